@@ -1,0 +1,1 @@
+"""Declarative construct schemas of I/O assemblies, per device family."""

@@ -1,0 +1,426 @@
+"""The CIP object model: classes declared once, instances that hold or bind their values.
+
+A class is declared with ``ClassSpec``: its id, name and revision, its instance (and any extra
+class) attributes as ``AttributeSpec`` entries, and the services it answers at class and at
+instance level. The standard class attributes 1-3, 6 and 7 (revision, max instance, number
+of instances, max class/instance attribute id) are derived from the declaration, never
+written by hand. ``CipObject`` is the runtime of a declared class: it stores instances and
+serves the common services; objects with behaviour subclass it or bind attributes to a
+value source (``Binding``) such as a drive register.
+"""
+
+from __future__ import annotations
+
+import struct
+from collections.abc import Callable, Mapping
+from dataclasses import dataclass
+from enum import Enum
+from typing import TYPE_CHECKING, Any, ClassVar
+
+from .epath import ApplicationPath
+from .messages import MessageRouterRequest, Service
+from .status import CipError, GeneralStatus
+from .types import UINT, CipType
+
+if TYPE_CHECKING:
+    from .router import RequestContext
+
+
+class Access(Enum):
+    GET = "Get"
+    SET = "Set"  # write-only (rare)
+    GET_SET = "Get/Set"
+
+    @property
+    def readable(self) -> bool:
+        return self is not Access.SET
+
+    @property
+    def settable(self) -> bool:
+        return self is not Access.GET
+
+
+@dataclass(frozen=True)
+class AttributeSpec:
+    """One attribute, declared once; runtime, EDS parameters, decoding and docs derive from it."""
+
+    id: int
+    name: str
+    type: CipType
+    access: Access = Access.GET
+    default: Any = None
+    minimum: int | float | None = None
+    maximum: int | float | None = None
+    #: Enumerated values: raw value -> meaning.
+    enum: Mapping[int, str] | None = None
+    #: Engineering unit of the scaled value ("Hz", "rpm", "A").
+    unit: str = ""
+    #: Engineering value = raw value x scale (e.g. 0.01 for a frequency in 0.01 Hz).
+    scale: float = 1.0
+    help: str = ""
+    #: Part of the Get_Attributes_All reply.
+    in_get_all: bool = True
+
+    def validate(self, value: Any) -> Any:
+        """Check a value about to be stored: type, declared range, enumeration (0x09)."""
+        value = self.type.check(value)
+        if self.minimum is not None and value < self.minimum:
+            raise CipError(GeneralStatus.INVALID_ATTRIBUTE_VALUE,
+                           message=f"{self.name}: {value} below minimum {self.minimum}")
+        if self.maximum is not None and value > self.maximum:
+            raise CipError(GeneralStatus.INVALID_ATTRIBUTE_VALUE,
+                           message=f"{self.name}: {value} above maximum {self.maximum}")
+        if self.enum is not None and self.minimum is None and self.maximum is None and value not in self.enum:
+            raise CipError(GeneralStatus.INVALID_ATTRIBUTE_VALUE,
+                           message=f"{self.name}: {value} is not one of {sorted(self.enum)}")
+        return value
+
+    def describe(self, value: Any) -> str:
+        if self.enum is not None and value in self.enum:
+            return f"{value} ({self.enum[value]})"
+        if self.scale != 1.0 and isinstance(value, int):
+            return f"{value * self.scale:g} {self.unit}".strip()
+        return f"{value} {self.unit}".strip()
+
+
+@dataclass(frozen=True)
+class ClassSpec:
+    class_id: int
+    name: str
+    revision: int = 1
+    instance_attributes: tuple[AttributeSpec, ...] = ()
+    #: Class attributes beyond the standard 1-3, 6, 7 (rare).
+    extra_class_attributes: tuple[AttributeSpec, ...] = ()
+    class_services: frozenset[int] = frozenset({Service.GET_ATTRIBUTE_SINGLE})
+    instance_services: frozenset[int] = frozenset(
+        {Service.GET_ATTRIBUTES_ALL, Service.GET_ATTRIBUTE_SINGLE, Service.SET_ATTRIBUTE_SINGLE,
+         Service.GET_ATTRIBUTE_LIST, Service.SET_ATTRIBUTE_LIST}
+    )
+    #: Declared maximum instance number when it exceeds the instances created (attribute 2).
+    max_instance: int | None = None
+
+    def instance_attribute(self, attribute_id: int) -> AttributeSpec | None:
+        return self._instance_index.get(attribute_id)
+
+    @property
+    def _instance_index(self) -> dict[int, AttributeSpec]:
+        index = self.__dict__.get("_index_cache")
+        if index is None:
+            index = {a.id: a for a in self.instance_attributes}
+            object.__setattr__(self, "_index_cache", index)
+        return index
+
+    def __post_init__(self) -> None:
+        ids = [a.id for a in self.instance_attributes]
+        if len(ids) != len(set(ids)):
+            raise ValueError(f"{self.name}: an instance attribute id is declared twice")
+
+
+class Binding:
+    """A value that lives elsewhere (a drive register, a live counter).
+
+    Store one as an instance's value to have reads call ``get`` and writes call ``set``.
+    """
+
+    def __init__(self, get: Callable[[], Any], set: Callable[[Any], None] | None = None) -> None:
+        self.get = get
+        self.set = set
+
+
+class Instance:
+    """An instance of a declared class; holds plain values or ``Binding`` entries."""
+
+    __slots__ = ("instance_id", "values")
+
+    def __init__(self, instance_id: int, values: dict[int, Any]) -> None:
+        self.instance_id = instance_id
+        self.values = values
+
+
+ServiceHandler = Callable[["CipObject", Instance | None, ApplicationPath, MessageRouterRequest,
+                           "RequestContext"], bytes]
+
+_UINT_PAIR = struct.Struct("<HH")
+
+
+class CipObject:
+    """Runtime of a declared CIP class: its instances and the common services.
+
+    ``handle`` is called by the message router with the already-resolved application path.
+    Subclasses add services by listing them in ``extra_services`` (code -> method name) and
+    may override ``read_attribute`` / ``write_attribute`` for attributes with behaviour.
+    """
+
+    extra_services: ClassVar[Mapping[int, str]] = {}
+
+    def __init__(self, spec: ClassSpec) -> None:
+        self.spec = spec
+        self.instances: dict[int, Instance] = {}
+        self._class_attributes = self._standard_class_attributes()
+
+    # -- instances -----------------------------------------------------------------------
+    def add_instance(self, instance_id: int, **overrides: Any) -> Instance:
+        """Create an instance with every attribute at its declared default.
+
+        ``overrides`` maps attribute names (as declared, lower-cased with underscores) or
+        ``attr_<id>`` to a value or a ``Binding``.
+        """
+        if instance_id in self.instances or instance_id < 1:
+            raise ValueError(f"{self.spec.name}: instance {instance_id} exists or is invalid")
+        values = {a.id: a.default for a in self.spec.instance_attributes}
+        by_key = {attribute_key(a): a.id for a in self.spec.instance_attributes}
+        for key, value in overrides.items():
+            attr_id = by_key.get(key)
+            if attr_id is None and key.startswith("attr_"):
+                attr_id = int(key[5:])
+            if attr_id is None or attr_id not in values:
+                raise KeyError(f"{self.spec.name} has no attribute {key!r}")
+            values[attr_id] = value
+        instance = Instance(instance_id, values)
+        self.instances[instance_id] = instance
+        return instance
+
+    def bind(self, instance_id: int, attribute_id: int, binding: Binding) -> None:
+        self.instances[instance_id].values[attribute_id] = binding
+
+    # -- values ---------------------------------------------------------------------------
+    def read_attribute(self, instance: Instance, spec: AttributeSpec) -> Any:
+        value = instance.values.get(spec.id)
+        if isinstance(value, Binding):
+            return value.get()
+        return value
+
+    def write_attribute(self, instance: Instance, spec: AttributeSpec, value: Any,
+                        context: RequestContext | None = None) -> None:
+        value = spec.validate(value)
+        current = instance.values.get(spec.id)
+        if isinstance(current, Binding):
+            if current.set is None:
+                raise CipError(GeneralStatus.ATTRIBUTE_NOT_SETTABLE, message=spec.name)
+            current.set(value)
+        else:
+            instance.values[spec.id] = value
+
+    def get(self, instance_id: int, attribute_id: int) -> Any:
+        """Read a value directly (for devices and tests)."""
+        instance = self.instances[instance_id]
+        return self.read_attribute(instance, self._spec_or_raise(attribute_id))
+
+    def set(self, instance_id: int, attribute_id: int, value: Any) -> None:
+        """Write a value directly, bypassing the access rule (device side)."""
+        self.write_attribute(self.instances[instance_id], self._spec_or_raise(attribute_id), value)
+
+    def _spec_or_raise(self, attribute_id: int) -> AttributeSpec:
+        spec = self.spec.instance_attribute(attribute_id)
+        if spec is None:
+            raise CipError(GeneralStatus.ATTRIBUTE_NOT_SUPPORTED,
+                           message=f"{self.spec.name} has no attribute {attribute_id}")
+        return spec
+
+    # -- class level ------------------------------------------------------------------------
+    def _standard_class_attributes(self) -> dict[int, tuple[AttributeSpec, Callable[[], Any]]]:
+        spec = self.spec
+        max_class_attr = max([7, *(a.id for a in spec.extra_class_attributes)])
+        max_inst_attr = max((a.id for a in spec.instance_attributes), default=0)
+        table: dict[int, tuple[AttributeSpec, Callable[[], Any]]] = {
+            1: (AttributeSpec(1, "Revision", UINT), lambda: spec.revision),
+            2: (AttributeSpec(2, "Max Instance", UINT),
+                lambda: max([spec.max_instance or 0, *self.instances], default=0)),
+            3: (AttributeSpec(3, "Number of Instances", UINT), lambda: len(self.instances)),
+            6: (AttributeSpec(6, "Maximum ID Number Class Attributes", UINT), lambda: max_class_attr),
+            7: (AttributeSpec(7, "Maximum ID Number Instance Attributes", UINT), lambda: max_inst_attr),
+        }
+        for extra in spec.extra_class_attributes:
+            table[extra.id] = (extra, lambda extra=extra: extra.default)
+        return table
+
+    def class_attribute_ids(self) -> list[int]:
+        return sorted(self._class_attributes)
+
+    # -- dispatch ------------------------------------------------------------------------------
+    def handle(self, path: ApplicationPath, request: MessageRouterRequest, context: RequestContext) -> bytes:
+        """Serve one request; returns reply data or raises ``CipError``."""
+        instance: Instance | None
+        if not path.instance:
+            instance = None
+            allowed = self.spec.class_services
+        else:
+            instance = self.instances.get(path.instance)
+            if instance is None:
+                raise CipError(GeneralStatus.PATH_DESTINATION_UNKNOWN,
+                               message=f"{self.spec.name} has no instance {path.instance}")
+            allowed = self.spec.instance_services
+        service = request.service
+        if service not in allowed:
+            raise CipError(GeneralStatus.SERVICE_NOT_SUPPORTED,
+                           message=f"{self.spec.name} does not support service 0x{service:02X} here")
+        method_name = self.extra_services.get(service) or _COMMON_SERVICES.get(service)
+        if method_name is None:
+            raise CipError(GeneralStatus.SERVICE_NOT_SUPPORTED)
+        handler: Callable[..., bytes] = getattr(self, method_name)
+        return handler(instance, path, request, context)
+
+    def _attribute(self, instance: Instance | None, attribute_id: int | None) -> tuple[AttributeSpec, Callable[[], Any] | None]:
+        if attribute_id is None:
+            raise CipError(GeneralStatus.PATH_SEGMENT_ERROR, message="no attribute in the path")
+        if instance is None:
+            entry = self._class_attributes.get(attribute_id)
+            if entry is None:
+                raise CipError(GeneralStatus.ATTRIBUTE_NOT_SUPPORTED)
+            return entry
+        spec = self.spec.instance_attribute(attribute_id)
+        if spec is None:
+            raise CipError(GeneralStatus.ATTRIBUTE_NOT_SUPPORTED)
+        return spec, None
+
+    def _encoded(self, instance: Instance | None, attribute_id: int) -> bytes:
+        spec, getter = self._attribute(instance, attribute_id)
+        if getter is not None:
+            return spec.type.encode(getter())
+        if not spec.access.readable:
+            raise CipError(GeneralStatus.ATTRIBUTE_NOT_SUPPORTED, message=f"{spec.name} is write-only")
+        assert instance is not None
+        return spec.type.encode(self.read_attribute(instance, spec))
+
+    def _set_one(self, instance: Instance | None, attribute_id: int, data: bytes, offset: int,
+                 context: RequestContext, exact: bool) -> int:
+        spec, getter = self._attribute(instance, attribute_id)
+        if getter is not None or not spec.access.settable:
+            raise CipError(GeneralStatus.ATTRIBUTE_NOT_SETTABLE, message=spec.name)
+        assert instance is not None
+        if exact:
+            value = spec.type.decode(data[offset:])
+            end = len(data)
+        else:
+            value, end = spec.type.decode_from(data, offset)
+        self.write_attribute(instance, spec, value, context)
+        return end
+
+    # -- common services -----------------------------------------------------------------------
+    def get_attribute_single(self, instance: Instance | None, path: ApplicationPath,
+                             request: MessageRouterRequest, context: RequestContext) -> bytes:
+        if request.data:
+            raise CipError(GeneralStatus.TOO_MUCH_DATA)
+        return self._encoded(instance, path.attribute)
+
+    def set_attribute_single(self, instance: Instance | None, path: ApplicationPath,
+                             request: MessageRouterRequest, context: RequestContext) -> bytes:
+        if path.attribute is None:
+            raise CipError(GeneralStatus.PATH_SEGMENT_ERROR, message="no attribute in the path")
+        self._set_one(instance, path.attribute, request.data, 0, context, exact=True)
+        return b""
+
+    def get_attributes_all(self, instance: Instance | None, path: ApplicationPath,
+                           request: MessageRouterRequest, context: RequestContext) -> bytes:
+        if request.data:
+            raise CipError(GeneralStatus.TOO_MUCH_DATA)
+        if instance is None:
+            return b"".join(self._encoded(None, a) for a in self.class_attribute_ids())
+        return b"".join(
+            spec.type.encode(self.read_attribute(instance, spec))
+            for spec in self.spec.instance_attributes
+            if spec.in_get_all and spec.access.readable
+        )
+
+    def get_attribute_list(self, instance: Instance | None, path: ApplicationPath,
+                           request: MessageRouterRequest, context: RequestContext) -> bytes:
+        ids = _attribute_id_list(request.data)
+        out = bytearray(UINT.encode(len(ids)))
+        failed = False
+        for attribute_id in ids:
+            try:
+                value = self._encoded(instance, attribute_id)
+            except CipError as exc:
+                out += _UINT_PAIR.pack(attribute_id, exc.general)
+                failed = True
+            else:
+                out += _UINT_PAIR.pack(attribute_id, 0) + value
+        if failed:
+            raise CipError(GeneralStatus.ATTRIBUTE_LIST_ERROR, data=bytes(out))
+        return bytes(out)
+
+    def set_attribute_list(self, instance: Instance | None, path: ApplicationPath,
+                           request: MessageRouterRequest, context: RequestContext) -> bytes:
+        data = request.data
+        count, offset = UINT.decode_from(data, 0)
+        out = bytearray(UINT.encode(count))
+        failed = False
+        for _ in range(count):
+            attribute_id, offset = UINT.decode_from(data, offset)
+            try:
+                offset = self._set_one(instance, attribute_id, data, offset, context, exact=False)
+            except CipError as exc:
+                out += _UINT_PAIR.pack(attribute_id, exc.general)
+                failed = True
+                if exc.general in (GeneralStatus.ATTRIBUTE_NOT_SUPPORTED, GeneralStatus.NOT_ENOUGH_DATA):
+                    # The size of an unknown attribute's value is unknown: the rest of the list
+                    # cannot be parsed, so processing stops here.
+                    break
+                spec = self.spec.instance_attribute(attribute_id) if instance is not None else None
+                if spec is not None:
+                    _, offset = spec.type.decode_from(data, offset)
+            else:
+                out += _UINT_PAIR.pack(attribute_id, 0)
+        else:
+            if offset != len(data):
+                raise CipError(GeneralStatus.TOO_MUCH_DATA)
+        if failed:
+            raise CipError(GeneralStatus.ATTRIBUTE_LIST_ERROR, data=bytes(out))
+        return bytes(out)
+
+    def reset(self, instance: Instance | None, path: ApplicationPath,
+              request: MessageRouterRequest, context: RequestContext) -> bytes:
+        reset_type = 0
+        if request.data:
+            if len(request.data) > 1:
+                raise CipError(GeneralStatus.TOO_MUCH_DATA)
+            reset_type = request.data[0]
+        self.perform_reset(instance, reset_type, context)
+        return b""
+
+    def perform_reset(self, instance: Instance | None, reset_type: int, context: RequestContext) -> None:
+        """Objects that declare Reset override this; the default accepts type 0 only."""
+        if reset_type != 0:
+            raise CipError(GeneralStatus.INVALID_PARAMETER_VALUE, message=f"reset type {reset_type}")
+
+
+_COMMON_SERVICES: dict[int, str] = {
+    Service.GET_ATTRIBUTE_SINGLE: "get_attribute_single",
+    Service.SET_ATTRIBUTE_SINGLE: "set_attribute_single",
+    Service.GET_ATTRIBUTES_ALL: "get_attributes_all",
+    Service.GET_ATTRIBUTE_LIST: "get_attribute_list",
+    Service.SET_ATTRIBUTE_LIST: "set_attribute_list",
+    Service.RESET: "reset",
+}
+
+
+def _attribute_id_list(data: bytes) -> list[int]:
+    count, _ = UINT.decode_from(data, 0)
+    needed = 2 + 2 * count
+    if len(data) < needed:
+        raise CipError(GeneralStatus.NOT_ENOUGH_DATA, message="attribute list shorter than its count")
+    if len(data) > needed:
+        raise CipError(GeneralStatus.TOO_MUCH_DATA)
+    return list(struct.unpack_from(f"<{count}H", data, 2))
+
+
+def attribute_key(spec: AttributeSpec) -> str:
+    """Python-friendly name of an attribute: "Product Name" -> "product_name"."""
+    out = []
+    for ch in spec.name.lower():
+        out.append(ch if ch.isalnum() else "_")
+    return "_".join(part for part in "".join(out).split("_") if part)
+
+
+def declare_attributes(*specs: AttributeSpec) -> tuple[AttributeSpec, ...]:
+    return tuple(sorted(specs, key=lambda a: a.id))
+
+
+def services(*codes: int) -> frozenset[int]:
+    return frozenset(codes)
+
+
+__all__ = [
+    "Access", "AttributeSpec", "Binding", "CipObject", "ClassSpec", "Instance",
+    "attribute_key", "declare_attributes", "services",
+]

@@ -1,0 +1,78 @@
+"""The message router: resolves a request's path to an object and returns its reply.
+
+It knows no transport: EtherNet/IP (unconnected, class 3) and the CompoNet explicit
+exchange both hand it encoded requests and send back what it returns. Every failure becomes
+an error reply with the status the specification gives; nothing raised by an object escapes.
+"""
+
+from __future__ import annotations
+
+import logging
+from dataclasses import dataclass, field
+from typing import Any
+
+from .epath import parse_application_path
+from .messages import MessageRouterRequest, MessageRouterResponse
+from .model import CipObject
+from .status import CipError, GeneralStatus
+
+log = logging.getLogger(__name__)
+
+
+@dataclass
+class RequestContext:
+    """What a transport tells an object about the request it is serving."""
+
+    router: MessageRouter
+    #: Monotonic time of arrival, seconds.
+    now: float = 0.0
+    #: Peer address text, for logs.
+    origin: str = ""
+    #: Transport-specific owner of the request (an encapsulation connection), or None.
+    transport: Any = None
+    #: True when the request arrived on a class 3 connection.
+    connected: bool = False
+    extras: dict[str, Any] = field(default_factory=dict)
+
+
+class MessageRouter:
+    def __init__(self) -> None:
+        self.objects: dict[int, CipObject] = {}
+        #: Counts of requests answered with each general status (for diagnostics).
+        self.status_counts: dict[int, int] = {}
+
+    def register(self, obj: CipObject) -> CipObject:
+        class_id = obj.spec.class_id
+        if class_id in self.objects:
+            raise ValueError(f"class 0x{class_id:02X} registered twice")
+        self.objects[class_id] = obj
+        return obj
+
+    def __getitem__(self, class_id: int) -> CipObject:
+        return self.objects[class_id]
+
+    def __contains__(self, class_id: int) -> bool:
+        return class_id in self.objects
+
+    def handle(self, raw: bytes, context: RequestContext) -> bytes:
+        """Serve one encoded request and return the encoded reply (never raises)."""
+        return self.dispatch(raw, context).encode()
+
+    def dispatch(self, raw: bytes, context: RequestContext) -> MessageRouterResponse:
+        service = raw[0] & 0x7F if raw else 0
+        try:
+            request = MessageRouterRequest.decode(raw)
+            path = parse_application_path(request.path)
+            obj = self.objects.get(path.class_id)
+            if obj is None:
+                raise CipError(GeneralStatus.PATH_DESTINATION_UNKNOWN,
+                               message=f"no class 0x{path.class_id:02X}")
+            data = obj.handle(path, request, context)
+            response = MessageRouterResponse(service, 0, (), data)
+        except CipError as exc:
+            response = MessageRouterResponse.from_error(service, exc)
+        except Exception:  # an object bug must not take the server down
+            log.exception("internal error serving service 0x%02X", service)
+            response = MessageRouterResponse(service, GeneralStatus.VENDOR_SPECIFIC)
+        self.status_counts[response.general_status] = self.status_counts.get(response.general_status, 0) + 1
+        return response

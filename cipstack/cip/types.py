@@ -1,0 +1,387 @@
+"""CIP elementary data types and the composites built from them.
+
+Every type is a `construct` codec (``CipType.construct``) so that assemblies and larger
+schemas can embed it; the fixed-size numeric types also keep a precompiled ``struct.Struct``
+because attribute reads are on the explicit-messaging hot path.
+
+Decoding is strict: a request that carries too few bytes for a value raises
+``CipError(0x13)`` and one that carries more raises ``CipError(0x15)``, the codes a
+conformance tool expects.
+"""
+
+from __future__ import annotations
+
+import struct
+from collections.abc import Sequence
+from typing import Any
+
+import construct as cs
+
+from .status import CipError, GeneralStatus
+
+
+class CipType:
+    """A CIP data type: name, EDS type code, size, codec and value checks."""
+
+    name: str
+    #: Data type code used in EDS files and typed services (0xC1 BOOL ... 0xDA SHORT_STRING).
+    code: int | None
+    #: Encoded size in bytes, or None for variable-size types.
+    size: int | None
+    construct: cs.Construct
+
+    def encode(self, value: Any) -> bytes:
+        return self.construct.build(self.check(value))
+
+    def decode_from(self, data: bytes, offset: int = 0) -> tuple[Any, int]:
+        """Decode one value at ``offset``; return it and the offset just past it."""
+        try:
+            stream_value = self.construct.parse(data[offset:])
+        except cs.ConstructError as exc:
+            raise CipError(GeneralStatus.NOT_ENOUGH_DATA, message=f"{self.name}: {exc}") from None
+        consumed = len(self.construct.build(stream_value))
+        return self.normalize(stream_value), offset + consumed
+
+    def decode(self, data: bytes) -> Any:
+        """Decode exactly one value from ``data`` (0x13 if short, 0x15 if long)."""
+        value, end = self.decode_from(data, 0)
+        if end != len(data):
+            raise CipError(GeneralStatus.TOO_MUCH_DATA, message=f"{self.name}: trailing bytes")
+        return value
+
+    def normalize(self, parsed: Any) -> Any:
+        """Turn what construct parsed into the plain Python value callers see."""
+        return parsed
+
+    def check(self, value: Any) -> Any:
+        """Return ``value`` as this type holds it, or raise ``CipError(0x09)``."""
+        return value
+
+    def parse_text(self, text: str) -> Any:
+        """A value typed on the command line ("1500", "0x5DC", "1.5", "name")."""
+        raise ValueError(f"cannot parse a {self.name} from text")
+
+    def to_json(self, value: Any) -> Any:
+        return value
+
+    def __repr__(self) -> str:
+        return self.name
+
+
+def parse_int(text: str) -> int:
+    """Decimal or 0x hexadecimal integer (also 0b/0o), with an optional sign."""
+    try:
+        return int(text.strip(), 0)
+    except ValueError:
+        raise ValueError(f"not a number: {text!r}") from None
+
+
+class IntegerType(CipType):
+    def __init__(self, name: str, code: int | None, size: int, signed: bool) -> None:
+        self.name = name
+        self.code = code
+        self.size = size
+        self.signed = signed
+        fmt = {1: "b", 2: "h", 4: "i", 8: "q"}[size]
+        self._struct = struct.Struct("<" + (fmt if signed else fmt.upper()))
+        self.construct = cs.BytesInteger(size, signed=signed, swapped=True)
+        bits = size * 8
+        self.minimum = -(1 << (bits - 1)) if signed else 0
+        self.maximum = (1 << (bits - 1)) - 1 if signed else (1 << bits) - 1
+
+    def encode(self, value: Any) -> bytes:
+        return self._struct.pack(self.check(value))
+
+    def decode_from(self, data: bytes, offset: int = 0) -> tuple[int, int]:
+        end = offset + self.size
+        if end > len(data):
+            raise CipError(GeneralStatus.NOT_ENOUGH_DATA, message=f"{self.name} needs {self.size} bytes")
+        return self._struct.unpack_from(data, offset)[0], end
+
+    def decode(self, data: bytes) -> int:
+        if len(data) != self.size:
+            code = GeneralStatus.NOT_ENOUGH_DATA if len(data) < self.size else GeneralStatus.TOO_MUCH_DATA
+            raise CipError(code, message=f"{self.name} is {self.size} bytes, got {len(data)}")
+        return self._struct.unpack(data)[0]
+
+    def check(self, value: Any) -> int:
+        if isinstance(value, bool) or not isinstance(value, int):
+            try:
+                value = int(value)
+            except (TypeError, ValueError):
+                raise CipError(GeneralStatus.INVALID_ATTRIBUTE_VALUE, message=f"{value!r} is not a {self.name}") from None
+        if not self.minimum <= value <= self.maximum:
+            raise CipError(
+                GeneralStatus.INVALID_ATTRIBUTE_VALUE,
+                message=f"{value} outside {self.name} range {self.minimum}..{self.maximum}",
+            )
+        return value
+
+    def parse_text(self, text: str) -> int:
+        return parse_int(text)
+
+
+class BoolType(IntegerType):
+    """BOOL: one byte on the wire, 0 or 1."""
+
+    def __init__(self) -> None:
+        super().__init__("BOOL", 0xC1, 1, signed=False)
+        self.maximum = 1
+
+    def decode_from(self, data: bytes, offset: int = 0) -> tuple[int, int]:
+        raw, end = super().decode_from(data, offset)
+        return (1 if raw else 0), end
+
+    def decode(self, data: bytes) -> int:
+        return 1 if super().decode(data) else 0
+
+    def check(self, value: Any) -> int:
+        if isinstance(value, bool):
+            return int(value)
+        return super().check(value)
+
+    def parse_text(self, text: str) -> int:
+        lowered = text.strip().lower()
+        if lowered in ("true", "on", "yes"):
+            return 1
+        if lowered in ("false", "off", "no"):
+            return 0
+        return parse_int(text)
+
+
+class RealType(CipType):
+    def __init__(self, name: str, code: int, size: int) -> None:
+        self.name = name
+        self.code = code
+        self.size = size
+        self._struct = struct.Struct("<f" if size == 4 else "<d")
+        self.construct = cs.Float32l if size == 4 else cs.Float64l
+
+    def encode(self, value: Any) -> bytes:
+        return self._struct.pack(self.check(value))
+
+    def decode_from(self, data: bytes, offset: int = 0) -> tuple[float, int]:
+        end = offset + self.size
+        if end > len(data):
+            raise CipError(GeneralStatus.NOT_ENOUGH_DATA, message=f"{self.name} needs {self.size} bytes")
+        return self._struct.unpack_from(data, offset)[0], end
+
+    def check(self, value: Any) -> float:
+        try:
+            value = float(value)
+        except (TypeError, ValueError):
+            raise CipError(GeneralStatus.INVALID_ATTRIBUTE_VALUE, message=f"{value!r} is not a {self.name}") from None
+        if self.size == 4:
+            try:
+                self._struct.pack(value)
+            except OverflowError:
+                raise CipError(GeneralStatus.INVALID_ATTRIBUTE_VALUE, message=f"{value} overflows REAL") from None
+        return value
+
+    def parse_text(self, text: str) -> float:
+        try:
+            return float(text)
+        except ValueError:
+            raise ValueError(f"not a number: {text!r}") from None
+
+
+class StringType(CipType):
+    """SHORT_STRING (USINT length) or STRING (UINT length) of single-byte characters."""
+
+    def __init__(self, name: str, code: int, length_size: int) -> None:
+        self.name = name
+        self.code = code
+        self.size = None
+        self._length = IntegerType("length", None, length_size, signed=False)
+        self.construct = cs.PascalString(self._length.construct, "latin-1")
+
+    def encode(self, value: Any) -> bytes:
+        raw = self.check(value).encode("latin-1")
+        return self._length.encode(len(raw)) + raw
+
+    def decode_from(self, data: bytes, offset: int = 0) -> tuple[str, int]:
+        length, start = self._length.decode_from(data, offset)
+        end = start + length
+        if end > len(data):
+            raise CipError(GeneralStatus.NOT_ENOUGH_DATA, message=f"{self.name} of {length} characters is cut short")
+        return data[start:end].decode("latin-1"), end
+
+    def check(self, value: Any) -> str:
+        if isinstance(value, bytes):
+            value = value.decode("latin-1")
+        if not isinstance(value, str):
+            raise CipError(GeneralStatus.INVALID_ATTRIBUTE_VALUE, message=f"{value!r} is not a {self.name}")
+        try:
+            raw = value.encode("latin-1")
+        except UnicodeEncodeError:
+            raise CipError(GeneralStatus.INVALID_ATTRIBUTE_VALUE, message=f"{value!r} is not Latin-1") from None
+        if len(raw) > self._length.maximum:
+            raise CipError(GeneralStatus.INVALID_ATTRIBUTE_VALUE, message=f"{self.name} longer than {self._length.maximum}")
+        return value
+
+    def parse_text(self, text: str) -> str:
+        return text
+
+
+class OctetString(CipType):
+    """A fixed number of raw bytes (a MAC address, a reserved block); value is ``bytes``."""
+
+    def __init__(self, size: int, name: str | None = None) -> None:
+        self.name = name or f"BYTE[{size}]"
+        self.code = None
+        self.size = size
+        self.construct = cs.Bytes(size)
+
+    def encode(self, value: Any) -> bytes:
+        return bytes(self.check(value))
+
+    def decode_from(self, data: bytes, offset: int = 0) -> tuple[bytes, int]:
+        end = offset + self.size
+        if end > len(data):
+            raise CipError(GeneralStatus.NOT_ENOUGH_DATA, message=f"{self.name} needs {self.size} bytes")
+        return bytes(data[offset:end]), end
+
+    def check(self, value: Any) -> bytes:
+        if not isinstance(value, (bytes, bytearray)) or len(value) != self.size:
+            raise CipError(GeneralStatus.INVALID_ATTRIBUTE_VALUE, message=f"{self.name} needs {self.size} bytes")
+        return bytes(value)
+
+    def parse_text(self, text: str) -> bytes:
+        return bytes.fromhex(text.replace(":", "").replace("-", ""))
+
+    def to_json(self, value: Any) -> Any:
+        return value.hex()
+
+
+class RemainingBytes(CipType):
+    """All the bytes that remain (raw data of unknown structure, an assembly's data)."""
+
+    def __init__(self, name: str = "BYTES") -> None:
+        self.name = name
+        self.code = None
+        self.size = None
+        self.construct = cs.GreedyBytes
+
+    def encode(self, value: Any) -> bytes:
+        return bytes(value)
+
+    def decode_from(self, data: bytes, offset: int = 0) -> tuple[bytes, int]:
+        return bytes(data[offset:]), len(data)
+
+    def check(self, value: Any) -> bytes:
+        if not isinstance(value, (bytes, bytearray)):
+            raise CipError(GeneralStatus.INVALID_ATTRIBUTE_VALUE, message="raw bytes expected")
+        return bytes(value)
+
+    def parse_text(self, text: str) -> bytes:
+        return bytes.fromhex(text)
+
+    def to_json(self, value: Any) -> Any:
+        return value.hex()
+
+
+class StructType(CipType):
+    """A structure of named members; its value is a dict in member order."""
+
+    def __init__(self, name: str, members: Sequence[tuple[str, CipType]]) -> None:
+        self.name = name
+        self.code = None
+        self.members = tuple(members)
+        sizes = [m.size for _, m in self.members]
+        self.size = None if None in sizes else sum(s for s in sizes if s is not None)
+        self.construct = cs.Struct(*(member_name / member.construct for member_name, member in self.members))
+
+    def encode(self, value: Any) -> bytes:
+        value = self.check(value)
+        return b"".join(member.encode(value[name]) for name, member in self.members)
+
+    def decode_from(self, data: bytes, offset: int = 0) -> tuple[dict[str, Any], int]:
+        result: dict[str, Any] = {}
+        for name, member in self.members:
+            result[name], offset = member.decode_from(data, offset)
+        return result, offset
+
+    def check(self, value: Any) -> dict[str, Any]:
+        if not isinstance(value, dict):
+            raise CipError(GeneralStatus.INVALID_ATTRIBUTE_VALUE, message=f"{self.name} needs a mapping")
+        missing = [name for name, _ in self.members if name not in value]
+        if missing:
+            raise CipError(GeneralStatus.INVALID_ATTRIBUTE_VALUE, message=f"{self.name} lacks {', '.join(missing)}")
+        return {name: member.check(value[name]) for name, member in self.members}
+
+    def to_json(self, value: Any) -> Any:
+        return {name: member.to_json(value[name]) for name, member in self.members}
+
+
+class ArrayType(CipType):
+    """``count`` elements of one type, or as many as the data holds when count is None."""
+
+    def __init__(self, element: CipType, count: int | None = None, name: str | None = None) -> None:
+        self.element = element
+        self.count = count
+        self.name = name or f"{element.name}[{'' if count is None else count}]"
+        self.code = None
+        self.size = None if count is None or element.size is None else count * element.size
+        self.construct = cs.Array(count, element.construct) if count is not None else cs.GreedyRange(element.construct)
+
+    def encode(self, value: Any) -> bytes:
+        return b"".join(self.element.encode(item) for item in self.check(value))
+
+    def decode_from(self, data: bytes, offset: int = 0) -> tuple[list[Any], int]:
+        items: list[Any] = []
+        if self.count is None:
+            while offset < len(data):
+                item, offset = self.element.decode_from(data, offset)
+                items.append(item)
+        else:
+            for _ in range(self.count):
+                item, offset = self.element.decode_from(data, offset)
+                items.append(item)
+        return items, offset
+
+    def check(self, value: Any) -> list[Any]:
+        items = list(value)
+        if self.count is not None and len(items) != self.count:
+            raise CipError(GeneralStatus.INVALID_ATTRIBUTE_VALUE, message=f"{self.name} needs {self.count} items")
+        return [self.element.check(item) for item in items]
+
+    def to_json(self, value: Any) -> Any:
+        return [self.element.to_json(item) for item in value]
+
+
+BOOL = BoolType()
+SINT = IntegerType("SINT", 0xC2, 1, signed=True)
+INT = IntegerType("INT", 0xC3, 2, signed=True)
+DINT = IntegerType("DINT", 0xC4, 4, signed=True)
+LINT = IntegerType("LINT", 0xC5, 8, signed=True)
+USINT = IntegerType("USINT", 0xC6, 1, signed=False)
+UINT = IntegerType("UINT", 0xC7, 2, signed=False)
+UDINT = IntegerType("UDINT", 0xC8, 4, signed=False)
+ULINT = IntegerType("ULINT", 0xC9, 8, signed=False)
+REAL = RealType("REAL", 0xCA, 4)
+LREAL = RealType("LREAL", 0xCB, 8)
+STRING = StringType("STRING", 0xD0, 2)
+BYTE = IntegerType("BYTE", 0xD1, 1, signed=False)
+WORD = IntegerType("WORD", 0xD2, 2, signed=False)
+DWORD = IntegerType("DWORD", 0xD3, 4, signed=False)
+LWORD = IntegerType("LWORD", 0xD4, 8, signed=False)
+SHORT_STRING = StringType("SHORT_STRING", 0xDA, 1)
+
+ELEMENTARY: dict[str, CipType] = {
+    t.name: t
+    for t in (BOOL, SINT, INT, DINT, LINT, USINT, UINT, UDINT, ULINT, REAL, LREAL,
+              STRING, BYTE, WORD, DWORD, LWORD, SHORT_STRING)
+}
+BY_CODE: dict[int, CipType] = {t.code: t for t in ELEMENTARY.values() if t.code is not None}
+
+#: Revision as Identity attribute 4 holds it: major then minor, one byte each.
+REVISION = StructType("REVISION", [("major", USINT), ("minor", USINT)])
+
+
+def type_by_name(name: str) -> CipType:
+    """Look up an elementary type by its CIP name, case-insensitive ("uint", "SHORT_STRING")."""
+    try:
+        return ELEMENTARY[name.strip().upper()]
+    except KeyError:
+        known = ", ".join(ELEMENTARY)
+        raise ValueError(f"unknown CIP type {name!r} (known: {known})") from None

@@ -1,0 +1,1 @@
+"""CompoNet: node addressing, explicit messages, cyclic I/O refresh, routing."""

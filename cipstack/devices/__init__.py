@@ -1,0 +1,1 @@
+"""Device families: identity, objects, assemblies, parameter table and drive simulation."""

@@ -1,0 +1,1 @@
+"""EDS model, writer, reader and checker."""

@@ -1,0 +1,1 @@
+"""EtherNet/IP: encapsulation, common packet format, sessions, target and originator."""

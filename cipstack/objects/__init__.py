@@ -1,0 +1,1 @@
+"""The standard CIP objects a device is built from."""
