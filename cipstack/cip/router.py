@@ -68,7 +68,8 @@ class MessageRouter:
                 raise CipError(GeneralStatus.PATH_DESTINATION_UNKNOWN,
                                message=f"no class 0x{path.class_id:02X}")
             data = obj.handle(path, request, context)
-            response = MessageRouterResponse(service, 0, (), data)
+            # A service that forwards a request (Unconnected_Send) returns the whole reply.
+            response = data if isinstance(data, MessageRouterResponse) else MessageRouterResponse(service, 0, (), data)
         except CipError as exc:
             response = MessageRouterResponse.from_error(service, exc)
         except Exception:  # an object bug must not take the server down

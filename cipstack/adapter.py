@@ -1,0 +1,81 @@
+"""The adapter emulator: where a device meets the EtherNet/IP transport."""
+
+from __future__ import annotations
+
+import asyncio
+import logging
+import signal
+from dataclasses import dataclass
+
+from .devices.base import Device, DeviceLimits
+from .devices.profiles import DEFAULT_MAC, DEFAULT_PROFILE, build_device
+from .eip.server import DEFAULT_PORT, EncapsulationServer
+from .eip.target import EncapsulationTarget, TargetSettings
+from .objects.tcpip import NetworkInterface
+
+log = logging.getLogger(__name__)
+
+
+@dataclass
+class AdapterSettings:
+    host: str = "127.0.0.1"
+    port: int = DEFAULT_PORT
+    profile: str = DEFAULT_PROFILE
+    max_sessions: int = 32
+    max_connections: int = 32
+    max_frame_length: int = 4200
+
+
+class Adapter:
+    """A running emulated device: its objects, the encapsulation target and the server."""
+
+    def __init__(self, settings: AdapterSettings | None = None, device: Device | None = None) -> None:
+        self.settings = settings or AdapterSettings()
+        s = self.settings
+        self.device = device or build_device(
+            s.profile, NetworkInterface(ip_address=s.host if s.host not in ("", "0.0.0.0", "localhost") else "127.0.0.1",
+                                        mac=DEFAULT_MAC),
+            DeviceLimits(s.max_sessions, s.max_connections))
+        self.target = EncapsulationTarget(
+            self.device.router, self.device.identity_record,
+            TargetSettings(max_sessions=s.max_sessions, max_connections=s.max_connections,
+                           max_frame_length=s.max_frame_length,
+                           inactivity_timeout=lambda: self.device.inactivity_timeout),
+            table=self.device.connection_table,
+        )
+        self.server = EncapsulationServer(self.target, s.host, s.port)
+
+    @property
+    def port(self) -> int:
+        return self.server.port
+
+    async def start(self) -> None:
+        await self.server.start()
+
+    async def close(self) -> None:
+        await self.server.close()
+
+    async def __aenter__(self) -> Adapter:
+        await self.start()
+        return self
+
+    async def __aexit__(self, *exc: object) -> None:
+        await self.close()
+
+    async def serve_forever(self) -> None:
+        """Serve until SIGINT or SIGTERM, then close cleanly."""
+        loop = asyncio.get_running_loop()
+        stop = asyncio.Event()
+        for sig in (signal.SIGINT, signal.SIGTERM):
+            loop.add_signal_handler(sig, stop.set)
+        await self.start()
+        info = self.device.identity_info
+        log.info("emulating %s (vendor %d, device type %d, product code %d, revision %d.%d)",
+                 info.product_name, info.vendor_id, info.device_type, info.product_code, *info.revision)
+        try:
+            await stop.wait()
+        finally:
+            log.info("stopping")
+            for sig in (signal.SIGINT, signal.SIGTERM):
+                loop.remove_signal_handler(sig)
+            await self.close()

@@ -1,0 +1,89 @@
+"""A device made of CIP objects: the standard objects every EtherNet/IP adapter has.
+
+Device families (ACG-ET2, MX2, RX) build on ``Device``: they add their own objects and
+assemblies to the same message router. The transport (EtherNet/IP, CompoNet) never sees a
+device, only its router and its identity.
+"""
+
+from __future__ import annotations
+
+import logging
+from dataclasses import dataclass, field
+
+from ..cip.epath import ElectronicKey
+from ..cip.router import MessageRouter
+from ..cip.status import CipError, ExtendedStatus, GeneralStatus
+from ..eip.connection_manager import ConnectionManagerObject, ConnectionTable
+from ..eip.identity_items import IdentityRecord
+from ..objects.assembly import AssemblyObject
+from ..objects.identity import IdentityInfo, IdentityObject
+from ..objects.message_router import MessageRouterObject
+from ..objects.tcpip import EthernetLinkObject, NetworkInterface, TcpIpObject
+
+log = logging.getLogger(__name__)
+
+
+@dataclass
+class DeviceLimits:
+    max_sessions: int = 32
+    max_connections: int = 32
+
+
+@dataclass
+class Device:
+    identity_info: IdentityInfo
+    interface: NetworkInterface = field(default_factory=NetworkInterface)
+    limits: DeviceLimits = field(default_factory=DeviceLimits)
+
+    def __post_init__(self) -> None:
+        self.router = MessageRouter()
+        self.connection_table = ConnectionTable(self.limits.max_connections)
+        #: Reset types requested over the network, for the shell to act on.
+        self.pending_reset: int | None = None
+        self.identity = IdentityObject(self.identity_info, on_reset=self._on_reset)
+        self.router.register(self.identity)
+        self.router.register(MessageRouterObject(self.router, self.limits.max_connections))
+        self.assembly = AssemblyObject()
+        self.router.register(self.assembly)
+        self.connection_manager = ConnectionManagerObject(self.connection_table, key_check=self.check_key)
+        self.router.register(self.connection_manager)
+        self.tcpip = TcpIpObject(self.interface)
+        self.router.register(self.tcpip)
+        self.ethernet_link = EthernetLinkObject(self.interface)
+        self.router.register(self.ethernet_link)
+
+    # -- identity -------------------------------------------------------------------------------
+    def identity_record(self) -> IdentityRecord:
+        info = self.identity_info
+        return IdentityRecord(info.vendor_id, info.device_type, info.product_code, info.revision,
+                              self.identity.status, info.serial_number, info.product_name, self.identity.state)
+
+    def check_key(self, key: ElectronicKey) -> None:
+        """Electronic key check of a connection path (0x0114 / 0x0115 / 0x0116); zero fields match anything."""
+        info = self.identity_info
+        if (key.vendor_id and key.vendor_id != info.vendor_id) or (
+                key.product_code and key.product_code != info.product_code):
+            raise CipError(GeneralStatus.CONNECTION_FAILURE, (ExtendedStatus.VENDOR_OR_PRODUCT_CODE_MISMATCH,))
+        if key.device_type and key.device_type != info.device_type:
+            raise CipError(GeneralStatus.CONNECTION_FAILURE, (ExtendedStatus.DEVICE_TYPE_MISMATCH,))
+        major, minor = info.revision
+        if key.major_revision:
+            if key.major_revision != major:
+                raise CipError(GeneralStatus.CONNECTION_FAILURE, (ExtendedStatus.REVISION_MISMATCH,))
+            # Compatible: any minor revision the device can emulate (not newer than its own).
+            too_new = key.minor_revision > minor
+            if key.minor_revision and ((key.compatibility and too_new)
+                                       or (not key.compatibility and key.minor_revision != minor)):
+                raise CipError(GeneralStatus.CONNECTION_FAILURE, (ExtendedStatus.REVISION_MISMATCH,))
+
+    def _on_reset(self, reset_type: int) -> None:
+        log.info("Identity Reset type %d requested", reset_type)
+        self.pending_reset = reset_type
+        self.reset(reset_type)
+
+    def reset(self, reset_type: int) -> None:
+        """Emulated power cycle (type 0) or return to defaults (type 1): families override."""
+
+    @property
+    def inactivity_timeout(self) -> float:
+        return float(self.tcpip.inactivity_timeout)

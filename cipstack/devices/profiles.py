@@ -1,0 +1,53 @@
+"""The device profiles `cipstack adapter --profile NAME` can emulate."""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from dataclasses import dataclass
+
+from ..objects.identity import IdentityInfo
+from ..objects.tcpip import NetworkInterface
+from .base import Device, DeviceLimits
+
+#: Locally administered MAC of the emulated card (bit 1 of the first octet set).
+DEFAULT_MAC = bytes.fromhex("02CA10000064")
+
+
+def serial_from_mac(mac: bytes) -> int:
+    """ACG-ET2 Identity attribute 6: "Serial number uses the last 4 digits of the MAC ID"
+    (seed 000, Identity Object table): the last four octets, most significant first."""
+    return int.from_bytes(mac[-4:], "big")
+
+
+def acg_et2_identity(mac: bytes = DEFAULT_MAC) -> IdentityInfo:
+    """Identity of the ACG drive's ACG-ET2 card (seed 000, Identity Object, class 0x01, instance 1):
+    vendor 259, device type 2 (AC drive), product code 100 (the ACG drive), revision 0x0101 (1.01,
+    the card's version shown in CM.6), product name "CENT" (4 bytes)."""
+    return IdentityInfo(vendor_id=259, device_type=2, product_code=100, revision=(1, 1),
+                        serial_number=serial_from_mac(mac), product_name="CENT")
+
+
+@dataclass(frozen=True)
+class Profile:
+    name: str
+    description: str
+    build: Callable[[NetworkInterface, DeviceLimits], Device]
+
+
+def _acg(interface: NetworkInterface, limits: DeviceLimits) -> Device:
+    return Device(acg_et2_identity(interface.mac), interface, limits)
+
+
+PROFILES: dict[str, Profile] = {
+    "acg": Profile("acg", "ACG drive with its ACG-ET2 EtherNet/IP card (identity and standard objects)", _acg),
+}
+DEFAULT_PROFILE = "acg"
+
+
+def build_device(name: str = DEFAULT_PROFILE, interface: NetworkInterface | None = None,
+                 limits: DeviceLimits | None = None) -> Device:
+    try:
+        profile = PROFILES[name]
+    except KeyError:
+        raise ValueError(f"unknown profile {name!r} (known: {', '.join(sorted(PROFILES))})") from None
+    return profile.build(interface or NetworkInterface(mac=DEFAULT_MAC), limits or DeviceLimits())

@@ -1,0 +1,76 @@
+"""EtherNet/IP encapsulation: the 24-byte header, its commands and status codes.
+
+Header: command UINT, length UINT (bytes after the header), session handle UDINT, status
+UDINT, sender context 8 bytes (echoed unchanged), options UDINT (must be 0). Little-endian.
+"""
+
+from __future__ import annotations
+
+import struct
+from dataclasses import dataclass
+from enum import IntEnum
+
+HEADER = struct.Struct("<HHII8sI")
+HEADER_SIZE = HEADER.size  # 24
+
+
+class Command(IntEnum):
+    NOP = 0x0000
+    LIST_SERVICES = 0x0004
+    LIST_IDENTITY = 0x0063
+    LIST_INTERFACES = 0x0064
+    REGISTER_SESSION = 0x0065
+    UNREGISTER_SESSION = 0x0066
+    SEND_RR_DATA = 0x006F
+    SEND_UNIT_DATA = 0x0070
+
+
+#: Commands a target also answers over UDP 44818.
+UDP_COMMANDS = frozenset({Command.LIST_SERVICES, Command.LIST_IDENTITY, Command.LIST_INTERFACES})
+
+
+class EncapsulationStatus(IntEnum):
+    SUCCESS = 0x0000
+    INVALID_COMMAND = 0x0001
+    INSUFFICIENT_MEMORY = 0x0002
+    INCORRECT_DATA = 0x0003
+    INVALID_SESSION = 0x0064
+    INVALID_LENGTH = 0x0065
+    UNSUPPORTED_PROTOCOL = 0x0069
+
+
+class EncapsulationError(Exception):
+    """An encapsulation-level failure, answered with ``status`` in the reply header."""
+
+    def __init__(self, status: EncapsulationStatus, message: str = "") -> None:
+        self.status = status
+        super().__init__(message or status.name.lower().replace("_", " "))
+
+
+@dataclass(frozen=True, slots=True)
+class EncapsulationHeader:
+    command: int
+    length: int
+    session: int
+    status: int
+    context: bytes
+    options: int
+
+    @classmethod
+    def decode(cls, raw: bytes | bytearray | memoryview, offset: int = 0) -> EncapsulationHeader:
+        return cls(*HEADER.unpack_from(raw, offset))
+
+    def encode(self) -> bytes:
+        return HEADER.pack(self.command, self.length, self.session, self.status, self.context, self.options)
+
+
+def encode_frame(command: int, data: bytes = b"", session: int = 0, status: int = 0,
+                 context: bytes = b"\x00" * 8, options: int = 0) -> bytes:
+    return HEADER.pack(command, len(data), session, status, context, options) + data
+
+
+PROTOCOL_VERSION = 1
+REGISTER_SESSION_DATA = struct.Struct("<HH")
+
+#: Interface handle UDINT (0 for CIP) and timeout UINT that open SendRRData/SendUnitData.
+RR_PREFIX = struct.Struct("<IH")

@@ -1,0 +1,171 @@
+"""The asyncio shell of the target: moves bytes between sockets and the sans-I/O core.
+
+One TCP listener and one UDP endpoint on the same host and port (44818 by default). Each
+TCP connection gets an ``EncapsulationConnection``; a loop timer at its next deadline runs
+the inactivity and class 3 timeouts. Delayed ListIdentity replies use loop timers too.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import logging
+import socket
+
+from .cpf import SockAddr
+from .encapsulation import HEADER_SIZE
+from .target import EncapsulationConnection, EncapsulationTarget
+
+log = logging.getLogger(__name__)
+
+DEFAULT_PORT = 44818
+
+
+class _TcpProtocol(asyncio.Protocol):
+    def __init__(self, server: EncapsulationServer) -> None:
+        self.server = server
+        self.loop = server.loop
+        self.transport: asyncio.Transport | None = None
+        self.connection: EncapsulationConnection | None = None
+        self._timer: asyncio.TimerHandle | None = None
+        self._timer_at: float | None = None
+
+    def connection_made(self, transport: asyncio.BaseTransport) -> None:
+        assert isinstance(transport, asyncio.Transport)
+        self.transport = transport
+        peer = transport.get_extra_info("peername")
+        sock = transport.get_extra_info("sockname")
+        peer_text = f"{peer[0]}:{peer[1]}" if peer else "?"
+        local = SockAddr(sock[0], sock[1]) if sock else SockAddr("0.0.0.0", self.server.port)
+        sock_obj = transport.get_extra_info("socket")
+        if sock_obj is not None:
+            sock_obj.setsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY, 1)
+        self.connection = self.server.target.connection(peer_text, local, self.loop.time())
+        self.server.connections.add(self)
+        log.info("%s: TCP connection accepted", peer_text)
+        self._arm()
+
+    def data_received(self, data: bytes) -> None:
+        connection = self.connection
+        assert connection is not None and self.transport is not None
+        connection.receive(data, self.loop.time())
+        out = connection.data_to_send()
+        if out:
+            self.transport.write(out)
+        if connection.closing:
+            self.transport.close()
+        elif self._timer is None:
+            self._arm()
+
+    def connection_lost(self, exc: Exception | None) -> None:
+        if self._timer is not None:
+            self._timer.cancel()
+            self._timer = None
+        if self.connection is not None:
+            self.connection.connection_lost()
+            log.info("%s: TCP connection closed", self.connection.peer)
+        self.server.connections.discard(self)
+
+    def _arm(self) -> None:
+        assert self.connection is not None
+        deadline = self.connection.next_deadline()
+        if deadline is not None:
+            self._timer = self.loop.call_at(deadline, self._on_timer)
+
+    def _on_timer(self) -> None:
+        # Deadlines move forward with traffic; the timer fires at the old one and re-arms lazily,
+        # so the hot path never reschedules a timer per packet.
+        self._timer = None
+        connection = self.connection
+        if connection is None or self.transport is None:
+            return
+        connection.on_timer(self.loop.time())
+        if connection.closing:
+            self.transport.close()
+        else:
+            self._arm()
+
+
+class _UdpProtocol(asyncio.DatagramProtocol):
+    def __init__(self, server: EncapsulationServer) -> None:
+        self.server = server
+        self.transport: asyncio.DatagramTransport | None = None
+
+    def connection_made(self, transport: asyncio.BaseTransport) -> None:
+        self.transport = transport  # type: ignore[assignment]
+
+    def datagram_received(self, data: bytes, addr: tuple[str, int]) -> None:
+        server = self.server
+        try:
+            result = server.target.datagram(data, server.local_address())
+        except Exception:  # never let a datagram take the endpoint down
+            log.exception("UDP datagram from %s", addr)
+            return
+        if result is None:
+            return
+        reply, delay = result
+        if delay <= 0:
+            self._send(reply, addr)
+        else:
+            server.loop.call_later(delay, self._send, reply, addr)
+
+    def _send(self, reply: bytes, addr: tuple[str, int]) -> None:
+        if self.transport is not None and not self.transport.is_closing():
+            self.transport.sendto(reply, addr)
+
+    def error_received(self, exc: Exception) -> None:
+        log.debug("UDP error: %s", exc)
+
+
+class EncapsulationServer:
+    """TCP + UDP encapsulation endpoints for one target."""
+
+    def __init__(self, target: EncapsulationTarget, host: str = "127.0.0.1", port: int = DEFAULT_PORT,
+                 udp: bool = True) -> None:
+        self.target = target
+        self.host = host
+        self.port = port
+        self.udp = udp
+        self.loop = asyncio.get_event_loop()
+        self.connections: set[_TcpProtocol] = set()
+        self._tcp: asyncio.base_events.Server | None = None
+        self._udp: asyncio.DatagramTransport | None = None
+        self._expiry: asyncio.TimerHandle | None = None
+
+    def local_address(self) -> SockAddr:
+        host = self.host if self.host not in ("", "0.0.0.0") else "127.0.0.1"
+        return SockAddr(socket.gethostbyname(host), self.port)
+
+    async def start(self) -> None:
+        self.loop = asyncio.get_running_loop()
+        self._tcp = await self.loop.create_server(lambda: _TcpProtocol(self), self.host, self.port,
+                                                  reuse_address=True)
+        if self.port == 0:
+            self.port = self._tcp.sockets[0].getsockname()[1]
+        if self.udp:
+            transport, _ = await self.loop.create_datagram_endpoint(lambda: _UdpProtocol(self),
+                                                                    local_addr=(self.host, self.port))
+            self._udp = transport  # type: ignore[assignment]
+        log.info("EtherNet/IP target listening on %s:%d (TCP%s)", self.host, self.port, " and UDP" if self.udp else "")
+
+    async def close(self) -> None:
+        if self._tcp is not None:
+            self._tcp.close()
+        for protocol in list(self.connections):
+            if protocol.transport is not None:
+                protocol.transport.close()
+        if self._tcp is not None:
+            await self._tcp.wait_closed()
+        if self._udp is not None:
+            self._udp.close()
+        self._tcp = None
+        self._udp = None
+
+    async def __aenter__(self) -> EncapsulationServer:
+        await self.start()
+        return self
+
+    async def __aexit__(self, *exc: object) -> None:
+        await self.close()
+
+
+__all__ = ["DEFAULT_PORT", "HEADER_SIZE", "EncapsulationServer"]

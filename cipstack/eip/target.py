@@ -1,0 +1,302 @@
+"""The EtherNet/IP target (adapter), sans-I/O.
+
+``EncapsulationTarget`` holds what all TCP connections share: the message router, the
+session registry, the class 3 connection table and the limits. Each TCP connection is an
+``EncapsulationConnection`` that takes received bytes and the current time, and leaves
+bytes to send and whether to close. UDP datagrams go through ``datagram``, which returns
+the reply and how long to delay it. Nothing here touches a socket or a clock.
+
+Limits that keep a target bounded on any input: sessions, class 3 connections, the largest
+encapsulation frame (a larger announced length is answered with 0x0065 and the connection
+closed, so the receive buffer never exceeds header + limit), and the encapsulation
+inactivity timeout (TCP/IP attribute 13).
+"""
+
+from __future__ import annotations
+
+import itertools
+import logging
+import random
+import struct
+from collections.abc import Callable
+from dataclasses import dataclass, field
+
+from ..cip.router import MessageRouter, RequestContext
+from .connection_manager import ConnectionTable, ExplicitConnection
+from .cpf import Item, ItemType, SockAddr, decode_items, encode_items
+from .encapsulation import (
+    HEADER,
+    HEADER_SIZE,
+    PROTOCOL_VERSION,
+    REGISTER_SESSION_DATA,
+    RR_PREFIX,
+    UDP_COMMANDS,
+    Command,
+    EncapsulationError,
+    EncapsulationStatus,
+)
+from .identity_items import CAPABILITY_CIP_TCP, IdentityRecord, encode_list_identity, encode_list_services
+
+log = logging.getLogger(__name__)
+
+_SEQ = struct.Struct("<H")
+_CONN_ID = struct.Struct("<I")
+
+
+@dataclass
+class TargetSettings:
+    max_sessions: int = 32
+    max_connections: int = 32
+    #: Largest encapsulation data length accepted (bytes after the 24-byte header).
+    max_frame_length: int = 4200
+    #: Encapsulation inactivity timeout in seconds (0 disables); read live from TCP/IP attribute 13.
+    inactivity_timeout: Callable[[], float] = lambda: 120.0
+    #: ListServices capability flags; class 0/1 over UDP is added when the device offers class 1 I/O.
+    capabilities: int = CAPABILITY_CIP_TCP
+    #: Randomness of the UDP ListIdentity reply delay (seedable for tests).
+    rng: random.Random = field(default_factory=random.Random)
+
+
+@dataclass
+class TargetStatistics:
+    frames: int = 0
+    dropped: int = 0
+    errors: int = 0
+    sessions_opened: int = 0
+
+
+class EncapsulationTarget:
+    def __init__(self, router: MessageRouter, identity: Callable[[], IdentityRecord],
+                 settings: TargetSettings | None = None, table: ConnectionTable | None = None) -> None:
+        self.router = router
+        self.identity = identity
+        self.settings = settings or TargetSettings()
+        self.table = table or ConnectionTable(self.settings.max_connections)
+        self.sessions: dict[int, EncapsulationConnection] = {}
+        self.stats = TargetStatistics()
+        self._handles = itertools.count(random.randrange(1, 0x7FFF0000))
+
+    # -- TCP ------------------------------------------------------------------------------------
+    def connection(self, peer: str, local: SockAddr, now: float) -> EncapsulationConnection:
+        return EncapsulationConnection(self, peer, local, now)
+
+    def _new_session(self, owner: EncapsulationConnection) -> int:
+        while True:
+            handle = next(self._handles) & 0xFFFFFFFF
+            if handle and handle not in self.sessions:
+                self.sessions[handle] = owner
+                self.stats.sessions_opened += 1
+                return handle
+
+    # -- UDP ------------------------------------------------------------------------------------
+    def datagram(self, data: bytes, local: SockAddr) -> tuple[bytes, float] | None:
+        """Answer a UDP datagram: (reply, delay in seconds), or None to drop it."""
+        if len(data) < HEADER_SIZE:
+            self.stats.dropped += 1
+            return None
+        command, length, session, _status, context, options = HEADER.unpack_from(data)
+        if options != 0 or length != len(data) - HEADER_SIZE:
+            self.stats.dropped += 1
+            return None
+        if command not in UDP_COMMANDS:
+            reply = HEADER.pack(command, 0, session, EncapsulationStatus.INVALID_COMMAND, context, 0)
+            return reply, 0.0
+        body = self._list_reply(command, local)
+        reply = HEADER.pack(command, len(body), session, 0, context, 0) + body
+        if command == Command.LIST_IDENTITY:
+            return reply, self.list_identity_delay(context)
+        return reply, 0.0
+
+    def list_identity_delay(self, context: bytes) -> float:
+        """Random delay up to the maximum in the sender context's first UINT (0: 2000 ms, 1..499: 500 ms)."""
+        (max_ms,) = _SEQ.unpack_from(context)
+        if max_ms == 0:
+            max_ms = 2000
+        elif max_ms < 500:
+            max_ms = 500
+        return self.settings.rng.uniform(0, max_ms) / 1000.0
+
+    def _list_reply(self, command: int, local: SockAddr) -> bytes:
+        if command == Command.LIST_IDENTITY:
+            return encode_list_identity(self.identity(), local)
+        if command == Command.LIST_SERVICES:
+            return encode_list_services(self.settings.capabilities)
+        return encode_items([])  # ListInterfaces: no items
+
+    # -- timers ---------------------------------------------------------------------------------
+    def expire(self, now: float) -> list[ExplicitConnection]:
+        return self.table.expire(now)
+
+
+class EncapsulationConnection:
+    """One TCP connection to the target."""
+
+    def __init__(self, target: EncapsulationTarget, peer: str, local: SockAddr, now: float) -> None:
+        self.target = target
+        self.peer = peer
+        self.local = local
+        self.session: int | None = None
+        self.closing = False
+        self.last_activity = now
+        self._inbox = bytearray()
+        self._outbox: list[bytes] = []
+        self._context = RequestContext(target.router, now, peer, self)
+
+    # -- bytes in, bytes out ------------------------------------------------------------------------
+    def receive(self, data: bytes, now: float) -> None:
+        if self.closing:
+            return
+        self.last_activity = now
+        inbox = self._inbox
+        inbox += data
+        limit = self.target.settings.max_frame_length
+        while len(inbox) >= HEADER_SIZE and not self.closing:
+            command, length, session, _status, context, options = HEADER.unpack_from(inbox)
+            if length > limit:
+                self.target.stats.errors += 1
+                log.info("%s: frame of %d bytes exceeds the %d-byte limit; closing", self.peer, length, limit)
+                self._reply(command, session, context, status=EncapsulationStatus.INVALID_LENGTH)
+                self.closing = True
+                inbox.clear()
+                return
+            end = HEADER_SIZE + length
+            if len(inbox) < end:
+                return
+            body = bytes(inbox[HEADER_SIZE:end])
+            del inbox[:end]
+            self.target.stats.frames += 1
+            if options != 0:
+                self.target.stats.dropped += 1  # the specification says: discard
+                continue
+            try:
+                self._frame(command, session, context, body, now)
+            except EncapsulationError as exc:
+                self.target.stats.errors += 1
+                self._reply(command, session, context, status=exc.status)
+
+    def data_to_send(self) -> bytes:
+        if not self._outbox:
+            return b""
+        out = b"".join(self._outbox)
+        self._outbox.clear()
+        return out
+
+    def next_deadline(self) -> float | None:
+        deadlines = []
+        timeout = self.target.settings.inactivity_timeout()
+        if timeout:
+            deadlines.append(self.last_activity + timeout)
+        table_deadline = self.target.table.next_deadline(self)
+        if table_deadline is not None:
+            deadlines.append(table_deadline)
+        return min(deadlines, default=None)
+
+    def on_timer(self, now: float) -> None:
+        self.target.table.expire(now, self)
+        timeout = self.target.settings.inactivity_timeout()
+        if timeout and now >= self.last_activity + timeout and not self.closing:
+            log.info("%s: no traffic for %g s (encapsulation inactivity timeout); closing", self.peer, timeout)
+            self.closing = True
+
+    def connection_lost(self) -> None:
+        """The TCP connection is gone: its session and class 3 connections go with it."""
+        self.closing = True
+        if self.session is not None:
+            self.target.sessions.pop(self.session, None)
+            log.info("%s: session 0x%08X ended", self.peer, self.session)
+            self.session = None
+        dropped = self.target.table.drop_owner(self)
+        if dropped:
+            log.info("%s: %d class 3 connection(s) closed with their TCP connection", self.peer, dropped)
+
+    # -- frames -----------------------------------------------------------------------------------------
+    def _reply(self, command: int, session: int, context: bytes, data: bytes = b"", status: int = 0) -> None:
+        self._outbox.append(HEADER.pack(command, len(data), session, status, context, 0) + data)
+
+    def _frame(self, command: int, session: int, context: bytes, body: bytes, now: float) -> None:
+        if command == Command.SEND_RR_DATA:
+            self._check_session(session)
+            self._reply(command, session, context, self._send_rr_data(body, now))
+        elif command == Command.SEND_UNIT_DATA:
+            self._check_session(session)
+            reply = self._send_unit_data(body, now)
+            if reply is not None:
+                self._reply(command, session, context, reply)
+        elif command == Command.REGISTER_SESSION:
+            self._register_session(session, context, body)
+        elif command == Command.UNREGISTER_SESSION:
+            self._check_session(session)
+            self.closing = True  # no reply; the TCP connection closes
+        elif command == Command.NOP:
+            pass  # no reply by definition
+        elif command in UDP_COMMANDS:
+            self._reply(command, session, context, self.target._list_reply(command, self.local))
+        else:
+            raise EncapsulationError(EncapsulationStatus.INVALID_COMMAND, f"command 0x{command:04X}")
+
+    def _check_session(self, session: int) -> None:
+        if self.session is None or session != self.session:
+            raise EncapsulationError(EncapsulationStatus.INVALID_SESSION)
+
+    def _register_session(self, session: int, context: bytes, body: bytes) -> None:
+        if len(body) != REGISTER_SESSION_DATA.size:
+            raise EncapsulationError(EncapsulationStatus.INVALID_LENGTH)
+        version, options = REGISTER_SESSION_DATA.unpack(body)
+        if self.session is not None:
+            raise EncapsulationError(EncapsulationStatus.INVALID_COMMAND, "second RegisterSession")
+        if version != PROTOCOL_VERSION or options != 0:
+            self._reply(Command.REGISTER_SESSION, 0, context, REGISTER_SESSION_DATA.pack(PROTOCOL_VERSION, 0),
+                        status=EncapsulationStatus.UNSUPPORTED_PROTOCOL)
+            return
+        if len(self.target.sessions) >= self.target.settings.max_sessions:
+            raise EncapsulationError(EncapsulationStatus.INSUFFICIENT_MEMORY, "no session slot")
+        self.session = self.target._new_session(self)
+        log.info("%s: session 0x%08X registered", self.peer, self.session)
+        self._reply(Command.REGISTER_SESSION, self.session, context, body)
+
+    def _send_rr_data(self, body: bytes, now: float) -> bytes:
+        if len(body) < RR_PREFIX.size:
+            raise EncapsulationError(EncapsulationStatus.INVALID_LENGTH)
+        interface, _timeout = RR_PREFIX.unpack_from(body)
+        items = decode_items(body, RR_PREFIX.size)
+        if (interface != 0 or len(items) != 2 or items[0].type != ItemType.NULL_ADDRESS or items[0].data
+                or items[1].type != ItemType.UNCONNECTED_DATA or not items[1].data):
+            raise EncapsulationError(EncapsulationStatus.INCORRECT_DATA, "SendRRData needs Null Address + Unconnected Data")
+        context = self._context
+        context.now = now
+        context.connected = False
+        reply = self.target.router.handle(items[1].data, context)
+        return RR_PREFIX.pack(0, 0) + encode_items((Item(ItemType.NULL_ADDRESS), Item(ItemType.UNCONNECTED_DATA, reply)))
+
+    def _send_unit_data(self, body: bytes, now: float) -> bytes | None:
+        if len(body) < RR_PREFIX.size:
+            raise EncapsulationError(EncapsulationStatus.INVALID_LENGTH)
+        items = decode_items(body, RR_PREFIX.size)
+        if (len(items) != 2 or items[0].type != ItemType.CONNECTED_ADDRESS or len(items[0].data) != 4
+                or items[1].type != ItemType.CONNECTED_DATA or len(items[1].data) < 2):
+            raise EncapsulationError(EncapsulationStatus.INCORRECT_DATA,
+                                     "SendUnitData needs Connected Address + Connected Data")
+        (connection_id,) = _CONN_ID.unpack(items[0].data)
+        connection = self.target.table.connections.get(connection_id)
+        if connection is None or connection.owner is not self:
+            # No CIP-level way to answer a packet for an unknown connection: drop and count.
+            self.target.stats.dropped += 1
+            log.debug("%s: SendUnitData for unknown connection 0x%08X dropped", self.peer, connection_id)
+            return None
+        connection.deadline = now + connection.timeout_s
+        (sequence,) = _SEQ.unpack_from(items[1].data)
+        if sequence == connection.last_sequence:
+            reply = connection.last_reply  # a retransmission: answer again, do not execute twice
+        else:
+            context = self._context
+            context.now = now
+            context.connected = True
+            reply = self.target.router.handle(items[1].data[2:], context)
+            context.connected = False
+            connection.last_sequence = sequence
+            connection.last_reply = reply
+            connection.requests += 1
+        return RR_PREFIX.pack(0, 0) + encode_items((
+            Item(ItemType.CONNECTED_ADDRESS, _CONN_ID.pack(connection.to_connection_id)),
+            Item(ItemType.CONNECTED_DATA, _SEQ.pack(sequence) + reply),
+        ))

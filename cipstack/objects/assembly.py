@@ -1,0 +1,78 @@
+"""Assembly object (class 0x04): instances whose attribute 3 is a block of I/O data.
+
+Generic: each instance has a fixed size and either holds its bytes or takes them from the
+device (``produce``) and hands written bytes to it (``consume``). Output (consumed)
+assemblies are settable; a write must carry exactly the instance's size (0x13 short,
+0x15 long).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from dataclasses import dataclass
+
+from ..cip.messages import Service
+from ..cip.model import Access, AttributeSpec, Binding, CipObject, ClassSpec, Instance
+from ..cip.router import RequestContext
+from ..cip.status import CipError, GeneralStatus
+from ..cip.types import UINT, RemainingBytes
+
+CLASS_ID = 0x04
+
+SPEC = ClassSpec(
+    CLASS_ID, "Assembly", revision=2,
+    instance_attributes=(
+        AttributeSpec(3, "Data", RemainingBytes("ASSEMBLY DATA"), Access.GET_SET, default=b""),
+        AttributeSpec(4, "Size", UINT),
+    ),
+    class_services=frozenset({Service.GET_ATTRIBUTE_SINGLE}),
+    instance_services=frozenset({Service.GET_ATTRIBUTE_SINGLE, Service.SET_ATTRIBUTE_SINGLE}),
+)
+
+
+@dataclass
+class AssemblyPoint:
+    instance_id: int
+    size: int
+    #: True for output (consumed, O->T) assemblies: settable over the network.
+    consumed: bool
+    produce: Callable[[], bytes] | None = None
+    consume: Callable[[bytes], None] | None = None
+    name: str = ""
+
+
+class AssemblyObject(CipObject):
+    def __init__(self) -> None:
+        super().__init__(SPEC)
+        self.points: dict[int, AssemblyPoint] = {}
+
+    def add_assembly(self, point: AssemblyPoint) -> None:
+        self.points[point.instance_id] = point
+        store = bytearray(point.size)
+
+        def produce() -> bytes:
+            return point.produce() if point.produce is not None else bytes(store)
+
+        def consume(data: bytes) -> None:
+            store[:] = data
+            if point.consume is not None:
+                point.consume(bytes(data))
+
+        self.add_instance(point.instance_id, data=Binding(produce, consume), size=point.size)
+
+    def data(self, instance_id: int) -> bytes:
+        return bytes(self.get(instance_id, 3))
+
+    def write_attribute(self, instance: Instance, spec: AttributeSpec, value: object,
+                        context: RequestContext | None = None) -> None:
+        if spec.id == 3:
+            point = self.points[instance.instance_id]
+            if not point.consumed and context is not None:
+                # An input (produced) assembly is the device's to write, not the network's.
+                raise CipError(GeneralStatus.ATTRIBUTE_NOT_SETTABLE, message=f"assembly {point.instance_id} is an input")
+            data = bytes(value)  # type: ignore[call-overload]
+            if len(data) < point.size:
+                raise CipError(GeneralStatus.NOT_ENOUGH_DATA, message=f"assembly {point.instance_id} is {point.size} bytes")
+            if len(data) > point.size:
+                raise CipError(GeneralStatus.TOO_MUCH_DATA, message=f"assembly {point.instance_id} is {point.size} bytes")
+        super().write_attribute(instance, spec, value, context)
