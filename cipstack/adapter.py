@@ -32,10 +32,9 @@ class Adapter:
     def __init__(self, settings: AdapterSettings | None = None, device: Device | None = None) -> None:
         self.settings = settings or AdapterSettings()
         s = self.settings
-        self.device = device or build_device(
-            s.profile, NetworkInterface(ip_address=s.host if s.host not in ("", "0.0.0.0", "localhost") else "127.0.0.1",
-                                        mac=DEFAULT_MAC),
-            DeviceLimits(s.max_sessions, s.max_connections))
+        ip_address = s.host if s.host not in ("", "0.0.0.0", "localhost") else "127.0.0.1"
+        self.device = device or build_device(s.profile, NetworkInterface(ip_address=ip_address, mac=DEFAULT_MAC),
+                                             DeviceLimits(s.max_sessions, s.max_connections))
         self.target = EncapsulationTarget(
             self.device.router, self.device.identity_record,
             TargetSettings(max_sessions=s.max_sessions, max_connections=s.max_connections,

@@ -260,7 +260,8 @@ class CipObject:
         handler: Callable[..., bytes] = getattr(self, method_name)
         return handler(instance, path, request, context)
 
-    def _attribute(self, instance: Instance | None, attribute_id: int | None) -> tuple[AttributeSpec, Callable[[], Any] | None]:
+    def _attribute(self, instance: Instance | None,
+                   attribute_id: int | None) -> tuple[AttributeSpec, Callable[[], Any] | None]:
         if attribute_id is None:
             raise CipError(GeneralStatus.PATH_SEGMENT_ERROR, message="no attribute in the path")
         if instance is None:

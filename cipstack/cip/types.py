@@ -109,7 +109,8 @@ class IntegerType(CipType):
             try:
                 value = int(value)
             except (TypeError, ValueError):
-                raise CipError(GeneralStatus.INVALID_ATTRIBUTE_VALUE, message=f"{value!r} is not a {self.name}") from None
+                raise CipError(GeneralStatus.INVALID_ATTRIBUTE_VALUE,
+                               message=f"{value!r} is not a {self.name}") from None
         if not self.minimum <= value <= self.maximum:
             raise CipError(
                 GeneralStatus.INVALID_ATTRIBUTE_VALUE,
@@ -216,7 +217,8 @@ class StringType(CipType):
         except UnicodeEncodeError:
             raise CipError(GeneralStatus.INVALID_ATTRIBUTE_VALUE, message=f"{value!r} is not Latin-1") from None
         if len(raw) > self._length.maximum:
-            raise CipError(GeneralStatus.INVALID_ATTRIBUTE_VALUE, message=f"{self.name} longer than {self._length.maximum}")
+            raise CipError(GeneralStatus.INVALID_ATTRIBUTE_VALUE,
+                           message=f"{self.name} longer than {self._length.maximum}")
         return value
 
     def parse_text(self, text: str) -> str:

@@ -261,12 +261,14 @@ class EncapsulationConnection:
         items = decode_items(body, RR_PREFIX.size)
         if (interface != 0 or len(items) != 2 or items[0].type != ItemType.NULL_ADDRESS or items[0].data
                 or items[1].type != ItemType.UNCONNECTED_DATA or not items[1].data):
-            raise EncapsulationError(EncapsulationStatus.INCORRECT_DATA, "SendRRData needs Null Address + Unconnected Data")
+            raise EncapsulationError(EncapsulationStatus.INCORRECT_DATA,
+                                     "SendRRData needs Null Address + Unconnected Data")
         context = self._context
         context.now = now
         context.connected = False
         reply = self.target.router.handle(items[1].data, context)
-        return RR_PREFIX.pack(0, 0) + encode_items((Item(ItemType.NULL_ADDRESS), Item(ItemType.UNCONNECTED_DATA, reply)))
+        items_out = (Item(ItemType.NULL_ADDRESS), Item(ItemType.UNCONNECTED_DATA, reply))
+        return RR_PREFIX.pack(0, 0) + encode_items(items_out)
 
     def _send_unit_data(self, body: bytes, now: float) -> bytes | None:
         if len(body) < RR_PREFIX.size:

@@ -67,12 +67,12 @@ class AssemblyObject(CipObject):
                         context: RequestContext | None = None) -> None:
         if spec.id == 3:
             point = self.points[instance.instance_id]
+            where = f"assembly {point.instance_id}"
             if not point.consumed and context is not None:
                 # An input (produced) assembly is the device's to write, not the network's.
-                raise CipError(GeneralStatus.ATTRIBUTE_NOT_SETTABLE, message=f"assembly {point.instance_id} is an input")
+                raise CipError(GeneralStatus.ATTRIBUTE_NOT_SETTABLE, message=f"{where} is an input")
             data = bytes(value)  # type: ignore[call-overload]
-            if len(data) < point.size:
-                raise CipError(GeneralStatus.NOT_ENOUGH_DATA, message=f"assembly {point.instance_id} is {point.size} bytes")
-            if len(data) > point.size:
-                raise CipError(GeneralStatus.TOO_MUCH_DATA, message=f"assembly {point.instance_id} is {point.size} bytes")
+            if len(data) != point.size:
+                code = GeneralStatus.NOT_ENOUGH_DATA if len(data) < point.size else GeneralStatus.TOO_MUCH_DATA
+                raise CipError(code, message=f"{where} is {point.size} bytes, got {len(data)}")
         super().write_attribute(instance, spec, value, context)

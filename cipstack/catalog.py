@@ -1,0 +1,54 @@
+"""Known class declarations, for decoding replies into Python values.
+
+The scanner looks an attribute up here; a device profile's declarations extend the
+standard ones, so a profile's attributes decode by the same declaration the emulator serves.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Iterable
+
+from .cip.model import AttributeSpec, ClassSpec
+from .cip.types import UINT
+from .eip.connection_manager import SPEC as CONNECTION_MANAGER_SPEC
+from .objects.assembly import SPEC as ASSEMBLY_SPEC
+from .objects.identity import identity_spec
+from .objects.message_router import SPEC as MESSAGE_ROUTER_SPEC
+from .objects.tcpip import ETHERNET_LINK_SPEC, TCPIP_SPEC
+
+STANDARD_CLASSES: dict[int, ClassSpec] = {
+    spec.class_id: spec
+    for spec in (identity_spec(), MESSAGE_ROUTER_SPEC, ASSEMBLY_SPEC, CONNECTION_MANAGER_SPEC, TCPIP_SPEC,
+                 ETHERNET_LINK_SPEC)
+}
+
+#: Standard class attributes every class has (instance 0).
+CLASS_ATTRIBUTES: dict[int, AttributeSpec] = {
+    1: AttributeSpec(1, "Revision", UINT),
+    2: AttributeSpec(2, "Max Instance", UINT),
+    3: AttributeSpec(3, "Number of Instances", UINT),
+    6: AttributeSpec(6, "Maximum ID Number Class Attributes", UINT),
+    7: AttributeSpec(7, "Maximum ID Number Instance Attributes", UINT),
+}
+
+
+class Catalog:
+    def __init__(self, classes: Iterable[ClassSpec] = ()) -> None:
+        self.classes: dict[int, ClassSpec] = dict(STANDARD_CLASSES)
+        for spec in classes:
+            self.classes[spec.class_id] = spec
+
+    def add(self, spec: ClassSpec) -> None:
+        self.classes[spec.class_id] = spec
+
+    def attribute(self, class_id: int, instance: int, attribute_id: int) -> AttributeSpec | None:
+        if instance == 0:
+            return CLASS_ATTRIBUTES.get(attribute_id)
+        spec = self.classes.get(class_id)
+        return spec.instance_attribute(attribute_id) if spec is not None else None
+
+    def get_all_layout(self, class_id: int) -> list[AttributeSpec] | None:
+        spec = self.classes.get(class_id)
+        if spec is None:
+            return None
+        return [a for a in spec.instance_attributes if a.in_get_all and a.access.readable]

@@ -1,0 +1,324 @@
+"""The ``cipstack`` command: adapter emulator, discovery, explicit messaging.
+
+Every failure prints one line on stderr and exits non-zero: 2 for bad arguments, 1 for an
+error status or a network failure. ``--json`` prints one JSON object per line on stdout.
+"""
+
+from __future__ import annotations
+
+import argparse
+import asyncio
+import json
+import logging
+import sys
+from collections.abc import Callable, Sequence
+from typing import Any
+
+from . import __version__
+from .cip.status import CipError, describe_status
+from .cip.types import CipType, parse_int, type_by_name
+from .eip.originator import DEFAULT_PORT, EncapsulationStatusError, parse_host
+
+EXIT_OK = 0
+EXIT_FAILURE = 1
+EXIT_USAGE = 2
+
+
+class UsageError(Exception):
+    """A bad argument: reported as one line, exit status 2."""
+
+
+def parse_number(text: str, what: str) -> int:
+    try:
+        return parse_int(text)
+    except ValueError:
+        raise UsageError(f"{what}: {text!r} is not a number (decimal or 0x hex)") from None
+
+
+def parse_object_path(text: str, need_attribute: bool = False) -> tuple[int, int, int | None]:
+    """``CLASS/INSTANCE[/ATTRIBUTE]`` with decimal or 0x hex numbers."""
+    parts = text.strip().lstrip("@").split("/")
+    if len(parts) not in (2, 3) or (need_attribute and len(parts) != 3):
+        form = "CLASS/INSTANCE/ATTRIBUTE" if need_attribute else "CLASS/INSTANCE[/ATTRIBUTE]"
+        raise UsageError(f"path {text!r} is not {form}")
+    numbers = [parse_number(p, "path") for p in parts]
+    for number, limit, name in zip(numbers, (0xFFFF, 0xFFFF, 0xFFFF), ("class", "instance", "attribute"), strict=False):
+        if not 0 <= number <= limit:
+            raise UsageError(f"{name} {number} out of range 0..{limit}")
+    return numbers[0], numbers[1], (numbers[2] if len(numbers) == 3 else None)
+
+
+def parse_type(text: str | None) -> CipType | None:
+    if text is None:
+        return None
+    try:
+        return type_by_name(text)
+    except ValueError as exc:
+        raise UsageError(str(exc)) from None
+
+
+def parse_duration(text: str) -> float:
+    """``2``, ``2.5``, ``500ms``, ``2s``."""
+    raw = text.strip().lower()
+    scale = 1.0
+    if raw.endswith("ms"):
+        raw, scale = raw[:-2], 0.001
+    elif raw.endswith("s"):
+        raw = raw[:-1]
+    try:
+        value = float(raw) * scale
+    except ValueError:
+        raise UsageError(f"{text!r} is not a duration (e.g. 2, 500ms, 1.5s)") from None
+    if value < 0:
+        raise UsageError(f"duration {text!r} is negative")
+    return value
+
+
+def _emit(args: argparse.Namespace, record: dict[str, Any], text: str) -> None:
+    if args.json:
+        print(json.dumps(record), flush=True)
+    else:
+        print(text, flush=True)
+
+
+# -- adapter -----------------------------------------------------------------------------------------
+def cmd_adapter(args: argparse.Namespace) -> int:
+    from .adapter import Adapter, AdapterSettings
+    from .devices.profiles import PROFILES
+
+    if args.profile not in PROFILES:
+        raise UsageError(f"unknown profile {args.profile!r} (known: {', '.join(sorted(PROFILES))})")
+    if not 0 <= args.port < 65536:
+        raise UsageError(f"port {args.port} out of range")
+    settings = AdapterSettings(host=args.host, port=args.port, profile=args.profile,
+                               max_sessions=args.max_sessions, max_connections=args.max_connections)
+    adapter = Adapter(settings)
+    try:
+        asyncio.run(adapter.serve_forever())
+    except OSError as exc:
+        print(f"cipstack adapter: cannot listen on {args.host}:{args.port}: {exc.strerror or exc}", file=sys.stderr)
+        return EXIT_FAILURE
+    return EXIT_OK
+
+
+# -- discovery -----------------------------------------------------------------------------------
+def _identity_text(record: Any) -> str:
+    address = f"{record.address.host}:{record.address.port}" if record.address else "?"
+    return (f"{address}  {record.product_name!r}  vendor {record.vendor_id}  device type {record.device_type}  "
+            f"product code {record.product_code}  revision {record.revision[0]}.{record.revision[1]}  "
+            f"serial 0x{record.serial_number:08X}  status 0x{record.status:04X}  state {record.state}")
+
+
+def cmd_discover(args: argparse.Namespace) -> int:
+    from .eip.originator import discover
+
+    records = asyncio.run(discover(args.broadcast, args.port, args.timeout))
+    for record in records:
+        _emit(args, record.as_dict(), _identity_text(record))
+    if not records and not args.json:
+        print("no device answered", file=sys.stderr)
+    return EXIT_OK
+
+
+def cmd_identity(args: argparse.Namespace) -> int:
+    from .eip.originator import EncapsulationClient
+
+    host, port = parse_host(args.target)
+
+    async def run() -> list[Any]:
+        client = await EncapsulationClient.connect(host, port, args.timeout, register=False)
+        try:
+            return await client.list_identity()
+        finally:
+            await client.close()
+
+    records = asyncio.run(run())
+    if not records:
+        print(f"cipstack identity: {args.target} answered ListIdentity with no identity", file=sys.stderr)
+        return EXIT_FAILURE
+    for record in records:
+        _emit(args, record.as_dict(), _identity_text(record))
+    return EXIT_OK
+
+
+# -- get / set -------------------------------------------------------------------------------------
+def _value_text(value: Any) -> str:
+    if isinstance(value, bytes):
+        return value.hex(" ")
+    if isinstance(value, str):
+        return repr(value)
+    return json.dumps(value) if isinstance(value, (dict, list)) else str(value)
+
+
+def cmd_get(args: argparse.Namespace) -> int:
+    from .scanner import Scanner
+
+    class_id, instance, attribute = parse_object_path(args.path)
+    cip_type = parse_type(args.type)
+
+    async def run() -> dict[str, Any]:
+        scanner = await Scanner.connect(args.target, timeout=args.timeout)
+        try:
+            if args.connected:
+                await scanner.open_connection()
+            if attribute is None:
+                data, values = await scanner.get_attributes_all(class_id, instance)
+                record: dict[str, Any] = {"status": 0, "data": data.hex()}
+                if values is not None:
+                    record["value"] = {name: _jsonable(v) for name, v in values.items()}
+                return record
+            result = await scanner.get_attribute_single(class_id, instance, attribute, cip_type)
+            record = {"status": 0, "data": result.data.hex()}
+            if result.known:
+                record["value"] = result.json_value()
+                record["type"] = result.type.name if result.type else None
+            if result.spec is not None:
+                record["name"] = result.spec.name
+            return record
+        finally:
+            await scanner.close()
+
+    record = asyncio.run(run())
+    record["path"] = args.path
+    if args.json:
+        print(json.dumps(record), flush=True)
+    elif "value" in record:
+        name = f"{record['name']} = " if "name" in record else ""
+        value = record["value"]
+        print(f"{name}{_value_text(value)}" if not isinstance(value, dict)
+              else "\n".join(f"{k} = {_value_text(v)}" for k, v in value.items()), flush=True)
+    else:
+        print(bytes.fromhex(record["data"]).hex(" ") or "(no data)", flush=True)
+    return EXIT_OK
+
+
+def _jsonable(value: Any) -> Any:
+    if isinstance(value, bytes):
+        return value.hex()
+    if isinstance(value, dict):
+        return {k: _jsonable(v) for k, v in value.items()}
+    if isinstance(value, list):
+        return [_jsonable(v) for v in value]
+    return value
+
+
+def cmd_set(args: argparse.Namespace) -> int:
+    from .scanner import Scanner
+
+    class_id, instance, attribute = parse_object_path(args.path, need_attribute=True)
+    assert attribute is not None
+    cip_type = parse_type(args.type)
+    assert cip_type is not None
+    try:
+        value = cip_type.parse_text(args.value)
+        data = cip_type.encode(value)
+    except (ValueError, CipError) as exc:
+        raise UsageError(f"value {args.value!r} is not a valid {cip_type.name}: {exc}") from None
+
+    async def run() -> None:
+        scanner = await Scanner.connect(args.target, timeout=args.timeout)
+        try:
+            if args.connected:
+                await scanner.open_connection()
+            await scanner.set_attribute_single(class_id, instance, attribute, data)
+        finally:
+            await scanner.close()
+
+    asyncio.run(run())
+    _emit(args, {"status": 0, "path": args.path, "data": data.hex(), "value": cip_type.to_json(value)},
+          f"set {args.path} = {args.value}")
+    return EXIT_OK
+
+
+# -- parser ------------------------------------------------------------------------------------------
+class _Parser(argparse.ArgumentParser):
+    def error(self, message: str) -> Any:  # one line, exit 2, no usage dump
+        raise UsageError(message)
+
+
+def build_parser() -> argparse.ArgumentParser:
+    parser = _Parser(prog="cipstack", description="CIP for AC drives over EtherNet/IP and CompoNet")
+    parser.add_argument("--version", action="version", version=f"cipstack {__version__}")
+    parser.add_argument("--log-level", default="INFO", choices=["DEBUG", "INFO", "WARNING", "ERROR"])
+    sub = parser.add_subparsers(dest="command", required=True, parser_class=_Parser)
+
+    def common(p: argparse.ArgumentParser, target: bool = True) -> None:
+        if target:
+            p.add_argument("target", metavar="HOST[:PORT]", help=f"target address (default port {DEFAULT_PORT})")
+        p.add_argument("--timeout", type=parse_duration, default=5.0, help="reply timeout (default 5 s)")
+        p.add_argument("--json", action="store_true", help="one JSON object per line")
+
+    p = sub.add_parser("adapter", help="run the adapter emulator")
+    p.add_argument("--host", default="127.0.0.1", help="address to listen on (default 127.0.0.1)")
+    p.add_argument("--port", type=lambda t: parse_number(t, "port"), default=DEFAULT_PORT)
+    p.add_argument("--profile", default="acg", help="device profile (default acg)")
+    p.add_argument("--max-sessions", type=lambda t: parse_number(t, "max sessions"), default=32)
+    p.add_argument("--max-connections", type=lambda t: parse_number(t, "max connections"), default=32)
+    p.add_argument("--json", action="store_true", help=argparse.SUPPRESS)
+    p.set_defaults(func=cmd_adapter)
+
+    p = sub.add_parser("discover", help="ListIdentity over UDP")
+    p.add_argument("--broadcast", default="255.255.255.255", help="broadcast or unicast address")
+    p.add_argument("--port", type=lambda t: parse_number(t, "port"), default=DEFAULT_PORT)
+    common(p, target=False)
+    p.set_defaults(func=cmd_discover, timeout=2.0)
+
+    p = sub.add_parser("identity", help="ListIdentity over TCP")
+    common(p)
+    p.set_defaults(func=cmd_identity)
+
+    p = sub.add_parser("get", help="Get_Attribute_Single (or Get_Attributes_All without an attribute)")
+    common(p)
+    p.add_argument("path", metavar="CLASS/INSTANCE[/ATTRIBUTE]")
+    p.add_argument("--type", help="CIP type to decode the value (UINT, SHORT_STRING, ...)")
+    p.add_argument("--connected", action="store_true", help="use a class 3 connection")
+    p.set_defaults(func=cmd_get)
+
+    p = sub.add_parser("set", help="Set_Attribute_Single")
+    common(p)
+    p.add_argument("path", metavar="CLASS/INSTANCE/ATTRIBUTE")
+    p.add_argument("value")
+    p.add_argument("--type", required=True, help="CIP type of the value (UINT, INT, REAL, SHORT_STRING, ...)")
+    p.add_argument("--connected", action="store_true", help="use a class 3 connection")
+    p.set_defaults(func=cmd_set)
+    return parser
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    parser = build_parser()
+    try:
+        args = parser.parse_args(argv)
+    except UsageError as exc:
+        print(f"cipstack: {exc}", file=sys.stderr)
+        return EXIT_USAGE
+    logging.basicConfig(level=getattr(logging, args.log_level), stream=sys.stderr,
+                        format="%(asctime)s %(levelname)s %(name)s: %(message)s")
+    func: Callable[[argparse.Namespace], int] = args.func
+    name = f"cipstack {args.command}"
+    try:
+        return func(args)
+    except UsageError as exc:
+        print(f"{name}: {exc}", file=sys.stderr)
+        return EXIT_USAGE
+    except CipError as exc:
+        if getattr(args, "json", False):
+            print(json.dumps({"status": exc.general, "extended_status": list(exc.extended),
+                              "error": describe_status(exc.general, exc.extended),
+                              "path": getattr(args, "path", None)}), flush=True)
+        print(f"{name}: error status {exc}", file=sys.stderr)
+        return EXIT_FAILURE
+    except EncapsulationStatusError as exc:
+        print(f"{name}: {exc}", file=sys.stderr)
+        return EXIT_FAILURE
+    except (ConnectionError, asyncio.TimeoutError, TimeoutError, OSError) as exc:
+        print(f"{name}: {exc or type(exc).__name__}", file=sys.stderr)
+        return EXIT_FAILURE
+    except KeyboardInterrupt:
+        return 130
+    except ValueError as exc:
+        print(f"{name}: {exc}", file=sys.stderr)
+        return EXIT_USAGE
+
+
+if __name__ == "__main__":  # pragma: no cover
+    raise SystemExit(main())

@@ -1,0 +1,384 @@
+"""The EtherNet/IP originator (scanner) client, asyncio.
+
+``EncapsulationClient`` owns one TCP connection and one session. Requests are matched to
+replies by sender context, so several may be in flight at once; class 3 requests are
+matched by their connection's sequence count. ``discover`` sends ListIdentity over UDP
+(unicast or broadcast) and collects replies until its timeout.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import itertools
+import random
+import socket
+import struct
+from collections.abc import Sequence
+from dataclasses import dataclass
+
+from ..cip.epath import Segment, encode_path, request_path
+from ..cip.messages import MessageRouterRequest, MessageRouterResponse, Service
+from ..cip.status import CipError, GeneralStatus
+from .cm_messages import (
+    ConnectionTriad,
+    ForwardCloseRequest,
+    ForwardOpenReply,
+    ForwardOpenRequest,
+    NetworkParameters,
+    TransportTrigger,
+    TriggerType,
+    UnconnectedSendRequest,
+)
+from .cpf import Item, ItemType, decode_items, encode_items
+from .encapsulation import (
+    HEADER,
+    HEADER_SIZE,
+    PROTOCOL_VERSION,
+    REGISTER_SESSION_DATA,
+    RR_PREFIX,
+    Command,
+    EncapsulationError,
+    EncapsulationHeader,
+    EncapsulationStatus,
+)
+from .identity_items import IdentityRecord, ServiceRecord, decode_list_identity, decode_list_services
+
+DEFAULT_PORT = 44818
+#: Our vendor id as an originator (0xFFFF is not assigned; any value works for tests).
+ORIGINATOR_VENDOR_ID = 0xFFFE
+CONNECTION_MANAGER_PATH = request_path(0x06, 1)
+MESSAGE_ROUTER_PATH = request_path(0x02, 1)
+
+_SEQ = struct.Struct("<H")
+_CONN_ID = struct.Struct("<I")
+
+
+class EncapsulationStatusError(Exception):
+    """A reply carried a non-zero encapsulation status."""
+
+    def __init__(self, command: int, status: int) -> None:
+        self.command = command
+        self.status = status
+        try:
+            name = EncapsulationStatus(status).name.lower().replace("_", " ")
+        except ValueError:
+            name = "unknown"
+        super().__init__(f"encapsulation command 0x{command:04X} failed with status 0x{status:04X} ({name})")
+
+
+def parse_host(text: str, default_port: int = DEFAULT_PORT) -> tuple[str, int]:
+    """``HOST[:PORT]`` -> (host, port)."""
+    host, sep, port = text.rpartition(":")
+    if not sep:
+        return text, default_port
+    if not host:
+        raise ValueError(f"no host in {text!r}")
+    try:
+        number = int(port, 0)
+    except ValueError:
+        raise ValueError(f"bad port in {text!r}") from None
+    if not 0 < number < 65536:
+        raise ValueError(f"port {number} out of range")
+    return host, number
+
+
+class _ClientProtocol(asyncio.Protocol):
+    def __init__(self, client: EncapsulationClient) -> None:
+        self.client = client
+        self.buffer = bytearray()
+        self.transport: asyncio.Transport | None = None
+
+    def connection_made(self, transport: asyncio.BaseTransport) -> None:
+        self.transport = transport  # type: ignore[assignment]
+        sock = transport.get_extra_info("socket")
+        if sock is not None:
+            sock.setsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY, 1)
+
+    def data_received(self, data: bytes) -> None:
+        buffer = self.buffer
+        buffer += data
+        while len(buffer) >= HEADER_SIZE:
+            length = int.from_bytes(buffer[2:4], "little")
+            end = HEADER_SIZE + length
+            if len(buffer) < end:
+                return
+            header = EncapsulationHeader.decode(buffer)
+            body = bytes(buffer[HEADER_SIZE:end])
+            del buffer[:end]
+            self.client._deliver(header, body)
+
+    def connection_lost(self, exc: Exception | None) -> None:
+        self.client._lost(exc)
+
+
+@dataclass
+class ExplicitConnectionInfo:
+    """A class 3 connection this client opened."""
+
+    ot_connection_id: int
+    to_connection_id: int
+    triad: ConnectionTriad
+    rpi_us: int
+    sequence: int = 0
+
+
+class EncapsulationClient:
+    def __init__(self, host: str, port: int = DEFAULT_PORT, timeout: float = 5.0) -> None:
+        self.host = host
+        self.port = port
+        self.timeout = timeout
+        self.session = 0
+        self._protocol: _ClientProtocol | None = None
+        self._pending: dict[bytes, asyncio.Future[tuple[EncapsulationHeader, bytes]]] = {}
+        self._connected_pending: dict[int, asyncio.Future[bytes]] = {}
+        self._contexts = itertools.count(1)
+        self._closed_exc: BaseException | None = None
+        self.connection: ExplicitConnectionInfo | None = None
+        self._serials = itertools.count(random.randrange(0, 0xFFFF))
+
+    # -- life cycle -----------------------------------------------------------------------------
+    @classmethod
+    async def connect(cls, host: str, port: int = DEFAULT_PORT, timeout: float = 5.0,
+                      register: bool = True) -> EncapsulationClient:
+        client = cls(host, port, timeout)
+        await client.open(register)
+        return client
+
+    async def open(self, register: bool = True) -> None:
+        loop = asyncio.get_running_loop()
+        try:
+            _, protocol = await asyncio.wait_for(
+                loop.create_connection(lambda: _ClientProtocol(self), self.host, self.port), self.timeout)
+        except (OSError, asyncio.TimeoutError) as exc:
+            raise ConnectionError(f"cannot connect to {self.host}:{self.port}: {exc or 'timed out'}") from None
+        self._protocol = protocol
+        if register:
+            await self.register_session()
+
+    async def close(self) -> None:
+        if self._protocol is None or self._protocol.transport is None:
+            return
+        try:
+            if self.connection is not None:
+                await self.forward_close()
+            if self.session:
+                self._write(Command.UNREGISTER_SESSION, b"", bytes(8))
+        except (ConnectionError, CipError, EncapsulationStatusError, asyncio.TimeoutError):
+            pass
+        finally:
+            self._protocol.transport.close()
+            self._protocol = None
+            self.session = 0
+
+    async def __aenter__(self) -> EncapsulationClient:
+        if self._protocol is None:
+            await self.open()
+        return self
+
+    async def __aexit__(self, *exc: object) -> None:
+        await self.close()
+
+    # -- frames ---------------------------------------------------------------------------------
+    def _write(self, command: int, data: bytes, context: bytes) -> None:
+        if self._protocol is None or self._protocol.transport is None or self._protocol.transport.is_closing():
+            raise ConnectionError(f"connection to {self.host}:{self.port} is closed")
+        self._protocol.transport.write(HEADER.pack(command, len(data), self.session, 0, context, 0) + data)
+
+    def _deliver(self, header: EncapsulationHeader, body: bytes) -> None:
+        if header.command == Command.SEND_UNIT_DATA and header.status == 0:
+            try:
+                items = decode_items(body, RR_PREFIX.size)
+                sequence = _SEQ.unpack_from(items[1].data)[0]
+            except Exception:
+                return
+            future = self._connected_pending.pop(sequence, None)
+            if future is not None and not future.done():
+                future.set_result(items[1].data[2:])
+            return
+        future2 = self._pending.pop(header.context, None)
+        if future2 is not None and not future2.done():
+            future2.set_result((header, body))
+
+    def _lost(self, exc: Exception | None) -> None:
+        self._closed_exc = ConnectionError(f"connection to {self.host}:{self.port} lost" + (f": {exc}" if exc else ""))
+        for future in [*self._pending.values(), *self._connected_pending.values()]:
+            if not future.done():
+                future.set_exception(self._closed_exc)
+        self._pending.clear()
+        self._connected_pending.clear()
+        if self._protocol is not None:
+            self._protocol = None
+
+    async def exchange(self, command: int, data: bytes = b"", context: bytes | None = None,
+                       timeout: float | None = None) -> tuple[EncapsulationHeader, bytes]:
+        """Send one encapsulation frame and wait for the reply with the same sender context."""
+        if context is None:
+            context = next(self._contexts).to_bytes(8, "little")
+        future: asyncio.Future[tuple[EncapsulationHeader, bytes]] = asyncio.get_running_loop().create_future()
+        self._pending[context] = future
+        try:
+            self._write(command, data, context)
+            header, body = await asyncio.wait_for(future, timeout or self.timeout)
+        except asyncio.TimeoutError:
+            raise asyncio.TimeoutError(f"no reply from {self.host}:{self.port} to command 0x{command:04X}") from None
+        finally:
+            self._pending.pop(context, None)
+        if header.status != 0:
+            raise EncapsulationStatusError(command, header.status)
+        return header, body
+
+    # -- encapsulation commands -----------------------------------------------------------------
+    async def register_session(self) -> int:
+        header, _ = await self.exchange(Command.REGISTER_SESSION, REGISTER_SESSION_DATA.pack(PROTOCOL_VERSION, 0))
+        self.session = header.session
+        return self.session
+
+    async def list_identity(self) -> list[IdentityRecord]:
+        _, body = await self.exchange(Command.LIST_IDENTITY)
+        return decode_list_identity(body)
+
+    async def list_services(self) -> list[ServiceRecord]:
+        _, body = await self.exchange(Command.LIST_SERVICES)
+        return decode_list_services(body)
+
+    async def list_interfaces(self) -> list[Item]:
+        _, body = await self.exchange(Command.LIST_INTERFACES)
+        return decode_items(body)
+
+    async def nop(self, data: bytes = b"") -> None:
+        self._write(Command.NOP, data, bytes(8))
+
+    # -- explicit messaging ---------------------------------------------------------------------
+    async def send_rr_data(self, request: bytes, timeout: float | None = None) -> bytes:
+        """Unconnected explicit request (SendRRData); returns the encoded message-router reply."""
+        items = (Item(ItemType.NULL_ADDRESS), Item(ItemType.UNCONNECTED_DATA, request))
+        body = RR_PREFIX.pack(0, 0) + encode_items(items)
+        _, reply = await self.exchange(Command.SEND_RR_DATA, body, timeout=timeout)
+        items = decode_items(reply, RR_PREFIX.size)
+        for item in items:
+            if item.type == ItemType.UNCONNECTED_DATA:
+                return item.data
+        raise ValueError("SendRRData reply without Unconnected Data item")
+
+    async def send_unit_data(self, request: bytes, timeout: float | None = None) -> bytes:
+        """Class 3 connected request on the open connection; returns the message-router reply."""
+        connection = self.connection
+        if connection is None:
+            raise ConnectionError("no class 3 connection is open")
+        connection.sequence = (connection.sequence + 1) & 0xFFFF
+        sequence = connection.sequence
+        future: asyncio.Future[bytes] = asyncio.get_running_loop().create_future()
+        self._connected_pending[sequence] = future
+        body = RR_PREFIX.pack(0, 0) + encode_items((
+            Item(ItemType.CONNECTED_ADDRESS, _CONN_ID.pack(connection.ot_connection_id)),
+            Item(ItemType.CONNECTED_DATA, _SEQ.pack(sequence) + request),
+        ))
+        try:
+            self._write(Command.SEND_UNIT_DATA, body, bytes(8))
+            return await asyncio.wait_for(future, timeout or self.timeout)
+        except asyncio.TimeoutError:
+            raise asyncio.TimeoutError(f"no class 3 reply from {self.host}:{self.port}") from None
+        finally:
+            self._connected_pending.pop(sequence, None)
+
+    async def request(self, service: int, path: bytes, data: bytes = b"", *,
+                      route: Sequence[Segment] | bytes | None = None, connected: bool | None = None,
+                      timeout: float | None = None) -> MessageRouterResponse:
+        """Send any service; returns the reply (its status is not checked here).
+
+        ``route``: a route path (port segments): the request is wrapped in Unconnected_Send
+        to the Connection Manager. ``connected``: use the class 3 connection (default: when
+        one is open).
+        """
+        raw = MessageRouterRequest(service, path, data).encode()
+        if route is not None:
+            route_bytes = route if isinstance(route, bytes) else encode_path(route)
+            raw = MessageRouterRequest(Service.UNCONNECTED_SEND, CONNECTION_MANAGER_PATH,
+                                       UnconnectedSendRequest(0x0A, 0x0E, raw, route_bytes).encode()).encode()
+        use_connection = self.connection is not None if connected is None else connected
+        reply = await (self.send_unit_data(raw, timeout) if use_connection else self.send_rr_data(raw, timeout))
+        return MessageRouterResponse.decode(reply)
+
+    # -- class 3 connection -----------------------------------------------------------------------
+    async def forward_open(self, rpi_us: int = 2_000_000, connection_size: int = 500, large: bool = False,
+                           timeout_multiplier: int = 1, route: Sequence[Segment] | bytes = b"",
+                           path: bytes = MESSAGE_ROUTER_PATH) -> ExplicitConnectionInfo:
+        """Open a class 3 connection to the message router (Forward_Open or Large_Forward_Open)."""
+        route_bytes = route if isinstance(route, bytes) else encode_path(route)
+        triad = ConnectionTriad(next(self._serials) & 0xFFFF, ORIGINATOR_VENDOR_ID, random.randrange(1, 0xFFFFFFFF))
+        params = NetworkParameters(connection_size, variable=True)
+        fo = ForwardOpenRequest(
+            priority_tick=0x0A, timeout_ticks=0x0E, ot_connection_id=0,
+            to_connection_id=random.randrange(1, 0xFFFFFFFF), triad=triad, timeout_multiplier=timeout_multiplier,
+            ot_rpi_us=rpi_us, ot_parameters=params, to_rpi_us=rpi_us, to_parameters=params,
+            transport=TransportTrigger(3, TriggerType.APPLICATION, server=True),
+            connection_path=route_bytes + path, large=large)
+        service = Service.LARGE_FORWARD_OPEN if large else Service.FORWARD_OPEN
+        reply = await self.request(service, CONNECTION_MANAGER_PATH, fo.encode(), connected=False)
+        reply.raise_for_status()
+        decoded = ForwardOpenReply.decode(reply.data)
+        self.connection = ExplicitConnectionInfo(decoded.ot_connection_id, decoded.to_connection_id, triad,
+                                                 decoded.ot_api_us)
+        return self.connection
+
+    async def forward_close(self) -> None:
+        connection = self.connection
+        if connection is None:
+            return
+        self.connection = None
+        fc = ForwardCloseRequest(0x0A, 0x0E, connection.triad, MESSAGE_ROUTER_PATH)
+        reply = await self.request(Service.FORWARD_CLOSE, CONNECTION_MANAGER_PATH, fc.encode(), connected=False)
+        reply.raise_for_status()
+
+
+class _DiscoveryProtocol(asyncio.DatagramProtocol):
+    def __init__(self) -> None:
+        self.replies: list[tuple[bytes, tuple[str, int]]] = []
+
+    def datagram_received(self, data: bytes, addr: tuple[str, int]) -> None:
+        self.replies.append((data, addr))
+
+
+async def udp_query(command: int, address: str = "255.255.255.255", port: int = DEFAULT_PORT,
+                    timeout: float = 2.0, max_delay_ms: int | None = None) -> list[tuple[bytes, tuple[str, int]]]:
+    """Send a ListIdentity/ListServices datagram and collect the reply bodies for ``timeout`` seconds."""
+    loop = asyncio.get_running_loop()
+    transport, protocol = await loop.create_datagram_endpoint(_DiscoveryProtocol, family=socket.AF_INET,
+                                                              allow_broadcast=True)
+    try:
+        delay = max_delay_ms if max_delay_ms is not None else max(500, min(int(timeout * 1000) - 100, 0xFFFF))
+        context = _SEQ.pack(delay) + bytes(6)
+        transport.sendto(HEADER.pack(command, 0, 0, 0, context, 0), (address, port))
+        await asyncio.sleep(timeout)
+    finally:
+        transport.close()
+    bodies = []
+    for data, addr in protocol.replies:
+        if len(data) >= HEADER_SIZE:
+            header = EncapsulationHeader.decode(data)
+            if header.command == command and header.status == 0 and header.length == len(data) - HEADER_SIZE:
+                bodies.append((data[HEADER_SIZE:], addr))
+    return bodies
+
+
+async def discover(address: str = "255.255.255.255", port: int = DEFAULT_PORT,
+                   timeout: float = 2.0) -> list[IdentityRecord]:
+    """ListIdentity over UDP: every device that answers within ``timeout`` seconds."""
+    records: list[IdentityRecord] = []
+    for body, _addr in await udp_query(Command.LIST_IDENTITY, address, port, timeout):
+        try:
+            records.extend(decode_list_identity(body))
+        except (ValueError, struct.error, EncapsulationError):
+            continue
+    return records
+
+
+async def list_services_udp(address: str, port: int = DEFAULT_PORT, timeout: float = 1.0) -> list[ServiceRecord]:
+    records: list[ServiceRecord] = []
+    for body, _addr in await udp_query(Command.LIST_SERVICES, address, port, timeout):
+        records.extend(decode_list_services(body))
+    return records
+
+
+__all__ = ["DEFAULT_PORT", "CipError", "EncapsulationClient", "EncapsulationStatusError", "ExplicitConnectionInfo",
+           "GeneralStatus", "discover", "list_services_udp", "parse_host", "udp_query"]

@@ -1,0 +1,275 @@
+"""The scanner library: typed explicit messaging over an ``EncapsulationClient``.
+
+``Scanner`` is async; ``SyncScanner`` is a thin wrapper that runs it on a private event
+loop for scripts. Values decode by the attribute's declaration when the catalog knows it
+(standard objects, device profiles), or by an explicit type; otherwise the raw bytes are
+returned. Every error status raises ``CipError`` naming the general and extended status.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import struct
+from collections.abc import Awaitable, Coroutine, Sequence
+from dataclasses import dataclass
+from typing import Any, TypeVar
+
+from .catalog import Catalog
+from .cip.epath import PortSegment, Segment, request_path
+from .cip.messages import MessageRouterRequest, MessageRouterResponse, Service
+from .cip.model import AttributeSpec
+from .cip.status import CipError, GeneralStatus
+from .cip.types import UINT, CipType
+from .eip.identity_items import IdentityRecord, ServiceRecord
+from .eip.originator import DEFAULT_PORT, EncapsulationClient, discover, list_services_udp, parse_host
+
+T = TypeVar("T")
+
+
+@dataclass(frozen=True)
+class AttributeValue:
+    """A read attribute: its raw bytes, and its value when the type is known."""
+
+    class_id: int
+    instance: int
+    attribute: int
+    data: bytes
+    value: Any = None
+    spec: AttributeSpec | None = None
+    type: CipType | None = None
+
+    @property
+    def known(self) -> bool:
+        return self.type is not None
+
+    def json_value(self) -> Any:
+        if self.type is None:
+            return None
+        return self.type.to_json(self.value)
+
+
+def _decode(cip_type: CipType | None, data: bytes) -> Any:
+    if cip_type is None:
+        return None
+    return cip_type.decode(data)
+
+
+class Scanner:
+    """Explicit messaging to one target (unconnected, routed or class 3)."""
+
+    def __init__(self, client: EncapsulationClient, catalog: Catalog | None = None,
+                 route: Sequence[Segment] | None = None) -> None:
+        self.client = client
+        self.catalog = catalog or Catalog()
+        self.route = route
+
+    @classmethod
+    async def connect(cls, address: str, port: int | None = None, *, timeout: float = 5.0,
+                      catalog: Catalog | None = None, route: Sequence[Segment] | None = None) -> Scanner:
+        host, parsed_port = parse_host(address)
+        client = await EncapsulationClient.connect(host, port or parsed_port, timeout)
+        return cls(client, catalog, route)
+
+    async def close(self) -> None:
+        await self.client.close()
+
+    async def __aenter__(self) -> Scanner:
+        return self
+
+    async def __aexit__(self, *exc: object) -> None:
+        await self.close()
+
+    # -- generic ----------------------------------------------------------------------------------
+    async def request(self, service: int, class_id: int, instance: int | None = None, attribute: int | None = None,
+                      data: bytes = b"", *, check: bool = True) -> MessageRouterResponse:
+        """Any service by code to class/instance[/attribute]; raises ``CipError`` on an error status."""
+        path = request_path(class_id, instance, attribute)
+        reply = await self.client.request(service, path, data, route=self.route)
+        if reply.service != service & 0x7F:
+            raise CipError(GeneralStatus.INVALID_REPLY_RECEIVED, message=f"reply to service 0x{reply.service:02X}")
+        return reply.raise_for_status() if check else reply
+
+    async def open_connection(self, rpi: float = 2.0, large: bool = True, connection_size: int = 500) -> None:
+        """Open a class 3 connection; later requests travel on it until ``close_connection``."""
+        route: Sequence[Segment] = self.route or ()
+        await self.client.forward_open(int(rpi * 1e6), connection_size, large, route=list(route))
+
+    async def close_connection(self) -> None:
+        await self.client.forward_close()
+
+    # -- attributes -------------------------------------------------------------------------------
+    def _type_for(self, class_id: int, instance: int, attribute: int, cip_type: CipType | None
+                  ) -> tuple[CipType | None, AttributeSpec | None]:
+        spec = self.catalog.attribute(class_id, instance, attribute)
+        return (cip_type or (spec.type if spec is not None else None)), spec
+
+    async def get_attribute_single(self, class_id: int, instance: int, attribute: int,
+                                   cip_type: CipType | None = None) -> AttributeValue:
+        reply = await self.request(Service.GET_ATTRIBUTE_SINGLE, class_id, instance, attribute)
+        value_type, spec = self._type_for(class_id, instance, attribute, cip_type)
+        return AttributeValue(class_id, instance, attribute, reply.data, _decode(value_type, reply.data), spec,
+                              value_type)
+
+    async def read(self, class_id: int, instance: int, attribute: int, cip_type: CipType | None = None) -> Any:
+        """The decoded value (raw bytes when the type is unknown)."""
+        result = await self.get_attribute_single(class_id, instance, attribute, cip_type)
+        return result.value if result.known else result.data
+
+    async def set_attribute_single(self, class_id: int, instance: int, attribute: int, value: Any,
+                                   cip_type: CipType | None = None) -> None:
+        value_type, _ = self._type_for(class_id, instance, attribute, cip_type)
+        if isinstance(value, (bytes, bytearray)):
+            data = bytes(value)
+        elif value_type is None:
+            raise TypeError(f"type of 0x{class_id:02X}/{instance}/{attribute} unknown: give cip_type or bytes")
+        else:
+            data = value_type.encode(value)
+        await self.request(Service.SET_ATTRIBUTE_SINGLE, class_id, instance, attribute, data)
+
+    async def get_attributes_all(self, class_id: int, instance: int) -> tuple[bytes, dict[str, Any] | None]:
+        """Raw reply and, when the class is declared, the values by attribute name."""
+        reply = await self.request(Service.GET_ATTRIBUTES_ALL, class_id, instance)
+        layout = self.catalog.get_all_layout(class_id) if instance else None
+        if layout is None:
+            return reply.data, None
+        values: dict[str, Any] = {}
+        offset = 0
+        try:
+            for spec in layout:
+                values[spec.name], offset = spec.type.decode_from(reply.data, offset)
+        except CipError:
+            return reply.data, None
+        return reply.data, values if offset == len(reply.data) else None
+
+    async def get_attribute_list(self, class_id: int, instance: int, attributes: Sequence[int]
+                                 ) -> dict[int, AttributeValue | CipError]:
+        """Per-attribute results; needs every attribute's declaration to split the reply."""
+        data = UINT.encode(len(attributes)) + struct.pack(f"<{len(attributes)}H", *attributes)
+        reply = await self.request(Service.GET_ATTRIBUTE_LIST, class_id, instance, data=data, check=False)
+        if reply.general_status not in (GeneralStatus.SUCCESS, GeneralStatus.ATTRIBUTE_LIST_ERROR):
+            reply.raise_for_status()
+        results: dict[int, AttributeValue | CipError] = {}
+        body = reply.data
+        count, offset = UINT.decode_from(body, 0)
+        for _ in range(count):
+            attribute_id, offset = UINT.decode_from(body, offset)
+            status, offset = UINT.decode_from(body, offset)
+            if status:
+                results[attribute_id] = CipError(status, message=f"attribute {attribute_id}")
+                continue
+            value_type, spec = self._type_for(class_id, instance, attribute_id, None)
+            if value_type is None:
+                raise CipError(GeneralStatus.INVALID_REPLY_RECEIVED,
+                               message=f"attribute {attribute_id} has no known type: cannot split the list reply")
+            value, end = value_type.decode_from(body, offset)
+            results[attribute_id] = AttributeValue(class_id, instance, attribute_id, body[offset:end], value, spec,
+                                                   value_type)
+            offset = end
+        return results
+
+    async def set_attribute_list(self, class_id: int, instance: int, values: dict[int, Any]) -> dict[int, int]:
+        """Set several attributes; returns each attribute's status (0 = set)."""
+        out = bytearray(UINT.encode(len(values)))
+        for attribute_id, value in values.items():
+            value_type, _ = self._type_for(class_id, instance, attribute_id, None)
+            if isinstance(value, (bytes, bytearray)):
+                encoded = bytes(value)
+            elif value_type is None:
+                raise TypeError(f"type of attribute {attribute_id} unknown: give bytes")
+            else:
+                encoded = value_type.encode(value)
+            out += UINT.encode(attribute_id) + encoded
+        reply = await self.request(Service.SET_ATTRIBUTE_LIST, class_id, instance, data=bytes(out), check=False)
+        if reply.general_status not in (GeneralStatus.SUCCESS, GeneralStatus.ATTRIBUTE_LIST_ERROR):
+            reply.raise_for_status()
+        statuses: dict[int, int] = {}
+        count, offset = UINT.decode_from(reply.data, 0)
+        for _ in range(count):
+            attribute_id, offset = UINT.decode_from(reply.data, offset)
+            statuses[attribute_id], offset = UINT.decode_from(reply.data, offset)
+        return statuses
+
+    async def reset(self, class_id: int = 0x01, instance: int = 1, reset_type: int | None = None) -> None:
+        data = b"" if reset_type is None else bytes((reset_type,))
+        await self.request(Service.RESET, class_id, instance, data=data)
+
+    async def multiple_service_packet(self, requests: Sequence[MessageRouterRequest]) -> list[MessageRouterResponse]:
+        """Several requests in one Multiple_Service_Packet; returns each reply (status unchecked)."""
+        encoded = [r.encode() for r in requests]
+        table = bytearray(UINT.encode(len(encoded)))
+        offset = 2 + 2 * len(encoded)
+        for item in encoded:
+            table += UINT.encode(offset)
+            offset += len(item)
+        reply = await self.request(Service.MULTIPLE_SERVICE_PACKET, 0x02, 1, data=bytes(table) + b"".join(encoded),
+                                   check=False)
+        if reply.general_status not in (GeneralStatus.SUCCESS, GeneralStatus.EMBEDDED_SERVICE_ERROR):
+            reply.raise_for_status()
+        body = reply.data
+        count, _ = UINT.decode_from(body, 0)
+        offsets = [UINT.decode_from(body, 2 + 2 * i)[0] for i in range(count)] + [len(body)]
+        return [MessageRouterResponse.decode(body[offsets[i]:offsets[i + 1]]) for i in range(count)]
+
+    # -- encapsulation --------------------------------------------------------------------------
+    async def list_identity(self) -> list[IdentityRecord]:
+        return await self.client.list_identity()
+
+    async def list_services(self) -> list[ServiceRecord]:
+        return await self.client.list_services()
+
+
+def backplane_route(slot: int = 0) -> list[Segment]:
+    """Route path "port 1 (backplane), link = slot": with slot 0, the target itself."""
+    return [PortSegment(1, bytes((slot,)))]
+
+
+class SyncScanner:
+    """Blocking wrapper of ``Scanner`` for scripts: each call runs on a private event loop."""
+
+    def __init__(self, address: str, port: int | None = None, *, timeout: float = 5.0,
+                 catalog: Catalog | None = None, route: Sequence[Segment] | None = None) -> None:
+        self._loop = asyncio.new_event_loop()
+        try:
+            self._scanner = self._run(Scanner.connect(address, port, timeout=timeout, catalog=catalog, route=route))
+        except BaseException:
+            self._loop.close()
+            raise
+
+    def _run(self, coroutine: Coroutine[Any, Any, T] | Awaitable[T]) -> T:
+        return self._loop.run_until_complete(coroutine)
+
+    @property
+    def scanner(self) -> Scanner:
+        return self._scanner
+
+    def __getattr__(self, name: str) -> Any:
+        attribute = getattr(self._scanner, name)
+        if not asyncio.iscoroutinefunction(attribute):
+            return attribute
+
+        def call(*args: Any, **kwargs: Any) -> Any:
+            return self._run(attribute(*args, **kwargs))
+
+        return call
+
+    def close(self) -> None:
+        if not self._loop.is_closed():
+            try:
+                self._run(self._scanner.close())
+            finally:
+                self._loop.close()
+
+    def __enter__(self) -> SyncScanner:
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.close()
+
+
+def discover_sync(address: str = "255.255.255.255", port: int = DEFAULT_PORT, timeout: float = 2.0
+                  ) -> list[IdentityRecord]:
+    return asyncio.run(discover(address, port, timeout))
+
+
+__all__ = ["AttributeValue", "Scanner", "SyncScanner", "backplane_route", "discover", "discover_sync",
+           "list_services_udp"]
