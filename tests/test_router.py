@@ -1,0 +1,174 @@
+"""The object model and message router: every service and every failure status of wire.md."""
+
+from __future__ import annotations
+
+import struct
+
+import pytest
+
+from cipstack.cip.epath import request_path
+from cipstack.cip.messages import MessageRouterRequest, MessageRouterResponse, Service
+from cipstack.cip.model import Access, AttributeSpec, Binding, CipObject, ClassSpec
+from cipstack.cip.router import MessageRouter, RequestContext
+from cipstack.cip.status import GeneralStatus
+from cipstack.cip.types import INT, REAL, SHORT_STRING, UINT
+from cipstack.devices.profiles import build_device
+
+SPEED_SPEC = ClassSpec(
+    0x70, "Test Drive", revision=3,
+    instance_attributes=(
+        AttributeSpec(1, "Name", SHORT_STRING, default="drive"),
+        AttributeSpec(2, "Speed Reference", INT, Access.GET_SET, default=0, minimum=-1800, maximum=1800, unit="rpm"),
+        AttributeSpec(3, "Mode", UINT, Access.GET_SET, default=1, enum={1: "speed", 2: "torque"}),
+        AttributeSpec(4, "Gain", REAL, Access.GET_SET, default=1.5),
+        AttributeSpec(5, "Live Counter", UINT, in_get_all=False),
+    ),
+)
+
+
+@pytest.fixture
+def router() -> MessageRouter:
+    router = build_device().router
+    obj = CipObject(SPEED_SPEC)
+    counter = iter(range(100, 1000))
+    obj.add_instance(1, live_counter=Binding(lambda: next(counter)))
+    obj.add_instance(2, name="second")
+    router.register(obj)
+    return router
+
+
+def ask(router: MessageRouter, service: int, path: bytes, data: bytes = b"") -> MessageRouterResponse:
+    raw = router.handle(MessageRouterRequest(service, path, data).encode(), RequestContext(router))
+    return MessageRouterResponse.decode(raw)
+
+
+def test_get_attribute_single(router: MessageRouter) -> None:
+    reply = ask(router, Service.GET_ATTRIBUTE_SINGLE, request_path(1, 1, 7))
+    assert reply.encode() == bytes.fromhex("8E 00 00 00 04") + b"CENT"
+    assert ask(router, 0x0E, request_path(0x70, 1, 2)).data == b"\x00\x00"
+    # A bound attribute reads live.
+    assert ask(router, 0x0E, request_path(0x70, 1, 5)).data == struct.pack("<H", 100)
+    assert ask(router, 0x0E, request_path(0x70, 1, 5)).data == struct.pack("<H", 101)
+
+
+@pytest.mark.parametrize(("service", "path", "data", "status"), [
+    (0x0E, request_path(0x99, 1, 1), b"", GeneralStatus.PATH_DESTINATION_UNKNOWN),
+    (0x0E, request_path(0x70, 9, 1), b"", GeneralStatus.PATH_DESTINATION_UNKNOWN),
+    (0x0E, request_path(0x70, 1, 99), b"", GeneralStatus.ATTRIBUTE_NOT_SUPPORTED),
+    (0x0E, request_path(0x70, 0, 99), b"", GeneralStatus.ATTRIBUTE_NOT_SUPPORTED),
+    (0x0E, request_path(0x70, 1, 1), b"\x00", GeneralStatus.TOO_MUCH_DATA),
+    (0x4C, request_path(0x70, 1, 1), b"", GeneralStatus.SERVICE_NOT_SUPPORTED),
+    (0x10, request_path(0x70, 1, 1), b"\x01x", GeneralStatus.ATTRIBUTE_NOT_SETTABLE),
+    (0x10, request_path(0x70, 1, 2), b"\x01", GeneralStatus.NOT_ENOUGH_DATA),
+    (0x10, request_path(0x70, 1, 2), b"\x01\x00\x00", GeneralStatus.TOO_MUCH_DATA),
+    (0x10, request_path(0x70, 1, 2), struct.pack("<h", 1801), GeneralStatus.INVALID_ATTRIBUTE_VALUE),
+    (0x10, request_path(0x70, 1, 3), struct.pack("<H", 3), GeneralStatus.INVALID_ATTRIBUTE_VALUE),
+    (0x10, request_path(0x70, 1, 99), b"\x00\x00", GeneralStatus.ATTRIBUTE_NOT_SUPPORTED),
+    (0x10, request_path(0x70, 1), b"\x00\x00", GeneralStatus.PATH_SEGMENT_ERROR),
+    (0x0E, bytes.fromhex("24 01 20 70"), b"", GeneralStatus.PATH_SEGMENT_ERROR),
+    (0x10, request_path(0x01, 1, 1), b"\x00\x00", GeneralStatus.SERVICE_NOT_SUPPORTED),
+    (0x05, request_path(0x01, 1), b"\x07", GeneralStatus.INVALID_PARAMETER_VALUE),
+])
+def test_failures(router: MessageRouter, service: int, path: bytes, data: bytes, status: int) -> None:
+    reply = ask(router, service, path, data)
+    assert reply.general_status == status
+    assert reply.service == service
+
+
+def test_set_attribute_single_then_get(router: MessageRouter) -> None:
+    assert ask(router, 0x10, request_path(0x70, 1, 2), struct.pack("<h", -1500)).ok
+    assert ask(router, 0x0E, request_path(0x70, 1, 2)).data == struct.pack("<h", -1500)
+    # Instance 2 is untouched.
+    assert ask(router, 0x0E, request_path(0x70, 2, 2)).data == b"\x00\x00"
+
+
+def test_class_attributes_derive_from_declaration(router: MessageRouter) -> None:
+    def class_attr(attribute: int) -> int:
+        return struct.unpack("<H", ask(router, 0x0E, request_path(0x70, 0, attribute)).data)[0]
+
+    assert class_attr(1) == 3  # revision
+    assert class_attr(2) == 2  # max instance
+    assert class_attr(3) == 2  # number of instances
+    assert class_attr(6) == 7  # max class attribute id
+    assert class_attr(7) == 5  # max instance attribute id
+
+
+def test_get_attributes_all(router: MessageRouter) -> None:
+    reply = ask(router, 0x01, request_path(0x70, 2))
+    # Attributes 1-4 in id order; 5 is declared outside Get_Attributes_All.
+    assert reply.data == b"\x06second" + b"\x00\x00" + b"\x01\x00" + struct.pack("<f", 1.5)
+    identity = ask(router, 0x01, request_path(0x01, 1)).data
+    assert identity == (struct.pack("<HHHBBHI", 259, 2, 100, 1, 1, 0, 0x10000064) + b"\x04CENT")
+
+
+def test_get_attribute_list(router: MessageRouter) -> None:
+    reply = ask(router, 0x03, request_path(0x70, 1), struct.pack("<HHH", 2, 2, 3))
+    assert reply.ok
+    assert reply.data == struct.pack("<HHHhHHH", 2, 2, 0, 0, 3, 0, 1)
+    partial = ask(router, 0x03, request_path(0x70, 1), struct.pack("<HHH", 2, 2, 42))
+    assert partial.general_status == GeneralStatus.ATTRIBUTE_LIST_ERROR
+    assert partial.data == struct.pack("<HHHhHH", 2, 2, 0, 0, 42, GeneralStatus.ATTRIBUTE_NOT_SUPPORTED)
+    assert ask(router, 0x03, request_path(0x70, 1), struct.pack("<HH", 2, 2)).general_status == 0x13
+    assert ask(router, 0x03, request_path(0x70, 1), struct.pack("<HHHH", 2, 2, 3, 4)).general_status == 0x15
+
+
+def test_set_attribute_list(router: MessageRouter) -> None:
+    data = struct.pack("<HHhHH", 2, 2, 900, 3, 2)
+    reply = ask(router, 0x04, request_path(0x70, 1), data)
+    assert reply.ok
+    assert reply.data == struct.pack("<HHHHH", 2, 2, 0, 3, 0)
+    assert ask(router, 0x0E, request_path(0x70, 1, 2)).data == struct.pack("<h", 900)
+    # One value out of range, one read-only: per-attribute statuses and 0x0A overall; the good one still applies.
+    data = struct.pack("<HHhHH", 3, 2, 5000, 3, 1) + struct.pack("<H", 1) + b"\x01x"
+    reply = ask(router, 0x04, request_path(0x70, 1), data)
+    assert reply.general_status == GeneralStatus.ATTRIBUTE_LIST_ERROR
+    assert reply.data == struct.pack("<HHHHHHH", 3, 2, 0x09, 3, 0, 1, 0x0E)
+    assert ask(router, 0x0E, request_path(0x70, 1, 2)).data == struct.pack("<h", 900)
+
+
+def test_multiple_service_packet(router: MessageRouter) -> None:
+    inner = [MessageRouterRequest(0x0E, request_path(1, 1, 1)).encode(),
+             MessageRouterRequest(0x0E, request_path(1, 1, 99)).encode()]
+    table = struct.pack("<HHH", 2, 6, 6 + len(inner[0]))
+    reply = ask(router, 0x0A, request_path(2, 1), table + b"".join(inner))
+    assert reply.general_status == GeneralStatus.EMBEDDED_SERVICE_ERROR
+    count, first, second = struct.unpack_from("<HHH", reply.data)
+    assert count == 2
+    assert MessageRouterResponse.decode(reply.data[first:second]).data == struct.pack("<H", 259)
+    assert MessageRouterResponse.decode(reply.data[second:]).general_status == 0x14
+    ok = ask(router, 0x0A, request_path(2, 1), struct.pack("<HH", 1, 4) + inner[0])
+    assert ok.ok
+    bad_offsets = ask(router, 0x0A, request_path(2, 1), struct.pack("<HH", 1, 200) + inner[0])
+    assert bad_offsets.general_status == GeneralStatus.INVALID_PARAMETER
+
+
+def test_message_router_object_list(router: MessageRouter) -> None:
+    data = ask(router, 0x0E, request_path(2, 1, 1)).data
+    count = struct.unpack_from("<H", data)[0]
+    classes = list(struct.unpack_from(f"<{count}H", data, 2))
+    assert classes == [0x01, 0x02, 0x04, 0x06, 0x70, 0xF5, 0xF6]
+
+
+def test_identity_reset_types(router: MessageRouter) -> None:
+    device = build_device()
+    assert ask(device.router, 0x05, request_path(1, 1), b"\x01").ok
+    assert device.pending_reset == 1
+    assert ask(device.router, 0x05, request_path(1, 1)).ok
+    assert device.pending_reset == 0
+
+
+def test_object_exception_becomes_status_not_crash(router: MessageRouter) -> None:
+    obj = router[0x70]
+
+    def broken() -> int:
+        raise RuntimeError("boom")
+
+    obj.bind(2, 5, Binding(broken))
+    assert ask(router, 0x0E, request_path(0x70, 2, 5)).general_status == GeneralStatus.VENDOR_SPECIFIC
+
+
+def test_tcpip_inactivity_timeout_range() -> None:
+    device = build_device()
+    assert ask(device.router, 0x10, request_path(0xF5, 1, 13), struct.pack("<H", 3601)).general_status == 0x09
+    assert ask(device.router, 0x10, request_path(0xF5, 1, 13), struct.pack("<H", 30)).ok
+    assert device.inactivity_timeout == 30
