@@ -85,6 +85,9 @@ class Scanner:
         """Any service by code to class/instance[/attribute]; raises ``CipError`` on an error status."""
         path = request_path(class_id, instance, attribute)
         reply = await self.client.request(service, path, data, route=self.route)
+        if self.route is not None and reply.service == Service.UNCONNECTED_SEND and service != reply.service:
+            # The Connection Manager could not route the request: its error is the answer.
+            reply.raise_for_status()
         if reply.service != service & 0x7F:
             raise CipError(GeneralStatus.INVALID_REPLY_RECEIVED, message=f"reply to service 0x{reply.service:02X}")
         return reply.raise_for_status() if check else reply

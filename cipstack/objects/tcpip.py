@@ -48,7 +48,8 @@ TCPIP_SPEC = ClassSpec(
                       help="Seconds of inactivity before an encapsulation TCP connection is closed; 0 disables"),
     ),
     class_services=frozenset({Service.GET_ATTRIBUTE_SINGLE}),
-    instance_services=_GET_SERVICES | {Service.SET_ATTRIBUTE_SINGLE},
+    instance_services=_GET_SERVICES | {Service.SET_ATTRIBUTE_SINGLE, Service.GET_ATTRIBUTE_LIST,
+                                       Service.SET_ATTRIBUTE_LIST},
 )
 
 ETHERNET_LINK_SPEC = ClassSpec(

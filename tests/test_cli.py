@@ -1,0 +1,170 @@
+"""The cipstack command, run as a user runs it: a real adapter process and real clients."""
+
+from __future__ import annotations
+
+import json
+import os
+import signal
+import socket
+import subprocess
+import sys
+import time
+from collections.abc import Iterator
+
+import pytest
+
+from cipstack.cli import parse_duration, parse_object_path
+
+
+def free_port() -> int:
+    with socket.socket() as tcp, socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as udp:
+        tcp.bind(("127.0.0.1", 0))
+        port = tcp.getsockname()[1]
+        udp.bind(("127.0.0.1", port))
+        return port
+
+
+def run(*args: str, timeout: float = 20) -> subprocess.CompletedProcess[str]:
+    return subprocess.run([sys.executable, "-m", "cipstack", *args], capture_output=True, text=True,
+                          timeout=timeout, stdin=subprocess.DEVNULL)
+
+
+@pytest.fixture(scope="module")
+def adapter_process() -> Iterator[tuple[str, subprocess.Popen[str]]]:
+    port = free_port()
+    process = subprocess.Popen([sys.executable, "-m", "cipstack", "adapter", "--host", "127.0.0.1", "--port",
+                                str(port)], stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    deadline = time.monotonic() + 15
+    while time.monotonic() < deadline:
+        try:
+            socket.create_connection(("127.0.0.1", port), timeout=0.2).close()
+            break
+        except OSError:
+            time.sleep(0.05)
+    else:
+        process.kill()
+        pytest.fail("adapter did not start")
+    yield f"127.0.0.1:{port}", process
+    if process.poll() is None:
+        process.send_signal(signal.SIGTERM)
+        process.wait(10)
+
+
+def one_line_error(result: subprocess.CompletedProcess[str]) -> str:
+    lines = result.stderr.strip().splitlines()
+    assert len(lines) == 1, result.stderr
+    assert "Traceback" not in result.stderr
+    return lines[0]
+
+
+def test_get_single_json(adapter_process: tuple[str, subprocess.Popen[str]]) -> None:
+    address, _ = adapter_process
+    result = run("get", address, "1/1/7", "--json")
+    assert result.returncode == 0, result.stderr
+    record = json.loads(result.stdout)
+    assert record == {"status": 0, "data": "0443454e54", "value": "CENT", "type": "SHORT_STRING",
+                      "name": "Product Name", "path": "1/1/7"}
+
+
+def test_get_forms(adapter_process: tuple[str, subprocess.Popen[str]]) -> None:
+    address, _ = adapter_process
+    assert run("get", address, "0x01/0x01/0x03").stdout.strip() == "Product Code = 100"
+    assert run("get", address, "1/1/1", "--connected").stdout.strip() == "Vendor ID = 259"
+    everything = run("get", address, "1/1", "--json")
+    assert json.loads(everything.stdout)["value"]["Product Name"] == "CENT"
+    typed = run("get", address, "0xF5/1/13", "--type", "INT", "--json")
+    assert json.loads(typed.stdout)["type"] == "INT"
+
+
+def test_set_then_get(adapter_process: tuple[str, subprocess.Popen[str]]) -> None:
+    address, _ = adapter_process
+    result = run("set", address, "0xF5/1/13", "0x3c", "--type", "UINT", "--json")
+    assert result.returncode == 0, result.stderr
+    assert json.loads(result.stdout) == {"status": 0, "path": "0xF5/1/13", "data": "3c00", "value": 60}
+    assert run("get", address, "0xF5/1/13").stdout.strip() == "Encapsulation Inactivity Timeout = 60"
+    run("set", address, "0xF5/1/13", "120", "--type", "UINT")
+
+
+@pytest.mark.parametrize(("args", "code", "fragment"), [
+    (("get", "{a}", "1/1/99"), 1, "0x14 (attribute not supported)"),
+    (("get", "{a}", "0x99/1/1"), 1, "0x05 (path destination unknown)"),
+    (("set", "{a}", "0xF5/1/13", "9999", "--type", "UINT"), 1, "0x09 (invalid attribute value)"),
+    (("set", "{a}", "0xF5/1/13", "70000", "--type", "UINT"), 2, "not a valid UINT"),
+    (("set", "{a}", "0xF5/1/13", "x", "--type", "UINT"), 2, "not a valid UINT"),
+    (("set", "{a}", "0xF5/1/13", "1", "--type", "FLOATY"), 2, "unknown CIP type"),
+    (("set", "{a}", "0xF5/1/13", "1"), 2, "--type"),
+    (("get", "{a}", "1/1/zz"), 2, "not a number"),
+    (("get", "{a}", "1"), 2, "CLASS/INSTANCE"),
+    (("get", "127.0.0.1:notaport", "1/1/1"), 2, "bad port"),
+    (("get", "127.0.0.1:1", "1/1/1", "--timeout", "1"), 1, "cannot connect"),
+    (("frobnicate",), 2, "invalid choice"),
+    (("adapter", "--profile", "nope"), 2, "unknown profile"),
+])
+def test_errors_are_one_line(adapter_process: tuple[str, subprocess.Popen[str]], args: tuple[str, ...], code: int,
+                             fragment: str) -> None:
+    address, _ = adapter_process
+    result = run(*(a.format(a=address) for a in args))
+    assert result.returncode == code
+    assert fragment in one_line_error(result)
+
+
+def test_error_status_json(adapter_process: tuple[str, subprocess.Popen[str]]) -> None:
+    address, _ = adapter_process
+    result = run("get", address, "1/1/99", "--json")
+    assert result.returncode == 1
+    assert json.loads(result.stdout) == {"status": 0x14, "extended_status": [], "path": "1/1/99",
+                                         "error": "0x14 (attribute not supported)"}
+
+
+def test_identity_and_discover(adapter_process: tuple[str, subprocess.Popen[str]]) -> None:
+    address, _ = adapter_process
+    identity = json.loads(run("identity", address, "--json").stdout)
+    assert identity["product_name"] == "CENT" and identity["vendor_id"] == 259 and identity["revision"] == "1.1"
+    host, port = address.split(":")
+    found = run("discover", "--broadcast", host, "--port", port, "--timeout", "1", "--json")
+    assert found.returncode == 0
+    [record] = [json.loads(line) for line in found.stdout.splitlines()]
+    assert record["product_code"] == 100 and record["address"] == address
+
+
+def test_adapter_logs_and_stops_on_sigterm() -> None:
+    port = free_port()
+    process = subprocess.Popen([sys.executable, "-m", "cipstack", "adapter", "--port", str(port)],
+                               stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    try:
+        for _ in range(200):
+            if run("get", f"127.0.0.1:{port}", "1/1/1", "--timeout", "1").returncode == 0:
+                break
+            time.sleep(0.05)
+        process.send_signal(signal.SIGTERM)
+        _, stderr = process.communicate(timeout=10)
+    finally:
+        if process.poll() is None:
+            process.kill()
+    assert process.returncode == 0
+    assert "listening on 127.0.0.1" in stderr
+    assert "session" in stderr and "registered" in stderr
+    assert "stopping" in stderr and "Traceback" not in stderr
+
+
+def test_adapter_port_in_use() -> None:
+    with socket.socket() as busy:
+        busy.bind(("127.0.0.1", 0))
+        busy.listen()
+        port = busy.getsockname()[1]
+        result = run("adapter", "--port", str(port), timeout=10)
+    assert result.returncode == 1
+    assert "cannot listen" in one_line_error(result)
+
+
+def test_python_dash_m_and_version() -> None:
+    result = run("--version")
+    assert result.returncode == 0 and result.stdout.startswith("cipstack ")
+    assert os.path.exists(os.path.join(os.path.dirname(__import__("cipstack").__file__), "py.typed"))
+
+
+def test_argument_parsers() -> None:
+    assert parse_object_path("0x2A/1/8") == (0x2A, 1, 8)
+    assert parse_object_path("@1/1") == (1, 1, None)
+    assert parse_duration("500ms") == 0.5
+    assert parse_duration("2s") == 2.0
