@@ -239,8 +239,19 @@ class _Parser(argparse.ArgumentParser):
 def build_parser() -> argparse.ArgumentParser:
     parser = _Parser(prog="cipstack", description="CIP for AC drives over EtherNet/IP and CompoNet")
     parser.add_argument("--version", action="version", version=f"cipstack {__version__}")
-    parser.add_argument("--log-level", default="INFO", choices=["DEBUG", "INFO", "WARNING", "ERROR"])
+    levels = ["DEBUG", "INFO", "WARNING", "ERROR"]
+    parser.add_argument("--log-level", default="INFO", choices=levels, type=str.upper)
+    # Also accepted after the command name (``cipstack adapter --log-level WARNING``).
+    logging_options = _Parser(add_help=False)
+    logging_options.add_argument("--log-level", default=argparse.SUPPRESS, choices=levels, type=str.upper,
+                                 help="log level on stderr (default INFO)")
     sub = parser.add_subparsers(dest="command", required=True, parser_class=_Parser)
+    _add_parser = sub.add_parser
+
+    def add_parser(name: str, **kwargs: Any) -> argparse.ArgumentParser:
+        return _add_parser(name, parents=[logging_options], **kwargs)
+
+    sub.add_parser = add_parser  # type: ignore[method-assign]
 
     def common(p: argparse.ArgumentParser, target: bool = True) -> None:
         if target:

@@ -129,8 +129,8 @@ def test_identity_and_discover(adapter_process: tuple[str, subprocess.Popen[str]
 
 def test_adapter_logs_and_stops_on_sigterm() -> None:
     port = free_port()
-    process = subprocess.Popen([sys.executable, "-m", "cipstack", "adapter", "--port", str(port)],
-                               stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    command = [sys.executable, "-m", "cipstack", "adapter", "--port", str(port), "--log-level", "info"]
+    process = subprocess.Popen(command, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
     try:
         for _ in range(200):
             if run("get", f"127.0.0.1:{port}", "1/1/1", "--timeout", "1").returncode == 0:
