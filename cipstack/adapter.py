@@ -9,6 +9,10 @@ from dataclasses import dataclass
 
 from .devices.base import Device, DeviceLimits
 from .devices.profiles import DEFAULT_MAC, DEFAULT_PROFILE, build_device
+from .eip.identity_items import CAPABILITY_CIP_TCP, CAPABILITY_CLASS01_UDP
+from .eip.io_core import DEFAULT_IO_PORT
+from .eip.io_server import IoEndpoint
+from .eip.io_target import IoTarget
 from .eip.server import DEFAULT_PORT, EncapsulationServer
 from .eip.target import EncapsulationTarget, TargetSettings
 from .objects.tcpip import NetworkInterface
@@ -24,6 +28,8 @@ class AdapterSettings:
     max_sessions: int = 32
     max_connections: int = 32
     max_frame_length: int = 4200
+    #: UDP port of class 1 I/O (consumed O->T datagrams, and the default T->O destination port).
+    io_port: int = DEFAULT_IO_PORT
 
 
 class Adapter:
@@ -43,6 +49,16 @@ class Adapter:
             table=self.device.connection_table,
         )
         self.server = EncapsulationServer(self.target, s.host, s.port)
+        self.io: IoTarget | None = None
+        self.io_endpoint: IoEndpoint | None = None
+        profile = self.device.io_profile()
+        if profile is not None:
+            self.io = IoTarget(profile, self.device, self.device.multicast_block, s.io_port)
+            self.device.connection_manager.io_handler = self.io
+            self.target.settings.capabilities = CAPABILITY_CIP_TCP | CAPABILITY_CLASS01_UDP
+            self.io_endpoint = IoEndpoint(self.io, s.host, s.io_port, lambda: int(self.device.tcpip.get(1, 8)))
+            self.io.changed = self.io_endpoint.wakeup
+            self.device._update_io_status()
 
     @property
     def port(self) -> int:
@@ -50,8 +66,20 @@ class Adapter:
 
     async def start(self) -> None:
         await self.server.start()
+        if self.io_endpoint is not None:
+            try:
+                await self.io_endpoint.start()
+            except OSError:
+                await self.server.close()
+                raise
+            if self.io is not None:
+                self.io.io_port = self.io_endpoint.port
 
     async def close(self) -> None:
+        if self.io is not None:
+            self.io.close_all()
+        if self.io_endpoint is not None:
+            await self.io_endpoint.close()
         await self.server.close()
 
     async def __aenter__(self) -> Adapter:

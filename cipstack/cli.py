@@ -85,6 +85,7 @@ def _emit(args: argparse.Namespace, record: dict[str, Any], text: str) -> None:
 def cmd_adapter(args: argparse.Namespace) -> int:
     from .adapter import Adapter, AdapterSettings
     from .devices.profiles import PROFILES
+    from .eip.io_server import run_precise
 
     if args.profile not in PROFILES:
         raise UsageError(f"unknown profile {args.profile!r} (known: {', '.join(sorted(PROFILES))})")
@@ -94,7 +95,7 @@ def cmd_adapter(args: argparse.Namespace) -> int:
                                max_sessions=args.max_sessions, max_connections=args.max_connections)
     adapter = Adapter(settings)
     try:
-        asyncio.run(adapter.serve_forever())
+        run_precise(adapter.serve_forever())
     except OSError as exc:
         print(f"cipstack adapter: cannot listen on {args.host}:{args.port}: {exc.strerror or exc}", file=sys.stderr)
         return EXIT_FAILURE

@@ -15,8 +15,9 @@ from ..cip.router import MessageRouter
 from ..cip.status import CipError, ExtendedStatus, GeneralStatus
 from ..eip.connection_manager import ConnectionManagerObject, ConnectionTable
 from ..eip.identity_items import IdentityRecord
+from ..eip.io_target import CIP_MULTICAST_BASE, ConnectionKind, IoConnection, IoProfile
 from ..objects.assembly import AssemblyObject
-from ..objects.identity import IdentityInfo, IdentityObject
+from ..objects.identity import ExtendedDeviceStatus, IdentityInfo, IdentityObject, IdentityStatus
 from ..objects.message_router import MessageRouterObject
 from ..objects.tcpip import EthernetLinkObject, NetworkInterface, TcpIpObject
 
@@ -51,6 +52,8 @@ class Device:
         self.router.register(self.tcpip)
         self.ethernet_link = EthernetLinkObject(self.interface)
         self.router.register(self.ethernet_link)
+        self._io_connections: dict[int, IoConnection] = {}
+        self._io_faulted = False
 
     # -- identity -------------------------------------------------------------------------------
     def identity_record(self) -> IdentityRecord:
@@ -87,3 +90,49 @@ class Device:
     @property
     def inactivity_timeout(self) -> float:
         return float(self.tcpip.inactivity_timeout)
+
+    # -- class 1 ----------------------------------------------------------------------------------
+    def io_profile(self) -> IoProfile | None:
+        """What this device offers for class 1 I/O; None when it has no I/O assemblies."""
+        return None
+
+    def multicast_block(self) -> tuple[int, int]:
+        """T->O multicast addresses from TCP/IP attribute 9: the CIP default algorithm
+        (239.192.1.0 + 32 x ((host id - 1) mod 1024), 32 addresses) unless configured."""
+        config = self.tcpip.get(1, 9)
+        if config["alloc_control"] == 1 and config["num_mcast"]:
+            return config["mcast_start_addr"], config["num_mcast"]
+        interface = self.tcpip.get(1, 5)
+        host_id = interface["ip_address"] & ~interface["network_mask"] & 0xFFFFFFFF
+        return CIP_MULTICAST_BASE + ((host_id - 1) & 0x3FF) * 32, 32
+
+    def _update_io_status(self) -> None:
+        """Identity status: bit 0 owned, bits 4-7 the extended device status of the I/O connections."""
+        connections = list(self._io_connections.values())
+        owned = any(c.kind is ConnectionKind.EXCLUSIVE_OWNER for c in connections)
+        if self._io_faulted and not connections:
+            extended = ExtendedDeviceStatus.IO_CONNECTION_FAULTED
+        elif not connections:
+            extended = ExtendedDeviceStatus.NO_IO_CONNECTION
+        elif any(c.run for c in connections if c.kind is ConnectionKind.EXCLUSIVE_OWNER):
+            extended = ExtendedDeviceStatus.IO_CONNECTION_RUNNING
+        elif owned:
+            extended = ExtendedDeviceStatus.IO_CONNECTION_IDLE
+        else:
+            extended = ExtendedDeviceStatus.IO_CONNECTION_RUNNING
+        status = int(self.identity.get(1, 5)) & ~(0x00F0 | IdentityStatus.OWNED)
+        status |= (extended << 4) | (IdentityStatus.OWNED if owned else 0)
+        self.identity.set(1, 5, status)
+
+    def io_opened(self, connection: IoConnection) -> None:
+        self._io_connections[connection.ot_connection_id] = connection
+        self._io_faulted = False
+        self._update_io_status()
+
+    def io_closed(self, connection: IoConnection, timed_out: bool) -> None:
+        self._io_connections.pop(connection.ot_connection_id, None)
+        self._io_faulted = timed_out
+        self._update_io_status()
+
+    def io_run_idle(self, connection: IoConnection, run: bool) -> None:
+        self._update_io_status()

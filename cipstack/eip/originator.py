@@ -10,11 +10,13 @@ from __future__ import annotations
 
 import asyncio
 import itertools
+import logging
 import random
 import socket
 import struct
 from collections.abc import Sequence
 from dataclasses import dataclass
+from typing import TYPE_CHECKING
 
 from ..cip.epath import Segment, encode_path, request_path
 from ..cip.messages import MessageRouterRequest, MessageRouterResponse, Service
@@ -29,7 +31,7 @@ from .cm_messages import (
     TriggerType,
     UnconnectedSendRequest,
 )
-from .cpf import Item, ItemType, decode_items, encode_items
+from .cpf import Item, ItemType, SockAddr, decode_items, encode_items
 from .encapsulation import (
     HEADER,
     HEADER_SIZE,
@@ -42,6 +44,14 @@ from .encapsulation import (
     EncapsulationStatus,
 )
 from .identity_items import IdentityRecord, ServiceRecord, decode_list_identity, decode_list_services
+from .io_core import DEFAULT_IO_PORT
+from .io_originator import Class1Request, IoConnectionHandle, IoOriginator, class1_path, new_connection
+from .io_server import IoEndpoint
+
+if TYPE_CHECKING:
+    from ..assemblies.schema import AssemblySchema
+
+log = logging.getLogger(__name__)
 
 DEFAULT_PORT = 44818
 #: Our vendor id as an originator (0xFFFF is not assigned; any value works for tests).
@@ -155,6 +165,16 @@ class EncapsulationClient:
         if register:
             await self.register_session()
 
+    def local_host(self) -> str:
+        """The local address of the TCP connection (where T->O data should come)."""
+        assert self._protocol is not None and self._protocol.transport is not None
+        return str(self._protocol.transport.get_extra_info("sockname")[0])
+
+    def host_address(self) -> str:
+        """The target's address as connected (an IP address even if a name was given)."""
+        assert self._protocol is not None and self._protocol.transport is not None
+        return str(self._protocol.transport.get_extra_info("peername")[0])
+
     async def close(self) -> None:
         if self._protocol is None or self._protocol.transport is None:
             return
@@ -260,6 +280,18 @@ class EncapsulationClient:
                 return item.data
         raise ValueError("SendRRData reply without Unconnected Data item")
 
+    async def send_rr_data_items(self, request: bytes, extra: Sequence[Item] = (),
+                                 timeout: float | None = None) -> tuple[bytes, list[Item]]:
+        """SendRRData with extra CPF items (Sockaddr Info); returns the reply and its extra items."""
+        items = (Item(ItemType.NULL_ADDRESS), Item(ItemType.UNCONNECTED_DATA, request), *extra)
+        _, reply = await self.exchange(Command.SEND_RR_DATA, RR_PREFIX.pack(0, 0) + encode_items(items),
+                                       timeout=timeout)
+        reply_items = decode_items(reply, RR_PREFIX.size)
+        data = next((i.data for i in reply_items if i.type == ItemType.UNCONNECTED_DATA), None)
+        if data is None:
+            raise ValueError("SendRRData reply without Unconnected Data item")
+        return data, [i for i in reply_items if i.type not in (ItemType.NULL_ADDRESS, ItemType.UNCONNECTED_DATA)]
+
     async def send_unit_data(self, request: bytes, timeout: float | None = None) -> bytes:
         """Class 3 connected request on the open connection; returns the message-router reply."""
         connection = self.connection
@@ -321,6 +353,26 @@ class EncapsulationClient:
                                                  decoded.ot_api_us)
         return self.connection
 
+    # -- class 1 -------------------------------------------------------------------------------------
+    async def io_connection(self, output: int | None, input: int, rpi: float, *, output_size: int,
+                            input_size: int, config: int = 1, heartbeat: int | None = None,
+                            target_io_port: int = DEFAULT_IO_PORT, local_io_port: int = 0, multicast: bool = False,
+                            timeout_multiplier: int = 2, output_schema: AssemblySchema | None = None,
+                            input_schema: AssemblySchema | None = None, run: bool = True,
+                            keep_intervals: bool = False) -> IoContext:
+        """Open a class 1 connection; use as ``async with client.io_connection(...) as io``.
+
+        ``output``/``input`` are the assembly instances (``heartbeat`` replaces the output for
+        input-only and listen-only connections); ``rpi`` is in seconds. T->O data comes to this
+        host's UDP ``local_io_port`` (0: the shared endpoint's port), which the Forward_Open
+        announces in a Sockaddr Info item; O->T data goes to ``target_io_port`` on the target.
+        """
+        request = Class1Request(None if heartbeat is not None else output_size, input_size, int(rpi * 1e6),
+                                int(rpi * 1e6), class1_path(output, input, config, heartbeat), multicast,
+                                timeout_multiplier)
+        return IoContext(self, request, target_io_port, local_io_port, output_schema, input_schema, run,
+                         keep_intervals)
+
     async def forward_close(self) -> None:
         connection = self.connection
         if connection is None:
@@ -329,6 +381,81 @@ class EncapsulationClient:
         fc = ForwardCloseRequest(0x0A, 0x0E, connection.triad, MESSAGE_ROUTER_PATH)
         reply = await self.request(Service.FORWARD_CLOSE, CONNECTION_MANAGER_PATH, fc.encode(), connected=False)
         reply.raise_for_status()
+
+
+class IoContext:
+    """Async context manager of a class 1 connection: Forward_Open on enter, Forward_Close on exit."""
+
+    def __init__(self, client: EncapsulationClient, request: Class1Request, target_io_port: int, local_io_port: int,
+                 output_schema: AssemblySchema | None, input_schema: AssemblySchema | None, run: bool,
+                 keep_intervals: bool) -> None:
+        self.client = client
+        self.request = request
+        self.target_io_port = target_io_port
+        self.local_io_port = local_io_port
+        self.output_schema = output_schema
+        self.input_schema = input_schema
+        self.run = run
+        self.keep_intervals = keep_intervals
+        self.handle: IoConnectionHandle | None = None
+        self._triad: ConnectionTriad | None = None
+
+    async def __aenter__(self) -> IoConnectionHandle:
+        client = self.client
+        core, endpoint = await shared_io_endpoint(client.local_host(), self.local_io_port)
+        ot, to, transport, triad, to_id = self.request.parameters()
+        fo = ForwardOpenRequest(0x0A, 0x0E, 0, to_id, triad, self.request.timeout_multiplier, self.request.ot_rpi_us,
+                                ot, self.request.to_rpi_us, to, transport, self.request.path, self.request.large)
+        raw = MessageRouterRequest(Service.FORWARD_OPEN, CONNECTION_MANAGER_PATH, fo.encode()).encode()
+        sockaddr = Item(ItemType.SOCKADDR_T_O, SockAddr("0.0.0.0", endpoint.port).encode())
+        reply_raw, extra = await client.send_rr_data_items(raw, [] if self.request.multicast else [sockaddr])
+        MessageRouterResponse.decode(reply_raw).raise_for_status()
+        reply = ForwardOpenReply.decode(MessageRouterResponse.decode(reply_raw).data)
+        self._triad = triad
+        connection = new_connection(self.request, client.host_address(), self.target_io_port,
+                                    reply.ot_connection_id, reply.to_connection_id, reply.ot_api_us, reply.to_api_us,
+                                    asyncio.get_running_loop().time(), self.keep_intervals)
+        connection.run = self.run
+        for item in extra:
+            if item.type == ItemType.SOCKADDR_T_O:
+                await endpoint.join_multicast(SockAddr.decode(item.data).host)
+        core.add(connection)
+        endpoint.wakeup()
+        self.handle = IoConnectionHandle(core, endpoint, connection, self.output_schema, self.input_schema)
+        return self.handle
+
+    async def __aexit__(self, *exc: object) -> None:
+        handle = self.handle
+        if handle is None:
+            return
+        handle.connection.closed = True
+        handle._core.remove(handle.connection)
+        assert self._triad is not None
+        fc = ForwardCloseRequest(0x0A, 0x0E, self._triad, self.request.path)
+        try:
+            reply = await self.client.request(Service.FORWARD_CLOSE, CONNECTION_MANAGER_PATH, fc.encode(),
+                                              connected=False)
+            reply.raise_for_status()
+        except (ConnectionError, CipError, EncapsulationStatusError, asyncio.TimeoutError) as exc_close:
+            log.info("Forward_Close of class 1 connection failed: %s", exc_close)
+
+
+_io_endpoints: dict[tuple[int, str, int], tuple[IoOriginator, IoEndpoint]] = {}
+
+
+async def shared_io_endpoint(host: str, port: int = 0) -> tuple[IoOriginator, IoEndpoint]:
+    """The originator's class 1 endpoint for this event loop and local address (one socket serves every
+    connection, as a PLC's one UDP 2222 socket does)."""
+    loop = asyncio.get_running_loop()
+    key = (id(loop), host, port)
+    found = _io_endpoints.get(key)
+    if found is not None and found[1].transport is not None:
+        return found
+    core = IoOriginator()
+    endpoint = IoEndpoint(core, host, port)
+    await endpoint.start()
+    _io_endpoints[key] = (core, endpoint)
+    return core, endpoint
 
 
 class _DiscoveryProtocol(asyncio.DatagramProtocol):

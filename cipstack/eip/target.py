@@ -41,6 +41,8 @@ log = logging.getLogger(__name__)
 
 _SEQ = struct.Struct("<H")
 _CONN_ID = struct.Struct("<I")
+#: Requests whose reply may carry a Sockaddr Info item (a class 1 Forward_Open, possibly routed).
+_MAY_CARRY_SOCKADDR = frozenset({0x54, 0x5B, 0x52})
 
 
 @dataclass
@@ -259,16 +261,33 @@ class EncapsulationConnection:
             raise EncapsulationError(EncapsulationStatus.INVALID_LENGTH)
         interface, _timeout = RR_PREFIX.unpack_from(body)
         items = decode_items(body, RR_PREFIX.size)
-        if (interface != 0 or len(items) != 2 or items[0].type != ItemType.NULL_ADDRESS or items[0].data
+        if (interface != 0 or len(items) < 2 or items[0].type != ItemType.NULL_ADDRESS or items[0].data
                 or items[1].type != ItemType.UNCONNECTED_DATA or not items[1].data):
             raise EncapsulationError(EncapsulationStatus.INCORRECT_DATA,
                                      "SendRRData needs Null Address + Unconnected Data")
         context = self._context
         context.now = now
         context.connected = False
-        reply = self.target.router.handle(items[1].data, context)
-        items_out = (Item(ItemType.NULL_ADDRESS), Item(ItemType.UNCONNECTED_DATA, reply))
-        return RR_PREFIX.pack(0, 0) + encode_items(items_out)
+        if len(items) == 2 and items[1].data[0] not in _MAY_CARRY_SOCKADDR:
+            reply = self.target.router.handle(items[1].data, context)
+            return RR_PREFIX.pack(0, 0) + encode_items((Item(ItemType.NULL_ADDRESS), Item(ItemType.UNCONNECTED_DATA,
+                                                                                          reply)))
+        # A Forward_Open may carry Sockaddr Info items (where the originator wants T->O data), and
+        # its reply may carry one (the multicast group of T->O data).
+        sockaddrs: dict[int, SockAddr] = {}
+        for item in items[2:]:
+            if item.type not in (ItemType.SOCKADDR_O_T, ItemType.SOCKADDR_T_O) or len(item.data) != 16:
+                raise EncapsulationError(EncapsulationStatus.INCORRECT_DATA, f"unexpected CPF item 0x{item.type:04X}")
+            sockaddrs[item.type] = SockAddr.decode(item.data)
+        context.extras["sockaddr"] = sockaddrs
+        reply_items: list[Item] = []
+        context.extras["reply_items"] = reply_items
+        try:
+            reply = self.target.router.handle(items[1].data, context)
+        finally:
+            del context.extras["sockaddr"], context.extras["reply_items"]
+        return RR_PREFIX.pack(0, 0) + encode_items((Item(ItemType.NULL_ADDRESS), Item(ItemType.UNCONNECTED_DATA, reply),
+                                                    *reply_items))
 
     def _send_unit_data(self, body: bytes, now: float) -> bytes | None:
         if len(body) < RR_PREFIX.size:

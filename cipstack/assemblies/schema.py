@@ -1,0 +1,170 @@
+"""Assembly schemas: an I/O assembly declared once as named fields and bit flags.
+
+From one declaration come the ``construct`` schema (``AssemblySchema.construct``, compiled),
+the size, decoding to a flat dict of field values, encoding, the EDS ``[Assembly]`` members
+and the scanner's field access. A field is either whole bytes of a CIP type at a byte
+offset, or ``bits`` bits starting at bit ``bit`` (0 = least significant) of byte ``offset``.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Iterable, Mapping
+from dataclasses import dataclass
+from typing import Any
+
+import construct as cs
+
+from ..cip.types import USINT, CipType, IntegerType
+
+
+@dataclass(frozen=True)
+class AssemblyField:
+    name: str
+    offset: int
+    #: CIP type of a whole-byte field (ignored for bit fields).
+    type: CipType = USINT
+    #: Width of a bit field in bits (0: a whole-byte field of ``type``).
+    bits: int = 0
+    #: Position of a bit field's least significant bit within byte ``offset``.
+    bit: int = 0
+    unit: str = ""
+    #: Engineering value = raw x scale.
+    scale: float = 1.0
+    help: str = ""
+    #: The attribute this field mirrors, as (class, instance, attribute), for the EDS and docs.
+    link: tuple[int, int, int] | None = None
+
+    @property
+    def size_bits(self) -> int:
+        if self.bits:
+            return self.bits
+        assert self.type.size is not None
+        return 8 * self.type.size
+
+    @property
+    def start_bit(self) -> int:
+        """Position of the field's first bit counted from the start of the assembly."""
+        return 8 * self.offset + (self.bit if self.bits else 0)
+
+
+def bit(name: str, offset: int, position: int, **kwargs: Any) -> AssemblyField:
+    return AssemblyField(name, offset, bits=1, bit=position, **kwargs)
+
+
+def word(name: str, offset: int, cip_type: CipType, **kwargs: Any) -> AssemblyField:
+    return AssemblyField(name, offset, cip_type, **kwargs)
+
+
+class AssemblySchema:
+    """Immutable description of one assembly instance's data."""
+
+    def __init__(self, instance: int, name: str, size: int, fields: Iterable[AssemblyField],
+                 description: str = "") -> None:
+        self.instance = instance
+        self.name = name
+        self.size = size
+        self.description = description
+        self.fields: tuple[AssemblyField, ...] = tuple(sorted(fields, key=lambda f: f.start_bit))
+        self.field_names = frozenset(f.name for f in self.fields)
+        self._by_name = {f.name: f for f in self.fields}
+        self._check()
+        self.construct = self._build_construct().compile()
+
+    def _check(self) -> None:
+        if len(self._by_name) != len(self.fields):
+            raise ValueError(f"assembly {self.instance}: a field name is declared twice")
+        used = [False] * (8 * self.size)
+        for f in self.fields:
+            if f.bits and not f.bit >= 0 and f.bit + f.bits <= 8:
+                raise ValueError(f"assembly {self.instance}: bit field {f.name} crosses a byte")
+            for position in range(f.start_bit, f.start_bit + f.size_bits):
+                if position >= len(used):
+                    raise ValueError(f"assembly {self.instance}: field {f.name} runs past {self.size} bytes")
+                if used[position]:
+                    raise ValueError(f"assembly {self.instance}: field {f.name} overlaps another")
+                used[position] = True
+
+    def _build_construct(self) -> cs.Struct:
+        parts: list[cs.Construct] = []
+        offset = 0
+        by_offset: dict[int, list[AssemblyField]] = {}
+        for f in self.fields:
+            by_offset.setdefault(f.offset, []).append(f)
+        while offset < self.size:
+            group = by_offset.get(offset)
+            if group is None:
+                parts.append(f"_byte_{offset}" / cs.Int8ul)  # a byte no field declares
+                offset += 1
+            elif group[0].bits:
+                # A byte of flags: construct's BitStruct lists bits most significant first.
+                members: list[cs.Construct] = []
+                position = 8
+                for f in sorted(group, key=lambda g: -(g.bit + g.bits)):
+                    top = f.bit + f.bits
+                    if top < position:
+                        members.append(f"_pad_{offset}_{top}" / cs.BitsInteger(position - top))
+                    members.append(f.name / (cs.Flag if f.bits == 1 else cs.BitsInteger(f.bits)))
+                    position = f.bit
+                if position > 0:
+                    members.append(f"_pad_{offset}_0" / cs.BitsInteger(position))
+                parts.append(f"_flags_{offset}" / cs.BitStruct(*members))
+                offset += 1
+            else:
+                f = group[0]
+                parts.append(f.name / f.type.construct)
+                assert f.type.size is not None
+                offset += f.type.size
+        return cs.Struct(*parts)
+
+    # -- values ---------------------------------------------------------------------------------------
+    def decode(self, data: bytes) -> dict[str, Any]:
+        """Field values by name (bit flags as bool, multi-bit fields and words as int)."""
+        if len(data) != self.size:
+            raise ValueError(f"assembly {self.instance} is {self.size} bytes, got {len(data)}")
+        parsed = self.construct.parse(data)
+        values: dict[str, Any] = {}
+        for key, value in parsed.items():
+            if key.startswith("_flags_"):
+                values.update((k, v) for k, v in value.items() if not k.startswith("_"))
+            elif not key.startswith("_"):
+                values[key] = value
+        return values
+
+    def encode(self, values: Mapping[str, Any] | None = None, **more: Any) -> bytes:
+        """Bytes for the given field values; fields not given are zero."""
+        given = dict(values or {}, **more)
+        unknown = set(given) - self.field_names
+        if unknown:
+            raise KeyError(f"assembly {self.instance} has no field {', '.join(sorted(unknown))}")
+        out = bytearray(self.size)
+        for name, value in given.items():
+            self._put(out, self._by_name[name], value)
+        return bytes(out)
+
+    def with_field(self, data: bytes, name: str, value: Any) -> bytes:
+        """``data`` with one field changed."""
+        if name not in self._by_name:
+            raise KeyError(f"assembly {self.instance} has no field {name!r}")
+        out = bytearray(data)
+        self._put(out, self._by_name[name], value)
+        return bytes(out)
+
+    def _put(self, out: bytearray, f: AssemblyField, value: Any) -> None:
+        if f.bits:
+            raw = int(value)
+            if not 0 <= raw < (1 << f.bits):
+                raise ValueError(f"{f.name}: {value} does not fit {f.bits} bit(s)")
+            mask = ((1 << f.bits) - 1) << f.bit
+            out[f.offset] = (out[f.offset] & ~mask) | (raw << f.bit)
+        else:
+            out[f.offset:f.offset + (f.type.size or 0)] = f.type.encode(value)
+
+    def field(self, name: str) -> AssemblyField:
+        return self._by_name[name]
+
+    def __repr__(self) -> str:
+        return f"AssemblySchema({self.instance}, {self.name!r}, {self.size} bytes)"
+
+
+def is_signed(f: AssemblyField) -> bool:
+    return isinstance(f.type, IntegerType) and f.type.signed

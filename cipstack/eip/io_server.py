@@ -1,0 +1,167 @@
+"""The asyncio shell of class 1 I/O, both roles: one UDP endpoint (2222 by default) and a
+loop timer at the core's next deadline.
+
+Timing: the default asyncio loop on Linux waits in epoll, whose timeout has millisecond
+granularity and is rounded up, so a 1 ms RPI would jitter by up to a millisecond. The
+``precise_event_loop`` waits in select(), whose timeout has microsecond granularity, and
+lowers the thread's timer slack: sends then leave within tens of microseconds of their slot.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import ctypes
+import ctypes.util
+import logging
+import selectors
+import socket
+import sys
+from collections.abc import Callable, Coroutine
+from typing import Any, Protocol, TypeVar
+
+log = logging.getLogger(__name__)
+
+T = TypeVar("T")
+
+_PR_SET_TIMERSLACK = 29
+
+
+def _lower_timer_slack(nanoseconds: int = 1000) -> None:
+    """Linux rounds sleeps up by the timer slack (50 us by default); 1 us keeps sends on time."""
+    if not sys.platform.startswith("linux"):
+        return
+    try:
+        libc = ctypes.CDLL(ctypes.util.find_library("c") or "libc.so.6", use_errno=True)
+        libc.prctl(_PR_SET_TIMERSLACK, nanoseconds, 0, 0, 0)
+    except (OSError, AttributeError):
+        pass
+
+
+def precise_event_loop() -> asyncio.AbstractEventLoop:
+    """An event loop whose timers fire within tens of microseconds (select() waits)."""
+    _lower_timer_slack()
+    return asyncio.SelectorEventLoop(selectors.SelectSelector())
+
+
+def run_precise(coroutine: Coroutine[Any, Any, T]) -> T:
+    """``asyncio.run`` on a precise event loop."""
+    loop = precise_event_loop()
+    asyncio.set_event_loop(loop)
+    try:
+        return loop.run_until_complete(coroutine)
+    finally:
+        try:
+            loop.run_until_complete(loop.shutdown_asyncgens())
+        finally:
+            asyncio.set_event_loop(None)
+            loop.close()
+
+
+class IoCore(Protocol):
+    """The sans-I/O side: ``IoTarget`` or an originator's connection set."""
+
+    def receive(self, raw: bytes, source: tuple[str, int], now: float) -> None: ...
+
+    def poll(self, now: float) -> list[tuple[bytes, tuple[str, int]]]: ...
+
+    def next_deadline(self) -> float | None: ...
+
+    def expire(self, now: float) -> list[Any]: ...
+
+
+class _UdpIo(asyncio.DatagramProtocol):
+    def __init__(self, endpoint: IoEndpoint) -> None:
+        self.endpoint = endpoint
+
+    def datagram_received(self, data: bytes, addr: tuple[str, int]) -> None:
+        endpoint = self.endpoint
+        try:
+            endpoint.core.receive(data, addr, endpoint.loop.time())
+        except Exception:  # a datagram must never take the I/O path down
+            log.exception("class 1 datagram from %s", addr)
+
+    def error_received(self, exc: Exception) -> None:
+        log.debug("class 1 UDP error: %s", exc)
+
+
+class IoEndpoint:
+    """UDP socket + timer around an ``IoCore``."""
+
+    def __init__(self, core: IoCore, host: str = "127.0.0.1", port: int = 2222,
+                 multicast_ttl: Callable[[], int] = lambda: 1) -> None:
+        self.core = core
+        self.host = host
+        self.port = port
+        self.multicast_ttl = multicast_ttl
+        self.loop = asyncio.get_event_loop()
+        self.transport: asyncio.DatagramTransport | None = None
+        self._timer: asyncio.TimerHandle | None = None
+        self._timer_at: float | None = None
+        self.send_errors = 0
+
+    async def start(self) -> None:
+        self.loop = asyncio.get_running_loop()
+        sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+        sock.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
+        try:
+            sock.bind((self.host, self.port))
+            if self.host not in ("", "0.0.0.0"):
+                sock.setsockopt(socket.IPPROTO_IP, socket.IP_MULTICAST_IF, socket.inet_aton(self.host))
+            sock.setsockopt(socket.IPPROTO_IP, socket.IP_MULTICAST_TTL, self.multicast_ttl())
+            sock.setsockopt(socket.IPPROTO_IP, socket.IP_MULTICAST_LOOP, 1)
+        except OSError:
+            sock.close()
+            raise
+        transport, _ = await self.loop.create_datagram_endpoint(lambda: _UdpIo(self), sock=sock)
+        self.transport = transport  # type: ignore[assignment]
+        self.port = sock.getsockname()[1]
+        self.wakeup()
+        log.info("class 1 I/O on UDP %s:%d", self.host, self.port)
+
+    async def join_multicast(self, group: str) -> None:
+        """Receive T->O data sent to a multicast group (on the endpoint's interface)."""
+        assert self.transport is not None
+        sock = self.transport.get_extra_info("socket")
+        interface = self.host if self.host not in ("", "0.0.0.0") else "0.0.0.0"
+        membership = socket.inet_aton(group) + socket.inet_aton(interface)
+        try:
+            sock.setsockopt(socket.IPPROTO_IP, socket.IP_ADD_MEMBERSHIP, membership)
+        except OSError as exc:
+            if exc.errno != 98:  # already a member
+                raise
+
+    def wakeup(self) -> None:
+        """Re-arm the timer (a connection opened, so a deadline may be earlier)."""
+        deadline = self.core.next_deadline()
+        if deadline is None:
+            return
+        if self._timer is not None:
+            if self._timer_at is not None and self._timer_at <= deadline:
+                return
+            self._timer.cancel()
+        self._timer_at = deadline
+        self._timer = self.loop.call_at(deadline, self._on_timer)
+
+    def _on_timer(self) -> None:
+        self._timer = None
+        self._timer_at = None
+        now = self.loop.time()
+        transport = self.transport
+        if transport is None:
+            return
+        for datagram, destination in self.core.poll(now):
+            try:
+                transport.sendto(datagram, destination)
+            except OSError as exc:
+                self.send_errors += 1
+                log.debug("class 1 send to %s failed: %s", destination, exc)
+        self.core.expire(now)
+        self.wakeup()
+
+    async def close(self) -> None:
+        if self._timer is not None:
+            self._timer.cancel()
+            self._timer = None
+        if self.transport is not None:
+            self.transport.close()
+            self.transport = None

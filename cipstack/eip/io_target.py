@@ -1,0 +1,440 @@
+"""Class 1 connections, target side, sans-I/O.
+
+``IoTarget`` validates class 1 Forward_Opens against what the device offers (``IoProfile``),
+keeps the open connections, consumes O->T datagrams (sequence filtering, run/idle, watchdog)
+and says which T->O datagrams are due when. The asyncio shell (``io_server``) moves its
+datagrams; the Connection Manager hands it Forward_Open and Forward_Close.
+
+Connection kinds: exclusive owner (an output assembly and an input assembly), input only
+(the O->T "heartbeat" point, no output data) and listen only (heartbeat; needs a live
+connection that produces the same input assembly by multicast, and closes with it).
+"""
+
+from __future__ import annotations
+
+import itertools
+import logging
+import random
+import socket
+import struct
+from collections.abc import Callable, Mapping
+from dataclasses import dataclass, field
+from enum import Enum
+from typing import Protocol
+
+from ..cip.epath import DataSegment, ElectronicKey, LogicalSegment, LogicalType, decode_path
+from ..cip.router import RequestContext
+from ..cip.status import CipError, ExtendedStatus
+from ..objects.assembly import AssemblyPoint
+from .cm_messages import (
+    ConnectionTriad,
+    ConnectionType,
+    ForwardCloseRequest,
+    ForwardOpenReply,
+    ForwardOpenRequest,
+    TriggerType,
+)
+from .connection_manager import connection_failure
+from .cpf import Item, ItemType, SockAddr
+from .io_core import (
+    DEFAULT_IO_PORT,
+    ConsumerState,
+    IoDatagramError,
+    IoStatistics,
+    ProductionSchedule,
+    Reception,
+    connection_timeout,
+    decode_io_datagram,
+    encode_io_datagram,
+    split_run_idle,
+)
+
+log = logging.getLogger(__name__)
+
+#: Sequence count + 32-bit run/idle header in front of O->T data.
+OT_OVERHEAD = 6
+#: Sequence count in front of T->O data (modeless).
+TO_OVERHEAD = 2
+#: CIP default multicast allocation (CIP Vol. 2, TCP/IP object attribute 9): 239.192.1.0 + 32 x host id.
+CIP_MULTICAST_BASE = 0xEFC00100
+
+
+class ConnectionKind(Enum):
+    EXCLUSIVE_OWNER = "exclusive owner"
+    INPUT_ONLY = "input only"
+    LISTEN_ONLY = "listen only"
+
+
+class RpiType:
+    """Types of the acceptable RPI values carried with extended status 0x0112."""
+
+    ACCEPTABLE = 0
+    UNSPECIFIED = 1
+    MINIMUM = 2
+    MAXIMUM = 3
+    REQUIRED = 4
+
+
+@dataclass
+class IoProfile:
+    """What a device offers for class 1, read at each Forward_Open (the offer may change)."""
+
+    consumed: Callable[[], Mapping[int, AssemblyPoint]]
+    produced: Callable[[], Mapping[int, AssemblyPoint]]
+    config_instances: frozenset[int] = frozenset({1})
+    input_only_point: int = 198
+    listen_only_point: int = 199
+    rpi_min_us: int = 1_000
+    rpi_max_us: int = 10_000_000
+    max_connections: int = 64
+    triggers: frozenset[TriggerType] = frozenset({TriggerType.CYCLIC})
+    #: Allowed (output, input) pairs for exclusive owners; None allows any pair.
+    pairs: Callable[[], set[tuple[int, int]]] | None = None
+
+
+class IoEvents(Protocol):
+    """What the device is told about its class 1 connections."""
+
+    def io_opened(self, connection: IoConnection) -> None: ...
+
+    def io_closed(self, connection: IoConnection, timed_out: bool) -> None: ...
+
+    def io_run_idle(self, connection: IoConnection, run: bool) -> None: ...
+
+
+class NoEvents:
+    def io_opened(self, connection: IoConnection) -> None:
+        pass
+
+    def io_closed(self, connection: IoConnection, timed_out: bool) -> None:
+        pass
+
+    def io_run_idle(self, connection: IoConnection, run: bool) -> None:
+        pass
+
+
+@dataclass
+class IoConnection:
+    kind: ConnectionKind
+    triad: ConnectionTriad
+    ot_connection_id: int
+    to_connection_id: int
+    ot_rpi_us: int
+    to_rpi_us: int
+    consumed: AssemblyPoint | None
+    produced: AssemblyPoint
+    destination: tuple[str, int]
+    multicast: bool
+    consumer: ConsumerState
+    #: None for a listen-only connection that shares its owner's multicast production.
+    producer: ProductionSchedule | None
+    stats: IoStatistics
+    peer: str = ""
+    run: bool | None = None
+    encap_sequence: int = 0
+    cip_sequence: int = 0
+    owner: IoConnection | None = None
+    listeners: list[IoConnection] = field(default_factory=list)
+
+    @property
+    def name(self) -> str:
+        out = self.consumed.instance_id if self.consumed else "heartbeat"
+        return f"{self.kind.value} {out}->{self.produced.instance_id} (0x{self.ot_connection_id:08X})"
+
+
+class IoTarget:
+    def __init__(self, profile: IoProfile, events: IoEvents | None = None,
+                 multicast_block: Callable[[], tuple[int, int]] | None = None,
+                 io_port: int = DEFAULT_IO_PORT) -> None:
+        self.profile = profile
+        self.events = events or NoEvents()
+        #: (first multicast address as an int, number of addresses) for T->O multicast.
+        self.multicast_block = multicast_block or (lambda: (CIP_MULTICAST_BASE, 32))
+        self.io_port = io_port
+        self.connections: dict[int, IoConnection] = {}
+        self._ids = itertools.count(random.randrange(0x10000, 0x7FFF0000))
+        self.timeouts = 0
+        self.dropped = 0
+        #: Called when a connection opens (the shell re-arms its timer for the new deadlines).
+        self.changed: Callable[[], None] = lambda: None
+
+    # -- Forward_Open -------------------------------------------------------------------------
+    def forward_open(self, fo: ForwardOpenRequest, context: RequestContext) -> ForwardOpenReply:
+        triad = fo.triad
+        if any(c.triad == triad for c in self.connections.values()):
+            raise connection_failure(ExtendedStatus.CONNECTION_IN_USE, triad, "duplicate Forward_Open")
+        if fo.transport.trigger not in self.profile.triggers:
+            raise connection_failure(ExtendedStatus.TRANSPORT_CLASS_NOT_SUPPORTED, triad,
+                                     f"{fo.transport.trigger.name.lower()} trigger not offered")
+        config, points, config_data = self._parse_path(fo, context)
+        if config is not None and config not in self.profile.config_instances:
+            raise connection_failure(ExtendedStatus.INVALID_CONFIGURATION_APPLICATION_PATH, triad,
+                                     f"configuration instance {config}")
+        if config_data:
+            raise connection_failure(ExtendedStatus.INVALID_CONFIGURATION_PATH, triad,
+                                     "this device takes no configuration data")
+        if len(points) != 2:
+            raise connection_failure(ExtendedStatus.INCONSISTENT_PATH_COMBINATION, triad,
+                                     "a connection path needs a consumed and a produced point")
+        out_point, in_point = points
+        consumed_points = self.profile.consumed()
+        produced_points = self.profile.produced()
+        if out_point == self.profile.input_only_point:
+            kind, consumed = ConnectionKind.INPUT_ONLY, None
+        elif out_point == self.profile.listen_only_point:
+            kind, consumed = ConnectionKind.LISTEN_ONLY, None
+        elif out_point in consumed_points:
+            kind, consumed = ConnectionKind.EXCLUSIVE_OWNER, consumed_points[out_point]
+        else:
+            raise connection_failure(ExtendedStatus.INVALID_CONSUMING_PATH, triad, f"no output assembly {out_point}")
+        produced = produced_points.get(in_point)
+        if produced is None:
+            raise connection_failure(ExtendedStatus.INVALID_PRODUCING_PATH, triad, f"no input assembly {in_point}")
+        if kind is ConnectionKind.EXCLUSIVE_OWNER and self.profile.pairs is not None and (
+                (out_point, in_point) not in self.profile.pairs()):
+            raise connection_failure(ExtendedStatus.INCONSISTENT_PATH_COMBINATION, triad,
+                                     f"assemblies {out_point}/{in_point} are not a pair this device offers")
+        self._check_network(fo, kind, consumed, produced)
+        self._check_rpi(fo)
+        owner = None
+        if kind is ConnectionKind.EXCLUSIVE_OWNER:
+            for other in self.connections.values():
+                if other.kind is ConnectionKind.EXCLUSIVE_OWNER and other.consumed is consumed:
+                    raise connection_failure(ExtendedStatus.OWNERSHIP_CONFLICT, triad,
+                                             f"output assembly {out_point} already has an owner")
+        if kind is ConnectionKind.LISTEN_ONLY:
+            owner = next((c for c in self.connections.values() if c.kind is not ConnectionKind.LISTEN_ONLY
+                          and c.produced is produced and c.multicast), None)
+            if owner is None:
+                raise connection_failure(ExtendedStatus.NON_LISTEN_ONLY_NOT_OPENED, triad,
+                                         f"no connection produces input assembly {in_point} to listen to")
+        if len(self.connections) >= self.profile.max_connections:
+            raise connection_failure(ExtendedStatus.OUT_OF_CONNECTIONS, triad)
+        return self._open(fo, context, kind, consumed, produced, owner)
+
+    def _parse_path(self, fo: ForwardOpenRequest, context: RequestContext
+                    ) -> tuple[int | None, list[int], bytes]:
+        triad = fo.triad
+        try:
+            segments = decode_path(fo.connection_path)
+        except CipError:
+            raise connection_failure(ExtendedStatus.INVALID_SEGMENT_IN_CONNECTION_PATH, triad) from None
+        config: int | None = None
+        points: list[int] = []
+        data = b""
+        seen_class = False
+        for segment in segments:
+            if isinstance(segment, ElectronicKey):
+                if seen_class:
+                    raise connection_failure(ExtendedStatus.INVALID_SEGMENT_IN_CONNECTION_PATH, triad)
+                cm = context.router.objects.get(0x06)
+                if cm is not None:
+                    cm.check_key(segment, triad)  # type: ignore[attr-defined]
+            elif isinstance(segment, LogicalSegment):
+                if segment.kind == LogicalType.CLASS_ID:
+                    if seen_class or segment.value != 0x04:
+                        raise connection_failure(ExtendedStatus.INVALID_APPLICATION_PATH, triad,
+                                                 "class 1 connections go to assembly instances")
+                    seen_class = True
+                elif not seen_class:
+                    raise connection_failure(ExtendedStatus.INVALID_SEGMENT_IN_CONNECTION_PATH, triad)
+                elif segment.kind == LogicalType.INSTANCE_ID and config is None and not points:
+                    config = segment.value
+                elif segment.kind in (LogicalType.CONNECTION_POINT, LogicalType.INSTANCE_ID):
+                    points.append(segment.value)
+                else:
+                    raise connection_failure(ExtendedStatus.INVALID_SEGMENT_IN_CONNECTION_PATH, triad)
+            elif isinstance(segment, DataSegment):
+                data += segment.data
+            else:
+                raise connection_failure(ExtendedStatus.INVALID_SEGMENT_IN_CONNECTION_PATH, triad)
+        if not seen_class:
+            raise connection_failure(ExtendedStatus.INVALID_APPLICATION_PATH, triad)
+        return config, points, data
+
+    def _check_network(self, fo: ForwardOpenRequest, kind: ConnectionKind, consumed: AssemblyPoint | None,
+                       produced: AssemblyPoint) -> None:
+        triad = fo.triad
+        ot, to = fo.ot_parameters, fo.to_parameters
+        if ot.type != ConnectionType.POINT_TO_POINT:
+            raise connection_failure(ExtendedStatus.INVALID_NETWORK_CONNECTION_PARAMETER, triad,
+                                     "O->T must be point-to-point")
+        if to.type not in (ConnectionType.POINT_TO_POINT, ConnectionType.MULTICAST):
+            raise connection_failure(ExtendedStatus.INVALID_NETWORK_CONNECTION_PARAMETER, triad,
+                                     "T->O must be point-to-point or multicast")
+        if kind is ConnectionKind.LISTEN_ONLY and to.type != ConnectionType.MULTICAST:
+            raise connection_failure(ExtendedStatus.INVALID_NETWORK_CONNECTION_PARAMETER, triad,
+                                     "a listen-only connection receives multicast")
+        expected_ot = consumed.size + OT_OVERHEAD if consumed is not None else None
+        if expected_ot is None:
+            # Heartbeat: the sequence count, with or without the run/idle header.
+            if ot.size not in (TO_OVERHEAD, OT_OVERHEAD):
+                raise connection_failure(ExtendedStatus.INVALID_OT_SIZE, triad, "heartbeat size",
+                                         extra_words=(TO_OVERHEAD,))
+        elif ot.size != expected_ot and not (ot.variable and ot.size > expected_ot):
+            raise connection_failure(ExtendedStatus.INVALID_OT_SIZE, triad,
+                                     f"O->T size {ot.size}, assembly needs {expected_ot}", extra_words=(expected_ot,))
+        expected_to = produced.size + TO_OVERHEAD
+        if to.size != expected_to and not (to.variable and to.size > expected_to):
+            raise connection_failure(ExtendedStatus.INVALID_TO_SIZE, triad,
+                                     f"T->O size {to.size}, assembly needs {expected_to}", extra_words=(expected_to,))
+
+    def _check_rpi(self, fo: ForwardOpenRequest) -> None:
+        low, high = self.profile.rpi_min_us, self.profile.rpi_max_us
+
+        def verdict(rpi: int) -> tuple[int, int]:
+            if rpi < low:
+                return RpiType.MINIMUM, low
+            if rpi > high:
+                return RpiType.MAXIMUM, high
+            return RpiType.ACCEPTABLE, rpi
+
+        (ot_type, ot_value), (to_type, to_value) = verdict(fo.ot_rpi_us), verdict(fo.to_rpi_us)
+        if ot_type or to_type:
+            words = struct.unpack("<5H", struct.pack("<BBII", ot_type, to_type, ot_value, to_value))
+            raise connection_failure(ExtendedStatus.RPI_VALUE_NOT_ACCEPTABLE, fo.triad,
+                                     f"RPI outside {low}..{high} us", extra_words=words)
+
+    def _open(self, fo: ForwardOpenRequest, context: RequestContext, kind: ConnectionKind,
+              consumed: AssemblyPoint | None, produced: AssemblyPoint, owner: IoConnection | None) -> ForwardOpenReply:
+        now = context.now
+        multicast = fo.to_parameters.type == ConnectionType.MULTICAST
+        peer_host = context.origin.rsplit(":", 1)[0] if context.origin else "127.0.0.1"
+        sockaddrs: dict[int, SockAddr] = context.extras.get("sockaddr", {})
+        if owner is not None:
+            destination = owner.destination
+            to_id = owner.to_connection_id
+        elif multicast:
+            destination = (self._multicast_address(), self.io_port)
+            to_id = self._new_id()
+        else:
+            requested = sockaddrs.get(ItemType.SOCKADDR_T_O)
+            destination = (peer_host, requested.port if requested is not None else self.io_port)
+            to_id = fo.to_connection_id
+        stats = IoStatistics()
+        consumer = ConsumerState.opened(connection_timeout(fo.ot_rpi_us, fo.timeout_multiplier), now, stats=stats)
+        producer = None if owner is not None else ProductionSchedule(fo.to_rpi_us / 1e6, now, stats=stats)
+        connection = IoConnection(kind, fo.triad, self._new_id(), to_id, fo.ot_rpi_us, fo.to_rpi_us, consumed,
+                                  produced, destination, multicast, consumer, producer, stats, peer_host,
+                                  owner=owner)
+        if owner is not None:
+            owner.listeners.append(connection)
+        self.connections[connection.ot_connection_id] = connection
+        if multicast:
+            host, port = destination
+            reply_item = Item(ItemType.SOCKADDR_T_O, SockAddr(host, port).encode())
+            context.extras.setdefault("reply_items", []).append(reply_item)
+        log.info("class 1 %s opened by %s (RPI O->T %d us, T->O %d us%s)", connection.name, context.origin,
+                 fo.ot_rpi_us, fo.to_rpi_us, ", multicast " + destination[0] if multicast else "")
+        self.events.io_opened(connection)
+        self.changed()
+        return ForwardOpenReply(connection.ot_connection_id, to_id, fo.triad, fo.ot_rpi_us, fo.to_rpi_us)
+
+    def _new_id(self) -> int:
+        while True:
+            candidate = next(self._ids) & 0xFFFFFFFF
+            if candidate and candidate not in self.connections and all(
+                    c.to_connection_id != candidate for c in self.connections.values()):
+                return candidate
+
+    def _multicast_address(self) -> str:
+        start, count = self.multicast_block()
+        in_use = {c.destination[0] for c in self.connections.values() if c.multicast}
+        for index in range(max(count, 1)):
+            address = socket.inet_ntoa(struct.pack(">I", start + index))
+            if address not in in_use:
+                return address
+        return socket.inet_ntoa(struct.pack(">I", start))
+
+    # -- Forward_Close ------------------------------------------------------------------------
+    def forward_close(self, fc: ForwardCloseRequest, context: RequestContext) -> bool:
+        for connection in list(self.connections.values()):
+            if connection.triad == fc.triad:
+                self._close(connection, timed_out=False)
+                return True
+        return False
+
+    def _close(self, connection: IoConnection, timed_out: bool) -> None:
+        if self.connections.pop(connection.ot_connection_id, None) is None:
+            return
+        if connection.owner is not None and connection in connection.owner.listeners:
+            connection.owner.listeners.remove(connection)
+        log.info("class 1 %s %s", connection.name, "timed out" if timed_out else "closed")
+        self.events.io_closed(connection, timed_out)
+        for listener in list(connection.listeners):
+            # A listen-only connection lives only as long as the connection it listens to.
+            self._close(listener, timed_out)
+
+    def close_all(self) -> None:
+        for connection in list(self.connections.values()):
+            self._close(connection, timed_out=False)
+
+    # -- datagrams ------------------------------------------------------------------------------
+    def receive(self, raw: bytes, source: tuple[str, int], now: float) -> None:
+        """Consume one O->T datagram; anything malformed or unknown is dropped and counted."""
+        try:
+            datagram = decode_io_datagram(raw)
+        except IoDatagramError:
+            self.dropped += 1
+            return
+        connection = self.connections.get(datagram.connection_id)
+        if connection is None or connection.peer != source[0]:
+            self.dropped += 1
+            return
+        reception = connection.consumer.accept(datagram.encap_sequence, datagram.cip_sequence, now)
+        if reception is Reception.STALE:
+            return
+        payload = datagram.payload
+        if connection.consumed is None:
+            if len(payload) >= 4:
+                self._run_idle(connection, bool(payload[0] & 1))
+            return
+        try:
+            run, data = split_run_idle(payload)
+        except IoDatagramError:
+            self.dropped += 1
+            return
+        if len(data) != connection.consumed.size:
+            self.dropped += 1
+            return
+        self._run_idle(connection, run)
+        if reception is Reception.NEW and run and connection.consumed.consume is not None:
+            connection.consumed.consume(data)
+
+    def _run_idle(self, connection: IoConnection, run: bool) -> None:
+        if connection.run is not run:
+            connection.run = run
+            log.info("class 1 %s: %s", connection.name, "run" if run else "idle")
+            self.events.io_run_idle(connection, run)
+
+    def poll(self, now: float) -> list[tuple[bytes, tuple[str, int]]]:
+        """The T->O datagrams due at ``now``, each with its destination."""
+        out = []
+        for connection in self.connections.values():
+            producer = connection.producer
+            if producer is None or now < producer.next_due:
+                continue
+            due, _ = producer.due(now)
+            if not due:
+                continue
+            data = connection.produced.produce() if connection.produced.produce is not None else bytes(
+                connection.produced.size)
+            connection.encap_sequence = (connection.encap_sequence + 1) & 0xFFFFFFFF
+            connection.cip_sequence = (connection.cip_sequence + 1) & 0xFFFF
+            out.append((encode_io_datagram(connection.to_connection_id, connection.encap_sequence,
+                                           connection.cip_sequence, data), connection.destination))
+            producer.stats.sent += 1
+        return out
+
+    def next_deadline(self) -> float | None:
+        deadlines = [c.consumer.deadline for c in self.connections.values()]
+        deadlines += [c.producer.next_due for c in self.connections.values() if c.producer is not None]
+        return min(deadlines, default=None)
+
+    def expire(self, now: float) -> list[IoConnection]:
+        expired = [c for c in self.connections.values() if c.consumer.expired(now)]
+        for connection in expired:
+            if connection.ot_connection_id in self.connections:
+                self.timeouts += 1
+                self._close(connection, timed_out=True)
+        return expired
