@@ -49,6 +49,8 @@ class Adapter:
             table=self.device.connection_table,
         )
         self.server = EncapsulationServer(self.target, s.host, s.port)
+        self.target.tick = self._tick
+        self._device_timer: asyncio.TimerHandle | None = None
         self.io: IoTarget | None = None
         self.io_endpoint: IoEndpoint | None = None
         profile = self.device.io_profile()
@@ -58,14 +60,33 @@ class Adapter:
             self.target.settings.capabilities = CAPABILITY_CIP_TCP | CAPABILITY_CLASS01_UDP
             self.io_endpoint = IoEndpoint(self.io, s.host, s.io_port, lambda: int(self.device.tcpip.get(1, 8)))
             self.io.changed = self.io_endpoint.wakeup
+            self.io.deliver = self.device.assembly.deliver
+            self.io.tick = self._tick
             self.device._update_io_status()
 
     @property
     def port(self) -> int:
         return self.server.port
 
+    def _tick(self, now: float) -> None:
+        """Advance the device to ``now`` and keep a timer at its next deadline (lost-command timers,
+        the end of a ramp), so it changes on time even when nobody asks."""
+        self.device.advance(now)
+        deadline = self.device.next_deadline()
+        if self._device_timer is not None:
+            self._device_timer.cancel()
+            self._device_timer = None
+        if deadline is not None:
+            loop = asyncio.get_running_loop()
+            self._device_timer = loop.call_at(max(deadline, now), self._on_device_timer)
+
+    def _on_device_timer(self) -> None:
+        self._device_timer = None
+        self._tick(asyncio.get_running_loop().time())
+
     async def start(self) -> None:
         await self.server.start()
+        self._tick(asyncio.get_running_loop().time())
         if self.io_endpoint is not None:
             try:
                 await self.io_endpoint.start()
@@ -76,6 +97,9 @@ class Adapter:
                 self.io.io_port = self.io_endpoint.port
 
     async def close(self) -> None:
+        if self._device_timer is not None:
+            self._device_timer.cancel()
+            self._device_timer = None
         if self.io is not None:
             self.io.close_all()
         if self.io_endpoint is not None:

@@ -35,6 +35,8 @@ class Device:
     identity_info: IdentityInfo
     interface: NetworkInterface = field(default_factory=NetworkInterface)
     limits: DeviceLimits = field(default_factory=DeviceLimits)
+    #: TCP/IP Interface and Ethernet Link objects: an EtherNet/IP device has them, a CompoNet slave not.
+    ethernet: bool = True
 
     def __post_init__(self) -> None:
         self.router = MessageRouter()
@@ -49,9 +51,10 @@ class Device:
         self.connection_manager = ConnectionManagerObject(self.connection_table, key_check=self.check_key)
         self.router.register(self.connection_manager)
         self.tcpip = TcpIpObject(self.interface)
-        self.router.register(self.tcpip)
         self.ethernet_link = EthernetLinkObject(self.interface)
-        self.router.register(self.ethernet_link)
+        if self.ethernet:
+            self.router.register(self.tcpip)
+            self.router.register(self.ethernet_link)
         self._io_connections: dict[int, IoConnection] = {}
         self._io_faulted = False
 
@@ -86,6 +89,14 @@ class Device:
 
     def reset(self, reset_type: int) -> None:
         """Emulated power cycle (type 0) or return to defaults (type 1): families override."""
+
+    # -- time -----------------------------------------------------------------------------------
+    def advance(self, now: float) -> None:
+        """Move the device's simulation to ``now`` (ramps, timers); families with behaviour override."""
+
+    def next_deadline(self) -> float | None:
+        """When the simulation next changes by itself, or None; the adapter calls ``advance`` then."""
+        return None
 
     @property
     def inactivity_timeout(self) -> float:

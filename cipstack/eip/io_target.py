@@ -148,6 +148,8 @@ class IoTarget:
                  io_port: int = DEFAULT_IO_PORT) -> None:
         self.profile = profile
         self.events = events or NoEvents()
+        #: Where consumed data goes: the device's Assembly object (``AssemblyObject.deliver``).
+        self.deliver: Callable[[int, bytes, float], None] = self._deliver_to_point
         #: (first multicast address as an int, number of addresses) for T->O multicast.
         self.multicast_block = multicast_block or (lambda: (CIP_MULTICAST_BASE, 32))
         self.io_port = io_port
@@ -157,6 +159,8 @@ class IoTarget:
         self.dropped = 0
         #: Called when a connection opens (the shell re-arms its timer for the new deadlines).
         self.changed: Callable[[], None] = lambda: None
+        #: Called with the time before data is consumed or produced: the device moves its simulation there.
+        self.tick: Callable[[float], None] = lambda now: None
 
     # -- Forward_Open -------------------------------------------------------------------------
     def forward_open(self, fo: ForwardOpenRequest, context: RequestContext) -> ForwardOpenReply:
@@ -381,6 +385,7 @@ class IoTarget:
         if connection is None or connection.peer != source[0]:
             self.dropped += 1
             return
+        self.tick(now)
         reception = connection.consumer.accept(datagram.encap_sequence, datagram.cip_sequence, now)
         if reception is Reception.STALE:
             return
@@ -398,8 +403,13 @@ class IoTarget:
             self.dropped += 1
             return
         self._run_idle(connection, run)
-        if reception is Reception.NEW and run and connection.consumed.consume is not None:
-            connection.consumed.consume(data)
+        if reception is Reception.NEW and run:
+            self.deliver(connection.consumed.instance_id, data, now)
+
+    def _deliver_to_point(self, instance_id: int, data: bytes, now: float) -> None:
+        for point in self.profile.consumed().values():
+            if point.instance_id == instance_id and point.consume is not None:
+                point.consume(data, now)
 
     def _run_idle(self, connection: IoConnection, run: bool) -> None:
         if connection.run is not run:
@@ -410,6 +420,7 @@ class IoTarget:
     def poll(self, now: float) -> list[tuple[bytes, tuple[str, int]]]:
         """The T->O datagrams due at ``now``, each with its destination."""
         out = []
+        self.tick(now)
         for connection in self.connections.values():
             producer = connection.producer
             if producer is None or now < producer.next_due:

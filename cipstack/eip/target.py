@@ -76,6 +76,8 @@ class EncapsulationTarget:
         self.table = table or ConnectionTable(self.settings.max_connections)
         self.sessions: dict[int, EncapsulationConnection] = {}
         self.stats = TargetStatistics()
+        #: Called with the time before a request is served: the device moves its simulation there.
+        self.tick: Callable[[float], None] = lambda now: None
         self._handles = itertools.count(random.randrange(1, 0x7FFF0000))
 
     # -- TCP ------------------------------------------------------------------------------------
@@ -218,9 +220,11 @@ class EncapsulationConnection:
     def _frame(self, command: int, session: int, context: bytes, body: bytes, now: float) -> None:
         if command == Command.SEND_RR_DATA:
             self._check_session(session)
+            self.target.tick(now)
             self._reply(command, session, context, self._send_rr_data(body, now))
         elif command == Command.SEND_UNIT_DATA:
             self._check_session(session)
+            self.target.tick(now)
             reply = self._send_unit_data(body, now)
             if reply is not None:
                 self._reply(command, session, context, reply)

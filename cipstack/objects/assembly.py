@@ -36,8 +36,10 @@ class AssemblyPoint:
     size: int
     #: True for output (consumed, O->T) assemblies: settable over the network.
     consumed: bool
+    #: The device's current data of an input (produced) assembly.
     produce: Callable[[], bytes] | None = None
-    consume: Callable[[bytes], None] | None = None
+    #: Called with new data of an output (consumed) assembly and the time it arrived.
+    consume: Callable[[bytes, float], None] | None = None
     name: str = ""
 
 
@@ -45,20 +47,24 @@ class AssemblyObject(CipObject):
     def __init__(self) -> None:
         super().__init__(SPEC)
         self.points: dict[int, AssemblyPoint] = {}
+        #: Last data written to each assembly (what an output without a device consumer holds).
+        self.stores: dict[int, bytearray] = {}
 
     def add_assembly(self, point: AssemblyPoint) -> None:
         self.points[point.instance_id] = point
-        store = bytearray(point.size)
+        self.stores[point.instance_id] = bytearray(point.size)
 
         def produce() -> bytes:
-            return point.produce() if point.produce is not None else bytes(store)
+            return point.produce() if point.produce is not None else bytes(self.stores[point.instance_id])
 
-        def consume(data: bytes) -> None:
-            store[:] = data
-            if point.consume is not None:
-                point.consume(bytes(data))
+        self.add_instance(point.instance_id, data=Binding(produce), size=point.size)
 
-        self.add_instance(point.instance_id, data=Binding(produce, consume), size=point.size)
+    def deliver(self, instance_id: int, data: bytes, now: float) -> None:
+        """New data for an output assembly, from explicit messaging or a class 1 connection."""
+        self.stores[instance_id][:] = data
+        point = self.points[instance_id]
+        if point.consume is not None:
+            point.consume(bytes(data), now)
 
     def data(self, instance_id: int) -> bytes:
         return bytes(self.get(instance_id, 3))
@@ -75,4 +81,6 @@ class AssemblyObject(CipObject):
             if len(data) != point.size:
                 code = GeneralStatus.NOT_ENOUGH_DATA if len(data) < point.size else GeneralStatus.TOO_MUCH_DATA
                 raise CipError(code, message=f"{where} is {point.size} bytes, got {len(data)}")
+            self.deliver(point.instance_id, data, context.now if context is not None else 0.0)
+            return
         super().write_attribute(instance, spec, value, context)
