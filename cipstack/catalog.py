@@ -8,6 +8,7 @@ from __future__ import annotations
 
 from collections.abc import Iterable
 
+from .assemblies.schema import AssemblySchema
 from .cip.model import AttributeSpec, ClassSpec
 from .cip.types import UINT
 from .eip.connection_manager import SPEC as CONNECTION_MANAGER_SPEC
@@ -33,10 +34,12 @@ CLASS_ATTRIBUTES: dict[int, AttributeSpec] = {
 
 
 class Catalog:
-    def __init__(self, classes: Iterable[ClassSpec] = ()) -> None:
+    def __init__(self, classes: Iterable[ClassSpec] = (), assemblies: Iterable[AssemblySchema] = ()) -> None:
         self.classes: dict[int, ClassSpec] = dict(STANDARD_CLASSES)
         for spec in classes:
             self.classes[spec.class_id] = spec
+        #: Assembly schemas by instance, when the device profile is known.
+        self.assemblies: dict[int, AssemblySchema] = {a.instance: a for a in assemblies}
 
     def add(self, spec: ClassSpec) -> None:
         self.classes[spec.class_id] = spec

@@ -9,8 +9,9 @@ returned. Every error status raises ``CipError`` naming the general and extended
 from __future__ import annotations
 
 import asyncio
+import contextlib
 import struct
-from collections.abc import Awaitable, Coroutine, Sequence
+from collections.abc import AsyncIterator, Awaitable, Coroutine, Sequence
 from dataclasses import dataclass
 from typing import Any, TypeVar
 
@@ -21,6 +22,7 @@ from .cip.model import AttributeSpec
 from .cip.status import CipError, GeneralStatus
 from .cip.types import UINT, CipType
 from .eip.identity_items import IdentityRecord, ServiceRecord
+from .eip.io_originator import IoConnectionHandle
 from .eip.originator import DEFAULT_PORT, EncapsulationClient, discover, list_services_udp, parse_host
 
 T = TypeVar("T")
@@ -212,6 +214,38 @@ class Scanner:
         count, _ = UINT.decode_from(body, 0)
         offsets = [UINT.decode_from(body, 2 + 2 * i)[0] for i in range(count)] + [len(body)]
         return [MessageRouterResponse.decode(body[offsets[i]:offsets[i + 1]]) for i in range(count)]
+
+    # -- class 1 --------------------------------------------------------------------------------------
+    async def assembly_size(self, instance: int) -> int:
+        """Size of an assembly instance: from its schema when known, else Assembly attribute 4."""
+        schema = self.catalog.assemblies.get(instance)
+        if schema is not None:
+            return schema.size
+        return int(await self.read(0x04, instance, 4, UINT))
+
+    @contextlib.asynccontextmanager
+    async def io_connection(self, output: int | None = None, input: int = 0, rpi: float = 0.010, *,
+                            config: int = 1, heartbeat: int | None = None, output_size: int | None = None,
+                            input_size: int | None = None, **options: Any) -> AsyncIterator[IoConnectionHandle]:
+        """A class 1 connection: ``async with scanner.io_connection(output=21, input=71, rpi=0.010) as io``.
+
+        Sizes come from the assembly schemas of a known profile, else from each assembly's
+        attribute 4; fields are accessible by name when the schema is known (``io.output.run_forward``),
+        raw bytes always (``io.output.raw``). ``options`` go to ``EncapsulationClient.io_connection``
+        (``target_io_port``, ``local_io_port``, ``multicast``, ``timeout_multiplier``, ``run``).
+        """
+        if output is None and heartbeat is None:
+            raise ValueError("give an output assembly, or a heartbeat point for input-only / listen-only")
+        if output_size is None:
+            output_size = 0 if output is None else await self.assembly_size(output)
+        if input_size is None:
+            input_size = await self.assembly_size(input)
+        context = self.client.io_connection(
+            output, input, rpi, output_size=output_size, input_size=input_size, config=config, heartbeat=heartbeat,
+            output_schema=self.catalog.assemblies.get(output) if output is not None else None,
+            input_schema=self.catalog.assemblies.get(input), **options)
+        async with context as handle:
+            yield handle
 
     # -- encapsulation --------------------------------------------------------------------------
     async def list_identity(self) -> list[IdentityRecord]:

@@ -354,7 +354,7 @@ class EncapsulationClient:
         return self.connection
 
     # -- class 1 -------------------------------------------------------------------------------------
-    async def io_connection(self, output: int | None, input: int, rpi: float, *, output_size: int,
+    def io_connection(self, output: int | None, input: int, rpi: float, *, output_size: int,
                             input_size: int, config: int = 1, heartbeat: int | None = None,
                             target_io_port: int = DEFAULT_IO_PORT, local_io_port: int = 0, multicast: bool = False,
                             timeout_multiplier: int = 2, output_schema: AssemblySchema | None = None,

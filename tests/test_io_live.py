@@ -1,0 +1,216 @@
+"""Class 1 over real loopback sockets: our scanner and our adapter, several connections at once."""
+
+from __future__ import annotations
+
+import asyncio
+import signal
+import socket
+import subprocess
+import sys
+import textwrap
+from collections.abc import AsyncIterator
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import pytest
+
+from cipstack.adapter import Adapter, AdapterSettings
+from cipstack.assemblies.drive_profile import (
+    basic_speed_control_input,
+    basic_speed_control_output,
+    extended_speed_control_input,
+    extended_speed_control_output,
+)
+from cipstack.catalog import Catalog
+from cipstack.devices.base import Device
+from cipstack.devices.profiles import acg_et2_identity
+from cipstack.eip.io_originator import IoTimeoutError
+from cipstack.eip.io_target import IoConnection, IoProfile
+from cipstack.objects.assembly import AssemblyPoint
+from cipstack.objects.tcpip import NetworkInterface
+from cipstack.scanner import Scanner
+
+OUTPUTS = [basic_speed_control_output(), extended_speed_control_output()]
+INPUTS = [basic_speed_control_input(), extended_speed_control_input()]
+CATALOG = Catalog(assemblies=[*OUTPUTS, *INPUTS])
+
+
+@dataclass
+class SpeedDevice(Device):
+    """A device whose input assemblies echo the speed reference and run bits of its outputs."""
+
+    consumed: list[tuple[int, bytes, float]] = field(default_factory=list)
+    closed: list[bool] = field(default_factory=list)
+    run_modes: list[bool] = field(default_factory=list)
+
+    def __post_init__(self) -> None:
+        super().__post_init__()
+        self.state = {"run_forward": False, "speed": 0}
+        for schema in OUTPUTS:
+            self.assembly.add_assembly(AssemblyPoint(schema.instance, schema.size, True, consume=self._consume(schema)))
+        self.assembly.add_assembly(AssemblyPoint(70, 4, False, produce=lambda: INPUTS[0].encode(
+            running_forward=self.state["run_forward"], speed_actual=self.state["speed"])))
+        self.assembly.add_assembly(AssemblyPoint(71, 4, False, produce=lambda: INPUTS[1].encode(
+            running_forward=self.state["run_forward"], speed_actual=self.state["speed"], ready=True)))
+
+    def _consume(self, schema):  # type: ignore[no-untyped-def]
+        def consume(data: bytes, now: float) -> None:
+            values = schema.decode(data)
+            self.state.update(run_forward=values["run_forward"], speed=values["speed_reference"])
+            self.consumed.append((schema.instance, data, now))
+        return consume
+
+    def io_profile(self) -> IoProfile:
+        return IoProfile(lambda: {p: self.assembly.points[p] for p in (20, 21)},
+                         lambda: {p: self.assembly.points[p] for p in (70, 71)}, rpi_min_us=1000)
+
+    def io_closed(self, connection: IoConnection, timed_out: bool) -> None:
+        super().io_closed(connection, timed_out)
+        self.closed.append(timed_out)
+
+    def io_run_idle(self, connection: IoConnection, run: bool) -> None:
+        super().io_run_idle(connection, run)
+        self.run_modes.append(run)
+
+
+def free_port_on(*hosts: str) -> int:
+    """A UDP and TCP port number free on every given loopback address."""
+    for _ in range(50):
+        with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as probe:
+            probe.bind((hosts[0], 0))
+            port = probe.getsockname()[1]
+        try:
+            sockets = []
+            for host in hosts:
+                for kind in (socket.SOCK_DGRAM, socket.SOCK_STREAM):
+                    s = socket.socket(socket.AF_INET, kind)
+                    sockets.append(s)
+                    s.bind((host, port))
+            return port
+        except OSError:
+            continue
+        finally:
+            for s in sockets:
+                s.close()
+    raise RuntimeError("no common free port")
+
+
+async def start_adapter(host: str, io_port: int = 0) -> Adapter:
+    device = SpeedDevice(acg_et2_identity(), NetworkInterface(ip_address=host))
+    adapter = Adapter(AdapterSettings(host=host, port=0, io_port=io_port), device=device)
+    await adapter.start()
+    return adapter
+
+
+@pytest.fixture
+async def adapter() -> AsyncIterator[Adapter]:
+    running = await start_adapter("127.0.0.1")
+    yield running
+    await running.close()
+
+
+async def test_fields_by_name_and_updates(adapter: Adapter) -> None:
+    assert adapter.io_endpoint is not None
+    async with await Scanner.connect(f"127.0.0.1:{adapter.port}", catalog=CATALOG) as scanner:
+        async with scanner.io_connection(output=21, input=71, rpi=0.005,
+                                         target_io_port=adapter.io_endpoint.port) as io:
+            io.output.run_forward = True
+            io.output.speed_reference = 1500
+            image = await io.wait_input(lambda i: i.speed_actual == 1500, timeout=5)
+            assert image.running_forward and image.ready
+            assert io.input.fields()["speed_actual"] == 1500
+            device = adapter.device
+            assert isinstance(device, SpeedDevice)
+            assert device.consumed[-1][:2] == (21, bytes.fromhex("0100dc05"))
+            assert device.identity.status & 0x00F1 == 0x0061  # owned, I/O running
+            io.set_run(False)
+            await asyncio.sleep(0.05)
+            assert device.run_modes[-1] is False
+            assert device.identity.status & 0x00F0 == 0x0070  # idle
+            assert io.stats.sent > 5 and io.stats.received > 5 and io.stats.lost == 0
+        assert device.closed == [False]
+        assert not adapter.io or not adapter.io.connections  # Forward_Close on exit
+
+
+async def test_sizes_from_attribute_4_without_schema(adapter: Adapter) -> None:
+    assert adapter.io_endpoint is not None
+    async with await Scanner.connect(f"127.0.0.1:{adapter.port}") as scanner:  # no catalog: raw bytes
+        async with scanner.io_connection(output=20, input=70, rpi=0.004,
+                                         target_io_port=adapter.io_endpoint.port) as io:
+            io.output.raw = bytes.fromhex("0100e803")
+            image = await io.wait_input(lambda i: i.raw == bytes.fromhex("0400e803"), timeout=5)
+            assert image.raw[2:] == (1000).to_bytes(2, "little")
+            with pytest.raises(AttributeError):
+                io.output.speed_reference = 5  # no schema: fields unknown
+
+
+async def test_several_targets_on_two_loopback_addresses() -> None:
+    port = free_port_on("127.0.0.1", "127.0.0.2")
+    first = await start_adapter("127.0.0.2", io_port=port)
+    second = await start_adapter("127.0.0.1", io_port=free_port_on("127.0.0.1"))
+    try:
+        assert first.io_endpoint and second.io_endpoint
+        async with await Scanner.connect(f"127.0.0.2:{first.port}", catalog=CATALOG) as a, \
+                await Scanner.connect(f"127.0.0.1:{second.port}", catalog=CATALOG) as b:
+            # Our originator's own I/O socket uses the same port number on 127.0.0.1.
+            async with a.io_connection(output=21, input=71, rpi=0.002, target_io_port=port, local_io_port=port) as io_a, \
+                    b.io_connection(output=21, input=71, rpi=0.003, target_io_port=second.io_endpoint.port) as io_b, \
+                    b.io_connection(output=20, input=70, rpi=0.010, target_io_port=second.io_endpoint.port) as io_c:
+                io_a.output.speed_reference = 111
+                io_b.output.speed_reference = 222
+                io_c.output.speed_reference = 333
+                await io_a.wait_input(lambda i: i.speed_actual == 111, 5)
+                await io_b.wait_input(lambda i: i.speed_actual in (222, 333), 5)
+                await asyncio.sleep(0.2)
+                assert io_a.stats.received > 50 and io_b.stats.received > 30 and io_c.stats.received > 10
+                assert first.io and first.io.connections and len(second.io.connections) == 2  # type: ignore[union-attr]
+    finally:
+        await first.close()
+        await second.close()
+
+
+async def test_originator_watchdog_raises_when_target_stops(adapter: Adapter) -> None:
+    assert adapter.io_endpoint is not None
+    async with await Scanner.connect(f"127.0.0.1:{adapter.port}", catalog=CATALOG) as scanner:
+        async with scanner.io_connection(output=21, input=71, rpi=0.002, timeout_multiplier=0,
+                                         target_io_port=adapter.io_endpoint.port) as io:
+            await io.wait_input(lambda i: i.ready, 5)
+            await adapter.io_endpoint.close()  # the target goes silent
+            with pytest.raises(IoTimeoutError):
+                async for _ in io.updates():
+                    pass
+            assert io.timed_out
+
+
+async def test_killed_originator_times_out_at_the_target(adapter: Adapter, tmp_path: Path) -> None:
+    assert adapter.io_endpoint is not None
+    script = tmp_path / "originator.py"
+    script.write_text(textwrap.dedent(f"""
+        import asyncio, sys
+        from cipstack.scanner import Scanner
+        async def main():
+            scanner = await Scanner.connect("127.0.0.1:{adapter.port}")
+            async with scanner.io_connection(output=21, input=71, rpi=0.010, timeout_multiplier=1,
+                                             target_io_port={adapter.io_endpoint.port}) as io:
+                await io.wait_input(lambda i: len(i.raw) == 4, 5)
+                print("running", flush=True)
+                await asyncio.sleep(60)
+        asyncio.run(main())
+    """))
+    process = subprocess.Popen([sys.executable, str(script)], stdout=subprocess.PIPE, text=True)
+    try:
+        line = await asyncio.wait_for(asyncio.get_running_loop().run_in_executor(None, process.stdout.readline), 20)  # type: ignore[union-attr]
+        assert line.strip() == "running"
+        device = adapter.device
+        assert isinstance(device, SpeedDevice)
+        assert adapter.io and len(adapter.io.connections) == 1
+        process.send_signal(signal.SIGKILL)
+        process.wait(5)
+        # Timeout = 10 ms x 4 x 2^1 = 80 ms after the last packet.
+        await asyncio.sleep(0.3)
+        assert device.closed == [True]
+        assert not adapter.io.connections
+        assert device.identity.status & 0x00F0 == 0x0020  # I/O connection faulted
+    finally:
+        if process.poll() is None:
+            process.kill()
