@@ -212,7 +212,7 @@ def test_exclusive_owner_open_consume_produce_close() -> None:
     assert connection.destination == ("127.0.0.1", 40000)  # the port of the Sockaddr Info item
     assert rig.events.events == [("opened", ConnectionKind.EXCLUSIVE_OWNER)]
     # Production starts at once and follows the RPI.
-    [(datagram, destination)] = rig.io.poll(5.0)
+    [(datagram, _)] = rig.io.poll(5.0)
     decoded = decode_io_datagram(datagram)
     assert (decoded.connection_id, decoded.encap_sequence, decoded.cip_sequence, decoded.payload) == (
         0xABCD0001, 1, 1, b"\x11\x22\x33\x44")

@@ -134,14 +134,14 @@ async def test_fields_by_name_and_updates(adapter: Adapter) -> None:
 
 async def test_sizes_from_attribute_4_without_schema(adapter: Adapter) -> None:
     assert adapter.io_endpoint is not None
-    async with await Scanner.connect(f"127.0.0.1:{adapter.port}") as scanner:  # no catalog: raw bytes
-        async with scanner.io_connection(output=20, input=70, rpi=0.004,
-                                         target_io_port=adapter.io_endpoint.port) as io:
-            io.output.raw = bytes.fromhex("0100e803")
-            image = await io.wait_input(lambda i: i.raw == bytes.fromhex("0400e803"), timeout=5)
-            assert image.raw[2:] == (1000).to_bytes(2, "little")
-            with pytest.raises(AttributeError):
-                io.output.speed_reference = 5  # no schema: fields unknown
+    scanner = await Scanner.connect(f"127.0.0.1:{adapter.port}")  # no catalog: raw bytes
+    async with scanner, scanner.io_connection(output=20, input=70, rpi=0.004,
+                                              target_io_port=adapter.io_endpoint.port) as io:
+        io.output.raw = bytes.fromhex("0100e803")
+        image = await io.wait_input(lambda i: i.raw == bytes.fromhex("0400e803"), timeout=5)
+        assert image.raw[2:] == (1000).to_bytes(2, "little")
+        with pytest.raises(AttributeError):
+            io.output.speed_reference = 5  # no schema: fields unknown
 
 
 async def test_several_targets_on_two_loopback_addresses() -> None:
@@ -150,20 +150,22 @@ async def test_several_targets_on_two_loopback_addresses() -> None:
     second = await start_adapter("127.0.0.1", io_port=free_port_on("127.0.0.1"))
     try:
         assert first.io_endpoint and second.io_endpoint
-        async with await Scanner.connect(f"127.0.0.2:{first.port}", catalog=CATALOG) as a, \
-                await Scanner.connect(f"127.0.0.1:{second.port}", catalog=CATALOG) as b:
-            # Our originator's own I/O socket uses the same port number on 127.0.0.1.
-            async with a.io_connection(output=21, input=71, rpi=0.002, target_io_port=port, local_io_port=port) as io_a, \
-                    b.io_connection(output=21, input=71, rpi=0.003, target_io_port=second.io_endpoint.port) as io_b, \
-                    b.io_connection(output=20, input=70, rpi=0.010, target_io_port=second.io_endpoint.port) as io_c:
-                io_a.output.speed_reference = 111
-                io_b.output.speed_reference = 222
-                io_c.output.speed_reference = 333
-                await io_a.wait_input(lambda i: i.speed_actual == 111, 5)
-                await io_b.wait_input(lambda i: i.speed_actual in (222, 333), 5)
-                await asyncio.sleep(0.2)
-                assert io_a.stats.received > 50 and io_b.stats.received > 30 and io_c.stats.received > 10
-                assert first.io and first.io.connections and len(second.io.connections) == 2  # type: ignore[union-attr]
+        a = await Scanner.connect(f"127.0.0.2:{first.port}", catalog=CATALOG)
+        b = await Scanner.connect(f"127.0.0.1:{second.port}", catalog=CATALOG)
+        second_port = second.io_endpoint.port
+        # Our originator's own I/O socket uses the same port number, on 127.0.0.1.
+        async with a, b, a.io_connection(output=21, input=71, rpi=0.002, target_io_port=port,
+                                         local_io_port=port) as io_a, \
+                b.io_connection(output=21, input=71, rpi=0.003, target_io_port=second_port) as io_b, \
+                b.io_connection(output=20, input=70, rpi=0.010, target_io_port=second_port) as io_c:
+            io_a.output.speed_reference = 111
+            io_b.output.speed_reference = 222
+            io_c.output.speed_reference = 333
+            await io_a.wait_input(lambda i: i.speed_actual == 111, 5)
+            await io_b.wait_input(lambda i: i.speed_actual in (222, 333), 5)
+            await asyncio.sleep(0.2)
+            assert io_a.stats.received > 50 and io_b.stats.received > 30 and io_c.stats.received > 10
+            assert first.io and first.io.connections and len(second.io.connections) == 2  # type: ignore[union-attr]
     finally:
         await first.close()
         await second.close()
@@ -171,15 +173,15 @@ async def test_several_targets_on_two_loopback_addresses() -> None:
 
 async def test_originator_watchdog_raises_when_target_stops(adapter: Adapter) -> None:
     assert adapter.io_endpoint is not None
-    async with await Scanner.connect(f"127.0.0.1:{adapter.port}", catalog=CATALOG) as scanner:
-        async with scanner.io_connection(output=21, input=71, rpi=0.002, timeout_multiplier=0,
-                                         target_io_port=adapter.io_endpoint.port) as io:
-            await io.wait_input(lambda i: i.ready, 5)
-            await adapter.io_endpoint.close()  # the target goes silent
-            with pytest.raises(IoTimeoutError):
-                async for _ in io.updates():
-                    pass
-            assert io.timed_out
+    scanner = await Scanner.connect(f"127.0.0.1:{adapter.port}", catalog=CATALOG)
+    async with scanner, scanner.io_connection(output=21, input=71, rpi=0.002, timeout_multiplier=0,
+                                              target_io_port=adapter.io_endpoint.port) as io:
+        await io.wait_input(lambda i: i.ready, 5)
+        await adapter.io_endpoint.close()  # the target goes silent
+        with pytest.raises(IoTimeoutError):
+            async for _ in io.updates():
+                pass
+        assert io.timed_out
 
 
 async def test_killed_originator_times_out_at_the_target(adapter: Adapter, tmp_path: Path) -> None:
