@@ -51,6 +51,7 @@ class Adapter:
         self.server = EncapsulationServer(self.target, s.host, s.port)
         self.target.tick = self._tick
         self._device_timer: asyncio.TimerHandle | None = None
+        self._device_timer_at: float | None = None
         self.io: IoTarget | None = None
         self.io_endpoint: IoEndpoint | None = None
         profile = self.device.io_profile()
@@ -73,15 +74,19 @@ class Adapter:
         the end of a ramp), so it changes on time even when nobody asks."""
         self.device.advance(now)
         deadline = self.device.next_deadline()
+        if deadline == self._device_timer_at and self._device_timer is not None:
+            return  # already armed for it: the common case on the request path
         if self._device_timer is not None:
             self._device_timer.cancel()
             self._device_timer = None
+        self._device_timer_at = deadline
         if deadline is not None:
             loop = asyncio.get_running_loop()
             self._device_timer = loop.call_at(max(deadline, now), self._on_device_timer)
 
     def _on_device_timer(self) -> None:
         self._device_timer = None
+        self._device_timer_at = None
         self._tick(asyncio.get_running_loop().time())
 
     async def start(self) -> None:

@@ -241,6 +241,8 @@ class CipObject:
     def handle(self, path: ApplicationPath, request: MessageRouterRequest, context: RequestContext) -> bytes:
         """Serve one request; returns reply data or raises ``CipError``."""
         instance: Instance | None
+        if path.member is not None:
+            raise CipError(GeneralStatus.PATH_SEGMENT_ERROR, message="member addressing is not supported here")
         if not path.instance:
             instance = None
             allowed = self.spec.class_services

@@ -33,6 +33,13 @@ class RequestContext:
     #: True when the request arrived on a class 3 connection.
     connected: bool = False
     extras: dict[str, Any] = field(default_factory=dict)
+    #: How many requests enclose the one being served (Multiple_Service_Packet, Unconnected_Send).
+    depth: int = 0
+
+
+#: Requests nest (a packet of routed requests of packets...); deeper than this is refused with
+#: 0x02 (resource unavailable) rather than recursing without bound.
+MAX_NESTING = 4
 
 
 class MessageRouter:
@@ -60,6 +67,9 @@ class MessageRouter:
 
     def dispatch(self, raw: bytes, context: RequestContext) -> MessageRouterResponse:
         service = raw[0] & 0x7F if raw else 0
+        if context.depth > MAX_NESTING:
+            return MessageRouterResponse(service, GeneralStatus.RESOURCE_UNAVAILABLE)
+        context.depth += 1
         try:
             request = MessageRouterRequest.decode(raw)
             path = parse_application_path(request.path)
@@ -75,5 +85,7 @@ class MessageRouter:
         except Exception:  # an object bug must not take the server down
             log.exception("internal error serving service 0x%02X", service)
             response = MessageRouterResponse(service, GeneralStatus.VENDOR_SPECIFIC)
+        finally:
+            context.depth -= 1
         self.status_counts[response.general_status] = self.status_counts.get(response.general_status, 0) + 1
         return response

@@ -40,6 +40,8 @@ class _TcpProtocol(asyncio.Protocol):
         if sock_obj is not None:
             sock_obj.setsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY, 1)
         self.connection = self.server.target.connection(peer_text, local, self.loop.time())
+        # Replies above 64 KiB unsent pause reading (see pause_writing).
+        transport.set_write_buffer_limits(high=64 * 1024)
         self.server.connections.add(self)
         log.info("%s: TCP connection accepted", peer_text)
         self._arm()
@@ -55,6 +57,16 @@ class _TcpProtocol(asyncio.Protocol):
             self.transport.close()
         elif self._timer is None:
             self._arm()
+
+    # Back-pressure: a client that sends requests but does not read the replies stops being
+    # read from until the replies drain, so replies never pile up in memory.
+    def pause_writing(self) -> None:
+        if self.transport is not None:
+            self.transport.pause_reading()
+
+    def resume_writing(self) -> None:
+        if self.transport is not None and not self.transport.is_closing():
+            self.transport.resume_reading()
 
     def connection_lost(self, exc: Exception | None) -> None:
         if self._timer is not None:

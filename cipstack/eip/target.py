@@ -296,8 +296,9 @@ class EncapsulationConnection:
     def _send_unit_data(self, body: bytes, now: float) -> bytes | None:
         if len(body) < RR_PREFIX.size:
             raise EncapsulationError(EncapsulationStatus.INVALID_LENGTH)
+        interface, _timeout = RR_PREFIX.unpack_from(body)
         items = decode_items(body, RR_PREFIX.size)
-        if (len(items) != 2 or items[0].type != ItemType.CONNECTED_ADDRESS or len(items[0].data) != 4
+        if (interface != 0 or len(items) != 2 or items[0].type != ItemType.CONNECTED_ADDRESS or len(items[0].data) != 4
                 or items[1].type != ItemType.CONNECTED_DATA or len(items[1].data) < 2):
             raise EncapsulationError(EncapsulationStatus.INCORRECT_DATA,
                                      "SendUnitData needs Connected Address + Connected Data")

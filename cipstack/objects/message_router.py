@@ -27,8 +27,6 @@ SPEC = ClassSpec(
 )
 
 _UINT = struct.Struct("<H")
-#: Bounds nesting of Multiple_Service_Packet inside itself.
-MAX_NESTING = 2
 
 
 class MessageRouterObject(CipObject):
@@ -55,14 +53,7 @@ class MessageRouterObject(CipObject):
         for i in range(count):
             if not table_end <= bounds[i] < bounds[i + 1] <= len(data):
                 raise CipError(GeneralStatus.INVALID_PARAMETER, message=f"offset {i} of a service packet is invalid")
-        depth = context.extras.get("msp_depth", 0)
-        if depth >= MAX_NESTING:
-            raise CipError(GeneralStatus.INVALID_PARAMETER, message="Multiple_Service_Packet nested too deep")
-        context.extras["msp_depth"] = depth + 1
-        try:
-            replies = [self.router.handle(data[bounds[i]:bounds[i + 1]], context) for i in range(count)]
-        finally:
-            context.extras["msp_depth"] = depth
+        replies = [self.router.handle(data[bounds[i]:bounds[i + 1]], context) for i in range(count)]
         out = bytearray(_UINT.pack(count))
         offset = 2 + 2 * count
         for reply in replies:

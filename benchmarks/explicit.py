@@ -1,0 +1,407 @@
+"""Explicit-messaging throughput and CPU cost: Get_Attribute_Single of Identity 1/1/7, one request in flight.
+
+Starts the adapter as a subprocess on a free loopback port and measures, one after another, from a
+single TCP connection:
+
+* ``scanner-sync``   cipstack's ``SyncScanner.get_attribute_single``
+* ``scanner-async``  cipstack's ``Scanner.get_attribute_single`` awaited in a loop
+* ``pycomm3``        pycomm3's ``CIPDriver.generic_message(..., connected=False, route_path=False)``
+* ``raw``            a pre-built SendRRData frame written on a plain socket, the reply read back
+
+and, to calibrate the machine, the same raw client against two echo servers in a subprocess that
+send every frame straight back: one built on asyncio like the adapter (``echo-asyncio``) and one a
+blocking socket loop (``echo-socket``).
+
+For each run: requests per second; the server's CPU time per request (utime + stime from
+/proc/PID/stat); the client's CPU time per request (``time.process_time`` in this process).
+
+    python benchmarks/explicit.py [--seconds N] [--rounds R] [--json] [--profile FILE]
+
+Each client runs ``--rounds`` times for ``--seconds``, the clients interleaved, and the medians are
+reported: the figures are CPU time, but a busy machine still moves them.
+
+``--profile FILE`` runs the adapter under cProfile, writes the statistics to FILE and prints the top
+functions by own time (profiling slows the adapter: use it for where time goes, not how much).
+"""
+
+from __future__ import annotations
+
+import argparse
+import asyncio
+import contextlib
+import json
+import os
+import pstats
+import signal
+import socket
+import statistics
+import struct
+import subprocess
+import sys
+import time
+from collections.abc import Callable, Iterator
+from dataclasses import asdict, dataclass
+from typing import Any
+
+HEADER = struct.Struct("<HHII8sI")
+REGISTER_SESSION = 0x0065
+SEND_RR_DATA = 0x006F
+#: Get_Attribute_Single, path 20 01 24 01 30 07 (Identity 1/1/7: product name).
+GET_PRODUCT_NAME = bytes((0x0E, 0x03, 0x20, 0x01, 0x24, 0x01, 0x30, 0x07))
+EXPECTED_NAME = b"\x04CENT"
+ADAPTER_CPU_TARGET_US = 100.0
+CLOCK_TICKS = os.sysconf("SC_CLK_TCK")
+
+
+# -- servers ------------------------------------------------------------------------------------------------
+def free_port() -> int:
+    with socket.socket(socket.AF_INET, socket.SOCK_STREAM) as probe:
+        probe.bind(("127.0.0.1", 0))
+        return int(probe.getsockname()[1])
+
+
+def process_cpu_seconds(pid: int) -> float:
+    """utime + stime of a process, in seconds (fields 14 and 15 of /proc/PID/stat)."""
+    with open(f"/proc/{pid}/stat", encoding="ascii") as stat:
+        fields = stat.read().rsplit(")", 1)[1].split()
+    return (int(fields[11]) + int(fields[12])) / CLOCK_TICKS
+
+
+def wait_for_listener(port: int, process: subprocess.Popen[bytes], timeout: float = 10.0) -> None:
+    deadline = time.monotonic() + timeout
+    while time.monotonic() < deadline:
+        if process.poll() is not None:
+            raise RuntimeError(f"server exited with status {process.returncode} before listening")
+        try:
+            with socket.create_connection(("127.0.0.1", port), timeout=0.5):
+                return
+        except OSError:
+            time.sleep(0.05)
+    raise RuntimeError(f"nothing listens on 127.0.0.1:{port} after {timeout} s")
+
+
+@contextlib.contextmanager
+def server_process(command: list[str], port: int) -> Iterator[subprocess.Popen[bytes]]:
+    process = subprocess.Popen(command, stdin=subprocess.DEVNULL)
+    try:
+        wait_for_listener(port, process)
+        yield process
+    finally:
+        if process.poll() is None:
+            process.send_signal(signal.SIGTERM)
+            try:
+                process.wait(10)
+            except subprocess.TimeoutExpired:
+                process.kill()
+                process.wait()
+
+
+def adapter_command(port: int, profile: str | None) -> list[str]:
+    prefix = [sys.executable]
+    if profile:
+        prefix += ["-m", "cProfile", "-o", profile]
+    return [*prefix, "-m", "cipstack", "adapter", "--host", "127.0.0.1", "--port", str(port),
+            "--log-level", "WARNING"]
+
+
+def echo_command(port: int, kind: str) -> list[str]:
+    return [sys.executable, os.path.abspath(__file__), "--serve-echo", kind, "--port", str(port)]
+
+
+class _EchoProtocol(asyncio.Protocol):
+    def connection_made(self, transport: asyncio.BaseTransport) -> None:
+        assert isinstance(transport, asyncio.Transport)
+        self.transport = transport
+        sock = transport.get_extra_info("socket")
+        if sock is not None:
+            sock.setsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY, 1)
+
+    def data_received(self, data: bytes) -> None:
+        self.transport.write(data)
+
+
+async def _serve_echo_asyncio(port: int) -> None:
+    loop = asyncio.get_running_loop()
+    stop = asyncio.Event()
+    loop.add_signal_handler(signal.SIGTERM, stop.set)
+    server = await loop.create_server(_EchoProtocol, "127.0.0.1", port, reuse_address=True)
+    async with server:
+        await stop.wait()
+
+
+def _serve_echo_socket(port: int) -> None:
+    """Blocking echo of one connection at a time: the least a server can spend per frame."""
+    signal.signal(signal.SIGTERM, lambda *_: sys.exit(0))
+    with socket.socket(socket.AF_INET, socket.SOCK_STREAM) as listener:
+        listener.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
+        listener.bind(("127.0.0.1", port))
+        listener.listen(4)
+        while True:
+            connection, _ = listener.accept()
+            with connection:
+                connection.setsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY, 1)
+                while data := connection.recv(65536):
+                    connection.sendall(data)
+
+
+def serve_echo(kind: str, port: int) -> None:
+    if kind == "asyncio":
+        asyncio.run(_serve_echo_asyncio(port))
+    else:
+        _serve_echo_socket(port)
+
+
+# -- clients --------------------------------------------------------------------------------------------------
+BATCH = 50  # requests between two clock reads
+
+
+@dataclass
+class Run:
+    client: str
+    server: str
+    requests: int
+    seconds: float
+    rate: float
+    server_cpu_us: float
+    client_cpu_us: float
+
+
+@dataclass
+class Bench:
+    """One client connected to one server: ``batch(n)`` makes n requests back to back."""
+
+    client: str
+    server: str
+    pid: int
+    batch: Callable[[int], None]
+    close: Callable[[], None]
+
+
+def measure(bench: Bench, seconds: float, warmup: float) -> Run:
+    """Batches for ``warmup`` seconds, then batches measured for ``seconds``."""
+    end = time.perf_counter() + warmup
+    while time.perf_counter() < end:
+        bench.batch(BATCH)
+    count = 0
+    server_start = process_cpu_seconds(bench.pid)
+    client_start = time.process_time()
+    start = now = time.perf_counter()
+    while now < start + seconds:
+        bench.batch(BATCH)
+        count += BATCH
+        now = time.perf_counter()
+    client_cpu = time.process_time() - client_start
+    server_cpu = process_cpu_seconds(bench.pid) - server_start
+    elapsed = now - start
+    return Run(bench.client, bench.server, count, elapsed, count / elapsed, server_cpu / count * 1e6,
+               client_cpu / count * 1e6)
+
+
+def repeat(call: Callable[[], object]) -> Callable[[int], None]:
+    def batch(n: int) -> None:
+        for _ in range(n):
+            call()
+
+    return batch
+
+
+class RawClient:
+    """A registered session and a pre-built SendRRData frame; the least work a client can do."""
+
+    def __init__(self, port: int, register: bool = True) -> None:
+        self.sock = socket.create_connection(("127.0.0.1", port))
+        self.sock.setsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY, 1)
+        session = 0
+        if register:
+            self.sock.sendall(HEADER.pack(REGISTER_SESSION, 4, 0, 0, b"\x00" * 8, 0) + b"\x01\x00\x00\x00")
+            session = HEADER.unpack_from(self._read())[2]
+        body = struct.pack("<IHHHHHH", 0, 0, 2, 0, 0, 0xB2, len(GET_PRODUCT_NAME)) + GET_PRODUCT_NAME
+        self.frame = HEADER.pack(SEND_RR_DATA, len(body), session, 0, b"bench\x00\x00\x00", 0) + body
+
+    def _read(self) -> bytes:
+        sock = self.sock
+        data = sock.recv(4096)
+        while len(data) < 24 or len(data) < 24 + (data[2] | data[3] << 8):
+            more = sock.recv(4096)
+            if not more:
+                raise ConnectionError("connection closed by the server")
+            data += more
+        return data
+
+    def call(self) -> bytes:
+        self.sock.sendall(self.frame)
+        return self._read()
+
+    def close(self) -> None:
+        self.sock.close()
+
+
+def scanner_sync(port: int, pid: int) -> Bench:
+    from cipstack.scanner import SyncScanner
+
+    scanner = SyncScanner("127.0.0.1", port)
+    value = scanner.get_attribute_single(1, 1, 7)
+    assert value.data == EXPECTED_NAME, value
+    return Bench("scanner-sync", "adapter", pid, repeat(lambda: scanner.get_attribute_single(1, 1, 7)), scanner.close)
+
+
+def scanner_async(port: int, pid: int) -> Bench:
+    """The async Scanner awaited in a loop; the event loop is entered once per batch."""
+    from cipstack.scanner import Scanner
+
+    loop = asyncio.new_event_loop()
+    scanner = loop.run_until_complete(Scanner.connect("127.0.0.1", port))
+    value = loop.run_until_complete(scanner.get_attribute_single(1, 1, 7))
+    assert value.data == EXPECTED_NAME, value
+
+    async def requests(n: int) -> None:
+        for _ in range(n):
+            await scanner.get_attribute_single(1, 1, 7)
+
+    def close() -> None:
+        loop.run_until_complete(scanner.close())
+        loop.close()
+
+    return Bench("scanner-async", "adapter", pid, lambda n: loop.run_until_complete(requests(n)), close)
+
+
+def pycomm3_driver(port: int, pid: int) -> Bench:
+    from pycomm3 import CIPDriver
+
+    driver = CIPDriver(f"127.0.0.1:{port}")
+    driver.open()
+
+    def call() -> Any:
+        return driver.generic_message(service=0x0E, class_code=0x01, instance=0x01, attribute=0x07,
+                                      connected=False, route_path=False, name="product_name")
+
+    tag = call()
+    assert tag.error is None and tag.value == EXPECTED_NAME, tag
+    return Bench("pycomm3", "adapter", pid, repeat(call), driver.close)
+
+
+def raw_client(port: int, pid: int, server: str) -> Bench:
+    client = RawClient(port, register=server == "adapter")
+    reply = client.call()
+    if server == "adapter":
+        assert reply.endswith(b"\x8e\x00\x00\x00" + EXPECTED_NAME), reply.hex()
+    else:
+        assert reply == client.frame
+    return Bench("raw", server, pid, repeat(client.call), client.close)
+
+
+def median_run(runs: list[Run]) -> Run:
+    """Per-metric medians over the rounds of one client."""
+    first = runs[0]
+    return Run(first.client, first.server, sum(r.requests for r in runs), sum(r.seconds for r in runs),
+               statistics.median(r.rate for r in runs), statistics.median(r.server_cpu_us for r in runs),
+               statistics.median(r.client_cpu_us for r in runs))
+
+
+# -- report ------------------------------------------------------------------------------------------------------
+def print_table(runs: list[Run], summary: dict[str, float | bool | None]) -> None:
+    print(f"{'client':<14} {'server':<13} {'requests':>9} {'req/s':>9} {'server CPU':>12} {'client CPU':>12}"
+          f" {'vs echo':>8}")
+    echo_rate = summary.get("echo_asyncio_rate") or 0.0
+    for run in runs:
+        share = f"{100 * run.rate / echo_rate:7.0f}%" if echo_rate else "       -"
+        print(f"{run.client:<14} {run.server:<13} {run.requests:>9} {run.rate:>9.0f} {run.server_cpu_us:>9.1f} µs"
+              f" {run.client_cpu_us:>9.1f} µs {share}")
+    print()
+    adapter_cpu = summary["adapter_cpu_us"]
+    print(f"adapter CPU per request (raw client run): {adapter_cpu:.1f} µs; target {ADAPTER_CPU_TARGET_US:.0f} µs"
+          f" -> {summary['adapter_cpu_vs_target']:.2f}x the target "
+          f"({'met' if summary['adapter_target_met'] else 'MISSED'})")
+    if summary.get("scanner_sync_vs_pycomm3") is not None:
+        print(f"scanner CPU per request vs pycomm3: sync {summary['scanner_sync_vs_pycomm3']:.2f}x, "
+              f"async {summary['scanner_async_vs_pycomm3']:.2f}x (<= 1.00 is no worse)")
+    print(f"echo baselines: asyncio {summary['echo_asyncio_rate']:.0f} req/s "
+          f"({summary['echo_asyncio_cpu_us']:.1f} µs server CPU), socket {summary['echo_socket_rate']:.0f} req/s "
+          f"({summary['echo_socket_cpu_us']:.1f} µs server CPU)")
+
+
+def summarise(runs: list[Run]) -> dict[str, float | bool | None]:
+    by_key = {(run.client, run.server): run for run in runs}
+    raw = by_key[("raw", "adapter")]
+    pycomm3 = by_key.get(("pycomm3", "adapter"))
+    echo_asyncio = by_key[("raw", "echo-asyncio")]
+    echo_socket = by_key[("raw", "echo-socket")]
+    summary: dict[str, float | bool | None] = {
+        "adapter_cpu_us": raw.server_cpu_us,
+        "adapter_cpu_target_us": ADAPTER_CPU_TARGET_US,
+        "adapter_cpu_vs_target": raw.server_cpu_us / ADAPTER_CPU_TARGET_US,
+        "adapter_target_met": raw.server_cpu_us <= ADAPTER_CPU_TARGET_US,
+        "adapter_cpu_us_max_over_runs": max(r.server_cpu_us for r in runs if r.server == "adapter"),
+        "echo_asyncio_rate": echo_asyncio.rate,
+        "echo_asyncio_cpu_us": echo_asyncio.server_cpu_us,
+        "echo_socket_rate": echo_socket.rate,
+        "echo_socket_cpu_us": echo_socket.server_cpu_us,
+        "scanner_sync_vs_pycomm3": None,
+        "scanner_async_vs_pycomm3": None,
+    }
+    if pycomm3 is not None:
+        summary["scanner_sync_vs_pycomm3"] = by_key[("scanner-sync", "adapter")].client_cpu_us / pycomm3.client_cpu_us
+        summary["scanner_async_vs_pycomm3"] = (by_key[("scanner-async", "adapter")].client_cpu_us
+                                               / pycomm3.client_cpu_us)
+    for run in runs:
+        summary[f"rate_vs_echo_asyncio[{run.client}->{run.server}]"] = run.rate / echo_asyncio.rate
+    return summary
+
+
+def print_profile(path: str, top: int = 25) -> None:
+    print(f"\nadapter profile ({path}), top {top} by own time:")
+    stats = pstats.Stats(path)
+    stats.sort_stats("tottime").print_stats(top)
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0] if __doc__ else None)
+    parser.add_argument("--seconds", type=float, default=1.0,
+                        help="measured time per client and round (default 1)")
+    parser.add_argument("--rounds", type=int, default=3, help="rounds; medians are reported (default 3)")
+    parser.add_argument("--warmup", type=float, default=0.2, help="unmeasured time before each run (default 0.2)")
+    parser.add_argument("--json", action="store_true", help="print one JSON object instead of the table")
+    parser.add_argument("--profile", metavar="FILE", help="run the adapter under cProfile, statistics to FILE")
+    parser.add_argument("--no-pycomm3", action="store_true", help="skip the pycomm3 client")
+    parser.add_argument("--serve-echo", choices=["asyncio", "socket"], help=argparse.SUPPRESS)
+    parser.add_argument("--port", type=int, help=argparse.SUPPRESS)
+    args = parser.parse_args(argv)
+    if args.serve_echo:
+        serve_echo(args.serve_echo, args.port)
+        return 0
+
+    with contextlib.ExitStack() as stack:
+        port = free_port()
+        adapter = stack.enter_context(server_process(adapter_command(port, args.profile), port))
+        benches = [scanner_sync(port, adapter.pid), scanner_async(port, adapter.pid)]
+        if not args.no_pycomm3:
+            benches.append(pycomm3_driver(port, adapter.pid))
+        benches.append(raw_client(port, adapter.pid, "adapter"))
+        for kind in ("asyncio", "socket"):
+            echo_port = free_port()
+            echo = stack.enter_context(server_process(echo_command(echo_port, kind), echo_port))
+            benches.append(raw_client(echo_port, echo.pid, f"echo-{kind}"))
+        for bench in benches:
+            stack.callback(bench.close)
+        # Rounds interleave the clients, so a burst of load elsewhere on the machine hits them all alike.
+        rounds: dict[tuple[str, str], list[Run]] = {}
+        for _ in range(args.rounds):
+            for bench in benches:
+                rounds.setdefault((bench.client, bench.server), []).append(measure(bench, args.seconds, args.warmup))
+    runs = [median_run(r) for r in rounds.values()]
+
+    summary = summarise(runs)
+    if args.json:
+        print(json.dumps({"runs": [asdict(run) for run in runs], "summary": summary, "rounds": args.rounds,
+                          "load_average": os.getloadavg()}, indent=2))
+    else:
+        print_table(runs, summary)
+        print(f"medians of {args.rounds} rounds of {args.seconds:g} s; load average {os.getloadavg()[0]:.2f} "
+              f"on {os.cpu_count()} CPUs")
+    if args.profile and not args.json:
+        print_profile(args.profile)
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
