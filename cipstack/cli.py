@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import argparse
 import asyncio
+import contextlib
 import json
 import logging
 import sys
@@ -231,6 +232,78 @@ def cmd_set(args: argparse.Namespace) -> int:
     return EXIT_OK
 
 
+# -- class 1 ---------------------------------------------------------------------------------------------
+def parse_assignment(text: str) -> tuple[str, str]:
+    name, sep, value = text.partition("=")
+    if not sep or not name.strip():
+        raise UsageError(f"--set {text!r} is not FIELD=VALUE")
+    return name.strip(), value.strip()
+
+
+def cmd_io(args: argparse.Namespace) -> int:
+    from .devices.profiles import catalog_for_identity
+    from .eip.io_server import run_precise
+    from .eip.originator import EncapsulationClient
+    from .scanner import Scanner
+
+    rpi = parse_duration(args.rpi)
+    if not 0.0001 <= rpi <= 10:
+        raise UsageError(f"RPI {args.rpi} outside 0.1 ms .. 10 s")
+    assignments = [parse_assignment(a) for a in args.set or []]
+    host, port = parse_host(args.target)
+
+    async def run() -> int:
+        probe = await EncapsulationClient.connect(host, port, args.timeout, register=False)
+        try:
+            identities = await probe.list_identity()
+        finally:
+            await probe.close()
+        catalog = catalog_for_identity(identities[0]) if identities else None
+        scanner = await Scanner.connect(args.target, timeout=args.timeout, catalog=catalog)
+        options: dict[str, Any] = {"target_io_port": args.target_io_port, "local_io_port": args.io_port}
+        loop = asyncio.get_running_loop()
+        started = loop.time()
+        async with scanner, scanner.io_connection(output=args.output, input=args.input, rpi=rpi,
+                                                  heartbeat=args.heartbeat, **options) as io:
+            for name, value in assignments:
+                try:
+                    if name == "raw":
+                        io.output.raw = bytes.fromhex(value)
+                    else:
+                        setattr(io.output, name, parse_int(value))
+                except (AttributeError, ValueError) as exc:
+                    raise UsageError(f"--set {name}={value}: {exc}") from None
+            io.set_run(not args.idle)
+
+            def show(image: Any) -> None:
+                elapsed = round(loop.time() - started, 4)
+                try:
+                    values: Any = image.fields()
+                except AttributeError:
+                    values = {"raw": image.raw.hex()}
+                if args.json:
+                    print(json.dumps({"t": elapsed, "input": values}), flush=True)
+                else:
+                    print(f"{elapsed:9.3f}s  " + "  ".join(f"{k}={v}" for k, v in values.items()), flush=True)
+
+            async def follow() -> None:
+                async for image in io.updates():
+                    show(image)
+
+            with contextlib.suppress(asyncio.TimeoutError):
+                await asyncio.wait_for(follow(), args.duration)
+            stats = io.stats.as_dict()
+        summary = {"summary": {"duration_s": round(loop.time() - started, 3), **stats}}
+        if args.json:
+            print(json.dumps(summary), flush=True)
+        else:
+            print("sent {sent}  received {received}  late {late}  lost {lost}  duplicates {duplicates}  "
+                  "max lateness {max_lateness:.6f} s".format(**stats), flush=True)
+        return EXIT_OK
+
+    return run_precise(run())
+
+
 # -- parser ------------------------------------------------------------------------------------------
 class _Parser(argparse.ArgumentParser):
     def error(self, message: str) -> Any:  # one line, exit 2, no usage dump
@@ -285,6 +358,23 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--type", help="CIP type to decode the value (UINT, SHORT_STRING, ...)")
     p.add_argument("--connected", action="store_true", help="use a class 3 connection")
     p.set_defaults(func=cmd_get)
+
+    p = sub.add_parser("io", help="open a class 1 connection, print input changes by field name")
+    common(p)
+    p.add_argument("--output", type=lambda t: parse_number(t, "output"), help="output (O->T) assembly instance")
+    p.add_argument("--input", type=lambda t: parse_number(t, "input"), required=True, help="input assembly instance")
+    p.add_argument("--heartbeat", type=lambda t: parse_number(t, "heartbeat"),
+                   help="O->T heartbeat point instead of an output (input only: e.g. 198, listen only: 199)")
+    p.add_argument("--rpi", default="10ms", help="requested packet interval (default 10ms)")
+    p.add_argument("--set", action="append", metavar="FIELD=VALUE",
+                   help="output field to set (or raw=HEX); repeatable")
+    p.add_argument("--duration", type=parse_duration, default=5.0, help="how long to run (default 5s)")
+    p.add_argument("--idle", action="store_true", help="send idle instead of run in the run/idle header")
+    p.add_argument("--io-port", type=lambda t: parse_number(t, "io port"), default=0,
+                   help="local UDP port for T->O data (default: any free port, announced to the target)")
+    p.add_argument("--target-io-port", type=lambda t: parse_number(t, "target io port"), default=2222,
+                   help="the target's class 1 UDP port (default 2222)")
+    p.set_defaults(func=cmd_io)
 
     p = sub.add_parser("set", help="Set_Attribute_Single")
     common(p)

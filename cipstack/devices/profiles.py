@@ -5,6 +5,8 @@ from __future__ import annotations
 from collections.abc import Callable
 from dataclasses import dataclass
 
+from ..catalog import Catalog
+from ..eip.identity_items import IdentityRecord
 from ..objects.identity import IdentityInfo
 from ..objects.tcpip import NetworkInterface
 from .base import Device, DeviceLimits
@@ -32,6 +34,14 @@ class Profile:
     name: str
     description: str
     build: Callable[[NetworkInterface, DeviceLimits], Device]
+    #: (vendor id, product codes) a live device reports when it is of this profile.
+    vendor_id: int = 0
+    product_codes: frozenset[int] = frozenset()
+    #: The declarations of the profile's objects and assemblies, for a scanner.
+    catalog: Callable[[], Catalog] | None = None
+
+    def matches(self, identity: IdentityRecord) -> bool:
+        return identity.vendor_id == self.vendor_id and identity.product_code in self.product_codes
 
 
 def _acg(interface: NetworkInterface, limits: DeviceLimits) -> Device:
@@ -42,6 +52,15 @@ PROFILES: dict[str, Profile] = {
     "acg": Profile("acg", "ACG drive with its ACG-ET2 EtherNet/IP card (identity and standard objects)", _acg),
 }
 DEFAULT_PROFILE = "acg"
+
+
+def catalog_for_identity(identity: IdentityRecord) -> Catalog:
+    """The declarations a scanner decodes with for a device that identified itself: those of
+    the profile with the same vendor and product code, else the standard objects only."""
+    for profile in PROFILES.values():
+        if profile.catalog is not None and profile.matches(identity):
+            return profile.catalog()
+    return Catalog()
 
 
 def build_device(name: str = DEFAULT_PROFILE, interface: NetworkInterface | None = None,
