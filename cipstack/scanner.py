@@ -11,7 +11,7 @@ from __future__ import annotations
 import asyncio
 import contextlib
 import struct
-from collections.abc import AsyncIterator, Awaitable, Coroutine, Sequence
+from collections.abc import AsyncIterator, Sequence
 from dataclasses import dataclass
 from typing import Any, TypeVar
 
@@ -23,7 +23,16 @@ from .cip.status import CipError, GeneralStatus
 from .cip.types import UINT, CipType
 from .eip.identity_items import IdentityRecord, ServiceRecord
 from .eip.io_originator import IoConnectionHandle
-from .eip.originator import DEFAULT_PORT, EncapsulationClient, discover, list_services_udp, parse_host
+from .eip.originator import (
+    DEFAULT_PORT,
+    BlockingEncapsulationClient,
+    EncapsulationClient,
+    ExplicitClient,
+    discover,
+    list_services_udp,
+    parse_host,
+    run_blocking,
+)
 
 T = TypeVar("T")
 
@@ -59,7 +68,7 @@ def _decode(cip_type: CipType | None, data: bytes) -> Any:
 class Scanner:
     """Explicit messaging to one target (unconnected, routed or class 3)."""
 
-    def __init__(self, client: EncapsulationClient, catalog: Catalog | None = None,
+    def __init__(self, client: ExplicitClient, catalog: Catalog | None = None,
                  route: Sequence[Segment] | None = None) -> None:
         self.client = client
         self.catalog = catalog or Catalog()
@@ -236,6 +245,8 @@ class Scanner:
         """
         if output is None and heartbeat is None:
             raise ValueError("give an output assembly, or a heartbeat point for input-only / listen-only")
+        if not isinstance(self.client, EncapsulationClient):
+            raise TypeError("class 1 connections need the asyncio client (Scanner.connect)")
         if output_size is None:
             output_size = 0 if output is None else await self.assembly_size(output)
         if input_size is None:
@@ -261,40 +272,39 @@ def backplane_route(slot: int = 0) -> list[Segment]:
 
 
 class SyncScanner:
-    """Blocking wrapper of ``Scanner`` for scripts: each call runs on a private event loop."""
+    """Blocking twin of ``Scanner`` for scripts: the same methods, called without ``await``.
+
+    It runs the same scanner code over a blocking socket (``BlockingEncapsulationClient``), with
+    no event loop in between, so a call costs little more than the socket round trip. Class 1
+    connections need an event loop: use the async ``Scanner`` for them.
+    """
 
     def __init__(self, address: str, port: int | None = None, *, timeout: float = 5.0,
                  catalog: Catalog | None = None, route: Sequence[Segment] | None = None) -> None:
-        self._loop = asyncio.new_event_loop()
-        try:
-            self._scanner = self._run(Scanner.connect(address, port, timeout=timeout, catalog=catalog, route=route))
-        except BaseException:
-            self._loop.close()
-            raise
-
-    def _run(self, coroutine: Coroutine[Any, Any, T] | Awaitable[T]) -> T:
-        return self._loop.run_until_complete(coroutine)
+        host, parsed_port = parse_host(address)
+        client = BlockingEncapsulationClient.connect(host, port or parsed_port, timeout)
+        self._scanner = Scanner(client, catalog, route)
 
     @property
     def scanner(self) -> Scanner:
         return self._scanner
 
     def __getattr__(self, name: str) -> Any:
+        if name == "io_connection":
+            raise AttributeError("class 1 connections need an event loop: use the async Scanner")
         attribute = getattr(self._scanner, name)
         if not asyncio.iscoroutinefunction(attribute):
             return attribute
 
         def call(*args: Any, **kwargs: Any) -> Any:
-            return self._run(attribute(*args, **kwargs))
+            return run_blocking(attribute(*args, **kwargs))
 
+        call.__doc__ = attribute.__doc__
+        setattr(self, name, call)  # later calls find it directly, without this lookup
         return call
 
     def close(self) -> None:
-        if not self._loop.is_closed():
-            try:
-                self._run(self._scanner.close())
-            finally:
-                self._loop.close()
+        run_blocking(self._scanner.close())
 
     def __enter__(self) -> SyncScanner:
         return self

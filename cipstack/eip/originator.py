@@ -14,9 +14,9 @@ import logging
 import random
 import socket
 import struct
-from collections.abc import Sequence
+from collections.abc import Coroutine, Sequence
 from dataclasses import dataclass
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Any, TypeVar
 
 from ..cip.epath import Segment, encode_path, request_path
 from ..cip.messages import MessageRouterRequest, MessageRouterResponse, Service
@@ -52,6 +52,7 @@ if TYPE_CHECKING:
     from ..assemblies.schema import AssemblySchema
 
 log = logging.getLogger(__name__)
+T = TypeVar("T")
 
 DEFAULT_PORT = 44818
 #: Our vendor id as an originator (0xFFFF is not assigned; any value works for tests).
@@ -132,19 +133,160 @@ class ExplicitConnectionInfo:
     sequence: int = 0
 
 
-class EncapsulationClient:
+class ExplicitClient:
+    """What an originator says on an encapsulation session, whatever moves the bytes.
+
+    Subclasses provide ``exchange`` (a frame and its reply, matched by sender context),
+    ``_connected_round_trip`` (a class 3 request and its reply, matched by sequence count),
+    ``_write`` and ``close``. The asyncio client awaits replies; the blocking client's
+    coroutines never suspend, so a plain call drives them (see ``run_blocking``).
+    """
+
     def __init__(self, host: str, port: int = DEFAULT_PORT, timeout: float = 5.0) -> None:
         self.host = host
         self.port = port
         self.timeout = timeout
         self.session = 0
+        self._contexts = itertools.count(1)
+        self.connection: ExplicitConnectionInfo | None = None
+        self._serials = itertools.count(random.randrange(0, 0xFFFF))
+
+    def _write(self, command: int, data: bytes, context: bytes) -> None:
+        raise NotImplementedError
+
+    async def exchange(self, command: int, data: bytes = b"", context: bytes | None = None,
+                       timeout: float | None = None) -> tuple[EncapsulationHeader, bytes]:
+        raise NotImplementedError
+
+    async def _connected_round_trip(self, sequence: int, body: bytes, timeout: float | None) -> bytes:
+        raise NotImplementedError
+
+    async def close(self) -> None:
+        raise NotImplementedError
+
+    def _new_context(self) -> bytes:
+        return next(self._contexts).to_bytes(8, "little")
+
+    def _timeout_error(self, what: str) -> asyncio.TimeoutError:
+        return asyncio.TimeoutError(f"no reply from {self.host}:{self.port} to {what}")
+
+    # -- encapsulation commands -----------------------------------------------------------------
+    async def register_session(self) -> int:
+        header, _ = await self.exchange(Command.REGISTER_SESSION, REGISTER_SESSION_DATA.pack(PROTOCOL_VERSION, 0))
+        self.session = header.session
+        return self.session
+
+    async def list_identity(self) -> list[IdentityRecord]:
+        _, body = await self.exchange(Command.LIST_IDENTITY)
+        return decode_list_identity(body)
+
+    async def list_services(self) -> list[ServiceRecord]:
+        _, body = await self.exchange(Command.LIST_SERVICES)
+        return decode_list_services(body)
+
+    async def list_interfaces(self) -> list[Item]:
+        _, body = await self.exchange(Command.LIST_INTERFACES)
+        return decode_items(body)
+
+    async def nop(self, data: bytes = b"") -> None:
+        self._write(Command.NOP, data, bytes(8))
+
+    # -- explicit messaging ---------------------------------------------------------------------
+    async def send_rr_data(self, request: bytes, timeout: float | None = None) -> bytes:
+        """Unconnected explicit request (SendRRData); returns the encoded message-router reply."""
+        items = (Item(ItemType.NULL_ADDRESS), Item(ItemType.UNCONNECTED_DATA, request))
+        body = RR_PREFIX.pack(0, 0) + encode_items(items)
+        _, reply = await self.exchange(Command.SEND_RR_DATA, body, timeout=timeout)
+        items = decode_items(reply, RR_PREFIX.size)
+        for item in items:
+            if item.type == ItemType.UNCONNECTED_DATA:
+                return item.data
+        raise ValueError("SendRRData reply without Unconnected Data item")
+
+    async def send_rr_data_items(self, request: bytes, extra: Sequence[Item] = (),
+                                 timeout: float | None = None) -> tuple[bytes, list[Item]]:
+        """SendRRData with extra CPF items (Sockaddr Info); returns the reply and its extra items."""
+        items = (Item(ItemType.NULL_ADDRESS), Item(ItemType.UNCONNECTED_DATA, request), *extra)
+        _, reply = await self.exchange(Command.SEND_RR_DATA, RR_PREFIX.pack(0, 0) + encode_items(items),
+                                       timeout=timeout)
+        reply_items = decode_items(reply, RR_PREFIX.size)
+        data = next((i.data for i in reply_items if i.type == ItemType.UNCONNECTED_DATA), None)
+        if data is None:
+            raise ValueError("SendRRData reply without Unconnected Data item")
+        return data, [i for i in reply_items if i.type not in (ItemType.NULL_ADDRESS, ItemType.UNCONNECTED_DATA)]
+
+    async def send_unit_data(self, request: bytes, timeout: float | None = None) -> bytes:
+        """Class 3 connected request on the open connection; returns the message-router reply."""
+        connection = self.connection
+        if connection is None:
+            raise ConnectionError("no class 3 connection is open")
+        connection.sequence = (connection.sequence + 1) & 0xFFFF
+        sequence = connection.sequence
+        body = RR_PREFIX.pack(0, 0) + encode_items((
+            Item(ItemType.CONNECTED_ADDRESS, _CONN_ID.pack(connection.ot_connection_id)),
+            Item(ItemType.CONNECTED_DATA, _SEQ.pack(sequence) + request),
+        ))
+        return await self._connected_round_trip(sequence, body, timeout)
+
+    async def request(self, service: int, path: bytes, data: bytes = b"", *,
+                      route: Sequence[Segment] | bytes | None = None, connected: bool | None = None,
+                      timeout: float | None = None) -> MessageRouterResponse:
+        """Send any service; returns the reply (its status is not checked here).
+
+        ``route``: a route path (port segments): the request is wrapped in Unconnected_Send
+        to the Connection Manager. ``connected``: use the class 3 connection (default: when
+        one is open).
+        """
+        raw = MessageRouterRequest(service, path, data).encode()
+        if route is not None:
+            route_bytes = route if isinstance(route, bytes) else encode_path(route)
+            raw = MessageRouterRequest(Service.UNCONNECTED_SEND, CONNECTION_MANAGER_PATH,
+                                       UnconnectedSendRequest(0x0A, 0x0E, raw, route_bytes).encode()).encode()
+        use_connection = self.connection is not None if connected is None else connected
+        reply = await (self.send_unit_data(raw, timeout) if use_connection else self.send_rr_data(raw, timeout))
+        return MessageRouterResponse.decode(reply)
+
+    # -- class 3 connection -----------------------------------------------------------------------
+    async def forward_open(self, rpi_us: int = 2_000_000, connection_size: int = 500, large: bool = False,
+                           timeout_multiplier: int = 1, route: Sequence[Segment] | bytes = b"",
+                           path: bytes = MESSAGE_ROUTER_PATH) -> ExplicitConnectionInfo:
+        """Open a class 3 connection to the message router (Forward_Open or Large_Forward_Open)."""
+        route_bytes = route if isinstance(route, bytes) else encode_path(route)
+        triad = ConnectionTriad(next(self._serials) & 0xFFFF, ORIGINATOR_VENDOR_ID, random.randrange(1, 0xFFFFFFFF))
+        params = NetworkParameters(connection_size, variable=True)
+        fo = ForwardOpenRequest(
+            priority_tick=0x0A, timeout_ticks=0x0E, ot_connection_id=0,
+            to_connection_id=random.randrange(1, 0xFFFFFFFF), triad=triad, timeout_multiplier=timeout_multiplier,
+            ot_rpi_us=rpi_us, ot_parameters=params, to_rpi_us=rpi_us, to_parameters=params,
+            transport=TransportTrigger(3, TriggerType.APPLICATION, server=True),
+            connection_path=route_bytes + path, large=large)
+        service = Service.LARGE_FORWARD_OPEN if large else Service.FORWARD_OPEN
+        reply = await self.request(service, CONNECTION_MANAGER_PATH, fo.encode(), connected=False)
+        reply.raise_for_status()
+        decoded = ForwardOpenReply.decode(reply.data)
+        self.connection = ExplicitConnectionInfo(decoded.ot_connection_id, decoded.to_connection_id, triad,
+                                                 decoded.ot_api_us)
+        return self.connection
+
+    async def forward_close(self) -> None:
+        connection = self.connection
+        if connection is None:
+            return
+        self.connection = None
+        fc = ForwardCloseRequest(0x0A, 0x0E, connection.triad, MESSAGE_ROUTER_PATH)
+        reply = await self.request(Service.FORWARD_CLOSE, CONNECTION_MANAGER_PATH, fc.encode(), connected=False)
+        reply.raise_for_status()
+
+
+class EncapsulationClient(ExplicitClient):
+    """The asyncio originator: replies are matched to futures, so requests may overlap."""
+
+    def __init__(self, host: str, port: int = DEFAULT_PORT, timeout: float = 5.0) -> None:
+        super().__init__(host, port, timeout)
         self._protocol: _ClientProtocol | None = None
         self._pending: dict[bytes, asyncio.Future[tuple[EncapsulationHeader, bytes]]] = {}
         self._connected_pending: dict[int, asyncio.Future[bytes]] = {}
-        self._contexts = itertools.count(1)
         self._closed_exc: BaseException | None = None
-        self.connection: ExplicitConnectionInfo | None = None
-        self._serials = itertools.count(random.randrange(0, 0xFFFF))
 
     # -- life cycle -----------------------------------------------------------------------------
     @classmethod
@@ -233,125 +375,37 @@ class EncapsulationClient:
                        timeout: float | None = None) -> tuple[EncapsulationHeader, bytes]:
         """Send one encapsulation frame and wait for the reply with the same sender context."""
         if context is None:
-            context = next(self._contexts).to_bytes(8, "little")
-        future: asyncio.Future[tuple[EncapsulationHeader, bytes]] = asyncio.get_running_loop().create_future()
+            context = self._new_context()
+        loop = asyncio.get_running_loop()
+        future: asyncio.Future[tuple[EncapsulationHeader, bytes]] = loop.create_future()
         self._pending[context] = future
+        # A plain timer, not asyncio.wait_for: no task and no extra waiter per request.
+        timer = loop.call_later(timeout or self.timeout, _expire, future)
         try:
             self._write(command, data, context)
-            header, body = await asyncio.wait_for(future, timeout or self.timeout)
+            header, body = await future
         except asyncio.TimeoutError:
-            raise asyncio.TimeoutError(f"no reply from {self.host}:{self.port} to command 0x{command:04X}") from None
+            raise self._timeout_error(f"command 0x{command:04X}") from None
         finally:
+            timer.cancel()
             self._pending.pop(context, None)
         if header.status != 0:
             raise EncapsulationStatusError(command, header.status)
         return header, body
 
-    # -- encapsulation commands -----------------------------------------------------------------
-    async def register_session(self) -> int:
-        header, _ = await self.exchange(Command.REGISTER_SESSION, REGISTER_SESSION_DATA.pack(PROTOCOL_VERSION, 0))
-        self.session = header.session
-        return self.session
-
-    async def list_identity(self) -> list[IdentityRecord]:
-        _, body = await self.exchange(Command.LIST_IDENTITY)
-        return decode_list_identity(body)
-
-    async def list_services(self) -> list[ServiceRecord]:
-        _, body = await self.exchange(Command.LIST_SERVICES)
-        return decode_list_services(body)
-
-    async def list_interfaces(self) -> list[Item]:
-        _, body = await self.exchange(Command.LIST_INTERFACES)
-        return decode_items(body)
-
-    async def nop(self, data: bytes = b"") -> None:
-        self._write(Command.NOP, data, bytes(8))
-
-    # -- explicit messaging ---------------------------------------------------------------------
-    async def send_rr_data(self, request: bytes, timeout: float | None = None) -> bytes:
-        """Unconnected explicit request (SendRRData); returns the encoded message-router reply."""
-        items = (Item(ItemType.NULL_ADDRESS), Item(ItemType.UNCONNECTED_DATA, request))
-        body = RR_PREFIX.pack(0, 0) + encode_items(items)
-        _, reply = await self.exchange(Command.SEND_RR_DATA, body, timeout=timeout)
-        items = decode_items(reply, RR_PREFIX.size)
-        for item in items:
-            if item.type == ItemType.UNCONNECTED_DATA:
-                return item.data
-        raise ValueError("SendRRData reply without Unconnected Data item")
-
-    async def send_rr_data_items(self, request: bytes, extra: Sequence[Item] = (),
-                                 timeout: float | None = None) -> tuple[bytes, list[Item]]:
-        """SendRRData with extra CPF items (Sockaddr Info); returns the reply and its extra items."""
-        items = (Item(ItemType.NULL_ADDRESS), Item(ItemType.UNCONNECTED_DATA, request), *extra)
-        _, reply = await self.exchange(Command.SEND_RR_DATA, RR_PREFIX.pack(0, 0) + encode_items(items),
-                                       timeout=timeout)
-        reply_items = decode_items(reply, RR_PREFIX.size)
-        data = next((i.data for i in reply_items if i.type == ItemType.UNCONNECTED_DATA), None)
-        if data is None:
-            raise ValueError("SendRRData reply without Unconnected Data item")
-        return data, [i for i in reply_items if i.type not in (ItemType.NULL_ADDRESS, ItemType.UNCONNECTED_DATA)]
-
-    async def send_unit_data(self, request: bytes, timeout: float | None = None) -> bytes:
-        """Class 3 connected request on the open connection; returns the message-router reply."""
-        connection = self.connection
-        if connection is None:
-            raise ConnectionError("no class 3 connection is open")
-        connection.sequence = (connection.sequence + 1) & 0xFFFF
-        sequence = connection.sequence
-        future: asyncio.Future[bytes] = asyncio.get_running_loop().create_future()
+    async def _connected_round_trip(self, sequence: int, body: bytes, timeout: float | None) -> bytes:
+        loop = asyncio.get_running_loop()
+        future: asyncio.Future[bytes] = loop.create_future()
         self._connected_pending[sequence] = future
-        body = RR_PREFIX.pack(0, 0) + encode_items((
-            Item(ItemType.CONNECTED_ADDRESS, _CONN_ID.pack(connection.ot_connection_id)),
-            Item(ItemType.CONNECTED_DATA, _SEQ.pack(sequence) + request),
-        ))
+        timer = loop.call_later(timeout or self.timeout, _expire, future)
         try:
             self._write(Command.SEND_UNIT_DATA, body, bytes(8))
-            return await asyncio.wait_for(future, timeout or self.timeout)
+            return await future
         except asyncio.TimeoutError:
-            raise asyncio.TimeoutError(f"no class 3 reply from {self.host}:{self.port}") from None
+            raise self._timeout_error("a class 3 request") from None
         finally:
+            timer.cancel()
             self._connected_pending.pop(sequence, None)
-
-    async def request(self, service: int, path: bytes, data: bytes = b"", *,
-                      route: Sequence[Segment] | bytes | None = None, connected: bool | None = None,
-                      timeout: float | None = None) -> MessageRouterResponse:
-        """Send any service; returns the reply (its status is not checked here).
-
-        ``route``: a route path (port segments): the request is wrapped in Unconnected_Send
-        to the Connection Manager. ``connected``: use the class 3 connection (default: when
-        one is open).
-        """
-        raw = MessageRouterRequest(service, path, data).encode()
-        if route is not None:
-            route_bytes = route if isinstance(route, bytes) else encode_path(route)
-            raw = MessageRouterRequest(Service.UNCONNECTED_SEND, CONNECTION_MANAGER_PATH,
-                                       UnconnectedSendRequest(0x0A, 0x0E, raw, route_bytes).encode()).encode()
-        use_connection = self.connection is not None if connected is None else connected
-        reply = await (self.send_unit_data(raw, timeout) if use_connection else self.send_rr_data(raw, timeout))
-        return MessageRouterResponse.decode(reply)
-
-    # -- class 3 connection -----------------------------------------------------------------------
-    async def forward_open(self, rpi_us: int = 2_000_000, connection_size: int = 500, large: bool = False,
-                           timeout_multiplier: int = 1, route: Sequence[Segment] | bytes = b"",
-                           path: bytes = MESSAGE_ROUTER_PATH) -> ExplicitConnectionInfo:
-        """Open a class 3 connection to the message router (Forward_Open or Large_Forward_Open)."""
-        route_bytes = route if isinstance(route, bytes) else encode_path(route)
-        triad = ConnectionTriad(next(self._serials) & 0xFFFF, ORIGINATOR_VENDOR_ID, random.randrange(1, 0xFFFFFFFF))
-        params = NetworkParameters(connection_size, variable=True)
-        fo = ForwardOpenRequest(
-            priority_tick=0x0A, timeout_ticks=0x0E, ot_connection_id=0,
-            to_connection_id=random.randrange(1, 0xFFFFFFFF), triad=triad, timeout_multiplier=timeout_multiplier,
-            ot_rpi_us=rpi_us, ot_parameters=params, to_rpi_us=rpi_us, to_parameters=params,
-            transport=TransportTrigger(3, TriggerType.APPLICATION, server=True),
-            connection_path=route_bytes + path, large=large)
-        service = Service.LARGE_FORWARD_OPEN if large else Service.FORWARD_OPEN
-        reply = await self.request(service, CONNECTION_MANAGER_PATH, fo.encode(), connected=False)
-        reply.raise_for_status()
-        decoded = ForwardOpenReply.decode(reply.data)
-        self.connection = ExplicitConnectionInfo(decoded.ot_connection_id, decoded.to_connection_id, triad,
-                                                 decoded.ot_api_us)
-        return self.connection
 
     # -- class 1 -------------------------------------------------------------------------------------
     def io_connection(self, output: int | None, input: int, rpi: float, *, output_size: int,
@@ -373,15 +427,118 @@ class EncapsulationClient:
         return IoContext(self, request, target_io_port, local_io_port, output_schema, input_schema, run,
                          keep_intervals)
 
-    async def forward_close(self) -> None:
-        connection = self.connection
-        if connection is None:
-            return
-        self.connection = None
-        fc = ForwardCloseRequest(0x0A, 0x0E, connection.triad, MESSAGE_ROUTER_PATH)
-        reply = await self.request(Service.FORWARD_CLOSE, CONNECTION_MANAGER_PATH, fc.encode(), connected=False)
-        reply.raise_for_status()
 
+
+
+class BlockingEncapsulationClient(ExplicitClient):
+    """The same originator over a blocking socket, for scripts: one request at a time, no event
+    loop. Its coroutines complete without suspending; drive them with ``run_blocking``."""
+
+    def __init__(self, host: str, port: int = DEFAULT_PORT, timeout: float = 5.0) -> None:
+        super().__init__(host, port, timeout)
+        self._sock: socket.socket | None = None
+        self._sock_timeout: float | None = None
+        self._buffer = bytearray()
+
+    @classmethod
+    def connect(cls, host: str, port: int = DEFAULT_PORT, timeout: float = 5.0,
+                register: bool = True) -> BlockingEncapsulationClient:
+        client = cls(host, port, timeout)
+        try:
+            client._sock = socket.create_connection((host, port), timeout)
+        except OSError as exc:
+            raise ConnectionError(f"cannot connect to {host}:{port}: {exc}") from None
+        client._sock.setsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY, 1)
+        if register:
+            run_blocking(client.register_session())
+        return client
+
+    def _write(self, command: int, data: bytes, context: bytes) -> None:
+        if self._sock is None:
+            raise ConnectionError(f"connection to {self.host}:{self.port} is closed")
+        try:
+            self._sock.sendall(HEADER.pack(command, len(data), self.session, 0, context, 0) + data)
+        except OSError as exc:
+            raise ConnectionError(f"connection to {self.host}:{self.port} lost: {exc}") from None
+
+    def _read_frame(self, timeout: float) -> tuple[EncapsulationHeader, bytes]:
+        sock = self._sock
+        if sock is None:
+            raise ConnectionError(f"connection to {self.host}:{self.port} is closed")
+        buffer = self._buffer
+        if timeout != self._sock_timeout:
+            sock.settimeout(timeout)
+            self._sock_timeout = timeout
+        while True:
+            if len(buffer) >= HEADER_SIZE:
+                end = HEADER_SIZE + int.from_bytes(buffer[2:4], "little")
+                if len(buffer) >= end:
+                    header = EncapsulationHeader.decode(buffer)
+                    body = bytes(buffer[HEADER_SIZE:end])
+                    del buffer[:end]
+                    return header, body
+            try:
+                # A reply is small; a 64 KiB receive buffer would be allocated and shrunk on every call.
+                chunk = sock.recv(4096)
+            except TimeoutError:
+                raise self._timeout_error("a request") from None
+            except OSError as exc:
+                raise ConnectionError(f"connection to {self.host}:{self.port} lost: {exc}") from None
+            if not chunk:
+                raise ConnectionError(f"connection to {self.host}:{self.port} closed by the target")
+            buffer += chunk
+
+    async def exchange(self, command: int, data: bytes = b"", context: bytes | None = None,
+                       timeout: float | None = None) -> tuple[EncapsulationHeader, bytes]:
+        context = context or self._new_context()
+        self._write(command, data, context)
+        while True:
+            header, body = self._read_frame(timeout or self.timeout)
+            if header.context == context and header.command == command:
+                break  # anything else is a late reply to an earlier, timed-out request
+        if header.status != 0:
+            raise EncapsulationStatusError(command, header.status)
+        return header, body
+
+    async def _connected_round_trip(self, sequence: int, body: bytes, timeout: float | None) -> bytes:
+        self._write(Command.SEND_UNIT_DATA, body, bytes(8))
+        while True:
+            header, reply = self._read_frame(timeout or self.timeout)
+            if header.command != Command.SEND_UNIT_DATA or header.status != 0:
+                continue
+            items = decode_items(reply, RR_PREFIX.size)
+            if len(items) == 2 and _SEQ.unpack_from(items[1].data)[0] == sequence:
+                return items[1].data[2:]
+
+    async def close(self) -> None:
+        if self._sock is None:
+            return
+        try:
+            if self.connection is not None:
+                await self.forward_close()
+            if self.session:
+                self._write(Command.UNREGISTER_SESSION, b"", bytes(8))
+        except (ConnectionError, CipError, EncapsulationStatusError, asyncio.TimeoutError):
+            pass
+        finally:
+            self._sock.close()
+            self._sock = None
+            self.session = 0
+
+
+def run_blocking(coroutine: Coroutine[Any, Any, T]) -> T:
+    """Run a coroutine of a ``BlockingEncapsulationClient`` to completion without an event loop."""
+    try:
+        coroutine.send(None)
+    except StopIteration as done:
+        return done.value  # type: ignore[no-any-return]
+    coroutine.close()
+    raise RuntimeError("this operation needs an event loop (use the async Scanner)")
+
+
+def _expire(future: asyncio.Future[Any]) -> None:
+    if not future.done():
+        future.set_exception(asyncio.TimeoutError())
 
 class IoContext:
     """Async context manager of a class 1 connection: Forward_Open on enter, Forward_Close on exit."""
