@@ -96,7 +96,8 @@ class Scanner:
         """Any service by code to class/instance[/attribute]; raises ``CipError`` on an error status."""
         path = request_path(class_id, instance, attribute)
         reply = await self.client.request(service, path, data, route=self.route)
-        if self.route is not None and reply.service == Service.UNCONNECTED_SEND and service != reply.service:
+        if (self.route is not None and self.client.connection is None and reply.service == Service.UNCONNECTED_SEND
+                and service != reply.service):
             # The Connection Manager could not route the request: its error is the answer.
             reply.raise_for_status()
         if reply.service != service & 0x7F:
@@ -141,7 +142,10 @@ class Scanner:
         await self.request(Service.SET_ATTRIBUTE_SINGLE, class_id, instance, attribute, data)
 
     async def get_attributes_all(self, class_id: int, instance: int) -> tuple[bytes, dict[str, Any] | None]:
-        """Raw reply and, when the class is declared, the values by attribute name."""
+        """Raw reply and, when the class is declared, the values by attribute name.
+
+        A device may carry attributes beyond the declared ones after them (its own, or a later
+        revision's): the declared ones are decoded and the rest is left in the raw reply."""
         reply = await self.request(Service.GET_ATTRIBUTES_ALL, class_id, instance)
         layout = self.catalog.get_all_layout(class_id) if instance else None
         if layout is None:
@@ -153,7 +157,7 @@ class Scanner:
                 values[spec.name], offset = spec.type.decode_from(reply.data, offset)
         except CipError:
             return reply.data, None
-        return reply.data, values if offset == len(reply.data) else None
+        return reply.data, values
 
     async def get_attribute_list(self, class_id: int, instance: int, attributes: Sequence[int]
                                  ) -> dict[int, AttributeValue | CipError]:

@@ -296,7 +296,7 @@ def test_unconnected_send_routing_errors() -> None:
     slot3 = h.rr(unconnected_send(gas(1, 1, 7), b"\x01\x03"), session)
     assert (slot3.service, slot3.general_status, slot3.extended_status) == (0x52, 0x01, (0x0312,))
     port5 = h.rr(unconnected_send(gas(1, 1, 7), b"\x05\x01"), session)
-    assert (port5.general_status, port5.extended_status, port5.data) == (0x01, (0x0311,), b"\x01")
+    assert (port5.general_status, port5.extended_status, port5.data) == (0x01, (0x0311,), b"\x01\x00")
     bad = h.rr(MessageRouterRequest(0x52, request_path(6, 1), b"\x0a\x0e\x40\x00").encode(), session)
     assert bad.general_status == 0x13
 
@@ -393,7 +393,8 @@ def test_class3_connection_dies_with_its_tcp_connection() -> None:
     ({"transport_class": 1}, 0x0103),
     ({"transport_class": 2}, 0x0103),
     ({"path": request_path(1, 1)}, 0x0117),
-    ({"path": b"\x01\x03" + request_path(2, 1)}, 0x0311),
+    ({"path": b"\x01\x03" + request_path(2, 1)}, 0x0312),
+    ({"path": b"\x02\x01" + request_path(2, 1)}, 0x0311),
     ({"path": b"\xe0\x00"}, 0x0315),
     ({"rpi_us": 0}, 0x0111),
     ({"conn_type": ConnectionType.MULTICAST}, 0x0108),

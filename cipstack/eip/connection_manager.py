@@ -216,8 +216,10 @@ class ConnectionManagerObject(CipObject):
                 self.check_key(segment, fo.triad)
             elif isinstance(segment, PortSegment):
                 # A route that ends here: the backplane port, link 0 (the device itself).
-                if segment.port != BACKPLANE_PORT or segment.link != b"\x00" or logical:
+                if segment.port != BACKPLANE_PORT or logical:
                     raise connection_failure(ExtendedStatus.PORT_NOT_AVAILABLE, fo.triad)
+                if segment.link != b"\x00":
+                    raise connection_failure(ExtendedStatus.LINK_ADDRESS_NOT_VALID, fo.triad)
             elif isinstance(segment, LogicalSegment):
                 logical.append(segment)
             else:
@@ -266,17 +268,19 @@ class ConnectionManagerObject(CipObject):
         if not route:
             return context.router.dispatch(us.message, context)
         first = route[0]
+        # An Unconnected_Send refused on its route answers the remaining path size (words) and a
+        # reserved byte.
         remaining_words = len(us.route_path) // 2
         if not isinstance(first, PortSegment):
-            raise CipError(GeneralStatus.PATH_SEGMENT_ERROR, data=bytes((remaining_words,)),
+            raise CipError(GeneralStatus.PATH_SEGMENT_ERROR, data=bytes((remaining_words, 0)),
                            message="route path must start with a port segment")
         if first.port == BACKPLANE_PORT:
             if first.link != b"\x00" or len(route) > 1:
                 raise CipError(GeneralStatus.CONNECTION_FAILURE, (ExtendedStatus.LINK_ADDRESS_NOT_VALID,),
-                               data=bytes((remaining_words,)), message=f"no module at slot {first.link.hex()}")
+                               data=bytes((remaining_words, 0)), message=f"no module at slot {first.link.hex()}")
             return context.router.dispatch(us.message, context)
         handler = self.routes.get(first.port)
         if handler is None:
             raise CipError(GeneralStatus.CONNECTION_FAILURE, (ExtendedStatus.PORT_NOT_AVAILABLE,),
-                           data=bytes((remaining_words,)), message=f"no port {first.port}")
+                           data=bytes((remaining_words, 0)), message=f"no port {first.port}")
         return handler(first, us.message, route[1:], context)

@@ -238,11 +238,12 @@ class ExplicitClient:
         one is open).
         """
         raw = MessageRouterRequest(service, path, data).encode()
-        if route is not None:
+        use_connection = self.connection is not None if connected is None else connected
+        if route is not None and not use_connection:
+            # On a class 3 connection the route is already in the connection path.
             route_bytes = route if isinstance(route, bytes) else encode_path(route)
             raw = MessageRouterRequest(Service.UNCONNECTED_SEND, CONNECTION_MANAGER_PATH,
                                        UnconnectedSendRequest(0x0A, 0x0E, raw, route_bytes).encode()).encode()
-        use_connection = self.connection is not None if connected is None else connected
         reply = await (self.send_unit_data(raw, timeout) if use_connection else self.send_rr_data(raw, timeout))
         return MessageRouterResponse.decode(reply)
 

@@ -1,0 +1,158 @@
+"""Peers in their own processes: our adapter (for blocking clients) and cpppo's server.
+
+pycomm3 and cpppo's tools block, so the adapter they talk to cannot share the test's event
+loop: it runs as ``python -m cipstack adapter`` on a free loopback port. Every process a
+fixture starts is stopped by its PID.
+"""
+
+from __future__ import annotations
+
+import os
+import signal
+import socket
+import subprocess
+import sys
+import time
+from collections.abc import Iterator, Sequence
+from dataclasses import dataclass
+from pathlib import Path
+
+import pytest
+
+HOST = "127.0.0.1"
+START_TIMEOUT = 15.0
+STOP_TIMEOUT = 5.0
+
+#: What the adapter's default profile (ACG-ET2) reports as its identity.
+IDENTITY = {
+    "vendor_id": 259,
+    "device_type": 2,
+    "product_code": 100,
+    "revision": (1, 1),
+    "serial_number": 0x10000064,
+    "product_name": "CENT",
+}
+
+
+def free_port(host: str = HOST) -> int:
+    """A port that is free for both TCP and UDP on ``host`` (the adapter listens on both)."""
+    for _ in range(100):
+        with socket.socket(socket.AF_INET, socket.SOCK_STREAM) as tcp:
+            tcp.bind((host, 0))
+            port = tcp.getsockname()[1]
+            with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as udp:
+                try:
+                    udp.bind((host, port))
+                except OSError:
+                    continue
+        return port
+    raise RuntimeError(f"no port free for both TCP and UDP on {host}")
+
+
+def python_module(module: str, *args: str) -> list[str]:
+    return [sys.executable, "-m", module, *args]
+
+
+@dataclass
+class PeerProcess:
+    """A server in a child process, listening on host:port."""
+
+    name: str
+    host: str
+    port: int
+    process: subprocess.Popen[bytes]
+    log: Path
+
+    @property
+    def address(self) -> str:
+        return f"{self.host}:{self.port}"
+
+    @property
+    def pid(self) -> int:
+        return self.process.pid
+
+    def log_text(self) -> str:
+        try:
+            return self.log.read_text(errors="replace")
+        except OSError:
+            return ""
+
+    def alive(self) -> bool:
+        return self.process.poll() is None
+
+    def stop(self, sig: int = signal.SIGTERM) -> int:
+        """Signal the process by its PID and wait; SIGKILL (by PID) if it does not go."""
+        if self.process.poll() is None:
+            os.kill(self.process.pid, sig)
+            try:
+                self.process.wait(STOP_TIMEOUT)
+            except subprocess.TimeoutExpired:
+                os.kill(self.process.pid, signal.SIGKILL)
+                self.process.wait(STOP_TIMEOUT)
+        return self.process.returncode
+
+
+def wait_listening(peer: PeerProcess, timeout: float = START_TIMEOUT) -> None:
+    """Poll until the peer accepts TCP connections; fail with its log if it exits or hangs."""
+    deadline = time.monotonic() + timeout
+    while time.monotonic() < deadline:
+        if not peer.alive():
+            raise RuntimeError(f"{peer.name} exited with {peer.process.returncode} before listening:\n"
+                               f"{peer.log_text()}")
+        try:
+            with socket.create_connection((peer.host, peer.port), timeout=0.5):
+                return
+        except OSError:
+            time.sleep(0.05)
+    peer.stop(signal.SIGKILL)
+    raise RuntimeError(f"{peer.name} not listening on {peer.address} after {timeout} s:\n{peer.log_text()}")
+
+
+def start_peer(name: str, command: Sequence[str], host: str, port: int, log: Path) -> PeerProcess:
+    env = dict(os.environ, PYTHONUNBUFFERED="1")
+    with log.open("wb") as out:
+        process = subprocess.Popen(list(command), stdout=out, stderr=subprocess.STDOUT, stdin=subprocess.DEVNULL,
+                                   env=env)
+    peer = PeerProcess(name, host, port, process, log)
+    wait_listening(peer)
+    return peer
+
+
+def adapter_command(host: str, port: int) -> list[str]:
+    return python_module("cipstack", "adapter", "--host", host, "--port", str(port))
+
+
+CPPPO_TAG = "Speed@0x2A/1/7=INT"
+
+
+def cpppo_server_command(host: str, port: int) -> list[str]:
+    return python_module("cpppo.server.enip", "--address", f"{host}:{port}", CPPPO_TAG)
+
+
+@pytest.fixture(scope="module")
+def adapter(tmp_path_factory: pytest.TempPathFactory) -> Iterator[PeerProcess]:
+    """``cipstack adapter`` on a free loopback port; it must stop cleanly on SIGTERM."""
+    port = free_port()
+    log = tmp_path_factory.mktemp("adapter") / "adapter.log"
+    peer = start_peer("cipstack adapter", adapter_command(HOST, port), HOST, port, log)
+    try:
+        yield peer
+    finally:
+        was_alive = peer.alive()
+        code = peer.stop(signal.SIGTERM)
+    text = peer.log_text()
+    assert was_alive, f"the adapter died during the tests (exit {code}):\n{text}"
+    assert code == 0, f"the adapter exited with {code} on SIGTERM:\n{text}"
+    assert "Traceback" not in text, f"the adapter logged an exception:\n{text}"
+
+
+@pytest.fixture(scope="module")
+def cpppo_server(tmp_path_factory: pytest.TempPathFactory) -> Iterator[PeerProcess]:
+    """cpppo's EtherNet/IP server with one INT tag at 0x2A/1/7, on a free loopback port."""
+    port = free_port()
+    log = tmp_path_factory.mktemp("cpppo") / "cpppo-server.log"
+    peer = start_peer("cpppo server", cpppo_server_command(HOST, port), HOST, port, log)
+    try:
+        yield peer
+    finally:
+        peer.stop(signal.SIGTERM)
