@@ -1,0 +1,216 @@
+"""The ``cipstack eds check`` and ``cipstack eds show`` commands.
+
+Each command is a pair of functions, one that adds its arguments to an argparse parser and
+one that runs it and returns the exit status, so the ``cipstack`` command can mount them.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+from collections.abc import Mapping
+from typing import Any, TextIO
+
+from .checker import ERROR, Finding, check_eds
+from .model import EdsDocument, Entry, FieldKind, Section, format_epath
+from .reader import EdsSyntaxError, read_eds
+
+EXIT_OK = 0
+EXIT_FINDINGS = 1
+EXIT_UNREADABLE = 2
+
+
+def add_check_arguments(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument("files", nargs="+", metavar="FILE", help="EDS files to check")
+    parser.add_argument("--json", action="store_true", help="one JSON object per finding, one per line")
+
+
+def add_show_arguments(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument("file", metavar="FILE", help="EDS file to summarize")
+    parser.add_argument("--json", action="store_true", help="the summary as one JSON object")
+
+
+def _load(path: str, command: str, stderr: TextIO) -> EdsDocument | None:
+    """The document, or None after one line on stderr saying why it cannot be had."""
+    try:
+        return read_eds(path)
+    except EdsSyntaxError as exc:
+        print(f"{path}:{exc.line}: syntax error: {exc.message}", file=stderr)
+    except OSError as exc:
+        print(f"cipstack eds {command}: {path}: cannot read: {exc.strerror or exc}", file=stderr)
+    return None
+
+
+def run_check(
+    args: argparse.Namespace,
+    identity: Mapping[str, Any] | None = None,
+    stdout: TextIO | None = None,
+    stderr: TextIO | None = None,
+) -> int:
+    """Check every file; 0 when none has an error, 1 when one has, 2 when one cannot be read.
+    ``identity`` is a live device's Identity (see :func:`check_eds`) the files must match."""
+    stdout = stdout or sys.stdout
+    stderr = stderr or sys.stderr
+    status = EXIT_OK
+    for path in args.files:
+        doc = _load(path, "check", stderr)
+        if doc is None:
+            status = EXIT_UNREADABLE
+            continue
+        findings = check_eds(doc, identity)
+        for finding in findings:
+            print(_format_finding(path, finding, as_json=args.json), file=stdout)
+        if status == EXIT_OK and any(finding.severity == ERROR for finding in findings):
+            status = EXIT_FINDINGS
+    return status
+
+
+def _format_finding(path: str, finding: Finding, as_json: bool) -> str:
+    if as_json:
+        return json.dumps({"file": path, **finding.to_dict()}, sort_keys=True)
+    return f"{path}:{finding.line}: {finding.severity} {finding.rule}: {finding.message}"
+
+
+def run_show(args: argparse.Namespace, stdout: TextIO | None = None, stderr: TextIO | None = None) -> int:
+    """Print what a file describes: identity, assemblies and their members, connections."""
+    stdout = stdout or sys.stdout
+    doc = _load(args.file, "show", stderr or sys.stderr)
+    if doc is None:
+        return EXIT_UNREADABLE
+    summary = summarize(doc)
+    if args.json:
+        print(json.dumps(summary, indent=2, sort_keys=True), file=stdout)
+    else:
+        print(render_summary(summary), file=stdout)
+    return EXIT_OK
+
+
+# -- the summary ------------------------------------------------------------------------------
+
+_DEVICE_KEYS = {
+    "VendCode": "vendor_id", "VendName": "vendor_name", "ProdType": "device_type", "ProdTypeStr": "device_type_name",
+    "ProdCode": "product_code", "ProdName": "product_name", "Catalog": "catalog",
+}
+_APPLICATION_TYPES = ((24, "listen only"), (25, "input only"), (26, "exclusive owner"), (27, "redundant owner"))
+_TRIGGERS = ((16, "cyclic"), (17, "change of state"), (18, "application triggered"))
+_CONNECTION_TYPES = {1: "null", 2: "multicast", 4: "point-to-point"}
+_REAL_TIME = {0: "modeless", 1: "zero length data", 3: "heartbeat", 4: "run/idle header"}
+
+
+def _plain(value: Any, kind: FieldKind) -> Any:
+    """A field value as JSON holds it."""
+    if kind is FieldKind.EPATH:
+        return format_epath(value)
+    if kind is FieldKind.REVISION:
+        return "{}.{}".format(*value)
+    if kind in (FieldKind.DATE, FieldKind.TIME, FieldKind.DATASET):
+        return str(value)
+    return value
+
+
+def _value(entry: Entry | None, number: int = 1) -> Any:
+    item = None if entry is None else entry.field(number)
+    return None if item is None else _plain(item.value, item.kind)
+
+
+def summarize(doc: EdsDocument) -> dict[str, Any]:
+    """Identity, assemblies and connections of a document, as plain data."""
+    device = doc.get("Device")
+    identity: dict[str, Any] = {}
+    if device is not None:
+        identity = {name: _value(device.get(keyword)) for keyword, name in _DEVICE_KEYS.items()}
+        major, minor = _value(device.get("MajRev")), _value(device.get("MinRev"))
+        identity["revision"] = None if major is None or minor is None else f"{major}.{minor}"
+    classification = doc.get("Device Classification")
+    networks = [_value(entry) for entry in classification] if classification else []
+    params = doc.get("Params")
+    assembly_section = doc.get("Assembly")
+    assemblies = [_assembly(entry, params) for entry in assembly_section] if assembly_section else []
+    manager = doc.get("Connection Manager")
+    connections = [_connection(entry) for entry in manager if entry.keyword.startswith("Connection")] if manager else []
+    return {"identity": identity, "networks": networks, "assemblies": assemblies, "connections": connections}
+
+
+def _assembly(entry: Entry, params: Section | None) -> dict[str, Any]:
+    members = []
+    for size_item, member in zip(entry.fields[6::2], entry.fields[7::2], strict=False):
+        reference = member.value if member.kind is FieldKind.KEYWORD else None
+        bits = size_item.value if size_item.kind is FieldKind.INT else None
+        name = None
+        if reference is not None and params is not None and (param := params.get(reference)) is not None:
+            name = _value(param, 7)
+            if bits is None and param.field(6) is not None and param.field(6).kind is FieldKind.INT:
+                bits = param.field(6).value * 8
+        members.append({"bits": bits, "reference": reference, "name": name})
+    return {
+        "keyword": entry.keyword,
+        "name": _value(entry, 1),
+        "path": _value(entry, 2),
+        "size": _value(entry, 3),
+        "members": members,
+    }
+
+
+def _connection(entry: Entry) -> dict[str, Any]:
+    trigger, parameters = _value(entry, 1), _value(entry, 2)
+    description: dict[str, Any] = {
+        "keyword": entry.keyword,
+        "name": _value(entry, 13),
+        "path": _value(entry, 15),
+        "o_to_t": {"rpi": _value(entry, 3), "size": _value(entry, 4), "assembly": _value(entry, 5)},
+        "t_to_o": {"rpi": _value(entry, 6), "size": _value(entry, 7), "assembly": _value(entry, 8)},
+    }
+    if isinstance(trigger, int):
+        description["types"] = [name for bit, name in _APPLICATION_TYPES if trigger >> bit & 1]
+        description["triggers"] = [name for bit, name in _TRIGGERS if trigger >> bit & 1]
+        description["transport_classes"] = [bit for bit in range(16) if trigger >> bit & 1]
+    if isinstance(parameters, int):
+        for key, shift_type, shift_format in (("o_to_t", 16, 8), ("t_to_o", 20, 12)):
+            kinds = [name for bit, name in _CONNECTION_TYPES.items() if parameters >> shift_type & bit]
+            description[key]["connection_types"] = kinds
+            real_time = parameters >> shift_format & 0x7
+            description[key]["format"] = _REAL_TIME.get(real_time, f"real-time format {real_time}")
+    return description
+
+
+def render_summary(summary: dict[str, Any]) -> str:
+    lines: list[str] = []
+    identity = summary["identity"]
+    if identity:
+        lines.append(f"Device: {identity['product_name']} ({identity['catalog']}), revision {identity['revision']}")
+        lines.append(f"  vendor {identity['vendor_id']} {identity['vendor_name']}")
+        lines.append(f"  device type {identity['device_type']} {identity['device_type_name']}")
+        lines.append(f"  product code {identity['product_code']}")
+    if summary["networks"]:
+        lines.append(f"Network: {', '.join(str(network) for network in summary['networks'])}")
+    if summary["assemblies"]:
+        lines.append("Assemblies:")
+    for assembly in summary["assemblies"]:
+        lines.append(
+            f"  {assembly['keyword']} {assembly['name']!r}: {assembly['size']} bytes, path {assembly['path']}"
+        )
+        for member in assembly["members"]:
+            bits = "?" if member["bits"] is None else member["bits"]
+            what = member["reference"] or "(padding)"
+            name = f" {member['name']!r}" if member["name"] else ""
+            lines.append(f"    {bits:>4} bits  {what}{name}")
+    if summary["connections"]:
+        lines.append("Connections:")
+    for connection in summary["connections"]:
+        kinds = ", ".join(connection.get("types", [])) or "unspecified"
+        lines.append(f"  {connection['keyword']} {connection['name']!r} ({kinds}), path {connection['path']}")
+        for key, label in (("o_to_t", "O->T"), ("t_to_o", "T->O")):
+            part = connection[key]
+            size = "?" if part["size"] is None else part["size"]
+            details = [f"{size} bytes"]
+            if part["assembly"]:
+                details.append(str(part["assembly"]))
+            if part.get("connection_types"):
+                details.append("/".join(part["connection_types"]))
+            if "format" in part:
+                details.append(part["format"])
+            if part["rpi"] is not None:
+                details.append(f"RPI {part['rpi']}")
+            lines.append(f"    {label}: {', '.join(details)}")
+    return "\n".join(lines)

@@ -1,0 +1,284 @@
+"""Reading EDS text into an :class:`EdsDocument`.
+
+Real EDS files come from many tools: Latin-1 text, CRLF or LF, comments between the fields
+of an entry, entries over many lines and long strings split into adjacent quoted pieces.
+All of that is accepted; what is not EDS syntax raises :class:`EdsSyntaxError` with the
+line it was found on.
+
+Comments: one on a line of its own belongs to what follows it (the next section or entry;
+inside an entry, to that entry); one after other text on the same line belongs to the field
+(or the entry or section header) that text ends.
+"""
+
+from __future__ import annotations
+
+import os
+import re
+from collections.abc import Iterator
+from dataclasses import dataclass
+
+from .model import (
+    WORD_CHARACTERS,
+    EdsDocument,
+    Entry,
+    Field,
+    FieldKind,
+    Section,
+    parse_epath,
+    parse_word,
+    unescape_string,
+)
+
+
+class EdsSyntaxError(ValueError):
+    """Text that is not EDS syntax, and the line where that shows."""
+
+    def __init__(self, line: int, message: str) -> None:
+        super().__init__(f"line {line}: {message}")
+        self.line = line
+        self.message = message
+
+
+#: Fields that hold an EPATH when they hold a quoted string: (section, keyword pattern, field number).
+EPATH_FIELDS: tuple[tuple[str, re.Pattern[str], int], ...] = (
+    ("Params", re.compile(r"(?:Proxy)?Param[0-9]+"), 3),
+    ("Assembly", re.compile(r"(?:Proxy|Proxied)?Assem(?:Exa)?[0-9]+"), 2),
+    ("Connection Manager", re.compile(r"Connection[0-9]+"), 15),
+    ("Port", re.compile(r"Port[0-9]+"), 3),
+)
+#: Fields written as ``major.minor``, which elsewhere would read as a real number.
+REVISION_FIELDS: tuple[tuple[str, str, int], ...] = (("File", "Revision", 1),)
+
+_PUNCTUATION = "=,;{}"
+# A DOS end-of-file mark still ends some files written by old tools.
+_END_OF_FILE_MARK = "\x1a"
+
+
+@dataclass
+class _Token:
+    kind: str  # "section", "word", "string", "comment", or the punctuation character itself
+    text: str
+    line: int
+    #: For a comment: nothing but blanks precede it on its line.
+    own_line: bool = False
+
+
+def _tokens(text: str) -> Iterator[_Token]:
+    line = 1
+    index = 0
+    length = len(text)
+    line_has_token = False
+    while index < length:
+        char = text[index]
+        if char == "\n":
+            line += 1
+            line_has_token = False
+            index += 1
+        elif char in " \t\f\v":
+            index += 1
+        elif char == "$":
+            end = text.find("\n", index)
+            end = length if end < 0 else end
+            yield _Token("comment", text[index + 1 : end], line, own_line=not line_has_token)
+            index = end
+        elif char == '"':
+            end = index + 1
+            while end < length and text[end] not in '"\n':
+                # A backslash escapes the next character, a quote included.
+                end += 2 if text[end] == "\\" and end + 1 < length and text[end + 1] != "\n" else 1
+            if end >= length or text[end] != '"':
+                raise EdsSyntaxError(line, "string not closed on the line it starts")
+            yield _Token("string", text[index + 1 : end], line)
+            line_has_token = True
+            index = end + 1
+        elif char == "[":
+            end = index + 1
+            while end < length and text[end] not in "]\n":
+                end += 1
+            if end >= length or text[end] != "]":
+                raise EdsSyntaxError(line, "section name not closed by ']'")
+            name = text[index + 1 : end].strip()
+            if not name:
+                raise EdsSyntaxError(line, "empty section name")
+            bad = [c for c in name if not " " <= c <= "~" or c == "["]
+            if bad:
+                raise EdsSyntaxError(line, f"character {bad[0]!r} in section name")
+            yield _Token("section", name, line)
+            line_has_token = True
+            index = end + 1
+        elif char in _PUNCTUATION:
+            yield _Token(char, char, line)
+            line_has_token = True
+            index += 1
+        elif char in WORD_CHARACTERS:
+            end = index + 1
+            while end < length and text[end] in WORD_CHARACTERS:
+                end += 1
+            yield _Token("word", text[index:end], line)
+            line_has_token = True
+            index = end
+        elif char == _END_OF_FILE_MARK and not text[index + 1 :].strip():
+            return
+        else:
+            raise EdsSyntaxError(line, f"unexpected character {char!r}")
+
+
+class _Parser:
+    def __init__(self, text: str) -> None:
+        self.tokens = list(_tokens(text))
+        self.position = 0
+        self.doc = EdsDocument()
+        #: Own-line comments waiting for the section or entry that follows them.
+        self.pending: list[str] = []
+        #: Where a comment at the end of a line goes: the field, entry or section that line ends.
+        self.trailing_target: Field | Entry | Section | None = None
+        self.entry: Entry | None = None
+        self.last_line = 1
+
+    # -- token access, with comments taken out of the stream as they pass ----------------------
+
+    def _attach_comment(self, token: _Token) -> None:
+        text = token.text.strip()
+        target = self.trailing_target
+        if not token.own_line and isinstance(target, Field) and target.comment is None:
+            target.comment = text
+        elif not token.own_line and isinstance(target, (Entry, Section)):
+            target.comments.append(text)
+        elif self.entry is not None:
+            self.entry.comments.append(text)
+        else:
+            self.pending.append(text)
+
+    def peek(self) -> _Token | None:
+        while self.position < len(self.tokens) and self.tokens[self.position].kind == "comment":
+            self._attach_comment(self.tokens[self.position])
+            self.position += 1
+        return self.tokens[self.position] if self.position < len(self.tokens) else None
+
+    def take(self) -> _Token | None:
+        token = self.peek()
+        if token is not None:
+            self.position += 1
+            self.last_line = token.line
+        return token
+
+    # -- grammar ----------------------------------------------------------------------------
+
+    def parse(self) -> EdsDocument:
+        section: Section | None = None
+        while (token := self.take()) is not None:
+            if token.kind == "section":
+                section = Section(token.text, line=token.line, comments=self.pending)
+                self.pending = []
+                self.doc.sections.append(section)
+                self.trailing_target = section
+            elif token.kind == "word":
+                if section is None:
+                    raise EdsSyntaxError(token.line, f"entry {token.text!r} before the first section")
+                section.entries.append(self._entry(section, token))
+            else:
+                raise EdsSyntaxError(token.line, f"expected a keyword or a section, found {token.text!r}")
+        self.doc.trailing_comments = self.pending
+        return self.doc
+
+    def _entry(self, section: Section, keyword: _Token) -> Entry:
+        entry = Entry(keyword.text, line=keyword.line, comments=self.pending)
+        self.pending = []
+        self.entry = entry
+        self.trailing_target = entry
+        assign = self.take()
+        if assign is None or assign.kind != "=":
+            raise EdsSyntaxError(keyword.line, f"keyword {keyword.text!r} not followed by '='")
+        entry.fields = self._fields(entry, closing=";")
+        self.entry = None
+        _apply_field_hints(section.name, entry)
+        return entry
+
+    def _fields(self, entry: Entry, closing: str) -> list[Field]:
+        """Fields up to ``closing`` (";" for an entry, "}" for a dataset), which is consumed."""
+        fields: list[Field] = []
+        while True:
+            token = self.peek()
+            if token is None:
+                raise EdsSyntaxError(self.last_line, f"entry {entry.keyword!r} not terminated by '{closing}'")
+            if token.kind in (",", closing):
+                item = Field.empty()
+                item.line = token.line
+            else:
+                item = self._field(entry)
+            fields.append(item)
+            self.trailing_target = item
+            separator = self.take()
+            if separator is None or separator.kind not in (",", closing):
+                # The separator is missing where the field ends, not where the next token is.
+                found = "the end of the file" if separator is None else f"{separator.text!r} on line {separator.line}"
+                raise EdsSyntaxError(
+                    item.line, f"entry {entry.keyword!r}: ',' or '{closing}' missing after a field (found {found})"
+                )
+            if separator.kind == closing:
+                return fields
+
+    def _field(self, entry: Entry) -> Field:
+        token = self.take()
+        assert token is not None
+        if token.kind == "string":
+            pieces = [token.text]
+            # Adjacent quoted strings are one field: long texts are split over lines this way.
+            while (following := self.peek()) is not None and following.kind == "string":
+                pieces.append(following.text)
+                self.take()
+            value = "".join(unescape_string(piece) for piece in pieces)
+            raw = " ".join(f'"{piece}"' for piece in pieces)
+            return Field(FieldKind.STRING, value, raw, token.line)
+        if token.kind == "word":
+            kind, value = parse_word(token.text)
+            return Field(kind, value, token.text, token.line)
+        if token.kind == "{":
+            children = [] if self._closes_at_once() else self._fields(entry, closing="}")
+            raw = "{" + ", ".join(child.raw for child in children) + "}"
+            return Field(FieldKind.DATASET, tuple(children), raw, token.line)
+        raise EdsSyntaxError(token.line, f"entry {entry.keyword!r}: unexpected {token.text!r} where a field belongs")
+
+    def _closes_at_once(self) -> bool:
+        token = self.peek()
+        if token is not None and token.kind == "}":
+            self.take()
+            return True
+        return False
+
+
+def _apply_field_hints(section: str, entry: Entry) -> None:
+    """Give fields whose meaning depends on their place the kind that place calls for."""
+    for section_name, pattern, number in EPATH_FIELDS:
+        if section == section_name and pattern.fullmatch(entry.keyword):
+            item = entry.field(number)
+            if item is not None and item.kind is FieldKind.STRING:
+                items = parse_epath(item.value)
+                if items is not None:
+                    item.kind, item.value = FieldKind.EPATH, items
+    for section_name, keyword, number in REVISION_FIELDS:
+        if section == section_name and entry.keyword == keyword:
+            item = entry.field(number)
+            if item is not None and item.kind in (FieldKind.FLOAT, FieldKind.INT):
+                item.kind, item.value = parse_word(item.raw, revision=True)
+
+
+def parse_eds(text: str) -> EdsDocument:
+    """Parse EDS text (LF, CRLF or CR line ends); raise EdsSyntaxError on malformed text."""
+    text = text.replace("\r\n", "\n").replace("\r", "\n")
+    # A byte-order mark, decoded as Latin-1 or as Unicode, is no part of the text.
+    for mark in ("\ufeff", "\xef\xbb\xbf"):
+        if text.startswith(mark):
+            text = text[len(mark) :]
+    return _Parser(text).parse()
+
+
+def decode_eds(data: bytes) -> str:
+    """EDS bytes as text: Latin-1, which never fails and is what most EDS files are in."""
+    return data.decode("latin-1")
+
+
+def read_eds(path: str | os.PathLike[str]) -> EdsDocument:
+    """Read and parse an EDS file; OSError if it cannot be read, EdsSyntaxError if malformed."""
+    with open(path, "rb") as stream:
+        return parse_eds(decode_eds(stream.read()))

@@ -1,0 +1,204 @@
+"""``cipstack eds check`` and ``cipstack eds show``, run through argparse as the command runs them."""
+
+from __future__ import annotations
+
+import argparse
+import json
+from pathlib import Path
+
+import pytest
+
+from cipstack.eds.commands import add_check_arguments, add_show_arguments, run_check, run_show
+
+from .samples import ACG_IDENTITY, ADAPTER_EDS, MESSY_EDS
+
+
+def parser() -> argparse.ArgumentParser:
+    """The shape the cipstack command gives them: ``eds check`` and ``eds show``."""
+    top = argparse.ArgumentParser(prog="cipstack")
+    commands = top.add_subparsers(dest="command", required=True)
+    eds = commands.add_parser("eds").add_subparsers(dest="eds_command", required=True)
+    check = eds.add_parser("check")
+    add_check_arguments(check)
+    check.set_defaults(run=run_check)
+    show = eds.add_parser("show")
+    add_show_arguments(show)
+    show.set_defaults(run=run_show)
+    return top
+
+
+def run(*argv: str) -> int:
+    args = parser().parse_args(["eds", *argv])
+    return args.run(args)
+
+
+@pytest.fixture
+def good(tmp_path: Path) -> Path:
+    path = tmp_path / "acg.eds"
+    path.write_text(ADAPTER_EDS, encoding="ascii")
+    return path
+
+
+@pytest.fixture
+def bad(tmp_path: Path) -> Path:
+    path = tmp_path / "bad.eds"
+    path.write_text(ADAPTER_EDS.replace("0xCA, 4,", "0xCA, 2,").replace("0, 7, 1,", "0, 300, 1,"), encoding="ascii")
+    return path
+
+
+def line_of(snippet: str, text: str) -> int:
+    return text[: text.index(snippet)].count("\n") + 1
+
+
+def test_clean_file(good: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    assert run("check", str(good)) == 0
+    assert capsys.readouterr() == ("", "")
+
+
+def test_findings_printed_and_exit_1(bad: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    assert run("check", str(bad)) == 1
+    out, err = capsys.readouterr()
+    text = bad.read_text()
+    assert out.splitlines() == [
+        f"{bad}:{line_of('0, 300, 1,', text)}: warning value-range: "
+        "Param7 field 11 (300) is outside USINT range 0..255",
+        f"{bad}:{line_of('0xCA, 2,', text)}: error data-size: Param8 is a REAL of 4 bytes, not 2",
+    ]
+    assert err == ""
+
+
+def test_warnings_alone_exit_0(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    path = tmp_path / "warn.eds"
+    path.write_text(ADAPTER_EDS.replace("Class1 = EtherNetIP;", "Class1 = Profibus;"))
+    assert run("check", str(path)) == 0
+    assert "warning device-classification" in capsys.readouterr().out
+
+
+def test_json_lines(bad: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    assert run("check", "--json", str(bad)) == 1
+    records = [json.loads(line) for line in capsys.readouterr().out.splitlines()]
+    assert [(record["rule"], record["severity"]) for record in records] == [
+        ("value-range", "warning"), ("data-size", "error"),
+    ]
+    assert set(records[0]) == {"file", "line", "rule", "severity", "message"}
+    assert records[1]["file"] == str(bad)
+    assert records[1]["line"] == line_of("0xCA, 2,", bad.read_text())
+
+
+def test_identity_from_a_live_device(good: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    args = parser().parse_args(["eds", "check", str(good)])
+    assert run_check(args, identity=ACG_IDENTITY) == 0
+    assert run_check(args, identity={**ACG_IDENTITY, "product_code": 101}) == 1
+    out = capsys.readouterr().out
+    line = line_of("ProdCode", ADAPTER_EDS)
+    assert out == f"{good}:{line}: error device-identity: ProdCode is 100 but the device reports 101\n"
+
+
+def test_unreadable_file_is_one_line_and_exit_2(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    missing = tmp_path / "missing.eds"
+    assert run("check", str(missing)) == 2
+    out, err = capsys.readouterr()
+    assert out == ""
+    assert err == f"cipstack eds check: {missing}: cannot read: No such file or directory\n"
+
+
+def test_directory_is_unreadable(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    assert run("check", str(tmp_path)) == 2
+    err = capsys.readouterr().err
+    assert len(err.splitlines()) == 1 and "Traceback" not in err
+
+
+def test_syntax_error_is_one_line_and_exit_2(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    path = tmp_path / "broken.eds"
+    path.write_bytes(b'[File]\r\nDescText = "no end\r\n')
+    assert run("check", str(path)) == 2
+    assert capsys.readouterr().err == f"{path}:2: syntax error: string not closed on the line it starts\n"
+
+
+def test_binary_garbage(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    path = tmp_path / "garbage.eds"
+    path.write_bytes(bytes(range(256)) * 4)
+    assert run("check", str(path)) == 2
+    err = capsys.readouterr().err
+    assert err.startswith(f"{path}:1: syntax error: ") and err.count("\n") == 1
+
+
+def test_several_files_worst_status_wins(
+    good: Path, bad: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    assert run("check", str(good), str(bad)) == 1
+    assert run("check", str(tmp_path / "none.eds"), str(bad)) == 2
+    out, err = capsys.readouterr()
+    # The readable file is still checked after the unreadable one.
+    assert out.count(f"{bad}:") == 4
+    assert err.count("\n") == 1
+
+
+def test_latin1_file(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    path = tmp_path / "messy.eds"
+    path.write_bytes(MESSY_EDS)
+    assert run("check", str(path)) == 0
+    assert run("show", str(path)) == 0
+    assert "Soci\xe9t\xe9 Exemple" in capsys.readouterr().out
+
+
+def test_show(good: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    assert run("show", str(good)) == 0
+    out = capsys.readouterr().out
+    assert "Device: CENT (ACG-ET2), revision 1.1\n" in out
+    assert "  vendor 259 Example Drives\n  device type 2 AC Drive\n  product code 100\n" in out
+    assert "Network: EtherNetIP\n" in out
+    assert (
+        "  Assem21 'Extended Speed Control Output': 4 bytes, path 20 04 24 15 30 03\n"
+        "      16 bits  Param1 'Control Word'\n"
+        "      16 bits  Param2 'Speed Reference'\n"
+    ) in out
+    assert (
+        "  Connection1 'Exclusive Owner' (exclusive owner), path 20 04 24 01 2C 15 2C 47\n"
+        "    O->T: 4 bytes, Assem21, point-to-point, run/idle header, RPI Param9\n"
+        "    T->O: 4 bytes, Assem71, multicast/point-to-point, modeless, RPI Param9\n"
+    ) in out
+    assert "  Connection3 'Listen Only' (listen only), path 20 04 24 01 2C C7 2C 47\n" in out
+    assert "    O->T: 0 bytes, Assem199, point-to-point, heartbeat, RPI Param9\n" in out
+
+
+def test_show_json(good: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    assert run("show", "--json", str(good)) == 0
+    summary = json.loads(capsys.readouterr().out)
+    assert summary["identity"] == {
+        "vendor_id": 259, "vendor_name": "Example Drives", "device_type": 2, "device_type_name": "AC Drive",
+        "product_code": 100, "product_name": "CENT", "catalog": "ACG-ET2", "revision": "1.1",
+    }
+    assert summary["networks"] == ["EtherNetIP"]
+    assembly = {item["keyword"]: item for item in summary["assemblies"]}["Assem71"]
+    assert assembly["size"] == 4 and assembly["path"] == "20 04 24 47 30 03"
+    assert assembly["members"] == [
+        {"bits": 16, "reference": "Param3", "name": "Status Word"},
+        {"bits": 16, "reference": "Param4", "name": "Speed Actual"},
+    ]
+    connection = summary["connections"][1]
+    assert connection["name"] == "Input Only"
+    assert connection["types"] == ["input only"]
+    assert connection["triggers"] == ["cyclic"]
+    assert connection["transport_classes"] == [1]
+    assert connection["o_to_t"] == {
+        "rpi": "Param9", "size": 0, "assembly": "Assem198", "connection_types": ["point-to-point"],
+        "format": "heartbeat",
+    }
+    assert connection["t_to_o"]["size"] == 4
+    assert connection["path"] == "20 04 24 01 2C C6 2C 47"
+
+
+def test_show_member_size_from_the_parameter(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    path = tmp_path / "sizes.eds"
+    path.write_text(ADAPTER_EDS.replace("16, Param3,", ", Param3,"))
+    assert run("show", "--json", str(path)) == 0
+    summary = json.loads(capsys.readouterr().out)
+    members = {item["keyword"]: item for item in summary["assemblies"]}["Assem71"]["members"]
+    assert members[0] == {"bits": 16, "reference": "Param3", "name": "Status Word"}
+
+
+def test_show_unreadable(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    assert run("show", str(tmp_path / "none.eds")) == 2
+    out, err = capsys.readouterr()
+    assert out == "" and err.startswith("cipstack eds show: ") and err.count("\n") == 1
