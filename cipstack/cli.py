@@ -304,6 +304,31 @@ def cmd_io(args: argparse.Namespace) -> int:
     return run_precise(run())
 
 
+# -- EDS ----------------------------------------------------------------------------------------------------
+def cmd_eds_check(args: argparse.Namespace) -> int:
+    from .eds.commands import run_check
+
+    identity = None
+    if args.against:
+        from .scanner import SyncScanner
+
+        with SyncScanner(args.against, timeout=args.timeout) as scanner:
+            _, values = scanner.get_attributes_all(0x01, 1)
+        if values is None:
+            raise CipError(0x1F, message=f"{args.against}: Identity reply could not be decoded")
+        identity = {"vendor_id": values["Vendor ID"], "device_type": values["Device Type"],
+                    "product_code": values["Product Code"],
+                    "revision": (values["Revision"]["major"], values["Revision"]["minor"]),
+                    "product_name": values["Product Name"]}
+    return run_check(args, identity)
+
+
+def cmd_eds_show(args: argparse.Namespace) -> int:
+    from .eds.commands import run_show
+
+    return run_show(args)
+
+
 # -- parser ------------------------------------------------------------------------------------------
 class _Parser(argparse.ArgumentParser):
     def error(self, message: str) -> Any:  # one line, exit 2, no usage dump
@@ -375,6 +400,19 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--target-io-port", type=lambda t: parse_number(t, "target io port"), default=2222,
                    help="the target's class 1 UDP port (default 2222)")
     p.set_defaults(func=cmd_io)
+
+    from .eds.commands import add_check_arguments, add_show_arguments
+
+    p = sub.add_parser("eds", help="EDS files: check, show")
+    eds = p.add_subparsers(dest="eds_command", required=True, parser_class=_Parser)
+    q = eds.add_parser("check", help="check EDS files against the rules a configuration tool relies on")
+    add_check_arguments(q)
+    q.add_argument("--against", metavar="HOST[:PORT]", help="also compare [Device] with a live device's Identity")
+    q.add_argument("--timeout", type=parse_duration, default=5.0)
+    q.set_defaults(func=cmd_eds_check)
+    q = eds.add_parser("show", help="a readable summary: identity, assemblies, connections")
+    add_show_arguments(q)
+    q.set_defaults(func=cmd_eds_show)
 
     p = sub.add_parser("set", help="Set_Attribute_Single")
     common(p)

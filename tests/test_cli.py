@@ -10,6 +10,7 @@ import subprocess
 import sys
 import time
 from collections.abc import Iterator
+from pathlib import Path
 
 import pytest
 
@@ -168,3 +169,23 @@ def test_argument_parsers() -> None:
     assert parse_object_path("@1/1") == (1, 1, None)
     assert parse_duration("500ms") == 0.5
     assert parse_duration("2s") == 2.0
+
+
+def test_eds_check_against_a_live_device(adapter_process: tuple[str, subprocess.Popen[str]], tmp_path: Path) -> None:
+    from tests.eds.samples import ADAPTER_EDS
+
+    address, _ = adapter_process
+    good = tmp_path / "acg.eds"
+    good.write_text(ADAPTER_EDS)
+    result = run("eds", "check", str(good), "--against", address)
+    assert result.returncode == 0, result.stdout + result.stderr
+    wrong = tmp_path / "other.eds"
+    wrong.write_text(ADAPTER_EDS.replace("ProdCode = 100;", "ProdCode = 101;"))
+    result = run("eds", "check", str(wrong), "--against", address, "--json")
+    assert result.returncode == 1
+    findings = [json.loads(line) for line in result.stdout.splitlines()]
+    assert [f["rule"] for f in findings] == ["device-identity"]
+    shown = run("eds", "show", str(good))
+    assert shown.returncode == 0 and "CENT" in shown.stdout
+    missing = run("eds", "check", str(tmp_path / "nope.eds"))
+    assert missing.returncode == 2 and "nope.eds" in one_line_error(missing)
