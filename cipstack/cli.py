@@ -93,7 +93,8 @@ def cmd_adapter(args: argparse.Namespace) -> int:
     if not 0 <= args.port < 65536:
         raise UsageError(f"port {args.port} out of range")
     settings = AdapterSettings(host=args.host, port=args.port, profile=args.profile,
-                               max_sessions=args.max_sessions, max_connections=args.max_connections)
+                               max_sessions=args.max_sessions, max_connections=args.max_connections,
+                               io_port=args.io_port)
     adapter = Adapter(settings)
     try:
         run_precise(adapter.serve_forever())
@@ -364,6 +365,8 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--profile", default="acg", help="device profile (default acg)")
     p.add_argument("--max-sessions", type=lambda t: parse_number(t, "max sessions"), default=32)
     p.add_argument("--max-connections", type=lambda t: parse_number(t, "max connections"), default=32)
+    p.add_argument("--io-port", type=lambda t: parse_number(t, "io port"), default=2222,
+                   help="UDP port of class 1 I/O (default 2222; 0 picks a free one)")
     p.add_argument("--json", action="store_true", help=argparse.SUPPRESS)
     p.set_defaults(func=cmd_adapter)
 

@@ -65,8 +65,9 @@ class OriginatorConnection:
     timed_out: bool = False
     closed: bool = False
     updates: asyncio.Queue[bytes] | None = None
-    #: Sequence of the last input delivered to the iterator; inputs are coalesced, not queued up.
     interval_samples: list[float] = field(default_factory=list)
+    #: Times O->T packets went out (with ``keep_intervals``).
+    send_times: list[float] = field(default_factory=list)
     last_arrival: float | None = None
     keep_intervals: bool = False
 
@@ -124,6 +125,8 @@ class IoOriginator:
                                            connection.cip_sequence, data, 1 if connection.run else 0),
                         (connection.target_host, connection.target_io_port)))
             connection.stats.sent += 1
+            if connection.keep_intervals:
+                connection.send_times.append(now)
         return out
 
     def next_deadline(self) -> float | None:

@@ -1,0 +1,189 @@
+"""Class 1 I/O timing: how evenly and how cheaply cyclic data flows.
+
+Starts the adapter emulator (``python -m cipstack adapter``, default profile) as a subprocess on
+free loopback ports and opens class 1 connections to it with cipstack's scanner:
+
+(a) one exclusive-owner connection (output 21, input 71) at RPI 1 ms for ``--seconds`` (default
+    10): packets per second in each direction, the distribution of the intervals (p50, p99, max),
+    the share of intervals within +-0.5 ms of the RPI, late and lost packets;
+(b) 64 connections (one exclusive owner, 63 input-only on the heartbeat point; 64 is the ACG-ET2's
+    station limit) at RPI 10 ms for ``--seconds``: connection timeouts, late and lost T->O packets,
+    and the adapter's CPU share (utime + stime from /proc/PID/stat over the run).
+
+Targets on a 2-core machine: (a) at least 99 % of the intervals within +-0.5 ms and no lost packet;
+(b) no timeout, under 1 % late packets, the adapter under one core.
+
+    python benchmarks/io.py [--seconds N] [--json] [--only a|b]
+
+O->T intervals are measured where the packets leave (the originator's sends), T->O intervals where
+they arrive (the originator's receptions); a T->O packet is late when it arrives more than half an
+RPI after the one before it was due to be followed. Timings are wall-clock on a shared machine:
+compare runs made in the same conditions.
+"""
+
+from __future__ import annotations
+
+import argparse
+import asyncio
+import itertools
+import json
+import os
+import signal
+import socket
+import subprocess
+import sys
+import time
+from collections.abc import Sequence
+from typing import Any
+
+from cipstack.eip.io_server import run_precise
+from cipstack.scanner import Scanner
+
+CLOCK_TICKS = os.sysconf("SC_CLK_TCK")
+STATION_LIMIT = 64
+INPUT_ONLY_POINT = 198
+
+
+def free_port() -> int:
+    with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as udp, socket.socket() as tcp:
+        tcp.bind(("127.0.0.1", 0))
+        port = int(tcp.getsockname()[1])
+        udp.bind(("127.0.0.1", port))
+        return port
+
+
+def cpu_seconds(pid: int) -> float:
+    with open(f"/proc/{pid}/stat") as stat:
+        fields = stat.read().rsplit(")", 1)[1].split()
+    return (int(fields[11]) + int(fields[12])) / CLOCK_TICKS
+
+
+def start_adapter(port: int, io_port: int) -> subprocess.Popen[bytes]:
+    process = subprocess.Popen([sys.executable, "-m", "cipstack", "adapter", "--host", "127.0.0.1", "--port",
+                                str(port), "--io-port", str(io_port), "--log-level", "WARNING"])
+    deadline = time.monotonic() + 20
+    while time.monotonic() < deadline:
+        try:
+            socket.create_connection(("127.0.0.1", port), timeout=0.2).close()
+            return process
+        except OSError:
+            time.sleep(0.05)
+    process.kill()
+    raise RuntimeError("adapter did not start")
+
+
+def distribution(intervals: Sequence[float], rpi: float) -> dict[str, Any]:
+    if not intervals:
+        return {"count": 0}
+    ordered = sorted(intervals)
+
+    def pct(p: float) -> float:
+        return ordered[min(len(ordered) - 1, int(p * len(ordered)))] * 1e3
+
+    within = sum(1 for i in intervals if abs(i - rpi) <= 0.0005)
+    return {"count": len(intervals), "p50_ms": round(pct(0.50), 3), "p99_ms": round(pct(0.99), 3),
+            "max_ms": round(ordered[-1] * 1e3, 3), "min_ms": round(ordered[0] * 1e3, 3),
+            "within_0.5ms_pct": round(100.0 * within / len(intervals), 2)}
+
+
+async def single_connection(port: int, io_port: int, seconds: float) -> dict[str, Any]:
+    rpi = 0.001
+    async with await Scanner.connect(f"127.0.0.1:{port}") as scanner, \
+            scanner.io_connection(output=21, input=71, rpi=rpi, target_io_port=io_port, keep_intervals=True) as io:
+        await asyncio.sleep(0.5)  # settle, then measure from a clean start
+        connection = io.connection
+        connection.interval_samples.clear()
+        connection.send_times.clear()
+        connection.last_arrival = None
+        stats_before = dict(io.stats.as_dict())
+        await asyncio.sleep(seconds)
+        received = list(connection.interval_samples)
+        sends = list(connection.send_times)
+        stats = io.stats.as_dict()
+    sent_intervals = [b - a for a, b in itertools.pairwise(sends)]
+    delta = {k: stats[k] - stats_before[k] for k in ("sent", "received", "late", "lost", "skipped_slots")}
+    return {
+        "rpi_ms": rpi * 1e3, "seconds": seconds,
+        "o_to_t": {"packets_per_s": round(len(sends) / seconds, 1), "late": delta["late"],
+                   "skipped_slots": delta["skipped_slots"], **distribution(sent_intervals, rpi)},
+        "t_to_o": {"packets_per_s": round((len(received) + 1) / seconds, 1), "lost": delta["lost"],
+                   **distribution(received, rpi)},
+    }
+
+
+async def station_limit(port: int, io_port: int, seconds: float, pid: int) -> dict[str, Any]:
+    rpi = 0.010
+    async with await Scanner.connect(f"127.0.0.1:{port}") as scanner:
+        contexts = [scanner.io_connection(output=21, input=71, rpi=rpi, target_io_port=io_port, keep_intervals=True)]
+        contexts += [scanner.io_connection(input=71, heartbeat=INPUT_ONLY_POINT, rpi=rpi, target_io_port=io_port,
+                                           keep_intervals=True) for _ in range(STATION_LIMIT - 1)]
+        handles = []
+        try:
+            for context in contexts:
+                handles.append(await context.__aenter__())
+            await asyncio.sleep(0.5)
+            for handle in handles:
+                handle.connection.interval_samples.clear()
+                handle.connection.last_arrival = None
+            lost_before = sum(h.stats.lost for h in handles)
+            cpu_before, wall_before = cpu_seconds(pid), time.monotonic()
+            await asyncio.sleep(seconds)
+            cpu, wall = cpu_seconds(pid) - cpu_before, time.monotonic() - wall_before
+            intervals = [i for h in handles for i in h.connection.interval_samples]
+            timeouts = sum(1 for h in handles if h.timed_out)
+            lost = sum(h.stats.lost for h in handles) - lost_before
+        finally:
+            for context in reversed(contexts[:len(handles)]):
+                await context.__aexit__(None, None, None)
+    late = sum(1 for i in intervals if i > 1.5 * rpi)
+    return {
+        "connections": len(handles), "rpi_ms": rpi * 1e3, "seconds": seconds, "timeouts": timeouts,
+        "t_to_o_packets": len(intervals), "late": late,
+        "late_pct": round(100.0 * late / len(intervals), 3) if intervals else None, "lost": lost,
+        "adapter_cpu_share": round(cpu / wall, 3),
+        **{f"t_to_o_{k}": v for k, v in distribution(intervals, rpi).items()},
+    }
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    parser.add_argument("--seconds", type=float, default=10.0, help="measured time of each part (default 10)")
+    parser.add_argument("--only", choices=["a", "b"], help="run one part")
+    parser.add_argument("--json", action="store_true", help="one JSON object instead of the text report")
+    args = parser.parse_args(argv)
+    port, io_port = free_port(), free_port()
+    adapter = start_adapter(port, io_port)
+    results: dict[str, Any] = {"load_average": os.getloadavg()[0], "cpus": os.cpu_count()}
+    try:
+        if args.only in (None, "a"):
+            results["a_one_connection_1ms"] = run_precise(single_connection(port, io_port, args.seconds))
+        if args.only in (None, "b"):
+            results["b_64_connections_10ms"] = run_precise(station_limit(port, io_port, args.seconds, adapter.pid))
+    finally:
+        adapter.send_signal(signal.SIGTERM)
+        adapter.wait(10)
+    if args.json:
+        print(json.dumps(results))
+        return 0
+    a = results.get("a_one_connection_1ms")
+    if a:
+        print(f"(a) one connection, RPI {a['rpi_ms']} ms, {a['seconds']} s")
+        for direction in ("o_to_t", "t_to_o"):
+            d = a[direction]
+            print(f"    {direction.replace('_', '->').upper():6} {d['packets_per_s']:8.1f} packets/s  intervals p50 "
+                  f"{d.get('p50_ms')} ms  p99 {d.get('p99_ms')} ms  max {d.get('max_ms')} ms  within +-0.5 ms "
+                  f"{d.get('within_0.5ms_pct')} % (target >= 99 %)")
+        print(f"    O->T late {a['o_to_t']['late']}, skipped slots {a['o_to_t']['skipped_slots']}; "
+              f"T->O lost {a['t_to_o']['lost']} (target 0)")
+    b = results.get("b_64_connections_10ms")
+    if b:
+        print(f"(b) {b['connections']} connections, RPI {b['rpi_ms']} ms, {b['seconds']} s")
+        print(f"    timeouts {b['timeouts']} (target 0); T->O packets {b['t_to_o_packets']}, late {b['late']} "
+              f"({b['late_pct']} %, target < 1 %), lost {b['lost']}")
+        print(f"    adapter CPU share {b['adapter_cpu_share']} cores (target < 1.0)")
+    print(f"load average {results['load_average']:.2f} on {results['cpus']} CPUs")
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
