@@ -6,7 +6,10 @@ import asyncio
 import logging
 import signal
 from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
 
+from .control import ControlError, ControlServer, default_control_path
 from .devices.base import Device, DeviceLimits
 from .devices.profiles import DEFAULT_MAC, DEFAULT_PROFILE, build_device
 from .eip.identity_items import CAPABILITY_CIP_TCP, CAPABILITY_CLASS01_UDP
@@ -30,6 +33,10 @@ class AdapterSettings:
     max_frame_length: int = 4200
     #: UDP port of class 1 I/O (consumed O->T datagrams, and the default T->O destination port).
     io_port: int = DEFAULT_IO_PORT
+    #: Unix socket of the control channel (``cipstack drive ...``); None: the default for the port.
+    control_path: Path | None = None
+    #: Print the device's status line on stdout whenever it changes.
+    status_lines: bool = False
 
 
 class Adapter:
@@ -118,6 +125,39 @@ class Adapter:
     async def __aexit__(self, *exc: object) -> None:
         await self.close()
 
+    def control(self, request: dict[str, Any]) -> dict[str, Any]:
+        """Serve one control-channel request (see ``cipstack.control``)."""
+        now = asyncio.get_running_loop().time()
+        self._tick(now)
+        command = request.get("command")
+        if command == "trip":
+            code = request["code"]
+            if not isinstance(code, int):
+                raise ControlError("the trip code is a number")
+            try:
+                result = self.device.inject_trip(code, now)
+            except NotImplementedError as exc:
+                raise ControlError(str(exc)) from None
+            except (KeyError, ValueError) as exc:
+                raise ControlError(f"fault code 0x{code:04X}: {exc}") from None
+            self._tick(now)
+            return {"result": result, "status": self.device.status_line()}
+        if command == "status":
+            return {"status": self.device.status_line(), "sessions": len(self.target.sessions),
+                    "class3_connections": len(self.device.connection_table.connections),
+                    "class1_connections": len(self.io.connections) if self.io else 0}
+        raise ControlError(f"unknown command {command!r} (known: trip, status)")
+
+    async def _print_status_lines(self) -> None:
+        last = None
+        while True:
+            self._tick(asyncio.get_running_loop().time())
+            line = self.device.status_line()
+            if line is not None and line != last:
+                print(line, flush=True)
+                last = line
+            await asyncio.sleep(0.2)
+
     async def serve_forever(self) -> None:
         """Serve until SIGINT or SIGTERM, then close cleanly."""
         loop = asyncio.get_running_loop()
@@ -125,6 +165,13 @@ class Adapter:
         for sig in (signal.SIGINT, signal.SIGTERM):
             loop.add_signal_handler(sig, stop.set)
         await self.start()
+        control = ControlServer(self.settings.control_path or default_control_path(self.port), self.control)
+        try:
+            await control.start()
+        except OSError as exc:
+            await self.close()
+            raise OSError(f"control socket: {exc}") from None
+        printer = asyncio.create_task(self._print_status_lines()) if self.settings.status_lines else None
         info = self.device.identity_info
         log.info("emulating %s (vendor %d, device type %d, product code %d, revision %d.%d)",
                  info.product_name, info.vendor_id, info.device_type, info.product_code, *info.revision)
@@ -134,4 +181,7 @@ class Adapter:
             log.info("stopping")
             for sig in (signal.SIGINT, signal.SIGTERM):
                 loop.remove_signal_handler(sig)
+            if printer is not None:
+                printer.cancel()
+            await control.close()
             await self.close()

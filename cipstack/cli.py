@@ -13,6 +13,7 @@ import json
 import logging
 import sys
 from collections.abc import Callable, Sequence
+from pathlib import Path
 from typing import Any
 
 from . import __version__
@@ -94,7 +95,8 @@ def cmd_adapter(args: argparse.Namespace) -> int:
         raise UsageError(f"port {args.port} out of range")
     settings = AdapterSettings(host=args.host, port=args.port, profile=args.profile,
                                max_sessions=args.max_sessions, max_connections=args.max_connections,
-                               io_port=args.io_port)
+                               io_port=args.io_port, control_path=args.control,
+                               status_lines=not args.quiet)
     adapter = Adapter(settings)
     try:
         run_precise(adapter.serve_forever())
@@ -305,6 +307,30 @@ def cmd_io(args: argparse.Namespace) -> int:
     return run_precise(run())
 
 
+# -- emulator control ---------------------------------------------------------------------------------------
+def _control(args: argparse.Namespace, request: dict[str, Any]) -> dict[str, Any]:
+    from .control import ControlError, control_request, default_control_path
+
+    path = args.control or default_control_path(args.port)
+    try:
+        return control_request(path, request, args.timeout)
+    except ControlError as exc:
+        raise UsageError(str(exc)) if "no emulator" in str(exc) else ConnectionError(str(exc)) from None
+
+
+def cmd_drive_trip(args: argparse.Namespace) -> int:
+    reply = _control(args, {"command": "trip", "code": args.code})
+    _emit(args, reply, f"{reply['result']}" + (f"\n{reply['status']}" if reply.get("status") else ""))
+    return EXIT_OK
+
+
+def cmd_drive_status(args: argparse.Namespace) -> int:
+    reply = _control(args, {"command": "status"})
+    _emit(args, reply, f"{reply['status'] or '(no drive)'}  sessions {reply['sessions']}  class 3 "
+                       f"{reply['class3_connections']}  class 1 {reply['class1_connections']}")
+    return EXIT_OK
+
+
 # -- EDS ----------------------------------------------------------------------------------------------------
 def cmd_eds_check(args: argparse.Namespace) -> int:
     from .eds.commands import run_check
@@ -367,6 +393,8 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--max-connections", type=lambda t: parse_number(t, "max connections"), default=32)
     p.add_argument("--io-port", type=lambda t: parse_number(t, "io port"), default=2222,
                    help="UDP port of class 1 I/O (default 2222; 0 picks a free one)")
+    p.add_argument("--control", type=Path, help="control socket for `cipstack drive` (default: per port)")
+    p.add_argument("--quiet", action="store_true", help="no status line on stdout")
     p.add_argument("--json", action="store_true", help=argparse.SUPPRESS)
     p.set_defaults(func=cmd_adapter)
 
@@ -403,6 +431,21 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--target-io-port", type=lambda t: parse_number(t, "target io port"), default=2222,
                    help="the target's class 1 UDP port (default 2222)")
     p.set_defaults(func=cmd_io)
+
+    p = sub.add_parser("drive", help="control a running emulator: inject a trip, read its status")
+    drive = p.add_subparsers(dest="drive_command", required=True, parser_class=_Parser)
+    for name, func, text in (("trip", cmd_drive_trip, "trip the emulated drive with a fault code"),
+                             ("status", cmd_drive_status, "the emulated drive's status line")):
+        q = drive.add_parser(name, help=text)
+        if name == "trip":
+            q.add_argument("code", type=lambda t: parse_number(t, "fault code"),
+                           help="fault code of the drive's manual (decimal or 0x hex)")
+        q.add_argument("--port", type=lambda t: parse_number(t, "port"), default=DEFAULT_PORT,
+                       help="the emulator's EtherNet/IP port (finds its control socket)")
+        q.add_argument("--control", type=Path, help="the emulator's control socket")
+        q.add_argument("--timeout", type=parse_duration, default=5.0)
+        q.add_argument("--json", action="store_true")
+        q.set_defaults(func=func)
 
     from .eds.commands import add_check_arguments, add_show_arguments
 

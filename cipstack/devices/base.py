@@ -90,6 +90,15 @@ class Device:
     def reset(self, reset_type: int) -> None:
         """Emulated power cycle (type 0) or return to defaults (type 1): families override."""
 
+    # -- emulator control (test rigs) -------------------------------------------------------------
+    def inject_trip(self, code: int, now: float) -> str:
+        """Trip the simulated drive with a fault code of its manual; returns what happened."""
+        raise NotImplementedError(f"{self.identity_info.product_name}: this profile simulates no drive")
+
+    def status_line(self) -> str | None:
+        """A compact line of the device's state for the emulator's console, or None."""
+        return None
+
     # -- time -----------------------------------------------------------------------------------
     def advance(self, now: float) -> None:
         """Move the device's simulation to ``now`` (ramps, timers); families with behaviour override."""
