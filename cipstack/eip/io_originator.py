@@ -21,6 +21,7 @@ from ..cip.epath import LogicalSegment, LogicalType, encode_path
 from .cm_messages import ConnectionTriad, ConnectionType, NetworkParameters, TransportTrigger, TriggerType
 from .io_core import (
     ConsumerState,
+    IoDatagram,
     IoDatagramError,
     IoStatistics,
     ProductionSchedule,
@@ -76,14 +77,23 @@ class IoOriginator:
     """All class 1 connections of one originator (an ``IoCore`` for ``IoEndpoint``)."""
 
     def __init__(self) -> None:
-        self.by_to_id: dict[int, OriginatorConnection] = {}
+        #: By O->T connection id, which the target makes unique.
+        self.connections: dict[int, OriginatorConnection] = {}
+        #: By T->O connection id: several connections share one when they listen to the same multicast data.
+        self.by_to_id: dict[int, list[OriginatorConnection]] = {}
         self.dropped = 0
 
     def add(self, connection: OriginatorConnection) -> None:
-        self.by_to_id[connection.to_connection_id] = connection
+        self.connections[connection.ot_connection_id] = connection
+        self.by_to_id.setdefault(connection.to_connection_id, []).append(connection)
 
     def remove(self, connection: OriginatorConnection) -> None:
-        self.by_to_id.pop(connection.to_connection_id, None)
+        self.connections.pop(connection.ot_connection_id, None)
+        sharing = self.by_to_id.get(connection.to_connection_id, [])
+        if connection in sharing:
+            sharing.remove(connection)
+        if not sharing:
+            self.by_to_id.pop(connection.to_connection_id, None)
 
     def receive(self, raw: bytes, source: tuple[str, int], now: float) -> None:
         try:
@@ -91,8 +101,15 @@ class IoOriginator:
         except IoDatagramError:
             self.dropped += 1
             return
-        connection = self.by_to_id.get(datagram.connection_id)
-        if connection is None or connection.closed or len(datagram.payload) != connection.input_size:
+        sharing = self.by_to_id.get(datagram.connection_id)
+        if not sharing:
+            self.dropped += 1
+            return
+        for connection in sharing:
+            self._consume(connection, datagram, now)
+
+    def _consume(self, connection: OriginatorConnection, datagram: IoDatagram, now: float) -> None:
+        if connection.closed or len(datagram.payload) != connection.input_size:
             self.dropped += 1
             return
         reception = connection.consumer.accept(datagram.encap_sequence, datagram.cip_sequence, now)
@@ -112,7 +129,7 @@ class IoOriginator:
 
     def poll(self, now: float) -> list[tuple[bytes, tuple[str, int]]]:
         out = []
-        for connection in self.by_to_id.values():
+        for connection in self.connections.values():
             if connection.closed or now < connection.producer.next_due:
                 continue
             due, _ = connection.producer.due(now)
@@ -130,12 +147,13 @@ class IoOriginator:
         return out
 
     def next_deadline(self) -> float | None:
-        deadlines = [c.producer.next_due for c in self.by_to_id.values() if not c.closed]
-        deadlines += [c.consumer.deadline for c in self.by_to_id.values() if not c.closed and not c.timed_out]
+        deadlines = [c.producer.next_due for c in self.connections.values() if not c.closed]
+        deadlines += [c.consumer.deadline for c in self.connections.values() if not c.closed and not c.timed_out]
         return min(deadlines, default=None)
 
     def expire(self, now: float) -> list[OriginatorConnection]:
-        expired = [c for c in self.by_to_id.values() if not c.timed_out and not c.closed and c.consumer.expired(now)]
+        expired = [c for c in self.connections.values()
+                   if not c.timed_out and not c.closed and c.consumer.expired(now)]
         for connection in expired:
             connection.timed_out = True
             log.warning("class 1 connection 0x%08X: no data from %s for %.3f s: timed out",

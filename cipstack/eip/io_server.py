@@ -97,6 +97,7 @@ class IoEndpoint:
         self.transport: asyncio.DatagramTransport | None = None
         self._timer: asyncio.TimerHandle | None = None
         self._timer_at: float | None = None
+        self._groups: dict[tuple[str, int], asyncio.DatagramTransport] = {}
         self.send_errors = 0
 
     async def start(self) -> None:
@@ -118,17 +119,26 @@ class IoEndpoint:
         self.wakeup()
         log.info("class 1 I/O on UDP %s:%d", self.host, self.port)
 
-    async def join_multicast(self, group: str) -> None:
-        """Receive T->O data sent to a multicast group (on the endpoint's interface)."""
-        assert self.transport is not None
-        sock = self.transport.get_extra_info("socket")
-        interface = self.host if self.host not in ("", "0.0.0.0") else "0.0.0.0"
-        membership = socket.inet_aton(group) + socket.inet_aton(interface)
+    async def join_multicast(self, group: str, port: int) -> None:
+        """Also receive what is sent to ``group:port`` (multicast T->O data), on this endpoint's interface.
+
+        A socket bound to a unicast address never sees datagrams addressed to a group, so each
+        group gets a socket of its own, bound to the group and port, feeding the same core."""
+        key = (group, port)
+        if key in self._groups:
+            return
+        sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
         try:
-            sock.setsockopt(socket.IPPROTO_IP, socket.IP_ADD_MEMBERSHIP, membership)
-        except OSError as exc:
-            if exc.errno != 98:  # already a member
-                raise
+            sock.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
+            sock.bind((group, port))
+            interface = self.host if self.host not in ("", "0.0.0.0") else "0.0.0.0"
+            sock.setsockopt(socket.IPPROTO_IP, socket.IP_ADD_MEMBERSHIP,
+                            socket.inet_aton(group) + socket.inet_aton(interface))
+        except OSError:
+            sock.close()
+            raise
+        transport, _ = await self.loop.create_datagram_endpoint(lambda: _UdpIo(self), sock=sock)
+        self._groups[key] = transport  # type: ignore[assignment]
 
     def wakeup(self) -> None:
         """Re-arm the timer (a connection opened, so a deadline may be earlier)."""
@@ -165,3 +175,6 @@ class IoEndpoint:
         if self.transport is not None:
             self.transport.close()
             self.transport = None
+        for transport in self._groups.values():
+            transport.close()
+        self._groups.clear()

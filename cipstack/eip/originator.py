@@ -576,7 +576,8 @@ class IoContext:
         connection.run = self.run
         for item in extra:
             if item.type == ItemType.SOCKADDR_T_O:
-                await endpoint.join_multicast(SockAddr.decode(item.data).host)
+                group = SockAddr.decode(item.data)
+                await endpoint.join_multicast(group.host, group.port)
         core.add(connection)
         endpoint.wakeup()
         self.handle = IoConnectionHandle(core, endpoint, connection, self.output_schema, self.input_schema)
