@@ -100,7 +100,7 @@ def adapter_command(port: int, profile: str | None) -> list[str]:
     prefix = [sys.executable]
     if profile:
         prefix += ["-m", "cProfile", "-o", profile]
-    return [*prefix, "-m", "cipstack", "adapter", "--host", "127.0.0.1", "--port", str(port),
+    return [*prefix, "-m", "cipstack", "adapter", "--host", "127.0.0.1", "--port", str(port), "--io-port", "0",
             "--log-level", "WARNING"]
 
 

@@ -34,7 +34,7 @@ def run(*args: str, timeout: float = 20) -> subprocess.CompletedProcess[str]:
 def adapter_process() -> Iterator[tuple[str, subprocess.Popen[str]]]:
     port = free_port()
     process = subprocess.Popen([sys.executable, "-m", "cipstack", "adapter", "--host", "127.0.0.1", "--port",
-                                str(port)], stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+                                str(port), "--io-port", "0"], stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
     deadline = time.monotonic() + 15
     while time.monotonic() < deadline:
         try:
@@ -130,7 +130,8 @@ def test_identity_and_discover(adapter_process: tuple[str, subprocess.Popen[str]
 
 def test_adapter_logs_and_stops_on_sigterm() -> None:
     port = free_port()
-    command = [sys.executable, "-m", "cipstack", "adapter", "--port", str(port), "--log-level", "info"]
+    command = [sys.executable, "-m", "cipstack", "adapter", "--port", str(port), "--io-port", "0",
+               "--log-level", "info"]
     process = subprocess.Popen(command, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
     try:
         for _ in range(200):
@@ -153,7 +154,7 @@ def test_adapter_port_in_use() -> None:
         busy.bind(("127.0.0.1", 0))
         busy.listen()
         port = busy.getsockname()[1]
-        result = run("adapter", "--port", str(port), timeout=10)
+        result = run("adapter", "--port", str(port), "--io-port", "0", timeout=10)
     assert result.returncode == 1
     assert "cannot listen" in one_line_error(result)
 

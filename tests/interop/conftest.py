@@ -119,7 +119,8 @@ def start_peer(name: str, command: Sequence[str], host: str, port: int, log: Pat
 
 
 def adapter_command(host: str, port: int) -> list[str]:
-    return python_module("cipstack", "adapter", "--host", host, "--port", str(port))
+    # --io-port 0: class 1 I/O on a free port, so adapters of several tests never compete for 2222.
+    return python_module("cipstack", "adapter", "--host", host, "--port", str(port), "--io-port", "0")
 
 
 CPPPO_TAG = "Speed@0x2A/1/7=INT"
