@@ -1,0 +1,338 @@
+"""The emulated ACG drive with its ACG-ET2 card: the drive model behind the card's CIP objects
+and assemblies (seed 000, appendix B).
+
+* Objects: Identity, Motor Data 0x28, Control Supervisor 0x29, AC/DC Drive 0x2A and class 0x64
+  (``objects.py``), on top of the standard objects of every EtherNet/IP adapter.
+* Assemblies: all 24 instances are served by the Assembly object (explicit messaging); a class 1
+  connection may use only the pair that CM.23/CM.24 select, as the card last applied them with
+  CM.94 Comm Update ("CIP Input Instance (CM.23)", "CIP Output Instance (CM.24)").
+* Lost command: an exclusive-owner class 1 connection that times out starts the drive's
+  lost-command timers (Pr.12 after Pr.13, seed 000 "Lost command conditions by protocol").
+* Idle: the seed says nothing about a class 1 run/idle header. An idle originator sends no new
+  command data, so the drive keeps the last commands it consumed; the connection is alive, so
+  it is no command loss either.
+* Reset (Identity service 0x05): type 0 is a power cycle (values written but not saved are lost,
+  saved ones kept, seed 001 "Saving Parameters Defined by Communication"); type 1 returns to the
+  factory values and forgets the saved ones.
+"""
+
+from __future__ import annotations
+
+import logging
+import struct
+import time
+from collections.abc import Mapping
+from dataclasses import dataclass, field
+from pathlib import Path
+
+from ...assemblies.acg import (
+    INPUT_INSTANCES,
+    OUTPUT_INSTANCES,
+    AcgAssemblies,
+    acg_assemblies,
+    assembly_size,
+    parameter_words,
+)
+from ...assemblies.schema import AssemblySchema
+from ...cip.model import ClassSpec
+from ...eip.io_target import ConnectionKind, IoConnection, IoProfile
+from ...objects.assembly import AssemblyPoint
+from ...objects.tcpip import NetworkInterface
+from ..base import Device, DeviceLimits
+from ..profiles import DEFAULT_MAC, serial_from_mac
+from ..registers import Register, RegisterError
+from ..state import ParameterStore
+from . import registers as reg
+from .drive import FAMILY, MODEL, AcgDrive, Trip
+from .objects import (
+    CATALOG_CLASSES,
+    OUTPUT_FREQUENCY,
+    AcDcDriveObject,
+    AcgIdentityObject,
+    ControlSupervisorObject,
+    KeypadParameterObject,
+    MotorDataObject,
+    acg_identity_info,
+)
+
+log = logging.getLogger(__name__)
+
+#: The seed gives no RPI limits: 2 ms is the fastest the emulator's event loop keeps to reliably;
+#: the upper limit is the adapter's default (``IoProfile.rpi_max_us``).
+RPI_MIN_US = 2_000
+
+
+class MemoryParameterStore(ParameterStore):
+    """Saved parameters that live as long as the process (an emulator run without a state file)."""
+
+    def __init__(self) -> None:
+        super().__init__("<memory>", FAMILY, MODEL)
+        self._values: dict[int, int] = {}
+
+    def load(self) -> dict[int, int]:
+        return dict(self._values)
+
+    def save(self, values: Mapping[int, int]) -> None:
+        self._values = dict(values)
+
+
+#: Register addresses of CM.51-CM.58 (Para Control-n) and CM.31-CM.38 (Para Status-n).
+_CONTROL_ADDRESSES = tuple(reg.ACG_REGISTERS.by_code(f"CM.{51 + i}").address for i in range(8))
+_STATUS_ADDRESSES = tuple(reg.ACG_REGISTERS.by_code(f"CM.{31 + i}").address for i in range(8))
+
+
+def _words(addresses: tuple[int, ...]) -> list[Register | None]:
+    return [reg.ACG_REGISTERS.get(a) for a in addresses]
+
+
+@dataclass
+class AcgDevice(Device):
+    drive: AcgDrive = field(default_factory=AcgDrive)
+
+    def __post_init__(self) -> None:
+        super().__post_init__()
+        #: The latest time the adapter has moved the device to (loop time, seconds).
+        self._now = self.drive.time
+        # The ACG's Identity replaces the generic one: its services, status bits and state.
+        self.identity = AcgIdentityObject(self.identity_info, lambda: self.drive, on_reset=self._on_reset)
+        self.router.objects[self.identity.spec.class_id] = self.identity
+        drive, clock = (lambda: self.drive), (lambda: self.now)
+        self.motor_data = MotorDataObject(drive, clock)
+        self.control_supervisor = ControlSupervisorObject(drive, clock)
+        self.ac_dc_drive = AcDcDriveObject(drive, clock)
+        self.keypad_parameters = KeypadParameterObject(drive, clock)
+        for obj in (self.motor_data, self.control_supervisor, self.ac_dc_drive, self.keypad_parameters):
+            self.router.register(obj)
+        self._schemas: tuple[tuple[tuple[int, ...], tuple[int, ...]], AcgAssemblies] | None = None
+        # 20/21/100/101 and 70/71/110/111 do not depend on any setting: decoded on the I/O path as they are.
+        speed = self.schemas()
+        self._speed_schemas = {i: speed[i] for i in (*OUTPUT_INSTANCES, *INPUT_INSTANCES) if not parameter_words(i)}
+        self._points: dict[int, AssemblyPoint] = {}
+        #: Last data each smart-scaling output consumed: a word is written when it changes.
+        self._last_words: dict[int, bytes] = {}
+        for instance in (*OUTPUT_INSTANCES, *INPUT_INSTANCES):
+            point = self._assembly_point(instance)
+            self._points[instance] = point
+            self.assembly.add_assembly(point)
+        self._update_io_status()
+
+    # -- assemblies -------------------------------------------------------------------------------
+    def schemas(self) -> AcgAssemblies:
+        """Every assembly schema at the present CM.31-CM.38 / CM.51-CM.58 addresses."""
+        drive = self.drive
+        key = (tuple(drive.read(_CONTROL_ADDRESSES[i]) for i in range(8)),
+               tuple(drive.read(_STATUS_ADDRESSES[i]) for i in range(8)))
+        if self._schemas is None or self._schemas[0] != key:
+            self._schemas = key, acg_assemblies(reg.SPEED_REFERENCE, OUTPUT_FREQUENCY, _words(key[0]), _words(key[1]))
+        return self._schemas[1]
+
+    def assembly_schema(self, instance: int) -> AssemblySchema:
+        """The schema of one instance; 121-128 and 141-148 as CM.51-58 / CM.31-38 name them now."""
+        schema = self._speed_schemas.get(instance)
+        return schema if schema is not None else self.schemas()[instance]
+
+    @property
+    def active_output_instance(self) -> int:
+        """The output instance CM.24 selects, as the card applied it (CM.94)."""
+        return self.drive.active_comm_settings.output_instance.instance
+
+    @property
+    def active_input_instance(self) -> int:
+        return self.drive.active_comm_settings.input_instance.instance
+
+    def _assembly_point(self, instance: int) -> AssemblyPoint:
+        size = assembly_size(instance)
+        if instance in OUTPUT_INSTANCES:
+            return AssemblyPoint(instance, size, consumed=True,
+                                 consume=lambda data, now: self._consume(instance, data, now),
+                                 name=self.assembly_schema(instance).name)
+        if parameter_words(instance):
+            return AssemblyPoint(instance, size, consumed=False, produce=lambda: self._produce_words(instance),
+                                 name=self.assembly_schema(instance).name)
+        schema = self.assembly_schema(instance)
+        return AssemblyPoint(instance, size, consumed=False, produce=lambda: self._produce_speed(schema),
+                             name=schema.name)
+
+    def _produce_speed(self, schema: AssemblySchema) -> bytes:
+        """Inputs 70/71/110/111 (seed 000, input instances and the bits table after them)."""
+        drive = self.drive
+        hz = schema.instance in (110, 111)
+        values = {
+            "faulted": drive.faulted,                          # 0x29 attribute 10
+            "running_forward": drive.running_forward,          # 0x29 attribute 7
+            "speed_actual": drive.output_frequency if hz else drive.speed_actual_rpm,  # 0x2A attribute 7 / 100
+        }
+        if schema.instance in (71, 111):
+            values.update(
+                warning=False,                                 # "Not supported"
+                running_reverse=drive.running_reverse,         # 0x29 attribute 8
+                ready=drive.ready,                             # 0x29 attribute 9
+                ctrl_from_net=drive.control_from_net,          # 0x29 attribute 14
+                ref_from_net=drive.reference_from_net,         # 0x2A attribute 29
+                at_reference=drive.at_reference,               # 0x2A attribute 3
+                drive_state=int(drive.drive_state),            # 0x29 attribute 6
+            )
+        return schema.encode(values)
+
+    def _produce_words(self, instance: int) -> bytes:
+        """Inputs 141-148: the words of 0x0100-0x0107, the registers CM.31-CM.38 name."""
+        count = parameter_words(instance)
+        drive = self.drive
+        return struct.pack(f"<{count}H", *(drive.read(reg.STATUS_PARAMETER_BASE + i) & 0xFFFF for i in range(count)))
+
+    def _consume(self, instance: int, data: bytes, now: float) -> None:
+        now = max(now, self.drive.time)
+        if parameter_words(instance):
+            self._consume_words(instance, data, now)
+        else:
+            self._consume_speed(instance, data, now)
+
+    def _consume_speed(self, instance: int, data: bytes, now: float) -> None:
+        """Outputs 20/21/100/101: Run Fwd/Rev through the Drive Run edge table, Fault reset on
+        0 -> 1, the speed reference (rpm or Hz). NetCtrl/NetRef are "Not used" (note 2)."""
+        drive = self.drive
+        values = self.assembly_schema(instance).decode(data)
+        drive.set_run_command(values["run_forward"], values.get("run_reverse", False), now)
+        drive.set_fault_reset(values["fault_reset"], now)
+        try:
+            if instance in (100, 101):
+                drive.set_speed_reference(values["speed_reference"], now)
+            else:
+                drive.set_speed_reference_rpm(values["speed_reference"], now)
+        except RegisterError as exc:
+            log.debug("assembly %d: speed reference refused: %s", instance, exc)
+
+    def _consume_words(self, instance: int, data: bytes, now: float) -> None:
+        """Outputs 121-128: each word goes to the register its CM.51-CM.58 names, in order (the
+        manual puts the speed and the run command last). A word is written when it changes, so a
+        command word held at the same value is not repeated (and a trip is not run over)."""
+        count = parameter_words(instance)
+        previous = self._last_words.get(instance)
+        self._last_words[instance] = bytes(data)
+        words = struct.unpack(f"<{count}H", data)
+        old = struct.unpack(f"<{count}H", previous) if previous is not None else (None,) * count
+        drive = self.drive
+        for index, (value, before) in enumerate(zip(words, old, strict=True)):
+            if value == before:
+                continue
+            target = reg.ACG_REGISTERS.get(drive.read(_CONTROL_ADDRESSES[index]))
+            raw = target.from_words([value]) if target is not None else value
+            try:
+                drive.write(reg.CONTROL_PARAMETER_BASE + index, raw, now)
+            except RegisterError as exc:
+                log.debug("assembly %d word %d refused: %s", instance, index + 1, exc)
+
+    # -- class 1 ----------------------------------------------------------------------------------
+    def io_profile(self) -> IoProfile:
+        return IoProfile(
+            consumed=lambda: {self.active_output_instance: self._points[self.active_output_instance]},
+            produced=lambda: {self.active_input_instance: self._points[self.active_input_instance]},
+            rpi_min_us=RPI_MIN_US,
+            pairs=lambda: {(self.active_output_instance, self.active_input_instance)},
+        )
+
+    def io_opened(self, connection: IoConnection) -> None:
+        super().io_opened(connection)
+        if connection.kind is ConnectionKind.EXCLUSIVE_OWNER:
+            self._last_words.clear()
+            self.drive.on_io_connection_opened(self.now)
+
+    def io_closed(self, connection: IoConnection, timed_out: bool) -> None:
+        super().io_closed(connection, timed_out)
+        # Only a break counts: a Forward_Close is the originator ending control on purpose.
+        if timed_out and connection.kind is ConnectionKind.EXCLUSIVE_OWNER:
+            self.drive.on_io_connection_lost(self.now)
+
+    def io_run_idle(self, connection: IoConnection, run: bool) -> None:
+        super().io_run_idle(connection, run)  # idle: the last commands stay (module docstring)
+
+    @property
+    def io_connection_count(self) -> int:
+        return len(self._io_connections)
+
+    # -- time -------------------------------------------------------------------------------------
+    @property
+    def now(self) -> float:
+        """The device's present time: the latest the adapter gave it, or later if another protocol
+        (Modbus TCP) has moved the drive since."""
+        return max(self._now, self.drive.time)
+
+    def advance(self, now: float) -> None:
+        self._now = max(now, self._now, self.drive.time)
+        self.drive.advance(self._now)
+
+    def next_deadline(self) -> float | None:
+        return self.drive.next_deadline()
+
+    def reset(self, reset_type: int) -> None:
+        """Identity Reset: 0 power cycle (unsaved values lost), 1 factory defaults (saved ones too)."""
+        store = self.drive.store
+        if reset_type == 1 and store is not None:
+            store.save({})
+        self.drive = AcgDrive(store, now=self.now)
+        self._last_words.clear()
+        self._update_io_status()
+
+    def inject_trip(self, code: Trip | int | str) -> Trip:
+        """Trip the drive as if ``code`` occurred: a ``Trip``, its name ("OverHeat", "OVER_HEAT") or a
+        fault code of the Drive Fault Codes table (0x4200 or "0x4200")."""
+        return self.drive.inject_trip(parse_trip(code), self.now)
+
+    def status_line(self) -> str:
+        """One compact line for the emulator's console."""
+        drive = self.drive
+        direction = "fwd" if drive.running_forward else "rev" if drive.running_reverse else "---"
+        parts = [
+            f"{drive.drive_state.name:<10}", direction,
+            f"out {drive.output_frequency / 100:6.2f} Hz", f"ref {drive.speed_reference / 100:6.2f} Hz",
+            f"io {len(self._io_connections)}",
+        ]
+        if drive.trip is not None:
+            parts.append(f"trip {drive.trip.label} (0x{drive.fault_code:04X})")
+        if drive.command_lost:
+            parts.append("lost command")
+        if drive.comm_update_pending:
+            parts.append("CM.94 pending")
+        return " | ".join(parts)
+
+    @staticmethod
+    def catalog_classes() -> tuple[ClassSpec, ...]:
+        """The ClassSpecs of 0x28, 0x29, 0x2A and 0x64, for a scanner's ``Catalog``."""
+        return CATALOG_CLASSES
+
+
+def parse_trip(code: Trip | int | str) -> Trip:
+    """A trip from a ``Trip``, a fault code (int or "0x..." text) or a trip name."""
+    if isinstance(code, Trip):
+        return code
+    if isinstance(code, int):
+        return Trip.from_fault_code(code)
+    text = code.strip()
+    try:
+        return Trip.from_fault_code(int(text, 0))
+    except ValueError:
+        pass
+    wanted = text.replace(" ", "").replace("_", "").lower()
+    for trip in Trip:
+        if wanted in (trip.name.replace("_", "").lower(), trip.label.replace(" ", "").lower()):
+            return trip
+    raise ValueError(f"unknown trip {code!r}: give a fault code (e.g. 0x4200) or a name (e.g. OverHeat)")
+
+
+def build_acg_device(interface: NetworkInterface | None = None, limits: DeviceLimits | None = None,
+                     state_path: Path | None = None, *, now: float | None = None) -> AcgDevice:
+    """The ACG drive with its ACG-ET2 card. ``state_path``: the state file that holds the saved
+    parameters (None: they are kept in memory only, for the life of the process). ``now``: the
+    power-up time on the clock the adapter will advance the device with (default: the monotonic
+    clock, which asyncio's loop time follows). A corrupt or foreign state file raises
+    ``StateFileError``."""
+    interface = interface or NetworkInterface(mac=DEFAULT_MAC)
+    start = time.monotonic() if now is None else now
+    store: ParameterStore = MemoryParameterStore() if state_path is None else ParameterStore(
+        state_path, FAMILY, MODEL)
+    drive = AcgDrive(store, now=start)
+    info = acg_identity_info(drive, serial_from_mac(interface.mac))
+    return AcgDevice(info, interface, limits or DeviceLimits(), drive=drive)
+
+
+__all__ = ["RPI_MIN_US", "AcgDevice", "MemoryParameterStore", "build_acg_device", "parse_trip"]
