@@ -10,8 +10,10 @@ from pathlib import Path
 from typing import Any
 
 from .control import ControlError, ControlServer, default_control_path
+from .devices.acg.device import AcgDevice
+from .devices.acg.modbus import ModbusTcpServer
 from .devices.base import Device, DeviceLimits
-from .devices.profiles import DEFAULT_MAC, DEFAULT_PROFILE, build_device
+from .devices.profiles import DEFAULT_MAC, DEFAULT_PROFILE, ProfileOptions, build_device
 from .eip.identity_items import CAPABILITY_CIP_TCP, CAPABILITY_CLASS01_UDP
 from .eip.io_core import DEFAULT_IO_PORT
 from .eip.io_server import IoEndpoint
@@ -37,6 +39,12 @@ class AdapterSettings:
     control_path: Path | None = None
     #: Print the device's status line on stdout whenever it changes.
     status_lines: bool = False
+    #: State file of saved parameters (None: in memory only).
+    state_path: Path | None = None
+    #: Model of families with several models.
+    model: str | None = None
+    #: Modbus TCP port for a drive that also speaks Modbus TCP (None: off; 0: any free port).
+    modbus_port: int | None = None
 
 
 class Adapter:
@@ -47,7 +55,14 @@ class Adapter:
         s = self.settings
         ip_address = s.host if s.host not in ("", "0.0.0.0", "localhost") else "127.0.0.1"
         self.device = device or build_device(s.profile, NetworkInterface(ip_address=ip_address, mac=DEFAULT_MAC),
-                                             DeviceLimits(s.max_sessions, s.max_connections))
+                                             DeviceLimits(s.max_sessions, s.max_connections),
+                                             ProfileOptions(s.state_path, s.model))
+        self.modbus: ModbusTcpServer | None = None
+        if s.modbus_port is not None:
+            if not isinstance(self.device, AcgDevice):
+                raise ValueError(f"profile {s.profile!r} has no Modbus TCP (the ACG-ET2 card speaks it)")
+            acg = self.device
+            self.modbus = ModbusTcpServer(lambda: acg.drive, s.host, s.modbus_port)
         self.target = EncapsulationTarget(
             self.device.router, self.device.identity_record,
             TargetSettings(max_sessions=s.max_sessions, max_connections=s.max_connections,
@@ -107,8 +122,16 @@ class Adapter:
                 raise
             if self.io is not None:
                 self.io.io_port = self.io_endpoint.port
+        if self.modbus is not None:
+            try:
+                await self.modbus.start()
+            except OSError:
+                await self.close()
+                raise
 
     async def close(self) -> None:
+        if self.modbus is not None:
+            await self.modbus.close()
         if self._device_timer is not None:
             self._device_timer.cancel()
             self._device_timer = None
@@ -135,13 +158,14 @@ class Adapter:
             if not isinstance(code, int):
                 raise ControlError("the trip code is a number")
             try:
-                result = self.device.inject_trip(code, now)
+                trip = self.device.inject_trip(code)
             except NotImplementedError as exc:
                 raise ControlError(str(exc)) from None
             except (KeyError, ValueError) as exc:
                 raise ControlError(f"fault code 0x{code:04X}: {exc}") from None
             self._tick(now)
-            return {"result": result, "status": self.device.status_line()}
+            label = getattr(trip, "label", str(trip))
+            return {"result": f"tripped: {label} (fault code 0x{code:04X})", "status": self.device.status_line()}
         if command == "status":
             return {"status": self.device.status_line(), "sessions": len(self.target.sessions),
                     "class3_connections": len(self.device.connection_table.connections),

@@ -87,17 +87,23 @@ def _emit(args: argparse.Namespace, record: dict[str, Any], text: str) -> None:
 def cmd_adapter(args: argparse.Namespace) -> int:
     from .adapter import Adapter, AdapterSettings
     from .devices.profiles import PROFILES
+    from .devices.state import StateFileError, default_state_path
     from .eip.io_server import run_precise
 
     if args.profile not in PROFILES:
         raise UsageError(f"unknown profile {args.profile!r} (known: {', '.join(sorted(PROFILES))})")
     if not 0 <= args.port < 65536:
         raise UsageError(f"port {args.port} out of range")
+    if args.state is None:
+        args.state = default_state_path(args.profile)
     settings = AdapterSettings(host=args.host, port=args.port, profile=args.profile,
                                max_sessions=args.max_sessions, max_connections=args.max_connections,
                                io_port=args.io_port, control_path=args.control,
-                               status_lines=not args.quiet)
-    adapter = Adapter(settings)
+                               status_lines=not args.quiet, state_path=args.state, modbus_port=args.modbus_port)
+    try:
+        adapter = Adapter(settings)
+    except (StateFileError, ValueError) as exc:
+        raise UsageError(str(exc)) from None
     try:
         run_precise(adapter.serve_forever())
     except OSError as exc:
@@ -155,14 +161,28 @@ def _value_text(value: Any) -> str:
     return json.dumps(value) if isinstance(value, (dict, list)) else str(value)
 
 
-def cmd_get(args: argparse.Namespace) -> int:
+async def _connect_identified(args: argparse.Namespace) -> Any:
+    """A scanner that decodes by the declarations of the device's profile when it is one we know."""
+    from .devices.profiles import catalog_for_identity
     from .scanner import Scanner
 
+    scanner = await Scanner.connect(args.target, timeout=args.timeout)
+    try:
+        identities = await scanner.list_identity()
+    except Exception:
+        await scanner.close()
+        raise
+    if identities:
+        scanner.catalog = catalog_for_identity(identities[0])
+    return scanner
+
+
+def cmd_get(args: argparse.Namespace) -> int:
     class_id, instance, attribute = parse_object_path(args.path)
     cip_type = parse_type(args.type)
 
     async def run() -> dict[str, Any]:
-        scanner = await Scanner.connect(args.target, timeout=args.timeout)
+        scanner = await _connect_identified(args)
         try:
             if args.connected:
                 await scanner.open_connection()
@@ -394,6 +414,10 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--io-port", type=lambda t: parse_number(t, "io port"), default=2222,
                    help="UDP port of class 1 I/O (default 2222; 0 picks a free one)")
     p.add_argument("--control", type=Path, help="control socket for `cipstack drive` (default: per port)")
+    p.add_argument("--state", type=Path,
+                   help="state file of saved parameters (default: in the user's data directory, per profile)")
+    p.add_argument("--modbus-port", type=lambda t: parse_number(t, "modbus port"),
+                   help="also serve Modbus TCP on this port (ACG)")
     p.add_argument("--quiet", action="store_true", help="no status line on stdout")
     p.add_argument("--json", action="store_true", help=argparse.SUPPRESS)
     p.set_defaults(func=cmd_adapter)

@@ -12,7 +12,7 @@ from hypothesis import strategies as st
 from cipstack.cip.epath import ElectronicKey, encode_path
 from cipstack.cip.router import MessageRouter, RequestContext
 from cipstack.cip.status import CipError
-from cipstack.devices.profiles import build_device
+from cipstack.devices.profiles import identity_only_device as build_device
 from cipstack.eip.cm_messages import (
     ConnectionTriad,
     ConnectionType,

@@ -13,13 +13,14 @@ from cipstack.cip.epath import PortSegment, request_path
 from cipstack.cip.messages import MessageRouterRequest
 from cipstack.cip.status import CipError
 from cipstack.cip.types import UDINT, UINT
+from cipstack.devices.profiles import identity_only_device
 from cipstack.eip.originator import EncapsulationClient, discover, list_services_udp
 from cipstack.scanner import Scanner, SyncScanner, backplane_route
 
 
 @pytest.fixture
 async def adapter() -> AsyncIterator[Adapter]:
-    async with Adapter(AdapterSettings(host="127.0.0.1", port=0)) as running:
+    async with Adapter(AdapterSettings(host="127.0.0.1", port=0), device=identity_only_device()) as running:
         yield running
 
 
@@ -166,7 +167,7 @@ async def test_typed_request_bytes(scanner: Scanner) -> None:
 
 def test_sync_scanner() -> None:
     async def start() -> Adapter:
-        adapter = Adapter(AdapterSettings(host="127.0.0.1", port=0))
+        adapter = Adapter(AdapterSettings(host="127.0.0.1", port=0), device=identity_only_device())
         await adapter.start()
         return adapter
 

@@ -12,7 +12,7 @@ from cipstack.cip.model import Access, AttributeSpec, Binding, CipObject, ClassS
 from cipstack.cip.router import MessageRouter, RequestContext
 from cipstack.cip.status import GeneralStatus
 from cipstack.cip.types import INT, REAL, SHORT_STRING, UINT
-from cipstack.devices.profiles import build_device
+from cipstack.devices.profiles import identity_only_device as build_device
 
 SPEED_SPEC = ClassSpec(
     0x70, "Test Drive", revision=3,

@@ -11,7 +11,7 @@ from cipstack.cip.epath import ElectronicKey, PortSegment, encode_path, request_
 from cipstack.cip.messages import MessageRouterRequest, MessageRouterResponse, Service
 from cipstack.cip.model import Binding
 from cipstack.devices.base import Device, DeviceLimits
-from cipstack.devices.profiles import build_device
+from cipstack.devices.profiles import identity_only_device as build_device
 from cipstack.eip.cm_messages import (
     ConnectionTriad,
     ConnectionType,

@@ -91,8 +91,8 @@ class Device:
         """Emulated power cycle (type 0) or return to defaults (type 1): families override."""
 
     # -- emulator control (test rigs) -------------------------------------------------------------
-    def inject_trip(self, code: int, now: float) -> str:
-        """Trip the simulated drive with a fault code of its manual; returns what happened."""
+    def inject_trip(self, code: int | str) -> object:
+        """Trip the simulated drive, now, with a fault code (or name) of its manual; returns the trip."""
         raise NotImplementedError(f"{self.identity_info.product_name}: this profile simulates no drive")
 
     def status_line(self) -> str | None:

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 from collections.abc import Callable
 from dataclasses import dataclass
+from pathlib import Path
 
 from ..catalog import Catalog
 from ..eip.identity_items import IdentityRecord
@@ -30,10 +31,20 @@ def acg_et2_identity(mac: bytes = DEFAULT_MAC) -> IdentityInfo:
 
 
 @dataclass(frozen=True)
+class ProfileOptions:
+    """What the command line passes to a profile's device."""
+
+    #: State file of saved parameters (None: kept in memory for the life of the process).
+    state_path: Path | None = None
+    #: Model name, for families with several models.
+    model: str | None = None
+
+
+@dataclass(frozen=True)
 class Profile:
     name: str
     description: str
-    build: Callable[[NetworkInterface, DeviceLimits], Device]
+    build: Callable[[NetworkInterface, DeviceLimits, ProfileOptions], Device]
     #: (vendor id, product codes) a live device reports when it is of this profile.
     vendor_id: int = 0
     product_codes: frozenset[int] = frozenset()
@@ -44,12 +55,27 @@ class Profile:
         return identity.vendor_id == self.vendor_id and identity.product_code in self.product_codes
 
 
-def _acg(interface: NetworkInterface, limits: DeviceLimits) -> Device:
-    return Device(acg_et2_identity(interface.mac), interface, limits)
+def _acg(interface: NetworkInterface, limits: DeviceLimits, options: ProfileOptions) -> Device:
+    from .acg.device import build_acg_device
+
+    return build_acg_device(interface, limits, options.state_path)
+
+
+def _acg_catalog() -> Catalog:
+    from .acg.device import build_acg_device
+
+    device = build_acg_device()
+    return Catalog(device.catalog_classes(),
+                   [device.assembly_schema(i) for i in device.assembly.points if i in _ACG_FIXED_ASSEMBLIES])
+
+
+#: The ACG assemblies whose layout does not depend on CM settings (seed 000 instance tables).
+_ACG_FIXED_ASSEMBLIES = frozenset({20, 21, 100, 101, 70, 71, 110, 111})
 
 
 PROFILES: dict[str, Profile] = {
-    "acg": Profile("acg", "ACG drive with its ACG-ET2 EtherNet/IP card (identity and standard objects)", _acg),
+    "acg": Profile("acg", "ACG drive with its ACG-ET2 EtherNet/IP card (seeds 000 and 001)", _acg,
+                   vendor_id=259, product_codes=frozenset({100}), catalog=_acg_catalog),
 }
 DEFAULT_PROFILE = "acg"
 
@@ -64,9 +90,16 @@ def catalog_for_identity(identity: IdentityRecord) -> Catalog:
 
 
 def build_device(name: str = DEFAULT_PROFILE, interface: NetworkInterface | None = None,
-                 limits: DeviceLimits | None = None) -> Device:
+                 limits: DeviceLimits | None = None, options: ProfileOptions | None = None) -> Device:
     try:
         profile = PROFILES[name]
     except KeyError:
         raise ValueError(f"unknown profile {name!r} (known: {', '.join(sorted(PROFILES))})") from None
-    return profile.build(interface or NetworkInterface(mac=DEFAULT_MAC), limits or DeviceLimits())
+    return profile.build(interface or NetworkInterface(mac=DEFAULT_MAC), limits or DeviceLimits(),
+                         options or ProfileOptions())
+
+
+def identity_only_device(interface: NetworkInterface | None = None, limits: DeviceLimits | None = None) -> Device:
+    """The ACG-ET2 identity with the standard objects only: the generic object model, no drive."""
+    return Device(acg_et2_identity((interface or NetworkInterface(mac=DEFAULT_MAC)).mac),
+                  interface or NetworkInterface(mac=DEFAULT_MAC), limits or DeviceLimits())

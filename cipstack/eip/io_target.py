@@ -448,4 +448,8 @@ class IoTarget:
             if connection.ot_connection_id in self.connections:
                 self.timeouts += 1
                 self._close(connection, timed_out=True)
+        if expired:
+            # The device has been told (a lost-command timer may have started): let the shell
+            # follow its new deadlines even if no request or datagram ever comes again.
+            self.tick(now)
         return expired
