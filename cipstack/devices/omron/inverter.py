@@ -466,6 +466,16 @@ class Inverter:
         self._local_run = (direction > 0) - (direction < 0)
         self._evaluate(now)
 
+    @property
+    def time(self) -> float:
+        """The instant the simulation has reached (the latest ``now`` it was given)."""
+        return self._t
+
+    @property
+    def local_run(self) -> int:
+        """Run command of the local sources: +1 (FW terminal), -1 (RV) or 0 (Table C-10 instance 9 on the RX)."""
+        return self._local_run
+
     def press_stop_reset(self, now: float) -> None:
         """The operator's STOP/RESET key: clears a trip (section 4-5-2 warning, Table 25 Step II)."""
         self.advance(now)

@@ -157,6 +157,9 @@ class Parameter:
     torque_related: bool = False
     #: "F001 can not be written using the Function code object" (section E-2-2).
     function_code_writable: bool = True
+    #: Words the Function Code object carries when they differ from the Modbus register's (section E-2-2:
+    #: "B127 has a data size of 2 words (different from the Modbus register size of 1 word)"); 0: ``words``.
+    function_code_words: int = 0
     bits: tuple[Bit, ...] = ()
     source: str = ""
 
@@ -431,6 +434,10 @@ PARAMETERS: tuple[Parameter, ...] = (
               enum=_enum(v0="no function", v1="induction motor", v2="high-frequency induction motor",
                          v3="permanent magnet motor"),
               group="b", source=f"section 4-1 Step 1, Table D-2 note; address {_I570}"),
+    # Section E-2-2: b127 is one Modbus word but two words through the Function Code object. The manual
+    # gives neither its meaning nor its address; the emulator keeps a plain word behind the function code.
+    Parameter("b127", "Function code b127", None, group="b", maximum=0xFFFF, function_code_words=2,
+              source="section E-2-2 (double word by function code)"),
     *_per_family("b180", "Initialization trigger", 0x13B7, access=STOPPED, saved=False,
                  enum=_enum(v0="no action", v1="initialize"), group="b", source="section 4-1 Step 1"),
 

@@ -1,0 +1,678 @@
+"""The CIP objects of the MX2/RX CompoNet option board (appendices C, D and E).
+
+Each class is declared once (``ClassSpec``) with the attributes, data types, access and
+services of its table; the runtime binds every attribute to the inverter simulation
+(``Inverter``) through the ``OptionBoard`` the objects belong to. The Modbus Register object
+(0x64) and the Function Code object (0x65) address the inverter's registers by instance and
+attribute (sections E-2-2 and E-3-2), so they have no declared attributes.
+
+Errors are those of Table E-5: a refusal of the inverter (``RegisterError``) becomes 0x0E
+(read only), 0x09 (out of range), 0x10 (not in this inverter mode or while running) or 0x14
+(no such parameter); an unknown instance 0x16; a size mismatch 0x13/0x15; a broken link
+between option board and inverter 0x02.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable, Iterator, Mapping
+from contextlib import contextmanager
+from dataclasses import dataclass
+from types import MappingProxyType
+from typing import Any, Protocol
+
+from ...cip.epath import ApplicationPath, LogicalSegment, LogicalType, decode_path, encode_path
+from ...cip.messages import MessageRouterRequest, Service
+from ...cip.model import Access, AttributeSpec, Binding, CipObject, ClassSpec, Instance
+from ...cip.router import RequestContext
+from ...cip.status import CipError, GeneralStatus
+from ...cip.types import BOOL, BYTE, DINT, INT, UDINT, UINT, USINT, WORD, CipType, RemainingBytes
+from ...objects.identity import IdentityInfo, IdentityObject, identity_spec
+from ..registers import RegisterError, RegisterRefusal
+from .inverter import Inverter, InverterModeError
+from .models import FIRMWARE_REVISION, Family
+from .registers import FamilyTraits, Parameter, RegisterSet, function_code_from_number
+
+_GET_SET = frozenset({Service.GET_ATTRIBUTE_SINGLE, Service.SET_ATTRIBUTE_SINGLE})
+_GET = frozenset({Service.GET_ATTRIBUTE_SINGLE})
+
+IDENTITY = 0x01
+CONNECTION = 0x05
+DISCRETE_INPUT_POINT = 0x08
+DISCRETE_OUTPUT_POINT = 0x09
+MOTOR_DATA = 0x28
+CONTROL_SUPERVISOR = 0x29
+AC_DC_DRIVE = 0x2A
+MODBUS_REGISTER = 0x64
+FUNCTION_CODE = 0x65
+UNIT_PARAMETER = 0x94
+COMPONET_LINK = 0xF7
+
+
+class OptionBoard(Protocol):
+    """What the objects need from the device they belong to."""
+
+    inverter: Inverter
+
+    @property
+    def now(self) -> float: ...
+
+    @property
+    def inverter_link_ok(self) -> bool: ...
+
+    def command(self, **fields: Any) -> None: ...
+
+    def motor_type_changed(self) -> None: ...
+
+
+# -- Table E-5 -----------------------------------------------------------------------------------
+
+_REFUSALS: Mapping[RegisterRefusal, GeneralStatus] = MappingProxyType({
+    RegisterRefusal.NO_SUCH_REGISTER: GeneralStatus.ATTRIBUTE_NOT_SUPPORTED,
+    RegisterRefusal.READ_ONLY: GeneralStatus.ATTRIBUTE_NOT_SETTABLE,
+    RegisterRefusal.OUT_OF_RANGE: GeneralStatus.INVALID_ATTRIBUTE_VALUE,
+    RegisterRefusal.NOT_WHILE_RUNNING: GeneralStatus.DEVICE_STATE_CONFLICT,
+})
+
+
+def refusal_status(error: RegisterError) -> GeneralStatus:
+    """The Table E-5 status of an inverter refusal: "10 Device state conflict: cannot be executed in
+    this inverter mode" covers both the run-mode lock and the torque registers outside d060 = 0."""
+    if isinstance(error, InverterModeError):
+        return GeneralStatus.DEVICE_STATE_CONFLICT
+    return _REFUSALS[error.refusal]
+
+
+@contextmanager
+def inverter_access(board: OptionBoard) -> Iterator[None]:
+    """Run an inverter access; refusals become the statuses of Table E-5."""
+    if not board.inverter_link_ok:
+        # Table E-5: "02 Resource unavailable: an internal communication error between Option Board and Inverter".
+        raise CipError(GeneralStatus.RESOURCE_UNAVAILABLE, message="no communication with the inverter")
+    try:
+        yield
+    except RegisterError as exc:
+        raise CipError(refusal_status(exc), message=str(exc)) from None
+
+
+class OptionBoardObject(CipObject):
+    """An object of appendices C/D: an unknown instance answers 0x16 (Table E-5, "Object does not exist")."""
+
+    def handle(self, path: ApplicationPath, request: MessageRouterRequest, context: RequestContext) -> bytes:
+        if path.instance and path.instance not in self.instances:
+            raise CipError(GeneralStatus.OBJECT_DOES_NOT_EXIST, message=f"{self.spec.name} has no instance "
+                                                                        f"{path.instance}")
+        return super().handle(path, request, context)
+
+
+class BoundObject(OptionBoardObject):
+    """A declared class whose attributes are ``Binding`` entries onto the option board."""
+
+    def __init__(self, spec: ClassSpec, board: OptionBoard) -> None:
+        super().__init__(spec)
+        self.board = board
+
+    def bound(self, get: Callable[[], Any], set: Callable[[Any], None] | None = None) -> Binding:
+        board = self.board
+
+        def guarded_get() -> Any:
+            with inverter_access(board):
+                return get()
+
+        guarded_set = None
+        if set is not None:
+            def guarded_set(value: Any) -> None:
+                with inverter_access(board):
+                    set(value)
+        return Binding(guarded_get, guarded_set)
+
+
+def _spec(class_id: int, name: str, attributes: tuple[AttributeSpec, ...], revision: int = 1) -> ClassSpec:
+    return ClassSpec(class_id, name, revision=revision, instance_attributes=attributes, class_services=_GET,
+                     instance_services=_GET_SET)
+
+
+# -- Identity (Table C-2) -------------------------------------------------------------------------
+
+#: Identity status bit 0 of Table C-2: "Always ON" (bits 8-11 are the fault bits of ``IdentityStatus``).
+STATUS_ALWAYS_ON = 0x0001
+
+IDENTITY_SPEC = identity_spec(
+    extra=(AttributeSpec(9, "Configuration Consistency Value", UINT, default=0,
+                         help="EEPROM saves through the option board (Table C-2)"),
+           AttributeSpec(0x65, "Firmware Revision Option Board", WORD,
+                         help="software version of the option board, major in the high byte")),
+    instance_services=frozenset({Service.GET_ATTRIBUTE_SINGLE, Service.RESET}),   # Table C-1
+    class_services=_GET,
+)
+
+
+class OptionBoardIdentity(IdentityObject):
+    """Identity of Table C-2: Get_Attribute_Single and Reset (Table C-1)."""
+
+    def __init__(self, info: IdentityInfo, board: OptionBoard, on_reset: Callable[[int], None]) -> None:
+        super().__init__(info, IDENTITY_SPEC, on_reset)
+        self.board = board
+        self.bind(1, 9, Binding(lambda: board.inverter.consistency_value))
+        major, minor = FIRMWARE_REVISION
+        self.instances[1].values[0x65] = major << 8 | minor
+        self.set(1, 5, STATUS_ALWAYS_ON)
+
+    def perform_reset(self, instance: Instance | None, reset_type: int, context: RequestContext) -> None:
+        if instance is None:
+            raise CipError(GeneralStatus.SERVICE_NOT_SUPPORTED)
+        if reset_type not in (0, 1):
+            # Table E-5: "20 Invalid parameter: the specified operation command data is not supported".
+            raise CipError(GeneralStatus.INVALID_PARAMETER, message=f"reset type {reset_type}")
+        if self.on_reset is not None:
+            self.on_reset(reset_type)
+
+
+# -- Connection (Table C-8) -----------------------------------------------------------------------
+
+EPATH = RemainingBytes("EPATH")
+
+CONNECTION_SPEC = _spec(CONNECTION, "Connection", (
+    AttributeSpec(1, "State", USINT, default=1),
+    AttributeSpec(2, "Instance Type", USINT, default=1),
+    AttributeSpec(3, "TransportClass_Trigger", BYTE, default=0x83),
+    AttributeSpec(7, "Produced Connection Size", UINT, default=16),
+    AttributeSpec(8, "Consumed Connection Size", UINT, default=16),
+    AttributeSpec(9, "Expected Packet Rate", UINT, Access.GET_SET, default=0, unit="ms", scale=10.0,
+                  help="internal processing timeout, 10 ms units"),
+    AttributeSpec(0x0C, "Watchdog Timeout Action", USINT, Access.GET_SET, default=0,
+                  enum=MappingProxyType({0: "retain timeout status", 1: "cut connection automatically",
+                                         2: "operate again with same connection"})),
+    AttributeSpec(0x0D, "Produced Connection Path Length", UINT),
+    AttributeSpec(0x0E, "Produced Connection Path", EPATH, Access.GET_SET),
+    AttributeSpec(0x0F, "Consumed Connection Path Length", UINT),
+    AttributeSpec(0x10, "Consumed Connection Path", EPATH, Access.GET_SET),
+))
+
+
+def assembly_path(instance: int) -> bytes:
+    """Connection path to an assembly's data: class 4, the instance, attribute 3."""
+    return encode_path([LogicalSegment(LogicalType.CLASS_ID, 4), LogicalSegment(LogicalType.INSTANCE_ID, instance),
+                        LogicalSegment(LogicalType.ATTRIBUTE_ID, 3)])
+
+
+def path_instance(path: bytes) -> int:
+    """The assembly instance a connection path names (0x09 if it names anything else)."""
+    try:
+        segments = decode_path(path)
+    except CipError:
+        segments = []
+    kinds = [(s.kind, s.value) for s in segments if isinstance(s, LogicalSegment)]
+    well_formed = len(kinds) == len(segments) and len(kinds) in (2, 3) and kinds[0] == (LogicalType.CLASS_ID, 4) \
+        and kinds[1][0] is LogicalType.INSTANCE_ID and (len(kinds) == 2 or kinds[2] == (LogicalType.ATTRIBUTE_ID, 3))
+    if not well_formed:
+        raise CipError(GeneralStatus.INVALID_ATTRIBUTE_VALUE, message="not a path to an assembly's data")
+    return kinds[1][1]
+
+
+class ConnectionObject(OptionBoardObject):
+    """Instance 1, the poll I/O connection of Table C-8; its paths follow P046 at each start."""
+
+    def __init__(self, outputs: frozenset[int], inputs: frozenset[int]) -> None:
+        super().__init__(CONNECTION_SPEC)
+        self.outputs = outputs
+        self.inputs = inputs
+        self.add_instance(1)
+        self.select(21, 71)
+
+    def select(self, output: int, input_: int) -> None:
+        """The default connection path (P046, Table 10): produced = input assembly, consumed = output."""
+        values = self.instances[1].values
+        values[0x0E], values[0x10] = assembly_path(input_), assembly_path(output)
+        values[0x0D], values[0x0F] = len(values[0x0E]), len(values[0x10])
+
+    @property
+    def pair(self) -> tuple[int, int]:
+        values = self.instances[1].values
+        return path_instance(values[0x10]), path_instance(values[0x0E])
+
+    def write_attribute(self, instance: Instance, spec: AttributeSpec, value: Any,
+                        context: RequestContext | None = None) -> None:
+        if spec.id in (0x0E, 0x10):
+            allowed = self.inputs if spec.id == 0x0E else self.outputs
+            if path_instance(bytes(value)) not in allowed:
+                raise CipError(GeneralStatus.INVALID_ATTRIBUTE_VALUE, message="no such assembly for this path")
+            instance.values[spec.id - 1] = len(value)
+        super().write_attribute(instance, spec, value, context)
+
+
+# -- Discrete Input / Output Point (Tables C-10, C-12) --------------------------------------------
+
+DISCRETE_INPUT_SPEC = _spec(DISCRETE_INPUT_POINT, "Discrete Input Point", (
+    AttributeSpec(3, "Value", BOOL, help="input point value"),
+    AttributeSpec(0x69, "Override", BOOL, Access.GET_SET, help="override the input point value"),
+))
+DISCRETE_OUTPUT_SPEC = _spec(DISCRETE_OUTPUT_POINT, "Discrete Output Point", (
+    AttributeSpec(3, "Value", BOOL, Access.GET_SET, help="control the output point value"),
+))
+#: Table C-10: on the RX, instance 9 is the FW input terminal; its override travels in bit 8.
+FW_TERMINAL_INSTANCE = 9
+
+
+class DiscreteInputPointObject(BoundObject):
+    """Instances 1-7 (MX2) / 1-8 and 9 = FW (RX): input terminal [n] and its network override."""
+
+    def __init__(self, board: OptionBoard, traits: FamilyTraits) -> None:
+        super().__init__(DISCRETE_INPUT_SPEC, board)
+        for n in range(1, traits.discrete_inputs + 1):
+            mask = 1 << (n - 1)
+            if n == FW_TERMINAL_INSTANCE:
+                def value(mask: int = mask) -> int:
+                    inverter = board.inverter
+                    return int(inverter.local_run > 0 or bool(inverter.option_command.input_overrides & mask))
+            else:
+                def value(mask: int = mask) -> int:
+                    return int(bool(board.inverter.status().inputs & mask))
+            self.add_instance(n, value=self.bound(value),
+                              override=self.bound(lambda mask=mask: int(bool(board.inverter.option_command
+                                                                              .input_overrides & mask)),
+                                                  lambda on, mask=mask: self._override(mask, on)))
+
+    def _override(self, mask: int, on: int) -> None:
+        current = self.board.inverter.option_command.input_overrides
+        self.board.command(input_overrides=(current | mask) if on else (current & ~mask))
+
+
+class DiscreteOutputPointObject(BoundObject):
+    """Instances 1-3 (MX2: 11, 12, relay) / 1-6 (RX: 11-15, relay)."""
+
+    def __init__(self, board: OptionBoard, traits: FamilyTraits) -> None:
+        super().__init__(DISCRETE_OUTPUT_SPEC, board)
+        for n in range(1, len(traits.output_terminals) + 1):
+            mask = 1 << (n - 1)
+            self.add_instance(n, value=self.bound(
+                lambda mask=mask: int(bool(board.inverter.option_command.outputs & mask)),
+                lambda on, mask=mask: self._set(mask, on)))
+
+    def _set(self, mask: int, on: int) -> None:
+        current = self.board.inverter.option_command.outputs
+        self.board.command(outputs=(current | mask) if on else (current & ~mask))
+
+
+# -- Motor Data (Table D-2) -------------------------------------------------------------------------
+
+MOTOR_TYPE_PM = 3
+MOTOR_TYPE_INDUCTION = 7
+MOTOR_DATA_SPEC = _spec(MOTOR_DATA, "Motor Data", (
+    AttributeSpec(3, "Motor Type", USINT, Access.GET_SET, default=MOTOR_TYPE_INDUCTION,
+                  enum=MappingProxyType({MOTOR_TYPE_PM: "PM synchronous motor",
+                                         MOTOR_TYPE_INDUCTION: "squirrel cage induction motor"})),
+    AttributeSpec(6, "Rated Current", UINT, Access.GET_SET, unit="A", scale=0.1),
+    AttributeSpec(7, "Rated Voltage", UINT, Access.GET_SET, unit="V"),
+    AttributeSpec(8, "Rated Power", UINT, Access.GET_SET, unit="W"),
+    AttributeSpec(9, "Rated Frequency", UINT, Access.GET_SET, default=50, unit="Hz"),
+    AttributeSpec(0x0B, "MaxSpeed", UINT, Access.GET_SET, default=50, unit="rpm"),
+    AttributeSpec(0x0C, "PoleCount", UINT, Access.GET_SET, minimum=0, maximum=38,
+                  help="motor poles for the RPM speed unit (P049); even numbers only"),
+))
+
+
+def rated_power(model_name: str) -> int:
+    """Rated power in W from the capacity code of the model name ("A2015" = 1.5 kW, "B4750" = 75 kW);
+    the codes ending in K (110 kW and more) exceed the UINT of Table D-2 and read 65535."""
+    capacity = model_name.split("-")[1][2:]
+    if capacity.endswith("K"):
+        return 0xFFFF
+    return min(int(capacity) * 100, 0xFFFF)
+
+
+class MotorDataObject(BoundObject):
+    def __init__(self, board: OptionBoard, model_name: str, voltage: int) -> None:
+        super().__init__(MOTOR_DATA_SPEC, board)
+        inverter = board.inverter
+        self.add_instance(1, rated_voltage=voltage, rated_power=rated_power(model_name), rated_current=0,
+                          motor_type=self.bound(self._motor_type, self._set_motor_type),
+                          polecount=self.bound(lambda: inverter.read_code("P049"),
+                                               lambda poles: inverter.write_code("P049", poles, board.now)))
+
+    def _motor_type(self) -> int:
+        # Table D-2: 3 when d060 = 3 (PM), else 7; fixed to 7 on the RX.
+        return MOTOR_TYPE_PM if self.board.inverter.read_code("d060") == 3 else MOTOR_TYPE_INDUCTION
+
+    def _set_motor_type(self, value: int) -> None:
+        inverter, now = self.board.inverter, self.board.now
+        if value not in (MOTOR_TYPE_PM, MOTOR_TYPE_INDUCTION) or (
+                value == MOTOR_TYPE_PM and inverter.family is Family.RX):
+            raise CipError(GeneralStatus.INVALID_ATTRIBUTE_VALUE, message=f"motor type {value}")
+        if value == self._motor_type():
+            return
+        # Table D-2 (MX2): like setting b171 (inverter mode) and b180 (initialization); 3 selects PM
+        # (d060 = 3), 7 leaves PM for the ND mode (d060 = 1); then the inverter and the board reset.
+        if value == MOTOR_TYPE_PM:
+            inverter.write_code("b171", 3, now)
+        else:
+            inverter.write_code("b171", 1, now)
+            inverter.write_code("b049", 1, now)
+        inverter.write_code("b180", 1, now)
+        self.board.motor_type_changed()
+
+
+# -- Control Supervisor (Tables D-4, D-5) ----------------------------------------------------------
+
+CONTROL_SUPERVISOR_SPEC = _spec(CONTROL_SUPERVISOR, "Control Supervisor", (
+    AttributeSpec(3, "Run1", BOOL, Access.GET_SET, default=0, help="run forward"),
+    AttributeSpec(4, "Run2", BOOL, Access.GET_SET, default=0, help="run reverse"),
+    AttributeSpec(5, "Net Ctrl", BOOL, Access.GET_SET, default=0, help="run command from the network"),
+    AttributeSpec(6, "State", UINT, enum=MappingProxyType({1: "Startup", 2: "Not ready", 3: "Ready", 4: "Enabled",
+                                                            5: "Stopping", 6: "Fault/trip stop",
+                                                            7: "Faulted/tripped"})),
+    AttributeSpec(7, "Running1", BOOL),
+    AttributeSpec(8, "Running2", BOOL),
+    AttributeSpec(9, "Ready", UINT),
+    AttributeSpec(0x0A, "Faulted", BOOL),
+    AttributeSpec(0x0B, "Warning", BOOL),
+    AttributeSpec(0x0C, "Fault Rst", BOOL, Access.GET_SET, default=0, help="reset a trip on 0 to 1"),
+    AttributeSpec(0x0D, "Fault Code", UINT, help="CIP fault code of the trip (Table D-5)"),
+    AttributeSpec(0x0F, "Ctrl From Net", BOOL),
+    AttributeSpec(0x10, "Net Fault Mode", UINT, Access.GET_SET, default=2, minimum=0, maximum=2,
+                  enum=MappingProxyType({0: "fault/trip and stop (P045 = 1)", 1: "ignore (P045 = 2)",
+                                         2: "vendor specific"})),
+    AttributeSpec(0x11, "Force Fault", BOOL, Access.GET_SET, default=0, help="external trip on 0 to 1"),
+    AttributeSpec(0x12, "Force Status", BOOL),
+    AttributeSpec(0x14, "Net Idle Mode", USINT, Access.GET_SET, default=2, minimum=0, maximum=2,
+                  enum=MappingProxyType({0: "stop (P048 = 4)", 1: "ignore (P048 = 2)", 2: "vendor specific"})),
+    AttributeSpec(0x64, "Drive State Detail", USINT),
+    AttributeSpec(0x65, "Trip Cause", USINT, help="n of the trip En, 0 when not tripped"),
+    AttributeSpec(0x66, "Free Run", BOOL, Access.GET_SET, default=0),
+))
+
+#: Net Fault Mode <-> P045 and Net Idle Mode <-> P048 (Table D-4); 2 is any other (vendor) setting.
+NET_FAULT_MODES: Mapping[int, int] = MappingProxyType({0: 1, 1: 2})
+NET_IDLE_MODES: Mapping[int, int] = MappingProxyType({0: 4, 1: 2})
+_VENDOR_SPECIFIC = 2
+
+
+class ControlSupervisorObject(BoundObject):
+    def __init__(self, board: OptionBoard) -> None:
+        super().__init__(CONTROL_SUPERVISOR_SPEC, board)
+        inverter = board.inverter
+
+        def command(name: str) -> Binding:
+            return self.bound(lambda: int(getattr(inverter.option_command, name)),
+                              lambda value: board.command(**{name: bool(value)}))
+
+        def status(name: str, cast: Callable[[Any], int] = int) -> Binding:
+            return self.bound(lambda: cast(getattr(inverter.status(), name)))
+
+        self.add_instance(
+            1, run1=command("fwd"), run2=command("rev"), net_ctrl=command("net_ctrl"), state=status("drive_state"),
+            running1=status("forward"), running2=status("reverse"), ready=status("ready"), faulted=status("faulted"),
+            warning=status("warning"), fault_rst=command("fault_reset"), fault_code=status("fault_code"),
+            ctrl_from_net=status("ctrl_from_net"),
+            net_fault_mode=self.bound(lambda: self._mode("P045", NET_FAULT_MODES),
+                                      lambda value: self._set_mode("P045", NET_FAULT_MODES, value)),
+            force_fault=command("force_fault"), force_status=status("force_status"),
+            net_idle_mode=self.bound(lambda: self._mode("P048", NET_IDLE_MODES),
+                                     lambda value: self._set_mode("P048", NET_IDLE_MODES, value)),
+            drive_state_detail=status("drive_state_detail"), trip_cause=status("trip_cause"),
+            free_run=command("free_run"))
+
+    def _mode(self, code: str, modes: Mapping[int, int]) -> int:
+        setting = self.board.inverter.read_code(code)
+        return next((mode for mode, value in modes.items() if value == setting), _VENDOR_SPECIFIC)
+
+    def _set_mode(self, code: str, modes: Mapping[int, int], mode: int) -> None:
+        if mode == _VENDOR_SPECIFIC:
+            if self._mode(code, modes) != _VENDOR_SPECIFIC:
+                # "Vendor specific" asks for the option board's own action: its default, trip (P045/P048 = 0).
+                self.board.inverter.write_code(code, 0, self.board.now)
+            return
+        self.board.inverter.write_code(code, modes[mode], self.board.now)
+
+
+# -- AC/DC Drive (Table D-7) ------------------------------------------------------------------------
+
+AC_DC_DRIVE_SPEC = _spec(AC_DC_DRIVE, "AC/DC Drive", (
+    AttributeSpec(3, "At Reference", BOOL),
+    AttributeSpec(4, "Net Ref", BOOL, Access.GET_SET, default=0, help="speed reference from the network"),
+    AttributeSpec(6, "Drive Mode", USINT, Access.GET_SET, default=0, minimum=0, maximum=0,
+                  enum=MappingProxyType({0: "vendor specific mode"})),
+    AttributeSpec(7, "Speed Actual", INT, help="0.01 Hz, 0.1 Hz or RPM (P049, d060)"),
+    AttributeSpec(8, "Speed Ref", INT, Access.GET_SET, default=0, minimum=0,
+                  help="0.01 Hz, 0.1 Hz or RPM (P049, d060)"),
+    AttributeSpec(9, "Current Actual", INT, unit="A", scale=0.1),
+    AttributeSpec(0x0F, "Power Actual", INT, unit="W"),
+    AttributeSpec(0x11, "Output Voltage", INT, unit="V"),
+    AttributeSpec(0x12, "Accel Time", UINT, Access.GET_SET, default=10000, minimum=10, unit="ms"),
+    AttributeSpec(0x13, "Decel Time", UINT, Access.GET_SET, default=10000, minimum=10, unit="ms"),
+    AttributeSpec(0x1D, "Ref From Net", BOOL),
+    AttributeSpec(0x77, "Torque Actual Rel", INT, Access.GET_SET, unit="%"),
+    AttributeSpec(0x78, "Torque Ref Rel", INT, Access.GET_SET, default=0, minimum=0, maximum=200, unit="%"),
+    AttributeSpec(0x79, "Torque Compensation Bias Rel", INT, Access.GET_SET, default=0, minimum=-200, maximum=200,
+                  unit="%"),
+    AttributeSpec(0x7A, "At Zero Speed", BOOL),
+))
+
+
+def speed_word(value: int) -> int:
+    """A speed magnitude as the INT the wire carries: 400.00 Hz (40000) exceeds INT, so the word is
+    sent as its 16-bit pattern (the master reads it as an unsigned word, section 4-2-5)."""
+    value &= 0xFFFF
+    return value - 0x10000 if value & 0x8000 else value
+
+
+class AcDcDriveObject(BoundObject):
+    def __init__(self, board: OptionBoard) -> None:
+        super().__init__(AC_DC_DRIVE_SPEC, board)
+        inverter = board.inverter
+
+        def status(name: str) -> Binding:
+            return self.bound(lambda: int(getattr(inverter.status(), name)))
+
+        def ramp(code: str) -> Binding:
+            # Table D-7 in ms; F002/F003 in 0.01 s.
+            return self.bound(lambda: min(inverter.read_code(code) * 10, 0xFFFF),
+                              lambda ms: inverter.write_code(code, max(1, round(ms / 10)), board.now))
+
+        self.add_instance(
+            1, at_reference=status("at_reference"),
+            net_ref=self.bound(lambda: int(inverter.option_command.net_ref),
+                               lambda value: board.command(net_ref=bool(value))),
+            speed_actual=self.bound(lambda: speed_word(inverter.status().speed_actual)),
+            speed_ref=self.bound(lambda: speed_word(inverter.option_command.speed_reference),
+                                 lambda value: board.command(speed_reference=value)),
+            current_actual=0, power_actual=0, output_voltage=0,
+            accel_time=ramp("F002"), decel_time=ramp("F003"), ref_from_net=status("ref_from_net"),
+            # d012 is a monitor: writing it is refused by the inverter (0x0E).
+            torque_actual_rel=self.bound(lambda: inverter.read_code("d012"),
+                                         lambda value: inverter.write_code("d012", value, board.now)),
+            torque_ref_rel=self.bound(lambda: inverter.option_command.torque_reference,
+                                      lambda value: self._torque(torque_reference=value)),
+            torque_compensation_bias_rel=self.bound(lambda: inverter.option_command.torque_bias,
+                                                    lambda value: self._torque(torque_bias=value)),
+            at_zero_speed=status("zero_speed"))
+
+    def _torque(self, **value: int) -> None:
+        if self.board.inverter.read_code("d060") != 0:
+            # Section 4-4 note: torque settings only in the constant-torque IM mode (Tables 22/23).
+            raise CipError(GeneralStatus.DEVICE_STATE_CONFLICT, message="torque control needs d060 = 0")
+        self.board.command(**value)
+
+
+# -- Unit Parameter (Table C-14), CompoNet Link (Table C-16) ----------------------------------------
+
+UNIT_PARAMETER_SPEC = _spec(UNIT_PARAMETER, "Unit Parameter", (
+    AttributeSpec(0x64, "Default Connection Path", USINT, Access.GET_SET, default=1, minimum=0, maximum=7,
+                  help="P046 (Table 10)"),
+))
+
+
+class UnitParameterObject(BoundObject):
+    def __init__(self, board: OptionBoard) -> None:
+        super().__init__(UNIT_PARAMETER_SPEC, board)
+        inverter = board.inverter
+        self.add_instance(1, default_connection_path=self.bound(
+            lambda: inverter.read_code("P046"), lambda value: inverter.write_code("P046", value, board.now)))
+
+
+BAUD_RATES: Mapping[int, str] = MappingProxyType({0: "93.75 kbit/s", 1: "reserved", 2: "1.5 Mbit/s",
+                                                  3: "3 Mbit/s", 4: "4 Mbit/s"})
+COMPONET_LINK_SPEC = _spec(COMPONET_LINK, "CompoNet Link", (
+    AttributeSpec(1, "MAC ID", USINT, default=0, minimum=0, maximum=63, help="node address in use"),
+    AttributeSpec(2, "Baud Rate", UINT, default=0, enum=BAUD_RATES),
+    AttributeSpec(5, "Allocation Choice", WORD, default=2),
+    AttributeSpec(6, "MAC ID Switch Changed", BOOL, default=0),
+    AttributeSpec(8, "MAC ID Switch Value", UINT, default=0),
+    AttributeSpec(0x0A, "Explicit Message Timer", UINT, Access.GET_SET, default=0),
+))
+
+
+@dataclass
+class LinkState:
+    """The option board's CompoNet link: node address in use and the setting behind it (section 2-1-4)."""
+
+    #: Rotary switches (0-99); 64-99 hand the address to P190.
+    rotary_switches: int = 0
+    mac_id: int = 0
+    baud_rate: int = 0
+
+
+class CompoNetLinkObject(BoundObject):
+    def __init__(self, board: OptionBoard, link: LinkState, setting: Callable[[], int]) -> None:
+        super().__init__(COMPONET_LINK_SPEC, board)
+        self.link = link
+        self.add_instance(1, mac_id=Binding(lambda: link.mac_id), baud_rate=Binding(lambda: link.baud_rate),
+                          mac_id_switch_changed=self.bound(lambda: int(setting() != link.mac_id)),
+                          mac_id_switch_value=Binding(lambda: link.rotary_switches))
+
+
+# -- Modbus Register (section E-3) and Function Code (section E-2) ---------------------------------
+
+def _value_type(parameter: Parameter, words: int) -> CipType:
+    if words == 2:
+        return DINT if parameter.signed else UDINT
+    return INT if parameter.signed and parameter.words == 1 else UINT
+
+
+class RegisterObject(CipObject):
+    """Instance = high byte, attribute = low byte of a number naming one inverter register.
+
+    The manual's mapping makes instance 0 address numbers 0001h-00FFh (F001 at Modbus 0001h,
+    A001-A255 by function code), so instance 0 is not the class level here.
+    """
+
+    def __init__(self, spec: ClassSpec, board: OptionBoard, registers: RegisterSet) -> None:
+        super().__init__(spec)
+        self.board = board
+        self.registers = registers
+        self.instance_ids = frozenset(number >> 8 for number in self.numbers())
+
+    def numbers(self) -> Iterator[int]:
+        raise NotImplementedError
+
+    def handle(self, path: ApplicationPath, request: MessageRouterRequest, context: RequestContext) -> bytes:
+        if request.service not in _GET_SET:
+            raise CipError(GeneralStatus.SERVICE_NOT_SUPPORTED, message=f"service 0x{request.service:02X}")
+        instance = path.instance or 0
+        if instance > 0xFF or instance not in self.instance_ids:
+            raise CipError(GeneralStatus.OBJECT_DOES_NOT_EXIST, message=f"{self.spec.name} has no instance {instance}")
+        if path.attribute is None or path.attribute > 0xFF:
+            raise CipError(GeneralStatus.ATTRIBUTE_NOT_SUPPORTED, message="attribute must be one byte")
+        number = instance << 8 | path.attribute
+        with inverter_access(self.board):
+            if request.service == Service.GET_ATTRIBUTE_SINGLE:
+                if request.data:
+                    raise CipError(GeneralStatus.TOO_MUCH_DATA)
+                return self.read(number)
+            self.write(number, request.data)
+            return b""
+
+    def read(self, number: int) -> bytes:
+        raise NotImplementedError
+
+    def write(self, number: int, data: bytes) -> None:
+        raise NotImplementedError
+
+
+def _decode_sized(cip_type: CipType, data: bytes) -> int:
+    """Table E-5: data smaller than the register 0x13, larger 0x15."""
+    assert cip_type.size is not None
+    if len(data) < cip_type.size:
+        raise CipError(GeneralStatus.NOT_ENOUGH_DATA, message=f"the register takes {cip_type.size} bytes")
+    if len(data) > cip_type.size:
+        raise CipError(GeneralStatus.TOO_MUCH_DATA, message=f"the register takes {cip_type.size} bytes")
+    return int(cip_type.decode(data))
+
+
+MODBUS_REGISTER_SPEC = ClassSpec(MODBUS_REGISTER, "Modbus Register", class_services=_GET_SET,
+                                 instance_services=_GET_SET, max_instance=0xFF)
+FUNCTION_CODE_SPEC = ClassSpec(FUNCTION_CODE, "Function Code", class_services=_GET_SET,
+                               instance_services=_GET_SET, max_instance=0xFF)
+
+
+class ModbusRegisterObject(RegisterObject):
+    """Class 0x64: Modbus address XXYYh at instance XXh, attribute YYh (section E-3-2). A double
+    word is 4 bytes at its first (high) word; its second word alone is one word."""
+
+    def __init__(self, board: OptionBoard, registers: RegisterSet) -> None:
+        super().__init__(MODBUS_REGISTER_SPEC, board, registers)
+
+    def numbers(self) -> Iterator[int]:
+        for register in self.registers.modbus.values():
+            yield from range(register.address, register.address + register.words)
+
+    def _register(self, address: int) -> tuple[Parameter, CipType]:
+        found = self.registers.word(address)
+        if found is None:
+            raise CipError(GeneralStatus.ATTRIBUTE_NOT_SUPPORTED, message=f"no register {address:04X}h")
+        parameter, index = found
+        words = parameter.words if index == 0 else 1
+        return parameter, _value_type(parameter, words) if index == 0 else UINT
+
+    def read(self, number: int) -> bytes:
+        _, cip_type = self._register(number)
+        return cip_type.encode(self.board.inverter.read(number))
+
+    def write(self, number: int, data: bytes) -> None:
+        _, cip_type = self._register(number)
+        self.board.inverter.write(number, _decode_sized(cip_type, data), self.board.now)
+
+
+class FunctionCodeObject(RegisterObject):
+    """Class 0x65: group base x 1000 + code (Table E-3) split into instance (high byte) and attribute
+    (low byte): d005 = 3005 = 0BBDh, P060 = 15060 = 3AD4h. F001 is read only here; b127 is two words."""
+
+    def __init__(self, board: OptionBoard, registers: RegisterSet) -> None:
+        super().__init__(FUNCTION_CODE_SPEC, board, registers)
+
+    def numbers(self) -> Iterator[int]:
+        yield from self.registers.by_number
+
+    def _parameter(self, number: int) -> tuple[Parameter, CipType]:
+        parameter = self.registers.by_number.get(number)
+        if parameter is None:
+            try:
+                code = function_code_from_number(number)
+            except ValueError:
+                code = f"{number}"
+            raise CipError(GeneralStatus.ATTRIBUTE_NOT_SUPPORTED, message=f"no function code {code}")
+        return parameter, _value_type(parameter, parameter.function_code_words or parameter.words)
+
+    def read(self, number: int) -> bytes:
+        _, cip_type = self._parameter(number)
+        return cip_type.encode(self.board.inverter.read_function_code(number))
+
+    def write(self, number: int, data: bytes) -> None:
+        parameter, cip_type = self._parameter(number)
+        if not parameter.function_code_writable:
+            raise CipError(GeneralStatus.ATTRIBUTE_NOT_SETTABLE, message=f"{parameter.key} (section E-2-2)")
+        self.board.inverter.write_function_code(number, _decode_sized(cip_type, data), self.board.now)
+
+
+#: The declared classes, for the scanner's catalog and the EDS (0x64/0x65 have no fixed attributes).
+CLASS_SPECS: tuple[ClassSpec, ...] = (
+    IDENTITY_SPEC, CONNECTION_SPEC, DISCRETE_INPUT_SPEC, DISCRETE_OUTPUT_SPEC, MOTOR_DATA_SPEC,
+    CONTROL_SUPERVISOR_SPEC, AC_DC_DRIVE_SPEC, MODBUS_REGISTER_SPEC, FUNCTION_CODE_SPEC, UNIT_PARAMETER_SPEC,
+    COMPONET_LINK_SPEC,
+)
+
+__all__ = [
+    "CLASS_SPECS", "AcDcDriveObject", "CompoNetLinkObject", "ConnectionObject", "ControlSupervisorObject",
+    "DiscreteInputPointObject", "DiscreteOutputPointObject", "FunctionCodeObject", "LinkState", "ModbusRegisterObject",
+    "MotorDataObject", "OptionBoard", "OptionBoardIdentity", "UnitParameterObject", "assembly_path",
+    "inverter_access", "refusal_status", "speed_word",
+]
