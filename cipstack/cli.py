@@ -11,6 +11,7 @@ import asyncio
 import contextlib
 import json
 import logging
+import os
 import sys
 from collections.abc import Callable, Sequence
 from pathlib import Path
@@ -96,13 +97,13 @@ def cmd_adapter(args: argparse.Namespace) -> int:
         raise UsageError(f"port {args.port} out of range")
     if args.state is None:
         args.state = default_state_path(args.profile)
-    settings = AdapterSettings(host=args.host, port=args.port, profile=args.profile,
+    settings = AdapterSettings(host=args.host, port=args.port, profile=args.profile, model=args.model,
                                max_sessions=args.max_sessions, max_connections=args.max_connections,
                                io_port=args.io_port, control_path=args.control,
                                status_lines=not args.quiet, state_path=args.state, modbus_port=args.modbus_port)
     try:
         adapter = Adapter(settings)
-    except (StateFileError, ValueError) as exc:
+    except (StateFileError, ValueError, KeyError) as exc:
         raise UsageError(str(exc)) from None
     try:
         run_precise(adapter.serve_forever())
@@ -327,6 +328,44 @@ def cmd_io(args: argparse.Namespace) -> int:
     return run_precise(run())
 
 
+def cmd_models(args: argparse.Namespace) -> int:
+    from .devices.omron.models import MODELS
+
+    for m in MODELS:
+        family = m.family.value.lower()
+        if args.profile and family != args.profile:
+            continue
+        _emit(args, {"profile": family, "model": m.name, "product_code": m.product_code,
+                     "product_name": m.product_name, "eds_file": m.eds_file},
+              f"{family:3}  {m.name:14}  product code {m.product_code:5}  {m.product_name:32}  {m.eds_file}")
+    return EXIT_OK
+
+
+def cmd_componet(args: argparse.Namespace) -> int:
+    from .adapter import Adapter, AdapterSettings
+    from .devices.omron.device import build_componet_gateway, parse_nodes
+    from .devices.profiles import DEFAULT_MAC
+    from .eip.io_server import run_precise
+    from .objects.tcpip import NetworkInterface
+
+    try:
+        nodes = parse_nodes(args.nodes)
+        if not nodes:
+            raise ValueError("--nodes names no node")
+        gateway = build_componet_gateway(nodes, NetworkInterface(ip_address=args.host, mac=DEFAULT_MAC))
+    except (ValueError, KeyError) as exc:
+        raise UsageError(str(exc)) from None
+    settings = AdapterSettings(host=args.host, port=args.port, io_port=args.io_port, control_path=args.control,
+                               status_lines=not args.quiet)
+    adapter = Adapter(settings, device=gateway)
+    try:
+        run_precise(adapter.serve_forever())
+    except OSError as exc:
+        print(f"cipstack componet: cannot listen on {args.host}:{args.port}: {exc.strerror or exc}", file=sys.stderr)
+        return EXIT_FAILURE
+    return EXIT_OK
+
+
 # -- emulator control ---------------------------------------------------------------------------------------
 def _control(args: argparse.Namespace, request: dict[str, Any]) -> dict[str, Any]:
     from .control import ControlError, control_request, default_control_path
@@ -408,7 +447,8 @@ def build_parser() -> argparse.ArgumentParser:
     p = sub.add_parser("adapter", help="run the adapter emulator")
     p.add_argument("--host", default="127.0.0.1", help="address to listen on (default 127.0.0.1)")
     p.add_argument("--port", type=lambda t: parse_number(t, "port"), default=DEFAULT_PORT)
-    p.add_argument("--profile", default="acg", help="device profile (default acg)")
+    p.add_argument("--profile", default="acg", help="device profile: acg (default), mx2, rx")
+    p.add_argument("--model", help="model of the mx2/rx profiles (e.g. MX2-A2015-E, RX-A4055-E)")
     p.add_argument("--max-sessions", type=lambda t: parse_number(t, "max sessions"), default=32)
     p.add_argument("--max-connections", type=lambda t: parse_number(t, "max connections"), default=32)
     p.add_argument("--io-port", type=lambda t: parse_number(t, "io port"), default=2222,
@@ -421,6 +461,22 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--quiet", action="store_true", help="no status line on stdout")
     p.add_argument("--json", action="store_true", help=argparse.SUPPRESS)
     p.set_defaults(func=cmd_adapter)
+
+    p = sub.add_parser("models", help="the MX2/RX models the mx2/rx profiles emulate (Tables 2/3)")
+    p.add_argument("--profile", choices=["mx2", "rx"])
+    p.add_argument("--json", action="store_true")
+    p.set_defaults(func=cmd_models)
+
+    p = sub.add_parser("componet", help="run a CompoNet network of MX2/RX slaves behind an EtherNet/IP gateway")
+    p.add_argument("--nodes", required=True, metavar="PROFILE:MODEL@NODE,...",
+                   help="slaves, e.g. mx2:MX2-A2015-E@3,rx:RX-A4055-E@5 (node addresses 0-63)")
+    p.add_argument("--host", default="127.0.0.1", help="address to listen on (default 127.0.0.1)")
+    p.add_argument("--port", type=lambda t: parse_number(t, "port"), default=DEFAULT_PORT)
+    p.add_argument("--io-port", type=lambda t: parse_number(t, "io port"), default=2222)
+    p.add_argument("--control", type=Path, help="control socket (default: per port)")
+    p.add_argument("--quiet", action="store_true", help="no status line on stdout")
+    p.add_argument("--json", action="store_true", help=argparse.SUPPRESS)
+    p.set_defaults(func=cmd_componet)
 
     p = sub.add_parser("discover", help="ListIdentity over UDP")
     p.add_argument("--broadcast", default="255.255.255.255", help="broadcast or unicast address")
@@ -525,6 +581,10 @@ def main(argv: Sequence[str] | None = None) -> int:
         return EXIT_FAILURE
     except KeyboardInterrupt:
         return 130
+    except BrokenPipeError:
+        # The reader went away (``cipstack models | head``): not an error of ours.
+        sys.stdout = open(os.devnull, "w")  # noqa: SIM115 - silences the flush at exit
+        return EXIT_OK
     except ValueError as exc:
         print(f"{name}: {exc}", file=sys.stderr)
         return EXIT_USAGE

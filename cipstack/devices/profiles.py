@@ -69,6 +69,35 @@ def _acg_catalog() -> Catalog:
                    [device.assembly_schema(i) for i in device.assembly.points if i in _ACG_FIXED_ASSEMBLIES])
 
 
+def _omron(family: str, default_model: str) -> Callable[[NetworkInterface, DeviceLimits, ProfileOptions], Device]:
+    def build(interface: NetworkInterface, limits: DeviceLimits, options: ProfileOptions) -> Device:
+        from .omron.device import build_omron_device
+        from .omron.models import model
+
+        name = options.model or default_model
+        if model(name).family.value.lower() != family:
+            raise ValueError(f"{name} is not an {family.upper()} model (see `cipstack models`)")
+        return build_omron_device(name, interface, limits, options.state_path)
+
+    return build
+
+
+def _omron_catalog(default_model: str) -> Callable[[], Catalog]:
+    def catalog() -> Catalog:
+        from .omron.device import build_omron_device
+
+        device = build_omron_device(default_model)
+        return Catalog(device.catalog_classes(), device.schemas().values())
+
+    return catalog
+
+
+def _omron_product_codes(family: str) -> frozenset[int]:
+    from .omron.models import MODELS
+
+    return frozenset(m.product_code for m in MODELS if m.family.value.lower() == family)
+
+
 #: The ACG assemblies whose layout does not depend on CM settings (seed 000 instance tables).
 _ACG_FIXED_ASSEMBLIES = frozenset({20, 21, 100, 101, 70, 71, 110, 111})
 
@@ -76,6 +105,13 @@ _ACG_FIXED_ASSEMBLIES = frozenset({20, 21, 100, 101, 70, 71, 110, 111})
 PROFILES: dict[str, Profile] = {
     "acg": Profile("acg", "ACG drive with its ACG-ET2 EtherNet/IP card (seeds 000 and 001)", _acg,
                    vendor_id=259, product_codes=frozenset({100}), catalog=_acg_catalog),
+    # The Omron inverters with the CompoNet option board (seed 004), served over EtherNet/IP.
+    "mx2": Profile("mx2", "Omron MX2 with the 3G3AX-MX2-CRT-E CompoNet option board (--model, Tables 2/C-3)",
+                   _omron("mx2", "MX2-A2015-E"), vendor_id=47, product_codes=_omron_product_codes("mx2"),
+                   catalog=_omron_catalog("MX2-A2015-E")),
+    "rx": Profile("rx", "Omron RX with the 3G3AX-RX-CRT-E CompoNet option board (--model, Tables 3/C-4)",
+                  _omron("rx", "RX-A4055-E"), vendor_id=47, product_codes=_omron_product_codes("rx"),
+                  catalog=_omron_catalog("RX-A4055-E")),
 }
 DEFAULT_PROFILE = "acg"
 
