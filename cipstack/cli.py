@@ -162,19 +162,48 @@ def _value_text(value: Any) -> str:
     return json.dumps(value) if isinstance(value, (dict, list)) else str(value)
 
 
+def parse_route(text: str | None) -> list[Any] | None:
+    """``PORT/LINK[,PORT/LINK...]``: ``1/0`` (backplane slot 0), ``2/3`` (CompoNet node 3), ``2/10.0.0.5``."""
+    from .cip.epath import PortSegment
+
+    if not text:
+        return None
+    route = []
+    for hop in text.split(","):
+        port_text, sep, link_text = hop.strip().partition("/")
+        if not sep or not link_text:
+            raise UsageError(f"route hop {hop!r} is not PORT/LINK")
+        port = parse_number(port_text, "route port")
+        try:
+            link: int | str = parse_int(link_text)
+        except ValueError:
+            link = link_text  # an IP address or name: the link address as text
+        if isinstance(link, int) and not 0 <= link <= 255:
+            raise UsageError(f"link address {link} out of range 0..255")
+        if not 1 <= port <= 0xFFFF:
+            raise UsageError(f"route port {port} out of range")
+        route.append(PortSegment.to(port, link))
+    return route
+
+
 async def _connect_identified(args: argparse.Namespace) -> Any:
-    """A scanner that decodes by the declarations of the device's profile when it is one we know."""
-    from .devices.profiles import catalog_for_identity
+    """A scanner that decodes by the declarations of the device's profile when it is one we know
+    (the routed device's own Identity when ``--route`` is given)."""
+    from .cip.types import UINT
+    from .devices.profiles import catalog_for
     from .scanner import Scanner
 
-    scanner = await Scanner.connect(args.target, timeout=args.timeout)
+    scanner = await Scanner.connect(args.target, timeout=args.timeout, route=parse_route(args.route))
     try:
-        identities = await scanner.list_identity()
+        if scanner.route:
+            vendor, product = await scanner.read(1, 1, 1, UINT), await scanner.read(1, 1, 3, UINT)
+        else:
+            identities = await scanner.list_identity()
+            vendor, product = (identities[0].vendor_id, identities[0].product_code) if identities else (0, 0)
     except Exception:
         await scanner.close()
         raise
-    if identities:
-        scanner.catalog = catalog_for_identity(identities[0])
+    scanner.catalog = catalog_for(vendor, product)
     return scanner
 
 
@@ -242,7 +271,7 @@ def cmd_set(args: argparse.Namespace) -> int:
         raise UsageError(f"value {args.value!r} is not a valid {cip_type.name}: {exc}") from None
 
     async def run() -> None:
-        scanner = await Scanner.connect(args.target, timeout=args.timeout)
+        scanner = await Scanner.connect(args.target, timeout=args.timeout, route=parse_route(args.route))
         try:
             if args.connected:
                 await scanner.open_connection()
@@ -493,6 +522,8 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("path", metavar="CLASS/INSTANCE[/ATTRIBUTE]")
     p.add_argument("--type", help="CIP type to decode the value (UINT, SHORT_STRING, ...)")
     p.add_argument("--connected", action="store_true", help="use a class 3 connection")
+    p.add_argument("--route", metavar="PORT/LINK[,...]",
+                   help="route through the target (Unconnected_Send), e.g. 1/0 or 2/3 (CompoNet node 3)")
     p.set_defaults(func=cmd_get)
 
     p = sub.add_parser("io", help="open a class 1 connection, print input changes by field name")
@@ -546,6 +577,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("value")
     p.add_argument("--type", required=True, help="CIP type of the value (UINT, INT, REAL, SHORT_STRING, ...)")
     p.add_argument("--connected", action="store_true", help="use a class 3 connection")
+    p.add_argument("--route", metavar="PORT/LINK[,...]", help="route through the target (Unconnected_Send)")
     p.set_defaults(func=cmd_set)
     return parser
 

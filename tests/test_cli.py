@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import contextlib
 import json
 import os
 import signal
@@ -190,3 +191,115 @@ def test_eds_check_against_a_live_device(adapter_process: tuple[str, subprocess.
     assert shown.returncode == 0 and "CENT" in shown.stdout
     missing = run("eds", "check", str(tmp_path / "nope.eds"))
     assert missing.returncode == 2 and "nope.eds" in one_line_error(missing)
+
+
+def start_adapter(*args: str) -> tuple[str, subprocess.Popen[str]]:
+    port = free_port()
+    process = subprocess.Popen([sys.executable, "-m", "cipstack", "adapter", "--port", str(port), "--io-port", "0",
+                                *args], stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    for _ in range(300):
+        try:
+            socket.create_connection(("127.0.0.1", port), timeout=0.2).close()
+            return f"127.0.0.1:{port}", process
+        except OSError:
+            if process.poll() is not None:
+                pytest.fail(f"adapter exited: {process.stderr.read() if process.stderr else ''}")
+            time.sleep(0.05)
+    process.kill()
+    pytest.fail("adapter did not start")
+
+
+def stop(process: subprocess.Popen[str]) -> str:
+    process.send_signal(signal.SIGTERM)
+    _, stderr = process.communicate(timeout=10)
+    assert process.returncode == 0, stderr
+    return stderr
+
+
+def test_saved_parameters_survive_a_restart_of_the_process(tmp_path: Path) -> None:
+    """Seed 001 memory control: writing 0x03E0 from 0 to 1 saves every parameter; what is written
+    afterwards and not saved is gone after a restart."""
+    from pymodbus.client import ModbusTcpClient
+
+    from cipstack.devices.acg.registers import ACG_REGISTERS
+
+    state = tmp_path / "acg.json"
+    pr12, pr13 = ACG_REGISTERS.by_code("Pr.12"), ACG_REGISTERS.by_code("Pr.13")
+    modbus_port = free_port()
+    address, process = start_adapter("--state", str(state), "--modbus-port", str(modbus_port))
+    try:
+        client = ModbusTcpClient("127.0.0.1", port=modbus_port, timeout=3)
+        assert client.connect()
+        assert not client.write_register(pr12.address, 2, device_id=1).isError()   # Pr.12 = Dec
+        assert not client.write_register(0x03E0, 1, device_id=1).isError()         # save all
+        assert not client.write_register(pr13.address, 55, device_id=1).isError()  # Pr.13: not saved
+        # The same value over CIP (class 0x64, instance = group Pr (11), attribute = code number).
+        assert json.loads(run("get", address, "0x64/11/12", "--json").stdout)["value"] == 2
+        assert json.loads(run("get", address, "0x64/11/13", "--json").stdout)["value"] == 55
+        client.close()
+    finally:
+        stop(process)
+    assert state.exists()
+    address, process = start_adapter("--state", str(state))
+    try:
+        assert json.loads(run("get", address, "0x64/11/12", "--json").stdout)["value"] == 2
+        assert json.loads(run("get", address, "0x64/11/13", "--json").stdout)["value"] == pr13.default
+    finally:
+        stop(process)
+    state.write_text("{not json")
+    result = run("adapter", "--port", str(free_port()), "--io-port", "0", "--state", str(state))
+    assert result.returncode == 2 and str(state) in one_line_error(result)
+
+
+def test_drive_trip_and_status_over_the_control_socket(tmp_path: Path) -> None:
+    control = tmp_path / "control.sock"
+    address, process = start_adapter("--control", str(control), "--state", str(tmp_path / "s.json"))
+    try:
+        tripped = run("drive", "trip", "0x4200", "--control", str(control), "--json")
+        assert tripped.returncode == 0, tripped.stderr
+        assert "OverHeat" in json.loads(tripped.stdout)["result"]
+        # The trip shows over CIP: Control Supervisor Faulted (0x29/10) and the fault code (0x29/13).
+        assert json.loads(run("get", address, "0x29/1/10", "--json").stdout)["value"] == 1
+        assert json.loads(run("get", address, "0x29/1/13", "--json").stdout)["value"] == 0x4200
+        status = run("drive", "status", "--control", str(control))
+        assert status.returncode == 0 and "OverHeat" in status.stdout
+        unknown = run("drive", "trip", "0x9999", "--control", str(control))
+        assert unknown.returncode == 1 and "0x9999" in one_line_error(unknown)
+    finally:
+        stderr = stop(process)
+    assert "Traceback" not in stderr
+    assert not control.exists()
+
+
+def test_mx2_rx_profiles_models_and_componet_gateway() -> None:
+    models = [json.loads(line) for line in run("models", "--json").stdout.splitlines()]
+    assert len(models) == 61 and {m["profile"] for m in models} == {"mx2", "rx"}
+    for profile, model in (("mx2", "MX2-A2015-E"), ("rx", "RX-A4055-E")):
+        entry = next(m for m in models if m["model"] == model)
+        address, process = start_adapter("--profile", profile, "--model", model, "--quiet")
+        try:
+            identity = json.loads(run("identity", address, "--json").stdout)
+            assert (identity["vendor_id"], identity["product_code"]) == (47, entry["product_code"])
+            assert identity["product_name"] == entry["product_name"]
+        finally:
+            stop(process)
+    port = free_port()
+    gateway = subprocess.Popen([sys.executable, "-m", "cipstack", "componet", "--nodes",
+                                "mx2:MX2-A2015-E@3,rx:RX-A4055-E@5", "--port", str(port), "--io-port", "0",
+                                "--quiet"], stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    try:
+        for _ in range(300):
+            with contextlib.suppress(OSError):
+                socket.create_connection(("127.0.0.1", port), timeout=0.2).close()
+                break
+            time.sleep(0.05)
+        for node, model in ((3, "MX2-A2015-E"), (5, "RX-A4055-E")):
+            entry = next(m for m in models if m["model"] == model)
+            name = run("get", f"127.0.0.1:{port}", "1/1/7", "--route", f"2/{node}", "--type", "SHORT_STRING",
+                       "--json")
+            assert name.returncode == 0, name.stderr
+            assert json.loads(name.stdout)["value"] == entry["product_name"]
+        absent = run("get", f"127.0.0.1:{port}", "1/1/7", "--route", "2/9")
+        assert absent.returncode == 1 and "0x01" in one_line_error(absent)
+    finally:
+        stop(gateway)

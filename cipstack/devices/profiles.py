@@ -119,8 +119,12 @@ DEFAULT_PROFILE = "acg"
 def catalog_for_identity(identity: IdentityRecord) -> Catalog:
     """The declarations a scanner decodes with for a device that identified itself: those of
     the profile with the same vendor and product code, else the standard objects only."""
+    return catalog_for(identity.vendor_id, identity.product_code)
+
+
+def catalog_for(vendor_id: int, product_code: int) -> Catalog:
     for profile in PROFILES.values():
-        if profile.catalog is not None and profile.matches(identity):
+        if profile.catalog is not None and vendor_id == profile.vendor_id and product_code in profile.product_codes:
             return profile.catalog()
     return Catalog()
 
