@@ -438,6 +438,12 @@ def cmd_eds_check(args: argparse.Namespace) -> int:
     return run_check(args, identity)
 
 
+def cmd_eds_generate(args: argparse.Namespace) -> int:
+    from .eds.commands_generate import run_generate
+
+    return run_generate(args)
+
+
 def cmd_eds_show(args: argparse.Namespace) -> int:
     from .eds.commands import run_show
 
@@ -559,6 +565,7 @@ def build_parser() -> argparse.ArgumentParser:
         q.set_defaults(func=func)
 
     from .eds.commands import add_check_arguments, add_show_arguments
+    from .eds.commands_generate import add_generate_arguments
 
     p = sub.add_parser("eds", help="EDS files: check, show")
     eds = p.add_subparsers(dest="eds_command", required=True, parser_class=_Parser)
@@ -567,6 +574,9 @@ def build_parser() -> argparse.ArgumentParser:
     q.add_argument("--against", metavar="HOST[:PORT]", help="also compare [Device] with a live device's Identity")
     q.add_argument("--timeout", type=parse_duration, default=5.0)
     q.set_defaults(func=cmd_eds_check)
+    q = eds.add_parser("generate", help="write the EDS files of emulated models")
+    add_generate_arguments(q)
+    q.set_defaults(func=cmd_eds_generate)
     q = eds.add_parser("show", help="a readable summary: identity, assemblies, connections")
     add_show_arguments(q)
     q.set_defaults(func=cmd_eds_show)

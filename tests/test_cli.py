@@ -303,3 +303,15 @@ def test_mx2_rx_profiles_models_and_componet_gateway() -> None:
         assert absent.returncode == 1 and "0x01" in one_line_error(absent)
     finally:
         stop(gateway)
+
+
+def test_eds_generate_then_check(tmp_path: Path) -> None:
+    written = run("eds", "generate", "--profile", "rx", "--all", "-o", str(tmp_path))
+    assert written.returncode == 0, written.stderr
+    files = sorted(Path(line).name for line in written.stdout.splitlines())
+    rx = [json.loads(line)["eds_file"] for line in run("models", "--profile", "rx", "--json").stdout.splitlines()]
+    assert files == sorted(set(rx))
+    checked = run("eds", "check", *(str(tmp_path / name) for name in files))
+    assert checked.returncode == 0, checked.stdout
+    bad = run("eds", "generate", "--profile", "rx", "--model", "MX2-A2015-E", "-o", str(tmp_path))
+    assert bad.returncode == 2 and "MX2-A2015-E" in one_line_error(bad)
