@@ -96,7 +96,8 @@ def cmd_adapter(args: argparse.Namespace) -> int:
     if not 0 <= args.port < 65536:
         raise UsageError(f"port {args.port} out of range")
     if args.state is None:
-        args.state = default_state_path(args.profile)
+        # One file per profile and model: another model's saved parameters are not this one's.
+        args.state = default_state_path(f"{args.profile}-{args.model}" if args.model else args.profile)
     settings = AdapterSettings(host=args.host, port=args.port, profile=args.profile, model=args.model,
                                max_sessions=args.max_sessions, max_connections=args.max_connections,
                                io_port=args.io_port, control_path=args.control,
