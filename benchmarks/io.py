@@ -32,6 +32,7 @@ import signal
 import socket
 import subprocess
 import sys
+import tempfile
 import time
 from collections.abc import Sequence
 from typing import Any
@@ -60,7 +61,8 @@ def cpu_seconds(pid: int) -> float:
 
 def start_adapter(port: int, io_port: int) -> subprocess.Popen[bytes]:
     process = subprocess.Popen([sys.executable, "-m", "cipstack", "adapter", "--host", "127.0.0.1", "--port",
-                                str(port), "--io-port", str(io_port), "--log-level", "WARNING"])
+                                str(port), "--io-port", str(io_port), "--log-level", "WARNING", "--quiet",
+                                "--state", os.path.join(tempfile.mkdtemp(), "state.json")])
     deadline = time.monotonic() + 20
     while time.monotonic() < deadline:
         try:
@@ -88,8 +90,10 @@ def distribution(intervals: Sequence[float], rpi: float) -> dict[str, Any]:
 
 async def single_connection(port: int, io_port: int, seconds: float) -> dict[str, Any]:
     rpi = 0.001
+    # Timeout multiplier 3: 1 ms x 4 x 2^3 = 32 ms, a usual choice at a 1 ms RPI (2 would be 16 ms).
     async with await Scanner.connect(f"127.0.0.1:{port}") as scanner, \
-            scanner.io_connection(output=21, input=71, rpi=rpi, target_io_port=io_port, keep_intervals=True) as io:
+            scanner.io_connection(output=21, input=71, rpi=rpi, target_io_port=io_port, keep_intervals=True,
+                                  timeout_multiplier=3) as io:
         await asyncio.sleep(0.5)  # settle, then measure from a clean start
         connection = io.connection
         connection.interval_samples.clear()
@@ -100,10 +104,11 @@ async def single_connection(port: int, io_port: int, seconds: float) -> dict[str
         received = list(connection.interval_samples)
         sends = list(connection.send_times)
         stats = io.stats.as_dict()
+        watchdog_expired = io.timed_out
     sent_intervals = [b - a for a, b in itertools.pairwise(sends)]
     delta = {k: stats[k] - stats_before[k] for k in ("sent", "received", "late", "lost", "skipped_slots")}
     return {
-        "rpi_ms": rpi * 1e3, "seconds": seconds,
+        "rpi_ms": rpi * 1e3, "seconds": seconds, "originator_watchdog_expired": watchdog_expired,
         "o_to_t": {"packets_per_s": round(len(sends) / seconds, 1), "late": delta["late"],
                    "skipped_slots": delta["skipped_slots"], **distribution(sent_intervals, rpi)},
         "t_to_o": {"packets_per_s": round((len(received) + 1) / seconds, 1), "lost": delta["lost"],
@@ -168,13 +173,14 @@ def main(argv: Sequence[str] | None = None) -> int:
     a = results.get("a_one_connection_1ms")
     if a:
         print(f"(a) one connection, RPI {a['rpi_ms']} ms, {a['seconds']} s")
-        for direction in ("o_to_t", "t_to_o"):
+        for direction, label in (("o_to_t", "O->T"), ("t_to_o", "T->O")):
             d = a[direction]
-            print(f"    {direction.replace('_', '->').upper():6} {d['packets_per_s']:8.1f} packets/s  intervals p50 "
+            print(f"    {label} {d['packets_per_s']:8.1f} packets/s  intervals p50 "
                   f"{d.get('p50_ms')} ms  p99 {d.get('p99_ms')} ms  max {d.get('max_ms')} ms  within +-0.5 ms "
                   f"{d.get('within_0.5ms_pct')} % (target >= 99 %)")
         print(f"    O->T late {a['o_to_t']['late']}, skipped slots {a['o_to_t']['skipped_slots']}; "
-              f"T->O lost {a['t_to_o']['lost']} (target 0)")
+              f"T->O lost {a['t_to_o']['lost']} (target 0); originator watchdog expired: "
+              f"{a['originator_watchdog_expired']}")
     b = results.get("b_64_connections_10ms")
     if b:
         print(f"(b) {b['connections']} connections, RPI {b['rpi_ms']} ms, {b['seconds']} s")

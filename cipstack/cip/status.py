@@ -103,13 +103,16 @@ def extended_status_name(code: int) -> str:
 
 
 def describe_status(general: int, extended: Sequence[int] = ()) -> str:
+    """``0x01 (connection failure), extended 0x0127 (invalid o t size), additional 0x000A``: the first
+    additional status word is the extended status; the words after it are its data (a correct size,
+    acceptable RPIs)."""
     text = f"0x{general:02X} ({status_name(general)})"
     if extended:
-        parts = []
-        for word in extended:
-            name = extended_status_name(word) if general == GeneralStatus.CONNECTION_FAILURE else ""
-            parts.append(f"0x{word:04X}" + (f" ({name})" if name else ""))
-        text += ", extended " + ", ".join(parts)
+        first, *rest = extended
+        name = extended_status_name(first) if general == GeneralStatus.CONNECTION_FAILURE else ""
+        text += f", extended 0x{first:04X}" + (f" ({name})" if name else "")
+        if rest:
+            text += ", additional " + " ".join(f"0x{word:04X}" for word in rest)
     return text
 
 
