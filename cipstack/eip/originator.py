@@ -161,8 +161,27 @@ class ExplicitClient:
     async def _connected_round_trip(self, sequence: int, body: bytes, timeout: float | None) -> bytes:
         raise NotImplementedError
 
-    async def close(self) -> None:
+    @property
+    def is_open(self) -> bool:
         raise NotImplementedError
+
+    def _close_transport(self) -> None:
+        raise NotImplementedError
+
+    async def close(self) -> None:
+        """Forward_Close the class 3 connection, UnRegisterSession, close the socket."""
+        if not self.is_open:
+            return
+        try:
+            if self.connection is not None:
+                await self.forward_close()
+            if self.session:
+                self._write(Command.UNREGISTER_SESSION, b"", bytes(8))
+        except (ConnectionError, CipError, EncapsulationStatusError, asyncio.TimeoutError):
+            pass
+        finally:
+            self._close_transport()
+            self.session = 0
 
     def _new_context(self) -> bytes:
         return next(self._contexts).to_bytes(8, "little")
@@ -318,20 +337,14 @@ class EncapsulationClient(ExplicitClient):
         assert self._protocol is not None and self._protocol.transport is not None
         return str(self._protocol.transport.get_extra_info("peername")[0])
 
-    async def close(self) -> None:
-        if self._protocol is None or self._protocol.transport is None:
-            return
-        try:
-            if self.connection is not None:
-                await self.forward_close()
-            if self.session:
-                self._write(Command.UNREGISTER_SESSION, b"", bytes(8))
-        except (ConnectionError, CipError, EncapsulationStatusError, asyncio.TimeoutError):
-            pass
-        finally:
+    @property
+    def is_open(self) -> bool:
+        return self._protocol is not None and self._protocol.transport is not None
+
+    def _close_transport(self) -> None:
+        if self._protocol is not None and self._protocol.transport is not None:
             self._protocol.transport.close()
-            self._protocol = None
-            self.session = 0
+        self._protocol = None
 
     async def __aenter__(self) -> EncapsulationClient:
         if self._protocol is None:
@@ -511,20 +524,14 @@ class BlockingEncapsulationClient(ExplicitClient):
             if len(items) == 2 and _SEQ.unpack_from(items[1].data)[0] == sequence:
                 return items[1].data[2:]
 
-    async def close(self) -> None:
-        if self._sock is None:
-            return
-        try:
-            if self.connection is not None:
-                await self.forward_close()
-            if self.session:
-                self._write(Command.UNREGISTER_SESSION, b"", bytes(8))
-        except (ConnectionError, CipError, EncapsulationStatusError, asyncio.TimeoutError):
-            pass
-        finally:
+    @property
+    def is_open(self) -> bool:
+        return self._sock is not None
+
+    def _close_transport(self) -> None:
+        if self._sock is not None:
             self._sock.close()
-            self._sock = None
-            self.session = 0
+        self._sock = None
 
 
 def run_blocking(coroutine: Coroutine[Any, Any, T]) -> T:
