@@ -132,8 +132,9 @@ async def test_class1_21_71_ramps_and_lost_command(scanner: Scanner, adapter: Ad
                 await asyncio.sleep(0.02)
             elapsed = time.monotonic() - broken
             assert await scanner.read(0x29, 1, 13) == 0x1000             # LostCommand
-            # Connection timeout (40 ms) + the one-second break + Pr.13 (0.2 s).
-            assert 1.2 <= elapsed < 2.5, elapsed
+            # Not before the connection timeout (40 ms) + the one-second break + Pr.13 (0.2 s); how much
+            # later depends on the machine, so only the loop above bounds it.
+            assert elapsed >= 1.2, elapsed
             assert await scanner.read(0x2A, 1, 7) == 0                   # free-run stop
             assert await scanner.read(1, 1, 5) & 0x00F0 == 0x0050        # major fault
     finally:
