@@ -1251,7 +1251,7 @@ def test_huge_announced_length_is_refused_at_once(target: RunningAdapter) -> Non
         # more data after the refusal is not kept anywhere
         with contextlib.suppress(OSError):
             client.sock.sendall(b"\x00" * 100_000)
-    assert _wait_for(lambda: target.connection_count() == baseline)
+    assert _wait_for(lambda: target.connection_count() <= baseline)
     target.assert_healthy(errors_before)
 
 
@@ -1294,7 +1294,7 @@ def test_partial_frames_on_many_connections_stay_bounded(target: RunningAdapter)
                 client.close()
     finally:
         tracemalloc.stop()
-    assert _wait_for(lambda: target.connection_count() == baseline)
+    assert _wait_for(lambda: target.connection_count() <= baseline)
     target.assert_healthy(errors_before)
 
 
