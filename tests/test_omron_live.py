@@ -171,9 +171,10 @@ async def test_class1_extended_speed(direct: Adapter, model_name: str) -> None:
             assert image.drive_state == 7
             io.output.fault_reset = True
             await io.wait_input(lambda i: not i.faulted, timeout=5)
-        with pytest.raises(Exception):   # noqa: B017 - a pair Table 10 does not offer
+        with pytest.raises(CipError) as refused:   # a pair Table 10 does not offer
             async with scanner.io_connection(output=21, input=153, rpi=0.01, target_io_port=direct.io_endpoint.port):
                 pass
+        assert (refused.value.general, refused.value.extended[:1]) == (0x01, (0x012F,))
 
 
 async def test_class1_idle_and_timeout_actions() -> None:
