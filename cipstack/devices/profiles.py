@@ -23,11 +23,14 @@ def serial_from_mac(mac: bytes) -> int:
 
 
 def acg_et2_identity(mac: bytes = DEFAULT_MAC) -> IdentityInfo:
-    """Identity of the ACG drive's ACG-ET2 card (seed 000, Identity Object, class 0x01, instance 1):
-    vendor 259, device type 2 (AC drive), product code 100 (the ACG drive), revision 0x0101 (1.01,
-    the card's version shown in CM.6), product name "CENT" (4 bytes)."""
-    return IdentityInfo(vendor_id=259, device_type=2, product_code=100, revision=(1, 1),
-                        serial_number=serial_from_mac(mac), product_name="CENT")
+    """Identity of the ACG drive's ACG-ET2 card as it leaves the factory (seed 000, Identity Object):
+    the values the ACG objects declare, the revision from CM.6's factory value."""
+    from .acg.objects import DEVICE_TYPE, PRODUCT_CODE, PRODUCT_NAME, VENDOR_ID
+    from .acg.registers import ACG_REGISTERS
+
+    version = ACG_REGISTERS.by_code("CM.6").default
+    return IdentityInfo(VENDOR_ID, DEVICE_TYPE, PRODUCT_CODE, (version >> 8, version & 0xFF),
+                        serial_from_mac(mac), PRODUCT_NAME)
 
 
 @dataclass(frozen=True)
@@ -104,7 +107,8 @@ _ACG_FIXED_ASSEMBLIES = frozenset({20, 21, 100, 101, 70, 71, 110, 111})
 
 PROFILES: dict[str, Profile] = {
     "acg": Profile("acg", "ACG drive with its ACG-ET2 EtherNet/IP card (seeds 000 and 001)", _acg,
-                   vendor_id=259, product_codes=frozenset({100}), catalog=_acg_catalog),
+                   vendor_id=acg_et2_identity().vendor_id, product_codes=frozenset({acg_et2_identity().product_code}),
+                   catalog=_acg_catalog),
     # The Omron inverters with the CompoNet option board (seed 004), served over EtherNet/IP.
     "mx2": Profile("mx2", "Omron MX2 with the 3G3AX-MX2-CRT-E CompoNet option board (--model, Tables 2/C-3)",
                    _omron("mx2", "MX2-A2015-E"), vendor_id=47, product_codes=_omron_product_codes("mx2"),
