@@ -111,17 +111,24 @@ def speed_output(instance: int, frequency_command: ParameterWord) -> AssemblySch
     raise KeyError(f"{instance} is not a speed control output of the ACG-ET2")
 
 
+#: Seed 000 disagrees with itself: the table after the input instances relates Ctrl From Net to 0x29
+#: attribute 15, the Control Supervisor's own table serves "Control From Net." at 14. The object
+#: table is what the device answers, so the bit links there.
+CTRL_FROM_NET_ATTRIBUTE = 14
+
+
 def speed_input(instance: int, output_frequency: ParameterWord) -> AssemblySchema:
     """Input 70/110 (Faulted, Running1) or 71/111 (all eight flags and Drive State). The Warning
     flag is "Not supported" (bit table after the input instances) and stays 0."""
     if instance == 70:
         return basic_speed_control_input(70, "rpm")
     if instance == 71:
-        return extended_speed_control_input(71, "rpm")
+        return extended_speed_control_input(71, "rpm", ctrl_from_net_attribute=CTRL_FROM_NET_ATTRIBUTE)
     if instance == 110:
         return _hz_speed(basic_speed_control_input(110), "speed_actual", output_frequency)
     if instance == 111:
-        return _hz_speed(extended_speed_control_input(111), "speed_actual", output_frequency)
+        return _hz_speed(extended_speed_control_input(111, ctrl_from_net_attribute=CTRL_FROM_NET_ATTRIBUTE),
+                         "speed_actual", output_frequency)
     raise KeyError(f"{instance} is not a speed control input of the ACG-ET2")
 
 

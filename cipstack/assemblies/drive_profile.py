@@ -48,14 +48,18 @@ def basic_speed_control_input(instance: int = 70, unit: str = "rpm", scale: floa
     ])
 
 
-def extended_speed_control_input(instance: int = 71, unit: str = "rpm", scale: float = 1.0) -> AssemblySchema:
+def extended_speed_control_input(instance: int = 71, unit: str = "rpm", scale: float = 1.0,
+                                 ctrl_from_net_attribute: int = 15) -> AssemblySchema:
+    """``ctrl_from_net_attribute``: the Control Supervisor attribute the bit mirrors, 15 in the AC drive
+    profile and Omron's Table D-4; the ACG serves it at 14 (seed 000's object table)."""
     return AssemblySchema(instance, "Extended Speed Control Input", 4, [
         bit("faulted", 0, 0, help="Fault or trip", link=(CONTROL_SUPERVISOR, 1, 10)),
         bit("warning", 0, 1, help="Warning", link=(CONTROL_SUPERVISOR, 1, 11)),
         bit("running_forward", 0, 2, help="Running forward", link=(CONTROL_SUPERVISOR, 1, 7)),
         bit("running_reverse", 0, 3, help="Running reverse", link=(CONTROL_SUPERVISOR, 1, 8)),
         bit("ready", 0, 4, help="Ready", link=(CONTROL_SUPERVISOR, 1, 9)),
-        bit("ctrl_from_net", 0, 5, help="Run command comes from the network", link=(CONTROL_SUPERVISOR, 1, 15)),
+        bit("ctrl_from_net", 0, 5, help="Run command comes from the network",
+            link=(CONTROL_SUPERVISOR, 1, ctrl_from_net_attribute)),
         bit("ref_from_net", 0, 6, help="Speed reference comes from the network", link=(AC_DC_DRIVE, 1, 29)),
         bit("at_reference", 0, 7, help="Speed has reached the reference", link=(AC_DC_DRIVE, 1, 3)),
         AssemblyField("drive_state", 1, USINT, help="Drive state (Control Supervisor attribute 6)",
