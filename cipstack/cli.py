@@ -91,6 +91,10 @@ def cmd_adapter(args: argparse.Namespace) -> int:
     from .devices.state import StateFileError, default_state_path
     from .eip.io_server import run_precise
 
+    if args.eds is not None:
+        return _adapter_from_eds(args)
+    if args.profile is None:
+        args.profile = "acg"
     if args.profile not in PROFILES:
         raise UsageError(f"unknown profile {args.profile!r} (known: {', '.join(sorted(PROFILES))})")
     if not 0 <= args.port < 65536:
@@ -106,6 +110,53 @@ def cmd_adapter(args: argparse.Namespace) -> int:
         adapter = Adapter(settings)
     except (StateFileError, ValueError, KeyError) as exc:
         raise UsageError(str(exc)) from None
+    try:
+        run_precise(adapter.serve_forever())
+    except OSError as exc:
+        print(f"cipstack adapter: cannot listen on {args.host}:{args.port}: {exc.strerror or exc}", file=sys.stderr)
+        return EXIT_FAILURE
+    return EXIT_OK
+
+
+def _read_eds_file(path: str) -> Any:
+    """The EDS document of ``path``; an unreadable file is a usage error (one line, exit 2)."""
+    from .eds.reader import EdsSyntaxError, read_eds
+
+    try:
+        return read_eds(path)
+    except EdsSyntaxError as exc:
+        raise UsageError(f"{path}:{exc.line}: not a readable EDS: {exc.message}") from None
+    except OSError as exc:
+        raise UsageError(f"{path}: cannot read: {exc.strerror or exc}") from None
+
+
+def _adapter_from_eds(args: argparse.Namespace) -> int:
+    """``cipstack adapter --eds FILE``: the generic device the file describes; each construct it
+    cannot serve is one warning line on stderr."""
+    from .adapter import Adapter, AdapterSettings
+    from .devices.base import DeviceLimits
+    from .devices.from_eds import EdsDeviceError, build_eds_device
+    from .devices.profiles import DEFAULT_MAC
+    from .eip.io_server import run_precise
+    from .objects.tcpip import NetworkInterface
+
+    if args.model is not None or args.state is not None or args.modbus_port is not None:
+        raise UsageError("--model, --state and --modbus-port belong to --profile, not --eds")
+    if not 0 <= args.port < 65536:
+        raise UsageError(f"port {args.port} out of range")
+    doc = _read_eds_file(args.eds)
+    ip_address = args.host if args.host not in ("", "0.0.0.0", "localhost") else "127.0.0.1"
+    try:
+        device = build_eds_device(doc, NetworkInterface(ip_address=ip_address, mac=DEFAULT_MAC),
+                                  DeviceLimits(args.max_sessions, args.max_connections))
+    except EdsDeviceError as exc:
+        raise UsageError(f"{args.eds}: {exc}") from None
+    for issue in device.issues:
+        print(f"cipstack adapter: {args.eds}:{issue.line}: warning: {issue.message}", file=sys.stderr, flush=True)
+    settings = AdapterSettings(host=args.host, port=args.port, max_sessions=args.max_sessions,
+                               max_connections=args.max_connections, io_port=args.io_port,
+                               control_path=args.control, status_lines=not args.quiet)
+    adapter = Adapter(settings, device=device)
     try:
         run_precise(adapter.serve_forever())
     except OSError as exc:
@@ -300,8 +351,30 @@ def cmd_io(args: argparse.Namespace) -> int:
     from .eip.originator import EncapsulationClient
     from .scanner import Scanner
 
-    rpi = parse_duration(args.rpi)
-    if not 0.0001 <= rpi <= 10:
+    doc = None
+    if args.eds is not None:
+        if args.connection is None:
+            raise UsageError("--eds needs --connection N (a ConnectionN of the file, by number or name)")
+        if args.output is not None or args.input is not None or args.heartbeat is not None:
+            raise UsageError("--eds takes the output, input and heartbeat from the file: give none of them")
+        doc = _read_eds_file(args.eds)
+        from .eds.interpret import read_view
+
+        try:
+            read_view(doc).connection(args.connection)
+        except KeyError as exc:
+            raise UsageError(f"{args.eds}: {exc.args[0]}") from None
+    elif args.connection is not None:
+        raise UsageError("--connection needs --eds FILE")
+    elif args.input is None:
+        raise UsageError("give --input (or --eds FILE --connection N)")
+    # Without --rpi: the RPI the EDS proposes (None lets the scanner take it), else 10 ms.
+    rpi: float | None = 0.010
+    if args.rpi is not None:
+        rpi = parse_duration(args.rpi)
+    elif doc is not None:
+        rpi = None
+    if rpi is not None and not 0.0001 <= rpi <= 10:
         raise UsageError(f"RPI {args.rpi} outside 0.1 ms .. 10 s")
     assignments = [parse_assignment(a) for a in args.set or []]
     host, port = parse_host(args.target)
@@ -317,8 +390,13 @@ def cmd_io(args: argparse.Namespace) -> int:
         options: dict[str, Any] = {"target_io_port": args.target_io_port, "local_io_port": args.io_port}
         loop = asyncio.get_running_loop()
         started = loop.time()
-        async with scanner, scanner.io_connection(output=args.output, input=args.input, rpi=rpi,
-                                                  heartbeat=args.heartbeat, **options) as io:
+        if doc is not None:
+            opened = scanner.io_connection_from_eds(doc, args.connection, rpi, **options)
+        else:
+            assert rpi is not None  # set above when no EDS is given
+            opened = scanner.io_connection(output=args.output, input=args.input, rpi=rpi, heartbeat=args.heartbeat,
+                                           **options)
+        async with scanner, opened as io:
             for name, value in assignments:
                 try:
                     if name == "raw":
@@ -483,7 +561,11 @@ def build_parser() -> argparse.ArgumentParser:
     p = sub.add_parser("adapter", help="run the adapter emulator")
     p.add_argument("--host", default="127.0.0.1", help="address to listen on (default 127.0.0.1)")
     p.add_argument("--port", type=lambda t: parse_number(t, "port"), default=DEFAULT_PORT)
-    p.add_argument("--profile", default="acg", help="device profile: acg (default), mx2, rx")
+    device = p.add_mutually_exclusive_group()
+    device.add_argument("--profile", help="device profile: acg (default), mx2, rx")
+    device.add_argument("--eds", metavar="FILE",
+                        help="emulate the generic device an EDS file describes (identity, parameters as "
+                             "attributes, assemblies, connections)")
     p.add_argument("--model", help="model of the mx2/rx profiles (e.g. MX2-A2015-E, RX-A4055-E)")
     p.add_argument("--max-sessions", type=lambda t: parse_number(t, "max sessions"), default=32)
     p.add_argument("--max-connections", type=lambda t: parse_number(t, "max connections"), default=32)
@@ -536,10 +618,13 @@ def build_parser() -> argparse.ArgumentParser:
     p = sub.add_parser("io", help="open a class 1 connection, print input changes by field name")
     common(p)
     p.add_argument("--output", type=lambda t: parse_number(t, "output"), help="output (O->T) assembly instance")
-    p.add_argument("--input", type=lambda t: parse_number(t, "input"), required=True, help="input assembly instance")
+    p.add_argument("--input", type=lambda t: parse_number(t, "input"), help="input assembly instance")
     p.add_argument("--heartbeat", type=lambda t: parse_number(t, "heartbeat"),
                    help="O->T heartbeat point instead of an output (input only: e.g. 198, listen only: 199)")
-    p.add_argument("--rpi", default="10ms", help="requested packet interval (default 10ms)")
+    p.add_argument("--rpi", help="requested packet interval (default: the EDS's with --eds, else 10ms)")
+    p.add_argument("--eds", metavar="FILE", help="open a connection this EDS file describes (with --connection)")
+    p.add_argument("--connection", metavar="N",
+                   help="the ConnectionN of --eds to open, by number N or by name")
     p.add_argument("--set", action="append", metavar="FIELD=VALUE",
                    help="output field to set (or raw=HEX); repeatable")
     p.add_argument("--duration", type=parse_duration, default=5.0, help="how long to run (default 5s)")

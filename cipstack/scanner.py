@@ -21,6 +21,7 @@ from .cip.messages import MessageRouterRequest, MessageRouterResponse, Service
 from .cip.model import AttributeSpec
 from .cip.status import CipError, GeneralStatus
 from .cip.types import UINT, CipType
+from .eds.model import EdsDocument
 from .eip.identity_items import IdentityRecord, ServiceRecord
 from .eip.io_originator import IoConnectionHandle
 from .eip.originator import (
@@ -259,6 +260,40 @@ class Scanner:
             output, input, rpi, output_size=output_size, input_size=input_size, config=config, heartbeat=heartbeat,
             output_schema=self.catalog.assemblies.get(output) if output is not None else None,
             input_schema=self.catalog.assemblies.get(input), **options)
+        async with context as handle:
+            yield handle
+
+    @contextlib.asynccontextmanager
+    async def io_connection_from_eds(self, doc: EdsDocument, connection: int | str, rpi: float | None = None,
+                                     **options: Any) -> AsyncIterator[IoConnectionHandle]:
+        """The class 1 connection ``ConnectionN`` of an EDS describes, by number N or by name (field 13):
+        ``async with scanner.io_connection_from_eds(doc, 1) as io``.
+
+        Its path gives the configuration instance and the connection points; the sizes are those of
+        the assemblies it names (else its size fields); input only and listen only send the
+        heartbeat point; T->O is multicast when the file allows only multicast (listen only), unless
+        ``multicast`` is given. ``rpi`` (seconds) defaults to the RPI the file proposes, else 10 ms.
+        Fields are named after the parameters the assembly members refer to, when every member can
+        be a field; else the catalog's schema, else raw bytes. ``options`` as for ``io_connection``.
+        A connection the file does not describe raises ``KeyError``.
+        """
+        from .eds.description import DEFAULT_RPI_US
+        from .eds.interpret import read_view
+
+        if not isinstance(self.client, EncapsulationClient):
+            raise TypeError("class 1 connections need the asyncio client (Scanner.connect)")
+        view = read_view(doc)
+        found = view.connection(connection)
+        if rpi is None:
+            rpi = (found.rpi_us or DEFAULT_RPI_US) / 1e6
+        options.setdefault("multicast", found.t_o_multicast and not found.t_o_point_to_point)
+        output = None if found.heartbeat else found.o_t_point
+        output_schema = None if output is None else (view.schema(output) or self.catalog.assemblies.get(output))
+        input_schema = view.schema(found.t_o_point) or self.catalog.assemblies.get(found.t_o_point)
+        context = self.client.io_connection(
+            output, found.t_o_point, rpi, output_size=found.o_t_size, input_size=found.t_o_size, config=found.config,
+            heartbeat=found.o_t_point if found.heartbeat else None, output_schema=output_schema,
+            input_schema=input_schema, **options)
         async with context as handle:
             yield handle
 

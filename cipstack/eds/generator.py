@@ -14,7 +14,8 @@ Choices the EDS format leaves open, made once here:
 
 * Parameters are numbered in declaration order, then come the parameters made for assembly
   fields that link no declared parameter (an unlinked field gets a parameter with an empty
-  link path), then one ``Requested Packet Interval`` parameter that every connection's RPI
+  link path, and so does a field that carries a declared attribute in another type, unit or
+  scale: one link path names one value), then one ``Requested Packet Interval`` parameter that every connection's RPI
   fields refer to, its range the device's.
 * A scale such as 0.01 Hz is written as multiplier/divider 1/100 (base 1, offset 0) with two
   decimal places, descriptor bit 2 set. Without a scale the scaling fields are empty.
@@ -39,7 +40,7 @@ Choices the EDS format leaves open, made once here:
 from __future__ import annotations
 
 import os
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from datetime import datetime, timezone
 from decimal import Decimal
 from fractions import Fraction
@@ -353,10 +354,17 @@ def _plan(description: EdsDescription) -> _Plan:
 def _member_parameter(item: AssemblyField, output: bool, schema: AssemblySchema, params: list[EdsParameter],
                       declared_by_link: dict[Link, list[int]], made: dict[tuple[Any, ...], int]) -> int:
     if item.link is not None:
-        for index in declared_by_link.get(item.link, ()):
+        declared = declared_by_link.get(item.link, ())
+        for index in declared:
             if _compatible(params[index], item):
                 return index
-        key: tuple[Any, ...] = ("link", item.link, item.bits, item.type.code, item.unit, item.scale, output)
+        if declared:
+            # The field carries the attribute in another form (a Hz word for an rpm attribute): its
+            # parameter is not that attribute's value, so it gets no link path of its own.
+            key: tuple[Any, ...] = ("other form", item.link, item.bits, item.type.code, item.unit, item.scale, output)
+            item = replace(item, link=None)
+        else:
+            key = ("link", item.link, item.bits, item.type.code, item.unit, item.scale, output)
     else:
         key = ("field", schema.instance, item.name)
     if key not in made:

@@ -1,70 +1,80 @@
-"""The EDS descriptions of the emulated devices, built from their declarations.
+"""The EDS descriptions of the emulated devices, built from the devices themselves.
 
-* ``acg_et2_description()``: the ACG drive with its ACG-ET2 EtherNet/IP card (seed 000): its
-  Identity, every keypad parameter through its class 0x64 path (instance = keypad group,
-  attribute = code number), grouped by keypad group, and the drive-profile assemblies.
+* ``acg_et2_description()``: the ACG drive with its ACG-ET2 EtherNet/IP card (seed 000) as
+  ``build_acg_device()`` builds it at the factory settings: its Identity, the attributes of its
+  Motor Data 0x28, Control Supervisor 0x29 and AC/DC Drive 0x2A objects, every keypad parameter
+  through its class 0x64 path (instance = keypad group, attribute = code number), grouped by
+  keypad group, all 24 assemblies (20/21/100/101/121-128 and 70/71/110/111/141-148 at the
+  CM.31-CM.38 / CM.51-CM.58 factory addresses), the objects its message router serves, and its
+  class 1 offer: the RPI range, heartbeat points and connection limit of its ``IoProfile``, with
+  every CM.24/CM.23 pair (the card accepts the pair the settings select).
 * ``omron_description(model_name)``: the 3G3AX-MX2-CRT-E / 3G3AX-RX-CRT-E CompoNet option board
-  on one MX2 or RX inverter model (seed 004): its Identity (Table C-2 with the product code and
-  name of Tables 2/3), every function-code parameter through its class 0x65 path (Table E-3),
-  the drive-profile assemblies and the ``[CompoNet_IO]`` sizes of the default connection path.
+  on one MX2 or RX inverter model (seed 004) as ``build_omron_device`` builds it: its Identity
+  (Table C-2 with the product code and name of Tables 2/3), the attributes of its drive objects,
+  every function-code parameter through its class 0x65 path (Table E-3), its assemblies in the
+  factory speed unit (the flexible 139/159 when the factory mapping makes them), its object
+  classes and the ``[CompoNet_IO]`` sizes of the default connection path (P046, Table 10).
 * ``eds_file_name(description)``: the file the description is written to; for the option
   board the name of Tables 2/3.
 
-The device modules may pass their full assembly sets, class declarations and CIP attributes;
-without them each description holds what the shared declarations give.
+Nothing here is declared a second time: every value comes from the device modules.
 """
 
 from __future__ import annotations
 
-from collections.abc import Iterable, Mapping, Sequence
+import dataclasses
+from collections.abc import Iterable, Sequence
 
-from ..assemblies.drive_profile import (
-    basic_speed_control_input,
-    basic_speed_control_output,
-    extended_speed_control_input,
-    extended_speed_control_output,
-)
+from ..assemblies.acg import INPUT_INSTANCES as ACG_INPUT_INSTANCES
+from ..assemblies.acg import OUTPUT_INSTANCES as ACG_OUTPUT_INSTANCES
+from ..assemblies.omron import INPUT_INSTANCES as OMRON_INPUT_INSTANCES
+from ..assemblies.omron import OUTPUT_INSTANCES as OMRON_OUTPUT_INSTANCES
 from ..assemblies.schema import AssemblySchema
 from ..devices.acg import registers as acg
-from ..devices.base import DeviceLimits
+from ..devices.acg.device import build_acg_device
+from ..devices.acg.drive import MODEL as ACG_MODEL
+from ..devices.acg.objects import AC_DC_DRIVE_SPEC, CONTROL_SUPERVISOR_SPEC, KEYPAD_PARAMETERS, MOTOR_DATA_SPEC
+from ..devices.base import Device, DeviceLimits
 from ..devices.omron import models as omron
-from ..devices.omron.registers import (
-    CONNECTION_PATHS,
-    TRAITS,
-    Parameter,
-    SpeedUnit,
-    function_code_path,
-    register_set,
-)
-from ..devices.profiles import acg_et2_identity
+from ..devices.omron.device import build_omron_device
+from ..devices.omron.objects import AC_DC_DRIVE_SPEC as OMRON_AC_DC_DRIVE_SPEC
+from ..devices.omron.objects import CLASS_SPECS as OMRON_CLASS_SPECS
+from ..devices.omron.objects import CONTROL_SUPERVISOR_SPEC as OMRON_CONTROL_SUPERVISOR_SPEC
+from ..devices.omron.objects import FUNCTION_CODE
+from ..devices.omron.objects import MOTOR_DATA_SPEC as OMRON_MOTOR_DATA_SPEC
+from ..devices.omron.registers import Parameter, function_code_path, register_set
 from ..eip.connection_manager import BACKPLANE_PORT
-from ..objects import message_router
-from ..objects.identity import IdentityInfo, identity_spec
-from ..objects.tcpip import ETHERNET_LINK_SPEC, TCPIP_CLASS_ID, TCPIP_SPEC
-from .description import EdsCapacity, EdsDescription, EdsObjectClass, EdsParameter, EdsPort, IoOffer
+from ..objects.identity import IdentityInfo
+from ..objects.tcpip import TCPIP_CLASS_ID
+from .description import (
+    EdsCapacity,
+    EdsDescription,
+    EdsObjectClass,
+    EdsParameter,
+    EdsPort,
+    IoOffer,
+    attribute_parameters,
+)
 
-#: Class of the ACG-ET2 keypad parameters: "Class 0x64 (Drive Object)" (seed 000).
-ACG_KEYPAD_CLASS = 0x64
 #: Seed 000 gives vendor ID 259 (Identity Object, attribute 1) but no vendor name: the EDS says
 #: only the number rather than guess a company.
 ACG_VENDOR_NAME = "Vendor 259"
-#: The card's catalog name, "ACG-ET2" (seed 000, appendix B title and overview).
-ACG_CATALOG = "ACG-ET2"
+#: The card's catalog name, "ACG-ET2" (seed 000, appendix B title and overview): the drive model's name.
+ACG_CATALOG = ACG_MODEL
 #: ``ProdTypeStr`` of device type 2: the CIP AC drive profile (seed 000: "Device Type (drive) 2";
 #: seed 004, Table 1: "CompoNet Profile AC Drive (0x02)").
 AC_DRIVE = "AC Drive"
 
-#: Function Code object: "class 0x65" (seed 004, section E-3, Table E-3).
-OMRON_FUNCTION_CODE_CLASS = 0x65
 #: Identity attribute 1 of the option board: "47 (OMRON Corporation)" (seed 004, Table C-2).
 OMRON_VENDOR_NAME = "OMRON Corporation"
 
-#: Unit and scale of the rotational speed words for each speed unit (seed 004, section 4-2-5).
-SPEED_UNITS: Mapping[SpeedUnit, tuple[str, float]] = {
-    SpeedUnit.CENTIHERTZ: ("Hz", 0.01),
-    SpeedUnit.DECIHERTZ: ("Hz", 0.1),
-    SpeedUnit.RPM: ("rpm", 1.0),
-}
+
+def device_object_classes(device: Device) -> tuple[EdsObjectClass, ...]:
+    """An object class section for every class the device's message router serves, with the
+    instances it has (the generator leaves out Assembly and Connection Manager, which have
+    sections of their own)."""
+    return tuple(EdsObjectClass(obj.spec, len(obj.instances))
+                 for _, obj in sorted(device.router.objects.items()))
 
 
 # -- ACG-ET2 ---------------------------------------------------------------------------------------
@@ -79,8 +89,16 @@ def acg_keypad_parameters() -> tuple[EdsParameter, ...]:
         if path is None:
             continue
         # Group names as seed 001 "Total Memory Map for Communication" writes them ("dr Group").
-        out.append(EdsParameter.from_register(register, (ACG_KEYPAD_CLASS, *path), group=f"{register.group} Group"))
+        out.append(EdsParameter.from_register(register, (KEYPAD_PARAMETERS, *path), group=f"{register.group} Group"))
     return tuple(out)
+
+
+def acg_attribute_parameters() -> tuple[EdsParameter, ...]:
+    """The instance 1 attributes of Motor Data 0x28, Control Supervisor 0x29 and AC/DC Drive 0x2A
+    (seed 000, "Supported Objects"), as the card declares them; the drive-profile assembly
+    members refer to them."""
+    return tuple(p for spec in (MOTOR_DATA_SPEC, CONTROL_SUPERVISOR_SPEC, AC_DC_DRIVE_SPEC)
+                 for p in attribute_parameters(spec))
 
 
 def acg_pairs(outputs: Iterable[AssemblySchema], inputs: Iterable[AssemblySchema]
@@ -116,32 +134,32 @@ def acg_et2_description(
     identity: IdentityInfo | None = None,
     outputs: Sequence[AssemblySchema] | None = None,
     inputs: Sequence[AssemblySchema] | None = None,
-    attributes: Sequence[EdsParameter] = (),
+    attributes: Sequence[EdsParameter] | None = None,
     io: IoOffer | None = None,
     object_classes: Sequence[EdsObjectClass] | None = None,
     limits: DeviceLimits | None = None,
 ) -> EdsDescription:
-    """The ACG-ET2's description.
+    """The ACG-ET2's description; each argument replaces what the device built by
+    ``build_acg_device(limits=limits)`` gives.
 
-    Defaults: the Identity of ``acg_et2_identity()``; outputs 20/21 and inputs 70/71 of the
-    drive profile in rpm; ``attributes`` (parameters of the CIP objects, e.g. 0x28/0x29/0x2A)
-    before the keypad parameters; the connections of ``acg_pairs`` with the class 1 limits
-    ``IoProfile`` has by default; the message connection limit of ``DeviceLimits``; the
-    Identity, Message Router, TCP/IP Interface and Ethernet Link classes.
+    Defaults: the device's Identity; its 24 assemblies at the factory settings; the attributes
+    of 0x28/0x29/0x2A (``acg_attribute_parameters``) before the keypad parameters; the class 1
+    offer of its ``IoProfile`` (RPI range, heartbeat points, connection limit) with the pairs of
+    ``acg_pairs``; the message connection limit of ``limits``; the classes its router serves.
     """
-    outputs = tuple(outputs) if outputs is not None else (
-        basic_speed_control_output(20, "rpm"), extended_speed_control_output(21, "rpm"))
-    inputs = tuple(inputs) if inputs is not None else (
-        basic_speed_control_input(70, "rpm"), extended_speed_control_input(71, "rpm"))
+    device = build_acg_device(limits=limits, now=0.0)
+    outputs = tuple(outputs) if outputs is not None else tuple(
+        device.assembly_schema(i) for i in ACG_OUTPUT_INSTANCES)
+    inputs = tuple(inputs) if inputs is not None else tuple(device.assembly_schema(i) for i in ACG_INPUT_INSTANCES)
     if io is None:
         pairs, notes, input_notes = acg_pairs(outputs, inputs)
-        io = IoOffer(pairs=pairs, pair_notes=notes, input_notes=input_notes)
-    limits = limits or DeviceLimits()
+        io = dataclasses.replace(IoOffer.from_io_profile(device.io_profile()), pairs=pairs, pair_notes=notes,
+                                 input_notes=input_notes)
+    attributes = acg_attribute_parameters() if attributes is None else tuple(attributes)
     if object_classes is None:
-        object_classes = tuple(EdsObjectClass(spec) for spec in (
-            identity_spec(), message_router.SPEC, TCPIP_SPEC, ETHERNET_LINK_SPEC))
+        object_classes = device_object_classes(device)
     return EdsDescription(
-        identity=identity or acg_et2_identity(),
+        identity=identity or device.identity_info,
         vendor_name=ACG_VENDOR_NAME,
         product_type_name=AC_DRIVE,
         catalog=ACG_CATALOG,
@@ -153,7 +171,8 @@ def acg_et2_description(
         io=io,
         # Port 1 is the backplane (the device itself); the Ethernet port is the next one.
         ports=(EdsPort("TCP", "EtherNet/IP Port", (TCPIP_CLASS_ID, 1), BACKPLANE_PORT + 1),),
-        capacity=EdsCapacity(max_io_connections=io.max_connections, max_msg_connections=limits.max_connections),
+        capacity=EdsCapacity(max_io_connections=io.max_connections,
+                             max_msg_connections=device.limits.max_connections),
         object_classes=tuple(object_classes),
     )
 
@@ -164,7 +183,7 @@ def omron_parameter(parameter: Parameter) -> EdsParameter:
     """A function-code parameter through its class 0x65 path (Table E-3). F001 cannot be written
     by function code and b127 is two words there (section E-2-2)."""
     return EdsParameter.from_register(
-        parameter, (OMRON_FUNCTION_CODE_CLASS, *function_code_path(parameter.code)),
+        parameter, (FUNCTION_CODE, *function_code_path(parameter.code)),
         group=f"{parameter.group} Group",
         settable=parameter.access.writable and parameter.function_code_writable,
         words=parameter.function_code_words or None,
@@ -176,12 +195,11 @@ def omron_parameters(family: omron.Family) -> tuple[EdsParameter, ...]:
     return tuple(omron_parameter(p) for p in register_set(family).parameters if p.code)
 
 
-def omron_speed_unit(family: omron.Family) -> tuple[str, float]:
-    """Unit and scale of the speed words with the factory settings: P049 (motor poles) and d060
-    (inverter mode) at their defaults select the unit (section 4-2-5)."""
-    registers = register_set(family)
-    unit = TRAITS[family].speed_unit(registers.by_code("P049").default, registers.by_code("d060").default)
-    return SPEED_UNITS[unit]
+def omron_attribute_parameters() -> tuple[EdsParameter, ...]:
+    """The instance 1 attributes of the option board's Motor Data 0x28, Control Supervisor 0x29
+    and AC/DC Drive 0x2A objects (appendix D); the assembly members refer to them."""
+    return tuple(p for spec in (OMRON_MOTOR_DATA_SPEC, OMRON_CONTROL_SUPERVISOR_SPEC, OMRON_AC_DC_DRIVE_SPEC)
+                 for p in attribute_parameters(spec))
 
 
 def omron_description(
@@ -189,33 +207,34 @@ def omron_description(
     *,
     outputs: Sequence[AssemblySchema] | None = None,
     inputs: Sequence[AssemblySchema] | None = None,
-    attributes: Sequence[EdsParameter] = (),
+    attributes: Sequence[EdsParameter] | None = None,
     object_classes: Sequence[EdsObjectClass] | None = None,
 ) -> EdsDescription:
     """The option board on inverter ``model_name`` (Tables 2/3); ``UnknownModelError`` for a
-    name the tables do not list.
+    name the tables do not list. Each argument replaces what ``build_omron_device(model_name)``
+    gives at the factory settings.
 
-    Defaults: outputs 20/21 and inputs 70/71 of the drive profile with speed words in the
-    factory unit (``omron_speed_unit``); the Identity and Message Router classes. The
-    ``[CompoNet_IO]`` sizes are those of the pair P046's factory setting selects (Table 10).
+    Defaults: the device's Identity; its assemblies (``OmronDevice.schemas()``: speed words in
+    the unit P049/d060 select, section 4-2-5, and 139/159 with the words of the flexible mapping
+    when there is one); the attributes of 0x28/0x29/0x2A before the function codes; the classes
+    of ``CLASS_SPECS`` with the instances the device has. ``[CompoNet_IO]`` gives the pair P046
+    selects (Table 10), as the device applied it at power-on.
     """
     found = omron.model(model_name)
     family = found.family
-    label, scale = omron_speed_unit(family)
-    outputs = tuple(outputs) if outputs is not None else (
-        basic_speed_control_output(20, label, scale), extended_speed_control_output(21, label, scale))
-    inputs = tuple(inputs) if inputs is not None else (
-        basic_speed_control_input(70, label, scale), extended_speed_control_input(71, label, scale))
-    _, default_output, default_input = CONNECTION_PATHS[register_set(family).by_code("P046").default]
+    device = build_omron_device(found.name)
+    schemas = device.schemas()
+    outputs = tuple(outputs) if outputs is not None else tuple(
+        schemas[i] for i in OMRON_OUTPUT_INSTANCES if i in schemas)
+    inputs = tuple(inputs) if inputs is not None else tuple(schemas[i] for i in OMRON_INPUT_INSTANCES if i in schemas)
+    attributes = omron_attribute_parameters() if attributes is None else tuple(attributes)
     if object_classes is None:
-        object_classes = tuple(EdsObjectClass(spec) for spec in (identity_spec(), message_router.SPEC))
+        objects = device.router.objects
+        object_classes = tuple(EdsObjectClass(spec, len(objects[spec.class_id].instances) if spec.class_id in objects
+                                              else 0) for spec in OMRON_CLASS_SPECS)
     names = " / ".join(m.name for m in omron.models_with_product_code(found.product_code))
-    identity = IdentityInfo(
-        vendor_id=omron.VENDOR_ID, device_type=omron.DEVICE_TYPE, product_code=found.product_code,
-        revision=omron.REVISION, serial_number=0, product_name=found.product_name,
-    )
     return EdsDescription(
-        identity=identity,
+        identity=device.identity_info,
         vendor_name=OMRON_VENDOR_NAME,
         product_type_name=AC_DRIVE,
         catalog=family.option_board,
@@ -225,7 +244,7 @@ def omron_description(
         outputs=outputs,
         inputs=inputs,
         object_classes=tuple(object_classes),
-        componet_io=(default_output, default_input),
+        componet_io=device.default_pair,
         file_name=found.eds_file,
     )
 

@@ -265,3 +265,133 @@ MESSY_EDS: bytes = (
     "259_Ratio = .004, 1e3, +5, {1, 2, 3}, 12:00:00;\r\n"
     "$ closing comment\r\n"
 ).encode("latin-1")
+
+
+#: A device none of our profiles describes: a flow controller of a made-up vendor, written by hand.
+#: Class 0x70 holds its parameters (instance 1: setpoint, actual flow, valve, tag; instance 2: mode);
+#: Param7 mirrors a standard Identity attribute. The heartbeat points are 197/196, not the usual
+#: 198/199, and the RPI parameter allows 2 ms to 1 s.
+GENERIC_EDS = """\
+$ Acme FC-10 flow controller: hand-written for the cipstack tests
+[File]
+    DescText = "Acme FC-10 flow controller";
+    CreateDate = 04-01-2024;
+    CreateTime = 08:30:00;
+    Revision = 1.2;
+
+[Device]
+    VendCode = 1234;
+    VendName = "Acme Controls";
+    ProdType = 0x2B;            $ generic device
+    ProdTypeStr = "Generic Device";
+    ProdCode = 77;
+    MajRev = 3;
+    MinRev = 14;
+    ProdName = "Acme FC-10";
+    Catalog = "FC-10";
+
+[Device Classification]
+    Class1 = EtherNetIP;
+
+[Params]
+    Param1 = 0, 6, "20 70 24 01 30 01", 0x0000, 0xC7, 2, "Flow Setpoint", "l/min", "Flow to hold",
+        0, 500, 120, , , , , , , , , 0;
+    Param2 = 0, 6, "20 70 24 01 30 02", 0x0030, 0xC3, 2, "Flow Actual", "l/min", "Measured flow",
+        -100, 600, 0, , , , , , , , , 0;
+    Param3 = 0, 6, "20 70 24 01 30 03", 0x0002, 0xC1, 1, "Valve Open", "", "",
+        0, 1, 0, , , , , , , , , 0;
+    Enum3 = 0, "Closed", 1, "Open";
+    Param4 = 0, 6, "20 70 24 02 30 01", 0x0000, 0xC6, 1, "Mode", "", "0 off, 1 auto, 2 manual, 3 purge",
+        0, 3, 1, , , , , , , , , 0;
+    Param5 = 0, 6, "20 70 24 01 30 04", 0x0000, 0xDA, 12, "Tag", "", "Plant tag",
+        , , "FC-10 North", , , , , , , , , 0;
+    Param6 = 0, , , 0x0000, 0xC8, 4, "RPI", "us", "Requested packet interval",
+        2000, 1000000, 20000, , , , , , , , , 0;
+    Param7 = 0, 6, "20 01 24 01 30 07", 0x0010, 0xDA, 11, "Product Name", "", "",
+        , , "Acme FC-10", , , , , , , , , 0;
+
+[Assembly]
+    Assem100 = "Control", "20 04 24 64 30 03", 4, 0x0000, , ,
+        16, Param1,
+        1, Param3,
+        7, ,
+        8, Param4;
+    Assem101 = "Status", "20 04 24 65 30 03", 6, 0x0000, , ,
+        16, Param2,
+        16, Param1,
+        1, Param3,
+        15, ;
+    Assem196 = "Listen Only Heartbeat", "20 04 24 C4 30 03", 0, 0x0000, , ;
+    Assem197 = "Input Only Heartbeat", "20 04 24 C5 30 03", 0, 0x0000, , ;
+
+[Connection Manager]
+    Connection1 = 0x04010002, 0x44640405, Param6, 4, Assem100, Param6, 6, Assem101, , , , ,
+        "Control", "Setpoint, valve and mode out; flow in", "20 04 24 01 2C 64 2C 65";
+    Connection2 = 0x02010002, 0x44640305, Param6, 0, Assem197, Param6, 6, Assem101, , , , ,
+        "Monitor", "Flow in, heartbeat out", "20 04 24 01 2C C5 2C 65";
+    Connection3 = 0x01010002, 0x44240305, Param6, 0, Assem196, Param6, 6, Assem101, , , , ,
+        "Listen", "Flow in, shared by multicast", "20 04 24 01 2C C4 2C 65";
+
+[Capacity]
+    MaxIOConnections = 4;
+    MaxMsgConnections = 4;
+"""
+
+#: One construct per line that the emulator cannot serve, and what it says of each (a fragment
+#: of the warning), with the keyword of the entry. Everything else in the file is served.
+BROKEN_EDS = """\
+[Device]
+    VendCode = 1234;
+    ProdType = 0x2B;
+    MajRev = 1;
+    MinRev = 0;
+    ProdName = "Broken";
+
+[Params]
+    Param1 = 0, 6, "20 70 24 01 30 01", 0x0000, 0xC7, 2, "Good", "", "", 0, 10, 5, , , , , , , , , 0;
+    Param2 = 0, 6, "20 70 24 01 30 02", 0x0000, 0xEE, 2, "Odd type", "", "", 0, 10, 5, , , , , , , , , 0;
+    Param3 = 0, 8, "20 70 24 [Param1] 30 03", 0x0000, 0xC7, 2, "Path by param", "", "",
+        0, 300, 5, , , , , , , , , 0;
+    Param4 = 0, 4, "20 70 24 01", 0x0000, 0xC7, 2, "No attribute", "", "", 0, 10, 5, , , , , , , , , 0;
+    Param5 = 0, 6, "20 70 24 01 30 05", 0x0000, 0xC7, 2, "Default too big", "", "",
+        0, 10, 99, , , , , , , , , 0;
+    Param6 = 0, 6, "20 70 24 01 30 06";
+    Param7 = 0, 6, "20 01 24 01 30 63", 0x0000, 0xC7, 2, "No such Identity attribute", "", "",
+        0, 10, 5, , , , , , , , , 0;
+    Param8 = 0, 6, "20 70 24 01 30 08", 0x0000, 0xC6, 1, "Bad enum", "", "", 0, 3, 1, , , , , , , , , 0;
+    Enum8 = 0, "Off", "On", 1;
+
+[Assembly]
+    Assem100 = "Variable", "20 04 24 64 30 03", Param1, 0x0000, , ;
+    Assem101 = "Too few members", "20 04 24 65 30 03", 4, 0x0000, , , 16, Param1;
+    Assem102 = "Not an assembly", "20 05 24 01", 2, 0x0000, , , 16, Param1;
+    Assem103 = "Input", "20 04 24 67 30 03", 2, 0x0000, , , 16, Param1;
+
+[Connection Manager]
+    Connection1 = 0x00010008, 0x44640405, 10000, 2, Assem101, 10000, 2, Assem103, , , , ,
+        "Class 3", "", "20 04 24 01 2C 65 2C 67";
+    Connection2 = 0x08010002, 0x44640405, 10000, 4, Assem101, 10000, 2, Assem103, , , , ,
+        "Redundant", "", "20 04 24 01 2C 65 2C 67";
+    Connection3 = 0x04010002, 0x44640405, 10000, 4, Assem101, 10000, 2, , , , , ,
+        "Unknown input", "", "20 04 24 01 2C 65 2C 99";
+    Connection4 = 0x04010002, 0x44640405, 10000, 4, Assem101, 10000, 2, Assem103, , , , ,
+        "Good", "", "20 04 24 01 2C 65 2C 67";
+"""
+
+#: (entry, fragment of its warning) for every construct of BROKEN_EDS the emulator skips.
+BROKEN_WARNINGS = [
+    ("[Device]", "[Device] ProdCode is missing"),
+    ("Param2", "Param2: data type 0xEE"),
+    ("Param3", "Param3: link path: path item [Param1]"),
+    ("Param4", "Param4: link path 20 70 24 01: not a class/instance/attribute path"),
+    ("Param5", "Param5: default 99"),
+    ("Param6", "Param6 has 3 fields"),
+    ("Param7", "Param7: the standard Identity object has no instance 1 attribute 99"),
+    ("Enum8", "Enum8: a value/name pair is malformed"),
+    ("Assem100", "Assem100: size Param1 is not a fixed number of bytes"),
+    ("Assem101", "Assem101: members add up to 16 bits, not 32"),
+    ("Assem102", "Assem102: path 20 05 24 01 is not an Assembly instance"),
+    ("Connection1", "Connection1: transport 0x0008 is not class 1"),
+    ("Connection2", "Connection2: redundant owner connections are not supported"),
+    ("Connection3", "Connection3 (Unknown input): T->O point 153 is no input assembly"),
+]

@@ -27,19 +27,20 @@ from cipstack.devices.omron import models as omron
 from cipstack.devices.profiles import acg_et2_identity
 from cipstack.eds.checker import ERROR, check_eds
 from cipstack.eds.commands_generate import add_generate_arguments, run_generate
-from cipstack.eds.description import EdsDescription, EdsParameter, IoOffer, attribute_parameters
+from cipstack.eds.description import EdsDescription, EdsObjectClass, EdsParameter, IoOffer, attribute_parameters
 from cipstack.eds.generator import (
     DEFAULT_CREATED,
     EXCLUSIVE_OWNER_KIND,
     INPUT_ONLY_KIND,
     LISTEN_ONLY_KIND,
+    class_section_name,
     connection_words,
     eds_text,
     generate_eds,
     scaling,
 )
 from cipstack.eds.model import EdsDocument, FieldKind
-from cipstack.eds.profiles import acg_et2_description, eds_file_name, omron_description
+from cipstack.eds.profiles import acg_et2_description, eds_file_name, omron_description, omron_models_by_file
 from cipstack.eds.reader import parse_eds
 from cipstack.eds.writer import format_eds
 from cipstack.eip.io_target import IoProfile
@@ -264,7 +265,9 @@ def test_groups_list_every_grouped_param() -> None:
     groups = doc.get("Groups")
     assert groups is not None
     names = [entry.value(1) for entry in groups]
-    assert names[:3] == ["dr Group", "bA Group", "Ad Group"] and "CM Group" in names
+    # The CIP objects' attributes first (one group per class), then the keypad groups.
+    assert names[:6] == ["Motor Data", "Control Supervisor", "AC/DC Drive", "dr Group", "bA Group", "Ad Group"]
+    assert "CM Group" in names
     members = [item.value for entry in groups for item in entry.fields[2:]]
     assert len(members) == len(set(members))
     assert all(entry.value(2) == len(entry.fields) - 2 for entry in groups)
@@ -301,9 +304,15 @@ def test_acg_connections() -> None:
                                                                          (0x20, 0xF5, 0x24, 0x01), 2]
     assert value(doc, "Capacity", "MaxIOConnections") == 64
     assert value(doc, "Capacity", "MaxMsgConnections") == 32
-    tspec = doc.entry("Capacity", "TSpec1")
-    assert tspec is not None and [item.value for item in tspec.fields] == ["TxRx", 4, 1000]
-    for section in ("Identity Class", "TCP/IP Interface Class", "Ethernet Link Class"):
+    # One TSpec per data size: 2 to 16 bytes (121-128 / 141-148), 4 (the speed assemblies), at 1 ms.
+    capacity = doc.get("Capacity")
+    assert capacity is not None
+    tspecs = [[item.value for item in entry.fields] for entry in capacity if entry.keyword.startswith("TSpec")]
+    assert tspecs == [["TxRx", size, 1000] for size in range(2, 17, 2)]
+    # Every class the card's message router serves, but Assembly and Connection Manager.
+    for section in ("Identity Class", "Message Router Class", "TCP/IP Interface Class", "Ethernet Link Class",
+                    "259_Motor Data Class", "259_Control Supervisor Class", "259_AC/DC Drive Class",
+                    "259_Keypad Parameters Class"):
         assert section in doc
 
 
@@ -447,8 +456,12 @@ def test_eds_pie_reads_acg(cip_eds: Any, eds_pie_log: _Collector) -> None:
     assert list(theirs.sections) == [section.name for section in ours]
 
 
+#: One model per generated file: every file of Tables 2 and 3.
+FILE_MODELS = [item.name for family in omron.Family for item in omron_models_by_file(family)]
+
+
 @pytest.mark.interop
-@pytest.mark.parametrize("name", ["MX2-AB001-E", "MX2-A4150-E", "RX-A2004-E", "RX-B413K-E"])
+@pytest.mark.parametrize("name", FILE_MODELS)
 def test_eds_pie_reads_omron(cip_eds: Any, eds_pie_log: _Collector, name: str) -> None:
     text = omron_text(name)
     theirs = cip_eds(text)
@@ -537,3 +550,57 @@ def test_class_attributes_as_parameters() -> None:
     name = param(doc, "Product Name")
     assert (name.value(3), name.value(5)) == ((0x20, 0x01, 0x24, 0x01, 0x30, 0x07), 0xDA)
     assert name.value(4) & 0x10  # Get only: read only
+
+
+# -- the files declare what the devices serve -----------------------------------------------------------
+
+def test_acg_file_lists_every_assembly_and_pair_of_the_device() -> None:
+    from cipstack.devices.acg import registers as acg_registers
+    from cipstack.devices.acg.device import RPI_MIN_US, build_acg_device
+
+    device = build_acg_device(now=0.0)
+    doc = parse_eds(acg_text())
+    assembly = doc.get("Assembly")
+    assert assembly is not None
+    sizes = {int(entry.keyword[5:]): entry.value(3) for entry in assembly}
+    served = {instance: point.size for instance, point in device.assembly.points.items()}
+    assert {i: s for i, s in sizes.items() if s} == served  # 20/21/100/101/121-128, 70/71/110/111/141-148
+    assert len(served) == 24
+    profile = device.io_profile()
+    assert (sizes[profile.input_only_point], sizes[profile.listen_only_point]) == (0, 0)
+    manager = doc.get("Connection Manager")
+    assert manager is not None
+    owners = [entry.value(15)[-3::2] for entry in manager if entry.value(1) == 0x04010002]
+    # One exclusive owner per CM.24/CM.23 setting, the factory pair first.
+    expected = [(o.instance, i.instance) for o, i in zip(acg_registers.CIP_OUTPUT_INSTANCES,
+                                                           acg_registers.CIP_INPUT_INSTANCES, strict=True)]
+    assert owners[0] == next(iter(profile.pairs()))
+    assert sorted(owners) == sorted(expected)
+    rpi = doc.entry("Params", manager.entries[0].value(3))
+    assert rpi is not None and rpi.value(10) == RPI_MIN_US
+    # Assembly members refer to the CIP attributes the card declares (Control Supervisor Run Fwd).
+    run_forward = doc.entry("Params", doc.entry("Assembly", "Assem21").value(8))  # type: ignore[union-attr]
+    assert run_forward is not None and run_forward.value(3) == (0x20, 0x29, 0x24, 0x01, 0x30, 0x03)
+
+
+@pytest.mark.parametrize("name", ["MX2-A2015-E", "RX-A4055-E"])
+def test_omron_file_lists_what_the_device_serves(name: str) -> None:
+    from cipstack.assemblies.omron import componet_io_words
+    from cipstack.devices.omron.device import build_omron_device
+    from cipstack.devices.omron.objects import CLASS_SPECS
+
+    device = build_omron_device(name)
+    doc = parse_eds(omron_text(name))
+    assembly = doc.get("Assembly")
+    assert assembly is not None
+    assert {int(entry.keyword[5:]): entry.value(3) for entry in assembly} == {
+        instance: point.size for instance, point in device.assembly.points.items()}
+    words = componet_io_words(*device.default_pair)
+    assert doc.entry("CompoNet_IO", "CompoNet_Input_Info").value(2) == words[0]  # type: ignore[union-attr]
+    assert doc.entry("CompoNet_IO", "CompoNet_Output_Info").value(2) == words[1]  # type: ignore[union-attr]
+    # A section for every class of CLASS_SPECS, with the instances the device has.
+    for spec in CLASS_SPECS:
+        section = doc.get(class_section_name(EdsObjectClass(spec), omron.VENDOR_ID) or "")
+        assert section is not None, spec.name
+        count = section.get("Number_Of_Static_Instances")
+        assert count is not None and count.value() == len(device.router.objects[spec.class_id].instances)

@@ -1,0 +1,398 @@
+"""A generic device emulated from any EDS file (``cipstack adapter --eds FILE``).
+
+``build_eds_device(doc)`` serves what the file declares, read the way ``eds.interpret`` reads it:
+
+* Identity from ``[Device]`` (VendCode, ProdType, ProdCode, MajRev/MinRev, ProdName; the serial
+  number from the interface's MAC, as the profiles do).
+* Every ``ParamN`` with a link path is an attribute at its (class, instance, attribute), with the
+  parameter's data type, range, default, enumeration and access (descriptor bit 4: read only).
+  Classes and instances are made as needed, one ``EdsObject`` per class; the standard objects
+  every adapter has (Identity, Message Router, Assembly, Connection Manager, TCP/IP Interface,
+  Ethernet Link) are kept and serve a linked attribute only if they have it.
+* Every ``AssemN`` with an Assembly path and a size is an Assembly instance of that size. It is an
+  output (consumed) when a connection sends it O->T, an input when one produces it T->O, and
+  otherwise an output when every parameter its members name is settable. Where a member carries a
+  linked parameter whole (``assembly_schema``), an input's data shows the attribute and data
+  written to an output sets it; other bytes are plain data, kept as written.
+* ``[Connection Manager]``: the class 1 offer: one exclusive owner per (output, input) pair, the
+  input-only and listen-only heartbeat points, the configuration instances, the triggers and the
+  RPI range of the connections (the target's defaults where the file gives none), and
+  ``[Capacity] MaxIOConnections``.
+
+What cannot be served is skipped and listed in ``EdsDevice.issues`` (one ``EdsIssue`` each), never
+raised. A document without ``[Device]`` is not an EDS: ``EdsDeviceError``.
+"""
+
+from __future__ import annotations
+
+import logging
+from collections.abc import Callable, Mapping
+from dataclasses import dataclass, field
+from typing import Any
+
+from ..assemblies.schema import AssemblySchema
+from ..cip.messages import MessageRouterRequest
+from ..cip.model import Access, AttributeSpec, CipObject, ClassSpec, Instance
+from ..cip.router import RequestContext
+from ..cip.status import CipError, GeneralStatus
+from ..cip.types import IntegerType, RealType
+from ..eds.interpret import EdsIssue, EdsView, ParamInfo, assembly_schema, read_view
+from ..eds.model import EdsDocument, FieldKind
+from ..eip.io_target import IoProfile
+from ..objects.assembly import AssemblyPoint
+from ..objects.identity import IdentityInfo
+from ..objects.tcpip import NetworkInterface
+from .base import Device, DeviceLimits
+from .profiles import DEFAULT_MAC, serial_from_mac
+
+log = logging.getLogger(__name__)
+
+Link = tuple[int, int, int]
+
+
+class EdsDeviceError(ValueError):
+    """The document describes no device (no ``[Device]`` section)."""
+
+
+class EdsObject(CipObject):
+    """A class made from an EDS's parameters. Instances may declare different attributes (an EDS
+    links each parameter on its own), so each instance keeps its own declarations; the class
+    declaration holds the first declaration of each attribute id, for the class attributes."""
+
+    def __init__(self, spec: ClassSpec, declared: Mapping[int, Mapping[int, AttributeSpec]]) -> None:
+        super().__init__(spec)
+        self.declared = {instance: dict(sorted(attributes.items())) for instance, attributes in declared.items()}
+        for instance, attributes in sorted(self.declared.items()):
+            created = self.add_instance(instance)
+            created.values = {attribute.id: attribute.default for attribute in attributes.values()}
+
+    def _instance_spec(self, instance_id: int, attribute_id: int | None) -> AttributeSpec:
+        found = self.declared.get(instance_id, {}).get(attribute_id) if attribute_id is not None else None
+        if found is None:
+            raise CipError(GeneralStatus.ATTRIBUTE_NOT_SUPPORTED,
+                           message=f"{self.spec.name} instance {instance_id} has no attribute {attribute_id}")
+        return found
+
+    def _attribute(self, instance: Instance | None, attribute_id: int | None
+                   ) -> tuple[AttributeSpec, Callable[[], Any] | None]:
+        if instance is None or attribute_id is None:
+            return super()._attribute(instance, attribute_id)
+        return self._instance_spec(instance.instance_id, attribute_id), None
+
+    def get(self, instance_id: int, attribute_id: int) -> Any:
+        return self.read_attribute(self.instances[instance_id], self._instance_spec(instance_id, attribute_id))
+
+    def set(self, instance_id: int, attribute_id: int, value: Any) -> None:
+        self.write_attribute(self.instances[instance_id], self._instance_spec(instance_id, attribute_id), value)
+
+    def get_attributes_all(self, instance: Instance | None, path: Any, request: MessageRouterRequest,
+                           context: RequestContext) -> bytes:
+        if instance is None:
+            return super().get_attributes_all(instance, path, request, context)
+        if request.data:
+            raise CipError(GeneralStatus.TOO_MUCH_DATA)
+        return b"".join(spec.type.encode(self.read_attribute(instance, spec))
+                        for spec in self.declared[instance.instance_id].values() if spec.access.readable)
+
+
+@dataclass
+class EdsDevice(Device):
+    """The device an EDS describes; ``issues`` lists what of the file it does not serve."""
+
+    issues: list[EdsIssue] = field(default_factory=list)
+
+    def __post_init__(self) -> None:
+        super().__post_init__()
+        self._io: IoProfile | None = None
+        #: The Assembly instances made from the file, with the schema their data is decoded by.
+        self.schemas: dict[int, AssemblySchema] = {}
+
+    def io_profile(self) -> IoProfile | None:
+        return self._io
+
+    def attribute(self, link: Link) -> tuple[CipObject, int, int] | None:
+        """The object serving ``link`` and its instance and attribute, if any object does."""
+        class_id, instance, attribute = link
+        obj = self.router.objects.get(class_id)
+        if obj is None or instance not in obj.instances:
+            return None
+        if isinstance(obj, EdsObject):
+            return (obj, instance, attribute) if attribute in obj.declared.get(instance, {}) else None
+        return (obj, instance, attribute) if obj.spec.instance_attribute(attribute) is not None else None
+
+
+# -- identity --------------------------------------------------------------------------------------------
+
+_IDENTITY_KEYWORDS = (("VendCode", 0xFFFF), ("ProdType", 0xFFFF), ("ProdCode", 0xFFFF), ("MajRev", 0xFF),
+                      ("MinRev", 0xFF))
+
+
+def identity_from_eds(doc: EdsDocument, serial_number: int, issues: list[EdsIssue]) -> IdentityInfo:
+    """Identity attributes 1-4 and 7 from ``[Device]`` (eds.md: they must equal each other)."""
+    section = doc.get("Device")
+    if section is None:
+        raise EdsDeviceError("no [Device] section: not an EDS file")
+    numbers: dict[str, int] = {}
+    for keyword, limit in _IDENTITY_KEYWORDS:
+        entry = section.get(keyword)
+        value = entry.value() if entry is not None and entry.fields[0].kind is FieldKind.INT else None
+        if value is None or not 0 <= value <= limit:
+            issues.append(EdsIssue(entry.line if entry else section.line,
+                                   f"[Device] {keyword} is missing or not a number 0..{limit}: 0 served"))
+            value = 0
+        numbers[keyword] = value
+    entry = section.get("ProdName")
+    name = entry.value() if entry is not None and entry.fields[0].kind is FieldKind.STRING else None
+    if name is None:
+        issues.append(EdsIssue(entry.line if entry else section.line, "[Device] ProdName is missing: \"\" served"))
+        name = ""
+    encoded = name.encode("latin-1", "replace")[:255].decode("latin-1")
+    return IdentityInfo(vendor_id=numbers["VendCode"], device_type=numbers["ProdType"],
+                        product_code=numbers["ProdCode"], revision=(numbers["MajRev"], numbers["MinRev"]),
+                        serial_number=serial_number, product_name=encoded)
+
+
+# -- parameters as attributes ---------------------------------------------------------------------------
+
+def attribute_spec(param: ParamInfo, attribute_id: int, issues: list[EdsIssue]) -> AttributeSpec:
+    """The attribute a parameter declares: its type, range, enumeration and access, and its
+    default when that is a value of the type in range (else the minimum, or zero)."""
+    cip_type = param.type
+    numeric = isinstance(cip_type, (IntegerType, RealType))
+    minimum = param.minimum if numeric else None
+    maximum = param.maximum if numeric else None
+    if isinstance(cip_type, IntegerType):
+        minimum = int(minimum) if isinstance(minimum, (int, float)) else None
+        maximum = int(maximum) if isinstance(maximum, (int, float)) else None
+    spec = AttributeSpec(attribute_id, param.name or param.keyword, cip_type,
+                         Access.GET_SET if param.settable else Access.GET, minimum=minimum, maximum=maximum,
+                         enum=param.enum, unit=param.unit, help=param.help)
+    default = param.default
+    if isinstance(cip_type, IntegerType) and isinstance(default, float) and default.is_integer():
+        default = int(default)
+    try:
+        value = spec.validate(default)
+    except CipError:
+        fallback = ("" if not numeric else 0.0 if isinstance(cip_type, RealType)
+                    else minimum if minimum is not None else 0)
+        issues.append(EdsIssue(param.line, f"{param.keyword}: default {default!r} is not a valid {cip_type.name} "
+                                           f"in its range: {fallback!r} served"))
+        value = fallback
+    return AttributeSpec(attribute_id, spec.name, cip_type, spec.access, default=value, minimum=minimum,
+                         maximum=maximum, enum=param.enum, unit=param.unit, help=param.help)
+
+
+def _add_parameter_objects(device: EdsDevice, view: EdsView, issues: list[EdsIssue]) -> list[ParamInfo]:
+    """Objects for the parameters of non-standard classes; the parameters that link a standard
+    object are returned, to be checked once the assemblies exist too."""
+    standard = dict(device.router.objects)
+    deferred: list[ParamInfo] = []
+    declared: dict[int, dict[int, dict[int, AttributeSpec]]] = {}
+    first: dict[Link, ParamInfo] = {}
+    for param in view.params.values():
+        if param.link is None:
+            continue
+        class_id, instance, attribute = param.link
+        if param.link in first:
+            earlier = first[param.link]
+            if earlier.type is not param.type:
+                issues.append(EdsIssue(param.line, f"{param.keyword} links the attribute {earlier.keyword} declares, "
+                                                   f"with another type: {earlier.keyword}'s is served"))
+            continue
+        first[param.link] = param
+        if class_id in standard:
+            deferred.append(param)
+            continue
+        if not (1 <= class_id <= 0xFFFF and 1 <= instance <= 0xFFFF and 1 <= attribute <= 0xFFFF):
+            what = "a class attribute (instance 0)" if instance == 0 else "no instance attribute"
+            issues.append(EdsIssue(param.line, f"{param.keyword}: link {param.link} is {what}: not served"))
+            continue
+        spec = attribute_spec(param, attribute, issues)
+        declared.setdefault(class_id, {}).setdefault(instance, {})[attribute] = spec
+    for class_id, instances in sorted(declared.items()):
+        union: dict[int, AttributeSpec] = {}
+        for attributes in instances.values():
+            for attribute_id, spec in attributes.items():
+                union.setdefault(attribute_id, spec)
+        class_spec = ClassSpec(class_id, f"Class 0x{class_id:02X}", instance_attributes=tuple(
+            union[key] for key in sorted(union)))
+        device.router.register(EdsObject(class_spec, instances))
+    return deferred
+
+
+def _check_standard_links(device: EdsDevice, params: list[ParamInfo], issues: list[EdsIssue]) -> None:
+    for param in params:
+        assert param.link is not None
+        if device.attribute(param.link) is None:
+            class_id, instance, attribute = param.link
+            name = device.router.objects[class_id].spec.name
+            issues.append(EdsIssue(param.line, f"{param.keyword}: the standard {name} object has no instance "
+                                               f"{instance} attribute {attribute}: not served"))
+
+
+# -- assemblies -----------------------------------------------------------------------------------------
+
+def _value_for(value: Any) -> Any:
+    """An attribute's value as an assembly field holds it (flags as 0/1)."""
+    return int(value) if isinstance(value, bool) else value
+
+
+def _add_assemblies(device: EdsDevice, view: EdsView, issues: list[EdsIssue]) -> dict[int, AssemblyPoint]:
+    o_t_points = {c.o_t_point for c in view.connections if not c.heartbeat}
+    t_o_points = {c.t_o_point for c in view.connections}
+    heartbeats = {c.o_t_point for c in view.connections if c.heartbeat}
+    points: dict[int, AssemblyPoint] = {}
+    for info in view.assemblies.values():
+        if info.instance is None:
+            if any(c.o_t_assembly == info.keyword or c.t_o_assembly == info.keyword for c in view.connections):
+                issues.append(EdsIssue(info.line, f"{info.keyword} has no path: its connection's path names the "
+                                                  "instance"))
+            continue
+        if info.size == 0:
+            if info.instance not in heartbeats:
+                issues.append(EdsIssue(info.line, f"{info.keyword}: an assembly of size 0 that no connection uses as "
+                                                  "its heartbeat: not served"))
+            continue
+        if info.instance in points:
+            issues.append(EdsIssue(info.line, f"{info.keyword}: instance {info.instance} is declared twice: "
+                                              "the first is served"))
+            continue
+        if not 1 <= info.instance <= 0xFFFF or info.instance in heartbeats:
+            issues.append(EdsIssue(info.line, f"{info.keyword}: instance {info.instance} cannot be an assembly "
+                                              "here: not served"))
+            continue
+        if info.instance in o_t_points and info.instance in t_o_points:
+            issues.append(EdsIssue(info.line, f"{info.keyword}: connections both consume and produce instance "
+                                              f"{info.instance}: served as an output"))
+        if info.instance in o_t_points:
+            output = True
+        elif info.instance in t_o_points:
+            output = False
+        else:
+            named = [view.params[m.reference] for m in info.members if m.reference in view.params]
+            output = bool(named) and all(p.settable for p in named)
+        schema = assembly_schema(info, view.params)
+        linked = [] if schema is None else [f for f in schema.fields if f.link and device.attribute(f.link)]
+        if schema is not None:
+            device.schemas[info.instance] = schema
+        point = _point(device, info.instance, info.size, output, schema, linked, info.name)
+        points[info.instance] = point
+        device.assembly.add_assembly(point)
+    return points
+
+
+def _point(device: EdsDevice, instance: int, size: int, output: bool, schema: AssemblySchema | None,
+           linked: list[Any], name: str) -> AssemblyPoint:
+    if output:
+        def consume(data: bytes, now: float) -> None:
+            if schema is None or not linked:
+                return
+            values = schema.decode(data)
+            for item in linked:
+                found = device.attribute(item.link)
+                assert found is not None
+                obj, inst, attribute = found
+                try:
+                    obj.set(inst, attribute, values[item.name])
+                except (CipError, ValueError, TypeError) as exc:
+                    log.debug("assembly %d: %s refused: %s", instance, item.name, exc)
+
+        return AssemblyPoint(instance, size, consumed=True, consume=consume, name=name)
+
+    def produce() -> bytes:
+        data = bytes(device.assembly.stores[instance])
+        if schema is None:
+            return data
+        for item in linked:
+            found = device.attribute(item.link)
+            assert found is not None
+            obj, inst, attribute = found
+            try:
+                data = schema.with_field(data, item.name, _value_for(obj.get(inst, attribute)))
+            except (CipError, ValueError, TypeError, KeyError):
+                continue  # a value the member cannot hold: the bytes stay as they were
+        return data
+
+    return AssemblyPoint(instance, size, consumed=False, produce=produce, name=name)
+
+
+# -- class 1 ----------------------------------------------------------------------------------------------
+
+def _io_profile(doc: EdsDocument, view: EdsView, points: Mapping[int, AssemblyPoint],
+                issues: list[EdsIssue]) -> IoProfile | None:
+    defaults = IoProfile(consumed=dict, produced=dict)
+    pairs: set[tuple[int, int]] = set()
+    heartbeat: dict[str, int] = {}
+    config: set[int] = set()
+    rpi_min: list[int] = []
+    rpi_max: list[int] = []
+    triggers: set[Any] = set()
+    usable = 0
+    for connection in view.connections:
+        where = f"Connection{connection.number} ({connection.name})"
+        produced = points.get(connection.t_o_point)
+        if produced is None or produced.consumed:
+            issues.append(EdsIssue(connection.line, f"{where}: T->O point {connection.t_o_point} is no input "
+                                                    "assembly: not offered"))
+            continue
+        if connection.heartbeat:
+            earlier = heartbeat.setdefault(connection.kind, connection.o_t_point)
+            if earlier != connection.o_t_point:
+                issues.append(EdsIssue(connection.line, f"{where}: a second {connection.kind} heartbeat point "
+                                                        f"{connection.o_t_point} ({earlier} is served): not offered"))
+                continue
+        else:
+            consumed = points.get(connection.o_t_point)
+            if consumed is None or not consumed.consumed:
+                issues.append(EdsIssue(connection.line, f"{where}: O->T point {connection.o_t_point} is no output "
+                                                        "assembly: not offered"))
+                continue
+            pairs.add((connection.o_t_point, connection.t_o_point))
+        usable += 1
+        config.add(connection.config)
+        triggers |= connection.triggers
+        if connection.rpi_min_us is not None:
+            rpi_min.append(connection.rpi_min_us)
+        if connection.rpi_max_us is not None:
+            rpi_max.append(connection.rpi_max_us)
+    if not usable:
+        return None
+    capacity = doc.entry("Capacity", "MaxIOConnections")
+    max_connections = capacity.value() if capacity is not None and isinstance(capacity.value(), int) else None
+    low = min(rpi_min) if rpi_min else defaults.rpi_min_us
+    high = max(rpi_max) if rpi_max else defaults.rpi_max_us
+    if low < 1 or high < low:
+        issues.append(EdsIssue(0, f"RPI range {low}..{high} us is empty: the target's default range is served"))
+        low, high = defaults.rpi_min_us, defaults.rpi_max_us
+    return IoProfile(
+        consumed=lambda: {i: p for i, p in points.items() if p.consumed},
+        produced=lambda: {i: p for i, p in points.items() if not p.consumed},
+        config_instances=frozenset(config),
+        input_only_point=heartbeat.get("input only", defaults.input_only_point),
+        listen_only_point=heartbeat.get("listen only", defaults.listen_only_point),
+        rpi_min_us=low, rpi_max_us=high,
+        max_connections=max_connections if max_connections and max_connections > 0 else defaults.max_connections,
+        triggers=frozenset(triggers), pairs=lambda: set(pairs),
+    )
+
+
+def build_eds_device(doc: EdsDocument, interface: NetworkInterface | None = None,
+                     limits: DeviceLimits | None = None) -> EdsDevice:
+    """The device ``doc`` describes (module docstring); what it cannot serve is in ``.issues``."""
+    interface = interface or NetworkInterface(mac=DEFAULT_MAC)
+    issues: list[EdsIssue] = []
+    identity = identity_from_eds(doc, serial_from_mac(interface.mac), issues)
+    view = read_view(doc)
+    issues.extend(view.issues)
+    device = EdsDevice(identity, interface, limits or DeviceLimits(), issues=issues)
+    standard_links = _add_parameter_objects(device, view, issues)
+    points = _add_assemblies(device, view, issues)
+    _check_standard_links(device, standard_links, issues)
+    device._io = _io_profile(doc, view, points, issues)
+    if device._io is not None:
+        device._update_io_status()
+    issues.sort(key=lambda issue: issue.line)
+    return device
+
+
+__all__ = ["EdsDevice", "EdsDeviceError", "EdsObject", "attribute_spec", "build_eds_device", "identity_from_eds"]

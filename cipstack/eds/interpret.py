@@ -1,0 +1,552 @@
+"""What an EDS file says about a device, read back for use.
+
+``read_view(doc)`` gives an ``EdsView``: the parameters with the CIP attribute each one mirrors
+(its link path), the assemblies with their members, and the class 1 connections of
+``[Connection Manager]``. The emulator of ``devices.from_eds`` serves that view and the scanner
+opens its connections (``Scanner.io_connection_from_eds``), so both read an EDS the same way.
+
+Reading is forgiving: a construct this module cannot use is reported as an ``EdsIssue`` (its
+line and what was skipped) and costs that entry only; nothing here raises on file content.
+Field numbers below are those of ``shared/reference/eds.md`` (ParamN, AssemN, ConnectionN).
+"""
+
+from __future__ import annotations
+
+import re
+from collections.abc import Mapping
+from dataclasses import dataclass, field
+from typing import Any
+
+from ..assemblies.schema import AssemblyField, AssemblySchema
+from ..cip.epath import ElectronicKey, LogicalSegment, LogicalType, PortSegment, decode_path
+from ..cip.status import CipError
+from ..cip.types import BY_CODE, UDINT, UINT, ULINT, USINT, CipType, IntegerType, RealType
+from ..eip.cm_messages import TriggerType
+from .generator import (
+    EXCLUSIVE_OWNER,
+    EXCLUSIVE_OWNER_KIND,
+    INPUT_ONLY,
+    INPUT_ONLY_KIND,
+    LISTEN_ONLY,
+    LISTEN_ONLY_KIND,
+    T_O_TYPE_SHIFT,
+    TRANSPORT_CLASS_1,
+    TRIGGER_SHIFT,
+    TYPE_MULTICAST,
+    TYPE_POINT_TO_POINT,
+)
+from .model import EdsDocument, Entry, Field, FieldKind
+
+#: (class, instance, attribute) a parameter mirrors.
+Link = tuple[int, int, int]
+
+#: ConnectionN field 1 bit 27: redundant owner (eds.md, "Field 1 bits").
+REDUNDANT_OWNER = 1 << 27
+_REFERENCE = re.compile(r"(Param|Assem)([0-9]+)")
+
+
+@dataclass(frozen=True)
+class EdsIssue:
+    """A construct of the file that was skipped, and why."""
+
+    line: int
+    message: str
+
+    def __str__(self) -> str:
+        return f"line {self.line}: {self.message}"
+
+
+@dataclass(frozen=True)
+class ParamInfo:
+    """One ``ParamN``: the attribute it mirrors and how (fields 3-12 and its ``EnumN``)."""
+
+    keyword: str
+    name: str
+    link: Link | None
+    type: CipType
+    #: Field 6, the data size in bytes.
+    size: int
+    #: Descriptor bit 4 clear.
+    settable: bool
+    minimum: Any = None
+    maximum: Any = None
+    default: Any = None
+    enum: Mapping[int, str] | None = None
+    unit: str = ""
+    help: str = ""
+    line: int = 0
+
+
+@dataclass(frozen=True)
+class AssemblyMember:
+    """One (size in bits, reference) pair of an ``AssemN``, at its bit offset."""
+
+    start_bit: int
+    bits: int
+    #: ``ParamN``, ``AssemN`` or None for padding.
+    reference: str | None
+
+
+@dataclass(frozen=True)
+class AssemblyInfo:
+    keyword: str
+    name: str
+    #: From the path of field 2 (None when the entry has no path).
+    instance: int | None
+    size: int
+    members: tuple[AssemblyMember, ...]
+    line: int = 0
+
+
+@dataclass(frozen=True)
+class ConnectionInfo:
+    """One class 1 ``ConnectionN``: kind, connection points, sizes, RPI and T->O types."""
+
+    number: int
+    name: str
+    kind: str
+    config: int
+    #: The O->T connection point: the output assembly, or the heartbeat point.
+    o_t_point: int
+    t_o_point: int
+    #: O->T data size (0 for a heartbeat) and T->O data size, in bytes.
+    o_t_size: int
+    t_o_size: int
+    #: The RPI the file proposes and the range it allows, in microseconds (None: not given).
+    rpi_us: int | None
+    rpi_min_us: int | None
+    rpi_max_us: int | None
+    #: T->O connection types the file allows (field 2 bits 21 and 22).
+    t_o_multicast: bool
+    t_o_point_to_point: bool
+    triggers: frozenset[TriggerType]
+    #: The O->T and T->O assemblies of fields 5 and 8 (their keywords), when named.
+    o_t_assembly: str | None = None
+    t_o_assembly: str | None = None
+    line: int = 0
+
+    @property
+    def heartbeat(self) -> bool:
+        """Input only and listen only send the heartbeat point, not output data."""
+        return self.kind != EXCLUSIVE_OWNER_KIND
+
+
+@dataclass
+class EdsView:
+    params: dict[str, ParamInfo] = field(default_factory=dict)
+    #: By keyword (``Assem21``).
+    assemblies: dict[str, AssemblyInfo] = field(default_factory=dict)
+    connections: list[ConnectionInfo] = field(default_factory=list)
+    issues: list[EdsIssue] = field(default_factory=list)
+
+    def connection(self, which: int | str) -> ConnectionInfo:
+        """ConnectionN by its number N (``1``, ``"1"``, ``"Connection1"``) or by its name (field 13)."""
+        text = str(which).strip()
+        if text.startswith("Connection") and text[len("Connection"):].isdigit():
+            text = text[len("Connection"):]
+        for item in self.connections:
+            if (text.isdigit() and item.number == int(text)) or item.name == str(which):
+                return item
+        known = ", ".join(f"{c.number} ({c.name})" for c in self.connections) or "none usable"
+        raise KeyError(f"no class 1 connection {which!r} in the EDS (known: {known})")
+
+    def assembly_at(self, instance: int) -> AssemblyInfo | None:
+        """The assembly whose path names ``instance``."""
+        return next((a for a in self.assemblies.values() if a.instance == instance), None)
+
+    def schema(self, instance: int) -> AssemblySchema | None:
+        """The assembly's members as a schema (see :func:`assembly_schema`), or None."""
+        found = self.assembly_at(instance)
+        return None if found is None else assembly_schema(found, self.params)
+
+
+# -- fields ---------------------------------------------------------------------------------------------
+
+def _int(item: Field | None) -> int | None:
+    return item.value if item is not None and item.kind is FieldKind.INT else None
+
+
+def _number(item: Field | None) -> int | float | None:
+    return item.number if item is not None else None
+
+
+def _text(item: Field | None) -> str:
+    return item.value if item is not None and item.kind is FieldKind.STRING else ""
+
+
+def _keyword(item: Field | None) -> str | None:
+    return item.value if item is not None and item.kind is FieldKind.KEYWORD else None
+
+
+def _path_bytes(entry: Entry, number: int, params: Mapping[str, ParamInfo]) -> tuple[bytes | None, str | None]:
+    """The bytes of an EPATH field, ``[ParamN]`` items replaced by that parameter's default;
+    (None, why) when that cannot be done, (b"", None) for an empty field."""
+    item = entry.field(number)
+    if item is None or item.kind is FieldKind.EMPTY:
+        return b"", None
+    if item.kind is not FieldKind.EPATH:
+        return None, f"field {number} is not an EPATH"
+    out = bytearray()
+    for part in item.value:
+        if isinstance(part, int):
+            out.append(part)
+            continue
+        param = params.get(part)
+        value = param.default if param is not None else None
+        if not isinstance(value, int) or isinstance(value, bool) or not 0 <= value <= 0xFF:
+            return None, f"path item [{part}] has no byte value as its default"
+        out.append(value)
+    return bytes(out), None
+
+
+def _segments(data: bytes) -> list[Any] | None:
+    try:
+        return decode_path(data)
+    except (CipError, ValueError, IndexError):
+        return None
+
+
+# -- [Params] -------------------------------------------------------------------------------------------
+
+def _param(entry: Entry, enum_entry: Entry | None, issues: list[EdsIssue]) -> ParamInfo | None:
+    keyword = entry.keyword
+    if len(entry.fields) < 12:
+        issues.append(EdsIssue(entry.line, f"{keyword} has {len(entry.fields)} fields, fewer than 12: skipped"))
+        return None
+    code = _int(entry.field(5))
+    cip_type = BY_CODE.get(code) if code is not None else None
+    if cip_type is None:
+        type_item = entry.field(5)
+        written = type_item.raw if type_item is not None else "?"
+        issues.append(EdsIssue(entry.line_of(5), f"{keyword}: data type {written} is not one this emulator "
+                                                 "serves: skipped"))
+        return None
+    size = _int(entry.field(6))
+    if cip_type.size is not None and size is not None and size != cip_type.size:
+        issues.append(EdsIssue(entry.line_of(6), f"{keyword}: data size {size} is not the {cip_type.size} bytes of "
+                                                 f"{cip_type.name}; {cip_type.size} used"))
+    size = cip_type.size if cip_type.size is not None else (size or 0)
+    descriptor = _int(entry.field(4)) or 0
+    link: Link | None = None
+    path, why = _path_bytes(entry, 3, {})
+    if path is None:
+        issues.append(EdsIssue(entry.line_of(3), f"{keyword}: link path: {why}; served by no attribute"))
+    elif path:
+        link, why = _link(path)
+        if link is None:
+            issues.append(EdsIssue(entry.line_of(3), f"{keyword}: link path {path.hex(' ')}: {why}; "
+                                                     "served by no attribute"))
+    enum: dict[int, str] | None = None
+    if enum_entry is not None:
+        values = enum_entry.fields
+        enum = {}
+        for value_item, name_item in zip(values[0::2], values[1::2], strict=False):
+            value = _int(value_item)
+            if value is None or name_item.kind is not FieldKind.STRING:
+                issues.append(EdsIssue(enum_entry.line, f"{enum_entry.keyword}: a value/name pair is malformed: "
+                                                        "the enumeration is left out"))
+                enum = None
+                break
+            enum[value] = name_item.value
+    numeric = isinstance(cip_type, (IntegerType, RealType))
+    minimum, maximum, default = (_number(entry.field(n)) if numeric else None for n in (10, 11, 12))
+    if not numeric:
+        default = _text(entry.field(12))
+    return ParamInfo(keyword, _text(entry.field(7)), link, cip_type, size, not descriptor & 0x10, minimum, maximum,
+                     default, enum or None, _text(entry.field(8)), _text(entry.field(9)), entry.line)
+
+
+def _link(path: bytes) -> tuple[Link | None, str | None]:
+    segments = _segments(path)
+    if segments is None:
+        return None, "not a valid EPATH"
+    values: dict[LogicalType, int] = {}
+    for segment in segments:
+        if not isinstance(segment, LogicalSegment) or segment.kind in values or segment.kind not in (
+                LogicalType.CLASS_ID, LogicalType.INSTANCE_ID, LogicalType.ATTRIBUTE_ID):
+            return None, "not a class/instance/attribute path"
+        values[segment.kind] = segment.value
+    if len(values) != 3:
+        return None, "not a class/instance/attribute path"
+    return (values[LogicalType.CLASS_ID], values[LogicalType.INSTANCE_ID], values[LogicalType.ATTRIBUTE_ID]), None
+
+
+def read_params(doc: EdsDocument, issues: list[EdsIssue]) -> dict[str, ParamInfo]:
+    section = doc.get("Params")
+    out: dict[str, ParamInfo] = {}
+    if section is None:
+        return out
+    for entry in section:
+        match = re.fullmatch(r"Param([0-9]+)", entry.keyword)
+        if match is None:
+            continue
+        if entry.keyword in out:
+            issues.append(EdsIssue(entry.line, f"{entry.keyword} is defined twice: the first is kept"))
+            continue
+        found = _param(entry, section.get(f"Enum{match[1]}"), issues)
+        if found is not None:
+            out[entry.keyword] = found
+    return out
+
+
+# -- [Assembly] -----------------------------------------------------------------------------------------
+
+def _assembly(entry: Entry, params: Mapping[str, ParamInfo], sizes: Mapping[str, int],
+              issues: list[EdsIssue]) -> AssemblyInfo | None:
+    keyword = entry.keyword
+    if len(entry.fields) < 3:
+        issues.append(EdsIssue(entry.line, f"{keyword} has {len(entry.fields)} fields, fewer than 3: skipped"))
+        return None
+    instance = None
+    path, why = _path_bytes(entry, 2, params)
+    if path is None:
+        issues.append(EdsIssue(entry.line_of(2), f"{keyword}: path: {why}: skipped"))
+        return None
+    if path:
+        segments = _segments(path)
+        instances = [s.value for s in segments or () if isinstance(s, LogicalSegment)
+                     and s.kind is LogicalType.INSTANCE_ID]
+        classes = [s.value for s in segments or () if isinstance(s, LogicalSegment) and s.kind is LogicalType.CLASS_ID]
+        if segments is None or classes != [0x04] or len(instances) != 1:
+            issues.append(EdsIssue(entry.line_of(2), f"{keyword}: path {path.hex(' ')} is not an Assembly instance: "
+                                                     "skipped"))
+            return None
+        instance = instances[0]
+    members: list[AssemblyMember] = []
+    position = 0
+    for size_item, reference_item in zip(entry.fields[6::2], entry.fields[7::2], strict=False):
+        reference = _keyword(reference_item)
+        bits = _int(size_item)
+        if bits is None and reference is not None:
+            bits = 8 * params[reference].size if reference in params else (
+                8 * sizes[reference] if reference in sizes else None)
+        if bits is None or bits < 0:
+            issues.append(EdsIssue(entry.line_of(7), f"{keyword}: a member has no size: its members are left out"))
+            members = []
+            break
+        members.append(AssemblyMember(position, bits, reference))
+        position += bits
+    size_item = entry.field(3)
+    size = _int(size_item)
+    if size is None and size_item is not None and size_item.kind is FieldKind.EMPTY and members:
+        size = (position + 7) // 8
+    if size is None:
+        written = size_item.raw if size_item is not None else ""
+        issues.append(EdsIssue(entry.line_of(3), f"{keyword}: size {written} is not a fixed number of bytes: "
+                                                 "skipped"))
+        return None
+    if members and position != 8 * size:
+        issues.append(EdsIssue(entry.line, f"{keyword}: members add up to {position} bits, not {8 * size}: "
+                                           "served as plain data"))
+        members = []
+    return AssemblyInfo(keyword, _text(entry.field(1)), instance, size, tuple(members), entry.line)
+
+
+def read_assemblies(doc: EdsDocument, params: Mapping[str, ParamInfo],
+                    issues: list[EdsIssue]) -> dict[str, AssemblyInfo]:
+    section = doc.get("Assembly")
+    out: dict[str, AssemblyInfo] = {}
+    if section is None:
+        return out
+    sizes = {e.keyword: e.value(3) for e in section if _int(e.field(3)) is not None}
+    for entry in section:
+        if not re.fullmatch(r"Assem[0-9]+", entry.keyword):
+            continue
+        if entry.keyword in out:
+            issues.append(EdsIssue(entry.line, f"{entry.keyword} is defined twice: the first is kept"))
+            continue
+        found = _assembly(entry, params, sizes, issues)
+        if found is not None:
+            out[entry.keyword] = found
+    return out
+
+
+def _identifier(text: str, used: set[str]) -> str:
+    name = re.sub(r"[^0-9a-z]+", "_", text.lower()).strip("_") or "member"
+    if name[0].isdigit():
+        name = f"m_{name}"
+    base, count = name, 2
+    while name in used:
+        name, count = f"{base}_{count}", count + 1
+    used.add(name)
+    return name
+
+
+def assembly_schema(info: AssemblyInfo, params: Mapping[str, ParamInfo]) -> AssemblySchema | None:
+    """The members of an assembly as named fields, or None when they cannot be (no instance, no
+    members, a member that crosses a byte boundary without filling whole bytes).
+
+    A member referring to a parameter is named after it; it keeps the parameter's link when it
+    carries that parameter's value whole (a 1-bit member of a BOOL or integer, or whole bytes of
+    the parameter's own size), which is what the emulator and the scanner decode by.
+    """
+    if info.instance is None or not info.members:
+        return None
+    fields: list[AssemblyField] = []
+    used: set[str] = set()
+    for member in info.members:
+        param = params.get(member.reference) if member.reference else None
+        if member.reference is None or member.bits == 0:
+            continue  # padding
+        offset, bit = divmod(member.start_bit, 8)
+        name = _identifier(param.name if param is not None and param.name else member.reference, used)
+        unit, scale_help = (param.unit, param.help) if param is not None else ("", "")
+        if bit + member.bits <= 8 and member.bits < 8:
+            whole = param is not None and isinstance(param.type, IntegerType) and (
+                member.bits == 1 or member.bits == 8 * param.size)
+            fields.append(AssemblyField(name, offset, bits=member.bits, bit=bit, unit=unit, help=scale_help,
+                                        link=param.link if whole and param is not None else None))
+        elif bit == 0 and member.bits % 8 == 0:
+            cip_type: CipType | None = None
+            link = None
+            if param is not None and param.type.size == member.bits // 8:
+                cip_type, link = param.type, param.link
+            else:
+                cip_type = {8: USINT, 16: UINT, 32: UDINT, 64: ULINT}.get(member.bits)
+            if cip_type is None:
+                return None
+            fields.append(AssemblyField(name, offset, cip_type, unit=unit, help=scale_help, link=link))
+        else:
+            return None
+    try:
+        return AssemblySchema(info.instance, info.name or info.keyword, info.size, fields)
+    except ValueError:
+        return None
+
+
+# -- [Connection Manager] --------------------------------------------------------------------------------
+
+def _rpi(item: Field | None, params: Mapping[str, ParamInfo]) -> tuple[int | None, int | None, int | None]:
+    """(proposed, minimum, maximum) of an RPI field: a number, or a parameter's default and range."""
+    value = _int(item)
+    if value is not None:
+        return value, None, None
+    reference = _keyword(item)
+    param = params.get(reference) if reference else None
+    if param is None:
+        return None, None, None
+
+    def whole(number: Any) -> int | None:
+        return int(number) if isinstance(number, (int, float)) and not isinstance(number, bool) else None
+
+    return whole(param.default), whole(param.minimum), whole(param.maximum)
+
+
+def _connection(entry: Entry, number: int, params: Mapping[str, ParamInfo], assemblies: Mapping[str, AssemblyInfo],
+                issues: list[EdsIssue]) -> ConnectionInfo | None:
+    keyword = entry.keyword
+    if len(entry.fields) < 15:
+        issues.append(EdsIssue(entry.line, f"{keyword} has {len(entry.fields)} fields, not 15: skipped"))
+        return None
+    trigger, parameters = _int(entry.field(1)), _int(entry.field(2))
+    if trigger is None or parameters is None:
+        issues.append(EdsIssue(entry.line, f"{keyword}: fields 1 and 2 are not numbers: skipped"))
+        return None
+    if not trigger & TRANSPORT_CLASS_1:
+        issues.append(EdsIssue(entry.line_of(1), f"{keyword}: transport 0x{trigger & 0xFFFF:04X} is not class 1: "
+                                                 "skipped"))
+        return None
+    if trigger & REDUNDANT_OWNER:
+        issues.append(EdsIssue(entry.line_of(1), f"{keyword}: redundant owner connections are not supported: "
+                                                 "skipped"))
+        return None
+    o_t_name, t_o_name = _keyword(entry.field(5)), _keyword(entry.field(8))
+    o_t_assembly, t_o_assembly = assemblies.get(o_t_name or ""), assemblies.get(t_o_name or "")
+    path, why = _path_bytes(entry, 15, params)
+    if path is None:
+        issues.append(EdsIssue(entry.line_of(15), f"{keyword}: path: {why}: skipped"))
+        return None
+    segments = _segments(path) if path else []
+    config, points, bad = 1, [], segments is None
+    for segment in segments or ():
+        if isinstance(segment, LogicalSegment) and segment.kind is LogicalType.CLASS_ID:
+            bad = bad or segment.value != 0x04
+        elif isinstance(segment, LogicalSegment) and segment.kind is LogicalType.INSTANCE_ID:
+            config = segment.value
+        elif isinstance(segment, LogicalSegment) and segment.kind is LogicalType.CONNECTION_POINT:
+            points.append(segment.value)
+        elif not isinstance(segment, (ElectronicKey, PortSegment)):
+            bad = True  # configuration data (a data segment): this target takes none
+    if path and (bad or not points):
+        issues.append(EdsIssue(entry.line_of(15), f"{keyword}: path {path.hex(' ')} is not an assembly connection "
+                                                  "path: skipped"))
+        return None
+    if len(points) == 3:
+        config, points = points[0], points[1:]
+    if len(points) == 1:
+        points = [o_t_assembly.instance if o_t_assembly and o_t_assembly.instance is not None else -1, points[0]]
+    if not points:
+        points = [a.instance if a and a.instance is not None else -1 for a in (o_t_assembly, t_o_assembly)]
+    o_t, t_o = points
+    if o_t < 0 or t_o < 0:
+        issues.append(EdsIssue(entry.line, f"{keyword}: its connection points are unknown: skipped"))
+        return None
+    if trigger & LISTEN_ONLY:
+        kind = LISTEN_ONLY_KIND
+    elif trigger & INPUT_ONLY:
+        kind = INPUT_ONLY_KIND
+    elif trigger & EXCLUSIVE_OWNER:
+        kind = EXCLUSIVE_OWNER_KIND
+    else:
+        # No application type bit: older files; a connection with no O->T data sends the heartbeat.
+        o_t_data = o_t_assembly.size if o_t_assembly is not None else (_int(entry.field(4)) or 0)
+        kind = EXCLUSIVE_OWNER_KIND if o_t_data else INPUT_ONLY_KIND
+
+    def size(number: int, assembly: AssemblyInfo | None) -> int | None:
+        if assembly is not None:
+            return assembly.size
+        value = _int(entry.field(number))
+        if value is not None:
+            return value
+        reference = _keyword(entry.field(number))
+        param = params.get(reference) if reference else None
+        return param.default if param is not None and isinstance(param.default, int) else None
+
+    o_t_size = 0 if kind != EXCLUSIVE_OWNER_KIND else size(4, o_t_assembly)
+    t_o_size = size(7, t_o_assembly)
+    if o_t_size is None or t_o_size is None:
+        issues.append(EdsIssue(entry.line, f"{keyword}: a data size is unknown: skipped"))
+        return None
+    rpi, rpi_min, rpi_max = _rpi(entry.field(6), params)
+    o_t_rpi = _rpi(entry.field(3), params)
+    rpi = rpi if rpi is not None else o_t_rpi[0]
+    rpi_min = rpi_min if rpi_min is not None else o_t_rpi[1]
+    rpi_max = rpi_max if rpi_max is not None else o_t_rpi[2]
+    t_o_types = (parameters >> T_O_TYPE_SHIFT) & 0xF
+    triggers = frozenset(t for t in TriggerType if trigger & (1 << (TRIGGER_SHIFT + int(t)))) or frozenset(
+        {TriggerType.CYCLIC})
+    return ConnectionInfo(
+        number, _text(entry.field(13)) or keyword, kind, config, o_t, t_o, o_t_size, t_o_size, rpi, rpi_min, rpi_max,
+        bool(t_o_types & TYPE_MULTICAST), bool(t_o_types & TYPE_POINT_TO_POINT) or not t_o_types, triggers,
+        o_t_name, t_o_name, entry.line)
+
+
+def read_connections(doc: EdsDocument, params: Mapping[str, ParamInfo], assemblies: Mapping[str, AssemblyInfo],
+                     issues: list[EdsIssue]) -> list[ConnectionInfo]:
+    section = doc.get("Connection Manager")
+    out: list[ConnectionInfo] = []
+    if section is None:
+        return out
+    for entry in section:
+        match = re.fullmatch(r"Connection([0-9]+)", entry.keyword)
+        if match is None:
+            continue
+        found = _connection(entry, int(match[1]), params, assemblies, issues)
+        if found is not None:
+            out.append(found)
+    return out
+
+
+def read_view(doc: EdsDocument) -> EdsView:
+    """Parameters, assemblies and class 1 connections of ``doc``, with what was skipped."""
+    issues: list[EdsIssue] = []
+    params = read_params(doc, issues)
+    assemblies = read_assemblies(doc, params, issues)
+    connections = read_connections(doc, params, assemblies, issues)
+    return EdsView(params, assemblies, connections, issues)
+
+
+__all__ = [
+    "AssemblyInfo", "AssemblyMember", "ConnectionInfo", "EdsIssue", "EdsView", "ParamInfo", "assembly_schema",
+    "read_assemblies", "read_connections", "read_params", "read_view",
+]
