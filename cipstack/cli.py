@@ -89,7 +89,6 @@ def cmd_adapter(args: argparse.Namespace) -> int:
     from .adapter import Adapter, AdapterSettings
     from .devices.profiles import PROFILES
     from .devices.state import StateFileError, default_state_path
-    from .eip.io_server import run_precise
 
     if args.eds is not None:
         return _adapter_from_eds(args)
@@ -110,10 +109,17 @@ def cmd_adapter(args: argparse.Namespace) -> int:
         adapter = Adapter(settings)
     except (StateFileError, ValueError, KeyError) as exc:
         raise UsageError(str(exc)) from None
+    return _serve(adapter, args, "adapter")
+
+
+def _serve(adapter: Any, args: argparse.Namespace, command: str) -> int:
+    """Run an emulator until SIGINT/SIGTERM; a port it cannot listen on is one line and exit 1."""
+    from .eip.io_server import run_precise
+
     try:
         run_precise(adapter.serve_forever())
     except OSError as exc:
-        print(f"cipstack adapter: cannot listen on {args.host}:{args.port}: {exc.strerror or exc}", file=sys.stderr)
+        print(f"cipstack {command}: cannot listen on {args.host}:{args.port}: {exc.strerror or exc}", file=sys.stderr)
         return EXIT_FAILURE
     return EXIT_OK
 
@@ -137,7 +143,6 @@ def _adapter_from_eds(args: argparse.Namespace) -> int:
     from .devices.base import DeviceLimits
     from .devices.from_eds import EdsDeviceError, build_eds_device
     from .devices.profiles import DEFAULT_MAC
-    from .eip.io_server import run_precise
     from .objects.tcpip import NetworkInterface
 
     if args.model is not None or args.state is not None or args.modbus_port is not None:
@@ -157,12 +162,7 @@ def _adapter_from_eds(args: argparse.Namespace) -> int:
                                max_connections=args.max_connections, io_port=args.io_port,
                                control_path=args.control, status_lines=not args.quiet)
     adapter = Adapter(settings, device=device)
-    try:
-        run_precise(adapter.serve_forever())
-    except OSError as exc:
-        print(f"cipstack adapter: cannot listen on {args.host}:{args.port}: {exc.strerror or exc}", file=sys.stderr)
-        return EXIT_FAILURE
-    return EXIT_OK
+    return _serve(adapter, args, "adapter")
 
 
 # -- discovery -----------------------------------------------------------------------------------
@@ -453,7 +453,6 @@ def cmd_componet(args: argparse.Namespace) -> int:
     from .adapter import Adapter, AdapterSettings
     from .devices.omron.device import build_componet_gateway, parse_nodes
     from .devices.profiles import DEFAULT_MAC
-    from .eip.io_server import run_precise
     from .objects.tcpip import NetworkInterface
 
     try:
@@ -466,12 +465,7 @@ def cmd_componet(args: argparse.Namespace) -> int:
     settings = AdapterSettings(host=args.host, port=args.port, io_port=args.io_port, control_path=args.control,
                                status_lines=not args.quiet)
     adapter = Adapter(settings, device=gateway)
-    try:
-        run_precise(adapter.serve_forever())
-    except OSError as exc:
-        print(f"cipstack componet: cannot listen on {args.host}:{args.port}: {exc.strerror or exc}", file=sys.stderr)
-        return EXIT_FAILURE
-    return EXIT_OK
+    return _serve(adapter, args, "componet")
 
 
 # -- emulator control ---------------------------------------------------------------------------------------
