@@ -25,7 +25,6 @@ from typing import Protocol
 from ..cip.epath import DataSegment, ElectronicKey, LogicalSegment, LogicalType, decode_path
 from ..cip.router import RequestContext
 from ..cip.status import CipError, ExtendedStatus
-from ..objects.assembly import AssemblyPoint
 from .cm_messages import (
     ConnectionTriad,
     ConnectionType,
@@ -57,6 +56,23 @@ OT_OVERHEAD = 6
 TO_OVERHEAD = 2
 #: CIP default multicast allocation (CIP Vol. 2, TCP/IP object attribute 9): 239.192.1.0 + 32 x host id.
 CIP_MULTICAST_BASE = 0xEFC00100
+
+
+class AssemblyPoint(Protocol):
+    """A connection point as class 1 sees it (``objects.assembly.AssemblyPoint`` is one): the
+    transport knows no device and no object, only sizes and where data comes from and goes."""
+
+    @property
+    def instance_id(self) -> int: ...
+
+    @property
+    def size(self) -> int: ...
+
+    @property
+    def produce(self) -> Callable[[], bytes] | None: ...
+
+    @property
+    def consume(self) -> Callable[[bytes, float], None] | None: ...
 
 
 class ConnectionKind(Enum):
