@@ -16,14 +16,7 @@ from pathlib import Path
 import pytest
 
 from cipstack.cli import parse_duration, parse_object_path
-
-
-def free_port() -> int:
-    with socket.socket() as tcp, socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as udp:
-        tcp.bind(("127.0.0.1", 0))
-        port = tcp.getsockname()[1]
-        udp.bind(("127.0.0.1", port))
-        return port
+from tests.ports import free_port
 
 
 def run(*args: str, timeout: float = 20) -> subprocess.CompletedProcess[str]:

@@ -8,7 +8,6 @@ import os
 import re
 import shutil
 import signal
-import socket
 import subprocess
 import sys
 import textwrap
@@ -28,6 +27,7 @@ from cipstack.eds.profiles import acg_et2_description
 from cipstack.eds.reader import parse_eds
 from cipstack.objects.tcpip import NetworkInterface
 from cipstack.scanner import Scanner
+from tests.ports import free_port
 
 # -- the scanner --------------------------------------------------------------------------------------------
 
@@ -116,13 +116,6 @@ def test_listen_only_connection_of_an_eds_shares_the_owner_multicast(tmp_path: P
 
 # -- the command line ----------------------------------------------------------------------------------------
 
-def free_port() -> int:
-    """A port free for both TCP and UDP on 127.0.0.1, chosen by the OS."""
-    with socket.socket() as tcp, socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as udp:
-        tcp.bind(("127.0.0.1", 0))
-        port = tcp.getsockname()[1]
-        udp.bind(("127.0.0.1", port))
-        return port
 
 
 def run(*args: str, timeout: float = 30) -> subprocess.CompletedProcess[str]:

@@ -4,7 +4,6 @@ from __future__ import annotations
 
 import asyncio
 import signal
-import socket
 import subprocess
 import sys
 import textwrap
@@ -29,6 +28,7 @@ from cipstack.eip.io_target import IoConnection, IoProfile
 from cipstack.objects.assembly import AssemblyPoint
 from cipstack.objects.tcpip import NetworkInterface
 from cipstack.scanner import Scanner
+from tests.ports import free_port
 
 OUTPUTS = [basic_speed_control_output(), extended_speed_control_output()]
 INPUTS = [basic_speed_control_input(), extended_speed_control_input()]
@@ -73,26 +73,6 @@ class SpeedDevice(Device):
         self.run_modes.append(run)
 
 
-def free_port_on(*hosts: str) -> int:
-    """A UDP and TCP port number free on every given loopback address."""
-    for _ in range(50):
-        with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as probe:
-            probe.bind((hosts[0], 0))
-            port = probe.getsockname()[1]
-        try:
-            sockets = []
-            for host in hosts:
-                for kind in (socket.SOCK_DGRAM, socket.SOCK_STREAM):
-                    s = socket.socket(socket.AF_INET, kind)
-                    sockets.append(s)
-                    s.bind((host, port))
-            return port
-        except OSError:
-            continue
-        finally:
-            for s in sockets:
-                s.close()
-    raise RuntimeError("no common free port")
 
 
 async def start_adapter(host: str, io_port: int = 0) -> Adapter:
@@ -145,9 +125,9 @@ async def test_sizes_from_attribute_4_without_schema(adapter: Adapter) -> None:
 
 
 async def test_several_targets_on_two_loopback_addresses() -> None:
-    port = free_port_on("127.0.0.1", "127.0.0.2")
+    port = free_port("127.0.0.1", "127.0.0.2")
     first = await start_adapter("127.0.0.2", io_port=port)
-    second = await start_adapter("127.0.0.1", io_port=free_port_on("127.0.0.1"))
+    second = await start_adapter("127.0.0.1", io_port=free_port("127.0.0.1"))
     try:
         assert first.io_endpoint and second.io_endpoint
         a = await Scanner.connect(f"127.0.0.2:{first.port}", catalog=CATALOG)

@@ -9,8 +9,6 @@ files of Tables 2 and 3 of the Omron option board manual, transcribed here from 
 from __future__ import annotations
 
 import argparse
-import importlib
-import logging
 from collections.abc import Iterator
 from datetime import datetime, timezone
 from functools import cache
@@ -47,6 +45,8 @@ from cipstack.eip.io_target import IoProfile
 from cipstack.objects.assembly import AssemblyPoint
 from cipstack.objects.identity import identity_spec
 from cipstack.objects.tcpip import TCPIP_SPEC
+
+from .conftest import EdsPieLog
 
 # Table 2 (MX2 Device List) and Table 3 (RX Device List), "Name of EDS file" column.
 TABLE_2 = (
@@ -390,39 +390,6 @@ def test_description_rejects_unknown_pair() -> None:
 UNKNOWN_ENTRY = "Unknown Entry [{section.keyword,}].{entry.keyword}"
 
 
-class _Collector(logging.Handler):
-    def __init__(self) -> None:
-        super().__init__(level=logging.WARNING)
-        self.records: list[logging.LogRecord] = []
-
-    def emit(self, record: logging.LogRecord) -> None:
-        self.records.append(record)
-
-
-@pytest.fixture(scope="module")
-def cip_eds() -> Any:
-    root = logging.getLogger()
-    guard = logging.NullHandler()
-    root.addHandler(guard)  # eds-pie's basicConfig(level=DEBUG) then changes nothing
-    try:
-        module = importlib.import_module("eds_pie.eds_pie")
-    finally:
-        root.removeHandler(guard)
-    return module.CIP_EDS
-
-
-@pytest.fixture
-def eds_pie_log() -> Iterator[_Collector]:
-    logger = logging.getLogger("eds_pie")
-    collector = _Collector()
-    level = logger.level
-    logger.setLevel(logging.WARNING)
-    logger.addHandler(collector)
-    try:
-        yield collector
-    finally:
-        logger.removeHandler(collector)
-        logger.setLevel(level)
 
 
 def known_false_positives(doc: EdsDocument) -> list[str]:
@@ -445,7 +412,7 @@ def known_false_positives(doc: EdsDocument) -> list[str]:
 
 
 @pytest.mark.interop
-def test_eds_pie_reads_acg(cip_eds: Any, eds_pie_log: _Collector) -> None:
+def test_eds_pie_reads_acg(cip_eds: Any, eds_pie_log: EdsPieLog) -> None:
     text = acg_text()
     ours = parse_eds(text)
     theirs = cip_eds(text)
@@ -462,7 +429,7 @@ FILE_MODELS = [item.name for family in omron.Family for item in omron_models_by_
 
 @pytest.mark.interop
 @pytest.mark.parametrize("name", FILE_MODELS)
-def test_eds_pie_reads_omron(cip_eds: Any, eds_pie_log: _Collector, name: str) -> None:
+def test_eds_pie_reads_omron(cip_eds: Any, eds_pie_log: EdsPieLog, name: str) -> None:
     text = omron_text(name)
     theirs = cip_eds(text)
     assert [record.getMessage() for record in eds_pie_log.records] == known_false_positives(parse_eds(text))

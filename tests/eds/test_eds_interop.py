@@ -12,9 +12,7 @@ vendor-specific section, whose keywords are the vendor's own and need no prefix.
 
 from __future__ import annotations
 
-import importlib
 import logging
-from collections.abc import Iterator
 from typing import Any
 
 import pytest
@@ -23,6 +21,7 @@ from cipstack.eds.model import FieldKind, format_epath
 from cipstack.eds.reader import parse_eds
 from cipstack.eds.writer import format_eds
 
+from .conftest import EdsPieLog
 from .samples import ADAPTER_EDS
 
 pytestmark = pytest.mark.interop
@@ -50,42 +49,6 @@ KNOWN_FALSE_POSITIVES = [
 ]
 
 
-class _Collector(logging.Handler):
-    def __init__(self) -> None:
-        super().__init__(level=logging.WARNING)
-        self.records: list[logging.LogRecord] = []
-
-    def emit(self, record: logging.LogRecord) -> None:
-        self.records.append(record)
-
-
-@pytest.fixture(scope="module")
-def cip_eds() -> Any:
-    # eds-pie calls logging.basicConfig(level=DEBUG) on import; with a handler already on the
-    # root logger that call changes nothing.
-    root = logging.getLogger()
-    guard = logging.NullHandler()
-    root.addHandler(guard)
-    try:
-        module = importlib.import_module("eds_pie.eds_pie")
-    finally:
-        root.removeHandler(guard)
-    return module.CIP_EDS
-
-
-@pytest.fixture
-def eds_pie_log() -> Iterator[_Collector]:
-    """What eds-pie logs at warning level or above, and nothing of its token-by-token debug."""
-    logger = logging.getLogger("eds_pie")
-    collector = _Collector()
-    level = logger.level
-    logger.setLevel(logging.WARNING)
-    logger.addHandler(collector)
-    try:
-        yield collector
-    finally:
-        logger.removeHandler(collector)
-        logger.setLevel(level)
 
 
 def _number(value: Any) -> float:
@@ -97,7 +60,7 @@ def _number(value: Any) -> float:
         return float(value)
 
 
-def test_eds_pie_reads_the_written_sample(cip_eds: Any, eds_pie_log: _Collector) -> None:
+def test_eds_pie_reads_the_written_sample(cip_eds: Any, eds_pie_log: EdsPieLog) -> None:
     ours = parse_eds(ADAPTER_EDS)
     text = format_eds(ours)
     theirs = cip_eds(text)
@@ -108,7 +71,7 @@ def test_eds_pie_reads_the_written_sample(cip_eds: Any, eds_pie_log: _Collector)
     assert theirs.get_value("Device", "ProdName") == "CENT"
 
 
-def test_eds_pie_sees_the_same_values(cip_eds: Any, eds_pie_log: _Collector) -> None:
+def test_eds_pie_sees_the_same_values(cip_eds: Any, eds_pie_log: EdsPieLog) -> None:
     ours = parse_eds(format_eds(parse_eds(ADAPTER_EDS)))
     theirs = cip_eds(format_eds(ours))
     assert list(theirs.sections) == [section.name for section in ours]

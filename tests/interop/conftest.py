@@ -19,6 +19,8 @@ from pathlib import Path
 
 import pytest
 
+from tests.ports import free_port
+
 HOST = "127.0.0.1"
 START_TIMEOUT = 15.0
 STOP_TIMEOUT = 5.0
@@ -34,19 +36,6 @@ IDENTITY = {
 }
 
 
-def free_port(host: str = HOST) -> int:
-    """A port that is free for both TCP and UDP on ``host`` (the adapter listens on both)."""
-    for _ in range(100):
-        with socket.socket(socket.AF_INET, socket.SOCK_STREAM) as tcp:
-            tcp.bind((host, 0))
-            port = tcp.getsockname()[1]
-            with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as udp:
-                try:
-                    udp.bind((host, port))
-                except OSError:
-                    continue
-        return port
-    raise RuntimeError(f"no port free for both TCP and UDP on {host}")
 
 
 def python_module(module: str, *args: str) -> list[str]:

@@ -7,7 +7,6 @@ reads Running and Speed Actual ramping in its input (seed 000 assembly tables), 
 from __future__ import annotations
 
 import re
-import socket
 import time
 from collections.abc import Iterator
 
@@ -19,6 +18,7 @@ from cipstack.cip.types import UINT
 from cipstack.devices.acg.registers import ACG_REGISTERS, CLASS_64_INSTANCES
 from cipstack.devices.profiles import catalog_for
 from cipstack.scanner import SyncScanner
+from tests.ports import free_port
 
 from .conftest import PeerProcess
 
@@ -65,10 +65,6 @@ def select_instances(scanner: SyncScanner, output_setting: int, input_setting: i
     scanner.set_attribute_single(0x64, CM, 94, 1, UINT)
 
 
-def free_udp_port() -> int:
-    with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as probe:
-        probe.bind(("0.0.0.0", 0))
-        return int(probe.getsockname()[1])
 
 
 @pytest.mark.parametrize(("output", "input_", "setting", "extended"), [(20, 70, 0, False), (21, 71, 1, True)])
@@ -83,7 +79,7 @@ def test_python_ethernetip_runs_the_drive_over_class1(adapter: PeerProcess, driv
     connection.registerSession()
     inputs = enip.registerAssembly(ethernetip.EtherNetIP.ENIP_IO_TYPE_INPUT, 4, input_, connection)
     outputs = enip.registerAssembly(ethernetip.EtherNetIP.ENIP_IO_TYPE_OUTPUT, 4, output, connection)
-    enip.startIO(free_udp_port())
+    enip.startIO(free_port("0.0.0.0"))
     try:
         status = connection.sendFwdOpenReq(input_, output, 1, torpi=10, otrpi=10, multiplier=1, inputsz=4,
                                            outputsz=4, originator_udp_port=enip.originator_udp_port)
