@@ -17,7 +17,7 @@ pytestmark = pytest.mark.skipif(os.geteuid() != 0 or not shutil.which("unshare")
 
 SCRIPT = textwrap.dedent('''
     import asyncio, json, sys
-    sys.path.insert(0, {tests!r})
+    sys.path[:0] = [{tests!r}, {root!r}]  # test_io_live, and the tests package it imports from
     from test_io_live import CATALOG, start_adapter
     from cipstack.scanner import Scanner
 
@@ -50,7 +50,8 @@ SCRIPT = textwrap.dedent('''
 
 def test_multicast_owner_and_listener(tmp_path: Path) -> None:
     script = tmp_path / "multicast.py"
-    script.write_text(SCRIPT.format(tests=str(Path(__file__).parent)))
+    tests = Path(__file__).parent
+    script.write_text(SCRIPT.format(tests=str(tests), root=str(tests.parent)))
     result = subprocess.run(["unshare", "-n", "sh", "-c", f"ip link set lo up && exec {sys.executable} {script}"],
                             capture_output=True, text=True, timeout=60)
     assert result.returncode == 0, result.stderr
