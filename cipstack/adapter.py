@@ -3,8 +3,11 @@
 from __future__ import annotations
 
 import asyncio
+import contextlib
 import logging
+import os
 import signal
+from collections.abc import Iterator
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -23,6 +26,16 @@ from .eip.target import EncapsulationTarget, TargetSettings
 from .objects.tcpip import NetworkInterface
 
 log = logging.getLogger(__name__)
+
+
+class ListenError(OSError):
+    """A port (or the control socket) the adapter cannot listen on: ``where`` names it and its option."""
+
+    def __init__(self, where: str, cause: OSError | str) -> None:
+        self.where = where
+        # asyncio's bind error carries the address in its text: the reason alone is the errno's.
+        self.reason = cause if isinstance(cause, str) else (os.strerror(cause.errno) if cause.errno else str(cause))
+        super().__init__(f"cannot listen on {where}: {self.reason}")
 
 
 @dataclass
@@ -45,6 +58,45 @@ class AdapterSettings:
     model: str | None = None
     #: Modbus TCP port for a drive that also speaks Modbus TCP (None: off; 0: any free port).
     modbus_port: int | None = None
+
+
+class _HeldRecords:
+    """The log records of a start that may still fail; emitted only once ``release`` is called."""
+
+    def __init__(self) -> None:
+        self.records: list[tuple[logging.Handler, logging.LogRecord]] = []
+        self.released = False
+
+    def release(self) -> None:
+        self.released = True
+
+
+class _Hold(logging.Filter):
+    def __init__(self, handler: logging.Handler, held: _HeldRecords) -> None:
+        super().__init__()
+        self.handler = handler
+        self.held = held
+
+    def filter(self, record: logging.LogRecord) -> bool:
+        self.held.records.append((self.handler, record))
+        return False
+
+
+@contextlib.contextmanager
+def _held_log_records() -> Iterator[_HeldRecords]:
+    """Hold back what the root logger's handlers would print until the caller releases it."""
+    held = _HeldRecords()
+    holds = [_Hold(handler, held) for handler in logging.getLogger().handlers]
+    for hold in holds:
+        hold.handler.addFilter(hold)
+    try:
+        yield held
+    finally:
+        for hold in holds:
+            hold.handler.removeFilter(hold)
+        if held.released:
+            for handler, record in held.records:
+                handler.handle(record)
 
 
 class Adapter:
@@ -81,7 +133,8 @@ class Adapter:
             self.io = IoTarget(profile, self.device, self.device.multicast_block, s.io_port)
             self.device.connection_manager.io_handler = self.io
             self.target.settings.capabilities = CAPABILITY_CIP_TCP | CAPABILITY_CLASS01_UDP
-            self.io_endpoint = IoEndpoint(self.io, s.host, s.io_port, lambda: int(self.device.tcpip.get(1, 8)))
+            self.io_endpoint = IoEndpoint(self.io, s.host, s.io_port, lambda: int(self.device.tcpip.get(1, 8)),
+                                          exclusive=True)
             self.io.changed = self.io_endpoint.wakeup
             self.io.deliver = self.device.assembly.deliver
             self.io.tick = self._tick
@@ -112,22 +165,35 @@ class Adapter:
         self._tick(asyncio.get_running_loop().time())
 
     async def start(self) -> None:
-        await self.server.start()
+        """Listen on every port, each exclusively; a port that is taken raises ``ListenError``
+        naming it, with nothing left open and nothing logged (the error is the one line to say)."""
+        with _held_log_records() as held:
+            await self._start()
+            held.release()
+
+    async def _start(self) -> None:
+        s = self.settings
+        try:
+            await self.server.start()
+        except OSError as exc:
+            what = "UDP" if self.server._tcp is not None else "TCP"
+            await self.server.close()
+            raise ListenError(f"{what} {s.host}:{s.port} (EtherNet/IP, --port)", exc) from None
         self._tick(asyncio.get_running_loop().time())
         if self.io_endpoint is not None:
             try:
                 await self.io_endpoint.start()
-            except OSError:
+            except OSError as exc:
                 await self.server.close()
-                raise
+                raise ListenError(f"UDP {s.host}:{s.io_port} (class 1 I/O, --io-port)", exc) from None
             if self.io is not None:
                 self.io.io_port = self.io_endpoint.port
         if self.modbus is not None:
             try:
                 await self.modbus.start()
-            except OSError:
+            except OSError as exc:
                 await self.close()
-                raise
+                raise ListenError(f"TCP {s.host}:{s.modbus_port} (Modbus TCP, --modbus-port)", exc) from None
 
     async def close(self) -> None:
         if self.modbus is not None:
@@ -194,7 +260,7 @@ class Adapter:
             await control.start()
         except OSError as exc:
             await self.close()
-            raise OSError(f"control socket: {exc}") from None
+            raise ListenError(f"control socket {control.path} (--control)", exc.strerror or str(exc)) from None
         printer = asyncio.create_task(self._print_status_lines()) if self.settings.status_lines else None
         info = self.device.identity_info
         log.info("emulating %s (vendor %d, device type %d, product code %d, revision %d.%d)",

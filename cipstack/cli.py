@@ -93,9 +93,11 @@ def cmd_adapter(args: argparse.Namespace) -> int:
     if args.eds is not None:
         return _adapter_from_eds(args)
     if args.profile is None:
-        args.profile = "acg"
+        args.profile = _profile_of_model(args.model) if args.model else "acg"
     if args.profile not in PROFILES:
         raise UsageError(f"unknown profile {args.profile!r} (known: {', '.join(sorted(PROFILES))})")
+    if args.model and args.profile == "acg":
+        raise UsageError(f"--model {args.model}: the acg profile has one model; --model names an MX2 or RX model")
     if not 0 <= args.port < 65536:
         raise UsageError(f"port {args.port} out of range")
     if args.state is None:
@@ -109,18 +111,51 @@ def cmd_adapter(args: argparse.Namespace) -> int:
         adapter = Adapter(settings)
     except (StateFileError, ValueError, KeyError) as exc:
         raise UsageError(str(exc)) from None
+    if args.param:
+        _apply_keypad_parameters(adapter, args.param)
     return _serve(adapter, args, "adapter")
 
 
+def _apply_keypad_parameters(adapter: Any, assignments: list[str]) -> None:
+    """``--param CODE=VALUE``: keypad parameters set before the network connects (the ACG's codes)."""
+    from .devices.acg.device import AcgDevice
+    from .devices.acg.keypad import apply_parameters
+
+    if not isinstance(adapter.device, AcgDevice):
+        raise UsageError("--param sets the ACG's keypad parameters (profile acg)")
+    drive = adapter.device.drive
+    try:
+        applied = apply_parameters(drive, assignments, drive.time)
+    except ValueError as exc:
+        raise UsageError(str(exc)) from None
+    for line in applied:
+        logging.getLogger("cipstack.adapter").info("keypad parameter %s", line)
+
+
+def _profile_of_model(name: str) -> str:
+    """The profile of ``--model`` given without ``--profile``: the family the model belongs to."""
+    from .devices.omron.models import model
+
+    try:
+        return model(name).family.value.lower()
+    except KeyError as exc:
+        raise UsageError(f"--model: {exc} (`cipstack models` lists them)") from None
+
+
 def _serve(adapter: Any, args: argparse.Namespace, command: str) -> int:
-    """Run an emulator until SIGINT/SIGTERM; a port it cannot listen on is one line and exit 1."""
+    """Run an emulator until SIGINT/SIGTERM; a port it cannot listen on (taken, or not an address of
+    this machine) is one line naming the port and its option, and exit 2."""
+    from .adapter import ListenError
     from .eip.io_server import run_precise
 
     try:
         run_precise(adapter.serve_forever())
+    except ListenError as exc:
+        print(f"cipstack {command}: {exc}", file=sys.stderr)
+        return EXIT_USAGE
     except OSError as exc:
         print(f"cipstack {command}: cannot listen on {args.host}:{args.port}: {exc.strerror or exc}", file=sys.stderr)
-        return EXIT_FAILURE
+        return EXIT_USAGE
     return EXIT_OK
 
 
@@ -145,8 +180,8 @@ def _adapter_from_eds(args: argparse.Namespace) -> int:
     from .devices.profiles import DEFAULT_MAC
     from .objects.tcpip import NetworkInterface
 
-    if args.model is not None or args.state is not None or args.modbus_port is not None:
-        raise UsageError("--model, --state and --modbus-port belong to --profile, not --eds")
+    if args.model is not None or args.state is not None or args.modbus_port is not None or args.param:
+        raise UsageError("--model, --state, --modbus-port and --param belong to --profile, not --eds")
     if not 0 <= args.port < 65536:
         raise UsageError(f"port {args.port} out of range")
     doc = _read_eds_file(args.eds)
@@ -570,6 +605,9 @@ def build_parser() -> argparse.ArgumentParser:
                    help="state file of saved parameters (default: in the user's data directory, per profile)")
     p.add_argument("--modbus-port", type=lambda t: parse_number(t, "modbus port"),
                    help="also serve Modbus TCP on this port (ACG)")
+    p.add_argument("--param", action="append", metavar="CODE=VALUE",
+                   help="set an ACG keypad parameter at start, in the keypad's unit; repeatable "
+                        "(drv=4 Frq=8: run from the network)")
     p.add_argument("--quiet", action="store_true", help="no status line on stdout")
     p.add_argument("--json", action="store_true", help=argparse.SUPPRESS)
     p.set_defaults(func=cmd_adapter)

@@ -149,8 +149,9 @@ def test_adapter_port_in_use() -> None:
         busy.listen()
         port = busy.getsockname()[1]
         result = run("adapter", "--port", str(port), "--io-port", "0", timeout=10)
-    assert result.returncode == 1
-    assert "cannot listen" in one_line_error(result)
+    assert result.returncode == 2
+    assert one_line_error(result) == (f"cipstack adapter: cannot listen on TCP 127.0.0.1:{port} (EtherNet/IP, --port): "
+                                      "Address already in use")
 
 
 def test_python_dash_m_and_version() -> None:

@@ -88,8 +88,11 @@ class IoEndpoint:
     """UDP socket + timer around an ``IoCore``."""
 
     def __init__(self, core: IoCore, host: str = "127.0.0.1", port: int = 2222,
-                 multicast_ttl: Callable[[], int] = lambda: 1) -> None:
+                 multicast_ttl: Callable[[], int] = lambda: 1, exclusive: bool = False) -> None:
         self.core = core
+        #: Bind without SO_REUSEADDR, so that a second process cannot bind the same port and take
+        #: the datagrams (a target's consuming port must be its own).
+        self.exclusive = exclusive
         self.host = host
         self.port = port
         self.multicast_ttl = multicast_ttl
@@ -103,7 +106,8 @@ class IoEndpoint:
     async def start(self) -> None:
         self.loop = asyncio.get_running_loop()
         sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
-        sock.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
+        if not self.exclusive:
+            sock.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
         try:
             sock.bind((self.host, self.port))
             if self.host not in ("", "0.0.0.0"):

@@ -106,6 +106,19 @@ class IoProfile:
     triggers: frozenset[TriggerType] = frozenset({TriggerType.CYCLIC})
     #: Allowed (output, input) pairs for exclusive owners; None allows any pair.
     pairs: Callable[[], set[tuple[int, int]]] | None = None
+    #: For a device that offers only some of its assemblies: which pair is offered now and how
+    #: to change it, added to the log line of a Forward_Open refused for its path.
+    pair_hint: Callable[[], str] | None = None
+
+
+#: A connection whose first O->T datagram has not come after this many RPIs (and at least this
+#: long, for scheduling noise) is reported once in the log; the watchdog waits 10 s before closing it.
+SILENT_RPIS = 8
+SILENT_MINIMUM_S = 0.5
+
+#: The extended statuses of a connection path that names assemblies the device does not offer.
+_PATH_REFUSALS = frozenset({ExtendedStatus.INVALID_CONSUMING_PATH, ExtendedStatus.INVALID_PRODUCING_PATH,
+                           ExtendedStatus.INCONSISTENT_PATH_COMBINATION})
 
 
 class IoEvents(Protocol):
@@ -151,6 +164,8 @@ class IoConnection:
     cip_sequence: int = 0
     owner: IoConnection | None = None
     listeners: list[IoConnection] = field(default_factory=list)
+    #: When to say so if no O->T datagram has arrived yet (None: said, or no longer needed).
+    silence_check: float | None = None
 
     @property
     def name(self) -> str:
@@ -180,6 +195,17 @@ class IoTarget:
 
     # -- Forward_Open -------------------------------------------------------------------------
     def forward_open(self, fo: ForwardOpenRequest, context: RequestContext) -> ForwardOpenReply:
+        try:
+            return self._forward_open(fo, context)
+        except CipError as exc:
+            # One line per refusal, so that whoever runs the adapter sees why a scanner gets no I/O.
+            reason = str(exc)
+            if exc.extended and exc.extended[0] in _PATH_REFUSALS and self.profile.pair_hint is not None:
+                reason += f"; {self.profile.pair_hint()}"
+            log.info("class 1 Forward_Open from %s refused: %s", context.origin, reason)
+            raise
+
+    def _forward_open(self, fo: ForwardOpenRequest, context: RequestContext) -> ForwardOpenReply:
         triad = fo.triad
         if any(c.triad == triad for c in self.connections.values()):
             raise connection_failure(ExtendedStatus.CONNECTION_IN_USE, triad, "duplicate Forward_Open")
@@ -339,6 +365,7 @@ class IoTarget:
                                   owner=owner)
         if owner is not None:
             owner.listeners.append(connection)
+        connection.silence_check = now + max(SILENT_RPIS * fo.ot_rpi_us / 1e6, SILENT_MINIMUM_S)
         self.connections[connection.ot_connection_id] = connection
         if multicast:
             host, port = destination
@@ -349,6 +376,19 @@ class IoTarget:
         self.events.io_opened(connection)
         self.changed()
         return ForwardOpenReply(connection.ot_connection_id, to_id, fo.triad, fo.ot_rpi_us, fo.to_rpi_us)
+
+    def _check_silence(self, now: float) -> None:
+        """Say once, well before the watchdog's first timeout, that an opened connection's O->T data
+        has not arrived: an originator that sends to another port (or host) otherwise looks connected."""
+        for connection in self.connections.values():
+            if connection.silence_check is None or now < connection.silence_check:
+                continue
+            connection.silence_check = None
+            if connection.stats.received == 0:
+                waited = SILENT_RPIS * connection.ot_rpi_us / 1e6
+                log.warning("class 1 %s: no O->T data from %s after %d RPIs (%.3f s); this adapter consumes on "
+                            "UDP port %d: is the originator sending there?", connection.name, connection.peer,
+                            SILENT_RPIS, max(waited, SILENT_MINIMUM_S), self.io_port)
 
     def _new_id(self) -> int:
         while True:
@@ -455,10 +495,12 @@ class IoTarget:
 
     def next_deadline(self) -> float | None:
         deadlines = [c.consumer.deadline for c in self.connections.values()]
+        deadlines += [c.silence_check for c in self.connections.values() if c.silence_check is not None]
         deadlines += [c.producer.next_due for c in self.connections.values() if c.producer is not None]
         return min(deadlines, default=None)
 
     def expire(self, now: float) -> list[IoConnection]:
+        self._check_silence(now)
         expired = [c for c in self.connections.values() if c.consumer.expired(now)]
         for connection in expired:
             if connection.ot_connection_id in self.connections:

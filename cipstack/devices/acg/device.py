@@ -230,7 +230,17 @@ class AcgDevice(Device):
             produced=lambda: {self.active_input_instance: self._points[self.active_input_instance]},
             rpi_min_us=RPI_MIN_US,
             pairs=lambda: {(self.active_output_instance, self.active_input_instance)},
+            pair_hint=self.class1_pair_hint,
         )
+
+    def class1_pair_hint(self) -> str:
+        """Which exclusive-owner pair class 1 accepts now, and how to select another (seed 000,
+        "CIP Input Instance (CM.23)", "CIP Output Instance (CM.24)", applied by CM.94 Comm Update)."""
+        settings = self.drive.active_comm_settings
+        return (f"class 1 takes only output {settings.output_instance.instance} / input "
+                f"{settings.input_instance.instance}, the pair CM.24 = {settings.output_instance.setting} / "
+                f"CM.23 = {settings.input_instance.setting} select; write CM.24 and CM.23 (class 0x64 instance 7 "
+                f"attributes 24/23) then CM.94 = 1, or start with --param CM.24=N --param CM.23=N --param CM.94=1")
 
     def io_opened(self, connection: IoConnection) -> None:
         super().io_opened(connection)
