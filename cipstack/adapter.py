@@ -221,19 +221,23 @@ class Adapter:
         command = request.get("command")
         if command == "trip":
             code = request["code"]
-            if not isinstance(code, int):
-                raise ControlError("the trip code is a number")
+            if not isinstance(code, (int, str)) or isinstance(code, bool):
+                raise ControlError("the trip code is a number or a name")
             try:
                 trip = self.device.inject_trip(code)
             except NotImplementedError as exc:
                 raise ControlError(str(exc)) from None
             except (KeyError, ValueError) as exc:
-                raise ControlError(f"fault code 0x{code:04X}: {exc}") from None
+                reason = exc.args[0] if exc.args else exc
+                raise ControlError(f"{reason}; valid codes: {self.device.trip_codes()}") from None
             self._tick(now)
-            label = getattr(trip, "label", str(trip))
-            return {"result": f"tripped: {label} (fault code 0x{code:04X})", "status": self.device.status_line()}
+            label = getattr(trip, "label", None) or str(trip)
+            fault = getattr(trip, "fault_code", None)
+            return {"result": f"tripped: {label}" + (f" (fault code 0x{fault:04X})" if fault is not None else ""),
+                    "trip": label, "status": self.device.status_line()}
         if command == "status":
-            return {"status": self.device.status_line(), "sessions": len(self.target.sessions),
+            return {"status": self.device.status_line(), "drive": self.device.status_fields(),
+                    "sessions": len(self.target.sessions),
                     "class3_connections": len(self.device.connection_table.connections),
                     "class1_connections": len(self.io.connections) if self.io else 0}
         raise ControlError(f"unknown command {command!r} (known: trip, status)")

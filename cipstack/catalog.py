@@ -6,7 +6,7 @@ standard ones, so a profile's attributes decode by the same declaration the emul
 
 from __future__ import annotations
 
-from collections.abc import Iterable
+from collections.abc import Callable, Iterable, Mapping
 
 from .assemblies.schema import AssemblySchema
 from .cip.model import AttributeSpec, ClassSpec
@@ -33,18 +33,30 @@ CLASS_ATTRIBUTES: dict[int, AttributeSpec] = {
 }
 
 
+#: For a class whose attributes depend on the instance (a register map behind instance/attribute):
+#: the declaration at (instance, attribute), or None.
+AttributeResolver = Callable[[int, int], "AttributeSpec | None"]
+
+
 class Catalog:
-    def __init__(self, classes: Iterable[ClassSpec] = (), assemblies: Iterable[AssemblySchema] = ()) -> None:
+    def __init__(self, classes: Iterable[ClassSpec] = (), assemblies: Iterable[AssemblySchema] = (),
+                 resolvers: Mapping[int, AttributeResolver] | None = None) -> None:
         self.classes: dict[int, ClassSpec] = dict(STANDARD_CLASSES)
         for spec in classes:
             self.classes[spec.class_id] = spec
         #: Assembly schemas by instance, when the device profile is known.
         self.assemblies: dict[int, AssemblySchema] = {a.instance: a for a in assemblies}
+        #: Classes that declare their attributes per instance, instance 0 included (the Omron 0x64/0x65
+        #: registers): what the device declares there is what a reply decodes by.
+        self.resolvers: dict[int, AttributeResolver] = dict(resolvers or {})
 
     def add(self, spec: ClassSpec) -> None:
         self.classes[spec.class_id] = spec
 
     def attribute(self, class_id: int, instance: int, attribute_id: int) -> AttributeSpec | None:
+        resolve = self.resolvers.get(class_id)
+        if resolve is not None:
+            return resolve(instance, attribute_id)
         if instance == 0:
             return CLASS_ATTRIBUTES.get(attribute_id)
         spec = self.classes.get(class_id)

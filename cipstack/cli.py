@@ -307,7 +307,7 @@ def cmd_get(args: argparse.Namespace) -> int:
                 data, values = await scanner.get_attributes_all(class_id, instance)
                 record: dict[str, Any] = {"status": 0, "data": data.hex()}
                 if values is not None:
-                    record["value"] = {name: _jsonable(v) for name, v in values.items()}
+                    record["value"] = {json_key(name): _jsonable(v) for name, v in values.items()}
                 return record
             result = await scanner.get_attribute_single(class_id, instance, attribute, cip_type)
             record = {"status": 0, "data": result.data.hex()}
@@ -332,6 +332,12 @@ def cmd_get(args: argparse.Namespace) -> int:
     else:
         print(bytes.fromhex(record["data"]).hex(" ") or "(no data)", flush=True)
     return EXIT_OK
+
+
+def json_key(name: str) -> str:
+    """An attribute's name as a JSON key, as every JSON record of the command spells fields: "Serial Number"
+    -> "serial_number" (so ``get HOST 1/1 --json`` and ``identity --json`` give one Identity shape)."""
+    return "_".join("".join(c if c.isalnum() else " " for c in name.lower()).split())
 
 
 def _jsonable(value: Any) -> Any:
@@ -505,13 +511,24 @@ def cmd_componet(args: argparse.Namespace) -> int:
 
 # -- emulator control ---------------------------------------------------------------------------------------
 def _control(args: argparse.Namespace, request: dict[str, Any]) -> dict[str, Any]:
-    from .control import ControlError, control_request, default_control_path
+    from .control import ControlError, ControlRefused, control_request, default_control_path
 
     path = args.control or default_control_path(args.port)
     try:
-        return control_request(path, request, args.timeout)
+        reply = control_request(path, request, args.timeout)
+    except ControlRefused as exc:
+        raise UsageError(str(exc)) from None    # the emulator named what is wrong with the argument
     except ControlError as exc:
-        raise UsageError(str(exc)) if "no emulator" in str(exc) else ConnectionError(str(exc)) from None
+        raise ConnectionError(str(exc)) from None   # no emulator there, or no answer: exit 1
+    reply.pop("ok", None)
+    return reply
+
+
+def _trip_code(text: str) -> int | str:
+    try:
+        return parse_int(text)
+    except ValueError:
+        return text.strip()
 
 
 def cmd_drive_trip(args: argparse.Namespace) -> int:
@@ -522,8 +539,14 @@ def cmd_drive_trip(args: argparse.Namespace) -> int:
 
 def cmd_drive_status(args: argparse.Namespace) -> int:
     reply = _control(args, {"command": "status"})
-    _emit(args, reply, f"{reply['status'] or '(no drive)'}  sessions {reply['sessions']}  class 3 "
-                       f"{reply['class3_connections']}  class 1 {reply['class1_connections']}")
+    if args.json:
+        # Fields, not the console line: the drive's state, then the emulator's sessions and connections.
+        record = {**(reply.get("drive") or {}), "sessions": reply["sessions"],
+                  "class3_connections": reply["class3_connections"], "class1_connections": reply["class1_connections"]}
+        print(json.dumps(record), flush=True)
+        return EXIT_OK
+    print(f"{reply['status'] or '(no drive)'}  sessions {reply['sessions']}  class 3 "
+          f"{reply['class3_connections']}  class 1 {reply['class1_connections']}", flush=True)
     return EXIT_OK
 
 
@@ -589,15 +612,18 @@ def build_parser() -> argparse.ArgumentParser:
 
     p = sub.add_parser("adapter", help="run the adapter emulator")
     p.add_argument("--host", default="127.0.0.1", help="address to listen on (default 127.0.0.1)")
-    p.add_argument("--port", type=lambda t: parse_number(t, "port"), default=DEFAULT_PORT)
+    p.add_argument("--port", type=lambda t: parse_number(t, "port"), default=DEFAULT_PORT,
+                   help=f"EtherNet/IP port, TCP and UDP (default {DEFAULT_PORT})")
     device = p.add_mutually_exclusive_group()
     device.add_argument("--profile", help="device profile: acg (default), mx2, rx")
     device.add_argument("--eds", metavar="FILE",
                         help="emulate the generic device an EDS file describes (identity, parameters as "
                              "attributes, assemblies, connections)")
     p.add_argument("--model", help="model of the mx2/rx profiles (e.g. MX2-A2015-E, RX-A4055-E)")
-    p.add_argument("--max-sessions", type=lambda t: parse_number(t, "max sessions"), default=32)
-    p.add_argument("--max-connections", type=lambda t: parse_number(t, "max connections"), default=32)
+    p.add_argument("--max-sessions", type=lambda t: parse_number(t, "max sessions"), default=32,
+                   help="encapsulation sessions at once; one more is refused with 0x0002 (default 32)")
+    p.add_argument("--max-connections", type=lambda t: parse_number(t, "max connections"), default=32,
+                   help="class 1 and class 3 connections at once (default 32)")
     p.add_argument("--io-port", type=lambda t: parse_number(t, "io port"), default=2222,
                    help="UDP port of class 1 I/O (default 2222; 0 picks a free one)")
     p.add_argument("--control", type=Path, help="control socket for `cipstack drive` (default: per port)")
@@ -621,8 +647,10 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--nodes", required=True, metavar="PROFILE:MODEL@NODE,...",
                    help="slaves, e.g. mx2:MX2-A2015-E@3,rx:RX-A4055-E@5 (node addresses 0-63)")
     p.add_argument("--host", default="127.0.0.1", help="address to listen on (default 127.0.0.1)")
-    p.add_argument("--port", type=lambda t: parse_number(t, "port"), default=DEFAULT_PORT)
-    p.add_argument("--io-port", type=lambda t: parse_number(t, "io port"), default=2222)
+    p.add_argument("--port", type=lambda t: parse_number(t, "port"), default=DEFAULT_PORT,
+                   help=f"EtherNet/IP port, TCP and UDP (default {DEFAULT_PORT})")
+    p.add_argument("--io-port", type=lambda t: parse_number(t, "io port"), default=2222,
+                   help="UDP port of class 1 I/O (default 2222; 0 picks a free one)")
     p.add_argument("--control", type=Path, help="control socket (default: per port)")
     p.add_argument("--quiet", action="store_true", help="no status line on stdout")
     p.add_argument("--json", action="store_true", help=argparse.SUPPRESS)
@@ -630,7 +658,8 @@ def build_parser() -> argparse.ArgumentParser:
 
     p = sub.add_parser("discover", help="ListIdentity over UDP")
     p.add_argument("--broadcast", default="255.255.255.255", help="broadcast or unicast address")
-    p.add_argument("--port", type=lambda t: parse_number(t, "port"), default=DEFAULT_PORT)
+    p.add_argument("--port", type=lambda t: parse_number(t, "port"), default=DEFAULT_PORT,
+                   help=f"UDP port to ask (default {DEFAULT_PORT})")
     common(p, target=False)
     p.set_defaults(func=cmd_discover, timeout=2.0)
 
@@ -673,19 +702,20 @@ def build_parser() -> argparse.ArgumentParser:
                              ("status", cmd_drive_status, "the emulated drive's status line")):
         q = drive.add_parser(name, help=text)
         if name == "trip":
-            q.add_argument("code", type=lambda t: parse_number(t, "fault code"),
-                           help="fault code of the drive's manual (decimal or 0x hex)")
+            q.add_argument("code", type=_trip_code,
+                           help="fault code of the drive's manual (decimal or 0x hex: 0x4200 on the ACG, 5 on "
+                                "the MX2/RX) or its name (OverHeat, E05)")
         q.add_argument("--port", type=lambda t: parse_number(t, "port"), default=DEFAULT_PORT,
                        help="the emulator's EtherNet/IP port (finds its control socket)")
         q.add_argument("--control", type=Path, help="the emulator's control socket")
-        q.add_argument("--timeout", type=parse_duration, default=5.0)
-        q.add_argument("--json", action="store_true")
+        q.add_argument("--timeout", type=parse_duration, default=5.0, help="reply timeout (default 5 s)")
+        q.add_argument("--json", action="store_true", help="one JSON object per line")
         q.set_defaults(func=func)
 
     from .eds.commands import add_check_arguments, add_show_arguments
     from .eds.commands_generate import add_generate_arguments
 
-    p = sub.add_parser("eds", help="EDS files: check, show")
+    p = sub.add_parser("eds", help="EDS files: generate, check, show")
     eds = p.add_subparsers(dest="eds_command", required=True, parser_class=_Parser)
     q = eds.add_parser("check", help="check EDS files against the rules a configuration tool relies on")
     add_check_arguments(q)

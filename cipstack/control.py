@@ -30,7 +30,11 @@ def default_control_path(port: int) -> Path:
 
 
 class ControlError(Exception):
-    """A control request the emulator refused (one line of text for the user)."""
+    """A control request that failed (one line of text for the user)."""
+
+
+class ControlRefused(ControlError):
+    """The emulator answered and refused the request (a bad argument, e.g. an unknown trip code)."""
 
 
 Handler = Callable[[dict[str, Any]], dict[str, Any]]
@@ -105,5 +109,5 @@ def control_request(path: Path, request: dict[str, Any], timeout: float = 5.0) -
     except ValueError:
         raise ControlError("the emulator sent no reply") from None
     if not reply.get("ok"):
-        raise ControlError(str(reply.get("error", "refused")))
+        raise ControlRefused(str(reply.get("error", "refused")))
     return dict(reply)

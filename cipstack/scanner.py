@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import asyncio
 import contextlib
+import logging
 import struct
 from collections.abc import AsyncIterator, Sequence
 from dataclasses import dataclass
@@ -36,6 +37,7 @@ from .eip.originator import (
 )
 
 T = TypeVar("T")
+log = logging.getLogger(__name__)
 
 
 @dataclass(frozen=True)
@@ -58,6 +60,11 @@ class AttributeValue:
         if self.type is None:
             return None
         return self.type.to_json(self.value)
+
+
+class ReplyDecodeError(ValueError):
+    """A successful reply whose data is not the type asked for: a mismatch on this side (the device
+    answered status 0), so not a ``CipError``."""
 
 
 def _decode(cip_type: CipType | None, data: bytes) -> Any:
@@ -123,8 +130,17 @@ class Scanner:
                                    cip_type: CipType | None = None) -> AttributeValue:
         reply = await self.request(Service.GET_ATTRIBUTE_SINGLE, class_id, instance, attribute)
         value_type, spec = self._type_for(class_id, instance, attribute, cip_type)
-        return AttributeValue(class_id, instance, attribute, reply.data, _decode(value_type, reply.data), spec,
-                              value_type)
+        try:
+            value = _decode(value_type, reply.data)
+        except CipError as exc:
+            where = f"0x{class_id:02X}/{instance}/{attribute}"
+            if cip_type is not None:
+                raise ReplyDecodeError(f"{where} answered {len(reply.data)} bytes ({reply.data.hex(' ') or 'none'}), "
+                                       f"which do not decode as {cip_type.name}: {exc.message}") from None
+            # The device differs from the declaration: tolerant as an originator, the raw bytes stand.
+            log.debug("%s: reply %s does not decode as declared (%s): %s", where, reply.data.hex(), value_type, exc)
+            return AttributeValue(class_id, instance, attribute, reply.data, None, spec, None)
+        return AttributeValue(class_id, instance, attribute, reply.data, value, spec, value_type)
 
     async def read(self, class_id: int, instance: int, attribute: int, cip_type: CipType | None = None) -> Any:
         """The decoded value (raw bytes when the type is unknown)."""
@@ -357,5 +373,5 @@ def discover_sync(address: str = "255.255.255.255", port: int = DEFAULT_PORT, ti
     return asyncio.run(discover(address, port, timeout))
 
 
-__all__ = ["AttributeValue", "Scanner", "SyncScanner", "backplane_route", "discover", "discover_sync",
-           "list_services_udp"]
+__all__ = ["AttributeValue", "ReplyDecodeError", "Scanner", "SyncScanner", "backplane_route", "discover",
+           "discover_sync", "list_services_udp"]

@@ -66,7 +66,7 @@ def test_get_forms(adapter_process: tuple[str, subprocess.Popen[str]]) -> None:
     assert run("get", address, "0x01/0x01/0x03").stdout.strip() == "Product Code = 100"
     assert run("get", address, "1/1/1", "--connected").stdout.strip() == "Vendor ID = 259"
     everything = run("get", address, "1/1", "--json")
-    assert json.loads(everything.stdout)["value"]["Product Name"] == "CENT"
+    assert json.loads(everything.stdout)["value"]["product_name"] == "CENT"
     typed = run("get", address, "0xF5/1/13", "--type", "INT", "--json")
     assert json.loads(typed.stdout)["type"] == "INT"
 
@@ -114,7 +114,10 @@ def test_error_status_json(adapter_process: tuple[str, subprocess.Popen[str]]) -
 def test_identity_and_discover(adapter_process: tuple[str, subprocess.Popen[str]]) -> None:
     address, _ = adapter_process
     identity = json.loads(run("identity", address, "--json").stdout)
-    assert identity["product_name"] == "CENT" and identity["vendor_id"] == 259 and identity["revision"] == "1.1"
+    assert identity["product_name"] == "CENT" and identity["vendor_id"] == 259
+    # One Identity shape: ListIdentity's and the Identity object's Get_Attributes_All.
+    everything = json.loads(run("get", address, "1/1", "--json").stdout)["value"]
+    assert everything == {k: v for k, v in identity.items() if k not in ("state", "address")}
     host, port = address.split(":")
     found = run("discover", "--broadcast", host, "--port", port, "--timeout", "1", "--json")
     assert found.returncode == 0
@@ -258,7 +261,9 @@ def test_drive_trip_and_status_over_the_control_socket(tmp_path: Path) -> None:
         status = run("drive", "status", "--control", str(control))
         assert status.returncode == 0 and "OverHeat" in status.stdout
         unknown = run("drive", "trip", "0x9999", "--control", str(control))
-        assert unknown.returncode == 1 and "0x9999" in one_line_error(unknown)
+        # A code the drive's table lacks is a bad argument (2); the line lists the valid codes.
+        assert unknown.returncode == 2 and "0x9999" in one_line_error(unknown)
+        assert "valid codes: 0x1000, 0x2200" in one_line_error(unknown)
     finally:
         stderr = stop(process)
     assert "Traceback" not in stderr

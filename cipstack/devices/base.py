@@ -95,8 +95,16 @@ class Device:
         """Trip the simulated drive, now, with a fault code (or name) of its manual; returns the trip."""
         raise NotImplementedError(f"{self.identity_info.product_name}: this profile simulates no drive")
 
+    def trip_codes(self) -> str:
+        """The trip codes ``inject_trip`` takes, as one line for an error message."""
+        return "none (this profile simulates no drive)"
+
     def status_line(self) -> str | None:
         """A compact line of the device's state for the emulator's console, or None."""
+        return None
+
+    def status_fields(self) -> dict[str, object] | None:
+        """The state ``status_line`` shows, field by field (``cipstack drive status --json``), or None."""
         return None
 
     # -- time -----------------------------------------------------------------------------------

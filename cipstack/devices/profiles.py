@@ -88,9 +88,14 @@ def _omron(family: str, default_model: str) -> Callable[[NetworkInterface, Devic
 def _omron_catalog(default_model: str) -> Callable[[], Catalog]:
     def catalog() -> Catalog:
         from .omron.device import build_omron_device
+        from .omron.objects import FUNCTION_CODE, MODBUS_REGISTER, register_attribute
 
         device = build_omron_device(default_model)
-        return Catalog(device.catalog_classes(), device.schemas().values())
+        registers = device.inverter.registers
+        resolvers = {class_id: (lambda instance, attribute, c=class_id: register_attribute(registers, c, instance,
+                                                                                          attribute))
+                     for class_id in (MODBUS_REGISTER, FUNCTION_CODE)}
+        return Catalog(device.catalog_classes(), device.schemas().values(), resolvers)
 
     return catalog
 

@@ -34,8 +34,9 @@ class IdentityRecord:
     def as_dict(self) -> dict[str, object]:
         return {
             "vendor_id": self.vendor_id, "device_type": self.device_type, "product_code": self.product_code,
-            "revision": f"{self.revision[0]}.{self.revision[1]}", "status": self.status,
-            "serial_number": f"0x{self.serial_number:08X}", "product_name": self.product_name, "state": self.state,
+            # The shape `cipstack get HOST 1/1 --json` gives the Identity object's attributes.
+            "revision": {"major": self.revision[0], "minor": self.revision[1]}, "status": self.status,
+            "serial_number": self.serial_number, "product_name": self.product_name, "state": self.state,
             "address": f"{self.address.host}:{self.address.port}" if self.address else None,
         }
 

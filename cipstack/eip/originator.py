@@ -74,7 +74,11 @@ class EncapsulationStatusError(Exception):
             name = EncapsulationStatus(status).name.lower().replace("_", " ")
         except ValueError:
             name = "unknown"
-        super().__init__(f"encapsulation command 0x{command:04X} failed with status 0x{status:04X} ({name})")
+        text = f"encapsulation command 0x{command:04X} failed with status 0x{status:04X} ({name})"
+        if command == 0x0065 and status == 0x0002:
+            # RegisterSession answered "insufficient memory": what targets answer when every session is taken.
+            text += ": the target's session table is full (its session limit is reached)"
+        super().__init__(text)
 
 
 def parse_host(text: str, default_port: int = DEFAULT_PORT) -> tuple[str, int]:

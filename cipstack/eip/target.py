@@ -255,7 +255,10 @@ class EncapsulationConnection:
                         status=EncapsulationStatus.UNSUPPORTED_PROTOCOL)
             return
         if len(self.target.sessions) >= self.target.settings.max_sessions:
-            raise EncapsulationError(EncapsulationStatus.INSUFFICIENT_MEMORY, "no session slot")
+            limit = self.target.settings.max_sessions
+            log.warning("%s: RegisterSession refused (0x0002): all %d sessions in use (the session limit, "
+                        "--max-sessions)", self.peer, limit)
+            raise EncapsulationError(EncapsulationStatus.INSUFFICIENT_MEMORY, f"all {limit} sessions in use")
         self.session = self.target._new_session(self)
         log.info("%s: session 0x%08X registered", self.peer, self.session)
         self._reply(Command.REGISTER_SESSION, self.session, context, body)

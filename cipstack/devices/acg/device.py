@@ -289,20 +289,35 @@ class AcgDevice(Device):
         fault code of the Drive Fault Codes table (0x4200 or "0x4200")."""
         return self.drive.inject_trip(parse_trip(code), self.now)
 
+    def trip_codes(self) -> str:
+        """The fault codes of the Drive Fault Codes table (seed 000), or a trip's name."""
+        codes = sorted({trip.fault_code for trip in Trip})
+        return ", ".join(f"0x{code:04X}" for code in codes) + " (or a trip name, e.g. OverHeat)"
+
+    def status_fields(self) -> dict[str, object]:
+        drive = self.drive
+        return {
+            "state": drive.drive_state.name,
+            "direction": "fwd" if drive.running_forward else "rev" if drive.running_reverse else None,
+            "output_frequency_hz": drive.output_frequency / 100, "reference_hz": drive.speed_reference / 100,
+            "io_connections": len(self._io_connections),
+            "trip": drive.trip.label if drive.trip is not None else None,
+            "fault_code": drive.fault_code if drive.trip is not None else None,
+            "lost_command": bool(drive.command_lost), "comm_update_pending": bool(drive.comm_update_pending),
+        }
+
     def status_line(self) -> str:
         """One compact line for the emulator's console."""
-        drive = self.drive
-        direction = "fwd" if drive.running_forward else "rev" if drive.running_reverse else "---"
+        f = self.status_fields()
         parts = [
-            f"{drive.drive_state.name:<10}", direction,
-            f"out {drive.output_frequency / 100:6.2f} Hz", f"ref {drive.speed_reference / 100:6.2f} Hz",
-            f"io {len(self._io_connections)}",
+            f"{f['state']:<10}", f["direction"] or "---",
+            f"out {f['output_frequency_hz']:6.2f} Hz", f"ref {f['reference_hz']:6.2f} Hz", f"io {f['io_connections']}",
         ]
-        if drive.trip is not None:
-            parts.append(f"trip {drive.trip.label} (0x{drive.fault_code:04X})")
-        if drive.command_lost:
+        if f["trip"] is not None:
+            parts.append(f"trip {f['trip']} (0x{f['fault_code']:04X})")
+        if f["lost_command"]:
             parts.append("lost command")
-        if drive.comm_update_pending:
+        if f["comm_update_pending"]:
             parts.append("CM.94 pending")
         return " | ".join(parts)
 

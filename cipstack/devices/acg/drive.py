@@ -27,6 +27,7 @@ analog inputs read 0. The monitor rpm is the synchronous speed 120 * f / poles.
 
 from __future__ import annotations
 
+import logging
 import math
 import os
 from collections.abc import Callable, Mapping
@@ -68,6 +69,8 @@ from .registers import (
     OperationStatus,
     WarningInformation,
 )
+
+log = logging.getLogger(__name__)
 
 FAMILY = "acg"
 MODEL = "ACG-ET2"
@@ -888,6 +891,9 @@ class AcgDrive:
             raise RegisterError(RegisterRefusal.READ_ONLY, address)
         register.check(value)
         if register.access is RegisterAccess.WRITE_STOPPED and self._output_on:
+            if address == SAVE_PARAMETERS.address and value == 1:
+                # The writer gets an error status; whoever runs the emulator should see it too.
+                log.warning("parameter save refused (0x03E0 = 1 while the drive runs): nothing saved")
             raise RegisterError(RegisterRefusal.NOT_WHILE_RUNNING, address)
         if self._parameter_locked and register.group in reg.KEYPAD_GROUPS:
             raise RegisterError(RegisterRefusal.READ_ONLY, address, "parameters are locked (0x03E8)")

@@ -74,7 +74,7 @@ from .objects import (
     UnitParameterObject,
     speed_word,
 )
-from .registers import CONNECTION_PATHS, SpeedUnit, TripCode, trip_code
+from .registers import CONNECTION_PATHS, TRIP_CODES, SpeedUnit, TripCode, trip_code
 
 _UNIT_OF = {SpeedUnit.CENTIHERTZ: CENTIHERTZ, SpeedUnit.DECIHERTZ: DECIHERTZ, SpeedUnit.RPM: RPM}
 #: State-file key of the configuration consistency value (see the module docstring).
@@ -456,14 +456,26 @@ class OmronDevice(Device):
         self.link.baud_rate = code
 
     # -- shells ----------------------------------------------------------------------------------------
-    def status_line(self) -> str:
+    def trip_codes(self) -> str:
+        """The trip numbers of Table D-5 this family has (5 or E05)."""
+        return " ".join(str(t.number) for t in TRIP_CODES if self.family in t.families) + " (or as En, e.g. E05)"
+
+    def status_fields(self) -> dict[str, object]:
         status = self.inverter.status()
-        trip = f"E{status.trip_cause:02d}" if status.trip_cause else "-"
-        reference = self.inverter.option_command.speed_reference
-        unit = self.inverter.speed_unit.value
-        return (f"{self.model.name if self.model else '?'} node {self.link.mac_id}: {status.drive_state.name.lower()} "
-                f"{status.output_frequency / 100:.2f} Hz (speed {status.speed_actual}, reference {reference} "
-                f"[{unit}]) trip {trip} P046={self.inverter.connection_path}")
+        return {
+            "model": self.model.name if self.model else None, "node": self.link.mac_id,
+            "state": status.drive_state.name.lower(), "output_frequency_hz": status.output_frequency / 100,
+            "speed_actual": status.speed_actual, "speed_reference": self.inverter.option_command.speed_reference,
+            "speed_unit": self.inverter.speed_unit.value,
+            "trip": f"E{status.trip_cause:02d}" if status.trip_cause else None,
+            "connection_path": self.inverter.connection_path,
+        }
+
+    def status_line(self) -> str:
+        f = self.status_fields()
+        return (f"{f['model'] or '?'} node {f['node']}: {f['state']} {f['output_frequency_hz']:.2f} Hz (speed "
+                f"{f['speed_actual']}, reference {f['speed_reference']} [{f['speed_unit']}]) trip {f['trip'] or '-'} "
+                f"P046={f['connection_path']}")
 
     def catalog_classes(self) -> tuple[ClassSpec, ...]:
         """The class declarations a scanner needs to decode this device's replies."""

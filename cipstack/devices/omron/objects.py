@@ -663,6 +663,31 @@ class FunctionCodeObject(RegisterObject):
         self.board.inverter.write_function_code(number, _decode_sized(cip_type, data), self.board.now)
 
 
+def register_attribute(registers: RegisterSet, class_id: int, instance: int, attribute: int) -> AttributeSpec | None:
+    """What class 0x64 or 0x65 holds at ``instance``/``attribute`` (instance 0 included: F001 is 0x64/0/1),
+    by the same rules the objects above serve it: its register's name and CIP type, for a scanner."""
+    if not (0 <= instance <= 0xFF and 0 <= attribute <= 0xFF):
+        return None
+    number = instance << 8 | attribute
+    if class_id == MODBUS_REGISTER:
+        found = registers.word(number)
+        if found is None:
+            return None
+        parameter, index = found
+        cip_type = _value_type(parameter, parameter.words) if index == 0 else UINT
+        name = f"{parameter.key} {parameter.name}" + (" (second word)" if index else "")
+    elif class_id == FUNCTION_CODE:
+        found_code = registers.by_number.get(number)
+        if found_code is None:
+            return None
+        parameter = found_code
+        cip_type = _value_type(parameter, parameter.function_code_words or parameter.words)
+        name = f"{parameter.key} {parameter.name}"
+    else:
+        return None
+    return AttributeSpec(attribute, name, cip_type, Access.GET_SET)
+
+
 #: The declared classes, for the scanner's catalog and the EDS (0x64/0x65 have no fixed attributes).
 CLASS_SPECS: tuple[ClassSpec, ...] = (
     IDENTITY_SPEC, CONNECTION_SPEC, DISCRETE_INPUT_SPEC, DISCRETE_OUTPUT_SPEC, MOTOR_DATA_SPEC,

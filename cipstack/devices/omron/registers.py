@@ -515,6 +515,11 @@ class TripCode:
     def code(self) -> str:
         return f"E{self.number:02d}"
 
+    @property
+    def label(self) -> str:
+        """How the emulator's messages name it: "E05 Overload protection"."""
+        return f"{self.code} {self.name}"
+
 
 def _option_errors(family: tuple[Family, ...], base: int, interface: str) -> tuple[TripCode, ...]:
     names = ("Option error (inverter communications error)", "Option error (Duplicated MAC ID)",
