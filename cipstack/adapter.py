@@ -258,13 +258,15 @@ class Adapter:
         stop = asyncio.Event()
         for sig in (signal.SIGINT, signal.SIGTERM):
             loop.add_signal_handler(sig, stop.set)
-        await self.start()
-        control = ControlServer(self.settings.control_path or default_control_path(self.port), self.control)
-        try:
-            await control.start()
-        except OSError as exc:
-            await self.close()
-            raise ListenError(f"control socket {control.path} (--control)", exc.strerror or str(exc)) from None
+        with _held_log_records() as held:
+            await self._start()
+            control = ControlServer(self.settings.control_path or default_control_path(self.port), self.control)
+            try:
+                await control.start()
+            except OSError as exc:
+                await self.close()
+                raise ListenError("control socket (--control)", exc.strerror or str(exc)) from None
+            held.release()
         printer = asyncio.create_task(self._print_status_lines()) if self.settings.status_lines else None
         info = self.device.identity_info
         log.info("emulating %s (vendor %d, device type %d, product code %d, revision %d.%d)",
