@@ -12,7 +12,8 @@ The convention, for whoever writes a block:
 
 Each ``##`` section is one test: its blocks run in order against one fresh emulator, the default
 ``cipstack adapter`` (ACG profile) at 127.0.0.1:44818, or the one the section's own ```` ```sh ````
-block starts (a line ``cipstack adapter ...``, as the tour restarts it with ``--param``).
+blocks start before its first runnable block (the last line ``cipstack adapter ...``: the tour
+restarts it with ``--param``).
 
 The README names the default ports (44818, 2222), so each section runs in a private network
 namespace of its own (``unshare -n``, root needed), where they are free whatever else runs on this
@@ -56,15 +57,19 @@ class Section:
 
     @property
     def adapter(self) -> str:
-        """The emulator command this section's own set-up block starts, else the default."""
+        """The emulator the reader has running when the section's first runnable block comes: the last
+        ``cipstack adapter ...`` its set-up blocks start before it, else the default."""
+        found = DEFAULT_ADAPTER
         for block in self.blocks:
+            if block.language in ("python", "console"):
+                break
             if block.language != "sh":
                 continue
             for line in block.text.splitlines():
                 for command in line.split("&&"):
                     if command.strip().startswith("cipstack adapter"):
-                        return command.strip()
-        return DEFAULT_ADAPTER
+                        found = command.strip()
+        return found
 
     @property
     def runnable(self) -> bool:
