@@ -591,7 +591,8 @@ def build_parser() -> argparse.ArgumentParser:
     parser = _Parser(prog="cipstack", description="CIP for AC drives over EtherNet/IP and CompoNet")
     parser.add_argument("--version", action="version", version=f"cipstack {__version__}")
     levels = ["DEBUG", "INFO", "WARNING", "ERROR"]
-    parser.add_argument("--log-level", default="INFO", choices=levels, type=str.upper)
+    parser.add_argument("--log-level", default="INFO", choices=levels, type=str.upper,
+                        help="log level on stderr (default INFO)")
     # Also accepted after the command name (``cipstack adapter --log-level WARNING``).
     logging_options = _Parser(add_help=False)
     logging_options.add_argument("--log-level", default=argparse.SUPPRESS, choices=levels, type=str.upper,
@@ -639,8 +640,8 @@ def build_parser() -> argparse.ArgumentParser:
     p.set_defaults(func=cmd_adapter)
 
     p = sub.add_parser("models", help="the MX2/RX models the mx2/rx profiles emulate (Tables 2/3)")
-    p.add_argument("--profile", choices=["mx2", "rx"])
-    p.add_argument("--json", action="store_true")
+    p.add_argument("--profile", choices=["mx2", "rx"], help="one family only (default: both)")
+    p.add_argument("--json", action="store_true", help="one JSON object per line")
     p.set_defaults(func=cmd_models)
 
     p = sub.add_parser("componet", help="run a CompoNet network of MX2/RX slaves behind an EtherNet/IP gateway")
@@ -706,7 +707,7 @@ def build_parser() -> argparse.ArgumentParser:
                            help="fault code of the drive's manual (decimal or 0x hex: 0x4200 on the ACG, 5 on "
                                 "the MX2/RX) or its name (OverHeat, E05)")
         q.add_argument("--port", type=lambda t: parse_number(t, "port"), default=DEFAULT_PORT,
-                       help="the emulator's EtherNet/IP port (finds its control socket)")
+                       help=f"the emulator's EtherNet/IP port, which finds its control socket (default {DEFAULT_PORT})")
         q.add_argument("--control", type=Path, help="the emulator's control socket")
         q.add_argument("--timeout", type=parse_duration, default=5.0, help="reply timeout (default 5 s)")
         q.add_argument("--json", action="store_true", help="one JSON object per line")
@@ -720,7 +721,7 @@ def build_parser() -> argparse.ArgumentParser:
     q = eds.add_parser("check", help="check EDS files against the rules a configuration tool relies on")
     add_check_arguments(q)
     q.add_argument("--against", metavar="HOST[:PORT]", help="also compare [Device] with a live device's Identity")
-    q.add_argument("--timeout", type=parse_duration, default=5.0)
+    q.add_argument("--timeout", type=parse_duration, default=5.0, help="reply timeout with --against (default 5 s)")
     q.set_defaults(func=cmd_eds_check)
     q = eds.add_parser("generate", help="write the EDS files of emulated models")
     add_generate_arguments(q)
