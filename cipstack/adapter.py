@@ -3,11 +3,8 @@
 from __future__ import annotations
 
 import asyncio
-import contextlib
 import logging
-import os
 import signal
-from collections.abc import Iterator
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -23,19 +20,10 @@ from .eip.io_server import IoEndpoint
 from .eip.io_target import IoTarget
 from .eip.server import DEFAULT_PORT, EncapsulationServer
 from .eip.target import EncapsulationTarget, TargetSettings
+from .listening import ListenError, held_log_records
 from .objects.tcpip import NetworkInterface
 
 log = logging.getLogger(__name__)
-
-
-class ListenError(OSError):
-    """A port (or the control socket) the adapter cannot listen on: ``where`` names it and its option."""
-
-    def __init__(self, where: str, cause: OSError | str) -> None:
-        self.where = where
-        # asyncio's bind error carries the address in its text: the reason alone is the errno's.
-        self.reason = cause if isinstance(cause, str) else (os.strerror(cause.errno) if cause.errno else str(cause))
-        super().__init__(f"cannot listen on {where}: {self.reason}")
 
 
 @dataclass
@@ -58,45 +46,6 @@ class AdapterSettings:
     model: str | None = None
     #: Modbus TCP port for a drive that also speaks Modbus TCP (None: off; 0: any free port).
     modbus_port: int | None = None
-
-
-class _HeldRecords:
-    """The log records of a start that may still fail; emitted only once ``release`` is called."""
-
-    def __init__(self) -> None:
-        self.records: list[tuple[logging.Handler, logging.LogRecord]] = []
-        self.released = False
-
-    def release(self) -> None:
-        self.released = True
-
-
-class _Hold(logging.Filter):
-    def __init__(self, handler: logging.Handler, held: _HeldRecords) -> None:
-        super().__init__()
-        self.handler = handler
-        self.held = held
-
-    def filter(self, record: logging.LogRecord) -> bool:
-        self.held.records.append((self.handler, record))
-        return False
-
-
-@contextlib.contextmanager
-def _held_log_records() -> Iterator[_HeldRecords]:
-    """Hold back what the root logger's handlers would print until the caller releases it."""
-    held = _HeldRecords()
-    holds = [_Hold(handler, held) for handler in logging.getLogger().handlers]
-    for hold in holds:
-        hold.handler.addFilter(hold)
-    try:
-        yield held
-    finally:
-        for hold in holds:
-            hold.handler.removeFilter(hold)
-        if held.released:
-            for handler, record in held.records:
-                handler.handle(record)
 
 
 class Adapter:
@@ -167,7 +116,7 @@ class Adapter:
     async def start(self) -> None:
         """Listen on every port, each exclusively; a port that is taken raises ``ListenError``
         naming it, with nothing left open and nothing logged (the error is the one line to say)."""
-        with _held_log_records() as held:
+        with held_log_records() as held:
             await self._start()
             held.release()
 
@@ -258,7 +207,7 @@ class Adapter:
         stop = asyncio.Event()
         for sig in (signal.SIGINT, signal.SIGTERM):
             loop.add_signal_handler(sig, stop.set)
-        with _held_log_records() as held:
+        with held_log_records() as held:
             await self._start()
             control = ControlServer(self.settings.control_path or default_control_path(self.port), self.control)
             try:

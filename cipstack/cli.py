@@ -145,8 +145,8 @@ def _profile_of_model(name: str) -> str:
 def _serve(adapter: Any, args: argparse.Namespace, command: str) -> int:
     """Run an emulator until SIGINT/SIGTERM; a port it cannot listen on (taken, or not an address of
     this machine) is one line naming the port and its option, and exit 2."""
-    from .adapter import ListenError
     from .eip.io_server import run_precise
+    from .listening import ListenError
 
     try:
         run_precise(adapter.serve_forever())
