@@ -541,7 +541,9 @@ def cmd_drive_status(args: argparse.Namespace) -> int:
     reply = _control(args, {"command": "status"})
     if args.json:
         # Fields, not the console line: the drive's state, then the emulator's sessions and connections.
-        record = {**(reply.get("drive") or {}), "sessions": reply["sessions"],
+        # A device without one drive (the CompoNet gateway) has its status lines instead.
+        fields = reply.get("drive") or {"status": reply.get("status")}
+        record = {**fields, "sessions": reply["sessions"],
                   "class3_connections": reply["class3_connections"], "class1_connections": reply["class1_connections"]}
         print(json.dumps(record), flush=True)
         return EXIT_OK

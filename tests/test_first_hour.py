@@ -335,3 +335,22 @@ def test_omron_register_instance_zero(tmp_path: Path) -> None:
         assert run("get", address, "0x29/0/1").stdout.startswith("Revision = ")
     finally:
         stop(process)
+
+
+def test_gateway_status_json_and_trip_refusal(tmp_path: Path) -> None:
+    control = tmp_path / "gateway.sock"
+    port = free_port()
+    gateway = subprocess.Popen([sys.executable, "-m", "cipstack", "componet", "--nodes", "mx2:MX2-A2015-E@3",
+                                "--port", str(port), "--io-port", "0", "--quiet", "--control", str(control)],
+                               stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    try:
+        for _ in range(300):
+            status = run("drive", "status", "--control", str(control), "--json")
+            if status.returncode == 0:
+                break
+        record = json.loads(status.stdout)
+        assert record["status"].startswith("CompoNet gateway") and record["sessions"] == 0
+        trip = run("drive", "trip", "5", "--control", str(control))
+        assert trip.returncode == 2 and "simulates no drive" in one_line_error(trip)
+    finally:
+        stop(gateway)

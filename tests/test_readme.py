@@ -146,6 +146,14 @@ def test_output_matching() -> None:
     assert output_matches(["..."], [])
 
 
+def test_two_set_up_commands() -> None:
+    """The README's set-up stays two commands: install and run the emulator, install and run the tests."""
+    installs = [line for s in readme_sections(README.read_text()) for b in s.blocks if b.language == "sh"
+                for line in b.text.splitlines() if "pip install" in line]
+    assert installs == ['python3 -m pip install . && cipstack adapter',
+                        'python3 -m pip install ".[test]" && python3 -m pytest']
+
+
 def test_readme_is_parsed_whole() -> None:
     """Every fence is closed and has a language this test knows, so no block is left out silently."""
     sections = readme_sections(README.read_text())
