@@ -354,3 +354,33 @@ def test_gateway_status_json_and_trip_refusal(tmp_path: Path) -> None:
         assert trip.returncode == 2 and "simulates no drive" in one_line_error(trip)
     finally:
         stop(gateway)
+
+
+@pytest.mark.parametrize("data_at", [None, 0.1])
+def test_silence_is_said_once_after_8_rpis(caplog: pytest.LogCaptureFixture, data_at: float | None) -> None:
+    """Sans I/O: 8 RPIs of 10 ms is under the 0.5 s floor, so the warning comes at 0.5 s, once, and
+    only when no O->T datagram came; the watchdog still waits its 10 s before closing."""
+    from cipstack.eip.io_core import encode_io_datagram
+    from tests.test_io_core import Rig
+
+    rig = Rig()
+    with caplog.at_level(logging.WARNING, logger="cipstack.eip.io_target"):
+        rig.open(rig.request(rpi=10_000), now=0.0)
+        [connection] = rig.io.connections.values()
+        if data_at is not None:
+            rig.io.receive(encode_io_datagram(connection.ot_connection_id, 1, 1, bytes(4), 1), ("127.0.0.1", 2222),
+                           data_at)
+        assert connection.silence_check == 0.5
+        rig.io.poll(0.0)   # production due at once: the next deadline is then the earliest of RPI and silence
+        assert rig.io.next_deadline() == 0.01
+        rig.io.expire(0.49)
+        assert not caplog.records
+        rig.io.expire(0.5)
+        rig.io.expire(0.9)
+    said = [r.getMessage() for r in caplog.records]
+    if data_at is None:
+        assert len(said) == 1 and said[0].startswith(f"class 1 {connection.name}: no O->T data from 127.0.0.1 "
+                                                     "after 8 RPIs (0.500 s)")
+        assert rig.io.connections and connection.silence_check is None   # open until its first 10 s are up
+    else:
+        assert said == []   # data came (then stopped: the watchdog closed it at RPI x 4, no silence to tell)
