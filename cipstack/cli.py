@@ -20,6 +20,7 @@ from typing import Any
 from . import __version__
 from .cip.status import CipError, describe_status
 from .cip.types import CipType, parse_int, type_by_name
+from .eip.encapsulation import EncapsulationError
 from .eip.originator import DEFAULT_PORT, EncapsulationStatusError, parse_host
 
 EXIT_OK = 0
@@ -768,6 +769,10 @@ def main(argv: Sequence[str] | None = None) -> int:
         return EXIT_FAILURE
     except EncapsulationStatusError as exc:
         print(f"{name}: {exc}", file=sys.stderr)
+        return EXIT_FAILURE
+    except EncapsulationError as exc:
+        # A reply this side cannot read (the originator's decoders raise it): the peer's, one line.
+        print(f"{name}: malformed reply from the target: {exc}", file=sys.stderr)
         return EXIT_FAILURE
     except (ConnectionError, asyncio.TimeoutError, TimeoutError, OSError) as exc:
         print(f"{name}: {exc or type(exc).__name__}", file=sys.stderr)

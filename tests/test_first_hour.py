@@ -384,3 +384,93 @@ def test_silence_is_said_once_after_8_rpis(caplog: pytest.LogCaptureFixture, dat
         assert rig.io.connections and connection.silence_check is None   # open until its first 10 s are up
     else:
         assert said == []   # data came (then stopped: the watchdog closed it at RPI x 4, no silence to tell)
+
+
+@contextlib.contextmanager
+def omron_register_target(reply_data: bytes, layout: str = "00000000 0000 0200 0000 0000 b200") -> Iterator[int]:
+    """A scripted MX2 (vendor 47, the product code of MX2-A2015-E) that answers every explicit request
+    with status 0 and ``reply_data``: the issue's 4-byte reply of 0x64/0/1 (F001). ``layout``: the bytes of
+    the SendRRData reply before the unconnected item's length (interface, timeout, item count, items)."""
+    from cipstack.devices.omron.models import model
+    from cipstack.eip.cpf import SockAddr
+    from cipstack.eip.identity_items import IdentityRecord, encode_list_identity
+
+    server = socket.socket()
+    server.bind(("127.0.0.1", 0))
+    server.listen()
+    port = server.getsockname()[1]
+    identity = encode_list_identity(IdentityRecord(47, 2, model("MX2-A2015-E").product_code, (1, 1), 0, 1, "MX2"),
+                                    SockAddr("127.0.0.1", port))
+    stopping = threading.Event()
+
+    def frame(command: int, session: int, context: bytes, body: bytes) -> bytes:
+        return struct.pack("<HHII8sI", command, len(body), session, 0, context, 0) + body
+
+    def serve_one(peer: socket.socket) -> None:
+        data = b""
+        while not stopping.is_set():
+            chunk = peer.recv(4096)
+            if not chunk:
+                return
+            data += chunk
+            while len(data) >= 24:
+                command, length, _, _, context, _ = struct.unpack("<HHII8sI", data[:24])
+                if len(data) < 24 + length:
+                    break
+                body, data = data[24:24 + length], data[24 + length:]
+                if command == 0x63:            # ListIdentity
+                    peer.sendall(frame(command, 0, context, identity))
+                elif command == 0x65:          # RegisterSession
+                    peer.sendall(frame(command, 0x11223344, context, body))
+                elif command == 0x6F:          # SendRRData: reply service = request service | 0x80, status 0
+                    service = body[16]         # after interface, timeout, count, null item, item header
+                    response = bytes((service | 0x80, 0, 0, 0)) + reply_data
+                    items = (bytes.fromhex(layout) + struct.pack("<H", len(response))
+                             + response)
+                    peer.sendall(frame(command, 0x11223344, context, items))
+                else:                          # UnRegisterSession
+                    return
+
+    def serve() -> None:
+        server.settimeout(0.2)
+        while not stopping.is_set():
+            try:
+                peer, _ = server.accept()
+            except OSError:
+                continue
+            with peer:
+                peer.settimeout(5)
+                with contextlib.suppress(OSError):
+                    serve_one(peer)
+
+    thread = threading.Thread(target=serve, daemon=True)
+    thread.start()
+    try:
+        yield port
+    finally:
+        stopping.set()
+        thread.join(2)
+        server.close()
+
+
+def test_instance_zero_register_reply_from_its_wire_bytes() -> None:
+    """The issue's bytes: F001 = 1000 (0x000003E8) answered at 0x64/0/1 in 4 bytes."""
+    with omron_register_target(bytes.fromhex("e8030000")) as port:
+        declared = run("get", f"127.0.0.1:{port}", "0x64/0/1", "--json")
+        typed = run("get", f"127.0.0.1:{port}", "0x64/0/1", "--type", "UDINT")
+        wrong = run("get", f"127.0.0.1:{port}", "0x64/0/1", "--type", "UINT")
+    assert declared.returncode == 0, declared.stderr
+    record = json.loads(declared.stdout)
+    assert (record["value"], record["type"], record["data"]) == (1000, "UDINT", "e8030000")
+    assert record["name"].startswith("F001 ")
+    assert typed.returncode == 0 and typed.stdout.startswith("F001 ") and typed.stdout.rstrip().endswith("= 1000")
+    assert wrong.returncode == 2 and "0x15" not in one_line_error(wrong)
+    assert "4 bytes (e8 03 00 00), which do not decode as UINT" in one_line_error(wrong)
+
+
+def test_a_malformed_reply_is_one_line() -> None:
+    """A SendRRData reply whose item count is wrong (timeout 2, no items, then bytes): one line, exit 1."""
+    with omron_register_target(bytes.fromhex("e8030000"), layout="00000000 0200 0000 0000 b200") as port:
+        result = run("get", f"127.0.0.1:{port}", "0x64/0/1")
+    assert result.returncode == 1
+    assert one_line_error(result) == "cipstack get: malformed reply from the target: bytes after the last CPF item"
