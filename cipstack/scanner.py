@@ -23,7 +23,7 @@ from .cip.status import CipError, GeneralStatus
 from .cip.types import UINT, CipType
 from .eds.model import EdsDocument
 from .eip.identity_items import IdentityRecord, ServiceRecord
-from .eip.io_originator import IoConnectionHandle
+from .eip.io_originator import IoConnectionHandle, OtFormat
 from .eip.originator import (
     DEFAULT_PORT,
     BlockingEncapsulationClient,
@@ -36,6 +36,9 @@ from .eip.originator import (
 )
 
 T = TypeVar("T")
+
+#: Key of the bytes of a Get_Attributes_All reply after the attributes the catalog declares.
+UNDECODED = "(undecoded)"
 
 
 @dataclass(frozen=True)
@@ -146,7 +149,8 @@ class Scanner:
         """Raw reply and, when the class is declared, the values by attribute name.
 
         A device may carry attributes beyond the declared ones after them (its own, or a later
-        revision's): the declared ones are decoded and the rest is left in the raw reply."""
+        revision's): the declared ones are decoded and the rest is returned as raw bytes under
+        the key ``UNDECODED`` (nothing is dropped silently)."""
         reply = await self.request(Service.GET_ATTRIBUTES_ALL, class_id, instance)
         layout = self.catalog.get_all_layout(class_id) if instance else None
         if layout is None:
@@ -156,8 +160,10 @@ class Scanner:
         try:
             for spec in layout:
                 values[spec.name], offset = spec.type.decode_from(reply.data, offset)
-        except CipError:
+        except (CipError, ValueError, struct.error, IndexError):
             return reply.data, None
+        if offset < len(reply.data):
+            values[UNDECODED] = reply.data[offset:]
         return reply.data, values
 
     async def get_attribute_list(self, class_id: int, instance: int, attributes: Sequence[int]
@@ -287,6 +293,9 @@ class Scanner:
         if rpi is None:
             rpi = (found.rpi_us or DEFAULT_RPI_US) / 1e6
         options.setdefault("multicast", found.t_o_multicast and not found.t_o_point_to_point)
+        eds_format = _eds_ot_format(doc, found.number)
+        if eds_format is not None:
+            options.setdefault("ot_format", eds_format)
         output = None if found.heartbeat else found.o_t_point
         output_schema = None if output is None else (view.schema(output) or self.catalog.assemblies.get(output))
         input_schema = view.schema(found.t_o_point) or self.catalog.assemblies.get(found.t_o_point)
@@ -303,6 +312,19 @@ class Scanner:
 
     async def list_services(self) -> list[ServiceRecord]:
         return await self.client.list_services()
+
+
+def _eds_ot_format(doc: EdsDocument, number: int) -> OtFormat | None:
+    """The O->T real-time format ``ConnectionN`` declares (field 2, bits 8-10: 0 modeless,
+    3 heartbeat, 4 run/idle header; eds.md), or None when the file gives none we know."""
+    from .eds.model import FieldKind
+
+    section = doc.get("Connection Manager")
+    entry = section.get(f"Connection{number}") if section is not None else None
+    parameters = entry.field(2) if entry is not None else None
+    if parameters is None or parameters.kind is not FieldKind.INT:
+        return None
+    return OtFormat.from_eds((int(parameters.value) >> 8) & 0x7)
 
 
 def backplane_route(slot: int = 0) -> list[Segment]:
@@ -352,10 +374,10 @@ class SyncScanner:
         self.close()
 
 
-def discover_sync(address: str = "255.255.255.255", port: int = DEFAULT_PORT, timeout: float = 2.0
+def discover_sync(address: str | Sequence[str] | None = None, port: int = DEFAULT_PORT, timeout: float = 2.0
                   ) -> list[IdentityRecord]:
     return asyncio.run(discover(address, port, timeout))
 
 
-__all__ = ["AttributeValue", "Scanner", "SyncScanner", "backplane_route", "discover", "discover_sync",
+__all__ = ["UNDECODED", "AttributeValue", "Scanner", "SyncScanner", "backplane_route", "discover", "discover_sync",
            "list_services_udp"]
