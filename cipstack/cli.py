@@ -293,10 +293,20 @@ def cmd_get(args: argparse.Namespace) -> int:
         name = f"{record['name']} = " if "name" in record else ""
         value = record["value"]
         print(f"{name}{_value_text(value)}" if not isinstance(value, dict)
-              else "\n".join(f"{k} = {_value_text(v)}" for k, v in value.items()), flush=True)
+              else "\n".join(_member_text(k, v) for k, v in value.items()), flush=True)
     else:
         print(bytes.fromhex(record["data"]).hex(" ") or "(no data)", flush=True)
     return EXIT_OK
+
+
+def _member_text(name: str, value: Any) -> str:
+    """One ``name = value`` line of Get_Attributes_All; the bytes after the declared attributes as hex."""
+    from .scanner import UNDECODED
+
+    if name == UNDECODED and isinstance(value, str):
+        raw = bytes.fromhex(value)
+        return f"{name} = {len(raw)} bytes: {raw.hex(' ')}"
+    return f"{name} = {_value_text(value)}"
 
 
 def _jsonable(value: Any) -> Any:
@@ -492,6 +502,8 @@ def cmd_io(args: argparse.Namespace) -> int:
         latest: dict[str, Any] = {"image": None, "dirty": False}
         async with scanner, opened as io:
             state["opened"] = True
+            for note in io.notes:
+                print(f"cipstack io: {note}", file=sys.stderr, flush=True)
             for name, value in assignments:
                 _set_output(io, name, value)
             io.set_run(not args.idle)

@@ -334,6 +334,8 @@ class IoConnectionHandle:
         self.connection = connection
         self.output = ProcessImage(connection.output, output_schema, writable=True)
         self._input_schema = input_schema
+        #: What opening had to adapt to, one line each (e.g. a retry with the size the target asked for).
+        self.notes: list[str] = []
 
     @property
     def input(self) -> ProcessImage:

@@ -626,13 +626,14 @@ class IoContext:
             if corrected is None:
                 raise
             request, note = corrected
-            log.warning("Forward_Open to %s: %s", client.host, note)
+            log.debug("Forward_Open to %s: %s", client.host, note)
             self.notes.append(note)
             reply, extra, triad = await self._forward_open(request, endpoint.port)
         self.request = request
         self._triad = triad
         try:
             self.handle = await self._start(request, reply, extra, core, endpoint)
+            self.handle.notes = self.notes
         except BaseException:
             # Opened but not started: the target would keep producing to a port nobody reads.
             await self._forward_close()
@@ -697,9 +698,12 @@ async def shared_io_endpoint(host: str, port: int = 0) -> tuple[IoOriginator, Io
     """The originator's class 1 endpoint for this event loop and local address (one socket serves every
     connection, as a PLC's one UDP 2222 socket does)."""
     loop = asyncio.get_running_loop()
+    for stale in [k for k, (_, e) in _io_endpoints.items() if getattr(e, "loop", loop).is_closed()]:
+        del _io_endpoints[stale]  # an earlier asyncio.run's: nothing can use it any more
     key = (id(loop), host, port)
     found = _io_endpoints.get(key)
-    if found is not None and found[1].transport is not None:
+    # An id can be reused by a later loop once the first is gone: the endpoint must be this loop's.
+    if found is not None and found[1].transport is not None and getattr(found[1], "loop", None) is loop:
         return found
     core = IoOriginator()
     endpoint = IoEndpoint(core, host, port)
