@@ -11,7 +11,7 @@ from __future__ import annotations
 import asyncio
 import contextlib
 import struct
-from collections.abc import AsyncIterator, Sequence
+from collections.abc import AsyncIterator, Iterator, Sequence
 from dataclasses import dataclass
 from typing import Any, TypeVar
 
@@ -29,6 +29,7 @@ from .eip.originator import (
     BlockingEncapsulationClient,
     EncapsulationClient,
     ExplicitClient,
+    MalformedReplyError,
     discover,
     list_services_udp,
     parse_host,
@@ -61,6 +62,24 @@ class AttributeValue:
         if self.type is None:
             return None
         return self.type.to_json(self.value)
+
+
+class _Unsplittable(CipError):
+    """A list reply the scanner cannot split for want of a declaration (not the device's fault)."""
+
+    def __init__(self, message: str) -> None:
+        super().__init__(GeneralStatus.INVALID_REPLY_RECEIVED, message=message)
+
+
+@contextlib.contextmanager
+def _malformed(what: str) -> Iterator[None]:
+    """A reply body that does not parse is a ``MalformedReplyError`` (one line), not a device status."""
+    try:
+        yield
+    except _Unsplittable:
+        raise
+    except (CipError, ValueError, struct.error, IndexError) as exc:
+        raise MalformedReplyError(f"malformed {what}: {exc}") from None
 
 
 def _decode(cip_type: CipType | None, data: bytes) -> Any:
@@ -175,21 +194,21 @@ class Scanner:
             reply.raise_for_status()
         results: dict[int, AttributeValue | CipError] = {}
         body = reply.data
-        count, offset = UINT.decode_from(body, 0)
-        for _ in range(count):
-            attribute_id, offset = UINT.decode_from(body, offset)
-            status, offset = UINT.decode_from(body, offset)
-            if status:
-                results[attribute_id] = CipError(status, message=f"attribute {attribute_id}")
-                continue
-            value_type, spec = self._type_for(class_id, instance, attribute_id, None)
-            if value_type is None:
-                raise CipError(GeneralStatus.INVALID_REPLY_RECEIVED,
-                               message=f"attribute {attribute_id} has no known type: cannot split the list reply")
-            value, end = value_type.decode_from(body, offset)
-            results[attribute_id] = AttributeValue(class_id, instance, attribute_id, body[offset:end], value, spec,
-                                                   value_type)
-            offset = end
+        with _malformed("Get_Attribute_List reply"):
+            count, offset = UINT.decode_from(body, 0)
+            for _ in range(count):
+                attribute_id, offset = UINT.decode_from(body, offset)
+                status, offset = UINT.decode_from(body, offset)
+                if status:
+                    results[attribute_id] = CipError(status, message=f"attribute {attribute_id}")
+                    continue
+                value_type, spec = self._type_for(class_id, instance, attribute_id, None)
+                if value_type is None:
+                    raise _Unsplittable(f"attribute {attribute_id} has no known type: cannot split the list reply")
+                value, end = value_type.decode_from(body, offset)
+                results[attribute_id] = AttributeValue(class_id, instance, attribute_id, body[offset:end], value,
+                                                       spec, value_type)
+                offset = end
         return results
 
     async def set_attribute_list(self, class_id: int, instance: int, values: dict[int, Any]) -> dict[int, int]:
@@ -208,10 +227,11 @@ class Scanner:
         if reply.general_status not in (GeneralStatus.SUCCESS, GeneralStatus.ATTRIBUTE_LIST_ERROR):
             reply.raise_for_status()
         statuses: dict[int, int] = {}
-        count, offset = UINT.decode_from(reply.data, 0)
-        for _ in range(count):
-            attribute_id, offset = UINT.decode_from(reply.data, offset)
-            statuses[attribute_id], offset = UINT.decode_from(reply.data, offset)
+        with _malformed("Set_Attribute_List reply"):
+            count, offset = UINT.decode_from(reply.data, 0)
+            for _ in range(count):
+                attribute_id, offset = UINT.decode_from(reply.data, offset)
+                statuses[attribute_id], offset = UINT.decode_from(reply.data, offset)
         return statuses
 
     async def reset(self, class_id: int = 0x01, instance: int = 1, reset_type: int | None = None) -> None:
@@ -231,9 +251,11 @@ class Scanner:
         if reply.general_status not in (GeneralStatus.SUCCESS, GeneralStatus.EMBEDDED_SERVICE_ERROR):
             reply.raise_for_status()
         body = reply.data
-        count, _ = UINT.decode_from(body, 0)
-        offsets = [UINT.decode_from(body, 2 + 2 * i)[0] for i in range(count)] + [len(body)]
-        return [MessageRouterResponse.decode(body[offsets[i]:offsets[i + 1]]) for i in range(count)]
+        with _malformed("Multiple_Service_Packet reply"):
+            count, _ = UINT.decode_from(body, 0)
+            offsets = [UINT.decode_from(body, 2 + 2 * i)[0] for i in range(count)] + [len(body)]
+            return [MessageRouterResponse.decode(body[offsets[i]:offsets[i + 1]]) for i in range(count)]
+        raise AssertionError("unreachable")  # pragma: no cover - the block returns or raises
 
     # -- class 1 --------------------------------------------------------------------------------------
     async def assembly_size(self, instance: int) -> int:

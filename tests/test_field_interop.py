@@ -503,3 +503,23 @@ def test_forward_open_refusal_is_cip_error_with_extended_status(producer: ClassO
             pytest.raises(CipError) as refused:
         asyncio.run(scenario(target.address))
     assert refused.value.general == 0x01 and refused.value.extended[0] == 0x0315
+
+
+@pytest.mark.parametrize(("service", "data", "what"), [
+    (0x03, b"\x02\x00\x01\x00\x00\x00\x01", "Get_Attribute_List"),      # second entry cut short
+    (0x0A, b"\x02\x00\x06\x00\x40\x00\x8e\x00\x00\x00", "Multiple_Service_Packet"),  # offset past the end
+])
+def test_a_malformed_list_reply_is_malformed_reply_error(service: int, data: bytes, what: str) -> None:
+    with ScriptedTarget(handler=lambda r: rr_body(mr_reply(r.service, data=data)) if r.service == service
+                        else None) as target:
+        async def scenario() -> None:
+            async with await Scanner.connect(target.address) as scanner:
+                if service == 0x03:
+                    await scanner.get_attribute_list(0x01, 1, [1, 2])
+                else:
+                    from cipstack.cip.epath import request_path
+                    from cipstack.cip.messages import MessageRouterRequest
+                    await scanner.multiple_service_packet([MessageRouterRequest(0x0E, request_path(1, 1, 1))] * 2)
+
+        with pytest.raises(MalformedReplyError, match=what):
+            asyncio.run(scenario())
