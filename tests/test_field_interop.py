@@ -523,3 +523,24 @@ def test_a_malformed_list_reply_is_malformed_reply_error(service: int, data: byt
 
         with pytest.raises(MalformedReplyError, match=what):
             asyncio.run(scenario())
+
+
+def test_a_target_that_falls_silent_is_closed_too(producer: ClassOneProducer,
+                                                  capsys: pytest.CaptureFixture[str]) -> None:
+    """The target stops producing after 30 packets: the watchdog ends the run (exit 1, one line) and
+    the connection is still closed."""
+    def handle(request: MrRequest) -> bytes | None:
+        if request.service != FORWARD_OPEN:
+            return None
+        port = to_port(request)
+        assert port is not None
+        producer.produce(0x22, (request.peer[0], port), bytes(4), 0.010, count=30)
+        return rr_body(mr_reply(FORWARD_OPEN, data=struct.pack("<IIHHIIIBB", 0x11, 0x22, 1, 0xFFFE, 7, 10000,
+                                                                   10000, 0, 0)))
+
+    with ScriptedTarget(handler=handle, assembly_sizes={21: 4, 71: 4}) as target:
+        code, _, err = run_cli(["io", target.address, "--output", "21", "--input", "71", "--duration", "5s",
+                                "--target-io-port", str(producer.port)], capsys)
+        assert code == 1
+        assert err.count("\n") == 1 and "timed out" in err, err
+        assert len(target.services(FORWARD_CLOSE)) == 1
