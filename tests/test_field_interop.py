@@ -544,3 +544,31 @@ def test_a_target_that_falls_silent_is_closed_too(producer: ClassOneProducer,
         assert code == 1
         assert err.count("\n") == 1 and "timed out" in err, err
         assert len(target.services(FORWARD_CLOSE)) == 1
+
+
+def test_ctrl_c_while_the_forward_open_is_on_the_wire(producer: ClassOneProducer) -> None:
+    """The target answers the Forward_Open 1.5 s late; Ctrl-C comes before: what it opens is closed."""
+    def slow(request: MrRequest) -> bytes | None:
+        if request.service != FORWARD_OPEN:
+            return None
+        time.sleep(1.5)
+        return p2p_echo_reply(request, producer)
+
+    with ScriptedTarget(handler=slow, assembly_sizes={21: 4, 71: 4}) as target:
+        env = {**os.environ, "PYTHONPATH": str(ROOT)}
+        proc = subprocess.Popen([sys.executable, "-m", "cipstack", "io", target.address, "--output", "21", "--input",
+                                 "71", "--duration", "30s", "--target-io-port", str(producer.port)],
+                                stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, env=env)
+        try:
+            deadline = time.monotonic() + 20
+            while not target.services(FORWARD_OPEN):
+                assert time.monotonic() < deadline and proc.poll() is None, proc.communicate()
+                time.sleep(0.02)
+            proc.send_signal(signal.SIGINT)
+            _, err = proc.communicate(timeout=20)
+        finally:
+            if proc.poll() is None:
+                proc.kill()
+        assert proc.returncode == 130, err
+        assert "Traceback" not in err
+        assert len(target.services(FORWARD_CLOSE)) == 1

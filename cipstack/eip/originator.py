@@ -614,12 +614,28 @@ class IoContext:
         response.raise_for_status()
         return _decode_reply("Forward_Open reply", lambda: ForwardOpenReply.decode(response.data)), extra, triad
 
+    async def _open_shielded(self, request: Class1Request, port: int
+                             ) -> tuple[ForwardOpenReply, list[Item], ConnectionTriad]:
+        """``_forward_open``, closing what the target opens even when the caller is cancelled (Ctrl-C)
+        while the request is on the wire."""
+        opening = asyncio.ensure_future(self._forward_open(request, port))
+        try:
+            return await asyncio.shield(opening)
+        except asyncio.CancelledError:
+            try:
+                _, _, self._triad = await opening
+            except Exception:  # refused or lost: nothing was opened
+                self._triad = None
+            else:
+                await self._forward_close()
+            raise
+
     async def __aenter__(self) -> IoConnectionHandle:
         client = self.client
         core, endpoint = await shared_io_endpoint(client.local_host(), self.local_io_port)
         request = self.request
         try:
-            reply, extra, triad = await self._forward_open(request, endpoint.port)
+            reply, extra, triad = await self._open_shielded(request, endpoint.port)
         except CipError as refused:
             corrected = request.corrected(refused.extended) if refused.general == GeneralStatus.CONNECTION_FAILURE \
                 else None
@@ -628,7 +644,7 @@ class IoContext:
             request, note = corrected
             log.debug("Forward_Open to %s: %s", client.host, note)
             self.notes.append(note)
-            reply, extra, triad = await self._forward_open(request, endpoint.port)
+            reply, extra, triad = await self._open_shielded(request, endpoint.port)
         self.request = request
         self._triad = triad
         try:
