@@ -86,7 +86,10 @@ class ArrivalStatistics:
     #: Input data changes (new data that differs from the previous input).
     changes: int = 0
     slow_warned: bool = False
-    intervals: deque[float] = field(default_factory=deque)
+    intervals: deque[float] = field(init=False)
+
+    def __post_init__(self) -> None:
+        self.intervals = deque(maxlen=self.window)
 
     def arrived(self, now: float) -> float | None:
         """Record a packet; returns the mean interval when the producer has proven slower than its API
@@ -98,14 +101,12 @@ class ArrivalStatistics:
             self.first = now
             return None
         interval = now - last
-        intervals = self.intervals
-        if len(intervals) >= self.window:
-            intervals.popleft()
-        intervals.append(interval)
+        self.intervals.append(interval)  # a deque with maxlen ``window``: the oldest falls out
         if interval > self.max_interval:
             self.max_interval = interval
-        # Judge on at least 20 intervals, on the mean (cheap); 1.5 x the API leaves room for jitter.
-        if not self.slow_warned and self.count > 20 and self.first is not None:
+        # Judged every 16 packets from the 17th interval on, on the mean (cheap); 1.5 x the API
+        # leaves room for jitter.
+        if not self.count & 15 and not self.slow_warned and self.first is not None:
             mean = (now - self.first) / (self.count - 1)
             if mean > 1.5 * self.api:
                 self.slow_warned = True
