@@ -273,8 +273,11 @@ class Scanner:
 
         Sizes come from the assembly schemas of a known profile, else from each assembly's
         attribute 4; fields are accessible by name when the schema is known (``io.output.run_forward``),
-        raw bytes always (``io.output.raw``). ``options`` go to ``EncapsulationClient.io_connection``
-        (``target_io_port``, ``local_io_port``, ``multicast``, ``timeout_multiplier``, ``run``).
+        raw bytes always (``io.output.raw``). ``config`` is the configuration instance; ``options`` go
+        to ``EncapsulationClient.io_connection`` (``config_data``, ``ot_format``, ``target_io_port``,
+        ``local_io_port``, ``multicast``, ``timeout_multiplier``, ``run``). Leaving the block by any
+        way closes the connection (Forward_Close); ``io.statistics()`` gives the counters and how
+        the target really produces (received rate, inter-arrival p50/p99/max, missed slots).
         """
         if output is None and heartbeat is None:
             raise ValueError("give an output assembly, or a heartbeat point for input-only / listen-only")
@@ -300,7 +303,8 @@ class Scanner:
         Its path gives the configuration instance and the connection points; the sizes are those of
         the assemblies it names (else its size fields); input only and listen only send the
         heartbeat point; T->O is multicast when the file allows only multicast (listen only), unless
-        ``multicast`` is given. ``rpi`` (seconds) defaults to the RPI the file proposes, else 10 ms.
+        ``multicast`` is given; the O->T real-time format is the file's (field 2), unless ``ot_format``
+        is given. ``rpi`` (seconds) defaults to the RPI the file proposes, else 10 ms.
         Fields are named after the parameters the assembly members refer to, when every member can
         be a field; else the catalog's schema, else raw bytes. ``options`` as for ``io_connection``.
         A connection the file does not describe raises ``KeyError``.
