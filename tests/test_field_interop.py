@@ -572,3 +572,27 @@ def test_ctrl_c_while_the_forward_open_is_on_the_wire(producer: ClassOneProducer
         assert proc.returncode == 130, err
         assert "Traceback" not in err
         assert len(target.services(FORWARD_CLOSE)) == 1
+
+
+def test_t_o_data_of_another_size_is_counted_and_reported_once(producer: ClassOneProducer,
+                                                               caplog: pytest.LogCaptureFixture) -> None:
+    """The target produces 6 data bytes on a connection opened for 4: dropped, counted, one warning."""
+    def handle(request: MrRequest) -> bytes | None:
+        if request.service != FORWARD_OPEN:
+            return None
+        port = to_port(request)
+        assert port is not None
+        producer.produce(0x22, (request.peer[0], port), bytes(6), 0.010, count=40)
+        return rr_body(mr_reply(FORWARD_OPEN, data=struct.pack("<IIHHIIIBB", 0x11, 0x22, 1, 0xFFFE, 7, 10000,
+                                                                   10000, 0, 0)))
+
+    async def scenario(address: str) -> dict[str, Any]:
+        async with await Scanner.connect(address) as scanner, scanner.io_connection(
+                output=21, input=71, output_size=4, input_size=4, target_io_port=producer.port) as io:
+            await asyncio.sleep(0.6)
+            return io.statistics()
+
+    with ScriptedTarget(handler=handle) as target, caplog.at_level(logging.WARNING):
+        stats = asyncio.run(scenario(target.address))
+    assert stats["received"] == 0 and stats["wrong_size"] > 20, stats
+    assert len([r for r in caplog.records if "sends 6 data bytes" in r.getMessage()]) == 1

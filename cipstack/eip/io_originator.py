@@ -85,6 +85,8 @@ class ArrivalStatistics:
     max_interval: float = 0.0
     #: Input data changes (new data that differs from the previous input).
     changes: int = 0
+    #: T->O packets dropped because their data size is not the connection's.
+    wrong_size: int = 0
     slow_warned: bool = False
     intervals: deque[float] = field(init=False)
 
@@ -139,6 +141,7 @@ class ArrivalStatistics:
             "interval_max_ms": round(self.max_interval * 1e3, 3) if self.intervals else None,
             "missed_slots": None if share is None else round(share, 4),
             "input_changes": self.changes,
+            "wrong_size": self.wrong_size,
         }
 
 
@@ -211,8 +214,17 @@ class IoOriginator:
             self._consume(connection, datagram, now)
 
     def _consume(self, connection: OriginatorConnection, datagram: IoDatagram, now: float) -> None:
-        if connection.closed or len(datagram.payload) != connection.input_size:
+        if connection.closed:
             self.dropped += 1
+            return
+        if len(datagram.payload) != connection.input_size:
+            self.dropped += 1
+            arrivals = connection.arrivals
+            arrivals.wrong_size += 1
+            if arrivals.wrong_size == 1:  # once: a target producing another size does so every RPI
+                log.warning("class 1 connection 0x%08X: %s sends %d data bytes, the connection carries %d: dropped",
+                            connection.to_connection_id, connection.target_host, len(datagram.payload),
+                            connection.input_size)
             return
         reception = connection.consumer.accept(datagram.encap_sequence, datagram.cip_sequence, now)
         if reception is Reception.STALE:
