@@ -1,7 +1,7 @@
 """Every exit of ``cipstack io`` after a successful Forward_Open sends a Forward_Close, as tshark sees
-it on the wire: Ctrl-C (exit 130, statistics, no traceback) and a failure after the open (an
-unknown ``--set`` field, exit 2). Run in a private network namespace with the ACG emulator on
-127.0.0.2 at the default ports."""
+it on the wire: Ctrl-C (exit 130, statistics, no traceback), a failure after the open (an
+unknown ``--set`` field, exit 2), and Ctrl-C in the README's class 1 example. Run in a private
+network namespace with the ACG emulator on 127.0.0.2 at the default ports."""
 
 from __future__ import annotations
 
@@ -64,6 +64,15 @@ try:
     failed = subprocess.run([PY, "-m", "cipstack", "io", ADAPTER, "--output", "21", "--input", "71", "--set",
                              "foo=1"], capture_output=True, text=True, timeout=60)
     seen["failure"] = {"code": failed.returncode, "out": failed.stdout, "err": failed.stderr}
+    # The README's class 1 example, written for 127.0.0.1: here the emulator is on 127.0.0.2.
+    example = (OUT / "readme_io.py").read_text()
+    (OUT / "readme_io.py").write_text(example.replace('connect("127.0.0.1")', f'connect("{ADAPTER}")'))
+    readme = subprocess.Popen([PY, str(OUT / "readme_io.py")], stdout=subprocess.PIPE, stderr=subprocess.PIPE,
+                              text=True)
+    first = readme.stdout.readline()      # the first input: the connection is open
+    readme.send_signal(signal.SIGINT)
+    out, err = readme.communicate(timeout=30)
+    seen["readme"] = {"code": readme.returncode, "out": first + out, "err": err}
 finally:
     if adapter is not None:
         adapter.send_signal(signal.SIGTERM)
@@ -73,6 +82,13 @@ finally:
     tshark.wait(20)
     (OUT / "seen.json").write_text(json.dumps(seen, indent=1))
 '''
+
+
+def readme_io_example() -> str:
+    """The README's class 1 I/O example (the python block after "Class 1 I/O, in an event loop")."""
+    text = (ROOT / "README.md").read_text()
+    start = text.index("```python", text.index("Class 1 I/O, in an event loop")) + len("```python")
+    return text[start:text.index("```", start)]
 
 
 def tshark(capture: Path, display_filter: str, *fields: str) -> list[str]:
@@ -92,6 +108,7 @@ def capture(tmp_path_factory: pytest.TempPathFactory) -> tuple[Path, dict[str, A
     if os.geteuid() != 0:
         pytest.skip("a private network namespace (unshare -n) and a loopback capture need root")
     out = tmp_path_factory.mktemp("tshark-close")
+    (out / "readme_io.py").write_text(readme_io_example())
     script = out / "close.py"
     script.write_text(HELPER)
     command = " ".join(shlex.quote(str(part)) for part in (sys.executable, script, out))
@@ -120,6 +137,14 @@ def test_a_failure_after_the_open_is_one_line(capture: tuple[Path, dict[str, Any
     assert "Traceback" not in failure["err"]
 
 
+def test_ctrl_c_in_the_readme_example_closes_and_exits_130(capture: tuple[Path, dict[str, Any]]) -> None:
+    _, seen = capture
+    readme = seen["readme"]
+    assert readme["code"] == 130, readme
+    assert "Traceback" not in readme["err"], readme["err"]
+    assert "'sent'" in readme["out"] and "'received_rate_hz'" in readme["out"], readme["out"]
+
+
 def test_each_open_is_closed_on_the_wire(capture: tuple[Path, dict[str, Any]]) -> None:
     path, _ = capture
     opens = tshark(path, "cip.service == 0x54 && cip.cm.transport_type_trigger", "frame.number",
@@ -127,8 +152,9 @@ def test_each_open_is_closed_on_the_wire(capture: tuple[Path, dict[str, Any]]) -
     opened = tshark(path, "cip.service == 0xd4 && cip.genstat == 0", "frame.number", "cip.cm.conn_serial_num")
     closes = tshark(path, "cip.service == 0x4e", "frame.number", "cip.cm.conn_serial_num")
     closed = tshark(path, "cip.service == 0xce && cip.genstat == 0", "frame.number", "cip.cm.conn_serial_num")
-    assert len(opens) == 2 and len(opened) == 2, (opens, opened)
-    assert len(closes) == 2 and len(closed) == 2, (closes, closed)
+    # cipstack io interrupted, cipstack io failing after the open, the README example interrupted.
+    assert len(opens) == 3 and len(opened) == 3, (opens, opened)
+    assert len(closes) == 3 and len(closed) == 3, (closes, closed)
     # Each Forward_Close names the connection serial of an open, and follows it.
     for open_line in opened:
         number, serial = open_line.split("\t")
