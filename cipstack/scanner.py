@@ -12,7 +12,7 @@ import asyncio
 import contextlib
 import logging
 import struct
-from collections.abc import AsyncIterator, Sequence
+from collections.abc import AsyncIterator, Iterator, Sequence
 from dataclasses import dataclass
 from typing import Any, TypeVar
 
@@ -24,12 +24,13 @@ from .cip.status import CipError, GeneralStatus
 from .cip.types import UINT, CipType
 from .eds.model import EdsDocument
 from .eip.identity_items import IdentityRecord, ServiceRecord
-from .eip.io_originator import IoConnectionHandle
+from .eip.io_originator import IoConnectionHandle, OtFormat
 from .eip.originator import (
     DEFAULT_PORT,
     BlockingEncapsulationClient,
     EncapsulationClient,
     ExplicitClient,
+    MalformedReplyError,
     discover,
     list_services_udp,
     parse_host,
@@ -38,6 +39,9 @@ from .eip.originator import (
 
 T = TypeVar("T")
 log = logging.getLogger(__name__)
+
+#: Key of the bytes of a Get_Attributes_All reply after the attributes the catalog declares.
+UNDECODED = "(undecoded)"
 
 
 @dataclass(frozen=True)
@@ -65,6 +69,24 @@ class AttributeValue:
 class ReplyDecodeError(ValueError):
     """A successful reply whose data is not the type asked for: a mismatch on this side (the device
     answered status 0), so not a ``CipError``."""
+
+
+class _Unsplittable(CipError):
+    """A list reply the scanner cannot split for want of a declaration (not the device's fault)."""
+
+    def __init__(self, message: str) -> None:
+        super().__init__(GeneralStatus.INVALID_REPLY_RECEIVED, message=message)
+
+
+@contextlib.contextmanager
+def _malformed(what: str) -> Iterator[None]:
+    """A reply body that does not parse is a ``MalformedReplyError`` (one line), not a device status."""
+    try:
+        yield
+    except _Unsplittable:
+        raise
+    except (CipError, ValueError, struct.error, IndexError) as exc:
+        raise MalformedReplyError(f"malformed {what}: {exc}") from None
 
 
 def _decode(cip_type: CipType | None, data: bytes) -> Any:
@@ -162,7 +184,8 @@ class Scanner:
         """Raw reply and, when the class is declared, the values by attribute name.
 
         A device may carry attributes beyond the declared ones after them (its own, or a later
-        revision's): the declared ones are decoded and the rest is left in the raw reply."""
+        revision's): the declared ones are decoded and the rest is returned as raw bytes under
+        the key ``UNDECODED`` (nothing is dropped silently)."""
         reply = await self.request(Service.GET_ATTRIBUTES_ALL, class_id, instance)
         layout = self.catalog.get_all_layout(class_id) if instance else None
         if layout is None:
@@ -172,8 +195,10 @@ class Scanner:
         try:
             for spec in layout:
                 values[spec.name], offset = spec.type.decode_from(reply.data, offset)
-        except CipError:
+        except (CipError, ValueError, struct.error, IndexError):
             return reply.data, None
+        if offset < len(reply.data):
+            values[UNDECODED] = reply.data[offset:]
         return reply.data, values
 
     async def get_attribute_list(self, class_id: int, instance: int, attributes: Sequence[int]
@@ -185,21 +210,21 @@ class Scanner:
             reply.raise_for_status()
         results: dict[int, AttributeValue | CipError] = {}
         body = reply.data
-        count, offset = UINT.decode_from(body, 0)
-        for _ in range(count):
-            attribute_id, offset = UINT.decode_from(body, offset)
-            status, offset = UINT.decode_from(body, offset)
-            if status:
-                results[attribute_id] = CipError(status, message=f"attribute {attribute_id}")
-                continue
-            value_type, spec = self._type_for(class_id, instance, attribute_id, None)
-            if value_type is None:
-                raise CipError(GeneralStatus.INVALID_REPLY_RECEIVED,
-                               message=f"attribute {attribute_id} has no known type: cannot split the list reply")
-            value, end = value_type.decode_from(body, offset)
-            results[attribute_id] = AttributeValue(class_id, instance, attribute_id, body[offset:end], value, spec,
-                                                   value_type)
-            offset = end
+        with _malformed("Get_Attribute_List reply"):
+            count, offset = UINT.decode_from(body, 0)
+            for _ in range(count):
+                attribute_id, offset = UINT.decode_from(body, offset)
+                status, offset = UINT.decode_from(body, offset)
+                if status:
+                    results[attribute_id] = CipError(status, message=f"attribute {attribute_id}")
+                    continue
+                value_type, spec = self._type_for(class_id, instance, attribute_id, None)
+                if value_type is None:
+                    raise _Unsplittable(f"attribute {attribute_id} has no known type: cannot split the list reply")
+                value, end = value_type.decode_from(body, offset)
+                results[attribute_id] = AttributeValue(class_id, instance, attribute_id, body[offset:end], value,
+                                                       spec, value_type)
+                offset = end
         return results
 
     async def set_attribute_list(self, class_id: int, instance: int, values: dict[int, Any]) -> dict[int, int]:
@@ -218,10 +243,11 @@ class Scanner:
         if reply.general_status not in (GeneralStatus.SUCCESS, GeneralStatus.ATTRIBUTE_LIST_ERROR):
             reply.raise_for_status()
         statuses: dict[int, int] = {}
-        count, offset = UINT.decode_from(reply.data, 0)
-        for _ in range(count):
-            attribute_id, offset = UINT.decode_from(reply.data, offset)
-            statuses[attribute_id], offset = UINT.decode_from(reply.data, offset)
+        with _malformed("Set_Attribute_List reply"):
+            count, offset = UINT.decode_from(reply.data, 0)
+            for _ in range(count):
+                attribute_id, offset = UINT.decode_from(reply.data, offset)
+                statuses[attribute_id], offset = UINT.decode_from(reply.data, offset)
         return statuses
 
     async def reset(self, class_id: int = 0x01, instance: int = 1, reset_type: int | None = None) -> None:
@@ -241,9 +267,11 @@ class Scanner:
         if reply.general_status not in (GeneralStatus.SUCCESS, GeneralStatus.EMBEDDED_SERVICE_ERROR):
             reply.raise_for_status()
         body = reply.data
-        count, _ = UINT.decode_from(body, 0)
-        offsets = [UINT.decode_from(body, 2 + 2 * i)[0] for i in range(count)] + [len(body)]
-        return [MessageRouterResponse.decode(body[offsets[i]:offsets[i + 1]]) for i in range(count)]
+        with _malformed("Multiple_Service_Packet reply"):
+            count, _ = UINT.decode_from(body, 0)
+            offsets = [UINT.decode_from(body, 2 + 2 * i)[0] for i in range(count)] + [len(body)]
+            return [MessageRouterResponse.decode(body[offsets[i]:offsets[i + 1]]) for i in range(count)]
+        raise AssertionError("unreachable")  # pragma: no cover - the block returns or raises
 
     # -- class 1 --------------------------------------------------------------------------------------
     async def assembly_size(self, instance: int) -> int:
@@ -261,8 +289,11 @@ class Scanner:
 
         Sizes come from the assembly schemas of a known profile, else from each assembly's
         attribute 4; fields are accessible by name when the schema is known (``io.output.run_forward``),
-        raw bytes always (``io.output.raw``). ``options`` go to ``EncapsulationClient.io_connection``
-        (``target_io_port``, ``local_io_port``, ``multicast``, ``timeout_multiplier``, ``run``).
+        raw bytes always (``io.output.raw``). ``config`` is the configuration instance; ``options`` go
+        to ``EncapsulationClient.io_connection`` (``config_data``, ``ot_format``, ``target_io_port``,
+        ``local_io_port``, ``multicast``, ``timeout_multiplier``, ``run``). Leaving the block by any
+        way closes the connection (Forward_Close); ``io.statistics()`` gives the counters and how
+        the target really produces (received rate, inter-arrival p50/p99/max, missed slots).
         """
         if output is None and heartbeat is None:
             raise ValueError("give an output assembly, or a heartbeat point for input-only / listen-only")
@@ -288,7 +319,8 @@ class Scanner:
         Its path gives the configuration instance and the connection points; the sizes are those of
         the assemblies it names (else its size fields); input only and listen only send the
         heartbeat point; T->O is multicast when the file allows only multicast (listen only), unless
-        ``multicast`` is given. ``rpi`` (seconds) defaults to the RPI the file proposes, else 10 ms.
+        ``multicast`` is given; the O->T real-time format is the file's (field 2), unless ``ot_format``
+        is given. ``rpi`` (seconds) defaults to the RPI the file proposes, else 10 ms.
         Fields are named after the parameters the assembly members refer to, when every member can
         be a field; else the catalog's schema, else raw bytes. ``options`` as for ``io_connection``.
         A connection the file does not describe raises ``KeyError``.
@@ -303,6 +335,9 @@ class Scanner:
         if rpi is None:
             rpi = (found.rpi_us or DEFAULT_RPI_US) / 1e6
         options.setdefault("multicast", found.t_o_multicast and not found.t_o_point_to_point)
+        eds_format = _eds_ot_format(doc, found.number)
+        if eds_format is not None:
+            options.setdefault("ot_format", eds_format)
         output = None if found.heartbeat else found.o_t_point
         output_schema = None if output is None else (view.schema(output) or self.catalog.assemblies.get(output))
         input_schema = view.schema(found.t_o_point) or self.catalog.assemblies.get(found.t_o_point)
@@ -319,6 +354,19 @@ class Scanner:
 
     async def list_services(self) -> list[ServiceRecord]:
         return await self.client.list_services()
+
+
+def _eds_ot_format(doc: EdsDocument, number: int) -> OtFormat | None:
+    """The O->T real-time format ``ConnectionN`` declares (field 2, bits 8-10: 0 modeless,
+    3 heartbeat, 4 run/idle header; eds.md), or None when the file gives none we know."""
+    from .eds.model import FieldKind
+
+    section = doc.get("Connection Manager")
+    entry = section.get(f"Connection{number}") if section is not None else None
+    parameters = entry.field(2) if entry is not None else None
+    if parameters is None or parameters.kind is not FieldKind.INT:
+        return None
+    return OtFormat.from_eds((int(parameters.value) >> 8) & 0x7)
 
 
 def backplane_route(slot: int = 0) -> list[Segment]:
@@ -368,10 +416,10 @@ class SyncScanner:
         self.close()
 
 
-def discover_sync(address: str = "255.255.255.255", port: int = DEFAULT_PORT, timeout: float = 2.0
+def discover_sync(address: str | Sequence[str] | None = None, port: int = DEFAULT_PORT, timeout: float = 2.0
                   ) -> list[IdentityRecord]:
     return asyncio.run(discover(address, port, timeout))
 
 
-__all__ = ["AttributeValue", "ReplyDecodeError", "Scanner", "SyncScanner", "backplane_route", "discover",
+__all__ = ["UNDECODED", "AttributeValue", "ReplyDecodeError", "Scanner", "SyncScanner", "backplane_route", "discover",
            "discover_sync", "list_services_udp"]

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import logging
 import socket
 import struct
 from dataclasses import dataclass
@@ -21,6 +22,8 @@ class ItemType(IntEnum):
     SOCKADDR_T_O = 0x8001
     SEQUENCED_ADDRESS = 0x8002
 
+
+log = logging.getLogger(__name__)
 
 _ITEM = struct.Struct("<HH")
 _COUNT = struct.Struct("<H")
@@ -42,8 +45,12 @@ def encode_items(items: list[Item] | tuple[Item, ...]) -> bytes:
     return b"".join(out)
 
 
-def decode_items(raw: bytes, offset: int = 0) -> list[Item]:
-    """Decode a CPF; any inconsistency is encapsulation status 0x0003 (poorly formed)."""
+def decode_items(raw: bytes, offset: int = 0, *, strict: bool = True) -> list[Item]:
+    """Decode a CPF; any inconsistency is encapsulation status 0x0003 (poorly formed).
+
+    ``strict=False`` is the originator's reading of a reply: the items the count declares are
+    decoded and bytes after the last of them (some targets append an item they did not count)
+    are noted at DEBUG, not refused. A target decodes requests strictly."""
     if offset + 2 > len(raw):
         raise EncapsulationError(EncapsulationStatus.INCORRECT_DATA, "CPF item count missing")
     (count,) = _COUNT.unpack_from(raw, offset)
@@ -61,6 +68,10 @@ def decode_items(raw: bytes, offset: int = 0) -> list[Item]:
         items.append(Item(item_type, bytes(raw[pos:pos + length])))
         pos += length
     if pos != len(raw):
+        if not strict:
+            log.debug("CPF: %d bytes after the %d declared item(s) ignored: %s", len(raw) - pos, count,
+                      bytes(raw[pos:pos + 64]).hex())
+            return items
         raise EncapsulationError(EncapsulationStatus.INCORRECT_DATA, "bytes after the last CPF item")
     return items
 

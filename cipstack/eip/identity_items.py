@@ -68,7 +68,8 @@ def decode_identity_item(data: bytes) -> IdentityRecord:
 
 
 def decode_list_identity(body: bytes) -> list[IdentityRecord]:
-    return [decode_identity_item(item.data) for item in decode_items(body) if item.type == ItemType.LIST_IDENTITY]
+    return [decode_identity_item(item.data) for item in decode_items(body, strict=False)
+            if item.type == ItemType.LIST_IDENTITY]
 
 
 @dataclass(frozen=True)
@@ -92,7 +93,7 @@ def encode_list_services(capabilities: int = CAPABILITY_CIP_TCP | CAPABILITY_CLA
 
 def decode_list_services(body: bytes) -> list[ServiceRecord]:
     records = []
-    for item in decode_items(body):
+    for item in decode_items(body, strict=False):
         if item.type == ItemType.LIST_SERVICES and len(item.data) >= 4:
             version, flags = struct.unpack_from("<HH", item.data)
             name = item.data[4:20].split(b"\x00", 1)[0].decode("latin-1")

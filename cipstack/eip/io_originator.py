@@ -13,8 +13,10 @@ import asyncio
 import itertools
 import logging
 import random
+from collections import deque
 from collections.abc import AsyncIterator
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
+from enum import Enum
 from typing import TYPE_CHECKING, Any
 
 from ..cip.epath import LogicalSegment, LogicalType, encode_path
@@ -30,7 +32,7 @@ from .io_core import (
     decode_io_datagram,
     encode_io_datagram,
 )
-from .io_target import OT_OVERHEAD, TO_OVERHEAD
+from .io_target import TO_OVERHEAD
 
 if TYPE_CHECKING:
     from ..assemblies.schema import AssemblySchema
@@ -41,6 +43,106 @@ log = logging.getLogger(__name__)
 
 class IoTimeoutError(ConnectionError):
     """The target's T->O data stopped for longer than the connection timeout."""
+
+
+#: The 2-byte CIP sequence count that opens every class 1 packet, and the 32-bit run/idle header.
+SEQUENCE_COUNT_SIZE = 2
+RUN_IDLE_HEADER_SIZE = 4
+
+
+class OtFormat(Enum):
+    """The O->T real-time format (EDS ``ConnectionN`` field 2, bits 8-10: 0, 3 or 4; eds.md)."""
+
+    #: Sequence count and data, no header (EDS 0).
+    MODELESS = "modeless"
+    #: Sequence count alone (EDS 3): input-only and listen-only connections of many stacks.
+    HEARTBEAT = "heartbeat"
+    #: Sequence count, 32-bit run/idle header, data (EDS 4); what an exclusive owner sends.
+    RUN_IDLE = "run-idle"
+
+    @classmethod
+    def from_eds(cls, code: int) -> OtFormat | None:
+        return {0: cls.MODELESS, 3: cls.HEARTBEAT, 4: cls.RUN_IDLE}.get(code)
+
+    @property
+    def header_size(self) -> int:
+        return RUN_IDLE_HEADER_SIZE if self is OtFormat.RUN_IDLE else 0
+
+
+@dataclass
+class ArrivalStatistics:
+    """How the target really produces: T->O inter-arrival times against the granted T->O API.
+
+    ``lost`` (gaps in the sequence numbers) cannot see a target that numbers every packet
+    but sends fewer than it was granted; the share of missed production slots does. The last
+    ``window`` intervals are kept for the percentiles, so memory stays bounded."""
+
+    api: float
+    window: int = 4096
+    count: int = 0
+    first: float | None = None
+    last: float | None = None
+    max_interval: float = 0.0
+    #: Input data changes (new data that differs from the previous input).
+    changes: int = 0
+    #: T->O packets dropped because their data size is not the connection's.
+    wrong_size: int = 0
+    slow_warned: bool = False
+    intervals: deque[float] = field(init=False)
+
+    def __post_init__(self) -> None:
+        self.intervals = deque(maxlen=self.window)
+
+    def arrived(self, now: float) -> float | None:
+        """Record a packet; returns the mean interval when the producer has proven slower than its API
+        (once per connection), else None."""
+        last = self.last
+        self.count += 1
+        self.last = now
+        if last is None:
+            self.first = now
+            return None
+        interval = now - last
+        self.intervals.append(interval)  # a deque with maxlen ``window``: the oldest falls out
+        if interval > self.max_interval:
+            self.max_interval = interval
+        # Judged every 16 packets from the 17th interval on, on the mean (cheap); 1.5 x the API
+        # leaves room for jitter.
+        if not self.count & 15 and not self.slow_warned and self.first is not None:
+            mean = (now - self.first) / (self.count - 1)
+            if mean > 1.5 * self.api:
+                self.slow_warned = True
+                return mean
+        return None
+
+    def percentile(self, share: float) -> float | None:
+        if not self.intervals:
+            return None
+        ordered = sorted(self.intervals)
+        return ordered[min(len(ordered) - 1, int(share * len(ordered)))]
+
+    @property
+    def missed_slot_share(self) -> float | None:
+        """Share of the T->O production slots (one per API since the first packet) with no packet."""
+        if self.first is None or self.last is None or self.api <= 0:
+            return None
+        slots = round((self.last - self.first) / self.api) + 1
+        return max(0, slots - self.count) / slots
+
+    def as_dict(self) -> dict[str, float | int | None]:
+        span = (self.last - self.first) if self.first is not None and self.last is not None else 0.0
+        p50, p99, share = self.percentile(0.50), self.percentile(0.99), self.missed_slot_share
+        return {
+            "api_ms": round(self.api * 1e3, 3),
+            "api_rate_hz": round(1 / self.api, 3) if self.api > 0 else None,
+            "received_rate_hz": round((self.count - 1) / span, 3) if span > 0 else None,
+            "interval_p50_ms": None if p50 is None else round(p50 * 1e3, 3),
+            "interval_p99_ms": None if p99 is None else round(p99 * 1e3, 3),
+            "interval_max_ms": round(self.max_interval * 1e3, 3) if self.intervals else None,
+            "missed_slots": None if share is None else round(share, 4),
+            "input_changes": self.changes,
+            "wrong_size": self.wrong_size,
+        }
 
 
 @dataclass
@@ -58,7 +160,10 @@ class OriginatorConnection:
     consumer: ConsumerState
     producer: ProductionSchedule
     stats: IoStatistics
+    arrivals: ArrivalStatistics
     heartbeat: bool = False
+    #: O->T packets carry the 32-bit run/idle header (real-time format RUN_IDLE).
+    ot_header: bool = True
     run: bool = True
     input: bytes = b""
     encap_sequence: int = 0
@@ -109,18 +214,35 @@ class IoOriginator:
             self._consume(connection, datagram, now)
 
     def _consume(self, connection: OriginatorConnection, datagram: IoDatagram, now: float) -> None:
-        if connection.closed or len(datagram.payload) != connection.input_size:
+        if connection.closed:
             self.dropped += 1
+            return
+        if len(datagram.payload) != connection.input_size:
+            self.dropped += 1
+            arrivals = connection.arrivals
+            arrivals.wrong_size += 1
+            if arrivals.wrong_size == 1:  # once: a target producing another size does so every RPI
+                log.warning("class 1 connection 0x%08X: %s sends %d data bytes, the connection carries %d: dropped",
+                            connection.to_connection_id, connection.target_host, len(datagram.payload),
+                            connection.input_size)
             return
         reception = connection.consumer.accept(datagram.encap_sequence, datagram.cip_sequence, now)
         if reception is Reception.STALE:
             return
+        slow = connection.arrivals.arrived(now)
+        if slow is not None:
+            log.warning("class 1 connection 0x%08X: %s produces every %.3f ms on average, slower than its API of "
+                        "%.3f ms (%.0f%% of the production slots missed)", connection.to_connection_id,
+                        connection.target_host, slow * 1e3, connection.arrivals.api * 1e3,
+                        100 * (connection.arrivals.missed_slot_share or 0))
         if connection.keep_intervals:
             if connection.last_arrival is not None:
                 connection.interval_samples.append(now - connection.last_arrival)
             connection.last_arrival = now
         if reception is Reception.NEW:
             changed = datagram.payload != connection.input
+            if changed and connection.input:
+                connection.arrivals.changes += 1
             connection.input = datagram.payload
             if changed and connection.updates is not None:
                 if connection.updates.full():
@@ -138,8 +260,9 @@ class IoOriginator:
             connection.encap_sequence = (connection.encap_sequence + 1) & 0xFFFFFFFF
             connection.cip_sequence = (connection.cip_sequence + 1) & 0xFFFF
             data = b"" if connection.heartbeat else bytes(connection.output)
+            run_idle = (1 if connection.run else 0) if connection.ot_header else None
             out.append((encode_io_datagram(connection.ot_connection_id, connection.encap_sequence,
-                                           connection.cip_sequence, data, 1 if connection.run else 0),
+                                           connection.cip_sequence, data, run_idle),
                         (connection.target_host, connection.target_io_port)))
             connection.stats.sent += 1
             if connection.keep_intervals:
@@ -183,6 +306,11 @@ class ProcessImage:
             raise ValueError(f"assembly is {len(self._buffer)} bytes, got {len(value)}")
         self._buffer[:] = value
 
+    @property
+    def field_names(self) -> frozenset[str]:
+        """The fields this image has by name (empty when no schema is known)."""
+        return self._schema.field_names if self._schema is not None else frozenset()
+
     def fields(self) -> dict[str, Any]:
         if self._schema is None:
             raise AttributeError("no assembly schema known: use .raw")
@@ -219,6 +347,8 @@ class IoConnectionHandle:
         self.connection = connection
         self.output = ProcessImage(connection.output, output_schema, writable=True)
         self._input_schema = input_schema
+        #: What opening had to adapt to, one line each (e.g. a retry with the size the target asked for).
+        self.notes: list[str] = []
 
     @property
     def input(self) -> ProcessImage:
@@ -229,6 +359,15 @@ class IoConnectionHandle:
     @property
     def stats(self) -> IoStatistics:
         return self.connection.stats
+
+    @property
+    def arrivals(self) -> ArrivalStatistics:
+        """T->O inter-arrival times, received rate against the API, missed production slots."""
+        return self.connection.arrivals
+
+    def statistics(self) -> dict[str, Any]:
+        """Counters and arrival figures in one dictionary."""
+        return {**self.connection.stats.as_dict(), **self.connection.arrivals.as_dict()}
 
     @property
     def timed_out(self) -> bool:
@@ -269,14 +408,26 @@ class IoConnectionHandle:
 _serials = itertools.count(random.randrange(0, 0xFFFF))
 
 
-def class1_path(output: int | None, input: int, config: int, heartbeat: int | None = None) -> bytes:
-    """``20 04 24 <config> 2C <O->T> 2C <T->O>`` (the O->T point is the heartbeat point when given)."""
+#: A simple data segment carries at most 255 words.
+MAX_CONFIG_DATA = 510
+
+
+def class1_path(output: int | None, input: int, config: int, heartbeat: int | None = None,
+                config_data: bytes = b"") -> bytes:
+    """``20 04 24 <config> 2C <O->T> 2C <T->O>`` (the O->T point is the heartbeat point when given),
+    then ``80 <words> <config data>`` when configuration data is given (padded to whole words)."""
     consumed = heartbeat if heartbeat is not None else output
     assert consumed is not None
-    return encode_path([
+    path = encode_path([
         LogicalSegment(LogicalType.CLASS_ID, 0x04), LogicalSegment(LogicalType.INSTANCE_ID, config),
         LogicalSegment(LogicalType.CONNECTION_POINT, consumed), LogicalSegment(LogicalType.CONNECTION_POINT, input),
     ])
+    if config_data:
+        if len(config_data) > MAX_CONFIG_DATA:
+            raise ValueError(f"configuration data is {len(config_data)} bytes, at most {MAX_CONFIG_DATA}")
+        padded = config_data + b"\x00" * (len(config_data) & 1)
+        path += bytes((0x80, len(padded) // 2)) + padded
+    return path
 
 
 @dataclass(frozen=True)
@@ -291,11 +442,46 @@ class Class1Request:
     multicast: bool = False
     timeout_multiplier: int = 2
     large: bool = False
+    ot_format: OtFormat = OtFormat.RUN_IDLE
+
+    @property
+    def ot_size(self) -> int:
+        """O->T connection size: sequence count, header of the format, data."""
+        return SEQUENCE_COUNT_SIZE + self.ot_format.header_size + (self.output_size or 0)
+
+    @property
+    def to_size(self) -> int:
+        return self.input_size + TO_OVERHEAD
+
+    def corrected(self, extended: tuple[int, ...]) -> tuple[Class1Request, str] | None:
+        """The request a target's 0x0127 (O->T) / 0x0128 (T->O) refusal asks for, when it names the
+        size it wants, and a line saying what changed; None when there is nothing to retry with."""
+        if len(extended) < 2:
+            return None
+        status, wanted = extended[0], extended[1]
+        if status == 0x0128 and wanted >= TO_OVERHEAD and wanted != self.to_size:
+            return (replace(self, input_size=wanted - TO_OVERHEAD),
+                    f"T->O size {self.to_size} refused (0x0128), the target wants {wanted}: retrying with {wanted}")
+        if status != 0x0127 or wanted == self.ot_size or wanted < SEQUENCE_COUNT_SIZE:
+            return None
+        data = self.output_size or 0
+        if self.output_size is None:  # heartbeat: the format is all that can differ
+            fmt = {2: OtFormat.HEARTBEAT, 6: OtFormat.RUN_IDLE}.get(wanted)
+            if fmt is None:
+                return None
+            changed = replace(self, ot_format=fmt)
+        elif wanted == SEQUENCE_COUNT_SIZE + data:
+            changed = replace(self, ot_format=OtFormat.MODELESS)
+        elif wanted == SEQUENCE_COUNT_SIZE + RUN_IDLE_HEADER_SIZE + data:
+            changed = replace(self, ot_format=OtFormat.RUN_IDLE)
+        else:
+            changed = replace(self, output_size=max(0, wanted - SEQUENCE_COUNT_SIZE - self.ot_format.header_size))
+        return (changed, f"O->T size {self.ot_size} refused (0x0127), the target wants {wanted}: retrying with "
+                         f"{wanted} ({changed.ot_format.value}, {changed.output_size or 0} data bytes)")
 
     def parameters(self) -> tuple[NetworkParameters, NetworkParameters, TransportTrigger, ConnectionTriad, int]:
-        ot_size = (self.output_size + OT_OVERHEAD) if self.output_size is not None else OT_OVERHEAD
-        ot = NetworkParameters(ot_size, ConnectionType.POINT_TO_POINT)
-        to = NetworkParameters(self.input_size + TO_OVERHEAD,
+        ot = NetworkParameters(self.ot_size, ConnectionType.POINT_TO_POINT)
+        to = NetworkParameters(self.to_size,
                                ConnectionType.MULTICAST if self.multicast else ConnectionType.POINT_TO_POINT)
         triad = ConnectionTriad(next(_serials) & 0xFFFF, 0xFFFE, random.randrange(1, 0xFFFFFFFF))
         return ot, to, TransportTrigger(1, TriggerType.CYCLIC), triad, random.randrange(1, 0xFFFFFFFF)
@@ -304,15 +490,17 @@ class Class1Request:
 def new_connection(request: Class1Request, target_host: str, target_io_port: int, ot_id: int, to_id: int,
                    ot_api_us: int, to_api_us: int, now: float, keep_intervals: bool = False) -> OriginatorConnection:
     stats = IoStatistics()
+    arrivals = ArrivalStatistics(to_api_us / 1e6)
     to_timeout = connection_timeout(to_api_us, request.timeout_multiplier)
     return OriginatorConnection(
         target_host=target_host, target_io_port=target_io_port, ot_connection_id=ot_id, to_connection_id=to_id,
         ot_rpi=ot_api_us / 1e6, to_rpi=to_api_us / 1e6,
         output=bytearray(request.output_size or 0), input_size=request.input_size,
         consumer=ConsumerState.opened(to_timeout, now, stats=stats),
-        producer=ProductionSchedule(ot_api_us / 1e6, now, stats=stats), stats=stats,
-        heartbeat=request.output_size is None, updates=asyncio.Queue(maxsize=64), keep_intervals=keep_intervals)
+        producer=ProductionSchedule(ot_api_us / 1e6, now, stats=stats), stats=stats, arrivals=arrivals,
+        heartbeat=request.output_size is None, ot_header=request.ot_format is OtFormat.RUN_IDLE,
+        updates=asyncio.Queue(maxsize=64), keep_intervals=keep_intervals)
 
 
-__all__ = ["Class1Request", "IoConnectionHandle", "IoOriginator", "IoTimeoutError", "OriginatorConnection",
-           "ProcessImage", "class1_path", "new_connection"]
+__all__ = ["ArrivalStatistics", "Class1Request", "IoConnectionHandle", "IoOriginator", "IoTimeoutError",
+           "OriginatorConnection", "OtFormat", "ProcessImage", "class1_path", "new_connection"]

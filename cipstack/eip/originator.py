@@ -9,12 +9,13 @@ matched by their connection's sequence count. ``discover`` sends ListIdentity ov
 from __future__ import annotations
 
 import asyncio
+import ipaddress
 import itertools
 import logging
 import random
 import socket
 import struct
-from collections.abc import Coroutine, Sequence
+from collections.abc import Callable, Coroutine, Sequence
 from dataclasses import dataclass
 from typing import TYPE_CHECKING, Any, TypeVar
 
@@ -45,7 +46,14 @@ from .encapsulation import (
 )
 from .identity_items import IdentityRecord, ServiceRecord, decode_list_identity, decode_list_services
 from .io_core import DEFAULT_IO_PORT
-from .io_originator import Class1Request, IoConnectionHandle, IoOriginator, class1_path, new_connection
+from .io_originator import (
+    Class1Request,
+    IoConnectionHandle,
+    IoOriginator,
+    OtFormat,
+    class1_path,
+    new_connection,
+)
 from .io_server import IoEndpoint
 
 if TYPE_CHECKING:
@@ -79,6 +87,18 @@ class EncapsulationStatusError(Exception):
             # RegisterSession answered "insufficient memory": what targets answer when every session is taken.
             text += ": the target's session table is full (its session limit is reached)"
         super().__init__(text)
+
+
+class MalformedReplyError(ConnectionError):
+    """A reply that cannot be decoded: one line for the user, never a traceback."""
+
+
+def _decode_reply(what: str, decode: Callable[[], T]) -> T:
+    """Run a client-side decoder; any failure of it is a ``MalformedReplyError`` naming ``what``."""
+    try:
+        return decode()
+    except (ValueError, struct.error, IndexError, CipError, EncapsulationError) as exc:
+        raise MalformedReplyError(f"malformed {what}: {exc}") from None
 
 
 def parse_host(text: str, default_port: int = DEFAULT_PORT) -> tuple[str, int]:
@@ -201,15 +221,15 @@ class ExplicitClient:
 
     async def list_identity(self) -> list[IdentityRecord]:
         _, body = await self.exchange(Command.LIST_IDENTITY)
-        return decode_list_identity(body)
+        return _decode_reply("ListIdentity reply", lambda: decode_list_identity(body))
 
     async def list_services(self) -> list[ServiceRecord]:
         _, body = await self.exchange(Command.LIST_SERVICES)
-        return decode_list_services(body)
+        return _decode_reply("ListServices reply", lambda: decode_list_services(body))
 
     async def list_interfaces(self) -> list[Item]:
         _, body = await self.exchange(Command.LIST_INTERFACES)
-        return decode_items(body)
+        return _decode_reply("ListInterfaces reply", lambda: decode_items(body, strict=False))
 
     async def nop(self, data: bytes = b"") -> None:
         self._write(Command.NOP, data, bytes(8))
@@ -220,11 +240,11 @@ class ExplicitClient:
         items = (Item(ItemType.NULL_ADDRESS), Item(ItemType.UNCONNECTED_DATA, request))
         body = RR_PREFIX.pack(0, 0) + encode_items(items)
         _, reply = await self.exchange(Command.SEND_RR_DATA, body, timeout=timeout)
-        items = decode_items(reply, RR_PREFIX.size)
+        items = _decode_reply("SendRRData reply", lambda: decode_items(reply, RR_PREFIX.size, strict=False))
         for item in items:
             if item.type == ItemType.UNCONNECTED_DATA:
                 return item.data
-        raise ValueError("SendRRData reply without Unconnected Data item")
+        raise MalformedReplyError("malformed SendRRData reply: no Unconnected Data item")
 
     async def send_rr_data_items(self, request: bytes, extra: Sequence[Item] = (),
                                  timeout: float | None = None) -> tuple[bytes, list[Item]]:
@@ -232,10 +252,10 @@ class ExplicitClient:
         items = (Item(ItemType.NULL_ADDRESS), Item(ItemType.UNCONNECTED_DATA, request), *extra)
         _, reply = await self.exchange(Command.SEND_RR_DATA, RR_PREFIX.pack(0, 0) + encode_items(items),
                                        timeout=timeout)
-        reply_items = decode_items(reply, RR_PREFIX.size)
+        reply_items = _decode_reply("SendRRData reply", lambda: decode_items(reply, RR_PREFIX.size, strict=False))
         data = next((i.data for i in reply_items if i.type == ItemType.UNCONNECTED_DATA), None)
         if data is None:
-            raise ValueError("SendRRData reply without Unconnected Data item")
+            raise MalformedReplyError("malformed SendRRData reply: no Unconnected Data item")
         return data, [i for i in reply_items if i.type not in (ItemType.NULL_ADDRESS, ItemType.UNCONNECTED_DATA)]
 
     async def send_unit_data(self, request: bytes, timeout: float | None = None) -> bytes:
@@ -268,7 +288,7 @@ class ExplicitClient:
             raw = MessageRouterRequest(Service.UNCONNECTED_SEND, CONNECTION_MANAGER_PATH,
                                        UnconnectedSendRequest(0x0A, 0x0E, raw, route_bytes).encode()).encode()
         reply = await (self.send_unit_data(raw, timeout) if use_connection else self.send_rr_data(raw, timeout))
-        return MessageRouterResponse.decode(reply)
+        return _decode_reply("message router reply", lambda: MessageRouterResponse.decode(reply))
 
     # -- class 3 connection -----------------------------------------------------------------------
     async def forward_open(self, rpi_us: int = 2_000_000, connection_size: int = 500, large: bool = False,
@@ -287,7 +307,7 @@ class ExplicitClient:
         service = Service.LARGE_FORWARD_OPEN if large else Service.FORWARD_OPEN
         reply = await self.request(service, CONNECTION_MANAGER_PATH, fo.encode(), connected=False)
         reply.raise_for_status()
-        decoded = ForwardOpenReply.decode(reply.data)
+        decoded = _decode_reply("Forward_Open reply", lambda: ForwardOpenReply.decode(reply.data))
         self.connection = ExplicitConnectionInfo(decoded.ot_connection_id, decoded.to_connection_id, triad,
                                                  decoded.ot_api_us)
         return self.connection
@@ -367,7 +387,7 @@ class EncapsulationClient(ExplicitClient):
     def _deliver(self, header: EncapsulationHeader, body: bytes) -> None:
         if header.command == Command.SEND_UNIT_DATA and header.status == 0:
             try:
-                items = decode_items(body, RR_PREFIX.size)
+                items = decode_items(body, RR_PREFIX.size, strict=False)
                 sequence = _SEQ.unpack_from(items[1].data)[0]
             except Exception:
                 return
@@ -427,25 +447,31 @@ class EncapsulationClient(ExplicitClient):
 
     # -- class 1 -------------------------------------------------------------------------------------
     def io_connection(self, output: int | None, input: int, rpi: float, *, output_size: int,
-                            input_size: int, config: int = 1, heartbeat: int | None = None,
-                            target_io_port: int = DEFAULT_IO_PORT, local_io_port: int = 0, multicast: bool = False,
-                            timeout_multiplier: int = 2, output_schema: AssemblySchema | None = None,
-                            input_schema: AssemblySchema | None = None, run: bool = True,
-                            keep_intervals: bool = False) -> IoContext:
+                      input_size: int, config: int = 1, heartbeat: int | None = None,
+                      target_io_port: int = DEFAULT_IO_PORT, local_io_port: int = 0, multicast: bool = False,
+                      timeout_multiplier: int = 2, output_schema: AssemblySchema | None = None,
+                      input_schema: AssemblySchema | None = None, run: bool = True,
+                      keep_intervals: bool = False, config_data: bytes = b"",
+                      ot_format: OtFormat | str | None = None) -> IoContext:
         """Open a class 1 connection; use as ``async with client.io_connection(...) as io``.
 
         ``output``/``input`` are the assembly instances (``heartbeat`` replaces the output for
-        input-only and listen-only connections); ``rpi`` is in seconds. T->O data comes to this
-        host's UDP ``local_io_port`` (0: the shared endpoint's port), which the Forward_Open
-        announces in a Sockaddr Info item; O->T data goes to ``target_io_port`` on the target.
+        input-only and listen-only connections); ``rpi`` is in seconds; ``config`` the
+        configuration instance and ``config_data`` the data sent with it (a simple data segment).
+        ``ot_format`` is the O->T real-time format: run/idle header (default), heartbeat (the
+        sequence count alone) or modeless. T->O data comes to this host's UDP ``local_io_port``
+        (0: the shared endpoint's port), which the Forward_Open announces in a Sockaddr Info
+        item; O->T data goes to ``target_io_port`` on the target. A target that refuses the
+        O->T or T->O size with 0x0127/0x0128 and names the size it wants gets one retry with it.
         """
+        fmt = OtFormat(ot_format) if ot_format is not None else OtFormat.RUN_IDLE
+        if fmt is OtFormat.HEARTBEAT and heartbeat is None:
+            raise ValueError("the heartbeat format carries no data: give a heartbeat point, not an output")
         request = Class1Request(None if heartbeat is not None else output_size, input_size, int(rpi * 1e6),
-                                int(rpi * 1e6), class1_path(output, input, config, heartbeat), multicast,
-                                timeout_multiplier)
+                                int(rpi * 1e6), class1_path(output, input, config, heartbeat, config_data), multicast,
+                                timeout_multiplier, ot_format=fmt)
         return IoContext(self, request, target_io_port, local_io_port, output_schema, input_schema, run,
                          keep_intervals)
-
-
 
 
 class BlockingEncapsulationClient(ExplicitClient):
@@ -524,8 +550,13 @@ class BlockingEncapsulationClient(ExplicitClient):
             header, reply = self._read_frame(timeout or self.timeout)
             if header.command != Command.SEND_UNIT_DATA or header.status != 0:
                 continue
-            items = decode_items(reply, RR_PREFIX.size)
-            if len(items) == 2 and _SEQ.unpack_from(items[1].data)[0] == sequence:
+            try:
+                items = decode_items(reply, RR_PREFIX.size, strict=False)
+                matched = len(items) >= 2 and _SEQ.unpack_from(items[1].data)[0] == sequence
+            except (EncapsulationError, struct.error):
+                log.debug("malformed SendUnitData reply ignored: %s", reply.hex())
+                continue
+            if matched:
                 return items[1].data[2:]
 
     @property
@@ -553,7 +584,11 @@ def _expire(future: asyncio.Future[Any]) -> None:
         future.set_exception(asyncio.TimeoutError())
 
 class IoContext:
-    """Async context manager of a class 1 connection: Forward_Open on enter, Forward_Close on exit."""
+    """Async context manager of a class 1 connection: Forward_Open on enter, Forward_Close on exit.
+
+    Once the Forward_Open succeeded, every way out closes the connection: an error while
+    setting it up (a group that cannot be joined, a socket error), an exception or a
+    cancellation (Ctrl-C) in the body, or a normal exit."""
 
     def __init__(self, client: EncapsulationClient, request: Class1Request, target_io_port: int, local_io_port: int,
                  output_schema: AssemblySchema | None, input_schema: AssemblySchema | None, run: bool,
@@ -568,46 +603,112 @@ class IoContext:
         self.keep_intervals = keep_intervals
         self.handle: IoConnectionHandle | None = None
         self._triad: ConnectionTriad | None = None
+        #: What the opening had to adapt to (a retry with the size a target asked for), one line each.
+        self.notes: list[str] = []
+
+    async def _forward_open(self, request: Class1Request, port: int
+                            ) -> tuple[ForwardOpenReply, list[Item], ConnectionTriad]:
+        ot, to, transport, triad, to_id = request.parameters()
+        fo = ForwardOpenRequest(0x0A, 0x0E, 0, to_id, triad, request.timeout_multiplier, request.ot_rpi_us,
+                                ot, request.to_rpi_us, to, transport, request.path, request.large)
+        raw = MessageRouterRequest(Service.FORWARD_OPEN, CONNECTION_MANAGER_PATH, fo.encode()).encode()
+        sockaddr = Item(ItemType.SOCKADDR_T_O, SockAddr("0.0.0.0", port).encode())
+        reply_raw, extra = await self.client.send_rr_data_items(raw, [] if request.multicast else [sockaddr])
+        response = _decode_reply("Forward_Open reply", lambda: MessageRouterResponse.decode(reply_raw))
+        response.raise_for_status()
+        return _decode_reply("Forward_Open reply", lambda: ForwardOpenReply.decode(response.data)), extra, triad
+
+    async def _open_shielded(self, request: Class1Request, port: int
+                             ) -> tuple[ForwardOpenReply, list[Item], ConnectionTriad]:
+        """``_forward_open``, closing what the target opens even when the caller is cancelled (Ctrl-C)
+        while the request is on the wire."""
+        opening = asyncio.ensure_future(self._forward_open(request, port))
+        try:
+            return await asyncio.shield(opening)
+        except asyncio.CancelledError:
+            try:
+                _, _, self._triad = await opening
+            except Exception:  # refused or lost: nothing was opened
+                self._triad = None
+            else:
+                await self._forward_close()
+            raise
 
     async def __aenter__(self) -> IoConnectionHandle:
         client = self.client
         core, endpoint = await shared_io_endpoint(client.local_host(), self.local_io_port)
-        ot, to, transport, triad, to_id = self.request.parameters()
-        fo = ForwardOpenRequest(0x0A, 0x0E, 0, to_id, triad, self.request.timeout_multiplier, self.request.ot_rpi_us,
-                                ot, self.request.to_rpi_us, to, transport, self.request.path, self.request.large)
-        raw = MessageRouterRequest(Service.FORWARD_OPEN, CONNECTION_MANAGER_PATH, fo.encode()).encode()
-        sockaddr = Item(ItemType.SOCKADDR_T_O, SockAddr("0.0.0.0", endpoint.port).encode())
-        reply_raw, extra = await client.send_rr_data_items(raw, [] if self.request.multicast else [sockaddr])
-        MessageRouterResponse.decode(reply_raw).raise_for_status()
-        reply = ForwardOpenReply.decode(MessageRouterResponse.decode(reply_raw).data)
+        request = self.request
+        try:
+            reply, extra, triad = await self._open_shielded(request, endpoint.port)
+        except CipError as refused:
+            corrected = request.corrected(refused.extended) if refused.general == GeneralStatus.CONNECTION_FAILURE \
+                else None
+            if corrected is None:
+                raise
+            request, note = corrected
+            log.debug("Forward_Open to %s: %s", client.host, note)
+            self.notes.append(note)
+            reply, extra, triad = await self._open_shielded(request, endpoint.port)
+        self.request = request
         self._triad = triad
-        connection = new_connection(self.request, client.host_address(), self.target_io_port,
+        try:
+            self.handle = await self._start(request, reply, extra, core, endpoint)
+            self.handle.notes = self.notes
+        except BaseException:
+            # Opened but not started: the target would keep producing to a port nobody reads.
+            await self._forward_close()
+            raise
+        return self.handle
+
+    async def _start(self, request: Class1Request, reply: ForwardOpenReply, extra: list[Item], core: IoOriginator,
+                     endpoint: IoEndpoint) -> IoConnectionHandle:
+        connection = new_connection(request, self.client.host_address(), self.target_io_port,
                                     reply.ot_connection_id, reply.to_connection_id, reply.ot_api_us, reply.to_api_us,
                                     asyncio.get_running_loop().time(), self.keep_intervals)
         connection.run = self.run
         for item in extra:
-            if item.type == ItemType.SOCKADDR_T_O:
-                group = SockAddr.decode(item.data)
-                await endpoint.join_multicast(group.host, group.port)
+            if item.type not in (ItemType.SOCKADDR_T_O, ItemType.SOCKADDR_O_T):
+                log.debug("Forward_Open reply: item 0x%04X ignored", item.type)
+                continue
+            try:
+                address = SockAddr.decode(item.data)
+            except EncapsulationError as exc:
+                log.debug("Forward_Open reply: Sockaddr Info 0x%04X ignored: %s", item.type, exc)
+                continue
+            if item.type == ItemType.SOCKADDR_T_O and ipaddress.IPv4Address(address.host).is_multicast:
+                await endpoint.join_multicast(address.host, address.port)
+            else:
+                # 0.0.0.0:<our port> echoed back on a point-to-point connection, or the target's
+                # O->T address: informational; only a 224.0.0.0/4 group is something to join.
+                log.debug("Forward_Open reply: Sockaddr Info 0x%04X %s:%d (informational)", item.type,
+                          address.host, address.port)
+        output_schema, input_schema = self.output_schema, self.input_schema
+        if output_schema is not None and output_schema.size != (request.output_size or 0):
+            output_schema = None  # the size the target asked for is not the schema's: raw bytes only
+        if input_schema is not None and input_schema.size != request.input_size:
+            input_schema = None
         core.add(connection)
         endpoint.wakeup()
-        self.handle = IoConnectionHandle(core, endpoint, connection, self.output_schema, self.input_schema)
-        return self.handle
+        return IoConnectionHandle(core, endpoint, connection, output_schema, input_schema)
 
-    async def __aexit__(self, *exc: object) -> None:
-        handle = self.handle
-        if handle is None:
+    async def _forward_close(self) -> None:
+        if self._triad is None:
             return
-        handle.connection.closed = True
-        handle._core.remove(handle.connection)
-        assert self._triad is not None
         fc = ForwardCloseRequest(0x0A, 0x0E, self._triad, self.request.path)
+        self._triad = None
         try:
             reply = await self.client.request(Service.FORWARD_CLOSE, CONNECTION_MANAGER_PATH, fc.encode(),
                                               connected=False)
             reply.raise_for_status()
         except (ConnectionError, CipError, EncapsulationStatusError, asyncio.TimeoutError) as exc_close:
             log.info("Forward_Close of class 1 connection failed: %s", exc_close)
+
+    async def __aexit__(self, *exc: object) -> None:
+        handle = self.handle
+        if handle is not None:
+            handle.connection.closed = True
+            handle._core.remove(handle.connection)
+        await self._forward_close()
 
 
 _io_endpoints: dict[tuple[int, str, int], tuple[IoOriginator, IoEndpoint]] = {}
@@ -617,9 +718,12 @@ async def shared_io_endpoint(host: str, port: int = 0) -> tuple[IoOriginator, Io
     """The originator's class 1 endpoint for this event loop and local address (one socket serves every
     connection, as a PLC's one UDP 2222 socket does)."""
     loop = asyncio.get_running_loop()
+    for stale in [k for k, (_, e) in _io_endpoints.items() if getattr(e, "loop", loop).is_closed()]:
+        del _io_endpoints[stale]  # an earlier asyncio.run's: nothing can use it any more
     key = (id(loop), host, port)
     found = _io_endpoints.get(key)
-    if found is not None and found[1].transport is not None:
+    # An id can be reused by a later loop once the first is gone: the endpoint must be this loop's.
+    if found is not None and found[1].transport is not None and getattr(found[1], "loop", None) is loop:
         return found
     core = IoOriginator()
     endpoint = IoEndpoint(core, host, port)
@@ -633,19 +737,65 @@ class _DiscoveryProtocol(asyncio.DatagramProtocol):
         self.replies: list[tuple[bytes, tuple[str, int]]] = []
 
     def datagram_received(self, data: bytes, addr: tuple[str, int]) -> None:
-        self.replies.append((data, addr))
+        if len(self.replies) < MAX_DISCOVERY_REPLIES:
+            self.replies.append((data, addr))
+
+    def error_received(self, exc: Exception) -> None:
+        log.debug("discovery: %s", exc)
 
 
-async def udp_query(command: int, address: str = "255.255.255.255", port: int = DEFAULT_PORT,
+#: Replies kept from one query: far more devices than one subnet holds; the rest are dropped.
+MAX_DISCOVERY_REPLIES = 4096
+LIMITED_BROADCAST = "255.255.255.255"
+
+
+def broadcast_addresses() -> list[str]:
+    """Where a broadcast with no address given goes: 255.255.255.255 and the directed broadcast
+    address of every IPv4 interface, loopback included (127.255.255.255), so that devices on
+    every attached subnet hear it. Linux reads the interfaces; elsewhere the limited broadcast alone."""
+    addresses = [LIMITED_BROADCAST]
+    try:
+        import fcntl
+
+        names = [name for _, name in socket.if_nameindex()]
+    except (ImportError, OSError, AttributeError):
+        return addresses
+    siocgifaddr, siocgifnetmask = 0x8915, 0x891B
+    with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as sock:
+        for name in names:
+            request = struct.pack("256s", name.encode()[:15])
+            try:
+                address = fcntl.ioctl(sock.fileno(), siocgifaddr, request)[20:24]
+                netmask = fcntl.ioctl(sock.fileno(), siocgifnetmask, request)[20:24]
+            except OSError:
+                continue  # no IPv4 address on this interface
+            network = ipaddress.IPv4Network((int.from_bytes(address, "big"), socket.inet_ntoa(netmask)), strict=False)
+            if network.prefixlen < 31:
+                broadcast = str(network.broadcast_address)
+                if broadcast not in addresses:
+                    addresses.append(broadcast)
+    return addresses
+
+
+async def udp_query(command: int, address: str | Sequence[str] | None = None, port: int = DEFAULT_PORT,
                     timeout: float = 2.0, max_delay_ms: int | None = None) -> list[tuple[bytes, tuple[str, int]]]:
-    """Send a ListIdentity/ListServices datagram and collect the reply bodies for ``timeout`` seconds."""
+    """Send a ListIdentity/ListServices datagram and collect the reply bodies for ``timeout`` seconds.
+
+    ``address``: one address (broadcast or unicast), several, or None for every interface's
+    broadcast address (see ``broadcast_addresses``)."""
+    addresses = [address] if isinstance(address, str) else list(address) if address is not None else []
+    addresses = addresses or broadcast_addresses()
     loop = asyncio.get_running_loop()
     transport, protocol = await loop.create_datagram_endpoint(_DiscoveryProtocol, family=socket.AF_INET,
                                                               allow_broadcast=True)
     try:
         delay = max_delay_ms if max_delay_ms is not None else max(500, min(int(timeout * 1000) - 100, 0xFFFF))
         context = _SEQ.pack(delay) + bytes(6)
-        transport.sendto(HEADER.pack(command, 0, 0, 0, context, 0), (address, port))
+        for destination in addresses:
+            try:
+                transport.sendto(HEADER.pack(command, 0, 0, 0, context, 0), (destination, port))
+            except OSError as exc:  # an interface without a route: the others still count
+                log.debug("discovery: cannot send to %s:%d: %s", destination, port, exc)
         await asyncio.sleep(timeout)
     finally:
         transport.close()
@@ -655,27 +805,44 @@ async def udp_query(command: int, address: str = "255.255.255.255", port: int = 
             header = EncapsulationHeader.decode(data)
             if header.command == command and header.status == 0 and header.length == len(data) - HEADER_SIZE:
                 bodies.append((data[HEADER_SIZE:], addr))
+                continue
+        log.debug("discovery: reply from %s:%d ignored: %s", addr[0], addr[1], data[:64].hex())
     return bodies
 
 
-async def discover(address: str = "255.255.255.255", port: int = DEFAULT_PORT,
+async def discover(address: str | Sequence[str] | None = None, port: int = DEFAULT_PORT,
                    timeout: float = 2.0) -> list[IdentityRecord]:
-    """ListIdentity over UDP: every device that answers within ``timeout`` seconds."""
+    """ListIdentity over UDP: every device that answers within ``timeout`` seconds, once each.
+
+    ``address`` None: the broadcast address of every interface (loopback included). A device
+    that answers twice (two broadcasts reached it, or it repeated its reply) is listed once:
+    replies are told apart by the address they came from and the serial number."""
     records: list[IdentityRecord] = []
-    for body, _addr in await udp_query(Command.LIST_IDENTITY, address, port, timeout):
+    seen: set[tuple[str, int]] = set()
+    for body, addr in await udp_query(Command.LIST_IDENTITY, address, port, timeout):
         try:
-            records.extend(decode_list_identity(body))
-        except (ValueError, struct.error, EncapsulationError):
+            found = decode_list_identity(body)
+        except (ValueError, struct.error, EncapsulationError) as exc:
+            log.debug("discovery: malformed ListIdentity reply from %s ignored: %s", addr[0], exc)
             continue
+        for record in found:
+            key = (addr[0], record.serial_number)
+            if key not in seen:
+                seen.add(key)
+                records.append(record)
     return records
 
 
 async def list_services_udp(address: str, port: int = DEFAULT_PORT, timeout: float = 1.0) -> list[ServiceRecord]:
     records: list[ServiceRecord] = []
-    for body, _addr in await udp_query(Command.LIST_SERVICES, address, port, timeout):
-        records.extend(decode_list_services(body))
+    for body, addr in await udp_query(Command.LIST_SERVICES, address, port, timeout):
+        try:
+            records.extend(decode_list_services(body))
+        except (ValueError, struct.error, EncapsulationError) as exc:
+            log.debug("malformed ListServices reply from %s ignored: %s", addr[0], exc)
     return records
 
 
 __all__ = ["DEFAULT_PORT", "CipError", "EncapsulationClient", "EncapsulationStatusError", "ExplicitConnectionInfo",
-           "GeneralStatus", "discover", "list_services_udp", "parse_host", "udp_query"]
+           "GeneralStatus", "MalformedReplyError", "broadcast_addresses", "discover", "list_services_udp", "parse_host",
+           "udp_query"]

@@ -237,6 +237,8 @@ def test_scanner_get_attributes_all_from_cpppo(scanner: SyncScanner) -> None:
     assert {k: normalise(v) for k, v in values.items()} == {
         "Vendor ID": 1, "Device Type": 14, "Product Code": 54, "Revision": {"major": 20, "minor": 11},
         "Status": 0x3160, "Serial Number": 7079450, "Product Name": "1756-L61/B LOGIX5561",
+        # What follows the declared attributes is kept, raw (issue 9.8), not dropped.
+        "(undecoded)": b"\xff\x00\x00\x00",
     }
 
 
