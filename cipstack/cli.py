@@ -345,9 +345,9 @@ def _member_text(name: str, value: Any) -> str:
     """One ``name = value`` line of Get_Attributes_All; the bytes after the declared attributes as hex."""
     from .scanner import UNDECODED
 
-    if name == UNDECODED and isinstance(value, str):
+    if name in (UNDECODED, json_key(UNDECODED)) and isinstance(value, str):
         raw = bytes.fromhex(value)
-        return f"{name} = {len(raw)} bytes: {raw.hex(' ')}"
+        return f"{UNDECODED} = {len(raw)} bytes: {raw.hex(' ')}"
     return f"{name} = {_value_text(value)}"
 
 

@@ -473,4 +473,4 @@ def test_a_malformed_reply_is_one_line() -> None:
     with omron_register_target(bytes.fromhex("e8030000"), layout="00000000 0200 0000 0000 b200") as port:
         result = run("get", f"127.0.0.1:{port}", "0x64/0/1")
     assert result.returncode == 1
-    assert one_line_error(result) == "cipstack get: malformed reply from the target: bytes after the last CPF item"
+    assert one_line_error(result) == "cipstack get: malformed SendRRData reply: no Unconnected Data item"
