@@ -117,6 +117,9 @@ class ModbusTcpCore:
             return bytes((function | 0x80, ExceptionCode.SLAVE_DEVICE_FAILURE))
 
     def _serve(self, function: int, data: bytes, drive: AcgDrive, now: float) -> bytes:
+        # A PDU is exactly as long as its function says: bytes beyond it (a wrong MBAP length, or
+        # data the request does not have) refuse the request with 0x03, which the Modbus
+        # Application Protocol gives for "the implied length is incorrect".
         if function in (FunctionCode.READ_HOLDING_REGISTERS, FunctionCode.READ_INPUT_REGISTERS):
             address, count = _unpack(">HH", data)
             return self._read(drive, address, count)
@@ -125,7 +128,7 @@ class ModbusTcpCore:
             self._write(drive, address, [value], now)
             return data
         if function == FunctionCode.WRITE_MULTIPLE_REGISTERS:
-            address, count, byte_count = _unpack(">HHB", data[:5])
+            address, count, byte_count = _unpack(">HHB", data[:5])  # the values' length: _values
             values = _values(data[5:], count, byte_count)
             self._write(drive, address, values, now)
             return struct.pack(">HH", address, count)
@@ -173,10 +176,12 @@ class ModbusTcpCore:
 
 
 def _unpack(fmt: str, data: bytes) -> tuple[int, ...]:
+    """The fields of a fixed-size request, which must be exactly ``fmt`` long."""
     size = struct.calcsize(fmt)
-    if len(data) < size:
-        raise ModbusException(ExceptionCode.ILLEGAL_DATA_VALUE, "request too short")
-    return struct.unpack_from(fmt, data)
+    if len(data) != size:
+        raise ModbusException(ExceptionCode.ILLEGAL_DATA_VALUE,
+                              f"request data of {len(data)} bytes, the function takes {size}")
+    return struct.unpack(fmt, data)
 
 
 def _check_count(count: int) -> None:
