@@ -62,7 +62,7 @@ class Adapter:
             if not isinstance(self.device, AcgDevice):
                 raise ValueError(f"profile {s.profile!r} has no Modbus TCP (the ACG-ET2 card speaks it)")
             acg = self.device
-            self.modbus = ModbusTcpServer(lambda: acg.drive, s.host, s.modbus_port)
+            self.modbus = ModbusTcpServer(lambda: acg.drive, s.host, s.modbus_port, saves=acg.saves)
         self.target = EncapsulationTarget(
             self.device.router, self.device.identity_record,
             TargetSettings(max_sessions=s.max_sessions, max_connections=s.max_connections,
@@ -140,6 +140,8 @@ class Adapter:
         if self.io_endpoint is not None:
             await self.io_endpoint.close()
         await self.server.close()
+        # The last saves are written off the loop: wait for them without blocking it.
+        await asyncio.get_running_loop().run_in_executor(None, self.device.close)
 
     async def __aenter__(self) -> Adapter:
         await self.start()

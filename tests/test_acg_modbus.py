@@ -53,7 +53,7 @@ async def bench(tmp_path: Path) -> AsyncIterator[Bench]:
     state_file = tmp_path / "acg.json"
     device = build_acg_device(state_path=state_file)
     async with Adapter(AdapterSettings(host="127.0.0.1", port=0, io_port=0), device=device) as adapter, \
-            ModbusTcpServer(lambda: device.drive, "127.0.0.1", 0) as modbus:
+            ModbusTcpServer(lambda: device.drive, "127.0.0.1", 0, saves=device.saves) as modbus:
         scanner = await Scanner.connect(f"127.0.0.1:{adapter.port}", catalog=Catalog(device.catalog_classes()))
         client = AsyncModbusTcpClient("127.0.0.1", port=modbus.port, timeout=3)
         assert await client.connect()

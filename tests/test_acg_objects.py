@@ -337,6 +337,7 @@ def test_state_file_is_the_drives_memory(tmp_path: Path) -> None:
     first = build_acg_device(state_path=state, now=0.0)
     first.drive.write(addr("dEC"), 42, 0.0)
     first.drive.write(0x03E0, 1, 0.0)
+    assert first.flush_saves(5)                               # written off the caller's thread
     assert build_acg_device(state_path=state, now=0.0).drive.read(addr("dEC")) == 42
     state.write_text("{not json")
     with pytest.raises(StateFileError, match="not valid JSON"):

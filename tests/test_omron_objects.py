@@ -63,6 +63,7 @@ def test_consistency_value_counts_saves_and_survives_restart(tmp_path):
     assert get(d, 1, 1, 9) == "01 00"
     assert put(d, 0x64, 0x09, 0x00, "01 00") == 0
     assert get(d, 1, 1, 9) == "02 00"
+    assert d.flush_saves(5)                                   # written off the caller's thread
     assert load_state(path, "mx2")[15044] == 50
     again = fresh(MX2, state_path=path)                       # power cycle on the same file
     p044 = function_code_path("P044")                         # 15044 = 3AC4h

@@ -72,6 +72,10 @@ from .registers import (
 FAMILY = "acg"
 MODEL = "ACG-ET2"
 
+#: What the drive hands a save to: every saved value (address -> raw). It may refuse the save
+#: by raising ``StateFileError`` (the state file is known not to be writable).
+SaveRequest = Callable[[dict[int, int]], None]
+
 #: Seed 000, "Lost command conditions by protocol": a class 1 connection that stays broken for
 #: longer than one second, or a Modbus TCP server that receives nothing for five seconds, puts
 #: the card in lost command mode; Pr.12 then acts after Pr.13 seconds.
@@ -313,19 +317,23 @@ class AcgDrive:
     family = FAMILY
     model = MODEL
 
-    def __init__(self, store: ParameterStore | None = None, *, now: float = 0.0, password: int | None = None) -> None:
-        """Power the drive up at ``now``: factory values, then whatever ``store`` has saved
-        (a ``StateFileError`` if the file cannot be used)."""
+    def __init__(self, saved: Mapping[int, int] | None = None, *, now: float = 0.0, password: int | None = None,
+                 on_save: SaveRequest | None = None, origin: str = "saved parameters") -> None:
+        """Power the drive up at ``now``: factory values, then the ``saved`` ones (a
+        ``StateFileError`` naming ``origin`` if one is no saved parameter of this drive or out of
+        range). Each save (0x03E0, CM.94, a parameter initialization) is handed to ``on_save``
+        with every saved value: the drive does no file I/O itself. ``on_save`` refuses a save by
+        raising ``StateFileError``; the write is then refused and nothing is saved."""
         self.registers: RegisterMap = ACG_REGISTERS
-        self.store = store
+        self.on_save = on_save
         self._time = now
         self._start_time = now
         #: Password of 0x03E7/0x03E8 (registered from the keypad; None: none registered).
         self._password = password
         self._values: dict[int, int] = {a: r.default for a, r in self.registers.items() if a not in ALIASES}
         self._saved: dict[int, int] = {}
-        if store is not None:
-            self._restore(store.load(), store)
+        if saved:
+            self._restore(saved, origin)
         self._active_comm = {code: self._value(code) for code in COMM_UPDATE_CODES}
         self.control_supervisor = ControlSupervisor()
         # Run state.
@@ -350,22 +358,25 @@ class AcgDrive:
     @classmethod
     def with_state_file(cls, path: str | os.PathLike[str], *, now: float = 0.0,
                         password: int | None = None) -> AcgDrive:
-        """A drive that keeps its saved parameters in ``path`` (see ``state.default_state_path``)."""
-        return cls(ParameterStore(path, FAMILY, MODEL), now=now, password=password)
+        """A drive that keeps its saved parameters in ``path`` (see ``state.default_state_path``),
+        writing each save at once on the caller's thread: for scripts and tests. An emulator
+        writes them off its event loop (``build_acg_device``, ``state.StateWriter``)."""
+        store = ParameterStore(path, FAMILY, MODEL)
+        return cls(store.load(), now=now, password=password, on_save=store.save, origin=str(store.path))
 
     # -----------------------------------------------------------------------------------------
     # Saved parameters
     # -----------------------------------------------------------------------------------------
 
-    def _restore(self, saved: Mapping[int, int], store: ParameterStore) -> None:
+    def _restore(self, saved: Mapping[int, int], origin: str) -> None:
         for address, value in saved.items():
             register = self.registers.get(address)
             if register is None or not register.saved or address in ALIASES:
-                raise StateFileError(f"{store.path}: 0x{address:04X} is not a saved parameter of the {self.model}")
+                raise StateFileError(f"{origin}: 0x{address:04X} is not a saved parameter of the {self.model}")
             try:
                 register.check(value)
             except RegisterError as exc:
-                raise StateFileError(f"{store.path}: {exc}") from None
+                raise StateFileError(f"{origin}: {exc}") from None
             self._values[address] = value
         self._saved = dict(saved)
 
@@ -376,17 +387,20 @@ class AcgDrive:
 
     def save_parameters(self) -> None:
         """Save every keypad parameter as it is now (what 0x03E0 0 -> 1 does)."""
-        self._saved = {a: self._values[a] for a, r in self.registers.items() if r.saved and a not in ALIASES}
-        self._persist()
+        self._persist({a: self._values[a] for a, r in self.registers.items() if r.saved and a not in ALIASES})
 
-    def _save_some(self, addresses: list[int]) -> None:
-        for address in addresses:
-            self._saved[address] = self._values[address]
-        self._persist()
+    def _save_some(self, values: Mapping[int, int]) -> None:
+        """Save these values (address -> raw) on top of the saved ones."""
+        self._persist({**self._saved, **values})
 
-    def _persist(self) -> None:
-        if self.store is not None:
-            self.store.save(self._saved)
+    def _persist(self, saved: dict[int, int]) -> None:
+        """Hand a save to the shell; refused (``RegisterError`` SAVE_FAILED), nothing is saved."""
+        if self.on_save is not None:
+            try:
+                self.on_save(dict(saved))
+            except StateFileError as exc:
+                raise RegisterError(RegisterRefusal.SAVE_FAILED, SAVE_PARAMETERS.address, str(exc)) from None
+        self._saved = saved
 
     # -----------------------------------------------------------------------------------------
     # Time
@@ -395,6 +409,18 @@ class AcgDrive:
     @property
     def time(self) -> float:
         return self._time
+
+    def power_up_at(self, now: float) -> None:
+        """Place the power-up instant of a drive built before its shell's clock was known; only
+        before anything has moved it."""
+        if self._time != self._start_time:
+            raise RuntimeError("the drive has already run: its power-up time is fixed")
+        self._time = self._start_time = now
+
+    @property
+    def password(self) -> int | None:
+        """The password of 0x03E7/0x03E8 registered from the keypad (None: none)."""
+        return self._password
 
     def advance(self, now: float) -> None:
         """Move the simulation to ``now``: ramps, lost-command timers and counters."""
@@ -859,9 +885,9 @@ class AcgDrive:
         return tuple(self._value(f"CM.{51 + i}") for i in range(count))
 
     def _comm_update(self) -> None:
-        self._active_comm = {code: self._value(code) for code in COMM_UPDATE_CODES}
         # "This action will prevent any data loss from a drive power loss": the CM group is saved.
-        self._save_some([r.address for r in self.registers.group("CM") if r.saved])
+        self._save_some({r.address: self._values[r.address] for r in self.registers.group("CM") if r.saved})
+        self._active_comm = {code: self._value(code) for code in COMM_UPDATE_CODES}
 
     # -----------------------------------------------------------------------------------------
     # Register access
@@ -969,23 +995,22 @@ class AcgDrive:
         # "Setting address 0h03E0 to 0 and then setting it again to 1 ... allows the existing
         # parameter settings to be saved. However, setting 0h03E0 to 1 and then setting it to 0
         # does not carry out the same function." (seed 001)
-        previous = self._values[address]
-        self._values[address] = value
-        if previous == 0 and value == 1:
+        # A refused save (the state file cannot be written) leaves 0x03E0 as it was.
+        if self._values[address] == 0 and value == 1:
             self.save_parameters()
+        self._values[address] = value
 
     def _write_parameter_initialization(self, address: int, value: int, now: float) -> None:
         if self._trip is not None:
             raise RegisterError(RegisterRefusal.NOT_WHILE_RUNNING, address,
                                 "parameter initialization is prohibited during a fault trip")
-        self._values[address] = value
         groups = reg.PARAMETER_INITIALIZATION_TARGETS.get(value, ())
-        initialized = [r for r in self.registers.values() if r.group in groups and r.saved]
-        for register in initialized:
-            self._values[register.address] = register.default
+        initialized = {r.address: r.default for r in self.registers.values() if r.group in groups and r.saved}
         # Memory-control settings "are reflected to the drive operation and saved".
         if initialized:
-            self._save_some([r.address for r in initialized])
+            self._save_some(initialized)
+        self._values[address] = value
+        self._values.update(initialized)
 
     def _write_fault_history(self, address: int, value: int, now: float) -> None:
         self._values[address] = value

@@ -31,6 +31,7 @@ from collections.abc import Callable
 from enum import IntEnum
 
 from ..registers import RegisterAccess, RegisterError, RegisterRefusal
+from ..state import StateFileError, StateWriter
 from .drive import AcgDrive
 
 log = logging.getLogger(__name__)
@@ -67,6 +68,7 @@ _REFUSAL_CODES = {
     RegisterRefusal.OUT_OF_RANGE: ExceptionCode.ILLEGAL_DATA_VALUE,
     RegisterRefusal.READ_ONLY: ExceptionCode.WRITE_PERMISSION_ERROR,
     RegisterRefusal.NOT_WHILE_RUNNING: ExceptionCode.WRITE_PERMISSION_ERROR,
+    RegisterRefusal.SAVE_FAILED: ExceptionCode.SLAVE_DEVICE_FAILURE,   # the state file took no write
 }
 
 
@@ -98,6 +100,13 @@ class ModbusTcpCore:
             return None
         pdu = self.handle_pdu(adu[MBAP_SIZE:], now)
         return MBAP.pack(transaction, 0, len(pdu) + 1, unit) + pdu
+
+    def exception_adu(self, adu: bytes, code: ExceptionCode) -> bytes:
+        """The exception reply to the request ``adu`` (e.g. 0x04 for a save the file did not take)."""
+        transaction, _protocol, _length, unit = MBAP.unpack_from(adu)
+        function = adu[MBAP_SIZE] if len(adu) > MBAP_SIZE else 0
+        self.exceptions += 1
+        return MBAP.pack(transaction, 0, 3, unit) + bytes((function | 0x80, code))
 
     def handle_pdu(self, pdu: bytes, now: float) -> bytes:
         drive = self.drive
@@ -218,48 +227,26 @@ class MbapBuffer:
         return frames
 
 
-class _ModbusConnection(asyncio.Protocol):
-    def __init__(self, server: ModbusTcpServer) -> None:
-        self.server = server
-        self.buffer = MbapBuffer()
-        self.transport: asyncio.Transport | None = None
-
-    def connection_made(self, transport: asyncio.BaseTransport) -> None:
-        self.transport = transport  # type: ignore[assignment]
-        self.server._transports.add(transport)  # type: ignore[arg-type]
-
-    def connection_lost(self, exc: Exception | None) -> None:
-        if self.transport is not None:
-            self.server._transports.discard(self.transport)
-
-    def data_received(self, data: bytes) -> None:
-        assert self.transport is not None
-        try:
-            frames = self.buffer.feed(data)
-        except ValueError as exc:
-            log.info("Modbus TCP connection closed: %s", exc)
-            self.transport.close()
-            return
-        for frame in frames:
-            assert self.server.loop is not None
-            reply = self.server.core.handle_adu(frame, self.server.loop.time())
-            if reply is not None:
-                self.transport.write(reply)
-        self.server.rearm()
-
-
 class ModbusTcpServer:
     """Modbus TCP server of the emulated ACG-ET2 (port 502 on the real card; here any port, 0 =
     chosen by the OS). ``drive``: the drive, or a function returning the present one (a device
     replaces its drive on an Identity reset). It keeps a loop timer at the drive's next deadline,
-    so the Modbus silence timer fires even when nothing else moves the drive."""
+    so the Modbus silence timer fires even when nothing else moves the drive.
 
-    def __init__(self, drive: AcgDrive | DriveSource, host: str = "127.0.0.1", port: int = 0) -> None:
+    ``saves``: the state writer of the drive's saves. A request that saves is answered once the
+    file is written, on the writer's thread: the event loop (and every class 1 connection) runs
+    on meanwhile, and a save the file did not take is answered with exception 0x04.
+    Each connection serves its requests in order; ``_accept`` is the one place a connection
+    is accepted."""
+
+    def __init__(self, drive: AcgDrive | DriveSource, host: str = "127.0.0.1", port: int = 0, *,
+                 saves: StateWriter | None = None) -> None:
         self.core = ModbusTcpCore(drive)
         self.host = host
+        self.saves = saves
         self._requested_port = port
         self._server: asyncio.AbstractServer | None = None
-        self._transports: set[asyncio.Transport] = set()
+        self._writers: set[asyncio.StreamWriter] = set()
         self._timer: asyncio.TimerHandle | None = None
         self.loop: asyncio.AbstractEventLoop | None = None
 
@@ -271,9 +258,48 @@ class ModbusTcpServer:
 
     async def start(self) -> None:
         self.loop = asyncio.get_running_loop()
-        self._server = await self.loop.create_server(lambda: _ModbusConnection(self), self.host,
-                                                     self._requested_port)
+        self._server = await asyncio.start_server(self._accept, self.host, self._requested_port)
         log.info("Modbus TCP on %s:%d", self.host, self.port)
+
+    async def _accept(self, reader: asyncio.StreamReader, writer: asyncio.StreamWriter) -> None:
+        self._writers.add(writer)
+        try:
+            await self._serve(reader, writer)
+        except (ConnectionError, OSError) as exc:
+            log.debug("Modbus TCP connection ended: %s", exc)
+        finally:
+            self._writers.discard(writer)
+            writer.close()
+
+    async def _serve(self, reader: asyncio.StreamReader, writer: asyncio.StreamWriter) -> None:
+        buffer = MbapBuffer()
+        while data := await reader.read(4096):
+            try:
+                frames = buffer.feed(data)
+            except ValueError as exc:
+                log.info("Modbus TCP connection closed: %s", exc)
+                return
+            for frame in frames:
+                reply = await self.handle_frame(frame)
+                if reply is not None:
+                    writer.write(reply)
+            self.rearm()
+            await writer.drain()
+
+    async def handle_frame(self, frame: bytes) -> bytes | None:
+        """One frame's reply; a request that saved waits (off the loop) for the file to take the save."""
+        assert self.loop is not None
+        saves = self.saves
+        submitted = saves.submitted if saves is not None else 0
+        reply = self.core.handle_adu(frame, self.loop.time())
+        if saves is None or reply is None or saves.submitted == submitted or saves.last is None:
+            return reply
+        try:
+            await asyncio.wrap_future(saves.last)
+        except StateFileError as exc:
+            log.debug("Modbus TCP: %s", exc)
+            return self.core.exception_adu(frame, ExceptionCode.SLAVE_DEVICE_FAILURE)
+        return reply
 
     def rearm(self) -> None:
         """Keep a timer at the drive's next deadline."""
@@ -297,8 +323,8 @@ class ModbusTcpServer:
             self._timer = None
         if self._server is not None:
             self._server.close()
-        for transport in list(self._transports):
-            transport.close()
+        for writer in list(self._writers):
+            writer.close()
         if self._server is not None:
             await self._server.wait_closed()
             self._server = None

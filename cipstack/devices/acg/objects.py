@@ -48,6 +48,7 @@ _REFUSAL_STATUS: Mapping[RegisterRefusal, GeneralStatus] = {
     RegisterRefusal.OUT_OF_RANGE: GeneralStatus.INVALID_ATTRIBUTE_VALUE,
     RegisterRefusal.NOT_WHILE_RUNNING: GeneralStatus.DEVICE_STATE_CONFLICT,
     RegisterRefusal.NO_SUCH_REGISTER: GeneralStatus.ATTRIBUTE_NOT_SUPPORTED,
+    RegisterRefusal.SAVE_FAILED: GeneralStatus.STORE_OPERATION_FAILURE,   # the state file took no write
 }
 
 

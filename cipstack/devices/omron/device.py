@@ -54,7 +54,7 @@ from ...objects.identity import IdentityInfo, IdentityStatus
 from ...objects.tcpip import NetworkInterface
 from ..base import Device, DeviceLimits
 from ..registers import RegisterError, RegisterRefusal
-from ..state import ParameterStore
+from ..state import ParameterStore, StateFileError, StateWriter
 from .inverter import Inverter, InverterModeError
 from .models import DEVICE_TYPE, REVISION, VENDOR_ID, Family, Model, model
 from .objects import (
@@ -125,9 +125,15 @@ class OmronDevice(Device):
         self.store = ParameterStore(self.state_path, inverter_model.family.value.lower(), inverter_model.name) \
             if self.state_path is not None else None
         saved = dict(self.store.load()) if self.store is not None else {}
+        if self.store is not None:
+            # Saves are written off the event loop's thread (DESIGN: file I/O never runs on it).
+            self.saves = StateWriter(self.store, saved)
         consistency = saved.pop(CONSISTENCY_KEY, 0)
-        self.inverter = Inverter(inverter_model, now=0.0, saved=saved, on_save=self._saved,
-                                 consistency_value=consistency)
+        try:
+            self.inverter = Inverter(inverter_model, now=0.0, saved=saved, on_save=self._saved,
+                                     consistency_value=consistency)
+        except ValueError as exc:   # a saved value this model cannot hold: the file is named
+            raise StateFileError(f"{self.state_path}: {exc}") from None
         self.link = LinkState(self.rotary_switches)
         self.special = SpecialIo()
         traits = self.inverter.traits
@@ -407,8 +413,9 @@ class OmronDevice(Device):
         self._start()
 
     def _saved(self, values: dict[int, int]) -> None:
-        if self.store is not None:
-            self.store.save({**values, CONSISTENCY_KEY: self.inverter.consistency_value})
+        """The inverter's EEPROM save, handed to the state writer (which may refuse it: StateFileError)."""
+        if self.saves is not None:
+            self.saves.request({**values, CONSISTENCY_KEY: self.inverter.consistency_value})
 
     def inject_trip(self, code: int | str) -> TripCode:
         """Trip the inverter with En (Table D-5), given as n or as "En", for test rigs; returns the trip."""

@@ -20,6 +20,7 @@ from dataclasses import dataclass
 from enum import Enum, IntEnum
 
 from ..registers import RegisterAccess, RegisterError, RegisterRefusal
+from ..state import StateFileError
 from .models import Family, Model, model
 from .registers import (
     COIL_DATA_0,
@@ -833,10 +834,16 @@ class Inverter:
 
     def _save(self) -> None:
         """EEPROM save (0900h): every parameter, and Identity attribute 9 counts it (Table C-2)."""
-        self._eeprom = {number: self._values[p.key] for number, p in self.registers.by_number.items() if p.saved}
-        self.consistency_value = (self.consistency_value + 1) & 0xFFFF
+        eeprom = {number: self._values[p.key] for number, p in self.registers.by_number.items() if p.saved}
+        before = self.consistency_value
+        self.consistency_value = (before + 1) & 0xFFFF
         if self._on_save is not None:
-            self._on_save(dict(self._eeprom))
+            try:
+                self._on_save(dict(eeprom))
+            except StateFileError as exc:   # refused by the shell: nothing saved, nothing counted
+                self.consistency_value = before
+                raise RegisterError(RegisterRefusal.SAVE_FAILED, EEPROM_SAVE, str(exc)) from None
+        self._eeprom = eeprom
 
     def _initialize(self) -> None:
         """b180 = 1: initialize the inverter mode from b171 (MX2) and b049 (section 4-1 Step 1),

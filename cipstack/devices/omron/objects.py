@@ -71,6 +71,7 @@ _REFUSALS: Mapping[RegisterRefusal, GeneralStatus] = MappingProxyType({
     RegisterRefusal.READ_ONLY: GeneralStatus.ATTRIBUTE_NOT_SETTABLE,
     RegisterRefusal.OUT_OF_RANGE: GeneralStatus.INVALID_ATTRIBUTE_VALUE,
     RegisterRefusal.NOT_WHILE_RUNNING: GeneralStatus.DEVICE_STATE_CONFLICT,
+    RegisterRefusal.SAVE_FAILED: GeneralStatus.STORE_OPERATION_FAILURE,   # the state file took no write
 })
 
 
