@@ -132,11 +132,14 @@ def test_motor_data(device: AcgDevice) -> None:
 # --- Control Supervisor (class 0x29) -------------------------------------------------------------------
 
 def test_control_supervisor_attributes(device: AcgDevice) -> None:
-    assert [get(device, 0x29, a) for a in (3, 4, 5, 6, 7, 8, 9, 10, 12, 14)] == [
-        b"\x00", b"\x00", b"\x01", bytes((DriveState.READY,)), b"\x00", b"\x00", b"\x01", b"\x00", b"\x00", b"\x01"]
+    assert [get(device, 0x29, a) for a in (3, 4, 6, 7, 8, 9, 10, 12, 14)] == [
+        b"\x00", b"\x00", bytes((DriveState.READY,)), b"\x00", b"\x00", b"\x01", b"\x00", b"\x00", b"\x01"]
     assert get(device, 0x29, 13) == u16(0)
     assert call(device, GET, 0x29, 1, 11).general_status == 0x14    # Warning: not in the table
-    for attribute in (5, 6, 7, 8, 9, 10, 13, 14):
+    # 5 Net Control, Access "N/A" (seed 000:642): served neither to Get nor to Set.
+    assert call(device, GET, 0x29, 1, 5).general_status == 0x14
+    assert status_of_set(device, 0x29, 5, b"\x01") == 0x14
+    for attribute in (6, 7, 8, 9, 10, 13, 14):
         assert status_of_set(device, 0x29, attribute, b"\x01" if attribute != 13 else u16(1)) == 0x0E
     assert status_of_set(device, 0x29, 3, b"\x01") == 0
     device.advance(1.0)
@@ -150,7 +153,7 @@ def test_control_supervisor_attributes(device: AcgDevice) -> None:
 
 def test_control_from_net_follows_drv(device: AcgDevice) -> None:
     device.drive.write(addr("drv"), 1, 0.0)
-    assert get(device, 0x29, 14) == b"\x00" and get(device, 0x29, 5) == b"\x00"
+    assert get(device, 0x29, 14) == b"\x00"
     assert status_of_set(device, 0x29, 3, b"\x01") == 0              # the card keeps the command ...
     assert get(device, 0x29, 3) == b"\x01" and not device.drive.running  # ... the drive obeys drv
 
@@ -226,7 +229,10 @@ def test_ac_dc_drive_attributes(device: AcgDevice) -> None:
     assert get(device, 0x2A, 7) == u16(450) and get(device, 0x2A, 100) == u16(1500)
     device.advance(3.0)
     assert get(device, 0x2A, 3) == b"\x01" and get(device, 0x2A, 7) == u16(900) and get(device, 0x2A, 8) == u16(900)
-    assert get(device, 0x2A, 4) == b"\x01" and get(device, 0x2A, 29) == b"\x01"
+    assert get(device, 0x2A, 29) == b"\x01"
+    # 4 Net Reference, Access "N/A" (seed 000:722): served neither to Get nor to Set.
+    assert call(device, GET, 0x2A, 1, 4).general_status == 0x14
+    assert status_of_set(device, 0x2A, 4, b"\x01") == 0x14
     assert get(device, 0x2A, 6) == b"\x01"                          # open loop speed
     assert get(device, 0x2A, 9) == u16(0)                           # no motor model: 0.0 A
     assert get(device, 0x2A, 102) == u16(50) and get(device, 0x2A, 103) == u16(100)
@@ -236,7 +242,7 @@ def test_ac_dc_drive_attributes(device: AcgDevice) -> None:
     assert status_of_set(device, 0x2A, 101, u16(7000)) == 0x09       # above dr.20 Max Freq 60.00 Hz
     assert status_of_set(device, 0x2A, 101, u16(40001)) == 0x09      # above 400.00 Hz
     assert status_of_set(device, 0x2A, 8, u16(24001)) == 0x09
-    for attribute in (3, 4, 6, 7, 9, 29, 100):
+    for attribute in (3, 6, 7, 9, 29, 100):
         assert status_of_set(device, 0x2A, attribute, u16(1) if attribute in (7, 9, 100) else b"\x01") == 0x0E
     assert call(device, GET, 0x2A, 1, 5).general_status == 0x14
     device.drive.write(addr("AP.1"), 2, 4.0)                         # App Mode: a process mode

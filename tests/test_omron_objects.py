@@ -49,10 +49,23 @@ def test_identity(name, code, product):
     assert get(d, 1, 1, 2) == "02 00"                     # AC drive
     assert int.from_bytes(bytes.fromhex(get(d, 1, 1, 3)), "little") == code
     assert bytes.fromhex(get(d, 1, 1, 7))[1:].decode() == product
-    assert get(d, 1, 1, 5) == "31 00"                     # bit 0 always ON; bits 4-7: no I/O connection
+    assert get(d, 1, 1, 5) == "01 00"                     # Table C-2: bit 0 always ON, bits 8-11 faults only
     assert get(d, 1, 1, 9) == "00 00"                     # configuration consistency value
     assert get(d, 1, 1, 0x65) == "01 01"                  # firmware revision
     assert request(d, GET_ALL, 1, 1).general_status == 0x08   # Table C-1: 0E and 05 only
+
+
+def test_identity_status_is_the_boards_not_the_inverters():
+    # Table C-2 (seed 004:2416): bits 0 (always ON) and 8-11 only. A trip of the inverter, even the one
+    # the network forces (E62), is the Control Supervisor's (0x29 Faulted, Fault Code); the board's
+    # status stays 0001h, as the MS indicator stays green (Table 4 lists board faults only).
+    d = fresh(MX2)
+    d.inject_trip(62)
+    d.advance(2.0)
+    assert get(d, 0x29, 1, 0x0A, now=2.0) == "01" and get(d, 1, 1, 5, now=2.0) == "01 00"
+    d.rotary_switches = 5                                  # node address changed: Table 4, minor recoverable
+    d.advance(3.0)
+    assert get(d, 1, 1, 5, now=3.0) == "01 01"
 
 
 def test_consistency_value_counts_saves_and_survives_restart(tmp_path):
@@ -89,9 +102,11 @@ def test_connection_object():
     assert [get(d, 5, 1, a) for a in (1, 2, 3, 7, 8, 9, 0x0C)] == ["01", "01", "83", "10 00", "10 00", "00 00", "00"]
     assert get(d, 5, 1, 0x0E) == "20 04 24 47 30 03"      # produced: input 71 (P046 = 1)
     assert get(d, 5, 1, 0x10) == "20 04 24 15 30 03"      # consumed: output 21
-    assert get(d, 5, 1, 0x0D) == "06 00"
+    # Table C-8 (seed 004:2553, 2555): path lengths default to 3, the six-byte path in 16-bit words.
+    assert get(d, 5, 1, 0x0D) == "03 00" and get(d, 5, 1, 0x0F) == "03 00"
     assert put(d, 5, 1, 9, "0a 00") == 0 and get(d, 5, 1, 9) == "0a 00"
     assert put(d, 5, 1, 0x0E, "20 04 24 99 30 03") == 0 and d.default_pair == (21, 153)
+    assert put(d, 5, 1, 0x0E, "20 04 24 96") == 0 and get(d, 5, 1, 0x0D) == "02 00"   # no attribute: 2 words
     assert put(d, 5, 1, 0x0E, "20 04 24 15 30 03") == 0x09   # 21 is an output
     assert put(d, 5, 1, 1, "02") == 0x0E
     assert request(d, GET, 5, 2, 1).general_status == 0x16

@@ -387,10 +387,14 @@ class OmronDevice(Device):
             self.inverter.on_idle(self.now)   # Table 12: the P048 action
 
     def _update_io_status(self) -> None:
+        # Table C-2 (seed 004:2416): the status is "communications status for CompoNet Option Board"
+        # with bits 0 (always ON) and 8-11 (the four fault bits) only; the extended device status
+        # of bits 4-7 is not the board's, so it stays 0. The fault bits follow the board's faults
+        # (the MS indicator, Table 4: a flexible configuration rejected, the node address changed),
+        # never an inverter trip: a trip (E62 forced by the network too) shows in Control
+        # Supervisor 0x29 (Faulted, Fault Code), not in Identity (Table 24 leaves MS green for it).
         super()._update_io_status()
-        faults = IdentityStatus.MINOR_RECOVERABLE_FAULT | IdentityStatus.MAJOR_RECOVERABLE_FAULT
-        status = int(self.identity.get(1, 5)) & ~faults
-        status |= STATUS_ALWAYS_ON   # Table C-2: bit 0 always ON
+        status = STATUS_ALWAYS_ON
         if self.inverter.flexible_error is not None:
             status |= IdentityStatus.MAJOR_RECOVERABLE_FAULT   # appendix F Note 5
         if self.node_setting() != self.link.mac_id:

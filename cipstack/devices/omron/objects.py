@@ -210,6 +210,14 @@ def path_instance(path: bytes) -> int:
     return kinds[1][1]
 
 
+def path_length(path: bytes) -> int:
+    """Attributes 0Dh and 0Fh: Table C-8 (seed 004:2553, 2555) calls them the "number of bytes" of
+    the path yet gives 3 as the default, for a default path of six bytes (class 4, instance,
+    attribute 3: 20 04 24 nn 30 03). The default is the one figure the table fixes, and 3 is that
+    path's length in 16-bit words, as CIP counts EPATH sizes: the length is served in words."""
+    return (len(path) + 1) // 2
+
+
 class ConnectionObject(OptionBoardObject):
     """Instance 1, the poll I/O connection of Table C-8; its paths follow P046 at each start."""
 
@@ -224,7 +232,7 @@ class ConnectionObject(OptionBoardObject):
         """The default connection path (P046, Table 10): produced = input assembly, consumed = output."""
         values = self.instances[1].values
         values[0x0E], values[0x10] = assembly_path(input_), assembly_path(output)
-        values[0x0D], values[0x0F] = len(values[0x0E]), len(values[0x10])
+        values[0x0D], values[0x0F] = path_length(values[0x0E]), path_length(values[0x10])
 
     @property
     def pair(self) -> tuple[int, int]:
@@ -237,7 +245,7 @@ class ConnectionObject(OptionBoardObject):
             allowed = self.inputs if spec.id == 0x0E else self.outputs
             if path_instance(bytes(value)) not in allowed:
                 raise CipError(GeneralStatus.INVALID_ATTRIBUTE_VALUE, message="no such assembly for this path")
-            instance.values[spec.id - 1] = len(value)
+            instance.values[spec.id - 1] = path_length(bytes(value))
         super().write_attribute(instance, spec, value, context)
 
 
