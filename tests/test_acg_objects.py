@@ -275,6 +275,11 @@ def test_keypad_parameters_set_and_refusals(device: AcgDevice) -> None:
     assert status_of_set(device, 0x64, 12, u16(5) + b"\x00", pr) == 0x15
     assert call(device, GET, 0x64, cm, 99).general_status == 0x14
     assert call(device, GET, 0x64, 9, 1).general_status == 0x05               # no group at instance 9
+    # "10 (AP Group)" (seed 000:763): a second instance of the AP group (8).
+    ap = CLASS_64_INSTANCES["AP"]
+    assert status_of_set(device, 0x64, 1, u16(2), 10) == 0 and device.drive.read(addr("AP.1")) == 2
+    assert get(device, 0x64, 1, 10) == get(device, 0x64, 1, ap) == u16(2)
+    assert call(device, GET, 0x64, 10, 99).general_status == 0x14
     assert call(device, GET, 0x64, 0, 1).general_status == 0x08
     assert call(device, GET_ALL, 0x64, cm).general_status == 0x08
     # "The setting cannot be written while the drive is operating": device state conflict.

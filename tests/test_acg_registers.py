@@ -211,6 +211,8 @@ def test_lost_command_parameters() -> None:
     assert code("Pr.13").raw_minimum * code("Pr.13").scale == pytest.approx(0.1)
     assert code("Pr.13").raw_maximum * code("Pr.13").scale == pytest.approx(120)
     assert (code("Pr.14").default, code("Pr.14").scale, code("Pr.14").unit) == (0, 0.01, "Hz")
+    # Pr.14: 0.05-60.00 Hz (seed 000:214), with the table's default 0.00.
+    assert (code("Pr.14").raw_minimum, code("Pr.14").raw_maximum) == (0, 6000)
 
 
 def test_serial_cm_parameters() -> None:
@@ -294,7 +296,7 @@ def test_class_0x64_paths() -> None:
     assert class64_register(11, 12) is code("Pr.12")
     assert class64_register(1, 20) is code("dr.20")
     assert class64_register(7, 25) is None          # no CM.25
-    assert class64_register(10, 1) is None          # the garbled second "AP" row
+    assert class64_register(10, 1) is code("AP.1")  # "10 (AP Group)", seed 000:763
     for group in acg.CLASS_64_INSTANCES:
         for register in ACG_REGISTERS.group(group):
             path = class64_path(register)

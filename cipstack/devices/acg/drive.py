@@ -937,6 +937,13 @@ class AcgDrive:
         self._check_frequency(address, value)
         self._values[address] = value
 
+    def _write_lost_preset(self, address: int, value: int, now: float) -> None:
+        # Pr.14: 0.05-60.00, or the table's default 0.00 (seed 000:214; registers.LOST_PRESET_FREQ).
+        if 0 < value < reg.LOST_PRESET_MINIMUM:
+            raise RegisterError(RegisterRefusal.OUT_OF_RANGE, address,
+                                f"{value / 100:.2f} Hz below the lowest Lost Preset F, 0.05 Hz (0.00: none)")
+        self._write_frequency(address, value, now)
+
     def _write_rpm_command(self, address: int, value: int, now: float) -> None:
         centihertz = self.rpm_to_centihertz(value)
         if centihertz > SPEED_REFERENCE.raw_maximum:
@@ -1066,7 +1073,7 @@ class AcgDrive:
     _write_handlers: Mapping[int, Callable[[AcgDrive, int, int, float], None]] = {
         SPEED_REFERENCE.address: _write_frequency,
         TARGET_FREQUENCY.address: _write_frequency,
-        LOST_PRESET_FREQ.address: _write_frequency,
+        LOST_PRESET_FREQ.address: _write_lost_preset,
         0x0381: _write_rpm_command,
         0x0006: _write_operation_command,
         0x0382: _write_control_command,

@@ -291,7 +291,7 @@ class KeypadParameterObject(CipObject):
         super().__init__(KEYPAD_PARAMETERS_SPEC)
         self._drive = drive
         self._clock = clock
-        for instance in sorted(reg.CLASS_64_INSTANCES.values()):
+        for instance in sorted({*reg.CLASS_64_INSTANCES.values(), *reg.CLASS_64_ALIASES}):
             self.add_instance(instance)
 
     def parameter(self, instance: Instance, attribute: int | None) -> Register:

@@ -66,11 +66,15 @@ GROUP_BASES: Mapping[str, int] = {
 KEYPAD_GROUPS = ("dr", "bA", "Ad", "Cn", "In", "OU", "CM", "AP", "Pr", "M2", "operation")
 
 # Class 0x64 instance of each keypad group; the attribute number is the code number (seed 000,
-# "Class 0x64 (Drive Object)"). The table prints "10 (AP Group)" a second time: instance n is
-# the group at 0x1000 + n * 0x100, so 10 would be 0x1A00, which no memory map lists; it is left out.
+# "Class 0x64 (Drive Object)").
 CLASS_64_INSTANCES: Mapping[str, int] = {
     "dr": 1, "bA": 2, "Ad": 3, "Cn": 4, "In": 5, "OU": 6, "CM": 7, "AP": 8, "Pr": 11, "M2": 12,
 }
+# The table lists "10 (AP Group)" as well as "8 (AP Group)" (seed 000:763). The register map has
+# no group at 0x1A00 (seed 001:395-405 lists 0x1100-0x1800, 0x1B00 and 0x1C00), so instance 10
+# cannot be another group: it is served as the table names it, a second instance of the AP group
+# (instance 8 stays the one the EDS and the scanner name).
+CLASS_64_ALIASES: Mapping[int, str] = {10: "AP"}
 
 # Codes each group's address table lists (seed 001). Codes printed with "-" instead of an
 # address (bA.20-bA.24, Ad.83, M2.17-M2.20) have no communication address and are left out.
@@ -436,11 +440,15 @@ LOST_CMD_MODE = _parameter(
     source=ET2_TABLE)
 LOST_CMD_TIME = _parameter("Pr", 13, "Lost Cmd Time", default=10, minimum=1, maximum=1200, scale=0.1, unit="s",
                            source=ET2_TABLE)
-# The table prints default 0.00 and range 0.05-60.00, which excludes its own default; the text
-# says "from the start frequency to the max frequency". The register accepts 0.00 up to the
-# highest Max Freq; the drive refuses a value above the present dr.20.
-LOST_PRESET_FREQ = _parameter("Pr", 14, "Lost Preset F", default=0, minimum=0, maximum=40000, scale=0.01,
+# Seed 000:214 prints range 0.05-60.00 and default 0.00, which the range excludes; 000:257 says
+# "from the start frequency to the max frequency". The range is the table's: at most 60.00, and
+# 0.05 at least, with the table's own default 0.00 (no preset) accepted too, so a tool can write
+# the default back; 0.01-0.04 are refused (``drive.py``), and so is a value above the present
+# dr.20 Max Freq.
+LOST_PRESET_FREQ = _parameter("Pr", 14, "Lost Preset F", default=0, minimum=0, maximum=6000, scale=0.01,
                               unit="Hz", source=ET2_TABLE)
+#: Pr.14's lowest setting but the default 0.00 (seed 000:214): 0.05 Hz.
+LOST_PRESET_MINIMUM = 5
 
 _MULTI_FUNCTION_INPUTS = [
     _parameter("In", 65 + i, f"Multi-function input P{i + 1}", source="seed 001, Setting Virtual Multi-Function Input")
@@ -817,11 +825,13 @@ def register_for_code(text: str) -> Register:
 
 def class64_register(instance: int, attribute: int) -> Register | None:
     """The keypad parameter behind class 0x64 ``instance``/``attribute`` (seed 000)."""
-    for group, number in CLASS_64_INSTANCES.items():
-        if number == instance:
-            register = ACG_REGISTERS.get(GROUP_BASES[group] + attribute)
-            return register if register is not None and register.group == group else None
-    return None
+    group = CLASS_64_ALIASES.get(instance)
+    if group is None:
+        group = next((g for g, number in CLASS_64_INSTANCES.items() if number == instance), None)
+    if group is None:
+        return None
+    register = ACG_REGISTERS.get(GROUP_BASES[group] + attribute)
+    return register if register is not None and register.group == group else None
 
 
 def class64_path(register: Register) -> tuple[int, int] | None:
