@@ -228,8 +228,21 @@ def test_force_fault_examples_2_and_3():
     assert get(d, 0x29, 1, 0x12) == "01"                     # Force Status
     put(d, 0x29, 1, 0x11, "00")
     put(d, 0x29, 1, 0x0C, "00")
-    assert put(d, 0x29, 1, 0x0C, "01") == 0                  # Fault Rst on the rising edge
+    assert put(d, 0x29, 1, 0x0C, "01") == 0                  # Fault Rst
     assert get(d, 0x29, 1, 0x0A) == "00" and get(d, 0x29, 1, 0x12) == "00"
+
+
+def test_fault_rst_resets_whenever_written_to_1():
+    # Table D-4 (seed 004:2708): Fault Rst "Reset fault / trip state of inverter when written to 1";
+    # Force Fault, in the same table, is "on rising edge". A 1 written while it reads 1 resets too.
+    d = fresh(MX2)
+    d.inject_trip(5)
+    assert put(d, 0x29, 1, 0x0C, "01") == 0 and get(d, 0x29, 1, 0x0A) == "00"
+    d.inject_trip(5)
+    assert get(d, 0x29, 1, 0x0C) == "01" and get(d, 0x29, 1, 0x0A) == "01"
+    assert put(d, 0x29, 1, 0x0C, "01") == 0 and get(d, 0x29, 1, 0x0A) == "00"
+    d.inject_trip(5)
+    assert put(d, 0x29, 1, 0x0C, "00") == 0 and get(d, 0x29, 1, 0x0A) == "01"   # 0 resets nothing
 
 
 def test_net_fault_and_idle_modes():
@@ -335,6 +348,8 @@ def test_error_codes_of_table_e5():
         "0E attribute not settable": put(d, 0x64, 0x10, 0x07, "00 00"),
         "13 not enough data": put(d, 0x64, 0x11, 0x03, "2c 01"),
         "14 attribute not supported": request(d, GET, 0x65, 0x00, 0x03).general_status,
+        "14 no parameter A999": request(d, GET, 0x65, 0x03, 0xE7).general_status,   # Table E-3 range, no A999
+        "16 no function group": request(d, GET, 0x65, 0x10, 0x01).general_status,   # 4097: between d and F
         "14 no Modbus register": request(d, GET, 0x64, 0x10, 0xFF).general_status,
         "14 no attribute": request(d, GET, 0x29, 1, 0x99).general_status,
         "15 too much data": put(d, 0x64, 0x12, 0x04, "58 02 00 00"),
@@ -344,7 +359,8 @@ def test_error_codes_of_table_e5():
     }
     assert status == {"08 service not supported": 0x08, "08 on 0x29": 0x08, "09 invalid attribute value": 0x09,
                       "0E attribute not settable": 0x0E, "13 not enough data": 0x13,
-                      "14 attribute not supported": 0x14, "14 no Modbus register": 0x14, "14 no attribute": 0x14,
+                      "14 attribute not supported": 0x14, "14 no parameter A999": 0x14, "16 no function group": 0x16,
+                      "14 no Modbus register": 0x14, "14 no attribute": 0x14,
                       "15 too much data": 0x15, "16 object does not exist": 0x16, "16 no instance": 0x16,
                       "20 invalid parameter": 0x20}
     put(d, 0x29, 1, 5, "01")

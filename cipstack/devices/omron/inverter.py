@@ -455,6 +455,16 @@ class Inverter:
         self._armed_rst |= not new.fault_reset
         self._evaluate(now)
 
+    def write_fault_reset(self, now: float, value: bool) -> None:
+        """Control Supervisor attribute 0Ch Fault Rst written: "Reset fault / trip state of inverter
+        when written to 1" (Table D-4, seed 004:2708). Each write of 1 resets: the same table says
+        "on rising edge" for Force Fault (11h) and not here, and the rising-edge rule of the notes
+        under Tables B-2 and after (004:1992) is for the RST bit of the I/O data, repeated each cycle."""
+        self.command(now, fault_reset=value)
+        if value:
+            self._reset_trip(now)
+            self._evaluate(now)
+
     def set_terminals(self, now: float, mask: int) -> None:
         """Physical state of the intelligent input terminals, bit n-1 = terminal [n]."""
         self.advance(now)

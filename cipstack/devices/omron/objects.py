@@ -374,7 +374,7 @@ CONTROL_SUPERVISOR_SPEC = _spec(CONTROL_SUPERVISOR, "Control Supervisor", (
     AttributeSpec(9, "Ready", UINT),
     AttributeSpec(0x0A, "Faulted", BOOL),
     AttributeSpec(0x0B, "Warning", BOOL),
-    AttributeSpec(0x0C, "Fault Rst", BOOL, Access.GET_SET, default=0, help="reset a trip on 0 to 1"),
+    AttributeSpec(0x0C, "Fault Rst", BOOL, Access.GET_SET, default=0, help="reset a trip when written to 1"),
     AttributeSpec(0x0D, "Fault Code", UINT, help="CIP fault code of the trip (Table D-5)"),
     AttributeSpec(0x0F, "Ctrl From Net", BOOL),
     AttributeSpec(0x10, "Net Fault Mode", UINT, Access.GET_SET, default=2, minimum=0, maximum=2,
@@ -410,7 +410,9 @@ class ControlSupervisorObject(BoundObject):
         self.add_instance(
             1, run1=command("fwd"), run2=command("rev"), net_ctrl=command("net_ctrl"), state=status("drive_state"),
             running1=status("forward"), running2=status("reverse"), ready=status("ready"), faulted=status("faulted"),
-            warning=status("warning"), fault_rst=command("fault_reset"), fault_code=status("fault_code"),
+            warning=status("warning"), fault_code=status("fault_code"),
+            fault_rst=self.bound(lambda: int(inverter.option_command.fault_reset),
+                                 lambda value: inverter.write_fault_reset(board.now, bool(value))),
             ctrl_from_net=status("ctrl_from_net"),
             net_fault_mode=self.bound(lambda: self._mode("P045", NET_FAULT_MODES),
                                       lambda value: self._set_mode("P045", NET_FAULT_MODES, value)),
@@ -607,6 +609,10 @@ def _decode_sized(cip_type: CipType, data: bytes) -> int:
     return int(cip_type.decode(data))
 
 
+#: Table E-3: the decimal base of each function group (A 0, b 1000, C 2000, d 3000, F 5000, H 7000,
+#: P 15000, U 20000); a group's codes are base + 1 to base + 999.
+FUNCTION_CODE_GROUP_BASES = (0, 1000, 2000, 3000, 5000, 7000, 15000, 20000)
+
 MODBUS_REGISTER_SPEC = ClassSpec(MODBUS_REGISTER, "Modbus Register", class_services=_GET_SET,
                                  instance_services=_GET_SET, max_instance=0xFF)
 FUNCTION_CODE_SPEC = ClassSpec(FUNCTION_CODE, "Function Code", class_services=_GET_SET,
@@ -647,6 +653,12 @@ class FunctionCodeObject(RegisterObject):
 
     def __init__(self, board: OptionBoard, registers: RegisterSet) -> None:
         super().__init__(FUNCTION_CODE_SPEC, board, registers)
+        # Table E-3 (seed 004:2931) gives each group's number range, e.g. A001-A999 = 0001-03E7h: an
+        # instance inside one is supported, and a number in it that names no parameter of this
+        # inverter is Table E-5's 14h "the attribute or inverter parameter does not exist"
+        # (seed 004:3055); 16h is for an instance outside every range.
+        self.instance_ids = frozenset(instance for base in FUNCTION_CODE_GROUP_BASES
+                                      for instance in range((base + 1) >> 8, ((base + 999) >> 8) + 1))
 
     def numbers(self) -> Iterator[int]:
         yield from self.registers.by_number
