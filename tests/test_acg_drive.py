@@ -435,7 +435,7 @@ def test_not_while_running_refusal(drive: AcgDrive) -> None:
 
 def test_no_such_register(drive: AcgDrive) -> None:
     assert refusal(lambda: drive.read(0x0400)) is RegisterRefusal.NO_SUCH_REGISTER
-    assert refusal(lambda: drive.write(0x1C12, 0, 0)) is RegisterRefusal.NO_SUCH_REGISTER
+    assert refusal(lambda: drive.write(0x1C22, 0, 0)) is RegisterRefusal.NO_SUCH_REGISTER
 
 
 def test_parameter_initialization_refused_during_a_trip(drive: AcgDrive) -> None:

@@ -120,12 +120,14 @@ def test_address_table_rows(keypad_code: str, rtu: int) -> None:
     assert modbus_tcp_number(register.address) == rtu + 1
 
 
-def test_every_listed_code_is_at_group_base_plus_number() -> None:
+def test_every_listed_code_is_at_group_base_plus_number_or_as_printed() -> None:
+    assert acg.PRINTED_ADDRESSES == {"M2.34": 0x1C12}
     for group, numbers in acg.LISTED_CODES.items():
         declared = {r.code for r in ACG_REGISTERS.group(group)}
         for number in numbers:
             register = code(f"{group}.{number}")
-            assert register.address == acg.GROUP_BASES[group] + number
+            expected = acg.PRINTED_ADDRESSES.get(register.code, acg.GROUP_BASES[group] + number)
+            assert register.address == expected
         assert {f"{group}.{n}" for n in numbers} <= declared
 
 
@@ -143,9 +145,11 @@ def test_codes_without_an_address_are_not_declared() -> None:
 
 
 def test_m2_34_reconstructed_address() -> None:
-    # Printed 0x1C12 (the address M2.18 would have); the group rule puts M2.34 at 0x1C22.
-    assert code("M2.34").address == 0x1C22
-    assert 0x1C12 not in ACG_REGISTERS
+    # Printed 1C12 / 47186 (seed 001:1477), hex and decimal agreeing, away from the group rule's 0x1C22.
+    assert code("M2.34").address == 0x1C12 and modbus_rtu_number(0x1C12) == 47186
+    assert 0x1C22 not in ACG_REGISTERS
+    assert class64_register(12, 34) is code("M2.34") and class64_path(code("M2.34")) == (12, 34)
+    assert class64_register(12, 18) is None                  # M2.18 has no address
 
 
 def test_operation_group() -> None:

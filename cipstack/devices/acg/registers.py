@@ -94,10 +94,12 @@ LISTED_CODES: Mapping[str, tuple[int, ...]] = {
     "AP": (1, *range(16, 33), *range(34, 41), 43, 44, 45),
     "Pr": (*range(4, 11), *range(12, 16), *range(17, 23), *range(25, 34), *range(40, 44), 45,
            *range(50, 60), 66, *range(77, 83), *range(86, 90), *range(91, 97)),
-    # M2.34 is printed at 0x1C12 (decimal 47186), the address of the unlisted M2.18; every other
-    # code of every group sits at base + number, so M2.34 is declared at 0x1C22.
     "M2": (*range(4, 9), *range(10, 17), *range(25, 35), 40, 41, 42),
 }
+# Codes the address table prints away from base + number. M2.34 is printed at 1C12 with the
+# decimal numbers 47186/47187 (seed 001:1477): hex and decimal agree, so this is the table's
+# address and no OCR slip; 0x1C12 is free, M2.18 having none ("-"). Served there, as printed.
+PRINTED_ADDRESSES: Mapping[str, int] = {"M2.34": 0x1C12}
 
 # Operation group, seed 001 address table: code -> address. "Fr9" in the OCR text is Frq.
 OPERATION_CODES: Mapping[str, int] = {
@@ -349,9 +351,11 @@ def _reserved_range(first: int, last: int, group: str, source: str) -> list[Regi
 
 
 def _parameter(group: str, number: int, name: str, **fields: object) -> Register:
-    """A keypad parameter of ``group`` at the group base plus its code number."""
+    """A keypad parameter of ``group`` at the group base plus its code number (or as printed)."""
     fields.setdefault("source", ADDRESS_TABLE)
-    return Register(GROUP_BASES[group] + number, f"{group}.{number}", name, group=group, **fields)  # type: ignore[arg-type]
+    code = f"{group}.{number}"
+    address = PRINTED_ADDRESSES.get(code, GROUP_BASES[group] + number)
+    return Register(address, code, name, group=group, **fields)  # type: ignore[arg-type]
 
 
 def _listed(group: str, number: int) -> Register:
@@ -830,14 +834,16 @@ def class64_register(instance: int, attribute: int) -> Register | None:
         group = next((g for g, number in CLASS_64_INSTANCES.items() if number == instance), None)
     if group is None:
         return None
-    register = ACG_REGISTERS.get(GROUP_BASES[group] + attribute)
-    return register if register is not None and register.group == group else None
+    try:
+        return ACG_REGISTERS.by_code(f"{group}.{attribute}")   # "Identical to the ACG Manual Code number"
+    except KeyError:
+        return None
 
 
 def class64_path(register: Register) -> tuple[int, int] | None:
     """(instance, attribute) of a keypad parameter in class 0x64, or None outside its groups."""
     instance = CLASS_64_INSTANCES.get(register.group)
-    return None if instance is None else (instance, register.address - GROUP_BASES[register.group])
+    return None if instance is None else (instance, int(register.code.rsplit(".", 1)[1]))
 
 
 def modbus_rtu_number(address: int) -> int:
