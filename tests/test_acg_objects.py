@@ -7,9 +7,11 @@ from pathlib import Path
 
 import pytest
 
+from cipstack.adapter import Adapter, AdapterSettings
 from cipstack.cip.epath import request_path
 from cipstack.cip.messages import MessageRouterRequest, MessageRouterResponse
 from cipstack.cip.router import RequestContext
+from cipstack.control import ControlError
 from cipstack.devices.acg.device import AcgDevice, build_acg_device
 from cipstack.devices.acg.drive import DriveState, Trip
 from cipstack.devices.acg.objects import CATALOG_CLASSES
@@ -329,6 +331,21 @@ def test_inject_trip_accepts_codes_and_names(device: AcgDevice) -> None:
         device.inject_trip("0x1234")
     with pytest.raises(ValueError):
         device.inject_trip("no such trip")
+
+
+async def test_a_second_trip_is_refused_and_the_first_kept(device: AcgDevice) -> None:
+    # 0x29 attribute 13 holds one Drive Fault Code; a trip is left by a Fault Reset only (seed 000:654).
+    async with Adapter(AdapterSettings(host="127.0.0.1", port=0, io_port=0), device=device) as adapter:
+        first = adapter.control({"command": "trip", "code": 0x4200})
+        assert "OverHeat" in first["result"]
+        with pytest.raises(ControlError) as refused:
+            adapter.control({"command": "trip", "code": 0x5000})
+        message = str(refused.value)
+        assert "already tripped: OverHeat (fault code 0x4200)" in message and "\n" not in message
+        assert device.drive.trip is Trip.OVER_HEAT and get(device, 0x29, 13) == u16(0x4200)
+        assert "trip OverHeat (0x4200)" in adapter.control({"command": "status"})["status"]
+        device.drive.set_fault_reset(True, device.now)                # reset: the next trip is taken
+        assert "0x5000" in adapter.control({"command": "trip", "code": 0x5000})["result"]
 
 
 def test_status_line(device: AcgDevice) -> None:

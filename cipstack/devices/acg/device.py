@@ -273,8 +273,18 @@ class AcgDevice(Device):
 
     def inject_trip(self, code: Trip | int | str) -> Trip:
         """Trip the drive as if ``code`` occurred: a ``Trip``, its name ("OverHeat", "OVER_HEAT") or a
-        fault code of the Drive Fault Codes table (0x4200 or "0x4200")."""
-        return self.drive.inject_trip(parse_trip(code), self.now)
+        fault code of the Drive Fault Codes table (0x4200 or "0x4200").
+
+        A drive already tripped keeps its trip: class 0x29 attribute 13 holds one Drive Fault Code,
+        and a trip is left only by a Fault Reset (attribute 12, seed 000:654-656) or, for a level
+        type, by its cause going away. So a second trip is refused (``ValueError`` naming the
+        present one), and nothing changes."""
+        trip = parse_trip(code)
+        present = self.drive.trip
+        if present is not None:
+            raise ValueError(f"the drive is already tripped: {present.label} (fault code 0x{present.fault_code:04X}); "
+                             f"it keeps that trip until a Fault Reset, so {trip.label} is not taken")
+        return self.drive.inject_trip(trip, self.now)
 
     def status_line(self) -> str:
         """One compact line for the emulator's console."""

@@ -429,6 +429,10 @@ class OmronDevice(Device):
         except ValueError:
             raise ValueError(f"not a trip code of Table D-5: {code!r} (e.g. 5 or E05)") from None
         trip = trip_code(self.family, number)   # KeyError for a code the family does not have
+        if self.inverter.trip:
+            # The inverter keeps its first trip until it is reset (Table D-4 Fault Code: one code).
+            raise ValueError(f"the inverter is already tripped: E{self.inverter.trip:02d}; it keeps that trip "
+                             f"until a Fault Rst, so E{number:02d} is not taken")
         self.inverter.raise_trip(self.now, number)
         return trip
 
