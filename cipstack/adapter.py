@@ -11,7 +11,7 @@ from typing import Any
 
 from .control import ControlError, ControlServer, default_control_path
 from .devices.acg.device import AcgDevice
-from .devices.acg.modbus import ModbusTcpServer
+from .devices.acg.modbus_server import ModbusTcpServer
 from .devices.base import Device, DeviceLimits
 from .devices.profiles import DEFAULT_MAC, DEFAULT_PROFILE, ProfileOptions, build_device
 from .eip.identity_items import CAPABILITY_CIP_TCP, CAPABILITY_CLASS01_UDP

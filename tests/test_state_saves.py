@@ -29,7 +29,7 @@ from cipstack.cip.router import RequestContext
 from cipstack.cip.status import CipError
 from cipstack.devices import state
 from cipstack.devices.acg.device import AcgDevice, build_acg_device
-from cipstack.devices.acg.modbus import ModbusTcpServer
+from cipstack.devices.acg.modbus_server import ModbusTcpServer
 from cipstack.devices.acg.registers import ACG_REGISTERS, CLASS_64_INSTANCES
 from cipstack.devices.omron.device import OmronDevice, build_omron_device
 from cipstack.devices.omron.registers import modbus_path
