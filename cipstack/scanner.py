@@ -25,7 +25,6 @@ from .eds.model import EdsDocument
 from .eip.identity_items import IdentityRecord, ServiceRecord
 from .eip.io_originator import IoConnectionHandle
 from .eip.originator import (
-    DEFAULT_PORT,
     BlockingEncapsulationClient,
     EncapsulationClient,
     ExplicitClient,
@@ -352,10 +351,5 @@ class SyncScanner:
         self.close()
 
 
-def discover_sync(address: str = "255.255.255.255", port: int = DEFAULT_PORT, timeout: float = 2.0
-                  ) -> list[IdentityRecord]:
-    return asyncio.run(discover(address, port, timeout))
-
-
-__all__ = ["AttributeValue", "Scanner", "SyncScanner", "backplane_route", "discover", "discover_sync",
+__all__ = ["AttributeValue", "Scanner", "SyncScanner", "backplane_route", "discover",
            "list_services_udp"]

@@ -26,6 +26,8 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 from ...assemblies.acg import (
+    HZ_INPUTS,
+    HZ_OUTPUTS,
     INPUT_INSTANCES,
     OUTPUT_INSTANCES,
     AcgAssemblies,
@@ -148,7 +150,7 @@ class AcgDevice(Device):
     def _produce_speed(self, schema: AssemblySchema) -> bytes:
         """Inputs 70/71/110/111 (seed 000, input instances and the bits table after them)."""
         drive = self.drive
-        hz = schema.instance in (110, 111)
+        hz = schema.instance in HZ_INPUTS
         values = {
             "faulted": drive.faulted,                          # 0x29 attribute 10
             "running_forward": drive.running_forward,          # 0x29 attribute 7
@@ -187,7 +189,7 @@ class AcgDevice(Device):
         drive.set_run_command(values["run_forward"], values.get("run_reverse", False), now)
         drive.set_fault_reset(values["fault_reset"], now)
         try:
-            if instance in (100, 101):
+            if instance in HZ_OUTPUTS:
                 drive.set_speed_reference(values["speed_reference"], now)
             else:
                 drive.set_speed_reference_rpm(values["speed_reference"], now)

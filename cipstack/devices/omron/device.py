@@ -36,6 +36,7 @@ from ...assemblies.omron import (
     RPM,
     SIZES,
     SPECIAL_FAILURE,
+    SPECIAL_FUNCTION_CODES,
     SPECIAL_READ_DOUBLE,
     SPECIAL_READ_WORD,
     SPECIAL_WRITE_DOUBLE,
@@ -331,7 +332,7 @@ class OmronDevice(Device):
 
     def _special_fault(self, function: int, address: int) -> int | None:
         """Table B-17 checks made before the inverter is asked."""
-        if function not in (SPECIAL_READ_WORD, SPECIAL_WRITE_WORD, SPECIAL_READ_DOUBLE, SPECIAL_WRITE_DOUBLE):
+        if function not in SPECIAL_FUNCTION_CODES:
             return FAULT_FUNCTION_CODE
         if not self.inverter_link_ok:
             return FAULT_SLAVE_DEVICE
