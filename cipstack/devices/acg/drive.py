@@ -34,6 +34,7 @@ from dataclasses import dataclass
 from enum import Enum, IntEnum
 
 from ..registers import Register, RegisterAccess, RegisterError, RegisterMap, RegisterRefusal
+from ..simulation import TimedSimulation
 from ..state import ParameterStore, StateFileError
 from . import registers as reg
 from .registers import (
@@ -311,8 +312,9 @@ class _CommandLossWatch:
         self.acted = False
 
 
-class AcgDrive:
-    """The ACG drive behind its ACG-ET2 card, sans I/O."""
+class AcgDrive(TimedSimulation):
+    """The ACG drive behind its ACG-ET2 card, sans I/O. ``advance``/``next_deadline``: ``TimedSimulation``
+    (ramps; the lost-command timers)."""
 
     family = FAMILY
     model = MODEL
@@ -421,24 +423,6 @@ class AcgDrive:
     def password(self) -> int | None:
         """The password of 0x03E7/0x03E8 registered from the keypad (None: none)."""
         return self._password
-
-    def advance(self, now: float) -> None:
-        """Move the simulation to ``now``: ramps, lost-command timers and counters."""
-        if now < self._time:
-            raise ValueError(f"time went backwards: {now} < {self._time}")
-        while True:
-            deadline = self._timer_deadline()
-            if deadline is None or deadline > now:
-                break
-            self._run_until(deadline)
-            self._fire_timers(deadline)
-        self._run_until(now)
-
-    def next_deadline(self) -> float | None:
-        """When the drive next changes by itself: the end of the present ramp segment or a
-        lost-command timer; None while nothing is pending."""
-        candidates = [t for t in (self._timer_deadline(), self._ramp_deadline()) if t is not None]
-        return min(candidates) if candidates else None
 
     def _run_until(self, moment: float) -> None:
         self._ramp(max(0.0, moment - self._time))

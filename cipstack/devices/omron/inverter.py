@@ -20,6 +20,7 @@ from dataclasses import dataclass
 from enum import Enum, IntEnum
 
 from ..registers import RegisterAccess, RegisterError, RegisterRefusal
+from ..simulation import TimedSimulation
 from ..state import StateFileError
 from .models import Family, Model, model
 from .registers import (
@@ -256,7 +257,7 @@ _RS = 1 << 4
 _IN_SHIFT = 7    # coil data 0 bit 7 is intelligent input [1] (Table 18)
 
 
-class Inverter:
+class Inverter(TimedSimulation):
     """One MX2 or RX inverter with its option board, from power-on onwards."""
 
     def __init__(self, inverter_model: Model | str, *, now: float = 0.0, saved: Mapping[int, int] | None = None,
@@ -358,26 +359,22 @@ class Inverter:
         self._settle(now)
 
     # -- time --------------------------------------------------------------------------------------
-    def advance(self, now: float) -> None:
-        """Bring ramps and timers up to ``now``."""
-        if now < self._t:
-            raise ValueError(f"time went backwards: {now} < {self._t}")
-        while True:
-            deadline = self._watchdog_deadline()
-            if deadline is None or deadline > now:
-                self._ramp_to(now)
-                return
-            self._ramp_to(deadline)
-            due = self._watchdog_deadline()
-            if due is not None and due <= deadline:
-                # Table 12 / Table 26: no communication for P044 while running: P045 action.
-                self._net_error = True
-                self._lost_command(NetworkAction(self._values["P045"]), deadline)
+    # ``advance``/``next_deadline`` (``TimedSimulation``): the ramps and the P044 timer.
+    def _timer_deadline(self) -> float | None:
+        return self._watchdog_deadline()
 
-    def next_deadline(self) -> float | None:
-        """When the state next changes without input: a ramp reaching its end or the P044 timer."""
-        times = [t for t in (self._watchdog_deadline(), self._ramp_end()) if t is not None]
-        return min(times) if times else None
+    def _fire_timers(self, moment: float) -> None:
+        due = self._watchdog_deadline()
+        if due is not None and due <= moment:
+            # Table 12 / Table 26: no communication for P044 while running: P045 action.
+            self._net_error = True
+            self._lost_command(NetworkAction(self._values["P045"]), moment)
+
+    def _run_until(self, moment: float) -> None:
+        self._ramp_to(moment)
+
+    def _ramp_deadline(self) -> float | None:
+        return self._ramp_end()
 
     def _watchdog_deadline(self) -> float | None:
         timer = self._values["P044"]
