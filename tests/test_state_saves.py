@@ -265,3 +265,16 @@ def request(device: OmronDevice, service: int, cls: int, instance: int, attribut
 
 def put(device: OmronDevice, cls: int, instance: int, attribute: int, data: str) -> int:
     return request(device, 0x10, cls, instance, attribute, data).general_status
+
+
+def test_an_omron_special_io_save_the_file_cannot_take_is_fault_04(small_filesystem: Path) -> None:
+    # Special I/O (assembly 100/150, Tables B-13 to B-17): a write of 0900h the file cannot take answers
+    # its function code with 80h and fault 04h "Slave device failure", the nearest Table B-17 has.
+    device = build_omron_device(MX2, state_path=small_filesystem / "mx2.json")
+    device.advance(0.0)
+    make_read_only(small_filesystem)
+    assert device.special_io(0x10, 0x0900, 1, 0, 1.0)[0] == 0x10                  # accepted before the write
+    assert device.flush_saves(10) and device.saves is not None and device.saves.error is not None
+    reply = device.special_io(0x10, 0x0900, 1, 0, 2.0)
+    assert reply[0] == 0x90 and int.from_bytes(reply[4:6], "little") == 0x04
+    device.close()

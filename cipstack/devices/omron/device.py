@@ -15,6 +15,7 @@ counts those saves (Table C-2) and so lives in the same non-volatile memory.
 
 from __future__ import annotations
 
+import logging
 from collections.abc import Mapping
 from dataclasses import dataclass
 from pathlib import Path
@@ -36,6 +37,7 @@ from ...assemblies.omron import (
     RPM,
     SIZES,
     SPECIAL_FAILURE,
+    SPECIAL_FAULTS,
     SPECIAL_FUNCTION_CODES,
     SPECIAL_READ_DOUBLE,
     SPECIAL_READ_WORD,
@@ -82,6 +84,8 @@ _UNIT_OF = {SpeedUnit.CENTIHERTZ: CENTIHERTZ, SpeedUnit.DECIHERTZ: DECIHERTZ, Sp
 CONSISTENCY_KEY = 0
 #: Rotary switch settings 64-99 hand the node address to P190 (section 2-1-4).
 SWITCHES_USE_P190 = 64
+
+log = logging.getLogger(__name__)
 
 
 def omron_identity(inverter_model: Model, serial_number: int) -> IdentityInfo:
@@ -325,8 +329,11 @@ class OmronDevice(Device):
             except InverterModeError:
                 fault = FAULT_WRITING_MODE
             except RegisterError as exc:
+                # A save the state file did not take is the device failing: 04h, the nearest of Table B-17.
                 fault = {RegisterRefusal.OUT_OF_RANGE: FAULT_DATA_SETTING,
-                         RegisterRefusal.NO_SUCH_REGISTER: FAULT_REGISTER_NUMBER}.get(exc.refusal, FAULT_WRITING_MODE)
+                         RegisterRefusal.NO_SUCH_REGISTER: FAULT_REGISTER_NUMBER,
+                         RegisterRefusal.SAVE_FAILED: FAULT_SLAVE_DEVICE}.get(exc.refusal, FAULT_WRITING_MODE)
+        log.debug("Special I/O %02Xh %04Xh: fault %02Xh, %s", function, address, fault, SPECIAL_FAULTS[fault])
         return schema.encode(function_code=(function | SPECIAL_FAILURE) & 0xFF, register_number=address,
                              data_word_0=fault)
 
