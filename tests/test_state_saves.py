@@ -169,22 +169,32 @@ def _mount(*args: str) -> bool:
 
 @pytest.fixture
 def small_filesystem(tmp_path: Path) -> Iterator[Path]:
-    """A 64 KiB tmpfs of our own (root only), unmounted afterwards."""
+    """A directory whose writes can be taken away: a 64 KiB tmpfs of our own when running as root
+    (unmounted afterwards; root ignores permissions, so a read-only mount makes it read-only), else a
+    plain directory (made read-only by its mode; filling a disk needs root)."""
     directory = tmp_path / "mnt"
     directory.mkdir()
-    if os.geteuid() != 0 or not _mount("-t", "tmpfs", "-o", "size=64k,mode=0755", "tmpfs", str(directory)):
-        pytest.skip("needs a filesystem of its own (root, mount)")
+    if os.geteuid() != 0:
+        try:
+            yield directory
+        finally:
+            directory.chmod(0o755)
+        return
+    if not _mount("-t", "tmpfs", "-o", "size=64k,mode=0755", "tmpfs", str(directory)):
+        pytest.skip("mount is not allowed here")
     try:
         yield directory
     finally:
         subprocess.run(["umount", "-l", str(directory)], capture_output=True)
 
 
-def make_read_only(directory: Path) -> None:
+def make_read_only(directory: Path) -> str:
+    """Take writes away from ``directory``; the reason a write then fails with."""
     if os.geteuid() == 0:
         assert _mount("-o", "remount,ro", str(directory))
-    else:
-        directory.chmod(0o555)
+        return "Read-only file system"
+    directory.chmod(0o555)
+    return "Permission denied"
 
 
 def fill(directory: Path) -> None:
@@ -205,9 +215,12 @@ async def test_a_save_the_file_cannot_take_is_refused(small_filesystem: Path, da
     before = path.read_bytes()
     async with running(path) as bench:
         if damage == "read-only directory":
-            make_read_only(small_filesystem)
+            why = make_read_only(small_filesystem)
         else:
+            if os.geteuid() != 0:
+                pytest.skip("filling a disk of our own needs root (mount)")
             fill(small_filesystem)
+            why = "No space left on device"
         caplog.clear()
         with caplog.at_level(logging.DEBUG):
             replies = await exchange(bench.modbus.port, [
@@ -221,7 +234,6 @@ async def test_a_save_the_file_cannot_take_is_refused(small_filesystem: Path, da
         assert replies[5] == bytes.fromhex("0006 0000 0003 ff 86 04")
         # The log: one line per failed write, naming the file and why; no traceback anywhere.
         errors = [r.getMessage() for r in caplog.records if r.levelno >= logging.ERROR]
-        why = "Read-only file system" if damage == "read-only directory" else "No space left on device"
         assert errors and all(m.startswith(f"{path}: parameters not saved ({why})") for m in errors), errors
         assert all("\n" not in m for m in errors)
         assert all(r.exc_info is None for r in caplog.records)
