@@ -11,7 +11,7 @@ from typing import Any
 
 from .control import ControlError, ControlServer, default_control_path
 from .devices.acg.device import AcgDevice
-from .devices.acg.modbus import ModbusTcpServer
+from .devices.acg.modbus_server import ModbusTcpServer
 from .devices.base import Device, DeviceLimits
 from .devices.profiles import DEFAULT_MAC, DEFAULT_PROFILE, ProfileOptions, build_device
 from .eip.identity_items import CAPABILITY_CIP_TCP, CAPABILITY_CLASS01_UDP
@@ -63,7 +63,7 @@ class Adapter:
             if not isinstance(self.device, AcgDevice):
                 raise ValueError(f"profile {s.profile!r} has no Modbus TCP (the ACG-ET2 card speaks it)")
             acg = self.device
-            self.modbus = ModbusTcpServer(lambda: acg.drive, s.host, s.modbus_port)
+            self.modbus = ModbusTcpServer(lambda: acg.drive, s.host, s.modbus_port, saves=acg.saves)
         self.target = EncapsulationTarget(
             self.device.router, self.device.identity_record,
             TargetSettings(max_sessions=s.max_sessions, max_connections=s.max_connections,
@@ -155,6 +155,8 @@ class Adapter:
         if self.io_endpoint is not None:
             await self.io_endpoint.close()
         await self.server.close()
+        # The last saves are written off the loop: wait for them without blocking it.
+        await asyncio.get_running_loop().run_in_executor(None, self.device.close)
 
     async def __aenter__(self) -> Adapter:
         await self.start()

@@ -26,7 +26,6 @@ from .eds.model import EdsDocument
 from .eip.identity_items import IdentityRecord, ServiceRecord
 from .eip.io_originator import IoConnectionHandle, OtFormat
 from .eip.originator import (
-    DEFAULT_PORT,
     BlockingEncapsulationClient,
     EncapsulationClient,
     ExplicitClient,
@@ -416,10 +415,5 @@ class SyncScanner:
         self.close()
 
 
-def discover_sync(address: str | Sequence[str] | None = None, port: int = DEFAULT_PORT, timeout: float = 2.0
-                  ) -> list[IdentityRecord]:
-    return asyncio.run(discover(address, port, timeout))
-
-
 __all__ = ["UNDECODED", "AttributeValue", "ReplyDecodeError", "Scanner", "SyncScanner", "backplane_route", "discover",
-           "discover_sync", "list_services_udp"]
+           "list_services_udp"]

@@ -435,7 +435,7 @@ def test_not_while_running_refusal(drive: AcgDrive) -> None:
 
 def test_no_such_register(drive: AcgDrive) -> None:
     assert refusal(lambda: drive.read(0x0400)) is RegisterRefusal.NO_SUCH_REGISTER
-    assert refusal(lambda: drive.write(0x1C12, 0, 0)) is RegisterRefusal.NO_SUCH_REGISTER
+    assert refusal(lambda: drive.write(0x1C22, 0, 0)) is RegisterRefusal.NO_SUCH_REGISTER
 
 
 def test_parameter_initialization_refused_during_a_trip(drive: AcgDrive) -> None:
@@ -527,6 +527,20 @@ def test_operation_state_word(drive: AcgDrive) -> None:
 
 
 # --- Lost command: Pr.12 / Pr.13 / Pr.14 -----------------------------------------------------
+
+def test_lost_preset_range() -> None:
+    # Seed 000:214: Pr.14 0.05-60.00 Hz, default 0.00 (kept, so it can be written back).
+    d = AcgDrive()
+    d.write(addr("dr.20"), 40000, 0.0)                   # Max Freq 400.00 Hz: the table's 60.00 still bounds Pr.14
+    for value in (0, 5, 6000):
+        d.write(PR14, value, 0.0)
+        assert d.read(PR14) == value
+    for value in (1, 4, 6001):
+        assert refusal(lambda v=value: d.write(PR14, v, 0.0)) is RegisterRefusal.OUT_OF_RANGE
+    assert d.read(PR14) == 6000
+    d.write(addr("dr.20"), 5000, 0.0)                    # and the present Max Freq does too
+    assert refusal(lambda: d.write(PR14, 5500, 0.0)) is RegisterRefusal.OUT_OF_RANGE
+
 
 def lost_setup(mode: int, lost_time: int = 20, acc: int = 600) -> AcgDrive:
     """Running forward towards 60 Hz at 1 Hz/s (ACC 60.0 s); Pr.13 = 2.0 s."""

@@ -93,6 +93,7 @@ async def test_scanner_runs_trips_resets_and_saves(scanner: Scanner, adapter: Ad
     await write_registers(scanner, {SAVE_PARAMETERS: 1})                 # 0x03E0: 0 -> 1 saves
     await scanner.set_attribute_single(0x2A, 1, 103, 77)                 # changed, not saved
     assert await scanner.read(0x2A, 1, 103) == 77
+    assert adapter.device.flush_saves(5)                                 # written off the event loop
     assert state_file.exists()
 
     restarted = build_acg_device(state_path=state_file)                  # a power cycle on the same file

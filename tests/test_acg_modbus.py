@@ -1,5 +1,5 @@
-"""Modbus TCP of the ACG-ET2 (seed 000, "Modbus TCP Frame") against pymodbus's client, an
-independent peer, with the same drive served over CIP at the same time."""
+"""Modbus TCP of the ACG-ET2 (seed 000, "Modbus TCP Frame"): the wire bytes from a scripted peer, and
+pymodbus's client, an independent peer (marked ``interop``), with the same drive served over CIP."""
 
 from __future__ import annotations
 
@@ -16,11 +16,10 @@ from cipstack.adapter import Adapter, AdapterSettings
 from cipstack.catalog import Catalog
 from cipstack.devices.acg.device import AcgDevice, build_acg_device
 from cipstack.devices.acg.drive import MODBUS_SILENCE_TIME, AcgDrive, Trip
-from cipstack.devices.acg.modbus import MbapBuffer, ModbusTcpCore, ModbusTcpServer
+from cipstack.devices.acg.modbus import MbapBuffer, ModbusTcpCore
+from cipstack.devices.acg.modbus_server import ModbusTcpServer
 from cipstack.devices.acg.registers import ACG_REGISTERS, CLASS_64_INSTANCES, modbus_tcp_number
 from cipstack.scanner import Scanner
-
-pytestmark = pytest.mark.interop
 
 UNIT = 0xFF  # "The address is fixed to 0xFF when Modbus TCP communication is used alone."
 
@@ -43,11 +42,19 @@ class Bench:
 
 
 @pytest.fixture
+async def modbus_port() -> AsyncIterator[int]:
+    """A Modbus TCP server of a fresh ACG drive, for a scripted peer."""
+    device = build_acg_device()
+    async with ModbusTcpServer(lambda: device.drive, "127.0.0.1", 0) as modbus:
+        yield modbus.port
+
+
+@pytest.fixture
 async def bench(tmp_path: Path) -> AsyncIterator[Bench]:
     state_file = tmp_path / "acg.json"
     device = build_acg_device(state_path=state_file)
     async with Adapter(AdapterSettings(host="127.0.0.1", port=0, io_port=0), device=device) as adapter, \
-            ModbusTcpServer(lambda: device.drive, "127.0.0.1", 0) as modbus:
+            ModbusTcpServer(lambda: device.drive, "127.0.0.1", 0, saves=device.saves) as modbus:
         scanner = await Scanner.connect(f"127.0.0.1:{adapter.port}", catalog=Catalog(device.catalog_classes()))
         client = AsyncModbusTcpClient("127.0.0.1", port=modbus.port, timeout=3)
         assert await client.connect()
@@ -71,6 +78,7 @@ async def exception_code(request: object) -> int:
     return int(reply.exception_code)
 
 
+@pytest.mark.interop
 async def test_numbering_of_the_modbus_tcp_column(bench: Bench) -> None:
     # 0x0300 "Drive model" is register 40769 in the Modbus TCP column (40768 in the RTU one): ACG = 0x0010.
     assert modbus_tcp_number(0x0300) == 40769
@@ -81,6 +89,7 @@ async def test_numbering_of_the_modbus_tcp_column(bench: Bench) -> None:
     assert await read(bench.client, pdu_address(47938), 2, function=4) == [50, 100]
 
 
+@pytest.mark.interop
 async def test_same_values_as_over_cip(bench: Bench) -> None:
     client, scanner = bench.client, bench.scanner
     reply = await client.write_registers(addr("ACC"), [25, 35], device_id=UNIT)        # function 16
@@ -100,6 +109,7 @@ async def test_same_values_as_over_cip(bench: Bench) -> None:
     assert await scanner.read(0x64, CLASS_64_INSTANCES["Pr"], 14) == 500
 
 
+@pytest.mark.interop
 async def test_run_ramp_trip_reset_save_over_modbus(bench: Bench) -> None:
     client, scanner = bench.client, bench.scanner
     await client.write_registers(addr("drv"), [4, 8], device_id=UNIT)                 # drv, Frq: Field Bus
@@ -128,6 +138,7 @@ async def test_run_ramp_trip_reset_save_over_modbus(bench: Bench) -> None:
     assert restarted.drive.read(addr("ACC")) == 10 and restarted.drive.read(addr("drv")) == 4
 
 
+@pytest.mark.interop
 async def test_exception_codes(bench: Bench) -> None:
     client = bench.client
     assert await exception_code(client.read_coils(0, count=1, device_id=UNIT)) == 0x01       # unsupported function
@@ -148,8 +159,8 @@ async def test_exception_codes(bench: Bench) -> None:
     assert await exception_code(client.write_register(addr("CM.23"), 0, device_id=UNIT)) == 0x20
 
 
-async def test_frames_on_the_wire(bench: Bench) -> None:
-    port = bench.client.comm_params.port
+async def test_frames_on_the_wire(modbus_port: int) -> None:
+    port = modbus_port
     reader, writer = await asyncio.open_connection("127.0.0.1", port)
     try:
         # Two requests in one segment, the second split: replies echo transaction and unit id.
@@ -170,6 +181,35 @@ async def test_frames_on_the_wire(bench: Bench) -> None:
         assert await reader.read() == b""
     finally:
         writer.close()
+
+
+async def test_bytes_beyond_the_pdu_refuse_the_request(modbus_port: int) -> None:
+    # Write Single Register 0x1F01 (ACC) = 100 with two bytes more than function 6 has: refused with
+    # 0x03 (the implied length is wrong), nothing written, and the stream goes on with the next frame.
+    reader, writer = await asyncio.open_connection("127.0.0.1", modbus_port)
+    try:
+        writer.write(bytes.fromhex("0001 0000 0008 01 06 1f01 0064 abcd"))
+        assert await reader.readexactly(9) == bytes.fromhex("0001 0000 0003 01 86 03")
+        writer.write(bytes.fromhex("0002 0000 0006 01 03 1f01 0001"))
+        assert await reader.readexactly(11) == bytes.fromhex("0002 0000 0005 01 03 02 0032")  # ACC still 5.0 s
+        # The same for a read, and for a request one byte short.
+        writer.write(bytes.fromhex("0003 0000 0007 01 03 1f01 0001 00"))
+        assert await reader.readexactly(9) == bytes.fromhex("0003 0000 0003 01 83 03")
+        writer.write(bytes.fromhex("0004 0000 0005 01 06 1f01 00"))
+        assert await reader.readexactly(9) == bytes.fromhex("0004 0000 0003 01 86 03")
+    finally:
+        writer.close()
+
+
+def test_pdu_length_is_exact() -> None:
+    core = ModbusTcpCore(AcgDrive(now=0.0))
+    assert core.handle_pdu(bytes.fromhex("06 1f01 0064"), 0.0) == bytes.fromhex("06 1f01 0064")
+    assert core.handle_pdu(bytes.fromhex("06 1f01 0064 abcd"), 0.0) == bytes.fromhex("86 03")
+    assert core.handle_pdu(bytes.fromhex("04 1f01 0001 ff"), 0.0) == bytes.fromhex("84 03")
+    # 0x10 and 0x17: the byte count must match the bytes that follow.
+    assert core.handle_pdu(bytes.fromhex("10 1f01 0001 02 0032 00"), 0.0) == bytes.fromhex("90 03")
+    assert core.handle_pdu(bytes.fromhex("17 1f01 0001 1f02 0001 02 0032 00"), 0.0) == bytes.fromhex("97 03")
+    assert core.handle_pdu(bytes.fromhex("17 1f01 0001 1f02 0001 02 0032"), 0.0) == bytes.fromhex("17 02 0064")
 
 
 def test_modbus_silence_is_a_lost_command() -> None:

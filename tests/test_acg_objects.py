@@ -7,9 +7,11 @@ from pathlib import Path
 
 import pytest
 
+from cipstack.adapter import Adapter, AdapterSettings
 from cipstack.cip.epath import request_path
 from cipstack.cip.messages import MessageRouterRequest, MessageRouterResponse
 from cipstack.cip.router import RequestContext
+from cipstack.control import ControlError
 from cipstack.devices.acg.device import AcgDevice, build_acg_device
 from cipstack.devices.acg.drive import DriveState, Trip
 from cipstack.devices.acg.objects import CATALOG_CLASSES
@@ -132,11 +134,14 @@ def test_motor_data(device: AcgDevice) -> None:
 # --- Control Supervisor (class 0x29) -------------------------------------------------------------------
 
 def test_control_supervisor_attributes(device: AcgDevice) -> None:
-    assert [get(device, 0x29, a) for a in (3, 4, 5, 6, 7, 8, 9, 10, 12, 14)] == [
-        b"\x00", b"\x00", b"\x01", bytes((DriveState.READY,)), b"\x00", b"\x00", b"\x01", b"\x00", b"\x00", b"\x01"]
+    assert [get(device, 0x29, a) for a in (3, 4, 6, 7, 8, 9, 10, 12, 14)] == [
+        b"\x00", b"\x00", bytes((DriveState.READY,)), b"\x00", b"\x00", b"\x01", b"\x00", b"\x00", b"\x01"]
     assert get(device, 0x29, 13) == u16(0)
     assert call(device, GET, 0x29, 1, 11).general_status == 0x14    # Warning: not in the table
-    for attribute in (5, 6, 7, 8, 9, 10, 13, 14):
+    # 5 Net Control, Access "N/A" (seed 000:642): served neither to Get nor to Set.
+    assert call(device, GET, 0x29, 1, 5).general_status == 0x14
+    assert status_of_set(device, 0x29, 5, b"\x01") == 0x14
+    for attribute in (6, 7, 8, 9, 10, 13, 14):
         assert status_of_set(device, 0x29, attribute, b"\x01" if attribute != 13 else u16(1)) == 0x0E
     assert status_of_set(device, 0x29, 3, b"\x01") == 0
     device.advance(1.0)
@@ -150,7 +155,7 @@ def test_control_supervisor_attributes(device: AcgDevice) -> None:
 
 def test_control_from_net_follows_drv(device: AcgDevice) -> None:
     device.drive.write(addr("drv"), 1, 0.0)
-    assert get(device, 0x29, 14) == b"\x00" and get(device, 0x29, 5) == b"\x00"
+    assert get(device, 0x29, 14) == b"\x00"
     assert status_of_set(device, 0x29, 3, b"\x01") == 0              # the card keeps the command ...
     assert get(device, 0x29, 3) == b"\x01" and not device.drive.running  # ... the drive obeys drv
 
@@ -226,7 +231,10 @@ def test_ac_dc_drive_attributes(device: AcgDevice) -> None:
     assert get(device, 0x2A, 7) == u16(450) and get(device, 0x2A, 100) == u16(1500)
     device.advance(3.0)
     assert get(device, 0x2A, 3) == b"\x01" and get(device, 0x2A, 7) == u16(900) and get(device, 0x2A, 8) == u16(900)
-    assert get(device, 0x2A, 4) == b"\x01" and get(device, 0x2A, 29) == b"\x01"
+    assert get(device, 0x2A, 29) == b"\x01"
+    # 4 Net Reference, Access "N/A" (seed 000:722): served neither to Get nor to Set.
+    assert call(device, GET, 0x2A, 1, 4).general_status == 0x14
+    assert status_of_set(device, 0x2A, 4, b"\x01") == 0x14
     assert get(device, 0x2A, 6) == b"\x01"                          # open loop speed
     assert get(device, 0x2A, 9) == u16(0)                           # no motor model: 0.0 A
     assert get(device, 0x2A, 102) == u16(50) and get(device, 0x2A, 103) == u16(100)
@@ -236,7 +244,7 @@ def test_ac_dc_drive_attributes(device: AcgDevice) -> None:
     assert status_of_set(device, 0x2A, 101, u16(7000)) == 0x09       # above dr.20 Max Freq 60.00 Hz
     assert status_of_set(device, 0x2A, 101, u16(40001)) == 0x09      # above 400.00 Hz
     assert status_of_set(device, 0x2A, 8, u16(24001)) == 0x09
-    for attribute in (3, 4, 6, 7, 9, 29, 100):
+    for attribute in (3, 6, 7, 9, 29, 100):
         assert status_of_set(device, 0x2A, attribute, u16(1) if attribute in (7, 9, 100) else b"\x01") == 0x0E
     assert call(device, GET, 0x2A, 1, 5).general_status == 0x14
     device.drive.write(addr("AP.1"), 2, 4.0)                         # App Mode: a process mode
@@ -269,6 +277,11 @@ def test_keypad_parameters_set_and_refusals(device: AcgDevice) -> None:
     assert status_of_set(device, 0x64, 12, u16(5) + b"\x00", pr) == 0x15
     assert call(device, GET, 0x64, cm, 99).general_status == 0x14
     assert call(device, GET, 0x64, 9, 1).general_status == 0x05               # no group at instance 9
+    # "10 (AP Group)" (seed 000:763): a second instance of the AP group (8).
+    ap = CLASS_64_INSTANCES["AP"]
+    assert status_of_set(device, 0x64, 1, u16(2), 10) == 0 and device.drive.read(addr("AP.1")) == 2
+    assert get(device, 0x64, 1, 10) == get(device, 0x64, 1, ap) == u16(2)
+    assert call(device, GET, 0x64, 10, 99).general_status == 0x14
     assert call(device, GET, 0x64, 0, 1).general_status == 0x08
     assert call(device, GET_ALL, 0x64, cm).general_status == 0x08
     # "The setting cannot be written while the drive is operating": device state conflict.
@@ -320,6 +333,21 @@ def test_inject_trip_accepts_codes_and_names(device: AcgDevice) -> None:
         device.inject_trip("no such trip")
 
 
+async def test_a_second_trip_is_refused_and_the_first_kept(device: AcgDevice) -> None:
+    # 0x29 attribute 13 holds one Drive Fault Code; a trip is left by a Fault Reset only (seed 000:654).
+    async with Adapter(AdapterSettings(host="127.0.0.1", port=0, io_port=0), device=device) as adapter:
+        first = adapter.control({"command": "trip", "code": 0x4200})
+        assert "OverHeat" in first["result"]
+        with pytest.raises(ControlError) as refused:
+            adapter.control({"command": "trip", "code": 0x5000})
+        message = str(refused.value)
+        assert "already tripped: OverHeat (fault code 0x4200)" in message and "\n" not in message
+        assert device.drive.trip is Trip.OVER_HEAT and get(device, 0x29, 13) == u16(0x4200)
+        assert "trip OverHeat (0x4200)" in adapter.control({"command": "status"})["status"]
+        device.drive.set_fault_reset(True, device.now)                # reset: the next trip is taken
+        assert "0x5000" in adapter.control({"command": "trip", "code": 0x5000})["result"]
+
+
 def test_status_line(device: AcgDevice) -> None:
     assert device.status_line() == "READY      | --- | out   0.00 Hz | ref   0.00 Hz | io 0"
     device.drive.set_speed_reference(3000, 0.0)
@@ -337,6 +365,7 @@ def test_state_file_is_the_drives_memory(tmp_path: Path) -> None:
     first = build_acg_device(state_path=state, now=0.0)
     first.drive.write(addr("dEC"), 42, 0.0)
     first.drive.write(0x03E0, 1, 0.0)
+    assert first.flush_saves(5)                               # written off the caller's thread
     assert build_acg_device(state_path=state, now=0.0).drive.read(addr("dEC")) == 42
     state.write_text("{not json")
     with pytest.raises(StateFileError, match="not valid JSON"):

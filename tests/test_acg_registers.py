@@ -120,12 +120,14 @@ def test_address_table_rows(keypad_code: str, rtu: int) -> None:
     assert modbus_tcp_number(register.address) == rtu + 1
 
 
-def test_every_listed_code_is_at_group_base_plus_number() -> None:
+def test_every_listed_code_is_at_group_base_plus_number_or_as_printed() -> None:
+    assert acg.PRINTED_ADDRESSES == {"M2.34": 0x1C12}
     for group, numbers in acg.LISTED_CODES.items():
         declared = {r.code for r in ACG_REGISTERS.group(group)}
         for number in numbers:
             register = code(f"{group}.{number}")
-            assert register.address == acg.GROUP_BASES[group] + number
+            expected = acg.PRINTED_ADDRESSES.get(register.code, acg.GROUP_BASES[group] + number)
+            assert register.address == expected
         assert {f"{group}.{n}" for n in numbers} <= declared
 
 
@@ -143,9 +145,11 @@ def test_codes_without_an_address_are_not_declared() -> None:
 
 
 def test_m2_34_reconstructed_address() -> None:
-    # Printed 0x1C12 (the address M2.18 would have); the group rule puts M2.34 at 0x1C22.
-    assert code("M2.34").address == 0x1C22
-    assert 0x1C12 not in ACG_REGISTERS
+    # Printed 1C12 / 47186 (seed 001:1477), hex and decimal agreeing, away from the group rule's 0x1C22.
+    assert code("M2.34").address == 0x1C12 and modbus_rtu_number(0x1C12) == 47186
+    assert 0x1C22 not in ACG_REGISTERS
+    assert class64_register(12, 34) is code("M2.34") and class64_path(code("M2.34")) == (12, 34)
+    assert class64_register(12, 18) is None                  # M2.18 has no address
 
 
 def test_operation_group() -> None:
@@ -211,6 +215,8 @@ def test_lost_command_parameters() -> None:
     assert code("Pr.13").raw_minimum * code("Pr.13").scale == pytest.approx(0.1)
     assert code("Pr.13").raw_maximum * code("Pr.13").scale == pytest.approx(120)
     assert (code("Pr.14").default, code("Pr.14").scale, code("Pr.14").unit) == (0, 0.01, "Hz")
+    # Pr.14: 0.05-60.00 Hz (seed 000:214), with the table's default 0.00.
+    assert (code("Pr.14").raw_minimum, code("Pr.14").raw_maximum) == (0, 6000)
 
 
 def test_serial_cm_parameters() -> None:
@@ -294,7 +300,7 @@ def test_class_0x64_paths() -> None:
     assert class64_register(11, 12) is code("Pr.12")
     assert class64_register(1, 20) is code("dr.20")
     assert class64_register(7, 25) is None          # no CM.25
-    assert class64_register(10, 1) is None          # the garbled second "AP" row
+    assert class64_register(10, 1) is code("AP.1")  # "10 (AP Group)", seed 000:763
     for group in acg.CLASS_64_INSTANCES:
         for register in ACG_REGISTERS.group(group):
             path = class64_path(register)

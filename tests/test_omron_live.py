@@ -204,7 +204,7 @@ async def test_class1_idle_and_timeout_actions() -> None:
                 await until(lambda: _true(not adapter.io or not adapter.io.connections))
             status = device.inverter.status()                                      # P045 = 3: free run, no trip
             assert device.inverter.trip == 0 and status.output_frequency == 0 and not status.running
-            assert device.identity.status & 0x00F0 == 0x0020                       # I/O connection faulted
+            assert device.identity.status == 0x0001                                # Table C-2: no bits 4-7
     finally:
         await adapter.close()
 

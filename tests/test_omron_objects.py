@@ -49,10 +49,23 @@ def test_identity(name, code, product):
     assert get(d, 1, 1, 2) == "02 00"                     # AC drive
     assert int.from_bytes(bytes.fromhex(get(d, 1, 1, 3)), "little") == code
     assert bytes.fromhex(get(d, 1, 1, 7))[1:].decode() == product
-    assert get(d, 1, 1, 5) == "31 00"                     # bit 0 always ON; bits 4-7: no I/O connection
+    assert get(d, 1, 1, 5) == "01 00"                     # Table C-2: bit 0 always ON, bits 8-11 faults only
     assert get(d, 1, 1, 9) == "00 00"                     # configuration consistency value
     assert get(d, 1, 1, 0x65) == "01 01"                  # firmware revision
     assert request(d, GET_ALL, 1, 1).general_status == 0x08   # Table C-1: 0E and 05 only
+
+
+def test_identity_status_is_the_boards_not_the_inverters():
+    # Table C-2 (seed 004:2416): bits 0 (always ON) and 8-11 only. A trip of the inverter, even the one
+    # the network forces (E62), is the Control Supervisor's (0x29 Faulted, Fault Code); the board's
+    # status stays 0001h, as the MS indicator stays green (Table 4 lists board faults only).
+    d = fresh(MX2)
+    d.inject_trip(62)
+    d.advance(2.0)
+    assert get(d, 0x29, 1, 0x0A, now=2.0) == "01" and get(d, 1, 1, 5, now=2.0) == "01 00"
+    d.rotary_switches = 5                                  # node address changed: Table 4, minor recoverable
+    d.advance(3.0)
+    assert get(d, 1, 1, 5, now=3.0) == "01 01"
 
 
 def test_consistency_value_counts_saves_and_survives_restart(tmp_path):
@@ -63,6 +76,7 @@ def test_consistency_value_counts_saves_and_survives_restart(tmp_path):
     assert get(d, 1, 1, 9) == "01 00"
     assert put(d, 0x64, 0x09, 0x00, "01 00") == 0
     assert get(d, 1, 1, 9) == "02 00"
+    assert d.flush_saves(5)                                   # written off the caller's thread
     assert load_state(path, "mx2")[15044] == 50
     again = fresh(MX2, state_path=path)                       # power cycle on the same file
     p044 = function_code_path("P044")                         # 15044 = 3AC4h
@@ -88,9 +102,11 @@ def test_connection_object():
     assert [get(d, 5, 1, a) for a in (1, 2, 3, 7, 8, 9, 0x0C)] == ["01", "01", "83", "10 00", "10 00", "00 00", "00"]
     assert get(d, 5, 1, 0x0E) == "20 04 24 47 30 03"      # produced: input 71 (P046 = 1)
     assert get(d, 5, 1, 0x10) == "20 04 24 15 30 03"      # consumed: output 21
-    assert get(d, 5, 1, 0x0D) == "06 00"
+    # Table C-8 (seed 004:2553, 2555): path lengths default to 3, the six-byte path in 16-bit words.
+    assert get(d, 5, 1, 0x0D) == "03 00" and get(d, 5, 1, 0x0F) == "03 00"
     assert put(d, 5, 1, 9, "0a 00") == 0 and get(d, 5, 1, 9) == "0a 00"
     assert put(d, 5, 1, 0x0E, "20 04 24 99 30 03") == 0 and d.default_pair == (21, 153)
+    assert put(d, 5, 1, 0x0E, "20 04 24 96") == 0 and get(d, 5, 1, 0x0D) == "02 00"   # no attribute: 2 words
     assert put(d, 5, 1, 0x0E, "20 04 24 15 30 03") == 0x09   # 21 is an output
     assert put(d, 5, 1, 1, "02") == 0x0E
     assert request(d, GET, 5, 2, 1).general_status == 0x16
@@ -212,8 +228,21 @@ def test_force_fault_examples_2_and_3():
     assert get(d, 0x29, 1, 0x12) == "01"                     # Force Status
     put(d, 0x29, 1, 0x11, "00")
     put(d, 0x29, 1, 0x0C, "00")
-    assert put(d, 0x29, 1, 0x0C, "01") == 0                  # Fault Rst on the rising edge
+    assert put(d, 0x29, 1, 0x0C, "01") == 0                  # Fault Rst
     assert get(d, 0x29, 1, 0x0A) == "00" and get(d, 0x29, 1, 0x12) == "00"
+
+
+def test_fault_rst_resets_whenever_written_to_1():
+    # Table D-4 (seed 004:2708): Fault Rst "Reset fault / trip state of inverter when written to 1";
+    # Force Fault, in the same table, is "on rising edge". A 1 written while it reads 1 resets too.
+    d = fresh(MX2)
+    d.inject_trip(5)
+    assert put(d, 0x29, 1, 0x0C, "01") == 0 and get(d, 0x29, 1, 0x0A) == "00"
+    d.inject_trip(5)
+    assert get(d, 0x29, 1, 0x0C) == "01" and get(d, 0x29, 1, 0x0A) == "01"
+    assert put(d, 0x29, 1, 0x0C, "01") == 0 and get(d, 0x29, 1, 0x0A) == "00"
+    d.inject_trip(5)
+    assert put(d, 0x29, 1, 0x0C, "00") == 0 and get(d, 0x29, 1, 0x0A) == "01"   # 0 resets nothing
 
 
 def test_net_fault_and_idle_modes():
@@ -319,6 +348,8 @@ def test_error_codes_of_table_e5():
         "0E attribute not settable": put(d, 0x64, 0x10, 0x07, "00 00"),
         "13 not enough data": put(d, 0x64, 0x11, 0x03, "2c 01"),
         "14 attribute not supported": request(d, GET, 0x65, 0x00, 0x03).general_status,
+        "14 no parameter A999": request(d, GET, 0x65, 0x03, 0xE7).general_status,   # Table E-3 range, no A999
+        "16 no function group": request(d, GET, 0x65, 0x10, 0x01).general_status,   # 4097: between d and F
         "14 no Modbus register": request(d, GET, 0x64, 0x10, 0xFF).general_status,
         "14 no attribute": request(d, GET, 0x29, 1, 0x99).general_status,
         "15 too much data": put(d, 0x64, 0x12, 0x04, "58 02 00 00"),
@@ -328,7 +359,8 @@ def test_error_codes_of_table_e5():
     }
     assert status == {"08 service not supported": 0x08, "08 on 0x29": 0x08, "09 invalid attribute value": 0x09,
                       "0E attribute not settable": 0x0E, "13 not enough data": 0x13,
-                      "14 attribute not supported": 0x14, "14 no Modbus register": 0x14, "14 no attribute": 0x14,
+                      "14 attribute not supported": 0x14, "14 no parameter A999": 0x14, "16 no function group": 0x16,
+                      "14 no Modbus register": 0x14, "14 no attribute": 0x14,
                       "15 too much data": 0x15, "16 object does not exist": 0x16, "16 no instance": 0x16,
                       "20 invalid parameter": 0x20}
     put(d, 0x29, 1, 5, "01")

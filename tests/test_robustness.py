@@ -34,6 +34,7 @@ from hypothesis import strategies as st
 
 from cipstack.adapter import Adapter, AdapterSettings
 from cipstack.scanner import SyncScanner
+from tests.waiting import wait_for
 
 T = TypeVar("T")
 
@@ -1227,12 +1228,7 @@ def test_random_udp_datagrams(target: RunningAdapter) -> None:
 
 # -- memory bounds ---------------------------------------------------------------------------------------------------
 def _wait_for(condition: Callable[[], bool], timeout: float = 2.0) -> bool:
-    deadline = time.monotonic() + timeout
-    while time.monotonic() < deadline:
-        if condition():
-            return True
-        time.sleep(0.01)
-    return condition()
+    return wait_for(condition, timeout)
 
 
 def test_huge_announced_length_is_refused_at_once(target: RunningAdapter) -> None:

@@ -281,7 +281,7 @@ def test_state_file_with_values_the_drive_cannot_hold(path: Path, address: int, 
 
 def test_parameter_store_is_the_drive_memory(path: Path) -> None:
     store = ParameterStore(path, "acg", "ACG-ET2")
-    drive = AcgDrive(store)
+    drive = AcgDrive(store.load(), on_save=store.save)
     drive.write(ACC, 120, 0)
     drive.write(SAVE, 1, 0)
     assert store.load() == drive.saved_parameters

@@ -14,7 +14,7 @@ from typing import Any
 
 import construct as cs
 
-from ..cip.types import USINT, CipType, IntegerType
+from ..cip.types import USINT, CipType
 
 
 @dataclass(frozen=True)
@@ -164,7 +164,3 @@ class AssemblySchema:
 
     def __repr__(self) -> str:
         return f"AssemblySchema({self.instance}, {self.name!r}, {self.size} bytes)"
-
-
-def is_signed(f: AssemblyField) -> bool:
-    return isinstance(f.type, IntegerType) and f.type.signed

@@ -16,7 +16,7 @@ paths, and the packed form are encoded and decoded.
 from __future__ import annotations
 
 import struct
-from collections.abc import Iterable, Sequence
+from collections.abc import Iterable
 from dataclasses import dataclass
 from enum import IntEnum
 
@@ -280,18 +280,3 @@ def parse_application_path(data: bytes) -> ApplicationPath:
         values.get(LogicalType.ATTRIBUTE_ID),
         values.get(LogicalType.MEMBER_ID),
     )
-
-
-def format_path(segments: Sequence[Segment]) -> str:
-    """Human-readable rendering for logs and the command line."""
-    parts = []
-    for s in segments:
-        if isinstance(s, LogicalSegment):
-            parts.append(f"{s.kind.name.lower()}=0x{s.value:X}")
-        elif isinstance(s, PortSegment):
-            parts.append(f"port={s.port},link={s.link.hex()}")
-        elif isinstance(s, ElectronicKey):
-            parts.append(f"key={s.vendor_id}/{s.device_type}/{s.product_code}/{s.major_revision}.{s.minor_revision}")
-        else:
-            parts.append(f"data={s.data.hex()}")
-    return " ".join(parts)

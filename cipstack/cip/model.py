@@ -137,9 +137,6 @@ class Instance:
         self.values = values
 
 
-ServiceHandler = Callable[["CipObject", Instance | None, ApplicationPath, MessageRouterRequest,
-                           "RequestContext"], bytes]
-
 _UINT_PAIR = struct.Struct("<HH")
 
 
@@ -415,15 +412,11 @@ def attribute_key(spec: AttributeSpec) -> str:
     return "_".join(part for part in "".join(out).split("_") if part)
 
 
-def declare_attributes(*specs: AttributeSpec) -> tuple[AttributeSpec, ...]:
-    return tuple(sorted(specs, key=lambda a: a.id))
-
-
 def services(*codes: int) -> frozenset[int]:
     return frozenset(codes)
 
 
 __all__ = [
     "Access", "AttributeSpec", "Binding", "CipObject", "ClassSpec", "Instance",
-    "attribute_key", "declare_attributes", "services",
+    "attribute_key", "services",
 ]

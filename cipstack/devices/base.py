@@ -20,6 +20,7 @@ from ..objects.assembly import AssemblyObject
 from ..objects.identity import ExtendedDeviceStatus, IdentityInfo, IdentityObject, IdentityStatus
 from ..objects.message_router import MessageRouterObject
 from ..objects.tcpip import EthernetLinkObject, NetworkInterface, TcpIpObject
+from .state import StateWriter
 
 log = logging.getLogger(__name__)
 
@@ -106,6 +107,19 @@ class Device:
     def status_fields(self) -> dict[str, object] | None:
         """The state ``status_line`` shows, field by field (``cipstack drive status --json``), or None."""
         return None
+
+    # -- saved parameters -------------------------------------------------------------------------
+    #: Where the device's saves are written off the event loop (``state.StateWriter``), or None.
+    saves: StateWriter | None = field(default=None, kw_only=True)
+
+    def flush_saves(self, timeout: float | None = None) -> bool:
+        """Wait until the saves handed to the state file are written (or failed); False on timeout."""
+        return self.saves.flush(timeout) if self.saves is not None else True
+
+    def close(self) -> None:
+        """Write the pending saves and stop the state writer: the shell calls it when it stops."""
+        if self.saves is not None:
+            self.saves.close()
 
     # -- time -----------------------------------------------------------------------------------
     def advance(self, now: float) -> None:

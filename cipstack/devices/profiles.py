@@ -88,7 +88,7 @@ def _omron(family: str, default_model: str) -> Callable[[NetworkInterface, Devic
 def _omron_catalog(default_model: str) -> Callable[[], Catalog]:
     def catalog() -> Catalog:
         from .omron.device import build_omron_device
-        from .omron.objects import FUNCTION_CODE, MODBUS_REGISTER, register_attribute
+        from .omron.register_objects import FUNCTION_CODE, MODBUS_REGISTER, register_attribute
 
         device = build_omron_device(default_model)
         registers = device.inverter.registers

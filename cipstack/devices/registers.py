@@ -36,6 +36,8 @@ class RegisterRefusal(Enum):
     READ_ONLY = "read-only register"
     OUT_OF_RANGE = "value out of range"
     NOT_WHILE_RUNNING = "not writable while running"
+    #: A save the state file could not take (read-only directory, full disk): nothing saved.
+    SAVE_FAILED = "parameters not saved"
 
 
 class RegisterError(Exception):

@@ -11,20 +11,33 @@ The file is JSON::
      "parameters": {"0x1F01": 50, "0x1F03": 4}}
 
 It is written atomically (a temporary file in the same directory, fsync, then ``os.replace``),
-so a crash leaves either the old file or the new one. A file that is truncated, corrupt, of
-another format or version, or of another drive family raises ``StateFileError`` with a one-line
-message: an emulated drive never falls back silently to its factory values.
+so a crash leaves either the old file or the new one; the temporary files a killed save leaves
+behind are removed at the next start (``ParameterStore.load``). A file that is truncated, corrupt,
+too deep or too large to decode, of another format or version, or of another drive family raises
+``StateFileError`` with a one-line message naming the file: an emulated drive never falls back
+silently to its factory values.
+
+A drive model does no file I/O: it hands each save to its shell, and a running emulator writes
+it with a ``StateWriter``, on a thread of its own (never on the event loop's thread), coalescing
+back-to-back saves. A write that fails (a read-only directory, a full disk) keeps the old file,
+logs one line naming the file and the reason, and refuses the save to the client that asked.
 """
 
 from __future__ import annotations
 
 import contextlib
+import glob
 import json
+import logging
 import os
 import re
 import tempfile
+import threading
 from collections.abc import Mapping
+from concurrent.futures import Future
 from pathlib import Path
+
+log = logging.getLogger(__name__)
 
 STATE_FORMAT = "cipstack.drive-state"
 STATE_VERSION = 1
@@ -75,6 +88,10 @@ def decode_state(text: str, family: str, *, origin: str = "state file") -> dict[
     except json.JSONDecodeError as exc:
         raise StateFileError(f"{origin}: not valid JSON, truncated or corrupt ({exc.msg} at line {exc.lineno}, "
                              f"column {exc.colno})") from None
+    except RecursionError:
+        raise StateFileError(f"{origin}: nested too deeply to be a state file, corrupt") from None
+    except ValueError as exc:   # e.g. an integer of more digits than Python converts (4300)
+        raise StateFileError(f"{origin}: corrupt ({_one_line(exc)})") from None
     if not isinstance(document, dict) or document.get("format") != STATE_FORMAT:
         raise StateFileError(f"{origin}: not a cipstack drive state file (no \"format\": \"{STATE_FORMAT}\")")
     version = document.get("version")
@@ -93,6 +110,10 @@ def decode_state(text: str, family: str, *, origin: str = "state file") -> dict[
             raise StateFileError(f"{origin}: malformed parameter entry {key!r}: {value!r}")
         values[int(key, 16)] = value
     return values
+
+
+def _one_line(exc: BaseException) -> str:
+    return " ".join(str(exc).split())
 
 
 def load_state(path: str | os.PathLike[str], family: str) -> dict[int, int]:
@@ -132,6 +153,22 @@ def save_state(path: str | os.PathLike[str], family: str, model: str, values: Ma
     _fsync_directory(path.parent)
 
 
+def remove_stale_temporaries(path: str | os.PathLike[str]) -> list[Path]:
+    """Remove the temporary files of saves of ``path`` that never finished (a killed process);
+    the ones that could be removed are returned. Call it at start, before any save of ``path``."""
+    path = Path(path)
+    removed = []
+    try:
+        candidates = list(path.parent.glob(f".{glob.escape(path.name)}.*.tmp"))
+    except OSError:
+        return removed
+    for candidate in candidates:
+        with contextlib.suppress(OSError):
+            candidate.unlink()
+            removed.append(candidate)
+    return removed
+
+
 def _fsync_directory(directory: Path) -> None:
     # The rename is durable once the directory entry is; not every platform can open a directory.
     try:
@@ -155,10 +192,125 @@ class ParameterStore:
         self.model = model
 
     def load(self) -> dict[int, int]:
+        """The saved values, at start: temporary files of saves a killed process left are removed first."""
+        removed = remove_stale_temporaries(self.path)
+        if removed:
+            log.info("%s: removed %d temporary file(s) of unfinished saves", self.path, len(removed))
         return load_state(self.path, self.family)
 
     def save(self, values: Mapping[int, int]) -> None:
-        save_state(self.path, self.family, self.model, values)
+        """Write ``values`` now, on the caller's thread (a ``StateWriter`` calls it off the event loop).
+        A failure raises ``StateFileError`` with one line naming the file; the file keeps its old values."""
+        try:
+            save_state(self.path, self.family, self.model, values)
+        except (OSError, ValueError) as exc:
+            reason = exc.strerror if isinstance(exc, OSError) and exc.strerror else _one_line(exc)
+            raise StateFileError(f"{self.path}: parameters not saved ({reason}); "
+                                 f"the file keeps the ones saved before") from None
 
     def __repr__(self) -> str:
         return f"ParameterStore({str(self.path)!r}, family={self.family!r}, model={self.model!r})"
+
+
+class StateWriter:
+    """Writes the saves of one ``ParameterStore`` on a thread of its own.
+
+    ``submit`` returns at once with a ``Future`` of the write. Saves coalesce: while one is being
+    written, the saves that follow replace each other and only the latest is written next, so a
+    save storm costs at most two writes in flight and never blocks the caller. ``error`` is the
+    last write's failure (None once a write succeeds): a shell refuses a save while it is set.
+    """
+
+    def __init__(self, store: ParameterStore, written: Mapping[int, int] | None = None) -> None:
+        """``written``: what the file holds now (what ``store.load()`` returned at start)."""
+        self.store = store
+        self.error: StateFileError | None = None
+        self._written: dict[int, int] = dict(written or {})
+        #: Saves submitted and files written (the difference: the saves coalesced away).
+        self.submitted = 0
+        self.written = 0
+        self.last: Future[None] | None = None
+        self._condition = threading.Condition()
+        self._pending: dict[int, int] | None = None
+        self._waiters: list[Future[None]] = []
+        self._busy = False
+        self._closed = False
+        self._thread: threading.Thread | None = None
+
+    @property
+    def path(self) -> Path:
+        return self.store.path
+
+    def submit(self, values: Mapping[int, int]) -> Future[None]:
+        """Have ``values`` written; the latest values submitted are the ones the file ends with."""
+        future: Future[None] = Future()
+        with self._condition:
+            if self._closed:
+                raise StateFileError(f"{self.path}: parameters not saved (the emulator is stopping)")
+            self._pending = dict(values)
+            self._waiters.append(future)
+            self.submitted += 1
+            self.last = future
+            if self._thread is None:
+                self._thread = threading.Thread(target=self._run, name=f"state writer {self.path.name}",
+                                                daemon=True)
+                self._thread.start()
+            self._condition.notify_all()
+        return future
+
+    def request(self, values: Mapping[int, int]) -> Future[None]:
+        """A drive's save: submitted, or refused with the last failure (``StateFileError``) while
+        the file is known not to take a write. A refused save is not written; the file is written
+        again with what it already holds instead, to find out whether it takes writes again."""
+        with self._condition:
+            error = self.error
+        if error is not None:
+            self.submit(self._written)
+            raise error
+        return self.submit(values)
+
+    def _run(self) -> None:
+        while True:
+            with self._condition:
+                while self._pending is None and not self._closed:
+                    self._condition.wait()
+                if self._pending is None:
+                    return
+                values, waiters = self._pending, self._waiters
+                self._pending, self._waiters = None, []
+                self._busy = True
+            error: StateFileError | None = None
+            try:
+                self.store.save(values)
+            except StateFileError as exc:
+                error = exc
+                log.error("%s", exc)
+            except Exception as exc:   # a bug must not kill the writer: one line, the file as it was
+                error = StateFileError(f"{self.path}: parameters not saved ({_one_line(exc)})")
+                log.error("%s", error)
+            with self._condition:
+                self._busy = False
+                self.error = error
+                self.written += 1
+                if error is None:
+                    self._written = values
+                self._condition.notify_all()
+            for waiter in waiters:
+                if error is None:
+                    waiter.set_result(None)
+                else:
+                    waiter.set_exception(error)
+
+    def flush(self, timeout: float | None = None) -> bool:
+        """Wait until every save submitted so far is written (or has failed); False on timeout."""
+        with self._condition:
+            return self._condition.wait_for(lambda: self._pending is None and not self._busy, timeout)
+
+    def close(self, timeout: float | None = 10.0) -> None:
+        """Write what is pending, then stop the thread."""
+        with self._condition:
+            self._closed = True
+            self._condition.notify_all()
+            thread = self._thread
+        if thread is not None:
+            thread.join(timeout)

@@ -132,7 +132,6 @@ _ASSEMBLY_HEAD_KINDS: tuple[frozenset[FieldKind], ...] = (
 
 _PARAM = re.compile(r"Param([0-9]+)")
 _ENUM = re.compile(r"Enum([0-9]+)")
-_ASSEM = re.compile(r"Assem[0-9]+")
 _CONNECTION = re.compile(r"Connection[0-9]+")
 _GROUP = re.compile(r"Group[0-9]+")
 _PORT = re.compile(r"Port[0-9]+")

@@ -245,8 +245,3 @@ class UnconnectedSendRequest:
         pad = b"\x00" if len(self.message) % 2 else b""
         return (_US_HEAD.pack(self.priority_tick, self.timeout_ticks, len(self.message)) + self.message + pad
                 + bytes((len(self.route_path) // 2, 0)) + self.route_path)
-
-
-def ticks_to_ms(priority_tick: int, timeout_ticks: int) -> int:
-    """Unconnected request timeout: timeout ticks x 2^(tick time in the low nibble) ms."""
-    return timeout_ticks << (priority_tick & 0x0F)

@@ -7,7 +7,9 @@ fixture starts is stopped by its PID.
 
 from __future__ import annotations
 
+import ast
 import os
+import re
 import signal
 import socket
 import subprocess
@@ -16,6 +18,7 @@ import time
 from collections.abc import Iterator, Sequence
 from dataclasses import dataclass
 from pathlib import Path
+from typing import Any
 
 import pytest
 
@@ -40,6 +43,24 @@ IDENTITY = {
 
 def python_module(module: str, *args: str) -> list[str]:
     return [sys.executable, "-m", module, *args]
+
+
+#: One result line of cpppo's get_attribute, e.g. ``...:   0: Single G_A_S      @0x002A/1/7 == [132, 3]``.
+CPPPO_RESULT_LINE = re.compile(r":\s+(\d+): (?:Single|Multi\.) (G_A_S|S_A_S|G_A_A)\s+(@\S+) == (.*)$")
+CPPPO_TIMEOUT = 30.0
+
+
+def cpppo_get_attribute(address: str, *arguments: str) -> tuple[int, list[tuple[str, str, Any]], str]:
+    """Run cpppo's get_attribute against ``address`` with options and tags; returns its exit status,
+    the (operation, path, value) of each result line, and its whole output."""
+    result = subprocess.run(python_module("cpppo.server.enip.get_attribute", "-a", address, *arguments),
+                            capture_output=True, text=True, timeout=CPPPO_TIMEOUT, check=False)
+    rows = []
+    for line in result.stdout.splitlines():
+        match = CPPPO_RESULT_LINE.search(line)
+        if match:
+            rows.append((match.group(2), match.group(3), ast.literal_eval(match.group(4))))
+    return result.returncode, rows, result.stdout + result.stderr
 
 
 @dataclass

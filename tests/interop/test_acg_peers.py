@@ -4,11 +4,8 @@ across a restart of the emulator process on the same state file."""
 
 from __future__ import annotations
 
-import ast
-import re
 import signal
 import struct
-import subprocess
 import sys
 import textwrap
 import time
@@ -23,7 +20,7 @@ from pycomm3.cip.status_info import SERVICE_STATUS
 
 from cipstack.devices.acg.registers import ACG_REGISTERS, CLASS_64_INSTANCES
 
-from .conftest import HOST, IDENTITY, PeerProcess, free_port, python_module, start_peer
+from .conftest import HOST, IDENTITY, PeerProcess, cpppo_get_attribute, free_port, start_peer
 
 pytestmark = pytest.mark.interop
 
@@ -45,9 +42,6 @@ EMULATOR = textwrap.dedent("""\
     device = build_acg_device(NetworkInterface(ip_address="127.0.0.1", mac=DEFAULT_MAC), state_path=state)
     run_precise(Adapter(AdapterSettings(host="127.0.0.1", port=port, io_port=0), device=device).serve_forever())
 """)
-
-#: One result line of cpppo's get_attribute, e.g. ``...:   0: Single G_A_S      @0x002A/1/7 == [132, 3]``.
-RESULT_LINE = re.compile(r":\s+(\d+): (?:Single|Multi\.) (G_A_S|S_A_S)\s+(@\S+) == (.*)$")
 
 
 def start_emulator(directory: Path, state: Path, name: str) -> PeerProcess:
@@ -107,14 +101,7 @@ def write_registers(drv: CIPDriver, values: dict[int, int]) -> None:
 
 
 def cpppo(address: str, *tags: str) -> tuple[int, list[tuple[str, str, Any]], str]:
-    result = subprocess.run(python_module("cpppo.server.enip.get_attribute", "-S", "-a", address, *tags),
-                            capture_output=True, text=True, timeout=30, check=False)
-    rows = []
-    for line in result.stdout.splitlines():
-        match = RESULT_LINE.search(line)
-        if match:
-            rows.append((match.group(2), match.group(3), ast.literal_eval(match.group(4))))
-    return result.returncode, rows, result.stdout + result.stderr
+    return cpppo_get_attribute(address, "-S", *tags)
 
 
 def test_pycomm3_identity(emulator: PeerProcess, driver: CIPDriver) -> None:

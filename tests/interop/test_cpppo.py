@@ -17,14 +17,14 @@ from cipstack.cip.types import INT
 from cipstack.eip.originator import EncapsulationClient, EncapsulationStatusError, discover, parse_host
 from cipstack.scanner import SyncScanner, backplane_route
 
-from .conftest import IDENTITY, PeerProcess, python_module
+from .conftest import CPPPO_RESULT_LINE as RESULT_LINE
+from .conftest import IDENTITY, PeerProcess, cpppo_get_attribute, python_module
 
 pytestmark = pytest.mark.interop
 
 CLI_TIMEOUT = 30.0
 
 #: One result line of cpppo's get_attribute, e.g. ``...:   0: Single G_A_S      @0x0001/1/1 == [3, 1]``.
-RESULT_LINE = re.compile(r":\s+(\d+): (?:Single|Multi\.) (G_A_S|S_A_S|G_A_A)\s+(@\S+) == (.*)$")
 #: One decoded field of cpppo's list_services output, e.g. ``'enip.status':    0,``.
 FIELD_LINE = re.compile(r"^\s*'([\w.\[\]]+)':\s+(.*?),?\s*$")
 
@@ -46,14 +46,7 @@ def run_tool(module: str, *args: str) -> subprocess.CompletedProcess[str]:
 
 def get_attribute(address: str, *arguments: str, simple: bool = False) -> tuple[int, list[tuple[str, str, Any]], str]:
     """Run cpppo's get_attribute with tags (and options); returns (exit status, [(operation, path, value)], output)."""
-    options = ["-S"] if simple else []
-    result = run_tool("cpppo.server.enip.get_attribute", *options, "-a", address, *arguments)
-    rows = []
-    for line in result.stdout.splitlines():
-        match = RESULT_LINE.search(line)
-        if match:
-            rows.append((match.group(2), match.group(3), ast.literal_eval(match.group(4))))
-    return result.returncode, rows, result.stdout + result.stderr
+    return cpppo_get_attribute(address, *(["-S"] if simple else []), *arguments)
 
 
 def list_services(address: str, udp: bool) -> tuple[list[dict[str, Any]], str]:

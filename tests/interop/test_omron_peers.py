@@ -4,12 +4,9 @@ routed through the CompoNet gateway (port 2, link = node address)."""
 
 from __future__ import annotations
 
-import ast
 import json
-import re
 import signal
 import struct
-import subprocess
 import sys
 import textwrap
 from collections.abc import Iterator
@@ -20,16 +17,13 @@ import pytest
 from pycomm3 import CIPDriver, Services
 from pycomm3.cip.data_types import UDINT, UINT, USINT
 
-from .conftest import HOST, PeerProcess, free_port, python_module, start_peer
+from .conftest import HOST, PeerProcess, cpppo_get_attribute, free_port, start_peer
 
 pytestmark = pytest.mark.interop
 
-CLI_TIMEOUT = 30.0
 GATEWAY_PORT = 2
 MX2_NODE = 3
 RX_NODE = 5
-#: One result line of cpppo's get_attribute, e.g. ``...:   0: Single G_A_S      @0x0029/1/101 == [62]``.
-RESULT_LINE = re.compile(r":\s+(\d+): (?:Single|Multi\.) (G_A_S|S_A_S)\s+(@\S+) == (.*)$")
 
 EMULATOR = textwrap.dedent("""
     import sys
@@ -155,15 +149,8 @@ def test_pycomm3_through_the_gateway(gateway: PeerProcess, node: int) -> None:
 def get_attribute(address: str, *tags: str, route: tuple[int, int] | None = None) -> list[tuple[str, str, Any]]:
     """cpppo's get_attribute: ``-S`` for direct requests, else Unconnected_Send with ``--route-path``."""
     options = ["-S"] if route is None else ["--route-path", json.dumps([{"port": route[0], "link": route[1]}])]
-    result = subprocess.run(python_module("cpppo.server.enip.get_attribute", *options, "-a", address, *tags),
-                            capture_output=True, text=True, timeout=CLI_TIMEOUT, check=False)
-    output = result.stdout + result.stderr
-    assert result.returncode == 0, output
-    rows = []
-    for line in result.stdout.splitlines():
-        match = RESULT_LINE.search(line)
-        if match:
-            rows.append((match.group(2), match.group(3), ast.literal_eval(match.group(4))))
+    returncode, rows, output = cpppo_get_attribute(address, *options, *tags)
+    assert returncode == 0, output
     assert len(rows) == len(tags), output
     return rows
 

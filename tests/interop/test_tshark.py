@@ -40,6 +40,8 @@ import time
 import traceback
 from pathlib import Path
 
+from waiting import wait_for  # tests/waiting.py, copied next to this script
+
 OUT = Path(sys.argv[1])
 PY = sys.executable
 PORT = 44818
@@ -51,15 +53,6 @@ seen = {"errors": []}
 def log_text(name):
     path = OUT / f"{name}.log"
     return path.read_text(errors="replace") if path.exists() else ""
-
-
-def wait_for(predicate, timeout, what):
-    deadline = time.monotonic() + timeout
-    while time.monotonic() < deadline:
-        if predicate():
-            return
-        time.sleep(0.05)
-    raise RuntimeError(f"timed out waiting for {what}")
 
 
 def bound(table, host, state):
@@ -309,6 +302,7 @@ def exchange(tmp_path_factory: pytest.TempPathFactory) -> tuple[Path, dict[str, 
     out = tmp_path_factory.mktemp("tshark")
     script = out / "exchange.py"
     script.write_text(HELPER)
+    shutil.copy(Path(__file__).parents[1] / "waiting.py", out / "waiting.py")
     command = " ".join(shlex.quote(str(part)) for part in (sys.executable, script, out))
     inner = f"ip link set lo up && exec {command}"
     result = subprocess.run(["unshare", "-n", "sh", "-c", inner], capture_output=True, text=True,

@@ -23,6 +23,8 @@ HELPER = r'''
 import asyncio, json, os, signal, socket, subprocess, sys, time, traceback
 from pathlib import Path
 
+from waiting import wait_for  # tests/waiting.py, copied next to this script
+
 OUT = Path(sys.argv[1])
 PY = sys.executable
 ADAPTER = "127.0.0.2"
@@ -33,15 +35,6 @@ def listening():
     local = f"{socket.inet_aton(ADAPTER)[::-1].hex().upper()}:{44818:04X}"
     with open("/proc/net/tcp") as lines:
         return any(f[1] == local and f[3] == "0A" for f in (line.split() for line in lines))
-
-
-def wait_for(predicate, timeout, what):
-    deadline = time.monotonic() + timeout
-    while time.monotonic() < deadline:
-        if predicate():
-            return
-        time.sleep(0.05)
-    raise RuntimeError(f"timed out waiting for {what}")
 
 
 async def ours():
@@ -157,6 +150,7 @@ def capture(tmp_path_factory: pytest.TempPathFactory) -> tuple[Path, dict[str, A
     out = tmp_path_factory.mktemp("tshark-io")
     script = out / "exchange.py"
     script.write_text(HELPER)
+    shutil.copy(Path(__file__).parents[1] / "waiting.py", out / "waiting.py")
     command = " ".join(shlex.quote(str(part)) for part in (sys.executable, script, out))
     inner = f"ip link set lo up && exec {command}"
     result = subprocess.run(["unshare", "-n", "sh", "-c", inner], capture_output=True, text=True, timeout=120,

@@ -14,18 +14,20 @@ and assemblies (seed 000, appendix B).
 * Reset (Identity service 0x05): type 0 is a power cycle (values written but not saved are lost,
   saved ones kept, seed 001 "Saving Parameters Defined by Communication"); type 1 returns to the
   factory values and forgets the saved ones.
+* Saves: the drive hands each save to the device; with a state file a ``StateWriter`` writes it
+  off the event loop's thread, coalescing back-to-back saves (``flush_saves`` waits for them).
 """
 
 from __future__ import annotations
 
 import logging
 import struct
-import time
-from collections.abc import Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
 
 from ...assemblies.acg import (
+    HZ_INPUTS,
+    HZ_OUTPUTS,
     INPUT_INSTANCES,
     OUTPUT_INSTANCES,
     AcgAssemblies,
@@ -41,7 +43,7 @@ from ...objects.tcpip import NetworkInterface
 from ..base import Device, DeviceLimits
 from ..profiles import DEFAULT_MAC, serial_from_mac
 from ..registers import Register, RegisterError
-from ..state import ParameterStore
+from ..state import ParameterStore, StateWriter
 from . import registers as reg
 from .drive import FAMILY, MODEL, AcgDrive, Trip
 from .objects import (
@@ -63,20 +65,6 @@ log = logging.getLogger(__name__)
 RPI_MIN_US = 1_000
 
 
-class MemoryParameterStore(ParameterStore):
-    """Saved parameters that live as long as the process (an emulator run without a state file)."""
-
-    def __init__(self) -> None:
-        super().__init__("<memory>", FAMILY, MODEL)
-        self._values: dict[int, int] = {}
-
-    def load(self) -> dict[int, int]:
-        return dict(self._values)
-
-    def save(self, values: Mapping[int, int]) -> None:
-        self._values = dict(values)
-
-
 #: Register addresses of CM.51-CM.58 (Para Control-n) and CM.31-CM.38 (Para Status-n).
 _CONTROL_ADDRESSES = tuple(reg.ACG_REGISTERS.by_code(f"CM.{51 + i}").address for i in range(8))
 _STATUS_ADDRESSES = tuple(reg.ACG_REGISTERS.by_code(f"CM.{31 + i}").address for i in range(8))
@@ -89,9 +77,14 @@ def _words(addresses: tuple[int, ...]) -> list[Register | None]:
 @dataclass
 class AcgDevice(Device):
     drive: AcgDrive = field(default_factory=AcgDrive)
+    #: The drive's power-up instant is the first time the shell advances the device to (the device
+    #: was built before the shell's clock was known).
+    power_up_on_first_advance: bool = field(default=False, kw_only=True)
 
     def __post_init__(self) -> None:
         super().__post_init__()
+        if self.saves is not None:
+            self.drive.on_save = self.saves.request
         #: The latest time the adapter has moved the device to (loop time, seconds).
         self._now = self.drive.time
         # The ACG's Identity replaces the generic one: its services, status bits and state.
@@ -157,7 +150,7 @@ class AcgDevice(Device):
     def _produce_speed(self, schema: AssemblySchema) -> bytes:
         """Inputs 70/71/110/111 (seed 000, input instances and the bits table after them)."""
         drive = self.drive
-        hz = schema.instance in (110, 111)
+        hz = schema.instance in HZ_INPUTS
         values = {
             "faulted": drive.faulted,                          # 0x29 attribute 10
             "running_forward": drive.running_forward,          # 0x29 attribute 7
@@ -196,7 +189,7 @@ class AcgDevice(Device):
         drive.set_run_command(values["run_forward"], values.get("run_reverse", False), now)
         drive.set_fault_reset(values["fault_reset"], now)
         try:
-            if instance in (100, 101):
+            if instance in HZ_OUTPUTS:
                 drive.set_speed_reference(values["speed_reference"], now)
             else:
                 drive.set_speed_reference_rpm(values["speed_reference"], now)
@@ -269,6 +262,9 @@ class AcgDevice(Device):
         return max(self._now, self.drive.time)
 
     def advance(self, now: float) -> None:
+        if self.power_up_on_first_advance:
+            self.power_up_on_first_advance = False
+            self.drive.power_up_at(now)
         self._now = max(now, self._now, self.drive.time)
         self.drive.advance(self._now)
 
@@ -277,17 +273,30 @@ class AcgDevice(Device):
 
     def reset(self, reset_type: int) -> None:
         """Identity Reset: 0 power cycle (unsaved values lost), 1 factory defaults (saved ones too)."""
-        store = self.drive.store
-        if reset_type == 1 and store is not None:
-            store.save({})
-        self.drive = AcgDrive(store, now=self.now)
+        old = self.drive
+        saved = old.saved_parameters
+        if reset_type == 1:
+            if old.on_save is not None:
+                old.on_save({})   # a refused save (StateFileError) refuses the reset
+            saved = {}
+        self.drive = AcgDrive(saved, now=self.now, password=old.password, on_save=old.on_save)
         self._last_words.clear()
         self._update_io_status()
 
     def inject_trip(self, code: Trip | int | str) -> Trip:
         """Trip the drive as if ``code`` occurred: a ``Trip``, its name ("OverHeat", "OVER_HEAT") or a
-        fault code of the Drive Fault Codes table (0x4200 or "0x4200")."""
-        return self.drive.inject_trip(parse_trip(code), self.now)
+        fault code of the Drive Fault Codes table (0x4200 or "0x4200").
+
+        A drive already tripped keeps its trip: class 0x29 attribute 13 holds one Drive Fault Code,
+        and a trip is left only by a Fault Reset (attribute 12, seed 000:654-656) or, for a level
+        type, by its cause going away. So a second trip is refused (``ValueError`` naming the
+        present one), and nothing changes."""
+        trip = parse_trip(code)
+        present = self.drive.trip
+        if present is not None:
+            raise ValueError(f"the drive is already tripped: {present.label} (fault code 0x{present.fault_code:04X}); "
+                             f"it keeps that trip until a Fault Reset, so {trip.label} is not taken")
+        return self.drive.inject_trip(trip, self.now)
 
     def trip_codes(self) -> str:
         """The fault codes of the Drive Fault Codes table (seed 000), or a trip's name."""
@@ -349,16 +358,21 @@ def build_acg_device(interface: NetworkInterface | None = None, limits: DeviceLi
                      state_path: Path | None = None, *, now: float | None = None) -> AcgDevice:
     """The ACG drive with its ACG-ET2 card. ``state_path``: the state file that holds the saved
     parameters (None: they are kept in memory only, for the life of the process). ``now``: the
-    power-up time on the clock the adapter will advance the device with (default: the monotonic
-    clock, which asyncio's loop time follows). A corrupt or foreign state file raises
+    power-up time on the clock the device will be advanced with; None: the first time its shell
+    advances it to (the device reads no clock). A corrupt or foreign state file raises
     ``StateFileError``."""
     interface = interface or NetworkInterface(mac=DEFAULT_MAC)
-    start = time.monotonic() if now is None else now
-    store: ParameterStore = MemoryParameterStore() if state_path is None else ParameterStore(
-        state_path, FAMILY, MODEL)
-    drive = AcgDrive(store, now=start)
+    writer: StateWriter | None = None
+    if state_path is None:
+        drive = AcgDrive(now=now or 0.0)
+    else:
+        store = ParameterStore(state_path, FAMILY, MODEL)
+        saved = store.load()
+        drive = AcgDrive(saved, now=now or 0.0, origin=str(store.path))
+        writer = StateWriter(store, saved)
     info = acg_identity_info(drive, serial_from_mac(interface.mac))
-    return AcgDevice(info, interface, limits or DeviceLimits(), drive=drive)
+    return AcgDevice(info, interface, limits or DeviceLimits(), drive=drive, saves=writer,
+                     power_up_on_first_advance=now is None)
 
 
-__all__ = ["RPI_MIN_US", "AcgDevice", "MemoryParameterStore", "build_acg_device", "parse_trip"]
+__all__ = ["RPI_MIN_US", "AcgDevice", "build_acg_device", "parse_trip"]

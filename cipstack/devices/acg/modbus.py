@@ -16,15 +16,14 @@ model as EtherNet/IP.
 * Every request counts as Modbus activity: five seconds without one is a command loss (Pr.12
   after Pr.13, seed 000 "Lost command conditions by protocol").
 
-The protocol core (``ModbusTcpCore``, ``MbapBuffer``) takes bytes and the time and returns bytes;
-``ModbusTcpServer`` is its asyncio shell. pymodbus 3.16's server is not used: its supported
+The protocol core (``ModbusTcpCore``, ``MbapBuffer``, this module) takes bytes and the time and
+returns bytes; ``modbus_server.ModbusTcpServer`` is its asyncio shell. pymodbus 3.16's server is not used: its supported
 custom datastore (``SimDevice`` with an ``action``) can only return members of its ``ExcCodes``
 enum, which has no 0x20, and treats any other return value of a write as success.
 """
 
 from __future__ import annotations
 
-import asyncio
 import logging
 import struct
 from collections.abc import Callable
@@ -67,6 +66,7 @@ _REFUSAL_CODES = {
     RegisterRefusal.OUT_OF_RANGE: ExceptionCode.ILLEGAL_DATA_VALUE,
     RegisterRefusal.READ_ONLY: ExceptionCode.WRITE_PERMISSION_ERROR,
     RegisterRefusal.NOT_WHILE_RUNNING: ExceptionCode.WRITE_PERMISSION_ERROR,
+    RegisterRefusal.SAVE_FAILED: ExceptionCode.SLAVE_DEVICE_FAILURE,   # the state file took no write
 }
 
 
@@ -99,6 +99,13 @@ class ModbusTcpCore:
         pdu = self.handle_pdu(adu[MBAP_SIZE:], now)
         return MBAP.pack(transaction, 0, len(pdu) + 1, unit) + pdu
 
+    def exception_adu(self, adu: bytes, code: ExceptionCode) -> bytes:
+        """The exception reply to the request ``adu`` (e.g. 0x04 for a save the file did not take)."""
+        transaction, _protocol, _length, unit = MBAP.unpack_from(adu)
+        function = adu[MBAP_SIZE] if len(adu) > MBAP_SIZE else 0
+        self.exceptions += 1
+        return MBAP.pack(transaction, 0, 3, unit) + bytes((function | 0x80, code))
+
     def handle_pdu(self, pdu: bytes, now: float) -> bytes:
         drive = self.drive
         now = max(now, drive.time)
@@ -117,6 +124,9 @@ class ModbusTcpCore:
             return bytes((function | 0x80, ExceptionCode.SLAVE_DEVICE_FAILURE))
 
     def _serve(self, function: int, data: bytes, drive: AcgDrive, now: float) -> bytes:
+        # A PDU is exactly as long as its function says: bytes beyond it (a wrong MBAP length, or
+        # data the request does not have) refuse the request with 0x03, which the Modbus
+        # Application Protocol gives for "the implied length is incorrect".
         if function in (FunctionCode.READ_HOLDING_REGISTERS, FunctionCode.READ_INPUT_REGISTERS):
             address, count = _unpack(">HH", data)
             return self._read(drive, address, count)
@@ -125,7 +135,7 @@ class ModbusTcpCore:
             self._write(drive, address, [value], now)
             return data
         if function == FunctionCode.WRITE_MULTIPLE_REGISTERS:
-            address, count, byte_count = _unpack(">HHB", data[:5])
+            address, count, byte_count = _unpack(">HHB", data[:5])  # the values' length: _values
             values = _values(data[5:], count, byte_count)
             self._write(drive, address, values, now)
             return struct.pack(">HH", address, count)
@@ -173,10 +183,12 @@ class ModbusTcpCore:
 
 
 def _unpack(fmt: str, data: bytes) -> tuple[int, ...]:
+    """The fields of a fixed-size request, which must be exactly ``fmt`` long."""
     size = struct.calcsize(fmt)
-    if len(data) < size:
-        raise ModbusException(ExceptionCode.ILLEGAL_DATA_VALUE, "request too short")
-    return struct.unpack_from(fmt, data)
+    if len(data) != size:
+        raise ModbusException(ExceptionCode.ILLEGAL_DATA_VALUE,
+                              f"request data of {len(data)} bytes, the function takes {size}")
+    return struct.unpack(fmt, data)
 
 
 def _check_count(count: int) -> None:
@@ -213,97 +225,4 @@ class MbapBuffer:
         return frames
 
 
-class _ModbusConnection(asyncio.Protocol):
-    def __init__(self, server: ModbusTcpServer) -> None:
-        self.server = server
-        self.buffer = MbapBuffer()
-        self.transport: asyncio.Transport | None = None
-
-    def connection_made(self, transport: asyncio.BaseTransport) -> None:
-        self.transport = transport  # type: ignore[assignment]
-        self.server._transports.add(transport)  # type: ignore[arg-type]
-
-    def connection_lost(self, exc: Exception | None) -> None:
-        if self.transport is not None:
-            self.server._transports.discard(self.transport)
-
-    def data_received(self, data: bytes) -> None:
-        assert self.transport is not None
-        try:
-            frames = self.buffer.feed(data)
-        except ValueError as exc:
-            log.info("Modbus TCP connection closed: %s", exc)
-            self.transport.close()
-            return
-        for frame in frames:
-            assert self.server.loop is not None
-            reply = self.server.core.handle_adu(frame, self.server.loop.time())
-            if reply is not None:
-                self.transport.write(reply)
-        self.server.rearm()
-
-
-class ModbusTcpServer:
-    """Modbus TCP server of the emulated ACG-ET2 (port 502 on the real card; here any port, 0 =
-    chosen by the OS). ``drive``: the drive, or a function returning the present one (a device
-    replaces its drive on an Identity reset). It keeps a loop timer at the drive's next deadline,
-    so the Modbus silence timer fires even when nothing else moves the drive."""
-
-    def __init__(self, drive: AcgDrive | DriveSource, host: str = "127.0.0.1", port: int = 0) -> None:
-        self.core = ModbusTcpCore(drive)
-        self.host = host
-        self._requested_port = port
-        self._server: asyncio.AbstractServer | None = None
-        self._transports: set[asyncio.Transport] = set()
-        self._timer: asyncio.TimerHandle | None = None
-        self.loop: asyncio.AbstractEventLoop | None = None
-
-    @property
-    def port(self) -> int:
-        if self._server is None or not self._server.sockets:
-            return self._requested_port
-        return int(self._server.sockets[0].getsockname()[1])
-
-    async def start(self) -> None:
-        self.loop = asyncio.get_running_loop()
-        self._server = await self.loop.create_server(lambda: _ModbusConnection(self), self.host,
-                                                     self._requested_port)
-        log.info("Modbus TCP on %s:%d", self.host, self.port)
-
-    def rearm(self) -> None:
-        """Keep a timer at the drive's next deadline."""
-        if self._timer is not None:
-            self._timer.cancel()
-            self._timer = None
-        deadline = self.core.drive.next_deadline()
-        if deadline is not None and self.loop is not None:
-            self._timer = self.loop.call_at(deadline, self._on_timer)
-
-    def _on_timer(self) -> None:
-        self._timer = None
-        assert self.loop is not None
-        drive = self.core.drive
-        drive.advance(max(self.loop.time(), drive.time))
-        self.rearm()
-
-    async def close(self) -> None:
-        if self._timer is not None:
-            self._timer.cancel()
-            self._timer = None
-        if self._server is not None:
-            self._server.close()
-        for transport in list(self._transports):
-            transport.close()
-        if self._server is not None:
-            await self._server.wait_closed()
-            self._server = None
-
-    async def __aenter__(self) -> ModbusTcpServer:
-        await self.start()
-        return self
-
-    async def __aexit__(self, *exc: object) -> None:
-        await self.close()
-
-
-__all__ = ["MAX_WORDS", "ExceptionCode", "FunctionCode", "MbapBuffer", "ModbusTcpCore", "ModbusTcpServer"]
+__all__ = ["MAX_WORDS", "DriveSource", "ExceptionCode", "FunctionCode", "MbapBuffer", "ModbusTcpCore"]

@@ -48,6 +48,7 @@ _REFUSAL_STATUS: Mapping[RegisterRefusal, GeneralStatus] = {
     RegisterRefusal.OUT_OF_RANGE: GeneralStatus.INVALID_ATTRIBUTE_VALUE,
     RegisterRefusal.NOT_WHILE_RUNNING: GeneralStatus.DEVICE_STATE_CONFLICT,
     RegisterRefusal.NO_SUCH_REGISTER: GeneralStatus.ATTRIBUTE_NOT_SUPPORTED,
+    RegisterRefusal.SAVE_FAILED: GeneralStatus.STORE_OPERATION_FAILURE,   # the state file took no write
 }
 
 
@@ -182,8 +183,9 @@ CONTROL_SUPERVISOR_ATTRIBUTES: tuple[DriveAttribute, ...] = (
           "0: stopped, 1: forward run (Drive Run table)", lambda d, v, now: d.set_run_forward(bool(v), now)),
     _flag(4, "Reverse Run Cmd.", lambda d: d.control_supervisor.run_reverse,
           "0: stopped, 1: reverse run (Drive Run table)", lambda d, v, now: d.set_run_reverse(bool(v), now)),
-    # 5 "N/A: Configurable only with the drive parameter" (drv): readable, never settable.
-    _flag(5, "Net Control", lambda d: d.control_from_net, "configurable only with the drive parameter drv"),
+    # 5 Net Control: Access "N/A", "Configurable only with the drive parameter" (seed 000:642). N/A
+    # is the access, not a value: the card serves it neither to Get nor to Set, so it is not
+    # declared and both answer 0x14 (attribute not supported). 14 "Control From Net." reports drv.
     DriveAttribute(AttributeSpec(6, "Drive State", USINT, Access.GET, default=DriveState.READY, minimum=0, maximum=6,
                                  enum=DRIVE_STATES), lambda d: int(d.drive_state)),
     _flag(7, "Running Forward", lambda d: d.running_forward, "1: running forward"),
@@ -222,8 +224,8 @@ OUTPUT_FREQUENCY = reg.ACG_REGISTERS[0x000A]
 
 AC_DC_DRIVE_ATTRIBUTES: tuple[DriveAttribute, ...] = (
     _flag(3, "At Reference", lambda d: d.at_reference, "1: the output frequency has reached the reference"),
-    # 4 "N/A": the reference source is set with the drive parameter Frq; readable, never settable.
-    _flag(4, "Net Reference", lambda d: d.reference_from_net, "configurable only with the drive parameter Frq"),
+    # 4 Net Reference: Access "N/A" (seed 000:722), like 0x29 attribute 5: not served, 0x14 to Get
+    # and Set. The reference source is the drive parameter Frq, reported by 29 "Ref.From Network".
     DriveAttribute(AttributeSpec(6, "Drive Mode", USINT, Access.GET, default=1, minimum=0, maximum=4,
                                  enum=DRIVE_MODES), drive_mode),
     register_attribute(mirror_spec(7, "SpeedActual", OUTPUT_RPM, cip_type=INT, minimum=0, maximum=24000), OUTPUT_RPM),
@@ -289,7 +291,7 @@ class KeypadParameterObject(CipObject):
         super().__init__(KEYPAD_PARAMETERS_SPEC)
         self._drive = drive
         self._clock = clock
-        for instance in sorted(reg.CLASS_64_INSTANCES.values()):
+        for instance in sorted({*reg.CLASS_64_INSTANCES.values(), *reg.CLASS_64_ALIASES}):
             self.add_instance(instance)
 
     def parameter(self, instance: Instance, attribute: int | None) -> Register:

@@ -66,11 +66,15 @@ GROUP_BASES: Mapping[str, int] = {
 KEYPAD_GROUPS = ("dr", "bA", "Ad", "Cn", "In", "OU", "CM", "AP", "Pr", "M2", "operation")
 
 # Class 0x64 instance of each keypad group; the attribute number is the code number (seed 000,
-# "Class 0x64 (Drive Object)"). The table prints "10 (AP Group)" a second time: instance n is
-# the group at 0x1000 + n * 0x100, so 10 would be 0x1A00, which no memory map lists; it is left out.
+# "Class 0x64 (Drive Object)").
 CLASS_64_INSTANCES: Mapping[str, int] = {
     "dr": 1, "bA": 2, "Ad": 3, "Cn": 4, "In": 5, "OU": 6, "CM": 7, "AP": 8, "Pr": 11, "M2": 12,
 }
+# The table lists "10 (AP Group)" as well as "8 (AP Group)" (seed 000:763). The register map has
+# no group at 0x1A00 (seed 001:395-405 lists 0x1100-0x1800, 0x1B00 and 0x1C00), so instance 10
+# cannot be another group: it is served as the table names it, a second instance of the AP group
+# (instance 8 stays the one the EDS and the scanner name).
+CLASS_64_ALIASES: Mapping[int, str] = {10: "AP"}
 
 # Codes each group's address table lists (seed 001). Codes printed with "-" instead of an
 # address (bA.20-bA.24, Ad.83, M2.17-M2.20) have no communication address and are left out.
@@ -90,10 +94,12 @@ LISTED_CODES: Mapping[str, tuple[int, ...]] = {
     "AP": (1, *range(16, 33), *range(34, 41), 43, 44, 45),
     "Pr": (*range(4, 11), *range(12, 16), *range(17, 23), *range(25, 34), *range(40, 44), 45,
            *range(50, 60), 66, *range(77, 83), *range(86, 90), *range(91, 97)),
-    # M2.34 is printed at 0x1C12 (decimal 47186), the address of the unlisted M2.18; every other
-    # code of every group sits at base + number, so M2.34 is declared at 0x1C22.
     "M2": (*range(4, 9), *range(10, 17), *range(25, 35), 40, 41, 42),
 }
+# Codes the address table prints away from base + number. M2.34 is printed at 1C12 with the
+# decimal numbers 47186/47187 (seed 001:1477): hex and decimal agree, so this is the table's
+# address and no OCR slip; 0x1C12 is free, M2.18 having none ("-"). Served there, as printed.
+PRINTED_ADDRESSES: Mapping[str, int] = {"M2.34": 0x1C12}
 
 # Operation group, seed 001 address table: code -> address. "Fr9" in the OCR text is Frq.
 OPERATION_CODES: Mapping[str, int] = {
@@ -345,9 +351,11 @@ def _reserved_range(first: int, last: int, group: str, source: str) -> list[Regi
 
 
 def _parameter(group: str, number: int, name: str, **fields: object) -> Register:
-    """A keypad parameter of ``group`` at the group base plus its code number."""
+    """A keypad parameter of ``group`` at the group base plus its code number (or as printed)."""
     fields.setdefault("source", ADDRESS_TABLE)
-    return Register(GROUP_BASES[group] + number, f"{group}.{number}", name, group=group, **fields)  # type: ignore[arg-type]
+    code = f"{group}.{number}"
+    address = PRINTED_ADDRESSES.get(code, GROUP_BASES[group] + number)
+    return Register(address, code, name, group=group, **fields)  # type: ignore[arg-type]
 
 
 def _listed(group: str, number: int) -> Register:
@@ -391,7 +399,6 @@ FREQ_REF_SOURCE = Register(
 
 CMD_SOURCE_FIELDBUS = 4
 FREQ_REF_SOURCE_FIELDBUS = 8
-FREQ_REF_SOURCE_KEYPAD = 0
 
 _OPERATION: list[Register] = [
     TARGET_FREQUENCY, ACCEL_TIME, DECEL_TIME, CMD_SOURCE, FREQ_REF_SOURCE,
@@ -436,11 +443,15 @@ LOST_CMD_MODE = _parameter(
     source=ET2_TABLE)
 LOST_CMD_TIME = _parameter("Pr", 13, "Lost Cmd Time", default=10, minimum=1, maximum=1200, scale=0.1, unit="s",
                            source=ET2_TABLE)
-# The table prints default 0.00 and range 0.05-60.00, which excludes its own default; the text
-# says "from the start frequency to the max frequency". The register accepts 0.00 up to the
-# highest Max Freq; the drive refuses a value above the present dr.20.
-LOST_PRESET_FREQ = _parameter("Pr", 14, "Lost Preset F", default=0, minimum=0, maximum=40000, scale=0.01,
+# Seed 000:214 prints range 0.05-60.00 and default 0.00, which the range excludes; 000:257 says
+# "from the start frequency to the max frequency". The range is the table's: at most 60.00, and
+# 0.05 at least, with the table's own default 0.00 (no preset) accepted too, so a tool can write
+# the default back; 0.01-0.04 are refused (``drive.py``), and so is a value above the present
+# dr.20 Max Freq.
+LOST_PRESET_FREQ = _parameter("Pr", 14, "Lost Preset F", default=0, minimum=0, maximum=6000, scale=0.01,
                               unit="Hz", source=ET2_TABLE)
+#: Pr.14's lowest setting but the default 0.00 (seed 000:214): 0.05 Hz.
+LOST_PRESET_MINIMUM = 5
 
 _MULTI_FUNCTION_INPUTS = [
     _parameter("In", 65 + i, f"Multi-function input P{i + 1}", source="seed 001, Setting Virtual Multi-Function Input")
@@ -817,17 +828,21 @@ def register_for_code(text: str) -> Register:
 
 def class64_register(instance: int, attribute: int) -> Register | None:
     """The keypad parameter behind class 0x64 ``instance``/``attribute`` (seed 000)."""
-    for group, number in CLASS_64_INSTANCES.items():
-        if number == instance:
-            register = ACG_REGISTERS.get(GROUP_BASES[group] + attribute)
-            return register if register is not None and register.group == group else None
-    return None
+    group = CLASS_64_ALIASES.get(instance)
+    if group is None:
+        group = next((g for g, number in CLASS_64_INSTANCES.items() if number == instance), None)
+    if group is None:
+        return None
+    try:
+        return ACG_REGISTERS.by_code(f"{group}.{attribute}")   # "Identical to the ACG Manual Code number"
+    except KeyError:
+        return None
 
 
 def class64_path(register: Register) -> tuple[int, int] | None:
     """(instance, attribute) of a keypad parameter in class 0x64, or None outside its groups."""
     instance = CLASS_64_INSTANCES.get(register.group)
-    return None if instance is None else (instance, register.address - GROUP_BASES[register.group])
+    return None if instance is None else (instance, int(register.code.rsplit(".", 1)[1]))
 
 
 def modbus_rtu_number(address: int) -> int:

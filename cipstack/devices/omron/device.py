@@ -15,6 +15,7 @@ counts those saves (Table C-2) and so lives in the same non-volatile memory.
 
 from __future__ import annotations
 
+import logging
 from collections.abc import Mapping
 from dataclasses import dataclass
 from pathlib import Path
@@ -36,6 +37,8 @@ from ...assemblies.omron import (
     RPM,
     SIZES,
     SPECIAL_FAILURE,
+    SPECIAL_FAULTS,
+    SPECIAL_FUNCTION_CODES,
     SPECIAL_READ_DOUBLE,
     SPECIAL_READ_WORD,
     SPECIAL_WRITE_DOUBLE,
@@ -54,7 +57,7 @@ from ...objects.identity import IdentityInfo, IdentityStatus
 from ...objects.tcpip import NetworkInterface
 from ..base import Device, DeviceLimits
 from ..registers import RegisterError, RegisterRefusal
-from ..state import ParameterStore
+from ..state import ParameterStore, StateFileError, StateWriter
 from .inverter import Inverter, InverterModeError
 from .models import DEVICE_TYPE, REVISION, VENDOR_ID, Family, Model, model
 from .objects import (
@@ -81,6 +84,8 @@ _UNIT_OF = {SpeedUnit.CENTIHERTZ: CENTIHERTZ, SpeedUnit.DECIHERTZ: DECIHERTZ, Sp
 CONSISTENCY_KEY = 0
 #: Rotary switch settings 64-99 hand the node address to P190 (section 2-1-4).
 SWITCHES_USE_P190 = 64
+
+log = logging.getLogger(__name__)
 
 
 def omron_identity(inverter_model: Model, serial_number: int) -> IdentityInfo:
@@ -125,9 +130,15 @@ class OmronDevice(Device):
         self.store = ParameterStore(self.state_path, inverter_model.family.value.lower(), inverter_model.name) \
             if self.state_path is not None else None
         saved = dict(self.store.load()) if self.store is not None else {}
+        if self.store is not None:
+            # Saves are written off the event loop's thread (DESIGN: file I/O never runs on it).
+            self.saves = StateWriter(self.store, saved)
         consistency = saved.pop(CONSISTENCY_KEY, 0)
-        self.inverter = Inverter(inverter_model, now=0.0, saved=saved, on_save=self._saved,
-                                 consistency_value=consistency)
+        try:
+            self.inverter = Inverter(inverter_model, now=0.0, saved=saved, on_save=self._saved,
+                                     consistency_value=consistency)
+        except ValueError as exc:   # a saved value this model cannot hold: the file is named
+            raise StateFileError(f"{self.state_path}: {exc}") from None
         self.link = LinkState(self.rotary_switches)
         self.special = SpecialIo()
         traits = self.inverter.traits
@@ -318,14 +329,17 @@ class OmronDevice(Device):
             except InverterModeError:
                 fault = FAULT_WRITING_MODE
             except RegisterError as exc:
+                # A save the state file did not take is the device failing: 04h, the nearest of Table B-17.
                 fault = {RegisterRefusal.OUT_OF_RANGE: FAULT_DATA_SETTING,
-                         RegisterRefusal.NO_SUCH_REGISTER: FAULT_REGISTER_NUMBER}.get(exc.refusal, FAULT_WRITING_MODE)
+                         RegisterRefusal.NO_SUCH_REGISTER: FAULT_REGISTER_NUMBER,
+                         RegisterRefusal.SAVE_FAILED: FAULT_SLAVE_DEVICE}.get(exc.refusal, FAULT_WRITING_MODE)
+        log.debug("Special I/O %02Xh %04Xh: fault %02Xh, %s", function, address, fault, SPECIAL_FAULTS[fault])
         return schema.encode(function_code=(function | SPECIAL_FAILURE) & 0xFF, register_number=address,
                              data_word_0=fault)
 
     def _special_fault(self, function: int, address: int) -> int | None:
         """Table B-17 checks made before the inverter is asked."""
-        if function not in (SPECIAL_READ_WORD, SPECIAL_WRITE_WORD, SPECIAL_READ_DOUBLE, SPECIAL_WRITE_DOUBLE):
+        if function not in SPECIAL_FUNCTION_CODES:
             return FAULT_FUNCTION_CODE
         if not self.inverter_link_ok:
             return FAULT_SLAVE_DEVICE
@@ -381,10 +395,14 @@ class OmronDevice(Device):
             self.inverter.on_idle(self.now)   # Table 12: the P048 action
 
     def _update_io_status(self) -> None:
+        # Table C-2 (seed 004:2416): the status is "communications status for CompoNet Option Board"
+        # with bits 0 (always ON) and 8-11 (the four fault bits) only; the extended device status
+        # of bits 4-7 is not the board's, so it stays 0. The fault bits follow the board's faults
+        # (the MS indicator, Table 4: a flexible configuration rejected, the node address changed),
+        # never an inverter trip: a trip (E62 forced by the network too) shows in Control
+        # Supervisor 0x29 (Faulted, Fault Code), not in Identity (Table 24 leaves MS green for it).
         super()._update_io_status()
-        faults = IdentityStatus.MINOR_RECOVERABLE_FAULT | IdentityStatus.MAJOR_RECOVERABLE_FAULT
-        status = int(self.identity.get(1, 5)) & ~faults
-        status |= STATUS_ALWAYS_ON   # Table C-2: bit 0 always ON
+        status = STATUS_ALWAYS_ON
         if self.inverter.flexible_error is not None:
             status |= IdentityStatus.MAJOR_RECOVERABLE_FAULT   # appendix F Note 5
         if self.node_setting() != self.link.mac_id:
@@ -407,8 +425,9 @@ class OmronDevice(Device):
         self._start()
 
     def _saved(self, values: dict[int, int]) -> None:
-        if self.store is not None:
-            self.store.save({**values, CONSISTENCY_KEY: self.inverter.consistency_value})
+        """The inverter's EEPROM save, handed to the state writer (which may refuse it: StateFileError)."""
+        if self.saves is not None:
+            self.saves.request({**values, CONSISTENCY_KEY: self.inverter.consistency_value})
 
     def inject_trip(self, code: int | str) -> TripCode:
         """Trip the inverter with En (Table D-5), given as n or as "En", for test rigs; returns the trip."""
@@ -418,6 +437,10 @@ class OmronDevice(Device):
         except ValueError:
             raise ValueError(f"not a trip code of Table D-5: {code!r} (e.g. 5 or E05)") from None
         trip = trip_code(self.family, number)   # KeyError for a code the family does not have
+        if self.inverter.trip:
+            # The inverter keeps its first trip until it is reset (Table D-4 Fault Code: one code).
+            raise ValueError(f"the inverter is already tripped: E{self.inverter.trip:02d}; it keeps that trip "
+                             f"until a Fault Rst, so E{number:02d} is not taken")
         self.inverter.raise_trip(self.now, number)
         return trip
 

@@ -10,23 +10,37 @@ Supervisor, AC/DC Drive and Discrete Point objects) goes through ``command()``; 
 registers through ``read``/``write`` (Modbus address, class 0x64) and ``read_code``/``write_code``
 (function code, class 0x65); the flexible format (assemblies 139/159) through
 ``flexible_output``/``flexible_input`` once ``validate_flexible`` accepted P160-P179.
+
+``Inverter`` combines the modules of each concern: ``states`` (Drive State, sources, the command
+fields), ``network`` (P044/P045/P048), ``ramps``, ``monitors`` and ``flexible``; this module holds
+power-on, the option board's commands, trips, sources and register access.
 """
 
 from __future__ import annotations
 
 import dataclasses
-from collections.abc import Callable, Mapping, Sequence
-from dataclasses import dataclass
-from enum import Enum, IntEnum
+from collections.abc import Callable, Mapping
 
 from ..registers import RegisterAccess, RegisterError, RegisterRefusal
+from ..simulation import TimedSimulation
+from ..state import StateFileError
+from .flexible import (
+    FlexibleFormat,
+    FlexibleMapping,
+    FlexibleMappingError,
+    FlexibleProblem,
+    FlexibleRule,
+    validate_flexible,
+)
 from .models import Family, Model, model
+from .monitors import Monitors
+from .network import NetworkEvents
+from .ramps import Ramps
 from .registers import (
     COIL_DATA_0,
     COIL_DATA_1,
     EEPROM_SAVE,
     FLEXIBLE_FORMAT,
-    OUTPUT_FROM_OPTION,
     STATUS_C_ADDRESS,
     TERMINAL_FRS,
     TORQUE_PATHS,
@@ -34,228 +48,26 @@ from .registers import (
     Parameter,
     RegisterSet,
     SpeedUnit,
-    centihertz_to_speed,
     function_code_from_number,
     register_set,
     speed_to_centihertz,
     trip_code,
 )
-
-# -- flexible format (appendix F) -------------------------------------------------------------------
-
-FLEXIBLE_WORDS = 8
-OUTPUT_PARAMETERS = tuple(f"P16{n}" for n in range(FLEXIBLE_WORDS))
-INPUT_PARAMETERS = tuple(f"P17{n}" for n in range(FLEXIBLE_WORDS))
-#: "Be sure to keep parameters P168, P169, P178 and P179 always to zero" (appendix F Note 6).
-RESERVED_PARAMETERS = ("P168", "P169", "P178", "P179")
-
-
-class FlexibleRule(Enum):
-    """The flexible-format rules of appendix F and Table 25 (Step I)."""
-
-    RESERVED_NOT_ZERO = "P168, P169, P178 and P179 must be zero (Note 6)"
-    EMPTY_AREA = "input and output each need at least one word (Note 1)"
-    NO_SUCH_REGISTER = "the Modbus register does not exist (Table 25)"
-    DOUBLE_WORD_SPLIT = "a double word needs its high word followed by its low word in two consecutive " \
-                        "parameters; only the output area may take the low word alone (Note 3)"
-    DUPLICATE_OUTPUT = "a register may be mapped only once in the output area (Note 4)"
-    READ_ONLY_OUTPUT = "an output register must be writable (Table 25)"
-    NOT_RUN_MODE_EDITABLE = "an output register must be editable in run mode (Table 25)"
-    TORQUE_NOT_AVAILABLE = "torque-related registers need the constant-torque IM mode, d060 = 0 (Tables 22/23)"
+from .states import (
+    _DIR,
+    _EXT,
+    _OPR,
+    DriveState,
+    DriveStateDetail,
+    InverterModeError,
+    NetworkAction,
+    OptionCommand,
+    Source,
+    Status,
+)
 
 
-@dataclass(frozen=True)
-class FlexibleProblem:
-    rule: FlexibleRule
-    parameter: str
-    address: int
-
-    def __str__(self) -> str:
-        return f"{self.parameter} = {self.address:04X}h: {self.rule.value}"
-
-
-class FlexibleMappingError(ValueError):
-    """P160-P179 break a rule of appendix F; ``problems`` lists every broken rule."""
-
-    def __init__(self, problems: Sequence[FlexibleProblem]) -> None:
-        self.problems = tuple(problems)
-        super().__init__("illegal flexible mapping: " + "; ".join(str(p) for p in self.problems))
-
-    @property
-    def rule(self) -> FlexibleRule:
-        return self.problems[0].rule
-
-
-@dataclass(frozen=True)
-class FlexibleMapping:
-    """Word addresses of the flexible output (master to inverter) and input areas; 0 reserves a word."""
-
-    outputs: tuple[int, ...]
-    inputs: tuple[int, ...]
-
-
-def _area(values: Mapping[str, int], codes: Sequence[str]) -> tuple[int, ...]:
-    entries = [values.get(code, 0) for code in codes]
-    # Note 1: the size is set by the highest non-zero parameter.
-    size = max((i + 1 for i, address in enumerate(entries) if address), default=0)
-    return tuple(entries[:size])
-
-
-def validate_flexible(values: Mapping[str, int], registers: RegisterSet, inverter_mode: int = 0) -> FlexibleMapping:
-    """Check P160-P179 (``values`` by function code; missing ones are zero) against appendix F.
-
-    Returns the word addresses of both areas, or raises ``FlexibleMappingError`` listing
-    every rule broken (appendix F Notes 1-6, Table 25 Step I, the note of Tables 22/23).
-    """
-    problems: list[FlexibleProblem] = [FlexibleProblem(FlexibleRule.RESERVED_NOT_ZERO, code, values.get(code, 0))
-                                       for code in RESERVED_PARAMETERS if values.get(code, 0)]
-    outputs, inputs = _area(values, OUTPUT_PARAMETERS), _area(values, INPUT_PARAMETERS)
-    for is_output, codes, entries in ((True, OUTPUT_PARAMETERS, outputs), (False, INPUT_PARAMETERS, inputs)):
-        if not entries:
-            problems.append(FlexibleProblem(FlexibleRule.EMPTY_AREA, f"{codes[0]}-{codes[-1]}", 0))
-        seen: set[int] = set()
-        for i, address in enumerate(entries):
-            if not address:
-                continue  # Note 2: a reserved word
-            code = codes[i]
-            found = registers.word(address)
-            if found is None:
-                problems.append(FlexibleProblem(FlexibleRule.NO_SUCH_REGISTER, code, address))
-                continue
-            parameter, index = found
-            if parameter.words == 2:
-                following = entries[i + 1] if i + 1 < len(entries) else 0
-                preceding = entries[i - 1] if i > 0 else 0
-                if (index == 0 and following != address + 1) or (
-                        index == 1 and not is_output and preceding != address - 1):
-                    problems.append(FlexibleProblem(FlexibleRule.DOUBLE_WORD_SPLIT, code, address))
-            if is_output:
-                if address in seen:
-                    problems.append(FlexibleProblem(FlexibleRule.DUPLICATE_OUTPUT, code, address))
-                seen.add(address)
-                if not parameter.access.writable:
-                    problems.append(FlexibleProblem(FlexibleRule.READ_ONLY_OUTPUT, code, address))
-                elif parameter.access is RegisterAccess.WRITE_STOPPED:
-                    problems.append(FlexibleProblem(FlexibleRule.NOT_RUN_MODE_EDITABLE, code, address))
-            if parameter.torque_related and inverter_mode != 0:
-                problems.append(FlexibleProblem(FlexibleRule.TORQUE_NOT_AVAILABLE, code, address))
-    if problems:
-        raise FlexibleMappingError(problems)
-    return FlexibleMapping(outputs, inputs)
-
-
-# -- states and commands -----------------------------------------------------------------------------
-
-class DriveState(IntEnum):
-    """Drive Status of assemblies 71/173 and Control Supervisor attribute 6 (Tables B-8, D-4)."""
-
-    STARTUP = 1
-    NOT_READY = 2
-    READY = 3
-    ENABLED = 4
-    STOPPING = 5
-    FAULT_STOP = 6
-    FAULTED = 7
-
-
-class DriveStateDetail(IntEnum):
-    """Drive Status Detail of assembly 111 and Control Supervisor attribute 0x64 (Tables B-27, D-4)."""
-
-    STOPPING = 0
-    RUNNING = 1
-    JOGGING = 2
-    FREE_RUNNING = 3
-    DC_BRAKING = 4
-    PICKUP = 5
-    RETRY_PICKUP = 7
-    RETRY_WAITING = 8
-    TRIP = 10
-    UNDERVOLTAGE = 11
-
-
-class NetworkAction(IntEnum):
-    """P045 (network error) and P048 (network idle) settings (Table 12)."""
-
-    TRIP = 0
-    DECELERATE_AND_TRIP = 1
-    NONE = 2
-    FREE_RUN = 3
-    DECELERATE_AND_STOP = 4
-
-
-class Source(Enum):
-    """Where the run command or the frequency reference comes from."""
-
-    OPTION_BOARD = "option board"   # A001/A002 = 4 (MX2) / 5 (RX), or the NetCtrl/NetRef override
-    MODBUS = "Modbus"               # A001/A002 = 3: coil data 0 and F001 (flexible format)
-    OPERATOR = "digital operator"   # A001 = 2: F001
-    LOCAL = "local"                 # terminals and other local sources
-
-
-@dataclass(frozen=True)
-class OptionCommand:
-    """What the master commands through the option board (appendix B outputs, Tables D-4, D-7, C-10, C-12)."""
-
-    fwd: bool = False               # FWD, Control Supervisor Run1
-    rev: bool = False               # REV, Run2
-    fault_reset: bool = False       # RST, Fault Rst
-    force_fault: bool = False       # FFL, Force Fault
-    net_ctrl: bool = False          # CTR, Net Ctrl
-    net_ref: bool = False           # REF, Net Ref
-    free_run: bool = False          # FRS (assembly 110), Free Run (0x29 attribute 0x66)
-    #: Rotational Speed Reference in the current speed unit (0.01 Hz, 0.1 Hz or RPM, section 4-2-5).
-    speed_reference: int = 0
-    #: Acceleration/deceleration times of assembly 110 in seconds; used while REF is set (Table B-25).
-    accel_time: float | None = None
-    decel_time: float | None = None
-    torque_reference: int = 0       # % (Tables B-9, B-18)
-    torque_bias: int = 0            # %
-    #: CI3-CI8 and Discrete Input Point overrides: bit n-1 overrides input terminal [n] (Tables B-19, C-10).
-    input_overrides: int = 0
-    #: CO1-CO5, CR and Discrete Output Point values: bit i sets output ``traits.output_terminals[i]``.
-    outputs: int = 0
-
-
-@dataclass(frozen=True)
-class Status:
-    """A snapshot of everything the input assemblies and the status attributes report."""
-
-    faulted: bool                   # FLT
-    warning: bool                   # WR
-    forward: bool                   # DFR, Running1
-    reverse: bool                   # DRR, Running2
-    ready: bool                     # RDY
-    running: bool                   # RUN coil: the inverter drives the motor
-    ctrl_from_net: bool             # CFN
-    ref_from_net: bool              # RFN
-    at_reference: bool              # ARF
-    zero_speed: bool                # DZS
-    drive_state: DriveState
-    drive_state_detail: DriveStateDetail
-    trip_cause: int                 # n of En, 0 when not tripped
-    fault_code: int                 # CIP fault code of the trip (Table D-5), 0 when not tripped
-    force_status: bool              # Force Status
-    output_frequency: int           # 0.01 Hz, magnitude
-    speed_unit: SpeedUnit
-    speed_actual: int               # Rotational Speed Monitor in ``speed_unit``, magnitude
-    inputs: int                     # intelligent input terminals, bit n-1 = terminal [n]
-    outputs: int                    # output terminals, in ``traits.output_terminals`` order
-    status_c: int                   # inverter status C (0005h)
-
-
-class InverterModeError(RegisterError):
-    """A torque-related register written outside the constant-torque IM mode (section 4-4 note)."""
-
-
-_EPSILON = 1e-6
-_OPR = 1 << 1
-_DIR = 1 << 2
-_EXT = 1 << 3
-_RS = 1 << 4
-_IN_SHIFT = 7    # coil data 0 bit 7 is intelligent input [1] (Table 18)
-
-
-class Inverter:
+class Inverter(NetworkEvents, Ramps, Monitors, FlexibleFormat, TimedSimulation):
     """One MX2 or RX inverter with its option board, from power-on onwards."""
 
     def __init__(self, inverter_model: Model | str, *, now: float = 0.0, saved: Mapping[int, int] | None = None,
@@ -357,26 +169,22 @@ class Inverter:
         self._settle(now)
 
     # -- time --------------------------------------------------------------------------------------
-    def advance(self, now: float) -> None:
-        """Bring ramps and timers up to ``now``."""
-        if now < self._t:
-            raise ValueError(f"time went backwards: {now} < {self._t}")
-        while True:
-            deadline = self._watchdog_deadline()
-            if deadline is None or deadline > now:
-                self._ramp_to(now)
-                return
-            self._ramp_to(deadline)
-            due = self._watchdog_deadline()
-            if due is not None and due <= deadline:
-                # Table 12 / Table 26: no communication for P044 while running: P045 action.
-                self._net_error = True
-                self._lost_command(NetworkAction(self._values["P045"]), deadline)
+    # ``advance``/``next_deadline`` (``TimedSimulation``): the ramps and the P044 timer.
+    def _timer_deadline(self) -> float | None:
+        return self._watchdog_deadline()
 
-    def next_deadline(self) -> float | None:
-        """When the state next changes without input: a ramp reaching its end or the P044 timer."""
-        times = [t for t in (self._watchdog_deadline(), self._ramp_end()) if t is not None]
-        return min(times) if times else None
+    def _fire_timers(self, moment: float) -> None:
+        due = self._watchdog_deadline()
+        if due is not None and due <= moment:
+            # Table 12 / Table 26: no communication for P044 while running: P045 action.
+            self._net_error = True
+            self._lost_command(NetworkAction(self._values["P045"]), moment)
+
+    def _run_until(self, moment: float) -> None:
+        self._ramp_to(moment)
+
+    def _ramp_deadline(self) -> float | None:
+        return self._ramp_end()
 
     def _watchdog_deadline(self) -> float | None:
         timer = self._values["P044"]
@@ -384,51 +192,6 @@ class Inverter:
             return None
         start = self._run_since if self._last_ok is None else max(self._last_ok, self._run_since)
         return start + timer * 0.1
-
-    # -- network events ----------------------------------------------------------------------------
-    def on_network_ok(self, now: float) -> None:
-        """Valid I/O data arrived: restarts the P044 timer and ends an idle or error condition."""
-        self.advance(now)
-        self._last_ok = now
-        self._net_error = False
-        self._idle = False
-
-    def on_network_error(self, now: float) -> None:
-        """The connection was lost (timed out or closed): the P045 action (Table 12)."""
-        self.advance(now)
-        if not self._net_error:
-            self._net_error = True
-            self._lost_command(NetworkAction(self._values["P045"]), now)
-
-    def on_idle(self, now: float) -> None:
-        """The master entered idle mode: the P048 action (Table 12) if the inverter is running;
-        Table 26 names "communication idle or communication timeout during RUN mode"."""
-        self.advance(now)
-        if not self._idle:
-            self._idle = True
-            if self._output_active():
-                self._lost_command(NetworkAction(self._values["P048"]), now)
-
-    def _lost_command(self, action: NetworkAction, now: float) -> None:
-        if action is NetworkAction.NONE:
-            return
-        if action is NetworkAction.TRIP:
-            self._raise_trip(self.traits.trip_network)
-            self._evaluate(now)
-            return
-        network_run = self.run_source in (Source.OPTION_BOARD, Source.MODBUS)
-        # The option board drops the run command it holds; a later FWD/Opr from the master runs again.
-        self._cmd = dataclasses.replace(self._cmd, fwd=False, rev=False)
-        self._armed_fwd = self._armed_rev = True
-        self._coils &= ~_OPR
-        if action is NetworkAction.FREE_RUN and network_run:
-            self._frequency = 0.0
-        elif action is NetworkAction.DECELERATE_AND_TRIP:
-            if abs(self._frequency) < _EPSILON:
-                self._raise_trip(self.traits.trip_network)
-            else:
-                self._pending_trip = self.traits.trip_network
-        self._evaluate(now)
 
     # -- option board commands -----------------------------------------------------------------
     @property
@@ -453,6 +216,16 @@ class Inverter:
         self._armed_rev |= not new.rev
         self._armed_rst |= not new.fault_reset
         self._evaluate(now)
+
+    def write_fault_reset(self, now: float, value: bool) -> None:
+        """Control Supervisor attribute 0Ch Fault Rst written: "Reset fault / trip state of inverter
+        when written to 1" (Table D-4, seed 004:2708). Each write of 1 resets: the same table says
+        "on rising edge" for Force Fault (11h) and not here, and the rising-edge rule of the notes
+        under Tables B-2 and after (004:1992) is for the RST bit of the I/O data, repeated each cycle."""
+        self.command(now, fault_reset=value)
+        if value:
+            self._reset_trip(now)
+            self._evaluate(now)
 
     def set_terminals(self, now: float, mask: int) -> None:
         """Physical state of the intelligent input terminals, bit n-1 = terminal [n]."""
@@ -576,144 +349,6 @@ class Inverter:
     def _target(self) -> float:
         return self._run_direction() * self._reference()
 
-    # -- ramps ------------------------------------------------------------------------------------
-    def _rates(self) -> tuple[float, float]:
-        """Acceleration and deceleration in 0.01 Hz per second: the times run from 0 to A004."""
-        accel = self._values["F002"] * 0.01
-        decel = self._values["F003"] * 0.01
-        if self._cmd.net_ref:   # Table B-25: the REF bit selects the network times of assembly 110
-            accel = self._cmd.accel_time if self._cmd.accel_time is not None else accel
-            decel = self._cmd.decel_time if self._cmd.decel_time is not None else decel
-        top = self._values["A004"] * 10.0
-        return top / max(accel, 0.01), top / max(decel, 0.01)
-
-    def _ramp_to(self, t: float) -> None:
-        dt, self._t = t - self._t, t
-        if self._trip or self._free_running():
-            self._frequency = 0.0
-        else:
-            self._ramp(dt)
-        self._settle(t)
-
-    def _ramp(self, dt: float) -> None:
-        target = self._target()
-        accel, decel = self._rates()
-        f = self._frequency
-        while dt > 0 and abs(f - target) > _EPSILON:
-            slowing = (f > 0 and target < f) or (f < 0 and target > f)
-            if slowing:
-                limit, rate = (max(target, 0.0) if f > 0 else min(target, 0.0)), decel
-            else:
-                limit, rate = target, accel
-            distance = abs(limit - f)
-            if rate * dt >= distance - _EPSILON:
-                f = limit
-                dt -= distance / rate
-            else:
-                f += rate * dt if limit > f else -rate * dt
-                dt = 0.0
-        self._frequency = f
-
-    def _ramp_end(self) -> float | None:
-        if self._trip or self._free_running():
-            return None
-        target, f = self._target(), self._frequency
-        if abs(f - target) <= _EPSILON:
-            return None
-        accel, decel = self._rates()
-        if f * target < 0:   # decelerate to 0, then accelerate the other way
-            return self._t + abs(f) / decel + abs(target) / accel
-        slowing = abs(target) < abs(f)
-        return self._t + abs(target - f) / (decel if slowing else accel)
-
-    def _settle(self, now: float) -> None:
-        if self._pending_trip and abs(self._frequency) <= _EPSILON:
-            self._raise_trip(self._pending_trip)
-        running = self._output_active()
-        if running and self._run_since is None:
-            self._run_since = now
-        elif not running:
-            self._run_since = None
-
-    def _evaluate(self, now: float) -> None:
-        """Apply level-triggered inputs after any change."""
-        if self._coils & _RS and self._trip:
-            # Section 4-7-3: while RS stays set, new trips are cleared automatically.
-            self._reset_trip(now)
-        if self._trip or self._free_running():
-            self._frequency = 0.0
-        self._settle(now)
-
-    def _output_active(self) -> bool:
-        """The RUN state: the inverter drives the motor (a run command, or decelerating to a stop)."""
-        if self._trip or self._free_running():
-            return False
-        return self._run_direction() != 0 or abs(self._frequency) > _EPSILON
-
-    @property
-    def output_frequency(self) -> float:
-        """Signed output frequency in Hz (negative in reverse)."""
-        return self._frequency / 100
-
-    # -- monitors ---------------------------------------------------------------------------------
-    def _inputs(self) -> int:
-        mask = (1 << self.traits.input_terminals) - 1
-        return (self.terminals | self._coils >> _IN_SHIFT | self._cmd.input_overrides) & mask
-
-    def _outputs(self) -> int:
-        mask = 0
-        for i, code in enumerate(self.traits.output_sources):
-            if self._values[code] == OUTPUT_FROM_OPTION and self._cmd.outputs >> i & 1:
-                mask |= 1 << i
-        return mask
-
-    def _at_reference(self) -> bool:
-        return self._output_active() and self._run_direction() != 0 and abs(self._frequency - self._target()) <= 0.5
-
-    def _status_c(self) -> int:
-        if not self._output_active():
-            return 1
-        target, f = self._target(), self._frequency
-        if abs(f - target) <= 0.5:
-            return 3
-        return 4 if (target > f >= 0) or (target < f <= 0) else 2
-
-    def _coil_data_1(self) -> int:
-        f = self._frequency
-        reverse = f < -_EPSILON or (abs(f) <= _EPSILON and self._run_direction() < 0)
-        bits = {0: reverse, 1: not self._trip, 3: self._output_active(), 4: self._at_reference(), 8: bool(self._trip)}
-        return sum(1 << index for index, on in bits.items() if on)
-
-    def status(self) -> Status:
-        f = self._frequency
-        running = self._output_active()
-        direction = self._run_direction()
-        forward = running and (f > _EPSILON or (abs(f) <= _EPSILON and direction > 0))
-        reverse = running and (f < -_EPSILON or (abs(f) <= _EPSILON and direction < 0))
-        if self._trip:
-            state, detail = DriveState.FAULTED, DriveStateDetail.TRIP
-        elif self._pending_trip:
-            state, detail = DriveState.FAULT_STOP, DriveStateDetail.RUNNING
-        elif direction:
-            state, detail = DriveState.ENABLED, DriveStateDetail.RUNNING
-        elif running:
-            state, detail = DriveState.STOPPING, DriveStateDetail.RUNNING
-        else:
-            state, detail = DriveState.READY, DriveStateDetail.STOPPING
-        if not self._trip and self._free_running() and (self._run_direction() or self._cmd.free_run):
-            detail = DriveStateDetail.FREE_RUNNING
-        unit = self.speed_unit
-        magnitude = round(abs(f))
-        return Status(
-            faulted=bool(self._trip), warning=False, forward=forward, reverse=reverse, ready=not self._trip,
-            running=running, ctrl_from_net=self.run_source is Source.OPTION_BOARD,
-            ref_from_net=self.reference_source is Source.OPTION_BOARD, at_reference=self._at_reference(),
-            zero_speed=abs(f) <= _EPSILON, drive_state=state, drive_state_detail=detail, trip_cause=self._trip,
-            fault_code=trip_code(self.family, self._trip).cip_code if self._trip else 0,
-            force_status=self._force_status, output_frequency=magnitude, speed_unit=unit,
-            speed_actual=centihertz_to_speed(magnitude, unit, self._values["P049"]),
-            inputs=self._inputs(), outputs=self._outputs(), status_c=self._status_c())
-
     # -- registers ----------------------------------------------------------------------------------
     def _computed(self) -> dict[str, Callable[[], int]]:
         """Registers whose value the simulation produces rather than stores."""
@@ -833,10 +468,16 @@ class Inverter:
 
     def _save(self) -> None:
         """EEPROM save (0900h): every parameter, and Identity attribute 9 counts it (Table C-2)."""
-        self._eeprom = {number: self._values[p.key] for number, p in self.registers.by_number.items() if p.saved}
-        self.consistency_value = (self.consistency_value + 1) & 0xFFFF
+        eeprom = {number: self._values[p.key] for number, p in self.registers.by_number.items() if p.saved}
+        before = self.consistency_value
+        self.consistency_value = (before + 1) & 0xFFFF
         if self._on_save is not None:
-            self._on_save(dict(self._eeprom))
+            try:
+                self._on_save(dict(eeprom))
+            except StateFileError as exc:   # refused by the shell: nothing saved, nothing counted
+                self.consistency_value = before
+                raise RegisterError(RegisterRefusal.SAVE_FAILED, EEPROM_SAVE, str(exc)) from None
+        self._eeprom = eeprom
 
     def _initialize(self) -> None:
         """b180 = 1: initialize the inverter mode from b171 (MX2) and b049 (section 4-1 Step 1),
@@ -851,40 +492,8 @@ class Inverter:
         """The values in EEPROM, by function code number."""
         return dict(self._eeprom)
 
-    # -- flexible format -------------------------------------------------------------------------
-    def flexible_output(self, words: Sequence[int], now: float) -> None:
-        """The output words of assembly 139, written to the mapped registers in order (appendix F)."""
-        if self.flexible is None:
-            raise RuntimeError("the flexible format is not active (P046 = 6 and a valid P160-P179 at start-up)")
-        mapping = self.flexible.outputs
-        if len(words) != len(mapping):
-            raise ValueError(f"flexible output is {len(mapping)} words, got {len(words)}")
-        self.advance(now)
-        i = 0
-        while i < len(mapping):
-            address, word = mapping[i], words[i] & 0xFFFF
-            i += 1
-            if not address:
-                continue   # Note 2: a reserved word is ignored
-            found = self.registers.word(address)
-            if found is None:   # validate_flexible let no such address through
-                raise AssertionError(f"{address:04X}h is not a register")
-            parameter, index = found
-            value = word
-            if parameter.words == 2 and index == 0:
-                value = word << 16 | (words[i] & 0xFFFF)
-                i += 1
-            if parameter.signed and parameter.words == 1 and value >= 0x8000:
-                value -= 0x10000
-            elif parameter.signed and parameter.words == 2 and index == 0 and value >= 0x80000000:
-                value -= 1 << 32
-            try:
-                self._write(parameter, value, now)
-            except RegisterError:
-                self.flexible_write_errors += 1
 
-    def flexible_input(self) -> list[int]:
-        """The input words of assembly 159: each mapped register's word, 0 for a reserved word."""
-        if self.flexible is None:
-            raise RuntimeError("the flexible format is not active (P046 = 6 and a valid P160-P179 at start-up)")
-        return [self.read_word(address) if address else 0 for address in self.flexible.inputs]
+__all__ = [
+    "DriveState", "DriveStateDetail", "FlexibleMapping", "FlexibleMappingError", "FlexibleProblem", "FlexibleRule",
+    "Inverter", "InverterModeError", "NetworkAction", "OptionCommand", "Source", "Status", "validate_flexible",
+]

@@ -2,9 +2,10 @@
 
 Each class is declared once (``ClassSpec``) with the attributes, data types, access and
 services of its table; the runtime binds every attribute to the inverter simulation
-(``Inverter``) through the ``OptionBoard`` the objects belong to. The Modbus Register object
-(0x64) and the Function Code object (0x65) address the inverter's registers by instance and
-attribute (sections E-2-2 and E-3-2), so they have no declared attributes.
+(``Inverter``) through the ``OptionBoard`` the objects belong to (``board.py``: what the objects
+share). The Modbus Register object (0x64) and the Function Code object (0x65, ``register_objects.py``)
+address the inverter's registers by instance and attribute (sections E-2-2 and E-3-2), so they have
+no declared attributes.
 
 Errors are those of Table E-5: a refusal of the inverter (``RegisterError``) becomes 0x0E
 (read only), 0x09 (out of range), 0x10 (not in this inverter mode or while running) or 0x14
@@ -14,122 +15,48 @@ between option board and inverter 0x02.
 
 from __future__ import annotations
 
-from collections.abc import Callable, Iterator, Mapping
-from contextlib import contextmanager
+from collections.abc import Callable, Mapping
 from dataclasses import dataclass
 from types import MappingProxyType
-from typing import Any, Protocol
+from typing import Any
 
-from ...cip.epath import ApplicationPath, LogicalSegment, LogicalType, decode_path, encode_path
-from ...cip.messages import MessageRouterRequest, Service
-from ...cip.model import Access, AttributeSpec, Binding, CipObject, ClassSpec, Instance
+from ...cip.epath import LogicalSegment, LogicalType, decode_path, encode_path
+from ...cip.messages import Service
+from ...cip.model import Access, AttributeSpec, Binding, ClassSpec, Instance
 from ...cip.router import RequestContext
 from ...cip.status import CipError, GeneralStatus
-from ...cip.types import BOOL, BYTE, DINT, INT, UDINT, UINT, USINT, WORD, CipType, RemainingBytes
+from ...cip.types import BOOL, BYTE, INT, UINT, USINT, WORD, RemainingBytes
 from ...objects.identity import IdentityInfo, IdentityObject, identity_spec
-from ..registers import RegisterError, RegisterRefusal
-from .inverter import Inverter, InverterModeError
+from .board import (
+    _GET,
+    AC_DC_DRIVE,
+    COMPONET_LINK,
+    CONNECTION,
+    CONTROL_SUPERVISOR,
+    DISCRETE_INPUT_POINT,
+    DISCRETE_OUTPUT_POINT,
+    FUNCTION_CODE,
+    IDENTITY,
+    MODBUS_REGISTER,
+    MOTOR_DATA,
+    UNIT_PARAMETER,
+    BoundObject,
+    OptionBoard,
+    OptionBoardObject,
+    _spec,
+    inverter_access,
+    refusal_status,
+)
 from .models import FIRMWARE_REVISION, Family
-from .registers import FamilyTraits, Parameter, RegisterSet, function_code_from_number
-
-_GET_SET = frozenset({Service.GET_ATTRIBUTE_SINGLE, Service.SET_ATTRIBUTE_SINGLE})
-_GET = frozenset({Service.GET_ATTRIBUTE_SINGLE})
-
-IDENTITY = 0x01
-CONNECTION = 0x05
-DISCRETE_INPUT_POINT = 0x08
-DISCRETE_OUTPUT_POINT = 0x09
-MOTOR_DATA = 0x28
-CONTROL_SUPERVISOR = 0x29
-AC_DC_DRIVE = 0x2A
-MODBUS_REGISTER = 0x64
-FUNCTION_CODE = 0x65
-UNIT_PARAMETER = 0x94
-COMPONET_LINK = 0xF7
-
-
-class OptionBoard(Protocol):
-    """What the objects need from the device they belong to."""
-
-    inverter: Inverter
-
-    @property
-    def now(self) -> float: ...
-
-    @property
-    def inverter_link_ok(self) -> bool: ...
-
-    def command(self, **fields: Any) -> None: ...
-
-    def motor_type_changed(self) -> None: ...
-
-
-# -- Table E-5 -----------------------------------------------------------------------------------
-
-_REFUSALS: Mapping[RegisterRefusal, GeneralStatus] = MappingProxyType({
-    RegisterRefusal.NO_SUCH_REGISTER: GeneralStatus.ATTRIBUTE_NOT_SUPPORTED,
-    RegisterRefusal.READ_ONLY: GeneralStatus.ATTRIBUTE_NOT_SETTABLE,
-    RegisterRefusal.OUT_OF_RANGE: GeneralStatus.INVALID_ATTRIBUTE_VALUE,
-    RegisterRefusal.NOT_WHILE_RUNNING: GeneralStatus.DEVICE_STATE_CONFLICT,
-})
-
-
-def refusal_status(error: RegisterError) -> GeneralStatus:
-    """The Table E-5 status of an inverter refusal: "10 Device state conflict: cannot be executed in
-    this inverter mode" covers both the run-mode lock and the torque registers outside d060 = 0."""
-    if isinstance(error, InverterModeError):
-        return GeneralStatus.DEVICE_STATE_CONFLICT
-    return _REFUSALS[error.refusal]
-
-
-@contextmanager
-def inverter_access(board: OptionBoard) -> Iterator[None]:
-    """Run an inverter access; refusals become the statuses of Table E-5."""
-    if not board.inverter_link_ok:
-        # Table E-5: "02 Resource unavailable: an internal communication error between Option Board and Inverter".
-        raise CipError(GeneralStatus.RESOURCE_UNAVAILABLE, message="no communication with the inverter")
-    try:
-        yield
-    except RegisterError as exc:
-        raise CipError(refusal_status(exc), message=str(exc)) from None
-
-
-class OptionBoardObject(CipObject):
-    """An object of appendices C/D: an unknown instance answers 0x16 (Table E-5, "Object does not exist")."""
-
-    def handle(self, path: ApplicationPath, request: MessageRouterRequest, context: RequestContext) -> bytes:
-        if path.instance and path.instance not in self.instances:
-            raise CipError(GeneralStatus.OBJECT_DOES_NOT_EXIST, message=f"{self.spec.name} has no instance "
-                                                                        f"{path.instance}")
-        return super().handle(path, request, context)
-
-
-class BoundObject(OptionBoardObject):
-    """A declared class whose attributes are ``Binding`` entries onto the option board."""
-
-    def __init__(self, spec: ClassSpec, board: OptionBoard) -> None:
-        super().__init__(spec)
-        self.board = board
-
-    def bound(self, get: Callable[[], Any], set: Callable[[Any], None] | None = None) -> Binding:
-        board = self.board
-
-        def guarded_get() -> Any:
-            with inverter_access(board):
-                return get()
-
-        guarded_set = None
-        if set is not None:
-            def guarded_set(value: Any) -> None:
-                with inverter_access(board):
-                    set(value)
-        return Binding(guarded_get, guarded_set)
-
-
-def _spec(class_id: int, name: str, attributes: tuple[AttributeSpec, ...], revision: int = 1) -> ClassSpec:
-    return ClassSpec(class_id, name, revision=revision, instance_attributes=attributes, class_services=_GET,
-                     instance_services=_GET_SET)
-
+from .register_objects import (
+    FUNCTION_CODE_GROUP_BASES,
+    FUNCTION_CODE_SPEC,
+    MODBUS_REGISTER_SPEC,
+    FunctionCodeObject,
+    ModbusRegisterObject,
+    RegisterObject,
+)
+from .registers import FamilyTraits
 
 # -- Identity (Table C-2) -------------------------------------------------------------------------
 
@@ -209,6 +136,14 @@ def path_instance(path: bytes) -> int:
     return kinds[1][1]
 
 
+def path_length(path: bytes) -> int:
+    """Attributes 0Dh and 0Fh: Table C-8 (seed 004:2553, 2555) calls them the "number of bytes" of
+    the path yet gives 3 as the default, for a default path of six bytes (class 4, instance,
+    attribute 3: 20 04 24 nn 30 03). The default is the one figure the table fixes, and 3 is that
+    path's length in 16-bit words, as CIP counts EPATH sizes: the length is served in words."""
+    return (len(path) + 1) // 2
+
+
 class ConnectionObject(OptionBoardObject):
     """Instance 1, the poll I/O connection of Table C-8; its paths follow P046 at each start."""
 
@@ -223,7 +158,7 @@ class ConnectionObject(OptionBoardObject):
         """The default connection path (P046, Table 10): produced = input assembly, consumed = output."""
         values = self.instances[1].values
         values[0x0E], values[0x10] = assembly_path(input_), assembly_path(output)
-        values[0x0D], values[0x0F] = len(values[0x0E]), len(values[0x10])
+        values[0x0D], values[0x0F] = path_length(values[0x0E]), path_length(values[0x10])
 
     @property
     def pair(self) -> tuple[int, int]:
@@ -236,7 +171,7 @@ class ConnectionObject(OptionBoardObject):
             allowed = self.inputs if spec.id == 0x0E else self.outputs
             if path_instance(bytes(value)) not in allowed:
                 raise CipError(GeneralStatus.INVALID_ATTRIBUTE_VALUE, message="no such assembly for this path")
-            instance.values[spec.id - 1] = len(value)
+            instance.values[spec.id - 1] = path_length(bytes(value))
         super().write_attribute(instance, spec, value, context)
 
 
@@ -365,7 +300,7 @@ CONTROL_SUPERVISOR_SPEC = _spec(CONTROL_SUPERVISOR, "Control Supervisor", (
     AttributeSpec(9, "Ready", UINT),
     AttributeSpec(0x0A, "Faulted", BOOL),
     AttributeSpec(0x0B, "Warning", BOOL),
-    AttributeSpec(0x0C, "Fault Rst", BOOL, Access.GET_SET, default=0, help="reset a trip on 0 to 1"),
+    AttributeSpec(0x0C, "Fault Rst", BOOL, Access.GET_SET, default=0, help="reset a trip when written to 1"),
     AttributeSpec(0x0D, "Fault Code", UINT, help="CIP fault code of the trip (Table D-5)"),
     AttributeSpec(0x0F, "Ctrl From Net", BOOL),
     AttributeSpec(0x10, "Net Fault Mode", UINT, Access.GET_SET, default=2, minimum=0, maximum=2,
@@ -401,7 +336,9 @@ class ControlSupervisorObject(BoundObject):
         self.add_instance(
             1, run1=command("fwd"), run2=command("rev"), net_ctrl=command("net_ctrl"), state=status("drive_state"),
             running1=status("forward"), running2=status("reverse"), ready=status("ready"), faulted=status("faulted"),
-            warning=status("warning"), fault_rst=command("fault_reset"), fault_code=status("fault_code"),
+            warning=status("warning"), fault_code=status("fault_code"),
+            fault_rst=self.bound(lambda: int(inverter.option_command.fault_reset),
+                                 lambda value: inverter.write_fault_reset(board.now, bool(value))),
             ctrl_from_net=status("ctrl_from_net"),
             net_fault_mode=self.bound(lambda: self._mode("P045", NET_FAULT_MODES),
                                       lambda value: self._set_mode("P045", NET_FAULT_MODES, value)),
@@ -540,154 +477,6 @@ class CompoNetLinkObject(BoundObject):
                           mac_id_switch_value=Binding(lambda: link.rotary_switches))
 
 
-# -- Modbus Register (section E-3) and Function Code (section E-2) ---------------------------------
-
-def _value_type(parameter: Parameter, words: int) -> CipType:
-    if words == 2:
-        return DINT if parameter.signed else UDINT
-    return INT if parameter.signed and parameter.words == 1 else UINT
-
-
-class RegisterObject(CipObject):
-    """Instance = high byte, attribute = low byte of a number naming one inverter register.
-
-    The manual's mapping makes instance 0 address numbers 0001h-00FFh (F001 at Modbus 0001h,
-    A001-A255 by function code), so instance 0 is not the class level here.
-    """
-
-    def __init__(self, spec: ClassSpec, board: OptionBoard, registers: RegisterSet) -> None:
-        super().__init__(spec)
-        self.board = board
-        self.registers = registers
-        self.instance_ids = frozenset(number >> 8 for number in self.numbers())
-
-    def numbers(self) -> Iterator[int]:
-        raise NotImplementedError
-
-    def handle(self, path: ApplicationPath, request: MessageRouterRequest, context: RequestContext) -> bytes:
-        if request.service not in _GET_SET:
-            raise CipError(GeneralStatus.SERVICE_NOT_SUPPORTED, message=f"service 0x{request.service:02X}")
-        instance = path.instance or 0
-        if instance > 0xFF or instance not in self.instance_ids:
-            raise CipError(GeneralStatus.OBJECT_DOES_NOT_EXIST, message=f"{self.spec.name} has no instance {instance}")
-        if path.attribute is None or path.attribute > 0xFF:
-            raise CipError(GeneralStatus.ATTRIBUTE_NOT_SUPPORTED, message="attribute must be one byte")
-        number = instance << 8 | path.attribute
-        with inverter_access(self.board):
-            if request.service == Service.GET_ATTRIBUTE_SINGLE:
-                if request.data:
-                    raise CipError(GeneralStatus.TOO_MUCH_DATA)
-                return self.read(number)
-            self.write(number, request.data)
-            return b""
-
-    def read(self, number: int) -> bytes:
-        raise NotImplementedError
-
-    def write(self, number: int, data: bytes) -> None:
-        raise NotImplementedError
-
-
-def _decode_sized(cip_type: CipType, data: bytes) -> int:
-    """Table E-5: data smaller than the register 0x13, larger 0x15."""
-    assert cip_type.size is not None
-    if len(data) < cip_type.size:
-        raise CipError(GeneralStatus.NOT_ENOUGH_DATA, message=f"the register takes {cip_type.size} bytes")
-    if len(data) > cip_type.size:
-        raise CipError(GeneralStatus.TOO_MUCH_DATA, message=f"the register takes {cip_type.size} bytes")
-    return int(cip_type.decode(data))
-
-
-MODBUS_REGISTER_SPEC = ClassSpec(MODBUS_REGISTER, "Modbus Register", class_services=_GET_SET,
-                                 instance_services=_GET_SET, max_instance=0xFF)
-FUNCTION_CODE_SPEC = ClassSpec(FUNCTION_CODE, "Function Code", class_services=_GET_SET,
-                               instance_services=_GET_SET, max_instance=0xFF)
-
-
-class ModbusRegisterObject(RegisterObject):
-    """Class 0x64: Modbus address XXYYh at instance XXh, attribute YYh (section E-3-2). A double
-    word is 4 bytes at its first (high) word; its second word alone is one word."""
-
-    def __init__(self, board: OptionBoard, registers: RegisterSet) -> None:
-        super().__init__(MODBUS_REGISTER_SPEC, board, registers)
-
-    def numbers(self) -> Iterator[int]:
-        for register in self.registers.modbus.values():
-            yield from range(register.address, register.address + register.words)
-
-    def _register(self, address: int) -> tuple[Parameter, CipType]:
-        found = self.registers.word(address)
-        if found is None:
-            raise CipError(GeneralStatus.ATTRIBUTE_NOT_SUPPORTED, message=f"no register {address:04X}h")
-        parameter, index = found
-        words = parameter.words if index == 0 else 1
-        return parameter, _value_type(parameter, words) if index == 0 else UINT
-
-    def read(self, number: int) -> bytes:
-        _, cip_type = self._register(number)
-        return cip_type.encode(self.board.inverter.read(number))
-
-    def write(self, number: int, data: bytes) -> None:
-        _, cip_type = self._register(number)
-        self.board.inverter.write(number, _decode_sized(cip_type, data), self.board.now)
-
-
-class FunctionCodeObject(RegisterObject):
-    """Class 0x65: group base x 1000 + code (Table E-3) split into instance (high byte) and attribute
-    (low byte): d005 = 3005 = 0BBDh, P060 = 15060 = 3AD4h. F001 is read only here; b127 is two words."""
-
-    def __init__(self, board: OptionBoard, registers: RegisterSet) -> None:
-        super().__init__(FUNCTION_CODE_SPEC, board, registers)
-
-    def numbers(self) -> Iterator[int]:
-        yield from self.registers.by_number
-
-    def _parameter(self, number: int) -> tuple[Parameter, CipType]:
-        parameter = self.registers.by_number.get(number)
-        if parameter is None:
-            try:
-                code = function_code_from_number(number)
-            except ValueError:
-                code = f"{number}"
-            raise CipError(GeneralStatus.ATTRIBUTE_NOT_SUPPORTED, message=f"no function code {code}")
-        return parameter, _value_type(parameter, parameter.function_code_words or parameter.words)
-
-    def read(self, number: int) -> bytes:
-        _, cip_type = self._parameter(number)
-        return cip_type.encode(self.board.inverter.read_function_code(number))
-
-    def write(self, number: int, data: bytes) -> None:
-        parameter, cip_type = self._parameter(number)
-        if not parameter.function_code_writable:
-            raise CipError(GeneralStatus.ATTRIBUTE_NOT_SETTABLE, message=f"{parameter.key} (section E-2-2)")
-        self.board.inverter.write_function_code(number, _decode_sized(cip_type, data), self.board.now)
-
-
-def register_attribute(registers: RegisterSet, class_id: int, instance: int, attribute: int) -> AttributeSpec | None:
-    """What class 0x64 or 0x65 holds at ``instance``/``attribute`` (instance 0 included: F001 is 0x64/0/1),
-    by the same rules the objects above serve it: its register's name and CIP type, for a scanner."""
-    if not (0 <= instance <= 0xFF and 0 <= attribute <= 0xFF):
-        return None
-    number = instance << 8 | attribute
-    if class_id == MODBUS_REGISTER:
-        found = registers.word(number)
-        if found is None:
-            return None
-        parameter, index = found
-        cip_type = _value_type(parameter, parameter.words) if index == 0 else UINT
-        name = f"{parameter.key} {parameter.name}" + (" (second word)" if index else "")
-    elif class_id == FUNCTION_CODE:
-        found_code = registers.by_number.get(number)
-        if found_code is None:
-            return None
-        parameter = found_code
-        cip_type = _value_type(parameter, parameter.function_code_words or parameter.words)
-        name = f"{parameter.key} {parameter.name}"
-    else:
-        return None
-    return AttributeSpec(attribute, name, cip_type, Access.GET_SET)
-
-
 #: The declared classes, for the scanner's catalog and the EDS (0x64/0x65 have no fixed attributes).
 CLASS_SPECS: tuple[ClassSpec, ...] = (
     IDENTITY_SPEC, CONNECTION_SPEC, DISCRETE_INPUT_SPEC, DISCRETE_OUTPUT_SPEC, MOTOR_DATA_SPEC,
@@ -696,8 +485,39 @@ CLASS_SPECS: tuple[ClassSpec, ...] = (
 )
 
 __all__ = [
-    "CLASS_SPECS", "AcDcDriveObject", "CompoNetLinkObject", "ConnectionObject", "ControlSupervisorObject",
-    "DiscreteInputPointObject", "DiscreteOutputPointObject", "FunctionCodeObject", "LinkState", "ModbusRegisterObject",
-    "MotorDataObject", "OptionBoard", "OptionBoardIdentity", "UnitParameterObject", "assembly_path",
-    "inverter_access", "refusal_status", "speed_word",
+    "AC_DC_DRIVE",
+    "CLASS_SPECS",
+    "COMPONET_LINK",
+    "CONNECTION",
+    "CONTROL_SUPERVISOR",
+    "DISCRETE_INPUT_POINT",
+    "DISCRETE_OUTPUT_POINT",
+    "FUNCTION_CODE",
+    "FUNCTION_CODE_GROUP_BASES",
+    "FUNCTION_CODE_SPEC",
+    "IDENTITY",
+    "MODBUS_REGISTER",
+    "MODBUS_REGISTER_SPEC",
+    "MOTOR_DATA",
+    "UNIT_PARAMETER",
+    "AcDcDriveObject",
+    "BoundObject",
+    "CompoNetLinkObject",
+    "ConnectionObject",
+    "ControlSupervisorObject",
+    "DiscreteInputPointObject",
+    "DiscreteOutputPointObject",
+    "FunctionCodeObject",
+    "LinkState",
+    "ModbusRegisterObject",
+    "MotorDataObject",
+    "OptionBoard",
+    "OptionBoardIdentity",
+    "OptionBoardObject",
+    "RegisterObject",
+    "UnitParameterObject",
+    "assembly_path",
+    "inverter_access",
+    "refusal_status",
+    "speed_word",
 ]

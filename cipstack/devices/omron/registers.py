@@ -24,11 +24,10 @@ from __future__ import annotations
 from collections.abc import Iterable, Mapping
 from dataclasses import dataclass, field
 from enum import Enum
-from functools import cached_property
 from types import MappingProxyType
 from typing import Any
 
-from ...cip.types import DINT, INT, UDINT, UINT, CipType
+from ...cip.types import DINT, INT, UDINT
 from ..registers import Register, RegisterAccess, RegisterError, RegisterMap, RegisterRefusal
 from .models import Family
 
@@ -129,30 +128,13 @@ class Bit:
 
 
 @dataclass(frozen=True, eq=False)
-class Parameter:
-    """One inverter register as the manual describes it (the row of the table below)."""
+class Parameter(Register):
+    """One inverter register as the manual describes it (the row of the table below): a ``Register``
+    (``address`` is None where no Modbus address is known for the family; ``code`` the function
+    code as the manual spells it, "P044", "b049", or empty for Modbus-only registers) with what the
+    option board adds. Build rows with ``parameter()``. Compared and hashed by identity."""
 
-    #: Function code as the manual spells it ("P044", "b049"); empty for Modbus-only registers.
-    code: str
-    name: str
-    #: Modbus address of the (first) word, or None where no address is known for the family.
-    address: int | None
     families: tuple[Family, ...] = BOTH
-    type: CipType = UINT
-    access: RegisterAccess = RW
-    default: int = 0
-    minimum: int | None = None
-    maximum: int | None = None
-    scale: float = 1.0
-    unit: str = ""
-    enum: Mapping[int, str] | None = None
-    help: str = ""
-    group: str = ""
-    #: 2 for a double word: high word at ``address``, low word at ``address + 1`` (Table 20: F001 =
-    #: 0000h at 0001h, 03E8h at 0002h).
-    words: int = 1
-    #: Persisted by the EEPROM save (0900h); monitors and control words are not.
-    saved: bool = True
     #: Unavailable unless the inverter is in constant-torque induction-motor mode, d060 = 0 (Tables 22/23).
     torque_related: bool = False
     #: "F001 can not be written using the Function code object" (section E-2-2).
@@ -161,7 +143,9 @@ class Parameter:
     #: "B127 has a data size of 2 words (different from the Modbus register size of 1 word)"); 0: ``words``.
     function_code_words: int = 0
     bits: tuple[Bit, ...] = ()
-    source: str = ""
+
+    __eq__ = object.__eq__
+    __hash__ = object.__hash__
 
     @property
     def key(self) -> str:
@@ -171,22 +155,6 @@ class Parameter:
     @property
     def function_code_number(self) -> int | None:
         return function_code_number(self.code) if self.code else None
-
-    @property
-    def signed(self) -> bool:
-        return bool(getattr(self.type, "signed", False))
-
-    @property
-    def raw_minimum(self) -> int:
-        if self.minimum is not None:
-            return self.minimum
-        return -(1 << (16 * self.words - 1)) if self.signed else 0
-
-    @property
-    def raw_maximum(self) -> int:
-        if self.maximum is not None:
-            return self.maximum
-        return (1 << (16 * self.words - (1 if self.signed else 0))) - 1
 
     @property
     def writable_bits(self) -> int:
@@ -217,15 +185,16 @@ class Parameter:
                 return bit
         raise KeyError(f"{self.key} has no bit {name!r}")
 
-    @cached_property
+    @property
     def register(self) -> Register | None:
-        """The ``Register`` of the Modbus view, or None when no address is known."""
-        if self.address is None:
-            return None
-        return Register(address=self.address, code=self.code, name=self.name, type=self.type, access=self.access,
-                        default=self.default, minimum=self.minimum, maximum=self.maximum, scale=self.scale,
-                        unit=self.unit, enum=self.enum, help=self.help, group=self.group, words=self.words,
-                        saved=self.saved, source=self.source)
+        """The parameter as a register of the Modbus view, or None when no address is known."""
+        return self if self.address is not None else None
+
+
+def parameter(code: str, name: str, address: int | None, families: tuple[Family, ...] = BOTH,
+              **fields: Any) -> Parameter:
+    """A row of the table: function code, name, Modbus address (None: not known for the family)."""
+    return Parameter(address, code, name, families=families, **fields)  # type: ignore[arg-type]
 
 
 def _enum(**names: str) -> Mapping[int, str]:
@@ -320,7 +289,7 @@ def _terminal_functions(family: tuple[Family, ...], count: int, base: int | None
     # C001..C007 (MX2) / C008 (RX): the function of each intelligent input terminal. The defaults
     # are the inverters' own and not in this manual; the emulator starts with "no function".
     return tuple(
-        Parameter(f"C{n:03d}", f"Input terminal [{n}] function", None if base is None else base + n - 1, family,
+        parameter(f"C{n:03d}", f"Input terminal [{n}] function", None if base is None else base + n - 1, family,
                   access=STOPPED, default=NO_FUNCTION, minimum=0, maximum=255, group="C",
                   enum=_frozen({TERMINAL_FRS: "FRS: free-run stop", TERMINAL_ATR: "ATR: torque command input",
                                 NO_FUNCTION: "no function"}),
@@ -330,7 +299,7 @@ def _terminal_functions(family: tuple[Family, ...], count: int, base: int | None
 
 def _output_sources(family: tuple[Family, ...], codes: Iterable[tuple[str, str, int | None]]) -> tuple[Parameter, ...]:
     return tuple(
-        Parameter(code, f"{what} source", address, family, access=STOPPED, minimum=0, maximum=255, group="C",
+        parameter(code, f"{what} source", address, family, access=STOPPED, minimum=0, maximum=255, group="C",
                   enum=_frozen({OUTPUT_FROM_OPTION: "Option Board"}),
                   source="Tables 15/16" + (f"; address {_I570}" if address is not None else ""))
         for code, what, address in codes)
@@ -346,7 +315,7 @@ def _flexible_parameters() -> tuple[Parameter, ...]:
             name = (f"{area} register {offset + 1} contents" if not reserved
                     else f"{area} register {offset + 1} (keep zero)")
             for families, address in ((MX2, mx2_base + offset), (RX, None)):
-                rows.append(Parameter(code, name, address, families, access=STOPPED, default=0, minimum=0,
+                rows.append(parameter(code, name, address, families, access=STOPPED, default=0, minimum=0,
                                       maximum=0xFFFF, group="P", help="Modbus address mapped into the flexible format",
                                       source="Table 17, appendix F" + ("; address " + _I570 if address else "")))
     return tuple(rows)
@@ -356,28 +325,28 @@ def _per_family(code: str, name: str, mx2_address: int, **kwargs: Any) -> tuple[
     """One parameter with the same meaning on both families, whose Modbus address is only known
     for the MX2 (I570); the RX row is reachable by function code."""
     source = kwargs.pop("source", "")
-    return (Parameter(code, name, mx2_address, MX2, source=f"{source}; address {_I570}", **kwargs),
-            Parameter(code, name, None, RX, source=source, **kwargs))
+    return (parameter(code, name, mx2_address, MX2, source=f"{source}; address {_I570}", **kwargs),
+            parameter(code, name, None, RX, source=source, **kwargs))
 
 
 #: Every register the manual uses, one row per register and family variant.
 PARAMETERS: tuple[Parameter, ...] = (
     # Monitoring and control words whose addresses this manual gives (both families).
-    Parameter("F001", "Output frequency setting", F001_ADDRESS, words=2, type=UDINT, minimum=0, maximum=40000,
+    parameter("F001", "Output frequency setting", F001_ADDRESS, words=2, type=UDINT, minimum=0, maximum=40000,
               group="F", function_code_writable=False,
               help="Modbus frequency reference; the highest frequency that can be set is 400.00 Hz",
               source="Tables 18/20, section 4-2-5, section E-2-2", **_HZ),
-    Parameter("", "Inverter status C", STATUS_C_ADDRESS, access=R, saved=False, enum=STATUS_C, group="monitor",
+    parameter("", "Inverter status C", STATUS_C_ADDRESS, access=R, saved=False, enum=STATUS_C, group="monitor",
               source="section 4-7-1 Step 4, Tables 19/21"),
-    Parameter("", "EEPROM save (ENTER)", EEPROM_SAVE, access=W, saved=False, minimum=1, maximum=1, group="command",
+    parameter("", "EEPROM save (ENTER)", EEPROM_SAVE, access=W, saved=False, minimum=1, maximum=1, group="command",
               help="write 01h to store all parameters in EEPROM", source="sections E-2-2, E-3-2, Table C-2"),
-    Parameter("d001", "Output frequency monitor", D001_ADDRESS, words=2, type=UDINT, access=R, saved=False,
+    parameter("d001", "Output frequency monitor", D001_ADDRESS, words=2, type=UDINT, access=R, saved=False,
               group="d", source="Tables 19/21", **_HZ),
-    Parameter("", "Coil data 1", COIL_DATA_1, access=R, saved=False, bits=_COIL_DATA_1, group="coil",
+    parameter("", "Coil data 1", COIL_DATA_1, access=R, saved=False, bits=_COIL_DATA_1, group="coil",
               source="Tables 19/21"),
-    Parameter("", "Coil data 0", COIL_DATA_0, MX2, saved=False, bits=_COIL_DATA_0_COMMON, group="coil",
+    parameter("", "Coil data 0", COIL_DATA_0, MX2, saved=False, bits=_COIL_DATA_0_COMMON, group="coil",
               source="Tables 18/20"),
-    Parameter("", "Coil data 0", COIL_DATA_0, RX, saved=False, bits=_COIL_DATA_0_RX, group="coil",
+    parameter("", "Coil data 0", COIL_DATA_0, RX, saved=False, bits=_COIL_DATA_0_RX, group="coil",
               source="Tables 18/20"),
 
     # Monitors by function code.
@@ -388,9 +357,9 @@ PARAMETERS: tuple[Parameter, ...] = (
     *_per_family("d012", "Output torque monitor", 0x1010, type=INT, access=R, saved=False, unit="%", group="d",
                  torque_related=True, source="section 4-4 Step 10"),
     # The mode is set by the initialization (b180) and survives a restart, so the save keeps it.
-    Parameter("d060", "Inverter mode", 0x1057, MX2, access=R, enum=MX2_MODES, group="d",
+    parameter("d060", "Inverter mode", 0x1057, MX2, access=R, enum=MX2_MODES, group="d",
               source=f"Table 22; address {_I570}"),
-    Parameter("d060", "Inverter mode", None, RX, access=R, enum=RX_MODES, group="d", source="Table 23"),
+    parameter("d060", "Inverter mode", None, RX, access=R, enum=RX_MODES, group="d", source="Table 23"),
     *_per_family("d081", "Trip monitor 1 (trip cause)", 0x0012, access=R, saved=False, minimum=0, maximum=99,
                  group="d", help="latest trip: n for En", source="section 5-1-1"),
 
@@ -402,19 +371,19 @@ PARAMETERS: tuple[Parameter, ...] = (
                  default=1000, scale=0.01, unit="s", group="F", source="section 4-2-1 Step 2, Table D-7"),
 
     # A group: frequency and run command sources (Tables 13/14), maximum frequency (the ramp base).
-    Parameter("A001", "Frequency source", 0x1201, MX2, access=STOPPED, default=1, minimum=0, maximum=10,
+    parameter("A001", "Frequency source", 0x1201, MX2, access=STOPPED, default=1, minimum=0, maximum=10,
               enum=_enum(v1="control terminal", v2="digital operator (F001)", v3="Modbus network input",
                          v4="Option Board Interface"),
               group="A", source=f"Table 13; address {_I570}"),
-    Parameter("A001", "Frequency source", None, RX, access=STOPPED, default=1, minimum=0, maximum=10,
+    parameter("A001", "Frequency source", None, RX, access=STOPPED, default=1, minimum=0, maximum=10,
               enum=_enum(v1="control terminal", v2="digital operator (F001)", v3="Modbus network input",
                          v5="Option Board Interface 2"),
               group="A", source="Table 14"),
-    Parameter("A002", "Run command source", 0x1202, MX2, access=STOPPED, default=1, minimum=1, maximum=4,
+    parameter("A002", "Run command source", 0x1202, MX2, access=STOPPED, default=1, minimum=1, maximum=4,
               enum=_enum(v1="control terminal", v2="digital operator", v3="Modbus network input",
                          v4="Option Board Interface"),
               group="A", source=f"Table 13; address {_I570}"),
-    Parameter("A002", "Run command source", None, RX, access=STOPPED, default=1, minimum=1, maximum=5,
+    parameter("A002", "Run command source", None, RX, access=STOPPED, default=1, minimum=1, maximum=5,
               enum=_enum(v1="control terminal", v2="digital operator", v3="Modbus network input",
                          v5="Option Board Interface 2"),
               group="A", source="Table 14"),
@@ -428,15 +397,15 @@ PARAMETERS: tuple[Parameter, ...] = (
                  source="appendix F Tip (set 10 to edit parameters in run mode)"),
     *_per_family("b049", "Dual rating selection", 0x1333, access=STOPPED, enum=_enum(v0="CT", v1="VT"),
                  group="b", source="section 4-1 Step 1, Tables 22/23"),
-    Parameter("b084", "Initialization selection", None, RX, access=STOPPED, minimum=0, maximum=3, group="b",
+    parameter("b084", "Initialization selection", None, RX, access=STOPPED, minimum=0, maximum=3, group="b",
               source="section 4-1 Step 1 (RX)"),
-    Parameter("b171", "Inverter mode selection", 0x13AE, MX2, access=STOPPED, minimum=0, maximum=3,
+    parameter("b171", "Inverter mode selection", 0x13AE, MX2, access=STOPPED, minimum=0, maximum=3,
               enum=_enum(v0="no function", v1="induction motor", v2="high-frequency induction motor",
                          v3="permanent magnet motor"),
               group="b", source=f"section 4-1 Step 1, Table D-2 note; address {_I570}"),
     # Section E-2-2: b127 is one Modbus word but two words through the Function Code object. The manual
     # gives neither its meaning nor its address; the emulator keeps a plain word behind the function code.
-    Parameter("b127", "Function code b127", None, group="b", maximum=0xFFFF, function_code_words=2,
+    parameter("b127", "Function code b127", None, group="b", maximum=0xFFFF, function_code_words=2,
               source="section E-2-2 (double word by function code)"),
     *_per_family("b180", "Initialization trigger", 0x13B7, access=STOPPED, saved=False,
                  enum=_enum(v0="no action", v1="initialize"), group="b", source="section 4-1 Step 1"),
@@ -455,18 +424,18 @@ PARAMETERS: tuple[Parameter, ...] = (
                  group="C", source="Table 11 (3 recommended)"),
 
     # P group: torque control (Tables 15/16, section 4-4) ...
-    Parameter("P033", "Torque command source", 0x1621, MX2, access=STOPPED, minimum=0, maximum=6,
+    parameter("P033", "Torque command source", 0x1621, MX2, access=STOPPED, minimum=0, maximum=6,
               enum=_enum(v3="digital operator input", v6="Option Board Interface"), torque_related=True,
               group="P", source=f"Table 15, section 4-4 Step 4; address {_I570}"),
-    Parameter("P033", "Torque command source", None, RX, access=STOPPED, minimum=0, maximum=7,
+    parameter("P033", "Torque command source", None, RX, access=STOPPED, minimum=0, maximum=7,
               enum=_enum(v3="digital operator input", v7="Option Board Interface 2"), torque_related=True,
               group="P", source="Table 16, section 4-4 Step 4"),
     *_per_family("P034", "Torque command setting", 0x1622, minimum=0, maximum=200, unit="%", torque_related=True,
                  group="P", source="Table D-7 Torque Ref (0 - 200 %)"),
-    Parameter("P036", "Torque bias mode", 0x1624, MX2, access=STOPPED, minimum=0, maximum=5,
+    parameter("P036", "Torque bias mode", 0x1624, MX2, access=STOPPED, minimum=0, maximum=5,
               enum=_enum(v0="digital operator input", v5="Option Board Interface"), torque_related=True,
               group="P", source=f"Table 15; address {_I570}"),
-    Parameter("P036", "Torque bias mode", None, RX, access=STOPPED, minimum=0, maximum=6,
+    parameter("P036", "Torque bias mode", None, RX, access=STOPPED, minimum=0, maximum=6,
               enum=_enum(v0="digital operator input", v6="Option Board Interface 2"), torque_related=True,
               group="P", source="Table 16"),
     *_per_family("P037", "Torque bias value", 0x1625, type=INT, minimum=-200, maximum=200, unit="%",

@@ -1,0 +1,143 @@
+"""Lost command: Pr.12/Pr.13/Pr.14 (seed 000, PR Group (Lost Command) and "Lost command conditions
+by protocol"; seed 001, Command Loss Protective Operation)."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from enum import IntEnum
+
+from .registers import (
+    LOST_CMD_MODE,
+    LOST_CMD_TIME,
+    LOST_PRESET_FREQ,
+    WarningInformation,
+)
+from .trips import Trip
+
+#: Seed 000, "Lost command conditions by protocol": a class 1 connection that stays broken for
+#: longer than one second, or a Modbus TCP server that receives nothing for five seconds, puts
+#: the card in lost command mode; Pr.12 then acts after Pr.13 seconds.
+IO_BREAK_TIME = 1.0
+MODBUS_SILENCE_TIME = 5.0
+
+
+class LostCommandMode(IntEnum):
+    """Pr.12 Lost Cmd Mode (seed 000)."""
+
+    NONE = 0
+    FREE_RUN = 1
+    DEC = 2
+    HOLD_INPUT = 3
+    HOLD_OUTPUT = 4
+    LOST_PRESET = 5
+
+
+
+@dataclass
+class _CommandLossWatch:
+    """One protocol's lost-command timers (seed 000, "Lost command conditions by protocol")."""
+
+    detect_after: float
+    #: Since when nothing has arrived (class 1: the break; Modbus: the last request), or None.
+    silent_since: float | None = None
+    #: When lost command mode was entered (Pr.13 counts from here), or None.
+    lost_since: float | None = None
+    #: Pr.12 has acted for this loss.
+    acted: bool = False
+
+    def deadline(self, lost_time: float) -> float | None:
+        if self.silent_since is None or self.acted:
+            return None
+        if self.lost_since is None:
+            return self.silent_since + self.detect_after
+        return self.lost_since + lost_time
+
+    def clear(self) -> None:
+        self.silent_since = None
+        self.lost_since = None
+        self.acted = False
+
+
+
+class LostCommand:
+    """Pr.12/Pr.13/Pr.14 (part of ``AcgDrive``)."""
+
+
+    def on_io_connection_lost(self, now: float) -> None:
+        """The class 1 connection broke (timed out or closed)."""
+        self.advance(now)
+        if self._io_watch.silent_since is None:
+            self._io_watch.silent_since = now
+
+    def on_io_connection_opened(self, now: float) -> None:
+        """A class 1 connection is open and producing again: communication has returned."""
+        self.advance(now)
+        self._io_watch.clear()
+        self._restore_after_loss()
+        self._ramp(0.0)
+
+    def on_modbus_activity(self, now: float) -> None:
+        """A Modbus TCP request arrived; from the first one on, 5 s of silence is a command loss."""
+        self.advance(now)
+        self._modbus_watch.clear()
+        self._modbus_watch.silent_since = now
+        self._restore_after_loss()
+        self._ramp(0.0)
+
+    def _lost_time(self) -> float:
+        return self._values[LOST_CMD_TIME.address] / 10
+
+    def _timer_deadline(self) -> float | None:
+        lost_time = self._lost_time()
+        deadlines = [d for d in (self._io_watch.deadline(lost_time), self._modbus_watch.deadline(lost_time))
+                     if d is not None]
+        return min(deadlines) if deadlines else None
+
+    def _fire_timers(self, moment: float) -> None:
+        lost_time = self._lost_time()
+        for watch in (self._io_watch, self._modbus_watch):
+            deadline = watch.deadline(lost_time)
+            if deadline is None or deadline > moment:
+                continue
+            if watch.lost_since is None:
+                watch.lost_since = moment            # lost command mode entered; Pr.13 starts
+            else:
+                watch.acted = True
+                self._lost_command_action()
+
+    @property
+    def command_lost(self) -> bool:
+        """The card is in lost command mode on some protocol."""
+        return any(w.lost_since is not None for w in (self._io_watch, self._modbus_watch))
+
+    def _lost_command_action(self) -> None:
+        """Pr.12 after Pr.13 (seed 000, PR Group (Lost Command)), for a drive operated via the
+        network ("while the drive is operated via network communication")."""
+        if not (self.control_from_net or self.reference_from_net):
+            return
+        mode = LostCommandMode(self._values[LOST_CMD_MODE.address])
+        if mode is LostCommandMode.NONE:
+            return                                  # "Maintains the previous status."
+        if mode is LostCommandMode.FREE_RUN:        # Lost Command Trip, free-run stop
+            self._set_level_cause(Trip.LOST_COMMAND, True, free_run=True)
+        elif mode is LostCommandMode.DEC:           # Lost Command Trip, deceleration stop
+            self._set_level_cause(Trip.LOST_COMMAND, True, free_run=False)
+            self._settle()
+        else:
+            self._warnings |= WarningInformation.LOST_COMMAND
+            if mode is LostCommandMode.HOLD_INPUT:    # the speed reference before the loss
+                self._lost_reference = self._reference_hz()
+            elif mode is LostCommandMode.HOLD_OUTPUT:  # the running speed before the loss
+                self._lost_reference = abs(self._output_hz)
+            else:                                      # Lost Preset: Pr.14
+                self._lost_reference = self._values[LOST_PRESET_FREQ.address] / 100
+
+    def _restore_after_loss(self) -> None:
+        """Communication is back. The Lost Command warning clears and the reference is the
+        network's again; the Lost Command trip is a level-type trip (0x0332 B2) and clears
+        with its cause, leaving the drive stopped until a run command's next 0 -> 1 change."""
+        if any(w.acted for w in (self._io_watch, self._modbus_watch)):
+            return                                  # another protocol is still lost
+        self._warnings &= ~WarningInformation.LOST_COMMAND
+        self._lost_reference = None
+        self._set_level_cause(Trip.LOST_COMMAND, False)

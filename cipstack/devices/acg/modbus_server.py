@@ -1,0 +1,126 @@
+"""The asyncio shell of the ACG-ET2's Modbus TCP (``modbus.ModbusTcpCore``): accepts connections,
+frames their streams, answers each request in order, and keeps a timer at the drive's next deadline."""
+
+from __future__ import annotations
+
+import asyncio
+import logging
+
+from ..state import StateFileError, StateWriter
+from .drive import AcgDrive
+from .modbus import DriveSource, ExceptionCode, MbapBuffer, ModbusTcpCore
+
+log = logging.getLogger(__name__)
+
+
+class ModbusTcpServer:
+    """Modbus TCP server of the emulated ACG-ET2 (port 502 on the real card; here any port, 0 =
+    chosen by the OS). ``drive``: the drive, or a function returning the present one (a device
+    replaces its drive on an Identity reset). It keeps a loop timer at the drive's next deadline,
+    so the Modbus silence timer fires even when nothing else moves the drive.
+
+    ``saves``: the state writer of the drive's saves. A request that saves is answered once the
+    file is written, on the writer's thread: the event loop (and every class 1 connection) runs
+    on meanwhile, and a save the file did not take is answered with exception 0x04.
+    Each connection serves its requests in order; ``_accept`` is the one place a connection
+    is accepted."""
+
+    def __init__(self, drive: AcgDrive | DriveSource, host: str = "127.0.0.1", port: int = 0, *,
+                 saves: StateWriter | None = None) -> None:
+        self.core = ModbusTcpCore(drive)
+        self.host = host
+        self.saves = saves
+        self._requested_port = port
+        self._server: asyncio.AbstractServer | None = None
+        self._writers: set[asyncio.StreamWriter] = set()
+        self._timer: asyncio.TimerHandle | None = None
+        self.loop: asyncio.AbstractEventLoop | None = None
+
+    @property
+    def port(self) -> int:
+        if self._server is None or not self._server.sockets:
+            return self._requested_port
+        return int(self._server.sockets[0].getsockname()[1])
+
+    async def start(self) -> None:
+        self.loop = asyncio.get_running_loop()
+        self._server = await asyncio.start_server(self._accept, self.host, self._requested_port)
+        log.info("Modbus TCP on %s:%d", self.host, self.port)
+
+    async def _accept(self, reader: asyncio.StreamReader, writer: asyncio.StreamWriter) -> None:
+        self._writers.add(writer)
+        try:
+            await self._serve(reader, writer)
+        except (ConnectionError, OSError) as exc:
+            log.debug("Modbus TCP connection ended: %s", exc)
+        finally:
+            self._writers.discard(writer)
+            writer.close()
+
+    async def _serve(self, reader: asyncio.StreamReader, writer: asyncio.StreamWriter) -> None:
+        buffer = MbapBuffer()
+        while data := await reader.read(4096):
+            try:
+                frames = buffer.feed(data)
+            except ValueError as exc:
+                log.info("Modbus TCP connection closed: %s", exc)
+                return
+            for frame in frames:
+                reply = await self.handle_frame(frame)
+                if reply is not None:
+                    writer.write(reply)
+            self.rearm()
+            await writer.drain()
+
+    async def handle_frame(self, frame: bytes) -> bytes | None:
+        """One frame's reply; a request that saved waits (off the loop) for the file to take the save."""
+        assert self.loop is not None
+        saves = self.saves
+        submitted = saves.submitted if saves is not None else 0
+        reply = self.core.handle_adu(frame, self.loop.time())
+        if saves is None or reply is None or saves.submitted == submitted or saves.last is None:
+            return reply
+        try:
+            await asyncio.wrap_future(saves.last)
+        except StateFileError as exc:
+            log.debug("Modbus TCP: %s", exc)
+            return self.core.exception_adu(frame, ExceptionCode.SLAVE_DEVICE_FAILURE)
+        return reply
+
+    def rearm(self) -> None:
+        """Keep a timer at the drive's next deadline."""
+        if self._timer is not None:
+            self._timer.cancel()
+            self._timer = None
+        deadline = self.core.drive.next_deadline()
+        if deadline is not None and self.loop is not None:
+            self._timer = self.loop.call_at(deadline, self._on_timer)
+
+    def _on_timer(self) -> None:
+        self._timer = None
+        assert self.loop is not None
+        drive = self.core.drive
+        drive.advance(max(self.loop.time(), drive.time))
+        self.rearm()
+
+    async def close(self) -> None:
+        if self._timer is not None:
+            self._timer.cancel()
+            self._timer = None
+        if self._server is not None:
+            self._server.close()
+        for writer in list(self._writers):
+            writer.close()
+        if self._server is not None:
+            await self._server.wait_closed()
+            self._server = None
+
+    async def __aenter__(self) -> ModbusTcpServer:
+        await self.start()
+        return self
+
+    async def __aexit__(self, *exc: object) -> None:
+        await self.close()
+
+
+__all__ = ["ModbusTcpServer"]
