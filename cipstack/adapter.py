@@ -9,10 +9,10 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-from .control import ControlError, ControlServer, default_control_path
+from .control import ControlDenied, ControlError, ControlServer, default_control_path
 from .devices.acg.device import AcgDevice
 from .devices.acg.modbus_server import ModbusTcpServer
-from .devices.base import Device, DeviceLimits
+from .devices.base import Device, DeviceLimits, TripRefused
 from .devices.profiles import DEFAULT_MAC, DEFAULT_PROFILE, ProfileOptions, build_device
 from .eip.identity_items import CAPABILITY_CIP_TCP, CAPABILITY_CLASS01_UDP
 from .eip.io_core import DEFAULT_IO_PORT
@@ -178,6 +178,8 @@ class Adapter:
                 trip = self.device.inject_trip(code)
             except NotImplementedError as exc:
                 raise ControlError(str(exc)) from None
+            except TripRefused as exc:
+                raise ControlDenied(str(exc)) from None
             except (KeyError, ValueError) as exc:
                 reason = exc.args[0] if exc.args else exc
                 raise ControlError(f"{reason}; valid codes: {self.device.trip_codes()}") from None

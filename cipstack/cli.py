@@ -676,7 +676,7 @@ def _control(args: argparse.Namespace, request: dict[str, Any]) -> dict[str, Any
     except ControlRefused as exc:
         raise UsageError(str(exc)) from None    # the emulator named what is wrong with the argument
     except ControlError as exc:
-        raise ConnectionError(str(exc)) from None   # no emulator there, or no answer: exit 1
+        raise ConnectionError(str(exc)) from None   # no emulator there, no answer, or its state says no: exit 1
     reply.pop("ok", None)
     return reply
 

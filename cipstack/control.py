@@ -37,6 +37,10 @@ class ControlRefused(ControlError):
     """The emulator answered and refused the request (a bad argument, e.g. an unknown trip code)."""
 
 
+class ControlDenied(ControlError):
+    """The emulator understood the request and its state refuses it (a trip while already tripped)."""
+
+
 Handler = Callable[[dict[str, Any]], dict[str, Any]]
 
 
@@ -72,7 +76,7 @@ class ControlServer:
                         raise ControlError("a request is a JSON object")
                     reply = {"ok": True, **self.handler(request)}
                 except (ControlError, ValueError, KeyError, TypeError) as exc:
-                    reply = {"ok": False, "error": str(exc)}
+                    reply = {"ok": False, "error": str(exc), "denied": isinstance(exc, ControlDenied)}
                 writer.write(json.dumps(reply).encode() + b"\n")
                 await writer.drain()
         except (ConnectionError, asyncio.LimitOverrunError, ValueError):
@@ -109,5 +113,7 @@ def control_request(path: Path, request: dict[str, Any], timeout: float = 5.0) -
     except ValueError:
         raise ControlError("the emulator sent no reply") from None
     if not reply.get("ok"):
+        if reply.get("denied"):
+            raise ControlDenied(str(reply.get("error", "denied")))
         raise ControlRefused(str(reply.get("error", "refused")))
     return dict(reply)

@@ -170,8 +170,9 @@ def test_trips_in_words_and_valid_codes_listed(tmp_path: Path) -> None:
         tripped = run("drive", "trip", "5", "--control", str(control))
         assert tripped.returncode == 0, tripped.stderr
         assert tripped.stdout.splitlines()[0] == "tripped: E05 Overload protection"
-        by_name = run("drive", "trip", "E12", "--control", str(control), "--json")
-        assert json.loads(by_name.stdout)["trip"] == "E12 External trip"
+        # A second fault while tripped is refused and the first one kept (issue 14 item 9).
+        second = run("drive", "trip", "E12", "--control", str(control), "--json")
+        assert second.returncode == 1 and "already tripped" in one_line_error(second)
         unknown = run("drive", "trip", "12345", "--control", str(control))
         assert unknown.returncode == 2
         assert "valid codes: 1 2 3 4 5 6 7 8 9 10 11 12 13 14 15 16 20" in one_line_error(unknown)
@@ -188,7 +189,8 @@ def test_acg_status_json_by_field(tmp_path: Path) -> None:
     control = tmp_path / "acg.sock"
     _, process = start_adapter("--quiet", "--control", str(control), "--param", "drv=4")
     try:
-        run("drive", "trip", "0x4200", "--control", str(control))
+        by_name = run("drive", "trip", "OverHeat", "--control", str(control), "--json")
+        assert json.loads(by_name.stdout)["trip"] == "OverHeat", by_name.stderr
         status = json.loads(run("drive", "status", "--control", str(control), "--json").stdout)
         assert status == {"state": "FAULT_STOP", "direction": None, "output_frequency_hz": 0.0, "reference_hz": 0.0,
                           "io_connections": 0, "trip": "OverHeat", "fault_code": 0x4200, "lost_command": False,

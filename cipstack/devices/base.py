@@ -25,6 +25,11 @@ from .state import StateWriter
 log = logging.getLogger(__name__)
 
 
+
+class TripRefused(ValueError):
+    """A trip the device's present state does not take (it is tripped already and keeps its first trip):
+    the request was understood, the device said no."""
+
 @dataclass
 class DeviceLimits:
     max_sessions: int = 32

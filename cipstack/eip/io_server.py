@@ -96,7 +96,9 @@ class IoEndpoint:
         self.host = host
         self.port = port
         self.multicast_ttl = multicast_ttl
-        self.loop = asyncio.get_event_loop()
+        #: The running loop, taken in ``start()`` (none is made here: one made outside a running loop
+        #: would never be closed).
+        self.loop: asyncio.AbstractEventLoop
         self.transport: asyncio.DatagramTransport | None = None
         self._timer: asyncio.TimerHandle | None = None
         self._timer_at: float | None = None

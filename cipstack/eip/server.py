@@ -137,7 +137,9 @@ class EncapsulationServer:
         self.host = host
         self.port = port
         self.udp = udp
-        self.loop = asyncio.get_event_loop()
+        #: The running loop, taken in ``start()`` (none is made here: one made outside a running loop
+        #: would never be closed).
+        self.loop: asyncio.AbstractEventLoop
         self.connections: set[_TcpProtocol] = set()
         self._tcp: asyncio.base_events.Server | None = None
         self._udp: asyncio.DatagramTransport | None = None

@@ -40,7 +40,7 @@ from ...cip.model import ClassSpec
 from ...eip.io_target import ConnectionKind, IoConnection, IoProfile
 from ...objects.assembly import AssemblyPoint
 from ...objects.tcpip import NetworkInterface
-from ..base import Device, DeviceLimits
+from ..base import Device, DeviceLimits, TripRefused
 from ..profiles import DEFAULT_MAC, serial_from_mac
 from ..registers import Register, RegisterError
 from ..state import ParameterStore, StateWriter
@@ -289,12 +289,12 @@ class AcgDevice(Device):
 
         A drive already tripped keeps its trip: class 0x29 attribute 13 holds one Drive Fault Code,
         and a trip is left only by a Fault Reset (attribute 12, seed 000:654-656) or, for a level
-        type, by its cause going away. So a second trip is refused (``ValueError`` naming the
+        type, by its cause going away. So a second trip is refused (``TripRefused`` naming the
         present one), and nothing changes."""
         trip = parse_trip(code)
         present = self.drive.trip
         if present is not None:
-            raise ValueError(f"the drive is already tripped: {present.label} (fault code 0x{present.fault_code:04X}); "
+            raise TripRefused(f"the drive is already tripped: {present.label} (fault code 0x{present.fault_code:04X}); "
                              f"it keeps that trip until a Fault Reset, so {trip.label} is not taken")
         return self.drive.inject_trip(trip, self.now)
 

@@ -55,7 +55,7 @@ from ...eip.io_target import IoConnection, IoProfile
 from ...objects.assembly import AssemblyPoint
 from ...objects.identity import IdentityInfo, IdentityStatus
 from ...objects.tcpip import NetworkInterface
-from ..base import Device, DeviceLimits
+from ..base import Device, DeviceLimits, TripRefused
 from ..registers import RegisterError, RegisterRefusal
 from ..state import ParameterStore, StateFileError, StateWriter
 from .inverter import Inverter, InverterModeError
@@ -439,7 +439,7 @@ class OmronDevice(Device):
         trip = trip_code(self.family, number)   # KeyError for a code the family does not have
         if self.inverter.trip:
             # The inverter keeps its first trip until it is reset (Table D-4 Fault Code: one code).
-            raise ValueError(f"the inverter is already tripped: E{self.inverter.trip:02d}; it keeps that trip "
+            raise TripRefused(f"the inverter is already tripped: E{self.inverter.trip:02d}; it keeps that trip "
                              f"until a Fault Rst, so E{number:02d} is not taken")
         self.inverter.raise_trip(self.now, number)
         return trip
