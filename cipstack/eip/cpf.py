@@ -45,23 +45,23 @@ def encode_items(items: list[Item] | tuple[Item, ...]) -> bytes:
 def decode_items(raw: bytes, offset: int = 0) -> list[Item]:
     """Decode a CPF; any inconsistency is encapsulation status 0x0003 (poorly formed)."""
     if offset + 2 > len(raw):
-        raise EncapsulationError(EncapsulationStatus.INCORRECT_DATA, "CPF item count missing")
+        raise EncapsulationError(EncapsulationStatus.INCORRECT_DATA, "CPF item count missing", offset)
     (count,) = _COUNT.unpack_from(raw, offset)
     if count > MAX_ITEMS:
-        raise EncapsulationError(EncapsulationStatus.INCORRECT_DATA, f"{count} CPF items")
+        raise EncapsulationError(EncapsulationStatus.INCORRECT_DATA, f"{count} CPF items", offset)
     pos = offset + 2
     items = []
     for _ in range(count):
         if pos + 4 > len(raw):
-            raise EncapsulationError(EncapsulationStatus.INCORRECT_DATA, "CPF item header cut short")
+            raise EncapsulationError(EncapsulationStatus.INCORRECT_DATA, "CPF item header cut short", pos)
         item_type, length = _ITEM.unpack_from(raw, pos)
         pos += 4
         if pos + length > len(raw):
-            raise EncapsulationError(EncapsulationStatus.INCORRECT_DATA, "CPF item runs past the packet")
+            raise EncapsulationError(EncapsulationStatus.INCORRECT_DATA, "CPF item runs past the packet", pos - 2)
         items.append(Item(item_type, bytes(raw[pos:pos + length])))
         pos += length
     if pos != len(raw):
-        raise EncapsulationError(EncapsulationStatus.INCORRECT_DATA, "bytes after the last CPF item")
+        raise EncapsulationError(EncapsulationStatus.INCORRECT_DATA, "bytes after the last CPF item", pos)
     return items
 
 
