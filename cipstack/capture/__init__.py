@@ -13,7 +13,7 @@ from .analyzer import Analyzer, Connection, Direction, Totals
 from .decoding import Declarations
 from .reader import CaptureFormatError, Record, decode_segment, read_records
 
-_LAYERS = ("ENIP", "CPF", "CPFItem", "CIP", "ENIP_IO", "bind_layers_to_ports")
+_LAYERS = ("ENIP", "CPF", "CPFItem", "CIP", "CIPConnected", "ENIP_IO", "bind_layers_to_ports")
 
 
 def __getattr__(name: str) -> Any:

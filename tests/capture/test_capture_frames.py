@@ -1,0 +1,176 @@
+"""``capture analyze`` on scripted wire bytes: each case is a capture written frame by frame from
+the project's codecs (and hand-made bytes for the malformed ones), then analysed by the command."""
+
+from __future__ import annotations
+
+import json
+import subprocess
+import sys
+from pathlib import Path
+from typing import Any
+
+from cipstack.capture.layers import CIP, CPF, ENIP, ENIP_IO, CPFItem
+from cipstack.capture.synth import PcapWriter, TcpFlow, ethernet, udp
+from cipstack.cip.epath import PortSegment, encode_path, request_path
+from cipstack.cip.messages import MessageRouterRequest, MessageRouterResponse, Service
+from cipstack.eip.cm_messages import (
+    ConnectionTriad,
+    ForwardOpenReply,
+    ForwardOpenRequest,
+    NetworkParameters,
+    TransportTrigger,
+    UnconnectedSendRequest,
+)
+from cipstack.eip.cpf import Item, ItemType, encode_items
+from cipstack.eip.encapsulation import RR_PREFIX, Command, encode_frame
+from cipstack.eip.io_core import encode_io_datagram
+
+CLIENT, TARGET = ("10.0.0.1", 50000), ("10.0.0.2", 44818)
+CM_PATH = request_path(0x06, 1)
+
+
+def rr(message: bytes, session: int = 7, context: bytes = b"ctx00001", extra: tuple[Item, ...] = ()) -> bytes:
+    items = encode_items([Item(ItemType.NULL_ADDRESS), Item(ItemType.UNCONNECTED_DATA, message), *extra])
+    return encode_frame(Command.SEND_RR_DATA, RR_PREFIX.pack(0, 0) + items, session=session, context=context)
+
+
+def analyze(path: Path, *args: str) -> tuple[int, list[dict[str, Any]], str]:
+    result = subprocess.run([sys.executable, "-m", "cipstack", "capture", "analyze", str(path), "--json", *args],
+                            capture_output=True, text=True, timeout=60, check=False)
+    return result.returncode, [json.loads(line) for line in result.stdout.splitlines()], result.stderr
+
+
+def forward_open(rpi_us: int = 10_000, multiplier: int = 0) -> ForwardOpenRequest:
+    return ForwardOpenRequest(
+        0x0A, 0x0E, 0, 0x2000_0001, ConnectionTriad(0x1234, 0x0103, 0xCAFE), multiplier, rpi_us,
+        NetworkParameters(2 + 4 + 4), rpi_us, NetworkParameters(2 + 4), TransportTrigger(1),
+        bytes.fromhex("20042401") + bytes.fromhex("2c15") + bytes.fromhex("2c46"))
+
+
+def test_split_and_coalesced_segments_io_timing_gaps_and_timeout(tmp_path: Path) -> None:
+    path = tmp_path / "c.pcap"
+    flow = TcpFlow(CLIENT, TARGET)
+    request = forward_open()
+    fo = rr(MessageRouterRequest(Service.FORWARD_OPEN, CM_PATH, request.encode()).encode())
+    reply_data = ForwardOpenReply(0x1111, 0x2000_0001, request.triad, 10_000, 10_000).encode()
+    fo_reply = rr(MessageRouterResponse(Service.FORWARD_OPEN, data=reply_data).encode())
+    get = rr(MessageRouterRequest(Service.GET_ATTRIBUTE_SINGLE, request_path(1, 1, 7)).encode(), context=b"ctx00002")
+    bad = rr(MessageRouterRequest(Service.GET_ATTRIBUTE_SINGLE, request_path(1, 1, 99)).encode(), context=b"ctx00003")
+    with path.open("wb") as stream:
+        pcap = PcapWriter(stream)
+        t = 100.0
+        for frame in flow.handshake():
+            pcap.write(t, ethernet(frame))
+        # The Forward_Open request split over two segments; its reply in one.
+        pcap.write(t + 0.001, ethernet(flow.send(True, fo[:10])))
+        pcap.write(t + 0.002, ethernet(flow.send(True, fo[10:])))
+        pcap.write(t + 0.003, ethernet(flow.send(False, fo_reply)))
+        # Two requests in one segment, then their replies (the second an error).
+        pcap.write(t + 0.004, ethernet(flow.send(True, get + bad)))
+        name = b"\x04CENT"
+        pcap.write(t + 0.005, ethernet(flow.send(False, rr(MessageRouterResponse(0x0E, data=name).encode(),
+                                                           context=b"ctx00002"))))
+        pcap.write(t + 0.006, ethernet(flow.send(False, rr(MessageRouterResponse(0x0E, 0x14).encode(),
+                                                           context=b"ctx00003"))))
+        # 20 O->T frames at 10 ms with sequence 6 missing and 9 twice, then silence: timeout.
+        for n in range(1, 21):
+            if n == 6:
+                continue
+            run = 1 if n > 3 else 0
+            data = encode_io_datagram(0x1111, n, n, b"\x00" * 4, run_idle=run)
+            pcap.write(t + 0.01 + n * 0.010, ethernet(udp("10.0.0.1", 2222, "10.0.0.2", 2222, data)))
+            if n == 9:
+                pcap.write(t + 0.01 + n * 0.010 + 0.0001, ethernet(udp("10.0.0.1", 2222, "10.0.0.2", 2222, data)))
+        # A frame for a connection nobody opened, and a malformed class 1 datagram.
+        unknown = encode_io_datagram(0x9999, 1, 1, b"")
+        pcap.write(t + 0.3, ethernet(udp("10.0.0.9", 2222, "10.0.0.2", 2222, unknown)))
+        pcap.write(t + 0.31, ethernet(udp("10.0.0.9", 2222, "10.0.0.2", 2222, b"\x02\x00\x02\x80")))
+        pcap.write(t + 1.0, ethernet(udp("10.0.0.9", 40000, "10.0.0.3", 40001, b"x")))
+    code, records, stderr = analyze(path, "--profile", "acg")
+    assert code == 0, stderr
+    explicit = [r for r in records if r["type"] == "explicit"]
+    assert [r["request"]["service_name"] for r in explicit] == ["Forward_Open", "Get_Attribute_Single",
+                                                               "Get_Attribute_Single"]
+    assert explicit[1]["reply"]["data"]["value"] == "CENT"
+    assert explicit[1]["request"]["attribute_name"] == "Product Name"
+    assert explicit[2]["error"] and explicit[2]["reply"]["status_name"] == "0x14 (attribute not supported)"
+    connection = next(r for r in records if r["type"] == "connection")
+    assert connection["o_t_id"] == 0x1111 and (connection["o_t_point"], connection["t_o_point"]) == (0x15, 0x46)
+    o_t = connection["o_t"]
+    assert (o_t["frames"], o_t["lost"], o_t["duplicates"]) == (20, 1, 1)
+    assert abs(o_t["p50_ms"] - 10) < 0.2 and abs(o_t["max_ms"] - 20) < 0.2
+    assert [c["mode"] for c in connection["run_idle_changes"]] == ["idle", "run"]
+    # 10 ms x 4 x 2^0 = 40 ms of silence after the last frame.
+    assert connection["end_reason"].startswith("timeout: O->T silent for more than 40 ms")
+    anomalies = [r for r in records if r["type"] == "anomaly"]
+    assert any("unknown connection 0x00009999" in a["reason"] for a in anomalies)
+    assert any(a["layer"] == "class1" and a["offset"] == 4 for a in anomalies)
+
+
+def test_routed_request_to_the_componet_gateway_and_unanswered(tmp_path: Path) -> None:
+    path = tmp_path / "r.pcap"
+    flow = TcpFlow(CLIENT, TARGET)
+    embedded = MessageRouterRequest(Service.GET_ATTRIBUTE_SINGLE, request_path(1, 1, 1)).encode()
+    send = UnconnectedSendRequest(0x0A, 0x0E, embedded, encode_path([PortSegment(2, b"\x05")])).encode()
+    routed = rr(MessageRouterRequest(Service.UNCONNECTED_SEND, CM_PATH, send).encode())
+    lonely = rr(MessageRouterRequest(Service.GET_ATTRIBUTE_SINGLE, request_path(1, 1, 3)).encode(), context=b"zz")
+    # Items after the declared count: the count says 2, a third item follows.
+    extra = bytearray(rr(MessageRouterRequest(Service.GET_ATTRIBUTE_SINGLE, request_path(1, 1, 2)).encode(),
+                         context=b"xx", extra=(Item(ItemType.SOCKADDR_T_O, b"\x00" * 16),)))
+    extra[30] = 2
+    with path.open("wb") as stream:
+        pcap = PcapWriter(stream)
+        for frame in flow.handshake():
+            pcap.write(1.0, ethernet(frame))
+        pcap.write(1.1, ethernet(flow.send(True, routed)))
+        pcap.write(1.2, ethernet(flow.send(False, rr(MessageRouterResponse(0x0E, data=b"\x2f\x00").encode()))))
+        pcap.write(1.3, ethernet(flow.send(True, lonely)))
+        pcap.write(1.4, ethernet(flow.send(True, bytes(extra))))
+    code, records, stderr = analyze(path)
+    assert code == 0, stderr
+    routed_record = next(r for r in records if r["type"] == "explicit" and "reply" in r
+                         and r["request"]["service_name"] == "Unconnected_Send")
+    assert routed_record["request"]["route"] == [{"port": 2, "link": 5, "network": "CompoNet"}]
+    assert routed_record["request"]["embedded"]["attribute_name"] == "Vendor ID"
+    assert routed_record["reply"]["data"]["value"] == 47
+    unanswered = [r for r in records if r["type"] == "explicit" and "unanswered" in r]
+    assert {r["request"]["attribute"] for r in unanswered} == {2, 3}
+    after = next(r for r in records if r["type"] == "anomaly")
+    assert after["layer"] == "cpf" and "after the declared count" in after["reason"]
+    # Header 24, prefix 6, count 2, null address item 4, data item 4 + 8: the third item starts there.
+    assert after["offset"] == 24 + 6 + 2 + 4 + 4 + 8
+
+
+def test_scapy_layers_build_the_project_bytes_and_dissect_them() -> None:
+    from scapy.layers.inet import IP, UDP
+
+    path = request_path(1, 1, 7)
+    built = ENIP(command_code="SEND_RR_DATA", session=0x11) / CPF(items=[
+        CPFItem(type="NULL_ADDRESS"), CPFItem(type="UNCONNECTED_DATA") / CIP(service="GET_ATTRIBUTE_SINGLE",
+                                                                            path=path)])
+    expected = rr(MessageRouterRequest(Service.GET_ATTRIBUTE_SINGLE, path).encode(), session=0x11,
+                  context=b"\x00" * 8)
+    assert bytes(built) == expected
+    dissected = IP(bytes(IP(src="1.1.1.1", dst="2.2.2.2") / UDP(sport=1, dport=44818) / built))
+    assert dissected[ENIP].command_code == Command.SEND_RR_DATA and dissected[CPF].count == 2
+    assert dissected[CIP].describe()["attribute_name"] == "Product Name"
+    io = IP(bytes(IP() / UDP(sport=2222, dport=2222) / (ENIP_IO(connection_id=5, encap_sequence=9, cip_sequence=3)
+                                                          / b"\x01\x00\x00\x00ab")))
+    assert bytes(io[ENIP_IO]) == encode_io_datagram(5, 9, 3, b"ab", run_idle=1)
+    assert io[ENIP_IO].datagram().payload == b"\x01\x00\x00\x00ab"
+
+
+def test_bad_files_and_missing_matplotlib_are_one_line_errors(tmp_path: Path) -> None:
+    junk = tmp_path / "junk.pcap"
+    junk.write_bytes(b"not a capture at all")
+    result = subprocess.run([sys.executable, "-m", "cipstack", "capture", "analyze", str(junk)], capture_output=True,
+                            text=True, timeout=60, check=False)
+    assert result.returncode == 1 and "not a pcap or pcapng file" in result.stderr
+    assert len(result.stderr.strip().splitlines()) == 1
+    result = subprocess.run([sys.executable, "-m", "cipstack", "capture", "analyze", str(tmp_path / "nope.pcap")],
+                            capture_output=True, text=True, timeout=60, check=False)
+    assert result.returncode == 1 and "No such file" in result.stderr
+    script = ("import sys; sys.modules['matplotlib'] = None; from cipstack.cli import main; "
+              f"sys.exit(main(['capture', 'analyze', {str(junk)!r}, '--plot', 'x.png']))")
+    result = subprocess.run([sys.executable, "-c", script], capture_output=True, text=True, timeout=60, check=False)
+    assert result.returncode == 2 and 'pip install "cipstack[plot]"' in result.stderr
