@@ -34,12 +34,16 @@ from .decoding import (
     field_changes,
 )
 from .reader import decode_segment
-from .stats import LogHistogram, Reservoir
+from .stats import LogHistogram, Reservoir, Worst
 
 ENIP_PORT = 44818
 MAX_TCP_BUFFER = 1 << 18
 MAX_PENDING = 64
 MAX_EVENTS = 200
+#: TCP streams (and their pending requests) followed at once; the least recently opened goes first.
+MAX_STREAMS = 4096
+#: Unknown connection ids remembered (each reported once).
+MAX_UNKNOWN = 4096
 #: Largest encapsulation frame accepted from a stream (header + 65,535-byte length field).
 MAX_FRAME = HEADER_SIZE + 0xFFFF
 #: The tolerance the project measures I/O timing with (benchmarks/io.py): an interval within
@@ -76,6 +80,7 @@ class Direction:
     late: int = 0
     intervals: LogHistogram = field(default_factory=LogHistogram)
     reservoir: Reservoir = field(default_factory=Reservoir)
+    worst: Worst = field(default_factory=Worst)
     last_payload: bytes | None = None
     last_fields: dict[str, Any] | None = None
 
@@ -236,11 +241,11 @@ class Analyzer:
         key = (segment.src, segment.sport, segment.dst, segment.dport)
         stream = self._streams.get(key)
         if segment.flags & 0x02:  # SYN: a new stream starts after it
-            self._streams[key] = _Stream(next_seq=(segment.seq + 1) & 0xFFFFFFFF)
+            self._new_stream(key, (segment.seq + 1) & 0xFFFFFFFF)
             return
         if stream is None:
             # Capture started mid-connection: take the stream from here.
-            stream = self._streams[key] = _Stream(next_seq=segment.seq)
+            stream = self._new_stream(key, segment.seq)
         payload = segment.payload
         if payload:
             offset = (segment.seq - stream.next_seq) & 0xFFFFFFFF
@@ -262,6 +267,16 @@ class Analyzer:
             self._streams.pop(key, None)
             if segment.sport == ENIP_PORT:
                 self._drop_pending((segment.dst, segment.dport, segment.src, segment.sport), "TCP connection closed")
+
+    def _new_stream(self, key: tuple[str, int, str, int], next_seq: int) -> _Stream:
+        self._streams.pop(key, None)
+        if len(self._streams) >= MAX_STREAMS:
+            oldest = next(iter(self._streams))
+            del self._streams[oldest]
+            if oldest[3] == ENIP_PORT:
+                self._drop_pending(oldest, "stream no longer followed (too many TCP streams)")
+        stream = self._streams[key] = _Stream(next_seq=next_seq)
+        return stream
 
     def _frames_from_stream(self, time: float, number: int, segment: Any, stream: _Stream) -> None:
         buffer = stream.buffer
@@ -556,7 +571,8 @@ class Analyzer:
             if segment.dport in self.io_ports or segment.sport in self.io_ports:
                 unknown = (segment.dst, datagram.connection_id)
                 seen = self._unknown.get(unknown, 0)
-                self._unknown[unknown] = seen + 1
+                if seen or len(self._unknown) < MAX_UNKNOWN:
+                    self._unknown[unknown] = seen + 1
                 if seen == 0:  # reported once per id, counted in the totals
                     self._anomaly(time, number, segment, "class1",
                                   f"frame for unknown connection 0x{datagram.connection_id:08X}", 6)
@@ -594,6 +610,7 @@ class Analyzer:
             if interval > 1.5 * rpi:
                 direction.late += 1
             direction.reservoir.add((time, interval))
+            direction.worst.add(interval, time)
         else:
             direction.first_time = time
         direction.last_time = time

@@ -16,6 +16,7 @@ from .reader import CaptureFormatError, read_records
 EXIT_OK, EXIT_FAILURE, EXIT_USAGE = 0, 1, 2
 #: Explicit exchanges and anomalies kept for the human summary (all of them stream with --json).
 KEEP = 200
+ROUTINE = 5
 
 
 def add_arguments(sub: Any) -> None:
@@ -135,6 +136,7 @@ def run(args: argparse.Namespace) -> int:
         print(f"{name}: {args.file}: {exc.strerror or exc}", file=sys.stderr)
         return EXIT_FAILURE
     explicit: list[dict[str, Any]] = []
+    routine: list[dict[str, Any]] = []
     anomalies: list[dict[str, Any]] = []
     connections: list[Connection] = []
     out = sys.stdout
@@ -145,14 +147,14 @@ def run(args: argparse.Namespace) -> int:
             connection = record.pop("_connection")
             connections.append(connection)
         elif kind == "explicit":
-            # Errors and unanswered requests first in line for the summary's bounded list.
-            if len(explicit) < KEEP:
+            # The summary lists the first few exchanges and the notable ones: errors, unanswered
+            # requests, replies without a request, routed requests.
+            notable = any(k in record for k in ("error", "unanswered", "unmatched_reply")) or (
+                "route" in record.get("request", {}))
+            if notable and len(explicit) < KEEP:
                 explicit.append(record)
-            elif "error" in record or "unanswered" in record:
-                for index, kept in enumerate(explicit):
-                    if "error" not in kept and "unanswered" not in kept:
-                        explicit[index] = record
-                        break
+            elif not notable and len(routine) < ROUTINE:
+                routine.append(record)
         elif kind == "anomaly" and len(anomalies) < KEEP:
             anomalies.append(record)
         if args.json:
@@ -184,8 +186,9 @@ def run(args: argparse.Namespace) -> int:
         from .report import summary_text
 
         sources = {t: analyzer._declarations(t).source for t in analyzer.identities}
+        shown = sorted(explicit + routine, key=lambda r: r.get("time", r.get("reply_time", 0.0)))
         print(summary_text(args.file.name, totals, analyzer.identities,
-                           [] if args.connection is not None else explicit, anomalies, connections, sources))
+                           [] if args.connection is not None else shown, anomalies, connections, sources))
     if args.csv is not None:
         from .report import write_csv
 

@@ -6,7 +6,7 @@ import csv
 from pathlib import Path
 from typing import Any
 
-from .analyzer import Connection, Totals
+from .analyzer import Connection, Direction, Totals
 from .decoding import path_text
 
 #: How many explicit exchanges / anomalies the human summary lists (the totals count them all).
@@ -98,8 +98,9 @@ def summary_text(name: str, totals: Totals, identities: dict[str, dict[str, Any]
         lines.append("Explicit messages: " + ", ".join(f"{k} {v}" for k, v in sorted(totals.services.items())))
     for record in explicit[:LIST_LIMIT]:
         lines.append("  " + explicit_line(record, origin))
-    if len(explicit) > LIST_LIMIT:
-        lines.append(f"  ... {len(explicit) - LIST_LIMIT} more (--json lists every one)")
+    if totals.explicit + totals.unanswered > min(len(explicit), LIST_LIMIT):
+        lines.append(f"  ... (the first exchanges and the errors, unanswered and routed ones; --json lists all "
+                     f"{totals.explicit + totals.unanswered})")
     for connection in connections:
         lines.append("")
         lines.extend(connection_text(connection, origin))
@@ -113,9 +114,14 @@ def summary_text(name: str, totals: Totals, identities: dict[str, dict[str, Any]
     return "\n".join(lines)
 
 
+def samples(direction: Direction) -> list[tuple[float, float]]:
+    """(time, interval) of a direction: its uniform sample plus its largest intervals."""
+    return sorted(set(direction.reservoir.items) | {(t, v) for v, t in direction.worst.heap})
+
+
 def write_csv(directory: Path, connections: list[Connection]) -> list[Path]:
-    """``connections.csv`` (one row per connection and direction) and ``connection-N.csv`` (the sampled
-    inter-arrival times: time, direction, interval in ms)."""
+    """``connections.csv`` (one row per connection and direction) and ``connection-N.csv`` (inter-arrival
+    times: a uniform sample of at most 5,000 per direction plus the 50 largest; time, direction, ms)."""
     directory.mkdir(parents=True, exist_ok=True)
     written = [directory / "connections.csv"]
     columns = ["connection", "direction", "o_t_id", "t_o_id", "rpi_ms", "size", "frames", "intervals", "p50_ms",
@@ -134,8 +140,8 @@ def write_csv(directory: Path, connections: list[Connection]) -> list[Path]:
         with path.open("w", newline="") as out:
             writer = csv.writer(out)
             writer.writerow(["time", "direction", "interval_ms", "rpi_ms"])
-            rows = [(t, "O->T", i, connection.o_t.rpi_us) for t, i in connection.o_t.reservoir.sorted()]
-            rows += [(t, "T->O", i, connection.t_o.rpi_us) for t, i in connection.t_o.reservoir.sorted()]
+            rows = [(t, "O->T", i, connection.o_t.rpi_us) for t, i in samples(connection.o_t)]
+            rows += [(t, "T->O", i, connection.t_o.rpi_us) for t, i in samples(connection.t_o)]
             for t, which, interval, rpi in sorted(rows):
                 writer.writerow([f"{t:.6f}", which, f"{interval * 1e3:.3f}", rpi / 1000])
         written.append(path)
@@ -164,7 +170,7 @@ def write_plot(path: Path, connections: list[Connection], origin: float) -> None
             axis.text(0.5, 0.5, "no class 1 traffic", ha="center", va="center")
             continue
         for name, direction, colour in (("O->T", connection.o_t, "tab:blue"), ("T->O", connection.t_o, "tab:orange")):
-            points = direction.reservoir.sorted()
+            points = samples(direction)
             if not points:
                 continue
             rpi = direction.rpi_us / 1000

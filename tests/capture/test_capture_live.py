@@ -5,6 +5,7 @@ against what the run knows (the RPI asked, the frames sent, the trip injected)."
 
 from __future__ import annotations
 
+import itertools
 import json
 import os
 import shlex
@@ -185,15 +186,19 @@ def test_explicit_exchanges_match_tshark_frame_by_frame(recorded: tuple[Path, di
                                                         analysis: list[dict[str, Any]]) -> None:
     path, _ = recorded
     # Every CIP reply tshark sees over TCP: frame, session, service, general status.
+    from cipstack.eip.encapsulation import Command
+
     rows = tshark_fields(path, "tcp && cip && enip.command != 0x0065",
-                         ("frame.number", "enip.session", "cip.service", "cip.genstat", "enip.cpf.itemcount"))
+                         ("frame.number", "enip.command", "enip.session", "cip.service", "cip.genstat",
+                          "enip.cpf.itemcount"))
     theirs = {}
-    for frame, session, service, status, _items in rows:
+    for frame, command, session, service, status, items in rows:
         services = [int(s, 16) for s in service.split(",")]
         statuses = [int(s, 0) for s in status.split(",")] if status else []
         if services[0] & 0x80:
-            theirs[int(frame)] = (int(session, 16), services[0] & 0x7F, statuses[0])
-    ours = {r["reply_frame"]: (r["session"], r["reply"]["service"], r["reply"]["status"])
+            theirs[int(frame)] = (int(command, 16), int(session, 16), services[0] & 0x7F, statuses[0])
+            assert int(items) >= 2
+    ours = {r["reply_frame"]: (Command[r["command"]].value, r["session"], r["reply"]["service"], r["reply"]["status"])
             for r in analysis if r["type"] == "explicit" and "reply_frame" in r}
     assert theirs, "tshark found no CIP reply"
     assert ours == theirs
@@ -226,14 +231,20 @@ def test_class1_connections_match_tshark_and_the_run(recorded: tuple[Path, dict[
     decode = ("-d", f"udp.port=={port},cipio")
     frames = tshark_fields(path, "cipio", ("enip.cpf.sai.connid", "enip.cpf.sai.seq"), *decode)
     per_id: dict[int, int] = {}
-    for conn_id, _seq in frames:
+    sequences: dict[int, list[int]] = {}
+    for conn_id, seq in frames:
         per_id[int(conn_id, 16)] = per_id.get(int(conn_id, 16), 0) + 1
+        sequences.setdefault(int(conn_id, 16), []).append(int(seq))
     opened = [c for c in connections if not c["end_reason"].startswith("refused")]
     assert len(opened) == 2, [c["end_reason"] for c in connections]
     for connection in opened:
         assert connection["o_t"]["frames"] == per_id[connection["o_t_id"]]
         assert connection["t_o"]["frames"] == per_id[connection["t_o_id"]]
-        assert connection["o_t"]["lost"] == 0 and connection["t_o"]["lost"] == 0
+        for key, conn_id in (("o_t", connection["o_t_id"]), ("t_o", connection["t_o_id"])):
+            seqs = sequences[conn_id]
+            gaps = sum(max(0, b - a - 1) for a, b in itertools.pairwise(seqs))
+            duplicates = sum(1 for a, b in itertools.pairwise(seqs) if a == b)
+            assert (connection[key]["lost"], connection[key]["duplicates"]) == (gaps, duplicates)
     owner = next(c for c in opened if c["t_o_point"] == 71)
     truth = seen["ours"]["owner"]
     assert owner["o_t"]["rpi_ms"] == 10 and owner["o_t_point"] == 21
