@@ -29,11 +29,12 @@ from pathlib import Path
 OUT = Path(sys.argv[1])
 PY = sys.executable
 ADAPTER = "127.0.0.2"
+GATEWAY = "127.0.0.3"
 seen = {"errors": []}
 
 
-def listening():
-    local = f"{socket.inet_aton(ADAPTER)[::-1].hex().upper()}:{44818:04X}"
+def listening(host=ADAPTER):
+    local = f"{socket.inet_aton(host)[::-1].hex().upper()}:{44818:04X}"
     with open("/proc/net/tcp") as lines:
         return any(f[1] == local and f[3] == "0A" for f in (line.split() for line in lines))
 
@@ -70,7 +71,13 @@ async def ours():
             await owner.wait_input(lambda i: i.faulted, 5)
             await asyncio.sleep(0.3)
             stats = owner.stats.as_dict()
-        return {"owner": stats}
+    # A request routed through the CompoNet gateway (port 2) to the MX2 at node 5.
+    from cipstack.cip.epath import PortSegment
+
+    gateway = await Scanner.connect(f"{GATEWAY}:44818", route=[PortSegment(2, bytes([5]))])
+    async with gateway:
+        vendor = await gateway.get_attribute_single(0x01, 1, 1)
+    return {"owner": stats, "routed_vendor": repr(vendor)}
 
 
 def pycomm3_exchange():
@@ -108,21 +115,25 @@ def ethernetip_exchange():
                                  originator_udp_port=port)
     conn.produce()
     time.sleep(0.4)
-    conn.stopProduce()
-    closed = conn.sendFwdCloseReq(70, 20, 1)
+    conn.stopProduce()  # and no Forward_Close: the connection times out (20 ms x 4 x 2^1 = 160 ms)
+    time.sleep(0.4)
     enip.stopIO()
-    return {"forward_open": status, "forward_close": closed, "port": port}
+    return {"forward_open": status, "port": port}
 
 
 dump = subprocess.Popen(["dumpcap", "-i", "lo", "-f", "tcp port 44818 or udp", "-w", str(OUT / "capture.pcapng"),
                          "-q"], stdout=subprocess.DEVNULL, stderr=(OUT / "dumpcap.log").open("wb"))
-adapter = None
+adapter = gateway = None
 try:
     wait_for(lambda: "Capturing on" in (OUT / "dumpcap.log").read_text(errors="replace"), 30, "dumpcap")
     adapter = subprocess.Popen([PY, "-m", "cipstack", "adapter", "--host", ADAPTER, "--quiet",
                                 "--state", str(OUT / "state.json"), "--control", str(OUT / "control.sock")],
                                stdout=(OUT / "adapter.log").open("wb"), stderr=subprocess.STDOUT)
+    gateway = subprocess.Popen([PY, "-m", "cipstack", "componet", "--host", GATEWAY, "--quiet", "--nodes",
+                                "mx2:MX2-A2015-E@5", "--io-port", "2223", "--control", str(OUT / "gateway.sock")],
+                               stdout=(OUT / "gateway.log").open("wb"), stderr=subprocess.STDOUT)
     wait_for(listening, 20, "the adapter")
+    wait_for(lambda: listening(GATEWAY), 20, "the CompoNet gateway")
     for name, job in (("ours", lambda: asyncio.run(ours())), ("pycomm3", pycomm3_exchange),
                       ("ethernetip", ethernetip_exchange)):
         try:
@@ -130,9 +141,10 @@ try:
         except Exception:
             seen["errors"].append(name + ": " + traceback.format_exc())
 finally:
-    if adapter is not None:
-        adapter.send_signal(signal.SIGTERM)
-        seen["adapter_exit"] = adapter.wait(10)
+    for name, process in (("adapter", adapter), ("gateway", gateway)):
+        if process is not None:
+            process.send_signal(signal.SIGTERM)
+            seen[name + "_exit"] = process.wait(10)
     time.sleep(0.5)
     dump.send_signal(signal.SIGINT)
     dump.wait(20)
@@ -255,8 +267,17 @@ def test_class1_connections_match_tshark_and_the_run(recorded: tuple[Path, dict[
     trips = [c for c in owner["data_changes"] if c["changes"].get("faulted") == [False, True]]
     assert trips, owner["data_changes"]
     theirs = next(c for c in opened if c is not owner)
-    assert theirs["o_t"]["rpi_ms"] == 20 and theirs["end_reason"] == "Forward_Close"
-    assert theirs["run_idle_change_count"] >= 0
+    assert seen["ethernetip"]["forward_open"] == 0
+    assert theirs["o_t"]["rpi_ms"] == 20 and theirs["end_reason"] == "timeout: O->T silent for more than 160 ms"
+
+
+def test_routed_request_through_the_componet_gateway(analysis: list[dict[str, Any]]) -> None:
+    routed = [r for r in analysis if r["type"] == "explicit" and "route" in r.get("request", {})]
+    assert len(routed) == 1, routed
+    assert routed[0]["target"] == "127.0.0.3:44818"
+    assert routed[0]["request"]["route"] == [{"port": 2, "link": 5, "network": "CompoNet"}]
+    assert routed[0]["request"]["embedded"]["attribute_name"] == "Vendor ID"
+    assert routed[0]["reply"]["status"] == 0 and routed[0]["reply"]["data"]["value"] == 47
 
 
 def test_human_summary_csv_and_plot(recorded: tuple[Path, dict[str, Any]], tmp_path: Path) -> None:
