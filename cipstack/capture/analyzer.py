@@ -17,6 +17,7 @@ import struct
 from collections import deque
 from collections.abc import Callable
 from dataclasses import dataclass, field
+from socket import inet_aton, inet_ntoa
 from typing import Any
 
 from ..cip.messages import MessageRouterResponse, Service
@@ -33,7 +34,7 @@ from .decoding import (
     decode_request,
     field_changes,
 )
-from .reader import decode_segment
+from .reader import Segment, decode_segment, ip_offset
 from .stats import LogHistogram, Reservoir, Worst
 
 ENIP_PORT = 44818
@@ -83,6 +84,7 @@ class Direction:
     worst: Worst = field(default_factory=Worst)
     last_payload: bytes | None = None
     last_fields: dict[str, Any] | None = None
+    timeout: float | None = None
 
     def summary(self) -> dict[str, Any]:
         hist = self.intervals
@@ -132,7 +134,10 @@ class Connection:
         return self.reply.to_connection_id if self.reply else self.request.to_connection_id
 
     def timeout_s(self, direction: Direction) -> float:
-        return connection_timeout(direction.rpi_us, self.request.timeout_multiplier)
+        """RPI x 4 x 2^multiplier of that direction, computed once per connection."""
+        if direction.timeout is None:
+            direction.timeout = connection_timeout(direction.rpi_us, self.request.timeout_multiplier)
+        return direction.timeout
 
     def as_dict(self) -> dict[str, Any]:
         triad = self.request.triad
@@ -213,10 +218,11 @@ class Analyzer:
         self._streams: dict[tuple[str, int, str, int], _Stream] = {}
         self._pending: dict[tuple[str, int, str, int], deque[_Pending]] = {}
         #: Open connections by (target address, connection id) -> (connection, "o_t" | "t_o").
-        self._by_id: dict[tuple[str, int], tuple[Connection, str]] = {}
+        #: Keyed by the raw 4-byte address: the class 1 path compares bytes, it formats no address.
+        self._by_id: dict[tuple[bytes, int], tuple[Connection, str]] = {}
         self.connections: list[Connection] = []
         self._numbers = 0
-        self._unknown: dict[tuple[str, int], int] = {}
+        self._unknown: dict[tuple[bytes, int], int] = {}
 
     # -- frames ------------------------------------------------------------------------------------
 
@@ -226,6 +232,18 @@ class Analyzer:
         if totals.first_time is None:
             totals.first_time = time
         totals.last_time = time
+        # Hot path: an IPv4 UDP datagram off 44818 (class 1 I/O), read in place without a Segment.
+        ip = ip_offset(linktype, data)
+        if ip is not None and len(data) >= ip + 28 and data[ip] == 0x45 and data[ip + 9] == 17 and not (
+                data[ip + 6] & 0x1F or data[ip + 7]):
+            sport = (data[ip + 20] << 8) | data[ip + 21]
+            dport = (data[ip + 22] << 8) | data[ip + 23]
+            if sport != ENIP_PORT and dport != ENIP_PORT:
+                if dport in self.io_ports or sport in self.io_ports or self._by_id:
+                    length = (data[ip + 24] << 8) | data[ip + 25]
+                    self._io(time, number, data[ip + 12:ip + 16], sport, data[ip + 16:ip + 20], dport,
+                             data[ip + 28:ip + 20 + length])
+                return
         segment = decode_segment(linktype, data)
         if segment is None:
             return
@@ -233,7 +251,8 @@ class Analyzer:
             if segment.sport == ENIP_PORT or segment.dport == ENIP_PORT:
                 self._udp_encapsulation(time, number, segment)
             elif segment.dport in self.io_ports or segment.sport in self.io_ports or self._by_id:
-                self._io(time, number, segment)
+                self._io(time, number, inet_aton(segment.src), segment.sport, inet_aton(segment.dst), segment.dport,
+                         segment.payload)
         elif segment.sport == ENIP_PORT or segment.dport == ENIP_PORT:
             self._tcp(time, number, segment)
 
@@ -533,8 +552,9 @@ class Analyzer:
             self._emit_connection(connection)
             return
         self.connections.append(connection)
-        self._by_id[(key[2], fo_reply.ot_connection_id)] = (connection, "o_t")
-        self._by_id[(key[2], fo_reply.to_connection_id)] = (connection, "t_o")
+        address = inet_aton(key[2])
+        self._by_id[(address, fo_reply.ot_connection_id)] = (connection, "o_t")
+        self._by_id[(address, fo_reply.to_connection_id)] = (connection, "t_o")
 
     def _forward_close(self, time: float, target: str, close: ForwardCloseRequest) -> None:
         for connection in list(self.connections):
@@ -544,7 +564,7 @@ class Analyzer:
     def _end(self, connection: Connection, time: float, reason: str) -> None:
         connection.ended = time
         connection.end_reason = reason
-        target = connection.target.split(" ")[0]
+        target = inet_aton(connection.target.split(" ")[0])
         for conn_id in (connection.ot_id, connection.to_id):
             if self._by_id.get((target, conn_id), (None,))[0] is connection:
                 del self._by_id[(target, conn_id)]
@@ -557,23 +577,23 @@ class Analyzer:
             return
         self.sink(connection.as_dict() | {"_connection": connection})
 
-    def _io(self, time: float, number: int, segment: Any) -> None:
-        data = segment.payload
+    def _io(self, time: float, number: int, src: bytes, sport: int, dst: bytes, dport: int, data: bytes) -> None:
         try:
             datagram = decode_io_datagram(data)
         except IoDatagramError as exc:
-            if segment.dport in self.io_ports or segment.sport in self.io_ports:
+            if dport in self.io_ports or sport in self.io_ports:
+                segment = Segment(17, inet_ntoa(src), sport, inet_ntoa(dst), dport, data)
                 self._anomaly(time, number, segment, "class1", str(exc), exc.offset)
             return
-        found = self._by_id.get((segment.dst, datagram.connection_id)) or self._by_id.get(
-            (segment.src, datagram.connection_id))
+        found = self._by_id.get((dst, datagram.connection_id)) or self._by_id.get((src, datagram.connection_id))
         if found is None:
-            if segment.dport in self.io_ports or segment.sport in self.io_ports:
-                unknown = (segment.dst, datagram.connection_id)
+            if dport in self.io_ports or sport in self.io_ports:
+                unknown = (dst, datagram.connection_id)
                 seen = self._unknown.get(unknown, 0)
                 if seen or len(self._unknown) < MAX_UNKNOWN:
                     self._unknown[unknown] = seen + 1
                 if seen == 0:  # reported once per id, counted in the totals
+                    segment = Segment(17, inet_ntoa(src), sport, inet_ntoa(dst), dport, data)
                     self._anomaly(time, number, segment, "class1",
                                   f"frame for unknown connection 0x{datagram.connection_id:08X}", 6)
                 else:
@@ -581,11 +601,11 @@ class Analyzer:
             return
         connection, which = found
         direction = connection.o_t if which == "o_t" else connection.t_o
-        timeout = connection.timeout_s(direction)
+        timeout = direction.timeout or connection.timeout_s(direction)
         if direction.last_time is not None and time - direction.last_time > timeout:
             self._end(connection, direction.last_time + timeout,
                       f"timeout: {which.replace('_', '->').upper()} silent for more than {timeout * 1e3:g} ms")
-            self._io(time, number, segment)  # now a frame for an unknown connection
+            self._io(time, number, src, sport, dst, dport, data)  # now a frame of an unknown connection
             return
         self.totals.io_frames += 1
         direction.frames += 1
@@ -610,7 +630,9 @@ class Analyzer:
             if interval > 1.5 * rpi:
                 direction.late += 1
             direction.reservoir.add((time, interval))
-            direction.worst.add(interval, time)
+            worst = direction.worst
+            if interval > worst.floor:
+                worst.add(interval, time)
         else:
             direction.first_time = time
         direction.last_time = time

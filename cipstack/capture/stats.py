@@ -54,23 +54,34 @@ class LogHistogram:
 
 
 class Reservoir:
-    """A uniform sample of at most ``size`` items from a stream of any length (algorithm R),
-    deterministic for a given seed so two runs over one file plot the same points."""
+    """A uniform sample of at most ``size`` items from a stream of any length, deterministic for a
+    given seed so two runs over one file plot the same points. Algorithm L (Li, 1994): once full,
+    it draws how many items to skip, so most items cost a counter increment, not a random number."""
 
     def __init__(self, size: int = 5000, seed: int = 0) -> None:
         self.size = size
         self.items: list[tuple[float, float]] = []
         self.seen = 0
         self._random = random.Random(seed)
+        self._weight = 1.0
+        self._next = 0
+
+    def _skip(self) -> None:
+        draw = self._random.random
+        self._weight *= math.exp(math.log(draw() or 1e-300) / self.size)
+        self._next += int(math.log(draw() or 1e-300) / math.log1p(-self._weight)) + 1
 
     def add(self, item: tuple[float, float]) -> None:
         self.seen += 1
         if len(self.items) < self.size:
             self.items.append(item)
+            if len(self.items) == self.size:
+                self._next = self.seen
+                self._skip()
             return
-        slot = self._random.randrange(self.seen)
-        if slot < self.size:
-            self.items[slot] = item
+        if self.seen == self._next:
+            self.items[self._random.randrange(self.size)] = item
+            self._skip()
 
     def sorted(self) -> list[tuple[float, float]]:
         return sorted(self.items)
@@ -82,9 +93,13 @@ class Worst:
     def __init__(self, size: int = 50) -> None:
         self.size = size
         self.heap: list[tuple[float, float]] = []
+        #: A value must exceed this to enter (the smallest kept, once full): a cheap test for callers.
+        self.floor = -math.inf
 
     def add(self, value: float, time: float) -> None:
         if len(self.heap) < self.size:
             heapq.heappush(self.heap, (value, time))
         elif value > self.heap[0][0]:
             heapq.heapreplace(self.heap, (value, time))
+        if len(self.heap) == self.size:
+            self.floor = self.heap[0][0]
