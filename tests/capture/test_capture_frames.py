@@ -174,3 +174,99 @@ def test_bad_files_and_missing_matplotlib_are_one_line_errors(tmp_path: Path) ->
               f"sys.exit(main(['capture', 'analyze', {str(junk)!r}, '--plot', 'x.png']))")
     result = subprocess.run([sys.executable, "-c", script], capture_output=True, text=True, timeout=60, check=False)
     assert result.returncode == 2 and 'pip install "cipstack[plot]"' in result.stderr
+
+
+def _sll(ip_packet: bytes) -> bytes:
+    return b"\x00\x00\x03\x04\x00\x06" + b"\x02\x00\x00\x00\x00\x01\x00\x00" + b"\x08\x00" + ip_packet
+
+
+def _null(ip_packet: bytes) -> bytes:
+    return b"\x02\x00\x00\x00" + ip_packet
+
+
+def test_linux_cooked_and_loopback_link_types_and_connection_filter(tmp_path: Path) -> None:
+    from cipstack.capture.synth import tcp as tcp_frame
+
+    request = forward_open()
+    fo = rr(MessageRouterRequest(Service.FORWARD_OPEN, CM_PATH, request.encode()).encode())
+    reply_data = ForwardOpenReply(0x2222, 0x2000_0001, request.triad, 10_000, 10_000).encode()
+    fo_reply = rr(MessageRouterResponse(Service.FORWARD_OPEN, data=reply_data).encode())
+    for linktype, wrap in ((113, _sll), (0, _null)):
+        path = tmp_path / f"link{linktype}.pcap"
+        with path.open("wb") as stream:
+            pcap = PcapWriter(stream, linktype)
+            pcap.write(1.0, wrap(tcp_frame(*CLIENT, *TARGET, fo, 1)))
+            pcap.write(1.001, wrap(tcp_frame(*TARGET, *CLIENT, fo_reply, 1)))
+            for n in range(1, 6):
+                data = encode_io_datagram(0x2000_0001, n, n, b"\x00" * 4)
+                pcap.write(1.01 + n * 0.01, wrap(udp("10.0.0.2", 2222, "10.0.0.1", 2222, data)))
+        code, records, stderr = analyze(path, "--connection", "0x20000001")
+        assert code == 0, stderr
+        # --connection: only that connection's record (and the summary).
+        assert [r["type"] for r in records] == ["connection", "summary"]
+        assert records[0]["t_o"]["frames"] == 5 and records[0]["o_t_id"] == 0x2222
+
+
+def test_eds_parameters_name_attributes_by_link_path(tmp_path: Path) -> None:
+    from cipstack.eds.interpret import read_view
+    from cipstack.eds.reader import read_eds
+
+    result = subprocess.run([sys.executable, "-m", "cipstack", "eds", "generate", "--profile", "acg", "-o",
+                             str(tmp_path)], capture_output=True, text=True, timeout=60, check=False)
+    assert result.returncode == 0, result.stderr
+    eds = next(tmp_path.glob("*.eds"))
+    param = next(p for p in read_view(read_eds(eds)).params.values() if p.link is not None and p.link[0] != 1)
+    flow = TcpFlow(CLIENT, TARGET)
+    path = tmp_path / "eds.pcap"
+    with path.open("wb") as stream:
+        pcap = PcapWriter(stream)
+        get = rr(MessageRouterRequest(Service.GET_ATTRIBUTE_SINGLE, request_path(*param.link)).encode())
+        pcap.write(1.0, ethernet(flow.send(True, get)))
+        value = param.type.encode(param.default if param.default is not None else 0)
+        pcap.write(1.1, ethernet(flow.send(False, rr(MessageRouterResponse(0x0E, data=value).encode()))))
+    code, records, stderr = analyze(path, "--eds", str(eds))
+    assert code == 0, stderr
+    exchange = next(r for r in records if r["type"] == "explicit")
+    assert exchange["request"]["attribute_name"] == param.name
+    assert exchange["reply"]["data"]["value"] == (param.default if param.default is not None else 0)
+    bad = subprocess.run([sys.executable, "-m", "cipstack", "capture", "analyze", str(path), "--eds", "x.eds",
+                          "--profile", "acg"], capture_output=True, text=True, timeout=60, check=False)
+    assert bad.returncode == 2 and "not both" in bad.stderr
+
+
+def test_memory_stays_bounded_on_long_streams() -> None:
+    from cipstack.capture.analyzer import MAX_FRAME, MAX_TCP_BUFFER, Analyzer
+    from cipstack.capture.stats import LogHistogram, Reservoir
+
+    found: list[dict[str, Any]] = []
+    analyzer = Analyzer(found.append)
+    flow = TcpFlow(CLIENT, TARGET)
+    # A header announcing 65,535 bytes, then more and more stream bytes: the buffer never holds
+    # more than one frame's worth (the length field is 16 bits), whatever the stream carries.
+    analyzer.feed(0.0, 1, 1, ethernet(flow.send(True, encode_frame(Command.SEND_RR_DATA, b"")[:2] + b"\xff\xff")))
+    largest = 0
+    for n in range(2, 2 + MAX_TCP_BUFFER // 1400 + 2):
+        analyzer.feed(n * 0.001, n, 1, ethernet(flow.send(True, b"\x01" * 1400)))
+        largest = max(largest, *(len(s.buffer) for s in analyzer._streams.values()))
+    assert 60_000 < largest < MAX_FRAME
+    histogram, reservoir = LogHistogram(), Reservoir(1000)
+    for n in range(200_000):
+        interval = 0.001 + (n % 997) * 1e-7
+        histogram.add(interval)
+        reservoir.add((n, interval))
+    assert len(reservoir.items) == 1000 and reservoir.seen == 200_000
+    assert len(histogram.counts) < 200 and histogram.count == 200_000
+    median = histogram.quantile(0.5)
+    assert median is not None and abs(median - 0.00105) / 0.00105 < 0.002
+
+
+def test_progress_bar_draws_on_a_stream() -> None:
+    import io
+
+    from cipstack.capture.command import Progress
+
+    out = io.StringIO()
+    bar = Progress(1000, out)
+    bar.update(500, 42)
+    bar.close()
+    assert "50.0 % 42 frames" in out.getvalue() and out.getvalue().endswith("\r")
