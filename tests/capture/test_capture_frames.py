@@ -107,6 +107,28 @@ def test_split_and_coalesced_segments_io_timing_gaps_and_timeout(tmp_path: Path)
     assert any(a["layer"] == "class1" and a["offset"] == 4 for a in anomalies)
 
 
+def test_refused_forward_open_is_a_connection_that_never_ran(tmp_path: Path) -> None:
+    path = tmp_path / "refused.pcap"
+    flow = TcpFlow(CLIENT, TARGET)
+    request = forward_open()
+    fo = rr(MessageRouterRequest(Service.FORWARD_OPEN, CM_PATH, request.encode()).encode())
+    # Connection failure, extended 0x0127 (invalid O->T size) with the correct size 10.
+    failure = bytes.fromhex("34120301feca00000000")  # the triad and the remaining path size
+    refusal = MessageRouterResponse(Service.FORWARD_OPEN, 0x01, (0x0127, 10), failure)
+    with path.open("wb") as stream:
+        pcap = PcapWriter(stream)
+        pcap.write(1.0, ethernet(flow.send(True, fo)))
+        pcap.write(1.1, ethernet(flow.send(False, rr(refusal.encode()))))
+    code, records, stderr = analyze(path)
+    assert code == 0, stderr
+    connection = next(r for r in records if r["type"] == "connection")
+    from cipstack.cip.status import describe_status
+
+    assert connection["end_reason"] == "refused: " + describe_status(0x01, (0x0127, 10))
+    assert "extended 0x0127" in connection["end_reason"] and "additional 0x000A" in connection["end_reason"]
+    assert connection["o_t"]["frames"] == 0 and connection["t_o_api_ms"] is None
+
+
 def test_routed_request_to_the_componet_gateway_and_unanswered(tmp_path: Path) -> None:
     path = tmp_path / "r.pcap"
     flow = TcpFlow(CLIENT, TARGET)

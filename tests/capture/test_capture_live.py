@@ -63,6 +63,9 @@ async def ours():
             await scanner.set_attribute_single(0x01, 1, 1, 5, UINT)  # Vendor ID is read-only: refused
         except CipError as exc:
             seen["refused_status"] = exc.general
+        await scanner.open_connection()  # class 3: SendUnitData with CIP sequence counts
+        await scanner.get_attribute_single(0x01, 1, 3)
+        await scanner.close_connection()
         async with scanner.io_connection(output=21, input=71, rpi=0.010, local_io_port=2222) as owner:
             await asyncio.sleep(0.5)
             reply = await asyncio.to_thread(control_request, OUT / "control.sock",
@@ -269,6 +272,14 @@ def test_class1_connections_match_tshark_and_the_run(recorded: tuple[Path, dict[
     theirs = next(c for c in opened if c is not owner)
     assert seen["ethernetip"]["forward_open"] == 0
     assert theirs["o_t"]["rpi_ms"] == 20 and theirs["end_reason"] == "timeout: O->T silent for more than 160 ms"
+
+
+def test_class3_exchange_is_paired_by_its_sequence_count(analysis: list[dict[str, Any]]) -> None:
+    connected = [r for r in analysis if r["type"] == "explicit" and r.get("command") == "SEND_UNIT_DATA"
+                 and r["request"].get("attribute") == 3]
+    assert len(connected) == 1, connected
+    assert connected[0]["request"]["attribute_name"] == "Product Code"
+    assert connected[0]["reply"]["data"]["value"] == 100 and "connection_id" in connected[0]
 
 
 def test_routed_request_through_the_componet_gateway(analysis: list[dict[str, Any]]) -> None:
