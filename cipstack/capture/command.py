@@ -7,11 +7,11 @@ import json
 import sys
 import time as clock
 from pathlib import Path
-from typing import Any, TextIO
+from typing import TYPE_CHECKING, Any, TextIO
 
-from .analyzer import Analyzer, Connection
-from .decoding import Declarations
-from .reader import CaptureFormatError, read_records
+if TYPE_CHECKING:  # the analysis modules load when the command runs, not when the parser is built
+    from .analyzer import Connection
+    from .decoding import Declarations
 
 EXIT_OK, EXIT_FAILURE, EXIT_USAGE = 0, 1, 2
 #: Explicit exchanges and anomalies kept for the human summary (all of them stream with --json).
@@ -43,6 +43,8 @@ class UsageProblem(Exception):
 
 
 def fixed_declarations(profile: str | None, model: str | None, eds: list[Path]) -> Declarations | None:
+    from .decoding import Declarations
+
     if model and not profile:
         raise UsageProblem("--model needs --profile")
     if profile and eds:
@@ -87,6 +89,7 @@ def fixed_declarations(profile: str | None, model: str | None, eds: list[Path]) 
 
 def declarations_for_identity(identity: dict[str, Any]) -> Declarations:
     from ..devices.profiles import PROFILES, catalog_for
+    from .decoding import Declarations
 
     profile = next((p.name for p in PROFILES.values() if p.vendor_id == identity["vendor_id"]
                     and identity["product_code"] in p.product_codes), None)
@@ -118,6 +121,9 @@ class Progress:
 
 
 def run(args: argparse.Namespace) -> int:
+    from .analyzer import Analyzer
+    from .reader import CaptureFormatError, read_records
+
     name = "cipstack capture analyze"
     try:
         fixed = fixed_declarations(args.profile, args.model, args.eds)
