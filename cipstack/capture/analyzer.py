@@ -383,7 +383,7 @@ class Analyzer:
                 self._anomaly(time, number, segment, "cip", "a reply sent to the target", None)
                 return
             self._reply(time, number, key, command, session, context, status, message, connected_id, cip_sequence,
-                        sockaddrs, decl)
+                        sockaddrs, decl, [i.type for i in items])
         else:
             if from_target:
                 self._anomaly(time, number, segment, "cip", "a request sent by the target", None)
@@ -428,7 +428,7 @@ class Analyzer:
 
     def _reply(self, time: float, number: int, key: tuple[str, int, str, int], command: int, session: int,
                context: bytes, status: int, message: bytes, connected_id: int | None, cip_sequence: int | None,
-               sockaddrs: tuple[SockAddr, ...], decl: Declarations) -> None:
+               sockaddrs: tuple[SockAddr, ...], decl: Declarations, item_types: list[int]) -> None:
         queue = self._pending.get(key)
         pending = None
         if queue:
@@ -453,7 +453,7 @@ class Analyzer:
         record: dict[str, Any] = {
             "type": "explicit", "client": f"{key[0]}:{key[1]}", "target": f"{key[2]}:{key[3]}",
             "session": session, "command": _command_name(command), "reply_frame": number, "reply_time": time,
-            "reply": reply,
+            "reply": reply, "reply_items": [f"0x{t:04X}" for t in item_types],
         }
         if connected_id is not None:
             record["connection_id"] = connected_id

@@ -211,9 +211,9 @@ def test_explicit_exchanges_match_tshark_frame_by_frame(recorded: tuple[Path, di
         services = [int(s, 16) for s in service.split(",")]
         statuses = [int(s, 0) for s in status.split(",")] if status else []
         if services[0] & 0x80:
-            theirs[int(frame)] = (int(command, 16), int(session, 16), services[0] & 0x7F, statuses[0])
-            assert int(items) >= 2
-    ours = {r["reply_frame"]: (Command[r["command"]].value, r["session"], r["reply"]["service"], r["reply"]["status"])
+            theirs[int(frame)] = (int(command, 16), int(session, 16), int(items), services[0] & 0x7F, statuses[0])
+    ours = {r["reply_frame"]: (Command[r["command"]].value, r["session"], len(r["reply_items"]), r["reply"]["service"],
+                               r["reply"]["status"])
             for r in analysis if r["type"] == "explicit" and "reply_frame" in r}
     assert theirs, "tshark found no CIP reply"
     assert ours == theirs
