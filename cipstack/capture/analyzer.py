@@ -43,6 +43,8 @@ MAX_PENDING = 64
 MAX_EVENTS = 200
 #: TCP streams (and their pending requests) followed at once; the least recently opened goes first.
 MAX_STREAMS = 4096
+#: Out-of-order segments held per stream while the gap before them may still fill.
+MAX_AHEAD = 32
 #: Unknown connection ids remembered (each reported once).
 MAX_UNKNOWN = 4096
 #: Largest encapsulation frame accepted from a stream (header + 65,535-byte length field).
@@ -166,8 +168,10 @@ class Connection:
 class _Stream:
     """One direction of a TCP connection, reassembled by sequence number."""
 
-    next_seq: int | None = None
+    next_seq: int = 0
     buffer: bytearray = field(default_factory=bytearray)
+    #: Segments that arrived ahead of a gap, by sequence number (at most MAX_AHEAD of them).
+    ahead: dict[int, bytes] = field(default_factory=dict)
 
 
 @dataclass
@@ -267,25 +271,50 @@ class Analyzer:
             stream = self._new_stream(key, segment.seq)
         payload = segment.payload
         if payload:
-            offset = (segment.seq - stream.next_seq) & 0xFFFFFFFF
-            if offset == 0:
-                stream.buffer += payload
-                stream.next_seq = (segment.seq + len(payload)) & 0xFFFFFFFF
-            elif offset >= 0x80000000:  # retransmission, maybe with new bytes at its end
-                behind = 0x100000000 - offset
-                if behind < len(payload):
-                    stream.buffer += payload[behind:]
-                    stream.next_seq = (segment.seq + len(payload)) & 0xFFFFFFFF
-            else:  # a hole (bytes not captured): resynchronise at this segment
-                self._anomaly(time, number, segment, "tcp", f"{offset} stream bytes missing before this segment; "
+            if self._take(stream, segment.seq, payload):
+                while stream.ahead and self._take_ahead(stream):
+                    pass
+            elif len(stream.ahead) < MAX_AHEAD:  # out of order: hold it while the gap may fill
+                stream.ahead[segment.seq] = payload
+            else:  # a hole that never filled (bytes not captured): resynchronise after it
+                first = min(stream.ahead, key=lambda seq: (seq - stream.next_seq) & 0xFFFFFFFF)
+                missing = (first - stream.next_seq) & 0xFFFFFFFF
+                self._anomaly(time, number, segment, "tcp", f"{missing} stream bytes missing; "
                               f"{len(stream.buffer)} buffered bytes dropped", None)
-                stream.buffer = bytearray(payload)
-                stream.next_seq = (segment.seq + len(payload)) & 0xFFFFFFFF
+                stream.buffer.clear()
+                stream.next_seq = first
+                stream.ahead[segment.seq] = payload
+                while stream.ahead and self._take_ahead(stream):
+                    pass
             self._frames_from_stream(time, number, segment, stream)
         if segment.flags & 0x05:  # FIN or RST
             self._streams.pop(key, None)
             if segment.sport == ENIP_PORT:
                 self._drop_pending((segment.dst, segment.dport, segment.src, segment.sport), "TCP connection closed")
+
+    @staticmethod
+    def _take(stream: _Stream, seq: int, payload: bytes) -> bool:
+        """Append the part of a segment that continues the stream; False when it starts after a gap."""
+        offset = (seq - stream.next_seq) & 0xFFFFFFFF
+        if offset == 0:
+            stream.buffer += payload
+        elif offset >= 0x80000000:  # a retransmission, maybe with new bytes at its end
+            behind = 0x100000000 - offset
+            if behind >= len(payload):
+                return True
+            stream.buffer += payload[behind:]
+        else:
+            return False
+        stream.next_seq = (seq + len(payload)) & 0xFFFFFFFF
+        return True
+
+    def _take_ahead(self, stream: _Stream) -> bool:
+        """Move one held segment that the stream has now reached; False when none has."""
+        for seq in list(stream.ahead):
+            if (seq - stream.next_seq) & 0xFFFFFFFF >= 0x80000000 or seq == stream.next_seq:
+                self._take(stream, seq, stream.ahead.pop(seq))
+                return True
+        return False
 
     def _new_stream(self, key: tuple[str, int, str, int], next_seq: int) -> _Stream:
         self._streams.pop(key, None)

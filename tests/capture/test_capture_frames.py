@@ -329,3 +329,35 @@ def test_mutated_frames_never_raise() -> None:
             analyzer.feed(round_ + number * 0.001, number, 1, bytes(mutated))
         analyzer.finish()
     assert any(r["type"] == "anomaly" for r in found)
+
+
+def test_out_of_order_segments_are_put_back_in_order_and_a_lasting_hole_is_reported() -> None:
+    from cipstack.capture.analyzer import MAX_AHEAD, Analyzer
+
+    found: list[dict[str, Any]] = []
+    analyzer = Analyzer(found.append)
+    flow = TcpFlow(CLIENT, TARGET)
+    for number, frame in enumerate(flow.handshake()):
+        analyzer.feed(0.0, number, 1, ethernet(frame))
+    requests = [rr(MessageRouterRequest(Service.GET_ATTRIBUTE_SINGLE, request_path(1, 1, a)).encode(),
+                   context=bytes([a]) * 8) for a in (1, 3, 7)]
+    stream = b"".join(requests)
+    start = flow.seq[CLIENT]
+    pieces = [(start + i, stream[i:i + 17]) for i in range(0, len(stream), 17)]
+    order = [2, 0, 1, *range(3, len(pieces))]  # the third piece first, then the rest in order
+    for number, index in enumerate(order):
+        seq, piece = pieces[index]
+        analyzer.feed(number * 0.001, number, 1, ethernet(flow.send(True, piece, seq_offset=seq)))
+    flow.seq[CLIENT] = start + len(stream)
+    for a in (1, 3, 7):
+        analyzer.feed(1.0, 100 + a, 1, ethernet(flow.send(False, rr(MessageRouterResponse(0x0E).encode(),
+                                                                    context=bytes([a]) * 8))))
+    paired = [r for r in found if r["type"] == "explicit" and "reply" in r]
+    assert [r["request"]["attribute"] for r in paired] == [1, 3, 7]
+    assert not [r for r in found if r["type"] == "anomaly"]
+    # A gap that never fills: after MAX_AHEAD held segments the stream resynchronises and says so.
+    base = flow.seq[CLIENT] + 1000
+    for n in range(MAX_AHEAD + 1):
+        analyzer.feed(2.0, 200 + n, 1, ethernet(flow.send(True, b"\x00" * 24, seq_offset=base + 24 * n)))
+    holes = [r for r in found if r["type"] == "anomaly" and r["layer"] == "tcp"]
+    assert len(holes) == 1 and "1000 stream bytes missing" in holes[0]["reason"]
