@@ -19,6 +19,13 @@ KEEP = 200
 ROUTINE = 5
 
 
+def connection_id(text: str) -> int:
+    try:
+        return int(text, 0)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"{text!r} is not a connection number or id (decimal or 0x hex)") from None
+
+
 def add_arguments(sub: Any) -> None:
     """Register ``capture analyze`` on the top-level subparsers (cli.build_parser)."""
     p = sub.add_parser("capture", help="analyse a pcap/pcapng capture of EtherNet/IP and CIP traffic")
@@ -32,7 +39,7 @@ def add_arguments(sub: Any) -> None:
     q.add_argument("--json", action="store_true", help="one JSON object per line")
     q.add_argument("--csv", type=Path, metavar="DIR", help="write per-connection timing rows into DIR")
     q.add_argument("--plot", type=Path, metavar="FILE.png", help="plot inter-arrival times (needs cipstack[plot])")
-    q.add_argument("--connection", type=lambda t: int(t, 0), metavar="ID",
+    q.add_argument("--connection", type=connection_id, metavar="ID",
                    help="only this connection (its number in the summary, or its O->T or T->O id)")
     q.add_argument("--no-progress", action="store_true", help="no progress bar on stderr")
     q.set_defaults(func=run)
@@ -61,7 +68,7 @@ def fixed_declarations(profile: str | None, model: str | None, eds: list[Path]) 
         try:
             device = build_device(profile, options=ProfileOptions(model=model))
         except (KeyError, ValueError) as exc:
-            raise UsageProblem(str(exc).strip("'\"")) from None
+            raise UsageProblem(str(exc.args[0]) if exc.args else str(exc)) from None
         schemas = device.schemas().values() if hasattr(device, "schemas") else ()
         return Declarations(Catalog(device.catalog_classes(), schemas), source=f"profile {profile} {model}")
     if eds:

@@ -196,6 +196,13 @@ def test_bad_files_and_missing_matplotlib_are_one_line_errors(tmp_path: Path) ->
               f"sys.exit(main(['capture', 'analyze', {str(junk)!r}, '--plot', 'x.png']))")
     result = subprocess.run([sys.executable, "-c", script], capture_output=True, text=True, timeout=60, check=False)
     assert result.returncode == 2 and 'pip install "cipstack[plot]"' in result.stderr
+    for args, message in ((["--connection", "xyz"], "'xyz' is not a connection number or id"),
+                          (["--profile", "mx2", "--model", "BAD"], "unknown inverter model 'BAD'"),
+                          (["--model", "MX2-A2015-E"], "--model needs --profile")):
+        result = subprocess.run([sys.executable, "-m", "cipstack", "capture", "analyze", str(junk), *args],
+                                capture_output=True, text=True, timeout=60, check=False)
+        assert result.returncode == 2 and message in result.stderr
+        assert len(result.stderr.strip().splitlines()) == 1 and "Traceback" not in result.stderr
 
 
 def _sll(ip_packet: bytes) -> bytes:
