@@ -902,6 +902,10 @@ def build_parser() -> argparse.ArgumentParser:
     add_show_arguments(q)
     q.set_defaults(func=cmd_eds_show)
 
+    from .capture.command import add_arguments as add_capture_arguments
+
+    add_capture_arguments(sub)
+
     p = sub.add_parser("set", help="Set_Attribute_Single")
     common(p)
     p.add_argument("path", metavar="CLASS/INSTANCE/ATTRIBUTE")

@@ -52,19 +52,19 @@ def decode_items(raw: bytes, offset: int = 0, *, strict: bool = True) -> list[It
     decoded and bytes after the last of them (some targets append an item they did not count)
     are noted at DEBUG, not refused. A target decodes requests strictly."""
     if offset + 2 > len(raw):
-        raise EncapsulationError(EncapsulationStatus.INCORRECT_DATA, "CPF item count missing")
+        raise EncapsulationError(EncapsulationStatus.INCORRECT_DATA, "CPF item count missing", offset)
     (count,) = _COUNT.unpack_from(raw, offset)
     if count > MAX_ITEMS:
-        raise EncapsulationError(EncapsulationStatus.INCORRECT_DATA, f"{count} CPF items")
+        raise EncapsulationError(EncapsulationStatus.INCORRECT_DATA, f"{count} CPF items", offset)
     pos = offset + 2
     items = []
     for _ in range(count):
         if pos + 4 > len(raw):
-            raise EncapsulationError(EncapsulationStatus.INCORRECT_DATA, "CPF item header cut short")
+            raise EncapsulationError(EncapsulationStatus.INCORRECT_DATA, "CPF item header cut short", pos)
         item_type, length = _ITEM.unpack_from(raw, pos)
         pos += 4
         if pos + length > len(raw):
-            raise EncapsulationError(EncapsulationStatus.INCORRECT_DATA, "CPF item runs past the packet")
+            raise EncapsulationError(EncapsulationStatus.INCORRECT_DATA, "CPF item runs past the packet", pos - 2)
         items.append(Item(item_type, bytes(raw[pos:pos + length])))
         pos += length
     if pos != len(raw):
@@ -72,7 +72,7 @@ def decode_items(raw: bytes, offset: int = 0, *, strict: bool = True) -> list[It
             log.debug("CPF: %d bytes after the %d declared item(s) ignored: %s", len(raw) - pos, count,
                       bytes(raw[pos:pos + 64]).hex())
             return items
-        raise EncapsulationError(EncapsulationStatus.INCORRECT_DATA, "bytes after the last CPF item")
+        raise EncapsulationError(EncapsulationStatus.INCORRECT_DATA, "bytes after the last CPF item", pos)
     return items
 
 

@@ -42,8 +42,10 @@ class EncapsulationStatus(IntEnum):
 class EncapsulationError(Exception):
     """An encapsulation-level failure, answered with ``status`` in the reply header."""
 
-    def __init__(self, status: EncapsulationStatus, message: str = "") -> None:
+    def __init__(self, status: EncapsulationStatus, message: str = "", offset: int | None = None) -> None:
         self.status = status
+        #: Where in the decoded buffer the problem is, when the decoder knows (capture analysis reports it).
+        self.offset = offset
         super().__init__(message or status.name.lower().replace("_", " "))
 
 

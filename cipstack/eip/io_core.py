@@ -50,18 +50,21 @@ class IoDatagram:
 
 
 class IoDatagramError(ValueError):
-    pass
+    def __init__(self, message: str, offset: int | None = None) -> None:
+        super().__init__(message)
+        #: Where in the datagram the problem is (capture analysis reports it).
+        self.offset = offset
 
 
 def decode_io_datagram(raw: bytes) -> IoDatagram:
     """Decode a class 1 datagram; anything else raises ``IoDatagramError`` (the caller drops it)."""
     if len(raw) < IO_HEAD_SIZE:
-        raise IoDatagramError("shorter than a class 1 datagram")
+        raise IoDatagramError("shorter than a class 1 datagram", len(raw))
     count, addr_type, addr_len, connection_id, sequence, data_type, data_len, cip_sequence = _IO_HEAD.unpack_from(raw)
     if count != 2 or addr_type != ItemType.SEQUENCED_ADDRESS or addr_len != 8:
-        raise IoDatagramError("not a Sequenced Address item")
+        raise IoDatagramError("not a Sequenced Address item", 0 if count != 2 else 2)
     if data_type != ItemType.CONNECTED_DATA or data_len < 2 or IO_HEAD_SIZE - 2 + data_len != len(raw):
-        raise IoDatagramError("Connected Data item length does not match the datagram")
+        raise IoDatagramError("Connected Data item length does not match the datagram", 14)
     return IoDatagram(connection_id, sequence, cip_sequence, raw[IO_HEAD_SIZE:])
 
 
