@@ -33,7 +33,7 @@ from .cm_messages import (
     ForwardOpenRequest,
     TriggerType,
 )
-from .connection_manager import connection_failure
+from .connection_manager import connection_failure, origin_host
 from .cpf import Item, ItemType, SockAddr
 from .io_core import (
     DEFAULT_IO_PORT,
@@ -151,6 +151,9 @@ class IoConnection:
     cip_sequence: int = 0
     owner: IoConnection | None = None
     listeners: list[IoConnection] = field(default_factory=list)
+    #: Bytes after the CIP sequence count of every O->T datagram: the run/idle header and the
+    #: consumed assembly, or the heartbeat's (0 or the 4-byte header) as the Forward_Open sized it.
+    ot_payload_size: int = 4
 
     @property
     def name(self) -> str:
@@ -181,7 +184,8 @@ class IoTarget:
     # -- Forward_Open -------------------------------------------------------------------------
     def forward_open(self, fo: ForwardOpenRequest, context: RequestContext) -> ForwardOpenReply:
         triad = fo.triad
-        if any(c.triad == triad for c in self.connections.values()):
+        host = origin_host(context.origin) if context.origin else "127.0.0.1"
+        if any(c.triad == triad and c.peer == host for c in self.connections.values()):
             raise connection_failure(ExtendedStatus.CONNECTION_IN_USE, triad, "duplicate Forward_Open")
         if fo.transport.trigger not in self.profile.triggers:
             raise connection_failure(ExtendedStatus.TRANSPORT_CLASS_NOT_SUPPORTED, triad,
@@ -319,7 +323,7 @@ class IoTarget:
               consumed: AssemblyPoint | None, produced: AssemblyPoint, owner: IoConnection | None) -> ForwardOpenReply:
         now = context.now
         multicast = fo.to_parameters.type == ConnectionType.MULTICAST
-        peer_host = context.origin.rsplit(":", 1)[0] if context.origin else "127.0.0.1"
+        peer_host = origin_host(context.origin) if context.origin else "127.0.0.1"
         sockaddrs: dict[int, SockAddr] = context.extras.get("sockaddr", {})
         if owner is not None:
             destination = owner.destination
@@ -334,9 +338,11 @@ class IoTarget:
         stats = IoStatistics()
         consumer = ConsumerState.opened(connection_timeout(fo.ot_rpi_us, fo.timeout_multiplier), now, stats=stats)
         producer = None if owner is not None else ProductionSchedule(fo.to_rpi_us / 1e6, now, stats=stats)
+        ot_payload_size = consumed.size + OT_OVERHEAD - TO_OVERHEAD if consumed is not None else (
+            fo.ot_parameters.size - TO_OVERHEAD)
         connection = IoConnection(kind, fo.triad, self._new_id(), to_id, fo.ot_rpi_us, fo.to_rpi_us, consumed,
                                   produced, destination, multicast, consumer, producer, stats, peer_host,
-                                  owner=owner)
+                                  owner=owner, ot_payload_size=ot_payload_size)
         if owner is not None:
             owner.listeners.append(connection)
         self.connections[connection.ot_connection_id] = connection
@@ -368,8 +374,11 @@ class IoTarget:
 
     # -- Forward_Close ------------------------------------------------------------------------
     def forward_close(self, fc: ForwardCloseRequest, context: RequestContext) -> bool:
+        """Close the connection the requesting address opened with this triad; False when none
+        (a connection of another originator address is not found, whatever its triad)."""
+        host = origin_host(context.origin) if context.origin else "127.0.0.1"
         for connection in list(self.connections.values()):
-            if connection.triad == fc.triad:
+            if connection.triad == fc.triad and connection.peer == host:
                 self._close(connection, timed_out=False)
                 return True
         return False
@@ -398,26 +407,22 @@ class IoTarget:
             self.dropped += 1
             return
         connection = self.connections.get(datagram.connection_id)
-        if connection is None or connection.peer != source[0]:
+        payload = datagram.payload
+        # Refused before anything moves: a datagram of another source or of the wrong size neither
+        # advances the sequence window nor feeds the watchdog (DESIGN: state changes only on
+        # accepted input), so it can neither keep a dead connection alive nor make later ones stale.
+        if connection is None or connection.peer != source[0] or len(payload) != connection.ot_payload_size:
             self.dropped += 1
             return
         self.tick(now)
         reception = connection.consumer.accept(datagram.encap_sequence, datagram.cip_sequence, now)
         if reception is Reception.STALE:
             return
-        payload = datagram.payload
         if connection.consumed is None:
-            if len(payload) >= 4:
+            if payload:
                 self._run_idle(connection, bool(payload[0] & 1))
             return
-        try:
-            run, data = split_run_idle(payload)
-        except IoDatagramError:
-            self.dropped += 1
-            return
-        if len(data) != connection.consumed.size:
-            self.dropped += 1
-            return
+        run, data = split_run_idle(payload)
         self._run_idle(connection, run)
         if reception is Reception.NEW and run:
             self.deliver(connection.consumed.instance_id, data, now)
