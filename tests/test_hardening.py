@@ -430,3 +430,85 @@ def test_adapter_refuses_a_limit_below_its_minimum(argv: list[str], capsys: pyte
     assert main(["adapter", "--port", "0", *argv]) == 2
     err = capsys.readouterr().err
     assert argv[0] in err and len(err.strip().splitlines()) == 1
+
+
+# -- 10. rules pinned exactly ----------------------------------------------------------------------------
+def _open_status(raw: bytes) -> tuple[int, tuple[int, ...]]:
+    """(general, extended words) of a class 1 Forward_Open (request bytes) to a fresh ACG-ET2."""
+    from cipstack.cip.router import RequestContext
+    from cipstack.cip.status import CipError
+    from cipstack.devices.profiles import build_device
+    from cipstack.eip.cm_messages import ForwardOpenRequest
+    from cipstack.eip.io_target import IoTarget
+
+    device = build_device()
+    io = IoTarget(device.io_profile(), device)
+    try:
+        io.forward_open(ForwardOpenRequest.decode(raw[6:], large=False),
+                        RequestContext(device.router, 0.0, "127.0.0.1:1", None))
+    except CipError as exc:
+        return exc.general, tuple(exc.extended)
+    return 0, ()
+
+
+# Output assembly 21 holds 4 bytes: a fixed O->T size is exactly 4 + 6 = 10, whichever side it misses.
+@pytest.mark.parametrize(("ot_params", "expected"), [
+    (0x4000 | 10, (0, ())),
+    (0x4000 | 11, (0x01, (0x0127, 10))),  # larger than the assembly: refused, with the right size
+    (0x4000 | 64, (0x01, (0x0127, 10))),
+    (0x4000 | 9, (0x01, (0x0127, 10))),
+    (0x4200 | 11, (0, ())),  # variable size: a larger maximum is fine
+    (0x4200 | 9, (0x01, (0x0127, 10))),
+])
+def test_fixed_ot_size_must_equal_the_assembly(ot_params: int, expected: tuple[int, tuple[int, ...]]) -> None:
+    raw = attacks.forward_open(1, transport=0x01, ot_params=ot_params, to_params=0x4000 | 6, rpi_us=10_000,
+                               path=attacks.ACG_OWNER_PATH)
+    assert _open_status(raw) == expected
+
+
+@pytest.mark.parametrize(("to_params", "expected"), [
+    (0x4000 | 6, (0, ())), (0x4000 | 7, (0x01, (0x0128, 6))), (0x4000 | 5, (0x01, (0x0128, 6)))])
+def test_fixed_to_size_must_equal_the_assembly(to_params: int, expected: tuple[int, tuple[int, ...]]) -> None:
+    raw = attacks.forward_open(1, transport=0x01, ot_params=0x4000 | 10, to_params=to_params, rpi_us=10_000,
+                               path=attacks.ACG_OWNER_PATH)
+    assert _open_status(raw) == expected
+
+
+def _routed(message: bytes) -> bytes:
+    """Unconnected_Send to the Connection Manager 6/1 with an empty route path (the device itself)."""
+    pad = b"\x00" if len(message) % 2 else b""
+    return bytes((0x52, 2, 0x20, 0x06, 0x24, 0x01)) + struct.pack("<BBH", 0x0A, 0x0E, len(message)) + message + pad + (
+        b"\x00\x00")
+
+
+def _packet(message: bytes) -> bytes:
+    """Multiple_Service_Packet to the Message Router 2/1 holding one request."""
+    return bytes((0x0A, 2, 0x20, 0x02, 0x24, 0x01)) + struct.pack("<HH", 1, 4) + message
+
+
+def _serve(raw: bytes) -> bytes:
+    from cipstack.cip.router import RequestContext
+    from cipstack.devices.profiles import build_device
+
+    device = build_device()
+    return device.router.handle(raw, RequestContext(device.router, 0.0, "127.0.0.1:1", None))
+
+
+@pytest.mark.parametrize("depth", [1, 4])
+def test_requests_nested_four_deep_are_served(depth: int) -> None:
+    routed, packed = attacks.GET_NAME, attacks.GET_NAME
+    for _ in range(depth):
+        routed, packed = _routed(routed), _packet(packed)
+    assert _serve(routed) == bytes.fromhex("8e000000") + attacks.IDENTITY_NAME
+    ok = bytes.fromhex("8a000000" "01000400")
+    assert _serve(packed) == ok * depth + bytes.fromhex("8e000000") + attacks.IDENTITY_NAME
+
+
+def test_a_fifth_level_is_resource_unavailable() -> None:
+    """The request nested five deep is answered 0x02 (resource unavailable); the enclosing
+    Unconnected_Sends pass its reply up, the enclosing packets report 0x1E (embedded service error)."""
+    routed, packed = attacks.GET_NAME, attacks.GET_NAME
+    for _ in range(5):
+        routed, packed = _routed(routed), _packet(packed)
+    assert _serve(routed) == bytes.fromhex("8e000200")
+    assert _serve(packed) == bytes.fromhex("8a001e00" "01000400") * 5 + bytes.fromhex("8e000200")
