@@ -337,11 +337,15 @@ def list_identity_flood(target: AttackTarget, scale: int, rng: random.Random) ->
         for sock in sockets:
             sock.close()
     assert late == 0, f"{late} replies more than 2 s after the last request"
-    # 4 sources x at most 4 pending each, per 2 s.
-    bound = len(sockets) * 4 * (int(flood_seconds / 2.0) + 2)
+    # 4 sources x at most 4 pending each; a slot frees when its reply leaves, after 1 s on average
+    # (uniform 0..2 s): about 4 replies a second per source, twice that as the bound.
+    bound = len(sockets) * 4 * 2 * (int(flood_seconds) + 3)
     assert replies <= bound, f"{replies} replies to {scale} requests (bound {bound})"
+    rss_after = target.rss()
+    if rss_before:  # the adapter in another process: its own memory is back near the start
+        assert rss_after - rss_before < 16 * 2**20, f"RSS {rss_before} -> {rss_after} bytes"
     return {"requests": scale, "replies": replies, "flood_seconds": round(flood_seconds, 2),
-            "rss_before": rss_before, "rss_peak": rss_peak, "rss_after": target.rss()}
+            "rss_before": rss_before, "rss_peak": rss_peak, "rss_after": rss_after}
 
 
 def _drain(sockets: list[socket.socket]) -> int:
