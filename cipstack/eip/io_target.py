@@ -12,6 +12,7 @@ connection that produces the same input assembly by multicast, and closes with i
 
 from __future__ import annotations
 
+import heapq
 import itertools
 import logging
 import random
@@ -154,6 +155,8 @@ class IoConnection:
     #: Bytes after the CIP sequence count of every O->T datagram: the run/idle header and the
     #: consumed assembly, or the heartbeat's (0 or the 4-byte header) as the Forward_Open sized it.
     ot_payload_size: int = 4
+    #: When the target's watchdog heap looks at this connection next (its live entry there).
+    watch_at: float = 0.0
 
     @property
     def name(self) -> str:
@@ -173,6 +176,13 @@ class IoTarget:
         self.multicast_block = multicast_block or (lambda: (CIP_MULTICAST_BASE, 32))
         self.io_port = io_port
         self.connections: dict[int, IoConnection] = {}
+        # Deadlines in heaps, so a timer firing touches only what is due (not every connection):
+        # production slots and watchdogs, each entry (time, order, connection). Entries of closed
+        # connections are dropped when they come up; a watchdog entry whose deadline has moved on
+        # (packets arrived) is pushed again at the new deadline.
+        self._productions: list[tuple[float, int, IoConnection]] = []
+        self._watchdogs: list[tuple[float, int, IoConnection]] = []
+        self._order = itertools.count()
         self._ids = itertools.count(random.randrange(0x10000, 0x7FFF0000))
         self.timeouts = 0
         self.dropped = 0
@@ -346,6 +356,9 @@ class IoTarget:
         if owner is not None:
             owner.listeners.append(connection)
         self.connections[connection.ot_connection_id] = connection
+        if producer is not None:
+            heapq.heappush(self._productions, (producer.next_due, next(self._order), connection))
+        self._watch(connection)
         if multicast:
             host, port = destination
             reply_item = Item(ItemType.SOCKADDR_T_O, SockAddr(host, port).encode())
@@ -397,6 +410,8 @@ class IoTarget:
     def close_all(self) -> None:
         for connection in list(self.connections.values()):
             self._close(connection, timed_out=False)
+        self._productions.clear()
+        self._watchdogs.clear()
 
     # -- datagrams ------------------------------------------------------------------------------
     def receive(self, raw: bytes, source: tuple[str, int], now: float) -> None:
@@ -415,9 +430,12 @@ class IoTarget:
             self.dropped += 1
             return
         self.tick(now)
-        reception = connection.consumer.accept(datagram.encap_sequence, datagram.cip_sequence, now)
+        consumer = connection.consumer
+        reception = consumer.accept(datagram.encap_sequence, datagram.cip_sequence, now)
         if reception is Reception.STALE:
             return
+        if consumer.deadline < connection.watch_at:
+            self._watch(connection)  # the first packet ends the 10 s first-packet allowance
         if connection.consumed is None:
             if payload:
                 self._run_idle(connection, bool(payload[0] & 1))
@@ -440,13 +458,19 @@ class IoTarget:
 
     def poll(self, now: float) -> list[tuple[bytes, tuple[str, int]]]:
         """The T->O datagrams due at ``now``, each with its destination."""
+        heap = self._productions
+        if not heap or heap[0][0] > now:
+            return []
         out = []
         self.tick(now)
-        for connection in self.connections.values():
+        connections = self.connections
+        while heap and heap[0][0] <= now:
+            _due_at, _order, connection = heapq.heappop(heap)
             producer = connection.producer
-            if producer is None or now < producer.next_due:
-                continue
+            if producer is None or connections.get(connection.ot_connection_id) is not connection:
+                continue  # closed since
             due, _ = producer.due(now)
+            heapq.heappush(heap, (producer.next_due, next(self._order), connection))
             if not due:
                 continue
             data = connection.produced.produce() if connection.produced.produce is not None else bytes(
@@ -459,12 +483,39 @@ class IoTarget:
         return out
 
     def next_deadline(self) -> float | None:
-        deadlines = [c.consumer.deadline for c in self.connections.values()]
-        deadlines += [c.producer.next_due for c in self.connections.values() if c.producer is not None]
-        return min(deadlines, default=None)
+        """The earliest production slot or watchdog deadline (a watchdog may have moved on since:
+        firing early costs one look, see ``expire``)."""
+        self._drop_closed(self._productions)
+        self._drop_closed(self._watchdogs)
+        candidates = [heap[0][0] for heap in (self._productions, self._watchdogs) if heap]
+        return min(candidates, default=None)
+
+    def _drop_closed(self, heap: list[tuple[float, int, IoConnection]]) -> None:
+        connections = self.connections
+        while heap:
+            at, _order, connection = heap[0]
+            if connections.get(connection.ot_connection_id) is connection and (
+                    heap is not self._watchdogs or at == connection.watch_at):
+                return
+            heapq.heappop(heap)
+
+    def _watch(self, connection: IoConnection) -> None:
+        """Put the connection's watchdog deadline in the heap (an earlier entry becomes stale)."""
+        connection.watch_at = connection.consumer.deadline
+        heapq.heappush(self._watchdogs, (connection.watch_at, next(self._order), connection))
 
     def expire(self, now: float) -> list[IoConnection]:
-        expired = [c for c in self.connections.values() if c.consumer.expired(now)]
+        expired = []
+        heap = self._watchdogs
+        connections = self.connections
+        while heap and heap[0][0] <= now:
+            at, _order, connection = heapq.heappop(heap)
+            if connections.get(connection.ot_connection_id) is not connection or at != connection.watch_at:
+                continue  # closed since, or superseded by an earlier entry
+            if connection.consumer.expired(now):
+                expired.append(connection)
+            else:  # packets arrived: watch again at the deadline they set
+                self._watch(connection)
         for connection in expired:
             if connection.ot_connection_id in self.connections:
                 self.timeouts += 1
