@@ -197,11 +197,16 @@ def _open_reserve() -> int | None:
 
 
 def guarded_listener(host: str, port: int, backlog: int = 100) -> GuardedListener:
-    """A ``GuardedListener`` bound to ``host:port`` (IPv4) and listening."""
-    sock = GuardedListener(socket.AF_INET, socket.SOCK_STREAM)
+    """A ``GuardedListener`` bound to ``host:port`` and listening ("" or "0.0.0.0": every IPv4
+    address; a name or an IPv6 address: its first address)."""
+    if host in ("", "0.0.0.0"):
+        family, address = socket.AF_INET, ("0.0.0.0", port)
+    else:
+        family, _type, _proto, _name, address = socket.getaddrinfo(host, port, type=socket.SOCK_STREAM)[0]
+    sock = GuardedListener(family, socket.SOCK_STREAM)
     try:
         sock.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
-        sock.bind((host, port))
+        sock.bind(address)
         sock.listen(backlog)
         sock.setblocking(False)
     except OSError:

@@ -6,8 +6,9 @@ the inactivity and class 3 timeouts. Delayed ListIdentity replies wait in the ta
 ``DelayedReplies``, sent by one loop timer at the earliest.
 
 TCP connections are bounded in total and per host (``ConnectionLimiter``): one over a bound is
-closed as soon as it is accepted, with one log line per 10 s whatever the rate, and accept()
-running out of descriptors is one log line per 10 s too (``quiet_accept_errors``).
+closed as soon as it is accepted, with one log line per 10 s whatever the rate. The listening
+socket is a ``GuardedListener``: when accept() runs out of descriptors, the waiting connection is
+closed at once and logged once per 10 s, never a traceback per attempt (see ``limits``).
 """
 
 from __future__ import annotations
