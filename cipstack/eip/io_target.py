@@ -464,6 +464,9 @@ class IoTarget:
         out = []
         self.tick(now)
         connections = self.connections
+        # The device does not change within one firing: each input assembly is produced once and
+        # its bytes shared by every connection due that reads it.
+        produced: dict[int, bytes] = {}
         while heap and heap[0][0] <= now:
             _due_at, _order, connection = heapq.heappop(heap)
             producer = connection.producer
@@ -473,8 +476,10 @@ class IoTarget:
             heapq.heappush(heap, (producer.next_due, next(self._order), connection))
             if not due:
                 continue
-            data = connection.produced.produce() if connection.produced.produce is not None else bytes(
-                connection.produced.size)
+            point = connection.produced
+            data = produced.get(id(point))
+            if data is None:
+                data = produced[id(point)] = point.produce() if point.produce is not None else bytes(point.size)
             connection.encap_sequence = (connection.encap_sequence + 1) & 0xFFFFFFFF
             connection.cip_sequence = (connection.cip_sequence + 1) & 0xFFFF
             out.append((encode_io_datagram(connection.to_connection_id, connection.encap_sequence,
