@@ -47,6 +47,11 @@ _CONN_ID = struct.Struct("<I")
 #: Requests whose reply may carry a Sockaddr Info item (a class 1 Forward_Open, possibly routed).
 _MAY_CARRY_SOCKADDR = frozenset({0x54, 0x5B, 0x52})
 
+#: The common SendRRData: interface handle 0, timeout, 2 items, Null Address (0x0000, length 0),
+#: Unconnected Data (0x00B2, length), then the request; served without building Item objects.
+_RR_TWO_ITEMS = struct.Struct("<IHHHHHH")
+_RR_REPLY_HEAD = struct.Struct("<IHHHHHH")
+
 #: UDP ListIdentity reply delay (CIP Vol. 2, 2-4.2.3): random between 0 and the MaxResponseDelay of
 #: the request (the first UINT of the sender context, in ms); 0 means 2000 ms, 1..500 mean 500 ms.
 LIST_IDENTITY_DEFAULT_DELAY_MS = 2000
@@ -358,6 +363,17 @@ class EncapsulationConnection:
         self._reply(Command.REGISTER_SESSION, self.session, context, body)
 
     def _send_rr_data(self, body: bytes, now: float) -> bytes:
+        if len(body) > _RR_TWO_ITEMS.size:
+            interface, _timeout, count, null_type, null_length, data_type, length = _RR_TWO_ITEMS.unpack_from(body)
+            if (interface == 0 and count == 2 and null_type == ItemType.NULL_ADDRESS and null_length == 0
+                    and data_type == ItemType.UNCONNECTED_DATA and len(body) == _RR_TWO_ITEMS.size + length
+                    and body[_RR_TWO_ITEMS.size] not in _MAY_CARRY_SOCKADDR):
+                context = self._context
+                context.now = now
+                context.connected = False
+                reply = self.target.router.handle(body[_RR_TWO_ITEMS.size:], context)
+                return _RR_REPLY_HEAD.pack(0, 0, 2, ItemType.NULL_ADDRESS, 0, ItemType.UNCONNECTED_DATA,
+                                           len(reply)) + reply
         if len(body) < RR_PREFIX.size:
             raise EncapsulationError(EncapsulationStatus.INVALID_LENGTH)
         interface, _timeout = RR_PREFIX.unpack_from(body)
