@@ -18,6 +18,7 @@ from .eip.identity_items import CAPABILITY_CIP_TCP, CAPABILITY_CLASS01_UDP
 from .eip.io_core import DEFAULT_IO_PORT
 from .eip.io_server import IoEndpoint
 from .eip.io_target import IoTarget
+from .eip.limits import DEFAULT_MAX_TCP_CONNECTIONS
 from .eip.server import DEFAULT_PORT, EncapsulationServer
 from .eip.target import EncapsulationTarget, TargetSettings
 from .listening import ListenError, held_log_records
@@ -32,7 +33,15 @@ class AdapterSettings:
     port: int = DEFAULT_PORT
     profile: str = DEFAULT_PROFILE
     max_sessions: int = 32
+    #: Sessions one originator address may hold (None: half of ``max_sessions``, rounded up).
+    max_sessions_per_host: int | None = None
+    #: Class 3 (connected explicit messaging) connections.
     max_connections: int = 32
+    #: Class 1 (I/O) connections (None: the device's own limit, 64 for the ACG-ET2).
+    max_io_connections: int | None = None
+    #: Open TCP connections to the encapsulation port, in total and per host (None: half the total).
+    max_tcp_connections: int = DEFAULT_MAX_TCP_CONNECTIONS
+    max_tcp_connections_per_host: int | None = None
     max_frame_length: int = 4200
     #: UDP port of class 1 I/O (consumed O->T datagrams, and the default T->O destination port).
     io_port: int = DEFAULT_IO_PORT
@@ -66,12 +75,13 @@ class Adapter:
             self.modbus = ModbusTcpServer(lambda: acg.drive, s.host, s.modbus_port, saves=acg.saves)
         self.target = EncapsulationTarget(
             self.device.router, self.device.identity_record,
-            TargetSettings(max_sessions=s.max_sessions, max_connections=s.max_connections,
-                           max_frame_length=s.max_frame_length,
+            TargetSettings(max_sessions=s.max_sessions, max_sessions_per_host=s.max_sessions_per_host,
+                           max_connections=s.max_connections, max_frame_length=s.max_frame_length,
                            inactivity_timeout=lambda: self.device.inactivity_timeout),
             table=self.device.connection_table,
         )
-        self.server = EncapsulationServer(self.target, s.host, s.port)
+        self.server = EncapsulationServer(self.target, s.host, s.port, max_tcp_connections=s.max_tcp_connections,
+                                          max_tcp_connections_per_host=s.max_tcp_connections_per_host)
         self.target.tick = self._tick
         self._device_timer: asyncio.TimerHandle | None = None
         self._device_timer_at: float | None = None
@@ -79,6 +89,8 @@ class Adapter:
         self.io_endpoint: IoEndpoint | None = None
         profile = self.device.io_profile()
         if profile is not None:
+            if s.max_io_connections is not None:
+                profile.max_connections = s.max_io_connections
             self.io = IoTarget(profile, self.device, self.device.multicast_block, s.io_port)
             self.device.connection_manager.io_handler = self.io
             self.target.settings.capabilities = CAPABILITY_CIP_TCP | CAPABILITY_CLASS01_UDP

@@ -107,7 +107,8 @@ def cmd_adapter(args: argparse.Namespace) -> int:
     settings = AdapterSettings(host=args.host, port=args.port, profile=args.profile, model=args.model,
                                max_sessions=args.max_sessions, max_connections=args.max_connections,
                                io_port=args.io_port, control_path=args.control,
-                               status_lines=not args.quiet, state_path=args.state, modbus_port=args.modbus_port)
+                               status_lines=not args.quiet, state_path=args.state, modbus_port=args.modbus_port,
+                               **_limit_settings(args))
     try:
         adapter = Adapter(settings)
     except (StateFileError, ValueError, KeyError) as exc:
@@ -141,6 +142,20 @@ def _profile_of_model(name: str) -> str:
         return model(name).family.value.lower()
     except KeyError as exc:
         raise UsageError(f"--model: {exc} (`cipstack models` lists them)") from None
+
+
+def _limit_settings(args: argparse.Namespace) -> dict[str, Any]:
+    """The adapter's limits beyond sessions and class 3 connections, checked with those two (a
+    connection limit may be 0: that transport class refused; every other at least 1)."""
+    limits = {"max_sessions_per_host": args.max_sessions_per_host, "max_io_connections": args.max_io_connections,
+              "max_tcp_connections": args.max_tcp_connections,
+              "max_tcp_connections_per_host": args.max_tcp_connections_per_host}
+    checked = (("max_sessions", args.max_sessions), ("max_connections", args.max_connections), *limits.items())
+    for name, value in checked:
+        minimum = 0 if name in ("max_connections", "max_io_connections") else 1
+        if value is not None and value < minimum:
+            raise UsageError(f"--{name.replace('_', '-')} {value}: must be at least {minimum}")
+    return limits
 
 
 def _serve(adapter: Any, args: argparse.Namespace, command: str) -> int:
@@ -196,7 +211,7 @@ def _adapter_from_eds(args: argparse.Namespace) -> int:
         print(f"cipstack adapter: {args.eds}:{issue.line}: warning: {issue.message}", file=sys.stderr, flush=True)
     settings = AdapterSettings(host=args.host, port=args.port, max_sessions=args.max_sessions,
                                max_connections=args.max_connections, io_port=args.io_port,
-                               control_path=args.control, status_lines=not args.quiet)
+                               control_path=args.control, status_lines=not args.quiet, **_limit_settings(args))
     adapter = Adapter(settings, device=device)
     return _serve(adapter, args, "adapter")
 
@@ -782,8 +797,16 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--model", help="model of the mx2/rx profiles (e.g. MX2-A2015-E, RX-A4055-E)")
     p.add_argument("--max-sessions", type=lambda t: parse_number(t, "max sessions"), default=32,
                    help="encapsulation sessions at once; one more is refused with 0x0002 (default 32)")
+    p.add_argument("--max-sessions-per-host", type=lambda t: parse_number(t, "max sessions per host"),
+                   help="sessions one originator address may hold (default: half of --max-sessions)")
     p.add_argument("--max-connections", type=lambda t: parse_number(t, "max connections"), default=32,
-                   help="class 1 and class 3 connections at once (default 32)")
+                   help="class 3 (connected explicit) connections (default 32)")
+    p.add_argument("--max-io-connections", type=lambda t: parse_number(t, "max io connections"),
+                   help="class 1 (I/O) connections (default: the device's, 64 for the ACG-ET2)")
+    p.add_argument("--max-tcp-connections", type=lambda t: parse_number(t, "max tcp connections"), default=256,
+                   help="open TCP connections to the encapsulation port; more are closed at accept (default 256)")
+    p.add_argument("--max-tcp-connections-per-host", type=lambda t: parse_number(t, "max tcp connections per host"),
+                   help="open TCP connections from one address (default: half of --max-tcp-connections)")
     p.add_argument("--io-port", type=lambda t: parse_number(t, "io port"), default=2222,
                    help="UDP port of class 1 I/O (default 2222; 0 picks a free one)")
     p.add_argument("--control", type=Path, help="control socket for `cipstack drive` (default: per port)")

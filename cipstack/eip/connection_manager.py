@@ -59,6 +59,12 @@ SPEC = ClassSpec(
 )
 
 
+def origin_host(origin: str) -> str:
+    """The originator's address in a ``host:port`` origin text: a connection is named by its triad
+    together with this address, so another host can neither close it nor open it twice."""
+    return origin.rsplit(":", 1)[0]
+
+
 def connection_failure(extended: int, triad: ConnectionTriad | None = None, message: str = "",
                        extra_words: tuple[int, ...] = ()) -> CipError:
     data = forward_open_failure_data(triad) if triad is not None else b""
@@ -78,6 +84,8 @@ class ExplicitConnection:
     last_sequence: int | None = None
     last_reply: bytes = b""
     requests: int = 0
+    #: Address of the originator that opened it (see ``origin_host``).
+    host: str = ""
 
 
 class IoConnectionHandler(Protocol):
@@ -106,9 +114,10 @@ class ConnectionTable:
             if candidate and candidate not in self.connections:
                 return candidate
 
-    def by_triad(self, triad: ConnectionTriad) -> ExplicitConnection | None:
+    def by_triad(self, triad: ConnectionTriad, host: str) -> ExplicitConnection | None:
+        """The connection ``host`` opened with ``triad``, if any."""
         for connection in self.connections.values():
-            if connection.triad == triad:
+            if connection.triad == triad and connection.host == host:
                 return connection
         return None
 
@@ -182,7 +191,8 @@ class ConnectionManagerObject(CipObject):
         if fo.transport.transport_class != 3:
             raise connection_failure(ExtendedStatus.TRANSPORT_CLASS_NOT_SUPPORTED, fo.triad,
                                      f"transport class {fo.transport.transport_class}")
-        if self.table.by_triad(fo.triad) is not None:
+        host = origin_host(context.origin)
+        if self.table.by_triad(fo.triad, host) is not None:
             raise connection_failure(ExtendedStatus.CONNECTION_IN_USE, fo.triad, "duplicate Forward_Open")
         for params in (fo.ot_parameters, fo.to_parameters):
             if params.type != ConnectionType.POINT_TO_POINT:
@@ -198,7 +208,7 @@ class ConnectionManagerObject(CipObject):
             ot_connection_id=ot_id, to_connection_id=fo.to_connection_id, triad=fo.triad,
             timeout_s=fo.timeout_s, owner=context.transport,
             # Before the first packet at least 10 s, as for every connection.
-            deadline=context.now + max(fo.timeout_s, 10.0),
+            deadline=context.now + max(fo.timeout_s, 10.0), host=host,
         )
         self.table.connections[ot_id] = connection
         log.info("class 3 connection 0x%08X opened by %s (serial 0x%04X)", ot_id, context.origin,
@@ -247,7 +257,8 @@ class ConnectionManagerObject(CipObject):
         except CipError:
             self._count(6)
             raise
-        connection = self.table.by_triad(fc.triad)
+        # Only the originator's own address may close a connection; to anyone else it does not exist.
+        connection = self.table.by_triad(fc.triad, origin_host(context.origin))
         if connection is not None:
             del self.table.connections[connection.ot_connection_id]
             log.info("class 3 connection 0x%08X closed", connection.ot_connection_id)

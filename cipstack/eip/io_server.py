@@ -1,10 +1,14 @@
 """The asyncio shell of class 1 I/O, both roles: one UDP endpoint (2222 by default) and a
 loop timer at the core's next deadline.
 
-Timing: the default asyncio loop on Linux waits in epoll, whose timeout has millisecond
-granularity and is rounded up, so a 1 ms RPI would jitter by up to a millisecond. The
-``precise_event_loop`` waits in select(), whose timeout has microsecond granularity, and
-lowers the thread's timer slack: sends then leave within tens of microseconds of their slot.
+Timing: the default asyncio loop on Linux waits in epoll_wait(), whose timeout has millisecond
+granularity and is rounded up, so a 1 ms RPI would jitter by up to a millisecond. select() has
+microsecond timeouts but takes no descriptor numbered 1024 or above and scans every socket on
+each wait. The ``precise_event_loop`` keeps both strengths: sockets are registered with epoll
+(any descriptor number, no scan), and the wait is a select() on the one epoll descriptor (it
+becomes readable when any registered socket is ready) with the exact timeout; the ready events
+are then harvested with a non-blocking epoll_wait(). It also lowers the thread's timer slack:
+sends then leave within tens of microseconds of their slot.
 """
 
 from __future__ import annotations
@@ -13,9 +17,12 @@ import asyncio
 import ctypes
 import ctypes.util
 import logging
+import math
+import select
 import selectors
 import socket
 import sys
+import time
 from collections.abc import Callable, Coroutine
 from typing import Any, Protocol, TypeVar
 
@@ -37,10 +44,40 @@ def _lower_timer_slack(nanoseconds: int = 1000) -> None:
         pass
 
 
+#: select() takes descriptors below FD_SETSIZE only (1024 on Linux).
+FD_SETSIZE = 1024
+
+
+class PreciseEpollSelector(selectors.EpollSelector):
+    """epoll for registration and readiness, with a microsecond-precise wait (see the module docstring)."""
+
+    def select(self, timeout: float | None = None) -> list[tuple[selectors.SelectorKey, int]]:
+        if timeout is None or timeout > 0:
+            epoll_fd = self._selector.fileno()  # type: ignore[attr-defined]
+            if epoll_fd < FD_SETSIZE:
+                # Returns when a registered socket is ready or at the timeout, to the microsecond.
+                select.select((epoll_fd,), (), (), timeout)
+            elif timeout is not None:
+                # The epoll descriptor itself is numbered too high for select() (the loop was made
+                # after 1,024 files were open): wait the whole milliseconds in epoll, then sleep
+                # the remainder, so timers still fire on time (events wait at most that remainder).
+                whole_ms = math.floor(timeout * 1000)
+                if whole_ms:
+                    ready = super().select((whole_ms - 0.5) / 1000)  # epoll rounds up: exactly whole_ms
+                    if ready:
+                        return ready
+                remainder = timeout - whole_ms / 1000
+                if remainder > 0:
+                    time.sleep(remainder)
+            else:
+                return super().select(None)
+        return super().select(0)
+
+
 def precise_event_loop() -> asyncio.AbstractEventLoop:
-    """An event loop whose timers fire within tens of microseconds (select() waits)."""
+    """An event loop whose timers fire within tens of microseconds and that takes any number of sockets."""
     _lower_timer_slack()
-    return asyncio.SelectorEventLoop(selectors.SelectSelector())
+    return asyncio.SelectorEventLoop(PreciseEpollSelector())
 
 
 def run_precise(coroutine: Coroutine[Any, Any, T]) -> T:

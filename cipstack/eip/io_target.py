@@ -12,6 +12,7 @@ connection that produces the same input assembly by multicast, and closes with i
 
 from __future__ import annotations
 
+import heapq
 import itertools
 import logging
 import random
@@ -33,7 +34,7 @@ from .cm_messages import (
     ForwardOpenRequest,
     TriggerType,
 )
-from .connection_manager import connection_failure
+from .connection_manager import connection_failure, origin_host
 from .cpf import Item, ItemType, SockAddr
 from .io_core import (
     DEFAULT_IO_PORT,
@@ -166,6 +167,11 @@ class IoConnection:
     listeners: list[IoConnection] = field(default_factory=list)
     #: When to say so if no O->T datagram has arrived yet (None: said, or no longer needed).
     silence_check: float | None = None
+    #: Bytes after the CIP sequence count of every O->T datagram: the run/idle header and the
+    #: consumed assembly, or the heartbeat's (0 or the 4-byte header) as the Forward_Open sized it.
+    ot_payload_size: int = 4
+    #: When the target's watchdog heap looks at this connection next (its live entry there).
+    watch_at: float = 0.0
 
     @property
     def name(self) -> str:
@@ -185,6 +191,15 @@ class IoTarget:
         self.multicast_block = multicast_block or (lambda: (CIP_MULTICAST_BASE, 32))
         self.io_port = io_port
         self.connections: dict[int, IoConnection] = {}
+        # Deadlines in heaps, so a timer firing touches only what is due (not every connection):
+        # production slots and watchdogs, each entry (time, order, connection). Entries of closed
+        # connections are dropped when they come up; a watchdog entry whose deadline has moved on
+        # (packets arrived) is pushed again at the new deadline.
+        self._productions: list[tuple[float, int, IoConnection]] = []
+        self._watchdogs: list[tuple[float, int, IoConnection]] = []
+        #: Connections whose O->T data is still awaited, by when to say it has not come (few, briefly).
+        self._silences: list[tuple[float, int, IoConnection]] = []
+        self._order = itertools.count()
         self._ids = itertools.count(random.randrange(0x10000, 0x7FFF0000))
         self.timeouts = 0
         self.dropped = 0
@@ -207,7 +222,8 @@ class IoTarget:
 
     def _forward_open(self, fo: ForwardOpenRequest, context: RequestContext) -> ForwardOpenReply:
         triad = fo.triad
-        if any(c.triad == triad for c in self.connections.values()):
+        host = origin_host(context.origin) if context.origin else "127.0.0.1"
+        if any(c.triad == triad and c.peer == host for c in self.connections.values()):
             raise connection_failure(ExtendedStatus.CONNECTION_IN_USE, triad, "duplicate Forward_Open")
         if fo.transport.trigger not in self.profile.triggers:
             raise connection_failure(ExtendedStatus.TRANSPORT_CLASS_NOT_SUPPORTED, triad,
@@ -345,7 +361,7 @@ class IoTarget:
               consumed: AssemblyPoint | None, produced: AssemblyPoint, owner: IoConnection | None) -> ForwardOpenReply:
         now = context.now
         multicast = fo.to_parameters.type == ConnectionType.MULTICAST
-        peer_host = context.origin.rsplit(":", 1)[0] if context.origin else "127.0.0.1"
+        peer_host = origin_host(context.origin) if context.origin else "127.0.0.1"
         sockaddrs: dict[int, SockAddr] = context.extras.get("sockaddr", {})
         if owner is not None:
             destination = owner.destination
@@ -360,13 +376,19 @@ class IoTarget:
         stats = IoStatistics()
         consumer = ConsumerState.opened(connection_timeout(fo.ot_rpi_us, fo.timeout_multiplier), now, stats=stats)
         producer = None if owner is not None else ProductionSchedule(fo.to_rpi_us / 1e6, now, stats=stats)
+        ot_payload_size = consumed.size + OT_OVERHEAD - TO_OVERHEAD if consumed is not None else (
+            fo.ot_parameters.size - TO_OVERHEAD)
         connection = IoConnection(kind, fo.triad, self._new_id(), to_id, fo.ot_rpi_us, fo.to_rpi_us, consumed,
                                   produced, destination, multicast, consumer, producer, stats, peer_host,
-                                  owner=owner)
+                                  owner=owner, ot_payload_size=ot_payload_size)
         if owner is not None:
             owner.listeners.append(connection)
         connection.silence_check = now + max(SILENT_RPIS * fo.ot_rpi_us / 1e6, SILENT_MINIMUM_S)
         self.connections[connection.ot_connection_id] = connection
+        heapq.heappush(self._silences, (connection.silence_check, next(self._order), connection))
+        if producer is not None:
+            heapq.heappush(self._productions, (producer.next_due, next(self._order), connection))
+        self._watch(connection)
         if multicast:
             host, port = destination
             reply_item = Item(ItemType.SOCKADDR_T_O, SockAddr(host, port).encode())
@@ -380,8 +402,10 @@ class IoTarget:
     def _check_silence(self, now: float) -> None:
         """Say once, well before the watchdog's first timeout, that an opened connection's O->T data
         has not arrived: an originator that sends to another port (or host) otherwise looks connected."""
-        for connection in self.connections.values():
-            if connection.silence_check is None or now < connection.silence_check:
+        heap = self._silences
+        while heap and heap[0][0] <= now:
+            _at, _order, connection = heapq.heappop(heap)
+            if self.connections.get(connection.ot_connection_id) is not connection or connection.silence_check is None:
                 continue
             connection.silence_check = None
             if connection.stats.received == 0:
@@ -408,8 +432,11 @@ class IoTarget:
 
     # -- Forward_Close ------------------------------------------------------------------------
     def forward_close(self, fc: ForwardCloseRequest, context: RequestContext) -> bool:
+        """Close the connection the requesting address opened with this triad; False when none
+        (a connection of another originator address is not found, whatever its triad)."""
+        host = origin_host(context.origin) if context.origin else "127.0.0.1"
         for connection in list(self.connections.values()):
-            if connection.triad == fc.triad:
+            if connection.triad == fc.triad and connection.peer == host:
                 self._close(connection, timed_out=False)
                 return True
         return False
@@ -428,6 +455,9 @@ class IoTarget:
     def close_all(self) -> None:
         for connection in list(self.connections.values()):
             self._close(connection, timed_out=False)
+        self._productions.clear()
+        self._watchdogs.clear()
+        self._silences.clear()
 
     # -- datagrams ------------------------------------------------------------------------------
     def receive(self, raw: bytes, source: tuple[str, int], now: float) -> None:
@@ -438,26 +468,25 @@ class IoTarget:
             self.dropped += 1
             return
         connection = self.connections.get(datagram.connection_id)
-        if connection is None or connection.peer != source[0]:
+        payload = datagram.payload
+        # Refused before anything moves: a datagram of another source or of the wrong size neither
+        # advances the sequence window nor feeds the watchdog (DESIGN: state changes only on
+        # accepted input), so it can neither keep a dead connection alive nor make later ones stale.
+        if connection is None or connection.peer != source[0] or len(payload) != connection.ot_payload_size:
             self.dropped += 1
             return
         self.tick(now)
-        reception = connection.consumer.accept(datagram.encap_sequence, datagram.cip_sequence, now)
+        consumer = connection.consumer
+        reception = consumer.accept(datagram.encap_sequence, datagram.cip_sequence, now)
         if reception is Reception.STALE:
             return
-        payload = datagram.payload
+        if consumer.deadline < connection.watch_at:
+            self._watch(connection)  # the first packet ends the 10 s first-packet allowance
         if connection.consumed is None:
-            if len(payload) >= 4:
+            if payload:
                 self._run_idle(connection, bool(payload[0] & 1))
             return
-        try:
-            run, data = split_run_idle(payload)
-        except IoDatagramError:
-            self.dropped += 1
-            return
-        if len(data) != connection.consumed.size:
-            self.dropped += 1
-            return
+        run, data = split_run_idle(payload)
         self._run_idle(connection, run)
         if reception is Reception.NEW and run:
             self.deliver(connection.consumed.instance_id, data, now)
@@ -475,17 +504,28 @@ class IoTarget:
 
     def poll(self, now: float) -> list[tuple[bytes, tuple[str, int]]]:
         """The T->O datagrams due at ``now``, each with its destination."""
+        heap = self._productions
+        if not heap or heap[0][0] > now:
+            return []
         out = []
         self.tick(now)
-        for connection in self.connections.values():
+        connections = self.connections
+        # The device does not change within one firing: each input assembly is produced once and
+        # its bytes shared by every connection due that reads it.
+        produced: dict[int, bytes] = {}
+        while heap and heap[0][0] <= now:
+            _due_at, _order, connection = heapq.heappop(heap)
             producer = connection.producer
-            if producer is None or now < producer.next_due:
-                continue
+            if producer is None or connections.get(connection.ot_connection_id) is not connection:
+                continue  # closed since
             due, _ = producer.due(now)
+            heapq.heappush(heap, (producer.next_due, next(self._order), connection))
             if not due:
                 continue
-            data = connection.produced.produce() if connection.produced.produce is not None else bytes(
-                connection.produced.size)
+            point = connection.produced
+            data = produced.get(id(point))
+            if data is None:
+                data = produced[id(point)] = point.produce() if point.produce is not None else bytes(point.size)
             connection.encap_sequence = (connection.encap_sequence + 1) & 0xFFFFFFFF
             connection.cip_sequence = (connection.cip_sequence + 1) & 0xFFFF
             out.append((encode_io_datagram(connection.to_connection_id, connection.encap_sequence,
@@ -494,14 +534,42 @@ class IoTarget:
         return out
 
     def next_deadline(self) -> float | None:
-        deadlines = [c.consumer.deadline for c in self.connections.values()]
-        deadlines += [c.silence_check for c in self.connections.values() if c.silence_check is not None]
-        deadlines += [c.producer.next_due for c in self.connections.values() if c.producer is not None]
-        return min(deadlines, default=None)
+        """The earliest production slot or watchdog deadline (a watchdog may have moved on since:
+        firing early costs one look, see ``expire``)."""
+        self._drop_closed(self._productions)
+        self._drop_closed(self._watchdogs)
+        self._drop_closed(self._silences)
+        candidates = [heap[0][0] for heap in (self._productions, self._watchdogs, self._silences) if heap]
+        return min(candidates, default=None)
+
+    def _drop_closed(self, heap: list[tuple[float, int, IoConnection]]) -> None:
+        connections = self.connections
+        while heap:
+            at, _order, connection = heap[0]
+            if connections.get(connection.ot_connection_id) is connection and (
+                    (heap is self._productions) or (heap is self._watchdogs and at == connection.watch_at)
+                    or (heap is self._silences and connection.silence_check is not None)):
+                return
+            heapq.heappop(heap)
+
+    def _watch(self, connection: IoConnection) -> None:
+        """Put the connection's watchdog deadline in the heap (an earlier entry becomes stale)."""
+        connection.watch_at = connection.consumer.deadline
+        heapq.heappush(self._watchdogs, (connection.watch_at, next(self._order), connection))
 
     def expire(self, now: float) -> list[IoConnection]:
         self._check_silence(now)
-        expired = [c for c in self.connections.values() if c.consumer.expired(now)]
+        expired = []
+        heap = self._watchdogs
+        connections = self.connections
+        while heap and heap[0][0] <= now:
+            at, _order, connection = heapq.heappop(heap)
+            if connections.get(connection.ot_connection_id) is not connection or at != connection.watch_at:
+                continue  # closed since, or superseded by an earlier entry
+            if connection.consumer.expired(now):
+                expired.append(connection)
+            else:  # packets arrived: watch again at the deadline they set
+                self._watch(connection)
         for connection in expired:
             if connection.ot_connection_id in self.connections:
                 self.timeouts += 1

@@ -2,7 +2,13 @@
 
 One TCP listener and one UDP endpoint on the same host and port (44818 by default). Each
 TCP connection gets an ``EncapsulationConnection``; a loop timer at its next deadline runs
-the inactivity and class 3 timeouts. Delayed ListIdentity replies use loop timers too.
+the inactivity and class 3 timeouts. Delayed ListIdentity replies wait in the target's bounded
+``DelayedReplies``, sent by one loop timer at the earliest.
+
+TCP connections are bounded in total and per host (``ConnectionLimiter``): one over a bound is
+closed as soon as it is accepted, with one log line per 10 s whatever the rate. The listening
+socket is a ``GuardedListener``: when accept() runs out of descriptors, the waiting connection is
+closed at once and logged once per 10 s, never a traceback per attempt (see ``limits``).
 """
 
 from __future__ import annotations
@@ -13,6 +19,14 @@ import socket
 
 from .cpf import SockAddr
 from .encapsulation import HEADER_SIZE
+from .limits import (
+    DEFAULT_MAX_TCP_CONNECTIONS,
+    ConnectionLimiter,
+    RateLimitedLog,
+    fit_to_open_file_limit,
+    guarded_listener,
+    quiet_accept_errors,
+)
 from .target import EncapsulationConnection, EncapsulationTarget
 
 log = logging.getLogger(__name__)
@@ -28,11 +42,19 @@ class _TcpProtocol(asyncio.Protocol):
         self.connection: EncapsulationConnection | None = None
         self._timer: asyncio.TimerHandle | None = None
         self._timer_at: float | None = None
+        self._admitted_host: str | None = None
 
     def connection_made(self, transport: asyncio.BaseTransport) -> None:
         assert isinstance(transport, asyncio.Transport)
-        self.transport = transport
         peer = transport.get_extra_info("peername")
+        host = peer[0] if peer else "?"
+        limiter = self.server.limiter
+        if not limiter.admit(host):
+            self.server.refused_log("TCP connection from %s refused: %s", host, limiter.reason(host))
+            transport.abort()
+            return
+        self._admitted_host = host
+        self.transport = transport
         sock = transport.get_extra_info("sockname")
         peer_text = f"{peer[0]}:{peer[1]}" if peer else "?"
         local = SockAddr(sock[0], sock[1]) if sock else SockAddr("0.0.0.0", self.server.port)
@@ -48,7 +70,8 @@ class _TcpProtocol(asyncio.Protocol):
 
     def data_received(self, data: bytes) -> None:
         connection = self.connection
-        assert connection is not None and self.transport is not None
+        if connection is None or self.transport is None:
+            return  # refused at accept: its last bytes are not ours to read
         connection.receive(data, self.loop.time())
         out = connection.data_to_send()
         if out:
@@ -69,6 +92,9 @@ class _TcpProtocol(asyncio.Protocol):
             self.transport.resume_reading()
 
     def connection_lost(self, exc: Exception | None) -> None:
+        if self._admitted_host is not None:
+            self.server.limiter.release(self._admitted_host)
+            self._admitted_host = None
         if self._timer is not None:
             self._timer.cancel()
             self._timer = None
@@ -108,21 +134,39 @@ class _UdpProtocol(asyncio.DatagramProtocol):
     def datagram_received(self, data: bytes, addr: tuple[str, int]) -> None:
         server = self.server
         try:
-            result = server.target.datagram(data, server.local_address())
+            reply = server.target.datagram_from(data, addr, server.local_address(), server.loop.time())
         except Exception:  # never let a datagram take the endpoint down
             log.exception("UDP datagram from %s", addr)
             return
-        if result is None:
-            return
-        reply, delay = result
-        if delay <= 0:
+        if reply is not None:
             self._send(reply, addr)
-        else:
-            server.loop.call_later(delay, self._send, reply, addr)
+        self._arm()
+
+    def _arm(self) -> None:
+        """Keep one timer at the earliest delayed reply (never one per reply)."""
+        server = self.server
+        deadline = server.target.delayed.next_deadline()
+        if deadline is None or (server._delayed_at is not None and server._delayed_at <= deadline):
+            return
+        if server._delayed_timer is not None:
+            server._delayed_timer.cancel()
+        server._delayed_at = deadline
+        server._delayed_timer = server.loop.call_at(deadline, self._on_delayed)
+
+    def _on_delayed(self) -> None:
+        server = self.server
+        server._delayed_timer = None
+        server._delayed_at = None
+        for reply, addr in server.target.delayed.due(server.loop.time()):
+            self._send(reply, addr)
+        self._arm()
 
     def _send(self, reply: bytes, addr: tuple[str, int]) -> None:
         if self.transport is not None and not self.transport.is_closing():
-            self.transport.sendto(reply, addr)
+            try:
+                self.transport.sendto(reply, addr)
+            except OSError as exc:
+                log.debug("UDP reply to %s failed: %s", addr, exc)
 
     def error_received(self, exc: Exception) -> None:
         log.debug("UDP error: %s", exc)
@@ -132,7 +176,8 @@ class EncapsulationServer:
     """TCP + UDP encapsulation endpoints for one target."""
 
     def __init__(self, target: EncapsulationTarget, host: str = "127.0.0.1", port: int = DEFAULT_PORT,
-                 udp: bool = True) -> None:
+                 udp: bool = True, max_tcp_connections: int = DEFAULT_MAX_TCP_CONNECTIONS,
+                 max_tcp_connections_per_host: int | None = None) -> None:
         self.target = target
         self.host = host
         self.port = port
@@ -141,9 +186,12 @@ class EncapsulationServer:
         #: would never be closed).
         self.loop: asyncio.AbstractEventLoop
         self.connections: set[_TcpProtocol] = set()
+        self.limiter = ConnectionLimiter(max_tcp_connections, max_tcp_connections_per_host)
+        self.refused_log = RateLimitedLog(log)
         self._tcp: asyncio.base_events.Server | None = None
         self._udp: asyncio.DatagramTransport | None = None
-        self._expiry: asyncio.TimerHandle | None = None
+        self._delayed_timer: asyncio.TimerHandle | None = None
+        self._delayed_at: float | None = None
 
     def local_address(self) -> SockAddr:
         host = self.host if self.host not in ("", "0.0.0.0") else "127.0.0.1"
@@ -151,8 +199,15 @@ class EncapsulationServer:
 
     async def start(self) -> None:
         self.loop = asyncio.get_running_loop()
-        self._tcp = await self.loop.create_server(lambda: _TcpProtocol(self), self.host, self.port,
-                                                  reuse_address=True)
+        quiet_accept_errors(self.loop)
+        self.limiter.total = fit_to_open_file_limit(self.limiter.total)
+        self.limiter.per_host = min(self.limiter.per_host, self.limiter.total)
+        listener = guarded_listener(self.host, self.port)
+        try:
+            self._tcp = await self.loop.create_server(lambda: _TcpProtocol(self), sock=listener)
+        except BaseException:
+            listener.close()
+            raise
         if self.port == 0:
             self.port = self._tcp.sockets[0].getsockname()[1]
         if self.udp:
@@ -171,6 +226,11 @@ class EncapsulationServer:
             await self._tcp.wait_closed()
         if self._udp is not None:
             self._udp.close()
+        if self._delayed_timer is not None:
+            self._delayed_timer.cancel()
+            self._delayed_timer = None
+            self._delayed_at = None
+        self.target.delayed.clear()
         self._tcp = None
         self._udp = None
 

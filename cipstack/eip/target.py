@@ -6,14 +6,17 @@ session registry, the class 3 connection table and the limits. Each TCP connecti
 bytes to send and whether to close. UDP datagrams go through ``datagram``, which returns
 the reply and how long to delay it. Nothing here touches a socket or a clock.
 
-Limits that keep a target bounded on any input: sessions, class 3 connections, the largest
+Limits that keep a target bounded on any input: sessions (in total and per originator
+address, so one host cannot lock every other out), class 3 connections, the largest
 encapsulation frame (a larger announced length is answered with 0x0065 and the connection
-closed, so the receive buffer never exceeds header + limit), and the encapsulation
-inactivity timeout (TCP/IP attribute 13).
+closed, so the receive buffer never exceeds header + limit), the encapsulation inactivity
+timeout (TCP/IP attribute 13), and the delayed UDP ListIdentity replies (``DelayedReplies``:
+a bounded number in total and per source, each held at most ``LIST_IDENTITY_MAX_DELAY``).
 """
 
 from __future__ import annotations
 
+import heapq
 import itertools
 import logging
 import random
@@ -22,7 +25,7 @@ from collections.abc import Callable
 from dataclasses import dataclass, field
 
 from ..cip.router import MessageRouter, RequestContext
-from .connection_manager import ConnectionTable, ExplicitConnection
+from .connection_manager import ConnectionTable, ExplicitConnection, origin_host
 from .cpf import Item, ItemType, SockAddr, decode_items, encode_items
 from .encapsulation import (
     HEADER,
@@ -44,10 +47,25 @@ _CONN_ID = struct.Struct("<I")
 #: Requests whose reply may carry a Sockaddr Info item (a class 1 Forward_Open, possibly routed).
 _MAY_CARRY_SOCKADDR = frozenset({0x54, 0x5B, 0x52})
 
+#: The common SendRRData: interface handle 0, timeout, 2 items, Null Address (0x0000, length 0),
+#: Unconnected Data (0x00B2, length), then the request; served without building Item objects.
+_RR_TWO_ITEMS = struct.Struct("<IHHHHHH")
+_RR_REPLY_HEAD = struct.Struct("<IHHHHHH")
+
+#: UDP ListIdentity reply delay (CIP Vol. 2, 2-4.2.3): random between 0 and the MaxResponseDelay of
+#: the request (the first UINT of the sender context, in ms); 0 means 2000 ms, 1..500 mean 500 ms.
+LIST_IDENTITY_DEFAULT_DELAY_MS = 2000
+LIST_IDENTITY_MIN_DELAY_MS = 500
+#: The field allows up to 65,535 ms; a reply at any time within 0..2000 ms is also within every
+#: larger maximum, so the target holds no reply longer than this (bounding how long a slot is taken).
+LIST_IDENTITY_MAX_DELAY = 2.0
+
 
 @dataclass
 class TargetSettings:
     max_sessions: int = 32
+    #: Sessions one originator address may hold; None: half of ``max_sessions`` (rounded up).
+    max_sessions_per_host: int | None = None
     max_connections: int = 32
     #: Largest encapsulation data length accepted (bytes after the 24-byte header).
     max_frame_length: int = 4200
@@ -57,6 +75,15 @@ class TargetSettings:
     capabilities: int = CAPABILITY_CIP_TCP
     #: Randomness of the UDP ListIdentity reply delay (seedable for tests).
     rng: random.Random = field(default_factory=random.Random)
+    #: Delayed UDP ListIdentity replies held at once, in total and per source address; the excess is dropped.
+    max_delayed_replies: int = 64
+    max_delayed_replies_per_host: int = 4
+
+    @property
+    def sessions_per_host(self) -> int:
+        if self.max_sessions_per_host is not None:
+            return self.max_sessions_per_host
+        return max(1, (self.max_sessions + 1) // 2)
 
 
 @dataclass
@@ -65,6 +92,57 @@ class TargetStatistics:
     dropped: int = 0
     errors: int = 0
     sessions_opened: int = 0
+    #: Delayed ListIdentity replies not sent because their source or the target had too many pending.
+    replies_dropped: int = 0
+
+
+class DelayedReplies:
+    """UDP replies waiting for their time, bounded in total and per source address.
+
+    ``push`` refuses a reply (False, nothing kept) when ``total`` are pending or its source host
+    has ``per_host`` pending; ``due(now)`` hands out the replies whose time has come, in order.
+    Memory is therefore at most ``total`` replies, whatever the rate of requests.
+    """
+
+    def __init__(self, total: int = 64, per_host: int = 4) -> None:
+        self.total = total
+        self.per_host = per_host
+        self._heap: list[tuple[float, int, bytes, tuple[str, int]]] = []
+        self._by_host: dict[str, int] = {}
+        self._order = itertools.count()
+
+    def __len__(self) -> int:
+        return len(self._heap)
+
+    def push(self, reply: bytes, destination: tuple[str, int], at: float) -> bool:
+        host = destination[0]
+        held = self._by_host.get(host, 0)
+        if len(self._heap) >= self.total or held >= self.per_host:
+            return False
+        self._by_host[host] = held + 1
+        heapq.heappush(self._heap, (at, next(self._order), reply, destination))
+        return True
+
+    def next_deadline(self) -> float | None:
+        return self._heap[0][0] if self._heap else None
+
+    def due(self, now: float) -> list[tuple[bytes, tuple[str, int]]]:
+        out = []
+        heap = self._heap
+        while heap and heap[0][0] <= now:
+            _at, _order, reply, destination = heapq.heappop(heap)
+            host = destination[0]
+            held = self._by_host[host] - 1
+            if held:
+                self._by_host[host] = held
+            else:
+                del self._by_host[host]
+            out.append((reply, destination))
+        return out
+
+    def clear(self) -> None:
+        self._heap.clear()
+        self._by_host.clear()
 
 
 class EncapsulationTarget:
@@ -76,6 +154,7 @@ class EncapsulationTarget:
         self.table = table or ConnectionTable(self.settings.max_connections)
         self.sessions: dict[int, EncapsulationConnection] = {}
         self.stats = TargetStatistics()
+        self.delayed = DelayedReplies(self.settings.max_delayed_replies, self.settings.max_delayed_replies_per_host)
         #: Called with the time before a request is served: the device moves its simulation there.
         self.tick: Callable[[float], None] = lambda now: None
         self._handles = itertools.count(random.randrange(1, 0x7FFF0000))
@@ -112,13 +191,29 @@ class EncapsulationTarget:
         return reply, 0.0
 
     def list_identity_delay(self, context: bytes) -> float:
-        """Random delay up to the maximum in the sender context's first UINT (0: 2000 ms, 1..499: 500 ms)."""
+        """Random delay up to the maximum in the sender context's first UINT (0: 2000 ms, 1..499: 500 ms),
+        never more than ``LIST_IDENTITY_MAX_DELAY``."""
         (max_ms,) = _SEQ.unpack_from(context)
         if max_ms == 0:
-            max_ms = 2000
-        elif max_ms < 500:
-            max_ms = 500
-        return self.settings.rng.uniform(0, max_ms) / 1000.0
+            max_ms = LIST_IDENTITY_DEFAULT_DELAY_MS
+        elif max_ms < LIST_IDENTITY_MIN_DELAY_MS:
+            max_ms = LIST_IDENTITY_MIN_DELAY_MS
+        return self.settings.rng.uniform(0, min(max_ms / 1000.0, LIST_IDENTITY_MAX_DELAY))
+
+    def datagram_from(self, data: bytes, source: tuple[str, int], local: SockAddr,
+                      now: float) -> bytes | None:
+        """Answer a UDP datagram from ``source`` at ``now``: the reply to send at once, or None. A
+        delayed reply is queued in ``delayed`` (or dropped and counted when its source or the target
+        has too many pending); the shell sends ``delayed.due(now)`` at ``delayed.next_deadline()``."""
+        result = self.datagram(data, local)
+        if result is None:
+            return None
+        reply, delay = result
+        if delay <= 0:
+            return reply
+        if not self.delayed.push(reply, source, now + delay):
+            self.stats.replies_dropped += 1
+        return None
 
     def _list_reply(self, command: int, local: SockAddr) -> bytes:
         if command == Command.LIST_IDENTITY:
@@ -138,6 +233,7 @@ class EncapsulationConnection:
     def __init__(self, target: EncapsulationTarget, peer: str, local: SockAddr, now: float) -> None:
         self.target = target
         self.peer = peer
+        self.host = origin_host(peer)
         self.local = local
         self.session: int | None = None
         self.closing = False
@@ -254,16 +350,34 @@ class EncapsulationConnection:
             self._reply(Command.REGISTER_SESSION, 0, context, REGISTER_SESSION_DATA.pack(PROTOCOL_VERSION, 0),
                         status=EncapsulationStatus.UNSUPPORTED_PROTOCOL)
             return
-        if len(self.target.sessions) >= self.target.settings.max_sessions:
-            limit = self.target.settings.max_sessions
+        settings = self.target.settings
+        if len(self.target.sessions) >= settings.max_sessions:
+            limit = settings.max_sessions
             log.warning("%s: RegisterSession refused (0x0002): all %d sessions in use (the session limit, "
                         "--max-sessions)", self.peer, limit)
             raise EncapsulationError(EncapsulationStatus.INSUFFICIENT_MEMORY, f"all {limit} sessions in use")
+        held = sum(1 for owner in self.target.sessions.values() if owner.host == self.host)
+        if held >= settings.sessions_per_host:
+            log.info("%s: RegisterSession refused (0x0002): %s holds %d sessions (the per-host limit, "
+                     "--max-sessions-per-host)", self.peer, self.host, held)
+            raise EncapsulationError(EncapsulationStatus.INSUFFICIENT_MEMORY,
+                                     f"{self.host} holds {held} sessions (the per-host limit)")
         self.session = self.target._new_session(self)
         log.info("%s: session 0x%08X registered", self.peer, self.session)
         self._reply(Command.REGISTER_SESSION, self.session, context, body)
 
     def _send_rr_data(self, body: bytes, now: float) -> bytes:
+        if len(body) > _RR_TWO_ITEMS.size:
+            interface, _timeout, count, null_type, null_length, data_type, length = _RR_TWO_ITEMS.unpack_from(body)
+            if (interface == 0 and count == 2 and null_type == ItemType.NULL_ADDRESS and null_length == 0
+                    and data_type == ItemType.UNCONNECTED_DATA and len(body) == _RR_TWO_ITEMS.size + length
+                    and body[_RR_TWO_ITEMS.size] not in _MAY_CARRY_SOCKADDR):
+                context = self._context
+                context.now = now
+                context.connected = False
+                reply = self.target.router.handle(body[_RR_TWO_ITEMS.size:], context)
+                return _RR_REPLY_HEAD.pack(0, 0, 2, ItemType.NULL_ADDRESS, 0, ItemType.UNCONNECTED_DATA,
+                                           len(reply)) + reply
         if len(body) < RR_PREFIX.size:
             raise EncapsulationError(EncapsulationStatus.INVALID_LENGTH)
         interface, _timeout = RR_PREFIX.unpack_from(body)
