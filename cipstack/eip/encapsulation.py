@@ -66,6 +66,12 @@ class EncapsulationHeader:
         return HEADER.pack(self.command, self.length, self.session, self.status, self.context, self.options)
 
 
+def encode_frame(command: int, data: bytes = b"", session: int = 0, status: int = 0,
+                 context: bytes = b"\x00" * 8, options: int = 0) -> bytes:
+    """One whole encapsulation frame: the header (its length from ``data``) and the data."""
+    return HEADER.pack(command, len(data), session, status, context, options) + data
+
+
 PROTOCOL_VERSION = 1
 REGISTER_SESSION_DATA = struct.Struct("<HH")
 
