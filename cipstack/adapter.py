@@ -72,7 +72,9 @@ class Adapter:
             if not isinstance(self.device, AcgDevice):
                 raise ValueError(f"profile {s.profile!r} has no Modbus TCP (the ACG-ET2 card speaks it)")
             acg = self.device
-            self.modbus = ModbusTcpServer(lambda: acg.drive, s.host, s.modbus_port, saves=acg.saves)
+            self.modbus = ModbusTcpServer(lambda: acg.drive, s.host, s.modbus_port, saves=acg.saves,
+                                          max_connections=s.max_tcp_connections,
+                                          max_connections_per_host=s.max_tcp_connections_per_host)
         self.target = EncapsulationTarget(
             self.device.router, self.device.identity_record,
             TargetSettings(max_sessions=s.max_sessions, max_sessions_per_host=s.max_sessions_per_host,

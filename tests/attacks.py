@@ -362,8 +362,8 @@ def _drain(sockets: list[socket.socket]) -> int:
 
 
 def forward_close_from_elsewhere(target: AttackTarget, scale: int, rng: random.Random) -> dict[str, Any]:
-    """A Forward_Close with another originator's triad, from another address, is "not found"
-    (0x0107) and closes nothing; a Forward_Open with that triad from there is no duplicate of it."""
+    """A Forward_Close, or a duplicate Forward_Open, with another originator's triad from another
+    address is "connection not found" (0x0107) and touches nothing; the owner's own close works."""
     udp = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
     udp.bind(("127.0.0.1", 0))
     try:
@@ -376,14 +376,20 @@ def forward_close_from_elsewhere(target: AttackTarget, scale: int, rng: random.R
             for serial, path in ((0x0B01, b"\x20\x02\x24\x01"), (0x0B02, ACG_OWNER_PATH)):
                 status, extended, _ = intruder.request(forward_close(serial, path))
                 assert (status, extended) == (0x01, (0x0107,)), (serial, status, extended)
-            # The same triad from the intruder's address names none of the owner's connections.
+            # A duplicate Forward_Open of the owner's triads from the intruder's address: not found.
             status, extended, _ = intruder.request(class3_open(0x0B01))
-            assert status == 0, ("class 3 triad reused from another address", status, extended)
+            assert (status, extended) == (0x01, (0x0107,)), ("class 3 triad reused elsewhere", status, extended)
             status, extended, _ = intruder.request(class1_open(0x0B02, rpi_us=100_000, multiplier=3))
-            assert (status, extended) == (0x01, (0x0106,)), ("owner's output from another address", extended)
+            assert (status, extended) == (0x01, (0x0107,)), ("class 1 triad reused elsewhere", status, extended)
+            # The owner's connections are untouched: its duplicate is "in use", its closes succeed.
+            status, extended, _ = owner.request(class3_open(0x0B01))
+            assert (status, extended) == (0x01, (0x0100,)), ("the owner's duplicate", status, extended)
             for serial, path in ((0x0B01, b"\x20\x02\x24\x01"), (0x0B02, ACG_OWNER_PATH)):
                 status, extended, _ = owner.request(forward_close(serial, path))
                 assert status == 0, ("the owner's own close", serial, extended)
+            # Once the owner closed them, the triads are free for anyone.
+            status, extended, _ = intruder.request(class3_open(0x0B01))
+            assert status == 0, ("a free triad", status, extended)
             status, extended, _ = intruder.request(forward_close(0x0B01, b"\x20\x02\x24\x01"))
             assert status == 0, ("the intruder's own class 3 connection", extended)
     finally:

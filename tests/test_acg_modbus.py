@@ -201,6 +201,41 @@ async def test_bytes_beyond_the_pdu_refuse_the_request(modbus_port: int) -> None
         writer.close()
 
 
+async def test_connections_past_the_limit_are_closed_and_the_rest_served(caplog: pytest.LogCaptureFixture) -> None:
+    """The Modbus TCP port has the EtherNet/IP port's connection limits (issue: one peer holding every
+    connection): past 4 in total, or 2 from one address, a connection is closed at accept, with one log
+    line; an admitted client is served throughout and a slot comes back when a connection ends."""
+    device = build_acg_device()
+    read_acc = bytes.fromhex("0001 0000 0006 01 03 1f01 0001")
+    async with ModbusTcpServer(lambda: device.drive, "127.0.0.1", 0, max_connections=4,
+                               max_connections_per_host=2) as modbus:
+        async def connect(source: str) -> tuple[asyncio.StreamReader, asyncio.StreamWriter]:
+            return await asyncio.open_connection("127.0.0.1", modbus.port, local_addr=(source, 0))
+
+        async def served(stream: tuple[asyncio.StreamReader, asyncio.StreamWriter]) -> bool:
+            reader, writer = stream
+            writer.write(read_acc)
+            try:
+                return await asyncio.wait_for(reader.readexactly(11), 2.0) == bytes.fromhex(
+                    "0001 0000 0005 01 03 02 0032")
+            except (asyncio.IncompleteReadError, ConnectionError):
+                return False
+
+        first, second = await connect("127.0.0.2"), await connect("127.0.0.2")
+        assert await served(first) and await served(second)
+        assert not await served(await connect("127.0.0.2"))      # a third from one address
+        third, fourth = await connect("127.0.0.3"), await connect("127.0.0.4")
+        assert await served(third) and await served(fourth)
+        assert not await served(await connect("127.0.0.5"))      # a fifth in total
+        assert modbus.limiter.refused == 2
+        assert await served(first)                               # the admitted ones are still served
+        first[1].close()
+        await first[1].wait_closed()
+        await asyncio.sleep(0.05)
+        assert await served(await connect("127.0.0.5"))          # its slot is free again
+    assert sum("Modbus TCP connection from" in r.getMessage() for r in caplog.records) == 1
+
+
 def test_pdu_length_is_exact() -> None:
     core = ModbusTcpCore(AcgDrive(now=0.0))
     assert core.handle_pdu(bytes.fromhex("06 1f01 0064"), 0.0) == bytes.fromhex("06 1f01 0064")

@@ -194,6 +194,11 @@ class ConnectionManagerObject(CipObject):
         host = origin_host(context.origin)
         if self.table.by_triad(fo.triad, host) is not None:
             raise connection_failure(ExtendedStatus.CONNECTION_IN_USE, fo.triad, "duplicate Forward_Open")
+        if any(c.triad == fo.triad for c in self.table.connections.values()):
+            # The triad is another originator's (it came from another address): for this one there is
+            # no such connection, and nothing of the other's is touched.
+            raise connection_failure(ExtendedStatus.CONNECTION_NOT_FOUND, fo.triad,
+                                     "the triad is a connection of another originator address")
         for params in (fo.ot_parameters, fo.to_parameters):
             if params.type != ConnectionType.POINT_TO_POINT:
                 raise connection_failure(ExtendedStatus.INVALID_NETWORK_CONNECTION_PARAMETER, fo.triad,

@@ -223,8 +223,14 @@ class IoTarget:
     def _forward_open(self, fo: ForwardOpenRequest, context: RequestContext) -> ForwardOpenReply:
         triad = fo.triad
         host = origin_host(context.origin) if context.origin else "127.0.0.1"
-        if any(c.triad == triad and c.peer == host for c in self.connections.values()):
-            raise connection_failure(ExtendedStatus.CONNECTION_IN_USE, triad, "duplicate Forward_Open")
+        for existing in self.connections.values():
+            if existing.triad != triad:
+                continue
+            if existing.peer == host:
+                raise connection_failure(ExtendedStatus.CONNECTION_IN_USE, triad, "duplicate Forward_Open")
+            # Another originator's triad, from another address: no such connection for this one.
+            raise connection_failure(ExtendedStatus.CONNECTION_NOT_FOUND, triad,
+                                     "the triad is a connection of another originator address")
         if fo.transport.trigger not in self.profile.triggers:
             raise connection_failure(ExtendedStatus.TRANSPORT_CLASS_NOT_SUPPORTED, triad,
                                      f"{fo.transport.trigger.name.lower()} trigger not offered")

@@ -6,6 +6,13 @@ from __future__ import annotations
 import asyncio
 import logging
 
+from ...eip.limits import (
+    DEFAULT_MAX_TCP_CONNECTIONS,
+    ConnectionLimiter,
+    RateLimitedLog,
+    guarded_listener,
+    quiet_accept_errors,
+)
 from ..state import StateFileError, StateWriter
 from .drive import AcgDrive
 from .modbus import DriveSource, ExceptionCode, MbapBuffer, ModbusTcpCore
@@ -23,11 +30,15 @@ class ModbusTcpServer:
     file is written, on the writer's thread: the event loop (and every class 1 connection) runs
     on meanwhile, and a save the file did not take is answered with exception 0x04.
     Each connection serves its requests in order; ``_accept`` is the one place a connection
-    is accepted."""
+    is accepted, and refused (closed at once, one log line per 10 s) past ``max_connections`` in
+    total or ``max_connections_per_host`` from one address, as on the EtherNet/IP port."""
 
     def __init__(self, drive: AcgDrive | DriveSource, host: str = "127.0.0.1", port: int = 0, *,
-                 saves: StateWriter | None = None) -> None:
+                 saves: StateWriter | None = None, max_connections: int = DEFAULT_MAX_TCP_CONNECTIONS,
+                 max_connections_per_host: int | None = None) -> None:
         self.core = ModbusTcpCore(drive)
+        self.limiter = ConnectionLimiter(max_connections, max_connections_per_host)
+        self._refused_log = RateLimitedLog(log)
         self.host = host
         self.saves = saves
         self._requested_port = port
@@ -44,16 +55,29 @@ class ModbusTcpServer:
 
     async def start(self) -> None:
         self.loop = asyncio.get_running_loop()
-        self._server = await asyncio.start_server(self._accept, self.host, self._requested_port)
+        quiet_accept_errors(self.loop)
+        listener = guarded_listener(self.host, self._requested_port)
+        try:
+            self._server = await asyncio.start_server(self._accept, sock=listener)
+        except BaseException:
+            listener.close()
+            raise
         log.info("Modbus TCP on %s:%d", self.host, self.port)
 
     async def _accept(self, reader: asyncio.StreamReader, writer: asyncio.StreamWriter) -> None:
+        peer = writer.get_extra_info("peername")
+        host = str(peer[0]) if peer else "?"
+        if not self.limiter.admit(host):
+            self._refused_log("Modbus TCP connection from %s refused: %s", host, self.limiter.reason(host))
+            writer.transport.abort()
+            return
         self._writers.add(writer)
         try:
             await self._serve(reader, writer)
         except (ConnectionError, OSError) as exc:
             log.debug("Modbus TCP connection ended: %s", exc)
         finally:
+            self.limiter.release(host)
             self._writers.discard(writer)
             writer.close()
 
