@@ -227,7 +227,8 @@ class Adapter:
             loop.add_signal_handler(sig, stop.set)
         with held_log_records() as held:
             await self._start()
-            control = ControlServer(self.settings.control_path or default_control_path(self.port), self.control)
+            control = ControlServer(self.settings.control_path or default_control_path(self.port, self.settings.host),
+                                    self.control)
             try:
                 await control.start()
             except OSError as exc:

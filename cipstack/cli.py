@@ -685,7 +685,7 @@ def cmd_componet(args: argparse.Namespace) -> int:
 def _control(args: argparse.Namespace, request: dict[str, Any]) -> dict[str, Any]:
     from .control import ControlError, ControlRefused, control_request, default_control_path
 
-    path = args.control or default_control_path(args.port)
+    path = args.control or default_control_path(args.port, args.host)
     try:
         reply = control_request(path, request, args.timeout)
     except ControlRefused as exc:
@@ -901,6 +901,9 @@ def build_parser() -> argparse.ArgumentParser:
             q.add_argument("code", type=_trip_code,
                            help="fault code of the drive's manual (decimal or 0x hex: 0x4200 on the ACG, 5 on "
                                 "the MX2/RX) or its name (OverHeat, E05)")
+        q.add_argument("--host", default="127.0.0.1",
+                       help="the emulator's address (its --host), which with --port finds its control socket "
+                            "(default 127.0.0.1)")
         q.add_argument("--port", type=lambda t: parse_number(t, "port"), default=DEFAULT_PORT,
                        help=f"the emulator's EtherNet/IP port, which finds its control socket (default {DEFAULT_PORT})")
         q.add_argument("--control", type=Path, help="the emulator's control socket")
