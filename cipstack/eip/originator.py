@@ -45,6 +45,7 @@ from .encapsulation import (
     EncapsulationStatus,
 )
 from .identity_items import IdentityRecord, ServiceRecord, decode_list_identity, decode_list_services
+from .interfaces import directed_broadcasts
 from .io_core import DEFAULT_IO_PORT
 from .io_originator import (
     Class1Request,
@@ -753,28 +754,7 @@ def broadcast_addresses() -> list[str]:
     """Where a broadcast with no address given goes: 255.255.255.255 and the directed broadcast
     address of every IPv4 interface, loopback included (127.255.255.255), so that devices on
     every attached subnet hear it. Linux reads the interfaces; elsewhere the limited broadcast alone."""
-    addresses = [LIMITED_BROADCAST]
-    try:
-        import fcntl
-
-        names = [name for _, name in socket.if_nameindex()]
-    except (ImportError, OSError, AttributeError):
-        return addresses
-    siocgifaddr, siocgifnetmask = 0x8915, 0x891B
-    with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as sock:
-        for name in names:
-            request = struct.pack("256s", name.encode()[:15])
-            try:
-                address = fcntl.ioctl(sock.fileno(), siocgifaddr, request)[20:24]
-                netmask = fcntl.ioctl(sock.fileno(), siocgifnetmask, request)[20:24]
-            except OSError:
-                continue  # no IPv4 address on this interface
-            network = ipaddress.IPv4Network((int.from_bytes(address, "big"), socket.inet_ntoa(netmask)), strict=False)
-            if network.prefixlen < 31:
-                broadcast = str(network.broadcast_address)
-                if broadcast not in addresses:
-                    addresses.append(broadcast)
-    return addresses
+    return [LIMITED_BROADCAST, *(address for address in directed_broadcasts() if address != LIMITED_BROADCAST)]
 
 
 async def udp_query(command: int, address: str | Sequence[str] | None = None, port: int = DEFAULT_PORT,

@@ -1,6 +1,9 @@
 """The asyncio shell of the target: moves bytes between sockets and the sans-I/O core.
 
-One TCP listener and one UDP endpoint on the same host and port (44818 by default). Each
+One TCP listener and one UDP endpoint on the same host and port (44818 by default), and, for a
+target on one address, a UDP socket on its subnet's broadcast address (shared with every other
+target of the machine on that subnet: each gets a copy of a broadcast) whose datagrams are answered
+from the unicast endpoint, as a device answers the broadcasts of its subnet. Each
 TCP connection gets an ``EncapsulationConnection``; a loop timer at its next deadline runs
 the inactivity and class 3 timeouts. Delayed ListIdentity replies wait in the target's bounded
 ``DelayedReplies``, sent by one loop timer at the earliest.
@@ -14,11 +17,13 @@ closed at once and logged once per 10 s, never a traceback per attempt (see ``li
 from __future__ import annotations
 
 import asyncio
+import errno
 import logging
 import socket
 
 from .cpf import SockAddr
 from .encapsulation import HEADER_SIZE
+from .interfaces import subnet_broadcast
 from .limits import (
     DEFAULT_MAX_TCP_CONNECTIONS,
     ConnectionLimiter,
@@ -172,6 +177,24 @@ class _UdpProtocol(asyncio.DatagramProtocol):
         log.debug("UDP error: %s", exc)
 
 
+class _BroadcastListener(asyncio.DatagramProtocol):
+    """Hears the subnet's broadcasts; the unicast endpoint answers them, from the target's address."""
+
+    def __init__(self, unicast: _UdpProtocol) -> None:
+        self.unicast = unicast
+
+    def datagram_received(self, data: bytes, addr: tuple[str, int]) -> None:
+        self.unicast.datagram_received(data, addr)
+
+    def error_received(self, exc: Exception) -> None:
+        log.debug("UDP broadcast socket error: %s", exc)
+
+
+#: Tries at a pair of free TCP and UDP ports of one number (port 0): the OS picks the TCP one, and
+#: another process may hold that number in UDP.
+_FREE_PORT_TRIES = 20
+
+
 class EncapsulationServer:
     """TCP + UDP encapsulation endpoints for one target."""
 
@@ -190,31 +213,77 @@ class EncapsulationServer:
         self.refused_log = RateLimitedLog(log)
         self._tcp: asyncio.base_events.Server | None = None
         self._udp: asyncio.DatagramTransport | None = None
+        self._broadcast: asyncio.DatagramTransport | None = None
+        self._local: SockAddr | None = None
         self._delayed_timer: asyncio.TimerHandle | None = None
         self._delayed_at: float | None = None
 
     def local_address(self) -> SockAddr:
-        host = self.host if self.host not in ("", "0.0.0.0") else "127.0.0.1"
-        return SockAddr(socket.gethostbyname(host), self.port)
+        if self._local is None or self._local.port != self.port:
+            host = self.host if self.host not in ("", "0.0.0.0") else "127.0.0.1"
+            self._local = SockAddr(socket.gethostbyname(host), self.port)
+        return self._local
 
     async def start(self) -> None:
         self.loop = asyncio.get_running_loop()
         quiet_accept_errors(self.loop)
         self.limiter.total = fit_to_open_file_limit(self.limiter.total)
         self.limiter.per_host = min(self.limiter.per_host, self.limiter.total)
-        listener = guarded_listener(self.host, self.port)
+        any_port = self.port == 0
+        for attempt in range(_FREE_PORT_TRIES if any_port else 1):
+            await self._listen_tcp(0 if any_port else self.port)
+            try:
+                await self._listen_udp()
+            except OSError as exc:
+                if not any_port or exc.errno != errno.EADDRINUSE or attempt == _FREE_PORT_TRIES - 1:
+                    raise
+                await self._close_tcp()   # that number is taken in UDP: another pair
+                continue
+            break
+        log.info("EtherNet/IP target listening on %s:%d (TCP%s)", self.host, self.port, " and UDP" if self.udp else "")
+
+    async def _listen_tcp(self, port: int) -> None:
+        listener = guarded_listener(self.host, port)
         try:
             self._tcp = await self.loop.create_server(lambda: _TcpProtocol(self), sock=listener)
         except BaseException:
             listener.close()
             raise
-        if self.port == 0:
-            self.port = self._tcp.sockets[0].getsockname()[1]
-        if self.udp:
-            transport, _ = await self.loop.create_datagram_endpoint(lambda: _UdpProtocol(self),
-                                                                    local_addr=(self.host, self.port))
-            self._udp = transport  # type: ignore[assignment]
-        log.info("EtherNet/IP target listening on %s:%d (TCP%s)", self.host, self.port, " and UDP" if self.udp else "")
+        self.port = self._tcp.sockets[0].getsockname()[1]
+
+    async def _listen_udp(self) -> None:
+        if not self.udp:
+            return
+        transport, unicast = await self.loop.create_datagram_endpoint(lambda: _UdpProtocol(self),
+                                                                      local_addr=(self.host, self.port))
+        self._udp = transport  # type: ignore[assignment]
+        self._broadcast = await self._listen_broadcasts(unicast)
+
+    async def _listen_broadcasts(self, unicast: _UdpProtocol) -> asyncio.DatagramTransport | None:
+        """A socket on the subnet's broadcast address and this port, shared (SO_REUSEADDR) with the
+        other targets of the machine on that subnet: Linux gives each a copy of a broadcast. A target
+        on every address (0.0.0.0) hears broadcasts on its own socket already."""
+        if self.host in ("", "0.0.0.0"):
+            return None
+        broadcast = subnet_broadcast(self.host)
+        if broadcast is None:
+            return None
+        sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+        try:
+            sock.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
+            sock.bind((broadcast, self.port))
+        except OSError as exc:
+            sock.close()
+            log.warning("broadcasts to %s:%d are not heard: %s", broadcast, self.port, exc.strerror or exc)
+            return None
+        transport, _ = await self.loop.create_datagram_endpoint(lambda: _BroadcastListener(unicast), sock=sock)
+        return transport  # type: ignore[return-value]
+
+    async def _close_tcp(self) -> None:
+        if self._tcp is not None:
+            self._tcp.close()
+            await self._tcp.wait_closed()
+            self._tcp = None
 
     async def close(self) -> None:
         if self._tcp is not None:
@@ -226,6 +295,9 @@ class EncapsulationServer:
             await self._tcp.wait_closed()
         if self._udp is not None:
             self._udp.close()
+        if self._broadcast is not None:
+            self._broadcast.close()
+            self._broadcast = None
         if self._delayed_timer is not None:
             self._delayed_timer.cancel()
             self._delayed_timer = None

@@ -1,0 +1,92 @@
+"""A target answers the broadcasts of its subnet (issue: an adapter on --host 127.0.0.2 did not
+answer a ListIdentity sent to 127.255.255.255), each target of a machine once with its own reply from
+its own address, and still answers unicast; and a target asked for a free port (0) gets a number free
+in both TCP and UDP even when the OS's first pick is taken in UDP."""
+
+from __future__ import annotations
+
+import asyncio
+import ipaddress
+import socket
+import struct
+import sys
+
+import pytest
+
+from cipstack.adapter import Adapter, AdapterSettings
+from cipstack.eip import server as server_module
+from cipstack.eip.interfaces import ipv4_networks, subnet_broadcast
+from cipstack.scanner import discover
+from tests.ports import free_port
+
+pytestmark = pytest.mark.skipif(not sys.platform.startswith("linux"), reason="loopback /8 and interface table")
+
+#: ListIdentity (0x0063), no data, sender context asking for replies within 500 ms.
+LIST_IDENTITY = struct.pack("<HHII8sI", 0x0063, 0, 0, 0, struct.pack("<H", 500) + bytes(6), 0)
+
+
+def test_the_loopback_subnet_broadcast() -> None:
+    assert subnet_broadcast("127.0.0.2") == "127.255.255.255"
+    assert subnet_broadcast("localhost") == "127.255.255.255"
+    outside = next(f"198.51.100.{n}" for n in range(1, 255)
+                   if not any(ipaddress.IPv4Address(f"198.51.100.{n}") in i.network for i in ipv4_networks()))
+    assert subnet_broadcast(outside) is None                # no interface of this machine is there
+
+
+async def _replies(destination: str, port: int, seconds: float = 1.2) -> list[tuple[bytes, str]]:
+    sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+    sock.setsockopt(socket.SOL_SOCKET, socket.SO_BROADCAST, 1)
+    sock.bind(("127.0.0.1", 0))
+    sock.setblocking(False)
+    loop = asyncio.get_running_loop()
+    try:
+        await loop.sock_sendto(sock, LIST_IDENTITY, (destination, port))
+        replies = []
+        deadline = loop.time() + seconds
+        while (left := deadline - loop.time()) > 0:
+            try:
+                data, (host, _) = await asyncio.wait_for(loop.sock_recvfrom(sock, 2048), left)
+            except asyncio.TimeoutError:
+                break
+            replies.append((data, host))
+        return replies
+    finally:
+        sock.close()
+
+
+async def test_each_target_answers_a_subnet_broadcast_once_from_its_own_address() -> None:
+    port = free_port("127.0.0.2", "127.0.0.3")
+    async with Adapter(AdapterSettings(host="127.0.0.2", port=port, io_port=0)) as first, \
+            Adapter(AdapterSettings(host="127.0.0.3", port=port, io_port=0)) as second:
+        replies = await _replies("127.255.255.255", port)
+        assert sorted(host for _, host in replies) == ["127.0.0.2", "127.0.0.3"]
+        for data, _ in replies:
+            assert struct.unpack_from("<H", data)[0] == 0x0063 and len(data) > 24
+        # Unicast is still the target's own: only the one asked answers.
+        assert [host for _, host in await _replies("127.0.0.3", port)] == ["127.0.0.3"]
+        # The scanner's discovery, given the broadcast address, lists each device once.
+        found = await discover("127.255.255.255", port, timeout=1.2)
+        assert sorted(record.address.host for record in found if record.address) == ["127.0.0.2", "127.0.0.3"]
+        assert first.server.port == second.server.port == port
+
+
+async def test_a_free_port_is_free_in_udp_too(monkeypatch: pytest.MonkeyPatch) -> None:
+    """The OS picks the TCP number; when that number is taken in UDP, another pair is taken."""
+    taken = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+    taken.bind(("127.0.0.1", 0))
+    clash = taken.getsockname()[1]
+    picks: list[int] = []
+    real = server_module.guarded_listener
+
+    def first_pick_clashes(host: str, port: int, backlog: int = 100) -> socket.socket:
+        listener = real(host, clash if port == 0 and not picks else port, backlog)
+        picks.append(listener.getsockname()[1])
+        return listener
+
+    monkeypatch.setattr(server_module, "guarded_listener", first_pick_clashes)
+    try:
+        async with Adapter(AdapterSettings(host="127.0.0.1", port=0, io_port=0)) as adapter:
+            assert picks[0] == clash and adapter.server.port == picks[-1] != clash
+            assert [host for _, host in await _replies("127.0.0.1", adapter.server.port)] == ["127.0.0.1"]
+    finally:
+        taken.close()
