@@ -56,9 +56,9 @@ from .description import (
     attribute_parameters,
 )
 
-#: Seed 000 gives vendor ID 259 (Identity Object, attribute 1) but no vendor name: the EDS says
-#: only the number rather than guess a company.
-ACG_VENDOR_NAME = "Vendor 259"
+#: Seed 000 gives vendor ID 259 (Identity Object, attribute 1) but no vendor name; the ODVA vendor
+#: list that scanner libraries carry (pycomm3's among them) names 259 "LS ELECTRIC".
+ACG_VENDOR_NAME = "LS ELECTRIC"
 #: The card's catalog name, "ACG-ET2" (seed 000, appendix B title and overview): the drive model's name.
 ACG_CATALOG = ACG_MODEL
 #: ``ProdTypeStr`` of device type 2: the CIP AC drive profile (seed 000: "Device Type (drive) 2";
