@@ -192,8 +192,8 @@ def _adapter_from_eds(args: argparse.Namespace) -> int:
     cannot serve is one warning line on stderr."""
     from .adapter import Adapter, AdapterSettings
     from .devices.base import DeviceLimits
-    from .devices.from_eds import EdsDeviceError, build_eds_device
     from .devices.profiles import DEFAULT_MAC
+    from .eds.emulated_device import EdsDeviceError, build_eds_device
     from .objects.tcpip import NetworkInterface
 
     if args.model is not None or args.state is not None or args.modbus_port is not None or args.param:

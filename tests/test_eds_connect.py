@@ -69,7 +69,7 @@ async def test_acg_connections_of_its_eds() -> None:
 LISTEN_SCRIPT = textwrap.dedent('''
     import asyncio, json, sys
     from cipstack.adapter import Adapter, AdapterSettings
-    from cipstack.devices.from_eds import build_eds_device
+    from cipstack.eds.emulated_device import build_eds_device
     from cipstack.eds.reader import read_eds
     from cipstack.objects.tcpip import NetworkInterface
     from cipstack.scanner import Scanner

@@ -2,7 +2,7 @@
 
 ``read_view(doc)`` gives an ``EdsView``: the parameters with the CIP attribute each one mirrors
 (its link path), the assemblies with their members, and the class 1 connections of
-``[Connection Manager]``. The emulator of ``devices.from_eds`` serves that view and the scanner
+``[Connection Manager]``. The emulator of ``eds.emulated_device`` serves that view and the scanner
 opens its connections (``Scanner.io_connection_from_eds``), so both read an EDS the same way.
 
 Reading is forgiving: a construct this module cannot use is reported as an ``EdsIssue`` (its

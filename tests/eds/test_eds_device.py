@@ -1,4 +1,4 @@
-"""The generic device emulated from an EDS (``devices.from_eds``), served by a real ``Adapter``.
+"""The generic device emulated from an EDS (``eds.emulated_device``), served by a real ``Adapter``.
 
 * Round trip: the emulator started from the EDS we generate for a profile serves, over the
   network, the identity and the assembly instances and sizes the profile's own emulator serves,
@@ -22,11 +22,11 @@ from cipstack.cip.status import CipError, ExtendedStatus, GeneralStatus
 from cipstack.cip.types import BOOL, INT, SHORT_STRING, UINT, USINT
 from cipstack.devices.acg.device import build_acg_device
 from cipstack.devices.base import Device
-from cipstack.devices.from_eds import EdsDevice, EdsDeviceError, build_eds_device
 from cipstack.devices.omron.device import build_omron_device
 from cipstack.devices.omron.registers import function_code_path
 from cipstack.devices.profiles import DEFAULT_MAC
 from cipstack.eds.checker import check_eds
+from cipstack.eds.emulated_device import EdsDevice, EdsDeviceError, build_eds_device
 from cipstack.eds.generator import eds_text
 from cipstack.eds.interpret import read_view
 from cipstack.eds.profiles import acg_et2_description, omron_description

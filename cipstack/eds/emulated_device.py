@@ -36,14 +36,14 @@ from ..cip.model import Access, AttributeSpec, CipObject, ClassSpec, Instance
 from ..cip.router import RequestContext
 from ..cip.status import CipError, GeneralStatus
 from ..cip.types import IntegerType, RealType
-from ..eds.interpret import EdsIssue, EdsView, ParamInfo, assembly_schema, read_view
-from ..eds.model import EdsDocument, FieldKind
+from ..devices.base import Device, DeviceLimits
+from ..devices.profiles import DEFAULT_MAC, serial_from_mac
 from ..eip.io_target import IoProfile
 from ..objects.assembly import AssemblyPoint
 from ..objects.identity import IdentityInfo
 from ..objects.tcpip import NetworkInterface
-from .base import Device, DeviceLimits
-from .profiles import DEFAULT_MAC, serial_from_mac
+from .interpret import EdsIssue, EdsView, ParamInfo, assembly_schema, read_view
+from .model import EdsDocument, FieldKind
 
 log = logging.getLogger(__name__)
 

@@ -1,0 +1,68 @@
+"""The dependency direction DESIGN.md gives, checked on the source: ``cip`` depends on nothing of
+ours; ``objects`` and ``assemblies`` on ``cip``; ``eip`` and ``componet`` on ``cip`` alone (a
+transport knows no device); ``devices`` on those; ``eds`` reads the devices' declarations, never
+the other way round."""
+
+from __future__ import annotations
+
+import ast
+from pathlib import Path
+
+import pytest
+
+PACKAGE = Path(__file__).resolve().parent.parent / "cipstack"
+
+#: What each part may import of the package (its own modules always).
+ALLOWED = {
+    "cip": set(),
+    "objects": {"cip"},
+    "assemblies": {"cip"},
+    "eip": {"cip"},
+    "componet": {"cip", "eip"},
+    # catalog: the index of declared classes a device hands its scanner (it imports only what lies below).
+    "devices": {"cip", "objects", "assemblies", "eip", "componet", "catalog"},
+}
+
+
+def _type_checking_only(tree: ast.Module) -> set[int]:
+    """Line numbers of imports under ``if TYPE_CHECKING:``: annotations, not a dependency at run time."""
+    lines: set[int] = set()
+    for node in ast.walk(tree):
+        if isinstance(node, ast.If) and isinstance(node.test, ast.Name) and node.test.id == "TYPE_CHECKING":
+            for inner in node.body:
+                lines.update(range(inner.lineno, (inner.end_lineno or inner.lineno) + 1))
+    return lines
+
+
+def _imports(path: Path) -> set[str]:
+    """The top-level parts of ``cipstack`` a module imports (relative or absolute)."""
+    part_depth = len(path.relative_to(PACKAGE).parts) - 1     # package levels below cipstack/
+    found: set[str] = set()
+    tree = ast.parse(path.read_text(encoding="utf-8"))
+    typing_only = _type_checking_only(tree)
+    for node in ast.walk(tree):
+        if getattr(node, "lineno", None) in typing_only:
+            continue
+        if isinstance(node, ast.ImportFrom):
+            if node.level:
+                up = node.level - 1
+                if up < part_depth:
+                    continue                                     # inside its own part
+                target = (node.module or "").split(".")
+                names = [alias.name for alias in node.names] if not target[0] else [target[0]]
+                found.update(names)
+            elif node.module and node.module.startswith("cipstack."):
+                found.add(node.module.split(".")[1])
+        elif isinstance(node, ast.Import):
+            found.update(alias.name.split(".")[1] for alias in node.names if alias.name.startswith("cipstack."))
+    return found
+
+
+@pytest.mark.parametrize("part", sorted(ALLOWED))
+def test_each_part_imports_only_what_lies_below_it(part: str) -> None:
+    wrong = {}
+    for path in sorted((PACKAGE / part).rglob("*.py")):
+        extra = _imports(path) - ALLOWED[part] - {part}
+        if extra:
+            wrong[str(path.relative_to(PACKAGE))] = sorted(extra)
+    assert wrong == {}
