@@ -8,8 +8,8 @@ device the emulator serves can never disagree.
 
 The pieces:
 
-* ``EdsParameter``: one ``ParamN``. Built from a drive ``Register`` (or anything with the same
-  fields, such as an Omron ``Parameter``) with ``from_register``, from a CIP ``AttributeSpec``
+* ``EdsParameter``: one ``ParamN``. Built from a drive ``Register`` (the Omron ``Parameter`` is
+  one) with ``from_register``, from a CIP ``AttributeSpec``
   with ``from_attribute``, or, by the generator, from an assembly field that links no declared
   parameter. ``link`` is the (class, instance, attribute) the parameter mirrors.
 * ``IoOffer``: the class 1 connections the device accepts, as ``IoProfile`` states them: the
@@ -25,12 +25,12 @@ from __future__ import annotations
 import itertools
 from collections.abc import Iterable, Mapping
 from dataclasses import dataclass, field, fields
-from typing import Any, Literal, Protocol
+from typing import Any, Literal
 
 from ..assemblies.schema import AssemblySchema
 from ..cip.model import AttributeSpec, ClassSpec
 from ..cip.types import DINT, UDINT, CipType, IntegerType
-from ..devices.registers import RegisterAccess
+from ..devices.registers import Register
 from ..eip.cm_messages import TriggerType
 from ..eip.io_target import IoProfile
 from ..objects.identity import IdentityInfo
@@ -40,53 +40,6 @@ NETWORKS: tuple[str, ...] = ("EtherNetIP", "CompoNet")
 
 #: (class, instance, attribute) of the CIP attribute a parameter or assembly field mirrors.
 Link = tuple[int, int, int]
-
-
-class RegisterLike(Protocol):
-    """The fields of a drive register an EDS parameter is made from (``devices.registers.Register``
-    has them, and so has the Omron ``Parameter`` row)."""
-
-    @property
-    def code(self) -> str: ...
-
-    @property
-    def name(self) -> str: ...
-
-    @property
-    def type(self) -> CipType: ...
-
-    @property
-    def access(self) -> RegisterAccess: ...
-
-    @property
-    def default(self) -> int: ...
-
-    @property
-    def minimum(self) -> int | None: ...
-
-    @property
-    def maximum(self) -> int | None: ...
-
-    @property
-    def scale(self) -> float: ...
-
-    @property
-    def unit(self) -> str: ...
-
-    @property
-    def enum(self) -> Mapping[int, str] | None: ...
-
-    @property
-    def help(self) -> str: ...
-
-    @property
-    def group(self) -> str: ...
-
-    @property
-    def words(self) -> int: ...
-
-    @property
-    def saved(self) -> bool: ...
 
 
 def wire_type(cip_type: CipType, words: int) -> CipType:
@@ -127,7 +80,7 @@ class EdsParameter:
             raise ValueError(f"parameter {self.name!r}: {self.type.name} has no EDS data type code")
 
     @classmethod
-    def from_register(cls, register: RegisterLike, link: Link | None, *, group: str | None = None,
+    def from_register(cls, register: Register, link: Link | None, *, group: str | None = None,
                       settable: bool | None = None, words: int | None = None) -> EdsParameter:
         """A parameter from a drive register: ``link`` is the attribute that reads it (class 0x64
         of the ACG-ET2, 0x65 of the Omron option board). ``settable`` overrides the register's
