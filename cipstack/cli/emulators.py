@@ -1,0 +1,180 @@
+"""The emulator commands: adapter (a profile or an EDS), componet, models."""
+
+from __future__ import annotations
+
+import argparse
+import logging
+import sys
+from typing import Any
+
+from .common import (
+    EXIT_OK,
+    EXIT_USAGE,
+    UsageError,
+    _emit,
+)
+
+
+# -- adapter -----------------------------------------------------------------------------------------
+def cmd_adapter(args: argparse.Namespace) -> int:
+    from ..adapter import Adapter, AdapterSettings
+    from ..devices.profiles import PROFILES
+    from ..devices.state import StateFileError, default_state_path
+
+    if args.eds is not None:
+        return _adapter_from_eds(args)
+    if args.profile is None:
+        args.profile = _profile_of_model(args.model) if args.model else "acg"
+    if args.profile not in PROFILES:
+        raise UsageError(f"unknown profile {args.profile!r} (known: {', '.join(sorted(PROFILES))})")
+    if args.model and args.profile == "acg":
+        raise UsageError(f"--model {args.model}: the acg profile has one model; --model names an MX2 or RX model")
+    if not 0 <= args.port < 65536:
+        raise UsageError(f"port {args.port} out of range")
+    if args.state is None:
+        # One file per profile and model: another model's saved parameters are not this one's.
+        args.state = default_state_path(f"{args.profile}-{args.model}" if args.model else args.profile)
+    settings = AdapterSettings(host=args.host, port=args.port, profile=args.profile, model=args.model,
+                               max_sessions=args.max_sessions, max_connections=args.max_connections,
+                               io_port=args.io_port, control_path=args.control,
+                               status_lines=not args.quiet, state_path=args.state, modbus_port=args.modbus_port,
+                               **_limit_settings(args))
+    try:
+        adapter = Adapter(settings)
+    except (StateFileError, ValueError, KeyError) as exc:
+        raise UsageError(str(exc)) from None
+    if args.param:
+        _apply_keypad_parameters(adapter, args.param)
+    return _serve(adapter, args, "adapter")
+
+
+def _apply_keypad_parameters(adapter: Any, assignments: list[str]) -> None:
+    """``--param CODE=VALUE``: keypad parameters set before the network connects (the ACG's codes)."""
+    from ..devices.acg.device import AcgDevice
+    from ..devices.acg.keypad import apply_parameters
+
+    if not isinstance(adapter.device, AcgDevice):
+        raise UsageError("--param sets the ACG's keypad parameters (profile acg)")
+    drive = adapter.device.drive
+    try:
+        applied = apply_parameters(drive, assignments, drive.time)
+    except ValueError as exc:
+        raise UsageError(str(exc)) from None
+    for line in applied:
+        logging.getLogger("cipstack.adapter").info("keypad parameter %s", line)
+
+
+def _profile_of_model(name: str) -> str:
+    """The profile of ``--model`` given without ``--profile``: the family the model belongs to."""
+    from ..devices.omron.models import model
+
+    try:
+        return model(name).family.value.lower()
+    except KeyError as exc:
+        raise UsageError(f"--model: {exc} (`cipstack models` lists them)") from None
+
+
+def _limit_settings(args: argparse.Namespace) -> dict[str, Any]:
+    """The adapter's limits beyond sessions and class 3 connections, checked with those two (a
+    connection limit may be 0: that transport class refused; every other at least 1)."""
+    limits = {"max_sessions_per_host": args.max_sessions_per_host, "max_io_connections": args.max_io_connections,
+              "max_tcp_connections": args.max_tcp_connections,
+              "max_tcp_connections_per_host": args.max_tcp_connections_per_host}
+    checked = (("max_sessions", args.max_sessions), ("max_connections", args.max_connections), *limits.items())
+    for name, value in checked:
+        minimum = 0 if name in ("max_connections", "max_io_connections") else 1
+        if value is not None and value < minimum:
+            raise UsageError(f"--{name.replace('_', '-')} {value}: must be at least {minimum}")
+    return limits
+
+
+def _serve(adapter: Any, args: argparse.Namespace, command: str) -> int:
+    """Run an emulator until SIGINT/SIGTERM; a port it cannot listen on (taken, or not an address of
+    this machine) is one line naming the port and its option, and exit 2."""
+    from ..eip.io_server import run_precise
+    from ..listening import ListenError
+
+    try:
+        run_precise(adapter.serve_forever())
+    except ListenError as exc:
+        print(f"cipstack {command}: {exc}", file=sys.stderr)
+        return EXIT_USAGE
+    except OSError as exc:
+        print(f"cipstack {command}: cannot listen on {args.host}:{args.port}: {exc.strerror or exc}", file=sys.stderr)
+        return EXIT_USAGE
+    return EXIT_OK
+
+
+def _read_eds_file(path: str) -> Any:
+    """The EDS document of ``path``; an unreadable file is a usage error (one line, exit 2)."""
+    from ..eds.reader import EdsSyntaxError, read_eds
+
+    try:
+        return read_eds(path)
+    except EdsSyntaxError as exc:
+        raise UsageError(f"{path}:{exc.line}: not a readable EDS: {exc.message}") from None
+    except OSError as exc:
+        raise UsageError(f"{path}: cannot read: {exc.strerror or exc}") from None
+
+
+def _adapter_from_eds(args: argparse.Namespace) -> int:
+    """``cipstack adapter --eds FILE``: the generic device the file describes; each construct it
+    cannot serve is one warning line on stderr."""
+    from ..adapter import Adapter, AdapterSettings
+    from ..devices.base import DeviceLimits
+    from ..devices.profiles import DEFAULT_MAC
+    from ..eds.emulated_device import EdsDeviceError, build_eds_device
+    from ..objects.tcpip import NetworkInterface
+
+    if args.model is not None or args.state is not None or args.modbus_port is not None or args.param:
+        raise UsageError("--model, --state, --modbus-port and --param belong to --profile, not --eds")
+    if not 0 <= args.port < 65536:
+        raise UsageError(f"port {args.port} out of range")
+    doc = _read_eds_file(args.eds)
+    ip_address = args.host if args.host not in ("", "0.0.0.0", "localhost") else "127.0.0.1"
+    try:
+        device = build_eds_device(doc, NetworkInterface(ip_address=ip_address, mac=DEFAULT_MAC),
+                                  DeviceLimits(args.max_sessions, args.max_connections))
+    except EdsDeviceError as exc:
+        raise UsageError(f"{args.eds}: {exc}") from None
+    for issue in device.issues:
+        print(f"cipstack adapter: {args.eds}:{issue.line}: warning: {issue.message}", file=sys.stderr, flush=True)
+    settings = AdapterSettings(host=args.host, port=args.port, max_sessions=args.max_sessions,
+                               max_connections=args.max_connections, io_port=args.io_port,
+                               control_path=args.control, status_lines=not args.quiet, **_limit_settings(args))
+    adapter = Adapter(settings, device=device)
+    return _serve(adapter, args, "adapter")
+
+
+
+
+def cmd_models(args: argparse.Namespace) -> int:
+    from ..devices.omron.models import MODELS
+
+    for m in MODELS:
+        family = m.family.value.lower()
+        if args.profile and family != args.profile:
+            continue
+        _emit(args, {"profile": family, "model": m.name, "product_code": m.product_code,
+                     "product_name": m.product_name, "eds_file": m.eds_file},
+              f"{family:3}  {m.name:14}  product code {m.product_code:5}  {m.product_name:32}  {m.eds_file}")
+    return EXIT_OK
+
+
+def cmd_componet(args: argparse.Namespace) -> int:
+    from ..adapter import Adapter, AdapterSettings
+    from ..devices.omron.device import build_componet_gateway, parse_nodes
+    from ..devices.profiles import DEFAULT_MAC
+    from ..objects.tcpip import NetworkInterface
+
+    try:
+        nodes = parse_nodes(args.nodes)
+        if not nodes:
+            raise ValueError("--nodes names no node")
+        gateway = build_componet_gateway(nodes, NetworkInterface(ip_address=args.host, mac=DEFAULT_MAC))
+    except (ValueError, KeyError) as exc:
+        raise UsageError(str(exc)) from None
+    settings = AdapterSettings(host=args.host, port=args.port, io_port=args.io_port, control_path=args.control,
+                               status_lines=not args.quiet)
+    adapter = Adapter(settings, device=gateway)
+    return _serve(adapter, args, "componet")

@@ -1,0 +1,210 @@
+"""Explicit messaging commands: discover, identity, get, set."""
+
+from __future__ import annotations
+
+import argparse
+import asyncio
+import json
+import sys
+from typing import Any
+
+from ..cip.status import CipError
+from ..cip.types import parse_int
+from ..eip.originator import parse_host
+from .common import (
+    EXIT_FAILURE,
+    EXIT_OK,
+    UsageError,
+    _emit,
+    parse_number,
+    parse_object_path,
+    parse_type,
+)
+
+
+# -- discovery -----------------------------------------------------------------------------------
+def _identity_text(record: Any) -> str:
+    address = f"{record.address.host}:{record.address.port}" if record.address else "?"
+    return (f"{address}  {record.product_name!r}  vendor {record.vendor_id}  device type {record.device_type}  "
+            f"product code {record.product_code}  revision {record.revision[0]}.{record.revision[1]}  "
+            f"serial 0x{record.serial_number:08X}  status 0x{record.status:04X}  state {record.state}")
+
+
+def cmd_discover(args: argparse.Namespace) -> int:
+    from ..eip.originator import discover
+
+    records = asyncio.run(discover(args.broadcast, args.port, args.timeout))
+    for record in records:
+        _emit(args, record.as_dict(), _identity_text(record))
+    if not records and not args.json:
+        print("no device answered", file=sys.stderr)
+    return EXIT_OK
+
+
+def cmd_identity(args: argparse.Namespace) -> int:
+    from ..eip.originator import EncapsulationClient
+
+    host, port = parse_host(args.target)
+
+    async def run() -> list[Any]:
+        client = await EncapsulationClient.connect(host, port, args.timeout, register=False)
+        try:
+            return await client.list_identity()
+        finally:
+            await client.close()
+
+    records = asyncio.run(run())
+    if not records:
+        print(f"cipstack identity: {args.target} answered ListIdentity with no identity", file=sys.stderr)
+        return EXIT_FAILURE
+    for record in records:
+        _emit(args, record.as_dict(), _identity_text(record))
+    return EXIT_OK
+
+
+# -- get / set -------------------------------------------------------------------------------------
+def _value_text(value: Any) -> str:
+    if isinstance(value, bytes):
+        return value.hex(" ")
+    if isinstance(value, str):
+        return repr(value)
+    return json.dumps(value) if isinstance(value, (dict, list)) else str(value)
+
+
+def parse_route(text: str | None) -> list[Any] | None:
+    """``PORT/LINK[,PORT/LINK...]``: ``1/0`` (backplane slot 0), ``2/3`` (CompoNet node 3), ``2/10.0.0.5``."""
+    from ..cip.epath import PortSegment
+
+    if not text:
+        return None
+    route = []
+    for hop in text.split(","):
+        port_text, sep, link_text = hop.strip().partition("/")
+        if not sep or not link_text:
+            raise UsageError(f"route hop {hop!r} is not PORT/LINK")
+        port = parse_number(port_text, "route port")
+        try:
+            link: int | str = parse_int(link_text)
+        except ValueError:
+            link = link_text  # an IP address or name: the link address as text
+        if isinstance(link, int) and not 0 <= link <= 255:
+            raise UsageError(f"link address {link} out of range 0..255")
+        if not 1 <= port <= 0xFFFF:
+            raise UsageError(f"route port {port} out of range")
+        route.append(PortSegment.to(port, link))
+    return route
+
+
+async def _connect_identified(args: argparse.Namespace) -> Any:
+    """A scanner that decodes by the declarations of the device's profile when it is one we know
+    (the routed device's own Identity when ``--route`` is given)."""
+    from ..cip.types import UINT
+    from ..devices.profiles import catalog_for
+    from ..scanner import Scanner
+
+    scanner = await Scanner.connect(args.target, timeout=args.timeout, route=parse_route(args.route))
+    try:
+        if scanner.route:
+            vendor, product = await scanner.read(1, 1, 1, UINT), await scanner.read(1, 1, 3, UINT)
+        else:
+            identities = await scanner.list_identity()
+            vendor, product = (identities[0].vendor_id, identities[0].product_code) if identities else (0, 0)
+    except Exception:
+        await scanner.close()
+        raise
+    scanner.catalog = catalog_for(vendor, product)
+    return scanner
+
+
+def cmd_get(args: argparse.Namespace) -> int:
+    class_id, instance, attribute = parse_object_path(args.path)
+    cip_type = parse_type(args.type)
+
+    async def run() -> dict[str, Any]:
+        scanner = await _connect_identified(args)
+        try:
+            if args.connected:
+                await scanner.open_connection()
+            if attribute is None:
+                data, values = await scanner.get_attributes_all(class_id, instance)
+                record: dict[str, Any] = {"status": 0, "data": data.hex()}
+                if values is not None:
+                    record["value"] = {json_key(name): _jsonable(v) for name, v in values.items()}
+                return record
+            result = await scanner.get_attribute_single(class_id, instance, attribute, cip_type)
+            record = {"status": 0, "data": result.data.hex()}
+            if result.known:
+                record["value"] = result.json_value()
+                record["type"] = result.type.name if result.type else None
+            if result.spec is not None:
+                record["name"] = result.spec.name
+            return record
+        finally:
+            await scanner.close()
+
+    record = asyncio.run(run())
+    record["path"] = args.path
+    if args.json:
+        print(json.dumps(record), flush=True)
+    elif "value" in record:
+        name = f"{record['name']} = " if "name" in record else ""
+        value = record["value"]
+        print(f"{name}{_value_text(value)}" if not isinstance(value, dict)
+              else "\n".join(_member_text(k, v) for k, v in value.items()), flush=True)
+    else:
+        print(bytes.fromhex(record["data"]).hex(" ") or "(no data)", flush=True)
+    return EXIT_OK
+
+
+def json_key(name: str) -> str:
+    """An attribute's name as a JSON key, as every JSON record of the command spells fields: "Serial Number"
+    -> "serial_number" (so ``get HOST 1/1 --json`` and ``identity --json`` give one Identity shape)."""
+    return "_".join("".join(c if c.isalnum() else " " for c in name.lower()).split())
+
+
+def _member_text(name: str, value: Any) -> str:
+    """One ``name = value`` line of Get_Attributes_All; the bytes after the declared attributes as hex."""
+    from ..scanner import UNDECODED
+
+    if name in (UNDECODED, json_key(UNDECODED)) and isinstance(value, str):
+        raw = bytes.fromhex(value)
+        return f"{UNDECODED} = {len(raw)} bytes: {raw.hex(' ')}"
+    return f"{name} = {_value_text(value)}"
+
+
+def _jsonable(value: Any) -> Any:
+    if isinstance(value, bytes):
+        return value.hex()
+    if isinstance(value, dict):
+        return {k: _jsonable(v) for k, v in value.items()}
+    if isinstance(value, list):
+        return [_jsonable(v) for v in value]
+    return value
+
+
+def cmd_set(args: argparse.Namespace) -> int:
+    from ..scanner import Scanner
+
+    class_id, instance, attribute = parse_object_path(args.path, need_attribute=True)
+    assert attribute is not None
+    cip_type = parse_type(args.type)
+    assert cip_type is not None
+    try:
+        value = cip_type.parse_text(args.value)
+        data = cip_type.encode(value)
+    except (ValueError, CipError) as exc:
+        raise UsageError(f"value {args.value!r} is not a valid {cip_type.name}: {exc}") from None
+
+    async def run() -> None:
+        scanner = await Scanner.connect(args.target, timeout=args.timeout, route=parse_route(args.route))
+        try:
+            if args.connected:
+                await scanner.open_connection()
+            await scanner.set_attribute_single(class_id, instance, attribute, data)
+        finally:
+            await scanner.close()
+
+    asyncio.run(run())
+    _emit(args, {"status": 0, "path": args.path, "data": data.hex(), "value": cip_type.to_json(value)},
+          f"set {args.path} = {args.value}")
+    return EXIT_OK

@@ -1,0 +1,260 @@
+"""The class 1 command: cipstack io."""
+
+from __future__ import annotations
+
+import argparse
+import asyncio
+import contextlib
+import json
+import sys
+from typing import Any
+
+from ..cip.types import parse_int
+from ..eip.originator import parse_host
+from .common import EXIT_OK, UsageError, parse_duration
+from .emulators import _read_eds_file
+
+
+# -- class 1 ---------------------------------------------------------------------------------------------
+def parse_assignment(text: str) -> tuple[str, str]:
+    name, sep, value = text.partition("=")
+    if not sep or not name.strip():
+        raise UsageError(f"--set {text!r} is not FIELD=VALUE")
+    return name.strip(), value.strip()
+
+
+_RPI_UNITS = (("us", 1e-6), ("ms", 1e-3), ("s", 1.0))
+
+
+def parse_rpi(text: str) -> float:
+    """``10ms``, ``500us``, ``0.5s``: an RPI needs its unit (a bare ``5`` would be 5 s, 500 times 10 ms)."""
+    raw = text.strip().lower()
+    for suffix, scale in _RPI_UNITS:
+        if raw.endswith(suffix):
+            try:
+                value = float(raw[:-len(suffix)]) * scale
+            except ValueError:
+                break
+            if not 0.0001 <= value <= 10:
+                raise UsageError(f"RPI {text} outside 0.1 ms .. 10 s")
+            return value
+    else:
+        try:
+            float(raw)
+        except ValueError:
+            pass
+        else:
+            raise UsageError(f"--rpi {text}: give a unit (e.g. {text}ms or {text}s)")
+    raise UsageError(f"--rpi {text!r} is not a duration (e.g. 10ms, 500us, 0.5s)")
+
+
+def parse_print(text: str) -> tuple[str, float]:
+    """``changes`` (every input change), ``summary`` (statistics only), ``every:DURATION``
+    (also ``every=DURATION`` or ``"every DURATION"``): the latest input at most once per DURATION."""
+    raw = text.strip().lower()
+    if raw in ("changes", "summary"):
+        return raw, 0.0
+    for separator in (":", "=", " "):
+        head, sep, tail = raw.partition(separator)
+        if sep and head == "every":
+            period = parse_duration(tail.strip())
+            if period <= 0:
+                raise UsageError(f"--print {text}: the period must be positive")
+            return "every", period
+    raise UsageError(f"--print {text!r} is not changes, summary or every:DURATION (e.g. every:1s)")
+
+
+def parse_config_data(text: str | None) -> bytes:
+    if not text:
+        return b""
+    try:
+        data = bytes.fromhex(text.replace(":", "").replace("_", ""))
+    except ValueError:
+        raise UsageError(f"--config-data {text!r} is not hex bytes (e.g. 0102ff00)") from None
+    if len(data) > 510:
+        raise UsageError(f"--config-data is {len(data)} bytes, at most 510")
+    return data
+
+
+def _set_output(io: Any, name: str, value: str) -> None:
+    """One ``--set``; an unknown field names the valid ones."""
+    try:
+        if name == "raw":
+            io.output.raw = bytes.fromhex(value)
+        else:
+            setattr(io.output, name, parse_int(value))
+    except (AttributeError, ValueError) as exc:
+        fields = io.output.field_names
+        hint = (f" (output fields: {', '.join(sorted(fields))}, raw)" if fields
+                else " (no field names known: use raw=HEX)")
+        raise UsageError(f"--set {name}={value}: {exc}{hint}") from None
+
+
+def _statistics_text(stats: dict[str, Any]) -> str:
+    def ms(key: str) -> str:
+        return "-" if stats.get(key) is None else f"{stats[key]:.3f} ms"
+
+    rate = stats.get("received_rate_hz")
+    missed = stats.get("missed_slots")
+    return ("sent {sent}  received {received}  late {late}  lost {lost}  duplicates {duplicates}  "
+            "max lateness {max_lateness:.6f} s\n".format(**stats)
+            + f"T->O API {stats['api_ms']:.3f} ms ({stats['api_rate_hz'] or 0:.1f}/s)  received "
+            + ("-" if rate is None else f"{rate:.1f}/s")
+            + f"  interval p50 {ms('interval_p50_ms')}  p99 {ms('interval_p99_ms')}  max {ms('interval_max_ms')}"
+            + "  missed slots " + ("-" if missed is None else f"{100 * missed:.1f}%")
+            + f"  input changes {stats['input_changes']}")
+
+
+def cmd_io(args: argparse.Namespace) -> int:
+    import signal
+
+    from ..devices.profiles import catalog_for_identity
+    from ..eip.io_originator import OtFormat
+    from ..eip.io_server import run_precise
+    from ..eip.originator import EncapsulationClient
+    from ..scanner import Scanner
+
+    doc = None
+    if args.eds is not None:
+        if args.connection is None:
+            raise UsageError("--eds needs --connection N (a ConnectionN of the file, by number or name)")
+        if args.output is not None or args.input is not None or args.heartbeat is not None:
+            raise UsageError("--eds takes the output, input and heartbeat from the file: give none of them")
+        if args.config is not None:
+            raise UsageError("--eds takes the configuration instance from the file: drop --config")
+        doc = _read_eds_file(args.eds)
+        from ..eds.interpret import read_view
+
+        try:
+            read_view(doc).connection(args.connection)
+        except KeyError as exc:
+            raise UsageError(f"{args.eds}: {exc.args[0]}") from None
+    elif args.connection is not None:
+        raise UsageError("--connection needs --eds FILE")
+    elif args.input is None:
+        raise UsageError("give --input (or --eds FILE --connection N)")
+    if args.ot_format == OtFormat.HEARTBEAT.value and doc is None and args.heartbeat is None:
+        raise UsageError("--ot-format heartbeat sends no data: give --heartbeat POINT instead of --output")
+    if args.config is not None and not 0 <= args.config <= 0xFFFF:
+        raise UsageError(f"--config {args.config} out of range 0..65535")
+    # Without --rpi: the RPI the EDS proposes (None lets the scanner take it), else 10 ms.
+    rpi: float | None = 0.010
+    if args.rpi is not None:
+        rpi = parse_rpi(args.rpi)
+    elif doc is not None:
+        rpi = None
+    print_mode, print_every = parse_print(args.print)
+    config_data = parse_config_data(args.config_data)
+    assignments = [parse_assignment(a) for a in args.set or []]
+    host, port = parse_host(args.target)
+
+    async def session(loop: asyncio.AbstractEventLoop, stop: asyncio.Event, state: dict[str, bool]) -> int:
+        probe = await EncapsulationClient.connect(host, port, args.timeout, register=False)
+        try:
+            identities = await probe.list_identity()
+        finally:
+            await probe.close()
+        catalog = catalog_for_identity(identities[0]) if identities else None
+        scanner = await Scanner.connect(args.target, timeout=args.timeout, catalog=catalog)
+        options: dict[str, Any] = {"target_io_port": args.target_io_port, "local_io_port": args.io_port,
+                                   "config_data": config_data}
+        if args.ot_format is not None:
+            options["ot_format"] = args.ot_format
+        started = loop.time()
+        if doc is not None:
+            opened = scanner.io_connection_from_eds(doc, args.connection, rpi, **options)
+        else:
+            assert rpi is not None  # set above when no EDS is given
+            opened = scanner.io_connection(output=args.output, input=args.input, rpi=rpi, heartbeat=args.heartbeat,
+                                           config=1 if args.config is None else args.config, **options)
+        latest: dict[str, Any] = {"image": None, "dirty": False}
+        async with scanner, opened as io:
+            state["opened"] = True
+            for note in io.notes:
+                print(f"cipstack io: {note}", file=sys.stderr, flush=True)
+            for name, value in assignments:
+                _set_output(io, name, value)
+            io.set_run(not args.idle)
+
+            def show(image: Any) -> None:
+                elapsed = round(loop.time() - started, 4)
+                try:
+                    values: Any = image.fields()
+                except AttributeError:
+                    values = {"raw": image.raw.hex()}
+                if args.json:
+                    print(json.dumps({"t": elapsed, "input": values}), flush=True)
+                else:
+                    print(f"{elapsed:9.3f}s  " + "  ".join(f"{k}={v}" for k, v in values.items()), flush=True)
+
+            async def follow() -> None:
+                async for image in io.updates():
+                    if print_mode == "changes":
+                        show(image)
+                    else:
+                        latest["image"], latest["dirty"] = image, True
+
+            async def ticker() -> None:
+                while True:
+                    await asyncio.sleep(print_every)
+                    if latest["dirty"]:
+                        latest["dirty"] = False
+                        show(latest["image"])
+
+            tasks = [asyncio.ensure_future(follow()), asyncio.ensure_future(stop.wait())]
+            if print_mode == "every":
+                tasks.append(asyncio.ensure_future(ticker()))
+            try:
+                done, _ = await asyncio.wait(tasks, timeout=args.duration, return_when=asyncio.FIRST_COMPLETED)
+            finally:
+                for task in tasks:
+                    task.cancel()
+                await asyncio.gather(*tasks, return_exceptions=True)
+            if tasks[0] in done and not tasks[0].cancelled() and tasks[0].exception() is not None:
+                raise tasks[0].exception()  # type: ignore[misc]
+            if print_mode == "every" and latest["dirty"]:
+                show(latest["image"])
+            if print_mode == "summary" and io.connection.input:
+                show(io.input)
+            stats = io.statistics()
+            outputs_set = bool(assignments) and any(io.output.raw) and not args.idle
+        summary = {"summary": {"duration_s": round(loop.time() - started, 3), **stats}}
+        if args.json:
+            print(json.dumps(summary), flush=True)
+        else:
+            print(_statistics_text(stats), flush=True)
+        if outputs_set and stats["received"] > 1 and stats["input_changes"] == 0:
+            print("cipstack io: warning: the input never changed while outputs were set: the target may not be "
+                  f"receiving them (is {args.target_io_port} its class 1 port? see --target-io-port)",
+                  file=sys.stderr, flush=True)
+        return 130 if state["interrupted"] else EXIT_OK
+
+    async def guarded() -> int:
+        loop = asyncio.get_running_loop()
+        stop = asyncio.Event()
+        state = {"opened": False, "interrupted": False}
+        main_task = asyncio.current_task()
+
+        def on_interrupt() -> None:
+            # Ctrl-C: stop following, close the connection (Forward_Close), print the statistics.
+            state["interrupted"] = True
+            stop.set()
+            with contextlib.suppress(NotImplementedError, RuntimeError, ValueError):
+                loop.remove_signal_handler(signal.SIGINT)  # a second Ctrl-C stops at once
+            if not state["opened"] and main_task is not None:
+                main_task.cancel()  # still opening: give up (an open in flight is closed by the context)
+
+        with contextlib.suppress(NotImplementedError, RuntimeError, ValueError):
+            loop.add_signal_handler(signal.SIGINT, on_interrupt)
+        try:
+            return await session(loop, stop, state)
+        except asyncio.CancelledError:
+            if state["interrupted"]:
+                print("cipstack io: interrupted", file=sys.stderr, flush=True)
+                return 130
+            raise
+        finally:
+            with contextlib.suppress(NotImplementedError, RuntimeError, ValueError):
+                loop.remove_signal_handler(signal.SIGINT)
+
+    return run_precise(guarded())
