@@ -487,6 +487,66 @@ def random_frames(target: AttackTarget, scale: int, rng: random.Random) -> dict[
     return {"cases": cases, "attacker_connections_closed": closed}
 
 
+def modbus_frames(target: AttackTarget, scale: int, rng: random.Random) -> dict[str, Any]:
+    """Modbus TCP (issue items 1 and 8): a request with bytes beyond its function's PDU is refused with
+    exception 0x03 and writes nothing; ``scale`` connections of random and mutated MBAP frames, and
+    more connections from one address than its share, leave the port serving a well-behaved client."""
+    port = target.extra["modbus_port"]
+    read_acc = bytes.fromhex("0009 0000 0006 01 03 1f01 0001")
+
+    def read_value(sock: socket.socket) -> bytes:
+        sock.sendall(read_acc)
+        reply = b""
+        while len(reply) < 11:
+            chunk = sock.recv(11 - len(reply))
+            assert chunk, "the Modbus port closed a well-behaved connection"
+            reply += chunk
+        return reply
+
+    def well_formed(reply: bytes) -> bool:
+        """A read of one register answered: transaction echoed, 5 bytes follow, function 03, 2 data bytes
+        (the value itself may have been written by a mutated frame: a valid write is no attack)."""
+        return reply[:9] == bytes.fromhex("0009 0000 0005 01 03 02")
+
+    with socket.create_connection(("127.0.0.1", port), timeout=3) as good:
+        before = read_value(good)
+        good.sendall(bytes.fromhex("0001 0000 0008 01 06 1f01 0064 abcd"))      # the issue's frame
+        assert good.recv(64) == bytes.fromhex("0001 0000 0003 01 86 03"), "bytes beyond the PDU not refused"
+        assert read_value(good) == before, "a refused write changed the register"
+        closed = 0
+        valid = [bytes.fromhex("0002 0000 0006 01 03 0300 0001"), bytes.fromhex("0003 0000 0006 01 04 0300 0002"),
+                 bytes.fromhex("0004 0000 0009 01 10 1f01 0001 02 0032")]
+        for attempt in range(scale):
+            data = bytearray(rng.choice(valid))
+            for _ in range(rng.randint(0, 4)):
+                data[rng.randrange(len(data))] = rng.randrange(256)
+            if rng.random() < 0.3:
+                data = bytearray(rng.randbytes(rng.randint(1, 300)))
+            with socket.socket() as sock:
+                sock.settimeout(0.05)   # a frame the port waits to complete: move on, it closes on our close
+                sock.bind(("127.0.0.2", 0))
+                try:
+                    sock.connect(("127.0.0.1", port))
+                    sock.sendall(bytes(data))
+                    closed += sock.recv(512) == b""
+                except (TimeoutError, ConnectionError):
+                    pass
+            if attempt % 50 == 0:
+                assert well_formed(read_value(good)), "the well-behaved client got no proper reply"
+        # One address holding more than its share of connections: the excess is closed at accept.
+        per_host = (OPTIONS["max_tcp_connections"] + 1) // 2
+        held = []
+        try:
+            for _ in range(min(per_host, 64)):
+                held.append(socket.create_connection(("127.0.0.1", port), timeout=3, source_address=("127.0.0.3", 0)))
+            assert well_formed(read_value(good)), "the well-behaved client got no proper reply"
+        finally:
+            for sock in held:
+                sock.close()
+        assert well_formed(read_value(good)), "the well-behaved client got no proper reply"
+    return {"frames": scale, "closed_by_the_port": closed}
+
+
 @dataclass(frozen=True)
 class Case:
     name: str
@@ -508,6 +568,7 @@ CASES: list[Case] = [
     Case("sessions_per_host", sessions_per_host, 2, 50),
     Case("connection_limits", connection_limits, 1, 1),
     Case("random_frames", random_frames, 2_000, 200_000),
+    Case("modbus_frames", modbus_frames, 300, 5_000, needs=("modbus",)),
 ]
 
 __all__ = ["CASES", "OPTIONS", "AttackTarget", "Case", "Client"]

@@ -69,7 +69,7 @@ class InProcessAdapter:
         self.loop.run_forever()
 
     async def _start(self, options: dict[str, Any]) -> Adapter:
-        adapter = Adapter(AdapterSettings(host="127.0.0.1", port=0, io_port=0, **options))
+        adapter = Adapter(AdapterSettings(host="127.0.0.1", port=0, io_port=0, modbus_port=0, **options))
         await adapter.start()
         return adapter
 
@@ -83,8 +83,10 @@ class InProcessAdapter:
 
     def attack_target(self) -> AttackTarget:
         assert self.adapter.io_endpoint is not None
+        assert self.adapter.modbus is not None
         return AttackTarget(self.adapter.port, self.adapter.io_endpoint.port,
-                            fds=lambda: len(os.listdir("/proc/self/fd")), log_lines=lambda: list(self.records.lines))
+                            fds=lambda: len(os.listdir("/proc/self/fd")), log_lines=lambda: list(self.records.lines),
+                            extra={"modbus_port": self.adapter.modbus.port})
 
     def close(self) -> None:
         self.run(self.adapter.close())
