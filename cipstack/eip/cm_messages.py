@@ -10,7 +10,11 @@ import struct
 from dataclasses import dataclass, field
 from enum import IntEnum
 
+from ..cip.epath import request_path
 from ..cip.status import CipError, GeneralStatus
+
+#: Where an originator sends Forward_Open and Forward_Close: the Connection Manager, instance 1.
+CONNECTION_MANAGER_PATH = request_path(0x06, 1)
 
 _FO_HEAD = struct.Struct("<BBIIHHIB3x")
 _FO_SMALL_TAIL = struct.Struct("<IHIHBB")

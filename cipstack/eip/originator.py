@@ -9,13 +9,12 @@ matched by their connection's sequence count. ``discover`` sends ListIdentity ov
 from __future__ import annotations
 
 import asyncio
-import ipaddress
 import itertools
 import logging
 import random
 import socket
 import struct
-from collections.abc import Callable, Coroutine, Sequence
+from collections.abc import Coroutine, Sequence
 from dataclasses import dataclass
 from typing import TYPE_CHECKING, Any, TypeVar
 
@@ -23,6 +22,7 @@ from ..cip.epath import Segment, encode_path, request_path
 from ..cip.messages import MessageRouterRequest, MessageRouterResponse, Service
 from ..cip.status import CipError, GeneralStatus
 from .cm_messages import (
+    CONNECTION_MANAGER_PATH,
     ConnectionTriad,
     ForwardCloseRequest,
     ForwardOpenReply,
@@ -32,8 +32,10 @@ from .cm_messages import (
     TriggerType,
     UnconnectedSendRequest,
 )
-from .cpf import Item, ItemType, SockAddr, decode_items, encode_items
+from .cpf import Item, ItemType, decode_items, encode_items
+from .discovery import broadcast_addresses, discover, list_services_udp, udp_query
 from .encapsulation import (
+    DEFAULT_PORT,
     HEADER,
     HEADER_SIZE,
     PROTOCOL_VERSION,
@@ -42,20 +44,16 @@ from .encapsulation import (
     Command,
     EncapsulationError,
     EncapsulationHeader,
-    EncapsulationStatus,
 )
 from .identity_items import IdentityRecord, ServiceRecord, decode_list_identity, decode_list_services
-from .interfaces import directed_broadcasts
+from .io_context import IoContext
 from .io_core import DEFAULT_IO_PORT
 from .io_originator import (
     Class1Request,
-    IoConnectionHandle,
-    IoOriginator,
     OtFormat,
     class1_path,
-    new_connection,
 )
-from .io_server import IoEndpoint
+from .replies import EncapsulationStatusError, MalformedReplyError, decode_reply
 
 if TYPE_CHECKING:
     from ..assemblies.schema import AssemblySchema
@@ -63,43 +61,12 @@ if TYPE_CHECKING:
 log = logging.getLogger(__name__)
 T = TypeVar("T")
 
-DEFAULT_PORT = 44818
 #: Our vendor id as an originator (0xFFFF is not assigned; any value works for tests).
 ORIGINATOR_VENDOR_ID = 0xFFFE
-CONNECTION_MANAGER_PATH = request_path(0x06, 1)
 MESSAGE_ROUTER_PATH = request_path(0x02, 1)
 
 _SEQ = struct.Struct("<H")
 _CONN_ID = struct.Struct("<I")
-
-
-class EncapsulationStatusError(Exception):
-    """A reply carried a non-zero encapsulation status."""
-
-    def __init__(self, command: int, status: int) -> None:
-        self.command = command
-        self.status = status
-        try:
-            name = EncapsulationStatus(status).name.lower().replace("_", " ")
-        except ValueError:
-            name = "unknown"
-        text = f"encapsulation command 0x{command:04X} failed with status 0x{status:04X} ({name})"
-        if command == 0x0065 and status == 0x0002:
-            # RegisterSession answered "insufficient memory": what targets answer when every session is taken.
-            text += ": the target's session table is full (its session limit is reached)"
-        super().__init__(text)
-
-
-class MalformedReplyError(ConnectionError):
-    """A reply that cannot be decoded: one line for the user, never a traceback."""
-
-
-def _decode_reply(what: str, decode: Callable[[], T]) -> T:
-    """Run a client-side decoder; any failure of it is a ``MalformedReplyError`` naming ``what``."""
-    try:
-        return decode()
-    except (ValueError, struct.error, IndexError, CipError, EncapsulationError) as exc:
-        raise MalformedReplyError(f"malformed {what}: {exc}") from None
 
 
 def parse_host(text: str, default_port: int = DEFAULT_PORT) -> tuple[str, int]:
@@ -222,15 +189,15 @@ class ExplicitClient:
 
     async def list_identity(self) -> list[IdentityRecord]:
         _, body = await self.exchange(Command.LIST_IDENTITY)
-        return _decode_reply("ListIdentity reply", lambda: decode_list_identity(body))
+        return decode_reply("ListIdentity reply", lambda: decode_list_identity(body))
 
     async def list_services(self) -> list[ServiceRecord]:
         _, body = await self.exchange(Command.LIST_SERVICES)
-        return _decode_reply("ListServices reply", lambda: decode_list_services(body))
+        return decode_reply("ListServices reply", lambda: decode_list_services(body))
 
     async def list_interfaces(self) -> list[Item]:
         _, body = await self.exchange(Command.LIST_INTERFACES)
-        return _decode_reply("ListInterfaces reply", lambda: decode_items(body, strict=False))
+        return decode_reply("ListInterfaces reply", lambda: decode_items(body, strict=False))
 
     async def nop(self, data: bytes = b"") -> None:
         self._write(Command.NOP, data, bytes(8))
@@ -241,7 +208,7 @@ class ExplicitClient:
         items = (Item(ItemType.NULL_ADDRESS), Item(ItemType.UNCONNECTED_DATA, request))
         body = RR_PREFIX.pack(0, 0) + encode_items(items)
         _, reply = await self.exchange(Command.SEND_RR_DATA, body, timeout=timeout)
-        items = _decode_reply("SendRRData reply", lambda: decode_items(reply, RR_PREFIX.size, strict=False))
+        items = decode_reply("SendRRData reply", lambda: decode_items(reply, RR_PREFIX.size, strict=False))
         for item in items:
             if item.type == ItemType.UNCONNECTED_DATA:
                 return item.data
@@ -253,7 +220,7 @@ class ExplicitClient:
         items = (Item(ItemType.NULL_ADDRESS), Item(ItemType.UNCONNECTED_DATA, request), *extra)
         _, reply = await self.exchange(Command.SEND_RR_DATA, RR_PREFIX.pack(0, 0) + encode_items(items),
                                        timeout=timeout)
-        reply_items = _decode_reply("SendRRData reply", lambda: decode_items(reply, RR_PREFIX.size, strict=False))
+        reply_items = decode_reply("SendRRData reply", lambda: decode_items(reply, RR_PREFIX.size, strict=False))
         data = next((i.data for i in reply_items if i.type == ItemType.UNCONNECTED_DATA), None)
         if data is None:
             raise MalformedReplyError("malformed SendRRData reply: no Unconnected Data item")
@@ -289,7 +256,7 @@ class ExplicitClient:
             raw = MessageRouterRequest(Service.UNCONNECTED_SEND, CONNECTION_MANAGER_PATH,
                                        UnconnectedSendRequest(0x0A, 0x0E, raw, route_bytes).encode()).encode()
         reply = await (self.send_unit_data(raw, timeout) if use_connection else self.send_rr_data(raw, timeout))
-        return _decode_reply("message router reply", lambda: MessageRouterResponse.decode(reply))
+        return decode_reply("message router reply", lambda: MessageRouterResponse.decode(reply))
 
     # -- class 3 connection -----------------------------------------------------------------------
     async def forward_open(self, rpi_us: int = 2_000_000, connection_size: int = 500, large: bool = False,
@@ -308,7 +275,7 @@ class ExplicitClient:
         service = Service.LARGE_FORWARD_OPEN if large else Service.FORWARD_OPEN
         reply = await self.request(service, CONNECTION_MANAGER_PATH, fo.encode(), connected=False)
         reply.raise_for_status()
-        decoded = _decode_reply("Forward_Open reply", lambda: ForwardOpenReply.decode(reply.data))
+        decoded = decode_reply("Forward_Open reply", lambda: ForwardOpenReply.decode(reply.data))
         self.connection = ExplicitConnectionInfo(decoded.ot_connection_id, decoded.to_connection_id, triad,
                                                  decoded.ot_api_us)
         return self.connection
@@ -583,245 +550,6 @@ def run_blocking(coroutine: Coroutine[Any, Any, T]) -> T:
 def _expire(future: asyncio.Future[Any]) -> None:
     if not future.done():
         future.set_exception(asyncio.TimeoutError())
-
-class IoContext:
-    """Async context manager of a class 1 connection: Forward_Open on enter, Forward_Close on exit.
-
-    Once the Forward_Open succeeded, every way out closes the connection: an error while
-    setting it up (a group that cannot be joined, a socket error), an exception or a
-    cancellation (Ctrl-C) in the body, or a normal exit."""
-
-    def __init__(self, client: EncapsulationClient, request: Class1Request, target_io_port: int, local_io_port: int,
-                 output_schema: AssemblySchema | None, input_schema: AssemblySchema | None, run: bool,
-                 keep_intervals: bool) -> None:
-        self.client = client
-        self.request = request
-        self.target_io_port = target_io_port
-        self.local_io_port = local_io_port
-        self.output_schema = output_schema
-        self.input_schema = input_schema
-        self.run = run
-        self.keep_intervals = keep_intervals
-        self.handle: IoConnectionHandle | None = None
-        self._triad: ConnectionTriad | None = None
-        #: What the opening had to adapt to (a retry with the size a target asked for), one line each.
-        self.notes: list[str] = []
-
-    async def _forward_open(self, request: Class1Request, port: int
-                            ) -> tuple[ForwardOpenReply, list[Item], ConnectionTriad]:
-        ot, to, transport, triad, to_id = request.parameters()
-        fo = ForwardOpenRequest(0x0A, 0x0E, 0, to_id, triad, request.timeout_multiplier, request.ot_rpi_us,
-                                ot, request.to_rpi_us, to, transport, request.path, request.large)
-        raw = MessageRouterRequest(Service.FORWARD_OPEN, CONNECTION_MANAGER_PATH, fo.encode()).encode()
-        sockaddr = Item(ItemType.SOCKADDR_T_O, SockAddr("0.0.0.0", port).encode())
-        reply_raw, extra = await self.client.send_rr_data_items(raw, [] if request.multicast else [sockaddr])
-        response = _decode_reply("Forward_Open reply", lambda: MessageRouterResponse.decode(reply_raw))
-        response.raise_for_status()
-        return _decode_reply("Forward_Open reply", lambda: ForwardOpenReply.decode(response.data)), extra, triad
-
-    async def _open_shielded(self, request: Class1Request, port: int
-                             ) -> tuple[ForwardOpenReply, list[Item], ConnectionTriad]:
-        """``_forward_open``, closing what the target opens even when the caller is cancelled (Ctrl-C)
-        while the request is on the wire."""
-        opening = asyncio.ensure_future(self._forward_open(request, port))
-        try:
-            return await asyncio.shield(opening)
-        except asyncio.CancelledError:
-            try:
-                _, _, self._triad = await opening
-            except Exception:  # refused or lost: nothing was opened
-                self._triad = None
-            else:
-                await self._forward_close()
-            raise
-
-    async def __aenter__(self) -> IoConnectionHandle:
-        client = self.client
-        core, endpoint = await shared_io_endpoint(client.local_host(), self.local_io_port)
-        request = self.request
-        try:
-            reply, extra, triad = await self._open_shielded(request, endpoint.port)
-        except CipError as refused:
-            corrected = request.corrected(refused.extended) if refused.general == GeneralStatus.CONNECTION_FAILURE \
-                else None
-            if corrected is None:
-                raise
-            request, note = corrected
-            log.debug("Forward_Open to %s: %s", client.host, note)
-            self.notes.append(note)
-            reply, extra, triad = await self._open_shielded(request, endpoint.port)
-        self.request = request
-        self._triad = triad
-        try:
-            self.handle = await self._start(request, reply, extra, core, endpoint)
-            self.handle.notes = self.notes
-        except BaseException:
-            # Opened but not started: the target would keep producing to a port nobody reads.
-            await self._forward_close()
-            raise
-        return self.handle
-
-    async def _start(self, request: Class1Request, reply: ForwardOpenReply, extra: list[Item], core: IoOriginator,
-                     endpoint: IoEndpoint) -> IoConnectionHandle:
-        connection = new_connection(request, self.client.host_address(), self.target_io_port,
-                                    reply.ot_connection_id, reply.to_connection_id, reply.ot_api_us, reply.to_api_us,
-                                    asyncio.get_running_loop().time(), self.keep_intervals)
-        connection.run = self.run
-        for item in extra:
-            if item.type not in (ItemType.SOCKADDR_T_O, ItemType.SOCKADDR_O_T):
-                log.debug("Forward_Open reply: item 0x%04X ignored", item.type)
-                continue
-            try:
-                address = SockAddr.decode(item.data)
-            except EncapsulationError as exc:
-                log.debug("Forward_Open reply: Sockaddr Info 0x%04X ignored: %s", item.type, exc)
-                continue
-            if item.type == ItemType.SOCKADDR_T_O and ipaddress.IPv4Address(address.host).is_multicast:
-                await endpoint.join_multicast(address.host, address.port)
-            else:
-                # 0.0.0.0:<our port> echoed back on a point-to-point connection, or the target's
-                # O->T address: informational; only a 224.0.0.0/4 group is something to join.
-                log.debug("Forward_Open reply: Sockaddr Info 0x%04X %s:%d (informational)", item.type,
-                          address.host, address.port)
-        output_schema, input_schema = self.output_schema, self.input_schema
-        if output_schema is not None and output_schema.size != (request.output_size or 0):
-            output_schema = None  # the size the target asked for is not the schema's: raw bytes only
-        if input_schema is not None and input_schema.size != request.input_size:
-            input_schema = None
-        core.add(connection)
-        endpoint.wakeup()
-        return IoConnectionHandle(core, endpoint, connection, output_schema, input_schema)
-
-    async def _forward_close(self) -> None:
-        if self._triad is None:
-            return
-        fc = ForwardCloseRequest(0x0A, 0x0E, self._triad, self.request.path)
-        self._triad = None
-        try:
-            reply = await self.client.request(Service.FORWARD_CLOSE, CONNECTION_MANAGER_PATH, fc.encode(),
-                                              connected=False)
-            reply.raise_for_status()
-        except (ConnectionError, CipError, EncapsulationStatusError, asyncio.TimeoutError) as exc_close:
-            log.info("Forward_Close of class 1 connection failed: %s", exc_close)
-
-    async def __aexit__(self, *exc: object) -> None:
-        handle = self.handle
-        if handle is not None:
-            handle.connection.closed = True
-            handle._core.remove(handle.connection)
-        await self._forward_close()
-
-
-_io_endpoints: dict[tuple[int, str, int], tuple[IoOriginator, IoEndpoint]] = {}
-
-
-async def shared_io_endpoint(host: str, port: int = 0) -> tuple[IoOriginator, IoEndpoint]:
-    """The originator's class 1 endpoint for this event loop and local address (one socket serves every
-    connection, as a PLC's one UDP 2222 socket does)."""
-    loop = asyncio.get_running_loop()
-    for stale in [k for k, (_, e) in _io_endpoints.items() if getattr(e, "loop", loop).is_closed()]:
-        del _io_endpoints[stale]  # an earlier asyncio.run's: nothing can use it any more
-    key = (id(loop), host, port)
-    found = _io_endpoints.get(key)
-    # An id can be reused by a later loop once the first is gone: the endpoint must be this loop's.
-    if found is not None and found[1].transport is not None and getattr(found[1], "loop", None) is loop:
-        return found
-    core = IoOriginator()
-    endpoint = IoEndpoint(core, host, port)
-    await endpoint.start()
-    _io_endpoints[key] = (core, endpoint)
-    return core, endpoint
-
-
-class _DiscoveryProtocol(asyncio.DatagramProtocol):
-    def __init__(self) -> None:
-        self.replies: list[tuple[bytes, tuple[str, int]]] = []
-
-    def datagram_received(self, data: bytes, addr: tuple[str, int]) -> None:
-        if len(self.replies) < MAX_DISCOVERY_REPLIES:
-            self.replies.append((data, addr))
-
-    def error_received(self, exc: Exception) -> None:
-        log.debug("discovery: %s", exc)
-
-
-#: Replies kept from one query: far more devices than one subnet holds; the rest are dropped.
-MAX_DISCOVERY_REPLIES = 4096
-LIMITED_BROADCAST = "255.255.255.255"
-
-
-def broadcast_addresses() -> list[str]:
-    """Where a broadcast with no address given goes: 255.255.255.255 and the directed broadcast
-    address of every IPv4 interface, loopback included (127.255.255.255), so that devices on
-    every attached subnet hear it. Linux reads the interfaces; elsewhere the limited broadcast alone."""
-    return [LIMITED_BROADCAST, *(address for address in directed_broadcasts() if address != LIMITED_BROADCAST)]
-
-
-async def udp_query(command: int, address: str | Sequence[str] | None = None, port: int = DEFAULT_PORT,
-                    timeout: float = 2.0, max_delay_ms: int | None = None) -> list[tuple[bytes, tuple[str, int]]]:
-    """Send a ListIdentity/ListServices datagram and collect the reply bodies for ``timeout`` seconds.
-
-    ``address``: one address (broadcast or unicast), several, or None for every interface's
-    broadcast address (see ``broadcast_addresses``)."""
-    addresses = [address] if isinstance(address, str) else list(address) if address is not None else []
-    addresses = addresses or broadcast_addresses()
-    loop = asyncio.get_running_loop()
-    transport, protocol = await loop.create_datagram_endpoint(_DiscoveryProtocol, family=socket.AF_INET,
-                                                              allow_broadcast=True)
-    try:
-        delay = max_delay_ms if max_delay_ms is not None else max(500, min(int(timeout * 1000) - 100, 0xFFFF))
-        context = _SEQ.pack(delay) + bytes(6)
-        for destination in addresses:
-            try:
-                transport.sendto(HEADER.pack(command, 0, 0, 0, context, 0), (destination, port))
-            except OSError as exc:  # an interface without a route: the others still count
-                log.debug("discovery: cannot send to %s:%d: %s", destination, port, exc)
-        await asyncio.sleep(timeout)
-    finally:
-        transport.close()
-    bodies = []
-    for data, addr in protocol.replies:
-        if len(data) >= HEADER_SIZE:
-            header = EncapsulationHeader.decode(data)
-            if header.command == command and header.status == 0 and header.length == len(data) - HEADER_SIZE:
-                bodies.append((data[HEADER_SIZE:], addr))
-                continue
-        log.debug("discovery: reply from %s:%d ignored: %s", addr[0], addr[1], data[:64].hex())
-    return bodies
-
-
-async def discover(address: str | Sequence[str] | None = None, port: int = DEFAULT_PORT,
-                   timeout: float = 2.0) -> list[IdentityRecord]:
-    """ListIdentity over UDP: every device that answers within ``timeout`` seconds, once each.
-
-    ``address`` None: the broadcast address of every interface (loopback included). A device
-    that answers twice (two broadcasts reached it, or it repeated its reply) is listed once:
-    replies are told apart by the address they came from and the serial number."""
-    records: list[IdentityRecord] = []
-    seen: set[tuple[str, int]] = set()
-    for body, addr in await udp_query(Command.LIST_IDENTITY, address, port, timeout):
-        try:
-            found = decode_list_identity(body)
-        except (ValueError, struct.error, EncapsulationError) as exc:
-            log.debug("discovery: malformed ListIdentity reply from %s ignored: %s", addr[0], exc)
-            continue
-        for record in found:
-            key = (addr[0], record.serial_number)
-            if key not in seen:
-                seen.add(key)
-                records.append(record)
-    return records
-
-
-async def list_services_udp(address: str, port: int = DEFAULT_PORT, timeout: float = 1.0) -> list[ServiceRecord]:
-    records: list[ServiceRecord] = []
-    for body, addr in await udp_query(Command.LIST_SERVICES, address, port, timeout):
-        try:
-            records.extend(decode_list_services(body))
-        except (ValueError, struct.error, EncapsulationError) as exc:
-            log.debug("malformed ListServices reply from %s ignored: %s", addr[0], exc)
-    return records
-
 
 __all__ = ["DEFAULT_PORT", "CipError", "EncapsulationClient", "EncapsulationStatusError", "ExplicitConnectionInfo",
            "GeneralStatus", "MalformedReplyError", "broadcast_addresses", "discover", "list_services_udp", "parse_host",

@@ -22,7 +22,7 @@ import logging
 import socket
 
 from .cpf import SockAddr
-from .encapsulation import HEADER_SIZE
+from .encapsulation import DEFAULT_PORT, HEADER_SIZE
 from .interfaces import subnet_broadcast
 from .limits import (
     DEFAULT_MAX_TCP_CONNECTIONS,
@@ -36,7 +36,6 @@ from .target import EncapsulationConnection, EncapsulationTarget
 
 log = logging.getLogger(__name__)
 
-DEFAULT_PORT = 44818
 
 
 class _TcpProtocol(asyncio.Protocol):

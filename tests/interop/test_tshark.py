@@ -162,7 +162,8 @@ async def connection_manager_errors():
     from cipstack.cip.epath import request_path
     from cipstack.eip.cm_messages import (ConnectionTriad, ForwardCloseRequest, ForwardOpenRequest,
                                           NetworkParameters, TransportTrigger, TriggerType)
-    from cipstack.eip.originator import CONNECTION_MANAGER_PATH, MESSAGE_ROUTER_PATH, EncapsulationClient
+    from cipstack.eip.cm_messages import CONNECTION_MANAGER_PATH
+    from cipstack.eip.originator import MESSAGE_ROUTER_PATH, EncapsulationClient
 
     def forward_open(triad, transport_class=3, path=MESSAGE_ROUTER_PATH, large=False):
         params = NetworkParameters(500, variable=True)
