@@ -14,7 +14,7 @@ import logging
 import struct
 from collections.abc import AsyncIterator, Iterator, Sequence
 from dataclasses import dataclass
-from typing import Any, TypeVar
+from typing import TYPE_CHECKING, Any, TypeVar
 
 from .catalog import Catalog
 from .cip.epath import PortSegment, Segment, request_path
@@ -22,9 +22,7 @@ from .cip.messages import MessageRouterRequest, MessageRouterResponse, Service
 from .cip.model import AttributeSpec
 from .cip.status import CipError, GeneralStatus
 from .cip.types import UINT, CipType
-from .eds.model import EdsDocument
 from .eip.identity_items import IdentityRecord, ServiceRecord
-from .eip.io_originator import IoConnectionHandle, OtFormat
 from .eip.originator import (
     BlockingEncapsulationClient,
     EncapsulationClient,
@@ -35,6 +33,11 @@ from .eip.originator import (
     parse_host,
     run_blocking,
 )
+
+if TYPE_CHECKING:
+    # Imported where used: explicit messaging alone does not load the EDS model or class 1.
+    from .eds.model import EdsDocument
+    from .eip.io_originator import IoConnectionHandle, OtFormat
 
 T = TypeVar("T")
 log = logging.getLogger(__name__)
@@ -359,6 +362,7 @@ def _eds_ot_format(doc: EdsDocument, number: int) -> OtFormat | None:
     """The O->T real-time format ``ConnectionN`` declares (field 2, bits 8-10: 0 modeless,
     3 heartbeat, 4 run/idle header; eds.md), or None when the file gives none we know."""
     from .eds.model import FieldKind
+    from .eip.io_originator import OtFormat
 
     section = doc.get("Connection Manager")
     entry = section.get(f"Connection{number}") if section is not None else None

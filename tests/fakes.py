@@ -205,7 +205,8 @@ def forward_open_fields(request: MrRequest) -> dict[str, int | bytes]:
     (_tick, _ticks, _ot_id, to_id, _serial, _vendor, _originator, _mult, ot_rpi, ot_params, to_rpi, to_params,
      transport, words) = struct.unpack_from("<BBIIHHIB3xIHIHBB", data)
     return {"ot_rpi": ot_rpi, "to_rpi": to_rpi, "ot_size": ot_params & 0x1FF, "to_size": to_params & 0x1FF,
-            "to_id": to_id, "triad": data[10:18], "path": data[36:36 + 2 * words], "transport": transport}
+            "to_id": to_id, "triad": data[10:18], "path": data[36:36 + 2 * words], "transport": transport,
+            "timeout_multiplier": _mult}
 
 
 def to_port(request: MrRequest) -> int | None:

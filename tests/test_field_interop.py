@@ -305,6 +305,23 @@ def test_config_instance_and_data(producer: ClassOneProducer, capsys: pytest.Cap
         assert path == bytes.fromhex("20042497 2c15 2c47 8003 010203040500".replace(" ", ""))
 
 
+def test_timeout_multiplier_is_the_users(producer: ClassOneProducer, capsys: pytest.CaptureFixture[str]) -> None:
+    """`--timeout-multiplier N` goes into the Forward_Open (byte 12 of its data): RPI x 4 x 2^N; 2 by
+    default; outside 0..7 one line and exit 2."""
+    def handle(request: MrRequest) -> bytes | None:
+        return p2p_echo_reply(request, producer) if request.service == FORWARD_OPEN else None
+
+    with ScriptedTarget(handler=handle, assembly_sizes={21: 4, 71: 4}) as target:
+        for option, multiplier in (([], 2), (["--timeout-multiplier", "5"], 5)):
+            code, _, err = run_cli(["io", target.address, "--output", "21", "--input", "71", "--duration", "0.2s",
+                                    "--target-io-port", str(producer.port), *option], capsys)
+            assert code == 0, err
+            assert forward_open_fields(target.services(FORWARD_OPEN)[-1])["timeout_multiplier"] == multiplier
+    code, _, err = run_cli(["io", "127.0.0.1:1", "--output", "21", "--input", "71", "--timeout-multiplier", "8"],
+                           capsys)
+    assert code == 2 and "--timeout-multiplier" in err
+
+
 def test_config_data_must_be_hex(capsys: pytest.CaptureFixture[str]) -> None:
     code, _, err = run_cli(["io", "127.0.0.1:1", "--output", "21", "--input", "71", "--config-data", "xyz"], capsys)
     assert code == 2 and "--config-data" in err

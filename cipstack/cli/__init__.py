@@ -17,7 +17,7 @@ from collections.abc import Callable, Sequence
 
 from ..cip.status import CipError, describe_status
 from ..eip.encapsulation import EncapsulationError
-from ..eip.originator import EncapsulationStatusError
+from ..eip.replies import EncapsulationStatusError
 from .common import EXIT_FAILURE, EXIT_OK, EXIT_USAGE, UsageError, parse_duration, parse_object_path
 from .explicit import json_key
 from .parser import build_parser

@@ -106,6 +106,7 @@ def _statistics_text(stats: dict[str, Any]) -> str:
 
 
 def cmd_io(args: argparse.Namespace) -> int:
+    import gc
     import signal
 
     from ..devices.profiles import catalog_for_identity
@@ -160,6 +161,8 @@ def cmd_io(args: argparse.Namespace) -> int:
                                    "config_data": config_data}
         if args.ot_format is not None:
             options["ot_format"] = args.ot_format
+        if args.timeout_multiplier is not None:
+            options["timeout_multiplier"] = args.timeout_multiplier
         started = loop.time()
         if doc is not None:
             opened = scanner.io_connection_from_eds(doc, args.connection, rpi, **options)
@@ -175,6 +178,10 @@ def cmd_io(args: argparse.Namespace) -> int:
             for name, value in assignments:
                 _set_output(io, name, value)
             io.set_run(not args.idle)
+            # Set-up is done: move what it allocated out of the collector's reach, so a full
+            # collection cannot stall the receive path for longer than a short RPI.
+            gc.collect()
+            gc.freeze()
 
             def show(image: Any) -> None:
                 elapsed = round(loop.time() - started, 4)

@@ -7,7 +7,7 @@ from pathlib import Path
 from typing import Any
 
 from .. import __version__
-from ..eip.originator import DEFAULT_PORT
+from ..eip.encapsulation import DEFAULT_PORT
 from .common import (
     UsageError,
     parse_duration,
@@ -152,6 +152,9 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--ot-format", choices=["run-idle", "heartbeat", "modeless"],
                    help="O->T real-time format: run-idle header (default), heartbeat (sequence count only, "
                         "size 2), modeless (no header); with --eds: the file's")
+    p.add_argument("--timeout-multiplier", type=lambda t: parse_number(t, "timeout multiplier"), choices=range(8),
+                   metavar="0..7", help="connection timeout = RPI x 4 x 2^N, each way (default 2: 16 ms at a 1 ms RPI; "
+                                        "3 or more at RPIs under 2 ms on a busy host)")
     p.add_argument("--print", default="changes", metavar="changes|summary|every:DURATION",
                    help="input lines: every change (default), none (statistics only), or the latest at most "
                         "once per DURATION (every:1s)")
