@@ -87,7 +87,8 @@ def data_type(code: int) -> tuple[str, int | None] | None:
 REQUIRED_KEYWORDS: dict[str, tuple[str, ...]] = {
     "File": ("DescText", "CreateDate", "CreateTime", "Revision"),
     "Device": (
-        "VendCode", "VendName", "ProdType", "ProdTypeStr", "ProdCode", "MajRev", "MinRev", "ProdName", "Catalog",
+        # Catalog is optional (configuration tools accept files without it; EZ-EDS writes none).
+        "VendCode", "VendName", "ProdType", "ProdTypeStr", "ProdCode", "MajRev", "MinRev", "ProdName",
     ),
     "Device Classification": ("Class1",),
 }
@@ -95,7 +96,8 @@ SECTION_ORDER = (
     "File", "Device", "Device Classification", "Params", "EnumPar", "Groups", "Assembly",
     "Connection Manager", "Port", "Capacity",
 )
-NETWORKS = ("EtherNetIP", "CompoNet", "DeviceNet", "ControlNet")
+#: Names a ``ClassN`` of [Device Classification] may give: the networks, and Safety (a CIP Safety device).
+NETWORKS = ("EtherNetIP", "CompoNet", "DeviceNet", "ControlNet", "Safety")
 
 _INT = frozenset({FieldKind.INT})
 _NUMBER = frozenset({FieldKind.INT, FieldKind.FLOAT})
@@ -125,6 +127,8 @@ _CONNECTION_KINDS: tuple[frozenset[FieldKind], ...] = (
     _INT, _INT, _REFERENCE_OR_NUMBER, _REFERENCE_OR_NUMBER, _KEYWORD | _EMPTY,
     _REFERENCE_OR_NUMBER, _REFERENCE_OR_NUMBER, _KEYWORD | _EMPTY, _REFERENCE_OR_NUMBER, _KEYWORD | _EMPTY,
     _REFERENCE_OR_NUMBER, _KEYWORD | _EMPTY, _STRING, _STRING | _EMPTY, _PATH,
+    # CIP Safety connections (EZ-EDS 3.31): Asynchronous, Maximum Consumer Number.
+    _INT | _KEYWORD | _EMPTY, _INT | _EMPTY,
 )
 _ASSEMBLY_HEAD_KINDS: tuple[frozenset[FieldKind], ...] = (
     _STRING, _PATH, _REFERENCE_OR_NUMBER, _INT | _EMPTY, _ANY, _ANY,
@@ -556,7 +560,8 @@ class _Checker:
 
     def check_connections(self, section: Section) -> None:
         for entry in section.entries:
-            if not _CONNECTION.fullmatch(entry.keyword) or not self.check_count(entry, (15,), "a connection"):
+            if not _CONNECTION.fullmatch(entry.keyword) or not self.check_count(
+                    entry, (15, 17), "a connection (17 with the CIP Safety fields)"):
                 continue
             self.check_kinds(entry, _CONNECTION_KINDS)
             self.check_path(entry, 15, required=True)
@@ -566,8 +571,14 @@ class _Checker:
                     self.check_param_reference(entry, item, item.value)
             for number in (5, 8, 10, 12):
                 item = entry.field(number)
-                if _reference(item) is not None:
-                    self.check_assembly_reference(entry, item, item.value)
+                reference = _reference(item)
+                if reference is None:
+                    continue
+                if number == 12 and _PARAM.fullmatch(reference):
+                    # The configuration format may be a parameter rather than an assembly.
+                    self.check_param_reference(entry, item, reference)
+                else:
+                    self.check_assembly_reference(entry, item, reference)
             self.check_connection_sizes(entry)
             self.check_connection_words(entry)
             self.check_connection_points(entry)

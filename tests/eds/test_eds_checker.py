@@ -62,7 +62,7 @@ CASES = [
         [("required-section", None, 0)],
     ),
     ("file keyword missing", "    CreateTime = 09:30:00;\n", "", [("required-keyword", "[File]", 0)]),
-    ("device keyword missing", '    Catalog = "ACG-ET2";\n', "", [("required-keyword", "[Device]", 0)]),
+    ("device keyword missing", '    ProdTypeStr = "AC Drive";\n', "", [("required-keyword", "[Device]", 0)]),
     (
         "classification keyword missing",
         "    Class1 = EtherNetIP;\n", "    Class2 = EtherNetIP;\n",
@@ -358,3 +358,87 @@ def test_componet_file() -> None:
     doc = parse_eds(COMPONET_EDS)
     assert check_eds(doc) == []
     assert doc.entry("CompoNet_IO", "CompoNet_Input_Info").value(2) == 4
+
+
+# -- what configuration tools accept (issue: false errors on files from the field) -------------------------
+#: In the style of EZ-EDS output: no Catalog, a CIP Safety device class, a safety connection of 17
+#: fields, and a configuration format that is a parameter.
+EZ_EDS_STYLE = """\
+$ EZ-EDS Version 3.31 Generated Electronic Data Sheet
+
+[File]
+        DescText = "Safety I/O block";
+        CreateDate = 04-02-2025;
+        CreateTime = 10:11:12;
+        ModDate = 04-02-2025;
+        ModTime = 10:11:12;
+        Revision = 1.1;
+
+[Device]
+        VendCode = 65001;
+        VendName = "Example Controls";
+        ProdType = 35;
+        ProdTypeStr = "Safety Discrete I/O Device";
+        ProdCode = 7;
+        MajRev = 1;
+        MinRev = 1;
+        ProdName = "SIO-8";
+
+[Device Classification]
+        Class1 = EtherNetIP;
+        Class2 = Safety;
+
+[Params]
+        Param1 =
+                0,
+                ,,
+                0x0000,
+                0xC7,
+                2,
+                "Config Word",
+                "",
+                "",
+                0,0xFFFF,0,
+                ,,,,
+                ,,,,,
+                ,,;
+
+[Assembly]
+        Assem100 = "Safety Input", "20 04 24 64 30 03", 2, 0x0000,,;
+        Assem150 = "Safety Output", "20 04 24 96 30 03", 2, 0x0000,,;
+
+[Connection Manager]
+        Connection1 =
+                0x02030001,
+                0x44640405,
+                , 2, Assem150,
+                , 2, Assem100,
+                , ,
+                2, Param1,
+                "Safety Exclusive Owner",
+                "",
+                "20 04 24 97 2C 96 2C 64",
+                1,
+                1;
+"""
+
+
+def test_a_file_in_the_ez_eds_style_is_clean() -> None:
+    findings = check_eds(parse_eds(EZ_EDS_STYLE))
+    assert [(f.rule, f.message) for f in findings if f.severity == "error"] == []
+    assert not any("Safety" in f.message or "Catalog" in f.message or "17 fields" in f.message for f in findings)
+
+
+def test_a_connection_of_16_fields_is_still_wrong() -> None:
+    text = EZ_EDS_STYLE.replace("""                1,
+                1;""", """                1;""")
+    assert ("field-count", line_of(text, "        Connection1 =")) in found(text)
+
+
+def test_a_configuration_parameter_that_is_not_there_is_reported() -> None:
+    text = EZ_EDS_STYLE.replace("2, Param1,", "2, Param9,")
+    assert any(rule.startswith("param") or "reference" in rule for rule, _ in found(text)), found(text)
+
+
+def test_catalog_may_be_missing() -> None:
+    assert found(broken('    Catalog = "ACG-ET2";\n', "")) == set()
