@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import re
 import sys
 from collections.abc import Mapping
 from typing import Any, TextIO
@@ -114,6 +115,10 @@ def _value(entry: Entry | None, number: int = 1) -> Any:
     return None if item is None else _plain(item.value, item.kind)
 
 
+_ASSEMBLY = re.compile(r"Assem[0-9]+")
+_CONNECTION = re.compile(r"Connection[0-9]+")
+
+
 def summarize(doc: EdsDocument) -> dict[str, Any]:
     """Identity, assemblies and connections of a document, as plain data."""
     device = doc.get("Device")
@@ -126,9 +131,15 @@ def summarize(doc: EdsDocument) -> dict[str, Any]:
     networks = [_value(entry) for entry in classification] if classification else []
     params = doc.get("Params")
     assembly_section = doc.get("Assembly")
-    assemblies = [_assembly(entry, params) for entry in assembly_section] if assembly_section else []
+    # Only AssemN entries are assemblies; the section also holds the Assembly class's keywords
+    # (Revision, Object_Name, Number_Of_Static_Instances, ...).
+    assembly_entries = [entry for entry in assembly_section if _ASSEMBLY.fullmatch(entry.keyword)] \
+        if assembly_section else []
+    assemblies = [_assembly(entry, params) for entry in assembly_entries]
+    sizes = {entry.keyword: _value(entry, 3) for entry in assembly_entries}
     manager = doc.get("Connection Manager")
-    connections = [_connection(entry) for entry in manager if entry.keyword.startswith("Connection")] if manager else []
+    connections = [_connection(entry, sizes, params) for entry in manager
+                   if _CONNECTION.fullmatch(entry.keyword)] if manager else []
     return {"identity": identity, "networks": networks, "assemblies": assemblies, "connections": connections}
 
 
@@ -152,14 +163,32 @@ def _assembly(entry: Entry, params: Section | None) -> dict[str, Any]:
     }
 
 
-def _connection(entry: Entry) -> dict[str, Any]:
+def _connection_size(entry: Entry, size_number: int, format_number: int, sizes: dict[str, Any],
+                     params: Section | None) -> Any:
+    """A connection's size as the file determines it: the number given; else the default of the
+    ParamN the size field names; else the size of the AssemN the format field names."""
+    size = _value(entry, size_number)
+    if isinstance(size, int):
+        return size
+    if isinstance(size, str) and params is not None and (param := params.get(size)) is not None:
+        default = _value(param, 12)
+        if isinstance(default, int):
+            return default
+    assembly = _value(entry, format_number)
+    known = sizes.get(assembly) if isinstance(assembly, str) else None
+    return known if isinstance(known, int) else size
+
+
+def _connection(entry: Entry, sizes: dict[str, Any], params: Section | None) -> dict[str, Any]:
     trigger, parameters = _value(entry, 1), _value(entry, 2)
     description: dict[str, Any] = {
         "keyword": entry.keyword,
         "name": _value(entry, 13),
         "path": _value(entry, 15),
-        "o_to_t": {"rpi": _value(entry, 3), "size": _value(entry, 4), "assembly": _value(entry, 5)},
-        "t_to_o": {"rpi": _value(entry, 6), "size": _value(entry, 7), "assembly": _value(entry, 8)},
+        "o_to_t": {"rpi": _value(entry, 3), "size": _connection_size(entry, 4, 5, sizes, params),
+                   "assembly": _value(entry, 5)},
+        "t_to_o": {"rpi": _value(entry, 6), "size": _connection_size(entry, 7, 8, sizes, params),
+                   "assembly": _value(entry, 8)},
     }
     if isinstance(trigger, int):
         description["types"] = [name for bit, name in _APPLICATION_TYPES if trigger >> bit & 1]
@@ -178,7 +207,8 @@ def render_summary(summary: dict[str, Any]) -> str:
     lines: list[str] = []
     identity = summary["identity"]
     if identity:
-        lines.append(f"Device: {identity['product_name']} ({identity['catalog']}), revision {identity['revision']}")
+        catalog = f" ({identity['catalog']})" if identity.get("catalog") else ""   # Catalog is optional
+        lines.append(f"Device: {identity['product_name']}{catalog}, revision {identity['revision']}")
         lines.append(f"  vendor {identity['vendor_id']} {identity['vendor_name']}")
         lines.append(f"  device type {identity['device_type']} {identity['device_type_name']}")
         lines.append(f"  product code {identity['product_code']}")
@@ -188,7 +218,8 @@ def render_summary(summary: dict[str, Any]) -> str:
         lines.append("Assemblies:")
     for assembly in summary["assemblies"]:
         lines.append(
-            f"  {assembly['keyword']} {assembly['name']!r}: {assembly['size']} bytes, path {assembly['path']}"
+            f"  {assembly['keyword']} {assembly['name']!r}: {assembly['size']} bytes, "
+            f"path {assembly['path'] or '(none: the connection paths name it)'}"
         )
         for member in assembly["members"]:
             bits = "?" if member["bits"] is None else member["bits"]

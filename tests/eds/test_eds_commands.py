@@ -202,3 +202,35 @@ def test_show_unreadable(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> 
     assert run("show", str(tmp_path / "none.eds")) == 2
     out, err = capsys.readouterr()
     assert out == "" and err.startswith("cipstack eds show: ") and err.count("\n") == 1
+
+
+def test_show_lists_assemblies_only_and_the_sizes_the_file_determines() -> None:
+    """[Assembly] also holds the Assembly class's keywords (EZ-EDS writes them): they are not
+    assemblies. A connection whose size field is empty or a ParamN has the size the file gives
+    (the parameter's default, else the assembly's size), not '?'."""
+    from cipstack.eds.commands import summarize
+    from cipstack.eds.reader import parse_eds
+
+    text = """\
+[File] DescText = "x"; CreateDate = 01-01-2025; CreateTime = 00:00:00; Revision = 1.0;
+[Device] VendCode = 1; VendName = "v"; ProdType = 12; ProdTypeStr = "t"; ProdCode = 1; MajRev = 1; MinRev = 1;
+  ProdName = "p";
+[Device Classification] Class1 = EtherNetIP;
+[Params]
+  Param1 = 0, , , 0x0000, 0xC7, 2, "Output size", "", "", 0, 64, 8, , , , , , , , , , , ;
+[Assembly]
+  Revision = 2;
+  Object_Name = "Assembly Object";
+  Object_Class_Code = 0x04;
+  Number_Of_Static_Instances = 2;
+  Assem100 = "Input", "", 32, 0x0000, , ;
+  Assem150 = "Output", "", 8, 0x0000, , ;
+[Connection Manager]
+  Object_Name = "Connection Manager Object";
+  Connection1 = 0x04010002, 0x44640405, , Param1, Assem150, , , Assem100, , , , ,
+    "Exclusive Owner", "", "20 04 24 97 2C 96 2C 64";
+"""
+    summary = summarize(parse_eds(text))
+    assert [assembly["keyword"] for assembly in summary["assemblies"]] == ["Assem100", "Assem150"]
+    (connection,) = summary["connections"]
+    assert connection["o_to_t"]["size"] == 8 and connection["t_to_o"]["size"] == 32
