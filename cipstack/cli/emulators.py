@@ -110,11 +110,14 @@ def _read_eds_file(path: str) -> Any:
     from ..eds.reader import EdsSyntaxError, read_eds
 
     try:
-        return read_eds(path)
+        doc = read_eds(path)
     except EdsSyntaxError as exc:
         raise UsageError(f"{path}:{exc.line}: not a readable EDS: {exc.message}") from None
     except OSError as exc:
         raise UsageError(f"{path}: cannot read: {exc.strerror or exc}") from None
+    for line, what in doc.reader_notes:   # read, but not as the specification writes it
+        print(f"{path}:{line}: warning: {what}", file=sys.stderr)
+    return doc
 
 
 def _adapter_from_eds(args: argparse.Namespace) -> int:

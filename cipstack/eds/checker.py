@@ -24,6 +24,7 @@ RULES: dict[str, str] = {
     "section-order": "public sections come in the order the specification lists them",
     "field-count": "an entry has the number of fields its keyword calls for",
     "field-type": "a field holds the kind of value its place calls for (number, string, keyword)",
+    "unquoted-value": "a path or string is quoted (an unquoted one is read as what it evidently is)",
     "date-format": "dates are mm-dd-yyyy and exist",
     "time-format": "times are hh:mm:ss and exist",
     "revision-format": "the file revision is major.minor",
@@ -191,6 +192,8 @@ class _Checker:
         self.findings.append(Finding(rule, severity, line, message))
 
     def run(self) -> list[Finding]:
+        for line, what in self.doc.reader_notes:
+            self.report("unquoted-value", line, what, WARNING)
         self.check_sections()
         per_section: dict[str, Callable[[Section], None]] = {
             "File": self.check_file,

@@ -76,9 +76,12 @@ def _format_finding(path: str, finding: Finding, as_json: bool) -> str:
 def run_show(args: argparse.Namespace, stdout: TextIO | None = None, stderr: TextIO | None = None) -> int:
     """Print what a file describes: identity, assemblies and their members, connections."""
     stdout = stdout or sys.stdout
-    doc = _load(args.file, "show", stderr or sys.stderr)
+    stderr = stderr or sys.stderr
+    doc = _load(args.file, "show", stderr)
     if doc is None:
         return EXIT_UNREADABLE
+    for line, what in doc.reader_notes:   # read, but not as the specification writes it
+        print(f"{args.file}:{line}: warning: {what}", file=stderr)
     summary = summarize(doc)
     if args.json:
         print(json.dumps(summary, indent=2, sort_keys=True), file=stdout)

@@ -397,6 +397,9 @@ class EdsDocument:
     sections: list[Section] = dataclass_field(default_factory=list)
     #: Comments after the last entry of the file.
     trailing_comments: list[str] = dataclass_field(default_factory=list)
+    #: What the reader took in although the specification writes it otherwise, as (line, what):
+    #: an unquoted path, read as the path it evidently is. The checker reports each as a warning.
+    reader_notes: list[tuple[int, str]] = dataclass_field(default_factory=list)
 
     def section(self, name: str, comment: str | Sequence[str] | None = None) -> Section:
         """The section with this name, appended if the document has none yet."""

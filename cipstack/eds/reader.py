@@ -29,6 +29,9 @@ from .model import (
     unescape_string,
 )
 
+#: One byte of a path as hex: two hex digits.
+_HEX_BYTE = re.compile(r"[0-9A-Fa-f]{2}")
+
 
 class EdsSyntaxError(ValueError):
     """Text that is not EDS syntax, and the line where that shows."""
@@ -231,6 +234,9 @@ class _Parser:
             raw = " ".join(f'"{piece}"' for piece in pieces)
             return Field(FieldKind.STRING, value, raw, token.line)
         if token.kind == "word":
+            if _HEX_BYTE.fullmatch(token.text) and (following := self.peek()) is not None \
+                    and following.kind == "word" and _HEX_BYTE.fullmatch(following.text):
+                return self._unquoted_path(entry, token)
             kind, value = parse_word(token.text)
             return Field(kind, value, token.text, token.line)
         if token.kind == "{":
@@ -238,6 +244,19 @@ class _Parser:
             raw = "{" + ", ".join(child.raw for child in children) + "}"
             return Field(FieldKind.DATASET, tuple(children), raw, token.line)
         raise EdsSyntaxError(token.line, f"entry {entry.keyword!r}: unexpected {token.text!r} where a field belongs")
+
+    def _unquoted_path(self, entry: Entry, first: _Token) -> Field:
+        """Hex bytes without quotes (``Port1 = TCP, "A", 20 66 24 01, 2;``): a path written without
+        its quotes. Read as that string (the place's hint makes it a path) and noted, not refused."""
+        texts = [first.text]
+        while (following := self.peek()) is not None and following.kind == "word" and _HEX_BYTE.fullmatch(
+                following.text):
+            texts.append(following.text)
+            self.take()
+        value = " ".join(texts)
+        self.doc.reader_notes.append(
+            (first.line, f"{entry.keyword}: unquoted value {value} read as the path \"{value}\""))
+        return Field(FieldKind.STRING, value, value, first.line)
 
     def _closes_at_once(self) -> bool:
         token = self.peek()

@@ -234,3 +234,21 @@ def test_show_lists_assemblies_only_and_the_sizes_the_file_determines() -> None:
     assert [assembly["keyword"] for assembly in summary["assemblies"]] == ["Assem100", "Assem150"]
     (connection,) = summary["connections"]
     assert connection["o_to_t"]["size"] == 8 and connection["t_to_o"]["size"] == 32
+
+
+def test_show_reads_an_unquoted_path_and_says_so(tmp_path: Path) -> None:
+    import subprocess
+    import sys
+
+    path = tmp_path / "unquoted.eds"
+    path.write_text('[File] DescText = "x"; CreateDate = 01-01-2025; CreateTime = 00:00:00; Revision = 1.0;\n'
+                    '[Device] VendCode = 1; VendName = "v"; ProdType = 12; ProdTypeStr = "t"; ProdCode = 1;\n'
+                    '  MajRev = 1; MinRev = 1; ProdName = "p";\n'
+                    "[Device Classification] Class1 = EtherNetIP;\n"
+                    '[Port] Port1 = TCP, "A", 20 66 24 01, 2;\n', encoding="latin-1")
+    result = subprocess.run([sys.executable, "-m", "cipstack", "eds", "show", str(path)], capture_output=True,
+                            text=True, timeout=60)
+    assert result.returncode == 0, result.stderr
+    assert result.stderr.splitlines() == [f'{path}:5: warning: Port1: unquoted value 20 66 24 01 read as the path '
+                                          '"20 66 24 01"']
+    assert "Device: p" in result.stdout

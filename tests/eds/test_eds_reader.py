@@ -275,3 +275,22 @@ class TestBuildingInCode:
         assert not semantically_equal(first, fourth)
         assert not semantically_equal(first, parse_eds("[B]\nK = 16, \"ab\";\n"))
         assert not semantically_equal(first, parse_eds("[A]\nL = 16, \"ab\";\n"))
+
+
+def test_an_unquoted_path_is_read_as_the_path_with_a_warning() -> None:
+    """`Port1 = TCP, "A", 20 66 24 01, 2;` (a path without its quotes) made the whole file unreadable:
+    it is the path it evidently is, and the checker names the line."""
+    from cipstack.eds.checker import check_eds
+    from cipstack.eds.model import FieldKind
+
+    text = ('[File] DescText = "x"; CreateDate = 01-01-2025; CreateTime = 00:00:00; Revision = 1.0;\n'
+            "[Port]\n"
+            '  Port1 = TCP, "A", 20 66 24 01, 2;\n')
+    doc = parse_eds(text)
+    path = doc.get("Port").get("Port1").field(3)
+    assert path.kind is FieldKind.EPATH and bytes(path.value) == bytes.fromhex("20662401")
+    assert doc.get("Port").get("Port1").field(4).value == 2
+    warnings = [(f.rule, f.line) for f in check_eds(doc) if f.severity == "warning"]
+    assert ("unquoted-value", 3) in warnings
+    # One hex-looking word alone is still the number it is, not a path.
+    assert parse_eds(text.replace("20 66 24 01", "20")).reader_notes == []
