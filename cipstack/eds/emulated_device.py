@@ -9,7 +9,8 @@
   Classes and instances are made as needed, one ``EdsObject`` per class; the standard objects
   every adapter has (Identity, Message Router, Assembly, Connection Manager, TCP/IP Interface,
   Ethernet Link) are kept and serve a linked attribute only if they have it.
-* Every ``AssemN`` with an Assembly path and a size is an Assembly instance of that size. It is an
+* Every ``AssemN`` with an Assembly path (its own, or for an empty path the one its connections
+  name: ``interpret.place_assemblies``) and a size is an Assembly instance of that size. It is an
   output (consumed) when a connection sends it O->T, an input when one produces it T->O, and
   otherwise an output when every parameter its members name is settable. Where a member carries a
   linked parameter whole (``assembly_schema``), an input's data shows the attribute and data
@@ -244,10 +245,7 @@ def _add_assemblies(device: EdsDevice, view: EdsView, issues: list[EdsIssue]) ->
     points: dict[int, AssemblyPoint] = {}
     for info in view.assemblies.values():
         if info.instance is None:
-            if any(c.o_t_assembly == info.keyword or c.t_o_assembly == info.keyword for c in view.connections):
-                issues.append(EdsIssue(info.line, f"{info.keyword} has no path: its connection's path names the "
-                                                  "instance"))
-            continue
+            continue  # no path, and no connection names it: nothing says where it is
         if info.size == 0:
             if info.instance not in heartbeats:
                 issues.append(EdsIssue(info.line, f"{info.keyword}: an assembly of size 0 that no connection uses as "

@@ -14,7 +14,7 @@ from __future__ import annotations
 
 import re
 from collections.abc import Mapping
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from typing import Any
 
 from ..assemblies.schema import AssemblyField, AssemblySchema
@@ -91,7 +91,8 @@ class AssemblyMember:
 class AssemblyInfo:
     keyword: str
     name: str
-    #: From the path of field 2 (None when the entry has no path).
+    #: From the path of field 2; for an empty path, from the connection paths that name the assembly
+    #: (``place_assemblies``); None when neither gives one.
     instance: int | None
     size: int
     members: tuple[AssemblyMember, ...]
@@ -537,16 +538,42 @@ def read_connections(doc: EdsDocument, params: Mapping[str, ParamInfo], assembli
     return out
 
 
+def place_assemblies(assemblies: Mapping[str, AssemblyInfo], connections: list[ConnectionInfo],
+                     issues: list[EdsIssue]) -> dict[str, AssemblyInfo]:
+    """Give an assembly written with an empty path (``Assem100 = "Input", "", 32, ...``: most files
+    do) the instance the connection paths name for it: the O->T point of the connections whose
+    field 5 names it, the T->O point of those whose field 8 does. Its own path wins when it has one;
+    the AssemN number is not taken for an instance (only the paths say where data goes). Connections
+    that name it as two instances: not placed, one issue."""
+    named: dict[str, set[int]] = {}
+    for connection in connections:
+        if connection.o_t_assembly and not connection.heartbeat:
+            named.setdefault(connection.o_t_assembly, set()).add(connection.o_t_point)
+        if connection.t_o_assembly:
+            named.setdefault(connection.t_o_assembly, set()).add(connection.t_o_point)
+    placed = dict(assemblies)
+    for keyword, info in assemblies.items():
+        points = named.get(keyword, set())
+        if info.instance is not None or not points:
+            continue
+        if len(points) > 1:
+            issues.append(EdsIssue(info.line, f"{keyword} has no path and its connections name it as instances "
+                                              f"{', '.join(str(p) for p in sorted(points))}: not served"))
+            continue
+        placed[keyword] = replace(info, instance=points.pop())
+    return placed
+
+
 def read_view(doc: EdsDocument) -> EdsView:
     """Parameters, assemblies and class 1 connections of ``doc``, with what was skipped."""
     issues: list[EdsIssue] = []
     params = read_params(doc, issues)
     assemblies = read_assemblies(doc, params, issues)
     connections = read_connections(doc, params, assemblies, issues)
-    return EdsView(params, assemblies, connections, issues)
+    return EdsView(params, place_assemblies(assemblies, connections, issues), connections, issues)
 
 
 __all__ = [
     "AssemblyInfo", "AssemblyMember", "ConnectionInfo", "EdsIssue", "EdsView", "ParamInfo", "assembly_schema",
-    "read_assemblies", "read_connections", "read_params", "read_view",
+    "place_assemblies", "read_assemblies", "read_connections", "read_params", "read_view",
 ]
