@@ -40,7 +40,10 @@ RULES: dict[str, str] = {
     "assembly-size": "the member sizes of an assembly add up to its size in bits",
     "connection-size": "a connection's O->T and T->O sizes are those of the assemblies it names",
     "connection-format": "a connection's trigger/transport and parameter words are consistent",
-    "connection-path": "a connection path's connection points are those of the assemblies it names",
+    "connection-path": "a connection path's connection points are those of the assemblies it names, and it has one",
+    "assembly-member": "an assembly does not contain itself",
+    "class-code": "an object class section's Object_Class_Code is that section's class",
+    "keyword-case": "keywords are written in the specification's case (VendCode, not vendcode)",
     "device-identity": "[Device] matches the Identity object of the live device",
 }
 
@@ -166,6 +169,26 @@ def _number(item: Field | None) -> int | float | None:
     return item.number if item is not None else None
 
 
+#: The class each object class section describes (the section names of the specification).
+_SECTION_CLASSES = {
+    "Identity Class": 0x01, "Message Router": 0x02, "Assembly": 0x04, "Connection Manager": 0x06,
+    "Port": 0xF4, "TCP/IP Interface Class": 0xF5, "Ethernet Link Class": 0xF6,
+}
+#: Keywords of a fixed spelling, by their lower case.
+_KNOWN_KEYWORDS = {keyword.lower(): keyword for keyword in (
+    *(k for keys in REQUIRED_KEYWORDS.values() for k in keys), *(k for keys in _SINGLE_VALUES.values() for k in keys),
+    "Catalog", "ModDate", "ModTime", "Revision", "Object_Name", "Object_Class_Code", "Number_Of_Static_Instances",
+    "Max_Instance",
+)}
+_NUMBERED = re.compile(r"(param|enum|assem|connection|group|port)([0-9]+)", re.IGNORECASE)
+
+
+def _numbered_keyword(keyword: str) -> str | None:
+    """``param12`` -> ``Param12`` (the spelling of a numbered keyword), or None."""
+    match = _NUMBERED.fullmatch(keyword)
+    return None if match is None else match[1].capitalize() + match[2]
+
+
 def _reference(item: Field | None) -> str | None:
     return item.value if item is not None and item.kind is FieldKind.KEYWORD else None
 
@@ -209,6 +232,8 @@ class _Checker:
         seen: set[str] = set()
         for section in self.doc.sections:
             self.check_duplicate_keywords(section)
+            self.check_class_code(section)
+            self.check_keyword_case(section)
             if section.name in per_section and section.name not in seen:
                 per_section[section.name](section)
             seen.add(section.name)
@@ -252,6 +277,23 @@ class _Checker:
                 )
             elif latest is None or SECTION_ORDER.index(section.name) > SECTION_ORDER.index(latest.name):
                 latest = section
+
+    def check_class_code(self, section: Section) -> None:
+        """``Object_Class_Code`` of an object class section is the class the section is for."""
+        expected = _SECTION_CLASSES.get(section.name)
+        entry = section.get("Object_Class_Code")
+        if expected is None or entry is None:
+            return
+        code = _int(entry.field(1))
+        if code is not None and code != expected:
+            self.report("class-code", entry.line,
+                        f"[{section.name}] Object_Class_Code is 0x{code:02X}; the section is class 0x{expected:02X}")
+
+    def check_keyword_case(self, section: Section) -> None:
+        for entry in section.entries:
+            known = _KNOWN_KEYWORDS.get(entry.keyword.lower()) or _numbered_keyword(entry.keyword)
+            if known is not None and known != entry.keyword:
+                self.report("keyword-case", entry.line, f"[{section.name}] {entry.keyword} is written {known}")
 
     def check_duplicate_keywords(self, section: Section) -> None:
         seen: set[str] = set()
@@ -526,6 +568,10 @@ class _Checker:
             if _reference(size_item) is not None:
                 self.check_param_reference(entry, size_item, size_item.value)
             for item in entry.fields[7::2]:
+                if _reference(item) == entry.keyword:
+                    self.report("assembly-member", item.line or entry.line,
+                                f"{entry.keyword} has itself as a member")
+                    continue
                 self.check_member_reference(entry, item)
             self.check_assembly_size(entry)
 
@@ -632,6 +678,11 @@ class _Checker:
         if path is None or path.kind is not FieldKind.EPATH:
             return
         points = _logical_values(path.value, _CONNECTION_POINT)
+        if not points and _logical_values(path.value, _INSTANCE):
+            # 20 04 24 97 24 64: instances only; a target cannot tell where data goes.
+            self.report("connection-path", path.line,
+                        f"{entry.keyword} path names no connection point (a 2C segment): nothing says where its "
+                        "data goes")
         for index, (format_number, direction) in enumerate(((5, "O->T"), (8, "T->O"))):
             assembly = self.assemblies.get(_reference(entry.field(format_number)) or "")
             if assembly is None or index >= len(points):

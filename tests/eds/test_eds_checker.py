@@ -442,3 +442,33 @@ def test_a_configuration_parameter_that_is_not_there_is_reported() -> None:
 
 def test_catalog_may_be_missing() -> None:
     assert found(broken('    Catalog = "ACG-ET2";\n', "")) == set()
+
+
+# -- errors the checker used to miss ---------------------------------------------------------------------
+def _rules(text: str) -> set[tuple[str, int]]:
+    return {(f.rule, f.line) for f in check_eds(parse_eds(text)) if f.severity == "error"}
+
+
+def test_an_assembly_that_contains_itself() -> None:
+    # Sized consistently (16 bits, 2 bytes), so only the self-reference is wrong.
+    text = EZ_EDS_STYLE.replace('''Assem150 = "Safety Output", "20 04 24 96 30 03", 2, 0x0000,,;''',
+                                '''Assem150 = "Safety Output", "20 04 24 96 30 03", 2, 0x0000,,, 16, Assem150;''')
+    assert _rules(text) == {("assembly-member", line_of(text, "Assem150 = "))}
+
+
+def test_a_connection_path_without_a_connection_point() -> None:
+    text = EZ_EDS_STYLE.replace('"20 04 24 97 2C 96 2C 64"', '"20 04 24 97 24 64"')
+    assert ("connection-path", line_of(text, '"20 04 24 97 24 64"')) in _rules(text)
+
+
+def test_an_object_class_code_of_another_class() -> None:
+    text = EZ_EDS_STYLE.replace("[Connection Manager]\n", "[Connection Manager]\n        Object_Class_Code = 0x05;\n")
+    assert _rules(text) == {("class-code", line_of(text, "Object_Class_Code = 0x05"))}
+    assert _rules(text.replace("0x05", "0x06")) == set()
+
+
+@pytest.mark.parametrize(("right", "wrong"), [("VendCode", "vendcode"), ("ProdName", "PRODNAME"),
+                                              ("Assem100 =", "assem100 =")])
+def test_a_keyword_in_another_case(right: str, wrong: str) -> None:
+    text = EZ_EDS_STYLE.replace(right, wrong, 1)
+    assert ("keyword-case", line_of(text, wrong)) in _rules(text)
