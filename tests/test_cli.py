@@ -314,3 +314,14 @@ def test_eds_generate_then_check(tmp_path: Path) -> None:
     assert checked.returncode == 0, checked.stdout
     bad = run("eds", "generate", "--profile", "rx", "--model", "MX2-A2015-E", "-o", str(tmp_path))
     assert bad.returncode == 2 and "MX2-A2015-E" in one_line_error(bad)
+
+
+def test_io_list_fields_of_a_profile(adapter_process: tuple[str, subprocess.Popen[str]]) -> None:
+    """The ACG's fields by the names `--set` and the printed input use, from its identity's profile."""
+    address, _ = adapter_process
+    result = run("io", address, "--output", "21", "--input", "71", "--list-fields")
+    assert result.returncode == 0, result.stderr
+    names = [line.split()[0] for line in result.stdout.splitlines() if line.startswith("  ")]
+    assert names == ["run_forward", "run_reverse", "fault_reset", "net_ctrl", "net_ref", "speed_reference",
+                     "faulted", "warning", "running_forward", "running_reverse", "ready", "ctrl_from_net",
+                     "ref_from_net", "at_reference", "drive_state", "speed_actual"]

@@ -105,6 +105,53 @@ def _statistics_text(stats: dict[str, Any]) -> str:
             + f"  input changes {stats['input_changes']}")
 
 
+def _field_lines(direction: str, schema: Any, instance: int | None) -> list[str]:
+    """One line per field of an assembly: name, offset, width or type, unit."""
+    if schema is None:
+        what = "no data (heartbeat)" if instance is None else f"assembly {instance}: no field names known (raw=HEX)"
+        return [f"{direction}: {what}"]
+    lines = [f"{direction}: assembly {schema.instance} {schema.name!r}, {schema.size} bytes"]
+    for item in schema.fields:
+        place = f"byte {item.offset} bit {item.bit}" + (f"-{item.bit + item.bits - 1}" if item.bits > 1 else "") \
+            if item.bits else f"byte {item.offset} {item.type.name}"
+        unit = f" [{item.unit}]" if item.unit else ""
+        lines.append(f"  {item.name:<28} {place}{unit}")
+    return lines
+
+
+def _list_fields(args: argparse.Namespace, doc: Any) -> int:
+    """``--list-fields``: the output and input fields of the connection, by the names ``--set`` and the
+    printed input take; from the EDS alone, or from the profile of the device's identity."""
+    if doc is not None:
+        from ..eds.interpret import read_view
+
+        view = read_view(doc)
+        connection = view.connection(args.connection)
+        output = None if connection.heartbeat else connection.o_t_point
+        schemas = (view.schema(output) if output is not None else None, view.schema(connection.t_o_point))
+        points = (output, connection.t_o_point)
+    else:
+        from ..devices.profiles import catalog_for_identity
+        from ..eip.originator import EncapsulationClient
+
+        async def identify() -> Any:
+            probe = await EncapsulationClient.connect(*parse_host(args.target), args.timeout, register=False)
+            try:
+                return await probe.list_identity()
+            finally:
+                await probe.close()
+
+        identities = asyncio.run(identify())
+        catalog = catalog_for_identity(identities[0]) if identities else None
+        output = None if args.heartbeat is not None else args.output
+        assemblies = catalog.assemblies if catalog is not None else {}
+        schemas = (assemblies.get(output) if output is not None else None, assemblies.get(args.input))
+        points = (output, args.input)
+    for direction, schema, point in zip(("output (O->T)", "input (T->O)"), schemas, points, strict=True):
+        print("\n".join(_field_lines(direction, schema, point)), flush=True)
+    return EXIT_OK
+
+
 def cmd_io(args: argparse.Namespace) -> int:
     import gc
     import signal
@@ -134,6 +181,8 @@ def cmd_io(args: argparse.Namespace) -> int:
         raise UsageError("--connection needs --eds FILE")
     elif args.input is None:
         raise UsageError("give --input (or --eds FILE --connection N)")
+    if args.list_fields:
+        return _list_fields(args, doc)
     if args.ot_format == OtFormat.HEARTBEAT.value and doc is None and args.heartbeat is None:
         raise UsageError("--ot-format heartbeat sends no data: give --heartbeat POINT instead of --output")
     if args.config is not None and not 0 <= args.config <= 0xFFFF:

@@ -152,6 +152,8 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--ot-format", choices=["run-idle", "heartbeat", "modeless"],
                    help="O->T real-time format: run-idle header (default), heartbeat (sequence count only, "
                         "size 2), modeless (no header); with --eds: the file's")
+    p.add_argument("--list-fields", action="store_true",
+                   help="list the output and input fields of the connection (names for --set and the input) and exit")
     p.add_argument("--timeout-multiplier", type=lambda t: parse_number(t, "timeout multiplier"), choices=range(8),
                    metavar="0..7", help="connection timeout = RPI x 4 x 2^N, each way (default 2: 16 ms at a 1 ms RPI; "
                                         "3 or more at RPIs under 2 ms on a busy host)")

@@ -66,3 +66,19 @@ def test_each_declared_connection_runs(adapters: dict[Path, tuple[int, int, subp
     stats = next(line for line in result.stdout.splitlines() if line.startswith("sent "))
     received = int(stats.split()[3])
     assert received > 10, stats
+
+
+def test_list_fields_names_what_set_and_the_input_take(tmp_path: Path) -> None:
+    """`cipstack io --eds F --connection N --list-fields` reads the file alone (no device needed)."""
+    from cipstack.eds.generator import eds_text
+    from cipstack.eds.profiles import acg_et2_description
+
+    path = tmp_path / "acg.eds"
+    path.write_text(eds_text(acg_et2_description()), encoding="latin-1")
+    result = subprocess.run([sys.executable, "-m", "cipstack", "io", "127.0.0.1:1", "--eds", str(path),
+                             "--connection", "1", "--list-fields"], capture_output=True, text=True, timeout=60)
+    assert result.returncode == 0, result.stderr
+    lines = result.stdout.splitlines()
+    assert lines[0] == "output (O->T): assembly 21 'Extended Speed Control Output', 4 bytes"
+    assert any(line.split()[:4] == ["speedref", "byte", "2", "INT"] for line in lines)
+    assert "input (T->O): assembly 71 'Extended Speed Control Input', 4 bytes" in lines
