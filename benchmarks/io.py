@@ -37,20 +37,14 @@ import time
 from collections.abc import Sequence
 from typing import Any
 
+from io_common import free_port  # benchmarks/ is on the path when a benchmark runs
+
 from cipstack.eip.io_server import run_precise
 from cipstack.scanner import Scanner
 
 CLOCK_TICKS = os.sysconf("SC_CLK_TCK")
 STATION_LIMIT = 64
 INPUT_ONLY_POINT = 198
-
-
-def free_port() -> int:
-    with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as udp, socket.socket() as tcp:
-        tcp.bind(("127.0.0.1", 0))
-        port = int(tcp.getsockname()[1])
-        udp.bind(("127.0.0.1", port))
-        return port
 
 
 def cpu_seconds(pid: int) -> float:

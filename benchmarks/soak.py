@@ -31,18 +31,12 @@ from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
 
+from io_common import free_port  # benchmarks/ is on the path when a benchmark runs
+
 ROOT = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(ROOT))
 
 from tests.attacks import CASES, OPTIONS, AttackTarget, Client, served  # noqa: E402
-
-
-def free_port() -> int:
-    with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as udp, socket.socket() as tcp:
-        tcp.bind(("127.0.0.1", 0))
-        port = int(tcp.getsockname()[1])
-        udp.bind(("127.0.0.1", port))
-        return port
 
 
 def rss_bytes(pid: int) -> int:
