@@ -25,6 +25,7 @@ from ..devices.omron.models import model as omron_model
 from .description import EdsDescription
 from .generator import eds_text
 from .profiles import acg_et2_description, eds_file_name, omron_description, omron_models_by_file
+from .writer import encode_eds
 
 EXIT_OK = 0
 EXIT_USAGE = 2
@@ -80,7 +81,7 @@ def write_descriptions(items: list[EdsDescription], directory: str,
     paths: list[str] = []
     for description in items:
         path = os.path.join(directory, eds_file_name(description))
-        data = text(description).encode("ascii")
+        data = encode_eds(text(description))
         try:
             with open(path, "wb") as handle:
                 handle.write(data)

@@ -104,7 +104,9 @@ def format_epath(items: Iterable[EpathItem]) -> str:
 
 
 def escape_string(value: str) -> str:
-    """Quoted-string body in pure ASCII: backslash escapes for quotes, controls and non-ASCII."""
+    """Quoted-string body: backslash escapes for quotes, backslashes and control characters;
+    Latin-1 letters as themselves (EDS files are Latin-1, and readers take ``\\xF6`` literally);
+    a character beyond Latin-1, which no EDS file can hold, as "?"."""
     out: list[str] = []
     for char in value:
         code = ord(char)
@@ -116,10 +118,9 @@ def escape_string(value: str) -> str:
             out.append("\\t")
         elif char == "\r":
             out.append("\\r")
-        elif code < 0x20 or 0x7F <= code <= 0xFF:
+        elif code < 0x20 or 0x7F <= code <= 0x9F:
             out.append(f"\\x{code:02X}")
         elif code > 0xFF:
-            # EDS text is single-byte; a wider character has no faithful encoding.
             out.append("?")
         else:
             out.append(char)
@@ -152,17 +153,58 @@ def unescape_string(body: str) -> str:
     return "".join(out)
 
 
-def _ascii_character(char: str) -> str:
-    if " " <= char <= "~" or char == "\t":
+def _comment_character(char: str) -> str:
+    if " " <= char <= "~" or char == "\t" or "\xa0" <= char <= "\xff":
         return char
-    # An accented letter keeps its base letter; anything else becomes "?".
+    # Beyond Latin-1, a letter keeps its base letter; anything else becomes "?".
     base = unicodedata.normalize("NFKD", char).encode("ascii", "ignore").decode("ascii")
     return base if base and all(" " <= c <= "~" for c in base) else "?"
 
 
-def ascii_comment(text: str) -> str:
-    """A comment as written: printable ASCII, one line, no surrounding blanks."""
-    return "".join(_ascii_character(char) for char in text).strip()
+def written_comment(text: str) -> str:
+    """A comment as written: one line of printable Latin-1, no surrounding blanks."""
+    return "".join(_comment_character(char) for char in text).strip()
+
+
+@dataclass(frozen=True)
+class FieldSource:
+    """A field's place in the text it was read from (``text[start:end]``; empty for an empty
+    field) and its value and comment then, to tell whether it has been edited since."""
+
+    start: int
+    end: int
+    value: Any
+    comment: str | None
+
+    def edited(self, item: Field) -> bool:
+        return item.semantic_value() != self.value
+
+
+@dataclass(frozen=True)
+class EntrySource:
+    """An entry's chunk of the text it was read from: ``text[start:end]`` holds the blank lines and
+    comments before it, the entry and the rest of its last line; ``keyword_*`` the keyword, and
+    ``fields`` the Field objects read, with the entry's comments then."""
+
+    start: int
+    end: int
+    keyword_start: int
+    keyword: str
+    fields: tuple[Field, ...]
+    comments: tuple[str, ...]
+
+
+@dataclass(frozen=True)
+class SectionSource:
+    """A section header's chunk (blank lines and comments before it, ``[name]``, the rest of its
+    line), where its name stands, and its name and comments then."""
+
+    start: int
+    end: int
+    name_start: int
+    name_end: int
+    name: str
+    comments: tuple[str, ...]
 
 
 @dataclass
@@ -175,6 +217,8 @@ class Field:
     line: int = 0
     #: A comment written on the same line right after this field.
     comment: str | None = None
+    #: Where the field was read from, and what it was then (None for a field built in code).
+    source: FieldSource | None = dataclass_field(default=None, compare=False, repr=False)
 
     # -- typed constructors, for documents built in code --------------------------------------
 
@@ -316,6 +360,10 @@ def render_field(item: Field) -> str:
     if _raw_still_valid(item):
         return item.raw
     if kind is FieldKind.INT:
+        if _HEX.fullmatch(item.raw):
+            # A number the author wrote in hex keeps hex, and at least as many digits.
+            digits = len(item.raw.lstrip("+-")) - 2
+            return ("-" if value < 0 else "") + f"0x{abs(value):0{digits}X}"
         return str(value)
     if kind is FieldKind.FLOAT:
         return repr(float(value))
@@ -339,6 +387,8 @@ class Entry:
     fields: list[Field] = dataclass_field(default_factory=list)
     line: int = 0
     comments: list[str] = dataclass_field(default_factory=list)
+    #: Where the entry was read from (None for an entry built in code).
+    source: EntrySource | None = dataclass_field(default=None, compare=False, repr=False)
 
     def field(self, number: int) -> Field | None:
         """Field ``number``, counted from 1 as the EDS specification numbers them."""
@@ -364,6 +414,8 @@ class Section:
     entries: list[Entry] = dataclass_field(default_factory=list)
     line: int = 0
     comments: list[str] = dataclass_field(default_factory=list)
+    #: Where the section header was read from (None for a section built in code).
+    source: SectionSource | None = dataclass_field(default=None, compare=False, repr=False)
 
     def add(self, keyword: str, fields: Sequence[Any], comment: str | Sequence[str] | None = None) -> Entry:
         """Append an entry; ``fields`` holds Fields or plain values (see :func:`as_field`)."""
@@ -389,7 +441,18 @@ def _comment_list(comment: str | Sequence[str] | None) -> list[str]:
     if comment is None:
         return []
     lines = comment.splitlines() if isinstance(comment, str) else [line for c in comment for line in c.splitlines()]
-    return [ascii_comment(line) for line in lines]
+    return [written_comment(line) for line in lines]
+
+
+@dataclass(frozen=True)
+class DocumentSource:
+    """The whole text read, where its last chunk ends (what follows is the file's closing
+    comments and blank lines), the line break it uses and its closing comments then."""
+
+    text: str
+    epilogue_start: int
+    newline: str
+    trailing_comments: tuple[str, ...]
 
 
 @dataclass
@@ -400,6 +463,8 @@ class EdsDocument:
     #: What the reader took in although the specification writes it otherwise, as (line, what):
     #: an unquoted path, read as the path it evidently is. The checker reports each as a warning.
     reader_notes: list[tuple[int, str]] = dataclass_field(default_factory=list)
+    #: The text the document was read from, which the writer keeps wherever nothing was edited.
+    source: DocumentSource | None = dataclass_field(default=None, compare=False, repr=False)
 
     def section(self, name: str, comment: str | Sequence[str] | None = None) -> Section:
         """The section with this name, appended if the document has none yet."""

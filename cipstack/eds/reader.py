@@ -19,11 +19,15 @@ from dataclasses import dataclass
 
 from .model import (
     WORD_CHARACTERS,
+    DocumentSource,
     EdsDocument,
     Entry,
+    EntrySource,
     Field,
     FieldKind,
+    FieldSource,
     Section,
+    SectionSource,
     parse_epath,
     parse_word,
     unescape_string,
@@ -62,41 +66,46 @@ class _Token:
     kind: str  # "section", "word", "string", "comment", or the punctuation character itself
     text: str
     line: int
+    #: Where the token stands in the text: ``text[start:end]`` is its spelling.
+    start: int = 0
+    end: int = 0
     #: For a comment: nothing but blanks precede it on its line.
     own_line: bool = False
 
 
-def _tokens(text: str) -> Iterator[_Token]:
+_LINE_END = "\r\n"
+
+
+def _tokens(text: str, index: int = 0) -> Iterator[_Token]:
     line = 1
-    index = 0
     length = len(text)
     line_has_token = False
     while index < length:
         char = text[index]
-        if char == "\n":
+        if char in _LINE_END:
+            # CRLF, LF and a lone CR each end one line.
+            index += 2 if text.startswith("\r\n", index) else 1
             line += 1
             line_has_token = False
-            index += 1
         elif char in " \t\f\v":
             index += 1
         elif char == "$":
-            end = text.find("\n", index)
-            end = length if end < 0 else end
-            yield _Token("comment", text[index + 1 : end], line, own_line=not line_has_token)
+            end = _line_end(text, index)
+            yield _Token("comment", text[index + 1 : end], line, index, end, own_line=not line_has_token)
             index = end
         elif char == '"':
             end = index + 1
-            while end < length and text[end] not in '"\n':
+            while end < length and text[end] not in '"\r\n':
                 # A backslash escapes the next character, a quote included.
-                end += 2 if text[end] == "\\" and end + 1 < length and text[end + 1] != "\n" else 1
+                end += 2 if text[end] == "\\" and end + 1 < length and text[end + 1] not in _LINE_END else 1
             if end >= length or text[end] != '"':
                 raise EdsSyntaxError(line, "string not closed on the line it starts")
-            yield _Token("string", text[index + 1 : end], line)
+            yield _Token("string", text[index + 1 : end], line, index, end + 1)
             line_has_token = True
             index = end + 1
         elif char == "[":
             end = index + 1
-            while end < length and text[end] not in "]\n":
+            while end < length and text[end] not in "]\r\n":
                 end += 1
             if end >= length or text[end] != "]":
                 raise EdsSyntaxError(line, "section name not closed by ']'")
@@ -106,18 +115,18 @@ def _tokens(text: str) -> Iterator[_Token]:
             bad = [c for c in name if not " " <= c <= "~" or c == "["]
             if bad:
                 raise EdsSyntaxError(line, f"character {bad[0]!r} in section name")
-            yield _Token("section", name, line)
+            yield _Token("section", name, line, index, end + 1)
             line_has_token = True
             index = end + 1
         elif char in _PUNCTUATION:
-            yield _Token(char, char, line)
+            yield _Token(char, char, line, index, index + 1)
             line_has_token = True
             index += 1
         elif char in WORD_CHARACTERS:
             end = index + 1
             while end < length and text[end] in WORD_CHARACTERS:
                 end += 1
-            yield _Token("word", text[index:end], line)
+            yield _Token("word", text[index:end], line, index, end)
             line_has_token = True
             index = end
         elif char == _END_OF_FILE_MARK and not text[index + 1 :].strip():
@@ -126,10 +135,40 @@ def _tokens(text: str) -> Iterator[_Token]:
             raise EdsSyntaxError(line, f"unexpected character {char!r}")
 
 
+def _line_end(text: str, index: int) -> int:
+    """Where the line holding ``index`` ends, before its line break."""
+    ends = [found for found in (text.find("\n", index), text.find("\r", index)) if found >= 0]
+    return min(ends) if ends else len(text)
+
+
+def _chunk_end(text: str, index: int) -> int:
+    """Where the chunk of an item that ends at ``index`` ends: the rest of its line (blanks and a
+    comment) and the line break, when nothing else stands on that line; else ``index`` itself."""
+    end = index
+    while end < len(text) and text[end] in " \t\f\v":
+        end += 1
+    if end < len(text) and text[end] == "$":
+        end = _line_end(text, end)
+    if text.startswith("\r\n", end):
+        return end + 2
+    if end < len(text) and text[end] in _LINE_END:
+        return end + 1
+    return end if end == len(text) else index
+
+
 class _Parser:
-    def __init__(self, text: str) -> None:
-        self.tokens = list(_tokens(text))
+    def __init__(self, text: str, start: int = 0) -> None:
+        self.text = text
+        self.tokens = list(_tokens(text, start))
         self.position = 0
+        #: Where the chunk of the next section header or entry starts: where the last one ended.
+        self.chunk_start = 0
+        #: Where each field, entry and section header was read, by id(): kept until the parse is
+        #: over, when they get their sources (comments attach to them until then).
+        self.field_spans: dict[int, tuple[int, int]] = {}
+        self.entry_spans: dict[int, tuple[int, int, int]] = {}
+        self.section_spans: dict[int, tuple[int, int, int, int]] = {}
+        self.last_end = start
         self.doc = EdsDocument()
         #: Own-line comments waiting for the section or entry that follows them.
         self.pending: list[str] = []
@@ -163,6 +202,7 @@ class _Parser:
         if token is not None:
             self.position += 1
             self.last_line = token.line
+            self.last_end = token.end
         return token
 
     # -- grammar ----------------------------------------------------------------------------
@@ -173,6 +213,9 @@ class _Parser:
             if token.kind == "section":
                 section = Section(token.text, line=token.line, comments=self.pending)
                 self.pending = []
+                end = _chunk_end(self.text, token.end)
+                self.section_spans[id(section)] = (self.chunk_start, end, token.start, token.end)
+                self.chunk_start = end
                 self.doc.sections.append(section)
                 self.trailing_target = section
             elif token.kind == "word":
@@ -182,7 +225,24 @@ class _Parser:
             else:
                 raise EdsSyntaxError(token.line, f"expected a keyword or a section, found {token.text!r}")
         self.doc.trailing_comments = self.pending
+        self._record_sources()
         return self.doc
+
+    def _record_sources(self) -> None:
+        """Give every section, entry and field its place in the text and its value as read."""
+        doc = self.doc
+        newline = next((mark for mark in ("\r\n", "\n", "\r") if mark in self.text), "\r\n")
+        doc.source = DocumentSource(self.text, self.chunk_start, newline, tuple(doc.trailing_comments))
+        for section in doc.sections:
+            start, end, name_start, name_end = self.section_spans[id(section)]
+            section.source = SectionSource(start, end, name_start, name_end, section.name, tuple(section.comments))
+            for entry in section.entries:
+                start, end, keyword_start = self.entry_spans[id(entry)]
+                for item in entry.fields:
+                    field_start, field_end = self.field_spans[id(item)]
+                    item.source = FieldSource(field_start, field_end, item.semantic_value(), item.comment)
+                entry.source = EntrySource(start, end, keyword_start, entry.keyword, tuple(entry.fields),
+                                           tuple(entry.comments))
 
     def _entry(self, section: Section, keyword: _Token) -> Entry:
         entry = Entry(keyword.text, line=keyword.line, comments=self.pending)
@@ -194,6 +254,9 @@ class _Parser:
             raise EdsSyntaxError(keyword.line, f"keyword {keyword.text!r} not followed by '='")
         entry.fields = self._fields(entry, closing=";")
         self.entry = None
+        end = _chunk_end(self.text, self.last_end)
+        self.entry_spans[id(entry)] = (self.chunk_start, end, keyword.start)
+        self.chunk_start = end
         _apply_field_hints(section.name, entry)
         return entry
 
@@ -207,8 +270,11 @@ class _Parser:
             if token.kind in (",", closing):
                 item = Field.empty()
                 item.line = token.line
+                self.field_spans[id(item)] = (token.start, token.start)
             else:
+                start = token.start
                 item = self._field(entry)
+                self.field_spans[id(item)] = (start, self.last_end)
             fields.append(item)
             self.trailing_target = item
             separator = self.take()
@@ -283,13 +349,14 @@ def _apply_field_hints(section: str, entry: Entry) -> None:
 
 
 def parse_eds(text: str) -> EdsDocument:
-    """Parse EDS text (LF, CRLF or CR line ends); raise EdsSyntaxError on malformed text."""
-    text = text.replace("\r\n", "\n").replace("\r", "\n")
-    # A byte-order mark, decoded as Latin-1 or as Unicode, is no part of the text.
-    for mark in ("\ufeff", "\xef\xbb\xbf"):
-        if text.startswith(mark):
-            text = text[len(mark) :]
-    return _Parser(text).parse()
+    """Parse EDS text (LF, CRLF or CR line ends); raise EdsSyntaxError on malformed text.
+
+    The document keeps the text (``doc.source``) and every item its place in it, so that
+    :func:`~cipstack.eds.writer.format_eds` gives the same text back where nothing was edited."""
+    # A byte-order mark, decoded as Latin-1 or as Unicode, is no part of the EDS text; it stays in
+    # the source, ahead of the first chunk, so the file is written back with it.
+    start = next((len(mark) for mark in ("\ufeff", "\xef\xbb\xbf") if text.startswith(mark)), 0)
+    return _Parser(text, start).parse()
 
 
 def decode_eds(data: bytes) -> str:

@@ -36,7 +36,7 @@ def test_sample_is_clean() -> None:
 
 
 def test_written_sample_is_clean() -> None:
-    assert check_eds(parse_eds(format_eds(parse_eds(ADAPTER_EDS))), ACG_IDENTITY) == []
+    assert check_eds(parse_eds(format_eds(parse_eds(ADAPTER_EDS), layout=True)), ACG_IDENTITY) == []
 
 
 def test_messy_sample_is_clean() -> None:

@@ -145,7 +145,7 @@ def test_checker_finds_no_error(name: str) -> None:
 
 def test_round_trip_byte_identical() -> None:
     for name, text in all_texts():
-        assert format_eds(parse_eds(text)) == text, name
+        assert format_eds(parse_eds(text), layout=True) == text, name
         assert text.isascii() and "\r\n" in text and "\n" not in text.replace("\r\n", ""), name
 
 
@@ -458,7 +458,7 @@ def test_generate_all_writes_the_table(profile: str, table: tuple[str, ...], tmp
     assert err == "" and len(out.splitlines()) == len(table)
     for path in tmp_path.iterdir():
         text = path.read_bytes().decode("ascii")
-        assert text == format_eds(parse_eds(text))
+        assert text == format_eds(parse_eds(text), layout=True)
         doc = parse_eds(text)
         assert value(doc, "Device", "ProdName") + ".eds" == path.name
 

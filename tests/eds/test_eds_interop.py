@@ -72,7 +72,7 @@ def test_eds_pie_reads_the_written_sample(cip_eds: Any, eds_pie_log: EdsPieLog) 
 
 
 def test_eds_pie_sees_the_same_values(cip_eds: Any, eds_pie_log: EdsPieLog) -> None:
-    ours = parse_eds(format_eds(parse_eds(ADAPTER_EDS)))
+    ours = parse_eds(format_eds(parse_eds(ADAPTER_EDS), layout=True))
     theirs = cip_eds(format_eds(ours))
     assert list(theirs.sections) == [section.name for section in ours]
     for section in ours:

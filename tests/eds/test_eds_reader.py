@@ -16,7 +16,7 @@ from cipstack.eds.model import (
     semantically_equal,
 )
 from cipstack.eds.reader import EdsSyntaxError, parse_eds, read_eds
-from cipstack.eds.writer import format_eds
+from cipstack.eds.writer import encode_eds, format_eds
 
 from .samples import ADAPTER_EDS, MESSY_EDS
 
@@ -120,15 +120,18 @@ class TestMessyFile:
         assert messy.entry("Device", "VendCode").field(1).comment == "vendor"
         assert messy.trailing_comments == ["closing comment"]
 
-    def test_rewritten_as_ascii_crlf_with_the_same_meaning(self, messy: EdsDocument) -> None:
-        text = format_eds(messy)
-        assert text.isascii()
+    def test_written_back_byte_for_byte(self, messy: EdsDocument) -> None:
+        assert encode_eds(format_eds(messy)) == MESSY_EDS
+
+    def test_laid_out_afresh_as_latin1_crlf_with_the_same_meaning(self, messy: EdsDocument) -> None:
+        text = format_eds(messy, layout=True)
         assert "\n" not in text.replace("\r\n", "")
-        assert '"Variateur ACG pour r\\xE9seau"' in text
-        assert "$ Fichier EDS ecrit a la main" in text
-        again = parse_eds(text)
+        # Latin-1 letters are written as themselves: other readers take "\xE9" literally.
+        assert '"Variateur ACG pour r\xe9seau"' in text and "\\x" not in text
+        assert "$ Fichier EDS \xe9crit \xe0 la main" in text
+        again = parse_eds(encode_eds(text).decode("latin-1"))
         assert semantic_differences(again, messy) == []
-        assert format_eds(again) == text
+        assert format_eds(again, layout=True) == text
 
 
 class TestLexicalDetails:
