@@ -20,8 +20,9 @@ Choices the EDS format leaves open, made once here:
   ``display_name(field)`` ("Ctrl From Net" for ``ctrl_from_net``), with the field's help text,
   and with the declared attribute's link path, type and range when one carries the value in the
   same form (else an empty link path: one link path names one value, and a Hz word is not the
-  rpm attribute). So reading the file back (``interpret.assembly_schema``) gives exactly the
-  device's field names.
+  rpm attribute; empty too for an attribute of an object whose attributes the description
+  declares, but not that one: the device does not serve it). So reading the file back
+  (``interpret.assembly_schema``) gives exactly the device's field names.
 * A scale such as 0.01 Hz is written as multiplier/divider 1/100 (base 1, offset 0) with two
   decimal places, descriptor bit 2 set. Without a scale the scaling fields are empty.
 * Enumerated strings (``EnumN``, descriptor bit 1) are written when the names cover every
@@ -386,6 +387,11 @@ def _member_parameter(item: AssemblyField, output: bool, schema: AssemblySchema,
         elif declared:
             # The field carries the attribute in another form (a Hz word for an rpm attribute): its
             # parameter is not that attribute's value, so it gets no link path of its own.
+            item = replace(item, link=None)
+        elif any(link[:2] == item.link[:2] for link in declared_by_link):
+            # The description declares that object's attributes but not this one: the device does not
+            # serve it (seed 000: Net Control 0x29/5 and Net Reference 0x2A/4 are "N/A"), so a path to
+            # it would be answered 0x14.
             item = replace(item, link=None)
         key: tuple[Any, ...] = ("link", item.name, item.link, item.bits, item.type.code, item.unit, item.scale,
                                 output)

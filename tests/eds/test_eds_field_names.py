@@ -128,6 +128,11 @@ def test_the_issue_names(acg_file: Path, capsys: pytest.CaptureFixture[str]) -> 
     # A declared name the rule maps to the field's is the member's parameter itself: no second one.
     assert by_link[(0x2A, 1, 7)] == ["SpeedActual"]
     assert by_link[(0x29, 1, 7)] == ["Running Forward"]
+    # Attributes the card does not serve (seed 000: Net Control 0x29/5 and Net Reference 0x2A/4 "N/A",
+    # Warning 0x29/11 "Not supported") are named by no link path: the members' parameters have none.
+    assert {(0x29, 1, 5), (0x2A, 1, 4), (0x29, 1, 11)}.isdisjoint(by_link)
+    schema = view.schema(21)
+    assert schema is not None and schema.field("net_ctrl").link is None
 
 
 OMRON_MODELS = ["MX2-A2015-E", "MX2-AB001-E", "RX-A4055-E", "RX-A2004-E"]
