@@ -46,9 +46,9 @@ async def test_acg_connections_of_its_eds() -> None:
             async with scanner.io_connection_from_eds(doc, 1, target_io_port=port) as owner, \
                     scanner.io_connection_from_eds(doc, "Input Only 71", target_io_port=port) as listener:
                 image = await owner.wait_input(lambda i: i.drive_state == 3, timeout=5)  # Ready (0x29/6)
-                assert image.fields()["drive_ready"] in (True, False)
+                assert image.fields()["ready"] in (True, False)
                 await listener.wait_input(lambda i: i.drive_state == 3, timeout=5)
-                owner.output.speedref = 900  # member names come from the parameters (0x2A/8 SpeedRef)
+                owner.output.speed_reference = 900  # the profile's names (field_name of "Speed Reference")
                 connections = adapter.io.connections.values()  # type: ignore[union-attr]
                 assert sorted((c.kind.value, c.consumed.instance_id if c.consumed else 198, c.produced.instance_id)
                               for c in connections) == [("exclusive owner", 21, 71), ("input only", 198, 71)]

@@ -18,7 +18,6 @@ This module knows no drive: a word is described by anything with the attributes 
 
 from __future__ import annotations
 
-import re
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, replace
 from typing import Protocol
@@ -30,6 +29,7 @@ from .drive_profile import (
     extended_speed_control_input,
     extended_speed_control_output,
 )
+from .names import field_name, unique_field_names
 from .schema import AssemblyField, AssemblySchema, word
 
 #: Output (O->T) instances, in CM.24 setting order (seed 000, "CIP Output Instance (CM.24)").
@@ -132,28 +132,22 @@ def speed_input(instance: int, output_frequency: ParameterWord) -> AssemblySchem
     raise KeyError(f"{instance} is not a speed control input of the ACG-ET2")
 
 
-def _identifier(text: str) -> str:
-    name = re.sub(r"[^0-9a-z]+", "_", text.lower()).strip("_")
-    return name if name and not name[0].isdigit() else f"p_{name}"
-
-
 def _parameter_fields(kind: str, cm_first: int, words: Sequence[ParameterWord | None]) -> list[AssemblyField]:
-    fields: list[AssemblyField] = []
-    used: set[str] = set()
+    """One word per register, named by the field-name rule after its code or name; a register
+    named twice gets its word number (``drive_model_4``: the register of CM.54 again)."""
+    described: list[tuple[str, CipType, str, float, str]] = []
     for index, register in enumerate(words):
         number = index + 1
         where = f"{kind} Parameter - {number} data, the register named by CM.{cm_first + index}"
         if register is None:
-            name, cip_type, unit, scale, text = f"{kind.lower()}_parameter_{number}", UINT, "", 1.0, where
+            described.append((f"{kind.lower()}_parameter_{number}", UINT, "", 1.0, where))
         else:
-            name = _identifier(register.code or register.name)
-            cip_type, unit, scale = register.type, register.unit, register.scale
-            text = f"{register.name} (0x{register.address:04X}): {where}"
-        if name in used:
-            name = f"{name}_{number}"
-        used.add(name)
-        fields.append(word(name, 2 * index, cip_type, unit=unit, scale=scale, help=text))
-    return fields
+            described.append((field_name(register.code or register.name) or f"{kind.lower()}_parameter_{number}",
+                              register.type, register.unit, register.scale,
+                              f"{register.name} (0x{register.address:04X}): {where}"))
+    names = unique_field_names(name for name, *_ in described)
+    return [word(name, 2 * index, cip_type, unit=unit, scale=scale, help=text)
+            for index, (name, (_, cip_type, unit, scale, text)) in enumerate(zip(names, described, strict=True))]
 
 
 def control_parameter_output(instance: int, words: Sequence[ParameterWord | None]) -> AssemblySchema:

@@ -85,7 +85,9 @@ def fixed_declarations(profile: str | None, model: str | None, eds: list[Path]) 
                 raise UsageProblem(f"{path}: {exc}") from None
             for param in view.params.values():
                 if param.link is not None:
-                    out.eds_params[tuple(param.link)] = param
+                    # The first parameter of a link names the attribute, as ``adapter --eds`` serves the first:
+                    # a later one is an assembly member's name for the same value ("Faulted" for "Drive Fault").
+                    out.eds_params.setdefault(tuple(param.link), param)
             for info in view.assemblies.values():
                 schema = view.schema(info.instance) if info.instance is not None else None
                 if schema is not None:

@@ -13,10 +13,16 @@ host or dictionary order. The file's dates are, in this order of preference:
 Choices the EDS format leaves open, made once here:
 
 * Parameters are numbered in declaration order, then come the parameters made for assembly
-  fields that link no declared parameter (an unlinked field gets a parameter with an empty
-  link path, and so does a field that carries a declared attribute in another type, unit or
-  scale: one link path names one value), then one ``Requested Packet Interval`` parameter that every connection's RPI
-  fields refer to, its range the device's.
+  fields, then one ``Requested Packet Interval`` parameter that every connection's RPI fields
+  refer to, its range the device's. An assembly member refers to a declared parameter when that
+  parameter carries the field's value in the field's form and its name gives the field's name by
+  ``assemblies.names.field_name``; otherwise to a parameter made for the field: named
+  ``display_name(field)`` ("Ctrl From Net" for ``ctrl_from_net``), with the field's help text,
+  and with the declared attribute's link path, type and range when one carries the value in the
+  same form (else an empty link path: one link path names one value, and a Hz word is not the
+  rpm attribute; empty too for an attribute of an object whose attributes the description
+  declares, but not that one: the device does not serve it). So reading the file back
+  (``interpret.assembly_schema``) gives exactly the device's field names.
 * A scale such as 0.01 Hz is written as multiplier/divider 1/100 (base 1, offset 0) with two
   decimal places, descriptor bit 2 set. Without a scale the scaling fields are empty.
 * Enumerated strings (``EnumN``, descriptor bit 1) are written when the names cover every
@@ -46,6 +52,7 @@ from decimal import Decimal
 from fractions import Fraction
 from typing import Any
 
+from ..assemblies.names import display_name, field_name
 from ..assemblies.schema import AssemblyField, AssemblySchema
 from ..cip.epath import LogicalSegment, LogicalType, encode_path, request_path
 from ..cip.types import BOOL, UDINT, UINT, USINT, IntegerType, RealType
@@ -282,10 +289,6 @@ def _add_param(section: Section, number: int, param: EdsParameter) -> None:
 
 # -- assembly members --------------------------------------------------------------------------------
 
-def _title(name: str) -> str:
-    return " ".join(word.capitalize() for word in name.replace("_", " ").split())
-
-
 def _compatible(param: EdsParameter, item: AssemblyField) -> bool:
     """Whether an assembly field carries the value of a declared parameter as that parameter
     describes it (a flag of a BOOL attribute, or a word of the same size, unit and scale)."""
@@ -294,14 +297,19 @@ def _compatible(param: EdsParameter, item: AssemblyField) -> bool:
     return param.type.size == item.type.size and param.unit == item.unit and param.scale == item.scale
 
 
-def _field_parameter(item: AssemblyField, output: bool) -> EdsParameter:
-    """A parameter for an assembly field that links no declared parameter."""
+def _field_parameter(item: AssemblyField, output: bool, same_value: EdsParameter | None = None) -> EdsParameter:
+    """The parameter made for an assembly field: named after the field, with its help text. With
+    ``same_value`` (a declared parameter carrying the field's value in the same form under another
+    name), that parameter's link, type, range and enumeration; else the field's own."""
+    if same_value is not None:
+        return replace(same_value, name=display_name(item.name), help=item.help or same_value.help, group="",
+                       monitor=not output)
     cip_type = BOOL if item.bits == 1 else item.type
     if item.bits > 1:
         # A multi-bit field: the smallest unsigned integer type that holds it.
         cip_type = USINT if item.bits <= 8 else UINT if item.bits <= 16 else UDINT
     return EdsParameter(
-        name=_title(item.name), type=cip_type, link=item.link, settable=output, monitor=not output,
+        name=display_name(item.name), type=cip_type, link=item.link, settable=output, monitor=not output,
         scale=item.scale, unit=item.unit, help=item.help,
         maximum=(1 << item.bits) - 1 if item.bits > 1 else None,
     )
@@ -353,22 +361,44 @@ def _plan(description: EdsDescription) -> _Plan:
 
 def _member_parameter(item: AssemblyField, output: bool, schema: AssemblySchema, params: list[EdsParameter],
                       declared_by_link: dict[Link, list[int]], made: dict[tuple[Any, ...], int]) -> int:
+    """The index in ``params`` of the parameter an assembly member refers to (see the module docstring).
+
+    The device's manuals name one value twice: seed 000 calls Control Supervisor attribute 10
+    "Drive Fault" in its object table and "Faulted" in the input instance table; Omron's Table D-4
+    has "Run1" where Tables B-1/B-2 have "FWD". Both names are right where they stand. The declared
+    attribute's parameter keeps the object table's name, which explicit access shows and a user
+    looks up in the object table; the member's parameter takes the assembly field's name (the
+    name scripts use for the I/O data, kept stable), and both carry the same link path, so a
+    configuration tool and ``adapter --eds`` see one attribute under its two names.
+    """
+    name = display_name(item.name)
+    if field_name(name) != item.name:
+        raise ValueError(f"assembly {schema.instance}: field {item.name!r} is not in field-name form "
+                         f"(the rule gives {field_name(item.name)!r}): an EDS could not give it back")
+    same_value: EdsParameter | None = None
     if item.link is not None:
         declared = declared_by_link.get(item.link, ())
-        for index in declared:
-            if _compatible(params[index], item):
-                return index
-        if declared:
+        compatible = [index for index in declared if _compatible(params[index], item)]
+        for index in compatible:
+            if field_name(params[index].name) == item.name:
+                return index  # the attribute's own name is the field's: one parameter for both
+        if compatible:
+            same_value = params[compatible[0]]
+        elif declared:
             # The field carries the attribute in another form (a Hz word for an rpm attribute): its
             # parameter is not that attribute's value, so it gets no link path of its own.
-            key: tuple[Any, ...] = ("other form", item.link, item.bits, item.type.code, item.unit, item.scale, output)
             item = replace(item, link=None)
-        else:
-            key = ("link", item.link, item.bits, item.type.code, item.unit, item.scale, output)
+        elif any(link[:2] == item.link[:2] for link in declared_by_link):
+            # The description declares that object's attributes but not this one: the device does not
+            # serve it (seed 000: Net Control 0x29/5 and Net Reference 0x2A/4 are "N/A"), so a path to
+            # it would be answered 0x14.
+            item = replace(item, link=None)
+        key: tuple[Any, ...] = ("link", item.name, item.link, item.bits, item.type.code, item.unit, item.scale,
+                                output)
     else:
         key = ("field", schema.instance, item.name)
     if key not in made:
-        params.append(_field_parameter(item, output))
+        params.append(_field_parameter(item, output, same_value))
         made[key] = len(params) - 1
     return made[key]
 

@@ -17,6 +17,7 @@ from collections.abc import Mapping
 from dataclasses import dataclass, field, replace
 from typing import Any
 
+from ..assemblies.names import field_name, unique_field_names
 from ..assemblies.schema import AssemblyField, AssemblySchema
 from ..cip.epath import ElectronicKey, LogicalSegment, LogicalType, PortSegment, decode_path
 from ..cip.status import CipError
@@ -362,35 +363,30 @@ def read_assemblies(doc: EdsDocument, params: Mapping[str, ParamInfo],
     return out
 
 
-def _identifier(text: str, used: set[str]) -> str:
-    name = re.sub(r"[^0-9a-z]+", "_", text.lower()).strip("_") or "member"
-    if name[0].isdigit():
-        name = f"m_{name}"
-    base, count = name, 2
-    while name in used:
-        name, count = f"{base}_{count}", count + 1
-    used.add(name)
-    return name
+def _member_name(reference: str, params: Mapping[str, ParamInfo]) -> str:
+    param = params.get(reference)
+    return (field_name(param.name) if param is not None else "") or field_name(reference)
 
 
 def assembly_schema(info: AssemblyInfo, params: Mapping[str, ParamInfo]) -> AssemblySchema | None:
     """The members of an assembly as named fields, or None when they cannot be (no instance, no
     members, a member that crosses a byte boundary without filling whole bytes).
 
-    A member referring to a parameter is named after it; it keeps the parameter's link when it
+    A member referring to a parameter is named after it by ``field_name`` (a parameter without a
+    usable name, or a member naming an assembly, after its keyword: ``param12``), repeats made
+    distinct by ``unique_field_names``: the rule the profiles' own field names follow, so the EDS
+    of a device and its profile give one set of names. A member keeps the parameter's link when it
     carries that parameter's value whole (a 1-bit member of a BOOL or integer, or whole bytes of
     the parameter's own size), which is what the emulator and the scanner decode by.
     """
     if info.instance is None or not info.members:
         return None
     fields: list[AssemblyField] = []
-    used: set[str] = set()
-    for member in info.members:
-        param = params.get(member.reference) if member.reference else None
-        if member.reference is None or member.bits == 0:
-            continue  # padding
+    named = [member for member in info.members if member.reference is not None and member.bits]  # the rest: padding
+    names = unique_field_names(_member_name(member.reference or "", params) for member in named)
+    for member, name in zip(named, names, strict=True):
+        param = params.get(member.reference or "")
         offset, bit = divmod(member.start_bit, 8)
-        name = _identifier(param.name if param is not None and param.name else member.reference, used)
         unit, scale_help = (param.unit, param.help) if param is not None else ("", "")
         if bit + member.bits <= 8 and member.bits < 8:
             whole = param is not None and isinstance(param.type, IntegerType) and (

@@ -80,5 +80,5 @@ def test_list_fields_names_what_set_and_the_input_take(tmp_path: Path) -> None:
     assert result.returncode == 0, result.stderr
     lines = result.stdout.splitlines()
     assert lines[0] == "output (O->T): assembly 21 'Extended Speed Control Output', 4 bytes"
-    assert any(line.split()[:4] == ["speedref", "byte", "2", "INT"] for line in lines)
+    assert any(line.split()[:4] == ["speed_reference", "byte", "2", "INT"] for line in lines)
     assert "input (T->O): assembly 71 'Extended Speed Control Input', 4 bytes" in lines

@@ -356,15 +356,43 @@ def test_componet_io_sizes_of_section_3_4_example() -> None:
 
 
 def test_members_reference_declared_attribute() -> None:
-    speed = AttributeSpec(8, "SpeedRef", INT, Access.GET_SET, default=0, unit="rpm", help="Speed reference")
+    # A declared attribute whose name gives the field's name ("Speed Reference": speed_reference) is
+    # the member's parameter itself, not a copy.
+    speed = AttributeSpec(8, "Speed Reference", INT, Access.GET_SET, default=0, unit="rpm", help="Speed reference")
     declared = EdsParameter.from_attribute(speed, (0x2A, 1, 8), group="AC/DC Drive")
-    description = acg_et2_description(attributes=[declared])
-    doc = generate_eds(description)
+    doc = generate_eds(acg_et2_description(attributes=[declared]))
     assem = doc.entry("Assembly", "Assem21")
     assert assem is not None
-    assert assem.fields[-1].value == "Param1"  # the speed word is the declared attribute, not a copy
+    assert assem.fields[-1].value == "Param1"
     assert value(doc, "Params", "Param1") == 0
+    assert doc.entry("Params", "Param1").value(7) == "Speed Reference"  # type: ignore[union-attr]
+
+
+def test_a_member_under_another_name_gets_its_own_parameter_with_the_same_link() -> None:
+    # The attribute as the object table names it ("SpeedRef" gives speed_ref) keeps its name; the
+    # member gets a parameter named after the field, with the attribute's link, type and range.
+    speed = AttributeSpec(8, "SpeedRef", INT, Access.GET_SET, default=0, minimum=0, maximum=24000, unit="rpm",
+                          help="Speed reference in rpm")
+    declared = EdsParameter.from_attribute(speed, (0x2A, 1, 8), group="AC/DC Drive")
+    doc = generate_eds(acg_et2_description(attributes=[declared]))
+    assem = doc.entry("Assembly", "Assem21")
+    assert assem is not None
+    member = doc.entry("Params", assem.fields[-1].value)
+    assert member is not None and assem.fields[-1].value != "Param1"
     assert doc.entry("Params", "Param1").value(7) == "SpeedRef"  # type: ignore[union-attr]
+    assert (member.value(7), member.value(9)) == ("Speed Reference", "Speed reference")
+    assert member.value(3) == doc.entry("Params", "Param1").value(3) == (0x20, 0x2A, 0x24, 0x01, 0x30, 0x08)  # type: ignore[union-attr]
+    assert (member.value(5), member.value(10), member.value(11)) == (0xC3, 0, 24000)
+    # Every other assembly with that field refers to the same member parameter.
+    assert doc.entry("Assembly", "Assem20").fields[-1].value == assem.fields[-1].value  # type: ignore[union-attr]
+
+
+def test_a_field_name_the_rule_would_change_is_refused() -> None:
+    bad = AssemblySchema(21, "Output", 2, [word("SpeedRef", 0, UINT)])
+    description = acg_et2_description(outputs=[bad], inputs=[extended_speed_control_input(71)],
+                                      io=IoOffer(pairs=((21, 71),)))
+    with pytest.raises(ValueError, match="'SpeedRef' is not in field-name form"):
+        generate_eds(description)
 
 
 def test_io_offer_from_io_profile() -> None:
