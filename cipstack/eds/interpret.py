@@ -125,6 +125,8 @@ class ConnectionInfo:
     o_t_assembly: str | None = None
     t_o_assembly: str | None = None
     line: int = 0
+    #: The configuration assembly of field 12 (its keyword), when the field names an AssemN.
+    config_assembly: str | None = None
 
     @property
     def heartbeat(self) -> bool:
@@ -451,7 +453,7 @@ def _connection(entry: Entry, number: int, params: Mapping[str, ParamInfo], asse
         issues.append(EdsIssue(entry.line_of(1), f"{keyword}: redundant owner connections are not supported: "
                                                  "skipped"))
         return None
-    o_t_name, t_o_name = _keyword(entry.field(5)), _keyword(entry.field(8))
+    o_t_name, t_o_name, config_name = _keyword(entry.field(5)), _keyword(entry.field(8)), _keyword(entry.field(12))
     o_t_assembly, t_o_assembly = assemblies.get(o_t_name or ""), assemblies.get(t_o_name or "")
     path, why = _path_bytes(entry, 15, params)
     if path is None:
@@ -519,7 +521,7 @@ def _connection(entry: Entry, number: int, params: Mapping[str, ParamInfo], asse
     return ConnectionInfo(
         number, _text(entry.field(13)) or keyword, kind, config, o_t, t_o, o_t_size, t_o_size, rpi, rpi_min, rpi_max,
         bool(t_o_types & TYPE_MULTICAST), bool(t_o_types & TYPE_POINT_TO_POINT) or not t_o_types, triggers,
-        o_t_name, t_o_name, entry.line)
+        o_t_name, t_o_name, entry.line, config_name if config_name in assemblies else None)
 
 
 def read_connections(doc: EdsDocument, params: Mapping[str, ParamInfo], assemblies: Mapping[str, AssemblyInfo],
@@ -542,15 +544,18 @@ def place_assemblies(assemblies: Mapping[str, AssemblyInfo], connections: list[C
                      issues: list[EdsIssue]) -> dict[str, AssemblyInfo]:
     """Give an assembly written with an empty path (``Assem100 = "Input", "", 32, ...``: most files
     do) the instance the connection paths name for it: the O->T point of the connections whose
-    field 5 names it, the T->O point of those whose field 8 does. Its own path wins when it has one;
-    the AssemN number is not taken for an instance (only the paths say where data goes). Connections
-    that name it as two instances: not placed, one issue."""
+    field 5 names it, the T->O point of those whose field 8 does, the configuration instance of
+    those whose field 12 does. Its own path wins when it has one; the AssemN number is not taken
+    for an instance (only the paths say where data goes). Connections that name it as two
+    instances: not placed, one issue."""
     named: dict[str, set[int]] = {}
     for connection in connections:
         if connection.o_t_assembly and not connection.heartbeat:
             named.setdefault(connection.o_t_assembly, set()).add(connection.o_t_point)
         if connection.t_o_assembly:
             named.setdefault(connection.t_o_assembly, set()).add(connection.t_o_point)
+        if connection.config_assembly:
+            named.setdefault(connection.config_assembly, set()).add(connection.config)
     placed = dict(assemblies)
     for keyword, info in assemblies.items():
         points = named.get(keyword, set())

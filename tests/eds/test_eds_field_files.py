@@ -12,6 +12,7 @@ from __future__ import annotations
 import argparse
 import io
 import re
+import signal
 import socket
 import subprocess
 import sys
@@ -270,27 +271,36 @@ def test_the_adapter_says_what_it_skips(adapter: Adapter) -> None:
 def test_each_offered_connection_runs_with_cipstack_io(adapter: Adapter) -> None:
     """Every connection the adapter offers exchanges data with `cipstack io --eds`; those of a round
     run at once. A listen-only connection runs while a connection of the file that produces the same
-    input by multicast (its owner) runs."""
+    input by multicast (its owner) runs: the owner runs until its listeners are done, then stops as
+    Ctrl-C stops it (exit 130, after closing and printing its statistics)."""
     view = read_view(read_eds(adapter.path))
     offered = [c for c in view.connections if c.number in EXPECTED[adapter.path.name].offered]
     listeners = [c for c in offered if c.kind == "listen only"]
     owners = {c.number: next(o for o in offered if o.kind != "listen only" and o.t_o_point == c.t_o_point
                              and o.t_o_multicast and not o.t_o_point_to_point) for c in listeners}
     results: dict[int, subprocess.CompletedProcess[str]] = {}
+    interrupted: set[int] = set()
+
+    def collect(number: int, process: subprocess.Popen[str]) -> None:
+        stdout, stderr = process.communicate(timeout=60)
+        results[number] = subprocess.CompletedProcess(process.args, process.returncode, stdout, stderr)
+
     for batch in _rounds([c for c in offered if c.kind != "listen only"]):
         serving = [o for o in batch if o in owners.values()]
-        running = {c.number: _io(adapter, c.number, 3.0 if serving else 0.5) for c in batch}
-        if serving:
-            for owner in serving:
-                adapter.wait_for(rf"->{owner.t_o_point} \(0x[0-9A-F]+\) opened .*multicast")
-            for number in [n for n, o in owners.items() if o in serving]:
-                running[number] = _io(adapter, number, 0.5)
+        running = {c.number: _io(adapter, c.number, 30.0 if c in serving else 0.5) for c in batch}
+        for owner in serving:
+            adapter.wait_for(rf"->{owner.t_o_point} \(0x[0-9A-F]+\) opened .*multicast")
+        listening = {n: _io(adapter, n, 0.5) for n, o in owners.items() if o in serving}
+        for number, process in listening.items():
+            collect(number, process)
+        for owner in serving:
+            running[owner.number].send_signal(signal.SIGINT)
+            interrupted.add(owner.number)
         for number, process in running.items():
-            stdout, stderr = process.communicate(timeout=60)
-            results[number] = subprocess.CompletedProcess(process.args, process.returncode, stdout, stderr)
+            collect(number, process)
     assert sorted(results) == EXPECTED[adapter.path.name].offered
     for number, result in sorted(results.items()):
-        assert result.returncode == 0, f"Connection{number}: {result.stderr}"
+        assert result.returncode == (130 if number in interrupted else 0), f"Connection{number}: {result.stderr}"
         stats = next(line for line in result.stdout.splitlines() if line.startswith("sent "))
         assert int(stats.split()[3]) > 10, f"Connection{number}: {stats}"
 
@@ -371,3 +381,47 @@ def test_list_fields_names_what_set_and_the_input_take(tmp_path: Path) -> None:
     assert lines[0] == "output (O->T): assembly 21 'Extended Speed Control Output', 4 bytes"
     assert any(line.split()[:4] == ["speedref", "byte", "2", "INT"] for line in lines)
     assert "input (T->O): assembly 71 'Extended Speed Control Input', 4 bytes" in lines
+
+
+# -- configuration assemblies ---------------------------------------------------------------------------
+
+def test_a_configuration_assembly_without_a_path_is_the_configuration_instance_of_its_connection() -> None:
+    view = read_view(read_eds(DIRECTORY / "ez_style_comm_module.eds"))
+    assert view.connection(1).config_assembly == "Assem128" and view.connection(1).config == 0x80
+    assert (view.assemblies["Assem128"].instance, view.assemblies["Assem128"].size) == (0x80, 8)
+    # Field 12 may name a parameter (Connection2): no assembly is placed for it.
+    assert view.connection(2).config_assembly is None and view.connection(2).config == 0x81
+
+
+async def test_the_configuration_data_of_a_forward_open_goes_to_the_configuration_assembly() -> None:
+    from cipstack.adapter import Adapter as Target
+    from cipstack.adapter import AdapterSettings
+    from cipstack.cip.status import CipError, ExtendedStatus
+    from cipstack.objects.tcpip import NetworkInterface
+    from cipstack.scanner import Scanner
+
+    doc = read_eds(DIRECTORY / "ez_style_comm_module.eds")
+    device = build_eds_device(doc, NetworkInterface(ip_address="127.0.0.1"))
+    target = Target(AdapterSettings(host="127.0.0.1", port=0, io_port=0), device=device)
+    await target.start()
+    try:
+        assert target.io_endpoint is not None
+        io_port = target.io_endpoint.port
+        settings = bytes(range(1, 9))
+        async with await Scanner.connect(f"127.0.0.1:{target.port}") as scanner:
+            # Instance 0x80 is the configuration point, not an output a connection may own.
+            assert 0x80 not in device.io_profile().consumed()  # type: ignore[union-attr]
+            async with scanner.io_connection_from_eds(doc, 1, target_io_port=io_port, config_data=settings) as io:
+                await io.wait_input(lambda image: True, timeout=5)
+            assert (await scanner.get_attribute_single(0x04, 0x80, 3)).data == settings
+            # Another size is refused (0x0126), and so is data for a configuration instance that is
+            # no assembly (Connection2's is a parameter); the assembly keeps what it had.
+            for number, data, status in ((1, settings[:6], ExtendedStatus.INVALID_CONFIGURATION_SIZE),
+                                         (2, b"\x01\x00", ExtendedStatus.INVALID_CONFIGURATION_PATH)):
+                with pytest.raises(CipError) as refused:
+                    async with scanner.io_connection_from_eds(doc, number, target_io_port=io_port, config_data=data):
+                        pass
+                assert refused.value.extended[:1] == (status,)
+            assert (await scanner.get_attribute_single(0x04, 0x80, 3)).data == settings
+    finally:
+        await target.close()
