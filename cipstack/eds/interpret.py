@@ -237,7 +237,7 @@ def _param(entry: Entry, enum_entry: Entry | None, issues: list[EdsIssue]) -> Pa
     elif path:
         link, why = _link(path)
         if link is None:
-            issues.append(EdsIssue(entry.line_of(3), f"{keyword}: link path {path.hex(' ')}: {why}; "
+            issues.append(EdsIssue(entry.line_of(3), f"{keyword}: link path {path.hex(' ').upper()}: {why}; "
                                                      "served by no attribute"))
     enum: dict[int, str] | None = None
     if enum_entry is not None:
@@ -311,8 +311,8 @@ def _assembly(entry: Entry, params: Mapping[str, ParamInfo], sizes: Mapping[str,
                      and s.kind is LogicalType.INSTANCE_ID]
         classes = [s.value for s in segments or () if isinstance(s, LogicalSegment) and s.kind is LogicalType.CLASS_ID]
         if segments is None or classes != [0x04] or len(instances) != 1:
-            issues.append(EdsIssue(entry.line_of(2), f"{keyword}: path {path.hex(' ')} is not an Assembly instance: "
-                                                     "skipped"))
+            issues.append(EdsIssue(entry.line_of(2), f"{keyword}: path {path.hex(' ').upper()} is not an Assembly "
+                                                     "instance: skipped"))
             return None
         instance = instances[0]
     members: list[AssemblyMember] = []
@@ -469,10 +469,10 @@ def _connection(entry: Entry, number: int, params: Mapping[str, ParamInfo], asse
         elif isinstance(segment, LogicalSegment) and segment.kind is LogicalType.CONNECTION_POINT:
             points.append(segment.value)
         elif not isinstance(segment, (ElectronicKey, PortSegment)):
-            bad = True  # configuration data (a data segment): this target takes none
+            bad = True  # a data segment: configuration data are sent by the originator, not the file
     if path and (bad or not points):
-        issues.append(EdsIssue(entry.line_of(15), f"{keyword}: path {path.hex(' ')} is not an assembly connection "
-                                                  "path: skipped"))
+        issues.append(EdsIssue(entry.line_of(15), f"{keyword}: path {path.hex(' ').upper()} is not an assembly "
+                                                  "connection path: skipped"))
         return None
     if len(points) == 3:
         config, points = points[0], points[1:]

@@ -62,14 +62,17 @@ EXPECTED: dict[str, Expected] = {
         check_warnings=[(194, "unquoted-value")], offered=[1, 2, 3, 4, 5, 6], ethernetip=[1]),
     "hand_smart_sensor.eds": Expected(offered=[1, 2, 3], ethernetip=[1]),
     "hand_valve_manifold.eds": Expected(
-        skipped=[(50, "Assem110 has no path and its connections name it as instances 110, 111: not served"),
-                 (59, "Connection3: redundant owner connections are not supported: skipped"),
-                 (62, "Connection4: transport 0x0008 is not class 1: skipped"),
-                 (67, "Connection5: path 20 04 24 01 2c 64 2c 65 80 01 0f 00 is not an assembly connection path: "
+        check_warnings=[(81, "connection-path")],
+        skipped=[(51, "Assem110 has no path and its connections name it as instances 110, 111: not served"),
+                 (52, "Assem120 has no path and no connection names it: not served"),
+                 (61, "Connection3: redundant owner connections are not supported: skipped"),
+                 (64, "Connection4: transport 0x0008 is not class 1: skipped"),
+                 (69, "Connection5: path 20 04 24 01 2C 64 2C 65 80 01 0F 00 is not an assembly connection path: "
                       "skipped"),
-                 (70, "Connection6: path: path item [Param5] has no byte value as its default: skipped"),
-                 (71, "Connection7 (Diagnostics A): T->O point 110 is no input assembly: not offered"),
-                 (74, "Connection8 (Diagnostics B): T->O point 111 is no input assembly: not offered")],
+                 (72, "Connection6: path: path item [Param5] has no byte value as its default: skipped"),
+                 (73, "Connection7 (Diagnostics A): T->O point 110 is no input assembly: not offered"),
+                 (76, "Connection8 (Diagnostics B): T->O point 111 is no input assembly: not offered"),
+                 (79, "Connection9 (Owner Of 103): T->O point 103 is no input assembly: not offered")],
         offered=[1, 2], ethernetip=[1]),
 }
 WITH_CONNECTIONS = [path for path in FILES if read_eds(path).get("Connection Manager")]
@@ -190,6 +193,16 @@ def test_an_assembly_without_a_path_takes_the_instance_its_connection_path_names
     assert {k: (a.instance, a.size) for k, a in view.assemblies.items()} == {"Assem100": (100, 4),
                                                                              "Assem150": (150, 2)}
     assert view.issues == []
+
+
+def test_an_assembly_path_wins_over_its_number_and_over_a_connection_path_that_disagrees() -> None:
+    """Assem2's path names instance 100 (its number is no instance); Connection9 names Assem101 (instance
+    101 by its path) for T->O but its path says 0x67: the assembly stays at 101, eds check warns, and
+    the connection is not offered, as the point its path names is no assembly."""
+    view = read_view(read_eds(DIRECTORY / "hand_valve_manifold.eds"))
+    assert (view.assemblies["Assem2"].instance, view.assemblies["Assem101"].instance) == (100, 101)
+    assert (view.connection(9).t_o_assembly, view.connection(9).t_o_point) == ("Assem101", 0x67)
+    assert view.connection(1).config == 0x66   # "20 04 24 [Param4] ...": Param4's default
 
 
 class Adapter:
@@ -425,3 +438,10 @@ async def test_the_configuration_data_of_a_forward_open_goes_to_the_configuratio
             assert (await scanner.get_attribute_single(0x04, 0x80, 3)).data == settings
     finally:
         await target.close()
+
+
+def test_the_readme_shows_what_the_adapter_prints_for_the_manifold() -> None:
+    readme = (Path(__file__).parents[2] / "README.md").read_text(encoding="utf-8")
+    shown = [line for line in readme.splitlines() if line.startswith("cipstack adapter: hand_valve_manifold.eds:")]
+    assert shown == [f"cipstack adapter: hand_valve_manifold.eds:{line}: warning: {message}"
+                     for line, message in EXPECTED["hand_valve_manifold.eds"].skipped]
