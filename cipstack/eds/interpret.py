@@ -469,7 +469,7 @@ def _connection(entry: Entry, number: int, params: Mapping[str, ParamInfo], asse
         elif isinstance(segment, LogicalSegment) and segment.kind is LogicalType.CONNECTION_POINT:
             points.append(segment.value)
         elif not isinstance(segment, (ElectronicKey, PortSegment)):
-            bad = True  # a data segment: configuration data are sent by the originator, not the file
+            bad = True  # a data segment (configuration data written into the path): not offered
     if path and (bad or not points):
         issues.append(EdsIssue(entry.line_of(15), f"{keyword}: path {path.hex(' ').upper()} is not an assembly "
                                                   "connection path: skipped"))
