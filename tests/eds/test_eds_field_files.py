@@ -38,12 +38,12 @@ FILES = sorted(DIRECTORY.glob("*.eds"))
 
 @dataclass(frozen=True)
 class Expected:
-    """What a corpus file is expected to give: the warnings of `eds check` (line, rule), what
+    """What a corpus file is expected to give: the warnings of `eds check` (line, rule, message), what
     `adapter --eds` skips (line, message), the connections it offers, and those python-ethernetip
     opens (it sends a run/idle header, takes point-to-point T->O only, Forward_Open sizes, instances
     up to 255)."""
 
-    check_warnings: list[tuple[int, str]] = field(default_factory=list)
+    check_warnings: list[tuple[int, str, str]] = field(default_factory=list)
     skipped: list[tuple[int, str]] = field(default_factory=list)
     offered: list[int] = field(default_factory=list)
     ethernetip: list[int] = field(default_factory=list)
@@ -59,10 +59,12 @@ EXPECTED: dict[str, Expected] = {
         offered=[1, 2], ethernetip=[1]),
     "ez_style_servo_large.eds": Expected(offered=[1, 2]),
     "hand_drive_oelpumpe.eds": Expected(
-        check_warnings=[(194, "unquoted-value")], offered=[1, 2, 3, 4, 5, 6], ethernetip=[1]),
+        check_warnings=[(194, "unquoted-value", 'Port1: unquoted value 20 F5 24 01 read as the path "20 F5 24 01"')],
+        offered=[1, 2, 3, 4, 5, 6], ethernetip=[1]),
     "hand_smart_sensor.eds": Expected(offered=[1, 2, 3], ethernetip=[1]),
     "hand_valve_manifold.eds": Expected(
-        check_warnings=[(81, "connection-path")],
+        check_warnings=[(81, "connection-path",
+                         "Connection9 T->O connection point is 103 but Assem101 is instance 101")],
         skipped=[(51, "Assem110 has no path and its connections name it as instances 110, 111: not served"),
                  (52, "Assem120 has no path and no connection names it: not served"),
                  (61, "Connection3: redundant owner connections are not supported: skipped"),
@@ -149,11 +151,9 @@ def _is_utf8_text(data: bytes) -> bool:
 def test_eds_check_finds_no_error_and_the_expected_warnings(path: Path) -> None:
     out = io.StringIO()
     status = run_check(argparse.Namespace(files=[str(path)], json=False), stdout=out, stderr=out)
-    findings = [re.match(r".*?:(\d+): (\w+) ([\w-]+): ", line).groups()  # type: ignore[union-attr]
-                for line in out.getvalue().splitlines()]
     assert status == 0, out.getvalue()
-    assert [(int(line), rule) for line, severity, rule in findings if severity == "warning"] == \
-        EXPECTED[path.name].check_warnings, out.getvalue()
+    assert out.getvalue().splitlines() == [f"{path}:{line}: warning {rule}: {message}"
+                                           for line, rule, message in EXPECTED[path.name].check_warnings]
 
 
 @pytest.mark.parametrize("path", FILES, ids=_ids(FILES))
