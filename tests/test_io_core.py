@@ -33,7 +33,7 @@ from cipstack.eip.io_core import (
     seq16_newer,
     seq32_newer,
 )
-from cipstack.eip.io_originator import class1_path
+from cipstack.eip.io_originator import Class1Request, OtFormat, class1_path
 from cipstack.eip.io_target import ConnectionKind, IoConnection, IoProfile, IoTarget
 from cipstack.objects.assembly import AssemblyPoint
 
@@ -300,3 +300,16 @@ def test_identity_status_follows_io(tmp_path: object) -> None:
     assert device.identity.status == 0x0061  # owned, running
     rig.io.expire(100.0)
     assert device.identity.status == 0x0020  # I/O connection faulted (timed out)
+
+
+def test_a_connection_past_511_bytes_is_opened_with_large_forward_open() -> None:
+    """A Forward_Open's network parameters hold 9 bits of size: one byte more (sequence count, run/idle
+    header and data, or T->O sequence count and data) needs the Large_Forward_Open."""
+    def request(output: int | None, input_size: int) -> Class1Request:
+        return Class1Request(output, input_size, 10_000, 10_000, b"",
+                             ot_format=OtFormat.RUN_IDLE if output is not None else OtFormat.HEARTBEAT)
+
+    assert request(505, 4).ot_size == 511 and not request(505, 4).large_forward_open
+    assert request(506, 4).large_forward_open
+    assert not request(None, 509).large_forward_open and request(None, 510).large_forward_open
+    assert request(4, 4).ot_size == 10 and not request(4, 4).large_forward_open

@@ -19,6 +19,9 @@
   input-only and listen-only heartbeat points, the configuration instances, the triggers and the
   RPI range of the connections (the target's defaults where the file gives none), and
   ``[Capacity] MaxIOConnections``.
+* A configuration instance that is an assembly (its own path, or field 12 naming it) takes the
+  configuration data of a Forward_Open of its size (``IoProfile.config_sizes``), as an output
+  takes O->T data; it is no connection point unless a connection's path makes it one.
 
 What cannot be served is skipped and listed in ``EdsDevice.issues`` (one ``EdsIssue`` each), never
 raised. A document without ``[Device]`` is not an EDS: ``EdsDeviceError``.
@@ -242,10 +245,15 @@ def _add_assemblies(device: EdsDevice, view: EdsView, issues: list[EdsIssue]) ->
     o_t_points = {c.o_t_point for c in view.connections if not c.heartbeat}
     t_o_points = {c.t_o_point for c in view.connections}
     heartbeats = {c.o_t_point for c in view.connections if c.heartbeat}
+    configs = {c.config for c in view.connections}
     points: dict[int, AssemblyPoint] = {}
     for info in view.assemblies.values():
         if info.instance is None:
-            continue  # no path, and no connection names it: nothing says where it is
+            # No path, and no connection names it (or names it twice: place_assemblies said so).
+            if not any(issue.line == info.line for issue in view.issues):
+                issues.append(EdsIssue(info.line, f"{info.keyword} has no path and no connection names it: "
+                                                  "not served"))
+            continue
         if info.size == 0:
             if info.instance not in heartbeats:
                 issues.append(EdsIssue(info.line, f"{info.keyword}: an assembly of size 0 that no connection uses as "
@@ -262,8 +270,8 @@ def _add_assemblies(device: EdsDevice, view: EdsView, issues: list[EdsIssue]) ->
         if info.instance in o_t_points and info.instance in t_o_points:
             issues.append(EdsIssue(info.line, f"{info.keyword}: connections both consume and produce instance "
                                               f"{info.instance}: served as an output"))
-        if info.instance in o_t_points:
-            output = True
+        if info.instance in o_t_points or info.instance in configs:
+            output = True   # a configuration assembly takes the Forward_Open's configuration data
         elif info.instance in t_o_points:
             output = False
         else:
@@ -362,10 +370,14 @@ def _io_profile(doc: EdsDocument, view: EdsView, points: Mapping[int, AssemblyPo
     if low < 1 or high < low:
         issues.append(EdsIssue(0, f"RPI range {low}..{high} us is empty: the target's default range is served"))
         low, high = defaults.rpi_min_us, defaults.rpi_max_us
+    # A configuration instance that is an assembly takes configuration data, and is no I/O point
+    # unless a connection sends or produces it.
+    io_points = {c.o_t_point for c in view.connections} | {c.t_o_point for c in view.connections}
+    configurations = {i: p.size for i, p in points.items() if i in config and i not in io_points}
     return IoProfile(
-        consumed=lambda: {i: p for i, p in points.items() if p.consumed},
+        consumed=lambda: {i: p for i, p in points.items() if p.consumed and i not in configurations},
         produced=lambda: {i: p for i, p in points.items() if not p.consumed},
-        config_instances=frozenset(config),
+        config_instances=frozenset(config), config_sizes=lambda: configurations,
         input_only_point=heartbeat.get("input only", defaults.input_only_point),
         listen_only_point=heartbeat.get("listen only", defaults.listen_only_point),
         rpi_min_us=low, rpi_max_us=high,

@@ -126,6 +126,8 @@ class ConnectionInfo:
     o_t_assembly: str | None = None
     t_o_assembly: str | None = None
     line: int = 0
+    #: The configuration assembly of field 12 (its keyword), when the field names an AssemN.
+    config_assembly: str | None = None
 
     @property
     def heartbeat(self) -> bool:
@@ -236,7 +238,7 @@ def _param(entry: Entry, enum_entry: Entry | None, issues: list[EdsIssue]) -> Pa
     elif path:
         link, why = _link(path)
         if link is None:
-            issues.append(EdsIssue(entry.line_of(3), f"{keyword}: link path {path.hex(' ')}: {why}; "
+            issues.append(EdsIssue(entry.line_of(3), f"{keyword}: link path {path.hex(' ').upper()}: {why}; "
                                                      "served by no attribute"))
     enum: dict[int, str] | None = None
     if enum_entry is not None:
@@ -310,8 +312,8 @@ def _assembly(entry: Entry, params: Mapping[str, ParamInfo], sizes: Mapping[str,
                      and s.kind is LogicalType.INSTANCE_ID]
         classes = [s.value for s in segments or () if isinstance(s, LogicalSegment) and s.kind is LogicalType.CLASS_ID]
         if segments is None or classes != [0x04] or len(instances) != 1:
-            issues.append(EdsIssue(entry.line_of(2), f"{keyword}: path {path.hex(' ')} is not an Assembly instance: "
-                                                     "skipped"))
+            issues.append(EdsIssue(entry.line_of(2), f"{keyword}: path {path.hex(' ').upper()} is not an Assembly "
+                                                     "instance: skipped"))
             return None
         instance = instances[0]
     members: list[AssemblyMember] = []
@@ -447,7 +449,7 @@ def _connection(entry: Entry, number: int, params: Mapping[str, ParamInfo], asse
         issues.append(EdsIssue(entry.line_of(1), f"{keyword}: redundant owner connections are not supported: "
                                                  "skipped"))
         return None
-    o_t_name, t_o_name = _keyword(entry.field(5)), _keyword(entry.field(8))
+    o_t_name, t_o_name, config_name = _keyword(entry.field(5)), _keyword(entry.field(8)), _keyword(entry.field(12))
     o_t_assembly, t_o_assembly = assemblies.get(o_t_name or ""), assemblies.get(t_o_name or "")
     path, why = _path_bytes(entry, 15, params)
     if path is None:
@@ -463,10 +465,10 @@ def _connection(entry: Entry, number: int, params: Mapping[str, ParamInfo], asse
         elif isinstance(segment, LogicalSegment) and segment.kind is LogicalType.CONNECTION_POINT:
             points.append(segment.value)
         elif not isinstance(segment, (ElectronicKey, PortSegment)):
-            bad = True  # configuration data (a data segment): this target takes none
+            bad = True  # a data segment (configuration data written into the path): not offered
     if path and (bad or not points):
-        issues.append(EdsIssue(entry.line_of(15), f"{keyword}: path {path.hex(' ')} is not an assembly connection "
-                                                  "path: skipped"))
+        issues.append(EdsIssue(entry.line_of(15), f"{keyword}: path {path.hex(' ').upper()} is not an assembly "
+                                                  "connection path: skipped"))
         return None
     if len(points) == 3:
         config, points = points[0], points[1:]
@@ -515,7 +517,7 @@ def _connection(entry: Entry, number: int, params: Mapping[str, ParamInfo], asse
     return ConnectionInfo(
         number, _text(entry.field(13)) or keyword, kind, config, o_t, t_o, o_t_size, t_o_size, rpi, rpi_min, rpi_max,
         bool(t_o_types & TYPE_MULTICAST), bool(t_o_types & TYPE_POINT_TO_POINT) or not t_o_types, triggers,
-        o_t_name, t_o_name, entry.line)
+        o_t_name, t_o_name, entry.line, config_name if config_name in assemblies else None)
 
 
 def read_connections(doc: EdsDocument, params: Mapping[str, ParamInfo], assemblies: Mapping[str, AssemblyInfo],
@@ -538,15 +540,18 @@ def place_assemblies(assemblies: Mapping[str, AssemblyInfo], connections: list[C
                      issues: list[EdsIssue]) -> dict[str, AssemblyInfo]:
     """Give an assembly written with an empty path (``Assem100 = "Input", "", 32, ...``: most files
     do) the instance the connection paths name for it: the O->T point of the connections whose
-    field 5 names it, the T->O point of those whose field 8 does. Its own path wins when it has one;
-    the AssemN number is not taken for an instance (only the paths say where data goes). Connections
-    that name it as two instances: not placed, one issue."""
+    field 5 names it, the T->O point of those whose field 8 does, the configuration instance of
+    those whose field 12 does. Its own path wins when it has one; the AssemN number is not taken
+    for an instance (only the paths say where data goes). Connections that name it as two
+    instances: not placed, one issue."""
     named: dict[str, set[int]] = {}
     for connection in connections:
         if connection.o_t_assembly and not connection.heartbeat:
             named.setdefault(connection.o_t_assembly, set()).add(connection.o_t_point)
         if connection.t_o_assembly:
             named.setdefault(connection.t_o_assembly, set()).add(connection.t_o_point)
+        if connection.config_assembly:
+            named.setdefault(connection.config_assembly, set()).add(connection.config)
     placed = dict(assemblies)
     for keyword, info in assemblies.items():
         points = named.get(keyword, set())

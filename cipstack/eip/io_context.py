@@ -67,9 +67,11 @@ class IoContext:
     async def _forward_open(self, request: Class1Request, port: int
                             ) -> tuple[ForwardOpenReply, list[Item], ConnectionTriad]:
         ot, to, transport, triad, to_id = request.parameters()
+        large = request.large_forward_open
         fo = ForwardOpenRequest(0x0A, 0x0E, 0, to_id, triad, request.timeout_multiplier, request.ot_rpi_us,
-                                ot, request.to_rpi_us, to, transport, request.path, request.large)
-        raw = MessageRouterRequest(Service.FORWARD_OPEN, CONNECTION_MANAGER_PATH, fo.encode()).encode()
+                                ot, request.to_rpi_us, to, transport, request.path, large)
+        service = Service.LARGE_FORWARD_OPEN if large else Service.FORWARD_OPEN
+        raw = MessageRouterRequest(service, CONNECTION_MANAGER_PATH, fo.encode()).encode()
         sockaddr = Item(ItemType.SOCKADDR_T_O, SockAddr("0.0.0.0", port).encode())
         reply_raw, extra = await self.client.send_rr_data_items(raw, [] if request.multicast else [sockaddr])
         response = decode_reply("Forward_Open reply", lambda: MessageRouterResponse.decode(reply_raw))

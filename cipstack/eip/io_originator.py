@@ -430,6 +430,10 @@ def class1_path(output: int | None, input: int, config: int, heartbeat: int | No
     return path
 
 
+#: The largest connection size a (small) Forward_Open carries: 9 bits of its network parameters.
+MAX_FORWARD_OPEN_SIZE = 0x1FF
+
+
 @dataclass(frozen=True)
 class Class1Request:
     """What the originator asks for, before it becomes a Forward_Open."""
@@ -452,6 +456,12 @@ class Class1Request:
     @property
     def to_size(self) -> int:
         return self.input_size + TO_OVERHEAD
+
+    @property
+    def large_forward_open(self) -> bool:
+        """Whether the connection needs a Large_Forward_Open: asked for, or a connection size past
+        the 9 bits (511 bytes) a Forward_Open's network connection parameters hold."""
+        return self.large or max(self.ot_size, self.to_size) > MAX_FORWARD_OPEN_SIZE
 
     def corrected(self, extended: tuple[int, ...]) -> tuple[Class1Request, str] | None:
         """The request a target's 0x0127 (O->T) / 0x0128 (T->O) refusal asks for, when it names the

@@ -107,6 +107,10 @@ class IoProfile:
     triggers: frozenset[TriggerType] = frozenset({TriggerType.CYCLIC})
     #: Allowed (output, input) pairs for exclusive owners; None allows any pair.
     pairs: Callable[[], set[tuple[int, int]]] | None = None
+    #: The configuration instances that take a Forward_Open's configuration data (a data segment
+    #: after the connection points), with the size in bytes each takes; data for another instance
+    #: is refused with 0x0118, data of another size with 0x0126.
+    config_sizes: Callable[[], Mapping[int, int]] | None = None
     #: For a device that offers only some of its assemblies: which pair is offered now and how
     #: to change it, added to the log line of a Forward_Open refused for its path.
     pair_hint: Callable[[], str] | None = None
@@ -239,8 +243,7 @@ class IoTarget:
             raise connection_failure(ExtendedStatus.INVALID_CONFIGURATION_APPLICATION_PATH, triad,
                                      f"configuration instance {config}")
         if config_data:
-            raise connection_failure(ExtendedStatus.INVALID_CONFIGURATION_PATH, triad,
-                                     "this device takes no configuration data")
+            config_data = self._configuration(config, config_data, triad)
         if len(points) != 2:
             raise connection_failure(ExtendedStatus.INCONSISTENT_PATH_COMBINATION, triad,
                                      "a connection path needs a consumed and a produced point")
@@ -278,7 +281,25 @@ class IoTarget:
                                          f"no connection produces input assembly {in_point} to listen to")
         if len(self.connections) >= self.profile.max_connections:
             raise connection_failure(ExtendedStatus.OUT_OF_CONNECTIONS, triad)
+        if config_data and config is not None:
+            # Only a Forward_Open that succeeds configures: every check above came first.
+            self.deliver(config, config_data, context.now)
         return self._open(fo, context, kind, consumed, produced, owner)
+
+    def _configuration(self, config: int | None, data: bytes, triad: ConnectionTriad) -> bytes:
+        """The configuration data a Forward_Open carries for ``config``, without the pad byte a
+        data segment of whole words adds to an odd size; refused when the instance takes none or
+        another size."""
+        sizes = self.profile.config_sizes() if self.profile.config_sizes is not None else {}
+        size = sizes.get(config) if config is not None else None
+        if size is None:
+            raise connection_failure(ExtendedStatus.INVALID_CONFIGURATION_PATH, triad,
+                                     "this device takes no configuration data" if not sizes else
+                                     f"configuration instance {config} takes no configuration data")
+        if len(data) != size and not (size % 2 and len(data) == size + 1):
+            raise connection_failure(ExtendedStatus.INVALID_CONFIGURATION_SIZE, triad,
+                                     f"configuration data of {len(data)} bytes; instance {config} takes {size}")
+        return data[:size]
 
     def _parse_path(self, fo: ForwardOpenRequest, context: RequestContext
                     ) -> tuple[int | None, list[int], bytes]:

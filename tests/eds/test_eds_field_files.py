@@ -1,71 +1,383 @@
-"""The test corpus of EDS files written in the styles the field ships (tests/eds/files/): for every
-file with a [Connection Manager], `cipstack adapter --eds FILE` serves it and `cipstack io --eds FILE
---connection N` runs each connection it declares, as a user runs them."""
+"""The test corpus of EDS files written in the styles the field ships (tests/eds/files/).
+
+Every file: `eds check` finds no error (and exactly the warnings its constructs deserve), `eds
+show` prints no unknown where the file determines the value, and the canonical writer's round
+trip keeps its meaning. Every file with a [Connection Manager]: `cipstack adapter --eds FILE`
+serves it, says on stderr exactly what it skips, and `cipstack io --eds FILE --connection N` runs
+each connection it offers, as a user runs them; python-ethernetip runs those it can open.
+"""
 
 from __future__ import annotations
 
+import argparse
+import io
+import re
+import signal
 import socket
 import subprocess
 import sys
+import threading
 import time
+from collections.abc import Iterator
+from dataclasses import dataclass, field
 from pathlib import Path
 
 import pytest
 
-from cipstack.eds.interpret import read_view
-from cipstack.eds.reader import read_eds
+from cipstack.eds.commands import run_check, run_show
+from cipstack.eds.emulated_device import build_eds_device
+from cipstack.eds.interpret import ConnectionInfo, read_view
+from cipstack.eds.model import semantic_differences
+from cipstack.eds.reader import parse_eds, read_eds
+from cipstack.eds.writer import format_eds
 from tests.ports import free_port
 
-FILES = sorted((Path(__file__).parent / "files").glob("*.eds"))
-CONNECTIONS = [(path, connection.number) for path in FILES if read_eds(path).get("Connection Manager")
-               for connection in read_view(read_eds(path)).connections]
+DIRECTORY = Path(__file__).parent / "files"
+FILES = sorted(DIRECTORY.glob("*.eds"))
 
 
-def test_the_corpus_offers_connections() -> None:
-    assert CONNECTIONS, "no file of the corpus declares a class 1 connection"
+@dataclass(frozen=True)
+class Expected:
+    """What a corpus file is expected to give: the warnings of `eds check` (line, rule, message), what
+    `adapter --eds` skips (line, message), the connections it offers, and those python-ethernetip
+    opens (it sends a run/idle header, takes point-to-point T->O only, Forward_Open sizes, instances
+    up to 255)."""
+
+    check_warnings: list[tuple[int, str, str]] = field(default_factory=list)
+    skipped: list[tuple[int, str]] = field(default_factory=list)
+    offered: list[int] = field(default_factory=list)
+    ethernetip: list[int] = field(default_factory=list)
+
+
+EXPECTED: dict[str, Expected] = {
+    "devicenet_valve.eds": Expected(),
+    "ez_style_comm_module.eds": Expected(offered=[1, 2, 3, 4], ethernetip=[2]),
+    "ez_style_io_block.eds": Expected(offered=[1, 2], ethernetip=[1]),
+    "ez_style_safety_io.eds": Expected(
+        skipped=[(117, "Connection3: transport 0x0001 is not class 1: skipped"),
+                 (129, "Connection4: transport 0x0001 is not class 1: skipped")],
+        offered=[1, 2], ethernetip=[1]),
+    "ez_style_servo_large.eds": Expected(offered=[1, 2]),
+    "hand_drive_oelpumpe.eds": Expected(
+        check_warnings=[(194, "unquoted-value", 'Port1: unquoted value 20 F5 24 01 read as the path "20 F5 24 01"')],
+        offered=[1, 2, 3, 4, 5, 6], ethernetip=[1]),
+    "hand_smart_sensor.eds": Expected(offered=[1, 2, 3], ethernetip=[1]),
+    "hand_valve_manifold.eds": Expected(
+        check_warnings=[(81, "connection-path",
+                         "Connection9 T->O connection point is 103 but Assem101 is instance 101")],
+        skipped=[(51, "Assem110 has no path and its connections name it as instances 110, 111: not served"),
+                 (52, "Assem120 has no path and no connection names it: not served"),
+                 (61, "Connection3: redundant owner connections are not supported: skipped"),
+                 (64, "Connection4: transport 0x0008 is not class 1: skipped"),
+                 (69, "Connection5: path 20 04 24 01 2C 64 2C 65 80 01 0F 00 is not an assembly connection path: "
+                      "skipped"),
+                 (72, "Connection6: path: path item [Param5] has no byte value as its default: skipped"),
+                 (73, "Connection7 (Diagnostics A): T->O point 110 is no input assembly: not offered"),
+                 (76, "Connection8 (Diagnostics B): T->O point 111 is no input assembly: not offered"),
+                 (79, "Connection9 (Owner Of 103): T->O point 103 is no input assembly: not offered")],
+        offered=[1, 2], ethernetip=[1]),
+}
+WITH_CONNECTIONS = [path for path in FILES if read_eds(path).get("Connection Manager")]
+
+
+def _ids(paths: list[Path]) -> list[str]:
+    return [path.stem for path in paths]
+
+
+def test_every_corpus_file_says_what_it_gives() -> None:
+    assert sorted(EXPECTED) == [path.name for path in FILES]
+
+
+# -- the constructs the corpus exists for ---------------------------------------------------------------
+
+def test_the_corpus_holds_every_construct_of_the_field() -> None:
+    """Each construct issue 11 found in published files is in at least one file of the corpus; a
+    file edited so that one disappears fails here, not silently."""
+    docs = {path.name: read_eds(path) for path in FILES}
+    raw = {path.name: path.read_bytes() for path in FILES}
+    # An AssemN with an empty path whose instance only the connection path names.
+    assert b'"20 04 24 97 2C 96 2C 64"' in raw["ez_style_io_block.eds"]
+    assert docs["ez_style_io_block.eds"].entry("Assembly", "Assem150").value(2) == ()
+    # Files without Catalog, and files with it.
+    without = [n for n, d in docs.items() if "Catalog" not in d.get("Device")]
+    assert len(without) >= 4 and len(without) < len(docs)
+    # CIP Safety: Class2 = Safety and connections of 17 fields.
+    safety = docs["ez_style_safety_io.eds"]
+    assert safety.entry("Device Classification", "Class2").value() == "Safety"
+    assert {len(e.fields) for e in safety.get("Connection Manager") if e.keyword.startswith("Connection")} == {17}
+    # Connection field 12 referencing a ParamN.
+    assert docs["ez_style_comm_module.eds"].entry("Connection Manager", "Connection2").value(12) == "Param3"
+    # An unquoted path.
+    assert b"Port1 = TCP, \"Ethernet\", 20 F5 24 01, 1;" in raw["hand_drive_oelpumpe.eds"]
+    # The [Assembly] class keywords next to AssemN.
+    for name in ("ez_style_comm_module.eds", "ez_style_servo_large.eds", "ez_style_safety_io.eds"):
+        keywords = {e.keyword for e in docs[name].get("Assembly")}
+        assert {"Revision", "Object_Name", "Number_Of_Static_Instances"} <= keywords, name
+    # Connection sizes that only ParamN defaults give.
+    drive = docs["hand_drive_oelpumpe.eds"].entry("Connection Manager", "Connection1")
+    assert (drive.value(4), drive.value(5), drive.value(7), drive.value(8)) == ("Param10", None, "Param11", None)
+    # Sizes past what a Forward_Open carries.
+    assert max(a.size for a in read_view(docs["ez_style_servo_large.eds"]).assemblies.values()) > 511
+    # For the writer: an icon in many adjacent quoted pieces, a long help text in pieces.
+    assert raw["ez_style_comm_module.eds"].count(b'"\r\n                "') >= 20
+    assert b'pump; "\n\t\t"a negative' in raw["hand_drive_oelpumpe.eds"]
+    # Latin-1, not UTF-8: non-ASCII in comments, ProdName and VendName.
+    drive_raw = raw["hand_drive_oelpumpe.eds"]
+    assert "Geräte".encode("latin-1") in drive_raw and "Überwachung".encode("latin-1") in drive_raw
+    assert docs["hand_drive_oelpumpe.eds"].entry("Device", "ProdName").value() == "Ölpumpe ÖP-7.5 Antrieb"
+    assert docs["hand_drive_oelpumpe.eds"].entry("Device", "VendName").value() == "Müller & Söhne Antriebstechnik"
+    assert all(not _is_utf8_text(data) for name, data in raw.items() if not data.isascii())
+    # CRLF in some files, LF in others; tab indentation and comments between fields in a hand-written one.
+    crlf = {name for name, data in raw.items() if b"\r\n" in data}
+    assert crlf and crlf != set(raw) and all(raw[name].count(b"\n") == raw[name].count(b"\r\n") for name in crlf)
+    assert b"\n\tParam2 = " in drive_raw and b"\t\t$ read only\n" in drive_raw
+    # A DeviceNet file without [Connection Manager].
+    devicenet = docs["devicenet_valve.eds"]
+    assert devicenet.entry("Device Classification", "Class1").value() == "DeviceNet"
+    assert "Connection Manager" not in devicenet and "IO_Info" in devicenet
+
+
+def _is_utf8_text(data: bytes) -> bool:
+    try:
+        data.decode("utf-8")
+    except UnicodeDecodeError:
+        return False
+    return True
+
+
+# -- eds check, eds show, the writer's round trip -------------------------------------------------------
+
+@pytest.mark.parametrize("path", FILES, ids=_ids(FILES))
+def test_eds_check_finds_no_error_and_the_expected_warnings(path: Path) -> None:
+    out = io.StringIO()
+    status = run_check(argparse.Namespace(files=[str(path)], json=False), stdout=out, stderr=out)
+    assert status == 0, out.getvalue()
+    assert out.getvalue().splitlines() == [f"{path}:{line}: warning {rule}: {message}"
+                                           for line, rule, message in EXPECTED[path.name].check_warnings]
+
+
+@pytest.mark.parametrize("path", FILES, ids=_ids(FILES))
+def test_eds_show_knows_what_the_file_determines(path: Path) -> None:
+    out, err = io.StringIO(), io.StringIO()
+    assert run_show(argparse.Namespace(file=str(path), json=False), stdout=out, stderr=err) == 0
+    text = out.getvalue()
+    assert "None" not in text and "?" not in text, text
+    doc = read_eds(path)
+    assert f"Device: {doc.entry('Device', 'ProdName').value()}" in text
+    view = read_view(doc)
+    for connection in view.connections:
+        sizes = (0 if connection.heartbeat else connection.o_t_size, connection.t_o_size)
+        block = text.split(f"  Connection{connection.number} ", 1)[1]
+        assert [int(n) for n in re.findall(r"(?:O->T|T->O): (\d+) bytes", block)[:2]] == list(sizes), block
+
+
+@pytest.mark.parametrize("path", FILES, ids=_ids(FILES))
+def test_the_canonical_writer_keeps_what_the_file_means(path: Path) -> None:
+    doc = read_eds(path)
+    assert semantic_differences(doc, parse_eds(format_eds(doc))) == []
+
+
+# -- adapter --eds and io --eds --------------------------------------------------------------------------
+
+@pytest.mark.parametrize("path", FILES, ids=_ids(FILES))
+def test_the_emulation_skips_exactly_what_it_cannot_serve(path: Path) -> None:
+    device = build_eds_device(read_eds(path))
+    assert [(issue.line, issue.message) for issue in device.issues] == EXPECTED[path.name].skipped
+    assert [c.number for c in read_view(read_eds(path)).connections
+            if f"Connection{c.number} " not in " ".join(i.message for i in device.issues)] == \
+        EXPECTED[path.name].offered
 
 
 def test_an_assembly_without_a_path_takes_the_instance_its_connection_path_names() -> None:
-    view = read_view(read_eds(Path(__file__).parent / "files" / "ez_style_io_block.eds"))
+    view = read_view(read_eds(DIRECTORY / "ez_style_io_block.eds"))
     assert {k: (a.instance, a.size) for k, a in view.assemblies.items()} == {"Assem100": (100, 4),
                                                                              "Assem150": (150, 2)}
     assert view.issues == []
 
 
-@pytest.fixture(scope="module")
-def adapters() -> dict[Path, tuple[int, int, subprocess.Popen[str]]]:
-    started: dict[Path, tuple[int, int, subprocess.Popen[str]]] = {}
-    for path in {path for path, _ in CONNECTIONS}:
-        port, io_port = free_port(), free_port()
-        process = subprocess.Popen([sys.executable, "-m", "cipstack", "adapter", "--eds", str(path), "--port",
-                                    str(port), "--io-port", str(io_port), "--quiet"],
-                                   stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+def test_an_assembly_path_wins_over_its_number_and_over_a_connection_path_that_disagrees() -> None:
+    """Assem2's path names instance 100 (its number is no instance); Connection9 names Assem101 (instance
+    101 by its path) for T->O but its path says 0x67: the assembly stays at 101, eds check warns, and
+    the connection is not offered, as the point its path names is no assembly."""
+    view = read_view(read_eds(DIRECTORY / "hand_valve_manifold.eds"))
+    assert (view.assemblies["Assem2"].instance, view.assemblies["Assem101"].instance) == (100, 101)
+    assert (view.connection(9).t_o_assembly, view.connection(9).t_o_point) == ("Assem101", 0x67)
+    assert view.connection(1).config == 0x66   # "20 04 24 [Param4] ...": Param4's default
+
+
+class Adapter:
+    """`cipstack adapter --eds FILE` as a subprocess; its stderr read as it comes (the pipe never fills)."""
+
+    def __init__(self, path: Path) -> None:
+        self.path = path
+        self.port, self.io_port = free_port(), free_port()
+        self.process = subprocess.Popen(
+            [sys.executable, "-m", "cipstack", "adapter", "--eds", str(path), "--port", str(self.port),
+             "--io-port", str(self.io_port), "--quiet"],
+            stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True, encoding="utf-8")
+        self.lines: list[str] = []
+        self._reader = threading.Thread(target=self._read, daemon=True)
+        self._reader.start()
         for _ in range(300):
             try:
-                socket.create_connection(("127.0.0.1", port), timeout=0.2).close()
-                break
+                socket.create_connection(("127.0.0.1", self.port), timeout=0.2).close()
+                return
             except OSError:
-                assert process.poll() is None, process.stderr.read() if process.stderr else ""
+                assert self.process.poll() is None, "\n".join(self.lines)
                 time.sleep(0.05)
-        started[path] = (port, io_port, process)
+        raise AssertionError("the adapter does not listen")
+
+    def _read(self) -> None:
+        assert self.process.stderr is not None
+        for line in self.process.stderr:
+            self.lines.append(line.rstrip("\n"))
+
+    def wait_for(self, pattern: str, timeout: float = 15.0) -> None:
+        deadline = time.monotonic() + timeout
+        while time.monotonic() < deadline:
+            if any(re.search(pattern, line) for line in self.lines):
+                return
+            time.sleep(0.05)
+        raise AssertionError(f"the adapter never logged {pattern!r}:\n" + "\n".join(self.lines))
+
+    def close(self) -> None:
+        self.process.terminate()
+        self.process.wait(10)
+        self._reader.join(5)
+
+
+@pytest.fixture(scope="module", params=WITH_CONNECTIONS, ids=_ids(WITH_CONNECTIONS))
+def adapter(request: pytest.FixtureRequest) -> Iterator[Adapter]:
+    started = Adapter(request.param)
     yield started
-    for _, _, process in started.values():
-        process.terminate()
-        process.wait(10)
+    started.close()
 
 
-@pytest.mark.parametrize(("path", "number"), CONNECTIONS, ids=[f"{p.stem}-{n}" for p, n in CONNECTIONS])
-def test_each_declared_connection_runs(adapters: dict[Path, tuple[int, int, subprocess.Popen[str]]], path: Path,
-                                       number: int) -> None:
-    port, io_port, _ = adapters[path]
-    result = subprocess.run([sys.executable, "-m", "cipstack", "io", f"127.0.0.1:{port}", "--eds", str(path),
-                             "--connection", str(number), "--rpi", "10ms", "--duration", "0.5s",
-                             "--target-io-port", str(io_port), "--print", "summary"],
-                            capture_output=True, text=True, timeout=60)
-    assert result.returncode == 0, result.stderr
-    stats = next(line for line in result.stdout.splitlines() if line.startswith("sent "))
-    received = int(stats.split()[3])
-    assert received > 10, stats
+def _io(adapter: Adapter, number: int, duration: float) -> subprocess.Popen[str]:
+    return subprocess.Popen(
+        [sys.executable, "-m", "cipstack", "io", f"127.0.0.1:{adapter.port}", "--eds", str(adapter.path),
+         "--connection", str(number), "--rpi", "10ms", "--duration", f"{duration}s", "--timeout-multiplier", "4",
+         "--target-io-port", str(adapter.io_port), "--print", "summary"],
+        stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+
+
+def _rounds(connections: list[ConnectionInfo]) -> list[list[ConnectionInfo]]:
+    """Connections that may run at once: one exclusive owner per output assembly in a round."""
+    rounds: list[list[ConnectionInfo]] = []
+    for connection in connections:
+        for batch in rounds:
+            if connection.heartbeat or all(other.heartbeat or other.o_t_point != connection.o_t_point
+                                           for other in batch):
+                batch.append(connection)
+                break
+        else:
+            rounds.append([connection])
+    return rounds
+
+
+def test_the_adapter_says_what_it_skips(adapter: Adapter) -> None:
+    warnings = [line for line in adapter.lines if ": warning: " in line and "cipstack adapter:" in line]
+    assert warnings == [f"cipstack adapter: {adapter.path}:{line}: warning: {message}"
+                        for line, message in EXPECTED[adapter.path.name].skipped]
+
+
+def test_each_offered_connection_runs_with_cipstack_io(adapter: Adapter) -> None:
+    """Every connection the adapter offers exchanges data with `cipstack io --eds`; those of a round
+    run at once. A listen-only connection runs while a connection of the file that produces the same
+    input by multicast (its owner) runs: the owner runs until its listeners are done, then stops as
+    Ctrl-C stops it (exit 130, after closing and printing its statistics)."""
+    view = read_view(read_eds(adapter.path))
+    offered = [c for c in view.connections if c.number in EXPECTED[adapter.path.name].offered]
+    listeners = [c for c in offered if c.kind == "listen only"]
+    owners = {c.number: next(o for o in offered if o.kind != "listen only" and o.t_o_point == c.t_o_point
+                             and o.t_o_multicast and not o.t_o_point_to_point) for c in listeners}
+    results: dict[int, subprocess.CompletedProcess[str]] = {}
+    interrupted: set[int] = set()
+
+    def collect(number: int, process: subprocess.Popen[str]) -> None:
+        stdout, stderr = process.communicate(timeout=60)
+        results[number] = subprocess.CompletedProcess(process.args, process.returncode, stdout, stderr)
+
+    for batch in _rounds([c for c in offered if c.kind != "listen only"]):
+        serving = [o for o in batch if o in owners.values()]
+        running = {c.number: _io(adapter, c.number, 30.0 if c in serving else 0.5) for c in batch}
+        for owner in serving:
+            adapter.wait_for(rf"->{owner.t_o_point} \(0x[0-9A-F]+\) opened .*multicast")
+        listening = {n: _io(adapter, n, 0.5) for n, o in owners.items() if o in serving}
+        for number, process in listening.items():
+            collect(number, process)
+        for owner in serving:
+            running[owner.number].send_signal(signal.SIGINT)
+            interrupted.add(owner.number)
+        for number, process in running.items():
+            collect(number, process)
+    assert sorted(results) == EXPECTED[adapter.path.name].offered
+    for number, result in sorted(results.items()):
+        assert result.returncode == (130 if number in interrupted else 0), f"Connection{number}: {result.stderr}"
+        stats = next(line for line in result.stdout.splitlines() if line.startswith("sent "))
+        assert int(stats.split()[3]) > 10, f"Connection{number}: {stats}"
+
+
+def _ethernetip_format(path: Path, number: int) -> int:
+    """The O->T real-time format of ConnectionN (field 2 bits 8-10: 4 run/idle header)."""
+    return (read_eds(path).entry("Connection Manager", f"Connection{number}").value(2) >> 8) & 0x7
+
+
+def test_python_ethernetip_runs_what_it_can_open(adapter: Adapter, monkeypatch: pytest.MonkeyPatch) -> None:
+    import ethernetip
+    import ethernetip.ethernetip as enip_module
+
+    from cipstack.scanner import SyncScanner
+
+    view = read_view(read_eds(adapter.path))
+    expected = EXPECTED[adapter.path.name].ethernetip
+    usable = [c.number for c in view.connections if c.number in EXPECTED[adapter.path.name].offered
+              and _ethernetip_format(adapter.path, c.number) == 4 and c.t_o_point_to_point
+              and max(c.o_t_size + 6, c.t_o_size + 2) <= 511 and max(c.config, c.o_t_point, c.t_o_point) <= 255]
+    assert usable == expected
+    if not expected:
+        pytest.skip("python-ethernetip opens no connection of this file")
+    received: dict[int, int] = {}
+
+    class Counting(enip_module.UdpRecvDataPacket):  # type: ignore[misc,name-defined]
+        def __init__(self, buf: bytes) -> None:
+            super().__init__(buf)
+            received[self.conn_id] = received.get(self.conn_id, 0) + 1
+
+    monkeypatch.setattr(enip_module, "UdpRecvDataPacket", Counting)
+    monkeypatch.setattr(enip_module, "ENIP_TCP_PORT", adapter.port)
+    monkeypatch.setattr(enip_module, "ENIP_UDP_PORT", adapter.io_port)
+    for number in expected:
+        connection = view.connection(number)
+        enip = ethernetip.EtherNetIP("127.0.0.1")
+        explicit = enip.explicit_conn("127.0.0.1")
+        explicit.registerSession()
+        enip.registerAssembly(ethernetip.EtherNetIP.ENIP_IO_TYPE_INPUT, connection.t_o_size, connection.t_o_point,
+                              explicit)
+        # Input only: the heartbeat point as an output of no data (it sends the run/idle header alone).
+        outputs = enip.registerAssembly(ethernetip.EtherNetIP.ENIP_IO_TYPE_OUTPUT, connection.o_t_size,
+                                        connection.o_t_point, explicit)
+        enip.startIO(free_port("0.0.0.0"))
+        try:
+            status = explicit.sendFwdOpenReq(connection.t_o_point, connection.o_t_point, connection.config,
+                                             torpi=10, otrpi=10, multiplier=2, inputsz=connection.t_o_size,
+                                             outputsz=0 if connection.heartbeat else connection.o_t_size,
+                                             originator_udp_port=enip.originator_udp_port)
+            assert status == 0, f"Connection{number}: Forward_Open refused, extended status 0x{status or 0:04X}"
+            if outputs:
+                outputs[1] = outputs[3] = True          # 0x0A in the first output byte
+            explicit.produce()
+            time.sleep(0.5)
+            if outputs:
+                with SyncScanner(f"127.0.0.1:{adapter.port}") as scanner:
+                    data = scanner.get_attribute_single(0x04, connection.o_t_point, 3).data
+                assert data[0] == 0x0A, f"Connection{number}: output assembly holds {data.hex()}"
+            explicit.stopProduce()
+            assert explicit.sendFwdCloseReq(connection.t_o_point, connection.o_t_point, connection.config) == 0
+        finally:
+            explicit.stopProduce()
+            enip.stopIO()
+        assert received.get(explicit.toconnid, 0) > 10, f"Connection{number}: {received}"
 
 
 def test_list_fields_names_what_set_and_the_input_take(tmp_path: Path) -> None:
@@ -82,3 +394,54 @@ def test_list_fields_names_what_set_and_the_input_take(tmp_path: Path) -> None:
     assert lines[0] == "output (O->T): assembly 21 'Extended Speed Control Output', 4 bytes"
     assert any(line.split()[:4] == ["speed_reference", "byte", "2", "INT"] for line in lines)
     assert "input (T->O): assembly 71 'Extended Speed Control Input', 4 bytes" in lines
+
+
+# -- configuration assemblies ---------------------------------------------------------------------------
+
+def test_a_configuration_assembly_without_a_path_is_the_configuration_instance_of_its_connection() -> None:
+    view = read_view(read_eds(DIRECTORY / "ez_style_comm_module.eds"))
+    assert view.connection(1).config_assembly == "Assem128" and view.connection(1).config == 0x80
+    assert (view.assemblies["Assem128"].instance, view.assemblies["Assem128"].size) == (0x80, 8)
+    # Field 12 may name a parameter (Connection2): no assembly is placed for it.
+    assert view.connection(2).config_assembly is None and view.connection(2).config == 0x81
+
+
+async def test_the_configuration_data_of_a_forward_open_goes_to_the_configuration_assembly() -> None:
+    from cipstack.adapter import Adapter as Target
+    from cipstack.adapter import AdapterSettings
+    from cipstack.cip.status import CipError, ExtendedStatus
+    from cipstack.objects.tcpip import NetworkInterface
+    from cipstack.scanner import Scanner
+
+    doc = read_eds(DIRECTORY / "ez_style_comm_module.eds")
+    device = build_eds_device(doc, NetworkInterface(ip_address="127.0.0.1"))
+    target = Target(AdapterSettings(host="127.0.0.1", port=0, io_port=0), device=device)
+    await target.start()
+    try:
+        assert target.io_endpoint is not None
+        io_port = target.io_endpoint.port
+        settings = bytes(range(1, 9))
+        async with await Scanner.connect(f"127.0.0.1:{target.port}") as scanner:
+            # Instance 0x80 is the configuration point, not an output a connection may own.
+            assert 0x80 not in device.io_profile().consumed()  # type: ignore[union-attr]
+            async with scanner.io_connection_from_eds(doc, 1, target_io_port=io_port, config_data=settings) as io:
+                await io.wait_input(lambda image: True, timeout=5)
+            assert (await scanner.get_attribute_single(0x04, 0x80, 3)).data == settings
+            # Another size is refused (0x0126), and so is data for a configuration instance that is
+            # no assembly (Connection2's is a parameter); the assembly keeps what it had.
+            for number, data, status in ((1, settings[:6], ExtendedStatus.INVALID_CONFIGURATION_SIZE),
+                                         (2, b"\x01\x00", ExtendedStatus.INVALID_CONFIGURATION_PATH)):
+                with pytest.raises(CipError) as refused:
+                    async with scanner.io_connection_from_eds(doc, number, target_io_port=io_port, config_data=data):
+                        pass
+                assert refused.value.extended[:1] == (status,)
+            assert (await scanner.get_attribute_single(0x04, 0x80, 3)).data == settings
+    finally:
+        await target.close()
+
+
+def test_the_readme_shows_what_the_adapter_prints_for_the_manifold() -> None:
+    readme = (Path(__file__).parents[2] / "README.md").read_text(encoding="utf-8")
+    shown = [line for line in readme.splitlines() if line.startswith("cipstack adapter: hand_valve_manifold.eds:")]
+    assert shown == [f"cipstack adapter: hand_valve_manifold.eds:{line}: warning: {message}"
+                     for line, message in EXPECTED["hand_valve_manifold.eds"].skipped]
