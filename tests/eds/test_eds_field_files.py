@@ -62,6 +62,8 @@ EXPECTED: dict[str, Expected] = {
         check_warnings=[(194, "unquoted-value", 'Port1: unquoted value 20 F5 24 01 read as the path "20 F5 24 01"')],
         offered=[1, 2, 3, 4, 5, 6], ethernetip=[1]),
     "hand_smart_sensor.eds": Expected(offered=[1, 2, 3], ethernetip=[1]),
+    "hand_written_oil_pump.eds": Expected(
+        check_warnings=[(105, "unquoted-value", 'Port1: unquoted value 20 F5 24 01 read as the path "20 F5 24 01"')]),
     "hand_valve_manifold.eds": Expected(
         check_warnings=[(81, "connection-path",
                          "Connection9 T->O connection point is 103 but Assem101 is instance 101")],
@@ -336,7 +338,7 @@ def test_python_ethernetip_runs_what_it_can_open(adapter: Adapter, monkeypatch: 
               and max(c.o_t_size + 6, c.t_o_size + 2) <= 511 and max(c.config, c.o_t_point, c.t_o_point) <= 255]
     assert usable == expected
     if not expected:
-        pytest.skip("python-ethernetip opens no connection of this file")
+        return  # none applies (the servo's sizes take a Large_Forward_Open, which it cannot send)
     received: dict[int, int] = {}
 
     class Counting(enip_module.UdpRecvDataPacket):  # type: ignore[misc,name-defined]
