@@ -198,42 +198,36 @@ def state_file(state_dir: Path, address: str, group: DeviceGroup) -> Path:
 
 def assign(groups: Sequence[DeviceGroup], pool: Sequence[ipaddress.IPv4Address] | None,
            state_dir: Path | None) -> list[FleetDevice]:
-    """The devices of ``groups``, each at its address (see the module docstring)."""
+    """The devices of ``groups``, each at its address, in address order: the groups with a first
+    address take theirs, then the others the pool's unused addresses in order."""
     if not groups:
         raise SpecError("no device: give --device PROFILE*COUNT (e.g. acg*16) or a spec file")
-    taken: dict[ipaddress.IPv4Address, str] = {}
-    devices: list[FleetDevice] = []
-    free = list(pool or [])
-    next_index = 0
+    taken: dict[ipaddress.IPv4Address, DeviceGroup] = {}
+    for group in groups:
+        if group.first is None:
+            continue
+        if int(group.first) + group.count - 1 > int(ipaddress.IPv4Address("255.255.255.255")):
+            raise SpecError(f"{group.text}: {group.count} addresses from {group.first} run past 255.255.255.255")
+        for address in (group.first + n for n in range(group.count)):
+            if address in taken:
+                raise SpecError(f"{group.text}: {address} is already given to {taken[address].text}")
+            taken[address] = group
+    free = iter([a for a in (pool or []) if a not in taken])
     for group in groups:
         if group.first is not None:
-            if int(group.first) + group.count - 1 > int(ipaddress.IPv4Address("255.255.255.255")):
-                raise SpecError(f"{group.text}: {group.count} addresses from {group.first} run past 255.255.255.255")
-            addresses = [group.first + n for n in range(group.count)]
-        else:
-            if pool is None:
-                raise SpecError(f"{group.text}: no address: give --addresses (e.g. 127.0.0.10-127.0.0.73) or a "
-                                f"first address (acg*16@127.0.0.10)")
-            while next_index < len(free) and free[next_index] in taken:
-                next_index += 1
-            addresses = []
-            while len(addresses) < group.count and next_index < len(free):
-                if free[next_index] not in taken:
-                    addresses.append(free[next_index])
-                next_index += 1
-            if len(addresses) < group.count:
-                unused = len(addresses)
-                raise SpecError(f"{group.text}: {group.count} devices, but the addresses "
-                                f"{describe_addresses(pool)} have {unused} left for them")
-        for address in addresses:
-            if address in taken:
-                raise SpecError(f"{group.text}: {address} is already given to {taken[address]}")
-            taken[address] = group.text
-            if len(taken) > MAX_DEVICES:
-                raise SpecError(f"more than {MAX_DEVICES} devices (a fleet serves at most {MAX_DEVICES})")
-            devices.append(FleetDevice(str(address), group.profile, group.model, group.params,
-                                       state_file(state_dir, str(address), group) if state_dir else None))
-    return devices
+            continue
+        if pool is None:
+            raise SpecError(f"{group.text}: no address: give --addresses (e.g. 127.0.0.10-127.0.0.73) or a "
+                            f"first address (acg*16@127.0.0.10)")
+        mine = [a for _, a in zip(range(group.count), free, strict=False)]
+        if len(mine) < group.count:
+            raise SpecError(f"{group.text}: {group.count} devices, but the addresses {describe_addresses(pool)} "
+                            f"have {len(mine)} left for them")
+        taken.update((a, group) for a in mine)
+    if len(taken) > MAX_DEVICES:
+        raise SpecError(f"{len(taken)} devices: a fleet serves at most {MAX_DEVICES}")
+    return [FleetDevice(str(a), g.profile, g.model, g.params, state_file(state_dir, str(a), g) if state_dir else None)
+            for a, g in sorted(taken.items())]
 
 
 def check_port(value: Any, where: str) -> int:
