@@ -147,13 +147,16 @@ async def scan(addresses: list[str], port: int, io_port: int, seconds: float, ch
             handle.connection.interval_samples.clear()
             handle.connection.last_arrival = None
         lost_before = sum(h.stats.lost for h in handles)
+        cpu_before = time.process_time()
         await asyncio.sleep(seconds)
+        cpu = time.process_time() - cpu_before
         intervals = [i for h in handles for i in h.connection.interval_samples]
         return {"connections": len(handles), "packets": len(intervals),
                 "late": sum(1 for i in intervals if i > 1.5 * RPI),
                 "lost": sum(h.stats.lost for h in handles) - lost_before,
                 "timeouts": sum(1 for h in handles if h.timed_out),
-                "max_interval_ms": round(max(intervals, default=0.0) * 1e3, 2)}
+                "max_interval_ms": round(max(intervals, default=0.0) * 1e3, 2),
+                "cpu_share": round(cpu / seconds, 3)}
 
 
 def scanner_process(addresses: list[str], port: int, io_port: int, seconds: float, channel: Connection) -> None:
@@ -214,6 +217,7 @@ def run_case(devices: int, workers: int, scanners: int, seconds: float, block: i
             "lost": sum(r["lost"] for r in reports), "timeouts": sum(r["timeouts"] for r in reports),
             "max_interval_ms": max(r["max_interval_ms"] for r in reports),
             "fleet_cpu_share": round(cpu / wall, 3),
+            "scanner_cpu_share": round(sum(r["cpu_share"] for r in reports), 3),
             "fleet_cpu_us_per_packet": round(1e6 * cpu / max(1, packets / seconds * wall), 1),
             "rss_mb": round(rss / 2**20, 1),
             "rss_per_device_mb": round(rss / devices / 2**20, 2),
@@ -259,7 +263,8 @@ def main(argv: Sequence[str] | None = None) -> int:
         print(f"    memory: RSS {case['rss_mb']} MB in all, {case['rss_per_device_mb']} MB per device; a fleet of "
               f"{case['workers']} device(s) {case['rss_base_mb']} MB, each further device "
               f"{case['rss_per_further_device_mb']} MB; fleet CPU {case['fleet_cpu_share']} cores, "
-              f"{case['fleet_cpu_us_per_packet']} us per T->O packet (with its O->T one)")
+              f"{case['fleet_cpu_us_per_packet']} us per T->O packet (with its O->T one); scanner CPU "
+              f"{case['scanner_cpu_share']} cores")
     if not args.json:
         print(f"nproc {results['nproc']}, load average {results['load_average_before']} before, "
               f"{results['load_average_after']} after")
