@@ -8,6 +8,7 @@ from __future__ import annotations
 import asyncio
 import contextlib
 import ipaddress
+import json
 import os
 import signal
 import socket
@@ -342,6 +343,11 @@ def test_workers_serve_every_device_and_a_dead_worker_stops_the_fleet(tmp_path: 
         assert len(workers) == 2
         replies = asyncio.run(broadcast_replies(port, 2.0))
         assert sorted(replies, key=sort_key) == hosts                      # 64 devices, each answered once
+        # `cipstack discover` with its default broadcast addresses lists every device once.
+        command = subprocess.run([sys.executable, "-m", "cipstack", "discover", "--port", str(port), "--json"],
+                                 capture_output=True, text=True, timeout=30)
+        listed = [json.loads(line)["address"] for line in command.stdout.splitlines()]
+        assert sorted(listed, key=lambda a: sort_key(a.rsplit(":", 1)[0])) == [f"{h}:{port}" for h in hosts]
         for host in (hosts[0], hosts[-1]):                                   # one of each worker's share
             status = drive("status", "--host", host, "--port", str(port))
             assert status.returncode == 0 and "READY" in status.stdout, status.stderr

@@ -106,7 +106,6 @@ def build_parser() -> argparse.ArgumentParser:
                    help="set an ACG keypad parameter at start on every ACG device; repeatable")
     p.add_argument("--workers", type=lambda t: parse_number(t, "workers"),
                    help="spread the devices over N processes, one event loop each (default 1)")
-    p.add_argument("--json", action="store_true", help=argparse.SUPPRESS)
     p.set_defaults(func=cmd_fleet)
 
     p = sub.add_parser("models", help="the MX2/RX models the mx2/rx profiles emulate (Tables 2/3)")

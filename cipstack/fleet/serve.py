@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import asyncio
 import logging
+import resource
 import signal
 from collections.abc import Callable, Sequence
 
@@ -21,6 +22,24 @@ from ..listening import held_log_records
 from .spec import FleetDevice, SpecError
 
 log = logging.getLogger(__name__)
+
+
+#: Descriptors a device holds before any connection: TCP listener, UDP, broadcast UDP, class 1 UDP,
+#: control socket; with room for a few connections each.
+DESCRIPTORS_PER_DEVICE = 12
+
+
+def raise_open_file_limit(devices: int) -> None:
+    """Raise the soft open-file limit toward the hard one for ``devices`` devices (one process may
+    serve hundreds); where it cannot be raised, a device that cannot open a socket says so at start."""
+    try:
+        soft, hard = resource.getrlimit(resource.RLIMIT_NOFILE)
+        needed = 256 + devices * DESCRIPTORS_PER_DEVICE
+        if soft != resource.RLIM_INFINITY and soft < needed:
+            resource.setrlimit(resource.RLIMIT_NOFILE, (needed if hard == resource.RLIM_INFINITY
+                                                        else min(needed, hard), hard))
+    except (OSError, ValueError):
+        pass
 
 
 def build_adapter(device: FleetDevice, port: int, io_port: int) -> Adapter:
@@ -60,6 +79,7 @@ class DeviceSet:
 
     async def start(self) -> list[str]:
         """Build and start every device; returns their lines. All or nothing (see the module docstring)."""
+        raise_open_file_limit(len(self.devices))
         built: list[Adapter] = []
         try:
             for device in self.devices:
