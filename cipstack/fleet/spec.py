@@ -16,7 +16,7 @@ import ipaddress
 import re
 import sys
 from collections.abc import Iterable, Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
@@ -67,7 +67,6 @@ class FleetSpec:
     io_port: int
     workers: int = 1
     state_dir: Path | None = None
-    extra: dict[str, Any] = field(default_factory=dict)
 
 
 # -- addresses ------------------------------------------------------------------------------------------
