@@ -412,3 +412,20 @@ first = "{hosts[3]}"
         assert asyncio.run(_read(hosts[1], port, 0x2A, 1, 29)) == 1
         found = asyncio.run(discover(BROADCAST, port, timeout=1.2))
         assert sorted((r.address.host for r in found if r.address), key=sort_key) == [hosts[0], hosts[1], hosts[3]]
+
+
+@pytest.mark.parametrize("workers", [1, 2])
+def test_a_corrupt_state_file_is_one_line_naming_it(tmp_path: Path, workers: int) -> None:
+    hosts = addresses(10 + workers, 4)
+    state = tmp_path / "state"
+    state.mkdir()
+    corrupt = state / f"{hosts[3]}-acg.json"
+    corrupt.write_text("{garbage")
+    result = subprocess.run([sys.executable, "-m", "cipstack", "fleet", "--addresses", f"{hosts[0]}-{hosts[-1]}",
+                             "--device", "acg*4", "--port", str(free_port(*hosts)), "--io-port", "0", "--workers",
+                             str(workers), "--state-dir", str(state)], capture_output=True, text=True, timeout=60)
+    assert result.returncode == 2 and result.stdout == ""
+    assert result.stderr.splitlines() == [f"cipstack fleet: {hosts[3]}: {corrupt}: not valid JSON, truncated or "
+                                          "corrupt (Expecting property name enclosed in double quotes at line 1, "
+                                          "column 2)"]
+    assert corrupt.read_text() == "{garbage"                                 # never silently reset
