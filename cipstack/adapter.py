@@ -9,7 +9,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-from .control import ControlDenied, ControlError, ControlServer, default_control_path
+from .control import ControlAddress, ControlDenied, ControlError, ControlServer, default_control_path
 from .devices.acg.device import AcgDevice
 from .devices.acg.modbus_server import ModbusTcpServer
 from .devices.base import Device, DeviceLimits, TripRefused
@@ -55,6 +55,8 @@ class AdapterSettings:
     model: str | None = None
     #: Modbus TCP port for a drive that also speaks Modbus TCP (None: off; 0: any free port).
     modbus_port: int | None = None
+    #: MAC address of the emulated card, from which its serial number derives (None: ``DEFAULT_MAC``).
+    mac: bytes | None = None
 
 
 class Adapter:
@@ -64,7 +66,8 @@ class Adapter:
         self.settings = settings or AdapterSettings()
         s = self.settings
         ip_address = s.host if s.host not in ("", "0.0.0.0", "localhost") else "127.0.0.1"
-        self.device = device or build_device(s.profile, NetworkInterface(ip_address=ip_address, mac=DEFAULT_MAC),
+        self.device = device or build_device(s.profile, NetworkInterface(ip_address=ip_address,
+                                                                          mac=s.mac or DEFAULT_MAC),
                                              DeviceLimits(s.max_sessions, s.max_connections),
                                              ProfileOptions(s.state_path, s.model))
         self.modbus: ModbusTcpServer | None = None
@@ -89,6 +92,7 @@ class Adapter:
         self._device_timer_at: float | None = None
         self.io: IoTarget | None = None
         self.io_endpoint: IoEndpoint | None = None
+        self.control_server: ControlServer | None = None
         profile = self.device.io_profile()
         if profile is not None:
             if s.max_io_connections is not None:
@@ -158,6 +162,41 @@ class Adapter:
                 await self.close()
                 raise ListenError(f"TCP {s.host}:{s.modbus_port} (Modbus TCP, --modbus-port)", exc) from None
 
+    @property
+    def control_path(self) -> ControlAddress:
+        """Where ``cipstack drive`` finds this emulator: ``--control``, else the default for its host and port."""
+        return self.settings.control_path or default_control_path(self.port, self.settings.host)
+
+    async def start_serving(self) -> None:
+        """Listen on every port and on the control socket; what is taken raises ``ListenError`` naming
+        it, with nothing left open. The caller holds the log records (``held_log_records``)."""
+        await self._start()
+        control = ControlServer(self.control_path, self.control)
+        try:
+            await control.start()
+        except OSError as exc:
+            await self.close()
+            raise ListenError("control socket (--control)", exc.strerror or str(exc)) from None
+        self.control_server = control
+
+    async def stop_serving(self) -> None:
+        """Close the control socket, then every port; the last saves are written."""
+        if self.control_server is not None:
+            await self.control_server.close()
+            self.control_server = None
+        await self.close()
+
+    def apply_keypad_parameters(self, assignments: list[str]) -> list[str]:
+        """``--param CODE=VALUE``: keypad parameters set before the network connects (the ACG's codes),
+        applied as a write over the network would be, not saved. Returns what was set, one line each;
+        a device without a keypad or a bad assignment raises ``ValueError``."""
+        from .devices.acg.keypad import apply_parameters
+
+        if not isinstance(self.device, AcgDevice):
+            raise ValueError("--param sets the ACG's keypad parameters (profile acg)")
+        drive = self.device.drive
+        return apply_parameters(drive, assignments, drive.time)
+
     async def close(self) -> None:
         if self.modbus is not None:
             await self.modbus.close()
@@ -226,14 +265,7 @@ class Adapter:
         for sig in (signal.SIGINT, signal.SIGTERM):
             loop.add_signal_handler(sig, stop.set)
         with held_log_records() as held:
-            await self._start()
-            control = ControlServer(self.settings.control_path or default_control_path(self.port, self.settings.host),
-                                    self.control)
-            try:
-                await control.start()
-            except OSError as exc:
-                await self.close()
-                raise ListenError("control socket (--control)", exc.strerror or str(exc)) from None
+            await self.start_serving()
             held.release()
         printer = asyncio.create_task(self._print_status_lines()) if self.settings.status_lines else None
         info = self.device.identity_info
@@ -247,5 +279,4 @@ class Adapter:
                 loop.remove_signal_handler(sig)
             if printer is not None:
                 printer.cancel()
-            await control.close()
-            await self.close()
+            await self.stop_serving()

@@ -12,8 +12,9 @@ The convention, for whoever writes a block:
 
 Each ``##`` section is one test: its blocks run in order against one fresh emulator, the default
 ``cipstack adapter`` (ACG profile) at 127.0.0.1:44818, or the one the section's own ```` ```sh ````
-blocks start before its first runnable block (the last line ``cipstack adapter ...``: the tour
-restarts it with ``--param``).
+blocks start before its first runnable block (the last line ``cipstack adapter ...`` or
+``cipstack fleet ...``: the tour restarts the adapter with ``--param``; the fleet's section starts
+a fleet instead).
 
 The README names the default ports (44818, 2222), so each section runs in a private network
 namespace of its own (``unshare -n``, root needed), where they are free whatever else runs on this
@@ -58,7 +59,7 @@ class Section:
     @property
     def adapter(self) -> str:
         """The emulator the reader has running when the section's first runnable block comes: the last
-        ``cipstack adapter ...`` its set-up blocks start before it, else the default."""
+        ``cipstack adapter ...`` or ``cipstack fleet ...`` its set-up blocks start before it, else the default."""
         found = DEFAULT_ADAPTER
         for block in self.blocks:
             if block.language in ("python", "console"):
@@ -67,7 +68,7 @@ class Section:
                 continue
             for line in block.text.splitlines():
                 for command in line.split("&&"):
-                    if command.strip().startswith("cipstack adapter"):
+                    if command.strip().startswith(("cipstack adapter", "cipstack fleet")):
                         found = command.strip()
         return found
 
@@ -216,8 +217,8 @@ def _namespaces_available() -> str | None:
 
 @contextlib.contextmanager
 def emulator(namespace: Namespace, command: str, env: dict[str, str], cwd: Path) -> Iterator[Path]:
-    """``command`` (a ``cipstack adapter ...`` line) running in ``namespace`` until the block ends;
-    yields its log file."""
+    """``command`` (a ``cipstack adapter ...`` or ``cipstack fleet ...`` line) running in ``namespace``
+    until the block ends; yields its log file."""
     log = cwd / "adapter.log"
     with log.open("w") as out:
         process = subprocess.Popen(namespace.command(["sh", "-c", f"exec {command}"]), stdout=out,

@@ -50,14 +50,8 @@ def cmd_adapter(args: argparse.Namespace) -> int:
 
 def _apply_keypad_parameters(adapter: Any, assignments: list[str]) -> None:
     """``--param CODE=VALUE``: keypad parameters set before the network connects (the ACG's codes)."""
-    from ..devices.acg.device import AcgDevice
-    from ..devices.acg.keypad import apply_parameters
-
-    if not isinstance(adapter.device, AcgDevice):
-        raise UsageError("--param sets the ACG's keypad parameters (profile acg)")
-    drive = adapter.device.drive
     try:
-        applied = apply_parameters(drive, assignments, drive.time)
+        applied = adapter.apply_keypad_parameters(assignments)
     except ValueError as exc:
         raise UsageError(str(exc)) from None
     for line in applied:

@@ -17,6 +17,7 @@ from .drive import _trip_code, cmd_drive_status, cmd_drive_trip
 from .eds import cmd_eds_check, cmd_eds_generate, cmd_eds_show
 from .emulators import cmd_adapter, cmd_componet, cmd_models
 from .explicit import cmd_discover, cmd_get, cmd_identity, cmd_set
+from .fleet import cmd_fleet
 from .io import cmd_io
 
 
@@ -85,6 +86,27 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--quiet", action="store_true", help="no status line on stdout")
     p.add_argument("--json", action="store_true", help=argparse.SUPPRESS)
     p.set_defaults(func=cmd_adapter)
+
+    p = sub.add_parser("fleet", help="emulate many devices at once, each on its own address")
+    p.add_argument("--addresses", metavar="RANGE[,...]",
+                   help="the addresses the devices take in order: 127.0.0.10-127.0.0.73, or a list "
+                        "(127.0.0.10,127.0.0.12-127.0.0.20); any 127.x works on Linux's loopback")
+    p.add_argument("--device", action="append", metavar="PROFILE[:MODEL][*COUNT][@FIRST]",
+                   help="a group of devices: acg*32, mx2:MX2-A2015-E*16, rx*2@127.0.0.90 (from that address "
+                        "on); repeatable")
+    p.add_argument("--spec", type=Path, metavar="FILE", help="the fleet in a TOML file (see the README)")
+    p.add_argument("--port", type=lambda t: parse_number(t, "port"),
+                   help=f"EtherNet/IP port of every device, TCP and UDP (default {DEFAULT_PORT})")
+    p.add_argument("--io-port", type=lambda t: parse_number(t, "io port"),
+                   help="UDP port of class 1 I/O of every device (default 2222)")
+    p.add_argument("--state-dir", type=Path, metavar="DIR",
+                   help="where each device keeps its state file, ADDRESS-PROFILE[-MODEL].json (default: "
+                        "fleet/ in the user's data directory)")
+    p.add_argument("--param", action="append", metavar="CODE=VALUE",
+                   help="set an ACG keypad parameter at start on every ACG device; repeatable")
+    p.add_argument("--workers", type=lambda t: parse_number(t, "workers"),
+                   help="spread the devices over N processes, one event loop each (default 1)")
+    p.set_defaults(func=cmd_fleet)
 
     p = sub.add_parser("models", help="the MX2/RX models the mx2/rx profiles emulate (Tables 2/3)")
     p.add_argument("--profile", choices=["mx2", "rx"], help="one family only (default: both)")

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import ipaddress
 from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
@@ -14,6 +15,14 @@ from .base import Device, DeviceLimits
 
 #: Locally administered MAC of the emulated card (bit 1 of the first octet set).
 DEFAULT_MAC = bytes.fromhex("02CA10000064")
+
+
+def mac_for_address(address: str) -> bytes:
+    """The MAC of an emulated card at IPv4 ``address``, for a fleet whose devices each need their own:
+    the locally administered prefix of ``DEFAULT_MAC`` (02:CA) and the four octets of the address, so
+    that the serial number, taken from the MAC's last four octets (``serial_from_mac``), is the address
+    read as one 32-bit number (127.0.0.10 -> 02:CA:7F:00:00:0A -> serial 0x7F00000A)."""
+    return DEFAULT_MAC[:2] + ipaddress.IPv4Address(address).packed
 
 
 def serial_from_mac(mac: bytes) -> int:

@@ -1,0 +1,137 @@
+"""Many devices in one event loop: each is what ``cipstack adapter`` builds (``Adapter``), on its own
+address, with its own identity, state file, control socket and class 1 endpoint.
+
+Starting is all or nothing: a port or control socket that is taken stops every device already
+started and raises ``ListenError`` naming it; the per-device start-up log lines are dropped (the
+device lines and one summary say the same), warnings kept.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import logging
+import resource
+import signal
+from collections.abc import Callable, Sequence
+
+from ..adapter import Adapter, AdapterSettings
+from ..control import describe
+from ..devices.profiles import mac_for_address
+from ..devices.state import StateFileError
+from ..listening import held_log_records
+from .spec import FleetDevice, SpecError
+
+log = logging.getLogger(__name__)
+
+
+#: Descriptors a device holds before any connection: TCP listener, UDP, broadcast UDP, class 1 UDP,
+#: control socket; with room for a few connections each.
+DESCRIPTORS_PER_DEVICE = 12
+
+
+def raise_open_file_limit(devices: int) -> None:
+    """Raise the soft open-file limit toward the hard one for ``devices`` devices (one process may
+    serve hundreds); where it cannot be raised, a device that cannot open a socket says so at start."""
+    try:
+        soft, hard = resource.getrlimit(resource.RLIMIT_NOFILE)
+        needed = 256 + devices * DESCRIPTORS_PER_DEVICE
+        if soft != resource.RLIM_INFINITY and soft < needed:
+            resource.setrlimit(resource.RLIMIT_NOFILE, (needed if hard == resource.RLIM_INFINITY
+                                                        else min(needed, hard), hard))
+    except (OSError, ValueError):
+        pass
+
+
+def build_adapter(device: FleetDevice, port: int, io_port: int) -> Adapter:
+    """The emulator of one device; a state file or parameter it cannot take raises ``SpecError``."""
+    settings = AdapterSettings(host=device.address, port=port, io_port=io_port, profile=device.profile,
+                               model=device.model, state_path=device.state_path, mac=mac_for_address(device.address))
+    try:
+        adapter = Adapter(settings)
+    except (StateFileError, ValueError, KeyError) as exc:
+        raise SpecError(f"{device.address}: {exc}") from None
+    if device.params:
+        try:
+            adapter.apply_keypad_parameters(list(device.params))
+        except ValueError as exc:
+            adapter.device.close()
+            raise SpecError(f"{device.address}: {exc}") from None
+    return adapter
+
+
+def device_line(device: FleetDevice, adapter: Adapter) -> str:
+    """What the fleet prints for a device once it serves: where, what, who, where its state and control are."""
+    info = adapter.device.identity_info
+    kind = f"{device.profile}:{device.model}" if device.model else device.profile
+    state = str(device.state_path) if device.state_path else "(in memory)"
+    return (f"{device.address}:{adapter.port}  {kind}  {info.product_name!r}  serial 0x{info.serial_number:08X}  "
+            f"state {state}  control {describe(adapter.control_path)}")
+
+
+class DeviceSet:
+    """The running adapters of one process's share of a fleet."""
+
+    def __init__(self, devices: Sequence[FleetDevice], port: int, io_port: int) -> None:
+        self.devices = list(devices)
+        self.port = port
+        self.io_port = io_port
+        self.adapters: list[Adapter] = []
+
+    async def start(self) -> list[str]:
+        """Build and start every device; returns their lines. All or nothing (see the module docstring)."""
+        raise_open_file_limit(len(self.devices))
+        built: list[Adapter] = []
+        try:
+            for device in self.devices:
+                built.append(build_adapter(device, self.port, self.io_port))
+        except SpecError:
+            for adapter in built:
+                adapter.device.close()
+            raise
+        with held_log_records() as held:
+            try:
+                for adapter in built:
+                    await adapter.start_serving()
+                    self.adapters.append(adapter)
+            except BaseException:
+                started = len(self.adapters)
+                await self.stop()
+                for adapter in built[started:]:   # built, never serving: their state writers only
+                    adapter.device.close()
+                raise
+            held.records = [(h, r) for h, r in held.records if r.levelno >= logging.WARNING]
+            held.release()
+        return [device_line(d, a) for d, a in zip(self.devices, self.adapters, strict=True)]
+
+    async def stop(self) -> None:
+        """Stop every started device, at once; each writes its last saves."""
+        adapters, self.adapters = self.adapters, []
+        await asyncio.gather(*(adapter.stop_serving() for adapter in adapters))
+
+
+async def serve_until_signalled(devices: Sequence[FleetDevice], port: int, io_port: int,
+                                on_ready: Callable[[list[str]], None],
+                                signals: Sequence[int] = (signal.SIGINT, signal.SIGTERM)) -> int:
+    """Serve ``devices`` until one of ``signals``; returns the signal that stopped them."""
+    loop = asyncio.get_running_loop()
+    stop = asyncio.Event()
+    received: list[int] = []
+
+    def stop_on(sig: int) -> None:
+        received.append(sig)
+        stop.set()
+
+    for sig in signals:
+        loop.add_signal_handler(sig, stop_on, sig)
+    fleet = DeviceSet(devices, port, io_port)
+    try:
+        on_ready(await fleet.start())
+        await stop.wait()
+    finally:
+        await fleet.stop()
+        for sig in signals:
+            loop.remove_signal_handler(sig)
+    return received[0] if received else signal.SIGTERM
+
+
+__all__ = ["DeviceSet", "build_adapter", "device_line", "serve_until_signalled"]

@@ -1,0 +1,307 @@
+"""What a fleet is: which device at which address, read from the command line or a TOML file.
+
+A fleet spec names an address pool (``127.0.0.10-127.0.0.73``, or a list of addresses and ranges)
+and groups of devices (``acg*32``, ``mx2:MX2-A2015-E*16``, ``acg*4@127.0.0.90``). A group with a
+first address takes that many consecutive addresses from it; a group without one takes the next
+unused addresses of the pool, in order. Every device gets its own state file in the state
+directory, named after its address and its profile (and model), so that a device keeps its saved
+parameters across restarts and no two devices share one.
+
+Everything here is checked before anything listens: a bad spec is one ``SpecError`` line.
+"""
+
+from __future__ import annotations
+
+import ipaddress
+import re
+import sys
+from collections.abc import Iterable, Sequence
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+#: Devices in one fleet: each holds five descriptors (TCP listener, UDP, broadcast UDP, class 1 UDP,
+#: control socket) plus its connections, so a bound keeps a typo (127.0.0.0-127.255.255.255) from
+#: exhausting the machine.
+MAX_DEVICES = 1024
+
+_GROUP = re.compile(r"^(?P<kind>[^*@]+?)(?:\*(?P<count>[^@]*))?(?:@(?P<first>.*))?$")
+
+
+class SpecError(ValueError):
+    """A fleet spec that cannot be served as written; the message is one line naming the problem."""
+
+
+@dataclass(frozen=True)
+class DeviceGroup:
+    """``count`` devices of one profile (and model), from ``first`` or from the pool."""
+
+    profile: str
+    model: str | None = None
+    count: int = 1
+    first: ipaddress.IPv4Address | None = None
+    params: tuple[str, ...] = ()
+    #: How the user wrote it, for error messages.
+    text: str = ""
+
+    @property
+    def label(self) -> str:
+        return f"{self.profile}-{self.model}" if self.model else self.profile
+
+
+@dataclass(frozen=True)
+class FleetDevice:
+    """One device of a fleet: what ``cipstack adapter --host ADDRESS --profile ... --state ...`` runs."""
+
+    address: str
+    profile: str
+    model: str | None = None
+    params: tuple[str, ...] = ()
+    state_path: Path | None = None
+
+
+@dataclass
+class FleetSpec:
+    devices: list[FleetDevice]
+    port: int
+    io_port: int
+    workers: int = 1
+    state_dir: Path | None = None
+
+
+# -- addresses ------------------------------------------------------------------------------------------
+def _address(text: str, where: str) -> ipaddress.IPv4Address:
+    try:
+        return ipaddress.IPv4Address(text.strip())
+    except ValueError:
+        raise SpecError(f"{where}: {text.strip()!r} is not an IPv4 address") from None
+
+
+def parse_addresses(text: str | Sequence[str], where: str = "--addresses") -> list[ipaddress.IPv4Address]:
+    """``127.0.0.10-127.0.0.73``, ``127.0.0.10,127.0.0.12``, or a mix; in the order given, each once."""
+    items = [text] if isinstance(text, str) else list(text)
+    found: list[ipaddress.IPv4Address] = []
+    seen: set[ipaddress.IPv4Address] = set()
+    for item in items:
+        if not isinstance(item, str):
+            raise SpecError(f"{where}: {item!r} is not an address or a range (text)")
+        for part in item.split(","):
+            if not part.strip():
+                raise SpecError(f"{where}: an empty item in {item!r}")
+            low_text, dash, high_text = part.partition("-")
+            low = _address(low_text, where)
+            high = _address(high_text, where) if dash else low
+            if high < low:
+                raise SpecError(f"{where}: the range {part.strip()} ends before it starts")
+            if int(high) - int(low) + 1 + len(found) > MAX_DEVICES:
+                raise SpecError(f"{where}: more than {MAX_DEVICES} addresses (a fleet serves at most {MAX_DEVICES} "
+                                f"devices)")
+            for number in range(int(low), int(high) + 1):
+                address = ipaddress.IPv4Address(number)
+                if address in seen:
+                    raise SpecError(f"{where}: {address} is given twice")
+                seen.add(address)
+                found.append(address)
+    return found
+
+
+def describe_addresses(addresses: Iterable[str | ipaddress.IPv4Address]) -> str:
+    """Addresses as ranges where they run on: ``127.0.0.10-127.0.0.41,127.0.0.50``."""
+    numbers = [int(ipaddress.IPv4Address(a)) for a in addresses]
+    runs: list[list[int]] = []
+    for number in numbers:
+        if runs and number == runs[-1][1] + 1:
+            runs[-1][1] = number
+        else:
+            runs.append([number, number])
+    v4 = ipaddress.IPv4Address
+    return ",".join(str(v4(a)) if a == b else f"{v4(a)}-{v4(b)}" for a, b in runs)
+
+
+# -- device groups --------------------------------------------------------------------------------------
+def _count(value: Any, where: str) -> int:
+    if isinstance(value, str):
+        try:
+            value = int(value.strip(), 0)
+        except ValueError:
+            raise SpecError(f"{where}: the count {value!r} is not a number") from None
+    if isinstance(value, bool) or not isinstance(value, int):
+        raise SpecError(f"{where}: the count {value!r} is not a number")
+    if not 1 <= value <= MAX_DEVICES:
+        raise SpecError(f"{where}: the count {value} is not in 1..{MAX_DEVICES}")
+    return value
+
+
+def make_group(profile: str | None, model: str | None, count: Any, first: str | None, params: Sequence[str],
+               where: str) -> DeviceGroup:
+    """A group checked against the profiles and models this cipstack emulates."""
+    from ..devices.omron.models import model as find_model
+    from ..devices.profiles import PROFILES
+
+    if profile is None and model is None:
+        raise SpecError(f"{where}: no profile")
+    if profile is not None and profile not in PROFILES:
+        raise SpecError(f"{where}: unknown profile {profile!r} (known: {', '.join(sorted(PROFILES))})")
+    if model is not None:
+        try:
+            family = find_model(model).family.value.lower()
+        except KeyError:
+            raise SpecError(f"{where}: unknown model {model!r} (`cipstack models` lists them)") from None
+        if profile is not None and profile != family:
+            raise SpecError(f"{where}: {model} is an {family} model, not {profile}")
+        profile = family
+    assert profile is not None
+    if params:
+        if profile != "acg":
+            raise SpecError(f"{where}: parameters (--param, params) are the ACG's keypad codes (profile acg)")
+        from ..devices.acg.keypad import parse_assignment
+
+        for text in params:
+            try:
+                parse_assignment(text)
+            except ValueError as exc:
+                raise SpecError(f"{where}: {exc}") from None
+    return DeviceGroup(profile, model, _count(count, where), _address(first, where) if first else None,
+                       tuple(params), where)
+
+
+def parse_group(text: str) -> DeviceGroup:
+    """``--device PROFILE[:MODEL][*COUNT][@FIRST]``, or ``MODEL[*COUNT][@FIRST]``."""
+    from ..devices.profiles import PROFILES
+
+    where = f"--device {text}"
+    match = _GROUP.match(text.strip())
+    if match is None:
+        raise SpecError(f"{where}: not PROFILE[:MODEL][*COUNT][@FIRST] (e.g. acg*32, mx2:MX2-A2015-E*16)")
+    kind, count, first = match.group("kind"), match.group("count"), match.group("first")
+    profile, colon, model = kind.partition(":")
+    if not colon and profile not in PROFILES:
+        from ..devices.omron.models import model as find_model
+
+        try:
+            find_model(profile)
+        except KeyError:
+            raise SpecError(f"{where}: unknown profile {profile!r} (known: {', '.join(sorted(PROFILES))}; "
+                            f"or a model `cipstack models` lists)") from None
+        profile, model = "", profile          # a model alone names its family
+    if (colon and not model) or (count is not None and not count.strip()) or (first is not None and not first.strip()):
+        raise SpecError(f"{where}: not PROFILE[:MODEL][*COUNT][@FIRST] (e.g. acg*32, mx2:MX2-A2015-E*16)")
+    return make_group(profile or None, model or None, count if count is not None else 1, first, (), where)
+
+
+# -- assigning addresses ---------------------------------------------------------------------------------
+def state_file(state_dir: Path, address: str, group: DeviceGroup) -> Path:
+    """The state file of the device at ``address``: one per address, profile and model."""
+    return state_dir / f"{address}-{group.label}.json"
+
+
+def assign(groups: Sequence[DeviceGroup], pool: Sequence[ipaddress.IPv4Address] | None,
+           state_dir: Path | None) -> list[FleetDevice]:
+    """The devices of ``groups``, each at its address, in address order: the groups with a first
+    address take theirs, then the others the pool's unused addresses in order."""
+    if not groups:
+        raise SpecError("no device: give --device PROFILE*COUNT (e.g. acg*16) or a spec file")
+    taken: dict[ipaddress.IPv4Address, DeviceGroup] = {}
+    for group in groups:
+        if group.first is None:
+            continue
+        if int(group.first) + group.count - 1 > int(ipaddress.IPv4Address("255.255.255.255")):
+            raise SpecError(f"{group.text}: {group.count} addresses from {group.first} run past 255.255.255.255")
+        for address in (group.first + n for n in range(group.count)):
+            if address in taken:
+                raise SpecError(f"{group.text}: {address} is already given to {taken[address].text}")
+            taken[address] = group
+    free = iter([a for a in (pool or []) if a not in taken])
+    for group in groups:
+        if group.first is not None:
+            continue
+        if pool is None:
+            raise SpecError(f"{group.text}: no address: give --addresses (e.g. 127.0.0.10-127.0.0.73) or a "
+                            f"first address (acg*16@127.0.0.10)")
+        mine = [a for _, a in zip(range(group.count), free, strict=False)]
+        if len(mine) < group.count:
+            raise SpecError(f"{group.text}: {group.count} devices, but the addresses {describe_addresses(pool)} "
+                            f"have {len(mine)} left for them")
+        taken.update((a, group) for a in mine)
+    if len(taken) > MAX_DEVICES:
+        raise SpecError(f"{len(taken)} devices: a fleet serves at most {MAX_DEVICES}")
+    return [FleetDevice(str(a), g.profile, g.model, g.params, state_file(state_dir, str(a), g) if state_dir else None)
+            for a, g in sorted(taken.items())]
+
+
+def check_port(value: Any, where: str) -> int:
+    if isinstance(value, bool) or not isinstance(value, int) or not 0 <= value < 65536:
+        raise SpecError(f"{where}: {value!r} is not a port number (0..65535)")
+    return value
+
+
+def check_workers(workers: Any, devices: int, where: str = "--workers") -> int:
+    if isinstance(workers, bool) or not isinstance(workers, int) or workers < 1:
+        raise SpecError(f"{where}: {workers!r} is not a number of processes (1 or more)")
+    if workers > devices:
+        raise SpecError(f"{where} {workers}: more worker processes than the fleet's {devices} device(s)")
+    return workers
+
+
+# -- the TOML file ---------------------------------------------------------------------------------------
+_FILE_KEYS = {"addresses", "port", "io_port", "workers", "state_dir", "device"}
+_GROUP_KEYS = {"profile", "model", "count", "first", "params"}
+
+
+def _load_toml(path: Path) -> dict[str, Any]:
+    if sys.version_info >= (3, 11):
+        import tomllib
+    else:  # pragma: no cover - Python 3.10 reads TOML with the tomli package (a dependency there)
+        try:
+            import tomli as tomllib
+        except ImportError:
+            raise SpecError(f"{path}: reading a TOML spec on Python 3.10 needs the tomli package") from None
+    try:
+        with open(path, "rb") as file:
+            return tomllib.load(file)
+    except OSError as exc:
+        raise SpecError(f"{path}: cannot read: {exc.strerror or exc}") from None
+    except tomllib.TOMLDecodeError as exc:
+        raise SpecError(f"{path}: not valid TOML: {' '.join(str(exc).split())}") from None
+
+
+def _params(value: Any, where: str) -> list[str]:
+    """``params = ["drv=4", "Frq=8"]`` or ``params = {drv = 4, Frq = 8}``."""
+    if isinstance(value, dict):
+        return [f"{code}={v}" for code, v in value.items()]
+    if isinstance(value, list) and all(isinstance(v, str) for v in value):
+        return list(value)
+    raise SpecError(f"{where}: params is a list of \"CODE=VALUE\" or a table of CODE = VALUE")
+
+
+def read_spec_file(path: Path) -> tuple[dict[str, Any], list[DeviceGroup]]:
+    """The file's settings (``addresses``, ``port``, ``io_port``, ``workers``, ``state_dir``) and its
+    ``[[device]]`` groups. A relative ``state_dir`` is relative to the file's directory."""
+    document = _load_toml(path)
+    unknown = sorted(set(document) - _FILE_KEYS)
+    if unknown:
+        raise SpecError(f"{path}: unknown key {unknown[0]!r} (known: {', '.join(sorted(_FILE_KEYS))})")
+    settings = {k: v for k, v in document.items() if k != "device"}
+    if "state_dir" in settings:
+        if not isinstance(settings["state_dir"], str):
+            raise SpecError(f"{path}: state_dir is a directory name (text)")
+        settings["state_dir"] = path.parent / settings["state_dir"]
+    entries = document.get("device", [])
+    if not isinstance(entries, list) or not all(isinstance(e, dict) for e in entries):
+        raise SpecError(f"{path}: devices are [[device]] tables")
+    groups = []
+    for index, entry in enumerate(entries, start=1):
+        where = f"{path}: device {index}"
+        unknown = sorted(set(entry) - _GROUP_KEYS)
+        if unknown:
+            raise SpecError(f"{where}: unknown key {unknown[0]!r} (known: {', '.join(sorted(_GROUP_KEYS))})")
+        for key in ("profile", "model", "first"):
+            if key in entry and not isinstance(entry[key], str):
+                raise SpecError(f"{where}: {key} is text")
+        groups.append(make_group(entry.get("profile"), entry.get("model"), entry.get("count", 1), entry.get("first"),
+                                 _params(entry.get("params", []), where), where))
+    return settings, groups
+
+
+__all__ = ["MAX_DEVICES", "DeviceGroup", "FleetDevice", "FleetSpec", "SpecError", "assign", "check_port",
+           "check_workers", "describe_addresses", "make_group", "parse_addresses", "parse_group", "read_spec_file"]

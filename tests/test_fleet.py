@@ -1,0 +1,431 @@
+"""``cipstack fleet``: many emulated devices in one command, each on its own loopback address, run as
+a real subprocess and talked to over real sockets: discovery finds each once, class 1 runs to several
+at once, a trip or a saved parameter stays with its device, a taken address is one line, and the
+devices spread over worker processes are all served and all stopped."""
+
+from __future__ import annotations
+
+import asyncio
+import contextlib
+import ipaddress
+import json
+import os
+import signal
+import socket
+import struct
+import subprocess
+import sys
+import time
+from collections.abc import Iterator
+from pathlib import Path
+
+import pytest
+
+from cipstack.cli import main
+from cipstack.devices.profiles import PROFILES, mac_for_address, serial_from_mac
+from cipstack.eip.io_server import run_precise
+from cipstack.fleet.spec import SpecError, assign, describe_addresses, parse_addresses, parse_group
+from cipstack.fleet.workers import shares
+from cipstack.scanner import Scanner, discover
+from tests.ports import free_port
+from tests.test_acg_live import SAVE_PARAMETERS, write_registers
+from tests.waiting import wait_for
+
+pytestmark = pytest.mark.skipif(not sys.platform.startswith("linux"), reason="any 127.x on loopback")
+
+#: ListIdentity (0x0063), no data, sender context asking for replies within 500 ms.
+LIST_IDENTITY = struct.pack("<HHII8sI", 0x0063, 0, 0, 0, struct.pack("<H", 500) + bytes(6), 0)
+BROADCAST = "127.255.255.255"
+
+
+def addresses(block: int, count: int, first: int = 10) -> list[str]:
+    """``count`` loopback addresses of a block of this file's own (127.77.BLOCK.x)."""
+    return [f"127.77.{block}.{first + n}" for n in range(count)]
+
+
+class Fleet:
+    """A ``cipstack fleet`` subprocess, its output in files; ready once it says what it emulates."""
+
+    def __init__(self, tmp_path: Path, *args: str, name: str = "fleet") -> None:
+        self.out = tmp_path / f"{name}.out"
+        self.err = tmp_path / f"{name}.err"
+        with self.out.open("w") as out, self.err.open("w") as err:
+            self.process = subprocess.Popen([sys.executable, "-m", "cipstack", "fleet", *args], stdout=out,
+                                            stderr=err, stdin=subprocess.DEVNULL, cwd=tmp_path)
+
+    def wait_ready(self, timeout: float = 30.0) -> list[str]:
+        deadline = time.monotonic() + timeout
+        while "emulating" not in self.err.read_text():
+            if self.process.poll() is not None or time.monotonic() > deadline:
+                self.kill()
+                pytest.fail(f"the fleet did not start:\n{self.err.read_text()}")
+            time.sleep(0.05)
+        return self.out.read_text().splitlines()
+
+    def stop(self, sig: int = signal.SIGINT) -> int:
+        if self.process.poll() is None:
+            self.process.send_signal(sig)
+        try:
+            return self.process.wait(30)
+        except subprocess.TimeoutExpired:
+            self.kill()
+            raise
+
+    def kill(self) -> None:
+        for pid in children(self.process.pid):
+            with contextlib.suppress(ProcessLookupError):
+                os.kill(pid, signal.SIGKILL)
+        if self.process.poll() is None:
+            self.process.kill()
+            self.process.wait(10)
+
+
+@contextlib.contextmanager
+def running(tmp_path: Path, *args: str, name: str = "fleet") -> Iterator[tuple[Fleet, list[str]]]:
+    fleet = Fleet(tmp_path, *args, name=name)
+    try:
+        lines = fleet.wait_ready()
+        yield fleet, lines
+        assert fleet.stop() == 0, fleet.err.read_text()
+    finally:
+        fleet.kill()
+
+
+def children(pid: int) -> list[int]:
+    """The processes whose parent is ``pid`` (from /proc)."""
+    found = []
+    for entry in os.listdir("/proc"):
+        if entry.isdigit():
+            try:
+                with open(f"/proc/{entry}/stat") as stat:
+                    if int(stat.read().rsplit(")", 1)[1].split()[1]) == pid:
+                        found.append(int(entry))
+            except (OSError, IndexError, ValueError):
+                continue
+    return found
+
+
+def alive(pid: int) -> bool:
+    try:
+        with open(f"/proc/{pid}/stat") as stat:
+            return stat.read().rsplit(")", 1)[1].split()[0] != "Z"
+    except OSError:
+        return False
+
+
+async def broadcast_replies(port: int, seconds: float = 1.2) -> list[str]:
+    """The source address of each reply to one ListIdentity sent to loopback's broadcast address."""
+    sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+    sock.setsockopt(socket.SOL_SOCKET, socket.SO_BROADCAST, 1)
+    sock.bind(("127.0.0.1", 0))
+    sock.setblocking(False)
+    loop = asyncio.get_running_loop()
+    try:
+        await loop.sock_sendto(sock, LIST_IDENTITY, (BROADCAST, port))
+        replies = []
+        deadline = loop.time() + seconds
+        while (left := deadline - loop.time()) > 0:
+            try:
+                _, (host, _) = await asyncio.wait_for(loop.sock_recvfrom(sock, 2048), left)
+            except asyncio.TimeoutError:
+                break
+            replies.append(host)
+        return replies
+    finally:
+        sock.close()
+
+
+def drive(*args: str) -> subprocess.CompletedProcess[str]:
+    return subprocess.run([sys.executable, "-m", "cipstack", "drive", *args], capture_output=True, text=True,
+                          timeout=30, stdin=subprocess.DEVNULL)
+
+
+def sort_key(address: str) -> int:
+    return int(ipaddress.IPv4Address(address))
+
+
+# -- the spec, without sockets ------------------------------------------------------------------------
+def test_serial_numbers_derive_from_the_address() -> None:
+    assert mac_for_address("127.0.0.10") == bytes.fromhex("02CA7F00000A")
+    assert serial_from_mac(mac_for_address("127.0.0.10")) == 0x7F00000A
+    assert serial_from_mac(mac_for_address("10.1.2.3")) == 0x0A010203
+
+
+def test_groups_take_addresses_in_order() -> None:
+    pool = parse_addresses("127.0.0.10-127.0.0.13,127.0.0.20")
+    assert describe_addresses(pool) == "127.0.0.10-127.0.0.13,127.0.0.20"
+    groups = [parse_group("acg*2"), parse_group("MX2-A2015-E*1@127.0.0.11"), parse_group("rx:RX-A4055-E*2")]
+    devices = assign(groups, pool, Path("state"))
+    assert [(d.address, d.profile, d.model) for d in devices] == [
+        ("127.0.0.10", "acg", None), ("127.0.0.11", "mx2", "MX2-A2015-E"), ("127.0.0.12", "acg", None),
+        ("127.0.0.13", "rx", "RX-A4055-E"), ("127.0.0.20", "rx", "RX-A4055-E")]
+    assert devices[1].state_path == Path("state/127.0.0.11-mx2-MX2-A2015-E.json")
+    assert [len(s) for s in shares(devices, 2)] == [3, 2]
+    with pytest.raises(SpecError, match="already given"):
+        assign([parse_group("acg*2@127.0.0.10"), parse_group("acg@127.0.0.11")], None, None)
+
+
+BAD_SPECS = [
+    (["--addresses", "127.77.9.1-127.77.9.4", "--device", "pump*2"], "unknown profile 'pump'"),
+    (["--addresses", "127.77.9.4-127.77.9.1", "--device", "acg"], "the range 127.77.9.4-127.77.9.1 ends before"),
+    (["--addresses", "127.77.9.1-127.77.9.300", "--device", "acg"], "'127.77.9.300' is not an IPv4 address"),
+    (["--addresses", "127.77.9.1-127.77.9.4", "--device", "acg*5"],
+     "5 devices, but the addresses 127.77.9.1-127.77.9.4 have 4 left"),
+    (["--addresses", "127.77.9.1-127.77.9.4", "--device", "acg*2", "--device", "mx2*3"], "3 devices, but"),
+    (["--addresses", "127.0.0.0-127.255.255.255", "--device", "acg"], "more than 1024 addresses"),
+    (["--addresses", "127.77.9.1-127.77.9.4", "--device", "acg*x"], "the count 'x' is not a number"),
+    (["--addresses", "127.77.9.1-127.77.9.4", "--device", "mx2:RX-A4055-E"], "RX-A4055-E is an rx model"),
+    (["--addresses", "127.77.9.1-127.77.9.4", "--device", "mx2", "--param", "drv=4"], "no acg device"),
+    (["--addresses", "127.77.9.1-127.77.9.4", "--device", "acg", "--param", "drv=99"], "--param 'drv=99'"),
+    (["--addresses", "127.77.9.1-127.77.9.4", "--device", "acg*2", "--workers", "3"], "more worker processes"),
+    (["--device", "acg*2"], "no address: give --addresses"),
+    (["--addresses", "127.77.9.1"], "no device"),
+]
+
+
+@pytest.mark.parametrize(("argv", "message"), BAD_SPECS, ids=[" ".join(a) for a, _ in BAD_SPECS])
+def test_a_bad_spec_is_one_line(argv: list[str], message: str, capsys: pytest.CaptureFixture[str]) -> None:
+    assert main(["fleet", *argv]) == 2
+    captured = capsys.readouterr()
+    assert captured.out == ""
+    lines = captured.err.splitlines()
+    assert len(lines) == 1 and lines[0].startswith("cipstack fleet: ") and message in lines[0], captured.err
+
+
+@pytest.mark.parametrize(("text", "message"), [
+    ('addresses = "127.77.9.1-127.77.9.2"\n[[device]]\nprofile = "pump"\n', "device 1: unknown profile 'pump'"),
+    ('addresses = "127.77.9.1-127.77.9.2"\n[[device]]\nprofile = "acg"\ncount = 3\n', "3 devices, but"),
+    ('adresses = "127.77.9.1"\n', "unknown key 'adresses'"),
+    ('[[device]]\nprofile = "acg"\ncolour = "red"\n', "unknown key 'colour'"),
+    ('[[device]\n', "not valid TOML"),
+    ('addresses = "127.77.9.1"\n[[device]]\nprofile = "mx2"\nparams = ["drv=4"]\n', "profile acg"),
+])
+def test_a_bad_spec_file_is_one_line(text: str, message: str, tmp_path: Path,
+                                     capsys: pytest.CaptureFixture[str]) -> None:
+    spec = tmp_path / "plant.toml"
+    spec.write_text(text)
+    assert main(["fleet", "--spec", str(spec)]) == 2
+    lines = capsys.readouterr().err.splitlines()
+    assert len(lines) == 1 and lines[0].startswith(f"cipstack fleet: {spec}") and message in lines[0], lines
+
+
+# -- running fleets ---------------------------------------------------------------------------------
+def test_discovery_finds_every_device_once(tmp_path: Path) -> None:
+    hosts = addresses(1, 16)
+    port, io_port = free_port(*hosts), free_port(*hosts)
+    with running(tmp_path, "--addresses", f"{hosts[0]}-{hosts[-1]}", "--device", "acg*12", "--device",
+                 "mx2:MX2-A2015-E*4", "--port", str(port), "--io-port", str(io_port),
+                 "--state-dir", str(tmp_path / "state")) as (_, lines):
+        assert [line.split()[0] for line in lines] == [f"{h}:{port}" for h in hosts]
+        # One broadcast: each device answers once, from its own address.
+        replies = asyncio.run(broadcast_replies(port))
+        assert sorted(replies, key=sort_key) == hosts
+        # The scanner's discovery lists each once, with its own identity: the serial is its address's.
+        found = asyncio.run(discover(BROADCAST, port, timeout=1.2))
+        by_host = {r.address.host: r for r in found if r.address}
+        assert sorted(by_host, key=sort_key) == hosts and len(found) == len(hosts)
+        for host in hosts:
+            assert by_host[host].serial_number == int(ipaddress.IPv4Address(host))
+        assert {by_host[h].vendor_id for h in hosts[:12]} == {PROFILES["acg"].vendor_id}
+        assert {by_host[h].vendor_id for h in hosts[12:]} == {47}
+        command = subprocess.run([sys.executable, "-m", "cipstack", "discover", "--broadcast", BROADCAST, "--port",
+                                  str(port)], capture_output=True, text=True, timeout=30)
+        listed = sorted((line.split()[0] for line in command.stdout.splitlines()), key=lambda a: sort_key(a[:-6]))
+        assert listed == [f"{h}:{port}" for h in hosts], command.stdout
+
+
+async def _class1_then_trip(hosts: list[str], port: int, io_port: int) -> None:
+    catalog = PROFILES["acg"].catalog
+    assert catalog is not None
+    scanners = [await Scanner.connect(f"{h}:{port}", timeout=5, catalog=catalog()) for h in hosts]
+    try:
+        async with contextlib.AsyncExitStack() as stack:
+            handles = [await stack.enter_async_context(s.io_connection(output=21, input=71, rpi=0.010,
+                                                                        target_io_port=io_port))
+                       for s in scanners[:3]]
+            await asyncio.sleep(1.0)
+            for handle in handles:
+                assert not handle.timed_out and handle.stats.received >= 50, handle.stats.as_dict()
+            # One device's trip: that device faults; the others, and their connections, do not.
+            tripped = await asyncio.to_thread(drive, "trip", "OverHeat", "--host", hosts[1], "--port", str(port))
+            assert tripped.returncode == 0 and "tripped: OverHeat" in tripped.stdout, tripped.stderr
+            assert await scanners[1].read(0x29, 1, 10) == 1                       # Faulted
+            assert await scanners[1].read(0x29, 1, 13) == 0x4200                  # Fault Code
+            for index in (0, 2, 3):
+                assert await scanners[index].read(0x29, 1, 10) == 0
+            await asyncio.sleep(0.3)
+            assert not any(handle.timed_out for handle in handles)
+            for host in (hosts[0], hosts[2]):
+                status = await asyncio.to_thread(drive, "status", "--host", host, "--port", str(port))
+                assert status.returncode == 0 and "TRIP" not in status.stdout.upper() and "class 1 1" in status.stdout
+    finally:
+        for scanner in scanners:
+            await scanner.close()
+
+
+def test_class1_to_several_devices_and_a_trip_stays_with_its_device(tmp_path: Path) -> None:
+    hosts = addresses(2, 4)
+    port, io_port = free_port(*hosts), free_port(*hosts)
+    with running(tmp_path, "--addresses", ",".join(hosts), "--device", "acg*4", "--port", str(port),
+                 "--io-port", str(io_port), "--state-dir", str(tmp_path / "state")):
+        run_precise(_class1_then_trip(hosts, port, io_port))
+
+
+async def _read(host: str, port: int, *path: int) -> object:
+    catalog = PROFILES["acg"].catalog
+    assert catalog is not None
+    async with await Scanner.connect(f"{host}:{port}", timeout=5, catalog=catalog()) as scanner:
+        return await scanner.read(*path)
+
+
+async def _save_deceleration(host: str, port: int, tenths: int) -> None:
+    catalog = PROFILES["acg"].catalog
+    assert catalog is not None
+    async with await Scanner.connect(f"{host}:{port}", timeout=5, catalog=catalog()) as scanner:
+        await scanner.set_attribute_single(0x2A, 1, 103, tenths)              # dEC
+        await write_registers(scanner, {SAVE_PARAMETERS: 0})
+        await write_registers(scanner, {SAVE_PARAMETERS: 1})                   # 0x03E0: 0 -> 1 saves
+
+
+def test_each_device_keeps_its_own_saved_parameters(tmp_path: Path) -> None:
+    hosts = addresses(3, 2)
+    port = free_port(*hosts)
+    state = tmp_path / "state"
+    args = ("--addresses", f"{hosts[0]}-{hosts[1]}", "--device", "acg*2", "--port", str(port), "--io-port", "0",
+            "--state-dir", str(state))
+    with running(tmp_path, *args):
+        default = asyncio.run(_read(hosts[1], port, 0x2A, 1, 103))
+        asyncio.run(_save_deceleration(hosts[0], port, 55))
+        assert default != 55
+    assert (state / f"{hosts[0]}-acg.json").exists()
+    assert not (state / f"{hosts[1]}-acg.json").exists()                     # nothing saved there
+    with running(tmp_path, *args, name="restarted"):                         # a power cycle of both
+        assert asyncio.run(_read(hosts[0], port, 0x2A, 1, 103)) == 55
+        assert asyncio.run(_read(hosts[1], port, 0x2A, 1, 103)) == default
+
+
+@pytest.mark.parametrize("workers", [1, 2])
+def test_a_taken_address_is_one_line_and_nothing_is_left(tmp_path: Path, workers: int) -> None:
+    hosts = addresses(4 + workers, 4)
+    port = free_port(*hosts)
+    taken = socket.socket()
+    taken.bind((hosts[2], port))
+    taken.listen()
+    try:
+        fleet = Fleet(tmp_path, "--addresses", f"{hosts[0]}-{hosts[-1]}", "--device", "acg*4", "--port", str(port),
+                      "--io-port", "0", "--workers", str(workers), "--state-dir", str(tmp_path / "state"))
+        try:
+            assert fleet.process.wait(30) == 2
+        finally:
+            fleet.kill()
+    finally:
+        taken.close()
+    assert fleet.out.read_text() == ""
+    lines = fleet.err.read_text().splitlines()
+    assert lines == [f"cipstack fleet: cannot listen on TCP {hosts[2]}:{port} (EtherNet/IP, --port): "
+                     "Address already in use"], lines
+    assert children(fleet.process.pid) == []
+    for host in hosts:                                                      # every port of every device free
+        for kind in (socket.SOCK_STREAM, socket.SOCK_DGRAM):
+            with socket.socket(socket.AF_INET, kind) as probe:
+                probe.bind((host, port))
+
+
+def test_workers_serve_every_device_and_a_dead_worker_stops_the_fleet(tmp_path: Path) -> None:
+    hosts = addresses(7, 64)
+    port, io_port = free_port(hosts[0], hosts[-1]), free_port(hosts[0], hosts[-1])
+    fleet = Fleet(tmp_path, "--addresses", f"{hosts[0]}-{hosts[-1]}", "--device", "acg*64", "--port", str(port),
+                  "--io-port", str(io_port), "--workers", "2", "--state-dir", str(tmp_path / "state"))
+    try:
+        lines = fleet.wait_ready(60)
+        assert [line.split()[0] for line in lines] == [f"{h}:{port}" for h in hosts]
+        workers = children(fleet.process.pid)
+        assert len(workers) == 2
+        replies = asyncio.run(broadcast_replies(port, 2.0))
+        assert sorted(replies, key=sort_key) == hosts                      # 64 devices, each answered once
+        # `cipstack discover` with its default broadcast addresses lists every device once.
+        command = subprocess.run([sys.executable, "-m", "cipstack", "discover", "--port", str(port), "--json"],
+                                 capture_output=True, text=True, timeout=30)
+        listed = [json.loads(line)["address"] for line in command.stdout.splitlines()]
+        assert sorted(listed, key=lambda a: sort_key(a.rsplit(":", 1)[0])) == [f"{h}:{port}" for h in hosts]
+        for host in (hosts[0], hosts[-1]):                                   # one of each worker's share
+            status = drive("status", "--host", host, "--port", str(port))
+            assert status.returncode == 0 and "READY" in status.stdout, status.stderr
+        os.kill(workers[1], signal.SIGKILL)
+        assert fleet.process.wait(30) == 1
+        err = [line for line in fleet.err.read_text().splitlines() if "cipstack fleet:" in line]
+        assert len(err) == 1 and "ended: killed by SIGKILL; stopping the fleet" in err[0], err
+        assert f"{hosts[0]}-{hosts[31]}" in err[0] or f"{hosts[32]}-{hosts[63]}" in err[0]
+        assert "Traceback" not in fleet.err.read_text()
+        wait_for(lambda: not any(alive(pid) for pid in workers), 10, "the other worker to stop")
+    finally:
+        fleet.kill()
+
+
+def test_sigterm_stops_every_worker_and_a_killed_parent_leaves_none(tmp_path: Path) -> None:
+    hosts = addresses(8, 2)
+    port = free_port(*hosts)
+    args = ("--addresses", f"{hosts[0]}-{hosts[1]}", "--device", "acg*2", "--port", str(port), "--io-port", "0",
+            "--workers", "2", "--state-dir", str(tmp_path / "state"))
+    with running(tmp_path, *args) as (fleet, _):
+        workers = children(fleet.process.pid)
+        assert len(workers) == 2
+        assert fleet.stop(signal.SIGTERM) == 0
+        assert not any(alive(pid) for pid in workers)
+    fleet = Fleet(tmp_path, *args, name="killed")
+    try:
+        fleet.wait_ready()
+        workers = children(fleet.process.pid)
+        fleet.process.kill()                                                 # no chance to stop them
+        fleet.process.wait(10)
+        wait_for(lambda: not any(alive(pid) for pid in workers), 10, "the workers to end with their parent")
+    finally:
+        fleet.kill()
+
+
+def test_a_spec_file(tmp_path: Path) -> None:
+    hosts = addresses(9, 4)
+    port = free_port(*hosts)
+    spec = tmp_path / "plant.toml"
+    spec.write_text(f"""
+# Two conveyors' drives under network control, and the pump's inverter.
+addresses = "{hosts[0]}-{hosts[2]}"
+port = {port}
+io_port = 0
+state_dir = "plant-state"
+
+[[device]]
+profile = "acg"
+count = 2
+params = {{drv = 4, Frq = 8}}
+
+[[device]]
+model = "MX2-A2015-E"
+first = "{hosts[3]}"
+""")
+    with running(tmp_path, "--spec", str(spec)) as (_, lines):
+        assert [line.split()[:2] for line in lines] == [[f"{hosts[0]}:{port}", "acg"], [f"{hosts[1]}:{port}", "acg"],
+                                                        [f"{hosts[3]}:{port}", "mx2:MX2-A2015-E"]]
+        assert f"state {tmp_path / 'plant-state' / (hosts[0] + '-acg.json')}" in lines[0]
+        # drv = 4, Frq = 8: the network is the command and the frequency source (0x29/1/14, 0x2A/1/29).
+        assert asyncio.run(_read(hosts[1], port, 0x29, 1, 14)) == 1
+        assert asyncio.run(_read(hosts[1], port, 0x2A, 1, 29)) == 1
+        found = asyncio.run(discover(BROADCAST, port, timeout=1.2))
+        assert sorted((r.address.host for r in found if r.address), key=sort_key) == [hosts[0], hosts[1], hosts[3]]
+
+
+@pytest.mark.parametrize("workers", [1, 2])
+def test_a_corrupt_state_file_is_one_line_naming_it(tmp_path: Path, workers: int) -> None:
+    hosts = addresses(10 + workers, 4)
+    state = tmp_path / "state"
+    state.mkdir()
+    corrupt = state / f"{hosts[3]}-acg.json"
+    corrupt.write_text("{garbage")
+    result = subprocess.run([sys.executable, "-m", "cipstack", "fleet", "--addresses", f"{hosts[0]}-{hosts[-1]}",
+                             "--device", "acg*4", "--port", str(free_port(*hosts)), "--io-port", "0", "--workers",
+                             str(workers), "--state-dir", str(state)], capture_output=True, text=True, timeout=60)
+    assert result.returncode == 2 and result.stdout == ""
+    assert result.stderr.splitlines() == [f"cipstack fleet: {hosts[3]}: {corrupt}: not valid JSON, truncated or "
+                                          "corrupt (Expecting property name enclosed in double quotes at line 1, "
+                                          "column 2)"]
+    assert corrupt.read_text() == "{garbage"                                 # never silently reset
