@@ -8,6 +8,7 @@ offset, or ``bits`` bits starting at bit ``bit`` (0 = least significant) of byte
 
 from __future__ import annotations
 
+import functools
 import struct
 from collections.abc import Callable, Iterable, Mapping
 from dataclasses import dataclass
@@ -69,7 +70,6 @@ class AssemblySchema:
         self.field_names = frozenset(f.name for f in self.fields)
         self._by_name = {f.name: f for f in self.fields}
         self._check()
-        self.construct = self._build_construct().compile()
         self._decoders = self._build_decoders()
 
     def _check(self) -> None:
@@ -85,6 +85,12 @@ class AssemblySchema:
                 if used[position]:
                     raise ValueError(f"assembly {self.instance}: field {f.name} overlaps another")
                 used[position] = True
+
+    @functools.cached_property
+    def construct(self) -> cs.Compiled:
+        """The compiled ``construct`` schema, made on first use: compiling costs milliseconds per
+        assembly (a device has dozens, a fleet hundreds), and the hot paths use ``decode``."""
+        return self._build_construct().compile()
 
     def _build_construct(self) -> cs.Struct:
         parts: list[cs.Construct] = []
