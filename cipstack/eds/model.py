@@ -192,6 +192,8 @@ class EntrySource:
     keyword: str
     fields: tuple[Field, ...]
     comments: tuple[str, ...]
+    #: The text itself, so that an item moved into another document is not taken for part of its text.
+    text: str = dataclass_field(repr=False, compare=False, default="")
 
 
 @dataclass(frozen=True)
@@ -205,6 +207,8 @@ class SectionSource:
     name_end: int
     name: str
     comments: tuple[str, ...]
+    #: The text itself, so that an item moved into another document is not taken for part of its text.
+    text: str = dataclass_field(repr=False, compare=False, default="")
 
 
 @dataclass

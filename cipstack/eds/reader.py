@@ -235,14 +235,15 @@ class _Parser:
         doc.source = DocumentSource(self.text, self.chunk_start, newline, tuple(doc.trailing_comments))
         for section in doc.sections:
             start, end, name_start, name_end = self.section_spans[id(section)]
-            section.source = SectionSource(start, end, name_start, name_end, section.name, tuple(section.comments))
+            section.source = SectionSource(start, end, name_start, name_end, section.name, tuple(section.comments),
+                                           self.text)
             for entry in section.entries:
                 start, end, keyword_start = self.entry_spans[id(entry)]
                 for item in entry.fields:
                     field_start, field_end = self.field_spans[id(item)]
                     item.source = FieldSource(field_start, field_end, item.semantic_value(), item.comment)
                 entry.source = EntrySource(start, end, keyword_start, entry.keyword, tuple(entry.fields),
-                                           tuple(entry.comments))
+                                           tuple(entry.comments), self.text)
 
     def _entry(self, section: Section, keyword: _Token) -> Entry:
         entry = Entry(keyword.text, line=keyword.line, comments=self.pending)

@@ -241,12 +241,12 @@ class _SourceWriter:
     def write(self) -> str:
         indent = ENTRY_INDENT
         for section in self.doc.sections:
-            if section.source is None:
+            if section.source is None or section.source.text is not self.text:
                 self._new_lines(_section_header(section), blank_before=True)
             else:
                 self.out.append(self._section_chunk(section, section.source))
             for entry in section.entries:
-                if entry.source is None:
+                if entry.source is None or entry.source.text is not self.text:
                     self._new_lines(format_entry(entry, indent, _field_indent(indent), self.newline))
                 else:
                     indent = _indent_before(self.text, entry.source.keyword_start) or ENTRY_INDENT

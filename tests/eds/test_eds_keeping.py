@@ -180,3 +180,12 @@ def test_write_eds_writes_the_file_bytes(tmp_path: Path) -> None:
     ]
     write_eds(doc, tmp_path / "laid-out.eds", layout=True)
     assert b"\r\n    MinRev = 4;\r\n" in (tmp_path / "laid-out.eds").read_bytes()
+
+
+def test_an_entry_moved_from_another_file_is_laid_out_not_cut_from_this_one() -> None:
+    doc, other = read_eds(PUMP), parse_eds(ADAPTER_EDS)
+    doc.get("Device").entries.append(other.entry("Device", "Catalog"))
+    doc.sections.append(other.get("Device Classification"))
+    after = written(doc)
+    assert after.startswith(PUMP.read_bytes().split(b"\n\n[Device Classification]")[0] + b'\n\tCatalog = "ACG-ET2";\n')
+    assert after.endswith(b"\n[Device Classification]\n\tClass1 = EtherNetIP;\n\n$ Ende der Datei\n")
