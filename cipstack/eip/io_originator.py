@@ -87,6 +87,8 @@ class ArrivalStatistics:
     changes: int = 0
     #: T->O packets dropped because their data size is not the connection's.
     wrong_size: int = 0
+    #: Intervals within half an API of the API (the share of on-time arrivals).
+    on_time: int = 0
     slow_warned: bool = False
     intervals: deque[float] = field(init=False)
 
@@ -104,6 +106,8 @@ class ArrivalStatistics:
             return None
         interval = now - last
         self.intervals.append(interval)  # a deque with maxlen ``window``: the oldest falls out
+        if abs(interval - self.api) <= self.api / 2:
+            self.on_time += 1
         if interval > self.max_interval:
             self.max_interval = interval
         # Judged every 16 packets from the 17th interval on, on the mean (cheap); 1.5 x the API
@@ -140,6 +144,7 @@ class ArrivalStatistics:
             "interval_p99_ms": None if p99 is None else round(p99 * 1e3, 3),
             "interval_max_ms": round(self.max_interval * 1e3, 3) if self.intervals else None,
             "missed_slots": None if share is None else round(share, 4),
+            "within_half_api_pct": round(100.0 * self.on_time / (self.count - 1), 2) if self.count > 1 else None,
             "input_changes": self.changes,
             "wrong_size": self.wrong_size,
         }
