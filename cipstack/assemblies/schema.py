@@ -68,7 +68,18 @@ class AssemblySchema:
         self.field_names = frozenset(f.name for f in self.fields)
         self._by_name = {f.name: f for f in self.fields}
         self._check()
-        self.construct = self._build_construct().compile()
+        self._construct: cs.Construct | None = None
+        #: The field values last encoded and their bytes: a produced assembly whose values have not
+        #: changed since (every firing of a class 1 timer, mostly) costs one comparison.
+        self._last_encoded: tuple[tuple[tuple[str, Any], ...], bytes] | None = None
+
+    @property
+    def construct(self) -> cs.Construct:
+        """The compiled parser, built when first used (compiling is most of a schema's cost, and a
+        catalog of schemas is mostly never parsed with)."""
+        if self._construct is None:
+            self._construct = self._build_construct().compile()
+        return self._construct
 
     def _check(self) -> None:
         if len(self._by_name) != len(self.fields):
@@ -133,13 +144,19 @@ class AssemblySchema:
     def encode(self, values: Mapping[str, Any] | None = None, **more: Any) -> bytes:
         """Bytes for the given field values; fields not given are zero."""
         given = dict(values or {}, **more)
+        key = tuple(given.items())
+        last = self._last_encoded
+        if last is not None and last[0] == key:
+            return last[1]
         unknown = set(given) - self.field_names
         if unknown:
             raise KeyError(f"assembly {self.instance} has no field {', '.join(sorted(unknown))}")
         out = bytearray(self.size)
         for name, value in given.items():
             self._put(out, self._by_name[name], value)
-        return bytes(out)
+        encoded = bytes(out)
+        self._last_encoded = (key, encoded)
+        return encoded
 
     def with_field(self, data: bytes, name: str, value: Any) -> bytes:
         """``data`` with one field changed."""

@@ -481,20 +481,25 @@ class IoTarget:
         if connection is None or connection.peer != source[0] or len(payload) != connection.ot_payload_size:
             self.dropped += 1
             return
-        self.tick(now)
         consumer = connection.consumer
         reception = consumer.accept(datagram.encap_sequence, datagram.cip_sequence, now)
         if reception is Reception.STALE:
             return
         if consumer.deadline < connection.watch_at:
             self._watch(connection)  # the first packet ends the 10 s first-packet allowance
+        # The device is moved to ``now`` only when it is told something (run/idle changes, new
+        # data): a heartbeat or a repeated packet leaves it alone, so most datagrams cost no tick.
         if connection.consumed is None:
-            if payload:
+            if payload and connection.run is not bool(payload[0] & 1):
+                self.tick(now)
                 self._run_idle(connection, bool(payload[0] & 1))
             return
         run, data = split_run_idle(payload)
+        deliver = reception is Reception.NEW and run
+        if deliver or connection.run is not run:
+            self.tick(now)
         self._run_idle(connection, run)
-        if reception is Reception.NEW and run:
+        if deliver:
             self.deliver(connection.consumed.instance_id, data, now)
 
     def _deliver_to_point(self, instance_id: int, data: bytes, now: float) -> None:
