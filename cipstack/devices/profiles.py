@@ -65,11 +65,16 @@ def _acg(interface: NetworkInterface, limits: DeviceLimits, options: ProfileOpti
 
 
 def _acg_catalog() -> Catalog:
-    from .acg.device import build_acg_device
+    """From the declarations alone (no drive is built): the ACG classes and the assemblies whose
+    layout no CM setting changes, the speed outputs 20/21/100/101 and inputs 70/71/110/111 (seed 000
+    instance tables), made as the device makes them."""
+    from ..assemblies.acg import HZ_INPUTS, HZ_OUTPUTS, speed_input, speed_output
+    from .acg.objects import CATALOG_CLASSES, OUTPUT_FREQUENCY
+    from .acg.registers import SPEED_REFERENCE
 
-    device = build_acg_device()
-    return Catalog(device.catalog_classes(),
-                   [device.assembly_schema(i) for i in device.assembly.points if i in _ACG_FIXED_ASSEMBLIES])
+    outputs = [speed_output(i, SPEED_REFERENCE) for i in (20, 21, *HZ_OUTPUTS)]
+    inputs = [speed_input(i, OUTPUT_FREQUENCY) for i in (70, 71, *HZ_INPUTS)]
+    return Catalog(CATALOG_CLASSES, [*outputs, *inputs])
 
 
 def _omron(family: str, default_model: str) -> Callable[[NetworkInterface, DeviceLimits, ProfileOptions], Device]:
@@ -104,10 +109,6 @@ def _omron_product_codes(family: str) -> frozenset[int]:
     from .omron.models import MODELS
 
     return frozenset(m.product_code for m in MODELS if m.family.value.lower() == family)
-
-
-#: The ACG assemblies whose layout does not depend on CM settings (seed 000 instance tables).
-_ACG_FIXED_ASSEMBLIES = frozenset({20, 21, 100, 101, 70, 71, 110, 111})
 
 
 PROFILES: dict[str, Profile] = {
