@@ -183,7 +183,8 @@ def parse_ladder(text: str) -> tuple[float, list[int]]:
     return float(rpi.rstrip("msu")) * scale, [int(c) for c in counts.split(",")]
 
 
-def run_ladder(ladders: Sequence[str], seconds: float, originators: int, settle: float = 1.0) -> list[Step]:
+def run_ladder(ladders: Sequence[str], seconds: float, originators: int, settle: float = 1.0,
+               every_step: bool = False) -> list[Step]:
     port, io_port = free_port(), free_port()
     adapter = start_adapter(port, io_port, "--max-io-connections", "1024")
     steps: list[Step] = []
@@ -193,7 +194,7 @@ def run_ladder(ladders: Sequence[str], seconds: float, originators: int, settle:
             for count in counts:
                 step = run_step(port, io_port, adapter.pid, rpi, count, seconds, originators, settle)
                 steps.append(step)
-                if not step.holds:
+                if not step.holds and not every_step:
                     break
     finally:
         stop_adapter(adapter)
@@ -245,6 +246,8 @@ def main(argv: Sequence[str] | None = None) -> int:
     parser.add_argument("--originators", type=int, default=2, help="scanner processes (default 2)")
     parser.add_argument("--ladder", action="append", metavar="RPI:N,N,...",
                         help=f"RPI and connection counts, repeatable (default {' '.join(DEFAULT_LADDER)})")
+    parser.add_argument("--every-step", action="store_true",
+                        help="run every step, also after the break point (the cost per packet as connections grow)")
     parser.add_argument("--json", action="store_true", help="one JSON object instead of the text report")
     parser.add_argument("--originate", action="store_true", help=argparse.SUPPRESS)
     parser.add_argument("--port", type=int, help=argparse.SUPPRESS)
@@ -255,7 +258,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     args = parser.parse_args(argv)
     if args.originate:
         return originator_main(args)
-    steps = run_ladder(args.ladder or DEFAULT_LADDER, args.seconds, args.originators)
+    steps = run_ladder(args.ladder or DEFAULT_LADDER, args.seconds, args.originators, every_step=args.every_step)
     if args.json:
         print(json.dumps({"steps": [asdict(s) for s in steps], "load_average": os.getloadavg(),
                           "cpus": os.cpu_count()}))

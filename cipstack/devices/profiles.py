@@ -5,12 +5,17 @@ from __future__ import annotations
 from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 from ..catalog import Catalog
 from ..eip.identity_items import IdentityRecord
 from ..objects.identity import IdentityInfo
 from ..objects.tcpip import NetworkInterface
-from .base import Device, DeviceLimits
+
+if TYPE_CHECKING:
+    # The device model (router, Connection Manager, class 1 target) is loaded by what builds a
+    # device: a scanner that only wants a profile's catalog does without it.
+    from .base import Device, DeviceLimits
 
 #: Locally administered MAC of the emulated card (bit 1 of the first octet set).
 DEFAULT_MAC = bytes.fromhex("02CA10000064")
@@ -141,6 +146,8 @@ def catalog_for(vendor_id: int, product_code: int) -> Catalog:
 
 def build_device(name: str = DEFAULT_PROFILE, interface: NetworkInterface | None = None,
                  limits: DeviceLimits | None = None, options: ProfileOptions | None = None) -> Device:
+    from .base import DeviceLimits
+
     try:
         profile = PROFILES[name]
     except KeyError:
@@ -151,5 +158,7 @@ def build_device(name: str = DEFAULT_PROFILE, interface: NetworkInterface | None
 
 def identity_only_device(interface: NetworkInterface | None = None, limits: DeviceLimits | None = None) -> Device:
     """The ACG-ET2 identity with the standard objects only: the generic object model, no drive."""
+    from .base import Device, DeviceLimits
+
     return Device(acg_et2_identity((interface or NetworkInterface(mac=DEFAULT_MAC)).mac),
                   interface or NetworkInterface(mac=DEFAULT_MAC), limits or DeviceLimits())
