@@ -30,6 +30,14 @@ def cpu_seconds(pid: int) -> tuple[float, float]:
     return int(fields[11]) / CLOCK_TICKS, int(fields[12]) / CLOCK_TICKS
 
 
+def machine_busy() -> tuple[float, float]:
+    """(busy, total) CPU time of the whole machine so far, from /proc/stat (all cores, in ticks)."""
+    with open("/proc/stat") as stat:
+        fields = [int(v) for v in stat.readline().split()[1:]]
+    idle = fields[3] + fields[4]  # idle + iowait
+    return sum(fields) - idle, sum(fields)
+
+
 def start_adapter(port: int, io_port: int, *extra: str, state: bool = True) -> subprocess.Popen[bytes]:
     """The adapter emulator on 127.0.0.1; ``state``: a state file of its own (a profile's, not ``--eds``)."""
     state_file = ["--state", os.path.join(tempfile.mkdtemp(), "state.json")] if state else []

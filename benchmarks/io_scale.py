@@ -38,7 +38,7 @@ from dataclasses import asdict, dataclass
 from typing import Any
 
 sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
-from io_common import Verdict, cpu_seconds, free_port, start_adapter, stop_adapter
+from io_common import Verdict, cpu_seconds, free_port, machine_busy, start_adapter, stop_adapter
 
 INPUT = 71
 INPUT_ONLY_POINT = 198
@@ -120,18 +120,22 @@ class Step:
         return round(1e6 / self.adapter_us_per_packet) if self.adapter_us_per_packet else 0
 
     originators: int = 1
+    #: Share of the whole machine's CPU time that was busy during the step (every process, every core).
+    machine_busy: float = 0.0
 
     @property
     def limited_by(self) -> str:
-        """Which side ran out of CPU, when a step fails: a process near a whole core is saturated;
-        when none is, the time went elsewhere (other load on the machine, wake-up latency)."""
+        """Which side ran out of CPU, when a step fails: a process near a whole core is saturated; a
+        machine busy nearly all the time had no core to give either; else the time went to latency."""
         if self.holds:
             return "-"
         if self.adapter_cpu >= 0.9:
             return "adapter"
         if self.originators_cpu >= 0.9 * self.originators:
             return "originators"
-        return "no process saturated: other load or latency"
+        if self.machine_busy >= 0.9:
+            return f"the machine ({self.machine_busy:.0%} busy, its other load included)"
+        return "no process saturated: wake-up latency"
 
 
 def run_step(port: int, io_port: int, adapter_pid: int, rpi: float, connections: int, seconds: float,
@@ -148,6 +152,7 @@ def run_step(port: int, io_port: int, adapter_pid: int, rpi: float, connections:
             if line.strip() != "measuring":
                 raise RuntimeError(f"an originator failed before measuring: {line!r}")
         user, system = cpu_seconds(adapter_pid)
+        busy, total = machine_busy()
         wall_before = time.monotonic()
         results = []
         for process in processes:
@@ -155,6 +160,7 @@ def run_step(port: int, io_port: int, adapter_pid: int, rpi: float, connections:
             results.append(json.loads(out.strip().splitlines()[-1]))
         wall = time.monotonic() - wall_before
         user2, system2 = cpu_seconds(adapter_pid)
+        busy2, total2 = machine_busy()
     finally:
         for process in processes:
             if process.poll() is None:
@@ -174,7 +180,8 @@ def run_step(port: int, io_port: int, adapter_pid: int, rpi: float, connections:
     return Step(rpi * 1e3, connections, round(measured, 2), round(received / measured), round(sent / measured),
                 round(expected), round(late_pct, 3), lost, timeouts, skipped, round(adapter_cpu / wall, 3),
                 round(sum(r["cpu"] for r in results) / measured, 3), holds,
-                round(adapter_cpu / pairs * 1e6, 1) if pairs else 0.0, len(processes))
+                round(adapter_cpu / pairs * 1e6, 1) if pairs else 0.0, len(processes),
+                round((busy2 - busy) / (total2 - total), 3) if total2 > total else 0.0)
 
 
 def parse_ladder(text: str) -> tuple[float, list[int]]:
@@ -232,11 +239,11 @@ def verdicts(steps: Sequence[Step]) -> list[Verdict]:
 
 def print_steps(steps: Sequence[Step]) -> None:
     print(f"{'RPI':>6} {'conns':>6} {'T->O/s':>8} {'O->T/s':>8} {'asked/s':>8} {'late %':>7} {'lost':>5} "
-          f"{'t/o':>4} {'adapter':>8} {'scanners':>9} {'µs/pkt':>7}  holds")
+          f"{'t/o':>4} {'adapter':>8} {'scanners':>9} {'µs/pkt':>7} {'machine':>8}  holds")
     for s in steps:
         print(f"{s.rpi_ms:>4g}ms {s.connections:>6} {s.t_to_o_per_s:>8,} {s.o_to_t_per_s:>8,} {s.expected_per_s:>8,} "
               f"{s.late_pct:>7.3f} {s.lost:>5} {s.timeouts:>4} {s.adapter_cpu:>8.2f} {s.originators_cpu:>9.2f} "
-              f"{s.adapter_us_per_packet:>7.1f}  "
+              f"{s.adapter_us_per_packet:>7.1f} {s.machine_busy:>8.0%}  "
               f"{'yes' if s.holds else 'NO (' + s.limited_by + ')'}")
 
 

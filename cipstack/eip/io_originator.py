@@ -33,7 +33,7 @@ from .io_core import (
     decode_io_datagram,
     encode_io_datagram,
 )
-from .io_target import TO_OVERHEAD
+from .io_target import EARLY_SHARE, TO_OVERHEAD
 
 if TYPE_CHECKING:
     from ..assemblies.schema import AssemblySchema
@@ -275,15 +275,19 @@ class IoOriginator:
                     connection.updates.get_nowait()  # keep the newest: a slow reader sees the latest state
                 connection.updates.put_nowait(datagram.payload)
 
-    def poll(self, now: float) -> list[tuple[bytes, tuple[str, int]]]:
+    def poll(self, now: float, horizon: float = 0.0) -> list[tuple[bytes, tuple[str, int]]]:
+        """The O->T datagrams due at ``now`` (and within ``horizon`` after it, as ``IoTarget.poll``)."""
         heap = self._productions
         out: list[tuple[bytes, tuple[str, int]]] = []
-        while heap and heap[0][0] <= now:
-            _due_at, _order, connection = heapq.heappop(heap)
+        while heap and heap[0][0] <= now + horizon:
+            due_at, _order, connection = heap[0]
+            producer = connection.producer
+            if due_at > now and due_at - now > producer.period * EARLY_SHARE:
+                break  # not due, and too far off to send early
+            heapq.heappop(heap)
             if not self._live(connection):
                 continue  # closed since
-            producer = connection.producer
-            due, _ = producer.due(now)
+            due, _ = producer.due(max(now, due_at))
             heapq.heappush(heap, (producer.next_due, next(self._order), connection))
             if not due:
                 continue
