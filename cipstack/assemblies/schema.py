@@ -55,6 +55,10 @@ def word(name: str, offset: int, cip_type: CipType, **kwargs: Any) -> AssemblyFi
     return AssemblyField(name, offset, cip_type, **kwargs)
 
 
+#: Field values whose equality now means equality later (see ``AssemblySchema.encode``).
+_IMMUTABLE_VALUES = frozenset({bool, int, float, str, bytes})
+
+
 class AssemblySchema:
     """Immutable description of one assembly instance's data."""
 
@@ -144,9 +148,11 @@ class AssemblySchema:
     def encode(self, values: Mapping[str, Any] | None = None, **more: Any) -> bytes:
         """Bytes for the given field values; fields not given are zero."""
         given = dict(values or {}, **more)
-        key = tuple(given.items())
+        # Remembered only when every value is immutable: a bytearray changed in place after being
+        # encoded would compare equal to itself and bring back the old bytes.
+        key = tuple(given.items()) if all(type(v) in _IMMUTABLE_VALUES for v in given.values()) else None
         last = self._last_encoded
-        if last is not None and last[0] == key:
+        if key is not None and last is not None and last[0] == key:
             return last[1]
         unknown = set(given) - self.field_names
         if unknown:
@@ -155,7 +161,8 @@ class AssemblySchema:
         for name, value in given.items():
             self._put(out, self._by_name[name], value)
         encoded = bytes(out)
-        self._last_encoded = (key, encoded)
+        if key is not None:
+            self._last_encoded = (key, encoded)
         return encoded
 
     def with_field(self, data: bytes, name: str, value: Any) -> bytes:
