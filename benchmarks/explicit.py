@@ -43,6 +43,9 @@ from collections.abc import Callable, Iterator
 from dataclasses import asdict, dataclass
 from typing import Any
 
+sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
+from io_common import Verdict, cpu_seconds, free_port
+
 HEADER = struct.Struct("<HHII8sI")
 REGISTER_SESSION = 0x0065
 SEND_RR_DATA = 0x006F
@@ -50,23 +53,16 @@ SEND_RR_DATA = 0x006F
 GET_PRODUCT_NAME = bytes((0x0E, 0x03, 0x20, 0x01, 0x24, 0x01, 0x30, 0x07))
 EXPECTED_NAME = b"\x04CENT"
 ADAPTER_CPU_TARGET_US = 100.0
-CLOCK_TICKS = os.sysconf("SC_CLK_TCK")
+#: Issue 16's targets (from a C adapter stack on the same machine): adapter user CPU per request with
+#: one client, total CPU per request with eight clients, and what 100 idle sessions may add.
+USER_CPU_TARGET_US = 6.0
+EIGHT_CLIENTS_TARGET_US = 12.0
+IDLE_SESSIONS_TARGET_US = 2.0
+CLIENTS = 8
+IDLE_SESSIONS = 100
 
 
 # -- servers ------------------------------------------------------------------------------------------------
-def free_port() -> int:
-    with socket.socket(socket.AF_INET, socket.SOCK_STREAM) as probe:
-        probe.bind(("127.0.0.1", 0))
-        return int(probe.getsockname()[1])
-
-
-def process_cpu_seconds(pid: int) -> float:
-    """utime + stime of a process, in seconds (fields 14 and 15 of /proc/PID/stat)."""
-    with open(f"/proc/{pid}/stat", encoding="ascii") as stat:
-        fields = stat.read().rsplit(")", 1)[1].split()
-    return (int(fields[11]) + int(fields[12])) / CLOCK_TICKS
-
-
 def wait_for_listener(port: int, process: subprocess.Popen[bytes], timeout: float = 10.0) -> None:
     deadline = time.monotonic() + timeout
     while time.monotonic() < deadline:
@@ -100,8 +96,11 @@ def adapter_command(port: int, profile: str | None) -> list[str]:
     prefix = [sys.executable]
     if profile:
         prefix += ["-m", "cProfile", "-o", profile]
+    # Room for the idle sessions of the +100 run (the defaults hold 32 sessions, 16 per address).
+    limits = ["--max-sessions", "256", "--max-sessions-per-host", "256", "--max-tcp-connections", "512",
+              "--max-tcp-connections-per-host", "512"]
     return [*prefix, "-m", "cipstack", "adapter", "--host", "127.0.0.1", "--port", str(port), "--io-port", "0",
-            "--log-level", "WARNING"]
+            "--log-level", "WARNING", "--quiet", *limits]
 
 
 def echo_command(port: int, kind: str) -> list[str]:
@@ -164,37 +163,54 @@ class Run:
     rate: float
     server_cpu_us: float
     client_cpu_us: float
+    server_user_us: float = 0.0
+    server_system_us: float = 0.0
+    #: Largest minus smallest server CPU per request over the rounds (how far noise moves the figure).
+    server_cpu_spread_us: float = 0.0
 
 
 @dataclass
 class Bench:
-    """One client connected to one server: ``batch(n)`` makes n requests back to back."""
+    """One client connected to one server: ``batch(n)`` makes n rounds of ``per_round`` requests each."""
 
     client: str
     server: str
     pid: int
     batch: Callable[[int], None]
     close: Callable[[], None]
+    per_round: int = 1
+    #: Called before and after each measured run (the idle sessions exist only during their own runs).
+    enter: Callable[[], None] = lambda: None
+    leave: Callable[[], None] = lambda: None
 
 
 def measure(bench: Bench, seconds: float, warmup: float) -> Run:
     """Batches for ``warmup`` seconds, then batches measured for ``seconds``."""
+    bench.enter()
+    try:
+        return _measure(bench, seconds, warmup)
+    finally:
+        bench.leave()
+
+
+def _measure(bench: Bench, seconds: float, warmup: float) -> Run:
     end = time.perf_counter() + warmup
     while time.perf_counter() < end:
         bench.batch(BATCH)
     count = 0
-    server_start = process_cpu_seconds(bench.pid)
+    user_start, system_start = cpu_seconds(bench.pid)
     client_start = time.process_time()
     start = now = time.perf_counter()
     while now < start + seconds:
         bench.batch(BATCH)
-        count += BATCH
+        count += BATCH * bench.per_round
         now = time.perf_counter()
     client_cpu = time.process_time() - client_start
-    server_cpu = process_cpu_seconds(bench.pid) - server_start
+    user_end, system_end = cpu_seconds(bench.pid)
+    user, system = user_end - user_start, system_end - system_start
     elapsed = now - start
-    return Run(bench.client, bench.server, count, elapsed, count / elapsed, server_cpu / count * 1e6,
-               client_cpu / count * 1e6)
+    return Run(bench.client, bench.server, count, elapsed, count / elapsed, (user + system) / count * 1e6,
+               client_cpu / count * 1e6, user / count * 1e6, system / count * 1e6)
 
 
 def repeat(call: Callable[[], object]) -> Callable[[int], None]:
@@ -290,24 +306,65 @@ def raw_client(port: int, pid: int, server: str) -> Bench:
     return Bench("raw", server, pid, repeat(client.call), client.close)
 
 
+def raw_clients(port: int, pid: int, server: str, count: int = CLIENTS) -> Bench:
+    """``count`` raw clients on their own connections, one request in flight on each: all send, then
+    each reply is read (the server sees ``count`` sockets ready at once, as with that many scanners)."""
+    clients = [RawClient(port, register=server == "adapter") for _ in range(count)]
+    for client in clients:
+        client.call()
+
+    def batch(n: int) -> None:
+        for _ in range(n):
+            for client in clients:
+                client.sock.sendall(client.frame)
+            for client in clients:
+                client._read()
+
+    def close() -> None:
+        for client in clients:
+            client.close()
+
+    return Bench(f"raw x{count}", server, pid, batch, close, per_round=count)
+
+
+def with_idle_sessions(bench: Bench, port: int, count: int = IDLE_SESSIONS) -> Bench:
+    """The same client while ``count`` other connections hold a registered session and send nothing."""
+    idle: list[RawClient] = []
+
+    def enter() -> None:
+        idle.extend(RawClient(port, register=bench.server == "adapter") for _ in range(count))
+
+    def leave() -> None:
+        for client in idle:
+            client.close()
+        idle.clear()
+
+    return Bench(f"{bench.client} +{count} idle", bench.server, bench.pid, bench.batch, bench.close,
+                 bench.per_round, enter, leave)
+
+
 def median_run(runs: list[Run]) -> Run:
     """Per-metric medians over the rounds of one client."""
     first = runs[0]
     return Run(first.client, first.server, sum(r.requests for r in runs), sum(r.seconds for r in runs),
                statistics.median(r.rate for r in runs), statistics.median(r.server_cpu_us for r in runs),
-               statistics.median(r.client_cpu_us for r in runs))
+               statistics.median(r.client_cpu_us for r in runs), statistics.median(r.server_user_us for r in runs),
+               statistics.median(r.server_system_us for r in runs),
+               max(r.server_cpu_us for r in runs) - min(r.server_cpu_us for r in runs))
 
 
 # -- report ------------------------------------------------------------------------------------------------------
 def print_table(runs: list[Run], summary: dict[str, float | bool | None]) -> None:
-    print(f"{'client':<14} {'server':<13} {'requests':>9} {'req/s':>9} {'server CPU':>12} {'client CPU':>12}"
-          f" {'vs echo':>8}")
+    print(f"{'client':<19} {'server':<13} {'requests':>9} {'req/s':>9} {'server CPU':>12} {'(user)':>10}"
+          f" {'client CPU':>12} {'vs echo':>8}")
     echo_rate = summary.get("echo_asyncio_rate") or 0.0
     for run in runs:
         share = f"{100 * run.rate / echo_rate:7.0f}%" if echo_rate else "       -"
-        print(f"{run.client:<14} {run.server:<13} {run.requests:>9} {run.rate:>9.0f} {run.server_cpu_us:>9.1f} µs"
-              f" {run.client_cpu_us:>9.1f} µs {share}")
+        print(f"{run.client:<19} {run.server:<13} {run.requests:>9} {run.rate:>9.0f} {run.server_cpu_us:>9.1f} µs"
+              f" {run.server_user_us:>7.1f} µs {run.client_cpu_us:>9.1f} µs {share}")
     print()
+    for line in verdict_lines(summary):
+        print(line)
     adapter_cpu = summary["adapter_cpu_us"]
     print(f"adapter CPU per request (raw client run): {adapter_cpu:.1f} µs; target {ADAPTER_CPU_TARGET_US:.0f} µs"
           f" -> {summary['adapter_cpu_vs_target']:.2f}x the target "
@@ -345,7 +402,77 @@ def summarise(runs: list[Run]) -> dict[str, float | bool | None]:
                                                / pycomm3.client_cpu_us)
     for run in runs:
         summary[f"rate_vs_echo_asyncio[{run.client}->{run.server}]"] = run.rate / echo_asyncio.rate
+    # Issue 16's targets, each beside the asyncio echo server's figure for the same client shape.
+    many, many_echo = by_key.get((f"raw x{CLIENTS}", "adapter")), by_key.get((f"raw x{CLIENTS}", "echo-asyncio"))
+    idle = by_key.get((f"raw +{IDLE_SESSIONS} idle", "adapter"))
+    idle_echo = by_key.get((f"raw +{IDLE_SESSIONS} idle", "echo-asyncio"))
+    summary.update({
+        "adapter_user_us": raw.server_user_us, "echo_asyncio_user_us": echo_asyncio.server_user_us,
+        "adapter_user_target_us": USER_CPU_TARGET_US,
+    })
+    if many is not None and many_echo is not None:
+        summary.update({"adapter_8_clients_us": many.server_cpu_us, "echo_8_clients_us": many_echo.server_cpu_us,
+                        "adapter_8_clients_target_us": EIGHT_CLIENTS_TARGET_US})
+    if idle is not None and idle_echo is not None:
+        summary.update({"adapter_idle_added_us": idle.server_cpu_us - raw.server_cpu_us,
+                        "echo_idle_added_us": idle_echo.server_cpu_us - echo_asyncio.server_cpu_us,
+                        "adapter_idle_added_target_us": IDLE_SESSIONS_TARGET_US,
+                        "adapter_idle_noise_us": max(idle.server_cpu_spread_us, raw.server_cpu_spread_us)})
     return summary
+
+
+def verdicts(summary: dict[str, Any]) -> list[Verdict]:
+    """Issue 16's explicit-messaging targets, each with the echo floor's figure."""
+    found = [Verdict("adapter user CPU per Get_Attribute_Single, 1 client", summary["adapter_user_us"],
+                     USER_CPU_TARGET_US, "µs", floor=summary["echo_asyncio_user_us"])]
+    if "adapter_8_clients_us" in summary:
+        found.append(Verdict(f"adapter CPU per request, {CLIENTS} clients (user + system)",
+                             summary["adapter_8_clients_us"], EIGHT_CLIENTS_TARGET_US, "µs",
+                             floor=summary["echo_8_clients_us"]))
+    if "adapter_idle_added_us" in summary:
+        # A difference of two noisy figures: it passes only when the rounds agree more closely than
+        # the target (else the run cannot tell, and says so).
+        added, noise = summary["adapter_idle_added_us"], summary["adapter_idle_noise_us"]
+        conclusive = noise <= IDLE_SESSIONS_TARGET_US
+        note = (f"echo server +{IDLE_SESSIONS} idle: {summary['echo_idle_added_us']:+.1f} µs; the rounds spread "
+                f"{noise:.1f} µs" + ("" if conclusive else ", more than the target: INCONCLUSIVE on this run"))
+        found.append(Verdict(f"CPU per request added by {IDLE_SESSIONS} idle sessions", added,
+                             IDLE_SESSIONS_TARGET_US, "µs", note=note,
+                             passed=conclusive and added <= IDLE_SESSIONS_TARGET_US))
+    return found
+
+
+def verdict_lines(summary: dict[str, Any]) -> list[str]:
+    return [v.line() for v in verdicts(summary)]
+
+
+def run_all(seconds: float, rounds: int, warmup: float, profile: str | None = None, pycomm3: bool = True,
+            scanners: bool = True) -> list[Run]:
+    """Every client against the adapter and the echo servers, the rounds interleaved; medians per client."""
+    with contextlib.ExitStack() as stack:
+        port = free_port()
+        adapter = stack.enter_context(server_process(adapter_command(port, profile), port))
+        benches = [scanner_sync(port, adapter.pid), scanner_async(port, adapter.pid)] if scanners else []
+        if pycomm3:
+            benches.append(pycomm3_driver(port, adapter.pid))
+        benches.append(raw_client(port, adapter.pid, "adapter"))
+        benches.append(raw_clients(port, adapter.pid, "adapter"))
+        benches.append(with_idle_sessions(raw_client(port, adapter.pid, "adapter"), port))
+        for kind in ("asyncio", "socket"):
+            echo_port = free_port()
+            echo = stack.enter_context(server_process(echo_command(echo_port, kind), echo_port))
+            benches.append(raw_client(echo_port, echo.pid, f"echo-{kind}"))
+            if kind == "asyncio":  # the socket echo serves one connection at a time
+                benches.append(raw_clients(echo_port, echo.pid, f"echo-{kind}"))
+                benches.append(with_idle_sessions(raw_client(echo_port, echo.pid, f"echo-{kind}"), echo_port))
+        for bench in benches:
+            stack.callback(bench.close)
+        # Rounds interleave the clients, so a burst of load elsewhere on the machine hits them all alike.
+        measured: dict[tuple[str, str], list[Run]] = {}
+        for _ in range(rounds):
+            for bench in benches:
+                measured.setdefault((bench.client, bench.server), []).append(measure(bench, seconds, warmup))
+    return [median_run(r) for r in measured.values()]
 
 
 def print_profile(path: str, top: int = 25) -> None:
@@ -370,26 +497,7 @@ def main(argv: list[str] | None = None) -> int:
         serve_echo(args.serve_echo, args.port)
         return 0
 
-    with contextlib.ExitStack() as stack:
-        port = free_port()
-        adapter = stack.enter_context(server_process(adapter_command(port, args.profile), port))
-        benches = [scanner_sync(port, adapter.pid), scanner_async(port, adapter.pid)]
-        if not args.no_pycomm3:
-            benches.append(pycomm3_driver(port, adapter.pid))
-        benches.append(raw_client(port, adapter.pid, "adapter"))
-        for kind in ("asyncio", "socket"):
-            echo_port = free_port()
-            echo = stack.enter_context(server_process(echo_command(echo_port, kind), echo_port))
-            benches.append(raw_client(echo_port, echo.pid, f"echo-{kind}"))
-        for bench in benches:
-            stack.callback(bench.close)
-        # Rounds interleave the clients, so a burst of load elsewhere on the machine hits them all alike.
-        rounds: dict[tuple[str, str], list[Run]] = {}
-        for _ in range(args.rounds):
-            for bench in benches:
-                rounds.setdefault((bench.client, bench.server), []).append(measure(bench, args.seconds, args.warmup))
-    runs = [median_run(r) for r in rounds.values()]
-
+    runs = run_all(args.seconds, args.rounds, args.warmup, args.profile, pycomm3=not args.no_pycomm3)
     summary = summarise(runs)
     if args.json:
         print(json.dumps({"runs": [asdict(run) for run in runs], "summary": summary, "rounds": args.rounds,

@@ -9,6 +9,7 @@ import subprocess
 import sys
 import tempfile
 import time
+from dataclasses import dataclass
 
 CLOCK_TICKS = os.sysconf("SC_CLK_TCK")
 
@@ -29,10 +30,20 @@ def cpu_seconds(pid: int) -> tuple[float, float]:
     return int(fields[11]) / CLOCK_TICKS, int(fields[12]) / CLOCK_TICKS
 
 
-def start_adapter(port: int, io_port: int, *extra: str) -> subprocess.Popen[bytes]:
+def machine_busy() -> tuple[float, float]:
+    """(busy, total) CPU time of the whole machine so far, from /proc/stat (all cores, in ticks)."""
+    with open("/proc/stat") as stat:
+        fields = [int(v) for v in stat.readline().split()[1:]]
+    idle = fields[3] + fields[4]  # idle + iowait
+    return sum(fields) - idle, sum(fields)
+
+
+def start_adapter(port: int, io_port: int, *extra: str, state: bool = True) -> subprocess.Popen[bytes]:
+    """The adapter emulator on 127.0.0.1; ``state``: a state file of its own (a profile's, not ``--eds``)."""
+    state_file = ["--state", os.path.join(tempfile.mkdtemp(), "state.json")] if state else []
     process = subprocess.Popen([sys.executable, "-m", "cipstack", "adapter", "--host", "127.0.0.1", "--port",
                                 str(port), "--io-port", str(io_port), "--log-level", "WARNING", "--quiet",
-                                "--state", os.path.join(tempfile.mkdtemp(), "state.json"), *extra])
+                                *state_file, *extra])
     deadline = time.monotonic() + 30
     while time.monotonic() < deadline:
         try:
@@ -53,3 +64,41 @@ def stop_adapter(process: subprocess.Popen[bytes]) -> None:
     except subprocess.TimeoutExpired:
         process.kill()
         process.wait(5)
+
+
+@dataclass
+class Verdict:
+    """One target of a benchmark: what was measured against what was asked, PASS or FAIL.
+
+    ``floor`` is the same figure for the asyncio echo server (the least an asyncio server spends),
+    which stands in for a C stack measured elsewhere; ``higher_is_better`` for rates and shares."""
+
+    name: str
+    measured: float | None
+    target: float
+    unit: str
+    floor: float | None = None
+    higher_is_better: bool = False
+    note: str = ""
+    #: A target that needs more than one figure (e.g. "none lost" beside a rate) decides it here.
+    passed: bool | None = None
+
+    def __post_init__(self) -> None:
+        if self.passed is None:
+            if self.measured is None:
+                self.passed = False
+            elif self.higher_is_better:
+                self.passed = self.measured >= self.target
+            else:
+                self.passed = self.measured <= self.target
+
+    def line(self) -> str:
+        measured = "-" if self.measured is None else f"{self.measured:,.1f} {self.unit}"
+        sign = ">=" if self.higher_is_better else "<="
+        text = (f"[{'PASS' if self.passed else 'FAIL'}] {self.name}: {measured} "
+                f"(target {sign} {self.target:,g} {self.unit}")
+        if self.floor is not None and self.measured is not None:
+            ratio = f"{self.measured / self.floor:.1f}x" if self.floor > 0 else "-"
+            text += f"; echo floor {self.floor:,.1f} {self.unit}, {ratio} the floor"
+        text += ")"
+        return text + (f"; {self.note}" if self.note else "")

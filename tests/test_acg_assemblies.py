@@ -155,3 +155,18 @@ def test_control_parameter_outputs(device: AcgDevice) -> None:
     assert device.drive.read(0x0380) == 1000
     device.assembly.deliver(122, bytes.fromhex("e803" "0100"), 3.0)  # B0: stop
     assert device.drive.drive_state.name == "STOPPING"
+
+
+def test_the_profile_catalog_is_the_device_s_own_declarations_without_building_one() -> None:
+    """``cipstack get`` decodes by the ACG catalog, made from the declarations alone: the same classes
+    and the same fixed assemblies (20/21/100/101, 70/71/110/111) a built device serves."""
+    from cipstack.devices.profiles import PROFILES
+
+    catalog = PROFILES["acg"].catalog()
+    device = build_acg_device()
+    assert sorted(catalog.assemblies) == [20, 21, 70, 71, 100, 101, 110, 111]
+    for instance, schema in catalog.assemblies.items():
+        served = device.assembly_schema(instance)
+        assert (schema.name, schema.size, schema.fields) == (served.name, served.size, served.fields)
+    for spec in device.catalog_classes():
+        assert catalog.classes[spec.class_id] == spec

@@ -172,3 +172,28 @@ def test_tcpip_inactivity_timeout_range() -> None:
     assert ask(device.router, 0x10, request_path(0xF5, 1, 13), struct.pack("<H", 3601)).general_status == 0x09
     assert ask(device.router, 0x10, request_path(0xF5, 1, 13), struct.pack("<H", 30)).ok
     assert device.inactivity_timeout == 30
+
+
+@pytest.mark.parametrize("profile", ["acg", "mx2"])
+def test_get_attribute_single_served_directly_answers_as_dispatch_does(profile: str) -> None:
+    """``handle`` serves ``0E 03 20 cc 24 ii 30 aa`` without the request and reply objects when it can:
+    for every class, instance and attribute of a device (and ones it lacks) the reply is the one the
+    full dispatch gives, errors included."""
+    from cipstack.devices.profiles import build_device as build_profile_device
+
+    device = build_profile_device(profile)
+    router = device.router
+    context = RequestContext(router, 1.0, "127.0.0.1:1", None)
+    compared = 0
+    for class_id in [*sorted(router.objects), 0x99]:
+        obj = router.objects.get(class_id)
+        instances = [0, *sorted(obj.instances)[:3], 0xFE] if obj is not None else [0, 1]
+        for instance in instances:
+            for attribute in range(0, 24):
+                raw = bytes((0x0E, 0x03, 0x20, class_id, 0x24, instance, 0x30, attribute))
+                assert router.handle(raw, context) == router.dispatch(raw, context).encode(), raw.hex()
+                compared += 1
+    assert compared > 500
+    # A request with data is no plain Get_Attribute_Single: 0x15 (too much data), as dispatch says.
+    raw = bytes((0x0E, 0x03, 0x20, 0x01, 0x24, 0x01, 0x30, 0x07, 0x00))
+    assert router.handle(raw, context)[2] == GeneralStatus.TOO_MUCH_DATA

@@ -8,7 +8,6 @@ offset, or ``bits`` bits starting at bit ``bit`` (0 = least significant) of byte
 
 from __future__ import annotations
 
-import functools
 import struct
 from collections.abc import Callable, Iterable, Mapping
 from dataclasses import dataclass
@@ -57,6 +56,10 @@ def word(name: str, offset: int, cip_type: CipType, **kwargs: Any) -> AssemblyFi
     return AssemblyField(name, offset, cip_type, **kwargs)
 
 
+#: Field values whose equality now means equality later (see ``AssemblySchema.encode``).
+_IMMUTABLE_VALUES = frozenset({bool, int, float, str, bytes})
+
+
 class AssemblySchema:
     """Immutable description of one assembly instance's data."""
 
@@ -71,6 +74,18 @@ class AssemblySchema:
         self._by_name = {f.name: f for f in self.fields}
         self._check()
         self._decoders = self._build_decoders()
+        self._construct: cs.Construct | None = None
+        #: The field values last encoded and their bytes: a produced assembly whose values have not
+        #: changed since (every firing of a class 1 timer, mostly) costs one comparison.
+        self._last_encoded: tuple[tuple[tuple[str, Any], ...], bytes] | None = None
+
+    @property
+    def construct(self) -> cs.Construct:
+        """The compiled parser, built when first used (compiling is most of a schema's cost, and a
+        catalog of schemas is mostly never parsed with)."""
+        if self._construct is None:
+            self._construct = self._build_construct().compile()
+        return self._construct
 
     def _check(self) -> None:
         if len(self._by_name) != len(self.fields):
@@ -85,12 +100,6 @@ class AssemblySchema:
                 if used[position]:
                     raise ValueError(f"assembly {self.instance}: field {f.name} overlaps another")
                 used[position] = True
-
-    @functools.cached_property
-    def construct(self) -> cs.Compiled:
-        """The compiled ``construct`` schema, made on first use: compiling costs milliseconds per
-        assembly (a device has dozens, a fleet hundreds), and the hot paths use ``decode``."""
-        return self._build_construct().compile()
 
     def _build_construct(self) -> cs.Struct:
         parts: list[cs.Construct] = []
@@ -166,13 +175,22 @@ class AssemblySchema:
     def encode(self, values: Mapping[str, Any] | None = None, **more: Any) -> bytes:
         """Bytes for the given field values; fields not given are zero."""
         given = dict(values or {}, **more)
+        # Remembered only when every value is immutable: a bytearray changed in place after being
+        # encoded would compare equal to itself and bring back the old bytes.
+        key = tuple(given.items()) if all(type(v) in _IMMUTABLE_VALUES for v in given.values()) else None
+        last = self._last_encoded
+        if key is not None and last is not None and last[0] == key:
+            return last[1]
         unknown = set(given) - self.field_names
         if unknown:
             raise KeyError(f"assembly {self.instance} has no field {', '.join(sorted(unknown))}")
         out = bytearray(self.size)
         for name, value in given.items():
             self._put(out, self._by_name[name], value)
-        return bytes(out)
+        encoded = bytes(out)
+        if key is not None:
+            self._last_encoded = (key, encoded)
+        return encoded
 
     def with_field(self, data: bytes, name: str, value: Any) -> bytes:
         """``data`` with one field changed."""

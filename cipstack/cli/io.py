@@ -101,6 +101,8 @@ def _statistics_text(stats: dict[str, Any]) -> str:
             + f"T->O API {stats['api_ms']:.3f} ms ({stats['api_rate_hz'] or 0:.1f}/s)  received "
             + ("-" if rate is None else f"{rate:.1f}/s")
             + f"  interval p50 {ms('interval_p50_ms')}  p99 {ms('interval_p99_ms')}  max {ms('interval_max_ms')}"
+            + "  within +-0.5 API " + ("-" if stats.get("within_half_api_pct") is None
+                                       else f"{stats['within_half_api_pct']:.1f}%")
             + "  missed slots " + ("-" if missed is None else f"{100 * missed:.1f}%")
             + f"  input changes {stats['input_changes']}")
 

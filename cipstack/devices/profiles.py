@@ -6,12 +6,17 @@ import ipaddress
 from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 from ..catalog import Catalog
 from ..eip.identity_items import IdentityRecord
 from ..objects.identity import IdentityInfo
 from ..objects.tcpip import NetworkInterface
-from .base import Device, DeviceLimits
+
+if TYPE_CHECKING:
+    # The device model (router, Connection Manager, class 1 target) is loaded by what builds a
+    # device: a scanner that only wants a profile's catalog does without it.
+    from .base import Device, DeviceLimits
 
 #: Locally administered MAC of the emulated card (bit 1 of the first octet set).
 DEFAULT_MAC = bytes.fromhex("02CA10000064")
@@ -74,11 +79,16 @@ def _acg(interface: NetworkInterface, limits: DeviceLimits, options: ProfileOpti
 
 
 def _acg_catalog() -> Catalog:
-    from .acg.device import build_acg_device
+    """From the declarations alone (no drive is built): the ACG classes and the assemblies whose
+    layout no CM setting changes, the speed outputs 20/21/100/101 and inputs 70/71/110/111 (seed 000
+    instance tables), made as the device makes them."""
+    from ..assemblies.acg import HZ_INPUTS, HZ_OUTPUTS, speed_input, speed_output
+    from .acg.objects import CATALOG_CLASSES, OUTPUT_FREQUENCY
+    from .acg.registers import SPEED_REFERENCE
 
-    device = build_acg_device()
-    return Catalog(device.catalog_classes(),
-                   [device.assembly_schema(i) for i in device.assembly.points if i in _ACG_FIXED_ASSEMBLIES])
+    outputs = [speed_output(i, SPEED_REFERENCE) for i in (20, 21, *HZ_OUTPUTS)]
+    inputs = [speed_input(i, OUTPUT_FREQUENCY) for i in (70, 71, *HZ_INPUTS)]
+    return Catalog(CATALOG_CLASSES, [*outputs, *inputs])
 
 
 def _omron(family: str, default_model: str) -> Callable[[NetworkInterface, DeviceLimits, ProfileOptions], Device]:
@@ -115,10 +125,6 @@ def _omron_product_codes(family: str) -> frozenset[int]:
     return frozenset(m.product_code for m in MODELS if m.family.value.lower() == family)
 
 
-#: The ACG assemblies whose layout does not depend on CM settings (seed 000 instance tables).
-_ACG_FIXED_ASSEMBLIES = frozenset({20, 21, 100, 101, 70, 71, 110, 111})
-
-
 PROFILES: dict[str, Profile] = {
     "acg": Profile("acg", "ACG drive with its ACG-ET2 EtherNet/IP card (seeds 000 and 001)", _acg,
                    vendor_id=acg_et2_identity().vendor_id, product_codes=frozenset({acg_et2_identity().product_code}),
@@ -149,6 +155,8 @@ def catalog_for(vendor_id: int, product_code: int) -> Catalog:
 
 def build_device(name: str = DEFAULT_PROFILE, interface: NetworkInterface | None = None,
                  limits: DeviceLimits | None = None, options: ProfileOptions | None = None) -> Device:
+    from .base import DeviceLimits
+
     try:
         profile = PROFILES[name]
     except KeyError:
@@ -159,5 +167,7 @@ def build_device(name: str = DEFAULT_PROFILE, interface: NetworkInterface | None
 
 def identity_only_device(interface: NetworkInterface | None = None, limits: DeviceLimits | None = None) -> Device:
     """The ACG-ET2 identity with the standard objects only: the generic object model, no drive."""
+    from .base import Device, DeviceLimits
+
     return Device(acg_et2_identity((interface or NetworkInterface(mac=DEFAULT_MAC)).mac),
                   interface or NetworkInterface(mac=DEFAULT_MAC), limits or DeviceLimits())

@@ -11,11 +11,13 @@ import json
 import re
 import sys
 from collections.abc import Mapping
-from typing import Any, TextIO
+from typing import TYPE_CHECKING, Any, TextIO
 
-from .checker import ERROR, Finding, check_eds
 from .model import EdsDocument, Entry, FieldKind, Section, format_epath
 from .reader import EdsSyntaxError, read_eds
+
+if TYPE_CHECKING:
+    from .checker import Finding
 
 EXIT_OK = 0
 EXIT_FINDINGS = 1
@@ -51,6 +53,9 @@ def run_check(
 ) -> int:
     """Check every file; 0 when none has an error, 1 when one has, 2 when one cannot be read.
     ``identity`` is a live device's Identity (see :func:`check_eds`) the files must match."""
+    # The checker is loaded by the command that checks (the parser takes this module for every command).
+    from .checker import ERROR, check_eds
+
     stdout = stdout or sys.stdout
     stderr = stderr or sys.stderr
     status = EXIT_OK

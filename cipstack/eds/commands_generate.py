@@ -18,14 +18,16 @@ import argparse
 import os
 import sys
 from collections.abc import Callable
-from typing import TextIO
+from typing import TYPE_CHECKING, TextIO
 
 from ..devices.omron.models import Family, UnknownModelError
 from ..devices.omron.models import model as omron_model
-from .description import EdsDescription
-from .generator import eds_text
-from .profiles import acg_et2_description, eds_file_name, omron_description, omron_models_by_file
-from .writer import encode_eds
+
+if TYPE_CHECKING:
+    from .description import EdsDescription
+
+# The generator and the descriptions (which build the devices they describe) are imported when a
+# file is generated: the command line's parser takes this module's arguments for every command.
 
 EXIT_OK = 0
 EXIT_USAGE = 2
@@ -48,6 +50,8 @@ def add_generate_arguments(parser: argparse.ArgumentParser) -> None:
 
 def descriptions(profile: str, model: str | None = None, every: bool = False) -> list[EdsDescription]:
     """The descriptions a command line asks for; ``GenerateError`` when it asks for none."""
+    from .profiles import acg_et2_description, omron_description, omron_models_by_file
+
     key = profile.strip().lower()
     if key not in PROFILES:
         raise GenerateError(f"unknown profile {profile!r} (known: {', '.join(PROFILES)})")
@@ -70,8 +74,14 @@ def descriptions(profile: str, model: str | None = None, every: bool = False) ->
 
 
 def write_descriptions(items: list[EdsDescription], directory: str,
-                       text: Callable[[EdsDescription], str] = eds_text) -> list[str]:
-    """Write each description's file into ``directory`` (made if missing); the paths written."""
+                       text: Callable[[EdsDescription], str] | None = None) -> list[str]:
+    """Write each description's file into ``directory`` (made if missing); the paths written.
+    ``text`` makes a file's text (default: the generator's ``eds_text``)."""
+    from .generator import eds_text
+    from .profiles import eds_file_name
+    from .writer import encode_eds
+
+    text = text or eds_text
     try:
         os.makedirs(directory, exist_ok=True)
     except OSError as exc:

@@ -10,6 +10,7 @@ output fields, read input fields, iterate input updates, switch run/idle, read s
 from __future__ import annotations
 
 import asyncio
+import heapq
 import itertools
 import logging
 import random
@@ -32,7 +33,7 @@ from .io_core import (
     decode_io_datagram,
     encode_io_datagram,
 )
-from .io_target import TO_OVERHEAD
+from .io_target import EARLY_SHARE, TO_OVERHEAD
 
 if TYPE_CHECKING:
     from ..assemblies.schema import AssemblySchema
@@ -87,6 +88,8 @@ class ArrivalStatistics:
     changes: int = 0
     #: T->O packets dropped because their data size is not the connection's.
     wrong_size: int = 0
+    #: Intervals within half an API of the API (the share of on-time arrivals).
+    on_time: int = 0
     slow_warned: bool = False
     intervals: deque[float] = field(init=False)
 
@@ -104,6 +107,8 @@ class ArrivalStatistics:
             return None
         interval = now - last
         self.intervals.append(interval)  # a deque with maxlen ``window``: the oldest falls out
+        if abs(interval - self.api) <= self.api / 2:
+            self.on_time += 1
         if interval > self.max_interval:
             self.max_interval = interval
         # Judged every 16 packets from the 17th interval on, on the mean (cheap); 1.5 x the API
@@ -140,6 +145,7 @@ class ArrivalStatistics:
             "interval_p99_ms": None if p99 is None else round(p99 * 1e3, 3),
             "interval_max_ms": round(self.max_interval * 1e3, 3) if self.intervals else None,
             "missed_slots": None if share is None else round(share, 4),
+            "within_half_api_pct": round(100.0 * self.on_time / (self.count - 1), 2) if self.count > 1 else None,
             "input_changes": self.changes,
             "wrong_size": self.wrong_size,
         }
@@ -176,6 +182,8 @@ class OriginatorConnection:
     send_times: list[float] = field(default_factory=list)
     last_arrival: float | None = None
     keep_intervals: bool = False
+    #: When the originator's watchdog heap looks at this connection next (its live entry there).
+    watch_at: float = 0.0
 
 
 class IoOriginator:
@@ -187,10 +195,26 @@ class IoOriginator:
         #: By T->O connection id: several connections share one when they listen to the same multicast data.
         self.by_to_id: dict[int, list[OriginatorConnection]] = {}
         self.dropped = 0
+        # Deadlines in heaps, as the target keeps them (``IoTarget``): a timer firing touches what is
+        # due, not every connection. Entries (time, order, connection); those of closed connections
+        # are dropped when they come up, a watchdog entry whose deadline has moved on (packets
+        # arrived) is pushed again at the new one.
+        self._productions: list[tuple[float, int, OriginatorConnection]] = []
+        self._watchdogs: list[tuple[float, int, OriginatorConnection]] = []
+        self._order = itertools.count()
 
     def add(self, connection: OriginatorConnection) -> None:
         self.connections[connection.ot_connection_id] = connection
         self.by_to_id.setdefault(connection.to_connection_id, []).append(connection)
+        heapq.heappush(self._productions, (connection.producer.next_due, next(self._order), connection))
+        self._watch(connection)
+
+    def _watch(self, connection: OriginatorConnection) -> None:
+        connection.watch_at = connection.consumer.deadline
+        heapq.heappush(self._watchdogs, (connection.watch_at, next(self._order), connection))
+
+    def _live(self, connection: OriginatorConnection) -> bool:
+        return not connection.closed and self.connections.get(connection.ot_connection_id) is connection
 
     def remove(self, connection: OriginatorConnection) -> None:
         self.connections.pop(connection.ot_connection_id, None)
@@ -229,6 +253,8 @@ class IoOriginator:
         reception = connection.consumer.accept(datagram.encap_sequence, datagram.cip_sequence, now)
         if reception is Reception.STALE:
             return
+        if connection.consumer.deadline < connection.watch_at:
+            self._watch(connection)  # the first packet ends the 10 s first-packet allowance
         slow = connection.arrivals.arrived(now)
         if slow is not None:
             log.warning("class 1 connection 0x%08X: %s produces every %.3f ms on average, slower than its API of "
@@ -249,12 +275,20 @@ class IoOriginator:
                     connection.updates.get_nowait()  # keep the newest: a slow reader sees the latest state
                 connection.updates.put_nowait(datagram.payload)
 
-    def poll(self, now: float) -> list[tuple[bytes, tuple[str, int]]]:
-        out = []
-        for connection in self.connections.values():
-            if connection.closed or now < connection.producer.next_due:
-                continue
-            due, _ = connection.producer.due(now)
+    def poll(self, now: float, horizon: float = 0.0) -> list[tuple[bytes, tuple[str, int]]]:
+        """The O->T datagrams due at ``now`` (and within ``horizon`` after it, as ``IoTarget.poll``)."""
+        heap = self._productions
+        out: list[tuple[bytes, tuple[str, int]]] = []
+        while heap and heap[0][0] <= now + horizon:
+            due_at, _order, connection = heap[0]
+            producer = connection.producer
+            if due_at > now and due_at - now > producer.period * EARLY_SHARE:
+                break  # not due, and too far off to send early
+            heapq.heappop(heap)
+            if not self._live(connection):
+                continue  # closed since
+            due, _ = producer.due(max(now, due_at))
+            heapq.heappush(heap, (producer.next_due, next(self._order), connection))
             if not due:
                 continue
             connection.encap_sequence = (connection.encap_sequence + 1) & 0xFFFFFFFF
@@ -270,13 +304,28 @@ class IoOriginator:
         return out
 
     def next_deadline(self) -> float | None:
-        deadlines = [c.producer.next_due for c in self.connections.values() if not c.closed]
-        deadlines += [c.consumer.deadline for c in self.connections.values() if not c.closed and not c.timed_out]
-        return min(deadlines, default=None)
+        """The earliest production slot or watchdog deadline (a watchdog may have moved on since:
+        firing early costs one look, see ``expire``)."""
+        productions, watchdogs = self._productions, self._watchdogs
+        while productions and not self._live(productions[0][2]):
+            heapq.heappop(productions)
+        while watchdogs and not (self._live(watchdogs[0][2]) and not watchdogs[0][2].timed_out
+                                 and watchdogs[0][0] == watchdogs[0][2].watch_at):
+            heapq.heappop(watchdogs)
+        candidates = [heap[0][0] for heap in (productions, watchdogs) if heap]
+        return min(candidates, default=None)
 
     def expire(self, now: float) -> list[OriginatorConnection]:
-        expired = [c for c in self.connections.values()
-                   if not c.timed_out and not c.closed and c.consumer.expired(now)]
+        expired = []
+        heap = self._watchdogs
+        while heap and heap[0][0] <= now:
+            at, _order, connection = heapq.heappop(heap)
+            if not self._live(connection) or connection.timed_out or at != connection.watch_at:
+                continue  # closed or timed out since, or superseded by another entry
+            if connection.consumer.expired(now):
+                expired.append(connection)
+            else:  # packets arrived: watch again at the deadline they set
+                self._watch(connection)
         for connection in expired:
             connection.timed_out = True
             log.warning("class 1 connection 0x%08X: no data from %s for %.3f s: timed out",

@@ -46,17 +46,14 @@ from .encapsulation import (
     EncapsulationHeader,
 )
 from .identity_items import IdentityRecord, ServiceRecord, decode_list_identity, decode_list_services
-from .io_context import IoContext
 from .io_core import DEFAULT_IO_PORT
-from .io_originator import (
-    Class1Request,
-    OtFormat,
-    class1_path,
-)
 from .replies import EncapsulationStatusError, MalformedReplyError, decode_reply
 
 if TYPE_CHECKING:
+    # Imported where used: explicit messaging (a one-shot ``cipstack get``) does not load class 1.
     from ..assemblies.schema import AssemblySchema
+    from .io_context import IoContext
+    from .io_originator import OtFormat
 
 log = logging.getLogger(__name__)
 T = TypeVar("T")
@@ -432,6 +429,9 @@ class EncapsulationClient(ExplicitClient):
         item; O->T data goes to ``target_io_port`` on the target. A target that refuses the
         O->T or T->O size with 0x0127/0x0128 and names the size it wants gets one retry with it.
         """
+        from .io_context import IoContext
+        from .io_originator import Class1Request, OtFormat, class1_path
+
         fmt = OtFormat(ot_format) if ot_format is not None else OtFormat.RUN_IDLE
         if fmt is OtFormat.HEARTBEAT and heartbeat is None:
             raise ValueError("the heartbeat format carries no data: give a heartbeat point, not an output")
