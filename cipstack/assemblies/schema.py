@@ -226,9 +226,11 @@ def _bit_reader(f: AssemblyField) -> Callable[[bytes], Any]:
 
 def _word_reader(f: AssemblyField) -> Callable[[bytes], Any]:
     offset, size = f.offset, f.type.size or 0
-    fmt = getattr(f.type.construct, "fmtstr", None)
-    if fmt is not None and struct.calcsize(fmt) == size:
-        unpack = struct.Struct(fmt).unpack_from
+    codec = f.type.struct_codec
+    if codec is None and (fmt := getattr(f.type.construct, "fmtstr", None)) is not None:
+        codec = struct.Struct(fmt)
+    if codec is not None and codec.size == size:
+        unpack = codec.unpack_from
         return lambda data: unpack(data, offset)[0]
     parse = f.type.construct.parse   # a type that is not one fixed format: its own codec
     return lambda data: parse(data[offset:offset + size])

@@ -29,6 +29,9 @@ class CipType:
     #: Encoded size in bytes, or None for variable-size types.
     size: int | None
     construct: cs.Construct
+    #: The fixed-size numeric types' precompiled little-endian codec (None for the others): what
+    #: the hot paths (assembly decoding) unpack with instead of the ``construct`` parser.
+    struct_codec: struct.Struct | None = None
 
     def encode(self, value: Any) -> bytes:
         return self.construct.build(self.check(value))
@@ -83,26 +86,26 @@ class IntegerType(CipType):
         self.size = size
         self.signed = signed
         fmt = {1: "b", 2: "h", 4: "i", 8: "q"}[size]
-        self._struct = struct.Struct("<" + (fmt if signed else fmt.upper()))
+        self.struct_codec = struct.Struct("<" + (fmt if signed else fmt.upper()))
         self.construct = cs.BytesInteger(size, signed=signed, swapped=True)
         bits = size * 8
         self.minimum = -(1 << (bits - 1)) if signed else 0
         self.maximum = (1 << (bits - 1)) - 1 if signed else (1 << bits) - 1
 
     def encode(self, value: Any) -> bytes:
-        return self._struct.pack(self.check(value))
+        return self.struct_codec.pack(self.check(value))
 
     def decode_from(self, data: bytes, offset: int = 0) -> tuple[int, int]:
         end = offset + self.size
         if end > len(data):
             raise CipError(GeneralStatus.NOT_ENOUGH_DATA, message=f"{self.name} needs {self.size} bytes")
-        return self._struct.unpack_from(data, offset)[0], end
+        return self.struct_codec.unpack_from(data, offset)[0], end
 
     def decode(self, data: bytes) -> int:
         if len(data) != self.size:
             code = GeneralStatus.NOT_ENOUGH_DATA if len(data) < self.size else GeneralStatus.TOO_MUCH_DATA
             raise CipError(code, message=f"{self.name} is {self.size} bytes, got {len(data)}")
-        return self._struct.unpack(data)[0]
+        return self.struct_codec.unpack(data)[0]
 
     def check(self, value: Any) -> int:
         if isinstance(value, bool) or not isinstance(value, int):
@@ -155,17 +158,17 @@ class RealType(CipType):
         self.name = name
         self.code = code
         self.size = size
-        self._struct = struct.Struct("<f" if size == 4 else "<d")
+        self.struct_codec = struct.Struct("<f" if size == 4 else "<d")
         self.construct = cs.Float32l if size == 4 else cs.Float64l
 
     def encode(self, value: Any) -> bytes:
-        return self._struct.pack(self.check(value))
+        return self.struct_codec.pack(self.check(value))
 
     def decode_from(self, data: bytes, offset: int = 0) -> tuple[float, int]:
         end = offset + self.size
         if end > len(data):
             raise CipError(GeneralStatus.NOT_ENOUGH_DATA, message=f"{self.name} needs {self.size} bytes")
-        return self._struct.unpack_from(data, offset)[0], end
+        return self.struct_codec.unpack_from(data, offset)[0], end
 
     def check(self, value: Any) -> float:
         try:
@@ -174,7 +177,7 @@ class RealType(CipType):
             raise CipError(GeneralStatus.INVALID_ATTRIBUTE_VALUE, message=f"{value!r} is not a {self.name}") from None
         if self.size == 4:
             try:
-                self._struct.pack(value)
+                self.struct_codec.pack(value)
             except OverflowError:
                 raise CipError(GeneralStatus.INVALID_ATTRIBUTE_VALUE, message=f"{value} overflows REAL") from None
         return value
