@@ -88,6 +88,8 @@ class LostCommand:
         return self._values[LOST_CMD_TIME.address] / 10
 
     def _timer_deadline(self) -> float | None:
+        if self._io_watch.silent_since is None and self._modbus_watch.silent_since is None:
+            return None  # nothing is silent: the common case, asked several times per O->T datagram
         lost_time = self._lost_time()
         deadlines = [d for d in (self._io_watch.deadline(lost_time), self._modbus_watch.deadline(lost_time))
                      if d is not None]
