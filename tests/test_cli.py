@@ -325,3 +325,46 @@ def test_io_list_fields_of_a_profile(adapter_process: tuple[str, subprocess.Pope
     assert names == ["run_forward", "run_reverse", "fault_reset", "net_ctrl", "net_ref", "speed_reference",
                      "faulted", "warning", "running_forward", "running_reverse", "ready", "ctrl_from_net",
                      "ref_from_net", "at_reference", "drive_state", "speed_actual"]
+
+
+@pytest.mark.parametrize(("argv", "word"), [
+    (["get", "h", "1/1/7"], "get"),
+    (["--log-level", "DEBUG", "eds", "show", "f"], "eds"),
+    (["--log-level=DEBUG", "capture", "analyze", "f"], "capture"),
+    (["--version"], None),
+    ([], None),
+])
+def test_the_command_word_is_found_past_the_global_options(argv: list[str], word: str | None) -> None:
+    from cipstack.cli.parser import command_word
+
+    assert command_word(argv) == word
+
+
+def test_a_one_shot_get_loads_neither_the_eds_tool_nor_a_device_profile() -> None:
+    """The eds and capture commands' arguments are built only for them; a standard attribute
+    decodes without the device's profile: `cipstack get` stays a short process."""
+    port = free_port()
+    adapter = subprocess.Popen([sys.executable, "-m", "cipstack", "adapter", "--port", str(port), "--io-port",
+                                str(free_port()), "--log-level", "WARNING", "--quiet"], stdout=subprocess.DEVNULL,
+                               stderr=subprocess.DEVNULL)
+    try:
+        probe = (f"import runpy, sys; sys.argv = ['cipstack', 'get', '127.0.0.1:{port}', '1/1/7'];\n"
+                 "try:\n    runpy.run_module('cipstack', run_name='__main__')\nexcept SystemExit as e:\n"
+                 "    print(sorted(m for m in sys.modules if m.startswith(('cipstack.eds', 'cipstack.capture',"
+                 " 'cipstack.devices'))), e.code)")
+        deadline = time.monotonic() + 10
+        while True:
+            out = subprocess.run([sys.executable, "-c", probe], capture_output=True, text=True, timeout=30)
+            if "CENT" in out.stdout or time.monotonic() > deadline:
+                break
+            time.sleep(0.2)
+        assert "Product Name = 'CENT'" in out.stdout
+        assert out.stdout.strip().splitlines()[-1] == "[] 0"
+        # The eds command still has its whole parser when it is the command.
+        shown = subprocess.run([sys.executable, "-m", "cipstack", "--log-level", "WARNING", "eds", "show",
+                                str(Path(__file__).parent / "eds" / "files" / "ez_style_io_block.eds")],
+                               capture_output=True, text=True, timeout=30)
+        assert shown.returncode == 0 and "IOB-8" in shown.stdout
+    finally:
+        adapter.terminate()
+        adapter.wait(10)

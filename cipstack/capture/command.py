@@ -26,9 +26,9 @@ def connection_id(text: str) -> int:
         raise argparse.ArgumentTypeError(f"{text!r} is not a connection number or id (decimal or 0x hex)") from None
 
 
-def add_arguments(sub: Any) -> None:
+def add_arguments(sub: Any, help_text: str) -> None:
     """Register ``capture analyze`` on the top-level subparsers (cli.build_parser)."""
-    p = sub.add_parser("capture", help="analyse a pcap/pcapng capture of EtherNet/IP and CIP traffic")
+    p = sub.add_parser("capture", help=help_text)
     capture = p.add_subparsers(dest="capture_command", required=True, parser_class=type(p))
     q = capture.add_parser("analyze", help="explicit exchanges, class 1 connection timing, anomalies")
     q.add_argument("file", type=Path, help="pcap or pcapng file")

@@ -20,13 +20,14 @@ from ..eip.encapsulation import EncapsulationError
 from ..eip.replies import EncapsulationStatusError
 from .common import EXIT_FAILURE, EXIT_OK, EXIT_USAGE, UsageError, parse_duration, parse_object_path
 from .explicit import json_key
-from .parser import build_parser
+from .parser import build_parser, command_word
 
 
 def main(argv: Sequence[str] | None = None) -> int:
-    parser = build_parser()
+    words = list(sys.argv[1:] if argv is None else argv)
+    parser = build_parser(command_word(words))
     try:
-        args = parser.parse_args(argv)
+        args = parser.parse_args(words)
     except UsageError as exc:
         print(f"cipstack: {exc}", file=sys.stderr)
         return EXIT_USAGE

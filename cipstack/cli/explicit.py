@@ -95,14 +95,20 @@ def parse_route(text: str | None) -> list[Any] | None:
     return route
 
 
-async def _connect_identified(args: argparse.Namespace) -> Any:
+async def _connect_identified(args: argparse.Namespace, standard: tuple[int, int, int] | None = None) -> Any:
     """A scanner that decodes by the declarations of the device's profile when it is one we know
-    (the routed device's own Identity when ``--route`` is given)."""
+    (the routed device's own Identity when ``--route`` is given). ``standard``: the (class,
+    attribute) asked for, which when a standard class declares it decodes by that declaration
+    alone, as every profile's does: no identity is asked, and no profile loaded."""
+    from ..catalog import STANDARD_CLASSES
     from ..cip.types import UINT
-    from ..devices.profiles import catalog_for
     from ..scanner import Scanner
 
     scanner = await Scanner.connect(args.target, timeout=args.timeout, route=parse_route(args.route))
+    if standard is not None and standard[0] in STANDARD_CLASSES and scanner.catalog.attribute(*standard):
+        return scanner
+    from ..devices.profiles import catalog_for
+
     try:
         if scanner.route:
             vendor, product = await scanner.read(1, 1, 1, UINT), await scanner.read(1, 1, 3, UINT)
@@ -121,7 +127,7 @@ def cmd_get(args: argparse.Namespace) -> int:
     cip_type = parse_type(args.type)
 
     async def run() -> dict[str, Any]:
-        scanner = await _connect_identified(args)
+        scanner = await _connect_identified(args, None if attribute is None else (class_id, instance, attribute))
         try:
             if args.connected:
                 await scanner.open_connection()

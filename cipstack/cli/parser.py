@@ -27,7 +27,27 @@ class _Parser(argparse.ArgumentParser):
         raise UsageError(message)
 
 
-def build_parser() -> argparse.ArgumentParser:
+# The eds and capture commands take their arguments from modules that take tens of milliseconds
+# to import: the parser names them with these lines, and adds their arguments only when the
+# command line is theirs (see ``build_parser``).
+_EDS_HELP = "EDS files: generate, check, show"
+_CAPTURE_HELP = "analyse a pcap/pcapng capture of EtherNet/IP and CIP traffic"
+
+
+def command_word(argv: list[str]) -> str | None:
+    """The command a command line names (``get`` in ``--log-level DEBUG get HOST 1/1/7``), or None."""
+    words = iter(argv)
+    for word in words:
+        if word == "--log-level":
+            next(words, None)
+        elif not word.startswith("-"):
+            return word
+    return None
+
+
+def build_parser(command: str | None = None) -> argparse.ArgumentParser:
+    """The whole command line; given the ``command`` it will parse, the ``eds`` and ``capture``
+    commands are only named unless it is theirs (a one-shot ``get`` does not import the EDS tool)."""
     parser = _Parser(prog="cipstack", description="CIP for AC drives over EtherNet/IP and CompoNet")
     parser.add_argument("--version", action="version", version=f"cipstack {__version__}")
     levels = ["DEBUG", "INFO", "WARNING", "ERROR"]
@@ -203,10 +223,33 @@ def build_parser() -> argparse.ArgumentParser:
         q.add_argument("--json", action="store_true", help="one JSON object per line")
         q.set_defaults(func=func)
 
+    if command in (None, "eds"):
+        _add_eds_commands(sub)
+    else:
+        sub.add_parser("eds", help=_EDS_HELP)
+    if command in (None, "capture"):
+        from ..capture.command import add_arguments as add_capture_arguments
+
+        add_capture_arguments(sub, _CAPTURE_HELP)
+    else:
+        sub.add_parser("capture", help=_CAPTURE_HELP)
+
+    p = sub.add_parser("set", help="Set_Attribute_Single")
+    common(p)
+    p.add_argument("path", metavar="CLASS/INSTANCE/ATTRIBUTE")
+    p.add_argument("value")
+    p.add_argument("--type", required=True, help="CIP type of the value (UINT, INT, REAL, SHORT_STRING, ...)")
+    p.add_argument("--connected", action="store_true", help="use a class 3 connection")
+    p.add_argument("--route", metavar="PORT/LINK[,...]", help="route through the target (Unconnected_Send)")
+    p.set_defaults(func=cmd_set)
+    return parser
+
+
+def _add_eds_commands(sub: Any) -> None:
     from ..eds.commands import add_check_arguments, add_show_arguments
     from ..eds.commands_generate import add_generate_arguments
 
-    p = sub.add_parser("eds", help="EDS files: generate, check, show")
+    p = sub.add_parser("eds", help=_EDS_HELP)
     eds = p.add_subparsers(dest="eds_command", required=True, parser_class=_Parser)
     q = eds.add_parser("check", help="check EDS files against the rules a configuration tool relies on")
     add_check_arguments(q)
@@ -219,17 +262,3 @@ def build_parser() -> argparse.ArgumentParser:
     q = eds.add_parser("show", help="a readable summary: identity, assemblies, connections")
     add_show_arguments(q)
     q.set_defaults(func=cmd_eds_show)
-
-    from ..capture.command import add_arguments as add_capture_arguments
-
-    add_capture_arguments(sub)
-
-    p = sub.add_parser("set", help="Set_Attribute_Single")
-    common(p)
-    p.add_argument("path", metavar="CLASS/INSTANCE/ATTRIBUTE")
-    p.add_argument("value")
-    p.add_argument("--type", required=True, help="CIP type of the value (UINT, INT, REAL, SHORT_STRING, ...)")
-    p.add_argument("--connected", action="store_true", help="use a class 3 connection")
-    p.add_argument("--route", metavar="PORT/LINK[,...]", help="route through the target (Unconnected_Send)")
-    p.set_defaults(func=cmd_set)
-    return parser
