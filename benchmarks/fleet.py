@@ -33,7 +33,7 @@ from collections.abc import Sequence
 from multiprocessing.connection import Connection
 from typing import Any
 
-from io_common import CLOCK_TICKS  # benchmarks/ is on the path when a benchmark runs
+from io_common import CLOCK_TICKS, free_port  # benchmarks/ is on the path when a benchmark runs
 
 from cipstack.devices.profiles import PROFILES
 from cipstack.eip.io_server import run_precise
@@ -46,29 +46,6 @@ CASES = {64: 1, 128: 2}
 
 def hosts(block: int, count: int) -> list[str]:
     return [f"127.88.{block + n // 200}.{10 + n % 200}" for n in range(count)]
-
-
-def free_port_on(addresses: Sequence[str]) -> int:
-    """A port free in TCP and UDP on every one of ``addresses``."""
-    import socket
-
-    for _ in range(100):
-        with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as probe:
-            probe.bind((addresses[0], 0))
-            port = int(probe.getsockname()[1])
-        sockets = []
-        try:
-            for address in addresses:
-                for kind in (socket.SOCK_STREAM, socket.SOCK_DGRAM):
-                    sockets.append(socket.socket(socket.AF_INET, kind))
-                    sockets[-1].bind((address, port))
-        except OSError:
-            continue
-        finally:
-            for sock in sockets:
-                sock.close()
-        return port
-    raise RuntimeError("no free port")
 
 
 def fleet_pids(parent: int) -> list[int]:
@@ -168,8 +145,8 @@ def scanner_process(addresses: list[str], port: int, io_port: int, seconds: floa
 
 def run_case(devices: int, workers: int, scanners: int, seconds: float, block: int) -> dict[str, Any]:
     addresses = hosts(block, devices)
-    port = free_port_on([addresses[0], addresses[-1]])
-    io_port = free_port_on([addresses[0], addresses[-1]])
+    port = free_port(addresses[0], addresses[-1])
+    io_port = free_port(addresses[0], addresses[-1])
     with tempfile.TemporaryDirectory() as state:
         # The same fleet machinery with one device per worker: what the processes cost before devices.
         small = start_fleet(addresses[:workers], port, io_port, workers, state)

@@ -1,8 +1,11 @@
-"""Ports for the emulators and peers a test starts: chosen by the OS, free for TCP and UDP alike."""
+"""Ports for the emulators and peers a test starts (chosen by the OS, free for TCP and UDP alike), and
+the ListIdentity probe that asks who answers on one."""
 
 from __future__ import annotations
 
+import asyncio
 import socket
+import struct
 
 
 def free_port(*hosts: str) -> int:
@@ -26,3 +29,30 @@ def free_port(*hosts: str) -> int:
                 sock.close()
         return port
     raise RuntimeError(f"no port free for TCP and UDP on {', '.join(hosts)}")
+
+
+#: A ListIdentity request (encapsulation command 0x0063, no session, sender context "\xf4\x01...").
+LIST_IDENTITY = struct.pack("<HHII8sI", 0x0063, 0, 0, 0, struct.pack("<H", 500) + bytes(6), 0)
+
+
+async def list_identity_replies(destination: str, port: int, seconds: float = 1.2) -> list[tuple[bytes, str]]:
+    """Each reply, with the address it came from, to one ListIdentity sent over UDP to ``destination``
+    (a broadcast address too) within ``seconds``."""
+    sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+    sock.setsockopt(socket.SOL_SOCKET, socket.SO_BROADCAST, 1)
+    sock.bind(("127.0.0.1", 0))
+    sock.setblocking(False)
+    loop = asyncio.get_running_loop()
+    try:
+        await loop.sock_sendto(sock, LIST_IDENTITY, (destination, port))
+        replies = []
+        deadline = loop.time() + seconds
+        while (left := deadline - loop.time()) > 0:
+            try:
+                data, (host, _) = await asyncio.wait_for(loop.sock_recvfrom(sock, 2048), left)
+            except asyncio.TimeoutError:
+                break
+            replies.append((data, host))
+        return replies
+    finally:
+        sock.close()

@@ -5,7 +5,6 @@ in both TCP and UDP even when the OS's first pick is taken in UDP."""
 
 from __future__ import annotations
 
-import asyncio
 import ipaddress
 import socket
 import struct
@@ -17,12 +16,11 @@ from cipstack.adapter import Adapter, AdapterSettings
 from cipstack.eip import server as server_module
 from cipstack.eip.interfaces import ipv4_networks, subnet_broadcast
 from cipstack.scanner import discover
-from tests.ports import free_port
+from tests.ports import free_port, list_identity_replies
 
 pytestmark = pytest.mark.skipif(not sys.platform.startswith("linux"), reason="loopback /8 and interface table")
 
 #: ListIdentity (0x0063), no data, sender context asking for replies within 500 ms.
-LIST_IDENTITY = struct.pack("<HHII8sI", 0x0063, 0, 0, 0, struct.pack("<H", 500) + bytes(6), 0)
 
 
 def test_the_loopback_subnet_broadcast() -> None:
@@ -33,37 +31,16 @@ def test_the_loopback_subnet_broadcast() -> None:
     assert subnet_broadcast(outside) is None                # no interface of this machine is there
 
 
-async def _replies(destination: str, port: int, seconds: float = 1.2) -> list[tuple[bytes, str]]:
-    sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
-    sock.setsockopt(socket.SOL_SOCKET, socket.SO_BROADCAST, 1)
-    sock.bind(("127.0.0.1", 0))
-    sock.setblocking(False)
-    loop = asyncio.get_running_loop()
-    try:
-        await loop.sock_sendto(sock, LIST_IDENTITY, (destination, port))
-        replies = []
-        deadline = loop.time() + seconds
-        while (left := deadline - loop.time()) > 0:
-            try:
-                data, (host, _) = await asyncio.wait_for(loop.sock_recvfrom(sock, 2048), left)
-            except asyncio.TimeoutError:
-                break
-            replies.append((data, host))
-        return replies
-    finally:
-        sock.close()
-
-
 async def test_each_target_answers_a_subnet_broadcast_once_from_its_own_address() -> None:
     port = free_port("127.0.0.2", "127.0.0.3")
     async with Adapter(AdapterSettings(host="127.0.0.2", port=port, io_port=0)) as first, \
             Adapter(AdapterSettings(host="127.0.0.3", port=port, io_port=0)) as second:
-        replies = await _replies("127.255.255.255", port)
+        replies = await list_identity_replies("127.255.255.255", port)
         assert sorted(host for _, host in replies) == ["127.0.0.2", "127.0.0.3"]
         for data, _ in replies:
             assert struct.unpack_from("<H", data)[0] == 0x0063 and len(data) > 24
         # Unicast is still the target's own: only the one asked answers.
-        assert [host for _, host in await _replies("127.0.0.3", port)] == ["127.0.0.3"]
+        assert [host for _, host in await list_identity_replies("127.0.0.3", port)] == ["127.0.0.3"]
         # The scanner's discovery, given the broadcast address, lists each device once.
         found = await discover("127.255.255.255", port, timeout=1.2)
         assert sorted(record.address.host for record in found if record.address) == ["127.0.0.2", "127.0.0.3"]
@@ -87,6 +64,6 @@ async def test_a_free_port_is_free_in_udp_too(monkeypatch: pytest.MonkeyPatch) -
     try:
         async with Adapter(AdapterSettings(host="127.0.0.1", port=0, io_port=0)) as adapter:
             assert picks[0] == clash and adapter.server.port == picks[-1] != clash
-            assert [host for _, host in await _replies("127.0.0.1", adapter.server.port)] == ["127.0.0.1"]
+            assert [host for _, host in await list_identity_replies("127.0.0.1", adapter.server.port)] == ["127.0.0.1"]
     finally:
         taken.close()

@@ -12,7 +12,6 @@ import json
 import os
 import signal
 import socket
-import struct
 import subprocess
 import sys
 import time
@@ -27,14 +26,13 @@ from cipstack.eip.io_server import run_precise
 from cipstack.fleet.spec import SpecError, assign, describe_addresses, parse_addresses, parse_group
 from cipstack.fleet.workers import shares
 from cipstack.scanner import Scanner, discover
-from tests.ports import free_port
+from tests.ports import free_port, list_identity_replies
 from tests.test_acg_live import SAVE_PARAMETERS, write_registers
 from tests.waiting import wait_for
 
 pytestmark = pytest.mark.skipif(not sys.platform.startswith("linux"), reason="any 127.x on loopback")
 
 #: ListIdentity (0x0063), no data, sender context asking for replies within 500 ms.
-LIST_IDENTITY = struct.pack("<HHII8sI", 0x0063, 0, 0, 0, struct.pack("<H", 500) + bytes(6), 0)
 BROADCAST = "127.255.255.255"
 
 
@@ -115,24 +113,7 @@ def alive(pid: int) -> bool:
 
 async def broadcast_replies(port: int, seconds: float = 1.2) -> list[str]:
     """The source address of each reply to one ListIdentity sent to loopback's broadcast address."""
-    sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
-    sock.setsockopt(socket.SOL_SOCKET, socket.SO_BROADCAST, 1)
-    sock.bind(("127.0.0.1", 0))
-    sock.setblocking(False)
-    loop = asyncio.get_running_loop()
-    try:
-        await loop.sock_sendto(sock, LIST_IDENTITY, (BROADCAST, port))
-        replies = []
-        deadline = loop.time() + seconds
-        while (left := deadline - loop.time()) > 0:
-            try:
-                _, (host, _) = await asyncio.wait_for(loop.sock_recvfrom(sock, 2048), left)
-            except asyncio.TimeoutError:
-                break
-            replies.append(host)
-        return replies
-    finally:
-        sock.close()
+    return [host for _, host in await list_identity_replies(BROADCAST, port, seconds)]
 
 
 def drive(*args: str) -> subprocess.CompletedProcess[str]:
