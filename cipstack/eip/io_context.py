@@ -40,6 +40,12 @@ if TYPE_CHECKING:
 
 log = logging.getLogger(__name__)
 
+#: How often the TCP session of an open class 1 connection is kept alive with an encapsulation NOP
+#: (no reply, by definition). A target closes a session idle for its encapsulation inactivity
+#: timeout (TCP/IP attribute 13, 120 s by default); the class 1 connection outlives its session,
+#: but its Forward_Close needs one.
+SESSION_KEEPALIVE_S = 30.0
+
 
 class IoContext:
     """Async context manager of a class 1 connection: Forward_Open on enter, Forward_Close on exit.
@@ -61,6 +67,7 @@ class IoContext:
         self.keep_intervals = keep_intervals
         self.handle: IoConnectionHandle | None = None
         self._triad: ConnectionTriad | None = None
+        self._keepalive: asyncio.Task[None] | None = None
         #: What the opening had to adapt to (a retry with the size a target asked for), one line each.
         self.notes: list[str] = []
 
@@ -118,7 +125,19 @@ class IoContext:
             # Opened but not started: the target would keep producing to a port nobody reads.
             await self._forward_close()
             raise
+        self._keepalive = asyncio.ensure_future(self._keep_session_alive())
         return self.handle
+
+    async def _keep_session_alive(self) -> None:
+        while True:
+            await asyncio.sleep(SESSION_KEEPALIVE_S)
+            if not self.client.is_open:
+                return  # lost: the Forward_Close opens a session of its own
+            try:
+                await self.client.nop()
+            except (ConnectionError, OSError) as exc:
+                log.debug("class 1 session keepalive to %s: %s", self.client.host, exc)
+                return
 
     async def _start(self, request: Class1Request, reply: ForwardOpenReply, extra: list[Item], core: IoOriginator,
                      endpoint: IoEndpoint) -> IoConnectionHandle:
@@ -157,6 +176,12 @@ class IoContext:
         fc = ForwardCloseRequest(0x0A, 0x0E, self._triad, self.request.path)
         self._triad = None
         try:
+            if not self.client.is_open and self.client.session:
+                # The target closed the session (not the caller, who ends it with a session of 0):
+                # the connection is still open there, and a new session can close it.
+                log.info("class 1 connection to %s: the session was closed; a new one sends the Forward_Close",
+                         self.client.host)
+                await self.client.open()
             reply = await self.client.request(Service.FORWARD_CLOSE, CONNECTION_MANAGER_PATH, fc.encode(),
                                               connected=False)
             reply.raise_for_status()
@@ -164,6 +189,9 @@ class IoContext:
             log.info("Forward_Close of class 1 connection failed: %s", exc_close)
 
     async def __aexit__(self, *exc: object) -> None:
+        if self._keepalive is not None:
+            self._keepalive.cancel()
+            self._keepalive = None
         handle = self.handle
         if handle is not None:
             handle.connection.closed = True
