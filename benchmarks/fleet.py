@@ -24,7 +24,6 @@ import contextlib
 import json
 import multiprocessing
 import os
-import signal
 import subprocess
 import sys
 import tempfile
@@ -33,7 +32,7 @@ from collections.abc import Sequence
 from multiprocessing.connection import Connection
 from typing import Any
 
-from io_common import CLOCK_TICKS, free_port  # benchmarks/ is on the path when a benchmark runs
+from io_common import CLOCK_TICKS, free_port, stop_adapter  # benchmarks/ is on the path when a benchmark runs
 
 from cipstack.devices.profiles import PROFILES
 from cipstack.eip.io_server import run_precise
@@ -96,15 +95,6 @@ def start_fleet(addresses: list[str], port: int, io_port: int, workers: int, sta
         raise RuntimeError(f"the fleet did not start (exit status {process.wait()}): {text.read()[-500:]!r}")
 
 
-def stop_fleet(process: subprocess.Popen[bytes]) -> None:
-    process.send_signal(signal.SIGTERM)
-    try:
-        process.wait(60)
-    except subprocess.TimeoutExpired:
-        process.kill()
-        process.wait(10)
-
-
 async def scan(addresses: list[str], port: int, io_port: int, seconds: float, channel: Connection) -> dict[str, Any]:
     """One exclusive owner per address; tells the parent when all run, measures ``seconds`` after its go."""
     make_catalog = PROFILES["acg"].catalog
@@ -154,7 +144,7 @@ def run_case(devices: int, workers: int, scanners: int, seconds: float, block: i
             time.sleep(1.0)
             base_rss = rss_bytes(fleet_pids(small.pid))
         finally:
-            stop_fleet(small)
+            stop_adapter(small, 60)
         fleet = start_fleet(addresses, port, io_port, workers, state)
         try:
             pids = fleet_pids(fleet.pid)
@@ -185,7 +175,7 @@ def run_case(devices: int, workers: int, scanners: int, seconds: float, block: i
             if errors:
                 raise RuntimeError(errors[0])
         finally:
-            stop_fleet(fleet)
+            stop_adapter(fleet, 60)
     packets = sum(r["packets"] for r in reports)
     late = sum(r["late"] for r in reports)
     return {"devices": devices, "workers": workers, "scanner_processes": scanners, "rpi_ms": RPI * 1e3,

@@ -70,10 +70,11 @@ def start_adapter(port: int, io_port: int, *extra: str, state: bool = True) -> s
     raise RuntimeError("adapter did not start")
 
 
-def stop_adapter(process: subprocess.Popen[bytes]) -> None:
+def stop_adapter(process: subprocess.Popen[bytes], wait_s: float = 10.0) -> None:
+    """SIGTERM, then SIGKILL if it has not ended within ``wait_s`` (a fleet writes its saves first)."""
     process.send_signal(signal.SIGTERM)
     try:
-        process.wait(10)
+        process.wait(wait_s)
     except subprocess.TimeoutExpired:
         process.kill()
         process.wait(5)
