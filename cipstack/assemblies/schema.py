@@ -8,7 +8,6 @@ offset, or ``bits`` bits starting at bit ``bit`` (0 = least significant) of byte
 
 from __future__ import annotations
 
-import struct
 from collections.abc import Callable, Iterable, Mapping
 from dataclasses import dataclass
 from typing import Any
@@ -227,8 +226,6 @@ def _bit_reader(f: AssemblyField) -> Callable[[bytes], Any]:
 def _word_reader(f: AssemblyField) -> Callable[[bytes], Any]:
     offset, size = f.offset, f.type.size or 0
     codec = f.type.struct_codec
-    if codec is None and (fmt := getattr(f.type.construct, "fmtstr", None)) is not None:
-        codec = struct.Struct(fmt)
     if codec is not None and codec.size == size:
         unpack = codec.unpack_from
         return lambda data: unpack(data, offset)[0]
