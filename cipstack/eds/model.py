@@ -177,6 +177,7 @@ class FieldSource:
     comment: str | None
 
     def edited(self, item: Field) -> bool:
+        """Whether ``item``, in this field's place now, means something else than what was read."""
         return item.semantic_value() != self.value
 
 

@@ -280,7 +280,7 @@ class _SourceWriter:
         for item, read in zip(entry.fields, source.fields, strict=True):
             place = read.source
             assert place is not None
-            if item.semantic_value() != place.value:
+            if place.edited(item):
                 continuation = self.newline + (_indent_before(self.text, place.start) or _field_indent(indent))
                 edits.append((place.start, place.end, _render(item, continuation)))
         for start, end, replacement in sorted(edits, reverse=True):
