@@ -16,7 +16,7 @@ from .devices.base import Device, DeviceLimits, TripRefused
 from .devices.profiles import DEFAULT_MAC, DEFAULT_PROFILE, ProfileOptions, build_device
 from .eip.identity_items import CAPABILITY_CIP_TCP, CAPABILITY_CLASS01_UDP
 from .eip.io_core import DEFAULT_IO_PORT
-from .eip.io_server import IoEndpoint
+from .eip.io_server import IoEndpoint, freeze_startup_objects
 from .eip.io_target import IoTarget
 from .eip.limits import DEFAULT_MAX_TCP_CONNECTIONS
 from .eip.server import DEFAULT_PORT, EncapsulationServer
@@ -267,6 +267,7 @@ class Adapter:
         with held_log_records() as held:
             await self.start_serving()
             held.release()
+        freeze_startup_objects()
         printer = asyncio.create_task(self._print_status_lines()) if self.settings.status_lines else None
         info = self.device.identity_info
         log.info("emulating %s (vendor %d, device type %d, product code %d, revision %d.%d)",

@@ -4,7 +4,8 @@ file and control socket in temporary directories, never in the user's own (XDG b
 from __future__ import annotations
 
 import os
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator
+from typing import Any
 
 import pytest
 
@@ -22,3 +23,21 @@ def isolated_user_directories(tmp_path_factory: pytest.TempPathFactory) -> Itera
             os.environ.pop(name, None)
         else:
             os.environ[name] = value
+
+
+#: Modules whose tests also run on asyncio's own loop: a scanner inside an application's loop
+#: serves class 1 through asyncio's datagram transport and timers, not the precise loop's lane.
+BOTH_LOOPS = frozenset({"test_io_live", "test_io_session", "test_io_multicast", "test_acg_live"})
+
+
+def pytest_asyncio_loop_factories(config: pytest.Config, item: pytest.Item) -> dict[str, Callable[[], Any]]:
+    """Async tests run on the loop the command line runs (``precise_event_loop``, with its class 1
+    lane); the I/O modules of ``BOTH_LOOPS`` on asyncio's default loop as well."""
+    import asyncio
+
+    from cipstack.eip.io_server import precise_event_loop
+
+    factories: dict[str, Callable[[], Any]] = {"lane": precise_event_loop}
+    if item.module is not None and item.module.__name__.rsplit(".", 1)[-1] in BOTH_LOOPS:
+        factories["asyncio"] = asyncio.new_event_loop
+    return factories

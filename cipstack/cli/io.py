@@ -155,12 +155,11 @@ def _list_fields(args: argparse.Namespace, doc: Any) -> int:
 
 
 def cmd_io(args: argparse.Namespace) -> int:
-    import gc
     import signal
 
     from ..devices.profiles import catalog_for_identity
     from ..eip.io_originator import OtFormat
-    from ..eip.io_server import run_precise
+    from ..eip.io_server import freeze_startup_objects, run_precise
     from ..eip.originator import EncapsulationClient
     from ..scanner import Scanner
 
@@ -229,10 +228,8 @@ def cmd_io(args: argparse.Namespace) -> int:
             for name, value in assignments:
                 _set_output(io, name, value)
             io.set_run(not args.idle)
-            # Set-up is done: move what it allocated out of the collector's reach, so a full
-            # collection cannot stall the receive path for longer than a short RPI.
-            gc.collect()
-            gc.freeze()
+            # Set-up is done: a full collection must not stall the receive path for longer than a short RPI.
+            freeze_startup_objects()
 
             def show(image: Any) -> None:
                 elapsed = round(loop.time() - started, 4)

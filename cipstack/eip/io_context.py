@@ -211,7 +211,7 @@ async def shared_io_endpoint(host: str, port: int = 0) -> tuple[IoOriginator, Io
     key = (id(loop), host, port)
     found = _io_endpoints.get(key)
     # An id can be reused by a later loop once the first is gone: the endpoint must be this loop's.
-    if found is not None and found[1].transport is not None and getattr(found[1], "loop", None) is loop:
+    if found is not None and found[1].is_open and getattr(found[1], "loop", None) is loop:
         return found
     core = IoOriginator()
     endpoint = IoEndpoint(core, host, port)

@@ -18,6 +18,7 @@ from ..adapter import Adapter, AdapterSettings
 from ..control import describe
 from ..devices.profiles import mac_for_address
 from ..devices.state import StateFileError
+from ..eip.io_server import freeze_startup_objects
 from ..listening import held_log_records
 from .spec import FleetDevice, SpecError
 
@@ -125,7 +126,9 @@ async def serve_until_signalled(devices: Sequence[FleetDevice], port: int, io_po
         loop.add_signal_handler(sig, stop_on, sig)
     fleet = DeviceSet(devices, port, io_port)
     try:
-        on_ready(await fleet.start())
+        lines = await fleet.start()
+        freeze_startup_objects()  # every device built: a full collection would stop them all at once
+        on_ready(lines)
         await stop.wait()
     finally:
         await fleet.stop()

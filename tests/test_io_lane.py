@@ -1,0 +1,238 @@
+"""The class 1 lane of the precise event loop: sockets read and timers fired inside the selector's
+wait, beside asyncio's own sockets and timers on the same loop (``cipstack.eip.io_server``)."""
+
+from __future__ import annotations
+
+import asyncio
+import logging
+import socket
+from collections.abc import Coroutine
+from typing import Any, TypeVar
+
+import pytest
+
+from cipstack.eip.io_server import (
+    DRAIN_LIMIT,
+    FD_SETSIZE,
+    IoEndpoint,
+    PreciseEventLoop,
+    precise_event_loop,
+)
+
+T = TypeVar("T")
+
+
+class RecordingCore:
+    """An ``IoCore`` that keeps what it receives and sends one datagram per firing to ``send_to``."""
+
+    def __init__(self, period: float = 0.002, send_to: tuple[str, int] | None = None) -> None:
+        self.period = period
+        self.send_to = send_to
+        self.received: list[bytes] = []
+        self.polls: list[float] = []
+        self.deadline: float | None = None
+        self.fail_on: bytes | None = None
+
+    def receive(self, raw: bytes, source: tuple[str, int], now: float) -> None:
+        if raw == self.fail_on:
+            raise RuntimeError("a core that fails on this datagram")
+        self.received.append(raw)
+
+    def poll(self, now: float, horizon: float = 0.0) -> list[tuple[bytes, tuple[str, int]]]:
+        if self.deadline is None or now < self.deadline:
+            return []
+        self.polls.append(now)
+        self.deadline += self.period
+        return [(b"tick %d" % len(self.polls), self.send_to)] if self.send_to is not None else []
+
+    def next_deadline(self) -> float | None:
+        return self.deadline
+
+    def expire(self, now: float) -> list[Any]:
+        return []
+
+
+def run_on(loop: asyncio.AbstractEventLoop, coroutine: Coroutine[Any, Any, T]) -> T:
+    try:
+        return loop.run_until_complete(coroutine)
+    finally:
+        loop.close()
+
+
+def sender() -> socket.socket:
+    sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+    sock.bind(("127.0.0.1", 0))
+    return sock
+
+
+async def started(core: RecordingCore) -> IoEndpoint:
+    endpoint = IoEndpoint(core, "127.0.0.1", 0)
+    await endpoint.start()
+    return endpoint
+
+
+def test_lane_timers_fire_in_order_never_early_and_a_cancelled_one_never() -> None:
+    async def scenario() -> list[tuple[str, float, float]]:
+        loop = asyncio.get_running_loop()
+        assert isinstance(loop, PreciseEventLoop)
+        lane = loop.selector.lane
+        fired: list[tuple[str, float, float]] = []
+        start = loop.time()
+        for name, delay in (("c", 0.006), ("a", 0.002), ("b", 0.004)):
+            when = start + delay
+            lane.call_at(when, lambda name=name, when=when: fired.append((name, when, loop.time())))
+        # Due with "a" and behind it in the heap: run_due meets it, not only next_deadline.
+        lane.call_at(start + 0.002, lambda: fired.append(("cancelled", 0.0, 0.0))).cancel()
+        await asyncio.sleep(0.05)
+        return fired
+
+    fired = run_on(precise_event_loop(), scenario())
+    assert [name for name, _, _ in fired] == ["a", "b", "c"]
+    assert all(at >= when for _, when, at in fired), fired
+
+
+def test_lane_endpoint_reads_every_datagram_beside_asyncio_streams_on_the_same_loop() -> None:
+    """More datagrams than one wake-up drains (``DRAIN_LIMIT``) arrive in order, while a TCP echo
+    served by asyncio on the same loop goes on answering."""
+    count = 3 * DRAIN_LIMIT + 5
+
+    async def echo(reader: asyncio.StreamReader, writer: asyncio.StreamWriter) -> None:
+        writer.write(await reader.readexactly(4))
+        await writer.drain()
+        writer.close()
+
+    async def scenario() -> tuple[list[bytes], bytes, bool]:
+        core = RecordingCore()
+        endpoint = await started(core)
+        server = await asyncio.start_server(echo, "127.0.0.1", 0)
+        out = sender()
+        try:
+            assert endpoint.transport is None                       # on the lane, no transport
+            for index in range(count):
+                out.sendto(b"datagram %d" % index, ("127.0.0.1", endpoint.port))
+            reader, writer = await asyncio.open_connection(*server.sockets[0].getsockname()[:2])
+            writer.write(b"ping")
+            answer = await reader.readexactly(4)
+            writer.close()
+            for _ in range(200):
+                if len(core.received) == count:
+                    break
+                await asyncio.sleep(0.01)
+            return core.received, answer, endpoint.is_open
+        finally:
+            out.close()
+            server.close()
+            await endpoint.close()
+
+    received, answer, was_open = run_on(precise_event_loop(), scenario())
+    assert received == [b"datagram %d" % index for index in range(count)]
+    assert answer == b"ping" and was_open
+
+
+def test_lane_production_timer_sends_on_schedule_and_stops_at_close() -> None:
+    async def scenario() -> tuple[list[float], list[bytes], int, bool]:
+        listener = sender()
+        listener.setblocking(False)
+        core = RecordingCore(period=0.002, send_to=listener.getsockname())
+        loop = asyncio.get_running_loop()
+        core.deadline = loop.time() + 0.002
+        endpoint = await started(core)
+        await asyncio.sleep(0.05)
+        await endpoint.close()
+        polls_at_close = len(core.polls)
+        await asyncio.sleep(0.02)
+        received = []
+        while True:
+            try:
+                received.append(listener.recv(100))
+            except BlockingIOError:
+                break
+        listener.close()
+        lane = loop.selector.lane  # type: ignore[attr-defined]
+        return core.polls, received, polls_at_close, bool(lane.readers)
+
+    polls, received, polls_at_close, readers_left = run_on(precise_event_loop(), scenario())
+    assert len(polls) >= 5 and len(polls) == polls_at_close     # nothing fires after close()
+    assert received == [b"tick %d" % (index + 1) for index in range(len(polls))]
+    assert not readers_left
+
+
+def test_lane_callback_that_raises_is_logged_and_the_loop_goes_on(caplog: pytest.LogCaptureFixture) -> None:
+    async def scenario() -> tuple[list[bytes], list[str]]:
+        loop = asyncio.get_running_loop()
+        lane = loop.selector.lane  # type: ignore[attr-defined]
+        core = RecordingCore()
+        core.fail_on = b"bad"
+        endpoint = await started(core)
+        fired: list[str] = []
+
+        def broken() -> None:
+            raise RuntimeError("a timer callback that fails")
+
+        lane.call_at(loop.time() + 0.001, broken)
+        lane.call_at(loop.time() + 0.002, lambda: fired.append("after"))
+        out = sender()
+        for payload in (b"first", b"bad", b"second"):
+            out.sendto(payload, ("127.0.0.1", endpoint.port))
+        for _ in range(200):
+            if len(core.received) == 2 and fired:
+                break
+            await asyncio.sleep(0.01)
+        out.close()
+        await endpoint.close()
+        return core.received, fired
+
+    with caplog.at_level(logging.ERROR, logger="cipstack"):
+        received, fired = run_on(precise_event_loop(), scenario())
+    assert received == [b"first", b"second"] and fired == ["after"]
+    messages = [record.getMessage() for record in caplog.records]
+    assert any(message.startswith("class 1 datagram from ('127.0.0.1'") for message in messages), messages
+    assert any(message.startswith("class 1 lane callback") for message in messages), messages
+
+
+def test_endpoint_on_asyncio_own_loop_uses_a_datagram_transport() -> None:
+    async def scenario() -> tuple[bool, list[bytes]]:
+        core = RecordingCore()
+        endpoint = await started(core)
+        uses_transport = endpoint.transport is not None
+        out = sender()
+        out.sendto(b"over the transport", ("127.0.0.1", endpoint.port))
+        for _ in range(200):
+            if core.received:
+                break
+            await asyncio.sleep(0.01)
+        out.close()
+        await endpoint.close()
+        return uses_transport, core.received
+
+    uses_transport, received = run_on(asyncio.new_event_loop(), scenario())
+    assert uses_transport and received == [b"over the transport"]
+
+
+def test_lane_works_when_the_epoll_descriptor_is_numbered_above_select_range() -> None:
+    """Made after 1,024 files are open, the loop waits in epoll and sleeps the rest: lane timers
+    still fire in order and lane sockets are still read."""
+    held = [socket.socket() for _ in range(FD_SETSIZE + 16)]
+    try:
+        loop = precise_event_loop()
+        assert isinstance(loop, PreciseEventLoop)
+        assert loop.selector._selector.fileno() >= FD_SETSIZE  # type: ignore[attr-defined]
+
+        async def scenario() -> tuple[list[float], list[bytes]]:
+            listener = sender()
+            core = RecordingCore(period=0.0015, send_to=listener.getsockname())
+            core.deadline = asyncio.get_running_loop().time() + 0.0015
+            endpoint = await started(core)
+            out = sender()
+            out.sendto(b"high", ("127.0.0.1", endpoint.port))
+            await asyncio.sleep(0.03)
+            out.close()
+            listener.close()
+            await endpoint.close()
+            return core.polls, core.received
+
+        polls, received = run_on(loop, scenario())
+        assert len(polls) >= 5 and polls == sorted(polls) and received == [b"high"]
+    finally:
+        for sock in held:
+            sock.close()
