@@ -10,11 +10,12 @@ from __future__ import annotations
 
 from collections.abc import Callable, Iterable, Mapping
 from dataclasses import dataclass
-from typing import Any
-
-import construct as cs
+from typing import TYPE_CHECKING, Any
 
 from ..cip.types import USINT, CipType
+
+if TYPE_CHECKING:
+    import construct as cs
 
 
 @dataclass(frozen=True)
@@ -101,6 +102,8 @@ class AssemblySchema:
                 used[position] = True
 
     def _build_construct(self) -> cs.Struct:
+        import construct as cs  # only here: what decodes by the readers below never imports it
+
         parts: list[cs.Construct] = []
         offset = 0
         by_offset: dict[int, list[AssemblyField]] = {}

@@ -2,7 +2,9 @@
 
 Every type is a `construct` codec (``CipType.construct``) so that assemblies and larger
 schemas can embed it; the fixed-size numeric types also keep a precompiled ``struct.Struct``
-because attribute reads are on the explicit-messaging hot path.
+because attribute reads are on the explicit-messaging hot path. Each type encodes and decodes
+its own values without ``construct``, which is imported when a type's codec is first asked for
+(an assembly schema): a one-shot ``cipstack get`` never pays for it.
 
 Decoding is strict: a request that carries too few bytes for a value raises
 ``CipError(0x13)`` and one that carries more raises ``CipError(0x15)``, the codes a
@@ -13,11 +15,12 @@ from __future__ import annotations
 
 import struct
 from collections.abc import Sequence
-from typing import Any
-
-import construct as cs
+from typing import TYPE_CHECKING, Any
 
 from .status import CipError, GeneralStatus
+
+if TYPE_CHECKING:
+    import construct as cs
 
 
 class CipType:
@@ -33,17 +36,25 @@ class CipType:
     #: the hot paths (assembly decoding) unpack with instead of the ``construct`` parser.
     struct_codec: struct.Struct | None = None
 
+    @property
+    def construct(self) -> cs.Construct:
+        """This type as a ``construct`` codec, for schemas that embed it; built on first use."""
+        built: cs.Construct | None = self.__dict__.get("_construct")
+        if built is None:
+            import construct
+
+            built = self.__dict__["_construct"] = self._build_construct(construct)
+        return built
+
+    def _build_construct(self, cs: Any) -> cs.Construct:
+        raise NotImplementedError
+
     def encode(self, value: Any) -> bytes:
-        return self.construct.build(self.check(value))
+        raise NotImplementedError
 
     def decode_from(self, data: bytes, offset: int = 0) -> tuple[Any, int]:
         """Decode one value at ``offset``; return it and the offset just past it."""
-        try:
-            stream_value = self.construct.parse(data[offset:])
-        except cs.ConstructError as exc:
-            raise CipError(GeneralStatus.NOT_ENOUGH_DATA, message=f"{self.name}: {exc}") from None
-        consumed = len(self.construct.build(stream_value))
-        return self.normalize(stream_value), offset + consumed
+        raise NotImplementedError
 
     def decode(self, data: bytes) -> Any:
         """Decode exactly one value from ``data`` (0x13 if short, 0x15 if long)."""
@@ -51,10 +62,6 @@ class CipType:
         if end != len(data):
             raise CipError(GeneralStatus.TOO_MUCH_DATA, message=f"{self.name}: trailing bytes")
         return value
-
-    def normalize(self, parsed: Any) -> Any:
-        """Turn what construct parsed into the plain Python value callers see."""
-        return parsed
 
     def check(self, value: Any) -> Any:
         """Return ``value`` as this type holds it, or raise ``CipError(0x09)``."""
@@ -87,10 +94,12 @@ class IntegerType(CipType):
         self.signed = signed
         fmt = {1: "b", 2: "h", 4: "i", 8: "q"}[size]
         self.struct_codec = struct.Struct("<" + (fmt if signed else fmt.upper()))
-        self.construct = cs.BytesInteger(size, signed=signed, swapped=True)
         bits = size * 8
         self.minimum = -(1 << (bits - 1)) if signed else 0
         self.maximum = (1 << (bits - 1)) - 1 if signed else (1 << bits) - 1
+
+    def _build_construct(self, cs: Any) -> cs.Construct:
+        return cs.BytesInteger(self.size, signed=self.signed, swapped=True)
 
     def encode(self, value: Any) -> bytes:
         return self.struct_codec.pack(self.check(value))
@@ -159,7 +168,9 @@ class RealType(CipType):
         self.code = code
         self.size = size
         self.struct_codec = struct.Struct("<f" if size == 4 else "<d")
-        self.construct = cs.Float32l if size == 4 else cs.Float64l
+
+    def _build_construct(self, cs: Any) -> cs.Construct:
+        return cs.Float32l if self.size == 4 else cs.Float64l
 
     def encode(self, value: Any) -> bytes:
         return self.struct_codec.pack(self.check(value))
@@ -197,7 +208,9 @@ class StringType(CipType):
         self.code = code
         self.size = None
         self._length = IntegerType("length", None, length_size, signed=False)
-        self.construct = cs.PascalString(self._length.construct, "latin-1")
+
+    def _build_construct(self, cs: Any) -> cs.Construct:
+        return cs.PascalString(self._length.construct, "latin-1")
 
     def encode(self, value: Any) -> bytes:
         raw = self.check(value).encode("latin-1")
@@ -235,7 +248,9 @@ class OctetString(CipType):
         self.name = name or f"BYTE[{size}]"
         self.code = None
         self.size = size
-        self.construct = cs.Bytes(size)
+
+    def _build_construct(self, cs: Any) -> cs.Construct:
+        return cs.Bytes(self.size)
 
     def encode(self, value: Any) -> bytes:
         return bytes(self.check(value))
@@ -265,7 +280,9 @@ class RemainingBytes(CipType):
         self.name = name
         self.code = None
         self.size = None
-        self.construct = cs.GreedyBytes
+
+    def _build_construct(self, cs: Any) -> cs.Construct:
+        return cs.GreedyBytes
 
     def encode(self, value: Any) -> bytes:
         return bytes(value)
@@ -294,7 +311,9 @@ class StructType(CipType):
         self.members = tuple(members)
         sizes = [m.size for _, m in self.members]
         self.size = None if None in sizes else sum(s for s in sizes if s is not None)
-        self.construct = cs.Struct(*(member_name / member.construct for member_name, member in self.members))
+
+    def _build_construct(self, cs: Any) -> cs.Construct:
+        return cs.Struct(*(member_name / member.construct for member_name, member in self.members))
 
     def encode(self, value: Any) -> bytes:
         value = self.check(value)
@@ -327,7 +346,10 @@ class ArrayType(CipType):
         self.name = name or f"{element.name}[{'' if count is None else count}]"
         self.code = None
         self.size = None if count is None or element.size is None else count * element.size
-        self.construct = cs.Array(count, element.construct) if count is not None else cs.GreedyRange(element.construct)
+
+    def _build_construct(self, cs: Any) -> cs.Construct:
+        element = self.element.construct
+        return cs.Array(self.count, element) if self.count is not None else cs.GreedyRange(element)
 
     def encode(self, value: Any) -> bytes:
         return b"".join(self.element.encode(item) for item in self.check(value))
