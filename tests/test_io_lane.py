@@ -6,6 +6,8 @@ from __future__ import annotations
 import asyncio
 import logging
 import socket
+import threading
+import time
 from collections.abc import Coroutine
 from typing import Any, TypeVar
 
@@ -236,3 +238,30 @@ def test_lane_works_when_the_epoll_descriptor_is_numbered_above_select_range() -
     finally:
         for sock in held:
             sock.close()
+
+
+def test_asyncio_work_given_by_a_lane_timer_before_the_wait_is_not_held_by_it() -> None:
+    """A lane timer that fell due while asyncio's callbacks ran fires before the next wait; what it
+    schedules in asyncio (here a timer 10 ms on, with nothing else pending) must count for that
+    wait, or the loop would sleep until some unrelated event (the thread's wake-up, 3 s later)."""
+    loop = precise_event_loop()
+    assert isinstance(loop, PreciseEventLoop)
+    waker = threading.Timer(3.0, lambda: loop.call_soon_threadsafe(lambda: None))
+
+    async def scenario() -> float:
+        done = loop.create_future()
+        start = loop.time()
+
+        def from_lane() -> None:
+            loop.call_later(0.01, lambda: done.done() or done.set_result(loop.time()))
+
+        loop.selector.lane.call_at(start + 0.002, from_lane)
+        time.sleep(0.005)  # an asyncio callback running long: the lane timer falls due meanwhile
+        return await done - start
+
+    waker.start()
+    try:
+        elapsed = run_on(loop, scenario())
+    finally:
+        waker.cancel()
+    assert elapsed < 1.5, elapsed

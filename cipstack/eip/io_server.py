@@ -109,13 +109,17 @@ class IoLane:
             heapq.heappop(timers)
         return timers[0][0] if timers else None
 
-    def run_due(self, now: float) -> None:
+    def run_due(self, now: float) -> bool:
+        """Run the timers due at ``now``; whether any ran."""
         timers = self._timers
+        ran = False
         while timers and timers[0][0] <= now:
             timer = heapq.heappop(timers)[2]
             if not timer.cancelled:
                 timer.cancelled = True  # ran: a late cancel() is harmless
+                ran = True
                 _run_guarded(timer.callback)
+        return ran
 
     def read(self, fd: int) -> None:
         reader = self.readers.get(fd)  # removed by an earlier callback of the same wake-up: skip
@@ -151,7 +155,10 @@ class PreciseEpollSelector(selectors.EpollSelector):
 
     def select(self, timeout: float | None = None) -> list[tuple[selectors.SelectorKey, int]]:
         lane = self.lane
-        lane.run_due(time.monotonic())
+        if lane.run_due(time.monotonic()):
+            # What ran may have given asyncio work (a callback, a timer) that the timeout it passed
+            # does not know of: no wait, so that it sees that work before the next one.
+            timeout = 0
         lane_at = lane.next_deadline()
         if lane_at is not None:
             wait = max(0.0, lane_at - time.monotonic())
