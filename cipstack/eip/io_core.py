@@ -14,6 +14,7 @@ from __future__ import annotations
 import struct
 from dataclasses import dataclass, field
 from enum import Enum
+from typing import NamedTuple
 
 from .cpf import ItemType
 
@@ -22,6 +23,10 @@ _IO_HEAD = struct.Struct("<HHHIIHHH")
 IO_HEAD_SIZE = _IO_HEAD.size  # 22 bytes before the run/idle header or data
 _RUN_IDLE = struct.Struct("<I")
 DEFAULT_IO_PORT = 2222
+#: The item type codes as plain ints: compared and packed for every datagram, where an enum
+#: member's lookup costs more than the comparison.
+_SEQUENCED_ADDRESS = int(ItemType.SEQUENCED_ADDRESS)
+_CONNECTED_DATA = int(ItemType.CONNECTED_DATA)
 
 
 def seq16_newer(new: int, old: int) -> bool:
@@ -35,13 +40,16 @@ def seq32_newer(new: int, old: int) -> bool:
 
 def encode_io_datagram(connection_id: int, encap_sequence: int, cip_sequence: int, data: bytes,
                        run_idle: int | None = None) -> bytes:
-    header = b"" if run_idle is None else _RUN_IDLE.pack(run_idle)
-    return _IO_HEAD.pack(2, ItemType.SEQUENCED_ADDRESS, 8, connection_id, encap_sequence & 0xFFFFFFFF,
-                         ItemType.CONNECTED_DATA, 2 + len(header) + len(data), cip_sequence & 0xFFFF) + header + data
+    if run_idle is None:
+        return _IO_HEAD.pack(2, _SEQUENCED_ADDRESS, 8, connection_id, encap_sequence & 0xFFFFFFFF,
+                             _CONNECTED_DATA, 2 + len(data), cip_sequence & 0xFFFF) + data
+    return _IO_HEAD.pack(2, _SEQUENCED_ADDRESS, 8, connection_id, encap_sequence & 0xFFFFFFFF,
+                         _CONNECTED_DATA, 6 + len(data), cip_sequence & 0xFFFF) + _RUN_IDLE.pack(run_idle) + data
 
 
-@dataclass(frozen=True, slots=True)
-class IoDatagram:
+class IoDatagram(NamedTuple):
+    """One decoded class 1 datagram (a tuple: made for every datagram received)."""
+
     connection_id: int
     encap_sequence: int
     cip_sequence: int
@@ -61,9 +69,9 @@ def decode_io_datagram(raw: bytes) -> IoDatagram:
     if len(raw) < IO_HEAD_SIZE:
         raise IoDatagramError("shorter than a class 1 datagram", len(raw))
     count, addr_type, addr_len, connection_id, sequence, data_type, data_len, cip_sequence = _IO_HEAD.unpack_from(raw)
-    if count != 2 or addr_type != ItemType.SEQUENCED_ADDRESS or addr_len != 8:
+    if count != 2 or addr_type != _SEQUENCED_ADDRESS or addr_len != 8:
         raise IoDatagramError("not a Sequenced Address item", 0 if count != 2 else 2)
-    if data_type != ItemType.CONNECTED_DATA or data_len < 2 or IO_HEAD_SIZE - 2 + data_len != len(raw):
+    if data_type != _CONNECTED_DATA or data_len < 2 or IO_HEAD_SIZE - 2 + data_len != len(raw):
         raise IoDatagramError("Connected Data item length does not match the datagram", 14)
     return IoDatagram(connection_id, sequence, cip_sequence, raw[IO_HEAD_SIZE:])
 
@@ -158,11 +166,12 @@ class ConsumerState:
     def accept(self, encap_sequence: int, cip_sequence: int, now: float) -> Reception:
         last = self.last_encap_sequence
         if last is not None:
-            if not seq32_newer(encap_sequence, last):
+            ahead = (encap_sequence - last) & 0xFFFFFFFF   # seq32_newer, inline: once per datagram
+            if not 0 < ahead < 0x80000000:
                 self.stats.stale += 1
                 return Reception.STALE
-            gap = ((encap_sequence - last) & 0xFFFFFFFF) - 1
-            self.stats.lost += gap
+            if ahead > 1:
+                self.stats.lost += ahead - 1
         self.last_encap_sequence = encap_sequence
         self.deadline = now + self.timeout
         self.stats.received += 1

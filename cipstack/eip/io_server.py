@@ -170,6 +170,10 @@ class PreciseEpollSelector(selectors.EpollSelector):
 
     def _wait_and_harvest(self, timeout: float | None) -> list[tuple[selectors.SelectorKey, int]]:
         if timeout is None or timeout > 0:
+            # A busy loop finds something ready at once: one epoll_wait, no select() before it.
+            ready, seen = self._harvest(0)
+            if seen:
+                return ready
             epoll_fd = self._selector.fileno()  # type: ignore[attr-defined]
             if epoll_fd < FD_SETSIZE:
                 # Returns when a registered socket is ready or at the timeout, to the microsecond.
@@ -341,7 +345,7 @@ class IoEndpoint:
 
     def _drain(self, sock: socket.socket) -> None:
         """The lane's reader: what the socket holds, up to ``DRAIN_LIMIT`` datagrams, to the core."""
-        receive, clock = self.core.receive, self.loop.time
+        receive, clock = self.core.receive, time.monotonic  # the lane's loop keeps time.monotonic()
         for _ in range(DRAIN_LIMIT):
             try:
                 data, source = sock.recvfrom(MAX_DATAGRAM)
