@@ -17,7 +17,10 @@ Targets on a 2-core machine: (a) at least 99 % of the intervals within +-0.5 ms 
 
 O->T intervals are measured where the packets leave (the originator's sends), T->O intervals where
 they arrive (the originator's receptions); a T->O packet is late when it arrives more than half an
-RPI after the one before it was due to be followed. Timings are wall-clock on a shared machine:
+RPI after the one before it was due to be followed. When dumpcap and tshark are installed, part (a)
+runs under a capture of the class 1 port on the loopback interface, and the wire's shares within
++-0.5 ms (both directions, the same window) are printed beside the originator's own T->O share,
+which must agree with the wire's within one point. Timings are wall-clock on a shared machine:
 compare runs made in the same conditions.
 """
 
@@ -28,44 +31,34 @@ import asyncio
 import itertools
 import json
 import os
-import signal
-import socket
-import subprocess
-import sys
 import tempfile
 import time
 from collections.abc import Sequence
+from pathlib import Path
 from typing import Any
 
-from io_common import free_port  # benchmarks/ is on the path when a benchmark runs
+from io_common import (  # benchmarks/ is on the path when a benchmark runs
+    can_capture,
+    class1_capture,
+    cpu_seconds,
+    free_port,
+    start_adapter,
+    stop_adapter,
+    wire_times,
+    within,
+)
 
 from cipstack.eip.io_server import run_precise
 from cipstack.scanner import Scanner
 
-CLOCK_TICKS = os.sysconf("SC_CLK_TCK")
 STATION_LIMIT = 64
 INPUT_ONLY_POINT = 198
+#: The originator's own T->O share must agree with the capture's within this many points.
+AGREEMENT_POINTS = 1.0
 
 
-def cpu_seconds(pid: int) -> float:
-    with open(f"/proc/{pid}/stat") as stat:
-        fields = stat.read().rsplit(")", 1)[1].split()
-    return (int(fields[11]) + int(fields[12])) / CLOCK_TICKS
-
-
-def start_adapter(port: int, io_port: int) -> subprocess.Popen[bytes]:
-    process = subprocess.Popen([sys.executable, "-m", "cipstack", "adapter", "--host", "127.0.0.1", "--port",
-                                str(port), "--io-port", str(io_port), "--log-level", "WARNING", "--quiet",
-                                "--state", os.path.join(tempfile.mkdtemp(), "state.json")])
-    deadline = time.monotonic() + 20
-    while time.monotonic() < deadline:
-        try:
-            socket.create_connection(("127.0.0.1", port), timeout=0.2).close()
-            return process
-        except OSError:
-            time.sleep(0.05)
-    process.kill()
-    raise RuntimeError("adapter did not start")
+def cpu_total(pid: int) -> float:
+    return sum(cpu_seconds(pid))
 
 
 def distribution(intervals: Sequence[float], rpi: float) -> dict[str, Any]:
@@ -94,7 +87,9 @@ async def single_connection(port: int, io_port: int, seconds: float) -> dict[str
         connection.send_times.clear()
         connection.last_arrival = None
         stats_before = dict(io.stats.as_dict())
+        window_start = time.time()
         await asyncio.sleep(seconds)
+        window = (window_start, time.time())
         received = list(connection.interval_samples)
         sends = list(connection.send_times)
         stats = io.stats.as_dict()
@@ -102,7 +97,7 @@ async def single_connection(port: int, io_port: int, seconds: float) -> dict[str
     sent_intervals = [b - a for a, b in itertools.pairwise(sends)]
     delta = {k: stats[k] - stats_before[k] for k in ("sent", "received", "late", "lost", "skipped_slots")}
     return {
-        "rpi_ms": rpi * 1e3, "seconds": seconds, "originator_watchdog_expired": watchdog_expired,
+        "rpi_ms": rpi * 1e3, "seconds": seconds, "originator_watchdog_expired": watchdog_expired, "window": window,
         "o_to_t": {"packets_per_s": round(len(sends) / seconds, 1), "late": delta["late"],
                    "skipped_slots": delta["skipped_slots"], **distribution(sent_intervals, rpi)},
         "t_to_o": {"packets_per_s": round((len(received) + 1) / seconds, 1), "lost": delta["lost"],
@@ -125,9 +120,9 @@ async def station_limit(port: int, io_port: int, seconds: float, pid: int) -> di
                 handle.connection.interval_samples.clear()
                 handle.connection.last_arrival = None
             lost_before = sum(h.stats.lost for h in handles)
-            cpu_before, wall_before = cpu_seconds(pid), time.monotonic()
+            cpu_before, wall_before = cpu_total(pid), time.monotonic()
             await asyncio.sleep(seconds)
-            cpu, wall = cpu_seconds(pid) - cpu_before, time.monotonic() - wall_before
+            cpu, wall = cpu_total(pid) - cpu_before, time.monotonic() - wall_before
             intervals = [i for h in handles for i in h.connection.interval_samples]
             timeouts = sum(1 for h in handles if h.timed_out)
             lost = sum(h.stats.lost for h in handles) - lost_before
@@ -144,6 +139,28 @@ async def station_limit(port: int, io_port: int, seconds: float, pid: int) -> di
     }
 
 
+def single_connection_captured(port: int, io_port: int, seconds: float) -> dict[str, Any]:
+    """Part (a), under a capture when dumpcap and tshark are here: the wire's share of intervals within
+    +-0.5 ms each way, over the same window, beside the originator's own (the receive side's figure
+    is only honest if it agrees with the wire's)."""
+    if not can_capture():
+        result = run_precise(single_connection(port, io_port, seconds))
+        result["wire"] = None
+        return result
+    with tempfile.TemporaryDirectory() as tmp:
+        os.chmod(tmp, 0o755)  # dumpcap may run as another user
+        with class1_capture(io_port, Path(tmp) / "io.pcapng") as capture:
+            result = run_precise(single_connection(port, io_port, seconds))
+        ot, to = wire_times(capture, io_port, result["window"])
+    rpi = result["rpi_ms"] / 1e3
+    (ot_count, ot_share), (to_count, to_share) = within(ot, rpi), within(to, rpi)
+    own = result["t_to_o"].get("within_0.5ms_pct")
+    result["wire"] = {"o_to_t_intervals": ot_count, "o_to_t_within_pct": ot_share, "t_to_o_intervals": to_count,
+                      "t_to_o_within_pct": to_share,
+                      "agrees": own is not None and to_share is not None and abs(own - to_share) <= AGREEMENT_POINTS}
+    return result
+
+
 def main(argv: Sequence[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--seconds", type=float, default=10.0, help="measured time of each part (default 10)")
@@ -155,12 +172,11 @@ def main(argv: Sequence[str] | None = None) -> int:
     results: dict[str, Any] = {"load_average": os.getloadavg()[0], "cpus": os.cpu_count()}
     try:
         if args.only in (None, "a"):
-            results["a_one_connection_1ms"] = run_precise(single_connection(port, io_port, args.seconds))
+            results["a_one_connection_1ms"] = single_connection_captured(port, io_port, args.seconds)
         if args.only in (None, "b"):
             results["b_64_connections_10ms"] = run_precise(station_limit(port, io_port, args.seconds, adapter.pid))
     finally:
-        adapter.send_signal(signal.SIGTERM)
-        adapter.wait(10)
+        stop_adapter(adapter)
     if args.json:
         print(json.dumps(results))
         return 0
@@ -172,6 +188,13 @@ def main(argv: Sequence[str] | None = None) -> int:
             print(f"    {label} {d['packets_per_s']:8.1f} packets/s  intervals p50 "
                   f"{d.get('p50_ms')} ms  p99 {d.get('p99_ms')} ms  max {d.get('max_ms')} ms  within +-0.5 ms "
                   f"{d.get('within_0.5ms_pct')} % (target >= 99 %)")
+        wire = a["wire"]
+        if wire is None:
+            print("    on the wire: not captured (dumpcap and tshark are needed)")
+        else:
+            print(f"    on the wire: O->T {wire['o_to_t_within_pct']} %, T->O {wire['t_to_o_within_pct']} % within "
+                  f"+-0.5 ms; the originator's own T->O figure {a['t_to_o'].get('within_0.5ms_pct')} % "
+                  f"{'agrees' if wire['agrees'] else 'DISAGREES'} (within {AGREEMENT_POINTS:g} point)")
         print(f"    O->T late {a['o_to_t']['late']}, skipped slots {a['o_to_t']['skipped_slots']}; "
               f"T->O lost {a['t_to_o']['lost']} (target 0); originator watchdog expired: "
               f"{a['originator_watchdog_expired']}")

@@ -20,22 +20,18 @@ one percentage point).
 from __future__ import annotations
 
 import argparse
-import itertools
 import json
 import os
 import re
-import shutil
-import signal
 import subprocess
 import sys
 import tempfile
-import time
 from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
 
 sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
-from io_common import Verdict, free_port, start_adapter, stop_adapter
+from io_common import Verdict, can_capture, class1_capture, free_port, start_adapter, stop_adapter, wire_times, within
 
 SHARE_TARGET = 99.0
 AGREEMENT_POINTS = 1.0
@@ -66,30 +62,6 @@ def parse_rpi(text: str) -> float:
     return float(value.rstrip("s"))
 
 
-def within(times: Sequence[float], rpi: float) -> tuple[int, float | None]:
-    intervals = [b - a for a, b in itertools.pairwise(times)]
-    if not intervals:
-        return 0, None
-    good = sum(1 for i in intervals if abs(i - rpi) <= rpi / 2)
-    return len(intervals), round(100.0 * good / len(intervals), 2)
-
-
-def wire_times(capture: Path, io_port: int) -> tuple[list[float], list[float]]:
-    """Capture timestamps of the class 1 datagrams, (O->T, T->O) by the target's port."""
-    done = subprocess.run(["tshark", "-r", str(capture), "-Y", f"udp.port == {io_port}", "-T", "fields",
-                           "-e", "frame.time_epoch", "-e", "udp.srcport", "-e", "udp.dstport"],
-                          capture_output=True, text=True, timeout=300, check=True)
-    ot: list[float] = []
-    to: list[float] = []
-    for line in done.stdout.splitlines():
-        stamp, source, destination = line.split("\t")
-        if int(destination) == io_port:
-            ot.append(float(stamp))
-        elif int(source) == io_port:
-            to.append(float(stamp))
-    return ot, to
-
-
 #: The watchdog's timeout multiplier ``cipstack io`` is given: 3 is 32 ms at 1 ms and 16 ms at 0.5 ms (the
 #: command's default, 2, allows 16 ms and 8 ms, less than a loaded machine may stall a process).
 TIMEOUT_MULTIPLIER = 3
@@ -99,21 +71,11 @@ def run_one(port: int, io_port: int, rpi_text: str, seconds: float, workdir: Pat
             multiplier: int = TIMEOUT_MULTIPLIER) -> dict[str, Any]:
     rpi = parse_rpi(rpi_text)
     capture = workdir / f"io-{rpi_text}.pcapng"
-    dumpcap = subprocess.Popen(["dumpcap", "-q", "-i", "lo", "-f", f"udp port {io_port}", "-w", str(capture)],
-                               stdout=subprocess.DEVNULL, stderr=subprocess.PIPE)
-    try:
-        deadline = time.monotonic() + 10
-        while not (capture.exists() and capture.stat().st_size > 0) and time.monotonic() < deadline:
-            time.sleep(0.05)
-        time.sleep(0.3)  # the filter is attached once the file has its header
+    with class1_capture(io_port, capture):
         done = subprocess.run([sys.executable, "-m", "cipstack", "io", f"127.0.0.1:{port}", "--output", "21",
                                "--input", "71", "--rpi", rpi_text, "--duration", f"{seconds}s", "--print", "summary",
                                "--json", "--target-io-port", str(io_port), "--timeout-multiplier", str(multiplier)],
                               capture_output=True, text=True, timeout=seconds + 60)
-        time.sleep(0.3)
-    finally:
-        dumpcap.send_signal(signal.SIGTERM)
-        dumpcap.wait(10)
     summary: dict[str, Any] = {}
     for line in done.stdout.splitlines():
         if line.startswith('{"summary"'):
@@ -132,7 +94,7 @@ def run_one(port: int, io_port: int, rpi_text: str, seconds: float, workdir: Pat
 
 
 def measure(rpis: Sequence[str], seconds: float, multiplier: int = TIMEOUT_MULTIPLIER) -> list[dict[str, Any]]:
-    if shutil.which("dumpcap") is None or shutil.which("tshark") is None:
+    if not can_capture():
         raise RuntimeError("dumpcap and tshark are needed (Wireshark's command-line tools)")
     with tempfile.TemporaryDirectory() as tmp:
         workdir = Path(tmp)

@@ -1,15 +1,21 @@
-"""What the benchmarks share: free loopback ports, the adapter emulator as a subprocess, CPU times."""
+"""What the benchmarks share: free loopback ports, the adapter emulator as a subprocess, CPU times,
+and captures of class 1 traffic on the loopback interface."""
 
 from __future__ import annotations
 
+import contextlib
+import itertools
 import os
+import shutil
 import signal
 import socket
 import subprocess
 import sys
 import tempfile
 import time
+from collections.abc import Iterator, Sequence
 from dataclasses import dataclass
+from pathlib import Path
 
 CLOCK_TICKS = os.sysconf("SC_CLK_TCK")
 
@@ -116,3 +122,55 @@ class Verdict:
             text += f"; echo floor {self.floor:,.1f} {self.unit}, {ratio} the floor"
         text += ")"
         return text + (f"; {self.note}" if self.note else "")
+
+
+def can_capture() -> bool:
+    """dumpcap and tshark (Wireshark's command-line tools) are both here."""
+    return shutil.which("dumpcap") is not None and shutil.which("tshark") is not None
+
+
+@contextlib.contextmanager
+def class1_capture(io_port: int, path: Path) -> Iterator[Path]:
+    """dumpcap on the loopback interface, UDP ``io_port`` only, into ``path`` while the block runs."""
+    dumpcap = subprocess.Popen(["dumpcap", "-q", "-i", "lo", "-f", f"udp port {io_port}", "-w", str(path)],
+                               stdout=subprocess.DEVNULL, stderr=subprocess.PIPE)
+    try:
+        deadline = time.monotonic() + 10
+        while not (path.exists() and path.stat().st_size > 0) and time.monotonic() < deadline:
+            time.sleep(0.05)
+        time.sleep(0.3)  # the filter is attached once the file has its header
+        yield path
+        time.sleep(0.3)
+    finally:
+        dumpcap.send_signal(signal.SIGTERM)
+        dumpcap.wait(10)
+
+
+def wire_times(capture: Path, io_port: int,
+               window: tuple[float, float] | None = None) -> tuple[list[float], list[float]]:
+    """Capture timestamps of the class 1 datagrams, (O->T, T->O) by the target's port; with ``window``
+    (epoch seconds), only those within it."""
+    done = subprocess.run(["tshark", "-r", str(capture), "-Y", f"udp.port == {io_port}", "-T", "fields",
+                           "-e", "frame.time_epoch", "-e", "udp.srcport", "-e", "udp.dstport"],
+                          capture_output=True, text=True, timeout=300, check=True)
+    ot: list[float] = []
+    to: list[float] = []
+    for line in done.stdout.splitlines():
+        stamp, source, destination = line.split("\t")
+        at = float(stamp)
+        if window is not None and not window[0] <= at <= window[1]:
+            continue
+        if int(destination) == io_port:
+            ot.append(at)
+        elif int(source) == io_port:
+            to.append(at)
+    return ot, to
+
+
+def within(times: Sequence[float], rpi: float) -> tuple[int, float | None]:
+    """How many intervals ``times`` make, and the share (%) within half an RPI of the RPI."""
+    intervals = [b - a for a, b in itertools.pairwise(times)]
+    if not intervals:
+        return 0, None
+    good = sum(1 for i in intervals if abs(i - rpi) <= rpi / 2)
+    return len(intervals), round(100.0 * good / len(intervals), 2)
