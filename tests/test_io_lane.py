@@ -284,3 +284,38 @@ def test_class1_socket_asks_for_a_receive_buffer_that_outlasts_a_stall() -> None
             await endpoint.close()
 
     assert run_on(precise_event_loop(), scenario()) == 2 * min(RECEIVE_BUFFER, rmem_max)
+
+
+def test_a_datagram_ends_a_long_wait_at_once() -> None:
+    """A wait of many milliseconds (the next timer 500 ms away) is epoll_wait() itself: a datagram
+    arriving meanwhile is read when it arrives, not at the timer."""
+
+    async def scenario() -> float:
+        loop = asyncio.get_running_loop()
+        core = RecordingCore()
+        endpoint = await started(core)
+        fired: list[float] = []
+        loop.selector.lane.call_at(loop.time() + 0.5, lambda: fired.append(loop.time()))  # type: ignore[attr-defined]
+        out = sender()
+        sent_at: list[float] = []
+
+        def send() -> None:
+            sent_at.append(time.monotonic())
+            out.sendto(b"wake", ("127.0.0.1", endpoint.port))
+
+        arrived: asyncio.Future[float] = loop.create_future()
+        receive = core.receive
+
+        def receive_and_tell(raw: bytes, source: tuple[str, int], now: float) -> None:
+            receive(raw, source, now)
+            arrived.set_result(time.monotonic())
+
+        core.receive = receive_and_tell  # type: ignore[method-assign]
+        threading.Timer(0.05, send).start()
+        received_at = await arrived  # nothing else to do: the loop waits in the selector
+        out.close()
+        await endpoint.close()
+        assert not fired
+        return received_at - sent_at[0]
+
+    assert run_on(precise_event_loop(), scenario()) < 0.25

@@ -5,10 +5,11 @@ Timing: the default asyncio loop on Linux waits in epoll_wait(), whose timeout h
 granularity and is rounded up, so a 1 ms RPI would jitter by up to a millisecond. select() has
 microsecond timeouts but takes no descriptor numbered 1024 or above and scans every socket on
 each wait. The ``precise_event_loop`` keeps both strengths: sockets are registered with epoll
-(any descriptor number, no scan), and the wait is a select() on the one epoll descriptor (it
-becomes readable when any registered socket is ready) with the exact timeout; the ready events
-are then harvested with a non-blocking epoll_wait(). It also lowers the thread's timer slack:
-sends then leave within tens of microseconds of their slot.
+(any descriptor number, no scan); a wait spends its whole milliseconds in epoll_wait() and the
+sub-millisecond rest in a select() on the one epoll descriptor (it becomes readable when any
+registered socket is ready), and the ready events are then harvested with a non-blocking
+epoll_wait(). It also lowers the thread's timer slack: sends then leave within tens of
+microseconds of their slot.
 
 The class 1 lane: on that loop, each ``IoEndpoint`` hands its UDP socket and its timer to the
 selector itself (``IoLane``), which reads the sockets that are ready and fires the timers that
@@ -176,29 +177,28 @@ class PreciseEpollSelector(selectors.EpollSelector):
         return ready
 
     def _wait_and_harvest(self, timeout: float | None) -> list[tuple[selectors.SelectorKey, int]]:
-        if timeout is None or timeout > 0:
-            # A busy loop finds something ready at once: one epoll_wait, no select() before it.
-            ready, seen = self._harvest(0)
-            if seen:
-                return ready
+        """Wait until a registered socket is ready or ``timeout`` has passed, to the microsecond, with
+        as few system calls as the wait allows: an event that ends a wait of a millisecond or more
+        comes in the epoll_wait() that waited for it (one call), only the sub-millisecond rest of a
+        wait is a select() on the epoll descriptor (or a sleep, when that descriptor is numbered
+        too high for select), and a loop with something ready harvests it at once."""
+        if timeout is None:
+            return self._harvest(-1)[0]
+        if timeout <= 0:
+            return self._harvest(0)[0]
+        deadline = time.monotonic() + timeout
+        whole_ms = math.floor(timeout * 1000)
+        # epoll_wait() counts whole milliseconds: wait those there (0: only look), the rest below.
+        ready, seen = self._harvest(whole_ms / 1000)
+        if seen:
+            return ready
+        remainder = deadline - time.monotonic()
+        if remainder > 0:
             epoll_fd = self._selector.fileno()  # type: ignore[attr-defined]
             if epoll_fd < FD_SETSIZE:
-                # Returns when a registered socket is ready or at the timeout, to the microsecond.
-                select.select((epoll_fd,), (), (), timeout)
-            elif timeout is not None:
-                # The epoll descriptor itself is numbered too high for select() (the loop was made
-                # after 1,024 files were open): wait the whole milliseconds in epoll, then sleep
-                # the remainder, so timers still fire on time (events wait at most that remainder).
-                whole_ms = math.floor(timeout * 1000)
-                if whole_ms:
-                    ready, seen = self._harvest(whole_ms / 1000)
-                    if seen:
-                        return ready
-                remainder = timeout - whole_ms / 1000
-                if remainder > 0:
-                    time.sleep(remainder)
+                select.select((epoll_fd,), (), (), remainder)
             else:
-                return self._harvest(-1)[0]
+                time.sleep(remainder)  # events wait at most this remainder
         return self._harvest(0)[0]
 
     def _harvest(self, epoll_timeout: float) -> tuple[list[tuple[selectors.SelectorKey, int]], bool]:
