@@ -38,6 +38,7 @@ from pathlib import Path
 from typing import Any
 
 from io_common import (  # benchmarks/ is on the path when a benchmark runs
+    acg_class1,
     can_capture,
     class1_capture,
     cpu_seconds,
@@ -51,8 +52,9 @@ from io_common import (  # benchmarks/ is on the path when a benchmark runs
 from cipstack.eip.io_server import run_precise
 from cipstack.scanner import Scanner
 
-STATION_LIMIT = 64
-INPUT_ONLY_POINT = 198
+#: The ACG-ET2's station limit (one exclusive owner, the rest input only) and heartbeat point.
+STATION_LIMIT = acg_class1().max_connections
+INPUT_ONLY_POINT = acg_class1().input_only_point
 #: The originator's own T->O share must agree with the capture's within this many points.
 AGREEMENT_POINTS = 1.0
 

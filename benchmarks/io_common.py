@@ -15,7 +15,12 @@ import tempfile
 import time
 from collections.abc import Iterator, Sequence
 from dataclasses import dataclass
+from functools import cache
 from pathlib import Path
+from typing import TYPE_CHECKING
+
+if TYPE_CHECKING:
+    from cipstack.eip.io_target import IoProfile
 
 CLOCK_TICKS = os.sysconf("SC_CLK_TCK")
 
@@ -40,6 +45,17 @@ def free_port(*hosts: str) -> int:
                 sock.close()
         return port
     raise RuntimeError(f"no port free for TCP and UDP on {', '.join(hosts)}")
+
+
+@cache
+def acg_class1() -> IoProfile:
+    """The class 1 offer of the adapter's default profile (the ACG-ET2) as the device declares it:
+    its connection limit, input-only heartbeat point and RPI range."""
+    from cipstack.devices.profiles import build_device
+
+    profile = build_device().io_profile()
+    assert profile is not None
+    return profile
 
 
 def cpu_seconds(pid: int) -> tuple[float, float]:

@@ -38,10 +38,10 @@ from dataclasses import asdict, dataclass
 from typing import Any
 
 sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
-from io_common import Verdict, cpu_seconds, free_port, machine_busy, start_adapter, stop_adapter
+from io_common import Verdict, acg_class1, cpu_seconds, free_port, machine_busy, start_adapter, stop_adapter
 
 INPUT = 71
-INPUT_ONLY_POINT = 198
+INPUT_ONLY_POINT = acg_class1().input_only_point
 DEFAULT_LADDER = ("10ms:128,256,384,512", "1ms:16,32,48,64")
 #: Issue 16: one process sustains this many packets per second each way (512 at 10 ms, 64 at 1 ms).
 PACKETS_TARGET = 60_000

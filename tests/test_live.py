@@ -194,3 +194,33 @@ def test_sync_scanner() -> None:
 def test_sync_scanner_connection_refused() -> None:
     with pytest.raises(ConnectionError):
         SyncScanner("127.0.0.1:1", timeout=1)
+
+
+def test_the_adapter_freezes_its_start_up_objects_once_it_serves() -> None:
+    """A full collection over one ACG drive's 28,000 objects stops the loop for about 8 ms, past a
+    1 ms connection's watchdog (the stall behind `cipstack io` timing out at 1 ms): once the
+    adapter serves, what start-up built is frozen out of the collector's reach."""
+    import gc
+    import os
+    import signal
+
+    from cipstack.eip.io_server import run_precise
+
+    async def serve_then_stop() -> int:
+        adapter = Adapter(AdapterSettings(host="127.0.0.1", port=0, io_port=0))
+        serving = asyncio.ensure_future(adapter.serve_forever())
+        for _ in range(500):
+            if gc.get_freeze_count() or serving.done():
+                break
+            await asyncio.sleep(0.01)
+        frozen = gc.get_freeze_count()
+        os.kill(os.getpid(), signal.SIGTERM)   # serve_forever's own handler: it closes and returns
+        await asyncio.wait_for(serving, 10)
+        return frozen
+
+    gc.unfreeze()
+    try:
+        frozen = run_precise(serve_then_stop())
+    finally:
+        gc.unfreeze()
+    assert frozen > 0

@@ -166,12 +166,10 @@ class ConsumerState:
     def accept(self, encap_sequence: int, cip_sequence: int, now: float) -> Reception:
         last = self.last_encap_sequence
         if last is not None:
-            ahead = (encap_sequence - last) & 0xFFFFFFFF   # seq32_newer, inline: once per datagram
-            if not 0 < ahead < 0x80000000:
+            if not seq32_newer(encap_sequence, last):
                 self.stats.stale += 1
                 return Reception.STALE
-            if ahead > 1:
-                self.stats.lost += ahead - 1
+            self.stats.lost += ((encap_sequence - last) & 0xFFFFFFFF) - 1
         self.last_encap_sequence = encap_sequence
         self.deadline = now + self.timeout
         self.stats.received += 1

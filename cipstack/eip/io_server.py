@@ -96,15 +96,28 @@ class LaneTimer:
 
 
 class IoLane:
-    """Sockets read and timers fired inside the selector's wait (see the module docstring).
+    """Sockets read and timers fired inside the selector's wait (see the module docstring), on
+    the selector's own epoll set.
 
     Callbacks run on the loop's thread between two rounds of asyncio callbacks, as asyncio's own
     would; one that raises is logged and the rest go on."""
 
-    def __init__(self) -> None:
+    def __init__(self, epoll: select.epoll) -> None:
+        self._epoll = epoll
         self.readers: dict[int, Callable[[], None]] = {}
         self._timers: list[tuple[float, int, LaneTimer]] = []
         self._order = itertools.count()
+
+    def add_reader(self, fd: int, callback: Callable[[], None]) -> None:
+        """Serve ``fd``'s readiness with ``callback`` in the wait; asyncio never sees the descriptor."""
+        self._epoll.register(fd, select.EPOLLIN)
+        self.readers[fd] = callback
+
+    def remove_reader(self, fd: int) -> None:
+        if self.readers.pop(fd, None) is not None:
+            # A socket closed already has left the epoll set with it.
+            with contextlib.suppress(OSError, ValueError):
+                self._epoll.unregister(fd)
 
     def call_at(self, when: float, callback: Callable[[], None]) -> LaneTimer:
         timer = LaneTimer(when, callback)
@@ -148,18 +161,7 @@ class PreciseEpollSelector(selectors.EpollSelector):
 
     def __init__(self) -> None:
         super().__init__()
-        self.lane = IoLane()
-
-    def add_lane_reader(self, fd: int, callback: Callable[[], None]) -> None:
-        """Serve ``fd``'s readiness with ``callback`` in the wait; asyncio never sees the descriptor."""
-        self._selector.register(fd, select.EPOLLIN)  # type: ignore[attr-defined]
-        self.lane.readers[fd] = callback
-
-    def remove_lane_reader(self, fd: int) -> None:
-        if self.lane.readers.pop(fd, None) is not None:
-            # A socket closed already has left the epoll set with it.
-            with contextlib.suppress(OSError, ValueError):
-                self._selector.unregister(fd)  # type: ignore[attr-defined]
+        self.lane = IoLane(self._selector)  # type: ignore[attr-defined]
 
     def select(self, timeout: float | None = None) -> list[tuple[selectors.SelectorKey, int]]:
         lane = self.lane
@@ -302,8 +304,8 @@ class IoEndpoint:
         #: The running loop, taken in ``start()`` (none is made here: one made outside a running loop
         #: would never be closed).
         self.loop: asyncio.AbstractEventLoop
-        #: The selector serving the lane, or None on a loop without one.
-        self._lane: PreciseEpollSelector | None = None
+        #: The loop's class 1 lane, or None on a loop without one.
+        self._lane: IoLane | None = None
         #: Off the lane: the transport that queues what the socket cannot take at once.
         self.transport: asyncio.DatagramTransport | None = None
         #: The endpoint's socket (None once closed); sends go straight to it (see ``_send``).
@@ -317,7 +319,7 @@ class IoEndpoint:
     async def start(self) -> None:
         self.loop = asyncio.get_running_loop()
         if isinstance(self.loop, PreciseEventLoop):
-            self._lane = self.loop.selector
+            self._lane = self.loop.selector.lane
         sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
         if not self.exclusive:
             sock.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
@@ -346,7 +348,7 @@ class IoEndpoint:
         """Feed what ``sock`` receives to the core: on the lane, or through a transport (returned)."""
         if self._lane is not None:
             sock.setblocking(False)
-            self._lane.add_lane_reader(sock.fileno(), lambda: self._drain(sock))
+            self._lane.add_reader(sock.fileno(), lambda: self._drain(sock))
             return None
         transport, _ = await self.loop.create_datagram_endpoint(lambda: _UdpIo(self), sock=sock)
         return transport  # type: ignore[return-value]
@@ -398,7 +400,7 @@ class IoEndpoint:
             self._timer.cancel()
         self._timer_at = deadline
         lane = self._lane
-        self._timer = (lane.lane.call_at(deadline, self._on_timer) if lane is not None
+        self._timer = (lane.call_at(deadline, self._on_timer) if lane is not None
                        else self.loop.call_at(deadline, self._on_timer))
 
     def _on_timer(self) -> None:
@@ -452,5 +454,5 @@ class IoEndpoint:
                 transport.close()
             else:
                 if self._lane is not None:
-                    self._lane.remove_lane_reader(sock.fileno())
+                    self._lane.remove_reader(sock.fileno())
                 sock.close()
