@@ -1,6 +1,8 @@
 """The adapter on the wire never crashes, hangs or grows: crafted and random frames over TCP and UDP.
 
-An in-process adapter runs on its own event loop in a background thread and listens on loopback;
+An in-process adapter runs on its own event loop in a background thread and listens on loopback,
+once on asyncio's default loop (TCP through asyncio's transports) and once on the precise loop
+the command line runs (TCP served on its lane, ``tcp_lane``);
 the tests talk to it through real sockets with blocking clients, and read its internals (receive
 buffers, write buffers, connection set) through the loop thread. Frames are built here byte by byte,
 independently of the library's encoders.
@@ -33,6 +35,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from cipstack.adapter import Adapter, AdapterSettings
+from cipstack.eip.io_server import precise_event_loop
 from cipstack.scanner import SyncScanner
 from tests.waiting import wait_for
 
@@ -237,8 +240,8 @@ class ErrorRecords(logging.Handler):
 class RunningAdapter:
     """An in-process adapter on loopback, served by an event loop in a background thread."""
 
-    def __init__(self) -> None:
-        self.loop = asyncio.new_event_loop()
+    def __init__(self, new_loop: Callable[[], asyncio.AbstractEventLoop] = asyncio.new_event_loop) -> None:
+        self.loop = new_loop()
         self.thread = threading.Thread(target=self._serve, name="adapter-loop", daemon=True)
         self.thread.start()
         self.errors = ErrorRecords()
@@ -286,8 +289,7 @@ class RunningAdapter:
                                        if p.connection is not None])
 
     def write_buffer_sizes(self) -> list[int]:
-        return self.inspect(lambda a: [p.transport.get_write_buffer_size() for p in a.server.connections
-                                       if p.transport is not None and not p.transport.is_closing()])
+        return self.inspect(lambda a: [c.write_buffer_size() for c in a.server.connections])
 
     def assert_healthy(self, errors_before: int = 0) -> None:
         """Still answers 1/1/7 with "CENT"; nothing logged at ERROR since ``errors_before``."""
@@ -296,9 +298,9 @@ class RunningAdapter:
         assert len(self.errors.records) == errors_before, f"errors logged: {self.errors.describe(errors_before)}"
 
 
-@pytest.fixture(scope="module")
-def target() -> Iterator[RunningAdapter]:
-    running = RunningAdapter()
+@pytest.fixture(scope="module", params=["asyncio", "lane"])
+def target(request: pytest.FixtureRequest) -> Iterator[RunningAdapter]:
+    running = RunningAdapter(precise_event_loop if request.param == "lane" else asyncio.new_event_loop)
     try:
         yield running
     finally:

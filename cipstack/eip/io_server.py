@@ -108,10 +108,15 @@ class IoLane:
         self._timers: list[tuple[float, int, LaneTimer]] = []
         self._order = itertools.count()
 
-    def add_reader(self, fd: int, callback: Callable[[], None]) -> None:
-        """Serve ``fd``'s readiness with ``callback`` in the wait; asyncio never sees the descriptor."""
-        self._epoll.register(fd, select.EPOLLIN)
+    def add_reader(self, fd: int, callback: Callable[[], None], events: int = select.EPOLLIN) -> None:
+        """Serve ``fd``'s readiness with ``callback`` in the wait; asyncio never sees the descriptor.
+        ``events``: the epoll events watched (readable by default); errors and hang-ups always are."""
+        self._epoll.register(fd, events)
         self.readers[fd] = callback
+
+    def watch(self, fd: int, events: int) -> None:
+        """Change the events watched on a reader's ``fd`` (writable instead of readable, say)."""
+        self._epoll.modify(fd, events)
 
     def remove_reader(self, fd: int) -> None:
         if self.readers.pop(fd, None) is not None:
@@ -152,7 +157,7 @@ def _run_guarded(callback: Callable[[], None]) -> None:
     try:
         callback()
     except Exception:  # one callback must never take the loop down
-        log.exception("class 1 lane callback %r", callback)
+        log.exception("lane callback %r", callback)
 
 
 class PreciseEpollSelector(selectors.EpollSelector):
@@ -230,6 +235,11 @@ class PreciseEventLoop(asyncio.SelectorEventLoop):
     def __init__(self) -> None:
         self.selector = PreciseEpollSelector()
         super().__init__(self.selector)
+
+
+def lane_of(loop: asyncio.AbstractEventLoop) -> IoLane | None:
+    """The lane of a ``PreciseEventLoop``; None on any other loop."""
+    return loop.selector.lane if isinstance(loop, PreciseEventLoop) else None
 
 
 def precise_event_loop() -> asyncio.AbstractEventLoop:
@@ -318,8 +328,7 @@ class IoEndpoint:
 
     async def start(self) -> None:
         self.loop = asyncio.get_running_loop()
-        if isinstance(self.loop, PreciseEventLoop):
-            self._lane = self.loop.selector.lane
+        self._lane = lane_of(self.loop)
         sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
         if not self.exclusive:
             sock.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)

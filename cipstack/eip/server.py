@@ -24,6 +24,7 @@ import socket
 from .cpf import SockAddr
 from .encapsulation import DEFAULT_PORT, HEADER_SIZE
 from .interfaces import subnet_broadcast
+from .io_server import lane_of
 from .limits import (
     DEFAULT_MAX_TCP_CONNECTIONS,
     ConnectionLimiter,
@@ -33,6 +34,7 @@ from .limits import (
     quiet_accept_errors,
 )
 from .target import EncapsulationConnection, EncapsulationTarget
+from .tcp_lane import LaneListener, LaneTcpConnection
 
 log = logging.getLogger(__name__)
 
@@ -106,6 +108,14 @@ class _TcpProtocol(asyncio.Protocol):
             self.connection.connection_lost()
             log.info("%s: TCP connection closed", self.connection.peer)
         self.server.connections.discard(self)
+
+    def write_buffer_size(self) -> int:
+        """Reply bytes the transport holds because the socket would not take them."""
+        return self.transport.get_write_buffer_size() if self.transport is not None else 0
+
+    def close(self) -> None:
+        if self.transport is not None:
+            self.transport.close()
 
     def _arm(self) -> None:
         assert self.connection is not None
@@ -207,10 +217,11 @@ class EncapsulationServer:
         #: The running loop, taken in ``start()`` (none is made here: one made outside a running loop
         #: would never be closed).
         self.loop: asyncio.AbstractEventLoop
-        self.connections: set[_TcpProtocol] = set()
+        self.connections: set[_TcpProtocol | LaneTcpConnection] = set()
         self.limiter = ConnectionLimiter(max_tcp_connections, max_tcp_connections_per_host)
         self.refused_log = RateLimitedLog(log)
-        self._tcp: asyncio.base_events.Server | None = None
+        #: The listener: asyncio's server, or on a ``PreciseEventLoop`` the lane's (``tcp_lane``).
+        self._tcp: asyncio.base_events.Server | LaneListener | None = None
         self._udp: asyncio.DatagramTransport | None = None
         self._broadcast: asyncio.DatagramTransport | None = None
         self._local: SockAddr | None = None
@@ -243,12 +254,16 @@ class EncapsulationServer:
 
     async def _listen_tcp(self, port: int) -> None:
         listener = guarded_listener(self.host, port)
+        lane = lane_of(self.loop)
         try:
-            self._tcp = await self.loop.create_server(lambda: _TcpProtocol(self), sock=listener)
+            if lane is not None:
+                self._tcp = LaneListener(self, listener, lane)
+            else:
+                self._tcp = await self.loop.create_server(lambda: _TcpProtocol(self), sock=listener)
         except BaseException:
             listener.close()
             raise
-        self.port = self._tcp.sockets[0].getsockname()[1]
+        self.port = listener.getsockname()[1]
 
     async def _listen_udp(self) -> None:
         if not self.udp:
@@ -279,19 +294,20 @@ class EncapsulationServer:
         return transport  # type: ignore[return-value]
 
     async def _close_tcp(self) -> None:
-        if self._tcp is not None:
-            self._tcp.close()
-            await self._tcp.wait_closed()
-            self._tcp = None
+        tcp, self._tcp = self._tcp, None
+        if tcp is not None:
+            tcp.close()
+            if not isinstance(tcp, LaneListener):
+                await tcp.wait_closed()
 
     async def close(self) -> None:
-        if self._tcp is not None:
-            self._tcp.close()
-        for protocol in list(self.connections):
-            if protocol.transport is not None:
-                protocol.transport.close()
-        if self._tcp is not None:
-            await self._tcp.wait_closed()
+        tcp = self._tcp
+        if tcp is not None:
+            tcp.close()
+        for connection in list(self.connections):
+            connection.close()
+        if tcp is not None and not isinstance(tcp, LaneListener):
+            await tcp.wait_closed()
         if self._udp is not None:
             self._udp.close()
         if self._broadcast is not None:

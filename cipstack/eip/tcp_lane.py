@@ -1,0 +1,215 @@
+"""Encapsulation TCP connections served on the lane of a ``PreciseEventLoop``.
+
+On that loop the ``EncapsulationServer`` accepts its connections and serves their bytes in the
+selector's wait (``io_server.IoLane``), as the class 1 sockets are: a request costs one
+``recv``, the sans-I/O ``EncapsulationConnection`` and one ``send``, with no asyncio handle,
+transport buffer or flow-control bookkeeping between them. That bookkeeping was most of the
+server's own time per Get_Attribute_Single; what is left is the system calls and the CIP work.
+
+Behaviour is that of the asyncio path (``server._TcpProtocol``), rule for rule:
+
+* admission: the same ``ConnectionLimiter``, the same refusal log line; the listener is the same
+  ``GuardedListener``, so running out of descriptors sheds the waiting connection;
+* back-pressure: a reply the socket cannot take at once is kept, the connection then waits for
+  the socket to be writable and reads nothing until that reply has gone, so what is held is at
+  most one read's replies, whatever a client that never reads sends;
+* closing: what the connection still has to send (a 0x0065 reply to an oversized frame) goes
+  out before the socket closes;
+* timers: one lane timer per connection at its next deadline (inactivity, class 3 timeouts),
+  re-armed lazily as on the asyncio path.
+"""
+
+from __future__ import annotations
+
+import errno
+import logging
+import select
+import socket
+from typing import TYPE_CHECKING
+
+from .cpf import SockAddr
+from .io_server import IoLane, LaneTimer
+
+if TYPE_CHECKING:
+    from .limits import GuardedListener
+    from .server import EncapsulationServer
+    from .target import EncapsulationConnection
+
+log = logging.getLogger(__name__)
+
+#: Bytes asked of the socket per readiness: the largest frame the target takes is 4,224 bytes by
+#: default, and a pipelining client's requests are taken several at a time.
+RECEIVE_SIZE = 65536
+
+#: Connections accepted per readiness of the listener before other sockets get their turn.
+ACCEPT_BATCH = 32
+
+_READABLE = select.EPOLLIN
+_WRITABLE = select.EPOLLOUT
+
+
+class LaneListener:
+    """The server's listening socket on the lane: accepts and hands each connection to a
+    ``LaneTcpConnection``."""
+
+    def __init__(self, server: EncapsulationServer, sock: GuardedListener, lane: IoLane) -> None:
+        self.server = server
+        self.sock = sock
+        self.lane = lane
+        self._fd = sock.fileno()
+        lane.add_reader(self._fd, self._accept)
+
+    def _accept(self) -> None:
+        for _ in range(ACCEPT_BATCH):
+            try:
+                sock, peer = self.sock.accept()  # a shed connection is BlockingIOError (``limits``)
+            except (BlockingIOError, InterruptedError):
+                return
+            except OSError as exc:  # the peer gave up in the backlog (ECONNABORTED), and the like
+                log.debug("accept() on %s: %s", self.sock.getsockname(), exc)
+                if exc.errno not in (errno.ECONNABORTED, errno.EPROTO, errno.EPERM):
+                    return
+                continue
+            LaneTcpConnection.accepted(self.server, sock, peer, self.lane)
+
+    def close(self) -> None:
+        self.lane.remove_reader(self._fd)
+        self.sock.close()
+
+
+class LaneTcpConnection:
+    """One accepted TCP connection of the encapsulation server, served on the lane."""
+
+    def __init__(self, server: EncapsulationServer, sock: socket.socket, host: str, peer_text: str,
+                 lane: IoLane) -> None:
+        self.server = server
+        self.sock = sock
+        self.lane = lane
+        self.host = host
+        self._fd = sock.fileno()
+        local = sock.getsockname()
+        self.connection: EncapsulationConnection = server.target.connection(
+            peer_text, SockAddr(local[0], local[1]), server.loop.time())
+        #: Reply bytes the socket has not taken yet; reading waits until they are gone.
+        self._unsent = b""
+        self._close_when_sent = False
+        self._closed = False
+        self._timer: LaneTimer | None = None
+
+    @classmethod
+    def accepted(cls, server: EncapsulationServer, sock: socket.socket, peer: tuple[str, int],
+                 lane: IoLane) -> LaneTcpConnection | None:
+        host = peer[0] if peer else "?"
+        limiter = server.limiter
+        if not limiter.admit(host):
+            server.refused_log("TCP connection from %s refused: %s", host, limiter.reason(host))
+            sock.setsockopt(socket.SOL_SOCKET, socket.SO_LINGER, b"\x01\x00\x00\x00\x00\x00\x00\x00")
+            sock.close()  # a reset, as asyncio's abort() gives on the other path
+            return None
+        try:
+            sock.setblocking(False)
+            sock.setsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY, 1)
+            peer_text = f"{peer[0]}:{peer[1]}"
+            served = cls(server, sock, host, peer_text, lane)
+        except OSError as exc:  # reset before we looked at it
+            limiter.release(host)
+            sock.close()
+            log.debug("TCP connection from %s lost at accept: %s", host, exc)
+            return None
+        server.connections.add(served)
+        lane.add_reader(served._fd, served._on_ready)
+        log.info("%s: TCP connection accepted", peer_text)
+        served._arm()
+        return served
+
+    # -- the lane's callbacks --------------------------------------------------------------------
+    def _on_ready(self) -> None:
+        if self._unsent:
+            self._flush()
+            return
+        try:
+            data = self.sock.recv(RECEIVE_SIZE)
+        except (BlockingIOError, InterruptedError):
+            return
+        except OSError as exc:
+            log.debug("%s: %s", self.connection.peer, exc)
+            self.close()
+            return
+        if not data:
+            self.close()
+            return
+        connection = self.connection
+        connection.receive(data, self.server.loop.time())
+        out = connection.data_to_send()
+        if out:
+            self._send(out)
+        if connection.closing:
+            self._close_when_sent = True
+            if not self._unsent:
+                self.close()
+        elif self._timer is None:
+            self._arm()
+
+    def _send(self, out: bytes) -> None:
+        try:
+            sent = self.sock.send(out)
+        except (BlockingIOError, InterruptedError):
+            sent = 0
+        except OSError as exc:
+            log.debug("%s: %s", self.connection.peer, exc)
+            self.close()
+            return
+        if sent < len(out):
+            self._unsent = out[sent:]
+            self.lane.watch(self._fd, _WRITABLE)  # and read nothing more until it has gone
+
+    def _flush(self) -> None:
+        unsent = self._unsent
+        self._unsent = b""
+        self._send(unsent)
+        if self._closed or self._unsent:
+            return
+        if self._close_when_sent:
+            self.close()
+        else:
+            self.lane.watch(self._fd, _READABLE)
+
+    def _arm(self) -> None:
+        deadline = self.connection.next_deadline()
+        if deadline is not None:
+            self._timer = self.lane.call_at(deadline, self._on_timer)
+
+    def _on_timer(self) -> None:
+        # Deadlines move forward with traffic; the timer fires at the old one and re-arms lazily.
+        self._timer = None
+        if self._closed:
+            return
+        connection = self.connection
+        connection.on_timer(self.server.loop.time())
+        if connection.closing:
+            self._close_when_sent = True
+            if not self._unsent:
+                self.close()
+        else:
+            self._arm()
+
+    # -- the end ---------------------------------------------------------------------------------------
+    def write_buffer_size(self) -> int:
+        """Reply bytes held because the socket would not take them."""
+        return len(self._unsent)
+
+    def close(self) -> None:
+        if self._closed:
+            return
+        self._closed = True
+        self._unsent = b""
+        if self._timer is not None:
+            self._timer.cancel()
+            self._timer = None
+        self.lane.remove_reader(self._fd)
+        self.sock.close()
+        self.server.limiter.release(self.host)
+        self.connection.connection_lost()
+        log.info("%s: TCP connection closed", self.connection.peer)
+        self.server.connections.discard(self)
+
