@@ -102,6 +102,8 @@ class IntegerType(CipType):
         return cs.BytesInteger(self.size, signed=self.signed, swapped=True)
 
     def encode(self, value: Any) -> bytes:
+        if value.__class__ is int and self.minimum <= value <= self.maximum:
+            return self.struct_codec.pack(value)  # the common case, without check()'s call
         return self.struct_codec.pack(self.check(value))
 
     def decode_from(self, data: bytes, offset: int = 0) -> tuple[int, int]:
@@ -213,7 +215,7 @@ class StringType(CipType):
         return cs.PascalString(self._length.construct, "latin-1")
 
     def encode(self, value: Any) -> bytes:
-        raw = self.check(value).encode("latin-1")
+        raw = self._latin1(value)
         return self._length.encode(len(raw)) + raw
 
     def decode_from(self, data: bytes, offset: int = 0) -> tuple[str, int]:
@@ -224,18 +226,24 @@ class StringType(CipType):
         return data[start:end].decode("latin-1"), end
 
     def check(self, value: Any) -> str:
+        self._latin1(value)
+        return value.decode("latin-1") if isinstance(value, bytes) else value
+
+    def _latin1(self, value: Any) -> bytes:
+        """The characters of ``value`` (text or bytes) as they go on the wire, or 0x09 if they cannot."""
         if isinstance(value, bytes):
-            value = value.decode("latin-1")
-        if not isinstance(value, str):
+            raw = value
+        elif isinstance(value, str):
+            try:
+                raw = value.encode("latin-1")
+            except UnicodeEncodeError:
+                raise CipError(GeneralStatus.INVALID_ATTRIBUTE_VALUE, message=f"{value!r} is not Latin-1") from None
+        else:
             raise CipError(GeneralStatus.INVALID_ATTRIBUTE_VALUE, message=f"{value!r} is not a {self.name}")
-        try:
-            raw = value.encode("latin-1")
-        except UnicodeEncodeError:
-            raise CipError(GeneralStatus.INVALID_ATTRIBUTE_VALUE, message=f"{value!r} is not Latin-1") from None
         if len(raw) > self._length.maximum:
             raise CipError(GeneralStatus.INVALID_ATTRIBUTE_VALUE,
                            message=f"{self.name} longer than {self._length.maximum}")
-        return value
+        return raw
 
     def parse_text(self, text: str) -> str:
         return text

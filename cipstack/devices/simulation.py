@@ -50,5 +50,7 @@ class TimedSimulation(ABC):
 
     def next_deadline(self) -> float | None:
         """When the simulation next changes by itself: the end of a ramp segment or a timer."""
-        candidates = [t for t in (self._timer_deadline(), self._ramp_deadline()) if t is not None]
-        return min(candidates) if candidates else None
+        timer, ramp = self._timer_deadline(), self._ramp_deadline()
+        if timer is None or (ramp is not None and ramp < timer):
+            return ramp
+        return timer

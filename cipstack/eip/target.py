@@ -50,7 +50,8 @@ _MAY_CARRY_SOCKADDR = frozenset({0x54, 0x5B, 0x52})
 #: The common SendRRData: interface handle 0, timeout, 2 items, Null Address (0x0000, length 0),
 #: Unconnected Data (0x00B2, length), then the request; served without building Item objects.
 _RR_TWO_ITEMS = struct.Struct("<IHHHHHH")
-_RR_REPLY_HEAD = struct.Struct("<IHHHHHH")
+#: Its reply frame up to the reply's bytes: the encapsulation header and the same two items.
+_RR_REPLY_FRAME = struct.Struct("<HHII8sI" + "IHHHHHH")
 
 #: UDP ListIdentity reply delay (CIP Vol. 2, 2-4.2.3): random between 0 and the MaxResponseDelay of
 #: the request (the first UINT of the sender context, in ms); 0 means 2000 ms, 1..500 mean 500 ms.
@@ -248,31 +249,40 @@ class EncapsulationConnection:
             return
         self.last_activity = now
         inbox = self._inbox
-        inbox += data
+        if inbox:  # the rest of a frame cut short by the last read comes first
+            inbox += data
+            data = bytes(inbox)
+            inbox.clear()
+        # Frames are taken from ``data`` in place; only an incomplete last frame is kept, and it is
+        # never longer than the header and the frame limit (a larger announced length closes).
+        size = len(data)
+        offset = 0
         limit = self.target.settings.max_frame_length
-        while len(inbox) >= HEADER_SIZE and not self.closing:
-            command, length, session, _status, context, options = HEADER.unpack_from(inbox)
+        stats = self.target.stats
+        while size - offset >= HEADER_SIZE and not self.closing:
+            command, length, session, _status, context, options = HEADER.unpack_from(data, offset)
             if length > limit:
-                self.target.stats.errors += 1
+                stats.errors += 1
                 log.info("%s: frame of %d bytes exceeds the %d-byte limit; closing", self.peer, length, limit)
                 self._reply(command, session, context, status=EncapsulationStatus.INVALID_LENGTH)
                 self.closing = True
-                inbox.clear()
                 return
-            end = HEADER_SIZE + length
-            if len(inbox) < end:
-                return
-            body = bytes(inbox[HEADER_SIZE:end])
-            del inbox[:end]
-            self.target.stats.frames += 1
+            end = offset + HEADER_SIZE + length
+            if end > size:
+                break
+            body = data[offset + HEADER_SIZE:end]
+            offset = end
+            stats.frames += 1
             if options != 0:
-                self.target.stats.dropped += 1  # the specification says: discard
+                stats.dropped += 1  # the specification says: discard
                 continue
             try:
                 self._frame(command, session, context, body, now)
             except EncapsulationError as exc:
-                self.target.stats.errors += 1
+                stats.errors += 1
                 self._reply(command, session, context, status=exc.status)
+        if offset < size and not self.closing:
+            inbox += memoryview(data)[offset:]
 
     def data_to_send(self) -> bytes:
         if not self._outbox:
@@ -317,7 +327,13 @@ class EncapsulationConnection:
         if command == Command.SEND_RR_DATA:
             self._check_session(session)
             self.target.tick(now)
-            self._reply(command, session, context, self._send_rr_data(body, now))
+            reply = self._common_send_rr_data(body, now)
+            if reply is not None:
+                self._outbox.append(_RR_REPLY_FRAME.pack(Command.SEND_RR_DATA, _RR_TWO_ITEMS.size + len(reply),
+                                                         session, 0, context, 0, 0, 0, 2, ItemType.NULL_ADDRESS, 0,
+                                                         ItemType.UNCONNECTED_DATA, len(reply)) + reply)
+            else:
+                self._reply(command, session, context, self._send_rr_data(body, now))
         elif command == Command.SEND_UNIT_DATA:
             self._check_session(session)
             self.target.tick(now)
@@ -366,18 +382,22 @@ class EncapsulationConnection:
         log.info("%s: session 0x%08X registered", self.peer, self.session)
         self._reply(Command.REGISTER_SESSION, self.session, context, body)
 
+    def _common_send_rr_data(self, body: bytes, now: float) -> bytes | None:
+        """The reply to the common SendRRData (see ``_RR_TWO_ITEMS``), served without building items;
+        None for any other shape, which ``_send_rr_data`` serves."""
+        if len(body) <= _RR_TWO_ITEMS.size:
+            return None
+        interface, _timeout, count, null_type, null_length, data_type, length = _RR_TWO_ITEMS.unpack_from(body)
+        if (interface == 0 and count == 2 and null_type == ItemType.NULL_ADDRESS and null_length == 0
+                and data_type == ItemType.UNCONNECTED_DATA and len(body) == _RR_TWO_ITEMS.size + length
+                and body[_RR_TWO_ITEMS.size] not in _MAY_CARRY_SOCKADDR):
+            context = self._context
+            context.now = now
+            context.connected = False
+            return self.target.router.handle(body[_RR_TWO_ITEMS.size:], context)
+        return None
+
     def _send_rr_data(self, body: bytes, now: float) -> bytes:
-        if len(body) > _RR_TWO_ITEMS.size:
-            interface, _timeout, count, null_type, null_length, data_type, length = _RR_TWO_ITEMS.unpack_from(body)
-            if (interface == 0 and count == 2 and null_type == ItemType.NULL_ADDRESS and null_length == 0
-                    and data_type == ItemType.UNCONNECTED_DATA and len(body) == _RR_TWO_ITEMS.size + length
-                    and body[_RR_TWO_ITEMS.size] not in _MAY_CARRY_SOCKADDR):
-                context = self._context
-                context.now = now
-                context.connected = False
-                reply = self.target.router.handle(body[_RR_TWO_ITEMS.size:], context)
-                return _RR_REPLY_HEAD.pack(0, 0, 2, ItemType.NULL_ADDRESS, 0, ItemType.UNCONNECTED_DATA,
-                                           len(reply)) + reply
         if len(body) < RR_PREFIX.size:
             raise EncapsulationError(EncapsulationStatus.INVALID_LENGTH)
         interface, _timeout = RR_PREFIX.unpack_from(body)
