@@ -76,9 +76,18 @@ def wait_for_listener(port: int, process: subprocess.Popen[bytes], timeout: floa
     raise RuntimeError(f"nothing listens on 127.0.0.1:{port} after {timeout} s")
 
 
+def core_pair() -> tuple[int, int] | None:
+    """Two CPUs this process may run on: the servers' and the clients' (None with fewer than two)."""
+    allowed = sorted(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else []
+    return (allowed[0], allowed[1]) if len(allowed) >= 2 else None
+
+
 @contextlib.contextmanager
-def server_process(command: list[str], port: int) -> Iterator[subprocess.Popen[bytes]]:
+def server_process(command: list[str], port: int, cpu: int | None = None) -> Iterator[subprocess.Popen[bytes]]:
+    """The server ``command`` running and listening on ``port`` (pinned to ``cpu`` if given)."""
     process = subprocess.Popen(command, stdin=subprocess.DEVNULL)
+    if cpu is not None:
+        os.sched_setaffinity(process.pid, {cpu})
     try:
         wait_for_listener(port, process)
         yield process
@@ -447,11 +456,21 @@ def verdict_lines(summary: dict[str, Any]) -> list[str]:
 
 
 def run_all(seconds: float, rounds: int, warmup: float, profile: str | None = None, pycomm3: bool = True,
-            scanners: bool = True) -> list[Run]:
-    """Every client against the adapter and the echo servers, the rounds interleaved; medians per client."""
+            scanners: bool = True, pin: bool = True) -> list[Run]:
+    """Every client against the adapter and the echo servers, the rounds interleaved; medians per client.
+
+    With ``pin`` (and two CPUs or more) the servers run on one CPU and this process, every client,
+    on another, as the C stack's figures of issue 16 were measured: neither then takes the other's
+    CPU, and the scheduler does not move them between runs."""
     with contextlib.ExitStack() as stack:
+        cores = core_pair() if pin else None
+        server_cpu = None
+        if cores is not None:
+            server_cpu = cores[0]
+            stack.callback(os.sched_setaffinity, 0, os.sched_getaffinity(0))
+            os.sched_setaffinity(0, {cores[1]})
         port = free_port()
-        adapter = stack.enter_context(server_process(adapter_command(port, profile), port))
+        adapter = stack.enter_context(server_process(adapter_command(port, profile), port, server_cpu))
         benches = [scanner_sync(port, adapter.pid), scanner_async(port, adapter.pid)] if scanners else []
         if pycomm3:
             benches.append(pycomm3_driver(port, adapter.pid))
@@ -460,7 +479,7 @@ def run_all(seconds: float, rounds: int, warmup: float, profile: str | None = No
         benches.append(with_idle_sessions(raw_client(port, adapter.pid, "adapter"), port))
         for kind in ("asyncio", "socket"):
             echo_port = free_port()
-            echo = stack.enter_context(server_process(echo_command(echo_port, kind), echo_port))
+            echo = stack.enter_context(server_process(echo_command(echo_port, kind), echo_port, server_cpu))
             benches.append(raw_client(echo_port, echo.pid, f"echo-{kind}"))
             if kind == "asyncio":  # the socket echo serves one connection at a time
                 benches.append(raw_clients(echo_port, echo.pid, f"echo-{kind}"))
@@ -490,6 +509,8 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--json", action="store_true", help="print one JSON object instead of the table")
     parser.add_argument("--profile", metavar="FILE", help="run the adapter under cProfile, statistics to FILE")
     parser.add_argument("--no-pycomm3", action="store_true", help="skip the pycomm3 client")
+    parser.add_argument("--no-pin", action="store_true",
+                        help="let the scheduler place servers and clients (default: one CPU each)")
     parser.add_argument("--serve-echo", choices=["asyncio", "socket"], help=argparse.SUPPRESS)
     parser.add_argument("--port", type=int, help=argparse.SUPPRESS)
     args = parser.parse_args(argv)
@@ -497,15 +518,18 @@ def main(argv: list[str] | None = None) -> int:
         serve_echo(args.serve_echo, args.port)
         return 0
 
-    runs = run_all(args.seconds, args.rounds, args.warmup, args.profile, pycomm3=not args.no_pycomm3)
+    runs = run_all(args.seconds, args.rounds, args.warmup, args.profile, pycomm3=not args.no_pycomm3,
+                   pin=not args.no_pin)
     summary = summarise(runs)
     if args.json:
         print(json.dumps({"runs": [asdict(run) for run in runs], "summary": summary, "rounds": args.rounds,
                           "load_average": os.getloadavg()}, indent=2))
     else:
         print_table(runs, summary)
+        cores = core_pair() if not args.no_pin else None
+        pinned = f"; servers on CPU {cores[0]}, clients on CPU {cores[1]}" if cores else "; not pinned"
         print(f"medians of {args.rounds} rounds of {args.seconds:g} s; load average {os.getloadavg()[0]:.2f} "
-              f"on {os.cpu_count()} CPUs")
+              f"on {os.cpu_count()} CPUs{pinned}")
     if args.profile and not args.json:
         print_profile(args.profile)
     return 0
