@@ -18,6 +18,7 @@ and the protocol core, and a production one heap entry: no callback handle, no t
 no asyncio timer per packet, which is most of what a packet cost on asyncio's own path (a fleet
 of drives or a scanner with hundreds of connections is made of little else). On any other loop
 (a scanner inside an application's own loop) the endpoint uses asyncio's datagram transport.
+The encapsulation server's TCP connections ride the same lane on that loop (``tcp_lane``).
 """
 
 from __future__ import annotations

@@ -1,5 +1,9 @@
 """The asyncio shell of the target: moves bytes between sockets and the sans-I/O core.
 
+On a ``PreciseEventLoop`` (the command line's) the TCP listener and connections are served on the
+loop's lane (``tcp_lane``); on any other loop through asyncio's transports (``_TcpProtocol``), with
+the same rules.
+
 One TCP listener and one UDP endpoint on the same host and port (44818 by default), and, for a
 target on one address, a UDP socket on its subnet's broadcast address (shared with every other
 target of the machine on that subnet: each gets a copy of a broadcast) whose datagrams are answered
