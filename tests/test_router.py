@@ -185,15 +185,65 @@ def test_get_attribute_single_served_directly_answers_as_dispatch_does(profile: 
     router = device.router
     context = RequestContext(router, 1.0, "127.0.0.1:1", None)
     compared = 0
-    for class_id in [*sorted(router.objects), 0x99]:
-        obj = router.objects.get(class_id)
-        instances = [0, *sorted(obj.instances)[:3], 0xFE] if obj is not None else [0, 1]
-        for instance in instances:
-            for attribute in range(0, 24):
-                raw = bytes((0x0E, 0x03, 0x20, class_id, 0x24, instance, 0x30, attribute))
-                assert router.handle(raw, context) == router.dispatch(raw, context).encode(), raw.hex()
-                compared += 1
-    assert compared > 500
+    for _pass in range(2):  # the second pass through the readers the first one made
+        for class_id in [*sorted(router.objects), 0x99]:
+            obj = router.objects.get(class_id)
+            instances = [0, *sorted(obj.instances)[:3], 0xFE] if obj is not None else [0, 1]
+            for instance in instances:
+                for attribute in range(0, 24):
+                    raw = bytes((0x0E, 0x03, 0x20, class_id, 0x24, instance, 0x30, attribute))
+                    assert router.handle(raw, context) == router.dispatch(raw, context).encode(), raw.hex()
+                    compared += 1
+    assert compared > 1000
     # A request with data is no plain Get_Attribute_Single: 0x15 (too much data), as dispatch says.
     raw = bytes((0x0E, 0x03, 0x20, 0x01, 0x24, 0x01, 0x30, 0x07, 0x00))
     assert router.handle(raw, context)[2] == GeneralStatus.TOO_MUCH_DATA
+
+
+def test_a_kept_attribute_reader_reads_what_is_there_now(router: MessageRouter) -> None:
+    """``handle`` keeps a reader per Get_Attribute_Single request: it reads the value of the moment,
+    of the instance that exists now, and a failure is answered as dispatch answers it."""
+    obj = router[0x70]
+    assert ask(router, 0x0E, request_path(0x70, 2, 2)).data == b"\x00\x00"
+    assert ask(router, 0x10, request_path(0x70, 2, 2), struct.pack("<h", -5)).ok
+    assert ask(router, 0x0E, request_path(0x70, 2, 2)).data == struct.pack("<h", -5)
+    # The instance goes: 0x05, as for an instance that never was; another instance 2: its value.
+    del obj.instances[2]
+    assert ask(router, 0x0E, request_path(0x70, 2, 2)).general_status == GeneralStatus.PATH_DESTINATION_UNKNOWN
+    obj.add_instance(2, speed_reference=7)
+    assert ask(router, 0x0E, request_path(0x70, 2, 2)).data == struct.pack("<h", 7)
+    # A read that fails is answered as dispatch answers it; once the value reads again, it is served.
+    assert ask(router, 0x0E, request_path(0x70, 1, 5)).data == struct.pack("<H", 100)
+    failing = True
+
+    def flaky() -> int:
+        if failing:
+            raise RuntimeError("not now")
+        return 42
+
+    obj.bind(1, 5, Binding(flaky))
+    assert ask(router, 0x0E, request_path(0x70, 1, 5)).general_status == GeneralStatus.VENDOR_SPECIFIC
+    failing = False
+    assert ask(router, 0x0E, request_path(0x70, 1, 5)).data == struct.pack("<H", 42)
+    # A value out of its type's range is refused at every read (0x09, as dispatch says), not once.
+    obj.bind(1, 5, Binding(lambda: 70000))
+    for _ in range(2):
+        assert ask(router, 0x0E, request_path(0x70, 1, 5)).general_status == GeneralStatus.INVALID_ATTRIBUTE_VALUE
+
+
+def test_attribute_readers_are_bounded() -> None:
+    from cipstack.cip.router import MAX_ATTRIBUTE_READERS
+
+    router = MessageRouter()
+    spec = ClassSpec(0x70, "Many", instance_attributes=tuple(
+        AttributeSpec(attribute, f"A{attribute}", UINT, default=attribute) for attribute in range(1, 256)))
+    obj = CipObject(spec)
+    for instance in range(1, 256):
+        obj.add_instance(instance)
+    router.register(obj)
+    context = RequestContext(router)
+    for instance in range(1, 256):
+        for attribute in range(1, 256):
+            raw = bytes((0x0E, 0x03, 0x20, 0x70, 0x24, instance, 0x30, attribute))
+            assert router.handle(raw, context) == b"\x8e\x00\x00\x00" + struct.pack("<H", attribute)
+    assert len(router._readers) == MAX_ATTRIBUTE_READERS

@@ -8,6 +8,7 @@ an error reply with the status the specification gives; nothing raised by an obj
 from __future__ import annotations
 
 import logging
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -42,6 +43,10 @@ class RequestContext:
     depth: int = 0
 
 
+#: Readers of Get_Attribute_Single kept at most: every readable attribute of a large device, and a
+#: bound on what a peer asking for every combination of bytes can make the router hold.
+MAX_ATTRIBUTE_READERS = 4096
+
 #: Requests nest (a packet of routed requests of packets...); deeper than this is refused with
 #: 0x02 (resource unavailable) rather than recursing without bound.
 MAX_NESTING = 4
@@ -52,6 +57,8 @@ class MessageRouter:
         self.objects: dict[int, CipObject] = {}
         #: Counts of requests answered with each general status (for diagnostics).
         self.status_counts: dict[int, int] = {}
+        #: Get_Attribute_Single requests -> their readers (``_attribute_reader``), bounded.
+        self._readers: dict[bytes, Callable[[], bytes | None]] = {}
 
     def register(self, obj: CipObject) -> CipObject:
         class_id = obj.spec.class_id
@@ -70,34 +77,63 @@ class MessageRouter:
         """Serve one encoded request and return the encoded reply (never raises)."""
         if (len(raw) == 8 and raw[0] == _GET_ATTRIBUTE_SINGLE and raw[1] == 3 and raw[2] == 0x20 and raw[4] == 0x24
                 and raw[6] == 0x30 and context.depth <= MAX_NESTING):
-            data = self._get_attribute_single(raw[3], raw[5], raw[7])
+            reader = self._readers.get(raw) or self._attribute_reader(raw)
+            data = reader() if reader is not None else None
             if data is not None:
                 self.status_counts[0] = self.status_counts.get(0, 0) + 1
                 return _GET_ATTRIBUTE_SINGLE_REPLY + data
+            self._readers.pop(raw, None)  # the instance is gone, or the read failed: dispatch says why
         return self.dispatch(raw, context).encode()
 
-    def _get_attribute_single(self, class_id: int, instance_id: int, attribute_id: int) -> bytes | None:
-        """The most common request (``0E 03 20 cc 24 ii 30 aa``), served without building the request,
-        path and reply objects when the object serves it the common way and it succeeds; None
-        otherwise, and ``dispatch`` serves it (errors included) as it serves every request."""
+    def _attribute_reader(self, raw: bytes) -> Callable[[], bytes | None] | None:
+        """For the most common request, Get_Attribute_Single ``0E 03 20 cc 24 ii 30 aa``: a reader of
+        the attribute's encoded value that skips the request, path and reply objects and the lookups
+        (object, instance, attribute declaration), made once per request and kept while it reads. None
+        when the object does not serve the request the common way; then, as when a reader returns
+        None (the read failed, or the instance has gone), ``dispatch`` serves it, errors included, as
+        it serves every request."""
+        class_id, instance_id, attribute_id = raw[3], raw[5], raw[7]
         obj = self.objects.get(class_id)
         if obj is None or _GET_ATTRIBUTE_SINGLE in obj.extra_services:
             return None
         kind = type(obj)
         if kind.handle is not _COMMON_HANDLE or kind.get_attribute_single is not _COMMON_GET_ATTRIBUTE_SINGLE:
             return None
+        instance = None
         if instance_id:
             instance = obj.instances.get(instance_id)
             if instance is None or _GET_ATTRIBUTE_SINGLE not in obj.spec.instance_services:
                 return None
-        else:
-            instance = None
-            if _GET_ATTRIBUTE_SINGLE not in obj.spec.class_services:
-                return None
-        try:
-            return obj._encoded(instance, attribute_id)
-        except Exception:  # an error reply (or a logged fault) is dispatch's to make
+        elif _GET_ATTRIBUTE_SINGLE not in obj.spec.class_services:
             return None
+        try:
+            spec, getter = obj._attribute(instance, attribute_id)  # declarations do not change
+        except CipError:
+            return None
+        if getter is None and not spec.access.readable:
+            return None
+        encode = spec.type.encode
+        if getter is not None:
+            def read_class_attribute() -> bytes | None:
+                try:
+                    return encode(getter())
+                except Exception:
+                    return None
+            reader = read_class_attribute
+        else:
+            instances, read, held = obj.instances, obj.read_attribute, instance
+
+            def read_instance_attribute() -> bytes | None:
+                if instances.get(instance_id) is not held:
+                    return None
+                try:
+                    return encode(read(held, spec))
+                except Exception:
+                    return None
+            reader = read_instance_attribute
+        if len(self._readers) < MAX_ATTRIBUTE_READERS:
+            self._readers[raw] = reader
+        return reader
 
     def dispatch(self, raw: bytes, context: RequestContext) -> MessageRouterResponse:
         service = raw[0] & 0x7F if raw else 0
