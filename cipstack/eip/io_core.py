@@ -144,6 +144,11 @@ class Reception(Enum):
     STALE = "stale"
 
 
+#: The members under plain module names for the per-packet path: naming an enum member
+#: (``Reception.NEW``) is an attribute lookup on the class each time, about 0.1 µs.
+RECEIVED_NEW, RECEIVED_DUPLICATE, RECEIVED_STALE = Reception.NEW, Reception.DUPLICATE, Reception.STALE
+
+
 @dataclass
 class ConsumerState:
     """The receiving end of a connection: sequence filtering and the watchdog.
@@ -168,16 +173,16 @@ class ConsumerState:
         if last is not None:
             if not seq32_newer(encap_sequence, last):
                 self.stats.stale += 1
-                return Reception.STALE
+                return RECEIVED_STALE
             self.stats.lost += ((encap_sequence - last) & 0xFFFFFFFF) - 1
         self.last_encap_sequence = encap_sequence
         self.deadline = now + self.timeout
         self.stats.received += 1
         if self.last_cip_sequence is not None and cip_sequence == self.last_cip_sequence:
             self.stats.duplicates += 1
-            return Reception.DUPLICATE
+            return RECEIVED_DUPLICATE
         self.last_cip_sequence = cip_sequence
-        return Reception.NEW
+        return RECEIVED_NEW
 
     def expired(self, now: float) -> bool:
         return now >= self.deadline

@@ -23,12 +23,13 @@ from typing import TYPE_CHECKING, Any
 from ..cip.epath import LogicalSegment, LogicalType, encode_path
 from .cm_messages import ConnectionTriad, ConnectionType, NetworkParameters, TransportTrigger, TriggerType
 from .io_core import (
+    RECEIVED_NEW,
+    RECEIVED_STALE,
     ConsumerState,
     IoDatagram,
     IoDatagramError,
     IoStatistics,
     ProductionSchedule,
-    Reception,
     connection_timeout,
     decode_io_datagram,
     encode_io_datagram,
@@ -251,7 +252,7 @@ class IoOriginator:
                             connection.input_size)
             return
         reception = connection.consumer.accept(datagram.encap_sequence, datagram.cip_sequence, now)
-        if reception is Reception.STALE:
+        if reception is RECEIVED_STALE:
             return
         if connection.consumer.deadline < connection.watch_at:
             self._watch(connection)  # the first packet ends the 10 s first-packet allowance
@@ -265,7 +266,7 @@ class IoOriginator:
             if connection.last_arrival is not None:
                 connection.interval_samples.append(now - connection.last_arrival)
             connection.last_arrival = now
-        if reception is Reception.NEW:
+        if reception is RECEIVED_NEW:
             changed = datagram.payload != connection.input
             if changed and connection.input:
                 connection.arrivals.changes += 1

@@ -38,11 +38,12 @@ from .connection_manager import connection_failure, origin_host
 from .cpf import Item, ItemType, SockAddr
 from .io_core import (
     DEFAULT_IO_PORT,
+    RECEIVED_NEW,
+    RECEIVED_STALE,
     ConsumerState,
     IoDatagramError,
     IoStatistics,
     ProductionSchedule,
-    Reception,
     connection_timeout,
     decode_io_datagram,
     encode_io_datagram,
@@ -507,7 +508,7 @@ class IoTarget:
             return
         consumer = connection.consumer
         reception = consumer.accept(datagram.encap_sequence, datagram.cip_sequence, now)
-        if reception is Reception.STALE:
+        if reception is RECEIVED_STALE:
             return
         if consumer.deadline < connection.watch_at:
             self._watch(connection)  # the first packet ends the 10 s first-packet allowance
@@ -519,7 +520,7 @@ class IoTarget:
                 self._run_idle(connection, bool(payload[0] & 1))
             return
         run, data = split_run_idle(payload)
-        deliver = reception is Reception.NEW and run
+        deliver = reception is RECEIVED_NEW and run
         if deliver or connection.run is not run:
             self.tick(now)
         self._run_idle(connection, run)

@@ -47,9 +47,15 @@ _CONN_ID = struct.Struct("<I")
 #: Requests whose reply may carry a Sockaddr Info item (a class 1 Forward_Open, possibly routed).
 _MAY_CARRY_SOCKADDR = frozenset({0x54, 0x5B, 0x52})
 
+# Plain ints for the request path: an enum member costs an attribute lookup each time it is named.
+_SEND_RR_DATA = int(Command.SEND_RR_DATA)
+_NULL_ADDRESS = int(ItemType.NULL_ADDRESS)
+_UNCONNECTED_DATA = int(ItemType.UNCONNECTED_DATA)
+
 #: The common SendRRData: interface handle 0, timeout, 2 items, Null Address (0x0000, length 0),
 #: Unconnected Data (0x00B2, length), then the request; served without building Item objects.
 _RR_TWO_ITEMS = struct.Struct("<IHHHHHH")
+_RR_TWO_ITEMS_SIZE = _RR_TWO_ITEMS.size
 #: Its reply frame up to the reply's bytes: the encapsulation header and the same two items.
 _RR_REPLY_FRAME = struct.Struct("<HHII8sI" + "IHHHHHH")
 
@@ -324,14 +330,15 @@ class EncapsulationConnection:
         self._outbox.append(HEADER.pack(command, len(data), session, status, context, 0) + data)
 
     def _frame(self, command: int, session: int, context: bytes, body: bytes, now: float) -> None:
-        if command == Command.SEND_RR_DATA:
-            self._check_session(session)
+        if command == _SEND_RR_DATA:
+            if self.session is None or session != self.session:
+                raise EncapsulationError(EncapsulationStatus.INVALID_SESSION)
             self.target.tick(now)
             reply = self._common_send_rr_data(body, now)
             if reply is not None:
-                self._outbox.append(_RR_REPLY_FRAME.pack(Command.SEND_RR_DATA, _RR_TWO_ITEMS.size + len(reply),
-                                                         session, 0, context, 0, 0, 0, 2, ItemType.NULL_ADDRESS, 0,
-                                                         ItemType.UNCONNECTED_DATA, len(reply)) + reply)
+                self._outbox.append(_RR_REPLY_FRAME.pack(_SEND_RR_DATA, _RR_TWO_ITEMS_SIZE + len(reply), session, 0,
+                                                         context, 0, 0, 0, 2, _NULL_ADDRESS, 0, _UNCONNECTED_DATA,
+                                                         len(reply)) + reply)
             else:
                 self._reply(command, session, context, self._send_rr_data(body, now))
         elif command == Command.SEND_UNIT_DATA:
@@ -385,16 +392,17 @@ class EncapsulationConnection:
     def _common_send_rr_data(self, body: bytes, now: float) -> bytes | None:
         """The reply to the common SendRRData (see ``_RR_TWO_ITEMS``), served without building items;
         None for any other shape, which ``_send_rr_data`` serves."""
-        if len(body) <= _RR_TWO_ITEMS.size:
+        size = len(body)
+        if size <= _RR_TWO_ITEMS_SIZE:
             return None
         interface, _timeout, count, null_type, null_length, data_type, length = _RR_TWO_ITEMS.unpack_from(body)
-        if (interface == 0 and count == 2 and null_type == ItemType.NULL_ADDRESS and null_length == 0
-                and data_type == ItemType.UNCONNECTED_DATA and len(body) == _RR_TWO_ITEMS.size + length
-                and body[_RR_TWO_ITEMS.size] not in _MAY_CARRY_SOCKADDR):
+        if (interface == 0 and count == 2 and null_type == _NULL_ADDRESS and null_length == 0
+                and data_type == _UNCONNECTED_DATA and size == _RR_TWO_ITEMS_SIZE + length
+                and body[_RR_TWO_ITEMS_SIZE] not in _MAY_CARRY_SOCKADDR):
             context = self._context
             context.now = now
             context.connected = False
-            return self.target.router.handle(body[_RR_TWO_ITEMS.size:], context)
+            return self.target.router.handle(body[_RR_TWO_ITEMS_SIZE:], context)
         return None
 
     def _send_rr_data(self, body: bytes, now: float) -> bytes:
