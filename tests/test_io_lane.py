@@ -4,11 +4,12 @@ wait, beside asyncio's own sockets and timers on the same loop (``cipstack.eip.i
 from __future__ import annotations
 
 import asyncio
+import contextlib
 import logging
 import socket
 import threading
 import time
-from collections.abc import Coroutine
+from collections.abc import Coroutine, Iterator
 from pathlib import Path
 from typing import Any, TypeVar
 
@@ -319,3 +320,91 @@ def test_a_datagram_ends_a_long_wait_at_once() -> None:
         return received_at - sent_at[0]
 
     assert run_on(precise_event_loop(), scenario()) < 0.25
+
+
+
+@contextlib.contextmanager
+def nudged(loop: asyncio.AbstractEventLoop, every: float = 2.0) -> Iterator[None]:
+    """Wake ``loop`` from another thread every ``every`` seconds, so that a selector that failed to
+    return to asyncio makes a test fail by its timeouts instead of hanging it."""
+    stop = threading.Event()
+
+    def nudge() -> None:
+        while not stop.wait(every):
+            with contextlib.suppress(RuntimeError):  # closed meanwhile
+                loop.call_soon_threadsafe(lambda: None)
+
+    thread = threading.Thread(target=nudge, daemon=True)
+    thread.start()
+    try:
+        yield
+    finally:
+        stop.set()
+        thread.join()
+
+
+@pytest.mark.parametrize("gives", ["nothing for 19 datagrams, then a callback", "a callback", "an earlier timer"])
+def test_the_wait_returns_to_asyncio_for_what_a_lane_reader_gives_it(gives: str) -> None:
+    """While only the lane has work the selector waits again without returning to asyncio; a lane
+    reader that gives asyncio work (a callback, a timer earlier than any it had) ends the wait at
+    once, though asyncio's own next timer is 5 s away."""
+    count = 20 if gives.startswith("nothing") else 1
+
+    async def scenario() -> float:
+        loop = asyncio.get_running_loop()
+        far = loop.call_later(5.0, lambda: None)  # asyncio's timeout: 5 s
+        core = RecordingCore()
+        endpoint = await started(core)
+        done: asyncio.Future[float] = loop.create_future()
+        received = core.receive
+
+        def set_done() -> None:
+            if not done.done():
+                done.set_result(time.monotonic())
+
+        def on_datagram(raw: bytes, source: tuple[str, int], now: float) -> None:
+            received(raw, source, now)
+            if len(core.received) < count:
+                return  # nothing for asyncio: the selector keeps serving the lane
+            if gives == "an earlier timer":
+                loop.call_later(0.01, set_done)
+            else:
+                loop.call_soon(set_done)
+
+        core.receive = on_datagram  # type: ignore[method-assign]
+        out = sender()
+        start = time.monotonic()
+        for _ in range(count):
+            out.sendto(b"x", ("127.0.0.1", endpoint.port))
+        try:
+            return await asyncio.wait_for(done, 3.0) - start
+        finally:
+            out.close()
+            far.cancel()
+            await endpoint.close()
+            assert len(core.received) == count
+
+    loop = precise_event_loop()
+    with nudged(loop):
+        assert run_on(loop, scenario()) < 1.0
+
+
+def test_a_stop_asked_by_a_lane_reader_ends_run_forever_at_once() -> None:
+    loop = precise_event_loop()
+    core = RecordingCore()
+    endpoint = loop.run_until_complete(started(core))
+    core.receive = lambda raw, source, now: loop.stop()  # type: ignore[method-assign]
+    out = sender()
+    far = loop.call_later(5.0, loop.stop)
+    threading.Timer(0.05, lambda: out.sendto(b"stop", ("127.0.0.1", endpoint.port))).start()
+    start = time.monotonic()
+    try:
+        with nudged(loop):
+            loop.run_forever()
+        elapsed = time.monotonic() - start
+        far.cancel()
+        loop.run_until_complete(endpoint.close())
+    finally:
+        out.close()
+        loop.close()
+    assert elapsed < 1.0, elapsed

@@ -18,7 +18,10 @@ and the protocol core, and a production one heap entry: no callback handle, no t
 no asyncio timer per packet, which is most of what a packet cost on asyncio's own path (a fleet
 of drives or a scanner with hundreds of connections is made of little else). On any other loop
 (a scanner inside an application's own loop) the endpoint uses asyncio's datagram transport.
-The encapsulation server's TCP connections ride the same lane on that loop (``tcp_lane``).
+The encapsulation server's TCP connections ride the same lane on that loop (``tcp_lane``). While
+only the lane has work, the selector goes on waiting and serving it without handing back to
+asyncio (whose round of bookkeeping costs more than a small request); it returns as soon as
+asyncio has something to do: a socket of its own, its next timer, or work a lane callback gave it.
 """
 
 from __future__ import annotations
@@ -148,11 +151,6 @@ class IoLane:
                 _run_guarded(timer.callback)
         return ran
 
-    def read(self, fd: int) -> None:
-        reader = self.readers.get(fd)  # removed by an earlier callback of the same wake-up: skip
-        if reader is not None:
-            _run_guarded(reader)
-
 
 def _run_guarded(callback: Callable[[], None]) -> None:
     try:
@@ -168,21 +166,55 @@ class PreciseEpollSelector(selectors.EpollSelector):
     def __init__(self) -> None:
         super().__init__()
         self.lane = IoLane(self._selector)  # type: ignore[attr-defined]
+        #: The loop this selector serves (set by ``PreciseEventLoop``); None: return to the caller
+        #: after every wait, as any selector does.
+        self.loop: PreciseEventLoop | None = None
 
     def select(self, timeout: float | None = None) -> list[tuple[selectors.SelectorKey, int]]:
+        """Wait as asyncio asks (until ``timeout``), serving the lane meanwhile; return when asyncio
+        has something to do: a socket of its own is ready, its timeout has come, or what a lane
+        callback did gave it work (a callback to run, an earlier timer). While only the lane has
+        work (every request of an explicit-messaging client, every class 1 packet), the selector
+        waits again without handing back to asyncio: a round of asyncio's loop costs more than the
+        lane's own work on a small request."""
         lane = self.lane
-        if lane.run_due(time.monotonic()):
-            # What ran may have given asyncio work (a callback, a timer) that the timeout it passed
-            # does not know of: no wait, so that it sees that work before the next one.
-            timeout = 0
-        lane_at = lane.next_deadline()
-        if lane_at is not None:
-            wait = max(0.0, lane_at - time.monotonic())
-            if timeout is None or wait < timeout:
-                timeout = wait
-        ready = self._wait_and_harvest(timeout)
-        lane.run_due(time.monotonic())
-        return ready
+        monotonic = time.monotonic
+        until = None if timeout is None else monotonic() + max(timeout, 0.0)
+        first_timer = self._first_timer()  # the timer asyncio's timeout was taken from
+        while True:
+            now = monotonic()
+            wait = None if until is None else until - now
+            if lane.run_due(now) and self._asyncio_has_work(first_timer):
+                wait = 0.0
+            lane_at = lane.next_deadline()
+            if lane_at is not None:
+                lane_wait = lane_at - monotonic()
+                if wait is None or lane_wait < wait:
+                    wait = lane_wait
+            ready = self._wait_and_harvest(wait)
+            now = monotonic()
+            lane.run_due(now)
+            if ready or (until is not None and now >= until) or self._asyncio_has_work(first_timer):
+                return ready
+
+    # The loop's queues are asyncio's own attributes (``_ready``, ``_scheduled``, ``_stopping``: the
+    # same from Python 3.4 to 3.13); only ``PreciseEventLoop`` sets ``loop``.
+    def _first_timer(self) -> float | None:
+        loop = self.loop
+        scheduled = loop._scheduled if loop is not None else None  # type: ignore[attr-defined]
+        return scheduled[0].when() if scheduled else None
+
+    def _asyncio_has_work(self, first_timer: float | None) -> bool:
+        """Whether the loop has a callback ready, is stopping, or has a timer earlier than
+        ``first_timer`` (the earliest it had when it asked for the wait): then ``select`` must return
+        to it."""
+        loop = self.loop
+        if loop is None:
+            return True
+        if loop._ready or loop._stopping:  # type: ignore[attr-defined]
+            return True
+        scheduled = loop._scheduled  # type: ignore[attr-defined]
+        return bool(scheduled) and (first_timer is None or scheduled[0].when() < first_timer)
 
     def _wait_and_harvest(self, timeout: float | None) -> list[tuple[selectors.SelectorKey, int]]:
         """Wait until a registered socket is ready or ``timeout`` has passed, to the microsecond, with
@@ -218,9 +250,16 @@ class PreciseEpollSelector(selectors.EpollSelector):
         except InterruptedError:
             return [], False
         ready = []
+        readers = lane.readers
         for fd, event in events:
-            if fd in lane.readers:
-                lane.read(fd)
+            # A lane descriptor an earlier callback of this wake-up removed is no longer here, nor
+            # asyncio's: it is skipped below.
+            reader = readers.get(fd)
+            if reader is not None:
+                try:
+                    reader()
+                except Exception:  # one callback must never take the loop down
+                    log.exception("lane callback %r", reader)
                 continue
             key = self._key_from_fd(fd)
             if key:
@@ -236,6 +275,7 @@ class PreciseEventLoop(asyncio.SelectorEventLoop):
     def __init__(self) -> None:
         self.selector = PreciseEpollSelector()
         super().__init__(self.selector)
+        self.selector.loop = self
 
 
 def lane_of(loop: asyncio.AbstractEventLoop) -> IoLane | None:

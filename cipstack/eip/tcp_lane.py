@@ -25,6 +25,7 @@ import errno
 import logging
 import select
 import socket
+from time import monotonic
 from typing import TYPE_CHECKING
 
 from .cpf import SockAddr
@@ -139,7 +140,7 @@ class LaneTcpConnection:
             self.close()
             return
         connection = self.connection
-        connection.receive(data, self.server.loop.time())
+        connection.receive(data, monotonic())  # the lane's loop keeps time.monotonic()
         out = connection.data_to_send()
         if out:
             self._send(out)
