@@ -1,0 +1,78 @@
+"""Explicit messaging cost without sockets: the adapter's work for one Get_Attribute_Single.
+
+Builds the adapter's objects (default profile, the ACG drive) without listening, registers a
+session on an ``EncapsulationConnection`` and feeds it the same SendRRData frame (Identity 1/1/7,
+as ``explicit.py``'s raw client sends) over and over, as the TCP shell does: ``receive`` with the
+time, then ``data_to_send``. It checks the reply and prints the time per request: the best of
+``--rounds`` rounds of ``--requests`` requests (the least the machine's other load added).
+
+    python benchmarks/explicit_core.py [--requests N] [--rounds R]
+
+The time moves with the machine; instructions do not. Under callgrind, the difference between two
+runs gives the instructions of one request whatever else the machine does:
+
+    valgrind --tool=callgrind --callgrind-out-file=/dev/null python3 benchmarks/explicit_core.py \
+        --requests 0 --rounds 1
+    (the same with --requests 5000)
+
+The "Collected" totals of the two, their difference divided by 5,000 (give valgrind the real
+interpreter, not a wrapper script such as pyenv's shim).
+"""
+
+from __future__ import annotations
+
+import argparse
+import asyncio
+import struct
+import sys
+import time
+from pathlib import Path
+
+sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
+
+from cipstack.adapter import Adapter, AdapterSettings
+from cipstack.eip.cpf import SockAddr
+
+HEADER = struct.Struct("<HHII8sI")
+REGISTER_SESSION, SEND_RR_DATA = 0x0065, 0x006F
+#: Get_Attribute_Single, path 20 01 24 01 30 07 (Identity 1/1/7: product name).
+GET_PRODUCT_NAME = bytes((0x0E, 0x03, 0x20, 0x01, 0x24, 0x01, 0x30, 0x07))
+EXPECTED_REPLY_END = b"\x8e\x00\x00\x00\x04CENT"
+
+
+async def measure(requests: int, rounds: int) -> float:
+    adapter = Adapter(AdapterSettings(port=0, io_port=0))
+    loop = asyncio.get_running_loop()
+    connection = adapter.target.connection("127.0.0.1:50000", SockAddr("127.0.0.1", 44818), loop.time())
+    connection.receive(HEADER.pack(REGISTER_SESSION, 4, 0, 0, bytes(8), 0) + b"\x01\x00\x00\x00", loop.time())
+    session = HEADER.unpack_from(connection.data_to_send())[2]
+    body = struct.pack("<IHHHHHH", 0, 0, 2, 0, 0, 0xB2, len(GET_PRODUCT_NAME)) + GET_PRODUCT_NAME
+    frame = HEADER.pack(SEND_RR_DATA, len(body), session, 0, b"bench\x00\x00\x00", 0) + body
+    connection.receive(frame, loop.time())
+    reply = connection.data_to_send()
+    assert reply.endswith(EXPECTED_REPLY_END), reply.hex()
+    receive, send, clock = connection.receive, connection.data_to_send, time.monotonic
+    best = float("inf")
+    for _ in range(rounds):
+        started = time.perf_counter()
+        for _ in range(requests):
+            receive(frame, clock())
+            send()
+        best = min(best, (time.perf_counter() - started) / max(requests, 1))
+    return best
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0] if __doc__ else None)
+    parser.add_argument("--requests", type=int, default=20000, help="requests per round (default 20000)")
+    parser.add_argument("--rounds", type=int, default=15, help="rounds; the best is printed (default 15)")
+    args = parser.parse_args(argv)
+    best = asyncio.run(measure(args.requests, args.rounds))
+    if args.requests:
+        print(f"adapter work per Get_Attribute_Single, no sockets: {best * 1e6:.2f} µs "
+              f"(best of {args.rounds} rounds of {args.requests})")
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
