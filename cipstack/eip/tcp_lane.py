@@ -21,6 +21,7 @@ Behaviour is that of the asyncio path (``server._TcpProtocol``), rule for rule:
 
 from __future__ import annotations
 
+import contextlib
 import errno
 import logging
 import select
@@ -104,7 +105,8 @@ class LaneTcpConnection:
         limiter = server.limiter
         if not limiter.admit(host):
             server.refused_log("TCP connection from %s refused: %s", host, limiter.reason(host))
-            sock.setsockopt(socket.SOL_SOCKET, socket.SO_LINGER, b"\x01\x00\x00\x00\x00\x00\x00\x00")
+            with contextlib.suppress(OSError):  # the peer may have reset it already
+                sock.setsockopt(socket.SOL_SOCKET, socket.SO_LINGER, b"\x01\x00\x00\x00\x00\x00\x00\x00")
             sock.close()  # a reset, as asyncio's abort() gives on the other path
             return None
         try:
@@ -148,7 +150,8 @@ class LaneTcpConnection:
             self._close_when_sent = True
             if not self._unsent:
                 self.close()
-        elif self._timer is None:
+                return
+        if self._timer is None:
             self._arm()
 
     def _send(self, out: bytes) -> None:
@@ -186,11 +189,11 @@ class LaneTcpConnection:
         if self._closed:
             return
         connection = self.connection
-        connection.on_timer(self.server.loop.time())
-        if connection.closing:
-            self._close_when_sent = True
-            if not self._unsent:
-                self.close()
+        connection.on_timer(monotonic())
+        if connection.closing or self._close_when_sent:
+            # Idle past the inactivity timeout; or closing with a reply its peer has not read for as
+            # long: nothing more is owed.
+            self.close()
         else:
             self._arm()
 
