@@ -139,28 +139,30 @@ class Adapter:
             held.release()
 
     async def _start(self) -> None:
+        # The EtherNet/IP port listens last: once it accepts, so do the class 1 port and Modbus TCP
+        # (a client that waits for it may go straight on to either).
         s = self.settings
-        try:
-            await self.server.start()
-        except OSError as exc:
-            what = "UDP" if self.server._tcp is not None else "TCP"
-            await self.server.close()
-            raise ListenError(f"{what} {s.host}:{s.port} (EtherNet/IP, --port)", exc) from None
-        self._tick(asyncio.get_running_loop().time())
-        if self.io_endpoint is not None:
-            try:
-                await self.io_endpoint.start()
-            except OSError as exc:
-                await self.server.close()
-                raise ListenError(f"UDP {s.host}:{s.io_port} (class 1 I/O, --io-port)", exc) from None
-            if self.io is not None:
-                self.io.io_port = self.io_endpoint.port
         if self.modbus is not None:
             try:
                 await self.modbus.start()
             except OSError as exc:
                 await self.close()
                 raise ListenError(f"TCP {s.host}:{s.modbus_port} (Modbus TCP, --modbus-port)", exc) from None
+        if self.io_endpoint is not None:
+            try:
+                await self.io_endpoint.start()
+            except OSError as exc:
+                await self.close()
+                raise ListenError(f"UDP {s.host}:{s.io_port} (class 1 I/O, --io-port)", exc) from None
+            if self.io is not None:
+                self.io.io_port = self.io_endpoint.port
+        try:
+            await self.server.start()
+        except OSError as exc:
+            what = "UDP" if self.server._tcp is not None else "TCP"
+            await self.close()
+            raise ListenError(f"{what} {s.host}:{s.port} (EtherNet/IP, --port)", exc) from None
+        self._tick(asyncio.get_running_loop().time())
 
     @property
     def control_path(self) -> ControlAddress:
