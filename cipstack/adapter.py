@@ -139,8 +139,8 @@ class Adapter:
             held.release()
 
     async def _start(self) -> None:
-        # The EtherNet/IP port listens last: once it accepts, so do the class 1 port and Modbus TCP
-        # (a client that waits for it may go straight on to either).
+        # Modbus TCP listens before the EtherNet/IP port: once that accepts, so does Modbus TCP (a
+        # client that waits for 44818 may go straight on to it).
         s = self.settings
         if self.modbus is not None:
             try:
@@ -148,6 +148,13 @@ class Adapter:
             except OSError as exc:
                 await self.close()
                 raise ListenError(f"TCP {s.host}:{s.modbus_port} (Modbus TCP, --modbus-port)", exc) from None
+        try:
+            await self.server.start()
+        except OSError as exc:
+            what = "UDP" if self.server._tcp is not None else "TCP"
+            await self.close()
+            raise ListenError(f"{what} {s.host}:{s.port} (EtherNet/IP, --port)", exc) from None
+        self._tick(asyncio.get_running_loop().time())
         if self.io_endpoint is not None:
             try:
                 await self.io_endpoint.start()
@@ -156,13 +163,6 @@ class Adapter:
                 raise ListenError(f"UDP {s.host}:{s.io_port} (class 1 I/O, --io-port)", exc) from None
             if self.io is not None:
                 self.io.io_port = self.io_endpoint.port
-        try:
-            await self.server.start()
-        except OSError as exc:
-            what = "UDP" if self.server._tcp is not None else "TCP"
-            await self.close()
-            raise ListenError(f"{what} {s.host}:{s.port} (EtherNet/IP, --port)", exc) from None
-        self._tick(asyncio.get_running_loop().time())
 
     @property
     def control_path(self) -> ControlAddress:
