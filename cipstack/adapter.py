@@ -5,6 +5,7 @@ from __future__ import annotations
 import asyncio
 import logging
 import signal
+from collections.abc import Awaitable, Callable
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -143,26 +144,24 @@ class Adapter:
         # client that waits for 44818 may go straight on to it).
         s = self.settings
         if self.modbus is not None:
-            try:
-                await self.modbus.start()
-            except OSError as exc:
-                await self.close()
-                raise ListenError(f"TCP {s.host}:{s.modbus_port} (Modbus TCP, --modbus-port)", exc) from None
-        try:
-            await self.server.start()
-        except OSError as exc:
-            what = "UDP" if self.server._tcp is not None else "TCP"
-            await self.close()
-            raise ListenError(f"{what} {s.host}:{s.port} (EtherNet/IP, --port)", exc) from None
+            await self._listen(self.modbus.start, lambda: f"TCP {s.host}:{s.modbus_port} (Modbus TCP, --modbus-port)")
+        await self._listen(self.server.start, lambda: (f"{'UDP' if self.server._tcp is not None else 'TCP'} "
+                                                       f"{s.host}:{s.port} (EtherNet/IP, --port)"))
         self._tick(asyncio.get_running_loop().time())
         if self.io_endpoint is not None:
-            try:
-                await self.io_endpoint.start()
-            except OSError as exc:
-                await self.close()
-                raise ListenError(f"UDP {s.host}:{s.io_port} (class 1 I/O, --io-port)", exc) from None
+            await self._listen(self.io_endpoint.start, lambda: f"UDP {s.host}:{s.io_port} (class 1 I/O, --io-port)")
             if self.io is not None:
                 self.io.io_port = self.io_endpoint.port
+
+    async def _listen(self, start: Callable[[], Awaitable[None]], where: Callable[[], str]) -> None:
+        """``start`` one listener; if it cannot listen, close what is open and raise ``ListenError``
+        naming ``where`` (asked before closing: it may tell which socket of the listener failed)."""
+        try:
+            await start()
+        except OSError as exc:
+            what = where()
+            await self.close()
+            raise ListenError(what, exc) from None
 
     @property
     def control_path(self) -> ControlAddress:

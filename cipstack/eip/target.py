@@ -331,8 +331,7 @@ class EncapsulationConnection:
 
     def _frame(self, command: int, session: int, context: bytes, body: bytes, now: float) -> None:
         if command == _SEND_RR_DATA:
-            if self.session is None or session != self.session:
-                raise EncapsulationError(EncapsulationStatus.INVALID_SESSION)
+            self._check_session(session)
             self.target.tick(now)
             reply = self._common_send_rr_data(body, now)
             if reply is not None:
