@@ -1,0 +1,58 @@
+"""The benchmarks' own arithmetic and the quickest of them, so that the figures the README gives
+come from code the suite runs: the paired idle-sessions verdict of ``explicit.py`` and
+``explicit_core.py`` end to end (a short run)."""
+
+from __future__ import annotations
+
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+BENCHMARKS = Path(__file__).resolve().parent.parent / "benchmarks"
+sys.path.insert(0, str(BENCHMARKS))
+
+import explicit  # noqa: E402
+
+
+@pytest.mark.parametrize(("n", "low_rank", "confidence"), [(3, 1, 0.75), (5, 1, 0.9375), (9, 2, 0.9609375),
+                                                           (15, 4, 0.96484375)])
+def test_median_bounds_are_the_sign_test_ranks(n: int, low_rank: int, confidence: float) -> None:
+    """The k-th smallest and k-th largest of n values hold the median with 1 - 2 P(Bin(n, 1/2) < k),
+    k the largest rank that keeps at least 95 % (or 1 when n is too small for it)."""
+    values = [float(v) for v in range(n, 0, -1)]  # unsorted on purpose
+    assert explicit.median_bounds(values) == (float(low_rank), float(n + 1 - low_rank), confidence)
+
+
+def idle_summary(idle: list[float], raw: list[float]) -> dict[str, object]:
+    def run(client: str, server: str, rounds: list[float]) -> explicit.Run:
+        return explicit.Run(client, server, 1, 1.0, 1.0, sorted(rounds)[len(rounds) // 2], 0.0,
+                            server_cpu_rounds_us=tuple(rounds))
+
+    runs = [run("raw", "adapter", raw), run("raw +100 idle", "adapter", idle),
+            run("raw", "echo-asyncio", raw), run("raw +100 idle", "echo-asyncio", raw),
+            run("raw", "echo-socket", raw)]
+    return explicit.summarise(runs)
+
+
+@pytest.mark.parametrize(("added", "verdict"), [
+    ([0.5, -0.3, 1.0, 0.2, 1.9], "PASS"),           # every paired difference within 2 µs
+    ([3.0, 2.5, 4.0, 2.2, 5.0], "FAIL"),            # even the smallest above it
+    ([0.5, -0.3, 1.0, 0.2, 9.0], "INCONCLUSIVE"),   # the bounds straddle the target
+])
+def test_idle_sessions_verdict_is_taken_on_paired_rounds(added: list[float], verdict: str) -> None:
+    raw = [40.0, 55.0, 38.0, 61.0, 45.0]  # the machine's load moves both halves of each pair alike
+    summary = idle_summary([r + a for r, a in zip(raw, added, strict=True)], raw)
+    line = explicit.idle_verdict(summary).line()
+    assert summary["adapter_idle_added_us"] == pytest.approx(sorted(added)[2])
+    assert line.startswith("[PASS]" if verdict == "PASS" else "[FAIL]"), line
+    assert ("INCONCLUSIVE" in line) == (verdict == "INCONCLUSIVE"), line
+
+
+def test_explicit_core_serves_the_raw_clients_request_and_prints_its_cost() -> None:
+    result = subprocess.run([sys.executable, str(BENCHMARKS / "explicit_core.py"), "--requests", "500",
+                             "--rounds", "2"], capture_output=True, text=True, timeout=120)
+    assert result.returncode == 0, result.stderr
+    assert result.stdout.startswith("adapter work per Get_Attribute_Single, no sockets: "), result.stdout
+    assert "(best of 2 rounds of 500)" in result.stdout
