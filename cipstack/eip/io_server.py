@@ -181,11 +181,11 @@ class PreciseEpollSelector(selectors.EpollSelector):
         monotonic = time.monotonic
         until = None if timeout is None else monotonic() + max(timeout, 0.0)
         first_timer = self._first_timer()  # the timer asyncio's timeout was taken from
+        # Lane timers that fell due while asyncio's callbacks ran; what they gave asyncio makes the
+        # first wait a look. Later rounds end with the lane's timers run and asyncio's work looked at.
+        busy = lane.run_due(monotonic()) and self._asyncio_has_work(first_timer)
         while True:
-            now = monotonic()
-            wait = None if until is None else until - now
-            if lane.run_due(now) and self._asyncio_has_work(first_timer):
-                wait = 0.0
+            wait = 0.0 if busy else None if until is None else until - monotonic()
             lane_at = lane.next_deadline()
             if lane_at is not None:
                 lane_wait = lane_at - monotonic()
@@ -194,7 +194,7 @@ class PreciseEpollSelector(selectors.EpollSelector):
             ready = self._wait_and_harvest(wait)
             now = monotonic()
             lane.run_due(now)
-            if ready or (until is not None and now >= until) or self._asyncio_has_work(first_timer):
+            if busy or ready or (until is not None and now >= until) or self._asyncio_has_work(first_timer):
                 return ready
 
     # The loop's queues are asyncio's own attributes (``_ready``, ``_scheduled``, ``_stopping``: the
