@@ -115,10 +115,9 @@ class Adapter:
     def _tick(self, now: float) -> None:
         """Advance the device to ``now`` and keep a timer at its next deadline (lost-command timers,
         the end of a ramp), so it changes on time even when nobody asks."""
-        self.device.advance(now)
-        deadline = self.device.next_deadline()
-        if deadline == self._device_timer_at and self._device_timer is not None:
-            return  # already armed for it: the common case on the request path
+        deadline = self.device.tick(now)
+        if deadline == self._device_timer_at and (deadline is None or self._device_timer is not None):
+            return  # none wanted, or already armed for it: the common cases on the request path
         if self._device_timer is not None:
             self._device_timer.cancel()
             self._device_timer = None

@@ -727,3 +727,71 @@ def test_parameter_lock_password() -> None:
     d.write(0x03E8, 244, 0)                      # 244 > 0 > 244
     assert d.read(0x03E8) == 0
     d.write(ACC, 20, 0)
+
+
+# --- advance_to: the shell's call before every request, cheap for a drive at rest --------------
+
+_STEPS = st.lists(st.tuples(
+    st.sampled_from(["forward", "reverse", "stop", "io_lost", "io_opened", "modbus", "trip", "reset", "none"]),
+    st.floats(min_value=0, max_value=8, allow_nan=False)), max_size=14)
+
+
+def _snapshot(d: AcgDrive) -> dict[int, object]:
+    seen: dict[int, object] = {}
+    for register in ACG_REGISTERS.values():
+        try:
+            seen[register.address] = d.read(register.address)
+        except RegisterError as exc:
+            seen[register.address] = exc.refusal
+    return seen
+
+
+@given(_STEPS)
+@settings(max_examples=60, deadline=None)
+def test_advance_to_is_advance_then_next_deadline(steps) -> None:
+    """Two drives given the same events: one moved by ``advance_to`` (which, at rest, only moves the
+    clock), the other by ``advance`` and ``next_deadline``. They agree on every register and every
+    deadline, at rest or not (stopped, ramping, running, watched for a command loss, tripped)."""
+    fast, slow = lost_setup(2, lost_time=10, acc=50), lost_setup(2, lost_time=10, acc=50)
+    for d in (fast, slow):
+        d.set_run_command(False, False, 0)  # begin at rest: output off, nothing watched
+    now = 0.0
+    for action, dt in steps:
+        now += dt
+        deadline = fast.advance_to(now)
+        slow.advance(now)
+        assert deadline == slow.next_deadline()
+        for d in (fast, slow):
+            if action == "forward":
+                d.set_run_command(True, False, now)
+            elif action == "reverse":
+                d.set_run_command(False, True, now)
+            elif action == "stop":
+                d.set_run_command(False, False, now)
+            elif action == "io_lost":
+                d.on_io_connection_lost(now)
+            elif action == "io_opened":
+                d.on_io_connection_opened(now)
+            elif action == "modbus":
+                d.on_modbus_activity(now)
+            elif action == "trip":
+                d.inject_trip(Trip.OVER_HEAT, now)
+            elif action == "reset":
+                d.set_fault_reset(False, now)
+                d.set_fault_reset(True, now)
+        assert fast.time == slow.time
+        assert _snapshot(fast) == _snapshot(slow)
+
+
+def test_advance_to_at_rest_moves_only_the_clock() -> None:
+    d = AcgDrive()
+    d.advance_to(1.0)
+    assert d._at_rest() and d.time == 1.0
+    assert d.advance_to(0.5) is None and d.time == 1.0  # never backwards: it stays where it is
+    d.write(DRV, 4, 1.0)
+    d.write(FRQ, 8, 1.0)
+    d.write(FREQUENCY_COMMAND, 6000, 1.0)
+    d.set_run_command(True, False, 1.0)
+    assert not d._at_rest()                              # ramping: advance_to runs the ramp
+    assert d.advance_to(2.0) == pytest.approx(1.0 + 5.0)  # ACC 5.0 s to 60 Hz
+    assert d.output_frequency == 1200

@@ -134,6 +134,12 @@ class Device:
         """When the simulation next changes by itself, or None; the adapter calls ``advance`` then."""
         return None
 
+    def tick(self, now: float) -> float | None:
+        """``advance(now)``, then ``next_deadline()``: the adapter's call before every request and
+        datagram, one call so that a family can make the common case (a drive at rest) cheap."""
+        self.advance(now)
+        return self.next_deadline()
+
     @property
     def inactivity_timeout(self) -> float:
         return float(self.tcpip.inactivity_timeout)

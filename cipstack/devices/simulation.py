@@ -48,6 +48,27 @@ class TimedSimulation(ABC):
             self._fire_timers(deadline)
         self._run_until(now)
 
+    def _at_rest(self) -> bool:
+        """True when nothing changes by itself (no ramp, no counter running, no timer pending), so
+        that moving to a later instant changes nothing but the clock; families that can tell cheaply
+        say so (``advance_to``)."""
+        return False
+
+    def _rest_until(self, moment: float) -> None:
+        """Move the clock of a simulation at rest to ``moment`` if that is later; called only when
+        ``_at_rest()``."""
+        self.advance(max(moment, self.time))
+
+    def advance_to(self, now: float) -> float | None:
+        """``advance`` to ``now`` (or to where the simulation is, if that is later), then
+        ``next_deadline()``: the shell's call before every request. A simulation at rest only moves
+        its clock, all the rest being the same as nothing."""
+        if self._at_rest():
+            self._rest_until(now)
+            return None
+        self.advance(max(now, self.time))
+        return self.next_deadline()
+
     def next_deadline(self) -> float | None:
         """When the simulation next changes by itself: the end of a ramp segment or a timer."""
         timer, ramp = self._timer_deadline(), self._ramp_deadline()

@@ -271,6 +271,14 @@ class AcgDevice(Device):
     def next_deadline(self) -> float | None:
         return self.drive.next_deadline()
 
+    def tick(self, now: float) -> float | None:
+        if self.power_up_on_first_advance:
+            self.advance(now)
+            return self.next_deadline()
+        if now > self._now:
+            self._now = now
+        return self.drive.advance_to(self._now)
+
     def reset(self, reset_type: int) -> None:
         """Identity Reset: 0 power cycle (unsaved values lost), 1 factory defaults (saved ones too)."""
         old = self.drive
