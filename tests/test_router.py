@@ -10,7 +10,7 @@ from cipstack.cip.epath import request_path
 from cipstack.cip.messages import MessageRouterRequest, MessageRouterResponse, Service
 from cipstack.cip.model import Access, AttributeSpec, Binding, CipObject, ClassSpec
 from cipstack.cip.router import MessageRouter, RequestContext
-from cipstack.cip.status import GeneralStatus
+from cipstack.cip.status import CipError, GeneralStatus
 from cipstack.cip.types import INT, REAL, SHORT_STRING, UINT
 from cipstack.devices.profiles import identity_only_device as build_device
 
@@ -247,3 +247,30 @@ def test_attribute_readers_are_bounded() -> None:
             raw = bytes((0x0E, 0x03, 0x20, 0x70, 0x24, instance, 0x30, attribute))
             assert router.handle(raw, context) == b"\x8e\x00\x00\x00" + struct.pack("<H", attribute)
     assert len(router._readers) == MAX_ATTRIBUTE_READERS
+
+
+def test_a_failing_read_is_read_once(router: MessageRouter, caplog: pytest.LogCaptureFixture) -> None:
+    """A read may have an effect (a counter, a latch that clears): a Get_Attribute_Single reads its
+    attribute once, whether the read succeeds, fails with a CIP status or fails with a bug, and the
+    failure is counted and answered as dispatch answers it."""
+    obj = router[0x70]
+    reads: list[str] = []
+
+    def read(outcome: str) -> int:
+        reads.append(outcome)
+        if outcome == "bug":
+            raise RuntimeError("boom")
+        if outcome == "state":
+            raise CipError(GeneralStatus.OBJECT_STATE_CONFLICT)
+        return 9
+
+    for outcome, status in (("ok", 0), ("state", GeneralStatus.OBJECT_STATE_CONFLICT),
+                            ("bug", GeneralStatus.VENDOR_SPECIFIC), ("ok", 0)):
+        obj.bind(1, 5, Binding(lambda o=outcome: read(o)))
+        before = dict(router.status_counts)
+        for _ in range(2):  # the first through a new reader, the second through the kept one
+            reads.clear()
+            assert ask(router, 0x0E, request_path(0x70, 1, 5)).general_status == status
+            assert reads == [outcome]
+        assert router.status_counts[status] == before.get(status, 0) + 2
+    assert "internal error serving service 0x0E" in caplog.text

@@ -78,20 +78,21 @@ class MessageRouter:
         if (len(raw) == 8 and raw[0] == _GET_ATTRIBUTE_SINGLE and raw[1] == 3 and raw[2] == 0x20 and raw[4] == 0x24
                 and raw[6] == 0x30 and context.depth <= MAX_NESTING):
             reader = self._readers.get(raw) or self._attribute_reader(raw)
-            data = reader() if reader is not None else None
-            if data is not None:
-                self.status_counts[0] = self.status_counts.get(0, 0) + 1
-                return _GET_ATTRIBUTE_SINGLE_REPLY + data
-            self._readers.pop(raw, None)  # the instance is gone, or the read failed: dispatch says why
+            if reader is not None:
+                reply = reader()
+                if reply is not None:
+                    return reply
+                self._readers.pop(raw, None)  # the instance has gone, nothing was read: dispatch says so
         return self.dispatch(raw, context).encode()
 
     def _attribute_reader(self, raw: bytes) -> Callable[[], bytes | None] | None:
-        """For the most common request, Get_Attribute_Single ``0E 03 20 cc 24 ii 30 aa``: a reader of
-        the attribute's encoded value that skips the request, path and reply objects and the lookups
-        (object, instance, attribute declaration), made once per request and kept while it reads. None
-        when the object does not serve the request the common way; then, as when a reader returns
-        None (the read failed, or the instance has gone), ``dispatch`` serves it, errors included, as
-        it serves every request."""
+        """For the most common request, Get_Attribute_Single ``0E 03 20 cc 24 ii 30 aa``: a reader that
+        reads the attribute and returns the whole reply, skipping the request, path and reply objects
+        and the lookups (object, instance, attribute declaration); made once per request and kept. A
+        read that fails is answered here as ``dispatch`` answers it, so that the attribute is read
+        once whatever happens (a read may have an effect). None when the object does not serve the
+        request the common way, and from the reader when its instance has gone before any read;
+        ``dispatch`` then serves the request, as it serves every other."""
         class_id, instance_id, attribute_id = raw[3], raw[5], raw[7]
         obj = self.objects.get(class_id)
         if obj is None or _GET_ATTRIBUTE_SINGLE in obj.extra_services:
@@ -112,13 +113,15 @@ class MessageRouter:
             return None
         if getter is None and not spec.access.readable:
             return None
-        encode = spec.type.encode
+        encode, counts, failure = spec.type.encode, self.status_counts, self._failure
         if getter is not None:
             def read_class_attribute() -> bytes | None:
                 try:
-                    return encode(getter())
-                except Exception:
-                    return None
+                    data = encode(getter())
+                except Exception as exc:
+                    return failure(_GET_ATTRIBUTE_SINGLE, exc).encode()
+                counts[0] = counts.get(0, 0) + 1
+                return _GET_ATTRIBUTE_SINGLE_REPLY + data
             reader = read_class_attribute
         else:
             instances, read, held = obj.instances, obj.read_attribute, instance
@@ -127,9 +130,11 @@ class MessageRouter:
                 if instances.get(instance_id) is not held:
                     return None
                 try:
-                    return encode(read(held, spec))
-                except Exception:
-                    return None
+                    data = encode(read(held, spec))
+                except Exception as exc:
+                    return failure(_GET_ATTRIBUTE_SINGLE, exc).encode()
+                counts[0] = counts.get(0, 0) + 1
+                return _GET_ATTRIBUTE_SINGLE_REPLY + data
             reader = read_instance_attribute
         if len(self._readers) < MAX_ATTRIBUTE_READERS:
             self._readers[raw] = reader
@@ -150,12 +155,21 @@ class MessageRouter:
             data = obj.handle(path, request, context)
             # A service that forwards a request (Unconnected_Send) returns the whole reply.
             response = data if isinstance(data, MessageRouterResponse) else MessageRouterResponse(service, 0, (), data)
-        except CipError as exc:
-            response = MessageRouterResponse.from_error(service, exc)
-        except Exception:  # an object bug must not take the server down
-            log.exception("internal error serving service 0x%02X", service)
-            response = MessageRouterResponse(service, GeneralStatus.VENDOR_SPECIFIC)
+        except Exception as exc:
+            return self._failure(service, exc)
         finally:
             context.depth -= 1
+        self.status_counts[response.general_status] = self.status_counts.get(response.general_status, 0) + 1
+        return response
+
+    def _failure(self, service: int, exc: Exception) -> MessageRouterResponse:
+        """The reply to a request whose service raised ``exc`` (called in its ``except``), counted: a
+        ``CipError`` gives its status; anything else is an object bug, logged, and must not take the
+        server down (0x1F)."""
+        if isinstance(exc, CipError):
+            response = MessageRouterResponse.from_error(service, exc)
+        else:
+            log.exception("internal error serving service 0x%02X", service)
+            response = MessageRouterResponse(service, GeneralStatus.VENDOR_SPECIFIC)
         self.status_counts[response.general_status] = self.status_counts.get(response.general_status, 0) + 1
         return response
