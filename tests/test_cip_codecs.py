@@ -115,6 +115,25 @@ def test_string_errors() -> None:
         t.SHORT_STRING.encode("\u20ac")
 
 
+@pytest.mark.parametrize("cip_type", [t.SHORT_STRING, t.STRING])
+def test_string_encoding_of_the_same_value_again(cip_type: t.StringType) -> None:
+    """A string type keeps the last value it encoded: the same object gives the same bytes again, and
+    what it keeps is never taken for another value (None, a mutable bytearray, a bad value)."""
+    for _ in range(2):
+        with pytest.raises(CipError):
+            cip_type.encode(None)
+    name = "ACG-ET2"
+    first = cip_type.encode(name)
+    assert cip_type.encode(name) is first and cip_type.decode(first) == name
+    assert cip_type.decode(cip_type.encode("other")) == "other"
+    buffer = bytearray(b"ab")
+    with pytest.raises(CipError):
+        cip_type.encode(buffer)  # not a string type's value: refused every time
+    with pytest.raises(CipError):
+        cip_type.encode("\u20ac")
+    assert cip_type.decode(cip_type.encode(name)) == name
+
+
 @given(st.integers(0, 255), st.integers(0, 255))
 def test_struct_round_trip(major: int, minor: int) -> None:
     value = {"major": major, "minor": minor}

@@ -195,6 +195,12 @@ def test_get_attribute_single_served_directly_answers_as_dispatch_does(profile: 
                     assert router.handle(raw, context) == router.dispatch(raw, context).encode(), raw.hex()
                     compared += 1
     assert compared > 1000
+    # Other 8-byte Get_Attribute_Single requests (other segments, path sizes, a member) go to dispatch.
+    for raw in (bytes.fromhex("0e032001240128 07".replace(" ", "")), bytes.fromhex("0e03200124013007"),
+                bytes.fromhex("0e02200124013007"), bytes.fromhex("0e03210001002407"),
+                bytes.fromhex("0e03200130072401"), bytes.fromhex("0e0320012c013007")):
+        for _pass in range(2):
+            assert router.handle(raw, context) == router.dispatch(raw, context).encode(), raw.hex()
     # A request with data is no plain Get_Attribute_Single: 0x15 (too much data), as dispatch says.
     raw = bytes((0x0E, 0x03, 0x20, 0x01, 0x24, 0x01, 0x30, 0x07, 0x00))
     assert router.handle(raw, context)[2] == GeneralStatus.TOO_MUCH_DATA

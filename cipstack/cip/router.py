@@ -75,8 +75,7 @@ class MessageRouter:
 
     def handle(self, raw: bytes, context: RequestContext) -> bytes:
         """Serve one encoded request and return the encoded reply (never raises)."""
-        if (len(raw) == 8 and raw[0] == _GET_ATTRIBUTE_SINGLE and raw[1] == 3 and raw[2] == 0x20 and raw[4] == 0x24
-                and raw[6] == 0x30 and context.depth <= MAX_NESTING):
+        if len(raw) == 8 and raw[0] == _GET_ATTRIBUTE_SINGLE and context.depth <= MAX_NESTING:
             reader = self._readers.get(raw) or self._attribute_reader(raw)
             if reader is not None:
                 reply = reader()
@@ -93,6 +92,8 @@ class MessageRouter:
         once whatever happens (a read may have an effect). None when the object does not serve the
         request the common way, and from the reader when its instance has gone before any read;
         ``dispatch`` then serves the request, as it serves every other."""
+        if raw[1] != 3 or raw[2] != 0x20 or raw[4] != 0x24 or raw[6] != 0x30:
+            return None  # another 8-byte Get_Attribute_Single (16-bit segments, a member...)
         class_id, instance_id, attribute_id = raw[3], raw[5], raw[7]
         obj = self.objects.get(class_id)
         if obj is None or _GET_ATTRIBUTE_SINGLE in obj.extra_services:

@@ -202,6 +202,10 @@ class RealType(CipType):
             raise ValueError(f"not a number: {text!r}") from None
 
 
+#: Stands for "no value encoded yet": no value a caller passes is this object.
+_NOTHING = object()
+
+
 class StringType(CipType):
     """SHORT_STRING (USINT length) or STRING (UINT length) of single-byte characters."""
 
@@ -210,13 +214,22 @@ class StringType(CipType):
         self.code = code
         self.size = None
         self._length = IntegerType("length", None, length_size, signed=False)
+        #: The last value encoded and its bytes: strings do not change, and most string attributes
+        #: (names, revisions) are read again and again with the same one.
+        self._last: tuple[Any, bytes] = (_NOTHING, b"")
 
     def _build_construct(self, cs: Any) -> cs.Construct:
         return cs.PascalString(self._length.construct, "latin-1")
 
     def encode(self, value: Any) -> bytes:
+        last, encoded = self._last
+        if value is last:
+            return encoded
         raw = self._latin1(value)
-        return self._length.encode(len(raw)) + raw
+        encoded = self._length.encode(len(raw)) + raw
+        if value.__class__ is str or value.__class__ is bytes:  # immutable: the same object, the same bytes
+            self._last = (value, encoded)
+        return encoded
 
     def decode_from(self, data: bytes, offset: int = 0) -> tuple[str, int]:
         length, start = self._length.decode_from(data, offset)

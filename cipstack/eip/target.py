@@ -332,14 +332,25 @@ class EncapsulationConnection:
     def _frame(self, command: int, session: int, context: bytes, body: bytes, now: float) -> None:
         if command == _SEND_RR_DATA:
             self._check_session(session)
-            self.target.tick(now)
-            reply = self._common_send_rr_data(body, now)
-            if reply is not None:
-                self._outbox.append(_RR_REPLY_FRAME.pack(_SEND_RR_DATA, _RR_TWO_ITEMS_SIZE + len(reply), session, 0,
-                                                         context, 0, 0, 0, 2, _NULL_ADDRESS, 0, _UNCONNECTED_DATA,
-                                                         len(reply)) + reply)
-            else:
-                self._reply(command, session, context, self._send_rr_data(body, now))
+            target = self.target
+            target.tick(now)
+            # The common SendRRData (see ``_RR_TWO_ITEMS``) is served without building items; any
+            # other shape by ``_send_rr_data``.
+            size = len(body)
+            if size > _RR_TWO_ITEMS_SIZE:
+                interface, _timeout, count, null_type, null_length, data_type, length = _RR_TWO_ITEMS.unpack_from(body)
+                if (interface == 0 and count == 2 and null_type == _NULL_ADDRESS and null_length == 0
+                        and data_type == _UNCONNECTED_DATA and size == _RR_TWO_ITEMS_SIZE + length
+                        and body[_RR_TWO_ITEMS_SIZE] not in _MAY_CARRY_SOCKADDR):
+                    request = self._context
+                    request.now = now
+                    request.connected = False
+                    reply = target.router.handle(body[_RR_TWO_ITEMS_SIZE:], request)
+                    self._outbox.append(_RR_REPLY_FRAME.pack(
+                        _SEND_RR_DATA, _RR_TWO_ITEMS_SIZE + len(reply), session, 0, context, 0, 0, 0, 2,
+                        _NULL_ADDRESS, 0, _UNCONNECTED_DATA, len(reply)) + reply)
+                    return
+            self._reply(command, session, context, self._send_rr_data(body, now))
         elif command == Command.SEND_UNIT_DATA:
             self._check_session(session)
             self.target.tick(now)
@@ -387,22 +398,6 @@ class EncapsulationConnection:
         self.session = self.target._new_session(self)
         log.info("%s: session 0x%08X registered", self.peer, self.session)
         self._reply(Command.REGISTER_SESSION, self.session, context, body)
-
-    def _common_send_rr_data(self, body: bytes, now: float) -> bytes | None:
-        """The reply to the common SendRRData (see ``_RR_TWO_ITEMS``), served without building items;
-        None for any other shape, which ``_send_rr_data`` serves."""
-        size = len(body)
-        if size <= _RR_TWO_ITEMS_SIZE:
-            return None
-        interface, _timeout, count, null_type, null_length, data_type, length = _RR_TWO_ITEMS.unpack_from(body)
-        if (interface == 0 and count == 2 and null_type == _NULL_ADDRESS and null_length == 0
-                and data_type == _UNCONNECTED_DATA and size == _RR_TWO_ITEMS_SIZE + length
-                and body[_RR_TWO_ITEMS_SIZE] not in _MAY_CARRY_SOCKADDR):
-            context = self._context
-            context.now = now
-            context.connected = False
-            return self.target.router.handle(body[_RR_TWO_ITEMS_SIZE:], context)
-        return None
 
     def _send_rr_data(self, body: bytes, now: float) -> bytes:
         if len(body) < RR_PREFIX.size:

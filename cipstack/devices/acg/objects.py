@@ -401,7 +401,7 @@ class AcgIdentityObject(IdentityObject):
     def read_attribute(self, instance: Instance, spec: AttributeSpec) -> Any:
         if spec.id == 5:
             return self.status_word()
-        return super().read_attribute(instance, spec)
+        return CipObject.read_attribute(self, instance, spec)  # super() costs a lookup per read
 
     def write_attribute(self, instance: Instance, spec: AttributeSpec, value: Any,
                         context: RequestContext | None = None) -> None:
