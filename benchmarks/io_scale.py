@@ -7,7 +7,10 @@ connections (heartbeat 198 -> input 71, timeout multiplier 3 as ``io.py`` (a) us
 connections split evenly) and measures ``--seconds``:
 
 * T->O: packets received per second, late packets (an interval above 1.5 RPI: more than half an RPI
-  after the packet was due), lost packets (gaps in the sequence), connections timed out;
+  after the packet was due), lost packets (gaps in the sequence), connections timed out. Packets
+  are timed by the kernel as they reach the originator's socket (``kernel_arrival_times``; on
+  loopback, the moment the adapter sent them), as a capture would show them: the lateness is the
+  adapter's, not that of originator processes waiting for a core the adapter and they share;
 * O->T: packets sent per second by the originators and their skipped slots;
 * the adapter's CPU share (user + system) and the originators' (their sum), so that a step that
   fails is seen to fail in the adapter or in the scanners that load it, and the adapter's CPU per
@@ -59,7 +62,8 @@ async def originate(port: int, io_port: int, rpi: float, connections: int, secon
 
     async with await Scanner.connect(f"127.0.0.1:{port}", timeout=20) as scanner:
         contexts = [scanner.io_connection(input=INPUT, heartbeat=INPUT_ONLY_POINT, rpi=rpi, input_size=4,
-                                          target_io_port=io_port, keep_intervals=True, timeout_multiplier=3)
+                                          target_io_port=io_port, keep_intervals=True, timeout_multiplier=3,
+                                          kernel_arrival_times=True)
                     for _ in range(connections)]
         handles = []
         try:

@@ -293,9 +293,10 @@ class Scanner:
         attribute 4; fields are accessible by name when the schema is known (``io.output.run_forward``),
         raw bytes always (``io.output.raw``). ``config`` is the configuration instance; ``options`` go
         to ``EncapsulationClient.io_connection`` (``config_data``, ``ot_format``, ``target_io_port``,
-        ``local_io_port``, ``multicast``, ``timeout_multiplier``, ``run``). Leaving the block by any
-        way closes the connection (Forward_Close); ``io.statistics()`` gives the counters and how
-        the target really produces (received rate, inter-arrival p50/p99/max, missed slots).
+        ``local_io_port``, ``multicast``, ``timeout_multiplier``, ``run``, ``keep_intervals``,
+        ``kernel_arrival_times``). Leaving the block by any way closes the connection (Forward_Close);
+        ``io.statistics()`` gives the counters and how the target really produces (received rate,
+        inter-arrival p50/p99/max, missed slots).
         """
         if output is None and heartbeat is None:
             raise ValueError("give an output assembly, or a heartbeat point for input-only / listen-only")

@@ -34,6 +34,8 @@ class RecordingCore:
         self.period = period
         self.send_to = send_to
         self.received: list[bytes] = []
+        #: The time each datagram was given with.
+        self.times: list[float] = []
         self.polls: list[float] = []
         self.deadline: float | None = None
         self.fail_on: bytes | None = None
@@ -42,6 +44,7 @@ class RecordingCore:
         if raw == self.fail_on:
             raise RuntimeError("a core that fails on this datagram")
         self.received.append(raw)
+        self.times.append(now)
 
     def poll(self, now: float, horizon: float = 0.0) -> list[tuple[bytes, tuple[str, int]]]:
         if self.deadline is None or now < self.deadline:
@@ -408,3 +411,52 @@ def test_a_stop_asked_by_a_lane_reader_ends_run_forever_at_once() -> None:
         out.close()
         loop.close()
     assert elapsed < 1.0, elapsed
+
+
+@pytest.mark.parametrize("stamped", [True, False])
+def test_kernel_arrival_times_are_when_the_datagram_came_not_when_the_loop_read_it(stamped: bool) -> None:
+    """With ``stamp_arrivals``, a datagram is given to the core
+    with the time the kernel received it: the loop busy for 80 ms meanwhile does not move it. Without,
+    the time is when the loop read it, 80 ms later."""
+    stall = 0.08
+
+    async def scenario() -> tuple[list[float], list[float], bool]:
+        core = RecordingCore()
+        endpoint = await started(core)
+        if stamped:
+            assert endpoint.stamp_arrivals() and endpoint.stamp_arrivals()  # asking twice is the same
+        out = sender()
+        sent: list[float] = []
+        try:
+            for index in range(3):
+                await asyncio.sleep(0.01)
+                sent.append(time.monotonic())
+                out.sendto(b"datagram %d" % index, ("127.0.0.1", endpoint.port))
+                time.sleep(stall)  # the loop is busy: the datagram waits in the socket
+            for _ in range(200):
+                if len(core.received) == 3:
+                    break
+                await asyncio.sleep(0.01)
+            return sent, core.times, endpoint.kernel_arrival_times
+        finally:
+            out.close()
+            await endpoint.close()
+
+    sent, times, kernel = run_on(precise_event_loop(), scenario())
+    assert kernel is stamped and len(times) == 3
+    delays = [given - at for at, given in zip(sent, times, strict=True)]
+    if stamped:
+        assert all(-0.005 < delay < stall / 2 for delay in delays), delays
+    else:
+        assert all(delay >= stall for delay in delays), delays
+
+
+def test_kernel_arrival_times_are_not_taken_off_the_lane() -> None:
+    async def scenario() -> tuple[bool, bool]:
+        endpoint = await started(RecordingCore())
+        try:
+            return endpoint.stamp_arrivals(), endpoint.kernel_arrival_times
+        finally:
+            await endpoint.close()
+
+    assert run_on(asyncio.new_event_loop(), scenario()) == (False, False)

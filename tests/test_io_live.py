@@ -112,6 +112,25 @@ async def test_fields_by_name_and_updates(adapter: Adapter) -> None:
         assert not adapter.io or not adapter.io.connections  # Forward_Close on exit
 
 
+async def test_kernel_arrival_times_through_the_scanner(adapter: Adapter) -> None:
+    """``kernel_arrival_times``: on the precise loop the packets are timed by the kernel, and the
+    intervals still say what the target does (its RPI); on asyncio's own loop it cannot be, and the
+    handle says so."""
+    from cipstack.eip.io_server import PreciseEventLoop
+
+    assert adapter.io_endpoint is not None
+    rpi = 0.004
+    scanner = await Scanner.connect(f"127.0.0.1:{adapter.port}", catalog=CATALOG)
+    async with scanner, scanner.io_connection(output=21, input=71, rpi=rpi, target_io_port=adapter.io_endpoint.port,
+                                              keep_intervals=True, kernel_arrival_times=True) as io:
+        await asyncio.sleep(0.3)
+        intervals = sorted(io.connection.interval_samples)
+        kernel = io.kernel_arrival_times
+    assert kernel is isinstance(asyncio.get_running_loop(), PreciseEventLoop)
+    assert len(intervals) > 20
+    assert 0.5 * rpi < intervals[len(intervals) // 2] < 1.5 * rpi
+
+
 async def test_sizes_from_attribute_4_without_schema(adapter: Adapter) -> None:
     assert adapter.io_endpoint is not None
     scanner = await Scanner.connect(f"127.0.0.1:{adapter.port}")  # no catalog: raw bytes

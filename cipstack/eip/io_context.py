@@ -56,7 +56,7 @@ class IoContext:
 
     def __init__(self, client: EncapsulationClient, request: Class1Request, target_io_port: int, local_io_port: int,
                  output_schema: AssemblySchema | None, input_schema: AssemblySchema | None, run: bool,
-                 keep_intervals: bool) -> None:
+                 keep_intervals: bool, kernel_arrival_times: bool = False) -> None:
         self.client = client
         self.request = request
         self.target_io_port = target_io_port
@@ -65,6 +65,7 @@ class IoContext:
         self.input_schema = input_schema
         self.run = run
         self.keep_intervals = keep_intervals
+        self.kernel_arrival_times = kernel_arrival_times
         self.handle: IoConnectionHandle | None = None
         self._triad: ConnectionTriad | None = None
         self._keepalive: asyncio.Task[None] | None = None
@@ -104,6 +105,8 @@ class IoContext:
     async def __aenter__(self) -> IoConnectionHandle:
         client = self.client
         core, endpoint = await shared_io_endpoint(client.local_host(), self.local_io_port)
+        if self.kernel_arrival_times:
+            endpoint.stamp_arrivals()
         request = self.request
         try:
             reply, extra, triad = await self._open_shielded(request, endpoint.port)

@@ -401,6 +401,11 @@ class IoConnectionHandle:
         self.notes: list[str] = []
 
     @property
+    def kernel_arrival_times(self) -> bool:
+        """Whether T->O packets are timed when the kernel received them (``io_connection``)."""
+        return self._endpoint.kernel_arrival_times
+
+    @property
     def input(self) -> ProcessImage:
         self._check()
         return ProcessImage(bytearray(self.connection.input or bytes(self.connection.input_size)),

@@ -38,6 +38,7 @@ import math
 import select
 import selectors
 import socket
+import struct
 import sys
 import time
 from collections.abc import Callable, Coroutine
@@ -76,6 +77,12 @@ DRAIN_LIMIT = 64
 
 #: The largest UDP payload: a Large_Forward_Open connection may carry up to this much.
 MAX_DATAGRAM = 65535
+
+#: Linux's SO_TIMESTAMPNS, also the type of its control message (SCM_TIMESTAMPNS), which Python's
+#: socket module does not name: the kernel stamps each datagram with the time it reached the socket.
+SO_TIMESTAMPNS = 35
+_TIMESPEC = struct.Struct("@qq")
+_STAMP_SPACE = socket.CMSG_SPACE(_TIMESPEC.size)
 
 #: The receive buffer asked for a class 1 socket. One socket takes every connection's datagrams
 #: (an originator's, an adapter's 2222), and what arrives while the process is not scheduled waits
@@ -228,13 +235,16 @@ class PreciseEpollSelector(selectors.EpollSelector):
             return self._harvest(0)[0]
         deadline = time.monotonic() + timeout
         whole_ms = math.floor(timeout * 1000)
-        # epoll_wait() counts whole milliseconds: wait those there (0: only look), the rest below.
-        ready, seen = self._harvest(whole_ms / 1000)
-        if seen:
-            return ready
+        epoll_fd = self._selector.fileno()  # type: ignore[attr-defined]
+        # epoll_wait() counts whole milliseconds: wait those there, the rest below. A wait shorter
+        # than a millisecond is the select() alone, which returns at once if something is ready;
+        # only a sleep needs a look first.
+        if whole_ms or epoll_fd >= FD_SETSIZE:
+            ready, seen = self._harvest(whole_ms / 1000)
+            if seen:
+                return ready
         remainder = deadline - time.monotonic()
         if remainder > 0:
-            epoll_fd = self._selector.fileno()  # type: ignore[attr-defined]
             if epoll_fd < FD_SETSIZE:
                 select.select((epoll_fd,), (), (), remainder)
             else:
@@ -366,6 +376,8 @@ class IoEndpoint:
         #: Multicast groups joined: each socket, and off the lane its transport.
         self._groups: dict[tuple[str, int], tuple[socket.socket, asyncio.DatagramTransport | None]] = {}
         self.send_errors = 0
+        #: Datagrams are given to the core with the time the kernel received them (``stamp_arrivals``).
+        self.kernel_arrival_times = False
 
     async def start(self) -> None:
         self.loop = asyncio.get_running_loop()
@@ -394,11 +406,32 @@ class IoEndpoint:
         """Started and not closed since."""
         return self._sock is not None
 
+    def stamp_arrivals(self) -> bool:
+        """From now on, give the core each datagram with the time the kernel received it, not the
+        time the loop read it: what a capture shows, whatever delayed this process (on loopback, the
+        moment the peer sent it). For measuring a target's timing; a socket read costs a little more.
+        On the lane of a ``PreciseEventLoop`` under Linux only; returns whether it is so."""
+        if self._lane is None or not sys.platform.startswith("linux"):
+            return False
+        if not self.kernel_arrival_times:
+            self.kernel_arrival_times = True
+            sockets = [self._sock] if self._sock is not None else []
+            for sock in [*sockets, *(sock for sock, _ in self._groups.values())]:
+                self._stamp(sock)
+        return True
+
+    def _stamp(self, sock: socket.socket) -> None:
+        sock.setsockopt(socket.SOL_SOCKET, SO_TIMESTAMPNS, 1)
+        self._lane.remove_reader(sock.fileno())  # type: ignore[union-attr]
+        self._lane.add_reader(sock.fileno(), lambda: self._drain_stamped(sock))  # type: ignore[union-attr]
+
     async def _serve(self, sock: socket.socket) -> asyncio.DatagramTransport | None:
         """Feed what ``sock`` receives to the core: on the lane, or through a transport (returned)."""
         if self._lane is not None:
             sock.setblocking(False)
             self._lane.add_reader(sock.fileno(), lambda: self._drain(sock))
+            if self.kernel_arrival_times:
+                self._stamp(sock)
             return None
         transport, _ = await self.loop.create_datagram_endpoint(lambda: _UdpIo(self), sock=sock)
         return transport  # type: ignore[return-value]
@@ -417,6 +450,30 @@ class IoEndpoint:
             try:
                 receive(data, source, clock())
             except Exception:  # a datagram must never take the I/O path down
+                log.exception("class 1 datagram from %s", source)
+
+    def _drain_stamped(self, sock: socket.socket) -> None:
+        """``_drain`` with the kernel's arrival time of each datagram (``stamp_arrivals``)."""
+        receive, monotonic = self.core.receive, time.monotonic
+        # The kernel stamps with the wall clock; the loop keeps the monotonic one. Their difference,
+        # taken once per wake-up, converts (the two drift apart by at most microseconds in between).
+        offset = time.time() - monotonic()
+        for _ in range(DRAIN_LIMIT):
+            try:
+                data, ancillary, _flags, source = sock.recvmsg(MAX_DATAGRAM, _STAMP_SPACE)
+            except (BlockingIOError, InterruptedError):
+                return
+            except OSError as exc:
+                log.debug("class 1 UDP error: %s", exc)
+                return
+            now = None
+            for level, kind, stamp in ancillary:
+                if level == socket.SOL_SOCKET and kind == SO_TIMESTAMPNS and len(stamp) >= _TIMESPEC.size:
+                    seconds, nanoseconds = _TIMESPEC.unpack_from(stamp)
+                    now = seconds - offset + nanoseconds * 1e-9
+            try:
+                receive(data, source, monotonic() if now is None else now)
+            except Exception:
                 log.exception("class 1 datagram from %s", source)
 
     async def join_multicast(self, group: str, port: int) -> None:

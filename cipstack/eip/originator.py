@@ -417,7 +417,7 @@ class EncapsulationClient(ExplicitClient):
                       timeout_multiplier: int = 2, output_schema: AssemblySchema | None = None,
                       input_schema: AssemblySchema | None = None, run: bool = True,
                       keep_intervals: bool = False, config_data: bytes = b"",
-                      ot_format: OtFormat | str | None = None) -> IoContext:
+                      ot_format: OtFormat | str | None = None, kernel_arrival_times: bool = False) -> IoContext:
         """Open a class 1 connection; use as ``async with client.io_connection(...) as io``.
 
         ``output``/``input`` are the assembly instances (``heartbeat`` replaces the output for
@@ -428,6 +428,10 @@ class EncapsulationClient(ExplicitClient):
         (0: the shared endpoint's port), which the Forward_Open announces in a Sockaddr Info
         item; O->T data goes to ``target_io_port`` on the target. A target that refuses the
         O->T or T->O size with 0x0127/0x0128 and names the size it wants gets one retry with it.
+        ``kernel_arrival_times``: T->O packets are timed (watchdog, statistics, ``keep_intervals``)
+        when the kernel received them, as a capture shows them, not when this process read them;
+        on the precise event loop under Linux, for every connection of the shared endpoint
+        (``io.kernel_arrival_times`` says whether it is so).
         """
         from .io_context import IoContext
         from .io_originator import Class1Request, OtFormat, class1_path
@@ -439,7 +443,7 @@ class EncapsulationClient(ExplicitClient):
                                 int(rpi * 1e6), class1_path(output, input, config, heartbeat, config_data), multicast,
                                 timeout_multiplier, ot_format=fmt)
         return IoContext(self, request, target_io_port, local_io_port, output_schema, input_schema, run,
-                         keep_intervals)
+                         keep_intervals, kernel_arrival_times)
 
 
 class BlockingEncapsulationClient(ExplicitClient):
