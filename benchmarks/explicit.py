@@ -498,12 +498,17 @@ def verdict_lines(summary: dict[str, Any]) -> list[str]:
 
 
 def run_all(seconds: float, rounds: int, warmup: float, profile: str | None = None, pycomm3: bool = True,
-            scanners: bool = True, pin: bool = True) -> list[Run]:
+            scanners: bool = True, pin: bool = True, idle_rounds: int = 0) -> list[Run]:
     """Every client against the adapter and the echo servers, the rounds interleaved; medians per client.
 
     With ``pin`` (and two CPUs or more) the servers run on one CPU and this process, every client,
     on another, as the C stack's figures of issue 16 were measured: neither then takes the other's
-    CPU, and the scheduler does not move them between runs."""
+    CPU, and the scheduler does not move them between runs.
+
+    The adapter's raw client and the same with idle sessions are a pair measured back to back, the
+    one or the other first in turn (a drift of the machine's load then weighs on both alike); up to
+    ``idle_rounds`` rounds in all, the pair alone goes on after the other clients' rounds, for
+    tighter bounds on what the idle sessions add (``idle_verdict``)."""
     with contextlib.ExitStack() as stack:
         cores = core_pair() if pin else None
         server_cpu = None
@@ -516,9 +521,10 @@ def run_all(seconds: float, rounds: int, warmup: float, profile: str | None = No
         benches = [scanner_sync(port, adapter.pid), scanner_async(port, adapter.pid)] if scanners else []
         if pycomm3:
             benches.append(pycomm3_driver(port, adapter.pid))
-        # Each client with idle sessions right after the same client without: their rounds are paired.
-        benches.append(raw_client(port, adapter.pid, "adapter"))
-        benches.append(with_idle_sessions(raw_client(port, adapter.pid, "adapter"), port))
+        # Each client with idle sessions beside the same client without: their rounds are paired.
+        pair = [raw_client(port, adapter.pid, "adapter"),
+                with_idle_sessions(raw_client(port, adapter.pid, "adapter"), port)]
+        benches += pair
         benches.append(raw_clients(port, adapter.pid, "adapter"))
         for kind in ("asyncio", "socket"):
             echo_port = free_port()
@@ -531,10 +537,20 @@ def run_all(seconds: float, rounds: int, warmup: float, profile: str | None = No
             stack.callback(bench.close)
         # Rounds interleave the clients, so a burst of load elsewhere on the machine hits them all alike.
         measured: dict[tuple[str, str], list[Run]] = {}
-        for _ in range(rounds):
-            for bench in benches:
-                measured.setdefault((bench.client, bench.server), []).append(measure(bench, seconds, warmup))
+        for bench in schedule(benches, pair, rounds, idle_rounds):
+            measured.setdefault((bench.client, bench.server), []).append(measure(bench, seconds, warmup))
     return [median_run(r) for r in measured.values()]
+
+
+def schedule(benches: list[Bench], pair: list[Bench], rounds: int, idle_rounds: int) -> Iterator[Bench]:
+    """The order of the runs of ``run_all``: ``rounds`` rounds of every bench, the two of ``pair`` back
+    to back in either order by turns, then the pair alone up to ``idle_rounds`` rounds."""
+    for index in range(max(rounds, idle_rounds)):
+        order = pair if index % 2 == 0 else pair[::-1]
+        for bench in (benches if index < rounds else pair):
+            if bench is pair[1]:
+                continue  # measured with its partner, in this round's order
+            yield from (order if bench is pair[0] else [bench])
 
 
 def print_profile(path: str, top: int = 25) -> None:
@@ -549,6 +565,8 @@ def main(argv: list[str] | None = None) -> int:
                         help="measured time per client and round (default 1)")
     parser.add_argument("--rounds", type=int, default=3, help="rounds; medians are reported (default 3)")
     parser.add_argument("--warmup", type=float, default=0.2, help="unmeasured time before each run (default 0.2)")
+    parser.add_argument("--idle-rounds", type=int, default=0,
+                        help="rounds of the idle-sessions pair, more than --rounds: the pair alone goes on")
     parser.add_argument("--json", action="store_true", help="print one JSON object instead of the table")
     parser.add_argument("--profile", metavar="FILE", help="run the adapter under cProfile, statistics to FILE")
     parser.add_argument("--no-pycomm3", action="store_true", help="skip the pycomm3 client")
@@ -562,7 +580,7 @@ def main(argv: list[str] | None = None) -> int:
         return 0
 
     runs = run_all(args.seconds, args.rounds, args.warmup, args.profile, pycomm3=not args.no_pycomm3,
-                   pin=not args.no_pin)
+                   pin=not args.no_pin, idle_rounds=args.idle_rounds)
     summary = summarise(runs)
     if args.json:
         print(json.dumps({"runs": [asdict(run) for run in runs], "summary": summary, "rounds": args.rounds,

@@ -56,3 +56,20 @@ def test_explicit_core_serves_the_raw_clients_request_and_prints_its_cost() -> N
     assert result.returncode == 0, result.stderr
     assert result.stdout.startswith("adapter work per Get_Attribute_Single, no sockets: "), result.stdout
     assert "(best of 2 rounds of 500)" in result.stdout
+
+
+def test_the_idle_sessions_pair_is_measured_back_to_back_in_either_order_by_turns() -> None:
+    """``run_all``'s order: every client each round, the raw client and the same with idle sessions
+    side by side (one or the other first, by turns), then that pair alone up to ``idle_rounds``."""
+    def bench(name: str) -> explicit.Bench:
+        return explicit.Bench(name, "adapter", 0, lambda n: None, lambda: None)
+
+    scanner, raw, idle, many = bench("scanner"), bench("raw"), bench("raw +100 idle"), bench("raw x8")
+    order = [b.client for b in explicit.schedule([scanner, raw, idle, many], [raw, idle], rounds=2, idle_rounds=4)]
+    assert order == ["scanner", "raw", "raw +100 idle", "raw x8",
+                     "scanner", "raw +100 idle", "raw", "raw x8",
+                     "raw", "raw +100 idle",
+                     "raw +100 idle", "raw"]
+    # Without extra rounds, as many runs of the pair as of the others.
+    assert [b.client for b in explicit.schedule([raw, idle, many], [raw, idle], rounds=1, idle_rounds=0)] == [
+        "raw", "raw +100 idle", "raw x8"]
