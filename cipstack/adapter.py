@@ -139,18 +139,23 @@ class Adapter:
             held.release()
 
     async def _start(self) -> None:
-        # Modbus TCP listens before the EtherNet/IP port: once that accepts, so does Modbus TCP (a
-        # client that waits for 44818 may go straight on to it).
+        # The EtherNet/IP ports are taken first (a taken one is the error to name first) but TCP
+        # accepts last: a client that finds 44818 accepting, and goes straight on to Modbus TCP or
+        # to a Forward_Open, finds every other port ready.
         s = self.settings
+        await self._listen(lambda: self.server.start(serve=False),
+                           lambda: (f"{'UDP' if self.server._tcp is not None else 'TCP'} "
+                                    f"{s.host}:{s.port} (EtherNet/IP, --port)"))
         if self.modbus is not None:
             await self._listen(self.modbus.start, lambda: f"TCP {s.host}:{s.modbus_port} (Modbus TCP, --modbus-port)")
-        await self._listen(self.server.start, lambda: (f"{'UDP' if self.server._tcp is not None else 'TCP'} "
-                                                       f"{s.host}:{s.port} (EtherNet/IP, --port)"))
         self._tick(asyncio.get_running_loop().time())
         if self.io_endpoint is not None:
             await self._listen(self.io_endpoint.start, lambda: f"UDP {s.host}:{s.io_port} (class 1 I/O, --io-port)")
             if self.io is not None:
                 self.io.io_port = self.io_endpoint.port
+        # Another process may have begun to listen on the port since it was bound (SO_REUSEADDR lets
+        # two bind it while neither listens): then listen() is what fails.
+        await self._listen(self.server.serve, lambda: f"TCP {s.host}:{self.server.port} (EtherNet/IP, --port)")
 
     async def _listen(self, start: Callable[[], Awaitable[None]], where: Callable[[], str]) -> None:
         """``start`` one listener; if it cannot listen, close what is open and raise ``ListenError``

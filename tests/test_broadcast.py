@@ -55,8 +55,8 @@ async def test_a_free_port_is_free_in_udp_too(monkeypatch: pytest.MonkeyPatch) -
     picks: list[int] = []
     real = server_module.guarded_listener
 
-    def first_pick_clashes(host: str, port: int, backlog: int = 100) -> socket.socket:
-        listener = real(host, clash if port == 0 and not picks else port, backlog)
+    def first_pick_clashes(host: str, port: int, backlog: int = 100, listen: bool = True) -> socket.socket:
+        listener = real(host, clash if port == 0 and not picks else port, backlog, listen)
         picks.append(listener.getsockname()[1])
         return listener
 

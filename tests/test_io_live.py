@@ -215,3 +215,76 @@ async def test_killed_originator_times_out_at_the_target(adapter: Adapter, tmp_p
     finally:
         if process.poll() is None:
             process.kill()
+
+
+async def test_every_port_is_ready_once_the_ethernet_ip_port_accepts() -> None:
+    """The adapter takes its EtherNet/IP ports first but accepts TCP on them last: while the class 1
+    and Modbus TCP ports are being opened, a connection to the EtherNet/IP port is refused, and once
+    it is accepted a Forward_Open finds its class 1 socket (and Modbus TCP its listener)."""
+    import socket
+
+    port, modbus_port = free_port(), free_port()
+    adapter = Adapter(AdapterSettings(host="127.0.0.1", port=port, io_port=0, modbus_port=modbus_port))
+    assert adapter.io_endpoint is not None and adapter.modbus is not None
+    refused_while_opening: list[bool] = []
+
+    def refused() -> bool:
+        with socket.socket() as probe:
+            return probe.connect_ex(("127.0.0.1", port)) != 0
+
+    for opening in (adapter.io_endpoint, adapter.modbus):
+        original = opening.start
+
+        async def start(original=original) -> None:  # type: ignore[no-untyped-def]
+            refused_while_opening.append(refused())
+            await original()
+        opening.start = start  # type: ignore[method-assign]
+    await adapter.start()
+    try:
+        assert refused_while_opening == [True, True]
+        assert not refused()
+        with socket.create_connection(("127.0.0.1", modbus_port), timeout=2):
+            pass
+        scanner = await Scanner.connect(f"127.0.0.1:{port}", catalog=CATALOG)
+        async with scanner, scanner.io_connection(output=21, input=71, rpi=0.005,
+                                                  target_io_port=adapter.io_endpoint.port) as io:
+            for _ in range(500):  # T->O data comes: the class 1 port served the connection
+                if io.stats.received:
+                    break
+                await asyncio.sleep(0.01)
+            assert io.stats.received > 0
+    finally:
+        await adapter.close()
+
+
+async def test_a_port_another_process_began_to_listen_on_meanwhile_is_named() -> None:
+    """Two emulators started together may both bind the EtherNet/IP port (SO_REUSEADDR, neither
+    listening yet): the one that listens second fails there, names the port, and leaves nothing open."""
+    import socket
+
+    from cipstack.listening import ListenError
+
+    port = free_port()
+    rival = socket.socket()
+    rival.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
+    rival.bind(("127.0.0.1", port))
+    adapter = Adapter(AdapterSettings(host="127.0.0.1", port=port, io_port=0))
+    assert adapter.io_endpoint is not None
+    original = adapter.io_endpoint.start
+
+    async def start() -> None:
+        rival.listen()  # the other emulator got there first
+        await original()
+    adapter.io_endpoint.start = start  # type: ignore[method-assign]
+    try:
+        with pytest.raises(ListenError) as raised:
+            await adapter.start()
+        assert str(raised.value) == (f"cannot listen on TCP 127.0.0.1:{port} (EtherNet/IP, --port): "
+                                     "Address already in use")
+        assert not adapter.io_endpoint.is_open
+    finally:
+        rival.close()
+    # Nothing of the failed start holds the ports: the same adapter's ports are free for another.
+    again = Adapter(AdapterSettings(host="127.0.0.1", port=port, io_port=0))
+    await again.start()
+    await again.close()

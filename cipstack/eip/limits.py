@@ -196,9 +196,14 @@ def _open_reserve() -> int | None:
         return None
 
 
-def guarded_listener(host: str, port: int, backlog: int = 100) -> GuardedListener:
+#: Connections the kernel holds for a listener until it accepts them (asyncio's default too).
+LISTEN_BACKLOG = 100
+
+
+def guarded_listener(host: str, port: int, backlog: int = LISTEN_BACKLOG, listen: bool = True) -> GuardedListener:
     """A ``GuardedListener`` bound to ``host:port`` and listening ("" or "0.0.0.0": every IPv4
-    address; a name or an IPv6 address: its first address)."""
+    address; a name or an IPv6 address: its first address); with ``listen`` false only bound, so
+    that it takes its port and accepts nothing yet (``listen()`` later)."""
     if host in ("", "0.0.0.0"):
         family, address = socket.AF_INET, ("0.0.0.0", port)
     else:
@@ -207,7 +212,8 @@ def guarded_listener(host: str, port: int, backlog: int = 100) -> GuardedListene
     try:
         sock.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
         sock.bind(address)
-        sock.listen(backlog)
+        if listen:
+            sock.listen(backlog)
         sock.setblocking(False)
     except OSError:
         sock.close()

@@ -31,6 +31,7 @@ from .interfaces import subnet_broadcast
 from .io_server import lane_of
 from .limits import (
     DEFAULT_MAX_TCP_CONNECTIONS,
+    LISTEN_BACKLOG,
     ConnectionLimiter,
     RateLimitedLog,
     fit_to_open_file_limit,
@@ -238,7 +239,9 @@ class EncapsulationServer:
             self._local = SockAddr(socket.gethostbyname(host), self.port)
         return self._local
 
-    async def start(self) -> None:
+    async def start(self, serve: bool = True) -> None:
+        """Take the TCP and UDP ports and serve them; with ``serve`` false the TCP port is only bound
+        (nothing connects yet) until ``serve()``, so that a shell can ready its other ports first."""
         self.loop = asyncio.get_running_loop()
         quiet_accept_errors(self.loop)
         self.limiter.total = fit_to_open_file_limit(self.limiter.total)
@@ -254,16 +257,27 @@ class EncapsulationServer:
                 await self._close_tcp()   # that number is taken in UDP: another pair
                 continue
             break
+        if serve:
+            await self.serve()
+
+    async def serve(self) -> None:
+        """Listen on the TCP port ``start(serve=False)`` bound: connections are accepted from now on."""
+        tcp = self._tcp
+        if isinstance(tcp, LaneListener):
+            tcp.start_serving()
+        elif tcp is not None:
+            await tcp.start_serving()
         log.info("EtherNet/IP target listening on %s:%d (TCP%s)", self.host, self.port, " and UDP" if self.udp else "")
 
     async def _listen_tcp(self, port: int) -> None:
-        listener = guarded_listener(self.host, port)
+        listener = guarded_listener(self.host, port, listen=False)
         lane = lane_of(self.loop)
         try:
             if lane is not None:
                 self._tcp = LaneListener(self, listener, lane)
             else:
-                self._tcp = await self.loop.create_server(lambda: _TcpProtocol(self), sock=listener)
+                self._tcp = await self.loop.create_server(lambda: _TcpProtocol(self), sock=listener,
+                                                          backlog=LISTEN_BACKLOG, start_serving=False)
         except BaseException:
             listener.close()
             raise

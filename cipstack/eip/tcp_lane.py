@@ -31,6 +31,7 @@ from typing import TYPE_CHECKING
 
 from .cpf import SockAddr
 from .io_server import IoLane, LaneTimer
+from .limits import LISTEN_BACKLOG
 
 if TYPE_CHECKING:
     from .limits import GuardedListener
@@ -52,14 +53,17 @@ _WRITABLE = select.EPOLLOUT
 
 class LaneListener:
     """The server's listening socket on the lane: accepts and hands each connection to a
-    ``LaneTcpConnection``."""
+    ``LaneTcpConnection``. Made on a bound socket; ``start_serving`` listens."""
 
     def __init__(self, server: EncapsulationServer, sock: GuardedListener, lane: IoLane) -> None:
         self.server = server
         self.sock = sock
         self.lane = lane
         self._fd = sock.fileno()
-        lane.add_reader(self._fd, self._accept)
+
+    def start_serving(self) -> None:
+        self.sock.listen(LISTEN_BACKLOG)
+        self.lane.add_reader(self._fd, self._accept)
 
     def _accept(self) -> None:
         for _ in range(ACCEPT_BATCH):
