@@ -460,3 +460,46 @@ def test_kernel_arrival_times_are_not_taken_off_the_lane() -> None:
             await endpoint.close()
 
     assert run_on(asyncio.new_event_loop(), scenario()) == (False, False)
+
+
+class WatchingCore(RecordingCore):
+    """A core whose connection is judged at each firing: it keeps how many datagrams it had by then."""
+
+    def __init__(self) -> None:
+        super().__init__(period=0.002)
+        self.judged_with: list[int] = []
+
+    def expire(self, now: float) -> list[Any]:
+        if self.deadline is not None and now >= self.deadline - self.period:
+            self.judged_with.append(len(self.received))
+        return []
+
+
+@pytest.mark.parametrize("stamped", [False, True])
+def test_after_a_stall_every_waiting_datagram_is_read_before_a_watchdog_judges(stamped: bool) -> None:
+    """The loop stalls while far more datagrams than one wake-up reads (``DRAIN_LIMIT``) come in, and
+    a firing is due when it resumes: the firing reads what waits before it judges (expire), so a
+    connection whose datagrams came in time is never taken for silent."""
+    count = 5 * DRAIN_LIMIT + 3
+
+    async def scenario() -> tuple[list[int], int]:
+        core = WatchingCore()
+        endpoint = await started(core)
+        if stamped:
+            assert endpoint.stamp_arrivals()
+        out = sender()
+        try:
+            core.deadline = asyncio.get_running_loop().time() + 0.02
+            endpoint.wakeup()
+            for index in range(count):
+                out.sendto(b"datagram %d" % index, ("127.0.0.1", endpoint.port))
+            time.sleep(0.05)  # the loop stalls past the firing; every datagram waits in the socket
+            await asyncio.sleep(0.01)
+            return core.judged_with, len(core.received)
+        finally:
+            out.close()
+            await endpoint.close()
+
+    judged_with, received = run_on(precise_event_loop(), scenario())
+    assert received == count
+    assert judged_with and judged_with[0] == count, judged_with
