@@ -470,10 +470,10 @@ class IoEndpoint:
         ``CATCH_UP_AFTER_S`` still holds (at most what its receive buffer holds). After a stall of
         the loop (a long callback, a collection, a busy machine), datagrams that came in time wait
         unread, behind the first ``DRAIN_LIMIT`` of a wake-up or not yet seen at all; a watchdog
-        judged first would close a connection whose peer kept its rate. While datagrams flow, each
-        wake-up reads to the end and this costs nothing; otherwise one read per firing."""
-        if self._lane is None:
-            return
+        judged first would close a connection whose peer kept its rate. On the lane, while datagrams
+        flow, each wake-up reads to the end and this costs nothing; otherwise one read per firing.
+        Off the lane, asyncio's transport reads one datagram per round of its loop, after which the
+        due timers run: the firing reads the socket itself, which the transport then finds empty."""
         emptied = self._emptied_at
         drain = self._drain_stamped if self.kernel_arrival_times else self._drain
         sockets = [self._sock] if self._sock is not None else []
