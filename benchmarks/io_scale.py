@@ -4,10 +4,7 @@ Starts the adapter emulator (default profile, ``--max-io-connections 1024``) as 
 loopback ports, then for each step of a ladder (RPI, connections) opens that many input-only
 connections (heartbeat 198 -> input 71, timeout multiplier 3 as ``io.py`` (a) uses at 1 ms) from
 ``--originators`` scanner processes (cipstack's ``Scanner`` on the precise event loop, the
-connections split evenly) and measures ``--seconds``. The scanners run at nice 10: on a machine
-they share with the adapter they stand for scanners on other machines, and a core they hold does
-not delay the adapter's productions (what they cannot send at that priority shows in the O->T
-rate, which a step must carry too).
+connections split evenly) and measures ``--seconds``:
 
 * T->O: packets received per second, late packets (an interval above 1.5 RPI: more than half an RPI
   after the packet was due), lost packets (gaps in the sequence), connections timed out. Packets
@@ -53,8 +50,6 @@ DEFAULT_LADDER = ("10ms:128,256,384,512", "1ms:16,32,48,64")
 PACKETS_TARGET = 60_000
 TARGET_STEPS = ((0.010, 512), (0.001, 64))
 LATE_LIMIT_PCT = 1.0
-#: The scanners' niceness (see the module docstring).
-SCANNER_NICE = 10
 RATE_SHARE = 0.99
 
 
@@ -153,8 +148,7 @@ def run_step(port: int, io_port: int, adapter_pid: int, rpi: float, connections:
     processes = [subprocess.Popen([sys.executable, os.path.abspath(__file__), "--originate", "--port", str(port),
                                    "--io-port", str(io_port), "--rpi", str(rpi), "--connections", str(share),
                                    "--seconds", str(seconds), "--settle", str(settle)],
-                                  stdout=subprocess.PIPE, text=True, preexec_fn=lambda: os.nice(SCANNER_NICE))
-                 for share in shares if share]
+                                  stdout=subprocess.PIPE, text=True) for share in shares if share]
     try:
         for process in processes:  # every originator has opened and settled
             assert process.stdout is not None
