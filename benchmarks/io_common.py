@@ -19,32 +19,16 @@ from functools import cache
 from pathlib import Path
 from typing import TYPE_CHECKING
 
+# The tests' helpers serve the benchmarks too: one definition of a free port (TCP and UDP alike).
+sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
+from tests.ports import free_port
+
 if TYPE_CHECKING:
     from cipstack.eip.io_target import IoProfile
 
+__all__ = ["free_port"]
+
 CLOCK_TICKS = os.sysconf("SC_CLK_TCK")
-
-
-def free_port(*hosts: str) -> int:
-    """A port free for both TCP and UDP on every one of ``hosts`` (default 127.0.0.1)."""
-    hosts = hosts or ("127.0.0.1",)
-    for _ in range(100):
-        with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as probe:
-            probe.bind((hosts[0], 0))
-            port = int(probe.getsockname()[1])
-        sockets: list[socket.socket] = []
-        try:
-            for host in hosts:
-                for kind in (socket.SOCK_STREAM, socket.SOCK_DGRAM):
-                    sockets.append(socket.socket(socket.AF_INET, kind))
-                    sockets[-1].bind((host, port))
-        except OSError:
-            continue
-        finally:
-            for sock in sockets:
-                sock.close()
-        return port
-    raise RuntimeError(f"no port free for TCP and UDP on {', '.join(hosts)}")
 
 
 @cache
