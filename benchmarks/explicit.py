@@ -425,7 +425,9 @@ def summarise(runs: list[Run]) -> dict[str, float | bool | None]:
     })
     if many is not None and many_echo is not None:
         summary.update({"adapter_8_clients_us": many.server_cpu_us, "echo_8_clients_us": many_echo.server_cpu_us,
-                        "adapter_8_clients_target_us": EIGHT_CLIENTS_TARGET_US})
+                        "adapter_8_clients_target_us": EIGHT_CLIENTS_TARGET_US,
+                        "adapter_8_clients_user_us": many.server_user_us,
+                        "echo_8_clients_user_us": many_echo.server_user_us})
     if idle is not None and idle_echo is not None:
         added = paired_differences(idle, raw)
         low, high, confidence = median_bounds(added)
@@ -466,6 +468,10 @@ def verdicts(summary: dict[str, Any]) -> list[Verdict]:
     found = [Verdict("adapter user CPU per Get_Attribute_Single, 1 client", summary["adapter_user_us"],
                      USER_CPU_TARGET_US, "µs", floor=summary["echo_asyncio_user_us"])]
     if "adapter_8_clients_us" in summary:
+        # The issue gives the user CPU "from 21.5 at one client, 12.5 at eight": both are judged.
+        found.append(Verdict(f"adapter user CPU per Get_Attribute_Single, {CLIENTS} clients",
+                             summary["adapter_8_clients_user_us"], USER_CPU_TARGET_US, "µs",
+                             floor=summary["echo_8_clients_user_us"]))
         found.append(Verdict(f"adapter CPU per request, {CLIENTS} clients (user + system)",
                              summary["adapter_8_clients_us"], EIGHT_CLIENTS_TARGET_US, "µs",
                              floor=summary["echo_8_clients_us"]))

@@ -73,3 +73,20 @@ def test_the_idle_sessions_pair_is_measured_back_to_back_in_either_order_by_turn
     # Without extra rounds, as many runs of the pair as of the others.
     assert [b.client for b in explicit.schedule([raw, idle, many], [raw, idle], rounds=1, idle_rounds=0)] == [
         "raw", "raw +100 idle", "raw x8"]
+
+
+def test_user_cpu_is_judged_at_one_client_and_at_eight() -> None:
+    """The issue gives the user CPU target "from 21.5 at one client, 12.5 at eight": a verdict each,
+    beside the echo server's figure for the same clients; the eight clients' total has its own."""
+    def run(client: str, server: str, user: float, system: float) -> explicit.Run:
+        return explicit.Run(client, server, 1, 1.0, 1.0, user + system, 0.0, user, system,
+                            server_cpu_rounds_us=(user + system,))
+
+    runs = [run("raw", "adapter", 12.0, 20.0), run("raw x8", "adapter", 4.5, 7.0),
+            run("raw", "echo-asyncio", 8.0, 20.0), run("raw x8", "echo-asyncio", 2.5, 6.0),
+            run("raw", "echo-socket", 2.0, 20.0)]
+    lines = {v.name: v.line() for v in explicit.verdicts(explicit.summarise(runs))}
+    assert lines["adapter user CPU per Get_Attribute_Single, 1 client"].startswith("[FAIL]")
+    eight = lines["adapter user CPU per Get_Attribute_Single, 8 clients"]
+    assert eight.startswith("[PASS]") and "4.5 µs" in eight and "echo floor 2.5 µs" in eight, eight
+    assert lines["adapter CPU per request, 8 clients (user + system)"].startswith("[PASS]")
