@@ -11,7 +11,7 @@ from collections.abc import Callable, Iterable, Mapping
 from .assemblies.schema import AssemblySchema
 from .cip.model import AttributeSpec, ClassSpec
 from .cip.types import UINT
-from .eip.connection_manager import SPEC as CONNECTION_MANAGER_SPEC
+from .eip.cm_spec import SPEC as CONNECTION_MANAGER_SPEC
 from .objects.assembly import SPEC as ASSEMBLY_SPEC
 from .objects.identity import identity_spec
 from .objects.message_router import SPEC as MESSAGE_ROUTER_SPEC

@@ -343,7 +343,8 @@ def test_the_command_word_is_found_past_the_global_options(argv: list[str], word
 def test_a_one_shot_get_loads_neither_the_eds_tool_nor_a_device_profile() -> None:
     """The eds and capture commands' arguments are built only for them; a standard attribute
     decodes without the device's profile, and data types without ``construct`` (assembly schemas
-    import it when they build their parser): `cipstack get` stays a short process."""
+    import it when they build their parser); names come from the Connection Manager's declaration
+    without its Forward_Open codecs: `cipstack get` stays a short process."""
     port = free_port()
     adapter = subprocess.Popen([sys.executable, "-m", "cipstack", "adapter", "--port", str(port), "--io-port",
                                 str(free_port()), "--log-level", "WARNING", "--quiet"], stdout=subprocess.DEVNULL,
@@ -352,7 +353,8 @@ def test_a_one_shot_get_loads_neither_the_eds_tool_nor_a_device_profile() -> Non
         probe = (f"import runpy, sys; sys.argv = ['cipstack', 'get', '127.0.0.1:{port}', '1/1/7'];\n"
                  "try:\n    runpy.run_module('cipstack', run_name='__main__')\nexcept SystemExit as e:\n"
                  "    print(sorted(m for m in sys.modules if m.startswith(('cipstack.eds', 'cipstack.capture',"
-                 " 'cipstack.devices', 'construct'))), e.code)")
+                 " 'cipstack.devices', 'construct', 'cipstack.eip.cm_messages', 'cipstack.eip.connection_manager'"
+                 "))), e.code)")
         deadline = time.monotonic() + 10
         while True:
             out = subprocess.run([sys.executable, "-c", probe], capture_output=True, text=True, timeout=30)

@@ -18,10 +18,9 @@ from typing import Any, Protocol
 
 from ..cip.epath import ElectronicKey, LogicalSegment, LogicalType, PortSegment, decode_path
 from ..cip.messages import MessageRouterRequest, MessageRouterResponse, Service
-from ..cip.model import AttributeSpec, CipObject, ClassSpec, Instance
+from ..cip.model import CipObject, Instance
 from ..cip.router import RequestContext
 from ..cip.status import CipError, ExtendedStatus, GeneralStatus
-from ..cip.types import UINT
 from .cm_messages import (
     ConnectionTriad,
     ConnectionType,
@@ -32,32 +31,9 @@ from .cm_messages import (
     UnconnectedSendRequest,
     forward_open_failure_data,
 )
+from .cm_spec import BACKPLANE_PORT, SPEC
 
 log = logging.getLogger(__name__)
-
-CLASS_ID = 0x06
-#: Backplane port of a device: a route path "port 1, link 0" addresses the device itself.
-BACKPLANE_PORT = 1
-
-SPEC = ClassSpec(
-    CLASS_ID, "Connection Manager", revision=1,
-    instance_attributes=(
-        AttributeSpec(1, "Open Requests", UINT, default=0),
-        AttributeSpec(2, "Open Format Rejects", UINT, default=0),
-        AttributeSpec(3, "Open Resource Rejects", UINT, default=0),
-        AttributeSpec(4, "Open Other Rejects", UINT, default=0),
-        AttributeSpec(5, "Close Requests", UINT, default=0),
-        AttributeSpec(6, "Close Format Requests", UINT, default=0),
-        AttributeSpec(7, "Close Other Requests", UINT, default=0),
-        AttributeSpec(8, "Connection Timeouts", UINT, default=0),
-    ),
-    class_services=frozenset({Service.GET_ATTRIBUTE_SINGLE}),
-    instance_services=frozenset({
-        Service.GET_ATTRIBUTE_SINGLE, Service.GET_ATTRIBUTES_ALL, Service.FORWARD_OPEN,
-        Service.LARGE_FORWARD_OPEN, Service.FORWARD_CLOSE, Service.UNCONNECTED_SEND,
-    }),
-)
-
 
 def origin_host(origin: str) -> str:
     """The originator's address in a ``host:port`` origin text: a connection is named by its triad
