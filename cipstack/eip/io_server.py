@@ -90,7 +90,7 @@ CATCH_UP_AFTER_S = 0.001
 #: Linux's SO_TIMESTAMPNS, also the type of its control message (SCM_TIMESTAMPNS), which Python's
 #: socket module does not name: the kernel stamps each datagram with the time it reached the socket.
 SO_TIMESTAMPNS = 35
-_TIMESPEC = struct.Struct("@qq")
+_TIMESPEC = struct.Struct("@ll")  # struct timespec: two C longs (8 bytes each on 64-bit Linux, 4 on 32-bit)
 _STAMP_SPACE = socket.CMSG_SPACE(_TIMESPEC.size)
 
 #: The receive buffer asked for a class 1 socket. One socket takes every connection's datagrams
