@@ -59,9 +59,7 @@ class _TcpProtocol(asyncio.Protocol):
         assert isinstance(transport, asyncio.Transport)
         peer = transport.get_extra_info("peername")
         host = peer[0] if peer else "?"
-        limiter = self.server.limiter
-        if not limiter.admit(host):
-            self.server.refused_log("TCP connection from %s refused: %s", host, limiter.reason(host))
+        if not self.server.admit(host):
             transport.abort()
             return
         self._admitted_host = host
@@ -72,11 +70,9 @@ class _TcpProtocol(asyncio.Protocol):
         sock_obj = transport.get_extra_info("socket")
         if sock_obj is not None:
             sock_obj.setsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY, 1)
-        self.connection = self.server.target.connection(peer_text, local, self.loop.time())
         # Replies above 64 KiB unsent pause reading (see pause_writing).
         transport.set_write_buffer_limits(high=64 * 1024)
-        self.server.connections.add(self)
-        log.info("%s: TCP connection accepted", peer_text)
+        self.connection = self.server.opened(self, peer_text, local)
         self._arm()
 
     def data_received(self, data: bytes) -> None:
@@ -103,16 +99,12 @@ class _TcpProtocol(asyncio.Protocol):
             self.transport.resume_reading()
 
     def connection_lost(self, exc: Exception | None) -> None:
-        if self._admitted_host is not None:
-            self.server.limiter.release(self._admitted_host)
-            self._admitted_host = None
         if self._timer is not None:
             self._timer.cancel()
             self._timer = None
-        if self.connection is not None:
-            self.connection.connection_lost()
-            log.info("%s: TCP connection closed", self.connection.peer)
-        self.server.connections.discard(self)
+        if self._admitted_host is not None:
+            self.server.closed(self, self._admitted_host, self.connection)
+            self._admitted_host = None
 
     def write_buffer_size(self) -> int:
         """Reply bytes the transport holds because the socket would not take them."""
@@ -232,6 +224,33 @@ class EncapsulationServer:
         self._local: SockAddr | None = None
         self._delayed_timer: asyncio.TimerHandle | None = None
         self._delayed_at: float | None = None
+
+    # -- what both kinds of TCP connection (``_TcpProtocol``, ``LaneTcpConnection``) share ----------
+    def admit(self, host: str) -> bool:
+        """Whether a TCP connection from ``host`` may be served (``ConnectionLimiter``); a refusal is
+        logged, at a bounded rate. An admitted host is released by ``closed``."""
+        if self.limiter.admit(host):
+            return True
+        self.refused_log("TCP connection from %s refused: %s", host, self.limiter.reason(host))
+        return False
+
+    def opened(self, served: _TcpProtocol | LaneTcpConnection, peer_text: str,
+               local: SockAddr) -> EncapsulationConnection:
+        """The sans-I/O connection of an admitted TCP connection, which the server now holds."""
+        connection = self.target.connection(peer_text, local, self.loop.time())
+        self.connections.add(served)
+        log.info("%s: TCP connection accepted", peer_text)
+        return connection
+
+    def closed(self, served: _TcpProtocol | LaneTcpConnection | None, host: str,
+               connection: EncapsulationConnection | None) -> None:
+        """An admitted TCP connection has ended (None: before it was ``opened``): its host's place,
+        its session and its class 3 connections go."""
+        self.limiter.release(host)
+        if connection is not None:
+            connection.connection_lost()
+            log.info("%s: TCP connection closed", connection.peer)
+        self.connections.discard(served)
 
     def local_address(self) -> SockAddr:
         if self._local is None or self._local.port != self.port:

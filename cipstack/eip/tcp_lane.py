@@ -94,8 +94,7 @@ class LaneTcpConnection:
         self.host = host
         self._fd = sock.fileno()
         local = sock.getsockname()
-        self.connection: EncapsulationConnection = server.target.connection(
-            peer_text, SockAddr(local[0], local[1]), server.loop.time())
+        self.connection: EncapsulationConnection = server.opened(self, peer_text, SockAddr(local[0], local[1]))
         #: Reply bytes the socket has not taken yet; reading waits until they are gone.
         self._unsent = b""
         self._close_when_sent = False
@@ -106,9 +105,7 @@ class LaneTcpConnection:
     def accepted(cls, server: EncapsulationServer, sock: socket.socket, peer: tuple[str, int],
                  lane: IoLane) -> LaneTcpConnection | None:
         host = peer[0] if peer else "?"
-        limiter = server.limiter
-        if not limiter.admit(host):
-            server.refused_log("TCP connection from %s refused: %s", host, limiter.reason(host))
+        if not server.admit(host):
             with contextlib.suppress(OSError):  # the peer may have reset it already
                 sock.setsockopt(socket.SOL_SOCKET, socket.SO_LINGER, b"\x01\x00\x00\x00\x00\x00\x00\x00")
             sock.close()  # a reset, as asyncio's abort() gives on the other path
@@ -119,13 +116,11 @@ class LaneTcpConnection:
             peer_text = f"{peer[0]}:{peer[1]}"
             served = cls(server, sock, host, peer_text, lane)
         except OSError as exc:  # reset before we looked at it
-            limiter.release(host)
+            server.closed(None, host, None)
             sock.close()
             log.debug("TCP connection from %s lost at accept: %s", host, exc)
             return None
-        server.connections.add(served)
         lane.add_reader(served._fd, served._on_ready)
-        log.info("%s: TCP connection accepted", peer_text)
         served._arm()
         return served
 
@@ -216,8 +211,5 @@ class LaneTcpConnection:
             self._timer = None
         self.lane.remove_reader(self._fd)
         self.sock.close()
-        self.server.limiter.release(self.host)
-        self.connection.connection_lost()
-        log.info("%s: TCP connection closed", self.connection.peer)
-        self.server.connections.discard(self)
+        self.server.closed(self, self.host, self.connection)
 
