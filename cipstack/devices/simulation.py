@@ -50,21 +50,17 @@ class TimedSimulation(ABC):
 
     def _at_rest(self) -> bool:
         """True when nothing changes by itself (no ramp, no counter running, no timer pending), so
-        that moving to a later instant changes nothing but the clock; families that can tell cheaply
-        say so (``advance_to``)."""
+        that moving to a later instant is ``_run_until`` alone, and there is no next deadline;
+        families that can tell cheaply say so (``advance_to``)."""
         return False
 
-    def _rest_until(self, moment: float) -> None:
-        """Move the clock of a simulation at rest to ``moment`` if that is later; called only when
-        ``_at_rest()``."""
-        self.advance(max(moment, self.time))
-
     def advance_to(self, now: float) -> float | None:
-        """``advance`` to ``now`` (or to where the simulation is, if that is later), then
-        ``next_deadline()``: the shell's call before every request. A simulation at rest only moves
-        its clock, all the rest being the same as nothing."""
+        """``advance`` to ``now`` (or stay, if the simulation is already later), then
+        ``next_deadline()``: the shell's call before every request. A simulation at rest has no
+        timer to fire and no deadline to look for."""
         if self._at_rest():
-            self._rest_until(now)
+            if now > self.time:
+                self._run_until(now)
             return None
         self.advance(max(now, self.time))
         return self.next_deadline()

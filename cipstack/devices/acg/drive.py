@@ -213,18 +213,15 @@ class AcgDrive(RunCommands, Ramps, Trips, LostCommand, RegisterEffects, Computed
         return self._password
 
     def _run_until(self, moment: float) -> None:
-        self._ramp(max(0.0, moment - self._time))
+        if self._output_on:  # off, nothing ramps and nothing counts (``_segment``, ``_ramp``)
+            self._ramp(max(0.0, moment - self._time))
         self._time = moment
 
     def _at_rest(self) -> bool:
-        # Output off: no ramp and no run-time counting (``_ramp``); no command-loss watch running:
-        # no timer (``_timer_deadline``). The stopped drive of most explicit traffic.
+        # Output off: no ramp and no run-time counting (``_run_until``); no command-loss watch
+        # running: no timer (``_timer_deadline``). The stopped drive of most explicit traffic.
         return (not self._output_on and self._io_watch.silent_since is None
                 and self._modbus_watch.silent_since is None)
-
-    def _rest_until(self, moment: float) -> None:
-        if moment > self._time:
-            self._time = moment
 
     # -----------------------------------------------------------------------------------------
     # Speeds
