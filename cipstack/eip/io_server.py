@@ -84,14 +84,26 @@ MAX_DATAGRAM = 65535
 CATCH_UP_READS = 64
 
 #: A socket read to its end this recently holds nothing a watchdog could miss: less than the
-#: shortest class 1 timeout (RPI 0.5 ms x 4).
+#: shortest connection timeout (``io_core.connection_timeout``, RPI x 4 x 2^multiplier: 2 ms at the
+#: 0.5 ms RPI ``cipstack io`` runs, with multiplier 0).
 CATCH_UP_AFTER_S = 0.001
 
 #: Linux's SO_TIMESTAMPNS, also the type of its control message (SCM_TIMESTAMPNS), which Python's
-#: socket module does not name: the kernel stamps each datagram with the time it reached the socket.
+#: socket module does not name (35 in <asm-generic/socket.h>, the x86, ARM and RISC-V value): the
+#: kernel stamps each datagram with the time it reached the socket.
 SO_TIMESTAMPNS = 35
 _TIMESPEC = struct.Struct("@ll")  # struct timespec: two C longs (8 bytes each on 64-bit Linux, 4 on 32-bit)
 _STAMP_SPACE = socket.CMSG_SPACE(_TIMESPEC.size)
+
+
+def _kernel_time(ancillary: list[tuple[int, int, bytes]], offset: float) -> float | None:
+    """The kernel's receive time of a datagram (``recvmsg``'s control messages, SO_TIMESTAMPNS) on the
+    monotonic clock, ``offset`` being wall clock minus monotonic; None when the message lacks it."""
+    for level, kind, stamp in ancillary:
+        if level == socket.SOL_SOCKET and kind == SO_TIMESTAMPNS and len(stamp) >= _TIMESPEC.size:
+            seconds, nanoseconds = _TIMESPEC.unpack_from(stamp)
+            return seconds - offset + nanoseconds * 1e-9
+    return None
 
 #: The receive buffer asked for a class 1 socket. One socket takes every connection's datagrams
 #: (an originator's, an adapter's 2222), and what arrives while the process is not scheduled waits
@@ -387,7 +399,8 @@ class IoEndpoint:
         self.send_errors = 0
         #: Datagrams are given to the core with the time the kernel received them (``stamp_arrivals``).
         self.kernel_arrival_times = False
-        #: On the lane, when each socket was last read to its end (``_catch_up``).
+        #: When each socket was last read to its end (``_catch_up``), by socket: the endpoint's own and
+        #: each group's, every socket the endpoint reads.
         self._emptied_at: dict[socket.socket, float] = {}
 
     async def start(self) -> None:
@@ -408,6 +421,7 @@ class IoEndpoint:
             raise
         self.transport = await self._serve(sock)
         self._sock = sock
+        self._emptied_at[sock] = -math.inf
         self.port = sock.getsockname()[1]
         self.wakeup()
         log.info("class 1 I/O on UDP %s:%d", self.host, self.port)
@@ -426,33 +440,36 @@ class IoEndpoint:
             return False
         if not self.kernel_arrival_times:
             self.kernel_arrival_times = True
-            sockets = [self._sock] if self._sock is not None else []
-            for sock in [*sockets, *(sock for sock, _ in self._groups.values())]:
-                self._stamp(sock)
+            for sock in self._emptied_at:
+                sock.setsockopt(socket.SOL_SOCKET, SO_TIMESTAMPNS, 1)
         return True
-
-    def _stamp(self, sock: socket.socket) -> None:
-        sock.setsockopt(socket.SOL_SOCKET, SO_TIMESTAMPNS, 1)
-        self._lane.remove_reader(sock.fileno())  # type: ignore[union-attr]
-        self._lane.add_reader(sock.fileno(), lambda: self._drain_stamped(sock))  # type: ignore[union-attr]
 
     async def _serve(self, sock: socket.socket) -> asyncio.DatagramTransport | None:
         """Feed what ``sock`` receives to the core: on the lane, or through a transport (returned)."""
         if self._lane is not None:
             sock.setblocking(False)
-            self._lane.add_reader(sock.fileno(), lambda: self._drain(sock))
             if self.kernel_arrival_times:
-                self._stamp(sock)
+                sock.setsockopt(socket.SOL_SOCKET, SO_TIMESTAMPNS, 1)
+            self._lane.add_reader(sock.fileno(), lambda: self._drain(sock))
             return None
         transport, _ = await self.loop.create_datagram_endpoint(lambda: _UdpIo(self), sock=sock)
         return transport  # type: ignore[return-value]
 
     def _drain(self, sock: socket.socket) -> None:
-        """The lane's reader: what the socket holds, up to ``DRAIN_LIMIT`` datagrams, to the core."""
+        """The lane's reader: what the socket holds, up to ``DRAIN_LIMIT`` datagrams, to the core, each
+        with the time it was read, or with ``kernel_arrival_times`` the time the kernel received it."""
         receive, clock = self.core.receive, time.monotonic  # the lane's loop keeps time.monotonic()
+        stamped = self.kernel_arrival_times
+        if stamped:
+            # The kernel stamps with the wall clock; the loop keeps the monotonic one. Their
+            # difference, taken once per wake-up, converts (they drift apart by microseconds at most).
+            offset = time.time() - clock()
         for _ in range(DRAIN_LIMIT):
             try:
-                data, source = sock.recvfrom(MAX_DATAGRAM)
+                if stamped:
+                    data, ancillary, _flags, source = sock.recvmsg(MAX_DATAGRAM, _STAMP_SPACE)
+                else:
+                    data, source = sock.recvfrom(MAX_DATAGRAM)
             except (BlockingIOError, InterruptedError):
                 self._emptied_at[sock] = clock()
                 return
@@ -460,8 +477,9 @@ class IoEndpoint:
                 log.debug("class 1 UDP error: %s", exc)
                 self._emptied_at[sock] = clock()
                 return
+            now = _kernel_time(ancillary, offset) if stamped else None
             try:
-                receive(data, source, clock())
+                receive(data, source, clock() if now is None else now)
             except Exception:  # a datagram must never take the I/O path down
                 log.exception("class 1 datagram from %s", source)
 
@@ -475,39 +493,11 @@ class IoEndpoint:
         Off the lane, asyncio's transport reads one datagram per round of its loop, after which the
         due timers run: the firing reads the socket itself, which the transport then finds empty."""
         emptied = self._emptied_at
-        drain = self._drain_stamped if self.kernel_arrival_times else self._drain
-        sockets = [self._sock] if self._sock is not None else []
-        for sock in [*sockets, *(sock for sock, _ in self._groups.values())]:
+        for sock in emptied:
             for _ in range(CATCH_UP_READS):
-                if now - emptied.get(sock, -math.inf) <= CATCH_UP_AFTER_S:
+                if now - emptied[sock] <= CATCH_UP_AFTER_S:
                     break
-                drain(sock)
-
-    def _drain_stamped(self, sock: socket.socket) -> None:
-        """``_drain`` with the kernel's arrival time of each datagram (``stamp_arrivals``)."""
-        receive, monotonic = self.core.receive, time.monotonic
-        # The kernel stamps with the wall clock; the loop keeps the monotonic one. Their difference,
-        # taken once per wake-up, converts (the two drift apart by at most microseconds in between).
-        offset = time.time() - monotonic()
-        for _ in range(DRAIN_LIMIT):
-            try:
-                data, ancillary, _flags, source = sock.recvmsg(MAX_DATAGRAM, _STAMP_SPACE)
-            except (BlockingIOError, InterruptedError):
-                self._emptied_at[sock] = monotonic()
-                return
-            except OSError as exc:
-                log.debug("class 1 UDP error: %s", exc)
-                self._emptied_at[sock] = monotonic()
-                return
-            now = None
-            for level, kind, stamp in ancillary:
-                if level == socket.SOL_SOCKET and kind == SO_TIMESTAMPNS and len(stamp) >= _TIMESPEC.size:
-                    seconds, nanoseconds = _TIMESPEC.unpack_from(stamp)
-                    now = seconds - offset + nanoseconds * 1e-9
-            try:
-                receive(data, source, monotonic() if now is None else now)
-            except Exception:
-                log.exception("class 1 datagram from %s", source)
+                self._drain(sock)
 
     async def join_multicast(self, group: str, port: int) -> None:
         """Also receive what is sent to ``group:port`` (multicast T->O data), on this endpoint's interface.
@@ -528,6 +518,7 @@ class IoEndpoint:
             sock.close()
             raise
         self._groups[key] = sock, await self._serve(sock)
+        self._emptied_at[sock] = -math.inf
 
     def wakeup(self) -> None:
         """Re-arm the timer (a connection opened, so a deadline may be earlier)."""
