@@ -10,6 +10,7 @@ from __future__ import annotations
 import logging
 from collections.abc import Callable
 from dataclasses import dataclass, field
+from functools import partial
 from typing import Any
 
 from .epath import parse_application_path
@@ -114,29 +115,20 @@ class MessageRouter:
             return None
         if getter is None and not spec.access.readable:
             return None
-        encode, counts, failure = spec.type.encode, self.status_counts, self._failure
-        if getter is not None:
-            def read_class_attribute() -> bytes | None:
-                try:
-                    data = encode(getter())
-                except Exception as exc:
-                    return failure(_GET_ATTRIBUTE_SINGLE, exc).encode()
-                counts[0] = counts.get(0, 0) + 1
-                return _GET_ATTRIBUTE_SINGLE_REPLY + data
-            reader = read_class_attribute
-        else:
-            instances, read, held = obj.instances, obj.read_attribute, instance
+        # A class attribute has its getter; an instance attribute is read from the instance found now,
+        # which must still be the one that exists when the reader reads.
+        value = getter if getter is not None else partial(obj.read_attribute, instance, spec)
+        encode, counts, failure, instances = spec.type.encode, self.status_counts, self._failure, obj.instances
 
-            def read_instance_attribute() -> bytes | None:
-                if instances.get(instance_id) is not held:
-                    return None
-                try:
-                    data = encode(read(held, spec))
-                except Exception as exc:
-                    return failure(_GET_ATTRIBUTE_SINGLE, exc).encode()
-                counts[0] = counts.get(0, 0) + 1
-                return _GET_ATTRIBUTE_SINGLE_REPLY + data
-            reader = read_instance_attribute
+        def reader() -> bytes | None:
+            if instance is not None and instances.get(instance_id) is not instance:
+                return None
+            try:
+                data = encode(value())
+            except Exception as exc:
+                return failure(_GET_ATTRIBUTE_SINGLE, exc).encode()
+            counts[0] = counts.get(0, 0) + 1
+            return _GET_ATTRIBUTE_SINGLE_REPLY + data
         if len(self._readers) < MAX_ATTRIBUTE_READERS:
             self._readers[raw] = reader
         return reader

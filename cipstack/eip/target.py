@@ -57,7 +57,7 @@ _UNCONNECTED_DATA = int(ItemType.UNCONNECTED_DATA)
 _RR_TWO_ITEMS = struct.Struct("<IHHHHHH")
 _RR_TWO_ITEMS_SIZE = _RR_TWO_ITEMS.size
 #: Its reply frame up to the reply's bytes: the encapsulation header and the same two items.
-_RR_REPLY_FRAME = struct.Struct("<HHII8sI" + "IHHHHHH")
+_RR_REPLY_FRAME = struct.Struct(HEADER.format + _RR_TWO_ITEMS.format.lstrip("<"))
 
 #: UDP ListIdentity reply delay (CIP Vol. 2, 2-4.2.3): random between 0 and the MaxResponseDelay of
 #: the request (the first UINT of the sender context, in ms); 0 means 2000 ms, 1..500 mean 500 ms.
