@@ -53,6 +53,8 @@ SEND_RR_DATA = 0x006F
 #: Get_Attribute_Single, path 20 01 24 01 30 07 (Identity 1/1/7: product name).
 GET_PRODUCT_NAME = bytes((0x0E, 0x03, 0x20, 0x01, 0x24, 0x01, 0x30, 0x07))
 EXPECTED_NAME = b"\x04CENT"
+#: RegisterSession, protocol version 1, no options.
+REGISTER_FRAME = HEADER.pack(REGISTER_SESSION, 4, 0, 0, b"\x00" * 8, 0) + b"\x01\x00\x00\x00"
 ADAPTER_CPU_TARGET_US = 100.0
 #: Issue 16's targets (from a C adapter stack on the same machine): adapter user CPU per request with
 #: one client, total CPU per request with eight clients, and what 100 idle sessions may add.
@@ -233,6 +235,13 @@ def repeat(call: Callable[[], object]) -> Callable[[int], None]:
     return batch
 
 
+def get_product_name_frame(session: int) -> bytes:
+    """The raw clients' request: a SendRRData of ``session`` with a Null Address and an Unconnected
+    Data item carrying ``GET_PRODUCT_NAME``."""
+    body = struct.pack("<IHHHHHH", 0, 0, 2, 0, 0, 0xB2, len(GET_PRODUCT_NAME)) + GET_PRODUCT_NAME
+    return HEADER.pack(SEND_RR_DATA, len(body), session, 0, b"bench\x00\x00\x00", 0) + body
+
+
 class RawClient:
     """A registered session and a pre-built SendRRData frame; the least work a client can do."""
 
@@ -241,10 +250,9 @@ class RawClient:
         self.sock.setsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY, 1)
         session = 0
         if register:
-            self.sock.sendall(HEADER.pack(REGISTER_SESSION, 4, 0, 0, b"\x00" * 8, 0) + b"\x01\x00\x00\x00")
+            self.sock.sendall(REGISTER_FRAME)
             session = HEADER.unpack_from(self._read())[2]
-        body = struct.pack("<IHHHHHH", 0, 0, 2, 0, 0, 0xB2, len(GET_PRODUCT_NAME)) + GET_PRODUCT_NAME
-        self.frame = HEADER.pack(SEND_RR_DATA, len(body), session, 0, b"bench\x00\x00\x00", 0) + body
+        self.frame = get_product_name_frame(session)
 
     def _read(self) -> bytes:
         sock = self.sock

@@ -23,31 +23,29 @@ from __future__ import annotations
 
 import argparse
 import asyncio
-import struct
 import sys
 import time
 from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+
+from explicit import EXPECTED_NAME, HEADER, REGISTER_FRAME, get_product_name_frame
 
 from cipstack.adapter import Adapter, AdapterSettings
 from cipstack.eip.cpf import SockAddr
 
-HEADER = struct.Struct("<HHII8sI")
-REGISTER_SESSION, SEND_RR_DATA = 0x0065, 0x006F
-#: Get_Attribute_Single, path 20 01 24 01 30 07 (Identity 1/1/7: product name).
-GET_PRODUCT_NAME = bytes((0x0E, 0x03, 0x20, 0x01, 0x24, 0x01, 0x30, 0x07))
-EXPECTED_REPLY_END = b"\x8e\x00\x00\x00\x04CENT"
+#: The reply's end: Get_Attribute_Single reply (0x8E), success, the product name.
+EXPECTED_REPLY_END = b"\x8e\x00\x00\x00" + EXPECTED_NAME
 
 
 async def measure(requests: int, rounds: int) -> float:
     adapter = Adapter(AdapterSettings(port=0, io_port=0))
     loop = asyncio.get_running_loop()
     connection = adapter.target.connection("127.0.0.1:50000", SockAddr("127.0.0.1", 44818), loop.time())
-    connection.receive(HEADER.pack(REGISTER_SESSION, 4, 0, 0, bytes(8), 0) + b"\x01\x00\x00\x00", loop.time())
+    connection.receive(REGISTER_FRAME, loop.time())
     session = HEADER.unpack_from(connection.data_to_send())[2]
-    body = struct.pack("<IHHHHHH", 0, 0, 2, 0, 0, 0xB2, len(GET_PRODUCT_NAME)) + GET_PRODUCT_NAME
-    frame = HEADER.pack(SEND_RR_DATA, len(body), session, 0, b"bench\x00\x00\x00", 0) + body
+    frame = get_product_name_frame(session)
     connection.receive(frame, loop.time())
     reply = connection.data_to_send()
     assert reply.endswith(EXPECTED_REPLY_END), reply.hex()
