@@ -61,6 +61,8 @@ ADAPTER_CPU_TARGET_US = 100.0
 USER_CPU_TARGET_US = 6.0
 EIGHT_CLIENTS_TARGET_US = 12.0
 IDLE_SESSIONS_TARGET_US = 2.0
+#: The least confidence the bounds of the idle sessions' median must hold for a verdict (5 rounds).
+IDLE_CONFIDENCE = 0.9
 CLIENTS = 8
 IDLE_SESSIONS = 100
 
@@ -493,18 +495,22 @@ def idle_verdict(summary: dict[str, Any]) -> Verdict:
 
     ``median_bounds`` bounds the median of the differences (94 % for 5 rounds, with the smallest and
     the largest; 96 % for 9, with the second smallest and the second largest): PASS only when the
-    upper bound is within the target, FAIL when the lower bound is above it; between the two the run
-    cannot tell, says INCONCLUSIVE and counts as a FAIL."""
+    upper bound is within the target, FAIL when the lower bound is above it; between the two, or with
+    bounds held at less than ``IDLE_CONFIDENCE`` (fewer than 5 rounds), the run cannot tell, says
+    INCONCLUSIVE and counts as a FAIL."""
     added, low, high = (summary["adapter_idle_added_us"], summary["adapter_idle_added_low_us"],
                         summary["adapter_idle_added_high_us"])
     rounds = summary["adapter_idle_added_rounds"]
-    confidence = 100 * summary["adapter_idle_added_confidence"]
-    conclusive = high <= IDLE_SESSIONS_TARGET_US or low > IDLE_SESSIONS_TARGET_US
-    note = (f"{rounds} paired rounds, median within {low:+.1f} .. {high:+.1f} µs ({confidence:.0f} % bounds); "
+    confident = summary["adapter_idle_added_confidence"] >= IDLE_CONFIDENCE
+    passed = confident and high <= IDLE_SESSIONS_TARGET_US
+    conclusive = passed or (confident and low > IDLE_SESSIONS_TARGET_US)
+    why = "the bounds straddle the target" if confident else "too few rounds to bound the median"
+    note = (f"{rounds} paired rounds, median within {low:+.1f} .. {high:+.1f} µs "
+            f"({100 * summary['adapter_idle_added_confidence']:.0f} % bounds); "
             f"echo server +{IDLE_SESSIONS} idle: {summary['echo_idle_added_us']:+.1f} µs"
-            + ("" if conclusive else "; the bounds straddle the target: INCONCLUSIVE on this run"))
+            + ("" if conclusive else f"; {why}: INCONCLUSIVE on this run"))
     return Verdict(f"CPU per request added by {IDLE_SESSIONS} idle sessions", added, IDLE_SESSIONS_TARGET_US, "µs",
-                   note=note, passed=high <= IDLE_SESSIONS_TARGET_US)
+                   note=note, passed=passed)
 
 
 def verdict_lines(summary: dict[str, Any]) -> list[str]:

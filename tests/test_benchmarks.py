@@ -50,6 +50,15 @@ def test_idle_sessions_verdict_is_taken_on_paired_rounds(added: list[float], ver
     assert ("INCONCLUSIVE" in line) == (verdict == "INCONCLUSIVE"), line
 
 
+@pytest.mark.parametrize("rounds", [1, 3])
+def test_too_few_idle_rounds_give_no_verdict(rounds: int) -> None:
+    """One or three paired rounds bound the median at 0 % or 75 %: however small the differences,
+    the run cannot tell (INCONCLUSIVE, a FAIL), as 5 rounds (94 %) can."""
+    raw = [40.0, 55.0, 38.0][:rounds]
+    line = explicit.idle_verdict(idle_summary([r + 0.1 for r in raw], raw)).line()
+    assert line.startswith("[FAIL]") and "too few rounds to bound the median: INCONCLUSIVE" in line, line
+
+
 def test_explicit_core_serves_the_raw_clients_request_and_prints_its_cost() -> None:
     result = subprocess.run([sys.executable, str(BENCHMARKS / "explicit_core.py"), "--requests", "500",
                              "--rounds", "2"], capture_output=True, text=True, timeout=120)
