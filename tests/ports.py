@@ -4,18 +4,26 @@ the ListIdentity probe that asks who answers on one."""
 from __future__ import annotations
 
 import asyncio
+import collections
 import socket
 import struct
+
+#: The numbers handed out last: the OS may pick a number it has just picked again, and two calls in
+#: a row (an adapter's --port and --io-port) must not get the same one.
+_GIVEN: collections.deque[int] = collections.deque(maxlen=256)
 
 
 def free_port(*hosts: str) -> int:
     """A port number free for both TCP and UDP on every one of ``hosts`` (default 127.0.0.1): an
-    adapter listens on both, and two loopback addresses may each need the same number."""
+    adapter listens on both, and two loopback addresses may each need the same number. Never one of
+    the last numbers it gave (they are free only until their caller binds them)."""
     hosts = hosts or ("127.0.0.1",)
     for _ in range(100):
         with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as probe:
             probe.bind((hosts[0], 0))
             port = int(probe.getsockname()[1])
+        if port in _GIVEN:
+            continue
         sockets: list[socket.socket] = []
         try:
             for host in hosts:
@@ -27,6 +35,7 @@ def free_port(*hosts: str) -> int:
         finally:
             for sock in sockets:
                 sock.close()
+        _GIVEN.append(port)
         return port
     raise RuntimeError(f"no port free for TCP and UDP on {', '.join(hosts)}")
 
