@@ -76,13 +76,14 @@ class MessageRouter:
 
     def handle(self, raw: bytes, context: RequestContext) -> bytes:
         """Serve one encoded request and return the encoded reply (never raises)."""
-        if len(raw) == 8 and raw[0] == _GET_ATTRIBUTE_SINGLE and context.depth <= MAX_NESTING:
-            reader = self._readers.get(raw) or self._attribute_reader(raw)
-            if reader is not None:
-                reply = reader()
-                if reply is not None:
-                    return reply
-                self._readers.pop(raw, None)  # the instance has gone, nothing was read: dispatch says so
+        reader = self._readers.get(raw)  # kept for this very request: its shape was checked then
+        if reader is None and len(raw) == 8 and raw[0] == _GET_ATTRIBUTE_SINGLE:
+            reader = self._attribute_reader(raw)
+        if reader is not None and context.depth <= MAX_NESTING:
+            reply = reader()
+            if reply is not None:
+                return reply
+            self._readers.pop(raw, None)  # the instance has gone, nothing was read: dispatch says so
         return self.dispatch(raw, context).encode()
 
     def _attribute_reader(self, raw: bytes) -> Callable[[], bytes | None] | None:

@@ -113,6 +113,12 @@ def _kernel_time(ancillary: list[tuple[int, int, bytes]], offset: float) -> floa
 RECEIVE_BUFFER = 1 << 20
 
 
+#: Events taken per epoll_wait. epoll is level-triggered and hands out its ready list in turn, so
+#: descriptors beyond these are served by the next call of the same wait, a moment later; a fixed
+#: number spares counting the registered descriptors on every call.
+HARVEST_EVENTS = 64
+
+
 class LaneTimer:
     """A callback due at ``when`` on the lane; ``cancel()`` before then and it does not run."""
 
@@ -137,7 +143,8 @@ class IoLane:
     def __init__(self, epoll: select.epoll) -> None:
         self._epoll = epoll
         self.readers: dict[int, Callable[[], None]] = {}
-        self._timers: list[tuple[float, int, LaneTimer]] = []
+        #: The timers' heap: (when, order, timer); the wait looks at its head to see whether one is due.
+        self.timers: list[tuple[float, int, LaneTimer]] = []
         self._order = itertools.count()
 
     def add_reader(self, fd: int, callback: Callable[[], None], events: int = select.EPOLLIN) -> None:
@@ -158,18 +165,18 @@ class IoLane:
 
     def call_at(self, when: float, callback: Callable[[], None]) -> LaneTimer:
         timer = LaneTimer(when, callback)
-        heapq.heappush(self._timers, (when, next(self._order), timer))
+        heapq.heappush(self.timers, (when, next(self._order), timer))
         return timer
 
     def next_deadline(self) -> float | None:
-        timers = self._timers
+        timers = self.timers
         while timers and timers[0][2].cancelled:
             heapq.heappop(timers)
         return timers[0][0] if timers else None
 
     def run_due(self, now: float) -> bool:
         """Run the timers due at ``now``; whether any ran."""
-        timers = self._timers
+        timers = self.timers
         ran = False
         while timers and timers[0][0] <= now:
             timer = heapq.heappop(timers)[2]
@@ -193,7 +200,10 @@ class PreciseEpollSelector(selectors.EpollSelector):
 
     def __init__(self) -> None:
         super().__init__()
-        self.lane = IoLane(self._selector)  # type: ignore[attr-defined]
+        epoll = self._selector  # type: ignore[attr-defined]
+        self.lane = IoLane(epoll)
+        self._poll = epoll.poll
+        self._epoll_fd: int = epoll.fileno()
         #: The loop this selector serves (set by ``PreciseEventLoop``); None: return to the caller
         #: after every wait, as any selector does.
         self.loop: PreciseEventLoop | None = None
@@ -204,70 +214,76 @@ class PreciseEpollSelector(selectors.EpollSelector):
         callback did gave it work (a callback to run, an earlier timer). While only the lane has
         work (every request of an explicit-messaging client, every class 1 packet), the selector
         waits again without handing back to asyncio: a round of asyncio's loop costs more than the
-        lane's own work on a small request."""
+        lane's own work on a small request, and a round of this wait is kept to a few dozen
+        bytecodes for the same reason (one clock reading serves the end of a round and the start
+        of the next; the lane's timers are looked at, not called, when none is due)."""
         lane = self.lane
+        timers = lane.timers
         monotonic = time.monotonic
-        until = None if timeout is None else monotonic() + max(timeout, 0.0)
-        first_timer = self._first_timer()  # the timer asyncio's timeout was taken from
+        now = monotonic()
+        until = None if timeout is None else now + max(timeout, 0.0)
+        first_timer = self._first_timer()  # the timer asyncio's timeout was taken from, or None
         # Lane timers that fell due while asyncio's callbacks ran; what they gave asyncio makes the
         # first wait a look. Later rounds end with the lane's timers run and asyncio's work looked at.
-        busy = lane.run_due(monotonic()) and self._asyncio_has_work(first_timer)
-        while True:
-            wait = 0.0 if busy else None if until is None else until - monotonic()
-            lane_at = lane.next_deadline()
-            if lane_at is not None:
-                lane_wait = lane_at - monotonic()
-                if wait is None or lane_wait < wait:
-                    wait = lane_wait
-            ready = self._wait_and_harvest(wait)
+        busy = False
+        if timers and timers[0][0] <= now and lane.run_due(now):
+            busy = self._asyncio_has_work(first_timer)
             now = monotonic()
-            lane.run_due(now)
+        while True:
+            wait = 0.0 if busy else None if until is None else until - now
+            if timers:
+                head = timers[0]
+                lane_at = lane.next_deadline() if head[2].cancelled else head[0]
+                if lane_at is not None and (wait is None or lane_at - now < wait):
+                    wait = lane_at - now
+            ready = self._wait_and_harvest(wait, now)
+            now = monotonic()
+            if timers and timers[0][0] <= now and lane.run_due(now):
+                now = monotonic()
             if busy or ready or (until is not None and now >= until) or self._asyncio_has_work(first_timer):
                 return ready
 
     # The loop's queues are asyncio's own attributes (``_ready``, ``_scheduled``, ``_stopping``: the
     # same from Python 3.4 to 3.13); only ``PreciseEventLoop`` sets ``loop``.
-    def _first_timer(self) -> float | None:
+    def _first_timer(self) -> object | None:
         loop = self.loop
         scheduled = loop._scheduled if loop is not None else None  # type: ignore[attr-defined]
-        return scheduled[0].when() if scheduled else None
+        return scheduled[0] if scheduled else None
 
-    def _asyncio_has_work(self, first_timer: float | None) -> bool:
+    def _asyncio_has_work(self, first_timer: object | None) -> bool:
         """Whether the loop has a callback ready, is stopping, or has a timer earlier than
         ``first_timer`` (the earliest it had when it asked for the wait): then ``select`` must return
-        to it."""
+        to it. Within a wait asyncio's timer heap only grows (it drops timers in its own round), so
+        a head that is no longer ``first_timer`` is an earlier timer."""
         loop = self.loop
-        if loop is None:
-            return True
-        if loop._ready or loop._stopping:  # type: ignore[attr-defined]
+        if loop is None or loop._ready or loop._stopping:  # type: ignore[attr-defined]
             return True
         scheduled = loop._scheduled  # type: ignore[attr-defined]
-        return bool(scheduled) and (first_timer is None or scheduled[0].when() < first_timer)
+        return bool(scheduled) and scheduled[0] is not first_timer
 
-    def _wait_and_harvest(self, timeout: float | None) -> list[tuple[selectors.SelectorKey, int]]:
-        """Wait until a registered socket is ready or ``timeout`` has passed, to the microsecond, with
-        as few system calls as the wait allows: an event that ends a wait of a millisecond or more
-        comes in the epoll_wait() that waited for it (one call), only the sub-millisecond rest of a
-        wait is a select() on the epoll descriptor (or a sleep, when that descriptor is numbered
-        too high for select), and a loop with something ready harvests it at once."""
+    def _wait_and_harvest(self, timeout: float | None, now: float) -> list[tuple[selectors.SelectorKey, int]]:
+        """Wait until a registered socket is ready or ``timeout`` (from ``now``) has passed, to the
+        microsecond, with as few system calls as the wait allows: an event that ends a wait of a
+        millisecond or more comes in the epoll_wait() that waited for it (one call), only the
+        sub-millisecond rest of a wait is a select() on the epoll descriptor (or a sleep, when that
+        descriptor is numbered too high for select), and a loop with something ready harvests it at
+        once."""
         if timeout is None:
             return self._harvest(-1)[0]
         if timeout <= 0:
             return self._harvest(0)[0]
-        deadline = time.monotonic() + timeout
-        whole_ms = math.floor(timeout * 1000)
-        epoll_fd = self._selector.fileno()  # type: ignore[attr-defined]
-        # epoll_wait() counts whole milliseconds: wait those there, the rest below. A wait shorter
-        # than a millisecond is the select() alone, which returns at once if something is ready;
-        # only a sleep needs a look first.
-        if whole_ms or epoll_fd >= FD_SETSIZE:
+        # epoll_wait() counts whole milliseconds (rounded up): wait those there, the rest below. A
+        # wait shorter than a millisecond is the select() alone, which returns at once if something
+        # is ready; only a sleep needs a look first.
+        whole_ms = int(timeout * 1000)
+        if whole_ms or self._epoll_fd >= FD_SETSIZE:
             ready, seen = self._harvest(whole_ms / 1000)
             if seen:
                 return ready
-        remainder = deadline - time.monotonic()
+        remainder = now + timeout - time.monotonic()
         if remainder > 0:
-            if epoll_fd < FD_SETSIZE:
-                select.select((epoll_fd,), (), (), remainder)
+            if self._epoll_fd < FD_SETSIZE:
+                select.select((self._epoll_fd,), (), (), remainder)
             else:
                 time.sleep(remainder)  # events wait at most this remainder
         return self._harvest(0)[0]
@@ -275,13 +291,12 @@ class PreciseEpollSelector(selectors.EpollSelector):
     def _harvest(self, epoll_timeout: float) -> tuple[list[tuple[selectors.SelectorKey, int]], bool]:
         """One epoll_wait: lane descriptors are served here, the others returned for asyncio (as
         ``EpollSelector.select`` does); also whether anything at all was ready."""
-        lane = self.lane
+        readers = self.lane.readers
         try:
-            events = self._selector.poll(epoll_timeout, max(len(self._fd_to_key) + len(lane.readers), 1))  # type: ignore[attr-defined]
+            events = self._poll(epoll_timeout, HARVEST_EVENTS)
         except InterruptedError:
             return [], False
         ready = []
-        readers = lane.readers
         for fd, event in events:
             # A lane descriptor an earlier callback of this wake-up removed is no longer here, nor
             # asyncio's: it is skipped below.

@@ -263,8 +263,8 @@ class EncapsulationConnection:
         # never longer than the header and the frame limit (a larger announced length closes).
         size = len(data)
         offset = 0
-        limit = self.target.settings.max_frame_length
-        stats = self.target.stats
+        target = self.target
+        limit, stats = target.settings.max_frame_length, target.stats
         while size - offset >= HEADER_SIZE and not self.closing:
             command, length, session, _status, context, options = HEADER.unpack_from(data, offset)
             if length > limit:
@@ -287,6 +287,8 @@ class EncapsulationConnection:
             except EncapsulationError as exc:
                 stats.errors += 1
                 self._reply(command, session, context, status=exc.status)
+            if offset == size:
+                return  # the common end: the read held whole frames
         if offset < size and not self.closing:
             inbox += memoryview(data)[offset:]
 
