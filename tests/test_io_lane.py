@@ -18,6 +18,7 @@ import pytest
 from cipstack.eip.io_server import (
     DRAIN_LIMIT,
     FD_SETSIZE,
+    HARVEST_EVENTS,
     RECEIVE_BUFFER,
     IoEndpoint,
     PreciseEventLoop,
@@ -390,6 +391,70 @@ def test_the_wait_returns_to_asyncio_for_what_a_lane_reader_gives_it(gives: str)
     loop = precise_event_loop()
     with nudged(loop):
         assert run_on(loop, scenario()) < 1.0
+
+
+def test_more_ready_sockets_than_one_epoll_wait_takes_are_all_served_in_the_same_wait() -> None:
+    """Each epoll_wait takes at most HARVEST_EVENTS events; the descriptors beyond them are served by
+    the next call of the same wait, each once per datagram."""
+    loop = precise_event_loop()
+    selector = loop.selector  # type: ignore[attr-defined]
+    count = 2 * HARVEST_EVENTS + 22
+    pairs = [socket.socketpair(socket.AF_UNIX, socket.SOCK_DGRAM) for _ in range(count)]
+    served: list[int] = []
+    try:
+        for index, (ours, theirs) in enumerate(pairs):
+            ours.setblocking(False)
+
+            def read(index: int = index, sock: socket.socket = ours) -> None:
+                sock.recv(64)
+                served.append(index)
+
+            selector.lane.add_reader(ours.fileno(), read)
+            theirs.send(b"x")
+        ready = selector.select(0.05)
+    finally:
+        for ours, theirs in pairs:
+            selector.lane.remove_reader(ours.fileno())
+            ours.close()
+            theirs.close()
+        loop.close()
+    assert ready == []  # nothing of asyncio's
+    assert sorted(served) == list(range(count))
+
+
+def test_a_later_asyncio_timer_given_by_a_lane_reader_does_not_end_the_wait() -> None:
+    """Only a timer earlier than asyncio's first ends the wait early; one after it (or beside it)
+    leaves the selector serving the lane until asyncio's own timeout."""
+    loop = precise_event_loop()
+    selector = loop.selector  # type: ignore[attr-defined]
+    ours, theirs = socket.socketpair(socket.AF_UNIX, socket.SOCK_DGRAM)
+    ours.setblocking(False)
+    first = loop.call_later(0.3, lambda: None)
+    later: list[asyncio.TimerHandle] = []
+
+    def read() -> None:
+        ours.recv(64)
+        later.append(loop.call_later(10.0 + len(later), lambda: None))
+
+    selector.lane.add_reader(ours.fileno(), read)
+    writer = threading.Timer(0.05, lambda: (theirs.send(b"a"), theirs.send(b"b")))
+    writer.start()
+    try:
+        start = time.monotonic()
+        ready = selector.select(0.3)
+        elapsed = time.monotonic() - start
+    finally:
+        writer.join()
+        selector.lane.remove_reader(ours.fileno())
+        ours.close()
+        theirs.close()
+        first.cancel()
+        for handle in later:
+            handle.cancel()
+        loop.close()
+    assert ready == []
+    assert len(later) == 2  # both datagrams read inside the one wait
+    assert elapsed >= 0.25, elapsed
 
 
 def test_a_stop_asked_by_a_lane_reader_ends_run_forever_at_once() -> None:
