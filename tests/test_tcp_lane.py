@@ -11,6 +11,8 @@ import asyncio
 import itertools
 import socket
 import struct
+import threading
+import time
 from collections.abc import AsyncIterator
 
 import pytest
@@ -167,4 +169,36 @@ async def test_closing_the_server_closes_its_lane_connections() -> None:
     loop = asyncio.get_running_loop()
     for sock in socks:
         assert await asyncio.wait_for(loop.sock_recv(sock, 100), 5) == b""
+        sock.close()
+
+
+async def test_a_request_that_waits_unread_through_a_stall_of_the_loop_keeps_the_connection(
+        adapter: Adapter) -> None:
+    """The loop stalls past the connection's inactivity deadline while a request, sent in time, waits
+    in the socket: the timer reads it before it judges, so the connection is not closed for a
+    silence there was not, and the request is answered."""
+    loop = asyncio.get_running_loop()
+    adapter.target.settings.inactivity_timeout = lambda: 0.3
+    sock = await connect(adapter.port)
+    buffer = bytearray()
+    session = await register(sock, buffer)  # the connection's timer: 0.3 s after the accept
+    sent = threading.Event()
+
+    def send_during_the_stall() -> None:
+        time.sleep(0.1)
+        sock.sendall(frame(SEND_RR_DATA, RR_BODY, session))
+        sent.set()
+
+    sender = threading.Thread(target=send_during_the_stall)
+    sender.start()
+    loop.call_soon(time.sleep, 0.6)  # the loop stops for 0.6 s: past the 0.3 s deadline
+    await asyncio.sleep(0)
+    sender.join()
+    assert sent.is_set()
+    try:
+        command, _session, status, _context, data = await read_frame(sock, buffer)
+        assert (command, status) == (SEND_RR_DATA, 0)
+        assert data[16:20] == b"\x8e\x00\x00\x00"  # Get_Attribute_Single, success
+        assert len(adapter.server.connections) == 1
+    finally:
         sock.close()

@@ -16,7 +16,8 @@ Behaviour is that of the asyncio path (``server._TcpProtocol``), rule for rule:
 * closing: what the connection still has to send (a 0x0065 reply to an oversized frame) goes
   out before the socket closes;
 * timers: one lane timer per connection at its next deadline (inactivity, class 3 timeouts),
-  re-armed lazily as on the asyncio path.
+  re-armed lazily as on the asyncio path; before it judges, the timer reads what waits unread on
+  the socket, so a request that came in time is not lost to a stall of the loop.
 """
 
 from __future__ import annotations
@@ -187,6 +188,16 @@ class LaneTcpConnection:
         self._timer = None
         if self._closed:
             return
+        if not self._unsent:
+            # What came in time but waits unread (the loop stalled past this deadline, and the wait
+            # runs due timers before it reads sockets) is traffic: it counts before the timers judge
+            # the connection's silence (inactivity, class 3 timeouts). Nothing waiting: one recv.
+            self._on_ready()
+            if self._closed:
+                return
+            if self._timer is not None:  # armed by the read; armed again below
+                self._timer.cancel()
+                self._timer = None
         connection = self.connection
         connection.on_timer(monotonic())
         if connection.closing or self._close_when_sent:
