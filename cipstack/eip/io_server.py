@@ -214,9 +214,9 @@ class PreciseEpollSelector(selectors.EpollSelector):
         callback did gave it work (a callback to run, an earlier timer). While only the lane has
         work (every request of an explicit-messaging client, every class 1 packet), the selector
         waits again without handing back to asyncio: a round of asyncio's loop costs more than the
-        lane's own work on a small request, and a round of this wait is kept to a few dozen
-        bytecodes for the same reason (one clock reading serves the end of a round and the start
-        of the next; the lane's timers are looked at, not called, when none is due)."""
+        lane's own work on a small request, and a round of this wait is kept short for the same
+        reason (one clock reading serves the end of a round and the start of the next; the lane's
+        timers are looked at, not called, when none is due)."""
         lane = self.lane
         timers = lane.timers
         monotonic = time.monotonic
@@ -245,12 +245,12 @@ class PreciseEpollSelector(selectors.EpollSelector):
 
     # The loop's queues are asyncio's own attributes (``_ready``, ``_scheduled``, ``_stopping``: the
     # same from Python 3.4 to 3.13); only ``PreciseEventLoop`` sets ``loop``.
-    def _first_timer(self) -> object | None:
+    def _first_timer(self) -> asyncio.TimerHandle | None:
         loop = self.loop
         scheduled = loop._scheduled if loop is not None else None  # type: ignore[attr-defined]
         return scheduled[0] if scheduled else None
 
-    def _asyncio_has_work(self, first_timer: object | None) -> bool:
+    def _asyncio_has_work(self, first_timer: asyncio.TimerHandle | None) -> bool:
         """Whether the loop has a callback ready, is stopping, or has a timer earlier than
         ``first_timer`` (the earliest it had when it asked for the wait): then ``select`` must return
         to it. Within a wait asyncio's timer heap only grows (it drops timers in its own round), so

@@ -185,19 +185,15 @@ class LaneTcpConnection:
 
     def _on_timer(self) -> None:
         # Deadlines move forward with traffic; the timer fires at the old one and re-arms lazily.
-        self._timer = None
-        if self._closed:
-            return
-        if not self._unsent:
+        if not self._closed and not self._unsent:
             # What came in time but waits unread (the loop stalled past this deadline, and the wait
             # runs due timers before it reads sockets) is traffic: it counts before the timers judge
             # the connection's silence (inactivity, class 3 timeouts). Nothing waiting: one recv.
+            # ``_timer`` still names this timer, which has fired: the read arms no other.
             self._on_ready()
-            if self._closed:
-                return
-            if self._timer is not None:  # armed by the read; armed again below
-                self._timer.cancel()
-                self._timer = None
+        self._timer = None
+        if self._closed:
+            return
         connection = self.connection
         connection.on_timer(monotonic())
         if connection.closing or self._close_when_sent:
