@@ -236,7 +236,15 @@ class PreciseEpollSelector(selectors.EpollSelector):
                 lane_at = lane.next_deadline() if head[2].cancelled else head[0]
                 if lane_at is not None and (wait is None or lane_at - now < wait):
                     wait = lane_at - now
-            ready = self._wait_and_harvest(wait, now)
+            # epoll_wait() counts whole milliseconds (rounded up): a wait of a millisecond or more
+            # waits those there, and an event that ends it comes in that call (one system call, the
+            # common case); only the sub-millisecond rest of a wait is ``_wait_rest``'s.
+            if wait is None or wait >= 0.001:
+                ready, seen = self._harvest(-1.0 if wait is None else int(wait * 1000) / 1000)
+                if not seen and wait is not None:
+                    ready = self._wait_rest(now + wait)
+            else:
+                ready = self._wait_rest(now + wait)
             now = monotonic()
             if timers and timers[0][0] <= now and lane.run_due(now):
                 now = monotonic()
@@ -261,30 +269,19 @@ class PreciseEpollSelector(selectors.EpollSelector):
         scheduled = loop._scheduled  # type: ignore[attr-defined]
         return bool(scheduled) and scheduled[0] is not first_timer
 
-    def _wait_and_harvest(self, timeout: float | None, now: float) -> list[tuple[selectors.SelectorKey, int]]:
-        """Wait until a registered socket is ready or ``timeout`` (from ``now``) has passed, to the
-        microsecond, with as few system calls as the wait allows: an event that ends a wait of a
-        millisecond or more comes in the epoll_wait() that waited for it (one call), only the
-        sub-millisecond rest of a wait is a select() on the epoll descriptor (or a sleep, when that
-        descriptor is numbered too high for select), and a loop with something ready harvests it at
-        once."""
-        if timeout is None:
-            return self._harvest(-1)[0]
-        if timeout <= 0:
-            return self._harvest(0)[0]
-        # epoll_wait() counts whole milliseconds (rounded up): wait those there, the rest below. A
-        # wait shorter than a millisecond is the select() alone, which returns at once if something
-        # is ready; only a sleep needs a look first.
-        whole_ms = int(timeout * 1000)
-        if whole_ms or self._epoll_fd >= FD_SETSIZE:
-            ready, seen = self._harvest(whole_ms / 1000)
-            if seen:
-                return ready
-        remainder = now + timeout - time.monotonic()
+    def _wait_rest(self, until: float) -> list[tuple[selectors.SelectorKey, int]]:
+        """The rest of a wait shorter than a millisecond, to ``until``, to the microsecond: a select()
+        on the epoll descriptor, which returns at once if something is ready (or, when that
+        descriptor is numbered too high for select, a look and then a sleep); then what is ready is
+        harvested. A wait already over is the harvest alone."""
+        remainder = until - time.monotonic()
         if remainder > 0:
             if self._epoll_fd < FD_SETSIZE:
                 select.select((self._epoll_fd,), (), (), remainder)
             else:
+                ready, seen = self._harvest(0)
+                if seen:
+                    return ready
                 time.sleep(remainder)  # events wait at most this remainder
         return self._harvest(0)[0]
 
