@@ -48,20 +48,10 @@ class TimedSimulation(ABC):
             self._fire_timers(deadline)
         self._run_until(now)
 
-    def _at_rest(self) -> bool:
-        """True when nothing changes by itself (no ramp, no counter running, no timer pending), so
-        that moving to a later instant is ``_run_until`` alone, and there is no next deadline;
-        families that can tell cheaply say so (``advance_to``)."""
-        return False
-
     def advance_to(self, now: float) -> float | None:
         """``advance`` to ``now`` (or stay, if the simulation is already later), then
-        ``next_deadline()``: the shell's call before every request. A simulation at rest has no
-        timer to fire and no deadline to look for."""
-        if self._at_rest():
-            if now > self.time:
-                self._run_until(now)
-            return None
+        ``next_deadline()``: the shell's call before every request. Families with a cheap way to
+        tell that nothing moves by itself override it (``AcgDrive``)."""
         self.advance(max(now, self.time))
         return self.next_deadline()
 

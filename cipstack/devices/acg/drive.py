@@ -217,6 +217,16 @@ class AcgDrive(RunCommands, Ramps, Trips, LostCommand, RegisterEffects, Computed
             self._ramp(max(0.0, moment - self._time))
         self._time = moment
 
+    def advance_to(self, now: float) -> float | None:
+        # The shell's call before every request. At rest (the stopped drive of most explicit
+        # traffic) nothing ramps, counts or times out: moving on is the clock alone, which is all
+        # ``_run_until`` does with the output off, and there is no deadline.
+        if self._at_rest():
+            if now > self._time:
+                self._time = now
+            return None
+        return super().advance_to(now)
+
     def _at_rest(self) -> bool:
         # Output off: no ramp and no run-time counting (``_run_until``); no command-loss watch
         # running: no timer (``_timer_deadline``). The stopped drive of most explicit traffic.
