@@ -210,6 +210,92 @@ def test_frames_split_and_coalesced() -> None:
     assert all(MessageRouterResponse.decode(decode_items(b, 6)[1].data).data == b"\x64\x00" for _, b in replies)
 
 
+def _gas_frame(session: int, class_id: int, instance: int, attribute: int, context: bytes = CTX) -> bytes:
+    data = struct.pack("<IH", 0, 5) + encode_items([Item(0), Item(0xB2, gas(class_id, instance, attribute))])
+    return frame(Command.SEND_RR_DATA, data, session, context=context)
+
+
+def _reply_value(replies: list[tuple[EncapsulationHeader, bytes]]) -> bytes:
+    [(header, body)] = replies
+    assert header.status == 0
+    reply = MessageRouterResponse.decode(decode_items(body, 6)[1].data)
+    assert reply.general_status == 0
+    return reply.data
+
+
+def test_a_frame_sent_again_byte_for_byte_is_served_afresh() -> None:
+    """A client polling one attribute sends the same frame again and again: each is counted, moves
+    the device's clock, reads the attribute anew (its value changes between reads) and is answered
+    with the frame's own session and context, as the first was."""
+    h = Harness()
+    counter = iter(range(100, 200))
+    h.device.identity.bind(1, 5, Binding(lambda: next(counter)))
+    ticks: list[float] = []
+    h.target.tick = ticks.append
+    session = h.register()
+    polled = _gas_frame(session, 1, 1, 5)
+    frames_before = h.target.stats.frames
+    values = []
+    for _ in range(4):
+        h.now += 0.5
+        replies = h.send(polled)
+        assert replies[0][0].session == session and replies[0][0].context == CTX
+        values.append(_reply_value(replies))
+    assert values == [struct.pack("<H", v) for v in (100, 101, 102, 103)]
+    assert ticks == [1000.5, 1001.0, 1001.5, 1002.0]
+    assert h.target.stats.frames == frames_before + 4
+    assert h.conn.last_activity == h.now
+    # Another frame in between (another context), then the first again: each answered as its own.
+    other = _gas_frame(session, 1, 1, 5, context=b"other-01")
+    assert h.send(other)[0][0].context == b"other-01"
+    assert h.send(polled)[0][0].context == CTX
+
+
+def test_a_repeated_frame_is_not_served_after_the_session_ends_nor_when_it_completes_a_split_frame() -> None:
+    h = Harness()
+    session = h.register()
+    polled = _gas_frame(session, 1, 1, 1)
+    assert _reply_value(h.send(polled)) == struct.pack("<H", 259)  # the profile's vendor ID
+    # The same bytes completing a frame cut short by the last read are that frame's rest: here the
+    # data of a NOP, which has no reply.
+    assert h.send(HEADER.pack(Command.NOP, len(polled), 0, 0, CTX, 0)) == []
+    assert h.send(polled) == []
+    assert len(h.conn._inbox) == 0
+    assert h.send(polled[:10]) == []
+    [(header, _)] = h.send(polled[10:] + polled[:10])
+    assert header.status == 0
+    assert h.send(polled[10:])[0][0].status == 0
+    # Two of them in one read are two frames.
+    assert len(h.send(polled * 2)) == 2
+    h.send(frame(Command.UNREGISTER_SESSION, session=session))
+    assert h.conn.closing
+    assert h.send(polled) == []
+
+
+def test_a_repeated_frame_of_another_connection_or_an_old_session_is_refused() -> None:
+    h = Harness()
+    session = h.register()
+    polled = _gas_frame(session, 1, 1, 1)
+    h.send(polled)
+    other = h.new_connection()
+    h.register(other)
+    [(header, _)] = h.send(polled, other)
+    assert header.status == 0x0064  # that session is not this connection's
+    [(header, _)] = h.send(polled, other)
+    assert header.status == 0x0064
+
+
+def test_a_repeated_request_whose_instance_has_gone_gets_the_router_s_answer() -> None:
+    h = Harness()
+    session = h.register()
+    polled = _gas_frame(session, 1, 1, 1)
+    h.send(polled)
+    del h.device.identity.instances[1]
+    [(header, body)] = h.send(polled)
+    assert header.status == 0
+    assert MessageRouterResponse.decode(decode_items(body, 6)[1].data).general_status == 0x05  # path unknown
+
+
 # -- list commands --------------------------------------------------------------------------------------------
 def test_list_identity_tcp_bytes() -> None:
     h = Harness()

@@ -248,6 +248,11 @@ class EncapsulationConnection:
         self._inbox = bytearray()
         self._outbox: list[bytes] = []
         self._context = RequestContext(target.router, now, peer, self)
+        #: The last common SendRRData that was a read of its own (``_frame``): its bytes, its CIP
+        #: request and its sender context, for a client that sends it again (``receive``).
+        self._repeat = b""
+        self._repeat_request = b""
+        self._repeat_context = b""
 
     # -- bytes in, bytes out ------------------------------------------------------------------------
     def receive(self, data: bytes, now: float) -> None:
@@ -255,6 +260,15 @@ class EncapsulationConnection:
             return
         self.last_activity = now
         inbox = self._inbox
+        if data == self._repeat and not inbox:
+            # The same frame again, byte for byte and alone (a client polling one attribute): what
+            # its header and items were found to say still holds, since the session cannot change
+            # while the connection is open, so the frame goes straight to its request.
+            target = self.target
+            target.stats.frames += 1
+            target.tick(now)
+            self._unconnected(self._repeat_request, self.session, self._repeat_context, now)
+            return
         if inbox:  # the rest of a frame cut short by the last read comes first
             inbox += data
             data = bytes(inbox)
@@ -273,17 +287,17 @@ class EncapsulationConnection:
                 self._reply(command, session, context, status=EncapsulationStatus.INVALID_LENGTH)
                 self.closing = True
                 return
-            end = offset + HEADER_SIZE + length
+            start = offset + HEADER_SIZE
+            end = start + length
             if end > size:
                 break
-            body = data[offset + HEADER_SIZE:end]
             offset = end
             stats.frames += 1
             if options != 0:
                 stats.dropped += 1  # the specification says: discard
                 continue
             try:
-                self._frame(command, session, context, body, now)
+                self._frame(command, session, context, data, start, end, now)
             except EncapsulationError as exc:
                 stats.errors += 1
                 self._reply(command, session, context, status=exc.status)
@@ -293,10 +307,11 @@ class EncapsulationConnection:
             inbox += memoryview(data)[offset:]
 
     def data_to_send(self) -> bytes:
-        if not self._outbox:
-            return b""
-        out = b"".join(self._outbox)
-        self._outbox.clear()
+        outbox = self._outbox
+        if len(outbox) == 1:  # the common case: one request read, one reply
+            return outbox.pop()
+        out = b"".join(outbox)
+        outbox.clear()
         return out
 
     def next_deadline(self) -> float | None:
@@ -331,29 +346,34 @@ class EncapsulationConnection:
     def _reply(self, command: int, session: int, context: bytes, data: bytes = b"", status: int = 0) -> None:
         self._outbox.append(HEADER.pack(command, len(data), session, status, context, 0) + data)
 
-    def _frame(self, command: int, session: int, context: bytes, body: bytes, now: float) -> None:
+    def _frame(self, command: int, session: int, context: bytes, data: bytes, start: int, end: int,
+               now: float) -> None:
+        """Serve a frame: its header's fields and its body, ``data[start:end]``, cut out only where
+        needed (the common SendRRData reads its items and request straight from ``data``)."""
         if command == _SEND_RR_DATA:
-            self._check_session(session)
+            if session != self.session:  # also when none is registered: no header carries None
+                raise EncapsulationError(EncapsulationStatus.INVALID_SESSION)
             target = self.target
             target.tick(now)
             # The common SendRRData (see ``_RR_TWO_ITEMS``) is served without building items; any
             # other shape by ``_send_rr_data``.
-            size = len(body)
-            if size > _RR_TWO_ITEMS_SIZE:
-                interface, _timeout, count, null_type, null_length, data_type, length = _RR_TWO_ITEMS.unpack_from(body)
+            request_at = start + _RR_TWO_ITEMS_SIZE
+            if end > request_at:
+                interface, _timeout, count, null_type, null_length, data_type, length = _RR_TWO_ITEMS.unpack_from(
+                    data, start)
                 if (interface == 0 and count == 2 and null_type == _NULL_ADDRESS and null_length == 0
-                        and data_type == _UNCONNECTED_DATA and size == _RR_TWO_ITEMS_SIZE + length
-                        and body[_RR_TWO_ITEMS_SIZE] not in _MAY_CARRY_SOCKADDR):
-                    request = self._context
-                    request.now = now
-                    request.connected = False
-                    reply = target.router.handle(body[_RR_TWO_ITEMS_SIZE:], request)
-                    self._outbox.append(_RR_REPLY_FRAME.pack(
-                        _SEND_RR_DATA, _RR_TWO_ITEMS_SIZE + len(reply), session, 0, context, 0, 0, 0, 2,
-                        _NULL_ADDRESS, 0, _UNCONNECTED_DATA, len(reply)) + reply)
+                        and data_type == _UNCONNECTED_DATA and end == request_at + length
+                        and data[request_at] not in _MAY_CARRY_SOCKADDR):
+                    request = data[request_at:end]
+                    if start == HEADER_SIZE and end == len(data) and data.__class__ is bytes:
+                        # The read was this frame alone (and bytes, which no caller can change).
+                        self._repeat, self._repeat_request, self._repeat_context = data, request, context
+                    self._unconnected(request, session, context, now)
                     return
-            self._reply(command, session, context, self._send_rr_data(body, now))
-        elif command == Command.SEND_UNIT_DATA:
+            self._reply(command, session, context, self._send_rr_data(data[start:end], now))
+            return
+        body = data[start:end]
+        if command == Command.SEND_UNIT_DATA:
             self._check_session(session)
             self.target.tick(now)
             reply = self._send_unit_data(body, now)
@@ -370,6 +390,16 @@ class EncapsulationConnection:
             self._reply(command, session, context, self.target._list_reply(command, self.local))
         else:
             raise EncapsulationError(EncapsulationStatus.INVALID_COMMAND, f"command 0x{command:04X}")
+
+    def _unconnected(self, request: bytes, session: int, context: bytes, now: float) -> None:
+        """Serve the CIP ``request`` of a common SendRRData; the reply goes out in the same two items."""
+        request_context = self._context
+        request_context.now = now
+        request_context.connected = False
+        reply = self.target.router.handle(request, request_context)
+        self._outbox.append(_RR_REPLY_FRAME.pack(
+            _SEND_RR_DATA, _RR_TWO_ITEMS_SIZE + len(reply), session, 0, context, 0, 0, 0, 2,
+            _NULL_ADDRESS, 0, _UNCONNECTED_DATA, len(reply)) + reply)
 
     def _check_session(self, session: int) -> None:
         if self.session is None or session != self.session:
