@@ -20,7 +20,7 @@ from typing import Any
 
 from ...cip.epath import ApplicationPath
 from ...cip.messages import MessageRouterRequest, Service
-from ...cip.model import Access, AttributeSpec, CipObject, ClassSpec, Instance
+from ...cip.model import Access, AttributeSpec, Binding, CipObject, ClassSpec, Instance
 from ...cip.router import RequestContext
 from ...cip.status import CipError, GeneralStatus
 from ...cip.types import BOOL, INT, UINT, USINT, CipType
@@ -381,6 +381,12 @@ class AcgIdentityObject(IdentityObject):
             1, vendor_id=info.vendor_id, device_type=info.device_type, product_code=info.product_code,
             revision={"major": info.revision[0], "minor": info.revision[1]}, status=0,
             serial_number=info.serial_number, product_name=info.product_name)
+        # Attribute 5 is made when read, from the drive (the table above); a write to it is the
+        # device's I/O bookkeeping, which keeps only the bits the I/O connections own.
+        self.bind(1, 5, Binding(self.status_word, self._set_io_status))
+
+    def _set_io_status(self, value: int) -> None:
+        self._io_status = int(value) & _IO_BITS
 
     def status_word(self) -> int:
         drive = self._drive()
@@ -397,18 +403,6 @@ class AcgIdentityObject(IdentityObject):
         if drive.warning:
             status |= IdentityStatus.MINOR_RECOVERABLE_FAULT
         return int(status) | extended << 4
-
-    def read_attribute(self, instance: Instance, spec: AttributeSpec) -> Any:
-        if spec.id == 5:
-            return self.status_word()
-        return CipObject.read_attribute(self, instance, spec)  # super() costs a lookup per read
-
-    def write_attribute(self, instance: Instance, spec: AttributeSpec, value: Any,
-                        context: RequestContext | None = None) -> None:
-        if spec.id == 5:  # the device's I/O bookkeeping; the fault bits come from the drive
-            self._io_status = int(spec.validate(value)) & _IO_BITS
-            return
-        super().write_attribute(instance, spec, value, context)
 
     @property
     def status(self) -> int:
