@@ -237,11 +237,11 @@ def repeat(call: Callable[[], object]) -> Callable[[int], None]:
     return batch
 
 
-def get_product_name_frame(session: int) -> bytes:
+def get_product_name_frame(session: int, context: bytes = b"bench\x00\x00\x00") -> bytes:
     """The raw clients' request: a SendRRData of ``session`` with a Null Address and an Unconnected
     Data item carrying ``GET_PRODUCT_NAME``."""
     body = struct.pack("<IHHHHHH", 0, 0, 2, 0, 0, 0xB2, len(GET_PRODUCT_NAME)) + GET_PRODUCT_NAME
-    return HEADER.pack(SEND_RR_DATA, len(body), session, 0, b"bench\x00\x00\x00", 0) + body
+    return HEADER.pack(SEND_RR_DATA, len(body), session, 0, context, 0) + body
 
 
 class RawClient:

@@ -59,12 +59,14 @@ def test_too_few_idle_rounds_give_no_verdict(rounds: int) -> None:
     assert line.startswith("[FAIL]") and "too few rounds to bound the median: INCONCLUSIVE" in line, line
 
 
-def test_explicit_core_serves_the_raw_clients_request_and_prints_its_cost() -> None:
+@pytest.mark.parametrize(("options", "mode"), [([], "the same frame each time"),
+                                             (["--new-context"], "two sender contexts in turn")])
+def test_explicit_core_serves_the_raw_clients_request_and_prints_its_cost(options: list[str], mode: str) -> None:
     result = subprocess.run([sys.executable, str(BENCHMARKS / "explicit_core.py"), "--requests", "500",
-                             "--rounds", "2"], capture_output=True, text=True, timeout=120)
+                             "--rounds", "2", *options], capture_output=True, text=True, timeout=120)
     assert result.returncode == 0, result.stderr
     assert result.stdout.startswith("adapter work per Get_Attribute_Single, no sockets: "), result.stdout
-    assert "(best of 2 rounds of 500)" in result.stdout
+    assert f"(best of 2 rounds of 500; {mode})" in result.stdout
 
 
 def test_the_idle_sessions_pair_is_measured_back_to_back_in_either_order_by_turns() -> None:
