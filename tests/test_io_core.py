@@ -26,6 +26,7 @@ from cipstack.eip.cpf import ItemType, SockAddr
 from cipstack.eip.io_core import (
     ConsumerState,
     IoDatagramError,
+    ProductionGrid,
     ProductionSchedule,
     Reception,
     decode_io_datagram,
@@ -33,7 +34,7 @@ from cipstack.eip.io_core import (
     seq16_newer,
     seq32_newer,
 )
-from cipstack.eip.io_originator import Class1Request, OtFormat, class1_path
+from cipstack.eip.io_originator import Class1Request, IoOriginator, OtFormat, class1_path, new_connection
 from cipstack.eip.io_target import ConnectionKind, IoConnection, IoProfile, IoTarget
 from cipstack.objects.assembly import AssemblyPoint
 
@@ -90,6 +91,16 @@ def test_schedule_on_time_late_and_skipped() -> None:
     assert schedule.stats.skipped_slots == 3
     assert schedule.next_due == pytest.approx(1.070)
     assert schedule.due(1.066) == (False, 0.0)
+
+
+def test_grid_a_period_s_first_production_sets_its_slots_and_later_ones_join_them() -> None:
+    grid = ProductionGrid()
+    assert grid.first_due(0.010, 5.0) == 5.0  # the first of its period: at once
+    assert grid.first_due(0.010, 5.0037) == pytest.approx(5.010)  # the next slot of that period
+    assert grid.first_due(0.010, 5.020) == pytest.approx(5.020)  # on a slot: that slot
+    assert grid.first_due(0.010, 4.0) == 5.0  # a time before the first slot waits for it
+    assert grid.first_due(0.001, 5.0041) == 5.0041  # another period has slots of its own
+    assert grid.first_due(0.001, 5.00555) == pytest.approx(5.0061)
 
 
 # -- consumer ---------------------------------------------------------------------------------------------
@@ -232,6 +243,35 @@ def test_exclusive_owner_open_consume_produce_close() -> None:
     assert rig.io.forward_close(ForwardCloseRequest(0, 0, connection.triad), rig.context())
     assert rig.events.events[-1] == ("closed", False)
     assert not rig.io.forward_close(ForwardCloseRequest(0, 0, connection.triad), rig.context())
+
+
+def test_connections_of_one_rpi_are_produced_in_the_same_slots() -> None:
+    """Opened 3.7 ms apart, two connections at 10 ms go out in one poll, every 10 ms, in the same
+    order; one at 20 ms starts at once, on slots of its own."""
+    rig = Rig()
+    first = rig.open(rig.request(), now=5.0).to_connection_id
+    assert [decode_io_datagram(d).connection_id for d, _ in rig.io.poll(5.0)] == [first]
+    second = rig.open(rig.request(class1_path(None, 71, 1, heartbeat=198), ot_size=2), now=5.0037).to_connection_id
+    other = rig.open(rig.request(class1_path(20, 70, 1), rpi=20_000), now=5.0041).to_connection_id
+    assert rig.io.next_deadline() == 5.0041
+    assert [decode_io_datagram(d).connection_id for d, _ in rig.io.poll(5.0041)] == [other]
+    assert rig.io.next_deadline() == pytest.approx(5.010)
+    for slot in (5.010, 5.020):
+        assert [decode_io_datagram(d).connection_id for d, _ in rig.io.poll(slot + 1e-6)] == [first, second]
+    assert [decode_io_datagram(d).connection_id for d, _ in rig.io.poll(5.0241)] == [other]
+    assert [decode_io_datagram(d).connection_id for d, _ in rig.io.poll(5.030001)] == [first, second]
+
+
+def test_an_originator_produces_its_connections_of_one_rpi_in_the_same_slots() -> None:
+    core = IoOriginator()
+    request = Class1Request(None, 4, 10_000, 10_000, class1_path(None, 71, 1, heartbeat=198))
+    core.add(new_connection(request, "127.0.0.1", 2222, 0x11, 0x21, 10_000, 10_000, now=1.0))
+    assert [decode_io_datagram(d).connection_id for d, _ in core.poll(1.0)] == [0x11]
+    core.add(new_connection(request, "127.0.0.1", 2222, 0x12, 0x22, 10_000, 10_000, now=1.0037))
+    assert core.poll(1.0037) == []
+    assert core.next_deadline() == pytest.approx(1.010)
+    for slot in (1.010, 1.020):
+        assert [decode_io_datagram(d).connection_id for d, _ in core.poll(slot + 1e-6)] == [0x11, 0x12]
 
 
 def test_duplicate_ownership_and_limits() -> None:

@@ -29,6 +29,7 @@ from .io_core import (
     IoDatagram,
     IoDatagramError,
     IoStatistics,
+    ProductionGrid,
     ProductionSchedule,
     connection_timeout,
     decode_io_datagram,
@@ -203,8 +204,12 @@ class IoOriginator:
         self._productions: list[tuple[float, int, OriginatorConnection]] = []
         self._watchdogs: list[tuple[float, int, OriginatorConnection]] = []
         self._order = itertools.count()
+        self._grid = ProductionGrid()
 
     def add(self, connection: OriginatorConnection) -> None:
+        """Take ``connection`` on; its O->T production joins the slots of those at its RPI (``ProductionGrid``)."""
+        producer = connection.producer
+        producer.next_due = self._grid.first_due(producer.period, producer.next_due)
         self.connections[connection.ot_connection_id] = connection
         self.by_to_id.setdefault(connection.to_connection_id, []).append(connection)
         heapq.heappush(self._productions, (connection.producer.next_due, next(self._order), connection))

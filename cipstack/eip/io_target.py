@@ -43,6 +43,7 @@ from .io_core import (
     ConsumerState,
     IoDatagramError,
     IoStatistics,
+    ProductionGrid,
     ProductionSchedule,
     connection_timeout,
     decode_io_datagram,
@@ -204,6 +205,7 @@ class IoTarget:
         # connections are dropped when they come up; a watchdog entry whose deadline has moved on
         # (packets arrived) is pushed again at the new deadline.
         self._productions: list[tuple[float, int, IoConnection]] = []
+        self._grid = ProductionGrid()
         self._watchdogs: list[tuple[float, int, IoConnection]] = []
         #: Connections whose O->T data is still awaited, by when to say it has not come (few, briefly).
         self._silences: list[tuple[float, int, IoConnection]] = []
@@ -406,7 +408,8 @@ class IoTarget:
             to_id = fo.to_connection_id
         stats = IoStatistics()
         consumer = ConsumerState.opened(connection_timeout(fo.ot_rpi_us, fo.timeout_multiplier), now, stats=stats)
-        producer = None if owner is not None else ProductionSchedule(fo.to_rpi_us / 1e6, now, stats=stats)
+        producer = None if owner is not None else ProductionSchedule(
+            fo.to_rpi_us / 1e6, self._grid.first_due(fo.to_rpi_us / 1e6, now), stats=stats)
         ot_payload_size = consumed.size + OT_OVERHEAD - TO_OVERHEAD if consumed is not None else (
             fo.ot_parameters.size - TO_OVERHEAD)
         connection = IoConnection(kind, fo.triad, self._new_id(), to_id, fo.ot_rpi_us, fo.to_rpi_us, consumed,
