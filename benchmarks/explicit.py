@@ -45,7 +45,7 @@ from dataclasses import asdict, dataclass
 from typing import Any
 
 sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
-from io_common import Verdict, cpu_seconds, free_port
+from io_common import Verdict, core_pair, cpu_seconds, free_port, pin_to_cpu
 
 HEADER = struct.Struct("<HHII8sI")
 REGISTER_SESSION = 0x0065
@@ -81,18 +81,11 @@ def wait_for_listener(port: int, process: subprocess.Popen[bytes], timeout: floa
     raise RuntimeError(f"nothing listens on 127.0.0.1:{port} after {timeout} s")
 
 
-def core_pair() -> tuple[int, int] | None:
-    """Two CPUs this process may run on: the servers' and the clients' (None with fewer than two)."""
-    allowed = sorted(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else []
-    return (allowed[0], allowed[1]) if len(allowed) >= 2 else None
-
-
 @contextlib.contextmanager
 def server_process(command: list[str], port: int, cpu: int | None = None) -> Iterator[subprocess.Popen[bytes]]:
     """The server ``command`` running and listening on ``port`` (pinned to ``cpu`` if given)."""
     process = subprocess.Popen(command, stdin=subprocess.DEVNULL)
-    if cpu is not None:
-        os.sched_setaffinity(process.pid, {cpu})
+    pin_to_cpu(process.pid, cpu)
     try:
         wait_for_listener(port, process)
         yield process

@@ -57,12 +57,28 @@ def machine_busy() -> tuple[float, float]:
     return sum(fields) - idle, sum(fields)
 
 
-def start_adapter(port: int, io_port: int, *extra: str, state: bool = True) -> subprocess.Popen[bytes]:
-    """The adapter emulator on 127.0.0.1; ``state``: a state file of its own (a profile's, not ``--eds``)."""
+def core_pair() -> tuple[int, int] | None:
+    """Two CPUs this process may run on: the server's and the clients' (None with fewer than two)."""
+    allowed = sorted(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else []
+    return (allowed[0], allowed[1]) if len(allowed) >= 2 else None
+
+
+def pin_to_cpu(pid: int, cpu: int | None) -> None:
+    """Keep process ``pid`` on ``cpu`` (None: leave it where the scheduler puts it). Done right after
+    the process is started, before it starts threads of its own, which inherit it."""
+    if cpu is not None:
+        os.sched_setaffinity(pid, {cpu})
+
+
+def start_adapter(port: int, io_port: int, *extra: str, state: bool = True, cpu: int | None = None
+                  ) -> subprocess.Popen[bytes]:
+    """The adapter emulator on 127.0.0.1; ``state``: a state file of its own (a profile's, not ``--eds``);
+    ``cpu``: the one CPU it runs on."""
     state_file = ["--state", os.path.join(tempfile.mkdtemp(), "state.json")] if state else []
     process = subprocess.Popen([sys.executable, "-m", "cipstack", "adapter", "--host", "127.0.0.1", "--port",
                                 str(port), "--io-port", str(io_port), "--log-level", "WARNING", "--quiet",
                                 *state_file, *extra])
+    pin_to_cpu(process.pid, cpu)
     deadline = time.monotonic() + 30
     while time.monotonic() < deadline:
         try:
