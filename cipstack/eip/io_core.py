@@ -140,18 +140,21 @@ class ProductionSchedule:
 
 
 class ProductionGrid:
-    """Where a new connection's production starts: a connection whose period another of the same
-    core already produced at joins that one's slots (the first of a period sets them), so that
-    connections of one RPI fall due together and one wake-up sends them all, back to back, as a
-    device producing on its own timer tick does. Without it, connections opened one after another
-    are due at as many phases as there were Forward_Opens, and each phase costs a wake-up: the most
-    of what a packet costs at 10 ms. The first packet waits at most one period."""
+    """Where a new connection's production starts: on the slots the core's first connection set, a
+    whole number of periods after its first production. Connections of one RPI then fall due
+    together and one wake-up sends them all, back to back, as a device producing on its own timer
+    tick does; RPIs that are multiples of one another share slots too. Without it, connections
+    opened one after another were due at as many phases as there were Forward_Opens, and each phase
+    cost a wake-up: at 10 ms, most of what a packet cost. The first packet waits at most one period;
+    one moment is kept, whatever the RPIs a peer asks for."""
 
     def __init__(self) -> None:
-        self._anchors: dict[float, float] = {}
+        self._anchor: float | None = None
 
     def first_due(self, period: float, now: float) -> float:
-        anchor = self._anchors.setdefault(period, now)
+        anchor = self._anchor
+        if anchor is None:
+            self._anchor = anchor = now
         if anchor >= now:
             return anchor
         return anchor + math.ceil((now - anchor) / period) * period
