@@ -16,7 +16,7 @@ from .devices.acg.modbus_server import ModbusTcpServer
 from .devices.base import Device, DeviceLimits, TripRefused
 from .devices.profiles import DEFAULT_MAC, DEFAULT_PROFILE, ProfileOptions, build_device
 from .eip.identity_items import CAPABILITY_CIP_TCP, CAPABILITY_CLASS01_UDP
-from .eip.io_core import DEFAULT_IO_PORT
+from .eip.io_core import DEFAULT_IO_PORT, ProductionGrid
 from .eip.io_server import IoEndpoint, freeze_startup_objects
 from .eip.io_target import IoTarget
 from .eip.limits import DEFAULT_MAX_TCP_CONNECTIONS
@@ -63,7 +63,10 @@ class AdapterSettings:
 class Adapter:
     """A running emulated device: its objects, the encapsulation target and the server."""
 
-    def __init__(self, settings: AdapterSettings | None = None, device: Device | None = None) -> None:
+    def __init__(self, settings: AdapterSettings | None = None, device: Device | None = None,
+                 production_grid: ProductionGrid | None = None) -> None:
+        """``production_grid``: where class 1 productions start, shared by the adapters of one process
+        so that theirs fall due together (``ProductionGrid``); by default one of its own."""
         self.settings = settings or AdapterSettings()
         s = self.settings
         ip_address = s.host if s.host not in ("", "0.0.0.0", "localhost") else "127.0.0.1"
@@ -98,7 +101,7 @@ class Adapter:
         if profile is not None:
             if s.max_io_connections is not None:
                 profile.max_connections = s.max_io_connections
-            self.io = IoTarget(profile, self.device, self.device.multicast_block, s.io_port)
+            self.io = IoTarget(profile, self.device, self.device.multicast_block, s.io_port, production_grid)
             self.device.connection_manager.io_handler = self.io
             self.target.settings.capabilities = CAPABILITY_CIP_TCP | CAPABILITY_CLASS01_UDP
             self.io_endpoint = IoEndpoint(self.io, s.host, s.io_port, lambda: int(self.device.tcpip.get(1, 8)),

@@ -20,12 +20,16 @@ from pathlib import Path
 
 import pytest
 
+from cipstack.cip.router import RequestContext
 from cipstack.cli import main
 from cipstack.devices.profiles import PROFILES, mac_for_address, serial_from_mac
+from cipstack.eip.cm_messages import ForwardOpenRequest
 from cipstack.eip.io_server import run_precise
-from cipstack.fleet.spec import SpecError, assign, describe_addresses, parse_addresses, parse_group
+from cipstack.fleet.serve import DeviceSet, build_adapter
+from cipstack.fleet.spec import FleetDevice, SpecError, assign, describe_addresses, parse_addresses, parse_group
 from cipstack.fleet.workers import shares
 from cipstack.scanner import Scanner, discover
+from tests.attacks import ACG_INPUT_ONLY_PATH, class1_open
 from tests.ports import free_port, list_identity_replies
 from tests.test_acg_live import SAVE_PARAMETERS, write_registers
 from tests.waiting import wait_for
@@ -437,3 +441,23 @@ def test_start_up_objects_are_frozen_out_of_the_collector(tmp_path: Path) -> Non
     assert stopped_by == signal.SIGUSR1
     # Every object the process tracks, the two drives' tables, schemas and registers among them.
     assert frozen and frozen[0] > 40_000, frozen
+
+
+def test_the_devices_of_one_process_produce_class1_in_the_same_slots() -> None:
+    """Two devices of one worker, a connection opened on each 3.7 ms apart: the second's first T->O
+    packet is due on the first's 10 ms slots, as if one device had both."""
+    devices = [FleetDevice(f"127.0.0.{n}", "acg") for n in (1, 2)]
+    fleet = DeviceSet(devices, free_port(), free_port())
+    first, second = (build_adapter(device, fleet.port, fleet.io_port, fleet.production_grid) for device in devices)
+    try:
+        for adapter, serial, now in ((first, 0x101, 5.0), (second, 0x102, 5.0037)):
+            assert adapter.io is not None
+            request = ForwardOpenRequest.decode(class1_open(serial, path=ACG_INPUT_ONLY_PATH, ot_size=2)[6:],
+                                                large=False)
+            adapter.io.forward_open(request, RequestContext(adapter.device.router, now, "127.0.0.1:1", None))
+        assert first.io is not None and second.io is not None
+        assert first.io.next_deadline() == 5.0
+        assert second.io.next_deadline() == pytest.approx(5.010)
+    finally:
+        first.device.close()
+        second.device.close()

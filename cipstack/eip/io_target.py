@@ -191,7 +191,7 @@ class IoConnection:
 class IoTarget:
     def __init__(self, profile: IoProfile, events: IoEvents | None = None,
                  multicast_block: Callable[[], tuple[int, int]] | None = None,
-                 io_port: int = DEFAULT_IO_PORT) -> None:
+                 io_port: int = DEFAULT_IO_PORT, grid: ProductionGrid | None = None) -> None:
         self.profile = profile
         self.events = events or NoEvents()
         #: Where consumed data goes: the device's Assembly object (``AssemblyObject.deliver``).
@@ -205,7 +205,8 @@ class IoTarget:
         # connections are dropped when they come up; a watchdog entry whose deadline has moved on
         # (packets arrived) is pushed again at the new deadline.
         self._productions: list[tuple[float, int, IoConnection]] = []
-        self._grid = ProductionGrid()
+        #: Where productions start; several targets of one process may share one (a fleet's devices).
+        self._grid = grid or ProductionGrid()
         self._watchdogs: list[tuple[float, int, IoConnection]] = []
         #: Connections whose O->T data is still awaited, by when to say it has not come (few, briefly).
         self._silences: list[tuple[float, int, IoConnection]] = []

@@ -18,6 +18,7 @@ from ..adapter import Adapter, AdapterSettings
 from ..control import describe
 from ..devices.profiles import mac_for_address
 from ..devices.state import StateFileError
+from ..eip.io_core import ProductionGrid
 from ..eip.io_server import freeze_startup_objects
 from ..listening import held_log_records
 from .spec import FleetDevice, SpecError
@@ -43,12 +44,13 @@ def raise_open_file_limit(devices: int) -> None:
         pass
 
 
-def build_adapter(device: FleetDevice, port: int, io_port: int) -> Adapter:
-    """The emulator of one device; a state file or parameter it cannot take raises ``SpecError``."""
+def build_adapter(device: FleetDevice, port: int, io_port: int, grid: ProductionGrid | None = None) -> Adapter:
+    """The emulator of one device; a state file or parameter it cannot take raises ``SpecError``.
+    ``grid``: the process's class 1 slots, which its devices share (one wake-up for all that are due)."""
     settings = AdapterSettings(host=device.address, port=port, io_port=io_port, profile=device.profile,
                                model=device.model, state_path=device.state_path, mac=mac_for_address(device.address))
     try:
-        adapter = Adapter(settings)
+        adapter = Adapter(settings, production_grid=grid)
     except (StateFileError, ValueError, KeyError) as exc:
         raise SpecError(f"{device.address}: {exc}") from None
     if device.params:
@@ -77,6 +79,8 @@ class DeviceSet:
         self.port = port
         self.io_port = io_port
         self.adapters: list[Adapter] = []
+        #: The class 1 slots every device of this process produces in.
+        self.production_grid = ProductionGrid()
 
     async def start(self) -> list[str]:
         """Build and start every device; returns their lines. All or nothing (see the module docstring)."""
@@ -84,7 +88,7 @@ class DeviceSet:
         built: list[Adapter] = []
         try:
             for device in self.devices:
-                built.append(build_adapter(device, self.port, self.io_port))
+                built.append(build_adapter(device, self.port, self.io_port, self.production_grid))
         except SpecError:
             for adapter in built:
                 adapter.device.close()
