@@ -1,11 +1,12 @@
 """Class 1 target cost without sockets: CPU per T->O packet of ``IoTarget`` as connections grow.
 
-Opens N input-only connections (heartbeat 198 -> input 71 of the ACG-ET2) at RPI 10 ms, spread
-evenly over one RPI ("staggered", as connections opened one after another are) or all at the
-same instant ("aligned"), and simulates 2 s: each connection's heartbeat arrives once per RPI,
-the timer fires at ``next_deadline()`` and runs ``poll`` and ``expire`` as the asyncio shell does.
-Prints the CPU time per produced packet for N = 16, 64, 256, 512: a timer firing should cost what
-is due, not what is open (the per-packet figure should stay flat as N grows).
+Opens N input-only connections (heartbeat 198 -> input 71 of the ACG-ET2) at RPI 10 ms, opened
+one after another over one RPI ("staggered"; the target puts each on the first one's production
+slots, ``ProductionGrid``) or all at the same instant ("aligned"), and simulates 2 s: each
+connection's heartbeat arrives once per RPI, the timer fires at ``next_deadline()`` and runs
+``poll`` and ``expire`` as the asyncio shell does. Prints the CPU time per produced packet for
+N = 16, 64, 256, 512: a timer firing should cost what is due, not what is open (the per-packet
+figure should stay flat as N grows).
 
     python benchmarks/io_core.py
 """
