@@ -207,7 +207,7 @@ class IoOriginator:
         self._grid = ProductionGrid()
 
     def add(self, connection: OriginatorConnection) -> None:
-        """Take ``connection`` on; its O->T production joins the slots of those at its RPI (``ProductionGrid``)."""
+        """Take ``connection`` on; its O->T production starts on this originator's slots (``ProductionGrid``)."""
         producer = connection.producer
         producer.next_due = self._grid.first_due(producer.period, producer.next_due)
         self.connections[connection.ot_connection_id] = connection
