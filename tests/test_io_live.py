@@ -170,6 +170,39 @@ async def test_several_targets_on_two_loopback_addresses() -> None:
         await second.close()
 
 
+def _slot_offsets(first: float, second: float, period: float) -> float:
+    """How far apart two times are on a grid of ``period``: 0 when they fall on the same slots."""
+    apart = (second - first) % period
+    return min(apart, period - apart)
+
+
+async def test_connections_opened_apart_are_produced_in_the_same_slots_both_ways(adapter: Adapter) -> None:
+    """Two Forward_Opens at 10 ms, 3 ms apart: the adapter's T->O and the scanner's O->T productions of
+    the second fall on the first's slots (whole periods apart), and on the wire the two T->O packets of a
+    slot reach the scanner together, not 3 ms and a round trip apart."""
+    assert adapter.io_endpoint is not None and adapter.io is not None
+    rpi = 0.010
+    scanner = await Scanner.connect(f"127.0.0.1:{adapter.port}", catalog=CATALOG)
+    async with scanner, scanner.io_connection(output=21, input=71, rpi=rpi, target_io_port=adapter.io_endpoint.port,
+                                              kernel_arrival_times=True) as io_a:
+        await asyncio.sleep(0.003)
+        async with scanner.io_connection(output=20, input=70, rpi=rpi, target_io_port=adapter.io_endpoint.port,
+                                         kernel_arrival_times=True) as io_b:
+            produced = [c.producer for c in adapter.io.connections.values() if c.producer is not None]
+            assert len(produced) == 2
+            assert _slot_offsets(produced[0].next_due, produced[1].next_due, rpi) < 1e-9
+            assert _slot_offsets(io_a.connection.producer.next_due, io_b.connection.producer.next_due, rpi) < 1e-9
+            apart = []
+            for _ in range(9):
+                await asyncio.sleep(0.037)
+                a, b = io_a.connection.arrivals.last, io_b.connection.arrivals.last
+                assert a is not None and b is not None
+                apart.append(_slot_offsets(a, b, rpi))
+    # The median of nine looks: one adapter wake-up sends both, microseconds apart (a look may fall
+    # between the two of a slot, or the adapter be preempted between them: the median is past that).
+    assert sorted(apart)[4] < 0.001, apart
+
+
 async def test_originator_watchdog_raises_when_target_stops(adapter: Adapter) -> None:
     assert adapter.io_endpoint is not None
     scanner = await Scanner.connect(f"127.0.0.1:{adapter.port}", catalog=CATALOG)
