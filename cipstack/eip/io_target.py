@@ -409,8 +409,9 @@ class IoTarget:
             to_id = fo.to_connection_id
         stats = IoStatistics()
         consumer = ConsumerState.opened(connection_timeout(fo.ot_rpi_us, fo.timeout_multiplier), now, stats=stats)
-        producer = None if owner is not None else ProductionSchedule(
-            fo.to_rpi_us / 1e6, self._grid.first_due(fo.to_rpi_us / 1e6, now), stats=stats)
+        period = fo.to_rpi_us / 1e6
+        producer = None if owner is not None else ProductionSchedule(period, self._grid.first_due(period, now),
+                                                                     stats=stats)
         ot_payload_size = consumed.size + OT_OVERHEAD - TO_OVERHEAD if consumed is not None else (
             fo.ot_parameters.size - TO_OVERHEAD)
         connection = IoConnection(kind, fo.triad, self._new_id(), to_id, fo.ot_rpi_us, fo.to_rpi_us, consumed,
