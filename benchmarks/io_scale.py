@@ -187,8 +187,11 @@ def run_step(port: int, io_port: int, adapter_pid: int, rpi: float, connections:
         busy2, total2 = machine_busy()
         results = []
         for process in processes:
-            out, _ = process.communicate(timeout=120)
-            results.append(json.loads(out.strip().splitlines()[-1]))
+            assert process.stdout is not None
+            # The same buffered reader as the lines before: what it has read ahead is not lost (a
+            # ``communicate`` with a timeout reads the pipe itself, and missed a result already read ahead).
+            results.append(json.loads(process.stdout.readline()))
+            process.wait(timeout=120)
     finally:
         for process in processes:
             if process.poll() is None:

@@ -101,3 +101,20 @@ def test_user_cpu_is_judged_at_one_client_and_at_eight() -> None:
     eight = lines["adapter user CPU per Get_Attribute_Single, 8 clients"]
     assert eight.startswith("[PASS]") and "4.5 µs" in eight and "echo floor 2.5 µs" in eight, eight
     assert lines["adapter CPU per request, 8 clients (user + system)"].startswith("[PASS]")
+
+
+@pytest.mark.parametrize("options", [[], ["--no-pin"]])
+def test_a_class1_ladder_step_measures_both_ways_where_it_was_placed(options: list[str]) -> None:
+    """``io_scale.py`` as its README runs it, one small step: the originators' windows are read
+    ("measuring", then "measured"), both directions counted, and the step says whether the adapter
+    and the originators had a CPU each (they do by default when there are two)."""
+    import json
+    import os
+
+    result = subprocess.run([sys.executable, str(BENCHMARKS / "io_scale.py"), "--ladder", "10ms:4", "--seconds", "1",
+                             "--json", *options], capture_output=True, text=True, timeout=120)
+    assert result.returncode == 0, result.stderr
+    [step] = json.loads(result.stdout)["steps"]
+    assert step["connections"] == 4 and step["originators"] == 2
+    assert step["t_to_o_per_s"] > 0 and step["o_to_t_per_s"] > 0 and step["adapter_cpu"] > 0
+    assert step["pinned"] is (not options and len(os.sched_getaffinity(0)) >= 2)
