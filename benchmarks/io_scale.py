@@ -4,7 +4,8 @@ Starts the adapter emulator (default profile, ``--max-io-connections 1024``) as 
 loopback ports, then for each step of a ladder (RPI, connections) opens that many input-only
 connections (heartbeat 198 -> input 71, timeout multiplier 3 as ``io.py`` (a) uses at 1 ms) from
 ``--originators`` scanner processes (cipstack's ``Scanner`` on the precise event loop, the
-connections split evenly) and measures ``--seconds``:
+connections split evenly; with two CPUs or more the adapter runs on one and the scanners on
+another, ``--no-pin`` to let the scheduler place them) and measures ``--seconds``:
 
 * T->O: packets received per second, late packets (an interval above 1.5 RPI: more than half an RPI
   after the packet was due), lost packets (gaps in the sequence), connections timed out. Packets
@@ -21,7 +22,7 @@ A step holds when nothing timed out and nothing was lost, under 1 % of T->O pack
 both directions carry at least 99 % of the packets their RPI asks for. The first step that does not
 hold is the break point of that RPI; the steps after it are not run.
 
-    python benchmarks/io_scale.py [--seconds N] [--originators P] [--ladder 10ms:128,256,384,512] [--json]
+    python benchmarks/io_scale.py [--seconds N] [--originators P] [--ladder 10ms:128,256,384,512] [--no-pin] [--json]
 
 Issue 16's targets: 512 connections at 10 ms and 64 at 1 ms hold (51,200 and 64,000 packets/s each
 way): one process sustains >= 60,000 packets/s each way.
