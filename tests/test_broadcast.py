@@ -1,6 +1,7 @@
 """A target answers the broadcasts of its subnet (issue: an adapter on --host 127.0.0.2 did not
-answer a ListIdentity sent to 127.255.255.255), each target of a machine once with its own reply from
-its own address, and still answers unicast; and a target asked for a free port (0) gets a number free
+answer a ListIdentity sent to 127.255.255.255) and the limited broadcast 255.255.255.255 (what many
+scanners send; issue 30, item 1), each target of a machine once with its own reply from its own
+address, and still answers unicast; and a target asked for a free port (0) gets a number free
 in both TCP and UDP even when the OS's first pick is taken in UDP."""
 
 from __future__ import annotations
@@ -45,6 +46,25 @@ async def test_each_target_answers_a_subnet_broadcast_once_from_its_own_address(
         found = await discover("127.255.255.255", port, timeout=1.2)
         assert sorted(record.address.host for record in found if record.address) == ["127.0.0.2", "127.0.0.3"]
         assert first.server.port == second.server.port == port
+
+
+async def test_each_target_answers_the_limited_broadcast_once_from_its_own_address() -> None:
+    """A ListIdentity to 255.255.255.255 from a socket bound to 127.0.0.1 leaves by loopback (Linux
+    routes a limited broadcast out of the interface of its source address), where it reaches every
+    socket bound to 255.255.255.255 or 0.0.0.0 on its port, and no socket bound to one address."""
+    port = free_port("127.0.0.2", "127.0.0.3")
+    async with Adapter(AdapterSettings(host="127.0.0.2", port=port, io_port=0)), \
+            Adapter(AdapterSettings(host="127.0.0.3", port=port, io_port=0)):
+        replies = await list_identity_replies("255.255.255.255", port)
+        assert sorted(host for _, host in replies) == ["127.0.0.2", "127.0.0.3"]
+        for data, host in replies:
+            command, length = struct.unpack_from("<HH", data)
+            assert command == 0x0063 and length == len(data) - 24
+            # The item's sockaddr (after the item count, type, length and version) is the target's own.
+            family, item_port, address = struct.unpack_from(">hH4s", data, 24 + 2 + 4 + 2)
+            assert (family, item_port, socket.inet_ntoa(address)) == (2, port, host)
+        found = await discover("255.255.255.255", port, timeout=1.2)
+        assert sorted(record.address.host for record in found if record.address) == ["127.0.0.2", "127.0.0.3"]
 
 
 async def test_a_free_port_is_free_in_udp_too(monkeypatch: pytest.MonkeyPatch) -> None:

@@ -205,6 +205,9 @@ def test_discovery_finds_every_device_once(tmp_path: Path) -> None:
         # One broadcast: each device answers once, from its own address.
         replies = asyncio.run(broadcast_replies(port))
         assert sorted(replies, key=sort_key) == hosts
+        # And to the limited broadcast, which many scanners send (issue 30, item 1).
+        replies = [host for _, host in asyncio.run(list_identity_replies("255.255.255.255", port))]
+        assert sorted(replies, key=sort_key) == hosts
         # The scanner's discovery lists each once, with its own identity: the serial is its address's.
         found = asyncio.run(discover(BROADCAST, port, timeout=1.2))
         by_host = {r.address.host: r for r in found if r.address}
@@ -328,6 +331,8 @@ def test_workers_serve_every_device_and_a_dead_worker_stops_the_fleet(tmp_path: 
         assert len(workers) == 2
         replies = asyncio.run(broadcast_replies(port, 2.0))
         assert sorted(replies, key=sort_key) == hosts                      # 64 devices, each answered once
+        replies = [host for _, host in asyncio.run(list_identity_replies("255.255.255.255", port, 2.0))]
+        assert sorted(replies, key=sort_key) == hosts                      # the limited broadcast too
         # `cipstack discover` with its default broadcast addresses lists every device once.
         command = subprocess.run([sys.executable, "-m", "cipstack", "discover", "--port", str(port), "--json"],
                                  capture_output=True, text=True, timeout=30)

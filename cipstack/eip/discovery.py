@@ -11,7 +11,7 @@ from collections.abc import Sequence
 
 from .encapsulation import DEFAULT_PORT, HEADER, HEADER_SIZE, Command, EncapsulationError, EncapsulationHeader
 from .identity_items import IdentityRecord, ServiceRecord, decode_list_identity, decode_list_services
-from .interfaces import directed_broadcasts
+from .interfaces import LIMITED_BROADCAST, directed_broadcasts
 
 log = logging.getLogger(__name__)
 
@@ -33,7 +33,6 @@ class _DiscoveryProtocol(asyncio.DatagramProtocol):
 
 #: Replies kept from one query: far more devices than one subnet holds; the rest are dropped.
 MAX_DISCOVERY_REPLIES = 4096
-LIMITED_BROADCAST = "255.255.255.255"
 
 
 def broadcast_addresses() -> list[str]:

@@ -8,6 +8,8 @@ import socket
 import struct
 
 _SIOCGIFADDR, _SIOCGIFNETMASK = 0x8915, 0x891B
+#: The limited broadcast: every host of the link the datagram is sent on, whatever its subnet.
+LIMITED_BROADCAST = "255.255.255.255"
 
 
 def ipv4_networks() -> list[ipaddress.IPv4Interface]:
@@ -56,4 +58,4 @@ def subnet_broadcast(host: str) -> str | None:
     return None
 
 
-__all__ = ["directed_broadcasts", "ipv4_networks", "subnet_broadcast"]
+__all__ = ["LIMITED_BROADCAST", "directed_broadcasts", "ipv4_networks", "subnet_broadcast"]

@@ -5,9 +5,10 @@ loop's lane (``tcp_lane``); on any other loop through asyncio's transports (``_T
 the same rules.
 
 One TCP listener and one UDP endpoint on the same host and port (44818 by default), and, for a
-target on one address, a UDP socket on its subnet's broadcast address (shared with every other
-target of the machine on that subnet: each gets a copy of a broadcast) whose datagrams are answered
-from the unicast endpoint, as a device answers the broadcasts of its subnet. Each
+target on one address, a UDP socket on the limited broadcast address and one on its subnet's
+broadcast address (shared with every other target of the machine: each gets a copy of a
+broadcast) whose datagrams are answered from the unicast endpoint, as a device answers the
+broadcasts of its link. Each
 TCP connection gets an ``EncapsulationConnection``; a loop timer at its next deadline runs
 the inactivity and class 3 timeouts. Delayed ListIdentity replies wait in the target's bounded
 ``DelayedReplies``, sent by one loop timer at the earliest.
@@ -27,7 +28,7 @@ import socket
 
 from .cpf import SockAddr
 from .encapsulation import DEFAULT_PORT, HEADER_SIZE
-from .interfaces import subnet_broadcast
+from .interfaces import LIMITED_BROADCAST, subnet_broadcast
 from .io_server import lane_of
 from .limits import (
     DEFAULT_MAX_TCP_CONNECTIONS,
@@ -220,7 +221,7 @@ class EncapsulationServer:
         #: The listener: asyncio's server, or on a ``PreciseEventLoop`` the lane's (``tcp_lane``).
         self._tcp: asyncio.base_events.Server | LaneListener | None = None
         self._udp: asyncio.DatagramTransport | None = None
-        self._broadcast: asyncio.DatagramTransport | None = None
+        self._broadcasts: list[asyncio.DatagramTransport] = []
         self._local: SockAddr | None = None
         self._delayed_timer: asyncio.TimerHandle | None = None
         self._delayed_at: float | None = None
@@ -308,27 +309,32 @@ class EncapsulationServer:
         transport, unicast = await self.loop.create_datagram_endpoint(lambda: _UdpProtocol(self),
                                                                       local_addr=(self.host, self.port))
         self._udp = transport  # type: ignore[assignment]
-        self._broadcast = await self._listen_broadcasts(unicast)
+        self._broadcasts = await self._listen_broadcasts(unicast)
 
-    async def _listen_broadcasts(self, unicast: _UdpProtocol) -> asyncio.DatagramTransport | None:
-        """A socket on the subnet's broadcast address and this port, shared (SO_REUSEADDR) with the
-        other targets of the machine on that subnet: Linux gives each a copy of a broadcast. A target
-        on every address (0.0.0.0) hears broadcasts on its own socket already."""
+    async def _listen_broadcasts(self, unicast: _UdpProtocol) -> list[asyncio.DatagramTransport]:
+        """A socket on each broadcast address a device on this address hears, on this port: the
+        limited broadcast 255.255.255.255 (what many scanners send) and the subnet's directed
+        broadcast. Each is shared (SO_REUSEADDR) with the other targets of the machine: Linux gives
+        every socket bound to a broadcast's address and port a copy of it (udp(7); a socket bound to
+        one unicast address never sees a broadcast), so each target answers once, from its own
+        address. A target on every address (0.0.0.0) hears broadcasts on its own socket already."""
         if self.host in ("", "0.0.0.0"):
-            return None
-        broadcast = subnet_broadcast(self.host)
-        if broadcast is None:
-            return None
-        sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
-        try:
-            sock.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
-            sock.bind((broadcast, self.port))
-        except OSError as exc:
-            sock.close()
-            log.warning("broadcasts to %s:%d are not heard: %s", broadcast, self.port, exc.strerror or exc)
-            return None
-        transport, _ = await self.loop.create_datagram_endpoint(lambda: _BroadcastListener(unicast), sock=sock)
-        return transport  # type: ignore[return-value]
+            return []
+        transports: list[asyncio.DatagramTransport] = []
+        for broadcast in (LIMITED_BROADCAST, subnet_broadcast(self.host)):
+            if broadcast is None:
+                continue
+            sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+            try:
+                sock.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
+                sock.bind((broadcast, self.port))
+            except OSError as exc:
+                sock.close()
+                log.warning("broadcasts to %s:%d are not heard: %s", broadcast, self.port, exc.strerror or exc)
+                continue
+            transport, _ = await self.loop.create_datagram_endpoint(lambda: _BroadcastListener(unicast), sock=sock)
+            transports.append(transport)  # type: ignore[arg-type]
+        return transports
 
     async def _close_tcp(self) -> None:
         tcp, self._tcp = self._tcp, None
@@ -347,9 +353,9 @@ class EncapsulationServer:
             await tcp.wait_closed()
         if self._udp is not None:
             self._udp.close()
-        if self._broadcast is not None:
-            self._broadcast.close()
-            self._broadcast = None
+        for broadcast in self._broadcasts:
+            broadcast.close()
+        self._broadcasts = []
         if self._delayed_timer is not None:
             self._delayed_timer.cancel()
             self._delayed_timer = None
