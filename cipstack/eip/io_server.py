@@ -30,11 +30,13 @@ import asyncio
 import contextlib
 import ctypes
 import ctypes.util
+import errno
 import gc
 import heapq
 import itertools
 import logging
 import math
+import os
 import select
 import selectors
 import socket
@@ -382,6 +384,34 @@ class _UdpIo(asyncio.DatagramProtocol):
         log.debug("class 1 UDP error: %s", exc)
 
 
+def udp_sockets_on(host: str, port: int) -> int:
+    """How many UDP sockets of this network namespace are bound to exactly ``host:port`` (Linux:
+    /proc/net/udp, whose local address is the 32-bit value in host order and the port in hex); -1
+    where that table cannot be read."""
+    wanted = f"{struct.unpack('=I', socket.inet_aton(host))[0]:08X}:{port:04X}"
+    try:
+        with open("/proc/net/udp", encoding="ascii") as table:
+            next(table, None)  # the column headings
+            return sum(1 for line in table if line.split(None, 2)[1:2] == [wanted])
+    except OSError:
+        return -1
+
+
+def refuse_exact_sharer(sock: socket.socket) -> None:
+    """Raise EADDRINUSE (``sock`` left to its caller to close) if another socket is bound to exactly
+    the address and port ``sock`` has just bound.
+
+    Linux lets two UDP sockets bind overlapping addresses (one on 0.0.0.0, one on 127.0.0.2, the
+    same port) only if both set SO_REUSEADDR, and then lets a third bind exactly the address of
+    one of them too (socket(7), SO_REUSEADDR; for UDP a listening state does not exist to tell
+    them apart). The class 1 socket sets it so that a scanner on 0.0.0.0:2222 can run beside the
+    adapter; the exact duplicate, which would split the adapter's O->T datagrams with another
+    process, is found here in the kernel's table and refused as a bind without the option would be."""
+    host, port = sock.getsockname()
+    if udp_sockets_on(host, port) > 1:
+        raise OSError(errno.EADDRINUSE, os.strerror(errno.EADDRINUSE))
+
+
 class IoEndpoint:
     """UDP socket + timer around an ``IoCore``: on the class 1 lane of a ``PreciseEventLoop``, or
     through asyncio's datagram transport and timers on any other loop."""
@@ -389,8 +419,10 @@ class IoEndpoint:
     def __init__(self, core: IoCore, host: str = "127.0.0.1", port: int = 2222,
                  multicast_ttl: Callable[[], int] = lambda: 1, exclusive: bool = False) -> None:
         self.core = core
-        #: Bind without SO_REUSEADDR, so that a second process cannot bind the same port and take
-        #: the datagrams (a target's consuming port must be its own).
+        #: The address and port are this endpoint's alone: a second socket on exactly them is refused
+        #: (a target's consuming port must be its own, see ``refuse_exact_sharer``), while a socket
+        #: on the wildcard address and the same port may coexist (a scanner on 0.0.0.0:2222 beside
+        #: an adapter on 127.0.0.2:2222). Elsewhere than Linux: bound without SO_REUSEADDR.
         self.exclusive = exclusive
         self.host = host
         self.port = port
@@ -419,10 +451,13 @@ class IoEndpoint:
         self.loop = asyncio.get_running_loop()
         self._lane = lane_of(self.loop)
         sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
-        if not self.exclusive:
+        shares_wildcard = self.exclusive and sys.platform.startswith("linux")
+        if not self.exclusive or shares_wildcard:
             sock.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
         try:
             sock.bind((self.host, self.port))
+            if shares_wildcard:
+                refuse_exact_sharer(sock)
             sock.setsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF, RECEIVE_BUFFER)
             if self.host not in ("", "0.0.0.0"):
                 sock.setsockopt(socket.IPPROTO_IP, socket.IP_MULTICAST_IF, socket.inet_aton(self.host))
