@@ -280,7 +280,7 @@ def cmd_io(args: argparse.Namespace) -> int:
             print(_statistics_text(stats), flush=True)
         if outputs_set and stats["received"] > 1 and stats["input_changes"] == 0:
             print("cipstack io: warning: the input never changed while outputs were set: the target may not be "
-                  f"receiving them (is {args.target_io_port} its class 1 port? see --target-io-port)",
+                  f"receiving them (is {io.connection.target_io_port} its class 1 port? see --target-io-port)",
                   file=sys.stderr, flush=True)
         return 130 if state["interrupted"] else EXIT_OK
 

@@ -186,8 +186,8 @@ def build_parser(command: str | None = None) -> argparse.ArgumentParser:
     p.add_argument("--idle", action="store_true", help="send idle instead of run in the run/idle header")
     p.add_argument("--io-port", type=lambda t: parse_number(t, "io port"), default=0,
                    help="local UDP port for T->O data (default: any free port, announced to the target)")
-    p.add_argument("--target-io-port", type=lambda t: parse_number(t, "target io port"), default=2222,
-                   help="the target's class 1 UDP port (default 2222)")
+    p.add_argument("--target-io-port", type=lambda t: parse_number(t, "target io port"), default=None,
+                   help="the target's class 1 UDP port (default: the port its Forward_Open reply names, else 2222)")
     p.add_argument("--config", type=lambda t: parse_number(t, "config"), metavar="N",
                    help="configuration assembly instance of the connection path (default 1)")
     p.add_argument("--config-data", metavar="HEX", help="configuration data sent in the Forward_Open (hex bytes)")

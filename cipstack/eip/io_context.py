@@ -22,6 +22,7 @@ from .cpf import Item, ItemType, SockAddr
 from .encapsulation import (
     EncapsulationError,
 )
+from .io_core import DEFAULT_IO_PORT
 from .io_originator import (
     Class1Request,
     IoConnectionHandle,
@@ -54,7 +55,8 @@ class IoContext:
     setting it up (a group that cannot be joined, a socket error), an exception or a
     cancellation (Ctrl-C) in the body, or a normal exit."""
 
-    def __init__(self, client: EncapsulationClient, request: Class1Request, target_io_port: int, local_io_port: int,
+    def __init__(self, client: EncapsulationClient, request: Class1Request, target_io_port: int | None,
+                 local_io_port: int,
                  output_schema: AssemblySchema | None, input_schema: AssemblySchema | None, run: bool,
                  keep_intervals: bool, kernel_arrival_times: bool = False) -> None:
         self.client = client
@@ -144,10 +146,7 @@ class IoContext:
 
     async def _start(self, request: Class1Request, reply: ForwardOpenReply, extra: list[Item], core: IoOriginator,
                      endpoint: IoEndpoint) -> IoConnectionHandle:
-        connection = new_connection(request, self.client.host_address(), self.target_io_port,
-                                    reply.ot_connection_id, reply.to_connection_id, reply.ot_api_us, reply.to_api_us,
-                                    asyncio.get_running_loop().time(), self.keep_intervals)
-        connection.run = self.run
+        announced: int | None = None
         for item in extra:
             if item.type not in (ItemType.SOCKADDR_T_O, ItemType.SOCKADDR_O_T):
                 log.debug("Forward_Open reply: item 0x%04X ignored", item.type)
@@ -159,11 +158,21 @@ class IoContext:
                 continue
             if item.type == ItemType.SOCKADDR_T_O and ipaddress.IPv4Address(address.host).is_multicast:
                 await endpoint.join_multicast(address.host, address.port)
+            elif item.type == ItemType.SOCKADDR_O_T and address.port:
+                # The target consumes O->T data on this port, not 2222 (CIP Vol. 2, 2-6.3.3).
+                announced = address.port
+                log.debug("Forward_Open reply: the target consumes O->T data on UDP port %d", address.port)
             else:
                 # 0.0.0.0:<our port> echoed back on a point-to-point connection, or the target's
                 # O->T address: informational; only a 224.0.0.0/4 group is something to join.
                 log.debug("Forward_Open reply: Sockaddr Info 0x%04X %s:%d (informational)", item.type,
                           address.host, address.port)
+        # O->T data goes to the port the caller gave, else to the one the reply names, else to 2222.
+        ot_port = self.target_io_port if self.target_io_port is not None else announced or DEFAULT_IO_PORT
+        connection = new_connection(request, self.client.host_address(), ot_port,
+                                    reply.ot_connection_id, reply.to_connection_id, reply.ot_api_us, reply.to_api_us,
+                                    asyncio.get_running_loop().time(), self.keep_intervals)
+        connection.run = self.run
         output_schema, input_schema = self.output_schema, self.input_schema
         if output_schema is not None and output_schema.size != (request.output_size or 0):
             output_schema = None  # the size the target asked for is not the schema's: raw bytes only

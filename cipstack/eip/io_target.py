@@ -404,8 +404,14 @@ class IoTarget:
             destination = (self._multicast_address(), self.io_port)
             to_id = self._new_id()
         else:
+            # Point-to-point T->O goes to the originator (the host of its TCP connection) at the
+            # port of the T->O Sockaddr Info item (0x8001) its Forward_Open carries, else at 2222,
+            # the class 1 port (CIP Vol. 2, 2-6.3.3 and 3-3.9.4, as OpENer's
+            # OpenProducingPointToPointConnection and Wireshark's packet-enip.c read it), never at
+            # this target's own consuming port. The item's sin_addr is not followed: an originator
+            # names where it receives, not another host to send this target's production to.
             requested = sockaddrs.get(ItemType.SOCKADDR_T_O)
-            destination = (peer_host, requested.port if requested is not None else self.io_port)
+            destination = (peer_host, requested.port if requested is not None else DEFAULT_IO_PORT)
             to_id = fo.to_connection_id
         stats = IoStatistics()
         consumer = ConsumerState.opened(connection_timeout(fo.ot_rpi_us, fo.timeout_multiplier), now, stats=stats)
@@ -425,10 +431,18 @@ class IoTarget:
         if producer is not None:
             heapq.heappush(self._productions, (producer.next_due, next(self._order), connection))
         self._watch(connection)
+        reply_items = context.extras.setdefault("reply_items", [])
+        if self.io_port != DEFAULT_IO_PORT:
+            # An originator sends O->T data to 2222 unless the reply's O->T Sockaddr Info item
+            # (0x8000) names another port (CIP Vol. 2, 2-6.3.3; OpENer's
+            # OpenConsumingPointToPointConnection always answers one): a target consuming elsewhere
+            # says so. Its sin_addr is 0, as OpENer's: the originator already knows this target's
+            # address, and the port is what the item is for.
+            reply_items.append(Item(ItemType.SOCKADDR_O_T, SockAddr("0.0.0.0", self.io_port).encode()))
         if multicast:
+            # Multicast T->O: the reply's T->O item (0x8001) names the group and port to receive on.
             host, port = destination
-            reply_item = Item(ItemType.SOCKADDR_T_O, SockAddr(host, port).encode())
-            context.extras.setdefault("reply_items", []).append(reply_item)
+            reply_items.append(Item(ItemType.SOCKADDR_T_O, SockAddr(host, port).encode()))
         log.info("class 1 %s opened by %s (RPI O->T %d us, T->O %d us%s)", connection.name, context.origin,
                  fo.ot_rpi_us, fo.to_rpi_us, ", multicast " + destination[0] if multicast else "")
         self.events.io_opened(connection)

@@ -35,7 +35,6 @@ from .encapsulation import (
     EncapsulationHeader,
 )
 from .identity_items import IdentityRecord, ServiceRecord, decode_list_identity, decode_list_services
-from .io_core import DEFAULT_IO_PORT
 from .replies import EncapsulationStatusError, MalformedReplyError, decode_reply
 
 if TYPE_CHECKING:
@@ -418,7 +417,7 @@ class EncapsulationClient(ExplicitClient):
     # -- class 1 -------------------------------------------------------------------------------------
     def io_connection(self, output: int | None, input: int, rpi: float, *, output_size: int,
                       input_size: int, config: int = 1, heartbeat: int | None = None,
-                      target_io_port: int = DEFAULT_IO_PORT, local_io_port: int = 0, multicast: bool = False,
+                      target_io_port: int | None = None, local_io_port: int = 0, multicast: bool = False,
                       timeout_multiplier: int = 2, output_schema: AssemblySchema | None = None,
                       input_schema: AssemblySchema | None = None, run: bool = True,
                       keep_intervals: bool = False, config_data: bytes = b"",
@@ -431,7 +430,8 @@ class EncapsulationClient(ExplicitClient):
         ``ot_format`` is the O->T real-time format: run/idle header (default), heartbeat (the
         sequence count alone) or modeless. T->O data comes to this host's UDP ``local_io_port``
         (0: the shared endpoint's port), which the Forward_Open announces in a Sockaddr Info
-        item; O->T data goes to ``target_io_port`` on the target. A target that refuses the
+        item; O->T data goes to ``target_io_port`` on the target (None: the port the reply's O->T
+        Sockaddr Info item names, else 2222). A target that refuses the
         O->T or T->O size with 0x0127/0x0128 and names the size it wants gets one retry with it.
         ``kernel_arrival_times``: T->O packets are timed (watchdog, statistics, ``keep_intervals``)
         when the kernel received them, as a capture shows them, not when this process read them;
