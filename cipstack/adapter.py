@@ -16,6 +16,7 @@ from .devices.acg.modbus_server import ModbusTcpServer
 from .devices.base import Device, DeviceLimits, TripRefused
 from .devices.profiles import DEFAULT_MAC, DEFAULT_PROFILE, ProfileOptions, build_device
 from .eip.identity_items import CAPABILITY_CIP_TCP, CAPABILITY_CLASS01_UDP
+from .eip.interfaces import interface_of
 from .eip.io_core import DEFAULT_IO_PORT, ProductionGrid
 from .eip.io_server import IoEndpoint, freeze_startup_objects
 from .eip.io_target import IoTarget
@@ -26,6 +27,19 @@ from .listening import ListenError, held_log_records
 from .objects.tcpip import NetworkInterface
 
 log = logging.getLogger(__name__)
+
+
+def network_interface(host: str, mac: bytes) -> NetworkInterface:
+    """What the TCP/IP Interface object of a device on ``host`` reports: the address and the netmask
+    of the interface it is on (an adapter on 127.0.0.2 is on loopback, 255.0.0.0; one on a /24
+    reports 255.255.255.0). On every address (0.0.0.0), the object keeps one: loopback's, since its
+    attribute 5 is one interface's configuration and feeds the multicast allocation, which every
+    originator must compute alike; ListIdentity, per request, gives the address it arrived on."""
+    ip_address = host if host not in ("", "0.0.0.0", "localhost") else "127.0.0.1"
+    interface = interface_of(ip_address)
+    if interface is None:
+        return NetworkInterface(ip_address=ip_address, mac=mac)
+    return NetworkInterface(ip_address=str(interface.ip), network_mask=str(interface.netmask), mac=mac)
 
 
 @dataclass
@@ -69,9 +83,7 @@ class Adapter:
         so that theirs fall due together (``ProductionGrid``); by default one of its own."""
         self.settings = settings or AdapterSettings()
         s = self.settings
-        ip_address = s.host if s.host not in ("", "0.0.0.0", "localhost") else "127.0.0.1"
-        self.device = device or build_device(s.profile, NetworkInterface(ip_address=ip_address,
-                                                                          mac=s.mac or DEFAULT_MAC),
+        self.device = device or build_device(s.profile, network_interface(s.host, s.mac or DEFAULT_MAC),
                                              DeviceLimits(s.max_sessions, s.max_connections),
                                              ProfileOptions(s.state_path, s.model))
         self.modbus: ModbusTcpServer | None = None

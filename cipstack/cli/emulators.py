@@ -117,20 +117,18 @@ def _read_eds_file(path: str) -> Any:
 def _adapter_from_eds(args: argparse.Namespace) -> int:
     """``cipstack adapter --eds FILE``: the generic device the file describes; each construct it
     cannot serve is one warning line on stderr."""
-    from ..adapter import Adapter, AdapterSettings
+    from ..adapter import Adapter, AdapterSettings, network_interface
     from ..devices.base import DeviceLimits
     from ..devices.profiles import DEFAULT_MAC
     from ..eds.emulated_device import EdsDeviceError, build_eds_device
-    from ..objects.tcpip import NetworkInterface
 
     if args.model is not None or args.state is not None or args.modbus_port is not None or args.param:
         raise UsageError("--model, --state, --modbus-port and --param belong to --profile, not --eds")
     if not 0 <= args.port < 65536:
         raise UsageError(f"port {args.port} out of range")
     doc = _read_eds_file(args.eds)
-    ip_address = args.host if args.host not in ("", "0.0.0.0", "localhost") else "127.0.0.1"
     try:
-        device = build_eds_device(doc, NetworkInterface(ip_address=ip_address, mac=DEFAULT_MAC),
+        device = build_eds_device(doc, network_interface(args.host, DEFAULT_MAC),
                                   DeviceLimits(args.max_sessions, args.max_connections))
     except EdsDeviceError as exc:
         raise UsageError(f"{args.eds}: {exc}") from None
@@ -159,16 +157,15 @@ def cmd_models(args: argparse.Namespace) -> int:
 
 
 def cmd_componet(args: argparse.Namespace) -> int:
-    from ..adapter import Adapter, AdapterSettings
+    from ..adapter import Adapter, AdapterSettings, network_interface
     from ..devices.omron.device import build_componet_gateway, parse_nodes
     from ..devices.profiles import DEFAULT_MAC
-    from ..objects.tcpip import NetworkInterface
 
     try:
         nodes = parse_nodes(args.nodes)
         if not nodes:
             raise ValueError("--nodes names no node")
-        gateway = build_componet_gateway(nodes, NetworkInterface(ip_address=args.host, mac=DEFAULT_MAC))
+        gateway = build_componet_gateway(nodes, network_interface(args.host, DEFAULT_MAC))
     except (ValueError, KeyError) as exc:
         raise UsageError(str(exc)) from None
     settings = AdapterSettings(host=args.host, port=args.port, io_port=args.io_port, control_path=args.control,
