@@ -225,9 +225,9 @@ NAMESPACE_HELPER = textwrap.dedent('''
 ''')
 
 
-def in_namespace(tmp_path: Path, script: str) -> subprocess.CompletedProcess[str]:
-    """Run ``script`` with this tree's cipstack in a private network namespace whose loopback is up:
-    UDP 2222 on 0.0.0.0 there takes nothing from anyone."""
+def in_namespace(tmp_path: Path, script: str, setup: str = "") -> subprocess.CompletedProcess[str]:
+    """Run ``script`` with this tree's cipstack in a private network namespace whose loopback is up
+    (after the shell command ``setup``): UDP 2222 or 0.0.0.0 there take nothing from anyone."""
     missing = [tool for tool in ("unshare", "ip") if shutil.which(tool) is None]
     if missing:
         pytest.skip(f"{' and '.join(missing)} not installed")
@@ -235,7 +235,7 @@ def in_namespace(tmp_path: Path, script: str) -> subprocess.CompletedProcess[str
         pytest.skip("a private network namespace (unshare -n) needs root")
     path = tmp_path / "in_namespace.py"
     path.write_text(script)
-    inner = f"ip link set lo up && {shlex.quote(sys.executable)} {shlex.quote(str(path))}"
+    inner = f"ip link set lo up && {setup or 'true'} && {shlex.quote(sys.executable)} {shlex.quote(str(path))}"
     env = {**os.environ, "PYTHONPATH": str(Path(__file__).parents[1])}
     return subprocess.run(["unshare", "-n", "sh", "-c", inner], capture_output=True, text=True, timeout=60,
                           env=env, check=False)
@@ -247,3 +247,65 @@ def test_a_scanner_on_the_wildcard_2222_runs_beside_the_adapter(tmp_path: Path) 
     assert result.stdout.splitlines() == [
         "adapter beside scanner", "scanner beside adapter", "adapter dropped 1, scanners heard 0",
         "second refused: cannot listen on UDP 127.0.0.2:2222 (class 1 I/O, --io-port): Address already in use"]
+
+
+# -- item 4: the address and the netmask a device reports -------------------------------------------
+INTERFACE_HELPER = textwrap.dedent('''
+    import asyncio, ipaddress, socket, struct
+    from cipstack.adapter import Adapter, AdapterSettings
+    from tests.ports import list_identity_replies
+
+    def advertised(reply):
+        """The sockaddr of a ListIdentity reply's item (after count, type, length and version)."""
+        family, port, address = struct.unpack_from(">hH4s", reply, 24 + 2 + 4 + 2)
+        return f"{socket.inet_ntoa(address)}:{port}"
+
+    def tcp_exchange(host, port, frames):
+        with socket.create_connection((host, port), timeout=5) as sock:
+            replies = []
+            session = 0
+            for command, body in frames:
+                sock.sendall(struct.pack("<HHII8sI", command, len(body), session, 0, bytes(8), 0) + body)
+                head = sock.recv(24, socket.MSG_WAITALL)
+                length, session = struct.unpack_from("<HI", head, 2)
+                replies.append(head + sock.recv(length, socket.MSG_WAITALL) if length else head)
+            return replies
+
+    async def main():
+        lines = []
+        # An adapter on an address of a /24: the TCP/IP object's attribute 5 (address, mask).
+        async with Adapter(AdapterSettings(host="10.20.30.40", port=44818, io_port=2222)):
+            get = bytes.fromhex("0e03 20f5 2401 3005")
+            rr = struct.pack("<IHHHHHH", 0, 5, 2, 0, 0, 0xB2, len(get)) + get
+            loop = asyncio.get_running_loop()
+            _, reply = await loop.run_in_executor(None, tcp_exchange, "10.20.30.40", 44818,
+                                                  [(0x65, b"\\x01\\x00\\x00\\x00"), (0x6F, rr)])
+            data = reply[24 + 16 + 4:]
+            address, mask = struct.unpack_from("<II", data)
+            lines.append(f"tcp/ip {ipaddress.IPv4Address(address)} {ipaddress.IPv4Address(mask)}")
+        # An adapter on every address: ListIdentity says the address each request arrived on.
+        async with Adapter(AdapterSettings(host="0.0.0.0", port=44819, io_port=0)):
+            for destination in ("127.0.0.5", "10.20.30.40"):
+                [(reply, _)] = await list_identity_replies(destination, 44819)
+                lines.append(f"udp {destination} {advertised(reply)}")
+            [_, reply] = await asyncio.get_running_loop().run_in_executor(
+                None, tcp_exchange, "127.0.0.7", 44819, [(0x65, b"\\x01\\x00\\x00\\x00"), (0x63, b"")])
+            lines.append(f"tcp 127.0.0.7 {advertised(reply)}")
+        print("\\n".join(lines))
+
+    asyncio.run(main())
+''')
+
+
+def test_the_interface_address_and_netmask_are_the_interfaces_own(tmp_path: Path) -> None:
+    """In a namespace whose loopback also holds 10.20.30.40/24: an adapter there reports netmask
+    255.255.255.0 (it said 255.0.0.0 whatever the interface), and an adapter on 0.0.0.0 advertises
+    in ListIdentity the address each request arrived on (over UDP it said 127.0.0.1)."""
+    result = in_namespace(tmp_path, INTERFACE_HELPER, setup="ip addr add 10.20.30.40/24 dev lo")
+    assert result.returncode == 0, result.stderr
+    assert result.stdout.splitlines() == [
+        "tcp/ip 10.20.30.40 255.255.255.0",
+        "udp 127.0.0.5 127.0.0.5:44819",
+        "udp 10.20.30.40 10.20.30.40:44819",
+        "tcp 127.0.0.7 127.0.0.7:44819",
+    ]

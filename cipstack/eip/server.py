@@ -25,6 +25,8 @@ import asyncio
 import errno
 import logging
 import socket
+import struct
+import sys
 
 from .cpf import SockAddr
 from .encapsulation import DEFAULT_PORT, HEADER_SIZE
@@ -143,10 +145,12 @@ class _UdpProtocol(asyncio.DatagramProtocol):
     def connection_made(self, transport: asyncio.BaseTransport) -> None:
         self.transport = transport  # type: ignore[assignment]
 
-    def datagram_received(self, data: bytes, addr: tuple[str, int]) -> None:
+    def datagram_received(self, data: bytes, addr: tuple[str, int], local: SockAddr | None = None) -> None:
+        """``local``: the address the datagram arrived on, when the socket says (``_ArrivalAddresses``);
+        else the target's own."""
         server = self.server
         try:
-            reply = server.target.datagram_from(data, addr, server.local_address(), server.loop.time())
+            reply = server.target.datagram_from(data, addr, local or server.local_address(), server.loop.time())
         except Exception:  # never let a datagram take the endpoint down
             log.exception("UDP datagram from %s", addr)
             return
@@ -182,6 +186,62 @@ class _UdpProtocol(asyncio.DatagramProtocol):
 
     def error_received(self, exc: Exception) -> None:
         log.debug("UDP error: %s", exc)
+
+
+#: Linux's IP_PKTINFO (<linux/in.h>), absent from Python's socket module before 3.13: each datagram
+#: then comes with a ``struct in_pktinfo`` (interface index, ``ipi_spec_dst``, ``ipi_addr``).
+_IP_PKTINFO = getattr(socket, "IP_PKTINFO", 8)
+_IN_PKTINFO = struct.Struct("=i4s4s")
+#: Datagrams read per wake-up before the loop has its turn again.
+_READS_PER_WAKEUP = 64
+
+
+class _ArrivalAddresses:
+    """The UDP endpoint of a target on every address (0.0.0.0), Linux: each datagram is read with the
+    local address it arrived on (IP_PKTINFO's ``ipi_spec_dst``: the address a unicast was sent to,
+    or for a broadcast the address of the interface it came in by), so that ListIdentity advertises
+    the address the originator reached, not one chosen for every interface. Offers what
+    ``_UdpProtocol`` uses of a datagram transport (``sendto``, ``is_closing``, ``close``)."""
+
+    def __init__(self, sock: socket.socket, protocol: _UdpProtocol, loop: asyncio.AbstractEventLoop) -> None:
+        self.sock = sock
+        self.protocol = protocol
+        self.loop = loop
+        self._closed = False
+        sock.setblocking(False)
+        loop.add_reader(sock.fileno(), self._read)
+        protocol.connection_made(self)  # type: ignore[arg-type]
+
+    def _read(self) -> None:
+        sock, port = self.sock, self.protocol.server.port
+        for _ in range(_READS_PER_WAKEUP):
+            try:
+                data, ancillary, _flags, source = sock.recvmsg(65535, socket.CMSG_SPACE(_IN_PKTINFO.size))
+            except (BlockingIOError, InterruptedError):
+                return
+            except OSError as exc:  # an ICMP error reported on the socket
+                log.debug("UDP socket error: %s", exc)
+                return
+            local = None
+            for level, kind, value in ancillary:
+                if level == socket.IPPROTO_IP and kind == _IP_PKTINFO and len(value) >= _IN_PKTINFO.size:
+                    local = SockAddr(socket.inet_ntoa(_IN_PKTINFO.unpack_from(value)[1]), port)
+            self.protocol.datagram_received(data, source, local)
+
+    def sendto(self, data: bytes, addr: tuple[str, int]) -> None:
+        try:
+            self.sock.sendto(data, addr)
+        except (BlockingIOError, InterruptedError):
+            log.debug("UDP reply to %s dropped: the socket's buffer is full", addr)
+
+    def is_closing(self) -> bool:
+        return self._closed
+
+    def close(self) -> None:
+        if not self._closed:
+            self._closed = True
+            self.loop.remove_reader(self.sock.fileno())
+            self.sock.close()
 
 
 class _BroadcastListener(asyncio.DatagramProtocol):
@@ -220,7 +280,7 @@ class EncapsulationServer:
         self.refused_log = RateLimitedLog(log)
         #: The listener: asyncio's server, or on a ``PreciseEventLoop`` the lane's (``tcp_lane``).
         self._tcp: asyncio.base_events.Server | LaneListener | None = None
-        self._udp: asyncio.DatagramTransport | None = None
+        self._udp: asyncio.DatagramTransport | _ArrivalAddresses | None = None
         self._broadcasts: list[asyncio.DatagramTransport] = []
         self._local: SockAddr | None = None
         self._delayed_timer: asyncio.TimerHandle | None = None
@@ -305,6 +365,16 @@ class EncapsulationServer:
 
     async def _listen_udp(self) -> None:
         if not self.udp:
+            return
+        if self.host in ("", "0.0.0.0") and sys.platform.startswith("linux"):
+            sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+            try:
+                sock.setsockopt(socket.IPPROTO_IP, _IP_PKTINFO, 1)
+                sock.bind((self.host, self.port))
+            except OSError:
+                sock.close()
+                raise
+            self._udp = _ArrivalAddresses(sock, _UdpProtocol(self), self.loop)
             return
         transport, unicast = await self.loop.create_datagram_endpoint(lambda: _UdpProtocol(self),
                                                                       local_addr=(self.host, self.port))
