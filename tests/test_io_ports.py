@@ -283,6 +283,9 @@ INTERFACE_HELPER = textwrap.dedent('''
             data = reply[24 + 16 + 4:]
             address, mask = struct.unpack_from("<II", data)
             lines.append(f"tcp/ip {ipaddress.IPv4Address(address)} {ipaddress.IPv4Address(mask)}")
+            # The broadcast of the subnet of an address added to an interface (not its first) is heard.
+            replies = await list_identity_replies("10.20.30.255", 44818)
+            lines.append("subnet broadcast " + " ".join(advertised(reply) for reply, _ in replies))
         # An adapter on every address: ListIdentity says the address each request arrived on.
         async with Adapter(AdapterSettings(host="0.0.0.0", port=44819, io_port=0)):
             for destination in ("127.0.0.5", "10.20.30.40"):
@@ -298,13 +301,16 @@ INTERFACE_HELPER = textwrap.dedent('''
 
 
 def test_the_interface_address_and_netmask_are_the_interfaces_own(tmp_path: Path) -> None:
-    """In a namespace whose loopback also holds 10.20.30.40/24: an adapter there reports netmask
-    255.255.255.0 (it said 255.0.0.0 whatever the interface), and an adapter on 0.0.0.0 advertises
-    in ListIdentity the address each request arrived on (over UDP it said 127.0.0.1)."""
+    """In a namespace whose loopback also holds 10.20.30.40/24 (as a fleet adds its addresses to an
+    interface): an adapter there reports netmask 255.255.255.0 (it said 255.0.0.0 whatever the
+    interface) and hears its subnet's broadcast (the interface table read missed such addresses);
+    an adapter on 0.0.0.0 advertises in ListIdentity the address each request arrived on (over UDP
+    it said 127.0.0.1)."""
     result = in_namespace(tmp_path, INTERFACE_HELPER, setup="ip addr add 10.20.30.40/24 dev lo")
     assert result.returncode == 0, result.stderr
     assert result.stdout.splitlines() == [
         "tcp/ip 10.20.30.40 255.255.255.0",
+        "subnet broadcast 10.20.30.40:44818",
         "udp 127.0.0.5 127.0.0.5:44819",
         "udp 10.20.30.40 10.20.30.40:44819",
         "tcp 127.0.0.7 127.0.0.7:44819",
