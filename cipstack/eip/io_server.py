@@ -384,17 +384,19 @@ class _UdpIo(asyncio.DatagramProtocol):
         log.debug("class 1 UDP error: %s", exc)
 
 
-def udp_sockets_on(host: str, port: int) -> int:
-    """How many UDP sockets of this network namespace are bound to exactly ``host:port`` (Linux:
-    /proc/net/udp, whose local address is the 32-bit value in host order and the port in hex); -1
-    where that table cannot be read."""
+def udp_sockets_on(host: str, port: int) -> set[int] | None:
+    """The inodes of the UDP sockets of this network namespace bound to exactly ``host:port``
+    (Linux: /proc/net/udp, whose local address is the 32-bit value in host order and the port in
+    hex; the inode is the tenth column); None where that table cannot be read. The table is read in
+    pages while other processes bind and close: a socket may be listed twice (hence a set)."""
     wanted = f"{struct.unpack('=I', socket.inet_aton(host))[0]:08X}:{port:04X}"
     try:
         with open("/proc/net/udp", encoding="ascii") as table:
             next(table, None)  # the column headings
-            return sum(1 for line in table if line.split(None, 2)[1:2] == [wanted])
+            rows = [line.split() for line in table]
     except OSError:
-        return -1
+        return None
+    return {int(row[9]) for row in rows if len(row) > 9 and row[1] == wanted}
 
 
 def refuse_exact_sharer(sock: socket.socket) -> None:
@@ -403,12 +405,13 @@ def refuse_exact_sharer(sock: socket.socket) -> None:
 
     Linux lets two UDP sockets bind overlapping addresses (one on 0.0.0.0, one on 127.0.0.2, the
     same port) only if both set SO_REUSEADDR, and then lets a third bind exactly the address of
-    one of them too (socket(7), SO_REUSEADDR; for UDP a listening state does not exist to tell
-    them apart). The class 1 socket sets it so that a scanner on 0.0.0.0:2222 can run beside the
-    adapter; the exact duplicate, which would split the adapter's O->T datagrams with another
-    process, is found here in the kernel's table and refused as a bind without the option would be."""
+    one of them too (socket(7), SO_REUSEADDR; for UDP no listening state tells them apart). The
+    class 1 socket sets it so that a scanner on 0.0.0.0:2222 can run beside the adapter; the exact
+    duplicate, which would split the adapter's O->T datagrams with another process, is found here
+    in the kernel's table and refused as a bind without the option would be."""
     host, port = sock.getsockname()
-    if udp_sockets_on(host, port) > 1:
+    others = (udp_sockets_on(host, port) or set()) - {os.fstat(sock.fileno()).st_ino}
+    if others:
         raise OSError(errno.EADDRINUSE, os.strerror(errno.EADDRINUSE))
 
 
