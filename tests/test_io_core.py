@@ -245,6 +245,22 @@ def test_exclusive_owner_open_consume_produce_close() -> None:
     assert not rig.io.forward_close(ForwardCloseRequest(0, 0, connection.triad), rig.context())
 
 
+@pytest.mark.parametrize("sockaddr", [None, {ItemType.SOCKADDR_T_O: SockAddr("0.0.0.0", 0)}])
+def test_t_to_o_without_a_port_goes_to_2222_whatever_the_consuming_port(
+        sockaddr: dict[int, SockAddr] | None) -> None:
+    """Consuming on 2223 (--io-port): T->O goes to the originator's 2222 when its Forward_Open names
+    no port, and the reply names 2223 in an O->T Sockaddr Info item (issue 30, item 2)."""
+    rig = Rig()
+    rig.io.io_port = 2223
+    context = rig.context(5.0, sockaddr)
+    rig.io.forward_open(rig.request(), context)
+    [connection] = rig.io.connections.values()
+    assert connection.destination == ("127.0.0.1", 2222)
+    [item] = context.extras["reply_items"]
+    assert (item.type, item.data) == (ItemType.SOCKADDR_O_T, struct.pack(">hH4s8x", 2, 2223, bytes(4)))
+    assert rig.io.poll(5.0)[0][1] == ("127.0.0.1", 2222)
+
+
 def test_connections_of_one_rpi_are_produced_in_the_same_slots() -> None:
     """Opened 3.7 ms apart, two connections at 10 ms go out in one poll, every 10 ms, in the same
     order; one at 20 ms opened 4.1 ms in starts 20 ms in, with them, and every other slot after."""

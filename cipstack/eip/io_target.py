@@ -409,9 +409,10 @@ class IoTarget:
             # the class 1 port (CIP Vol. 2, 2-6.3.3 and 3-3.9.4, as OpENer's
             # OpenProducingPointToPointConnection and Wireshark's packet-enip.c read it), never at
             # this target's own consuming port. The item's sin_addr is not followed: an originator
-            # names where it receives, not another host to send this target's production to.
+            # names where it receives, not another host to send this target's production to. Port 0
+            # names no port: the default then.
             requested = sockaddrs.get(ItemType.SOCKADDR_T_O)
-            destination = (peer_host, requested.port if requested is not None else DEFAULT_IO_PORT)
+            destination = (peer_host, requested.port if requested is not None and requested.port else DEFAULT_IO_PORT)
             to_id = fo.to_connection_id
         stats = IoStatistics()
         consumer = ConsumerState.opened(connection_timeout(fo.ot_rpi_us, fo.timeout_multiplier), now, stats=stats)
