@@ -3,10 +3,13 @@ Instances and the two bit tables that follow them).
 
 * Outputs 20/21 and inputs 70/71 are the shared drive-profile layouts of ``drive_profile.py``
   with the speed words in rpm ("Speed Reference/Actual ... RPM unit").
-* Outputs 100/101 and inputs 110/111 are the same bit layouts with the speed words in Hz
-  ("... Hz unit"). The Hz word is the drive's own frequency word: its type, scale and unit are
-  those of the register it carries (the frequency command for the reference, the output
-  frequency for the actual speed), so the caller passes that register.
+* Outputs 100/101 and inputs 110/111 are the same bit layouts with the speed words in 0.01 Hz.
+  The instance tables say only "Hz unit"; the count is the drive's own frequency word: the
+  AC/DC Drive object gives Reference Hz/Actual Hz (0x2A attributes 101/100) as "0-400.00 Hz",
+  and seed 001 gives the frequency command 0x0380 and the output frequency 0x000A in 0.01 Hz,
+  so 3000 is 30.00 Hz. The word's type, scale and unit are those of the register it carries
+  (the frequency command for the reference, the output frequency for the actual speed), so the
+  caller passes that register and the declaration says "Hz" with scale 0.01.
 * Outputs 121-128 and inputs 141-148 ("smart scaling") are 1 to 8 words, "Control Parameter -
   n data" / "Status Parameter - n data": the drive registers whose addresses CM.51-CM.58 /
   CM.31-CM.38 hold. Their schemas are built from those registers, so the fields carry the
@@ -41,7 +44,7 @@ CONTROL_PARAMETER_BASE_INSTANCE = 120
 STATUS_PARAMETER_BASE_INSTANCE = 140
 MAX_PARAMETER_WORDS = 8
 
-#: Instances whose speed word is in Hz rather than rpm.
+#: Instances whose speed word is the drive's frequency word (0.01 Hz) rather than rpm.
 HZ_OUTPUTS = (100, 101)
 HZ_INPUTS = (110, 111)
 

@@ -13,6 +13,7 @@ from dataclasses import dataclass
 from typing import TYPE_CHECKING, Any
 
 from ..cip.types import USINT, CipType
+from ..cip.units import count_unit
 
 if TYPE_CHECKING:
     import construct as cs
@@ -28,12 +29,19 @@ class AssemblyField:
     bits: int = 0
     #: Position of a bit field's least significant bit within byte ``offset``.
     bit: int = 0
+    #: Engineering unit of the scaled value ("Hz" for a word of 0.01 Hz: see ``count_unit``).
     unit: str = ""
     #: Engineering value = raw x scale.
     scale: float = 1.0
     help: str = ""
     #: The attribute this field mirrors, as (class, instance, attribute), for the EDS and docs.
     link: tuple[int, int, int] | None = None
+
+    @property
+    def count_unit(self) -> str:
+        """The unit a raw value of the field is in ("0.01 Hz" for a frequency word of scale 0.01):
+        what ``--set`` takes and the decoded input shows."""
+        return count_unit(self.unit, self.scale)
 
     @property
     def size_bits(self) -> int:

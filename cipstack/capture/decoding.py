@@ -16,6 +16,7 @@ from ..catalog import Catalog
 from ..cip.epath import LogicalSegment, LogicalType, PortSegment, decode_path, parse_application_path
 from ..cip.messages import MessageRouterRequest, MessageRouterResponse, Service
 from ..cip.status import CipError, describe_status
+from ..cip.units import scaled_text
 from ..componet.gateway import COMPONET_PORT
 from ..eip.cm_messages import UnconnectedSendRequest
 
@@ -76,8 +77,13 @@ def decode_value(declaration: Any, data: bytes) -> dict[str, Any]:
         out["text"] = describe(value)
     else:
         enum = getattr(declaration, "enum", None)
-        unit = getattr(declaration, "unit", "")
-        out["text"] = f"{value} ({enum[value]})" if enum and value in enum else f"{value} {unit}".strip()
+        unit, scale = getattr(declaration, "unit", ""), getattr(declaration, "scale", 1.0)
+        if enum and value in enum:
+            out["text"] = f"{value} ({enum[value]})"
+        elif isinstance(value, int) and not isinstance(value, bool):
+            out["text"] = scaled_text(value, unit, scale)  # the raw word in its declared unit, scaled
+        else:
+            out["text"] = f"{value} {unit}".strip()
     scale = getattr(declaration, "scale", 1.0)
     if scale != 1.0 and isinstance(value, int):
         out["scaled"] = value * scale

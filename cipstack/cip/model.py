@@ -21,6 +21,7 @@ from .epath import ApplicationPath
 from .messages import MessageRouterRequest, Service
 from .status import CipError, GeneralStatus
 from .types import UINT, CipType
+from .units import scaled_text
 
 if TYPE_CHECKING:
     from .router import RequestContext
@@ -78,8 +79,8 @@ class AttributeSpec:
     def describe(self, value: Any) -> str:
         if self.enum is not None and value in self.enum:
             return f"{value} ({self.enum[value]})"
-        if self.scale != 1.0 and isinstance(value, int):
-            return f"{value * self.scale:g} {self.unit}".strip()
+        if isinstance(value, int) and not isinstance(value, bool):
+            return scaled_text(value, self.unit, self.scale)
         return f"{value} {self.unit}".strip()
 
 

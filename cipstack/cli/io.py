@@ -108,7 +108,8 @@ def _statistics_text(stats: dict[str, Any]) -> str:
 
 
 def _field_lines(direction: str, schema: Any, instance: int | None) -> list[str]:
-    """One line per field of an assembly: name, offset, width or type, unit."""
+    """One line per field of an assembly: name, offset, width or type, and the unit of a raw value
+    (what ``--set`` takes: ``[0.01 Hz]`` for a frequency word, from the field's declaration)."""
     if schema is None:
         what = "no data (heartbeat)" if instance is None else f"assembly {instance}: no field names known (raw=HEX)"
         return [f"{direction}: {what}"]
@@ -116,7 +117,7 @@ def _field_lines(direction: str, schema: Any, instance: int | None) -> list[str]
     for item in schema.fields:
         place = f"byte {item.offset} bit {item.bit}" + (f"-{item.bit + item.bits - 1}" if item.bits > 1 else "") \
             if item.bits else f"byte {item.offset} {item.type.name}"
-        unit = f" [{item.unit}]" if item.unit else ""
+        unit = f" [{item.count_unit}]" if item.count_unit else ""
         lines.append(f"  {item.name:<28} {place}{unit}")
     return lines
 

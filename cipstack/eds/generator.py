@@ -48,7 +48,6 @@ from __future__ import annotations
 import os
 from dataclasses import dataclass, replace
 from datetime import datetime, timezone
-from decimal import Decimal
 from fractions import Fraction
 from typing import Any
 
@@ -56,6 +55,7 @@ from ..assemblies.names import display_name, field_name
 from ..assemblies.schema import AssemblyField, AssemblySchema
 from ..cip.epath import LogicalSegment, LogicalType, encode_path, request_path
 from ..cip.types import BOOL, UDINT, UINT, USINT, IntegerType, RealType
+from ..cip.units import decimal_places
 from ..eip.cm_messages import TriggerType
 from .description import EdsDescription, EdsObjectClass, EdsParameter, IoOffer, Link
 from .model import EdsDocument, Field, Section
@@ -211,9 +211,7 @@ def scaling(scale: float) -> tuple[int, int, int] | None:
     if scale <= 0:
         raise ValueError(f"a scale must be positive, not {scale}")
     exact = Fraction(repr(float(scale)))
-    exponent = Decimal(repr(float(scale))).normalize().as_tuple().exponent
-    places = max(0, -exponent) if isinstance(exponent, int) else 0
-    return exact.numerator, exact.denominator, places
+    return exact.numerator, exact.denominator, decimal_places(scale)
 
 
 def _value_field(param: EdsParameter, value: Any) -> Field:

@@ -76,6 +76,8 @@ class ParamInfo:
     unit: str = ""
     help: str = ""
     line: int = 0
+    #: Engineering value = raw x scale: fields 13-15 (multiplier x base / divider) with descriptor bit 2.
+    scale: float = 1.0
 
 
 @dataclass(frozen=True)
@@ -257,7 +259,20 @@ def _param(entry: Entry, enum_entry: Entry | None, issues: list[EdsIssue]) -> Pa
     if not numeric:
         default = _text(entry.field(12))
     return ParamInfo(keyword, _text(entry.field(7)), link, cip_type, size, not descriptor & 0x10, minimum, maximum,
-                     default, enum or None, _text(entry.field(8)), _text(entry.field(9)), entry.line)
+                     default, enum or None, _text(entry.field(8)), _text(entry.field(9)), entry.line,
+                     _scale(entry, descriptor))
+
+
+def _scale(entry: Entry, descriptor: int) -> float:
+    """The scale of a parameter whose descriptor says it scales (bit 2): multiplier x base / divider
+    (fields 13-15; an empty field is 1). An offset (field 16) is not a scale: such a parameter is
+    left unscaled, as is one whose fields do not give a positive factor."""
+    if not descriptor & 0x04:
+        return 1.0
+    multiplier, divider, base = (_number(entry.field(n)) or 1 for n in (13, 14, 15))
+    if _number(entry.field(16)) or multiplier <= 0 or divider <= 0 or base <= 0:
+        return 1.0
+    return float(multiplier) * float(base) / float(divider)
 
 
 def _link(path: bytes) -> tuple[Link | None, str | None]:
@@ -389,11 +404,12 @@ def assembly_schema(info: AssemblyInfo, params: Mapping[str, ParamInfo]) -> Asse
     for member, name in zip(named, names, strict=True):
         param = params.get(member.reference or "")
         offset, bit = divmod(member.start_bit, 8)
-        unit, scale_help = (param.unit, param.help) if param is not None else ("", "")
+        unit, scale, scale_help = (param.unit, param.scale, param.help) if param is not None else ("", 1.0, "")
         if bit + member.bits <= 8 and member.bits < 8:
             whole = param is not None and isinstance(param.type, IntegerType) and (
                 member.bits == 1 or member.bits == 8 * param.size)
-            fields.append(AssemblyField(name, offset, bits=member.bits, bit=bit, unit=unit, help=scale_help,
+            fields.append(AssemblyField(name, offset, bits=member.bits, bit=bit, unit=unit, scale=scale,
+                                        help=scale_help,
                                         link=param.link if whole and param is not None else None))
         elif bit == 0 and member.bits % 8 == 0:
             cip_type: CipType | None = None
@@ -404,7 +420,7 @@ def assembly_schema(info: AssemblyInfo, params: Mapping[str, ParamInfo]) -> Asse
                 cip_type = {8: USINT, 16: UINT, 32: UDINT, 64: ULINT}.get(member.bits)
             if cip_type is None:
                 return None
-            fields.append(AssemblyField(name, offset, cip_type, unit=unit, help=scale_help, link=link))
+            fields.append(AssemblyField(name, offset, cip_type, unit=unit, scale=scale, help=scale_help, link=link))
         else:
             return None
     try:
