@@ -8,6 +8,7 @@ gives the same values (Reference Hz/Actual Hz, 0x2A attributes 101/100) as "0-40
 
 from __future__ import annotations
 
+import socket
 import subprocess
 import sys
 from pathlib import Path
@@ -22,10 +23,20 @@ from cipstack.devices.acg.objects import OUTPUT_FREQUENCY
 from cipstack.devices.acg.registers import ACG_REGISTERS
 from cipstack.eds.interpret import read_view
 from cipstack.eds.reader import read_eds
+from tests.ports import free_port
+from tests.waiting import wait_for
 
 #: The unit of one count of each ACG speed word (seed 000 instance tables, 0x2A attributes 7/8/100/101).
 ACG_SPEED_UNITS = {20: "rpm", 21: "rpm", 70: "rpm", 71: "rpm",
                    100: "0.01 Hz", 101: "0.01 Hz", 110: "0.01 Hz", 111: "0.01 Hz"}
+
+
+def accepts(host: str, port: int) -> bool:
+    try:
+        socket.create_connection((host, port), timeout=0.2).close()
+    except OSError:
+        return False
+    return True
 
 
 def cipstack(*args: str) -> subprocess.CompletedProcess[str]:
@@ -130,3 +141,30 @@ def test_a_decoded_eds_parameter_is_shown_scaled(acg_eds: Path) -> None:
     view = read_view(read_eds(acg_eds))
     param = next(p for p in view.params.values() if p.link == (0x2A, 1, 101))
     assert decode_value(param, (3000).to_bytes(2, "little"))["text"] == "30.00 Hz"
+
+
+def test_3000_on_output_101_over_class_1_runs_the_emulator_at_30_hz(tmp_path: Path) -> None:
+    """The same over a real class 1 connection: an adapter process taking 101/111 (CM.24 = CM.23 = 3,
+    applied by CM.94), `cipstack io` setting the word in the unit --list-fields names."""
+    port, io_port = free_port(), free_port()
+    control = ("--control", str(tmp_path / "control"))
+    adapter = subprocess.Popen([sys.executable, "-m", "cipstack", "adapter", "--port", str(port), *control,
+                                "--io-port", str(io_port),
+                                "--state", str(tmp_path / "state.json"), "--quiet", "--log-level", "WARNING",
+                                *(f"--param={p}" for p in ("drv=4", "Frq=8", "CM.24=3", "CM.23=3", "CM.94=1"))],
+                               stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True)
+    try:
+        wait_for(lambda: accepts("127.0.0.1", port), 15, "the adapter")
+        target = ("io", f"127.0.0.1:{port}", "--output", "101", "--input", "111", "--target-io-port", str(io_port))
+        listed = cipstack(*target, "--list-fields")
+        assert "speed_reference              byte 2 UINT [0.01 Hz]" in listed.stdout, listed.stderr
+        ran = cipstack(*target, "--set", "run_forward=1", "--set", "speed_reference=3000", "--duration", "4s",
+                       "--print", "summary", "--json")
+        assert ran.returncode == 0, ran.stderr
+        status = cipstack("drive", "status", *control, "--json")
+        assert status.returncode == 0, status.stderr
+        assert '"output_frequency_hz": 30.0' in status.stdout and '"reference_hz": 30.0' in status.stdout
+        assert '"speed_actual": 3000' in ran.stdout
+    finally:
+        adapter.terminate()
+        adapter.wait(10)
