@@ -46,7 +46,14 @@ def adapter_process() -> Iterator[tuple[str, subprocess.Popen[str]]]:
 
 
 def one_line_error(result: subprocess.CompletedProcess[str]) -> str:
+    """The one line of an error; an error the parser finds comes after the command's usage (``usage:``
+    and its indented continuation lines), as argparse shows it."""
     lines = result.stderr.strip().splitlines()
+    if lines and lines[0].startswith("usage: "):
+        lines = lines[1:]
+        while lines and lines[0].startswith(" "):
+            lines = lines[1:]
+        assert lines and ": error: " in lines[0], result.stderr
     assert len(lines) == 1, result.stderr
     assert "Traceback" not in result.stderr
     return lines[0]

@@ -26,12 +26,15 @@ def connection_id(text: str) -> int:
         raise argparse.ArgumentTypeError(f"{text!r} is not a connection number or id (decimal or 0x hex)") from None
 
 
-def add_arguments(sub: Any, help_text: str) -> None:
-    """Register ``capture analyze`` on the top-level subparsers (cli.build_parser)."""
-    p = sub.add_parser("capture", help=help_text)
-    capture = p.add_subparsers(dest="capture_command", required=True, parser_class=type(p))
-    q = capture.add_parser("analyze", help="explicit exchanges, class 1 connection timing, anomalies")
-    q.add_argument("file", type=Path, help="pcap or pcapng file")
+def add_arguments(sub: Any) -> None:
+    """Register ``capture analyze`` on the top-level subparsers (cli.build_parser, whose parsers give
+    each command its help, description and examples)."""
+    p = sub.add_parser("capture")
+    capture = p.add_subparsers(dest="capture_command", metavar="COMMAND", title="commands", required=True,
+                               parser_class=type(p))
+    q = capture.add_parser("analyze")
+    q.add_argument("file", type=Path, help="pcap or pcapng file").complete = {  # type: ignore[attr-defined]
+        "bash": "_shtab_compgen_files", "zsh": "_files", "tcsh": "f"}
     q.add_argument("--profile", help="decode every target by this profile (acg, mx2, rx) instead of its identity")
     q.add_argument("--model", help="the model of an mx2/rx profile (see `cipstack models`)")
     q.add_argument("--eds", type=Path, action="append", default=[], metavar="FILE",

@@ -1,8 +1,10 @@
 """The ``cipstack`` command: adapter emulator, discovery, explicit messaging, class 1 I/O, EDS
 files, capture analysis.
 
-Every failure prints one line on stderr and exits non-zero: 2 for bad arguments, 1 for an
-error status or a network failure. ``--json`` prints one JSON object per line on stdout. Each
+Every failure prints one line on stderr and exits non-zero: 2 for bad arguments (after the
+command's usage when the parser finds them), 1 for an error status or a network failure; a closed
+stdout ends a command quietly with 141 (``EXIT_BROKEN_PIPE``). ``--json`` prints one JSON object
+per line on stdout. Each
 command lives in its own module and imports what it needs when it runs."""
 
 from __future__ import annotations
@@ -12,6 +14,7 @@ import asyncio
 import json
 import logging
 import os
+import select
 import sys
 from collections.abc import Callable, Sequence
 
@@ -22,14 +25,61 @@ from .common import EXIT_FAILURE, EXIT_OK, EXIT_USAGE, UsageError, parse_duratio
 from .explicit import json_key
 from .parser import build_parser, command_word
 
+#: A command whose reader went away (``cipstack capture analyze F | head``) stops quietly with the
+#: status of a process that SIGPIPE ended, 128 + 13, as ``cat`` or ``grep`` do: its output was cut
+#: short, which a success would hide from ``set -o pipefail`` or a reader that failed.
+EXIT_BROKEN_PIPE = 128 + 13
+
 
 def main(argv: Sequence[str] | None = None) -> int:
+    """Run one command line; the exit status (see the module docstring)."""
+    try:
+        status = _main(argv)
+        sys.stdout.flush()  # what is still buffered meets a closed pipe here, not at interpreter exit
+    except BrokenPipeError:
+        _discard_stdout()
+        return EXIT_BROKEN_PIPE
+    return status
+
+
+def _discard_stdout() -> None:
+    """Point stdout at /dev/null, so that the flush at exit writes nowhere instead of raising again
+    (the recipe of the Python documentation's note on SIGPIPE)."""
+    try:
+        devnull = os.open(os.devnull, os.O_WRONLY)
+        os.dup2(devnull, sys.stdout.fileno())
+    except (AttributeError, OSError, ValueError):
+        sys.stdout = open(os.devnull, "w")  # noqa: SIM115 - a stdout without a descriptor
+
+
+def _stdout_reader_gone() -> bool:
+    """Whether stdout is a pipe whose reader has closed it (poll reports POLLERR on such a pipe): a
+    broken pipe there is the reader's doing; elsewhere (a socket) it is a network failure."""
+    try:
+        fd = sys.stdout.fileno()
+    except (AttributeError, OSError, ValueError):
+        return False
+    if not hasattr(select, "poll"):
+        return True
+    poller = select.poll()
+    poller.register(fd, select.POLLOUT)
+    return any(events & select.POLLERR for _, events in poller.poll(0))
+
+
+def _main(argv: Sequence[str] | None) -> int:
     words = list(sys.argv[1:] if argv is None else argv)
     parser = build_parser(command_word(words))
     try:
         args = parser.parse_args(words)
     except UsageError as exc:
-        print(f"cipstack: {exc}", file=sys.stderr)
+        # As argparse reports it: the usage of the command the line names, then PROG: error: MESSAGE.
+        print(f"{exc.usage}{exc.prog or 'cipstack'}: error: {exc}", file=sys.stderr)
+        return EXIT_USAGE
+    if args.command is None:
+        # ``cipstack`` alone: the commands and what each does, on stderr, exit 2 as argparse exits for a
+        # missing argument (a script that loses its command word fails; ``cipstack --help`` is the 0 way).
+        print(parser.format_help() + "\ncipstack: error: the following arguments are required: COMMAND",
+              file=sys.stderr)
         return EXIT_USAGE
     logging.basicConfig(level=getattr(logging, args.log_level), stream=sys.stderr,
                         format="%(asctime)s %(levelname)s %(name)s: %(message)s")
@@ -54,19 +104,20 @@ def main(argv: Sequence[str] | None = None) -> int:
         # A reply this side cannot read (the originator's decoders raise it): the peer's, one line.
         print(f"{name}: malformed reply from the target: {exc}", file=sys.stderr)
         return EXIT_FAILURE
+    except BrokenPipeError as exc:
+        if _stdout_reader_gone():
+            raise  # ``main`` ends quietly
+        print(f"{name}: {exc}", file=sys.stderr)
+        return EXIT_FAILURE
     except (ConnectionError, asyncio.TimeoutError, TimeoutError, OSError) as exc:
         print(f"{name}: {exc or type(exc).__name__}", file=sys.stderr)
         return EXIT_FAILURE
     except KeyboardInterrupt:
         return 130
-    except BrokenPipeError:
-        # The reader went away (``cipstack models | head``): not an error of ours.
-        sys.stdout = open(os.devnull, "w")  # noqa: SIM115 - silences the flush at exit
-        return EXIT_OK
     except ValueError as exc:
         print(f"{name}: {exc}", file=sys.stderr)
         return EXIT_USAGE
 
 
-__all__ = ["EXIT_FAILURE", "EXIT_OK", "EXIT_USAGE", "UsageError", "build_parser", "json_key", "main",
-           "parse_duration", "parse_object_path"]
+__all__ = ["EXIT_BROKEN_PIPE", "EXIT_FAILURE", "EXIT_OK", "EXIT_USAGE", "UsageError", "build_parser", "json_key",
+           "main", "parse_duration", "parse_object_path"]

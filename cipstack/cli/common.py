@@ -15,7 +15,13 @@ EXIT_USAGE = 2
 
 
 class UsageError(Exception):
-    """A bad argument: reported as one line, exit status 2."""
+    """A bad argument: reported as one line, exit status 2. Raised by the parser, it carries the
+    parser's ``prog`` (``cipstack get``) and usage, which ``main`` prints before the line."""
+
+    def __init__(self, message: str, *, prog: str | None = None, usage: str = "") -> None:
+        super().__init__(message)
+        self.prog = prog
+        self.usage = usage
 
 
 def parse_number(text: str, what: str) -> int:

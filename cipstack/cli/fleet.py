@@ -8,7 +8,12 @@ import sys
 from pathlib import Path
 from typing import Any
 
+from ..eip.encapsulation import DEFAULT_PORT
+from ..eip.io_core import DEFAULT_IO_PORT
 from .common import EXIT_OK, EXIT_USAGE, UsageError
+
+#: Worker processes when neither --workers nor the spec file says.
+DEFAULT_WORKERS = 1
 
 log = logging.getLogger("cipstack.fleet")
 
@@ -49,9 +54,11 @@ def _fleet_spec(args: argparse.Namespace) -> Any:
         if addresses is not None else None
     state_dir = args.state_dir or settings.get("state_dir") or data_directory() / "fleet"
     devices = assign(groups, pool, Path(state_dir))
-    port = check_port(args.port if args.port is not None else settings.get("port", 44818), "port")
-    io_port = check_port(args.io_port if args.io_port is not None else settings.get("io_port", 2222), "io port")
-    workers = check_workers(args.workers if args.workers is not None else settings.get("workers", 1), len(devices))
+    port = check_port(args.port if args.port is not None else settings.get("port", DEFAULT_PORT), "port")
+    io_port = check_port(args.io_port if args.io_port is not None else settings.get("io_port", DEFAULT_IO_PORT),
+                         "io port")
+    workers = check_workers(args.workers if args.workers is not None else settings.get("workers", DEFAULT_WORKERS),
+                            len(devices))
     return FleetSpec(devices, port, io_port, workers, Path(state_dir))
 
 

@@ -48,9 +48,17 @@ def parse_rpi(text: str) -> float:
     raise UsageError(f"--rpi {text!r} is not a duration (e.g. 10ms, 500us, 0.5s)")
 
 
+#: ``--print``'s modes and what each prints: its help and ``parse_print`` both say these.
+PRINT_MODES = {
+    "changes": "every change of the input",
+    "summary": "the statistics and the last input only",
+    "every:DURATION": "the latest input at most once per DURATION (every:1s)",
+}
+
+
 def parse_print(text: str) -> tuple[str, float]:
-    """``changes`` (every input change), ``summary`` (statistics only), ``every:DURATION``
-    (also ``every=DURATION`` or ``"every DURATION"``): the latest input at most once per DURATION."""
+    """One of ``PRINT_MODES``: ``changes``, ``summary``, ``every:DURATION`` (also ``every=DURATION``
+    or ``"every DURATION"``)."""
     raw = text.strip().lower()
     if raw in ("changes", "summary"):
         return raw, 0.0
@@ -61,7 +69,7 @@ def parse_print(text: str) -> tuple[str, float]:
             if period <= 0:
                 raise UsageError(f"--print {text}: the period must be positive")
             return "every", period
-    raise UsageError(f"--print {text!r} is not changes, summary or every:DURATION (e.g. every:1s)")
+    raise UsageError(f"--print {text!r} is not one of {', '.join(PRINT_MODES)} (e.g. every:1s)")
 
 
 def parse_config_data(text: str | None) -> bytes:

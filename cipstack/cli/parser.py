@@ -8,30 +8,68 @@ from typing import Any
 
 from .. import __version__
 from ..eip.encapsulation import DEFAULT_PORT
+from ..eip.io_core import DEFAULT_IO_PORT
 from .common import (
     UsageError,
     parse_duration,
     parse_number,
 )
+from .completion import cmd_completion
 from .drive import _trip_code, cmd_drive_status, cmd_drive_trip
 from .eds import cmd_eds_check, cmd_eds_generate, cmd_eds_show
 from .emulators import cmd_adapter, cmd_componet, cmd_models
 from .explicit import cmd_discover, cmd_get, cmd_identity, cmd_set
-from .fleet import cmd_fleet
-from .io import cmd_io
+from .fleet import DEFAULT_WORKERS, cmd_fleet
+from .help_texts import COMMANDS, PROGRAM
+from .io import PRINT_MODES, cmd_io
 
 
 # -- parser ------------------------------------------------------------------------------------------
+class _Formatter(argparse.RawDescriptionHelpFormatter):
+    """The one formatter of every command: descriptions and examples as written (``help_texts``
+    wraps them), options wrapped to the terminal."""
+
+
+class _SubParsers(argparse._SubParsersAction):  # type: ignore[type-arg]
+    """Names each command's parser after its path and gives it its text from ``help_texts``."""
+
+    def add_parser(self, name: str, **kwargs: Any) -> argparse.ArgumentParser:
+        path = (*self._prog_prefix.split()[1:], name)
+        text = COMMANDS.get(path)
+        if text is not None:
+            kwargs.update(help=text.help, description=text.description_text(), epilog=text.epilog())
+        kwargs.setdefault("formatter_class", _Formatter)
+        return super().add_parser(name, **kwargs)
+
+
 class _Parser(argparse.ArgumentParser):
-    def error(self, message: str) -> Any:  # one line, exit 2, no usage dump
-        raise UsageError(message)
+    def __init__(self, *args: Any, **kwargs: Any) -> None:
+        kwargs.setdefault("formatter_class", _Formatter)
+        super().__init__(*args, **kwargs)
+        self.register("action", "parsers", _SubParsers)
+
+    def error(self, message: str) -> Any:
+        """A bad command line: the parser's usage and ``PROG: error: MESSAGE``, exit 2 (printed by
+        ``main``, which owns the exit)."""
+        raise UsageError(message, prog=self.prog, usage=self.format_usage())
+
+    def parse_known_args(self, args: Any = None, namespace: Any = None) -> Any:
+        try:
+            return super().parse_known_args(args, namespace)
+        except UsageError as exc:
+            if exc.prog is None:  # raised by an argument's type (a bad number): this parser's error
+                self.error(str(exc))
+            raise
 
 
-# The eds and capture commands take their arguments from modules that take tens of milliseconds
-# to import: the parser names them with these lines, and adds their arguments only when the
-# command line is theirs (see ``build_parser``).
-_EDS_HELP = "EDS files: generate, check, show"
-_CAPTURE_HELP = "analyse a pcap/pcapng capture of EtherNet/IP and CIP traffic"
+#: A path argument, for shell completion (shtab's names; shtab is needed only to print the script).
+_FILE = {"bash": "_shtab_compgen_files", "zsh": "_files", "tcsh": "f"}
+_DIRECTORY = {"bash": "_shtab_compgen_dirs", "zsh": "_files -/", "tcsh": "d"}
+
+
+def _complete(action: argparse.Action, kind: dict[str, str]) -> argparse.Action:
+    action.complete = kind  # type: ignore[attr-defined]
+    return action
 
 
 def command_word(argv: list[str]) -> str | None:
@@ -47,17 +85,19 @@ def command_word(argv: list[str]) -> str | None:
 
 def build_parser(command: str | None = None) -> argparse.ArgumentParser:
     """The whole command line; given the ``command`` it will parse, the ``eds`` and ``capture``
-    commands are only named unless it is theirs (a one-shot ``get`` does not import the EDS tool)."""
-    parser = _Parser(prog="cipstack", description="CIP for AC drives over EtherNet/IP and CompoNet")
+    commands are only named unless it is theirs (a one-shot ``get`` does not import the EDS tool).
+    A default a help text names is argparse's own (``%(default)s``), so the two cannot disagree."""
+    parser = _Parser(prog="cipstack", description=PROGRAM.description_text(), epilog=PROGRAM.epilog())
     parser.add_argument("--version", action="version", version=f"cipstack {__version__}")
     levels = ["DEBUG", "INFO", "WARNING", "ERROR"]
     parser.add_argument("--log-level", default="INFO", choices=levels, type=str.upper,
-                        help="log level on stderr (default INFO)")
+                        help="log level on stderr (default %(default)s)")
     # Also accepted after the command name (``cipstack adapter --log-level WARNING``).
     logging_options = _Parser(add_help=False)
     logging_options.add_argument("--log-level", default=argparse.SUPPRESS, choices=levels, type=str.upper,
-                                 help="log level on stderr (default INFO)")
-    sub = parser.add_subparsers(dest="command", required=True, parser_class=_Parser)
+                                 help=f"log level on stderr (default {parser.get_default('log_level')})")
+    # Not required here: without a command ``main`` prints the list of commands.
+    sub = parser.add_subparsers(dest="command", metavar="COMMAND", title="commands", parser_class=_Parser)
     _add_parser = sub.add_parser
 
     def add_parser(name: str, **kwargs: Any) -> argparse.ArgumentParser:
@@ -65,40 +105,48 @@ def build_parser(command: str | None = None) -> argparse.ArgumentParser:
 
     sub.add_parser = add_parser  # type: ignore[method-assign]
 
-    def common(p: argparse.ArgumentParser, target: bool = True) -> None:
+    def number(what: str) -> Any:
+        return lambda text: parse_number(text, what)
+
+    def common(p: argparse.ArgumentParser, target: bool = True, timeout: float = 5.0) -> None:
         if target:
             p.add_argument("target", metavar="HOST[:PORT]", help=f"target address (default port {DEFAULT_PORT})")
-        p.add_argument("--timeout", type=parse_duration, default=5.0, help="reply timeout (default 5 s)")
+        p.add_argument("--timeout", type=parse_duration, default=timeout, metavar="DURATION",
+                       help="reply timeout: 2, 500ms, 1.5s (default %(default)s s)")
         p.add_argument("--json", action="store_true", help="one JSON object per line")
 
-    p = sub.add_parser("adapter", help="run the adapter emulator")
-    p.add_argument("--host", default="127.0.0.1", help="address to listen on (default 127.0.0.1)")
-    p.add_argument("--port", type=lambda t: parse_number(t, "port"), default=DEFAULT_PORT,
-                   help=f"EtherNet/IP port, TCP and UDP (default {DEFAULT_PORT})")
+    p = sub.add_parser("adapter")
+    p.add_argument("--host", default="127.0.0.1", help="address to listen on (default %(default)s)")
+    p.add_argument("--port", type=number("port"), default=DEFAULT_PORT,
+                   help="EtherNet/IP port, TCP and UDP (default %(default)s)")
     device = p.add_mutually_exclusive_group()
     device.add_argument("--profile", help="device profile: acg (default), mx2, rx")
-    device.add_argument("--eds", metavar="FILE",
-                        help="emulate the generic device an EDS file describes (identity, parameters as "
-                             "attributes, assemblies, connections)")
-    p.add_argument("--model", help="model of the mx2/rx profiles (e.g. MX2-A2015-E, RX-A4055-E)")
-    p.add_argument("--max-sessions", type=lambda t: parse_number(t, "max sessions"), default=32,
-                   help="encapsulation sessions at once; one more is refused with 0x0002 (default 32)")
-    p.add_argument("--max-sessions-per-host", type=lambda t: parse_number(t, "max sessions per host"),
+    _complete(device.add_argument("--eds", metavar="FILE",
+                                  help="emulate the generic device an EDS file describes (identity, parameters "
+                                       "as attributes, assemblies, connections)"), _FILE)
+    p.add_argument("--model", help="model of the mx2/rx profiles (e.g. MX2-A2015-E, RX-A4055-E; see "
+                                   "`cipstack models`)")
+    p.add_argument("--max-sessions", type=number("max sessions"), default=32, metavar="N",
+                   help="encapsulation sessions at once; one more is refused with 0x0002 (default %(default)s)")
+    p.add_argument("--max-sessions-per-host", type=number("max sessions per host"), metavar="N",
                    help="sessions one originator address may hold (default: half of --max-sessions)")
-    p.add_argument("--max-connections", type=lambda t: parse_number(t, "max connections"), default=32,
-                   help="class 3 (connected explicit) connections (default 32)")
-    p.add_argument("--max-io-connections", type=lambda t: parse_number(t, "max io connections"),
+    p.add_argument("--max-connections", type=number("max connections"), default=32, metavar="N",
+                   help="class 3 (connected explicit) connections (default %(default)s)")
+    p.add_argument("--max-io-connections", type=number("max io connections"), metavar="N",
                    help="class 1 (I/O) connections (default: the device's, 64 for the ACG-ET2)")
-    p.add_argument("--max-tcp-connections", type=lambda t: parse_number(t, "max tcp connections"), default=256,
-                   help="open TCP connections to the encapsulation port; more are closed at accept (default 256)")
-    p.add_argument("--max-tcp-connections-per-host", type=lambda t: parse_number(t, "max tcp connections per host"),
+    p.add_argument("--max-tcp-connections", type=number("max tcp connections"), default=256, metavar="N",
+                   help="open TCP connections to the encapsulation port; more are closed at accept "
+                        "(default %(default)s)")
+    p.add_argument("--max-tcp-connections-per-host", type=number("max tcp connections per host"), metavar="N",
                    help="open TCP connections from one address (default: half of --max-tcp-connections)")
-    p.add_argument("--io-port", type=lambda t: parse_number(t, "io port"), default=2222,
-                   help="UDP port of class 1 I/O (default 2222; 0 picks a free one)")
-    p.add_argument("--control", type=Path, help="control socket for `cipstack drive` (default: per port)")
-    p.add_argument("--state", type=Path,
-                   help="state file of saved parameters (default: in the user's data directory, per profile)")
-    p.add_argument("--modbus-port", type=lambda t: parse_number(t, "modbus port"),
+    p.add_argument("--io-port", type=number("io port"), default=DEFAULT_IO_PORT, metavar="N",
+                   help="UDP port of class 1 I/O (default %(default)s; 0 picks a free one)")
+    _complete(p.add_argument("--control", type=Path, metavar="PATH",
+                             help="control socket for `cipstack drive` (default: per address and port)"), _FILE)
+    _complete(p.add_argument("--state", type=Path, metavar="FILE",
+                             help="state file of saved parameters (default: in the user's data directory, "
+                                  "per profile)"), _FILE)
+    p.add_argument("--modbus-port", type=number("modbus port"), metavar="N",
                    help="also serve Modbus TCP on this port (ACG)")
     p.add_argument("--param", action="append", metavar="CODE=VALUE",
                    help="set an ACG keypad parameter at start, in the keypad's unit; repeatable "
@@ -107,141 +155,157 @@ def build_parser(command: str | None = None) -> argparse.ArgumentParser:
     p.add_argument("--json", action="store_true", help=argparse.SUPPRESS)
     p.set_defaults(func=cmd_adapter)
 
-    p = sub.add_parser("fleet", help="emulate many devices at once, each on its own address")
+    p = sub.add_parser("fleet")
     p.add_argument("--addresses", metavar="RANGE[,...]",
                    help="the addresses the devices take in order: 127.0.0.10-127.0.0.73, or a list "
                         "(127.0.0.10,127.0.0.12-127.0.0.20); any 127.x works on Linux's loopback")
     p.add_argument("--device", action="append", metavar="PROFILE[:MODEL][*COUNT][@FIRST]",
                    help="a group of devices: acg*32, mx2:MX2-A2015-E*16, rx*2@127.0.0.90 (from that address "
                         "on); repeatable")
-    p.add_argument("--spec", type=Path, metavar="FILE", help="the fleet in a TOML file (see the README)")
-    p.add_argument("--port", type=lambda t: parse_number(t, "port"),
+    _complete(p.add_argument("--spec", type=Path, metavar="FILE",
+                             help="the fleet in a TOML file (devices, addresses, ports, workers)"), _FILE)
+    # No argparse defaults below: a value given here overrides the --spec file's, which overrides these.
+    p.add_argument("--port", type=number("port"), metavar="N",
                    help=f"EtherNet/IP port of every device, TCP and UDP (default {DEFAULT_PORT})")
-    p.add_argument("--io-port", type=lambda t: parse_number(t, "io port"),
-                   help="UDP port of class 1 I/O of every device (default 2222)")
-    p.add_argument("--state-dir", type=Path, metavar="DIR",
-                   help="where each device keeps its state file, ADDRESS-PROFILE[-MODEL].json (default: "
-                        "fleet/ in the user's data directory)")
+    p.add_argument("--io-port", type=number("io port"), metavar="N",
+                   help=f"UDP port of class 1 I/O of every device (default {DEFAULT_IO_PORT})")
+    _complete(p.add_argument("--state-dir", type=Path, metavar="DIR",
+                             help="where each device keeps its state file, ADDRESS-PROFILE[-MODEL].json "
+                                  "(default: fleet/ in the user's data directory)"), _DIRECTORY)
     p.add_argument("--param", action="append", metavar="CODE=VALUE",
                    help="set an ACG keypad parameter at start on every ACG device; repeatable")
-    p.add_argument("--workers", type=lambda t: parse_number(t, "workers"),
-                   help="spread the devices over N processes, one event loop each (default 1)")
+    p.add_argument("--workers", type=number("workers"), metavar="N",
+                   help=f"spread the devices over N processes, one event loop each (default {DEFAULT_WORKERS})")
     p.set_defaults(func=cmd_fleet)
 
-    p = sub.add_parser("models", help="the MX2/RX models the mx2/rx profiles emulate (Tables 2/3)")
+    p = sub.add_parser("models")
     p.add_argument("--profile", choices=["mx2", "rx"], help="one family only (default: both)")
     p.add_argument("--json", action="store_true", help="one JSON object per line")
     p.set_defaults(func=cmd_models)
 
-    p = sub.add_parser("componet", help="run a CompoNet network of MX2/RX slaves behind an EtherNet/IP gateway")
+    p = sub.add_parser("componet")
     p.add_argument("--nodes", required=True, metavar="PROFILE:MODEL@NODE,...",
                    help="slaves, e.g. mx2:MX2-A2015-E@3,rx:RX-A4055-E@5 (node addresses 0-63)")
-    p.add_argument("--host", default="127.0.0.1", help="address to listen on (default 127.0.0.1)")
-    p.add_argument("--port", type=lambda t: parse_number(t, "port"), default=DEFAULT_PORT,
-                   help=f"EtherNet/IP port, TCP and UDP (default {DEFAULT_PORT})")
-    p.add_argument("--io-port", type=lambda t: parse_number(t, "io port"), default=2222,
-                   help="UDP port of class 1 I/O (default 2222; 0 picks a free one)")
-    p.add_argument("--control", type=Path, help="control socket (default: per port)")
+    p.add_argument("--host", default="127.0.0.1", help="address to listen on (default %(default)s)")
+    p.add_argument("--port", type=number("port"), default=DEFAULT_PORT,
+                   help="EtherNet/IP port, TCP and UDP (default %(default)s)")
+    p.add_argument("--io-port", type=number("io port"), default=DEFAULT_IO_PORT, metavar="N",
+                   help="UDP port of class 1 I/O (default %(default)s; 0 picks a free one)")
+    _complete(p.add_argument("--control", type=Path, metavar="PATH",
+                             help="control socket (default: per address and port)"), _FILE)
     p.add_argument("--quiet", action="store_true", help="no status line on stdout")
     p.add_argument("--json", action="store_true", help=argparse.SUPPRESS)
     p.set_defaults(func=cmd_componet)
 
-    p = sub.add_parser("discover", help="ListIdentity over UDP")
+    p = sub.add_parser("discover")
     p.add_argument("--broadcast", metavar="ADDRESS",
                    help="broadcast or unicast address (default: 255.255.255.255 and every interface's broadcast "
                         "address, loopback's 127.255.255.255 included)")
-    p.add_argument("--port", type=lambda t: parse_number(t, "port"), default=DEFAULT_PORT,
-                   help=f"UDP port to ask (default {DEFAULT_PORT})")
-    common(p, target=False)
-    p.set_defaults(func=cmd_discover, timeout=2.0)
+    p.add_argument("--port", type=number("port"), default=DEFAULT_PORT,
+                   help="UDP port to ask (default %(default)s)")
+    common(p, target=False, timeout=2.0)
+    p.set_defaults(func=cmd_discover)
 
-    p = sub.add_parser("identity", help="ListIdentity over TCP")
+    p = sub.add_parser("identity")
     common(p)
     p.set_defaults(func=cmd_identity)
 
-    p = sub.add_parser("get", help="Get_Attribute_Single (or Get_Attributes_All without an attribute)")
+    p = sub.add_parser("get")
     common(p)
-    p.add_argument("path", metavar="CLASS/INSTANCE[/ATTRIBUTE]")
+    p.add_argument("path", metavar="CLASS/INSTANCE[/ATTRIBUTE]", help="decimal or 0x hex numbers: 1/1/7, 0x2A/1/102")
     p.add_argument("--type", help="CIP type to decode the value (UINT, SHORT_STRING, ...)")
     p.add_argument("--connected", action="store_true", help="use a class 3 connection")
     p.add_argument("--route", metavar="PORT/LINK[,...]",
                    help="route through the target (Unconnected_Send), e.g. 1/0 or 2/3 (CompoNet node 3)")
     p.set_defaults(func=cmd_get)
 
-    p = sub.add_parser("io", help="open a class 1 connection, print input changes by field name")
+    p = sub.add_parser("set")
     common(p)
-    p.add_argument("--output", type=lambda t: parse_number(t, "output"), help="output (O->T) assembly instance")
-    p.add_argument("--input", type=lambda t: parse_number(t, "input"), help="input assembly instance")
-    p.add_argument("--heartbeat", type=lambda t: parse_number(t, "heartbeat"),
+    p.add_argument("path", metavar="CLASS/INSTANCE/ATTRIBUTE", help="decimal or 0x hex numbers: 0xF5/1/13")
+    p.add_argument("value", metavar="VALUE", help="the value, in the type --type names")
+    p.add_argument("--type", required=True, help="CIP type of the value (UINT, INT, REAL, SHORT_STRING, ...)")
+    p.add_argument("--connected", action="store_true", help="use a class 3 connection")
+    p.add_argument("--route", metavar="PORT/LINK[,...]", help="route through the target (Unconnected_Send)")
+    p.set_defaults(func=cmd_set)
+
+    p = sub.add_parser("io")
+    common(p)
+    p.add_argument("--output", type=number("output"), metavar="N", help="output (O->T) assembly instance")
+    p.add_argument("--input", type=number("input"), metavar="N", help="input assembly instance")
+    p.add_argument("--heartbeat", type=number("heartbeat"), metavar="N",
                    help="O->T heartbeat point instead of an output (input only: e.g. 198, listen only: 199)")
     p.add_argument("--rpi", metavar="DURATION",
                    help="requested packet interval with its unit: 10ms, 500us, 0.5s (default: the EDS's with "
                         "--eds, else 10ms)")
-    p.add_argument("--eds", metavar="FILE", help="open a connection this EDS file describes (with --connection)")
+    _complete(p.add_argument("--eds", metavar="FILE", help="open a connection this EDS file describes "
+                                                            "(with --connection)"), _FILE)
     p.add_argument("--connection", metavar="N",
                    help="the ConnectionN of --eds to open, by number N or by name")
     p.add_argument("--set", action="append", metavar="FIELD=VALUE",
-                   help="output field to set (or raw=HEX); repeatable")
-    p.add_argument("--duration", type=parse_duration, default=5.0, help="how long to run (default 5s)")
+                   help="output field to set, a raw value in the field's unit (see --list-fields), or "
+                        "raw=HEX; repeatable")
+    p.add_argument("--duration", type=parse_duration, default=5.0, metavar="DURATION",
+                   help="how long to run (default %(default)s s)")
     p.add_argument("--idle", action="store_true", help="send idle instead of run in the run/idle header")
-    p.add_argument("--io-port", type=lambda t: parse_number(t, "io port"), default=0,
-                   help="local UDP port for T->O data (default: any free port, announced to the target)")
-    p.add_argument("--target-io-port", type=lambda t: parse_number(t, "target io port"), default=None,
-                   help="the target's class 1 UDP port (default: the port its Forward_Open reply names, else 2222)")
-    p.add_argument("--config", type=lambda t: parse_number(t, "config"), metavar="N",
+    p.add_argument("--io-port", type=number("io port"), default=0, metavar="N",
+                   help="local UDP port for T->O data (default %(default)s: any free port, announced to the "
+                        "target)")
+    p.add_argument("--target-io-port", type=number("target io port"), metavar="N",
+                   help="the target's class 1 UDP port (default: the port its Forward_Open reply names, else "
+                        f"{DEFAULT_IO_PORT})")
+    p.add_argument("--config", type=number("config"), metavar="N",
                    help="configuration assembly instance of the connection path (default 1)")
     p.add_argument("--config-data", metavar="HEX", help="configuration data sent in the Forward_Open (hex bytes)")
     p.add_argument("--ot-format", choices=["run-idle", "heartbeat", "modeless"],
                    help="O->T real-time format: run-idle header (default), heartbeat (sequence count only, "
                         "size 2), modeless (no header); with --eds: the file's")
     p.add_argument("--list-fields", action="store_true",
-                   help="list the output and input fields of the connection (names for --set and the input) and exit")
-    p.add_argument("--timeout-multiplier", type=lambda t: parse_number(t, "timeout multiplier"), choices=range(8),
-                   metavar="0..7", help="connection timeout = RPI x 4 x 2^N, each way (default 2: 16 ms at a 1 ms RPI; "
-                                        "3 or more at RPIs under 2 ms on a busy host)")
-    p.add_argument("--print", default="changes", metavar="changes|summary|every:DURATION",
-                   help="input lines: every change (default), none (statistics only), or the latest at most "
-                        "once per DURATION (every:1s)")
+                   help="list the output and input fields of the connection (names for --set and the input, "
+                        "and the unit of a raw value) and exit")
+    p.add_argument("--timeout-multiplier", type=number("timeout multiplier"), choices=range(8),
+                   metavar="0..7", help="connection timeout = RPI x 4 x 2^N, each way (default 2: 16 ms at a "
+                                        "1 ms RPI; 3 or more at RPIs under 2 ms on a busy host)")
+    p.add_argument("--print", default="changes", metavar="|".join(PRINT_MODES),
+                   help="which input lines to print: " + "; ".join(f"{mode}: {what}" for mode, what in
+                                                                   PRINT_MODES.items())
+                        + " (default %(default)s)")
     p.set_defaults(func=cmd_io)
 
-    p = sub.add_parser("drive", help="control a running emulator: inject a trip, read its status")
-    drive = p.add_subparsers(dest="drive_command", required=True, parser_class=_Parser)
-    for name, func, text in (("trip", cmd_drive_trip, "trip the emulated drive with a fault code"),
-                             ("status", cmd_drive_status, "the emulated drive's status line")):
-        q = drive.add_parser(name, help=text)
+    p = sub.add_parser("drive")
+    drive = p.add_subparsers(dest="drive_command", metavar="COMMAND", title="commands", required=True,
+                             parser_class=_Parser)
+    for name, func in (("trip", cmd_drive_trip), ("status", cmd_drive_status)):
+        q = drive.add_parser(name)
         if name == "trip":
             q.add_argument("code", type=_trip_code,
                            help="fault code of the drive's manual (decimal or 0x hex: 0x4200 on the ACG, 5 on "
                                 "the MX2/RX) or its name (OverHeat, E05)")
         q.add_argument("--host", default="127.0.0.1",
                        help="the emulator's address (its --host), which with --port finds its control socket "
-                            "(default 127.0.0.1)")
-        q.add_argument("--port", type=lambda t: parse_number(t, "port"), default=DEFAULT_PORT,
-                       help=f"the emulator's EtherNet/IP port, which finds its control socket (default {DEFAULT_PORT})")
-        q.add_argument("--control", type=Path, help="the emulator's control socket")
-        q.add_argument("--timeout", type=parse_duration, default=5.0, help="reply timeout (default 5 s)")
+                            "(default %(default)s)")
+        q.add_argument("--port", type=number("port"), default=DEFAULT_PORT,
+                       help="the emulator's EtherNet/IP port, which finds its control socket (default %(default)s)")
+        _complete(q.add_argument("--control", type=Path, metavar="PATH", help="the emulator's control socket"),
+                  _FILE)
+        q.add_argument("--timeout", type=parse_duration, default=5.0, metavar="DURATION",
+                       help="reply timeout (default %(default)s s)")
         q.add_argument("--json", action="store_true", help="one JSON object per line")
         q.set_defaults(func=func)
 
     if command in (None, "eds"):
         _add_eds_commands(sub)
     else:
-        sub.add_parser("eds", help=_EDS_HELP)
+        sub.add_parser("eds")
     if command in (None, "capture"):
         from ..capture.command import add_arguments as add_capture_arguments
 
-        add_capture_arguments(sub, _CAPTURE_HELP)
+        add_capture_arguments(sub)
     else:
-        sub.add_parser("capture", help=_CAPTURE_HELP)
+        sub.add_parser("capture")
 
-    p = sub.add_parser("set", help="Set_Attribute_Single")
-    common(p)
-    p.add_argument("path", metavar="CLASS/INSTANCE/ATTRIBUTE")
-    p.add_argument("value")
-    p.add_argument("--type", required=True, help="CIP type of the value (UINT, INT, REAL, SHORT_STRING, ...)")
-    p.add_argument("--connected", action="store_true", help="use a class 3 connection")
-    p.add_argument("--route", metavar="PORT/LINK[,...]", help="route through the target (Unconnected_Send)")
-    p.set_defaults(func=cmd_set)
+    p = sub.add_parser("completion")
+    p.add_argument("shell", choices=["bash", "zsh"], help="the shell")
+    p.set_defaults(func=cmd_completion)
     return parser
 
 
@@ -249,16 +313,18 @@ def _add_eds_commands(sub: Any) -> None:
     from ..eds.commands import add_check_arguments, add_show_arguments
     from ..eds.commands_generate import add_generate_arguments
 
-    p = sub.add_parser("eds", help=_EDS_HELP)
-    eds = p.add_subparsers(dest="eds_command", required=True, parser_class=_Parser)
-    q = eds.add_parser("check", help="check EDS files against the rules a configuration tool relies on")
+    p = sub.add_parser("eds")
+    eds = p.add_subparsers(dest="eds_command", metavar="COMMAND", title="commands", required=True,
+                           parser_class=_Parser)
+    q = eds.add_parser("check")
     add_check_arguments(q)
     q.add_argument("--against", metavar="HOST[:PORT]", help="also compare [Device] with a live device's Identity")
-    q.add_argument("--timeout", type=parse_duration, default=5.0, help="reply timeout with --against (default 5 s)")
+    q.add_argument("--timeout", type=parse_duration, default=5.0, metavar="DURATION",
+                   help="reply timeout with --against (default %(default)s s)")
     q.set_defaults(func=cmd_eds_check)
-    q = eds.add_parser("generate", help="write the EDS files of emulated models")
+    q = eds.add_parser("generate")
     add_generate_arguments(q)
     q.set_defaults(func=cmd_eds_generate)
-    q = eds.add_parser("show", help="a readable summary: identity, assemblies, connections")
+    q = eds.add_parser("show")
     add_show_arguments(q)
     q.set_defaults(func=cmd_eds_show)

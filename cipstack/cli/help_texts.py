@@ -1,0 +1,218 @@
+"""What each command says about itself: the one line the command list shows, the description and
+the examples its ``--help`` ends with. The parser takes them from here (``parser.build_parser``), so
+the parser is the whole reference of the command line, and the documentation is generated from it.
+
+An example is a command line as a user types it, and a few words on what it does; the tests parse
+every example (up to a pipe or a redirection) with the parser it documents.
+"""
+
+from __future__ import annotations
+
+import textwrap
+from dataclasses import dataclass
+
+#: Width of the description and examples (``--help`` wraps the options to the terminal itself).
+WIDTH = 79
+
+
+@dataclass(frozen=True)
+class CommandText:
+    help: str
+    description: str
+    examples: tuple[tuple[str, str], ...]
+
+    def description_text(self) -> str:
+        return "\n\n".join(textwrap.fill(paragraph, WIDTH) for paragraph in self.description.split("\n\n"))
+
+    def epilog(self) -> str:
+        lines = ["examples:"]
+        for command, what in self.examples:
+            lines.append(f"  {command}")
+            lines.extend(textwrap.wrap(what, WIDTH, initial_indent=" " * 6, subsequent_indent=" " * 6))
+        return "\n".join(lines)
+
+
+PROGRAM = CommandText(
+    "CIP for AC drives over EtherNet/IP and CompoNet",
+    "CIP for AC drives over EtherNet/IP and CompoNet: an adapter emulator of the ACG drive and the "
+    "Omron MX2/RX, discovery, explicit messaging and class 1 I/O against any target, EDS files and "
+    "capture analysis.\n\n"
+    "Every failure prints one line on stderr and exits non-zero: 2 for bad arguments, 1 for an error "
+    "status or a network failure. `cipstack COMMAND --help` describes a command.",
+    (("cipstack adapter --param drv=4 --param Frq=8",
+      "run the emulated ACG drive on 127.0.0.1, run command and speed reference from the network"),
+     ("cipstack identity 127.0.0.1", "who is there (ListIdentity)")),
+)
+
+#: By command path: ("get",), ("drive", "trip"), ("capture", "analyze").
+COMMANDS: dict[tuple[str, ...], CommandText] = {
+    ("adapter",): CommandText(
+        "run the adapter emulator",
+        "Run the adapter emulator: a software AC drive that answers EtherNet/IP explicit messages "
+        "(UCMM and class 3) and class 1 I/O on --host and --port until Ctrl-C or SIGTERM. The device is "
+        "the ACG drive with its ACG-ET2 card (seed 000) unless --profile names the Omron MX2 or RX with "
+        "its CompoNet option board, or --eds the generic device an EDS file describes.\n\n"
+        "Saved parameters persist in a state file; `cipstack drive` reaches the running emulator through "
+        "its control socket. A status line goes to stdout, the log to stderr.",
+        (("cipstack adapter --param drv=4 --param Frq=8",
+          "the ACG, taking its run command and speed reference from the network"),
+         ("cipstack adapter --host 127.0.0.2 --profile mx2 --model MX2-A2015-E",
+          "an Omron MX2 on a second loopback address"),
+         ("cipstack adapter --modbus-port 5020 --max-sessions 8",
+          "also serve Modbus TCP on port 5020, at most 8 encapsulation sessions")),
+    ),
+    ("fleet",): CommandText(
+        "emulate many devices at once, each on its own address",
+        "Emulate many devices at once, each an adapter on its own address (any 127.x address works on "
+        "Linux's loopback), from --device groups or a TOML --spec file. Each device keeps its own state "
+        "file and control socket (`cipstack drive ... --host ADDRESS`); --workers spreads the devices "
+        "over processes.",
+        (("cipstack fleet --addresses 127.0.0.10-127.0.0.13 --device 'acg*3' --device mx2:MX2-A2015-E",
+          "three ACG drives and one MX2 on 127.0.0.10 to 127.0.0.13"),
+         ("cipstack fleet --addresses 127.0.0.10-127.0.0.73 --device 'acg*64' --workers 2",
+          "64 ACG drives over two processes")),
+    ),
+    ("models",): CommandText(
+        "the MX2/RX models the mx2/rx profiles emulate (Tables 2/3)",
+        "List the Omron MX2 and RX models the mx2 and rx profiles emulate (Tables 2 and 3 of the option "
+        "board manual): model, product code and EDS file name.",
+        (("cipstack models --profile mx2", "the MX2 models"),
+         ("cipstack models --json", "every model, one JSON object per line")),
+    ),
+    ("componet",): CommandText(
+        "run a CompoNet network of MX2/RX slaves behind an EtherNet/IP gateway",
+        "Run a CompoNet network of MX2/RX slaves behind an EtherNet/IP gateway: explicit messages reach "
+        "a slave routed through the gateway's CompoNet port 2 to its node address (`get --route 2/NODE`); "
+        "the master's OUT and IN words are assembly instances of the gateway.",
+        (("cipstack componet --nodes mx2:MX2-A2015-E@3,rx:RX-A4055-E@5",
+          "an MX2 at node 3 and an RX at node 5"),
+         ("cipstack get 127.0.0.1 1/1/7 --route 2/3", "then: the product name of the slave at node 3")),
+    ),
+    ("discover",): CommandText(
+        "ListIdentity over UDP",
+        "Send ListIdentity over UDP (to the broadcast addresses, or to --broadcast) and print each "
+        "device that answers within --timeout: address, product name, vendor, device type, product "
+        "code, revision, serial number, status and state.",
+        (("cipstack discover", "every device on every interface, loopback included"),
+         ("cipstack discover --broadcast 127.255.255.255 --json", "loopback only, one JSON object a device")),
+    ),
+    ("identity",): CommandText(
+        "ListIdentity over TCP",
+        "Ask one target who it is (ListIdentity over TCP): vendor, device type, product code, revision, "
+        "serial number, status, state and product name.",
+        (("cipstack identity 127.0.0.1", "the emulator started by `cipstack adapter`"),
+         ("cipstack identity 127.0.0.2:44818 --json", "as one JSON object")),
+    ),
+    ("get",): CommandText(
+        "Get_Attribute_Single (or Get_Attributes_All without an attribute)",
+        "Read an attribute with Get_Attribute_Single, or every attribute of an instance with "
+        "Get_Attributes_All when the path has no attribute. Unconnected (UCMM) unless --connected opens "
+        "a class 3 connection; --route sends it on through the target (Unconnected_Send). The value is "
+        "decoded by what the device's profile declares, or as --type.",
+        (("cipstack get 127.0.0.1 1/1/7", "the Identity's Product Name"),
+         ("cipstack get 127.0.0.1 0x2A/1/102 --connected", "the ACG's acceleration time, over class 3"),
+         ("cipstack get 127.0.0.1 0xF5/1/13 --type UINT --json", "a raw attribute as UINT, in JSON")),
+    ),
+    ("set",): CommandText(
+        "Set_Attribute_Single",
+        "Write an attribute with Set_Attribute_Single: VALUE encoded as --type (decimal or 0x hex for "
+        "integers; text for strings). A refused value prints the general and extended status.",
+        (("cipstack set 127.0.0.1 0x2A/1/102 100 --type UINT",
+          "the ACG's acceleration time to 10.0 s (in 0.1 s)"),
+         ("cipstack set 127.0.0.1 0xF5/1/13 120 --type UINT --connected",
+          "the encapsulation inactivity timeout to 120 s, over class 3")),
+    ),
+    ("io",): CommandText(
+        "open a class 1 connection, print input changes by field name",
+        "Open a class 1 (I/O) connection with a Forward_Open, send the output assembly at the RPI, print "
+        "each change of the input by field name, and close the connection (Forward_Close) after "
+        "--duration or on Ctrl-C, then print its statistics. The assemblies come from --output/--input "
+        "or from a ConnectionN of an EDS file; --list-fields shows their fields and the unit of a raw "
+        "value, which is what --set takes.",
+        (("cipstack io 127.0.0.1 --output 21 --input 71 --set run_forward=1 --set speed_reference=900",
+          "run the ACG forward at 900 rpm (30 Hz on its 4-pole motor) for 5 s"),
+         ("cipstack io 127.0.0.1 --output 101 --input 111 --list-fields",
+          "the fields of 101/111: their speed words are in 0.01 Hz (3000 is 30.00 Hz)"),
+         ("cipstack io 127.0.0.1 --eds ACG-ET2_1.01.eds --connection 1 --print every:1s --duration 10s",
+          "the EDS file's first connection, the latest input once a second")),
+    ),
+    ("drive",): CommandText(
+        "control a running emulator: inject a trip, read its status",
+        "Control a running emulator through its local control socket (not a CIP object): inject a trip "
+        "or read its status line. The socket is found by the emulator's --host and --port, or given "
+        "with --control.",
+        (("cipstack drive status", "the status of the emulator on 127.0.0.1:44818"),
+         ("cipstack drive trip OverHeat --host 127.0.0.11", "trip one device of a fleet")),
+    ),
+    ("drive", "trip"): CommandText(
+        "trip the emulated drive with a fault code",
+        "Trip the emulated drive with a fault code of its manual (the ACG's Drive Fault Codes, the "
+        "MX2/RX's trip codes) or its name, as a real fault would: the drive stops and reports it until "
+        "a fault reset.",
+        (("cipstack drive trip 0x4200", "OverHeat on the ACG"),
+         ("cipstack drive trip E05 --port 44819", "overload on the MX2 emulated on port 44819")),
+    ),
+    ("drive", "status"): CommandText(
+        "the emulated drive's status line",
+        "Print the emulated drive's status line: drive state, direction, output and reference "
+        "frequency, connections, and the trip if there is one.",
+        (("cipstack drive status", "the emulator on 127.0.0.1:44818"),
+         ("cipstack drive status --host 127.0.0.12 --json", "a fleet device's status as JSON")),
+    ),
+    ("eds",): CommandText(
+        "EDS files: generate, check, show",
+        "Electronic Data Sheets: write the EDS files of the emulated models, check EDS files from "
+        "anywhere against the rules a configuration tool relies on, or summarize one.",
+        (("cipstack eds generate --profile acg -o eds", "the ACG-ET2's EDS file into eds/"),
+         ("cipstack eds check eds/ACG-ET2_1.01.eds", "check a file")),
+    ),
+    ("eds", "check"): CommandText(
+        "check EDS files against the rules a configuration tool relies on",
+        "Check EDS files against the rules a configuration tool relies on (syntax, required entries, "
+        "parameters, assemblies, connections); each finding is one line with the file and line number. "
+        "With --against, also compare [Device] with a live device's Identity. Exits 1 on an error.",
+        (("cipstack eds check eds/*.eds", "every file of a directory"),
+         ("cipstack eds check eds/ACG-ET2_1.01.eds --against 127.0.0.1", "and the device it describes")),
+    ),
+    ("eds", "generate"): CommandText(
+        "write the EDS files of emulated models",
+        "Write the EDS file of an emulated model, or of every model of a family's table, from the same "
+        "declarations the emulator serves.",
+        (("cipstack eds generate --profile acg -o eds", "the ACG-ET2's file"),
+         ("cipstack eds generate --profile mx2 --all -o eds", "every MX2 model's file")),
+    ),
+    ("eds", "show"): CommandText(
+        "a readable summary: identity, assemblies, connections",
+        "Print a readable summary of an EDS file: its identity, parameters by group, assemblies with "
+        "their members, and connections.",
+        (("cipstack eds show eds/ACG-ET2_1.01.eds", "the ACG-ET2's file"),
+         ("cipstack eds show eds/ACG-ET2_1.01.eds --json", "as one JSON object")),
+    ),
+    ("capture",): CommandText(
+        "analyse a pcap/pcapng capture of EtherNet/IP and CIP traffic",
+        "Analyse a pcap or pcapng capture of EtherNet/IP and CIP traffic.",
+        (("cipstack capture analyze traffic.pcapng", "what happened on the wire"),),
+    ),
+    ("capture", "analyze"): CommandText(
+        "explicit exchanges, class 1 connection timing, anomalies",
+        "Explain a pcap or pcapng capture in the device's own words: every explicit exchange with its "
+        "attribute names and decoded values, each class 1 connection's timing (RPI, API, inter-arrival "
+        "percentiles, late, lost and duplicate packets) and data changes, and anomalies. Targets are "
+        "decoded by the profile of their identity, or by --profile or --eds.",
+        (("cipstack capture analyze traffic.pcapng", "the summary"),
+         ("cipstack capture analyze traffic.pcapng --json --no-progress", "every record as JSON lines"),
+         ("cipstack capture analyze traffic.pcapng --connection 1 --csv timing",
+          "connection 1's timing rows into timing/")),
+    ),
+    ("completion",): CommandText(
+        "print the shell completion script for bash or zsh",
+        'Print the completion script of cipstack for bash or zsh, generated from this command line by '
+        'shtab (install it with pip install "cipstack[completion]").',
+        (("cipstack completion bash > ~/.local/share/bash-completion/completions/cipstack",
+          "bash: completion in every new shell"),
+         ("cipstack completion zsh > ~/.zfunc/_cipstack",
+          "zsh: with ~/.zfunc in fpath before compinit in ~/.zshrc")),
+    ),
+}
+
+__all__ = ["COMMANDS", "PROGRAM", "CommandText"]
