@@ -37,8 +37,10 @@ PROGRAM = CommandText(
     "CIP for AC drives over EtherNet/IP and CompoNet: an adapter emulator of the ACG drive and the "
     "Omron MX2/RX, discovery, explicit messaging and class 1 I/O against any target, EDS files and "
     "capture analysis.\n\n"
-    "Every failure prints one line on stderr and exits non-zero: 2 for bad arguments, 1 for an error "
-    "status or a network failure. `cipstack COMMAND --help` describes a command.",
+    "Every failure prints one line on stderr and exits non-zero: 2 for bad arguments (after the "
+    "command's usage when the parser finds them), 1 for an error status or a network failure. A "
+    "command whose output is cut short (cipstack ... | head) stops quietly with 141, as a process "
+    "SIGPIPE ends. `cipstack COMMAND --help` describes a command and gives examples.",
     (("cipstack adapter --param drv=4 --param Frq=8",
       "run the emulated ACG drive on 127.0.0.1, run command and speed reference from the network"),
      ("cipstack identity 127.0.0.1", "who is there (ListIdentity)")),

@@ -34,7 +34,7 @@ class _SubParsers(argparse._SubParsersAction):  # type: ignore[type-arg]
     """Names each command's parser after its path and gives it its text from ``help_texts``."""
 
     def add_parser(self, name: str, **kwargs: Any) -> argparse.ArgumentParser:
-        path = (*self._prog_prefix.split()[1:], name)
+        path = (*getattr(self, "_prog_prefix", "cipstack").split()[1:], name)
         text = COMMANDS.get(path)
         if text is not None:
             kwargs.update(help=text.help, description=text.description_text(), epilog=text.epilog())
