@@ -16,6 +16,7 @@ from pathlib import Path
 import pytest
 
 from cipstack.cli import parse_duration, parse_object_path
+from tests.cli_errors import one_line_error
 from tests.ports import free_port
 
 
@@ -43,20 +44,6 @@ def adapter_process() -> Iterator[tuple[str, subprocess.Popen[str]]]:
     if process.poll() is None:
         process.send_signal(signal.SIGTERM)
         process.wait(10)
-
-
-def one_line_error(result: subprocess.CompletedProcess[str]) -> str:
-    """The one line of an error; an error the parser finds comes after the command's usage (``usage:``
-    and its indented continuation lines), as argparse shows it."""
-    lines = result.stderr.strip().splitlines()
-    if lines and lines[0].startswith("usage: "):
-        lines = lines[1:]
-        while lines and lines[0].startswith(" "):
-            lines = lines[1:]
-        assert lines and ": error: " in lines[0], result.stderr
-    assert len(lines) == 1, result.stderr
-    assert "Traceback" not in result.stderr
-    return lines[0]
 
 
 def test_get_single_json(adapter_process: tuple[str, subprocess.Popen[str]]) -> None:

@@ -27,6 +27,7 @@ from cipstack.eds.profiles import acg_et2_description
 from cipstack.eds.reader import parse_eds
 from cipstack.objects.tcpip import NetworkInterface
 from cipstack.scanner import Scanner
+from tests.cli_errors import one_line_error
 from tests.ports import free_port
 
 # -- the scanner --------------------------------------------------------------------------------------------
@@ -121,12 +122,6 @@ def test_listen_only_connection_of_an_eds_shares_the_owner_multicast(tmp_path: P
 def run(*args: str, timeout: float = 30) -> subprocess.CompletedProcess[str]:
     return subprocess.run([sys.executable, "-m", "cipstack", *args], capture_output=True, text=True,
                           timeout=timeout, stdin=subprocess.DEVNULL)
-
-
-def one_line_error(result: subprocess.CompletedProcess[str]) -> str:
-    lines = result.stderr.strip().splitlines()
-    assert len(lines) == 1 and "Traceback" not in result.stderr, result.stderr
-    return lines[0]
 
 
 class EdsAdapter:
