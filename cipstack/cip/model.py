@@ -63,7 +63,8 @@ class AttributeSpec:
     in_get_all: bool = True
 
     def validate(self, value: Any) -> Any:
-        """Check a value about to be stored: type, declared range, enumeration (0x09)."""
+        """Check a value about to be stored: type (a BOOL is 0 or 1), declared range, enumeration
+        (0x09). Every object runtime calls it before a write changes anything."""
         value = self.type.check(value)
         if self.minimum is not None and value < self.minimum:
             raise CipError(GeneralStatus.INVALID_ATTRIBUTE_VALUE,
@@ -289,11 +290,13 @@ class CipObject:
         if getter is not None or not spec.access.settable:
             raise CipError(GeneralStatus.ATTRIBUTE_NOT_SETTABLE, message=spec.name)
         assert instance is not None
+        # The value as sent (a BOOL of 2 stays 2): ``write_attribute`` validates it against the
+        # declaration before anything changes.
         if exact:
-            value = spec.type.decode(data[offset:])
+            value = spec.type.decode_written(data[offset:])
             end = len(data)
         else:
-            value, end = spec.type.decode_from(data, offset)
+            value, end = spec.type.decode_written_from(data, offset)
         self.write_attribute(instance, spec, value, context)
         return end
 

@@ -63,6 +63,17 @@ class CipType:
             raise CipError(GeneralStatus.TOO_MUCH_DATA, message=f"{self.name}: trailing bytes")
         return value
 
+    def decode_written_from(self, data: bytes, offset: int = 0) -> tuple[Any, int]:
+        """Decode the value a Set service carries, as the wire has it, for ``check`` and the
+        declared range to judge. A reader is tolerant (``decode_from``); what a request writes is
+        stored only if it is a value of the type (most types decode the same either way)."""
+        return self.decode_from(data, offset)
+
+    def decode_written(self, data: bytes) -> Any:
+        """Exactly one value as a Set service carries it (0x13 if short, 0x15 if long): ``decode``,
+        for every type whose reader is not more tolerant than its writer."""
+        return self.decode(data)
+
     def check(self, value: Any) -> Any:
         """Return ``value`` as this type holds it, or raise ``CipError(0x09)``."""
         return value
@@ -149,6 +160,14 @@ class BoolType(IntegerType):
 
     def decode(self, data: bytes) -> int:
         return 1 if super().decode(data) else 0
+
+    def decode_written_from(self, data: bytes, offset: int = 0) -> tuple[int, int]:
+        # A write keeps the byte as sent: 2 or 0xFF is no BOOL (0 or 1), and ``check`` refuses it
+        # with 0x09 rather than storing 1 (a run command would otherwise start the drive).
+        return IntegerType.decode_from(self, data, offset)
+
+    def decode_written(self, data: bytes) -> int:
+        return IntegerType.decode(self, data)
 
     def check(self, value: Any) -> int:
         if isinstance(value, bool):

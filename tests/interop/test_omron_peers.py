@@ -162,7 +162,9 @@ CPPPO_TAGS = (
     "@0x64/0x12/0x04",
     "@0x2A/1/8=(INT)1500",               # Speed Ref
     "@0x2A/1/8",
-    "@0x29/1/0x11=(BOOL)1",              # Force Fault (appendix E Example 3)
+    # Force Fault (appendix E Example 3). cpppo encodes a BOOL's TRUE as FFh (Logix's convention), which
+    # Table D-4's BOOL (0 or 1) refuses with 09h like any value out of range: the 1 is sent as a USINT.
+    "@0x29/1/0x11=(USINT)1",
     "@0x29/1/0x65",                      # Trip Cause (Example 2): E62 = 3Eh
 )
 
@@ -178,6 +180,9 @@ def check_cpppo_rows(rows: list[tuple[str, str, Any]]) -> None:
 
 def test_cpppo_direct(mx2: PeerProcess) -> None:
     check_cpppo_rows(get_attribute(mx2.address, *CPPPO_TAGS))
+    # cpppo's (BOOL)1 is the byte FFh: refused (09h), nothing written, Net Ref still 0.
+    returncode, rows, output = cpppo_get_attribute(mx2.address, "-S", "@0x2A/1/4=(BOOL)1", "@0x2A/1/4")
+    assert returncode != 0 and rows[0][2] is None and rows[1][2] == [0], output
 
 
 def test_cpppo_through_the_gateway(gateway: PeerProcess) -> None:
