@@ -160,6 +160,15 @@ def test_control_from_net_follows_drv(device: AcgDevice) -> None:
     assert get(device, 0x29, 3) == b"\x01" and not device.drive.running  # ... the drive obeys drv
 
 
+def test_control_from_net_is_served_at_14_and_15(device: AcgDevice) -> None:
+    # Seed 000 gives it as 0x29 attribute 14 (Control Supervisor table, 000:661) and 15 (the input
+    # instances' bit table, 000:458, as CIP's Control Supervisor has it): both ids serve the one value.
+    assert get(device, 0x29, 14) == get(device, 0x29, 15) == b"\x01"
+    device.drive.write(addr("drv"), 1, 0.0)
+    assert get(device, 0x29, 14) == get(device, 0x29, 15) == b"\x00"
+    assert status_of_set(device, 0x29, 15, b"\x01") == 0x0E                  # Get only, as attribute 14
+
+
 # Drive Run table (seed 000, class 0x29): states (Run1, Run2) reached by single Set_Attribute_Single.
 RUN_ROWS = [
     # (start, attribute set, value, expected direction after, row)

@@ -185,7 +185,7 @@ CONTROL_SUPERVISOR_ATTRIBUTES: tuple[DriveAttribute, ...] = (
           "0: stopped, 1: reverse run (Drive Run table)", lambda d, v, now: d.set_run_reverse(bool(v), now)),
     # 5 Net Control: Access "N/A", "Configurable only with the drive parameter" (seed 000:642). N/A
     # is the access, not a value: the card serves it neither to Get nor to Set, so it is not
-    # declared and both answer 0x14 (attribute not supported). 14 "Control From Net." reports drv.
+    # declared and both answer 0x14 (attribute not supported). 14/15 "Control From Net." report drv.
     DriveAttribute(AttributeSpec(6, "Drive State", USINT, Access.GET, default=DriveState.READY, minimum=0, maximum=6,
                                  enum=DRIVE_STATES), lambda d: int(d.drive_state)),
     _flag(7, "Running Forward", lambda d: d.running_forward, "1: running forward"),
@@ -197,7 +197,13 @@ CONTROL_SUPERVISOR_ATTRIBUTES: tuple[DriveAttribute, ...] = (
           lambda d, v, now: d.set_fault_reset(bool(v), now)),
     DriveAttribute(AttributeSpec(13, "Drive Fault Codes", UINT, Access.GET, default=0, enum=FAULT_CODES),
                    lambda d: d.fault_code),
+    # Control From Net is attribute 14 in the Control Supervisor table (seed 000:661) and attribute
+    # 15 in the table of the input instances' bits (seed 000:458, "Ctrl From Net ... 0x29 15"); the
+    # CIP Control Supervisor has CtrlFromNet at 15. A scanner may follow either table, so the card
+    # serves the one value at both ids: 15 as CIP and the bit table say, 14 as the object table says.
     _flag(14, "Control From Net.", lambda d: d.control_from_net, "1: commands come from the ACG-ET2 (drv = 4)"),
+    _flag(15, "Ctrl From Net", lambda d: d.control_from_net,
+          "1: commands come from the ACG-ET2 (drv = 4); the same value as attribute 14"),
 )
 CONTROL_SUPERVISOR_SPEC = _class_spec(CONTROL_SUPERVISOR, "Control Supervisor", CONTROL_SUPERVISOR_ATTRIBUTES)
 
