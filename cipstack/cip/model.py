@@ -151,6 +151,9 @@ class CipObject:
     """
 
     extra_services: ClassVar[Mapping[int, str]] = {}
+    #: The status of a request to an instance that does not exist: CIP's 0x05 (path destination
+    #: unknown); a device whose manual gives another (the Omron board's 0x16) sets its own.
+    missing_instance_status: GeneralStatus = GeneralStatus.PATH_DESTINATION_UNKNOWN
 
     def __init__(self, spec: ClassSpec) -> None:
         self.spec = spec
@@ -248,7 +251,7 @@ class CipObject:
         else:
             instance = self.instances.get(path.instance)
             if instance is None:
-                raise CipError(GeneralStatus.PATH_DESTINATION_UNKNOWN,
+                raise CipError(self.missing_instance_status,
                                message=f"{self.spec.name} has no instance {path.instance}")
             allowed = self.spec.instance_services
         service = request.service

@@ -8,10 +8,8 @@ from contextlib import contextmanager
 from types import MappingProxyType
 from typing import Any, Protocol
 
-from ...cip.epath import ApplicationPath
-from ...cip.messages import MessageRouterRequest, Service
+from ...cip.messages import Service
 from ...cip.model import AttributeSpec, Binding, CipObject, ClassSpec
-from ...cip.router import RequestContext
 from ...cip.status import CipError, GeneralStatus
 from ..registers import RegisterError, RegisterRefusal
 from .inverter import Inverter, InverterModeError
@@ -79,14 +77,15 @@ def inverter_access(board: OptionBoard) -> Iterator[None]:
         raise CipError(refusal_status(exc), message=str(exc)) from None
 
 
+#: Table E-5 (seed 004:3058): "16 Object does not exist: The specified Instance ID is not supported",
+#: the board's answer to an instance it does not have, in every object (CIP's own is 0x05).
+MISSING_INSTANCE = GeneralStatus.OBJECT_DOES_NOT_EXIST
+
+
 class OptionBoardObject(CipObject):
     """An object of appendices C/D: an unknown instance answers 0x16 (Table E-5, "Object does not exist")."""
 
-    def handle(self, path: ApplicationPath, request: MessageRouterRequest, context: RequestContext) -> bytes:
-        if path.instance and path.instance not in self.instances:
-            raise CipError(GeneralStatus.OBJECT_DOES_NOT_EXIST, message=f"{self.spec.name} has no instance "
-                                                                        f"{path.instance}")
-        return super().handle(path, request, context)
+    missing_instance_status = MISSING_INSTANCE
 
 
 class BoundObject(OptionBoardObject):

@@ -58,6 +58,7 @@ from ...objects.tcpip import NetworkInterface
 from ..base import Device, DeviceLimits, TripRefused
 from ..registers import RegisterError, RegisterRefusal
 from ..state import ParameterStore, StateFileError, StateWriter
+from .board import MISSING_INSTANCE
 from .inverter import Inverter, InverterModeError
 from .models import DEVICE_TYPE, REVISION, VENDOR_ID, Family, Model, model
 from .objects import (
@@ -162,6 +163,10 @@ class OmronDevice(Device):
         for instance in (*OUTPUT_INSTANCES, *INPUT_INSTANCES):
             if instance in SIZES:
                 self.assembly.add_assembly(self._point(instance))
+        # Table E-5 gives 0x16 for an instance that does not exist, in every object the board serves
+        # (Identity, Message Router and Assembly as well as appendices C/D): one answer for the device.
+        for obj in self.router.objects.values():
+            obj.missing_instance_status = MISSING_INSTANCE
         self._start()
 
     # -- the option board as its objects see it ------------------------------------------------

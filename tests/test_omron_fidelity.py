@@ -1,0 +1,58 @@
+"""The option board as seed 004's tables give it, over a real loopback connection: the status of an
+instance that does not exist (Table E-5), the Identity attributes (Table C-2), the Connection
+object's path lengths (Table C-8) and what an Identity Reset leaves (Table C-1)."""
+
+from __future__ import annotations
+
+from collections.abc import AsyncIterator
+from contextlib import asynccontextmanager
+
+import pytest
+
+from cipstack.adapter import Adapter, AdapterSettings
+from cipstack.cip.messages import Service
+from cipstack.devices.base import Device
+from cipstack.devices.profiles import build_device
+from cipstack.scanner import Scanner
+
+OBJECT_DOES_NOT_EXIST = 0x16
+PATH_DESTINATION_UNKNOWN = 0x05
+ATTRIBUTE_NOT_SUPPORTED = 0x14
+
+
+@asynccontextmanager
+async def serving(device: Device) -> AsyncIterator[tuple[Adapter, Scanner]]:
+    adapter = Adapter(AdapterSettings(host="127.0.0.1", port=0, io_port=0), device=device)
+    await adapter.start()
+    try:
+        async with await Scanner.connect(f"127.0.0.1:{adapter.port}") as scanner:
+            yield adapter, scanner
+    finally:
+        await adapter.close()
+
+
+async def status(scanner: Scanner, service: int, class_id: int, instance: int, attribute: int | None,
+                 data: bytes = b"") -> int:
+    return (await scanner.request(service, class_id, instance, attribute, data, check=False)).general_status
+
+
+@pytest.mark.parametrize("profile", ["mx2", "rx"])
+async def test_omron_missing_instance_is_0x16_in_every_object(profile: str) -> None:
+    # Table E-5 (seed 004:3058): "16 Object does not exist: The specified Instance ID is not supported";
+    # Identity and Assembly answered 0x05 where every other object answered 0x16.
+    device = build_device(profile)
+    async with serving(device) as (_, scanner):
+        answers = {f"0x{class_id:02X}": await status(scanner, Service.GET_ATTRIBUTE_SINGLE, class_id, 0xC8, 1)
+                   for class_id in sorted(device.router.objects)}
+        assert set(answers.values()) == {OBJECT_DOES_NOT_EXIST}, answers
+        assert await status(scanner, Service.SET_ATTRIBUTE_SINGLE, 0x04, 99, 3, bytes(4)) == OBJECT_DOES_NOT_EXIST
+        assert await status(scanner, Service.RESET, 0x01, 2, None) == OBJECT_DOES_NOT_EXIST
+
+
+async def test_acg_missing_instance_stays_cip_0x05() -> None:
+    # Seed 000 gives no error table for its objects: CIP's 0x05 (path destination unknown) stands.
+    device = build_device("acg")
+    async with serving(device) as (_, scanner):
+        answers = {f"0x{class_id:02X}": await status(scanner, Service.GET_ATTRIBUTE_SINGLE, class_id, 0xC8, 1)
+                   for class_id in sorted(device.router.objects)}
+        assert set(answers.values()) == {PATH_DESTINATION_UNKNOWN}, answers
