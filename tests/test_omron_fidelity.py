@@ -13,6 +13,7 @@ from cipstack.adapter import Adapter, AdapterSettings
 from cipstack.cip.messages import Service
 from cipstack.devices.base import Device
 from cipstack.devices.profiles import build_device
+from cipstack.objects.identity import DeviceState
 from cipstack.scanner import Scanner
 
 OBJECT_DOES_NOT_EXIST = 0x16
@@ -56,3 +57,16 @@ async def test_acg_missing_instance_stays_cip_0x05() -> None:
         answers = {f"0x{class_id:02X}": await status(scanner, Service.GET_ATTRIBUTE_SINGLE, class_id, 0xC8, 1)
                    for class_id in sorted(device.router.objects)}
         assert set(answers.values()) == {PATH_DESTINATION_UNKNOWN}, answers
+
+
+@pytest.mark.parametrize("profile", ["mx2", "rx"])
+async def test_omron_identity_serves_the_attributes_of_table_c2(profile: str) -> None:
+    # Table C-2 (seed 004:2409-2420): attributes 1-7, 9 and 65h; no 8 (State).
+    device = build_device(profile)
+    async with serving(device) as (_, scanner):
+        for attribute in (1, 2, 3, 4, 5, 6, 7, 9, 0x65):
+            assert await status(scanner, Service.GET_ATTRIBUTE_SINGLE, 0x01, 1, attribute) == 0, attribute
+        assert await status(scanner, Service.GET_ATTRIBUTE_SINGLE, 0x01, 1, 8) == ATTRIBUTE_NOT_SUPPORTED
+        # ListIdentity still carries a state: the board is operational.
+        [record] = await scanner.list_identity()
+        assert record.state == DeviceState.OPERATIONAL

@@ -102,6 +102,9 @@ class IdentityObject(CipObject):
         super().__init__(spec or identity_spec())
         self.info = info
         self.on_reset = on_reset
+        # Attribute 8 is optional in CIP; a device whose table leaves it out (the Omron board's
+        # Table C-2) still has a state for ListIdentity (``state``).
+        state = {"state": DeviceState.OPERATIONAL} if self.spec.instance_attribute(8) is not None else {}
         self.add_instance(
             1,
             vendor_id=info.vendor_id,
@@ -111,7 +114,7 @@ class IdentityObject(CipObject):
             status=0,
             serial_number=info.serial_number,
             product_name=info.product_name,
-            state=DeviceState.OPERATIONAL,
+            **state,
         )
 
     @property
@@ -120,7 +123,15 @@ class IdentityObject(CipObject):
 
     @property
     def state(self) -> int:
-        return int(self.get(1, 8))
+        """Attribute 8, or, where it is not served, the state the status word's fault bits say."""
+        if self.spec.instance_attribute(8) is not None:
+            return int(self.get(1, 8))
+        status = self.status
+        if status & IdentityStatus.MAJOR_UNRECOVERABLE_FAULT:
+            return DeviceState.MAJOR_UNRECOVERABLE_FAULT
+        if status & IdentityStatus.MAJOR_RECOVERABLE_FAULT:
+            return DeviceState.MAJOR_RECOVERABLE_FAULT
+        return DeviceState.OPERATIONAL
 
     def perform_reset(self, instance: Instance | None, reset_type: int, context: RequestContext) -> None:
         if instance is None:

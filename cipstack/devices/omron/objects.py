@@ -16,7 +16,7 @@ between option board and inverter 0x02.
 from __future__ import annotations
 
 from collections.abc import Callable, Mapping
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from types import MappingProxyType
 from typing import Any
 
@@ -63,7 +63,7 @@ from .registers import FamilyTraits
 #: Identity status bit 0 of Table C-2: "Always ON" (bits 8-11 are the fault bits of ``IdentityStatus``).
 STATUS_ALWAYS_ON = 0x0001
 
-IDENTITY_SPEC = identity_spec(
+_IDENTITY_SPEC = identity_spec(
     extra=(AttributeSpec(9, "Configuration Consistency Value", UINT, default=0,
                          help="EEPROM saves through the option board (Table C-2)"),
            AttributeSpec(0x65, "Firmware Revision Option Board", WORD,
@@ -71,6 +71,9 @@ IDENTITY_SPEC = identity_spec(
     instance_services=frozenset({Service.GET_ATTRIBUTE_SINGLE, Service.RESET}),   # Table C-1
     class_services=_GET,
 )
+#: Table C-2 (seed 004:2409-2420) lists attributes 1-7, 9 and 65h: 8 (State) is not served (0x14).
+IDENTITY_SPEC = replace(_IDENTITY_SPEC, instance_attributes=tuple(
+    a for a in _IDENTITY_SPEC.instance_attributes if a.id != 8))
 
 
 class OptionBoardIdentity(IdentityObject):
