@@ -70,3 +70,16 @@ async def test_omron_identity_serves_the_attributes_of_table_c2(profile: str) ->
         # ListIdentity still carries a state: the board is operational.
         [record] = await scanner.list_identity()
         assert record.state == DeviceState.OPERATIONAL
+
+
+@pytest.mark.parametrize("profile", ["mx2", "rx"])
+async def test_omron_connection_path_lengths_count_the_bytes_of_the_path(profile: str) -> None:
+    # Table C-8 (seed 004:2553, 2555): "Number of bytes for produced [consumed] connection path".
+    device = build_device(profile)
+    async with serving(device) as (_, scanner):
+        for length, path in ((0x0D, 0x0E), (0x0F, 0x10)):
+            served = (await scanner.request(Service.GET_ATTRIBUTE_SINGLE, 0x05, 1, path)).data
+            assert served in (bytes.fromhex("20 04 24 47 30 03"), bytes.fromhex("20 04 24 15 30 03"))
+            assert (await scanner.request(Service.GET_ATTRIBUTE_SINGLE, 0x05, 1, length)).data == bytes((6, 0))
+        await scanner.request(Service.SET_ATTRIBUTE_SINGLE, 0x05, 1, 0x0E, bytes.fromhex("20 04 24 96"))
+        assert (await scanner.request(Service.GET_ATTRIBUTE_SINGLE, 0x05, 1, 0x0D)).data == bytes((4, 0))

@@ -102,11 +102,11 @@ def test_connection_object():
     assert [get(d, 5, 1, a) for a in (1, 2, 3, 7, 8, 9, 0x0C)] == ["01", "01", "83", "10 00", "10 00", "00 00", "00"]
     assert get(d, 5, 1, 0x0E) == "20 04 24 47 30 03"      # produced: input 71 (P046 = 1)
     assert get(d, 5, 1, 0x10) == "20 04 24 15 30 03"      # consumed: output 21
-    # Table C-8 (seed 004:2553, 2555): path lengths default to 3, the six-byte path in 16-bit words.
-    assert get(d, 5, 1, 0x0D) == "03 00" and get(d, 5, 1, 0x0F) == "03 00"
+    # Table C-8 (seed 004:2553, 2555): the "number of bytes" of each path, which agrees with the path.
+    assert get(d, 5, 1, 0x0D) == "06 00" and get(d, 5, 1, 0x0F) == "06 00"
     assert put(d, 5, 1, 9, "0a 00") == 0 and get(d, 5, 1, 9) == "0a 00"
     assert put(d, 5, 1, 0x0E, "20 04 24 99 30 03") == 0 and d.default_pair == (21, 153)
-    assert put(d, 5, 1, 0x0E, "20 04 24 96") == 0 and get(d, 5, 1, 0x0D) == "02 00"   # no attribute: 2 words
+    assert put(d, 5, 1, 0x0E, "20 04 24 96") == 0 and get(d, 5, 1, 0x0D) == "04 00"   # no attribute: 4 bytes
     assert put(d, 5, 1, 0x0E, "20 04 24 15 30 03") == 0x09   # 21 is an output
     assert put(d, 5, 1, 1, "02") == 0x0E
     assert request(d, GET, 5, 2, 1).general_status == 0x16

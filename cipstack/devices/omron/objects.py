@@ -140,11 +140,14 @@ def path_instance(path: bytes) -> int:
 
 
 def path_length(path: bytes) -> int:
-    """Attributes 0Dh and 0Fh: Table C-8 (seed 004:2553, 2555) calls them the "number of bytes" of
-    the path yet gives 3 as the default, for a default path of six bytes (class 4, instance,
-    attribute 3: 20 04 24 nn 30 03). The default is the one figure the table fixes, and 3 is that
-    path's length in 16-bit words, as CIP counts EPATH sizes: the length is served in words."""
-    return (len(path) + 1) // 2
+    """Attributes 0Dh and 0Fh, in bytes. Table C-8 defines each as the "Number of bytes for produced
+    [consumed] connection path" (seed 004:2553, 2555), as CIP's Connection object defines its
+    produced/consumed connection path lengths, and the path it counts is an array of bytes (0Eh, 10h:
+    ARRAY). Its default column's "3" fits no path to an assembly's data the board accepts (class 4,
+    the instance and attribute 3 are six bytes, 20 04 24 nn 30 03; without the attribute four): it
+    is the six bytes in 16-bit words. Two statements of the table and CIP against one figure: the
+    length is served in bytes, 6 for the default path, and always agrees with the path read beside it."""
+    return len(path)
 
 
 class ConnectionObject(OptionBoardObject):
