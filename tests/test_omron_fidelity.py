@@ -11,7 +11,9 @@ import pytest
 
 from cipstack.adapter import Adapter, AdapterSettings
 from cipstack.cip.messages import Service
+from cipstack.cip.types import BOOL, INT
 from cipstack.devices.base import Device
+from cipstack.devices.omron.device import OmronDevice
 from cipstack.devices.profiles import build_device
 from cipstack.objects.identity import DeviceState
 from cipstack.scanner import Scanner
@@ -83,3 +85,23 @@ async def test_omron_connection_path_lengths_count_the_bytes_of_the_path(profile
             assert (await scanner.request(Service.GET_ATTRIBUTE_SINGLE, 0x05, 1, length)).data == bytes((6, 0))
         await scanner.request(Service.SET_ATTRIBUTE_SINGLE, 0x05, 1, 0x0E, bytes.fromhex("20 04 24 96"))
         assert (await scanner.request(Service.GET_ATTRIBUTE_SINGLE, 0x05, 1, 0x0D)).data == bytes((4, 0))
+
+
+@pytest.mark.parametrize("profile", ["mx2", "rx"])
+async def test_omron_identity_reset_returns_the_board_to_its_initial_status(profile: str) -> None:
+    # Table C-1: "05 Reset (return to initial status)". Output assembly 21's data and the network's
+    # control override (Net Ctrl 0x29/5, Net Ref 0x2A/4) are the board's, and do not survive it.
+    device = build_device(profile)
+    assert isinstance(device, OmronDevice)
+    async with serving(device) as (_, scanner):
+        await scanner.request(Service.SET_ATTRIBUTE_SINGLE, 0x29, 1, 5, b"\x01")         # Net Ctrl
+        await scanner.request(Service.SET_ATTRIBUTE_SINGLE, 0x2A, 1, 4, b"\x01")         # Net Ref
+        assembly_21 = bytes.fromhex("60 00 e8 03")                                         # CTR REF, 10.00 Hz
+        await scanner.request(Service.SET_ATTRIBUTE_SINGLE, 0x04, 21, 3, assembly_21)
+        assert (await scanner.request(Service.GET_ATTRIBUTE_SINGLE, 0x04, 21, 3)).data == assembly_21
+        assert await scanner.read(0x29, 1, 0x0F, BOOL) == 1 and await scanner.read(0x2A, 1, 0x1D, BOOL) == 1
+        await scanner.request(Service.RESET, 0x01, 1)
+        assert (await scanner.request(Service.GET_ATTRIBUTE_SINGLE, 0x04, 21, 3)).data == bytes(4)
+        assert await scanner.read(0x29, 1, 5, BOOL) == 0 and await scanner.read(0x2A, 1, 4, BOOL) == 0
+        assert await scanner.read(0x29, 1, 0x0F, BOOL) == 0 and await scanner.read(0x2A, 1, 0x1D, BOOL) == 0
+        assert await scanner.read(0x2A, 1, 8, INT) == 0                      # Speed Ref

@@ -308,7 +308,7 @@ def test_free_run_terminal_takes_effect_after_an_option_board_reset():
     inverter.command(5.5, fwd=False)
     inverter.advance(6.0)
     inverter.reset_option_board(6.0)                  # "Restart the Inverter or reset the Option Board"
-    inverter.command(6.0, fwd=False)
+    inverter.command(6.0, fwd=False, speed_reference=1000)   # the reset board holds no reference: sent again
     inverter.command(6.0, fwd=True)
     inverter.advance(7.0)
     status = inverter.status()

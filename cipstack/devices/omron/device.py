@@ -184,8 +184,7 @@ class OmronDevice(Device):
 
     def motor_type_changed(self) -> None:
         """Table D-2 (MX2): a new Motor Type resets the inverter and the option board."""
-        self.inverter.reset_option_board(self.now)
-        self._start()
+        self._restart_board()
 
     def node_setting(self) -> int:
         """The node address the switches (or P190) set now (section 2-1-4)."""
@@ -426,6 +425,17 @@ class OmronDevice(Device):
     def reset(self, reset_type: int) -> None:
         """Identity Reset (Table C-1, appendix E Example 1): the option board restarts and re-reads its
         configuration (P046, P160-P179, P190)."""
+        self._restart_board()
+
+    def _restart_board(self) -> None:
+        """The option board returns to its initial status (Table C-1, "Reset (return to initial status)"):
+        its output assemblies hold zeros, as at power-on (Table C-6 defaults 00 ...), the Special I/O
+        exchange starts afresh, and the inverter forgets what the network commanded (Net Ctrl, Net Ref,
+        run bits: ``Inverter.reset_option_board``); then it reads its configuration again."""
+        for instance, point in self.assembly.points.items():
+            if point.consumed:
+                self.assembly.stores[instance][:] = bytes(point.size)
+        self.special = SpecialIo()
         self.inverter.reset_option_board(self.now)
         self._start()
 

@@ -154,9 +154,12 @@ class Inverter(NetworkEvents, Ramps, Monitors, FlexibleFormat, TimedSimulation):
         self._power_on(now)
 
     def reset_option_board(self, now: float) -> None:
-        """Identity Reset of the option board: it re-reads its configuration; an option-board trip
-        (E60-E69 / E70-E79) is cleared first and raised again if its cause remains (appendix F Note 5)."""
+        """Identity Reset of the option board, "return to initial status" (Table C-1): the board keeps
+        nothing the network commanded (run bits, Net Ctrl, Net Ref, references, overrides: as at
+        power-on) and re-reads its configuration; an option-board trip (E60-E69 / E70-E79) is cleared
+        first and raised again if its cause remains (appendix F Note 5)."""
         self.advance(now)
+        self._cmd = OptionCommand()
         base = self.traits.option_trip_base
         if base <= self._trip < base + 10:
             self._clear_trip()
