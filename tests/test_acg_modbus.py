@@ -159,6 +159,24 @@ async def test_exception_codes(bench: Bench) -> None:
     assert await exception_code(client.write_register(addr("CM.23"), 0, device_id=UNIT)) == 0x20
 
 
+async def test_cm94_has_no_modbus_address(modbus_port: int) -> None:
+    # Seed 001's address table prints "CM.94 - - -" (001:1384), as "bA.20 - - -" (001:1245): no Modbus
+    # RTU or TCP address. 0x175E (the CM group's base + 94) and 0x1214 (bA.20) are refused alike, 0x02,
+    # alone or inside a range; class 0x64 instance 7 attribute 94 serves CM.94 (seed 000, test_acg_objects).
+    reader, writer = await asyncio.open_connection("127.0.0.1", modbus_port)
+    try:
+        for transaction, pdu in enumerate(("03 175e 0001", "04 175e 0001", "06 175e 0001", "10 175e 0001 02 0001",
+                                           "03 175d 0002", "03 1214 0001", "06 1214 0001"), start=1):
+            body = bytes.fromhex("ff " + pdu)
+            writer.write(struct.pack(">HHH", transaction, 0, len(body)) + body)
+            function = body[1]
+            assert await reader.readexactly(9) == struct.pack(">HHHBBB", transaction, 0, 3, 0xFF, function | 0x80, 2)
+        writer.write(bytes.fromhex("0010 0000 0006 ff 03 175d 0001"))          # CM.93, the code before: served
+        assert (await reader.readexactly(11))[:9] == bytes.fromhex("0010 0000 0005 ff 03 02")
+    finally:
+        writer.close()
+
+
 async def test_frames_on_the_wire(modbus_port: int) -> None:
     port = modbus_port
     reader, writer = await asyncio.open_connection("127.0.0.1", port)

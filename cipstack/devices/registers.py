@@ -75,6 +75,10 @@ class Register:
     saved: bool = True
     #: Where the value is declared in the manual, e.g. "seed 000 table CM".
     source: str = ""
+    #: False for a parameter its manual's address table prints without an address ("-"): it is
+    #: reached by its keypad code alone (CIP class 0x64), and ``address`` is only the key the
+    #: device holds it under, never served at that address (Modbus, smart-scaling words).
+    addressed: bool = True
 
     @property
     def signed(self) -> bool:

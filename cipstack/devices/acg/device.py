@@ -71,7 +71,9 @@ _STATUS_ADDRESSES = tuple(reg.ACG_REGISTERS.by_code(f"CM.{31 + i}").address for 
 
 
 def _words(addresses: tuple[int, ...]) -> list[Register | None]:
-    return [reg.ACG_REGISTERS.get(a) for a in addresses]
+    """The registers at communication addresses (a parameter without one, CM.94, is at none)."""
+    found = (reg.ACG_REGISTERS.get(a) for a in addresses)
+    return [r if r is not None and r.addressed else None for r in found]
 
 
 @dataclass

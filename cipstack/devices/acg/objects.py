@@ -65,7 +65,8 @@ def mirror_spec(attribute_id: int, name: str, register: Register, *, cip_type: C
                 access: Access | None = None, minimum: int | None = None, maximum: int | None = None) -> AttributeSpec:
     """An attribute that shows ``register``: its range, scale, unit and enumeration come from the
     register; the seed's table may narrow the range or state the CIP type and access."""
-    where = f"register 0x{register.address:04X}" + (f" {register.code}" if register.code else "")
+    where = (f"register 0x{register.address:04X}" if register.addressed else "no communication address") + (
+        f" {register.code}" if register.code else "")
     return AttributeSpec(
         attribute_id, name, cip_type or register.type, access or _access(register), default=register.default,
         minimum=register.minimum if minimum is None else minimum,

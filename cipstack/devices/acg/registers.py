@@ -78,8 +78,11 @@ CLASS_64_ALIASES: Mapping[int, str] = {10: "AP"}
 
 # Codes each group's address table lists (seed 001). Codes printed with "-" instead of an
 # address (bA.20-bA.24, Ad.83, M2.17-M2.20) have no communication address and are left out.
-# CM.94 is printed with "-" too, but Comm Update must be reachable over the network (class
-# 0x64 instance 7 attribute 94), so it is declared at 0x175E by the group rule (see below).
+# CM.94 is printed with "-" too (seed 001:1384, "CM.94 - - -"), but seed 000 describes it (the
+# ACG-ET2 keypad table, 000:211) and reaches every keypad parameter by its code in class 0x64
+# (000:753-760: instance = group, attribute = code number): it is declared, under the key
+# 0x175E of the group rule, as not addressed: class 0x64 instance 7 attribute 94 serves it, and
+# Modbus refuses 0x175E as it refuses bA.20's 0x1214 (see COMM_UPDATE).
 # Pr.42 and Pr.96 are the two rows printed without their code (0x1B2A, 0x1B60).
 LISTED_CODES: Mapping[str, tuple[int, ...]] = {
     "dr": (9, *range(11, 21), 26, 27, 28, 80, 81, 89, 91, 93, 94, 95, 97, 98),
@@ -471,9 +474,14 @@ def _cm(number: int, name: str, **fields: object) -> Register:
 _OCTET = {"minimum": 0, "maximum": 255}
 _HEX_ADDRESS = {"minimum": 0x0000, "maximum": 0xFFFF}
 
+#: CM.94 Comm Update. Seed 001's address table prints no Modbus RTU or TCP address for it
+#: (001:1384, "CM.94 - - -"), as for bA.20-bA.24; seed 000 lists it among the card's keypad
+#: parameters (000:211, Protocol "E/M": it applies the settings of both protocols, which says
+#: what it concerns, not where it is addressed) and serves keypad parameters by code in class
+#: 0x64 (000:753). So: over CIP at class 0x64/7/94, never over Modbus (exception 02, as bA.20).
 COMM_UPDATE = Register(
     0x175E, "CM.94", "Comm Update", default=0, enum={0: "NO", 1: "YES"}, group="CM", saved=False,
-    source=f"{ET2_TABLE}; address by the group rule (seed 001 prints '-')")
+    addressed=False, source=f"{ET2_TABLE}; no communication address (seed 001 prints '-'): class 0x64 only")
 
 _CM: list[Register] = [
     _cm(1, "Int485 St ID", default=1, minimum=1, maximum=250, source=SERIAL_TABLE),
