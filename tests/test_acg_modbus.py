@@ -4,6 +4,7 @@ pymodbus's client, an independent peer (marked ``interop``), with the same drive
 from __future__ import annotations
 
 import asyncio
+import socket
 import struct
 from collections.abc import AsyncIterator
 from dataclasses import dataclass
@@ -183,6 +184,24 @@ async def test_frames_on_the_wire(modbus_port: int) -> None:
         writer.close()
 
 
+async def test_requests_before_an_impossible_length_are_answered_then_closed(modbus_port: int) -> None:
+    """Two valid requests and a frame announcing 400 bytes (over the 254 an MBAP frame can hold) in
+    one segment: both requests are executed and answered in order, then the connection closes."""
+    write_acc = bytes.fromhex("0011 0000 0006 01 06 1f01 0064")       # ACC (0x1F01) = 100: 10.0 s
+    read_acc = bytes.fromhex("0012 0000 0006 01 03 1f01 0001")
+    impossible = bytes.fromhex("0013 0000 0190 01 03")
+
+    def exchange() -> bytes:   # a plain socket (in a thread: the server runs on this loop)
+        with socket.create_connection(("127.0.0.1", modbus_port), timeout=5) as sock:
+            sock.sendall(write_acc + read_acc + impossible)
+            received = b""
+            while chunk := sock.recv(4096):
+                received += chunk
+            return received
+
+    assert await asyncio.to_thread(exchange) == write_acc + bytes.fromhex("0012 0000 0005 01 03 02 0064")
+
+
 async def test_bytes_beyond_the_pdu_refuse_the_request(modbus_port: int) -> None:
     # Write Single Register 0x1F01 (ACC) = 100 with two bytes more than function 6 has: refused with
     # 0x03 (the implied length is wrong), nothing written, and the stream goes on with the next frame.
@@ -233,7 +252,8 @@ async def test_connections_past_the_limit_are_closed_and_the_rest_served(caplog:
         await first[1].wait_closed()
         await asyncio.sleep(0.05)
         assert await served(await connect("127.0.0.5"))          # its slot is free again
-    assert sum("Modbus TCP connection from" in r.getMessage() for r in caplog.records) == 1
+    # One line for each refused source (127.0.0.2, 127.0.0.5): the refusal log's rule is per source.
+    assert sum("Modbus TCP connection from" in r.getMessage() for r in caplog.records) == 2
 
 
 def test_pdu_length_is_exact() -> None:

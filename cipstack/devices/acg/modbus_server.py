@@ -15,7 +15,7 @@ from ...eip.limits import (
 )
 from ..state import StateFileError, StateWriter
 from .drive import AcgDrive
-from .modbus import DriveSource, ExceptionCode, MbapBuffer, ModbusTcpCore
+from .modbus import DriveSource, ExceptionCode, MbapBuffer, MbapLengthError, ModbusTcpCore
 
 log = logging.getLogger(__name__)
 
@@ -39,6 +39,7 @@ class ModbusTcpServer:
         self.core = ModbusTcpCore(drive)
         self.limiter = ConnectionLimiter(max_connections, max_connections_per_host)
         self._refused_log = RateLimitedLog(log)
+        self._unframed_log = RateLimitedLog(log, level=logging.INFO)
         self.host = host
         self.saves = saves
         self._requested_port = port
@@ -68,7 +69,8 @@ class ModbusTcpServer:
         peer = writer.get_extra_info("peername")
         host = str(peer[0]) if peer else "?"
         if not self.limiter.admit(host):
-            self._refused_log("Modbus TCP connection from %s refused: %s", host, self.limiter.reason(host))
+            self._refused_log("Modbus TCP connection from %s refused: %s", host, self.limiter.reason(host),
+                              source=host)
             writer.transport.abort()
             return
         self._writers.add(writer)
@@ -84,17 +86,23 @@ class ModbusTcpServer:
     async def _serve(self, reader: asyncio.StreamReader, writer: asyncio.StreamWriter) -> None:
         buffer = MbapBuffer()
         while data := await reader.read(4096):
+            unframed: MbapLengthError | None = None
             try:
                 frames = buffer.feed(data)
-            except ValueError as exc:
-                log.info("Modbus TCP connection closed: %s", exc)
-                return
+            except MbapLengthError as exc:
+                # The requests complete before the impossible length came are served and answered;
+                # nothing after it can be framed, so the connection then closes.
+                frames, unframed = exc.frames, exc
             for frame in frames:
                 reply = await self.handle_frame(frame)
                 if reply is not None:
                     writer.write(reply)
             self.rearm()
             await writer.drain()
+            if unframed is not None:
+                host = writer.get_extra_info("peername", ("?",))[0]
+                self._unframed_log("Modbus TCP connection from %s closed: %s", host, unframed, source=host)
+                return
 
     async def handle_frame(self, frame: bytes) -> bytes | None:
         """One frame's reply; a request that saved waits (off the loop) for the file to take the save."""
