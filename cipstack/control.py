@@ -28,6 +28,8 @@ from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
+from .eip.limits import RateLimitedLog
+
 log = logging.getLogger(__name__)
 
 MAX_LINE = 4096
@@ -89,6 +91,8 @@ class ControlServer:
         self.path = path
         self.handler = handler
         self._server: asyncio.AbstractServer | None = None
+        #: Other users knocking: at most one line per 10 s per user id (``RateLimitedLog``).
+        self.refused_log = RateLimitedLog(log)
 
     async def start(self) -> None:
         if is_abstract(self.path):
@@ -121,7 +125,8 @@ class ControlServer:
         uid = _peer_uid(writer)
         if uid is not None and uid not in (0, os.getuid()):
             # An abstract socket has no file mode to keep other users out: their credentials do.
-            log.warning("control socket: a process of user %d refused (only user %d or root)", uid, os.getuid())
+            self.refused_log("control socket: a process of user %d refused (only user %d or root)", uid,
+                             os.getuid(), source=uid)
             writer.close()
             return
         try:

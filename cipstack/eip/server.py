@@ -292,7 +292,7 @@ class EncapsulationServer:
         logged, at a bounded rate. An admitted host is released by ``closed``."""
         if self.limiter.admit(host):
             return True
-        self.refused_log("TCP connection from %s refused: %s", host, self.limiter.reason(host))
+        self.refused_log("TCP connection from %s refused: %s", host, self.limiter.reason(host), source=host)
         return False
 
     def opened(self, served: _TcpProtocol | LaneTcpConnection, peer_text: str,

@@ -39,6 +39,7 @@ from .encapsulation import (
     EncapsulationStatus,
 )
 from .identity_items import CAPABILITY_CIP_TCP, IdentityRecord, encode_list_identity, encode_list_services
+from .limits import RateLimitedLog
 
 log = logging.getLogger(__name__)
 
@@ -165,6 +166,10 @@ class EncapsulationTarget:
         #: Called with the time before a request is served: the device moves its simulation there.
         self.tick: Callable[[float], None] = lambda now: None
         self._handles = itertools.count(random.randrange(1, 0x7FFF0000))
+        # Refusals, each kind logged at most once per 10 s per originator address (``RateLimitedLog``).
+        self.sessions_refused_log = RateLimitedLog(log, level=logging.WARNING)
+        self.sessions_per_host_refused_log = RateLimitedLog(log, level=logging.INFO)
+        self.frames_refused_log = RateLimitedLog(log, level=logging.INFO)
 
     # -- TCP ------------------------------------------------------------------------------------
     def connection(self, peer: str, local: SockAddr, now: float) -> EncapsulationConnection:
@@ -283,7 +288,8 @@ class EncapsulationConnection:
             command, length, session, _status, context, options = HEADER.unpack_from(data, offset)
             if length > limit:
                 stats.errors += 1
-                log.info("%s: frame of %d bytes exceeds the %d-byte limit; closing", self.peer, length, limit)
+                target.frames_refused_log("%s: frame of %d bytes exceeds the %d-byte limit; closing", self.peer,
+                                          length, limit, source=self.host, now=now)
                 self._reply(command, session, context, status=EncapsulationStatus.INVALID_LENGTH)
                 self.closing = True
                 return
@@ -380,7 +386,7 @@ class EncapsulationConnection:
             if reply is not None:
                 self._reply(command, session, context, reply)
         elif command == Command.REGISTER_SESSION:
-            self._register_session(session, context, body)
+            self._register_session(session, context, body, now)
         elif command == Command.UNREGISTER_SESSION:
             self._check_session(session)
             self.closing = True  # no reply; the TCP connection closes
@@ -405,7 +411,7 @@ class EncapsulationConnection:
         if self.session is None or session != self.session:
             raise EncapsulationError(EncapsulationStatus.INVALID_SESSION)
 
-    def _register_session(self, session: int, context: bytes, body: bytes) -> None:
+    def _register_session(self, session: int, context: bytes, body: bytes, now: float) -> None:
         if len(body) != REGISTER_SESSION_DATA.size:
             raise EncapsulationError(EncapsulationStatus.INVALID_LENGTH)
         version, options = REGISTER_SESSION_DATA.unpack(body)
@@ -418,13 +424,15 @@ class EncapsulationConnection:
         settings = self.target.settings
         if len(self.target.sessions) >= settings.max_sessions:
             limit = settings.max_sessions
-            log.warning("%s: RegisterSession refused (0x0002): all %d sessions in use (the session limit, "
-                        "--max-sessions)", self.peer, limit)
+            self.target.sessions_refused_log(
+                "%s: RegisterSession refused (0x0002): all %d sessions in use (the session limit, --max-sessions)",
+                self.peer, limit, source=self.host, now=now)
             raise EncapsulationError(EncapsulationStatus.INSUFFICIENT_MEMORY, f"all {limit} sessions in use")
         held = sum(1 for owner in self.target.sessions.values() if owner.host == self.host)
         if held >= settings.sessions_per_host:
-            log.info("%s: RegisterSession refused (0x0002): %s holds %d sessions (the per-host limit, "
-                     "--max-sessions-per-host)", self.peer, self.host, held)
+            self.target.sessions_per_host_refused_log(
+                "%s: RegisterSession refused (0x0002): %s holds %d sessions (the per-host limit, "
+                "--max-sessions-per-host)", self.peer, self.host, held, source=self.host, now=now)
             raise EncapsulationError(EncapsulationStatus.INSUFFICIENT_MEMORY,
                                      f"{self.host} holds {held} sessions (the per-host limit)")
         self.session = self.target._new_session(self)
