@@ -10,7 +10,14 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-from .control import ControlAddress, ControlDenied, ControlError, ControlServer, default_control_path
+from .control import (
+    ControlAddress,
+    ControlDenied,
+    ControlError,
+    ControlServer,
+    ControlTaken,
+    default_control_path,
+)
 from .devices.acg.device import AcgDevice
 from .devices.acg.modbus_server import ModbusTcpServer
 from .devices.base import Device, DeviceLimits, TripRefused
@@ -196,8 +203,20 @@ class Adapter:
             await control.start()
         except OSError as exc:
             await self.close()
-            raise ListenError("control socket (--control)", exc.strerror or str(exc)) from None
+            raise ListenError(*self._control_refusal(exc)) from None
         self.control_server = control
+
+    def _control_refusal(self, exc: OSError) -> tuple[str, str]:
+        """Where and why the control socket cannot be had, and what to do: with ``--control``, another
+        path; with the default address (named after the host and port), another host or port, or the
+        holder stopped."""
+        reason = str(exc.args[1]) if len(exc.args) > 1 else (exc.strerror or str(exc))
+        if self.settings.control_path is not None:
+            return "control socket (--control)", f"{reason}; give another --control path"
+        if isinstance(exc, ControlTaken):
+            return "control socket", (f"{reason}; stop that process, or serve on another --host or --port "
+                                      "(the control socket is named after them)")
+        return "control socket", reason
 
     async def stop_serving(self) -> None:
         """Close the control socket, then every port; the last saves are written."""
