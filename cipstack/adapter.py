@@ -29,7 +29,7 @@ from .eip.io_server import IoEndpoint, freeze_startup_objects
 from .eip.io_target import IoTarget
 from .eip.limits import DEFAULT_MAX_TCP_CONNECTIONS
 from .eip.server import DEFAULT_PORT, EncapsulationServer
-from .eip.target import EncapsulationTarget, TargetSettings
+from .eip.target import DEFAULT_FRAME_TIMEOUT, EncapsulationTarget, TargetSettings
 from .listening import ListenError, held_log_records
 from .objects.tcpip import NetworkInterface
 
@@ -65,6 +65,8 @@ class AdapterSettings:
     max_tcp_connections: int = DEFAULT_MAX_TCP_CONNECTIONS
     max_tcp_connections_per_host: int | None = None
     max_frame_length: int = 4200
+    #: Seconds a TCP frame, once begun, has to arrive whole (``TargetSettings.frame_timeout``).
+    frame_timeout: float = DEFAULT_FRAME_TIMEOUT
     #: UDP port of class 1 I/O (consumed O->T datagrams, and the default T->O destination port).
     io_port: int = DEFAULT_IO_PORT
     #: Unix socket of the control channel (``cipstack drive ...``); None: the default for the port.
@@ -105,6 +107,7 @@ class Adapter:
             self.device.router, self.device.identity_record,
             TargetSettings(max_sessions=s.max_sessions, max_sessions_per_host=s.max_sessions_per_host,
                            max_connections=s.max_connections, max_frame_length=s.max_frame_length,
+                           frame_timeout=s.frame_timeout,
                            inactivity_timeout=lambda: self.device.inactivity_timeout),
             table=self.device.connection_table,
         )

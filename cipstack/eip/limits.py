@@ -70,6 +70,23 @@ class ConnectionLimiter:
         self.by_host[host] = held + 1
         return True
 
+    def victim(self, host: str) -> str | None:
+        """The host that should give up a connection so that ``host``, refused because every slot is
+        taken, gets one; None when none should (``host`` is at its per-host limit, or nobody holds
+        more than ``host`` would once admitted).
+
+        Why eviction, and from whom: a fixed reserve of slots for new hosts only moves the wall (an
+        attacker with as many addresses takes the reserve too); taking a slot from the host that holds
+        the most, only while it holds more than the newcomer would (max-min fairness), lets every
+        new host in as long as any host holds more than its fair share, costs nothing until the
+        table is full, and never takes a connection from a host that holds as few as the newcomer.
+        Which of its connections goes is the server's choice: the idlest."""
+        held = self.by_host.get(host, 0)
+        if self.open < self.total or held >= self.per_host or not self.by_host:
+            return None
+        biggest, count = max(self.by_host.items(), key=lambda item: item[1])
+        return biggest if count > held + 1 else None
+
     def release(self, host: str) -> None:
         held = self.by_host.get(host, 0)
         if held <= 0:

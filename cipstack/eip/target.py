@@ -28,6 +28,7 @@ from ..cip.router import MessageRouter, RequestContext
 from .connection_manager import ConnectionTable, ExplicitConnection, origin_host
 from .cpf import Item, ItemType, SockAddr, decode_items, encode_items
 from .encapsulation import (
+    DEFAULT_FRAME_TIMEOUT,
     HEADER,
     HEADER_SIZE,
     PROTOCOL_VERSION,
@@ -78,7 +79,12 @@ class TargetSettings:
     #: Largest encapsulation data length accepted (bytes after the 24-byte header).
     max_frame_length: int = 4200
     #: Encapsulation inactivity timeout in seconds (0 disables); read live from TCP/IP attribute 13.
+    #: Only a complete frame is activity: bytes that do not finish one keep no connection open.
     inactivity_timeout: Callable[[], float] = lambda: 120.0
+    #: Seconds a frame, once its first byte has come, has to arrive whole; past that the connection
+    #: closes (a peer trickling bytes holds no slot). A frame is at most 24 + 4,200 bytes, which any
+    #: live peer sends in milliseconds.
+    frame_timeout: float = DEFAULT_FRAME_TIMEOUT
     #: ListServices capability flags; class 0/1 over UDP is added when the device offers class 1 I/O.
     capabilities: int = CAPABILITY_CIP_TCP
     #: Randomness of the UDP ListIdentity reply delay (seedable for tests).
@@ -170,6 +176,8 @@ class EncapsulationTarget:
         self.sessions_refused_log = RateLimitedLog(log, level=logging.WARNING)
         self.sessions_per_host_refused_log = RateLimitedLog(log, level=logging.INFO)
         self.frames_refused_log = RateLimitedLog(log, level=logging.INFO)
+        self.frames_late_log = RateLimitedLog(log, level=logging.INFO)
+        self.idle_log = RateLimitedLog(log, level=logging.INFO)
 
     # -- TCP ------------------------------------------------------------------------------------
     def connection(self, peer: str, local: SockAddr, now: float) -> EncapsulationConnection:
@@ -249,7 +257,11 @@ class EncapsulationConnection:
         self.local = local
         self.session: int | None = None
         self.closing = False
+        #: When the last complete frame came (or the connection opened): the inactivity timeout and
+        #: the choice of the idlest connection to close for a new host count from it.
         self.last_activity = now
+        #: When the first byte of the frame still incomplete came (None: no frame under way).
+        self.frame_started: float | None = None
         self._inbox = bytearray()
         self._outbox: list[bytes] = []
         self._context = RequestContext(target.router, now, peer, self)
@@ -263,12 +275,12 @@ class EncapsulationConnection:
     def receive(self, data: bytes, now: float) -> None:
         if self.closing:
             return
-        self.last_activity = now
         inbox = self._inbox
         if data == self._repeat and not inbox:
             # The same frame again, byte for byte and alone (a client polling one attribute): what
             # its header and items were found to say still holds, since the session cannot change
             # while the connection is open, so the frame goes straight to its request.
+            self.last_activity = now
             target = self.target
             target.stats.frames += 1
             target.tick(now)
@@ -308,9 +320,17 @@ class EncapsulationConnection:
                 stats.errors += 1
                 self._reply(command, session, context, status=exc.status)
             if offset == size:
+                self.last_activity = now
+                self.frame_started = None
                 return  # the common end: the read held whole frames
+        if offset:
+            self.last_activity = now
         if offset < size and not self.closing:
             inbox += memoryview(data)[offset:]
+            if offset or self.frame_started is None:
+                self.frame_started = now   # a new frame has begun: its bytes have frame_timeout to come
+        elif offset == size:
+            self.frame_started = None
 
     def data_to_send(self) -> bytes:
         outbox = self._outbox
@@ -320,11 +340,19 @@ class EncapsulationConnection:
         outbox.clear()
         return out
 
+    def frame_deadline(self) -> float | None:
+        """When the frame under way must be complete (None: none under way)."""
+        started = self.frame_started
+        return None if started is None else started + self.target.settings.frame_timeout
+
     def next_deadline(self) -> float | None:
         deadlines = []
         timeout = self.target.settings.inactivity_timeout()
         if timeout:
             deadlines.append(self.last_activity + timeout)
+        frame_deadline = self.frame_deadline()
+        if frame_deadline is not None:
+            deadlines.append(frame_deadline)
         table_deadline = self.target.table.next_deadline(self)
         if table_deadline is not None:
             deadlines.append(table_deadline)
@@ -333,8 +361,17 @@ class EncapsulationConnection:
     def on_timer(self, now: float) -> None:
         self.target.table.expire(now, self)
         timeout = self.target.settings.inactivity_timeout()
-        if timeout and now >= self.last_activity + timeout and not self.closing:
-            log.info("%s: no traffic for %g s (encapsulation inactivity timeout); closing", self.peer, timeout)
+        if self.closing:
+            return
+        frame_deadline = self.frame_deadline()
+        if frame_deadline is not None and now >= frame_deadline:
+            self.target.frames_late_log("%s: a frame begun %g s ago is still incomplete (the frame timeout, "
+                                        "--frame-timeout); closing", self.peer, now - (self.frame_started or now),
+                                        source=self.host, now=now)
+            self.closing = True
+        elif timeout and now >= self.last_activity + timeout:
+            self.target.idle_log("%s: no complete frame for %g s (encapsulation inactivity timeout); closing",
+                                 self.peer, timeout, source=self.host, now=now)
             self.closing = True
 
     def connection_lost(self) -> None:
