@@ -102,7 +102,8 @@ class Adapter:
             acg = self.device
             self.modbus = ModbusTcpServer(lambda: acg.drive, s.host, s.modbus_port, saves=acg.saves,
                                           max_connections=s.max_tcp_connections,
-                                          max_connections_per_host=s.max_tcp_connections_per_host)
+                                          max_connections_per_host=s.max_tcp_connections_per_host,
+                                          frame_timeout=s.frame_timeout)
         self.target = EncapsulationTarget(
             self.device.router, self.device.identity_record,
             TargetSettings(max_sessions=s.max_sessions, max_sessions_per_host=s.max_sessions_per_host,

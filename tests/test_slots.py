@@ -65,7 +65,7 @@ class Running:
 
 @pytest.fixture(params=sorted(LOOPS))
 def adapter(request: pytest.FixtureRequest) -> Iterator[Running]:
-    running = Running(LOOPS[request.param](), max_tcp_connections=8, frame_timeout=1.0)
+    running = Running(LOOPS[request.param](), max_tcp_connections=8, frame_timeout=1.0, modbus_port=0)
     yield running
     running.close()
 
@@ -140,6 +140,60 @@ def test_complete_frames_keep_a_slow_peer_connected(adapter: Running) -> None:
             client.sock.sendall(frame(NOP))
             time.sleep(0.4)
         served(AttackTarget(port, 0), client)
+
+
+#: Modbus TCP Read Holding Registers of ACC (0x1F01), and its answer (5.0 s).
+READ_ACC = bytes.fromhex("0001 0000 0006 01 03 1f01 0001")
+ACC = bytes.fromhex("0001 0000 0005 01 03 02 0032")
+
+
+def modbus_client(port: int, source: str) -> socket.socket:
+    sock = socket.create_connection(("127.0.0.1", port), timeout=3, source_address=(source, 0))
+    assert modbus_served(sock)
+    return sock
+
+
+def modbus_served(sock: socket.socket) -> bool:
+    try:
+        sock.sendall(READ_ACC)
+        answer = b""
+        while len(answer) < len(ACC):
+            chunk = sock.recv(len(ACC) - len(answer))
+            if not chunk:
+                return False
+            answer += chunk
+    except OSError:
+        return False
+    return answer == ACC
+
+
+def test_modbus_slots_are_not_locked_either(adapter: Running) -> None:
+    """The Modbus TCP port has the same rules: a third address gets in past two holding every slot,
+    and a frame trickled a byte at a time is closed at the frame timeout."""
+    assert adapter.adapter.modbus is not None
+    port = adapter.adapter.modbus.port
+    held = [modbus_client(port, source) for source in ("127.0.0.2", "127.0.0.3") for _ in range(4)]
+    try:
+        newcomer = modbus_client(port, "127.0.0.4")                  # was closed at accept
+        assert modbus_served(newcomer) and sum(modbus_served(sock) for sock in held) == 7
+        newcomer.close()
+    finally:
+        for sock in held:
+            sock.close()
+    with socket.create_connection(("127.0.0.1", port), timeout=5) as sock:
+        started = time.monotonic()
+        closed = False
+        for byte in READ_ACC[:-1]:
+            try:
+                sock.sendall(bytes([byte]))
+            except OSError:
+                closed = True
+                break
+            if closed_by_peer(sock, 0.2):
+                closed = True
+                break
+        took = time.monotonic() - started
+    assert closed and 0.9 <= took < 3.0, (closed, took)
 
 
 def test_the_limiter_names_the_host_to_make_room() -> None:

@@ -59,6 +59,8 @@ class ConnectionLimiter:
         self.by_host: dict[str, int] = {}
         #: Connections refused since the start.
         self.refused = 0
+        #: Connections closed to make room for another host (``admit_making_room``).
+        self.evicted = 0
 
     def admit(self, host: str) -> bool:
         """Count a new connection from ``host`` in, or refuse it (nothing counted)."""
@@ -86,6 +88,18 @@ class ConnectionLimiter:
             return None
         biggest, count = max(self.by_host.items(), key=lambda item: item[1])
         return biggest if count > held + 1 else None
+
+    def admit_making_room(self, host: str, close_idlest: Callable[[str, str], bool]) -> bool:
+        """``admit``, and when every slot is taken, ``close_idlest(victim, host)`` (the server closes the
+        idlest connection of ``victim`` and releases it; False if it had none) to let ``host`` in."""
+        if self.admit(host):
+            return True
+        victim = self.victim(host)
+        if victim is None or not close_idlest(victim, host):
+            return False
+        self.refused -= 1   # not refused after all: it takes the place made for it
+        self.evicted += 1
+        return self.admit(host)
 
     def release(self, host: str) -> None:
         held = self.by_host.get(host, 0)

@@ -277,9 +277,14 @@ class _BroadcastListener(asyncio.DatagramProtocol):
 
 
 def _last_activity(served: _TcpProtocol | LaneTcpConnection) -> float:
-    """When a served connection last completed a frame (its idleness, for ``_make_room``)."""
+    """When a served connection last completed a frame (its idleness, for ``_close_idlest``)."""
     connection = served.connection
     return connection.last_activity if connection is not None else float("-inf")
+
+
+def _peer_of(served: _TcpProtocol | LaneTcpConnection) -> str:
+    connection = served.connection
+    return connection.peer if connection is not None else served.host
 
 
 #: Tries at a pair of free TCP and UDP ports of one number (port 0): the OS picks the TCP one, and
@@ -316,26 +321,21 @@ class EncapsulationServer:
     def admit(self, host: str) -> bool:
         """Whether a TCP connection from ``host`` may be served (``ConnectionLimiter``); a refusal is
         logged, at a bounded rate. An admitted host is released by ``closed``."""
-        if self.limiter.admit(host):
-            return True
-        if self._make_room(host) and self.limiter.admit(host):
+        if self.limiter.admit_making_room(host, self._close_idlest):
             return True
         self.refused_log("TCP connection from %s refused: %s", host, self.limiter.reason(host), source=host)
         return False
 
-    def _make_room(self, host: str) -> bool:
+    def _close_idlest(self, victim: str, host: str) -> bool:
         """Every slot taken: close the idlest connection (the longest without a complete frame) of
-        the host the limiter names (``ConnectionLimiter.victim``), if any; True when one was closed."""
-        victim = self.limiter.victim(host)
-        if victim is None:
-            return False
+        ``victim`` to make room for ``host`` (``ConnectionLimiter.victim``); False if it has none."""
         idlest = min((served for served in self.connections if served.host == victim),
                      key=_last_activity, default=None)
         if idlest is None:
             return False
-        held = self.limiter.by_host.get(victim, 0)
         self.evicted_log("TCP connection %s closed to make room for %s: %s held %d of the %d connections",
-                         idlest.connection.peer, host, victim, held, self.limiter.total, source=victim)
+                         _peer_of(idlest), host, victim, self.limiter.by_host.get(victim, 0), self.limiter.total,
+                         source=victim)
         idlest.evict()
         return True
 

@@ -218,6 +218,11 @@ class MbapBuffer:
     def __init__(self) -> None:
         self._buffer = bytearray()
 
+    @property
+    def pending(self) -> int:
+        """Bytes of a frame begun and not complete yet."""
+        return len(self._buffer)
+
     def feed(self, data: bytes) -> list[bytes]:
         """The complete frames ``data`` finishes; raises ``MbapLengthError`` (with the frames before
         it) on an impossible length."""
