@@ -10,7 +10,14 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-from .control import ControlAddress, ControlDenied, ControlError, ControlServer, default_control_path
+from .control import (
+    ControlAddress,
+    ControlDenied,
+    ControlError,
+    ControlServer,
+    ControlTaken,
+    default_control_path,
+)
 from .devices.acg.device import AcgDevice
 from .devices.acg.modbus_server import ModbusTcpServer
 from .devices.base import Device, DeviceLimits, TripRefused
@@ -22,7 +29,7 @@ from .eip.io_server import IoEndpoint, freeze_startup_objects
 from .eip.io_target import IoTarget
 from .eip.limits import DEFAULT_MAX_TCP_CONNECTIONS
 from .eip.server import DEFAULT_PORT, EncapsulationServer
-from .eip.target import EncapsulationTarget, TargetSettings
+from .eip.target import DEFAULT_FRAME_TIMEOUT, EncapsulationTarget, TargetSettings
 from .listening import ListenError, held_log_records
 from .objects.tcpip import NetworkInterface
 
@@ -58,6 +65,8 @@ class AdapterSettings:
     max_tcp_connections: int = DEFAULT_MAX_TCP_CONNECTIONS
     max_tcp_connections_per_host: int | None = None
     max_frame_length: int = 4200
+    #: Seconds a TCP frame, once begun, has to arrive whole (``TargetSettings.frame_timeout``).
+    frame_timeout: float = DEFAULT_FRAME_TIMEOUT
     #: UDP port of class 1 I/O (consumed O->T datagrams, and the default T->O destination port).
     io_port: int = DEFAULT_IO_PORT
     #: Unix socket of the control channel (``cipstack drive ...``); None: the default for the port.
@@ -93,11 +102,13 @@ class Adapter:
             acg = self.device
             self.modbus = ModbusTcpServer(lambda: acg.drive, s.host, s.modbus_port, saves=acg.saves,
                                           max_connections=s.max_tcp_connections,
-                                          max_connections_per_host=s.max_tcp_connections_per_host)
+                                          max_connections_per_host=s.max_tcp_connections_per_host,
+                                          frame_timeout=s.frame_timeout)
         self.target = EncapsulationTarget(
             self.device.router, self.device.identity_record,
             TargetSettings(max_sessions=s.max_sessions, max_sessions_per_host=s.max_sessions_per_host,
                            max_connections=s.max_connections, max_frame_length=s.max_frame_length,
+                           frame_timeout=s.frame_timeout,
                            inactivity_timeout=lambda: self.device.inactivity_timeout),
             table=self.device.connection_table,
         )
@@ -196,8 +207,20 @@ class Adapter:
             await control.start()
         except OSError as exc:
             await self.close()
-            raise ListenError("control socket (--control)", exc.strerror or str(exc)) from None
+            raise ListenError(*self._control_refusal(exc)) from None
         self.control_server = control
+
+    def _control_refusal(self, exc: OSError) -> tuple[str, str]:
+        """Where and why the control socket cannot be had, and what to do: with ``--control``, another
+        path; with the default address (named after the host and port), another host or port, or the
+        holder stopped."""
+        reason = str(exc.args[1]) if len(exc.args) > 1 else (exc.strerror or str(exc))
+        if self.settings.control_path is not None:
+            return "control socket (--control)", f"{reason}; give another --control path"
+        if isinstance(exc, ControlTaken):
+            return "control socket", (f"{reason}; stop that process, or serve on another --host or --port "
+                                      "(the control socket is named after them)")
+        return "control socket", reason
 
     async def stop_serving(self) -> None:
         """Close the control socket, then every port; the last saves are written."""

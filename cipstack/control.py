@@ -20,6 +20,7 @@ import errno
 import json
 import logging
 import os
+import pwd
 import socket
 import struct
 import sys
@@ -27,6 +28,8 @@ import tempfile
 from collections.abc import Callable
 from pathlib import Path
 from typing import Any
+
+from .eip.limits import RateLimitedLog
 
 log = logging.getLogger(__name__)
 
@@ -56,17 +59,50 @@ def describe(address: ControlAddress) -> str:
     return "@" + address[1:] if is_abstract(address) else str(address)
 
 
+def peer_credentials(sock: socket.socket) -> tuple[int, int] | None:
+    """(process id, user id) of the other end of a connected Unix socket (SO_PEERCRED: for a server,
+    the process that called listen()), or None where the platform does not say."""
+    if not hasattr(socket, "SO_PEERCRED"):
+        return None
+    try:
+        pid, uid, _gid = struct.unpack("3i", sock.getsockopt(socket.SOL_SOCKET, socket.SO_PEERCRED,
+                                                             struct.calcsize("3i")))
+    except OSError:
+        return None
+    return pid, uid
+
+
 def _peer_uid(writer: asyncio.StreamWriter) -> int | None:
     """The connecting process's user id (SO_PEERCRED), or None where the platform does not say."""
     sock = writer.get_extra_info("socket")
-    if sock is None or not hasattr(socket, "SO_PEERCRED"):
-        return None
+    credentials = peer_credentials(sock) if sock is not None else None
+    return credentials[1] if credentials is not None else None
+
+
+def trusted_uid(uid: int) -> bool:
+    """Whether a process of user ``uid`` may be at the other end of the control channel: this user, or
+    root. Both ends hold to it: the server serves no one else, the client believes no one else."""
+    return uid in (0, os.getuid())
+
+
+def user_text(uid: int) -> str:
+    """``65534 (nobody)``: a user id and, where the system knows it, its name."""
     try:
-        _pid, uid, _gid = struct.unpack("3i", sock.getsockopt(socket.SOL_SOCKET, socket.SO_PEERCRED,
-                                                              struct.calcsize("3i")))
-    except OSError:
-        return None
-    return uid
+        return f"{uid} ({pwd.getpwuid(uid).pw_name})"
+    except (KeyError, OverflowError):
+        return str(uid)
+
+
+def holder(address: ControlAddress) -> tuple[int, int] | None:
+    """(process id, user id) of whoever listens on ``address``, or None when nothing does (or the
+    platform does not say)."""
+    with socket.socket(socket.AF_UNIX, socket.SOCK_STREAM) as probe:
+        probe.settimeout(1.0)
+        try:
+            probe.connect(address if is_abstract(address) else str(address))
+        except OSError:
+            return None
+        return peer_credentials(probe)
 
 
 class ControlError(Exception):
@@ -84,11 +120,17 @@ class ControlDenied(ControlError):
 Handler = Callable[[dict[str, Any]], dict[str, Any]]
 
 
+class ControlTaken(OSError):
+    """The control socket's address is held by another process; the text says by whom."""
+
+
 class ControlServer:
     def __init__(self, path: ControlAddress, handler: Handler) -> None:
         self.path = path
         self.handler = handler
         self._server: asyncio.AbstractServer | None = None
+        #: Other users knocking: at most one line per 10 s per user id (``RateLimitedLog``).
+        self.refused_log = RateLimitedLog(log)
 
     async def start(self) -> None:
         if is_abstract(self.path):
@@ -96,7 +138,7 @@ class ControlServer:
                 self._server = await asyncio.start_unix_server(self._serve, path=self.path, limit=MAX_LINE)
             except OSError as exc:
                 if exc.errno == errno.EADDRINUSE:
-                    raise OSError(exc.errno, f"another emulator already uses {describe(self.path)}") from None
+                    raise ControlTaken(exc.errno, self._taken_by()) from None
                 raise
             log.info("control socket %s", describe(self.path))
             return
@@ -117,11 +159,23 @@ class ControlServer:
         os.chmod(path, 0o600)
         log.info("control socket %s", path)
 
+    def _taken_by(self) -> str:
+        """Who holds the address: another emulator of this user, or a process of another user."""
+        held = holder(self.path)
+        if held is None:
+            return f"{describe(self.path)} is taken"
+        pid, uid = held
+        if trusted_uid(uid):
+            return f"another emulator (process {pid}) already uses {describe(self.path)}"
+        return (f"{describe(self.path)} is held by process {pid} of user {user_text(uid)}, not by an emulator "
+                f"of yours")
+
     async def _serve(self, reader: asyncio.StreamReader, writer: asyncio.StreamWriter) -> None:
         uid = _peer_uid(writer)
-        if uid is not None and uid not in (0, os.getuid()):
+        if uid is not None and not trusted_uid(uid):
             # An abstract socket has no file mode to keep other users out: their credentials do.
-            log.warning("control socket: a process of user %d refused (only user %d or root)", uid, os.getuid())
+            self.refused_log("control socket: a process of user %d refused (only user %d or root)", uid,
+                             os.getuid(), source=uid)
             writer.close()
             return
         try:
@@ -158,6 +212,12 @@ def control_request(path: ControlAddress, request: dict[str, Any], timeout: floa
             sock.connect(path if is_abstract(path) else str(path))
         except OSError:
             raise ControlError(f"no emulator listens on {describe(path)} (is `cipstack adapter` running?)") from None
+        # Anyone may take an abstract name first (it has no file mode): what another user listens
+        # with is not believed, as the server serves no other user.
+        credentials = peer_credentials(sock)
+        if credentials is not None and not trusted_uid(credentials[1]):
+            raise ControlError(f"{describe(path)} is held by process {credentials[0]} of user "
+                               f"{user_text(credentials[1])}, not by an emulator of yours: refused")
         sock.sendall(json.dumps(request).encode() + b"\n")
         data = b""
         while not data.endswith(b"\n"):

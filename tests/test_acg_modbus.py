@@ -4,6 +4,7 @@ pymodbus's client, an independent peer (marked ``interop``), with the same drive
 from __future__ import annotations
 
 import asyncio
+import socket
 import struct
 from collections.abc import AsyncIterator
 from dataclasses import dataclass
@@ -201,6 +202,24 @@ async def test_frames_on_the_wire(modbus_port: int) -> None:
         writer.close()
 
 
+async def test_requests_before_an_impossible_length_are_answered_then_closed(modbus_port: int) -> None:
+    """Two valid requests and a frame announcing 400 bytes (over the 254 an MBAP frame can hold) in
+    one segment: both requests are executed and answered in order, then the connection closes."""
+    write_acc = bytes.fromhex("0011 0000 0006 01 06 1f01 0064")       # ACC (0x1F01) = 100: 10.0 s
+    read_acc = bytes.fromhex("0012 0000 0006 01 03 1f01 0001")
+    impossible = bytes.fromhex("0013 0000 0190 01 03")
+
+    def exchange() -> bytes:   # a plain socket (in a thread: the server runs on this loop)
+        with socket.create_connection(("127.0.0.1", modbus_port), timeout=5) as sock:
+            sock.sendall(write_acc + read_acc + impossible)
+            received = b""
+            while chunk := sock.recv(4096):
+                received += chunk
+            return received
+
+    assert await asyncio.to_thread(exchange) == write_acc + bytes.fromhex("0012 0000 0005 01 03 02 0064")
+
+
 async def test_bytes_beyond_the_pdu_refuse_the_request(modbus_port: int) -> None:
     # Write Single Register 0x1F01 (ACC) = 100 with two bytes more than function 6 has: refused with
     # 0x03 (the implied length is wrong), nothing written, and the stream goes on with the next frame.
@@ -221,8 +240,9 @@ async def test_bytes_beyond_the_pdu_refuse_the_request(modbus_port: int) -> None
 
 async def test_connections_past_the_limit_are_closed_and_the_rest_served(caplog: pytest.LogCaptureFixture) -> None:
     """The Modbus TCP port has the EtherNet/IP port's connection limits (issue: one peer holding every
-    connection): past 4 in total, or 2 from one address, a connection is closed at accept, with one log
-    line; an admitted client is served throughout and a slot comes back when a connection ends."""
+    connection): past 2 from one address a connection is closed at accept; with all 4 taken, a new
+    address gets the idlest connection of the address holding the most, and when nobody holds more
+    than it would, it is closed at accept. One log line per refused address; the others are served."""
     device = build_acg_device()
     read_acc = bytes.fromhex("0001 0000 0006 01 03 1f01 0001")
     async with ModbusTcpServer(lambda: device.drive, "127.0.0.1", 0, max_connections=4,
@@ -244,14 +264,17 @@ async def test_connections_past_the_limit_are_closed_and_the_rest_served(caplog:
         assert not await served(await connect("127.0.0.2"))      # a third from one address
         third, fourth = await connect("127.0.0.3"), await connect("127.0.0.4")
         assert await served(third) and await served(fourth)
-        assert not await served(await connect("127.0.0.5"))      # a fifth in total
-        assert modbus.limiter.refused == 2
-        assert await served(first)                               # the admitted ones are still served
-        first[1].close()
-        await first[1].wait_closed()
+        fifth = await connect("127.0.0.5")                       # all 4 taken: 127.0.0.2 holds 2
+        assert await served(fifth)
+        assert not await served(first) and await served(second)  # its idlest made the room
+        assert not await served(await connect("127.0.0.6"))      # everyone holds 1: refused
+        assert (modbus.limiter.refused, modbus.limiter.evicted) == (2, 1)
+        second[1].close()
+        await second[1].wait_closed()
         await asyncio.sleep(0.05)
-        assert await served(await connect("127.0.0.5"))          # its slot is free again
-    assert sum("Modbus TCP connection from" in r.getMessage() for r in caplog.records) == 1
+        assert await served(await connect("127.0.0.6"))          # its slot is free again
+    refused = [r.getMessage() for r in caplog.records if "refused" in r.getMessage()]
+    assert len(refused) == 2 and "127.0.0.2" in refused[0] and "127.0.0.6" in refused[1], refused
 
 
 def test_pdu_length_is_exact() -> None:

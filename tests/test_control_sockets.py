@@ -13,6 +13,7 @@ import socket
 import subprocess
 import sys
 import time
+from pathlib import Path
 
 import pytest
 
@@ -125,3 +126,65 @@ def test_another_user_is_not_served() -> None:
     finally:
         stderr = stop(process)
     assert "a process of user 65534 refused" in stderr
+
+
+#: A process of another user that takes an abstract name first and answers anything with a status.
+SQUATTER = ("import socket,sys\n"
+            "s=socket.socket(socket.AF_UNIX); s.bind('\\0' + sys.argv[1]); s.listen(8)\n"
+            "print('ready', flush=True)\n"
+            "while True:\n"
+            "    c,_=s.accept()\n"
+            "    try:\n"
+            "        c.recv(4096)\n"
+            "        c.sendall(b'{\"ok\": true, \"status\": \"RUN 60.00 Hz\", \"drive\": {\"trip\": null}, '\n"
+            "                  b'\"sessions\": 0, \"class3_connections\": 0, \"class1_connections\": 0}\\n')\n"
+            "    except OSError: pass\n"
+            "    c.close()\n")
+
+
+@pytest.mark.skipif(not LINUX or os.geteuid() != 0 or not os.path.exists("/usr/bin/python3"),
+                    reason="needs root to act as another user")
+def test_a_control_socket_of_another_user_is_not_believed_and_says_what_to_do() -> None:
+    """User nobody (65534) takes this user's default control name first: `cipstack drive status`
+    refuses it in one line naming that user, exit 1 (it printed the squatter's answer with exit 0);
+    an adapter on that host and port cannot start and says so in one line that names the holder and
+    what to do, without mentioning the --control it was not given."""
+    import pwd
+
+    port = free_port()
+    address = default_control_path(port, "127.0.0.1")
+    assert isinstance(address, str)
+    squatter = subprocess.Popen(["/usr/bin/python3", "-c", SQUATTER, address[1:]], stdout=subprocess.PIPE,
+                                text=True, user=65534, env={"PATH": "/usr/bin:/bin"})
+    try:
+        assert squatter.stdout is not None and squatter.stdout.readline().strip() == "ready"
+        name = pwd.getpwuid(65534).pw_name
+        result = run("drive", "status", "--host", "127.0.0.1", "--port", str(port))
+        assert result.returncode == 1 and result.stdout == ""
+        line = one_line_error(result)
+        assert f"user 65534 ({name})" in line and "refused" in line, line
+        adapter = run("adapter", "--host", "127.0.0.1", "--port", str(port), "--io-port", "0", "--quiet")
+        assert adapter.returncode == 2
+        line = one_line_error(adapter)
+        assert f"user 65534 ({name})" in line and "--control" not in line, line
+        assert "another --host or --port" in line and f"process {squatter.pid}" in line, line
+    finally:
+        squatter.kill()
+        squatter.wait(10)
+
+
+def test_a_taken_control_path_names_the_option_it_was_given(tmp_path: Path) -> None:
+    """With --control, the message names that option and asks for another path."""
+    path = tmp_path / "control.sock"
+    held = socket.socket(socket.AF_UNIX, socket.SOCK_STREAM)
+    held.bind(str(path))
+    held.listen(1)
+    try:
+        port = free_port()
+        adapter = run("adapter", "--host", "127.0.0.1", "--port", str(port), "--io-port", "0", "--quiet",
+                      "--control", str(path))
+        assert adapter.returncode == 2
+        line = one_line_error(adapter)
+        assert "--control" in line and "another --control path" in line, line
+    finally:
+        held.close()

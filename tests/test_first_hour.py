@@ -141,7 +141,7 @@ def test_a_second_adapter_on_the_same_io_port_fails(tmp_path: Path) -> None:
         control = run("adapter", "--port", str(free_port()), "--io-port", "0", "--control", str(tmp_path / "a.sock"))
         assert control.returncode == 2
         assert one_line_error(control) == ("cipstack adapter: cannot listen on control socket (--control): another "
-                                           f"emulator already uses {tmp_path / 'a.sock'}")
+                                           f"emulator already uses {tmp_path / 'a.sock'}; give another --control path")
     finally:
         stop(first)
 

@@ -74,6 +74,11 @@ def _limit_settings(args: argparse.Namespace) -> dict[str, Any]:
     limits = {"max_sessions_per_host": args.max_sessions_per_host, "max_io_connections": args.max_io_connections,
               "max_tcp_connections": args.max_tcp_connections,
               "max_tcp_connections_per_host": args.max_tcp_connections_per_host}
+    frame_timeout = getattr(args, "frame_timeout", None)
+    if frame_timeout is not None:
+        if frame_timeout <= 0:
+            raise UsageError(f"--frame-timeout {frame_timeout:g}: must be more than 0")
+        limits["frame_timeout"] = frame_timeout
     checked = (("max_sessions", args.max_sessions), ("max_connections", args.max_connections), *limits.items())
     for name, value in checked:
         minimum = 0 if name in ("max_connections", "max_io_connections") else 1

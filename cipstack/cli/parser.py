@@ -7,7 +7,7 @@ from pathlib import Path
 from typing import Any
 
 from .. import __version__
-from ..eip.encapsulation import DEFAULT_PORT
+from ..eip.encapsulation import DEFAULT_FRAME_TIMEOUT, DEFAULT_PORT
 from ..eip.io_core import DEFAULT_IO_PORT
 from .common import (
     UsageError,
@@ -139,6 +139,9 @@ def build_parser(command: str | None = None) -> argparse.ArgumentParser:
                         "(default %(default)s)")
     p.add_argument("--max-tcp-connections-per-host", type=number("max tcp connections per host"), metavar="N",
                    help="open TCP connections from one address (default: half of --max-tcp-connections)")
+    p.add_argument("--frame-timeout", type=parse_duration, default=DEFAULT_FRAME_TIMEOUT, metavar="SECONDS",
+                   help="time a TCP frame, once begun, has to arrive whole; a slower one closes its connection "
+                        "(default %(default)g s)")
     p.add_argument("--io-port", type=number("io port"), default=DEFAULT_IO_PORT, metavar="N",
                    help="UDP port of class 1 I/O (default %(default)s; 0 picks a free one)")
     _complete(p.add_argument("--control", type=Path, metavar="PATH",

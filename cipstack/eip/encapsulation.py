@@ -75,6 +75,8 @@ def encode_frame(command: int, data: bytes = b"", session: int = 0, status: int 
 PROTOCOL_VERSION = 1
 #: The registered EtherNet/IP port: TCP and UDP 44818 (explicit messages, ListIdentity).
 DEFAULT_PORT = 44818
+#: Seconds a TCP frame, once begun, has to arrive whole by default (``TargetSettings.frame_timeout``).
+DEFAULT_FRAME_TIMEOUT = 5.0
 REGISTER_SESSION_DATA = struct.Struct("<HH")
 
 #: Interface handle UDINT (0 for CIP) and timeout UINT that open SendRRData/SendUnitData.

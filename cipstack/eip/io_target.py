@@ -50,6 +50,7 @@ from .io_core import (
     encode_io_datagram,
     split_run_idle,
 )
+from .limits import RateLimitedLog
 
 log = logging.getLogger(__name__)
 
@@ -214,6 +215,8 @@ class IoTarget:
         self._ids = itertools.count(random.randrange(0x10000, 0x7FFF0000))
         self.timeouts = 0
         self.dropped = 0
+        #: Refused Forward_Opens: at most one line per 10 s per originator address and status.
+        self.refused_log = RateLimitedLog(log, level=logging.INFO)
         #: Called when a connection opens (the shell re-arms its timer for the new deadlines).
         self.changed: Callable[[], None] = lambda: None
         #: Called with the time before data is consumed or produced: the device moves its simulation there.
@@ -224,11 +227,14 @@ class IoTarget:
         try:
             return self._forward_open(fo, context)
         except CipError as exc:
-            # One line per refusal, so that whoever runs the adapter sees why a scanner gets no I/O.
+            # A line per refusal and reason, so that whoever runs the adapter sees why a scanner gets no
+            # I/O; a flood of the same refusal is one line per 10 s with its count (``RateLimitedLog``).
+            source = (origin_host(context.origin) if context.origin else None, exc.general, exc.extended)
             reason = str(exc)
             if exc.extended and exc.extended[0] in _PATH_REFUSALS and self.profile.pair_hint is not None:
                 reason += f"; {self.profile.pair_hint()}"
-            log.info("class 1 Forward_Open from %s refused: %s", context.origin, reason)
+            self.refused_log("class 1 Forward_Open from %s refused: %s", context.origin, reason, source=source,
+                             now=context.now)
             raise
 
     def _forward_open(self, fo: ForwardOpenRequest, context: RequestContext) -> ForwardOpenReply:

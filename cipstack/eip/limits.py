@@ -4,8 +4,9 @@
 A server asks ``admit(host)`` when a connection is accepted and closes it at once when refused,
 and calls ``release(host)`` when an admitted connection ends.
 
-``RateLimitedLog`` turns a flood of identical events (refused connections, accept() failures)
-into one log line per interval that says how many happened.
+``RateLimitedLog`` is the one rule of every refusal log line: each kind of refusal at most once per
+10 s per source, the next line saying how many were held back (refused connections, sessions and
+Forward_Opens, accept() failures, other users at the control socket, frames refused).
 
 Running out of descriptors: asyncio (3.11) reports each ``EMFILE``/``ENFILE``/``ENOBUFS``/
 ``ENOMEM`` of accept() to the loop's exception handler with a traceback, and goes on trying the
@@ -27,7 +28,7 @@ import os
 import resource
 import socket
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Hashable
 from typing import Any
 
 log = logging.getLogger(__name__)
@@ -58,6 +59,8 @@ class ConnectionLimiter:
         self.by_host: dict[str, int] = {}
         #: Connections refused since the start.
         self.refused = 0
+        #: Connections closed to make room for another host (``admit_making_room``).
+        self.evicted = 0
 
     def admit(self, host: str) -> bool:
         """Count a new connection from ``host`` in, or refuse it (nothing counted)."""
@@ -68,6 +71,35 @@ class ConnectionLimiter:
         self.open += 1
         self.by_host[host] = held + 1
         return True
+
+    def victim(self, host: str) -> str | None:
+        """The host that should give up a connection so that ``host``, refused because every slot is
+        taken, gets one; None when none should (``host`` is at its per-host limit, or nobody holds
+        more than ``host`` would once admitted).
+
+        Why eviction, and from whom: a fixed reserve of slots for new hosts only moves the wall (an
+        attacker with as many addresses takes the reserve too); taking a slot from the host that holds
+        the most, only while it holds more than the newcomer would (max-min fairness), lets every
+        new host in as long as any host holds more than its fair share, costs nothing until the
+        table is full, and never takes a connection from a host that holds as few as the newcomer.
+        Which of its connections goes is the server's choice: the idlest."""
+        held = self.by_host.get(host, 0)
+        if self.open < self.total or held >= self.per_host or not self.by_host:
+            return None
+        biggest, count = max(self.by_host.items(), key=lambda item: item[1])
+        return biggest if count > held + 1 else None
+
+    def admit_making_room(self, host: str, close_idlest: Callable[[str, str], bool]) -> bool:
+        """``admit``, and when every slot is taken, ``close_idlest(victim, host)`` (the server closes the
+        idlest connection of ``victim`` and releases it; False if it had none) to let ``host`` in."""
+        if self.admit(host):
+            return True
+        victim = self.victim(host)
+        if victim is None or not close_idlest(victim, host):
+            return False
+        self.refused -= 1   # not refused after all: it takes the place made for it
+        self.evicted += 1
+        return self.admit(host)
 
     def release(self, host: str) -> None:
         held = self.by_host.get(host, 0)
@@ -86,31 +118,77 @@ class ConnectionLimiter:
         return f"{self.open} connections open (limit {self.total})"
 
 
-class RateLimitedLog:
-    """At most one log line per ``interval`` seconds; the next line says how many were held back."""
+#: The refusal log's interval: each kind of refusal is logged at most once per this many seconds
+#: per source.
+REFUSAL_LOG_INTERVAL = 10.0
 
-    def __init__(self, logger: logging.Logger, interval: float = 10.0, level: int = logging.WARNING,
-                 clock: Callable[[], float] = time.monotonic) -> None:
+#: Sources a ``RateLimitedLog`` keeps apart; past that, new sources share one line (``OTHER_SOURCES``)
+#: until the entries of quiet ones can go, so a flood from many addresses cannot grow the table.
+MAX_LOGGED_SOURCES = 256
+
+#: The source that the sources past ``MAX_LOGGED_SOURCES`` share.
+OTHER_SOURCES = "other sources"
+
+
+class RateLimitedLog:
+    """The one rule of every refusal log line: each kind of refusal (one ``RateLimitedLog``) is
+    logged at most once per ``interval`` seconds per source; the next line of that source says how
+    many were held back since its last one. A refusal is never silent for longer than the interval
+    once it goes on, and a flood writes a bounded number of lines whatever its rate.
+
+    ``source`` is whatever the refusal is from (an address, a user id; None: a refusal with no
+    source, e.g. accept() out of descriptors); ``now`` is the time of a sans-I/O caller (else
+    ``clock``)."""
+
+    def __init__(self, logger: logging.Logger, interval: float = REFUSAL_LOG_INTERVAL, level: int = logging.WARNING,
+                 clock: Callable[[], float] = time.monotonic, max_sources: int = MAX_LOGGED_SOURCES) -> None:
         self.logger = logger
         self.interval = interval
         self.level = level
         self.clock = clock
-        self._last: float | None = None
-        self._held_back = 0
+        self.max_sources = max_sources
+        #: Per source: [time of its last line, refusals held back since].
+        self._sources: dict[Hashable, list[float]] = {}
+        #: Lines written and refusals held back since the start.
+        self.written = 0
+        self.held_back = 0
 
-    def __call__(self, message: str, *args: Any) -> bool:
-        """Log ``message % args`` unless a line went out less than ``interval`` ago; True when logged."""
-        now = self.clock()
-        if self._last is not None and now - self._last < self.interval:
-            self._held_back += 1
+    def __call__(self, message: str, *args: Any, source: Hashable = None, now: float | None = None) -> bool:
+        """Log ``message % args`` unless a line of ``source`` went out less than ``interval`` ago;
+        True when logged."""
+        if now is None:
+            now = self.clock()
+        sources = self._sources
+        entry = sources.get(source)
+        if entry is None:
+            if len(sources) >= self.max_sources:
+                self._forget_quiet(now)
+            if len(sources) >= self.max_sources:
+                source = OTHER_SOURCES
+                entry = sources.get(source)
+            if entry is None:
+                entry = sources[source] = [now, 0]
+                return self._write(message, args, entry, now)
+        if now - entry[0] < self.interval:
+            entry[1] += 1
+            self.held_back += 1
             return False
-        if self._held_back:
+        return self._write(message, args, entry, now)
+
+    def _write(self, message: str, args: tuple[Any, ...], entry: list[float], now: float) -> bool:
+        if entry[1]:
             message += " (%d more like it in the last %.0f s)"
-            args = (*args, self._held_back, now - self._last if self._last is not None else 0.0)
-        self._last = now
-        self._held_back = 0
+            args = (*args, int(entry[1]), now - entry[0])
+        entry[0] = now
+        entry[1] = 0
+        self.written += 1
         self.logger.log(self.level, message, *args)
         return True
+
+    def _forget_quiet(self, now: float) -> None:
+        """Drop the sources whose interval has passed with nothing held back: nothing is lost."""
+        for source in [s for s, (last, held) in self._sources.items() if not held and now - last >= self.interval]:
+            del self._sources[source]
 
 
 def quiet_accept_errors(loop: asyncio.AbstractEventLoop, interval: float = 10.0) -> None:

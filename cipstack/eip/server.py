@@ -57,6 +57,7 @@ class _TcpProtocol(asyncio.Protocol):
         self._timer: asyncio.TimerHandle | None = None
         self._timer_at: float | None = None
         self._admitted_host: str | None = None
+        self.host = "?"
 
     def connection_made(self, transport: asyncio.BaseTransport) -> None:
         assert isinstance(transport, asyncio.Transport)
@@ -66,6 +67,7 @@ class _TcpProtocol(asyncio.Protocol):
             transport.abort()
             return
         self._admitted_host = host
+        self.host = host
         self.transport = transport
         sock = transport.get_extra_info("sockname")
         peer_text = f"{peer[0]}:{peer[1]}" if peer else "?"
@@ -90,6 +92,12 @@ class _TcpProtocol(asyncio.Protocol):
             self.transport.close()
         elif self._timer is None:
             self._arm()
+        elif connection.frame_started is not None:
+            # A frame has begun: its deadline may come before the timer's (the timer re-arms lazily).
+            frame_deadline = connection.frame_deadline()
+            if frame_deadline is not None and self._timer_at is not None and frame_deadline < self._timer_at:
+                self._timer.cancel()
+                self._arm()
 
     # Back-pressure: a client that sends requests but does not read the replies stops being
     # read from until the replies drain, so replies never pile up in memory.
@@ -117,11 +125,22 @@ class _TcpProtocol(asyncio.Protocol):
         if self.transport is not None:
             self.transport.close()
 
+    def evict(self) -> None:
+        """Closed (reset) to make room for another host: its place is free at once."""
+        host, self._admitted_host = self._admitted_host, None
+        if host is not None:
+            self.server.closed(self, host, self.connection)
+        if self.transport is not None:
+            self.transport.abort()
+
     def _arm(self) -> None:
         assert self.connection is not None
         deadline = self.connection.next_deadline()
+        self._timer_at = deadline
         if deadline is not None:
             self._timer = self.loop.call_at(deadline, self._on_timer)
+        else:
+            self._timer = None
 
     def _on_timer(self) -> None:
         # Deadlines move forward with traffic; the timer fires at the old one and re-arms lazily,
@@ -257,6 +276,17 @@ class _BroadcastListener(asyncio.DatagramProtocol):
         log.debug("UDP broadcast socket error: %s", exc)
 
 
+def _last_activity(served: _TcpProtocol | LaneTcpConnection) -> float:
+    """When a served connection last completed a frame (its idleness, for ``_close_idlest``)."""
+    connection = served.connection
+    return connection.last_activity if connection is not None else float("-inf")
+
+
+def _peer_of(served: _TcpProtocol | LaneTcpConnection) -> str:
+    connection = served.connection
+    return connection.peer if connection is not None else served.host
+
+
 #: Tries at a pair of free TCP and UDP ports of one number (port 0): the OS picks the TCP one, and
 #: another process may hold that number in UDP.
 _FREE_PORT_TRIES = 20
@@ -278,6 +308,7 @@ class EncapsulationServer:
         self.connections: set[_TcpProtocol | LaneTcpConnection] = set()
         self.limiter = ConnectionLimiter(max_tcp_connections, max_tcp_connections_per_host)
         self.refused_log = RateLimitedLog(log)
+        self.evicted_log = RateLimitedLog(log, level=logging.INFO)
         #: The listener: asyncio's server, or on a ``PreciseEventLoop`` the lane's (``tcp_lane``).
         self._tcp: asyncio.base_events.Server | LaneListener | None = None
         self._udp: asyncio.DatagramTransport | _ArrivalAddresses | None = None
@@ -290,10 +321,23 @@ class EncapsulationServer:
     def admit(self, host: str) -> bool:
         """Whether a TCP connection from ``host`` may be served (``ConnectionLimiter``); a refusal is
         logged, at a bounded rate. An admitted host is released by ``closed``."""
-        if self.limiter.admit(host):
+        if self.limiter.admit_making_room(host, self._close_idlest):
             return True
-        self.refused_log("TCP connection from %s refused: %s", host, self.limiter.reason(host))
+        self.refused_log("TCP connection from %s refused: %s", host, self.limiter.reason(host), source=host)
         return False
+
+    def _close_idlest(self, victim: str, host: str) -> bool:
+        """Every slot taken: close the idlest connection (the longest without a complete frame) of
+        ``victim`` to make room for ``host`` (``ConnectionLimiter.victim``); False if it has none."""
+        idlest = min((served for served in self.connections if served.host == victim),
+                     key=_last_activity, default=None)
+        if idlest is None:
+            return False
+        self.evicted_log("TCP connection %s closed to make room for %s: %s held %d of the %d connections",
+                         _peer_of(idlest), host, victim, self.limiter.by_host.get(victim, 0), self.limiter.total,
+                         source=victim)
+        idlest.evict()
+        return True
 
     def opened(self, served: _TcpProtocol | LaneTcpConnection, peer_text: str,
                local: SockAddr) -> EncapsulationConnection:

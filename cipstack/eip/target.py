@@ -28,6 +28,7 @@ from ..cip.router import MessageRouter, RequestContext
 from .connection_manager import ConnectionTable, ExplicitConnection, origin_host
 from .cpf import Item, ItemType, SockAddr, decode_items, encode_items
 from .encapsulation import (
+    DEFAULT_FRAME_TIMEOUT,
     HEADER,
     HEADER_SIZE,
     PROTOCOL_VERSION,
@@ -39,6 +40,7 @@ from .encapsulation import (
     EncapsulationStatus,
 )
 from .identity_items import CAPABILITY_CIP_TCP, IdentityRecord, encode_list_identity, encode_list_services
+from .limits import RateLimitedLog
 
 log = logging.getLogger(__name__)
 
@@ -77,7 +79,12 @@ class TargetSettings:
     #: Largest encapsulation data length accepted (bytes after the 24-byte header).
     max_frame_length: int = 4200
     #: Encapsulation inactivity timeout in seconds (0 disables); read live from TCP/IP attribute 13.
+    #: Only a complete frame is activity: bytes that do not finish one keep no connection open.
     inactivity_timeout: Callable[[], float] = lambda: 120.0
+    #: Seconds a frame, once its first byte has come, has to arrive whole; past that the connection
+    #: closes (a peer trickling bytes holds no slot). A frame is at most 24 + 4,200 bytes, which any
+    #: live peer sends in milliseconds.
+    frame_timeout: float = DEFAULT_FRAME_TIMEOUT
     #: ListServices capability flags; class 0/1 over UDP is added when the device offers class 1 I/O.
     capabilities: int = CAPABILITY_CIP_TCP
     #: Randomness of the UDP ListIdentity reply delay (seedable for tests).
@@ -165,6 +172,12 @@ class EncapsulationTarget:
         #: Called with the time before a request is served: the device moves its simulation there.
         self.tick: Callable[[float], None] = lambda now: None
         self._handles = itertools.count(random.randrange(1, 0x7FFF0000))
+        # Refusals, each kind logged at most once per 10 s per originator address (``RateLimitedLog``).
+        self.sessions_refused_log = RateLimitedLog(log, level=logging.WARNING)
+        self.sessions_per_host_refused_log = RateLimitedLog(log, level=logging.INFO)
+        self.frames_refused_log = RateLimitedLog(log, level=logging.INFO)
+        self.frames_late_log = RateLimitedLog(log, level=logging.INFO)
+        self.idle_log = RateLimitedLog(log, level=logging.INFO)
 
     # -- TCP ------------------------------------------------------------------------------------
     def connection(self, peer: str, local: SockAddr, now: float) -> EncapsulationConnection:
@@ -244,7 +257,11 @@ class EncapsulationConnection:
         self.local = local
         self.session: int | None = None
         self.closing = False
+        #: When the last complete frame came (or the connection opened): the inactivity timeout and
+        #: the choice of the idlest connection to close for a new host count from it.
         self.last_activity = now
+        #: When the first byte of the frame still incomplete came (None: no frame under way).
+        self.frame_started: float | None = None
         self._inbox = bytearray()
         self._outbox: list[bytes] = []
         self._context = RequestContext(target.router, now, peer, self)
@@ -258,12 +275,12 @@ class EncapsulationConnection:
     def receive(self, data: bytes, now: float) -> None:
         if self.closing:
             return
-        self.last_activity = now
         inbox = self._inbox
         if data == self._repeat and not inbox:
             # The same frame again, byte for byte and alone (a client polling one attribute): what
             # its header and items were found to say still holds, since the session cannot change
             # while the connection is open, so the frame goes straight to its request.
+            self.last_activity = now
             target = self.target
             target.stats.frames += 1
             target.tick(now)
@@ -283,7 +300,8 @@ class EncapsulationConnection:
             command, length, session, _status, context, options = HEADER.unpack_from(data, offset)
             if length > limit:
                 stats.errors += 1
-                log.info("%s: frame of %d bytes exceeds the %d-byte limit; closing", self.peer, length, limit)
+                target.frames_refused_log("%s: frame of %d bytes exceeds the %d-byte limit; closing", self.peer,
+                                          length, limit, source=self.host, now=now)
                 self._reply(command, session, context, status=EncapsulationStatus.INVALID_LENGTH)
                 self.closing = True
                 return
@@ -302,9 +320,17 @@ class EncapsulationConnection:
                 stats.errors += 1
                 self._reply(command, session, context, status=exc.status)
             if offset == size:
+                self.last_activity = now
+                self.frame_started = None
                 return  # the common end: the read held whole frames
+        if offset:
+            self.last_activity = now
         if offset < size and not self.closing:
             inbox += memoryview(data)[offset:]
+            if offset or self.frame_started is None:
+                self.frame_started = now   # a new frame has begun: its bytes have frame_timeout to come
+        elif offset == size:
+            self.frame_started = None
 
     def data_to_send(self) -> bytes:
         outbox = self._outbox
@@ -314,11 +340,19 @@ class EncapsulationConnection:
         outbox.clear()
         return out
 
+    def frame_deadline(self) -> float | None:
+        """When the frame under way must be complete (None: none under way)."""
+        started = self.frame_started
+        return None if started is None else started + self.target.settings.frame_timeout
+
     def next_deadline(self) -> float | None:
         deadlines = []
         timeout = self.target.settings.inactivity_timeout()
         if timeout:
             deadlines.append(self.last_activity + timeout)
+        frame_deadline = self.frame_deadline()
+        if frame_deadline is not None:
+            deadlines.append(frame_deadline)
         table_deadline = self.target.table.next_deadline(self)
         if table_deadline is not None:
             deadlines.append(table_deadline)
@@ -327,8 +361,17 @@ class EncapsulationConnection:
     def on_timer(self, now: float) -> None:
         self.target.table.expire(now, self)
         timeout = self.target.settings.inactivity_timeout()
-        if timeout and now >= self.last_activity + timeout and not self.closing:
-            log.info("%s: no traffic for %g s (encapsulation inactivity timeout); closing", self.peer, timeout)
+        if self.closing:
+            return
+        frame_deadline = self.frame_deadline()
+        if frame_deadline is not None and now >= frame_deadline:
+            self.target.frames_late_log("%s: a frame begun %g s ago is still incomplete (the frame timeout, "
+                                        "--frame-timeout); closing", self.peer, now - (self.frame_started or now),
+                                        source=self.host, now=now)
+            self.closing = True
+        elif timeout and now >= self.last_activity + timeout:
+            self.target.idle_log("%s: no complete frame for %g s (encapsulation inactivity timeout); closing",
+                                 self.peer, timeout, source=self.host, now=now)
             self.closing = True
 
     def connection_lost(self) -> None:
@@ -380,7 +423,7 @@ class EncapsulationConnection:
             if reply is not None:
                 self._reply(command, session, context, reply)
         elif command == Command.REGISTER_SESSION:
-            self._register_session(session, context, body)
+            self._register_session(session, context, body, now)
         elif command == Command.UNREGISTER_SESSION:
             self._check_session(session)
             self.closing = True  # no reply; the TCP connection closes
@@ -405,7 +448,7 @@ class EncapsulationConnection:
         if self.session is None or session != self.session:
             raise EncapsulationError(EncapsulationStatus.INVALID_SESSION)
 
-    def _register_session(self, session: int, context: bytes, body: bytes) -> None:
+    def _register_session(self, session: int, context: bytes, body: bytes, now: float) -> None:
         if len(body) != REGISTER_SESSION_DATA.size:
             raise EncapsulationError(EncapsulationStatus.INVALID_LENGTH)
         version, options = REGISTER_SESSION_DATA.unpack(body)
@@ -418,13 +461,15 @@ class EncapsulationConnection:
         settings = self.target.settings
         if len(self.target.sessions) >= settings.max_sessions:
             limit = settings.max_sessions
-            log.warning("%s: RegisterSession refused (0x0002): all %d sessions in use (the session limit, "
-                        "--max-sessions)", self.peer, limit)
+            self.target.sessions_refused_log(
+                "%s: RegisterSession refused (0x0002): all %d sessions in use (the session limit, --max-sessions)",
+                self.peer, limit, source=self.host, now=now)
             raise EncapsulationError(EncapsulationStatus.INSUFFICIENT_MEMORY, f"all {limit} sessions in use")
         held = sum(1 for owner in self.target.sessions.values() if owner.host == self.host)
         if held >= settings.sessions_per_host:
-            log.info("%s: RegisterSession refused (0x0002): %s holds %d sessions (the per-host limit, "
-                     "--max-sessions-per-host)", self.peer, self.host, held)
+            self.target.sessions_per_host_refused_log(
+                "%s: RegisterSession refused (0x0002): %s holds %d sessions (the per-host limit, "
+                "--max-sessions-per-host)", self.peer, self.host, held, source=self.host, now=now)
             raise EncapsulationError(EncapsulationStatus.INSUFFICIENT_MEMORY,
                                      f"{self.host} holds {held} sessions (the per-host limit)")
         self.session = self.target._new_session(self)

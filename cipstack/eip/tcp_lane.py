@@ -153,6 +153,12 @@ class LaneTcpConnection:
                 return
         if self._timer is None:
             self._arm()
+        elif connection.frame_started is not None:
+            # A frame has begun: its deadline may come before the timer's (the timer re-arms lazily).
+            frame_deadline = connection.frame_deadline()
+            if frame_deadline is not None and frame_deadline < self._timer.when:
+                self._timer.cancel()
+                self._arm()
 
     def _send(self, out: bytes) -> None:
         try:
@@ -180,8 +186,7 @@ class LaneTcpConnection:
 
     def _arm(self) -> None:
         deadline = self.connection.next_deadline()
-        if deadline is not None:
-            self._timer = self.lane.call_at(deadline, self._on_timer)
+        self._timer = self.lane.call_at(deadline, self._on_timer) if deadline is not None else None
 
     def _on_timer(self) -> None:
         # Deadlines move forward with traffic; the timer fires at the old one and re-arms lazily.
@@ -207,6 +212,12 @@ class LaneTcpConnection:
     def write_buffer_size(self) -> int:
         """Reply bytes held because the socket would not take them."""
         return len(self._unsent)
+
+    def evict(self) -> None:
+        """Closed (reset) to make room for another host: its place is free at once."""
+        with contextlib.suppress(OSError):
+            self.sock.setsockopt(socket.SOL_SOCKET, socket.SO_LINGER, b"\x01\x00\x00\x00\x00\x00\x00\x00")
+        self.close()
 
     def close(self) -> None:
         if self._closed:

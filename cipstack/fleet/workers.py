@@ -4,14 +4,20 @@ the addresses, under a parent that supervises them.
 The parent starts the workers and waits until each says it serves (its device lines) or why it
 cannot (one line, e.g. an address that is taken): then every other worker is stopped and the
 fleet exits 2. While serving, a worker that ends is reported in one line, the others are stopped
-and the fleet exits 1. SIGINT (Ctrl-C) and SIGTERM to the parent stop every worker with SIGTERM;
-the workers ignore SIGINT themselves, so a Ctrl-C at the terminal reaches them once, through the
-parent. A worker dies with its parent on Linux (PR_SET_PDEATHSIG), so even a parent that is killed
+and the fleet exits 1. A worker that stops answering is reported and handled the same way: the
+parent pings each worker over its channel every ``HEARTBEAT_INTERVAL`` and the worker's event loop
+answers; no answer for ``HEARTBEAT_TIMEOUT`` means its loop no longer runs (stopped, or stuck), and
+the devices it holds no longer serve. SIGINT (Ctrl-C) and SIGTERM to the parent stop every worker
+with SIGTERM (after SIGCONT, so that a stopped one can act on it); the workers ignore SIGINT
+themselves, so a Ctrl-C at the terminal reaches them once, through the parent. A worker that has
+not ended ``STOP_TIMEOUT`` later (``HUNG_STOP_TIMEOUT`` for one that had stopped answering) is
+killed. A worker dies with its parent on Linux (PR_SET_PDEATHSIG), so even a parent that is killed
 leaves no worker behind.
 """
 
 from __future__ import annotations
 
+import asyncio
 import contextlib
 import ctypes
 import ctypes.util
@@ -34,8 +40,17 @@ from .spec import FleetDevice, SpecError, describe_addresses
 
 log = logging.getLogger(__name__)
 
-#: How long stopping workers may take to write their last saves before they are killed.
-STOP_TIMEOUT = 30.0
+#: How long stopping workers may take to write their last saves before they are killed: a save is
+#: one small file per device, written in milliseconds.
+STOP_TIMEOUT = 5.0
+#: The same for a worker that had stopped answering: it is given a moment after SIGCONT, no more.
+HUNG_STOP_TIMEOUT = 2.0
+#: How often the parent pings each serving worker, and how long a ping may go unanswered before the
+#: worker is reported as not answering. The worker answers from its event loop, which never blocks
+#: for long (saves run off it), so 5 s of silence is a loop that does not run, not a busy one.
+HEARTBEAT_INTERVAL = 1.0
+HEARTBEAT_TIMEOUT = 5.0
+PING, PONG = "ping", "pong"
 _PR_SET_PDEATHSIG = 1
 
 
@@ -61,14 +76,35 @@ def _die_with_parent(parent: int) -> None:
         os._exit(1)
 
 
+async def _serve_answering(share: list[FleetDevice], port: int, io_port: int, channel: Connection) -> int:
+    """Serve ``share`` until SIGTERM, answering the parent's pings from the event loop."""
+    loop = asyncio.get_running_loop()
+    fd = channel.fileno()
+
+    def answer() -> None:
+        try:
+            while channel.poll():
+                if channel.recv() == PING:
+                    channel.send(PONG)
+        except (EOFError, OSError):   # the parent is gone: PR_SET_PDEATHSIG ends this process
+            loop.remove_reader(fd)
+
+    loop.add_reader(fd, answer)
+    try:
+        return await serve_until_signalled(share, port, io_port, lambda lines: channel.send(("ready", lines)),
+                                           signals=(signal.SIGTERM,))
+    finally:
+        loop.remove_reader(fd)
+
+
 def _worker(share: list[FleetDevice], port: int, io_port: int, parent: int, channel: Connection) -> None:
-    """A worker process: serve ``share`` until SIGTERM; says "ready" with its lines, or "error"."""
+    """A worker process: serve ``share`` until SIGTERM; says "ready" with its lines, or "error", and
+    answers each "ping" with "pong"."""
     signal.signal(signal.SIGINT, signal.SIG_IGN)     # Ctrl-C is the parent's to pass on
     signal.signal(signal.SIGTERM, signal.SIG_DFL)    # not the parent's handler, until the loop's own
     _die_with_parent(parent)
     try:
-        run_precise(serve_until_signalled(share, port, io_port, lambda lines: channel.send(("ready", lines)),
-                                          signals=(signal.SIGTERM,)))
+        run_precise(_serve_answering(share, port, io_port, channel))
     except (ListenError, SpecError) as exc:
         channel.send(("error", str(exc)))
         sys.exit(2)
@@ -87,6 +123,10 @@ class _Worker:
     process: Any
     channel: Connection
     lines: list[str] | None = None
+    #: When the oldest unanswered ping went out (None: every ping answered).
+    waiting_since: float | None = None
+    #: Reported as not answering: stopped with ``HUNG_STOP_TIMEOUT``.
+    hung: bool = False
 
     @property
     def name(self) -> str:
@@ -149,12 +189,12 @@ class Supervisor:
         context = multiprocessing.get_context("fork" if "fork" in multiprocessing.get_all_start_methods()
                                               else "spawn")
         for number, share in enumerate(shares(self.devices, self.workers_wanted), start=1):
-            receiver, sender = context.Pipe(duplex=False)
-            process = context.Process(target=_worker, args=(share, self.port, self.io_port, os.getpid(), sender),
+            ours, theirs = context.Pipe(duplex=True)
+            process = context.Process(target=_worker, args=(share, self.port, self.io_port, os.getpid(), theirs),
                                       name=f"cipstack fleet worker {number}", daemon=True)
             process.start()
-            sender.close()
-            self.workers.append(_Worker(number, share, process, receiver))
+            theirs.close()
+            self.workers.append(_Worker(number, share, process, ours))
 
     def _wait_ready(self) -> None:
         waiting = list(self.workers)
@@ -178,25 +218,62 @@ class Supervisor:
                     raise FleetFailure(f"{worker.name} ended while starting: {worker.how_it_ended()}", 1)
 
     def _supervise(self) -> None:
+        next_ping = time.monotonic()
         while self.stop_signal is None:
-            multiprocessing.connection.wait([w.process.sentinel for w in self.workers], timeout=0.5)
+            now = time.monotonic()
+            if now >= next_ping:
+                for worker in self.workers:
+                    self._ping(worker, now)
+                next_ping = now + HEARTBEAT_INTERVAL
+            handles = [w.process.sentinel for w in self.workers] + [w.channel for w in self.workers]
+            multiprocessing.connection.wait(handles, timeout=max(0.0, min(0.5, next_ping - time.monotonic())))
             for worker in self.workers:
-                if not worker.process.is_alive() and self.stop_signal is None:
+                self._read_answers(worker)
+                if self.stop_signal is not None:
+                    return
+                if not worker.process.is_alive():
                     worker.process.join()
                     raise FleetFailure(f"{worker.name} ended: {worker.how_it_ended()}; stopping the fleet", 1)
+                if worker.waiting_since is not None and time.monotonic() - worker.waiting_since > HEARTBEAT_TIMEOUT:
+                    worker.hung = True
+                    raise FleetFailure(f"{worker.name} stopped answering (no reply in {HEARTBEAT_TIMEOUT:.0f} s: "
+                                       f"stopped or stuck); stopping the fleet", 1)
+
+    @staticmethod
+    def _ping(worker: _Worker, now: float) -> None:
+        try:
+            worker.channel.send(PING)
+        except OSError:
+            return   # the worker is gone: its sentinel says so
+        if worker.waiting_since is None:
+            # The deadline runs from the first ping it has not answered, so a parent that was itself
+            # held up (and sent nothing) never takes its own delay for the worker's.
+            worker.waiting_since = now
+
+    @staticmethod
+    def _read_answers(worker: _Worker) -> None:
+        try:
+            while worker.channel.poll():
+                if worker.channel.recv() == PONG:
+                    worker.waiting_since = None
+        except (EOFError, OSError):
+            pass   # the worker is gone: its sentinel says so
 
     def _stop_all(self) -> None:
-        """SIGTERM to every worker still running; those that have not ended after ``STOP_TIMEOUT``
-        are killed. None is left behind."""
+        """SIGCONT and SIGTERM to every worker still running (a stopped process acts on no signal but
+        SIGKILL until it is continued); those that have not ended after ``STOP_TIMEOUT`` (one that had
+        stopped answering: ``HUNG_STOP_TIMEOUT``) are killed. None is left behind."""
         for worker in self.workers:
             if worker.process.is_alive():
                 with contextlib.suppress(ProcessLookupError):
+                    os.kill(worker.process.pid, signal.SIGCONT)
                     worker.process.terminate()
-        deadline = time.monotonic() + STOP_TIMEOUT
+        started = time.monotonic()
         for worker in self.workers:
-            worker.process.join(max(0.0, deadline - time.monotonic()))
+            timeout = HUNG_STOP_TIMEOUT if worker.hung else STOP_TIMEOUT
+            worker.process.join(max(0.0, started + timeout - time.monotonic()))
             if worker.process.is_alive():
-                log.warning("%s did not stop in %.0f s: killed", worker.name, STOP_TIMEOUT)
+                log.warning("%s did not stop in %.0f s: killed", worker.name, timeout)
                 worker.process.kill()
                 worker.process.join()
             worker.channel.close()

@@ -38,6 +38,7 @@ import os
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass
 
+from ...eip.limits import RateLimitedLog
 from ..registers import Register, RegisterAccess, RegisterError, RegisterMap, RegisterRefusal
 from ..simulation import TimedSimulation
 from ..state import ParameterStore, StateFileError
@@ -116,6 +117,8 @@ class AcgDrive(RunCommands, Ramps, Trips, LostCommand, RegisterEffects, Computed
         raising ``StateFileError``; the write is then refused and nothing is saved."""
         self.registers: RegisterMap = ACG_REGISTERS
         self.on_save = on_save
+        #: Saves refused while the drive runs: a line at most once per 10 s, with a count.
+        self._save_refused_log = RateLimitedLog(log)
         self._time = now
         self._start_time = now
         #: Password of 0x03E7/0x03E8 (registered from the keypad; None: none registered).
@@ -418,7 +421,8 @@ class AcgDrive(RunCommands, Ramps, Trips, LostCommand, RegisterEffects, Computed
         if register.access is RegisterAccess.WRITE_STOPPED and self._output_on:
             if address == SAVE_PARAMETERS.address and value == 1:
                 # The writer gets an error status; whoever runs the emulator should see it too.
-                log.warning("parameter save refused (0x03E0 = 1 while the drive runs): nothing saved")
+                self._save_refused_log("parameter save refused (0x03E0 = 1 while the drive runs): nothing saved",
+                                       now=now)
             raise RegisterError(RegisterRefusal.NOT_WHILE_RUNNING, address)
         if self._parameter_locked and register.group in reg.KEYPAD_GROUPS:
             raise RegisterError(RegisterRefusal.READ_ONLY, address, "parameters are locked (0x03E8)")

@@ -205,20 +205,35 @@ def _values(data: bytes, count: int, byte_count: int) -> list[int]:
     return list(struct.unpack(f">{count}H", data))
 
 
+class MbapLengthError(ValueError):
+    """A frame announced an impossible length: the stream cannot be framed past it. ``frames`` are the
+    complete frames that came before it (in the same read), still to be served."""
+
+    def __init__(self, length: int, frames: list[bytes]) -> None:
+        super().__init__(f"MBAP length {length}")
+        self.frames = frames
+
+
 class MbapBuffer:
     """Splits a TCP byte stream into MBAP frames."""
 
     def __init__(self) -> None:
         self._buffer = bytearray()
 
+    @property
+    def pending(self) -> int:
+        """Bytes of a frame begun and not complete yet."""
+        return len(self._buffer)
+
     def feed(self, data: bytes) -> list[bytes]:
-        """The complete frames ``data`` finishes; raises ``ValueError`` on an impossible length."""
+        """The complete frames ``data`` finishes; raises ``MbapLengthError`` (with the frames before
+        it) on an impossible length."""
         self._buffer += data
         frames = []
         while len(self._buffer) >= MBAP_SIZE:
             _, _, length, _ = MBAP.unpack_from(self._buffer)
             if not 2 <= length <= MAX_LENGTH:
-                raise ValueError(f"MBAP length {length}")
+                raise MbapLengthError(length, frames)
             end = MBAP_SIZE - 1 + length
             if len(self._buffer) < end:
                 break
@@ -227,4 +242,5 @@ class MbapBuffer:
         return frames
 
 
-__all__ = ["MAX_WORDS", "DriveSource", "ExceptionCode", "FunctionCode", "MbapBuffer", "ModbusTcpCore"]
+__all__ = ["MAX_WORDS", "DriveSource", "ExceptionCode", "FunctionCode", "MbapBuffer", "MbapLengthError",
+           "ModbusTcpCore"]

@@ -5,7 +5,9 @@ from __future__ import annotations
 
 import asyncio
 import logging
+from dataclasses import dataclass
 
+from ...eip.encapsulation import DEFAULT_FRAME_TIMEOUT
 from ...eip.limits import (
     DEFAULT_MAX_TCP_CONNECTIONS,
     ConnectionLimiter,
@@ -15,9 +17,19 @@ from ...eip.limits import (
 )
 from ..state import StateFileError, StateWriter
 from .drive import AcgDrive
-from .modbus import DriveSource, ExceptionCode, MbapBuffer, ModbusTcpCore
+from .modbus import DriveSource, ExceptionCode, MbapBuffer, MbapLengthError, ModbusTcpCore
 
 log = logging.getLogger(__name__)
+
+
+@dataclass(eq=False)
+class _Served:
+    """An admitted connection: its host, when it last completed a frame, whether it was evicted."""
+
+    host: str
+    writer: asyncio.StreamWriter
+    last_activity: float
+    evicted: bool = False
 
 
 class ModbusTcpServer:
@@ -31,14 +43,21 @@ class ModbusTcpServer:
     on meanwhile, and a save the file did not take is answered with exception 0x04.
     Each connection serves its requests in order; ``_accept`` is the one place a connection
     is accepted, and refused (closed at once, one log line per 10 s) past ``max_connections`` in
-    total or ``max_connections_per_host`` from one address, as on the EtherNet/IP port."""
+    total or ``max_connections_per_host`` from one address, as on the EtherNet/IP port; as there, a new
+    host finding every slot taken closes the idlest connection of the host holding the most
+    (``ConnectionLimiter.victim``), and a frame once begun has ``frame_timeout`` seconds to arrive."""
 
     def __init__(self, drive: AcgDrive | DriveSource, host: str = "127.0.0.1", port: int = 0, *,
                  saves: StateWriter | None = None, max_connections: int = DEFAULT_MAX_TCP_CONNECTIONS,
-                 max_connections_per_host: int | None = None) -> None:
+                 max_connections_per_host: int | None = None, frame_timeout: float = DEFAULT_FRAME_TIMEOUT) -> None:
         self.core = ModbusTcpCore(drive)
+        self.frame_timeout = frame_timeout
         self.limiter = ConnectionLimiter(max_connections, max_connections_per_host)
         self._refused_log = RateLimitedLog(log)
+        self._unframed_log = RateLimitedLog(log, level=logging.INFO)
+        self._late_log = RateLimitedLog(log, level=logging.INFO)
+        self._evicted_log = RateLimitedLog(log, level=logging.INFO)
+        self._served: set[_Served] = set()
         self.host = host
         self.saves = saves
         self._requested_port = port
@@ -67,34 +86,84 @@ class ModbusTcpServer:
     async def _accept(self, reader: asyncio.StreamReader, writer: asyncio.StreamWriter) -> None:
         peer = writer.get_extra_info("peername")
         host = str(peer[0]) if peer else "?"
-        if not self.limiter.admit(host):
-            self._refused_log("Modbus TCP connection from %s refused: %s", host, self.limiter.reason(host))
+        if not self.limiter.admit_making_room(host, self._close_idlest):
+            self._refused_log("Modbus TCP connection from %s refused: %s", host, self.limiter.reason(host),
+                              source=host)
             writer.transport.abort()
             return
+        assert self.loop is not None
+        served = _Served(host, writer, self.loop.time())
+        self._served.add(served)
         self._writers.add(writer)
         try:
-            await self._serve(reader, writer)
+            await self._serve(reader, writer, served)
         except (ConnectionError, OSError) as exc:
             log.debug("Modbus TCP connection ended: %s", exc)
         finally:
-            self.limiter.release(host)
+            if not served.evicted:
+                self.limiter.release(host)
+            self._served.discard(served)
             self._writers.discard(writer)
             writer.close()
 
-    async def _serve(self, reader: asyncio.StreamReader, writer: asyncio.StreamWriter) -> None:
+    def _close_idlest(self, victim: str, host: str) -> bool:
+        """Every slot taken: close the idlest connection of ``victim`` to make room for ``host``
+        (``ConnectionLimiter.victim``); False if it has none."""
+        idlest = min((s for s in self._served if s.host == victim and not s.evicted),
+                     key=lambda s: s.last_activity, default=None)
+        if idlest is None:
+            return False
+        self._evicted_log("Modbus TCP connection from %s closed to make room for %s: it held %d of the %d "
+                          "connections", victim, host, self.limiter.by_host.get(victim, 0), self.limiter.total,
+                          source=victim)
+        idlest.evicted = True
+        self.limiter.release(idlest.host)
+        idlest.writer.transport.abort()
+        return True
+
+    async def _serve(self, reader: asyncio.StreamReader, writer: asyncio.StreamWriter, served: _Served) -> None:
+        assert self.loop is not None
         buffer = MbapBuffer()
-        while data := await reader.read(4096):
+        frame_started: float | None = None
+        while True:
+            if frame_started is None:
+                data = await reader.read(4096)
+            else:
+                # A frame has begun: the rest has what is left of the frame timeout to come.
+                try:
+                    data = await asyncio.wait_for(reader.read(4096),
+                                                  frame_started + self.frame_timeout - self.loop.time())
+                except asyncio.TimeoutError:   # not TimeoutError before Python 3.11
+                    self._late_log("Modbus TCP connection from %s closed: a frame begun %g s ago is still "
+                                   "incomplete (the frame timeout)", served.host, self.frame_timeout,
+                                   source=served.host)
+                    return
+            if not data:
+                return
+            unframed: MbapLengthError | None = None
             try:
                 frames = buffer.feed(data)
-            except ValueError as exc:
-                log.info("Modbus TCP connection closed: %s", exc)
-                return
+            except MbapLengthError as exc:
+                # The requests complete before the impossible length came are served and answered;
+                # nothing after it can be framed, so the connection then closes.
+                frames, unframed = exc.frames, exc
+            now = self.loop.time()
+            if frames:
+                served.last_activity = now
+            if not buffer.pending:
+                frame_started = None
+            elif frames or frame_started is None:
+                frame_started = now
             for frame in frames:
                 reply = await self.handle_frame(frame)
                 if reply is not None:
                     writer.write(reply)
             self.rearm()
             await writer.drain()
+            if unframed is not None:
+                self._unframed_log("Modbus TCP connection from %s closed: %s", served.host, unframed,
+                                   source=served.host)
+                return
 
     async def handle_frame(self, frame: bytes) -> bytes | None:
         """One frame's reply; a request that saved waits (off the loop) for the file to take the save."""
