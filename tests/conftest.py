@@ -41,3 +41,23 @@ def pytest_asyncio_loop_factories(config: pytest.Config, item: pytest.Item) -> d
     if item.module is not None and item.module.__name__.rsplit(".", 1)[-1] in BOTH_LOOPS:
         factories["asyncio"] = asyncio.new_event_loop
     return factories
+
+
+#: Modules whose tests take seconds each (a process per test, property-based tests at length, the
+#: attack cases, the corpus of EDS files run one by one): marked ``slow``.
+SLOW_MODULES = frozenset({
+    "test_benchmarks", "test_cli", "test_control_sockets", "test_eds_field_files", "test_eds_field_names",
+    "test_eds_generator", "test_eds_roundtrip", "test_field_interop", "test_first_hour", "test_fleet",
+    "test_hardening", "test_io_session",
+})
+#: A test with none of these is also marked ``quick``: ``pytest -m quick`` runs in a couple of minutes.
+NOT_QUICK = ("slow", "interop", "tshark", "docs")
+
+
+@pytest.hookimpl(tryfirst=True)  # before ``-m`` selects by the markers
+def pytest_collection_modifyitems(config: pytest.Config, items: list[pytest.Item]) -> None:
+    for item in items:
+        if item.module is not None and item.module.__name__.rsplit(".", 1)[-1] in SLOW_MODULES:
+            item.add_marker(pytest.mark.slow)
+        if not any(item.get_closest_marker(name) for name in NOT_QUICK):
+            item.add_marker(pytest.mark.quick)

@@ -296,8 +296,9 @@ def test_failed_save_is_logged(caplog: pytest.LogCaptureFixture) -> None:
         "parameter save refused (0x03E0 = 1 while the drive runs): nothing saved"]
 
 
-def test_options_the_readme_names() -> None:
-    """The README says which commands take --json and which --timeout: each does."""
+def test_options_the_docs_name() -> None:
+    """The command line's page (docs/command-line/index.md) says which commands take --json and
+    which --timeout: each does."""
     parser = build_parser()
     printing = ["discover", "identity h", "get h 1/1", "set h 1/1/1 1 --type UINT", "io h", "models",
                 "drive trip 1", "drive status", "eds check f", "eds show f"]
@@ -307,7 +308,7 @@ def test_options_the_readme_names() -> None:
         assert parser.parse_args([*command.split(), "--json"]).json
     for command in talking:
         assert parser.parse_args([*command.split(), "--timeout", "1.5"]).timeout == 1.5
-    readme = (Path(__file__).resolve().parents[1] / "README.md").read_text()
+    readme = " ".join((Path(__file__).resolve().parents[1] / "docs" / "command-line" / "index.md").read_text().split())
     assert "`discover`, `identity`, `get`, `set`, `io`, `models`, `drive`, `eds check` and `eds show`" in readme
     assert "`identity`, `get`, `set`, `io`, `drive` and `eds check`" in readme
     overview = subprocess.run([sys.executable, "-m", "cipstack", "--help"], capture_output=True, text=True).stdout

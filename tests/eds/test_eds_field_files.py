@@ -442,8 +442,8 @@ async def test_the_configuration_data_of_a_forward_open_goes_to_the_configuratio
         await target.close()
 
 
-def test_the_readme_shows_what_the_adapter_prints_for_the_manifold() -> None:
-    readme = (Path(__file__).parents[2] / "README.md").read_text(encoding="utf-8")
+def test_the_docs_show_what_the_adapter_prints_for_the_manifold() -> None:
+    readme = (Path(__file__).parents[2] / "docs" / "emulator" / "eds-device.md").read_text(encoding="utf-8")
     shown = [line for line in readme.splitlines() if line.startswith("cipstack adapter: hand_valve_manifold.eds:")]
     assert shown == [f"cipstack adapter: hand_valve_manifold.eds:{line}: warning: {message}"
                      for line, message in EXPECTED["hand_valve_manifold.eds"].skipped]

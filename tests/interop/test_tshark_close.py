@@ -1,6 +1,6 @@
 """Every exit of ``cipstack io`` after a successful Forward_Open sends a Forward_Close, as tshark sees
 it on the wire: Ctrl-C (exit 130, statistics, no traceback), a failure after the open (an
-unknown ``--set`` field, exit 2), and Ctrl-C in the README's class 1 example. Run in a private
+unknown ``--set`` field, exit 2), and Ctrl-C in the library guide's class 1 example. Run in a private
 network namespace with the ACG emulator on 127.0.0.2 at the default ports."""
 
 from __future__ import annotations
@@ -64,7 +64,7 @@ try:
     failed = subprocess.run([PY, "-m", "cipstack", "io", ADAPTER, "--output", "21", "--input", "71", "--set",
                              "foo=1"], capture_output=True, text=True, timeout=60)
     seen["failure"] = {"code": failed.returncode, "out": failed.stdout, "err": failed.stderr}
-    # The README's class 1 example, written for 127.0.0.1: here the emulator is on 127.0.0.2.
+    # The library guide's class 1 example, written for 127.0.0.1: here the emulator is on 127.0.0.2.
     example = (OUT / "readme_io.py").read_text()
     (OUT / "readme_io.py").write_text(example.replace('connect("127.0.0.1")', f'connect("{ADAPTER}")'))
     readme = subprocess.Popen([PY, str(OUT / "readme_io.py")], stdout=subprocess.PIPE, stderr=subprocess.PIPE,
@@ -85,8 +85,8 @@ finally:
 
 
 def readme_io_example() -> str:
-    """The README's class 1 I/O example (the python block after "Class 1 I/O, in an event loop")."""
-    text = (ROOT / "README.md").read_text()
+    """The class 1 I/O example of the library guide (the python block after "Class 1 I/O, in an event loop")."""
+    text = (ROOT / "docs" / "library.md").read_text()
     start = text.index("```python", text.index("Class 1 I/O, in an event loop")) + len("```python")
     return text[start:text.index("```", start)]
 
