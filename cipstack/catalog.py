@@ -38,9 +38,21 @@ CLASS_ATTRIBUTES: dict[int, AttributeSpec] = {
 AttributeResolver = Callable[[int, int], "AttributeSpec | None"]
 
 
+#: What a catalog of the standard objects alone says of itself.
+STANDARD_ONLY = "the standard objects only"
+
+
 class Catalog:
+    """The declarations a scanner decodes replies and names class 1 fields with.
+
+    ``source`` says where they come from (a device profile, an EDS file, the standard objects
+    alone and why), so that an attribute or a field it does not know can say where it looked.
+    """
+
     def __init__(self, classes: Iterable[ClassSpec] = (), assemblies: Iterable[AssemblySchema] = (),
-                 resolvers: Mapping[int, AttributeResolver] | None = None) -> None:
+                 resolvers: Mapping[int, AttributeResolver] | None = None, source: str = STANDARD_ONLY) -> None:
+        #: Where the declarations come from, for messages: "profile acg (...)", "EDS file x.eds", ...
+        self.source = source
         self.classes: dict[int, ClassSpec] = dict(STANDARD_CLASSES)
         for spec in classes:
             self.classes[spec.class_id] = spec
@@ -53,6 +65,17 @@ class Catalog:
     def add(self, spec: ClassSpec) -> None:
         self.classes[spec.class_id] = spec
 
+    def copy(self, source: str | None = None) -> Catalog:
+        """A catalog with the same declarations (shared: they are immutable) and tables of its own."""
+        other = Catalog(source=self.source if source is None else source)
+        other.classes = dict(self.classes)
+        other.assemblies = dict(self.assemblies)
+        other.resolvers = dict(self.resolvers)
+        return other
+
+    def __repr__(self) -> str:
+        return f"<Catalog: {self.source}>"
+
     def attribute(self, class_id: int, instance: int, attribute_id: int) -> AttributeSpec | None:
         resolve = self.resolvers.get(class_id)
         if resolve is not None:
@@ -63,6 +86,7 @@ class Catalog:
         return spec.instance_attribute(attribute_id) if spec is not None else None
 
     def get_all_layout(self, class_id: int) -> list[AttributeSpec] | None:
+        """The attributes of a Get_Attributes_All reply of ``class_id``, in order (None: unknown class)."""
         spec = self.classes.get(class_id)
         if spec is None:
             return None

@@ -14,6 +14,7 @@ import logging
 import struct
 from collections.abc import AsyncIterator, Iterator, Sequence
 from dataclasses import dataclass
+from pathlib import Path
 from typing import TYPE_CHECKING, Any, TypeVar
 
 from .catalog import Catalog
@@ -21,7 +22,8 @@ from .cip.epath import PortSegment, Segment, request_path
 from .cip.messages import MessageRouterRequest, MessageRouterResponse, Service
 from .cip.model import AttributeSpec
 from .cip.status import CipError, GeneralStatus
-from .cip.types import UINT, CipType
+from .cip.types import UINT, CipType, IntegerType
+from .cip.values import Value
 from .eip.identity_items import IdentityRecord, ServiceRecord
 from .eip.originator import (
     BlockingEncapsulationClient,
@@ -33,9 +35,11 @@ from .eip.originator import (
     parse_host,
     run_blocking,
 )
+from .eip.replies import EncapsulationStatusError
 
 if TYPE_CHECKING:
     # Imported where used: explicit messaging alone does not load the EDS model or class 1.
+    from .assemblies.schema import AssemblySchema
     from .eds.model import EdsDocument
     from .eip.io_originator import IoConnectionHandle, OtFormat
 
@@ -48,7 +52,8 @@ UNDECODED = "(undecoded)"
 
 @dataclass(frozen=True)
 class AttributeValue:
-    """A read attribute: its raw bytes, and its value when the type is known."""
+    """A read attribute: its raw bytes, and its value when the type is known (``reading`` gives it
+    with its unit and scale)."""
 
     class_id: int
     instance: int
@@ -66,6 +71,20 @@ class AttributeValue:
         if self.type is None:
             return None
         return self.type.to_json(self.value)
+
+    @property
+    def reading(self) -> Value:
+        """The value with its declaration: raw, engineering value and unit (the bytes when unknown)."""
+        if self.type is None:
+            return Value(self.data, self.spec.name if self.spec is not None else "")
+        if self.spec is None:
+            return Value(self.value, "", self.type)
+        return Value(self.value, self.spec.name, self.type, self.spec.scaling)
+
+
+class UnknownAttributeError(TypeError):
+    """An attribute nothing declares where its type or scale is needed: the message names the
+    catalog looked in (``Catalog.source``) and what to give instead."""
 
 
 class ReplyDecodeError(ValueError):
@@ -98,20 +117,101 @@ def _decode(cip_type: CipType | None, data: bytes) -> Any:
 
 
 class Scanner:
-    """Explicit messaging to one target (unconnected, routed or class 3)."""
+    """Explicit messaging and class 1 I/O with one target (unconnected, routed or class 3), async.
+
+    Open one with ``await Scanner.connect(host)``: it identifies the device and decodes every
+    reply by the declarations of its profile (``catalog``); ``read`` returns a ``Value`` with its
+    unit, ``write`` takes a raw value or, with ``scaled=True``, an engineering one.
+    """
 
     def __init__(self, client: ExplicitClient, catalog: Catalog | None = None,
                  route: Sequence[Segment] | None = None) -> None:
         self.client = client
+        #: The declarations replies decode by and class 1 fields are named by (``catalog.source`` says whose).
         self.catalog = catalog or Catalog()
         self.route = route
+        #: What the device said it is (``identify``), or None before (or without) identification.
+        self.identity: IdentityRecord | None = None
 
     @classmethod
     async def connect(cls, address: str, port: int | None = None, *, timeout: float = 5.0,
-                      catalog: Catalog | None = None, route: Sequence[Segment] | None = None) -> Scanner:
+                      catalog: Catalog | None = None, route: Sequence[Segment] | None = None,
+                      identify: bool = True, eds: str | Path | EdsDocument | None = None) -> Scanner:
+        """Connect to ``address`` (``"host"`` or ``"host:port"``) and register a session.
+
+        The catalog replies decode by is, first match: ``catalog``; the EDS file ``eds`` (a path or
+        a read ``EdsDocument``); the profile of the device's identity (``identify``, the default);
+        else the standard objects alone. ``route`` sends every request through Unconnected_Send
+        along that path (``backplane_route``, a CompoNet node behind a gateway: ``[PortSegment(2, b"\\x03")]``),
+        and identification then asks the routed device itself.
+        """
         host, parsed_port = parse_host(address)
         client = await EncapsulationClient.connect(host, port or parsed_port, timeout)
-        return cls(client, catalog, route)
+        scanner = cls(client, catalog, route)
+        try:
+            await scanner._choose_catalog(catalog, eds, identify)
+        except BaseException:
+            await scanner.close()
+            raise
+        return scanner
+
+    async def _choose_catalog(self, catalog: Catalog | None, eds: str | Path | EdsDocument | None,
+                              identify: bool) -> None:
+        if catalog is not None:
+            return
+        if eds is not None:
+            from .eds.catalog import catalog_from_eds
+
+            self.catalog = catalog_from_eds(eds)
+        elif identify:
+            await self.identify()
+
+    async def identify(self) -> IdentityRecord | None:
+        """Ask the device what it is and take the catalog of its profile; returns its identity.
+
+        ListIdentity over this TCP connection; where a device does not answer it (or when a
+        ``route`` leads past the device that would), Identity attributes 1-4 and 7 (vendor,
+        device type, product code, revision, product name). A device of no known profile gets
+        the standard objects, and ``catalog.source`` says so; one that answers neither keeps them
+        too, with the reason."""
+        from .devices.profiles import catalog_for
+
+        record = None
+        if not self.route:
+            try:
+                records = await self.client.list_identity()
+            except (EncapsulationStatusError, MalformedReplyError, asyncio.TimeoutError) as exc:
+                log.debug("ListIdentity over TCP: %s; reading the Identity object instead", exc)
+                records = []
+            record = records[0] if records else None
+        if record is None:
+            record = await self._identity_attributes()
+        self.identity = record
+        if record is None:
+            self.catalog = Catalog(source="the standard objects only: the device did not identify itself (no "
+                                          "ListIdentity reply, no Identity attributes 1 and 3); give eds= or catalog=")
+        else:
+            self.catalog = catalog_for(record.vendor_id, record.product_code)
+        return record
+
+    async def _identity_attributes(self) -> IdentityRecord | None:
+        """Identity attributes 1-4 and 7 (only vendor and product code are needed)."""
+        from .objects.identity import identity_spec
+
+        spec = identity_spec()
+        values: dict[int, Any] = {}
+        for attribute in (1, 3, 2, 4, 7):
+            declared = spec.instance_attribute(attribute)
+            try:
+                reply = await self.request(Service.GET_ATTRIBUTE_SINGLE, 0x01, 1, attribute)
+                values[attribute] = declared.type.decode(reply.data) if declared is not None else None
+            except (CipError, ValueError, struct.error, MalformedReplyError) as exc:
+                if attribute in (1, 3):
+                    log.debug("Identity attribute %d: %s", attribute, exc)
+                    return None
+        revision = values.get(4) or {}
+        return IdentityRecord(values[1], values.get(2) or 0, values[3],
+                              (revision.get("major", 0), revision.get("minor", 0)), 0, 0, values.get(7) or "")
 
     async def close(self) -> None:
         await self.client.close()
@@ -166,18 +266,49 @@ class Scanner:
             return AttributeValue(class_id, instance, attribute, reply.data, None, spec, None)
         return AttributeValue(class_id, instance, attribute, reply.data, value, spec, value_type)
 
-    async def read(self, class_id: int, instance: int, attribute: int, cip_type: CipType | None = None) -> Any:
-        """The decoded value (raw bytes when the type is unknown)."""
+    async def read(self, class_id: int, instance: int, attribute: int, cip_type: CipType | None = None) -> Value:
+        """Get_Attribute_Single, decoded by the attribute's declaration (or ``cip_type``): a ``Value``
+        whose ``raw`` is the value on the wire, ``value`` the engineering value, ``unit`` its unit
+        (``str()`` gives ``5.0 s``). Undeclared and no ``cip_type``: ``raw`` is the reply's bytes."""
         result = await self.get_attribute_single(class_id, instance, attribute, cip_type)
-        return result.value if result.known else result.data
+        return result.reading
+
+    async def write(self, class_id: int, instance: int, attribute: int, value: Any, *, scaled: bool = False,
+                    cip_type: CipType | None = None) -> None:
+        """Set_Attribute_Single by the attribute's declaration (or ``cip_type``).
+
+        The rule: ``value`` is the raw value, as on the wire (an ``int`` for a scaled attribute:
+        ``write(0x2A, 1, 102, 50)`` is 5.0 s at 0.1 s per step), unless ``scaled=True``: then it is the
+        engineering value (``write(0x2A, 1, 102, 5.0, scaled=True)``), turned into raw steps by the
+        declaration; a value between two steps raises ``ValueError``. A ``Value`` writes its raw
+        value; ``bytes`` go as they are."""
+        value_type, spec = self._type_for(class_id, instance, attribute, cip_type)
+        if isinstance(value, Value):
+            value = value.raw
+        where = f"0x{class_id:02X}/{instance}/{attribute}"
+        if scaled:
+            if spec is None:
+                raise UnknownAttributeError(f"{where} is not declared in {self.catalog.source}: its scale is "
+                                            "unknown, give the raw value (no scaled=True)")
+            value = spec.scaling.to_raw(value)
+        elif isinstance(value, float) and isinstance(value_type, IntegerType):
+            if spec is not None and spec.scaling.scaled:
+                raise ValueError(f"{where} {spec.name} takes a raw integer ({spec.scaling.scale:g} {spec.unit} per "
+                                 f"step): give {value!r} with scaled=True, or the raw value")
+            if not value.is_integer():
+                raise ValueError(f"{where} is an integer ({value_type.name}), not {value!r}")
+            value = int(value)
+        await self.set_attribute_single(class_id, instance, attribute, value, cip_type)
 
     async def set_attribute_single(self, class_id: int, instance: int, attribute: int, value: Any,
                                    cip_type: CipType | None = None) -> None:
+        """Set_Attribute_Single of a raw value (or ``bytes``), encoded by the declaration or ``cip_type``."""
         value_type, _ = self._type_for(class_id, instance, attribute, cip_type)
         if isinstance(value, (bytes, bytearray)):
             data = bytes(value)
         elif value_type is None:
-            raise TypeError(f"type of 0x{class_id:02X}/{instance}/{attribute} unknown: give cip_type or bytes")
+            raise UnknownAttributeError(f"0x{class_id:02X}/{instance}/{attribute} is not declared in "
+                                        f"{self.catalog.source}: its type is unknown, give cip_type or bytes")
         else:
             data = value_type.encode(value)
         await self.request(Service.SET_ATTRIBUTE_SINGLE, class_id, instance, attribute, data)
@@ -222,7 +353,8 @@ class Scanner:
                     continue
                 value_type, spec = self._type_for(class_id, instance, attribute_id, None)
                 if value_type is None:
-                    raise _Unsplittable(f"attribute {attribute_id} has no known type: cannot split the list reply")
+                    raise _Unsplittable(f"attribute {attribute_id} is not declared in {self.catalog.source}: "
+                                        "cannot split the list reply")
                 value, end = value_type.decode_from(body, offset)
                 results[attribute_id] = AttributeValue(class_id, instance, attribute_id, body[offset:end], value,
                                                        spec, value_type)
@@ -237,7 +369,8 @@ class Scanner:
             if isinstance(value, (bytes, bytearray)):
                 encoded = bytes(value)
             elif value_type is None:
-                raise TypeError(f"type of attribute {attribute_id} unknown: give bytes")
+                raise UnknownAttributeError(f"0x{class_id:02X}/{instance}/{attribute_id} is not declared in "
+                                            f"{self.catalog.source}: its type is unknown, give bytes")
             else:
                 encoded = value_type.encode(value)
             out += UINT.encode(attribute_id) + encoded
@@ -281,7 +414,7 @@ class Scanner:
         schema = self.catalog.assemblies.get(instance)
         if schema is not None:
             return schema.size
-        return int(await self.read(0x04, instance, 4, UINT))
+        return int((await self.read(0x04, instance, 4, UINT)).raw)
 
     @contextlib.asynccontextmanager
     async def io_connection(self, output: int | None = None, input: int = 0, rpi: float = 0.010, *,
@@ -311,7 +444,21 @@ class Scanner:
             output_schema=self.catalog.assemblies.get(output) if output is not None else None,
             input_schema=self.catalog.assemblies.get(input), **options)
         async with context as handle:
+            handle.describe_schemas(self._schema_source(output, handle.output.schema),
+                                    self._schema_source(input, handle.input.schema))
             yield handle
+
+    def _schema_source(self, instance: int | None, schema: AssemblySchema | None, eds: str = "") -> str:
+        """Where an image's field names come from, or why it has none, for error messages."""
+        if instance is None:
+            return "a heartbeat connection sends no output data"
+        if schema is not None:
+            return f"assembly {instance} {schema.name!r} of {eds or self.catalog.source}"
+        declared = self.catalog.assemblies.get(instance)
+        if declared is not None:
+            return (f"assembly {instance} of {self.catalog.source} is {declared.size} bytes, not the size the "
+                    "connection opened with")
+        return f"no schema of assembly {instance} in {eds + ' nor in ' if eds else ''}{self.catalog.source}"
 
     @contextlib.asynccontextmanager
     async def io_connection_from_eds(self, doc: EdsDocument, connection: int | str, rpi: float | None = None,
@@ -349,6 +496,9 @@ class Scanner:
             heartbeat=found.o_t_point if found.heartbeat else None, output_schema=output_schema,
             input_schema=input_schema, **options)
         async with context as handle:
+            source = f"the EDS file's Connection{found.number}"
+            handle.describe_schemas(self._schema_source(output, handle.output.schema, source),
+                                    self._schema_source(found.t_o_point, handle.input.schema, source))
             yield handle
 
     # -- encapsulation --------------------------------------------------------------------------
@@ -382,15 +532,25 @@ class SyncScanner:
     """Blocking twin of ``Scanner`` for scripts: the same methods, called without ``await``.
 
     It runs the same scanner code over a blocking socket (``BlockingEncapsulationClient``), with
-    no event loop in between, so a call costs little more than the socket round trip. Class 1
-    connections need an event loop: use the async ``Scanner`` for them.
+    no event loop in between, so a call costs little more than the socket round trip. It
+    identifies the device as ``Scanner.connect`` does (``catalog=``, ``eds=``, ``identify=``).
+    Class 1 connections (``io_connection``, ``io_connection_from_eds``) run on a private event
+    loop in a background thread, opened when first needed.
     """
 
     def __init__(self, address: str, port: int | None = None, *, timeout: float = 5.0,
-                 catalog: Catalog | None = None, route: Sequence[Segment] | None = None) -> None:
+                 catalog: Catalog | None = None, route: Sequence[Segment] | None = None,
+                 identify: bool = True, eds: str | Path | EdsDocument | None = None) -> None:
         host, parsed_port = parse_host(address)
         client = BlockingEncapsulationClient.connect(host, port or parsed_port, timeout)
+        self._address = (host, port or parsed_port, timeout)
         self._scanner = Scanner(client, catalog, route)
+        self._loop_thread: Any = None
+        try:
+            run_blocking(self._scanner._choose_catalog(catalog, eds, identify))
+        except BaseException:
+            self.close()
+            raise
 
     @property
     def scanner(self) -> Scanner:

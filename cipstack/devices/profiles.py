@@ -146,11 +146,31 @@ def catalog_for_identity(identity: IdentityRecord) -> Catalog:
     return catalog_for(identity.vendor_id, identity.product_code)
 
 
-def catalog_for(vendor_id: int, product_code: int) -> Catalog:
+def profile_for(vendor_id: int, product_code: int) -> Profile | None:
+    """The profile a device with this vendor id and product code is, or None."""
     for profile in PROFILES.values():
         if profile.catalog is not None and vendor_id == profile.vendor_id and product_code in profile.product_codes:
-            return profile.catalog()
-    return Catalog()
+            return profile
+    return None
+
+
+#: Each profile's catalog, built once per process (the Omron ones build a device model, ~0.1 s):
+#: every scanner gets a copy of its own.
+_BUILT: dict[str, Catalog] = {}
+
+
+def catalog_for(vendor_id: int, product_code: int) -> Catalog:
+    """The catalog of the profile of (vendor id, product code); else the standard objects, with a
+    ``source`` that says no profile is known for them."""
+    profile = profile_for(vendor_id, product_code)
+    if profile is None or profile.catalog is None:
+        return Catalog(source=f"the standard objects only: no profile for vendor {vendor_id} product code "
+                              f"{product_code} (give eds= or catalog=)")
+    built = _BUILT.get(profile.name)
+    if built is None:
+        built = _BUILT[profile.name] = profile.catalog()
+    return built.copy(f"profile {profile.name} (vendor {vendor_id} product code {product_code}: "
+                      f"{profile.description})")
 
 
 def build_device(name: str = DEFAULT_PROFILE, interface: NetworkInterface | None = None,
