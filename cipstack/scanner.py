@@ -26,6 +26,7 @@ from .cip.types import UINT, CipType, IntegerType
 from .cip.values import Value
 from .eip.identity_items import IdentityRecord, ServiceRecord
 from .eip.originator import (
+    DEFAULT_PORT,
     BlockingEncapsulationClient,
     EncapsulationClient,
     ExplicitClient,
@@ -42,6 +43,7 @@ if TYPE_CHECKING:
     from .assemblies.schema import AssemblySchema
     from .eds.model import EdsDocument
     from .eip.io_originator import IoConnectionHandle, OtFormat
+    from .sync_io import LoopThread, SyncIoConnection
 
 T = TypeVar("T")
 log = logging.getLogger(__name__)
@@ -461,8 +463,8 @@ class Scanner:
         return f"no schema of assembly {instance} in {eds + ' nor in ' if eds else ''}{self.catalog.source}"
 
     @contextlib.asynccontextmanager
-    async def io_connection_from_eds(self, doc: EdsDocument, connection: int | str, rpi: float | None = None,
-                                     **options: Any) -> AsyncIterator[IoConnectionHandle]:
+    async def io_connection_from_eds(self, doc: EdsDocument | str | Path, connection: int | str,
+                                     rpi: float | None = None, **options: Any) -> AsyncIterator[IoConnectionHandle]:
         """The class 1 connection ``ConnectionN`` of an EDS describes, by number N or by name (field 13):
         ``async with scanner.io_connection_from_eds(doc, 1) as io``.
 
@@ -477,6 +479,11 @@ class Scanner:
         """
         from .eds.description import DEFAULT_RPI_US
         from .eds.interpret import read_view
+        from .eds.model import EdsDocument
+        from .eds.reader import read_eds
+
+        if not isinstance(doc, EdsDocument):
+            doc = read_eds(doc)
 
         if not isinstance(self.client, EncapsulationClient):
             raise TypeError("class 1 connections need the asyncio client (Scanner.connect)")
@@ -545,7 +552,8 @@ class SyncScanner:
         client = BlockingEncapsulationClient.connect(host, port or parsed_port, timeout)
         self._address = (host, port or parsed_port, timeout)
         self._scanner = Scanner(client, catalog, route)
-        self._loop_thread: Any = None
+        self._loop_thread: LoopThread | None = None
+        self._io: set[SyncIoConnection] = set()
         try:
             run_blocking(self._scanner._choose_catalog(catalog, eds, identify))
         except BaseException:
@@ -554,11 +562,98 @@ class SyncScanner:
 
     @property
     def scanner(self) -> Scanner:
+        """The ``Scanner`` this one runs (its methods are coroutines driven without an event loop)."""
         return self._scanner
 
+    @property
+    def catalog(self) -> Catalog:
+        """The declarations replies decode by (``catalog.source`` says whose)."""
+        return self._scanner.catalog
+
+    @property
+    def identity(self) -> IdentityRecord | None:
+        """What the device said it is, when it was identified."""
+        return self._scanner.identity
+
+    @property
+    def route(self) -> Sequence[Segment] | None:
+        return self._scanner.route
+
+    # The methods a script uses most, typed and documented here; any other ``Scanner`` coroutine
+    # method is reached through ``__getattr__`` and called the same way, without ``await``.
+    def read(self, class_id: int, instance: int, attribute: int, cip_type: CipType | None = None) -> Value:
+        """``Scanner.read``: the attribute's ``Value`` (raw, engineering value, unit)."""
+        return run_blocking(self._scanner.read(class_id, instance, attribute, cip_type))
+
+    def write(self, class_id: int, instance: int, attribute: int, value: Any, *, scaled: bool = False,
+              cip_type: CipType | None = None) -> None:
+        """``Scanner.write``: the raw value, or the engineering value with ``scaled=True``."""
+        run_blocking(self._scanner.write(class_id, instance, attribute, value, scaled=scaled, cip_type=cip_type))
+
+    def identify(self) -> IdentityRecord | None:
+        """``Scanner.identify``: ask the device again and take its profile's catalog."""
+        return run_blocking(self._scanner.identify())
+
+    def get_attribute_single(self, class_id: int, instance: int, attribute: int,
+                             cip_type: CipType | None = None) -> AttributeValue:
+        """``Scanner.get_attribute_single``: the reply's bytes with the decoded value and declaration."""
+        return run_blocking(self._scanner.get_attribute_single(class_id, instance, attribute, cip_type))
+
+    def set_attribute_single(self, class_id: int, instance: int, attribute: int, value: Any,
+                             cip_type: CipType | None = None) -> None:
+        """``Scanner.set_attribute_single``: a raw value (or bytes)."""
+        run_blocking(self._scanner.set_attribute_single(class_id, instance, attribute, value, cip_type))
+
+    def get_attributes_all(self, class_id: int, instance: int) -> tuple[bytes, dict[str, Any] | None]:
+        """``Scanner.get_attributes_all``: the raw reply and the values by attribute name."""
+        return run_blocking(self._scanner.get_attributes_all(class_id, instance))
+
+    def open_connection(self, rpi: float = 2.0, large: bool = True, connection_size: int = 500) -> None:
+        """``Scanner.open_connection``: later requests travel on a class 3 connection."""
+        run_blocking(self._scanner.open_connection(rpi, large, connection_size))
+
+    def close_connection(self) -> None:
+        run_blocking(self._scanner.close_connection())
+
+    # -- class 1 ---------------------------------------------------------------------------------------
+    def io_connection(self, output: int | None = None, input: int = 0, rpi: float = 0.010, **options: Any
+                      ) -> SyncIoConnection:
+        """A class 1 connection run by a private event loop in a background thread:
+        ``with scanner.io_connection(output=21, input=71, rpi=0.010) as io: io.update(run_forward=True)``.
+
+        Arguments as for ``Scanner.io_connection`` (``heartbeat``, ``config``, ``multicast``,
+        ``ot_format``, ``target_io_port``, ...); fields are named by this scanner's catalog. The
+        connection has a TCP session of its own; leaving the ``with`` block, ``close()`` on it, or
+        closing this scanner sends the Forward_Close."""
+        return self._open_io(lambda scanner: scanner.io_connection(output=output, input=input, rpi=rpi, **options))
+
+    def io_connection_from_eds(self, doc: EdsDocument | str | Path, connection: int | str, rpi: float | None = None,
+                               **options: Any) -> SyncIoConnection:
+        """``Scanner.io_connection_from_eds`` for synchronous code (``doc``: an EDS file or its path)."""
+        return self._open_io(lambda scanner: scanner.io_connection_from_eds(doc, connection, rpi, **options))
+
+    def _open_io(self, make: Any) -> SyncIoConnection:
+        from .sync_io import LoopThread, SyncIoConnection
+
+        if self._loop_thread is None:
+            self._loop_thread = LoopThread()
+        host, port, timeout = self._address
+        catalog, route, identity = self._scanner.catalog, self._scanner.route, self._scanner.identity
+
+        async def opener(stack: contextlib.AsyncExitStack) -> IoConnectionHandle:
+            client = await EncapsulationClient.connect(host, port, timeout)
+            scanner = Scanner(client, catalog, route)
+            scanner.identity = identity
+            stack.push_async_callback(scanner.close)
+            return await stack.enter_async_context(make(scanner))  # type: ignore[no-any-return]
+
+        opened = SyncIoConnection(self._loop_thread, opener, self._io.discard)
+        self._io.add(opened)
+        return opened
+
     def __getattr__(self, name: str) -> Any:
-        if name == "io_connection":
-            raise AttributeError("class 1 connections need an event loop: use the async Scanner")
+        if name.startswith("_"):
+            raise AttributeError(name)
         attribute = getattr(self._scanner, name)
         if not asyncio.iscoroutinefunction(attribute):
             return attribute
@@ -571,7 +666,16 @@ class SyncScanner:
         return call
 
     def close(self) -> None:
-        run_blocking(self._scanner.close())
+        """Close every class 1 connection opened here (Forward_Close), then the session."""
+        try:
+            for opened in list(self._io):
+                with contextlib.suppress(Exception):
+                    opened.close()
+            if self._loop_thread is not None:
+                self._loop_thread.stop()
+                self._loop_thread = None
+        finally:
+            run_blocking(self._scanner.close())
 
     def __enter__(self) -> SyncScanner:
         return self
@@ -579,6 +683,28 @@ class SyncScanner:
     def __exit__(self, *exc: object) -> None:
         self.close()
 
+    @staticmethod
+    def discover(address: str | Sequence[str] | None = None, port: int = DEFAULT_PORT,
+                 timeout: float = 2.0) -> list[IdentityRecord]:
+        """``discover_blocking``: who answers ListIdentity over UDP, without an event loop of yours."""
+        return discover_blocking(address, port, timeout)
 
-__all__ = ["UNDECODED", "AttributeValue", "ReplyDecodeError", "Scanner", "SyncScanner", "backplane_route", "discover",
-           "list_services_udp"]
+
+def discover_blocking(address: str | Sequence[str] | None = None, port: int = DEFAULT_PORT,
+                      timeout: float = 2.0) -> list[IdentityRecord]:
+    """``discover`` for synchronous code: every device that answers ListIdentity over UDP within
+    ``timeout`` seconds (``address`` None: every interface's broadcast address, loopback included)."""
+    from .sync_io import run_in_private_loop
+
+    return run_in_private_loop(discover(address, port, timeout))
+
+
+def componet_route(node: int) -> list[Segment]:
+    """Route path to CompoNet node ``node`` (0-63) behind a CompoNet gateway: port 2, link = node."""
+    if not 0 <= node <= 63:
+        raise ValueError(f"CompoNet node {node} out of range 0..63")
+    return [PortSegment(2, bytes((node,)))]
+
+
+__all__ = ["UNDECODED", "AttributeValue", "ReplyDecodeError", "Scanner", "SyncScanner", "UnknownAttributeError",
+           "Value", "backplane_route", "componet_route", "discover", "discover_blocking", "list_services_udp"]

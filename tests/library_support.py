@@ -8,7 +8,7 @@ import os
 import subprocess
 import sys
 import threading
-from collections.abc import Iterator
+from collections.abc import Iterator, Sequence
 from contextlib import contextmanager
 from pathlib import Path
 
@@ -19,13 +19,16 @@ ROOT = Path(__file__).resolve().parents[1]
 
 
 @contextmanager
-def threaded_adapter(device: Device, host: str = "127.0.0.1") -> Iterator[Adapter]:
+def threaded_adapter(device: Device, host: str = "127.0.0.1", params: Sequence[str] = ()) -> Iterator[Adapter]:
     """An in-process adapter serving ``device`` on loopback (ephemeral TCP and UDP ports) from a
-    background thread's event loop; closed on exit."""
+    background thread's event loop; closed on exit. ``params``: keypad parameters set first, as
+    ``cipstack adapter --param CODE=VALUE`` sets them (``drv=4``, ``Frq=8``)."""
     loop = asyncio.new_event_loop()
 
     async def start() -> Adapter:
         adapter = Adapter(AdapterSettings(host=host, port=0, io_port=0), device=device)
+        if params:
+            adapter.apply_keypad_parameters(list(params))
         await adapter.start()
         return adapter
 

@@ -30,14 +30,16 @@ from tests.library_support import run_cli, threaded_adapter
 
 @pytest.fixture
 async def acg() -> AsyncIterator[Adapter]:
-    async with Adapter(AdapterSettings(host="127.0.0.1", port=0, io_port=0), device=build_acg_device()) as running:
+    settings = AdapterSettings(host="127.0.0.1", port=0, io_port=0)
+    async with Adapter(settings, device=build_acg_device()) as running:
         yield running
 
 
 # -- item 1: identify by default -------------------------------------------------------------------------
 async def test_connect_identifies_and_decodes_by_the_profile(acg: Adapter) -> None:
     async with await Scanner.connect(f"127.0.0.1:{acg.port}") as scanner:
-        assert scanner.identity is not None and (scanner.identity.vendor_id, scanner.identity.product_code) == (259, 100)
+        identity = scanner.identity
+        assert identity is not None and (identity.vendor_id, identity.product_code) == (259, 100)
         assert scanner.catalog.source.startswith("profile acg ")
         accel = await scanner.read(0x2A, 1, 102)
     # Seed 000, AC/DC Drive attribute 102 "Acceleration Time, 0-6000.0 sec": 0.1 s per step; ACC's
@@ -100,7 +102,7 @@ async def test_a_device_that_does_not_identify_keeps_the_standard_objects_and_sa
         async with await Scanner.connect(target.address, timeout=2) as scanner:
             assert scanner.identity is None
             assert "did not identify itself" in scanner.catalog.source
-            with pytest.raises(UnknownAttributeError, match="did not identify itself.*give eds= or catalog="):
+            with pytest.raises(UnknownAttributeError, match=r"did not identify itself.*give eds= or catalog="):
                 await scanner.write(0x2A, 1, 102, 5.0, scaled=True)
 
 
@@ -108,25 +110,25 @@ async def test_routed_identification_asks_the_componet_node() -> None:
     """Through the CompoNet gateway (seed 004), ListIdentity would describe the gateway: the routed
     node's own Identity attributes give its profile."""
     device = build_componet_gateway([("mx2", "MX2-A2015-E", 3)])
-    async with Adapter(AdapterSettings(host="127.0.0.1", port=0, io_port=0), device=device) as gateway:
-        route = [PortSegment(COMPONET_PORT, bytes([3]))]
-        async with await Scanner.connect(f"127.0.0.1:{gateway.port}", route=route) as scanner:
-            assert scanner.catalog.source.startswith("profile mx2 ")
-            accel = await scanner.read(0x2A, 1, 0x12)
+    route = [PortSegment(COMPONET_PORT, bytes([3]))]
+    async with Adapter(AdapterSettings(host="127.0.0.1", port=0, io_port=0), device=device) as gateway, \
+            await Scanner.connect(f"127.0.0.1:{gateway.port}", route=route) as scanner:
+        assert scanner.catalog.source.startswith("profile mx2 ")
+        accel = await scanner.read(0x2A, 1, 0x12)
     # Table D-7: 0x12 Accel Time, UINT, "Unit: [ms]", default 10000.
     assert (accel.raw, str(accel)) == (10000, "10000 ms")
 
 
 # -- item 3: values with their unit ------------------------------------------------------------------------
 async def test_omron_values_carry_the_units_of_table_d7() -> None:
-    async with Adapter(AdapterSettings(host="127.0.0.1", port=0, io_port=0),
-                       device=build_omron_device("MX2-A2015-E")) as adapter:
-        async with await Scanner.connect(f"127.0.0.1:{adapter.port}") as scanner:
-            current = await scanner.read(0x2A, 1, 0x09)
-            assert (current.unit, current.scaling.scale) == ("A", 0.1)      # Table D-7: "Unit: [0.1 A]"
-            assert str(current) == f"{current.raw / 10:.1f} A"
-            await scanner.write(0x2A, 1, 0x12, 2500)                          # raw: ms
-            assert str(await scanner.read(0x2A, 1, 0x12)) == "2500 ms"
+    settings = AdapterSettings(host="127.0.0.1", port=0, io_port=0)
+    async with Adapter(settings, device=build_omron_device("MX2-A2015-E")) as adapter, \
+            await Scanner.connect(f"127.0.0.1:{adapter.port}") as scanner:
+        current = await scanner.read(0x2A, 1, 0x09)
+        assert (current.unit, current.scaling.scale) == ("A", 0.1)      # Table D-7: "Unit: [0.1 A]"
+        assert str(current) == f"{current.raw / 10:.1f} A"
+        await scanner.write(0x2A, 1, 0x12, 2500)                          # raw: ms
+        assert str(await scanner.read(0x2A, 1, 0x12)) == "2500 ms"
 
 
 async def test_write_takes_raw_or_scaled_by_one_rule(acg: Adapter) -> None:
@@ -137,9 +139,9 @@ async def test_write_takes_raw_or_scaled_by_one_rule(acg: Adapter) -> None:
         assert str(await scanner.read(0x2A, 1, 102)) == "6.0 s"
         await scanner.write(0x2A, 1, 102, await scanner.read(0x2A, 1, 103))   # a Value writes its raw value
         assert (await scanner.read(0x2A, 1, 102)).raw == 100
-        with pytest.raises(ValueError, match="scaled=True"):
+        with pytest.raises(ValueError, match=r"scaled=True"):
             await scanner.write(0x2A, 1, 102, 5.0)                            # a float is not raw steps
-        with pytest.raises(ValueError, match="not a whole number of steps of 0.1 s"):
+        with pytest.raises(ValueError, match=r"not a whole number of steps of 0\.1 s"):
             await scanner.write(0x2A, 1, 102, 5.05, scaled=True)
         assert (await scanner.read(0x2A, 1, 102)).raw == 100                  # nothing was written
 
@@ -195,7 +197,7 @@ def test_unknown_field_names_the_schema_and_its_fields() -> None:
         assert "run_forward" in message and "speed_reference" in message
     with threaded_adapter(build_acg_device()) as adapter, \
             SyncScanner(f"127.0.0.1:{adapter.port}", identify=False) as scanner, \
-            scanner.io_connection(output=21, input=71, rpi=0.02, target_io_port=adapter.io_endpoint.port) as io:
-        with pytest.raises(AttributeError, match="no field 'run_forward': no schema of assembly 21 in the standard "
-                                                 r"objects only \(use .raw\)"):
-            io.output.run_forward = 1
+            scanner.io_connection(output=21, input=71, rpi=0.02, target_io_port=adapter.io_endpoint.port) as io, \
+            pytest.raises(AttributeError, match=r"no field 'run_forward': no schema of assembly 21 in the standard "
+                                                r"objects only \(use \.raw\)"):
+        io.output.run_forward = 1

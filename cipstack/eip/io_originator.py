@@ -412,11 +412,15 @@ class ProcessImage:
 
     def update(self, **values: Any) -> None:
         """Set several fields at once (``io.output.update(run_forward=True, speed_reference=900)``)."""
+        if not self._writable:
+            raise AttributeError("input data is read-only")
         for name in values:
             if self._schema is None or name not in self._schema.field_names:
                 raise AttributeError(self._no_field(name))
+        data = bytes(self._buffer)
         for name, value in values.items():
-            setattr(self, name, value)
+            data = self._schema.with_field(data, name, value)  # type: ignore[union-attr]
+        self._buffer[:] = data  # one assignment: a production sees all the fields or none
 
     def __repr__(self) -> str:
         if self._schema is None:
