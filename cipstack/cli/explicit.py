@@ -103,8 +103,17 @@ async def _connect_identified(args: argparse.Namespace, standard: tuple[int, int
     from ..catalog import STANDARD_CLASSES
     from ..scanner import Scanner
 
+    eds = getattr(args, "eds", None)
+    doc = None
+    if eds is not None:
+        from .emulators import _read_eds_file
+
+        doc = _read_eds_file(eds)
     scanner = await Scanner.connect(args.target, timeout=args.timeout, route=parse_route(args.route),
-                                    identify=False)
+                                    identify=False, eds=doc)
+    if doc is not None:
+        scanner.catalog.source = f"EDS file {eds}"
+        return scanner
     if standard is not None and standard[0] in STANDARD_CLASSES and scanner.catalog.attribute(*standard):
         return scanner
     try:

@@ -205,7 +205,8 @@ def cmd_io(args: argparse.Namespace) -> int:
     host, port = parse_host(args.target)
 
     async def session(loop: asyncio.AbstractEventLoop, stop: asyncio.Event, state: dict[str, bool]) -> int:
-        scanner = await Scanner.connect(f"{host}:{port}", timeout=args.timeout)  # identifies the device
+        # Identifies the device and takes its profile's declarations, or those of the EDS file given.
+        scanner = await Scanner.connect(f"{host}:{port}", timeout=args.timeout, eds=doc)
         options: dict[str, Any] = {"target_io_port": args.target_io_port, "local_io_port": args.io_port,
                                    "config_data": config_data}
         if args.ot_format is not None:

@@ -217,6 +217,8 @@ def build_parser(command: str | None = None) -> argparse.ArgumentParser:
     p.add_argument("--connected", action="store_true", help="use a class 3 connection")
     p.add_argument("--route", metavar="PORT/LINK[,...]",
                    help="route through the target (Unconnected_Send), e.g. 1/0 or 2/3 (CompoNet node 3)")
+    p.add_argument("--eds", metavar="FILE", help="decode by this EDS file's parameters (link paths, units, scaling) "
+                                                 "instead of the device's profile")
     p.set_defaults(func=cmd_get)
 
     p = sub.add_parser("set")
@@ -230,6 +232,8 @@ def build_parser(command: str | None = None) -> argparse.ArgumentParser:
                    help="VALUE is the engineering value (5.0 for 5.0 s), turned into raw steps by the declaration")
     p.add_argument("--connected", action="store_true", help="use a class 3 connection")
     p.add_argument("--route", metavar="PORT/LINK[,...]", help="route through the target (Unconnected_Send)")
+    p.add_argument("--eds", metavar="FILE", help="decode by this EDS file's parameters (link paths, units, scaling) "
+                                                 "instead of the device's profile")
     p.set_defaults(func=cmd_set)
 
     p = sub.add_parser("io")
