@@ -221,6 +221,10 @@ def build_parser(command: str | None = None) -> argparse.ArgumentParser:
                                                  "instead of the device's profile")
     p.set_defaults(func=cmd_get)
 
+    from .params import add_arguments as add_params_arguments
+
+    add_params_arguments(sub, _Parser, common)
+
     p = sub.add_parser("set")
     common(p)
     p.add_argument("path", metavar="CLASS/INSTANCE/ATTRIBUTE", help="decimal or 0x hex numbers: 0xF5/1/13")

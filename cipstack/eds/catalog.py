@@ -1,6 +1,7 @@
 """An EDS file as a scanner's catalog, for any device: ``catalog_from_eds("drive.eds")``.
 
-Every ``ParamN`` with a link path (field 3) declares the attribute it names: type (field 5),
+Every ``ParamN`` with a link path (field 3) declares the attribute it names (and is a parameter of
+a recipe, ``cipstack params``): type (field 5),
 access (descriptor bit 4), range and default (10-12), enumeration (``EnumN``), unit (8) and
 scaling (13-16 multiplier, divider, base, offset; 21 decimal places; shared/reference eds.md), so
 a reply decodes, scales and prints as it does with a device profile. Every assembly with members
@@ -13,7 +14,7 @@ from __future__ import annotations
 import os
 from pathlib import Path
 
-from ..catalog import Catalog
+from ..catalog import Catalog, Parameter
 from ..cip.model import Access, AttributeSpec
 from .interpret import ParamInfo, read_view
 from .model import EdsDocument
@@ -43,9 +44,11 @@ def catalog_from_eds(eds: str | os.PathLike[str] | EdsDocument, name: str | None
         doc, label = read_eds(eds), name or Path(eds).name
     view = read_view(doc)
     table: _Table = {}
+    parameters = []
     for param in view.params.values():
         if param.link is not None and param.link not in table:   # the first parameter naming it wins
             table[param.link] = attribute_of(param)
+            parameters.append(Parameter(param.keyword, *param.link, table[param.link]))
     standard = Catalog()
     by_class: dict[int, _Table] = {}
     for link, spec in table.items():
@@ -65,7 +68,7 @@ def catalog_from_eds(eds: str | os.PathLike[str] | EdsDocument, name: str | None
         field = entry.field(1) if entry is not None else None
         product = f" ({field.value})" if field is not None and isinstance(field.value, str) else ""
     return Catalog(assemblies=schemas, resolvers={c: resolver(c, e) for c, e in by_class.items()},
-                   source=f"EDS file {label}{product}")
+                   source=f"EDS file {label}{product}", parameters=parameters)
 
 
 __all__ = ["attribute_of", "catalog_from_eds"]
