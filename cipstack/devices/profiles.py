@@ -211,6 +211,8 @@ def catalog_for(vendor_id: int, product_code: int) -> Catalog:
 
 def build_device(name: str = DEFAULT_PROFILE, interface: NetworkInterface | None = None,
                  limits: DeviceLimits | None = None, options: ProfileOptions | None = None) -> Device:
+    """The emulated device of profile ``name`` (``acg``, ``mx2``, ``rx``: ``PROFILES``), for an ``Adapter``
+    to serve: ``Adapter(AdapterSettings(port=0), device=build_device("mx2"))``."""
     from .base import DeviceLimits
 
     try:
