@@ -45,7 +45,7 @@ def test_the_names_a_user_needs() -> None:
 
 
 def test_import_is_light() -> None:
-    loaded = subprocess.run(
-        [sys.executable, "-c", "import sys, cipstack; print(sorted(m for m in sys.modules if m.startswith('cipstack')))"],
-        capture_output=True, text=True, check=True, cwd=ROOT).stdout.strip()
+    script = "import sys, cipstack; print(sorted(m for m in sys.modules if m.startswith('cipstack')))"
+    loaded = subprocess.run([sys.executable, "-c", script], capture_output=True, text=True, check=True,
+                            cwd=ROOT).stdout.strip()
     assert loaded == "['cipstack']"
