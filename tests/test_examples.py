@@ -10,7 +10,7 @@ from pathlib import Path
 import pytest
 
 from tests.test_readme import COMMAND_TIMEOUT, Namespace, _namespaces_available, emulator
-from tests.test_readme import shell_env as shell_env  # noqa: PLC0414 - the fixture, re-exported for these tests
+from tests.test_readme import shell_env as shell_env
 
 EXAMPLES = Path(__file__).resolve().parents[1] / "examples"
 NETWORK_CONTROL = "cipstack adapter --param drv=4 --param Frq=8"
