@@ -112,12 +112,6 @@ def _malformed(what: str) -> Iterator[None]:
         raise MalformedReplyError(f"malformed {what}: {exc}") from None
 
 
-def _decode(cip_type: CipType | None, data: bytes) -> Any:
-    if cip_type is None:
-        return None
-    return cip_type.decode(data)
-
-
 class Scanner:
     """Explicit messaging and class 1 I/O with one target (unconnected, routed or class 3), async.
 
@@ -254,26 +248,39 @@ class Scanner:
 
     async def get_attribute_single(self, class_id: int, instance: int, attribute: int,
                                    cip_type: CipType | None = None) -> AttributeValue:
+        """Get_Attribute_Single: the reply's bytes, the value decoded by the declaration (or ``cip_type``)
+        and the declaration itself."""
+        data, value, value_type, spec = await self._get_single(class_id, instance, attribute, cip_type)
+        return AttributeValue(class_id, instance, attribute, data, value, spec, value_type)
+
+    async def _get_single(self, class_id: int, instance: int, attribute: int, cip_type: CipType | None
+                          ) -> tuple[bytes, Any, CipType | None, AttributeSpec | None]:
         reply = await self.request(Service.GET_ATTRIBUTE_SINGLE, class_id, instance, attribute)
         value_type, spec = self._type_for(class_id, instance, attribute, cip_type)
+        data = reply.data
+        if value_type is None:
+            return data, None, None, spec
         try:
-            value = _decode(value_type, reply.data)
+            return data, value_type.decode(data), value_type, spec
         except CipError as exc:
             where = f"0x{class_id:02X}/{instance}/{attribute}"
             if cip_type is not None:
-                raise ReplyDecodeError(f"{where} answered {len(reply.data)} bytes ({reply.data.hex(' ') or 'none'}), "
+                raise ReplyDecodeError(f"{where} answered {len(data)} bytes ({data.hex(' ') or 'none'}), "
                                        f"which do not decode as {cip_type.name}: {exc.message}") from None
             # The device differs from the declaration: tolerant as an originator, the raw bytes stand.
-            log.debug("%s: reply %s does not decode as declared (%s): %s", where, reply.data.hex(), value_type, exc)
-            return AttributeValue(class_id, instance, attribute, reply.data, None, spec, None)
-        return AttributeValue(class_id, instance, attribute, reply.data, value, spec, value_type)
+            log.debug("%s: reply %s does not decode as declared (%s): %s", where, data.hex(), value_type, exc)
+            return data, None, None, spec
 
     async def read(self, class_id: int, instance: int, attribute: int, cip_type: CipType | None = None) -> Value:
         """Get_Attribute_Single, decoded by the attribute's declaration (or ``cip_type``): a ``Value``
         whose ``raw`` is the value on the wire, ``value`` the engineering value, ``unit`` its unit
         (``str()`` gives ``5.0 s``). Undeclared and no ``cip_type``: ``raw`` is the reply's bytes."""
-        result = await self.get_attribute_single(class_id, instance, attribute, cip_type)
-        return result.reading
+        data, value, value_type, spec = await self._get_single(class_id, instance, attribute, cip_type)
+        if value_type is None:
+            return Value(data, spec.name if spec is not None else "")
+        if spec is None:
+            return Value(value, "", value_type)
+        return Value(value, spec.name, value_type, spec.scaling)
 
     async def write(self, class_id: int, instance: int, attribute: int, value: Any, *, scaled: bool = False,
                     cip_type: CipType | None = None) -> None:

@@ -89,7 +89,9 @@ class Scaling:
         return f"{number} {self.unit}" if self.unit else number
 
 
-@dataclass(frozen=True, eq=False)
+_UNSCALED = Scaling()
+
+
 class Value:
     """A value read from a device: ``raw`` as on the wire, ``value`` in engineering units, ``unit``.
 
@@ -99,10 +101,19 @@ class Value:
     ``type`` is None when nothing declares the attribute: ``raw`` is then the reply's bytes.
     """
 
-    raw: Any
-    name: str = ""
-    type: CipType | None = None
-    scaling: Scaling = Scaling()
+    # A plain class with slots, not a frozen dataclass: one is made per read, and a frozen
+    # dataclass's __init__ costs a few microseconds more on that path. Treat it as immutable.
+    __slots__ = ("name", "raw", "scaling", "type")
+
+    def __init__(self, raw: Any, name: str = "", type: CipType | None = None, scaling: Scaling = _UNSCALED) -> None:
+        #: The value as the wire carries it (``bytes`` when nothing declares the attribute).
+        self.raw = raw
+        #: The attribute's declared name ("Acceleration Time"), empty when unknown.
+        self.name = name
+        #: The CIP type the reply was decoded as, None when undeclared.
+        self.type = type
+        #: Unit, scale, offset, decimal places and enumeration of the declaration.
+        self.scaling = scaling
 
     @property
     def value(self) -> Any:
