@@ -45,6 +45,7 @@ def test_example(script: str, adapter: str, setup: list[str], arguments: list[st
     reason = _namespaces_available()
     if reason:
         pytest.skip(reason)
+    shell_env = {**shell_env, "XDG_DATA_HOME": str(tmp_path / "data")}   # saved parameters stay in this test
     namespace = Namespace()
     try:
         with emulator(namespace, adapter, shell_env, tmp_path) as log:

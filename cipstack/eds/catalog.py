@@ -39,7 +39,7 @@ def catalog_from_eds(eds: str | os.PathLike[str] | EdsDocument, name: str | None
     """The declarations of an EDS file (a path or a read ``EdsDocument``) as a ``Catalog``:
     ``Scanner.connect(host, eds="drive.eds")`` uses it. ``name`` names the file in messages."""
     if isinstance(eds, EdsDocument):
-        doc, label = eds, name or "an EDS file"
+        doc, label = eds, name or ""
     else:
         doc, label = read_eds(eds), name or Path(eds).name
     view = read_view(doc)
@@ -66,9 +66,9 @@ def catalog_from_eds(eds: str | os.PathLike[str] | EdsDocument, name: str | None
     if device is not None:
         entry = device.get("ProdName")
         field = entry.field(1) if entry is not None else None
-        product = f" ({field.value})" if field is not None and isinstance(field.value, str) else ""
+        product = f"({field.value})" if field is not None and isinstance(field.value, str) else ""
     return Catalog(assemblies=schemas, resolvers={c: resolver(c, e) for c, e in by_class.items()},
-                   source=f"EDS file {label}{product}", parameters=parameters)
+                   source=" ".join(part for part in ("EDS file", label, product) if part), parameters=parameters)
 
 
 __all__ = ["attribute_of", "catalog_from_eds"]
