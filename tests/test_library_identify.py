@@ -201,3 +201,18 @@ def test_unknown_field_names_the_schema_and_its_fields() -> None:
             pytest.raises(AttributeError, match=r"no field 'run_forward': no schema of assembly 21 in the standard "
                                                 r"objects only \(use \.raw\)"):
         io.output.run_forward = 1
+
+
+def test_cli_io_flags_take_on_and_off() -> None:
+    """``cipstack io --set run_forward=on``: a flag field takes what a BOOL attribute takes."""
+    with threaded_adapter(build_acg_device(), params=("drv=4", "Frq=8")) as adapter:
+        address = f"127.0.0.1:{adapter.port}"
+        io_port = str(adapter.io_endpoint.port)
+        ran = run_cli("io", address, "--output", "21", "--input", "71", "--set", "run_forward=on", "--set",
+                      "speed_reference=300", "--duration", "0.5s", "--target-io-port", io_port, "--io-port", "0",
+                      "--print", "summary")
+        assert ran.returncode == 0, ran.stderr
+        assert run_cli("get", address, "0x29/1/7").stdout.strip() == "Running Forward = 1"
+        bad = run_cli("io", address, "--output", "21", "--input", "71", "--set", "run_forward=maybe",
+                      "--duration", "0.2s", "--target-io-port", io_port, "--io-port", "0")
+        assert bad.returncode == 2 and "--set run_forward=maybe" in bad.stderr
