@@ -23,8 +23,9 @@ from tests.eds.samples import GENERIC_EDS
 from tests.library_support import run_cli, threaded_adapter
 
 #: The hand-written flow controller with scaling (descriptor bit 2): Flow Setpoint in 0.1 l/min
-#: (multiplier 1, divider 10, base 1, offset 0, one decimal place) and a temperature of (raw - 40) x 0.5 degC (multiplier 1,
-#: divider 2, base 1, offset -40, one place), a parameter the plain sample does not have.
+#: (multiplier 1, divider 10, base 1, offset 0, one decimal place) and a temperature of
+#: (raw - 40) x 0.5 degC (multiplier 1, divider 2, base 1, offset -40, one place), a parameter the
+#: plain sample does not have.
 SCALED_EDS = GENERIC_EDS.replace(
     '''Param1 = 0, 6, "20 70 24 01 30 01", 0x0000,''',
     '''Param1 = 0, 6, "20 70 24 01 30 01", 0x0004,''').replace(
