@@ -6,6 +6,9 @@ single TCP connection:
 * ``scanner-sync``   cipstack's ``SyncScanner.get_attribute_single``
 * ``scanner-async``  cipstack's ``Scanner.get_attribute_single`` awaited in a loop
 * ``pycomm3``        pycomm3's ``CIPDriver.generic_message(..., connected=False, route_path=False)``
+* ``scanner-read``   cipstack's ``SyncScanner.read`` of the ACG's Acceleration Time (0x2A/1/102): the
+                     reply decoded by the attribute's declaration into a ``Value`` (UINT, 0.1 s, "5.0 s")
+* ``pycomm3-read``   pycomm3's ``generic_message`` of the same attribute with ``data_type=UINT``: decoded
 * ``raw``            a pre-built SendRRData frame written on a plain socket, the reply read back
 
 and, to calibrate the machine, the same raw client against two echo servers in a subprocess that
@@ -53,6 +56,10 @@ SEND_RR_DATA = 0x006F
 #: Get_Attribute_Single, path 20 01 24 01 30 07 (Identity 1/1/7: product name).
 GET_PRODUCT_NAME = bytes((0x0E, 0x03, 0x20, 0x01, 0x24, 0x01, 0x30, 0x07))
 EXPECTED_NAME = b"\x04CENT"
+#: AC/DC Drive object, Acceleration Time (seed 000: 0-6000.0 sec; factory value 5.0 s).
+ACCELERATION_TIME = (0x2A, 1, 102)
+#: Issue 26: the scanner's CPU per decoded read at most this share of pycomm3's.
+SCANNER_READ_TARGET = 0.9
 #: RegisterSession, protocol version 1, no options.
 REGISTER_FRAME = HEADER.pack(REGISTER_SESSION, 4, 0, 0, b"\x00" * 8, 0) + b"\x01\x00\x00\x00"
 ADAPTER_CPU_TARGET_US = 100.0
@@ -296,6 +303,34 @@ def scanner_async(port: int, pid: int) -> Bench:
     return Bench("scanner-async", "adapter", pid, lambda n: loop.run_until_complete(requests(n)), close)
 
 
+def scanner_read(port: int, pid: int) -> Bench:
+    """``SyncScanner.read`` as a script calls it: identified device, decoded and scaled ``Value``."""
+    from cipstack.scanner import SyncScanner
+
+    scanner = SyncScanner("127.0.0.1", port)
+    value = scanner.read(*ACCELERATION_TIME)
+    assert str(value) == "5.0 s" and value.raw == 50, value
+    return Bench("scanner-read", "adapter", pid, repeat(lambda: scanner.read(*ACCELERATION_TIME)), scanner.close)
+
+
+def pycomm3_read(port: int, pid: int) -> Bench:
+    """pycomm3 reading the same attribute and decoding it (``data_type=UINT``)."""
+    from pycomm3 import CIPDriver
+    from pycomm3.cip.data_types import UINT as PYCOMM3_UINT
+
+    driver = CIPDriver(f"127.0.0.1:{port}")
+    driver.open()
+
+    def call() -> Any:
+        return driver.generic_message(service=0x0E, class_code=ACCELERATION_TIME[0], instance=ACCELERATION_TIME[1],
+                                      attribute=ACCELERATION_TIME[2], data_type=PYCOMM3_UINT, connected=False,
+                                      route_path=False, name="acceleration_time")
+
+    tag = call()
+    assert tag.error is None and tag.value == 50, tag
+    return Bench("pycomm3-read", "adapter", pid, repeat(call), driver.close)
+
+
 def pycomm3_driver(port: int, pid: int) -> Bench:
     from pycomm3 import CIPDriver
 
@@ -388,6 +423,10 @@ def print_table(runs: list[Run], summary: dict[str, float | bool | None]) -> Non
     if summary.get("scanner_sync_vs_pycomm3") is not None:
         print(f"scanner CPU per request vs pycomm3: sync {summary['scanner_sync_vs_pycomm3']:.2f}x, "
               f"async {summary['scanner_async_vs_pycomm3']:.2f}x (<= 1.00 is no worse)")
+    if summary.get("scanner_read_vs_pycomm3") is not None:
+        print(f"decoded read (0x2A/1/102 -> Value '5.0 s') CPU vs pycomm3 decoding it: "
+              f"{summary['scanner_read_vs_pycomm3']:.2f}x; target {SCANNER_READ_TARGET:.2f}x "
+              f"({'met' if summary['scanner_read_target_met'] else 'MISSED'})")
     print(f"echo baselines: asyncio {summary['echo_asyncio_rate']:.0f} req/s "
           f"({summary['echo_asyncio_cpu_us']:.1f} µs server CPU), socket {summary['echo_socket_rate']:.0f} req/s "
           f"({summary['echo_socket_cpu_us']:.1f} µs server CPU)")
@@ -416,6 +455,11 @@ def summarise(runs: list[Run]) -> dict[str, float | bool | None]:
         summary["scanner_sync_vs_pycomm3"] = by_key[("scanner-sync", "adapter")].client_cpu_us / pycomm3.client_cpu_us
         summary["scanner_async_vs_pycomm3"] = (by_key[("scanner-async", "adapter")].client_cpu_us
                                                / pycomm3.client_cpu_us)
+    decoded, pycomm3_decoded = by_key.get(("scanner-read", "adapter")), by_key.get(("pycomm3-read", "adapter"))
+    if decoded is not None and pycomm3_decoded is not None:
+        summary["scanner_read_vs_pycomm3"] = decoded.client_cpu_us / pycomm3_decoded.client_cpu_us
+        summary["scanner_read_target"] = SCANNER_READ_TARGET
+        summary["scanner_read_target_met"] = summary["scanner_read_vs_pycomm3"] <= SCANNER_READ_TARGET
     for run in runs:
         summary[f"rate_vs_echo_asyncio[{run.client}->{run.server}]"] = run.rate / echo_asyncio.rate
     # Issue 16's targets, each beside the asyncio echo server's figure for the same client shape.
@@ -532,8 +576,12 @@ def run_all(seconds: float, rounds: int, warmup: float, profile: str | None = No
         port = free_port()
         adapter = stack.enter_context(server_process(adapter_command(port, profile), port, server_cpu))
         benches = [scanner_sync(port, adapter.pid), scanner_async(port, adapter.pid)] if scanners else []
+        if scanners:
+            benches.append(scanner_read(port, adapter.pid))
         if pycomm3:
             benches.append(pycomm3_driver(port, adapter.pid))
+            if scanners:
+                benches.append(pycomm3_read(port, adapter.pid))
         # Each client with idle sessions beside the same client without: their rounds are paired.
         pair = [raw_client(port, adapter.pid, "adapter"),
                 with_idle_sessions(raw_client(port, adapter.pid, "adapter"), port)]

@@ -6,6 +6,10 @@ free loopback ports and opens class 1 connections to it with cipstack's scanner:
 (a) one exclusive-owner connection (output 21, input 71) at RPI 1 ms for ``--seconds`` (default
     10): packets per second in each direction, the distribution of the intervals (p50, p99, max),
     the share of intervals within +-0.5 ms of the RPI, late and lost packets;
+(c) the same connection as (a) from synchronous code, ``SyncScanner.io_connection`` (its private loop in
+    a background thread, the main thread reading the input every 10 ms as a script does), measured
+    back to back with the async handle (no capture): their shares within +-0.5 ms must agree within
+    one point;
 (b) 64 connections (one exclusive owner, 63 input-only on the heartbeat point; 64 is the ACG-ET2's
     station limit) at RPI 10 ms for ``--seconds``: connection timeouts, late and lost T->O packets,
     and the adapter's CPU share (utime + stime from /proc/PID/stat over the run).
@@ -13,7 +17,7 @@ free loopback ports and opens class 1 connections to it with cipstack's scanner:
 Targets on a 2-core machine: (a) at least 99 % of the intervals within +-0.5 ms and no lost packet;
 (b) no timeout, under 1 % late packets, the adapter under one core.
 
-    python benchmarks/io.py [--seconds N] [--json] [--only a|b]
+    python benchmarks/io.py [--seconds N] [--json] [--only a|b|c]
 
 O->T intervals are measured where the packets leave (the originator's sends), T->O intervals where
 they arrive (the originator's receptions); a T->O packet is late when it arrives more than half an
@@ -31,6 +35,7 @@ import asyncio
 import itertools
 import json
 import os
+import statistics
 import tempfile
 import time
 from collections.abc import Sequence
@@ -50,7 +55,7 @@ from io_common import (  # benchmarks/ is on the path when a benchmark runs
 )
 
 from cipstack.eip.io_server import run_precise
-from cipstack.scanner import Scanner
+from cipstack.scanner import Scanner, SyncScanner
 
 #: The ACG-ET2's station limit (one exclusive owner, the rest input only) and heartbeat point.
 STATION_LIMIT = acg_class1().max_connections
@@ -105,6 +110,70 @@ async def single_connection(port: int, io_port: int, seconds: float) -> dict[str
         "t_to_o": {"packets_per_s": round((len(received) + 1) / seconds, 1), "lost": delta["lost"],
                    **distribution(received, rpi)},
     }
+
+
+def _figures(connection: Any, stats_before: dict[str, int], stats: dict[str, int], sends: list[float],
+             received: list[float], rpi: float, seconds: float) -> dict[str, Any]:
+    sent_intervals = [b - a for a, b in itertools.pairwise(sends)]
+    delta = {k: stats[k] - stats_before[k] for k in ("sent", "received", "late", "lost", "skipped_slots")}
+    return {
+        "o_to_t": {"packets_per_s": round(len(sends) / seconds, 1), "late": delta["late"],
+                   "skipped_slots": delta["skipped_slots"], **distribution(sent_intervals, rpi)},
+        "t_to_o": {"packets_per_s": round((len(received) + 1) / seconds, 1), "lost": delta["lost"],
+                   **distribution(received, rpi)},
+    }
+
+
+def sync_single_connection(port: int, io_port: int, seconds: float) -> dict[str, Any]:
+    """(a)'s connection opened from blocking code: the handle's loop runs in a background thread while
+    this thread reads the input every 10 ms."""
+    rpi = 0.001
+    with SyncScanner(f"127.0.0.1:{port}") as scanner, \
+            scanner.io_connection(output=21, input=71, rpi=rpi, target_io_port=io_port, keep_intervals=True,
+                                  timeout_multiplier=3) as io:
+        time.sleep(0.5)
+        connection = io.handle.connection
+        connection.interval_samples.clear()
+        connection.send_times.clear()
+        connection.last_arrival = None
+        stats_before = dict(io.handle.stats.as_dict())
+        end = time.monotonic() + seconds
+        reads = 0
+        while time.monotonic() < end:
+            _ = io.input.speed_actual
+            reads += 1
+            time.sleep(0.010)
+        received = list(connection.interval_samples)
+        sends = list(connection.send_times)
+        stats = io.handle.stats.as_dict()
+        expired = io.timed_out
+    return {"rpi_ms": rpi * 1e3, "seconds": seconds, "originator_watchdog_expired": expired, "input_reads": reads,
+            **_figures(connection, stats_before, stats, sends, received, rpi, seconds)}
+
+
+def sync_against_async(port: int, io_port: int, seconds: float, rounds: int = 3) -> dict[str, Any]:
+    """(c): the async handle and the sync one in turn, ``rounds`` times each for ``seconds`` / ``rounds``
+    (first one, then the other, by turns: a drift of the machine's load weighs on both alike); the
+    median share of each, and the gap in points."""
+    runs: dict[str, list[dict[str, Any]]] = {"async": [], "sync": []}
+    for index in range(rounds):
+        order = ("async", "sync") if index % 2 == 0 else ("sync", "async")
+        for kind in order:
+            runs[kind].append(run_precise(single_connection(port, io_port, seconds / rounds)) if kind == "async"
+                              else sync_single_connection(port, io_port, seconds / rounds))
+
+    def median_share(kind: str, direction: str) -> float:
+        return float(statistics.median(r[direction]["within_0.5ms_pct"] for r in runs[kind]))
+
+    summary = {kind: {direction: {"within_0.5ms_pct": median_share(kind, direction),
+                                  "lost": sum(r[direction].get("lost", 0) for r in runs[kind]),
+                                  "late": sum(r[direction].get("late", 0) for r in runs[kind])}
+                      for direction in ("o_to_t", "t_to_o")} for kind in runs}
+    gaps = {direction: round(abs(summary["sync"][direction]["within_0.5ms_pct"]
+                                 - summary["async"][direction]["within_0.5ms_pct"]), 2)
+            for direction in ("o_to_t", "t_to_o")}
+    return {**summary, "rounds": rounds, "gap_points": gaps,
+            "agrees": all(gap <= AGREEMENT_POINTS for gap in gaps.values())}
 
 
 async def station_limit(port: int, io_port: int, seconds: float, pid: int) -> dict[str, Any]:
@@ -166,7 +235,7 @@ def single_connection_captured(port: int, io_port: int, seconds: float) -> dict[
 def main(argv: Sequence[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--seconds", type=float, default=10.0, help="measured time of each part (default 10)")
-    parser.add_argument("--only", choices=["a", "b"], help="run one part")
+    parser.add_argument("--only", choices=["a", "b", "c"], help="run one part")
     parser.add_argument("--json", action="store_true", help="one JSON object instead of the text report")
     args = parser.parse_args(argv)
     port, io_port = free_port(), free_port()
@@ -175,6 +244,8 @@ def main(argv: Sequence[str] | None = None) -> int:
     try:
         if args.only in (None, "a"):
             results["a_one_connection_1ms"] = single_connection_captured(port, io_port, args.seconds)
+        if args.only in (None, "c"):
+            results["c_sync_against_async_1ms"] = sync_against_async(port, io_port, args.seconds)
         if args.only in (None, "b"):
             results["b_64_connections_10ms"] = run_precise(station_limit(port, io_port, args.seconds, adapter.pid))
     finally:
@@ -200,6 +271,17 @@ def main(argv: Sequence[str] | None = None) -> int:
         print(f"    O->T late {a['o_to_t']['late']}, skipped slots {a['o_to_t']['skipped_slots']}; "
               f"T->O lost {a['t_to_o']['lost']} (target 0); originator watchdog expired: "
               f"{a['originator_watchdog_expired']}")
+    c = results.get("c_sync_against_async_1ms")
+    if c:
+        print(f"(c) one connection, RPI 1.0 ms, {args.seconds:g} s each in {c['rounds']} turns: the async handle and "
+              "SyncScanner's (medians)")
+        for kind in ("async", "sync"):
+            figures = c[kind]
+            print(f"    {kind:<5} O->T within +-0.5 ms {figures['o_to_t'].get('within_0.5ms_pct')} %, T->O "
+                  f"{figures['t_to_o'].get('within_0.5ms_pct')} %, T->O lost {figures['t_to_o']['lost']}, "
+                  f"O->T late {figures['o_to_t']['late']}")
+        print(f"    gap O->T {c['gap_points']['o_to_t']} points, T->O {c['gap_points']['t_to_o']} points: "
+              f"{'within' if c['agrees'] else 'NOT within'} {AGREEMENT_POINTS:g} point")
     b = results.get("b_64_connections_10ms")
     if b:
         print(f"(b) {b['connections']} connections, RPI {b['rpi_ms']} ms, {b['seconds']} s")

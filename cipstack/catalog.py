@@ -7,6 +7,7 @@ standard ones, so a profile's attributes decode by the same declaration the emul
 from __future__ import annotations
 
 from collections.abc import Callable, Iterable, Mapping
+from dataclasses import dataclass
 
 from .assemblies.schema import AssemblySchema
 from .cip.model import AttributeSpec, ClassSpec
@@ -38,9 +39,45 @@ CLASS_ATTRIBUTES: dict[int, AttributeSpec] = {
 AttributeResolver = Callable[[int, int], "AttributeSpec | None"]
 
 
+@dataclass(frozen=True)
+class Parameter:
+    """A device parameter a recipe holds (``cipstack params``): where it is and how it is declared.
+
+    ``code`` is the manual's name for it (the ACG's keypad code ``dr.20``, the Omron function code
+    ``F002``, an EDS ``ParamN``); a catalog lists its parameters in the order they can be written
+    safely (the ones that bound the others' ranges first)."""
+
+    code: str
+    class_id: int
+    instance: int
+    attribute: int
+    spec: AttributeSpec
+
+    @property
+    def path(self) -> tuple[int, int, int]:
+        return self.class_id, self.instance, self.attribute
+
+    @property
+    def settable(self) -> bool:
+        return self.spec.access.settable
+
+
+#: What a catalog of the standard objects alone says of itself.
+STANDARD_ONLY = "the standard objects only"
+
+
 class Catalog:
+    """The declarations a scanner decodes replies and names class 1 fields with.
+
+    ``source`` says where they come from (a device profile, an EDS file, the standard objects
+    alone and why), so that an attribute or a field it does not know can say where it looked.
+    """
+
     def __init__(self, classes: Iterable[ClassSpec] = (), assemblies: Iterable[AssemblySchema] = (),
-                 resolvers: Mapping[int, AttributeResolver] | None = None) -> None:
+                 resolvers: Mapping[int, AttributeResolver] | None = None, source: str = STANDARD_ONLY,
+                 parameters: Iterable[Parameter] = (), profile: str | None = None) -> None:
+        #: Where the declarations come from, for messages: "profile acg (...)", "EDS file x.eds", ...
+        self.source = source
         self.classes: dict[int, ClassSpec] = dict(STANDARD_CLASSES)
         for spec in classes:
             self.classes[spec.class_id] = spec
@@ -49,9 +86,26 @@ class Catalog:
         #: Classes that declare their attributes per instance, instance 0 included (the Omron 0x64/0x65
         #: registers): what the device declares there is what a reply decodes by.
         self.resolvers: dict[int, AttributeResolver] = dict(resolvers or {})
+        #: The parameters a recipe holds, in a safe order to write them (empty: none declared).
+        self.parameters: tuple[Parameter, ...] = tuple(parameters)
+        #: The device profile these declarations are of (``acg``, ``mx2``, ``rx``), None otherwise.
+        self.profile = profile
 
     def add(self, spec: ClassSpec) -> None:
         self.classes[spec.class_id] = spec
+
+    def copy(self, source: str | None = None) -> Catalog:
+        """A catalog with the same declarations (shared: they are immutable) and tables of its own."""
+        other = Catalog(source=self.source if source is None else source)
+        other.classes = dict(self.classes)
+        other.assemblies = dict(self.assemblies)
+        other.resolvers = dict(self.resolvers)
+        other.parameters = self.parameters
+        other.profile = self.profile
+        return other
+
+    def __repr__(self) -> str:
+        return f"<Catalog: {self.source}>"
 
     def attribute(self, class_id: int, instance: int, attribute_id: int) -> AttributeSpec | None:
         resolve = self.resolvers.get(class_id)
@@ -63,6 +117,7 @@ class Catalog:
         return spec.instance_attribute(attribute_id) if spec is not None else None
 
     def get_all_layout(self, class_id: int) -> list[AttributeSpec] | None:
+        """The attributes of a Get_Attributes_All reply of ``class_id``, in order (None: unknown class)."""
         spec = self.classes.get(class_id)
         if spec is None:
             return None

@@ -14,6 +14,7 @@ import logging
 import struct
 from collections.abc import AsyncIterator, Iterator, Sequence
 from dataclasses import dataclass
+from pathlib import Path
 from typing import TYPE_CHECKING, Any, TypeVar
 
 from .catalog import Catalog
@@ -21,9 +22,11 @@ from .cip.epath import PortSegment, Segment, request_path
 from .cip.messages import MessageRouterRequest, MessageRouterResponse, Service
 from .cip.model import AttributeSpec
 from .cip.status import CipError, GeneralStatus
-from .cip.types import UINT, CipType
+from .cip.types import UINT, CipType, IntegerType
+from .cip.values import Value
 from .eip.identity_items import IdentityRecord, ServiceRecord
 from .eip.originator import (
+    DEFAULT_PORT,
     BlockingEncapsulationClient,
     EncapsulationClient,
     ExplicitClient,
@@ -33,11 +36,14 @@ from .eip.originator import (
     parse_host,
     run_blocking,
 )
+from .eip.replies import EncapsulationStatusError
 
 if TYPE_CHECKING:
     # Imported where used: explicit messaging alone does not load the EDS model or class 1.
+    from .assemblies.schema import AssemblySchema
     from .eds.model import EdsDocument
     from .eip.io_originator import IoConnectionHandle, OtFormat
+    from .sync_io import LoopThread, SyncIoConnection
 
 T = TypeVar("T")
 log = logging.getLogger(__name__)
@@ -48,7 +54,8 @@ UNDECODED = "(undecoded)"
 
 @dataclass(frozen=True)
 class AttributeValue:
-    """A read attribute: its raw bytes, and its value when the type is known."""
+    """A read attribute: its raw bytes, and its value when the type is known (``reading`` gives it
+    with its unit and scale)."""
 
     class_id: int
     instance: int
@@ -66,6 +73,20 @@ class AttributeValue:
         if self.type is None:
             return None
         return self.type.to_json(self.value)
+
+    @property
+    def reading(self) -> Value:
+        """The value with its declaration: raw, engineering value and unit (the bytes when unknown)."""
+        if self.type is None:
+            return Value(self.data, self.spec.name if self.spec is not None else "")
+        if self.spec is None:
+            return Value(self.value, "", self.type)
+        return Value(self.value, self.spec.name, self.type, self.spec.scaling)
+
+
+class UnknownAttributeError(TypeError):
+    """An attribute nothing declares where its type or scale is needed: the message names the
+    catalog looked in (``Catalog.source``) and what to give instead."""
 
 
 class ReplyDecodeError(ValueError):
@@ -91,27 +112,102 @@ def _malformed(what: str) -> Iterator[None]:
         raise MalformedReplyError(f"malformed {what}: {exc}") from None
 
 
-def _decode(cip_type: CipType | None, data: bytes) -> Any:
-    if cip_type is None:
-        return None
-    return cip_type.decode(data)
-
-
 class Scanner:
-    """Explicit messaging to one target (unconnected, routed or class 3)."""
+    """Explicit messaging and class 1 I/O with one target (unconnected, routed or class 3), async.
+
+    Open one with ``await Scanner.connect(host)``: it identifies the device and decodes every
+    reply by the declarations of its profile (``catalog``); ``read`` returns a ``Value`` with its
+    unit, ``write`` takes a raw value or, with ``scaled=True``, an engineering one.
+    """
 
     def __init__(self, client: ExplicitClient, catalog: Catalog | None = None,
                  route: Sequence[Segment] | None = None) -> None:
         self.client = client
+        #: The declarations replies decode by and class 1 fields are named by (``catalog.source`` says whose).
         self.catalog = catalog or Catalog()
         self.route = route
+        #: What the device said it is (``identify``), or None before (or without) identification.
+        self.identity: IdentityRecord | None = None
 
     @classmethod
     async def connect(cls, address: str, port: int | None = None, *, timeout: float = 5.0,
-                      catalog: Catalog | None = None, route: Sequence[Segment] | None = None) -> Scanner:
+                      catalog: Catalog | None = None, route: Sequence[Segment] | None = None,
+                      identify: bool = True, eds: str | Path | EdsDocument | None = None) -> Scanner:
+        """Connect to ``address`` (``"host"`` or ``"host:port"``) and register a session.
+
+        The catalog replies decode by is, first match: ``catalog``; the EDS file ``eds`` (a path or
+        a read ``EdsDocument``); the profile of the device's identity (``identify``, the default);
+        else the standard objects alone. ``route`` sends every request through Unconnected_Send
+        along that path (``backplane_route``, a CompoNet node behind a gateway: ``[PortSegment(2, b"\\x03")]``),
+        and identification then asks the routed device itself.
+        """
         host, parsed_port = parse_host(address)
         client = await EncapsulationClient.connect(host, port or parsed_port, timeout)
-        return cls(client, catalog, route)
+        scanner = cls(client, catalog, route)
+        try:
+            await scanner._choose_catalog(catalog, eds, identify)
+        except BaseException:
+            await scanner.close()
+            raise
+        return scanner
+
+    async def _choose_catalog(self, catalog: Catalog | None, eds: str | Path | EdsDocument | None,
+                              identify: bool) -> None:
+        if catalog is not None:
+            return
+        if eds is not None:
+            from .eds.catalog import catalog_from_eds
+
+            self.catalog = catalog_from_eds(eds)
+        elif identify:
+            await self.identify()
+
+    async def identify(self) -> IdentityRecord | None:
+        """Ask the device what it is and take the catalog of its profile; returns its identity.
+
+        ListIdentity over this TCP connection; where a device does not answer it (or when a
+        ``route`` leads past the device that would), Identity attributes 1-4 and 7 (vendor,
+        device type, product code, revision, product name). A device of no known profile gets
+        the standard objects, and ``catalog.source`` says so; one that answers neither keeps them
+        too, with the reason."""
+        from .devices.profiles import catalog_for
+
+        record = None
+        if not self.route:
+            try:
+                records = await self.client.list_identity()
+            except (EncapsulationStatusError, MalformedReplyError, asyncio.TimeoutError) as exc:
+                log.debug("ListIdentity over TCP: %s; reading the Identity object instead", exc)
+                records = []
+            record = records[0] if records else None
+        if record is None:
+            record = await self._identity_attributes()
+        self.identity = record
+        if record is None:
+            self.catalog = Catalog(source="the standard objects only: the device did not identify itself (no "
+                                          "ListIdentity reply, no Identity attributes 1 and 3); give eds= or catalog=")
+        else:
+            self.catalog = catalog_for(record.vendor_id, record.product_code)
+        return record
+
+    async def _identity_attributes(self) -> IdentityRecord | None:
+        """Identity attributes 1-4 and 7 (only vendor and product code are needed)."""
+        from .objects.identity import identity_spec
+
+        spec = identity_spec()
+        values: dict[int, Any] = {}
+        for attribute in (1, 3, 2, 4, 7):
+            declared = spec.instance_attribute(attribute)
+            try:
+                reply = await self.request(Service.GET_ATTRIBUTE_SINGLE, 0x01, 1, attribute)
+                values[attribute] = declared.type.decode(reply.data) if declared is not None else None
+            except (CipError, ValueError, struct.error, MalformedReplyError) as exc:
+                if attribute in (1, 3):
+                    log.debug("Identity attribute %d: %s", attribute, exc)
+                    return None
+        revision = values.get(4) or {}
+        return IdentityRecord(values[1], values.get(2) or 0, values[3],
+                              (revision.get("major", 0), revision.get("minor", 0)), 0, 0, values.get(7) or "")
 
     async def close(self) -> None:
         await self.client.close()
@@ -152,32 +248,76 @@ class Scanner:
 
     async def get_attribute_single(self, class_id: int, instance: int, attribute: int,
                                    cip_type: CipType | None = None) -> AttributeValue:
+        """Get_Attribute_Single: the reply's bytes, the value decoded by the declaration (or ``cip_type``)
+        and the declaration itself."""
+        data, value, value_type, spec = await self._get_single(class_id, instance, attribute, cip_type)
+        return AttributeValue(class_id, instance, attribute, data, value, spec, value_type)
+
+    async def _get_single(self, class_id: int, instance: int, attribute: int, cip_type: CipType | None
+                          ) -> tuple[bytes, Any, CipType | None, AttributeSpec | None]:
         reply = await self.request(Service.GET_ATTRIBUTE_SINGLE, class_id, instance, attribute)
         value_type, spec = self._type_for(class_id, instance, attribute, cip_type)
+        data = reply.data
+        if value_type is None:
+            return data, None, None, spec
         try:
-            value = _decode(value_type, reply.data)
+            return data, value_type.decode(data), value_type, spec
         except CipError as exc:
             where = f"0x{class_id:02X}/{instance}/{attribute}"
             if cip_type is not None:
-                raise ReplyDecodeError(f"{where} answered {len(reply.data)} bytes ({reply.data.hex(' ') or 'none'}), "
+                raise ReplyDecodeError(f"{where} answered {len(data)} bytes ({data.hex(' ') or 'none'}), "
                                        f"which do not decode as {cip_type.name}: {exc.message}") from None
             # The device differs from the declaration: tolerant as an originator, the raw bytes stand.
-            log.debug("%s: reply %s does not decode as declared (%s): %s", where, reply.data.hex(), value_type, exc)
-            return AttributeValue(class_id, instance, attribute, reply.data, None, spec, None)
-        return AttributeValue(class_id, instance, attribute, reply.data, value, spec, value_type)
+            log.debug("%s: reply %s does not decode as declared (%s): %s", where, data.hex(), value_type, exc)
+            return data, None, None, spec
 
-    async def read(self, class_id: int, instance: int, attribute: int, cip_type: CipType | None = None) -> Any:
-        """The decoded value (raw bytes when the type is unknown)."""
-        result = await self.get_attribute_single(class_id, instance, attribute, cip_type)
-        return result.value if result.known else result.data
+    async def read(self, class_id: int, instance: int, attribute: int, cip_type: CipType | None = None) -> Value:
+        """Get_Attribute_Single, decoded by the attribute's declaration (or ``cip_type``): a ``Value``
+        whose ``raw`` is the value on the wire, ``value`` the engineering value, ``unit`` its unit
+        (``str()`` gives ``5.0 s``). Undeclared and no ``cip_type``: ``raw`` is the reply's bytes."""
+        data, value, value_type, spec = await self._get_single(class_id, instance, attribute, cip_type)
+        if value_type is None:
+            return Value(data, spec.name if spec is not None else "")
+        if spec is None:
+            return Value(value, "", value_type)
+        return Value(value, spec.name, value_type, spec.scaling)
+
+    async def write(self, class_id: int, instance: int, attribute: int, value: Any, *, scaled: bool = False,
+                    cip_type: CipType | None = None) -> None:
+        """Set_Attribute_Single by the attribute's declaration (or ``cip_type``).
+
+        The rule: ``value`` is the raw value, as on the wire (an ``int`` for a scaled attribute:
+        ``write(0x2A, 1, 102, 50)`` is 5.0 s at 0.1 s per step), unless ``scaled=True``: then it is the
+        engineering value (``write(0x2A, 1, 102, 5.0, scaled=True)``), turned into raw steps by the
+        declaration; a value between two steps raises ``ValueError``. A ``Value`` writes its raw
+        value; ``bytes`` go as they are."""
+        value_type, spec = self._type_for(class_id, instance, attribute, cip_type)
+        if isinstance(value, Value):
+            value = value.raw
+        where = f"0x{class_id:02X}/{instance}/{attribute}"
+        if scaled:
+            if spec is None:
+                raise UnknownAttributeError(f"{where} is not declared in {self.catalog.source}: its scale is "
+                                            "unknown, give the raw value (no scaled=True)")
+            value = spec.scaling.to_raw(value)
+        elif isinstance(value, float) and isinstance(value_type, IntegerType):
+            if spec is not None and spec.scaling.scaled:
+                raise ValueError(f"{where} {spec.name} takes a raw integer ({spec.scaling.scale:g} {spec.unit} per "
+                                 f"step): give {value!r} with scaled=True, or the raw value")
+            if not value.is_integer():
+                raise ValueError(f"{where} is an integer ({value_type.name}), not {value!r}")
+            value = int(value)
+        await self.set_attribute_single(class_id, instance, attribute, value, cip_type)
 
     async def set_attribute_single(self, class_id: int, instance: int, attribute: int, value: Any,
                                    cip_type: CipType | None = None) -> None:
+        """Set_Attribute_Single of a raw value (or ``bytes``), encoded by the declaration or ``cip_type``."""
         value_type, _ = self._type_for(class_id, instance, attribute, cip_type)
         if isinstance(value, (bytes, bytearray)):
             data = bytes(value)
         elif value_type is None:
-            raise TypeError(f"type of 0x{class_id:02X}/{instance}/{attribute} unknown: give cip_type or bytes")
+            raise UnknownAttributeError(f"0x{class_id:02X}/{instance}/{attribute} is not declared in "
+                                        f"{self.catalog.source}: its type is unknown, give cip_type or bytes")
         else:
             data = value_type.encode(value)
         await self.request(Service.SET_ATTRIBUTE_SINGLE, class_id, instance, attribute, data)
@@ -222,7 +362,8 @@ class Scanner:
                     continue
                 value_type, spec = self._type_for(class_id, instance, attribute_id, None)
                 if value_type is None:
-                    raise _Unsplittable(f"attribute {attribute_id} has no known type: cannot split the list reply")
+                    raise _Unsplittable(f"attribute {attribute_id} is not declared in {self.catalog.source}: "
+                                        "cannot split the list reply")
                 value, end = value_type.decode_from(body, offset)
                 results[attribute_id] = AttributeValue(class_id, instance, attribute_id, body[offset:end], value,
                                                        spec, value_type)
@@ -237,7 +378,8 @@ class Scanner:
             if isinstance(value, (bytes, bytearray)):
                 encoded = bytes(value)
             elif value_type is None:
-                raise TypeError(f"type of attribute {attribute_id} unknown: give bytes")
+                raise UnknownAttributeError(f"0x{class_id:02X}/{instance}/{attribute_id} is not declared in "
+                                            f"{self.catalog.source}: its type is unknown, give bytes")
             else:
                 encoded = value_type.encode(value)
             out += UINT.encode(attribute_id) + encoded
@@ -281,7 +423,7 @@ class Scanner:
         schema = self.catalog.assemblies.get(instance)
         if schema is not None:
             return schema.size
-        return int(await self.read(0x04, instance, 4, UINT))
+        return int((await self.read(0x04, instance, 4, UINT)).raw)
 
     @contextlib.asynccontextmanager
     async def io_connection(self, output: int | None = None, input: int = 0, rpi: float = 0.010, *,
@@ -311,11 +453,25 @@ class Scanner:
             output_schema=self.catalog.assemblies.get(output) if output is not None else None,
             input_schema=self.catalog.assemblies.get(input), **options)
         async with context as handle:
+            handle.describe_schemas(self._schema_source(output, handle.output.schema),
+                                    self._schema_source(input, handle.input.schema))
             yield handle
 
+    def _schema_source(self, instance: int | None, schema: AssemblySchema | None, eds: str = "") -> str:
+        """Where an image's field names come from, or why it has none, for error messages."""
+        if instance is None:
+            return "a heartbeat connection sends no output data"
+        if schema is not None:
+            return f"assembly {instance} {schema.name!r} of {eds or self.catalog.source}"
+        declared = self.catalog.assemblies.get(instance)
+        if declared is not None:
+            return (f"assembly {instance} of {self.catalog.source} is {declared.size} bytes, not the size the "
+                    "connection opened with")
+        return f"no schema of assembly {instance} in {eds + ' nor in ' if eds else ''}{self.catalog.source}"
+
     @contextlib.asynccontextmanager
-    async def io_connection_from_eds(self, doc: EdsDocument, connection: int | str, rpi: float | None = None,
-                                     **options: Any) -> AsyncIterator[IoConnectionHandle]:
+    async def io_connection_from_eds(self, doc: EdsDocument | str | Path, connection: int | str,
+                                     rpi: float | None = None, **options: Any) -> AsyncIterator[IoConnectionHandle]:
         """The class 1 connection ``ConnectionN`` of an EDS describes, by number N or by name (field 13):
         ``async with scanner.io_connection_from_eds(doc, 1) as io``.
 
@@ -330,6 +486,11 @@ class Scanner:
         """
         from .eds.description import DEFAULT_RPI_US
         from .eds.interpret import read_view
+        from .eds.model import EdsDocument
+        from .eds.reader import read_eds
+
+        if not isinstance(doc, EdsDocument):
+            doc = read_eds(doc)
 
         if not isinstance(self.client, EncapsulationClient):
             raise TypeError("class 1 connections need the asyncio client (Scanner.connect)")
@@ -349,6 +510,9 @@ class Scanner:
             heartbeat=found.o_t_point if found.heartbeat else None, output_schema=output_schema,
             input_schema=input_schema, **options)
         async with context as handle:
+            source = f"the EDS file's Connection{found.number}"
+            handle.describe_schemas(self._schema_source(output, handle.output.schema, source),
+                                    self._schema_source(found.t_o_point, handle.input.schema, source))
             yield handle
 
     # -- encapsulation --------------------------------------------------------------------------
@@ -382,23 +546,121 @@ class SyncScanner:
     """Blocking twin of ``Scanner`` for scripts: the same methods, called without ``await``.
 
     It runs the same scanner code over a blocking socket (``BlockingEncapsulationClient``), with
-    no event loop in between, so a call costs little more than the socket round trip. Class 1
-    connections need an event loop: use the async ``Scanner`` for them.
+    no event loop in between, so a call costs little more than the socket round trip. It
+    identifies the device as ``Scanner.connect`` does (``catalog=``, ``eds=``, ``identify=``).
+    Class 1 connections (``io_connection``, ``io_connection_from_eds``) run on a private event
+    loop in a background thread, opened when first needed.
     """
 
     def __init__(self, address: str, port: int | None = None, *, timeout: float = 5.0,
-                 catalog: Catalog | None = None, route: Sequence[Segment] | None = None) -> None:
+                 catalog: Catalog | None = None, route: Sequence[Segment] | None = None,
+                 identify: bool = True, eds: str | Path | EdsDocument | None = None) -> None:
         host, parsed_port = parse_host(address)
         client = BlockingEncapsulationClient.connect(host, port or parsed_port, timeout)
+        self._address = (host, port or parsed_port, timeout)
         self._scanner = Scanner(client, catalog, route)
+        self._loop_thread: LoopThread | None = None
+        self._io: set[SyncIoConnection] = set()
+        try:
+            run_blocking(self._scanner._choose_catalog(catalog, eds, identify))
+        except BaseException:
+            self.close()
+            raise
 
     @property
     def scanner(self) -> Scanner:
+        """The ``Scanner`` this one runs (its methods are coroutines driven without an event loop)."""
         return self._scanner
 
+    @property
+    def catalog(self) -> Catalog:
+        """The declarations replies decode by (``catalog.source`` says whose)."""
+        return self._scanner.catalog
+
+    @property
+    def identity(self) -> IdentityRecord | None:
+        """What the device said it is, when it was identified."""
+        return self._scanner.identity
+
+    @property
+    def route(self) -> Sequence[Segment] | None:
+        return self._scanner.route
+
+    # The methods a script uses most, typed and documented here; any other ``Scanner`` coroutine
+    # method is reached through ``__getattr__`` and called the same way, without ``await``.
+    def read(self, class_id: int, instance: int, attribute: int, cip_type: CipType | None = None) -> Value:
+        """``Scanner.read``: the attribute's ``Value`` (raw, engineering value, unit)."""
+        return run_blocking(self._scanner.read(class_id, instance, attribute, cip_type))
+
+    def write(self, class_id: int, instance: int, attribute: int, value: Any, *, scaled: bool = False,
+              cip_type: CipType | None = None) -> None:
+        """``Scanner.write``: the raw value, or the engineering value with ``scaled=True``."""
+        run_blocking(self._scanner.write(class_id, instance, attribute, value, scaled=scaled, cip_type=cip_type))
+
+    def identify(self) -> IdentityRecord | None:
+        """``Scanner.identify``: ask the device again and take its profile's catalog."""
+        return run_blocking(self._scanner.identify())
+
+    def get_attribute_single(self, class_id: int, instance: int, attribute: int,
+                             cip_type: CipType | None = None) -> AttributeValue:
+        """``Scanner.get_attribute_single``: the reply's bytes with the decoded value and declaration."""
+        return run_blocking(self._scanner.get_attribute_single(class_id, instance, attribute, cip_type))
+
+    def set_attribute_single(self, class_id: int, instance: int, attribute: int, value: Any,
+                             cip_type: CipType | None = None) -> None:
+        """``Scanner.set_attribute_single``: a raw value (or bytes)."""
+        run_blocking(self._scanner.set_attribute_single(class_id, instance, attribute, value, cip_type))
+
+    def get_attributes_all(self, class_id: int, instance: int) -> tuple[bytes, dict[str, Any] | None]:
+        """``Scanner.get_attributes_all``: the raw reply and the values by attribute name."""
+        return run_blocking(self._scanner.get_attributes_all(class_id, instance))
+
+    def open_connection(self, rpi: float = 2.0, large: bool = True, connection_size: int = 500) -> None:
+        """``Scanner.open_connection``: later requests travel on a class 3 connection."""
+        run_blocking(self._scanner.open_connection(rpi, large, connection_size))
+
+    def close_connection(self) -> None:
+        run_blocking(self._scanner.close_connection())
+
+    # -- class 1 ---------------------------------------------------------------------------------------
+    def io_connection(self, output: int | None = None, input: int = 0, rpi: float = 0.010, **options: Any
+                      ) -> SyncIoConnection:
+        """A class 1 connection run by a private event loop in a background thread:
+        ``with scanner.io_connection(output=21, input=71, rpi=0.010) as io: io.update(run_forward=True)``.
+
+        Arguments as for ``Scanner.io_connection`` (``heartbeat``, ``config``, ``multicast``,
+        ``ot_format``, ``target_io_port``, ...); fields are named by this scanner's catalog. The
+        connection has a TCP session of its own; leaving the ``with`` block, ``close()`` on it, or
+        closing this scanner sends the Forward_Close."""
+        return self._open_io(lambda scanner: scanner.io_connection(output=output, input=input, rpi=rpi, **options))
+
+    def io_connection_from_eds(self, doc: EdsDocument | str | Path, connection: int | str, rpi: float | None = None,
+                               **options: Any) -> SyncIoConnection:
+        """``Scanner.io_connection_from_eds`` for synchronous code (``doc``: an EDS file or its path)."""
+        return self._open_io(lambda scanner: scanner.io_connection_from_eds(doc, connection, rpi, **options))
+
+    def _open_io(self, make: Any) -> SyncIoConnection:
+        from .sync_io import LoopThread, SyncIoConnection
+
+        if self._loop_thread is None:
+            self._loop_thread = LoopThread()
+        host, port, timeout = self._address
+        catalog, route, identity = self._scanner.catalog, self._scanner.route, self._scanner.identity
+
+        async def opener(stack: contextlib.AsyncExitStack) -> IoConnectionHandle:
+            client = await EncapsulationClient.connect(host, port, timeout)
+            scanner = Scanner(client, catalog, route)
+            scanner.identity = identity
+            stack.push_async_callback(scanner.close)
+            return await stack.enter_async_context(make(scanner))  # type: ignore[no-any-return]
+
+        opened = SyncIoConnection(self._loop_thread, opener, self._io.discard)
+        self._io.add(opened)
+        return opened
+
     def __getattr__(self, name: str) -> Any:
-        if name == "io_connection":
-            raise AttributeError("class 1 connections need an event loop: use the async Scanner")
+        if name.startswith("_"):
+            raise AttributeError(name)
         attribute = getattr(self._scanner, name)
         if not asyncio.iscoroutinefunction(attribute):
             return attribute
@@ -411,7 +673,16 @@ class SyncScanner:
         return call
 
     def close(self) -> None:
-        run_blocking(self._scanner.close())
+        """Close every class 1 connection opened here (Forward_Close), then the session."""
+        try:
+            for opened in list(self._io):
+                with contextlib.suppress(Exception):
+                    opened.close()
+            if self._loop_thread is not None:
+                self._loop_thread.stop()
+                self._loop_thread = None
+        finally:
+            run_blocking(self._scanner.close())
 
     def __enter__(self) -> SyncScanner:
         return self
@@ -419,6 +690,28 @@ class SyncScanner:
     def __exit__(self, *exc: object) -> None:
         self.close()
 
+    @staticmethod
+    def discover(address: str | Sequence[str] | None = None, port: int = DEFAULT_PORT,
+                 timeout: float = 2.0) -> list[IdentityRecord]:
+        """``discover_blocking``: who answers ListIdentity over UDP, without an event loop of yours."""
+        return discover_blocking(address, port, timeout)
 
-__all__ = ["UNDECODED", "AttributeValue", "ReplyDecodeError", "Scanner", "SyncScanner", "backplane_route", "discover",
-           "list_services_udp"]
+
+def discover_blocking(address: str | Sequence[str] | None = None, port: int = DEFAULT_PORT,
+                      timeout: float = 2.0) -> list[IdentityRecord]:
+    """``discover`` for synchronous code: every device that answers ListIdentity over UDP within
+    ``timeout`` seconds (``address`` None: every interface's broadcast address, loopback included)."""
+    from .sync_io import run_in_private_loop
+
+    return run_in_private_loop(discover(address, port, timeout))
+
+
+def componet_route(node: int) -> list[Segment]:
+    """Route path to CompoNet node ``node`` (0-63) behind a CompoNet gateway: port 2, link = node."""
+    if not 0 <= node <= 63:
+        raise ValueError(f"CompoNet node {node} out of range 0..63")
+    return [PortSegment(2, bytes((node,)))]
+
+
+__all__ = ["UNDECODED", "AttributeValue", "ReplyDecodeError", "Scanner", "SyncScanner", "UnknownAttributeError",
+           "Value", "backplane_route", "componet_route", "discover", "discover_blocking", "list_services_udp"]

@@ -71,7 +71,7 @@ async def test_scanner_runs_trips_resets_and_saves(scanner: Scanner, adapter: Ad
     seen: list[int] = []
     deadline = time.monotonic() + 3
     while time.monotonic() < deadline:
-        seen.append(await scanner.read(0x2A, 1, 7))
+        seen.append((await scanner.read(0x2A, 1, 7)).raw)
         if await scanner.read(0x2A, 1, 3) == 1:
             break
         await asyncio.sleep(0.02)
@@ -84,7 +84,7 @@ async def test_scanner_runs_trips_resets_and_saves(scanner: Scanner, adapter: Ad
     device.inject_trip(0x4200)                                           # OverHeat
     assert (await scanner.read(0x29, 1, 10), await scanner.read(0x29, 1, 13)) == (1, 0x4200)
     assert await scanner.read(0x29, 1, 6) == 6 and await scanner.read(0x2A, 1, 7) == 0
-    assert await scanner.read(1, 1, 5) & 0x0800
+    assert (await scanner.read(1, 1, 5)).raw & 0x0800
     await scanner.set_attribute_single(0x29, 1, 12, 1)                   # Drive Fault Reset 0 -> 1
     assert (await scanner.read(0x29, 1, 10), await scanner.read(0x29, 1, 6)) == (0, 3)
 
@@ -138,6 +138,6 @@ async def test_class1_21_71_ramps_and_lost_command(scanner: Scanner, adapter: Ad
             # later depends on the machine, so only the loop above bounds it.
             assert elapsed >= 1.2, elapsed
             assert await scanner.read(0x2A, 1, 7) == 0                   # free-run stop
-            assert await scanner.read(1, 1, 5) & 0x00F0 == 0x0050        # major fault
+            assert (await scanner.read(1, 1, 5)).raw & 0x00F0 == 0x0050        # major fault
     finally:
         await client.close()

@@ -69,8 +69,8 @@ def test_set_then_get(adapter_process: tuple[str, subprocess.Popen[str]]) -> Non
     address, _ = adapter_process
     result = run("set", address, "0xF5/1/13", "0x3c", "--type", "UINT", "--json")
     assert result.returncode == 0, result.stderr
-    assert json.loads(result.stdout) == {"status": 0, "path": "0xF5/1/13", "data": "3c00", "value": 60}
-    assert run("get", address, "0xF5/1/13").stdout.strip() == "Encapsulation Inactivity Timeout = 60"
+    assert json.loads(result.stdout) == {"status": 0, "path": "0xF5/1/13", "data": "3c00", "value": 60, "unit": "s"}
+    assert run("get", address, "0xF5/1/13").stdout.strip() == "Encapsulation Inactivity Timeout = 60 s"
     run("set", address, "0xF5/1/13", "120", "--type", "UINT")
 
 
@@ -81,7 +81,7 @@ def test_set_then_get(adapter_process: tuple[str, subprocess.Popen[str]]) -> Non
     (("set", "{a}", "0xF5/1/13", "70000", "--type", "UINT"), 2, "not a valid UINT"),
     (("set", "{a}", "0xF5/1/13", "x", "--type", "UINT"), 2, "not a valid UINT"),
     (("set", "{a}", "0xF5/1/13", "1", "--type", "FLOATY"), 2, "unknown CIP type"),
-    (("set", "{a}", "0xF5/1/13", "1"), 2, "--type"),
+    (("set", "{a}", "0x99/1/1", "1"), 2, "is not declared in profile acg"),   # nothing to take the type from
     (("get", "{a}", "1/1/zz"), 2, "not a number"),
     (("get", "{a}", "1"), 2, "CLASS/INSTANCE"),
     (("get", "127.0.0.1:notaport", "1/1/1"), 2, "bad port"),

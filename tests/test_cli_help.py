@@ -47,7 +47,8 @@ def commands(parser: argparse.ArgumentParser, path: tuple[str, ...] = ()) -> Ite
 def test_every_command_has_a_description_and_examples_that_parse() -> None:
     found = list(commands(build_parser(None)))
     assert {path[0] for path, _ in found} >= {"adapter", "fleet", "models", "componet", "discover", "identity",
-                                              "get", "set", "io", "drive", "eds", "capture", "completion"}
+                                              "get", "set", "io", "drive", "eds", "capture", "completion",
+                                              "params"}
     for path, parser in found:
         assert parser.description and len(parser.description.split()) >= 8, path
         examples = [line.strip() for line in (parser.epilog or "").splitlines() if line.startswith("  cipstack ")]
@@ -77,7 +78,7 @@ def test_cipstack_alone_lists_every_command_with_its_line_and_exits_2() -> None:
 
 
 @pytest.mark.parametrize(("argv", "prog", "message"), [
-    (["set", "127.0.0.1", "0xF5/1/13", "120"], "cipstack set", "the following arguments are required: --type"),
+    (["set", "127.0.0.1", "0xF5/1/13"], "cipstack set", "the following arguments are required: VALUE"),
     (["drive"], "cipstack drive", "the following arguments are required: COMMAND"),
     (["adapter", "--port", "x"], "cipstack adapter", "port: 'x' is not a number (decimal or 0x hex)"),
     (["eds", "generate", "--profile", "acg"], "cipstack eds generate",

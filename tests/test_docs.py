@@ -366,6 +366,7 @@ def shell_env(tmp_path: Path) -> dict[str, str]:
     env = dict(os.environ)
     env["PATH"] = f"{bin_dir}{os.pathsep}{env.get('PATH', '')}"
     env["PYTHONPATH"] = os.pathsep.join(p for p in (str(ROOT), env.get("PYTHONPATH", "")) if p)
+    env["XDG_DATA_HOME"] = str(tmp_path / "data")   # parameters a block saves stay in its test
     env.pop("COLUMNS", None)
     env["LC_ALL"] = "C.UTF-8"
     return env

@@ -466,7 +466,9 @@ def test_instance_zero_register_reply_from_its_wire_bytes() -> None:
     record = json.loads(declared.stdout)
     assert (record["value"], record["type"], record["data"]) == (1000, "UDINT", "e8030000")
     assert record["name"].startswith("F001 ")
-    assert typed.returncode == 0 and typed.stdout.startswith("F001 ") and typed.stdout.rstrip().endswith("= 1000")
+    # F001 is declared in 0.01 Hz (its register): the engineering value, its unit, then the raw value.
+    assert typed.returncode == 0 and typed.stdout.startswith("F001 ")
+    assert typed.stdout.rstrip().endswith("= 10.00 Hz (1000)")
     assert wrong.returncode == 2 and "0x15" not in one_line_error(wrong)
     assert "4 bytes (e8 03 00 00), which do not decode as UINT" in one_line_error(wrong)
 

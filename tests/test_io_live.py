@@ -133,7 +133,7 @@ async def test_kernel_arrival_times_through_the_scanner(adapter: Adapter) -> Non
 
 async def test_sizes_from_attribute_4_without_schema(adapter: Adapter) -> None:
     assert adapter.io_endpoint is not None
-    scanner = await Scanner.connect(f"127.0.0.1:{adapter.port}")  # no catalog: raw bytes
+    scanner = await Scanner.connect(f"127.0.0.1:{adapter.port}", identify=False)  # no catalog: raw bytes
     async with scanner, scanner.io_connection(output=20, input=70, rpi=0.004,
                                               target_io_port=adapter.io_endpoint.port) as io:
         io.output.raw = bytes.fromhex("0100e803")

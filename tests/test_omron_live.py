@@ -144,7 +144,7 @@ async def test_through_the_componet_gateway(gateway: Adapter, model_name: str) -
 
 
 async def _ready_in_area(scanner: Scanner) -> bool:
-    area = await scanner.read(4, 101, 3)
+    area = (await scanner.read(4, 101, 3)).raw
     return bool(area[2 * NODE] & 0x10) and not area[2 * NODE] & 0x01
 
 

@@ -21,7 +21,7 @@ from .epath import ApplicationPath
 from .messages import MessageRouterRequest, Service
 from .status import CipError, GeneralStatus
 from .types import UINT, CipType
-from .units import scaled_text
+from .values import Scaling
 
 if TYPE_CHECKING:
     from .router import RequestContext
@@ -61,6 +61,19 @@ class AttributeSpec:
     help: str = ""
     #: Part of the Get_Attributes_All reply.
     in_get_all: bool = True
+    #: Engineering value = (raw value + offset) x scale (an EDS ParamN's field 16; 0 for every device here).
+    offset: float = 0.0
+    #: Decimal places of the engineering value (None: those of ``scale``; an EDS ParamN's field 21).
+    decimals: int | None = None
+
+    @property
+    def scaling(self) -> Scaling:
+        """Unit, scale, offset, decimal places and enumeration: how a raw value reads."""
+        scaling = self.__dict__.get("_scaling")
+        if scaling is None:  # built once: every read of the attribute hands it to its Value
+            scaling = Scaling(self.unit, self.scale, self.offset, self.decimals, self.enum)
+            object.__setattr__(self, "_scaling", scaling)
+        return scaling
 
     def validate(self, value: Any) -> Any:
         """Check a value about to be stored: type (a BOOL is 0 or 1), declared range, enumeration
@@ -78,11 +91,8 @@ class AttributeSpec:
         return value
 
     def describe(self, value: Any) -> str:
-        if self.enum is not None and value in self.enum:
-            return f"{value} ({self.enum[value]})"
-        if isinstance(value, int) and not isinstance(value, bool):
-            return scaled_text(value, self.unit, self.scale)
-        return f"{value} {self.unit}".strip()
+        """A raw value as a person reads it (``5.0 s``): the scanner's ``Value`` text."""
+        return self.scaling.text(value)
 
 
 @dataclass(frozen=True)

@@ -101,24 +101,26 @@ async def _connect_identified(args: argparse.Namespace, standard: tuple[int, int
     attribute) asked for, which when a standard class declares it decodes by that declaration
     alone, as every profile's does: no identity is asked, and no profile loaded."""
     from ..catalog import STANDARD_CLASSES
-    from ..cip.types import UINT
     from ..scanner import Scanner
 
-    scanner = await Scanner.connect(args.target, timeout=args.timeout, route=parse_route(args.route))
+    eds = getattr(args, "eds", None)
+    doc = None
+    if eds is not None:
+        from .emulators import _read_eds_file
+
+        doc = _read_eds_file(eds)
+    scanner = await Scanner.connect(args.target, timeout=args.timeout, route=parse_route(args.route),
+                                    identify=False, eds=doc)
+    if doc is not None:
+        scanner.catalog.source = f"EDS file {eds}"
+        return scanner
     if standard is not None and standard[0] in STANDARD_CLASSES and scanner.catalog.attribute(*standard):
         return scanner
-    from ..devices.profiles import catalog_for
-
     try:
-        if scanner.route:
-            vendor, product = await scanner.read(1, 1, 1, UINT), await scanner.read(1, 1, 3, UINT)
-        else:
-            identities = await scanner.list_identity()
-            vendor, product = (identities[0].vendor_id, identities[0].product_code) if identities else (0, 0)
-    except Exception:
+        await scanner.identify()   # the library's own identification: one code path
+    except BaseException:
         await scanner.close()
         raise
-    scanner.catalog = catalog_for(vendor, product)
     return scanner
 
 
@@ -126,7 +128,7 @@ def cmd_get(args: argparse.Namespace) -> int:
     class_id, instance, attribute = parse_object_path(args.path)
     cip_type = parse_type(args.type)
 
-    async def run() -> dict[str, Any]:
+    async def run() -> tuple[dict[str, Any], str]:
         scanner = await _connect_identified(args, None if attribute is None else (class_id, instance, attribute))
         try:
             if args.connected:
@@ -136,30 +138,39 @@ def cmd_get(args: argparse.Namespace) -> int:
                 record: dict[str, Any] = {"status": 0, "data": data.hex()}
                 if values is not None:
                     record["value"] = {json_key(name): _jsonable(v) for name, v in values.items()}
-                return record
+                return record, ""
             result = await scanner.get_attribute_single(class_id, instance, attribute, cip_type)
             record = {"status": 0, "data": result.data.hex()}
+            reading = result.reading
             if result.known:
-                record["value"] = result.json_value()
+                record.update(reading.json())
                 record["type"] = result.type.name if result.type else None
             if result.spec is not None:
                 record["name"] = result.spec.name
-            return record
+            return record, _reading_text(reading)
         finally:
             await scanner.close()
 
-    record = asyncio.run(run())
+    record, text = asyncio.run(run())
     record["path"] = args.path
     if args.json:
         print(json.dumps(record), flush=True)
     elif "value" in record:
         name = f"{record['name']} = " if "name" in record else ""
         value = record["value"]
-        print(f"{name}{_value_text(value)}" if not isinstance(value, dict)
+        print(f"{name}{text}" if not isinstance(value, dict)
               else "\n".join(_member_text(k, v) for k, v in value.items()), flush=True)
     else:
         print(bytes.fromhex(record["data"]).hex(" ") or "(no data)", flush=True)
     return EXIT_OK
+
+
+def _reading_text(reading: Any) -> str:
+    """``5.0 s (50)``: the engineering value and unit, then the raw value when a scale makes them differ;
+    a string quoted, as Python writes it."""
+    if isinstance(reading.raw, str):
+        return repr(reading.raw)
+    return f"{reading} ({reading.raw})" if reading.scaled else str(reading)
 
 
 def json_key(name: str) -> str:
@@ -189,28 +200,52 @@ def _jsonable(value: Any) -> Any:
 
 
 def cmd_set(args: argparse.Namespace) -> int:
-    from ..scanner import Scanner
-
+    """Set_Attribute_Single. The value is raw (as on the wire) unless ``--scaled`` (the engineering value,
+    5.0 for 5.0 s); its type is the attribute's declaration, else ``--type``."""
     class_id, instance, attribute = parse_object_path(args.path, need_attribute=True)
     assert attribute is not None
-    cip_type = parse_type(args.type)
-    assert cip_type is not None
-    try:
-        value = cip_type.parse_text(args.value)
-        data = cip_type.encode(value)
-    except (ValueError, CipError) as exc:
-        raise UsageError(f"value {args.value!r} is not a valid {cip_type.name}: {exc}") from None
+    given_type = parse_type(args.type)
+    if given_type is not None and not args.scaled:
+        _parse_value(args, given_type, None)  # a bad value is refused before connecting
 
-    async def run() -> None:
-        scanner = await Scanner.connect(args.target, timeout=args.timeout, route=parse_route(args.route))
+    async def run() -> tuple[Any, Any, bytes]:
+        scanner = await _connect_identified(args, (class_id, instance, attribute))
         try:
+            spec = scanner.catalog.attribute(class_id, instance, attribute)
+            cip_type = given_type or (spec.type if spec is not None else None)
+            if cip_type is None:
+                raise UsageError(f"{args.path} is not declared in {scanner.catalog.source}: give --type (UINT, INT, "
+                                 "REAL, ...)" + (" or --eds FILE" if getattr(args, "eds", None) is None else ""))
+            raw = _parse_value(args, cip_type, spec)
+            data = cip_type.encode(raw)
             if args.connected:
                 await scanner.open_connection()
             await scanner.set_attribute_single(class_id, instance, attribute, data)
+            return spec, cip_type, data
         finally:
             await scanner.close()
 
-    asyncio.run(run())
-    _emit(args, {"status": 0, "path": args.path, "data": data.hex(), "value": cip_type.to_json(value)},
-          f"set {args.path} = {args.value}")
+    spec, cip_type, data = asyncio.run(run())
+    from ..cip.values import Scaling, Value
+
+    reading = Value(cip_type.decode(data), spec.name if spec is not None else "", cip_type,
+                    spec.scaling if spec is not None else Scaling())
+    name = f" {spec.name}" if spec is not None else ""
+    _emit(args, {"status": 0, "path": args.path, "data": data.hex(), **reading.json()},
+          f"set {args.path}{name} = {_reading_text(reading)}")
     return EXIT_OK
+
+
+def _parse_value(args: argparse.Namespace, cip_type: Any, spec: Any) -> Any:
+    """The raw value of ``args.value``: as ``cip_type`` reads text (BOOL: true/false/on/off/1/0), or with
+    ``--scaled`` an engineering value turned into raw steps by the declaration."""
+    try:
+        if getattr(args, "scaled", False):
+            if spec is None:
+                raise UsageError(f"--scaled: {args.path} has no declared scale (give the raw value)")
+            return spec.scaling.to_raw(float(args.value))
+        value = cip_type.parse_text(args.value)
+        cip_type.encode(value)
+        return value
+    except (ValueError, CipError, TypeError) as exc:
+        raise UsageError(f"value {args.value!r} is not a valid {cip_type.name}: {exc}") from None

@@ -117,12 +117,48 @@ COMMANDS: dict[tuple[str, ...], CommandText] = {
     ),
     ("set",): CommandText(
         "Set_Attribute_Single",
-        "Write an attribute with Set_Attribute_Single: VALUE encoded as --type (decimal or 0x hex for "
-        "integers; text for strings). A refused value prints the general and extended status.",
-        (("cipstack set 127.0.0.1 0x2A/1/102 100 --type UINT",
-          "the ACG's acceleration time to 10.0 s (in 0.1 s)"),
-         ("cipstack set 127.0.0.1 0xF5/1/13 120 --type UINT --connected",
-          "the encapsulation inactivity timeout to 120 s, over class 3")),
+        "Write an attribute with Set_Attribute_Single. VALUE is the raw value, as on the wire (decimal or "
+        "0x hex for integers, true/false/on/off for a BOOL, text for strings), unless --scaled: then it is "
+        "the engineering value, turned into raw steps by the attribute's declaration. The type is the "
+        "declaration's (the device's profile, or --eds FILE), else --type. A refused value prints the "
+        "general and extended status.",
+        (("cipstack set 127.0.0.1 0x2A/1/102 7.5 --scaled",
+          "the ACG's acceleration time to 7.5 s (75 steps of 0.1 s)"),
+         ("cipstack set 127.0.0.1 0x29/1/3 on", "the ACG's Forward Run Cmd. (a BOOL) on"),
+         ("cipstack set 127.0.0.1 0xF5/1/13 120 --connected",
+          "the encapsulation inactivity timeout to 120 s, over class 3"),
+         ("cipstack set 127.0.0.1 0x99/1/1 5 --type UINT", "an attribute nothing declares, as UINT")),
+    ),
+    ("params",): CommandText(
+        "drive parameter recipes: dump, load, diff (TOML files)",
+        "Drive parameter recipes: every parameter the device's profile (or --eds FILE) declares, with its "
+        "code, name, raw and engineering value and unit, in a TOML file; written back to another drive, "
+        "or compared with one.",
+        (("cipstack params dump 127.0.0.1 -o drive.toml", "the drive's parameters to drive.toml"),
+         ("cipstack params load 127.0.0.2 drive.toml", "the same parameters into a second drive, saved")),
+    ),
+    ("params", "dump"): CommandText(
+        "write every declared parameter to a TOML file",
+        "Read every parameter the device's profile (or --eds FILE) declares and write it to a TOML recipe "
+        "(standard output without -o): code, name, path, raw value, and the engineering value and unit "
+        "for the reader.",
+        (("cipstack params dump 127.0.0.1 -o drive.toml", "the ACG's 409 parameters to drive.toml"),),
+    ),
+    ("params", "load"): CommandText(
+        "write a recipe's parameters that differ, then save",
+        "Write the settable parameters of a recipe whose value on the device differs, in a safe order (the "
+        "ones that bound the others first: Max Freq on the ACG), then save them where the device has a "
+        "save command (the ACG's 0x03E0). Refused while the drive runs unless --force; a value the device "
+        "refuses is reported and the rest written (exit status 1).",
+        (("cipstack params load 127.0.0.1 drive.toml", "load and save"),
+         ("cipstack params load 127.0.0.1 drive.toml --force --no-save",
+          "load while the drive runs, without saving")),
+    ),
+    ("params", "diff"): CommandText(
+        "the recipe's parameters whose value on the device differs",
+        "Compare a recipe with the device: one line per parameter whose value differs, the device's and the "
+        "file's, each as engineering value and raw value. Exit status 1 when any differs, as diff's.",
+        (("cipstack params diff 127.0.0.1 drive.toml", "what changed on the drive since the dump"),),
     ),
     ("io",): CommandText(
         "open a class 1 connection, print input changes by field name",

@@ -9,7 +9,7 @@ import json
 import sys
 from typing import Any
 
-from ..cip.types import parse_int
+from ..cip.types import BOOL, parse_int
 from ..eip.originator import parse_host
 from .common import EXIT_OK, UsageError, parse_duration
 from .emulators import _read_eds_file
@@ -90,12 +90,14 @@ def _set_output(io: Any, name: str, value: str) -> None:
         if name == "raw":
             io.output.raw = bytes.fromhex(value)
         else:
-            setattr(io.output, name, parse_int(value))
-    except (AttributeError, ValueError) as exc:
-        fields = io.output.field_names
-        hint = (f" (output fields: {', '.join(sorted(fields))}, raw)" if fields
-                else " (no field names known: use raw=HEX)")
-        raise UsageError(f"--set {name}={value}: {exc}{hint}") from None
+            schema = io.output.schema
+            flag = schema is not None and name in schema.field_names and schema.field(name).bits == 1
+            # A flag takes true/false/on/off/1/0, as a BOOL attribute does (`cipstack set`).
+            setattr(io.output, name, BOOL.parse_text(value) if flag else parse_int(value))
+    except AttributeError as exc:
+        raise UsageError(f"--set {name}={value}: {exc}; or raw=HEX") from None
+    except ValueError as exc:
+        raise UsageError(f"--set {name}={value}: {exc}") from None
 
 
 def _statistics_text(stats: dict[str, Any]) -> str:
@@ -142,20 +144,16 @@ def _list_fields(args: argparse.Namespace, doc: Any) -> int:
         schemas = (view.schema(output) if output is not None else None, view.schema(connection.t_o_point))
         points = (output, connection.t_o_point)
     else:
-        from ..devices.profiles import catalog_for_identity
-        from ..eip.originator import EncapsulationClient
+        from ..scanner import Scanner
 
         async def identify() -> Any:
-            probe = await EncapsulationClient.connect(*parse_host(args.target), args.timeout, register=False)
-            try:
-                return await probe.list_identity()
-            finally:
-                await probe.close()
+            scanner = await Scanner.connect(args.target, timeout=args.timeout)  # identifies the device
+            await scanner.close()
+            return scanner.catalog
 
-        identities = asyncio.run(identify())
-        catalog = catalog_for_identity(identities[0]) if identities else None
+        catalog = asyncio.run(identify())
         output = None if args.heartbeat is not None else args.output
-        assemblies = catalog.assemblies if catalog is not None else {}
+        assemblies = catalog.assemblies
         schemas = (assemblies.get(output) if output is not None else None, assemblies.get(args.input))
         points = (output, args.input)
     for direction, schema, point in zip(("output (O->T)", "input (T->O)"), schemas, points, strict=True):
@@ -166,10 +164,8 @@ def _list_fields(args: argparse.Namespace, doc: Any) -> int:
 def cmd_io(args: argparse.Namespace) -> int:
     import signal
 
-    from ..devices.profiles import catalog_for_identity
     from ..eip.io_originator import OtFormat
     from ..eip.io_server import freeze_startup_objects, run_precise
-    from ..eip.originator import EncapsulationClient
     from ..scanner import Scanner
 
     doc = None
@@ -209,13 +205,8 @@ def cmd_io(args: argparse.Namespace) -> int:
     host, port = parse_host(args.target)
 
     async def session(loop: asyncio.AbstractEventLoop, stop: asyncio.Event, state: dict[str, bool]) -> int:
-        probe = await EncapsulationClient.connect(host, port, args.timeout, register=False)
-        try:
-            identities = await probe.list_identity()
-        finally:
-            await probe.close()
-        catalog = catalog_for_identity(identities[0]) if identities else None
-        scanner = await Scanner.connect(args.target, timeout=args.timeout, catalog=catalog)
+        # Identifies the device and takes its profile's declarations, or those of the EDS file given.
+        scanner = await Scanner.connect(f"{host}:{port}", timeout=args.timeout, eds=doc)
         options: dict[str, Any] = {"target_io_port": args.target_io_port, "local_io_port": args.io_port,
                                    "config_data": config_data}
         if args.ot_format is not None:

@@ -220,15 +220,27 @@ def build_parser(command: str | None = None) -> argparse.ArgumentParser:
     p.add_argument("--connected", action="store_true", help="use a class 3 connection")
     p.add_argument("--route", metavar="PORT/LINK[,...]",
                    help="route through the target (Unconnected_Send), e.g. 1/0 or 2/3 (CompoNet node 3)")
+    p.add_argument("--eds", metavar="FILE", help="decode by this EDS file's parameters (link paths, units, scaling) "
+                                                 "instead of the device's profile")
     p.set_defaults(func=cmd_get)
+
+    from .params import add_arguments as add_params_arguments
+
+    add_params_arguments(sub, _Parser, common)
 
     p = sub.add_parser("set")
     common(p)
     p.add_argument("path", metavar="CLASS/INSTANCE/ATTRIBUTE", help="decimal or 0x hex numbers: 0xF5/1/13")
-    p.add_argument("value", metavar="VALUE", help="the value, in the type --type names")
-    p.add_argument("--type", required=True, help="CIP type of the value (UINT, INT, REAL, SHORT_STRING, ...)")
+    p.add_argument("value", metavar="VALUE", help="the raw value, as on the wire (50 for 5.0 s at 0.1 s per step); "
+                                                  "BOOL also true/false/on/off")
+    p.add_argument("--type", help="CIP type of the value (UINT, INT, REAL, SHORT_STRING, ...); "
+                                  "default: the attribute's declaration")
+    p.add_argument("--scaled", action="store_true",
+                   help="VALUE is the engineering value (5.0 for 5.0 s), turned into raw steps by the declaration")
     p.add_argument("--connected", action="store_true", help="use a class 3 connection")
     p.add_argument("--route", metavar="PORT/LINK[,...]", help="route through the target (Unconnected_Send)")
+    p.add_argument("--eds", metavar="FILE", help="decode by this EDS file's parameters (link paths, units, scaling) "
+                                                 "instead of the device's profile")
     p.set_defaults(func=cmd_set)
 
     p = sub.add_parser("io")

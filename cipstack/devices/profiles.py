@@ -8,7 +8,8 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING
 
-from ..catalog import Catalog
+from ..catalog import Catalog, Parameter
+from ..cip.model import AttributeSpec
 from ..eip.identity_items import IdentityRecord
 from ..objects.identity import IdentityInfo
 from ..objects.tcpip import NetworkInterface
@@ -83,12 +84,38 @@ def _acg_catalog() -> Catalog:
     layout no CM setting changes, the speed outputs 20/21/100/101 and inputs 70/71/110/111 (seed 000
     instance tables), made as the device makes them."""
     from ..assemblies.acg import HZ_INPUTS, HZ_OUTPUTS, speed_input, speed_output
-    from .acg.objects import CATALOG_CLASSES, OUTPUT_FREQUENCY
-    from .acg.registers import SPEED_REFERENCE
+    from .acg.objects import (
+        AC_DC_DRIVE,
+        AC_DC_DRIVE_SPEC,
+        CATALOG_CLASSES,
+        KEYPAD_PARAMETERS,
+        OUTPUT_FREQUENCY,
+        keypad_parameter_spec,
+    )
+    from .acg.registers import ACG_REGISTERS, MAX_FREQUENCY, SPEED_REFERENCE, class64_path, class64_register
 
     outputs = [speed_output(i, SPEED_REFERENCE) for i in (20, 21, *HZ_OUTPUTS)]
     inputs = [speed_input(i, OUTPUT_FREQUENCY) for i in (70, 71, *HZ_INPUTS)]
-    return Catalog(CATALOG_CLASSES, [*outputs, *inputs])
+
+    def keypad(instance: int, attribute: int) -> AttributeSpec | None:
+        """Class 0x64 by the register behind it: its name, range, unit and scale (seed 000, class 0x64
+        "Identical to the ACG Manual Code number"; seed 001 tables)."""
+        register = class64_register(instance, attribute)
+        return keypad_parameter_spec(register) if register is not None and class64_path(register) else None
+
+    # A recipe: the keypad parameters the save command keeps (seed 001, 0x03E0), Max Freq first (it
+    # bounds every frequency parameter), the CM group last (it changes the network settings).
+    saved = [r for r in ACG_REGISTERS.values() if r.saved and r.access.writable and class64_path(r) is not None]
+    saved.sort(key=lambda r: (r is not MAX_FREQUENCY, r.group == "CM"))
+    parameters = [Parameter(r.code, KEYPAD_PARAMETERS, *class64_path(r), keypad_parameter_spec(r))  # type: ignore[misc]
+                  for r in saved]
+    # ACC and dEC are operation-group parameters with no class 0x64 address: AC/DC Drive attributes
+    # 102/103 mirror them (seed 000, "Value at DRV-03 (Acc Time)", "DRV-04 (Dec Time)").
+    ramps = [Parameter(code, AC_DC_DRIVE, 1, attribute, spec) for code, attribute in (("ACC", 102), ("dEC", 103))
+             if (spec := AC_DC_DRIVE_SPEC.instance_attribute(attribute)) is not None]
+    parameters[1:1] = ramps
+    return Catalog(CATALOG_CLASSES, [*outputs, *inputs], {KEYPAD_PARAMETERS: keypad}, parameters=parameters,
+                   profile="acg")
 
 
 def _omron(family: str, default_model: str) -> Callable[[NetworkInterface, DeviceLimits, ProfileOptions], Device]:
@@ -114,7 +141,16 @@ def _omron_catalog(default_model: str) -> Callable[[], Catalog]:
         resolvers = {class_id: (lambda instance, attribute, c=class_id: register_attribute(registers, c, instance,
                                                                                           attribute))
                      for class_id in (MODBUS_REGISTER, FUNCTION_CODE)}
-        return Catalog(device.catalog_classes(), device.schemas().values(), resolvers)
+        # A recipe: the function codes the inverter keeps in its EEPROM (seed 004, section E-2-2: class
+        # 0x65 instance/attribute = the function code number), A004 (maximum frequency) first.
+        parameters = []
+        for number, parameter in sorted(registers.by_number.items(), key=lambda item: item[1].code != "A004"):
+            if parameter.saved and parameter.access.writable and parameter.function_code_writable:
+                spec = register_attribute(registers, FUNCTION_CODE, number >> 8, number & 0xFF)
+                if spec is not None:
+                    parameters.append(Parameter(parameter.code, FUNCTION_CODE, number >> 8, number & 0xFF, spec))
+        return Catalog(device.catalog_classes(), device.schemas().values(), resolvers, parameters=parameters,
+                       profile=default_model.split("-")[0].lower())
 
     return catalog
 
@@ -146,15 +182,37 @@ def catalog_for_identity(identity: IdentityRecord) -> Catalog:
     return catalog_for(identity.vendor_id, identity.product_code)
 
 
-def catalog_for(vendor_id: int, product_code: int) -> Catalog:
+def profile_for(vendor_id: int, product_code: int) -> Profile | None:
+    """The profile a device with this vendor id and product code is, or None."""
     for profile in PROFILES.values():
         if profile.catalog is not None and vendor_id == profile.vendor_id and product_code in profile.product_codes:
-            return profile.catalog()
-    return Catalog()
+            return profile
+    return None
+
+
+#: Each profile's catalog, built once per process (the Omron ones build a device model, ~0.1 s):
+#: every scanner gets a copy of its own.
+_BUILT: dict[str, Catalog] = {}
+
+
+def catalog_for(vendor_id: int, product_code: int) -> Catalog:
+    """The catalog of the profile of (vendor id, product code); else the standard objects, with a
+    ``source`` that says no profile is known for them."""
+    profile = profile_for(vendor_id, product_code)
+    if profile is None or profile.catalog is None:
+        return Catalog(source=f"the standard objects only: no profile for vendor {vendor_id} product code "
+                              f"{product_code} (give eds= or catalog=)")
+    built = _BUILT.get(profile.name)
+    if built is None:
+        built = _BUILT[profile.name] = profile.catalog()
+    return built.copy(f"profile {profile.name} (vendor {vendor_id} product code {product_code}: "
+                      f"{profile.description})")
 
 
 def build_device(name: str = DEFAULT_PROFILE, interface: NetworkInterface | None = None,
                  limits: DeviceLimits | None = None, options: ProfileOptions | None = None) -> Device:
+    """The emulated device of profile ``name`` (``acg``, ``mx2``, ``rx``: ``PROFILES``), for an ``Adapter``
+    to serve: ``Adapter(AdapterSettings(port=0), device=build_device("mx2"))``."""
     from .base import DeviceLimits
 
     try:

@@ -22,6 +22,7 @@ from ..assemblies.schema import AssemblyField, AssemblySchema
 from ..cip.epath import ElectronicKey, LogicalSegment, LogicalType, PortSegment, decode_path
 from ..cip.status import CipError
 from ..cip.types import BY_CODE, UDINT, UINT, ULINT, USINT, CipType, IntegerType, RealType
+from ..cip.values import Scaling
 from ..eip.cm_messages import TriggerType
 from .generator import (
     EXCLUSIVE_OWNER,
@@ -76,8 +77,16 @@ class ParamInfo:
     unit: str = ""
     help: str = ""
     line: int = 0
-    #: Engineering value = raw x scale: fields 13-15 (multiplier x base / divider) with descriptor bit 2.
+    #: Engineering value = (raw + offset) x scale, scale = multiplier x base / divider (fields 13-16),
+    #: when descriptor bit 2 says the parameter scales.
     scale: float = 1.0
+    offset: float = 0.0
+    #: Field 21, the decimal places of the engineering value (None: not given).
+    decimals: int | None = None
+
+    @property
+    def scaling(self) -> Scaling:
+        return Scaling(self.unit, self.scale, self.offset, self.decimals, self.enum)
 
 
 @dataclass(frozen=True)
@@ -258,21 +267,29 @@ def _param(entry: Entry, enum_entry: Entry | None, issues: list[EdsIssue]) -> Pa
     minimum, maximum, default = (_number(entry.field(n)) if numeric else None for n in (10, 11, 12))
     if not numeric:
         default = _text(entry.field(12))
+    scale, offset, decimals = _scaling(entry, keyword, descriptor, issues) if numeric else (1.0, 0.0, None)
     return ParamInfo(keyword, _text(entry.field(7)), link, cip_type, size, not descriptor & 0x10, minimum, maximum,
                      default, enum or None, _text(entry.field(8)), _text(entry.field(9)), entry.line,
-                     _scale(entry, descriptor))
+                     scale, offset, decimals)
 
 
-def _scale(entry: Entry, descriptor: int) -> float:
-    """The scale of a parameter whose descriptor says it scales (bit 2): multiplier x base / divider
-    (fields 13-15; an empty field is 1). An offset (field 16) is not a scale: such a parameter is
-    left unscaled, as is one whose fields do not give a positive factor."""
+def _scaling(entry: Entry, keyword: str, descriptor: int, issues: list[EdsIssue]) -> tuple[float, float, int | None]:
+    """(scale, offset, decimal places) of a parameter whose descriptor says it scales (bit 2): fields
+    13-16 and 21, engineering = (raw + offset) x multiplier x base / divider (an empty field is 1, an
+    empty offset 0). Without bit 2 the parameter is unscaled; factors that are not positive, which
+    would make every value 0, infinite or reversed, are reported and left out."""
     if not descriptor & 0x04:
-        return 1.0
-    multiplier, divider, base = (_number(entry.field(n)) or 1 for n in (13, 14, 15))
-    if _number(entry.field(16)) or multiplier <= 0 or divider <= 0 or base <= 0:
-        return 1.0
-    return float(multiplier) * float(base) / float(divider)
+        return 1.0, 0.0, None
+    multiplier, divider, base = (_number(entry.field(n)) for n in (13, 14, 15))
+    offset, decimals = _number(entry.field(16)), _int(entry.field(21))
+    factors = [1 if factor is None else factor for factor in (multiplier, divider, base)]
+    if any(factor <= 0 for factor in factors):
+        issues.append(EdsIssue(entry.line, f"{keyword}: scaling multiplier/divider/base not positive: values left "
+                                           "unscaled"))
+        return 1.0, 0.0, None
+    if decimals is not None and not 0 <= decimals <= 15:
+        decimals = None
+    return float(factors[0]) * float(factors[2]) / float(factors[1]), float(offset or 0), decimals
 
 
 def _link(path: bytes) -> tuple[Link | None, str | None]:

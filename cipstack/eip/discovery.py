@@ -99,6 +99,8 @@ async def discover(address: str | Sequence[str] | None = None, port: int = DEFAU
 
 
 async def list_services_udp(address: str, port: int = DEFAULT_PORT, timeout: float = 1.0) -> list[ServiceRecord]:
+    """ListServices over UDP: what the device at ``address`` says it carries (CIP over TCP, class 0/1
+    over UDP), each reply that arrives within ``timeout`` seconds."""
     records: list[ServiceRecord] = []
     for body, addr in await udp_query(Command.LIST_SERVICES, address, port, timeout):
         try:

@@ -342,12 +342,18 @@ class IoOriginator:
 
 
 class ProcessImage:
-    """Assembly data with field access when the schema is known, raw bytes always."""
+    """Assembly data with field access when the schema is known, raw bytes always.
 
-    def __init__(self, buffer: bytearray, schema: AssemblySchema | None, writable: bool) -> None:
+    ``image.speed_reference`` reads a field, ``image.speed_reference = 900`` writes one (outputs
+    only), ``image.fields()`` decodes them all, ``image.raw`` is the bytes. A field the schema
+    does not have raises ``AttributeError`` naming the schema and its fields, or why none is known.
+    """
+
+    def __init__(self, buffer: bytearray, schema: AssemblySchema | None, writable: bool, where: str = "") -> None:
         object.__setattr__(self, "_buffer", buffer)
         object.__setattr__(self, "_schema", schema)
         object.__setattr__(self, "_writable", writable)
+        object.__setattr__(self, "_where", where)
 
     @property
     def raw(self) -> bytes:
@@ -362,19 +368,36 @@ class ProcessImage:
         self._buffer[:] = value
 
     @property
+    def schema(self) -> AssemblySchema | None:
+        """The assembly's declaration (None: raw bytes only)."""
+        return self._schema
+
+    @property
     def field_names(self) -> frozenset[str]:
         """The fields this image has by name (empty when no schema is known)."""
         return self._schema.field_names if self._schema is not None else frozenset()
 
     def fields(self) -> dict[str, Any]:
+        """Every field's value by name."""
         if self._schema is None:
-            raise AttributeError("no assembly schema known: use .raw")
+            raise AttributeError(self._no_field(None))
         return self._schema.decode(bytes(self._buffer))
+
+    def _no_field(self, name: str | None) -> str:
+        what = f"no field {name!r}" if name is not None else "no field names"
+        schema = self._schema
+        if schema is None:
+            why = self._where or "no assembly schema known"
+            return f"{what}: {why} (use .raw)"
+        where = self._where or f"assembly {schema.instance} {schema.name!r}"
+        return f"{what} in {where}; its fields: {', '.join(f.name for f in schema.fields)}"
 
     def __getattr__(self, name: str) -> Any:
         schema = self._schema
-        if schema is None or name not in schema.field_names:
-            raise AttributeError(f"no field {name!r}" + ("" if schema else " (no assembly schema known: use .raw)"))
+        if name.startswith("__") or schema is None or name not in schema.field_names:
+            if name.startswith("__"):
+                raise AttributeError(name)
+            raise AttributeError(self._no_field(name))
         return schema.decode(bytes(self._buffer))[name]
 
     def __setattr__(self, name: str, value: Any) -> None:
@@ -384,12 +407,25 @@ class ProcessImage:
         if not self._writable:
             raise AttributeError("input data is read-only")
         if self._schema is None or name not in self._schema.field_names:
-            raise AttributeError(f"no field {name!r}")
+            raise AttributeError(self._no_field(name))
         self._buffer[:] = self._schema.with_field(bytes(self._buffer), name, value)
 
     def update(self, **values: Any) -> None:
+        """Set several fields at once (``io.output.update(run_forward=True, speed_reference=900)``)."""
+        if not self._writable:
+            raise AttributeError("input data is read-only")
+        for name in values:
+            if self._schema is None or name not in self._schema.field_names:
+                raise AttributeError(self._no_field(name))
+        data = bytes(self._buffer)
         for name, value in values.items():
-            setattr(self, name, value)
+            data = self._schema.with_field(data, name, value)  # type: ignore[union-attr]
+        self._buffer[:] = data  # one assignment: a production sees all the fields or none
+
+    def __repr__(self) -> str:
+        if self._schema is None:
+            return f"ProcessImage(raw={self.raw.hex()!r})"
+        return "ProcessImage(" + ", ".join(f"{k}={v!r}" for k, v in self.fields().items()) + ")"
 
 
 class IoConnectionHandle:
@@ -402,8 +438,15 @@ class IoConnectionHandle:
         self.connection = connection
         self.output = ProcessImage(connection.output, output_schema, writable=True)
         self._input_schema = input_schema
+        self._input_where = ""
         #: What opening had to adapt to, one line each (e.g. a retry with the size the target asked for).
         self.notes: list[str] = []
+
+    def describe_schemas(self, output: str, input: str) -> None:
+        """Say where the output and input schemas come from (or why there is none), for the
+        message of a field name they do not have."""
+        object.__setattr__(self.output, "_where", output)
+        self._input_where = input
 
     @property
     def kernel_arrival_times(self) -> bool:
@@ -414,7 +457,7 @@ class IoConnectionHandle:
     def input(self) -> ProcessImage:
         self._check()
         return ProcessImage(bytearray(self.connection.input or bytes(self.connection.input_size)),
-                            self._input_schema, writable=False)
+                            self._input_schema, writable=False, where=self._input_where)
 
     @property
     def stats(self) -> IoStatistics:
@@ -450,7 +493,7 @@ class IoConnectionHandle:
             data = await queue.get()
             self._check()
             if data:
-                yield ProcessImage(bytearray(data), self._input_schema, writable=False)
+                yield ProcessImage(bytearray(data), self._input_schema, writable=False, where=self._input_where)
 
     async def wait_input(self, predicate: Any, timeout: float) -> ProcessImage:
         """Wait until ``predicate(input_image)`` is true (or raise ``asyncio.TimeoutError``)."""

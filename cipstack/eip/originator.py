@@ -54,6 +54,11 @@ MESSAGE_ROUTER_PATH = request_path(0x02, 1)
 
 _SEQ = struct.Struct("<H")
 _CONN_ID = struct.Struct("<I")
+_ITEM_LENGTH = struct.Struct("<H")
+#: A SendRRData body up to the Unconnected Data item's length: interface handle 0, timeout 0, item
+#: count 2, Null Address item (type 0, length 0), Unconnected Data item type 0x00B2.
+_RR_TWO_ITEMS = RR_PREFIX.pack(0, 0) + struct.pack("<HHHH", 2, ItemType.NULL_ADDRESS, 0, ItemType.UNCONNECTED_DATA)
+_RR_TWO_ITEMS_SIZE = len(_RR_TWO_ITEMS)
 
 
 def parse_host(text: str, default_port: int = DEFAULT_PORT) -> tuple[str, int]:
@@ -192,9 +197,14 @@ class ExplicitClient:
     # -- explicit messaging ---------------------------------------------------------------------
     async def send_rr_data(self, request: bytes, timeout: float | None = None) -> bytes:
         """Unconnected explicit request (SendRRData); returns the encoded message-router reply."""
-        items = (Item(ItemType.NULL_ADDRESS), Item(ItemType.UNCONNECTED_DATA, request))
-        body = RR_PREFIX.pack(0, 0) + encode_items(items)
+        # Interface handle 0, timeout 0, two items: Null Address, Unconnected Data (its length, the request).
+        body = _RR_TWO_ITEMS + _ITEM_LENGTH.pack(len(request)) + request
         _, reply = await self.exchange(Command.SEND_RR_DATA, body, timeout=timeout)
+        # The reply as nearly every target lays it out, read without building items; anything else
+        # (items in another order, an extra item, a count that lies) by the general decoder below.
+        if reply[:_RR_TWO_ITEMS_SIZE] == _RR_TWO_ITEMS and len(reply) == _RR_TWO_ITEMS_SIZE + 2 + int.from_bytes(
+                reply[_RR_TWO_ITEMS_SIZE:_RR_TWO_ITEMS_SIZE + 2], "little"):
+            return reply[_RR_TWO_ITEMS_SIZE + 2:]
         items = decode_reply("SendRRData reply", lambda: decode_items(reply, RR_PREFIX.size, strict=False))
         for item in items:
             if item.type == ItemType.UNCONNECTED_DATA:

@@ -77,7 +77,7 @@ async def ours():
     # A request routed through the CompoNet gateway (port 2) to the MX2 at node 5.
     from cipstack.cip.epath import PortSegment
 
-    gateway = await Scanner.connect(f"{GATEWAY}:44818", route=[PortSegment(2, bytes([5]))])
+    gateway = await Scanner.connect(f"{GATEWAY}:44818", route=[PortSegment(2, bytes([5]))], identify=False)
     async with gateway:
         vendor = await gateway.get_attribute_single(0x01, 1, 1)
     return {"owner": stats, "routed_vendor": repr(vendor)}

@@ -130,7 +130,7 @@ async def test_acg_input_assembly_shows_the_attributes_it_links() -> None:
     # Input 71 of the file: byte 1 is Drive State (0x29/6), byte 0 bit 4 Drive Ready (0x29/9).
     device = build_eds_device(parse_eds(profile_text("ACG-ET2")), INTERFACE)
     async with serving(device) as (_, scanner):
-        data = await scanner.read(4, 71, 3)
+        data = (await scanner.read(4, 71, 3)).raw
         assert data[1] == await scanner.read(0x29, 1, 6, USINT) == 3
         await scanner.set_attribute_single(0x29, 1, 3, 1, BOOL)  # Forward Run Cmd. is settable
         # Output 21 written over the network sets the attributes its members link.

@@ -215,25 +215,25 @@ def ours_exchange():
         result["missing_class"] = error_of(scanner.get_attribute_single, 0x77, 1, 1)
         result["all"] = scanner.get_attributes_all(1, 1)[0].hex()
         scanner.set_attribute_single(0xF5, 1, 13, 120, UINT)
-        result["read_back"] = scanner.read(0xF5, 1, 13)
+        result["read_back"] = scanner.read(0xF5, 1, 13).raw
         for large in (True, False):
             scanner.open_connection(large=large)
-            result[f"connected_large_{large}"] = [scanner.read(1, 1, 7),
+            result[f"connected_large_{large}"] = [scanner.read(1, 1, 7).raw,
                                                   error_of(scanner.get_attribute_single, 1, 1, 99)]
             scanner.close_connection()
         result["list_services"] = [s.name for s in scanner.list_services()]
         result["list_identity"] = [r.product_name for r in scanner.list_identity()]
     with SyncScanner(f"{ADAPTER}:{PORT}", route=backplane_route()) as scanner:
-        result["routed"] = scanner.read(1, 1, 7)
+        result["routed"] = scanner.read(1, 1, 7).raw
     result["cm_errors"] = asyncio.run(connection_manager_errors())
     result["discover"] = [(r.product_name, r.address.port) for r in asyncio.run(discover(ADAPTER, PORT, 1.0))]
     result["list_services_udp"] = [s.name for s in asyncio.run(list_services_udp(ADAPTER, PORT, 1.0))]
     with SyncScanner(f"{CPPPO}:{PORT}") as scanner:
         result["cpppo_list_services"] = [s.name for s in scanner.list_services()]
         scanner.set_attribute_single(0x2A, 1, 7, 1500, INT)
-        result["cpppo_tag"] = scanner.read(0x2A, 1, 7, INT)
+        result["cpppo_tag"] = scanner.read(0x2A, 1, 7, INT).raw
         scanner.open_connection()
-        result["cpppo_connected"] = scanner.read(1, 1, 7)
+        result["cpppo_connected"] = scanner.read(1, 1, 7).raw
     return result
 
 

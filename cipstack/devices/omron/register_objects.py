@@ -153,6 +153,7 @@ def register_attribute(registers: RegisterSet, class_id: int, instance: int, att
     if not (0 <= instance <= 0xFF and 0 <= attribute <= 0xFF):
         return None
     number = instance << 8 | attribute
+    index = 0
     if class_id == MODBUS_REGISTER:
         found = registers.word(number)
         if found is None:
@@ -169,4 +170,8 @@ def register_attribute(registers: RegisterSet, class_id: int, instance: int, att
         name = f"{parameter.key} {parameter.name}"
     else:
         return None
-    return AttributeSpec(attribute, name, cip_type, Access.GET_SET)
+    if index:
+        return AttributeSpec(attribute, name, cip_type, Access.GET_SET)
+    # The register's unit, scale and meanings (the tables of seed 004 and the inverter manuals).
+    return AttributeSpec(attribute, name, cip_type, Access.GET_SET, unit=parameter.unit, scale=parameter.scale,
+                         enum=parameter.enum)
