@@ -318,9 +318,15 @@ def _add_eds_commands(sub: Any) -> None:
                            parser_class=_Parser)
     q = eds.add_parser("check")
     add_check_arguments(q)
-    q.add_argument("--against", metavar="HOST[:PORT]", help="also compare [Device] with a live device's Identity")
+    q.add_argument("--against", metavar="HOST[:PORT]",
+                   help="also compare the file with a live device: [Device] with its Identity, every linked ParamN "
+                        "with its attribute, every AssemN with its size, every class 1 ConnectionN opened and closed")
     q.add_argument("--timeout", type=parse_duration, default=5.0, metavar="DURATION",
                    help="reply timeout with --against (default %(default)s s)")
+    q.add_argument("--target-io-port", type=lambda t: parse_number(t, "target io port"), default=2222,
+                   help="with --against: the device's class 1 UDP port (default 2222)")
+    q.add_argument("--no-connections", action="store_true",
+                   help="with --against: open no class 1 connection (read only)")
     q.set_defaults(func=cmd_eds_check)
     q = eds.add_parser("generate")
     add_generate_arguments(q)
