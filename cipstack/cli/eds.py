@@ -29,10 +29,9 @@ def cmd_eds_check(args: argparse.Namespace) -> int:
         return reports
 
     reports = asyncio.run(compare())
-    for path, report in reports.items():
-        print(f"{path}: {report.summary(args.against)}", flush=True)
     status = run_check(args, live={path: report.findings for path, report in reports.items()},
-                       identities={path: report.identity for path, report in reports.items()})
+                       identities={path: report.identity for path, report in reports.items()},
+                       live_summaries={path: report.summary(args.against) for path, report in reports.items()})
     return status if status != EXIT_UNREADABLE or reports else EXIT_UNREADABLE
 
 

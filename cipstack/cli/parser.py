@@ -238,7 +238,8 @@ def build_parser(command: str | None = None) -> argparse.ArgumentParser:
                    help="requested packet interval with its unit: 10ms, 500us, 0.5s (default: the EDS's with "
                         "--eds, else 10ms)")
     _complete(p.add_argument("--eds", metavar="FILE", help="open a connection this EDS file describes "
-                                                            "(with --connection)"), _FILE)
+                                                            "(with --connection), or take only field names from "
+                                                            "it (with --output/--input)"), _FILE)
     p.add_argument("--connection", metavar="N",
                    help="the ConnectionN of --eds to open, by number N or by name")
     p.add_argument("--set", action="append", metavar="FIELD=VALUE",
@@ -253,6 +254,10 @@ def build_parser(command: str | None = None) -> argparse.ArgumentParser:
     p.add_argument("--target-io-port", type=number("target io port"), metavar="N",
                    help="the target's class 1 UDP port (default: the port its Forward_Open reply names, else "
                         f"{DEFAULT_IO_PORT})")
+    p.add_argument("--multicast", action="store_true",
+                   help="ask T->O multicast (a listen-only connection needs an owner opened so); with --eds: "
+                        "the file's transport, and multicast when it allows both and the target refuses "
+                        "point-to-point (0x0108)")
     p.add_argument("--config", type=number("config"), metavar="N",
                    help="configuration assembly instance of the connection path (default 1)")
     p.add_argument("--config-data", metavar="HEX", help="configuration data sent in the Forward_Open (hex bytes)")

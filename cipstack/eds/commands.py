@@ -62,6 +62,7 @@ def run_check(
     stderr: TextIO | None = None,
     live: Mapping[str, list[Finding]] | None = None,
     identities: Mapping[str, Mapping[str, Any] | None] | None = None,
+    live_summaries: Mapping[str, str] | None = None,
 ) -> int:
     """Check every file, print its findings and one summary line; 0 when none has an error (with
     ``--strict``: nor a warning), 1 when one has, 2 when one cannot be read. ``identity`` is a
@@ -91,11 +92,16 @@ def run_check(
         counts = {severity: sum(f.severity == severity for f in findings) for severity in (ERROR, WARNING, INFO)}
         for severity, count in counts.items():
             totals[severity] += count
+        against = (live_summaries or {}).get(path)
         if as_json:
-            print(json.dumps({"file": path, "readable": True, "errors": counts[ERROR], "warnings": counts[WARNING],
-                              "notes": counts[INFO], "findings": [f.to_dict() for f in findings]},
-                             sort_keys=True), file=stdout)
+            record = {"file": path, "readable": True, "errors": counts[ERROR], "warnings": counts[WARNING],
+                      "notes": counts[INFO], "findings": [f.to_dict() for f in findings]}
+            if against is not None:
+                record["against"] = against
+            print(json.dumps(record, sort_keys=True), file=stdout)
         else:
+            if against is not None:
+                print(f"{path}: {against}", file=stdout)
             for finding in findings:
                 print(_format_finding(path, finding), file=stdout)
         failing = counts[ERROR] or (strict and counts[WARNING])

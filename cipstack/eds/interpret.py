@@ -158,6 +158,9 @@ class EdsView:
     assemblies: dict[str, AssemblyInfo] = field(default_factory=dict)
     connections: list[ConnectionInfo] = field(default_factory=list)
     issues: list[EdsIssue] = field(default_factory=list)
+    #: Why no class 1 connection is usable, when none is (no [Connection Manager]: a DeviceNet or
+    #: CompoNet file; or each ConnectionN skipped).
+    why_none: str = ""
 
     def connection(self, which: int | str) -> ConnectionInfo:
         """ConnectionN by its number N (``1``, ``"1"``, ``"Connection1"``) or by its name (field 13)."""
@@ -167,7 +170,7 @@ class EdsView:
         for item in self.connections:
             if (text.isdigit() and item.number == int(text)) or item.name == str(which):
                 return item
-        known = ", ".join(f"{c.number} ({c.name})" for c in self.connections) or "none usable"
+        known = ", ".join(f"{c.number} ({c.name})" for c in self.connections) or f"none usable: {self.why_none}"
         raise KeyError(f"no class 1 connection {which!r} in the EDS (known: {known})")
 
     def assembly_at(self, instance: int) -> AssemblyInfo | None:
@@ -682,7 +685,26 @@ def read_view(doc: EdsDocument) -> EdsView:
     params = read_params(doc, issues)
     assemblies = read_assemblies(doc, params, issues)
     connections = read_connections(doc, params, assemblies, issues)
-    return EdsView(params, place_assemblies(assemblies, connections, issues), connections, issues)
+    view = EdsView(params, place_assemblies(assemblies, connections, issues), connections, issues)
+    if not connections:
+        view.why_none = _why_no_connection(doc, issues)
+    return view
+
+
+def _why_no_connection(doc: EdsDocument, issues: list[EdsIssue]) -> str:
+    section = doc.get("Connection Manager")
+    if section is None:
+        classification = doc.get("Device Classification")
+        networks = [str(entry.value()) for entry in classification if entry.fields] if classification else []
+        network = next((n for n in networks if n in ("CompoNet", "DeviceNet", "ControlNet")), None)
+        if network is None and doc.get("IO_Info") is not None:
+            network = "DeviceNet"
+        kind = f"a {network} file" if network else "a DeviceNet or CompoNet file"
+        return (f"the file has no [Connection Manager] ({kind}: its I/O is not described as EtherNet/IP "
+                "connections); give --output N --input M to take only the field names from it")
+    skipped = [issue.message for issue in issues if re.match(r"Connection[0-9]+\b", issue.message)]
+    return "every ConnectionN was skipped (" + "; ".join(skipped) + ")" if skipped else \
+        "[Connection Manager] has no ConnectionN"
 
 
 __all__ = [

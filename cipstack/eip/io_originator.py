@@ -404,6 +404,8 @@ class IoConnectionHandle:
         self._input_schema = input_schema
         #: What opening had to adapt to, one line each (e.g. a retry with the size the target asked for).
         self.notes: list[str] = []
+        #: The multicast group T->O data comes from (the target's Sockaddr Info), None for point-to-point.
+        self.multicast_group: str | None = None
 
     @property
     def kernel_arrival_times(self) -> bool:
