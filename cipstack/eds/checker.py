@@ -286,6 +286,9 @@ class _Checker:
         assembly = doc.get("Assembly")
         for entry in assembly.entries if assembly else ():
             self.assemblies.setdefault(canonical_keyword(entry.keyword), entry)
+        # The sizes of assemblies written with an empty size, from their members (interpret's reading).
+        from .interpret import assembly_sizes
+        self.summed_sizes = assembly_sizes(doc)
 
     def report(self, rule: str, line: int, message: str, severity: str = ERROR) -> None:
         self.findings.append(Finding(rule, severity, line, message))
@@ -368,7 +371,7 @@ class _Checker:
             return  # Latin-1 (or already Unicode): read as written
         first = next(index for index, char in enumerate(text) if not char.isascii())
         line = text.count("\n", 0, first) + 1
-        sample = next((word for word in re.findall(r"[^\s\"',;=$]+", decoded) if not word.isascii()), "")
+        sample = next((word for word in re.findall(r"[^\s\"',;=$()]+", decoded) if not word.isascii()), "")
         self.report("encoding", line, f"the file is UTF-8 ({sample!r} on this line reads as "
                                       f"{sample.encode('utf-8').decode('latin-1')!r} in a Latin-1 tool)", INFO)
 
@@ -771,6 +774,9 @@ class _Checker:
             if size is None or assembly is None:
                 continue
             assembly_size = _int(assembly.field(3))
+            if assembly_size is None and assembly.field(3) is not None and assembly.field(3).kind is FieldKind.EMPTY:
+                # An empty size: the sum of the members (eds-pie: AssemExaN's size may be empty).
+                assembly_size = self.summed_sizes.get(canonical_keyword(assembly.keyword))
             parameters = _int(entry.field(2))
             variable_bit = {4: 1 << 1, 7: 1 << 3}.get(size_number, 0)
             if parameters is not None and parameters & variable_bit and assembly_size is not None \

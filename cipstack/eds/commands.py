@@ -181,7 +181,7 @@ def _value(entry: Entry | None, number: int = 1) -> Any:
     return None if item is None else _plain(item.value, item.kind)
 
 
-_ASSEMBLY = re.compile(r"Assem[0-9]+")
+_ASSEMBLY = re.compile(r"Assem(?:Exa)?[0-9]+")
 _CONNECTION = re.compile(r"Connection[0-9]+")
 
 
@@ -201,19 +201,25 @@ def summarize(doc: EdsDocument) -> dict[str, Any]:
     # (Revision, Object_Name, Number_Of_Static_Instances, ...).
     assembly_entries = [entry for entry in assembly_section if _ASSEMBLY.fullmatch(entry.keyword)] \
         if assembly_section else []
-    assemblies = [_assembly(entry, params) for entry in assembly_entries]
-    sizes = {entry.keyword: _value(entry, 3) for entry in assembly_entries}
+    # Sizes as the emulator reads them: a ParamN's default, the members' sum (AssemExaN, modular).
+    from .interpret import assembly_sizes
+
+    sizes: dict[str, Any] = {entry.keyword: _value(entry, 3) for entry in assembly_entries}
+    sizes.update(assembly_sizes(doc))
+    assemblies = [_assembly(entry, params, sizes) for entry in assembly_entries]
     manager = doc.get("Connection Manager")
     connections = [_connection(entry, sizes, params) for entry in manager
                    if _CONNECTION.fullmatch(entry.keyword)] if manager else []
     return {"identity": identity, "networks": networks, "assemblies": assemblies, "connections": connections}
 
 
-def _assembly(entry: Entry, params: Section | None) -> dict[str, Any]:
+def _assembly(entry: Entry, params: Section | None, sizes: Mapping[str, Any]) -> dict[str, Any]:
     members = []
     for size_item, member in zip(entry.fields[6::2], entry.fields[7::2], strict=False):
         reference = member.value if member.kind is FieldKind.KEYWORD else None
         bits = size_item.value if size_item.kind is FieldKind.INT else None
+        if bits is None and isinstance(sizes.get(reference or ""), int):
+            bits = sizes[reference] * 8   # an assembly member (its own: the instance's whole data)
         name = None
         if reference is not None and params is not None and (param := params.get(reference)) is not None:
             name = _value(param, 7)
@@ -224,7 +230,7 @@ def _assembly(entry: Entry, params: Section | None) -> dict[str, Any]:
         "keyword": entry.keyword,
         "name": _value(entry, 1),
         "path": _value(entry, 2),
-        "size": _value(entry, 3),
+        "size": sizes.get(entry.keyword, _value(entry, 3)),
         "members": members,
     }
 

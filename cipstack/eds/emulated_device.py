@@ -247,10 +247,12 @@ def _add_assemblies(device: EdsDevice, view: EdsView, issues: list[EdsIssue]) ->
     heartbeats = {c.o_t_point for c in view.connections if c.heartbeat}
     configs = {c.config for c in view.connections}
     points: dict[int, AssemblyPoint] = {}
+    # An assembly that is a member of another (a module's data in a modular station) needs no instance.
+    members = {m.reference for a in view.assemblies.values() for m in a.members if m.reference}
     for info in view.assemblies.values():
         if info.instance is None:
             # No path, and no connection names it (or names it twice: place_assemblies said so).
-            if not any(issue.line == info.line for issue in view.issues):
+            if info.keyword not in members and not any(issue.line == info.line for issue in view.issues):
                 issues.append(EdsIssue(info.line, f"{info.keyword} has no path and no connection names it: "
                                                   "not served"))
             continue
