@@ -51,6 +51,9 @@ class Expected:
     ethernetip: list[int] = field(default_factory=list)
 
 
+#: Connections of the 8-port IO-Link master python-ethernetip can open: the station owners and each
+#: port's owners (run/idle header, point-to-point allowed).
+ETHERNETIP_8PORT = [1, 4, 7, 10, *(13 + 6 * port + kind for port in range(8) for kind in (0, 3))]
 EXPECTED: dict[str, Expected] = {
     "devicenet_valve.eds": Expected(),
     "ez_style_comm_module.eds": Expected(offered=[1, 2, 3, 4], ethernetip=[2]),
@@ -83,7 +86,8 @@ EXPECTED: dict[str, Expected] = {
     "ez_style_iolink_master.eds": Expected(
         offered=[1, 2, 3, 4, 5, 6, 7, 8, 9, 10, 11, 12], ethernetip=[1, 4, 7, 10]),
     "vendor_modular_coupler.eds": Expected(
-        check_warnings=[(47, "keyword-case", "[Assembly] Object_Class_code is written Object_Class_Code (read as such)"),
+        check_warnings=[(47, "keyword-case",
+                         "[Assembly] Object_Class_code is written Object_Class_Code (read as such)"),
                         (56, "keyword-case",
                          "[Connection Manager] Object_Class_code is written Object_Class_Code (read as such)")],
         offered=[1, 2, 3, 4], ethernetip=[1, 4]),
@@ -98,6 +102,7 @@ EXPECTED: dict[str, Expected] = {
                  (162, "Connection6: transport 0x0001 is not class 1: skipped")],
         offered=[1, 2, 3, 4], ethernetip=[1, 2]),
     "vendor_plc_generic_adapter.eds": Expected(offered=[1, 2, 3, 4, 5, 6], ethernetip=[1, 4, 5]),
+    "vendor_iolink_master_8port.eds": Expected(offered=list(range(1, 61)), ethernetip=ETHERNETIP_8PORT),
 }
 WITH_CONNECTIONS = [path for path in FILES if read_eds(path).get("Connection Manager")]
 
@@ -270,7 +275,7 @@ class Adapter:
         for line in self.process.stderr:
             self.lines.append(line.rstrip("\n"))
 
-    def wait_for(self, pattern: str, timeout: float = 15.0) -> None:
+    def wait_for(self, pattern: str, timeout: float = 30.0) -> None:
         deadline = time.monotonic() + timeout
         while time.monotonic() < deadline:
             if any(re.search(pattern, line) for line in self.lines):
@@ -299,13 +304,17 @@ def _io(adapter: Adapter, number: int, duration: float, *more: str) -> subproces
         stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
 
 
+#: At most this many `cipstack io` processes at once (a file of 60 connections runs in rounds).
+ROUND_SIZE = 6
+
+
 def _rounds(connections: list[ConnectionInfo]) -> list[list[ConnectionInfo]]:
     """Connections that may run at once: one exclusive owner per output assembly in a round."""
     rounds: list[list[ConnectionInfo]] = []
     for connection in connections:
         for batch in rounds:
-            if connection.heartbeat or all(other.heartbeat or other.o_t_point != connection.o_t_point
-                                           for other in batch):
+            if len(batch) < ROUND_SIZE and (connection.heartbeat or all(
+                    other.heartbeat or other.o_t_point != connection.o_t_point for other in batch)):
                 batch.append(connection)
                 break
         else:
