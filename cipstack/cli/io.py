@@ -130,10 +130,14 @@ def _field_lines(direction: str, schema: Any, instance: int | None) -> list[str]
     return lines
 
 
-def _list_fields(args: argparse.Namespace, doc: Any) -> int:
+def _list_fields(args: argparse.Namespace, doc: Any, names_from: Any = None) -> int:
     """``--list-fields``: the output and input fields of the connection, by the names ``--set`` and the
     printed input take; from the EDS alone, or from the profile of the device's identity."""
-    if doc is not None:
+    if names_from is not None:
+        output = None if args.heartbeat is not None else args.output
+        schemas = (names_from.schema(output) if output is not None else None, names_from.schema(args.input))
+        points = (output, args.input)
+    elif doc is not None:
         from ..eds.interpret import read_view
 
         view = read_view(doc)
@@ -221,7 +225,7 @@ def cmd_io(args: argparse.Namespace) -> int:
     elif args.input is None:
         raise UsageError("give --input (or --eds FILE --connection N)")
     if args.list_fields:
-        return _list_fields(args, doc)
+        return _list_fields(args, doc, names_from)
     if args.ot_format == OtFormat.HEARTBEAT.value and doc is None and args.heartbeat is None:
         raise UsageError("--ot-format heartbeat sends no data: give --heartbeat POINT instead of --output")
     if args.config is not None and not 0 <= args.config <= 0xFFFF:

@@ -182,13 +182,29 @@ async def _connection(scanner: Scanner, doc: EdsDocument, connection: Connection
 
     try:
         if connection.kind == "listen only":
-            owner = next((o for o in owners if o.t_o_point == connection.t_o_point and o.t_o_multicast), None)
-            if owner is None:
+            candidates = [o for o in owners if o.t_o_point == connection.t_o_point and o.t_o_multicast]
+            refusals: list[str] = []
+            listened: list[bool] = []
+
+            async def listen() -> None:
+                listened.append(True)
+                await opened(connection.number, True, None)
+
+            for owner in candidates:
+                try:
+                    await opened(owner.number, True, listen)
+                except CipError as exc:
+                    if listened:
+                        raise   # the owner opened: the listener was refused
+                    refusals.append(f"Connection{owner.number}: {_status(exc)}")
+                    continue
+                break
+            else:
+                why = "; ".join(refusals) or "no connection of the file produces it by multicast"
                 _find(report, "live-connection", connection.line,
-                      f"{where}: listen only, and no connection of the file produces input {connection.t_o_point} "
-                      "by multicast for it to listen to: not opened", INFO)
+                      f"{where}: listen only, and nothing produces input {connection.t_o_point} by multicast for "
+                      f"it to listen to ({why}): not opened", INFO)
                 return
-            await opened(owner.number, True, lambda: opened(connection.number, True, None))
         else:
             await opened(connection.number, None, None)
     except CipError as exc:
