@@ -52,40 +52,39 @@ RULES: dict[str, str] = {
     "live-refused": "what the live device refuses without saying the file is wrong (noted)",
 }
 
-#: Where each rule comes from: the EDS specification (CIP Vol. 1, Chapter 7) as the open sources
-#: collected in shared/reference/eds.md describe it, what configuration tools and eds-pie accept,
-#: or the CIP objects a live device serves. ``docs/eds.md`` lists them with their severities.
+#: Where each rule comes from: the EDS specification (CIP Vol. 1, Chapter 7) as open sources describe
+#: it (EDS readers such as eds-pie, published files), what configuration tools and eds-pie accept, or
+#: the CIP objects a live device serves. ``docs/eds.md`` lists them with their severities.
 SOURCES: dict[str, str] = {
-    "required-section": "EDS spec: [File] and [Device] are required; [Device Classification] on all but DeviceNet "
-                        "(eds.md, Sections)",
-    "required-keyword": "EDS spec: the required entries of [File], [Device], [Device Classification] (eds.md, "
-                        "Sections); Catalog is optional as configuration tools accept files without it",
+    "required-section": "EDS spec: [File] and [Device] are required; [Device Classification] on all but DeviceNet",
+    "required-keyword": "EDS spec: the required entries of [File], [Device], [Device Classification]; Catalog is "
+                        "optional as configuration tools accept files without it",
     "duplicate-section": "EDS spec: a section appears once; a tool reads only one of two",
     "duplicate-keyword": "EDS spec: a keyword appears once in its section; a tool reads only one of two",
-    "section-order": "EDS spec: the order of the public sections (eds.md, Sections); tools read any order: warning",
-    "field-count": "EDS spec: fields per keyword (eds.md: ParamN 21 (+3), AssemN 6 + pairs, ConnectionN 15 "
+    "section-order": "EDS spec: the order of the public sections; tools read any order: warning",
+    "field-count": "EDS spec: fields per keyword (ParamN 21 (+3), AssemN 6 + pairs, ConnectionN 15 "
                    "(+2 CIP Safety))",
-    "field-type": "EDS spec: the data type of each field (eds.md; eds-pie's ethernetip_lib.json)",
-    "unquoted-value": "EDS spec: strings and EPATHs are quoted (eds.md, Lexical rules); read as what they "
+    "field-type": "EDS spec: the data type of each field (as eds-pie's ethernetip_lib.json lays them out)",
+    "unquoted-value": "EDS spec: strings and EPATHs are quoted (its lexical rules); read as what they "
                       "evidently are: warning",
-    "date-format": "EDS spec: dates mm-dd-yyyy (eds.md, Lexical rules)",
-    "time-format": "EDS spec: times hh:mm:ss (eds.md, Lexical rules)",
-    "revision-format": "EDS spec: the file revision is major.minor (eds.md, Lexical rules)",
-    "epath-format": "EDS spec: EPATHs are quoted hex bytes and [ParamN]; link path size counts them (eds.md, ParamN)",
+    "date-format": "EDS spec: dates mm-dd-yyyy (its lexical rules)",
+    "time-format": "EDS spec: times hh:mm:ss (its lexical rules)",
+    "revision-format": "EDS spec: the file revision is major.minor (its lexical rules)",
+    "epath-format": "EDS spec: EPATHs are quoted hex bytes and [ParamN]; link path size counts them",
     "device-classification": "EDS spec: ClassN names a network; other names are warned of",
-    "data-type": "CIP Vol. 1 Appendix C: data type codes (eds.md, Data type codes)",
-    "data-size": "EDS spec: ParamN field 6 is the size of the type of field 5 (eds.md, ParamN)",
-    "min-default-max": "EDS spec: ParamN fields 10-12 (eds.md, ParamN)",
+    "data-type": "CIP Vol. 1 Appendix C: data type codes",
+    "data-size": "EDS spec: ParamN field 6 is the size of the type of field 5",
+    "min-default-max": "EDS spec: ParamN fields 10-12",
     "value-range": "CIP Vol. 1 Appendix C: the range of each type; a tool clamps: warning",
     "param-reference": "EDS spec: a reference names an entry of the file",
-    "enum-reference": "EDS spec: EnumN follows its ParamN (eds.md, ParamN); a missing EnumN of an enumerated "
+    "enum-reference": "EDS spec: EnumN follows its ParamN ; a missing EnumN of an enumerated "
                       "ParamN shows numbers instead of names: warning",
     "assembly-reference": "EDS spec: a reference names an entry of the file",
-    "assembly-size": "EDS spec: AssemN member sizes add up to its size x 8 (eds.md, AssemN)",
-    "connection-size": "EDS spec: ConnectionN sizes are those of the formats it names (eds.md, ConnectionN)",
-    "connection-format": "EDS spec: ConnectionN fields 1 and 2 (eds.md, Field 1 bits); real-time format 5 is the "
+    "assembly-size": "EDS spec: AssemN member sizes add up to its size x 8",
+    "connection-size": "EDS spec: ConnectionN sizes are those of the formats it names",
+    "connection-format": "EDS spec: ConnectionN fields 1 and 2 (their bits); real-time format 5 is the "
                          "CIP Safety format, accepted on safety connections as certified safety files carry it",
-    "connection-path": "EDS spec: ConnectionN field 15, the connection points (eds.md, ConnectionN)",
+    "connection-path": "EDS spec: ConnectionN field 15, the connection points",
     "assembly-member": "EDS spec: members are parameters or other assemblies; an assembly naming itself is read "
                        "as its own data (an idiom of drive files), a loop through others has no size",
     "class-code": "CIP Vol. 1: the class codes of the object class sections",
@@ -93,9 +92,9 @@ SOURCES: dict[str, str] = {
                     "case: warning",
     "encoding": "EDS spec: text is ASCII/ISO 8859-1; a UTF-8 file shows its non-ASCII text garbled in a "
                 "Latin-1 tool: noted (info)",
-    "device-identity": "EDS spec: [Device] equals Identity attributes 1-4 and 7 (eds.md, Sections)",
+    "device-identity": "EDS spec: [Device] equals Identity attributes 1-4 and 7",
     "live-parameter": "EDS spec: ParamN field 3 is the path of the attribute it mirrors, fields 5, 6, 10, 11 its "
-                      "type, size and range (eds.md, ParamN); read with Get_Attribute_Single",
+                      "type, size and range ; read with Get_Attribute_Single",
     "live-assembly": "CIP Vol. 1 Assembly object: attribute 4 is the instance's size (attribute 3's length)",
     "live-connection": "CIP Vol. 1 Connection Manager: the Forward_Open's status and extended status",
     "live-refused": "CIP Vol. 1 general status (0x08 service not supported, ...): the device's choice, noted",

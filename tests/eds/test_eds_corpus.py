@@ -65,6 +65,8 @@ def test_at_least_95_percent_of_the_declared_class_1_connections_are_offered() -
     assert declared >= 120
     share = offered / declared
     assert share >= 0.95, f"{offered} of {declared} class 1 connections offered ({100 * share:.1f} %)"
+    docs = (Path(__file__).parents[2] / "docs" / "eds.md").read_text(encoding="utf-8")
+    assert f"the adapter offers {offered} of the {declared} class 1 connections" in docs
 
 
 # -- true errors planted into the corpus: each found, nothing else -------------------------------------------
