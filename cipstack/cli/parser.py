@@ -328,8 +328,9 @@ def _add_eds_commands(sub: Any) -> None:
                         "with its attribute, every AssemN with its size, every class 1 ConnectionN opened and closed")
     q.add_argument("--timeout", type=parse_duration, default=5.0, metavar="DURATION",
                    help="reply timeout with --against (default %(default)s s)")
-    q.add_argument("--target-io-port", type=lambda t: parse_number(t, "target io port"), default=2222,
-                   help="with --against: the device's class 1 UDP port (default 2222)")
+    q.add_argument("--target-io-port", type=lambda t: parse_number(t, "target io port"), metavar="N",
+                   help="with --against: the device's class 1 UDP port (default: the port its Forward_Open reply "
+                        "names, else 2222)")
     q.add_argument("--no-connections", action="store_true",
                    help="with --against: open no class 1 connection (read only)")
     q.set_defaults(func=cmd_eds_check)

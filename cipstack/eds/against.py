@@ -235,7 +235,7 @@ async def _guarded(step: Awaitable[T], report: LiveReport, what: str) -> T | Non
     return None
 
 
-async def compare_with_device(doc: EdsDocument, scanner: Scanner, *, target_io_port: int = 2222,
+async def compare_with_device(doc: EdsDocument, scanner: Scanner, *, target_io_port: int | None = None,
                               connections: bool = True) -> LiveReport:
     """Everything the module docstring lists, for one document."""
     report = LiveReport()
