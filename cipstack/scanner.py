@@ -21,7 +21,7 @@ from .catalog import Catalog
 from .cip.epath import PortSegment, Segment, request_path
 from .cip.messages import MessageRouterRequest, MessageRouterResponse, Service
 from .cip.model import AttributeSpec
-from .cip.status import CipError, GeneralStatus
+from .cip.status import CipError, ExtendedStatus, GeneralStatus
 from .cip.types import UINT, CipType, IntegerType
 from .cip.values import Value
 from .eip.identity_items import IdentityRecord, ServiceRecord
@@ -428,12 +428,16 @@ class Scanner:
     @contextlib.asynccontextmanager
     async def io_connection(self, output: int | None = None, input: int = 0, rpi: float = 0.010, *,
                             config: int = 1, heartbeat: int | None = None, output_size: int | None = None,
-                            input_size: int | None = None, **options: Any) -> AsyncIterator[IoConnectionHandle]:
+                            input_size: int | None = None, output_schema: AssemblySchema | None = None,
+                            input_schema: AssemblySchema | None = None,
+                            **options: Any) -> AsyncIterator[IoConnectionHandle]:
         """A class 1 connection: ``async with scanner.io_connection(output=21, input=71, rpi=0.010) as io``.
 
         Sizes come from the assembly schemas of a known profile, else from each assembly's
         attribute 4; fields are accessible by name when the schema is known (``io.output.run_forward``),
-        raw bytes always (``io.output.raw``). ``config`` is the configuration instance; ``options`` go
+        raw bytes always (``io.output.raw``); ``output_schema`` / ``input_schema`` name the fields (and
+        give the sizes) where the catalog does not (an EDS file's assemblies, say). ``config`` is the
+        configuration instance; ``options`` go
         to ``EncapsulationClient.io_connection`` (``config_data``, ``ot_format``, ``target_io_port``,
         ``local_io_port``, ``multicast``, ``timeout_multiplier``, ``run``, ``keep_intervals``,
         ``kernel_arrival_times``). Leaving the block by any way closes the connection (Forward_Close);
@@ -444,14 +448,18 @@ class Scanner:
             raise ValueError("give an output assembly, or a heartbeat point for input-only / listen-only")
         if not isinstance(self.client, EncapsulationClient):
             raise TypeError("class 1 connections need the asyncio client (Scanner.connect)")
+        if output_schema is None and output is not None:
+            output_schema = self.catalog.assemblies.get(output)
+        if input_schema is None:
+            input_schema = self.catalog.assemblies.get(input)
         if output_size is None:
-            output_size = 0 if output is None else await self.assembly_size(output)
+            output_size = 0 if output is None else (
+                output_schema.size if output_schema is not None else await self.assembly_size(output))
         if input_size is None:
-            input_size = await self.assembly_size(input)
+            input_size = input_schema.size if input_schema is not None else await self.assembly_size(input)
         context = self.client.io_connection(
             output, input, rpi, output_size=output_size, input_size=input_size, config=config, heartbeat=heartbeat,
-            output_schema=self.catalog.assemblies.get(output) if output is not None else None,
-            input_schema=self.catalog.assemblies.get(input), **options)
+            output_schema=output_schema if output is not None else None, input_schema=input_schema, **options)
         async with context as handle:
             handle.describe_schemas(self._schema_source(output, handle.output.schema),
                                     self._schema_source(input, handle.input.schema))
@@ -498,6 +506,10 @@ class Scanner:
         found = view.connection(connection)
         if rpi is None:
             rpi = (found.rpi_us or DEFAULT_RPI_US) / 1e6
+        # T->O as the file allows: multicast when it allows only that; when it allows both,
+        # point-to-point, and multicast when the target refuses that with 0x0108 (a listen-only
+        # point, say). An explicit ``multicast`` is asked as given.
+        may_retry = "multicast" not in options and found.t_o_multicast and found.t_o_point_to_point
         options.setdefault("multicast", found.t_o_multicast and not found.t_o_point_to_point)
         eds_format = _eds_ot_format(doc, found.number)
         if eds_format is not None:
@@ -505,11 +517,24 @@ class Scanner:
         output = None if found.heartbeat else found.o_t_point
         output_schema = None if output is None else (view.schema(output) or self.catalog.assemblies.get(output))
         input_schema = view.schema(found.t_o_point) or self.catalog.assemblies.get(found.t_o_point)
-        context = self.client.io_connection(
-            output, found.t_o_point, rpi, output_size=found.o_t_size, input_size=found.t_o_size, config=found.config,
-            heartbeat=found.o_t_point if found.heartbeat else None, output_schema=output_schema,
-            input_schema=input_schema, **options)
-        async with context as handle:
+        client = self.client
+
+        def context(multicast: bool) -> Any:
+            return client.io_connection(
+                output, found.t_o_point, rpi, output_size=found.o_t_size, input_size=found.t_o_size,
+                config=found.config, heartbeat=found.o_t_point if found.heartbeat else None,
+                output_schema=output_schema, input_schema=input_schema, **{**options, "multicast": multicast})
+
+        async with contextlib.AsyncExitStack() as stack:
+            try:
+                handle = await stack.enter_async_context(context(options["multicast"]))
+            except CipError as refused:
+                if not (may_retry and refused.general == GeneralStatus.CONNECTION_FAILURE
+                        and refused.extended[:1] == (ExtendedStatus.INVALID_NETWORK_CONNECTION_PARAMETER,)):
+                    raise
+                handle = await stack.enter_async_context(context(True))
+                handle.notes.append("the target refused point-to-point T->O (0x0108): multicast asked, which the "
+                                    "file allows")
             source = f"the EDS file's Connection{found.number}"
             handle.describe_schemas(self._schema_source(output, handle.output.schema, source),
                                     self._schema_source(found.t_o_point, handle.input.schema, source))

@@ -165,19 +165,26 @@ def test_argument_parsers() -> None:
 
 
 def test_eds_check_against_a_live_device(adapter_process: tuple[str, subprocess.Popen[str]], tmp_path: Path) -> None:
+    """The ACG's own EDS against the ACG emulator: no error; the sample file, written by hand for
+    the ACG, differs from the device in three parameters, and a ProdCode edited in it in one more."""
     from tests.eds.samples import ADAPTER_EDS
 
     address, _ = adapter_process
+    assert run("eds", "generate", "--profile", "acg", "-o", str(tmp_path)).returncode == 0
+    result = run("eds", "check", str(tmp_path / "ACG-ET2_1.01.eds"), "--against", address, "--no-connections")
+    assert result.returncode == 0, result.stdout + result.stderr
+    assert result.stdout.splitlines()[-1] == "1 file: 0 errors, 0 warnings"
     good = tmp_path / "acg.eds"
     good.write_text(ADAPTER_EDS)
-    result = run("eds", "check", str(good), "--against", address)
-    assert result.returncode == 0, result.stdout + result.stderr
     wrong = tmp_path / "other.eds"
     wrong.write_text(ADAPTER_EDS.replace("ProdCode = 100;", "ProdCode = 101;"))
-    result = run("eds", "check", str(wrong), "--against", address, "--json")
+    result = run("eds", "check", str(good), str(wrong), "--against", address, "--json", "--no-connections")
     assert result.returncode == 1
-    findings = [json.loads(line) for line in result.stdout.splitlines()]
-    assert [f["rule"] for f in findings] == ["device-identity"]
+    records = [json.loads(line) for line in result.stdout.splitlines()]
+    assert records[0]["against"].startswith(f"against {address}: identity by Get_Attributes_All, 4 parameters")
+    rules = {record["file"]: [f["rule"] for f in record["findings"] if f["severity"] == "error"]
+             for record in records if "file" in record}
+    assert rules == {str(good): ["live-parameter"] * 3, str(wrong): ["device-identity"] + ["live-parameter"] * 3}
     shown = run("eds", "show", str(good))
     assert shown.returncode == 0 and "CENT" in shown.stdout
     missing = run("eds", "check", str(tmp_path / "nope.eds"))

@@ -417,7 +417,10 @@ def test_section(section: Section, shell_env: dict[str, str], tmp_path: Path) ->
     if reason:
         pytest.skip(reason)
     work = tmp_path / "work"
-    work.mkdir()
+    # Commands and emulators name the EDS corpus as from the repository's root (docs/eds.md).
+    for where in (work, tmp_path):
+        (where / "tests" / "eds").mkdir(parents=True)
+        (where / "tests" / "eds" / "files").symlink_to(ROOT / "tests" / "eds" / "files")
     namespace = Namespace()
     try:
         with emulator(namespace, section.adapter, shell_env, tmp_path) as log:

@@ -9,8 +9,8 @@ from pathlib import Path
 
 import pytest
 
-from tests.test_readme import COMMAND_TIMEOUT, Namespace, _namespaces_available, emulator
-from tests.test_readme import shell_env as shell_env
+from tests.test_docs import COMMAND_TIMEOUT, Namespace, _namespaces_available, emulator
+from tests.test_docs import shell_env as shell_env
 
 EXAMPLES = Path(__file__).resolve().parents[1] / "examples"
 NETWORK_CONTROL = "cipstack adapter --param drv=4 --param Frq=8"

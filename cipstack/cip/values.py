@@ -161,6 +161,13 @@ class Value:
     def __bool__(self) -> bool:
         return bool(self.raw)
 
+    def __int__(self) -> int:
+        """The raw value, as ``==`` compares it: a count read is used as a count."""
+        return int(self.raw)
+
+    def __float__(self) -> float:
+        return float(self.raw)
+
     def json(self) -> dict[str, Any]:
         """A JSON record: ``value`` (raw, as the type writes it), and ``engineering``, ``unit``,
         ``meaning`` when the declaration gives them."""

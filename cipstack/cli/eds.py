@@ -3,27 +3,36 @@
 from __future__ import annotations
 
 import argparse
-
-from ..cip.status import CipError
+from typing import Any
 
 
 # -- EDS ----------------------------------------------------------------------------------------------------
 def cmd_eds_check(args: argparse.Namespace) -> int:
     from ..eds.commands import run_check
 
-    identity = None
-    if args.against:
-        from ..scanner import SyncScanner
+    if not args.against:
+        return run_check(args)
+    import asyncio
 
-        with SyncScanner(args.against, timeout=args.timeout) as scanner:
-            _, values = scanner.get_attributes_all(0x01, 1)
-        if values is None:
-            raise CipError(0x1F, message=f"{args.against}: Identity reply could not be decoded")
-        identity = {"vendor_id": values["Vendor ID"], "device_type": values["Device Type"],
-                    "product_code": values["Product Code"],
-                    "revision": (values["Revision"]["major"], values["Revision"]["minor"]),
-                    "product_name": values["Product Name"]}
-    return run_check(args, identity)
+    from ..eds.against import compare_with_device
+    from ..eds.commands import EXIT_UNREADABLE, load_quietly
+    from ..scanner import Scanner
+
+    async def compare() -> dict[str, Any]:
+        reports = {}
+        async with await Scanner.connect(args.against, timeout=args.timeout) as scanner:
+            for path in args.files:
+                doc = load_quietly(path)
+                if doc is not None:
+                    reports[path] = await compare_with_device(doc, scanner, target_io_port=args.target_io_port,
+                                                              connections=not args.no_connections)
+        return reports
+
+    reports = asyncio.run(compare())
+    status = run_check(args, live={path: report.findings for path, report in reports.items()},
+                       identities={path: report.identity for path, report in reports.items()},
+                       live_summaries={path: report.summary(args.against) for path, report in reports.items()})
+    return status if status != EXIT_UNREADABLE or reports else EXIT_UNREADABLE
 
 
 def cmd_eds_generate(args: argparse.Namespace) -> int:

@@ -132,10 +132,14 @@ def _field_lines(direction: str, schema: Any, instance: int | None) -> list[str]
     return lines
 
 
-def _list_fields(args: argparse.Namespace, doc: Any) -> int:
+def _list_fields(args: argparse.Namespace, doc: Any, names_from: Any = None) -> int:
     """``--list-fields``: the output and input fields of the connection, by the names ``--set`` and the
     printed input take; from the EDS alone, or from the profile of the device's identity."""
-    if doc is not None:
+    if names_from is not None:
+        output = None if args.heartbeat is not None else args.output
+        schemas = (names_from.schema(output) if output is not None else None, names_from.schema(args.input))
+        points = (output, args.input)
+    elif doc is not None:
         from ..eds.interpret import read_view
 
         view = read_view(doc)
@@ -161,6 +165,29 @@ def _list_fields(args: argparse.Namespace, doc: Any) -> int:
     return EXIT_OK
 
 
+@contextlib.asynccontextmanager
+async def _explained(opened: Any, args: argparse.Namespace) -> Any:
+    """The connection; a refusal that needs another connection first says which."""
+    from ..cip.status import CipError, ExtendedStatus
+
+    try:
+        handle = await opened.__aenter__()
+    except CipError as exc:
+        if exc.extended[:1] == (ExtendedStatus.NON_LISTEN_ONLY_NOT_OPENED,):
+            raise CipError(exc.general, exc.extended, message=(
+                f"{exc.message + ': ' if exc.message else ''}a listen-only connection receives the multicast of a "
+                "connection that already produces its input: an owner (exclusive owner or input only, opened with "
+                "--multicast) must produce first")) from None
+        raise
+    try:
+        yield handle
+    except BaseException:
+        if not await opened.__aexit__(*sys.exc_info()):
+            raise
+    else:
+        await opened.__aexit__(None, None, None)
+
+
 def cmd_io(args: argparse.Namespace) -> int:
     import signal
 
@@ -169,9 +196,15 @@ def cmd_io(args: argparse.Namespace) -> int:
     from ..scanner import Scanner
 
     doc = None
-    if args.eds is not None:
+    names_from = None   # --eds FILE --output N --input M: the file gives the field names only
+    if args.eds is not None and args.connection is None and args.input is not None:
+        from ..eds.interpret import read_view
+
+        names_from = read_view(_read_eds_file(args.eds))
+    elif args.eds is not None:
         if args.connection is None:
-            raise UsageError("--eds needs --connection N (a ConnectionN of the file, by number or name)")
+            raise UsageError("--eds needs --connection N (a ConnectionN of the file, by number or name), or "
+                             "--output N --input M to take only the field names from the file")
         if args.output is not None or args.input is not None or args.heartbeat is not None:
             raise UsageError("--eds takes the output, input and heartbeat from the file: give none of them")
         if args.config is not None:
@@ -188,7 +221,7 @@ def cmd_io(args: argparse.Namespace) -> int:
     elif args.input is None:
         raise UsageError("give --input (or --eds FILE --connection N)")
     if args.list_fields:
-        return _list_fields(args, doc)
+        return _list_fields(args, doc, names_from)
     if args.ot_format == OtFormat.HEARTBEAT.value and doc is None and args.heartbeat is None:
         raise UsageError("--ot-format heartbeat sends no data: give --heartbeat POINT instead of --output")
     if args.config is not None and not 0 <= args.config <= 0xFFFF:
@@ -213,18 +246,27 @@ def cmd_io(args: argparse.Namespace) -> int:
             options["ot_format"] = args.ot_format
         if args.timeout_multiplier is not None:
             options["timeout_multiplier"] = args.timeout_multiplier
+        if args.multicast:
+            options["multicast"] = True
         started = loop.time()
         if doc is not None:
             opened = scanner.io_connection_from_eds(doc, args.connection, rpi, **options)
         else:
             assert rpi is not None  # set above when no EDS is given
+            schemas: dict[str, Any] = {}
+            if names_from is not None:
+                output = None if args.heartbeat is not None else args.output
+                schemas = {"output_schema": names_from.schema(output) if output is not None else None,
+                           "input_schema": names_from.schema(args.input)}
             opened = scanner.io_connection(output=args.output, input=args.input, rpi=rpi, heartbeat=args.heartbeat,
-                                           config=1 if args.config is None else args.config, **options)
+                                           config=1 if args.config is None else args.config, **schemas, **options)
         latest: dict[str, Any] = {"image": None, "dirty": False}
-        async with scanner, opened as io:
+        async with scanner, _explained(opened, args) as io:
             state["opened"] = True
             for note in io.notes:
                 print(f"cipstack io: {note}", file=sys.stderr, flush=True)
+            if io.multicast_group is not None:
+                print(f"cipstack io: T->O multicast from {io.multicast_group}", file=sys.stderr, flush=True)
             for name, value in assignments:
                 _set_output(io, name, value)
             io.set_run(not args.idle)

@@ -253,7 +253,8 @@ def build_parser(command: str | None = None) -> argparse.ArgumentParser:
                    help="requested packet interval with its unit: 10ms, 500us, 0.5s (default: the EDS's with "
                         "--eds, else 10ms)")
     _complete(p.add_argument("--eds", metavar="FILE", help="open a connection this EDS file describes "
-                                                            "(with --connection)"), _FILE)
+                                                            "(with --connection), or take only field names from "
+                                                            "it (with --output/--input)"), _FILE)
     p.add_argument("--connection", metavar="N",
                    help="the ConnectionN of --eds to open, by number N or by name")
     p.add_argument("--set", action="append", metavar="FIELD=VALUE",
@@ -268,6 +269,10 @@ def build_parser(command: str | None = None) -> argparse.ArgumentParser:
     p.add_argument("--target-io-port", type=number("target io port"), metavar="N",
                    help="the target's class 1 UDP port (default: the port its Forward_Open reply names, else "
                         f"{DEFAULT_IO_PORT})")
+    p.add_argument("--multicast", action="store_true",
+                   help="ask T->O multicast (a listen-only connection needs an owner opened so); with --eds: "
+                        "the file's transport, and multicast when it allows both and the target refuses "
+                        "point-to-point (0x0108)")
     p.add_argument("--config", type=number("config"), metavar="N",
                    help="configuration assembly instance of the connection path (default 1)")
     p.add_argument("--config-data", metavar="HEX", help="configuration data sent in the Forward_Open (hex bytes)")
@@ -333,9 +338,16 @@ def _add_eds_commands(sub: Any) -> None:
                            parser_class=_Parser)
     q = eds.add_parser("check")
     add_check_arguments(q)
-    q.add_argument("--against", metavar="HOST[:PORT]", help="also compare [Device] with a live device's Identity")
+    q.add_argument("--against", metavar="HOST[:PORT]",
+                   help="also compare the file with a live device: [Device] with its Identity, every linked ParamN "
+                        "with its attribute, every AssemN with its size, every class 1 ConnectionN opened and closed")
     q.add_argument("--timeout", type=parse_duration, default=5.0, metavar="DURATION",
                    help="reply timeout with --against (default %(default)s s)")
+    q.add_argument("--target-io-port", type=lambda t: parse_number(t, "target io port"), metavar="N",
+                   help="with --against: the device's class 1 UDP port (default: the port its Forward_Open reply "
+                        "names, else 2222)")
+    q.add_argument("--no-connections", action="store_true",
+                   help="with --against: open no class 1 connection (read only)")
     q.set_defaults(func=cmd_eds_check)
     q = eds.add_parser("generate")
     add_generate_arguments(q)

@@ -41,14 +41,69 @@ RULES: dict[str, str] = {
     "connection-size": "a connection's O->T and T->O sizes are those of the assemblies it names",
     "connection-format": "a connection's trigger/transport and parameter words are consistent",
     "connection-path": "a connection path's connection points are those of the assemblies it names, and it has one",
-    "assembly-member": "an assembly does not contain itself",
+    "assembly-member": "an assembly does not contain itself through other assemblies (a loop)",
     "class-code": "an object class section's Object_Class_Code is that section's class",
     "keyword-case": "keywords are written in the specification's case (VendCode, not vendcode)",
+    "encoding": "the file's text is ASCII or Latin-1 (a UTF-8 file is noted: its non-ASCII text reads otherwise)",
     "device-identity": "[Device] matches the Identity object of the live device",
+    "live-parameter": "a linked ParamN's attribute exists on the live device with the file's size, in its range",
+    "live-assembly": "an AssemN's size is the live device's Assembly attribute 4",
+    "live-connection": "a class 1 ConnectionN opens on the live device as the file describes it",
+    "live-refused": "what the live device refuses without saying the file is wrong (noted)",
+}
+
+#: Where each rule comes from: the EDS specification (CIP Vol. 1, Chapter 7) as open sources describe
+#: it (EDS readers such as eds-pie, published files), what configuration tools and eds-pie accept, or
+#: the CIP objects a live device serves. ``docs/eds.md`` lists them with their severities.
+SOURCES: dict[str, str] = {
+    "required-section": "EDS spec: [File] and [Device] are required; [Device Classification] on all but DeviceNet",
+    "required-keyword": "EDS spec: the required entries of [File], [Device], [Device Classification]; Catalog is "
+                        "optional as configuration tools accept files without it",
+    "duplicate-section": "EDS spec: a section appears once; a tool reads only one of two",
+    "duplicate-keyword": "EDS spec: a keyword appears once in its section; a tool reads only one of two",
+    "section-order": "EDS spec: the order of the public sections; tools read any order: warning",
+    "field-count": "EDS spec: fields per keyword (ParamN 21 (+3), AssemN 6 + pairs, ConnectionN 15 "
+                   "(+2 CIP Safety))",
+    "field-type": "EDS spec: the data type of each field (as eds-pie's ethernetip_lib.json lays them out)",
+    "unquoted-value": "EDS spec: strings and EPATHs are quoted (its lexical rules); read as what they "
+                      "evidently are: warning",
+    "date-format": "EDS spec: dates mm-dd-yyyy (its lexical rules)",
+    "time-format": "EDS spec: times hh:mm:ss (its lexical rules)",
+    "revision-format": "EDS spec: the file revision is major.minor (its lexical rules)",
+    "epath-format": "EDS spec: EPATHs are quoted hex bytes and [ParamN]; link path size counts them",
+    "device-classification": "EDS spec: ClassN names a network; other names are warned of",
+    "data-type": "CIP Vol. 1 Appendix C: data type codes",
+    "data-size": "EDS spec: ParamN field 6 is the size of the type of field 5",
+    "min-default-max": "EDS spec: ParamN fields 10-12",
+    "value-range": "CIP Vol. 1 Appendix C: the range of each type; a tool clamps: warning",
+    "param-reference": "EDS spec: a reference names an entry of the file",
+    "enum-reference": "EDS spec: EnumN follows its ParamN ; a missing EnumN of an enumerated "
+                      "ParamN shows numbers instead of names: warning",
+    "assembly-reference": "EDS spec: a reference names an entry of the file",
+    "assembly-size": "EDS spec: AssemN member sizes add up to its size x 8",
+    "connection-size": "EDS spec: ConnectionN sizes are those of the formats it names",
+    "connection-format": "EDS spec: ConnectionN fields 1 and 2 (their bits); real-time format 5 is the "
+                         "CIP Safety format, accepted on safety connections as certified safety files carry it",
+    "connection-path": "EDS spec: ConnectionN field 15, the connection points",
+    "assembly-member": "EDS spec: members are parameters or other assemblies; an assembly naming itself is read "
+                       "as its own data (an idiom of drive files), a loop through others has no size",
+    "class-code": "CIP Vol. 1: the class codes of the object class sections",
+    "keyword-case": "EDS spec: keywords are case sensitive; configuration tools and eds-pie read them in any "
+                    "case: warning",
+    "encoding": "EDS spec: text is ASCII/ISO 8859-1; a UTF-8 file shows its non-ASCII text garbled in a "
+                "Latin-1 tool: noted (info)",
+    "device-identity": "EDS spec: [Device] equals Identity attributes 1-4 and 7",
+    "live-parameter": "EDS spec: ParamN field 3 is the path of the attribute it mirrors, fields 5, 6, 10, 11 its "
+                      "type, size and range ; read with Get_Attribute_Single",
+    "live-assembly": "CIP Vol. 1 Assembly object: attribute 4 is the instance's size (attribute 3's length)",
+    "live-connection": "CIP Vol. 1 Connection Manager: the Forward_Open's status and extended status",
+    "live-refused": "CIP Vol. 1 general status (0x08 service not supported, ...): the device's choice, noted",
 }
 
 ERROR = "error"
 WARNING = "warning"
+#: Noted, not wrong: neither fails a check nor counts as a warning (``--strict`` included).
+INFO = "info"
 
 
 @dataclass(frozen=True)
@@ -153,8 +208,10 @@ _TRANSPORT_CLASSES = 0x0000FFFF
 _TRIGGERS = 0x00070000
 _LISTEN_ONLY = 1 << 24
 # Real-time formats: 0 modeless, 1 zero length data, 3 heartbeat, 4 32-bit run/idle header;
-# 2 is accepted as files in use carry it, 5 to 7 are reserved.
+# 2 is accepted as files in use carry it, 5 is CIP Safety's, 6 and 7 are reserved.
 _REAL_TIME_FORMATS = frozenset({0, 1, 2, 3, 4})
+#: Format 5: CIP Safety (an ODVA-certified safety I/O file carries it on its safety connections).
+_SAFETY_FORMAT = 5
 _HEARTBEAT_ONLY = (1, 3)
 _MULTICAST_T_TO_O = 1 << 21
 _INSTANCE = 1
@@ -180,17 +237,34 @@ _KNOWN_KEYWORDS = {keyword.lower(): keyword for keyword in (
     "Catalog", "ModDate", "ModTime", "Revision", "Object_Name", "Object_Class_Code", "Number_Of_Static_Instances",
     "Max_Instance",
 )}
-_NUMBERED = re.compile(r"(param|enum|assem|connection|group|port)([0-9]+)", re.IGNORECASE)
+_NUMBERED_PREFIXES = {prefix.lower(): prefix for prefix in (
+    "Param", "Enum", "Assem", "AssemExa", "ProxyAssem", "ProxiedAssem", "Connection", "Group", "Port", "TSpec",
+    "Class",
+)}
+_NUMBERED = re.compile(r"([a-z]+)([0-9]+)", re.IGNORECASE)
 
 
 def _numbered_keyword(keyword: str) -> str | None:
     """``param12`` -> ``Param12`` (the spelling of a numbered keyword), or None."""
     match = _NUMBERED.fullmatch(keyword)
-    return None if match is None else match[1].capitalize() + match[2]
+    prefix = None if match is None else _NUMBERED_PREFIXES.get(match[1].lower())
+    return None if prefix is None or match is None else prefix + match[2]
+
+
+def canonical_keyword(keyword: str) -> str:
+    """A keyword in the specification's spelling (``Object_Class_code`` -> ``Object_Class_Code``,
+    ``param3`` -> ``Param3``); configuration tools read keywords in any case, and so does the checker
+    (it warns of the case once, under ``keyword-case``)."""
+    return _KNOWN_KEYWORDS.get(keyword.lower()) or _numbered_keyword(keyword) or keyword
 
 
 def _reference(item: Field | None) -> str | None:
-    return item.value if item is not None and item.kind is FieldKind.KEYWORD else None
+    return canonical_keyword(item.value) if item is not None and item.kind is FieldKind.KEYWORD else None
+
+
+def _get(section: Section, keyword: str) -> Entry | None:
+    """The entry of ``keyword`` in any case (the first one)."""
+    return next((entry for entry in section.entries if canonical_keyword(entry.keyword) == keyword), None)
 
 
 class _Checker:
@@ -203,13 +277,17 @@ class _Checker:
         self.assemblies: dict[str, Entry] = {}
         params = doc.get("Params")
         for entry in params.entries if params else ():
-            if _PARAM.fullmatch(entry.keyword):
-                self.params.setdefault(entry.keyword, entry)
-            elif _ENUM.fullmatch(entry.keyword):
-                self.enums.setdefault(entry.keyword, entry)
+            keyword = canonical_keyword(entry.keyword)
+            if _PARAM.fullmatch(keyword):
+                self.params.setdefault(keyword, entry)
+            elif _ENUM.fullmatch(keyword):
+                self.enums.setdefault(keyword, entry)
         assembly = doc.get("Assembly")
         for entry in assembly.entries if assembly else ():
-            self.assemblies.setdefault(entry.keyword, entry)
+            self.assemblies.setdefault(canonical_keyword(entry.keyword), entry)
+        # The sizes of assemblies written with an empty size, from their members (interpret's reading).
+        from .interpret import assembly_sizes
+        self.summed_sizes = assembly_sizes(doc)
 
     def report(self, rule: str, line: int, message: str, severity: str = ERROR) -> None:
         self.findings.append(Finding(rule, severity, line, message))
@@ -217,6 +295,7 @@ class _Checker:
     def run(self) -> list[Finding]:
         for line, what in self.doc.reader_notes:
             self.report("unquoted-value", line, what, WARNING)
+        self.check_encoding()
         self.check_sections()
         per_section: dict[str, Callable[[Section], None]] = {
             "File": self.check_file,
@@ -260,7 +339,7 @@ class _Checker:
             if section is None:
                 continue
             for keyword in keywords:
-                if keyword not in section:
+                if _get(section, keyword) is None:
                     self.report("required-keyword", section.line, f"[{name}] lacks {keyword}")
         self.check_order()
 
@@ -278,10 +357,27 @@ class _Checker:
             elif latest is None or SECTION_ORDER.index(section.name) > SECTION_ORDER.index(latest.name):
                 latest = section
 
+    def check_encoding(self) -> None:
+        """A file whose non-ASCII bytes are UTF-8 is noted: the reader (like the Latin-1 tools) reads
+        each of its bytes as one character, so "Ü" reads as two."""
+        source = self.doc.source
+        text = source.text if source is not None else ""
+        if text.isascii():
+            return
+        try:
+            decoded = text.encode("latin-1").decode("utf-8")
+        except (UnicodeEncodeError, UnicodeDecodeError):
+            return  # Latin-1 (or already Unicode): read as written
+        first = next(index for index, char in enumerate(text) if not char.isascii())
+        line = text.count("\n", 0, first) + 1
+        sample = next((word for word in re.findall(r"[^\s\"',;=$()]+", decoded) if not word.isascii()), "")
+        self.report("encoding", line, f"the file is UTF-8 ({sample!r} on this line reads as "
+                                      f"{sample.encode('utf-8').decode('latin-1')!r} in a Latin-1 tool)", INFO)
+
     def check_class_code(self, section: Section) -> None:
         """``Object_Class_Code`` of an object class section is the class the section is for."""
         expected = _SECTION_CLASSES.get(section.name)
-        entry = section.get("Object_Class_Code")
+        entry = _get(section, "Object_Class_Code")
         if expected is None or entry is None:
             return
         code = _int(entry.field(1))
@@ -291,16 +387,18 @@ class _Checker:
 
     def check_keyword_case(self, section: Section) -> None:
         for entry in section.entries:
-            known = _KNOWN_KEYWORDS.get(entry.keyword.lower()) or _numbered_keyword(entry.keyword)
-            if known is not None and known != entry.keyword:
-                self.report("keyword-case", entry.line, f"[{section.name}] {entry.keyword} is written {known}")
+            known = canonical_keyword(entry.keyword)
+            if known != entry.keyword:
+                self.report("keyword-case", entry.line, f"[{section.name}] {entry.keyword} is written {known} "
+                                                        "(read as such)", WARNING)
 
     def check_duplicate_keywords(self, section: Section) -> None:
         seen: set[str] = set()
         for entry in section.entries:
-            if entry.keyword in seen:
-                self.report("duplicate-keyword", entry.line, f"[{section.name}] has {entry.keyword} more than once")
-            seen.add(entry.keyword)
+            keyword = canonical_keyword(entry.keyword)
+            if keyword in seen:
+                self.report("duplicate-keyword", entry.line, f"[{section.name}] has {keyword} more than once")
+            seen.add(keyword)
 
     # -- helpers ----------------------------------------------------------------------------
 
@@ -334,9 +432,10 @@ class _Checker:
     def check_single_values(self, section: Section) -> None:
         kinds = _SINGLE_VALUES.get(section.name, {})
         for entry in section.entries:
-            if entry.keyword in kinds:
+            keyword = canonical_keyword(entry.keyword)
+            if keyword in kinds:
                 self.check_count(entry, (1,), "this keyword")
-                self.check_kinds(entry, [kinds[entry.keyword]])
+                self.check_kinds(entry, [kinds[keyword]])
 
     def check_path(self, entry: Entry, number: int, required: bool = False) -> None:
         item = entry.field(number)
@@ -382,13 +481,14 @@ class _Checker:
     def check_file(self, section: Section) -> None:
         self.check_single_values(section)
         for entry in section.entries:
-            if entry.keyword in ("CreateDate", "ModDate"):
+            keyword = canonical_keyword(entry.keyword)
+            if keyword in ("CreateDate", "ModDate"):
                 self.check_count(entry, (1,), "this keyword")
                 self.check_date(entry)
-            elif entry.keyword in ("CreateTime", "ModTime"):
+            elif keyword in ("CreateTime", "ModTime"):
                 self.check_count(entry, (1,), "this keyword")
                 self.check_time(entry)
-            elif entry.keyword == "Revision":
+            elif keyword == "Revision":
                 self.check_count(entry, (1,), "this keyword")
                 item = entry.fields[0]
                 if item.kind is not FieldKind.REVISION or not 1 <= item.value[0] <= 255 or item.value[1] > 255:
@@ -420,7 +520,7 @@ class _Checker:
 
     def check_classification(self, section: Section) -> None:
         for entry in section.entries:
-            if not _CLASS.fullmatch(entry.keyword):
+            if not _CLASS.fullmatch(canonical_keyword(entry.keyword)):
                 continue
             self.check_kinds(entry, [_KEYWORD])
             value = _reference(entry.field(1))
@@ -460,9 +560,9 @@ class _Checker:
 
     def check_params(self, section: Section) -> None:
         for entry in section.entries:
-            if _PARAM.fullmatch(entry.keyword):
+            if _PARAM.fullmatch(canonical_keyword(entry.keyword)):
                 self.check_param(entry)
-            elif match := _ENUM.fullmatch(entry.keyword):
+            elif match := _ENUM.fullmatch(canonical_keyword(entry.keyword)):
                 self.check_enum(entry, f"Param{match[1]}")
 
     def check_param(self, entry: Entry) -> None:
@@ -535,7 +635,7 @@ class _Checker:
 
     def check_groups(self, section: Section) -> None:
         for entry in section.entries:
-            if not _GROUP.fullmatch(entry.keyword) or not self.check_at_least(entry, 2, "a group"):
+            if not _GROUP.fullmatch(canonical_keyword(entry.keyword)) or not self.check_at_least(entry, 2, "a group"):
                 continue
             self.check_kinds(entry, [_STRING, _INT] + [_INT] * (len(entry.fields) - 2))
             count = _int(entry.field(2))
@@ -552,7 +652,7 @@ class _Checker:
 
     def check_assemblies(self, section: Section) -> None:
         for entry in section.entries:
-            if not _ANY_ASSEMBLY.fullmatch(entry.keyword):
+            if not _ANY_ASSEMBLY.fullmatch(canonical_keyword(entry.keyword)):
                 continue
             count = len(entry.fields)
             if count < 6 or count % 2:
@@ -567,21 +667,55 @@ class _Checker:
             size_item = entry.field(3)
             if _reference(size_item) is not None:
                 self.check_param_reference(entry, size_item, size_item.value)
+            keyword = canonical_keyword(entry.keyword)
             for item in entry.fields[7::2]:
-                if _reference(item) == entry.keyword:
-                    self.report("assembly-member", item.line or entry.line,
-                                f"{entry.keyword} has itself as a member")
-                    continue
+                if _reference(item) == keyword:
+                    continue  # the idiom "its own data": see member_bits
                 self.check_member_reference(entry, item)
             self.check_assembly_size(entry)
+            loop = self.assembly_loop(keyword)
+            if loop:
+                self.report("assembly-member", entry.line,
+                            f"{keyword} contains itself through {' -> '.join(loop)}: it has no size")
 
-    def member_bits(self, size: Field, member: Field) -> int | None:
-        """A member's size in bits: as written, or else the size of what it refers to."""
+    def assembly_loop(self, keyword: str) -> list[str]:
+        """The chain of other assemblies through which ``keyword`` is a member of itself, or [].
+        A member naming its own assembly directly is no loop: drive files write every assembly
+        as one member that names the assembly itself, meaning "this instance's data"."""
+        def members(name: str) -> list[str]:
+            entry = self.assemblies.get(name)
+            found = [] if entry is None else [_reference(item) for item in entry.fields[7::2]]
+            return [m for m in found if m is not None and m != name and m in self.assemblies]
+
+        chain: list[str] = []
+        seen: set[str] = set()
+
+        def walk(name: str) -> bool:
+            for member in members(name):
+                if member == keyword:
+                    return True
+                if member in seen:
+                    continue
+                seen.add(member)
+                chain.append(member)
+                if walk(member):
+                    return True
+                chain.pop()
+            return False
+
+        return [*chain, keyword] if walk(keyword) else []
+
+    def member_bits(self, size: Field, member: Field, owner: str = "") -> int | None:
+        """A member's size in bits: as written, or else the size of what it refers to (a member
+        naming its own assembly, empty-sized, is the assembly's whole data)."""
         if size.kind is FieldKind.INT:
             return size.value
         reference = _reference(member)
         if size.kind is not FieldKind.EMPTY or reference is None:
             return None
+        if reference == owner:
+            assembly_size = _int(self.assemblies[owner].field(3)) if owner in self.assemblies else None
+            return None if assembly_size is None else assembly_size * 8
         if reference in self.params:
             data_size = _int(self.params[reference].field(6))
             return None if data_size is None else data_size * 8
@@ -595,7 +729,7 @@ class _Checker:
         pairs = list(zip(entry.fields[6::2], entry.fields[7::2], strict=True))
         if size is None or not pairs:
             return
-        bits = [self.member_bits(size_item, member) for size_item, member in pairs]
+        bits = [self.member_bits(size_item, member, canonical_keyword(entry.keyword)) for size_item, member in pairs]
         if None in bits:
             return
         total = sum(bit for bit in bits if bit is not None)
@@ -609,7 +743,7 @@ class _Checker:
 
     def check_connections(self, section: Section) -> None:
         for entry in section.entries:
-            if not _CONNECTION.fullmatch(entry.keyword) or not self.check_count(
+            if not _CONNECTION.fullmatch(canonical_keyword(entry.keyword)) or not self.check_count(
                     entry, (15, 17), "a connection (17 with the CIP Safety fields)"):
                 continue
             self.check_kinds(entry, _CONNECTION_KINDS)
@@ -639,6 +773,14 @@ class _Checker:
             if size is None or assembly is None:
                 continue
             assembly_size = _int(assembly.field(3))
+            if assembly_size is None and assembly.field(3) is not None and assembly.field(3).kind is FieldKind.EMPTY:
+                # An empty size: the sum of the members (eds-pie: AssemExaN's size may be empty).
+                assembly_size = self.summed_sizes.get(canonical_keyword(assembly.keyword))
+            parameters = _int(entry.field(2))
+            variable_bit = {4: 1 << 1, 7: 1 << 3}.get(size_number, 0)
+            if parameters is not None and parameters & variable_bit and assembly_size is not None \
+                    and size <= assembly_size:
+                continue  # a variable-size connection carries up to its assembly's size
             if assembly_size is not None and assembly_size != size:
                 self.report(
                     "connection-size", entry.line_of(size_number),
@@ -648,6 +790,7 @@ class _Checker:
     def check_connection_words(self, entry: Entry) -> None:
         trigger, parameters = _int(entry.field(1)), _int(entry.field(2))
         problems: list[tuple[int, str]] = []
+        warnings: list[tuple[int, str]] = []
         if trigger is not None:
             if not trigger & _TRANSPORT_CLASSES:
                 problems.append((1, "trigger and transport (field 1) names no transport class (bits 0-15)"))
@@ -659,7 +802,10 @@ class _Checker:
                     problems.append((2, f"{direction} is neither fixed nor variable size"))
             for shift, direction in ((8, "O->T"), (12, "T->O")):
                 real_time = (parameters >> shift) & 0x7
-                if real_time not in _REAL_TIME_FORMATS:
+                if real_time == _SAFETY_FORMAT and not self.is_safety(entry):
+                    warnings.append((2, f"{direction} real-time format 5 is the CIP Safety format, but neither the "
+                                        "connection (17 fields) nor [Device Classification] (Safety) is safety"))
+                elif real_time not in _REAL_TIME_FORMATS and real_time != _SAFETY_FORMAT:
                     problems.append((2, f"{direction} real-time format {real_time} is reserved"))
             for shift, what in ((16, "O->T connection type"), (20, "T->O connection type"),
                                 (24, "O->T priority"), (28, "T->O priority")):
@@ -672,6 +818,15 @@ class _Checker:
                 problems.append((2, "a listen-only connection needs a multicast T->O connection"))
         for number, problem in problems:
             self.report("connection-format", entry.line_of(number), f"{entry.keyword}: {problem}")
+        for number, problem in warnings:
+            self.report("connection-format", entry.line_of(number), f"{entry.keyword}: {problem}", WARNING)
+
+    def is_safety(self, entry: Entry) -> bool:
+        """A CIP Safety connection: written with the two safety fields (EZ-EDS), or of a device
+        [Device Classification] says is a Safety device."""
+        classification = self.doc.get("Device Classification")
+        classes = [_reference(e.field(1)) for e in classification.entries] if classification else []
+        return len(entry.fields) == 17 or "Safety" in classes
 
     def check_connection_points(self, entry: Entry) -> None:
         path = entry.field(15)
@@ -703,14 +858,14 @@ class _Checker:
 
     def check_ports(self, section: Section) -> None:
         for entry in section.entries:
-            if _PORT.fullmatch(entry.keyword) and self.check_at_least(entry, 4, "a port"):
+            if _PORT.fullmatch(canonical_keyword(entry.keyword)) and self.check_at_least(entry, 4, "a port"):
                 self.check_kinds(entry, [_KEYWORD | _INT, _STRING, _PATH, _INT])
                 self.check_path(entry, 3)
 
     def check_capacity(self, section: Section) -> None:
         self.check_single_values(section)
         for entry in section.entries:
-            if _TSPEC.fullmatch(entry.keyword) and self.check_count(entry, (3,), "a TSpec"):
+            if _TSPEC.fullmatch(canonical_keyword(entry.keyword)) and self.check_count(entry, (3,), "a TSpec"):
                 self.check_kinds(entry, [_KEYWORD, _INT, _INT])
 
 

@@ -26,7 +26,9 @@ EXIT_UNREADABLE = 2
 
 def add_check_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("files", nargs="+", metavar="FILE", help="EDS files to check")
-    parser.add_argument("--json", action="store_true", help="one JSON object per finding, one per line")
+    parser.add_argument("--json", action="store_true",
+                        help="one JSON object per file (its findings and counts), one per line, then the summary")
+    parser.add_argument("--strict", action="store_true", help="warnings fail the check too (exit 1)")
 
 
 def add_show_arguments(parser: argparse.ArgumentParser) -> None:
@@ -45,36 +47,92 @@ def _load(path: str, command: str, stderr: TextIO) -> EdsDocument | None:
     return None
 
 
+def load_quietly(path: str) -> EdsDocument | None:
+    """The document, or None when it cannot be read (``run_check`` says why, once)."""
+    try:
+        return read_eds(path)
+    except (EdsSyntaxError, OSError):
+        return None
+
+
 def run_check(
     args: argparse.Namespace,
     identity: Mapping[str, Any] | None = None,
     stdout: TextIO | None = None,
     stderr: TextIO | None = None,
+    live: Mapping[str, list[Finding]] | None = None,
+    identities: Mapping[str, Mapping[str, Any] | None] | None = None,
+    live_summaries: Mapping[str, str] | None = None,
 ) -> int:
-    """Check every file; 0 when none has an error, 1 when one has, 2 when one cannot be read.
-    ``identity`` is a live device's Identity (see :func:`check_eds`) the files must match."""
+    """Check every file, print its findings and one summary line; 0 when none has an error (with
+    ``--strict``: nor a warning), 1 when one has, 2 when one cannot be read. ``identity`` is a
+    live device's Identity (see :func:`check_eds`) the files must match; ``live`` holds, per file,
+    what was found comparing it with the device (``eds check --against``)."""
     # The checker is loaded by the command that checks (the parser takes this module for every command).
-    from .checker import ERROR, check_eds
+    from .checker import ERROR, INFO, WARNING, check_eds
 
     stdout = stdout or sys.stdout
     stderr = stderr or sys.stderr
+    strict = bool(getattr(args, "strict", False))
+    as_json = bool(getattr(args, "json", False))
     status = EXIT_OK
+    totals = {ERROR: 0, WARNING: 0, INFO: 0, "unreadable": 0}
     for path in args.files:
         doc = _load(path, "check", stderr)
         if doc is None:
             status = EXIT_UNREADABLE
+            totals["unreadable"] += 1
+            if as_json:
+                print(json.dumps({"file": path, "readable": False, "errors": 0, "warnings": 0, "notes": 0,
+                                  "findings": []}, sort_keys=True), file=stdout)
             continue
-        findings = check_eds(doc, identity)
-        for finding in findings:
-            print(_format_finding(path, finding, as_json=args.json), file=stdout)
-        if status == EXIT_OK and any(finding.severity == ERROR for finding in findings):
+        findings = check_eds(doc, identities.get(path) if identities is not None else identity)
+        if live is not None:
+            findings = sorted([*findings, *live.get(path, [])], key=lambda finding: finding.line)
+        counts = {severity: sum(f.severity == severity for f in findings) for severity in (ERROR, WARNING, INFO)}
+        for severity, count in counts.items():
+            totals[severity] += count
+        against = (live_summaries or {}).get(path)
+        if as_json:
+            record = {"file": path, "readable": True, "errors": counts[ERROR], "warnings": counts[WARNING],
+                      "notes": counts[INFO], "findings": [f.to_dict() for f in findings]}
+            if against is not None:
+                record["against"] = against
+            print(json.dumps(record, sort_keys=True), file=stdout)
+        else:
+            if against is not None:
+                print(f"{path}: {against}", file=stdout)
+            for finding in findings:
+                print(_format_finding(path, finding), file=stdout)
+        failing = counts[ERROR] or (strict and counts[WARNING])
+        if status == EXIT_OK and failing:
             status = EXIT_FINDINGS
+    summary = summary_line(len(args.files), totals[ERROR], totals[WARNING], totals[INFO], totals["unreadable"])
+    if as_json:
+        print(json.dumps({"summary": {"files": len(args.files), "errors": totals[ERROR],
+                                      "warnings": totals[WARNING], "notes": totals[INFO],
+                                      "unreadable": totals["unreadable"], "strict": strict}},
+                         sort_keys=True), file=stdout)
+    else:
+        print(summary, file=stdout)
     return status
 
 
-def _format_finding(path: str, finding: Finding, as_json: bool) -> str:
-    if as_json:
-        return json.dumps({"file": path, **finding.to_dict()}, sort_keys=True)
+def _plural(count: int, word: str) -> str:
+    return f"{count} {word}" + ("" if count == 1 else "s")
+
+
+def summary_line(files: int, errors: int, warnings: int, notes: int = 0, unreadable: int = 0) -> str:
+    """``56 files: 0 errors, 3 warnings`` (notes and unreadable files added when there are any)."""
+    parts = [_plural(errors, "error"), _plural(warnings, "warning")]
+    if notes:
+        parts.append(_plural(notes, "note"))
+    if unreadable:
+        parts.append(f"{unreadable} unreadable")
+    return f"{_plural(files, 'file')}: {', '.join(parts)}"
+
+
+def _format_finding(path: str, finding: Finding) -> str:
     return f"{path}:{finding.line}: {finding.severity} {finding.rule}: {finding.message}"
 
 
@@ -123,7 +181,7 @@ def _value(entry: Entry | None, number: int = 1) -> Any:
     return None if item is None else _plain(item.value, item.kind)
 
 
-_ASSEMBLY = re.compile(r"Assem[0-9]+")
+_ASSEMBLY = re.compile(r"Assem(?:Exa)?[0-9]+")
 _CONNECTION = re.compile(r"Connection[0-9]+")
 
 
@@ -143,19 +201,25 @@ def summarize(doc: EdsDocument) -> dict[str, Any]:
     # (Revision, Object_Name, Number_Of_Static_Instances, ...).
     assembly_entries = [entry for entry in assembly_section if _ASSEMBLY.fullmatch(entry.keyword)] \
         if assembly_section else []
-    assemblies = [_assembly(entry, params) for entry in assembly_entries]
-    sizes = {entry.keyword: _value(entry, 3) for entry in assembly_entries}
+    # Sizes as the emulator reads them: a ParamN's default, the members' sum (AssemExaN, modular).
+    from .interpret import assembly_sizes
+
+    sizes: dict[str, Any] = {entry.keyword: _value(entry, 3) for entry in assembly_entries}
+    sizes.update(assembly_sizes(doc))
+    assemblies = [_assembly(entry, params, sizes) for entry in assembly_entries]
     manager = doc.get("Connection Manager")
     connections = [_connection(entry, sizes, params) for entry in manager
                    if _CONNECTION.fullmatch(entry.keyword)] if manager else []
     return {"identity": identity, "networks": networks, "assemblies": assemblies, "connections": connections}
 
 
-def _assembly(entry: Entry, params: Section | None) -> dict[str, Any]:
+def _assembly(entry: Entry, params: Section | None, sizes: Mapping[str, Any]) -> dict[str, Any]:
     members = []
     for size_item, member in zip(entry.fields[6::2], entry.fields[7::2], strict=False):
         reference = member.value if member.kind is FieldKind.KEYWORD else None
         bits = size_item.value if size_item.kind is FieldKind.INT else None
+        if bits is None and isinstance(sizes.get(reference or ""), int):
+            bits = sizes[reference] * 8   # an assembly member (its own: the instance's whole data)
         name = None
         if reference is not None and params is not None and (param := params.get(reference)) is not None:
             name = _value(param, 7)
@@ -166,7 +230,7 @@ def _assembly(entry: Entry, params: Section | None) -> dict[str, Any]:
         "keyword": entry.keyword,
         "name": _value(entry, 1),
         "path": _value(entry, 2),
-        "size": _value(entry, 3),
+        "size": sizes.get(entry.keyword, _value(entry, 3)),
         "members": members,
     }
 

@@ -247,10 +247,12 @@ def _add_assemblies(device: EdsDevice, view: EdsView, issues: list[EdsIssue]) ->
     heartbeats = {c.o_t_point for c in view.connections if c.heartbeat}
     configs = {c.config for c in view.connections}
     points: dict[int, AssemblyPoint] = {}
+    # An assembly that is a member of another (a module's data in a modular station) needs no instance.
+    members = {m.reference for a in view.assemblies.values() for m in a.members if m.reference}
     for info in view.assemblies.values():
         if info.instance is None:
             # No path, and no connection names it (or names it twice: place_assemblies said so).
-            if not any(issue.line == info.line for issue in view.issues):
+            if info.keyword not in members and not any(issue.line == info.line for issue in view.issues):
                 issues.append(EdsIssue(info.line, f"{info.keyword} has no path and no connection names it: "
                                                   "not served"))
             continue
@@ -281,14 +283,32 @@ def _add_assemblies(device: EdsDevice, view: EdsView, issues: list[EdsIssue]) ->
         linked = [] if schema is None else [f for f in schema.fields if f.link and device.attribute(f.link)]
         if schema is not None:
             device.schemas[info.instance] = schema
-        point = _point(device, info.instance, info.size, output, schema, linked, info.name)
+        point = _point(device, info.instance, info.size, output, schema, linked, info.name, info.variable)
         points[info.instance] = point
         device.assembly.add_assembly(point)
+    _add_raw_points(device, view, points, heartbeats)
     return points
 
 
+def _add_raw_points(device: EdsDevice, view: EdsView, points: dict[int, AssemblyPoint], heartbeats: set[int]) -> None:
+    """A connection point no assembly of the file declares, with the size the connection gives it
+    (a number, or a ParamN's default: files that size their I/O by parameters), is served as raw
+    data of that size: an output when a connection sends it O->T, else an input. A connection
+    whose format field names an assembly gets none (that assembly's placement decides)."""
+    for connection in view.connections:
+        wanted = [] if connection.t_o_assembly else [(connection.t_o_point, connection.t_o_size, False)]
+        if not connection.heartbeat and not connection.o_t_assembly:
+            wanted.insert(0, (connection.o_t_point, connection.o_t_size, True))
+        for instance, size, output in wanted:
+            if instance in points or instance in heartbeats or size <= 0 or not 1 <= instance <= 0xFFFF:
+                continue
+            point = _point(device, instance, size, output, None, [], f"Connection{connection.number} data", False)
+            points[instance] = point
+            device.assembly.add_assembly(point)
+
+
 def _point(device: EdsDevice, instance: int, size: int, output: bool, schema: AssemblySchema | None,
-           linked: list[Any], name: str) -> AssemblyPoint:
+           linked: list[Any], name: str, variable: bool) -> AssemblyPoint:
     if output:
         def consume(data: bytes, now: float) -> None:
             if schema is None or not linked:
@@ -303,7 +323,7 @@ def _point(device: EdsDevice, instance: int, size: int, output: bool, schema: As
                 except (CipError, ValueError, TypeError) as exc:
                     log.debug("assembly %d: %s refused: %s", instance, item.name, exc)
 
-        return AssemblyPoint(instance, size, consumed=True, consume=consume, name=name)
+        return AssemblyPoint(instance, size, consumed=True, consume=consume, name=name, variable=variable)
 
     def produce() -> bytes:
         data = bytes(device.assembly.stores[instance])
@@ -319,7 +339,7 @@ def _point(device: EdsDevice, instance: int, size: int, output: bool, schema: As
                 continue  # a value the member cannot hold: the bytes stay as they were
         return data
 
-    return AssemblyPoint(instance, size, consumed=False, produce=produce, name=name)
+    return AssemblyPoint(instance, size, consumed=False, produce=produce, name=name, variable=variable)
 
 
 # -- class 1 ----------------------------------------------------------------------------------------------
@@ -334,6 +354,8 @@ def _io_profile(doc: EdsDocument, view: EdsView, points: Mapping[int, AssemblyPo
     rpi_max: list[int] = []
     triggers: set[Any] = set()
     usable = 0
+    heartbeat_kinds: dict[int, str] = {}
+    multicast_inputs = {c.t_o_point for c in view.connections if c.kind != "listen only" and c.t_o_multicast}
     for connection in view.connections:
         where = f"Connection{connection.number} ({connection.name})"
         produced = points.get(connection.t_o_point)
@@ -341,17 +363,42 @@ def _io_profile(doc: EdsDocument, view: EdsView, points: Mapping[int, AssemblyPo
             issues.append(EdsIssue(connection.line, f"{where}: T->O point {connection.t_o_point} is no input "
                                                     "assembly: not offered"))
             continue
-        if connection.heartbeat:
-            earlier = heartbeat.setdefault(connection.kind, connection.o_t_point)
-            if earlier != connection.o_t_point:
-                issues.append(EdsIssue(connection.line, f"{where}: a second {connection.kind} heartbeat point "
-                                                        f"{connection.o_t_point} ({earlier} is served): not offered"))
+        if connection.t_o_size != produced.size and not (produced.variable and connection.t_o_size < produced.size):
+            issues.append(EdsIssue(connection.line, f"{where}: T->O size {connection.t_o_size} but point "
+                                                    f"{connection.t_o_point} is {produced.size} bytes: not offered"))
+            continue
+        if connection.kind == "listen only":
+            # Refused at start what every Forward_Open would be refused (0x0108, 0x0119) for.
+            if not connection.t_o_multicast:
+                issues.append(EdsIssue(connection.line, f"{where}: listen only, but the file allows its T->O "
+                                                        "point-to-point only (field 2 bits 20-23), and a listener "
+                                                        "receives its owner's multicast: not offered"))
                 continue
+            if connection.t_o_point not in multicast_inputs:
+                issues.append(EdsIssue(connection.line, f"{where}: listen only, and no other connection of the file "
+                                                        f"produces input {connection.t_o_point} by multicast for it "
+                                                        "to listen to: not offered"))
+                continue
+        if connection.heartbeat:
+            kind = "listen only" if connection.kind == "listen only" else "input only"
+            earlier = heartbeat_kinds.setdefault(connection.o_t_point, kind)
+            if earlier != kind:
+                issues.append(EdsIssue(connection.line, f"{where}: heartbeat point {connection.o_t_point} is also an "
+                                                        f"{earlier} point, which a Forward_Open cannot tell from "
+                                                        f"{kind}: not offered"))
+                continue
+            heartbeat.setdefault(kind, connection.o_t_point)
         else:
             consumed = points.get(connection.o_t_point)
             if consumed is None or not consumed.consumed:
                 issues.append(EdsIssue(connection.line, f"{where}: O->T point {connection.o_t_point} is no output "
                                                         "assembly: not offered"))
+                continue
+            if connection.o_t_size != consumed.size and not (consumed.variable
+                                                             and connection.o_t_size < consumed.size):
+                issues.append(EdsIssue(connection.line, f"{where}: O->T size {connection.o_t_size} but point "
+                                                        f"{connection.o_t_point} is {consumed.size} bytes: "
+                                                        "not offered"))
                 continue
             pairs.add((connection.o_t_point, connection.t_o_point))
         usable += 1
@@ -380,6 +427,8 @@ def _io_profile(doc: EdsDocument, view: EdsView, points: Mapping[int, AssemblyPo
         config_instances=frozenset(config), config_sizes=lambda: configurations,
         input_only_point=heartbeat.get("input only", defaults.input_only_point),
         listen_only_point=heartbeat.get("listen only", defaults.listen_only_point),
+        more_input_only_points=frozenset(p for p, k in heartbeat_kinds.items() if k == "input only"),
+        more_listen_only_points=frozenset(p for p, k in heartbeat_kinds.items() if k == "listen only"),
         rpi_min_us=low, rpi_max_us=high,
         max_connections=max_connections if max_connections and max_connections > 0 else defaults.max_connections,
         triggers=frozenset(triggers), pairs=lambda: set(pairs),

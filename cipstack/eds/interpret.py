@@ -44,6 +44,9 @@ Link = tuple[int, int, int]
 
 #: ConnectionN field 1 bit 27: redundant owner (eds.md, "Field 1 bits").
 REDUNDANT_OWNER = 1 << 27
+#: ConnectionN field 2 bits 1 and 3: O->T and T->O variable size (eds.md, "Field 2 bits").
+O_T_VARIABLE = 1 << 1
+T_O_VARIABLE = 1 << 3
 _REFERENCE = re.compile(r"(Param|Assem)([0-9]+)")
 
 
@@ -109,6 +112,9 @@ class AssemblyInfo:
     size: int
     members: tuple[AssemblyMember, ...]
     line: int = 0
+    #: An ``AssemExaN``: its size is that of its default configuration (a parameter's default, its
+    #: members); a variable-size connection may carry less of it.
+    variable: bool = False
 
 
 @dataclass(frozen=True)
@@ -140,10 +146,18 @@ class ConnectionInfo:
     #: The configuration assembly of field 12 (its keyword), when the field names an AssemN.
     config_assembly: str | None = None
 
+    #: An exclusive owner whose O->T carries no data (size 0): it sends to a heartbeat point, as
+    #: devices without outputs declare their owner connection.
+    o_t_heartbeat: bool = False
+    #: Field 2 bits 1 and 3: the O->T / T->O size is variable (up to the size above).
+    o_t_variable: bool = False
+    t_o_variable: bool = False
+
     @property
     def heartbeat(self) -> bool:
-        """Input only and listen only send the heartbeat point, not output data."""
-        return self.kind != EXCLUSIVE_OWNER_KIND
+        """Input only and listen only send the heartbeat point, not output data; so does an
+        exclusive owner of no O->T data."""
+        return self.kind != EXCLUSIVE_OWNER_KIND or self.o_t_heartbeat
 
 
 @dataclass
@@ -153,6 +167,9 @@ class EdsView:
     assemblies: dict[str, AssemblyInfo] = field(default_factory=dict)
     connections: list[ConnectionInfo] = field(default_factory=list)
     issues: list[EdsIssue] = field(default_factory=list)
+    #: Why no class 1 connection is usable, when none is (no [Connection Manager]: a DeviceNet or
+    #: CompoNet file; or each ConnectionN skipped).
+    why_none: str = ""
 
     def connection(self, which: int | str) -> ConnectionInfo:
         """ConnectionN by its number N (``1``, ``"1"``, ``"Connection1"``) or by its name (field 13)."""
@@ -162,7 +179,7 @@ class EdsView:
         for item in self.connections:
             if (text.isdigit() and item.number == int(text)) or item.name == str(which):
                 return item
-        known = ", ".join(f"{c.number} ({c.name})" for c in self.connections) or "none usable"
+        known = ", ".join(f"{c.number} ({c.name})" for c in self.connections) or f"none usable: {self.why_none}"
         raise KeyError(f"no class 1 connection {which!r} in the EDS (known: {known})")
 
     def assembly_at(self, instance: int) -> AssemblyInfo | None:
@@ -354,28 +371,102 @@ def _assembly(entry: Entry, params: Mapping[str, ParamInfo], sizes: Mapping[str,
         reference = _keyword(reference_item)
         bits = _int(size_item)
         if bits is None and reference is not None:
-            bits = 8 * params[reference].size if reference in params else (
-                8 * sizes[reference] if reference in sizes else None)
+            # A member naming its own assembly is the instance's own data (a drive vendor's idiom).
+            bits = 8 * sizes[reference] if reference in sizes else (
+                8 * params[reference].size if reference in params else None)
         if bits is None or bits < 0:
             issues.append(EdsIssue(entry.line_of(7), f"{keyword}: a member has no size: its members are left out"))
             members = []
             break
-        members.append(AssemblyMember(position, bits, reference))
+        members.append(AssemblyMember(position, bits, None if reference == keyword else reference))
         position += bits
-    size_item = entry.field(3)
-    size = _int(size_item)
-    if size is None and size_item is not None and size_item.kind is FieldKind.EMPTY and members:
-        size = (position + 7) // 8
+    size = sizes.get(keyword)
     if size is None:
+        size_item = entry.field(3)
         written = size_item.raw if size_item is not None else ""
-        issues.append(EdsIssue(entry.line_of(3), f"{keyword}: size {written} is not a fixed number of bytes: "
-                                                 "skipped"))
+        issues.append(EdsIssue(entry.line_of(3), f"{keyword}: size {written or '(empty)'} is not a number of bytes, "
+                                                 "nor a ParamN with a default, nor members of known sizes (a modular "
+                                                 "or variable-size assembly needs one of them): skipped"))
         return None
     if members and position != 8 * size:
         issues.append(EdsIssue(entry.line, f"{keyword}: members add up to {position} bits, not {8 * size}: "
                                            "served as plain data"))
         members = []
-    return AssemblyInfo(keyword, _text(entry.field(1)), instance, size, tuple(members), entry.line)
+    return AssemblyInfo(keyword, _text(entry.field(1)), instance, size, tuple(members), entry.line,
+                        variable=keyword.startswith("AssemExa"))
+
+
+#: The assemblies the emulator and the scanner read: fixed (AssemN) and variable-size (AssemExaN,
+#: how IO-Link masters and modular stations declare process data whose size their parameters set).
+ASSEMBLY_KEYWORD = re.compile(r"Assem(?:Exa)?[0-9]+")
+
+
+def raw_param_sizes(doc: EdsDocument) -> dict[str, tuple[int | None, Any]]:
+    """(data size, default) of every ParamN as written (fields 6 and 12), whatever its type: an
+    assembly member or size may name a parameter the emulator cannot serve as an attribute."""
+    section = doc.get("Params")
+    out: dict[str, tuple[int | None, Any]] = {}
+    for entry in section or ():
+        if re.fullmatch(r"Param[0-9]+", entry.keyword) and entry.keyword not in out:
+            out[entry.keyword] = (_int(entry.field(6)), _number(entry.field(12)))
+    return out
+
+
+def assembly_sizes(doc: EdsDocument) -> dict[str, int]:
+    """The size in bytes of every assembly the file sizes: field 3 when a number; the default of
+    the ParamN field 3 names (a variable-size or modular assembly at its default configuration);
+    else, for an empty field 3, the sum of its members (each its size in bits, or, empty, the
+    size of the parameter or assembly it names: a member naming its own assembly sizes nothing)."""
+    section = doc.get("Assembly")
+    entries = {e.keyword: e for e in section or () if ASSEMBLY_KEYWORD.fullmatch(e.keyword)}
+    params = raw_param_sizes(doc)
+    sizes: dict[str, int] = {}
+    resolving: set[str] = set()
+
+    def size_of(keyword: str) -> int | None:
+        if keyword in sizes:
+            return sizes[keyword]
+        entry = entries.get(keyword)
+        if entry is None or keyword in resolving:
+            return None
+        resolving.add(keyword)
+        try:
+            found = _entry_size(entry)
+        finally:
+            resolving.discard(keyword)
+        if found is not None:
+            sizes[keyword] = found
+        return found
+
+    def _entry_size(entry: Entry) -> int | None:
+        size_item = entry.field(3)
+        written = _int(size_item)
+        if written is not None:
+            return written if written >= 0 else None
+        reference = _keyword(size_item)
+        if reference is not None:
+            default = params.get(reference, (None, None))[1]
+            return int(default) if isinstance(default, (int, float)) and default >= 0 and \
+                float(default).is_integer() else None
+        if size_item is not None and size_item.kind is not FieldKind.EMPTY:
+            return None
+        bits = 0
+        for member_size, member in zip(entry.fields[6::2], entry.fields[7::2], strict=False):
+            count = _int(member_size)
+            name = _keyword(member)
+            if count is None and name is not None and name != entry.keyword:
+                if name in params and params[name][0] is not None:
+                    count = 8 * params[name][0]  # type: ignore[operator]
+                elif (inner := size_of(name)) is not None:
+                    count = 8 * inner
+            if count is None or count < 0:
+                return None
+            bits += count
+        return (bits + 7) // 8 if bits else None
+
+    for keyword in entries:
+        size_of(keyword)
+    return sizes
 
 
 def read_assemblies(doc: EdsDocument, params: Mapping[str, ParamInfo],
@@ -384,9 +475,14 @@ def read_assemblies(doc: EdsDocument, params: Mapping[str, ParamInfo],
     out: dict[str, AssemblyInfo] = {}
     if section is None:
         return out
-    sizes = {e.keyword: e.value(3) for e in section if _int(e.field(3)) is not None}
+    sizes = assembly_sizes(doc)
+    raw = raw_param_sizes(doc)
+    # Members may name parameters the emulator serves no attribute for: their size is as written.
+    member_params = {**{k: ParamInfo(k, k, None, USINT, size or 0, False) for k, (size, _) in raw.items()
+                        if size is not None}, **params}
+    params = member_params
     for entry in section:
-        if not re.fullmatch(r"Assem[0-9]+", entry.keyword):
+        if not ASSEMBLY_KEYWORD.fullmatch(entry.keyword):
             continue
         if entry.keyword in out:
             issues.append(EdsIssue(entry.line, f"{entry.keyword} is defined twice: the first is kept"))
@@ -550,7 +646,9 @@ def _connection(entry: Entry, number: int, params: Mapping[str, ParamInfo], asse
     return ConnectionInfo(
         number, _text(entry.field(13)) or keyword, kind, config, o_t, t_o, o_t_size, t_o_size, rpi, rpi_min, rpi_max,
         bool(t_o_types & TYPE_MULTICAST), bool(t_o_types & TYPE_POINT_TO_POINT) or not t_o_types, triggers,
-        o_t_name, t_o_name, entry.line, config_name if config_name in assemblies else None)
+        o_t_name, t_o_name, entry.line, config_name if config_name in assemblies else None,
+        o_t_heartbeat=kind == EXCLUSIVE_OWNER_KIND and o_t_size == 0,
+        o_t_variable=bool(parameters & O_T_VARIABLE), t_o_variable=bool(parameters & T_O_VARIABLE))
 
 
 def read_connections(doc: EdsDocument, params: Mapping[str, ParamInfo], assemblies: Mapping[str, AssemblyInfo],
@@ -604,7 +702,26 @@ def read_view(doc: EdsDocument) -> EdsView:
     params = read_params(doc, issues)
     assemblies = read_assemblies(doc, params, issues)
     connections = read_connections(doc, params, assemblies, issues)
-    return EdsView(params, place_assemblies(assemblies, connections, issues), connections, issues)
+    view = EdsView(params, place_assemblies(assemblies, connections, issues), connections, issues)
+    if not connections:
+        view.why_none = _why_no_connection(doc, issues)
+    return view
+
+
+def _why_no_connection(doc: EdsDocument, issues: list[EdsIssue]) -> str:
+    section = doc.get("Connection Manager")
+    if section is None:
+        classification = doc.get("Device Classification")
+        networks = [str(entry.value()) for entry in classification if entry.fields] if classification else []
+        network = next((n for n in networks if n in ("CompoNet", "DeviceNet", "ControlNet")), None)
+        if network is None and doc.get("IO_Info") is not None:
+            network = "DeviceNet"
+        kind = f"a {network} file" if network else "a DeviceNet or CompoNet file"
+        return (f"the file has no [Connection Manager] ({kind}: its I/O is not described as EtherNet/IP "
+                "connections); give --output N --input M to take only the field names from it")
+    skipped = [issue.message for issue in issues if re.match(r"Connection[0-9]+\b", issue.message)]
+    return "every ConnectionN was skipped (" + "; ".join(skipped) + ")" if skipped else \
+        "[Connection Manager] has no ConnectionN"
 
 
 __all__ = [

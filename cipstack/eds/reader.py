@@ -47,11 +47,12 @@ class EdsSyntaxError(ValueError):
 
 
 #: Fields that hold an EPATH when they hold a quoted string: (section, keyword pattern, field number).
+#: Keywords in any case: configuration tools read ``assem100`` as ``Assem100`` (the checker warns).
 EPATH_FIELDS: tuple[tuple[str, re.Pattern[str], int], ...] = (
-    ("Params", re.compile(r"(?:Proxy)?Param[0-9]+"), 3),
-    ("Assembly", re.compile(r"(?:Proxy|Proxied)?Assem(?:Exa)?[0-9]+"), 2),
-    ("Connection Manager", re.compile(r"Connection[0-9]+"), 15),
-    ("Port", re.compile(r"Port[0-9]+"), 3),
+    ("Params", re.compile(r"(?:Proxy)?Param[0-9]+", re.IGNORECASE), 3),
+    ("Assembly", re.compile(r"(?:Proxy|Proxied)?Assem(?:Exa)?[0-9]+", re.IGNORECASE), 2),
+    ("Connection Manager", re.compile(r"Connection[0-9]+", re.IGNORECASE), 15),
+    ("Port", re.compile(r"Port[0-9]+", re.IGNORECASE), 3),
 )
 #: Fields written as ``major.minor``, which elsewhere would read as a real number.
 REVISION_FIELDS: tuple[tuple[str, str, int], ...] = (("File", "Revision", 1),)
@@ -343,7 +344,7 @@ def _apply_field_hints(section: str, entry: Entry) -> None:
                 if items is not None:
                     item.kind, item.value = FieldKind.EPATH, items
     for section_name, keyword, number in REVISION_FIELDS:
-        if section == section_name and entry.keyword == keyword:
+        if section == section_name and entry.keyword.lower() == keyword.lower():
             item = entry.field(number)
             if item is not None and item.kind in (FieldKind.FLOAT, FieldKind.INT):
                 item.kind, item.value = parse_word(item.raw, revision=True)

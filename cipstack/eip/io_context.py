@@ -147,6 +147,7 @@ class IoContext:
     async def _start(self, request: Class1Request, reply: ForwardOpenReply, extra: list[Item], core: IoOriginator,
                      endpoint: IoEndpoint) -> IoConnectionHandle:
         announced: int | None = None
+        group: str | None = None
         for item in extra:
             if item.type not in (ItemType.SOCKADDR_T_O, ItemType.SOCKADDR_O_T):
                 log.debug("Forward_Open reply: item 0x%04X ignored", item.type)
@@ -158,6 +159,7 @@ class IoContext:
                 continue
             if item.type == ItemType.SOCKADDR_T_O and ipaddress.IPv4Address(address.host).is_multicast:
                 await endpoint.join_multicast(address.host, address.port)
+                group = address.host
             elif item.type == ItemType.SOCKADDR_O_T and address.port:
                 # The target consumes O->T data on this port, not 2222 (CIP Vol. 2, 2-6.3.3).
                 announced = address.port
@@ -180,7 +182,9 @@ class IoContext:
             input_schema = None
         core.add(connection)
         endpoint.wakeup()
-        return IoConnectionHandle(core, endpoint, connection, output_schema, input_schema)
+        handle = IoConnectionHandle(core, endpoint, connection, output_schema, input_schema)
+        handle.multicast_group = group
+        return handle
 
     async def _forward_close(self) -> None:
         if self._triad is None:

@@ -441,6 +441,8 @@ class IoConnectionHandle:
         self._input_where = ""
         #: What opening had to adapt to, one line each (e.g. a retry with the size the target asked for).
         self.notes: list[str] = []
+        #: The multicast group T->O data comes from (the target's Sockaddr Info), None for point-to-point.
+        self.multicast_group: str | None = None
 
     def describe_schemas(self, output: str, input: str) -> None:
         """Say where the output and input schemas come from (or why there is none), for the

@@ -107,6 +107,9 @@ class IoProfile:
     config_instances: frozenset[int] = frozenset({1})
     input_only_point: int = 198
     listen_only_point: int = 199
+    #: Further heartbeat points (an EDS may declare several of each kind), beyond the two above.
+    more_input_only_points: frozenset[int] = frozenset()
+    more_listen_only_points: frozenset[int] = frozenset()
     rpi_min_us: int = 1_000
     rpi_max_us: int = 10_000_000
     max_connections: int = 64
@@ -182,11 +185,18 @@ class IoConnection:
     ot_payload_size: int = 4
     #: When the target's watchdog heap looks at this connection next (its live entry there).
     watch_at: float = 0.0
+    #: T->O data bytes of a variable-size connection that asked for fewer than its assembly's size.
+    to_payload_size: int | None = None
 
     @property
     def name(self) -> str:
         out = self.consumed.instance_id if self.consumed else "heartbeat"
         return f"{self.kind.value} {out}->{self.produced.instance_id} (0x{self.ot_connection_id:08X})"
+
+
+def _variable(point: AssemblyPoint | None) -> bool:
+    """A point of a variable size (``objects.assembly.AssemblyPoint.variable``)."""
+    return bool(getattr(point, "variable", False))
 
 
 class IoTarget:
@@ -263,9 +273,10 @@ class IoTarget:
         out_point, in_point = points
         consumed_points = self.profile.consumed()
         produced_points = self.profile.produced()
-        if out_point == self.profile.input_only_point:
+        profile = self.profile
+        if out_point == profile.input_only_point or out_point in profile.more_input_only_points:
             kind, consumed = ConnectionKind.INPUT_ONLY, None
-        elif out_point == self.profile.listen_only_point:
+        elif out_point == profile.listen_only_point or out_point in profile.more_listen_only_points:
             kind, consumed = ConnectionKind.LISTEN_ONLY, None
         elif out_point in consumed_points:
             kind, consumed = ConnectionKind.EXCLUSIVE_OWNER, consumed_points[out_point]
@@ -373,11 +384,13 @@ class IoTarget:
             if ot.size not in (TO_OVERHEAD, OT_OVERHEAD):
                 raise connection_failure(ExtendedStatus.INVALID_OT_SIZE, triad, "heartbeat size",
                                          extra_words=(TO_OVERHEAD,))
-        elif ot.size != expected_ot and not (ot.variable and ot.size > expected_ot):
+        elif ot.size != expected_ot and not (ot.variable and ot.size > expected_ot) and not (
+                ot.variable and _variable(consumed) and OT_OVERHEAD <= ot.size < expected_ot):
             raise connection_failure(ExtendedStatus.INVALID_OT_SIZE, triad,
                                      f"O->T size {ot.size}, assembly needs {expected_ot}", extra_words=(expected_ot,))
         expected_to = produced.size + TO_OVERHEAD
-        if to.size != expected_to and not (to.variable and to.size > expected_to):
+        if to.size != expected_to and not (to.variable and to.size > expected_to) and not (
+                to.variable and _variable(produced) and TO_OVERHEAD <= to.size < expected_to):
             raise connection_failure(ExtendedStatus.INVALID_TO_SIZE, triad,
                                      f"T->O size {to.size}, assembly needs {expected_to}", extra_words=(expected_to,))
 
@@ -427,9 +440,14 @@ class IoTarget:
                                                                      stats=stats)
         ot_payload_size = consumed.size + OT_OVERHEAD - TO_OVERHEAD if consumed is not None else (
             fo.ot_parameters.size - TO_OVERHEAD)
+        if consumed is not None and _variable(consumed):
+            ot_payload_size = min(ot_payload_size, fo.ot_parameters.size - TO_OVERHEAD)
+        to_payload_size = None
+        if _variable(produced) and fo.to_parameters.size - TO_OVERHEAD < produced.size:
+            to_payload_size = fo.to_parameters.size - TO_OVERHEAD
         connection = IoConnection(kind, fo.triad, self._new_id(), to_id, fo.ot_rpi_us, fo.to_rpi_us, consumed,
                                   produced, destination, multicast, consumer, producer, stats, peer_host,
-                                  owner=owner, ot_payload_size=ot_payload_size)
+                                  owner=owner, ot_payload_size=ot_payload_size, to_payload_size=to_payload_size)
         if owner is not None:
             owner.listeners.append(connection)
         connection.silence_check = now + max(SILENT_RPIS * fo.ot_rpi_us / 1e6, SILENT_MINIMUM_S)
@@ -551,6 +569,8 @@ class IoTarget:
             self.tick(now)
         self._run_idle(connection, run)
         if deliver:
+            if len(data) < connection.consumed.size:   # a variable-size connection carries the first bytes
+                data = data.ljust(connection.consumed.size, b"\0")
             self.deliver(connection.consumed.instance_id, data, now)
 
     def _deliver_to_point(self, instance_id: int, data: bytes, now: float) -> None:
@@ -596,6 +616,8 @@ class IoTarget:
             data = produced.get(id(point))
             if data is None:
                 data = produced[id(point)] = point.produce() if point.produce is not None else bytes(point.size)
+            if connection.to_payload_size is not None:
+                data = data[:connection.to_payload_size]
             connection.encap_sequence = (connection.encap_sequence + 1) & 0xFFFFFFFF
             connection.cip_sequence = (connection.cip_sequence + 1) & 0xFFFF
             out.append((encode_io_datagram(connection.to_connection_id, connection.encap_sequence,

@@ -41,6 +41,9 @@ class AssemblyPoint:
     #: Called with new data of an output (consumed) assembly and the time it arrived.
     consume: Callable[[bytes, float], None] | None = None
     name: str = ""
+    #: A variable-size assembly (an EDS ``AssemExaN``): a connection that says its size is variable
+    #: may carry fewer bytes than ``size`` (the first ones; the rest of an output reads as zeros).
+    variable: bool = False
 
 
 class AssemblyObject(CipObject):

@@ -362,7 +362,7 @@ BROKEN_EDS = """\
     Enum8 = 0, "Off", "On", 1;
 
 [Assembly]
-    Assem100 = "Variable", "20 04 24 64 30 03", Param1, 0x0000, , ;
+    Assem100 = "Variable", "20 04 24 64 30 03", Param99, 0x0000, , ;
     Assem101 = "Too few members", "20 04 24 65 30 03", 4, 0x0000, , , 16, Param1;
     Assem102 = "Not an assembly", "20 05 24 01", 2, 0x0000, , , 16, Param1;
     Assem103 = "Input", "20 04 24 67 30 03", 2, 0x0000, , , 16, Param1;
@@ -372,8 +372,8 @@ BROKEN_EDS = """\
         "Class 3", "", "20 04 24 01 2C 65 2C 67";
     Connection2 = 0x08010002, 0x44640405, 10000, 4, Assem101, 10000, 2, Assem103, , , , ,
         "Redundant", "", "20 04 24 01 2C 65 2C 67";
-    Connection3 = 0x04010002, 0x44640405, 10000, 4, Assem101, 10000, 2, , , , , ,
-        "Unknown input", "", "20 04 24 01 2C 65 2C 99";
+    Connection3 = 0x04010002, 0x44640405, 10000, 4, Assem101, 10000, 4, , , , , ,
+        "Unknown input", "", "20 04 24 01 2C 65 2C 67";
     Connection4 = 0x04010002, 0x44640405, 10000, 4, Assem101, 10000, 2, Assem103, , , , ,
         "Good", "", "20 04 24 01 2C 65 2C 67";
 """
@@ -388,10 +388,10 @@ BROKEN_WARNINGS = [
     ("Param6", "Param6 has 3 fields"),
     ("Param7", "Param7: the standard Identity object has no instance 1 attribute 99"),
     ("Enum8", "Enum8: a value/name pair is malformed"),
-    ("Assem100", "Assem100: size Param1 is not a fixed number of bytes"),
+    ("Assem100", "Assem100: size Param99 is not a number of bytes, nor a ParamN with a default"),
     ("Assem101", "Assem101: members add up to 16 bits, not 32"),
     ("Assem102", "Assem102: path 20 05 24 01 is not an Assembly instance"),
     ("Connection1", "Connection1: transport 0x0008 is not class 1"),
     ("Connection2", "Connection2: redundant owner connections are not supported"),
-    ("Connection3", "Connection3 (Unknown input): T->O point 153 is no input assembly"),
+    ("Connection3", "Connection3 (Unknown input): T->O size 4 but point 103 is 2 bytes: not offered"),
 ]

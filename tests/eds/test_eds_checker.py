@@ -7,7 +7,7 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from cipstack.eds.checker import RULES, Finding, check_eds, data_type
+from cipstack.eds.checker import RULES, SOURCES, Finding, check_eds, data_type
 from cipstack.eds.reader import parse_eds
 from cipstack.eds.writer import format_eds
 
@@ -43,9 +43,10 @@ def test_messy_sample_is_clean() -> None:
     assert check_eds(parse_eds(MESSY_EDS.decode("latin-1")), ACG_IDENTITY) == []
 
 
-def test_every_rule_has_a_description() -> None:
+def test_every_rule_has_a_description_and_a_source() -> None:
     assert all(RULES.values())
     assert len(RULES) == len(set(RULES))
+    assert set(SOURCES) == set(RULES) and all(SOURCES.values())
 
 
 # Each case: name, text replaced, replacement, the findings expected as (rule, snippet of the
@@ -449,11 +450,29 @@ def _rules(text: str) -> set[tuple[str, int]]:
     return {(f.rule, f.line) for f in check_eds(parse_eds(text)) if f.severity == "error"}
 
 
-def test_an_assembly_that_contains_itself() -> None:
-    # Sized consistently (16 bits, 2 bytes), so only the self-reference is wrong.
+def test_an_assembly_naming_itself_is_its_own_data() -> None:
+    """The idiom of a drive vendor's files: every assembly one member naming the assembly itself,
+    sized or empty (its own size then). Read as the instance's own data: no finding."""
+    for member in ("16, Assem150", ", Assem150"):
+        text = EZ_EDS_STYLE.replace('''Assem150 = "Safety Output", "20 04 24 96 30 03", 2, 0x0000,,;''',
+                                    f'''Assem150 = "Safety Output", "20 04 24 96 30 03", 2, 0x0000,,, {member};''')
+        assert [f for f in check_eds(parse_eds(text)) if f.severity != "info"] == [], member
+    # Sized wrong, it is still wrong: the member sum is checked as for any member.
     text = EZ_EDS_STYLE.replace('''Assem150 = "Safety Output", "20 04 24 96 30 03", 2, 0x0000,,;''',
-                                '''Assem150 = "Safety Output", "20 04 24 96 30 03", 2, 0x0000,,, 16, Assem150;''')
-    assert _rules(text) == {("assembly-member", line_of(text, "Assem150 = "))}
+                                '''Assem150 = "Safety Output", "20 04 24 96 30 03", 2, 0x0000,,, 8, Assem150;''')
+    assert _rules(text) == {("assembly-size", line_of(text, "Assem150 = "))}
+
+
+def test_an_assembly_that_contains_itself_through_another() -> None:
+    # Sized consistently (16 bits, 2 bytes), so only the loop is wrong: it has no size.
+    text = EZ_EDS_STYLE.replace('''Assem100 = "Safety Input", "20 04 24 64 30 03", 2, 0x0000,,;''',
+                                '''Assem100 = "Safety Input", "20 04 24 64 30 03", 2, 0x0000,,, 16, Assem150;''')
+    text = text.replace('''Assem150 = "Safety Output", "20 04 24 96 30 03", 2, 0x0000,,;''',
+                        '''Assem150 = "Safety Output", "20 04 24 96 30 03", 2, 0x0000,,, 16, Assem100;''')
+    assert _rules(text) == {("assembly-member", line_of(text, "Assem100 = ")),
+                            ("assembly-member", line_of(text, "Assem150 = "))}
+    message = next(f.message for f in check_eds(parse_eds(text)) if f.rule == "assembly-member")
+    assert message == "Assem100 contains itself through Assem150 -> Assem100: it has no size"
 
 
 def test_a_connection_path_without_a_connection_point() -> None:
@@ -468,7 +487,44 @@ def test_an_object_class_code_of_another_class() -> None:
 
 
 @pytest.mark.parametrize(("right", "wrong"), [("VendCode", "vendcode"), ("ProdName", "PRODNAME"),
-                                              ("Assem100 =", "assem100 =")])
-def test_a_keyword_in_another_case(right: str, wrong: str) -> None:
+                                              ("Assem100 =", "assem100 ="), ("Param1 =", "param1 =")])
+def test_a_keyword_in_another_case_is_a_warning_and_read_as_written_right(right: str, wrong: str) -> None:
+    """Keywords are case sensitive in the specification, but configuration tools and eds-pie read
+    them in any case: a warning, and the entry counts (no missing keyword, no broken reference)."""
     text = EZ_EDS_STYLE.replace(right, wrong, 1)
-    assert ("keyword-case", line_of(text, wrong)) in _rules(text)
+    findings = check_eds(parse_eds(text))
+    assert [(f.rule, f.severity, f.line) for f in findings] == [("keyword-case", "warning", line_of(text, wrong))]
+
+
+def test_object_class_code_in_another_case() -> None:
+    """A vendor file writes Object_Class_code: a warning, and the code is still checked."""
+    text = EZ_EDS_STYLE.replace("[Connection Manager]\n", "[Connection Manager]\n        Object_Class_code = 0x06;\n")
+    assert [(f.rule, f.severity) for f in check_eds(parse_eds(text))] == [("keyword-case", "warning")]
+    assert _rules(text.replace("0x06;", "0x05;")) == {("class-code", line_of(text, "Object_Class_code"))}
+
+
+def _safety_format(text: str) -> str:
+    return text.replace("0x44640405,", "0x44640505,")
+
+
+def test_real_time_format_5_on_a_safety_connection() -> None:
+    """Format 5 is CIP Safety's: accepted on a connection with the safety fields or of a device
+    classed Safety; elsewhere a warning; 6 and 7 stay reserved (errors)."""
+    assert check_eds(parse_eds(_safety_format(EZ_EDS_STYLE))) == []
+    plain = _safety_format(EZ_EDS_STYLE).replace("        Class2 = Safety;\n", "").replace(
+        '2C 64",\n                1,\n                1;', '2C 64";')
+    line = line_of(plain, "0x44640505,")
+    assert [(f.rule, f.severity, f.line) for f in check_eds(parse_eds(plain))] == [
+        ("connection-format", "warning", line)]
+    reserved = EZ_EDS_STYLE.replace("0x44640405,", "0x44640605,")
+    assert _rules(reserved) == {("connection-format", line_of(reserved, "0x44640605,"))}
+
+
+def test_a_utf8_file_is_noted() -> None:
+    text = EZ_EDS_STYLE.replace('"Example Controls"', '"Müller Steuerungen"')
+    as_read = text.encode("utf-8").decode("latin-1")
+    findings = check_eds(parse_eds(as_read))
+    assert [(f.rule, f.severity, f.line) for f in findings] == [("encoding", "info", line_of(text, "Müller"))]
+    assert "'Müller' on this line reads as 'MÃ¼ller'" in findings[0].message
+    # Latin-1 is read as written: nothing to note.
+    assert check_eds(parse_eds(text.encode("latin-1").decode("latin-1"))) == []

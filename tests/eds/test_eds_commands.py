@@ -52,7 +52,7 @@ def line_of(snippet: str, text: str) -> int:
 
 def test_clean_file(good: Path, capsys: pytest.CaptureFixture[str]) -> None:
     assert run("check", str(good)) == 0
-    assert capsys.readouterr() == ("", "")
+    assert capsys.readouterr() == ("1 file: 0 errors, 0 warnings\n", "")
 
 
 def test_findings_printed_and_exit_1(bad: Path, capsys: pytest.CaptureFixture[str]) -> None:
@@ -63,6 +63,7 @@ def test_findings_printed_and_exit_1(bad: Path, capsys: pytest.CaptureFixture[st
         f"{bad}:{line_of('0, 300, 1,', text)}: warning value-range: "
         "Param7 field 11 (300) is outside USINT range 0..255",
         f"{bad}:{line_of('0xCA, 2,', text)}: error data-size: Param8 is a REAL of 4 bytes, not 2",
+        "1 file: 1 error, 1 warning",
     ]
     assert err == ""
 
@@ -71,18 +72,28 @@ def test_warnings_alone_exit_0(tmp_path: Path, capsys: pytest.CaptureFixture[str
     path = tmp_path / "warn.eds"
     path.write_text(ADAPTER_EDS.replace("Class1 = EtherNetIP;", "Class1 = Profibus;"))
     assert run("check", str(path)) == 0
-    assert "warning device-classification" in capsys.readouterr().out
+    out = capsys.readouterr().out
+    assert "warning device-classification" in out and out.endswith("1 file: 0 errors, 1 warning\n")
+    # --strict: a warning fails the check.
+    assert run("check", "--strict", str(path)) == 1
+    assert capsys.readouterr().out.endswith("1 file: 0 errors, 1 warning\n")
 
 
-def test_json_lines(bad: Path, capsys: pytest.CaptureFixture[str]) -> None:
-    assert run("check", "--json", str(bad)) == 1
+def test_json_lines(bad: Path, good: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    """One object per file, clean files too, then one summary object."""
+    assert run("check", "--json", str(good), str(bad)) == 1
     records = [json.loads(line) for line in capsys.readouterr().out.splitlines()]
-    assert [(record["rule"], record["severity"]) for record in records] == [
+    assert len(records) == 3
+    clean, found, summary = records
+    assert clean == {"file": str(good), "readable": True, "errors": 0, "warnings": 0, "notes": 0, "findings": []}
+    assert (found["file"], found["errors"], found["warnings"]) == (str(bad), 1, 1)
+    assert [(record["rule"], record["severity"]) for record in found["findings"]] == [
         ("value-range", "warning"), ("data-size", "error"),
     ]
-    assert set(records[0]) == {"file", "line", "rule", "severity", "message"}
-    assert records[1]["file"] == str(bad)
-    assert records[1]["line"] == line_of("0xCA, 2,", bad.read_text())
+    assert set(found["findings"][0]) == {"line", "rule", "severity", "message"}
+    assert found["findings"][1]["line"] == line_of("0xCA, 2,", bad.read_text())
+    assert summary == {"summary": {"files": 2, "errors": 1, "warnings": 1, "notes": 0, "unreadable": 0,
+                                   "strict": False}}
 
 
 def test_identity_from_a_live_device(good: Path, capsys: pytest.CaptureFixture[str]) -> None:
@@ -91,14 +102,16 @@ def test_identity_from_a_live_device(good: Path, capsys: pytest.CaptureFixture[s
     assert run_check(args, identity={**ACG_IDENTITY, "product_code": 101}) == 1
     out = capsys.readouterr().out
     line = line_of("ProdCode", ADAPTER_EDS)
-    assert out == f"{good}:{line}: error device-identity: ProdCode is 100 but the device reports 101\n"
+    assert out == ("1 file: 0 errors, 0 warnings\n"
+                   f"{good}:{line}: error device-identity: ProdCode is 100 but the device reports 101\n"
+                   "1 file: 1 error, 0 warnings\n")
 
 
 def test_unreadable_file_is_one_line_and_exit_2(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
     missing = tmp_path / "missing.eds"
     assert run("check", str(missing)) == 2
     out, err = capsys.readouterr()
-    assert out == ""
+    assert out == "1 file: 0 errors, 0 warnings, 1 unreadable\n"
     assert err == f"cipstack eds check: {missing}: cannot read: No such file or directory\n"
 
 

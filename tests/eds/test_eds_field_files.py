@@ -44,11 +44,16 @@ class Expected:
     up to 255)."""
 
     check_warnings: list[tuple[int, str, str]] = field(default_factory=list)
+    #: What `eds check` notes (severity info): a UTF-8 file.
+    check_notes: list[tuple[int, str, str]] = field(default_factory=list)
     skipped: list[tuple[int, str]] = field(default_factory=list)
     offered: list[int] = field(default_factory=list)
     ethernetip: list[int] = field(default_factory=list)
 
 
+#: Connections of the 8-port IO-Link master python-ethernetip can open: the station owners and each
+#: port's owners (run/idle header, point-to-point allowed).
+ETHERNETIP_8PORT = [1, 4, 7, 10, *(13 + 6 * port + kind for port in range(8) for kind in (0, 3))]
 EXPECTED: dict[str, Expected] = {
     "devicenet_valve.eds": Expected(),
     "ez_style_comm_module.eds": Expected(offered=[1, 2, 3, 4], ethernetip=[2]),
@@ -78,6 +83,26 @@ EXPECTED: dict[str, Expected] = {
                  (76, "Connection8 (Diagnostics B): T->O point 111 is no input assembly: not offered"),
                  (79, "Connection9 (Owner Of 103): T->O point 103 is no input assembly: not offered")],
         offered=[1, 2], ethernetip=[1]),
+    "ez_style_iolink_master.eds": Expected(
+        offered=[1, 2, 3, 4, 5, 6, 7, 8, 9, 10, 11, 12], ethernetip=[1, 4, 7, 10]),
+    "vendor_modular_coupler.eds": Expected(
+        check_warnings=[(47, "keyword-case",
+                         "[Assembly] Object_Class_code is written Object_Class_Code (read as such)"),
+                        (56, "keyword-case",
+                         "[Connection Manager] Object_Class_code is written Object_Class_Code (read as such)")],
+        offered=[1, 2, 3, 4], ethernetip=[1, 4]),
+    "vendor_drive_own_data.eds": Expected(offered=[1, 2, 3, 4, 5, 6, 7], ethernetip=[1, 2, 3]),
+    "hand_utf8_distance_sensor.eds": Expected(
+        check_notes=[(1, "encoding", "the file is UTF-8 ('µs' on this line reads as 'Âµs' in a Latin-1 tool)")],
+        offered=[1, 2, 3, 4]),
+    "ez_style_safety_format5.eds": Expected(
+        skipped=[(83, "Assem200 has no path and no connection names it: not served"),
+                 (90, "Assem201 has no path and no connection names it: not served"),
+                 (150, "Connection5: transport 0x0001 is not class 1: skipped"),
+                 (162, "Connection6: transport 0x0001 is not class 1: skipped")],
+        offered=[1, 2, 3, 4], ethernetip=[1, 2]),
+    "vendor_plc_generic_adapter.eds": Expected(offered=[1, 2, 3, 4, 5, 6], ethernetip=[1, 4, 5]),
+    "vendor_iolink_master_8port.eds": Expected(offered=list(range(1, 61)), ethernetip=ETHERNETIP_8PORT),
 }
 WITH_CONNECTIONS = [path for path in FILES if read_eds(path).get("Connection Manager")]
 
@@ -128,7 +153,19 @@ def test_the_corpus_holds_every_construct_of_the_field() -> None:
     assert "Geräte".encode("latin-1") in drive_raw and "Überwachung".encode("latin-1") in drive_raw
     assert docs["hand_drive_oelpumpe.eds"].entry("Device", "ProdName").value() == "Ölpumpe ÖP-7.5 Antrieb"
     assert docs["hand_drive_oelpumpe.eds"].entry("Device", "VendName").value() == "Müller & Söhne Antriebstechnik"
-    assert all(not _is_utf8_text(data) for name, data in raw.items() if not data.isascii())
+    utf8 = {name for name, data in raw.items() if not data.isascii() and _is_utf8_text(data)}
+    assert utf8 == {"hand_utf8_distance_sensor.eds"}
+    # Variable-size assemblies (AssemExaN) sized by their members and by a parameter; a modular
+    # station ([Modular]) whose assemblies sum its default modules; the self-member idiom; real-time
+    # format 5 on CIP Safety connections; connections whose points have no assembly.
+    iolink = docs["ez_style_iolink_master.eds"]
+    assert iolink.entry("Assembly", "AssemExa101").value(3) is None
+    assert iolink.entry("Assembly", "AssemExa103").value(3) == "Param11"
+    assert "Modular" in docs["vendor_modular_coupler.eds"]
+    assert docs["vendor_drive_own_data.eds"].entry("Assembly", "Assem20").value(8) == "Assem20"
+    safety5 = docs["ez_style_safety_format5.eds"].entry("Connection Manager", "Connection5").value(2)
+    assert (safety5 >> 8) & 7 == 5 and (safety5 >> 12) & 7 == 5
+    assert "Assembly" not in docs["vendor_plc_generic_adapter.eds"]
     # CRLF in some files, LF in others; tab indentation and comments between fields in a hand-written one.
     crlf = {name for name, data in raw.items() if b"\r\n" in data}
     assert crlf and crlf != set(raw) and all(raw[name].count(b"\n") == raw[name].count(b"\r\n") for name in crlf)
@@ -154,8 +191,12 @@ def test_eds_check_finds_no_error_and_the_expected_warnings(path: Path) -> None:
     out = io.StringIO()
     status = run_check(argparse.Namespace(files=[str(path)], json=False), stdout=out, stderr=out)
     assert status == 0, out.getvalue()
-    assert out.getvalue().splitlines() == [f"{path}:{line}: warning {rule}: {message}"
-                                           for line, rule, message in EXPECTED[path.name].check_warnings]
+    warnings, notes = EXPECTED[path.name].check_warnings, EXPECTED[path.name].check_notes
+    expected = sorted([(line, f"{path}:{line}: warning {rule}: {message}") for line, rule, message in warnings]
+                      + [(line, f"{path}:{line}: info {rule}: {message}") for line, rule, message in notes])
+    summary = f"1 file: 0 errors, {len(warnings)} warning" + ("" if len(warnings) == 1 else "s") + (
+        f", {len(notes)} note" + ("" if len(notes) == 1 else "s") if notes else "")
+    assert out.getvalue().splitlines() == [text for _, text in expected] + [summary]
 
 
 @pytest.mark.parametrize("path", FILES, ids=_ids(FILES))
@@ -234,7 +275,7 @@ class Adapter:
         for line in self.process.stderr:
             self.lines.append(line.rstrip("\n"))
 
-    def wait_for(self, pattern: str, timeout: float = 15.0) -> None:
+    def wait_for(self, pattern: str, timeout: float = 30.0) -> None:
         deadline = time.monotonic() + timeout
         while time.monotonic() < deadline:
             if any(re.search(pattern, line) for line in self.lines):
@@ -255,12 +296,16 @@ def adapter(request: pytest.FixtureRequest) -> Iterator[Adapter]:
     started.close()
 
 
-def _io(adapter: Adapter, number: int, duration: float) -> subprocess.Popen[str]:
+def _io(adapter: Adapter, number: int, duration: float, *more: str) -> subprocess.Popen[str]:
     return subprocess.Popen(
         [sys.executable, "-m", "cipstack", "io", f"127.0.0.1:{adapter.port}", "--eds", str(adapter.path),
          "--connection", str(number), "--rpi", "10ms", "--duration", f"{duration}s", "--timeout-multiplier", "4",
-         "--target-io-port", str(adapter.io_port), "--print", "summary"],
+         "--target-io-port", str(adapter.io_port), "--print", "summary", *more],
         stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+
+
+#: At most this many `cipstack io` processes at once (a file of 60 connections runs in rounds).
+ROUND_SIZE = 6
 
 
 def _rounds(connections: list[ConnectionInfo]) -> list[list[ConnectionInfo]]:
@@ -268,8 +313,8 @@ def _rounds(connections: list[ConnectionInfo]) -> list[list[ConnectionInfo]]:
     rounds: list[list[ConnectionInfo]] = []
     for connection in connections:
         for batch in rounds:
-            if connection.heartbeat or all(other.heartbeat or other.o_t_point != connection.o_t_point
-                                           for other in batch):
+            if len(batch) < ROUND_SIZE and (connection.heartbeat or all(
+                    other.heartbeat or other.o_t_point != connection.o_t_point for other in batch)):
                 batch.append(connection)
                 break
         else:
@@ -292,7 +337,7 @@ def test_each_offered_connection_runs_with_cipstack_io(adapter: Adapter) -> None
     offered = [c for c in view.connections if c.number in EXPECTED[adapter.path.name].offered]
     listeners = [c for c in offered if c.kind == "listen only"]
     owners = {c.number: next(o for o in offered if o.kind != "listen only" and o.t_o_point == c.t_o_point
-                             and o.t_o_multicast and not o.t_o_point_to_point) for c in listeners}
+                             and o.t_o_multicast) for c in listeners}
     results: dict[int, subprocess.CompletedProcess[str]] = {}
     interrupted: set[int] = set()
 
@@ -302,7 +347,9 @@ def test_each_offered_connection_runs_with_cipstack_io(adapter: Adapter) -> None
 
     for batch in _rounds([c for c in offered if c.kind != "listen only"]):
         serving = [o for o in batch if o in owners.values()]
-        running = {c.number: _io(adapter, c.number, 30.0 if c in serving else 0.5) for c in batch}
+        # An owner the file lets produce both ways is asked for multicast (--multicast), for its listeners.
+        running = {c.number: _io(adapter, c.number, 30.0 if c in serving else 0.5,
+                                 *(["--multicast"] if c in serving else [])) for c in batch}
         for owner in serving:
             adapter.wait_for(rf"->{owner.t_o_point} \(0x[0-9A-F]+\) opened .*multicast")
         listening = {n: _io(adapter, n, 0.5) for n, o in owners.items() if o in serving}

@@ -1,0 +1,261 @@
+"""``eds check --against HOST``: an EDS file compared with the live device it describes.
+
+What is compared, each through the services the device has:
+
+* ``[Device]`` with the Identity object: Get_Attributes_All of instance 1; where the device refuses
+  it (0x08, as the MX2 and RX do), Get_Attribute_Single of attributes 1-4 and 7; where that is
+  refused too, the ListIdentity reply (which carries the same attributes).
+* every ``ParamN`` with a link path: Get_Attribute_Single of that attribute; the size of the reply
+  against the parameter's data type and size (fields 5 and 6), its value against the minimum and
+  maximum (fields 10 and 11).
+* every ``AssemN`` the file places at an instance: its size against Assembly attribute 4 (where
+  attribute 4 is not served, the length of attribute 3, the data).
+* every class 1 ``ConnectionN``: opened as the file describes it (``Scanner.io_connection_from_eds``)
+  and closed at once; a listen-only connection while a connection of the file that produces the
+  same input by multicast is open.
+
+A difference is an error finding of the checker's kind (a rule, a line of the file, a message);
+what the device refuses without saying the file is wrong (a service it does not serve, a state
+conflict) is an ``info`` finding, so the check goes on with what the device does serve.
+"""
+
+from __future__ import annotations
+
+import asyncio
+from collections.abc import Awaitable, Callable
+from dataclasses import dataclass, field
+from typing import TYPE_CHECKING, Any, TypeVar
+
+from ..cip.status import CipError, ExtendedStatus, GeneralStatus, describe_status
+from ..cip.types import SHORT_STRING, UINT, USINT, IntegerType, RealType
+from .checker import ERROR, INFO, WARNING, Finding
+from .interpret import ConnectionInfo, ParamInfo, read_view
+from .model import EdsDocument
+
+if TYPE_CHECKING:
+    from ..scanner import Scanner
+
+T = TypeVar("T")
+
+#: Statuses that say the attribute or instance is not there: the file names something the device lacks.
+_ABSENT = frozenset({GeneralStatus.PATH_DESTINATION_UNKNOWN, GeneralStatus.ATTRIBUTE_NOT_SUPPORTED,
+                     GeneralStatus.OBJECT_DOES_NOT_EXIST, GeneralStatus.PATH_SEGMENT_ERROR})
+#: Forward_Open refusals of a connection path: the device does not offer these points (now).
+_PATH_REFUSALS = frozenset({ExtendedStatus.INVALID_CONSUMING_PATH, ExtendedStatus.INVALID_PRODUCING_PATH,
+                            ExtendedStatus.INCONSISTENT_PATH_COMBINATION})
+#: Identity attributes ``[Device]`` mirrors (eds.md: "must equal Identity attributes 1-4 and 7").
+_IDENTITY_ATTRIBUTES = ((1, "vendor_id", UINT), (2, "device_type", UINT), (3, "product_code", UINT),
+                        (7, "product_name", SHORT_STRING))
+
+
+@dataclass
+class LiveReport:
+    """What comparing one file with the device found, and what was compared."""
+
+    identity: dict[str, Any] | None = None
+    #: How the identity was read: "Get_Attributes_All", "Get_Attribute_Single" or "ListIdentity".
+    identity_by: str = ""
+    findings: list[Finding] = field(default_factory=list)
+    parameters: int = 0
+    assemblies: int = 0
+    connections: int = 0
+    opened: int = 0
+    #: The Assembly instances the device has (their size was read).
+    sized: set[int] = field(default_factory=set)
+
+    def summary(self, host: str) -> str:
+        return (f"against {host}: identity by {self.identity_by or 'nothing (refused)'}, "
+                f"{self.parameters} parameters read, {self.assemblies} assemblies sized, "
+                f"{self.opened} of {self.connections} class 1 connections opened and closed")
+
+
+def _status(exc: CipError) -> str:
+    return describe_status(exc.general, exc.extended)
+
+
+def _find(report: LiveReport, rule: str, line: int, message: str, severity: str = ERROR) -> None:
+    report.findings.append(Finding(rule, severity, line, message))
+
+
+async def _identity(scanner: Scanner, report: LiveReport) -> None:
+    try:
+        _, values = await scanner.get_attributes_all(0x01, 1)
+    except CipError as exc:
+        _find(report, "live-refused", 0, f"Identity Get_Attributes_All refused ({_status(exc)}): read "
+                                         "attribute by attribute", INFO)
+    else:
+        if values is not None:
+            report.identity_by = "Get_Attributes_All"
+            report.identity = {"vendor_id": values["Vendor ID"], "device_type": values["Device Type"],
+                               "product_code": values["Product Code"],
+                               "revision": (values["Revision"]["major"], values["Revision"]["minor"]),
+                               "product_name": values["Product Name"]}
+            return
+    identity: dict[str, Any] = {}
+    try:
+        for attribute, key, cip_type in _IDENTITY_ATTRIBUTES:
+            identity[key] = await scanner.read(0x01, 1, attribute, cip_type)
+        raw = (await scanner.get_attribute_single(0x01, 1, 4)).data
+        identity["revision"] = (USINT.decode(raw[:1]), USINT.decode(raw[1:2]))
+    except (CipError, ValueError) as exc:
+        why = _status(exc) if isinstance(exc, CipError) else str(exc)
+        _find(report, "live-refused", 0, f"Identity Get_Attribute_Single refused ({why}): ListIdentity read", INFO)
+    else:
+        report.identity_by, report.identity = "Get_Attribute_Single", identity
+        return
+    records = await scanner.list_identity()
+    if records:
+        record = records[0]
+        report.identity_by = "ListIdentity"
+        report.identity = {"vendor_id": record.vendor_id, "device_type": record.device_type,
+                           "product_code": record.product_code, "revision": record.revision,
+                           "product_name": record.product_name}
+
+
+async def _parameter(scanner: Scanner, param: ParamInfo, report: LiveReport) -> None:
+    assert param.link is not None
+    class_id, instance, attribute = param.link
+    where = f"{param.keyword} ({param.name}) at 0x{class_id:02X}/{instance}/{attribute}"
+    try:
+        raw = (await scanner.get_attribute_single(class_id, instance, attribute)).data
+    except CipError as exc:
+        if exc.general in _ABSENT:
+            _find(report, "live-parameter", param.line, f"{where}: the device has no such attribute ({_status(exc)})")
+        else:
+            _find(report, "live-refused", param.line, f"{where}: read refused ({_status(exc)})", INFO)
+        return
+    report.parameters += 1
+    cip_type = param.type
+    if not isinstance(cip_type, (IntegerType, RealType)):
+        try:
+            cip_type.decode(raw)
+        except (CipError, ValueError, IndexError) as exc:
+            _find(report, "live-parameter", param.line, f"{where}: the device's {len(raw)} bytes are no "
+                                                        f"{cip_type.name} ({exc})")
+        return
+    if isinstance(cip_type, (IntegerType, RealType)):
+        if len(raw) != param.size or cip_type.size != param.size:
+            _find(report, "live-parameter", param.line,
+                  f"{where}: the device answers {len(raw)} bytes; the file says a {cip_type.name} of {param.size}")
+            return
+        value = cip_type.decode(raw)
+        low, high = param.minimum, param.maximum
+        numbers = [bound for bound in (low, high) if isinstance(bound, (int, float)) and not isinstance(bound, bool)]
+        if len(numbers) == 2 and not low <= value <= high:
+            _find(report, "live-parameter", param.line,
+                  f"{where}: the device holds {value}, outside the file's {low}..{high}", WARNING)
+
+
+async def _assembly(scanner: Scanner, keyword: str, instance: int, size: int, line: int, report: LiveReport) -> None:
+    where = f"{keyword} (Assembly instance {instance})"
+    try:
+        served = int(await scanner.read(0x04, instance, 4, UINT))
+    except CipError as exc:
+        if exc.general in (GeneralStatus.PATH_DESTINATION_UNKNOWN, GeneralStatus.OBJECT_DOES_NOT_EXIST):
+            _find(report, "live-assembly", line, f"{where}: the device has no such instance ({_status(exc)})")
+            return
+        try:   # attribute 4 is optional: the data itself gives the size
+            served = len((await scanner.get_attribute_single(0x04, instance, 3)).data)
+        except CipError as again:
+            _find(report, "live-refused", line, f"{where}: attributes 4 and 3 refused ({_status(exc)}; "
+                                                f"{_status(again)})", INFO)
+            return
+    report.assemblies += 1
+    report.sized.add(instance)
+    if served != size:
+        _find(report, "live-assembly", line, f"{where} is {size} bytes in the file, {served} on the device")
+
+
+async def _connection(scanner: Scanner, doc: EdsDocument, connection: ConnectionInfo, owners: list[ConnectionInfo],
+                      options: dict[str, Any], report: LiveReport) -> None:
+    where = f"Connection{connection.number} ({connection.name})"
+
+    async def opened(number: int, multicast: bool | None, then: Callable[[], Awaitable[None]] | None) -> None:
+        extra = dict(options)
+        if multicast is not None:
+            extra["multicast"] = multicast
+        async with scanner.io_connection_from_eds(doc, number, **extra) as io:
+            for note in io.notes:
+                _find(report, "live-connection", connection.line, f"{where}: {note}")
+            if then is not None:
+                await then()
+
+    try:
+        if connection.kind == "listen only":
+            candidates = [o for o in owners if o.t_o_point == connection.t_o_point and o.t_o_multicast]
+            refusals: list[str] = []
+            listened: list[bool] = []
+
+            async def listen() -> None:
+                listened.append(True)
+                await opened(connection.number, True, None)
+
+            for owner in candidates:
+                try:
+                    await opened(owner.number, True, listen)
+                except CipError as exc:
+                    if listened:
+                        raise   # the owner opened: the listener was refused
+                    refusals.append(f"Connection{owner.number}: {_status(exc)}")
+                    continue
+                break
+            else:
+                why = "; ".join(refusals) or "no connection of the file produces it by multicast"
+                _find(report, "live-connection", connection.line,
+                      f"{where}: listen only, and nothing produces input {connection.t_o_point} by multicast for "
+                      f"it to listen to ({why}): not opened", INFO)
+                return
+        else:
+            await opened(connection.number, None, None)
+    except CipError as exc:
+        points = {connection.t_o_point} | (set() if connection.heartbeat else {connection.o_t_point})
+        if exc.extended[:1] and exc.extended[0] in _PATH_REFUSALS and points <= report.sized:
+            # Both assemblies exist: the device offers other pairs now (the ACG-ET2 serves the pair
+            # its parameters select), which says nothing against the file.
+            _find(report, "live-connection", connection.line,
+                  f"{where}: Forward_Open refused ({_status(exc)}); the device has assemblies "
+                  f"{', '.join(str(p) for p in sorted(points))} but does not offer this path now", WARNING)
+        else:
+            _find(report, "live-connection", connection.line, f"{where}: Forward_Open refused ({_status(exc)})")
+        return
+    except (OSError, asyncio.TimeoutError, ValueError) as exc:
+        _find(report, "live-connection", connection.line, f"{where}: {type(exc).__name__}: {exc}")
+        return
+    report.opened += 1
+
+
+async def _guarded(step: Awaitable[T], report: LiveReport, what: str) -> T | None:
+    """A step that a broken reply must not turn into a traceback: it becomes a finding."""
+    try:
+        return await step
+    except CipError as exc:
+        _find(report, "live-refused", 0, f"{what}: {_status(exc)}", INFO)
+    except (ValueError, KeyError, IndexError, TypeError) as exc:
+        _find(report, "live-refused", 0, f"{what}: the reply does not decode ({exc})", INFO)
+    return None
+
+
+async def compare_with_device(doc: EdsDocument, scanner: Scanner, *, target_io_port: int | None = None,
+                              connections: bool = True) -> LiveReport:
+    """Everything the module docstring lists, for one document."""
+    report = LiveReport()
+    await _guarded(_identity(scanner, report), report, "Identity")
+    view = read_view(doc)
+    for param in view.params.values():
+        if param.link is not None and param.link[1] != 0:
+            await _guarded(_parameter(scanner, param, report), report, param.keyword)
+    for info in view.assemblies.values():
+        if info.instance is not None and info.size:
+            await _guarded(_assembly(scanner, info.keyword, info.instance, info.size, info.line, report), report,
+                           info.keyword)
+    if connections:
+        options: dict[str, Any] = {"target_io_port": target_io_port, "timeout_multiplier": 4}
+        owners = [c for c in view.connections if c.kind != "listen only"]
+        report.connections = len(view.connections)
+        for connection in view.connections:
+            await _connection(scanner, doc, connection, owners, options, report)
+    report.findings.sort(key=lambda finding: finding.line)
+    return report
+
+
+__all__ = ["LiveReport", "compare_with_device"]
