@@ -106,6 +106,10 @@ def _msp_members(data: bytes) -> list[bytes] | None:
     return [data[start:end] for start, end in zip(offsets, ends, strict=True)]
 
 
+def _hexes(statuses: list[int | None] | None) -> str:
+    return "none" if statuses is None else "[" + ", ".join("?" if s is None else f"0x{s:02X}" for s in statuses) + "]"
+
+
 def _member_status(member: bytes) -> int | None:
     return member[2] if len(member) >= 4 and member[0] & 0x80 else None
 
@@ -124,7 +128,7 @@ def multiple_service_good(ctx: Context, spec: CheckSpec) -> Outcome:
     members = _msp_members(reply.data) if reply.status == 0 else None
     statuses = [_member_status(m) for m in members] if members is not None else None
     ok = statuses == [0, 0]
-    return outcome(spec, ok, f"{reply.describe()}; member statuses {statuses}", probe.exchanges)
+    return outcome(spec, ok, f"{reply.describe()}; member statuses {_hexes(statuses)}", probe.exchanges)
 
 
 @check("router.multiple_service.bad_member", "Multiple_Service_Packet of a good request and one for attribute 0xFE",
@@ -139,4 +143,4 @@ def multiple_service_bad(ctx: Context, spec: CheckSpec) -> Outcome:
     members = _msp_members(reply.data) if reply.response is not None else None
     statuses = [_member_status(m) for m in members] if members is not None else None
     ok = reply.status == 0x1E and statuses == [0, 0x14]
-    return outcome(spec, ok, f"{reply.describe()}; member statuses {statuses}", probe.exchanges)
+    return outcome(spec, ok, f"{reply.describe()}; member statuses {_hexes(statuses)}", probe.exchanges)
