@@ -5,11 +5,13 @@ from __future__ import annotations
 
 import struct
 from collections.abc import Iterator
+from dataclasses import replace
 
 from ..cip.epath import request_path
-from .connections import Endpoint, forward_open_request, plans, send_forward_open
+from .connections import Endpoint, Opened, Plan, forward_open_request, plans, send_forward_open
 from .model import CheckSpec, Outcome, Verdict
 from .registry import Context, check, outcome
+from .wire import Probe
 
 EDS_REFERENCE = "CIP Vol. 1 §7 (EDS)"
 
@@ -77,7 +79,12 @@ def assembly_sizes(ctx: Context, spec: CheckSpec) -> Iterator[Outcome]:
     placed = [a for a in ctx.view.assemblies.values() if a.instance is not None]
     if not placed:
         yield outcome(spec, Verdict.NOT_APPLICABLE, "no AssemN names an instance")
+    heartbeats = {c.o_t_point for c in ctx.view.connections if c.heartbeat}
     for assembly in placed:
+        if assembly.size == 0 and assembly.instance in heartbeats:
+            yield outcome(spec, Verdict.NOT_APPLICABLE, f"instance {assembly.instance} is a heartbeat connection "
+                          "point: no data, nothing to size", subject=assembly.keyword)
+            continue
         before = len(probe.exchanges)
         reply = probe.request(0x0E, request_path(0x04, assembly.instance, 4))
         exchanges = probe.exchanges[before:]
@@ -108,9 +115,42 @@ def connections_open(ctx: Context, spec: CheckSpec) -> Iterator[Outcome]:
     for plan in found:
         before = len(probe.exchanges)
         reply, opened = send_forward_open(ctx, probe, endpoint, forward_open_request(plan))
+        owner = None
+        if opened is None and reply.status == 0x01 and reply.extended == 0x0119:
+            # Listen only (or input only) needs a connection that owns the data: open the file's
+            # exclusive owner of the same input first, as a configuration tool would.
+            owner = _open_owner(ctx, probe, endpoint, found, plan)
+            if owner is not None:
+                reply, opened = send_forward_open(ctx, probe, endpoint, forward_open_request(plan))
+        exchanges = probe.exchanges[before:]
         if opened is None:
-            yield outcome(spec, False, f"Forward_Open: {reply.describe()}", probe.exchanges[before:], plan.name)
+            if owner is not None:
+                owner.close()
+            verdict = Verdict.FAIL
+            note = ""
+            if reply.status == 0x01 and reply.extended in (0x012A, 0x012B) and _assemblies_exist(probe, plan):
+                # The assemblies are there and the device refuses to connect them now: which pair it
+                # connects is part of its configuration (the ACG-ET2's CM.23/CM.24 select it).
+                verdict = Verdict.WARNING
+                note = ": the assemblies exist; the device's present configuration refuses this connection"
+            yield outcome(spec, verdict, f"Forward_Open: {reply.describe()}{note}", exchanges, plan.name)
             continue
         closing = opened.close()
-        yield outcome(spec, closing.status == 0, f"opened; Forward_Close: {closing.describe()}",
-                      probe.exchanges[before:], plan.name)
+        if owner is not None:
+            owner.close()
+        yield outcome(spec, closing.status == 0, f"opened{' with its owner' if owner else ''}; Forward_Close: "
+                      f"{closing.describe()}", probe.exchanges[before:], plan.name)
+
+
+def _open_owner(ctx: Context, probe: Probe, endpoint: Endpoint, found: list[Plan], plan: Plan) -> Opened | None:
+    for owner in (p for p in found if p.exclusive_owner and p.to_point == plan.to_point):
+        for variant in (replace(owner, multicast=plan.multicast), owner):
+            _, opened = send_forward_open(ctx, probe, endpoint, forward_open_request(variant))
+            if opened is not None:
+                return opened
+    return None
+
+
+def _assemblies_exist(probe: Probe, plan: Plan) -> bool:
+    points = [plan.to_point] if plan.heartbeat else [plan.ot_point, plan.to_point]
+    return all(probe.request(0x0E, request_path(0x04, point, 4)).status == 0 for point in points)
