@@ -4,6 +4,7 @@ Vol. 2 §3-4, as OpENer's cipioconnection.c and Wireshark's packet-cip.c (cipio)
 
 from __future__ import annotations
 
+import itertools
 import select
 import statistics
 import time
@@ -140,7 +141,7 @@ def production(ctx: Context, spec: CheckSpec) -> Outcome:
     if len(arrivals) < 2:
         return outcome(spec, False, f"{len(arrivals)} T->O packets in 1 s at an API of {run.api * 1e3:.1f} ms",
                        _exchanges(run))
-    intervals = [b.at - a.at for a, b in zip(arrivals, arrivals[1:], strict=False)]
+    intervals = [b.at - a.at for a, b in itertools.pairwise(arrivals)]
     mean = statistics.fmean(intervals)
     ok = 0.8 * run.api <= mean <= 1.25 * run.api and len(arrivals) >= 0.7 * expected
     return outcome(spec, ok, f"{len(arrivals)} packets (about {expected:.0f} due), mean interval {mean * 1e3:.2f} ms, "
@@ -156,7 +157,7 @@ def sequence(ctx: Context, spec: CheckSpec) -> Outcome:
         return measured
     _, run = measured
     problems = []
-    for before, after in zip(run.arrivals, run.arrivals[1:], strict=False):
+    for before, after in itertools.pairwise(run.arrivals):
         if (after.encap_sequence - before.encap_sequence) & 0xFFFFFFFF != 1:
             problems.append(f"encapsulation sequence {before.encap_sequence} then {after.encap_sequence}")
         if after.cip_sequence != before.cip_sequence and not seq16_newer(after.cip_sequence, before.cip_sequence):

@@ -9,6 +9,7 @@ connection do not apply. Every connection a check opens is closed when the check
 
 from __future__ import annotations
 
+import contextlib
 import random
 import socket
 from dataclasses import dataclass, replace
@@ -117,10 +118,8 @@ class Opened:
         self.io_port = DEFAULT_IO_PORT
         for item in items:
             if item.type == ItemType.SOCKADDR_O_T:
-                try:
+                with contextlib.suppress(Exception):  # a malformed item: the default port
                     self.io_port = SockAddr.decode(item.data).port or DEFAULT_IO_PORT
-                except Exception:  # noqa: BLE001 - a malformed item: the default port
-                    pass
         self.closed = False
 
     def close(self) -> Reply:

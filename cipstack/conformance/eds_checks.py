@@ -30,15 +30,14 @@ def device_identity(ctx: Context, spec: CheckSpec) -> Outcome:
     if skipped is not None:
         return skipped
     from ..eds.checker import check_eds
-    from .objects import IDENTITY, read_attributes
+    from .objects import IDENTITY, number, read_attributes
 
     probe = ctx.probe()
-    values, problems = read_attributes(probe, 0x01, {a: IDENTITY[a] for a in (1, 2, 3, 4, 7)})
+    values, problems = read_attributes(probe, 0x01, {a: IDENTITY[a] for a in (1, 2, 3, 4, 7)}, shapes=False)
     if problems:
         return outcome(spec, False, "; ".join(problems), probe.exchanges)
-    identity = {"vendor_id": struct.unpack("<H", values[1])[0], "device_type": struct.unpack("<H", values[2])[0],
-                "product_code": struct.unpack("<H", values[3])[0], "revision": (values[4][0], values[4][1]),
-                "product_name": values[7][1:].decode("latin-1")}
+    identity = {"vendor_id": number(values[1]), "device_type": number(values[2]), "product_code": number(values[3]),
+                "revision": tuple(values[4][:2]), "product_name": values[7][1:].decode("latin-1")}
     differ = [f.message for f in check_eds(ctx.eds, identity) if f.rule == "device-identity"]  # type: ignore[arg-type]
     return outcome(spec, not differ, "; ".join(differ) or "[Device] matches", probe.exchanges)
 

@@ -120,7 +120,7 @@ def _identity_problems(body: bytes, port: int | None) -> tuple[list[str], dict[s
     """What is wrong with a ListIdentity reply body (``port``: the port the sockaddr must name)."""
     try:
         items = decode_items(body)
-    except Exception as exc:  # noqa: BLE001 - any decoding failure is the finding
+    except Exception as exc:  # any decoding failure is the finding
         return [f"malformed CPF: {exc}"], None
     if len(items) != 1 or items[0].type != 0x000C:
         return [f"items {[hex(i.type) for i in items]}, expected one 0x000C"], None
@@ -174,7 +174,7 @@ def list_identity_udp(ctx: Context, spec: CheckSpec) -> Outcome:
     status = struct.unpack_from("<I", reply, 8)[0]
     if status != 0 or struct.unpack_from("<H", reply)[0] != Command.LIST_IDENTITY:
         return outcome(spec, False, f"reply header {reply[:HEADER_SIZE].hex()}", exchanges)
-    problems, record = _identity_problems(reply[HEADER_SIZE:], ctx.port)
+    problems, _ = _identity_problems(reply[HEADER_SIZE:], ctx.port)
     return outcome(spec, not problems, "; ".join(problems) or "one identity item", exchanges)
 
 
@@ -202,7 +202,7 @@ def list_services(ctx: Context, spec: CheckSpec) -> Outcome:
         return outcome(spec, False, _status(reply), probe.exchanges)
     try:
         items = decode_items(reply.body)
-    except Exception as exc:  # noqa: BLE001
+    except Exception as exc:
         return outcome(spec, False, f"malformed CPF: {exc}", probe.exchanges)
     problems = []
     services = [i for i in items if i.type == 0x0100]
@@ -232,7 +232,7 @@ def list_interfaces(ctx: Context, spec: CheckSpec) -> Outcome:
         return outcome(spec, False, _status(reply), probe.exchanges)
     try:
         items = decode_items(reply.body)
-    except Exception as exc:  # noqa: BLE001
+    except Exception as exc:
         return outcome(spec, False, f"malformed CPF: {exc}", probe.exchanges)
     return outcome(spec, True, f"{len(items)} item(s)", probe.exchanges)
 

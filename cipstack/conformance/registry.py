@@ -3,6 +3,7 @@ and the connections they opened (closed on every exit path)."""
 
 from __future__ import annotations
 
+import contextlib
 from collections.abc import Callable, Iterable
 from dataclasses import dataclass, field
 from typing import TYPE_CHECKING, Any
@@ -68,10 +69,8 @@ class Context:
         """Close what the last check left open: connections first, then its TCP connections."""
         while self.pending_closes:
             close = self.pending_closes.pop()
-            try:
+            with contextlib.suppress(Exception):  # a close that fails must not stop the others
                 close()
-            except Exception:  # noqa: BLE001 - a close that fails must not stop the others
-                pass
         while self.probes:
             self.probes.pop().close()
 

@@ -116,8 +116,8 @@ def to_html(report: Report) -> str:
                   "<th>observed</th><th>reference</th><th>sent / received</th></tr>"]
         for item in members:
             css = "na" if item.verdict is Verdict.NOT_APPLICABLE else item.verdict.value
-            wire = "<br>".join(f"{e(x.transport)} &rarr; <code>{e(_hex(x.sent))}</code><br>"
-                               f"{e(x.transport)} &larr; <code>{e(_hex(x.received))}</code>" for x in item.exchanges[-2:])
+            wire = "<br>".join(f"{e(x.transport)} &rarr; <code>{e(_hex(x.sent))}</code><br>{e(x.transport)} &larr; "
+                               f"<code>{e(_hex(x.received))}</code>" for x in item.exchanges[-2:])
             parts.append(f'<tr class="{css}"><td>{e(item.verdict.value)}</td><td><code>{e(item.name)}</code><br>'
                          f"{e(item.spec.title)}</td><td>{e(item.spec.expected)}</td><td>{e(item.observed)}</td>"
                          f"<td>{e(item.spec.reference)}</td><td>{wire}</td></tr>")

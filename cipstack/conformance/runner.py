@@ -53,7 +53,7 @@ def _preflight(context: Context) -> None:
         except ConnectionError:
             reply = None
     if reply is not None and reply.header.status == 0:
-        problems, record = encapsulation._identity_problems(reply.body, None)
+        _, record = encapsulation._identity_problems(reply.body, None)
         context.identity = record
 
 
@@ -63,7 +63,7 @@ def _run_check(context: Context, spec: object, function: object) -> list[Outcome
         return [result] if isinstance(result, Outcome) else list(result)
     except TargetUnreachable as exc:
         return [outcome(spec, Verdict.FAIL, f"the target stopped answering: {exc}")]  # type: ignore[arg-type]
-    except Exception as exc:  # noqa: BLE001 - a check that cannot finish is a failure of the target's
+    except Exception as exc:  # a check that cannot finish is a failure of the target's
         return [outcome(spec, Verdict.FAIL, f"the check could not finish: {type(exc).__name__}: {exc}")]  # type: ignore[arg-type]
     finally:
         context.cleanup()
