@@ -213,7 +213,8 @@ def ethernet_link(ctx: Context, spec: CheckSpec) -> Outcome:
 
 
 @check("objects.identity.set_read_only", "Set_Attribute_Single of Identity attribute 1 (only with --allow-writes)",
-       "general status 0x0E (attribute not settable); the value it sends is the one the device reports",
+       "general status 0x0E (attribute not settable); 0x08 when Identity has no Set_Attribute_Single makes the "
+       "check not applicable; the value it sends is the one the device reports",
        "CIP Vol. 1 Appendix B (0x0E); §5-2.2 (vendor ID is Get only)")
 def set_read_only(ctx: Context, spec: CheckSpec) -> Outcome:
     if not ctx.allow_writes:
@@ -223,4 +224,8 @@ def set_read_only(ctx: Context, spec: CheckSpec) -> Outcome:
     if current.status != 0:
         return outcome(spec, False, f"vendor ID not readable: {current.describe()}", probe.exchanges)
     reply = probe.request(SET_SINGLE, request_path(0x01, 1, 1), current.data)
+    if reply.status == 0x08:
+        # An Identity object with no settable attribute need not implement the service at all.
+        return outcome(spec, Verdict.NOT_APPLICABLE, "Identity implements no Set_Attribute_Single (0x08)",
+                       probe.exchanges)
     return outcome(spec, reply.status == 0x0E, f"set 1/1/1: {reply.describe()}", probe.exchanges)

@@ -76,8 +76,9 @@ class Connection:
 class FakeTarget:
     """The target on 127.0.0.1: TCP and UDP on one port, class 1 I/O on another UDP port."""
 
-    def __init__(self, deviation: str | None = None, host: str = "127.0.0.1") -> None:
+    def __init__(self, deviation: str | None = None, host: str = "127.0.0.1", name: bytes = NAME) -> None:
         self.deviation = deviation
+        self.name = name
         self.host = host
         self.errors: list[str] = []
         self._stop = threading.Event()
@@ -144,7 +145,7 @@ class FakeTarget:
             1: struct.pack("<H", VENDOR),
             2: struct.pack("<I" if self.deviates("objects.identity.attributes") else "<H", DEVICE_TYPE),
             3: struct.pack("<H", PRODUCT_CODE), 4: bytes(revision), 5: struct.pack("<H", status),
-            6: struct.pack("<I", SERIAL), 7: bytes((len(NAME),)) + NAME,
+            6: struct.pack("<I", SERIAL), 7: bytes((len(self.name),)) + self.name,
         }
         domain = b"lan"
         mac = bytes(8) if self.deviates("objects.ethernet_link.attributes") else bytes.fromhex("02005e000001")
