@@ -21,7 +21,8 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--json", action="store_true", help="the report as one JSON object on stdout")
     p.add_argument("--junit", metavar="FILE", type=Path, help="also write the report as JUnit XML")
     p.add_argument("--html", metavar="FILE", type=Path, help="also write the report as one self-contained HTML page")
-    p.add_argument("--timeout", type=_duration, default=5.0, help="reply timeout (default 5 s)")
+    p.add_argument("--timeout", type=_duration, default=5.0, metavar="DURATION",
+                   help="reply timeout: 2, 500ms, 1.5s (default %(default)s s)")
     p.set_defaults(func=cmd_conform)
 
 

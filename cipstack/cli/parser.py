@@ -310,6 +310,9 @@ def build_parser(command: str | None = None) -> argparse.ArgumentParser:
 
     p = sub.add_parser("conform")
     add_conform_arguments(p)
+    for action in p._actions:
+        if action.dest in ("eds", "junit", "html"):
+            _complete(action, _FILE)
     return parser
 
 
