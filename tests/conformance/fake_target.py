@@ -284,7 +284,7 @@ class FakeTarget:
             if command == 0x63:
                 body = self._list_identity(udp=True)
                 # Well inside the 500 ms the sender context asks for; the deviating one ignores it.
-                delay = 1.0 if self.deviates("encap.list_identity.max_response_delay") else random.uniform(0, 0.2)
+                delay = 1.5 if self.deviates("encap.list_identity.max_response_delay") else random.uniform(0, 0.2)
                 self._start(self._send_later, delay, HEADER.pack(command, len(body), 0, 0, context, 0) + body, peer)
             elif command == 0x04:
                 body = self._list_services()
