@@ -52,10 +52,12 @@ class Exchange:
     sent: bytes
     received: bytes | None
     transport: str = "tcp"
+    #: A finding is about this exchange (a report shows these rather than the last ones).
+    judged: bool = False
 
     def as_dict(self) -> dict[str, Any]:
         return {"transport": self.transport, "sent": self.sent.hex(),
-                "received": None if self.received is None else self.received.hex()}
+                "received": None if self.received is None else self.received.hex(), "judged": self.judged}
 
 
 @dataclass
@@ -76,6 +78,11 @@ class Outcome:
     @property
     def group(self) -> str:
         return self.spec.group
+
+    def shown_exchanges(self, count: int = 2) -> list[Exchange]:
+        """The exchanges a report shows: those a finding is about, else the last ``count``."""
+        judged = [e for e in self.exchanges if e.judged]
+        return judged[:count] if judged else self.exchanges[-count:]
 
     @property
     def name(self) -> str:

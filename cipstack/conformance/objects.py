@@ -74,12 +74,20 @@ def read_attributes(probe: Probe, class_id: int, attributes: dict[int, tuple[str
         reply = probe.request(GET_SINGLE, request_path(class_id, 1, attribute))
         if reply.status != 0:
             problems.append(f"{attribute} {name}: {reply.describe()}")
+            _judged(probe)
             continue
         values[attribute] = reply.data
         problem = shape(reply.data) if shapes else None
         if problem:
             problems.append(f"{attribute} {name}: {problem}")
+            _judged(probe)
     return values, problems
+
+
+def _judged(probe: Probe) -> None:
+    """Mark the last exchange as the one a finding is about (reports show those first)."""
+    if probe.exchanges:
+        probe.exchanges[-1].judged = True
 
 
 def number(data: bytes) -> int:

@@ -57,7 +57,7 @@ def to_text(report: Report) -> str:
         for item in failures:
             lines += [f"  FAIL {item.name}: {item.spec.title}", f"       expected:  {item.spec.expected}",
                       f"       observed:  {item.observed}", f"       reference: {item.spec.reference}"]
-            for exchange in item.exchanges[-2:]:  # the last exchanges hold the one judged
+            for exchange in item.shown_exchanges():
                 lines += _exchange_lines(exchange, "       ")
     width = max((len(o.name) for o in report.outcomes), default=10)
     for group, members in _grouped(report):
@@ -117,7 +117,7 @@ def to_html(report: Report) -> str:
         for item in members:
             css = "na" if item.verdict is Verdict.NOT_APPLICABLE else item.verdict.value
             wire = "<br>".join(f"{e(x.transport)} &rarr; <code>{e(_hex(x.sent))}</code><br>{e(x.transport)} &larr; "
-                               f"<code>{e(_hex(x.received))}</code>" for x in item.exchanges[-2:])
+                               f"<code>{e(_hex(x.received))}</code>" for x in item.shown_exchanges())
             parts.append(f'<tr class="{css}"><td>{e(item.verdict.value)}</td><td><code>{e(item.name)}</code><br>'
                          f"{e(item.spec.title)}</td><td>{e(item.spec.expected)}</td><td>{e(item.observed)}</td>"
                          f"<td>{e(item.spec.reference)}</td><td>{wire}</td></tr>")
