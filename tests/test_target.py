@@ -486,6 +486,9 @@ def test_class3_connection_dies_with_its_tcp_connection() -> None:
     ({"path": b"\xe0\x00"}, 0x0315),
     ({"rpi_us": 0}, 0x0111),
     ({"conn_type": ConnectionType.MULTICAST}, 0x0108),
+    # Both connection types null: a null Forward_Open, which this target does not support.
+    ({"conn_type": ConnectionType.NULL}, 0x0132),
+    ({"conn_type": ConnectionType.NULL, "transport_class": 1}, 0x0132),
     ({"path": encode_path([ElectronicKey(260, 0, 0, 0, 0)]) + request_path(2, 1)}, 0x0114),
     ({"path": encode_path([ElectronicKey(259, 0, 101, 0, 0)]) + request_path(2, 1)}, 0x0114),
     ({"path": encode_path([ElectronicKey(0, 3, 0, 0, 0)]) + request_path(2, 1)}, 0x0115),

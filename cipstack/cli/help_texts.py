@@ -242,6 +242,23 @@ COMMANDS: dict[tuple[str, ...], CommandText] = {
          ("cipstack capture analyze traffic.pcapng --connection 1 --csv timing",
           "connection 1's timing rows into timing/")),
     ),
+    ("conform",): CommandText(
+        "run the conformance battery against an EtherNet/IP target",
+        "Run the conformance battery against any EtherNet/IP target and report, check by check, what it "
+        "does against what the specification (and, with --eds, its EDS file) expects: the request sent, "
+        "the reply, the reference and a verdict (pass, fail, warning, n/a). Groups: encap "
+        "(encapsulation), router (message router and errors), objects (required objects), cm (Connection "
+        "Manager Forward_Open matrix), class1 (class 1 behaviour), eds (EDS against the device); cm and "
+        "class1 take their connection points from --eds.\n\n"
+        "Safe by default: nothing is written without --allow-writes, the device is not reset without "
+        "--allow-reset, requests are rate-bounded and every connection opened is closed. Exit status 0 "
+        "when no check fails, 1 when one fails, 2 for bad arguments or a target that is unreachable or "
+        "does not speak EtherNet/IP.",
+        (("cipstack conform 127.0.0.1", "every group that needs no EDS, against the emulator"),
+         ("cipstack conform 192.168.1.20 --eds drive.eds --junit conform.xml --html conform.html",
+          "all six groups, with a JUnit file for CI and a page to attach to a test report"),
+         ("cipstack conform 127.0.0.1:44818 --only encap,router --json", "two groups, as one JSON object")),
+    ),
     ("completion",): CommandText(
         "print the shell completion script for bash or zsh",
         'Print the completion script of cipstack for bash or zsh, generated from this command line by '

@@ -15,6 +15,7 @@ from .common import (
     parse_number,
 )
 from .completion import cmd_completion
+from .conform import add_arguments as add_conform_arguments
 from .drive import _trip_code, cmd_drive_status, cmd_drive_trip
 from .eds import cmd_eds_check, cmd_eds_generate, cmd_eds_show
 from .emulators import cmd_adapter, cmd_componet, cmd_models
@@ -326,6 +327,12 @@ def build_parser(command: str | None = None) -> argparse.ArgumentParser:
     p = sub.add_parser("completion")
     p.add_argument("shell", choices=["bash", "zsh"], help="the shell")
     p.set_defaults(func=cmd_completion)
+
+    p = sub.add_parser("conform")
+    add_conform_arguments(p)
+    for action in p._actions:
+        if action.dest in ("eds", "junit", "html"):
+            _complete(action, _FILE)
     return parser
 
 

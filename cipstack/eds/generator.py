@@ -329,6 +329,9 @@ def _plan(description: EdsDescription) -> _Plan:
         if param.link is not None:
             declared_by_link.setdefault(param.link, []).append(index)
     made: dict[tuple[Any, ...], int] = {}
+    #: Instances 1..N of each object class the description counts (the Omron Discrete Input Point:
+    #: 7 on the MX2, 9 on the RX, Table C-10).
+    counted = {item.spec.class_id: item.instances for item in description.object_classes}
     outputs = {schema.instance for schema in description.outputs}
     members: dict[int, list[tuple[int, int | None]]] = {}
     for schema in description.assemblies:
@@ -338,6 +341,10 @@ def _plan(description: EdsDescription) -> _Plan:
         for item in schema.fields:
             if item.start_bit > position:
                 layout.append((item.start_bit - position, None))
+            if item.link is not None and item.link[0] in counted and not 1 <= item.link[1] <= counted[item.link[0]]:
+                # The field is there on another model of the family (CI8 is the RX's): this device has
+                # no such instance, and a path to it would be answered 0x16.
+                item = replace(item, link=None)
             index = _member_parameter(item, output, schema, params, declared_by_link, made)
             layout.append((item.size_bits, index + 1))
             position = item.start_bit + item.size_bits

@@ -159,6 +159,11 @@ class ConnectionManagerObject(CipObject):
             raise
 
     def _open(self, fo: ForwardOpenRequest, context: RequestContext) -> bytes:
+        if fo.ot_parameters.type == fo.to_parameters.type == ConnectionType.NULL:
+            # A null Forward_Open (both types null) reconfigures or pings a connection without opening
+            # one; a target without that answers 0x0132 (CIP Vol. 1 §3-5.5.2.2, wire.md), whatever the class.
+            raise connection_failure(ExtendedStatus.NULL_FORWARD_OPEN_NOT_SUPPORTED, fo.triad,
+                                     "null Forward_Open not supported")
         if fo.transport.transport_class == 1:
             if self.io_handler is None:
                 raise connection_failure(ExtendedStatus.TRANSPORT_CLASS_NOT_SUPPORTED, fo.triad,

@@ -603,3 +603,15 @@ def test_omron_file_lists_what_the_device_serves(name: str) -> None:
         assert section is not None, spec.name
         count = section.get("Number_Of_Static_Instances")
         assert count is not None and count.value() == len(device.router.objects[spec.class_id].instances)
+
+
+@pytest.mark.parametrize(("name", "instances"), [("MX2-A2015-E", 7), ("RX-A4055-E", 9)])
+def test_link_paths_name_only_instances_the_model_has(name: str, instances: int) -> None:
+    """The Extended Control assemblies are the family's; their CI8/MI8 members link to Discrete Input
+    Point instance 8 and the RX's forward terminal to instance 9, which the MX2 does not have (7
+    instances, Table C-10): the MX2's file must not send a tool to them (it would read 0x16)."""
+    doc = parse_eds(omron_text(name))
+    paths = [str(entry.field(3).raw).strip('"') for entry in doc.get("Params").entries
+             if entry.keyword.startswith("Param") and entry.field(3) is not None]
+    linked = {int(path.split()[3], 16) for path in paths if path.startswith("20 08 24")}
+    assert max(linked) == instances

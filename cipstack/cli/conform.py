@@ -1,0 +1,69 @@
+"""``cipstack conform``: the conformance battery against a target, with its reports."""
+
+from __future__ import annotations
+
+import argparse
+import sys
+from pathlib import Path
+
+from ..eip.originator import parse_host
+from .common import EXIT_FAILURE, EXIT_OK, EXIT_USAGE, UsageError
+
+
+def add_arguments(p: argparse.ArgumentParser) -> None:
+    p.add_argument("target", metavar="HOST[:PORT]", help="target address (default port 44818)")
+    p.add_argument("--eds", metavar="FILE", help="the target's EDS file: enables group eds and the connection "
+                                                  "checks of groups cm and class1")
+    p.add_argument("--only", metavar="GROUP,...", help="run these groups only: encap, router, objects, cm, class1, eds")
+    p.add_argument("--allow-writes", action="store_true",
+                   help="also run checks that write (a set of a read-only attribute)")
+    p.add_argument("--allow-reset", action="store_true", help="also reset the device (Identity Reset type 0)")
+    p.add_argument("--json", action="store_true", help="the report as one JSON object on stdout")
+    p.add_argument("--junit", metavar="FILE", type=Path, help="also write the report as JUnit XML")
+    p.add_argument("--html", metavar="FILE", type=Path, help="also write the report as one self-contained HTML page")
+    p.add_argument("--timeout", type=_duration, default=5.0, metavar="DURATION",
+                   help="reply timeout: 2, 500ms, 1.5s (default %(default)s s)")
+    p.set_defaults(func=cmd_conform)
+
+
+def _duration(text: str) -> float:
+    from .common import parse_duration
+
+    value = parse_duration(text)
+    if value <= 0:
+        raise UsageError(f"timeout {text!r} must be positive")
+    return value
+
+
+def cmd_conform(args: argparse.Namespace) -> int:
+    from ..conformance import TargetUnreachable, parse_groups, run
+    from ..conformance.report import to_html, to_json, to_junit, to_text
+
+    host, port = parse_host(args.target)
+    try:
+        groups = parse_groups(args.only)
+    except ValueError as exc:
+        raise UsageError(f"--only: {exc}") from None
+    if args.eds is not None and not Path(args.eds).is_file():
+        raise UsageError(f"--eds: no such file: {args.eds}")
+    eds = None
+    if args.eds is not None:
+        from ..eds.reader import EdsSyntaxError, read_eds
+
+        try:
+            eds = read_eds(args.eds)
+        except (EdsSyntaxError, OSError, UnicodeError) as exc:
+            raise UsageError(f"--eds {args.eds}: {exc}") from None
+    try:
+        report = run(host, port, eds=eds, groups=groups, allow_writes=args.allow_writes,
+                     allow_reset=args.allow_reset, timeout=args.timeout)
+    except TargetUnreachable as exc:
+        print(f"cipstack conform: {exc}", file=sys.stderr)
+        return EXIT_USAGE
+    if args.eds is not None:
+        report.options["eds"] = args.eds
+    for path, render in ((args.junit, to_junit), (args.html, to_html)):
+        if path is not None:
+            path.write_text(render(report), encoding="utf-8")
+    print(to_json(report) if args.json else to_text(report), flush=True)
+    return EXIT_OK if report.passed else EXIT_FAILURE

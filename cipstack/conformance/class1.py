@@ -1,0 +1,223 @@
+"""Group 5: class 1 behaviour of the target on a live connection: production at the granted API,
+sequence counts, data size, run/idle, and the connection's timeout (CIP Vol. 1 §3-4 and
+Vol. 2 §3-4, as OpENer's cipioconnection.c and Wireshark's packet-cip.c (cipio) describe them)."""
+
+from __future__ import annotations
+
+import itertools
+import select
+import statistics
+import time
+from dataclasses import dataclass, field
+
+from ..eip.io_core import IoDatagramError, decode_io_datagram, encode_io_datagram, seq16_newer
+from .connections import Endpoint, Opened, Plan, forward_open_request, main_plan, send_forward_open
+from .model import CheckSpec, Exchange, Outcome, Verdict
+from .registry import Context, check, outcome
+
+IO_REFERENCE = "CIP Vol. 1 §3-4.4 (connection timeout = RPI x 4 x 2^multiplier); Vol. 2 §3-2 (class 1 over UDP)"
+
+
+@dataclass
+class Arrival:
+    at: float
+    phase: int
+    encap_sequence: int
+    cip_sequence: int
+    size: int
+
+
+@dataclass
+class Run:
+    """One class 1 connection driven through phases of (seconds, "run" | "idle" | "silent")."""
+
+    opened: Opened
+    phases: list[tuple[float, str]]
+    starts: list[float] = field(default_factory=list)
+    arrivals: list[Arrival] = field(default_factory=list)
+    foreign: int = 0
+    first_datagram: bytes | None = None
+    sent_example: bytes | None = None
+
+    @property
+    def api(self) -> float:
+        return self.opened.reply.to_api_us / 1e6
+
+    def in_phase(self, index: int) -> list[Arrival]:
+        return [a for a in self.arrivals if a.phase == index]
+
+
+def drive(ctx: Context, plan: Plan, endpoint: Endpoint, opened: Opened, phases: list[tuple[float, str]]) -> Run:
+    """Send O->T at the granted O->T API in the run and idle phases (nothing in silent ones) and record
+    every T->O datagram of the connection."""
+    run = Run(opened, phases)
+    ot_api = max(opened.reply.ot_api_us, 1000) / 1e6
+    header = 4 if plan.run_idle else 0
+    data = bytes(max(0, plan.ot_size - 2 - header))
+    destination = (ctx.host, opened.io_port)
+    sequence = 0
+    sock = endpoint.sock
+    for index, (duration, mode) in enumerate(phases):
+        start = time.monotonic()
+        run.starts.append(start)
+        end, due = start + duration, start
+        while True:
+            now = time.monotonic()
+            if now >= end:
+                break
+            if mode != "silent" and now >= due:
+                sequence += 1
+                run_idle = (1 if mode == "run" else 0) if plan.run_idle else None
+                datagram = encode_io_datagram(opened.reply.ot_connection_id, sequence, sequence, data, run_idle)
+                run.sent_example = run.sent_example or datagram
+                sock.sendto(datagram, destination)
+                due += ot_api
+                if due < now:
+                    due = now + ot_api
+            wait = min(end, due if mode != "silent" else end) - time.monotonic()
+            ready, _, _ = select.select([sock], [], [], max(0.0, wait))
+            if ready:
+                raw = sock.recv(65536)
+                at = time.monotonic()
+                try:
+                    datagram_in = decode_io_datagram(raw)
+                except IoDatagramError:
+                    run.foreign += 1
+                    continue
+                if datagram_in.connection_id != opened.reply.to_connection_id:
+                    run.foreign += 1
+                    continue
+                run.first_datagram = run.first_datagram or raw
+                run.arrivals.append(Arrival(at, index, datagram_in.encap_sequence, datagram_in.cip_sequence,
+                                            len(datagram_in.payload)))
+    return run
+
+
+def _open(ctx: Context, spec: CheckSpec, multiplier: int) -> tuple[Plan, Endpoint, Opened] | Outcome:
+    plan = main_plan(ctx)
+    if plan is None:
+        why = "no EDS given (--eds)" if ctx.eds is None else "the EDS declares no point-to-point exclusive owner"
+        return outcome(spec, Verdict.NOT_APPLICABLE, f"not run: {why}")
+    probe = ctx.probe()
+    endpoint = Endpoint(ctx, probe)
+    reply, opened = send_forward_open(ctx, probe, endpoint, forward_open_request(plan, multiplier=multiplier))
+    if opened is None:
+        return outcome(spec, False, f"Forward_Open of {plan.name}: {reply.describe()}", probe.exchanges)
+    return plan, endpoint, opened
+
+
+def _exchanges(run: Run) -> list[Exchange]:
+    return [*run.opened.probe.exchanges, Exchange(run.sent_example or b"", run.first_datagram, "udp")]
+
+
+def _production(ctx: Context, spec: CheckSpec) -> tuple[Plan, Run] | Outcome:
+    """One second of a running connection, shared by the production, sequence and size checks."""
+    if "production" not in ctx.cache:
+        opened = _open(ctx, spec, multiplier=4)
+        if isinstance(opened, Outcome):
+            ctx.cache["production"] = opened
+        else:
+            plan, endpoint, connection = opened
+            run = drive(ctx, plan, endpoint, connection, [(1.0, "run")])
+            connection.close()
+            ctx.cache["production"] = (plan, run)
+    cached = ctx.cache["production"]
+    if isinstance(cached, Outcome):
+        return outcome(spec, cached.verdict, cached.observed, cached.exchanges)
+    return cached  # type: ignore[no-any-return]
+
+
+@check("class1.production", "T->O production at the granted API for 1 s",
+       "packets arrive at the T->O API the Forward_Open reply granted: mean interval within 0.8-1.25 x API, "
+       "at least 70 % of the production slots filled", f"CIP Vol. 1 §3-4.2 (cyclic production at the API); "
+       f"{IO_REFERENCE}")
+def production(ctx: Context, spec: CheckSpec) -> Outcome:
+    measured = _production(ctx, spec)
+    if isinstance(measured, Outcome):
+        return measured
+    _, run = measured
+    arrivals = run.arrivals
+    expected = 1.0 / run.api if run.api > 0 else 0
+    if len(arrivals) < 2:
+        return outcome(spec, False, f"{len(arrivals)} T->O packets in 1 s at an API of {run.api * 1e3:.1f} ms",
+                       _exchanges(run))
+    intervals = [b.at - a.at for a, b in itertools.pairwise(arrivals)]
+    mean = statistics.fmean(intervals)
+    ok = 0.8 * run.api <= mean <= 1.25 * run.api and len(arrivals) >= 0.7 * expected
+    return outcome(spec, ok, f"{len(arrivals)} packets (about {expected:.0f} due), mean interval {mean * 1e3:.2f} ms, "
+                   f"max {max(intervals) * 1e3:.2f} ms, API {run.api * 1e3:.2f} ms", _exchanges(run))
+
+
+@check("class1.sequence", "T->O sequence numbers",
+       "the encapsulation sequence number grows by 1 with every packet; the CIP sequence count never goes back",
+       "CIP Vol. 2 §3-2.1 (Sequenced Address item); Vol. 1 §3-4.4 (CIP sequence count)")
+def sequence(ctx: Context, spec: CheckSpec) -> Outcome:
+    measured = _production(ctx, spec)
+    if isinstance(measured, Outcome):
+        return measured
+    _, run = measured
+    problems = []
+    for before, after in itertools.pairwise(run.arrivals):
+        if (after.encap_sequence - before.encap_sequence) & 0xFFFFFFFF != 1:
+            problems.append(f"encapsulation sequence {before.encap_sequence} then {after.encap_sequence}")
+        if after.cip_sequence != before.cip_sequence and not seq16_newer(after.cip_sequence, before.cip_sequence):
+            problems.append(f"CIP sequence {before.cip_sequence} then {after.cip_sequence}")
+    if not run.arrivals:
+        problems.append("no T->O packet")
+    return outcome(spec, not problems, "; ".join(problems[:3]) or f"{len(run.arrivals)} packets in order",
+                   _exchanges(run))
+
+
+@check("class1.data_size", "T->O data size",
+       "every T->O packet carries the T->O connection size: the sequence count and the EDS's input size",
+       "CIP Vol. 1 §3-5.5.2 (connection size); EDS ConnectionN T->O size")
+def data_size(ctx: Context, spec: CheckSpec) -> Outcome:
+    measured = _production(ctx, spec)
+    if isinstance(measured, Outcome):
+        return measured
+    plan, run = measured
+    sizes = sorted({a.size for a in run.arrivals})
+    ok = sizes == [plan.to_data_size]
+    return outcome(spec, ok, f"data sizes {sizes}, the connection carries {plan.to_data_size}", _exchanges(run))
+
+
+@check("class1.run_idle", "O->T run, then idle for 0.5 s, then run",
+       "idle does not close the connection: T->O production goes on through the idle phase and the "
+       "Forward_Close after it succeeds", "CIP Vol. 1 §3-6.1 (32-bit run/idle header); OpENer cipioconnection.c")
+def run_idle(ctx: Context, spec: CheckSpec) -> Outcome:
+    opened = _open(ctx, spec, multiplier=4)
+    if isinstance(opened, Outcome):
+        return opened
+    plan, endpoint, connection = opened
+    if not plan.run_idle:
+        connection.close()
+        return outcome(spec, Verdict.NOT_APPLICABLE, f"{plan.name} sends no run/idle header")
+    run = drive(ctx, plan, endpoint, connection, [(0.3, "run"), (0.5, "idle"), (0.3, "run")])
+    closing = connection.close()
+    counts = [len(run.in_phase(i)) for i in range(3)]
+    due = 0.5 / run.api if run.api > 0 else 0
+    ok = counts[1] >= 0.5 * due and counts[2] > 0 and closing.status == 0
+    return outcome(spec, ok, f"T->O packets in the run/idle/run phases: {counts}; Forward_Close: "
+                   f"{closing.describe()}", _exchanges(run))
+
+
+@check("class1.timeout", "O->T silence longer than the connection timeout",
+       "the target stops producing within RPI x 4 x 2^multiplier (plus 0.5 s) after the last O->T packet",
+       IO_REFERENCE)
+def timeout(ctx: Context, spec: CheckSpec) -> Outcome:
+    plan = main_plan(ctx)
+    multiplier = 0
+    while plan is not None and multiplier < 7 and plan.rpi_us * (4 << multiplier) < 200_000:
+        multiplier += 1
+    opened = _open(ctx, spec, multiplier=multiplier)
+    if isinstance(opened, Outcome):
+        return opened
+    plan, endpoint, connection = opened
+    limit = max(connection.request.ot_rpi_us, connection.reply.ot_api_us) * (4 << multiplier) / 1e6
+    run = drive(ctx, plan, endpoint, connection, [(0.4, "run"), (limit + 1.0, "silent")])
+    silent = run.in_phase(1)
+    stopped_after = (silent[-1].at - run.starts[1]) if silent else 0.0
+    connection.close()  # the target should answer 0x0107 now; one that did not time out is closed all the same
+    ok = bool(run.in_phase(0)) and stopped_after <= limit + 0.5
+    return outcome(spec, ok, f"timeout {limit * 1e3:.0f} ms; production stopped {stopped_after * 1e3:.0f} ms after "
+                   f"the last O->T packet ({len(run.in_phase(0))} packets before)", _exchanges(run))

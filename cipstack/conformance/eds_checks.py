@@ -1,0 +1,155 @@
+"""Group 6: the EDS file given with ``--eds`` against the device (shared/reference/eds.md; the EDS
+specification, CIP Vol. 1 chapter 7, as the EDS reader of ``cipstack.eds`` reads it)."""
+
+from __future__ import annotations
+
+import struct
+from collections.abc import Iterator
+from dataclasses import replace
+
+from ..cip.epath import request_path
+from .connections import Endpoint, Opened, Plan, forward_open_request, plans, send_forward_open
+from .model import CheckSpec, Outcome, Verdict
+from .registry import Context, check, outcome
+from .wire import Probe
+
+EDS_REFERENCE = "CIP Vol. 1 §7 (EDS)"
+
+
+def _no_eds(ctx: Context, spec: CheckSpec) -> Outcome | None:
+    if ctx.eds is None or ctx.view is None:
+        return outcome(spec, Verdict.NOT_APPLICABLE, "not run: no EDS given (--eds)")
+    return None
+
+
+@check("eds.device.identity", "[Device] against the Identity object",
+       "VendCode, ProdType, ProdCode, MajRev, MinRev and ProdName equal Identity attributes 1-4 and 7",
+       f"{EDS_REFERENCE} [Device] section; CIP Vol. 1 §5-2.2")
+def device_identity(ctx: Context, spec: CheckSpec) -> Outcome:
+    skipped = _no_eds(ctx, spec)
+    if skipped is not None:
+        return skipped
+    from ..eds.checker import check_eds
+    from .objects import IDENTITY, number, read_attributes
+
+    probe = ctx.probe()
+    values, problems = read_attributes(probe, 0x01, {a: IDENTITY[a] for a in (1, 2, 3, 4, 7)}, shapes=False)
+    if problems:
+        return outcome(spec, False, "; ".join(problems), probe.exchanges)
+    identity = {"vendor_id": number(values[1]), "device_type": number(values[2]), "product_code": number(values[3]),
+                "revision": tuple(values[4][:2]), "product_name": values[7][1:].decode("latin-1")}
+    differ = [f.message for f in check_eds(ctx.eds, identity) if f.rule == "device-identity"]  # type: ignore[arg-type]
+    return outcome(spec, not differ, "; ".join(differ) or "[Device] matches", probe.exchanges)
+
+
+@check("eds.param.link", "every ParamN with a link path, read from the device",
+       "Get_Attribute_Single of the link path succeeds with the data size the ParamN declares (field 6)",
+       f"{EDS_REFERENCE} [Params] (fields 3-6: link path, descriptor, type, size)")
+def param_links(ctx: Context, spec: CheckSpec) -> Iterator[Outcome]:
+    skipped = _no_eds(ctx, spec)
+    if skipped is not None:
+        yield skipped
+        return
+    assert ctx.view is not None
+    probe = ctx.probe()
+    linked = [p for p in ctx.view.params.values() if p.link is not None]
+    if not linked:
+        yield outcome(spec, Verdict.NOT_APPLICABLE, "no ParamN has a link path")
+    for param in linked:
+        assert param.link is not None
+        before = len(probe.exchanges)
+        reply = probe.request(0x0E, request_path(*param.link))
+        ok = reply.status == 0 and len(reply.data) == param.size
+        observed = (f"{'/'.join(map(str, param.link))}: {reply.describe()}"
+                    + ("" if reply.status != 0 else f", declared {param.size} ({param.type.name})"))
+        yield outcome(spec, ok, observed, probe.exchanges[before:], subject=param.keyword)
+
+
+@check("eds.assembly.size", "every AssemN with an instance, against Assembly attribute 4",
+       "Get_Attribute_Single 4/N/4 (data size, UINT) equals the size the AssemN declares; 0x14 (attribute 4 not "
+       "supported) is a warning", f"{EDS_REFERENCE} [Assembly]; CIP Vol. 1 §5-5 (Assembly attribute 4)")
+def assembly_sizes(ctx: Context, spec: CheckSpec) -> Iterator[Outcome]:
+    skipped = _no_eds(ctx, spec)
+    if skipped is not None:
+        yield skipped
+        return
+    assert ctx.view is not None
+    probe = ctx.probe()
+    placed = [a for a in ctx.view.assemblies.values() if a.instance is not None]
+    if not placed:
+        yield outcome(spec, Verdict.NOT_APPLICABLE, "no AssemN names an instance")
+    heartbeats = {c.o_t_point for c in ctx.view.connections if c.heartbeat}
+    for assembly in placed:
+        if assembly.size == 0 and assembly.instance in heartbeats:
+            yield outcome(spec, Verdict.NOT_APPLICABLE, f"instance {assembly.instance} is a heartbeat connection "
+                          "point: no data, nothing to size", subject=assembly.keyword)
+            continue
+        before = len(probe.exchanges)
+        reply = probe.request(0x0E, request_path(0x04, assembly.instance, 4))
+        exchanges = probe.exchanges[before:]
+        if reply.status == 0x14:
+            yield outcome(spec, Verdict.WARNING, f"instance {assembly.instance}: attribute 4 not supported (0x14)",
+                          exchanges, assembly.keyword)
+            continue
+        size = struct.unpack("<H", reply.data)[0] if reply.status == 0 and len(reply.data) == 2 else None
+        yield outcome(spec, size == assembly.size, f"instance {assembly.instance}: {reply.describe()}"
+                      + ("" if size is None else f", size {size}, declared {assembly.size}"), exchanges,
+                      assembly.keyword)
+
+
+@check("eds.connection.open", "every class 1 ConnectionN opened and closed",
+       "Forward_Open with the connection's points, sizes and RPI succeeds, and its Forward_Close succeeds",
+       f"{EDS_REFERENCE} [Connection Manager] ConnectionN; CIP Vol. 1 §3-5.5")
+def connections_open(ctx: Context, spec: CheckSpec) -> Iterator[Outcome]:
+    skipped = _no_eds(ctx, spec)
+    if skipped is not None:
+        yield skipped
+        return
+    found = plans(ctx)
+    if not found:
+        yield outcome(spec, Verdict.NOT_APPLICABLE, "the EDS declares no class 1 connection")
+        return
+    probe = ctx.probe()
+    endpoint = Endpoint(ctx, probe)
+    for plan in found:
+        before = len(probe.exchanges)
+        reply, opened = send_forward_open(ctx, probe, endpoint, forward_open_request(plan))
+        owner = None
+        if opened is None and reply.status == 0x01 and reply.extended == 0x0119:
+            # Listen only (or input only) needs a connection that owns the data: open the file's
+            # exclusive owner of the same input first, as a configuration tool would.
+            owner = _open_owner(ctx, probe, endpoint, found, plan)
+            if owner is not None:
+                reply, opened = send_forward_open(ctx, probe, endpoint, forward_open_request(plan))
+        exchanges = probe.exchanges[before:]
+        if opened is None:
+            if owner is not None:
+                owner.close()
+            verdict = Verdict.FAIL
+            note = ""
+            if reply.status == 0x01 and reply.extended in (0x012A, 0x012B) and _assemblies_exist(probe, plan):
+                # The assemblies are there and the device refuses to connect them now: which pair it
+                # connects is part of its configuration (the ACG-ET2's CM.23/CM.24 select it).
+                verdict = Verdict.WARNING
+                note = ": the assemblies exist; the device's present configuration refuses this connection"
+            yield outcome(spec, verdict, f"Forward_Open: {reply.describe()}{note}", exchanges, plan.name)
+            continue
+        closing = opened.close()
+        if owner is not None:
+            owner.close()
+        yield outcome(spec, closing.status == 0, f"opened{' with its owner' if owner else ''}; Forward_Close: "
+                      f"{closing.describe()}", probe.exchanges[before:], plan.name)
+
+
+def _open_owner(ctx: Context, probe: Probe, endpoint: Endpoint, found: list[Plan], plan: Plan) -> Opened | None:
+    for owner in (p for p in found if p.exclusive_owner and p.to_point == plan.to_point):
+        for variant in (replace(owner, multicast=plan.multicast), owner):
+            _, opened = send_forward_open(ctx, probe, endpoint, forward_open_request(variant))
+            if opened is not None:
+                return opened
+    return None
+
+
+def _assemblies_exist(probe: Probe, plan: Plan) -> bool:
+    points = [plan.to_point] if plan.heartbeat else [plan.ot_point, plan.to_point]
+    return all(probe.request(0x0E, request_path(0x04, point, 4)).status == 0 for point in points)

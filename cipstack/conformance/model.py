@@ -1,0 +1,134 @@
+"""The check model: what a check is, what one run of it found, and the report of a whole battery.
+
+A check is declared once (``CheckSpec``: id, group, title, what the specification expects and
+where it says so); running it gives one ``Outcome`` per subject it looked at (most checks have
+one subject, the target; the EDS checks have one per ``ParamN``, ``AssemN`` or ``ConnectionN``).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Iterator
+from dataclasses import dataclass, field
+from enum import Enum
+from typing import Any
+
+
+class Verdict(str, Enum):
+    PASS = "pass"
+    FAIL = "fail"
+    WARNING = "warning"
+    NOT_APPLICABLE = "n/a"
+
+
+#: The groups in the order they run and are reported (issue 28, groups 1-6).
+GROUPS: dict[str, str] = {
+    "encap": "Encapsulation",
+    "router": "Message router and errors",
+    "objects": "Required objects",
+    "cm": "Connection Manager",
+    "class1": "Class 1 behaviour",
+    "eds": "EDS against the device",
+}
+
+
+@dataclass(frozen=True)
+class CheckSpec:
+    """One check as declared: ``id`` is ``GROUP.WHAT[.DETAIL]``."""
+
+    id: str
+    title: str
+    expected: str
+    reference: str
+
+    @property
+    def group(self) -> str:
+        return self.id.split(".", 1)[0]
+
+
+@dataclass
+class Exchange:
+    """One thing sent and what came back (None: nothing came back)."""
+
+    sent: bytes
+    received: bytes | None
+    transport: str = "tcp"
+    #: A finding is about this exchange (a report shows these rather than the last ones).
+    judged: bool = False
+
+    def as_dict(self) -> dict[str, Any]:
+        return {"transport": self.transport, "sent": self.sent.hex(),
+                "received": None if self.received is None else self.received.hex(), "judged": self.judged}
+
+
+@dataclass
+class Outcome:
+    """A check's result on one subject."""
+
+    spec: CheckSpec
+    verdict: Verdict
+    #: What came back, in words (the bytes are in ``exchanges``).
+    observed: str
+    subject: str = ""
+    exchanges: list[Exchange] = field(default_factory=list)
+
+    @property
+    def id(self) -> str:
+        return self.spec.id
+
+    @property
+    def group(self) -> str:
+        return self.spec.group
+
+    def shown_exchanges(self, count: int = 2) -> list[Exchange]:
+        """The exchanges a report shows: those a finding is about, else the last ``count``."""
+        judged = [e for e in self.exchanges if e.judged]
+        return judged[:count] if judged else self.exchanges[-count:]
+
+    @property
+    def name(self) -> str:
+        """The id, with the subject when the check has several (``eds.param.link[Param3]``)."""
+        return f"{self.spec.id}[{self.subject}]" if self.subject else self.spec.id
+
+    def as_dict(self) -> dict[str, Any]:
+        return {"id": self.spec.id, "group": self.group, "subject": self.subject or None, "title": self.spec.title,
+                "verdict": self.verdict.value, "expected": self.spec.expected, "reference": self.spec.reference,
+                "observed": self.observed, "exchanges": [e.as_dict() for e in self.exchanges]}
+
+
+@dataclass
+class Report:
+    """Every outcome of one run against one target."""
+
+    target: str
+    outcomes: list[Outcome] = field(default_factory=list)
+    groups: tuple[str, ...] = tuple(GROUPS)
+    identity: dict[str, Any] | None = None
+    duration_s: float = 0.0
+    options: dict[str, Any] = field(default_factory=dict)
+
+    def __iter__(self) -> Iterator[Outcome]:
+        return iter(self.outcomes)
+
+    def by_verdict(self, verdict: Verdict) -> list[Outcome]:
+        return [o for o in self.outcomes if o.verdict is verdict]
+
+    @property
+    def failures(self) -> list[Outcome]:
+        return self.by_verdict(Verdict.FAIL)
+
+    @property
+    def passed(self) -> bool:
+        """Nothing failed (warnings and checks that do not apply are not failures)."""
+        return not self.failures
+
+    def counts(self) -> dict[str, int]:
+        return {v.value: len(self.by_verdict(v)) for v in Verdict}
+
+    def verdicts(self) -> dict[str, Verdict]:
+        """Outcome name -> verdict."""
+        return {o.name: o.verdict for o in self.outcomes}
+
+    def as_dict(self) -> dict[str, Any]:
+        return {"target": self.target, "identity": self.identity, "groups": list(self.groups),
+                "options": self.options, "duration_s": round(self.duration_s, 3), "counts": self.counts(),
+                "passed": self.passed, "checks": [o.as_dict() for o in self.outcomes]}

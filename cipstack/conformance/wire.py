@@ -1,0 +1,231 @@
+"""The battery's own view of the wire: blocking sockets that send exactly the bytes a check
+builds (well formed or not) and return exactly what came back, every exchange recorded.
+
+The originator client of ``eip.originator`` is tolerant by design and would hide what a check
+looks for (a status in the header, a reply that should not exist, a connection the target
+closed), so the battery frames its requests itself with the same codecs. Requests are spaced
+by ``MIN_GAP`` so that the battery never floods a device.
+"""
+
+from __future__ import annotations
+
+import select
+import socket
+import struct
+import time
+from dataclasses import dataclass
+
+from ..cip.messages import MessageRouterRequest, MessageRouterResponse
+from ..eip.cpf import Item, ItemType, decode_items, encode_items
+from ..eip.encapsulation import HEADER, HEADER_SIZE, REGISTER_SESSION_DATA, RR_PREFIX, Command, EncapsulationHeader
+from .model import Exchange
+
+#: At most one request every 2 ms from one probe: the battery's rate bound.
+MIN_GAP = 0.002
+
+
+class TargetUnreachable(ConnectionError):
+    """The target cannot be reached, or does not speak EtherNet/IP: reported in one line."""
+
+
+@dataclass
+class Frame:
+    """A reply frame: its header, its data and the whole frame as received."""
+
+    header: EncapsulationHeader
+    body: bytes
+    raw: bytes
+
+
+def frame(command: int, data: bytes = b"", session: int = 0, status: int = 0, context: bytes = b"cipconf\x00",
+          options: int = 0, length: int | None = None) -> bytes:
+    """An encapsulation frame; ``length`` overrides the length field (a wrong length)."""
+    return HEADER.pack(command, len(data) if length is None else length, session, status, context, options) + data
+
+
+def rr_data(request: bytes, extra: tuple[Item, ...] = ()) -> bytes:
+    """SendRRData data: interface handle, timeout, Null Address + Unconnected Data (+ extra items)."""
+    return RR_PREFIX.pack(0, 0) + encode_items((Item(ItemType.NULL_ADDRESS), Item(ItemType.UNCONNECTED_DATA, request),
+                                                *extra))
+
+
+class Probe:
+    """One TCP connection to the target; ``exchanges`` records everything sent and received."""
+
+    def __init__(self, host: str, port: int, timeout: float) -> None:
+        self.host, self.port, self.timeout = host, port, timeout
+        self.session = 0
+        self.exchanges: list[Exchange] = []
+        self._buffer = b""
+        self._last_send = 0.0
+        try:
+            self.sock: socket.socket | None = socket.create_connection((host, port), timeout)
+        except OSError as exc:
+            raise TargetUnreachable(f"cannot connect to {host}:{port}: {exc}") from None
+        self.sock.setsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY, 1)
+
+    # -- life cycle ---------------------------------------------------------------------------------------
+    def close(self) -> None:
+        if self.sock is not None:
+            try:
+                if self.session:
+                    self.sock.sendall(frame(Command.UNREGISTER_SESSION, session=self.session))
+            except OSError:
+                pass
+            self.sock.close()
+            self.sock = None
+
+    def __enter__(self) -> Probe:
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.close()
+
+    @property
+    def local_host(self) -> str:
+        assert self.sock is not None
+        return str(self.sock.getsockname()[0])
+
+    # -- frames -------------------------------------------------------------------------------------------
+    def send(self, raw: bytes) -> None:
+        if self.sock is None:
+            raise ConnectionError("probe closed")
+        wait = self._last_send + MIN_GAP - time.monotonic()
+        if wait > 0:
+            time.sleep(wait)
+        self._last_send = time.monotonic()
+        self.sock.sendall(raw)
+
+    def receive(self, timeout: float | None = None) -> Frame | None:
+        """The next whole frame; None on timeout; ``ConnectionError`` when the target closed."""
+        if self.sock is None:
+            raise ConnectionError("probe closed")
+        deadline = time.monotonic() + (self.timeout if timeout is None else timeout)
+        while True:
+            if len(self._buffer) >= HEADER_SIZE:
+                end = HEADER_SIZE + struct.unpack_from("<H", self._buffer, 2)[0]
+                if len(self._buffer) >= end:
+                    raw, self._buffer = self._buffer[:end], self._buffer[end:]
+                    return Frame(EncapsulationHeader.decode(raw), raw[HEADER_SIZE:], raw)
+            left = deadline - time.monotonic()
+            if left <= 0:
+                return None
+            ready, _, _ = select.select([self.sock], [], [], left)
+            if not ready:
+                return None
+            try:
+                chunk = self.sock.recv(65536)
+            except OSError as exc:
+                raise ConnectionError(f"connection reset: {exc}") from None
+            if not chunk:
+                raise ConnectionError("connection closed by the target")
+            self._buffer += chunk
+
+    def exchange(self, raw: bytes, timeout: float | None = None) -> Frame | None:
+        """Send ``raw`` and wait for one reply frame (None: no reply in time). A closed connection
+        raises ``ConnectionError``; either way the exchange is recorded."""
+        record = Exchange(raw, None)
+        self.exchanges.append(record)
+        self.send(raw)
+        reply = self.receive(timeout)
+        record.received = None if reply is None else reply.raw
+        return reply
+
+    def closed_by_target(self, timeout: float) -> bool:
+        """Whether the target closes the connection within ``timeout`` (frames before it are dropped)."""
+        try:
+            while True:
+                if self.receive(timeout) is None:
+                    return False
+        except ConnectionError:
+            return True
+
+    # -- sessions and requests ----------------------------------------------------------------------------
+    def register(self) -> int:
+        """RegisterSession (version 1, options 0); the handle, or ``TargetUnreachable``."""
+        try:
+            reply = self.exchange(frame(Command.REGISTER_SESSION, REGISTER_SESSION_DATA.pack(1, 0)))
+        except ConnectionError as exc:
+            raise TargetUnreachable(f"{self.host}:{self.port} closed the connection on RegisterSession: "
+                                    f"not an EtherNet/IP target? ({exc})") from None
+        if reply is None:
+            raise TargetUnreachable(f"{self.host}:{self.port} does not answer RegisterSession: "
+                                    "not an EtherNet/IP target?")
+        if reply.header.command != Command.REGISTER_SESSION or reply.header.status != 0 or not reply.header.session:
+            raise TargetUnreachable(f"{self.host}:{self.port} answers RegisterSession with "
+                                    f"{reply.raw[:HEADER_SIZE].hex()}: not an EtherNet/IP target?")
+        self.session = reply.header.session
+        return self.session
+
+    def request(self, service: int, path: bytes, data: bytes = b"", extra: tuple[Item, ...] = (),
+                raw_request: bytes | None = None, timeout: float | None = None) -> Reply:
+        """A message-router request over SendRRData; ``raw_request`` sends those bytes as the request."""
+        request = raw_request if raw_request is not None else MessageRouterRequest(service, path, data).encode()
+        try:
+            reply = self.exchange(frame(Command.SEND_RR_DATA, rr_data(request, extra), self.session), timeout)
+        except ConnectionError as exc:
+            return Reply(None, None, f"the target closed the connection ({exc})")
+        return Reply.of(reply)
+
+
+@dataclass
+class Reply:
+    """A SendRRData reply read for a check: the message-router reply, or what went wrong."""
+
+    frame: Frame | None
+    response: MessageRouterResponse | None
+    problem: str = ""
+    items: tuple[Item, ...] = ()
+
+    @classmethod
+    def of(cls, reply: Frame | None) -> Reply:
+        if reply is None:
+            return cls(None, None, "no reply")
+        if reply.header.status != 0:
+            return cls(reply, None, f"encapsulation status 0x{reply.header.status:04X}")
+        try:
+            items = decode_items(reply.body, RR_PREFIX.size, strict=False)
+            data = next(i.data for i in items if i.type == ItemType.UNCONNECTED_DATA)
+            return cls(reply, MessageRouterResponse.decode(data), "", tuple(items))
+        except (StopIteration, ValueError, struct.error) as exc:
+            return cls(reply, None, f"malformed reply ({exc or 'no Unconnected Data item'})")
+
+    @property
+    def status(self) -> int | None:
+        return None if self.response is None else self.response.general_status
+
+    @property
+    def extended(self) -> int | None:
+        if self.response is None or not self.response.extended_status:
+            return None
+        return self.response.extended_status[0]
+
+    @property
+    def data(self) -> bytes:
+        return b"" if self.response is None else self.response.data
+
+    def describe(self) -> str:
+        if self.response is None:
+            return self.problem
+        text = f"general status 0x{self.response.general_status:02X}"
+        if self.response.extended_status:
+            text += " extended " + " ".join(f"0x{w:04X}" for w in self.response.extended_status)
+        if self.response.data and self.response.general_status == 0:
+            text += f", {len(self.response.data)} data bytes"
+        return text
+
+
+def udp_exchange(host: str, port: int, raw: bytes, timeout: float) -> tuple[bytes | None, float]:
+    """Send one datagram, return the first reply datagram and how long it took (None: none came)."""
+    with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as sock:
+        start = time.monotonic()
+        sock.sendto(raw, (host, port))
+        deadline = start + timeout
+        while True:
+            left = deadline - time.monotonic()
+            if left <= 0:
+                return None, time.monotonic() - start
+            ready, _, _ = select.select([sock], [], [], left)
+            if ready:
+                data, _ = sock.recvfrom(65536)
+                return data, time.monotonic() - start

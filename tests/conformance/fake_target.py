@@ -1,0 +1,484 @@
+"""A scripted EtherNet/IP target for the conformance battery's tests: plain sockets and threads,
+written from the wire (shared/reference/wire.md), importing nothing of cipstack.
+
+By default it does what the specification asks of every check of the battery, for the device
+of ``fake_device.eds``. ``deviation`` names one check id: the target then answers as a
+deviating stack does in exactly that place (the bytes such stacks send: cpppo's 19-byte
+ListServices item, encapsulation status 8 for a missing class, a sockaddr with the wrong
+byte order, 0x0108 for a null Forward_Open, ...), so that that check, and only it, fails.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import itertools
+import random
+import socket
+import struct
+import threading
+import time
+from dataclasses import dataclass, field
+
+HEADER = struct.Struct("<HHII8sI")
+FO_HEAD = struct.Struct("<BBIIHHIB3x")
+FO_SMALL = struct.Struct("<IHIHBB")
+FO_LARGE = struct.Struct("<IIIIBB")
+IO_HEAD = struct.Struct("<HHHIIHHH")
+
+VENDOR, DEVICE_TYPE, PRODUCT_CODE, REVISION, SERIAL, NAME = 65001, 12, 7, (1, 2), 0x00C0FFEE, b"Fake Target"
+#: Output -> input assembly pairs the device connects (fake_device.eds Connection1 and 2).
+PAIRS = {100: 101, 102: 103}
+ASSEMBLY_SIZE = 2
+
+
+def sockaddr(host: str, port: int, family: bytes = b"\x00\x02") -> bytes:
+    return family + struct.pack(">H", port) + socket.inet_aton(host) + bytes(8)
+
+
+def cpf(*items: tuple[int, bytes]) -> bytes:
+    return struct.pack("<H", len(items)) + b"".join(struct.pack("<HH", t, len(d)) + d for t, d in items)
+
+
+def split_cpf(raw: bytes) -> list[tuple[int, bytes]]:
+    (count,) = struct.unpack_from("<H", raw)
+    pos, items = 2, []
+    for _ in range(count):
+        item_type, length = struct.unpack_from("<HH", raw, pos)
+        items.append((item_type, raw[pos + 4:pos + 4 + length]))
+        pos += 4 + length
+    return items
+
+
+def reply(service: int, status: int = 0, extended: tuple[int, ...] = (), data: bytes = b"") -> bytes:
+    return bytes((service | 0x80, 0, status, len(extended))) + b"".join(struct.pack("<H", w) for w in extended) + data
+
+
+class EncapStatus(Exception):
+    """Answer the frame with this encapsulation status and no data."""
+
+    def __init__(self, status: int) -> None:
+        self.status = status
+
+
+@dataclass
+class Connection:
+    triad: tuple[int, int, int]
+    ot_id: int
+    to_id: int
+    ot_point: int
+    api: float
+    timeout: float
+    destination: tuple[str, int]
+    last_heard: float
+    stop: threading.Event = field(default_factory=threading.Event)
+
+
+class FakeTarget:
+    """The target on 127.0.0.1: TCP and UDP on one port, class 1 I/O on another UDP port."""
+
+    def __init__(self, deviation: str | None = None, host: str = "127.0.0.1", name: bytes = NAME) -> None:
+        self.deviation = deviation
+        self.name = name
+        self.host = host
+        self.errors: list[str] = []
+        self._stop = threading.Event()
+        self._threads: list[threading.Thread] = []
+        self._lock = threading.Lock()
+        self._sessions = itertools.count(0x1000)
+        self._ids = itertools.count(0x2000)
+        self.connections: dict[int, Connection] = {}
+        for _ in range(20):  # a TCP port whose UDP twin is free too
+            self.tcp = socket.socket(socket.AF_INET, socket.SOCK_STREAM)
+            self.tcp.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
+            self.tcp.bind((host, 0))
+            self.port = self.tcp.getsockname()[1]
+            self.udp = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+            try:
+                self.udp.bind((host, self.port))
+                break
+            except OSError:
+                self.tcp.close()
+                self.udp.close()
+        self.tcp.listen(16)
+        self.tcp.settimeout(0.05)
+        self.udp.settimeout(0.05)
+        self.io = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+        self.io.bind((host, 0))
+        self.io.settimeout(0.05)
+        self.io_port = self.io.getsockname()[1]
+        self.attributes = self._attributes()
+        for target in (self._accept, self._serve_udp, self._serve_io):
+            self._start(target)
+
+    @property
+    def address(self) -> str:
+        return f"{self.host}:{self.port}"
+
+    def _start(self, target: object, *args: object) -> None:
+        thread = threading.Thread(target=target, args=args, daemon=True)  # type: ignore[arg-type]
+        self._threads.append(thread)
+        thread.start()
+
+    def close(self) -> None:
+        self._stop.set()
+        for connection in list(self.connections.values()):
+            connection.stop.set()
+        for thread in list(self._threads):
+            thread.join(5)
+        for sock in (self.tcp, self.udp, self.io):
+            sock.close()
+
+    def __enter__(self) -> FakeTarget:
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.close()
+
+    def deviates(self, check_id: str) -> bool:
+        return self.deviation == check_id
+
+    # -- the device --------------------------------------------------------------------------------------
+    def _attributes(self) -> dict[tuple[int, int], dict[int, bytes]]:
+        revision = (2, 0) if self.deviates("eds.device.identity") else REVISION
+        status = 0x0032 if self.deviates("objects.identity.status") else 0x0030
+        identity = {
+            1: struct.pack("<H", VENDOR),
+            2: struct.pack("<I" if self.deviates("objects.identity.attributes") else "<H", DEVICE_TYPE),
+            3: struct.pack("<H", PRODUCT_CODE), 4: bytes(revision), 5: struct.pack("<H", status),
+            6: struct.pack("<I", SERIAL), 7: bytes((len(self.name),)) + self.name,
+        }
+        domain = b"lan"
+        mac = bytes(8) if self.deviates("objects.ethernet_link.attributes") else bytes.fromhex("02005e000001")
+        tcp_ip = {1: struct.pack("<I", 1), 2: struct.pack("<I", 0x14), 3: struct.pack("<I", 0),
+                  4: struct.pack("<H", 2) + bytes((0x20, 0xF6, 0x24, 0x01)),
+                  5: socket.inet_aton("127.0.0.1")[::-1] + bytes(16) + struct.pack("<H", len(domain)) + domain + b"\0",
+                  6: struct.pack("<H", 4) + b"fake"}
+        if not self.deviates("objects.tcp_ip.attributes"):
+            tcp_ip[13] = struct.pack("<H", 120)
+        table = {
+            (0x01, 1): identity, (0x02, 1): {1: struct.pack("<HH", 1, 0x01)}, (0x06, 1): {1: struct.pack("<H", 0)},
+            (0xF5, 1): tcp_ip,
+            (0xF6, 1): {1: struct.pack("<I", 100), 2: struct.pack("<I", 0x0F), 3: mac},
+            (0x64, 1): {1: struct.pack("<I" if self.deviates("eds.param.link") else "<H", 10)},
+        }
+        for instance in (100, 101, 102, 103):
+            size = 3 if self.deviates("eds.assembly.size") and instance == 101 else ASSEMBLY_SIZE
+            table[(0x04, instance)] = {3: bytes(ASSEMBLY_SIZE), 4: struct.pack("<H", size)}
+        return table
+
+    # -- TCP ---------------------------------------------------------------------------------------------
+    def _accept(self) -> None:
+        while not self._stop.is_set():
+            try:
+                conn, _ = self.tcp.accept()
+            except (TimeoutError, OSError):
+                continue
+            conn.settimeout(0.05)
+            self._start(self._serve, conn)
+
+    def _serve(self, conn: socket.socket) -> None:
+        state = {"session": 0}
+        buffer = b""
+        with conn:
+            while not self._stop.is_set():
+                try:
+                    chunk = conn.recv(65536)
+                except TimeoutError:
+                    continue
+                except OSError:
+                    return
+                if not chunk:
+                    return
+                buffer += chunk
+                while len(buffer) >= 24:
+                    command, length, session, _status, context, options = HEADER.unpack_from(buffer)
+                    if len(buffer) < 24 + length:
+                        break
+                    body, buffer = buffer[24:24 + length], buffer[24 + length:]
+                    if options:
+                        continue  # discarded (wire.md)
+                    try:
+                        answer = self._frame(command, body, session, state)
+                        status = 0
+                    except EncapStatus as exc:
+                        answer, status = b"", exc.status
+                    except Exception as exc:  # a broken script: say so, the test then fails on it
+                        self.errors.append(f"{type(exc).__name__}: {exc}")
+                        raise
+                    if answer is None:
+                        if command == 0x66 and not self.deviates("encap.unregister_session"):
+                            return  # UnRegisterSession: close the connection
+                        continue
+                    try:
+                        conn.sendall(HEADER.pack(command, len(answer), state["session"] or session, status, context, 0)
+                                     + answer)
+                    except OSError:
+                        return
+
+    def _frame(self, command: int, body: bytes, session: int, state: dict[str, int]) -> bytes | None:
+        if command == 0x65:
+            if len(body) != 4 and not self.deviates("encap.wrong_length"):
+                raise EncapStatus(0x0065)
+            version, options = struct.unpack_from("<HH", body)
+            if state["session"] and not self.deviates("encap.register_session.second"):
+                raise EncapStatus(0x0001)
+            if options and not self.deviates("encap.register_session.options"):
+                raise EncapStatus(0x0069)
+            if version != 1 and not self.deviates("encap.register_session.protocol_version"):
+                raise EncapStatus(0x0069)
+            state["session"] = next(self._sessions)
+            return bytes(4) if self.deviates("encap.register_session.version") else body[:4]
+        if command == 0x66:
+            return None
+        if command == 0x00:
+            return body if self.deviates("encap.nop") else None
+        if command == 0x63:
+            return self._list_identity(udp=False)
+        if command == 0x04:
+            return self._list_services()
+        if command == 0x64:
+            if self.deviates("encap.list_interfaces"):
+                raise EncapStatus(0x0001)
+            return struct.pack("<H", 0)
+        if command == 0x6F:
+            registered = state["session"]
+            if session != registered or not registered:
+                excused = (self.deviates("encap.send_rr_data.no_session") and not registered) or (
+                    self.deviates("encap.send_rr_data.wrong_session") and registered)
+                if not excused:
+                    raise EncapStatus(0x0064)
+            items = split_cpf(body[6:])
+            request = next(d for t, d in items if t == 0x00B2)
+            extra = [(t, d) for t, d in items if t == 0x8001]
+            answer, reply_items = self._request(request, extra)
+            return bytes(6) + cpf((0x0000, b""), (0x00B2, answer), *reply_items)
+        if command == 0x0001 and self.deviates("encap.unsupported_command"):
+            return self._list_identity(udp=False)  # as cpppo: some answer, status 0
+        raise EncapStatus(0x0001)
+
+    def _list_identity(self, udp: bool) -> bytes:
+        serial = SERIAL + 1 if self.deviates("objects.identity.list_identity") else SERIAL
+        family = b"\x02\x00" if self.deviates("encap.list_identity.tcp") and not udp else b"\x00\x02"
+        attributes = self.attributes[(0x01, 1)]
+        item = (struct.pack("<H", 1) + sockaddr(self.host, self.port, family) + attributes[1]
+                + struct.pack("<H", DEVICE_TYPE) + attributes[3] + attributes[4] + attributes[5]
+                + struct.pack("<I", serial) + attributes[7] + b"\x03")
+        if udp and self.deviates("encap.list_identity.udp"):
+            item = item[:-1]  # no state byte
+        return cpf((0x000C, item))
+
+    def _list_services(self) -> bytes:
+        name = b"Communications\0" if self.deviates("encap.list_services") else b"Communications\0\0"
+        return cpf((0x0100, struct.pack("<HH", 1, 0x0120) + name))
+
+    # -- UDP ---------------------------------------------------------------------------------------------
+    def _serve_udp(self) -> None:
+        while not self._stop.is_set():
+            try:
+                data, peer = self.udp.recvfrom(2048)
+            except (TimeoutError, OSError):
+                continue
+            if len(data) < 24:
+                continue
+            command, _, _, _, context, _ = HEADER.unpack_from(data)
+            if command == 0x63:
+                body = self._list_identity(udp=True)
+                # Well inside the 500 ms the sender context asks for; the deviating one ignores it.
+                delay = 1.5 if self.deviates("encap.list_identity.max_response_delay") else random.uniform(0, 0.2)
+                self._start(self._send_later, delay, HEADER.pack(command, len(body), 0, 0, context, 0) + body, peer)
+            elif command == 0x04:
+                body = self._list_services()
+                self.udp.sendto(HEADER.pack(command, len(body), 0, 0, context, 0) + body, peer)
+
+    def _send_later(self, delay: float, datagram: bytes, peer: tuple[str, int]) -> None:
+        if not self._stop.wait(delay):
+            with contextlib.suppress(OSError):
+                self.udp.sendto(datagram, peer)
+
+    # -- message router ----------------------------------------------------------------------------------
+    def _request(self, raw: bytes, extra: list[tuple[int, bytes]]) -> tuple[bytes, list[tuple[int, bytes]]]:
+        service, words = raw[0], raw[1]
+        path, data = raw[2:2 + 2 * words], raw[2 + 2 * words:]
+        logical: dict[int, int] = {}
+        for pos in range(0, len(path), 2):
+            kind = path[pos]
+            if kind not in (0x20, 0x24, 0x30):
+                if self.deviates("router.bad_path"):
+                    return reply(service, 0x05), []
+                return reply(service, 0x04), []
+            logical[kind] = path[pos + 1]
+        class_id, instance, attribute = logical.get(0x20), logical.get(0x24), logical.get(0x30)
+        if (class_id, instance) == (0x06, 1):
+            return self._connection_manager(service, data, attribute, extra)
+        if service == 0x0A and (class_id, instance) == (0x02, 1):
+            return self._multiple(data), []
+        return self._object(service, class_id, instance, attribute, data), []
+
+    def _object(self, service: int, class_id: int | None, instance: int | None, attribute: int | None,
+                data: bytes) -> bytes:
+        if class_id not in {c for c, _ in self.attributes}:
+            if self.deviates("router.unknown_class"):
+                raise EncapStatus(0x0008)  # as cpppo
+            return reply(service, 0x05)
+        if (class_id, instance) == (0x02, 1) and self.deviates("objects.message_router"):
+            return reply(service, 0x05)
+        values = self.attributes.get((class_id, instance or 0))
+        if values is None:
+            return reply(service, 0x08 if self.deviates("router.unknown_instance") else 0x05)
+        if service == 0x0E:
+            if attribute not in values:
+                return reply(service, 0x08 if self.deviates("router.unknown_attribute") else 0x14)
+            if data and not self.deviates("router.too_much_data"):
+                return reply(service, 0x15)
+            return reply(service, data=values[attribute])
+        if service == 0x01 and class_id == 0x01:
+            every = b"".join(values[a] for a in range(1, 8))
+            return reply(service, data=every[:-3] if self.deviates("objects.identity.get_attributes_all") else every)
+        if service == 0x10 and class_id == 0x01:
+            return reply(service, 0 if self.deviates("objects.identity.set_read_only") else 0x0E)
+        if service == 0x05 and class_id == 0x01:
+            return reply(service, 0x08 if self.deviates("objects.identity.reset") else 0)
+        return reply(service, 0x05 if self.deviates("router.unknown_service") else 0x08)
+
+    def _multiple(self, data: bytes) -> bytes:
+        (count,) = struct.unpack_from("<H", data)
+        offsets = [*struct.unpack_from(f"<{count}H", data, 2), len(data)]
+        answers = []
+        for start, end in itertools.pairwise(offsets):
+            member = data[start:end]
+            answers.append(self._request(member, [])[0])
+        failed = any(a[2] for a in answers)
+        status = 0x1E if failed and not self.deviates("router.multiple_service.bad_member") else 0
+        if self.deviates("router.multiple_service.good"):
+            status = 0x1E
+        position, table = 2 + 2 * count, []
+        for answer in answers:
+            table.append(position)
+            position += len(answer)
+        return reply(0x0A, status, data=struct.pack(f"<H{count}H", count, *table) + b"".join(answers))
+
+    # -- Connection Manager ------------------------------------------------------------------------------
+    def _connection_manager(self, service: int, data: bytes, attribute: int | None,
+                            extra: list[tuple[int, bytes]]) -> tuple[bytes, list[tuple[int, bytes]]]:
+        if service == 0x0E:
+            if self.deviates("objects.connection_manager"):
+                raise EncapStatus(0x0008)
+            return reply(service, data=struct.pack("<H", 0)) if attribute == 1 else reply(service, 0x14), []
+        if service in (0x54, 0x5B):
+            return self._forward_open(service, data, extra)
+        if service == 0x4E:
+            return self._forward_close(data), []
+        return reply(service, 0x08), []
+
+    def _refuse(self, service: int, triad: tuple[int, int, int], code: int, *words: int) -> tuple[bytes, list]:
+        return reply(service, 0x01, (code, *words), struct.pack("<HHIBB", *triad, 0, 0)), []
+
+    def _forward_open(self, service: int, data: bytes, extra: list[tuple[int, bytes]]) -> tuple[bytes, list]:
+        large = service == 0x5B
+        tail = FO_LARGE if large else FO_SMALL
+        if len(data) < FO_HEAD.size + tail.size:
+            return reply(service, 0x20 if self.deviates("router.not_enough_data") else 0x13), []
+        _tick, _ticks, _ot_id, to_id, serial, vendor, originator, multiplier = FO_HEAD.unpack_from(data)
+        ot_rpi, ot_params, to_rpi, to_params, transport, words = tail.unpack_from(data, FO_HEAD.size)
+        triad = (serial, vendor, originator)
+        path = data[FO_HEAD.size + tail.size:FO_HEAD.size + tail.size + 2 * words]
+        if large and self.deviates("cm.large_forward_open"):
+            return self._refuse(service, triad, 0x0108)
+        ot_type, to_type = ((p >> 29) & 3 if large else (p >> 13) & 3 for p in (ot_params, to_params))
+        ot_size, to_size = ((p & 0xFFFF) if large else (p & 0x1FF) for p in (ot_params, to_params))
+        if ot_type == 0 and to_type == 0:
+            return self._refuse(service, triad, 0x0108 if self.deviates("cm.forward_open.null") else 0x0132)
+        if transport & 0x0F != 1:
+            return self._refuse(service, triad, 0x0108 if self.deviates("cm.forward_open.transport_class") else 0x0103)
+        if len(path) != 8 or path[0:2] != b"\x20\x04" or path[2] != 0x24 or path[4] != 0x2C or path[6] != 0x2C:
+            return self._refuse(service, triad, 0x0117 if self.deviates("cm.forward_open.bad_segment") else 0x0315)
+        ot_point, to_point = path[5], path[7]
+        if ot_point not in PAIRS:
+            return self._refuse(service, triad, 0x0110 if self.deviates("cm.forward_open.consuming_point") else 0x012A)
+        if to_point != PAIRS[ot_point]:
+            return self._refuse(service, triad, 0x0110 if self.deviates("cm.forward_open.producing_point") else 0x012B)
+        if ot_point == 102 and self.deviates("eds.connection.open"):
+            return self._refuse(service, triad, 0x0113)
+        if ot_rpi < 10_000 or to_rpi < 10_000:
+            return self._refuse(service, triad, 0x0108 if self.deviates("cm.forward_open.rpi") else 0x0112,
+                                0x0202, 10_000 & 0xFFFF, 10_000 >> 16, 10_000 & 0xFFFF, 10_000 >> 16)
+        if ot_size != 2 + 4 + ASSEMBLY_SIZE and not self.deviates("cm.forward_open.ot_size"):
+            return self._refuse(service, triad, 0x0127, 2 + 4 + ASSEMBLY_SIZE)
+        if to_size != 2 + ASSEMBLY_SIZE:
+            code = 0x0127 if self.deviates("cm.forward_open.to_size") else 0x0128
+            return self._refuse(service, triad, code, 2 + ASSEMBLY_SIZE)
+        with self._lock:
+            if not self.deviates("cm.forward_open.duplicate") and any(
+                    c.triad == triad for c in self.connections.values()):
+                return self._refuse(service, triad, 0x0100)
+            if not self.deviates("cm.forward_open.ownership") and any(
+                    c.ot_point == ot_point for c in self.connections.values()):
+                return self._refuse(service, triad, 0x0106)
+            port = next((struct.unpack_from(">H", d, 2)[0] for t, d in extra if t == 0x8001), 2222)
+            ot_id = next(self._ids)
+            api = to_rpi / 1e6
+            connection = Connection(triad, ot_id, to_id, ot_point, api,
+                                    ot_rpi / 1e6 * (4 << multiplier), (self.host, port), time.monotonic() + 10.0)
+            self.connections[ot_id] = connection
+        self._start(self._produce, connection)
+        echoed = (serial, vendor, originator + 1) if self.deviates("cm.forward_open.accepted") else triad
+        answer = struct.pack("<IIHHIIIBB", ot_id, to_id, *echoed, ot_rpi, to_rpi, 0, 0)
+        return reply(service, data=answer), [(0x8000, sockaddr(self.host, self.io_port))]
+
+    def _forward_close(self, data: bytes) -> bytes:
+        serial, vendor, originator = struct.unpack_from("<HHI", data, 2)
+        triad = (serial, vendor, originator)
+        with self._lock:
+            found = next((c for c in self.connections.values() if c.triad == triad
+                          or (self.deviates("cm.forward_close.other_originator") and c.triad[0] == serial)), None)
+            if found is not None:
+                del self.connections[found.ot_id]
+                found.stop.set()
+        if found is None:
+            # The deviating stack has one code for every refusal when no connection has the serial.
+            known = any(c.triad[0] == serial for c in self.connections.values())
+            code = 0x0100 if self.deviates("cm.forward_close.unknown") and not known else 0x0107
+            return reply(0x4E, 0x01, (code,), struct.pack("<HHIBB", *triad, 0, 0))
+        return reply(0x4E, data=struct.pack("<HHIBB", *triad, 0, 0))
+
+
+    # -- class 1 -----------------------------------------------------------------------------------------
+    def _serve_io(self) -> None:
+        while not self._stop.is_set():
+            try:
+                data, _ = self.io.recvfrom(2048)
+            except (TimeoutError, OSError):
+                continue
+            if len(data) < IO_HEAD.size:
+                continue
+            connection_id = struct.unpack_from("<I", data, 6)[0]
+            with self._lock:
+                connection = self.connections.get(connection_id)
+            if connection is None:
+                continue
+            header = data[IO_HEAD.size:IO_HEAD.size + 4]
+            if len(header) == 4 and not struct.unpack("<I", header)[0] & 1 and self.deviates("class1.run_idle"):
+                self._drop(connection)  # this stack closes the connection on idle
+                continue
+            connection.last_heard = time.monotonic() + connection.timeout
+
+    def _drop(self, connection: Connection) -> None:
+        with self._lock:
+            self.connections.pop(connection.ot_id, None)
+        connection.stop.set()
+
+    def _produce(self, connection: Connection) -> None:
+        period = connection.api * (2 if self.deviates("class1.production") else 1)
+        step = 2 if self.deviates("class1.sequence") else 1
+        payload = bytes(3 if self.deviates("class1.data_size") else ASSEMBLY_SIZE)
+        start, sequence = time.monotonic(), 0
+        while not connection.stop.is_set() and not self._stop.is_set():
+            if time.monotonic() > connection.last_heard and not self.deviates("class1.timeout"):
+                self._drop(connection)  # the connection timed out
+                return
+            sequence += 1
+            datagram = IO_HEAD.pack(2, 0x8002, 8, connection.to_id, sequence * step, 0x00B1, 2 + len(payload),
+                                    sequence & 0xFFFF) + payload
+            with contextlib.suppress(OSError):
+                self.io.sendto(datagram, connection.destination)
+            connection.stop.wait(max(0.0, start + sequence * period - time.monotonic()))
