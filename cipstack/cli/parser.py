@@ -142,7 +142,7 @@ def build_parser(command: str | None = None) -> argparse.ArgumentParser:
                    help="open TCP connections from one address (default: half of --max-tcp-connections)")
     p.add_argument("--frame-timeout", type=parse_duration, default=DEFAULT_FRAME_TIMEOUT, metavar="SECONDS",
                    help="time a TCP frame, once begun, has to arrive whole; a slower one closes its connection "
-                        "(default %(default)g s)")
+                        "(default %(default)s s)")
     p.add_argument("--io-port", type=number("io port"), default=DEFAULT_IO_PORT, metavar="N",
                    help="UDP port of class 1 I/O (default %(default)s; 0 picks a free one)")
     _complete(p.add_argument("--control", type=Path, metavar="PATH",
