@@ -59,6 +59,9 @@ async def ours():
             owner.output.run_forward = True
             await owner.wait_input(lambda i: i.at_reference, 10)
             await watcher.wait_input(lambda i: i.running_forward, 5)
+            # Half a second at speed: the ramps alone (0.25 s each way) made about as many frames
+            # as the count below asks for, and a quick run fell one short.
+            await asyncio.sleep(0.5)
             owner.output.run_forward = False
             await owner.wait_input(lambda i: i.speed_actual == 0, 10)
             return {"owner": owner.stats.as_dict(), "watcher": watcher.stats.as_dict()}
