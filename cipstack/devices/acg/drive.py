@@ -61,7 +61,15 @@ from .registers import (
     InstanceSelection,
     WarningInformation,
 )
-from .run_command import ControlSupervisor, Direction, DriveState, RunAction, RunCommands, drive_run_action
+from .run_command import (
+    CommandPort,
+    ControlSupervisor,
+    Direction,
+    DriveState,
+    RunAction,
+    RunCommands,
+    drive_run_action,
+)
 from .trips import NO_FAULT, Trip, Trips
 
 log = logging.getLogger(__name__)
@@ -140,6 +148,9 @@ class AcgDrive(RunCommands, Ramps, Trips, LostCommand, RegisterEffects, Computed
         # Lost command.
         self._io_watch = _CommandLossWatch(IO_BREAK_TIME)
         self._modbus_watch = _CommandLossWatch(MODBUS_SILENCE_TIME)
+        self._int485_watch = _CommandLossWatch(None, CommandPort.INT485)
+        #: The port the present write came in through (``commands_from``); the card's by default.
+        self._command_port = CommandPort.FIELDBUS
         self._lost_reference: float | None = None  # Hz held by Hold Input/Hold Output/Lost Preset
         # Memory control.
         self._hide_locked = False
@@ -234,7 +245,7 @@ class AcgDrive(RunCommands, Ramps, Trips, LostCommand, RegisterEffects, Computed
         # Output off: no ramp and no run-time counting (``_run_until``); no command-loss watch
         # running: no timer (``_timer_deadline``). The stopped drive of most explicit traffic.
         return (not self._output_on and self._io_watch.silent_since is None
-                and self._modbus_watch.silent_since is None)
+                and self._modbus_watch.silent_since is None and self._int485_watch.silent_since is None)
 
     # -----------------------------------------------------------------------------------------
     # Speeds
@@ -246,7 +257,8 @@ class AcgDrive(RunCommands, Ramps, Trips, LostCommand, RegisterEffects, Computed
     def _reference_hz(self) -> float:
         if self._lost_reference is not None:
             reference = self._lost_reference
-        elif self.reference_from_net:
+        elif self.reference_from_net or self.reference_from_int485:
+            # Both communication sources set the frequency command of 0x0005 / 0x0380 (seed 001).
             reference = self._values[SPEED_REFERENCE.address] / 100
         else:
             reference = self._values[TARGET_FREQUENCY.address] / 100
@@ -448,6 +460,7 @@ __all__ = [
     "NO_FAULT",
     "AcgDrive",
     "CommSettings",
+    "CommandPort",
     "ControlSupervisor",
     "Direction",
     "DriveState",

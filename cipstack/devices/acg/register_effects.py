@@ -63,7 +63,7 @@ class RegisterEffects:
         if OperationCommand.TRIP_RESET in bits and OperationCommand.TRIP_RESET not in previous:
             self._fault_reset()
         self._set_level_cause(Trip.BX, OperationCommand.EMERGENCY_STOP in bits)
-        if not self.control_from_net:
+        if not self._port_commands():
             return
         run_bits = bits & (OperationCommand.STOP | OperationCommand.FORWARD | OperationCommand.REVERSE)
         if OperationCommand.STOP in run_bits:
@@ -82,7 +82,7 @@ class RegisterEffects:
         rising = bits & ~previous
         if ControlCommand.TRIP_RESET in rising:
             self._fault_reset()
-        if not self.control_from_net:
+        if not self._port_commands():
             return
         if ControlCommand.FREE_RUN_STOP in rising:
             self._free_run()

@@ -402,6 +402,12 @@ FREQ_REF_SOURCE = Register(
 
 CMD_SOURCE_FIELDBUS = 4
 FREQ_REF_SOURCE_FIELDBUS = 8
+#: drv 3 / Frq 6 "Int485": the built-in RS-485 port (seed 001, Setting Operation Command and Frequency).
+CMD_SOURCE_INT485 = 3
+FREQ_REF_SOURCE_INT485 = 6
+#: drv 1 / 2 "Fx/Rx-1", "Fx/Rx-2": the terminals' FX and RX functions (0x0006 B6-B8 command sources).
+CMD_SOURCE_FX_RX_1 = 1
+CMD_SOURCE_FX_RX_2 = 2
 
 _OPERATION: list[Register] = [
     TARGET_FREQUENCY, ACCEL_TIME, DECEL_TIME, CMD_SOURCE, FREQ_REF_SOURCE,
