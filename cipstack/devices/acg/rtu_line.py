@@ -112,8 +112,11 @@ class SerialDevicePort:
 
 
 def _reason(exc: BaseException) -> str:
-    text = getattr(exc, "strerror", None) or str(exc)
-    return " ".join(str(text).split())
+    """The reason alone: pyserial's exception repeats the path around the errno's text."""
+    number = getattr(exc, "errno", None)
+    if isinstance(number, int) and number > 0:
+        return os.strerror(number)
+    return " ".join(str(getattr(exc, "strerror", None) or exc).split())
 
 
 def open_port(device: str, settings: LineSettings) -> LinePort:
