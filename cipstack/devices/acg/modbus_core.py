@@ -10,8 +10,11 @@ Communication") and the same drive. What differs between them is a ``ModbusDiale
 * the exception codes: the card's table (seed 000, "Exception Code": 0x01-0x04, 0x06 and the
   ACG's own 0x20 Write Permission Error) or the serial chapter's (seed 001, "Exception Code":
   01 Illegal Function, 02 Illegal Data Address, 03 Illegal Data Value, 06 Slave Device Busy);
-* the addresses: "Hex Address 0000 is unavailable with Modbus RTU" (seed 001, Drive Parameter
-  Modbus Communication Addresses);
+* the addresses: the card's PDU address is the communication address (its "Modbus TCP" column
+  numbers a register 40001 + address, seed 001 and seed 000); on the RS-485 port the "Modbus RTU"
+  column numbers it 40000 + address, so its PDU address is the communication address minus one.
+  The chapter's worked example sends "Starting Address -1 (0x1246-1)", 0x1245, to write 0x1246,
+  and "Hex Address 0000 is unavailable with Modbus RTU" (no PDU address reaches it);
 * the command source a run command written through the port belongs to (drv 4 Field Bus for the
   card, drv 3 Int485 for the RS-485 port) and the lost-command watch a request feeds (seed 000,
   "Lost command conditions by protocol": five seconds of Modbus TCP silence; seed 001, Command
@@ -74,8 +77,8 @@ class ModbusDialect:
     failure_code: ExceptionCode
     #: The command source run commands written through this port belong to.
     port: CommandPort
-    #: Addresses the port does not serve although the map has them.
-    unavailable: frozenset[int] = frozenset()
+    #: The communication address of PDU address 0.
+    address_offset: int = 0
 
     def refusal(self, refusal: RegisterRefusal) -> ExceptionCode:
         return self.refusal_codes[refusal]
@@ -117,7 +120,7 @@ RTU_DIALECT = ModbusDialect(
     },
     ExceptionCode.SLAVE_DEVICE_BUSY,
     CommandPort.INT485,
-    unavailable=frozenset({0x0000}),
+    address_offset=1,
 )
 
 DriveSource = Callable[[], AcgDrive]
@@ -162,30 +165,33 @@ class ModbusCore:
         # Application Protocol gives for "the implied length is incorrect".
         if function not in self.dialect.functions:
             raise ModbusException(ExceptionCode.ILLEGAL_FUNCTION, f"function 0x{function:02X} is not supported")
+        # The reply echoes the PDU addresses as they came; the drive is addressed by communication
+        # address (``ModbusDialect.address_offset``).
+        offset = self.dialect.address_offset
         if function in (FunctionCode.READ_HOLDING_REGISTERS, FunctionCode.READ_INPUT_REGISTERS):
             address, count = _unpack(">HH", data)
-            return self._read(drive, address, count)
+            return self._read(drive, address + offset, count)
         if function == FunctionCode.WRITE_SINGLE_REGISTER:
             address, value = _unpack(">HH", data)
-            self._write(drive, address, [value], now)
+            self._write(drive, address + offset, [value], now)
             return data
         if function == FunctionCode.WRITE_MULTIPLE_REGISTERS:
             address, count, byte_count = _unpack(">HHB", data[:5])  # the values' length: _values
             values = _values(data[5:], count, byte_count)
-            self._write(drive, address, values, now)
+            self._write(drive, address + offset, values, now)
             return struct.pack(">HH", address, count)
         # FunctionCode.READ_WRITE_MULTIPLE_REGISTERS
         read_address, read_count, write_address, write_count, byte_count = _unpack(">HHHHB", data[:9])
         values = _values(data[9:], write_count, byte_count)
         _check_count(read_count)
-        self._check_addresses(drive, read_address, read_count)
-        self._write(drive, write_address, values, now)  # the write is done before the read
-        return self._read(drive, read_address, read_count)
+        self._check_addresses(drive, read_address + offset, read_count)
+        self._write(drive, write_address + offset, values, now)  # the write is done before the read
+        return self._read(drive, read_address + offset, read_count)
 
-    def _check_addresses(self, drive: AcgDrive, address: int, count: int) -> None:
-        unavailable = self.dialect.unavailable
+    @staticmethod
+    def _check_addresses(drive: AcgDrive, address: int, count: int) -> None:
         for word in range(address, address + count):
-            if word > 0xFFFF or word in unavailable or drive.registers.word(word) is None:
+            if word > 0xFFFF or drive.registers.word(word) is None:
                 raise ModbusException(ExceptionCode.ILLEGAL_DATA_ADDRESS, f"no register 0x{word:04X}")
 
     def _read(self, drive: AcgDrive, address: int, count: int) -> bytes:

@@ -13,6 +13,8 @@ bytes and the time they arrived in, frames and replies with the time they leave 
   a frame whose CRC-16 (polynomial 0xA001 reflected, initial 0xFFFF, low byte first) does not
   match is a CRC error; a frame for another station ID is not ours. None of them is answered;
   each is counted (``RtuCounters``). Station 0 is a broadcast: a write is executed, nothing answers.
+* Addresses: a request's PDU address is the communication address minus one (the "Modbus RTU"
+  column, 40000 + address; the chapter's example writes 0x1246 at "0x1246-1"), ``modbus_core``.
 * Reply: station ID, the PDU of the Modbus layer (``modbus_core``, the RS-485 dialect) and the CRC,
   released CM.5 after the request's frame ended, and written when its last character would have
   left a real UART at the CM.3 rate (a pty moves bytes at once: the slave paces itself).
@@ -44,6 +46,8 @@ MAX_FRAME = 256
 #: "Number of connected drives: Maximum of 16 drives" (seed 001, Communication Standards).
 MAX_DRIVES_PER_LINE = 16
 BROADCAST = 0
+#: Rounding room when a silence is compared with t3.5 (times are float seconds).
+_EPSILON = 1e-9
 
 _CM = {n: ACG_REGISTERS.by_code(f"CM.{n}").address for n in (1, 3, 4, 5)}
 
@@ -147,7 +151,7 @@ class RtuFramer:
     def feed(self, data: bytes, now: float, silence: float) -> list[tuple[bytes, float]]:
         """Bytes read at ``now``; returns the frames (with the time they ended) that a silence of
         at least ``silence`` before them ended."""
-        frames = self.poll(now, silence) if self._last is not None and now - self._last >= silence else []
+        frames = self.poll(now, silence) if self._last is not None and now - self._last >= silence - _EPSILON else []
         if not data:
             return frames
         self._last = now
@@ -164,7 +168,7 @@ class RtuFramer:
 
     def poll(self, now: float, silence: float) -> list[tuple[bytes, float]]:
         """The frame that a silence up to ``now`` ended, with its end (last byte + ``silence``)."""
-        if self._last is None or now - self._last < silence:
+        if self._last is None or now - self._last < silence - _EPSILON:
             return []
         end = self._last + silence
         frame, oversize = bytes(self._buffer), self._oversize
