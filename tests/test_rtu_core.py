@@ -72,10 +72,10 @@ def test_the_chapters_worked_example_byte_for_byte(slave: RtuSlave, drive: AcgDr
     assert drive.read(0x1246) == 50 and drive.read(0x1247) == 100      # 5.0 s and 10.0 s
 
 
-def test_a_reply_leaves_cm5_after_the_frame_ended_paced_to_the_line(slave: RtuSlave, drive: AcgDrive) -> None:
-    """9,600 bps D8/PN/S1: a character is 10 bits; the frame ends 3.5 characters after its last
-    byte; the reply is released CM.5 (5 ms) later and written when its last character would
-    have left the UART (7 characters for a 7-byte reply)."""
+def test_a_reply_leaves_cm5_after_the_frame_ended(slave: RtuSlave) -> None:
+    """From a serial device (its UART times the bytes): 9,600 bps D8/PN/S1, a character is 10 bits;
+    the frame ends 3.5 characters after the read that held its last byte; the reply is due CM.5
+    (5 ms) later, when the UART is to start sending it."""
     settings = slave.settings
     assert settings == LineSettings(station=1, baud=9600, data_bits=8, parity="N", stop_bits=1,
                                     response_delay=0.005)
@@ -84,7 +84,23 @@ def test_a_reply_leaves_cm5_after_the_frame_ended_paced_to_the_line(slave: RtuSl
     assert slave.poll(1.0 + 3.4 * char) == []
     (reply,) = slave.poll(1.0 + 3.5 * char)
     assert reply.frame == request("01 03 02 0032")
-    assert reply.due == pytest.approx(1.0 + 3.5 * char + 0.005 + 7 * char)
+    assert reply.due == pytest.approx(1.0 + 3.5 * char + 0.005)
+
+
+def test_on_a_pty_the_slave_paces_request_and_reply_at_its_baud_rate(drive: AcgDrive) -> None:
+    """A pty moves the 8 bytes of a request at once: the slave hears them as a 9,600 bps line would
+    bring them (8 characters), ends the frame 3.5 characters later, and the 7-byte reply is due CM.5
+    after that plus its own 7 characters on the line."""
+    slave = RtuSlave(drive, paced=True)
+    char = 10 / 9600
+    assert slave.feed(read(1, 0x1F01), 1.0) == []
+    assert slave.poll(1.0 + 11.4 * char) == []
+    (reply,) = slave.poll(1.0 + 11.5 * char)
+    assert reply.due == pytest.approx(1.0 + 11.5 * char + 0.005 + 7 * char)
+    # Bytes read while the modelled line still brings earlier ones continue the same frame.
+    frame = read(1, 0x1F01)
+    assert slave.feed(frame[:4], 2.0) == [] and slave.feed(frame[4:], 2.0 + 5.9 * char) == []
+    assert len(slave.poll(2.0 + 9.9 * char + 3.5 * char)) == 1
 
 
 @pytest.mark.parametrize(("cm3", "cm4", "silence"), [

@@ -5,10 +5,12 @@ bytes and the time they arrived in, frames and replies with the time they leave 
   response delay (seed 001, Setting Communication Parameters). A character is a start bit, 8 data
   bits, the parity bit if any and the stop bits: 10 or 11 bits at the CM.3 rate.
 * Framing: a frame ends at a silence of 3.5 character times, fixed at 1.75 ms above 19,200 bps
-  (Modbus over serial line, V1.02, 2.5.1.1). The silence is measured between reads (what a UART
-  driver hands over); the 1.5-character rule inside a frame is not applied, since a read holds
-  many characters whose own spacing is not known. A frame longer than 256 bytes (the largest RTU
-  frame) is dropped whole, up to the next silence.
+  (Modbus over serial line, V1.02, 2.5.1.1). The silence is measured from the end of the last byte
+  heard to the next read: on a serial device a read's bytes have arrived when it is made; on a pty,
+  which moves bytes at once, the slave models them on a line at its CM.3 rate (``RtuFramer``). The
+  1.5-character rule inside a frame is not applied, since a read holds many characters whose own
+  spacing is not known. A frame longer than 256 bytes (the largest RTU frame) is dropped whole, up
+  to the next silence.
 * Checks, in the order a slave makes them: a frame shorter than its function needs is truncated;
   a frame whose CRC-16 (polynomial 0xA001 reflected, initial 0xFFFF, low byte first) does not
   match is a CRC error; a frame for another station ID is not ours. None of them is answered;
@@ -16,7 +18,7 @@ bytes and the time they arrived in, frames and replies with the time they leave 
 * Addresses: a request's PDU address is the communication address minus one (the "Modbus RTU"
   column, 40000 + address; the chapter's example writes 0x1246 at "0x1246-1"), ``modbus_core``.
 * Reply: station ID, the PDU of the Modbus layer (``modbus_core``, the RS-485 dialect) and the CRC,
-  released CM.5 after the request's frame ended, and written when its last character would have
+  released CM.5 after the request's frame ended; on a pty, written when its last character would have
   left a real UART at the CM.3 rate (a pty moves bytes at once: the slave paces itself).
 * A change of CM.1-CM.5 takes effect from the next frame: the reply to the write that changes them
   goes out as the request came in (seed 001 gives no other rule; CM.94 gates CM.7 and CM.10-CM.24
@@ -140,21 +142,29 @@ class RtuCounters:
 
 
 class RtuFramer:
-    """Splits the bytes of a line into frames by the silences between reads (sans I/O)."""
+    """Splits the bytes of a line into frames by the silences between them (sans I/O).
+
+    ``character_time`` given to ``feed`` is how long a byte takes on the line as the framer models
+    it: 0 where the bytes come from a UART, which delivers each once it has been on the line (a read
+    at ``now`` ends at ``now``); the line's character time where they come through a pty, which moves
+    them at once: the bytes of a read are then on a modelled line from the read on (or from the end
+    of the bytes before them, if those are still going out), and the silence is counted from the
+    moment the last of them would have arrived."""
 
     def __init__(self, counters: RtuCounters | None = None) -> None:
         self.counters = counters if counters is not None else RtuCounters()
         self._buffer = bytearray()
-        self._last: float | None = None     # when the last byte of the frame being received came
+        self._last: float | None = None     # when the last byte of the frame being heard ends
         self._oversize = False
 
-    def feed(self, data: bytes, now: float, silence: float) -> list[tuple[bytes, float]]:
+    def feed(self, data: bytes, now: float, silence: float, character_time: float = 0.0) -> list[tuple[bytes, float]]:
         """Bytes read at ``now``; returns the frames (with the time they ended) that a silence of
         at least ``silence`` before them ended."""
         frames = self.poll(now, silence) if self._last is not None and now - self._last >= silence - _EPSILON else []
         if not data:
             return frames
-        self._last = now
+        start = now if self._last is None else max(now, self._last)
+        self._last = start + len(data) * character_time
         if self._oversize or len(self._buffer) + len(data) > MAX_FRAME:
             self._oversize = True           # dropped whole, up to the next silence
             self._buffer.clear()
@@ -163,7 +173,7 @@ class RtuFramer:
         return frames
 
     def deadline(self, silence: float) -> float | None:
-        """When the frame being received ends if nothing more comes (None: none is)."""
+        """When the frame being heard ends if nothing more comes (None: none is)."""
         return None if self._last is None else self._last + silence
 
     def poll(self, now: float, silence: float) -> list[tuple[bytes, float]]:
@@ -210,9 +220,15 @@ class Reply:
 
 class RtuSlave:
     """One drive on an RS-485 line, sans I/O: frames the bytes it hears with its own line settings
-    and answers the frames for its station ID."""
+    and answers the frames for its station ID.
 
-    def __init__(self, drive: AcgDrive | Callable[[], AcgDrive]) -> None:
+    ``paced``: the line moves bytes at once (a pty), so the slave times them at its CM.3 rate itself:
+    a request is heard as it would come off the line (``RtuFramer``), and a reply is due when its
+    last character would have left the UART. Unpaced (a serial device, whose UART does both), a
+    reply is due when it is to start."""
+
+    def __init__(self, drive: AcgDrive | Callable[[], AcgDrive], paced: bool = False) -> None:
+        self.paced = paced
         self.core = ModbusCore(drive, RTU_DIALECT)
         self.counters = RtuCounters()
         self.framer = RtuFramer(self.counters)
@@ -228,7 +244,8 @@ class RtuSlave:
     def feed(self, data: bytes, now: float) -> list[Reply]:
         """Bytes heard on the line at ``now``; the replies of the frames they ended."""
         settings = self.settings
-        return self._serve(self.framer.feed(data, now, settings.frame_silence), settings)
+        character_time = settings.character_time if self.paced else 0.0
+        return self._serve(self.framer.feed(data, now, settings.frame_silence, character_time), settings)
 
     def deadline(self) -> float | None:
         """When the frame being heard ends if the line stays silent."""
@@ -243,8 +260,8 @@ class RtuSlave:
         for frame, end in frames:
             answer = self.handle_frame(frame, end, settings)
             if answer is not None:
-                replies.append(Reply(answer, end + settings.response_delay
-                                     + settings.transmission_time(len(answer)), frame))
+                on_line = settings.transmission_time(len(answer)) if self.paced else 0.0
+                replies.append(Reply(answer, end + settings.response_delay + on_line, frame))
         return replies
 
     def handle_frame(self, frame: bytes, now: float, settings: LineSettings | None = None) -> bytes | None:

@@ -43,6 +43,8 @@ class RtuPortError(Exception):
 
 class LinePort(Protocol):
     name: str
+    #: The line moves bytes at once (a pty): the drives time them at their CM.3 rate themselves.
+    paced: bool
 
     def fileno(self) -> int: ...
 
@@ -55,6 +57,8 @@ class PtyPort:
     """A pseudo-terminal pair: the emulator holds the master side, a client opens ``name``, the
     slave side (what pyserial, a test or ``socat`` opens as if it were a serial port). A pty has
     no baud rate: the slaves pace themselves by their CM.3 setting."""
+
+    paced = True
 
     def __init__(self) -> None:
         self._master, self._slave = os.openpty()
@@ -79,6 +83,8 @@ class PtyPort:
 
 class SerialDevicePort:
     """A serial device (``/dev/ttyUSB0``) through pyserial, set to the line settings."""
+
+    paced = False
 
     def __init__(self, path: str, settings: LineSettings) -> None:
         try:
@@ -127,8 +133,8 @@ def open_port(device: str, settings: LineSettings) -> LinePort:
 class _Station:
     """One drive on the line: its sans-I/O slave, its state writer and its own timer."""
 
-    def __init__(self, drive: AcgDrive | Callable[[], AcgDrive], saves: StateWriter | None) -> None:
-        self.slave = RtuSlave(drive)
+    def __init__(self, drive: AcgDrive | Callable[[], AcgDrive], saves: StateWriter | None, paced: bool) -> None:
+        self.slave = RtuSlave(drive, paced)
         self.saves = saves
         self.drive_timer: asyncio.TimerHandle | None = None
 
@@ -160,7 +166,7 @@ class RtuLine:
         if len(self.stations) >= MAX_DRIVES_PER_LINE:
             raise ValueError(f"an RS-485 line takes at most {MAX_DRIVES_PER_LINE} drives (seed 001, "
                              f"Communication Standards)")
-        station = _Station(drive, saves)
+        station = _Station(drive, saves, self.port.paced)
         self.stations.append(station)
         return station.slave
 
