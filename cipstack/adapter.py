@@ -313,10 +313,13 @@ class Adapter:
             return {"result": f"tripped: {label}" + (f" (fault code 0x{fault:04X})" if fault is not None else ""),
                     "trip": label, "status": self.device.status_line()}
         if command == "status":
-            return {"status": self.device.status_line(), "drive": self.device.status_fields(),
-                    "sessions": len(self.target.sessions),
-                    "class3_connections": len(self.device.connection_table.connections),
-                    "class1_connections": len(self.io.connections) if self.io else 0}
+            status = {"status": self.device.status_line(), "drive": self.device.status_fields(),
+                      "sessions": len(self.target.sessions),
+                      "class3_connections": len(self.device.connection_table.connections),
+                      "class1_connections": len(self.io.connections) if self.io else 0}
+            if self.rtu is not None:   # what the RS-485 port made of its line: frames, replies, refusals
+                status["rtu"] = {"device": self.rtu.name, **self.rtu.slaves[0].counters.as_dict()}
+            return status
         raise ControlError(f"unknown command {command!r} (known: trip, status)")
 
     async def _print_status_lines(self) -> None:

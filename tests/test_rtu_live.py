@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import asyncio
 import contextlib
+import json
 import os
 import queue
 import re
@@ -216,6 +217,12 @@ def test_a_saved_parameter_survives_a_restart_and_an_unsaved_one_does_not(tmp_pa
                 ACG_REGISTERS.by_code("Pr.13").default]
         finally:
             client.close()
+        # The port's counters, over the control socket: the frame for station 1 was heard, not answered.
+        status = subprocess.run([sys.executable, "-m", "cipstack", "drive", "status", "--control",
+                                 str(tmp_path / "control.sock"), "--json"], capture_output=True, text=True, timeout=30)
+        rtu = json.loads(status.stdout)["rtu"]
+        assert rtu["device"] == path
+        assert (rtu["frames"], rtu["replies"], rtu["other_station"], rtu["crc_errors"]) == (3, 2, 1, 0)
 
 
 def test_a_multi_drop_line_of_drives_answers_by_station_id(tmp_path: Path) -> None:

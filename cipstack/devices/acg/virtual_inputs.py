@@ -6,7 +6,7 @@ closes virtual input n + 1, whose function is CM.(70 + n); CM.86 Virt DI Status 
 
 * Functions modelled (``registers.MULTI_FUNCTIONS``): FX and RX run the drive as the terminals'
   run commands do, RST resets a trip when it closes, External Trip trips the drive (latch type,
-  0x0330 B12) when it closes, BX is the emergency stop (level type, 0x0332 B2) while it is closed.
+  0x0330 B12) when it closes, BX is the emergency stop (level type, 0x0332 B0) while it is closed.
   Other settings of 0-49 are taken and do nothing.
 * "Before you configure the virtual multi-function inputs, set the parameter code drv according to
   the command source": FX and RX are the terminals' run commands, which the drive obeys at drv 1
