@@ -233,6 +233,7 @@ def test_rs485_silence_does_not_act_on_a_drive_run_from_the_card(slave: RtuSlave
     for moment in range(1, 5):                          # the card's Modbus TCP stays busy
         ModbusTcpCore(drive).handle_pdu(bytes.fromhex("03 0300 0001"), float(moment))
     assert drive.running and drive.trip is None
+    assert not drive.command_lost and drive.next_deadline() is not None   # the card's own 5 s watch only
 
 
 def test_the_chapters_virtual_input_example_runs_the_drive(slave: RtuSlave, drive: AcgDrive) -> None:

@@ -118,6 +118,9 @@ class LostCommand:
             if deadline is None or deadline > moment:
                 continue
             if watch.lost_since is None:
+                if watch.detect_after is None and not self._operated_from(watch.port):
+                    watch.clear()                    # RS-485 silence matters to a drive run from RS-485
+                    continue
                 watch.lost_since = moment            # lost command mode entered; Pr.13 starts
             else:
                 watch.acted = True
@@ -128,12 +131,16 @@ class LostCommand:
         """The drive is in lost command mode on some protocol."""
         return any(w.lost_since is not None for w in self._watches)
 
+    def _operated_from(self, port: CommandPort) -> bool:
+        """drv or Frq is ``port``'s source."""
+        return (self._values[CMD_SOURCE.address] == port.command_source
+                or self._values[FREQ_REF_SOURCE.address] == port.frequency_source)
+
     def _lost_command_action(self, port: CommandPort = CommandPort.FIELDBUS) -> None:
         """Pr.12 after Pr.13 (seed 000, PR Group (Lost Command)), for a drive operated via the
         port that went silent ("while the drive is operated via network communication"): drv or
         Frq is that port's source."""
-        if not (self._values[CMD_SOURCE.address] == port.command_source
-                or self._values[FREQ_REF_SOURCE.address] == port.frequency_source):
+        if not self._operated_from(port):
             return
         mode = LostCommandMode(self._values[LOST_CMD_MODE.address])
         if mode is LostCommandMode.NONE:
