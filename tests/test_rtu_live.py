@@ -274,3 +274,33 @@ def test_a_serial_device_without_pyserial_names_the_extra(tmp_path: Path) -> Non
     assert result.returncode == 2
     assert result.stderr.strip().splitlines() == [
         "cipstack adapter: --rtu /dev/ttyUSB0 needs pyserial: pip install 'cipstack[rtu]' (--rtu pty needs nothing)"]
+
+
+async def test_a_serial_device_is_served_through_pyserial() -> None:
+    """``--rtu DEVICE``: pyserial opens the device at the CM.3/CM.4 settings (here the slave side of a
+    pty this test holds the master of, which takes a serial port's settings); its UART would time
+    the bytes, so the reply is written CM.5 after the frame ended, unpaced."""
+    from cipstack.devices.acg.modbus_rtu import LineSettings
+    from cipstack.devices.acg.rtu_line import SerialDevicePort
+
+    master, slave_fd = os.openpty()
+    try:
+        os.set_blocking(master, False)
+        drive = AcgDrive(now=0.0)
+        drive.write(addr("CM.1"), 9, 0.0)
+        drive.write(addr("CM.4"), 2, 0.0)                    # D8/PE/S1
+        port = SerialDevicePort(os.ttyname(slave_fd), LineSettings.from_drive(drive))
+        assert not port.paced and port.serial.parity == "E" and port.serial.baudrate == 9600
+        line = RtuLine(port)
+        slave = line.add(drive)
+        async with line:
+            request = with_crc(bytes.fromhex("09 03") + pdu("ACC").to_bytes(2, "big") + bytes.fromhex("0001"))
+            os.write(master, request)
+            assert await _read_reply(master, 0.5) == with_crc(bytes.fromhex("09 03 02 0032"))
+            assert slave.counters.replies == 1
+            os.write(master, with_crc(bytes.fromhex("09 06") + pdu("CM.3").to_bytes(2, "big") + b"\x00\x07"))
+            await _read_reply(master, 0.3)
+            assert port.serial.baudrate == 115200                 # CM.3 = 7 applied to the device
+    finally:
+        os.close(master)
+        os.close(slave_fd)
