@@ -32,7 +32,7 @@ from collections.abc import Callable
 from dataclasses import dataclass, field, fields
 
 from .drive import AcgDrive
-from .modbus_core import RTU_DIALECT, FunctionCode, ModbusCore
+from .modbus_core import RTU_DIALECT, ExceptionCode, FunctionCode, ModbusCore
 from .registers import ACG_REGISTERS
 
 #: CM.3 settings (seed 001, Communication Parameters Setting Details; "56 Kbps" and "115 Kbps" are
@@ -287,10 +287,10 @@ class RtuSlave:
         counters.replies += 1
         return with_crc(frame[:1] + self.core.handle_pdu(frame[1:-2], now))
 
-    def exception_reply(self, request: bytes, code: int) -> bytes:
+    def exception_reply(self, request: bytes, code: ExceptionCode) -> bytes:
         """The exception reply to ``request`` (e.g. 06 for a save the state file did not take)."""
         function = request[1] if len(request) > 1 else 0
-        return with_crc(request[:1] + self.core.exception_pdu(function, code))  # type: ignore[arg-type]
+        return with_crc(request[:1] + self.core.exception_pdu(function, code))
 
 
 __all__ = ["BAUD_RATES", "BROADCAST", "FRAMINGS", "MAX_DRIVES_PER_LINE", "MAX_FRAME", "LineSettings", "Reply",
