@@ -155,7 +155,7 @@ class AcgDrive(RunCommands, Ramps, Trips, LostCommand, RegisterEffects, VirtualI
         self._modbus_watch = _CommandLossWatch(MODBUS_SILENCE_TIME)
         self._int485_watch = _CommandLossWatch(None, CommandPort.INT485)
         #: The port the present write came in through (``commands_from``); the card's by default.
-        self._command_port = CommandPort.FIELDBUS
+        self.command_port = CommandPort.FIELDBUS
         self._lost_reference: float | None = None  # Hz held by Hold Input/Hold Output/Lost Preset
         # Virtual multi-function inputs: the functions closed, and what FX/RX last commanded.
         self._closed_functions: frozenset[int] = frozenset()

@@ -108,8 +108,12 @@ class LostCommand:
                 and self._int485_watch.silent_since is None):
             return None  # nothing is silent: the common case, asked several times per O->T datagram
         lost_time = self._lost_time()
-        deadlines = [d for d in (w.deadline(lost_time) for w in self._watches) if d is not None]
-        return min(deadlines) if deadlines else None
+        earliest = None
+        for watch in (self._io_watch, self._modbus_watch, self._int485_watch):   # on every request: no genexpr
+            deadline = watch.deadline(lost_time)
+            if deadline is not None and (earliest is None or deadline < earliest):
+                earliest = deadline
+        return earliest
 
     def _fire_timers(self, moment: float) -> None:
         lost_time = self._lost_time()
@@ -163,7 +167,7 @@ class LostCommand:
         """Communication is back. The Lost Command warning clears and the reference is the
         network's again; the Lost Command trip is a level-type trip (0x0332 B2) and clears
         with its cause, leaving the drive stopped until a run command's next 0 -> 1 change."""
-        if any(w.acted for w in self._watches):
+        if self._io_watch.acted or self._modbus_watch.acted or self._int485_watch.acted:
             return                                  # another protocol is still lost
         self._warnings &= ~WarningInformation.LOST_COMMAND
         self._lost_reference = None

@@ -149,15 +149,19 @@ class ModbusCore:
         drive.on_modbus_activity(now, self.dialect.port)
         self.requests += 1
         function = pdu[0] if pdu else 0
+        # The writes of this request come in through the dialect's port (``AcgDrive.commands_from``,
+        # inline: it is on every request).
+        previous, drive.command_port = drive.command_port, self.dialect.port
         try:
-            with drive.commands_from(self.dialect.port):
-                return bytes((function,)) + self._serve(function, pdu[1:], drive, now)
+            return bytes((function,)) + self._serve(function, pdu[1:], drive, now)
         except ModbusException as exc:
             log.debug("%s function 0x%02X: %s", self.dialect.name, function, exc)
             return self.exception_pdu(function, exc.code)
         except Exception:  # a drive bug must not take the server down
             log.exception("%s function 0x%02X failed", self.dialect.name, function)
             return self.exception_pdu(function, self.dialect.failure_code)
+        finally:
+            drive.command_port = previous
 
     def _serve(self, function: int, data: bytes, drive: AcgDrive, now: float) -> bytes:
         # A PDU is exactly as long as its function says: bytes beyond it (a wrong MBAP length, or

@@ -144,16 +144,17 @@ class RunCommands:
     @contextmanager
     def commands_from(self, port: CommandPort) -> Iterator[None]:
         """Writes made inside come in through ``port``: a run command in them is obeyed when drv is
-        that port's command source (``CommandPort``). Outside, writes are the card's."""
-        previous, self._command_port = self._command_port, port
+        that port's command source (``CommandPort``). Outside, writes are the card's. (A request path
+        may set ``command_port`` itself and put the previous one back, as ``commands_from`` does.)"""
+        previous, self.command_port = self.command_port, port
         try:
             yield
         finally:
-            self._command_port = previous
+            self.command_port = previous
 
     def _port_commands(self) -> bool:
         """The drive obeys run commands of the port the present write came in through."""
-        return self._values[CMD_SOURCE.address] == self._command_port.command_source
+        return self._values[CMD_SOURCE.address] == self.command_port.command_source
 
     @property
     def control_from_int485(self) -> bool:
