@@ -240,6 +240,17 @@ def test_a_multi_drop_line_of_drives_answers_by_station_id(tmp_path: Path) -> No
                     10 * station]
             with pytest.raises(ModbusIOException):                 # no drive at station 4
                 client.read_holding_registers(pdu("ACC"), count=1, device_id=4)
+            # A broadcast (station 0) write: every drive executes it, none answers.
+            fd = _raw_slave(path)
+            try:
+                os.write(fd, with_crc(bytes.fromhex("00 06") + pdu("ACC").to_bytes(2, "big") + b"\x00\x63"))
+                time.sleep(0.3)
+                with contextlib.suppress(BlockingIOError):
+                    assert os.read(fd, 256) == b""
+            finally:
+                os.close(fd)
+            for station in (1, 2, 3):
+                assert client.read_holding_registers(pdu("ACC"), count=1, device_id=station).registers == [99]
         finally:
             client.close()
 
