@@ -195,7 +195,9 @@ class ModbusCore:
     @staticmethod
     def _check_addresses(drive: AcgDrive, address: int, count: int) -> None:
         for word in range(address, address + count):
-            if word > 0xFFFF or drive.registers.word(word) is None:
+            found = drive.registers.word(word) if word <= 0xFFFF else None
+            # A parameter its address table gives no address (CM.94) is not at one (0x02, as bA.20).
+            if found is None or not found[0].addressed:
                 raise ModbusException(ExceptionCode.ILLEGAL_DATA_ADDRESS, f"no register 0x{word:04X}")
 
     def _read(self, drive: AcgDrive, address: int, count: int) -> bytes:
