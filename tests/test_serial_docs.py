@@ -12,8 +12,8 @@ from pathlib import Path
 import pytest
 
 from cipstack.fleet.spec import assign, assign_stations, parse_addresses, read_spec_file
-from tests.ports import free_port
-from tests.test_rtu_live import cipstack
+from tests.test_docs import Namespace, _namespaces_available, emulator, sections
+from tests.test_docs import shell_env as shell_env
 
 PAGE = Path(__file__).resolve().parents[1] / "docs" / "serial.md"
 FENCE = re.compile(r"^```(\w+)\n(.*?)^```", re.S | re.M)
@@ -32,18 +32,26 @@ def section(title: str) -> str:
     return text[start:end if end >= 0 else None]
 
 
-def test_the_pymodbus_example_runs_against_the_emulator_the_page_starts(tmp_path: Path) -> None:
-    command = next(line for line in blocks("sh")[0].splitlines() if line.startswith("cipstack adapter"))
-    example = FENCE.findall(section("pymodbus"))
-    (_, script), (_, expected) = [b for b in example if b[0] in ("python", "text")]
-    (tmp_path / "example.py").write_text(script)
-    args = command.split()[2:]
-    with cipstack("adapter", *args, "--port", str(free_port()), "--io-port", "0", "--quiet", "--state",
-                  str(tmp_path / "acg.json"), "--control", str(tmp_path / "control.sock")) as path:
-        result = subprocess.run([sys.executable, str(tmp_path / "example.py"), path], capture_output=True, text=True,
-                                timeout=60)
+@pytest.mark.docs
+def test_the_pymodbus_example_prints_what_the_page_shows(shell_env: dict[str, str], tmp_path: Path) -> None:
+    """The page's pymodbus section, as ``tests/test_docs.py`` runs it (its emulator, in a network
+    namespace of its own), with the output the page shows."""
+    reason = _namespaces_available()
+    if reason:
+        pytest.skip(reason)
+    (section,) = [s for s in sections(PAGE.read_text(), "docs/serial.md") if s.title == "pymodbus"]
+    script = next(b for b in section.blocks if b.language == "python")
+    expected = next(b for b in section.blocks if b.language == "text")
+    (tmp_path / "example.py").write_text(script.text)
+    namespace = Namespace()
+    try:
+        with emulator(namespace, section.adapter, shell_env, tmp_path):
+            result = subprocess.run(namespace.command([sys.executable, str(tmp_path / "example.py")]),
+                                    capture_output=True, text=True, env=shell_env, cwd=tmp_path, timeout=60)
+    finally:
+        namespace.close()
     assert result.returncode == 0, result.stderr
-    assert result.stdout == expected
+    assert result.stdout == expected.text
 
 
 def test_the_pages_spec_file_gives_the_station_ids_it_says(tmp_path: Path) -> None:
