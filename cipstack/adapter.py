@@ -19,7 +19,9 @@ from .control import (
     default_control_path,
 )
 from .devices.acg.device import AcgDevice
+from .devices.acg.modbus_rtu import LineSettings
 from .devices.acg.modbus_server import ModbusTcpServer
+from .devices.acg.rtu_line import RtuLine, RtuPortError, open_port
 from .devices.base import Device, DeviceLimits, TripRefused
 from .devices.profiles import DEFAULT_MAC, DEFAULT_PROFILE, ProfileOptions, build_device
 from .eip.identity_items import CAPABILITY_CIP_TCP, CAPABILITY_CLASS01_UDP
@@ -81,6 +83,9 @@ class AdapterSettings:
     modbus_port: int | None = None
     #: MAC address of the emulated card, from which its serial number derives (None: ``DEFAULT_MAC``).
     mac: bytes | None = None
+    #: Modbus-RTU on the drive's RS-485 port: a serial device path, or "pty" for a new pseudo-terminal
+    #: (None: off).
+    rtu: str | None = None
 
 
 class Adapter:
@@ -96,6 +101,10 @@ class Adapter:
                                              DeviceLimits(s.max_sessions, s.max_connections),
                                              ProfileOptions(s.state_path, s.model))
         self.modbus: ModbusTcpServer | None = None
+        #: The RS-485 line of ``settings.rtu`` once started.
+        self.rtu: RtuLine | None = None
+        if s.rtu is not None and not isinstance(self.device, AcgDevice):
+            raise ValueError(f"profile {s.profile!r} has no RS-485 Modbus-RTU port (the ACG drive has)")
         if s.modbus_port is not None:
             if not isinstance(self.device, AcgDevice):
                 raise ValueError(f"profile {s.profile!r} has no Modbus TCP (the ACG-ET2 card speaks it)")
@@ -174,6 +183,8 @@ class Adapter:
                                     f"{s.host}:{s.port} (EtherNet/IP, --port)"))
         if self.modbus is not None:
             await self._listen(self.modbus.start, lambda: f"TCP {s.host}:{s.modbus_port} (Modbus TCP, --modbus-port)")
+        if s.rtu is not None:
+            await self._open_rtu(s.rtu)
         self._tick(asyncio.get_running_loop().time())
         if self.io_endpoint is not None:
             await self._listen(self.io_endpoint.start, lambda: f"UDP {s.host}:{s.io_port} (class 1 I/O, --io-port)")
@@ -192,6 +203,20 @@ class Adapter:
             what = where()
             await self.close()
             raise ListenError(what, exc) from None
+
+    async def _open_rtu(self, device: str) -> None:
+        """The drive's RS-485 port on ``device`` ("pty" or a serial device); one that cannot be
+        opened raises ``RtuPortError`` naming it, with nothing left open."""
+        acg = self.device
+        assert isinstance(acg, AcgDevice)
+        try:
+            port = open_port(device, LineSettings.from_drive(acg.drive))
+        except RtuPortError:
+            await self.close()
+            raise
+        self.rtu = RtuLine(port)
+        self.rtu.add(lambda: acg.drive, acg.saves)
+        await self.rtu.start()
 
     @property
     def control_path(self) -> ControlAddress:
@@ -243,6 +268,9 @@ class Adapter:
     async def close(self) -> None:
         if self.modbus is not None:
             await self.modbus.close()
+        if self.rtu is not None:
+            await self.rtu.close()
+            self.rtu = None
         if self._device_timer is not None:
             self._device_timer.cancel()
             self._device_timer = None
@@ -285,10 +313,13 @@ class Adapter:
             return {"result": f"tripped: {label}" + (f" (fault code 0x{fault:04X})" if fault is not None else ""),
                     "trip": label, "status": self.device.status_line()}
         if command == "status":
-            return {"status": self.device.status_line(), "drive": self.device.status_fields(),
-                    "sessions": len(self.target.sessions),
-                    "class3_connections": len(self.device.connection_table.connections),
-                    "class1_connections": len(self.io.connections) if self.io else 0}
+            status = {"status": self.device.status_line(), "drive": self.device.status_fields(),
+                      "sessions": len(self.target.sessions),
+                      "class3_connections": len(self.device.connection_table.connections),
+                      "class1_connections": len(self.io.connections) if self.io else 0}
+            if self.rtu is not None:   # what the RS-485 port made of its line: frames, replies, refusals
+                status["rtu"] = {"device": self.rtu.name, **self.rtu.slaves[0].counters.as_dict()}
+            return status
         raise ControlError(f"unknown command {command!r} (known: trip, status)")
 
     async def _print_status_lines(self) -> None:
@@ -311,6 +342,8 @@ class Adapter:
             await self.start_serving()
             held.release()
         freeze_startup_objects()
+        if self.rtu is not None:   # what a client (pyserial, socat) opens
+            print(f"Modbus-RTU on {self.rtu.name} ({self.rtu.slaves[0].settings.describe()})", flush=True)
         printer = asyncio.create_task(self._print_status_lines()) if self.settings.status_lines else None
         info = self.device.identity_info
         log.info("emulating %s (vendor %d, device type %d, product code %d, revision %d.%d)",

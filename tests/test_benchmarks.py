@@ -4,6 +4,7 @@ come from code the suite runs: the paired idle-sessions verdict of ``explicit.py
 
 from __future__ import annotations
 
+import json
 import subprocess
 import sys
 from pathlib import Path
@@ -118,3 +119,20 @@ def test_a_class1_ladder_step_measures_both_ways_where_it_was_placed(options: li
     assert step["connections"] == 4 and step["originators"] == 2
     assert step["t_to_o_per_s"] > 0 and step["o_to_t_per_s"] > 0 and step["adapter_cpu"] > 0
     assert step["pinned"] is (not options and len(os.sched_getaffinity(0)) >= 2)
+
+
+def test_rtu_prints_requests_per_second_against_the_lines_limit() -> None:
+    """``rtu.py``: a short run at both baud rates; the ratio to the line's limit is below the most a
+    drive on a real line can reach (the frame-end silence and CM.5 hold every exchange), and above 0."""
+    result = subprocess.run([sys.executable, str(BENCHMARKS / "rtu.py"), "--requests", "10", "--json"],
+                            capture_output=True, text=True, timeout=120)
+    assert result.returncode == 0, result.stderr
+    runs = json.loads(result.stdout)
+    assert [r["baud"] for r in runs] == [9600, 115200]
+    for run in runs:
+        assert run["line_limit_per_s"] == pytest.approx(run["baud"] / 10 / 15)
+        assert 0 < run["ratio"] <= run["ceiling_per_s"] / run["line_limit_per_s"] * 1.02
+    text = subprocess.run([sys.executable, str(BENCHMARKS / "rtu.py"), "--requests", "5"], capture_output=True,
+                          text=True, timeout=120)
+    assert text.returncode == 0, text.stderr
+    assert "    9,600 bps: " in text.stdout and "  115,200 bps: " in text.stdout and "ratio 0." in text.stdout

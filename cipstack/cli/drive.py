@@ -50,8 +50,12 @@ def cmd_drive_status(args: argparse.Namespace) -> int:
         fields = reply.get("drive") or {"status": reply.get("status")}
         record = {**fields, "sessions": reply["sessions"],
                   "class3_connections": reply["class3_connections"], "class1_connections": reply["class1_connections"]}
+        if "rtu" in reply:
+            record["rtu"] = reply["rtu"]
         print(json.dumps(record), flush=True)
         return EXIT_OK
+    rtu = reply.get("rtu")
+    line = "" if not rtu else ("  rtu " + " ".join(f"{k} {v}" for k, v in rtu.items() if k != "device"))
     print(f"{reply['status'] or '(no drive)'}  sessions {reply['sessions']}  class 3 "
-          f"{reply['class3_connections']}  class 1 {reply['class1_connections']}", flush=True)
+          f"{reply['class3_connections']}  class 1 {reply['class1_connections']}{line}", flush=True)
     return EXIT_OK

@@ -38,7 +38,7 @@ def cmd_adapter(args: argparse.Namespace) -> int:
                                max_sessions=args.max_sessions, max_connections=args.max_connections,
                                io_port=args.io_port, control_path=args.control,
                                status_lines=not args.quiet, state_path=args.state, modbus_port=args.modbus_port,
-                               **_limit_settings(args))
+                               rtu=args.rtu, **_limit_settings(args))
     try:
         adapter = Adapter(settings)
     except (StateFileError, ValueError, KeyError) as exc:
@@ -90,11 +90,15 @@ def _limit_settings(args: argparse.Namespace) -> dict[str, Any]:
 def _serve(adapter: Any, args: argparse.Namespace, command: str) -> int:
     """Run an emulator until SIGINT/SIGTERM; a port it cannot listen on (taken, or not an address of
     this machine) is one line naming the port and its option, and exit 2."""
+    from ..devices.acg.rtu_line import RtuPortError
     from ..eip.io_server import run_precise
     from ..listening import ListenError
 
     try:
         run_precise(adapter.serve_forever())
+    except RtuPortError as exc:
+        print(f"cipstack {command}: {exc}", file=sys.stderr)
+        return EXIT_USAGE
     except ListenError as exc:
         print(f"cipstack {command}: {exc}", file=sys.stderr)
         return EXIT_USAGE
@@ -127,8 +131,9 @@ def _adapter_from_eds(args: argparse.Namespace) -> int:
     from ..devices.profiles import DEFAULT_MAC
     from ..eds.emulated_device import EdsDeviceError, build_eds_device
 
-    if args.model is not None or args.state is not None or args.modbus_port is not None or args.param:
-        raise UsageError("--model, --state, --modbus-port and --param belong to --profile, not --eds")
+    if (args.model is not None or args.state is not None or args.modbus_port is not None or args.param
+            or args.rtu is not None):
+        raise UsageError("--model, --state, --modbus-port, --rtu and --param belong to --profile, not --eds")
     if not 0 <= args.port < 65536:
         raise UsageError(f"port {args.port} out of range")
     doc = _read_eds_file(args.eds)

@@ -23,7 +23,9 @@ def _fleet_spec(args: argparse.Namespace) -> Any:
     from ..devices.state import data_directory
     from ..fleet.spec import (
         FleetSpec,
+        SpecError,
         assign,
+        assign_stations,
         check_port,
         check_workers,
         make_group,
@@ -59,10 +61,16 @@ def _fleet_spec(args: argparse.Namespace) -> Any:
                          "io port")
     workers = check_workers(args.workers if args.workers is not None else settings.get("workers", DEFAULT_WORKERS),
                             len(devices))
-    return FleetSpec(devices, port, io_port, workers, Path(state_dir))
+    rtu = args.rtu if args.rtu is not None else settings.get("rtu")
+    if rtu is not None:
+        devices = assign_stations(devices, workers, "--rtu" if args.rtu is not None else f"{where}: rtu")
+    elif any(d.station is not None for d in devices):
+        raise SpecError(f"{where}: a station ID puts a drive on the fleet's RS-485 line: give --rtu (rtu = \"pty\")")
+    return FleetSpec(devices, port, io_port, workers, Path(state_dir), rtu)
 
 
 def cmd_fleet(args: argparse.Namespace) -> int:
+    from ..devices.acg.rtu_line import RtuPortError
     from ..eip.io_server import run_precise
     from ..fleet.serve import serve_until_signalled
     from ..fleet.spec import SpecError, describe_addresses
@@ -84,10 +92,10 @@ def cmd_fleet(args: argparse.Namespace) -> int:
 
     try:
         if spec.workers == 1:
-            run_precise(serve_until_signalled(spec.devices, spec.port, spec.io_port, ready))
+            run_precise(serve_until_signalled(spec.devices, spec.port, spec.io_port, ready, rtu=spec.rtu))
         else:
             Supervisor(spec.devices, spec.port, spec.io_port, spec.workers).run(ready)
-    except (ListenError, SpecError) as exc:
+    except (ListenError, SpecError, RtuPortError) as exc:
         print(f"cipstack fleet: {exc}", file=sys.stderr)
         return EXIT_USAGE
     except FleetFailure as exc:

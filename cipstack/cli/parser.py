@@ -152,6 +152,10 @@ def build_parser(command: str | None = None) -> argparse.ArgumentParser:
                                   "per profile)"), _FILE)
     p.add_argument("--modbus-port", type=number("modbus port"), metavar="N",
                    help="also serve Modbus TCP on this port (ACG)")
+    p.add_argument("--rtu", metavar="DEVICE",
+                   help="also answer Modbus-RTU on the drive's RS-485 port (ACG): a serial device such as "
+                        "/dev/ttyUSB0 (needs pyserial: the rtu extra), or pty for a new pseudo-terminal whose "
+                        "path is printed; line settings from CM.1, CM.3, CM.4, CM.5")
     p.add_argument("--param", action="append", metavar="CODE=VALUE",
                    help="set an ACG keypad parameter at start, in the keypad's unit; repeatable "
                         "(drv=4 Frq=8: run from the network)")
@@ -180,6 +184,9 @@ def build_parser(command: str | None = None) -> argparse.ArgumentParser:
                    help="set an ACG keypad parameter at start on every ACG device; repeatable")
     p.add_argument("--workers", type=number("workers"), metavar="N",
                    help=f"spread the devices over N processes, one event loop each (default {DEFAULT_WORKERS})")
+    p.add_argument("--rtu", metavar="DEVICE",
+                   help="put the ACG drives (up to 16) on one RS-485 Modbus-RTU line: pty (a new pseudo-terminal, "
+                        "its path printed) or a serial device; station IDs 1, 2, ... in address order")
     p.set_defaults(func=cmd_fleet)
 
     p = sub.add_parser("models")

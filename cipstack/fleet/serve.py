@@ -16,6 +16,9 @@ from collections.abc import Callable, Sequence
 
 from ..adapter import Adapter, AdapterSettings
 from ..control import describe
+from ..devices.acg.device import AcgDevice
+from ..devices.acg.modbus_rtu import LineSettings
+from ..devices.acg.rtu_line import RtuLine, open_port
 from ..devices.profiles import mac_for_address
 from ..devices.state import StateFileError
 from ..eip.io_core import ProductionGrid
@@ -72,12 +75,16 @@ def device_line(device: FleetDevice, adapter: Adapter) -> str:
 
 
 class DeviceSet:
-    """The running adapters of one process's share of a fleet."""
+    """The running adapters of one process's share of a fleet; with ``rtu`` ("pty" or a serial
+    device), its ACG drives on one RS-485 line as well, each at the station ID of its device."""
 
-    def __init__(self, devices: Sequence[FleetDevice], port: int, io_port: int) -> None:
+    def __init__(self, devices: Sequence[FleetDevice], port: int, io_port: int, rtu: str | None = None) -> None:
         self.devices = list(devices)
         self.port = port
         self.io_port = io_port
+        self.rtu = rtu
+        #: The RS-485 line once started.
+        self.line: RtuLine | None = None
         self.adapters: list[Adapter] = []
         #: The class 1 slots every device of this process produces in.
         self.production_grid = ProductionGrid()
@@ -106,18 +113,44 @@ class DeviceSet:
                 raise
             held.records = [(h, r) for h, r in held.records if r.levelno >= logging.WARNING]
             held.release()
-        return [device_line(d, a) for d, a in zip(self.devices, self.adapters, strict=True)]
+        lines = [device_line(d, a) for d, a in zip(self.devices, self.adapters, strict=True)]
+        if self.rtu is not None:
+            try:
+                lines.append(await self._open_line(self.rtu))
+            except BaseException:
+                await self.stop()
+                raise
+        return lines
+
+    async def _open_line(self, device: str) -> str:
+        """The ACG drives on one RS-485 line; the line that says where it is and who is on it."""
+        drives = [(d, a.device) for d, a in zip(self.devices, self.adapters, strict=True)
+                  if isinstance(a.device, AcgDevice)]
+        port = open_port(device, LineSettings.from_drive(drives[0][1].drive))
+        line = RtuLine(port)
+        for _, acg in drives:
+            line.add(lambda acg=acg: acg.drive, acg.saves)
+        self.line = line
+        await line.start()
+        stations = ", ".join(f"{d.address} station {s.settings.station}" for (d, _), s in zip(drives, line.slaves,
+                                                                                               strict=True))
+        return f"Modbus-RTU on {line.name} ({line.slaves[0].settings.describe().split(', ', 1)[1]}): {stations}"
 
     async def stop(self) -> None:
         """Stop every started device, at once; each writes its last saves."""
+        if self.line is not None:
+            line, self.line = self.line, None
+            await line.close()
         adapters, self.adapters = self.adapters, []
         await asyncio.gather(*(adapter.stop_serving() for adapter in adapters))
 
 
 async def serve_until_signalled(devices: Sequence[FleetDevice], port: int, io_port: int,
                                 on_ready: Callable[[list[str]], None],
-                                signals: Sequence[int] = (signal.SIGINT, signal.SIGTERM)) -> int:
-    """Serve ``devices`` until one of ``signals``; returns the signal that stopped them."""
+                                signals: Sequence[int] = (signal.SIGINT, signal.SIGTERM),
+                                rtu: str | None = None) -> int:
+    """Serve ``devices`` until one of ``signals``; returns the signal that stopped them. ``rtu``:
+    the RS-485 line their ACG drives share (``DeviceSet``)."""
     loop = asyncio.get_running_loop()
     stop = asyncio.Event()
     received: list[int] = []
@@ -128,7 +161,7 @@ async def serve_until_signalled(devices: Sequence[FleetDevice], port: int, io_po
 
     for sig in signals:
         loop.add_signal_handler(sig, stop_on, sig)
-    fleet = DeviceSet(devices, port, io_port)
+    fleet = DeviceSet(devices, port, io_port, rtu)
     try:
         lines = await fleet.start()
         freeze_startup_objects()  # every device built: a full collection would stop them all at once

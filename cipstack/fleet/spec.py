@@ -7,6 +7,11 @@ unused addresses of the pool, in order. Every device gets its own state file in 
 directory, named after its address and its profile (and model), so that a device keeps its saved
 parameters across restarts and no two devices share one.
 
+With ``--rtu DEVICE`` (``rtu = "pty"`` in a file) the fleet's ACG drives also share one RS-485
+line, the Multi-drop Link System of seed 001: up to 16 drives, each at its own station ID (CM.1,
+1-250). A group may give its first station ID (``station = 10`` in a file); the others take the
+lowest free IDs from 1, in address order.
+
 Everything here is checked before anything listens: a bad spec is one ``SpecError`` line.
 """
 
@@ -16,7 +21,7 @@ import ipaddress
 import re
 import sys
 from collections.abc import Iterable, Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Any
 
@@ -24,6 +29,10 @@ from typing import Any
 #: control socket) plus its connections, so a bound keeps a typo (127.0.0.0-127.255.255.255) from
 #: exhausting the machine.
 MAX_DEVICES = 1024
+
+#: Seed 001, Communication Standards: "Maximum of 16 drives" on one line; CM.1 takes 1-250.
+MAX_DRIVES_PER_LINE = 16
+MAX_STATION = 250
 
 _GROUP = re.compile(r"^(?P<kind>[^*@]+?)(?:\*(?P<count>[^@]*))?(?:@(?P<first>.*))?$")
 
@@ -43,6 +52,8 @@ class DeviceGroup:
     params: tuple[str, ...] = ()
     #: How the user wrote it, for error messages.
     text: str = ""
+    #: First RS-485 station ID of the group's drives on the fleet's RTU line (None: the next free).
+    station: int | None = None
 
     @property
     def label(self) -> str:
@@ -58,6 +69,8 @@ class FleetDevice:
     model: str | None = None
     params: tuple[str, ...] = ()
     state_path: Path | None = None
+    #: Its station ID on the fleet's RS-485 line (None: not on it).
+    station: int | None = None
 
 
 @dataclass
@@ -67,6 +80,8 @@ class FleetSpec:
     io_port: int
     workers: int = 1
     state_dir: Path | None = None
+    #: The RS-485 line the ACG drives share: "pty" or a serial device (None: none).
+    rtu: str | None = None
 
 
 # -- addresses ------------------------------------------------------------------------------------------
@@ -133,7 +148,7 @@ def _count(value: Any, where: str) -> int:
 
 
 def make_group(profile: str | None, model: str | None, count: Any, first: str | None, params: Sequence[str],
-               where: str) -> DeviceGroup:
+               where: str, station: Any = None) -> DeviceGroup:
     """A group checked against the profiles and models this cipstack emulates."""
     from ..devices.omron.models import model as find_model
     from ..devices.profiles import PROFILES
@@ -161,8 +176,15 @@ def make_group(profile: str | None, model: str | None, count: Any, first: str | 
                 parse_assignment(text)
             except ValueError as exc:
                 raise SpecError(f"{where}: {exc}") from None
+    if station is not None:
+        if profile != "acg":
+            raise SpecError(f"{where}: a station ID is the ACG's RS-485 port (profile acg)")
+        if isinstance(station, bool) or not isinstance(station, int) or not 1 <= station <= MAX_STATION:
+            raise SpecError(f"{where}: station {station!r} is not a station ID (1..{MAX_STATION}, CM.1)")
+    if any(text.partition("=")[0].strip().upper().replace("-", ".") in ("CM.1", "CM.01") for text in params):
+        raise SpecError(f"{where}: CM.1 (the station ID) is given by the fleet's RTU line: use station = N")
     return DeviceGroup(profile, model, _count(count, where), _address(first, where) if first else None,
-                       tuple(params), where)
+                       tuple(params), where, station)
 
 
 def parse_group(text: str) -> DeviceGroup:
@@ -225,8 +247,46 @@ def assign(groups: Sequence[DeviceGroup], pool: Sequence[ipaddress.IPv4Address] 
         taken.update((a, group) for a in mine)
     if len(taken) > MAX_DEVICES:
         raise SpecError(f"{len(taken)} devices: a fleet serves at most {MAX_DEVICES}")
-    return [FleetDevice(str(a), g.profile, g.model, g.params, state_file(state_dir, str(a), g) if state_dir else None)
-            for a, g in sorted(taken.items())]
+    devices = []
+    placed: dict[int, int] = {}    # id(group) -> its devices so far
+    for address, group in sorted(taken.items()):
+        index = placed.get(id(group), 0)
+        placed[id(group)] = index + 1
+        station = None if group.station is None else group.station + index
+        if station is not None and station > MAX_STATION:
+            raise SpecError(f"{group.text}: {group.count} station IDs from {group.station} run past {MAX_STATION}")
+        devices.append(FleetDevice(str(address), group.profile, group.model, group.params,
+                                   state_file(state_dir, str(address), group) if state_dir else None, station))
+    return devices
+
+
+def assign_stations(devices: Sequence[FleetDevice], workers: int, where: str = "--rtu") -> list[FleetDevice]:
+    """The devices with the ACG drives on one RS-485 line, each at its station ID (CM.1, set at
+    start): a group's drives from its ``station`` on (``assign``), the others at the lowest free IDs
+    from 1, in address order."""
+    drives = [d for d in devices if d.profile == "acg"]
+    if not drives:
+        raise SpecError(f"{where}: the fleet has no acg device (the RS-485 port is the ACG drive's)")
+    if len(drives) > MAX_DRIVES_PER_LINE:
+        raise SpecError(f"{where}: {len(drives)} ACG drives, but an RS-485 line takes at most {MAX_DRIVES_PER_LINE} "
+                        f"(seed 001, Communication Standards)")
+    if workers != 1:
+        raise SpecError(f"{where}: one RS-485 line is served by one process: --workers 1")
+    owner: dict[int, str] = {}
+    for device in drives:
+        if device.station is not None:
+            if device.station in owner:
+                raise SpecError(f"{where}: station {device.station} is given to {owner[device.station]} and "
+                                f"{device.address}")
+            owner[device.station] = device.address
+    free = (n for n in range(1, MAX_STATION + 1) if n not in owner)
+    result = []
+    for device in devices:
+        if device.profile == "acg":
+            station = device.station if device.station is not None else next(free)
+            device = replace(device, params=(*device.params, f"CM.1={station}"), station=station)
+        result.append(device)
+    return result
 
 
 def check_port(value: Any, where: str) -> int:
@@ -244,8 +304,8 @@ def check_workers(workers: Any, devices: int, where: str = "--workers") -> int:
 
 
 # -- the TOML file ---------------------------------------------------------------------------------------
-_FILE_KEYS = {"addresses", "port", "io_port", "workers", "state_dir", "device"}
-_GROUP_KEYS = {"profile", "model", "count", "first", "params"}
+_FILE_KEYS = {"addresses", "port", "io_port", "workers", "state_dir", "device", "rtu"}
+_GROUP_KEYS = {"profile", "model", "count", "first", "params", "station"}
 
 
 def _load_toml(path: Path) -> dict[str, Any]:
@@ -282,6 +342,8 @@ def read_spec_file(path: Path) -> tuple[dict[str, Any], list[DeviceGroup]]:
     if unknown:
         raise SpecError(f"{path}: unknown key {unknown[0]!r} (known: {', '.join(sorted(_FILE_KEYS))})")
     settings = {k: v for k, v in document.items() if k != "device"}
+    if "rtu" in settings and not isinstance(settings["rtu"], str):
+        raise SpecError(f"{path}: rtu is \"pty\" or a serial device (text)")
     if "state_dir" in settings:
         if not isinstance(settings["state_dir"], str):
             raise SpecError(f"{path}: state_dir is a directory name (text)")
@@ -299,9 +361,10 @@ def read_spec_file(path: Path) -> tuple[dict[str, Any], list[DeviceGroup]]:
             if key in entry and not isinstance(entry[key], str):
                 raise SpecError(f"{where}: {key} is text")
         groups.append(make_group(entry.get("profile"), entry.get("model"), entry.get("count", 1), entry.get("first"),
-                                 _params(entry.get("params", []), where), where))
+                                 _params(entry.get("params", []), where), where, entry.get("station")))
     return settings, groups
 
 
-__all__ = ["MAX_DEVICES", "DeviceGroup", "FleetDevice", "FleetSpec", "SpecError", "assign", "check_port",
+__all__ = ["MAX_DEVICES", "MAX_DRIVES_PER_LINE", "DeviceGroup", "FleetDevice", "FleetSpec", "SpecError", "assign",
+           "assign_stations", "check_port",
            "check_workers", "describe_addresses", "make_group", "parse_addresses", "parse_group", "read_spec_file"]

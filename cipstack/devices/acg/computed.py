@@ -131,7 +131,7 @@ class ComputedRegisters:
         def minutes(seconds: Callable[[], float]) -> Callable[[], int]:
             return lambda: int(seconds() % _SECONDS_PER_DAY // _SECONDS_PER_MINUTE)
 
-        def virtual_inputs() -> int:   # 0x0385 as written, monitored at 0x0322 and CM.86
+        def virtual_inputs() -> int:   # 0x0385 as written, monitored at CM.86 (and 0x0322, an alias)
             return self._values[0x0385]
 
         def relays() -> int:           # 0x0386 as written, monitored at 0x0011 and 0x0321
@@ -159,7 +159,6 @@ class ComputedRegisters:
             0x031B: lambda: self.poles,
             0x031C: lambda: self.poles,
             0x0321: relays,
-            0x0322: virtual_inputs,
             0x0334: lambda: int(self._warnings),
             0x0340: days(self._on_seconds),
             0x0341: minutes(self._on_seconds),

@@ -20,12 +20,15 @@ Behaviour, with the table it comes from:
   Protective Operation).
 * Parameter save: 0x03E0 from 0 to 1 (seed 001, Saving Parameters Defined by Communication).
 * CM.94 Comm Update: CM.7 and CM.10-CM.24 take effect on the card only when it is set to 1.
+* Virtual multi-function inputs: CM.70-CM.77 and 0x0385 (seed 001, ``virtual_inputs``).
+* Command ports: a run command is obeyed when it comes in through the port drv names (4 Field
+  Bus: the card; 3 Int485: the RS-485 port, ``commands_from``; 1/2 Fx/Rx: the terminals' FX/RX).
 
 Each rule lives in one module, ``AcgDrive`` combines them: ``run_command`` (the Drive Run table,
 the run/stop commands), ``ramps``, ``trips``, ``lost_command``, ``register_effects`` (what a write
-does beyond storing the value: save, initialization, password, CM.94, ...) and ``computed`` (the
-monitors); this module holds the drive's state, its saved parameters, speeds, status and register
-access.
+does beyond storing the value: save, initialization, password, CM.94, ...), ``virtual_inputs``
+(CM.70-CM.77) and ``computed`` (the monitors); this module holds the drive's state, its saved
+parameters, speeds, status and register access.
 
 The simulation has no motor or load model: output current, voltage, power, torque and the
 analog inputs read 0. The monitor rpm is the synchronous speed 120 * f / poles.
@@ -61,8 +64,17 @@ from .registers import (
     InstanceSelection,
     WarningInformation,
 )
-from .run_command import ControlSupervisor, Direction, DriveState, RunAction, RunCommands, drive_run_action
+from .run_command import (
+    CommandPort,
+    ControlSupervisor,
+    Direction,
+    DriveState,
+    RunAction,
+    RunCommands,
+    drive_run_action,
+)
 from .trips import NO_FAULT, Trip, Trips
+from .virtual_inputs import VirtualInputs
 
 log = logging.getLogger(__name__)
 
@@ -101,7 +113,8 @@ class CommSettings:
         return cls(value("CM.7"), dotted(10), dotted(14), dotted(18), value("CM.22"), value("CM.23"), value("CM.24"))
 
 
-class AcgDrive(RunCommands, Ramps, Trips, LostCommand, RegisterEffects, ComputedRegisters, TimedSimulation):
+class AcgDrive(RunCommands, Ramps, Trips, LostCommand, RegisterEffects, VirtualInputs, ComputedRegisters,
+               TimedSimulation):
     """The ACG drive behind its ACG-ET2 card, sans I/O. ``advance``/``next_deadline``: ``TimedSimulation``
     (ramps; the lost-command timers)."""
 
@@ -140,7 +153,13 @@ class AcgDrive(RunCommands, Ramps, Trips, LostCommand, RegisterEffects, Computed
         # Lost command.
         self._io_watch = _CommandLossWatch(IO_BREAK_TIME)
         self._modbus_watch = _CommandLossWatch(MODBUS_SILENCE_TIME)
+        self._int485_watch = _CommandLossWatch(None, CommandPort.INT485)
+        #: The port the present write came in through (``commands_from``); the card's by default.
+        self.command_port = CommandPort.FIELDBUS
         self._lost_reference: float | None = None  # Hz held by Hold Input/Hold Output/Lost Preset
+        # Virtual multi-function inputs: the functions closed, and what FX/RX last commanded.
+        self._closed_functions: frozenset[int] = frozenset()
+        self._virtual_command: Direction | None = None
         # Memory control.
         self._hide_locked = False
         self._parameter_locked = False
@@ -234,7 +253,7 @@ class AcgDrive(RunCommands, Ramps, Trips, LostCommand, RegisterEffects, Computed
         # Output off: no ramp and no run-time counting (``_run_until``); no command-loss watch
         # running: no timer (``_timer_deadline``). The stopped drive of most explicit traffic.
         return (not self._output_on and self._io_watch.silent_since is None
-                and self._modbus_watch.silent_since is None)
+                and self._modbus_watch.silent_since is None and self._int485_watch.silent_since is None)
 
     # -----------------------------------------------------------------------------------------
     # Speeds
@@ -246,7 +265,8 @@ class AcgDrive(RunCommands, Ramps, Trips, LostCommand, RegisterEffects, Computed
     def _reference_hz(self) -> float:
         if self._lost_reference is not None:
             reference = self._lost_reference
-        elif self.reference_from_net:
+        elif self.reference_from_net or self.reference_from_int485:
+            # Both communication sources set the frequency command of 0x0005 / 0x0380 (seed 001).
             reference = self._values[SPEED_REFERENCE.address] / 100
         else:
             reference = self._values[TARGET_FREQUENCY.address] / 100
@@ -448,6 +468,7 @@ __all__ = [
     "NO_FAULT",
     "AcgDrive",
     "CommSettings",
+    "CommandPort",
     "ControlSupervisor",
     "Direction",
     "DriveState",

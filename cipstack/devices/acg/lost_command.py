@@ -7,11 +7,14 @@ from dataclasses import dataclass
 from enum import IntEnum
 
 from .registers import (
+    CMD_SOURCE,
+    FREQ_REF_SOURCE,
     LOST_CMD_MODE,
     LOST_CMD_TIME,
     LOST_PRESET_FREQ,
     WarningInformation,
 )
+from .run_command import CommandPort
 from .trips import Trip
 
 #: Seed 000, "Lost command conditions by protocol": a class 1 connection that stays broken for
@@ -35,9 +38,16 @@ class LostCommandMode(IntEnum):
 
 @dataclass
 class _CommandLossWatch:
-    """One protocol's lost-command timers (seed 000, "Lost command conditions by protocol")."""
+    """One protocol's lost-command timers (seed 000, "Lost command conditions by protocol").
 
-    detect_after: float
+    ``detect_after``: the silence that puts the port in lost command mode, after which Pr.12 acts
+    when Pr.13 has passed (the card's protocols). None: the built-in RS-485, where Pr.13 is the
+    silence itself: "the drive function that will occur after the communication loss time is
+    expired (set in Pr.13)" (seed 001, Command Loss Protective Operation), so Pr.12 acts at once."""
+
+    detect_after: float | None
+    #: The command source whose commands the watch guards (drv / Frq of that port).
+    port: CommandPort = CommandPort.FIELDBUS
     #: Since when nothing has arrived (class 1: the break; Modbus: the last request), or None.
     silent_since: float | None = None
     #: When lost command mode was entered (Pr.13 counts from here), or None.
@@ -49,8 +59,8 @@ class _CommandLossWatch:
         if self.silent_since is None or self.acted:
             return None
         if self.lost_since is None:
-            return self.silent_since + self.detect_after
-        return self.lost_since + lost_time
+            return self.silent_since + (lost_time if self.detect_after is None else self.detect_after)
+        return self.lost_since + (0.0 if self.detect_after is None else lost_time)
 
     def clear(self) -> None:
         self.silent_since = None
@@ -76,46 +86,65 @@ class LostCommand:
         self._restore_after_loss()
         self._ramp(0.0)
 
-    def on_modbus_activity(self, now: float) -> None:
-        """A Modbus TCP request arrived; from the first one on, 5 s of silence is a command loss."""
+    def on_modbus_activity(self, now: float, port: CommandPort = CommandPort.FIELDBUS) -> None:
+        """A Modbus request arrived: on the card (Modbus TCP; from the first one on, 5 s of silence
+        is a command loss) or, ``port`` INT485, on the built-in RS-485 (Pr.13 of silence is)."""
         self.advance(now)
-        self._modbus_watch.clear()
-        self._modbus_watch.silent_since = now
+        watch = self._int485_watch if port is CommandPort.INT485 else self._modbus_watch
+        watch.clear()
+        watch.silent_since = now
         self._restore_after_loss()
         self._ramp(0.0)
+
+    @property
+    def _watches(self) -> tuple[_CommandLossWatch, ...]:
+        return (self._io_watch, self._modbus_watch, self._int485_watch)
 
     def _lost_time(self) -> float:
         return self._values[LOST_CMD_TIME.address] / 10
 
     def _timer_deadline(self) -> float | None:
-        if self._io_watch.silent_since is None and self._modbus_watch.silent_since is None:
+        if (self._io_watch.silent_since is None and self._modbus_watch.silent_since is None
+                and self._int485_watch.silent_since is None):
             return None  # nothing is silent: the common case, asked several times per O->T datagram
         lost_time = self._lost_time()
-        deadlines = [d for d in (self._io_watch.deadline(lost_time), self._modbus_watch.deadline(lost_time))
-                     if d is not None]
-        return min(deadlines) if deadlines else None
+        earliest = None
+        for watch in (self._io_watch, self._modbus_watch, self._int485_watch):   # on every request: no genexpr
+            deadline = watch.deadline(lost_time)
+            if deadline is not None and (earliest is None or deadline < earliest):
+                earliest = deadline
+        return earliest
 
     def _fire_timers(self, moment: float) -> None:
         lost_time = self._lost_time()
-        for watch in (self._io_watch, self._modbus_watch):
+        for watch in self._watches:
             deadline = watch.deadline(lost_time)
             if deadline is None or deadline > moment:
                 continue
             if watch.lost_since is None:
+                if watch.detect_after is None and not self._operated_from(watch.port):
+                    watch.clear()                    # RS-485 silence matters to a drive run from RS-485
+                    continue
                 watch.lost_since = moment            # lost command mode entered; Pr.13 starts
             else:
                 watch.acted = True
-                self._lost_command_action()
+                self._lost_command_action(watch.port)
 
     @property
     def command_lost(self) -> bool:
-        """The card is in lost command mode on some protocol."""
-        return any(w.lost_since is not None for w in (self._io_watch, self._modbus_watch))
+        """The drive is in lost command mode on some protocol."""
+        return any(w.lost_since is not None for w in self._watches)
 
-    def _lost_command_action(self) -> None:
+    def _operated_from(self, port: CommandPort) -> bool:
+        """drv or Frq is ``port``'s source."""
+        return (self._values[CMD_SOURCE.address] == port.command_source
+                or self._values[FREQ_REF_SOURCE.address] == port.frequency_source)
+
+    def _lost_command_action(self, port: CommandPort = CommandPort.FIELDBUS) -> None:
         """Pr.12 after Pr.13 (seed 000, PR Group (Lost Command)), for a drive operated via the
-        network ("while the drive is operated via network communication")."""
-        if not (self.control_from_net or self.reference_from_net):
+        port that went silent ("while the drive is operated via network communication"): drv or
+        Frq is that port's source."""
+        if not self._operated_from(port):
             return
         mode = LostCommandMode(self._values[LOST_CMD_MODE.address])
         if mode is LostCommandMode.NONE:
@@ -138,7 +167,7 @@ class LostCommand:
         """Communication is back. The Lost Command warning clears and the reference is the
         network's again; the Lost Command trip is a level-type trip (0x0332 B2) and clears
         with its cause, leaving the drive stopped until a run command's next 0 -> 1 change."""
-        if any(w.acted for w in (self._io_watch, self._modbus_watch)):
+        if self._io_watch.acted or self._modbus_watch.acted or self._int485_watch.acted:
             return                                  # another protocol is still lost
         self._warnings &= ~WarningInformation.LOST_COMMAND
         self._lost_reference = None

@@ -20,6 +20,12 @@ from .registers import (
 )
 from .run_command import Direction
 from .trips import Trip
+from .virtual_inputs import (
+    TERMINAL_FUNCTION_ADDRESSES,
+    VIRTUAL_FUNCTION_ADDRESSES,
+    VIRTUAL_INPUT_CONTROL,
+    VirtualInputs,
+)
 
 
 class RegisterEffects:
@@ -62,8 +68,8 @@ class RegisterEffects:
         self._values[address] = int(bits)
         if OperationCommand.TRIP_RESET in bits and OperationCommand.TRIP_RESET not in previous:
             self._fault_reset()
-        self._set_level_cause(Trip.BX, OperationCommand.EMERGENCY_STOP in bits)
-        if not self.control_from_net:
+        self._set_level_cause(Trip.BX, self._emergency_stop())   # B4, or a closed virtual BX input
+        if not self._port_commands():
             return
         run_bits = bits & (OperationCommand.STOP | OperationCommand.FORWARD | OperationCommand.REVERSE)
         if OperationCommand.STOP in run_bits:
@@ -82,7 +88,7 @@ class RegisterEffects:
         rising = bits & ~previous
         if ControlCommand.TRIP_RESET in rising:
             self._fault_reset()
-        if not self.control_from_net:
+        if not self._port_commands():
             return
         if ControlCommand.FREE_RUN_STOP in rising:
             self._free_run()
@@ -182,4 +188,7 @@ class RegisterEffects:
         ACG_REGISTERS.by_code("CM.23").address: _write_instance_setting,
         ACG_REGISTERS.by_code("CM.24").address: _write_instance_setting,
         **dict.fromkeys(range(reg.CONTROL_PARAMETER_BASE, reg.CONTROL_PARAMETER_BASE + 8), _write_control_parameter),
+        VIRTUAL_INPUT_CONTROL: VirtualInputs._write_virtual_inputs,
+        **dict.fromkeys((*VIRTUAL_FUNCTION_ADDRESSES, *TERMINAL_FUNCTION_ADDRESSES),
+                        VirtualInputs._write_input_function),
     }

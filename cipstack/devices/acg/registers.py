@@ -402,6 +402,12 @@ FREQ_REF_SOURCE = Register(
 
 CMD_SOURCE_FIELDBUS = 4
 FREQ_REF_SOURCE_FIELDBUS = 8
+#: drv 3 / Frq 6 "Int485": the built-in RS-485 port (seed 001, Setting Operation Command and Frequency).
+CMD_SOURCE_INT485 = 3
+FREQ_REF_SOURCE_INT485 = 6
+#: drv 1 / 2 "Fx/Rx-1", "Fx/Rx-2": the terminals' FX and RX functions (0x0006 B6-B8 command sources).
+CMD_SOURCE_FX_RX_1 = 1
+CMD_SOURCE_FX_RX_2 = 2
 
 _OPERATION: list[Register] = [
     TARGET_FREQUENCY, ACCEL_TIME, DECEL_TIME, CMD_SOURCE, FREQ_REF_SOURCE,
@@ -456,8 +462,15 @@ LOST_PRESET_FREQ = _parameter("Pr", 14, "Lost Preset F", default=0, minimum=0, m
 #: Pr.14's lowest setting but the default 0.00 (seed 000:214): 0.05 Hz.
 LOST_PRESET_MINIMUM = 5
 
+# The functions a multi-function input (In.65-In.69, CM.70-CM.77) is set to. Seed 001 gives the
+# range 0-49 and "0: None" only; the numbers of the functions the simulation models are those of
+# the ACG keypad parameter list (In.65-In.69), which is outside the seeds. Settings 6-49 (jog,
+# multi-step speeds, ...) are accepted and do nothing here.
+MULTI_FUNCTIONS: Mapping[int, str] = {0: "None", 1: "FX", 2: "RX", 3: "RST", 4: "External Trip", 5: "BX"}
+
 _MULTI_FUNCTION_INPUTS = [
-    _parameter("In", 65 + i, f"Multi-function input P{i + 1}", source="seed 001, Setting Virtual Multi-Function Input")
+    _parameter("In", 65 + i, f"Multi-function input P{i + 1}", source="seed 001, Setting Virtual Multi-Function Input",
+               help="a function of MULTI_FUNCTIONS (0-5 modelled); no setting may be that of a CM.70-CM.77")
     for i in range(5)
 ]
 
@@ -526,8 +539,9 @@ _CM: list[Register] = [
     *(_cm(50 + n, f"Para Control-{n}", default={1: 0x0005, 2: 0x0006}.get(n, 0), **_HEX_ADDRESS)
       for n in range(1, 9)),
     *(_listed("CM", n) for n in (*range(59, 67), 68)),
-    *(_cm(69 + n, f"Virtual DI {n}", default=0, minimum=0, maximum=49, enum={0: "None"},
-          source="seed 001, Setting Virtual Multi-Function Input", help="communication multi-function input")
+    *(_cm(69 + n, f"Virtual DI {n}", default=0, minimum=0, maximum=49, enum=dict(MULTI_FUNCTIONS),
+          source=f"seed 001, Setting Virtual Multi-Function Input; names from {OUTSIDE_SEEDS}",
+          help=f"communication multi-function input: the function bit {n - 1} of 0x0385 operates")
       for n in range(1, 9)),
     _cm(86, "Virt DI Status", access=R, saved=False, source="seed 001, Setting Virtual Multi-Function Input"),
     *(_listed("CM", n) for n in range(90, 94)),
@@ -660,7 +674,14 @@ _MONITOR: list[Register] = [
     *_reserved_range(0x031E, 0x031F, "monitor", MONITOR_TABLE),
     _monitor(0x0320, "Digital input information", help="B0-B4: P1-P5 (I/O board)"),
     _monitor(0x0321, "Digital output information", help="B0 Relay1, B1 Relay2"),
-    _monitor(0x0322, "Virtual digital input information", help="B0-B7: virtual DI 1-8 (CM.70-CM.77)"),
+    # 0x0322 stands in the read-only monitoring area, but the chapter operates the virtual inputs
+    # by writing it: "set the BIT relevant to the function to 1 at 0h0322 to operate it", "assign
+    # a 0h0001 value to the communication address 0h0322" (Setting Virtual Multi-Function Input),
+    # as well as 0x0385 of the control area. It is served as the chapter's example uses it: the
+    # value of 0x0385 (``ALIASES``), written and read alike.
+    Register(0x0322, "", "Virtual digital input information", minimum=0, maximum=0x00FF, group="monitor",
+             saved=False, source=MONITOR_TABLE,
+             help="B0-B7: virtual DI 1-8 (CM.70-CM.77); the value of 0x0385, writable as the chapter's example"),
     _monitor(0x0323, "Display the selected motor", enum={0: "First Motor", 1: "Second Motor"}),
     _monitor(0x0324, "V1", scale=0.01, unit="%", help="analog input V1 (I/O board)"),
     _reserved(0x0325, "monitor", MONITOR_TABLE),
@@ -799,6 +820,7 @@ ALIASES: Mapping[int, int] = {
     0x0007: ACCEL_TIME.address, 0x0383: ACCEL_TIME.address,
     0x0008: DECEL_TIME.address, 0x0384: DECEL_TIME.address,
     0x038A: RATED_CURRENT.address, 0x038B: RATED_VOLTAGE.address,
+    0x0322: 0x0385,
 }
 
 

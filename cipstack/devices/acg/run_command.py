@@ -3,14 +3,32 @@ Drive State, and the commands of the common and control areas (seed 001)."""
 
 from __future__ import annotations
 
+from collections.abc import Iterator
+from contextlib import contextmanager
 from enum import Enum, IntEnum
 
 from .registers import (
     CMD_SOURCE,
     CMD_SOURCE_FIELDBUS,
+    CMD_SOURCE_INT485,
     FREQ_REF_SOURCE,
     FREQ_REF_SOURCE_FIELDBUS,
+    FREQ_REF_SOURCE_INT485,
 )
+
+
+class CommandPort(Enum):
+    """Where a command written to the drive came in, and the drv / Frq settings that make the drive
+    obey it: the communication option (the ACG-ET2 card: EtherNet/IP, Modbus TCP) at drv 4 / Frq 8
+    "Field Bus" (seed 000), the built-in RS-485 at drv 3 / Frq 6 "Int485" (seed 001, Setting
+    Operation Command and Frequency)."""
+
+    FIELDBUS = (CMD_SOURCE_FIELDBUS, FREQ_REF_SOURCE_FIELDBUS)
+    INT485 = (CMD_SOURCE_INT485, FREQ_REF_SOURCE_INT485)
+
+    def __init__(self, command_source: int, frequency_source: int) -> None:
+        self.command_source = command_source
+        self.frequency_source = frequency_source
 
 
 class Direction(IntEnum):
@@ -122,6 +140,31 @@ class RunCommands:
     def _stop(self) -> None:
         self._command = None
         self._settle()
+
+    @contextmanager
+    def commands_from(self, port: CommandPort) -> Iterator[None]:
+        """Writes made inside come in through ``port``: a run command in them is obeyed when drv is
+        that port's command source (``CommandPort``). Outside, writes are the card's. (A request path
+        may set ``command_port`` itself and put the previous one back, as ``commands_from`` does.)"""
+        previous, self.command_port = self.command_port, port
+        try:
+            yield
+        finally:
+            self.command_port = previous
+
+    def _port_commands(self) -> bool:
+        """The drive obeys run commands of the port the present write came in through."""
+        return self._values[CMD_SOURCE.address] == self.command_port.command_source
+
+    @property
+    def control_from_int485(self) -> bool:
+        """drv is 3 (Int485): the built-in RS-485 port commands run and stop."""
+        return self._values[CMD_SOURCE.address] == CMD_SOURCE_INT485
+
+    @property
+    def reference_from_int485(self) -> bool:
+        """Frq is 6 (Int485): the built-in RS-485 port sets the speed reference."""
+        return self._values[FREQ_REF_SOURCE.address] == FREQ_REF_SOURCE_INT485
 
     @property
     def control_from_net(self) -> bool:
