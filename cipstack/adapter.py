@@ -8,7 +8,7 @@ import signal
 from collections.abc import Awaitable, Callable
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 from .control import (
     ControlAddress,
@@ -32,8 +32,12 @@ from .eip.io_target import IoTarget
 from .eip.limits import DEFAULT_MAX_TCP_CONNECTIONS
 from .eip.server import DEFAULT_PORT, EncapsulationServer
 from .eip.target import DEFAULT_FRAME_TIMEOUT, EncapsulationTarget, TargetSettings
+from .faults import FaultController
 from .listening import ListenError, held_log_records
 from .objects.tcpip import NetworkInterface
+
+if TYPE_CHECKING:
+    from .faults import Fault
 
 log = logging.getLogger(__name__)
 
@@ -129,6 +133,7 @@ class Adapter:
         self.io: IoTarget | None = None
         self.io_endpoint: IoEndpoint | None = None
         self.control_server: ControlServer | None = None
+        self._faults: FaultController | None = None
         profile = self.device.io_profile()
         if profile is not None:
             if s.max_io_connections is not None:
@@ -146,6 +151,26 @@ class Adapter:
     @property
     def port(self) -> int:
         return self.server.port
+
+    # -- faults (cipstack.faults) ---------------------------------------------------------------------
+    @property
+    def faults(self) -> FaultController:
+        """This device's faults: ``apply``, ``clear``, ``faults()``, ``history`` (see ``cipstack.faults``)."""
+        if self._faults is None:
+            # Imported with the adapter, not here: a first fault must not stall the loop on an import.
+            self._faults = FaultController(self)
+        return self._faults
+
+    def fault(self, name: str, **options: object) -> Fault:
+        """Apply the fault ``name`` now, options as the command line names them (``share=0.1``,
+        ``connection=0x...``, ``for_=2.0`` or ``**{"for": 2.0}``); see ``FaultController.apply``."""
+        if "for_" in options:
+            options["for"] = options.pop("for_")
+        return self.faults.apply(name, **options)
+
+    def clear_faults(self, which: int | str | None = None) -> list[Fault]:
+        """Clear every active fault, or one by id, or those of one name."""
+        return self.faults.clear(which)
 
     def _tick(self, now: float) -> None:
         """Advance the device to ``now`` and keep a timer at its next deadline (lost-command timers,
@@ -289,7 +314,7 @@ class Adapter:
     async def __aexit__(self, *exc: object) -> None:
         await self.close()
 
-    def control(self, request: dict[str, Any]) -> dict[str, Any]:
+    def control(self, request: dict[str, Any]) -> Any:
         """Serve one control-channel request (see ``cipstack.control``)."""
         now = asyncio.get_running_loop().time()
         self._tick(now)
@@ -320,7 +345,38 @@ class Adapter:
             if self.rtu is not None:   # what the RS-485 port made of its line: frames, replies, refusals
                 status["rtu"] = {"device": self.rtu.name, **self.rtu.slaves[0].counters.as_dict()}
             return status
-        raise ControlError(f"unknown command {command!r} (known: trip, status)")
+        if command in ("fault", "clear", "faults"):
+            return self._control_fault(command, request, now)
+        raise ControlError(f"unknown command {command!r} (known: trip, status, fault, clear, faults)")
+
+    def _control_fault(self, command: str, request: dict[str, Any], now: float) -> Any:
+        """``fault`` (name, options), ``clear`` (which: an id, a name, or none for all), ``faults``."""
+        from .faults import FaultError, FaultStateError, NoSuchConnection
+
+        faults = self.faults
+        if command == "faults":
+            return {"faults": [f.as_json(now) for f in faults.faults()]}
+        try:
+            if command == "clear":
+                cleared = faults.clear(request.get("which"))
+                result: dict[str, Any] = {"cleared": [f.as_json(now) for f in cleared],
+                                          "result": f"cleared {len(cleared)} fault(s)"}
+            else:
+                options = request.get("options") or {}
+                if not isinstance(options, dict):
+                    raise ControlError("fault options are a JSON object")
+                fault = faults.apply(str(request.get("name")), **options)
+                result = {"fault": fault.as_json(now), "result": f"fault {fault}"}
+        except FaultError as exc:
+            raise ControlError(str(exc)) from None
+        except (NoSuchConnection, FaultStateError) as exc:
+            raise ControlDenied(str(exc)) from None
+
+        async def settled() -> dict[str, Any]:
+            await faults.settle()
+            return result
+
+        return settled()
 
     async def _print_status_lines(self) -> None:
         last = None
