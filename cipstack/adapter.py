@@ -18,6 +18,7 @@ from .control import (
     ControlTaken,
     default_control_path,
 )
+from .control.events import EventStream
 from .devices.acg.device import AcgDevice
 from .devices.acg.modbus_rtu import LineSettings
 from .devices.acg.modbus_server import ModbusTcpServer
@@ -134,6 +135,7 @@ class Adapter:
         self.io_endpoint: IoEndpoint | None = None
         self.control_server: ControlServer | None = None
         self._faults: FaultController | None = None
+        self._events: EventStream | None = None
         profile = self.device.io_profile()
         if profile is not None:
             if s.max_io_connections is not None:
@@ -160,6 +162,15 @@ class Adapter:
             # Imported with the adapter, not here: a first fault must not stall the loop on an import.
             self._faults = FaultController(self)
         return self._faults
+
+    @property
+    def events(self) -> EventStream:
+        """What happened, when (``cipstack.control.events``): connections, run/idle, the drive's state and
+        trips, parameter writes, faults. Watching starts on first use; nothing is paid before."""
+        if self._events is None:
+            self._events = EventStream(self)
+            self._events.start()
+        return self._events
 
     def fault(self, name: str, **options: object) -> Fault:
         """Apply the fault ``name`` now, options as the command line names them (``share=0.1``,
@@ -189,7 +200,7 @@ class Adapter:
     def _on_device_timer(self) -> None:
         self._device_timer = None
         self._device_timer_at = None
-        self._tick(asyncio.get_running_loop().time())
+        self.target.tick(asyncio.get_running_loop().time())  # through the event stream's tap, if any
 
     async def start(self) -> None:
         """Listen on every port, each exclusively; a port that is taken raises ``ListenError``
@@ -332,7 +343,7 @@ class Adapter:
             except (KeyError, ValueError) as exc:
                 reason = exc.args[0] if exc.args else exc
                 raise ControlError(f"{reason}; valid codes: {self.device.trip_codes()}") from None
-            self._tick(now)
+            self.target.tick(now)  # through the event stream's tap, if any
             label = getattr(trip, "label", None) or str(trip)
             fault = getattr(trip, "fault_code", None)
             return {"result": f"tripped: {label}" + (f" (fault code 0x{fault:04X})" if fault is not None else ""),
