@@ -27,6 +27,8 @@ ALLOWED = {
     # On top (DESIGN): the fault model acts on a running adapter's transport, never the reverse.
     "faults": {"cip", "eip"},
     "control": set(),
+    # The pytest plugin: fixtures over the in-process adapter, its faults and events, and the scanner.
+    "testing": {"adapter", "control", "scanner", "devices", "eds"},
 }
 
 #: The parts that sit on top: nothing else in the package imports them (DESIGN.md).
