@@ -91,6 +91,11 @@ class AdapterSettings:
     #: Modbus-RTU on the drive's RS-485 port: a serial device path, or "pty" for a new pseudo-terminal
     #: (None: off).
     rtu: str | None = None
+    #: HTTP control API (``cipstack.control.http``) on ``HOST:PORT`` (None: off); another address than
+    #: loopback only with ``http_allow_remote`` and a token.
+    http: str | None = None
+    http_token: str | None = None
+    http_allow_remote: bool = False
 
 
 class Adapter:
@@ -134,6 +139,8 @@ class Adapter:
         self.io: IoTarget | None = None
         self.io_endpoint: IoEndpoint | None = None
         self.control_server: ControlServer | None = None
+        #: The HTTP control API, while serving with ``settings.http``.
+        self.http_api: Any = None
         self._faults: FaultController | None = None
         self._events: EventStream | None = None
         profile = self.device.io_profile()
@@ -270,6 +277,18 @@ class Adapter:
             await self.close()
             raise ListenError(*self._control_refusal(exc)) from None
         self.control_server = control
+        if self.settings.http is not None:
+            from .control.http import HttpApi, parse_listen
+
+            host, port = parse_listen(self.settings.http)
+            api = HttpApi({self.settings.host: self}, host, port, token=self.settings.http_token,
+                          allow_remote=self.settings.http_allow_remote)
+            try:
+                await api.start()
+            except OSError as exc:
+                await self.stop_serving()
+                raise ListenError(f"TCP {self.settings.http} (HTTP control API, --http)", exc) from None
+            self.http_api = api
 
     def _control_refusal(self, exc: OSError) -> tuple[str, str]:
         """Where and why the control socket cannot be had, and what to do: with ``--control``, another
@@ -284,7 +303,10 @@ class Adapter:
         return "control socket", reason
 
     async def stop_serving(self) -> None:
-        """Close the control socket, then every port; the last saves are written."""
+        """Close the HTTP API and the control socket, then every port; the last saves are written."""
+        if self.http_api is not None:
+            await self.http_api.close()
+            self.http_api = None
         if self.control_server is not None:
             await self.control_server.close()
             self.control_server = None
@@ -300,6 +322,25 @@ class Adapter:
             raise ValueError("--param sets the ACG's keypad parameters (profile acg)")
         drive = self.device.drive
         return apply_parameters(drive, assignments, drive.time)
+
+    def keypad_parameter(self, code: str) -> dict[str, Any]:
+        """A keypad parameter by its code (the ACG's: ``drv``, ``ACC``, ``CM.23``...): its value in the
+        keypad's unit, its raw value, name and unit. ``LookupError`` for an unknown code, ``ValueError``
+        for a device without a keypad."""
+        from decimal import Decimal
+
+        from .devices.acg.registers import register_for_code
+
+        if not isinstance(self.device, AcgDevice):
+            raise ValueError("keypad parameters are the ACG's (profile acg)")
+        register = register_for_code(code)
+        raw = self.device.drive.read(register.address)
+        value = Decimal(raw) * Decimal(str(register.scale)) if register.scale != 1 else Decimal(raw)
+        record: dict[str, Any] = {"code": register.code, "name": register.name, "value": f"{value:f}", "raw": raw,
+                                  "unit": register.unit, "address": f"0x{register.address:04X}"}
+        if register.enum and raw in register.enum:
+            record["meaning"] = register.enum[raw]
+        return record
 
     async def close(self) -> None:
         if self.modbus is not None:

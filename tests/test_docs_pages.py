@@ -1,7 +1,7 @@
-"""Every code block of docs/faults.md and docs/testing.md runs as written, as the README's do
-(``tests/test_readme.py``: its conventions, one fresh emulator per ``##`` section in a private network
-namespace). A python block that defines tests (``def test_``) is run by pytest with the plugin; the
-commands run where the checkout's ``examples/`` are."""
+"""Every code block of docs/faults.md, docs/testing.md and docs/http.md (its curl examples) runs as
+written, as the README's do (``tests/test_readme.py``: its conventions, one fresh emulator per ``##``
+section in a private network namespace). A python block that defines tests (``def test_``) is run by
+pytest with the plugin; the commands run where the checkout's ``examples/`` are."""
 
 from __future__ import annotations
 
@@ -25,7 +25,7 @@ from tests.test_readme import (
     shell_env,
 )
 
-PAGES = [ROOT / "docs" / "faults.md", ROOT / "docs" / "testing.md"]
+PAGES = [ROOT / "docs" / "faults.md", ROOT / "docs" / "testing.md", ROOT / "docs" / "http.md"]
 SECTIONS = [(page, s) for page in PAGES for s in readme_sections(page.read_text()) if s.runnable]
 
 __all__ = ["shell_env"]

@@ -38,7 +38,7 @@ def cmd_adapter(args: argparse.Namespace) -> int:
                                max_sessions=args.max_sessions, max_connections=args.max_connections,
                                io_port=args.io_port, control_path=args.control,
                                status_lines=not args.quiet, state_path=args.state, modbus_port=args.modbus_port,
-                               rtu=args.rtu, **_limit_settings(args))
+                               rtu=args.rtu, **_limit_settings(args), **_http_settings(args))
     try:
         adapter = Adapter(settings)
     except (StateFileError, ValueError, KeyError) as exc:
@@ -85,6 +85,23 @@ def _limit_settings(args: argparse.Namespace) -> dict[str, Any]:
         if value is not None and value < minimum:
             raise UsageError(f"--{name.replace('_', '-')} {value}: must be at least {minimum}")
     return limits
+
+
+def _http_settings(args: argparse.Namespace) -> dict[str, Any]:
+    """``--http HOST:PORT`` (with ``--http-token``, ``--http-allow-remote``), checked before anything listens."""
+    if args.http is None:
+        if args.http_token is not None or args.http_allow_remote:
+            raise UsageError("--http-token and --http-allow-remote go with --http HOST:PORT")
+        return {}
+    try:
+        from ..control.http import HttpApiError, check_settings
+    except ImportError:
+        raise UsageError("--http needs aiohttp: python3 -m pip install 'cipstack[http]'") from None
+    try:
+        check_settings(args.http, args.http_token, args.http_allow_remote)
+    except HttpApiError as exc:
+        raise UsageError(str(exc)) from None
+    return {"http": args.http, "http_token": args.http_token, "http_allow_remote": args.http_allow_remote}
 
 
 def _serve(adapter: Any, args: argparse.Namespace, command: str) -> int:
@@ -146,7 +163,8 @@ def _adapter_from_eds(args: argparse.Namespace) -> int:
         print(f"cipstack adapter: {args.eds}:{issue.line}: warning: {issue.message}", file=sys.stderr, flush=True)
     settings = AdapterSettings(host=args.host, port=args.port, max_sessions=args.max_sessions,
                                max_connections=args.max_connections, io_port=args.io_port,
-                               control_path=args.control, status_lines=not args.quiet, **_limit_settings(args))
+                               control_path=args.control, status_lines=not args.quiet, **_limit_settings(args),
+                               **_http_settings(args))
     adapter = Adapter(settings, device=device)
     return _serve(adapter, args, "adapter")
 

@@ -160,6 +160,7 @@ def build_parser(command: str | None = None) -> argparse.ArgumentParser:
                    help="set an ACG keypad parameter at start, in the keypad's unit; repeatable "
                         "(drv=4 Frq=8: run from the network)")
     p.add_argument("--quiet", action="store_true", help="no status line on stdout")
+    _add_http_arguments(p)
     p.add_argument("--json", action="store_true", help=argparse.SUPPRESS)
     p.set_defaults(func=cmd_adapter)
 
@@ -182,6 +183,7 @@ def build_parser(command: str | None = None) -> argparse.ArgumentParser:
                                   "(default: fleet/ in the user's data directory)"), _DIRECTORY)
     p.add_argument("--param", action="append", metavar="CODE=VALUE",
                    help="set an ACG keypad parameter at start on every ACG device; repeatable")
+    _add_http_arguments(p)
     p.add_argument("--workers", type=number("workers"), metavar="N",
                    help=f"spread the devices over N processes, one event loop each (default {DEFAULT_WORKERS})")
     p.add_argument("--rtu", metavar="DEVICE",
@@ -310,10 +312,7 @@ def build_parser(command: str | None = None) -> argparse.ArgumentParser:
                            help="fault code of the drive's manual (decimal or 0x hex: 0x4200 on the ACG, 5 on "
                                 "the MX2/RX) or its name (OverHeat, E05)")
         if name == "fault":
-            from ..faults.model import FAULTS
-
-            q.add_argument("name", metavar="NAME",
-                           help="the fault, or clear [ID|NAME]: " + ", ".join(FAULTS))
+            q.add_argument("name", metavar="NAME", help="the fault (above), or clear [ID|NAME]")
             q.add_argument("arguments", nargs=argparse.REMAINDER, metavar="OPTION",
                            help="the fault's options (docs/faults.md), e.g. --share 0.1 --for 2s")
         q.add_argument("--host", default="127.0.0.1",
@@ -349,6 +348,15 @@ def build_parser(command: str | None = None) -> argparse.ArgumentParser:
         if action.dest in ("eds", "junit", "html"):
             _complete(action, _FILE)
     return parser
+
+
+def _add_http_arguments(p: argparse.ArgumentParser) -> None:
+    p.add_argument("--http", metavar="HOST:PORT",
+                   help="also serve the HTTP control API (docs/http.md) on this loopback address and port")
+    p.add_argument("--http-token", metavar="TOKEN",
+                   help="every HTTP request must carry Authorization: Bearer TOKEN")
+    p.add_argument("--http-allow-remote", action="store_true",
+                   help="let the HTTP API listen on and serve other than loopback (needs --http-token)")
 
 
 def _add_eds_commands(sub: Any) -> None:
