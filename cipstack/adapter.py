@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import asyncio
+import contextlib
 import logging
 import signal
 from collections.abc import Awaitable, Callable
@@ -440,8 +441,9 @@ class Adapter:
                 last = line
             await asyncio.sleep(0.2)
 
-    async def serve_forever(self) -> None:
-        """Serve until SIGINT or SIGTERM, then close cleanly."""
+    async def serve_forever(self, until: Callable[[Adapter], Awaitable[Any]] | None = None) -> Any:
+        """Serve until SIGINT or SIGTERM, or until ``until(self)`` (a scenario) is done, then close
+        cleanly; returns what ``until`` returned (None when a signal came first)."""
         loop = asyncio.get_running_loop()
         stop = asyncio.Event()
         for sig in (signal.SIGINT, signal.SIGTERM):
@@ -456,6 +458,9 @@ class Adapter:
         info = self.device.identity_info
         log.info("emulating %s (vendor %d, device type %d, product code %d, revision %d.%d)",
                  info.product_name, info.vendor_id, info.device_type, info.product_code, *info.revision)
+        task = asyncio.create_task(until(self)) if until is not None else None
+        if task is not None:
+            task.add_done_callback(lambda _: stop.set())
         try:
             await stop.wait()
         finally:
@@ -464,4 +469,11 @@ class Adapter:
                 loop.remove_signal_handler(sig)
             if printer is not None:
                 printer.cancel()
+            if task is not None and not task.done():
+                task.cancel()
+                with contextlib.suppress(asyncio.CancelledError):
+                    await task
             await self.stop_serving()
+        if task is None or task.cancelled():
+            return None
+        return task.result()

@@ -8,6 +8,7 @@ import sys
 from typing import Any
 
 from .common import (
+    EXIT_FAILURE,
     EXIT_OK,
     EXIT_USAGE,
     UsageError,
@@ -111,8 +112,20 @@ def _serve(adapter: Any, args: argparse.Namespace, command: str) -> int:
     from ..eip.io_server import run_precise
     from ..listening import ListenError
 
+    scenario = getattr(args, "scenario", None)
+    until = None
+    if scenario is not None:
+        from ..control import scenario as scenarios
+
+        try:
+            loaded = scenarios.load(scenario)
+        except scenarios.ScenarioError as exc:
+            raise UsageError(str(exc)) from None
+
+        def until(running: Any) -> Any:
+            return scenarios.run(running, loaded, lambda line: print(line, flush=True))
     try:
-        run_precise(adapter.serve_forever())
+        fired = run_precise(adapter.serve_forever(until) if until is not None else adapter.serve_forever())
     except RtuPortError as exc:
         print(f"cipstack {command}: {exc}", file=sys.stderr)
         return EXIT_USAGE
@@ -122,6 +135,8 @@ def _serve(adapter: Any, args: argparse.Namespace, command: str) -> int:
     except OSError as exc:
         print(f"cipstack {command}: cannot listen on {args.host}:{args.port}: {exc.strerror or exc}", file=sys.stderr)
         return EXIT_USAGE
+    if scenario is not None and fired is not True:
+        return EXIT_FAILURE  # a step did not fire, or a signal ended the scenario first
     return EXIT_OK
 
 

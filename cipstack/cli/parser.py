@@ -161,6 +161,9 @@ def build_parser(command: str | None = None) -> argparse.ArgumentParser:
                         "(drv=4 Frq=8: run from the network)")
     p.add_argument("--quiet", action="store_true", help="no status line on stdout")
     _add_http_arguments(p)
+    _complete(p.add_argument("--scenario", type=Path, metavar="FILE.toml",
+                             help="run this timeline of faults and actions (docs/scenarios.md), then exit: 0 when "
+                                  "every step fired, 1 when one did not"), _FILE)
     p.add_argument("--json", action="store_true", help=argparse.SUPPRESS)
     p.set_defaults(func=cmd_adapter)
 
