@@ -58,6 +58,15 @@ def test_sync_wait_for_a_trip(cip_adapter):
     assert cip_adapter.wait_for("trip", 5).fields["trip"] == "OverHeat"
 
 
+EDS = {eds!r}
+
+
+@pytest.mark.cip_adapter(eds=EDS)
+def test_an_eds_device(cip_adapter, cip_scanner):
+    assert cip_adapter.options.state_path is None
+    assert cip_scanner.read(0x01, 1, 1) == cip_adapter.adapter.device.identity_info.vendor_id
+
+
 @pytest.mark.cip_adapter(colour="red")
 def test_a_bad_marker_option(cip_adapter):
     pass
@@ -70,10 +79,11 @@ def pytest_in_subprocess(*args: str, cwd: Path) -> subprocess.CompletedProcess[s
 
 
 def test_the_fixtures_in_a_users_suite(tmp_path: Path) -> None:
-    (tmp_path / "test_users.py").write_text(textwrap.dedent(SUITE))
+    eds = str(ROOT / "tests" / "eds" / "files" / "ez_style_io_block.eds")
+    (tmp_path / "test_users.py").write_text(textwrap.dedent(SUITE).replace("{eds!r}", repr(eds)))
     result = pytest_in_subprocess("-rA", "test_users.py", cwd=tmp_path)
     out = result.stdout
-    assert "5 passed, 1 error" in out, out + result.stderr
+    assert "6 passed, 1 error" in out, out + result.stderr
     assert "ERROR test_users.py::test_a_bad_marker_option" in out
     assert "cip_adapter: unknown option colour; valid: profile, model, eds, params, host, settings" in out
 
