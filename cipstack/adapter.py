@@ -43,6 +43,9 @@ if TYPE_CHECKING:
 
 log = logging.getLogger(__name__)
 
+#: How long a control request that applies a fault waits for the ports it closes or opens.
+CONTROL_SETTLE_S = 2.0
+
 
 def network_interface(host: str, mac: bytes) -> NetworkInterface:
     """What the TCP/IP Interface object of a device on ``host`` reports: the address and the netmask
@@ -426,7 +429,9 @@ class Adapter:
             raise ControlDenied(str(exc)) from None
 
         async def settled() -> dict[str, Any]:
-            await faults.settle()
+            # The reply waits for the ports a fault closes or opens, but not for a long --off.
+            with contextlib.suppress(asyncio.TimeoutError):
+                await asyncio.wait_for(asyncio.shield(faults.settle()), CONTROL_SETTLE_S)
             return result
 
         return settled()

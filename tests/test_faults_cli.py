@@ -8,6 +8,7 @@ import json
 import re
 import socket
 import subprocess
+import time
 from collections.abc import Iterator
 from pathlib import Path
 
@@ -107,3 +108,25 @@ def test_help_names_every_fault(tmp_path: Path) -> None:
     assert result.returncode == 0
     for name in ("stop-producing", "refuse-forward-open", "power-cycle", "clear"):
         assert name in result.stdout
+
+
+def test_a_long_power_cycle_answers_before_the_power_is_back(tmp_path: Path) -> None:
+    port = free_port()
+    process = start(HOST, port, "--state", str(tmp_path / "acg.json"))
+    try:
+        started = time.monotonic()
+        result = drive(port, "fault", "power-cycle", "--off", "4s")
+        assert result.returncode == 0 and time.monotonic() - started < 4, result.stderr
+        with pytest.raises(ConnectionRefusedError):
+            socket.create_connection((HOST, port), timeout=1).close()
+        deadline = time.monotonic() + 10
+        while True:
+            try:
+                socket.create_connection((HOST, port), timeout=1).close()
+                break
+            except ConnectionRefusedError:
+                assert time.monotonic() < deadline
+                time.sleep(0.1)
+        assert time.monotonic() - started >= 4
+    finally:
+        stop(process)
