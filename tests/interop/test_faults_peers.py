@@ -8,22 +8,41 @@ next is accepted; a power cycle loses exactly the parameter that was written and
 from __future__ import annotations
 
 import logging
+import signal
 import time
+from collections.abc import Iterator
 
 import pytest
 from pycomm3 import CIPDriver
 from pycomm3.cip.data_types import SHORT_STRING, UINT
 
 from cipstack.devices.acg.registers import CLASS_64_INSTANCES
+from tests.ports import free_port
 from tests.test_cli import run
 
-from .conftest import IDENTITY, PeerProcess
+from .conftest import HOST, IDENTITY, PeerProcess, adapter_command, start_peer
 from .test_pycomm3 import get_single, ok, set_single
 
 pytestmark = pytest.mark.interop
 
 CM = CLASS_64_INSTANCES["CM"]
 SAVE_PARAMETERS = 0x03E0
+
+
+@pytest.fixture(scope="module")
+def adapter(tmp_path_factory: pytest.TempPathFactory) -> Iterator[PeerProcess]:
+    """``cipstack adapter`` of this module alone, with a state file of its own: what it saves (and its
+    faults) reach no other test's adapter."""
+    port = free_port()
+    directory = tmp_path_factory.mktemp("faults-peers")
+    peer = start_peer("cipstack adapter", [*adapter_command(HOST, port), "--state", str(directory / "acg.json")],
+                      HOST, port, directory / "adapter.log")
+    try:
+        yield peer
+    finally:
+        code = peer.stop(signal.SIGTERM)
+    assert code == 0, peer.log_text()
+    assert "Traceback" not in peer.log_text(), peer.log_text()
 
 
 def fault(adapter: PeerProcess, *args: str) -> None:
