@@ -347,6 +347,8 @@ class Adapter:
         return record
 
     async def close(self) -> None:
+        if self._faults is not None:
+            self._faults.shutdown()
         if self.modbus is not None:
             await self.modbus.close()
         if self.rtu is not None:

@@ -327,3 +327,16 @@ async def test_power_cycle_loses_exactly_the_unsaved_parameters(adapter: Adapter
     async with await connect(adapter) as scanner:
         assert await scanner.read(0x2A, 1, 102) == 55                       # saved: kept
         assert await scanner.read(0x2A, 1, 103) != 77                       # not saved: lost
+
+
+async def test_closing_leaves_no_fault_to_fire_later(tmp_path: Path) -> None:
+    adapter = Adapter(AdapterSettings(port=0, io_port=0, state_path=tmp_path / "acg.json"))
+    await adapter.start()
+    port = adapter.port
+    adapter.fault("unplug", **{"for": 0.1})
+    adapter.fault("power-cycle", off="0.1s")
+    await adapter.close()
+    await asyncio.sleep(0.3)                                                # past both: nothing opens again
+    with pytest.raises(ConnectionRefusedError):
+        socket.create_connection(("127.0.0.1", port), timeout=1).close()
+    assert not adapter.faults.active and adapter.target.router is adapter.device.router

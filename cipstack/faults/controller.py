@@ -137,6 +137,28 @@ class FaultController:
             for task in tasks:
                 await task
 
+    def shutdown(self) -> None:
+        """The adapter is closing: no fault's timer fires and no port opens again after it (an unplug
+        for a while, a power cycle still off); the layers go, so the closing adapter is as it was."""
+        for task in self._tasks:
+            task.cancel()
+        self._tasks.clear()
+        for fault in list(self.active.values()):
+            if fault.timer is not None:
+                fault.timer.cancel()
+                fault.timer = None
+        self.active.clear()
+        if self._io_layer is not None:
+            self._io_layer.uninstall(self.adapter.io_endpoint)
+            self._io_layer = None
+        if self._router_layer is not None:
+            self.adapter.target.router = self._router_layer.router
+            self._router_layer = None
+        if self._reply_delay is not None:
+            self._reply_delay[1].uninstall()
+            self._reply_delay = None
+        self.unplugged = False
+
     # -- bookkeeping -----------------------------------------------------------------------------------
     def _record(self, event: str, fault: Fault) -> None:
         wall = time.time()
