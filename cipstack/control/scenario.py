@@ -12,7 +12,8 @@ Each ``[[step]]`` waits for its trigger, then does one thing:
   ``clear = true`` (every fault; or ``clear = "NAME"``), or ``trip = "0x4200"``.
 * ``repeat = N``: the step N times in a row (each waits for its own trigger).
 
-Steps run in order; a step whose trigger does not come in time ends the scenario. Each step fired or
+Steps run in order; a step whose trigger does not come in time ends the scenario. A top-level
+``linger = "1s"`` keeps the device serving that long after the last step (the clients finish). Each step fired or
 missed is one line, with its time since the start, handed to ``report``; ``run`` returns whether every
 step fired. At the end every fault still active is cleared: nothing of a scenario outlives it.
 """
@@ -75,6 +76,8 @@ class Step:
 class Scenario:
     path: Path
     steps: list[Step] = field(default_factory=list)
+    #: How long the device goes on serving after the last step fired.
+    linger: float = 0.0
 
 
 def load(path: str | Path) -> Scenario:
@@ -85,13 +88,18 @@ def load(path: str | Path) -> Scenario:
         raise ScenarioError(f"{path}: {exc.strerror or exc}") from None
     except (tomllib.TOMLDecodeError, UnicodeDecodeError) as exc:
         raise ScenarioError(f"{path}: not TOML: {exc}") from None
-    unknown = set(document) - {"step"}
+    unknown = set(document) - {"step", "linger"}
     if unknown:
-        raise ScenarioError(f"{path}: unknown table or key {sorted(unknown)[0]!r} (a scenario is [[step]] tables)")
+        raise ScenarioError(f"{path}: unknown table or key {sorted(unknown)[0]!r} (a scenario is [[step]] tables "
+                            "and linger)")
+    try:
+        linger = parse_duration(document.get("linger", 0))
+    except FaultError as exc:
+        raise ScenarioError(f"{path}: linger: {exc}") from None
     raw_steps = document.get("step")
     if not isinstance(raw_steps, list) or not raw_steps:
         raise ScenarioError(f"{path}: no [[step]]")
-    return Scenario(path, [_step(path, index, raw) for index, raw in enumerate(raw_steps, start=1)])
+    return Scenario(path, [_step(path, index, raw) for index, raw in enumerate(raw_steps, start=1)], linger)
 
 
 def _step(path: Path, number: int, raw: Any) -> Step:
@@ -166,6 +174,8 @@ async def run(adapter: Adapter, scenario: Scenario, report: Callable[[str], None
                     fired_all = False
                     return False
                 line(f"{label} fired: {step.describe()}")
+        if scenario.linger:
+            await asyncio.sleep(scenario.linger)
         return fired_all
     finally:
         if adapter.faults.active:
