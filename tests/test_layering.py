@@ -26,7 +26,7 @@ ALLOWED = {
     "conformance": {"cip", "objects", "assemblies", "eip", "componet", "devices", "catalog", "eds", "scanner"},
     # On top (DESIGN): the fault model acts on a running adapter's transport, never the reverse.
     "faults": {"cip", "eip"},
-    "control": {"faults"},
+    "control": {"eip", "faults"},
     # The pytest plugin: fixtures over the in-process adapter, its faults and events, and the scanner.
     "testing": {"adapter", "control", "scanner", "devices", "eds"},
 }

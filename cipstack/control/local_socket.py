@@ -30,7 +30,7 @@ from collections.abc import Awaitable, Callable
 from pathlib import Path
 from typing import Any
 
-from .eip.limits import RateLimitedLog
+from ..eip.limits import RateLimitedLog
 
 log = logging.getLogger(__name__)
 
