@@ -237,10 +237,14 @@ def main(argv: Sequence[str] | None = None) -> int:
     parser.add_argument("--seconds", type=float, default=10.0, help="measured time of each part (default 10)")
     parser.add_argument("--only", choices=["a", "b", "c"], help="run one part")
     parser.add_argument("--json", action="store_true", help="one JSON object instead of the text report")
+    parser.add_argument("--http-poll", action="store_true",
+                        help="with the HTTP control API enabled and GET /status polled at 10 Hz throughout")
     args = parser.parse_args(argv)
     port, io_port = free_port(), free_port()
-    adapter = start_adapter(port, io_port)
+    http_port = free_port() if args.http_poll else None
+    adapter = start_adapter(port, io_port, *(["--http", f"127.0.0.1:{http_port}"] if http_port else []))
     results: dict[str, Any] = {"load_average": os.getloadavg()[0], "cpus": os.cpu_count()}
+    poller = HttpPoller(http_port) if http_port else None
     try:
         if args.only in (None, "a"):
             results["a_one_connection_1ms"] = single_connection_captured(port, io_port, args.seconds)
@@ -249,6 +253,8 @@ def main(argv: Sequence[str] | None = None) -> int:
         if args.only in (None, "b"):
             results["b_64_connections_10ms"] = run_precise(station_limit(port, io_port, args.seconds, adapter.pid))
     finally:
+        if poller is not None:
+            results["http_polls"] = poller.stop()
         stop_adapter(adapter)
     if args.json:
         print(json.dumps(results))
@@ -288,8 +294,40 @@ def main(argv: Sequence[str] | None = None) -> int:
         print(f"    timeouts {b['timeouts']} (target 0); T->O packets {b['t_to_o_packets']}, late {b['late']} "
               f"({b['late_pct']} %, target < 1 %), lost {b['lost']}")
         print(f"    adapter CPU share {b['adapter_cpu_share']} cores (target < 1.0)")
+    if "http_polls" in results:
+        polls = results["http_polls"]
+        print(f"HTTP API polled at 10 Hz throughout: {polls['answered']} answers, {polls['failed']} failures")
     print(f"load average {results['load_average']:.2f} on {results['cpus']} CPUs")
     return 0
+
+
+class HttpPoller:
+    """GET /status of the adapter's HTTP control API ten times a second, on a thread, until ``stop``."""
+
+    def __init__(self, port: int) -> None:
+        import threading
+
+        self.url = f"http://127.0.0.1:{port}/status"
+        self.answered = self.failed = 0
+        self._stop = threading.Event()
+        self._thread = threading.Thread(target=self._run, daemon=True)
+        self._thread.start()
+
+    def _run(self) -> None:
+        import urllib.request
+
+        while not self._stop.wait(0.1):
+            try:
+                with urllib.request.urlopen(self.url, timeout=2) as response:
+                    json.loads(response.read())
+                self.answered += 1
+            except (OSError, ValueError):
+                self.failed += 1
+
+    def stop(self) -> dict[str, int]:
+        self._stop.set()
+        self._thread.join(5)
+        return {"answered": self.answered, "failed": self.failed}
 
 
 if __name__ == "__main__":

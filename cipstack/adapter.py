@@ -3,12 +3,13 @@
 from __future__ import annotations
 
 import asyncio
+import contextlib
 import logging
 import signal
 from collections.abc import Awaitable, Callable
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 from .control import (
     ControlAddress,
@@ -18,6 +19,7 @@ from .control import (
     ControlTaken,
     default_control_path,
 )
+from .control.events import EventStream
 from .devices.acg.device import AcgDevice
 from .devices.acg.modbus_rtu import LineSettings
 from .devices.acg.modbus_server import ModbusTcpServer
@@ -32,10 +34,17 @@ from .eip.io_target import IoTarget
 from .eip.limits import DEFAULT_MAX_TCP_CONNECTIONS
 from .eip.server import DEFAULT_PORT, EncapsulationServer
 from .eip.target import DEFAULT_FRAME_TIMEOUT, EncapsulationTarget, TargetSettings
+from .faults import FaultController
 from .listening import ListenError, held_log_records
 from .objects.tcpip import NetworkInterface
 
+if TYPE_CHECKING:
+    from .faults import Fault
+
 log = logging.getLogger(__name__)
+
+#: How long a control request that applies a fault waits for the ports it closes or opens.
+CONTROL_SETTLE_S = 2.0
 
 
 def network_interface(host: str, mac: bytes) -> NetworkInterface:
@@ -86,6 +95,11 @@ class AdapterSettings:
     #: Modbus-RTU on the drive's RS-485 port: a serial device path, or "pty" for a new pseudo-terminal
     #: (None: off).
     rtu: str | None = None
+    #: HTTP control API (``cipstack.control.http``) on ``HOST:PORT`` (None: off); another address than
+    #: loopback only with ``http_allow_remote`` and a token.
+    http: str | None = None
+    http_token: str | None = None
+    http_allow_remote: bool = False
 
 
 class Adapter:
@@ -129,6 +143,10 @@ class Adapter:
         self.io: IoTarget | None = None
         self.io_endpoint: IoEndpoint | None = None
         self.control_server: ControlServer | None = None
+        #: The HTTP control API, while serving with ``settings.http``.
+        self.http_api: Any = None
+        self._faults: FaultController | None = None
+        self._events: EventStream | None = None
         profile = self.device.io_profile()
         if profile is not None:
             if s.max_io_connections is not None:
@@ -147,6 +165,35 @@ class Adapter:
     def port(self) -> int:
         return self.server.port
 
+    # -- faults (cipstack.faults) ---------------------------------------------------------------------
+    @property
+    def faults(self) -> FaultController:
+        """This device's faults: ``apply``, ``clear``, ``faults()``, ``history`` (see ``cipstack.faults``)."""
+        if self._faults is None:
+            # Imported with the adapter, not here: a first fault must not stall the loop on an import.
+            self._faults = FaultController(self)
+        return self._faults
+
+    @property
+    def events(self) -> EventStream:
+        """What happened, when (``cipstack.control.events``): connections, run/idle, the drive's state and
+        trips, parameter writes, faults. Watching starts on first use; nothing is paid before."""
+        if self._events is None:
+            self._events = EventStream(self)
+            self._events.start()
+        return self._events
+
+    def fault(self, name: str, **options: object) -> Fault:
+        """Apply the fault ``name`` now, options as the command line names them (``share=0.1``,
+        ``connection=0x...``, ``for_=2.0`` or ``**{"for": 2.0}``); see ``FaultController.apply``."""
+        if "for_" in options:
+            options["for"] = options.pop("for_")
+        return self.faults.apply(name, **options)
+
+    def clear_faults(self, which: int | str | None = None) -> list[Fault]:
+        """Clear every active fault, or one by id, or those of one name."""
+        return self.faults.clear(which)
+
     def _tick(self, now: float) -> None:
         """Advance the device to ``now`` and keep a timer at its next deadline (lost-command timers,
         the end of a ramp), so it changes on time even when nobody asks."""
@@ -164,7 +211,7 @@ class Adapter:
     def _on_device_timer(self) -> None:
         self._device_timer = None
         self._device_timer_at = None
-        self._tick(asyncio.get_running_loop().time())
+        self.target.tick(asyncio.get_running_loop().time())  # through the event stream's tap, if any
 
     async def start(self) -> None:
         """Listen on every port, each exclusively; a port that is taken raises ``ListenError``
@@ -234,6 +281,18 @@ class Adapter:
             await self.close()
             raise ListenError(*self._control_refusal(exc)) from None
         self.control_server = control
+        if self.settings.http is not None:
+            from .control.http import HttpApi, parse_listen
+
+            host, port = parse_listen(self.settings.http)
+            api = HttpApi({self.settings.host: self}, host, port, token=self.settings.http_token,
+                          allow_remote=self.settings.http_allow_remote)
+            try:
+                await api.start()
+            except OSError as exc:
+                await self.stop_serving()
+                raise ListenError(f"TCP {self.settings.http} (HTTP control API, --http)", exc) from None
+            self.http_api = api
 
     def _control_refusal(self, exc: OSError) -> tuple[str, str]:
         """Where and why the control socket cannot be had, and what to do: with ``--control``, another
@@ -248,7 +307,10 @@ class Adapter:
         return "control socket", reason
 
     async def stop_serving(self) -> None:
-        """Close the control socket, then every port; the last saves are written."""
+        """Close the HTTP API and the control socket, then every port; the last saves are written."""
+        if self.http_api is not None:
+            await self.http_api.close()
+            self.http_api = None
         if self.control_server is not None:
             await self.control_server.close()
             self.control_server = None
@@ -265,7 +327,28 @@ class Adapter:
         drive = self.device.drive
         return apply_parameters(drive, assignments, drive.time)
 
+    def keypad_parameter(self, code: str) -> dict[str, Any]:
+        """A keypad parameter by its code (the ACG's: ``drv``, ``ACC``, ``CM.23``...): its value in the
+        keypad's unit, its raw value, name and unit. ``LookupError`` for an unknown code, ``ValueError``
+        for a device without a keypad."""
+        from decimal import Decimal
+
+        from .devices.acg.registers import register_for_code
+
+        if not isinstance(self.device, AcgDevice):
+            raise ValueError("keypad parameters are the ACG's (profile acg)")
+        register = register_for_code(code)
+        raw = self.device.drive.read(register.address)
+        value = Decimal(raw) * Decimal(str(register.scale)) if register.scale != 1 else Decimal(raw)
+        record: dict[str, Any] = {"code": register.code, "name": register.name, "value": f"{value:f}", "raw": raw,
+                                  "unit": register.unit, "address": f"0x{register.address:04X}"}
+        if register.enum and raw in register.enum:
+            record["meaning"] = register.enum[raw]
+        return record
+
     async def close(self) -> None:
+        if self._faults is not None:
+            self._faults.shutdown()
         if self.modbus is not None:
             await self.modbus.close()
         if self.rtu is not None:
@@ -289,7 +372,7 @@ class Adapter:
     async def __aexit__(self, *exc: object) -> None:
         await self.close()
 
-    def control(self, request: dict[str, Any]) -> dict[str, Any]:
+    def control(self, request: dict[str, Any]) -> Any:
         """Serve one control-channel request (see ``cipstack.control``)."""
         now = asyncio.get_running_loop().time()
         self._tick(now)
@@ -307,7 +390,7 @@ class Adapter:
             except (KeyError, ValueError) as exc:
                 reason = exc.args[0] if exc.args else exc
                 raise ControlError(f"{reason}; valid codes: {self.device.trip_codes()}") from None
-            self._tick(now)
+            self.target.tick(now)  # through the event stream's tap, if any
             label = getattr(trip, "label", None) or str(trip)
             fault = getattr(trip, "fault_code", None)
             return {"result": f"tripped: {label}" + (f" (fault code 0x{fault:04X})" if fault is not None else ""),
@@ -320,7 +403,40 @@ class Adapter:
             if self.rtu is not None:   # what the RS-485 port made of its line: frames, replies, refusals
                 status["rtu"] = {"device": self.rtu.name, **self.rtu.slaves[0].counters.as_dict()}
             return status
-        raise ControlError(f"unknown command {command!r} (known: trip, status)")
+        if command in ("fault", "clear", "faults"):
+            return self._control_fault(command, request, now)
+        raise ControlError(f"unknown command {command!r} (known: trip, status, fault, clear, faults)")
+
+    def _control_fault(self, command: str, request: dict[str, Any], now: float) -> Any:
+        """``fault`` (name, options), ``clear`` (which: an id, a name, or none for all), ``faults``."""
+        from .faults import FaultError, FaultStateError, NoSuchConnection
+
+        faults = self.faults
+        if command == "faults":
+            return {"faults": [f.as_json(now) for f in faults.faults()]}
+        try:
+            if command == "clear":
+                cleared = faults.clear(request.get("which"))
+                result: dict[str, Any] = {"cleared": [f.as_json(now) for f in cleared],
+                                          "result": f"cleared {len(cleared)} fault(s)"}
+            else:
+                options = request.get("options") or {}
+                if not isinstance(options, dict):
+                    raise ControlError("fault options are a JSON object")
+                fault = faults.apply(str(request.get("name")), **options)
+                result = {"fault": fault.as_json(now), "result": f"fault {fault}"}
+        except FaultError as exc:
+            raise ControlError(str(exc)) from None
+        except (NoSuchConnection, FaultStateError) as exc:
+            raise ControlDenied(str(exc)) from None
+
+        async def settled() -> dict[str, Any]:
+            # The reply waits for the ports a fault closes or opens, but not for a long --off.
+            with contextlib.suppress(asyncio.TimeoutError):
+                await asyncio.wait_for(asyncio.shield(faults.settle()), CONTROL_SETTLE_S)
+            return result
+
+        return settled()
 
     async def _print_status_lines(self) -> None:
         last = None
@@ -332,8 +448,9 @@ class Adapter:
                 last = line
             await asyncio.sleep(0.2)
 
-    async def serve_forever(self) -> None:
-        """Serve until SIGINT or SIGTERM, then close cleanly."""
+    async def serve_forever(self, until: Callable[[Adapter], Awaitable[Any]] | None = None) -> Any:
+        """Serve until SIGINT or SIGTERM, or until ``until(self)`` (a scenario) is done, then close
+        cleanly; returns what ``until`` returned (None when a signal came first)."""
         loop = asyncio.get_running_loop()
         stop = asyncio.Event()
         for sig in (signal.SIGINT, signal.SIGTERM):
@@ -348,6 +465,9 @@ class Adapter:
         info = self.device.identity_info
         log.info("emulating %s (vendor %d, device type %d, product code %d, revision %d.%d)",
                  info.product_name, info.vendor_id, info.device_type, info.product_code, *info.revision)
+        task = asyncio.create_task(until(self)) if until is not None else None
+        if task is not None:
+            task.add_done_callback(lambda _: stop.set())
         try:
             await stop.wait()
         finally:
@@ -356,4 +476,11 @@ class Adapter:
                 loop.remove_signal_handler(sig)
             if printer is not None:
                 printer.cancel()
+            if task is not None and not task.done():
+                task.cancel()
+                with contextlib.suppress(asyncio.CancelledError):
+                    await task
             await self.stop_serving()
+        if task is None or task.cancelled():
+            return None
+        return task.result()

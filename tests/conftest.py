@@ -27,7 +27,7 @@ def isolated_user_directories(tmp_path_factory: pytest.TempPathFactory) -> Itera
 
 #: Modules whose tests also run on asyncio's own loop: a scanner inside an application's loop
 #: serves class 1 through asyncio's datagram transport and timers, not the precise loop's lane.
-BOTH_LOOPS = frozenset({"test_io_live", "test_io_session", "test_io_multicast", "test_acg_live"})
+BOTH_LOOPS = frozenset({"test_io_live", "test_io_session", "test_io_multicast", "test_acg_live", "test_faults"})
 
 
 def pytest_asyncio_loop_factories(config: pytest.Config, item: pytest.Item) -> dict[str, Callable[[], Any]]:

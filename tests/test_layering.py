@@ -24,6 +24,11 @@ ALLOWED = {
     # The battery sits on top: it may use what lies below (the codecs, the EDS reader, the
     # scanner's reading of an EDS) and nothing imports it but the command line.
     "conformance": {"cip", "objects", "assemblies", "eip", "componet", "devices", "catalog", "eds", "scanner"},
+    # On top (DESIGN): the fault model acts on a running adapter's transport, never the reverse.
+    "faults": {"cip", "eip"},
+    "control": {"eip", "faults"},
+    # The pytest plugin: fixtures over the in-process adapter, its faults and events, and the scanner.
+    "testing": {"adapter", "control", "scanner", "devices", "eds"},
 }
 
 #: The parts that sit on top: nothing else in the package imports them (DESIGN.md).

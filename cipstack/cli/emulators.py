@@ -8,6 +8,7 @@ import sys
 from typing import Any
 
 from .common import (
+    EXIT_FAILURE,
     EXIT_OK,
     EXIT_USAGE,
     UsageError,
@@ -38,7 +39,7 @@ def cmd_adapter(args: argparse.Namespace) -> int:
                                max_sessions=args.max_sessions, max_connections=args.max_connections,
                                io_port=args.io_port, control_path=args.control,
                                status_lines=not args.quiet, state_path=args.state, modbus_port=args.modbus_port,
-                               rtu=args.rtu, **_limit_settings(args))
+                               rtu=args.rtu, **_limit_settings(args), **_http_settings(args))
     try:
         adapter = Adapter(settings)
     except (StateFileError, ValueError, KeyError) as exc:
@@ -87,6 +88,23 @@ def _limit_settings(args: argparse.Namespace) -> dict[str, Any]:
     return limits
 
 
+def _http_settings(args: argparse.Namespace) -> dict[str, Any]:
+    """``--http HOST:PORT`` (with ``--http-token``, ``--http-allow-remote``), checked before anything listens."""
+    if args.http is None:
+        if args.http_token is not None or args.http_allow_remote:
+            raise UsageError("--http-token and --http-allow-remote go with --http HOST:PORT")
+        return {}
+    try:
+        from ..control.http import HttpApiError, check_settings
+    except ImportError:
+        raise UsageError("--http needs aiohttp: python3 -m pip install 'cipstack[http]'") from None
+    try:
+        check_settings(args.http, args.http_token, args.http_allow_remote)
+    except HttpApiError as exc:
+        raise UsageError(str(exc)) from None
+    return {"http": args.http, "http_token": args.http_token, "http_allow_remote": args.http_allow_remote}
+
+
 def _serve(adapter: Any, args: argparse.Namespace, command: str) -> int:
     """Run an emulator until SIGINT/SIGTERM; a port it cannot listen on (taken, or not an address of
     this machine) is one line naming the port and its option, and exit 2."""
@@ -94,8 +112,20 @@ def _serve(adapter: Any, args: argparse.Namespace, command: str) -> int:
     from ..eip.io_server import run_precise
     from ..listening import ListenError
 
+    scenario = getattr(args, "scenario", None)
+    until = None
+    if scenario is not None:
+        from ..control import scenario as scenarios
+
+        try:
+            loaded = scenarios.load(scenario)
+        except scenarios.ScenarioError as exc:
+            raise UsageError(str(exc)) from None
+
+        def until(running: Any) -> Any:
+            return scenarios.run(running, loaded, lambda line: print(line, flush=True))
     try:
-        run_precise(adapter.serve_forever())
+        fired = run_precise(adapter.serve_forever(until) if until is not None else adapter.serve_forever())
     except RtuPortError as exc:
         print(f"cipstack {command}: {exc}", file=sys.stderr)
         return EXIT_USAGE
@@ -105,6 +135,8 @@ def _serve(adapter: Any, args: argparse.Namespace, command: str) -> int:
     except OSError as exc:
         print(f"cipstack {command}: cannot listen on {args.host}:{args.port}: {exc.strerror or exc}", file=sys.stderr)
         return EXIT_USAGE
+    if scenario is not None and fired is not True:
+        return EXIT_FAILURE  # a step did not fire, or a signal ended the scenario first
     return EXIT_OK
 
 
@@ -146,7 +178,8 @@ def _adapter_from_eds(args: argparse.Namespace) -> int:
         print(f"cipstack adapter: {args.eds}:{issue.line}: warning: {issue.message}", file=sys.stderr, flush=True)
     settings = AdapterSettings(host=args.host, port=args.port, max_sessions=args.max_sessions,
                                max_connections=args.max_connections, io_port=args.io_port,
-                               control_path=args.control, status_lines=not args.quiet, **_limit_settings(args))
+                               control_path=args.control, status_lines=not args.quiet, **_limit_settings(args),
+                               **_http_settings(args))
     adapter = Adapter(settings, device=device)
     return _serve(adapter, args, "adapter")
 

@@ -82,6 +82,11 @@ def cmd_fleet(args: argparse.Namespace) -> int:
     except SpecError as exc:
         raise UsageError(str(exc)) from None
     addresses = describe_addresses(d.address for d in spec.devices)
+    from .emulators import _http_settings
+
+    http = _http_settings(args)
+    if http and spec.workers != 1:
+        raise UsageError(f"--http serves the devices of one process: add --workers 1 (not {spec.workers})")
 
     def ready(lines: list[str]) -> None:
         for line in lines:
@@ -92,7 +97,8 @@ def cmd_fleet(args: argparse.Namespace) -> int:
 
     try:
         if spec.workers == 1:
-            run_precise(serve_until_signalled(spec.devices, spec.port, spec.io_port, ready, rtu=spec.rtu))
+            run_precise(serve_until_signalled(spec.devices, spec.port, spec.io_port, ready, rtu=spec.rtu,
+                                              http=http or None))
         else:
             Supervisor(spec.devices, spec.port, spec.io_port, spec.workers).run(ready)
     except (ListenError, SpecError, RtuPortError) as exc:

@@ -190,6 +190,24 @@ COMMANDS: dict[tuple[str, ...], CommandText] = {
         (("cipstack drive trip 0x4200", "OverHeat on the ACG"),
          ("cipstack drive trip E05 --port 44819", "overload on the MX2 emulated on port 44819")),
     ),
+    ("drive", "fault"): CommandText(
+        "inject a fault into the running emulator, or clear faults",
+        "Inject a fault between the wire and the emulated device: class 1 (stop-producing, drop, duplicate, "
+        "reorder, delay, freeze-sequence, wrong-size, ignore-output, idle), explicit messaging "
+        "(delay-replies, error-status, refuse-forward-open, close-tcp, drop-sessions) or the whole device "
+        "(unplug, plug, power-cycle). A lasting fault stays until `cipstack drive fault clear` or for "
+        "--for DURATION; after it is cleared the device is what it would have been.",
+        (("cipstack drive fault stop-producing --for 2s", "the scanner's class 1 connection times out"),
+         ("cipstack drive fault refuse-forward-open 0x0113 --count 2", "the next two Forward_Opens refused"),
+         ("cipstack drive fault clear", "clear every active fault")),
+    ),
+    ("drive", "faults"): CommandText(
+        "the faults active in the running emulator",
+        "List the faults active in the running emulator: id, name, options, when applied and the time "
+        "left of one applied --for a while.",
+        (("cipstack drive faults", "the emulator on 127.0.0.1:44818"),
+         ("cipstack drive faults --json", "as JSON")),
+    ),
     ("drive", "status"): CommandText(
         "the emulated drive's status line",
         "Print the emulated drive's status line: drive state, direction, output and reference "

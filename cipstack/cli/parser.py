@@ -16,7 +16,7 @@ from .common import (
 )
 from .completion import cmd_completion
 from .conform import add_arguments as add_conform_arguments
-from .drive import _trip_code, cmd_drive_status, cmd_drive_trip
+from .drive import _trip_code, cmd_drive_fault, cmd_drive_faults, cmd_drive_status, cmd_drive_trip
 from .eds import cmd_eds_check, cmd_eds_generate, cmd_eds_show
 from .emulators import cmd_adapter, cmd_componet, cmd_models
 from .explicit import cmd_discover, cmd_get, cmd_identity, cmd_set
@@ -160,6 +160,10 @@ def build_parser(command: str | None = None) -> argparse.ArgumentParser:
                    help="set an ACG keypad parameter at start, in the keypad's unit; repeatable "
                         "(drv=4 Frq=8: run from the network)")
     p.add_argument("--quiet", action="store_true", help="no status line on stdout")
+    _add_http_arguments(p)
+    _complete(p.add_argument("--scenario", type=Path, metavar="FILE.toml",
+                             help="run this timeline of faults and actions (docs/scenarios.md), then exit: 0 when "
+                                  "every step fired, 1 when one did not"), _FILE)
     p.add_argument("--json", action="store_true", help=argparse.SUPPRESS)
     p.set_defaults(func=cmd_adapter)
 
@@ -182,6 +186,7 @@ def build_parser(command: str | None = None) -> argparse.ArgumentParser:
                                   "(default: fleet/ in the user's data directory)"), _DIRECTORY)
     p.add_argument("--param", action="append", metavar="CODE=VALUE",
                    help="set an ACG keypad parameter at start on every ACG device; repeatable")
+    _add_http_arguments(p)
     p.add_argument("--workers", type=number("workers"), metavar="N",
                    help=f"spread the devices over N processes, one event loop each (default {DEFAULT_WORKERS})")
     p.add_argument("--rtu", metavar="DEVICE",
@@ -302,12 +307,17 @@ def build_parser(command: str | None = None) -> argparse.ArgumentParser:
     p = sub.add_parser("drive")
     drive = p.add_subparsers(dest="drive_command", metavar="COMMAND", title="commands", required=True,
                              parser_class=_Parser)
-    for name, func in (("trip", cmd_drive_trip), ("status", cmd_drive_status)):
+    for name, func in (("trip", cmd_drive_trip), ("status", cmd_drive_status), ("fault", cmd_drive_fault),
+                       ("faults", cmd_drive_faults)):
         q = drive.add_parser(name)
         if name == "trip":
             q.add_argument("code", type=_trip_code,
                            help="fault code of the drive's manual (decimal or 0x hex: 0x4200 on the ACG, 5 on "
                                 "the MX2/RX) or its name (OverHeat, E05)")
+        if name == "fault":
+            q.add_argument("name", metavar="NAME", help="the fault (above), or clear [ID|NAME]")
+            q.add_argument("arguments", nargs=argparse.REMAINDER, metavar="OPTION",
+                           help="the fault's options (docs/faults.md), e.g. --share 0.1 --for 2s")
         q.add_argument("--host", default="127.0.0.1",
                        help="the emulator's address (its --host), which with --port finds its control socket "
                             "(default %(default)s)")
@@ -341,6 +351,15 @@ def build_parser(command: str | None = None) -> argparse.ArgumentParser:
         if action.dest in ("eds", "junit", "html"):
             _complete(action, _FILE)
     return parser
+
+
+def _add_http_arguments(p: argparse.ArgumentParser) -> None:
+    p.add_argument("--http", metavar="HOST:PORT",
+                   help="also serve the HTTP control API (docs/http.md) on this loopback address and port")
+    p.add_argument("--http-token", metavar="TOKEN",
+                   help="every HTTP request must carry Authorization: Bearer TOKEN")
+    p.add_argument("--http-allow-remote", action="store_true",
+                   help="let the HTTP API listen on and serve other than loopback (needs --http-token)")
 
 
 def _add_eds_commands(sub: Any) -> None:

@@ -117,6 +117,11 @@ class _TcpProtocol(asyncio.Protocol):
             self.server.closed(self, self._admitted_host, self.connection)
             self._admitted_host = None
 
+    def send_reply(self, out: bytes) -> None:
+        """Send reply bytes taken from the connection earlier (a reply held back for a while)."""
+        if self.transport is not None and not self.transport.is_closing():
+            self.transport.write(out)
+
     def write_buffer_size(self) -> int:
         """Reply bytes the transport holds because the socket would not take them."""
         return self.transport.get_write_buffer_size() if self.transport is not None else 0

@@ -191,6 +191,16 @@ class EncapsulationTarget:
                 self.stats.sessions_opened += 1
                 return handle
 
+    def drop_sessions(self) -> int:
+        """Forget every session, as a restarted target would; their TCP connections stay open, and a
+        request in one of them is answered 0x0064 (invalid session handle). Class 3 connections go
+        with their sessions. Returns how many sessions there were."""
+        owners = list(self.sessions.values())
+        self.sessions.clear()
+        for owner in owners:
+            owner.end_session()
+        return len(owners)
+
     # -- UDP ------------------------------------------------------------------------------------
     def datagram(self, data: bytes, local: SockAddr) -> tuple[bytes, float] | None:
         """Answer a UDP datagram: (reply, delay in seconds), or None to drop it."""
@@ -373,6 +383,13 @@ class EncapsulationConnection:
             self.target.idle_log("%s: no complete frame for %g s (encapsulation inactivity timeout); closing",
                                  self.peer, timeout, source=self.host, now=now)
             self.closing = True
+
+    def end_session(self) -> None:
+        """The target has forgotten this connection's session: its class 3 connections go, and the
+        repeated-frame shortcut (``receive``), which assumes the session, is forgotten too."""
+        self.session = None
+        self._repeat = self._repeat_request = self._repeat_context = b""
+        self.target.table.drop_owner(self)
 
     def connection_lost(self) -> None:
         """The TCP connection is gone: its session and class 3 connections go with it."""

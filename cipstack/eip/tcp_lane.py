@@ -173,6 +173,16 @@ class LaneTcpConnection:
             self._unsent = out[sent:]
             self.lane.watch(self._fd, _WRITABLE)  # and read nothing more until it has gone
 
+    def send_reply(self, out: bytes) -> None:
+        """Send reply bytes taken from the connection earlier (a reply held back for a while), after
+        whatever is still unsent."""
+        if self._closed:
+            return
+        if self._unsent:
+            self._unsent += out
+        else:
+            self._send(out)
+
     def _flush(self) -> None:
         unsent = self._unsent
         self._unsent = b""

@@ -13,6 +13,7 @@ import logging
 import resource
 import signal
 from collections.abc import Callable, Sequence
+from typing import Any
 
 from ..adapter import Adapter, AdapterSettings
 from ..control import describe
@@ -148,9 +149,10 @@ class DeviceSet:
 async def serve_until_signalled(devices: Sequence[FleetDevice], port: int, io_port: int,
                                 on_ready: Callable[[list[str]], None],
                                 signals: Sequence[int] = (signal.SIGINT, signal.SIGTERM),
-                                rtu: str | None = None) -> int:
+                                rtu: str | None = None, http: dict[str, Any] | None = None) -> int:
     """Serve ``devices`` until one of ``signals``; returns the signal that stopped them. ``rtu``:
-    the RS-485 line their ACG drives share (``DeviceSet``)."""
+    the RS-485 line their ACG drives share (``DeviceSet``); ``http``: the settings of one HTTP control
+    API for every device (``http``, ``http_token``, ``http_allow_remote``)."""
     loop = asyncio.get_running_loop()
     stop = asyncio.Event()
     received: list[int] = []
@@ -162,16 +164,39 @@ async def serve_until_signalled(devices: Sequence[FleetDevice], port: int, io_po
     for sig in signals:
         loop.add_signal_handler(sig, stop_on, sig)
     fleet = DeviceSet(devices, port, io_port, rtu)
+    api = None
     try:
         lines = await fleet.start()
+        if http is not None:
+            api = await _start_http(fleet.adapters, http)
         freeze_startup_objects()  # every device built: a full collection would stop them all at once
         on_ready(lines)
         await stop.wait()
     finally:
+        if api is not None:
+            await api.close()
         await fleet.stop()
         for sig in signals:
             loop.remove_signal_handler(sig)
     return received[0] if received else signal.SIGTERM
+
+
+async def _start_http(adapters: Sequence[Adapter], http: dict[str, Any]) -> Any:
+    """One HTTP control API for every device, each by its address (``host:port`` where hosts repeat)."""
+    from ..control.http import HttpApi, parse_listen
+    from ..listening import ListenError
+
+    hosts = [adapter.settings.host for adapter in adapters]
+    by_address = {(host if hosts.count(host) == 1 else f"{host}:{adapter.port}"): adapter
+                  for host, adapter in zip(hosts, adapters, strict=True)}
+    host, port = parse_listen(http["http"])
+    api = HttpApi(by_address, host, port, token=http.get("http_token"),
+                  allow_remote=http.get("http_allow_remote", False))
+    try:
+        await api.start()
+    except OSError as exc:
+        raise ListenError(f"TCP {http['http']} (HTTP control API, --http)", exc) from None
+    return api
 
 
 __all__ = ["DeviceSet", "build_adapter", "device_line", "serve_until_signalled"]

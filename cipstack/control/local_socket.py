@@ -1,4 +1,4 @@
-"""The emulator's control channel: a local Unix socket for test rigs (inject a trip, read status).
+"""The emulator's control channel: a local Unix socket for test rigs (trips, faults, status).
 
 Where it is: by default, on Linux, an abstract Unix socket named after the emulator's EtherNet/IP
 address and port (``@cipstack-adapter-UID-HOST-PORT``). Abstract names belong to the network
@@ -17,6 +17,7 @@ from __future__ import annotations
 import asyncio
 import contextlib
 import errno
+import inspect
 import json
 import logging
 import os
@@ -25,11 +26,11 @@ import socket
 import struct
 import sys
 import tempfile
-from collections.abc import Callable
+from collections.abc import Awaitable, Callable
 from pathlib import Path
 from typing import Any
 
-from .eip.limits import RateLimitedLog
+from ..eip.limits import RateLimitedLog
 
 log = logging.getLogger(__name__)
 
@@ -117,7 +118,8 @@ class ControlDenied(ControlError):
     """The emulator understood the request and its state refuses it (a trip while already tripped)."""
 
 
-Handler = Callable[[dict[str, Any]], dict[str, Any]]
+#: Serves one request: its reply, or an awaitable of it (a request that waits for the loop's work).
+Handler = Callable[[dict[str, Any]], dict[str, Any] | Awaitable[dict[str, Any]]]
 
 
 class ControlTaken(OSError):
@@ -184,7 +186,10 @@ class ControlServer:
                     request = json.loads(line)
                     if not isinstance(request, dict):
                         raise ControlError("a request is a JSON object")
-                    reply = {"ok": True, **self.handler(request)}
+                    answer = self.handler(request)
+                    if inspect.isawaitable(answer):
+                        answer = await answer
+                    reply = {"ok": True, **answer}
                 except (ControlError, ValueError, KeyError, TypeError) as exc:
                     reply = {"ok": False, "error": str(exc), "denied": isinstance(exc, ControlDenied)}
                 writer.write(json.dumps(reply).encode() + b"\n")

@@ -1,0 +1,364 @@
+"""The HTTP control API: status, faults, events and keypad parameters of running emulated devices,
+as JSON, for a test rig in any language (LabVIEW, TestStand, curl).
+
+It is aiohttp's server on the emulator's own event loop, a shell over the in-process API
+(``Adapter.control``, ``Adapter.faults``, ``Adapter.events``): it adds transport, no behaviour. One
+API serves every device of a process: ``/devices/{address}/...`` by the device's address (its host,
+or ``host:port``), and the same routes at the top for a process that runs one device.
+
+Limits (never trust the wire): it listens on loopback unless ``allow_remote`` is given, and then only
+with a bearer token, which every request must carry; a request from an address that is not loopback
+is refused (403) unless ``allow_remote``; bodies above ``MAX_BODY`` bytes are refused (413); at most
+``MAX_IN_FLIGHT`` requests are served at once (503 beyond); a malformed body is a 400 with a JSON
+body; nothing a client sends raises out of a handler. The description of every route is at
+``/openapi.json``.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import hmac
+import ipaddress
+import json
+import logging
+from collections.abc import Awaitable, Callable
+from typing import TYPE_CHECKING, Any
+
+from aiohttp import web
+
+from ..faults import FaultError, FaultStateError, NoSuchConnection
+
+if TYPE_CHECKING:
+    from ..adapter import Adapter
+
+log = logging.getLogger(__name__)
+
+MAX_BODY = 16 * 1024
+MAX_IN_FLIGHT = 32
+#: Events one ``GET .../events`` returns at most (the oldest after ``since`` first).
+MAX_EVENTS = 1000
+
+Handler = Callable[[web.Request], Awaitable[web.StreamResponse]]
+
+
+class HttpApiError(ValueError):
+    """A setting of the HTTP API that cannot be served (one line)."""
+
+
+def parse_listen(text: str) -> tuple[str, int]:
+    """``HOST:PORT`` of ``--http``."""
+    host, sep, port_text = text.rpartition(":")
+    if not sep or not host:
+        raise HttpApiError(f"--http {text!r} is not HOST:PORT (e.g. 127.0.0.1:8080)")
+    try:
+        port = int(port_text)
+        ipaddress.ip_address(host)
+    except ValueError:
+        raise HttpApiError(f"--http {text!r} is not HOST:PORT with an IPv4 address and a port number") from None
+    if not 0 <= port < 65536:
+        raise HttpApiError(f"--http port {port} out of range")
+    return host, port
+
+
+def check_settings(listen: str, token: str | None, allow_remote: bool) -> tuple[str, int]:
+    """``--http``, ``--http-token``, ``--http-allow-remote`` checked together; ``HttpApiError`` says why not."""
+    host, port = parse_listen(listen)
+    if not _is_loopback(host) and not allow_remote:
+        raise HttpApiError(f"--http {host}: not a loopback address; another address needs "
+                           "--http-allow-remote and --http-token")
+    if allow_remote and not token:
+        raise HttpApiError("--http-allow-remote needs --http-token (every request must carry it)")
+    return host, port
+
+
+def _is_loopback(host: str) -> bool:
+    try:
+        return ipaddress.ip_address(host).is_loopback
+    except ValueError:
+        return False
+
+
+def _error(status: int, message: str, **extra: Any) -> web.Response:
+    return web.json_response({"error": message, **extra}, status=status)
+
+
+class HttpApi:
+    def __init__(self, devices: dict[str, Adapter], host: str = "127.0.0.1", port: int = 0, *,
+                 token: str | None = None, allow_remote: bool = False) -> None:
+        """``devices``: by address (the host of each, or ``host:port`` when several share a host)."""
+        check_settings(f"{host}:{port}", token, allow_remote)
+        self.devices = devices
+        self.host = host
+        self.port = port
+        self.token = token
+        self.allow_remote = allow_remote
+        self._in_flight = 0
+        self._runner: web.AppRunner | None = None
+        self.app = self._build()
+
+    # -- serving -----------------------------------------------------------------------------------------
+    async def start(self) -> None:
+        for adapter in self.devices.values():
+            adapter.events.start()  # from now on every event is kept for GET .../events
+        runner = web.AppRunner(self.app, access_log=None, handle_signals=False)
+        await runner.setup()
+        site = web.TCPSite(runner, self.host, self.port, backlog=64, reuse_address=True)
+        try:
+            await site.start()
+        except OSError:
+            await runner.cleanup()
+            raise
+        self._runner = runner
+        server = site._server
+        if server is not None and server.sockets:  # type: ignore[union-attr]
+            self.port = server.sockets[0].getsockname()[1]  # type: ignore[union-attr]
+        log.info("HTTP control API on http://%s:%d/ (openapi.json)", self.host, self.port)
+
+    async def close(self) -> None:
+        if self._runner is not None:
+            await self._runner.cleanup()
+            self._runner = None
+
+    def _build(self) -> web.Application:
+        app = web.Application(client_max_size=MAX_BODY, middlewares=[self._guard])
+        routes = [
+            ("GET", "/status", self.status),
+            ("GET", "/faults", self.list_faults),
+            ("POST", "/faults", self.apply_fault),
+            ("DELETE", "/faults", self.clear_faults),
+            ("DELETE", "/faults/{fault}", self.clear_faults),
+            ("GET", "/events", self.list_events),
+            ("GET", "/parameters/{code}", self.get_parameter),
+            ("PUT", "/parameters/{code}", self.put_parameter),
+            ("POST", "/trip", self.trip),
+        ]
+        for method, path, handler in routes:
+            app.router.add_route(method, path, handler)
+            app.router.add_route(method, "/devices/{device}" + path, handler)
+        app.router.add_get("/devices", self.list_devices)
+        app.router.add_get("/openapi.json", self.openapi)
+        return app
+
+    @web.middleware
+    async def _guard(self, request: web.Request, handler: Handler) -> web.StreamResponse:
+        peer = request.remote or ""
+        if not self.allow_remote and not _is_loopback(peer):
+            return _error(403, f"{peer} is not loopback: this API serves loopback only (--http-allow-remote)")
+        if self.token is not None:
+            given = request.headers.get("Authorization", "")
+            if not hmac.compare_digest(given.encode(), f"Bearer {self.token}".encode()):
+                return _error(401, "a request needs the header Authorization: Bearer TOKEN (--http-token)")
+        if self._in_flight >= MAX_IN_FLIGHT:
+            return _error(503, f"{MAX_IN_FLIGHT} requests in progress; try again")
+        self._in_flight += 1
+        try:
+            return await handler(request)
+        except web.HTTPException as exc:
+            if exc.status < 400:
+                raise
+            return _error(exc.status, exc.reason)
+        except Exception:  # a request must never take the API down
+            log.exception("HTTP %s %s", request.method, request.path)
+            return _error(500, "internal error (logged)")
+        finally:
+            self._in_flight -= 1
+
+    # -- helpers ----------------------------------------------------------------------------------------
+    def _device(self, request: web.Request) -> Adapter:
+        name = request.match_info.get("device")
+        if name is None:
+            if len(self.devices) != 1:
+                raise _NotFound(f"this process runs {len(self.devices)} devices: use /devices/ADDRESS/...",
+                                devices=sorted(self.devices))
+            return next(iter(self.devices.values()))
+        adapter = self.devices.get(name)
+        if adapter is None:
+            raise _NotFound(f"no device {name!r}", devices=sorted(self.devices))
+        return adapter
+
+    async def _body(self, request: web.Request) -> dict[str, Any]:
+        try:
+            body = await request.json(loads=json.loads) if request.can_read_body else {}
+        except (ValueError, UnicodeDecodeError):
+            raise _BadRequest("the body is not JSON") from None
+        if not isinstance(body, dict):
+            raise _BadRequest("the body is a JSON object")
+        return body
+
+    # -- handlers ---------------------------------------------------------------------------------------
+    async def list_devices(self, request: web.Request) -> web.Response:
+        return web.json_response([{"address": name, "port": adapter.port,
+                                   "product_name": adapter.device.identity_info.product_name}
+                                  for name, adapter in sorted(self.devices.items())])
+
+    @staticmethod
+    def _handled(handler: Callable[[HttpApi, web.Request], Awaitable[web.Response]]) -> Any:
+        async def wrapped(self: HttpApi, request: web.Request) -> web.Response:
+            try:
+                return await handler(self, request)
+            except _NotFound as exc:
+                return _error(404, str(exc), **exc.extra)
+            except (_BadRequest, FaultError) as exc:
+                return _error(400, str(exc))
+            except NoSuchConnection as exc:
+                return _error(404, str(exc))
+            except FaultStateError as exc:
+                return _error(409, str(exc))
+        wrapped.__doc__ = handler.__doc__
+        return wrapped
+
+    @_handled
+    async def status(self, request: web.Request) -> web.Response:
+        adapter = self._device(request)
+        reply = adapter.control({"command": "status"})
+        return web.json_response({**reply, "faults": len(adapter.faults.active)})
+
+    @_handled
+    async def list_faults(self, request: web.Request) -> web.Response:
+        adapter = self._device(request)
+        now = asyncio.get_running_loop().time()
+        return web.json_response([f.as_json(now) for f in adapter.faults.faults()])
+
+    @_handled
+    async def apply_fault(self, request: web.Request) -> web.Response:
+        adapter = self._device(request)
+        body = await self._body(request)
+        name, options = body.get("name"), body.get("options", {})
+        if not isinstance(name, str):
+            raise _BadRequest("the body names a fault: {\"name\": \"stop-producing\", \"options\": {...}}")
+        if not isinstance(options, dict):
+            raise _BadRequest("options are a JSON object")
+        fault = adapter.faults.apply(name, **options)
+        await adapter.faults.settle()
+        return web.json_response(fault.as_json(asyncio.get_running_loop().time()), status=201)
+
+    @_handled
+    async def clear_faults(self, request: web.Request) -> web.Response:
+        adapter = self._device(request)
+        which: int | str | None = request.match_info.get("fault")
+        if isinstance(which, str) and which.isdigit():
+            which = int(which)
+        try:
+            cleared = adapter.faults.clear(which)
+        except FaultError as exc:
+            raise _NotFound(str(exc)) from None
+        await adapter.faults.settle()
+        return web.json_response([f.as_json() for f in cleared])
+
+    @_handled
+    async def list_events(self, request: web.Request) -> web.Response:
+        adapter = self._device(request)
+        try:
+            since = int(request.query.get("since", "0"))
+        except ValueError:
+            raise _BadRequest("since is an event number") from None
+        events = adapter.events.since(since)[:MAX_EVENTS]
+        return web.json_response([e.as_json() for e in events])
+
+    @_handled
+    async def get_parameter(self, request: web.Request) -> web.Response:
+        adapter = self._device(request)
+        try:
+            return web.json_response(adapter.keypad_parameter(request.match_info["code"]))
+        except LookupError as exc:
+            raise _NotFound(str(exc.args[0] if exc.args else exc)) from None
+        except ValueError as exc:
+            raise _BadRequest(str(exc)) from None
+
+    @_handled
+    async def put_parameter(self, request: web.Request) -> web.Response:
+        adapter = self._device(request)
+        body = await self._body(request)
+        code = request.match_info["code"]
+        if "value" not in body or isinstance(body["value"], (dict, list, bool)) or body["value"] is None:
+            raise _BadRequest("the body is {\"value\": VALUE}, in the keypad's unit")
+        try:
+            adapter.keypad_parameter(code)
+            adapter.apply_keypad_parameters([f"{code}={body['value']}"])
+            return web.json_response(adapter.keypad_parameter(code))
+        except LookupError as exc:
+            raise _NotFound(str(exc.args[0] if exc.args else exc)) from None
+        except ValueError as exc:
+            raise _BadRequest(str(exc)) from None
+
+    @_handled
+    async def trip(self, request: web.Request) -> web.Response:
+        adapter = self._device(request)
+        body = await self._body(request)
+        from . import ControlDenied, ControlError
+
+        try:
+            return web.json_response(adapter.control({"command": "trip", "code": body.get("code")}))
+        except ControlDenied as exc:
+            return _error(409, str(exc))
+        except (ControlError, KeyError, TypeError) as exc:
+            raise _BadRequest(str(exc)) from None
+
+    async def openapi(self, request: web.Request) -> web.Response:
+        return web.json_response(openapi_document())
+
+
+class _NotFound(LookupError):
+    def __init__(self, message: str, **extra: Any) -> None:
+        super().__init__(message)
+        self.extra = extra
+
+    def __str__(self) -> str:
+        return str(self.args[0])
+
+
+class _BadRequest(ValueError):
+    pass
+
+
+def openapi_document() -> dict[str, Any]:
+    """The OpenAPI 3.0 description of the API (``/openapi.json``)."""
+    from ..faults import FAULTS
+
+    error = {"description": "an error",
+             "content": {"application/json": {"schema": {"$ref": "#/components/schemas/Error"}}}}
+    ok = {"description": "JSON", "content": {"application/json": {"schema": {"type": "object"}}}}
+    device = {"name": "device", "in": "path", "required": True, "schema": {"type": "string"},
+              "description": "the device's address (its host, or host:port)"}
+    paths: dict[str, Any] = {}
+
+    def route(path: str, method: str, summary: str, body: dict[str, Any] | None = None,
+              params: list[dict[str, Any]] | None = None, codes: tuple[str, ...] = ("400", "404")) -> None:
+        operation: dict[str, Any] = {"summary": summary, "responses": {"200": ok, **{c: error for c in codes}}}
+        if body is not None:
+            operation["requestBody"] = {"required": True, "content": {"application/json": {"schema": body}}}
+        for prefix, extra in (("", []), ("/devices/{device}", [device])):
+            entry = dict(operation)
+            if params or extra:
+                entry["parameters"] = [*extra, *(params or [])]
+            paths.setdefault(prefix + path, {})[method] = entry
+
+    fault_body = {"type": "object", "required": ["name"], "properties": {
+        "name": {"type": "string", "enum": list(FAULTS)},
+        "options": {"type": "object", "description": "the fault's options, as `cipstack drive fault` names them "
+                                                     "(share, every, by, jitter, connection, for, ...)"}}}
+    code = {"name": "code", "in": "path", "required": True, "schema": {"type": "string"},
+            "description": "keypad code (drv, Frq, ACC, CM.23, ...)"}
+    fault_id = {"name": "fault", "in": "path", "required": True, "schema": {"type": "string"},
+                "description": "a fault's id, or a fault name (all of that name)"}
+    route("/status", "get", "the drive's state, sessions and connections")
+    route("/faults", "get", "the faults active")
+    route("/faults", "post", "apply a fault", fault_body, codes=("400", "404", "409"))
+    route("/faults", "delete", "clear every active fault")
+    route("/faults/{fault}", "delete", "clear one fault", params=[fault_id])
+    route("/events", "get", "the events after number `since`", params=[
+        {"name": "since", "in": "query", "schema": {"type": "integer", "minimum": 0}}])
+    route("/parameters/{code}", "get", "a keypad parameter", params=[code])
+    route("/parameters/{code}", "put", "set a keypad parameter (not saved)",
+          {"type": "object", "required": ["value"], "properties": {"value": {"type": ["string", "number"]}}},
+          params=[code])
+    route("/trip", "post", "trip the drive", {"type": "object", "required": ["code"],
+                                              "properties": {"code": {"type": ["string", "integer"]}}},
+          codes=("400", "404", "409"))
+    paths["/devices"] = {"get": {"summary": "the devices of this process", "responses": {"200": ok}}}
+    return {"openapi": "3.0.3",
+            "info": {"title": "cipstack emulator control", "version": "1"},
+            "paths": paths,
+            "components": {"schemas": {"Error": {"type": "object", "required": ["error"],
+                                                 "properties": {"error": {"type": "string"}}}},
+                           "securitySchemes": {"token": {"type": "http", "scheme": "bearer"}}}}

@@ -1,0 +1,217 @@
+"""Scenarios: a timeline of faults and device actions, at times or on events, from a TOML file
+(``cipstack adapter --scenario FILE.toml``).
+
+Each ``[[step]]`` waits for its trigger, then does one thing:
+
+* trigger: ``at = "2s"`` (after the scenario starts), or ``on = "KIND"`` (the next event of that
+  kind after the previous step fired: ``connection opened`` is a Forward_Open accepted, ``run``, ``idle``,
+  ``connection timed out``, ``trip``, ``parameter write``...; see ``cipstack.control.events``), or
+  ``on = "frequency"`` with ``hz = 30`` (the drive's output frequency reaches it); ``after = "0.5s"``
+  waits that much more; ``within = "10s"`` is how long the trigger may take (default 30 s).
+* action: ``fault = "NAME"`` with ``options = {...}`` (as ``cipstack drive fault`` takes them),
+  ``clear = true`` (every fault; or ``clear = "NAME"``), or ``trip = "0x4200"``.
+* ``repeat = N``: the step N times in a row (each waits for its own trigger).
+
+Steps run in order; a step whose trigger does not come in time ends the scenario. A top-level
+``linger = "1s"`` keeps the device serving that long after the last step (the clients finish). Each step fired or
+missed is one line, with its time since the start, handed to ``report``; ``run`` returns whether every
+step fired. At the end every fault still active is cleared: nothing of a scenario outlives it.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import sys
+from collections.abc import Callable
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import TYPE_CHECKING, Any
+
+from ..faults import FaultError, FaultRequest
+from ..faults.model import parse_duration
+
+if sys.version_info >= (3, 11):
+    import tomllib
+else:  # pragma: no cover
+    import tomli as tomllib
+
+if TYPE_CHECKING:
+    from ..adapter import Adapter
+
+DEFAULT_WITHIN = 30.0
+_STEP_KEYS = {"at", "on", "hz", "after", "within", "fault", "options", "clear", "trip", "repeat", "name"}
+
+
+class ScenarioError(ValueError):
+    """A scenario file that cannot be run (one line naming the file and the step)."""
+
+
+@dataclass(frozen=True)
+class Step:
+    number: int
+    name: str
+    at: float | None = None
+    on: str | None = None
+    hz: float | None = None
+    after: float = 0.0
+    within: float = DEFAULT_WITHIN
+    fault: FaultRequest | None = None
+    clear: bool | str = False
+    trip: str | int | None = None
+    repeat: int = 1
+
+    def describe(self) -> str:
+        if self.fault is not None:
+            what = f"fault {self.fault.describe()}"
+        elif self.clear:
+            what = "clear" + (f" {self.clear}" if isinstance(self.clear, str) else "")
+        else:
+            what = f"trip {self.trip}"
+        when = (f"at {self.at:g}s" if self.at is not None else
+                f"on frequency {self.hz:g} Hz" if self.on == "frequency" else f"on {self.on}")
+        return f"{what} ({when}{f' + {self.after:g}s' if self.after else ''})"
+
+
+@dataclass
+class Scenario:
+    path: Path
+    steps: list[Step] = field(default_factory=list)
+    #: How long the device goes on serving after the last step fired.
+    linger: float = 0.0
+
+
+def load(path: str | Path) -> Scenario:
+    path = Path(path)
+    try:
+        document = tomllib.loads(path.read_text(encoding="utf-8"))
+    except OSError as exc:
+        raise ScenarioError(f"{path}: {exc.strerror or exc}") from None
+    except (tomllib.TOMLDecodeError, UnicodeDecodeError) as exc:
+        raise ScenarioError(f"{path}: not TOML: {exc}") from None
+    unknown = set(document) - {"step", "linger"}
+    if unknown:
+        raise ScenarioError(f"{path}: unknown table or key {sorted(unknown)[0]!r} (a scenario is [[step]] tables "
+                            "and linger)")
+    try:
+        linger = parse_duration(document.get("linger", 0))
+    except FaultError as exc:
+        raise ScenarioError(f"{path}: linger: {exc}") from None
+    raw_steps = document.get("step")
+    if not isinstance(raw_steps, list) or not raw_steps:
+        raise ScenarioError(f"{path}: no [[step]]")
+    return Scenario(path, [_step(path, index, raw) for index, raw in enumerate(raw_steps, start=1)], linger)
+
+
+def _step(path: Path, number: int, raw: Any) -> Step:
+    where = f"{path}: step {number}"
+    if not isinstance(raw, dict):
+        raise ScenarioError(f"{where}: not a table")
+    unknown = set(raw) - _STEP_KEYS
+    if unknown:
+        raise ScenarioError(f"{where}: unknown key {sorted(unknown)[0]!r}; valid: {', '.join(sorted(_STEP_KEYS))}")
+    try:
+        at = parse_duration(raw["at"]) if "at" in raw else None
+        after = parse_duration(raw.get("after", 0))
+        within = parse_duration(raw.get("within", DEFAULT_WITHIN))
+        on = raw.get("on")
+        if (at is None) == (on is None):
+            raise ScenarioError(f"{where}: one trigger, at = TIME or on = EVENT")
+        if on is not None and not isinstance(on, str):
+            raise ScenarioError(f"{where}: on names an event kind")
+        hz = raw.get("hz")
+        if (on == "frequency") != (hz is not None) or (hz is not None and not isinstance(hz, (int, float))):
+            raise ScenarioError(f"{where}: on = \"frequency\" goes with hz = NUMBER")
+        actions = [k for k in ("fault", "clear", "trip") if k in raw]
+        if len(actions) != 1:
+            raise ScenarioError(f"{where}: one action, fault = NAME, clear = true or trip = CODE")
+        fault = None
+        if "fault" in raw:
+            options = raw.get("options", {})
+            if not isinstance(options, dict):
+                raise ScenarioError(f"{where}: options is a table")
+            fault = FaultRequest.build(raw["fault"], options)
+        repeat = raw.get("repeat", 1)
+        if not isinstance(repeat, int) or isinstance(repeat, bool) or not 1 <= repeat <= 1000:
+            raise ScenarioError(f"{where}: repeat is a whole number 1..1000")
+        clear = raw.get("clear", False)
+        if not isinstance(clear, (bool, str)):
+            raise ScenarioError(f"{where}: clear is true or a fault's name")
+    except FaultError as exc:
+        raise ScenarioError(f"{where}: {exc}") from None
+    return Step(number, str(raw.get("name", f"step {number}")), at, on, float(hz) if hz is not None else None,
+                after, within, fault, clear, raw.get("trip"), repeat)
+
+
+async def run(adapter: Adapter, scenario: Scenario, report: Callable[[str], None]) -> bool:
+    """Run the steps on ``adapter``; True when every one fired."""
+    loop = asyncio.get_running_loop()
+    events = adapter.events
+    start = loop.time()
+    mark = events.events[-1].number if events.events else 0
+    fired_all = True
+
+    def line(text: str) -> None:
+        report(f"{loop.time() - start:8.3f}s  {text}")
+
+    line(f"scenario {scenario.path.name}: {sum(s.repeat for s in scenario.steps)} step(s)")
+    try:
+        for step in scenario.steps:
+            for round_ in range(1, step.repeat + 1):
+                label = step.name + (f" ({round_}/{step.repeat})" if step.repeat > 1 else "")
+                try:
+                    mark = await _trigger(adapter, step, start, mark)
+                except asyncio.TimeoutError:
+                    line(f"{label} did not fire: no {step.describe()} within {step.within:g}s")
+                    fired_all = False
+                    return False
+                if step.after:
+                    await asyncio.sleep(step.after)
+                try:
+                    _act(adapter, step)
+                    await adapter.faults.settle()
+                except Exception as exc:  # a step refused by the device's state: said, and the scenario ends
+                    line(f"{label} failed: {step.describe()}: {exc}")
+                    fired_all = False
+                    return False
+                line(f"{label} fired: {step.describe()}")
+        if scenario.linger:
+            await asyncio.sleep(scenario.linger)
+        return fired_all
+    finally:
+        if adapter.faults.active:
+            adapter.faults.clear()
+            await adapter.faults.settle()
+        line("scenario " + ("complete: every step fired" if fired_all else "incomplete") +
+             "; no fault left active")
+
+
+async def _trigger(adapter: Adapter, step: Step, start: float, mark: int) -> int:
+    """Wait for ``step``'s trigger; returns the number of the last event seen (the next step's mark)."""
+    loop = asyncio.get_running_loop()
+    events = adapter.events
+    if step.at is not None:
+        await asyncio.sleep(max(0.0, start + step.at - loop.time()))
+        return events.events[-1].number if events.events else mark
+    if step.on == "frequency":
+        async def reached() -> None:
+            while True:
+                adapter.target.tick(loop.time())
+                fields = adapter.device.status_fields() or {}
+                if float(fields.get("output_frequency_hz") or 0.0) >= (step.hz or 0.0):
+                    return
+                await asyncio.sleep(0.01)
+        await asyncio.wait_for(reached(), step.within)
+        return events.events[-1].number if events.events else mark
+    event = await events.wait_for(step.on or "", step.within, after=mark)
+    return event.number
+
+
+def _act(adapter: Adapter, step: Step) -> None:
+    if step.fault is not None:
+        adapter.faults.apply(step.fault)
+    elif step.clear:
+        adapter.faults.clear(step.clear if isinstance(step.clear, str) else None)
+    else:
+        reply = adapter.control({"command": "trip", "code": step.trip})
+        if not isinstance(reply, dict):  # pragma: no cover - a trip is answered at once
+            raise RuntimeError("trip")

@@ -1,0 +1,294 @@
+"""The fault model: every fault the emulator can inject, its options, and how a request names one.
+
+One table (``FAULTS``) declares each fault: its name, what it acts on, the options it takes and
+whether it lasts (until cleared or for ``--for DURATION``) or happens once. The command line, the
+control socket and the Python API all parse and check a request against this table, so a fault
+and its options are written down once.
+
+A request is a name and options, as the command line gives them (``drop --share 0.1 --for 2s``)
+or as a mapping (``{"share": 0.1, "for": 2.0}``); ``parse_arguments`` and ``FaultRequest.build``
+return the same ``FaultRequest``. Anything unknown raises ``FaultError`` whose message is one line
+listing what is valid.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Callable, Mapping, Sequence
+from dataclasses import dataclass, field
+from typing import Any
+
+
+class FaultError(ValueError):
+    """A fault request that names an unknown fault or option, or a bad value (one line)."""
+
+
+class NoSuchConnection(LookupError):
+    """A fault aimed at a class 1 connection that is not open (one line naming the open ones)."""
+
+
+def parse_duration(value: object) -> float:
+    """``2``, ``2.5``, ``500ms``, ``2s``, ``1.5`` (seconds), or a number."""
+    if isinstance(value, bool):
+        raise FaultError(f"{value!r} is not a duration (e.g. 2s, 500ms)")
+    if isinstance(value, (int, float)):
+        seconds = float(value)
+    else:
+        text = str(value).strip().lower()
+        scale = 1.0
+        if text.endswith("ms"):
+            text, scale = text[:-2], 0.001
+        elif text.endswith("us"):
+            text, scale = text[:-2], 1e-6
+        elif text.endswith("s"):
+            text = text[:-1]
+        try:
+            seconds = float(text) * scale
+        except ValueError:
+            raise FaultError(f"{value!r} is not a duration (e.g. 2s, 500ms)") from None
+    if not math.isfinite(seconds) or seconds < 0:
+        raise FaultError(f"duration {value!r} is not a finite time of 0 or more")
+    return seconds
+
+
+def parse_integer(value: object, low: int = 0, high: int = 0xFFFFFFFF) -> int:
+    """A whole number, decimal or 0x hex, within ``low..high``."""
+    if isinstance(value, bool):
+        raise FaultError(f"{value!r} is not a number")
+    if isinstance(value, int):
+        number = value
+    else:
+        try:
+            number = int(str(value).strip(), 0)
+        except ValueError:
+            raise FaultError(f"{value!r} is not a number (decimal or 0x hex)") from None
+    if not low <= number <= high:
+        raise FaultError(f"{value!r} is out of range {low}..{high}")
+    return number
+
+
+def parse_share(value: object) -> float:
+    """A share of packets: more than 0, at most 1 (``0.1``, or ``10%``)."""
+    text = str(value).strip()
+    try:
+        share = float(text[:-1]) / 100 if text.endswith("%") else float(text)
+    except ValueError:
+        raise FaultError(f"{value!r} is not a share (e.g. 0.1 or 10%)") from None
+    if not 0 < share <= 1:
+        raise FaultError(f"share {value!r} is not in (0, 1]")
+    return share
+
+
+def parse_status(value: object) -> tuple[int, tuple[int, ...]]:
+    """A CIP status: ``GENERAL`` or ``GENERAL/EXTENDED`` (``0x08``, ``0x01/0x0100``)."""
+    text = str(value).strip()
+    general_text, _, extended_text = text.partition("/")
+    general = parse_integer(general_text, 1, 0xFF)
+    extended = (parse_integer(extended_text, 0, 0xFFFF),) if extended_text else ()
+    return general, extended
+
+
+def parse_host(value: object) -> str:
+    text = str(value).strip()
+    parts = text.split(".")
+    if len(parts) != 4 or not all(p.isdigit() and int(p) <= 255 for p in parts):
+        raise FaultError(f"originator {value!r} is not an IPv4 address")
+    return text
+
+
+@dataclass(frozen=True)
+class Option:
+    name: str
+    parse: Callable[[object], Any]
+    help: str
+    metavar: str = "VALUE"
+
+
+CONNECTION = Option("connection", lambda v: parse_integer(v), "one class 1 connection (its O->T or T->O id)", "ID")
+ORIGINATOR = Option("originator", parse_host, "the class 1 connections of one originator address", "HOST")
+FOR = Option("for", parse_duration, "clear the fault after this long", "DURATION")
+SHARE = Option("share", parse_share, "a random share of the packets (0.1 or 10%)", "SHARE")
+EVERY = Option("every", lambda v: parse_integer(v, 1, 1_000_000), "every Nth packet", "N")
+BY = Option("by", parse_duration, "how long (default 10ms)", "DURATION")
+JITTER = Option("jitter", parse_duration, "plus or minus up to this much, at random", "DURATION")
+SIZE = Option("size", lambda v: parse_integer(v, 0, 65000), "data bytes sent (default: one fewer)", "N")
+COUNT = Option("count", lambda v: parse_integer(v, 1, 1_000_000), "how many times (then it clears itself)", "N")
+STATUS = Option("status", parse_status, "general status, or general/extended (0x08, 0x01/0x0100)", "STATUS")
+SERVICE = Option("service", lambda v: parse_integer(v, 0, 0x7F), "only this service code", "CODE")
+CLASS = Option("class", lambda v: parse_integer(v, 0, 0xFFFF), "only requests to this class", "ID")
+INSTANCE = Option("instance", lambda v: parse_integer(v, 0, 0xFFFFFFFF), "only this instance", "ID")
+ATTRIBUTE = Option("attribute", lambda v: parse_integer(v, 0, 0xFFFF), "only this attribute", "ID")
+OFF = Option("off", parse_duration, "how long the power stays off (default 0)", "DURATION")
+EXTENDED = Option("status", lambda v: parse_integer(v, 0, 0xFFFF),
+                  "the Connection Manager's extended status (0x0100, 0x0106, 0x0113, 0x0315, ...)", "STATUS")
+
+#: Where a fault acts: on class 1 datagrams, on explicit requests and the encapsulation, on the device.
+CLASS1, EXPLICIT, DEVICE = "class 1", "explicit", "device"
+
+
+@dataclass(frozen=True)
+class FaultKind:
+    name: str
+    where: str
+    summary: str
+    options: tuple[Option, ...] = ()
+    #: A positional argument (its option): ``refuse-forward-open 0x0113``.
+    positional: Option | None = None
+    #: Happens once (an action), rather than lasting until cleared.
+    once: bool = False
+    #: Options the fault needs (one of each group).
+    requires: tuple[tuple[str, ...], ...] = ()
+
+    @property
+    def option_names(self) -> tuple[str, ...]:
+        names = [o.name for o in self.options]
+        if not self.once:
+            names.append("for")
+        return tuple(names)
+
+    def usage(self) -> str:
+        parts = [self.name]
+        if self.positional is not None:
+            parts.append(self.positional.metavar)
+        parts += [f"[--{o.name} {o.metavar}]" for o in self.options]
+        if not self.once:
+            parts.append("[--for DURATION]")
+        return " ".join(parts)
+
+
+_SELECT = (CONNECTION, ORIGINATOR)
+
+FAULTS: dict[str, FaultKind] = {kind.name: kind for kind in (
+    FaultKind("stop-producing", CLASS1, "no T->O data: the originator's connection times out", _SELECT),
+    FaultKind("drop", CLASS1, "drop a share or every Nth T->O packet", (*_SELECT, SHARE, EVERY),
+              requires=(("share", "every"),)),
+    FaultKind("duplicate", CLASS1, "send every (or every Nth) T->O packet twice", (*_SELECT, EVERY)),
+    FaultKind("reorder", CLASS1, "swap each two consecutive T->O packets", _SELECT),
+    FaultKind("delay", CLASS1, "delay T->O packets", (*_SELECT, BY, JITTER)),
+    FaultKind("freeze-sequence", CLASS1, "T->O packets keep one CIP sequence count (no new data)", _SELECT),
+    FaultKind("wrong-size", CLASS1, "T->O data of the wrong size", (*_SELECT, SIZE)),
+    FaultKind("ignore-output", CLASS1, "O->T data not given to the device (it keeps its last command)", _SELECT),
+    FaultKind("idle", CLASS1, "O->T run/idle header handed to the device as idle", _SELECT),
+    FaultKind("delay-replies", EXPLICIT, "delay every explicit reply (TCP)", (BY, JITTER)),
+    FaultKind("error-status", EXPLICIT, "answer matching requests with a chosen status",
+              (STATUS, SERVICE, CLASS, INSTANCE, ATTRIBUTE, COUNT), requires=(("status",),)),
+    FaultKind("refuse-forward-open", EXPLICIT, "refuse the next Forward_Opens with a Connection Manager status",
+              (COUNT,), positional=EXTENDED),
+    FaultKind("close-tcp", EXPLICIT, "close every TCP connection (sessions and class 3 go with them)", once=True),
+    FaultKind("drop-sessions", EXPLICIT, "forget every session (their TCP connections stay open)", once=True),
+    FaultKind("unplug", DEVICE, "silent on every port: TCP refused, no UDP, no class 1 (until plug)"),
+    FaultKind("plug", DEVICE, "end an unplug", once=True),
+    FaultKind("power-cycle", DEVICE, "power loss: connections gone, unsaved parameters lost", (OFF,), once=True),
+)}
+
+
+def valid_faults() -> str:
+    return ", ".join(FAULTS)
+
+
+def kind_of(name: str) -> FaultKind:
+    kind = FAULTS.get(name)
+    if kind is None:
+        raise FaultError(f"unknown fault {name!r}; valid: {valid_faults()}")
+    return kind
+
+
+@dataclass(frozen=True)
+class FaultRequest:
+    """A fault by name with its checked options (``for``: the duration, None: until cleared)."""
+
+    name: str
+    options: Mapping[str, Any] = field(default_factory=dict)
+
+    @property
+    def kind(self) -> FaultKind:
+        return FAULTS[self.name]
+
+    @property
+    def duration(self) -> float | None:
+        value = self.options.get("for")
+        return None if value is None else float(value)
+
+    @classmethod
+    def build(cls, name: str, options: Mapping[str, object] | None = None) -> FaultRequest:
+        """Check ``options`` (raw values: text or numbers) against the fault ``name``."""
+        if not isinstance(name, str):
+            raise FaultError(f"a fault is named by text; valid: {valid_faults()}")
+        kind = kind_of(name)
+        options = dict(options or {})
+        checked: dict[str, Any] = {}
+        allowed = {o.name: o for o in kind.options}
+        if kind.positional is not None:
+            allowed[kind.positional.name] = kind.positional
+        if not kind.once:
+            allowed["for"] = FOR
+        for key, value in options.items():
+            key = str(key).replace("_", "-")
+            option = allowed.get(key)
+            if option is None:
+                valid = ", ".join(f"--{n}" for n in allowed) or "none"
+                raise FaultError(f"unknown option --{key} for {name}; valid: {valid}")
+            if value is None:
+                continue
+            try:
+                checked[key] = option.parse(value)
+            except FaultError as exc:
+                raise FaultError(f"{name} --{key}: {exc}") from None
+        if kind.positional is not None and kind.positional.name not in checked:
+            raise FaultError(f"{name} needs its {kind.positional.metavar}: {kind.usage()}")
+        for group in kind.requires:
+            if not any(g in checked for g in group):
+                raise FaultError(f"{name} needs {' or '.join('--' + g for g in group)}: {kind.usage()}")
+        if "connection" in checked and "originator" in checked:
+            raise FaultError(f"{name}: --connection or --originator, not both")
+        if "share" in checked and "every" in checked:
+            raise FaultError(f"{name}: --share or --every, not both")
+        return cls(name, checked)
+
+    def describe(self) -> str:
+        parts = [self.name]
+        for key, value in self.options.items():
+            parts.append(f"--{key} {format_value(key, value)}")
+        return " ".join(parts)
+
+    def as_json(self) -> dict[str, Any]:
+        """Options as plain JSON values (a status as ``0x01/0x0100``)."""
+        return {key: (format_value(key, value) if key == "status" else value) for key, value in self.options.items()}
+
+
+def format_value(key: str, value: Any) -> str:
+    if key == "status" and isinstance(value, tuple):
+        general, extended = value
+        return f"0x{general:02X}" + "".join(f"/0x{e:04X}" for e in extended)
+    if key == "status" and isinstance(value, int):
+        return f"0x{value:04X}"
+    if key == "connection" and isinstance(value, int):
+        return f"0x{value:08X}"
+    if isinstance(value, float) and key in ("for", "by", "jitter", "off"):
+        return f"{value:g}s"
+    return str(value)
+
+
+def parse_arguments(name: str, arguments: Sequence[str]) -> FaultRequest:
+    """A fault as the command line gives it: ``NAME [POSITIONAL] [--option VALUE]...`` (also
+    ``--option=VALUE``)."""
+    kind = kind_of(name)
+    options: dict[str, object] = {}
+    tokens = list(arguments)
+    index = 0
+    while index < len(tokens):
+        token = tokens[index]
+        index += 1
+        if token.startswith("--"):
+            key, equals, value = token[2:].partition("=")
+            if not equals:
+                if index >= len(tokens):
+                    raise FaultError(f"{name} --{key} needs a value: {kind.usage()}")
+                value = tokens[index]
+                index += 1
+            options[key] = value
+        elif kind.positional is not None and kind.positional.name not in options:
+            options[kind.positional.name] = token
+        else:
+            raise FaultError(f"{name}: unexpected argument {token!r}: {kind.usage()}")
+    return FaultRequest.build(name, options)

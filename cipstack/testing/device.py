@@ -1,0 +1,172 @@
+"""An emulated device for a test: an ``Adapter`` on its own event loop in a thread of its own, on a
+free loopback port, with a temporary state file, driven from a test's thread (sync or async).
+
+The device runs beside the test, not inside its event loop: a blocking client (``SyncScanner``,
+pycomm3) in a sync test and an async ``Scanner`` in an async test reach it alike, over real sockets.
+Every call on the handle runs on the device's loop (``run``); faults and events are the adapter's
+own (``Adapter.faults``, ``Adapter.events``), seen through it."""
+
+from __future__ import annotations
+
+import asyncio
+import threading
+from collections.abc import Awaitable, Callable, Sequence
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any, TypeVar
+
+from ..adapter import Adapter, AdapterSettings, network_interface
+from ..control.events import Event
+
+T = TypeVar("T")
+
+#: How long a call on the device's loop may take before the test is told.
+CALL_TIMEOUT = 30.0
+
+
+@dataclass
+class DeviceOptions:
+    """What device a test wants: a profile (and model) with keypad parameters, or an EDS file."""
+
+    profile: str = "acg"
+    model: str | None = None
+    eds: str | Path | None = None
+    #: Keypad parameters set at start, as ``cipstack adapter --param`` takes them (``drv=4``).
+    params: Sequence[str] = ()
+    host: str = "127.0.0.1"
+    state_path: Path | None = None
+    settings: dict[str, Any] = field(default_factory=dict)
+
+
+class EmulatedDevice:
+    """A running emulated device and the calls a test makes on it."""
+
+    def __init__(self, options: DeviceOptions) -> None:
+        self.options = options
+        self.loop = asyncio.new_event_loop()
+        self._thread = threading.Thread(target=self.loop.run_forever, name="cipstack-device", daemon=True)
+        self._thread.start()
+        try:
+            self.adapter: Adapter = self.run(self._start)
+        except BaseException:
+            self._stop_loop()
+            raise
+
+    async def _start(self) -> Adapter:
+        options = self.options
+        settings = AdapterSettings(host=options.host, port=0, io_port=0, profile=options.profile,
+                                   model=options.model, state_path=options.state_path, **options.settings)
+        device = None
+        if options.eds is not None:
+            from ..devices.base import DeviceLimits
+            from ..devices.profiles import DEFAULT_MAC
+            from ..eds.emulated_device import build_eds_device
+            from ..eds.reader import read_eds
+
+            device = build_eds_device(read_eds(str(options.eds)), network_interface(options.host, DEFAULT_MAC),
+                                      DeviceLimits(settings.max_sessions, settings.max_connections))
+        adapter = Adapter(settings, device=device)
+        if options.params:
+            adapter.apply_keypad_parameters(list(options.params))
+        await adapter.start()
+        adapter.events  # noqa: B018 (watching starts now, so every event of the test is kept)
+        return adapter
+
+    # -- where it is ------------------------------------------------------------------------------------
+    @property
+    def host(self) -> str:
+        return self.options.host
+
+    @property
+    def port(self) -> int:
+        return self.adapter.port
+
+    @property
+    def address(self) -> str:
+        """``HOST:PORT``, as a scanner takes it."""
+        return f"{self.host}:{self.port}"
+
+    @property
+    def io_port(self) -> int:
+        """The class 1 UDP port (``target_io_port`` of a scanner's class 1 connection)."""
+        endpoint = self.adapter.io_endpoint
+        if endpoint is None:
+            raise AttributeError("this device has no class 1 I/O")
+        return endpoint.port
+
+    # -- calls on the device's loop -------------------------------------------------------------------------
+    def run(self, function: Callable[[], Awaitable[T] | T], timeout: float = CALL_TIMEOUT) -> T:
+        """Run ``function`` on the device's loop (awaited if it returns an awaitable); its result."""
+        async def call() -> T:
+            result = function()
+            if asyncio.iscoroutine(result) or isinstance(result, asyncio.Future):
+                return await result  # type: ignore[no-any-return]
+            return result  # type: ignore[return-value]
+
+        return asyncio.run_coroutine_threadsafe(call(), self.loop).result(timeout)
+
+    def fault(self, name: str, **options: Any) -> dict[str, Any]:
+        """Apply a fault (``cipstack.faults``; ``for_=2.0`` for ``--for``), once its ports are closed or
+        opened; its record (id, name, options)."""
+        async def apply() -> dict[str, Any]:
+            fault = self.adapter.fault(name, **options)
+            await self.adapter.faults.settle()
+            return fault.as_json(self.loop.time())
+
+        return self.run(apply)
+
+    def clear_faults(self, which: int | str | None = None) -> list[dict[str, Any]]:
+        async def clear() -> list[dict[str, Any]]:
+            cleared = self.adapter.clear_faults(which)
+            await self.adapter.faults.settle()
+            return [f.as_json() for f in cleared]
+
+        return self.run(clear)
+
+    def faults(self) -> list[dict[str, Any]]:
+        """The faults active now."""
+        return self.run(lambda: [f.as_json(self.loop.time()) for f in self.adapter.faults.faults()])
+
+    def events(self, since: int = 0) -> list[Event]:
+        """The events since event number ``since``, oldest first."""
+        return self.run(lambda: self.adapter.events.since(since))
+
+    def wait_for(self, kind: str | Callable[[Event], bool], timeout: float = 10.0, after: int = 0) -> Event:
+        """Block until an event of ``kind`` (after event number ``after``); for sync tests."""
+        return self.run(lambda: self.adapter.events.wait_for(kind, timeout, after), timeout + 5)
+
+    async def event(self, kind: str | Callable[[Event], bool], timeout: float = 10.0, after: int = 0) -> Event:
+        """Await an event of ``kind`` without blocking the test's own loop; for async tests."""
+        future = asyncio.run_coroutine_threadsafe(self.adapter.events.wait_for(kind, timeout, after), self.loop)
+        return await asyncio.wrap_future(future)
+
+    def status(self) -> dict[str, Any]:
+        """What ``cipstack drive status --json`` reports: the drive's fields, sessions and connections."""
+        return self.run(lambda: self.adapter.control({"command": "status"}))
+
+    def trip(self, code: int | str) -> dict[str, Any]:
+        return self.run(lambda: self.adapter.control({"command": "trip", "code": code}))
+
+    # -- the end ------------------------------------------------------------------------------------------
+    def close(self) -> None:
+        if self.loop.is_closed():
+            return
+        try:
+            async def stop() -> None:
+                await self.adapter.faults.settle()
+                await self.adapter.close()
+
+            self.run(stop)
+        finally:
+            self._stop_loop()
+
+    def _stop_loop(self) -> None:
+        self.loop.call_soon_threadsafe(self.loop.stop)
+        self._thread.join(10)
+        self.loop.close()
+
+    def __enter__(self) -> EmulatedDevice:
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.close()

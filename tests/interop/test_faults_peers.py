@@ -1,0 +1,92 @@
+"""Faults seen by a peer nobody here wrote: pycomm3 against `cipstack adapter` in its own process,
+the faults injected with `cipstack drive fault` over the control socket.
+
+A refused Forward_Open carries the chosen Connection Manager status to pycomm3, twice, and the
+next is accepted; a power cycle loses exactly the parameter that was written and not saved
+(seed 001, "Saving Parameters Defined by Communication")."""
+
+from __future__ import annotations
+
+import logging
+import signal
+import time
+from collections.abc import Iterator
+
+import pytest
+from pycomm3 import CIPDriver
+from pycomm3.cip.data_types import SHORT_STRING, UINT
+
+from cipstack.devices.acg.registers import CLASS_64_INSTANCES
+from tests.ports import free_port
+from tests.test_cli import run
+
+from .conftest import HOST, IDENTITY, PeerProcess, adapter_command, start_peer
+from .test_pycomm3 import get_single, ok, set_single
+
+pytestmark = pytest.mark.interop
+
+CM = CLASS_64_INSTANCES["CM"]
+SAVE_PARAMETERS = 0x03E0
+
+
+@pytest.fixture(scope="module")
+def adapter(tmp_path_factory: pytest.TempPathFactory) -> Iterator[PeerProcess]:
+    """``cipstack adapter`` of this module alone, with a state file of its own: what it saves (and its
+    faults) reach no other test's adapter."""
+    port = free_port()
+    directory = tmp_path_factory.mktemp("faults-peers")
+    peer = start_peer("cipstack adapter", [*adapter_command(HOST, port), "--state", str(directory / "acg.json")],
+                      HOST, port, directory / "adapter.log")
+    try:
+        yield peer
+    finally:
+        code = peer.stop(signal.SIGTERM)
+    assert code == 0, peer.log_text()
+    assert "Traceback" not in peer.log_text(), peer.log_text()
+
+
+def fault(adapter: PeerProcess, *args: str) -> None:
+    result = run("drive", "fault", *args, "--host", adapter.host, "--port", str(adapter.port))
+    assert result.returncode == 0, result.stderr
+
+
+def test_refused_forward_open_carries_the_chosen_status(adapter: PeerProcess,
+                                                        caplog: pytest.LogCaptureFixture) -> None:
+    """pycomm3 tries a connection twice (a Large_Forward_Open, then a Forward_Open): both refused."""
+    fault(adapter, "refuse-forward-open", "0x0100", "--count", "2")
+    drv = CIPDriver(adapter.address)
+    drv.open()
+    try:
+        with caplog.at_level(logging.ERROR), pytest.raises(Exception, match="did not connect"):
+            get_single(drv, 1, 1, 7, SHORT_STRING, connected=True)
+        failures = [r.getMessage() for r in caplog.records if "forward_open failed" in r.getMessage()]
+        assert len(failures) == 2 and all(f.endswith("Connection in use  (01, 100)") for f in failures), failures
+    finally:
+        drv.close()
+    drv = CIPDriver(adapter.address)                                           # the third is accepted
+    drv.open()
+    try:
+        assert ok(get_single(drv, 1, 1, 1, UINT, connected=True)) == IDENTITY["vendor_id"]
+    finally:
+        drv.close()
+
+
+def write_register(drv: CIPDriver, address: int, value: int) -> None:
+    """A drive register over CIP: named in CM.51, set through smart-scaling assembly 121 (seed 000)."""
+    set_single(drv, 0x64, CM, 51, UINT.encode(address))
+    set_single(drv, 0x04, 121, 3, UINT.encode(value))
+
+
+def test_power_cycle_loses_exactly_the_unsaved_parameter(adapter: PeerProcess) -> None:
+    with CIPDriver(adapter.address) as drv:
+        set_single(drv, 0x2A, 1, 102, UINT.encode(44))                        # ACC 4.4 s
+        write_register(drv, SAVE_PARAMETERS, 0)
+        write_register(drv, SAVE_PARAMETERS, 1)                               # 0 -> 1 saves every parameter
+        set_single(drv, 0x2A, 1, 103, UINT.encode(66))                        # dEC 6.6 s, not saved
+        before = (ok(get_single(drv, 0x2A, 1, 102, UINT)), ok(get_single(drv, 0x2A, 1, 103, UINT)))
+        assert before == (44, 66)
+        fault(adapter, "power-cycle", "--off", "200ms")
+    time.sleep(0.5)
+    with CIPDriver(adapter.address) as drv:
+        after = (ok(get_single(drv, 0x2A, 1, 102, UINT)), ok(get_single(drv, 0x2A, 1, 103, UINT)))
+    assert after[0] == 44 and after[1] != 66

@@ -1,0 +1,152 @@
+"""Scenarios (``cipstack adapter --scenario FILE.toml``): the three examples of docs/scenarios.md run
+against a real adapter process with our scanner doing its part; the run prints what happened when,
+and its exit status says whether every step fired. A scenario file that cannot run is one line, exit 2."""
+
+from __future__ import annotations
+
+import asyncio
+import re
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+from cipstack.cip.status import CipError
+from cipstack.cip.types import UINT
+from cipstack.devices.acg.registers import CLASS_64_INSTANCES
+from cipstack.devices.profiles import catalog_for
+from cipstack.eip.io_originator import IoTimeoutError
+from cipstack.scanner import Scanner
+from tests.cli_errors import one_line_error
+from tests.ports import free_port
+from tests.test_cli import run
+from tests.waiting import wait_for
+
+ROOT = Path(__file__).resolve().parents[1]
+EXAMPLES = ROOT / "examples" / "scenarios"
+CATALOG = catalog_for(259, 100)
+CM = CLASS_64_INSTANCES["CM"]
+
+
+def start(tmp_path: Path, scenario: str, *args: str) -> tuple[subprocess.Popen[str], int, int]:
+    port, io_port = free_port(), free_port()
+    process = subprocess.Popen([sys.executable, "-m", "cipstack", "adapter", "--port", str(port), "--io-port",
+                                str(io_port), "--quiet", "--state", str(tmp_path / "acg.json"), "--control",
+                                str(tmp_path / "control.sock"), "--scenario", str(EXAMPLES / scenario), *args],
+                               stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    import socket
+
+    def accepting() -> bool:
+        try:
+            socket.create_connection(("127.0.0.1", port), timeout=0.2).close()
+            return True
+        except OSError:
+            return False
+    wait_for(accepting, 20, "the adapter")
+    return process, port, io_port
+
+
+def finish(process: subprocess.Popen[str]) -> tuple[int, list[str]]:
+    out, err = process.communicate(timeout=60)
+    assert "Traceback" not in err, err
+    return process.returncode, out.splitlines()
+
+
+async def test_comm_loss_during_a_ramp(tmp_path: Path) -> None:
+    process, port, io_port = start(tmp_path, "comm_loss_during_ramp.toml", "--param", "drv=4", "--param", "Frq=8",
+                                   "--param", "ACC=2")
+    try:
+        async with await Scanner.connect(f"127.0.0.1:{port}", catalog=CATALOG) as scanner:
+            with pytest.raises(IoTimeoutError):
+                async with scanner.io_connection(output=21, input=71, rpi=0.010, timeout_multiplier=1,
+                                                 target_io_port=io_port) as io:
+                    io.output.speed_reference = 1800
+                    io.output.run_forward = True
+                    async for _ in io.updates():
+                        pass
+        code, lines = await asyncio.get_running_loop().run_in_executor(None, finish, process)
+    finally:
+        if process.poll() is None:
+            process.kill()
+    assert code == 0, lines
+    assert re.fullmatch(r" +\d+\.\d{3}s  ramping fired: fault stop-producing --for 0\.5s \(on frequency 10 Hz\)",
+                        lines[1]), lines
+    assert "the scanner gave up fired" in lines[2] and lines[-1].endswith("complete: every step fired; no fault "
+                                                                          "left active")
+
+
+async def test_forward_open_refused_twice_then_accepted(tmp_path: Path) -> None:
+    process, port, io_port = start(tmp_path, "forward_open_refused_twice.toml")
+    try:
+        refused = []
+        async with await Scanner.connect(f"127.0.0.1:{port}", catalog=CATALOG) as scanner:
+            for _ in range(3):
+                try:
+                    async with scanner.io_connection(output=21, input=71, rpi=0.010, target_io_port=io_port) as io:
+                        await io.wait_input(lambda image: True, 5)
+                except CipError as exc:
+                    refused.append(exc.extended[0])
+        code, lines = await asyncio.get_running_loop().run_in_executor(None, finish, process)
+    finally:
+        if process.poll() is None:
+            process.kill()
+    assert refused == [0x0113, 0x0113]
+    assert code == 0 and [line.split("s  ", 1)[1] for line in lines[1:]] == [
+        "refuse two fired: fault refuse-forward-open --status 0x0113 --count 2 (at 0s)",
+        "accepted fired: clear (on connection opened)",
+        "scenario complete: every step fired; no fault left active"], lines
+
+
+async def test_power_cycle_with_an_unsaved_parameter(tmp_path: Path) -> None:
+    process, port, _ = start(tmp_path, "power_cycle_unsaved.toml")
+    try:
+        async with await Scanner.connect(f"127.0.0.1:{port}", catalog=CATALOG) as scanner:
+            await scanner.set_attribute_single(0x2A, 1, 102, 55)                  # ACC 5.5 s
+            await scanner.set_attribute_single(0x64, CM, 51, 0x03E0, UINT)        # CM.51 names 0x03E0
+            await scanner.set_attribute_single(0x04, 121, 3, UINT.encode(0))
+            await scanner.set_attribute_single(0x04, 121, 3, UINT.encode(1))      # 0 -> 1: saved
+            await scanner.set_attribute_single(0x2A, 1, 103, 77)                  # dEC 7.7 s, not saved
+        code, lines = await asyncio.get_running_loop().run_in_executor(None, finish, process)
+    finally:
+        if process.poll() is None:
+            process.kill()
+    assert code == 0, lines
+    assert [line.split("s  ", 1)[1] for line in lines[1:]][-2:] == [
+        "power cycle fired: fault power-cycle --off 0.3s (on parameter write + 0.2s)",
+        "scenario complete: every step fired; no fault left active"]
+    # What the drive came back with is in its state file: the saved ACC, and dEC is not there.
+    import json
+    saved = json.loads((tmp_path / "acg.json").read_text())["parameters"]
+    assert saved["0x1F01"] == 55 and saved.get("0x1F02") != 77
+
+
+def test_a_step_that_does_not_fire_is_exit_1(tmp_path: Path) -> None:
+    scenario = tmp_path / "never.toml"
+    scenario.write_text('[[step]]\non = "trip"\nwithin = "0.3s"\nclear = true\n')
+    port = free_port()
+    result = subprocess.run([sys.executable, "-m", "cipstack", "adapter", "--port", str(port), "--io-port", "0",
+                             "--quiet", "--state", str(tmp_path / "s.json"), "--control", str(tmp_path / "c.sock"),
+                             "--scenario", str(scenario)], capture_output=True, text=True, timeout=30)
+    assert result.returncode == 1
+    assert "step 1 did not fire: no clear (on trip) within 0.3s" in result.stdout
+
+
+@pytest.mark.parametrize(("text", "message"), [
+    ("[[step]]\nat = \"1s\"\nfault = \"stop\"\n", "step 1: unknown fault 'stop'; valid: stop-producing"),
+    ("[[step]]\nfault = \"unplug\"\n", "step 1: one trigger, at = TIME or on = EVENT"),
+    ("[[step]]\nat = \"1s\"\n", "step 1: one action, fault = NAME, clear = true or trip = CODE"),
+    ("[[step]]\nat = \"1s\"\nclear = true\ncolour = 1\n", "step 1: unknown key 'colour'"),
+    ("[[step\n", "not TOML"),
+])
+def test_a_scenario_that_cannot_run_is_one_line(tmp_path: Path, text: str, message: str) -> None:
+    scenario = tmp_path / "bad.toml"
+    scenario.write_text(text)
+    result = run("adapter", "--port", "0", "--scenario", str(scenario))
+    assert result.returncode == 2 and message in one_line_error(result)
+
+
+def test_the_documentation_shows_the_example_files() -> None:
+    page = (ROOT / "docs" / "scenarios.md").read_text()
+    for example in sorted(EXAMPLES.glob("*.toml")):
+        assert example.read_text() in page, example.name

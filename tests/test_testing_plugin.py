@@ -1,0 +1,98 @@
+"""The pytest plugin (``cipstack.testing``) as a user's suite meets it: pytest run in another process
+on test files that use its fixtures, sync and async, with markers and the factory; and the example
+suite of a scanner program's comm-loss handling (examples/comm_loss)."""
+
+from __future__ import annotations
+
+import subprocess
+import sys
+import textwrap
+from pathlib import Path
+
+if sys.version_info >= (3, 11):
+    import tomllib
+else:
+    import tomli as tomllib
+
+ROOT = Path(__file__).resolve().parents[1]
+
+SUITE = '''
+import asyncio
+
+import pytest
+
+from cipstack.scanner import Scanner
+
+
+@pytest.mark.cip_adapter(profile="mx2")
+def test_marker_chooses_the_device(cip_adapter, cip_scanner):
+    assert cip_scanner.read(0x01, 1, 7) == cip_adapter.adapter.device.identity_info.product_name
+    assert cip_adapter.options.state_path.name == "adapter.json"
+
+
+def test_factory_and_fleet(cip_adapter_factory, cip_fleet):
+    rx = cip_adapter_factory(profile="rx")
+    assert len(cip_fleet) == 2 and len({d.port for d in [rx, *cip_fleet]}) == 3
+    assert "RX" in rx.adapter.device.identity_info.product_name
+
+
+@pytest.mark.cip_fleet(count=3)
+def test_fleet_count(cip_fleet):
+    assert len(cip_fleet) == 3
+
+
+@pytest.mark.asyncio
+async def test_async_faults_and_events(cip_adapter):
+    scanner = await Scanner.connect(cip_adapter.address)
+    async with scanner, scanner.io_connection(output=21, input=71, rpi=0.01, timeout_multiplier=1,
+                                              target_io_port=cip_adapter.io_port):
+        await cip_adapter.event("connection opened")
+        fault = cip_adapter.fault("unplug")
+        assert [f["name"] for f in cip_adapter.faults()] == ["unplug"] and fault["id"] == 1
+        event = await cip_adapter.event("connection timed out")
+        assert event.fields["originator"] == "127.0.0.1"
+
+
+def test_sync_wait_for_a_trip(cip_adapter):
+    cip_adapter.trip(0x4200)
+    assert cip_adapter.wait_for("trip", 5).fields["trip"] == "OverHeat"
+
+
+EDS = {eds!r}
+
+
+@pytest.mark.cip_adapter(eds=EDS)
+def test_an_eds_device(cip_adapter, cip_scanner):
+    assert cip_adapter.options.state_path is None
+    assert cip_scanner.read(0x01, 1, 1) == cip_adapter.adapter.device.identity_info.vendor_id
+
+
+@pytest.mark.cip_adapter(colour="red")
+def test_a_bad_marker_option(cip_adapter):
+    pass
+'''
+
+
+def pytest_in_subprocess(*args: str, cwd: Path) -> subprocess.CompletedProcess[str]:
+    return subprocess.run([sys.executable, "-m", "pytest", "-q", "-p", "no:cacheprovider", "-p", "cipstack.testing",
+                           *args], capture_output=True, text=True, cwd=cwd, timeout=180, check=False)
+
+
+def test_the_fixtures_in_a_users_suite(tmp_path: Path) -> None:
+    eds = str(ROOT / "tests" / "eds" / "files" / "ez_style_io_block.eds")
+    (tmp_path / "test_users.py").write_text(textwrap.dedent(SUITE).replace("{eds!r}", repr(eds)))
+    result = pytest_in_subprocess("-rA", "test_users.py", cwd=tmp_path)
+    out = result.stdout
+    assert "6 passed, 1 error" in out, out + result.stderr
+    assert "ERROR test_users.py::test_a_bad_marker_option" in out
+    assert "cip_adapter: unknown option colour; valid: profile, model, eds, params, host, settings" in out
+
+
+def test_the_example_suite_passes() -> None:
+    result = pytest_in_subprocess("examples/comm_loss", cwd=ROOT)
+    assert result.returncode == 0 and "4 passed" in result.stdout, result.stdout + result.stderr
+
+
+def test_the_plugin_is_registered_under_its_module_name() -> None:
+    project = tomllib.loads((ROOT / "pyproject.toml").read_text())
+    assert project["project"]["entry-points"]["pytest11"] == {"cipstack.testing": "cipstack.testing"}
