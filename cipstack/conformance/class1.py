@@ -4,14 +4,16 @@ Vol. 2 §3-4, as OpENer's cipioconnection.c and Wireshark's packet-cip.c (cipio)
 
 from __future__ import annotations
 
+import functools
 import itertools
 import select
 import statistics
 import time
+from collections.abc import Callable
 from dataclasses import dataclass, field
 
 from ..eip.io_core import IoDatagramError, decode_io_datagram, encode_io_datagram, seq16_newer
-from .connections import Endpoint, Opened, Plan, forward_open_request, main_plan, send_forward_open
+from .connections import Endpoint, Opened, Plan, forward_open_request, main_plan, not_planned, send_forward_open
 from .model import CheckSpec, Exchange, Outcome, Verdict
 from .registry import Context, check, outcome
 
@@ -96,8 +98,7 @@ def drive(ctx: Context, plan: Plan, endpoint: Endpoint, opened: Opened, phases: 
 def _open(ctx: Context, spec: CheckSpec, multiplier: int) -> tuple[Plan, Endpoint, Opened] | Outcome:
     plan = main_plan(ctx)
     if plan is None:
-        why = "no EDS given (--eds)" if ctx.eds is None else "the EDS declares no point-to-point exclusive owner"
-        return outcome(spec, Verdict.NOT_APPLICABLE, f"not run: {why}")
+        return not_planned(ctx, spec)
     probe = ctx.probe()
     endpoint = Endpoint(ctx, probe)
     reply, opened = send_forward_open(ctx, probe, endpoint, forward_open_request(plan, multiplier=multiplier))
@@ -127,15 +128,25 @@ def _production(ctx: Context, spec: CheckSpec) -> tuple[Plan, Run] | Outcome:
     return cached  # type: ignore[no-any-return]
 
 
+def _on_production(body: Callable[[Context, CheckSpec, Plan, Run], Outcome]) -> Callable[[Context, CheckSpec], Outcome]:
+    """Run ``body`` on the shared production run; its failure to open is each check's outcome."""
+
+    @functools.wraps(body)
+    def judge(ctx: Context, spec: CheckSpec) -> Outcome:
+        measured = _production(ctx, spec)
+        if isinstance(measured, Outcome):
+            return measured
+        return body(ctx, spec, *measured)
+
+    return judge
+
+
 @check("class1.production", "T->O production at the granted API for 1 s",
        "packets arrive at the T->O API the Forward_Open reply granted: mean interval within 0.8-1.25 x API, "
        "at least 70 % of the production slots filled", f"CIP Vol. 1 §3-4.2 (cyclic production at the API); "
        f"{IO_REFERENCE}")
-def production(ctx: Context, spec: CheckSpec) -> Outcome:
-    measured = _production(ctx, spec)
-    if isinstance(measured, Outcome):
-        return measured
-    _, run = measured
+@_on_production
+def production(ctx: Context, spec: CheckSpec, plan: Plan, run: Run) -> Outcome:
     arrivals = run.arrivals
     expected = 1.0 / run.api if run.api > 0 else 0
     if len(arrivals) < 2:
@@ -151,11 +162,8 @@ def production(ctx: Context, spec: CheckSpec) -> Outcome:
 @check("class1.sequence", "T->O sequence numbers",
        "the encapsulation sequence number grows by 1 with every packet; the CIP sequence count never goes back",
        "CIP Vol. 2 §3-2.1 (Sequenced Address item); Vol. 1 §3-4.4 (CIP sequence count)")
-def sequence(ctx: Context, spec: CheckSpec) -> Outcome:
-    measured = _production(ctx, spec)
-    if isinstance(measured, Outcome):
-        return measured
-    _, run = measured
+@_on_production
+def sequence(ctx: Context, spec: CheckSpec, plan: Plan, run: Run) -> Outcome:
     problems = []
     for before, after in itertools.pairwise(run.arrivals):
         if (after.encap_sequence - before.encap_sequence) & 0xFFFFFFFF != 1:
@@ -171,11 +179,8 @@ def sequence(ctx: Context, spec: CheckSpec) -> Outcome:
 @check("class1.data_size", "T->O data size",
        "every T->O packet carries the T->O connection size: the sequence count and the EDS's input size",
        "CIP Vol. 1 §3-5.5.2 (connection size); EDS ConnectionN T->O size")
-def data_size(ctx: Context, spec: CheckSpec) -> Outcome:
-    measured = _production(ctx, spec)
-    if isinstance(measured, Outcome):
-        return measured
-    plan, run = measured
+@_on_production
+def data_size(ctx: Context, spec: CheckSpec, plan: Plan, run: Run) -> Outcome:
     sizes = sorted({a.size for a in run.arrivals})
     ok = sizes == [plan.to_data_size]
     return outcome(spec, ok, f"data sizes {sizes}, the connection carries {plan.to_data_size}", _exchanges(run))

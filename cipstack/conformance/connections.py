@@ -10,8 +10,10 @@ connection do not apply. Every connection a check opens is closed when the check
 from __future__ import annotations
 
 import contextlib
+import functools
 import random
 import socket
+from collections.abc import Callable
 from dataclasses import dataclass, replace
 
 from ..cip.epath import request_path
@@ -163,13 +165,28 @@ def send_forward_open(ctx: Context, probe: Probe, endpoint: Endpoint, request: F
     return reply, opened
 
 
-def _setup(ctx: Context, spec: CheckSpec) -> tuple[Plan, Probe, Endpoint] | Outcome:
-    plan = main_plan(ctx)
-    if plan is None:
-        why = "no EDS given (--eds)" if ctx.eds is None else "the EDS declares no point-to-point exclusive owner"
-        return outcome(spec, Verdict.NOT_APPLICABLE, f"not run: {why}: the connection points are unknown")
-    probe = ctx.probe()
-    return plan, probe, Endpoint(ctx, probe)
+def not_planned(ctx: Context, spec: CheckSpec, consequence: str = "") -> Outcome:
+    """The outcome of a check that needs the EDS's main connection when there is none."""
+    why = "no EDS given (--eds)" if ctx.eds is None else "the EDS declares no point-to-point exclusive owner"
+    return outcome(spec, Verdict.NOT_APPLICABLE, f"not run: {why}{consequence}")
+
+
+MainPlanCheck = Callable[[Context, CheckSpec, Plan, Probe, Endpoint], Outcome]
+
+
+def _on_main_plan(body: MainPlanCheck) -> Callable[[Context, CheckSpec], Outcome]:
+    """Run ``body`` with the main connection's plan, a registered probe and a T->O endpoint; not
+    applicable without them."""
+
+    @functools.wraps(body)
+    def run(ctx: Context, spec: CheckSpec) -> Outcome:
+        plan = main_plan(ctx)
+        if plan is None:
+            return not_planned(ctx, spec, ": the connection points are unknown")
+        probe = ctx.probe()
+        return body(ctx, spec, plan, probe, Endpoint(ctx, probe))
+
+    return run
 
 
 def _refusal(spec: CheckSpec, probe: Probe, reply: Reply, opened: Opened | None, codes: set[int],
@@ -183,14 +200,18 @@ def _refusal(spec: CheckSpec, probe: Probe, reply: Reply, opened: Opened | None,
     return outcome(spec, verdict, f"{what}: {reply.describe()}", probe.exchanges)
 
 
+def _refused(ctx: Context, spec: CheckSpec, probe: Probe, endpoint: Endpoint, request: ForwardOpenRequest,
+             codes: set[int], warn: set[int], what: str) -> Outcome:
+    """Send ``request``, which the target should refuse with one of the extended ``codes``."""
+    reply, opened = send_forward_open(ctx, probe, endpoint, request)
+    return _refusal(spec, probe, reply, opened, codes, warn, what)
+
+
 @check("cm.forward_open.accepted", "Forward_Open of the EDS's first exclusive owner connection",
        "status 0; the reply echoes the connection triad and gives non-zero packet intervals",
        "CIP Vol. 1 §3-5.5.2 (Forward_Open reply); Wireshark packet-cip.c (dissect_cip_cm_fwd_open_rsp)")
-def accepted(ctx: Context, spec: CheckSpec) -> Outcome:
-    setup = _setup(ctx, spec)
-    if isinstance(setup, Outcome):
-        return setup
-    plan, probe, endpoint = setup
+@_on_main_plan
+def accepted(ctx: Context, spec: CheckSpec, plan: Plan, probe: Probe, endpoint: Endpoint) -> Outcome:
     request = forward_open_request(plan)
     reply, opened = send_forward_open(ctx, probe, endpoint, request)
     if opened is None:
@@ -208,67 +229,47 @@ def accepted(ctx: Context, spec: CheckSpec) -> Outcome:
 
 @check("cm.forward_open.ot_size", "Forward_Open with an O->T connection size 2 bytes too large",
        "status 0x01, extended 0x0127 (invalid O->T size)", EXTENDED)
-def ot_size(ctx: Context, spec: CheckSpec) -> Outcome:
-    setup = _setup(ctx, spec)
-    if isinstance(setup, Outcome):
-        return setup
-    plan, probe, endpoint = setup
+@_on_main_plan
+def ot_size(ctx: Context, spec: CheckSpec, plan: Plan, probe: Probe, endpoint: Endpoint) -> Outcome:
     request = forward_open_request(replace(plan, ot_size=plan.ot_size + 2))
-    reply, opened = send_forward_open(ctx, probe, endpoint, request)
-    return _refusal(spec, probe, reply, opened, {0x0127}, {0x0109}, f"O->T size {plan.ot_size + 2}")
+    return _refused(ctx, spec, probe, endpoint, request, {0x0127}, {0x0109}, f"O->T size {plan.ot_size + 2}")
 
 
 @check("cm.forward_open.to_size", "Forward_Open with a T->O connection size 2 bytes too large",
        "status 0x01, extended 0x0128 (invalid T->O size)", EXTENDED)
-def to_size(ctx: Context, spec: CheckSpec) -> Outcome:
-    setup = _setup(ctx, spec)
-    if isinstance(setup, Outcome):
-        return setup
-    plan, probe, endpoint = setup
+@_on_main_plan
+def to_size(ctx: Context, spec: CheckSpec, plan: Plan, probe: Probe, endpoint: Endpoint) -> Outcome:
     request = forward_open_request(replace(plan, to_size=plan.to_size + 2))
-    reply, opened = send_forward_open(ctx, probe, endpoint, request)
-    return _refusal(spec, probe, reply, opened, {0x0128}, {0x0109}, f"T->O size {plan.to_size + 2}")
+    return _refused(ctx, spec, probe, endpoint, request, {0x0128}, {0x0109}, f"T->O size {plan.to_size + 2}")
 
 
 @check("cm.forward_open.rpi", "Forward_Open with an RPI of 1 us",
        "status 0x01, extended 0x0111 (RPI not supported) or 0x0112 (RPI value not acceptable)", EXTENDED)
-def rpi(ctx: Context, spec: CheckSpec) -> Outcome:
-    setup = _setup(ctx, spec)
-    if isinstance(setup, Outcome):
-        return setup
-    plan, probe, endpoint = setup
+@_on_main_plan
+def rpi(ctx: Context, spec: CheckSpec, plan: Plan, probe: Probe, endpoint: Endpoint) -> Outcome:
     request = replace(forward_open_request(plan), ot_rpi_us=1, to_rpi_us=1)
-    reply, opened = send_forward_open(ctx, probe, endpoint, request)
-    return _refusal(spec, probe, reply, opened, {0x0111, 0x0112}, set(), "RPI 1 us")
+    return _refused(ctx, spec, probe, endpoint, request, {0x0111, 0x0112}, set(), "RPI 1 us")
 
 
 @check("cm.forward_open.duplicate", "the same Forward_Open (same triad) twice",
        "the second is refused with status 0x01, extended 0x0100 (connection in use)", EXTENDED)
-def duplicate(ctx: Context, spec: CheckSpec) -> Outcome:
-    setup = _setup(ctx, spec)
-    if isinstance(setup, Outcome):
-        return setup
-    plan, probe, endpoint = setup
+@_on_main_plan
+def duplicate(ctx: Context, spec: CheckSpec, plan: Plan, probe: Probe, endpoint: Endpoint) -> Outcome:
     request = forward_open_request(plan)
     first, opened = send_forward_open(ctx, probe, endpoint, request)
     if opened is None:
         return outcome(spec, False, f"the first Forward_Open failed: {first.describe()}", probe.exchanges)
-    reply, again = send_forward_open(ctx, probe, endpoint, request)
-    return _refusal(spec, probe, reply, again, {0x0100}, set(), "the same triad again")
+    return _refused(ctx, spec, probe, endpoint, request, {0x0100}, set(), "the same triad again")
 
 
 @check("cm.forward_open.ownership", "a second exclusive owner of the same output, from another triad",
        "status 0x01, extended 0x0106 (ownership conflict)", EXTENDED)
-def ownership(ctx: Context, spec: CheckSpec) -> Outcome:
-    setup = _setup(ctx, spec)
-    if isinstance(setup, Outcome):
-        return setup
-    plan, probe, endpoint = setup
+@_on_main_plan
+def ownership(ctx: Context, spec: CheckSpec, plan: Plan, probe: Probe, endpoint: Endpoint) -> Outcome:
     first, opened = send_forward_open(ctx, probe, endpoint, forward_open_request(plan))
     if opened is None:
         return outcome(spec, False, f"the first Forward_Open failed: {first.describe()}", probe.exchanges)
-    reply, second = send_forward_open(ctx, probe, endpoint, forward_open_request(plan))
-    return _refusal(spec, probe, reply, second, {0x0106}, set(), "a second exclusive owner")
+    return _refused(ctx, spec, probe, endpoint, forward_open_request(plan), {0x0106}, set(), "a second exclusive owner")
 
 
 def _unused_instance(ctx: Context, plan: Plan) -> int:
@@ -281,50 +282,35 @@ def _unused_instance(ctx: Context, plan: Plan) -> int:
 
 @check("cm.forward_open.bad_segment", "Forward_Open whose connection path starts with a reserved segment (0xE0)",
        "status 0x01, extended 0x0315 (invalid segment in connection path) or 0x0316", EXTENDED)
-def bad_segment(ctx: Context, spec: CheckSpec) -> Outcome:
-    setup = _setup(ctx, spec)
-    if isinstance(setup, Outcome):
-        return setup
-    plan, probe, endpoint = setup
+@_on_main_plan
+def bad_segment(ctx: Context, spec: CheckSpec, plan: Plan, probe: Probe, endpoint: Endpoint) -> Outcome:
     request = replace(forward_open_request(plan), connection_path=b"\xE0\x00" + plan.path)
-    reply, opened = send_forward_open(ctx, probe, endpoint, request)
-    return _refusal(spec, probe, reply, opened, {0x0315, 0x0316}, set(), "segment E0 00")
+    return _refused(ctx, spec, probe, endpoint, request, {0x0315, 0x0316}, set(), "segment E0 00")
 
 
 @check("cm.forward_open.consuming_point", "Forward_Open to an O->T (consuming) point the device does not have",
        "status 0x01, extended 0x012A (invalid consuming application path)", EXTENDED)
-def consuming_point(ctx: Context, spec: CheckSpec) -> Outcome:
-    setup = _setup(ctx, spec)
-    if isinstance(setup, Outcome):
-        return setup
-    plan, probe, endpoint = setup
+@_on_main_plan
+def consuming_point(ctx: Context, spec: CheckSpec, plan: Plan, probe: Probe, endpoint: Endpoint) -> Outcome:
     unused = _unused_instance(ctx, plan)
     request = forward_open_request(replace(plan, ot_point=unused))
-    reply, opened = send_forward_open(ctx, probe, endpoint, request)
-    return _refusal(spec, probe, reply, opened, {0x012A}, {0x0117, 0x0315}, f"O->T point {unused}")
+    return _refused(ctx, spec, probe, endpoint, request, {0x012A}, {0x0117, 0x0315}, f"O->T point {unused}")
 
 
 @check("cm.forward_open.producing_point", "Forward_Open to a T->O (producing) point the device does not have",
        "status 0x01, extended 0x012B (invalid producing application path)", EXTENDED)
-def producing_point(ctx: Context, spec: CheckSpec) -> Outcome:
-    setup = _setup(ctx, spec)
-    if isinstance(setup, Outcome):
-        return setup
-    plan, probe, endpoint = setup
+@_on_main_plan
+def producing_point(ctx: Context, spec: CheckSpec, plan: Plan, probe: Probe, endpoint: Endpoint) -> Outcome:
     unused = _unused_instance(ctx, plan)
     request = forward_open_request(replace(plan, to_point=unused))
-    reply, opened = send_forward_open(ctx, probe, endpoint, request)
-    return _refusal(spec, probe, reply, opened, {0x012B}, {0x0117, 0x0315}, f"T->O point {unused}")
+    return _refused(ctx, spec, probe, endpoint, request, {0x012B}, {0x0117, 0x0315}, f"T->O point {unused}")
 
 
 @check("cm.forward_open.transport_class", "Forward_Open with transport class 2",
        "status 0x01, extended 0x0103 (transport class and trigger combination not supported); a device that "
        "implements class 2 is a warning", EXTENDED)
-def transport_class(ctx: Context, spec: CheckSpec) -> Outcome:
-    setup = _setup(ctx, spec)
-    if isinstance(setup, Outcome):
-        return setup
-    plan, probe, endpoint = setup
+@_on_main_plan
+def transport_class(ctx: Context, spec: CheckSpec, plan: Plan, probe: Probe, endpoint: Endpoint) -> Outcome:
     request = replace(forward_open_request(plan), transport=TransportTrigger(2, TriggerType.CYCLIC))
     reply, opened = send_forward_open(ctx, probe, endpoint, request)
     if opened is not None:
@@ -336,11 +322,8 @@ def transport_class(ctx: Context, spec: CheckSpec) -> Outcome:
 @check("cm.forward_open.null", "a null Forward_Open (both connection types null) for the configuration point",
        "status 0 (configuration accepted, no connection made) or status 0x01 with extended 0x0132 (null "
        "Forward_Open not supported)", f"CIP Vol. 1 §3-5.5.2.2 (null Forward_Open); {EXTENDED}")
-def null_forward_open(ctx: Context, spec: CheckSpec) -> Outcome:
-    setup = _setup(ctx, spec)
-    if isinstance(setup, Outcome):
-        return setup
-    plan, probe, endpoint = setup
+@_on_main_plan
+def null_forward_open(ctx: Context, spec: CheckSpec, plan: Plan, probe: Probe, endpoint: Endpoint) -> Outcome:
     base = forward_open_request(plan)
     request = replace(base, ot_parameters=replace(base.ot_parameters, type=ConnectionType.NULL),
                       to_parameters=replace(base.to_parameters, type=ConnectionType.NULL))
@@ -353,11 +336,8 @@ def null_forward_open(ctx: Context, spec: CheckSpec) -> Outcome:
 @check("cm.large_forward_open", "Large_Forward_Open of the EDS's first exclusive owner connection",
        "status 0 and a well formed reply; 0x08 (service not supported) makes the check not applicable",
        "CIP Vol. 1 §3-5.5.3 (Large_Forward_Open, 0x5B); Wireshark packet-cip.c")
-def large_forward_open(ctx: Context, spec: CheckSpec) -> Outcome:
-    setup = _setup(ctx, spec)
-    if isinstance(setup, Outcome):
-        return setup
-    plan, probe, endpoint = setup
+@_on_main_plan
+def large_forward_open(ctx: Context, spec: CheckSpec, plan: Plan, probe: Probe, endpoint: Endpoint) -> Outcome:
     request = forward_open_request(plan, large=True)
     reply, opened = send_forward_open(ctx, probe, endpoint, request)
     if reply.status == 0x08:
@@ -381,11 +361,8 @@ def close_unknown(ctx: Context, spec: CheckSpec) -> Outcome:
        "Forward_Close naming an open connection's serial with another originator serial",
        "status 0x01, extended 0x0107 (the triad names no connection); the connection stays open and its "
        "own Forward_Close then succeeds", f"CIP Vol. 1 §3-5.5.4 (Forward_Close matches the whole triad); {EXTENDED}")
-def close_other_originator(ctx: Context, spec: CheckSpec) -> Outcome:
-    setup = _setup(ctx, spec)
-    if isinstance(setup, Outcome):
-        return setup
-    plan, probe, endpoint = setup
+@_on_main_plan
+def close_other_originator(ctx: Context, spec: CheckSpec, plan: Plan, probe: Probe, endpoint: Endpoint) -> Outcome:
     first, opened = send_forward_open(ctx, probe, endpoint, forward_open_request(plan))
     if opened is None:
         return outcome(spec, False, f"Forward_Open failed: {first.describe()}", probe.exchanges)
