@@ -3,15 +3,20 @@ specification, CIP Vol. 1 chapter 7, as the EDS reader of ``cipstack.eds`` reads
 
 from __future__ import annotations
 
+import functools
 import struct
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator
 from dataclasses import replace
+from typing import TYPE_CHECKING
 
 from ..cip.epath import request_path
 from .connections import Endpoint, Opened, Plan, forward_open_request, plans, send_forward_open
 from .model import CheckSpec, Outcome, Verdict
 from .registry import Context, check, outcome
 from .wire import Probe
+
+if TYPE_CHECKING:
+    from ..eds.interpret import EdsView
 
 EDS_REFERENCE = "CIP Vol. 1 §7 (EDS)"
 
@@ -20,6 +25,22 @@ def _no_eds(ctx: Context, spec: CheckSpec) -> Outcome | None:
     if ctx.eds is None or ctx.view is None:
         return outcome(spec, Verdict.NOT_APPLICABLE, "not run: no EDS given (--eds)")
     return None
+
+
+def _each_with_eds(body: Callable[[Context, CheckSpec, EdsView], Iterator[Outcome]],
+                   ) -> Callable[[Context, CheckSpec], Iterator[Outcome]]:
+    """A check with an outcome per EDS entry: not applicable, once, without an EDS."""
+
+    @functools.wraps(body)
+    def run(ctx: Context, spec: CheckSpec) -> Iterator[Outcome]:
+        skipped = _no_eds(ctx, spec)
+        if skipped is not None:
+            yield skipped
+            return
+        assert ctx.view is not None
+        yield from body(ctx, spec, ctx.view)
+
+    return run
 
 
 @check("eds.device.identity", "[Device] against the Identity object",
@@ -45,14 +66,10 @@ def device_identity(ctx: Context, spec: CheckSpec) -> Outcome:
 @check("eds.param.link", "every ParamN with a link path, read from the device",
        "Get_Attribute_Single of the link path succeeds with the data size the ParamN declares (field 6)",
        f"{EDS_REFERENCE} [Params] (fields 3-6: link path, descriptor, type, size)")
-def param_links(ctx: Context, spec: CheckSpec) -> Iterator[Outcome]:
-    skipped = _no_eds(ctx, spec)
-    if skipped is not None:
-        yield skipped
-        return
-    assert ctx.view is not None
+@_each_with_eds
+def param_links(ctx: Context, spec: CheckSpec, view: EdsView) -> Iterator[Outcome]:
     probe = ctx.probe()
-    linked = [p for p in ctx.view.params.values() if p.link is not None]
+    linked = [p for p in view.params.values() if p.link is not None]
     if not linked:
         yield outcome(spec, Verdict.NOT_APPLICABLE, "no ParamN has a link path")
     for param in linked:
@@ -68,17 +85,13 @@ def param_links(ctx: Context, spec: CheckSpec) -> Iterator[Outcome]:
 @check("eds.assembly.size", "every AssemN with an instance, against Assembly attribute 4",
        "Get_Attribute_Single 4/N/4 (data size, UINT) equals the size the AssemN declares; 0x14 (attribute 4 not "
        "supported) is a warning", f"{EDS_REFERENCE} [Assembly]; CIP Vol. 1 §5-5 (Assembly attribute 4)")
-def assembly_sizes(ctx: Context, spec: CheckSpec) -> Iterator[Outcome]:
-    skipped = _no_eds(ctx, spec)
-    if skipped is not None:
-        yield skipped
-        return
-    assert ctx.view is not None
+@_each_with_eds
+def assembly_sizes(ctx: Context, spec: CheckSpec, view: EdsView) -> Iterator[Outcome]:
     probe = ctx.probe()
-    placed = [a for a in ctx.view.assemblies.values() if a.instance is not None]
+    placed = [a for a in view.assemblies.values() if a.instance is not None]
     if not placed:
         yield outcome(spec, Verdict.NOT_APPLICABLE, "no AssemN names an instance")
-    heartbeats = {c.o_t_point for c in ctx.view.connections if c.heartbeat}
+    heartbeats = {c.o_t_point for c in view.connections if c.heartbeat}
     for assembly in placed:
         if assembly.size == 0 and assembly.instance in heartbeats:
             yield outcome(spec, Verdict.NOT_APPLICABLE, f"instance {assembly.instance} is a heartbeat connection "
@@ -100,11 +113,8 @@ def assembly_sizes(ctx: Context, spec: CheckSpec) -> Iterator[Outcome]:
 @check("eds.connection.open", "every class 1 ConnectionN opened and closed",
        "Forward_Open with the connection's points, sizes and RPI succeeds, and its Forward_Close succeeds",
        f"{EDS_REFERENCE} [Connection Manager] ConnectionN; CIP Vol. 1 §3-5.5")
-def connections_open(ctx: Context, spec: CheckSpec) -> Iterator[Outcome]:
-    skipped = _no_eds(ctx, spec)
-    if skipped is not None:
-        yield skipped
-        return
+@_each_with_eds
+def connections_open(ctx: Context, spec: CheckSpec, view: EdsView) -> Iterator[Outcome]:
     found = plans(ctx)
     if not found:
         yield outcome(spec, Verdict.NOT_APPLICABLE, "the EDS declares no class 1 connection")

@@ -5,7 +5,7 @@ from __future__ import annotations
 
 import struct
 
-from ..eip.cpf import decode_items
+from ..eip.cpf import Item, decode_items
 from ..eip.encapsulation import HEADER_SIZE, REGISTER_SESSION_DATA, Command
 from ..eip.identity_items import decode_identity_item
 from .model import CheckSpec, Exchange, Outcome, Verdict
@@ -30,6 +30,17 @@ def _expect_status(spec: CheckSpec, probe: Probe, raw: bytes, status: int, what:
         return outcome(spec, False, f"{what}: the target closed the connection instead ({exc})", probe.exchanges)
     ok = reply is not None and reply.header.status == status and reply.header.context == raw[12:20]
     return outcome(spec, ok, f"{what}: {_status(reply)}", probe.exchanges)
+
+
+def _list_items(spec: CheckSpec, probe: Probe, command: Command) -> list[Item] | Outcome:
+    """Send a list command (no session needed); its reply's item list, or the failure as the outcome."""
+    reply = probe.exchange(frame(command))
+    if reply is None or reply.header.status != 0:
+        return outcome(spec, False, _status(reply), probe.exchanges)
+    try:
+        return decode_items(reply.body)
+    except Exception as exc:
+        return outcome(spec, False, f"malformed CPF: {exc}", probe.exchanges)
 
 
 @check("encap.register_session.version", "RegisterSession version 1, options 0",
@@ -197,13 +208,9 @@ def list_identity_delay(ctx: Context, spec: CheckSpec) -> Outcome:
        f"{VOL2}-4.2 ListServices; Wireshark packet-enip.c (dissect_item_list_services_response)")
 def list_services(ctx: Context, spec: CheckSpec) -> Outcome:
     probe = ctx.probe(register=False)
-    reply = probe.exchange(frame(Command.LIST_SERVICES))
-    if reply is None or reply.header.status != 0:
-        return outcome(spec, False, _status(reply), probe.exchanges)
-    try:
-        items = decode_items(reply.body)
-    except Exception as exc:
-        return outcome(spec, False, f"malformed CPF: {exc}", probe.exchanges)
+    items = _list_items(spec, probe, Command.LIST_SERVICES)
+    if isinstance(items, Outcome):
+        return items
     problems = []
     services = [i for i in items if i.type == 0x0100]
     if len(services) != 1:
@@ -227,13 +234,9 @@ def list_services(ctx: Context, spec: CheckSpec) -> Outcome:
        "status 0 and a well formed item list (0 items is allowed)", f"{VOL2}-4.4 ListInterfaces")
 def list_interfaces(ctx: Context, spec: CheckSpec) -> Outcome:
     probe = ctx.probe(register=False)
-    reply = probe.exchange(frame(Command.LIST_INTERFACES))
-    if reply is None or reply.header.status != 0:
-        return outcome(spec, False, _status(reply), probe.exchanges)
-    try:
-        items = decode_items(reply.body)
-    except Exception as exc:
-        return outcome(spec, False, f"malformed CPF: {exc}", probe.exchanges)
+    items = _list_items(spec, probe, Command.LIST_INTERFACES)
+    if isinstance(items, Outcome):
+        return items
     return outcome(spec, True, f"{len(items)} item(s)", probe.exchanges)
 
 
