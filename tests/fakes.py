@@ -12,7 +12,7 @@ import socket
 import struct
 import threading
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Iterator
 from dataclasses import dataclass, field
 
 HEADER = struct.Struct("<HHII8sI")
@@ -27,6 +27,28 @@ FORWARD_OPEN = 0x54
 FORWARD_CLOSE = 0x4E
 GET_ATTRIBUTE_SINGLE = 0x0E
 GET_ATTRIBUTES_ALL = 0x01
+
+
+def encapsulation_frames(conn: socket.socket, stop: threading.Event) -> Iterator[tuple[int, int, bytes, int, bytes]]:
+    """Each whole encapsulation frame a peer sends on ``conn`` (a short recv timeout set), as
+    (command, session, sender context, options, data), until it closes or ``stop`` is set."""
+    buffer = b""
+    while not stop.is_set():
+        try:
+            chunk = conn.recv(65536)
+        except TimeoutError:
+            continue
+        except OSError:
+            return
+        if not chunk:
+            return
+        buffer += chunk
+        while len(buffer) >= 24:
+            command, length, session, _status, context, options = HEADER.unpack_from(buffer)
+            if len(buffer) < 24 + length:
+                break
+            body, buffer = buffer[24:24 + length], buffer[24 + length:]
+            yield command, session, context, options, body
 
 
 def cpf(*items: tuple[int, bytes]) -> bytes:
@@ -143,35 +165,20 @@ class ScriptedTarget:
             thread.start()
 
     def _serve(self, conn: socket.socket, peer: tuple[str, int]) -> None:
-        buffer = b""
         with conn:
-            while not self._stop.is_set():
+            for command, session, context, _options, body in encapsulation_frames(conn, self._stop):
                 try:
-                    chunk = conn.recv(65536)
-                except TimeoutError:
+                    reply = self._answer(command, body, peer)
+                except Exception as exc:  # a broken script: say so, the test then fails on the reset
+                    self.errors.append(f"{type(exc).__name__}: {exc}")
+                    raise
+                if reply is None:
                     continue
+                session = session or 0x11223344
+                try:
+                    conn.sendall(HEADER.pack(command, len(reply), session, 0, context, 0) + reply)
                 except OSError:
                     return
-                if not chunk:
-                    return
-                buffer += chunk
-                while len(buffer) >= 24:
-                    command, length, session, _status, context, _options = HEADER.unpack_from(buffer)
-                    if len(buffer) < 24 + length:
-                        break
-                    body, buffer = buffer[24:24 + length], buffer[24 + length:]
-                    try:
-                        reply = self._answer(command, body, peer)
-                    except Exception as exc:  # a broken script: say so, the test then fails on the reset
-                        self.errors.append(f"{type(exc).__name__}: {exc}")
-                        raise
-                    if reply is None:
-                        continue
-                    session = session or 0x11223344
-                    try:
-                        conn.sendall(HEADER.pack(command, len(reply), session, 0, context, 0) + reply)
-                    except OSError:
-                        return
 
     def _answer(self, command: int, body: bytes, peer: tuple[str, int]) -> bytes | None:
         if command == REGISTER_SESSION:

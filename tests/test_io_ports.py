@@ -28,6 +28,7 @@ import pytest
 from cipstack.adapter import Adapter, AdapterSettings
 from cipstack.scanner import Scanner
 from tests.attacks import SEND_RR, Client, class1_open, rr_body, sockaddr_item
+from tests.fakes import split_cpf
 from tests.ports import free_port
 from tests.test_cli import start_adapter, stop
 
@@ -59,13 +60,7 @@ def originator_on_2222() -> Iterator[socket.socket]:
 
 def items_of(body: bytes) -> list[tuple[int, bytes]]:
     """The CPF items of a SendRRData reply body."""
-    (count,) = struct.unpack_from("<H", body, 6)
-    position, items = 8, []
-    for _ in range(count):
-        item_type, length = struct.unpack_from("<HH", body, position)
-        items.append((item_type, body[position + 4:position + 4 + length]))
-        position += 4 + length
-    return items
+    return split_cpf(body[6:])  # after the interface handle and the timeout
 
 
 def t_to_o_id(mr: bytes) -> int:

@@ -19,7 +19,8 @@ import threading
 import time
 from dataclasses import dataclass, field
 
-HEADER = struct.Struct("<HHII8sI")
+from tests.fakes import HEADER, cpf, encapsulation_frames, split_cpf
+
 FO_HEAD = struct.Struct("<BBIIHHIB3x")
 FO_SMALL = struct.Struct("<IHIHBB")
 FO_LARGE = struct.Struct("<IIIIBB")
@@ -33,20 +34,6 @@ ASSEMBLY_SIZE = 2
 
 def sockaddr(host: str, port: int, family: bytes = b"\x00\x02") -> bytes:
     return family + struct.pack(">H", port) + socket.inet_aton(host) + bytes(8)
-
-
-def cpf(*items: tuple[int, bytes]) -> bytes:
-    return struct.pack("<H", len(items)) + b"".join(struct.pack("<HH", t, len(d)) + d for t, d in items)
-
-
-def split_cpf(raw: bytes) -> list[tuple[int, bytes]]:
-    (count,) = struct.unpack_from("<H", raw)
-    pos, items = 2, []
-    for _ in range(count):
-        item_type, length = struct.unpack_from("<HH", raw, pos)
-        items.append((item_type, raw[pos + 4:pos + 4 + length]))
-        pos += 4 + length
-    return items
 
 
 def reply(service: int, status: int = 0, extended: tuple[int, ...] = (), data: bytes = b"") -> bytes:
@@ -178,42 +165,27 @@ class FakeTarget:
 
     def _serve(self, conn: socket.socket) -> None:
         state = {"session": 0}
-        buffer = b""
         with conn:
-            while not self._stop.is_set():
+            for command, session, context, options, body in encapsulation_frames(conn, self._stop):
+                if options:
+                    continue  # discarded (wire.md)
                 try:
-                    chunk = conn.recv(65536)
-                except TimeoutError:
+                    answer = self._frame(command, body, session, state)
+                    status = 0
+                except EncapStatus as exc:
+                    answer, status = b"", exc.status
+                except Exception as exc:  # a broken script: say so, the test then fails on it
+                    self.errors.append(f"{type(exc).__name__}: {exc}")
+                    raise
+                if answer is None:
+                    if command == 0x66 and not self.deviates("encap.unregister_session"):
+                        return  # UnRegisterSession: close the connection
                     continue
+                try:
+                    conn.sendall(HEADER.pack(command, len(answer), state["session"] or session, status, context, 0)
+                                 + answer)
                 except OSError:
                     return
-                if not chunk:
-                    return
-                buffer += chunk
-                while len(buffer) >= 24:
-                    command, length, session, _status, context, options = HEADER.unpack_from(buffer)
-                    if len(buffer) < 24 + length:
-                        break
-                    body, buffer = buffer[24:24 + length], buffer[24 + length:]
-                    if options:
-                        continue  # discarded (wire.md)
-                    try:
-                        answer = self._frame(command, body, session, state)
-                        status = 0
-                    except EncapStatus as exc:
-                        answer, status = b"", exc.status
-                    except Exception as exc:  # a broken script: say so, the test then fails on it
-                        self.errors.append(f"{type(exc).__name__}: {exc}")
-                        raise
-                    if answer is None:
-                        if command == 0x66 and not self.deviates("encap.unregister_session"):
-                            return  # UnRegisterSession: close the connection
-                        continue
-                    try:
-                        conn.sendall(HEADER.pack(command, len(answer), state["session"] or session, status, context, 0)
-                                     + answer)
-                    except OSError:
-                        return
 
     def _frame(self, command: int, body: bytes, session: int, state: dict[str, int]) -> bytes | None:
         if command == 0x65:
