@@ -110,11 +110,9 @@ def test_two_addresses_holding_their_share_do_not_lock_a_third_out(adapter: Runn
             client.close()
 
 
-def test_a_frame_trickled_a_byte_at_a_time_is_closed_at_the_frame_timeout(adapter: Running) -> None:
-    """One byte every 0.2 s of a 28-byte RegisterSession: closed 1 s (``frame_timeout``) after its
-    first byte although bytes keep coming (the inactivity timeout, 120 s, was reset by each)."""
-    port = adapter.adapter.port
-    request = frame(REGISTER, b"\x01\x00\x00\x00")
+def assert_trickle_closed(port: int, request: bytes) -> None:
+    """All but the last byte of ``request``, one every 0.2 s: the server closes the connection about
+    1 s (the adapter's ``frame_timeout``) after the first byte."""
     with socket.create_connection(("127.0.0.1", port), timeout=5) as sock:
         started = time.monotonic()
         closed = False
@@ -129,6 +127,14 @@ def test_a_frame_trickled_a_byte_at_a_time_is_closed_at_the_frame_timeout(adapte
                 break
         took = time.monotonic() - started
     assert closed and 0.9 <= took < 3.0, (closed, took)
+
+
+def test_a_frame_trickled_a_byte_at_a_time_is_closed_at_the_frame_timeout(adapter: Running) -> None:
+    """One byte every 0.2 s of a 28-byte RegisterSession: closed 1 s (``frame_timeout``) after its
+    first byte although bytes keep coming (the inactivity timeout, 120 s, was reset by each)."""
+    port = adapter.adapter.port
+    request = frame(REGISTER, b"\x01\x00\x00\x00")
+    assert_trickle_closed(port, request)
 
 
 def test_complete_frames_keep_a_slow_peer_connected(adapter: Running) -> None:
@@ -180,20 +186,7 @@ def test_modbus_slots_are_not_locked_either(adapter: Running) -> None:
     finally:
         for sock in held:
             sock.close()
-    with socket.create_connection(("127.0.0.1", port), timeout=5) as sock:
-        started = time.monotonic()
-        closed = False
-        for byte in READ_ACC[:-1]:
-            try:
-                sock.sendall(bytes([byte]))
-            except OSError:
-                closed = True
-                break
-            if closed_by_peer(sock, 0.2):
-                closed = True
-                break
-        took = time.monotonic() - started
-    assert closed and 0.9 <= took < 3.0, (closed, took)
+    assert_trickle_closed(port, READ_ACC)
 
 
 def test_the_limiter_names_the_host_to_make_room() -> None:
