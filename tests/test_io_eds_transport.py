@@ -7,15 +7,12 @@ says why."""
 from __future__ import annotations
 
 import signal
-import socket
 import subprocess
 import sys
 import time
-from collections.abc import Iterator
-from contextlib import contextmanager
 from pathlib import Path
 
-from tests.ports import free_port
+from tests.library_support import adapter_process
 
 FILES = Path(__file__).parent / "eds" / "files"
 
@@ -23,25 +20,6 @@ FILES = Path(__file__).parent / "eds" / "files"
 def run(*args: str, timeout: float = 60) -> subprocess.CompletedProcess[str]:
     return subprocess.run([sys.executable, "-m", "cipstack", *args], capture_output=True, text=True,
                           timeout=timeout, stdin=subprocess.DEVNULL)
-
-
-@contextmanager
-def adapter(*args: str) -> Iterator[tuple[str, int]]:
-    port, io_port = free_port(), free_port()
-    process = subprocess.Popen([sys.executable, "-m", "cipstack", "adapter", "--port", str(port), "--io-port",
-                                str(io_port), "--quiet", *args], stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
-    try:
-        for _ in range(400):
-            try:
-                socket.create_connection(("127.0.0.1", port), timeout=0.2).close()
-                break
-            except OSError:
-                assert process.poll() is None, "the adapter exited"
-                time.sleep(0.05)
-        yield f"127.0.0.1:{port}", io_port
-    finally:
-        process.terminate()
-        process.wait(10)
 
 
 def io(address: str, io_port: int, *args: str, duration: str = "1s") -> list[str]:
@@ -54,7 +32,7 @@ def received(stdout: str) -> int:
 
 
 def test_multicast_from_the_command_line() -> None:
-    with adapter("--profile", "acg") as (address, io_port):
+    with adapter_process("--profile", "acg") as (address, io_port):
         result = subprocess.run(io(address, io_port, "--output", "21", "--input", "71", "--multicast"),
                                 capture_output=True, text=True, timeout=60)
     assert result.returncode == 0, result.stderr
@@ -74,7 +52,7 @@ def _both_ways(tmp_path: Path) -> Path:
 
 def test_a_listen_only_point_refused_point_to_point_is_asked_again_by_multicast(tmp_path: Path) -> None:
     path = _both_ways(tmp_path)
-    with adapter("--eds", str(path)) as (address, io_port):
+    with adapter_process("--eds", str(path)) as (address, io_port):
         # The owner the file lets produce both ways: asked for multicast, so that there is something to listen to.
         owner = subprocess.Popen(io(address, io_port, "--eds", str(path), "--connection", "1", "--multicast",
                                     duration="30s"), stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
@@ -96,7 +74,7 @@ def test_a_listen_only_point_refused_point_to_point_is_asked_again_by_multicast(
 
 def test_a_listener_without_an_owner_is_told_an_owner_must_produce_first(tmp_path: Path) -> None:
     path = FILES / "vendor_drive_own_data.eds"
-    with adapter("--eds", str(path)) as (address, io_port):
+    with adapter_process("--eds", str(path)) as (address, io_port):
         result = subprocess.run(io(address, io_port, "--eds", str(path), "--connection", "6"),
                                 capture_output=True, text=True, timeout=60)
     assert result.returncode == 1
@@ -143,7 +121,7 @@ def test_eds_with_output_and_input_takes_the_field_names_from_the_file(tmp_path:
         "  distance                     byte 0 UDINT [µm]",
         "  temperature                  byte 4 INT [°C]",
         "  signal_quality               byte 6 UINT [%]"]
-    with adapter("--eds", str(FILES / "hand_utf8_distance_sensor.eds")) as (address, io_port):
+    with adapter_process("--eds", str(FILES / "hand_utf8_distance_sensor.eds")) as (address, io_port):
         result = subprocess.run(io(address, io_port, "--eds", str(path), "--heartbeat", "198", "--input", "100",
                                    "--ot-format", "heartbeat"), capture_output=True, text=True, timeout=60)
     assert result.returncode == 0, result.stderr

@@ -4,34 +4,19 @@ object's path lengths (Table C-8) and what an Identity Reset leaves (Table C-1).
 
 from __future__ import annotations
 
-from collections.abc import AsyncIterator
-from contextlib import asynccontextmanager
-
 import pytest
 
-from cipstack.adapter import Adapter, AdapterSettings
 from cipstack.cip.messages import Service
 from cipstack.cip.types import BOOL, INT
-from cipstack.devices.base import Device
 from cipstack.devices.omron.device import OmronDevice
 from cipstack.devices.profiles import build_device
 from cipstack.objects.identity import DeviceState
 from cipstack.scanner import Scanner
+from tests.library_support import serving
 
 OBJECT_DOES_NOT_EXIST = 0x16
 PATH_DESTINATION_UNKNOWN = 0x05
 ATTRIBUTE_NOT_SUPPORTED = 0x14
-
-
-@asynccontextmanager
-async def serving(device: Device) -> AsyncIterator[tuple[Adapter, Scanner]]:
-    adapter = Adapter(AdapterSettings(host="127.0.0.1", port=0, io_port=0), device=device)
-    await adapter.start()
-    try:
-        async with await Scanner.connect(f"127.0.0.1:{adapter.port}") as scanner:
-            yield adapter, scanner
-    finally:
-        await adapter.close()
 
 
 async def status(scanner: Scanner, service: int, class_id: int, instance: int, attribute: int | None,

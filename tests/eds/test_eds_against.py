@@ -5,15 +5,11 @@ device emulated from an EDS file (every connection opened); and a deliberately w
 from __future__ import annotations
 
 import json
-import socket
 import subprocess
 import sys
-import time
-from collections.abc import Iterator
-from contextlib import contextmanager
 from pathlib import Path
 
-from tests.ports import free_port
+from tests.library_support import adapter_process
 
 DIRECTORY = Path(__file__).parent / "files"
 
@@ -21,26 +17,6 @@ DIRECTORY = Path(__file__).parent / "files"
 def run(*args: str, timeout: float = 120) -> subprocess.CompletedProcess[str]:
     return subprocess.run([sys.executable, "-m", "cipstack", *args], capture_output=True, text=True,
                           timeout=timeout, stdin=subprocess.DEVNULL)
-
-
-@contextmanager
-def adapter(*args: str) -> Iterator[tuple[str, int]]:
-    """``cipstack adapter ARGS`` on loopback: (its address, its class 1 UDP port)."""
-    port, io_port = free_port(), free_port()
-    process = subprocess.Popen([sys.executable, "-m", "cipstack", "adapter", "--port", str(port), "--io-port",
-                                str(io_port), "--quiet", *args], stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
-    try:
-        for _ in range(400):
-            try:
-                socket.create_connection(("127.0.0.1", port), timeout=0.2).close()
-                break
-            except OSError:
-                assert process.poll() is None, "the adapter exited"
-                time.sleep(0.05)
-        yield f"127.0.0.1:{port}", io_port
-    finally:
-        process.terminate()
-        process.wait(10)
 
 
 def check(path: Path, address: str, io_port: int, *more: str) -> tuple[int, dict, list[dict]]:
@@ -62,7 +38,7 @@ def test_against_the_acg_its_own_file_has_no_error(tmp_path: Path) -> None:
     """Identity by Get_Attributes_All, every parameter and assembly as the file says; the connections
     of the pairs the card does not serve now (it serves the pair its parameters select) are warnings."""
     path = generated(tmp_path, "--profile", "acg")
-    with adapter("--profile", "acg") as (address, io_port):
+    with adapter_process("--profile", "acg") as (address, io_port):
         status, record, findings = check(path, address, io_port)
     assert status == 0
     assert record["against"].startswith(f"against {address}: identity by Get_Attributes_All, ")
@@ -79,7 +55,7 @@ def test_against_the_mx2_identity_attribute_by_attribute(tmp_path: Path) -> None
     What differs is real: the generated file declares the RX's input terminal 8 and FW terminal
     (Discrete Input Point instances 8 and 9) that the MX2, with 7 inputs, does not have."""
     path = generated(tmp_path, "--profile", "mx2", "--model", "MX2-A2004-E")
-    with adapter("--profile", "mx2", "--model", "MX2-A2004-E") as (address, io_port):
+    with adapter_process("--profile", "mx2", "--model", "MX2-A2004-E") as (address, io_port):
         status, record, findings = check(path, address, io_port)
     assert "identity by Get_Attribute_Single" in record["against"]
     assert [f["message"] for f in findings if f["rule"] == "live-refused"] == [
@@ -93,7 +69,7 @@ def test_against_the_mx2_identity_attribute_by_attribute(tmp_path: Path) -> None
 
 def test_against_the_rx_its_own_file_has_no_error(tmp_path: Path) -> None:
     path = generated(tmp_path, "--profile", "rx", "--model", "RX-A2004-E")
-    with adapter("--profile", "rx", "--model", "RX-A2004-E") as (address, io_port):
+    with adapter_process("--profile", "rx", "--model", "RX-A2004-E") as (address, io_port):
         status, record, findings = check(path, address, io_port)
     assert status == 0 and record["errors"] == record["warnings"] == 0
     assert "identity by Get_Attribute_Single" in record["against"]
@@ -102,7 +78,7 @@ def test_against_the_rx_its_own_file_has_no_error(tmp_path: Path) -> None:
 
 def test_against_an_eds_emulator_every_connection_opens() -> None:
     path = DIRECTORY / "vendor_drive_own_data.eds"
-    with adapter("--eds", str(path)) as (address, io_port):
+    with adapter_process("--eds", str(path)) as (address, io_port):
         status, record, findings = check(path, address, io_port)
     assert (status, findings) == (0, [])
     assert record["against"] == (f"against {address}: identity by Get_Attributes_All, 5 parameters read, "
@@ -130,7 +106,7 @@ def test_a_deliberately_wrong_file_shows_each_difference(tmp_path: Path) -> None
     def line(snippet: str) -> int:
         return wrong[: wrong.index(snippet)].count("\n") + 1
 
-    with adapter("--eds", str(DIRECTORY / "vendor_drive_own_data.eds")) as (address, io_port):
+    with adapter_process("--eds", str(DIRECTORY / "vendor_drive_own_data.eds")) as (address, io_port):
         status, _, findings = check(path, address, io_port)
         text = run("eds", "check", str(path), "--against", address, "--target-io-port", str(io_port))
     assert status == 1

@@ -11,13 +11,10 @@
 
 from __future__ import annotations
 
-from collections.abc import AsyncIterator
-from contextlib import asynccontextmanager
 from typing import Any
 
 import pytest
 
-from cipstack.adapter import Adapter, AdapterSettings
 from cipstack.cip.status import CipError, ExtendedStatus, GeneralStatus
 from cipstack.cip.types import BOOL, INT, SHORT_STRING, UINT, USINT
 from cipstack.devices.acg.device import build_acg_device
@@ -33,6 +30,7 @@ from cipstack.eds.profiles import acg_et2_description, omron_description
 from cipstack.eds.reader import parse_eds
 from cipstack.objects.tcpip import NetworkInterface
 from cipstack.scanner import Scanner
+from tests.library_support import serving
 
 from .samples import BROKEN_EDS, BROKEN_WARNINGS, GENERIC_EDS
 
@@ -40,17 +38,6 @@ INTERFACE = NetworkInterface(ip_address="127.0.0.1", mac=DEFAULT_MAC)
 #: Identity attributes a scanner reads from both emulators: vendor, device type, product code,
 #: revision, serial number, product name (status and state belong to the running device).
 IDENTITY_ATTRIBUTES = (1, 2, 3, 4, 6, 7)
-
-
-@asynccontextmanager
-async def serving(device: Device) -> AsyncIterator[tuple[Adapter, Scanner]]:
-    adapter = Adapter(AdapterSettings(host="127.0.0.1", port=0, io_port=0), device=device)
-    await adapter.start()
-    try:
-        async with await Scanner.connect(f"127.0.0.1:{adapter.port}") as scanner:
-            yield adapter, scanner
-    finally:
-        await adapter.close()
 
 
 async def identity(scanner: Scanner) -> dict[int, Any]:
