@@ -5,16 +5,14 @@ network namespace with the ACG emulator on 127.0.0.2 at the default ports."""
 
 from __future__ import annotations
 
-import json
 import os
-import shlex
-import shutil
 import subprocess
-import sys
 from pathlib import Path
 from typing import Any
 
 import pytest
+
+from .netns import require_namespace, run_in_namespace
 
 pytestmark = [pytest.mark.interop, pytest.mark.tshark]
 
@@ -102,22 +100,11 @@ def tshark(capture: Path, display_filter: str, *fields: str) -> list[str]:
 
 @pytest.fixture(scope="module")
 def capture(tmp_path_factory: pytest.TempPathFactory) -> tuple[Path, dict[str, Any]]:
-    missing = [tool for tool in ("tshark", "unshare", "ip") if shutil.which(tool) is None]
-    if missing:
-        pytest.skip(f"{' and '.join(missing)} not installed")
-    if os.geteuid() != 0:
-        pytest.skip("a private network namespace (unshare -n) and a loopback capture need root")
+    require_namespace()
     out = tmp_path_factory.mktemp("tshark-close")
     (out / "readme_io.py").write_text(readme_io_example())
-    script = out / "close.py"
-    script.write_text(HELPER)
-    command = " ".join(shlex.quote(str(part)) for part in (sys.executable, script, out))
-    inner = f"ip link set lo up && exec {command}"
-    env = {**os.environ, "PYTHONPATH": str(ROOT)}
-    result = subprocess.run(["unshare", "-n", "sh", "-c", inner], capture_output=True, text=True, timeout=180,
-                            check=False, cwd=out, env=env)
-    assert result.returncode == 0, f"{result.stdout}\n{result.stderr}"
-    return out / "capture.pcapng", json.loads((out / "seen.json").read_text())
+    seen = run_in_namespace(out, "close.py", HELPER, timeout=180, env={**os.environ, "PYTHONPATH": str(ROOT)})
+    return out / "capture.pcapng", seen
 
 
 def test_ctrl_c_exits_130_with_statistics_and_no_traceback(capture: tuple[Path, dict[str, Any]]) -> None:

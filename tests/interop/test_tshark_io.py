@@ -4,16 +4,13 @@ network namespace (44818 and 2222 are free there), with no malformed packet and 
 
 from __future__ import annotations
 
-import json
-import os
-import shlex
-import shutil
 import subprocess
-import sys
 from pathlib import Path
 from typing import Any
 
 import pytest
+
+from .netns import require_namespace, run_in_namespace
 
 pytestmark = [pytest.mark.interop, pytest.mark.tshark]
 
@@ -145,21 +142,9 @@ def tshark(capture: Path, display_filter: str, *options: str, fields: tuple[str,
 
 @pytest.fixture(scope="module")
 def capture(tmp_path_factory: pytest.TempPathFactory) -> tuple[Path, dict[str, Any]]:
-    missing = [tool for tool in ("tshark", "unshare", "ip") if shutil.which(tool) is None]
-    if missing:
-        pytest.skip(f"{' and '.join(missing)} not installed")
-    if os.geteuid() != 0:
-        pytest.skip("a private network namespace (unshare -n) and a loopback capture need root")
+    require_namespace()
     out = tmp_path_factory.mktemp("tshark-io")
-    script = out / "exchange.py"
-    script.write_text(HELPER)
-    shutil.copy(Path(__file__).parents[1] / "waiting.py", out / "waiting.py")
-    command = " ".join(shlex.quote(str(part)) for part in (sys.executable, script, out))
-    inner = f"ip link set lo up && exec {command}"
-    result = subprocess.run(["unshare", "-n", "sh", "-c", inner], capture_output=True, text=True, timeout=120,
-                            check=False, cwd=out)
-    assert result.returncode == 0, f"{result.stdout}\n{result.stderr}"
-    seen = json.loads((out / "seen.json").read_text())
+    seen = run_in_namespace(out, "exchange.py", HELPER)
     assert not seen["errors"], "\n".join(seen["errors"])
     return out / "capture.pcapng", seen
 
