@@ -14,6 +14,26 @@ from typing import Any
 
 import pytest
 
+#: The head of a helper script: the adapter's address in the namespace, where its findings go
+#: (``seen``, written to seen.json by the script), and whether the adapter listens yet.
+PRELUDE = r'''
+import asyncio, json, os, signal, socket, subprocess, sys, time, traceback
+from pathlib import Path
+
+from waiting import wait_for  # tests/waiting.py, copied next to this script
+
+OUT = Path(sys.argv[1])
+PY = sys.executable
+ADAPTER = "127.0.0.2"
+seen = {"errors": []}
+
+
+def listening():
+    local = f"{socket.inet_aton(ADAPTER)[::-1].hex().upper()}:{44818:04X}"
+    with open("/proc/net/tcp") as lines:
+        return any(f[1] == local and f[3] == "0A" for f in (line.split() for line in lines))
+'''
+
 
 def require_namespace() -> None:
     """Skip unless tshark, unshare and ip are installed and we may make a namespace (root)."""

@@ -11,27 +11,12 @@ from typing import Any
 
 import pytest
 
-from .netns import require_namespace, run_in_namespace
+from .netns import PRELUDE, require_namespace, run_in_namespace
 from .test_tshark_io import tshark
 
 pytestmark = [pytest.mark.interop, pytest.mark.tshark]
 
-HELPER = r'''
-import asyncio, json, signal, socket, subprocess, sys, time, traceback
-from pathlib import Path
-
-from waiting import wait_for  # tests/waiting.py, copied next to this script
-
-OUT = Path(sys.argv[1])
-PY = sys.executable
-ADAPTER = "127.0.0.2"
-seen = {"errors": []}
-
-
-def listening():
-    local = f"{socket.inet_aton(ADAPTER)[::-1].hex().upper()}:{44818:04X}"
-    with open("/proc/net/tcp") as lines:
-        return any(f[1] == local and f[3] == "0A" for f in (line.split() for line in lines))
+HELPER = PRELUDE + r'''
 
 
 async def exchange():
