@@ -4,25 +4,15 @@ a scanner's connection, run/idle, parameter writes, a trip and faults happen ove
 from __future__ import annotations
 
 import asyncio
-from collections.abc import AsyncIterator
-from pathlib import Path
 
 import pytest
 
-from cipstack.adapter import Adapter, AdapterSettings
+from cipstack.adapter import Adapter
 from cipstack.devices.profiles import catalog_for
 from cipstack.scanner import Scanner
+from tests.test_faults import adapter as adapter  # the fixture: an ACG adapter with a state file of its own
 
 CATALOG = catalog_for(259, 100)
-
-
-@pytest.fixture
-async def adapter(tmp_path: Path) -> AsyncIterator[Adapter]:
-    running = Adapter(AdapterSettings(port=0, io_port=0, state_path=tmp_path / "acg.json"))
-    await running.start()
-    yield running
-    await running.faults.settle()
-    await running.close()
 
 
 async def test_connections_run_idle_writes_trips_and_faults(adapter: Adapter) -> None:
