@@ -174,6 +174,9 @@ def test_eds_check_against_a_live_device(adapter_process: tuple[str, subprocess.
     result = run("eds", "check", str(tmp_path / "ACG-ET2_1.01.eds"), "--against", address, "--no-connections")
     assert result.returncode == 0, result.stdout + result.stderr
     assert result.stdout.splitlines()[-1] == "1 file: 0 errors, 0 warnings"
+    # With its class 1 connections too: a report, and not a log line of the originator's own socket.
+    result = run("eds", "check", str(tmp_path / "ACG-ET2_1.01.eds"), "--against", address)
+    assert result.returncode == 0 and result.stderr == "", result.stderr
     good = tmp_path / "acg.eds"
     good.write_text(ADAPTER_EDS)
     wrong = tmp_path / "other.eds"

@@ -474,7 +474,9 @@ class IoEndpoint:
         self._emptied_at[sock] = -math.inf
         self.port = sock.getsockname()[1]
         self.wakeup()
-        log.info("class 1 I/O on UDP %s:%d", self.host, self.port)
+        # A target announces where it serves; an originator's socket is a detail of the command that
+        # opened it (``cipstack io``, ``eds check --against``) and would only clutter its output.
+        log.log(logging.INFO if self.exclusive else logging.DEBUG, "class 1 I/O on UDP %s:%d", self.host, self.port)
 
     @property
     def is_open(self) -> bool:
