@@ -73,6 +73,8 @@ async def test_bad_requests_get_json_and_the_api_goes_on(adapter: Adapter,
     assert status == 400 and body == {"error": "the body is a JSON object"}
     status, body = await call(http, "POST", "/faults", json={"name": "stop"})
     assert status == 400 and body["error"].startswith("unknown fault 'stop'; valid: stop-producing, drop")  # type: ignore[index]
+    status, body = await call(http, "POST", "/faults", json={"name": "drop", "share": 0.1})
+    assert status == 400 and body["error"].startswith("unknown key 'share': the body is")  # type: ignore[index]
     status, body = await call(http, "POST", "/faults", json={"name": "drop", "options": {"shar": 0.1}})
     assert status == 400 and "valid: --connection, --originator, --share, --every, --for" in body["error"]  # type: ignore[index]
     status, body = await call(http, "POST", "/faults", json={"name": "stop-producing",

@@ -176,11 +176,13 @@ COMMANDS: dict[tuple[str, ...], CommandText] = {
     ),
     ("drive",): CommandText(
         "control a running emulator: inject a trip, read its status",
-        "Control a running emulator through its local control socket (not a CIP object): inject a trip "
-        "or read its status line. The socket is found by the emulator's --host and --port, or given "
-        "with --control.",
+        "Control a running emulator through its local control socket (not a CIP object): trip it, "
+        "inject and clear faults (lost I/O, refused Forward_Opens, an unplugged cable, a power cycle...), "
+        "or read its status line and its active faults. The socket is found by the emulator's --host and "
+        "--port, or given with --control.",
         (("cipstack drive status", "the status of the emulator on 127.0.0.1:44818"),
-         ("cipstack drive trip OverHeat --host 127.0.0.11", "trip one device of a fleet")),
+         ("cipstack drive trip OverHeat --host 127.0.0.11", "trip one device of a fleet"),
+         ("cipstack drive fault stop-producing --for 5s", "the drive's T->O I/O stops for 5 s")),
     ),
     ("drive", "trip"): CommandText(
         "trip the emulated drive with a fault code",

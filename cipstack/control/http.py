@@ -224,6 +224,11 @@ class HttpApi:
         adapter = self._device(request)
         body = await self._body(request)
         name, options = body.get("name"), body.get("options", {})
+        stray = sorted(set(body) - {"name", "options"})
+        if stray:
+            # {"name": "drop", "share": 0.1} would otherwise read as a drop with no option at all.
+            raise _BadRequest(f"unknown key {', '.join(map(repr, stray))}: the body is "
+                              "{\"name\": FAULT, \"options\": {...}}, a fault's options go in \"options\"")
         if not isinstance(name, str):
             raise _BadRequest("the body names a fault: {\"name\": \"stop-producing\", \"options\": {...}}")
         if not isinstance(options, dict):
@@ -333,7 +338,7 @@ def openapi_document() -> dict[str, Any]:
                 entry["parameters"] = [*extra, *(params or [])]
             paths.setdefault(prefix + path, {})[method] = entry
 
-    fault_body = {"type": "object", "required": ["name"], "properties": {
+    fault_body = {"type": "object", "required": ["name"], "additionalProperties": False, "properties": {
         "name": {"type": "string", "enum": list(FAULTS)},
         "options": {"type": "object", "description": "the fault's options, as `cipstack drive fault` names them "
                                                      "(share, every, by, jitter, connection, for, ...)"}}}
