@@ -175,6 +175,18 @@ async def test_power_cycle_over_http(tmp_path: Path) -> None:
         await adapter.stop_serving()
 
 
+async def test_the_board_starts_its_connection_object_afresh(omron: Adapter) -> None:
+    """Table C-8: the Connection object's settable attributes are at their defaults after power-on."""
+    async with await connect(omron) as scanner:
+        await scanner.set_attribute_single(0x05, 1, 0x09, 50, CIP_UINT)       # expected packet rate
+        await scanner.set_attribute_single(0x05, 1, 0x0C, 1, CIP_USINT)       # watchdog timeout action
+        omron.fault("power-cycle")
+    await omron.faults.settle()
+    async with await connect(omron) as scanner:
+        assert await scanner.read(0x05, 1, 0x09, CIP_UINT) == 0
+        assert await scanner.read(0x05, 1, 0x0C, CIP_USINT) == 0
+
+
 def test_a_saved_cause_trips_again_at_power_on_and_an_unsaved_fix_is_lost() -> None:
     """Appendix F Note 5: an illegal flexible mapping trips E64 at the board's start, power-on included.
     The power cycle clears the trip (Table 25 Step II) but not its cause, if the cause is saved."""
