@@ -94,7 +94,21 @@ class Device:
         self.reset(reset_type)
 
     def reset(self, reset_type: int) -> None:
-        """Emulated power cycle (type 0) or return to defaults (type 1): families override."""
+        """Identity Reset over the network: type 0 (as a power cycle, as far as the device's manual says
+        its Identity does one) or 1 (return to defaults); families override."""
+
+    def power_cycle(self, now: float) -> None:
+        """The whole device loses its power and gets it back at ``now``: it keeps what its family keeps
+        in non-volatile memory and nothing else. The shell ends every connection first (the
+        ``power-cycle`` fault, ``cipstack.faults``); the device never sees a socket. Here, what any
+        device holds only while powered: the data last written to its assemblies (zeros at power-on)
+        and the I/O connection bits of Identity attribute 5 (no I/O connection, none faulted).
+        Families extend it with their own rules (``AcgDevice``, ``OmronDevice``, ``EdsDevice``)."""
+        for store in self.assembly.stores.values():
+            store[:] = bytes(len(store))
+        self._io_connections.clear()
+        self._io_faulted = False
+        self._update_io_status()
 
     # -- emulator control (test rigs) -------------------------------------------------------------
     def inject_trip(self, code: int | str) -> object:

@@ -114,6 +114,17 @@ class EdsDevice(Device):
     def io_profile(self) -> IoProfile | None:
         return self._io
 
+    def power_cycle(self, now: float) -> None:
+        """An EDS says nothing of what a device keeps over a power loss, so the emulated device keeps
+        nothing it was told: every attribute made from a ``ParamN`` is back at the file's default and
+        every assembly holds zeros. The standard objects (Identity, TCP/IP Interface, Ethernet Link)
+        keep their configuration, as CIP has them keep it in non-volatile memory."""
+        for obj in self.router.objects.values():
+            if isinstance(obj, EdsObject):
+                for instance_id, attributes in obj.declared.items():
+                    obj.instances[instance_id].values = {a.id: a.default for a in attributes.values()}
+        super().power_cycle(now)
+
     def attribute(self, link: Link) -> tuple[CipObject, int, int] | None:
         """The object serving ``link`` and its instance and attribute, if any object does."""
         class_id, instance, attribute = link

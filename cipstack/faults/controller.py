@@ -306,9 +306,9 @@ class FaultController:
     async def _power_cycle(self, off: float) -> None:
         """A power loss: every port closes and every connection with it (no Forward_Close, no FIN
         from a device without power would come, but the peer's socket is gone either way); the
-        device restarts from what it saved (``Device.reset(0)``: unsaved values are lost, e.g. the
-        ACG's parameter-save rule, seed 001); after ``off`` seconds its ports open again, unless it
-        is unplugged."""
+        whole device restarts from what it keeps over a power loss (``Device.power_cycle``: each
+        family says what that is, from its manual); after ``off`` seconds its ports open again,
+        unless it is unplugged."""
         adapter = self.adapter
         loop = asyncio.get_running_loop()
         was_plugged = not self.unplugged
@@ -316,10 +316,10 @@ class FaultController:
             await self._close_ports()
         if adapter.io is not None:
             adapter.io.close_all()
-        # A save the drive had handed to its memory before the power went is written (or failed).
+        adapter.device.power_cycle(loop.time())
+        adapter.target.tick(loop.time())   # through the event stream's tap, if any: the new state is seen
+        # A save the device had handed to its memory before the power went is written (or failed).
         await loop.run_in_executor(None, adapter.device.flush_saves, 10.0)
-        adapter.device.reset(0)
-        adapter._tick(loop.time())
         if off:
             await asyncio.sleep(off)
         if was_plugged and not self.unplugged:

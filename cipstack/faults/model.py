@@ -178,7 +178,8 @@ FAULTS: dict[str, FaultKind] = {kind.name: kind for kind in (
     FaultKind("drop-sessions", EXPLICIT, "forget every session (their TCP connections stay open)", once=True),
     FaultKind("unplug", DEVICE, "silent on every port: TCP refused, no UDP, no class 1 (until plug)"),
     FaultKind("plug", DEVICE, "end an unplug", once=True),
-    FaultKind("power-cycle", DEVICE, "power loss: connections gone, unsaved parameters lost", (OFF,), once=True),
+    FaultKind("power-cycle", DEVICE, "power loss: connections gone, the run stopped, unsaved parameters lost",
+              (OFF,), once=True),
 )}
 
 

@@ -2,21 +2,25 @@
 the faults injected with `cipstack drive fault` over the control socket.
 
 A refused Forward_Open carries the chosen Connection Manager status to pycomm3, twice, and the
-next is accepted; a power cycle loses exactly the parameter that was written and not saved
-(seed 001, "Saving Parameters Defined by Communication")."""
+next is accepted; a power cycle loses exactly the parameter that was written and not saved: on
+the ACG (seed 001, "Saving Parameters Defined by Communication") and on an RX with its CompoNet
+option board (seed 004, section E-2-2 note: stored in EEPROM by the ENTER command only)."""
 
 from __future__ import annotations
 
+import contextlib
 import logging
 import signal
+import struct
 import time
 from collections.abc import Iterator
 
 import pytest
-from pycomm3 import CIPDriver
-from pycomm3.cip.data_types import SHORT_STRING, UINT
+from pycomm3 import CIPDriver, CommError, Services
+from pycomm3.cip.data_types import SHORT_STRING, UDINT, UINT
 
 from cipstack.devices.acg.registers import CLASS_64_INSTANCES
+from cipstack.devices.omron.registers import function_code_path
 from tests.ports import free_port
 from tests.test_cli import run
 
@@ -90,3 +94,46 @@ def test_power_cycle_loses_exactly_the_unsaved_parameter(adapter: PeerProcess) -
     with CIPDriver(adapter.address) as drv:
         after = (ok(get_single(drv, 0x2A, 1, 102, UINT)), ok(get_single(drv, 0x2A, 1, 103, UINT)))
     assert after[0] == 44 and after[1] != 66
+
+
+@pytest.fixture(scope="module")
+def rx(tmp_path_factory: pytest.TempPathFactory) -> Iterator[PeerProcess]:
+    """``cipstack adapter --model RX-A4055-E`` with a state file (its EEPROM) of its own."""
+    port = free_port()
+    directory = tmp_path_factory.mktemp("faults-peers-rx")
+    peer = start_peer("cipstack adapter --model RX-A4055-E",
+                      [*adapter_command(HOST, port), "--model", "RX-A4055-E", "--state", str(directory / "rx.json")],
+                      HOST, port, directory / "adapter.log")
+    try:
+        yield peer
+    finally:
+        code = peer.stop(signal.SIGTERM)
+    assert code == 0, peer.log_text()
+    assert "Traceback" not in peer.log_text(), peer.log_text()
+
+
+def test_power_cycle_of_an_rx_loses_exactly_what_was_not_entered(rx: PeerProcess) -> None:
+    """Function codes through class 0x65 (Table E-3), the ENTER command through class 0x64 (0900h = 1):
+    F002 entered survives, F003 written after it does not; pycomm3's session goes with the power. Before,
+    the fault restarted the option board alone and F003 stayed."""
+    f002, f003 = function_code_path("F002"), function_code_path("F003")
+    drv = CIPDriver(rx.address)
+    drv.open()
+    try:
+        ok(set_single(drv, 0x65, *f002, UDINT.encode(250)))                   # 2.50 s
+        # ENTER: into EEPROM. Attribute 00h as a segment of its own: pycomm3 leaves an attribute id 0 out.
+        ok(drv.generic_message(service=Services.set_attribute_single, class_code=0x64, instance=0x09,
+                               attribute=b"\x00", request_data=UINT.encode(1), connected=False, route_path=False))
+        ok(set_single(drv, 0x65, *f003, UDINT.encode(4321)))                  # 43.21 s, not entered
+        assert ok(get_single(drv, 0x65, *f003, UDINT)) == 4321
+        fault(rx, "power-cycle", "--off", "200ms")
+        with pytest.raises((CommError, struct.error, AssertionError)):       # its session went with the power
+            ok(get_single(drv, 0x65, *f003, UDINT))
+    finally:
+        with contextlib.suppress(CommError):                                  # nothing to close it on
+            drv.close()
+    time.sleep(0.5)
+    with CIPDriver(rx.address) as drv:
+        after = ok(get_single(drv, 0x65, *f002, UDINT)), ok(get_single(drv, 0x65, *f003, UDINT))
+        assert ok(get_single(drv, 0x01, 1, 9, UINT)) == 1                     # Identity 9 counted one save
+    assert after == (250, 1000)                                               # F003 back at its default, 10 s

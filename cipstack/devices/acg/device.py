@@ -12,8 +12,9 @@ and assemblies (seed 000, appendix B).
   command data, so the drive keeps the last commands it consumed; the connection is alive, so
   it is no command loss either.
 * Reset (Identity service 0x05): type 0 is a power cycle (values written but not saved are lost,
-  saved ones kept, seed 001 "Saving Parameters Defined by Communication"); type 1 returns to the
-  factory values and forgets the saved ones.
+  saved ones kept, seed 001 "Saving Parameters Defined by Communication"; ``power_cycle``, which
+  the ``power-cycle`` fault calls too); type 1 returns to the factory values and forgets the saved
+  ones.
 * Saves: the drive hands each save to the device; with a state file a ``StateWriter`` writes it
   off the event loop's thread, coalescing back-to-back saves (``flush_saves`` waits for them).
 """
@@ -283,15 +284,18 @@ class AcgDevice(Device):
 
     def reset(self, reset_type: int) -> None:
         """Identity Reset: 0 power cycle (unsaved values lost), 1 factory defaults (saved ones too)."""
-        old = self.drive
-        saved = old.saved_parameters
         if reset_type == 1:
-            if old.on_save is not None:
-                old.on_save({})   # a refused save (StateFileError) refuses the reset
-            saved = {}
-        self.drive = AcgDrive(saved, now=self.now, password=old.password, on_save=old.on_save)
+            self.drive.forget_saved_parameters()   # a refused save (StateFileError) refuses the reset
+        self.power_cycle(self.now)
+
+    def power_cycle(self, now: float) -> None:
+        """The drive and its ACG-ET2 card lose power and get it back at ``now``: the drive comes back with
+        what it saved (``AcgDrive.power_cycled`` says what that is), the card with the instance pair
+        CM.23/CM.24 name as saved (CM.94 saves the CM group), and no connection."""
+        self.advance(max(now, self.now))   # places a power-up not yet placed, then runs to the loss
+        self.drive = self.drive.power_cycled(self._now)
         self._last_words.clear()
-        self._update_io_status()
+        super().power_cycle(self._now)
 
     def inject_trip(self, code: Trip | int | str) -> Trip:
         """Trip the drive as if ``code`` occurred: a ``Trip``, its name ("OverHeat", "OVER_HEAT") or a

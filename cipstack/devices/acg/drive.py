@@ -197,6 +197,38 @@ class AcgDrive(RunCommands, Ramps, Trips, LostCommand, RegisterEffects, VirtualI
         """What a power cycle comes back with (address -> raw value), beyond the defaults."""
         return dict(self._saved)
 
+    def forget_saved_parameters(self) -> None:
+        """Identity Reset type 1: the saved values go, so the next power-up is at the factory values. A
+        save the shell refuses (``StateFileError``) refuses this too, and nothing changes."""
+        if self.on_save is not None:
+            self.on_save({})
+        self._saved = {}
+
+    def power_cycled(self, now: float) -> AcgDrive:
+        """The drive as it comes back from a power loss at ``now``.
+
+        Kept: the saved parameters (seed 001, "Saving Parameters Defined by Communication": "Parameter
+        SET via Communications + SAVED + Power Cycle = Parameters holds saved value"), and what the
+        drive memory control area sets, since "when setting parameters in the drive memory control
+        area, the values are reflected to the drive operation and saved" (seed 001, 0x03E0-0x03EC):
+        the accumulated times it initializes (0x03EB run time, 0x03EC fan time; the On Time of
+        0x0340/0x0341 is the "total number of days the drive has been powered on", so it goes on
+        from where it was), the fault history it deletes (0x03E5) and the locks of the password
+        (0x03E7/0x03E8); the keypad's password itself.
+
+        Lost: every value written and not saved ("NOT Saved + Power Cycle = Parameters reverts back
+        to previous setting"; the frequency of 0x0380 even when saved, seed 001), the run command
+        and the output (0 Hz: the motor coasts), the trip present (the seeds say nothing of a trip
+        across a power cycle: the drive starts without it, and the fault history keeps it), the
+        lost-command watches and the virtual inputs (0x0385) and CM.94's pending settings."""
+        self.advance(max(now, self._time))
+        drive = AcgDrive(self._saved, now=now, password=self._password, on_save=self.on_save)
+        drive._start_time = now - self._on_seconds()
+        drive._run_seconds, drive._fan_seconds = self._run_seconds, self._fan_seconds
+        drive.fault_history = list(self.fault_history)
+        drive._hide_locked, drive._parameter_locked = self._hide_locked, self._parameter_locked
+        return drive
+
     def save_parameters(self) -> None:
         """Save every keypad parameter as it is now (what 0x03E0 0 -> 1 does)."""
         self._persist({a: self._values[a] for a, r in self.registers.items() if r.saved and a not in ALIASES})

@@ -8,7 +8,8 @@ gateway of ``cipstack.componet`` (``build_componet_gateway``). Time comes from t
 P044 network error timer.
 
 Saved parameters: the EEPROM save (0900h, section E-2-2) writes the inverter's saved values to
-the state file; a restart on the same file is a power cycle. Key 0 of the file (no function
+the state file; a restart on the same file is a power cycle, and so is ``power_cycle`` in process
+(the ``power-cycle`` fault). Key 0 of the file (no function
 code has number 0) holds the configuration consistency value of Identity attribute 9, which
 counts those saves (Table C-2) and so lives in the same non-volatile memory.
 """
@@ -431,12 +432,26 @@ class OmronDevice(Device):
         """The option board returns to its initial status (Table C-1, "Reset (return to initial status)"):
         its output assemblies hold zeros, as at power-on (Table C-6 defaults 00 ...), the Special I/O
         exchange starts afresh, and the inverter forgets what the network commanded (Net Ctrl, Net Ref,
-        run bits: ``Inverter.reset_option_board``); then it reads its configuration again."""
+        run bits: ``Inverter.reset_option_board``); then it reads its configuration again. The
+        inverter itself keeps its power: what it was told and did not save stays, it goes on running
+        or stopping as the cleared run bits say."""
         for instance, point in self.assembly.points.items():
             if point.consumed:
                 self.assembly.stores[instance][:] = bytes(point.size)
         self.special = SpecialIo()
         self.inverter.reset_option_board(self.now)
+        self._start()
+
+    def power_cycle(self, now: float) -> None:
+        """The inverter loses its power, and the option board it feeds with it; both come back at ``now``.
+        Unlike the Identity Reset (``reset``: the board alone), the inverter restarts too, with its
+        EEPROM and nothing else (``Inverter.power_cycle`` cites the manual); the board starts as at
+        power-on: zeros in its assemblies, a fresh Special I/O exchange, the node address, P046 and
+        the flexible mapping read again (section 1-1-1)."""
+        self._now = max(self.now, now)
+        self.special = SpecialIo()
+        self.inverter.power_cycle(self._now)
+        super().power_cycle(self._now)
         self._start()
 
     def _saved(self, values: dict[int, int]) -> None:
@@ -578,6 +593,16 @@ class CompoNetGatewayDevice(Device):
         assert self.network is not None
         self.gateway.now = max(self.gateway.now, now)
         self.network.advance(self.gateway.now)
+
+    def power_cycle(self, now: float) -> None:
+        """The gateway loses its power and gets it back: its master starts as it started, idle with a
+        zero OUT area until the originator writes the area again, so each slave gets idle cycles (its
+        P048 action, Table 12). The slaves are inverters with power of their own: they keep it."""
+        assert self.network is not None
+        self.advance(now)
+        super().power_cycle(now)
+        self.network.out_area[:] = bytes(len(self.network.out_area))
+        self.network.run = False
 
     def next_deadline(self) -> float | None:
         assert self.network is not None

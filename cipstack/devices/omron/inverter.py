@@ -148,10 +148,28 @@ class Inverter(NetworkEvents, Ramps, Monitors, FlexibleFormat, TimedSimulation):
             self._raise_trip(self.traits.trip_flexible_mapping)
 
     def power_cycle(self, now: float) -> None:
-        """Switch off and on: what was written but not saved is lost (section E-2-2 note)."""
+        """Switch off and on at ``now``, the option board with the inverter.
+
+        Lost: what was written and not saved ("All data written by Function Code or Modbus Register
+        object are stored temporary in the memory of the inverter. Be sure to execute the ENTER
+        command ... to store the value in EEPROM", section E-2-2 note); the output (0 Hz, the run
+        stopped) and everything the network commanded (run bits, Net Ctrl/Net Ref, coils); the trip
+        present: Table 25 Step II names "Power OFF and ON" among the ways to restart after a trip,
+        beside the STOP key and the RS terminal.
+
+        Kept: the EEPROM (the saved parameters, and the configuration consistency value of Identity
+        attribute 9 that counts its saves, Table C-2); the trip history: d081 still names the last trip
+        (section 5-1-1 Tip, "Checking data in trip history is still an option"); the option board's
+        reset count (power-on is no reset); and what is wired to the terminals.
+
+        At power-on the board reads its configuration again (section 1-1-1, "read automatically when
+        the power is turned ON or after a reset"): an illegal flexible mapping or torque path still
+        saved trips again (appendix F Note 5, Tables 22/23 note), and FWD, REV and RST wait for a
+        rising edge (note under Table B-2)."""
         if now < self._t:
             raise ValueError(f"time went backwards: {now} < {self._t}")
         self._power_on(now)
+        self._evaluate(now)
 
     def reset_option_board(self, now: float) -> None:
         """Identity Reset of the option board, "return to initial status" (Table C-1): the board keeps

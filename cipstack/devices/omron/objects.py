@@ -161,8 +161,12 @@ class ConnectionObject(OptionBoardObject):
         self.select(21, 71)
 
     def select(self, output: int, input_: int) -> None:
-        """The default connection path (P046, Table 10): produced = input assembly, consumed = output."""
+        """The connection as the board starts it, at power-on and reset: Table C-8's defaults (what was
+        set, the expected packet rate and the watchdog timeout action, is not kept: "retain timeout
+        status (until reset or cleared)"), with the default connection path (P046, Table 10):
+        produced = input assembly, consumed = output."""
         values = self.instances[1].values
+        values.update({attribute.id: attribute.default for attribute in self.spec.instance_attributes})
         values[0x0E], values[0x10] = assembly_path(input_), assembly_path(output)
         values[0x0D], values[0x0F] = path_length(values[0x0E]), path_length(values[0x10])
 
