@@ -61,13 +61,15 @@ def control(request):
 
 
 def fault(name, **options):
+    """Marked once applied (the reply comes after): what follows the mark is under the fault."""
     control({"command": "fault", "name": name, "options": options})
     mark(name)
 
 
 def clear():
-    control({"command": "clear"})
+    """Marked before the request: what precedes the mark was under the fault."""
     mark("clear")
+    control({"command": "clear"})
 
 
 def subscribe():
@@ -195,7 +197,7 @@ class Run:
         self.log: list[tuple[float, str]] = [tuple(entry) for entry in seen["log"]]  # type: ignore[misc]
 
     def window(self, name: str, nth: int = 0) -> tuple[float, float]:
-        """Monotonic times from the fault's application to the next mark (its clear)."""
+        """Monotonic times from the fault's application to the next mark (the request that clears it)."""
         indices = [i for i, m in enumerate(self.marks) if m[0] == name]
         i = indices[nth]
         return self.marks[i][1], self.marks[i + 1][1]
@@ -316,7 +318,8 @@ def test_duplicate_hands_eipscanner_each_sequence_count_twice(run: Run) -> None:
     counts = Counter(p[1] for p in run.packets_in(start, end))
     assert len(counts) >= 8 and set(list(counts.values())[:-1]) == {2}, counts
     frames = run.wire(*run.wall("duplicate"))
-    assert len(frames) >= 16 and all(a[2:] == b[2:] for a, b in zip(frames[::2], frames[1::2], strict=True)), frames
+    pairs = zip(frames[::2], frames[1::2], strict=False)
+    assert len(frames) >= 16 and all(a[2:] == b[2:] and b[0] - a[0] < 0.005 for a, b in pairs), frames
 
 
 def test_reorder_swaps_consecutive_packets_at_eipscanner(run: Run) -> None:
@@ -355,7 +358,7 @@ def test_delay_makes_one_gap_of_rpi_plus_the_delay_at_eipscanner(run: Run) -> No
     intervals = gaps(times)
     longest = max(intervals)
     assert RPI + 0.1 - 0.015 <= longest <= RPI + 0.1 + 0.02, intervals
-    assert sorted(intervals)[-2] < RPI + 0.02, intervals
+    assert sorted(intervals)[-2] < RPI + 0.03, intervals
     assert run.closes_in(start, end) == []
 
 
