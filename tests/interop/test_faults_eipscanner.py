@@ -7,16 +7,17 @@ code 0: x4), and a capture of loopback. The faults are applied over the adapter'
 one after another, each for a window of known times; the bridge's log lines, each T->O packet it
 accepted (its CIP sequence count and size, from NATS) and the capture are judged per window.
 
-EIPScanner's watchdog (IOConnection::notifyTick, called at every pass of the bridge's
-``handleConnections(1 ms)`` loop; in eip2nats 1.3.2's libEIPScanner): at each pass it adds the time
-since the last pass, truncated to whole milliseconds, to a counter in microseconds that every
-accepted T->O packet zeroes, and closes the connection once the counter exceeds
-``(4 << multiplier code) x T->O API`` (ConnectionManager::forwardOpen sets the factor, the API is the
-Forward_Open reply's). So the close comes at 4 x 50 ms = 200 ms after the last accepted packet at the
-earliest, later by the sub-millisecond remainders its passes drop (about 10 % here) and scheduling:
-the bound is 200 ms .. 200 ms + 2 RPIs. It does not check the sequence count (duplicates, reordered
-and frozen counts are all handed on) and ignores a packet whose size is not the connection's,
-without feeding the watchdog.
+EIPScanner's watchdog (nimbuscontrols/EIPScanner, src/IOConnection.cpp ``IOConnection::notifyTick``,
+called at every pass of the bridge's ``handleConnections(1 ms)`` loop; the same code in eip2nats
+1.3.2's libEIPScanner.so): at each pass it adds the time since the last pass, truncated to whole
+milliseconds, to a counter in microseconds that every accepted T->O packet zeroes
+(``notifyReceiveData``), and closes the connection once the counter exceeds
+``_connectionTimeoutMultiplier x _t2oAPI``, where src/ConnectionManager.cpp ``forwardOpen`` sets the
+factor to ``4 << multiplier code`` and the API is the Forward_Open reply's T->O API. So the close
+comes more than 4 x 50 ms = 200 ms after the last accepted packet, later by the sub-millisecond
+remainders its passes drop (about 10 % here, and scheduling): the bound is 200 ms .. 200 ms + 2 RPIs.
+It does not check the sequence count (duplicated, reordered and frozen counts are all handed on)
+and ignores a packet whose size is not the connection's, without zeroing the counter.
 """
 
 from __future__ import annotations
@@ -196,16 +197,18 @@ class Run:
         self.packets: list[tuple[float, int, int]] = [tuple(p) for p in seen["packets"]]  # type: ignore[misc]
         self.log: list[tuple[float, str]] = [tuple(entry) for entry in seen["log"]]  # type: ignore[misc]
 
+    def _span(self, name: str, nth: int, clock: int) -> tuple[float, float]:
+        i = [i for i, m in enumerate(self.marks) if m[0] == name][nth]
+        return self.marks[i][clock], self.marks[i + 1][clock]  # type: ignore[return-value]
+
     def window(self, name: str, nth: int = 0) -> tuple[float, float]:
-        """Monotonic times from the fault's application to the next mark (the request that clears it)."""
-        indices = [i for i, m in enumerate(self.marks) if m[0] == name]
-        i = indices[nth]
-        return self.marks[i][1], self.marks[i + 1][1]
+        """Monotonic times from the ``nth`` fault ``name``'s application to the next mark (the request
+        that clears it)."""
+        return self._span(name, nth, 1)
 
     def wall(self, name: str, nth: int = 0) -> tuple[float, float]:
-        indices = [i for i, m in enumerate(self.marks) if m[0] == name]
-        i = indices[nth]
-        return self.marks[i][2], self.marks[i + 1][2]
+        """The same window in wall-clock time, as the capture's frames are stamped."""
+        return self._span(name, nth, 2)
 
     def packets_in(self, start: float, end: float) -> list[tuple[float, int, int]]:
         return [p for p in self.packets if start < p[0] <= end]
@@ -239,7 +242,6 @@ def run(tmp_path_factory: pytest.TempPathFactory) -> Run:
     assert not seen["errors"], "\n".join(seen["errors"])
     assert seen["adapter_exit"] == 0
     return Run(out, seen)
-
 
 
 def gaps(times: list[float]) -> list[float]:
