@@ -9,6 +9,8 @@ from __future__ import annotations
 import re
 import time
 from collections.abc import Iterator
+from contextlib import contextmanager
+from typing import Any
 
 import ethernetip
 import ethernetip.ethernetip as enip_module
@@ -67,28 +69,42 @@ def select_instances(scanner: SyncScanner, output_setting: int, input_setting: i
 
 
 
+@contextmanager
+def class1(adapter: PeerProcess, output: int, input_: int) -> Iterator[tuple[Any, list[bool], list[bool]]]:
+    """python-ethernetip's class 1 connection to ``output``/``input_`` (4 bytes each, RPI 10 ms, timeout
+    multiplier code 1), producing: its connection and its input and output bits. Closed by its
+    Forward_Close after, which the adapter must accept."""
+    with pytest.MonkeyPatch.context() as patch:
+        patch.setattr(enip_module, "ENIP_TCP_PORT", int(adapter.address.rsplit(":", 1)[1]))
+        patch.setattr(enip_module, "ENIP_UDP_PORT", io_port(adapter))
+        enip = ethernetip.EtherNetIP("127.0.0.1")
+        connection = enip.explicit_conn("127.0.0.1")
+        connection.registerSession()
+        inputs = enip.registerAssembly(ethernetip.EtherNetIP.ENIP_IO_TYPE_INPUT, 4, input_, connection)
+        outputs = enip.registerAssembly(ethernetip.EtherNetIP.ENIP_IO_TYPE_OUTPUT, 4, output, connection)
+        enip.startIO(free_port("0.0.0.0"))
+        try:
+            status = connection.sendFwdOpenReq(input_, output, 1, torpi=10, otrpi=10, multiplier=1, inputsz=4,
+                                               outputsz=4, originator_udp_port=enip.originator_udp_port)
+            assert status == 0, f"Forward_Open refused: extended status 0x{status or 0:04X}"
+            connection.produce()
+            yield connection, inputs, outputs
+            connection.stopProduce()
+            assert connection.sendFwdCloseReq(input_, output, 1) == 0
+        finally:
+            connection.stopProduce()
+            enip.stopIO()
+
+
 @pytest.mark.parametrize(("output", "input_", "setting", "extended"), [(20, 70, 0, False), (21, 71, 1, True)])
 def test_python_ethernetip_runs_the_drive_over_class1(adapter: PeerProcess, drive: SyncScanner, output: int,
-                                                     input_: int, setting: int, extended: bool,
-                                                     monkeypatch: pytest.MonkeyPatch) -> None:
+                                                     input_: int, setting: int, extended: bool) -> None:
     select_instances(drive, setting, setting)
-    monkeypatch.setattr(enip_module, "ENIP_TCP_PORT", int(adapter.address.rsplit(":", 1)[1]))
-    monkeypatch.setattr(enip_module, "ENIP_UDP_PORT", io_port(adapter))
-    enip = ethernetip.EtherNetIP("127.0.0.1")
-    connection = enip.explicit_conn("127.0.0.1")
-    connection.registerSession()
-    inputs = enip.registerAssembly(ethernetip.EtherNetIP.ENIP_IO_TYPE_INPUT, 4, input_, connection)
-    outputs = enip.registerAssembly(ethernetip.EtherNetIP.ENIP_IO_TYPE_OUTPUT, 4, output, connection)
-    enip.startIO(free_port("0.0.0.0"))
-    try:
-        status = connection.sendFwdOpenReq(input_, output, 1, torpi=10, otrpi=10, multiplier=1, inputsz=4,
-                                           outputsz=4, originator_udp_port=enip.originator_udp_port)
-        assert status == 0, f"Forward_Open refused: extended status 0x{status or 0:04X}"
+    with class1(adapter, output, input_) as (_, inputs, outputs):
         outputs[0] = True                       # Run Fwd (byte 0, bit 0)
         if extended:
             outputs[5] = outputs[6] = True      # NetCtrl, NetRef (bits 5, 6: "not used" on the ACG, harmless)
         set_int(outputs, 16, 16, 1500)          # Speed Reference, rpm (bytes 2-3)
-        connection.produce()
         speeds: list[int] = []
         deadline = time.monotonic() + 10
         while time.monotonic() < deadline:
@@ -112,11 +128,6 @@ def test_python_ethernetip_runs_the_drive_over_class1(adapter: PeerProcess, driv
         deadline = time.monotonic() + 10
         while bits_to_int(inputs, 16, 16, signed=True) != 0 and time.monotonic() < deadline:
             time.sleep(0.01)
-        connection.stopProduce()
-        assert connection.sendFwdCloseReq(input_, output, 1) == 0
-    finally:
-        connection.stopProduce()
-        enip.stopIO()
     # Closed cleanly at the target: no class 1 connection left, and no timeout (Pr.12 untouched).
     assert drive.read(0x29, 1, 10) == 0
     log = adapter.log_text()

@@ -4,7 +4,10 @@ the faults injected with `cipstack drive fault` over the control socket.
 A refused Forward_Open carries the chosen Connection Manager status to pycomm3, twice, and the
 next is accepted; a power cycle loses exactly the parameter that was written and not saved: on
 the ACG (seed 001, "Saving Parameters Defined by Communication") and on an RX with its CompoNet
-option board (seed 004, section E-2-2 note: stored in EEPROM by the ENTER command only)."""
+option board (seed 004, section E-2-2 note: stored in EEPROM by the ENTER command only); replies
+come after the chosen delay; a chosen general and extended status reaches it; after `close-tcp` or
+`drop-sessions` its next request fails and a new connection works; while unplugged it cannot
+connect, after `plug` it can."""
 
 from __future__ import annotations
 
@@ -52,6 +55,20 @@ def adapter(tmp_path_factory: pytest.TempPathFactory) -> Iterator[PeerProcess]:
 def fault(adapter: PeerProcess, *args: str) -> None:
     result = run("drive", "fault", *args, "--host", adapter.host, "--port", str(adapter.port))
     assert result.returncode == 0, result.stderr
+
+
+@pytest.fixture
+def cleared(adapter: PeerProcess) -> Iterator[PeerProcess]:
+    """The adapter, its faults cleared after the test whatever happened (a fault left active would
+    reach the next test)."""
+    try:
+        yield adapter
+    finally:
+        fault(adapter, "clear")
+
+
+def vendor_id(drv: CIPDriver) -> int:
+    return ok(get_single(drv, 1, 1, 1, UINT))  # type: ignore[no-any-return]
 
 
 def test_refused_forward_open_carries_the_chosen_status(adapter: PeerProcess,
@@ -137,3 +154,70 @@ def test_power_cycle_of_an_rx_loses_exactly_what_was_not_entered(rx: PeerProcess
         after = ok(get_single(drv, 0x65, *f002, UDINT)), ok(get_single(drv, 0x65, *f003, UDINT))
         assert ok(get_single(drv, 0x01, 1, 9, UINT)) == 1                     # Identity 9 counted one save
     assert after == (250, 1000)                                               # F003 back at its default, 10 s
+
+
+def test_delayed_replies_reach_pycomm3_after_the_delay(cleared: PeerProcess) -> None:
+    with CIPDriver(cleared.address) as drv:
+        fault(cleared, "delay-replies", "--by", "300ms")
+        started = time.monotonic()
+        assert vendor_id(drv) == IDENTITY["vendor_id"]
+        delayed = time.monotonic() - started
+        fault(cleared, "clear")
+        started = time.monotonic()
+        assert vendor_id(drv) == IDENTITY["vendor_id"]
+        prompt = time.monotonic() - started
+    assert 0.3 <= delayed < 0.5 and prompt < 0.2, (delayed, prompt)
+
+
+def test_error_status_reaches_pycomm3_with_the_chosen_general_and_extended_status(cleared: PeerProcess) -> None:
+    """Identity attribute 7 answered with general status 0x1F (vendor specific) and extended 0x1234;
+    attribute 1 of the same object is not matched and answers as ever."""
+    fault(cleared, "error-status", "--status", "0x1F/0x1234", "--class", "1", "--attribute", "7")
+    with CIPDriver(cleared.address) as drv:
+        reply = drv.generic_message(service=Services.get_attribute_single, class_code=1, instance=1, attribute=7,
+                                    connected=False, route_path=False, return_response_packet=True).value
+        # SendRRData reply: the CIP general status at byte 42, the size of the additional status in
+        # words at 43, then the status words (CIP Vol. 1, 2-4.2).
+        general, words, extended = reply.raw[42], reply.raw[43], UINT.decode(reply.raw[44:46])
+        assert (general, words, extended) == (0x1F, 1, 0x1234), reply.raw.hex()
+        assert vendor_id(drv) == IDENTITY["vendor_id"]
+        fault(cleared, "clear")
+        assert ok(get_single(drv, 1, 1, 7, SHORT_STRING)) == IDENTITY["product_name"]
+
+
+def test_close_tcp_fails_pycomm3s_next_request_and_a_new_connection_works(cleared: PeerProcess) -> None:
+    drv = CIPDriver(cleared.address)
+    drv.open()
+    try:
+        assert vendor_id(drv) == IDENTITY["vendor_id"]
+        fault(cleared, "close-tcp")
+        # Its send meets the closed socket, or its read the end of the stream: either is a CommError.
+        with pytest.raises(CommError, match=r"failed to (send message|receive reply)"):
+            get_single(drv, 1, 1, 1, UINT)
+    finally:
+        with contextlib.suppress(CommError):                  # its UnregisterSession may fail as well
+            drv.close()
+    with CIPDriver(cleared.address) as drv:
+        assert vendor_id(drv) == IDENTITY["vendor_id"]
+
+
+def test_drop_sessions_fails_pycomm3s_next_request_and_a_new_session_works(cleared: PeerProcess) -> None:
+    """The TCP connection stays; the session handle pycomm3 holds is no longer known: the reply carries
+    encapsulation status 0x0064 (invalid session handle, CIP Vol. 2, 2-3.3)."""
+    with CIPDriver(cleared.address) as drv:
+        assert vendor_id(drv) == IDENTITY["vendor_id"]
+        fault(cleared, "drop-sessions")
+        reply = drv.generic_message(service=Services.get_attribute_single, class_code=1, instance=1, attribute=1,
+                                    connected=False, route_path=False, return_response_packet=True).value
+        assert not reply and UDINT.decode(reply.raw[8:12]) == 0x64, reply.raw.hex()
+    with CIPDriver(cleared.address) as drv:
+        assert vendor_id(drv) == IDENTITY["vendor_id"]
+
+
+def test_unplugged_pycomm3_cannot_connect_until_plug(cleared: PeerProcess) -> None:
+    fault(cleared, "unplug")
+    with pytest.raises(CommError, match="failed to open a connection"), CIPDriver(cleared.address):
+        pass
+    fault(cleared, "plug")
+    with CIPDriver(cleared.address) as drv:
+        assert vendor_id(drv) == IDENTITY["vendor_id"]
