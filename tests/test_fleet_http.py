@@ -6,6 +6,7 @@ a worker that was killed, or stopped, answer 503 naming the device while the oth
 
 from __future__ import annotations
 
+import asyncio
 import json
 import os
 import signal
@@ -17,11 +18,14 @@ import urllib.request
 from pathlib import Path
 from typing import Any
 
+import aiohttp
 import pytest
+from aiohttp import web
 
 from cipstack.cip.status import CipError
 from cipstack.control import default_control_path, peer_credentials
 from cipstack.control.http import MAX_BODY, openapi_document
+from cipstack.control.http_relay import Backend, RelayApi
 from cipstack.scanner import SyncScanner
 from tests.ports import free_port
 from tests.test_fleet import Fleet, alive, children
@@ -249,3 +253,49 @@ def test_a_taken_http_port_is_one_line_and_nothing_is_left(tmp_path: Path) -> No
     for host in hosts:                                                      # every device's port free again
         with socket.socket() as probe:
             probe.bind((host, port))
+
+
+# -- the relay alone, over a scripted worker ------------------------------------------------------------
+async def test_the_relay_streams_a_body_as_it_comes_and_a_silent_worker_is_503(tmp_path: Path) -> None:
+    """A worker's answer of no announced length (a stream of events) reaches the client chunk by chunk,
+    not once it is whole; a worker whose socket no longer answers makes its device 503."""
+    went_on = asyncio.Event()
+
+    async def listing(request: web.Request) -> web.Response:
+        return web.json_response([{"address": "127.79.9.10", "port": 44818, "product_name": "CENT"}])
+
+    async def events(request: web.Request) -> web.StreamResponse:
+        response = web.StreamResponse(headers={"Content-Type": "application/x-ndjson"})
+        await response.prepare(request)
+        await response.write(b'{"number": 1}\n')
+        await asyncio.wait_for(went_on.wait(), 10)     # the client must have the first line by now
+        await response.write(b'{"number": 2}\n')
+        await response.write_eof()
+        return response
+
+    worker = web.Application()
+    worker.router.add_get("/devices", listing)
+    worker.router.add_get("/devices/{device}/events", events)
+    runner = web.AppRunner(worker)
+    await runner.setup()
+    path = str(tmp_path / "worker-1.sock")
+    await web.UnixSite(runner, path).start()
+    relay = RelayApi([Backend("worker 1 (127.79.9.10)", path, number=1)], "127.0.0.1", 0)
+    await relay.start()
+    try:
+        async with aiohttp.ClientSession() as session:
+            url = f"http://127.0.0.1:{relay.port}/devices/127.79.9.10/events"
+            async with session.get(url) as response:
+                assert response.status == 200 and response.content_type == "application/x-ndjson"
+                assert await asyncio.wait_for(response.content.readline(), 10) == b'{"number": 1}\n'
+                went_on.set()
+                assert await response.content.readline() == b'{"number": 2}\n'
+            await runner.cleanup()                                           # the worker is gone
+            async with session.get(url) as response:
+                body = await response.json()
+                assert response.status == 503 and body["device"] == "127.79.9.10", body
+                assert body["error"].startswith("device 127.79.9.10 is not served: worker 1 (127.79.9.10) does "
+                                                "not answer"), body
+    finally:
+        await relay.close()
+        await runner.cleanup()
