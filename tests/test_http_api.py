@@ -12,7 +12,16 @@ import aiohttp
 import pytest
 
 from cipstack.adapter import Adapter, AdapterSettings
-from cipstack.control.http import MAX_BODY, HttpApi, HttpApiError, check_settings, openapi_document
+from cipstack.control.http import (
+    DEVICE_PREFIX,
+    DEVICE_ROUTES,
+    MAX_BODY,
+    HttpApi,
+    HttpApiError,
+    check_settings,
+    openapi_document,
+)
+from cipstack.control.http_relay import RelayApi
 from cipstack.scanner import Scanner
 
 
@@ -132,6 +141,20 @@ async def test_openapi_and_token(adapter: Adapter) -> None:
                 assert response.status == 200
     finally:
         await api.close()
+
+
+def test_the_description_has_every_route_the_api_serves(adapter: Adapter) -> None:
+    """The route table (``DEVICE_ROUTES``), ``/openapi.json`` and a fleet's relay name the same
+    routes, at the top and under a device's address."""
+    paths = openapi_document()["paths"]
+    served = {(method.lower(), prefix + path) for method, path, _ in DEVICE_ROUTES for prefix in ("", DEVICE_PREFIX)}
+    described = {(method, path) for path, operations in paths.items() for method in operations}
+    assert described == served | {("get", "/devices")}
+    relay = RelayApi([], "127.0.0.1", 0)
+    for app in (adapter.http_api.app, relay.app):                            # a fleet's relay serves the same
+        routes = {(route.method.lower(), route.resource.canonical) for route in app.router.routes()
+                  if route.resource is not None and route.method != "HEAD"}
+        assert routes == described | {("get", "/openapi.json")}
 
 
 def test_settings_refuse_other_addresses_without_a_token() -> None:

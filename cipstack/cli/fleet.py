@@ -85,8 +85,6 @@ def cmd_fleet(args: argparse.Namespace) -> int:
     from .emulators import _http_settings
 
     http = _http_settings(args)
-    if http and spec.workers != 1:
-        raise UsageError(f"--http serves the devices of one process: add --workers 1 (not {spec.workers})")
 
     def ready(lines: list[str]) -> None:
         for line in lines:
@@ -100,7 +98,12 @@ def cmd_fleet(args: argparse.Namespace) -> int:
             run_precise(serve_until_signalled(spec.devices, spec.port, spec.io_port, ready, rtu=spec.rtu,
                                               http=http or None))
         else:
-            Supervisor(spec.devices, spec.port, spec.io_port, spec.workers).run(ready)
+            supervisor = Supervisor(spec.devices, spec.port, spec.io_port, spec.workers, http=http or None)
+            supervisor.run(ready)
+            if supervisor.lost:   # --http: the fleet went on without them, and says so at the end
+                print(f"cipstack fleet: stopped; {len(supervisor.lost)} of {spec.workers} workers had ended: "
+                      + "; ".join(supervisor.lost), file=sys.stderr)
+                return 1
     except (ListenError, SpecError, RtuPortError) as exc:
         print(f"cipstack fleet: {exc}", file=sys.stderr)
         return EXIT_USAGE

@@ -68,11 +68,14 @@ COMMANDS: dict[tuple[str, ...], CommandText] = {
         "Emulate many devices at once, each an adapter on its own address (any 127.x address works on "
         "Linux's loopback), from --device groups or a TOML --spec file. Each device keeps its own state "
         "file and control socket (`cipstack drive ... --host ADDRESS`); --workers spreads the devices "
-        "over processes.",
+        "over processes; --http serves one HTTP control API for every device of every worker, by "
+        "address (/devices/ADDRESS/...).",
         (("cipstack fleet --addresses 127.0.0.10-127.0.0.13 --device 'acg*3' --device mx2:MX2-A2015-E",
           "three ACG drives and one MX2 on 127.0.0.10 to 127.0.0.13"),
          ("cipstack fleet --addresses 127.0.0.10-127.0.0.73 --device 'acg*64' --workers 2",
-          "64 ACG drives over two processes")),
+          "64 ACG drives over two processes"),
+         ("cipstack fleet --addresses 127.0.0.10-127.0.0.73 --device 'acg*64' --workers 2 --http 127.0.0.1:8080",
+          "the same, with one HTTP API for all: curl http://127.0.0.1:8080/devices")),
     ),
     ("models",): CommandText(
         "the MX2/RX models the mx2/rx profiles emulate (Tables 2/3)",

@@ -4,7 +4,9 @@ as JSON, for a test rig in any language (LabVIEW, TestStand, curl).
 It is aiohttp's server on the emulator's own event loop, a shell over the in-process API
 (``Adapter.control``, ``Adapter.faults``, ``Adapter.events``): it adds transport, no behaviour. One
 API serves every device of a process: ``/devices/{address}/...`` by the device's address (its host,
-or ``host:port``), and the same routes at the top for a process that runs one device.
+or ``host:port``), and the same routes at the top for a process that runs one device. A fleet spread
+over worker processes has one API in its parent, which forwards each device's routes to the worker
+that holds it (``http_relay``); each worker serves this API on a Unix socket only the parent reaches.
 
 Limits (never trust the wire): it listens on loopback unless ``allow_remote`` is given, and then only
 with a bearer token, which every request must carry; a request from an address that is not loopback
@@ -39,6 +41,23 @@ MAX_IN_FLIGHT = 32
 MAX_EVENTS = 1000
 
 Handler = Callable[[web.Request], Awaitable[web.StreamResponse]]
+
+#: The routes of one device: method, path, and the ``HttpApi`` method that serves it. Each answers at
+#: the top (a process of one device) and under ``/devices/{device}``; a fleet's relay
+#: (``cipstack.control.http_relay``) forwards the same routes, so the API is declared here once.
+DEVICE_ROUTES: tuple[tuple[str, str, str], ...] = (
+    ("GET", "/status", "status"),
+    ("GET", "/faults", "list_faults"),
+    ("POST", "/faults", "apply_fault"),
+    ("DELETE", "/faults", "clear_faults"),
+    ("DELETE", "/faults/{fault}", "clear_faults"),
+    ("GET", "/events", "list_events"),
+    ("GET", "/parameters/{code}", "get_parameter"),
+    ("PUT", "/parameters/{code}", "put_parameter"),
+    ("POST", "/trip", "trip"),
+)
+#: Where a device's routes answer by its address.
+DEVICE_PREFIX = "/devices/{device}"
 
 
 class HttpApiError(ValueError):
@@ -78,21 +97,89 @@ def _is_loopback(host: str) -> bool:
         return False
 
 
-def _error(status: int, message: str, **extra: Any) -> web.Response:
+def json_error(status: int, message: str, **extra: Any) -> web.Response:
     return web.json_response({"error": message, **extra}, status=status)
+
+
+def no_device(name: str | None, names: list[str]) -> web.Response:
+    """404 for a device the API does not serve (``name``), or for a route without an address where
+    the API serves more than one device (``name`` None)."""
+    if name is None:
+        return json_error(404, f"this API serves {len(names)} devices: use /devices/ADDRESS/...", devices=sorted(names))
+    return json_error(404, f"no device {name!r}", devices=sorted(names))
+
+
+class Guard:
+    """What every request passes before its handler (an aiohttp middleware): loopback peers only unless
+    ``allow_remote``, the bearer ``token`` when one is set, at most ``MAX_IN_FLIGHT`` at once; an error
+    of aiohttp's (unknown route, body too large) as a JSON body; nothing a handler raises escapes.
+    ``local``: the API listens on a Unix socket (a worker's, reached by its fleet's relay only), where
+    the socket's directory is the access control and there is no peer address to check."""
+
+    def __init__(self, token: str | None, allow_remote: bool, local: bool = False) -> None:
+        self.token = token
+        self.allow_remote = allow_remote
+        self.local = local
+        self.in_flight = 0
+
+    @web.middleware
+    async def middleware(self, request: web.Request, handler: Handler) -> web.StreamResponse:
+        peer = request.remote or ""
+        if not self.local and not self.allow_remote and not _is_loopback(peer):
+            return json_error(403, f"{peer} is not loopback: this API serves loopback only (--http-allow-remote)")
+        if self.token is not None:
+            given = request.headers.get("Authorization", "")
+            if not hmac.compare_digest(given.encode(), f"Bearer {self.token}".encode()):
+                return json_error(401, "a request needs the header Authorization: Bearer TOKEN (--http-token)")
+        if self.in_flight >= MAX_IN_FLIGHT:
+            return json_error(503, f"{MAX_IN_FLIGHT} requests in progress; try again")
+        self.in_flight += 1
+        try:
+            return await handler(request)
+        except web.HTTPException as exc:
+            if exc.status < 400:
+                raise
+            return json_error(exc.status, exc.reason)
+        except Exception:  # a request must never take the API down
+            log.exception("HTTP %s %s", request.method, request.path)
+            return json_error(500, "internal error (logged)")
+        finally:
+            self.in_flight -= 1
+
+
+async def serve_app(app: web.Application, host: str, port: int, path: str | None = None) -> tuple[web.AppRunner, int]:
+    """``app`` served on ``host:port`` (TCP), or on the Unix socket ``path``; the runner and the TCP
+    port it got (``port`` 0: the OS's choice). A port or path it cannot take raises ``OSError``."""
+    runner = web.AppRunner(app, access_log=None, handle_signals=False)
+    await runner.setup()
+    site: web.BaseSite = web.UnixSite(runner, path) if path is not None else \
+        web.TCPSite(runner, host, port, backlog=64, reuse_address=True)
+    try:
+        await site.start()
+    except OSError:
+        await runner.cleanup()
+        raise
+    server = site._server
+    if path is None and server is not None and server.sockets:  # type: ignore[union-attr]
+        port = server.sockets[0].getsockname()[1]  # type: ignore[union-attr]
+    return runner, port
 
 
 class HttpApi:
     def __init__(self, devices: dict[str, Adapter], host: str = "127.0.0.1", port: int = 0, *,
-                 token: str | None = None, allow_remote: bool = False) -> None:
-        """``devices``: by address (the host of each, or ``host:port`` when several share a host)."""
-        check_settings(f"{host}:{port}", token, allow_remote)
+                 token: str | None = None, allow_remote: bool = False, path: str | None = None) -> None:
+        """``devices``: by address (the host of each, or ``host:port`` when several share a host).
+        ``path``: listen on this Unix socket instead of ``host:port`` (a fleet worker's API, which the
+        fleet's relay forwards to; its directory is what keeps others out)."""
+        if path is None:
+            check_settings(f"{host}:{port}", token, allow_remote)
         self.devices = devices
         self.host = host
         self.port = port
+        self.path = path
         self.token = token
         self.allow_remote = allow_remote
-        self._in_flight = 0
+        self.guard = Guard(token, allow_remote, local=path is not None)
         self._runner: web.AppRunner | None = None
         self.app = self._build()
 
@@ -100,19 +187,9 @@ class HttpApi:
     async def start(self) -> None:
         for adapter in self.devices.values():
             adapter.events.start()  # from now on every event is kept for GET .../events
-        runner = web.AppRunner(self.app, access_log=None, handle_signals=False)
-        await runner.setup()
-        site = web.TCPSite(runner, self.host, self.port, backlog=64, reuse_address=True)
-        try:
-            await site.start()
-        except OSError:
-            await runner.cleanup()
-            raise
-        self._runner = runner
-        server = site._server
-        if server is not None and server.sockets:  # type: ignore[union-attr]
-            self.port = server.sockets[0].getsockname()[1]  # type: ignore[union-attr]
-        log.info("HTTP control API on http://%s:%d/ (openapi.json)", self.host, self.port)
+        self._runner, self.port = await serve_app(self.app, self.host, self.port, self.path)
+        if self.path is None:
+            log.info("HTTP control API on http://%s:%d/ (openapi.json)", self.host, self.port)
 
     async def close(self) -> None:
         if self._runner is not None:
@@ -120,60 +197,22 @@ class HttpApi:
             self._runner = None
 
     def _build(self) -> web.Application:
-        app = web.Application(client_max_size=MAX_BODY, middlewares=[self._guard])
-        routes = [
-            ("GET", "/status", self.status),
-            ("GET", "/faults", self.list_faults),
-            ("POST", "/faults", self.apply_fault),
-            ("DELETE", "/faults", self.clear_faults),
-            ("DELETE", "/faults/{fault}", self.clear_faults),
-            ("GET", "/events", self.list_events),
-            ("GET", "/parameters/{code}", self.get_parameter),
-            ("PUT", "/parameters/{code}", self.put_parameter),
-            ("POST", "/trip", self.trip),
-        ]
-        for method, path, handler in routes:
+        app = web.Application(client_max_size=MAX_BODY, middlewares=[self.guard.middleware])
+        for method, path, name in DEVICE_ROUTES:
+            handler = getattr(self, name)
             app.router.add_route(method, path, handler)
-            app.router.add_route(method, "/devices/{device}" + path, handler)
+            app.router.add_route(method, DEVICE_PREFIX + path, handler)
         app.router.add_get("/devices", self.list_devices)
-        app.router.add_get("/openapi.json", self.openapi)
+        app.router.add_get("/openapi.json", openapi)
         return app
-
-    @web.middleware
-    async def _guard(self, request: web.Request, handler: Handler) -> web.StreamResponse:
-        peer = request.remote or ""
-        if not self.allow_remote and not _is_loopback(peer):
-            return _error(403, f"{peer} is not loopback: this API serves loopback only (--http-allow-remote)")
-        if self.token is not None:
-            given = request.headers.get("Authorization", "")
-            if not hmac.compare_digest(given.encode(), f"Bearer {self.token}".encode()):
-                return _error(401, "a request needs the header Authorization: Bearer TOKEN (--http-token)")
-        if self._in_flight >= MAX_IN_FLIGHT:
-            return _error(503, f"{MAX_IN_FLIGHT} requests in progress; try again")
-        self._in_flight += 1
-        try:
-            return await handler(request)
-        except web.HTTPException as exc:
-            if exc.status < 400:
-                raise
-            return _error(exc.status, exc.reason)
-        except Exception:  # a request must never take the API down
-            log.exception("HTTP %s %s", request.method, request.path)
-            return _error(500, "internal error (logged)")
-        finally:
-            self._in_flight -= 1
 
     # -- helpers ----------------------------------------------------------------------------------------
     def _device(self, request: web.Request) -> Adapter:
         name = request.match_info.get("device")
-        if name is None:
-            if len(self.devices) != 1:
-                raise _NotFound(f"this process runs {len(self.devices)} devices: use /devices/ADDRESS/...",
-                                devices=sorted(self.devices))
-            return next(iter(self.devices.values()))
-        adapter = self.devices.get(name)
+        adapter = self.devices.get(name) if name is not None else \
+            next(iter(self.devices.values())) if len(self.devices) == 1 else None
         if adapter is None:
-            raise _NotFound(f"no device {name!r}", devices=sorted(self.devices))
+            raise _NoDevice(name)
         return adapter
 
     async def _body(self, request: web.Request) -> dict[str, Any]:
@@ -196,14 +235,16 @@ class HttpApi:
         async def wrapped(self: HttpApi, request: web.Request) -> web.Response:
             try:
                 return await handler(self, request)
+            except _NoDevice as exc:
+                return no_device(exc.name, list(self.devices))
             except _NotFound as exc:
-                return _error(404, str(exc), **exc.extra)
+                return json_error(404, str(exc))
             except (_BadRequest, FaultError) as exc:
-                return _error(400, str(exc))
+                return json_error(400, str(exc))
             except NoSuchConnection as exc:
-                return _error(404, str(exc))
+                return json_error(404, str(exc))
             except FaultStateError as exc:
-                return _error(409, str(exc))
+                return json_error(409, str(exc))
         wrapped.__doc__ = handler.__doc__
         return wrapped
 
@@ -295,19 +336,21 @@ class HttpApi:
         try:
             return web.json_response(adapter.control({"command": "trip", "code": body.get("code")}))
         except ControlDenied as exc:
-            return _error(409, str(exc))
+            return json_error(409, str(exc))
         except (ControlError, KeyError, TypeError) as exc:
             raise _BadRequest(str(exc)) from None
 
-    async def openapi(self, request: web.Request) -> web.Response:
-        return web.json_response(openapi_document())
+async def openapi(request: web.Request) -> web.Response:
+    return web.json_response(openapi_document())
+
+
+class _NoDevice(LookupError):
+    def __init__(self, name: str | None) -> None:
+        super().__init__(name)
+        self.name = name
 
 
 class _NotFound(LookupError):
-    def __init__(self, message: str, **extra: Any) -> None:
-        super().__init__(message)
-        self.extra = extra
-
     def __str__(self) -> str:
         return str(self.args[0])
 
@@ -328,11 +371,11 @@ def openapi_document() -> dict[str, Any]:
     paths: dict[str, Any] = {}
 
     def route(path: str, method: str, summary: str, body: dict[str, Any] | None = None,
-              params: list[dict[str, Any]] | None = None, codes: tuple[str, ...] = ("400", "404")) -> None:
+              params: list[dict[str, Any]] | None = None, codes: tuple[str, ...] = ("400", "404", "503")) -> None:
         operation: dict[str, Any] = {"summary": summary, "responses": {"200": ok, **{c: error for c in codes}}}
         if body is not None:
             operation["requestBody"] = {"required": True, "content": {"application/json": {"schema": body}}}
-        for prefix, extra in (("", []), ("/devices/{device}", [device])):
+        for prefix, extra in (("", []), (DEVICE_PREFIX, [device])):
             entry = dict(operation)
             if params or extra:
                 entry["parameters"] = [*extra, *(params or [])]
@@ -348,7 +391,7 @@ def openapi_document() -> dict[str, Any]:
                 "description": "a fault's id, or a fault name (all of that name)"}
     route("/status", "get", "the drive's state, sessions and connections")
     route("/faults", "get", "the faults active")
-    route("/faults", "post", "apply a fault", fault_body, codes=("400", "404", "409"))
+    route("/faults", "post", "apply a fault", fault_body, codes=("400", "404", "409", "503"))
     route("/faults", "delete", "clear every active fault")
     route("/faults/{fault}", "delete", "clear one fault", params=[fault_id])
     route("/events", "get", "the events after number `since`", params=[
@@ -359,8 +402,10 @@ def openapi_document() -> dict[str, Any]:
           params=[code])
     route("/trip", "post", "trip the drive", {"type": "object", "required": ["code"],
                                               "properties": {"code": {"type": ["string", "integer"]}}},
-          codes=("400", "404", "409"))
-    paths["/devices"] = {"get": {"summary": "the devices of this process", "responses": {"200": ok}}}
+          codes=("400", "404", "409", "503"))
+    paths["/devices"] = {"get": {"summary": "the devices this API serves (in a fleet of workers, each with its "
+                                            "worker's number, and `error` where that worker is lost)",
+                                 "responses": {"200": ok}}}
     return {"openapi": "3.0.3",
             "info": {"title": "cipstack emulator control", "version": "1"},
             "paths": paths,

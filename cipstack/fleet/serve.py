@@ -152,7 +152,8 @@ async def serve_until_signalled(devices: Sequence[FleetDevice], port: int, io_po
                                 rtu: str | None = None, http: dict[str, Any] | None = None) -> int:
     """Serve ``devices`` until one of ``signals``; returns the signal that stopped them. ``rtu``:
     the RS-485 line their ACG drives share (``DeviceSet``); ``http``: the settings of one HTTP control
-    API for every device (``http``, ``http_token``, ``http_allow_remote``)."""
+    API for every device (``http``, ``http_token``, ``http_allow_remote``; or ``path``, a fleet worker's
+    Unix socket)."""
     loop = asyncio.get_running_loop()
     stop = asyncio.Event()
     received: list[int] = []
@@ -181,22 +182,34 @@ async def serve_until_signalled(devices: Sequence[FleetDevice], port: int, io_po
     return received[0] if received else signal.SIGTERM
 
 
+def api_addresses(adapters: Sequence[Adapter]) -> dict[str, Adapter]:
+    """The devices of an HTTP control API by address: the host of each, ``host:port`` where hosts repeat."""
+    hosts = [adapter.settings.host for adapter in adapters]
+    return {(host if hosts.count(host) == 1 else f"{host}:{adapter.port}"): adapter
+            for host, adapter in zip(hosts, adapters, strict=True)}
+
+
 async def _start_http(adapters: Sequence[Adapter], http: dict[str, Any]) -> Any:
-    """One HTTP control API for every device, each by its address (``host:port`` where hosts repeat)."""
+    """One HTTP control API for every device, each by its address (``api_addresses``): on ``http["http"]``
+    (``HOST:PORT``), or for a worker of a fleet on the Unix socket ``http["path"]``, which only the
+    fleet's relay reaches (``cipstack.control.http_relay``)."""
     from ..control.http import HttpApi, parse_listen
     from ..listening import ListenError
 
-    hosts = [adapter.settings.host for adapter in adapters]
-    by_address = {(host if hosts.count(host) == 1 else f"{host}:{adapter.port}"): adapter
-                  for host, adapter in zip(hosts, adapters, strict=True)}
-    host, port = parse_listen(http["http"])
-    api = HttpApi(by_address, host, port, token=http.get("http_token"),
-                  allow_remote=http.get("http_allow_remote", False))
+    path = http.get("path")
+    if path is not None:
+        api = HttpApi(api_addresses(adapters), path=path)
+        where = f"Unix socket {path} (the worker's HTTP control API)"
+    else:
+        host, port = parse_listen(http["http"])
+        api = HttpApi(api_addresses(adapters), host, port, token=http.get("http_token"),
+                      allow_remote=http.get("http_allow_remote", False))
+        where = f"TCP {http['http']} (HTTP control API, --http)"
     try:
         await api.start()
     except OSError as exc:
-        raise ListenError(f"TCP {http['http']} (HTTP control API, --http)", exc) from None
+        raise ListenError(where, exc) from None
     return api
 
 
-__all__ = ["DeviceSet", "build_adapter", "device_line", "serve_until_signalled"]
+__all__ = ["DeviceSet", "api_addresses", "build_adapter", "device_line", "serve_until_signalled"]

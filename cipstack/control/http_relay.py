@@ -1,0 +1,183 @@
+"""One HTTP control API for a fleet spread over worker processes: the parent's, which forwards each
+device's routes to the worker that holds the device.
+
+Each worker serves the API of its own devices (``HttpApi``) on a Unix socket in a directory only the
+fleet's user reaches; the relay listens on ``--http`` and answers what the API of one process
+answers, for every device of every worker, by the same addresses: it declares no route of its own
+beyond ``DEVICE_ROUTES`` (the same table ``HttpApi`` serves), ``/devices`` (the workers' own listings,
+joined) and ``/openapi.json`` (the same document). The same ``Guard`` bounds its clients, bodies and
+peers, and checks the token; the worker's answer (status, JSON body, a streamed body as it comes) goes
+back as it is.
+
+A worker that no longer serves (ended, or stopped answering its parent) makes its devices answer 503
+with a JSON body naming the device and why; the other workers' devices answer as before.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import logging
+from collections.abc import Callable
+from dataclasses import dataclass, field
+from typing import Any
+
+import aiohttp
+from aiohttp import web
+from yarl import URL
+
+from .http import (
+    DEVICE_PREFIX,
+    DEVICE_ROUTES,
+    MAX_BODY,
+    Guard,
+    check_settings,
+    json_error,
+    no_device,
+    openapi,
+    serve_app,
+)
+
+log = logging.getLogger(__name__)
+
+#: How long the relay waits for a worker's socket to accept; its event loop accepts in microseconds,
+#: so a worker that takes longer is stopped or stuck (its parent's heartbeat says so, and ends it).
+CONNECT_TIMEOUT = 5.0
+#: Headers of a request the worker's API reads (the token stays with the relay, which checked it).
+_FORWARDED = ("Content-Type", "Accept")
+#: The host name of a worker's URL: a Unix socket has none, aiohttp's client needs one.
+_WORKER_HOST = "cipstack-worker"
+
+
+@dataclass
+class Backend:
+    """A worker's API as the relay reaches it."""
+
+    #: How the worker is named in messages: ``worker 2 (127.0.0.12-127.0.0.13)``.
+    name: str
+    #: The Unix socket its ``HttpApi`` listens on.
+    path: str
+    #: Why it serves no more (``worker 2 (...) ended: killed by SIGKILL``), or None while it serves.
+    down: Callable[[], str | None] = lambda: None
+    #: Its number among the fleet's workers (1, 2, ...), shown in ``/devices``.
+    number: int = 0
+    #: Its devices as its own ``GET /devices`` lists them (read once at start: they do not change).
+    devices: list[dict[str, Any]] = field(default_factory=list)
+    session: aiohttp.ClientSession | None = None
+
+
+class RelayApi:
+    """The fleet's HTTP API on ``host:port`` over the APIs of ``backends`` (see the module docstring)."""
+
+    def __init__(self, backends: list[Backend], host: str = "127.0.0.1", port: int = 0, *,
+                 token: str | None = None, allow_remote: bool = False) -> None:
+        check_settings(f"{host}:{port}", token, allow_remote)
+        self.backends = backends
+        self.host = host
+        self.port = port
+        self.guard = Guard(token, allow_remote)
+        #: Each device's worker, by the address the worker's API gives it.
+        self.routes: dict[str, Backend] = {}
+        self._runner: web.AppRunner | None = None
+        self.app = self._build()
+
+    async def start(self) -> None:
+        """Read each worker's devices, then listen. A worker whose API does not answer raises
+        ``ConnectionError`` naming it; a port that is taken raises ``OSError``."""
+        try:
+            for backend in self.backends:
+                backend.session = aiohttp.ClientSession(
+                    connector=aiohttp.UnixConnector(path=backend.path),
+                    timeout=aiohttp.ClientTimeout(total=None, sock_connect=CONNECT_TIMEOUT))
+                backend.devices = await self._listing(backend)
+                self.routes.update((entry["address"], backend) for entry in backend.devices)
+            self._runner, self.port = await serve_app(self.app, self.host, self.port)
+        except BaseException:
+            await self.close()
+            raise
+        log.info("HTTP control API on http://%s:%d/ (openapi.json), for %d devices in %d workers", self.host,
+                 self.port, len(self.routes), len(self.backends))
+
+    async def close(self) -> None:
+        if self._runner is not None:
+            await self._runner.cleanup()
+            self._runner = None
+        for backend in self.backends:
+            if backend.session is not None:
+                await backend.session.close()
+                backend.session = None
+
+    @staticmethod
+    async def _listing(backend: Backend) -> list[dict[str, Any]]:
+        assert backend.session is not None
+        try:
+            async with backend.session.get(URL.build(scheme="http", host=_WORKER_HOST, path="/devices")) as reply:
+                listed = await reply.json()
+                if reply.status != 200 or not isinstance(listed, list):
+                    raise ConnectionError(f"{backend.name}: its HTTP API answered {reply.status} to GET /devices")
+                return listed
+        except (aiohttp.ClientError, asyncio.TimeoutError, ValueError) as exc:
+            raise ConnectionError(f"{backend.name}: its HTTP API does not answer ({exc or type(exc).__name__})") \
+                from None
+
+    def _build(self) -> web.Application:
+        app = web.Application(client_max_size=MAX_BODY, middlewares=[self.guard.middleware])
+        for method, path, _ in DEVICE_ROUTES:
+            app.router.add_route(method, path, self.unaddressed)
+            app.router.add_route(method, DEVICE_PREFIX + path, self.forward)
+        app.router.add_get("/devices", self.list_devices)
+        app.router.add_get("/openapi.json", openapi)
+        return app
+
+    # -- handlers ---------------------------------------------------------------------------------------
+    async def list_devices(self, request: web.Request) -> web.Response:
+        """Every device of every worker, as its worker lists it, with the worker's number; a device
+        whose worker no longer serves carries ``error``, why."""
+        listed = []
+        for backend in self.backends:
+            down = backend.down()
+            for entry in backend.devices:
+                listed.append({**entry, "worker": backend.number, **({"error": down} if down else {})})
+        return web.json_response(sorted(listed, key=lambda entry: str(entry["address"])))
+
+    async def unaddressed(self, request: web.Request) -> web.Response:
+        """A device's route without its address: a fleet has more than one device."""
+        return no_device(None, list(self.routes))
+
+    async def forward(self, request: web.Request) -> web.StreamResponse:
+        """The request, as it came, to the API of the worker that holds the device; its answer back."""
+        name = request.match_info["device"]
+        backend = self.routes.get(name)
+        if backend is None:
+            return no_device(name, list(self.routes))
+        down = backend.down()
+        if down is not None or backend.session is None:
+            return self._unserved(name, down or f"{backend.name} is stopping")
+        body = await request.read()   # within MAX_BODY (413 beyond), as the worker's own limit
+        headers = {key: request.headers[key] for key in _FORWARDED if key in request.headers}
+        url = URL(f"http://{_WORKER_HOST}{request.raw_path}", encoded=True)
+        response: web.StreamResponse | None = None
+        try:
+            async with backend.session.request(request.method, url, data=body or None, headers=headers,
+                                               allow_redirects=False) as reply:
+                kept = {key: reply.headers[key] for key in ("Content-Type",) if key in reply.headers}
+                if reply.content_length is not None:
+                    return web.Response(status=reply.status, body=await reply.read(), headers=kept)
+                # A body of no announced length (a stream of events) goes on as it comes.
+                response = web.StreamResponse(status=reply.status, headers=kept)
+                await response.prepare(request)
+                async for chunk in reply.content.iter_any():
+                    await response.write(chunk)
+                await response.write_eof()
+                return response
+        except (aiohttp.ClientError, asyncio.TimeoutError) as exc:
+            if response is not None:   # the worker went away in mid-stream: the stream ends there
+                return response
+            return self._unserved(name, backend.down() or f"{backend.name} does not answer "
+                                                          f"({exc or type(exc).__name__})")
+
+    @staticmethod
+    def _unserved(name: str, why: str) -> web.Response:
+        return json_error(503, f"device {name} is not served: {why}", device=name)
+
+
+__all__ = ["Backend", "RelayApi"]
