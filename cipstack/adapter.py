@@ -25,6 +25,7 @@ from .devices.acg.modbus_rtu import LineSettings
 from .devices.acg.modbus_server import ModbusTcpServer
 from .devices.acg.rtu_line import RtuLine, RtuPortError, open_port
 from .devices.base import Device, DeviceLimits, TripRefused
+from .devices.keypad import Keypad, NoKeypad
 from .devices.profiles import DEFAULT_MAC, DEFAULT_PROFILE, ProfileOptions, build_device
 from .eip.identity_items import CAPABILITY_CIP_TCP, CAPABILITY_CLASS01_UDP
 from .eip.interfaces import interface_of
@@ -263,6 +264,8 @@ class Adapter:
             raise
         self.rtu = RtuLine(port)
         self.rtu.add(lambda: acg.drive, acg.saves)
+        if self._events is not None:    # watched before the port opened
+            self._events.tap_rtu(self.rtu)
         await self.rtu.start()
 
     @property
@@ -316,35 +319,46 @@ class Adapter:
             self.control_server = None
         await self.close()
 
-    def apply_keypad_parameters(self, assignments: list[str]) -> list[str]:
-        """``--param CODE=VALUE``: keypad parameters set before the network connects (the ACG's codes),
-        applied as a write over the network would be, not saved. Returns what was set, one line each;
-        a device without a keypad or a bad assignment raises ``ValueError``."""
-        from .devices.acg.keypad import apply_parameters
+    # -- the keypad (cipstack.devices.keypad) ---------------------------------------------------------
+    def keypad(self) -> Keypad:
+        """The device's keypad (the ACG's keypad, the MX2/RX Digital Operator); ``NoKeypad`` for a device
+        without one."""
+        keypad = self.device.keypad()
+        if keypad is None:
+            raise NoKeypad(f"{self.device.identity_info.product_name}: this device has no keypad (keypad "
+                           "parameters are a drive's: profile acg, mx2 or rx); write its parameters over CIP")
+        return keypad
 
-        if not isinstance(self.device, AcgDevice):
-            raise ValueError("--param sets the ACG's keypad parameters (profile acg)")
-        drive = self.device.drive
-        return apply_parameters(drive, assignments, drive.time)
+    def apply_keypad_parameters(self, assignments: list[str]) -> list[str]:
+        """``--param CODE=VALUE``: keypad parameters set before the network connects, by the keypad's
+        codes and in its unit, written with the device's rules and not saved. Returns what was set, one
+        line each; a device without a keypad or an assignment not taken raises ``ValueError`` (an
+        unknown code ``UnknownCode``, a ``LookupError``) naming it. Not an event: it precedes the stream."""
+        # At the device's own present time: before the shell's clock moves it (a drive's power-up
+        # instant is the first time the shell advances it).
+        return self.keypad().assign(assignments, 0.0)
 
     def keypad_parameter(self, code: str) -> dict[str, Any]:
-        """A keypad parameter by its code (the ACG's: ``drv``, ``ACC``, ``CM.23``...): its value in the
-        keypad's unit, its raw value, name and unit. ``LookupError`` for an unknown code, ``ValueError``
-        for a device without a keypad."""
-        from decimal import Decimal
+        """A keypad parameter by its code (``drv``, ``ACC``, ``CM.23``; ``F001``, ``A004``, ``P044``): code,
+        name, value in the keypad's unit, raw value, unit, address. ``UnknownCode`` (a ``LookupError``)
+        for a code the keypad does not have, ``NoKeypad`` (a ``ValueError``) for a device without one."""
+        return self.keypad().get(code)
 
-        from .devices.acg.registers import register_for_code
-
-        if not isinstance(self.device, AcgDevice):
-            raise ValueError("keypad parameters are the ACG's (profile acg)")
-        register = register_for_code(code)
-        raw = self.device.drive.read(register.address)
-        value = Decimal(raw) * Decimal(str(register.scale)) if register.scale != 1 else Decimal(raw)
-        record: dict[str, Any] = {"code": register.code, "name": register.name, "value": f"{value:f}", "raw": raw,
-                                  "unit": register.unit, "address": f"0x{register.address:04X}"}
-        if register.enum and raw in register.enum:
-            record["meaning"] = register.enum[raw]
-        return record
+    def set_keypad_parameter(self, code: str, value: object, origin: str = "python",
+                             peer: str | None = None) -> dict[str, Any]:
+        """Set a keypad parameter now, ``value`` in the keypad's unit (``"2.5"``, ``4``, an enumeration's
+        name), not saved; returns it as ``keypad_parameter`` does. ``UnknownCode``, ``BadValue``,
+        ``WriteRefused`` (with the device's reason) or ``NoKeypad`` when not written. ``origin`` and
+        ``peer`` are what the event stream's ``parameter write`` says of who wrote it."""
+        keypad = self.keypad()
+        now = asyncio.get_running_loop().time()
+        self._tick(now)
+        register, raw = keypad.set(code, str(value), now)
+        if self._events is not None and self._events.watching:
+            self._events.parameter_written(origin, **({"peer": peer} if peer is not None else {}),
+                                           **keypad.write_fields(register, raw))
+        self.target.tick(now)   # the drive's new state, through the event stream's tap if any
+        return keypad.get(register.code)
 
     async def close(self) -> None:
         if self._faults is not None:

@@ -40,7 +40,7 @@ def test_param_takes_keypad_codes_in_the_keypad_unit() -> None:
     assert parse_assignment("Frq=Field Bus") == (ACG_REGISTERS.by_code("Frq"), 8)
     assert parse_assignment("ACC=2.5") == (ACG_REGISTERS.by_code("ACC"), 25)      # 0.1 s steps
     assert parse_assignment("cm-24=3") == (ACG_REGISTERS.by_code("CM.24"), 3)
-    for text, words in (("drv=9", "takes 0..4"), ("ACC=2.55", "step 0.1"), ("foo=1", "not an ACG keypad code"),
+    for text, words in (("drv=9", "takes 0..4"), ("ACC=2.55", "step 0.1"), ("foo=1", "not a code of the ACG keypad"),
                         ("drv", "CODE=VALUE"), ("drv=x", "not a number")):
         with pytest.raises(ValueError, match=words):
             parse_assignment(text)

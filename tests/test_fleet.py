@@ -183,7 +183,8 @@ def test_a_bad_spec_is_one_line(argv: list[str], message: str, capsys: pytest.Ca
     ('adresses = "127.77.9.1"\n', "unknown key 'adresses'"),
     ('[[device]]\nprofile = "acg"\ncolour = "red"\n', "unknown key 'colour'"),
     ('[[device]\n', "not valid TOML"),
-    ('addresses = "127.77.9.1"\n[[device]]\nprofile = "mx2"\nparams = ["drv=4"]\n', "profile acg"),
+    ('addresses = "127.77.9.1"\n[[device]]\nprofile = "mx2"\nparams = ["drv=4"]\n',
+     "'drv' is not a code of the MX2 Digital Operator"),
 ])
 def test_a_bad_spec_file_is_one_line(text: str, message: str, tmp_path: Path,
                                      capsys: pytest.CaptureFixture[str]) -> None:

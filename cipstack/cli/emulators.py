@@ -50,7 +50,7 @@ def cmd_adapter(args: argparse.Namespace) -> int:
 
 
 def _apply_keypad_parameters(adapter: Any, assignments: list[str]) -> None:
-    """``--param CODE=VALUE``: keypad parameters set before the network connects (the ACG's codes)."""
+    """``--param CODE=VALUE``: keypad parameters set before the network connects (the device's keypad)."""
     try:
         applied = adapter.apply_keypad_parameters(assignments)
     except ValueError as exc:

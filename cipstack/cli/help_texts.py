@@ -60,6 +60,8 @@ COMMANDS: dict[tuple[str, ...], CommandText] = {
           "the ACG, taking its run command and speed reference from the network"),
          ("cipstack adapter --host 127.0.0.2 --profile mx2 --model MX2-A2015-E",
           "an Omron MX2 on a second loopback address"),
+         ("cipstack adapter --profile mx2 --param A004=60 --param P044=1.5",
+          "an MX2 set on its Digital Operator: maximum frequency 60.0 Hz, network error timer 1.5 s"),
          ("cipstack adapter --modbus-port 5020 --max-sessions 8",
           "also serve Modbus TCP on port 5020, at most 8 encapsulation sessions")),
     ),

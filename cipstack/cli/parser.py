@@ -157,8 +157,9 @@ def build_parser(command: str | None = None) -> argparse.ArgumentParser:
                         "/dev/ttyUSB0 (needs pyserial: the rtu extra), or pty for a new pseudo-terminal whose "
                         "path is printed; line settings from CM.1, CM.3, CM.4, CM.5")
     p.add_argument("--param", action="append", metavar="CODE=VALUE",
-                   help="set an ACG keypad parameter at start, in the keypad's unit; repeatable "
-                        "(drv=4 Frq=8: run from the network)")
+                   help="set a keypad parameter at start by its code, in the keypad's unit, not saved; "
+                        "repeatable: the ACG's keypad codes (drv=4 Frq=8: run from the network; ACC=2.5), "
+                        "an MX2/RX Digital Operator function code (A004=60 is 60.0 Hz, A001=2, P044=1.5)")
     p.add_argument("--quiet", action="store_true", help="no status line on stdout")
     _add_http_arguments(p)
     _complete(p.add_argument("--scenario", type=Path, metavar="FILE.toml",

@@ -2,12 +2,18 @@
 
 Events: class 1 connections opened, closed and timed out; run/idle changes of their O->T data; the
 drive's state changes and trips (seen whenever the adapter moves the device to a new time);
-parameter writes (a Set service the device accepted); faults applied, cleared, expired, used up.
+parameter writes, one per write the device accepted from any route (``parameter write``: a CIP Set
+service, a register of a Modbus TCP or Modbus-RTU request, a keypad parameter set over HTTP or from
+Python; ``origin`` says which, with the peer or the station, and ``code``, ``address``, ``raw`` what
+was written where the device knows the parameter); faults applied, cleared, expired, used up.
 Each is an ``Event`` with its wall-clock time, its time on the loop's clock, a kind and fields.
 
 Nothing is watched until the stream is started (``Adapter.events`` starts it on first use): the
 taps are put where the adapter hands things to the device (its class 1 events, its clock, its
-message router's entry), so an adapter nobody observes pays nothing. The stream keeps the last
+message router's entry, the one place each Modbus port writes a register), so an adapter nobody
+observes pays nothing. Each route has its own tap and a write passes one of them, so a write is one
+event (a CIP Set of class 0x64 is seen at the router, not again at the drive). Keypad parameters
+given at start (``--param``) precede the stream and are no event. The stream keeps the last
 ``limit`` events; ``wait_for`` waits for one on the loop.
 """
 
@@ -23,6 +29,7 @@ from typing import TYPE_CHECKING, Any
 
 if TYPE_CHECKING:
     from ..adapter import Adapter
+    from ..devices.keypad import Keypad
 
 #: Events kept (the oldest go first).
 DEFAULT_LIMIT = 10_000
@@ -85,11 +92,17 @@ class EventStream:
         self._started = False
         self._drive: dict[str, Any] | None = None
         self._undo: list[Callable[[], None]] = []
+        self._keypad: Keypad | None = None
 
     # -- reading ---------------------------------------------------------------------------------------
     def since(self, number: int = 0) -> list[Event]:
         """The events after event ``number`` still kept, oldest first."""
         return [e for e in self.events if e.number > number]
+
+    @property
+    def watching(self) -> bool:
+        """The taps are in place (``start``, until ``stop``)."""
+        return self._started
 
     def kinds(self) -> list[str]:
         return [e.kind for e in self.events]
@@ -155,19 +168,24 @@ class EventStream:
         self._undo.append(lambda: setattr(adapter.target, "tick", target_tick))
         if io is not None:
             self._undo.append(lambda: setattr(io, "tick", io_tick))
-        # Parameter writes: at the device's message router, behind any fault in front of it.
+        # Parameter writes: at the device's message router, behind any fault in front of it; at the
+        # register store of each Modbus port; keypad writes tell the stream themselves.
+        self._keypad = adapter.device.keypad()
         router = adapter.device.router
         handle = type(router).handle.__get__(router)
 
         def handle_and_record(raw: bytes, context: Any) -> bytes:
             reply = handle(raw, context)
             if raw and raw[0] in _SET_SERVICES and len(reply) >= 4 and reply[2] == 0:
-                self.emit("parameter write", service=f"0x{raw[0]:02X}", path=raw[2:2 + 2 * raw[1]].hex(),
-                          data=raw[2 + 2 * raw[1]:].hex(), origin=getattr(context, "origin", ""))
+                self._cip_write(raw, getattr(context, "origin", ""))
             return reply
 
         router.handle = handle_and_record  # type: ignore[method-assign]
         self._undo.append(lambda: router.__dict__.pop("handle", None))
+        if adapter.modbus is not None:
+            self._tap_modbus(adapter.modbus.core, "modbus-tcp", "peer")
+        if adapter.rtu is not None:
+            self.tap_rtu(adapter.rtu)
         adapter.faults.listeners.append(self._on_fault)
         self._undo.append(lambda: adapter.faults.listeners.remove(self._on_fault))
 
@@ -177,6 +195,45 @@ class EventStream:
             undo()
         self._undo.clear()
         self._started = False
+
+    def tap_rtu(self, line: Any) -> None:
+        """Watch the register writes of the drives on an RS-485 line (``RtuLine``), once it is open."""
+        if self._started:
+            for slave in line.slaves:
+                self._tap_modbus(slave.core, "modbus-rtu", "station")
+
+    def _tap_modbus(self, core: Any, origin: str, source_field: str) -> None:
+        """Record each register a Modbus port's core writes (``ModbusCore.store``): its source is the
+        peer's ``host:port`` (TCP) or the station the frame addressed (RTU, 0 for a broadcast)."""
+        store = type(core).store.__get__(core)
+        keypad = self._keypad
+
+        def store_and_record(drive: Any, address: int, raw: int, now: float, source: object) -> None:
+            store(drive, address, raw, now, source)
+            found = drive.registers.word(address)
+            register = found[0] if found is not None and found[1] == 0 else None
+            what = keypad.write_fields(register, raw, address) if keypad is not None else {"raw": raw}
+            self.parameter_written(origin, **{source_field: source}, **what)
+
+        core.store = store_and_record
+        self._undo.append(lambda: core.__dict__.pop("store", None))
+
+    def _cip_write(self, request: bytes, peer: str) -> None:
+        """A Set service the router answered with success: its service, path and data, and the
+        parameter it wrote by code where the device's keypad knows the path (class 0x64 of the ACG,
+        0x64/0x65 of the MX2/RX, an attribute that shows a register)."""
+        size = 2 * request[1]
+        fields: dict[str, Any] = {"peer": peer, "service": f"0x{request[0]:02X}",
+                                  "path": request[2:2 + size].hex(), "data": request[2 + size:].hex()}
+        if self._keypad is not None:
+            fields.update(self._keypad.written_by(request))
+        self.parameter_written("cip", **fields)
+
+    def parameter_written(self, origin: str, **fields: Any) -> Event:
+        """Record one accepted write: ``origin`` ("cip", "modbus-tcp", "modbus-rtu", "http", "python")
+        and what the route knows of it (``peer`` or ``station``; ``code``, ``address``, ``raw``,
+        ``value`` where the parameter is known)."""
+        return self.emit("parameter write", origin=origin, **fields)
 
     def _on_fault(self, record: dict[str, Any]) -> None:
         self.emit(record["event"], id=record["id"], fault=record["fault"], options=record["options"])

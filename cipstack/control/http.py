@@ -243,7 +243,7 @@ class HttpApi:
                 return json_error(400, str(exc))
             except NoSuchConnection as exc:
                 return json_error(404, str(exc))
-            except FaultStateError as exc:
+            except (FaultStateError, _Conflict) as exc:
                 return json_error(409, str(exc))
         wrapped.__doc__ = handler.__doc__
         return wrapped
@@ -304,28 +304,22 @@ class HttpApi:
     @_handled
     async def get_parameter(self, request: web.Request) -> web.Response:
         adapter = self._device(request)
-        try:
-            return web.json_response(adapter.keypad_parameter(request.match_info["code"]))
-        except LookupError as exc:
-            raise _NotFound(str(exc.args[0] if exc.args else exc)) from None
-        except ValueError as exc:
-            raise _BadRequest(str(exc)) from None
+        return web.json_response(_keypad_call(lambda: adapter.keypad_parameter(request.match_info["code"])))
 
     @_handled
     async def put_parameter(self, request: web.Request) -> web.Response:
         adapter = self._device(request)
         body = await self._body(request)
         code = request.match_info["code"]
-        if "value" not in body or isinstance(body["value"], (dict, list, bool)) or body["value"] is None:
-            raise _BadRequest("the body is {\"value\": VALUE}, in the keypad's unit")
-        try:
-            adapter.keypad_parameter(code)
-            adapter.apply_keypad_parameters([f"{code}={body['value']}"])
-            return web.json_response(adapter.keypad_parameter(code))
-        except LookupError as exc:
-            raise _NotFound(str(exc.args[0] if exc.args else exc)) from None
-        except ValueError as exc:
-            raise _BadRequest(str(exc)) from None
+        value = body.get("value")
+        if set(body) != {"value"} or isinstance(value, (dict, list, bool)) or value is None:
+            raise _BadRequest("the body is {\"value\": VALUE}, in the keypad's unit (\"2.5\", 60, or an "
+                              "enumeration's name)")
+        # The client's host:port; none behind a fleet's relay (a worker's API is on a Unix socket).
+        peer = request.transport.get_extra_info("peername") if request.transport is not None else None
+        where = f"{peer[0]}:{peer[1]}" if isinstance(peer, tuple) and len(peer) >= 2 else None
+        return web.json_response(_keypad_call(
+            lambda: adapter.set_keypad_parameter(code, value, origin="http", peer=where)))
 
     @_handled
     async def trip(self, request: web.Request) -> web.Response:
@@ -350,6 +344,20 @@ class _NoDevice(LookupError):
         self.name = name
 
 
+def _keypad_call(call: Callable[[], dict[str, Any]]) -> dict[str, Any]:
+    """A keypad read or write (``cipstack.devices.keypad``): a code the keypad lacks or a device without
+    one (a ``LookupError``) is 404, a write the device refuses (a ``ValueError`` with ``conflict``) 409,
+    a value the keypad does not take (another ``ValueError``) 400, each with its reason."""
+    try:
+        return call()
+    except LookupError as exc:
+        raise _NotFound(str(exc)) from None
+    except ValueError as exc:
+        if getattr(exc, "conflict", False):
+            raise _Conflict(str(exc)) from None
+        raise _BadRequest(str(exc)) from None
+
+
 class _NotFound(LookupError):
     def __str__(self) -> str:
         return str(self.args[0])
@@ -357,6 +365,10 @@ class _NotFound(LookupError):
 
 class _BadRequest(ValueError):
     pass
+
+
+class _Conflict(Exception):
+    """The request was understood and the device's state refuses it (409)."""
 
 
 def openapi_document() -> dict[str, Any]:
@@ -386,7 +398,8 @@ def openapi_document() -> dict[str, Any]:
         "options": {"type": "object", "description": "the fault's options, as `cipstack drive fault` names them "
                                                      "(share, every, by, jitter, connection, for, ...)"}}}
     code = {"name": "code", "in": "path", "required": True, "schema": {"type": "string"},
-            "description": "keypad code (drv, Frq, ACC, CM.23, ...)"}
+            "description": "keypad code: the ACG's (drv, Frq, ACC, CM.23, ...), an MX2/RX function code "
+                           "(F001, A004, P044, ...); 404 for a code the keypad lacks or a device without one"}
     fault_id = {"name": "fault", "in": "path", "required": True, "schema": {"type": "string"},
                 "description": "a fault's id, or a fault name (all of that name)"}
     route("/status", "get", "the drive's state, sessions and connections")
@@ -396,10 +409,13 @@ def openapi_document() -> dict[str, Any]:
     route("/faults/{fault}", "delete", "clear one fault", params=[fault_id])
     route("/events", "get", "the events after number `since`", params=[
         {"name": "since", "in": "query", "schema": {"type": "integer", "minimum": 0}}])
-    route("/parameters/{code}", "get", "a keypad parameter", params=[code])
-    route("/parameters/{code}", "put", "set a keypad parameter (not saved)",
-          {"type": "object", "required": ["value"], "properties": {"value": {"type": ["string", "number"]}}},
-          params=[code])
+    route("/parameters/{code}", "get", "a keypad parameter: code, name, value in the keypad's unit, raw, unit, "
+          "address", params=[code])
+    route("/parameters/{code}", "put", "set a keypad parameter (not saved): 400 for a value the keypad does not "
+          "take, 409 for a write the device refuses (read-only, not while running), with its reason",
+          {"type": "object", "required": ["value"], "additionalProperties": False,
+           "properties": {"value": {"type": ["string", "number"]}}},
+          params=[code], codes=("400", "404", "409"))
     route("/trip", "post", "trip the drive", {"type": "object", "required": ["code"],
                                               "properties": {"code": {"type": ["string", "integer"]}}},
           codes=("400", "404", "409", "503"))

@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import logging
 from dataclasses import dataclass, field
+from typing import TYPE_CHECKING
 
 from ..cip.epath import ElectronicKey
 from ..cip.router import MessageRouter
@@ -21,6 +22,9 @@ from ..objects.identity import ExtendedDeviceStatus, IdentityInfo, IdentityObjec
 from ..objects.message_router import MessageRouterObject
 from ..objects.tcpip import EthernetLinkObject, NetworkInterface, TcpIpObject
 from .state import StateWriter
+
+if TYPE_CHECKING:
+    from .keypad import Keypad
 
 log = logging.getLogger(__name__)
 
@@ -125,6 +129,11 @@ class Device:
 
     def status_fields(self) -> dict[str, object] | None:
         """The state ``status_line`` shows, field by field (``cipstack drive status --json``), or None."""
+        return None
+
+    def keypad(self) -> Keypad | None:
+        """The drive's keypad (``cipstack.devices.keypad``): its parameters by code, in the keypad's
+        unit; None for a device without one."""
         return None
 
     # -- saved parameters -------------------------------------------------------------------------

@@ -18,6 +18,7 @@ if TYPE_CHECKING:
     # The device model (router, Connection Manager, class 1 target) is loaded by what builds a
     # device: a scanner that only wants a profile's catalog does without it.
     from .base import Device, DeviceLimits
+    from .keypad import KeypadCodes
 
 #: Locally administered MAC of the emulated card (bit 1 of the first octet set).
 DEFAULT_MAC = bytes.fromhex("02CA10000064")
@@ -68,6 +69,9 @@ class Profile:
     product_codes: frozenset[int] = frozenset()
     #: The declarations of the profile's objects and assemblies, for a scanner.
     catalog: Callable[[], Catalog] | None = None
+    #: The codes of the drive's keypad, to check ``--param`` before a device is built (the device's
+    #: ``keypad()`` uses the same declaration); None for a device without a keypad.
+    keypad: Callable[[], KeypadCodes] | None = None
 
     def matches(self, identity: IdentityRecord) -> bool:
         return identity.vendor_id == self.vendor_id and identity.product_code in self.product_codes
@@ -155,6 +159,22 @@ def _omron_catalog(default_model: str) -> Callable[[], Catalog]:
     return catalog
 
 
+def _acg_keypad() -> KeypadCodes:
+    from .acg.keypad import ACG_KEYPAD
+
+    return ACG_KEYPAD
+
+
+def _omron_keypad(family: str) -> Callable[[], KeypadCodes]:
+    def keypad() -> KeypadCodes:
+        from .omron.models import Family
+        from .omron.operator import operator_codes
+
+        return operator_codes(Family[family.upper()])
+
+    return keypad
+
+
 def _omron_product_codes(family: str) -> frozenset[int]:
     from .omron.models import MODELS
 
@@ -164,14 +184,14 @@ def _omron_product_codes(family: str) -> frozenset[int]:
 PROFILES: dict[str, Profile] = {
     "acg": Profile("acg", "ACG drive with its ACG-ET2 EtherNet/IP card (seeds 000 and 001)", _acg,
                    vendor_id=acg_et2_identity().vendor_id, product_codes=frozenset({acg_et2_identity().product_code}),
-                   catalog=_acg_catalog),
+                   catalog=_acg_catalog, keypad=_acg_keypad),
     # The Omron inverters with the CompoNet option board (seed 004), served over EtherNet/IP.
     "mx2": Profile("mx2", "Omron MX2 with the 3G3AX-MX2-CRT-E CompoNet option board (--model, Tables 2/C-3)",
                    _omron("mx2", "MX2-A2015-E"), vendor_id=47, product_codes=_omron_product_codes("mx2"),
-                   catalog=_omron_catalog("MX2-A2015-E")),
+                   catalog=_omron_catalog("MX2-A2015-E"), keypad=_omron_keypad("mx2")),
     "rx": Profile("rx", "Omron RX with the 3G3AX-RX-CRT-E CompoNet option board (--model, Tables 3/C-4)",
                   _omron("rx", "RX-A4055-E"), vendor_id=47, product_codes=_omron_product_codes("rx"),
-                  catalog=_omron_catalog("RX-A4055-E")),
+                  catalog=_omron_catalog("RX-A4055-E"), keypad=_omron_keypad("rx")),
 }
 DEFAULT_PROFILE = "acg"
 

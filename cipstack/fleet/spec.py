@@ -167,14 +167,14 @@ def make_group(profile: str | None, model: str | None, count: Any, first: str | 
         profile = family
     assert profile is not None
     if params:
-        if profile != "acg":
-            raise SpecError(f"{where}: parameters (--param, params) are the ACG's keypad codes (profile acg)")
-        from ..devices.acg.keypad import parse_assignment
-
+        keypad = PROFILES[profile].keypad
+        if keypad is None:
+            raise SpecError(f"{where}: parameters (--param, params) are a keypad's, and profile {profile} has none")
+        codes = keypad()
         for text in params:
             try:
-                parse_assignment(text)
-            except ValueError as exc:
+                codes.parse(text)
+            except (ValueError, LookupError) as exc:
                 raise SpecError(f"{where}: {exc}") from None
     if station is not None:
         if profile != "acg":

@@ -31,7 +31,8 @@ class DeviceOptions:
     profile: str = "acg"
     model: str | None = None
     eds: str | Path | None = None
-    #: Keypad parameters set at start, as ``cipstack adapter --param`` takes them (``drv=4``).
+    #: Keypad parameters set at start, as ``cipstack adapter --param`` takes them: the ACG's codes
+    #: (``drv=4``), an MX2/RX Digital Operator's function codes (``A004=60``).
     params: Sequence[str] = ()
     host: str = "127.0.0.1"
     state_path: Path | None = None
@@ -146,6 +147,16 @@ class EmulatedDevice:
 
     def trip(self, code: int | str) -> dict[str, Any]:
         return self.run(lambda: self.adapter.control({"command": "trip", "code": code}))
+
+    def parameter(self, code: str) -> dict[str, Any]:
+        """A keypad parameter by its code (the ACG's ``ACC``, an MX2/RX function code ``A004``): code, name,
+        value in the keypad's unit, raw value, unit, address (``Adapter.keypad_parameter``)."""
+        return self.run(lambda: self.adapter.keypad_parameter(code))
+
+    def set_parameter(self, code: str, value: object) -> dict[str, Any]:
+        """Set a keypad parameter now, in the keypad's unit, not saved; a ``parameter write`` event with
+        origin "python" (``Adapter.set_keypad_parameter``)."""
+        return self.run(lambda: self.adapter.set_keypad_parameter(code, value))
 
     # -- the end ------------------------------------------------------------------------------------------
     def close(self) -> None:

@@ -47,6 +47,7 @@ from ..registers import Register, RegisterError
 from ..state import ParameterStore, StateWriter
 from . import registers as reg
 from .drive import FAMILY, MODEL, AcgDrive, Trip
+from .keypad import AcgKeypad
 from .objects import (
     CATALOG_CLASSES,
     OUTPUT_FREQUENCY,
@@ -316,6 +317,10 @@ class AcgDevice(Device):
         """The fault codes of the Drive Fault Codes table (seed 000), or a trip's name."""
         codes = sorted({trip.fault_code for trip in Trip})
         return ", ".join(f"0x{code:04X}" for code in codes) + " (or a trip name, e.g. OverHeat)"
+
+    def keypad(self) -> AcgKeypad:
+        """The drive's keypad: its codes (drv, ACC, CM.23...) in the keypad's unit."""
+        return AcgKeypad(lambda: self.drive, self.router.objects)
 
     def status_fields(self) -> dict[str, object]:
         drive = self.drive

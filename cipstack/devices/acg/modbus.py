@@ -52,12 +52,13 @@ class ModbusTcpCore(ModbusCore):
     def __init__(self, drive: AcgDrive | DriveSource) -> None:
         super().__init__(drive, TCP_DIALECT)
 
-    def handle_adu(self, adu: bytes, now: float) -> bytes | None:
-        """One MBAP frame in, its reply out (None: a frame of another protocol, discarded)."""
+    def handle_adu(self, adu: bytes, now: float, source: object = None) -> bytes | None:
+        """One MBAP frame in, its reply out (None: a frame of another protocol, discarded); ``source``
+        as ``handle_pdu`` takes it (the peer's address)."""
         transaction, protocol, _length, unit = MBAP.unpack_from(adu)
         if protocol != 0:
             return None
-        pdu = self.handle_pdu(adu[MBAP_SIZE:], now)
+        pdu = self.handle_pdu(adu[MBAP_SIZE:], now, source)
         return MBAP.pack(transaction, 0, len(pdu) + 1, unit) + pdu
 
     def exception_adu(self, adu: bytes, code: ExceptionCode) -> bytes:

@@ -143,7 +143,9 @@ class ModbusCore:
         self.exceptions += 1
         return bytes((function | 0x80, code))
 
-    def handle_pdu(self, pdu: bytes, now: float) -> bytes:
+    def handle_pdu(self, pdu: bytes, now: float, source: object = None) -> bytes:
+        """One request PDU in, its reply out. ``source``: who sent it (a TCP peer's address, the RTU
+        station addressed), handed to ``store`` with each register written, for an observer."""
         drive = self.drive
         now = max(now, drive.time)
         drive.on_modbus_activity(now, self.dialect.port)
@@ -153,7 +155,7 @@ class ModbusCore:
         # inline: it is on every request).
         previous, drive.command_port = drive.command_port, self.dialect.port
         try:
-            return bytes((function,)) + self._serve(function, pdu[1:], drive, now)
+            return bytes((function,)) + self._serve(function, pdu[1:], drive, now, source)
         except ModbusException as exc:
             log.debug("%s function 0x%02X: %s", self.dialect.name, function, exc)
             return self.exception_pdu(function, exc.code)
@@ -163,7 +165,7 @@ class ModbusCore:
         finally:
             drive.command_port = previous
 
-    def _serve(self, function: int, data: bytes, drive: AcgDrive, now: float) -> bytes:
+    def _serve(self, function: int, data: bytes, drive: AcgDrive, now: float, source: object) -> bytes:
         # A PDU is exactly as long as its function says: bytes beyond it (a wrong MBAP length, or
         # data the request does not have) refuse the request with 0x03, which the Modbus
         # Application Protocol gives for "the implied length is incorrect".
@@ -177,19 +179,19 @@ class ModbusCore:
             return self._read(drive, address + offset, count)
         if function == FunctionCode.WRITE_SINGLE_REGISTER:
             address, value = _unpack(">HH", data)
-            self._write(drive, address + offset, [value], now)
+            self._write(drive, address + offset, [value], now, source)
             return data
         if function == FunctionCode.WRITE_MULTIPLE_REGISTERS:
             address, count, byte_count = _unpack(">HHB", data[:5])  # the values' length: _values
             values = _values(data[5:], count, byte_count)
-            self._write(drive, address + offset, values, now)
+            self._write(drive, address + offset, values, now, source)
             return struct.pack(">HH", address, count)
         # FunctionCode.READ_WRITE_MULTIPLE_REGISTERS
         read_address, read_count, write_address, write_count, byte_count = _unpack(">HHHHB", data[:9])
         values = _values(data[9:], write_count, byte_count)
         _check_count(read_count)
         self._check_addresses(drive, read_address + offset, read_count)
-        self._write(drive, write_address + offset, values, now)  # the write is done before the read
+        self._write(drive, write_address + offset, values, now, source)  # the write is done before the read
         return self._read(drive, read_address + offset, read_count)
 
     @staticmethod
@@ -206,7 +208,7 @@ class ModbusCore:
         words = [drive.read(a) & 0xFFFF for a in range(address, address + count)]
         return bytes((2 * count,)) + struct.pack(f">{count}H", *words)
 
-    def _write(self, drive: AcgDrive, address: int, values: list[int], now: float) -> None:
+    def _write(self, drive: AcgDrive, address: int, values: list[int], now: float, source: object) -> None:
         _check_count(len(values))
         self._check_addresses(drive, address, len(values))
         # Every word is checked against its declaration before any is written.
@@ -224,9 +226,14 @@ class ModbusCore:
             raws.append(raw)
         for offset, raw in enumerate(raws):
             try:
-                drive.write(address + offset, raw, now)
+                self.store(drive, address + offset, raw, now, source)
             except RegisterError as exc:
                 raise ModbusException(self.dialect.refusal(exc.refusal), str(exc)) from None
+
+    def store(self, drive: AcgDrive, address: int, raw: int, now: float, source: object) -> None:
+        """Write one register of a request, checked: the one place a Modbus request changes the drive
+        (an observer, the event stream, wraps it on the instance; nobody pays for it otherwise)."""
+        drive.write(address, raw, now)
 
 
 def _unpack(fmt: str, data: bytes) -> tuple[int, ...]:

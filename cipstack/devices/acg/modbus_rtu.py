@@ -279,13 +279,13 @@ class RtuSlave:
         if station == BROADCAST:
             counters.broadcasts += 1
             if frame[1] in _WRITES:          # "write functions only; every slave executes"
-                self.core.handle_pdu(frame[1:-2], now)
+                self.core.handle_pdu(frame[1:-2], now, station)
             return None
         if station != settings.station:
             counters.other_station += 1
             return None
         counters.replies += 1
-        return with_crc(frame[:1] + self.core.handle_pdu(frame[1:-2], now))
+        return with_crc(frame[:1] + self.core.handle_pdu(frame[1:-2], now, station))
 
     def exception_reply(self, request: bytes, code: ExceptionCode) -> bytes:
         """The exception reply to ``request`` (e.g. 06 for a save the state file did not take)."""

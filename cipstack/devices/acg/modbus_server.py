@@ -30,6 +30,8 @@ class _Served:
     writer: asyncio.StreamWriter
     last_activity: float
     evicted: bool = False
+    #: ``host:port`` of the peer, as the requests' source.
+    peer: str = ""
 
 
 class ModbusTcpServer:
@@ -92,7 +94,7 @@ class ModbusTcpServer:
             writer.transport.abort()
             return
         assert self.loop is not None
-        served = _Served(host, writer, self.loop.time())
+        served = _Served(host, writer, self.loop.time(), peer=f"{host}:{peer[1]}" if peer else host)
         self._served.add(served)
         self._writers.add(writer)
         try:
@@ -155,7 +157,7 @@ class ModbusTcpServer:
             elif frames or frame_started is None:
                 frame_started = now
             for frame in frames:
-                reply = await self.handle_frame(frame)
+                reply = await self.handle_frame(frame, served.peer)
                 if reply is not None:
                     writer.write(reply)
             self.rearm()
@@ -165,12 +167,13 @@ class ModbusTcpServer:
                                    source=served.host)
                 return
 
-    async def handle_frame(self, frame: bytes) -> bytes | None:
-        """One frame's reply; a request that saved waits (off the loop) for the file to take the save."""
+    async def handle_frame(self, frame: bytes, peer: str | None = None) -> bytes | None:
+        """One frame's reply; a request that saved waits (off the loop) for the file to take the save.
+        ``peer``: the client's ``host:port``, the requests' source (``ModbusCore.store``)."""
         assert self.loop is not None
         saves = self.saves
         submitted = saves.submitted if saves is not None else 0
-        reply = self.core.handle_adu(frame, self.loop.time())
+        reply = self.core.handle_adu(frame, self.loop.time(), peer)
         if saves is None or reply is None or saves.submitted == submitted or saves.last is None:
             return reply
         try:

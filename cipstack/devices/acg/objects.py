@@ -82,6 +82,8 @@ class DriveAttribute:
     spec: AttributeSpec
     read: Callable[[AcgDrive], Any]
     write: Callable[[AcgDrive, Any, float], Any] | None = None
+    #: The drive register the attribute shows, where it shows one.
+    register: Register | None = None
 
 
 def register_attribute(spec: AttributeSpec, register: Register,
@@ -95,7 +97,7 @@ def register_attribute(spec: AttributeSpec, register: Register,
         drive.write(address, int(value), now)
 
     settable = spec.access.settable
-    return DriveAttribute(spec, read, (write or write_register) if settable else None)
+    return DriveAttribute(spec, read, (write or write_register) if settable else None, register)
 
 
 class DriveObject(CipObject):
@@ -113,6 +115,11 @@ class DriveObject(CipObject):
         """The time of a request; never before the drive's present time."""
         now = context.now if context is not None and context.now else self._clock()
         return max(now, self._drive().time)
+
+    def register_of(self, attribute: int) -> Register | None:
+        """The drive register behind instance 1's ``attribute``, if it shows one."""
+        bound = self._bound.get(attribute)
+        return bound.register if bound is not None else None
 
     def read_attribute(self, instance: Instance, spec: AttributeSpec) -> Any:
         value = self._bound[spec.id].read(self._drive())

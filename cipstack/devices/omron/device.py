@@ -20,7 +20,7 @@ import logging
 from collections.abc import Mapping
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 from ...assemblies.omron import (
     CENTIHERTZ,
@@ -80,6 +80,9 @@ from .objects import (
     speed_word,
 )
 from .registers import CONNECTION_PATHS, TRIP_CODES, SpeedUnit, TripCode, trip_code
+
+if TYPE_CHECKING:
+    from .operator import DigitalOperator
 
 _UNIT_OF = {SpeedUnit.CENTIHERTZ: CENTIHERTZ, SpeedUnit.DECIHERTZ: DECIHERTZ, SpeedUnit.RPM: RPM}
 #: State-file key of the configuration consistency value (see the module docstring).
@@ -509,6 +512,12 @@ class OmronDevice(Device):
         self.link.baud_rate = code
 
     # -- shells ----------------------------------------------------------------------------------------
+    def keypad(self) -> DigitalOperator:
+        """The inverter's Digital Operator: function codes (F001, A004, P044...) in the operator's unit."""
+        from .operator import DigitalOperator
+
+        return DigitalOperator(self)
+
     def trip_codes(self) -> str:
         """The trip numbers of Table D-5 this family has (5 or E05)."""
         return " ".join(str(t.number) for t in TRIP_CODES if self.family in t.families) + " (or as En, e.g. E05)"

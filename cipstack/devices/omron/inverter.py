@@ -435,6 +435,15 @@ class Inverter(NetworkEvents, Ramps, Monitors, FlexibleFormat, TimedSimulation):
                                 f"{parameter.key} cannot be written by function code (section E-2-2)")
         self._write(parameter, value, now)
 
+    def write_from_operator(self, code: str, value: int, now: float) -> None:
+        """Write function code ``code`` as the Digital Operator does: the inverter's own rules (read
+        only, range, not run-mode editable while running, torque-related outside d060 = 0) and not the
+        Function Code object's: "F001 can not be written using the Function code object" (section
+        E-2-2) is that object's limit, while the operator sets F001 itself (A001 = 2 takes the
+        frequency from "digital operator (F001)", Tables 13/14)."""
+        self.advance(now)
+        self._write(self._by_code(code), value, now)
+
     def read_function_code(self, number: int) -> int:
         """Class 0x65 by instance/attribute number (Table E-3)."""
         return self.read_code(self._code_of(number))
