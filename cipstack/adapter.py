@@ -25,7 +25,7 @@ from .devices.acg.modbus_rtu import LineSettings
 from .devices.acg.modbus_server import ModbusTcpServer
 from .devices.acg.rtu_line import RtuLine, RtuPortError, open_port
 from .devices.base import Device, DeviceLimits, TripRefused
-from .devices.keypad import Keypad, NoKeypad
+from .devices.keypad import Keypad, NoKeypad, WriteRefused
 from .devices.profiles import DEFAULT_MAC, DEFAULT_PROFILE, ProfileOptions, build_device
 from .eip.identity_items import CAPABILITY_CIP_TCP, CAPABILITY_CLASS01_UDP
 from .eip.interfaces import interface_of
@@ -351,6 +351,8 @@ class Adapter:
         ``WriteRefused`` (with the device's reason) or ``NoKeypad`` when not written. ``origin`` and
         ``peer`` are what the event stream's ``parameter write`` says of who wrote it."""
         keypad = self.keypad()
+        if self._faults is not None and self._faults.powered_off:
+            raise WriteRefused(f"{code}: the device is powered off (power-cycle)")
         now = asyncio.get_running_loop().time()
         self._tick(now)
         register, raw = keypad.set(code, str(value), now)
@@ -395,6 +397,8 @@ class Adapter:
             code = request["code"]
             if not isinstance(code, (int, str)) or isinstance(code, bool):
                 raise ControlError("the trip code is a number or a name")
+            if self._faults is not None and self._faults.powered_off:
+                raise ControlDenied("the device is powered off (power-cycle): it cannot trip")
             try:
                 trip = self.device.inject_trip(code)
             except NotImplementedError as exc:

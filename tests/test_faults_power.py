@@ -323,3 +323,30 @@ def test_the_componet_gateway_restarts_its_master_and_not_its_slaves() -> None:
     assert gateway.assembly.data(GATEWAY_OUT_AREA) == bytes(128) and not gateway.network.run
     gateway.advance(20.1)
     assert inverter.trip == 63
+
+
+async def test_a_device_without_power_takes_no_trip_no_keypad_write_and_no_second_power_cycle(
+        tmp_path: Path) -> None:
+    """While the power is off (``off``), nothing reaches the device: a trip, a keypad write and another
+    power cycle are refused with the reason; once the power is back each is taken again."""
+    from cipstack.control import ControlDenied
+    from cipstack.devices.keypad import WriteRefused
+    from cipstack.faults.controller import FaultStateError
+
+    adapter = Adapter(AdapterSettings(port=0, io_port=0, state_path=tmp_path / "acg.json"))
+    await adapter.start()
+    try:
+        adapter.faults.apply("power-cycle", off="300ms")
+        await asyncio.sleep(0.05)
+        with pytest.raises(ControlDenied, match="powered off"):
+            adapter.control({"command": "trip", "code": "OverHeat"})
+        with pytest.raises(WriteRefused, match="powered off"):
+            adapter.set_keypad_parameter("ACC", "2.5")
+        with pytest.raises(FaultStateError, match="powered off already"):
+            adapter.faults.apply("power-cycle")
+        await adapter.faults.settle()
+        assert adapter.set_keypad_parameter("ACC", "2.5")["raw"] == 25
+        assert adapter.control({"command": "trip", "code": "OverHeat"})["trip"] == "OverHeat"
+    finally:
+        await adapter.faults.settle()
+        await adapter.close()

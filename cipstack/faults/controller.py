@@ -84,6 +84,9 @@ class FaultController:
         self._reply_delay: tuple[int, ReplyDelay] | None = None
         self._tasks: list[asyncio.Task[None]] = []
         self.unplugged = False
+        #: True from a power-cycle's loss of power until its ports open again: a device without power
+        #: takes no trip, no keypad write and no second power cycle.
+        self.powered_off = False
 
     # -- the API -------------------------------------------------------------------------------------
     def apply(self, name: str | FaultRequest, **options: object) -> Fault:
@@ -287,6 +290,9 @@ class FaultController:
             self._end(unplug, "cleared")
 
     def _apply_power_cycle(self, fault: Fault) -> None:
+        if self.powered_off:
+            raise FaultStateError("the device is powered off already (a power-cycle is under way)")
+        self.powered_off = True
         self._start(self._power_cycle(fault.request.options.get("off", 0.0)))
 
     async def _close_ports(self) -> None:
@@ -312,15 +318,18 @@ class FaultController:
         adapter = self.adapter
         loop = asyncio.get_running_loop()
         was_plugged = not self.unplugged
-        if was_plugged:
-            await self._close_ports()
-        if adapter.io is not None:
-            adapter.io.close_all()
-        adapter.device.power_cycle(loop.time())
-        adapter.target.tick(loop.time())   # through the event stream's tap, if any: the new state is seen
-        # A save the device had handed to its memory before the power went is written (or failed).
-        await loop.run_in_executor(None, adapter.device.flush_saves, 10.0)
-        if off:
-            await asyncio.sleep(off)
+        try:
+            if was_plugged:
+                await self._close_ports()
+            if adapter.io is not None:
+                adapter.io.close_all()
+            adapter.device.power_cycle(loop.time())
+            adapter.target.tick(loop.time())   # through the event stream's tap, if any: the new state is seen
+            # A save the device had handed to its memory before the power went is written (or failed).
+            await loop.run_in_executor(None, adapter.device.flush_saves, 10.0)
+            if off:
+                await asyncio.sleep(off)
+        finally:
+            self.powered_off = False
         if was_plugged and not self.unplugged:
             await self._open_ports()
