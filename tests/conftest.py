@@ -31,6 +31,16 @@ def isolated_user_directories(tmp_path_factory: pytest.TempPathFactory) -> Itera
             os.environ[name] = value
 
 
+@pytest.fixture(scope="module", autouse=True)
+def module_data_home(tmp_path_factory: pytest.TempPathFactory) -> Iterator[None]:
+    """Each module's default state files (``XDG_DATA_HOME/cipstack/state/PROFILE.json``) are its own,
+    its module-scoped emulators' too: parameters one module's drives save are not what another
+    module's drives start with, whichever module this worker ran before."""
+    with pytest.MonkeyPatch.context() as patch:
+        patch.setenv("XDG_DATA_HOME", str(tmp_path_factory.mktemp("data-home")))
+        yield
+
+
 #: Modules whose tests also run on asyncio's own loop: a scanner inside an application's loop
 #: serves class 1 through asyncio's datagram transport and timers, not the precise loop's lane.
 BOTH_LOOPS = frozenset({"test_io_live", "test_io_session", "test_io_multicast", "test_acg_live", "test_faults"})
