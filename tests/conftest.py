@@ -1,5 +1,11 @@
 """Suite-wide isolation: every emulator the tests start, in-process or as a subprocess, keeps its state
-file and control socket in temporary directories, never in the user's own (XDG base directories)."""
+file and control socket in temporary directories, never in the user's own (XDG base directories).
+
+The suite runs in worker processes (pytest-xdist, ``addopts`` in pyproject.toml): each worker has
+XDG directories of its own (``tmp_path_factory`` gives each worker its own base directory), every
+port a test listens on comes from ``tests.ports.free_port`` (the defaults 44818, 2222 and 502 only
+in a private network namespace), and the tests of an ``xdist_group`` run on one worker, one after
+the other. docs/contributing.md has the rules for a new test."""
 
 from __future__ import annotations
 
@@ -23,6 +29,16 @@ def isolated_user_directories(tmp_path_factory: pytest.TempPathFactory) -> Itera
             os.environ.pop(name, None)
         else:
             os.environ[name] = value
+
+
+@pytest.fixture(scope="module", autouse=True)
+def module_data_home(tmp_path_factory: pytest.TempPathFactory) -> Iterator[None]:
+    """Each module's default state files (``XDG_DATA_HOME/cipstack/state/PROFILE.json``) are its own,
+    its module-scoped emulators' too: parameters one module's drives save are not what another
+    module's drives start with, whichever module this worker ran before."""
+    with pytest.MonkeyPatch.context() as patch:
+        patch.setenv("XDG_DATA_HOME", str(tmp_path_factory.mktemp("data-home")))
+        yield
 
 
 #: Modules whose tests also run on asyncio's own loop: a scanner inside an application's loop
@@ -61,3 +77,25 @@ def pytest_collection_modifyitems(config: pytest.Config, items: list[pytest.Item
             item.add_marker(pytest.mark.slow)
         if not any(item.get_closest_marker(name) for name in NOT_QUICK):
             item.add_marker(pytest.mark.quick)
+    if hasattr(config, "workerinput"):  # a worker of pytest-xdist
+        _long_modules_first(items)
+
+
+def _long_modules_first(items: list[pytest.Item]) -> None:
+    """The modules of long tests (any marker of ``NOT_QUICK``) first: the scheduler hands tests out
+    in this order, and a test of a minute begun last would end the run alone. Stable, so a module's
+    tests keep their order and stay together; every worker sorts alike (the scheduler checks that
+    the workers collected the same list)."""
+    long_modules = {item.module.__name__ for item in items
+                    if item.module is not None and any(item.get_closest_marker(name) for name in NOT_QUICK)}
+    items.sort(key=lambda item: item.module is None or item.module.__name__ not in long_modules)
+
+
+@pytest.hookimpl(optionalhook=True)  # pytest-xdist's hook: no error where it is not loaded
+def pytest_xdist_auto_num_workers(config: pytest.Config) -> int:
+    """``-n auto`` (the default, pyproject.toml): one worker more than the CPUs this process may run
+    on. Most tests wait on sockets, timers and the processes they start, so a worker more keeps the
+    CPUs busy; more than that only adds collections (each worker collects the whole suite) and
+    load on the tests that keep time (class 1 production at its RPI, a command's answer before a
+    fault ends)."""
+    return len(os.sched_getaffinity(0)) + 1

@@ -12,6 +12,7 @@ import signal
 import socket
 import subprocess
 import sys
+import threading
 import time
 from pathlib import Path
 
@@ -30,10 +31,7 @@ def start(host: str, port: int, *args: str, prefix: tuple[str, ...] = ()) -> sub
                                 str(port), "--io-port", "0", "--quiet", *args],
                                stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
     if prefix:  # in another network namespace: this one cannot connect to it; wait for its log line
-        time.sleep(2.0)
-        if process.poll() is not None:
-            pytest.fail(f"adapter exited: {process.stderr.read() if process.stderr else ''}")
-        return process
+        return _logged_emulating(process)
     for _ in range(300):
         try:
             socket.create_connection((host, port), timeout=0.2).close()
@@ -44,6 +42,24 @@ def start(host: str, port: int, *args: str, prefix: tuple[str, ...] = ()) -> sub
             time.sleep(0.05)
     process.kill()
     pytest.fail("adapter did not start")
+
+
+def _logged_emulating(process: subprocess.Popen[str], timeout: float = 30.0) -> subprocess.Popen[str]:
+    """``process`` once it logs "emulating ...": it serves, and SIGTERM (handled from before that line)
+    stops it cleanly. A loaded machine may take seconds to get there; no fixed sleep guesses how many."""
+    assert process.stderr is not None
+    watchdog = threading.Timer(timeout, process.kill)  # a blocking readline() ends with the process
+    watchdog.start()
+    seen: list[str] = []
+    try:
+        for line in iter(process.stderr.readline, ""):
+            seen.append(line)
+            if "emulating" in line:
+                return process
+    finally:
+        watchdog.cancel()
+    process.wait(10)
+    pytest.fail(f"adapter did not start (exit {process.returncode}): {''.join(seen)}")
 
 
 def status(host: str, port: int) -> dict[str, object]:

@@ -40,6 +40,7 @@ import contextlib
 import importlib.util
 import os
 import re
+import resource
 import shlex
 import shutil
 import signal
@@ -315,17 +316,19 @@ def test_examples_use_documented_names() -> None:
 
 def test_site_builds_strictly(tmp_path: Path) -> None:
     """``mkdocs build --strict``: a broken link, a missing anchor, a page left out of the nav or an
-    API reference that does not resolve fails the build; it stays under a minute."""
+    API reference that does not resolve fails the build; it stays under a minute of CPU (the build's
+    own work: the wall time also counts whatever the other workers and the machine run beside it)."""
     pytest.importorskip("mkdocs", reason="the docs extra is not installed: pip install '.[docs]'")
     env = dict(os.environ, NO_MKDOCS_2_WARNING="1")
     env["PYTHONPATH"] = os.pathsep.join(p for p in (str(ROOT), env.get("PYTHONPATH", "")) if p)
-    started = time.monotonic()
+    before = resource.getrusage(resource.RUSAGE_CHILDREN)
     result = subprocess.run([sys.executable, "-m", "mkdocs", "build", "--strict", "-q", "-d", str(tmp_path / "site")],
                             cwd=ROOT, capture_output=True, text=True, env=env, timeout=120)
-    took = time.monotonic() - started
+    after = resource.getrusage(resource.RUSAGE_CHILDREN)
+    took = (after.ru_utime - before.ru_utime) + (after.ru_stime - before.ru_stime)
     assert result.returncode == 0, result.stdout + result.stderr
     assert (tmp_path / "site" / "command-line" / "reference" / "index.html").exists()
-    assert took < 60, f"the docs took {took:.0f} s to build"
+    assert took < 60, f"the docs took {took:.0f} s of CPU to build"
 
 
 # -- the private network namespace ---------------------------------------------------------------------------

@@ -116,7 +116,8 @@ def test_a_long_power_cycle_answers_before_the_power_is_back(tmp_path: Path) -> 
     try:
         started = time.monotonic()
         result = drive(port, "fault", "power-cycle", "--off", "4s")
-        assert result.returncode == 0 and time.monotonic() - started < 4, result.stderr
+        answered = time.monotonic()
+        assert result.returncode == 0, result.stderr
         with pytest.raises(ConnectionRefusedError):
             socket.create_connection((HOST, port), timeout=1).close()
         deadline = time.monotonic() + 10
@@ -127,6 +128,11 @@ def test_a_long_power_cycle_answers_before_the_power_is_back(tmp_path: Path) -> 
             except ConnectionRefusedError:
                 assert time.monotonic() < deadline
                 time.sleep(0.1)
-        assert time.monotonic() - started >= 4
+        back = time.monotonic()
+        assert back - started >= 4
+        # The command answered with most of the 4 s still to go, not when the power came back. Timed
+        # from its answer, not its start: the process's own start-up (seconds on a loaded machine)
+        # comes before the fault begins.
+        assert back - answered >= 2, f"answered {back - answered:.1f} s before the power was back"
     finally:
         stop(process)

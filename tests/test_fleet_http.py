@@ -9,10 +9,12 @@ from __future__ import annotations
 import asyncio
 import json
 import os
+import shutil
 import signal
 import socket
 import stat
 import sys
+import tempfile
 import urllib.error
 import urllib.request
 from pathlib import Path
@@ -91,11 +93,14 @@ def forward_open(host: str, port: int) -> None:
         scanner.close_connection()
 
 
-def test_one_api_serves_every_device_of_every_worker(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+def test_one_api_serves_every_device_of_every_worker(tmp_path: Path, monkeypatch: pytest.MonkeyPatch,
+                                                    request: pytest.FixtureRequest) -> None:
     hosts = addresses(1, 4)
     port, http = free_port(*hosts), free_port()
-    runtime = tmp_path / "run"
-    runtime.mkdir()
+    # Short: the workers' sockets go in it, a Unix socket path has at most 107 bytes, and a pytest-xdist
+    # worker's tmp_path is long already.
+    runtime = Path(tempfile.mkdtemp(prefix="run-"))
+    request.addfinalizer(lambda: shutil.rmtree(runtime, ignore_errors=True))
     monkeypatch.setenv("XDG_RUNTIME_DIR", str(runtime))
     fleet = Fleet(tmp_path, "--spec", str(spec_file(tmp_path, hosts, port)), "--http", f"127.0.0.1:{http}",
                   "--http-token", TOKEN)

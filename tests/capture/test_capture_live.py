@@ -17,7 +17,8 @@ from typing import Any
 
 import pytest
 
-pytestmark = [pytest.mark.interop, pytest.mark.tshark]
+# One capture for the whole module (its fixture), and one capturing module at a time (docs/contributing.md).
+pytestmark = [pytest.mark.interop, pytest.mark.tshark, pytest.mark.xdist_group("tshark")]
 
 ADAPTER_HOST = "127.0.0.2"
 TRIP_CODE = 0x4200  # OverHeat (tests/test_cli.py)

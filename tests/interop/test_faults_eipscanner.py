@@ -35,7 +35,8 @@ from .eipscanner import BRIDGE, bridge_arguments, require_eipscanner
 from .netns import PRELUDE, require_namespace, run_in_namespace
 from .test_tshark_io import tshark
 
-pytestmark = [pytest.mark.interop, pytest.mark.tshark]
+# One capture for the whole module (its fixture), and one capturing module at a time (docs/contributing.md).
+pytestmark = [pytest.mark.interop, pytest.mark.tshark, pytest.mark.xdist_group("tshark")]
 
 RPI = 0.050
 MULTIPLIER_CODE = 0

@@ -22,7 +22,8 @@ import pytest
 
 from .conftest import IDENTITY
 
-pytestmark = [pytest.mark.tshark, pytest.mark.interop]
+# One capture for the whole module (its fixture), and one capturing module at a time (docs/contributing.md).
+pytestmark = [pytest.mark.tshark, pytest.mark.interop, pytest.mark.xdist_group("tshark")]
 
 ADAPTER_HOST = "127.0.0.1"
 CPPPO_HOST = "127.0.0.2"

@@ -12,7 +12,8 @@ import pytest
 
 from .netns import PRELUDE, require_namespace, run_in_namespace
 
-pytestmark = [pytest.mark.interop, pytest.mark.tshark]
+# One capture for the whole module (its fixture), and one capturing module at a time (docs/contributing.md).
+pytestmark = [pytest.mark.interop, pytest.mark.tshark, pytest.mark.xdist_group("tshark")]
 
 ADAPTER_HOST = "127.0.0.2"
 
