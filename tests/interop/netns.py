@@ -14,6 +14,12 @@ from typing import Any
 
 import pytest
 
+#: The display filter a capture is judged by: a malformed frame, or an expert warning. A frame that
+#: carries no EtherNet/IP and whose warnings are TCP's own analysis (a D-SACK, a duplicate ACK after a
+#: retransmission on the namespace's loopback under CPU load) is the transport's, not the stack's.
+JUDGED = ("_ws.malformed || (_ws.expert.severity >= warning "
+          "&& !((tcp.analysis.flags || tcp.options.sack.dsack) && !enip))")
+
 #: The head of a helper script: the adapter's address in the namespace, where its findings go
 #: (``seen``, written to seen.json by the script), and whether the adapter listens yet.
 PRELUDE = r'''

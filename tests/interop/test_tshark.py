@@ -21,6 +21,7 @@ from typing import Any
 import pytest
 
 from .conftest import IDENTITY
+from .netns import JUDGED
 
 # One capture for the whole module (its fixture), and one capturing module at a time (docs/contributing.md).
 pytestmark = [pytest.mark.tshark, pytest.mark.interop, pytest.mark.xdist_group("tshark")]
@@ -376,7 +377,7 @@ def test_no_malformed_packet_and_no_expert_warning(exchange: tuple[Path, dict[st
     """Everything but cpppo's own replies must dissect cleanly: all of the adapter and all of our requests."""
     capture, _ = exchange
     assert tshark_read(capture, "enip").strip(), "tshark decoded no EtherNet/IP at all"
-    judged = f"(_ws.malformed || _ws.expert.severity >= warning) && !(ip.src == {CPPPO_HOST})"
+    judged = f"({JUDGED}) && !(ip.src == {CPPPO_HOST})"
     assert tshark_read(capture, judged) == ""
     # the judge bites: cpppo's 19-byte ListServices item (a known deviation) is flagged
     control = tshark_read(capture, f"_ws.malformed && ip.src == {CPPPO_HOST} && enip.command == 0x0004")

@@ -10,7 +10,7 @@ from typing import Any
 
 import pytest
 
-from .netns import PRELUDE, require_namespace, run_in_namespace
+from .netns import JUDGED, PRELUDE, require_namespace, run_in_namespace
 
 # One capture for the whole module (its fixture), and one capturing module at a time (docs/contributing.md).
 pytestmark = [pytest.mark.interop, pytest.mark.tshark, pytest.mark.xdist_group("tshark")]
@@ -148,7 +148,7 @@ def test_both_originators_ran_the_drive(capture: tuple[Path, dict[str, Any]]) ->
 def test_no_malformed_packet_and_no_expert_warning(capture: tuple[Path, dict[str, Any]]) -> None:
     path, seen = capture
     decode = ("-d", f"udp.port=={seen['ethernetip']['port']},cipio")
-    assert tshark(path, "_ws.malformed || _ws.expert.severity >= warning", *decode) == []
+    assert tshark(path, JUDGED, *decode) == []
     assert tshark(path, "enip", *decode), "nothing dissected as EtherNet/IP: wrong ports?"
 
 
