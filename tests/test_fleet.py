@@ -93,6 +93,24 @@ def running(tmp_path: Path, *args: str, name: str = "fleet") -> Iterator[tuple[F
         fleet.kill()
 
 
+def refused_fleet(tmp_path: Path, taken: tuple[str, int], *args: str) -> Fleet:
+    """``cipstack fleet ARGS`` while another socket listens on TCP ``taken``: it must exit 2 and print
+    nothing on stdout; its stderr is the caller's to judge."""
+    holder = socket.socket()
+    holder.bind(taken)
+    holder.listen()
+    try:
+        fleet = Fleet(tmp_path, *args)
+        try:
+            assert fleet.process.wait(30) == 2
+        finally:
+            fleet.kill()
+    finally:
+        holder.close()
+    assert fleet.out.read_text() == ""
+    return fleet
+
+
 def children(pid: int) -> list[int]:
     """The processes whose parent is ``pid`` (from /proc)."""
     found = []
@@ -297,19 +315,9 @@ def test_each_device_keeps_its_own_saved_parameters(tmp_path: Path) -> None:
 def test_a_taken_address_is_one_line_and_nothing_is_left(tmp_path: Path, workers: int) -> None:
     hosts = addresses(4 + workers, 4)
     port = free_port(*hosts)
-    taken = socket.socket()
-    taken.bind((hosts[2], port))
-    taken.listen()
-    try:
-        fleet = Fleet(tmp_path, "--addresses", f"{hosts[0]}-{hosts[-1]}", "--device", "acg*4", "--port", str(port),
-                      "--io-port", "0", "--workers", str(workers), "--state-dir", str(tmp_path / "state"))
-        try:
-            assert fleet.process.wait(30) == 2
-        finally:
-            fleet.kill()
-    finally:
-        taken.close()
-    assert fleet.out.read_text() == ""
+    fleet = refused_fleet(tmp_path, (hosts[2], port), "--addresses", f"{hosts[0]}-{hosts[-1]}", "--device", "acg*4",
+                          "--port", str(port), "--io-port", "0", "--workers", str(workers),
+                          "--state-dir", str(tmp_path / "state"))
     lines = fleet.err.read_text().splitlines()
     assert lines == [f"cipstack fleet: cannot listen on TCP {hosts[2]}:{port} (EtherNet/IP, --port): "
                      "Address already in use"], lines

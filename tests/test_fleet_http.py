@@ -30,7 +30,7 @@ from cipstack.control.http import MAX_BODY, openapi_document
 from cipstack.control.http_relay import Backend, RelayApi
 from cipstack.scanner import SyncScanner
 from tests.ports import free_port
-from tests.test_fleet import Fleet, alive, children
+from tests.test_fleet import Fleet, alive, children, refused_fleet
 from tests.waiting import wait_for
 
 pytestmark = pytest.mark.skipif(not sys.platform.startswith("linux"), reason="any 127.x on loopback")
@@ -237,21 +237,10 @@ def test_a_stopped_worker_answers_503_and_the_others_go_on(tmp_path: Path) -> No
 def test_a_taken_http_port_is_one_line_and_nothing_is_left(tmp_path: Path) -> None:
     hosts = addresses(3, 2)
     port = free_port(*hosts)
-    taken = socket.socket()
-    taken.bind(("127.0.0.1", 0))
-    taken.listen()
-    http = taken.getsockname()[1]
-    try:
-        fleet = Fleet(tmp_path, "--addresses", f"{hosts[0]}-{hosts[1]}", "--device", "acg*2", "--port", str(port),
-                      "--io-port", "0", "--workers", "2", "--state-dir", str(tmp_path / "state"),
-                      "--http", f"127.0.0.1:{http}")
-        try:
-            assert fleet.process.wait(30) == 2
-        finally:
-            fleet.kill()
-    finally:
-        taken.close()
-    assert fleet.out.read_text() == ""
+    http = free_port()
+    fleet = refused_fleet(tmp_path, ("127.0.0.1", http), "--addresses", f"{hosts[0]}-{hosts[1]}", "--device", "acg*2",
+                          "--port", str(port), "--io-port", "0", "--workers", "2",
+                          "--state-dir", str(tmp_path / "state"), "--http", f"127.0.0.1:{http}")
     assert fleet.err.read_text().splitlines() == [
         f"cipstack fleet: cannot listen on TCP 127.0.0.1:{http} (HTTP control API, --http): Address already in use"]
     assert children(fleet.process.pid) == []

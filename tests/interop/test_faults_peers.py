@@ -40,9 +40,15 @@ SAVE_PARAMETERS = 0x03E0
 def adapter(tmp_path_factory: pytest.TempPathFactory) -> Iterator[PeerProcess]:
     """``cipstack adapter`` of this module alone, with a state file of its own: what it saves (and its
     faults) reach no other test's adapter."""
+    yield from adapter_with_state(tmp_path_factory, "acg.json")
+
+
+def adapter_with_state(tmp_path_factory: pytest.TempPathFactory, state: str, *options: str) -> Iterator[PeerProcess]:
+    """``cipstack adapter OPTIONS`` with a state file of its own, stopped cleanly at the end."""
     port = free_port()
     directory = tmp_path_factory.mktemp("faults-peers")
-    peer = start_peer("cipstack adapter", [*adapter_command(HOST, port), "--state", str(directory / "acg.json")],
+    peer = start_peer(" ".join(("cipstack adapter", *options)),
+                      [*adapter_command(HOST, port), *options, "--state", str(directory / state)],
                       HOST, port, directory / "adapter.log")
     try:
         yield peer
@@ -116,17 +122,7 @@ def test_power_cycle_loses_exactly_the_unsaved_parameter(adapter: PeerProcess) -
 @pytest.fixture(scope="module")
 def rx(tmp_path_factory: pytest.TempPathFactory) -> Iterator[PeerProcess]:
     """``cipstack adapter --model RX-A4055-E`` with a state file (its EEPROM) of its own."""
-    port = free_port()
-    directory = tmp_path_factory.mktemp("faults-peers-rx")
-    peer = start_peer("cipstack adapter --model RX-A4055-E",
-                      [*adapter_command(HOST, port), "--model", "RX-A4055-E", "--state", str(directory / "rx.json")],
-                      HOST, port, directory / "adapter.log")
-    try:
-        yield peer
-    finally:
-        code = peer.stop(signal.SIGTERM)
-    assert code == 0, peer.log_text()
-    assert "Traceback" not in peer.log_text(), peer.log_text()
+    yield from adapter_with_state(tmp_path_factory, "rx.json", "--model", "RX-A4055-E")
 
 
 def test_power_cycle_of_an_rx_loses_exactly_what_was_not_entered(rx: PeerProcess) -> None:
