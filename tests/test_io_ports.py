@@ -310,3 +310,26 @@ def test_the_interface_address_and_netmask_are_the_interfaces_own(tmp_path: Path
         "udp 10.20.30.40 10.20.30.40:44819",
         "tcp 127.0.0.7 127.0.0.7:44819",
     ]
+
+
+async def test_endpoints_on_port_0_never_share_a_port() -> None:
+    """``--io-port 0`` and an originator's own socket take a port of their own: with SO_REUSEADDR on a
+    port-0 bind, Linux gave a port another such socket held (600 of them shared about 5), and an
+    adapter then refused to start ("cannot listen on UDP 127.0.0.1:0") or two endpoints read each
+    other's T->O."""
+    from cipstack.eip.io_originator import IoOriginator
+    from cipstack.eip.io_server import IoEndpoint
+
+    # An originator's endpoint, and a target's (``exclusive``, as the adapter opens it); no datagram
+    # is sent, so one core serves both kinds.
+    core = IoOriginator()
+    endpoints = [IoEndpoint(core, "127.0.0.1", 0, exclusive=n % 2 == 0) for n in range(600)]
+    try:
+        for endpoint in endpoints:
+            await endpoint.start()
+        ports = [endpoint.port for endpoint in endpoints]
+        assert len(set(ports)) == len(ports), sorted(p for p in ports if ports.count(p) > 1)
+    finally:
+        for endpoint in endpoints:
+            if endpoint.is_open:
+                await endpoint.close()

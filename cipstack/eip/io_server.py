@@ -454,8 +454,12 @@ class IoEndpoint:
         self.loop = asyncio.get_running_loop()
         self._lane = lane_of(self.loop)
         sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
-        shares_wildcard = self.exclusive and sys.platform.startswith("linux")
-        if not self.exclusive or shares_wildcard:
+        # Sharing is for a port asked for by number (2222 beside a scanner on the wildcard). On port 0
+        # Linux hands a SO_REUSEADDR socket a port another such socket holds (udp(7): sharing is allowed
+        # when both set it), and two endpoints would then read each other's datagrams.
+        chosen = self.port != 0
+        shares_wildcard = chosen and self.exclusive and sys.platform.startswith("linux")
+        if (chosen and not self.exclusive) or shares_wildcard:
             sock.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
         try:
             sock.bind((self.host, self.port))
