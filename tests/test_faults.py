@@ -91,9 +91,9 @@ async def test_stop_producing_times_out_the_scanner_at_rpi_x_4_x_2_to_the_multip
 
 async def test_a_fault_for_a_while_clears_itself_and_the_connection_lives_on(adapter: Adapter) -> None:
     async with await connect(adapter) as scanner, scanner.io_connection(
-            output=21, input=71, rpi=0.010, timeout_multiplier=3, target_io_port=io_port(adapter)) as io:
+            output=21, input=71, rpi=0.010, timeout_multiplier=5, target_io_port=io_port(adapter)) as io:
         await io.wait_input(lambda i: True, 5)
-        adapter.fault("stop-producing", **{"for": 0.05})                   # shorter than the 160 ms timeout
+        adapter.fault("stop-producing", **{"for": 0.05})                   # shorter than the 1.28 s timeout
         await asyncio.sleep(0.03)
         before = io.stats.received
         assert adapter.faults.faults()
@@ -103,9 +103,12 @@ async def test_a_fault_for_a_while_clears_itself_and_the_connection_lives_on(ada
     assert [r["event"] for r in adapter.faults.history] == ["fault applied", "fault expired"]
 
 
+# The tests below judge what the scanner counts, not when it times out: their connections time out at
+# x128 (multiplier 5), so a scheduling stall of a loaded machine (tests run in parallel workers) is
+# not taken for the fault's doing.
 async def test_drop_every_second_packet_is_seen_as_lost(adapter: Adapter) -> None:
     async with await connect(adapter) as scanner, scanner.io_connection(
-            output=21, input=71, rpi=0.005, timeout_multiplier=3, target_io_port=io_port(adapter)) as io:
+            output=21, input=71, rpi=0.005, timeout_multiplier=5, target_io_port=io_port(adapter)) as io:
         await io.wait_input(lambda i: True, 5)
         lost, received = io.stats.lost, io.stats.received
         adapter.fault("drop", every=2)
@@ -119,7 +122,7 @@ async def test_drop_every_second_packet_is_seen_as_lost(adapter: Adapter) -> Non
 
 async def test_duplicate_and_reorder_are_seen_by_the_scanner(adapter: Adapter) -> None:
     async with await connect(adapter) as scanner, scanner.io_connection(
-            output=21, input=71, rpi=0.005, timeout_multiplier=3, target_io_port=io_port(adapter)) as io:
+            output=21, input=71, rpi=0.005, timeout_multiplier=5, target_io_port=io_port(adapter)) as io:
         await io.wait_input(lambda i: True, 5)
         stale, received = io.stats.stale, io.stats.received
         duplicate = adapter.fault("duplicate")
@@ -137,7 +140,7 @@ async def test_duplicate_and_reorder_are_seen_by_the_scanner(adapter: Adapter) -
 
 async def test_freeze_sequence_and_wrong_size_and_delay(adapter: Adapter) -> None:
     async with await connect(adapter) as scanner:
-        async with scanner.io_connection(output=21, input=71, rpi=0.005, timeout_multiplier=2,
+        async with scanner.io_connection(output=21, input=71, rpi=0.005, timeout_multiplier=5,
                                          target_io_port=io_port(adapter)) as io:
             await io.wait_input(lambda i: True, 5)
             adapter.fault("freeze-sequence")
@@ -157,7 +160,7 @@ async def test_freeze_sequence_and_wrong_size_and_delay(adapter: Adapter) -> Non
                 async for _ in io.updates():
                     pass
             adapter.clear_faults()
-        async with scanner.io_connection(output=21, input=71, rpi=0.005, timeout_multiplier=3,
+        async with scanner.io_connection(output=21, input=71, rpi=0.005, timeout_multiplier=5,
                                          target_io_port=io_port(adapter), keep_intervals=True) as io:
             await io.wait_input(lambda i: True, 5)
             adapter.fault("delay", by="40ms", jitter="2ms")
@@ -171,7 +174,7 @@ async def test_ignore_output_keeps_the_last_command_and_idle_is_idle(adapter: Ad
     assert isinstance(device, AcgDevice)
     async with await connect(adapter) as scanner:
         await write_registers(scanner, {DRV: 4, FRQ: 8})                     # run and reference from the network
-        async with scanner.io_connection(output=21, input=71, rpi=0.005, timeout_multiplier=3,
+        async with scanner.io_connection(output=21, input=71, rpi=0.005, timeout_multiplier=5,
                                          target_io_port=io_port(adapter)) as io:
             io.output.speed_reference = 600
             await asyncio.sleep(0.1)
