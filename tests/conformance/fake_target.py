@@ -440,7 +440,9 @@ class FakeTarget:
         connection.stop.set()
 
     def _produce(self, connection: Connection) -> None:
-        period = connection.api * (2 if self.deviates("class1.production") else 1)
+        # 1.5 x the API fails the production check (mean interval above 1.25 API) and no other: at 2 x, the
+        # idle phase of class1.run_idle got about half its due packets, its own bound, and failed now and then.
+        period = connection.api * (1.5 if self.deviates("class1.production") else 1)
         step = 2 if self.deviates("class1.sequence") else 1
         payload = bytes(3 if self.deviates("class1.data_size") else ASSEMBLY_SIZE)
         start, sequence = time.monotonic(), 0
