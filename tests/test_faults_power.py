@@ -333,11 +333,18 @@ async def test_a_device_without_power_takes_no_trip_no_keypad_write_and_no_secon
     from cipstack.devices.keypad import WriteRefused
     from cipstack.faults.controller import FaultStateError
 
-    adapter = Adapter(AdapterSettings(port=0, io_port=0, state_path=tmp_path / "acg.json"))
-    await adapter.start()
+    adapter = Adapter(AdapterSettings(port=0, io_port=0, state_path=tmp_path / "acg.json",
+                                      control_path=tmp_path / "control.sock", http="127.0.0.1:0"))
+    await adapter.start_serving()
+    status = f"http://127.0.0.1:{adapter.http_api.port}/status"
     try:
-        adapter.faults.apply("power-cycle", off="300ms")
-        await asyncio.sleep(0.05)
+        async with aiohttp.ClientSession() as session:
+            async with session.get(status) as reply:
+                assert (await reply.json())["power"] == "on"
+            adapter.faults.apply("power-cycle", off="300ms")
+            await asyncio.sleep(0.05)
+            async with session.get(status) as reply:
+                assert (await reply.json())["power"] == "off"
         with pytest.raises(ControlDenied, match="powered off"):
             adapter.control({"command": "trip", "code": "OverHeat"})
         with pytest.raises(WriteRefused, match="powered off"):
@@ -349,4 +356,4 @@ async def test_a_device_without_power_takes_no_trip_no_keypad_write_and_no_secon
         assert adapter.control({"command": "trip", "code": "OverHeat"})["trip"] == "OverHeat"
     finally:
         await adapter.faults.settle()
-        await adapter.close()
+        await adapter.stop_serving()

@@ -252,7 +252,10 @@ class HttpApi:
     async def status(self, request: web.Request) -> web.Response:
         adapter = self._device(request)
         reply = adapter.control({"command": "status"})
-        return web.json_response({**reply, "faults": len(adapter.faults.active)})
+        # "power": "off" while a power-cycle's --off lasts: the device's state is then what it comes back to.
+        faults = adapter.faults
+        power = "off" if faults.powered_off else "on"
+        return web.json_response({**reply, "faults": len(faults.active), "power": power})
 
     @_handled
     async def list_faults(self, request: web.Request) -> web.Response:
@@ -402,7 +405,7 @@ def openapi_document() -> dict[str, Any]:
                            "(F001, A004, P044, ...); 404 for a code the keypad lacks or a device without one"}
     fault_id = {"name": "fault", "in": "path", "required": True, "schema": {"type": "string"},
                 "description": "a fault's id, or a fault name (all of that name)"}
-    route("/status", "get", "the drive's state, sessions and connections")
+    route("/status", "get", "the drive's state, sessions and connections, active faults, power on or off")
     route("/faults", "get", "the faults active")
     route("/faults", "post", "apply a fault", fault_body, codes=("400", "404", "409", "503"))
     route("/faults", "delete", "clear every active fault")
