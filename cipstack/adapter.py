@@ -9,23 +9,14 @@ import signal
 from collections.abc import Awaitable, Callable
 from dataclasses import dataclass
 from pathlib import Path
-from typing import TYPE_CHECKING, Any
+from typing import Any
 
-from .control import (
-    ControlAddress,
-    ControlDenied,
-    ControlError,
-    ControlServer,
-    ControlTaken,
-    default_control_path,
-)
+from .control import ControlAddress, ControlServer, ControlTaken, default_control_path
 from .control.events import EventStream
-from .devices.acg.device import AcgDevice
+from .control.service import DeviceService
 from .devices.acg.modbus_rtu import LineSettings
-from .devices.acg.modbus_server import ModbusTcpServer
-from .devices.acg.rtu_line import RtuLine, RtuPortError, open_port
-from .devices.base import Device, DeviceLimits, TripRefused
-from .devices.keypad import Keypad, NoKeypad, WriteRefused
+from .devices.base import Device, DeviceLimits
+from .devices.keypad import Keypad, NoKeypad
 from .devices.profiles import DEFAULT_MAC, DEFAULT_PROFILE, ProfileOptions, build_device
 from .eip.identity_items import CAPABILITY_CIP_TCP, CAPABILITY_CLASS01_UDP
 from .eip.interfaces import interface_of
@@ -33,19 +24,20 @@ from .eip.io_core import DEFAULT_IO_PORT, ProductionGrid
 from .eip.io_server import IoEndpoint, freeze_startup_objects
 from .eip.io_target import IoTarget
 from .eip.limits import DEFAULT_MAX_TCP_CONNECTIONS
+from .eip.seams import IoSeam, ReplySeam, RequestSeam
 from .eip.server import DEFAULT_PORT, EncapsulationServer
 from .eip.target import DEFAULT_FRAME_TIMEOUT, EncapsulationTarget, TargetSettings
-from .faults import FaultController
+from .errors import BadRequest
+from .faults import Fault, FaultController
 from .listening import ListenError, held_log_records
+from .modbus.rtu_line import RtuLine, RtuPortError, open_port
+from .modbus.tcp_server import ModbusTcpServer
 from .objects.tcpip import NetworkInterface
-
-if TYPE_CHECKING:
-    from .faults import Fault
+from .runtime import Class1Port, DeviceRuntime, EncapsulationPort, ModbusTcpPort, Port, PowerLink, Rs485Port
+from .runtime.observer import IoEventRelay, RuntimeObserver, register_relay
+from .runtime.runtime import DeviceClock
 
 log = logging.getLogger(__name__)
-
-#: How long a control request that applies a fault waits for the ports it closes or opens.
-CONTROL_SETTLE_S = 2.0
 
 
 def network_interface(host: str, mac: bytes) -> NetworkInterface:
@@ -104,7 +96,9 @@ class AdapterSettings:
 
 
 class Adapter:
-    """A running emulated device: its objects, the encapsulation target and the server."""
+    """A running emulated device: composes the device, its ports, its runtime (``cipstack.runtime``),
+    its faults, its event stream and the command service every control surface calls. The one place
+    collaborators are made and passed in; nothing is patched in later."""
 
     def __init__(self, settings: AdapterSettings | None = None, device: Device | None = None,
                  production_grid: ProductionGrid | None = None) -> None:
@@ -115,73 +109,81 @@ class Adapter:
         self.device = device or build_device(s.profile, network_interface(s.host, s.mac or DEFAULT_MAC),
                                              DeviceLimits(s.max_sessions, s.max_connections),
                                              ProfileOptions(s.state_path, s.model))
+        self.observers: list[RuntimeObserver] = []
+        self.clock = DeviceClock(self.device, self.observers)
+        # The ports the device's family declares beside EtherNet/IP (the ACG's Modbus TCP and RS-485).
+        modbus_drive = self.device.modbus_drive()
+        product = self.device.identity_info.product_name
+        if s.rtu is not None and modbus_drive is None:
+            raise ValueError(f"profile {s.profile!r} ({product}) has no RS-485 Modbus-RTU port (the ACG drive has)")
+        if s.modbus_port is not None and modbus_drive is None:
+            raise ValueError(f"profile {s.profile!r} ({product}) has no Modbus TCP (the ACG-ET2 card speaks it)")
+        self.modbus_drive = modbus_drive
         self.modbus: ModbusTcpServer | None = None
-        #: The RS-485 line of ``settings.rtu`` once started.
-        self.rtu: RtuLine | None = None
-        if s.rtu is not None and not isinstance(self.device, AcgDevice):
-            raise ValueError(f"profile {s.profile!r} has no RS-485 Modbus-RTU port (the ACG drive has)")
-        if s.modbus_port is not None:
-            if not isinstance(self.device, AcgDevice):
-                raise ValueError(f"profile {s.profile!r} has no Modbus TCP (the ACG-ET2 card speaks it)")
-            acg = self.device
-            self.modbus = ModbusTcpServer(lambda: acg.drive, s.host, s.modbus_port, saves=acg.saves,
+        if s.modbus_port is not None and modbus_drive is not None:
+            self.modbus = ModbusTcpServer(modbus_drive.drive, s.host, s.modbus_port, saves=modbus_drive.saves,
                                           max_connections=s.max_tcp_connections,
                                           max_connections_per_host=s.max_tcp_connections_per_host,
-                                          frame_timeout=s.frame_timeout)
+                                          frame_timeout=s.frame_timeout,
+                                          written=register_relay("modbus-tcp", self.observers))
+        #: The RS-485 line of ``settings.rtu`` once started.
+        self.rtu: RtuLine | None = None
+        self.requests = RequestSeam(self.device.router)
+        self.replies = ReplySeam()
         self.target = EncapsulationTarget(
             self.device.router, self.device.identity_record,
             TargetSettings(max_sessions=s.max_sessions, max_sessions_per_host=s.max_sessions_per_host,
                            max_connections=s.max_connections, max_frame_length=s.max_frame_length,
                            frame_timeout=s.frame_timeout,
                            inactivity_timeout=lambda: self.device.inactivity_timeout),
-            table=self.device.connection_table,
+            table=self.device.connection_table, requests=self.requests,
         )
+        self.target.tick = self.clock.tick
         self.server = EncapsulationServer(self.target, s.host, s.port, max_tcp_connections=s.max_tcp_connections,
-                                          max_tcp_connections_per_host=s.max_tcp_connections_per_host)
-        self.target.tick = self._tick
-        self._device_timer: asyncio.TimerHandle | None = None
-        self._device_timer_at: float | None = None
+                                          max_tcp_connections_per_host=s.max_tcp_connections_per_host,
+                                          replies=self.replies)
         self.io: IoTarget | None = None
+        self.io_seam: IoSeam | None = None
         self.io_endpoint: IoEndpoint | None = None
-        self.control_server: ControlServer | None = None
-        #: The HTTP control API, while serving with ``settings.http``.
-        self.http_api: Any = None
-        self._faults: FaultController | None = None
-        self._events: EventStream | None = None
+        ports: list[Port] = [EncapsulationPort(self.server)]
+        if self.modbus is not None:
+            ports.append(ModbusTcpPort(self.modbus))
         profile = self.device.io_profile()
         if profile is not None:
             if s.max_io_connections is not None:
                 profile.max_connections = s.max_io_connections
-            self.io = IoTarget(profile, self.device, self.device.multicast_block, s.io_port, production_grid)
+            self.io = IoTarget(profile, IoEventRelay(self.device, self.observers), self.device.multicast_block,
+                               s.io_port, production_grid)
             self.device.connection_manager.io_handler = self.io
             self.target.settings.capabilities = CAPABILITY_CIP_TCP | CAPABILITY_CLASS01_UDP
-            self.io_endpoint = IoEndpoint(self.io, s.host, s.io_port, lambda: int(self.device.tcpip.get(1, 8)),
+            self.io_seam = IoSeam(self.io, self.device.assembly.deliver)
+            self.io_endpoint = IoEndpoint(self.io_seam, s.host, s.io_port, lambda: int(self.device.tcpip.get(1, 8)),
                                           exclusive=True)
             self.io.changed = self.io_endpoint.wakeup
-            self.io.deliver = self.device.assembly.deliver
-            self.io.tick = self._tick
-            self.device._update_io_status()
+            self.io.deliver = self.io_seam.deliver
+            self.io.tick = self.clock.tick
+            self.device.update_io_status()
+            ports.append(Class1Port(self.io_endpoint, self.io_seam))
+        self.power = PowerLink(ports)
+        self.runtime = DeviceRuntime(self.device, self.clock, self.observers, self.power, self.target, self.server,
+                                     self.requests, self.replies, self.io, self.io_seam, self.io_endpoint)
+        self.faults = FaultController(self.runtime)
+        self._events = EventStream(self.runtime, self.faults)
+        self.service = DeviceService(self.runtime, self.faults, self._events, product)
+        self.control_server: ControlServer | None = None
+        #: The HTTP control API, while serving with ``settings.http``.
+        self.http_api: Any = None
 
     @property
     def port(self) -> int:
         return self.server.port
 
-    # -- faults (cipstack.faults) ---------------------------------------------------------------------
-    @property
-    def faults(self) -> FaultController:
-        """This device's faults: ``apply``, ``clear``, ``faults()``, ``history`` (see ``cipstack.faults``)."""
-        if self._faults is None:
-            # Imported with the adapter, not here: a first fault must not stall the loop on an import.
-            self._faults = FaultController(self)
-        return self._faults
-
+    # -- faults and events (cipstack.faults, cipstack.control.events) ------------------------------------
     @property
     def events(self) -> EventStream:
         """What happened, when (``cipstack.control.events``): connections, run/idle, the drive's state and
         trips, parameter writes, faults. Watching starts on first use; nothing is paid before."""
-        if self._events is None:
-            self._events = EventStream(self)
-            self._events.start()
+        self._events.start()
         return self._events
 
     def fault(self, name: str, **options: object) -> Fault:
@@ -194,25 +196,6 @@ class Adapter:
     def clear_faults(self, which: int | str | None = None) -> list[Fault]:
         """Clear every active fault, or one by id, or those of one name."""
         return self.faults.clear(which)
-
-    def _tick(self, now: float) -> None:
-        """Advance the device to ``now`` and keep a timer at its next deadline (lost-command timers,
-        the end of a ramp), so it changes on time even when nobody asks."""
-        deadline = self.device.tick(now)
-        if deadline == self._device_timer_at and (deadline is None or self._device_timer is not None):
-            return  # none wanted, or already armed for it: the common cases on the request path
-        if self._device_timer is not None:
-            self._device_timer.cancel()
-            self._device_timer = None
-        self._device_timer_at = deadline
-        if deadline is not None:
-            loop = asyncio.get_running_loop()
-            self._device_timer = loop.call_at(max(deadline, now), self._on_device_timer)
-
-    def _on_device_timer(self) -> None:
-        self._device_timer = None
-        self._device_timer_at = None
-        self.target.tick(asyncio.get_running_loop().time())  # through the event stream's tap, if any
 
     async def start(self) -> None:
         """Listen on every port, each exclusively; a port that is taken raises ``ListenError``
@@ -227,13 +210,13 @@ class Adapter:
         # to a Forward_Open, finds every other port ready.
         s = self.settings
         await self._listen(lambda: self.server.start(serve=False),
-                           lambda: (f"{'UDP' if self.server._tcp is not None else 'TCP'} "
+                           lambda: (f"{'UDP' if self.server.is_open else 'TCP'} "
                                     f"{s.host}:{s.port} (EtherNet/IP, --port)"))
         if self.modbus is not None:
             await self._listen(self.modbus.start, lambda: f"TCP {s.host}:{s.modbus_port} (Modbus TCP, --modbus-port)")
         if s.rtu is not None:
             await self._open_rtu(s.rtu)
-        self._tick(asyncio.get_running_loop().time())
+        self.clock.tick(asyncio.get_running_loop().time())
         if self.io_endpoint is not None:
             await self._listen(self.io_endpoint.start, lambda: f"UDP {s.host}:{s.io_port} (class 1 I/O, --io-port)")
             if self.io is not None:
@@ -255,18 +238,19 @@ class Adapter:
     async def _open_rtu(self, device: str) -> None:
         """The drive's RS-485 port on ``device`` ("pty" or a serial device); one that cannot be
         opened raises ``RtuPortError`` naming it, with nothing left open."""
-        acg = self.device
-        assert isinstance(acg, AcgDevice)
+        drive = self.modbus_drive
+        assert drive is not None   # checked when the adapter was made
         try:
-            port = open_port(device, LineSettings.from_drive(acg.drive))
+            port = open_port(device, LineSettings.from_drive(drive.drive()))
         except RtuPortError:
             await self.close()
             raise
         self.rtu = RtuLine(port)
-        self.rtu.add(lambda: acg.drive, acg.saves)
-        if self._events is not None:    # watched before the port opened
-            self._events.tap_rtu(self.rtu)
-        await self.rtu.start()
+        self.rtu.add(drive.drive, drive.saves, written=register_relay("modbus-rtu", self.observers))
+        self.runtime.rtu = self.rtu
+        rs485 = Rs485Port(self.rtu)
+        self.power.ports.append(rs485)
+        await rs485.open()
 
     @property
     def control_path(self) -> ControlAddress:
@@ -288,7 +272,7 @@ class Adapter:
             from .control.http import HttpApi, parse_listen
 
             host, port = parse_listen(self.settings.http)
-            api = HttpApi({self.settings.host: self}, host, port, token=self.settings.http_token,
+            api = HttpApi({self.settings.host: self.service}, host, port, token=self.settings.http_token,
                           allow_remote=self.settings.http_allow_remote)
             try:
                 await api.start()
@@ -340,39 +324,30 @@ class Adapter:
 
     def keypad_parameter(self, code: str) -> dict[str, Any]:
         """A keypad parameter by its code (``drv``, ``ACC``, ``CM.23``; ``F001``, ``A004``, ``P044``): code,
-        name, value in the keypad's unit, raw value, unit, address. ``UnknownCode`` (a ``LookupError``)
-        for a code the keypad does not have, ``NoKeypad`` (a ``ValueError``) for a device without one."""
-        return self.keypad().get(code)
+        name, value in the keypad's unit, raw value, unit, address (the ``parameter`` operation of the
+        command service). ``UnknownCode`` or ``NoKeypad`` (``cipstack.errors.NotFound``) when not there."""
+        return self.service.parameter(code)
 
     def set_keypad_parameter(self, code: str, value: object, origin: str = "python",
                              peer: str | None = None) -> dict[str, Any]:
         """Set a keypad parameter now, ``value`` in the keypad's unit (``"2.5"``, ``4``, an enumeration's
-        name), not saved; returns it as ``keypad_parameter`` does. ``UnknownCode``, ``BadValue``,
-        ``WriteRefused`` (with the device's reason) or ``NoKeypad`` when not written. ``origin`` and
-        ``peer`` are what the event stream's ``parameter write`` says of who wrote it."""
-        keypad = self.keypad()
-        if self._faults is not None and self._faults.powered_off:
-            raise WriteRefused(f"{code}: the device is powered off (power-cycle)")
-        now = asyncio.get_running_loop().time()
-        self._tick(now)
-        register, raw = keypad.set(code, str(value), now)
-        if self._events is not None and self._events.watching:
-            self._events.parameter_written(origin, **({"peer": peer} if peer is not None else {}),
-                                           **keypad.write_fields(register, raw))
-        self.target.tick(now)   # the drive's new state, through the event stream's tap if any
-        return keypad.get(register.code)
+        name), not saved; returns it as ``keypad_parameter`` does (the ``set-parameter`` operation).
+        ``UnknownCode``, ``BadValue``, ``WriteRefused`` (with the device's reason, also while the power is
+        off) or ``NoKeypad`` when not written. ``origin`` and ``peer`` are what the event stream's
+        ``parameter write`` says of who wrote it."""
+        return self.service.set_parameter(code, value, origin, peer)
 
     async def close(self) -> None:
-        if self._faults is not None:
-            self._faults.shutdown()
+        self.faults.shutdown()
+        self.runtime.shutdown()
+        for port in self.power.ports:
+            if isinstance(port, Class1Port):
+                port.shutdown()
         if self.modbus is not None:
             await self.modbus.close()
         if self.rtu is not None:
             await self.rtu.close()
             self.rtu = None
-        if self._device_timer is not None:
-            self._device_timer.cancel()
-            self._device_timer = None
         if self.io is not None:
             self.io.close_all()
         if self.io_endpoint is not None:
@@ -389,77 +364,18 @@ class Adapter:
         await self.close()
 
     def control(self, request: dict[str, Any]) -> Any:
-        """Serve one control-channel request (see ``cipstack.control``)."""
-        now = asyncio.get_running_loop().time()
-        self._tick(now)
-        command = request.get("command")
-        if command == "trip":
-            code = request["code"]
-            if not isinstance(code, (int, str)) or isinstance(code, bool):
-                raise ControlError("the trip code is a number or a name")
-            if self._faults is not None and self._faults.powered_off:
-                raise ControlDenied("the device is powered off (power-cycle): it cannot trip")
-            try:
-                trip = self.device.inject_trip(code)
-            except NotImplementedError as exc:
-                raise ControlError(str(exc)) from None
-            except TripRefused as exc:
-                raise ControlDenied(str(exc)) from None
-            except (KeyError, ValueError) as exc:
-                reason = exc.args[0] if exc.args else exc
-                raise ControlError(f"{reason}; valid codes: {self.device.trip_codes()}") from None
-            self.target.tick(now)  # through the event stream's tap, if any
-            label = getattr(trip, "label", None) or str(trip)
-            fault = getattr(trip, "fault_code", None)
-            return {"result": f"tripped: {label}" + (f" (fault code 0x{fault:04X})" if fault is not None else ""),
-                    "trip": label, "status": self.device.status_line()}
-        if command == "status":
-            status = {"status": self.device.status_line(), "drive": self.device.status_fields(),
-                      "sessions": len(self.target.sessions),
-                      "class3_connections": len(self.device.connection_table.connections),
-                      "class1_connections": len(self.io.connections) if self.io else 0}
-            if self.rtu is not None:   # what the RS-485 port made of its line: frames, replies, refusals
-                status["rtu"] = {"device": self.rtu.name, **self.rtu.slaves[0].counters.as_dict()}
-            return status
-        if command in ("fault", "clear", "faults"):
-            return self._control_fault(command, request, now)
-        raise ControlError(f"unknown command {command!r} (known: trip, status, fault, clear, faults)")
-
-    def _control_fault(self, command: str, request: dict[str, Any], now: float) -> Any:
-        """``fault`` (name, options), ``clear`` (which: an id, a name, or none for all), ``faults``."""
-        from .faults import FaultError, FaultStateError, NoSuchConnection
-
-        faults = self.faults
-        if command == "faults":
-            return {"faults": [f.as_json(now) for f in faults.faults()]}
-        try:
-            if command == "clear":
-                cleared = faults.clear(request.get("which"))
-                result: dict[str, Any] = {"cleared": [f.as_json(now) for f in cleared],
-                                          "result": f"cleared {len(cleared)} fault(s)"}
-            else:
-                options = request.get("options") or {}
-                if not isinstance(options, dict):
-                    raise ControlError("fault options are a JSON object")
-                fault = faults.apply(str(request.get("name")), **options)
-                result = {"fault": fault.as_json(now), "result": f"fault {fault}"}
-        except FaultError as exc:
-            raise ControlError(str(exc)) from None
-        except (NoSuchConnection, FaultStateError) as exc:
-            raise ControlDenied(str(exc)) from None
-
-        async def settled() -> dict[str, Any]:
-            # The reply waits for the ports a fault closes or opens, but not for a long --off.
-            with contextlib.suppress(asyncio.TimeoutError):
-                await asyncio.wait_for(asyncio.shield(faults.settle()), CONTROL_SETTLE_S)
-            return result
-
-        return settled()
+        """Serve one control-socket request, ``{"command": OPERATION, KEY: VALUE...}`` (the command
+        service's operations, ``cipstack.control.service``): its reply, or an awaitable of it."""
+        arguments = dict(request)
+        command = arguments.pop("command", None)
+        if not isinstance(command, str):
+            raise BadRequest("a request names its \"command\" (an operation of the command service)")
+        return self.service.call(command, arguments, origin="control")
 
     async def _print_status_lines(self) -> None:
         last = None
         while True:
-            self._tick(asyncio.get_running_loop().time())
+            self.clock.tick(asyncio.get_running_loop().time())
             line = self.device.status_line()
             if line is not None and line != last:
                 print(line, flush=True)

@@ -18,8 +18,8 @@ from cipstack.catalog import Catalog
 from cipstack.devices.acg.device import AcgDevice, build_acg_device
 from cipstack.devices.acg.drive import MODBUS_SILENCE_TIME, AcgDrive, Trip
 from cipstack.devices.acg.modbus import MbapBuffer, ModbusTcpCore
-from cipstack.devices.acg.modbus_server import ModbusTcpServer
 from cipstack.devices.acg.registers import ACG_REGISTERS, CLASS_64_INSTANCES, modbus_tcp_number
+from cipstack.modbus.tcp_server import ModbusTcpServer
 from cipstack.scanner import Scanner
 
 UNIT = 0xFF  # "The address is fixed to 0xFF when Modbus TCP communication is used alone."

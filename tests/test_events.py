@@ -11,6 +11,7 @@ from cipstack.adapter import Adapter
 from cipstack.devices.profiles import catalog_for
 from cipstack.scanner import Scanner
 from tests.test_faults import adapter as adapter  # the fixture: an ACG adapter with a state file of its own
+from tests.test_faults import connect
 
 CATALOG = catalog_for(259, 100)
 
@@ -52,13 +53,18 @@ async def test_connections_run_idle_writes_trips_and_faults(adapter: Adapter) ->
 
 
 async def test_an_adapter_nobody_watches_has_no_tap(adapter: Adapter) -> None:
-    device_events = adapter.io.events if adapter.io else None
-    assert adapter.target.tick == adapter._tick and "handle" not in vars(adapter.device.router)
+    """Watching is an observer of the runtime and one in the request seam, there only while watched:
+    unwatched, the seam is the router's own call and a write is no event."""
+    router = adapter.device.router
+    assert adapter.observers == [] and adapter.requests.handle == router.handle
     stream = adapter.events
-    assert adapter.io is not None and adapter.io.events is not device_events
+    assert adapter.observers == [stream] and adapter.requests.handle != router.handle
     stream.stop()
-    assert adapter.io.events is device_events and adapter.target.tick == adapter._tick
-    assert "handle" not in vars(adapter.device.router)
+    assert adapter.observers == [] and adapter.requests.handle == router.handle
+    before = len(stream.events)
+    async with await connect(adapter) as scanner:
+        await scanner.set_attribute_single(0x2A, 1, 102, 55)                 # ACC 5.5 s
+    assert len(stream.events) == before
 
 
 async def test_wait_for_times_out(adapter: Adapter) -> None:

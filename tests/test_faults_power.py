@@ -329,9 +329,9 @@ async def test_a_device_without_power_takes_no_trip_no_keypad_write_and_no_secon
         tmp_path: Path) -> None:
     """While the power is off (``off``), nothing reaches the device: a trip, a keypad write and another
     power cycle are refused with the reason; once the power is back each is taken again."""
-    from cipstack.control import ControlDenied
     from cipstack.devices.keypad import WriteRefused
-    from cipstack.faults.controller import FaultStateError
+    from cipstack.errors import StateRefused
+    from cipstack.faults import FaultStateError
 
     adapter = Adapter(AdapterSettings(port=0, io_port=0, state_path=tmp_path / "acg.json",
                                       control_path=tmp_path / "control.sock", http="127.0.0.1:0"))
@@ -345,7 +345,7 @@ async def test_a_device_without_power_takes_no_trip_no_keypad_write_and_no_secon
             await asyncio.sleep(0.05)
             async with session.get(status) as reply:
                 assert (await reply.json())["power"] == "off"
-        with pytest.raises(ControlDenied, match="powered off"):
+        with pytest.raises(StateRefused, match="powered off"):
             adapter.control({"command": "trip", "code": "OverHeat"})
         with pytest.raises(WriteRefused, match="powered off"):
             adapter.set_keypad_parameter("ACC", "2.5")

@@ -348,7 +348,7 @@ def test_listen_only_needs_multicast() -> None:
 
 def test_identity_status_follows_io(tmp_path: object) -> None:
     device = build_device()
-    device._update_io_status()
+    device.update_io_status()
     assert device.identity.status == 0x0030  # no I/O connection
     rig = Rig()
     rig.io.events = device

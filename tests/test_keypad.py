@@ -287,12 +287,20 @@ async def test_a_modbus_port_nobody_watches_has_no_tap(tmp_path: Path) -> None:
     adapter = Adapter(AdapterSettings(port=0, io_port=0, modbus_port=0, state_path=tmp_path / "acg.json"))
     await adapter.start()
     try:
-        assert adapter.modbus is not None
-        assert "store" not in vars(adapter.modbus.core)
+        assert adapter.modbus is not None and adapter.observers == []
         stream = adapter.events
-        assert "store" in vars(adapter.modbus.core)
+        assert adapter.observers == [stream]
         stream.stop()
-        assert "store" not in vars(adapter.modbus.core)
+        assert adapter.observers == []
+        before = len(stream.events)
+        reader, writer = await asyncio.open_connection("127.0.0.1", adapter.modbus.port)
+        dec = ACG_REGISTERS.by_code("dEC").address.to_bytes(2, "big")
+        writer.write(bytes.fromhex("0001 0000 0006 01 06") + dec + (35).to_bytes(2, "big"))   # write single register
+        reply = await asyncio.wait_for(reader.readexactly(8), 5)
+        assert reply[7] == 0x06                                            # answered, not an exception
+        writer.close()
+        assert adapter.keypad_parameter("dEC")["raw"] == 35                # written
+        assert len(stream.events) == before                                # and no event: nobody watches
     finally:
         await adapter.close()
 

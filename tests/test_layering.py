@@ -14,21 +14,26 @@ PACKAGE = Path(__file__).resolve().parent.parent / "cipstack"
 
 #: What each part may import of the package (its own modules always).
 ALLOWED = {
-    "cip": set(),
-    "objects": {"cip"},
-    "assemblies": {"cip"},
-    "eip": {"cip"},
-    "componet": {"cip", "eip"},
+    "cip": {"errors"},
+    "objects": {"cip", "errors"},
+    "assemblies": {"cip", "errors"},
+    "eip": {"cip", "errors"},
+    "componet": {"cip", "eip", "errors"},
     # catalog: the index of declared classes a device hands its scanner (it imports only what lies below).
-    "devices": {"cip", "objects", "assemblies", "eip", "componet", "catalog"},
+    "devices": {"cip", "objects", "assemblies", "eip", "componet", "catalog", "errors"},
     # The battery sits on top: it may use what lies below (the codecs, the EDS reader, the
     # scanner's reading of an EDS) and nothing imports it but the command line.
-    "conformance": {"cip", "objects", "assemblies", "eip", "componet", "devices", "catalog", "eds", "scanner"},
-    # On top (DESIGN): the fault model acts on a running adapter's transport, never the reverse.
-    "faults": {"cip", "eip"},
-    "control": {"eip", "faults"},
+    "conformance": {"cip", "objects", "assemblies", "eip", "componet", "devices", "catalog", "eds", "scanner",
+                    "errors"},
+    # Modbus ports: transport shells over a drive's sans-I/O Modbus core (the register map is the device's).
+    "modbus": {"cip", "eip", "devices", "errors"},
+    # A running device: its ports, power and link, seams and observers; it knows no shell above it.
+    "runtime": {"cip", "eip", "devices", "modbus", "errors"},
+    # On top (DESIGN): faults and control act through the runtime's interface, never on the adapter.
+    "faults": {"cip", "eip", "runtime", "errors"},
+    "control": {"eip", "faults", "runtime", "devices", "errors"},
     # The pytest plugin: fixtures over the in-process adapter, its faults and events, and the scanner.
-    "testing": {"adapter", "control", "scanner", "devices", "eds"},
+    "testing": {"adapter", "control", "scanner", "devices", "eds", "errors"},
 }
 
 #: The parts that sit on top: nothing else in the package imports them (DESIGN.md).

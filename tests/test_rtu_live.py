@@ -26,7 +26,7 @@ from pymodbus.exceptions import ModbusIOException
 from cipstack.devices.acg.drive import AcgDrive
 from cipstack.devices.acg.modbus_rtu import RtuSlave, with_crc
 from cipstack.devices.acg.registers import ACG_REGISTERS
-from cipstack.devices.acg.rtu_line import PtyPort, RtuLine
+from cipstack.modbus.rtu_line import PtyPort, RtuLine
 from tests.ports import free_port
 
 pytestmark = pytest.mark.interop
@@ -292,7 +292,7 @@ async def test_a_serial_device_is_served_through_pyserial() -> None:
     pty this test holds the master of, which takes a serial port's settings); its UART would time
     the bytes, so the reply is written CM.5 after the frame ended, unpaced."""
     from cipstack.devices.acg.modbus_rtu import LineSettings
-    from cipstack.devices.acg.rtu_line import SerialDevicePort
+    from cipstack.modbus.rtu_line import SerialDevicePort
 
     master, slave_fd = os.openpty()
     try:

@@ -17,8 +17,8 @@ from cipstack.devices.acg.device import build_acg_device
 from cipstack.devices.acg.drive import AcgDrive
 from cipstack.devices.acg.modbus_rtu import RtuSlave, with_crc
 from cipstack.devices.acg.registers import ACG_REGISTERS
-from cipstack.devices.acg.rtu_line import PtyPort, RtuLine
 from cipstack.fleet.spec import FleetDevice, SpecError, assign, assign_stations, make_group, parse_addresses
+from cipstack.modbus.rtu_line import PtyPort, RtuLine
 from tests.ports import free_port
 from tests.test_state_saves import make_read_only, small_filesystem  # noqa: F401 (a fixture)
 

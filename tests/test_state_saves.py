@@ -29,11 +29,11 @@ from cipstack.cip.router import RequestContext
 from cipstack.cip.status import CipError
 from cipstack.devices import state
 from cipstack.devices.acg.device import AcgDevice, build_acg_device
-from cipstack.devices.acg.modbus_server import ModbusTcpServer
 from cipstack.devices.acg.registers import ACG_REGISTERS, CLASS_64_INSTANCES
 from cipstack.devices.omron.device import OmronDevice, build_omron_device
 from cipstack.devices.omron.registers import modbus_path
 from cipstack.devices.state import ParameterStore, StateFileError, StateWriter, load_state, save_state
+from cipstack.modbus.tcp_server import ModbusTcpServer
 from cipstack.scanner import Scanner
 from tests.ports import free_port
 

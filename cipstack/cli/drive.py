@@ -1,20 +1,20 @@
-"""cipstack drive: a running emulator's control socket (trip, status, faults)."""
+"""cipstack drive: a running emulator's command service over its control socket. One subcommand per
+operation of the service (``cipstack.control.operations.OPERATIONS``), generated from it: status,
+trip, fault / faults / clear, parameter / set-parameter, events, power, link."""
 
 from __future__ import annotations
 
 import argparse
 import json
+from collections.abc import Callable
 from typing import Any
 
 from ..cip.types import parse_int
-from .common import (
-    EXIT_OK,
-    UsageError,
-    _emit,
-)
+from ..control.operations import OPERATIONS, Operation
+from .common import EXIT_OK, UsageError
 
 
-# -- emulator control ---------------------------------------------------------------------------------------
+# -- the control socket -----------------------------------------------------------------------------------
 def _control(args: argparse.Namespace, request: dict[str, Any]) -> dict[str, Any]:
     from ..control import ControlError, ControlRefused, control_request, default_control_path
 
@@ -22,9 +22,11 @@ def _control(args: argparse.Namespace, request: dict[str, Any]) -> dict[str, Any
     try:
         reply = control_request(path, request, args.timeout)
     except ControlRefused as exc:
-        raise UsageError(str(exc)) from None    # the emulator named what is wrong with the argument
+        raise UsageError(str(exc)) from None    # the emulator named what is wrong with the argument: exit 2
     except ControlError as exc:
-        raise ConnectionError(str(exc)) from None   # no emulator there, no answer, or its state says no: exit 1
+        # Nothing of that name there, its state says no, no emulator there, no answer: exit 1
+        # (``cipstack.control.service.OUTCOMES``).
+        raise ConnectionError(str(exc)) from None
     reply.pop("ok", None)
     return reply
 
@@ -36,32 +38,102 @@ def _trip_code(text: str) -> int | str:
         return text.strip()
 
 
-def cmd_drive_trip(args: argparse.Namespace) -> int:
-    reply = _control(args, {"command": "trip", "code": args.code})
-    _emit(args, reply, f"{reply['result']}" + (f"\n{reply['status']}" if reply.get("status") else ""))
-    return EXIT_OK
-
-
-def cmd_drive_status(args: argparse.Namespace) -> int:
-    reply = _control(args, {"command": "status"})
-    if args.json:
-        # Fields, not the console line: the drive's state, then the emulator's sessions and connections.
-        # A device without one drive (the CompoNet gateway) has its status lines instead.
-        fields = reply.get("drive") or {"status": reply.get("status")}
-        record = {**fields, "sessions": reply["sessions"],
-                  "class3_connections": reply["class3_connections"], "class1_connections": reply["class1_connections"]}
-        if "rtu" in reply:
-            record["rtu"] = reply["rtu"]
-        print(json.dumps(record), flush=True)
-        return EXIT_OK
+# -- what each operation prints without --json --------------------------------------------------------------
+def _status_text(reply: dict[str, Any]) -> str:
     rtu = reply.get("rtu")
     line = "" if not rtu else ("  rtu " + " ".join(f"{k} {v}" for k, v in rtu.items() if k != "device"))
-    print(f"{reply['status'] or '(no drive)'}  sessions {reply['sessions']}  class 3 "
-          f"{reply['class3_connections']}  class 1 {reply['class1_connections']}{line}", flush=True)
+    power = "" if reply.get("power", "on") == "on" else "  POWER OFF"
+    link = "" if reply.get("link", "plugged") == "plugged" else "  UNPLUGGED"
+    return (f"{reply['status'] or '(no drive)'}{power}{link}  sessions {reply['sessions']}  class 3 "
+            f"{reply['class3_connections']}  class 1 {reply['class1_connections']}{line}")
+
+
+def _status_json(reply: dict[str, Any]) -> dict[str, Any]:
+    """Fields, not the console line: the drive's state, power and link, then the emulator's sessions and
+    connections. A device without one drive (the CompoNet gateway) has its status line instead."""
+    fields = reply.get("drive") or {"status": reply.get("status")}
+    record = {**fields, "power": reply.get("power"), "link": reply.get("link"), "sessions": reply["sessions"],
+              "class3_connections": reply["class3_connections"], "class1_connections": reply["class1_connections"],
+              "faults": reply.get("faults", 0)}
+    if "rtu" in reply:
+        record["rtu"] = reply["rtu"]
+    return record
+
+
+def _fault_words(fault: dict[str, Any]) -> str:
+    """``1: drop --share 0.1``: a fault's record as the command line gives a fault."""
+    from ..faults.model import format_value
+
+    options = " ".join(f"--{k} {format_value(k, v)}" for k, v in fault["options"].items())
+    return f"{fault['id']}: {fault['name']}" + (" " + options if options else "")
+
+
+def _faults_text(reply: Any) -> str:
+    lines = []
+    for fault in reply:
+        left = f"  ({fault['remaining_s']:g} s left)" if "remaining_s" in fault else ""
+        lines.append(f"{_fault_words(fault)}  since {fault['applied']}{left}")
+    return "\n".join(lines) or "no fault active"
+
+
+def _fault_text(reply: dict[str, Any]) -> str:
+    return f"fault {_fault_words(reply)}"
+
+
+def _cleared_text(reply: list[dict[str, Any]]) -> str:
+    return f"cleared {len(reply)} fault(s)"
+
+
+def _parameter_text(reply: dict[str, Any]) -> str:
+    unit = f" {reply['unit']}" if reply.get("unit") else ""
+    return f"{reply.get('code')} ({reply.get('name')}) = {reply.get('value')}{unit}  raw {reply.get('raw')}"
+
+
+def _events_text(reply: Any) -> str:
+    lines = []
+    for event in reply:
+        rest = " ".join(f"{k}={v}" for k, v in event.items() if k not in ("number", "kind", "time", "monotonic"))
+        lines.append(f"{event['number']:>6}  {event['time']}  {event['kind']}{'  ' + rest if rest else ''}")
+    return "\n".join(lines) or "no event"
+
+
+def _result_text(reply: Any) -> str:
+    if isinstance(reply, dict) and "result" in reply:
+        text = str(reply["result"])
+        return text + (f"\n{reply['status']}" if isinstance(reply.get("status"), str) else "")
+    return json.dumps(reply)
+
+
+#: How each operation's reply reads on a console (``--json`` prints the reply itself).
+_TEXT: dict[str, Callable[[Any], str]] = {"status": _status_text, "faults": _faults_text, "fault": _fault_text,
+                                          "power": _fault_text, "link": _fault_text, "clear": _cleared_text,
+                                          "parameter": _parameter_text, "set-parameter": _parameter_text,
+                                          "events": _events_text}
+_JSON: dict[str, Callable[[Any], Any]] = {"status": _status_json}
+
+
+def cmd_drive_operation(args: argparse.Namespace) -> int:
+    """Any operation: its arguments from the command line, by their JSON keys, to the control socket."""
+    operation: Operation = args.operation
+    request: dict[str, Any] = {"command": operation.name}
+    for argument in operation.arguments:
+        value = getattr(args, argument.key, None)
+        if value is not None:
+            request[argument.key] = value
+    _print(args, operation.name, _control(args, request))
     return EXIT_OK
 
 
-# -- faults (cipstack.faults) -------------------------------------------------------------------------------
+def _print(args: argparse.Namespace, operation: str, reply: dict[str, Any]) -> None:
+    """The answer: with ``--json`` as the service gave it, else as a console line."""
+    payload = reply["result"] if set(reply) == {"result"} else reply
+    if args.json:
+        print(json.dumps(_JSON.get(operation, lambda r: r)(payload)), flush=True)
+    else:
+        print(_TEXT.get(operation, _result_text)(payload), flush=True)
+
+
+# -- faults: the fault's options as the command line gives them ----------------------------------------------
 def _common_options(args: argparse.Namespace) -> list[str]:
     """Take ``--host``, ``--port``, ``--control``, ``--timeout`` and ``--json`` from the words after the
     fault's name (they may come anywhere on the line); the rest are the fault's own."""
@@ -92,43 +164,46 @@ def _common_options(args: argparse.Namespace) -> list[str]:
 
 
 def cmd_drive_fault(args: argparse.Namespace) -> int:
+    """``fault NAME [OPTION...]``, checked here in the command line's own terms (``--share``) before it is
+    sent; ``fault clear [ID|NAME]`` is the ``clear`` operation."""
     from ..faults import FaultError, parse_arguments
 
     rest = _common_options(args)
     if args.name == "clear":
         if len(rest) > 1:
             raise UsageError(f"clear takes one fault (its id or name), not {' '.join(rest)}")
-        which: int | str | None = None
-        if rest:
-            try:
-                which = parse_int(rest[0])
-            except ValueError:
-                which = rest[0]
-        reply = _control(args, {"command": "clear", "which": which})
-        _emit(args, reply, reply["result"])
+        _print(args, "clear", _control(args, {"command": "clear", **({"fault": rest[0]} if rest else {})}))
         return EXIT_OK
     try:
         request = parse_arguments(args.name, rest)
     except FaultError as exc:
         raise UsageError(str(exc)) from None
-    reply = _control(args, {"command": "fault", "name": request.name, "options": request.as_json()})
-    _emit(args, reply, reply["result"])
+    _print(args, "fault", _control(args, {"command": "fault", "name": request.name, "options": request.as_json()}))
     return EXIT_OK
 
 
-def cmd_drive_faults(args: argparse.Namespace) -> int:
-    from ..faults.model import format_value
+def add_drive_commands(drive: Any, add_common: Callable[[argparse.ArgumentParser], None]) -> None:
+    """One subcommand per operation of the command service, its arguments from the declaration
+    (a positional for each argument marked so, ``--KEY`` for the others); ``add_common`` adds where the
+    emulator is (``--host``, ``--port``, ``--control``, ``--timeout``, ``--json``)."""
+    for operation in OPERATIONS:
+        q = drive.add_parser(operation.name)
+        if operation.name == "fault":
+            q.add_argument("name", metavar="NAME", help="the fault (above), or clear [ID|NAME]")
+            q.add_argument("arguments", nargs=argparse.REMAINDER, metavar="OPTION",
+                           help="the fault's options (docs/faults.md), e.g. --share 0.1 --for 2s")
+            q.set_defaults(func=cmd_drive_fault)
+        else:
+            for argument in operation.arguments:
+                kind = _trip_code if argument.key == "code" and operation.name == "trip" else str
+                if argument.positional:
+                    q.add_argument(argument.key, metavar=argument.metavar or argument.key.upper(), type=kind,
+                                   nargs=None if argument.required else "?", help=argument.help)
+                else:
+                    q.add_argument(f"--{argument.key}", metavar=argument.metavar or "VALUE", type=kind,
+                                   help=argument.help)
+            q.set_defaults(func=cmd_drive_operation, operation=operation)
+        add_common(q)
 
-    reply = _control(args, {"command": "faults"})
-    faults = reply["faults"]
-    if args.json:
-        print(json.dumps(faults), flush=True)
-        return EXIT_OK
-    for fault in faults:
-        options = " ".join(f"--{k} {format_value(k, v)}" for k, v in fault["options"].items())
-        left = f"  ({fault['remaining_s']:g} s left)" if "remaining_s" in fault else ""
-        print(f"{fault['id']}: {fault['name']}{' ' + options if options else ''}  since {fault['applied']}{left}",
-              flush=True)
-    if not faults:
-        print("no fault active", flush=True)
-    return EXIT_OK
+
+__all__ = ["add_drive_commands", "cmd_drive_fault", "cmd_drive_operation"]

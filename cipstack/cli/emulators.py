@@ -108,9 +108,9 @@ def _http_settings(args: argparse.Namespace) -> dict[str, Any]:
 def _serve(adapter: Any, args: argparse.Namespace, command: str) -> int:
     """Run an emulator until SIGINT/SIGTERM; a port it cannot listen on (taken, or not an address of
     this machine) is one line naming the port and its option, and exit 2."""
-    from ..devices.acg.rtu_line import RtuPortError
     from ..eip.io_server import run_precise
     from ..listening import ListenError
+    from ..modbus.rtu_line import RtuPortError
 
     scenario = getattr(args, "scenario", None)
     until = None
@@ -123,7 +123,7 @@ def _serve(adapter: Any, args: argparse.Namespace, command: str) -> int:
             raise UsageError(str(exc)) from None
 
         def until(running: Any) -> Any:
-            return scenarios.run(running, loaded, lambda line: print(line, flush=True))
+            return scenarios.run(running.service, loaded, lambda line: print(line, flush=True))
     try:
         fired = run_precise(adapter.serve_forever(until) if until is not None else adapter.serve_forever())
     except RtuPortError as exc:

@@ -70,12 +70,12 @@ def _fleet_spec(args: argparse.Namespace) -> Any:
 
 
 def cmd_fleet(args: argparse.Namespace) -> int:
-    from ..devices.acg.rtu_line import RtuPortError
     from ..eip.io_server import run_precise
     from ..fleet.serve import serve_until_signalled
     from ..fleet.spec import SpecError, describe_addresses
     from ..fleet.workers import FleetFailure, Supervisor
     from ..listening import ListenError
+    from ..modbus.rtu_line import RtuPortError
 
     try:
         spec = _fleet_spec(args)

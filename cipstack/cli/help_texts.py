@@ -218,9 +218,49 @@ COMMANDS: dict[tuple[str, ...], CommandText] = {
     ("drive", "status"): CommandText(
         "the emulated drive's status line",
         "Print the emulated drive's status line: drive state, direction, output and reference "
-        "frequency, connections, and the trip if there is one.",
+        "frequency, the power and the link when they are off or unplugged, connections, and the trip if "
+        "there is one. With --json: the same fields, with power (on/off) and link (plugged/unplugged).",
         (("cipstack drive status", "the emulator on 127.0.0.1:44818"),
          ("cipstack drive status --host 127.0.0.12 --json", "a fleet device's status as JSON")),
+    ),
+    ("drive", "clear"): CommandText(
+        "clear active faults",
+        "Clear every active fault of the running emulator, or one by its id, or all of one name (as "
+        "`cipstack drive fault clear`). A power-cycle still off gets its power back.",
+        (("cipstack drive clear", "every active fault"), ("cipstack drive clear 3", "fault 3")),
+    ),
+    ("drive", "parameter"): CommandText(
+        "read a keypad parameter",
+        "Read a keypad parameter of the emulated drive by its code (the ACG's drv, ACC, CM.23; an MX2/RX "
+        "function code F001, A004, P044): its value in the keypad's unit, its raw value and address.",
+        (("cipstack drive parameter ACC", "the ACG's acceleration time"),
+         ("cipstack drive parameter A004 --port 44819 --json", "an MX2's base frequency, as JSON")),
+    ),
+    ("drive", "set-parameter"): CommandText(
+        "set a keypad parameter",
+        "Set a keypad parameter of the emulated drive now, in the keypad's unit, as on its keypad (not "
+        "saved: a power cycle loses it). Refused with the device's reason (read-only, not while running, "
+        "the power off).",
+        (("cipstack drive set-parameter ACC 2.5", "the ACG's acceleration time, 2.5 s"),),
+    ),
+    ("drive", "events"): CommandText(
+        "what happened in the emulator",
+        "Print the events the emulator kept (connections, run/idle, drive states and trips, parameter "
+        "writes, faults) after event number --since, oldest first, at most 1000.",
+        (("cipstack drive events", "every event kept"), ("cipstack drive events --since 40 --json", "as JSON")),
+    ),
+    ("drive", "power"): CommandText(
+        "cycle the emulated device's power",
+        "Cycle the power of the emulated device (the power-cycle fault): every port closes and the RS-485 "
+        "line is silent for --off, then everything opens once; what was not saved is lost. Answers within "
+        "2 s, while the power may still be off.",
+        (("cipstack drive power cycle --off 2s", "off for 2 s"),),
+    ),
+    ("drive", "link"): CommandText(
+        "unplug or plug the emulated device's Ethernet cable",
+        "Unplug the Ethernet cable (every Ethernet port closed, class 1 connections time out, RS-485 goes "
+        "on) or plug it back (the unplug and plug faults).",
+        (("cipstack drive link unplug", "pull the cable"), ("cipstack drive link plug", "plug it back")),
     ),
     ("eds",): CommandText(
         "EDS files: generate, check, show",

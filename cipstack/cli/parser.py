@@ -16,7 +16,7 @@ from .common import (
 )
 from .completion import cmd_completion
 from .conform import add_arguments as add_conform_arguments
-from .drive import _trip_code, cmd_drive_fault, cmd_drive_faults, cmd_drive_status, cmd_drive_trip
+from .drive import add_drive_commands
 from .eds import cmd_eds_check, cmd_eds_generate, cmd_eds_show
 from .emulators import cmd_adapter, cmd_componet, cmd_models
 from .explicit import cmd_discover, cmd_get, cmd_identity, cmd_set
@@ -308,17 +308,8 @@ def build_parser(command: str | None = None) -> argparse.ArgumentParser:
     p = sub.add_parser("drive")
     drive = p.add_subparsers(dest="drive_command", metavar="COMMAND", title="commands", required=True,
                              parser_class=_Parser)
-    for name, func in (("trip", cmd_drive_trip), ("status", cmd_drive_status), ("fault", cmd_drive_fault),
-                       ("faults", cmd_drive_faults)):
-        q = drive.add_parser(name)
-        if name == "trip":
-            q.add_argument("code", type=_trip_code,
-                           help="fault code of the drive's manual (decimal or 0x hex: 0x4200 on the ACG, 5 on "
-                                "the MX2/RX) or its name (OverHeat, E05)")
-        if name == "fault":
-            q.add_argument("name", metavar="NAME", help="the fault (above), or clear [ID|NAME]")
-            q.add_argument("arguments", nargs=argparse.REMAINDER, metavar="OPTION",
-                           help="the fault's options (docs/faults.md), e.g. --share 0.1 --for 2s")
+
+    def where_the_emulator_is(q: argparse.ArgumentParser) -> None:
         q.add_argument("--host", default="127.0.0.1",
                        help="the emulator's address (its --host), which with --port finds its control socket "
                             "(default %(default)s)")
@@ -329,7 +320,8 @@ def build_parser(command: str | None = None) -> argparse.ArgumentParser:
         q.add_argument("--timeout", type=parse_duration, default=5.0, metavar="DURATION",
                        help="reply timeout (default %(default)s s)")
         q.add_argument("--json", action="store_true", help="one JSON object per line")
-        q.set_defaults(func=func)
+
+    add_drive_commands(drive, where_the_emulator_is)
 
     if command in (None, "eds"):
         _add_eds_commands(sub)

@@ -8,10 +8,11 @@ Python; ``origin`` says which, with the peer or the station, and ``code``, ``add
 was written where the device knows the parameter); faults applied, cleared, expired, used up.
 Each is an ``Event`` with its wall-clock time, its time on the loop's clock, a kind and fields.
 
-Nothing is watched until the stream is started (``Adapter.events`` starts it on first use): the
-taps are put where the adapter hands things to the device (its class 1 events, its clock, its
-message router's entry, the one place each Modbus port writes a register), so an adapter nobody
-observes pays nothing. Each route has its own tap and a write passes one of them, so a write is one
+Nothing is watched until the stream is started (``Adapter.events`` starts it on first use): it then
+observes the device's runtime (``cipstack.runtime.RuntimeObserver``: class 1 events, the device's
+clock, the one place each Modbus port writes a register) and the requests that reach the message
+router (an observer in the request seam, behind any fault), so a device nobody observes pays
+nothing. Each route is observed in one place and a write passes one of them, so a write is one
 event (a CIP Set of class 0x64 is seen at the router, not again at the drive). Keypad parameters
 given at start (``--param``) precede the stream and are no event. The stream keeps the last
 ``limit`` events; ``wait_for`` waits for one on the loop.
@@ -28,8 +29,10 @@ from dataclasses import dataclass, field
 from typing import TYPE_CHECKING, Any
 
 if TYPE_CHECKING:
-    from ..adapter import Adapter
-    from ..devices.keypad import Keypad
+    from ..cip.router import RequestContext
+    from ..eip.seams import Handle
+    from ..faults import FaultController
+    from ..runtime import DeviceRuntime
 
 #: Events kept (the oldest go first).
 DEFAULT_LIMIT = 10_000
@@ -56,43 +59,29 @@ class Event:
                 **self.fields}
 
 
-class _IoTap:
-    """Stands in for the device as the class 1 target's ``events``: records, then tells the device."""
+def _connection_fields(connection: Any) -> dict[str, Any]:
+    return {"class": 1, "connection": f"0x{connection.ot_connection_id:08X}",
+            "t_to_o": f"0x{connection.to_connection_id:08X}", "originator": connection.peer,
+            "name": connection.name}
 
-    def __init__(self, device: Any, stream: EventStream) -> None:
-        self.device = device
-        self.stream = stream
 
-    @staticmethod
-    def _fields(connection: Any) -> dict[str, Any]:
-        return {"class": 1, "connection": f"0x{connection.ot_connection_id:08X}",
-                "t_to_o": f"0x{connection.to_connection_id:08X}", "originator": connection.peer,
-                "name": connection.name}
-
-    def io_opened(self, connection: Any) -> None:
-        self.stream.emit("connection opened", **self._fields(connection))
-        self.device.io_opened(connection)
-
-    def io_closed(self, connection: Any, timed_out: bool) -> None:
-        self.stream.emit("connection timed out" if timed_out else "connection closed", **self._fields(connection))
-        self.device.io_closed(connection, timed_out)
-
-    def io_run_idle(self, connection: Any, run: bool) -> None:
-        self.stream.emit("run" if run else "idle", **self._fields(connection))
-        self.device.io_run_idle(connection, run)
+#: The field that names where a Modbus write came from, by port: a TCP peer, an RTU station.
+_SOURCE_FIELD = {"modbus-tcp": "peer", "modbus-rtu": "station"}
 
 
 class EventStream:
-    def __init__(self, adapter: Adapter, limit: int = DEFAULT_LIMIT) -> None:
-        self.adapter = adapter
+    def __init__(self, runtime: DeviceRuntime, faults: FaultController | None = None,
+                 limit: int = DEFAULT_LIMIT) -> None:
+        """``runtime``: the device watched; ``faults``: its fault controller, whose records become events."""
+        self.runtime = runtime
+        self.faults = faults
         self.events: deque[Event] = deque(maxlen=limit)
         self._numbers = itertools.count(1)
         self._waiters: list[tuple[Callable[[Event], bool], asyncio.Future[Event]]] = []
         self._listeners: list[Callable[[Event], None]] = []
         self._started = False
         self._drive: dict[str, Any] | None = None
-        self._undo: list[Callable[[], None]] = []
-        self._keypad: Keypad | None = None
+        self._keypad = runtime.device.keypad()
 
     # -- reading ---------------------------------------------------------------------------------------
     def since(self, number: int = 0) -> list[Event]:
@@ -142,81 +131,56 @@ class EventStream:
             listener(event)
         return event
 
-    # -- the taps --------------------------------------------------------------------------------------
+    # -- watching -------------------------------------------------------------------------------------
     def start(self) -> None:
-        """Put the taps in place (once)."""
+        """Observe the device (once)."""
         if self._started:
             return
         self._started = True
-        adapter = self.adapter
-        io = adapter.io
-        if io is not None:
-            device_events = io.events
-            io.events = _IoTap(device_events, self)  # type: ignore[assignment]
-            self._undo.append(lambda: setattr(io, "events", device_events))
-        # The drive's state and trip, looked at whenever the adapter moves the device to a new time.
         self._drive = self._drive_state()
-        target_tick, io_tick = adapter.target.tick, io.tick if io is not None else None
-
-        def tick(now: float) -> None:
-            adapter._tick(now)
-            self._look_at_drive()
-
-        adapter.target.tick = tick
-        if io is not None:
-            io.tick = tick
-        self._undo.append(lambda: setattr(adapter.target, "tick", target_tick))
-        if io is not None:
-            self._undo.append(lambda: setattr(io, "tick", io_tick))
-        # Parameter writes: at the device's message router, behind any fault in front of it; at the
-        # register store of each Modbus port; keypad writes tell the stream themselves.
-        self._keypad = adapter.device.keypad()
-        router = adapter.device.router
-        handle = type(router).handle.__get__(router)
-
-        def handle_and_record(raw: bytes, context: Any) -> bytes:
-            reply = handle(raw, context)
-            if raw and raw[0] in _SET_SERVICES and len(reply) >= 4 and reply[2] == 0:
-                self._cip_write(raw, getattr(context, "origin", ""))
-            return reply
-
-        router.handle = handle_and_record  # type: ignore[method-assign]
-        self._undo.append(lambda: router.__dict__.pop("handle", None))
-        if adapter.modbus is not None:
-            self._tap_modbus(adapter.modbus.core, "modbus-tcp", "peer")
-        if adapter.rtu is not None:
-            self.tap_rtu(adapter.rtu)
-        adapter.faults.listeners.append(self._on_fault)
-        self._undo.append(lambda: adapter.faults.listeners.remove(self._on_fault))
+        self.runtime.observers.append(self)
+        self.runtime.requests.add(self, observer=True)
+        if self.faults is not None:
+            self.faults.listeners.append(self._on_fault)
 
     def stop(self) -> None:
-        """Take the taps away (the events kept stay)."""
-        for undo in reversed(self._undo):
-            undo()
-        self._undo.clear()
+        """Stop observing (the events kept stay)."""
+        if not self._started:
+            return
         self._started = False
+        self.runtime.observers.remove(self)
+        self.runtime.requests.remove(self)
+        if self.faults is not None:
+            self.faults.listeners.remove(self._on_fault)
 
-    def tap_rtu(self, line: Any) -> None:
-        """Watch the register writes of the drives on an RS-485 line (``RtuLine``), once it is open."""
-        if self._started:
-            for slave in line.slaves:
-                self._tap_modbus(slave.core, "modbus-rtu", "station")
+    # -- what the runtime tells (``cipstack.runtime.RuntimeObserver``) -----------------------------------
+    def ticked(self, now: float) -> None:
+        self._look_at_drive()
 
-    def _tap_modbus(self, core: Any, origin: str, source_field: str) -> None:
-        """Record each register a Modbus port's core writes (``ModbusCore.store``): its source is the
-        peer's ``host:port`` (TCP) or the station the frame addressed (RTU, 0 for a broadcast)."""
-        store = type(core).store.__get__(core)
+    def io_opened(self, connection: Any) -> None:
+        self.emit("connection opened", **_connection_fields(connection))
+
+    def io_closed(self, connection: Any, timed_out: bool) -> None:
+        self.emit("connection timed out" if timed_out else "connection closed", **_connection_fields(connection))
+
+    def io_run_idle(self, connection: Any, run: bool) -> None:
+        self.emit("run" if run else "idle", **_connection_fields(connection))
+
+    def register_written(self, port: str, drive: Any, address: int, raw: int, source: object) -> None:
+        """A register a Modbus port's request wrote: its source is the peer's ``host:port`` (TCP) or the
+        station the frame addressed (RTU, 0 for a broadcast)."""
+        found = drive.registers.word(address)
+        register = found[0] if found is not None and found[1] == 0 else None
         keypad = self._keypad
+        what = keypad.write_fields(register, raw, address) if keypad is not None else {"raw": raw}
+        self.parameter_written(port, **{_SOURCE_FIELD.get(port, "source"): source}, **what)
 
-        def store_and_record(drive: Any, address: int, raw: int, now: float, source: object) -> None:
-            store(drive, address, raw, now, source)
-            found = drive.registers.word(address)
-            register = found[0] if found is not None and found[1] == 0 else None
-            what = keypad.write_fields(register, raw, address) if keypad is not None else {"raw": raw}
-            self.parameter_written(origin, **{source_field: source}, **what)
-
-        core.store = store_and_record
-        self._undo.append(lambda: core.__dict__.pop("store", None))
+    def request(self, raw: bytes, context: RequestContext, call_next: Handle) -> bytes:
+        """An observer in the request seam: a Set service the router answered with success is a write."""
+        reply = call_next(raw, context)
+        if raw and raw[0] in _SET_SERVICES and len(reply) >= 4 and reply[2] == 0:
+            self._cip_write(raw, getattr(context, "origin", ""))
+        return reply
 
     def _cip_write(self, request: bytes, peer: str) -> None:
         """A Set service the router answered with success: its service, path and data, and the
@@ -239,7 +203,7 @@ class EventStream:
         self.emit(record["event"], id=record["id"], fault=record["fault"], options=record["options"])
 
     def _drive_state(self) -> dict[str, Any] | None:
-        fields = self.adapter.device.status_fields()
+        fields = self.runtime.device.status_fields()
         if fields is None:
             return None
         return {"state": fields.get("state"), "trip": fields.get("trip"), "direction": fields.get("direction")}
@@ -252,13 +216,13 @@ class EventStream:
         self._drive = state
         if before is not None and state["trip"] != before["trip"]:
             if state["trip"] is not None:
-                self.emit("trip", trip=state["trip"], **_drive_fields(self.adapter))
+                self.emit("trip", trip=state["trip"], **_drive_fields(self.runtime))
             else:
                 self.emit("trip reset", trip=before["trip"])
         if before is None or state["state"] != before["state"] or state["direction"] != before["direction"]:
             self.emit("drive state", state=state["state"], direction=state["direction"])
 
 
-def _drive_fields(adapter: Adapter) -> dict[str, Any]:
-    fields = adapter.device.status_fields() or {}
+def _drive_fields(runtime: DeviceRuntime) -> dict[str, Any]:
+    fields = runtime.device.status_fields() or {}
     return {k: fields[k] for k in ("fault_code",) if k in fields}

@@ -1,8 +1,9 @@
 """The HTTP control API: status, faults, events and keypad parameters of running emulated devices,
 as JSON, for a test rig in any language (LabVIEW, TestStand, curl).
 
-It is aiohttp's server on the emulator's own event loop, a shell over the in-process API
-(``Adapter.control``, ``Adapter.faults``, ``Adapter.events``): it adds transport, no behaviour. One
+It is aiohttp's server on the emulator's own event loop, a shell over the command service
+(``cipstack.control.service``): it adds transport, no behaviour, and its routes and ``/openapi.json``
+are generated from the service's operations (``operations.OPERATIONS``). One
 API serves every device of a process: ``/devices/{address}/...`` by the device's address (its host,
 or ``host:port``), and the same routes at the top for a process that runs one device. A fleet spread
 over worker processes has one API in its parent, which forwards each device's routes to the worker
@@ -18,7 +19,6 @@ body; nothing a client sends raises out of a handler. The description of every r
 
 from __future__ import annotations
 
-import asyncio
 import hmac
 import ipaddress
 import json
@@ -28,39 +28,37 @@ from typing import TYPE_CHECKING, Any
 
 from aiohttp import web
 
-from ..faults import FaultError, FaultStateError, NoSuchConnection
+from ..errors import BadRequest, CipstackError
+from .operations import OPERATIONS, Operation
+from .service import outcome
 
 if TYPE_CHECKING:
-    from ..adapter import Adapter
+    from .service import DeviceService
 
 log = logging.getLogger(__name__)
 
 MAX_BODY = 16 * 1024
 MAX_IN_FLIGHT = 32
-#: Events one ``GET .../events`` returns at most (the oldest after ``since`` first).
-MAX_EVENTS = 1000
 
 Handler = Callable[[web.Request], Awaitable[web.StreamResponse]]
 
-#: The routes of one device: method, path, and the ``HttpApi`` method that serves it. Each answers at
-#: the top (a process of one device) and under ``/devices/{device}``; a fleet's relay
-#: (``cipstack.control.http_relay``) forwards the same routes, so the API is declared here once.
-DEVICE_ROUTES: tuple[tuple[str, str, str], ...] = (
-    ("GET", "/status", "status"),
-    ("GET", "/faults", "list_faults"),
-    ("POST", "/faults", "apply_fault"),
-    ("DELETE", "/faults", "clear_faults"),
-    ("DELETE", "/faults/{fault}", "clear_faults"),
-    ("GET", "/events", "list_events"),
-    ("GET", "/parameters/{code}", "get_parameter"),
-    ("PUT", "/parameters/{code}", "put_parameter"),
-    ("POST", "/trip", "trip"),
-)
+def _routes(operation: Operation) -> list[str]:
+    """The paths an operation answers on (``DELETE /faults`` and ``DELETE /faults/{which}``)."""
+    if operation.optional_path:
+        return [operation.path.split("/{", 1)[0], operation.path]
+    return [operation.path]
+
+
+#: The routes of one device, generated from the command service's operations: method, path, operation.
+#: Each answers at the top (a process of one device) and under ``/devices/{device}``; a fleet's relay
+#: (``cipstack.control.http_relay``) forwards the same routes.
+DEVICE_ROUTES: tuple[tuple[str, str, Operation], ...] = tuple(
+    (operation.method, path, operation) for operation in OPERATIONS for path in _routes(operation))
 #: Where a device's routes answer by its address.
 DEVICE_PREFIX = "/devices/{device}"
 
 
-class HttpApiError(ValueError):
+class HttpApiError(BadRequest):
     """A setting of the HTTP API that cannot be served (one line)."""
 
 
@@ -166,11 +164,11 @@ async def serve_app(app: web.Application, host: str, port: int, path: str | None
 
 
 class HttpApi:
-    def __init__(self, devices: dict[str, Adapter], host: str = "127.0.0.1", port: int = 0, *,
+    def __init__(self, devices: dict[str, DeviceService], host: str = "127.0.0.1", port: int = 0, *,
                  token: str | None = None, allow_remote: bool = False, path: str | None = None) -> None:
-        """``devices``: by address (the host of each, or ``host:port`` when several share a host).
-        ``path``: listen on this Unix socket instead of ``host:port`` (a fleet worker's API, which the
-        fleet's relay forwards to; its directory is what keeps others out)."""
+        """``devices``: the command service of each device, by address (its host, or ``host:port`` when
+        several share a host). ``path``: listen on this Unix socket instead of ``host:port`` (a fleet
+        worker's API, which the fleet's relay forwards to; its directory is what keeps others out)."""
         if path is None:
             check_settings(f"{host}:{port}", token, allow_remote)
         self.devices = devices
@@ -185,8 +183,8 @@ class HttpApi:
 
     # -- serving -----------------------------------------------------------------------------------------
     async def start(self) -> None:
-        for adapter in self.devices.values():
-            adapter.events.start()  # from now on every event is kept for GET .../events
+        for service in self.devices.values():
+            service.events.start()  # from now on every event is kept for GET .../events
         self._runner, self.port = await serve_app(self.app, self.host, self.port, self.path)
         if self.path is None:
             log.info("HTTP control API on http://%s:%d/ (openapi.json)", self.host, self.port)
@@ -198,235 +196,123 @@ class HttpApi:
 
     def _build(self) -> web.Application:
         app = web.Application(client_max_size=MAX_BODY, middlewares=[self.guard.middleware])
-        for method, path, name in DEVICE_ROUTES:
-            handler = getattr(self, name)
+        for method, path, operation in DEVICE_ROUTES:
+            handler = self._handler(operation)
             app.router.add_route(method, path, handler)
             app.router.add_route(method, DEVICE_PREFIX + path, handler)
         app.router.add_get("/devices", self.list_devices)
         app.router.add_get("/openapi.json", openapi)
         return app
 
-    # -- helpers ----------------------------------------------------------------------------------------
-    def _device(self, request: web.Request) -> Adapter:
-        name = request.match_info.get("device")
-        adapter = self.devices.get(name) if name is not None else \
-            next(iter(self.devices.values())) if len(self.devices) == 1 else None
-        if adapter is None:
-            raise _NoDevice(name)
-        return adapter
-
-    async def _body(self, request: web.Request) -> dict[str, Any]:
-        try:
-            body = await request.json(loads=json.loads) if request.can_read_body else {}
-        except (ValueError, UnicodeDecodeError):
-            raise _BadRequest("the body is not JSON") from None
-        if not isinstance(body, dict):
-            raise _BadRequest("the body is a JSON object")
-        return body
-
-    # -- handlers ---------------------------------------------------------------------------------------
     async def list_devices(self, request: web.Request) -> web.Response:
-        return web.json_response([{"address": name, "port": adapter.port,
-                                   "product_name": adapter.device.identity_info.product_name}
-                                  for name, adapter in sorted(self.devices.items())])
+        return web.json_response([{"address": name, **service.describe()}
+                                  for name, service in sorted(self.devices.items())])
 
-    @staticmethod
-    def _handled(handler: Callable[[HttpApi, web.Request], Awaitable[web.Response]]) -> Any:
-        async def wrapped(self: HttpApi, request: web.Request) -> web.Response:
+    def _handler(self, operation: Operation) -> Callable[[web.Request], Awaitable[web.Response]]:
+        async def handle(request: web.Request) -> web.Response:
+            name = request.match_info.get("device")
+            service = self.devices.get(name) if name is not None else \
+                next(iter(self.devices.values())) if len(self.devices) == 1 else None
+            if service is None:
+                return no_device(name, list(self.devices))
             try:
-                return await handler(self, request)
-            except _NoDevice as exc:
-                return no_device(exc.name, list(self.devices))
-            except _NotFound as exc:
-                return json_error(404, str(exc))
-            except (_BadRequest, FaultError) as exc:
-                return json_error(400, str(exc))
-            except NoSuchConnection as exc:
-                return json_error(404, str(exc))
-            except (FaultStateError, _Conflict) as exc:
-                return json_error(409, str(exc))
-        wrapped.__doc__ = handler.__doc__
-        return wrapped
+                arguments = await _arguments(operation, request)
+                # The client's host:port; none behind a fleet's relay (a worker's API is on a Unix socket).
+                peer = request.transport.get_extra_info("peername") if request.transport is not None else None
+                where = f"{peer[0]}:{peer[1]}" if isinstance(peer, tuple) and len(peer) >= 2 else None
+                result = await service.call_async(operation.name, arguments, origin="http", peer=where)
+            except CipstackError as exc:
+                found = outcome(exc)
+                return json_error(found.http_status if found is not None else 500, str(exc))
+            return web.json_response(result, status=201 if operation.created else 200)
+        handle.__doc__ = operation.summary
+        return handle
 
-    @_handled
-    async def status(self, request: web.Request) -> web.Response:
-        adapter = self._device(request)
-        reply = adapter.control({"command": "status"})
-        # "power": "off" while a power-cycle's --off lasts: the device's state is then what it comes back to.
-        faults = adapter.faults
-        power = "off" if faults.powered_off else "on"
-        return web.json_response({**reply, "faults": len(faults.active), "power": power})
 
-    @_handled
-    async def list_faults(self, request: web.Request) -> web.Response:
-        adapter = self._device(request)
-        now = asyncio.get_running_loop().time()
-        return web.json_response([f.as_json(now) for f in adapter.faults.faults()])
-
-    @_handled
-    async def apply_fault(self, request: web.Request) -> web.Response:
-        adapter = self._device(request)
-        body = await self._body(request)
-        name, options = body.get("name"), body.get("options", {})
-        stray = sorted(set(body) - {"name", "options"})
-        if stray:
-            # {"name": "drop", "share": 0.1} would otherwise read as a drop with no option at all.
-            raise _BadRequest(f"unknown key {', '.join(map(repr, stray))}: the body is "
-                              "{\"name\": FAULT, \"options\": {...}}, a fault's options go in \"options\"")
-        if not isinstance(name, str):
-            raise _BadRequest("the body names a fault: {\"name\": \"stop-producing\", \"options\": {...}}")
-        if not isinstance(options, dict):
-            raise _BadRequest("options are a JSON object")
-        fault = adapter.faults.apply(name, **options)
-        await adapter.faults.settle()
-        return web.json_response(fault.as_json(asyncio.get_running_loop().time()), status=201)
-
-    @_handled
-    async def clear_faults(self, request: web.Request) -> web.Response:
-        adapter = self._device(request)
-        which: int | str | None = request.match_info.get("fault")
-        if isinstance(which, str) and which.isdigit():
-            which = int(which)
+async def _arguments(operation: Operation, request: web.Request) -> dict[str, Any]:
+    """An operation's arguments from its route (path), its query and its JSON body, by their JSON keys;
+    a key the operation does not take is a 400 naming the keys it takes."""
+    arguments: dict[str, Any] = {}
+    body: dict[str, Any] = {}
+    if request.can_read_body:
         try:
-            cleared = adapter.faults.clear(which)
-        except FaultError as exc:
-            raise _NotFound(str(exc)) from None
-        await adapter.faults.settle()
-        return web.json_response([f.as_json() for f in cleared])
+            loaded = await request.json(loads=json.loads)
+        except (ValueError, UnicodeDecodeError):
+            raise BadRequest("the body is not JSON") from None
+        if not isinstance(loaded, dict):
+            raise BadRequest("the body is a JSON object")
+        body = loaded
+    takes = {a.key for a in operation.arguments if a.where == "body"}
+    stray = sorted(set(body) - takes)
+    if stray:
+        keys = ", ".join(f'"{k}"' for k in sorted(takes)) or "none"
+        hint = " (a fault's options go in \"options\")" if operation.name == "fault" else ""
+        raise BadRequest(f"unknown key {', '.join(map(repr, stray))}: the body is {{{keys}}}{hint}")
+    for argument in operation.arguments:
+        if argument.where == "path":
+            value: Any = request.match_info.get(argument.key)
+        elif argument.where == "query":
+            value = request.query.get(argument.key)
+        else:
+            value = body.get(argument.key)
+        if value is not None:
+            arguments[argument.key] = value
+    return arguments
 
-    @_handled
-    async def list_events(self, request: web.Request) -> web.Response:
-        adapter = self._device(request)
-        try:
-            since = int(request.query.get("since", "0"))
-        except ValueError:
-            raise _BadRequest("since is an event number") from None
-        events = adapter.events.since(since)[:MAX_EVENTS]
-        return web.json_response([e.as_json() for e in events])
-
-    @_handled
-    async def get_parameter(self, request: web.Request) -> web.Response:
-        adapter = self._device(request)
-        return web.json_response(_keypad_call(lambda: adapter.keypad_parameter(request.match_info["code"])))
-
-    @_handled
-    async def put_parameter(self, request: web.Request) -> web.Response:
-        adapter = self._device(request)
-        body = await self._body(request)
-        code = request.match_info["code"]
-        value = body.get("value")
-        if set(body) != {"value"} or isinstance(value, (dict, list, bool)) or value is None:
-            raise _BadRequest("the body is {\"value\": VALUE}, in the keypad's unit (\"2.5\", 60, or an "
-                              "enumeration's name)")
-        # The client's host:port; none behind a fleet's relay (a worker's API is on a Unix socket).
-        peer = request.transport.get_extra_info("peername") if request.transport is not None else None
-        where = f"{peer[0]}:{peer[1]}" if isinstance(peer, tuple) and len(peer) >= 2 else None
-        return web.json_response(_keypad_call(
-            lambda: adapter.set_keypad_parameter(code, value, origin="http", peer=where)))
-
-    @_handled
-    async def trip(self, request: web.Request) -> web.Response:
-        adapter = self._device(request)
-        body = await self._body(request)
-        from . import ControlDenied, ControlError
-
-        try:
-            return web.json_response(adapter.control({"command": "trip", "code": body.get("code")}))
-        except ControlDenied as exc:
-            return json_error(409, str(exc))
-        except (ControlError, KeyError, TypeError) as exc:
-            raise _BadRequest(str(exc)) from None
 
 async def openapi(request: web.Request) -> web.Response:
     return web.json_response(openapi_document())
 
 
-class _NoDevice(LookupError):
-    def __init__(self, name: str | None) -> None:
-        super().__init__(name)
-        self.name = name
-
-
-def _keypad_call(call: Callable[[], dict[str, Any]]) -> dict[str, Any]:
-    """A keypad read or write (``cipstack.devices.keypad``): a code the keypad lacks or a device without
-    one (a ``LookupError``) is 404, a write the device refuses (a ``ValueError`` with ``conflict``) 409,
-    a value the keypad does not take (another ``ValueError``) 400, each with its reason."""
-    try:
-        return call()
-    except LookupError as exc:
-        raise _NotFound(str(exc)) from None
-    except ValueError as exc:
-        if getattr(exc, "conflict", False):
-            raise _Conflict(str(exc)) from None
-        raise _BadRequest(str(exc)) from None
-
-
-class _NotFound(LookupError):
-    def __str__(self) -> str:
-        return str(self.args[0])
-
-
-class _BadRequest(ValueError):
-    pass
-
-
-class _Conflict(Exception):
-    """The request was understood and the device's state refuses it (409)."""
+_JSON_TYPES = {"string": {"type": "string"}, "integer": {"type": "integer"}, "number": {"type": "number"},
+               "object": {"type": "object"}, "string|integer": {"type": ["string", "integer"]},
+               "string|number": {"type": ["string", "number"]}}
 
 
 def openapi_document() -> dict[str, Any]:
-    """The OpenAPI 3.0 description of the API (``/openapi.json``)."""
+    """The OpenAPI 3.0 description of the API (``/openapi.json``), generated from the operations: each
+    route's parameters and body by their JSON keys, and the statuses of the outcome table."""
     from ..faults import FAULTS
+    from .service import OUTCOMES
 
     error = {"description": "an error",
              "content": {"application/json": {"schema": {"$ref": "#/components/schemas/Error"}}}}
-    ok = {"description": "JSON", "content": {"application/json": {"schema": {"type": "object"}}}}
+    ok = {"description": "JSON", "content": {"application/json": {"schema": {}}}}
     device = {"name": "device", "in": "path", "required": True, "schema": {"type": "string"},
               "description": "the device's address (its host, or host:port)"}
+    errors = {str(result.http_status): {**error, "description": f"{result.name}"} for _, result in OUTCOMES}
     paths: dict[str, Any] = {}
-
-    def route(path: str, method: str, summary: str, body: dict[str, Any] | None = None,
-              params: list[dict[str, Any]] | None = None, codes: tuple[str, ...] = ("400", "404", "503")) -> None:
-        operation: dict[str, Any] = {"summary": summary, "responses": {"200": ok, **{c: error for c in codes}}}
-        if body is not None:
-            operation["requestBody"] = {"required": True, "content": {"application/json": {"schema": body}}}
+    for method, path, operation in DEVICE_ROUTES:
+        params: list[dict[str, Any]] = []
+        body: dict[str, Any] = {}
+        for argument in operation.arguments:
+            schema = dict(_JSON_TYPES[argument.json_type])
+            if argument.key == "name" and operation.name == "fault":
+                schema["enum"] = list(FAULTS)
+            if argument.where == "body":
+                body[argument.key] = {**schema, "description": argument.help}
+            elif f"{{{argument.key}}}" in path or argument.where == "query":
+                params.append({"name": argument.key, "in": argument.where, "required": argument.where == "path",
+                               "schema": schema, "description": argument.help})
+        entry: dict[str, Any] = {"summary": operation.summary, "operationId": operation.name,
+                                 "responses": {"201" if operation.created else "200": ok, **errors}}
+        if body:
+            required = [a.key for a in operation.arguments if a.where == "body" and a.required]
+            entry["requestBody"] = {"required": bool(required), "content": {"application/json": {"schema": {
+                "type": "object", "additionalProperties": False, "properties": body,
+                **({"required": required} if required else {})}}}}
         for prefix, extra in (("", []), (DEVICE_PREFIX, [device])):
-            entry = dict(operation)
+            routed = dict(entry)
             if params or extra:
-                entry["parameters"] = [*extra, *(params or [])]
-            paths.setdefault(prefix + path, {})[method] = entry
-
-    fault_body = {"type": "object", "required": ["name"], "additionalProperties": False, "properties": {
-        "name": {"type": "string", "enum": list(FAULTS)},
-        "options": {"type": "object", "description": "the fault's options, as `cipstack drive fault` names them "
-                                                     "(share, every, by, jitter, connection, for, ...)"}}}
-    code = {"name": "code", "in": "path", "required": True, "schema": {"type": "string"},
-            "description": "keypad code: the ACG's (drv, Frq, ACC, CM.23, ...), an MX2/RX function code "
-                           "(F001, A004, P044, ...); 404 for a code the keypad lacks or a device without one"}
-    fault_id = {"name": "fault", "in": "path", "required": True, "schema": {"type": "string"},
-                "description": "a fault's id, or a fault name (all of that name)"}
-    route("/status", "get", "the drive's state, sessions and connections, active faults, power on or off")
-    route("/faults", "get", "the faults active")
-    route("/faults", "post", "apply a fault", fault_body, codes=("400", "404", "409", "503"))
-    route("/faults", "delete", "clear every active fault")
-    route("/faults/{fault}", "delete", "clear one fault", params=[fault_id])
-    route("/events", "get", "the events after number `since`", params=[
-        {"name": "since", "in": "query", "schema": {"type": "integer", "minimum": 0}}])
-    route("/parameters/{code}", "get", "a keypad parameter: code, name, value in the keypad's unit, raw, unit, "
-          "address", params=[code])
-    route("/parameters/{code}", "put", "set a keypad parameter (not saved): 400 for a value the keypad does not "
-          "take, 409 for a write the device refuses (read-only, not while running), with its reason",
-          {"type": "object", "required": ["value"], "additionalProperties": False,
-           "properties": {"value": {"type": ["string", "number"]}}},
-          params=[code], codes=("400", "404", "409"))
-    route("/trip", "post", "trip the drive", {"type": "object", "required": ["code"],
-                                              "properties": {"code": {"type": ["string", "integer"]}}},
-          codes=("400", "404", "409", "503"))
+                routed["parameters"] = [*extra, *params]
+            if prefix:
+                routed["operationId"] = operation.name + "-by-address"
+            paths.setdefault(prefix + path, {})[method.lower()] = routed
     paths["/devices"] = {"get": {"summary": "the devices this API serves (in a fleet of workers, each with its "
                                             "worker's number, and `error` where that worker is lost)",
-                                 "responses": {"200": ok}}}
+                                 "operationId": "devices", "responses": {"200": ok}}}
     return {"openapi": "3.0.3",
-            "info": {"title": "cipstack emulator control", "version": "1"},
+            "info": {"title": "cipstack emulator control", "version": "2"},
             "paths": paths,
             "components": {"schemas": {"Error": {"type": "object", "required": ["error"],
                                                  "properties": {"error": {"type": "string"}}}},

@@ -121,7 +121,7 @@ class RelayApi:
 
     def _build(self) -> web.Application:
         app = web.Application(client_max_size=MAX_BODY, middlewares=[self.guard.middleware])
-        for method, path, _ in DEVICE_ROUTES:
+        for method, path, _operation in DEVICE_ROUTES:
             app.router.add_route(method, path, self.unaddressed)
             app.router.add_route(method, DEVICE_PREFIX + path, self.forward)
         app.router.add_get("/devices", self.list_devices)

@@ -9,7 +9,9 @@ with ``--control PATH``, it is a socket file (mode 0600).
 
 It is deliberately not a CIP object: a scanner or conformance tool talking to the emulator must see
 exactly the objects the manual lists, nothing added for testing. One JSON object per line each
-way: ``{"command": "trip", "code": 8960}`` -> ``{"ok": true, ...}``; ``{"command": "status"}``.
+way: ``{"command": OPERATION, KEY: VALUE...}`` with an operation of the command service
+(``service.OPERATIONS``: ``{"command": "trip", "code": 8960}``, ``{"command": "status"}``) ->
+``{"ok": true, ...}``, or ``{"ok": false, "error": "...", "outcome": "refused"}`` (``service.OUTCOMES``).
 """
 
 from __future__ import annotations
@@ -31,6 +33,7 @@ from pathlib import Path
 from typing import Any
 
 from ..eip.limits import RateLimitedLog
+from ..errors import BadRequest, CipstackError, NotFound, PeerUnreachable, StateRefused
 
 log = logging.getLogger(__name__)
 
@@ -106,23 +109,36 @@ def holder(address: ControlAddress) -> tuple[int, int] | None:
         return peer_credentials(probe)
 
 
-class ControlError(Exception):
-    """A control request that failed (one line of text for the user)."""
+class ControlError(CipstackError):
+    """A control request that failed (one line of text for the user): no emulator answered."""
 
 
-class ControlRefused(ControlError):
+class ControlUnreachable(ControlError, PeerUnreachable):
+    """No emulator listens on the control socket, or it sent no reply."""
+
+
+class ControlRefused(ControlError, BadRequest):
     """The emulator answered and refused the request (a bad argument, e.g. an unknown trip code)."""
 
 
-class ControlDenied(ControlError):
+class ControlNotFound(ControlError, NotFound):
+    """The emulator answered: what the request names is not there (a keypad code, a fault id)."""
+
+
+class ControlDenied(ControlError, StateRefused):
     """The emulator understood the request and its state refuses it (a trip while already tripped)."""
+
+
+#: The error a client raises for each outcome the emulator answered (``service.OUTCOMES``).
+_CLIENT_ERRORS: dict[str, type[ControlError]] = {"bad-request": ControlRefused, "not-found": ControlNotFound,
+                                                 "refused": ControlDenied, "unreachable": ControlUnreachable}
 
 
 #: Serves one request: its reply, or an awaitable of it (a request that waits for the loop's work).
 Handler = Callable[[dict[str, Any]], dict[str, Any] | Awaitable[dict[str, Any]]]
 
 
-class ControlTaken(OSError):
+class ControlTaken(CipstackError, OSError):
     """The control socket's address is held by another process; the text says by whom."""
 
 
@@ -185,13 +201,15 @@ class ControlServer:
                 try:
                     request = json.loads(line)
                     if not isinstance(request, dict):
-                        raise ControlError("a request is a JSON object")
+                        raise BadRequest("a request is a JSON object")
                     answer = self.handler(request)
                     if inspect.isawaitable(answer):
                         answer = await answer
-                    reply = {"ok": True, **answer}
-                except (ControlError, ValueError, KeyError, TypeError) as exc:
-                    reply = {"ok": False, "error": str(exc), "denied": isinstance(exc, ControlDenied)}
+                    reply = {"ok": True, **(answer if isinstance(answer, dict) else {"result": answer})}
+                except CipstackError as exc:
+                    reply = {"ok": False, "error": str(exc), "outcome": outcome_name(exc)}
+                except ValueError as exc:   # a line that is not JSON
+                    reply = {"ok": False, "error": f"not a JSON request: {exc}", "outcome": "bad-request"}
                 writer.write(json.dumps(reply).encode() + b"\n")
                 await writer.drain()
         except (ConnectionError, asyncio.LimitOverrunError, ValueError):
@@ -209,6 +227,13 @@ class ControlServer:
                 Path(self.path).unlink()
 
 
+def outcome_name(error: BaseException) -> str:
+    from .service import outcome
+
+    found = outcome(error)
+    return found.name if found is not None else "failed"
+
+
 def control_request(path: ControlAddress, request: dict[str, Any], timeout: float = 5.0) -> dict[str, Any]:
     """Send one request to a running emulator; raises ``ControlError`` with a one-line reason."""
     with socket.socket(socket.AF_UNIX, socket.SOCK_STREAM) as sock:
@@ -216,12 +241,13 @@ def control_request(path: ControlAddress, request: dict[str, Any], timeout: floa
         try:
             sock.connect(path if is_abstract(path) else str(path))
         except OSError:
-            raise ControlError(f"no emulator listens on {describe(path)} (is `cipstack adapter` running?)") from None
+            raise ControlUnreachable(f"no emulator listens on {describe(path)} (is `cipstack adapter` running?)") \
+                from None
         # Anyone may take an abstract name first (it has no file mode): what another user listens
         # with is not believed, as the server serves no other user.
         credentials = peer_credentials(sock)
         if credentials is not None and not trusted_uid(credentials[1]):
-            raise ControlError(f"{describe(path)} is held by process {credentials[0]} of user "
+            raise ControlUnreachable(f"{describe(path)} is held by process {credentials[0]} of user "
                                f"{user_text(credentials[1])}, not by an emulator of yours: refused")
         sock.sendall(json.dumps(request).encode() + b"\n")
         data = b""
@@ -233,9 +259,7 @@ def control_request(path: ControlAddress, request: dict[str, Any], timeout: floa
     try:
         reply = json.loads(data)
     except ValueError:
-        raise ControlError("the emulator sent no reply") from None
+        raise ControlUnreachable("the emulator sent no reply") from None
     if not reply.get("ok"):
-        if reply.get("denied"):
-            raise ControlDenied(str(reply.get("error", "denied")))
-        raise ControlRefused(str(reply.get("error", "refused")))
+        raise _CLIENT_ERRORS.get(str(reply.get("outcome")), ControlError)(str(reply.get("error", "refused")))
     return dict(reply)

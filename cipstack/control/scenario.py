@@ -27,8 +27,9 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
+from ..errors import BadRequest
 from ..faults import FaultError, FaultRequest
-from ..faults.model import parse_duration
+from ..faults.model import JSON_SPELLING, parse_duration
 
 if sys.version_info >= (3, 11):
     import tomllib
@@ -36,13 +37,13 @@ else:  # pragma: no cover
     import tomli as tomllib
 
 if TYPE_CHECKING:
-    from ..adapter import Adapter
+    from .service import DeviceService
 
 DEFAULT_WITHIN = 30.0
 _STEP_KEYS = {"at", "on", "hz", "after", "within", "fault", "options", "clear", "trip", "repeat", "name"}
 
 
-class ScenarioError(ValueError):
+class ScenarioError(BadRequest):
     """A scenario file that cannot be run (one line naming the file and the step)."""
 
 
@@ -129,7 +130,7 @@ def _step(path: Path, number: int, raw: Any) -> Step:
             options = raw.get("options", {})
             if not isinstance(options, dict):
                 raise ScenarioError(f"{where}: options is a table")
-            fault = FaultRequest.build(raw["fault"], options)
+            fault = FaultRequest.build(raw["fault"], options, JSON_SPELLING)
         repeat = raw.get("repeat", 1)
         if not isinstance(repeat, int) or isinstance(repeat, bool) or not 1 <= repeat <= 1000:
             raise ScenarioError(f"{where}: repeat is a whole number 1..1000")
@@ -142,16 +143,18 @@ def _step(path: Path, number: int, raw: Any) -> Step:
                 after, within, fault, clear, raw.get("trip"), repeat)
 
 
-async def run(adapter: Adapter, scenario: Scenario, report: Callable[[str], None]) -> bool:
-    """Run the steps on ``adapter``; True when every one fired."""
+async def run(service: DeviceService, scenario: Scenario, report: Callable[[str], None]) -> bool:
+    """Run the steps on the device of ``service`` (its command service, as every surface); True when
+    every one fired. Each step's line carries the time it fired, not the time its ports settled."""
     loop = asyncio.get_running_loop()
-    events = adapter.events
+    events = service.events
+    events.start()
     start = loop.time()
     mark = events.events[-1].number if events.events else 0
     fired_all = True
 
-    def line(text: str) -> None:
-        report(f"{loop.time() - start:8.3f}s  {text}")
+    def line(text: str, at: float | None = None) -> None:
+        report(f"{(loop.time() if at is None else at) - start:8.3f}s  {text}")
 
     line(f"scenario {scenario.path.name}: {sum(s.repeat for s in scenario.steps)} step(s)")
     try:
@@ -159,44 +162,43 @@ async def run(adapter: Adapter, scenario: Scenario, report: Callable[[str], None
             for round_ in range(1, step.repeat + 1):
                 label = step.name + (f" ({round_}/{step.repeat})" if step.repeat > 1 else "")
                 try:
-                    mark = await _trigger(adapter, step, start, mark)
+                    mark = await _trigger(service, step, start, mark)
                 except asyncio.TimeoutError:
                     line(f"{label} did not fire: no {step.describe()} within {step.within:g}s")
                     fired_all = False
                     return False
                 if step.after:
                     await asyncio.sleep(step.after)
+                fired_at = loop.time()
                 try:
-                    _act(adapter, step)
-                    await adapter.faults.settle()
+                    await _act(service, step)
                 except Exception as exc:  # a step refused by the device's state: said, and the scenario ends
-                    line(f"{label} failed: {step.describe()}: {exc}")
+                    line(f"{label} failed: {step.describe()}: {exc}", fired_at)
                     fired_all = False
                     return False
-                line(f"{label} fired: {step.describe()}")
+                line(f"{label} fired: {step.describe()}", fired_at)
         if scenario.linger:
             await asyncio.sleep(scenario.linger)
         return fired_all
     finally:
-        if adapter.faults.active:
-            adapter.faults.clear()
-            await adapter.faults.settle()
+        if service.faults.active:
+            await service.call_async("clear", {})
+        await service.faults.settle()
         line("scenario " + ("complete: every step fired" if fired_all else "incomplete") +
              "; no fault left active")
 
 
-async def _trigger(adapter: Adapter, step: Step, start: float, mark: int) -> int:
+async def _trigger(service: DeviceService, step: Step, start: float, mark: int) -> int:
     """Wait for ``step``'s trigger; returns the number of the last event seen (the next step's mark)."""
     loop = asyncio.get_running_loop()
-    events = adapter.events
+    events = service.events
     if step.at is not None:
         await asyncio.sleep(max(0.0, start + step.at - loop.time()))
         return events.events[-1].number if events.events else mark
     if step.on == "frequency":
         async def reached() -> None:
             while True:
-                adapter.target.tick(loop.time())
-                fields = adapter.device.status_fields() or {}
+                fields = service.status().get("drive") or {}
                 if float(fields.get("output_frequency_hz") or 0.0) >= (step.hz or 0.0):
                     return
                 await asyncio.sleep(0.01)
@@ -206,12 +208,11 @@ async def _trigger(adapter: Adapter, step: Step, start: float, mark: int) -> int
     return event.number
 
 
-def _act(adapter: Adapter, step: Step) -> None:
+async def _act(service: DeviceService, step: Step) -> None:
+    """The step's action, through the command service (a fault waits for its ports, not for a long off)."""
     if step.fault is not None:
-        adapter.faults.apply(step.fault)
+        await service.call_async("fault", {"name": step.fault.name, "options": step.fault.as_json()})
     elif step.clear:
-        adapter.faults.clear(step.clear if isinstance(step.clear, str) else None)
+        await service.call_async("clear", {"which": step.clear} if isinstance(step.clear, str) else {})
     else:
-        reply = adapter.control({"command": "trip", "code": step.trip})
-        if not isinstance(reply, dict):  # pragma: no cover - a trip is answered at once
-            raise RuntimeError("trip")
+        service.call("trip", {"code": step.trip})

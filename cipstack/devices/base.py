@@ -8,8 +8,9 @@ device, only its router and its identity.
 from __future__ import annotations
 
 import logging
+from collections.abc import Callable
 from dataclasses import dataclass, field
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Any
 
 from ..cip.epath import ElectronicKey
 from ..cip.router import MessageRouter
@@ -17,6 +18,7 @@ from ..cip.status import CipError, ExtendedStatus, GeneralStatus
 from ..eip.connection_manager import ConnectionManagerObject, ConnectionTable
 from ..eip.identity_items import IdentityRecord
 from ..eip.io_target import CIP_MULTICAST_BASE, ConnectionKind, IoConnection, IoProfile
+from ..errors import StateRefused
 from ..objects.assembly import AssemblyObject
 from ..objects.identity import ExtendedDeviceStatus, IdentityInfo, IdentityObject, IdentityStatus
 from ..objects.message_router import MessageRouterObject
@@ -30,9 +32,19 @@ log = logging.getLogger(__name__)
 
 
 
-class TripRefused(ValueError):
+class TripRefused(StateRefused, ValueError):
     """A trip the device's present state does not take (it is tripped already and keeps its first trip):
     the request was understood, the device said no."""
+
+@dataclass(frozen=True)
+class ModbusDrive:
+    """What a device hands its Modbus ports: the present drive (a device may replace its drive, on an
+    Identity reset or a power cycle) and the writer of its saves."""
+
+    drive: Callable[[], Any]
+    saves: StateWriter | None = None
+    #: The device's name for a one-line error (``--modbus-port`` on a device without Modbus).
+
 
 @dataclass
 class DeviceLimits:
@@ -112,7 +124,7 @@ class Device:
             store[:] = bytes(len(store))
         self._io_connections.clear()
         self._io_faulted = False
-        self._update_io_status()
+        self.update_io_status()
 
     # -- emulator control (test rigs) -------------------------------------------------------------
     def inject_trip(self, code: int | str) -> object:
@@ -134,6 +146,13 @@ class Device:
     def keypad(self) -> Keypad | None:
         """The drive's keypad (``cipstack.devices.keypad``): its parameters by code, in the keypad's
         unit; None for a device without one."""
+        return None
+
+    # -- ports the family declares ------------------------------------------------------------------
+    def modbus_drive(self) -> ModbusDrive | None:
+        """The drive this device serves over Modbus (TCP on its network card, RTU on its RS-485 port),
+        or None for a device that speaks no Modbus. The shells (``cipstack.modbus``) serve it as ports
+        of the running device; the device never sees their sockets or tty."""
         return None
 
     # -- saved parameters -------------------------------------------------------------------------
@@ -182,7 +201,7 @@ class Device:
         host_id = interface["ip_address"] & ~interface["network_mask"] & 0xFFFFFFFF
         return CIP_MULTICAST_BASE + ((host_id - 1) & 0x3FF) * 32, 32
 
-    def _update_io_status(self) -> None:
+    def update_io_status(self) -> None:
         """Identity status: bit 0 owned, bits 4-7 the extended device status of the I/O connections."""
         connections = list(self._io_connections.values())
         owned = any(c.kind is ConnectionKind.EXCLUSIVE_OWNER for c in connections)
@@ -203,12 +222,12 @@ class Device:
     def io_opened(self, connection: IoConnection) -> None:
         self._io_connections[connection.ot_connection_id] = connection
         self._io_faulted = False
-        self._update_io_status()
+        self.update_io_status()
 
     def io_closed(self, connection: IoConnection, timed_out: bool) -> None:
         self._io_connections.pop(connection.ot_connection_id, None)
         self._io_faulted = timed_out
-        self._update_io_status()
+        self.update_io_status()
 
     def io_run_idle(self, connection: IoConnection, run: bool) -> None:
-        self._update_io_status()
+        self.update_io_status()

@@ -23,10 +23,11 @@ from typing import Any
 
 from ..cip.epath import parse_application_path
 from ..cip.status import CipError
+from ..errors import BadRequest, NotFound, StateRefused
 from .registers import Register, RegisterError
 
 
-class UnknownCode(LookupError, ValueError):
+class UnknownCode(NotFound, ValueError):
     """A code the keypad does not have; the message names valid examples. A ``ValueError`` too, as
     every assignment a keypad does not take is."""
 
@@ -34,24 +35,20 @@ class UnknownCode(LookupError, ValueError):
         return str(self.args[0]) if self.args else ""
 
 
-class BadValue(ValueError):
+class BadValue(BadRequest):
     """A value the keypad does not take for a parameter (not a number, off its step, out of range)."""
 
 
-class WriteRefused(ValueError):
+class WriteRefused(StateRefused, ValueError):
     """A write the device refused (read-only, not while running, its mode...): the request was
     understood and the device said no. ``error`` is the device's refusal when it gave one."""
-
-    #: The device's state or the parameter refuses, not the request's form (a shell answers with its
-    #: "conflict": HTTP 409), told apart from the other ``ValueError`` of a keypad by this flag.
-    conflict = True
 
     def __init__(self, message: str, error: RegisterError | None = None) -> None:
         super().__init__(message)
         self.error = error
 
 
-class NoKeypad(LookupError, ValueError):
+class NoKeypad(NotFound, ValueError):
     """A device without a keypad (an EDS-emulated device, a CompoNet gateway)."""
 
 

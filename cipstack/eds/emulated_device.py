@@ -460,7 +460,7 @@ def build_eds_device(doc: EdsDocument, interface: NetworkInterface | None = None
     _check_standard_links(device, standard_links, issues)
     device._io = _io_profile(doc, view, points, issues)
     if device._io is not None:
-        device._update_io_status()
+        device.update_io_status()
     issues.sort(key=lambda issue: issue.line)
     return device
 

@@ -603,6 +603,11 @@ class IoEndpoint:
         self.core.expire(now)
         self.wakeup()
 
+    def send(self, datagrams: list[tuple[bytes, tuple[str, int]]]) -> None:
+        """Send datagrams now, outside a firing (a production held back for a while), if still open."""
+        if self._sock is not None:
+            self._send(datagrams)
+
     def _send(self, datagrams: list[tuple[bytes, tuple[str, int]]]) -> None:
         """The datagrams due in one firing, sent back to back on the socket itself (a transport's
         checks and bookkeeping cost more than the system call). Off the lane, whatever the socket

@@ -535,6 +535,13 @@ class IoTarget:
         self._silences.clear()
 
     # -- datagrams ------------------------------------------------------------------------------
+    def connection_of(self, raw: bytes) -> IoConnection | None:
+        """The open connection an O->T datagram names by its connection id (CIP Vol. 2, 3-2: the
+        Sequenced Address item's connection id at offset 6), or None."""
+        if len(raw) < 10:
+            return None
+        return self.connections.get(int.from_bytes(raw[6:10], "little"))
+
     def receive(self, raw: bytes, source: tuple[str, int], now: float) -> None:
         """Consume one O->T datagram; anything malformed or unknown is dropped and counted."""
         try:

@@ -41,6 +41,7 @@ from .limits import (
     guarded_listener,
     quiet_accept_errors,
 )
+from .seams import ReplySeam
 from .target import EncapsulationConnection, EncapsulationTarget
 from .tcp_lane import LaneListener, LaneTcpConnection
 
@@ -87,7 +88,11 @@ class _TcpProtocol(asyncio.Protocol):
         connection.receive(data, self.loop.time())
         out = connection.data_to_send()
         if out:
-            self.transport.write(out)
+            held = self.server.replies.filter
+            if held is None:
+                self.transport.write(out)
+            else:
+                held.reply(self, out)
         if connection.closing:
             self.transport.close()
         elif self._timer is None:
@@ -302,8 +307,10 @@ class EncapsulationServer:
 
     def __init__(self, target: EncapsulationTarget, host: str = "127.0.0.1", port: int = DEFAULT_PORT,
                  udp: bool = True, max_tcp_connections: int = DEFAULT_MAX_TCP_CONNECTIONS,
-                 max_tcp_connections_per_host: int | None = None) -> None:
+                 max_tcp_connections_per_host: int | None = None, replies: ReplySeam | None = None) -> None:
+        """``replies``: the seam TCP replies pass on their way out (``seams.ReplySeam``)."""
         self.target = target
+        self.replies = replies or ReplySeam()
         self.host = host
         self.port = port
         self.udp = udp
@@ -482,6 +489,18 @@ class EncapsulationServer:
         self.target.delayed.clear()
         self._tcp = None
         self._udp = None
+
+    @property
+    def is_open(self) -> bool:
+        """Its TCP port is bound (``start``) and not closed since."""
+        return self._tcp is not None
+
+    def close_connections(self) -> int:
+        """Close every TCP connection (their sessions and class 3 connections go with them); how many."""
+        served = list(self.connections)
+        for connection in served:
+            connection.close()
+        return len(served)
 
     async def __aenter__(self) -> EncapsulationServer:
         await self.start()

@@ -41,6 +41,7 @@ from .encapsulation import (
 )
 from .identity_items import CAPABILITY_CIP_TCP, IdentityRecord, encode_list_identity, encode_list_services
 from .limits import RateLimitedLog
+from .seams import RequestSeam
 
 log = logging.getLogger(__name__)
 
@@ -161,8 +162,12 @@ class DelayedReplies:
 
 class EncapsulationTarget:
     def __init__(self, router: MessageRouter, identity: Callable[[], IdentityRecord],
-                 settings: TargetSettings | None = None, table: ConnectionTable | None = None) -> None:
+                 settings: TargetSettings | None = None, table: ConnectionTable | None = None,
+                 requests: RequestSeam | None = None) -> None:
+        """``requests``: the seam explicit requests reach the router through (``seams.RequestSeam``); by
+        default one of its own, with nothing in it."""
         self.router = router
+        self.requests = requests or RequestSeam(router)
         self.identity = identity
         self.settings = settings or TargetSettings()
         self.table = table or ConnectionTable(self.settings.max_connections)
@@ -456,7 +461,7 @@ class EncapsulationConnection:
         request_context = self._context
         request_context.now = now
         request_context.connected = False
-        reply = self.target.router.handle(request, request_context)
+        reply = self.target.requests.handle(request, request_context)
         self._outbox.append(_RR_REPLY_FRAME.pack(
             _SEND_RR_DATA, _RR_TWO_ITEMS_SIZE + len(reply), session, 0, context, 0, 0, 0, 2,
             _NULL_ADDRESS, 0, _UNCONNECTED_DATA, len(reply)) + reply)
@@ -506,7 +511,7 @@ class EncapsulationConnection:
         context.now = now
         context.connected = False
         if len(items) == 2 and items[1].data[0] not in _MAY_CARRY_SOCKADDR:
-            reply = self.target.router.handle(items[1].data, context)
+            reply = self.target.requests.handle(items[1].data, context)
             return RR_PREFIX.pack(0, 0) + encode_items((Item(ItemType.NULL_ADDRESS), Item(ItemType.UNCONNECTED_DATA,
                                                                                           reply)))
         # A Forward_Open may carry Sockaddr Info items (where the originator wants T->O data), and
@@ -520,7 +525,7 @@ class EncapsulationConnection:
         reply_items: list[Item] = []
         context.extras["reply_items"] = reply_items
         try:
-            reply = self.target.router.handle(items[1].data, context)
+            reply = self.target.requests.handle(items[1].data, context)
         finally:
             del context.extras["sockaddr"], context.extras["reply_items"]
         return RR_PREFIX.pack(0, 0) + encode_items((Item(ItemType.NULL_ADDRESS), Item(ItemType.UNCONNECTED_DATA, reply),
@@ -550,7 +555,7 @@ class EncapsulationConnection:
             context = self._context
             context.now = now
             context.connected = True
-            reply = self.target.router.handle(items[1].data[2:], context)
+            reply = self.target.requests.handle(items[1].data[2:], context)
             context.connected = False
             connection.last_sequence = sequence
             connection.last_reply = reply

@@ -145,7 +145,11 @@ class LaneTcpConnection:
         connection.receive(data, monotonic())  # the lane's loop keeps time.monotonic()
         out = connection.data_to_send()
         if out:
-            self._send(out)
+            held = self.server.replies.filter
+            if held is None:
+                self._send(out)
+            else:
+                held.reply(self, out)
         if connection.closing:
             self._close_when_sent = True
             if not self._unsent:

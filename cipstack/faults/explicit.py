@@ -1,150 +1,147 @@
-"""Explicit-messaging faults, applied where a request reaches the message router or a reply
-leaves on TCP.
+"""Explicit-messaging faults: filters where a request reaches the message router
+(``cipstack.eip.seams.RequestSeam``) or a reply leaves on TCP (``ReplySeam``), and the actions on
+the encapsulation layer.
 
-``RouterFaultLayer`` stands in for the device's message router in the encapsulation target while
-an ``error-status`` or ``refuse-forward-open`` fault is active: a matching request is answered with
-the chosen status and never reaches the device; every other request goes to the router as before.
-``ReplyDelay`` holds each TCP reply back for a while (``delay-replies``), in order.
+``error-status`` and ``refuse-forward-open`` answer a matching request with the chosen status; it
+never reaches the device, every other request goes on to the router. ``delay-replies`` holds each
+TCP reply back for a while, in order. ``close-tcp`` and ``drop-sessions`` happen once.
 """
 
 from __future__ import annotations
 
 import asyncio
-import random
-from collections.abc import Callable
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING
 
 from ..cip.epath import parse_application_path
 from ..cip.messages import MessageRouterRequest, MessageRouterResponse, Service
 from ..cip.status import CipError, GeneralStatus
 from ..eip.cm_messages import ForwardOpenRequest
 from ..eip.connection_manager import connection_failure
-from .model import FaultRequest
+from .class1 import DEFAULT_DELAY
+from .effect import Action, FaultContext
 
 if TYPE_CHECKING:
-    from ..cip.router import MessageRouter, RequestContext
-    from ..eip.server import EncapsulationServer
+    from ..cip.router import RequestContext
+    from ..eip.seams import Handle, ReplySender
 
 _FORWARD_OPENS = (Service.FORWARD_OPEN, Service.LARGE_FORWARD_OPEN)
 _CONNECTION_MANAGER = 0x06
+#: Connections ``delay-replies`` remembers the last reply of before it forgets those with none held.
+_CONNECTIONS_KEPT = 256
 
 
-class ActiveRouterFault:
-    def __init__(self, fault_id: int, request: FaultRequest) -> None:
-        self.id = fault_id
-        self.name = request.name
-        options = request.options
-        self.status = options.get("status")
-        self.service: int | None = options.get("service")
-        self.class_id: int | None = options.get("class")
-        self.instance: int | None = options.get("instance")
-        self.attribute: int | None = options.get("attribute")
-        self.remaining: int | None = options.get("count", 1 if request.name == "refuse-forward-open" else None)
+class RequestFault:
+    """A request filter that answers matching requests itself, at most ``--count`` times."""
+
+    def __init__(self, context: FaultContext, remaining: int | None) -> None:
+        self.context = context
+        self.remaining = remaining
+
+    def start(self) -> None:
+        self.context.runtime.requests.add(self)
+
+    def stop(self) -> None:
+        self.context.runtime.requests.remove(self)
+
+    def request(self, raw: bytes, context: RequestContext, call_next: Handle) -> bytes:
+        reply = self._answer(raw)
+        if reply is None:
+            return call_next(raw, context)
+        if self.remaining is not None:
+            self.remaining -= 1
+            if self.remaining <= 0:
+                self.context.used_up()
+        return reply
+
+    def _answer(self, raw: bytes) -> bytes | None:
+        raise NotImplementedError
 
 
-class RouterFaultLayer:
-    """The message router as the target sees it while request faults are active."""
+def _decode(raw: bytes) -> tuple[MessageRouterRequest, int | None, int | None, int | None] | None:
+    """The request, its class, instance and attribute; None for a malformed one (the router's to answer)."""
+    try:
+        request = MessageRouterRequest.decode(raw)
+        path = parse_application_path(request.path)
+    except (CipError, ValueError):
+        return None
+    return request, path.class_id, path.instance, path.attribute
 
-    def __init__(self, router: MessageRouter, used_up: Callable[[int], None]) -> None:
-        self.router = router
-        #: Called with a fault's id when its ``--count`` is spent (the controller clears it).
-        self.used_up = used_up
-        self.faults: list[ActiveRouterFault] = []
 
-    def add(self, fault_id: int, request: FaultRequest) -> None:
-        self.faults.append(ActiveRouterFault(fault_id, request))
+class ErrorStatus(RequestFault):
+    def __init__(self, context: FaultContext) -> None:
+        super().__init__(context, context.options.get("count"))
 
-    def remove(self, fault_id: int) -> None:
-        self.faults = [f for f in self.faults if f.id != fault_id]
-
-    def handle(self, raw: bytes, context: RequestContext) -> bytes:
-        for fault in self.faults:
-            reply = self._answer(fault, raw)
-            if reply is not None:
-                if fault.remaining is not None:
-                    fault.remaining -= 1
-                    if fault.remaining <= 0:
-                        self.faults.remove(fault)
-                        self.used_up(fault.id)
-                return reply
-        return self.router.handle(raw, context)
-
-    def __getattr__(self, name: str) -> Any:
-        return getattr(self.router, name)
-
-    def _answer(self, fault: ActiveRouterFault, raw: bytes) -> bytes | None:
-        try:
-            request = MessageRouterRequest.decode(raw)
-            path = parse_application_path(request.path)
-        except (CipError, ValueError):
-            return None  # a malformed request is the router's to answer
-        if fault.name == "refuse-forward-open":
-            if request.service not in _FORWARD_OPENS or path.class_id != _CONNECTION_MANAGER:
+    def _answer(self, raw: bytes) -> bytes | None:
+        decoded = _decode(raw)
+        if decoded is None:
+            return None
+        request, class_id, instance, attribute = decoded
+        options = self.context.options
+        for key, value in (("service", request.service), ("class", class_id), ("instance", instance),
+                           ("attribute", attribute)):
+            if options.get(key) is not None and value != options[key]:
                 return None
-            try:
-                forward_open = ForwardOpenRequest.decode(request.data, request.service == Service.LARGE_FORWARD_OPEN)
-            except (CipError, ValueError, IndexError):
-                return None
-            error = connection_failure(fault.status, forward_open.triad, "refused (fault refuse-forward-open)")
-            return MessageRouterResponse.from_error(request.service, error).encode()
-        if fault.service is not None and request.service != fault.service:
-            return None
-        if fault.class_id is not None and path.class_id != fault.class_id:
-            return None
-        if fault.instance is not None and path.instance != fault.instance:
-            return None
-        if fault.attribute is not None and path.attribute != fault.attribute:
-            return None
-        general, extended = fault.status or (GeneralStatus.SERVICE_NOT_SUPPORTED, ())
+        general, extended = options.get("status") or (GeneralStatus.SERVICE_NOT_SUPPORTED, ())
         return MessageRouterResponse(request.service, general, extended).encode()
 
 
-class ReplyDelay:
-    """``delay-replies``: each TCP reply of the encapsulation server leaves this much later, in order."""
+class RefuseForwardOpen(RequestFault):
+    def __init__(self, context: FaultContext) -> None:
+        super().__init__(context, context.options.get("count", 1))
 
-    def __init__(self, server: EncapsulationServer, loop: asyncio.AbstractEventLoop, by: float, jitter: float,
-                 rng: random.Random | None = None) -> None:
-        self.server = server
-        self.loop = loop
-        self.by = by
-        self.jitter = jitter
-        self.rng = rng or random.Random()
-        self._patched: list[Any] = []
+    def _answer(self, raw: bytes) -> bytes | None:
+        decoded = _decode(raw)
+        if decoded is None:
+            return None
+        request, class_id, _instance, _attribute = decoded
+        if request.service not in _FORWARD_OPENS or class_id != _CONNECTION_MANAGER:
+            return None
+        try:
+            forward_open = ForwardOpenRequest.decode(request.data, request.service == Service.LARGE_FORWARD_OPEN)
+        except (CipError, ValueError, IndexError):
+            return None
+        error = connection_failure(self.context.options["status"], forward_open.triad,
+                                   "refused (fault refuse-forward-open)")
+        return MessageRouterResponse.from_error(request.service, error).encode()
 
-    def install(self) -> None:
-        server = self.server
-        opened = server.opened
 
-        def opened_with_delay(served: Any, peer_text: str, local: Any) -> Any:
-            connection = opened(served, peer_text, local)
-            self._patch(connection, served)
-            return connection
+class DelayReplies:
+    """``delay-replies``: each TCP reply of the encapsulation server leaves this much later, in order
+    per connection. One at a time: a new one replaces the one in force (``FaultKind.exclusive``)."""
 
-        server.opened = opened_with_delay  # type: ignore[method-assign]
-        for served in list(server.connections):
-            self._patch(served.connection, served)
+    def __init__(self, context: FaultContext) -> None:
+        self.context = context
+        self.by: float = context.options.get("by", DEFAULT_DELAY)
+        self.jitter: float = context.options.get("jitter", 0.0)
+        #: When the last reply of each connection leaves: the next never leaves before it.
+        self._last: dict[int, float] = {}
 
-    def uninstall(self) -> None:
-        self.server.__dict__.pop("opened", None)
-        for connection in self._patched:
-            connection.__dict__.pop("data_to_send", None)
-        self._patched.clear()
+    def start(self) -> None:
+        self.context.runtime.replies.filter = self
 
-    def _patch(self, connection: Any, served: Any) -> None:
-        if connection is None:
-            return
-        take = type(connection).data_to_send.__get__(connection)
-        last = [0.0]
+    def stop(self) -> None:
+        if self.context.runtime.replies.filter is self:
+            self.context.runtime.replies.filter = None
 
-        def data_to_send() -> bytes:
-            out = take()
-            if out:
-                now = self.loop.time()
-                spread = self.rng.uniform(-self.jitter, self.jitter) if self.jitter else 0.0
-                at = max(now + max(0.0, self.by + spread), last[0])  # replies stay in order
-                last[0] = at
-                self.loop.call_at(at, served.send_reply, out)
-            return b""
+    def reply(self, served: ReplySender, out: bytes) -> None:
+        loop = asyncio.get_running_loop()
+        now = loop.time()
+        if len(self._last) > _CONNECTIONS_KEPT:   # bounded: forget the connections whose replies have all left
+            self._last = {key: at for key, at in self._last.items() if at > now}
+        spread = self.context.rng.uniform(-self.jitter, self.jitter) if self.jitter else 0.0
+        at = max(now + max(0.0, self.by + spread), self._last.get(id(served), 0.0))
+        self._last[id(served)] = at
+        loop.call_at(at, served.send_reply, out)
 
-        connection.data_to_send = data_to_send
-        self._patched.append(connection)
+
+class CloseTcp(Action):
+    def start(self) -> None:
+        self.context.runtime.close_tcp()
+
+
+class DropSessions(Action):
+    def start(self) -> None:
+        self.context.runtime.drop_sessions()
+
+
+__all__ = ["CloseTcp", "DelayReplies", "DropSessions", "ErrorStatus", "RefuseForwardOpen"]

@@ -18,13 +18,9 @@ from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field
 from typing import Any
 
-
-class FaultError(ValueError):
-    """A fault request that names an unknown fault or option, or a bad value (one line)."""
-
-
-class NoSuchConnection(LookupError):
-    """A fault aimed at a class 1 connection that is not open (one line naming the open ones)."""
+from . import class1, device, explicit
+from .effect import EffectFactory
+from .errors import FaultError, FaultStateError, NoSuchConnection  # noqa: F401 (their import path of old)
 
 
 def parse_duration(value: object) -> float:
@@ -118,7 +114,20 @@ SERVICE = Option("service", lambda v: parse_integer(v, 0, 0x7F), "only this serv
 CLASS = Option("class", lambda v: parse_integer(v, 0, 0xFFFF), "only requests to this class", "ID")
 INSTANCE = Option("instance", lambda v: parse_integer(v, 0, 0xFFFFFFFF), "only this instance", "ID")
 ATTRIBUTE = Option("attribute", lambda v: parse_integer(v, 0, 0xFFFF), "only this attribute", "ID")
-OFF = Option("off", parse_duration, "how long the power stays off (default 0)", "DURATION")
+#: The longest a power-cycle's power stays off: a test rig's typo (``--off 3600000``) must not leave a
+#: device off for weeks; clearing the fault ends the off period early anyway.
+MAX_OFF_S = 3600.0
+
+
+def parse_off(value: object) -> float:
+    seconds = parse_duration(value)
+    if seconds > MAX_OFF_S:
+        raise FaultError(f"{value!r} is longer than the {MAX_OFF_S:g}s the power may stay off")
+    return seconds
+
+
+OFF = Option("off", parse_off, "how long the power stays off (default 0, at most 3600s; clearing the fault "
+             "ends it early)", "DURATION")
 EXTENDED = Option("status", lambda v: parse_integer(v, 0, 0xFFFF),
                   "the Connection Manager's extended status (0x0100, 0x0106, 0x0113, 0x0315, ...)", "STATUS")
 
@@ -131,6 +140,8 @@ class FaultKind:
     name: str
     where: str
     summary: str
+    #: What the fault does, made when it is applied (a filter in the seam of its layer, or an action).
+    effect: EffectFactory
     options: tuple[Option, ...] = ()
     #: A positional argument (its option): ``refuse-forward-open 0x0113``.
     positional: Option | None = None
@@ -138,6 +149,19 @@ class FaultKind:
     once: bool = False
     #: Options the fault needs (one of each group).
     requires: tuple[tuple[str, ...], ...] = ()
+    #: The option that is its duration instead of ``--for`` (a power-cycle lasts its ``--off``).
+    lasts: str | None = None
+    #: Applying it ends the active faults of this name, and is refused when there is none (plug ends unplug).
+    ends: str | None = None
+    #: Why it is refused when there is nothing to end.
+    refusal: str = ""
+    #: One at a time: applying it replaces the one in force.
+    exclusive: bool = False
+
+    @property
+    def lasting(self) -> bool:
+        """Kept as active until it ends (rather than happening once)."""
+        return not self.once or self.lasts is not None
 
     @property
     def option_names(self) -> tuple[str, ...]:
@@ -145,6 +169,15 @@ class FaultKind:
         if not self.once:
             names.append("for")
         return tuple(names)
+
+    def json_usage(self) -> str:
+        """The fault as a JSON body: ``{"name": "drop", "options": {"share" | "every", ...}}``."""
+        keys = [o.name for o in self.options]
+        if self.positional is not None:
+            keys.insert(0, self.positional.name)
+        if not self.once:
+            keys.append("for")
+        return f'{{"name": "{self.name}", "options": {{...}}}} with options {", ".join(keys) or "none"}'
 
     def usage(self) -> str:
         parts = [self.name]
@@ -159,27 +192,37 @@ class FaultKind:
 _SELECT = (CONNECTION, ORIGINATOR)
 
 FAULTS: dict[str, FaultKind] = {kind.name: kind for kind in (
-    FaultKind("stop-producing", CLASS1, "no T->O data: the originator's connection times out", _SELECT),
-    FaultKind("drop", CLASS1, "drop a share or every Nth T->O packet", (*_SELECT, SHARE, EVERY),
+    FaultKind("stop-producing", CLASS1, "no T->O data: the originator's connection times out",
+              class1.StopProducing, _SELECT),
+    FaultKind("drop", CLASS1, "drop a share or every Nth T->O packet", class1.Drop, (*_SELECT, SHARE, EVERY),
               requires=(("share", "every"),)),
-    FaultKind("duplicate", CLASS1, "send every (or every Nth) T->O packet twice", (*_SELECT, EVERY)),
-    FaultKind("reorder", CLASS1, "swap each two consecutive T->O packets", _SELECT),
-    FaultKind("delay", CLASS1, "delay T->O packets", (*_SELECT, BY, JITTER)),
-    FaultKind("freeze-sequence", CLASS1, "T->O packets keep one CIP sequence count (no new data)", _SELECT),
-    FaultKind("wrong-size", CLASS1, "T->O data of the wrong size", (*_SELECT, SIZE)),
-    FaultKind("ignore-output", CLASS1, "O->T data not given to the device (it keeps its last command)", _SELECT),
-    FaultKind("idle", CLASS1, "O->T run/idle header handed to the device as idle", _SELECT),
-    FaultKind("delay-replies", EXPLICIT, "delay every explicit reply (TCP)", (BY, JITTER)),
-    FaultKind("error-status", EXPLICIT, "answer matching requests with a chosen status",
+    FaultKind("duplicate", CLASS1, "send every (or every Nth) T->O packet twice", class1.Duplicate,
+              (*_SELECT, EVERY)),
+    FaultKind("reorder", CLASS1, "swap each two consecutive T->O packets", class1.Reorder, _SELECT),
+    FaultKind("delay", CLASS1, "delay T->O packets", class1.Delay, (*_SELECT, BY, JITTER)),
+    FaultKind("freeze-sequence", CLASS1, "T->O packets keep one CIP sequence count (no new data)",
+              class1.FreezeSequence, _SELECT),
+    FaultKind("wrong-size", CLASS1, "T->O data of the wrong size", class1.WrongSize, (*_SELECT, SIZE)),
+    FaultKind("ignore-output", CLASS1, "O->T data not given to the device (it keeps its last command)",
+              class1.IgnoreOutput, _SELECT),
+    FaultKind("idle", CLASS1, "O->T run/idle header handed to the device as idle", class1.Idle, _SELECT),
+    FaultKind("delay-replies", EXPLICIT, "delay every explicit reply (TCP)", explicit.DelayReplies, (BY, JITTER),
+              exclusive=True),
+    FaultKind("error-status", EXPLICIT, "answer matching requests with a chosen status", explicit.ErrorStatus,
               (STATUS, SERVICE, CLASS, INSTANCE, ATTRIBUTE, COUNT), requires=(("status",),)),
     FaultKind("refuse-forward-open", EXPLICIT, "refuse the next Forward_Opens with a Connection Manager status",
-              (COUNT,), positional=EXTENDED),
-    FaultKind("close-tcp", EXPLICIT, "close every TCP connection (sessions and class 3 go with them)", once=True),
-    FaultKind("drop-sessions", EXPLICIT, "forget every session (their TCP connections stay open)", once=True),
-    FaultKind("unplug", DEVICE, "silent on every port: TCP refused, no UDP, no class 1 (until plug)"),
-    FaultKind("plug", DEVICE, "end an unplug", once=True),
-    FaultKind("power-cycle", DEVICE, "power loss: connections gone, the run stopped, unsaved parameters lost",
-              (OFF,), once=True),
+              explicit.RefuseForwardOpen, (COUNT,), positional=EXTENDED),
+    FaultKind("close-tcp", EXPLICIT, "close every TCP connection (sessions and class 3 go with them)",
+              explicit.CloseTcp, once=True),
+    FaultKind("drop-sessions", EXPLICIT, "forget every session (their TCP connections stay open)",
+              explicit.DropSessions, once=True),
+    FaultKind("unplug", DEVICE, "link lost: every Ethernet port closed, connections time out; RS-485 goes on "
+              "(until plug)", device.Unplug),
+    FaultKind("plug", DEVICE, "end an unplug", device.Plug, once=True, ends="unplug",
+              refusal="the device is not unplugged"),
+    FaultKind("power-cycle", DEVICE, "power loss: every port closed and RS-485 silent, connections gone, the run "
+              "stopped, unsaved parameters lost; power back after --off (or when cleared)", device.PowerCycle,
+              (OFF,), once=True, lasts="off"),
 )}
 
 
@@ -195,6 +238,19 @@ def kind_of(name: str) -> FaultKind:
 
 
 @dataclass(frozen=True)
+class Spelling:
+    """How a surface names a fault's options in its messages: the command line's ``--share``, or the
+    JSON key ``"share"`` (the HTTP API, the control socket, scenarios)."""
+
+    option: Callable[[str], str]
+    usage: Callable[[FaultKind], str]
+
+
+CLI_SPELLING = Spelling(lambda name: f"--{name}", lambda kind: kind.usage())
+JSON_SPELLING = Spelling(lambda name: f'"{name}"', lambda kind: kind.json_usage())
+
+
+@dataclass(frozen=True)
 class FaultRequest:
     """A fault by name with its checked options (``for``: the duration, None: until cleared)."""
 
@@ -207,12 +263,16 @@ class FaultRequest:
 
     @property
     def duration(self) -> float | None:
-        value = self.options.get("for")
+        kind = self.kind
+        value = self.options.get(kind.lasts, 0.0) if kind.lasts is not None else self.options.get("for")
         return None if value is None else float(value)
 
     @classmethod
-    def build(cls, name: str, options: Mapping[str, object] | None = None) -> FaultRequest:
-        """Check ``options`` (raw values: text or numbers) against the fault ``name``."""
+    def build(cls, name: str, options: Mapping[str, object] | None = None,
+              spelling: Spelling = CLI_SPELLING) -> FaultRequest:
+        """Check ``options`` (raw values: text or numbers) against the fault ``name``; the messages name
+        the options as ``spelling`` does."""
+        said, usage = spelling.option, spelling.usage
         if not isinstance(name, str):
             raise FaultError(f"a fault is named by text; valid: {valid_faults()}")
         kind = kind_of(name)
@@ -227,23 +287,22 @@ class FaultRequest:
             key = str(key).replace("_", "-")
             option = allowed.get(key)
             if option is None:
-                valid = ", ".join(f"--{n}" for n in allowed) or "none"
-                raise FaultError(f"unknown option --{key} for {name}; valid: {valid}")
+                valid = ", ".join(said(n) for n in allowed) or "none"
+                raise FaultError(f"unknown option {said(key)} for {name}; valid: {valid}")
             if value is None:
                 continue
             try:
                 checked[key] = option.parse(value)
             except FaultError as exc:
-                raise FaultError(f"{name} --{key}: {exc}") from None
+                raise FaultError(f"{name} {said(key)}: {exc}") from None
         if kind.positional is not None and kind.positional.name not in checked:
-            raise FaultError(f"{name} needs its {kind.positional.metavar}: {kind.usage()}")
+            raise FaultError(f"{name} needs its {kind.positional.metavar}: {usage(kind)}")
         for group in kind.requires:
             if not any(g in checked for g in group):
-                raise FaultError(f"{name} needs {' or '.join('--' + g for g in group)}: {kind.usage()}")
-        if "connection" in checked and "originator" in checked:
-            raise FaultError(f"{name}: --connection or --originator, not both")
-        if "share" in checked and "every" in checked:
-            raise FaultError(f"{name}: --share or --every, not both")
+                raise FaultError(f"{name} needs {' or '.join(said(g) for g in group)}: {usage(kind)}")
+        for one, other in (("connection", "originator"), ("share", "every")):
+            if one in checked and other in checked:
+                raise FaultError(f"{name}: {said(one)} or {said(other)}, not both")
         return cls(name, checked)
 
     def describe(self) -> str:

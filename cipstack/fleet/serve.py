@@ -17,14 +17,15 @@ from typing import Any
 
 from ..adapter import Adapter, AdapterSettings
 from ..control import describe
-from ..devices.acg.device import AcgDevice
+from ..control.service import DeviceService
 from ..devices.acg.modbus_rtu import LineSettings
-from ..devices.acg.rtu_line import RtuLine, open_port
 from ..devices.profiles import mac_for_address
 from ..devices.state import StateFileError
 from ..eip.io_core import ProductionGrid
 from ..eip.io_server import freeze_startup_objects
 from ..listening import held_log_records
+from ..modbus.rtu_line import RtuLine, open_port
+from ..runtime.observer import register_relay
 from .spec import FleetDevice, SpecError
 
 log = logging.getLogger(__name__)
@@ -125,16 +126,16 @@ class DeviceSet:
 
     async def _open_line(self, device: str) -> str:
         """The ACG drives on one RS-485 line; the line that says where it is and who is on it."""
-        drives = [(d, a.device) for d, a in zip(self.devices, self.adapters, strict=True)
-                  if isinstance(a.device, AcgDevice)]
-        port = open_port(device, LineSettings.from_drive(drives[0][1].drive))
+        drives = [(d, a, a.modbus_drive) for d, a in zip(self.devices, self.adapters, strict=True)
+                  if a.modbus_drive is not None]
+        port = open_port(device, LineSettings.from_drive(drives[0][2].drive()))
         line = RtuLine(port)
-        for _, acg in drives:
-            line.add(lambda acg=acg: acg.drive, acg.saves)
+        for _, adapter, modbus in drives:
+            line.add(modbus.drive, modbus.saves, written=register_relay("modbus-rtu", adapter.observers))
         self.line = line
         await line.start()
-        stations = ", ".join(f"{d.address} station {s.settings.station}" for (d, _), s in zip(drives, line.slaves,
-                                                                                               strict=True))
+        stations = ", ".join(f"{d.address} station {s.settings.station}"
+                             for (d, _, _), s in zip(drives, line.slaves, strict=True))
         return f"Modbus-RTU on {line.name} ({line.slaves[0].settings.describe().split(', ', 1)[1]}): {stations}"
 
     async def stop(self) -> None:
@@ -182,10 +183,11 @@ async def serve_until_signalled(devices: Sequence[FleetDevice], port: int, io_po
     return received[0] if received else signal.SIGTERM
 
 
-def api_addresses(adapters: Sequence[Adapter]) -> dict[str, Adapter]:
-    """The devices of an HTTP control API by address: the host of each, ``host:port`` where hosts repeat."""
+def api_addresses(adapters: Sequence[Adapter]) -> dict[str, DeviceService]:
+    """The devices of an HTTP control API (their command services) by address: the host of each,
+    ``host:port`` where hosts repeat."""
     hosts = [adapter.settings.host for adapter in adapters]
-    return {(host if hosts.count(host) == 1 else f"{host}:{adapter.port}"): adapter
+    return {(host if hosts.count(host) == 1 else f"{host}:{adapter.port}"): adapter.service
             for host, adapter in zip(hosts, adapters, strict=True)}
 
 

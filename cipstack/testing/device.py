@@ -4,7 +4,7 @@ free loopback port, with a temporary state file, driven from a test's thread (sy
 The device runs beside the test, not inside its event loop: a blocking client (``SyncScanner``,
 pycomm3) in a sync test and an async ``Scanner`` in an async test reach it alike, over real sockets.
 Every call on the handle runs on the device's loop (``run``); faults and events are the adapter's
-own (``Adapter.faults``, ``Adapter.events``), seen through it."""
+own, reached through its command service (``cipstack.control.service``), as every surface reaches it."""
 
 from __future__ import annotations
 
@@ -106,27 +106,24 @@ class EmulatedDevice:
 
         return asyncio.run_coroutine_threadsafe(call(), self.loop).result(timeout)
 
+    def call(self, operation: str, **arguments: Any) -> Any:
+        """Any operation of the device's command service (``cipstack.control.operations``), by its JSON
+        keys, as every other surface calls it; its answer."""
+        return self.run(lambda: self.adapter.service.call_async(operation, arguments))
+
     def fault(self, name: str, **options: Any) -> dict[str, Any]:
         """Apply a fault (``cipstack.faults``; ``for_=2.0`` for ``--for``), once its ports are closed or
-        opened; its record (id, name, options)."""
-        async def apply() -> dict[str, Any]:
-            fault = self.adapter.fault(name, **options)
-            await self.adapter.faults.settle()
-            return fault.as_json(self.loop.time())
-
-        return self.run(apply)
+        opened (or, for a long power-cycle, while the power is still off); its record (id, name, options)."""
+        if "for_" in options:
+            options["for"] = options.pop("for_")
+        return dict(self.call("fault", name=name, options=options))
 
     def clear_faults(self, which: int | str | None = None) -> list[dict[str, Any]]:
-        async def clear() -> list[dict[str, Any]]:
-            cleared = self.adapter.clear_faults(which)
-            await self.adapter.faults.settle()
-            return [f.as_json() for f in cleared]
-
-        return self.run(clear)
+        return list(self.call("clear", **({"fault": which} if which is not None else {})))
 
     def faults(self) -> list[dict[str, Any]]:
         """The faults active now."""
-        return self.run(lambda: [f.as_json(self.loop.time()) for f in self.adapter.faults.faults()])
+        return list(self.call("faults"))
 
     def events(self, since: int = 0) -> list[Event]:
         """The events since event number ``since``, oldest first."""
@@ -142,21 +139,22 @@ class EmulatedDevice:
         return await asyncio.wrap_future(future)
 
     def status(self) -> dict[str, Any]:
-        """What ``cipstack drive status --json`` reports: the drive's fields, sessions and connections."""
-        return self.run(lambda: self.adapter.control({"command": "status"}))
+        """What ``cipstack drive status`` reports: the drive's fields, power and link, sessions and
+        connections."""
+        return dict(self.call("status"))
 
     def trip(self, code: int | str) -> dict[str, Any]:
-        return self.run(lambda: self.adapter.control({"command": "trip", "code": code}))
+        return dict(self.call("trip", code=code))
 
     def parameter(self, code: str) -> dict[str, Any]:
         """A keypad parameter by its code (the ACG's ``ACC``, an MX2/RX function code ``A004``): code, name,
-        value in the keypad's unit, raw value, unit, address (``Adapter.keypad_parameter``)."""
-        return self.run(lambda: self.adapter.keypad_parameter(code))
+        value in the keypad's unit, raw value, unit, address."""
+        return dict(self.call("parameter", code=code))
 
     def set_parameter(self, code: str, value: object) -> dict[str, Any]:
         """Set a keypad parameter now, in the keypad's unit, not saved; a ``parameter write`` event with
-        origin "python" (``Adapter.set_keypad_parameter``)."""
-        return self.run(lambda: self.adapter.set_keypad_parameter(code, value))
+        origin "python"."""
+        return dict(self.call("set-parameter", code=code, value=value))
 
     # -- the end ------------------------------------------------------------------------------------------
     def close(self) -> None:

@@ -41,7 +41,7 @@ from ...cip.model import ClassSpec
 from ...eip.io_target import ConnectionKind, IoConnection, IoProfile
 from ...objects.assembly import AssemblyPoint
 from ...objects.tcpip import NetworkInterface
-from ..base import Device, DeviceLimits, TripRefused
+from ..base import Device, DeviceLimits, ModbusDrive, TripRefused
 from ..profiles import DEFAULT_MAC, serial_from_mac
 from ..registers import Register, RegisterError
 from ..state import ParameterStore, StateWriter
@@ -112,7 +112,7 @@ class AcgDevice(Device):
             point = self._assembly_point(instance)
             self._points[instance] = point
             self.assembly.add_assembly(point)
-        self._update_io_status()
+        self.update_io_status()
 
     # -- assemblies -------------------------------------------------------------------------------
     def schemas(self) -> AcgAssemblies:
@@ -288,6 +288,10 @@ class AcgDevice(Device):
         if reset_type == 1:
             self.drive.forget_saved_parameters()   # a refused save (StateFileError) refuses the reset
         self.power_cycle(self.now)
+
+    def modbus_drive(self) -> ModbusDrive:
+        """The ACG speaks Modbus TCP on its ACG-ET2 card and Modbus-RTU on the drive's RS-485 port."""
+        return ModbusDrive(lambda: self.drive, self.saves)
 
     def power_cycle(self, now: float) -> None:
         """The drive and its ACG-ET2 card lose power and get it back at ``now``: the drive comes back with

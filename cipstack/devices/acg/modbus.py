@@ -18,7 +18,7 @@ model as EtherNet/IP.
 
 The protocol core (``ModbusTcpCore``, ``MbapBuffer``, this module) takes bytes and the time and
 returns bytes; its PDUs are served by the Modbus layer it shares with the RS-485 port
-(``modbus_core``); ``modbus_server.ModbusTcpServer`` is its asyncio shell. pymodbus 3.16's server
+(``modbus_core``); ``cipstack.modbus.tcp_server.ModbusTcpServer`` is its asyncio shell. pymodbus 3.16's server
 is not used: its supported custom datastore (``SimDevice`` with an ``action``) can only return
 members of its ``ExcCodes`` enum, which has no 0x20, and treats any other return value of a write
 as success.
@@ -37,6 +37,7 @@ from .modbus_core import (
     FunctionCode,
     ModbusCore,
     ModbusException,
+    RegisterWritten,
 )
 
 MBAP = struct.Struct(">HHHB")
@@ -49,8 +50,8 @@ class ModbusTcpCore(ModbusCore):
     """Serves MBAP frames from a drive, sans I/O: the shared Modbus layer (``modbus_core``) as the
     card's dialect has it, in the MBAP header."""
 
-    def __init__(self, drive: AcgDrive | DriveSource) -> None:
-        super().__init__(drive, TCP_DIALECT)
+    def __init__(self, drive: AcgDrive | DriveSource, written: RegisterWritten | None = None) -> None:
+        super().__init__(drive, TCP_DIALECT, written)
 
     def handle_adu(self, adu: bytes, now: float, source: object = None) -> bytes | None:
         """One MBAP frame in, its reply out (None: a frame of another protocol, discarded); ``source``

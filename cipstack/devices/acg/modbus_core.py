@@ -126,12 +126,20 @@ RTU_DIALECT = ModbusDialect(
 DriveSource = Callable[[], AcgDrive]
 
 
+#: Told of one register a Modbus request wrote: the drive, the address, the raw value, the time, and the
+#: request's source (a TCP peer's ``host:port``, the RTU station addressed).
+RegisterWritten = Callable[["AcgDrive", int, int, float, object], None]
+
+
 class ModbusCore:
     """Serves Modbus PDUs from a drive, sans I/O, as ``dialect``'s port does."""
 
-    def __init__(self, drive: AcgDrive | DriveSource, dialect: ModbusDialect = TCP_DIALECT) -> None:
+    def __init__(self, drive: AcgDrive | DriveSource, dialect: ModbusDialect = TCP_DIALECT,
+                 written: RegisterWritten | None = None) -> None:
+        """``written``: told of each register a request wrote (an observer: the event stream)."""
         self._drive: DriveSource = drive if callable(drive) else (lambda: drive)
         self.dialect = dialect
+        self.written = written
         self.requests = 0
         self.exceptions = 0
 
@@ -231,9 +239,11 @@ class ModbusCore:
                 raise ModbusException(self.dialect.refusal(exc.refusal), str(exc)) from None
 
     def store(self, drive: AcgDrive, address: int, raw: int, now: float, source: object) -> None:
-        """Write one register of a request, checked: the one place a Modbus request changes the drive
-        (an observer, the event stream, wraps it on the instance; nobody pays for it otherwise)."""
+        """Write one register of a request, checked: the one place a Modbus request changes the drive,
+        and so where its observer (``written``) hears of it."""
         drive.write(address, raw, now)
+        if self.written is not None:
+            self.written(drive, address, raw, now, source)
 
 
 def _unpack(fmt: str, data: bytes) -> tuple[int, ...]:

@@ -32,7 +32,7 @@ from collections.abc import Callable
 from dataclasses import dataclass, field, fields
 
 from .drive import AcgDrive
-from .modbus_core import RTU_DIALECT, ExceptionCode, FunctionCode, ModbusCore
+from .modbus_core import RTU_DIALECT, ExceptionCode, FunctionCode, ModbusCore, RegisterWritten
 from .registers import ACG_REGISTERS
 
 #: CM.3 settings (seed 001, Communication Parameters Setting Details; "56 Kbps" and "115 Kbps" are
@@ -227,15 +227,20 @@ class RtuSlave:
     last character would have left the UART. Unpaced (a serial device, whose UART does both), a
     reply is due when it is to start."""
 
-    def __init__(self, drive: AcgDrive | Callable[[], AcgDrive], paced: bool = False) -> None:
+    def __init__(self, drive: AcgDrive | Callable[[], AcgDrive], paced: bool = False,
+                 written: RegisterWritten | None = None) -> None:
         self.paced = paced
-        self.core = ModbusCore(drive, RTU_DIALECT)
+        self.core = ModbusCore(drive, RTU_DIALECT, written)
         self.counters = RtuCounters()
         self.framer = RtuFramer(self.counters)
 
     @property
     def drive(self) -> AcgDrive:
         return self.core.drive
+
+    def forget_input(self) -> None:
+        """Drop a frame half heard: the slave lost power, and what it had heard with it."""
+        self.framer = RtuFramer(self.counters)
 
     @property
     def settings(self) -> LineSettings:

@@ -210,7 +210,7 @@ class OmronDevice(Device):
         if mapping is not None:
             self.assembly.add_assembly(self._point(FLEXIBLE_OUTPUT, len(mapping.outputs)))
             self.assembly.add_assembly(self._point(FLEXIBLE_INPUT, len(mapping.inputs)))
-        self._update_io_status()
+        self.update_io_status()
 
     # -- assemblies ------------------------------------------------------------------------------
     def schemas(self) -> Mapping[int, AssemblySchema]:
@@ -402,14 +402,14 @@ class OmronDevice(Device):
         else:
             self.inverter.on_idle(self.now)   # Table 12: the P048 action
 
-    def _update_io_status(self) -> None:
+    def update_io_status(self) -> None:
         # Table C-2 (seed 004:2416): the status is "communications status for CompoNet Option Board"
         # with bits 0 (always ON) and 8-11 (the four fault bits) only; the extended device status
         # of bits 4-7 is not the board's, so it stays 0. The fault bits follow the board's faults
         # (the MS indicator, Table 4: a flexible configuration rejected, the node address changed),
         # never an inverter trip: a trip (E62 forced by the network too) shows in Control
         # Supervisor 0x29 (Faulted, Fault Code), not in Identity (Table 24 leaves MS green for it).
-        super()._update_io_status()
+        super().update_io_status()
         status = STATUS_ALWAYS_ON
         if self.inverter.flexible_error is not None:
             status |= IdentityStatus.MAJOR_RECOVERABLE_FAULT   # appendix F Note 5
@@ -421,7 +421,7 @@ class OmronDevice(Device):
     def advance(self, now: float) -> None:
         self._now = max(self.now, now)
         self.inverter.advance(self._now)
-        self._update_io_status()
+        self.update_io_status()
 
     def next_deadline(self) -> float | None:
         return self.inverter.next_deadline()

@@ -7,17 +7,18 @@ import asyncio
 import logging
 from dataclasses import dataclass
 
-from ...eip.encapsulation import DEFAULT_FRAME_TIMEOUT
-from ...eip.limits import (
+from ..devices.acg.drive import AcgDrive
+from ..devices.acg.modbus import DriveSource, ExceptionCode, MbapBuffer, MbapLengthError, ModbusTcpCore
+from ..devices.acg.modbus_core import RegisterWritten
+from ..devices.state import StateFileError, StateWriter
+from ..eip.encapsulation import DEFAULT_FRAME_TIMEOUT
+from ..eip.limits import (
     DEFAULT_MAX_TCP_CONNECTIONS,
     ConnectionLimiter,
     RateLimitedLog,
     guarded_listener,
     quiet_accept_errors,
 )
-from ..state import StateFileError, StateWriter
-from .drive import AcgDrive
-from .modbus import DriveSource, ExceptionCode, MbapBuffer, MbapLengthError, ModbusTcpCore
 
 log = logging.getLogger(__name__)
 
@@ -51,8 +52,10 @@ class ModbusTcpServer:
 
     def __init__(self, drive: AcgDrive | DriveSource, host: str = "127.0.0.1", port: int = 0, *,
                  saves: StateWriter | None = None, max_connections: int = DEFAULT_MAX_TCP_CONNECTIONS,
-                 max_connections_per_host: int | None = None, frame_timeout: float = DEFAULT_FRAME_TIMEOUT) -> None:
-        self.core = ModbusTcpCore(drive)
+                 max_connections_per_host: int | None = None, frame_timeout: float = DEFAULT_FRAME_TIMEOUT,
+                 written: RegisterWritten | None = None) -> None:
+        """``written``: told of each register a request writes (``ModbusCore.written``)."""
+        self.core = ModbusTcpCore(drive, written)
         self.frame_timeout = frame_timeout
         self.limiter = ConnectionLimiter(max_connections, max_connections_per_host)
         self._refused_log = RateLimitedLog(log)
@@ -199,7 +202,14 @@ class ModbusTcpServer:
         drive.advance(max(self.loop.time(), drive.time))
         self.rearm()
 
+    @property
+    def is_open(self) -> bool:
+        return self._server is not None
+
     async def close(self) -> None:
+        """Close the port and every connection; a later ``start`` opens it again on the same port
+        number, also one the OS chose (port 0)."""
+        self._requested_port = self.port
         if self._timer is not None:
             self._timer.cancel()
             self._timer = None

@@ -22,10 +22,10 @@ import tty
 from collections.abc import Callable
 from typing import Any, Protocol
 
-from ..state import StateFileError, StateWriter
-from .drive import AcgDrive
-from .modbus_core import ExceptionCode
-from .modbus_rtu import MAX_DRIVES_PER_LINE, LineSettings, Reply, RtuSlave
+from ..devices.acg.drive import AcgDrive
+from ..devices.acg.modbus_core import ExceptionCode, RegisterWritten
+from ..devices.acg.modbus_rtu import MAX_DRIVES_PER_LINE, LineSettings, Reply, RtuSlave
+from ..devices.state import StateFileError, StateWriter
 
 log = logging.getLogger(__name__)
 
@@ -133,8 +133,9 @@ def open_port(device: str, settings: LineSettings) -> LinePort:
 class _Station:
     """One drive on the line: its sans-I/O slave, its state writer and its own timer."""
 
-    def __init__(self, drive: AcgDrive | Callable[[], AcgDrive], saves: StateWriter | None, paced: bool) -> None:
-        self.slave = RtuSlave(drive, paced)
+    def __init__(self, drive: AcgDrive | Callable[[], AcgDrive], saves: StateWriter | None, paced: bool,
+                 written: RegisterWritten | None = None) -> None:
+        self.slave = RtuSlave(drive, paced, written)
         self.saves = saves
         self.drive_timer: asyncio.TimerHandle | None = None
 
@@ -157,16 +158,21 @@ class RtuLine:
         self._sequence = 0
         self._send_timer: asyncio.TimerHandle | None = None
         self._closed = False
+        #: The drives on the line have power: they hear and answer. Without it the tty stays open (the
+        #: client's side of a pty never sees the line vanish) and whatever comes is read and dropped.
+        self.powered = True
 
     @property
     def name(self) -> str:
         return self.port.name
 
-    def add(self, drive: AcgDrive | Callable[[], AcgDrive], saves: StateWriter | None = None) -> RtuSlave:
+    def add(self, drive: AcgDrive | Callable[[], AcgDrive], saves: StateWriter | None = None,
+            written: RegisterWritten | None = None) -> RtuSlave:
+        """Put a drive on the line; ``written``: told of each register a request writes."""
         if len(self.stations) >= MAX_DRIVES_PER_LINE:
             raise ValueError(f"an RS-485 line takes at most {MAX_DRIVES_PER_LINE} drives (seed 001, "
                              f"Communication Standards)")
-        station = _Station(drive, saves, self.port.paced)
+        station = _Station(drive, saves, self.port.paced, written)
         self.stations.append(station)
         return station.slave
 
@@ -203,7 +209,7 @@ class RtuLine:
         except OSError as exc:
             log.debug("Modbus-RTU on %s: read: %s", self.name, exc)
             return
-        if not data:
+        if not data or not self.powered:
             return
         now = self.loop.time()
         for station in self.stations:
@@ -259,7 +265,7 @@ class RtuLine:
     def _send_at(self, due: float, frame: bytes) -> None:
         """Write ``frame`` at ``due`` (a bounded queue: a flood of requests cannot grow it)."""
         assert self.loop is not None
-        if self._closed:
+        if self._closed or not self.powered:
             return
         if len(self._queue) >= MAX_QUEUED_REPLIES:
             self.dropped_replies += 1
@@ -326,6 +332,22 @@ class RtuLine:
         drive = station.slave.drive
         drive.advance(max(self.loop.time(), drive.time))
         self._rearm_drive(station)
+
+    def power_off(self) -> None:
+        """The drives lose power: nothing is answered, nothing half heard or queued is kept, until
+        ``power_on``."""
+        self.powered = False
+        self._queue.clear()
+        self._output.clear()
+        for timer in (self._frame_timer, self._send_timer):
+            if timer is not None:
+                timer.cancel()
+        self._frame_timer = self._send_timer = None
+        for station in self.stations:
+            station.slave.forget_input()
+
+    def power_on(self) -> None:
+        self.powered = True
 
     async def close(self) -> None:
         self._closed = True

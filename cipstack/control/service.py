@@ -1,0 +1,248 @@
+"""The command service: every operation on a running emulated device, once, for every surface.
+
+The local control socket (``cipstack drive``), the HTTP API, scenarios, the pytest plugin and a
+fleet's relay all call ``DeviceService``; none adds behaviour. ``OPERATIONS`` declares each
+operation once (its arguments with their JSON keys, its HTTP route, its ``cipstack drive`` words),
+and the HTTP routes, ``/openapi.json`` and the ``cipstack drive`` subcommands are generated from it,
+so that every operation is on every surface and no surface can drift.
+
+Errors: an operation raises one of the kinds of ``cipstack.errors``; ``outcome`` is the one table
+from an error to what each surface makes of it (an exit code, an HTTP status, the JSON error). The
+messages name JSON keys (``"share"``), never command-line options: the command line checks its own
+syntax before it asks.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import contextlib
+from collections.abc import Awaitable, Callable
+from dataclasses import dataclass
+from typing import TYPE_CHECKING, Any
+
+from ..devices.keypad import NoKeypad, WriteRefused
+from ..errors import BadRequest, CipstackError, NotFound, PeerUnreachable, StateRefused
+from ..faults import FaultController, FaultRequest
+from ..faults.model import JSON_SPELLING
+from .events import EventStream
+from .operations import OPERATION_BY_NAME, OPERATIONS, Argument, Operation
+
+if TYPE_CHECKING:
+    from ..runtime import DeviceRuntime
+
+#: How long an operation that opens or closes ports waits for them before it answers; a power-cycle
+#: with a longer ``off`` answers while the power is still off.
+SETTLE_S = 2.0
+
+#: Events one ``events`` call returns at most (the oldest after ``since`` first).
+MAX_EVENTS = 1000
+
+
+# -- the outcome table ---------------------------------------------------------------------------------
+@dataclass(frozen=True)
+class Outcome:
+    """What a surface makes of an error: its name on the control socket, the command line's exit code,
+    the HTTP status."""
+
+    name: str
+    exit_code: int
+    http_status: int
+
+
+#: From an error's kind to its outcome, the first that matches (the command line's exit 2 is a usage
+#: error: the request itself is malformed; 1 is a failure: the device has no such thing, its state
+#: says no, or it cannot be reached).
+OUTCOMES: tuple[tuple[type[BaseException], Outcome], ...] = (
+    (BadRequest, Outcome("bad-request", 2, 400)),
+    (NotFound, Outcome("not-found", 1, 404)),
+    (StateRefused, Outcome("refused", 1, 409)),
+    (PeerUnreachable, Outcome("unreachable", 1, 503)),
+    (CipstackError, Outcome("failed", 1, 500)),
+)
+OUTCOME_BY_NAME = {outcome.name: outcome for _, outcome in OUTCOMES}
+
+
+def outcome(error: BaseException) -> Outcome | None:
+    """The outcome of ``error``; None for an error the package did not raise on purpose (a defect)."""
+    for kind, result in OUTCOMES:
+        if isinstance(error, kind):
+            return result
+    return None
+
+
+def error_of(name: str, message: str) -> CipstackError:
+    """The error an outcome's name stands for, rebuilt on the client's side of a socket or an HTTP call."""
+    kinds = {result.name: kind for kind, result in OUTCOMES}
+    kind = kinds.get(name, CipstackError)
+    return kind(message)  # type: ignore[no-any-return]
+
+
+def check_arguments(operation: Operation, arguments: dict[str, Any]) -> dict[str, Any]:
+    """The arguments of a call, checked against the declaration: no unknown key, every required one."""
+    stray = sorted(set(arguments) - {a.key for a in operation.arguments})
+    if stray:
+        valid = ", ".join(f'"{a.key}"' for a in operation.arguments) or "none"
+        raise BadRequest(f"{operation.name}: unknown key {', '.join(repr(k) for k in stray)}; valid: {valid}")
+    for argument in operation.arguments:
+        if argument.required and arguments.get(argument.key) is None:
+            raise BadRequest(f"{operation.name} needs \"{argument.key}\": {argument.help}")
+    return arguments
+
+
+class DeviceService:
+    """The operations on one running device (``handlers``: one method each), called with JSON values and
+    answering JSON values."""
+
+    def __init__(self, runtime: DeviceRuntime, faults: FaultController, events: EventStream,
+                 name: str = "") -> None:
+        self.runtime = runtime
+        self.faults = faults
+        self.events = events
+        #: The device's product name, for ``/devices``.
+        self.name = name
+        #: Each operation's method.
+        self.handlers: dict[str, Callable[..., Any]] = {
+            "status": self.status, "trip": self.trip, "fault": self.fault, "faults": self.faults_active,
+            "clear": self.clear, "parameter": self.parameter, "set-parameter": self.set_parameter,
+            "events": self.events_since, "power": self.power, "link": self.link}
+
+    def describe(self) -> dict[str, Any]:
+        """What ``GET /devices`` lists of the device: its EtherNet/IP port and product name."""
+        return {"port": self.runtime.server.port, "product_name": self.name}
+
+    def call(self, operation: str, arguments: dict[str, Any], origin: str = "python",
+             peer: str | None = None) -> Any:
+        """Run ``operation`` with ``arguments`` (JSON keys): its result, or for an operation that waits
+        on the loop (a fault and its ports) an awaitable of it. ``origin`` and ``peer`` say who asks
+        (what a parameter write's event records). Raises the kinds of ``cipstack.errors``."""
+        declared = OPERATION_BY_NAME.get(operation)
+        if declared is None:
+            raise BadRequest(f"unknown operation {operation!r}; valid: {', '.join(OPERATION_BY_NAME)}")
+        check_arguments(declared, arguments)
+        method = self.handlers[declared.name]
+        if method == self.set_parameter:
+            arguments = {**arguments, "origin": origin, "peer": peer}
+        return method(**arguments)
+
+    async def call_async(self, operation: str, arguments: dict[str, Any], origin: str = "python",
+                         peer: str | None = None) -> Any:
+        """``call``, its result awaited when it is an awaitable."""
+        result = self.call(operation, arguments, origin, peer)
+        if isinstance(result, Awaitable):
+            result = await result
+        return result
+
+    # -- status, trip ----------------------------------------------------------------------------------
+    def status(self) -> dict[str, Any]:
+        self.runtime.tick()
+        return {**self.runtime.status(), "faults": len(self.faults.active)}
+
+    def trip(self, code: int | str) -> dict[str, Any]:
+        from ..devices.base import TripRefused
+
+        if not isinstance(code, (int, str)) or isinstance(code, bool):
+            raise BadRequest("\"code\" is a number or a name")
+        if isinstance(code, str):
+            with contextlib.suppress(ValueError):
+                code = int(code, 0)
+        if not self.runtime.power.powered:
+            raise StateRefused("the device is powered off (power-cycle): it cannot trip")
+        now = self.runtime.tick()
+        device = self.runtime.device
+        try:
+            trip = device.inject_trip(code)
+        except NotImplementedError as exc:
+            raise BadRequest(str(exc)) from None
+        except TripRefused as exc:
+            raise StateRefused(str(exc)) from None
+        except (KeyError, ValueError) as exc:
+            reason = exc.args[0] if exc.args else exc
+            raise BadRequest(f"{reason}; valid codes: {device.trip_codes()}") from None
+        self.runtime.tick(now)
+        label = getattr(trip, "label", None) or str(trip)
+        fault = getattr(trip, "fault_code", None)
+        return {"result": f"tripped: {label}" + (f" (fault code 0x{fault:04X})" if fault is not None else ""),
+                "trip": label, "status": device.status_line()}
+
+    # -- faults -----------------------------------------------------------------------------------------
+    async def fault(self, name: str, options: dict[str, Any] | None = None) -> dict[str, Any]:
+        """Apply a fault (``options`` by their JSON keys); its record once its ports are closed or opened
+        (at most ``SETTLE_S``: a long power-cycle answers while the power is off)."""
+        if not isinstance(name, str):
+            raise BadRequest("\"name\" names a fault: {\"name\": \"stop-producing\", \"options\": {...}}")
+        if options is None:
+            options = {}
+        if not isinstance(options, dict):
+            raise BadRequest("\"options\" is a JSON object")
+        request = FaultRequest.build(name, options, JSON_SPELLING)
+        fault = self.faults.apply(request)
+        await self._settled()
+        return fault.as_json(self.runtime.now())
+
+    def faults_active(self) -> list[dict[str, Any]]:
+        now = self.runtime.now()
+        return [f.as_json(now) for f in self.faults.faults()]
+
+    async def clear(self, fault: int | str | None = None) -> list[dict[str, Any]]:
+        """Clear every active fault, or one by id, or those of one name; the faults cleared."""
+        which = int(fault) if isinstance(fault, str) and fault.strip().isdigit() else fault
+        cleared = self.faults.clear(which)
+        await self._settled()
+        return [f.as_json() for f in cleared]
+
+    async def _settled(self) -> None:
+        """Wait for the ports a fault closes or opens, but not for a long ``off``."""
+        with contextlib.suppress(asyncio.TimeoutError):
+            await asyncio.wait_for(asyncio.shield(self.faults.settle()), SETTLE_S)
+
+    # -- power and link ---------------------------------------------------------------------------------
+    async def power(self, action: str, off: str | float | None = None) -> Any:
+        if action != "cycle":
+            raise BadRequest(f"\"action\" {action!r}: the power takes \"cycle\"")
+        return await self.fault("power-cycle", {"off": off} if off is not None else {})
+
+    async def link(self, state: str) -> Any:
+        if state not in ("unplug", "plug"):
+            raise BadRequest(f"\"state\" {state!r}: unplug or plug")
+        return await self.fault(state)
+
+    # -- keypad parameters ------------------------------------------------------------------------------
+    def _keypad(self) -> Any:
+        device = self.runtime.device
+        keypad = device.keypad()
+        if keypad is None:
+            raise NoKeypad(f"{device.identity_info.product_name}: this device has no keypad (keypad parameters "
+                           "are a drive's: profile acg, mx2 or rx); write its parameters over CIP")
+        return keypad
+
+    def parameter(self, code: str) -> dict[str, Any]:
+        return dict(self._keypad().get(code))
+
+    def set_parameter(self, code: str, value: object, origin: str = "python", peer: str | None = None
+                      ) -> dict[str, Any]:
+        keypad = self._keypad()
+        if isinstance(value, (dict, list, bool)) or value is None:
+            raise BadRequest("\"value\" is in the keypad's unit (\"2.5\", 60, or an enumeration's name)")
+        if not self.runtime.power.powered:
+            raise WriteRefused(f"{code}: the device is powered off (power-cycle)")
+        now = self.runtime.tick()
+        register, raw = keypad.set(code, str(value), now)
+        if self.events.watching:
+            self.events.parameter_written(origin, **({"peer": peer} if peer is not None else {}),
+                                          **keypad.write_fields(register, raw))
+        self.runtime.tick(now)
+        return dict(keypad.get(register.code))
+
+    # -- events -------------------------------------------------------------------------------------------
+    def events_since(self, since: int | str = 0) -> list[dict[str, Any]]:
+        try:
+            number = int(since)
+        except (TypeError, ValueError):
+            raise BadRequest("\"since\" is an event number") from None
+        if number < 0:
+            raise BadRequest("\"since\" is an event number (0 or more)")
+        return [e.as_json() for e in self.events.since(number)[:MAX_EVENTS]]
+
+
+__all__ = ["OPERATIONS", "OUTCOMES", "Argument", "DeviceService", "Operation", "Outcome", "check_arguments",
+           "error_of", "outcome"]

@@ -1,0 +1,187 @@
+"""The declared seams of the EtherNet/IP target: where filters may act on what enters and leaves.
+
+A core is built with its seams (DESIGN: collaborators passed in at construction, nothing patched
+later). Each seam holds an ordered list of filters and calls through them; with no filter it is a
+direct call to the core, bound once, so a target nobody filters runs exactly the code it runs
+without seams. What a filter does (drop a datagram, answer a request with an error, hold a reply)
+is the business of whoever installs it (``cipstack.faults``, ``cipstack.control.events``); a seam
+knows only the order.
+
+* ``IoSeam``: class 1, between the UDP endpoint and the core (``IoTarget``): O->T datagrams going in
+  (``IoInFilter``), T->O datagrams coming out (``IoOutFilter``), and consumed data handed to the
+  device (withheld on demand).
+* ``RequestSeam``: explicit requests between the encapsulation target and the message router
+  (``RequestFilter``); filters act first, observers last, the router answers.
+* ``ReplySeam``: explicit replies between the encapsulation target and the TCP socket
+  (``ReplyFilter``): a filter may hold a reply and send it later, in order.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from typing import TYPE_CHECKING, Any, Protocol
+
+if TYPE_CHECKING:
+    from ..cip.router import RequestContext
+    from .io_target import IoConnection
+
+Datagram = tuple[bytes, tuple[str, int]]
+
+
+# -- class 1 ---------------------------------------------------------------------------------------------
+class IoInFilter(Protocol):
+    """A filter of O->T datagrams: returns the datagram to pass on (changed or not), or None when it took
+    it (dropped it, or consumed it itself through ``seam.withhold``). ``connection`` is the open
+    connection the datagram names, if any."""
+
+    def inbound(self, raw: bytes, source: tuple[str, int], now: float, connection: IoConnection | None,
+                seam: IoSeam) -> bytes | None: ...
+
+
+class IoOutFilter(Protocol):
+    """A filter of the T->O datagrams due at ``now``: returns those to send now (it may hold some back,
+    duplicate, change or drop them, and hand others to ``seam.send_later``)."""
+
+    def outbound(self, datagrams: list[Datagram], now: float, seam: IoSeam) -> list[Datagram]: ...
+
+
+class IoSeam:
+    """The class 1 core as its UDP endpoint sees it (``io_server.IoCore``). ``receive`` and ``poll`` are
+    the core's own bound methods while no filter is in place, and the filtered paths otherwise."""
+
+    def __init__(self, core: Any, deliver: Callable[[int, bytes, float], None]) -> None:
+        """``core``: the ``IoTarget``; ``deliver``: where its consumed data goes (the device's Assembly
+        object), passed through ``deliver`` of this seam so a filter can withhold it."""
+        self.core = core
+        self.device_deliver = deliver
+        self.inbound: list[IoInFilter] = []
+        self.outbound: list[IoOutFilter] = []
+        #: Sends datagrams at a later time (a delayed production); given by the shell once it runs.
+        self.send_later: Callable[[float, list[Datagram]], None] = lambda at, datagrams: None
+        self.withholding = False
+        self.next_deadline = core.next_deadline
+        self.expire = core.expire
+        self.receive: Callable[[bytes, tuple[str, int], float], None] = core.receive
+        self.poll: Callable[..., list[Datagram]] = core.poll
+
+    def deliver(self, instance_id: int, data: bytes, now: float) -> None:
+        """The core's ``deliver``: to the device, unless a filter withholds the datagram being consumed."""
+        if not self.withholding:
+            self.device_deliver(instance_id, data, now)
+
+    def add(self, item: IoInFilter | IoOutFilter) -> None:
+        if hasattr(item, "inbound"):
+            self.inbound.append(item)  # type: ignore[arg-type]
+        if hasattr(item, "outbound"):
+            self.outbound.append(item)  # type: ignore[arg-type]
+        self._bind()
+
+    def remove(self, item: object) -> None:
+        self.inbound = [f for f in self.inbound if f is not item]
+        self.outbound = [f for f in self.outbound if f is not item]
+        self._bind()
+
+    def clear(self) -> None:
+        self.inbound.clear()
+        self.outbound.clear()
+        self._bind()
+
+    def _bind(self) -> None:
+        core = self.core
+        self.receive = self._receive_filtered if self.inbound else core.receive
+        self.poll = self._poll_filtered if self.outbound else core.poll
+
+    def _receive_filtered(self, raw: bytes, source: tuple[str, int], now: float) -> None:
+        core = self.core
+        connection = core.connection_of(raw)
+        for item in list(self.inbound):
+            passed = item.inbound(raw, source, now, connection, self)
+            if passed is None:
+                return
+            raw = passed
+        core.receive(raw, source, now)
+
+    def withhold(self, raw: bytes, source: tuple[str, int], now: float) -> None:
+        """Consume ``raw`` (sequence counts, watchdog, run/idle) without handing its data to the device."""
+        self.withholding = True
+        try:
+            self.core.receive(raw, source, now)
+        finally:
+            self.withholding = False
+
+    def _poll_filtered(self, now: float, horizon: float = 0.0) -> list[Datagram]:
+        out = self.core.poll(now, horizon)
+        for item in list(self.outbound):
+            if not out:
+                break
+            out = item.outbound(out, now, self)
+        return out
+
+
+# -- explicit requests -----------------------------------------------------------------------------------
+Handle = Callable[[bytes, "RequestContext"], bytes]
+
+
+class RequestFilter(Protocol):
+    """A filter of explicit requests: answers ``raw`` itself, or calls ``call_next`` for the rest of the
+    chain (and may look at what it answered)."""
+
+    def request(self, raw: bytes, context: RequestContext, call_next: Handle) -> bytes: ...
+
+
+class RequestSeam:
+    """The message router as the encapsulation target calls it: ``handle`` is the router's own while
+    nothing is in place. ``filters`` act first (they may answer in the router's stead), ``observers``
+    last (they see what reaches the router and what it answered)."""
+
+    def __init__(self, router: Any) -> None:
+        self.router = router
+        self.filters: list[RequestFilter] = []
+        self.observers: list[RequestFilter] = []
+        self.handle: Handle = router.handle
+
+    def add(self, item: RequestFilter, observer: bool = False) -> None:
+        (self.observers if observer else self.filters).append(item)
+        self._bind()
+
+    def remove(self, item: object) -> None:
+        self.filters = [f for f in self.filters if f is not item]
+        self.observers = [f for f in self.observers if f is not item]
+        self._bind()
+
+    def _bind(self) -> None:
+        handle: Handle = self.router.handle
+        for item in reversed([*self.filters, *self.observers]):
+            handle = _link(item, handle)
+        self.handle = handle
+
+
+def _link(item: RequestFilter, call_next: Handle) -> Handle:
+    def handle(raw: bytes, context: RequestContext) -> bytes:
+        return item.request(raw, context, call_next)
+    return handle
+
+
+# -- explicit replies ------------------------------------------------------------------------------------
+class ReplySender(Protocol):
+    """A served TCP connection: what sends a reply taken from its connection earlier."""
+
+    def send_reply(self, out: bytes) -> None: ...
+
+
+class ReplyFilter(Protocol):
+    """A filter of TCP replies: sends ``out`` on ``served`` now or later (``served.send_reply``)."""
+
+    def reply(self, served: ReplySender, out: bytes) -> None: ...
+
+
+class ReplySeam:
+    """Replies on their way to the TCP socket. While ``filter`` is None (the common case) the shell
+    writes each reply at once; otherwise the filter sends it."""
+
+    def __init__(self) -> None:
+        self.filter: ReplyFilter | None = None
+
+
+__all__ = ["Datagram", "IoInFilter", "IoOutFilter", "IoSeam", "ReplyFilter", "ReplySeam", "ReplySender",
+           "RequestFilter", "RequestSeam"]

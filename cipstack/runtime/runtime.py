@@ -1,0 +1,147 @@
+"""The narrow interface of a running device: what faults, the event stream and the command service
+may do to it and ask of it, without knowing the ``Adapter`` that composed it."""
+
+from __future__ import annotations
+
+import asyncio
+from typing import TYPE_CHECKING, Any
+
+from .observer import RuntimeObserver
+from .power import PowerLink
+
+if TYPE_CHECKING:
+    from ..devices.base import Device
+    from ..eip.io_server import IoEndpoint
+    from ..eip.io_target import IoConnection, IoTarget
+    from ..eip.seams import Datagram, IoSeam, ReplySeam, RequestSeam
+    from ..eip.server import EncapsulationServer
+    from ..eip.target import EncapsulationTarget
+    from ..modbus.rtu_line import RtuLine
+
+
+class DeviceClock:
+    """Moves the device to the time of each request and datagram (the cores call ``tick``), and keeps a
+    timer at its next deadline (lost-command timers, the end of a ramp), so it changes on time even
+    when nobody asks; its observers hear of each move."""
+
+    def __init__(self, device: Device, observers: list[RuntimeObserver]) -> None:
+        self.device = device
+        self.observers = observers
+        self._timer: asyncio.TimerHandle | None = None
+        self._timer_at: float | None = None
+
+    def tick(self, now: float) -> None:
+        deadline = self.device.tick(now)
+        if deadline != self._timer_at or (deadline is not None and self._timer is None):
+            if self._timer is not None:
+                self._timer.cancel()
+                self._timer = None
+            self._timer_at = deadline
+            if deadline is not None:
+                self._timer = asyncio.get_running_loop().call_at(max(deadline, now), self._on_timer)
+        if self.observers:
+            for observer in self.observers:
+                observer.ticked(now)
+
+    def _on_timer(self) -> None:
+        self._timer = None
+        self._timer_at = None
+        self.tick(asyncio.get_running_loop().time())
+
+    def stop(self) -> None:
+        if self._timer is not None:
+            self._timer.cancel()
+            self._timer = None
+            self._timer_at = None
+
+
+class DeviceRuntime:
+    """A device running behind its ports: its clock, its power and link (``power``), the seams where
+    faults act (``requests``, ``replies``, ``class1``) and its observers."""
+
+    def __init__(self, device: Device, clock: DeviceClock, observers: list[RuntimeObserver], power: PowerLink,
+                 target: EncapsulationTarget, server: EncapsulationServer, requests: RequestSeam,
+                 replies: ReplySeam, io: IoTarget | None = None, class1: IoSeam | None = None,
+                 endpoint: IoEndpoint | None = None, rtu: RtuLine | None = None) -> None:
+        self.device = device
+        self.clock = clock
+        self.observers = observers
+        self.power = power
+        self.target = target
+        self.server = server
+        self.requests = requests
+        self.replies = replies
+        self.io = io
+        self.class1 = class1
+        self.endpoint = endpoint
+        self.rtu = rtu
+        if class1 is not None:
+            class1.send_later = self.send_later
+
+    # -- time ---------------------------------------------------------------------------------------------
+    @staticmethod
+    def now() -> float:
+        return asyncio.get_running_loop().time()
+
+    def tick(self, now: float | None = None) -> float:
+        """Move the device to ``now`` (the loop's time by default); returns it."""
+        now = self.now() if now is None else now
+        self.clock.tick(now)
+        return now
+
+    # -- what faults do ---------------------------------------------------------------------------------
+    def close_tcp(self) -> int:
+        return self.server.close_connections()
+
+    def drop_sessions(self) -> int:
+        return self.target.drop_sessions()
+
+    def class1_connections(self) -> list[IoConnection]:
+        return list(self.io.connections.values()) if self.io is not None else []
+
+    def send_later(self, at: float, datagrams: list[Datagram]) -> None:
+        """Send class 1 datagrams at ``at`` (a delayed production), if the port is still open then."""
+        endpoint = self.endpoint
+        if endpoint is not None:
+            asyncio.get_running_loop().call_at(at, endpoint.send, datagrams)
+
+    async def lose_power(self) -> None:
+        """The power goes: every port closes (``power``) and every connection with it (no Forward_Close
+        and no FIN would come from a device without power, but the peer's socket is gone either way);
+        the device restarts from what it keeps over a power loss (``Device.power_cycle``, each family
+        from its manual), and a save it had handed to its memory before is written (or failed)."""
+        loop = asyncio.get_running_loop()
+        if self.power.powered:
+            self.power.power_off()
+        await self.power.settled()
+        if self.io is not None:
+            self.io.close_all()
+        self.device.power_cycle(loop.time())
+        self.tick(loop.time())
+        await loop.run_in_executor(None, self.device.flush_saves, 10.0)
+
+    async def restore_power(self) -> None:
+        self.power.power_on()
+        await self.power.settled()
+
+    # -- what the command service reads -------------------------------------------------------------------
+    def status(self) -> dict[str, Any]:
+        """The device's state, its power and link, its sessions and connections, and what its RS-485
+        port made of its line."""
+        device = self.device
+        status: dict[str, Any] = {"status": device.status_line(), "drive": device.status_fields(),
+                                  **self.power.as_json(),
+                                  "sessions": len(self.target.sessions),
+                                  "class3_connections": len(device.connection_table.connections),
+                                  "class1_connections": len(self.io.connections) if self.io is not None else 0}
+        if self.rtu is not None:
+            status["rtu"] = {"device": self.rtu.name, **self.rtu.slaves[0].counters.as_dict()}
+        return status
+
+    def shutdown(self) -> None:
+        """The device stops: no port opens again and no timer of the device fires."""
+        self.power.shutdown()
+        self.clock.stop()
+
+
+__all__ = ["DeviceClock", "DeviceRuntime"]
