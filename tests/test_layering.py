@@ -1,5 +1,6 @@
 """The dependency direction DESIGN.md gives, checked on the source: ``cip`` depends on nothing of
-ours; ``objects`` and ``assemblies`` on ``cip``; ``eip`` and ``componet`` on ``cip`` alone (a
+ours but ``errors`` (the error root, which every part may import and which imports nothing of ours);
+``objects`` and ``assemblies`` on ``cip``; ``eip`` and ``componet`` on ``cip`` alone (a
 transport knows no device); ``devices`` on those; ``eds`` reads the devices' declarations, never
 the other way round."""
 
@@ -14,21 +15,22 @@ PACKAGE = Path(__file__).resolve().parent.parent / "cipstack"
 
 #: What each part may import of the package (its own modules always).
 ALLOWED = {
-    "cip": set(),
-    "objects": {"cip"},
-    "assemblies": {"cip"},
-    "eip": {"cip"},
-    "componet": {"cip", "eip"},
+    "cip": {"errors"},
+    "objects": {"errors", "cip"},
+    "assemblies": {"errors", "cip"},
+    "eip": {"errors", "cip"},
+    "componet": {"errors", "cip", "eip"},
     # catalog: the index of declared classes a device hands its scanner (it imports only what lies below).
-    "devices": {"cip", "objects", "assemblies", "eip", "componet", "catalog"},
+    "devices": {"errors", "cip", "objects", "assemblies", "eip", "componet", "catalog"},
     # The battery sits on top: it may use what lies below (the codecs, the EDS reader, the
     # scanner's reading of an EDS) and nothing imports it but the command line.
-    "conformance": {"cip", "objects", "assemblies", "eip", "componet", "devices", "catalog", "eds", "scanner"},
+    "conformance": {"errors", "cip", "objects", "assemblies", "eip", "componet", "devices", "catalog", "eds",
+                    "scanner"},
     # On top (DESIGN): the fault model acts on a running adapter's transport, never the reverse.
-    "faults": {"cip", "eip"},
-    "control": {"eip", "faults"},
+    "faults": {"errors", "cip", "eip"},
+    "control": {"errors", "eip", "faults"},
     # The pytest plugin: fixtures over the in-process adapter, its faults and events, and the scanner.
-    "testing": {"adapter", "control", "scanner", "devices", "eds"},
+    "testing": {"errors", "adapter", "control", "scanner", "devices", "eds"},
 }
 
 #: The parts that sit on top: nothing else in the package imports them (DESIGN.md).
@@ -89,3 +91,8 @@ def test_nothing_below_imports_the_parts_on_top(part: str) -> None:
         if part in _imports(path):
             wrong[str(path.relative_to(PACKAGE))] = part
     assert wrong == {}
+
+
+def test_errors_imports_nothing_of_the_package() -> None:
+    """``errors`` lies below every part: it imports nothing of ours, so any part may import it."""
+    assert _imports(PACKAGE / "errors.py") == set()
