@@ -9,8 +9,8 @@ One import for each thing a user touches::
 
 The scanner (``Scanner`` async, ``SyncScanner`` blocking), discovery, values with their unit, class 1
 connections and their process images, EDS files, parameter recipes, the adapter emulator and the
-errors. Each name is imported when first used, so ``import cipstack`` (and ``cipstack --help``) stays
-fast.
+errors (``CipstackError``, the root of every error the package raises on purpose, and its kinds). Each
+name is imported when first used, so ``import cipstack`` (and ``cipstack --help``) stays fast.
 """
 
 from __future__ import annotations
@@ -48,7 +48,13 @@ _EXPORTS: dict[str, str] = {
     "precise_event_loop": "cipstack.eip.io_server",
     # routes
     "PortSegment": "cipstack.cip.epath",
-    # errors
+    # errors: the root every error of the package derives from, and its kinds
+    "CipstackError": "cipstack.errors",
+    "BadRequest": "cipstack.errors",
+    "NotFound": "cipstack.errors",
+    "StateRefused": "cipstack.errors",
+    "PeerUnreachable": "cipstack.errors",
+    "ProtocolError": "cipstack.errors",
     "CipError": "cipstack.cip.status",
     "GeneralStatus": "cipstack.cip.status",
     "MalformedReplyError": "cipstack.eip.replies",
@@ -76,8 +82,10 @@ __all__ = [
     "Adapter",
     "AdapterSettings",
     "AttributeValue",
+    "BadRequest",
     "Catalog",
     "CipError",
+    "CipstackError",
     "EdsDocument",
     "EncapsulationStatusError",
     "GeneralStatus",
@@ -85,12 +93,16 @@ __all__ = [
     "IoConnectionHandle",
     "IoTimeoutError",
     "MalformedReplyError",
+    "NotFound",
     "OtFormat",
+    "PeerUnreachable",
     "PortSegment",
     "ProcessImage",
+    "ProtocolError",
     "ReplyDecodeError",
     "Scaling",
     "Scanner",
+    "StateRefused",
     "SyncIoConnection",
     "SyncScanner",
     "UnknownAttributeError",
@@ -142,6 +154,7 @@ if TYPE_CHECKING:  # what type checkers and the API reference see; nothing is im
     from .eip.io_originator import IoConnectionHandle, IoTimeoutError, OtFormat, ProcessImage
     from .eip.io_server import precise_event_loop, run_precise
     from .eip.replies import EncapsulationStatusError, MalformedReplyError
+    from .errors import BadRequest, CipstackError, NotFound, PeerUnreachable, ProtocolError, StateRefused
     from .params import diff_params, dump_params, load_params, read_recipe, write_recipe
     from .scanner import (
         AttributeValue,

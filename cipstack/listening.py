@@ -8,8 +8,10 @@ import logging
 import os
 from collections.abc import Iterator
 
+from .errors import CipstackError
 
-class ListenError(OSError):
+
+class ListenError(CipstackError, OSError):
     """A port (or the control socket) the adapter cannot listen on: ``where`` names it and its option."""
 
     def __init__(self, where: str, cause: OSError | str) -> None:

@@ -39,6 +39,7 @@ from typing import TYPE_CHECKING, Any
 from .catalog import Parameter
 from .cip.status import CipError
 from .cip.values import Value
+from .errors import StateRefused
 
 if TYPE_CHECKING:
     from .scanner import Scanner
@@ -50,7 +51,7 @@ ACG_PARA_CONTROL_1 = (0x64, 7, 51)
 ACG_PARA_CONTROL_ASSEMBLY = 121
 
 
-class DriveRunningError(RuntimeError):
+class DriveRunningError(StateRefused, RuntimeError):
     """A recipe load refused because the drive runs (give ``force=True`` to load anyway)."""
 
 

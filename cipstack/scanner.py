@@ -37,6 +37,7 @@ from .eip.originator import (
     run_blocking,
 )
 from .eip.replies import EncapsulationStatusError
+from .errors import NotFound, ProtocolError
 
 if TYPE_CHECKING:
     # Imported where used: explicit messaging alone does not load the EDS model or class 1.
@@ -84,12 +85,12 @@ class AttributeValue:
         return Value(self.value, self.spec.name, self.type, self.spec.scaling)
 
 
-class UnknownAttributeError(TypeError):
+class UnknownAttributeError(NotFound, TypeError):
     """An attribute nothing declares where its type or scale is needed: the message names the
     catalog looked in (``Catalog.source``) and what to give instead."""
 
 
-class ReplyDecodeError(ValueError):
+class ReplyDecodeError(ProtocolError, ValueError):
     """A successful reply whose data is not the type asked for: a mismatch on this side (the device
     answered status 0), so not a ``CipError``."""
 

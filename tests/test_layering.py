@@ -1,5 +1,6 @@
 """The dependency direction DESIGN.md gives, checked on the source: ``cip`` depends on nothing of
-ours; ``objects`` and ``assemblies`` on ``cip``; ``eip`` and ``componet`` on ``cip`` alone (a
+ours but ``errors`` (the error root, which every part may import and which imports nothing of ours);
+``objects`` and ``assemblies`` on ``cip``; ``eip`` and ``componet`` on ``cip`` alone (a
 transport knows no device); ``devices`` on those; ``eds`` reads the devices' declarations, never
 the other way round."""
 
@@ -94,3 +95,8 @@ def test_nothing_below_imports_the_parts_on_top(part: str) -> None:
         if part in _imports(path):
             wrong[str(path.relative_to(PACKAGE))] = part
     assert wrong == {}
+
+
+def test_errors_imports_nothing_of_the_package() -> None:
+    """``errors`` lies below every part: it imports nothing of ours, so any part may import it."""
+    assert _imports(PACKAGE / "errors.py") == set()

@@ -9,6 +9,8 @@ import time as clock
 from pathlib import Path
 from typing import TYPE_CHECKING, Any, TextIO
 
+from ..errors import BadRequest
+
 if TYPE_CHECKING:  # the analysis modules load when the command runs, not when the parser is built
     from .analyzer import Connection
     from .decoding import Declarations
@@ -48,7 +50,7 @@ def add_arguments(sub: Any) -> None:
     q.set_defaults(func=run)
 
 
-class UsageProblem(Exception):
+class UsageProblem(BadRequest):
     pass
 
 

@@ -14,6 +14,8 @@ from collections.abc import Iterator
 from dataclasses import dataclass
 from typing import BinaryIO
 
+from ..errors import BadRequest
+
 # Link types (tcpdump.org/linktypes.html).
 LINKTYPE_NULL = 0          # BSD loopback: 4-byte address family in host byte order
 LINKTYPE_ETHERNET = 1
@@ -26,7 +28,7 @@ SUPPORTED_LINKTYPES = {LINKTYPE_NULL: "loopback", LINKTYPE_ETHERNET: "Ethernet",
                        LINKTYPE_LOOP: "loopback", LINKTYPE_LINUX_SLL: "Linux cooked",
                        LINKTYPE_IPV4: "raw IPv4", LINKTYPE_LINUX_SLL2: "Linux cooked v2"}
 
-class CaptureFormatError(ValueError):
+class CaptureFormatError(BadRequest):
     """The file is not a pcap/pcapng file, or is cut short inside its header."""
 
 

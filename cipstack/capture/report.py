@@ -6,6 +6,7 @@ import csv
 from pathlib import Path
 from typing import Any
 
+from ..errors import CipstackError
 from .analyzer import Connection, Direction, Totals
 from .decoding import path_text
 
@@ -148,7 +149,7 @@ def write_csv(directory: Path, connections: list[Connection]) -> list[Path]:
     return written
 
 
-class PlotUnavailable(RuntimeError):
+class PlotUnavailable(CipstackError, RuntimeError):
     pass
 
 

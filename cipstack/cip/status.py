@@ -9,6 +9,8 @@ from __future__ import annotations
 from collections.abc import Sequence
 from enum import IntEnum
 
+from ..errors import ProtocolError
+
 
 class GeneralStatus(IntEnum):
     SUCCESS = 0x00
@@ -117,7 +119,7 @@ def describe_status(general: int, extended: Sequence[int] = ()) -> str:
     return text
 
 
-class CipError(Exception):
+class CipError(ProtocolError):
     """A CIP request failed with a general status and optional extended status words.
 
     Raised by objects while serving a request (the router turns it into an error reply)

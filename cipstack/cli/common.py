@@ -8,15 +8,19 @@ import json
 from typing import Any
 
 from ..cip.types import CipType, parse_int, type_by_name
+from ..errors import CipstackError
 
 EXIT_OK = 0
 EXIT_FAILURE = 1
 EXIT_USAGE = 2
 
 
-class UsageError(Exception):
+class UsageError(CipstackError):
     """A bad argument: reported as one line, exit status 2. Raised by the parser, it carries the
     parser's ``prog`` (``cipstack get``) and usage, which ``main`` prints before the line."""
+
+    # Not a BadRequest: that is a ValueError, and argparse replaces the message of a ValueError
+    # raised by a ``type=`` function with its own "invalid <lambda> value".
 
     def __init__(self, message: str, *, prog: str | None = None, usage: str = "") -> None:
         super().__init__(message)

@@ -26,6 +26,7 @@ from dataclasses import dataclass
 from ..cip.epath import request_path
 from ..cip.messages import REPLY_BIT, MessageRouterRequest, Service
 from ..cip.router import MessageRouter, RequestContext
+from ..errors import ProtocolError
 
 #: FINS command code of Explicit Message Send through a CompoNet master (section 4-6).
 COMMAND_CODE = 0x2802
@@ -45,7 +46,7 @@ _REQUEST = struct.Struct(">HHBHH")
 _RESPONSE = struct.Struct(">HHHHB")
 
 
-class FrameError(ValueError):
+class FrameError(ProtocolError, ValueError):
     """A byte string that is not an explicit-message frame of this format."""
 
 

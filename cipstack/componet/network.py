@@ -30,6 +30,7 @@ from enum import Enum
 from typing import Protocol
 
 from ..cip.router import MessageRouter, RequestContext
+from ..errors import PeerUnreachable
 from .explicit import ExplicitRequest, serve_explicit
 
 log = logging.getLogger(__name__)
@@ -69,7 +70,7 @@ class NodeState(Enum):
     LOST = "communication lost"
 
 
-class NoResponse(Exception):
+class NoResponse(PeerUnreachable):
     """No slave answers at that node address."""
 
 

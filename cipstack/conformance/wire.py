@@ -18,13 +18,14 @@ from dataclasses import dataclass
 from ..cip.messages import MessageRouterRequest, MessageRouterResponse
 from ..eip.cpf import Item, ItemType, decode_items, encode_items
 from ..eip.encapsulation import HEADER, HEADER_SIZE, REGISTER_SESSION_DATA, RR_PREFIX, Command, EncapsulationHeader
+from ..errors import PeerUnreachable
 from .model import Exchange
 
 #: At most one request every 2 ms from one probe: the battery's rate bound.
 MIN_GAP = 0.002
 
 
-class TargetUnreachable(ConnectionError):
+class TargetUnreachable(PeerUnreachable):
     """The target cannot be reached, or does not speak EtherNet/IP: reported in one line."""
 
 

@@ -15,6 +15,7 @@ from dataclasses import dataclass
 from enum import Enum
 
 from ..cip.types import INT, UINT, CipType
+from ..errors import StateRefused
 
 
 class RegisterAccess(Enum):
@@ -40,7 +41,7 @@ class RegisterRefusal(Enum):
     SAVE_FAILED = "parameters not saved"
 
 
-class RegisterError(Exception):
+class RegisterError(StateRefused):
     def __init__(self, refusal: RegisterRefusal, address: int, detail: str = "") -> None:
         self.refusal = refusal
         self.address = address

@@ -37,6 +37,8 @@ from collections.abc import Mapping
 from concurrent.futures import Future
 from pathlib import Path
 
+from ..errors import StateRefused
+
 log = logging.getLogger(__name__)
 
 STATE_FORMAT = "cipstack.drive-state"
@@ -46,7 +48,7 @@ _PROFILE_PATTERN = re.compile(r"^[A-Za-z0-9_-][A-Za-z0-9._-]*$")
 _ADDRESS_PATTERN = re.compile(r"^0x[0-9A-Fa-f]{1,8}$")
 
 
-class StateFileError(Exception):
+class StateFileError(StateRefused):
     """A state file that cannot be used as it is; the message is one line and names the file."""
 
 

@@ -22,6 +22,7 @@ from typing import TYPE_CHECKING, TextIO
 
 from ..devices.omron.models import Family, UnknownModelError
 from ..devices.omron.models import model as omron_model
+from ..errors import BadRequest
 
 if TYPE_CHECKING:
     from .description import EdsDescription
@@ -35,7 +36,7 @@ EXIT_USAGE = 2
 PROFILES: dict[str, Family | None] = {"acg": None, "mx2": Family.MX2, "rx": Family.RX}
 
 
-class GenerateError(Exception):
+class GenerateError(BadRequest):
     """A request the command cannot carry out; the message is the one line it prints."""
 
 

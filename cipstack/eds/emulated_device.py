@@ -43,6 +43,7 @@ from ..cip.types import IntegerType, RealType
 from ..devices.base import Device, DeviceLimits
 from ..devices.profiles import DEFAULT_MAC, serial_from_mac
 from ..eip.io_target import IoProfile
+from ..errors import BadRequest
 from ..objects.assembly import AssemblyPoint
 from ..objects.identity import IdentityInfo
 from ..objects.tcpip import NetworkInterface
@@ -54,7 +55,7 @@ log = logging.getLogger(__name__)
 Link = tuple[int, int, int]
 
 
-class EdsDeviceError(ValueError):
+class EdsDeviceError(BadRequest):
     """The document describes no device (no ``[Device]`` section)."""
 
 

@@ -17,6 +17,7 @@ import re
 from collections.abc import Iterator
 from dataclasses import dataclass
 
+from ..errors import BadRequest
 from .model import (
     WORD_CHARACTERS,
     DocumentSource,
@@ -37,7 +38,7 @@ from .model import (
 _HEX_BYTE = re.compile(r"[0-9A-Fa-f]{2}")
 
 
-class EdsSyntaxError(ValueError):
+class EdsSyntaxError(BadRequest):
     """Text that is not EDS syntax, and the line where that shows."""
 
     def __init__(self, line: int, message: str) -> None:

@@ -10,6 +10,8 @@ import struct
 from dataclasses import dataclass
 from enum import IntEnum
 
+from ..errors import ProtocolError
+
 HEADER = struct.Struct("<HHII8sI")
 HEADER_SIZE = HEADER.size  # 24
 
@@ -39,7 +41,7 @@ class EncapsulationStatus(IntEnum):
     UNSUPPORTED_PROTOCOL = 0x0069
 
 
-class EncapsulationError(Exception):
+class EncapsulationError(ProtocolError):
     """An encapsulation-level failure, answered with ``status`` in the reply header."""
 
     def __init__(self, status: EncapsulationStatus, message: str = "", offset: int | None = None) -> None:

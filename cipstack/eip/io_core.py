@@ -17,6 +17,7 @@ from dataclasses import dataclass, field
 from enum import Enum
 from typing import NamedTuple
 
+from ..errors import ProtocolError
 from .cpf import ItemType
 
 #: CPF count 2, Sequenced Address item (type, length 8, connection id, sequence), Connected Data header.
@@ -58,7 +59,7 @@ class IoDatagram(NamedTuple):
     payload: bytes
 
 
-class IoDatagramError(ValueError):
+class IoDatagramError(ProtocolError, ValueError):
     def __init__(self, message: str, offset: int | None = None) -> None:
         super().__init__(message)
         #: Where in the datagram the problem is (capture analysis reports it).

@@ -21,6 +21,7 @@ from enum import Enum
 from typing import TYPE_CHECKING, Any
 
 from ..cip.epath import LogicalSegment, LogicalType, encode_path
+from ..errors import PeerUnreachable
 from .cm_messages import ConnectionTriad, ConnectionType, NetworkParameters, TransportTrigger, TriggerType
 from .io_core import (
     RECEIVED_NEW,
@@ -44,7 +45,7 @@ if TYPE_CHECKING:
 log = logging.getLogger(__name__)
 
 
-class IoTimeoutError(ConnectionError):
+class IoTimeoutError(PeerUnreachable):
     """The target's T->O data stopped for longer than the connection timeout."""
 
 

@@ -8,12 +8,13 @@ from collections.abc import Callable
 from typing import TypeVar
 
 from ..cip.status import CipError
+from ..errors import ProtocolError
 from .encapsulation import EncapsulationError, EncapsulationStatus
 
 T = TypeVar("T")
 
 
-class EncapsulationStatusError(Exception):
+class EncapsulationStatusError(ProtocolError):
     """A reply carried a non-zero encapsulation status."""
 
     def __init__(self, command: int, status: int) -> None:
@@ -30,7 +31,7 @@ class EncapsulationStatusError(Exception):
         super().__init__(text)
 
 
-class MalformedReplyError(ConnectionError):
+class MalformedReplyError(ProtocolError, ConnectionError):
     """A reply that cannot be decoded: one line for the user, never a traceback."""
 
 

@@ -25,6 +25,8 @@ from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Any
 
+from ..errors import BadRequest
+
 #: Devices in one fleet: each holds five descriptors (TCP listener, UDP, broadcast UDP, class 1 UDP,
 #: control socket) plus its connections, so a bound keeps a typo (127.0.0.0-127.255.255.255) from
 #: exhausting the machine.
@@ -37,7 +39,7 @@ MAX_STATION = 250
 _GROUP = re.compile(r"^(?P<kind>[^*@]+?)(?:\*(?P<count>[^@]*))?(?:@(?P<first>.*))?$")
 
 
-class SpecError(ValueError):
+class SpecError(BadRequest):
     """A fleet spec that cannot be served as written; the message is one line naming the problem."""
 
 

@@ -44,6 +44,7 @@ from multiprocessing.connection import Connection
 from typing import Any
 
 from ..eip.io_server import run_precise
+from ..errors import CipstackError
 from ..listening import ListenError
 from .serve import serve_until_signalled
 from .spec import FleetDevice, SpecError, describe_addresses
@@ -164,7 +165,7 @@ class _Worker:
         return f"exit status {code}"
 
 
-class FleetFailure(Exception):
+class FleetFailure(CipstackError):
     """The fleet could not start or a worker ended: one line, and the exit status."""
 
     def __init__(self, message: str, status: int) -> None:

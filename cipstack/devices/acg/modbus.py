@@ -28,6 +28,7 @@ from __future__ import annotations
 
 import struct
 
+from ...errors import ProtocolError
 from .drive import AcgDrive
 from .modbus_core import (
     MAX_WORDS,
@@ -69,7 +70,7 @@ class ModbusTcpCore(ModbusCore):
         return MBAP.pack(transaction, 0, 3, unit) + self.exception_pdu(function, code)
 
 
-class MbapLengthError(ValueError):
+class MbapLengthError(ProtocolError, ValueError):
     """A frame announced an impossible length: the stream cannot be framed past it. ``frames`` are the
     complete frames that came before it (in the same read), still to be served."""
 

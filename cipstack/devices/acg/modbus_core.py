@@ -29,6 +29,7 @@ from collections.abc import Callable, Mapping
 from dataclasses import dataclass
 from enum import IntEnum
 
+from ...errors import ProtocolError
 from ..registers import RegisterAccess, RegisterError, RegisterRefusal
 from .drive import AcgDrive
 from .run_command import CommandPort
@@ -59,7 +60,7 @@ class ExceptionCode(IntEnum):
     WRITE_PERMISSION_ERROR = 0x20
 
 
-class ModbusException(Exception):
+class ModbusException(ProtocolError):
     def __init__(self, code: ExceptionCode, detail: str = "") -> None:
         self.code = code
         super().__init__(f"{code.name} ({detail})" if detail else code.name)

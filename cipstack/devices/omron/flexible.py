@@ -7,6 +7,7 @@ from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 from enum import Enum
 
+from ...errors import BadRequest
 from ..registers import RegisterAccess, RegisterError
 from .registers import (
     RegisterSet,
@@ -45,7 +46,7 @@ class FlexibleProblem:
         return f"{self.parameter} = {self.address:04X}h: {self.rule.value}"
 
 
-class FlexibleMappingError(ValueError):
+class FlexibleMappingError(BadRequest):
     """P160-P179 break a rule of appendix F; ``problems`` lists every broken rule."""
 
     def __init__(self, problems: Sequence[FlexibleProblem]) -> None:

@@ -13,6 +13,8 @@ import difflib
 from dataclasses import dataclass
 from enum import Enum
 
+from ...errors import NotFound
+
 
 class Family(Enum):
     MX2 = "MX2"
@@ -122,17 +124,15 @@ MODELS: tuple[Model, ...] = (
 _BY_NAME: dict[str, Model] = {m.name: m for m in MODELS}
 
 
-class UnknownModelError(KeyError):
+class UnknownModelError(NotFound, KeyError):
     """An inverter model name that Tables 2/3 do not list."""
 
     def __init__(self, name: str, near: list[str]) -> None:
         self.name = name
         self.near = near
         hint = f"; did you mean {', '.join(near)}?" if near else ""
+        # NotFound's __str__ comes before KeyError's: the message plain, not its repr.
         super().__init__(f"unknown inverter model {name!r}{hint}")
-
-    def __str__(self) -> str:  # KeyError would print the repr of the message
-        return str(self.args[0])
 
 
 def model(name: str) -> Model:
