@@ -26,6 +26,7 @@ from ..devices.acg.drive import AcgDrive
 from ..devices.acg.modbus_core import ExceptionCode, RegisterWritten
 from ..devices.acg.modbus_rtu import MAX_DRIVES_PER_LINE, LineSettings, Reply, RtuSlave
 from ..devices.state import StateFileError, StateWriter
+from ..errors import CipstackError
 
 log = logging.getLogger(__name__)
 
@@ -37,7 +38,7 @@ MAX_PENDING_OUTPUT = 16 * 1024
 MAX_QUEUED_REPLIES = 64
 
 
-class RtuPortError(Exception):
+class RtuPortError(CipstackError):
     """A serial device that cannot be opened (one line naming it), or pyserial missing for one."""
 
 
