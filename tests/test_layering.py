@@ -35,10 +35,24 @@ ALLOWED = {
     "control": {"eip", "faults", "runtime", "devices", "errors"},
     # The pytest plugin: fixtures over the in-process adapter, its faults and events, and the scanner.
     "testing": {"adapter", "control", "scanner", "devices", "eds", "errors"},
+    # The single-file modules. The adapter is the composition root: it builds the device, its ports
+    # and runtime, the fault controller, the event stream and the command service, and passes each
+    # its collaborators; so it sits above faults and control, which know only the runtime.
+    "adapter": {"control", "devices", "eip", "errors", "faults", "listening", "modbus", "objects", "runtime"},
+    "scanner": {"catalog", "cip", "devices", "eds", "eip", "errors", "objects", "sync_io"},
+    "sync_io": {"eip", "errors"},
+    "params": {"catalog", "cip", "errors"},
+    "catalog": {"assemblies", "cip", "eip", "objects", "errors"},
+    "listening": {"errors"},
 }
 
 #: The parts that sit on top: nothing else in the package imports them (DESIGN.md).
-ON_TOP = {"conformance": {"cli"}}
+ON_TOP = {"conformance": {"cli"},
+          # Only what sits above the composition root imports it: the command line, a fleet, the plugin.
+          "adapter": {"cli", "fleet", "testing", "__init__", "__main__"}}
+
+#: What knows a running device only through the runtime's narrow interface, not even for type checking.
+RUNTIME_CLIENTS = ("runtime", "faults", "control", "modbus", "eip", "devices")
 
 
 def _type_checking_only(tree: ast.Module) -> set[int]:
@@ -51,12 +65,13 @@ def _type_checking_only(tree: ast.Module) -> set[int]:
     return lines
 
 
-def _imports(path: Path) -> set[str]:
-    """The top-level parts of ``cipstack`` a module imports (relative or absolute)."""
+def _imports(path: Path, type_checking: bool = False) -> set[str]:
+    """The top-level parts of ``cipstack`` a module imports (relative or absolute); with
+    ``type_checking``, its imports for annotations too."""
     part_depth = len(path.relative_to(PACKAGE).parts) - 1     # package levels below cipstack/
     found: set[str] = set()
     tree = ast.parse(path.read_text(encoding="utf-8"))
-    typing_only = _type_checking_only(tree)
+    typing_only = set() if type_checking else _type_checking_only(tree)
     for node in ast.walk(tree):
         if getattr(node, "lineno", None) in typing_only:
             continue
@@ -75,10 +90,18 @@ def _imports(path: Path) -> set[str]:
     return found
 
 
+def _modules_of(part: str) -> list[Path]:
+    """A package's modules, or the single-file module ``part.py``."""
+    single = PACKAGE / f"{part}.py"
+    return [single] if single.is_file() else sorted((PACKAGE / part).rglob("*.py"))
+
+
 @pytest.mark.parametrize("part", sorted(ALLOWED))
 def test_each_part_imports_only_what_lies_below_it(part: str) -> None:
+    modules = _modules_of(part)
+    assert modules, part
     wrong = {}
-    for path in sorted((PACKAGE / part).rglob("*.py")):
+    for path in modules:
         extra = _imports(path) - ALLOWED[part] - {part}
         if extra:
             wrong[str(path.relative_to(PACKAGE))] = sorted(extra)
@@ -92,7 +115,7 @@ def test_nothing_below_imports_the_parts_on_top(part: str) -> None:
         owner = path.relative_to(PACKAGE).parts[0].removesuffix(".py")
         if owner == part or owner in ON_TOP[part]:
             continue
-        if part in _imports(path):
+        if part in _imports(path, type_checking=True):
             wrong[str(path.relative_to(PACKAGE))] = part
     assert wrong == {}
 
@@ -100,3 +123,30 @@ def test_nothing_below_imports_the_parts_on_top(part: str) -> None:
 def test_errors_imports_nothing_of_the_package() -> None:
     """``errors`` lies below every part: it imports nothing of ours, so any part may import it."""
     assert _imports(PACKAGE / "errors.py") == set()
+
+
+@pytest.mark.parametrize("part", RUNTIME_CLIENTS)
+def test_what_lies_below_the_adapter_never_names_it_not_even_for_types(part: str) -> None:
+    """Faults, the event stream and the command service work through ``cipstack.runtime``'s interface:
+    no module of theirs (or of the runtime and what lies below it) imports ``adapter``, type-only
+    imports included, so there is no arrow up to the adapter and no circle through it."""
+    wrong = [str(path.relative_to(PACKAGE)) for path in _modules_of(part)
+             if "adapter" in _imports(path, type_checking=True)]
+    assert wrong == []
+
+
+def test_the_import_graph_has_no_circle_through_the_adapter() -> None:
+    """Follow every import (type-only ones too) from what the adapter imports: none leads back to it."""
+    parts = {path.relative_to(PACKAGE).parts[0].removesuffix(".py") for path in PACKAGE.glob("*")
+             if path.suffix == ".py" or path.is_dir() and (path / "__init__.py").exists()}
+    graph = {part: set().union(*(_imports(p, type_checking=True) for p in _modules_of(part))) - {part}
+             for part in parts if _modules_of(part)}
+    seen: set[str] = set()
+    todo = list(graph["adapter"])
+    while todo:
+        part = todo.pop()
+        if part in seen or part not in graph:
+            continue
+        seen.add(part)
+        todo.extend(graph[part])
+    assert "adapter" not in seen and seen >= {"runtime", "faults", "control"}

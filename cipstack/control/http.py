@@ -157,9 +157,8 @@ async def serve_app(app: web.Application, host: str, port: int, path: str | None
     except OSError:
         await runner.cleanup()
         raise
-    server = site._server
-    if path is None and server is not None and server.sockets:  # type: ignore[union-attr]
-        port = server.sockets[0].getsockname()[1]  # type: ignore[union-attr]
+    if path is None and runner.addresses:
+        port = int(runner.addresses[0][1])
     return runner, port
 
 

@@ -25,6 +25,7 @@ from typing import TYPE_CHECKING, Any
 from ..errors import NotFound
 from .effect import Effect, FaultContext
 from .errors import FaultError, FaultStateError, NoSuchConnection
+from ..runtime.power import settle_tasks
 from .model import CLASS1, FaultRequest, format_value
 
 if TYPE_CHECKING:
@@ -154,10 +155,7 @@ class FaultController:
     async def settle(self) -> None:
         """Wait until what the faults applied so far started on the loop is done (ports closed or
         opened, a power-cycle's power back)."""
-        while self._tasks:
-            tasks, self._tasks = self._tasks, []
-            for task in tasks:
-                await task
+        await settle_tasks(self._tasks)
         await self.runtime.power.settled()
 
     def shutdown(self) -> None:
@@ -211,6 +209,7 @@ class FaultController:
 
     def _start(self, work: Coroutine[Any, Any, None]) -> None:
         self._tasks.append(asyncio.get_running_loop().create_task(work))
+        self._tasks[:] = [t for t in self._tasks if not t.done()]
 
     # -- class 1 -----------------------------------------------------------------------------------------
     def _check_class1(self, request: FaultRequest) -> None:

@@ -69,6 +69,7 @@ class PowerLink:
     def _changed(self) -> None:
         if self._shut:
             return
+        self._pending[:] = [task for task in self._pending if not task.done()]
         self._pending.append(asyncio.get_running_loop().create_task(self.reconcile()))
 
     async def reconcile(self) -> None:
@@ -88,10 +89,23 @@ class PowerLink:
 
     async def settled(self) -> None:
         """Wait until the ports follow every change made so far."""
-        while self._pending:
-            tasks, self._pending = self._pending, []
-            for task in tasks:
-                await task
+        await settle_tasks(self._pending)
+
+
+async def settle_tasks(tasks: list[asyncio.Task[None]]) -> None:
+    """Wait until every task of ``tasks`` is done, those added meanwhile too; each waiter waits for all
+    (a waiter that gave up leaves the others to wait), and the done ones leave the list. A task's
+    error is raised to its waiters."""
+    while True:
+        pending = [task for task in tasks if not task.done()]
+        if not pending:
+            break
+        await asyncio.wait(pending)
+    done = [task for task in tasks if task.done()]
+    tasks[:] = [task for task in tasks if not task.done()]
+    for task in done:
+        if not task.cancelled() and task.exception() is not None:
+            raise task.exception()  # type: ignore[misc]
 
 
 __all__ = ["PowerLink"]
