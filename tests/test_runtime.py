@@ -198,3 +198,19 @@ async def test_every_operation_is_on_every_surface(acg: Adapter, capsys: pytest.
             path = operation.path.replace("{code}", "ACC").replace("{fault}", "1")
             async with session.request("OPTIONS", f"http://127.0.0.1:{acg.http_api.port}{path}") as reply:
                 assert reply.status != 404, (operation.name, path)
+
+
+async def test_a_trip_and_its_reset_on_each_family(tmp_path: Path) -> None:
+    """``reset``: the ACG's Drive Fault Reset, the MX2/RX operator's STOP/RESET key; the trip is gone
+    from the drive's own status, and a reset with no trip says so."""
+    for profile, code in (("acg", "OverHeat"), ("mx2", "E05"), ("rx", "E05")):
+        adapter = Adapter(AdapterSettings(port=0, io_port=0, profile=profile, state_path=tmp_path / f"{profile}.json"))
+        await adapter.start()
+        try:
+            tripped = adapter.service.call("trip", {"code": code})
+            assert adapter.service.status()["drive"]["trip"] is not None, tripped
+            reset = adapter.service.call("reset", {})
+            assert reset["cleared"] == tripped["trip"] and adapter.service.status()["drive"]["trip"] is None
+            assert adapter.service.call("reset", {})["result"] == "reset: no trip to clear"
+        finally:
+            await adapter.close()

@@ -223,6 +223,13 @@ COMMANDS: dict[tuple[str, ...], CommandText] = {
         (("cipstack drive status", "the emulator on 127.0.0.1:44818"),
          ("cipstack drive status --host 127.0.0.12 --json", "a fleet device's status as JSON")),
     ),
+    ("drive", "reset"): CommandText(
+        "reset the emulated drive's trip",
+        "Reset the trip of the emulated drive, as its manual's fault reset does: the ACG's Drive Fault "
+        "Reset (a level-type trip holds while its cause lasts: refused, exit 1), the MX2/RX Digital "
+        "Operator's STOP/RESET key.",
+        (("cipstack drive reset", "after `cipstack drive trip OverHeat`"),),
+    ),
     ("drive", "clear"): CommandText(
         "clear active faults",
         "Clear every active fault of the running emulator, or one by its id, or all of one name (as "

@@ -46,6 +46,7 @@ OPERATIONS: tuple[Operation, ...] = (
     Operation("trip", "trip the drive with a fault code of its manual (decimal, 0x hex or its name)", "POST", "/trip",
               (Argument("code", "string|integer", "fault code of the drive's manual (0x4200 on the ACG, 5 on the "
                         "MX2/RX) or its name (OverHeat, E05)", required=True, positional=True, metavar="CODE"),)),
+    Operation("reset", "reset the drive's trip, as its manual's fault reset does", "POST", "/reset"),
     Operation("fault", "apply a fault (cipstack.faults)", "POST", "/faults",
               (Argument("name", "string", "the fault", required=True, positional=True, metavar="NAME"),
                Argument("options", "object", "the fault's options by name (share, every, by, jitter, connection, "

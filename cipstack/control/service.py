@@ -102,7 +102,7 @@ class DeviceService:
         self.name = name
         #: Each operation's method.
         self.handlers: dict[str, Callable[..., Any]] = {
-            "status": self.status, "trip": self.trip, "fault": self.fault, "faults": self.faults_active,
+            "status": self.status, "trip": self.trip, "reset": self.reset, "fault": self.fault, "faults": self.faults_active,
             "clear": self.clear, "parameter": self.parameter, "set-parameter": self.set_parameter,
             "events": self.events_since, "power": self.power, "link": self.link}
 
@@ -163,6 +163,25 @@ class DeviceService:
         fault = getattr(trip, "fault_code", None)
         return {"result": f"tripped: {label}" + (f" (fault code 0x{fault:04X})" if fault is not None else ""),
                 "trip": label, "status": device.status_line()}
+
+    def reset(self) -> dict[str, Any]:
+        """A fault reset, now: the ACG's Drive Fault Reset, the MX2/RX Digital Operator's STOP/RESET key."""
+        from ..devices.base import TripRefused
+
+        if not self.runtime.power.powered:
+            raise StateRefused("the device is powered off (power-cycle): it cannot be reset")
+        now = self.runtime.tick()
+        device = self.runtime.device
+        try:
+            cleared = device.reset_trip()
+        except NotImplementedError as exc:
+            raise BadRequest(str(exc)) from None
+        except TripRefused as exc:
+            raise StateRefused(str(exc)) from None
+        self.runtime.tick(now)
+        label = None if cleared is None else getattr(cleared, "label", None) or str(cleared)
+        return {"result": f"reset: {label} cleared" if label is not None else "reset: no trip to clear",
+                "cleared": label, "status": device.status_line()}
 
     # -- faults -----------------------------------------------------------------------------------------
     async def fault(self, name: str, options: dict[str, Any] | None = None) -> dict[str, Any]:

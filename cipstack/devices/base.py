@@ -135,6 +135,11 @@ class Device:
         """The trip codes ``inject_trip`` takes, as one line for an error message."""
         return "none (this profile simulates no drive)"
 
+    def reset_trip(self) -> object | None:
+        """A fault reset, now, as the drive's manual resets a trip: the trip it cleared, None when it had
+        none; ``TripRefused`` when the trip holds (its cause lasts)."""
+        raise NotImplementedError(f"{self.identity_info.product_name}: this profile simulates no drive")
+
     def status_line(self) -> str | None:
         """A compact line of the device's state for the emulator's console, or None."""
         return None

@@ -317,6 +317,16 @@ class AcgDevice(Device):
                              f"it keeps that trip until a Fault Reset, so {trip.label} is not taken")
         return self.drive.inject_trip(trip, self.now)
 
+    def reset_trip(self) -> Trip | None:
+        """A Fault Reset, as class 0x29 attribute 12's rising edge makes one (seed 000, "Drive Fault
+        Reset"): the trip present is cleared, unless it is a level type whose cause lasts."""
+        present = self.drive.trip
+        if present is None:
+            return None
+        if not self.drive.fault_reset(self.now):
+            raise TripRefused(f"{present.label} holds: a level-type trip lasts while its cause does")
+        return present
+
     def trip_codes(self) -> str:
         """The fault codes of the Drive Fault Codes table (seed 000), or a trip's name."""
         codes = sorted({trip.fault_code for trip in Trip})

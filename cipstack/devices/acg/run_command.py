@@ -214,6 +214,12 @@ class RunCommands:
             self._run(direction)
         self._ramp(0.0)
 
+    def fault_reset(self, now: float) -> bool:
+        """A fault reset at ``now`` from outside the network (the test rig's): what a rising edge of
+        Drive Fault Reset does. Whether a trip was cleared."""
+        self.advance(now)
+        return self._fault_reset()
+
     def _fault_reset(self) -> bool:
         if self._trip is None or self._trip in self._level_causes:
             return False                            # a level-type trip holds while its cause lasts

@@ -462,6 +462,15 @@ class OmronDevice(Device):
         if self.saves is not None:
             self.saves.request({**values, CONSISTENCY_KEY: self.inverter.consistency_value})
 
+    def reset_trip(self) -> TripCode | None:
+        """The Digital Operator's STOP/RESET key clears the trip present (section 4-5-2, Table 25 Step
+        II): which one it was, None when the inverter had none."""
+        present = self.inverter.trip
+        if not present:
+            return None
+        self.inverter.press_stop_reset(self.now)
+        return trip_code(self.family, present)
+
     def inject_trip(self, code: int | str) -> TripCode:
         """Trip the inverter with En (Table D-5), given as n or as "En", for test rigs; returns the trip."""
         text = str(code).strip().upper()
