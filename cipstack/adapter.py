@@ -156,11 +156,11 @@ class Adapter:
                                s.io_port, production_grid)
             self.device.connection_manager.io_handler = self.io
             self.target.settings.capabilities = CAPABILITY_CIP_TCP | CAPABILITY_CLASS01_UDP
-            self.io_seam = IoSeam(self.io, self.device.assembly.deliver)
+            self.io_seam = IoSeam(self.io)
             self.io_endpoint = IoEndpoint(self.io_seam, s.host, s.io_port, lambda: int(self.device.tcpip.get(1, 8)),
                                           exclusive=True)
             self.io.changed = self.io_endpoint.wakeup
-            self.io.deliver = self.io_seam.deliver
+            self.io.deliver = self.device.assembly.deliver
             self.io.tick = self.clock.tick
             self.device.update_io_status()
             ports.append(Class1Port(self.io_endpoint, self.io_seam))

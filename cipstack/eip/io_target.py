@@ -542,8 +542,10 @@ class IoTarget:
             return None
         return self.connections.get(int.from_bytes(raw[6:10], "little"))
 
-    def receive(self, raw: bytes, source: tuple[str, int], now: float) -> None:
-        """Consume one O->T datagram; anything malformed or unknown is dropped and counted."""
+    def receive(self, raw: bytes, source: tuple[str, int], now: float, to_device: bool = True) -> None:
+        """Consume one O->T datagram; anything malformed or unknown is dropped and counted. With
+        ``to_device`` false its data is consumed (sequence count, watchdog, run/idle) and not handed
+        to the device (a filter withholds it: ``seams.IoSeam.withhold``)."""
         try:
             datagram = decode_io_datagram(raw)
         except IoDatagramError:
@@ -571,7 +573,7 @@ class IoTarget:
                 self._run_idle(connection, bool(payload[0] & 1))
             return
         run, data = split_run_idle(payload)
-        deliver = reception is RECEIVED_NEW and run
+        deliver = reception is RECEIVED_NEW and run and to_device
         if deliver or connection.run is not run:
             self.tick(now)
         self._run_idle(connection, run)

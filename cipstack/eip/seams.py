@@ -8,8 +8,8 @@ is the business of whoever installs it (``cipstack.faults``, ``cipstack.control.
 knows only the order.
 
 * ``IoSeam``: class 1, between the UDP endpoint and the core (``IoTarget``): O->T datagrams going in
-  (``IoInFilter``), T->O datagrams coming out (``IoOutFilter``), and consumed data handed to the
-  device (withheld on demand).
+  (``IoInFilter``, which may also have one consumed without its data reaching the device) and T->O
+  datagrams coming out (``IoOutFilter``).
 * ``RequestSeam``: explicit requests between the encapsulation target and the message router
   (``RequestFilter``); filters act first, observers last, the router answers.
 * ``ReplySeam``: explicit replies between the encapsulation target and the TCP socket
@@ -49,25 +49,17 @@ class IoSeam:
     """The class 1 core as its UDP endpoint sees it (``io_server.IoCore``). ``receive`` and ``poll`` are
     the core's own bound methods while no filter is in place, and the filtered paths otherwise."""
 
-    def __init__(self, core: Any, deliver: Callable[[int, bytes, float], None]) -> None:
-        """``core``: the ``IoTarget``; ``deliver``: where its consumed data goes (the device's Assembly
-        object), passed through ``deliver`` of this seam so a filter can withhold it."""
+    def __init__(self, core: Any) -> None:
+        """``core``: the ``IoTarget``."""
         self.core = core
-        self.device_deliver = deliver
         self.inbound: list[IoInFilter] = []
         self.outbound: list[IoOutFilter] = []
-        #: Sends datagrams at a later time (a delayed production); given by the shell once it runs.
+        #: Sends datagrams at a later time (a delayed production); given by the runtime.
         self.send_later: Callable[[float, list[Datagram]], None] = lambda at, datagrams: None
-        self.withholding = False
         self.next_deadline = core.next_deadline
         self.expire = core.expire
         self.receive: Callable[[bytes, tuple[str, int], float], None] = core.receive
         self.poll: Callable[..., list[Datagram]] = core.poll
-
-    def deliver(self, instance_id: int, data: bytes, now: float) -> None:
-        """The core's ``deliver``: to the device, unless a filter withholds the datagram being consumed."""
-        if not self.withholding:
-            self.device_deliver(instance_id, data, now)
 
     def add(self, item: IoInFilter | IoOutFilter) -> None:
         if hasattr(item, "inbound"):
@@ -103,11 +95,7 @@ class IoSeam:
 
     def withhold(self, raw: bytes, source: tuple[str, int], now: float) -> None:
         """Consume ``raw`` (sequence counts, watchdog, run/idle) without handing its data to the device."""
-        self.withholding = True
-        try:
-            self.core.receive(raw, source, now)
-        finally:
-            self.withholding = False
+        self.core.receive(raw, source, now, False)
 
     def _poll_filtered(self, now: float, horizon: float = 0.0) -> list[Datagram]:
         out = self.core.poll(now, horizon)
