@@ -115,9 +115,9 @@ class Adapter:
         modbus_drive = self.device.modbus_drive()
         product = self.device.identity_info.product_name
         if s.rtu is not None and modbus_drive is None:
-            raise ValueError(f"profile {s.profile!r} ({product}) has no RS-485 Modbus-RTU port (the ACG drive has)")
+            raise BadRequest(f"profile {s.profile!r} ({product}) has no RS-485 Modbus-RTU port (the ACG drive has)")
         if s.modbus_port is not None and modbus_drive is None:
-            raise ValueError(f"profile {s.profile!r} ({product}) has no Modbus TCP (the ACG-ET2 card speaks it)")
+            raise BadRequest(f"profile {s.profile!r} ({product}) has no Modbus TCP (the ACG-ET2 card speaks it)")
         self.modbus_drive = modbus_drive
         self.modbus: ModbusTcpServer | None = None
         if s.modbus_port is not None and modbus_drive is not None:
@@ -136,9 +136,8 @@ class Adapter:
                            max_connections=s.max_connections, max_frame_length=s.max_frame_length,
                            frame_timeout=s.frame_timeout,
                            inactivity_timeout=lambda: self.device.inactivity_timeout),
-            table=self.device.connection_table, requests=self.requests,
+            table=self.device.connection_table, requests=self.requests, tick=self.clock.tick,
         )
-        self.target.tick = self.clock.tick
         self.server = EncapsulationServer(self.target, s.host, s.port, max_tcp_connections=s.max_tcp_connections,
                                           max_tcp_connections_per_host=s.max_tcp_connections_per_host,
                                           replies=self.replies)

@@ -138,7 +138,7 @@ def test_what_lies_below_the_adapter_never_names_it_not_even_for_types(part: str
 def test_the_import_graph_has_no_circle_through_the_adapter() -> None:
     """Follow every import (type-only ones too) from what the adapter imports: none leads back to it."""
     parts = {path.relative_to(PACKAGE).parts[0].removesuffix(".py") for path in PACKAGE.glob("*")
-             if path.suffix == ".py" or path.is_dir() and (path / "__init__.py").exists()}
+             if path.suffix == ".py" or (path.is_dir() and (path / "__init__.py").exists())}
     graph = {part: set().union(*(_imports(p, type_checking=True) for p in _modules_of(part))) - {part}
              for part in parts if _modules_of(part)}
     seen: set[str] = set()

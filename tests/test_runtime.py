@@ -214,3 +214,22 @@ async def test_a_trip_and_its_reset_on_each_family(tmp_path: Path) -> None:
             assert adapter.service.call("reset", {})["result"] == "reset: no trip to clear"
         finally:
             await adapter.close()
+
+
+async def test_arguments_are_checked_against_the_declaration_on_every_surface(acg: Adapter) -> None:
+    """A key the operation does not take, a missing one and a value of the wrong JSON type are each a bad
+    request naming the JSON key, from the service and through HTTP and the control socket alike."""
+    from cipstack.control import ControlRefused, control_request
+
+    for arguments, said in (({"code": [1]}, '"code" is a string or integer'), ({}, 'needs "code"'),
+                            ({"code": 1, "cod": 2}, "unknown key 'cod'")):
+        with pytest.raises(BadRequest, match=said):
+            acg.service.call("trip", arguments)
+        async with aiohttp.ClientSession() as session:
+            async with session.post(f"http://127.0.0.1:{acg.http_api.port}/trip", json=arguments) as reply:
+                assert reply.status == 400 and said in (await reply.json())["error"]
+        with pytest.raises(ControlRefused, match=said):
+            await asyncio.to_thread(control_request, acg.control_path, {"command": "trip", **arguments})
+    async with aiohttp.ClientSession() as session:
+        async with session.get(f"http://127.0.0.1:{acg.http_api.port}/events?since=x") as reply:
+            assert reply.status == 400 and "since" in (await reply.json())["error"]

@@ -254,6 +254,11 @@ async def _arguments(operation: Operation, request: web.Request) -> dict[str, An
             value = request.query.get(argument.key)
         else:
             value = body.get(argument.key)
+        if isinstance(value, str) and argument.where != "body" and argument.json_type == "integer":
+            try:
+                value = int(value)
+            except ValueError:
+                raise BadRequest(f"{argument.key} is a whole number, not {value!r}") from None
         if value is not None:
             arguments[argument.key] = value
     return arguments

@@ -210,6 +210,9 @@ class ControlServer:
                     reply = {"ok": False, "error": str(exc), "outcome": outcome_name(exc)}
                 except ValueError as exc:   # a line that is not JSON
                     reply = {"ok": False, "error": f"not a JSON request: {exc}", "outcome": "bad-request"}
+                except Exception:  # a request must never take the control socket down
+                    log.exception("control request %r", line[:200])
+                    reply = {"ok": False, "error": "internal error (logged)", "outcome": "failed"}
                 writer.write(json.dumps(reply).encode() + b"\n")
                 await writer.drain()
         except (ConnectionError, asyncio.LimitOverrunError, ValueError):

@@ -22,6 +22,12 @@ class Argument:
     metavar: str = ""
 
 
+#: The Python types a JSON type names (a bool is no number here).
+JSON_TYPES: dict[str, tuple[type, ...]] = {"string": (str,), "integer": (int,), "number": (int, float),
+                                           "object": (dict,), "string|integer": (str, int),
+                                           "string|number": (str, int, float)}
+
+
 @dataclass(frozen=True)
 class Operation:
     name: str
@@ -53,7 +59,7 @@ OPERATIONS: tuple[Operation, ...] = (
                         "for, off, ...)")), created=True),
     Operation("faults", "the faults active now", "GET", "/faults"),
     Operation("clear", "clear every active fault, or one by id or name", "DELETE", "/faults/{fault}",
-              (Argument("fault", "string", "a fault's id, or a fault name (all of that name)", where="path",
+              (Argument("fault", "string|integer", "a fault's id, or a fault name (all of that name)", where="path",
                         positional=True, metavar="ID|NAME"),), optional_path=True),
     Operation("parameter", "a keypad parameter: code, name, value in the keypad's unit, raw, unit, address",
               "GET", "/parameters/{code}", (_CODE,)),
@@ -76,4 +82,4 @@ OPERATION_BY_NAME = {op.name: op for op in OPERATIONS}
 
 
 
-__all__ = ["OPERATIONS", "OPERATION_BY_NAME", "Argument", "Operation"]
+__all__ = ["JSON_TYPES", "OPERATIONS", "OPERATION_BY_NAME", "Argument", "Operation"]

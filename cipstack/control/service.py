@@ -16,6 +16,7 @@ from __future__ import annotations
 
 import asyncio
 import contextlib
+import json
 from collections.abc import Awaitable, Callable
 from dataclasses import dataclass
 from typing import TYPE_CHECKING, Any
@@ -25,7 +26,7 @@ from ..errors import BadRequest, CipstackError, NotFound, PeerUnreachable, State
 from ..faults import FaultController, FaultRequest
 from ..faults.model import JSON_SPELLING
 from .events import EventStream
-from .operations import OPERATION_BY_NAME, OPERATIONS, Argument, Operation
+from .operations import JSON_TYPES, OPERATION_BY_NAME, OPERATIONS, Argument, Operation
 
 if TYPE_CHECKING:
     from ..runtime import DeviceRuntime
@@ -84,8 +85,14 @@ def check_arguments(operation: Operation, arguments: dict[str, Any]) -> dict[str
         valid = ", ".join(f'"{a.key}"' for a in operation.arguments) or "none"
         raise BadRequest(f"{operation.name}: unknown key {', '.join(repr(k) for k in stray)}; valid: {valid}")
     for argument in operation.arguments:
-        if argument.required and arguments.get(argument.key) is None:
-            raise BadRequest(f"{operation.name} needs \"{argument.key}\": {argument.help}")
+        value = arguments.get(argument.key)
+        if value is None:
+            if argument.required:
+                raise BadRequest(f"{operation.name} needs \"{argument.key}\": {argument.help}")
+            continue
+        if isinstance(value, bool) or not isinstance(value, JSON_TYPES[argument.json_type]):
+            raise BadRequest(f"{operation.name}: \"{argument.key}\" is a {argument.json_type.replace('|', ' or ')}, "
+                             f"not {json.dumps(value)[:40]}")
     return arguments
 
 
@@ -102,9 +109,9 @@ class DeviceService:
         self.name = name
         #: Each operation's method.
         self.handlers: dict[str, Callable[..., Any]] = {
-            "status": self.status, "trip": self.trip, "reset": self.reset, "fault": self.fault, "faults": self.faults_active,
-            "clear": self.clear, "parameter": self.parameter, "set-parameter": self.set_parameter,
-            "events": self.events_since, "power": self.power, "link": self.link}
+            "status": self.status, "trip": self.trip, "reset": self.reset, "fault": self.fault,
+            "faults": self.faults_active, "clear": self.clear, "parameter": self.parameter,
+            "set-parameter": self.set_parameter, "events": self.events_since, "power": self.power, "link": self.link}
 
     def describe(self) -> dict[str, Any]:
         """What ``GET /devices`` lists of the device: its EtherNet/IP port and product name."""

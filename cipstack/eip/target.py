@@ -163,9 +163,10 @@ class DelayedReplies:
 class EncapsulationTarget:
     def __init__(self, router: MessageRouter, identity: Callable[[], IdentityRecord],
                  settings: TargetSettings | None = None, table: ConnectionTable | None = None,
-                 requests: RequestSeam | None = None) -> None:
+                 requests: RequestSeam | None = None, tick: Callable[[float], None] | None = None) -> None:
         """``requests``: the seam explicit requests reach the router through (``seams.RequestSeam``); by
-        default one of its own, with nothing in it."""
+        default one of its own, with nothing in it. ``tick``: called with the time before a request is
+        served (the device moves its simulation there)."""
         self.router = router
         self.requests = requests or RequestSeam(router)
         self.identity = identity
@@ -174,8 +175,7 @@ class EncapsulationTarget:
         self.sessions: dict[int, EncapsulationConnection] = {}
         self.stats = TargetStatistics()
         self.delayed = DelayedReplies(self.settings.max_delayed_replies, self.settings.max_delayed_replies_per_host)
-        #: Called with the time before a request is served: the device moves its simulation there.
-        self.tick: Callable[[float], None] = lambda now: None
+        self.tick: Callable[[float], None] = tick or (lambda now: None)
         self._handles = itertools.count(random.randrange(1, 0x7FFF0000))
         # Refusals, each kind logged at most once per 10 s per originator address (``RateLimitedLog``).
         self.sessions_refused_log = RateLimitedLog(log, level=logging.WARNING)

@@ -23,9 +23,9 @@ from dataclasses import dataclass, field
 from typing import TYPE_CHECKING, Any
 
 from ..errors import NotFound
+from ..runtime.power import settle_tasks
 from .effect import Effect, FaultContext
 from .errors import FaultError, FaultStateError, NoSuchConnection
-from ..runtime.power import settle_tasks
 from .model import CLASS1, FaultRequest, format_value
 
 if TYPE_CHECKING:
@@ -85,15 +85,6 @@ class FaultController:
         self._ids = itertools.count(1)
         self._effects: dict[int, Effect] = {}
         self._tasks: list[asyncio.Task[None]] = []
-
-    @property
-    def powered_off(self) -> bool:
-        """The device has no power (a power-cycle's off period): it takes no trip and no keypad write."""
-        return not self.runtime.power.powered
-
-    @property
-    def unplugged(self) -> bool:
-        return not self.runtime.power.plugged
 
     # -- the API -------------------------------------------------------------------------------------
     def apply(self, name: str | FaultRequest, **options: object) -> Fault:
