@@ -34,7 +34,7 @@ from .modbus.rtu_line import RtuLine, RtuPortError, open_port
 from .modbus.tcp_server import ModbusTcpServer
 from .objects.tcpip import NetworkInterface
 from .runtime import Class1Port, DeviceRuntime, EncapsulationPort, ModbusTcpPort, Port, PowerLink, Rs485Port
-from .runtime.observer import IoEventRelay, RuntimeObserver, register_relay
+from .runtime.observer import IoEventRelay, Observers, register_relay
 from .runtime.runtime import DeviceClock
 
 log = logging.getLogger(__name__)
@@ -109,15 +109,15 @@ class Adapter:
         self.device = device or build_device(s.profile, network_interface(s.host, s.mac or DEFAULT_MAC),
                                              DeviceLimits(s.max_sessions, s.max_connections),
                                              ProfileOptions(s.state_path, s.model))
-        self.observers: list[RuntimeObserver] = []
+        self.observers = Observers()
         self.clock = DeviceClock(self.device, self.observers)
         # The ports the device's family declares beside EtherNet/IP (the ACG's Modbus TCP and RS-485).
         modbus_drive = self.device.modbus_drive()
         product = self.device.identity_info.product_name
         if s.rtu is not None and modbus_drive is None:
-            raise BadRequest(f"profile {s.profile!r} ({product}) has no RS-485 Modbus-RTU port (the ACG drive has)")
+            raise BadRequest(f"profile {s.profile!r} has no RS-485 Modbus-RTU port (the ACG drive has)")
         if s.modbus_port is not None and modbus_drive is None:
-            raise BadRequest(f"profile {s.profile!r} ({product}) has no Modbus TCP (the ACG-ET2 card speaks it)")
+            raise BadRequest(f"profile {s.profile!r} has no Modbus TCP (the ACG-ET2 card speaks it)")
         self.modbus_drive = modbus_drive
         self.modbus: ModbusTcpServer | None = None
         if s.modbus_port is not None and modbus_drive is not None:

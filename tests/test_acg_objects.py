@@ -11,13 +11,13 @@ from cipstack.adapter import Adapter, AdapterSettings
 from cipstack.cip.epath import request_path
 from cipstack.cip.messages import MessageRouterRequest, MessageRouterResponse
 from cipstack.cip.router import RequestContext
-from cipstack.control import ControlError
 from cipstack.devices.acg.device import AcgDevice, build_acg_device
 from cipstack.devices.acg.drive import DriveState, Trip
 from cipstack.devices.acg.objects import CATALOG_CLASSES
 from cipstack.devices.acg.registers import ACG_REGISTERS, CLASS_64_INSTANCES, OperationStatus, class64_path
 from cipstack.devices.profiles import serial_from_mac
 from cipstack.devices.state import StateFileError
+from cipstack.errors import StateRefused
 from cipstack.objects.tcpip import NetworkInterface
 
 GET, SET, GET_ALL, RESET, GET_LIST = 0x0E, 0x10, 0x01, 0x05, 0x03
@@ -347,7 +347,7 @@ async def test_a_second_trip_is_refused_and_the_first_kept(device: AcgDevice) ->
     async with Adapter(AdapterSettings(host="127.0.0.1", port=0, io_port=0), device=device) as adapter:
         first = adapter.control({"command": "trip", "code": 0x4200})
         assert "OverHeat" in first["result"]
-        with pytest.raises(ControlError) as refused:
+        with pytest.raises(StateRefused) as refused:                   # the device's state says no
             adapter.control({"command": "trip", "code": 0x5000})
         message = str(refused.value)
         assert "already tripped: OverHeat (fault code 0x4200)" in message and "\n" not in message

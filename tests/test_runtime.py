@@ -225,11 +225,11 @@ async def test_arguments_are_checked_against_the_declaration_on_every_surface(ac
                             ({"code": 1, "cod": 2}, "unknown key 'cod'")):
         with pytest.raises(BadRequest, match=said):
             acg.service.call("trip", arguments)
-        async with aiohttp.ClientSession() as session:
-            async with session.post(f"http://127.0.0.1:{acg.http_api.port}/trip", json=arguments) as reply:
-                assert reply.status == 400 and said in (await reply.json())["error"]
+        async with aiohttp.ClientSession() as session, \
+                session.post(f"http://127.0.0.1:{acg.http_api.port}/trip", json=arguments) as reply:
+            assert reply.status == 400 and said in (await reply.json())["error"]
         with pytest.raises(ControlRefused, match=said):
             await asyncio.to_thread(control_request, acg.control_path, {"command": "trip", **arguments})
-    async with aiohttp.ClientSession() as session:
-        async with session.get(f"http://127.0.0.1:{acg.http_api.port}/events?since=x") as reply:
-            assert reply.status == 400 and "since" in (await reply.json())["error"]
+    async with aiohttp.ClientSession() as session, \
+            session.get(f"http://127.0.0.1:{acg.http_api.port}/events?since=x") as reply:
+        assert reply.status == 400 and "since" in (await reply.json())["error"]

@@ -138,7 +138,7 @@ class EventStream:
             return
         self._started = True
         self._drive = self._drive_state()
-        self.runtime.observers.append(self)
+        self.runtime.observers.add(self)
         self.runtime.requests.add(self, observer=True)
         if self.faults is not None:
             self.faults.listeners.append(self._on_fault)

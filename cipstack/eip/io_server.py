@@ -376,7 +376,8 @@ class _UdpIo(asyncio.DatagramProtocol):
     def datagram_received(self, data: bytes, addr: tuple[str, int]) -> None:
         endpoint = self.endpoint
         try:
-            endpoint.core.receive(data, addr, endpoint.loop.time())
+            receive = endpoint.core.receive   # a callable the core (or its seam) holds
+            receive(data, addr, endpoint.loop.time())
         except Exception:  # a datagram must never take the I/O path down
             log.exception("class 1 datagram from %s", addr)
 
@@ -578,7 +579,8 @@ class IoEndpoint:
 
     def wakeup(self) -> None:
         """Re-arm the timer (a connection opened, so a deadline may be earlier)."""
-        deadline = self.core.next_deadline()
+        next_deadline = self.core.next_deadline
+        deadline = next_deadline()
         if deadline is None or self._sock is None:
             return
         if self._timer is not None:
@@ -596,11 +598,13 @@ class IoEndpoint:
         if self._sock is None:
             return
         now = self.loop.time()
-        datagrams = self.core.poll(now, COALESCE_S)
+        core = self.core
+        poll, expire = core.poll, core.expire   # callables the seam holds: read as attributes, then called
+        datagrams = poll(now, COALESCE_S)
         if datagrams:
             self._send(datagrams)
         self._catch_up(now)
-        self.core.expire(now)
+        expire(now)
         self.wakeup()
 
     def send(self, datagrams: list[tuple[bytes, tuple[str, int]]]) -> None:

@@ -27,10 +27,25 @@ class RuntimeObserver(Protocol):
         """A Modbus request on ``port`` ("modbus-tcp", "modbus-rtu") wrote ``raw`` at ``address``."""
 
 
+class Observers(list["RuntimeObserver"]):
+    """The observers of one running device. ``watched`` says whether there is any: a flag the hot
+    paths test (a bool is the cheapest test there is), kept by ``add`` and ``remove``."""
+
+    watched = False
+
+    def add(self, observer: RuntimeObserver) -> None:
+        self.append(observer)
+        self.watched = True
+
+    def remove(self, observer: RuntimeObserver) -> None:  # type: ignore[override]
+        super().remove(observer)
+        self.watched = bool(self)
+
+
 class IoEventRelay:
     """The class 1 target's ``events``: the observers hear of it, then the device."""
 
-    def __init__(self, device: IoEvents, observers: list[RuntimeObserver]) -> None:
+    def __init__(self, device: IoEvents, observers: Observers) -> None:
         self.device = device
         self.observers = observers
 
@@ -50,7 +65,7 @@ class IoEventRelay:
         self.device.io_run_idle(connection, run)
 
 
-def register_relay(port: str, observers: list[RuntimeObserver]) -> RegisterWritten:
+def register_relay(port: str, observers: Observers) -> RegisterWritten:
     """What a Modbus port's core calls with each register a request wrote (``ModbusCore.written``)."""
     def written(drive: Any, address: int, raw: int, now: float, source: object) -> None:
         for observer in observers:
@@ -58,4 +73,4 @@ def register_relay(port: str, observers: list[RuntimeObserver]) -> RegisterWritt
     return written
 
 
-__all__ = ["IoEventRelay", "RuntimeObserver", "register_relay"]
+__all__ = ["IoEventRelay", "Observers", "RuntimeObserver", "register_relay"]

@@ -6,7 +6,7 @@ from __future__ import annotations
 import asyncio
 from typing import TYPE_CHECKING, Any
 
-from .observer import RuntimeObserver
+from .observer import Observers
 from .power import PowerLink
 
 if TYPE_CHECKING:
@@ -24,7 +24,7 @@ class DeviceClock:
     timer at its next deadline (lost-command timers, the end of a ramp), so it changes on time even
     when nobody asks; its observers hear of each move."""
 
-    def __init__(self, device: Device, observers: list[RuntimeObserver]) -> None:
+    def __init__(self, device: Device, observers: Observers) -> None:
         self.device = device
         self.observers = observers
         self._timer: asyncio.TimerHandle | None = None
@@ -32,16 +32,23 @@ class DeviceClock:
 
     def tick(self, now: float) -> None:
         deadline = self.device.tick(now)
-        if deadline != self._timer_at or (deadline is not None and self._timer is None):
-            if self._timer is not None:
-                self._timer.cancel()
-                self._timer = None
-            self._timer_at = deadline
-            if deadline is not None:
-                self._timer = asyncio.get_running_loop().call_at(max(deadline, now), self._on_timer)
-        if self.observers:
+        # The common case first, by identity (a device at rest: no deadline, no timer), then the rest.
+        if deadline is None:
+            if self._timer_at is not None:
+                self._arm(None, now)
+        elif deadline != self._timer_at or self._timer is None:
+            self._arm(deadline, now)
+        if self.observers.watched:
             for observer in self.observers:
                 observer.ticked(now)
+
+    def _arm(self, deadline: float | None, now: float) -> None:
+        if self._timer is not None:
+            self._timer.cancel()
+            self._timer = None
+        self._timer_at = deadline
+        if deadline is not None:
+            self._timer = asyncio.get_running_loop().call_at(max(deadline, now), self._on_timer)
 
     def _on_timer(self) -> None:
         self._timer = None
@@ -59,7 +66,7 @@ class DeviceRuntime:
     """A device running behind its ports: its clock, its power and link (``power``), the seams where
     faults act (``requests``, ``replies``, ``class1``) and its observers."""
 
-    def __init__(self, device: Device, clock: DeviceClock, observers: list[RuntimeObserver], power: PowerLink,
+    def __init__(self, device: Device, clock: DeviceClock, observers: Observers, power: PowerLink,
                  target: EncapsulationTarget, server: EncapsulationServer, requests: RequestSeam,
                  replies: ReplySeam, io: IoTarget | None = None, class1: IoSeam | None = None,
                  endpoint: IoEndpoint | None = None, rtu: RtuLine | None = None) -> None:
