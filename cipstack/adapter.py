@@ -33,7 +33,7 @@ from .listening import ListenError, held_log_records
 from .modbus.rtu_line import RtuLine, RtuPortError, open_port
 from .modbus.tcp_server import ModbusTcpServer
 from .objects.tcpip import NetworkInterface
-from .runtime import Class1Port, DeviceRuntime, EncapsulationPort, ModbusTcpPort, Port, PowerLink, Rs485Port
+from .runtime import Class1Port, DeviceRuntime, Port, PowerLink, Rs485Port, ServerPort
 from .runtime.observer import IoEventRelay, Observers, register_relay
 from .runtime.runtime import DeviceClock
 
@@ -144,9 +144,9 @@ class Adapter:
         self.io: IoTarget | None = None
         self.io_seam: IoSeam | None = None
         self.io_endpoint: IoEndpoint | None = None
-        ports: list[Port] = [EncapsulationPort(self.server)]
+        ports: list[Port] = [ServerPort("EtherNet/IP", self.server)]
         if self.modbus is not None:
-            ports.append(ModbusTcpPort(self.modbus))
+            ports.append(ServerPort("Modbus TCP", self.modbus))
         profile = self.device.io_profile()
         if profile is not None:
             if s.max_io_connections is not None:

@@ -6,9 +6,9 @@ and the command service (``cipstack.control``) work through; none of them knows 
 composes it."""
 
 from .observer import RuntimeObserver
-from .ports import Class1Port, EncapsulationPort, Medium, ModbusTcpPort, Port, Rs485Port
+from .ports import Class1Port, Medium, Port, Rs485Port, ServerPort
 from .power import PowerLink
 from .runtime import DeviceRuntime
 
-__all__ = ["Class1Port", "DeviceRuntime", "EncapsulationPort", "Medium", "ModbusTcpPort", "Port", "PowerLink",
-           "Rs485Port", "RuntimeObserver"]
+__all__ = ["Class1Port", "DeviceRuntime", "Medium", "Port", "PowerLink", "Rs485Port", "RuntimeObserver",
+           "ServerPort"]

@@ -14,9 +14,7 @@ from typing import TYPE_CHECKING, Protocol
 
 if TYPE_CHECKING:
     from ..eip.io_server import IoCore, IoEndpoint
-    from ..eip.server import EncapsulationServer
     from ..modbus.rtu_line import RtuLine
-    from ..modbus.tcp_server import ModbusTcpServer
 
 
 class Medium(enum.Enum):
@@ -36,14 +34,27 @@ class Port(Protocol):
     async def close(self) -> None: ...
 
 
-class EncapsulationPort:
-    """TCP and UDP 44818 (or ``--port``): sessions, explicit messages, ListIdentity."""
+class Listener(Protocol):
+    """A server that listens on its port: ``start`` takes the port (the one it had, after a ``close``),
+    ``close`` gives it back with every connection."""
+
+    @property
+    def is_open(self) -> bool: ...
+
+    async def start(self) -> None: ...
+
+    async def close(self) -> None: ...
+
+
+class ServerPort:
+    """A listening server as a port: the EtherNet/IP encapsulation server (TCP and UDP 44818, or
+    ``--port``: sessions, explicit messages, ListIdentity) or the card's Modbus TCP (``--modbus-port``)."""
 
     medium = Medium.ETHERNET
 
-    def __init__(self, server: EncapsulationServer) -> None:
+    def __init__(self, name: str, server: Listener) -> None:
+        self.name = name
         self.server = server
-        self.name = "EtherNet/IP"
 
     @property
     def is_open(self) -> bool:
@@ -105,26 +116,6 @@ class Class1Port:
         self._run_dark()
 
 
-class ModbusTcpPort:
-    """Modbus TCP of the drive's network card (``--modbus-port``)."""
-
-    medium = Medium.ETHERNET
-
-    def __init__(self, server: ModbusTcpServer) -> None:
-        self.server = server
-        self.name = "Modbus TCP"
-
-    @property
-    def is_open(self) -> bool:
-        return self.server.is_open
-
-    async def open(self) -> None:
-        await self.server.start()
-
-    async def close(self) -> None:
-        await self.server.close()
-
-
 class Rs485Port:
     """The drive's RS-485 line (Modbus-RTU). The tty is opened once, when the device starts (a pty's
     client must not see it vanish); the port is open while the drives on it have power, and closed
@@ -151,4 +142,4 @@ class Rs485Port:
         self.line.power_off()
 
 
-__all__ = ["Class1Port", "EncapsulationPort", "Medium", "ModbusTcpPort", "Port", "Rs485Port"]
+__all__ = ["Class1Port", "Listener", "Medium", "Port", "Rs485Port", "ServerPort"]
