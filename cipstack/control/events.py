@@ -138,7 +138,7 @@ class EventStream:
             return
         self._started = True
         self._drive = self._drive_state()
-        self.runtime.observers.add(self)
+        self.runtime.watch(self)
         self.runtime.requests.add(self, observer=True)
         if self.faults is not None:
             self.faults.listeners.append(self._on_fault)
@@ -148,7 +148,7 @@ class EventStream:
         if not self._started:
             return
         self._started = False
-        self.runtime.observers.remove(self)
+        self.runtime.unwatch(self)
         self.runtime.requests.remove(self)
         if self.faults is not None:
             self.faults.listeners.remove(self._on_fault)

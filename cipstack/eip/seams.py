@@ -118,15 +118,16 @@ class RequestFilter(Protocol):
 
 
 class RequestSeam:
-    """The message router as the encapsulation target calls it: ``handle`` is the router's own while
-    nothing is in place. ``filters`` act first (they may answer in the router's stead), ``observers``
-    last (they see what reaches the router and what it answered)."""
+    """The message router as the encapsulation target calls it (``entry.handle``): ``entry`` is the
+    router itself while nothing is in place, so an unfiltered request costs what it did without a
+    seam; otherwise a chain whose ``handle`` runs the ``filters`` first (they may answer in the
+    router's stead), then the ``observers`` (they see what reaches the router and what it answered)."""
 
     def __init__(self, router: Any) -> None:
         self.router = router
         self.filters: list[RequestFilter] = []
         self.observers: list[RequestFilter] = []
-        self.handle: Handle = router.handle
+        self.entry: Any = router
 
     def add(self, item: RequestFilter, observer: bool = False) -> None:
         (self.observers if observer else self.filters).append(item)
@@ -137,17 +138,27 @@ class RequestSeam:
         self.observers = [f for f in self.observers if f is not item]
         self._bind()
 
+    @property
+    def handle(self) -> Handle:
+        """What a request reaches: the first filter, or the router."""
+        return self.entry.handle  # type: ignore[no-any-return]
+
     def _bind(self) -> None:
-        handle: Handle = self.router.handle
+        entry: Any = self.router
         for item in reversed([*self.filters, *self.observers]):
-            handle = _link(item, handle)
-        self.handle = handle
+            entry = _Link(item, entry.handle)
+        self.entry = entry
 
 
-def _link(item: RequestFilter, call_next: Handle) -> Handle:
-    def handle(raw: bytes, context: RequestContext) -> bytes:
-        return item.request(raw, context, call_next)
-    return handle
+class _Link:
+    """One filter of the chain and what comes after it."""
+
+    def __init__(self, item: RequestFilter, call_next: Handle) -> None:
+        self.item = item
+        self.call_next = call_next
+
+    def handle(self, raw: bytes, context: RequestContext) -> bytes:
+        return self.item.request(raw, context, self.call_next)
 
 
 # -- explicit replies ------------------------------------------------------------------------------------

@@ -461,8 +461,7 @@ class EncapsulationConnection:
         request_context = self._context
         request_context.now = now
         request_context.connected = False
-        handle = self.target.requests.handle  # a callable the seam holds: read as an attribute, then called
-        reply = handle(request, request_context)
+        reply = self.target.requests.entry.handle(request, request_context)  # the router, or the seam's chain
         self._outbox.append(_RR_REPLY_FRAME.pack(
             _SEND_RR_DATA, _RR_TWO_ITEMS_SIZE + len(reply), session, 0, context, 0, 0, 0, 2,
             _NULL_ADDRESS, 0, _UNCONNECTED_DATA, len(reply)) + reply)
@@ -512,8 +511,7 @@ class EncapsulationConnection:
         context.now = now
         context.connected = False
         if len(items) == 2 and items[1].data[0] not in _MAY_CARRY_SOCKADDR:
-            handle = self.target.requests.handle
-            reply = handle(items[1].data, context)
+            reply = self.target.requests.entry.handle(items[1].data, context)
             return RR_PREFIX.pack(0, 0) + encode_items((Item(ItemType.NULL_ADDRESS), Item(ItemType.UNCONNECTED_DATA,
                                                                                           reply)))
         # A Forward_Open may carry Sockaddr Info items (where the originator wants T->O data), and
@@ -527,8 +525,7 @@ class EncapsulationConnection:
         reply_items: list[Item] = []
         context.extras["reply_items"] = reply_items
         try:
-            handle = self.target.requests.handle
-            reply = handle(items[1].data, context)
+            reply = self.target.requests.entry.handle(items[1].data, context)
         finally:
             del context.extras["sockaddr"], context.extras["reply_items"]
         return RR_PREFIX.pack(0, 0) + encode_items((Item(ItemType.NULL_ADDRESS), Item(ItemType.UNCONNECTED_DATA, reply),
@@ -558,8 +555,7 @@ class EncapsulationConnection:
             context = self._context
             context.now = now
             context.connected = True
-            handle = self.target.requests.handle
-            reply = handle(items[1].data[2:], context)
+            reply = self.target.requests.entry.handle(items[1].data[2:], context)
             context.connected = False
             connection.last_sequence = sequence
             connection.last_reply = reply

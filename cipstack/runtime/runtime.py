@@ -6,7 +6,7 @@ from __future__ import annotations
 import asyncio
 from typing import TYPE_CHECKING, Any
 
-from .observer import Observers
+from .observer import Observers, RuntimeObserver
 from .power import PowerLink
 
 if TYPE_CHECKING:
@@ -29,10 +29,13 @@ class DeviceClock:
         self.observers = observers
         self._timer: asyncio.TimerHandle | None = None
         self._timer_at: float | None = None
+        #: No timer armed and nobody watching: a tick that finds no deadline has nothing else to do.
+        self._quiet = not observers.watched
 
     def tick(self, now: float) -> None:
         deadline = self.device.tick(now)
-        # The common case first, by identity (a device at rest: no deadline, no timer), then the rest.
+        if deadline is None and self._quiet:
+            return   # the common case, a device at rest that nobody watches, in one test
         if deadline is None:
             if self._timer_at is not None:
                 self._arm(None, now)
@@ -42,11 +45,20 @@ class DeviceClock:
             for observer in self.observers:
                 observer.ticked(now)
 
+    def watch(self, observer: RuntimeObserver) -> None:
+        self.observers.add(observer)
+        self._quiet = False
+
+    def unwatch(self, observer: RuntimeObserver) -> None:
+        self.observers.remove(observer)
+        self._quiet = self._timer_at is None and not self.observers.watched
+
     def _arm(self, deadline: float | None, now: float) -> None:
         if self._timer is not None:
             self._timer.cancel()
             self._timer = None
         self._timer_at = deadline
+        self._quiet = deadline is None and not self.observers.watched
         if deadline is not None:
             self._timer = asyncio.get_running_loop().call_at(max(deadline, now), self._on_timer)
 
@@ -59,7 +71,7 @@ class DeviceClock:
         if self._timer is not None:
             self._timer.cancel()
             self._timer = None
-            self._timer_at = None
+        self._arm(None, 0.0)
 
 
 class DeviceRuntime:
@@ -95,6 +107,13 @@ class DeviceRuntime:
         now = self.now() if now is None else now
         self.clock.tick(now)
         return now
+
+    def watch(self, observer: RuntimeObserver) -> None:
+        """Tell ``observer`` what the device does from now on (``RuntimeObserver``)."""
+        self.clock.watch(observer)
+
+    def unwatch(self, observer: RuntimeObserver) -> None:
+        self.clock.unwatch(observer)
 
     # -- what faults do ---------------------------------------------------------------------------------
     def close_tcp(self) -> int:
