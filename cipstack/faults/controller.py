@@ -104,13 +104,9 @@ class FaultController:
         fault = Fault(next(self._ids), request, now, time.time())
         effect = kind.effect(FaultContext(self.runtime, fault.id, request.options, self.rng,
                                           lambda: self._used_up(fault.id), self._start))
-        if kind.exclusive:
-            for other in [f for f in self.active.values() if f.name == kind.name]:
-                self._end(other, "replaced")
-        effect.start()
-        if kind.ends is not None:
-            for ended in [f for f in self.active.values() if f.name == kind.ends]:
-                self._end(ended, "cleared")
+        effect.start()   # first: a fault its state refuses leaves everything as it was
+        for ended in [f for f in self.active.values() if f.name in (kind.ends, kind.name if kind.exclusive else None)]:
+            self._end(ended, "replaced" if ended.name == kind.name else "cleared")
         if not kind.lasting:
             self._record("applied", fault)
             return fault
