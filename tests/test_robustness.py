@@ -965,13 +965,41 @@ def connected_id(sent: bytes) -> int | None:
 
 
 def opened_by(sent: bytes, replies: list[Frame]) -> set[int]:
-    """The O->T id of a class 3 connection a SendRRData's accepted (Large) Forward_Open opened."""
-    if HEADER.unpack_from(sent)[0] != SEND_RR or len(replies) != 1:
+    """The O->T id of a class 3 connection an accepted (Large) Forward_Open opened: sent unconnected
+    (SendRRData) or as a connected message on a class 3 connection already open (SendUnitData, whose
+    Connected Data item is a sequence count and the message-router reply)."""
+    if len(replies) != 1 or replies[0].status != OK:
         return set()
-    reply = rr_reply(replies[0])
+    command = HEADER.unpack_from(sent)[0]
+    if command == SEND_RR:
+        reply = rr_reply(replies[0])
+    elif command == SEND_UNIT:
+        items = parse_items(replies[0].body, 6)
+        if items is None or [t for t, _ in items] != [CONNECTED_ADDRESS, CONNECTED_DATA] or len(items[1][1]) < 6:
+            return set()
+        reply = parse_cip_reply(items[1][1][2:])
+    else:
+        return set()
+    return _opened_in(reply)
+
+
+def _opened_in(reply: CipReply) -> set[int]:
+    """The O->T ids of the Forward_Opens ``reply`` accepted, a Multiple Service Packet's embedded ones too
+    (its data: a count, the offsets of the replies, the replies, CIP Vol. 1, A-4.10)."""
     if reply.service in (FORWARD_OPEN | 0x80, LARGE_FORWARD_OPEN | 0x80) and reply.status == 0:
         return {int(struct.unpack_from("<I", reply.data)[0])}
-    return set()
+    if reply.service != MSP | 0x80 or len(reply.data) < 2:
+        return set()
+    data = reply.data
+    count = struct.unpack_from("<H", data)[0]
+    if len(data) < 2 + 2 * count:
+        return set()
+    offsets = [*struct.unpack_from(f"<{count}H", data, 2), len(data)]
+    opened: set[int] = set()
+    for start, end in itertools.pairwise(offsets):
+        if 0 < start < end <= len(data) and end - start >= 4 and data[start] & 0x80:
+            opened |= _opened_in(parse_cip_reply(data[start:end]))
+    return opened
 
 
 def check_shape(sent: bytes, replies: list[Frame], closed: bool) -> None:
