@@ -91,8 +91,8 @@ def _limit_settings(args: argparse.Namespace) -> dict[str, Any]:
 def _http_settings(args: argparse.Namespace) -> dict[str, Any]:
     """``--http HOST:PORT`` (with ``--http-token``, ``--http-allow-remote``), checked before anything listens."""
     if args.http is None:
-        if args.http_token is not None or args.http_allow_remote:
-            raise UsageError("--http-token and --http-allow-remote go with --http HOST:PORT")
+        if args.http_token is not None or args.http_allow_remote or args.http_allow_host:
+            raise UsageError("--http-token, --http-allow-remote and --http-allow-host go with --http HOST:PORT")
         return {}
     try:
         from ..control.http import HttpApiError, check_settings
@@ -102,7 +102,8 @@ def _http_settings(args: argparse.Namespace) -> dict[str, Any]:
         check_settings(args.http, args.http_token, args.http_allow_remote)
     except HttpApiError as exc:
         raise UsageError(str(exc)) from None
-    return {"http": args.http, "http_token": args.http_token, "http_allow_remote": args.http_allow_remote}
+    return {"http": args.http, "http_token": args.http_token, "http_allow_remote": args.http_allow_remote,
+            "http_hosts": tuple(args.http_allow_host)}
 
 
 def _serve(adapter: Any, args: argparse.Namespace, command: str) -> int:

@@ -353,6 +353,9 @@ def _add_http_arguments(p: argparse.ArgumentParser) -> None:
                    help="every HTTP request must carry Authorization: Bearer TOKEN")
     p.add_argument("--http-allow-remote", action="store_true",
                    help="let the HTTP API listen on and serve other than loopback (needs --http-token)")
+    p.add_argument("--http-allow-host", action="append", default=[], metavar="NAME",
+                   help="a host name the HTTP API answers to besides its address and localhost (a request "
+                        "naming another is refused: DNS rebinding); repeatable")
 
 
 def _add_eds_commands(sub: Any) -> None:
