@@ -11,7 +11,14 @@ EtherNet/IP go on serving."""
 from __future__ import annotations
 
 import asyncio
+import os
+import signal
 import socket
+import subprocess
+import sys
+import time
+import urllib.error
+import urllib.request
 from collections.abc import AsyncIterator
 from pathlib import Path
 
@@ -19,6 +26,11 @@ import aiohttp
 import pytest
 
 from cipstack.adapter import Adapter, AdapterSettings
+from cipstack.cli.emulators import TOKEN_VARIABLE
+from tests.cli_errors import one_line_error
+from tests.ports import free_port
+from tests.test_cli import run, stop
+from tests.waiting import wait_for
 
 FAULT = b'{"name": "error-status", "options": {"status": "0x08", "class": 1}}'
 
@@ -120,3 +132,98 @@ async def test_a_token_header_that_is_not_utf8_is_refused_not_a_crash(tmp_path: 
         assert code == 200
     finally:
         await adapter.stop_serving()
+
+
+def _serve(tmp_path: Path, *args: str, env: dict[str, str] | None = None) -> tuple[subprocess.Popen[str], int]:
+    """``cipstack adapter --http`` in a process of its own; it and the HTTP API's port once it answers."""
+    port, http = free_port(), free_port()
+    process = subprocess.Popen([sys.executable, "-m", "cipstack", "adapter", "--port", str(port), "--io-port", "0",
+                                "--state", str(tmp_path / "acg.json"), "--control", str(tmp_path / "control.sock"),
+                                "--http", f"127.0.0.1:{http}", *args],
+                               stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+                               env={**os.environ, **(env or {})})
+
+    def answering() -> bool:
+        if process.poll() is not None:
+            pytest.fail(f"the adapter exited: {process.communicate()[1]}")
+        try:
+            socket.create_connection(("127.0.0.1", http), timeout=0.2).close()
+        except OSError:
+            return False
+        return True
+
+    wait_for(answering, 20, "the HTTP API")
+    return process, http
+
+
+def _status(http: int, token: str | None) -> int:
+    request = urllib.request.Request(f"http://127.0.0.1:{http}/status")
+    if token is not None:
+        request.add_header("Authorization", f"Bearer {token}")
+    try:
+        with urllib.request.urlopen(request, timeout=10) as reply:
+            return int(reply.status)
+    except urllib.error.HTTPError as error:
+        with error:
+            return int(error.code)
+
+
+@pytest.mark.parametrize("where", ["file", "environment"])
+def test_the_token_comes_from_a_file_or_the_environment_never_the_process_list(tmp_path: Path, where: str) -> None:
+    token = "t0ken-" + where
+    secret = tmp_path / "token"
+    secret.write_text(token + "\n", encoding="utf-8")
+    secret.chmod(0o600)
+    args, env = (("--http-token-file", str(secret)), None) if where == "file" else ((), {TOKEN_VARIABLE: token})
+    process, http = _serve(tmp_path, *args, env=env)
+    try:
+        assert _status(http, None) == 401 and _status(http, "wrong") == 401 and _status(http, token) == 200
+        assert token.encode() not in Path(f"/proc/{process.pid}/cmdline").read_bytes()   # what ps shows
+    finally:
+        stop(process)
+
+
+def test_an_empty_or_missing_token_file_is_one_line(tmp_path: Path) -> None:
+    (tmp_path / "empty").write_text("\n", encoding="utf-8")
+    for file, said in ((tmp_path / "empty", "the token is empty"), (tmp_path / "nowhere", "No such file")):
+        result = run("adapter", "--port", str(free_port()), "--http", "127.0.0.1:0", "--http-token-file", str(file))
+        assert result.returncode == 2 and said in one_line_error(result)
+    both = run("adapter", "--http", "127.0.0.1:0", "--http-token", "x", "--http-token-file", str(tmp_path / "empty"))
+    assert both.returncode == 2 and "not both" in one_line_error(both)
+
+
+def test_sigint_stops_the_adapter_within_2s_during_a_long_power_cycle(tmp_path: Path) -> None:
+    process, http = _serve(tmp_path)
+    try:
+        request = urllib.request.Request(f"http://127.0.0.1:{http}/power", method="POST",
+                                         data=b'{"action": "cycle", "off": "3000s"}',
+                                         headers={"Content-Type": "application/json"})
+        with urllib.request.urlopen(request, timeout=10) as reply:
+            assert reply.status == 200
+        process.send_signal(signal.SIGINT)
+        started = time.monotonic()
+        _, stderr = process.communicate(timeout=30)
+        assert process.returncode == 0 and "Traceback" not in stderr, stderr
+        assert time.monotonic() - started < 2.0
+    finally:
+        if process.poll() is None:
+            process.kill()
+            process.communicate()
+
+
+@pytest.mark.parametrize(("step", "said"), [
+    ('on = "conection opened"\nclear = true', 'on = \'conection opened\' is no event kind; valid: connection opened'),
+    ('on = "frequency"\nhz = nan\nclear = true', "hz = a number 0..1000"),
+    ('at = 1e9\nclear = true', "longer than 86400s"),
+    ('at = 1\nfault = "delay"\noptions = { by = ' + "9" * 400 + " }", "a number of about 400 digits"),
+    ('at = 1\nfault = "power-cycle"\noptions = { off = "2h" }', "not a duration"),
+    ("at = 1\nclear = true\nx = " + "[" * 2000 + "]" * 2000, "not TOML"),
+], ids=["event-kind", "hz-nan", "huge-at", "400-digits", "duration-unit", "nested-toml"])
+def test_a_scenario_is_checked_whole_when_it_is_read(tmp_path: Path, step: str, said: str) -> None:
+    """Refused at load, with one line naming the step, exit 2, before anything listens."""
+    path = tmp_path / "bad.toml"
+    path.write_text(f"[[step]]\n{step}\n", encoding="utf-8")
+    port = free_port()
+    result = run("adapter", "--port", str(port), "--io-port", "0", "--scenario", str(path))
+    assert result.returncode == 2 and said in one_line_error(result), result.stderr
+    assert "Traceback" not in result.stderr
