@@ -93,6 +93,8 @@ class AdapterSettings:
     http: str | None = None
     http_token: str | None = None
     http_allow_remote: bool = False
+    #: Host names the HTTP API answers to besides its addresses and localhost (``--http-allow-host``).
+    http_hosts: tuple[str, ...] = ()
 
 
 class Adapter:
@@ -272,7 +274,7 @@ class Adapter:
 
             host, port = parse_listen(self.settings.http)
             api = HttpApi({self.settings.host: self.service}, host, port, token=self.settings.http_token,
-                          allow_remote=self.settings.http_allow_remote)
+                          allow_remote=self.settings.http_allow_remote, hosts=self.settings.http_hosts)
             try:
                 await api.start()
             except OSError as exc:

@@ -50,11 +50,14 @@ class Api:
         self.base = base
         self.token = token
 
-    def __call__(self, method: str, path: str, body: object = None, raw: bytes | None = None) -> tuple[int, Any]:
+    def __call__(self, method: str, path: str, body: object = None, raw: bytes | None = None,
+                 headers: dict[str, str] | None = None) -> tuple[int, Any]:
         data = raw if raw is not None else (json.dumps(body).encode() if body is not None else None)
         request = urllib.request.Request(self.base + path, data=data, method=method)
         if data is not None:
             request.add_header("Content-Type", "application/json")
+        for name, value in (headers or {}).items():
+            request.add_header(name, value)
         if self.token is not None:
             request.add_header("Authorization", f"Bearer {self.token}")
         try:
@@ -167,6 +170,14 @@ def test_one_api_serves_every_device_of_every_worker(tmp_path: Path, monkeypatch
         assert api("POST", f"/devices/{hosts[3]}/faults", raw=b"{not json") == (400, {"error": "the body is not JSON"})
         status, body = api("POST", f"/devices/{hosts[3]}/faults", raw=b"x" * (MAX_BODY + 1))
         assert status == 413 and "error" in body
+        # A page of another origin, and a rebinding name, are refused by the relay as by one process.
+        fault = {"name": "stop-producing"}
+        assert api("POST", f"/devices/{hosts[3]}/faults", fault, headers={"Origin": "http://evil.example"})[0] == 403
+        assert api("POST", f"/devices/{hosts[3]}/faults", fault, headers={"Content-Type": "text/plain"})[0] == 415
+        assert api("GET", f"/devices/{hosts[3]}/status", headers={"Host": "evil.example"})[0] == 403
+        assert api("POST", f"/devices/{hosts[3]}/faults", raw=b'{"name": "delay", "options": {"by": ' + b"9" * 400
+                   + b"}}")[0] == 400
+        assert api("GET", f"/devices/{hosts[3]}/faults") == (200, [])
         status, body = api("GET", f"/devices/{hosts[3]}/nowhere")
         assert status == 404 and "error" in body
         status, body = api("POST", f"/devices/{hosts[3]}/faults",

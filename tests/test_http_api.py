@@ -93,7 +93,8 @@ async def test_bad_requests_get_json_and_the_api_goes_on(adapter: Adapter,
     assert status == 404 and body["error"].startswith("no class 1 connection 0x12345678")  # type: ignore[index]
     status, body = await call(http, "DELETE", "/faults/41")
     assert status == 404 and "no active fault 41" in body["error"]  # type: ignore[index]
-    status, body = await call(http, "POST", "/faults", data=b"x" * (MAX_BODY + 1))
+    status, body = await call(http, "POST", "/faults", data=b"x" * (MAX_BODY + 1),
+                              headers={"Content-Type": "application/json"})
     assert status == 413 and "error" in body  # type: ignore[operator]
     status, body = await call(http, "GET", "/events?since=x")
     assert status == 400

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import argparse
 import logging
+import os
 import sys
 from typing import Any
 
@@ -88,12 +89,47 @@ def _limit_settings(args: argparse.Namespace) -> dict[str, Any]:
     return limits
 
 
+#: Where the HTTP token may come from besides the command line, which every local user can read (ps).
+TOKEN_VARIABLE = "CIPSTACK_HTTP_TOKEN"
+
+
+def _http_token(args: argparse.Namespace) -> str | None:
+    """The HTTP token: ``--http-token``, else the first line of ``--http-token-file``, else the
+    environment's ``CIPSTACK_HTTP_TOKEN``; one of them only. A file that cannot be read, or an empty
+    token, is a usage error naming it."""
+    given = [name for name, value in (("--http-token", args.http_token), ("--http-token-file", args.http_token_file))
+             if value is not None]
+    if len(given) > 1:
+        raise UsageError("--http-token or --http-token-file, not both")
+    if args.http_token is not None:
+        token: str | None = args.http_token
+        where = "--http-token"
+    elif args.http_token_file is not None:
+        try:
+            token = args.http_token_file.read_text(encoding="utf-8").splitlines()[0].strip() \
+                if args.http_token_file.stat().st_size else ""
+        except (OSError, UnicodeDecodeError, IndexError) as exc:
+            raise UsageError(f"--http-token-file {args.http_token_file}: {getattr(exc, 'strerror', None) or exc}") \
+                from None
+        where = f"--http-token-file {args.http_token_file}"
+    else:
+        token = os.environ.get(TOKEN_VARIABLE)
+        where = TOKEN_VARIABLE
+    if token is not None and not token.strip():
+        raise UsageError(f"{where}: the token is empty")
+    return token
+
+
 def _http_settings(args: argparse.Namespace) -> dict[str, Any]:
-    """``--http HOST:PORT`` (with ``--http-token``, ``--http-allow-remote``), checked before anything listens."""
+    """``--http HOST:PORT`` (with its token, ``--http-allow-remote``, ``--http-allow-host``), checked
+    before anything listens."""
     if args.http is None:
-        if args.http_token is not None or args.http_allow_remote:
-            raise UsageError("--http-token and --http-allow-remote go with --http HOST:PORT")
+        if args.http_token is not None or args.http_token_file is not None or args.http_allow_remote \
+                or args.http_allow_host:
+            raise UsageError("--http-token, --http-token-file, --http-allow-remote and --http-allow-host go with "
+                             "--http HOST:PORT")
         return {}
+    args.http_token = _http_token(args)
     try:
         from ..control.http import HttpApiError, check_settings
     except ImportError:
@@ -102,7 +138,8 @@ def _http_settings(args: argparse.Namespace) -> dict[str, Any]:
         check_settings(args.http, args.http_token, args.http_allow_remote)
     except HttpApiError as exc:
         raise UsageError(str(exc)) from None
-    return {"http": args.http, "http_token": args.http_token, "http_allow_remote": args.http_allow_remote}
+    return {"http": args.http, "http_token": args.http_token, "http_allow_remote": args.http_allow_remote,
+            "http_hosts": tuple(args.http_allow_host)}
 
 
 def _serve(adapter: Any, args: argparse.Namespace, command: str) -> int:

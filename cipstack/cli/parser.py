@@ -350,9 +350,15 @@ def _add_http_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--http", metavar="HOST:PORT",
                    help="also serve the HTTP control API (docs/http.md) on this loopback address and port")
     p.add_argument("--http-token", metavar="TOKEN",
-                   help="every HTTP request must carry Authorization: Bearer TOKEN")
+                   help="every HTTP request must carry Authorization: Bearer TOKEN (visible to every local user "
+                        "in the process list: prefer --http-token-file or CIPSTACK_HTTP_TOKEN)")
+    _complete(p.add_argument("--http-token-file", type=Path, metavar="FILE",
+                             help="read the HTTP token from the first line of FILE (keep it mode 0600)"), _FILE)
     p.add_argument("--http-allow-remote", action="store_true",
                    help="let the HTTP API listen on and serve other than loopback (needs --http-token)")
+    p.add_argument("--http-allow-host", action="append", default=[], metavar="NAME",
+                   help="a host name the HTTP API answers to besides its address and localhost (a request "
+                        "naming another is refused: DNS rebinding); repeatable")
 
 
 def _add_eds_commands(sub: Any) -> None:

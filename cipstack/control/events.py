@@ -37,6 +37,11 @@ if TYPE_CHECKING:
 #: Events kept (the oldest go first).
 DEFAULT_LIMIT = 10_000
 
+#: Every kind of event the stream records (what a scenario's ``on`` may wait for).
+EVENT_KINDS = ("connection opened", "connection closed", "connection timed out", "run", "idle", "drive state",
+               "trip", "trip reset", "parameter write", "fault applied", "fault cleared", "fault expired",
+               "fault used up", "fault replaced")
+
 #: Services whose success writes a value (CIP Vol. 1, Appendix A): Set_Attributes_All,
 #: Set_Attribute_List, Set_Attribute_Single, Set_Member.
 _SET_SERVICES = frozenset({0x02, 0x04, 0x10, 0x19})

@@ -107,27 +107,85 @@ def no_device(name: str | None, names: list[str]) -> web.Response:
     return json_error(404, f"no device {name!r}", devices=sorted(names))
 
 
+#: Methods that change something: from a browser, only the API's own page may send them.
+_CHANGING = frozenset({"POST", "PUT", "DELETE", "PATCH"})
+#: What ``Sec-Fetch-Site`` says of a request a browser sent from the API's own page, or not from a page.
+_SAME_SITE = frozenset({"same-origin", "none"})
+
+
+def _host_name(host_header: str) -> str:
+    """The name or address of a ``Host`` header, without its port (``[::1]:8080`` -> ``::1``)."""
+    host = host_header.strip()
+    if host.startswith("["):
+        return host[1:].split("]", 1)[0]
+    return host.rsplit(":", 1)[0] if host.count(":") == 1 else host
+
+
+def _is_address(name: str) -> bool:
+    try:
+        ipaddress.ip_address(name)
+    except ValueError:
+        return False
+    return True
+
+
 class Guard:
     """What every request passes before its handler (an aiohttp middleware): loopback peers only unless
     ``allow_remote``, the bearer ``token`` when one is set, at most ``MAX_IN_FLIGHT`` at once; an error
     of aiohttp's (unknown route, body too large) as a JSON body; nothing a handler raises escapes.
-    ``local``: the API listens on a Unix socket (a worker's, reached by its fleet's relay only), where
-    the socket's directory is the access control and there is no peer address to check."""
 
-    def __init__(self, token: str | None, allow_remote: bool, local: bool = False) -> None:
+    Browsers: a web page of another origin that the test engineer opens must not drive the emulator.
+    A ``Host`` that is not an address, ``localhost`` or one of ``hosts`` is refused (a DNS-rebinding
+    page names the API by a name of its own); a request that changes something is refused when its
+    ``Origin`` is not the API's own (``null`` included: a sandboxed or ``file://`` page) or, without
+    ``Origin``, when ``Sec-Fetch-Site`` says another site sent it; and its body must be JSON
+    (``Content-Type: application/json``), which no page of another origin can send without the API's
+    consent (a CORS preflight, which it never gives). curl and scripts send none of these headers but
+    the content type. ``local``: the API listens on a Unix socket (a worker's, reached by its fleet's
+    relay only, which has checked all this), where the socket's directory is the access control."""
+
+    def __init__(self, token: str | None, allow_remote: bool, local: bool = False,
+                 hosts: tuple[str, ...] = ()) -> None:
         self.token = token
         self.allow_remote = allow_remote
         self.local = local
+        #: Host names the API answers to besides addresses and localhost (``--http-allow-host``).
+        self.hosts = frozenset(h.lower() for h in hosts)
         self.in_flight = 0
+
+    def refusal(self, request: web.Request) -> web.Response | None:
+        """Why ``request`` is refused before its handler, or None."""
+        peer = request.remote or ""
+        if not self.allow_remote and not _is_loopback(peer):
+            return json_error(403, f"{peer} is not loopback: this API serves loopback only (--http-allow-remote)")
+        name = _host_name(request.headers.get("Host", "")).lower()
+        if not (_is_address(name) or name == "localhost" or name.endswith(".localhost") or name in self.hosts):
+            return json_error(403, f"Host {name!r} is not this API's: use its address, localhost, or name it with "
+                                   "--http-allow-host")
+        if request.method in _CHANGING:
+            origin = request.headers.get("Origin")
+            if origin is not None:
+                own = f"{request.scheme}://{request.headers.get('Host', '')}".lower()
+                if origin.strip().lower() != own:
+                    return json_error(403, f"Origin {origin!r} is not this API's own: a page of another origin "
+                                           "cannot change the emulator")
+            elif request.headers.get("Sec-Fetch-Site", "none").lower() not in _SAME_SITE:
+                return json_error(403, "a request a browser sent from another site cannot change the emulator "
+                                       "(Sec-Fetch-Site)")
+            if request.can_read_body and request.content_type != "application/json":
+                return json_error(415, "a body is JSON: send it with Content-Type: application/json")
+        return None
 
     @web.middleware
     async def middleware(self, request: web.Request, handler: Handler) -> web.StreamResponse:
-        peer = request.remote or ""
-        if not self.local and not self.allow_remote and not _is_loopback(peer):
-            return json_error(403, f"{peer} is not loopback: this API serves loopback only (--http-allow-remote)")
+        if not self.local:
+            refused = self.refusal(request)
+            if refused is not None:
+                return refused
         if self.token is not None:
             given = request.headers.get("Authorization", "")
-            if not hmac.compare_digest(given.encode(), f"Bearer {self.token}".encode()):
+            # A header aiohttp decoded with surrogates (bytes that are not UTF-8) compares as what it is.
+            if not hmac.compare_digest(given.encode("utf-8", "surrogateescape"), f"Bearer {self.token}".encode()):
                 return json_error(401, "a request needs the header Authorization: Bearer TOKEN (--http-token)")
         if self.in_flight >= MAX_IN_FLIGHT:
             return json_error(503, f"{MAX_IN_FLIGHT} requests in progress; try again")
@@ -164,7 +222,8 @@ async def serve_app(app: web.Application, host: str, port: int, path: str | None
 
 class HttpApi:
     def __init__(self, devices: dict[str, DeviceService], host: str = "127.0.0.1", port: int = 0, *,
-                 token: str | None = None, allow_remote: bool = False, path: str | None = None) -> None:
+                 token: str | None = None, allow_remote: bool = False, path: str | None = None,
+                 hosts: tuple[str, ...] = ()) -> None:
         """``devices``: the command service of each device, by address (its host, or ``host:port`` when
         several share a host). ``path``: listen on this Unix socket instead of ``host:port`` (a fleet
         worker's API, which the fleet's relay forwards to; its directory is what keeps others out)."""
@@ -176,7 +235,7 @@ class HttpApi:
         self.path = path
         self.token = token
         self.allow_remote = allow_remote
-        self.guard = Guard(token, allow_remote, local=path is not None)
+        self.guard = Guard(token, allow_remote, local=path is not None, hosts=hosts)
         self._runner: web.AppRunner | None = None
         self.app = self._build()
 
@@ -228,6 +287,46 @@ class HttpApi:
         return handle
 
 
+#: The deepest JSON a body may nest (an operation's body is two levels deep: a fault's options).
+MAX_JSON_DEPTH = 8
+#: The most digits a JSON number may have (a duration, a count, a connection id have far fewer).
+MAX_NUMBER_DIGITS = 20
+
+
+def _bounded_number(text: str) -> int | float:
+    if len(text.lstrip("-").replace(".", "").split("e")[0].split("E")[0]) > MAX_NUMBER_DIGITS:
+        raise BadRequest(f"a number of the body has more than {MAX_NUMBER_DIGITS} digits")
+    return float(text) if any(c in text for c in ".eE") else int(text)
+
+
+def _depth(value: Any, limit: int) -> None:
+    """Raise ``BadRequest`` when ``value`` nests deeper than ``limit``."""
+    if limit < 0:
+        raise BadRequest(f"the body nests deeper than {MAX_JSON_DEPTH} levels")
+    children = value.values() if isinstance(value, dict) else value if isinstance(value, list) else ()
+    for child in children:
+        _depth(child, limit - 1)
+
+
+def parse_body(text: str) -> Any:
+    """A request body as JSON, bounded: nesting, number sizes; anything else a 400 naming the problem."""
+    try:
+        loaded = json.loads(text, parse_int=_bounded_number, parse_float=_bounded_number,
+                            parse_constant=_no_constant)
+    except RecursionError:
+        raise BadRequest(f"the body nests deeper than {MAX_JSON_DEPTH} levels") from None
+    except ValueError as exc:
+        if isinstance(exc, BadRequest):
+            raise
+        raise BadRequest("the body is not JSON") from None
+    _depth(loaded, MAX_JSON_DEPTH)
+    return loaded
+
+
+def _no_constant(name: str) -> Any:
+    raise BadRequest(f"{name} is not a JSON number")
+
+
 async def _arguments(operation: Operation, request: web.Request) -> dict[str, Any]:
     """An operation's arguments from its route (path), its query and its JSON body, by their JSON keys;
     a key the operation does not take is a 400 naming the keys it takes."""
@@ -235,9 +334,10 @@ async def _arguments(operation: Operation, request: web.Request) -> dict[str, An
     body: dict[str, Any] = {}
     if request.can_read_body:
         try:
-            loaded = await request.json(loads=json.loads)
-        except (ValueError, UnicodeDecodeError):
-            raise BadRequest("the body is not JSON") from None
+            text = await request.text()
+        except UnicodeDecodeError:
+            raise BadRequest("the body is not JSON (not UTF-8)") from None
+        loaded = parse_body(text) if text.strip() else {}
         if not isinstance(loaded, dict):
             raise BadRequest("the body is a JSON object")
         body = loaded

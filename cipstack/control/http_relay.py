@@ -69,12 +69,12 @@ class RelayApi:
     """The fleet's HTTP API on ``host:port`` over the APIs of ``backends`` (see the module docstring)."""
 
     def __init__(self, backends: list[Backend], host: str = "127.0.0.1", port: int = 0, *,
-                 token: str | None = None, allow_remote: bool = False) -> None:
+                 token: str | None = None, allow_remote: bool = False, hosts: tuple[str, ...] = ()) -> None:
         check_settings(f"{host}:{port}", token, allow_remote)
         self.backends = backends
         self.host = host
         self.port = port
-        self.guard = Guard(token, allow_remote)
+        self.guard = Guard(token, allow_remote, hosts=hosts)
         #: Each device's worker, by the address the worker's API gives it.
         self.routes: dict[str, Backend] = {}
         self._runner: web.AppRunner | None = None

@@ -29,7 +29,8 @@ from typing import TYPE_CHECKING, Any
 
 from ..errors import BadRequest
 from ..faults import FaultError, FaultRequest
-from ..faults.model import JSON_SPELLING, parse_duration
+from ..faults.model import JSON_SPELLING, parse_duration, shown
+from .events import EVENT_KINDS
 
 if sys.version_info >= (3, 11):
     import tomllib
@@ -40,6 +41,8 @@ if TYPE_CHECKING:
     from .service import DeviceService
 
 DEFAULT_WITHIN = 30.0
+#: The highest output frequency a step may wait for: well above any emulated drive's maximum frequency.
+MAX_HZ = 1000.0
 _STEP_KEYS = {"at", "on", "hz", "after", "within", "fault", "options", "clear", "trip", "repeat", "name"}
 
 
@@ -89,6 +92,8 @@ def load(path: str | Path) -> Scenario:
         raise ScenarioError(f"{path}: {exc.strerror or exc}") from None
     except (tomllib.TOMLDecodeError, UnicodeDecodeError) as exc:
         raise ScenarioError(f"{path}: not TOML: {exc}") from None
+    except RecursionError:
+        raise ScenarioError(f"{path}: not TOML a scenario can be: it nests too deeply") from None
     unknown = set(document) - {"step", "linger"}
     if unknown:
         raise ScenarioError(f"{path}: unknown table or key {sorted(unknown)[0]!r} (a scenario is [[step]] tables "
@@ -117,11 +122,13 @@ def _step(path: Path, number: int, raw: Any) -> Step:
         on = raw.get("on")
         if (at is None) == (on is None):
             raise ScenarioError(f"{where}: one trigger, at = TIME or on = EVENT")
-        if on is not None and not isinstance(on, str):
-            raise ScenarioError(f"{where}: on names an event kind")
+        if on is not None and (not isinstance(on, str) or on not in (*EVENT_KINDS, "frequency")):
+            raise ScenarioError(f"{where}: on = {shown(on)} is no event kind; valid: {', '.join(EVENT_KINDS)}, "
+                                "frequency")
         hz = raw.get("hz")
-        if (on == "frequency") != (hz is not None) or (hz is not None and not isinstance(hz, (int, float))):
-            raise ScenarioError(f"{where}: on = \"frequency\" goes with hz = NUMBER")
+        if (on == "frequency") != (hz is not None) or (hz is not None and (
+                isinstance(hz, bool) or not isinstance(hz, (int, float)) or not 0 <= hz <= MAX_HZ)):
+            raise ScenarioError(f"{where}: on = \"frequency\" goes with hz = a number 0..{MAX_HZ:g}")
         actions = [k for k in ("fault", "clear", "trip") if k in raw]
         if len(actions) != 1:
             raise ScenarioError(f"{where}: one action, fault = NAME, clear = true or trip = CODE")

@@ -22,13 +22,29 @@ from . import class1, device, explicit
 from .effect import EffectFactory
 from .errors import FaultError, FaultStateError, NoSuchConnection  # noqa: F401 (their import path of old)
 
+#: The longest duration any option takes (``--for``, ``--by``, a scenario's ``at``): a day. A test rig's
+#: typo (``--for 1e9``) is refused rather than a fault that outlives the rig.
+MAX_DURATION_S = 86400.0
+
+
+def shown(value: object, limit: int = 40) -> str:
+    """``value`` as a message quotes it, cut short: a 400-digit number is not worth echoing whole (and an
+    int of more than 4,300 digits cannot even be turned into text)."""
+    if isinstance(value, int) and not isinstance(value, bool) and value.bit_length() > 128:
+        return f"a number of about {int(value.bit_length() * 0.30103)} digits"
+    text = repr(value)
+    return text if len(text) <= limit else text[:limit] + "..."
+
 
 def parse_duration(value: object) -> float:
-    """``2``, ``2.5``, ``500ms``, ``2s``, ``1.5`` (seconds), or a number."""
+    """``2``, ``2.5``, ``500ms``, ``2s``, ``1.5`` (seconds), or a number; at most ``MAX_DURATION_S``."""
     if isinstance(value, bool):
-        raise FaultError(f"{value!r} is not a duration (e.g. 2s, 500ms)")
+        raise FaultError(f"{shown(value)} is not a duration (e.g. 2s, 500ms)")
     if isinstance(value, (int, float)):
-        seconds = float(value)
+        try:
+            seconds = float(value)
+        except OverflowError:
+            seconds = math.inf
     else:
         text = str(value).strip().lower()
         scale = 1.0
@@ -41,25 +57,28 @@ def parse_duration(value: object) -> float:
         try:
             seconds = float(text) * scale
         except ValueError:
-            raise FaultError(f"{value!r} is not a duration (e.g. 2s, 500ms)") from None
+            raise FaultError(f"{shown(value)} is not a duration (e.g. 2s, 500ms)") from None
     if not math.isfinite(seconds) or seconds < 0:
-        raise FaultError(f"duration {value!r} is not a finite time of 0 or more")
+        raise FaultError(f"duration {shown(value)} is not a finite time of 0 or more")
+    if seconds > MAX_DURATION_S:
+        raise FaultError(f"duration {shown(value)} is longer than {MAX_DURATION_S:g}s (a day), the longest taken")
     return seconds
 
 
 def parse_integer(value: object, low: int = 0, high: int = 0xFFFFFFFF) -> int:
     """A whole number, decimal or 0x hex, within ``low..high``."""
     if isinstance(value, bool):
-        raise FaultError(f"{value!r} is not a number")
+        raise FaultError(f"{shown(value)} is not a number")
     if isinstance(value, int):
         number = value
     else:
+        text = str(value).strip()
         try:
-            number = int(str(value).strip(), 0)
+            number = int(text, 0) if len(text) <= 40 else high + 1
         except ValueError:
-            raise FaultError(f"{value!r} is not a number (decimal or 0x hex)") from None
+            raise FaultError(f"{shown(value)} is not a number (decimal or 0x hex)") from None
     if not low <= number <= high:
-        raise FaultError(f"{value!r} is out of range {low}..{high}")
+        raise FaultError(f"{shown(value)} is out of range {low}..{high}")
     return number
 
 
@@ -69,9 +88,9 @@ def parse_share(value: object) -> float:
     try:
         share = float(text[:-1]) / 100 if text.endswith("%") else float(text)
     except ValueError:
-        raise FaultError(f"{value!r} is not a share (e.g. 0.1 or 10%)") from None
+        raise FaultError(f"{shown(value)} is not a share (e.g. 0.1 or 10%)") from None
     if not 0 < share <= 1:
-        raise FaultError(f"share {value!r} is not in (0, 1]")
+        raise FaultError(f"share {shown(value)} is not in (0, 1]")
     return share
 
 

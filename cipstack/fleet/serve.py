@@ -153,7 +153,7 @@ async def serve_until_signalled(devices: Sequence[FleetDevice], port: int, io_po
                                 rtu: str | None = None, http: dict[str, Any] | None = None) -> int:
     """Serve ``devices`` until one of ``signals``; returns the signal that stopped them. ``rtu``:
     the RS-485 line their ACG drives share (``DeviceSet``); ``http``: the settings of one HTTP control
-    API for every device (``http``, ``http_token``, ``http_allow_remote``; or ``path``, a fleet worker's
+    API for every device (``http``, ``http_token``, ``http_allow_remote``, ``http_hosts``; or ``path``, a fleet worker's
     Unix socket)."""
     loop = asyncio.get_running_loop()
     stop = asyncio.Event()
@@ -205,7 +205,7 @@ async def _start_http(adapters: Sequence[Adapter], http: dict[str, Any]) -> Any:
     else:
         host, port = parse_listen(http["http"])
         api = HttpApi(api_addresses(adapters), host, port, token=http.get("http_token"),
-                      allow_remote=http.get("http_allow_remote", False))
+                      allow_remote=http.get("http_allow_remote", False), hosts=tuple(http.get("http_hosts", ())))
         where = f"TCP {http['http']} (HTTP control API, --http)"
     try:
         await api.start()

@@ -179,7 +179,7 @@ class Supervisor:
     def __init__(self, devices: Sequence[FleetDevice], port: int, io_port: int, workers: int,
                  http: dict[str, Any] | None = None) -> None:
         """``http``: the settings of the fleet's HTTP control API (``http``, ``http_token``,
-        ``http_allow_remote``), or None for none."""
+        ``http_allow_remote``, ``http_hosts``), or None for none."""
         self.devices = list(devices)
         self.port = port
         self.io_port = io_port
@@ -339,7 +339,8 @@ class Supervisor:
         host, port = parse_listen(self.http["http"])
         relay = RelayApi([Backend(w.name, w.api_path or "", lambda w=w: self._why_down(w), w.number)
                           for w in self.workers], host, port, token=self.http.get("http_token"),
-                         allow_remote=self.http.get("http_allow_remote", False))
+                         allow_remote=self.http.get("http_allow_remote", False),
+                         hosts=tuple(self.http.get("http_hosts", ())))
         watched: dict[int, _Worker] = {}
         self._wake = wake.set
         for sig in (signal.SIGINT, signal.SIGTERM):   # the loop's own handling, which wakes its wait
