@@ -97,10 +97,40 @@ def test_on_a_pty_the_slave_paces_request_and_reply_at_its_baud_rate(drive: AcgD
     assert slave.poll(1.0 + 11.4 * char) == []
     (reply,) = slave.poll(1.0 + 11.5 * char)
     assert reply.due == pytest.approx(1.0 + 11.5 * char + 0.005 + 7 * char)
-    # Bytes read while the modelled line still brings earlier ones continue the same frame.
+    # Bytes read while the modelled line still brings earlier ones, or within t1.5 of their end,
+    # continue the same frame.
     frame = read(1, 0x1F01)
-    assert slave.feed(frame[:4], 2.0) == [] and slave.feed(frame[4:], 2.0 + 5.9 * char) == []
-    assert len(slave.poll(2.0 + 9.9 * char + 3.5 * char)) == 1
+    assert slave.feed(frame[:4], 2.0) == [] and slave.feed(frame[4:], 2.0 + 5.4 * char) == []
+    assert len(slave.poll(2.0 + 9.4 * char + 3.5 * char)) == 1
+
+
+def test_on_a_pty_a_silence_over_t15_inside_a_frame_discards_it(drive: AcgDrive) -> None:
+    """Modbus over serial line 2.5.1.1: more than 1.5 characters of silence between two characters of
+    a frame (and less than the 3.5 that would end it) make the frame incomplete: not answered, counted."""
+    slave = RtuSlave(drive, paced=True)
+    char = 10 / 9600
+    frame = read(1, 0x1F01)
+    assert slave.feed(frame[:4], 2.0) == [] and slave.feed(frame[4:], 2.0 + 5.9 * char) == []   # 1.9 characters
+    assert slave.poll(2.0 + 9.9 * char + 3.5 * char) == []
+    assert (slave.counters.frames, slave.counters.interrupted, slave.counters.replies) == (1, 1, 0)
+    # The next whole frame is answered.
+    assert slave.feed(frame, 3.0) == [] and len(slave.poll(3.0 + 11.5 * char)) == 1
+
+
+def test_on_a_pty_a_flood_is_dropped_at_line_rate_and_the_line_is_free_a_frame_later(drive: AcgDrive) -> None:
+    """A line carries one character per character time: what a pty brings faster, beyond one largest
+    frame (256 characters) ahead of now, could not have come off a line; it is dropped and counted,
+    never queued, so a request one frame time after the flood is answered."""
+    slave = RtuSlave(drive, paced=True)
+    char = 10 / 9600
+    noise = bytes(range(256)) * 40                                        # 10,240 bytes at once
+    assert slave.feed(noise, 5.0) == []
+    assert slave.counters.overrun == len(noise) - 256
+    assert slave.deadline() == pytest.approx(5.0 + 256 * char + 3.5 * char)
+    later = 5.0 + 256 * char + 3.5 * char                                 # the flood's frame ends, dropped
+    assert slave.poll(later) == [] and slave.counters.oversize + slave.counters.interrupted == 1
+    assert slave.feed(read(1, 0x1F01), later + char) == []
+    assert len(slave.poll(later + char + 11.5 * char)) == 1               # answered: free again
 
 
 @pytest.mark.parametrize(("cm3", "cm4", "silence"), [

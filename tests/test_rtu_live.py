@@ -315,3 +315,28 @@ async def test_a_serial_device_is_served_through_pyserial() -> None:
     finally:
         os.close(master)
         os.close(slave_fd)
+
+
+async def test_a_flood_on_the_pty_is_dropped_and_the_line_answers_a_frame_after_it() -> None:
+    """Noise at the pty as fast as it takes it, for a while: dropped at line rate (counted as overrun),
+    never queued, so a request soon after the noise stops is answered (it was deaf for days before)."""
+    drive = AcgDrive(now=0.0)
+    request = with_crc(bytes.fromhex("01 03") + pdu("ACC").to_bytes(2, "big") + bytes.fromhex("0001"))
+    async with line_with(drive) as (line, slave):
+        fd = _raw_slave(line.name)
+        try:
+            noise = os.urandom(4096)
+            until = time.monotonic() + 0.5
+            sent = 0
+            while time.monotonic() < until and sent < 4_000_000:      # bounded in time and in bytes
+                with contextlib.suppress(BlockingIOError):
+                    sent += os.write(fd, noise)
+                await asyncio.sleep(0)
+            assert sent > 100_000
+            await asyncio.sleep(0.5)                                   # > one largest frame at 9,600 bps
+            await _read_reply(fd, 0.1)                                 # whatever the noise made it answer
+            os.write(fd, request)
+            assert await _read_reply(fd, 1.0) == with_crc(bytes.fromhex("01 03 02 0032"))
+            assert slave.counters.overrun > 90_000
+        finally:
+            os.close(fd)

@@ -7,10 +7,16 @@ bytes and the time they arrived in, frames and replies with the time they leave 
 * Framing: a frame ends at a silence of 3.5 character times, fixed at 1.75 ms above 19,200 bps
   (Modbus over serial line, V1.02, 2.5.1.1). The silence is measured from the end of the last byte
   heard to the next read: on a serial device a read's bytes have arrived when it is made; on a pty,
-  which moves bytes at once, the slave models them on a line at its CM.3 rate (``RtuFramer``). The
-  1.5-character rule inside a frame is not applied, since a read holds many characters whose own
-  spacing is not known. A frame longer than 256 bytes (the largest RTU frame) is dropped whole, up
-  to the next silence.
+  which moves bytes at once, the slave models them on a line at its CM.3 rate (``RtuFramer``). On a
+  pty the 1.5-character rule applies too (2.5.1.1: a silence of more than t1.5 inside a frame makes
+  it incomplete, discarded; 0.75 ms above 19,200 bps), measured between the modelled end of the
+  bytes heard and the next read; on a serial device it is the UART's, since a read holds many
+  characters whose own spacing is not known. A frame longer than 256 bytes (the largest RTU frame)
+  is dropped whole, up to the next silence.
+* Bounded input: a line carries one character per character time. Bytes that come through a pty
+  faster than that, beyond one largest frame ahead of the present, could not have come off a line
+  (a UART would overrun): they are dropped and counted (``overrun``), never queued, so the line is
+  free again within one frame time after a flood stops.
 * Checks, in the order a slave makes them: a frame shorter than its function needs is truncated;
   a frame whose CRC-16 (polynomial 0xA001 reflected, initial 0xFFFF, low byte first) does not
   match is a CRC error; a frame for another station ID is not ours. None of them is answered;
@@ -43,6 +49,8 @@ FRAMINGS = {0: (8, "N", 1), 1: (8, "N", 2), 2: (8, "E", 1), 3: (8, "O", 1)}
 #: Above this rate the frame-end silence is fixed (Modbus over serial line V1.02, 2.5.1.1).
 FIXED_SILENCE_ABOVE = 19200
 FIXED_SILENCE = 0.00175
+#: t1.5 above 19,200 bps (Modbus over serial line V1.02, 2.5.1.1).
+FIXED_INTERCHARACTER = 0.00075
 #: The largest RTU frame: address, 253-byte PDU, CRC (Modbus over serial line V1.02, 2.5.1).
 MAX_FRAME = 256
 #: "Number of connected drives: Maximum of 16 drives" (seed 001, Communication Standards).
@@ -111,6 +119,11 @@ class LineSettings:
         """t3.5: the silence that ends a frame."""
         return FIXED_SILENCE if self.baud > FIXED_SILENCE_ABOVE else 3.5 * self.character_time
 
+    @property
+    def intercharacter_silence(self) -> float:
+        """t1.5: the longest silence a frame may hold between two of its characters."""
+        return FIXED_INTERCHARACTER if self.baud > FIXED_SILENCE_ABOVE else 1.5 * self.character_time
+
     def transmission_time(self, size: int) -> float:
         """How long ``size`` bytes take on the line."""
         return size * self.character_time
@@ -136,6 +149,10 @@ class RtuCounters:
     crc_errors: int = 0
     truncated: int = 0
     oversize: int = 0
+    #: Frames with a silence of more than t1.5 inside them (pty only), discarded.
+    interrupted: int = 0
+    #: Bytes that came faster than the line carries them (a pty flood), dropped.
+    overrun: int = 0
 
     def as_dict(self) -> dict[str, int]:
         return {f.name: getattr(self, f.name) for f in fields(self)}
@@ -156,15 +173,31 @@ class RtuFramer:
         self._buffer = bytearray()
         self._last: float | None = None     # when the last byte of the frame being heard ends
         self._oversize = False
+        self._interrupted = False
 
-    def feed(self, data: bytes, now: float, silence: float, character_time: float = 0.0) -> list[tuple[bytes, float]]:
+    def feed(self, data: bytes, now: float, silence: float, character_time: float = 0.0,
+             intercharacter: float | None = None) -> list[tuple[bytes, float]]:
         """Bytes read at ``now``; returns the frames (with the time they ended) that a silence of
-        at least ``silence`` before them ended."""
+        at least ``silence`` before them ended. With ``character_time`` (a pty) the bytes are modelled
+        on the line, at most one largest frame ahead of ``now`` (the rest is an overrun, dropped), and
+        a silence of more than ``intercharacter`` (t1.5) inside a frame makes it incomplete."""
         frames = self.poll(now, silence) if self._last is not None and now - self._last >= silence - _EPSILON else []
         if not data:
             return frames
-        start = now if self._last is None else max(now, self._last)
-        self._last = start + len(data) * character_time
+        if character_time > 0:
+            if self._last is not None and intercharacter is not None and now - self._last > intercharacter + _EPSILON:
+                self._interrupted = True
+            start = now if self._last is None else max(now, self._last)
+            fits = max(0, int((now + MAX_FRAME * character_time - start) / character_time + _EPSILON))
+            if len(data) > fits:
+                self.counters.overrun += len(data) - fits
+                self._interrupted = True     # characters were lost: the frame is not whole
+                data = data[:fits]
+                if not data:
+                    return frames
+            self._last = start + len(data) * character_time
+        else:
+            self._last = now
         if self._oversize or len(self._buffer) + len(data) > MAX_FRAME:
             self._oversize = True           # dropped whole, up to the next silence
             self._buffer.clear()
@@ -181,13 +214,16 @@ class RtuFramer:
         if self._last is None or now - self._last < silence - _EPSILON:
             return []
         end = self._last + silence
-        frame, oversize = bytes(self._buffer), self._oversize
+        frame, oversize, interrupted = bytes(self._buffer), self._oversize, self._interrupted
         self._buffer.clear()
         self._last = None
-        self._oversize = False
+        self._oversize = self._interrupted = False
         self.counters.frames += 1
         if oversize:
             self.counters.oversize += 1
+            return []
+        if interrupted:
+            self.counters.interrupted += 1
             return []
         return [(frame, end)]
 
@@ -249,8 +285,12 @@ class RtuSlave:
     def feed(self, data: bytes, now: float) -> list[Reply]:
         """Bytes heard on the line at ``now``; the replies of the frames they ended."""
         settings = self.settings
-        character_time = settings.character_time if self.paced else 0.0
-        return self._serve(self.framer.feed(data, now, settings.frame_silence, character_time), settings)
+        if self.paced:
+            frames = self.framer.feed(data, now, settings.frame_silence, settings.character_time,
+                                      settings.intercharacter_silence)
+        else:
+            frames = self.framer.feed(data, now, settings.frame_silence)
+        return self._serve(frames, settings)
 
     def deadline(self) -> float | None:
         """When the frame being heard ends if the line stays silent."""
