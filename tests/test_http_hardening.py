@@ -227,3 +227,65 @@ def test_a_scenario_is_checked_whole_when_it_is_read(tmp_path: Path, step: str, 
     result = run("adapter", "--port", str(port), "--io-port", "0", "--scenario", str(path))
     assert result.returncode == 2 and said in one_line_error(result), result.stderr
     assert "Traceback" not in result.stderr
+
+
+def test_idle_http_connections_neither_exhaust_the_process_nor_stay(tmp_path: Path) -> None:
+    """Under a low open-file limit (256), 300 connections to the HTTP API that never send a request
+    head: at most ``MAX_CONNECTIONS`` are kept, EtherNet/IP and a new HTTP client (once there is room)
+    are served meanwhile, and each idle one is closed ``HEADER_TIMEOUT`` after it came."""
+    import resource
+
+    from cipstack.control.http import HEADER_TIMEOUT, MAX_CONNECTIONS
+
+    def low_limit() -> None:
+        resource.setrlimit(resource.RLIMIT_NOFILE, (256, 256))
+
+    port, http = free_port(), free_port()
+    process = subprocess.Popen([sys.executable, "-m", "cipstack", "adapter", "--port", str(port), "--io-port", "0",
+                                "--state", str(tmp_path / "acg.json"), "--control", str(tmp_path / "control.sock"),
+                                "--http", f"127.0.0.1:{http}"],
+                               stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, preexec_fn=low_limit)
+    idle: list[socket.socket] = []
+    try:
+        wait_for(lambda: _status(http, None) == 200 if _accepting(http) else False, 20, "the HTTP API")
+        for _ in range(300):
+            idle.append(socket.create_connection(("127.0.0.1", http), timeout=5))
+        time.sleep(0.5)
+        open_ones = [s for s in idle if _still_open(s)]
+        assert 0 < len(open_ones) <= MAX_CONNECTIONS
+        # EtherNet/IP accepts and answers a RegisterSession meanwhile.
+        with socket.create_connection(("127.0.0.1", port), timeout=5) as eip:
+            eip.sendall(bytes.fromhex("6500 0400 00000000 00000000 0000000000000000 00000000 0100 0000"))
+            assert eip.recv(28)[:2] == b"\x65\x00"
+        for sock in open_ones[:5]:                                         # room again: a client is served
+            sock.close()
+        time.sleep(0.2)
+        assert _status(http, None) == 200
+        time.sleep(HEADER_TIMEOUT + 1)
+        assert not any(_still_open(s) for s in open_ones[5:])              # idle ones closed by the API
+        assert _status(http, None) == 200
+    finally:
+        for sock in idle:
+            sock.close()
+        stop(process)
+
+
+def _accepting(port: int) -> bool:
+    try:
+        socket.create_connection(("127.0.0.1", port), timeout=0.2).close()
+    except OSError:
+        return False
+    return True
+
+
+def _still_open(sock: socket.socket) -> bool:
+    """The peer has not closed ``sock`` (nothing was sent on it: a read would block)."""
+    sock.setblocking(False)
+    try:
+        return sock.recv(1) != b""
+    except BlockingIOError:
+        return True
+    except OSError:
+        return False
+    finally:
+        sock.setblocking(True)

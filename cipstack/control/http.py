@@ -19,6 +19,7 @@ body; nothing a client sends raises out of a handler. The description of every r
 
 from __future__ import annotations
 
+import asyncio
 import hmac
 import ipaddress
 import json
@@ -28,6 +29,7 @@ from typing import TYPE_CHECKING, Any
 
 from aiohttp import web
 
+from ..eip.limits import RateLimitedLog, guarded_listener, quiet_accept_errors
 from ..errors import BadRequest, CipstackError
 from .operations import OPERATIONS, Operation
 from .service import outcome
@@ -178,6 +180,9 @@ class Guard:
 
     @web.middleware
     async def middleware(self, request: web.Request, handler: Handler) -> web.StreamResponse:
+        connections = request.app.get(CONNECTIONS)
+        if connections is not None:
+            connections.started(request.protocol)    # its head came in time
         if not self.local:
             refused = self.refusal(request)
             if refused is not None:
@@ -203,21 +208,127 @@ class Guard:
             self.in_flight -= 1
 
 
-async def serve_app(app: web.Application, host: str, port: int, path: str | None = None) -> tuple[web.AppRunner, int]:
-    """``app`` served on ``host:port`` (TCP), or on the Unix socket ``path``; the runner and the TCP
-    port it got (``port`` 0: the OS's choice). A port or path it cannot take raises ``OSError``."""
-    runner = web.AppRunner(app, access_log=None, handle_signals=False)
+#: HTTP connections served at once; one more is closed at accept. Far below the process's open-file
+#: limit, so that no number of HTTP clients can keep EtherNet/IP and Modbus TCP from accepting theirs.
+MAX_CONNECTIONS = 64
+#: Seconds a connection has to send a whole request head after it is accepted, or after its last
+#: request (idle keep-alive); then it is closed.
+HEADER_TIMEOUT = 10.0
+#: Connections awaiting their first request head remembered, per connection of the limit (a burst of
+#: connections that open and close at once must not grow the table without bound).
+PENDING_PER_CONNECTION = 16
+#: Seconds a request's body has to arrive whole once its head has.
+BODY_TIMEOUT = 10.0
+
+
+class HttpConnections:
+    """The protocol factory of the HTTP listener over aiohttp's own (``server``): at most ``limit``
+    connections at once (one more is closed at once, one log line per 10 s), and a connection that has
+    not sent a whole request head ``header_timeout`` seconds after it was accepted is closed (an idle
+    keep-alive connection is aiohttp's, after the same time)."""
+
+    def __init__(self, limit: int = MAX_CONNECTIONS, header_timeout: float = HEADER_TIMEOUT) -> None:
+        #: aiohttp's protocol factory, given when the app is served (``serve_app``).
+        self.server: Any = None
+        self.limit = limit
+        self.header_timeout = header_timeout
+        #: Connections that have not begun a request yet, by id (the guard takes them out).
+        self.pending: dict[int, Any] = {}
+        self.refused_log = RateLimitedLog(log)
+        self.refused = 0
+        #: Connections made this round of the loop, which aiohttp does not list yet.
+        self.unmade = 0
+
+    def __call__(self) -> asyncio.BaseProtocol:
+        loop = asyncio.get_running_loop()
+        # aiohttp lists a connection once asyncio has told its protocol, on the loop's next round: those
+        # made in this round are counted apart until then. Connections still awaiting their first
+        # head are remembered (to close them at the timeout) up to a bound, closed ones included.
+        if (len(self.server.connections) + self.unmade >= self.limit
+                or len(self.pending) >= PENDING_PER_CONNECTION * self.limit):
+            self.refused += 1
+            self.refused_log("HTTP connection refused: %d connections already", self.limit, source="http")
+            return _Closed()
+        handler = self.server()
+        self.unmade += 1
+        loop.call_soon(loop.call_soon, self._made)   # after asyncio's own call of connection_made
+        self.pending[id(handler)] = handler
+        loop.call_later(self.header_timeout, self._check, id(handler))
+        return handler  # type: ignore[no-any-return]
+
+    def _made(self) -> None:
+        self.unmade -= 1
+
+    def started(self, handler: Any) -> None:
+        """``handler``'s connection sent a whole request head."""
+        self.pending.pop(id(handler), None)
+
+    def _check(self, key: int) -> None:
+        handler = self.pending.pop(key, None)
+        if handler is not None and handler.transport is not None:
+            handler.transport.close()
+
+
+class _Closed(asyncio.Protocol):
+    """A connection over the limit: closed as soon as it is made."""
+
+    def connection_made(self, transport: asyncio.BaseTransport) -> None:
+        transport.close()
+
+
+class ServedApp:
+    """An app being served: aiohttp's runner and, on TCP, the listener of ``HttpConnections``."""
+
+    def __init__(self, runner: web.AppRunner, port: int, server: asyncio.AbstractServer | None = None) -> None:
+        self.runner = runner
+        self.port = port
+        self.server = server
+
+    async def close(self) -> None:
+        """Stop accepting, then close every connection (aiohttp's cleanup ends the requests in flight)."""
+        if self.server is not None:
+            self.server.close()
+        await self.runner.cleanup()
+        if self.server is not None:
+            await self.server.wait_closed()
+
+
+async def serve_app(app: web.Application, host: str, port: int, path: str | None = None) -> ServedApp:
+    """``app`` served on ``host:port`` (TCP, through ``HttpConnections``), or on the Unix socket ``path``
+    (``port`` 0: the OS's choice). A port or path it cannot take raises ``OSError``."""
+    connections = app.get(CONNECTIONS)
+    runner = web.AppRunner(app, access_log=None, handle_signals=False,
+                           keepalive_timeout=connections.header_timeout if connections else HEADER_TIMEOUT)
     await runner.setup()
-    site: web.BaseSite = web.UnixSite(runner, path) if path is not None else \
-        web.TCPSite(runner, host, port, backlog=64, reuse_address=True)
+    if path is not None:
+        site = web.UnixSite(runner, path)
+        try:
+            await site.start()
+        except OSError:
+            await runner.cleanup()
+            raise
+        return ServedApp(runner, port)
+    loop = asyncio.get_running_loop()
+    quiet_accept_errors(loop)
     try:
-        await site.start()
+        listener = guarded_listener(host, port)
     except OSError:
         await runner.cleanup()
         raise
-    if path is None and runner.addresses:
-        port = int(runner.addresses[0][1])
-    return runner, port
+    if connections is not None:
+        connections.server = runner.server
+    factory = connections if connections is not None else runner.server
+    try:
+        server = await loop.create_server(factory, sock=listener)
+    except BaseException:
+        listener.close()
+        await runner.cleanup()
+        raise
+    return ServedApp(runner, int(listener.getsockname()[1]), server)
+
+
+#: Where an app keeps its ``HttpConnections`` (the guard marks the connections that began a request).
+CONNECTIONS: web.AppKey[HttpConnections] = web.AppKey("cipstack_http_connections", HttpConnections)
 
 
 class HttpApi:
@@ -236,24 +347,26 @@ class HttpApi:
         self.token = token
         self.allow_remote = allow_remote
         self.guard = Guard(token, allow_remote, local=path is not None, hosts=hosts)
-        self._runner: web.AppRunner | None = None
+        self._served: ServedApp | None = None
         self.app = self._build()
 
     # -- serving -----------------------------------------------------------------------------------------
     async def start(self) -> None:
         for service in self.devices.values():
             service.events.start()  # from now on every event is kept for GET .../events
-        self._runner, self.port = await serve_app(self.app, self.host, self.port, self.path)
+        self._served = await serve_app(self.app, self.host, self.port, self.path)
+        self.port = self._served.port
         if self.path is None:
             log.info("HTTP control API on http://%s:%d/ (openapi.json)", self.host, self.port)
 
     async def close(self) -> None:
-        if self._runner is not None:
-            await self._runner.cleanup()
-            self._runner = None
+        if self._served is not None:
+            await self._served.close()
+            self._served = None
 
     def _build(self) -> web.Application:
         app = web.Application(client_max_size=MAX_BODY, middlewares=[self.guard.middleware])
+        app[CONNECTIONS] = HttpConnections()
         for method, path, operation in DEVICE_ROUTES:
             handler = self._handler(operation)
             app.router.add_route(method, path, handler)
@@ -334,9 +447,11 @@ async def _arguments(operation: Operation, request: web.Request) -> dict[str, An
     body: dict[str, Any] = {}
     if request.can_read_body:
         try:
-            text = await request.text()
+            text = await asyncio.wait_for(request.text(), BODY_TIMEOUT)
         except UnicodeDecodeError:
             raise BadRequest("the body is not JSON (not UTF-8)") from None
+        except asyncio.TimeoutError:
+            raise web.HTTPRequestTimeout(reason=f"the body did not arrive within {BODY_TIMEOUT:g} s") from None
         loaded = parse_body(text) if text.strip() else {}
         if not isinstance(loaded, dict):
             raise BadRequest("the body is a JSON object")

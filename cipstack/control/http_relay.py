@@ -26,10 +26,13 @@ from aiohttp import web
 from yarl import URL
 
 from .http import (
+    CONNECTIONS,
     DEVICE_PREFIX,
     DEVICE_ROUTES,
     MAX_BODY,
     Guard,
+    HttpConnections,
+    ServedApp,
     check_settings,
     json_error,
     no_device,
@@ -77,7 +80,7 @@ class RelayApi:
         self.guard = Guard(token, allow_remote, hosts=hosts)
         #: Each device's worker, by the address the worker's API gives it.
         self.routes: dict[str, Backend] = {}
-        self._runner: web.AppRunner | None = None
+        self._served: ServedApp | None = None
         self.app = self._build()
 
     async def start(self) -> None:
@@ -90,7 +93,8 @@ class RelayApi:
                     timeout=aiohttp.ClientTimeout(total=None, sock_connect=CONNECT_TIMEOUT))
                 backend.devices = await self._listing(backend)
                 self.routes.update((entry["address"], backend) for entry in backend.devices)
-            self._runner, self.port = await serve_app(self.app, self.host, self.port)
+            self._served = await serve_app(self.app, self.host, self.port)
+            self.port = self._served.port
         except BaseException:
             await self.close()
             raise
@@ -98,9 +102,9 @@ class RelayApi:
                  self.port, len(self.routes), len(self.backends))
 
     async def close(self) -> None:
-        if self._runner is not None:
-            await self._runner.cleanup()
-            self._runner = None
+        if self._served is not None:
+            await self._served.close()
+            self._served = None
         for backend in self.backends:
             if backend.session is not None:
                 await backend.session.close()
@@ -121,6 +125,7 @@ class RelayApi:
 
     def _build(self) -> web.Application:
         app = web.Application(client_max_size=MAX_BODY, middlewares=[self.guard.middleware])
+        app[CONNECTIONS] = HttpConnections()
         for method, path, _operation in DEVICE_ROUTES:
             app.router.add_route(method, path, self.unaddressed)
             app.router.add_route(method, DEVICE_PREFIX + path, self.forward)
