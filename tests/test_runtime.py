@@ -233,3 +233,21 @@ async def test_arguments_are_checked_against_the_declaration_on_every_surface(ac
     async with aiohttp.ClientSession() as session, \
             session.get(f"http://127.0.0.1:{acg.http_api.port}/events?since=x") as reply:
         assert reply.status == 400 and "since" in (await reply.json())["error"]
+
+
+async def test_an_interrupted_scenario_says_so_and_which_steps_did_not_fire(acg: Adapter, tmp_path: Path) -> None:
+    """SIGINT or SIGTERM cancels the scenario's task: its last line says it was interrupted and names
+    the steps still waiting, never that every step fired; no fault is left active."""
+    path = tmp_path / "long.toml"
+    path.write_text('[[step]]\nname = "first"\nat = "0s"\nfault = "stop-producing"\n\n'
+                    '[[step]]\nname = "later"\nat = "60s"\nclear = true\n\n'
+                    '[[step]]\nname = "last"\nat = "61s"\ntrip = "OverHeat"\n', encoding="utf-8")
+    lines: list[str] = []
+    task = asyncio.create_task(scenarios.run(acg.service, scenarios.load(path), lines.append))
+    while not any("first fired" in line for line in lines):
+        await asyncio.sleep(0.01)
+    task.cancel()
+    with pytest.raises(asyncio.CancelledError):
+        await task
+    assert lines[-1].endswith("scenario interrupted: 2 step(s) did not fire (later, last); no fault left active")
+    assert acg.faults.faults() == []

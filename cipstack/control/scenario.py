@@ -159,6 +159,10 @@ async def run(service: DeviceService, scenario: Scenario, report: Callable[[str]
     start = loop.time()
     mark = events.events[-1].number if events.events else 0
     fired_all = True
+    #: Every step's label, in order; those fired are taken off the front.
+    waiting = [step.name + (f" ({round_}/{step.repeat})" if step.repeat > 1 else "")
+               for step in scenario.steps for round_ in range(1, step.repeat + 1)]
+    interrupted = False
 
     def line(text: str, at: float | None = None) -> None:
         report(f"{(loop.time() if at is None else at) - start:8.3f}s  {text}")
@@ -184,15 +188,23 @@ async def run(service: DeviceService, scenario: Scenario, report: Callable[[str]
                     fired_all = False
                     return False
                 line(f"{label} fired: {step.describe()}", fired_at)
+                waiting.pop(0)
         if scenario.linger:
             await asyncio.sleep(scenario.linger)
         return fired_all
+    except asyncio.CancelledError:   # SIGINT or SIGTERM: the emulator stops before the timeline is done
+        interrupted = fired_all = True
+        raise
     finally:
         if service.faults.active:
             await service.call_async("clear", {})
         await service.faults.settle()
-        line("scenario " + ("complete: every step fired" if fired_all else "incomplete") +
-             "; no fault left active")
+        if interrupted and waiting:
+            shown = ", ".join(waiting[:10]) + (f" and {len(waiting) - 10} more" if len(waiting) > 10 else "")
+            line(f"scenario interrupted: {len(waiting)} step(s) did not fire ({shown}); no fault left active")
+        else:
+            line("scenario " + ("complete: every step fired" if fired_all else "incomplete") +
+                 "; no fault left active")
 
 
 async def _trigger(service: DeviceService, step: Step, start: float, mark: int) -> int:
