@@ -318,8 +318,8 @@ class AcgDevice(Device):
         return self.drive.inject_trip(trip, self.now)
 
     def reset_trip(self) -> Trip | None:
-        """A Fault Reset, as class 0x29 attribute 12's rising edge makes one (seed 000, "Drive Fault
-        Reset"): the trip present is cleared, unless it is a level type whose cause lasts."""
+        """A Fault Reset, as class 0x29 attribute 12's rising edge makes one (the ACG-ET2 manual,
+        "Drive Fault Reset"): the trip present is cleared, unless it is a level type whose cause lasts."""
         present = self.drive.trip
         if present is None:
             return None
