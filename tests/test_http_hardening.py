@@ -218,7 +218,9 @@ def test_sigint_stops_the_adapter_within_2s_during_a_long_power_cycle(tmp_path: 
     ('at = 1\nfault = "delay"\noptions = { by = ' + "9" * 400 + " }", "a number of about 400 digits"),
     ('at = 1\nfault = "power-cycle"\noptions = { off = "2h" }', "not a duration"),
     ("at = 1\nclear = true\nx = " + "[" * 2000 + "]" * 2000, "not TOML"),
-], ids=["event-kind", "hz-nan", "huge-at", "400-digits", "duration-unit", "nested-toml"])
+    ('at = 1\ntrip = "bogus"', "step 1: trip 'bogus': unknown trip 'bogus'"),
+    ("at = 1\ntrip = 0x1234", "valid codes: 0x"),
+], ids=["event-kind", "hz-nan", "huge-at", "400-digits", "duration-unit", "nested-toml", "trip-name", "trip-code"])
 def test_a_scenario_is_checked_whole_when_it_is_read(tmp_path: Path, step: str, said: str) -> None:
     """Refused at load, with one line naming the step, exit 2, before anything listens."""
     path = tmp_path / "bad.toml"

@@ -156,6 +156,7 @@ def _serve(adapter: Any, args: argparse.Namespace, command: str) -> int:
 
         try:
             loaded = scenarios.load(scenario)
+            loaded.check(adapter.service)
         except scenarios.ScenarioError as exc:
             raise UsageError(str(exc)) from None
 

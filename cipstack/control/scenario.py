@@ -83,6 +83,16 @@ class Scenario:
     #: How long the device goes on serving after the last step fired.
     linger: float = 0.0
 
+    def check(self, service: DeviceService) -> None:
+        """What only the device can tell, checked before it serves: each ``trip`` step's code is one of
+        its trip codes (``ScenarioError`` naming the step and the valid codes)."""
+        for step in self.steps:
+            if step.trip is not None:
+                try:
+                    service.check_trip(step.trip)
+                except BadRequest as exc:
+                    raise ScenarioError(f"{self.path}: step {step.number}: trip {shown(step.trip)}: {exc}") from None
+
 
 def load(path: str | Path) -> Scenario:
     path = Path(path)

@@ -144,14 +144,28 @@ class DeviceService:
         self.runtime.tick()
         return {**self.runtime.status(), "faults": len(self.faults.active)}
 
-    def trip(self, code: int | str) -> dict[str, Any]:
-        from ..devices.base import TripRefused
-
+    def check_trip(self, code: object) -> int | str:
+        """``code`` as ``trip`` takes it, checked against the device's trip codes without tripping it
+        (a scenario's steps are checked when it is read); ``BadRequest`` naming the valid ones."""
         if not isinstance(code, (int, str)) or isinstance(code, bool):
             raise BadRequest("\"code\" is a number or a name")
         if isinstance(code, str):
             with contextlib.suppress(ValueError):
                 code = int(code, 0)
+        device = self.runtime.device
+        try:
+            device.check_trip_code(code)
+        except NotImplementedError as exc:
+            raise BadRequest(str(exc)) from None
+        except (KeyError, ValueError) as exc:
+            reason = exc.args[0] if exc.args else exc
+            raise BadRequest(f"{reason}; valid codes: {device.trip_codes()}") from None
+        return code
+
+    def trip(self, code: int | str) -> dict[str, Any]:
+        from ..devices.base import TripRefused
+
+        code = self.check_trip(code)
         if not self.runtime.power.powered:
             raise StateRefused("the device is powered off (power-cycle): it cannot trip")
         now = self.runtime.tick()

@@ -135,6 +135,11 @@ class Device:
         """The trip codes ``inject_trip`` takes, as one line for an error message."""
         return "none (this profile simulates no drive)"
 
+    def check_trip_code(self, code: int | str) -> None:
+        """Raise what ``inject_trip`` would for a code it does not take (``KeyError``, ``ValueError``,
+        ``NotImplementedError`` for a device without a drive); nothing for one it takes."""
+        raise NotImplementedError(f"{self.identity_info.product_name}: this profile simulates no drive")
+
     def reset_trip(self) -> object | None:
         """A fault reset, now, as the drive's manual resets a trip: the trip it cleared, None when it had
         none; ``TripRefused`` when the trip holds (its cause lasts)."""

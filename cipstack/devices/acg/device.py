@@ -317,6 +317,9 @@ class AcgDevice(Device):
                              f"it keeps that trip until a Fault Reset, so {trip.label} is not taken")
         return self.drive.inject_trip(trip, self.now)
 
+    def check_trip_code(self, code: int | str) -> None:
+        parse_trip(code)
+
     def reset_trip(self) -> Trip | None:
         """A Fault Reset, as class 0x29 attribute 12's rising edge makes one (the ACG-ET2 manual,
         "Drive Fault Reset"): the trip present is cleared, unless it is a level type whose cause lasts."""

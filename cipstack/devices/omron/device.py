@@ -471,14 +471,22 @@ class OmronDevice(Device):
         self.inverter.press_stop_reset(self.now)
         return trip_code(self.family, present)
 
-    def inject_trip(self, code: int | str) -> TripCode:
-        """Trip the inverter with En (Table D-5), given as n or as "En", for test rigs; returns the trip."""
+    def _trip_of(self, code: int | str) -> tuple[int, TripCode]:
+        """En (Table D-5) given as n or as "En": its number and trip; ``ValueError`` for what is no
+        trip code, ``KeyError`` for a code the family does not have."""
         text = str(code).strip().upper()
         try:
             number = int(text[1:] if text.startswith("E") else text)
         except ValueError:
             raise ValueError(f"not a trip code of Table D-5: {code!r} (e.g. 5 or E05)") from None
-        trip = trip_code(self.family, number)   # KeyError for a code the family does not have
+        return number, trip_code(self.family, number)
+
+    def check_trip_code(self, code: int | str) -> None:
+        self._trip_of(code)
+
+    def inject_trip(self, code: int | str) -> TripCode:
+        """Trip the inverter with En (Table D-5), given as n or as "En", for test rigs; returns the trip."""
+        number, trip = self._trip_of(code)
         if self.inverter.trip:
             # The inverter keeps its first trip until it is reset (Table D-4 Fault Code: one code).
             raise TripRefused(f"the inverter is already tripped: E{self.inverter.trip:02d}; it keeps that trip "
