@@ -56,7 +56,7 @@ SEND_RR_DATA = 0x006F
 #: Get_Attribute_Single, path 20 01 24 01 30 07 (Identity 1/1/7: product name).
 GET_PRODUCT_NAME = bytes((0x0E, 0x03, 0x20, 0x01, 0x24, 0x01, 0x30, 0x07))
 EXPECTED_NAME = b"\x04CENT"
-#: AC/DC Drive object, Acceleration Time (seed 000: 0-6000.0 sec; factory value 5.0 s).
+#: AC/DC Drive object, Acceleration Time (ACG-ET2 manual: 0-6000.0 sec; factory value 5.0 s).
 ACCELERATION_TIME = (0x2A, 1, 102)
 #: Issue 26: the scanner's CPU per decoded read at most this share of pycomm3's.
 SCANNER_READ_TARGET = 0.9

@@ -5,7 +5,7 @@ or every ``ParamN`` with a link path of an EDS file), each with its code, name, 
 value and unit. Loading writes only the settable parameters whose value differs, in the catalog's
 order (the ones that bound the others first), refuses while the drive runs unless forced, and saves
 where the device has a save command: on the ACG, memory control register 0x03E0 "Save parameters"
-(seed 001, 0x03E0-0x03EC), reached over CIP through CM.51 and output assembly 121 (seed 000, CM.51
+(ACG RS-485 manual, 0x03E0-0x03EC), reached over CIP through CM.51 and output assembly 121 (ACG-ET2 manual, CM.51
 Para Control-1 and the smart-scaling output instances 121-128), a 0 to 1 change saving.
 
 The file::
@@ -44,8 +44,8 @@ from .errors import StateRefused
 if TYPE_CHECKING:
     from .scanner import Scanner
 
-#: ACG: the memory control register whose 0 -> 1 change saves the parameters (seed 001, 0x03E0), the
-#: Para Control slot that points output assembly 121 at it (CM.51, seed 000), and that assembly.
+#: ACG: the memory control register whose 0 -> 1 change saves the parameters (ACG RS-485 manual, 0x03E0), the
+#: Para Control slot that points output assembly 121 at it (CM.51, ACG-ET2 manual), and that assembly.
 ACG_SAVE_REGISTER = 0x03E0
 ACG_PARA_CONTROL_1 = (0x64, 7, 51)
 ACG_PARA_CONTROL_ASSEMBLY = 121

@@ -1,7 +1,8 @@
 """Scripted peers for field-behaviour tests: a tiny EtherNet/IP target that answers with the bytes a
 test gives it, and the class 1 producer such a target runs after a Forward_Open.
 
-They are written from the wire (shared/reference/wire.md) with plain sockets and threads, so a
+They are written from the wire (CIP Vol. 2, as the open
+dissectors read it) with plain sockets and threads, so a
 test can run the ``cipstack`` command in-process or as a subprocess against them. Nothing here
 imports the emulator; the few cipstack codecs used build or split frames the test already states.
 """

@@ -1,4 +1,4 @@
-"""ACG-ET2 assemblies: the bytes of seed 000's input/output instance tables for known drive states."""
+"""ACG-ET2 assemblies: the bytes of the ACG-ET2 manual's input/output instance tables for known drive states."""
 
 from __future__ import annotations
 

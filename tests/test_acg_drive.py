@@ -1,4 +1,4 @@
-"""The ACG drive simulation against seed 000 (appendix B) and seed 001 (chapter 5)."""
+"""The ACG drive simulation against ACG-ET2 manual (appendix B) and ACG RS-485 manual (chapter 5)."""
 
 from __future__ import annotations
 
@@ -50,7 +50,7 @@ def refusal(action) -> RegisterRefusal:
     return raised.value.refusal
 
 
-# --- Control Supervisor "Drive Run" table (seed 000, class 0x29) ----------------------------
+# --- Control Supervisor "Drive Run" table (ACG-ET2 manual, class 0x29) ----------------------------
 
 TABLE = [
     # Run1 before, Run2 before, Run1 after, Run2 after, Run Type
@@ -449,7 +449,7 @@ def test_time_cannot_go_backwards(drive: AcgDrive) -> None:
         drive.advance(4)
 
 
-# --- Modbus command words (seed 001) ----------------------------------------------------------
+# --- Modbus command words (ACG RS-485 manual) ----------------------------------------------------------
 
 def test_control_area_operation_command(drive: AcgDrive) -> None:
     reach(drive, 30, 0)
@@ -529,7 +529,7 @@ def test_operation_state_word(drive: AcgDrive) -> None:
 # --- Lost command: Pr.12 / Pr.13 / Pr.14 -----------------------------------------------------
 
 def test_lost_preset_range() -> None:
-    # Seed 000:214: Pr.14 0.05-60.00 Hz, default 0.00 (kept, so it can be written back).
+    # ACG-ET2 manual: Pr.14 0.05-60.00 Hz, default 0.00 (kept, so it can be written back).
     d = AcgDrive()
     d.write(addr("dr.20"), 40000, 0.0)                   # Max Freq 400.00 Hz: the table's 60.00 still bounds Pr.14
     for value in (0, 5, 6000):

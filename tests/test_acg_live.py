@@ -47,7 +47,7 @@ async def scanner(adapter: Adapter) -> AsyncIterator[Scanner]:
 
 async def write_registers(scanner: Scanner, values: dict[int, int]) -> None:
     """Write drive registers over CIP alone: name them in CM.51.. (Para Control-n, class 0x64 instance 7)
-    and set the smart-scaling output assembly 12n (seed 000, CM.50-CM.58, output instances 121-128)."""
+    and set the smart-scaling output assembly 12n (ACG-ET2 manual, CM.50-CM.58, output instances 121-128)."""
     for index, address in enumerate(values):
         await scanner.set_attribute_single(0x64, CM, 51 + index, address)
     data = b"".join(UINT.encode(v) for v in values.values())
@@ -55,7 +55,7 @@ async def write_registers(scanner: Scanner, values: dict[int, int]) -> None:
 
 
 async def bring_under_network_control(scanner: Scanner, accel_tenths: int = 10) -> None:
-    # drv = 4 and Frq = 8 "Field Bus" (seed 000, Keypad Parameters Related to ACG-ET2).
+    # drv = 4 and Frq = 8 "Field Bus" (ACG-ET2 manual, Keypad Parameters Related to ACG-ET2).
     await write_registers(scanner, {DRV: 4, FRQ: 8})
     assert await scanner.read(0x29, 1, 14) == 1 and await scanner.read(0x2A, 1, 29) == 1
     await scanner.set_attribute_single(0x2A, 1, 102, accel_tenths)   # ACC: 0 to 60 Hz in 1.0 s

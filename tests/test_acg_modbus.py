@@ -1,4 +1,4 @@
-"""Modbus TCP of the ACG-ET2 (seed 000, "Modbus TCP Frame"): the wire bytes from a scripted peer, and
+"""Modbus TCP of the ACG-ET2 (ACG-ET2 manual, "Modbus TCP Frame"): the wire bytes from a scripted peer, and
 pymodbus's client, an independent peer (marked ``interop``), with the same drive served over CIP."""
 
 from __future__ import annotations
@@ -30,7 +30,7 @@ def addr(code: str) -> int:
 
 
 def pdu_address(tcp_number: int) -> int:
-    """The PDU address of a register numbered as the seed's "Modbus TCP" column."""
+    """The PDU address of a register numbered as the manual's "Modbus TCP" column."""
     return tcp_number - 40001
 
 
@@ -161,9 +161,9 @@ async def test_exception_codes(bench: Bench) -> None:
 
 
 async def test_cm94_has_no_modbus_address(modbus_port: int) -> None:
-    # Seed 001's address table prints "CM.94 - - -" (001:1384), as "bA.20 - - -" (001:1245): no Modbus
+    # The ACG RS-485 manual's address table prints "CM.94 - - -" (001:1384), as "bA.20 - - -" (001:1245): no Modbus
     # RTU or TCP address. 0x175E (the CM group's base + 94) and 0x1214 (bA.20) are refused alike, 0x02,
-    # alone or inside a range; class 0x64 instance 7 attribute 94 serves CM.94 (seed 000, test_acg_objects).
+    # alone or inside a range; class 0x64 instance 7 attribute 94 serves CM.94 (ACG-ET2 manual, test_acg_objects).
     reader, writer = await asyncio.open_connection("127.0.0.1", modbus_port)
     try:
         for transaction, pdu in enumerate(("03 175e 0001", "04 175e 0001", "06 175e 0001", "10 175e 0001 02 0001",

@@ -1,4 +1,4 @@
-"""The ACG-ET2 CIP objects through the message router, against seed 000's object tables."""
+"""The ACG-ET2 CIP objects through the message router, against the ACG-ET2 manual's object tables."""
 
 from __future__ import annotations
 
@@ -138,7 +138,7 @@ def test_control_supervisor_attributes(device: AcgDevice) -> None:
         b"\x00", b"\x00", bytes((DriveState.READY,)), b"\x00", b"\x00", b"\x01", b"\x00", b"\x00", b"\x01"]
     assert get(device, 0x29, 13) == u16(0)
     assert call(device, GET, 0x29, 1, 11).general_status == 0x14    # Warning: not in the table
-    # 5 Net Control, Access "N/A" (seed 000:642): served neither to Get nor to Set.
+    # 5 Net Control, Access "N/A" (ACG-ET2 manual): served neither to Get nor to Set.
     assert call(device, GET, 0x29, 1, 5).general_status == 0x14
     assert status_of_set(device, 0x29, 5, b"\x01") == 0x14
     for attribute in (6, 7, 8, 9, 10, 13, 14):
@@ -161,7 +161,7 @@ def test_control_from_net_follows_drv(device: AcgDevice) -> None:
 
 
 def test_control_from_net_is_served_at_14_and_15(device: AcgDevice) -> None:
-    # Seed 000 gives it as 0x29 attribute 14 (Control Supervisor table, 000:661) and 15 (the input
+    # ACG-ET2 manual gives it as 0x29 attribute 14 (Control Supervisor table, 000:661) and 15 (the input
     # instances' bit table, 000:458, as CIP's Control Supervisor has it): both ids serve the one value.
     assert get(device, 0x29, 14) == get(device, 0x29, 15) == b"\x01"
     device.drive.write(addr("drv"), 1, 0.0)
@@ -169,7 +169,7 @@ def test_control_from_net_is_served_at_14_and_15(device: AcgDevice) -> None:
     assert status_of_set(device, 0x29, 15, b"\x01") == 0x0E                  # Get only, as attribute 14
 
 
-# Drive Run table (seed 000, class 0x29): states (Run1, Run2) reached by single Set_Attribute_Single.
+# Drive Run table (ACG-ET2 manual, class 0x29): states (Run1, Run2) reached by single Set_Attribute_Single.
 RUN_ROWS = [
     # (start, attribute set, value, expected direction after, row)
     ((0, 0), 3, 1, "fwd", "0->1, 0: Run1"),
@@ -184,7 +184,7 @@ RUN_ROWS = [
 
 
 def _direction(device: AcgDevice) -> str:
-    """The command the drive executes: 0x000E B11 forward / B12 reverse operation command (seed 001)."""
+    """The command the drive executes: 0x000E B11 forward / B12 reverse operation command (ACG RS-485 manual)."""
     status = OperationStatus(device.drive.read(0x000E))
     if OperationStatus.FORWARD_COMMAND in status:
         return "fwd"
@@ -241,7 +241,7 @@ def test_ac_dc_drive_attributes(device: AcgDevice) -> None:
     device.advance(3.0)
     assert get(device, 0x2A, 3) == b"\x01" and get(device, 0x2A, 7) == u16(900) and get(device, 0x2A, 8) == u16(900)
     assert get(device, 0x2A, 29) == b"\x01"
-    # 4 Net Reference, Access "N/A" (seed 000:722): served neither to Get nor to Set.
+    # 4 Net Reference, Access "N/A" (ACG-ET2 manual): served neither to Get nor to Set.
     assert call(device, GET, 0x2A, 1, 4).general_status == 0x14
     assert status_of_set(device, 0x2A, 4, b"\x01") == 0x14
     assert get(device, 0x2A, 6) == b"\x01"                          # open loop speed
@@ -286,7 +286,7 @@ def test_keypad_parameters_set_and_refusals(device: AcgDevice) -> None:
     assert status_of_set(device, 0x64, 12, u16(5) + b"\x00", pr) == 0x15
     assert call(device, GET, 0x64, cm, 99).general_status == 0x14
     assert call(device, GET, 0x64, 9, 1).general_status == 0x05               # no group at instance 9
-    # "10 (AP Group)" (seed 000:763): a second instance of the AP group (8).
+    # "10 (AP Group)" (ACG-ET2 manual): a second instance of the AP group (8).
     ap = CLASS_64_INSTANCES["AP"]
     assert status_of_set(device, 0x64, 1, u16(2), 10) == 0 and device.drive.read(addr("AP.1")) == 2
     assert get(device, 0x64, 1, 10) == get(device, 0x64, 1, ap) == u16(2)
@@ -343,7 +343,7 @@ def test_inject_trip_accepts_codes_and_names(device: AcgDevice) -> None:
 
 
 async def test_a_second_trip_is_refused_and_the_first_kept(device: AcgDevice) -> None:
-    # 0x29 attribute 13 holds one Drive Fault Code; a trip is left by a Fault Reset only (seed 000:654).
+    # 0x29 attribute 13 holds one Drive Fault Code; a trip is left by a Fault Reset only (ACG-ET2 manual).
     async with Adapter(AdapterSettings(host="127.0.0.1", port=0, io_port=0), device=device) as adapter:
         first = adapter.control({"command": "trip", "code": 0x4200})
         assert "OverHeat" in first["result"]

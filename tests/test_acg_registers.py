@@ -1,4 +1,4 @@
-"""The ACG register map against the tables of seeds 000 (appendix B) and 001 (chapter 5)."""
+"""The ACG register map against the tables of the ACG-ET2 manual (appendix B) and the ACG RS-485 manual (chapter 5)."""
 
 from __future__ import annotations
 
@@ -27,7 +27,7 @@ def code(text: str) -> Register:
     return ACG_REGISTERS.by_code(text)
 
 
-# --- areas of seed 001 -----------------------------------------------------------------------
+# --- areas of the ACG RS-485 manual -----------------------------------------------------------------------
 
 @pytest.mark.parametrize(("first", "last", "group"), [
     (0x0000, 0x001B, "common"),     # Compatible Common Area Parameter
@@ -41,7 +41,7 @@ def test_every_word_of_each_area_is_declared(first: int, last: int, group: str) 
 
 
 def test_monitoring_area_is_read_only_but_the_virtual_inputs_the_chapter_writes() -> None:
-    """0x0322 is written in seed 001's own example ("assign a 0h0001 value to the communication
+    """0x0322 is written in the ACG RS-485 manual's own example ("assign a 0h0001 value to the communication
     address 0h0322"): it is the value of 0x0385; every other monitoring word is read only."""
     writable = [r.address for r in ACG_REGISTERS.group("monitor") if r.access is not RegisterAccess.READ]
     assert writable == [0x0322]
@@ -76,7 +76,7 @@ def test_trip_and_warning_bits_from_the_monitoring_table() -> None:
 
 
 def test_control_word_examples() -> None:
-    # Seed 001: "Forward operation command 0003h, Reverse operation command 0001h."
+    # ACG RS-485 manual: "Forward operation command 0003h, Reverse operation command 0001h."
     assert acg.ControlCommand.RUN | acg.ControlCommand.FORWARD == 0x0003
     assert acg.ControlCommand.RUN == 0x0001
 
@@ -101,7 +101,7 @@ def test_registered_parameter_areas() -> None:
 
 # --- keypad groups ---------------------------------------------------------------------------
 
-# Rows of seed 001's "Drive Parameter Modbus Communication Addresses": code, Modbus RTU decimal.
+# Rows of the ACG RS-485 manual's "Drive Parameter Modbus Communication Addresses": code, Modbus RTU decimal.
 # Several carry the OCR'd hex address with "B" read as "8" (dr.11 "1108", bA.11 "1208" ...);
 # the decimal column gives the true address.
 ADDRESS_ROWS = [
@@ -148,7 +148,7 @@ def test_codes_without_an_address_are_not_declared() -> None:
 
 
 def test_m2_34_reconstructed_address() -> None:
-    # Printed 1C12 / 47186 (seed 001:1477), hex and decimal agreeing, away from the group rule's 0x1C22.
+    # Printed 1C12 / 47186 (ACG RS-485 manual), hex and decimal agreeing, away from the group rule's 0x1C22.
     assert code("M2.34").address == 0x1C12 and modbus_rtu_number(0x1C12) == 47186
     assert 0x1C22 not in ACG_REGISTERS
     assert class64_register(12, 34) is code("M2.34") and class64_path(code("M2.34")) == (12, 34)
@@ -163,7 +163,7 @@ def test_operation_group() -> None:
     assert code("Cur").access is RegisterAccess.READ
 
 
-# Seed 000, "Keypad Parameters Related to ACG-ET2 Communication Board", every row:
+# ACG-ET2 manual, "Keypad Parameters Related to ACG-ET2 Communication Board", every row:
 # code, name, default, minimum, maximum.
 ET2_TABLE = [
     ("CM.7", "FBus ID", 10, 0, 220),
@@ -218,7 +218,7 @@ def test_lost_command_parameters() -> None:
     assert code("Pr.13").raw_minimum * code("Pr.13").scale == pytest.approx(0.1)
     assert code("Pr.13").raw_maximum * code("Pr.13").scale == pytest.approx(120)
     assert (code("Pr.14").default, code("Pr.14").scale, code("Pr.14").unit) == (0, 0.01, "Hz")
-    # Pr.14: 0.05-60.00 Hz (seed 000:214), with the table's default 0.00.
+    # Pr.14: 0.05-60.00 Hz (ACG-ET2 manual), with the table's default 0.00.
     assert (code("Pr.14").raw_minimum, code("Pr.14").raw_maximum) == (0, 6000)
 
 
@@ -232,7 +232,7 @@ def test_serial_cm_parameters() -> None:
 
 
 def test_instance_tables() -> None:
-    # Seed 000, "CM.23 and CM.24 Settings Comparison".
+    # ACG-ET2 manual, "CM.23 and CM.24 Settings Comparison".
     pairs = [(i.instance, o.instance) for i, o in zip(CIP_INPUT_INSTANCES, CIP_OUTPUT_INSTANCES, strict=True)]
     assert pairs == [(70, 20), (71, 21), (110, 100), (111, 101), *((140 + n, 120 + n) for n in range(1, 9))]
     for selection in (*CIP_INPUT_INSTANCES, *CIP_OUTPUT_INSTANCES):
@@ -298,12 +298,12 @@ def test_normalize_code_rejects_other_text() -> None:
 
 
 def test_class_0x64_paths() -> None:
-    # Seed 000, Class 0x64: instance per group, attribute = code number.
+    # ACG-ET2 manual, Class 0x64: instance per group, attribute = code number.
     assert class64_register(7, 23) is code("CM.23")
     assert class64_register(11, 12) is code("Pr.12")
     assert class64_register(1, 20) is code("dr.20")
     assert class64_register(7, 25) is None          # no CM.25
-    assert class64_register(10, 1) is code("AP.1")  # "10 (AP Group)", seed 000:763
+    assert class64_register(10, 1) is code("AP.1")  # "10 (AP Group)", ACG-ET2 manual
     for group in acg.CLASS_64_INSTANCES:
         for register in ACG_REGISTERS.group(group):
             path = class64_path(register)

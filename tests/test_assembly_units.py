@@ -1,7 +1,7 @@
 """The unit of an assembly word, as the manuals give it, wherever the word is named: ``io
 --list-fields``, the generated EDS, the decoded value and the drive itself.
 
-Seed 000 calls the speed words of the ACG's 100/101/110/111 "Hz unit"; the AC/DC Drive object
+ACG-ET2 manual calls the speed words of the ACG's 100/101/110/111 "Hz unit"; the AC/DC Drive object
 gives the same values (Reference Hz/Actual Hz, 0x2A attributes 101/100) as "0-400.00 Hz" and seed
 001 gives the frequency command 0x0380 in 0.01 Hz: one count is 0.01 Hz, and 3000 runs the drive at
 30.00 Hz. The words of 20/21/70/71 are in rpm (0x2A attributes 7/8, "[rpm]")."""
@@ -26,7 +26,7 @@ from cipstack.eds.reader import read_eds
 from tests.ports import free_port
 from tests.waiting import wait_for
 
-#: The unit of one count of each ACG speed word (seed 000 instance tables, 0x2A attributes 7/8/100/101).
+#: The unit of one count of each ACG speed word (ACG-ET2 manual instance tables, 0x2A attributes 7/8/100/101).
 ACG_SPEED_UNITS = {20: "rpm", 21: "rpm", 70: "rpm", 71: "rpm",
                    100: "0.01 Hz", 101: "0.01 Hz", 110: "0.01 Hz", 111: "0.01 Hz"}
 
@@ -72,7 +72,7 @@ def test_every_acg_speed_word_is_in_the_manual_s_unit() -> None:
 
 
 def test_every_omron_word_is_in_the_manual_s_unit() -> None:
-    """Seed 004, appendix B: Rotational Speed in RPM, 0.1 Hz or 0.01 Hz (P049, d060; default 0.01 Hz),
+    """CompoNet manual, appendix B: Rotational Speed in RPM, 0.1 Hz or 0.01 Hz (P049, d060; default 0.01 Hz),
     torque in 1 %, output current in 0.1 A, acceleration and deceleration times in 0.1 s; flags,
     states, codes and registers carry no unit."""
     fixed = {"torque_reference": "%", "torque_actual": "%", "torque_bias": "%", "output_current": "0.1 A",

@@ -81,7 +81,7 @@ def declared(obj: CipObject, instance_id: int) -> list[AttributeSpec]:
     if isinstance(obj, EdsObject):
         return list(obj.declared.get(instance_id, {}).values())
     if isinstance(obj, KeypadParameterObject):
-        # Class 0x64 serves each keypad parameter with its register's declaration (seed 000).
+        # Class 0x64 serves each keypad parameter with its register's declaration (ACG-ET2 manual).
         found = (acg_registers.class64_register(instance_id, n) for n in range(256))
         return [keypad_parameter_spec(register) for register in found if register is not None]
     return list(obj.spec.instance_attributes)
@@ -120,7 +120,7 @@ async def test_every_declared_range_is_enforced_on_the_wire(name: str) -> None:
 
 
 async def test_acg_run_forward_of_2_is_refused_and_the_next_1_still_runs() -> None:
-    """Seed 000, Control Supervisor table: Forward Run Cmd. and Drive Fault Reset are 0 or 1; the
+    """ACG-ET2 manual, Control Supervisor table: Forward Run Cmd. and Drive Fault Reset are 0 or 1; the
     drive acts on a 0 -> 1 change (Drive Run table, Drive Fault Reset)."""
     device = build_device("acg")
     assert isinstance(device, AcgDevice)
@@ -138,7 +138,7 @@ async def test_acg_run_forward_of_2_is_refused_and_the_next_1_still_runs() -> No
 
 @pytest.mark.parametrize("profile", ["mx2", "rx"])
 async def test_omron_net_ref_of_ff_is_refused(profile: str) -> None:
-    """Seed 004 Table D-7: Net Ref, setting range 0 - 1; Table E-5: 09 "The data written is outside range"."""
+    """CompoNet manual Table D-7: Net Ref, setting range 0 - 1; Table E-5: 09 "The data written is outside range"."""
     device = build_device(profile)
     async with serving(device) as scanner:
         reply = await scanner.request(Service.SET_ATTRIBUTE_SINGLE, 0x2A, 1, 4, b"\xff", check=False)

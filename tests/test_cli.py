@@ -218,7 +218,7 @@ def stop(process: subprocess.Popen[str]) -> str:
 
 
 def test_saved_parameters_survive_a_restart_of_the_process(tmp_path: Path) -> None:
-    """Seed 001 memory control: writing 0x03E0 from 0 to 1 saves every parameter; what is written
+    """ACG RS-485 manual memory control: writing 0x03E0 from 0 to 1 saves every parameter; what is written
     afterwards and not saved is gone after a restart."""
     from pymodbus.client import ModbusTcpClient
 

@@ -43,7 +43,7 @@ async def connect(adapter: Adapter) -> Scanner:
 
 
 async def write_registers(scanner: Scanner, values: dict[int, int]) -> None:
-    """Drive registers over CIP: named in CM.51.. and set through smart-scaling assembly 12n (seed 000)."""
+    """Drive registers over CIP: named in CM.51.. and set through smart-scaling assembly 12n (ACG-ET2 manual)."""
     for index, address in enumerate(values):
         await scanner.set_attribute_single(0x64, CM, 51 + index, address)
     await scanner.set_attribute_single(0x04, 120 + len(values), 3, b"".join(UINT.encode(v) for v in values.values()))
@@ -190,7 +190,7 @@ async def test_ignore_output_keeps_the_last_command_and_idle_is_idle(adapter: Ad
             adapter.fault("idle")
             io.output.speed_reference = 1500
             await asyncio.sleep(0.1)
-            # Idle: the device's connection is idle and the ACG keeps its last commands (seed 000; its
+            # Idle: the device's connection is idle and the ACG keeps its last commands (ACG-ET2 manual; its
             # Identity status has no idle state, so attribute 5 still says running).
             assert adapter.io is not None and [c.run for c in adapter.io.connections.values()] == [False]
             assert device.status_fields()["reference_hz"] == 40.0
@@ -317,7 +317,7 @@ async def test_power_cycle_loses_exactly_the_unsaved_parameters(adapter: Adapter
     async with await connect(adapter) as scanner:
         await scanner.set_attribute_single(0x2A, 1, 102, 55)                # ACC 5.5 s
         await write_registers(scanner, {SAVE_PARAMETERS: 0})
-        await write_registers(scanner, {SAVE_PARAMETERS: 1})                # 0x03E0: 0 -> 1 saves (seed 001)
+        await write_registers(scanner, {SAVE_PARAMETERS: 1})                # 0x03E0: 0 -> 1 saves (ACG RS-485 manual)
         await scanner.set_attribute_single(0x2A, 1, 103, 77)                # dEC 7.7 s, not saved
         assert await scanner.read(0x2A, 1, 103) == 77
         adapter.fault("power-cycle", off="100ms")

@@ -3,11 +3,11 @@ loopback: the originator's class 1 connection times out and its TCP session is g
 (0 Hz), a parameter written and not saved is lost, a saved one is back, and a trip does what the
 family's manual says of it.
 
-* MX2 and RX with the CompoNet option board (seed 004): section E-2-2 note (written values live in
+* MX2 and RX with the CompoNet option board (CompoNet manual): section E-2-2 note (written values live in
   the inverter's memory until the ENTER command, 0900h = 1, stores them in EEPROM); Table 25 Step II
   (power OFF and ON restarts after a trip); section 5-1-1 Tip (the trip history keeps the trip, d081).
   The option board's Identity Reset restarts the board alone, not the inverter: a power cycle is more.
-* ACG (seeds 000, 001): the memory control area 0x03E0-0x03EC saves what it sets.
+* ACG (the ACG-ET2 and ACG RS-485 manuals): the memory control area 0x03E0-0x03EC saves what it sets.
 * A device emulated from an EDS keeps nothing it was told.
 
 The fault is applied from Python here, from the command line and over HTTP in the tests that start
@@ -229,7 +229,7 @@ DAY = 86400.0
 
 
 def test_acg_keeps_what_its_memory_control_area_saves() -> None:
-    """Seed 001, drive memory control area: "the values are reflected to the drive operation and saved":
+    """ACG RS-485 manual, drive memory control area: "the values are reflected to the drive operation and saved":
     the accumulated times (0x0340-0x0345, initialized by 0x03EB/0x03EC), the fault history (deleted by
     0x03E5) and the parameter lock (0x03E8). The trip present goes; the fault history keeps it.
     Before, a power cycle started every count from 0, unlocked the parameters and forgot the history."""
@@ -254,7 +254,7 @@ def test_acg_keeps_what_its_memory_control_area_saves() -> None:
 
 
 async def test_acg_power_cycle_stops_the_run_and_loses_the_unsaved(tmp_path: Path) -> None:
-    """Seed 001: "Parameter SET via Communications + NOT Saved + Power Cycle = Parameters reverts back";
+    """ACG RS-485 manual: "Parameter SET via Communications + NOT Saved + Power Cycle = Parameters reverts back";
     the output is cut: the drive does not decelerate over a ramp, it has no power."""
     adapter = Adapter(AdapterSettings(port=0, io_port=0, state_path=tmp_path / "acg.json"))
     adapter.apply_keypad_parameters(["drv=4", "Frq=8"])

@@ -3,7 +3,7 @@ events of every route.
 
 The MX2/RX Digital Operator's function codes are set over the HTTP API, at start with ``--param`` and
 with the pytest plugin's marker, in the operator's unit (A004 in 0.1 Hz, F001 in 0.01 Hz, P044 in
-0.1 s: seed 004 and the register tables); a write the inverter refuses (a monitor, a parameter not
+0.1 s: CompoNet manual and the register tables); a write the inverter refuses (a monitor, a parameter not
 run-mode editable while running) is a 409 with its reason. Each write the device accepts, over CIP,
 Modbus TCP (pymodbus), Modbus-RTU (a pty) or HTTP, is exactly one ``parameter write`` event naming
 its origin and what was written. Real sockets and processes throughout."""

@@ -1,6 +1,6 @@
 """An EDS file as a catalog, for any device (issue 26, item 2): ``Scanner.connect(host, eds=FILE)`` and
 ``cipstack get/set --eds FILE`` decode, scale and name by the file's ``ParamN`` (link path, type, range,
-enumeration, unit; scaling fields 13-16 and 21 of shared/reference/eds.md) and its assemblies'
+enumeration, unit; scaling fields 13-16 and 21 of the EDS specification (CIP Vol. 1, chapter 7)) and its assemblies'
 members; a device the profiles know reads the same by its EDS as by its profile."""
 
 from __future__ import annotations
@@ -108,7 +108,7 @@ async def test_a_profile_device_reads_the_same_by_its_eds(tmp_path: Path) -> Non
         for path_ in [(0x2A, 1, 102), (0x2A, 1, 100), (0x2A, 1, 7), (0x29, 1, 6), (0x28, 1, 6)]:
             profile_value, eds_value = await by_profile.read(*path_), await by_eds.read(*path_)
             assert (eds_value.raw, str(eds_value)) == (profile_value.raw, str(profile_value)), path_
-        assert str(await by_eds.read(0x2A, 1, 102)) == "5.0 s"                   # seed 000: 0-6000.0 sec
+        assert str(await by_eds.read(0x2A, 1, 102)) == "5.0 s"                   # ACG-ET2 manual: 0-6000.0 sec
 
 
 def test_cli_get_and_set_with_eds(eds_file: Path) -> None:

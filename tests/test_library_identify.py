@@ -2,9 +2,9 @@
 items 1, 3 and 9): values carry their unit and scale, the CLI prints what the library reads, and a
 name nothing declares says where it was looked for.
 
-Units and scales are those of the manuals' tables: seed 000 (ACG-ET2, AC/DC Drive object 0x2A:
+Units and scales are those of the manuals' tables: ACG-ET2 manual (ACG-ET2, AC/DC Drive object 0x2A:
 100 Actual Hz "0-400.00 Hz", 102 Acceleration Time "0-6000.0 sec", 9 Actual Current "0-111.0 A")
-and seed 004 (Omron option board, Table D-7 AC/DC Drive Object: 0x09 Current Actual "Unit:
+and CompoNet manual (Omron option board, Table D-7 AC/DC Drive Object: 0x09 Current Actual "Unit:
 [0.1 A]", 0x12 Accel Time "Unit: [ms]").
 """
 
@@ -42,8 +42,8 @@ async def test_connect_identifies_and_decodes_by_the_profile(acg: Adapter) -> No
         assert identity is not None and (identity.vendor_id, identity.product_code) == (259, 100)
         assert scanner.catalog.source.startswith("profile acg ")
         accel = await scanner.read(0x2A, 1, 102)
-    # Seed 000, AC/DC Drive attribute 102 "Acceleration Time, 0-6000.0 sec": 0.1 s per step; ACC's
-    # factory value is 5.0 s (seed 001, dr ACC).
+    # ACG-ET2 manual, AC/DC Drive attribute 102 "Acceleration Time, 0-6000.0 sec": 0.1 s per step; ACC's
+    # factory value is 5.0 s (ACG RS-485 manual, dr ACC).
     assert (accel.raw, accel.value, accel.unit, str(accel)) == (50, 5.0, "s", "5.0 s")
     assert accel.name == "Acceleration Time" and accel.scaled
 
@@ -61,7 +61,7 @@ def test_sync_scanner_identifies() -> None:
     with threaded_adapter(build_acg_device()) as adapter, SyncScanner(f"127.0.0.1:{adapter.port}") as scanner:
         assert scanner.identity is not None and scanner.identity.product_name == "CENT"
         assert str(scanner.read(0x2A, 1, 102)) == "5.0 s"
-        assert str(scanner.read(0x2A, 1, 100)) == "0.00 Hz"                 # seed 000: 0-400.00 Hz
+        assert str(scanner.read(0x2A, 1, 100)) == "0.00 Hz"                 # ACG-ET2 manual: 0-400.00 Hz
 
 
 def _identity_only_by_attributes(request: MrRequest) -> bytes | None:
@@ -107,7 +107,7 @@ async def test_a_device_that_does_not_identify_keeps_the_standard_objects_and_sa
 
 
 async def test_routed_identification_asks_the_componet_node() -> None:
-    """Through the CompoNet gateway (seed 004), ListIdentity would describe the gateway: the routed
+    """Through the CompoNet gateway (CompoNet manual), ListIdentity would describe the gateway: the routed
     node's own Identity attributes give its profile."""
     device = build_componet_gateway([("mx2", "MX2-A2015-E", 3)])
     route = [PortSegment(COMPONET_PORT, bytes([3]))]

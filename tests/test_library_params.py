@@ -1,7 +1,7 @@
 """Drive parameter recipes (issue 26, item 6): dump every declared parameter to TOML, load it into
 another drive (settable ones that differ, Max Freq first, refused while running unless forced, saved
-with the ACG's 0x03E0 save: seed 001 memory control, reached through CM.51 and output assembly 121,
-seed 000), diff; the same functions in the library."""
+with the ACG's 0x03E0 save: ACG RS-485 manual memory control, reached through CM.51 and output assembly 121,
+ACG-ET2 manual), diff; the same functions in the library."""
 
 from __future__ import annotations
 
@@ -84,7 +84,7 @@ async def test_load_refuses_while_the_drive_runs_unless_forced() -> None:
 
 
 async def test_omron_recipe_by_function_codes() -> None:
-    """MX2: the function codes of class 0x65 (seed 004, section E-2-2), A004 first; no save command."""
+    """MX2: the function codes of class 0x65 (CompoNet manual, section E-2-2), A004 first; no save command."""
     async with Adapter(SETTINGS, device=build_omron_device("MX2-A2015-E")) as adapter, \
             await Scanner.connect(f"127.0.0.1:{adapter.port}") as scanner:
         recipe = await dump_params(scanner)

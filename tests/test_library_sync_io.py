@@ -16,11 +16,11 @@ from cipstack.eds.profiles import acg_et2_description
 from cipstack.scanner import SyncScanner, discover_blocking
 from tests.library_support import threaded_adapter
 
-NETWORK_CONTROL = ("drv=4", "Frq=8")   # seed 000: "4: Field Bus" command source, "8: Field Bus" reference
+NETWORK_CONTROL = ("drv=4", "Frq=8")   # ACG-ET2 manual: "4: Field Bus" command source, "8: Field Bus" reference
 
 
 def test_sync_class1_runs_the_drive_by_field_names() -> None:
-    """21/71 (seed 000, Extended Speed Control): run forward at 900 rpm (30 Hz on the 4-pole motor),
+    """21/71 (ACG-ET2 manual, Extended Speed Control): run forward at 900 rpm (30 Hz on the 4-pole motor),
     wait for At Reference, stop; the ramp follows ACC (0 to 60 Hz in 1.0 s here)."""
     with threaded_adapter(build_acg_device(), params=NETWORK_CONTROL) as adapter, \
             SyncScanner(f"127.0.0.1:{adapter.port}") as scanner:

@@ -1,4 +1,4 @@
-"""The option board as seed 004's tables give it, over a real loopback connection: the status of an
+"""The option board as the CompoNet manual's tables give it, over a real loopback connection: the status of an
 instance that does not exist (Table E-5), the Identity attributes (Table C-2), the Connection
 object's path lengths (Table C-8) and what an Identity Reset leaves (Table C-1)."""
 
@@ -26,7 +26,7 @@ async def status(scanner: Scanner, service: int, class_id: int, instance: int, a
 
 @pytest.mark.parametrize("profile", ["mx2", "rx"])
 async def test_omron_missing_instance_is_0x16_in_every_object(profile: str) -> None:
-    # Table E-5 (seed 004:3058): "16 Object does not exist: The specified Instance ID is not supported";
+    # Table E-5 (CompoNet manual): "16 Object does not exist: The specified Instance ID is not supported";
     # Identity and Assembly answered 0x05 where every other object answered 0x16.
     device = build_device(profile)
     async with serving(device) as (_, scanner):
@@ -38,7 +38,7 @@ async def test_omron_missing_instance_is_0x16_in_every_object(profile: str) -> N
 
 
 async def test_acg_missing_instance_stays_cip_0x05() -> None:
-    # Seed 000 gives no error table for its objects: CIP's 0x05 (path destination unknown) stands.
+    # ACG-ET2 manual gives no error table for its objects: CIP's 0x05 (path destination unknown) stands.
     device = build_device("acg")
     async with serving(device) as (_, scanner):
         answers = {f"0x{class_id:02X}": await status(scanner, Service.GET_ATTRIBUTE_SINGLE, class_id, 0xC8, 1)
@@ -48,7 +48,7 @@ async def test_acg_missing_instance_stays_cip_0x05() -> None:
 
 @pytest.mark.parametrize("profile", ["mx2", "rx"])
 async def test_omron_identity_serves_the_attributes_of_table_c2(profile: str) -> None:
-    # Table C-2 (seed 004:2409-2420): attributes 1-7, 9 and 65h; no 8 (State).
+    # Table C-2 (CompoNet manual): attributes 1-7, 9 and 65h; no 8 (State).
     device = build_device(profile)
     async with serving(device) as (_, scanner):
         for attribute in (1, 2, 3, 4, 5, 6, 7, 9, 0x65):
@@ -61,7 +61,7 @@ async def test_omron_identity_serves_the_attributes_of_table_c2(profile: str) ->
 
 @pytest.mark.parametrize("profile", ["mx2", "rx"])
 async def test_omron_connection_path_lengths_count_the_bytes_of_the_path(profile: str) -> None:
-    # Table C-8 (seed 004:2553, 2555): "Number of bytes for produced [consumed] connection path".
+    # Table C-8 (CompoNet manual): "Number of bytes for produced [consumed] connection path".
     device = build_device(profile)
     async with serving(device) as (_, scanner):
         for length, path in ((0x0D, 0x0E), (0x0F, 0x10)):

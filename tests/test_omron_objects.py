@@ -56,7 +56,7 @@ def test_identity(name, code, product):
 
 
 def test_identity_status_is_the_boards_not_the_inverters():
-    # Table C-2 (seed 004:2416): bits 0 (always ON) and 8-11 only. A trip of the inverter, even the one
+    # Table C-2 (CompoNet manual): bits 0 (always ON) and 8-11 only. A trip of the inverter, even the one
     # the network forces (E62), is the Control Supervisor's (0x29 Faulted, Fault Code); the board's
     # status stays 0001h, as the MS indicator stays green (Table 4 lists board faults only).
     d = fresh(MX2)
@@ -102,7 +102,7 @@ def test_connection_object():
     assert [get(d, 5, 1, a) for a in (1, 2, 3, 7, 8, 9, 0x0C)] == ["01", "01", "83", "10 00", "10 00", "00 00", "00"]
     assert get(d, 5, 1, 0x0E) == "20 04 24 47 30 03"      # produced: input 71 (P046 = 1)
     assert get(d, 5, 1, 0x10) == "20 04 24 15 30 03"      # consumed: output 21
-    # Table C-8 (seed 004:2553, 2555): the "number of bytes" of each path, which agrees with the path.
+    # Table C-8 (CompoNet manual): the "number of bytes" of each path, which agrees with the path.
     assert get(d, 5, 1, 0x0D) == "06 00" and get(d, 5, 1, 0x0F) == "06 00"
     assert put(d, 5, 1, 9, "0a 00") == 0 and get(d, 5, 1, 9) == "0a 00"
     assert put(d, 5, 1, 0x0E, "20 04 24 99 30 03") == 0 and d.default_pair == (21, 153)
@@ -233,7 +233,7 @@ def test_force_fault_examples_2_and_3():
 
 
 def test_fault_rst_resets_whenever_written_to_1():
-    # Table D-4 (seed 004:2708): Fault Rst "Reset fault / trip state of inverter when written to 1";
+    # Table D-4 (CompoNet manual): Fault Rst "Reset fault / trip state of inverter when written to 1";
     # Force Fault, in the same table, is "on rising edge". A 1 written while it reads 1 resets too.
     d = fresh(MX2)
     d.inject_trip(5)

@@ -585,7 +585,7 @@ CRAFTED_TCP: list[tuple[str, Builder, Expected, bool]] = [
      False),
     ("set-read-only-tcpip-status", rr(request(SET_SINGLE, path8(0xF5, 1, 1), b"\x00\x00\x00\x00")), Cip(0x0E),
      False),
-    # The ACG-ET2 Identity offers no Get_Attribute_List (seed 000 table); the TCP/IP object does.
+    # The ACG-ET2 Identity offers no Get_Attribute_List (ACG-ET2 manual table); the TCP/IP object does.
     ("get-list-short", rr(request(GET_LIST, path8(0xF5, 1), b"\x02\x00\x01\x00")), Cip(0x13), False),
     ("get-list-trailing", rr(request(GET_LIST, path8(0xF5, 1), b"\x01\x00\x01\x00\x00")), Cip(0x15), False),
     ("get-list-no-count", rr(request(GET_LIST, path8(0xF5, 1))), Cip(0x13), False),

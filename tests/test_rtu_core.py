@@ -1,4 +1,4 @@
-"""Modbus-RTU on the ACG drive's RS-485 port (seed 001, chapter 5), sans I/O: the chapter's worked
+"""Modbus-RTU on the ACG drive's RS-485 port (ACG RS-485 manual, chapter 5), sans I/O: the chapter's worked
 frames byte for byte, the framing by silences with timestamps, the checks a slave makes (CRC,
 station, truncated, oversize, broadcast), the exception codes of the chapter's table, the
 command-source and lost-command rules of the RS-485 source, and the virtual multi-function inputs."""
@@ -28,7 +28,7 @@ def request(hex_text: str) -> bytes:
 
 def write(station: int, address: int, value: int) -> bytes:
     """Function 0x06 to the register at communication ``address``: its "Modbus RTU" number is
-    40000 + address, so its PDU address is address - 1 (seed 001)."""
+    40000 + address, so its PDU address is address - 1 (ACG RS-485 manual)."""
     return with_crc(struct.pack(">BBHH", station, 6, address - 1, value))
 
 
@@ -62,7 +62,7 @@ def test_crc16_modbus_check_value() -> None:
 
 
 def test_the_chapters_worked_example_byte_for_byte(slave: RtuSlave, drive: AcgDrive) -> None:
-    """Seed 001, "Example of Modbus-RTU Communication in Use": multi-step acceleration time 1
+    """ACG RS-485 manual, "Example of Modbus-RTU Communication in Use": multi-step acceleration time 1
     (0x1246) to 5.0 s and deceleration time 1 (0x1247) to 10.0 s with function 0x10 from starting
     address 0x1245 ("0x1246-1"), CRC 0x4324; the response ends in 0x5565."""
     frame = bytes.fromhex("01 10 1245 0002 04 0032 0064 4324")
@@ -200,7 +200,7 @@ def test_broadcast_writes_are_executed_without_reply_and_reads_ignored(slave: Rt
     (read(1, 0x0300, 17), "01 83 03"),                # 1-16 words
 ])
 def test_exception_codes_of_the_chapters_table(slave: RtuSlave, frame: bytes, reply: str) -> None:
-    """Seed 001, "Exception Code": 01 illegal function, 02 illegal data address, 03 illegal data
+    """ACG RS-485 manual, "Exception Code": 01 illegal function, 02 illegal data address, 03 illegal data
     value (and 06 busy): the card's 0x20 is not on this port."""
     assert serve(slave, frame, 0.0) == request(reply)
 
@@ -215,7 +215,7 @@ def test_a_write_not_allowed_in_run_is_02_on_rtu_and_0x20_on_the_card(slave: Rtu
 
 def test_run_commands_obey_the_port_drv_names(slave: RtuSlave, drive: AcgDrive) -> None:
     """drv 3 Int485: the RS-485 port's run command runs the drive and the card's does not; drv 4
-    Field Bus: the other way round (seed 001, Setting Operation Command and Frequency)."""
+    Field Bus: the other way round (ACG RS-485 manual, Setting Operation Command and Frequency)."""
     tcp = ModbusTcpCore(drive)
     drive.write(addr("drv"), 4, 0.0)
     serve(slave, write(1, 0x0382, 0x0003), 0.0)
@@ -242,7 +242,7 @@ def test_frq_int485_takes_the_frequency_written_over_rs485(slave: RtuSlave, driv
 
 
 def test_rs485_silence_of_pr13_is_a_lost_command(slave: RtuSlave, drive: AcgDrive) -> None:
-    """Seed 001, Command Loss Protective Operation: Pr.12 acts once the loss time Pr.13 expires;
+    """ACG RS-485 manual, Command Loss Protective Operation: Pr.12 acts once the loss time Pr.13 expires;
     for a drive run from the RS-485 port (drv 3)."""
     for code, value in (("drv", 3), ("Pr.12", 1), ("Pr.13", 20)):   # free run after 2.0 s
         drive.write(addr(code), value, 0.0)
@@ -267,7 +267,7 @@ def test_rs485_silence_does_not_act_on_a_drive_run_from_the_card(slave: RtuSlave
 
 
 def test_the_chapters_virtual_input_example_runs_the_drive(slave: RtuSlave, drive: AcgDrive) -> None:
-    """Seed 001, Setting Virtual Multi-Function Input: CM.70 = FX, then 0h0001 at 0h0322 runs
+    """ACG RS-485 manual, Setting Virtual Multi-Function Input: CM.70 = FX, then 0h0001 at 0h0322 runs
     forward; 0h0003 (CM.71 = RX) runs in reverse; 0h0000 stops. CM.86 shows the inputs."""
     drive.write(addr("drv"), 2, 0.0)                    # Fx/Rx-2, the reading of the chapter's table
     assert serve(slave, write(1, addr("CM.70"), 1), 0.0) == write(1, addr("CM.70"), 1)

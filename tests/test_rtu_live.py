@@ -195,7 +195,7 @@ def serial_client(path: str) -> ModbusSerialClient:
 
 
 def test_a_saved_parameter_survives_a_restart_and_an_unsaved_one_does_not(tmp_path: Path) -> None:
-    """Seed 001, Saving Parameters Defined by Communication: 0x03E0 from 0 to 1 saves; a value
+    """ACG RS-485 manual, Saving Parameters Defined by Communication: 0x03E0 from 0 to 1 saves; a value
     written afterwards and not saved reverts at the next power-up. CM.1 from --param: station 5."""
     with adapter(tmp_path, "--param", "CM.1=5") as path:
         client = serial_client(path)
@@ -226,7 +226,7 @@ def test_a_saved_parameter_survives_a_restart_and_an_unsaved_one_does_not(tmp_pa
 
 
 def test_a_multi_drop_line_of_drives_answers_by_station_id(tmp_path: Path) -> None:
-    """Seed 001, Multi-drop Link System: three drives on one line, each answers its own ID."""
+    """ACG RS-485 manual, Multi-drop Link System: three drives on one line, each answers its own ID."""
     with cipstack("fleet", "--device", "acg*3", "--addresses", "127.0.0.61-127.0.0.63", "--port", str(free_port()),
                   "--io-port", "0", "--state-dir", str(tmp_path), "--rtu", "pty") as path:
         client = serial_client(path)
@@ -261,7 +261,7 @@ def test_more_drives_than_a_line_takes_is_one_line_and_exit_2(tmp_path: Path) ->
                             capture_output=True, text=True, timeout=30)
     assert result.returncode == 2
     assert result.stderr.strip().splitlines() == [
-        "cipstack fleet: --rtu: 17 ACG drives, but an RS-485 line takes at most 16 (seed 001, Communication "
+        "cipstack fleet: --rtu: 17 ACG drives, but an RS-485 line takes at most 16 (ACG RS-485 manual, Communication "
         "Standards)"]
 
 

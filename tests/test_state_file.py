@@ -1,6 +1,6 @@
 """Saved parameters across a restart, and the state file that keeps them.
 
-The rule (seed 001, "Saving Parameters Defined by Communication" and the memory control area):
+The rule (ACG RS-485 manual, "Saving Parameters Defined by Communication" and the memory control area):
 a parameter written over the network takes effect but reverts at power-up unless 0x03E0 has
 been set from 0 to 1 since; setting it from 1 to 0 saves nothing. A restart here is a new drive
 object on the same state file.
@@ -195,7 +195,7 @@ def test_save_is_refused_while_running(path: Path) -> None:
 
 
 def test_network_frequency_is_not_saved_keypad_frequency_is(path: Path) -> None:
-    # Seed 001: a frequency set at 0x0380 is not saved even with the save function; the
+    # ACG RS-485 manual: a frequency set at 0x0380 is not saved even with the save function; the
     # parameter-area frequency is.
     drive = start(path)
     drive.write(0x0380, 4000, 0)

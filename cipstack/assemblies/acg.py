@@ -1,4 +1,4 @@
-"""The ACG-ET2 card's I/O assemblies (seed 000, "Implicit message": Input Instances, Output
+"""The ACG-ET2 card's I/O assemblies (ACG-ET2 manual, "Implicit message": Input Instances, Output
 Instances and the two bit tables that follow them).
 
 * Outputs 20/21 and inputs 70/71 are the shared drive-profile layouts of ``drive_profile.py``
@@ -6,7 +6,7 @@ Instances and the two bit tables that follow them).
 * Outputs 100/101 and inputs 110/111 are the same bit layouts with the speed words in 0.01 Hz.
   The instance tables say only "Hz unit"; the count is the drive's own frequency word: the
   AC/DC Drive object gives Reference Hz/Actual Hz (0x2A attributes 101/100) as "0-400.00 Hz",
-  and seed 001 gives the frequency command 0x0380 and the output frequency 0x000A in 0.01 Hz,
+  and ACG RS-485 manual gives the frequency command 0x0380 and the output frequency 0x000A in 0.01 Hz,
   so 3000 is 30.00 Hz. The word's type, scale and unit are those of the register it carries
   (the frequency command for the reference, the output frequency for the actual speed), so the
   caller passes that register and the declaration says "Hz" with scale 0.01.
@@ -35,9 +35,9 @@ from .drive_profile import (
 from .names import field_name, unique_field_names
 from .schema import AssemblyField, AssemblySchema, word
 
-#: Output (O->T) instances, in CM.24 setting order (seed 000, "CIP Output Instance (CM.24)").
+#: Output (O->T) instances, in CM.24 setting order (ACG-ET2 manual, "CIP Output Instance (CM.24)").
 OUTPUT_INSTANCES: tuple[int, ...] = (20, 21, 100, 101, *range(121, 129))
-#: Input (T->O) instances, in CM.23 setting order (seed 000, "CIP Input Instance (CM.23)").
+#: Input (T->O) instances, in CM.23 setting order (ACG-ET2 manual, "CIP Input Instance (CM.23)").
 INPUT_INSTANCES: tuple[int, ...] = (70, 71, 110, 111, *range(141, 149))
 #: First smart-scaling instances: 121 carries one control word, 128 eight (likewise 141-148).
 CONTROL_PARAMETER_BASE_INSTANCE = 120
@@ -114,7 +114,7 @@ def speed_output(instance: int, frequency_command: ParameterWord) -> AssemblySch
     raise KeyError(f"{instance} is not a speed control output of the ACG-ET2")
 
 
-#: Seed 000 disagrees with itself: the table after the input instances relates Ctrl From Net to 0x29
+#: ACG-ET2 manual disagrees with itself: the table after the input instances relates Ctrl From Net to 0x29
 #: attribute 15, the Control Supervisor's own table serves "Control From Net." at 14. The object
 #: table is what the device answers, so the bit links there.
 CTRL_FROM_NET_ATTRIBUTE = 14

@@ -1,8 +1,8 @@
 """The AC drive profile assemblies both device families share: basic and extended speed
 control, output 20/21 and input 70/71, in byte 0 flags + speed word layout.
 
-The bit layout is the same in the ACG-ET2 appendix (seed 000, input instances 70/71/110/111,
-output instances 20/21/100/101) and the Omron option board manual (seed 004, Tables B-1 to
+The bit layout is the same in the ACG-ET2 appendix (ACG-ET2 manual, input instances 70/71/110/111,
+output instances 20/21/100/101) and the Omron option board manual (CompoNet manual, Tables B-1 to
 B-8); the families differ in the unit of the speed words, so the unit is a parameter and
 each family names its own instances (the ACG's 100/101/110/111 are these layouts in Hz).
 Each field links the Control Supervisor (0x29) or AC/DC Drive (0x2A) attribute it mirrors.
@@ -51,7 +51,7 @@ def basic_speed_control_input(instance: int = 70, unit: str = "rpm", scale: floa
 def extended_speed_control_input(instance: int = 71, unit: str = "rpm", scale: float = 1.0,
                                  ctrl_from_net_attribute: int = 15) -> AssemblySchema:
     """``ctrl_from_net_attribute``: the Control Supervisor attribute the bit mirrors, 15 in the AC drive
-    profile and Omron's Table D-4; the ACG serves it at 14 (seed 000's object table)."""
+    profile and Omron's Table D-4; the ACG serves it at 14 (the ACG-ET2 manual's object table)."""
     return AssemblySchema(instance, "Extended Speed Control Input", 4, [
         bit("faulted", 0, 0, help="Fault or trip", link=(CONTROL_SUPERVISOR, 1, 10)),
         bit("warning", 0, 1, help="Warning", link=(CONTROL_SUPERVISOR, 1, 11)),

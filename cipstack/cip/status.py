@@ -1,7 +1,7 @@
 """CIP general and extended status codes, and the one exception type that carries them.
 
 Codes and names follow the CIP general status table and the Connection Manager extended
-status table (see shared/reference/wire.md).
+status table (CIP Vol. 2, chapter 2, as Wireshark's ENIP dissector and OpENer read it).
 """
 
 from __future__ import annotations

@@ -5,10 +5,10 @@ gives a scale (an attribute's ``AttributeSpec``, an EDS ``ParamN``, an assembly 
 
     engineering = (raw + offset) x scale
 
-with ``scale`` = multiplier x base / divider of an EDS ``ParamN`` (fields 13-16, shared/reference
-eds.md) and ``offset`` its field 16; the text shows ``decimals`` places (field 21; else as many as
-the scale has: 0.1 -> 1, 0.01 -> 2). The ACG's acceleration time, 0.1 s per step (seed 000, AC/DC
-Drive object attribute 102; seed 001 ACC), reads ``Value(raw=50)`` and prints ``5.0 s``.
+with ``scale`` = multiplier x base / divider of an EDS ``ParamN`` (fields 13-16, the EDS
+specification) and ``offset`` its field 16; the text shows ``decimals`` places (field 21; else as many as
+the scale has: 0.1 -> 1, 0.01 -> 2). The ACG's acceleration time, 0.1 s per step (ACG-ET2 manual, AC/DC
+Drive object attribute 102; ACG RS-485 manual ACC), reads ``Value(raw=50)`` and prints ``5.0 s``.
 
 Writing goes the other way (``Scaling.to_raw``): an engineering value that is not a whole number of
 steps is refused rather than rounded, because a drive parameter set to a value nobody asked for is

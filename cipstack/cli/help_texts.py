@@ -52,7 +52,7 @@ COMMANDS: dict[tuple[str, ...], CommandText] = {
         "run the adapter emulator",
         "Run the adapter emulator: a software AC drive that answers EtherNet/IP explicit messages "
         "(UCMM and class 3) and class 1 I/O on --host and --port until Ctrl-C or SIGTERM. The device is "
-        "the ACG drive with its ACG-ET2 card (seed 000) unless --profile names the Omron MX2 or RX with "
+        "the ACG drive with its ACG-ET2 card (ACG-ET2 manual) unless --profile names the Omron MX2 or RX with "
         "its CompoNet option board, or --eds the generic device an EDS file describes.\n\n"
         "Saved parameters persist in a state file; `cipstack drive` reaches the running emulator through "
         "its control socket. A status line goes to stdout, the log to stderr.",

@@ -1,4 +1,4 @@
-"""Group 6: the EDS file given with ``--eds`` against the device (shared/reference/eds.md; the EDS
+"""Group 6: the EDS file given with ``--eds`` against the device (the EDS specification (CIP Vol. 1, chapter 7); the EDS
 specification, CIP Vol. 1 chapter 7, as the EDS reader of ``cipstack.eds`` reads it)."""
 
 from __future__ import annotations

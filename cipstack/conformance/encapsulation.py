@@ -1,5 +1,5 @@
 """Group 1: the encapsulation layer (CIP Vol. 2, chapter 2, as Wireshark's packet-enip.c and
-OpENer's encap.c read it; shared/reference/wire.md)."""
+OpENer's encap.c read it; CIP Vol. 2, chapter 2, as Wireshark's ENIP dissector and OpENer read it)."""
 
 from __future__ import annotations
 

@@ -34,12 +34,12 @@ def mac_for_address(address: str) -> bytes:
 
 def serial_from_mac(mac: bytes) -> int:
     """ACG-ET2 Identity attribute 6: "Serial number uses the last 4 digits of the MAC ID"
-    (seed 000, Identity Object table): the last four octets, most significant first."""
+    (ACG-ET2 manual, Identity Object table): the last four octets, most significant first."""
     return int.from_bytes(mac[-4:], "big")
 
 
 def acg_et2_identity(mac: bytes = DEFAULT_MAC) -> IdentityInfo:
-    """Identity of the ACG drive's ACG-ET2 card as it leaves the factory (seed 000, Identity Object):
+    """Identity of the ACG drive's ACG-ET2 card as it leaves the factory (ACG-ET2 manual, Identity Object):
     the values the ACG objects declare, the revision from CM.6's factory value."""
     from .acg.objects import DEVICE_TYPE, PRODUCT_CODE, PRODUCT_NAME, VENDOR_ID
     from .acg.registers import ACG_REGISTERS
@@ -85,7 +85,7 @@ def _acg(interface: NetworkInterface, limits: DeviceLimits, options: ProfileOpti
 
 def _acg_catalog() -> Catalog:
     """From the declarations alone (no drive is built): the ACG classes and the assemblies whose
-    layout no CM setting changes, the speed outputs 20/21/100/101 and inputs 70/71/110/111 (seed 000
+    layout no CM setting changes, the speed outputs 20/21/100/101 and inputs 70/71/110/111 (ACG-ET2 manual
     instance tables), made as the device makes them."""
     from ..assemblies.acg import HZ_INPUTS, HZ_OUTPUTS, speed_input, speed_output
     from .acg.objects import (
@@ -102,19 +102,19 @@ def _acg_catalog() -> Catalog:
     inputs = [speed_input(i, OUTPUT_FREQUENCY) for i in (70, 71, *HZ_INPUTS)]
 
     def keypad(instance: int, attribute: int) -> AttributeSpec | None:
-        """Class 0x64 by the register behind it: its name, range, unit and scale (seed 000, class 0x64
-        "Identical to the ACG Manual Code number"; seed 001 tables)."""
+        """Class 0x64 by the register behind it: its name, range, unit and scale (ACG-ET2 manual, class 0x64
+        "Identical to the ACG Manual Code number"; ACG RS-485 manual tables)."""
         register = class64_register(instance, attribute)
         return keypad_parameter_spec(register) if register is not None and class64_path(register) else None
 
-    # A recipe: the keypad parameters the save command keeps (seed 001, 0x03E0), Max Freq first (it
+    # A recipe: the keypad parameters the save command keeps (ACG RS-485 manual, 0x03E0), Max Freq first (it
     # bounds every frequency parameter), the CM group last (it changes the network settings).
     saved = [r for r in ACG_REGISTERS.values() if r.saved and r.access.writable and class64_path(r) is not None]
     saved.sort(key=lambda r: (r is not MAX_FREQUENCY, r.group == "CM"))
     parameters = [Parameter(r.code, KEYPAD_PARAMETERS, *class64_path(r), keypad_parameter_spec(r))  # type: ignore[misc]
                   for r in saved]
     # ACC and dEC are operation-group parameters with no class 0x64 address: AC/DC Drive attributes
-    # 102/103 mirror them (seed 000, "Value at DRV-03 (Acc Time)", "DRV-04 (Dec Time)").
+    # 102/103 mirror them (ACG-ET2 manual, "Value at DRV-03 (Acc Time)", "DRV-04 (Dec Time)").
     ramps = [Parameter(code, AC_DC_DRIVE, 1, attribute, spec) for code, attribute in (("ACC", 102), ("dEC", 103))
              if (spec := AC_DC_DRIVE_SPEC.instance_attribute(attribute)) is not None]
     parameters[1:1] = ramps
@@ -145,7 +145,7 @@ def _omron_catalog(default_model: str) -> Callable[[], Catalog]:
         resolvers = {class_id: (lambda instance, attribute, c=class_id: register_attribute(registers, c, instance,
                                                                                           attribute))
                      for class_id in (MODBUS_REGISTER, FUNCTION_CODE)}
-        # A recipe: the function codes the inverter keeps in its EEPROM (seed 004, section E-2-2: class
+        # A recipe: the function codes the inverter keeps in its EEPROM (CompoNet manual, section E-2-2: class
         # 0x65 instance/attribute = the function code number), A004 (maximum frequency) first.
         parameters = []
         for number, parameter in sorted(registers.by_number.items(), key=lambda item: item[1].code != "A004"):
@@ -182,10 +182,10 @@ def _omron_product_codes(family: str) -> frozenset[int]:
 
 
 PROFILES: dict[str, Profile] = {
-    "acg": Profile("acg", "ACG drive with its ACG-ET2 EtherNet/IP card (seeds 000 and 001)", _acg,
+    "acg": Profile("acg", "ACG drive with its ACG-ET2 EtherNet/IP card (the ACG-ET2 and ACG RS-485 manuals)", _acg,
                    vendor_id=acg_et2_identity().vendor_id, product_codes=frozenset({acg_et2_identity().product_code}),
                    catalog=_acg_catalog, keypad=_acg_keypad),
-    # The Omron inverters with the CompoNet option board (seed 004), served over EtherNet/IP.
+    # The Omron inverters with the CompoNet option board (CompoNet manual), served over EtherNet/IP.
     "mx2": Profile("mx2", "Omron MX2 with the 3G3AX-MX2-CRT-E CompoNet option board (--model, Tables 2/C-3)",
                    _omron("mx2", "MX2-A2015-E"), vendor_id=47, product_codes=_omron_product_codes("mx2"),
                    catalog=_omron_catalog("MX2-A2015-E"), keypad=_omron_keypad("mx2")),

@@ -74,7 +74,7 @@ class Register:
     low_word_first: bool = False
     #: A parameter that the save command persists (keypad parameters are; monitor words not).
     saved: bool = True
-    #: Where the value is declared in the manual, e.g. "seed 000 table CM".
+    #: Where the value is declared in the manual, e.g. "ACG-ET2 manual table CM".
     source: str = ""
     #: False for a parameter its manual's address table prints without an address ("-"): it is
     #: reached by its keypad code alone (CIP class 0x64), and ``address`` is only the key the

@@ -1,6 +1,6 @@
 """Saved drive parameters: the drive's non-volatile memory, as a JSON file.
 
-Every drive family follows the same rule (ACG: seed 001, "Saving Parameters Defined by
+Every drive family follows the same rule (ACG: ACG RS-485 manual, "Saving Parameters Defined by
 Communication"): a value written over the network takes effect at once but is lost at the
 next power cycle unless it has been saved; a saved value survives. A drive keeps its saved
 values in a ``ParameterStore``; restarting an emulated drive on the same file is a power cycle.

@@ -3,7 +3,7 @@
 Every ``ParamN`` with a link path (field 3) declares the attribute it names (and is a parameter of
 a recipe, ``cipstack params``): type (field 5),
 access (descriptor bit 4), range and default (10-12), enumeration (``EnumN``), unit (8) and
-scaling (13-16 multiplier, divider, base, offset; 21 decimal places; shared/reference eds.md), so
+scaling (13-16 multiplier, divider, base, offset; 21 decimal places; the EDS specification), so
 a reply decodes, scales and prints as it does with a device profile. Every assembly with members
 gives the field names of its class 1 data. What the file does not declare falls back to the
 standard objects (Identity, TCP/IP, ...).

@@ -368,7 +368,7 @@ def _member_parameter(item: AssemblyField, output: bool, schema: AssemblySchema,
                       declared_by_link: dict[Link, list[int]], made: dict[tuple[Any, ...], int]) -> int:
     """The index in ``params`` of the parameter an assembly member refers to (see the module docstring).
 
-    The device's manuals name one value twice: seed 000 calls Control Supervisor attribute 10
+    The device's manuals name one value twice: ACG-ET2 manual calls Control Supervisor attribute 10
     "Drive Fault" in its object table and "Faulted" in the input instance table; Omron's Table D-4
     has "Run1" where Tables B-1/B-2 have "FWD". Both names are right where they stand. The declared
     attribute's parameter keeps the object table's name, which explicit access shows and a user
@@ -395,7 +395,7 @@ def _member_parameter(item: AssemblyField, output: bool, schema: AssemblySchema,
             item = replace(item, link=None)
         elif any(link[:2] == item.link[:2] for link in declared_by_link):
             # The description declares that object's attributes but not this one: the device does not
-            # serve it (seed 000: Net Control 0x29/5 and Net Reference 0x2A/4 are "N/A"), so a path to
+            # serve it (ACG-ET2 manual: Net Control 0x29/5 and Net Reference 0x2A/4 are "N/A"), so a path to
             # it would be answered 0x14.
             item = replace(item, link=None)
         key: tuple[Any, ...] = ("link", item.name, item.link, item.bits, item.type.code, item.unit, item.scale,

@@ -7,7 +7,7 @@ opens its connections (``Scanner.io_connection_from_eds``), so both read an EDS 
 
 Reading is forgiving: a construct this module cannot use is reported as an ``EdsIssue`` (its
 line and what was skipped) and costs that entry only; nothing here raises on file content.
-Field numbers below are those of ``shared/reference/eds.md`` (ParamN, AssemN, ConnectionN).
+Field numbers below are those of the EDS specification (CIP Vol. 1, chapter 7) (ParamN, AssemN, ConnectionN).
 """
 
 from __future__ import annotations

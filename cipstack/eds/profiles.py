@@ -1,6 +1,6 @@
 """The EDS descriptions of the emulated devices, built from the devices themselves.
 
-* ``acg_et2_description()``: the ACG drive with its ACG-ET2 EtherNet/IP card (seed 000) as
+* ``acg_et2_description()``: the ACG drive with its ACG-ET2 EtherNet/IP card (ACG-ET2 manual) as
   ``build_acg_device()`` builds it at the factory settings: its Identity, the attributes of its
   Motor Data 0x28, Control Supervisor 0x29 and AC/DC Drive 0x2A objects, every keypad parameter
   through its class 0x64 path (instance = keypad group, attribute = code number), grouped by
@@ -9,7 +9,7 @@
   class 1 offer: the RPI range, heartbeat points and connection limit of its ``IoProfile``, with
   every CM.24/CM.23 pair (the card accepts the pair the settings select).
 * ``omron_description(model_name)``: the 3G3AX-MX2-CRT-E / 3G3AX-RX-CRT-E CompoNet option board
-  on one MX2 or RX inverter model (seed 004) as ``build_omron_device`` builds it: its Identity
+  on one MX2 or RX inverter model (CompoNet manual) as ``build_omron_device`` builds it: its Identity
   (Table C-2 with the product code and name of Tables 2/3), the attributes of its drive objects,
   every function-code parameter through its class 0x65 path (Table E-3), its assemblies in the
   factory speed unit (the flexible 139/159 when the factory mapping makes them), its object
@@ -56,16 +56,16 @@ from .description import (
     attribute_parameters,
 )
 
-#: Seed 000 gives vendor ID 259 (Identity Object, attribute 1) but no vendor name; the ODVA vendor
+#: ACG-ET2 manual gives vendor ID 259 (Identity Object, attribute 1) but no vendor name; the ODVA vendor
 #: list that scanner libraries carry (pycomm3's among them) names 259 "LS ELECTRIC".
 ACG_VENDOR_NAME = "LS ELECTRIC"
-#: The card's catalog name, "ACG-ET2" (seed 000, appendix B title and overview): the drive model's name.
+#: The card's catalog name, "ACG-ET2" (ACG-ET2 manual, appendix B title and overview): the drive model's name.
 ACG_CATALOG = ACG_MODEL
-#: ``ProdTypeStr`` of device type 2: the CIP AC drive profile (seed 000: "Device Type (drive) 2";
-#: seed 004, Table 1: "CompoNet Profile AC Drive (0x02)").
+#: ``ProdTypeStr`` of device type 2: the CIP AC drive profile (ACG-ET2 manual: "Device Type (drive) 2";
+#: CompoNet manual, Table 1: "CompoNet Profile AC Drive (0x02)").
 AC_DRIVE = "AC Drive"
 
-#: Identity attribute 1 of the option board: "47 (OMRON Corporation)" (seed 004, Table C-2).
+#: Identity attribute 1 of the option board: "47 (OMRON Corporation)" (CompoNet manual, Table C-2).
 OMRON_VENDOR_NAME = "OMRON Corporation"
 
 
@@ -88,14 +88,14 @@ def acg_keypad_parameters() -> tuple[EdsParameter, ...]:
         path = acg.class64_path(register)
         if path is None:
             continue
-        # Group names as seed 001 "Total Memory Map for Communication" writes them ("dr Group").
+        # Group names as ACG RS-485 manual "Total Memory Map for Communication" writes them ("dr Group").
         out.append(EdsParameter.from_register(register, (KEYPAD_PARAMETERS, *path), group=f"{register.group} Group"))
     return tuple(out)
 
 
 def acg_attribute_parameters() -> tuple[EdsParameter, ...]:
     """The instance 1 attributes of Motor Data 0x28, Control Supervisor 0x29 and AC/DC Drive 0x2A
-    (seed 000, "Supported Objects"), as the card declares them; the drive-profile assembly
+    (ACG-ET2 manual, "Supported Objects"), as the card declares them; the drive-profile assembly
     members refer to them."""
     return tuple(p for spec in (MOTOR_DATA_SPEC, CONTROL_SUPERVISOR_SPEC, AC_DC_DRIVE_SPEC)
                  for p in attribute_parameters(spec))
@@ -106,7 +106,7 @@ def acg_pairs(outputs: Iterable[AssemblySchema], inputs: Iterable[AssemblySchema
     """The exclusive-owner pairs of the ACG-ET2, and when each pair and each input is accepted.
 
     The card serves the output instance CM.24 selects and the input instance CM.23 selects
-    (seed 000, "CIP Input Instance (CM.23)", "CIP Output Instance (CM.24)"). The pairs listed
+    (ACG-ET2 manual, "CIP Input Instance (CM.23)", "CIP Output Instance (CM.24)"). The pairs listed
     are those of equal settings (20/70, 21/71, 100/110, ...), the pair of the factory settings
     first.
     """
@@ -260,7 +260,7 @@ def omron_models_by_file(family: omron.Family) -> tuple[omron.Model, ...]:
 
 def eds_file_name(description: EdsDescription) -> str:
     """The description's file name, else ``<catalog>_<major>.<minor>.eds`` (``ACG-ET2_1.01.eds``:
-    the revision as the ACG-ET2 shows its version, seed 000 Identity attribute 4 note)."""
+    the revision as the ACG-ET2 shows its version, ACG-ET2 manual Identity attribute 4 note)."""
     if description.file_name:
         return description.file_name
     major, minor = description.identity.revision

@@ -1,7 +1,7 @@
 """Connection Manager service codecs: Forward_Open, Large_Forward_Open, Forward_Close,
 Unconnected_Send, and the network connection parameters they carry.
 
-Field layouts as in shared/reference/wire.md; all little-endian.
+Field layouts as in CIP Vol. 2, chapter 2, as Wireshark's ENIP dissector and OpENer read it; all little-endian.
 """
 
 from __future__ import annotations

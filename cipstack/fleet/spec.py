@@ -8,7 +8,7 @@ directory, named after its address and its profile (and model), so that a device
 parameters across restarts and no two devices share one.
 
 With ``--rtu DEVICE`` (``rtu = "pty"`` in a file) the fleet's ACG drives also share one RS-485
-line, the Multi-drop Link System of seed 001: up to 16 drives, each at its own station ID (CM.1,
+line, the Multi-drop Link System of the ACG RS-485 manual: up to 16 drives, each at its own station ID (CM.1,
 1-250). A group may give its first station ID (``station = 10`` in a file); the others take the
 lowest free IDs from 1, in address order.
 
@@ -32,7 +32,7 @@ from ..errors import BadRequest
 #: exhausting the machine.
 MAX_DEVICES = 1024
 
-#: Seed 001, Communication Standards: "Maximum of 16 drives" on one line; CM.1 takes 1-250.
+#: ACG RS-485 manual, Communication Standards: "Maximum of 16 drives" on one line; CM.1 takes 1-250.
 MAX_DRIVES_PER_LINE = 16
 MAX_STATION = 250
 
@@ -271,7 +271,7 @@ def assign_stations(devices: Sequence[FleetDevice], workers: int, where: str = "
         raise SpecError(f"{where}: the fleet has no acg device (the RS-485 port is the ACG drive's)")
     if len(drives) > MAX_DRIVES_PER_LINE:
         raise SpecError(f"{where}: {len(drives)} ACG drives, but an RS-485 line takes at most {MAX_DRIVES_PER_LINE} "
-                        f"(seed 001, Communication Standards)")
+                        f"(ACG RS-485 manual, Communication Standards)")
     if workers != 1:
         raise SpecError(f"{where}: one RS-485 line is served by one process: --workers 1")
     owner: dict[int, str] = {}

@@ -1,5 +1,5 @@
 """The asyncio shell of Modbus-RTU (``modbus_rtu``): one RS-485 line, a pseudo-terminal or a serial
-device, with one drive or several (the Multi-drop Link System of seed 001, up to 16 drives).
+device, with one drive or several (the Multi-drop Link System of the ACG RS-485 manual, up to 16 drives).
 
 The line's file descriptor is watched by the event loop (``add_reader``): a read takes what the
 driver holds, without blocking, and every drive on the line hears it, as every station on a bus
@@ -171,7 +171,7 @@ class RtuLine:
             written: RegisterWritten | None = None) -> RtuSlave:
         """Put a drive on the line; ``written``: told of each register a request writes."""
         if len(self.stations) >= MAX_DRIVES_PER_LINE:
-            raise ValueError(f"an RS-485 line takes at most {MAX_DRIVES_PER_LINE} drives (seed 001, "
+            raise ValueError(f"an RS-485 line takes at most {MAX_DRIVES_PER_LINE} drives (ACG RS-485 manual, "
                              f"Communication Standards)")
         station = _Station(drive, saves, self.port.paced, written)
         self.stations.append(station)

@@ -1,5 +1,6 @@
 """A scripted EtherNet/IP target for the conformance battery's tests: plain sockets and threads,
-written from the wire (shared/reference/wire.md), importing nothing of cipstack.
+written from the wire (CIP Vol. 2, as the open
+dissectors read it), importing nothing of cipstack.
 
 By default it does what the specification asks of every check of the battery, for the device
 of ``fake_device.eds``. ``deviation`` names one check id: the target then answers as a

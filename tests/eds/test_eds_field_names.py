@@ -121,14 +121,14 @@ def test_the_issue_names(acg_file: Path, capsys: pytest.CaptureFixture[str]) -> 
     for param in view.params.values():
         if param.link is not None:
             by_link.setdefault(param.link, []).append(param.name)
-    # Seed 000: "Drive Fault" in the Control Supervisor table, "Faulted" in the input instance table.
+    # ACG-ET2 manual: "Drive Fault" in the Control Supervisor table, "Faulted" in the input instance table.
     assert by_link[(0x29, 1, 10)] == ["Drive Fault", "Faulted"]
     assert by_link[(0x29, 1, 9)] == ["Drive Ready", "Ready"]
     assert by_link[(0x29, 1, 14)] == ["Control From Net.", "Ctrl From Net"]
     # A declared name the rule maps to the field's is the member's parameter itself: no second one.
     assert by_link[(0x2A, 1, 7)] == ["SpeedActual"]
     assert by_link[(0x29, 1, 7)] == ["Running Forward"]
-    # Attributes the card does not serve (seed 000: Net Control 0x29/5 and Net Reference 0x2A/4 "N/A",
+    # Attributes the card does not serve (ACG-ET2 manual: Net Control 0x29/5 and Net Reference 0x2A/4 "N/A",
     # Warning 0x29/11 "Not supported") are named by no link path: the members' parameters have none.
     assert {(0x29, 1, 5), (0x2A, 1, 4), (0x29, 1, 11)}.isdisjoint(by_link)
     schema = view.schema(21)

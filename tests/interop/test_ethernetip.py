@@ -1,7 +1,7 @@
 """python-ethernetip (PyPI ``ethernetip``), a class 1 originator nobody here wrote, drives the ACG emulator.
 
 It opens 20/70 and 21/71 connections, sets Run Forward and a speed reference in its output and
-reads Running and Speed Actual ramping in its input (seed 000 assembly tables), then closes cleanly.
+reads Running and Speed Actual ramping in its input (ACG-ET2 manual assembly tables), then closes cleanly.
 """
 
 from __future__ import annotations
@@ -48,7 +48,7 @@ def set_int(bits: list[bool], first: int, count: int, value: int) -> None:
 
 @pytest.fixture(scope="module")
 def drive(adapter: PeerProcess) -> Iterator[SyncScanner]:
-    """The emulated drive under network control: drv = 4 and Frq = 8 "Field Bus" (seed 000, keypad parameters
+    """The emulated drive under network control: drv = 4 and Frq = 8 "Field Bus" (ACG-ET2 manual, keypad parameters
     related to the ACG-ET2), written through smart scaling (CM.51/CM.52 name them, assembly 122 carries them);
     ACC and dEC 1.0 s (AC/DC Drive attributes 102/103)."""
     with SyncScanner(adapter.address, catalog=catalog_for(259, 100)) as scanner:

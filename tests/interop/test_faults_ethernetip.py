@@ -4,7 +4,7 @@ and 7; Control Supervisor Running1, attribute 7), the faults applied with `cipst
 
 `ignore-output` and `idle` both leave the drive on the last command it consumed while the
 originator's output changes, and the connection up: on the ACG an idle originator sends no new
-command, so the drive keeps the last one and loses no command either (seed 000 says nothing of the
+command, so the drive keeps the last one and loses no command either (ACG-ET2 manual says nothing of the
 run/idle header; cipstack/devices/acg/device.py). After `clear` the drive follows the output again.
 """
 

@@ -3,8 +3,8 @@ the faults injected with `cipstack drive fault` over the control socket.
 
 A refused Forward_Open carries the chosen Connection Manager status to pycomm3, twice, and the
 next is accepted; a power cycle loses exactly the parameter that was written and not saved: on
-the ACG (seed 001, "Saving Parameters Defined by Communication") and on an RX with its CompoNet
-option board (seed 004, section E-2-2 note: stored in EEPROM by the ENTER command only); replies
+the ACG (ACG RS-485 manual, "Saving Parameters Defined by Communication") and on an RX with its CompoNet
+option board (CompoNet manual, section E-2-2 note: stored in EEPROM by the ENTER command only); replies
 come after the chosen delay; a chosen general and extended status reaches it; after `close-tcp` or
 `drop-sessions` its next request fails and a new connection works; while unplugged it cannot
 connect, after `plug` it can."""
@@ -99,7 +99,7 @@ def test_refused_forward_open_carries_the_chosen_status(adapter: PeerProcess,
 
 
 def write_register(drv: CIPDriver, address: int, value: int) -> None:
-    """A drive register over CIP: named in CM.51, set through smart-scaling assembly 121 (seed 000)."""
+    """A drive register over CIP: named in CM.51, set through smart-scaling assembly 121 (ACG-ET2 manual)."""
     set_single(drv, 0x64, CM, 51, UINT.encode(address))
     set_single(drv, 0x04, 121, 3, UINT.encode(value))
 

@@ -1,4 +1,4 @@
-"""Computed registers: the monitors of the common and monitoring areas (seed 001) that the
+"""Computed registers: the monitors of the common and monitoring areas (ACG RS-485 manual) that the
 simulation produces rather than stores."""
 
 from __future__ import annotations
@@ -25,7 +25,7 @@ _SECONDS_PER_DAY = 86400
 # Where the sources read in 0x0006 (B6-B8, B9-B14) and 0x0306 (B8-B15, B0-B7) come from.
 # drv codes equal the 0x0006 command-source codes (both lists read 0 keypad ... 4 option).
 _MONITOR_COMMAND_SOURCE = {0: 0, 1: 4, 2: 4, 3: 3, 4: 1}  # drv -> 0x0306 B8-B15
-# Frq settings the seeds name; an unnamed local source acts as the keypad frequency here (the
+# Frq settings the ACG manuals name; an unnamed local source acts as the keypad frequency here (the
 # emulated drive has no analog inputs), so it is shown as the keypad.
 _COMMON_FREQUENCY_SOURCE = {0: 0, 6: 27, 8: 28}  # Frq -> 0x0006 B9-B14
 _MONITOR_FREQUENCY_SOURCE = {0: 0, 6: 10, 8: 11}  # Frq -> 0x0306 B0-B7
@@ -39,7 +39,7 @@ class ComputedRegisters:
 
 
     def _operation_status(self) -> int:
-        """Common area 0x000E (seed 001)."""
+        """Common area 0x000E (ACG RS-485 manual)."""
         status = OperationStatus(0)
         direction = self._direction()
         if not self._output_on:
@@ -69,7 +69,7 @@ class ComputedRegisters:
         return int(status)
 
     def _fault_trip_information(self) -> int:
-        """Common area 0x000F (seed 001)."""
+        """Common area 0x000F (ACG RS-485 manual)."""
         info = FaultTripInformation(0)
         if self._trip is Trip.HW_DIAG:
             info |= FaultTripInformation.HW_DIAG
@@ -90,7 +90,7 @@ class ComputedRegisters:
                 | (frequency_source & reg.OPERATION_FREQUENCY_SOURCE_MASK) << reg.OPERATION_FREQUENCY_SOURCE_SHIFT)
 
     def _operation_state(self) -> int:
-        """Monitoring 0x0305 (seed 001)."""
+        """Monitoring 0x0305 (ACG RS-485 manual)."""
         if self._trip is not None:
             health = OperationHealth.FAULT
         elif self._warnings:
@@ -110,7 +110,7 @@ class ComputedRegisters:
         return health << reg.OPERATION_HEALTH_SHIFT | phase << reg.OPERATION_PHASE_SHIFT | direction
 
     def _source_word(self) -> int:
-        """Monitoring 0x0306 (seed 001)."""
+        """Monitoring 0x0306 (ACG RS-485 manual)."""
         command = _MONITOR_COMMAND_SOURCE[self._values[CMD_SOURCE.address]]
         frequency = _MONITOR_FREQUENCY_SOURCE.get(self._values[FREQ_REF_SOURCE.address], 0)
         return command << reg.MONITOR_COMMAND_SOURCE_SHIFT | frequency
@@ -155,7 +155,7 @@ class ComputedRegisters:
             0x0312: rpm,
             0x0313: lambda: self.hz_to_rpm(self._output_hz),
             0x031A: lambda: self.poles,
-            # The second motor's pole number is an M2 parameter the seeds do not describe.
+            # The second motor's pole number is an M2 parameter the ACG manuals do not describe.
             0x031B: lambda: self.poles,
             0x031C: lambda: self.poles,
             0x0321: relays,

@@ -1,5 +1,5 @@
 """The emulated ACG drive with its ACG-ET2 card: the drive model behind the card's CIP objects
-and assemblies (seed 000, appendix B).
+and assemblies (ACG-ET2 manual, appendix B).
 
 * Objects: Identity, Motor Data 0x28, Control Supervisor 0x29, AC/DC Drive 0x2A and class 0x64
   (``objects.py``), on top of the standard objects of every EtherNet/IP adapter.
@@ -7,12 +7,12 @@ and assemblies (seed 000, appendix B).
   connection may use only the pair that CM.23/CM.24 select, as the card last applied them with
   CM.94 Comm Update ("CIP Input Instance (CM.23)", "CIP Output Instance (CM.24)").
 * Lost command: an exclusive-owner class 1 connection that times out starts the drive's
-  lost-command timers (Pr.12 after Pr.13, seed 000 "Lost command conditions by protocol").
-* Idle: the seed says nothing about a class 1 run/idle header. An idle originator sends no new
+  lost-command timers (Pr.12 after Pr.13, ACG-ET2 manual "Lost command conditions by protocol").
+* Idle: the manual says nothing about a class 1 run/idle header. An idle originator sends no new
   command data, so the drive keeps the last commands it consumed; the connection is alive, so
   it is no command loss either.
 * Reset (Identity service 0x05): type 0 is a power cycle (values written but not saved are lost,
-  saved ones kept, seed 001 "Saving Parameters Defined by Communication"; ``power_cycle``, which
+  saved ones kept, ACG RS-485 manual "Saving Parameters Defined by Communication"; ``power_cycle``, which
   the ``power-cycle`` fault calls too); type 1 returns to the factory values and forgets the saved
   ones.
 * Saves: the drive hands each save to the device; with a state file a ``StateWriter`` writes it
@@ -61,7 +61,7 @@ from .objects import (
 
 log = logging.getLogger(__name__)
 
-#: The seed gives no RPI limits: 1 ms is the fastest the emulator keeps to (benchmarks/io.py measures
+#: The manual gives no RPI limits: 1 ms is the fastest the emulator keeps to (benchmarks/io.py measures
 #: it: sends leave within tens of microseconds of their slot); the upper limit is the adapter's
 #: default (``IoProfile.rpi_max_us``).
 RPI_MIN_US = 1_000
@@ -152,7 +152,7 @@ class AcgDevice(Device):
                              name=schema.name)
 
     def _produce_speed(self, schema: AssemblySchema) -> bytes:
-        """Inputs 70/71/110/111 (seed 000, input instances and the bits table after them)."""
+        """Inputs 70/71/110/111 (ACG-ET2 manual, input instances and the bits table after them)."""
         drive = self.drive
         hz = schema.instance in HZ_INPUTS
         values = {
@@ -231,7 +231,7 @@ class AcgDevice(Device):
         )
 
     def class1_pair_hint(self) -> str:
-        """Which exclusive-owner pair class 1 accepts now, and how to select another (seed 000,
+        """Which exclusive-owner pair class 1 accepts now, and how to select another (ACG-ET2 manual,
         "CIP Input Instance (CM.23)", "CIP Output Instance (CM.24)", applied by CM.94 Comm Update)."""
         settings = self.drive.active_comm_settings
         return (f"class 1 takes only output {settings.output_instance.instance} / input "
@@ -307,7 +307,7 @@ class AcgDevice(Device):
         fault code of the Drive Fault Codes table (0x4200 or "0x4200").
 
         A drive already tripped keeps its trip: class 0x29 attribute 13 holds one Drive Fault Code,
-        and a trip is left only by a Fault Reset (attribute 12, seed 000:654-656) or, for a level
+        and a trip is left only by a Fault Reset (attribute 12, ACG-ET2 manual) or, for a level
         type, by its cause going away. So a second trip is refused (``TripRefused`` naming the
         present one), and nothing changes."""
         trip = parse_trip(code)
@@ -331,7 +331,7 @@ class AcgDevice(Device):
         return present
 
     def trip_codes(self) -> str:
-        """The fault codes of the Drive Fault Codes table (seed 000), or a trip's name."""
+        """The fault codes of the Drive Fault Codes table (ACG-ET2 manual), or a trip's name."""
         codes = sorted({trip.fault_code for trip in Trip})
         return ", ".join(f"0x{code:04X}" for code in codes) + " (or a trip name, e.g. OverHeat)"
 

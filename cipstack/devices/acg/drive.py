@@ -10,17 +10,17 @@ Behaviour, with the table it comes from:
 * Registers: ``read``/``write`` over the map of ``registers.py``; a refused write raises
   ``RegisterError`` (read-only, out of range, not writable in run).
 * Command and frequency source: drv = 4 "Field Bus" takes the run command from the network,
-  Frq = 8 "Field Bus" the speed reference (seed 000, Keypad Parameters Related to ACG-ET2).
-* Run/stop: the Control Supervisor "Drive Run" table (seed 000, class 0x29), the common area
-  operation command 0x0006 and the control area command 0x0382 (seed 001).
+  Frq = 8 "Field Bus" the speed reference (ACG-ET2 manual, Keypad Parameters Related to ACG-ET2).
+* Run/stop: the Control Supervisor "Drive Run" table (ACG-ET2 manual, class 0x29), the common area
+  operation command 0x0006 and the control area command 0x0382 (ACG RS-485 manual).
 * Ramps: linear, from 0 to dr.20 Max Freq in ACC seconds and back in dEC seconds.
 * Trips: the "Drive Fault Codes" table (class 0x29 attribute 13) with the trip bits of the
   monitoring words 0x0330-0x0335; Drive Fault Reset acts on a 0 -> 1 change only.
-* Lost command: Pr.12/Pr.13/Pr.14 (seed 000, PR Group (Lost Command); seed 001, Command Loss
+* Lost command: Pr.12/Pr.13/Pr.14 (ACG-ET2 manual, PR Group (Lost Command); ACG RS-485 manual, Command Loss
   Protective Operation).
-* Parameter save: 0x03E0 from 0 to 1 (seed 001, Saving Parameters Defined by Communication).
+* Parameter save: 0x03E0 from 0 to 1 (ACG RS-485 manual, Saving Parameters Defined by Communication).
 * CM.94 Comm Update: CM.7 and CM.10-CM.24 take effect on the card only when it is set to 1.
-* Virtual multi-function inputs: CM.70-CM.77 and 0x0385 (seed 001, ``virtual_inputs``).
+* Virtual multi-function inputs: CM.70-CM.77 and 0x0385 (ACG RS-485 manual, ``virtual_inputs``).
 * Command ports: a run command is obeyed when it comes in through the port drv names (4 Field
   Bus: the card; 3 Int485: the RS-485 port, ``commands_from``; 1/2 Fx/Rx: the terminals' FX/RX).
 
@@ -207,18 +207,18 @@ class AcgDrive(RunCommands, Ramps, Trips, LostCommand, RegisterEffects, VirtualI
     def power_cycled(self, now: float) -> AcgDrive:
         """The drive as it comes back from a power loss at ``now``.
 
-        Kept: the saved parameters (seed 001, "Saving Parameters Defined by Communication": "Parameter
+        Kept: the saved parameters (ACG RS-485 manual, "Saving Parameters Defined by Communication": "Parameter
         SET via Communications + SAVED + Power Cycle = Parameters holds saved value"), and what the
         drive memory control area sets, since "when setting parameters in the drive memory control
-        area, the values are reflected to the drive operation and saved" (seed 001, 0x03E0-0x03EC):
+        area, the values are reflected to the drive operation and saved" (ACG RS-485 manual, 0x03E0-0x03EC):
         the accumulated times it initializes (0x03EB run time, 0x03EC fan time; the On Time of
         0x0340/0x0341 is the "total number of days the drive has been powered on", so it goes on
         from where it was), the fault history it deletes (0x03E5) and the locks of the password
         (0x03E7/0x03E8); the keypad's password itself.
 
         Lost: every value written and not saved ("NOT Saved + Power Cycle = Parameters reverts back
-        to previous setting"; the frequency of 0x0380 even when saved, seed 001), the run command
-        and the output (0 Hz: the motor coasts), the trip present (the seeds say nothing of a trip
+        to previous setting"; the frequency of 0x0380 even when saved, ACG RS-485 manual), the run command
+        and the output (0 Hz: the motor coasts), the trip present (the ACG manuals say nothing of a trip
         across a power cycle: the drive starts without it, and the fault history keeps it), the
         lost-command watches and the virtual inputs (0x0385) and CM.94's pending settings."""
         self.advance(max(now, self._time))
@@ -298,7 +298,7 @@ class AcgDrive(RunCommands, Ramps, Trips, LostCommand, RegisterEffects, VirtualI
         if self._lost_reference is not None:
             reference = self._lost_reference
         elif self.reference_from_net or self.reference_from_int485:
-            # Both communication sources set the frequency command of 0x0005 / 0x0380 (seed 001).
+            # Both communication sources set the frequency command of 0x0005 / 0x0380 (ACG RS-485 manual).
             reference = self._values[SPEED_REFERENCE.address] / 100
         else:
             reference = self._values[TARGET_FREQUENCY.address] / 100

@@ -1,7 +1,7 @@
 """The ACG drive's keypad (``cipstack.devices.keypad``): its codes and how it writes them.
 
 A real ACG is made to run from the network on its keypad before any network client connects:
-drv = 4 and Frq = 8 ("Field Bus", seed 000). ``--param`` does the same for the emulator, by the
+drv = 4 and Frq = 8 ("Field Bus", ACG-ET2 manual). ``--param`` does the same for the emulator, by the
 keypad code and in the unit the keypad shows (``ACC=2.5`` is 2.5 s, raw 25 at scale 0.1). The
 values are written as the drive's own write rules allow (range, not while running, the parameter
 lock) and are not saved: like any value written but not saved, they last until a power loss.
@@ -17,10 +17,10 @@ from ..registers import Register
 from .drive import AcgDrive
 from .registers import class64_register, register_for_code
 
-#: The ACG's keypad codes: the operation group's (drv, Frq, ACC...) and GROUP.N (seed 001 tables).
+#: The ACG's keypad codes: the operation group's (drv, Frq, ACC...) and GROUP.N (ACG RS-485 manual tables).
 ACG_KEYPAD = KeypadCodes("the ACG keypad", register_for_code, ("drv", "Frq", "ACC", "dr.20", "CM.23"))
 
-#: Class 0x64, the keypad parameters by group and code number (seed 000).
+#: Class 0x64, the keypad parameters by group and code number (ACG-ET2 manual).
 _KEYPAD_CLASS = 0x64
 
 
@@ -46,7 +46,7 @@ class AcgKeypad(Keypad):
         if class_id == _KEYPAD_CLASS:
             return class64_register(instance, attribute)
         # Motor Data, Control Supervisor, AC/DC Drive: the register an attribute of instance 1 shows
-        # (AC/DC Drive 102 is ACC, seed 000), as the objects declare it.
+        # (AC/DC Drive 102 is ACC, ACG-ET2 manual), as the objects declare it.
         obj = self._objects.get(class_id)
         register_of = getattr(obj, "register_of", None)
         return register_of(attribute) if register_of is not None and instance == 1 else None

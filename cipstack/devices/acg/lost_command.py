@@ -1,5 +1,5 @@
-"""Lost command: Pr.12/Pr.13/Pr.14 (seed 000, PR Group (Lost Command) and "Lost command conditions
-by protocol"; seed 001, Command Loss Protective Operation)."""
+"""Lost command: Pr.12/Pr.13/Pr.14 (ACG-ET2 manual, PR Group (Lost Command) and "Lost command conditions
+by protocol"; ACG RS-485 manual, Command Loss Protective Operation)."""
 
 from __future__ import annotations
 
@@ -17,7 +17,7 @@ from .registers import (
 from .run_command import CommandPort
 from .trips import Trip
 
-#: Seed 000, "Lost command conditions by protocol": a class 1 connection that stays broken for
+#: ACG-ET2 manual, "Lost command conditions by protocol": a class 1 connection that stays broken for
 #: longer than one second, or a Modbus TCP server that receives nothing for five seconds, puts
 #: the card in lost command mode; Pr.12 then acts after Pr.13 seconds.
 IO_BREAK_TIME = 1.0
@@ -25,7 +25,7 @@ MODBUS_SILENCE_TIME = 5.0
 
 
 class LostCommandMode(IntEnum):
-    """Pr.12 Lost Cmd Mode (seed 000)."""
+    """Pr.12 Lost Cmd Mode (ACG-ET2 manual)."""
 
     NONE = 0
     FREE_RUN = 1
@@ -38,12 +38,12 @@ class LostCommandMode(IntEnum):
 
 @dataclass
 class _CommandLossWatch:
-    """One protocol's lost-command timers (seed 000, "Lost command conditions by protocol").
+    """One protocol's lost-command timers (ACG-ET2 manual, "Lost command conditions by protocol").
 
     ``detect_after``: the silence that puts the port in lost command mode, after which Pr.12 acts
     when Pr.13 has passed (the card's protocols). None: the built-in RS-485, where Pr.13 is the
     silence itself: "the drive function that will occur after the communication loss time is
-    expired (set in Pr.13)" (seed 001, Command Loss Protective Operation), so Pr.12 acts at once."""
+    expired (set in Pr.13)" (ACG RS-485 manual, Command Loss Protective Operation), so Pr.12 acts at once."""
 
     detect_after: float | None
     #: The command source whose commands the watch guards (drv / Frq of that port).
@@ -141,7 +141,7 @@ class LostCommand:
                 or self._values[FREQ_REF_SOURCE.address] == port.frequency_source)
 
     def _lost_command_action(self, port: CommandPort = CommandPort.FIELDBUS) -> None:
-        """Pr.12 after Pr.13 (seed 000, PR Group (Lost Command)), for a drive operated via the
+        """Pr.12 after Pr.13 (ACG-ET2 manual, PR Group (Lost Command)), for a drive operated via the
         port that went silent ("while the drive is operated via network communication"): drv or
         Frq is that port's source."""
         if not self._operated_from(port):

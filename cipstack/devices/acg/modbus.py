@@ -1,4 +1,4 @@
-"""Modbus TCP on the ACG-ET2 card (seed 000, "Modbus TCP Frame"), served from the same drive
+"""Modbus TCP on the ACG-ET2 card (ACG-ET2 manual, "Modbus TCP Frame"), served from the same drive
 model as EtherNet/IP.
 
 * Frame: the 7-byte MBAP header (transaction id, protocol id 0, length, unit id) and the PDU.
@@ -6,15 +6,15 @@ model as EtherNet/IP.
 * Function codes 0x03 Read Holding Registers, 0x04 Read Input Registers, 0x06 Write Single
   Register, 0x10 Write Multiple Registers and 0x17 Read/Write Multiple Registers, 1-16 words per
   request ("1-16 (ACG drives)").
-* Numbering: the seed's "Modbus TCP" column numbers a register 40001 + its communication
+* Numbering: the manual's "Modbus TCP" column numbers a register 40001 + its communication
   address (``registers.modbus_tcp_number``; 0x0300 is 40769): holding register 40769 is sent as
   PDU address 0x0300, so the PDU address is the communication address.
-* Exception codes (seed 000, "Exception Code"): 0x01 unsupported function, 0x02 unused address,
+* Exception codes (ACG-ET2 manual, "Exception Code"): 0x01 unsupported function, 0x02 unused address,
   0x03 value out of range (and malformed requests), 0x04 server error, 0x20 write-protected
   parameter (a read-only register, or one not writable while the drive runs). 0x06 (busy during
   a parameter initialization) cannot occur here: the drive model initializes in no time.
 * Every request counts as Modbus activity: five seconds without one is a command loss (Pr.12
-  after Pr.13, seed 000 "Lost command conditions by protocol").
+  after Pr.13, ACG-ET2 manual "Lost command conditions by protocol").
 
 The protocol core (``ModbusTcpCore``, ``MbapBuffer``, this module) takes bytes and the time and
 returns bytes; its PDUs are served by the Modbus layer it shares with the RS-485 port

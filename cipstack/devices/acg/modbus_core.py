@@ -1,23 +1,23 @@
-"""The ACG drive's Modbus application layer, shared by Modbus TCP (the ACG-ET2 card, seed 000) and
-Modbus-RTU (the built-in RS-485 port, seed 001), sans I/O: a PDU and the time in, a PDU out.
+"""The ACG drive's Modbus application layer, shared by Modbus TCP (the ACG-ET2 card, ACG-ET2 manual) and
+Modbus-RTU (the built-in RS-485 port, ACG RS-485 manual), sans I/O: a PDU and the time in, a PDU out.
 
-Both ports serve one register map (seed 001, "Total Memory Map for Communication") with the same
-write rules, the same save rule (0x03E0 from 0 to 1, seed 001 "Saving Parameters Defined by
+Both ports serve one register map (ACG RS-485 manual, "Total Memory Map for Communication") with the same
+write rules, the same save rule (0x03E0 from 0 to 1, ACG RS-485 manual "Saving Parameters Defined by
 Communication") and the same drive. What differs between them is a ``ModbusDialect``:
 
-* the function codes: 0x03, 0x04, 0x06, 0x10 on both (seed 001, "Modbus-RTU Protocol"; seed 000,
-  "Modbus TCP Frame"), and 0x17 Read/Write Multiple Registers on the card only (seed 000);
-* the exception codes: the card's table (seed 000, "Exception Code": 0x01-0x04, 0x06 and the
-  ACG's own 0x20 Write Permission Error) or the serial chapter's (seed 001, "Exception Code":
+* the function codes: 0x03, 0x04, 0x06, 0x10 on both (ACG RS-485 manual, "Modbus-RTU Protocol"; ACG-ET2 manual,
+  "Modbus TCP Frame"), and 0x17 Read/Write Multiple Registers on the card only (ACG-ET2 manual);
+* the exception codes: the card's table (ACG-ET2 manual, "Exception Code": 0x01-0x04, 0x06 and the
+  ACG's own 0x20 Write Permission Error) or the serial chapter's (ACG RS-485 manual, "Exception Code":
   01 Illegal Function, 02 Illegal Data Address, 03 Illegal Data Value, 06 Slave Device Busy);
 * the addresses: the card's PDU address is the communication address (its "Modbus TCP" column
-  numbers a register 40001 + address, seed 001 and seed 000); on the RS-485 port the "Modbus RTU"
+  numbers a register 40001 + address, ACG RS-485 manual and ACG-ET2 manual); on the RS-485 port the "Modbus RTU"
   column numbers it 40000 + address, so its PDU address is the communication address minus one.
   The chapter's worked example sends "Starting Address -1 (0x1246-1)", 0x1245, to write 0x1246,
   and "Hex Address 0000 is unavailable with Modbus RTU" (no PDU address reaches it);
 * the command source a run command written through the port belongs to (drv 4 Field Bus for the
-  card, drv 3 Int485 for the RS-485 port) and the lost-command watch a request feeds (seed 000,
-  "Lost command conditions by protocol": five seconds of Modbus TCP silence; seed 001, Command
+  card, drv 3 Int485 for the RS-485 port) and the lost-command watch a request feeds (ACG-ET2 manual,
+  "Lost command conditions by protocol": five seconds of Modbus TCP silence; ACG RS-485 manual, Command
   Loss Protective Operation: Pr.13 of RS-485 silence).
 """
 
@@ -36,7 +36,7 @@ from .run_command import CommandPort
 
 log = logging.getLogger(__name__)
 
-#: "Number of data requests 1-16 (ACG drives)" (seed 000). The serial chapter gives no number of
+#: "Number of data requests 1-16 (ACG drives)" (ACG-ET2 manual). The serial chapter gives no number of
 #: its own; the drive behind both ports is the same, so the RS-485 port takes the same 1-16.
 MAX_WORDS = 16
 
@@ -50,7 +50,7 @@ class FunctionCode(IntEnum):
 
 
 class ExceptionCode(IntEnum):
-    """Seed 000, "Exception Code" (the card); seed 001 lists 0x01, 0x02, 0x03 and 0x06 of them."""
+    """ACG-ET2 manual, "Exception Code" (the card); ACG RS-485 manual lists 0x01, 0x02, 0x03 and 0x06 of them."""
 
     ILLEGAL_FUNCTION = 0x01
     ILLEGAL_DATA_ADDRESS = 0x02
@@ -85,7 +85,7 @@ class ModbusDialect:
         return self.refusal_codes[refusal]
 
 
-#: The ACG-ET2 card (seed 000, "Exception Code"): 0x20 for a write-protected parameter, 0x04 for a
+#: The ACG-ET2 card (ACG-ET2 manual, "Exception Code"): 0x20 for a write-protected parameter, 0x04 for a
 #: server error (the state file took no write). 0x06 (busy during a parameter initialization)
 #: cannot occur here: the drive model initializes in no time.
 TCP_DIALECT = ModbusDialect(
@@ -102,7 +102,7 @@ TCP_DIALECT = ModbusDialect(
     CommandPort.FIELDBUS,
 )
 
-#: The RS-485 port (seed 001, "Exception Code": 01, 02, 03, 06 and no other). A write the drive
+#: The RS-485 port (ACG RS-485 manual, "Exception Code": 01, 02, 03, 06 and no other). A write the drive
 #: does not take at that address (read only, locked, or not while running) is 02, the code the
 #: card's table gives to "modification ... requested for the data at an unused address": the
 #: chapter has no write-protect code. A save the state file did not take is 06 Slave Device Busy

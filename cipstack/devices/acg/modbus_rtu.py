@@ -1,8 +1,8 @@
-"""Modbus-RTU on the drive's built-in RS-485 port (seed 001, "Modbus-RTU Protocol"), sans I/O:
+"""Modbus-RTU on the drive's built-in RS-485 port (ACG RS-485 manual, "Modbus-RTU Protocol"), sans I/O:
 bytes and the time they arrived in, frames and replies with the time they leave out.
 
 * Line settings: CM.1 station ID (1-250), CM.3 baud rate, CM.4 data/parity/stop bits, CM.5
-  response delay (seed 001, Setting Communication Parameters). A character is a start bit, 8 data
+  response delay (ACG RS-485 manual, Setting Communication Parameters). A character is a start bit, 8 data
   bits, the parity bit if any and the stop bits: 10 or 11 bits at the CM.3 rate.
 * Framing: a frame ends at a silence of 3.5 character times, fixed at 1.75 ms above 19,200 bps
   (Modbus over serial line, V1.02, 2.5.1.1). The silence is measured from the end of the last byte
@@ -27,8 +27,8 @@ bytes and the time they arrived in, frames and replies with the time they leave 
   released CM.5 after the request's frame ended; on a pty, written when its last character would have
   left a real UART at the CM.3 rate (a pty moves bytes at once: the slave paces itself).
 * A change of CM.1-CM.5 takes effect from the next frame: the reply to the write that changes them
-  goes out as the request came in (seed 001 gives no other rule; CM.94 gates CM.7 and CM.10-CM.24
-  only, seed 000).
+  goes out as the request came in (ACG RS-485 manual gives no other rule; CM.94 gates CM.7 and CM.10-CM.24
+  only, ACG-ET2 manual).
 """
 
 from __future__ import annotations
@@ -41,7 +41,7 @@ from .drive import AcgDrive
 from .modbus_core import RTU_DIALECT, ExceptionCode, FunctionCode, ModbusCore, RegisterWritten
 from .registers import ACG_REGISTERS
 
-#: CM.3 settings (seed 001, Communication Parameters Setting Details; "56 Kbps" and "115 Kbps" are
+#: CM.3 settings (ACG RS-485 manual, Communication Parameters Setting Details; "56 Kbps" and "115 Kbps" are
 #: the 57,600 and 115,200 bps of the Communication Standards table).
 BAUD_RATES = {0: 1200, 1: 2400, 2: 4800, 3: 9600, 4: 19200, 5: 38400, 6: 57600, 7: 115200}
 #: CM.4 settings: (data bits, parity, stop bits).
@@ -53,7 +53,7 @@ FIXED_SILENCE = 0.00175
 FIXED_INTERCHARACTER = 0.00075
 #: The largest RTU frame: address, 253-byte PDU, CRC (Modbus over serial line V1.02, 2.5.1).
 MAX_FRAME = 256
-#: "Number of connected drives: Maximum of 16 drives" (seed 001, Communication Standards).
+#: "Number of connected drives: Maximum of 16 drives" (ACG RS-485 manual, Communication Standards).
 MAX_DRIVES_PER_LINE = 16
 BROADCAST = 0
 #: Rounding room when a silence is compared with t3.5 (times are float seconds).

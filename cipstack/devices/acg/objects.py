@@ -1,6 +1,6 @@
-"""The CIP objects of the ACG-ET2 card (seed 000, "Explicit Messages", "Supported Objects").
+"""The CIP objects of the ACG-ET2 card (ACG-ET2 manual, "Explicit Messages", "Supported Objects").
 
-Each object has exactly the attributes, access and services of its table in the seed:
+Each object has exactly the attributes, access and services of its table in the ACG-ET2 manual:
 
 * Identity 0x01 instance 1: attributes 1-7; instance services 0x0E, 0x05, 0x01; no class services.
 * Motor Data 0x28, Control Supervisor 0x29, AC/DC Drive 0x2A instance 1 and class 0x64: instance
@@ -38,7 +38,7 @@ CONTROL_SUPERVISOR = 0x29
 AC_DC_DRIVE = 0x2A
 KEYPAD_PARAMETERS = 0x64
 
-#: Seed 000: Motor data, Control Supervisor, Drive Objects and class 0x64 tables: "Support for
+#: ACG-ET2 manual: Motor data, Control Supervisor, Drive Objects and class 0x64 tables: "Support for
 #: Class: No"; instance: 0x0E Get Attribute Single and 0x10 Set Attribute Single.
 GET_SET_SINGLE = frozenset({Service.GET_ATTRIBUTE_SINGLE, Service.SET_ATTRIBUTE_SINGLE})
 NO_SERVICES: frozenset[int] = frozenset()
@@ -64,7 +64,7 @@ def _access(register: Register) -> Access:
 def mirror_spec(attribute_id: int, name: str, register: Register, *, cip_type: CipType | None = None,
                 access: Access | None = None, minimum: int | None = None, maximum: int | None = None) -> AttributeSpec:
     """An attribute that shows ``register``: its range, scale, unit and enumeration come from the
-    register; the seed's table may narrow the range or state the CIP type and access."""
+    register; the manual's table may narrow the range or state the CIP type and access."""
     where = (f"register 0x{register.address:04X}" if register.addressed else "no communication address") + (
         f" {register.code}" if register.code else "")
     return AttributeSpec(
@@ -151,7 +151,7 @@ MOTOR_TYPES: Mapping[int, str] = {
     4: "FC Synchronous Motor", 5: "Switched Reluctance Motor", 6: "Wound Rotor Induction Motor",
     7: "Squirrel Cage Induction Motor", 8: "Stepper Motor", 9: "Sinusoidal PM BL Motor", 10: "Trapezoidal PM BL Motor",
 }
-#: The ACG drives induction motors; the seed lists the range and not the value it reports.
+#: The ACG drives induction motors; the manual lists the range and not the value it reports.
 MOTOR_TYPE = 7
 
 MOTOR_DATA_ATTRIBUTES: tuple[DriveAttribute, ...] = (
@@ -191,7 +191,7 @@ CONTROL_SUPERVISOR_ATTRIBUTES: tuple[DriveAttribute, ...] = (
           "0: stopped, 1: forward run (Drive Run table)", lambda d, v, now: d.set_run_forward(bool(v), now)),
     _flag(4, "Reverse Run Cmd.", lambda d: d.control_supervisor.run_reverse,
           "0: stopped, 1: reverse run (Drive Run table)", lambda d, v, now: d.set_run_reverse(bool(v), now)),
-    # 5 Net Control: Access "N/A", "Configurable only with the drive parameter" (seed 000:642). N/A
+    # 5 Net Control: Access "N/A", "Configurable only with the drive parameter" (ACG-ET2 manual). N/A
     # is the access, not a value: the card serves it neither to Get nor to Set, so it is not
     # declared and both answer 0x14 (attribute not supported). 14/15 "Control From Net." report drv.
     DriveAttribute(AttributeSpec(6, "Drive State", USINT, Access.GET, default=DriveState.READY, minimum=0, maximum=6,
@@ -205,8 +205,8 @@ CONTROL_SUPERVISOR_ATTRIBUTES: tuple[DriveAttribute, ...] = (
           lambda d, v, now: d.set_fault_reset(bool(v), now)),
     DriveAttribute(AttributeSpec(13, "Drive Fault Codes", UINT, Access.GET, default=0, enum=FAULT_CODES),
                    lambda d: d.fault_code),
-    # Control From Net is attribute 14 in the Control Supervisor table (seed 000:661) and attribute
-    # 15 in the table of the input instances' bits (seed 000:458, "Ctrl From Net ... 0x29 15"); the
+    # Control From Net is attribute 14 in the Control Supervisor table (ACG-ET2 manual) and attribute
+    # 15 in the table of the input instances' bits (ACG-ET2 manual, "Ctrl From Net ... 0x29 15"); the
     # CIP Control Supervisor has CtrlFromNet at 15. A scanner may follow either table, so the card
     # serves the one value at both ids: 15 as CIP and the bit table say, 14 as the object table says.
     _flag(14, "Control From Net.", lambda d: d.control_from_net, "1: commands come from the ACG-ET2 (drv = 4)"),
@@ -227,7 +227,7 @@ DRIVE_MODES: Mapping[int, str] = {0: "Vendor Specific Mode", 1: "Open Loop Speed
 def drive_mode(drive: AcgDrive) -> int:
     """Attribute 6, note 1: "Process Control" when APP-01 App Mode selects a process mode (any
     value but 0 "None"); "Torque Control" would follow DRV-10, which has no communication address
-    on the ACG (seed 001 lists no dr.10), so the mode is otherwise Open Loop Speed."""
+    on the ACG (ACG RS-485 manual lists no dr.10), so the mode is otherwise Open Loop Speed."""
     return 4 if drive.read(reg.APP_MODE.address) else 1
 
 
@@ -238,7 +238,7 @@ OUTPUT_FREQUENCY = reg.ACG_REGISTERS[0x000A]
 
 AC_DC_DRIVE_ATTRIBUTES: tuple[DriveAttribute, ...] = (
     _flag(3, "At Reference", lambda d: d.at_reference, "1: the output frequency has reached the reference"),
-    # 4 Net Reference: Access "N/A" (seed 000:722), like 0x29 attribute 5: not served, 0x14 to Get
+    # 4 Net Reference: Access "N/A" (ACG-ET2 manual), like 0x29 attribute 5: not served, 0x14 to Get
     # and Set. The reference source is the drive parameter Frq, reported by 29 "Ref.From Network".
     DriveAttribute(AttributeSpec(6, "Drive Mode", USINT, Access.GET, default=1, minimum=0, maximum=4,
                                  enum=DRIVE_MODES), drive_mode),
@@ -346,7 +346,7 @@ class KeypadParameterObject(CipObject):
 # Identity (class 0x01, instance 1)
 # ---------------------------------------------------------------------------------------------
 
-#: Seed 000 Identity table: attributes 1-7; "Support for Class: No"; instance 0x0E, 0x05, 0x01.
+#: ACG-ET2 manual Identity table: attributes 1-7; "Support for Class: No"; instance 0x0E, 0x05, 0x01.
 IDENTITY_SPEC = replace(
     standard_identity_spec(
         instance_services=frozenset({Service.GET_ATTRIBUTE_SINGLE, Service.RESET, Service.GET_ATTRIBUTES_ALL}),
@@ -371,7 +371,7 @@ def identity_revision(drive: AcgDrive) -> tuple[int, int]:
 
 
 class AcgIdentityObject(IdentityObject):
-    """Identity with the status bits of the seed's "Definition of status bits" table:
+    """Identity with the status bits of the manual's "Definition of status bits" table:
 
     ====  ==============================================================================
     0     connected to the master (an exclusive owner I/O connection)
@@ -411,7 +411,7 @@ class AcgIdentityObject(IdentityObject):
         trip = drive.trip
         if trip is not None:
             extended = ExtendedDeviceStatus.MAJOR_FAULT
-            # The seed gives bit 10 to H/W trips and bit 11 (CIP's "major unrecoverable") to the others.
+            # The manual gives bit 10 to H/W trips and bit 11 (CIP's "major unrecoverable") to the others.
             status |= IdentityStatus.MAJOR_RECOVERABLE_FAULT if trip in HARDWARE_TRIPS else (
                 IdentityStatus.MAJOR_UNRECOVERABLE_FAULT)
         if drive.warning:

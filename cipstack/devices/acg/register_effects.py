@@ -1,5 +1,5 @@
 """Register side effects: run and frequency commands, parameter save and initialization, password,
-counters, CM.94 and the smart-scaling words (seed 001 control and memory control areas; seed 000)."""
+counters, CM.94 and the smart-scaling words (ACG RS-485 manual control and memory control areas; ACG-ET2 manual)."""
 
 from __future__ import annotations
 
@@ -37,7 +37,7 @@ class RegisterEffects:
         self._values[address] = value
 
     def _write_lost_preset(self, address: int, value: int, now: float) -> None:
-        # Pr.14: 0.05-60.00, or the table's default 0.00 (seed 000:214; registers.LOST_PRESET_FREQ).
+        # Pr.14: 0.05-60.00, or the table's default 0.00 (ACG-ET2 manual; registers.LOST_PRESET_FREQ).
         if 0 < value < reg.LOST_PRESET_MINIMUM:
             raise RegisterError(RegisterRefusal.OUT_OF_RANGE, address,
                                 f"{value / 100:.2f} Hz below the lowest Lost Preset F, 0.05 Hz (0.00: none)")
@@ -61,7 +61,7 @@ class RegisterEffects:
         self.write(SPEED_REFERENCE.address, centihertz, now)
 
     def _write_operation_command(self, address: int, value: int, now: float) -> None:
-        # Common area 0x0006 (seed 001): B0 stop, B1 forward, B2 reverse, B3 trip reset on 0 -> 1,
+        # Common area 0x0006 (ACG RS-485 manual): B0 stop, B1 forward, B2 reverse, B3 trip reset on 0 -> 1,
         # B4 emergency stop (the BX level trip while it is set).
         previous = OperationCommand(self._values[address] & 0x1F)
         bits = OperationCommand(value & 0x1F)
@@ -80,7 +80,7 @@ class RegisterEffects:
             self._run(Direction.REVERSE)
 
     def _write_control_command(self, address: int, value: int, now: float) -> None:
-        # Control area 0x0382 (seed 001): B0 run/stop, B1 forward/reverse, B2 trip reset on
+        # Control area 0x0382 (ACG RS-485 manual): B0 run/stop, B1 forward/reverse, B2 trip reset on
         # 0 -> 1, B3 free-run stop on 0 -> 1. Forward run is 0x0003, reverse run 0x0001.
         previous = ControlCommand(self._values[address] & 0x0F)
         bits = ControlCommand(value & 0x0F)
@@ -100,7 +100,7 @@ class RegisterEffects:
     def _write_save(self, address: int, value: int, now: float) -> None:
         # "Setting address 0h03E0 to 0 and then setting it again to 1 ... allows the existing
         # parameter settings to be saved. However, setting 0h03E0 to 1 and then setting it to 0
-        # does not carry out the same function." (seed 001)
+        # does not carry out the same function." (ACG RS-485 manual)
         # A refused save (the state file cannot be written) leaves 0x03E0 as it was.
         if self._values[address] == 0 and value == 1:
             self.save_parameters()
@@ -125,7 +125,7 @@ class RegisterEffects:
 
     def _write_password(self, address: int, value: int, now: float) -> None:
         # 0x03E7/0x03E8: entering the password toggles Lock/Unlock; the same value entered again
-        # in a row executes once only (seed 001).
+        # in a row executes once only (ACG RS-485 manual).
         previous = self._values[address]
         self._values[address] = value
         if value == previous or self._password is None or value != self._password:
@@ -144,7 +144,7 @@ class RegisterEffects:
         # 0x03EA: power consumption is not simulated and reads 0 anyway.
 
     def _write_comm_update(self, address: int, value: int, now: float) -> None:
-        # CM.94 = 1 applies CM.7 and CM.10-CM.24 and restarts the card's communication (seed 000);
+        # CM.94 = 1 applies CM.7 and CM.10-CM.24 and restarts the card's communication (ACG-ET2 manual);
         # it reads back 0 (NO), ready for the next update.
         if value == 1:
             self._comm_update()
@@ -152,7 +152,7 @@ class RegisterEffects:
 
     def _write_instance_setting(self, address: int, value: int, now: float) -> None:
         # CM.30/CM.50 are "automatically set according to the CIP Input/Output Instance": the
-        # Parameter Number column of the CM.23/CM.24 tables (seed 000).
+        # Parameter Number column of the CM.23/CM.24 tables (ACG-ET2 manual).
         self._values[address] = value
         if address == self.registers.by_code("CM.23").address:
             count, target = reg.input_instance(value).parameters, "CM.30"

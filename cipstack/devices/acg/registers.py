@@ -1,13 +1,13 @@
 """The ACG drive's register map, declared once.
 
-Sources (the two seeds in ``shared/seeds``):
+Sources (the two seeds in the ACG-ET2 manual and the ACG RS-485 manual):
 
-* seed 001, chapter 5 "Serial communications" of the ACG user manual: the Compatible Common
+* ACG RS-485 manual, chapter 5 "Serial communications" of the ACG user manual: the Compatible Common
   Area (0x0000-0x001B), the Monitoring Area (0x0300-0x034C, read only), the Control Area
   (0x0380-0x0395), the Drive Memory Control Area (0x03E0-0x03EC), the registered-parameter
   area (0x0100-0x0107, 0x0110-0x0117), the communication parameters CM.1-CM.5 and the
   "Drive Parameter Modbus Communication Addresses" tables of every keypad group.
-* seed 000, appendix B (ACG-ET2 card): the table "Keypad Parameters Related to ACG-ET2
+* ACG-ET2 manual, appendix B (ACG-ET2 card): the table "Keypad Parameters Related to ACG-ET2
   Communication Board" (drv, Frq, CM.6-CM.94, Pr.12-Pr.14), the CIP input/output instance
   tables of CM.23/CM.24, and the motor rating parameters behind the Motor Data object 0x28.
 
@@ -16,12 +16,12 @@ What is and is not covered:
 * The common, monitoring, control and memory-control areas are declared in full, reserved
   words included (they read as 0, as on the drive).
 * The keypad groups dr, bA, Ad, Cn, In, OU, CM, AP, Pr, M2 and the operation group: every code
-  that the address tables list is declared at its address. The seeds describe only some of
+  that the address tables list is declared at its address. The manuals describe only some of
   them (CM, Pr.12-Pr.14, drv, Frq, bA.13, bA.15, bA.70, bA.71, AP.1, Pr.30, In.65-In.69); the
   others are declared with their address and code only, the full 16-bit range and default 0,
-  and ``help`` says so. Their chapter-4 tables (name, default, range) are not in the seeds.
+  and ``help`` says so. Their chapter-4 tables (name, default, range) are not in the ACG manuals.
 * Three parameters the simulation cannot do without are described from the ACG keypad
-  parameter list, which is outside the seeds: dr.20 Max Freq, bA.11 Pole Number and the
+  parameter list, which is outside the ACG manuals: dr.20 Max Freq, bA.11 Pole Number and the
   factory acceleration/deceleration times of ACC/dEC. Their ``source`` says so.
 * The address tables are OCR text: several hex addresses lost a "B" to an "8" (dr.11 "1108",
   bA.11 "1208", bA.75 "1248", Cn.11 "1408", dr.91 "1158", CM.91 "1758"). Every address is
@@ -44,20 +44,20 @@ RW = RegisterAccess.READ_WRITE
 RW_STOPPED = RegisterAccess.WRITE_STOPPED
 
 # Where each declaration comes from; ``Register.source`` holds one of these.
-COMMON_TABLE = "seed 001, Compatible Common Area Parameter"
-MONITOR_TABLE = "seed 001, Monitoring Area Parameter (Read Only)"
-CONTROL_TABLE = "seed 001, Control Area Parameter (Read/Write)"
-MEMORY_TABLE = "seed 001, Drive Memory Control Area Parameter (Read and Write)"
-REGISTERED_TABLE = "seed 001, Currently Registered CM Group Parameter"
-ADDRESS_TABLE = "seed 001, Drive Parameter Modbus Communication Addresses"
-SERIAL_TABLE = "seed 001, Communication Parameters Setting Details"
-ET2_TABLE = "seed 000, Keypad Parameters Related to ACG-ET2 Communication Board"
-MOTOR_DATA_TABLE = "seed 000, Motor data object (Class 0x28, Instance 1)"
-OUTSIDE_SEEDS = "ACG keypad parameter list (not in the seeds)"
+COMMON_TABLE = "ACG RS-485 manual, Compatible Common Area Parameter"
+MONITOR_TABLE = "ACG RS-485 manual, Monitoring Area Parameter (Read Only)"
+CONTROL_TABLE = "ACG RS-485 manual, Control Area Parameter (Read/Write)"
+MEMORY_TABLE = "ACG RS-485 manual, Drive Memory Control Area Parameter (Read and Write)"
+REGISTERED_TABLE = "ACG RS-485 manual, Currently Registered CM Group Parameter"
+ADDRESS_TABLE = "ACG RS-485 manual, Drive Parameter Modbus Communication Addresses"
+SERIAL_TABLE = "ACG RS-485 manual, Communication Parameters Setting Details"
+ET2_TABLE = "ACG-ET2 manual, Keypad Parameters Related to ACG-ET2 Communication Board"
+MOTOR_DATA_TABLE = "ACG-ET2 manual, Motor data object (Class 0x28, Instance 1)"
+OUTSIDE_MANUALS = "ACG keypad parameter list (not in the ACG manuals)"
 
-LISTED_ONLY = "listed in the address tables of seed 001 without a description"
+LISTED_ONLY = "listed in the address tables of the ACG RS-485 manual without a description"
 
-# Group bases: seed 001, "Total Memory Map for Communication" (the operation group at 0x1F00
+# Group bases: ACG RS-485 manual, "Total Memory Map for Communication" (the operation group at 0x1F00
 # comes from the address table of that group).
 GROUP_BASES: Mapping[str, int] = {
     "dr": 0x1100, "bA": 0x1200, "Ad": 0x1300, "Cn": 0x1400, "In": 0x1500, "OU": 0x1600,
@@ -65,20 +65,20 @@ GROUP_BASES: Mapping[str, int] = {
 }
 KEYPAD_GROUPS = ("dr", "bA", "Ad", "Cn", "In", "OU", "CM", "AP", "Pr", "M2", "operation")
 
-# Class 0x64 instance of each keypad group; the attribute number is the code number (seed 000,
+# Class 0x64 instance of each keypad group; the attribute number is the code number (ACG-ET2 manual,
 # "Class 0x64 (Drive Object)").
 CLASS_64_INSTANCES: Mapping[str, int] = {
     "dr": 1, "bA": 2, "Ad": 3, "Cn": 4, "In": 5, "OU": 6, "CM": 7, "AP": 8, "Pr": 11, "M2": 12,
 }
-# The table lists "10 (AP Group)" as well as "8 (AP Group)" (seed 000:763). The register map has
-# no group at 0x1A00 (seed 001:395-405 lists 0x1100-0x1800, 0x1B00 and 0x1C00), so instance 10
+# The table lists "10 (AP Group)" as well as "8 (AP Group)" (ACG-ET2 manual). The register map has
+# no group at 0x1A00 (ACG RS-485 manual lists 0x1100-0x1800, 0x1B00 and 0x1C00), so instance 10
 # cannot be another group: it is served as the table names it, a second instance of the AP group
 # (instance 8 stays the one the EDS and the scanner name).
 CLASS_64_ALIASES: Mapping[int, str] = {10: "AP"}
 
-# Codes each group's address table lists (seed 001). Codes printed with "-" instead of an
+# Codes each group's address table lists (ACG RS-485 manual). Codes printed with "-" instead of an
 # address (bA.20-bA.24, Ad.83, M2.17-M2.20) have no communication address and are left out.
-# CM.94 is printed with "-" too (seed 001:1384, "CM.94 - - -"), but seed 000 describes it (the
+# CM.94 is printed with "-" too (ACG RS-485 manual, "CM.94 - - -"), but ACG-ET2 manual describes it (the
 # ACG-ET2 keypad table, 000:211) and reaches every keypad parameter by its code in class 0x64
 # (000:753-760: instance = group, attribute = code number): it is declared, under the key
 # 0x175E of the group rule, as not addressed: class 0x64 instance 7 attribute 94 serves it, and
@@ -100,11 +100,11 @@ LISTED_CODES: Mapping[str, tuple[int, ...]] = {
     "M2": (*range(4, 9), *range(10, 17), *range(25, 35), 40, 41, 42),
 }
 # Codes the address table prints away from base + number. M2.34 is printed at 1C12 with the
-# decimal numbers 47186/47187 (seed 001:1477): hex and decimal agree, so this is the table's
+# decimal numbers 47186/47187 (ACG RS-485 manual): hex and decimal agree, so this is the table's
 # address and no OCR slip; 0x1C12 is free, M2.18 having none ("-"). Served there, as printed.
 PRINTED_ADDRESSES: Mapping[str, int] = {"M2.34": 0x1C12}
 
-# Operation group, seed 001 address table: code -> address. "Fr9" in the OCR text is Frq.
+# Operation group, ACG RS-485 manual address table: code -> address. "Fr9" in the OCR text is Frq.
 OPERATION_CODES: Mapping[str, int] = {
     "0.00": 0x1F00, "ACC": 0x1F01, "dEC": 0x1F02, "drv": 0x1F03, "Frq": 0x1F04, "St1": 0x1F05,
     "St2": 0x1F06, "St3": 0x1F07, "Cur": 0x1F08, "RPM": 0x1F09, "dCL": 0x1F0A, "vOL": 0x1F0B,
@@ -119,7 +119,7 @@ NO_YES = {0: "No", 1: "Yes"}
 # ---------------------------------------------------------------------------------------------
 
 class OperationCommand(IntFlag):
-    """Common area 0x0006 "Operation command (option)", written bits B0-B4 (seed 001).
+    """Common area 0x0006 "Operation command (option)", written bits B0-B4 (ACG RS-485 manual).
 
     The OCR text reads B3 as "W: Trip (0->1)"; like B2 of the control word 0x0382 ("0 -> 1: Trip
     initialization") it is the trip reset, acting on a 0 -> 1 change.
@@ -132,13 +132,13 @@ class OperationCommand(IntFlag):
     EMERGENCY_STOP = 1 << 4
 
 
-#: 0x0006 read-back: B6-B8 hold the command source, B9-B14 the frequency source (seed 001).
+#: 0x0006 read-back: B6-B8 hold the command source, B9-B14 the frequency source (ACG RS-485 manual).
 OPERATION_COMMAND_SOURCE_SHIFT = 6
 OPERATION_COMMAND_SOURCE_MASK = 0x7
 OPERATION_FREQUENCY_SOURCE_SHIFT = 9
 OPERATION_FREQUENCY_SOURCE_MASK = 0x3F
 
-#: Frequency-source codes of 0x0006 B9-B14 (seed 001, Compatible Common Area, 0x0006).
+#: Frequency-source codes of 0x0006 B9-B14 (ACG RS-485 manual, Compatible Common Area, 0x0006).
 COMMON_FREQUENCY_SOURCES: Mapping[int, str] = {
     0: "Keypad Freq", 1: "Keypad Torq limit", **{n: f"Terminal block multi-step speed {n}" for n in range(2, 17)},
     17: "Up", 18: "Down", 19: "STEADY", 22: "V1", 24: "V0", 25: "I2", 26: "Reserved", 27: "Built-in 485",
@@ -147,7 +147,7 @@ COMMON_FREQUENCY_SOURCES: Mapping[int, str] = {
 
 
 class ControlCommand(IntFlag):
-    """Control area 0x0382 "Operation command" (seed 001): forward run is 0x0003, reverse 0x0001."""
+    """Control area 0x0382 "Operation command" (ACG RS-485 manual): forward run is 0x0003, reverse 0x0001."""
 
     RUN = 1 << 0            # 0: stop command, 1: run command
     FORWARD = 1 << 1        # 0: reverse command, 1: forward command
@@ -156,7 +156,7 @@ class ControlCommand(IntFlag):
 
 
 class OperationStatus(IntFlag):
-    """Common area 0x000E "Operation status" (seed 001)."""
+    """Common area 0x000E "Operation status" (ACG RS-485 manual)."""
 
     STOPPED = 1 << 0
     FORWARD = 1 << 1
@@ -176,7 +176,7 @@ class OperationStatus(IntFlag):
 
 
 class FaultTripInformation(IntFlag):
-    """Common area 0x000F "Fault trip information" (seed 001)."""
+    """Common area 0x000F "Fault trip information" (ACG RS-485 manual)."""
 
     LATCH_TYPE_TRIP = 1 << 0
     LEVEL_TYPE_TRIP = 1 << 3
@@ -184,7 +184,7 @@ class FaultTripInformation(IntFlag):
 
 
 class LatchTrip1(IntFlag):
-    """Monitoring 0x0330 "Latch type trip information - 1" (seed 001)."""
+    """Monitoring 0x0330 "Latch type trip information - 1" (ACG RS-485 manual)."""
 
     OVERLOAD = 1 << 0
     UNDERLOAD = 1 << 1
@@ -203,7 +203,7 @@ class LatchTrip1(IntFlag):
 
 
 class LatchTrip2(IntFlag):
-    """Monitoring 0x0331 "Latch type trip information - 2" (seed 001)."""
+    """Monitoring 0x0331 "Latch type trip information - 2" (ACG RS-485 manual)."""
 
     FAN_TRIP = 1 << 3
     PRE_PID_FAIL = 1 << 6
@@ -215,7 +215,7 @@ class LatchTrip2(IntFlag):
 
 
 class LevelTrip(IntFlag):
-    """Monitoring 0x0332 "Level type trip information" (seed 001)."""
+    """Monitoring 0x0332 "Level type trip information" (ACG RS-485 manual)."""
 
     BX = 1 << 0
     LOW_VOLTAGE = 1 << 1
@@ -224,7 +224,7 @@ class LevelTrip(IntFlag):
 
 
 class HardwareDiagnosis(IntFlag):
-    """Monitoring 0x0333 "H/W Diagnosis trip information" (seed 001)."""
+    """Monitoring 0x0333 "H/W Diagnosis trip information" (ACG RS-485 manual)."""
 
     ADC_ERROR = 1 << 0
     EEPROM_ERROR = 1 << 1
@@ -234,7 +234,7 @@ class HardwareDiagnosis(IntFlag):
 
 
 class WarningInformation(IntFlag):
-    """Monitoring 0x0334 "Warning information" (seed 001)."""
+    """Monitoring 0x0334 "Warning information" (ACG RS-485 manual)."""
 
     OVERLOAD = 1 << 0
     UNDERLOAD = 1 << 1
@@ -249,7 +249,7 @@ class WarningInformation(IntFlag):
 
 
 class LatchTrip3(IntFlag):
-    """Monitoring 0x0335 "Latch type trip information - 3" (seed 001; the OCR text prints
+    """Monitoring 0x0335 "Latch type trip information - 3" (ACG RS-485 manual; the OCR text prints
     B2 as "Over torque detection", the pattern of B0/B1/B3 makes it detection 2)."""
 
     OVER_TORQUE_1 = 1 << 0
@@ -259,7 +259,7 @@ class LatchTrip3(IntFlag):
 
 
 class OperationHealth(IntEnum):
-    """0x0305 B12-B15 (seed 001, "Drive operation state")."""
+    """0x0305 B12-B15 (ACG RS-485 manual, "Drive operation state")."""
 
     NORMAL = 0
     WARNING = 4
@@ -267,7 +267,7 @@ class OperationHealth(IntEnum):
 
 
 class OperationPhase(IntEnum):
-    """0x0305 B4-B7 (seed 001). The table is garbled: the eight states are listed in this order
+    """0x0305 B4-B7 (ACG RS-485 manual). The table is garbled: the eight states are listed in this order
     under the label B4-B7 and their numbers are lost; they are numbered 1-8 in that order,
     0 being "none of them" (stopped or running at 0 Hz without a ramp)."""
 
@@ -283,7 +283,7 @@ class OperationPhase(IntEnum):
 
 
 class OperationDirection(IntEnum):
-    """0x0305 B0-B3 (seed 001): listed in this order under the label B0-B3."""
+    """0x0305 B0-B3 (ACG RS-485 manual): listed in this order under the label B0-B3."""
 
     STOPPED = 0
     FORWARD = 1
@@ -294,10 +294,10 @@ class OperationDirection(IntEnum):
 OPERATION_HEALTH_SHIFT = 12
 OPERATION_PHASE_SHIFT = 4
 
-#: 0x0306 B8-B15 operation command source (seed 001).
+#: 0x0306 B8-B15 operation command source (ACG RS-485 manual).
 MONITOR_COMMAND_SOURCES: Mapping[int, str] = {0: "Keypad", 1: "Communication option", 3: "Built-in RS 485",
                                               4: "Terminal block"}
-#: 0x0306 B0-B7 frequency command source (seed 001).
+#: 0x0306 B0-B7 frequency command source (ACG RS-485 manual).
 MONITOR_FREQUENCY_SOURCES: Mapping[int, str] = {
     0: "Keypad speed", 1: "Keypad torque limit", 2: "Up/Down operation speed", 3: "Up/Down operation speed",
     4: "Up/Down operation speed", 5: "V1", 7: "V0", 8: "I2", 10: "Built-in RS 485", 11: "Communication option",
@@ -307,7 +307,7 @@ MONITOR_COMMAND_SOURCE_SHIFT = 8
 
 
 # ---------------------------------------------------------------------------------------------
-# CM.23 / CM.24: the assemblies the card serves (seed 000, "CIP Input Instance (CM.23)" and
+# CM.23 / CM.24: the assemblies the card serves (ACG-ET2 manual, "CIP Input Instance (CM.23)" and
 # "CIP Output Instance (CM.24)")
 # ---------------------------------------------------------------------------------------------
 
@@ -378,31 +378,31 @@ def _alias(target: Register, address: int, name: str, group: str, source: str) -
 TARGET_FREQUENCY = Register(
     0x1F00, "0.00", "Target frequency", default=0, minimum=0, maximum=40000, scale=0.01, unit="Hz",
     group="operation", source=ADDRESS_TABLE,
-    help="keypad frequency; upper limit is dr.20 Max Freq (400.00 Hz at most, seed 000 class 0x2A attribute 101)")
-# ACC/dEC: the range 0-6000.0 s is class 0x2A attributes 102/103 of seed 000 ("Value at DRV-03/04");
+    help="keypad frequency; upper limit is dr.20 Max Freq (400.00 Hz at most, ACG-ET2 manual class 0x2A attribute 101)")
+# ACC/dEC: the range 0-6000.0 s is class 0x2A attributes 102/103 of the ACG-ET2 manual ("Value at DRV-03/04");
 # the factory values 5.0 s and 10.0 s come from the ACG keypad parameter list.
 ACCEL_TIME = Register(
     0x1F01, "ACC", "Acc Time", default=50, minimum=0, maximum=60000, scale=0.1, unit="s", group="operation",
-    source=f"seed 000, class 0x2A attribute 102; default from {OUTSIDE_SEEDS}")
+    source=f"ACG-ET2 manual, class 0x2A attribute 102; default from {OUTSIDE_MANUALS}")
 DECEL_TIME = Register(
     0x1F02, "dEC", "Dec Time", default=100, minimum=0, maximum=60000, scale=0.1, unit="s", group="operation",
-    source=f"seed 000, class 0x2A attribute 103; default from {OUTSIDE_SEEDS}")
-# drv values: seed 000 "4: Field Bus", seed 001 "3 Int485", and the command-source list of the
+    source=f"ACG-ET2 manual, class 0x2A attribute 103; default from {OUTSIDE_MANUALS}")
+# drv values: ACG-ET2 manual "4: Field Bus", ACG RS-485 manual "3 Int485", and the command-source list of the
 # common area word 0x0006 B6-B8 (0 Keypad, 1 FX/RX-1, 2 FX/RX-2, 3 built-in 485, 4 option).
 CMD_SOURCE = Register(
     0x1F03, "drv", "Cmd Source", default=1, minimum=0, maximum=4,
     enum={0: "Keypad", 1: "Fx/Rx-1", 2: "Fx/Rx-2", 3: "Int485", 4: "Field Bus"}, group="operation",
     source=ET2_TABLE)
-# Frq values named in the seeds: 0 Keypad-1 (seed 001, frequency save note), 6 Int485 (seed 001,
-# Setting Operation Command and Frequency), 8 Field Bus (seed 000). The others of 0-8 are valid
-# settings whose names the seeds do not give.
+# Frq values named in the ACG manuals: 0 Keypad-1 (ACG RS-485 manual, frequency save note), 6 Int485 (ACG RS-485 manual,
+# Setting Operation Command and Frequency), 8 Field Bus (ACG-ET2 manual). The others of 0-8 are valid
+# settings whose names the ACG manuals do not give.
 FREQ_REF_SOURCE = Register(
     0x1F04, "Frq", "Freq Ref Src", default=0, minimum=0, maximum=8,
     enum={0: "Keypad-1", 6: "Int485", 8: "Field Bus"}, group="operation", source=ET2_TABLE)
 
 CMD_SOURCE_FIELDBUS = 4
 FREQ_REF_SOURCE_FIELDBUS = 8
-#: drv 3 / Frq 6 "Int485": the built-in RS-485 port (seed 001, Setting Operation Command and Frequency).
+#: drv 3 / Frq 6 "Int485": the built-in RS-485 port (ACG RS-485 manual, Setting Operation Command and Frequency).
 CMD_SOURCE_INT485 = 3
 FREQ_REF_SOURCE_INT485 = 6
 #: drv 1 / 2 "Fx/Rx-1", "Fx/Rx-2": the terminals' FX and RX functions (0x0006 B6-B8 command sources).
@@ -428,23 +428,23 @@ _OPERATION: list[Register] = [
 ]
 
 MAX_FREQUENCY = _parameter("dr", 20, "Max Freq", default=6000, minimum=4000, maximum=40000, scale=0.01, unit="Hz",
-                           source=OUTSIDE_SEEDS)
-POLE_NUMBER = _parameter("bA", 11, "Pole Number", default=4, minimum=2, maximum=48, source=OUTSIDE_SEEDS)
-# bA.13 / bA.15 stand behind class 0x28 attributes 6 and 7 (seed 000: "BAS-13 Rated Curr",
-# "BAS-15 Rated Voltage"). Their factory values depend on the drive's rating; the seeds give none.
+                           source=OUTSIDE_MANUALS)
+POLE_NUMBER = _parameter("bA", 11, "Pole Number", default=4, minimum=2, maximum=48, source=OUTSIDE_MANUALS)
+# bA.13 / bA.15 stand behind class 0x28 attributes 6 and 7 (ACG-ET2 manual: "BAS-13 Rated Curr",
+# "BAS-15 Rated Voltage"). Their factory values depend on the drive's rating; the ACG manuals give none.
 RATED_CURRENT = _parameter("bA", 13, "Rated Curr", minimum=0, maximum=10000, scale=0.1, unit="A",
                            source=MOTOR_DATA_TABLE)
 RATED_VOLTAGE = _parameter("bA", 15, "Rated Volt", minimum=0, maximum=690, unit="V", source=MOTOR_DATA_TABLE)
-# bA.70/bA.71: the multi-step acceleration/deceleration time 1 of the Modbus-RTU example in seed 001
+# bA.70/bA.71: the multi-step acceleration/deceleration time 1 of the Modbus-RTU example in the ACG RS-485 manual
 # (0x1246 = 5.0 s is written as 50, 0x1247 = 10.0 s as 100).
 MULTI_STEP_ACCEL_TIME_1 = _parameter("bA", 70, "Multi-step acceleration time 1", scale=0.1, unit="s",
-                                     source="seed 001, Example of Modbus-RTU Communication in Use")
+                                     source="ACG RS-485 manual, Example of Modbus-RTU Communication in Use")
 MULTI_STEP_DECEL_TIME_1 = _parameter("bA", 71, "Multi-step deceleration time 1", scale=0.1, unit="s",
-                                     source="seed 001, Example of Modbus-RTU Communication in Use")
-APP_MODE = _parameter("AP", 1, "App Mode", source="seed 000, class 0x2A attribute 6 note 1")
-TRIP_OUT_MODE = _parameter("Pr", 30, "Trip Out Mode", source="seed 001, Monitoring Area 0x0305")
+                                     source="ACG RS-485 manual, Example of Modbus-RTU Communication in Use")
+APP_MODE = _parameter("AP", 1, "App Mode", source="ACG-ET2 manual, class 0x2A attribute 6 note 1")
+TRIP_OUT_MODE = _parameter("Pr", 30, "Trip Out Mode", source="ACG RS-485 manual, Monitoring Area 0x0305")
 
-# Pr.12-Pr.14: seed 000, ET2 table and "PR Group (Lost Command)"; seed 001, "Command Loss
+# Pr.12-Pr.14: ACG-ET2 manual, ET2 table and "PR Group (Lost Command)"; ACG RS-485 manual, "Command Loss
 # Protective Operation".
 LOST_CMD_MODE = _parameter(
     "Pr", 12, "Lost Cmd Mode", default=0, minimum=0, maximum=5,
@@ -452,24 +452,25 @@ LOST_CMD_MODE = _parameter(
     source=ET2_TABLE)
 LOST_CMD_TIME = _parameter("Pr", 13, "Lost Cmd Time", default=10, minimum=1, maximum=1200, scale=0.1, unit="s",
                            source=ET2_TABLE)
-# Seed 000:214 prints range 0.05-60.00 and default 0.00, which the range excludes; 000:257 says
+# ACG-ET2 manual prints range 0.05-60.00 and default 0.00, which the range excludes; 000:257 says
 # "from the start frequency to the max frequency". The range is the table's: at most 60.00, and
 # 0.05 at least, with the table's own default 0.00 (no preset) accepted too, so a tool can write
 # the default back; 0.01-0.04 are refused (``drive.py``), and so is a value above the present
 # dr.20 Max Freq.
 LOST_PRESET_FREQ = _parameter("Pr", 14, "Lost Preset F", default=0, minimum=0, maximum=6000, scale=0.01,
                               unit="Hz", source=ET2_TABLE)
-#: Pr.14's lowest setting but the default 0.00 (seed 000:214): 0.05 Hz.
+#: Pr.14's lowest setting but the default 0.00 (ACG-ET2 manual): 0.05 Hz.
 LOST_PRESET_MINIMUM = 5
 
-# The functions a multi-function input (In.65-In.69, CM.70-CM.77) is set to. Seed 001 gives the
+# The functions a multi-function input (In.65-In.69, CM.70-CM.77) is set to. ACG RS-485 manual gives the
 # range 0-49 and "0: None" only; the numbers of the functions the simulation models are those of
-# the ACG keypad parameter list (In.65-In.69), which is outside the seeds. Settings 6-49 (jog,
+# the ACG keypad parameter list (In.65-In.69), which is outside the ACG manuals. Settings 6-49 (jog,
 # multi-step speeds, ...) are accepted and do nothing here.
 MULTI_FUNCTIONS: Mapping[int, str] = {0: "None", 1: "FX", 2: "RX", 3: "RST", 4: "External Trip", 5: "BX"}
 
 _MULTI_FUNCTION_INPUTS = [
-    _parameter("In", 65 + i, f"Multi-function input P{i + 1}", source="seed 001, Setting Virtual Multi-Function Input",
+    _parameter("In", 65 + i, f"Multi-function input P{i + 1}",
+               source="ACG RS-485 manual, Setting Virtual Multi-Function Input",
                help="a function of MULTI_FUNCTIONS (0-5 modelled); no setting may be that of a CM.70-CM.77")
     for i in range(5)
 ]
@@ -487,14 +488,14 @@ def _cm(number: int, name: str, **fields: object) -> Register:
 _OCTET = {"minimum": 0, "maximum": 255}
 _HEX_ADDRESS = {"minimum": 0x0000, "maximum": 0xFFFF}
 
-#: CM.94 Comm Update. Seed 001's address table prints no Modbus RTU or TCP address for it
-#: (001:1384, "CM.94 - - -"), as for bA.20-bA.24; seed 000 lists it among the card's keypad
+#: CM.94 Comm Update. The ACG RS-485 manual's address table prints no Modbus RTU or TCP address for it
+#: (001:1384, "CM.94 - - -"), as for bA.20-bA.24; ACG-ET2 manual lists it among the card's keypad
 #: parameters (000:211, Protocol "E/M": it applies the settings of both protocols, which says
 #: what it concerns, not where it is addressed) and serves keypad parameters by code in class
 #: 0x64 (000:753). So: over CIP at class 0x64/7/94, never over Modbus (exception 02, as bA.20).
 COMM_UPDATE = Register(
     0x175E, "CM.94", "Comm Update", default=0, enum={0: "NO", 1: "YES"}, group="CM", saved=False,
-    addressed=False, source=f"{ET2_TABLE}; no communication address (seed 001 prints '-'): class 0x64 only")
+    addressed=False, source=f"{ET2_TABLE}; no communication address (ACG RS-485 manual prints '-'): class 0x64 only")
 
 _CM: list[Register] = [
     _cm(1, "Int485 St ID", default=1, minimum=1, maximum=250, source=SERIAL_TABLE),
@@ -507,7 +508,7 @@ _CM: list[Register] = [
     _cm(4, "Int485 Mode", default=0, enum={0: "D8/PN/S1", 1: "D8/PN/S2", 2: "D8/PE/S1", 3: "D8/PO/S1"},
         source=SERIAL_TABLE),
     _cm(5, "Resp Delay", default=5, minimum=0, maximum=1000, unit="ms", source=SERIAL_TABLE),
-    # CM.6 shows the card version, which Identity attribute 4 reports as 0x0101 (seed 000).
+    # CM.6 shows the card version, which Identity attribute 4 reports as 0x0101 (ACG-ET2 manual).
     _cm(6, "FBus S/W Ver", access=R, default=0x0101, saved=False),
     # The table gives 0-220; the CM group text says 64 IDs 0-63. The table's range is kept.
     _cm(7, "FBus ID", default=10, minimum=0, maximum=220),
@@ -540,16 +541,16 @@ _CM: list[Register] = [
       for n in range(1, 9)),
     *(_listed("CM", n) for n in (*range(59, 67), 68)),
     *(_cm(69 + n, f"Virtual DI {n}", default=0, minimum=0, maximum=49, enum=dict(MULTI_FUNCTIONS),
-          source=f"seed 001, Setting Virtual Multi-Function Input; names from {OUTSIDE_SEEDS}",
+          source=f"ACG RS-485 manual, Setting Virtual Multi-Function Input; names from {OUTSIDE_MANUALS}",
           help=f"communication multi-function input: the function bit {n - 1} of 0x0385 operates")
       for n in range(1, 9)),
-    _cm(86, "Virt DI Status", access=R, saved=False, source="seed 001, Setting Virtual Multi-Function Input"),
+    _cm(86, "Virt DI Status", access=R, saved=False, source="ACG RS-485 manual, Setting Virtual Multi-Function Input"),
     *(_listed("CM", n) for n in range(90, 94)),
     COMM_UPDATE,
 ]
 
 #: CM parameters that take effect only after CM.94 (Comm Update): "CM.7 and CM.10-CM.25"
-#: (seed 000, Comm Update (CM.94)); CM.25 is not a listed code.
+#: (ACG-ET2 manual, Comm Update (CM.94)); CM.25 is not a listed code.
 COMM_UPDATE_CODES: tuple[str, ...] = ("CM.7", *(f"CM.{n}" for n in range(10, 25)))
 
 
@@ -567,7 +568,7 @@ def _groups() -> list[Register]:
 
 
 # ---------------------------------------------------------------------------------------------
-# Common area 0x0000-0x001B (seed 001, "Compatible Common Area Parameter")
+# Common area 0x0000-0x001B (ACG RS-485 manual, "Compatible Common Area Parameter")
 # ---------------------------------------------------------------------------------------------
 
 # 0x0001: capacity code 3 is lost in the OCR text; the others are as printed.
@@ -628,7 +629,7 @@ _COMMON: list[Register] = [
 
 
 # ---------------------------------------------------------------------------------------------
-# Monitoring area 0x0300-0x034C (seed 001, "Monitoring Area Parameter (Read Only)")
+# Monitoring area 0x0300-0x034C (ACG RS-485 manual, "Monitoring Area Parameter (Read Only)")
 # ---------------------------------------------------------------------------------------------
 
 def _monitor(address: int, name: str, **fields: object) -> Register:
@@ -715,7 +716,7 @@ _MONITOR: list[Register] = [
 
 
 # ---------------------------------------------------------------------------------------------
-# Control area 0x0380-0x0395 (seed 001, "Control Area Parameter (Read/Write)")
+# Control area 0x0380-0x0395 (ACG RS-485 manual, "Control Area Parameter (Read/Write)")
 # ---------------------------------------------------------------------------------------------
 
 def _control(address: int, name: str, **fields: object) -> Register:
@@ -748,7 +749,7 @@ _CONTROL: list[Register] = [
 
 
 # ---------------------------------------------------------------------------------------------
-# Memory control area 0x03E0-0x03EC (seed 001, "Drive Memory Control Area Parameter")
+# Memory control area 0x03E0-0x03EC (ACG RS-485 manual, "Drive Memory Control Area Parameter")
 # The table marks each word "(run mark) R/W" (writable in run), "R/W" (writable when stopped)
 # or read only. 0x03E1's mark is garbled ("LW"); like the other one-shot commands beside it
 # it is taken as writable in run.
@@ -791,7 +792,7 @@ _MEMORY: list[Register] = [
 
 
 # ---------------------------------------------------------------------------------------------
-# Registered parameters 0x0100-0x0107 / 0x0110-0x0117 (seed 001, "Currently Registered CM Group
+# Registered parameters 0x0100-0x0107 / 0x0110-0x0117 (ACG RS-485 manual, "Currently Registered CM Group
 # Parameter"): the words at the addresses set in CM.31-CM.38 (read only) and CM.51-CM.58 (R/W).
 # ---------------------------------------------------------------------------------------------
 
@@ -857,7 +858,7 @@ def register_for_code(text: str) -> Register:
 
 
 def class64_register(instance: int, attribute: int) -> Register | None:
-    """The keypad parameter behind class 0x64 ``instance``/``attribute`` (seed 000)."""
+    """The keypad parameter behind class 0x64 ``instance``/``attribute`` (ACG-ET2 manual)."""
     group = CLASS_64_ALIASES.get(instance)
     if group is None:
         group = next((g for g, number in CLASS_64_INSTANCES.items() if number == instance), None)
@@ -876,12 +877,12 @@ def class64_path(register: Register) -> tuple[int, int] | None:
 
 
 def modbus_rtu_number(address: int) -> int:
-    """The decimal register number of the seed's "Modbus RTU" column (0x0300 -> 40768)."""
+    """The decimal register number of the manual's "Modbus RTU" column (0x0300 -> 40768)."""
     return 40000 + address
 
 
 def modbus_tcp_number(address: int) -> int:
-    """The decimal register number of the seed's "Modbus TCP" column (0x0300 -> 40769)."""
+    """The decimal register number of the manual's "Modbus TCP" column (0x0300 -> 40769)."""
     return 40001 + address
 
 

@@ -1,5 +1,5 @@
-"""The Control Supervisor's run commands: the "Drive Run" edge table (seed 000, class 0x29),
-Drive State, and the commands of the common and control areas (seed 001)."""
+"""The Control Supervisor's run commands: the "Drive Run" edge table (ACG-ET2 manual, class 0x29),
+Drive State, and the commands of the common and control areas (ACG RS-485 manual)."""
 
 from __future__ import annotations
 
@@ -20,7 +20,7 @@ from .registers import (
 class CommandPort(Enum):
     """Where a command written to the drive came in, and the drv / Frq settings that make the drive
     obey it: the communication option (the ACG-ET2 card: EtherNet/IP, Modbus TCP) at drv 4 / Frq 8
-    "Field Bus" (seed 000), the built-in RS-485 at drv 3 / Frq 6 "Int485" (seed 001, Setting
+    "Field Bus" (ACG-ET2 manual), the built-in RS-485 at drv 3 / Frq 6 "Int485" (ACG RS-485 manual, Setting
     Operation Command and Frequency)."""
 
     FIELDBUS = (CMD_SOURCE_FIELDBUS, FREQ_REF_SOURCE_FIELDBUS)
@@ -37,7 +37,7 @@ class Direction(IntEnum):
 
 
 class DriveState(IntEnum):
-    """Class 0x29 attribute 6 "Drive State" (seed 000)."""
+    """Class 0x29 attribute 6 "Drive State" (ACG-ET2 manual)."""
 
     VENDOR_SPECIFIC = 0
     STARTUP = 1
@@ -56,7 +56,7 @@ class RunAction(Enum):
 
 
 def drive_run_action(previous: tuple[bool, bool], present: tuple[bool, bool]) -> RunAction:
-    """The Control Supervisor "Drive Run" table (seed 000, class 0x29): what a change of the
+    """The Control Supervisor "Drive Run" table (ACG-ET2 manual, class 0x29): what a change of the
     Forward Run Cmd (Run1, attribute 3) and Reverse Run Cmd (Run2, attribute 4) commands.
 
     ==========  ==========  ===========  ========
@@ -96,7 +96,7 @@ def drive_run_action(previous: tuple[bool, bool], present: tuple[bool, bool]) ->
 
 class ControlSupervisor:
     """The command attributes of class 0x29 instance 1: Forward Run Cmd (3), Reverse Run Cmd (4)
-    and Drive Fault Reset (12), as the card holds them (seed 000). "The Forward Run Cmd. value
+    and Drive Fault Reset (12), as the card holds them (ACG-ET2 manual). "The Forward Run Cmd. value
     does not indicate the present operation status of the drive; it indicates the operation
     command value on the Ethernet communication board."
     """
@@ -197,7 +197,7 @@ class RunCommands:
 
     def set_fault_reset(self, value: bool, now: float) -> bool:
         """Class 0x29 attribute 12 Drive Fault Reset: resets on FALSE -> TRUE only; writing TRUE
-        over TRUE does nothing (seed 000, "Drive Fault Reset"). Returns whether a reset was made."""
+        over TRUE does nothing (ACG-ET2 manual, "Drive Fault Reset"). Returns whether a reset was made."""
         self.advance(now)
         if self.control_supervisor.update_fault_reset(bool(value)):
             return self._fault_reset()

@@ -1,5 +1,5 @@
-"""Trips: the "Drive Fault Codes" table (seed 000, class 0x29 attribute 13) with the trip bits of
-the monitoring words 0x0330-0x0335 (seed 001)."""
+"""Trips: the "Drive Fault Codes" table (ACG-ET2 manual, class 0x29 attribute 13) with the trip bits of
+the monitoring words 0x0330-0x0335 (ACG RS-485 manual)."""
 
 from __future__ import annotations
 
@@ -14,10 +14,10 @@ from .registers import (
 
 
 class Trip(Enum):
-    """The trips of the "Drive Fault Codes" table (seed 000, class 0x29 attribute 13).
+    """The trips of the "Drive Fault Codes" table (ACG-ET2 manual, class 0x29 attribute 13).
 
     Each value: display name, fault code, the monitoring word that shows it and its bit there
-    (seed 001, 0x0330-0x0335; None where that table has no bit for it), and whether it is a
+    (ACG RS-485 manual, 0x0330-0x0335; None where that table has no bit for it), and whether it is a
     level-type trip (0x0332), which clears by itself once its cause is gone.
     The table lists 0x2330 twice (GFT and GroundTrip, both the ground fault of 0x0330 B4) and an
     "UNDEFINED" entry under 0x1000, which is no trip and is left out.

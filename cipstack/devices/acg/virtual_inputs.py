@@ -1,4 +1,4 @@
-"""Virtual multi-function inputs (seed 001, "Setting Virtual Multi-Function Input").
+"""Virtual multi-function inputs (ACG RS-485 manual, "Setting Virtual Multi-Function Input").
 
 "Set codes CM.70-CM.77 to the functions to operate, and then set the BIT relevant to the function
 to 1 at 0h0322 [0h0385] to operate it": bit n of 0x0385 (also written at 0x0322, ``registers``)

@@ -77,7 +77,7 @@ def inverter_access(board: OptionBoard) -> Iterator[None]:
         raise CipError(refusal_status(exc), message=str(exc)) from None
 
 
-#: Table E-5 (seed 004:3058): "16 Object does not exist: The specified Instance ID is not supported",
+#: Table E-5 (CompoNet manual): "16 Object does not exist: The specified Instance ID is not supported",
 #: the board's answer to an instance it does not have, in every object (CIP's own is 0x05).
 MISSING_INSTANCE = GeneralStatus.OBJECT_DOES_NOT_EXIST
 

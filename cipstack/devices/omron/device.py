@@ -403,7 +403,7 @@ class OmronDevice(Device):
             self.inverter.on_idle(self.now)   # Table 12: the P048 action
 
     def update_io_status(self) -> None:
-        # Table C-2 (seed 004:2416): the status is "communications status for CompoNet Option Board"
+        # Table C-2 (CompoNet manual): the status is "communications status for CompoNet Option Board"
         # with bits 0 (always ON) and 8-11 (the four fault bits) only; the extended device status
         # of bits 4-7 is not the board's, so it stays 0. The fault bits follow the board's faults
         # (the MS indicator, Table 4: a flexible configuration rejected, the node address changed),

@@ -240,7 +240,7 @@ class Inverter(NetworkEvents, Ramps, Monitors, FlexibleFormat, TimedSimulation):
 
     def write_fault_reset(self, now: float, value: bool) -> None:
         """Control Supervisor attribute 0Ch Fault Rst written: "Reset fault / trip state of inverter
-        when written to 1" (Table D-4, seed 004:2708). Each write of 1 resets: the same table says
+        when written to 1" (Table D-4, CompoNet manual). Each write of 1 resets: the same table says
         "on rising edge" for Force Fault (11h) and not here, and the rising-edge rule of the notes
         under Tables B-2 and after (004:1992) is for the RST bit of the I/O data, repeated each cycle."""
         self.command(now, fault_reset=value)

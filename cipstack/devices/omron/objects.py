@@ -71,7 +71,7 @@ _IDENTITY_SPEC = identity_spec(
     instance_services=frozenset({Service.GET_ATTRIBUTE_SINGLE, Service.RESET}),   # Table C-1
     class_services=_GET,
 )
-#: Table C-2 (seed 004:2409-2420) lists attributes 1-7, 9 and 65h: 8 (State) is not served (0x14).
+#: Table C-2 (CompoNet manual) lists attributes 1-7, 9 and 65h: 8 (State) is not served (0x14).
 IDENTITY_SPEC = replace(_IDENTITY_SPEC, instance_attributes=tuple(
     a for a in _IDENTITY_SPEC.instance_attributes if a.id != 8))
 
@@ -141,7 +141,7 @@ def path_instance(path: bytes) -> int:
 
 def path_length(path: bytes) -> int:
     """Attributes 0Dh and 0Fh, in bytes. Table C-8 defines each as the "Number of bytes for produced
-    [consumed] connection path" (seed 004:2553, 2555), as CIP's Connection object defines its
+    [consumed] connection path" (CompoNet manual), as CIP's Connection object defines its
     produced/consumed connection path lengths, and the path it counts is an array of bytes (0Eh, 10h:
     ARRAY). Its default column's "3" fits no path to an assembly's data the board accepts (class 4,
     the instance and attribute 3 are six bytes, 20 04 24 nn 30 03; without the attribute four): it

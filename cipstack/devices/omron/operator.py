@@ -1,7 +1,7 @@
 """The MX2/RX Digital Operator (``cipstack.devices.keypad``): function codes in the operator's unit.
 
 The inverter's parameters are set on its Digital Operator by function code (F001, A001, A004, b049,
-P044, P046...: seed 004 sections 3-2 and 4-1 set them there, "Set the desired parameters of the RX
+P044, P046...: CompoNet manual sections 3-2 and 4-1 set them there, "Set the desired parameters of the RX
 Inverter with the Digital Operator Display", section 2-3-2-1). A value is entered in the unit of the
 parameter's table (A004 in 0.1 Hz steps, F001 in 0.01 Hz, P044 in 0.1 s) and written with the
 inverter's own rules (``Inverter.write_from_operator``): read-only monitors, the range, parameters

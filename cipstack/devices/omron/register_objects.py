@@ -116,10 +116,10 @@ class FunctionCodeObject(RegisterObject):
 
     def __init__(self, board: OptionBoard, registers: RegisterSet) -> None:
         super().__init__(FUNCTION_CODE_SPEC, board, registers)
-        # Table E-3 (seed 004:2931) gives each group's number range, e.g. A001-A999 = 0001-03E7h: an
+        # Table E-3 (CompoNet manual) gives each group's number range, e.g. A001-A999 = 0001-03E7h: an
         # instance inside one is supported, and a number in it that names no parameter of this
         # inverter is Table E-5's 14h "the attribute or inverter parameter does not exist"
-        # (seed 004:3055); 16h is for an instance outside every range.
+        # (CompoNet manual); 16h is for an instance outside every range.
         self.instance_ids = frozenset(instance for base in FUNCTION_CODE_GROUP_BASES
                                       for instance in range((base + 1) >> 8, ((base + 999) >> 8) + 1))
 
@@ -172,6 +172,6 @@ def register_attribute(registers: RegisterSet, class_id: int, instance: int, att
         return None
     if index:
         return AttributeSpec(attribute, name, cip_type, Access.GET_SET)
-    # The register's unit, scale and meanings (the tables of seed 004 and the inverter manuals).
+    # The register's unit, scale and meanings (the tables of the CompoNet manual and the inverter manuals).
     return AttributeSpec(attribute, name, cip_type, Access.GET_SET, unit=parameter.unit, scale=parameter.scale,
                          enum=parameter.enum)
