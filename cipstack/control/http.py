@@ -254,7 +254,7 @@ class HttpConnections:
         loop.call_soon(loop.call_soon, self._made)   # after asyncio's own call of connection_made
         self.pending[id(handler)] = handler
         loop.call_later(self.header_timeout, self._check, id(handler))
-        return handler  # type: ignore[no-any-return]
+        return handler  # type: ignore[no-any-return]  # aiohttp types its Server as returning Any
 
     def _made(self) -> None:
         self.unmade -= 1

@@ -75,7 +75,7 @@ def error_of(name: str, message: str) -> CipstackError:
     """The error an outcome's name stands for, rebuilt on the client's side of a socket or an HTTP call."""
     kinds = {result.name: kind for kind, result in OUTCOMES}
     kind = kinds.get(name, CipstackError)
-    return kind(message)  # type: ignore[no-any-return]
+    return kind(message)  # type: ignore[no-any-return]  # every kind of OUTCOMES is a CipstackError
 
 
 def check_arguments(operation: Operation, arguments: dict[str, Any]) -> dict[str, Any]:

@@ -63,9 +63,9 @@ class IoSeam:
 
     def add(self, item: IoInFilter | IoOutFilter) -> None:
         if hasattr(item, "inbound"):
-            self.inbound.append(item)  # type: ignore[arg-type]
+            self.inbound.append(item)  # type: ignore[arg-type]  # has inbound: an IoInFilter
         if hasattr(item, "outbound"):
-            self.outbound.append(item)  # type: ignore[arg-type]
+            self.outbound.append(item)  # type: ignore[arg-type]  # has outbound: an IoOutFilter
         self._bind()
 
     def remove(self, item: object) -> None:
@@ -141,7 +141,7 @@ class RequestSeam:
     @property
     def handle(self) -> Handle:
         """What a request reaches: the first filter, or the router."""
-        return self.entry.handle  # type: ignore[no-any-return]
+        return self.entry.handle  # type: ignore[no-any-return]  # the router or a _Link, both Handle
 
     def _bind(self) -> None:
         entry: Any = self.router
