@@ -231,9 +231,19 @@ class DeviceService:
         return [f.as_json() for f in cleared]
 
     async def _settled(self) -> None:
-        """Wait for the ports a fault closes or opens, but not for a long ``off``."""
+        """Wait for the ports a fault closes or opens, at most ``SETTLE_S``. A power-cycle whose power
+        comes back within that time is waited for whole; a longer one answers as soon as its ports are
+        closed, while the power is off (not when the wait runs out)."""
+        loop = asyncio.get_running_loop()
+        until = loop.time() + SETTLE_S
         with contextlib.suppress(asyncio.TimeoutError):
-            await asyncio.wait_for(asyncio.shield(self.faults.settle()), SETTLE_S)
+            await asyncio.wait_for(asyncio.shield(self.runtime.power.settled()), SETTLE_S)
+            if not self.runtime.power.powered:
+                back = max((f.until for f in self.faults.faults() if f.request.kind.lasts and f.until is not None),
+                           default=None)
+                if back is None or back > until:
+                    return
+            await asyncio.wait_for(asyncio.shield(self.faults.settle()), max(0.0, until - loop.time()))
 
     # -- power and link ---------------------------------------------------------------------------------
     async def power(self, action: str, off: str | float | None = None) -> Any:
