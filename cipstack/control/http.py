@@ -155,27 +155,27 @@ class Guard:
         self.hosts = frozenset(h.lower() for h in hosts)
         self.in_flight = 0
 
-    def refusal(self, request: web.Request) -> web.Response | None:
-        """Why ``request`` is refused before its handler, or None."""
+    def refusal(self, request: web.Request) -> tuple[int, str] | None:
+        """The status and the reason ``request`` is refused for before its handler, or None."""
         peer = request.remote or ""
         if not self.allow_remote and not _is_loopback(peer):
-            return json_error(403, f"{peer} is not loopback: this API serves loopback only (--http-allow-remote)")
+            return 403, f"{peer} is not loopback: this API serves loopback only (--http-allow-remote)"
         name = _host_name(request.headers.get("Host", "")).lower()
         if not (_is_address(name) or name == "localhost" or name.endswith(".localhost") or name in self.hosts):
-            return json_error(403, f"Host {name!r} is not this API's: use its address, localhost, or name it with "
-                                   "--http-allow-host")
+            return 403, (f"Host {name!r} is not this API's: use its address, localhost, or name it with "
+                         "--http-allow-host")
         if request.method in _CHANGING:
             origin = request.headers.get("Origin")
             if origin is not None:
                 own = f"{request.scheme}://{request.headers.get('Host', '')}".lower()
                 if origin.strip().lower() != own:
-                    return json_error(403, f"Origin {origin!r} is not this API's own: a page of another origin "
-                                           "cannot change the emulator")
+                    return 403, (f"Origin {origin!r} is not this API's own: a page of another origin "
+                                 "cannot change the emulator")
             elif request.headers.get("Sec-Fetch-Site", "none").lower() not in _SAME_SITE:
-                return json_error(403, "a request a browser sent from another site cannot change the emulator "
-                                       "(Sec-Fetch-Site)")
+                return 403, ("a request a browser sent from another site cannot change the emulator "
+                             "(Sec-Fetch-Site)")
             if request.can_read_body and request.content_type != "application/json":
-                return json_error(415, "a body is JSON: send it with Content-Type: application/json")
+                return 415, "a body is JSON: send it with Content-Type: application/json"
         return None
 
     @web.middleware
@@ -186,7 +186,9 @@ class Guard:
         if not self.local:
             refused = self.refusal(request)
             if refused is not None:
-                return refused
+                # Said once per request, so that whoever wonders why a page or a script is refused reads it.
+                log.info("HTTP %s %s refused (%d): %s", request.method, request.path, *refused)
+                return json_error(*refused)
         if self.token is not None:
             given = request.headers.get("Authorization", "")
             # A header aiohttp decoded with surrogates (bytes that are not UTF-8) compares as what it is.
