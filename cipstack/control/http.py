@@ -32,6 +32,7 @@ from aiohttp import web
 from ..eip.limits import RateLimitedLog, guarded_listener, quiet_accept_errors
 from ..errors import BadRequest, CipstackError
 from .operations import OPERATIONS, Operation
+from .panel_app import PanelStreams
 from .service import outcome
 
 if TYPE_CHECKING:
@@ -58,6 +59,8 @@ DEVICE_ROUTES: tuple[tuple[str, str, Operation], ...] = tuple(
     (operation.method, path, operation) for operation in OPERATIONS for path in _routes(operation))
 #: Where a device's routes answer by its address.
 DEVICE_PREFIX = "/devices/{device}"
+#: The front panel's live stream of a device (``panel_app``), at the top and under ``DEVICE_PREFIX``.
+STREAM_PATH = "/stream"
 
 
 class HttpApiError(BadRequest):
@@ -131,6 +134,12 @@ def _is_address(name: str) -> bool:
     return True
 
 
+def _public(request: web.Request) -> bool:
+    """The front panel's own files: the same for everyone, no secret in them, so a browser loads them
+    without the token (the page then asks for it, and sends it with every call of the API)."""
+    return request.method == "GET" and (request.path == "/" or request.path.startswith("/panel/"))
+
+
 class Guard:
     """What every request passes before its handler (an aiohttp middleware): loopback peers only unless
     ``allow_remote``, the bearer ``token`` when one is set, at most ``MAX_IN_FLIGHT`` at once; an error
@@ -189,7 +198,7 @@ class Guard:
                 # Said once per request, so that whoever wonders why a page or a script is refused reads it.
                 log.info("HTTP %s %s refused (%d): %s", request.method, request.path, *refused)
                 return json_error(*refused)
-        if self.token is not None:
+        if self.token is not None and not _public(request):
             given = request.headers.get("Authorization", "")
             # A header aiohttp decoded with surrogates (bytes that are not UTF-8) compares as what it is.
             if not hmac.compare_digest(given.encode("utf-8", "surrogateescape"), f"Bearer {self.token}".encode()):
@@ -349,6 +358,7 @@ class HttpApi:
         self.token = token
         self.allow_remote = allow_remote
         self.guard = Guard(token, allow_remote, local=path is not None, hosts=hosts)
+        self.panel = PanelStreams()
         self._served: ServedApp | None = None
         self.app = self._build()
 
@@ -362,6 +372,7 @@ class HttpApi:
             log.info("HTTP control API on http://%s:%d/ (openapi.json)", self.host, self.port)
 
     async def close(self) -> None:
+        self.panel.close()
         if self._served is not None:
             await self._served.close()
             self._served = None
@@ -375,7 +386,23 @@ class HttpApi:
             app.router.add_route(method, DEVICE_PREFIX + path, handler)
         app.router.add_get("/devices", self.list_devices)
         app.router.add_get("/openapi.json", openapi)
+        app.router.add_get(STREAM_PATH, self.stream)
+        app.router.add_get(DEVICE_PREFIX + STREAM_PATH, self.stream)
+        self.panel.add_routes(app)
         return app
+
+    def _service(self, request: web.Request) -> DeviceService | web.Response:
+        """The device a request's route names (the only one where it names none), or the 404 saying so."""
+        name = request.match_info.get("device")
+        service = self.devices.get(name) if name is not None else \
+            next(iter(self.devices.values())) if len(self.devices) == 1 else None
+        return service if service is not None else no_device(name, list(self.devices))
+
+    async def stream(self, request: web.Request) -> web.StreamResponse:
+        service = self._service(request)
+        if isinstance(service, web.Response):
+            return service
+        return await self.panel.stream(request, service)
 
     async def list_devices(self, request: web.Request) -> web.Response:
         return web.json_response([{"address": name, **service.describe()}
@@ -383,11 +410,9 @@ class HttpApi:
 
     def _handler(self, operation: Operation) -> Callable[[web.Request], Awaitable[web.Response]]:
         async def handle(request: web.Request) -> web.Response:
-            name = request.match_info.get("device")
-            service = self.devices.get(name) if name is not None else \
-                next(iter(self.devices.values())) if len(self.devices) == 1 else None
-            if service is None:
-                return no_device(name, list(self.devices))
+            service = self._service(request)
+            if isinstance(service, web.Response):
+                return service
             try:
                 arguments = await _arguments(operation, request)
                 # The client's host:port; none behind a fleet's relay (a worker's API is on a Unix socket).

@@ -30,6 +30,7 @@ from .http import (
     DEVICE_PREFIX,
     DEVICE_ROUTES,
     MAX_BODY,
+    STREAM_PATH,
     Guard,
     HttpConnections,
     ServedApp,
@@ -39,6 +40,7 @@ from .http import (
     openapi,
     serve_app,
 )
+from .panel_app import PanelStreams
 
 log = logging.getLogger(__name__)
 
@@ -78,6 +80,8 @@ class RelayApi:
         self.host = host
         self.port = port
         self.guard = Guard(token, allow_remote, hosts=hosts)
+        #: The front panel's files (the plant view and each device's panel); its streams are the workers'.
+        self.panel = PanelStreams()
         #: Each device's worker, by the address the worker's API gives it.
         self.routes: dict[str, Backend] = {}
         self._served: ServedApp | None = None
@@ -102,6 +106,7 @@ class RelayApi:
                  self.port, len(self.routes), len(self.backends))
 
     async def close(self) -> None:
+        self.panel.close()
         if self._served is not None:
             await self._served.close()
             self._served = None
@@ -131,6 +136,8 @@ class RelayApi:
             app.router.add_route(method, DEVICE_PREFIX + path, self.forward)
         app.router.add_get("/devices", self.list_devices)
         app.router.add_get("/openapi.json", openapi)
+        app.router.add_get(DEVICE_PREFIX + STREAM_PATH, self.forward)
+        self.panel.add_routes(app)
         return app
 
     # -- handlers ---------------------------------------------------------------------------------------
@@ -171,6 +178,8 @@ class RelayApi:
                 response = web.StreamResponse(status=reply.status, headers=kept)
                 await response.prepare(request)
                 async for chunk in reply.content.iter_any():
+                    if self.panel.closing.is_set():     # the relay stops: a panel's stream ends here
+                        break
                     await response.write(chunk)
                 await response.write_eof()
                 return response

@@ -25,6 +25,7 @@ from ..devices.keypad import NoKeypad, WriteRefused
 from ..errors import BadRequest, CipstackError, NotFound, PeerUnreachable, StateRefused
 from ..faults import FaultController, FaultRequest
 from ..faults.model import JSON_SPELLING
+from . import views
 from .events import EventStream
 from .operations import JSON_TYPES, OPERATION_BY_NAME, OPERATIONS, Argument, Operation
 
@@ -111,7 +112,9 @@ class DeviceService:
         self.handlers: dict[str, Callable[..., Any]] = {
             "status": self.status, "trip": self.trip, "reset": self.reset, "fault": self.fault,
             "faults": self.faults_active, "clear": self.clear, "parameter": self.parameter,
-            "set-parameter": self.set_parameter, "events": self.events_since, "power": self.power, "link": self.link}
+            "set-parameter": self.set_parameter, "events": self.events_since, "power": self.power, "link": self.link,
+            "parameters": self.parameters, "connections": self.connections, "fault-table": self.fault_table,
+            "trips": self.trips}
 
     def describe(self) -> dict[str, Any]:
         """What ``GET /devices`` lists of the device: its EtherNet/IP port and product name."""
@@ -282,6 +285,22 @@ class DeviceService:
                                           **keypad.write_fields(register, raw))
         self.runtime.tick(now)
         return dict(keypad.get(register.code))
+
+    def parameters(self) -> dict[str, Any]:
+        self.runtime.tick()
+        return views.parameter_groups(self._keypad())
+
+    # -- what a front panel shows ---------------------------------------------------------------------------
+    def connections(self) -> dict[str, Any]:
+        self.runtime.tick()
+        return views.connections(self.runtime)
+
+    @staticmethod
+    def fault_table() -> list[dict[str, Any]]:
+        return views.fault_table()
+
+    def trips(self) -> list[dict[str, Any]]:
+        return [dict(choice) for choice in self.runtime.device.trip_choices()]
 
     # -- events -------------------------------------------------------------------------------------------
     def events_since(self, since: int | str = 0) -> list[dict[str, Any]]:

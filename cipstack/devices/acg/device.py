@@ -335,6 +335,10 @@ class AcgDevice(Device):
         codes = sorted({trip.fault_code for trip in Trip})
         return ", ".join(f"0x{code:04X}" for code in codes) + " (or a trip name, e.g. OverHeat)"
 
+    def trip_choices(self) -> list[dict[str, object]]:
+        """The trips of the Drive Fault Codes table (ACG-ET2 manual) by name: several share a code."""
+        return [{"code": trip.label, "label": trip.label, "fault_code": trip.fault_code} for trip in Trip]
+
     def keypad(self) -> AcgKeypad:
         """The drive's keypad: its codes (drv, ACC, CM.23...) in the keypad's unit."""
         return AcgKeypad(lambda: self.drive, self.router.objects)
