@@ -75,11 +75,13 @@ def _data(runtime: DeviceRuntime, instance: int) -> dict[str, Any]:
         data = device.assembly.data(instance)
     except Exception:  # an instance the device no longer serves (a remapped assembly)
         return {"hex": "", "fields": {}}
-    schemas = getattr(device, "schemas", None)
+    # A family's schemas are a method (they follow its mapping parameters); an EDS device's a table.
+    declared = getattr(device, "schemas", None)
+    schemas = declared() if callable(declared) else declared
     fields: dict[str, Any] = {}
     if schemas is not None:
         try:
-            schema = schemas()[instance]
+            schema = schemas[instance]
         except (KeyError, IndexError):
             schema = None        # an assembly without field names: its bytes alone
         if schema is not None and schema.size == len(data):
