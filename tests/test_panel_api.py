@@ -110,10 +110,31 @@ async def test_an_eds_device_s_data_without_field_names_is_hex(served: tuple[Ada
     [connection] = found["class1"]
     assert connection["output_data"] == {"hex": "01 02 03 04 05 06 07 08", "fields": {}}
     assert connection["input_data"]["hex"].count(" ") == 11
-    status, body = await get(base + "/parameters")
-    assert status == 404 and "no keypad" in body["error"]
     _, trips = await get(base + "/trips")
     assert trips == []
+
+
+@pytest.mark.parametrize("served", ["eds"], indirect=True)
+async def test_an_eds_device_s_parameters_from_its_file(served: tuple[Adapter, str]) -> None:
+    """The ParamN that link attributes the device serves, in the file's unit, written through the
+    attribute's own checks."""
+    _, base = served
+    status, found = await get(base + "/parameters")
+    assert status == 200 and found["keypad"] == "the parameters of its EDS (KV-400 EIP-KV)"
+    [group] = found["groups"]
+    params = {p["code"]: p for p in group["parameters"]}
+    assert (params["Param4"]["name"], params["Param4"]["value"], params["Param4"]["unit"]) == ("Accel Time",
+                                                                                             "10000", "ms")
+    assert params["Param2"]["writable"] is False and params["Param4"]["maximum"] == "65535"
+    async with aiohttp.ClientSession() as session:
+        async with session.put(base + "/parameters/Param4", json={"value": "2500"}) as reply:
+            assert reply.status == 200 and (await reply.json())["value"] == "2500"
+        async with session.put(base + "/parameters/accel time", json={"value": "70000"}) as reply:
+            assert reply.status == 400 and "takes 0..65535" in (await reply.json())["error"]
+        async with session.put(base + "/parameters/Param2", json={"value": "1"}) as reply:
+            assert reply.status == 409 and "read-only" in (await reply.json())["error"]
+    async with await Scanner.connect(base.replace("http://", "").split(":")[0] + f":{served[0].port}") as scanner:
+        assert (await scanner.read(0x2A, 1, 18)).raw == (2500).to_bytes(2, "little")   # the attribute itself
 
 
 async def test_the_panel_files_cannot_be_framed_and_the_page_needs_no_token(served: tuple[Adapter, str]) -> None:

@@ -45,6 +45,10 @@ def _status_text(reply: dict[str, Any]) -> str:
     line = "" if not rtu else ("  rtu " + " ".join(f"{k} {v}" for k, v in rtu.items() if k != "device"))
     power = "" if reply.get("power", "on") == "on" else "  POWER OFF"
     link = "" if reply.get("link", "plugged") == "plugged" else "  UNPLUGGED"
+    scenario = reply.get("scenario")
+    if scenario:
+        line += (f"  scenario {scenario['file']} {scenario['state']} {scenario['fired']}/{scenario['steps']}"
+                 + (f" next {scenario['next']}" if scenario["next"] else ""))
     return (f"{reply['status'] or '(no drive)'}{power}{link}  sessions {reply['sessions']}  class 3 "
             f"{reply['class3_connections']}  class 1 {reply['class1_connections']}{line}")
 
@@ -56,8 +60,9 @@ def _status_json(reply: dict[str, Any]) -> dict[str, Any]:
     record = {**fields, "power": reply.get("power"), "link": reply.get("link"), "sessions": reply["sessions"],
               "class3_connections": reply["class3_connections"], "class1_connections": reply["class1_connections"],
               "faults": reply.get("faults", 0)}
-    if "rtu" in reply:
-        record["rtu"] = reply["rtu"]
+    for extra in ("rtu", "scenario"):
+        if extra in reply:
+            record[extra] = reply[extra]
     return record
 
 

@@ -108,6 +108,8 @@ class DeviceService:
         self.events = events
         #: The device's product name, for ``/devices``.
         self.name = name
+        #: How far a scenario running on the device is (``scenario.run`` keeps it), for ``status``.
+        self.scenario: dict[str, Any] | None = None
         #: Each operation's method.
         self.handlers: dict[str, Callable[..., Any]] = {
             "status": self.status, "trip": self.trip, "reset": self.reset, "fault": self.fault,
@@ -145,7 +147,10 @@ class DeviceService:
     # -- status, trip ----------------------------------------------------------------------------------
     def status(self) -> dict[str, Any]:
         self.runtime.tick()
-        return {**self.runtime.status(), "faults": len(self.faults.active)}
+        status = {**self.runtime.status(), "faults": len(self.faults.active)}
+        if self.scenario is not None:
+            status["scenario"] = dict(self.scenario)
+        return status
 
     def check_trip(self, code: object) -> int | str:
         """``code`` as ``trip`` takes it, checked against the device's trip codes without tripping it

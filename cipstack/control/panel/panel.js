@@ -188,6 +188,12 @@ function showStatus(status) {
   $("power").textContent = status.power;
   $("link").textContent = status.link;
   $("power").className = status.power === "off" ? "down" : "";
+  const scenario = status.scenario;
+  $("scenario").hidden = !scenario;
+  if (scenario) {
+    $("scenario").textContent = `Scenario ${scenario.file}: ${scenario.state}, ${scenario.fired} of ${scenario.steps} ` +
+      `step(s) fired` + (scenario.next ? `; next: ${scenario.next}` : "");
+  }
   $("link").className = status.link === "unplugged" ? "down" : "";
 }
 
