@@ -1,11 +1,12 @@
 """The front panel in a real headless Chromium, against a real adapter and a real fleet: the network
 made the command source from the page's parameter fields, a class 1 connection seen with its data by
 field names, a fault applied from the page and seen by an independent client (pycomm3), a value out
-of range refused next to its field, the power cut and restored, the plant's grid and a link to a
-device's panel, the token asked once. Every test fails when the page logs a script error."""
+of range refused next to its field, the power cut and restored, the plant's grid with an ended worker
+and a link to a device's panel, the token asked once. Every test fails when the page logs a script error."""
 
 from __future__ import annotations
 
+import os
 import signal
 import subprocess
 import sys
@@ -20,6 +21,7 @@ import pytest
 from tests.browser import chromium, require_browser
 from tests.ports import free_port
 from tests.test_fleet import Fleet
+from tests.test_fleet_http import worker_pid
 from tests.waiting import wait_for
 
 pytestmark = [pytest.mark.browser,
@@ -161,6 +163,10 @@ def test_the_plant_lists_every_device_and_links_to_its_panel(tmp_path: Path) -> 
             grid = browser.find_element("id", "plant-table")
             wait_for(lambda: grid.text.count("on / plugged") == 3, 20, "every device's state")
             assert all(host in grid.text for host in hosts) and "MX2" in grid.text
+            # A worker that ended: its devices say so, the others go on.
+            os.kill(worker_pid(hosts[0], port), signal.SIGKILL)
+            wait_for(lambda: grid.text.count("worker ended") == 2, 20, "the ended worker's devices")
+            assert grid.text.count("on / plugged") >= 1
             browser.find_element("id", "plant-filter").send_keys("MX2")
             rows = grid.find_elements("css selector", "tbody tr")
             assert [row.is_displayed() for row in rows] == [False, False, True]
@@ -172,7 +178,7 @@ def test_the_plant_lists_every_device_and_links_to_its_panel(tmp_path: Path) -> 
             wait_for(lambda: "d (" in groups.text, 10, "the Digital Operator's monitor codes")
             assert browser.find_element("id", "parameter-d001").get_attribute("readonly") is not None
             no_script_error(browser)
-        assert fleet.stop(signal.SIGINT) == 0
+        fleet.stop(signal.SIGINT)
     finally:
         fleet.kill()
 
@@ -191,3 +197,16 @@ def test_the_panel_asks_for_the_token_once_and_keeps_it_for_the_tab(tmp_path: Pa
         wait_for(lambda: text(browser, "link-state") == "live", 20, "the panel after a reload")
         assert browser.find_element("id", "token-dialog").get_attribute("open") is None
         no_script_error(browser)
+
+
+def test_the_pictures_of_the_docs_are_made_from_live_pages(tmp_path: Path) -> None:
+    """tools/panel_screenshots.py, as the docs say it made docs/images: two PNG pictures of live pages,
+    and it fails on a script error of the page."""
+    require_browser()
+    root = Path(__file__).resolve().parents[1]
+    result = subprocess.run([sys.executable, str(root / "tools" / "panel_screenshots.py"), str(tmp_path)],
+                            capture_output=True, text=True, timeout=180, cwd=root)
+    assert result.returncode == 0, result.stderr
+    for name in ("front-panel.png", "plant.png"):
+        picture = (tmp_path / name).read_bytes()
+        assert picture[:8] == b"\x89PNG\r\n\x1a\n" and len(picture) > 20_000, name

@@ -234,7 +234,7 @@ function dataCell(data) {
   if (!data) { cell.textContent = "-"; return cell; }
   const names = Object.entries(data.fields || {});
   if (names.length) {
-    const list = element("ul");
+    const list = element("ul", null, {class: "fields"});
     for (const [name, value] of names) list.appendChild(element("li", `${name} = ${value === true ? 1 : value === false ? 0 : value}`));
     cell.appendChild(list);
   }
