@@ -66,7 +66,10 @@ def write_parameter(browser: Any, code: str, value: str) -> str:
     note = field.find_element("xpath", "following-sibling::span")
     before = note.text
     browser.execute_script("arguments[0].closest('details').open = true; arguments[0].scrollIntoView()", field)
-    field.clear()
+    from selenium.webdriver.common.keys import Keys
+
+    field.click()                     # focused: the page's refresh of the values leaves it alone
+    field.send_keys(Keys.CONTROL, "a")
     field.send_keys(value + "\n")
     wait_for(lambda: note.text not in ("", before) or "refusal" in (note.get_attribute("class") or ""), 10,
              f"the answer to {code}={value}")
@@ -90,6 +93,12 @@ def test_the_acg_panel_runs_faults_refuses_and_loses_power(tmp_path: Path) -> No
         browser.get(f"http://127.0.0.1:{http}/")
         wait_for(lambda: text(browser, "link-state") == "live", 20, "the panel's stream")
         assert text(browser, "state") == "READY" and text(browser, "display") == "0.00"
+        # Every control has a name a screen reader says (a label, aria-label, or its own text).
+        unnamed = browser.execute_script(
+            "return [...document.querySelectorAll('input, select, button, canvas, output')].filter(e =>"
+            " !(e.labels && e.labels.length) && !e.getAttribute('aria-label') && !e.textContent.trim())"
+            ".map(e => e.outerHTML.slice(0, 80))")
+        assert unnamed == []
 
         # The network as the command and frequency source, from the keypad's parameter fields.
         assert write_parameter(browser, "drv", "4") == "Field Bus"

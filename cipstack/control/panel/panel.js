@@ -184,6 +184,7 @@ function showStatus(status) {
     drive.speed_reference !== undefined ? `${drive.speed_reference} (${drive.speed_unit})` : "-";
   $("reference").textContent = reference;
   $("direction").textContent = drive.direction || "-";
+  $("current").textContent = drive.output_current_a === undefined ? "-" : `${Number(drive.output_current_a).toFixed(1)} A`;
   $("trip").textContent = drive.trip || "none";
   $("power").textContent = status.power;
   $("link").textContent = status.link;

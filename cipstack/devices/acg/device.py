@@ -349,6 +349,8 @@ class AcgDevice(Device):
             "state": drive.drive_state.name,
             "direction": "fwd" if drive.running_forward else "rev" if drive.running_reverse else None,
             "output_frequency_hz": drive.output_frequency / 100, "reference_hz": drive.speed_reference / 100,
+            # Output current, 0x0009 in 0.1 A (ACG RS-485 manual, Monitoring Area Parameter).
+            "output_current_a": drive.read(0x0009) / 10,
             "io_connections": len(self._io_connections),
             "trip": drive.trip.label if drive.trip is not None else None,
             "fault_code": drive.fault_code if drive.trip is not None else None,
