@@ -38,7 +38,7 @@ def chromium(profile: Path, *, resolve: dict[str, str] | None = None) -> Iterato
     # refused connection and a delay), and the profile is new for each test.
     for flag in ("--headless=new", "--no-sandbox", "--disable-gpu", "--disable-quic", "--no-first-run",
                  "--disable-background-networking", "--disable-component-update", "--disable-sync",
-                 "--disable-dev-shm-usage", f"--user-data-dir={profile}"):
+                 "--disable-dev-shm-usage", "--hide-scrollbars", f"--user-data-dir={profile}"):
         options.add_argument(flag)
     if resolve:
         rules = ", ".join(f"MAP {name} {address}" for name, address in resolve.items())

@@ -15,11 +15,12 @@ import tempfile
 import time
 import urllib.request
 from pathlib import Path
-
-from selenium import webdriver
-from selenium.webdriver.chrome.service import Service
+from typing import Any
 
 ROOT = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(ROOT))
+
+from tests.browser import chromium  # noqa: E402  (the browser the tests drive, set up once)
 
 
 def free_port(host: str = "127.0.0.1") -> int:
@@ -46,19 +47,7 @@ def call(base: str, method: str, path: str, body: object) -> object:
         return json.loads(reply.read())
 
 
-def browser(profile: Path) -> webdriver.Chrome:
-    options = webdriver.ChromeOptions()
-    options.binary_location = "/usr/bin/chromium"
-    for flag in ("--headless=new", "--no-sandbox", "--disable-gpu", "--disable-quic", "--no-first-run",
-                 "--disable-background-networking", "--disable-component-update", "--disable-sync",
-                 "--hide-scrollbars", f"--user-data-dir={profile}"):
-        options.add_argument(flag)
-    driver = webdriver.Chrome(service=Service("/usr/bin/chromedriver"), options=options)
-    driver.set_window_size(1280, 1000)
-    return driver
-
-
-def shoot(driver: webdriver.Chrome, url: str, out: Path, settle: float, height: int) -> None:
+def shoot(driver: Any, url: str, out: Path, settle: float, height: int) -> None:
     driver.get(url)
     time.sleep(settle)
     driver.set_window_size(1280, height)
@@ -88,14 +77,11 @@ def main(out: Path) -> None:
                                          "--input", "71", "--rpi", "20ms", "--io-port", "0", "--set", "run_forward=1",
                                          "--set", "net_ctrl=1", "--set", "net_ref=1", "--set", "speed_reference=1500",
                                          "--duration", "120s"], stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL))
-        driver = browser(work / "profile")
-        try:
+        with chromium(work / "profile") as driver:
             driver.get(base + "/")
             time.sleep(3)
             call(base, "POST", "/faults", {"name": "delay", "options": {"by": "3ms", "jitter": "1ms"}})
             shoot(driver, base + "/", out / "front-panel.png", 6, 1900)
-        finally:
-            driver.quit()
         hosts = [f"127.79.200.{n}" for n in range(10, 14)]
         fleet_http = free_port()
         started.append(subprocess.Popen([sys.executable, "-m", "cipstack", "fleet", "--addresses",
@@ -106,11 +92,8 @@ def main(out: Path) -> None:
                                         stderr=subprocess.DEVNULL))
         wait_listening(fleet_http)
         call(f"http://127.0.0.1:{fleet_http}", "POST", f"/devices/{hosts[1]}/trip", {"code": "OverHeat"})
-        driver = browser(work / "profile-plant")
-        try:
+        with chromium(work / "profile-plant") as driver:
             shoot(driver, f"http://127.0.0.1:{fleet_http}/", out / "plant.png", 4, 480)
-        finally:
-            driver.quit()
     finally:
         for process in reversed(started):
             process.terminate()
