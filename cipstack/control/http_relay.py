@@ -136,6 +136,7 @@ class RelayApi:
             app.router.add_route(method, DEVICE_PREFIX + path, self.forward)
         app.router.add_get("/devices", self.list_devices)
         app.router.add_get("/openapi.json", openapi)
+        app.router.add_get(STREAM_PATH, self.unaddressed)
         app.router.add_get(DEVICE_PREFIX + STREAM_PATH, self.forward)
         self.panel.add_routes(app)
         return app
