@@ -369,7 +369,7 @@ class HttpApi:
         self._served = await serve_app(self.app, self.host, self.port, self.path)
         self.port = self._served.port
         if self.path is None:
-            log.info("HTTP control API on http://%s:%d/ (openapi.json)", self.host, self.port)
+            log.info("HTTP control API on http://%s:%d/ (the front panel; openapi.json)", self.host, self.port)
 
     async def close(self) -> None:
         self.panel.close()

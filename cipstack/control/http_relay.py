@@ -102,7 +102,7 @@ class RelayApi:
         except BaseException:
             await self.close()
             raise
-        log.info("HTTP control API on http://%s:%d/ (openapi.json), for %d devices in %d workers", self.host,
+        log.info("HTTP control API on http://%s:%d/ (the plant; openapi.json), for %d devices in %d workers", self.host,
                  self.port, len(self.routes), len(self.backends))
 
     async def close(self) -> None:
