@@ -554,13 +554,14 @@ def openapi_document() -> dict[str, Any]:
             if prefix:
                 routed["operationId"] = operation.name + "-by-address"
             paths.setdefault(prefix + path, {})[method.lower()] = routed
-    stream = {"summary": "the front panel's live feed: Server-Sent Events `status`, `faults` and `connections` "
-                         "when they change and the new `events`, twice a second",
-              "operationId": "stream",
-              "parameters": [{"name": "since", "in": "query", "required": False, "schema": {"type": "integer"},
-                              "description": "the last event the client has (0: every event kept)"}],
-              "responses": {"200": {"description": "a stream of events",
-                                    "content": {"text/event-stream": {"schema": {"type": "string"}}}}, **errors}}
+    stream: dict[str, Any] = {
+        "summary": "the front panel's live feed: Server-Sent Events `status`, `faults` and `connections` when "
+                   "they change and the new `events`, twice a second",
+        "operationId": "stream",
+        "parameters": [{"name": "since", "in": "query", "required": False, "schema": {"type": "integer"},
+                        "description": "the last event the client has (0: every event kept)"}],
+        "responses": {"200": {"description": "a stream of events",
+                              "content": {"text/event-stream": {"schema": {"type": "string"}}}}, **errors}}
     paths[STREAM_PATH] = {"get": stream}
     paths[DEVICE_PREFIX + STREAM_PATH] = {"get": {**stream, "operationId": "stream-by-address",
                                                   "parameters": [device, *stream["parameters"]]}}
