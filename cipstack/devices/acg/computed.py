@@ -4,9 +4,12 @@ simulation produces rather than stores."""
 from __future__ import annotations
 
 from collections.abc import Callable
+from typing import TYPE_CHECKING
 
+from ..registers import RegisterError, RegisterMap, RegisterRefusal
 from . import registers as reg
 from .registers import (
+    ALIASES,
     CMD_SOURCE,
     FREQ_REF_SOURCE,
     SPEED_REFERENCE,
@@ -18,6 +21,15 @@ from .registers import (
 )
 from .run_command import Direction
 from .trips import Trip
+
+if TYPE_CHECKING:
+    from .memory import PasswordLocks
+    from .ramps import Ramp
+    from .state import AcgState
+
+_CMD_SOURCE = CMD_SOURCE.address
+_FREQ_REF_SOURCE = FREQ_REF_SOURCE.address
+_SPEED_REFERENCE = SPEED_REFERENCE.address
 
 _SECONDS_PER_MINUTE = 60
 _SECONDS_PER_DAY = 86400
@@ -35,96 +47,121 @@ _FREQUENCY_SOURCES_BY_COMMUNICATION = (6, 8)  # Frq Int485 or Field Bus: 0x000E 
 
 
 class ComputedRegisters:
-    """Registers whose value the simulation produces (part of ``AcgDrive``)."""
+    """Registers whose value the simulation produces: ``read`` gives any register's value, computed
+    or stored."""
 
+    def __init__(self, state: AcgState, registers: RegisterMap, ramp: Ramp, locks: PasswordLocks) -> None:
+        self._state = state
+        self._registers = registers
+        self._ramp = ramp
+        self._locks = locks
+        self._addresses = frozenset(registers)
+        self._computed = self._computed_registers()
+        self._cm_address = {code: registers.by_code(code).address
+                            for code in (*(f"CM.{31 + i}" for i in range(8)), *(f"CM.{51 + i}" for i in range(8)))}
+
+    def read(self, address: int) -> int:
+        """The raw value of the register at ``address`` (an alias reads its target), or ``RegisterError``."""
+        if address not in self._addresses:
+            raise RegisterError(RegisterRefusal.NO_SUCH_REGISTER, address)
+        address = ALIASES.get(address, address)
+        compute = self._computed.get(address)
+        return compute() if compute is not None else self._state.values[address]
+
+    def _output_frequency(self) -> int:
+        return round(abs(self._state.output_hz) * 100)
 
     def _operation_status(self) -> int:
         """Common area 0x000E (ACG RS-485 manual)."""
+        state, ramp = self._state, self._ramp
         status = OperationStatus(0)
-        direction = self._direction()
-        if not self._output_on:
+        direction = state.direction()
+        if not state.output_on:
             status |= OperationStatus.STOPPED
         if direction is Direction.FORWARD:
             status |= OperationStatus.FORWARD
         if direction is Direction.REVERSE:
             status |= OperationStatus.REVERSE
-        if self._trip is not None:
+        if state.trip is not None:
             status |= OperationStatus.FAULT_TRIP
-        if self.accelerating:
+        if ramp.accelerating:
             status |= OperationStatus.ACCELERATING
-        if self.decelerating:
+        if ramp.decelerating:
             status |= OperationStatus.DECELERATING
-        if self.at_reference:
+        if ramp.at_reference:
             status |= OperationStatus.SPEED_REACHED
-        if self._output_on and self._command is None:
+        if state.output_on and state.command is None:
             status |= OperationStatus.STOPPING
-        if self._command is Direction.FORWARD:
+        if state.command is Direction.FORWARD:
             status |= OperationStatus.FORWARD_COMMAND
-        if self._command is Direction.REVERSE:
+        if state.command is Direction.REVERSE:
             status |= OperationStatus.REVERSE_COMMAND
-        if self._values[CMD_SOURCE.address] in _COMMAND_SOURCES_BY_COMMUNICATION:
+        if state.values[_CMD_SOURCE] in _COMMAND_SOURCES_BY_COMMUNICATION:
             status |= OperationStatus.COMMAND_FROM_COMMUNICATION
-        if self._values[FREQ_REF_SOURCE.address] in _FREQUENCY_SOURCES_BY_COMMUNICATION:
+        if state.values[_FREQ_REF_SOURCE] in _FREQUENCY_SOURCES_BY_COMMUNICATION:
             status |= OperationStatus.FREQUENCY_FROM_COMMUNICATION
         return int(status)
 
     def _fault_trip_information(self) -> int:
         """Common area 0x000F (ACG RS-485 manual)."""
         info = FaultTripInformation(0)
-        if self._trip is Trip.HW_DIAG:
+        trip = self._state.trip
+        if trip is Trip.HW_DIAG:
             info |= FaultTripInformation.HW_DIAG
-        elif self._trip is not None:
-            info |= FaultTripInformation.LEVEL_TYPE_TRIP if self._trip.level else FaultTripInformation.LATCH_TYPE_TRIP
+        elif trip is not None:
+            info |= FaultTripInformation.LEVEL_TYPE_TRIP if trip.level else FaultTripInformation.LATCH_TYPE_TRIP
         return int(info)
 
     def _trip_bits(self, address: int) -> int:
-        trip = self._trip
+        trip = self._state.trip
         return trip.bit if trip is not None and trip.info_address == address else 0
 
     def _operation_command_word(self) -> int:
         """Common area 0x0006 read: command bits as written, command and frequency sources."""
-        frequency_source = _COMMON_FREQUENCY_SOURCE.get(self._values[FREQ_REF_SOURCE.address], 0)
-        return (self._values[0x0006] & 0x1F
-                | (self._values[CMD_SOURCE.address] & reg.OPERATION_COMMAND_SOURCE_MASK)
-                << reg.OPERATION_COMMAND_SOURCE_SHIFT
+        values = self._state.values
+        frequency_source = _COMMON_FREQUENCY_SOURCE.get(values[_FREQ_REF_SOURCE], 0)
+        return (values[0x0006] & 0x1F
+                | (values[_CMD_SOURCE] & reg.OPERATION_COMMAND_SOURCE_MASK) << reg.OPERATION_COMMAND_SOURCE_SHIFT
                 | (frequency_source & reg.OPERATION_FREQUENCY_SOURCE_MASK) << reg.OPERATION_FREQUENCY_SOURCE_SHIFT)
 
     def _operation_state(self) -> int:
         """Monitoring 0x0305 (ACG RS-485 manual)."""
-        if self._trip is not None:
+        state, ramp = self._state, self._ramp
+        if state.trip is not None:
             health = OperationHealth.FAULT
-        elif self._warnings:
+        elif state.warnings:
             health = OperationHealth.WARNING
         else:
             health = OperationHealth.NORMAL
-        if self.accelerating:
+        if ramp.accelerating:
             phase = OperationPhase.ACCELERATING
-        elif self.decelerating:
-            phase = OperationPhase.DECELERATING if self._command is not None else OperationPhase.DECELERATING_TO_STOP
-        elif self._output_on:
+        elif ramp.decelerating:
+            phase = OperationPhase.DECELERATING if state.command is not None else OperationPhase.DECELERATING_TO_STOP
+        elif state.output_on:
             phase = OperationPhase.CONSTANT_SPEED
         else:
             phase = OperationPhase.NONE
         direction = {Direction.FORWARD: OperationDirection.FORWARD, Direction.REVERSE: OperationDirection.REVERSE,
-                     None: OperationDirection.STOPPED}[self._direction()]
-        return health << reg.OPERATION_HEALTH_SHIFT | phase << reg.OPERATION_PHASE_SHIFT | direction
+                     None: OperationDirection.STOPPED}[state.direction()]
+        return int(health << reg.OPERATION_HEALTH_SHIFT | phase << reg.OPERATION_PHASE_SHIFT | direction)
 
     def _source_word(self) -> int:
         """Monitoring 0x0306 (ACG RS-485 manual)."""
-        command = _MONITOR_COMMAND_SOURCE[self._values[CMD_SOURCE.address]]
-        frequency = _MONITOR_FREQUENCY_SOURCE.get(self._values[FREQ_REF_SOURCE.address], 0)
+        values = self._state.values
+        command = _MONITOR_COMMAND_SOURCE[values[_CMD_SOURCE]]
+        frequency = _MONITOR_FREQUENCY_SOURCE.get(values[_FREQ_REF_SOURCE], 0)
         return command << reg.MONITOR_COMMAND_SOURCE_SHIFT | frequency
 
-    def _status_parameter(self, index: int) -> int:
-        target = self._value(f"CM.{31 + index}")
-        if self.registers.get(target) is None or reg.STATUS_PARAMETER_BASE <= target <= 0x01FF:
+    def _parameter_word(self, code: str) -> int:
+        """0x0100-0x0107 / 0x0110-0x0117 read: the word at the address ``code`` (CM.31.. / CM.51..) holds."""
+        target = self._state.values[self._cm_address[code]]
+        if self._registers.get(target) is None or reg.STATUS_PARAMETER_BASE <= target <= 0x01FF:
             return 0
         return self.read(target) & 0xFFFF
 
-    def _on_seconds(self) -> float:
-        return self._time - self._start_time
-
     def _computed_registers(self) -> dict[int, Callable[[], int]]:
+        state, locks = self._state, self._locks
+
         def days(seconds: Callable[[], float]) -> Callable[[], int]:
             return lambda: int(seconds() // _SECONDS_PER_DAY)
 
@@ -132,53 +169,58 @@ class ComputedRegisters:
             return lambda: int(seconds() % _SECONDS_PER_DAY // _SECONDS_PER_MINUTE)
 
         def virtual_inputs() -> int:   # 0x0385 as written, monitored at CM.86 (and 0x0322, an alias)
-            return self._values[0x0385]
+            return state.values[0x0385]
 
         def relays() -> int:           # 0x0386 as written, monitored at 0x0011 and 0x0321
-            return self._values[0x0386]
+            return state.values[0x0386]
 
         def rpm() -> int:
-            return self.speed_actual_rpm
+            return state.hz_to_rpm(abs(state.output_hz))
+
+        def poles() -> int:
+            return state.poles
+
+        def trip_bits(address: int) -> Callable[[], int]:
+            return lambda: self._trip_bits(address)
+
+        def parameter_word(code: str) -> Callable[[], int]:
+            return lambda: self._parameter_word(code)
 
         computed: dict[int, Callable[[], int]] = {
             0x0006: self._operation_command_word,
-            0x000A: lambda: self.output_frequency,
+            0x000A: self._output_frequency,
             0x000E: self._operation_status,
             0x000F: self._fault_trip_information,
             0x0011: relays,
             0x0015: rpm,
-            0x0381: lambda: self.hz_to_rpm(self._values[SPEED_REFERENCE.address] / 100),
-            0x001B: lambda: self.poles,
+            0x0381: lambda: state.hz_to_rpm(state.values[_SPEED_REFERENCE] / 100),
+            0x001B: poles,
             0x0305: self._operation_state,
             0x0306: self._source_word,
-            0x0311: lambda: self.output_frequency,
+            0x0311: self._output_frequency,
             0x0312: rpm,
-            0x0313: lambda: self.hz_to_rpm(self._output_hz),
-            0x031A: lambda: self.poles,
+            0x0313: lambda: state.hz_to_rpm(state.output_hz),
+            0x031A: poles,
             # The second motor's pole number is an M2 parameter the ACG manuals do not describe.
-            0x031B: lambda: self.poles,
-            0x031C: lambda: self.poles,
+            0x031B: poles,
+            0x031C: poles,
             0x0321: relays,
-            0x0334: lambda: int(self._warnings),
-            0x0340: days(self._on_seconds),
-            0x0341: minutes(self._on_seconds),
-            0x0342: days(lambda: self._run_seconds),
-            0x0343: minutes(lambda: self._run_seconds),
-            0x0344: days(lambda: self._fan_seconds),
-            0x0345: minutes(lambda: self._fan_seconds),
-            0x03E7: lambda: int(self._hide_locked),
-            0x03E8: lambda: int(self._parameter_locked),
+            0x0334: lambda: int(state.warnings),
+            0x0340: days(state.on_seconds),
+            0x0341: minutes(state.on_seconds),
+            0x0342: days(lambda: state.run_seconds),
+            0x0343: minutes(lambda: state.run_seconds),
+            0x0344: days(lambda: state.fan_seconds),
+            0x0345: minutes(lambda: state.fan_seconds),
+            0x03E7: lambda: int(locks.hide_locked),
+            0x03E8: lambda: int(locks.parameter_locked),
             0x1F09: rpm,
-            self.registers.by_code("CM.86").address: virtual_inputs,
-            **{address: (lambda a=address: self._trip_bits(a)) for address in (0x0330, 0x0331, 0x0332, 0x0333,
-                                                                                 0x0335)},
-            **{reg.STATUS_PARAMETER_BASE + i: (lambda i=i: self._status_parameter(i)) for i in range(8)},
-            **{reg.CONTROL_PARAMETER_BASE + i: (lambda i=i: self._control_parameter(i)) for i in range(8)},
+            self._registers.by_code("CM.86").address: virtual_inputs,
+            **{address: trip_bits(address) for address in (0x0330, 0x0331, 0x0332, 0x0333, 0x0335)},
+            **{reg.STATUS_PARAMETER_BASE + i: parameter_word(f"CM.{31 + i}") for i in range(8)},
+            **{reg.CONTROL_PARAMETER_BASE + i: parameter_word(f"CM.{51 + i}") for i in range(8)},
         }
         return computed
 
-    def _control_parameter(self, index: int) -> int:
-        target = self._value(f"CM.{51 + index}")
-        if self.registers.get(target) is None or reg.STATUS_PARAMETER_BASE <= target <= 0x01FF:
-            return 0
-        return self.read(target) & 0xFFFF
+
+__all__ = ["ComputedRegisters"]

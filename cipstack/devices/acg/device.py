@@ -361,7 +361,7 @@ class AcgDevice(Device):
         """One compact line for the emulator's console."""
         f = self.status_fields()
         parts = [
-            f"{f['state']:<10}", f["direction"] or "---",
+            f"{f['state']:<10}", str(f["direction"] or "---"),
             f"out {f['output_frequency_hz']:6.2f} Hz", f"ref {f['reference_hz']:6.2f} Hz", f"io {f['io_connections']}",
         ]
         if f["trip"] is not None:

@@ -24,11 +24,14 @@ Behaviour, with the table it comes from:
 * Command ports: a run command is obeyed when it comes in through the port drv names (4 Field
   Bus: the card; 3 Int485: the RS-485 port, ``commands_from``; 1/2 Fx/Rx: the terminals' FX/RX).
 
-Each rule lives in one module, ``AcgDrive`` combines them: ``run_command`` (the Drive Run table,
-the run/stop commands), ``ramps``, ``trips``, ``lost_command``, ``register_effects`` (what a write
-does beyond storing the value: save, initialization, password, CM.94, ...), ``virtual_inputs``
-(CM.70-CM.77) and ``computed`` (the monitors); this module holds the drive's state, its saved
-parameters, speeds, status and register access.
+Each rule lives in one component over one state (``state.AcgState``: values, output, command,
+trip, watches), given at construction the state and the register map it needs: ``ramps.Ramp``,
+``trips.TripLog``, ``run_command.RunControl`` (the run/stop commands; ``ControlSupervisor`` holds the
+Drive Run table's inputs), ``lost_command.CommandLossWatches``, ``virtual_inputs.VirtualInputs``
+(CM.70-CM.77), ``memory`` (saved parameters, password locks), ``comm_update.CommUpdate`` (CM.94),
+``register_effects.RegisterEffects`` (what a write does beyond storing the value) and
+``computed.ComputedRegisters`` (the monitors, and every register's read). ``AcgDrive`` composes them
+and holds the drive's public interface: time, speeds, status and register access.
 
 The simulation has no motor or load model: output current, voltage, power, torque and the
 analog inputs read 0. The monitor rpm is the synchronous speed 120 * f / poles.
@@ -38,30 +41,33 @@ from __future__ import annotations
 
 import logging
 import os
-from collections.abc import Callable, Mapping
-from dataclasses import dataclass
+from collections.abc import Iterator, Mapping
+from contextlib import contextmanager
 
 from ...eip.limits import RateLimitedLog
 from ..registers import Register, RegisterAccess, RegisterError, RegisterMap, RegisterRefusal
 from ..simulation import TimedSimulation
-from ..state import ParameterStore, StateFileError
+from ..state import ParameterStore
 from . import registers as reg
+from .comm_update import CommSettings, CommUpdate
 from .computed import ComputedRegisters
-from .lost_command import IO_BREAK_TIME, MODBUS_SILENCE_TIME, LostCommand, LostCommandMode, _CommandLossWatch
-from .ramps import Ramps
+from .lost_command import IO_BREAK_TIME, MODBUS_SILENCE_TIME, CommandLossWatches, LostCommandMode
+from .memory import PasswordLocks, SavedParameters, SaveRequest
+from .ramps import Ramp
 from .register_effects import RegisterEffects
 from .registers import (
     ACCEL_TIME,
     ACG_REGISTERS,
     ALIASES,
-    COMM_UPDATE_CODES,
+    CMD_SOURCE,
+    CMD_SOURCE_FIELDBUS,
+    CMD_SOURCE_INT485,
     DECEL_TIME,
-    MAX_FREQUENCY,
-    POLE_NUMBER,
+    FREQ_REF_SOURCE,
+    FREQ_REF_SOURCE_FIELDBUS,
+    FREQ_REF_SOURCE_INT485,
     SAVE_PARAMETERS,
     SPEED_REFERENCE,
-    TARGET_FREQUENCY,
-    InstanceSelection,
     WarningInformation,
 )
 from .run_command import (
@@ -70,10 +76,11 @@ from .run_command import (
     Direction,
     DriveState,
     RunAction,
-    RunCommands,
+    RunControl,
     drive_run_action,
 )
-from .trips import NO_FAULT, Trip, Trips
+from .state import AcgState
+from .trips import NO_FAULT, Trip, TripLog
 from .virtual_inputs import VirtualInputs
 
 log = logging.getLogger(__name__)
@@ -81,40 +88,11 @@ log = logging.getLogger(__name__)
 FAMILY = "acg"
 MODEL = "ACG-ET2"
 
-#: What the drive hands a save to: every saved value (address -> raw). It may refuse the save
-#: by raising ``StateFileError`` (the state file is known not to be writable).
-SaveRequest = Callable[[dict[int, int]], None]
-
-@dataclass(frozen=True)
-class CommSettings:
-    """The CM parameters gated by CM.94 (CM.7, CM.10-CM.24), as one consistent set."""
-
-    station_id: int
-    ip_address: str
-    subnet_mask: str
-    gateway: str
-    speed: int
-    input_setting: int
-    output_setting: int
-
-    @property
-    def input_instance(self) -> InstanceSelection:
-        return reg.input_instance(self.input_setting)
-
-    @property
-    def output_instance(self) -> InstanceSelection:
-        return reg.output_instance(self.output_setting)
-
-    @classmethod
-    def from_values(cls, value: Callable[[str], int]) -> CommSettings:
-        def dotted(first: int) -> str:
-            return ".".join(str(value(f"CM.{n}")) for n in range(first, first + 4))
-
-        return cls(value("CM.7"), dotted(10), dotted(14), dotted(18), value("CM.22"), value("CM.23"), value("CM.24"))
+_CMD_SOURCE = CMD_SOURCE.address
+_FREQ_REF_SOURCE = FREQ_REF_SOURCE.address
 
 
-class AcgDrive(RunCommands, Ramps, Trips, LostCommand, RegisterEffects, VirtualInputs, ComputedRegisters,
-               TimedSimulation):
+class AcgDrive(TimedSimulation):
     """The ACG drive behind its ACG-ET2 card, sans I/O. ``advance``/``next_deadline``: ``TimedSimulation``
     (ramps; the lost-command timers)."""
 
@@ -128,44 +106,27 @@ class AcgDrive(RunCommands, Ramps, Trips, LostCommand, RegisterEffects, VirtualI
         range). Each save (0x03E0, CM.94, a parameter initialization) is handed to ``on_save``
         with every saved value: the drive does no file I/O itself. ``on_save`` refuses a save by
         raising ``StateFileError``; the write is then refused and nothing is saved."""
-        self.registers: RegisterMap = ACG_REGISTERS
-        self.on_save = on_save
+        registers: RegisterMap = ACG_REGISTERS
+        self.registers = registers
         #: Saves refused while the drive runs: a line at most once per 10 s, with a count.
         self._save_refused_log = RateLimitedLog(log)
-        self._time = now
-        self._start_time = now
-        #: Password of 0x03E7/0x03E8 (registered from the keypad; None: none registered).
-        self._password = password
-        self._values: dict[int, int] = {a: r.default for a, r in self.registers.items() if a not in ALIASES}
-        self._saved: dict[int, int] = {}
+        values = {a: r.default for a, r in registers.items() if a not in ALIASES}
+        self._saving = SavedParameters(registers, on_save)
         if saved:
-            self._restore(saved, origin)
-        self._active_comm = {code: self._value(code) for code in COMM_UPDATE_CODES}
+            self._saving.restore(saved, values, origin, self.model)
+        state = self._state = AcgState(values, now)
+        self._locks = PasswordLocks(password)
+        self._comm = CommUpdate(registers, values, self._saving)
         self.control_supervisor = ControlSupervisor()
-        # Run state.
-        self._command: Direction | None = None
-        self._output_hz = 0.0           # signed: forward > 0, reverse < 0
-        self._output_on = False
-        self._trip: Trip | None = None
-        self._level_causes: set[Trip] = set()
-        self._warnings = WarningInformation(0)
-        self.fault_history: list[Trip] = []
-        # Lost command.
-        self._io_watch = _CommandLossWatch(IO_BREAK_TIME)
-        self._modbus_watch = _CommandLossWatch(MODBUS_SILENCE_TIME)
-        self._int485_watch = _CommandLossWatch(None, CommandPort.INT485)
-        #: The port the present write came in through (``commands_from``); the card's by default.
-        self.command_port = CommandPort.FIELDBUS
-        self._lost_reference: float | None = None  # Hz held by Hold Input/Hold Output/Lost Preset
-        # Virtual multi-function inputs: the functions closed, and what FX/RX last commanded.
-        self._closed_functions: frozenset[int] = frozenset()
-        self._virtual_command: Direction | None = None
-        # Memory control.
-        self._hide_locked = False
-        self._parameter_locked = False
-        self._run_seconds = 0.0
-        self._fan_seconds = 0.0
-        self._computed = self._computed_registers()
+        ramp = self._ramp = Ramp(state)
+        trips = self._trips = TripLog(state, ramp)
+        run = self._run = RunControl(state, ramp)
+        self._watches = CommandLossWatches(state, ramp, trips)
+        self._virtual_inputs = VirtualInputs(state, registers, trips, run)
+        self._effects = RegisterEffects(state, registers, trips=trips, run=run, virtual_inputs=self._virtual_inputs,
+                                        saving=self._saving, comm=self._comm, locks=self._locks,
+                                        write_through=self.write)
+        self._computed = ComputedRegisters(state, registers, ramp, self._locks)
 
     @classmethod
     def with_state_file(cls, path: str | os.PathLike[str], *, now: float = 0.0,
@@ -180,29 +141,24 @@ class AcgDrive(RunCommands, Ramps, Trips, LostCommand, RegisterEffects, VirtualI
     # Saved parameters
     # -----------------------------------------------------------------------------------------
 
-    def _restore(self, saved: Mapping[int, int], origin: str) -> None:
-        for address, value in saved.items():
-            register = self.registers.get(address)
-            if register is None or not register.saved or address in ALIASES:
-                raise StateFileError(f"{origin}: 0x{address:04X} is not a saved parameter of the {self.model}")
-            try:
-                register.check(value)
-            except RegisterError as exc:
-                raise StateFileError(f"{origin}: {exc}") from None
-            self._values[address] = value
-        self._saved = dict(saved)
+    @property
+    def on_save(self) -> SaveRequest | None:
+        """Where each save is handed (the shell: a state file, its writer); None: kept in memory."""
+        return self._saving.on_save
+
+    @on_save.setter
+    def on_save(self, on_save: SaveRequest | None) -> None:
+        self._saving.on_save = on_save
 
     @property
     def saved_parameters(self) -> dict[int, int]:
         """What a power cycle comes back with (address -> raw value), beyond the defaults."""
-        return dict(self._saved)
+        return dict(self._saving.saved)
 
     def forget_saved_parameters(self) -> None:
         """Identity Reset type 1: the saved values go, so the next power-up is at the factory values. A
         save the shell refuses (``StateFileError``) refuses this too, and nothing changes."""
-        if self.on_save is not None:
-            self.on_save({})
-        self._saved = {}
+        self._saving.forget()
 
     def power_cycled(self, now: float) -> AcgDrive:
         """The drive as it comes back from a power loss at ``now``.
@@ -221,30 +177,18 @@ class AcgDrive(RunCommands, Ramps, Trips, LostCommand, RegisterEffects, VirtualI
         and the output (0 Hz: the motor coasts), the trip present (the ACG manuals say nothing of a trip
         across a power cycle: the drive starts without it, and the fault history keeps it), the
         lost-command watches and the virtual inputs (0x0385) and CM.94's pending settings."""
-        self.advance(max(now, self._time))
-        drive = AcgDrive(self._saved, now=now, password=self._password, on_save=self.on_save)
-        drive._start_time = now - self._on_seconds()
-        drive._run_seconds, drive._fan_seconds = self._run_seconds, self._fan_seconds
-        drive.fault_history = list(self.fault_history)
-        drive._hide_locked, drive._parameter_locked = self._hide_locked, self._parameter_locked
+        self.advance(max(now, self._state.time))
+        drive = AcgDrive(self._saving.saved, now=now, password=self._locks.password, on_save=self._saving.on_save)
+        before, after = self._state, drive._state
+        after.start_time = now - before.on_seconds()
+        after.run_seconds, after.fan_seconds = before.run_seconds, before.fan_seconds
+        after.fault_history = list(before.fault_history)
+        drive._locks.hide_locked, drive._locks.parameter_locked = self._locks.hide_locked, self._locks.parameter_locked
         return drive
 
     def save_parameters(self) -> None:
         """Save every keypad parameter as it is now (what 0x03E0 0 -> 1 does)."""
-        self._persist({a: self._values[a] for a, r in self.registers.items() if r.saved and a not in ALIASES})
-
-    def _save_some(self, values: Mapping[int, int]) -> None:
-        """Save these values (address -> raw) on top of the saved ones."""
-        self._persist({**self._saved, **values})
-
-    def _persist(self, saved: dict[int, int]) -> None:
-        """Hand a save to the shell; refused (``RegisterError`` SAVE_FAILED), nothing is saved."""
-        if self.on_save is not None:
-            try:
-                self.on_save(dict(saved))
-            except StateFileError as exc:
-                raise RegisterError(RegisterRefusal.SAVE_FAILED, SAVE_PARAMETERS.address, str(exc)) from None
-        self._saved = saved
+        self._saving.save_all(self._state.values)
 
     # -----------------------------------------------------------------------------------------
     # Time
@@ -252,102 +196,271 @@ class AcgDrive(RunCommands, Ramps, Trips, LostCommand, RegisterEffects, VirtualI
 
     @property
     def time(self) -> float:
-        return self._time
+        return self._state.time
 
     def power_up_at(self, now: float) -> None:
         """Place the power-up instant of a drive built before its shell's clock was known; only
         before anything has moved it."""
-        if self._time != self._start_time:
+        state = self._state
+        if state.time != state.start_time:
             raise RuntimeError("the drive has already run: its power-up time is fixed")
-        self._time = self._start_time = now
+        state.time = state.start_time = now
 
     @property
     def password(self) -> int | None:
         """The password of 0x03E7/0x03E8 registered from the keypad (None: none)."""
-        return self._password
+        return self._locks.password
+
+    def _timer_deadline(self) -> float | None:
+        return self._watches.deadline()
+
+    def _fire_timers(self, moment: float) -> None:
+        self._watches.fire(moment)
 
     def _run_until(self, moment: float) -> None:
-        if self._output_on:  # off, nothing ramps and nothing counts (``_segment``, ``_ramp``)
-            self._ramp(max(0.0, moment - self._time))
-        self._time = moment
+        state = self._state
+        if state.output_on:  # off, nothing ramps and nothing counts (``Ramp.run``)
+            self._ramp.run(max(0.0, moment - state.time))
+        state.time = moment
+
+    def _ramp_deadline(self) -> float | None:
+        return self._ramp.deadline()
+
+    def advance(self, now: float) -> None:
+        # At rest (``_at_rest``) moving on is the clock alone: called several times per request and
+        # per O->T datagram, it skips the timer and ramp steps that would find nothing to do.
+        state = self._state
+        if state.output_on or now < state.time or state.watched:
+            TimedSimulation.advance(self, now)   # ramps, timers; or the error for a time gone backwards
+        else:
+            state.time = now
 
     def advance_to(self, now: float) -> float | None:
         # The shell's call before every request. At rest (the stopped drive of most explicit
         # traffic) nothing ramps, counts or times out: moving on is the clock alone, which is all
         # ``_run_until`` does with the output off, and there is no deadline.
-        if self._at_rest():
-            if now > self._time:
-                self._time = now
+        state = self._state
+        if not state.output_on and not state.watched:
+            if now > state.time:
+                state.time = now
             return None
         return super().advance_to(now)
 
     def _at_rest(self) -> bool:
         # Output off: no ramp and no run-time counting (``_run_until``); no command-loss watch
         # running: no timer (``_timer_deadline``). The stopped drive of most explicit traffic.
-        return (not self._output_on and self._io_watch.silent_since is None
-                and self._modbus_watch.silent_since is None and self._int485_watch.silent_since is None)
+        return not self._state.output_on and not self._state.watched
+
+    # -----------------------------------------------------------------------------------------
+    # Commands
+    # -----------------------------------------------------------------------------------------
+
+    @property
+    def command_port(self) -> CommandPort:
+        """The port the present write came in through (``commands_from``); the card's by default."""
+        return self._state.command_port
+
+    @command_port.setter
+    def command_port(self, port: CommandPort) -> None:
+        self._state.command_port = port
+
+    @contextmanager
+    def commands_from(self, port: CommandPort) -> Iterator[None]:
+        """Writes made inside come in through ``port``: a run command in them is obeyed when drv is
+        that port's command source (``CommandPort``). Outside, writes are the card's. (A request path
+        may set ``command_port`` itself and put the previous one back, as ``commands_from`` does.)"""
+        state = self._state
+        previous, state.command_port = state.command_port, port
+        try:
+            yield
+        finally:
+            state.command_port = previous
+
+    @property
+    def control_from_int485(self) -> bool:
+        """drv is 3 (Int485): the built-in RS-485 port commands run and stop."""
+        return self._state.values[_CMD_SOURCE] == CMD_SOURCE_INT485
+
+    @property
+    def reference_from_int485(self) -> bool:
+        """Frq is 6 (Int485): the built-in RS-485 port sets the speed reference."""
+        return self._state.values[_FREQ_REF_SOURCE] == FREQ_REF_SOURCE_INT485
+
+    @property
+    def control_from_net(self) -> bool:
+        """Class 0x29 attribute 14: drv is 4 (Field Bus)."""
+        return self._state.values[_CMD_SOURCE] == CMD_SOURCE_FIELDBUS
+
+    @property
+    def reference_from_net(self) -> bool:
+        """Class 0x2A attribute 29: Frq is 8 (Field Bus)."""
+        return self._state.values[_FREQ_REF_SOURCE] == FREQ_REF_SOURCE_FIELDBUS
+
+    def set_run_command(self, forward: bool, reverse: bool, now: float) -> RunAction:
+        """Forward and Reverse Run Cmd (class 0x29 attributes 3 and 4) written together, as an
+        output assembly does; returns what the Drive Run table made of it. The card keeps the
+        values whatever the command source; the drive acts on them only when drv is Field Bus."""
+        self.advance(now)
+        action = self.control_supervisor.update_run(bool(forward), bool(reverse))
+        if self._state.values[_CMD_SOURCE] == CMD_SOURCE_FIELDBUS:
+            self._run.apply(action)
+            self._ramp.run(0.0)
+        return action
+
+    def set_run_forward(self, value: bool, now: float) -> RunAction:
+        """Class 0x29 attribute 3 alone."""
+        return self.set_run_command(bool(value), self.control_supervisor.run_reverse, now)
+
+    def set_run_reverse(self, value: bool, now: float) -> RunAction:
+        """Class 0x29 attribute 4 alone."""
+        return self.set_run_command(self.control_supervisor.run_forward, bool(value), now)
+
+    def set_fault_reset(self, value: bool, now: float) -> bool:
+        """Class 0x29 attribute 12 Drive Fault Reset: resets on FALSE -> TRUE only; writing TRUE
+        over TRUE does nothing (ACG-ET2 manual, "Drive Fault Reset"). Returns whether a reset was made."""
+        self.advance(now)
+        if self.control_supervisor.update_fault_reset(bool(value)):
+            return self._trips.reset()
+        return False
+
+    def local_command(self, direction: Direction | None, now: float) -> None:
+        """Run or stop from the keypad or terminals, which the drive obeys when drv is not Field Bus."""
+        self.advance(now)
+        if self.control_from_net:
+            return
+        if direction is None:
+            self._run.stop()
+        else:
+            self._run.run(direction)
+        self._ramp.run(0.0)
+
+    def fault_reset(self, now: float) -> bool:
+        """A fault reset at ``now`` from outside the network (the test rig's): what a rising edge of
+        Drive Fault Reset does. Whether a trip was cleared."""
+        self.advance(now)
+        return self._trips.reset()
+
+    def set_speed_reference_rpm(self, rpm: int, now: float) -> None:
+        """Class 0x2A attribute 8 SpeedRef (0-24000 rpm): the network reference, in rpm."""
+        if not 0 <= rpm <= 24000:
+            raise RegisterError(RegisterRefusal.OUT_OF_RANGE, 0x0381, f"{rpm} rpm not in 0..24000")
+        self.write(0x0381, rpm, now)
+
+    def set_speed_reference(self, centihertz: int, now: float) -> None:
+        """Class 0x2A attribute 101 Reference Hz: the network reference, in 0.01 Hz."""
+        self.write(SPEED_REFERENCE.address, centihertz, now)
+
+    # -----------------------------------------------------------------------------------------
+    # Trips and lost command
+    # -----------------------------------------------------------------------------------------
+
+    def inject_trip(self, trip: Trip | int, now: float) -> Trip:
+        """Trip the drive as if ``trip`` occurred (a Trip, or a fault code of the table: the
+        first trip listed under it). The output is cut (free-run); a Fault Reset clears it."""
+        self.advance(now)
+        if not isinstance(trip, Trip):
+            trip = Trip.from_fault_code(trip)
+        self._trips.trip(trip)
+        return trip
+
+    @property
+    def trip(self) -> Trip | None:
+        return self._state.trip
+
+    @property
+    def faulted(self) -> bool:
+        """Class 0x29 attribute 10."""
+        return self._state.trip is not None
+
+    @property
+    def fault_code(self) -> int:
+        """Class 0x29 attribute 13: the Drive Fault Codes table value of the present trip."""
+        trip = self._state.trip
+        return NO_FAULT if trip is None else trip.fault_code
+
+    @property
+    def fault_history(self) -> list[Trip]:
+        """Every trip that occurred, oldest first (0x03E5 deletes it)."""
+        return self._state.fault_history
+
+    @property
+    def warnings(self) -> WarningInformation:
+        return self._state.warnings
+
+    @property
+    def warning(self) -> bool:
+        """A warning is active (0x0305 B12-B15 = 4). Class 0x29 attribute 11 is "Not supported"."""
+        return bool(self._state.warnings)
+
+    def on_io_connection_lost(self, now: float) -> None:
+        """The class 1 connection broke (timed out or closed)."""
+        self.advance(now)
+        self._watches.connection_lost(now)
+
+    def on_io_connection_opened(self, now: float) -> None:
+        """A class 1 connection is open and producing again: communication has returned."""
+        self.advance(now)
+        self._watches.connection_opened()
+
+    def on_modbus_activity(self, now: float, port: CommandPort = CommandPort.FIELDBUS) -> None:
+        """A Modbus request arrived: on the card (Modbus TCP; from the first one on, 5 s of silence
+        is a command loss) or, ``port`` INT485, on the built-in RS-485 (Pr.13 of silence is)."""
+        self.advance(now)
+        self._watches.activity(now, port)
+
+    @property
+    def command_lost(self) -> bool:
+        """The drive is in lost command mode on some protocol."""
+        return self._watches.lost
 
     # -----------------------------------------------------------------------------------------
     # Speeds
     # -----------------------------------------------------------------------------------------
 
-    def _max_hz(self) -> float:
-        return self._values[MAX_FREQUENCY.address] / 100
-
-    def _reference_hz(self) -> float:
-        if self._lost_reference is not None:
-            reference = self._lost_reference
-        elif self.reference_from_net or self.reference_from_int485:
-            # Both communication sources set the frequency command of 0x0005 / 0x0380 (ACG RS-485 manual).
-            reference = self._values[SPEED_REFERENCE.address] / 100
-        else:
-            reference = self._values[TARGET_FREQUENCY.address] / 100
-        return min(reference, self._max_hz())
-
     @property
     def poles(self) -> int:
-        return self._values[POLE_NUMBER.address]
+        return self._state.poles
 
     def hz_to_rpm(self, hz: float) -> int:
         """Synchronous speed: 120 * f / poles."""
-        return round(120 * hz / self.poles)
+        return self._state.hz_to_rpm(hz)
 
     def rpm_to_centihertz(self, rpm: int) -> int:
-        return round(rpm * self.poles * 100 / 120)
+        return self._state.rpm_to_centihertz(rpm)
 
     @property
     def output_frequency(self) -> int:
         """Output frequency in 0.01 Hz (class 0x2A attribute 100, 0x000A, 0x0311)."""
-        return round(abs(self._output_hz) * 100)
+        return round(abs(self._state.output_hz) * 100)
 
     @property
     def output_frequency_signed(self) -> float:
-        return self._output_hz
+        return self._state.output_hz
 
     @property
     def speed_reference(self) -> int:
         """The speed reference in use, 0.01 Hz."""
-        return round(self._reference_hz() * 100)
+        return round(self._state.reference_hz() * 100)
 
     @property
     def speed_actual_rpm(self) -> int:
         """Class 0x2A attribute 7: the output speed in rpm."""
-        return self.hz_to_rpm(abs(self._output_hz))
+        return self._state.hz_to_rpm(abs(self._state.output_hz))
 
     @property
     def speed_reference_rpm(self) -> int:
         """Class 0x2A attribute 8: the reference in rpm."""
-        return self.hz_to_rpm(self._reference_hz())
+        return self._state.hz_to_rpm(self._state.reference_hz())
 
     @property
     def accel_time(self) -> int:
         """ACC in 0.1 s (class 0x2A attribute 102)."""
-        return self._values[ACCEL_TIME.address]
+        return self._state.values[ACCEL_TIME.address]
 
     @property
     def decel_time(self) -> int:
         """dEC in 0.1 s (class 0x2A attribute 103)."""
-        return self._values[DECEL_TIME.address]
+        return self._state.values[DECEL_TIME.address]
 
     # -----------------------------------------------------------------------------------------
     # Status
@@ -356,78 +469,69 @@ class AcgDrive(RunCommands, Ramps, Trips, LostCommand, RegisterEffects, VirtualI
     @property
     def running(self) -> bool:
         """The output is on: running, or decelerating to a stop."""
-        return self._output_on
-
-    def _direction(self) -> Direction | None:
-        if not self._output_on:
-            return None
-        if self._output_hz != 0:
-            return Direction.FORWARD if self._output_hz > 0 else Direction.REVERSE
-        return self._command
+        return self._state.output_on
 
     @property
     def running_forward(self) -> bool:
         """Class 0x29 attribute 7."""
-        return self._direction() is Direction.FORWARD
+        return self._state.direction() is Direction.FORWARD
 
     @property
     def running_reverse(self) -> bool:
         """Class 0x29 attribute 8."""
-        return self._direction() is Direction.REVERSE
+        return self._state.direction() is Direction.REVERSE
 
     @property
     def ready(self) -> bool:
         """Class 0x29 attribute 9: 0 while a trip is active."""
-        return self._trip is None
+        return self._state.trip is None
 
     @property
     def drive_state(self) -> DriveState:
         """Class 0x29 attribute 6. Startup and Not Ready (resetting) pass in no time here."""
-        if self._trip is not None:
+        state = self._state
+        if state.trip is not None:
             return DriveState.FAULT_STOP
-        if self._output_on and self._command is not None:
+        if state.output_on and state.command is not None:
             return DriveState.ENABLED
-        if self._output_on:
+        if state.output_on:
             return DriveState.STOPPING
         return DriveState.READY
 
     @property
     def at_reference(self) -> bool:
         """Class 0x2A attribute 3: running, and the output frequency has reached the reference."""
-        return (self._output_on and self._command is not None and self._trip is None
-                and self._output_hz == self._target_hz())
+        return self._ramp.at_reference
 
     @property
     def accelerating(self) -> bool:
-        segment = self._segment()
-        return segment is not None and segment[1] and self._trip is None
+        return self._ramp.accelerating
 
     @property
     def decelerating(self) -> bool:
-        segment = self._segment()
-        return segment is not None and not segment[1]
+        return self._ramp.decelerating
 
     # -----------------------------------------------------------------------------------------
     # CM.94 Comm Update: pending and active communication settings
     # -----------------------------------------------------------------------------------------
 
     def _value(self, code: str) -> int:
-        return self._values[self.registers.by_code(code).address]
+        return self._state.values[self.registers.by_code(code).address]
 
     @property
     def active_comm_settings(self) -> CommSettings:
         """The settings the card runs with: those of the last CM.94 update (or of power-up)."""
-        return CommSettings.from_values(self._active_comm.__getitem__)
+        return self._comm.active
 
     @property
     def pending_comm_settings(self) -> CommSettings:
         """The CM parameters as written, which CM.94 = 1 would make active."""
-        return CommSettings.from_values(self._value)
+        return self._comm.pending
 
     @property
     def comm_update_pending(self) -> bool:
         """CM parameters changed without CM.94: the card's error LED flashes red every 2 s."""
-        return any(self._value(code) != self._active_comm[code] for code in COMM_UPDATE_CODES)
+        return self._comm.update_pending
 
     @property
     def status_parameter_addresses(self) -> tuple[int, ...]:
@@ -441,11 +545,6 @@ class AcgDrive(RunCommands, Ramps, Trips, LostCommand, RegisterEffects, VirtualI
         count = self._value("CM.50")
         return tuple(self._value(f"CM.{51 + i}") for i in range(count))
 
-    def _comm_update(self) -> None:
-        # "This action will prevent any data loss from a drive power loss": the CM group is saved.
-        self._save_some({r.address: self._values[r.address] for r in self.registers.group("CM") if r.saved})
-        self._active_comm = {code: self._value(code) for code in COMM_UPDATE_CODES}
-
     # -----------------------------------------------------------------------------------------
     # Register access
     # -----------------------------------------------------------------------------------------
@@ -458,10 +557,7 @@ class AcgDrive(RunCommands, Ramps, Trips, LostCommand, RegisterEffects, VirtualI
 
     def read(self, address: int) -> int:
         """The raw value of one register (signed for INT registers), as of the last ``advance``."""
-        self.register(address)
-        address = ALIASES.get(address, address)
-        compute = self._computed.get(address)
-        return compute() if compute is not None else self._values[address]
+        return self._computed.read(address)
 
     def write(self, address: int, value: int, now: float) -> None:
         """Write one register as a network client does, or raise ``RegisterError``."""
@@ -470,27 +566,17 @@ class AcgDrive(RunCommands, Ramps, Trips, LostCommand, RegisterEffects, VirtualI
         if register.access is RegisterAccess.READ:
             raise RegisterError(RegisterRefusal.READ_ONLY, address)
         register.check(value)
-        if register.access is RegisterAccess.WRITE_STOPPED and self._output_on:
+        if register.access is RegisterAccess.WRITE_STOPPED and self._state.output_on:
             if address == SAVE_PARAMETERS.address and value == 1:
                 # The writer gets an error status; whoever runs the emulator should see it too.
                 self._save_refused_log("parameter save refused (0x03E0 = 1 while the drive runs): nothing saved",
                                        now=now)
             raise RegisterError(RegisterRefusal.NOT_WHILE_RUNNING, address)
-        if self._parameter_locked and register.group in reg.KEYPAD_GROUPS:
+        if self._locks.parameter_locked and register.group in reg.KEYPAD_GROUPS:
             raise RegisterError(RegisterRefusal.READ_ONLY, address, "parameters are locked (0x03E8)")
-        target = ALIASES.get(address, address)
-        handler = self._write_handlers.get(target)
-        if handler is not None:
-            handler(self, target, value, now)
-        else:
-            self._values[target] = value
-        self._ramp(0.0)  # a 0 s ramp time takes effect at once
+        self._effects.write(ALIASES.get(address, address), value, now)
+        self._ramp.run(0.0)  # a 0 s ramp time takes effect at once
 
-    def _check_frequency(self, address: int, value: int) -> None:
-        if value > self._values[MAX_FREQUENCY.address]:
-            raise RegisterError(RegisterRefusal.OUT_OF_RANGE, address,
-                                f"{value / 100:.2f} Hz above dr.20 Max Freq "
-                                f"{self._values[MAX_FREQUENCY.address] / 100:.2f} Hz")
 
 __all__ = [
     "FAMILY",
@@ -506,6 +592,7 @@ __all__ = [
     "DriveState",
     "LostCommandMode",
     "RunAction",
+    "SaveRequest",
     "Trip",
     "drive_run_action",
 ]

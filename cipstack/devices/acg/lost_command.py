@@ -5,6 +5,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 from enum import IntEnum
+from typing import TYPE_CHECKING
 
 from .registers import (
     CMD_SOURCE,
@@ -16,6 +17,17 @@ from .registers import (
 )
 from .run_command import CommandPort
 from .trips import Trip
+
+if TYPE_CHECKING:
+    from .ramps import Ramp
+    from .state import AcgState
+    from .trips import TripLog
+
+_CMD_SOURCE = CMD_SOURCE.address
+_FREQ_REF_SOURCE = FREQ_REF_SOURCE.address
+_LOST_CMD_MODE = LOST_CMD_MODE.address
+_LOST_CMD_TIME = LOST_CMD_TIME.address
+_LOST_PRESET_FREQ = LOST_PRESET_FREQ.address
 
 #: ACG-ET2 manual, "Lost command conditions by protocol": a class 1 connection that stays broken for
 #: longer than one second, or a Modbus TCP server that receives nothing for five seconds, puts
@@ -37,7 +49,7 @@ class LostCommandMode(IntEnum):
 
 
 @dataclass
-class _CommandLossWatch:
+class CommandLossWatch:
     """One protocol's lost-command timers (ACG-ET2 manual, "Lost command conditions by protocol").
 
     ``detect_after``: the silence that puts the port in lost command mode, after which Pr.12 acts
@@ -69,55 +81,56 @@ class _CommandLossWatch:
 
 
 
-class LostCommand:
-    """Pr.12/Pr.13/Pr.14 (part of ``AcgDrive``)."""
+class CommandLossWatches:
+    """Pr.12/Pr.13/Pr.14 over the state's three watches: what silence on a port does to a drive
+    operated through it, and what the return of communication undoes."""
 
+    def __init__(self, state: AcgState, ramp: Ramp, trips: TripLog) -> None:
+        self._state = state
+        self._ramp = ramp
+        self._trips = trips
 
-    def on_io_connection_lost(self, now: float) -> None:
+    def connection_lost(self, now: float) -> None:
         """The class 1 connection broke (timed out or closed)."""
-        self.advance(now)
-        if self._io_watch.silent_since is None:
-            self._io_watch.silent_since = now
+        watch = self._state.io_watch
+        if watch.silent_since is None:
+            watch.silent_since = now
 
-    def on_io_connection_opened(self, now: float) -> None:
+    def connection_opened(self) -> None:
         """A class 1 connection is open and producing again: communication has returned."""
-        self.advance(now)
-        self._io_watch.clear()
+        self._state.io_watch.clear()
         self._restore_after_loss()
-        self._ramp(0.0)
+        self._ramp.run(0.0)
 
-    def on_modbus_activity(self, now: float, port: CommandPort = CommandPort.FIELDBUS) -> None:
-        """A Modbus request arrived: on the card (Modbus TCP; from the first one on, 5 s of silence
-        is a command loss) or, ``port`` INT485, on the built-in RS-485 (Pr.13 of silence is)."""
-        self.advance(now)
-        watch = self._int485_watch if port is CommandPort.INT485 else self._modbus_watch
+    def activity(self, now: float, port: CommandPort) -> None:
+        """A Modbus request arrived on the card (``port`` FIELDBUS) or on the built-in RS-485 (INT485)."""
+        watch = self._state.int485_watch if port is CommandPort.INT485 else self._state.modbus_watch
         watch.clear()
         watch.silent_since = now
         self._restore_after_loss()
-        self._ramp(0.0)
-
-    @property
-    def _watches(self) -> tuple[_CommandLossWatch, ...]:
-        return (self._io_watch, self._modbus_watch, self._int485_watch)
+        self._ramp.run(0.0)
 
     def _lost_time(self) -> float:
-        return self._values[LOST_CMD_TIME.address] / 10
+        return self._state.values[_LOST_CMD_TIME] / 10
 
-    def _timer_deadline(self) -> float | None:
-        if (self._io_watch.silent_since is None and self._modbus_watch.silent_since is None
-                and self._int485_watch.silent_since is None):
+    def deadline(self) -> float | None:
+        """When the earliest watch falls due, or None."""
+        state = self._state
+        if (state.io_watch.silent_since is None and state.modbus_watch.silent_since is None
+                and state.int485_watch.silent_since is None):
             return None  # nothing is silent: the common case, asked several times per O->T datagram
         lost_time = self._lost_time()
         earliest = None
-        for watch in (self._io_watch, self._modbus_watch, self._int485_watch):   # on every request: no genexpr
+        for watch in (state.io_watch, state.modbus_watch, state.int485_watch):   # on every request: no genexpr
             deadline = watch.deadline(lost_time)
             if deadline is not None and (earliest is None or deadline < earliest):
                 earliest = deadline
         return earliest
 
-    def _fire_timers(self, moment: float) -> None:
+    def fire(self, moment: float) -> None:
+        """Act on the watches due at ``moment``: lost command mode entered, or Pr.12 acting."""
         lost_time = self._lost_time()
-        for watch in self._watches:
+        for watch in self._state.watches:
             deadline = watch.deadline(lost_time)
             if deadline is None or deadline > moment:
                 continue
@@ -131,44 +144,49 @@ class LostCommand:
                 self._lost_command_action(watch.port)
 
     @property
-    def command_lost(self) -> bool:
+    def lost(self) -> bool:
         """The drive is in lost command mode on some protocol."""
-        return any(w.lost_since is not None for w in self._watches)
+        return any(w.lost_since is not None for w in self._state.watches)
 
     def _operated_from(self, port: CommandPort) -> bool:
         """drv or Frq is ``port``'s source."""
-        return (self._values[CMD_SOURCE.address] == port.command_source
-                or self._values[FREQ_REF_SOURCE.address] == port.frequency_source)
+        values = self._state.values
+        return values[_CMD_SOURCE] == port.command_source or values[_FREQ_REF_SOURCE] == port.frequency_source
 
-    def _lost_command_action(self, port: CommandPort = CommandPort.FIELDBUS) -> None:
+    def _lost_command_action(self, port: CommandPort) -> None:
         """Pr.12 after Pr.13 (ACG-ET2 manual, PR Group (Lost Command)), for a drive operated via the
         port that went silent ("while the drive is operated via network communication"): drv or
         Frq is that port's source."""
         if not self._operated_from(port):
             return
-        mode = LostCommandMode(self._values[LOST_CMD_MODE.address])
+        state = self._state
+        mode = LostCommandMode(state.values[_LOST_CMD_MODE])
         if mode is LostCommandMode.NONE:
             return                                  # "Maintains the previous status."
         if mode is LostCommandMode.FREE_RUN:        # Lost Command Trip, free-run stop
-            self._set_level_cause(Trip.LOST_COMMAND, True, free_run=True)
+            self._trips.set_level_cause(Trip.LOST_COMMAND, True, free_run=True)
         elif mode is LostCommandMode.DEC:           # Lost Command Trip, deceleration stop
-            self._set_level_cause(Trip.LOST_COMMAND, True, free_run=False)
-            self._settle()
+            self._trips.set_level_cause(Trip.LOST_COMMAND, True, free_run=False)
+            self._ramp.settle()
         else:
-            self._warnings |= WarningInformation.LOST_COMMAND
+            state.warnings |= WarningInformation.LOST_COMMAND
             if mode is LostCommandMode.HOLD_INPUT:    # the speed reference before the loss
-                self._lost_reference = self._reference_hz()
+                state.lost_reference = state.reference_hz()
             elif mode is LostCommandMode.HOLD_OUTPUT:  # the running speed before the loss
-                self._lost_reference = abs(self._output_hz)
+                state.lost_reference = abs(state.output_hz)
             else:                                      # Lost Preset: Pr.14
-                self._lost_reference = self._values[LOST_PRESET_FREQ.address] / 100
+                state.lost_reference = state.values[_LOST_PRESET_FREQ] / 100
 
     def _restore_after_loss(self) -> None:
         """Communication is back. The Lost Command warning clears and the reference is the
         network's again; the Lost Command trip is a level-type trip (0x0332 B2) and clears
         with its cause, leaving the drive stopped until a run command's next 0 -> 1 change."""
-        if self._io_watch.acted or self._modbus_watch.acted or self._int485_watch.acted:
+        state = self._state
+        if state.io_watch.acted or state.modbus_watch.acted or state.int485_watch.acted:
             return                                  # another protocol is still lost
-        self._warnings &= ~WarningInformation.LOST_COMMAND
-        self._lost_reference = None
-        self._set_level_cause(Trip.LOST_COMMAND, False)
+        state.warnings &= ~WarningInformation.LOST_COMMAND
+        state.lost_reference = None
+        self._trips.set_level_cause(Trip.LOST_COMMAND, False)
+
+
+__all__ = ["IO_BREAK_TIME", "MODBUS_SILENCE_TIME", "CommandLossWatch", "CommandLossWatches", "LostCommandMode"]

@@ -94,7 +94,7 @@ class MbapBuffer:
         """The complete frames ``data`` finishes; raises ``MbapLengthError`` (with the frames before
         it) on an impossible length."""
         self._buffer += data
-        frames = []
+        frames: list[bytes] = []
         while len(self._buffer) >= MBAP_SIZE:
             _, _, length, _ = MBAP.unpack_from(self._buffer)
             if not 2 <= length <= MAX_LENGTH:

@@ -562,7 +562,8 @@ def _groups() -> list[Register]:
     registers: list[Register] = []
     for group, numbers in LISTED_CODES.items():
         for number in numbers:
-            registers.append(by_code.pop(f"{group}.{number}", None) or _listed(group, number))
+            code = f"{group}.{number}"
+            registers.append(by_code.pop(code) if code in by_code else _listed(group, number))
     registers.extend(by_code.values())  # CM.94, the one described code no address table lists
     return registers
 

@@ -3,18 +3,22 @@ Drive State, and the commands of the common and control areas (ACG RS-485 manual
 
 from __future__ import annotations
 
-from collections.abc import Iterator
-from contextlib import contextmanager
 from enum import Enum, IntEnum
+from typing import TYPE_CHECKING
 
 from .registers import (
     CMD_SOURCE,
     CMD_SOURCE_FIELDBUS,
     CMD_SOURCE_INT485,
-    FREQ_REF_SOURCE,
     FREQ_REF_SOURCE_FIELDBUS,
     FREQ_REF_SOURCE_INT485,
 )
+
+if TYPE_CHECKING:
+    from .ramps import Ramp
+    from .state import AcgState
+
+_CMD_SOURCE = CMD_SOURCE.address
 
 
 class CommandPort(Enum):
@@ -119,109 +123,41 @@ class ControlSupervisor:
 
 
 
-class RunCommands:
-    """Run, stop and fault reset as the network and the keypad command them (part of ``AcgDrive``)."""
+class RunControl:
+    """Run and stop as the drive obeys them, whoever commands (the Control Supervisor, the common
+    and control areas, the keypad, the virtual inputs)."""
 
+    def __init__(self, state: AcgState, ramp: Ramp) -> None:
+        self._state = state
+        self._ramp = ramp
 
-    def _apply_run_action(self, action: RunAction) -> None:
+    def apply(self, action: RunAction) -> None:
+        """What a row of the Drive Run table commands."""
         if action is RunAction.STOP:
-            self._stop()
+            self.stop()
         elif action is RunAction.RUN_FORWARD:
-            self._run(Direction.FORWARD)
+            self.run(Direction.FORWARD)
         elif action is RunAction.RUN_REVERSE:
-            self._run(Direction.REVERSE)
+            self.run(Direction.REVERSE)
 
-    def _run(self, direction: Direction) -> None:
-        if self._trip is not None:
+    def run(self, direction: Direction) -> None:
+        state = self._state
+        if state.trip is not None:
             return                                  # a tripped drive ignores run commands
-        self._command = direction
-        self._output_on = True
+        state.command = direction
+        state.output_on = True
 
-    def _stop(self) -> None:
-        self._command = None
-        self._settle()
+    def stop(self) -> None:
+        self._state.command = None
+        self._ramp.settle()
 
-    @contextmanager
-    def commands_from(self, port: CommandPort) -> Iterator[None]:
-        """Writes made inside come in through ``port``: a run command in them is obeyed when drv is
-        that port's command source (``CommandPort``). Outside, writes are the card's. (A request path
-        may set ``command_port`` itself and put the previous one back, as ``commands_from`` does.)"""
-        previous, self.command_port = self.command_port, port
-        try:
-            yield
-        finally:
-            self.command_port = previous
+    def free_run(self) -> None:
+        """A free-run stop: the output is cut at once."""
+        self._ramp.free_run()
 
-    def _port_commands(self) -> bool:
+    def port_commands(self) -> bool:
         """The drive obeys run commands of the port the present write came in through."""
-        return self._values[CMD_SOURCE.address] == self.command_port.command_source
+        return self._state.values[_CMD_SOURCE] == self._state.command_port.command_source
 
-    @property
-    def control_from_int485(self) -> bool:
-        """drv is 3 (Int485): the built-in RS-485 port commands run and stop."""
-        return self._values[CMD_SOURCE.address] == CMD_SOURCE_INT485
 
-    @property
-    def reference_from_int485(self) -> bool:
-        """Frq is 6 (Int485): the built-in RS-485 port sets the speed reference."""
-        return self._values[FREQ_REF_SOURCE.address] == FREQ_REF_SOURCE_INT485
-
-    @property
-    def control_from_net(self) -> bool:
-        """Class 0x29 attribute 14: drv is 4 (Field Bus)."""
-        return self._values[CMD_SOURCE.address] == CMD_SOURCE_FIELDBUS
-
-    @property
-    def reference_from_net(self) -> bool:
-        """Class 0x2A attribute 29: Frq is 8 (Field Bus)."""
-        return self._values[FREQ_REF_SOURCE.address] == FREQ_REF_SOURCE_FIELDBUS
-
-    def set_run_command(self, forward: bool, reverse: bool, now: float) -> RunAction:
-        """Forward and Reverse Run Cmd (class 0x29 attributes 3 and 4) written together, as an
-        output assembly does; returns what the Drive Run table made of it. The card keeps the
-        values whatever the command source; the drive acts on them only when drv is Field Bus."""
-        self.advance(now)
-        action = self.control_supervisor.update_run(bool(forward), bool(reverse))
-        if self.control_from_net:
-            self._apply_run_action(action)
-            self._ramp(0.0)
-        return action
-
-    def set_run_forward(self, value: bool, now: float) -> RunAction:
-        """Class 0x29 attribute 3 alone."""
-        return self.set_run_command(bool(value), self.control_supervisor.run_reverse, now)
-
-    def set_run_reverse(self, value: bool, now: float) -> RunAction:
-        """Class 0x29 attribute 4 alone."""
-        return self.set_run_command(self.control_supervisor.run_forward, bool(value), now)
-
-    def set_fault_reset(self, value: bool, now: float) -> bool:
-        """Class 0x29 attribute 12 Drive Fault Reset: resets on FALSE -> TRUE only; writing TRUE
-        over TRUE does nothing (ACG-ET2 manual, "Drive Fault Reset"). Returns whether a reset was made."""
-        self.advance(now)
-        if self.control_supervisor.update_fault_reset(bool(value)):
-            return self._fault_reset()
-        return False
-
-    def local_command(self, direction: Direction | None, now: float) -> None:
-        """Run or stop from the keypad or terminals, which the drive obeys when drv is not Field Bus."""
-        self.advance(now)
-        if self.control_from_net:
-            return
-        if direction is None:
-            self._stop()
-        else:
-            self._run(direction)
-        self._ramp(0.0)
-
-    def fault_reset(self, now: float) -> bool:
-        """A fault reset at ``now`` from outside the network (the test rig's): what a rising edge of
-        Drive Fault Reset does. Whether a trip was cleared."""
-        self.advance(now)
-        return self._fault_reset()
-
-    def _fault_reset(self) -> bool:
-        if self._trip is None or self._trip in self._level_causes:
-            return False                            # a level-type trip holds while its cause lasts
-        self._trip = None
-        return True
+__all__ = ["CommandPort", "ControlSupervisor", "Direction", "DriveState", "RunAction", "RunControl", "drive_run_action"]

@@ -4,13 +4,17 @@ the monitoring words 0x0330-0x0335 (ACG RS-485 manual)."""
 from __future__ import annotations
 
 from enum import Enum
+from typing import TYPE_CHECKING
 
 from .registers import (
     LatchTrip1,
     LatchTrip2,
     LevelTrip,
-    WarningInformation,
 )
+
+if TYPE_CHECKING:
+    from .ramps import Ramp
+    from .state import AcgState
 
 
 class Trip(Enum):
@@ -75,57 +79,44 @@ class Trip(Enum):
 NO_FAULT = 0x0000
 
 
-class Trips:
-    """Trips and warnings of the drive (part of ``AcgDrive``)."""
+class TripLog:
+    """Trips and their causes: a trip cuts the output and is logged in the fault history; a latch
+    type holds until a Fault Reset, a level type while its cause lasts."""
 
+    def __init__(self, state: AcgState, ramp: Ramp) -> None:
+        self._state = state
+        self._ramp = ramp
 
-    def inject_trip(self, trip: Trip | int, now: float) -> Trip:
-        """Trip the drive as if ``trip`` occurred (a Trip, or a fault code of the table: the
-        first trip listed under it). The output is cut (free-run); a Fault Reset clears it."""
-        self.advance(now)
-        if not isinstance(trip, Trip):
-            trip = Trip.from_fault_code(trip)
-        self._trip_drive(trip)
-        return trip
-
-    def _trip_drive(self, trip: Trip, free_run: bool = True) -> None:
-        self.fault_history.append(trip)
-        if self._trip is not None:
+    def trip(self, trip: Trip, free_run: bool = True) -> None:
+        """``trip`` occurred: logged; the drive trips unless it is tripped already."""
+        state = self._state
+        state.fault_history.append(trip)
+        if state.trip is not None:
             return
-        self._trip = trip
-        self._command = None
+        state.trip = trip
+        state.command = None
         if free_run:
-            self._free_run()
+            self._ramp.free_run()
 
-    def _set_level_cause(self, trip: Trip, active: bool, free_run: bool = True) -> None:
-        if active and trip not in self._level_causes:
-            self._level_causes.add(trip)
-            self._trip_drive(trip, free_run)
-        elif not active and trip in self._level_causes:
-            self._level_causes.discard(trip)
-            if self._trip is trip:
-                self._trip = None                   # level type: clears with its cause
-                self._settle()
+    def set_level_cause(self, trip: Trip, active: bool, free_run: bool = True) -> None:
+        """The cause of level-type ``trip`` is present (it trips) or gone (the trip clears)."""
+        causes = self._state.level_causes
+        if active and trip not in causes:
+            causes.add(trip)
+            self.trip(trip, free_run)
+        elif not active and trip in causes:
+            causes.discard(trip)
+            if self._state.trip is trip:
+                self._state.trip = None             # level type: clears with its cause
+                self._ramp.settle()
 
-    @property
-    def trip(self) -> Trip | None:
-        return self._trip
+    def reset(self) -> bool:
+        """A Fault Reset: whether a trip was cleared."""
+        state = self._state
+        if state.trip is None or state.trip in state.level_causes:
+            return False                            # a level-type trip holds while its cause lasts
+        state.trip = None
+        return True
 
-    @property
-    def faulted(self) -> bool:
-        """Class 0x29 attribute 10."""
-        return self._trip is not None
 
-    @property
-    def fault_code(self) -> int:
-        """Class 0x29 attribute 13: the Drive Fault Codes table value of the present trip."""
-        return NO_FAULT if self._trip is None else self._trip.fault_code
-
-    @property
-    def warnings(self) -> WarningInformation:
-        return self._warnings
-
-    @property
-    def warning(self) -> bool:
-        """A warning is active (0x0305 B12-B15 = 4). Class 0x29 attribute 11 is "Not supported"."""
-        return bool(self._warnings)
+__all__ = ["NO_FAULT", "Trip", "TripLog"]

@@ -23,7 +23,9 @@ closes virtual input n + 1, whose function is CM.(70 + n); CM.86 Virt DI Status 
 
 from __future__ import annotations
 
-from ..registers import RegisterError, RegisterRefusal
+from typing import TYPE_CHECKING
+
+from ..registers import RegisterError, RegisterMap, RegisterRefusal
 from .registers import (
     ACG_REGISTERS,
     CMD_SOURCE,
@@ -32,6 +34,13 @@ from .registers import (
 )
 from .run_command import Direction
 from .trips import Trip
+
+if TYPE_CHECKING:
+    from .run_command import RunControl
+    from .state import AcgState
+    from .trips import TripLog
+
+_CMD_SOURCE = CMD_SOURCE.address
 
 VIRTUAL_INPUT_CONTROL = 0x0385
 FX, RX, RST, EXTERNAL_TRIP, BX = 1, 2, 3, 4, 5
@@ -42,58 +51,72 @@ TERMINAL_FUNCTION_ADDRESSES = tuple(ACG_REGISTERS.by_code(f"In.{65 + n}").addres
 
 
 class VirtualInputs:
-    """CM.70-CM.77 and 0x0385 (part of ``AcgDrive``)."""
+    """CM.70-CM.77 and 0x0385: the functions of the closed inputs, and what FX/RX last commanded."""
+
+    def __init__(self, state: AcgState, registers: RegisterMap, trips: TripLog, run: RunControl) -> None:
+        self._state = state
+        self._registers = registers
+        self._trips = trips
+        self._run = run
+        #: The functions of the inputs closed now.
+        self._closed_functions: frozenset[int] = frozenset()
+        #: What FX and RX last commanded (None: stop).
+        self._virtual_command: Direction | None = None
 
     def _virtual_functions(self) -> frozenset[int]:
         """The functions of the closed virtual inputs."""
-        bits = self._values[VIRTUAL_INPUT_CONTROL]
-        return frozenset(self._values[a] for n, a in enumerate(VIRTUAL_FUNCTION_ADDRESSES) if bits >> n & 1)
+        values = self._state.values
+        bits = values[VIRTUAL_INPUT_CONTROL]
+        return frozenset(values[a] for n, a in enumerate(VIRTUAL_FUNCTION_ADDRESSES) if bits >> n & 1)
 
-    def _write_virtual_inputs(self, address: int, value: int, now: float) -> None:
-        self._values[VIRTUAL_INPUT_CONTROL] = value
-        self._apply_virtual_inputs()
+    def write_inputs(self, address: int, value: int, now: float) -> None:
+        """0x0385 (0x0322) written: the inputs open and close."""
+        self._state.values[VIRTUAL_INPUT_CONTROL] = value
+        self._apply()
 
-    def _write_input_function(self, address: int, value: int, now: float) -> None:
+    def write_function(self, address: int, value: int, now: float) -> None:
+        """A function set at CM.70-CM.77 or In.65-In.69: refused when another input has it."""
+        values = self._state.values
         if value:
             for other in (*VIRTUAL_FUNCTION_ADDRESSES, *TERMINAL_FUNCTION_ADDRESSES):
-                if other != address and self._values[other] == value:
+                if other != address and values[other] == value:
                     raise RegisterError(RegisterRefusal.OUT_OF_RANGE, address,
-                                        f"function {value} is already set at {self.registers[other].code} "
+                                        f"function {value} is already set at {self._registers[other].code} "
                                         f"(a function cannot be set redundantly)")
-        self._values[address] = value
+        values[address] = value
         if address in VIRTUAL_FUNCTION_ADDRESSES:
-            self._apply_virtual_inputs()
+            self._apply()
 
     def _virtual_run_command(self, closed: frozenset[int]) -> Direction | None:
         """What FX and RX command at the present drv (None: stop)."""
         forward, reverse = FX in closed, RX in closed
-        if self._values[CMD_SOURCE.address] == CMD_SOURCE_FX_RX_2:
+        if self._state.values[_CMD_SOURCE] == CMD_SOURCE_FX_RX_2:
             return (Direction.REVERSE if reverse else Direction.FORWARD) if forward else None
         if forward != reverse:
             return Direction.FORWARD if forward else Direction.REVERSE
         return None
 
-    def _apply_virtual_inputs(self) -> None:
+    def _apply(self) -> None:
         closed = self._virtual_functions()
         rising = closed - self._closed_functions
         self._closed_functions = closed
         if RST in rising:
-            self._fault_reset()
+            self._trips.reset()
         if EXTERNAL_TRIP in rising:
-            self._trip_drive(Trip.EXTERNAL_TRIP)
-        self._set_level_cause(Trip.BX, self._emergency_stop())
+            self._trips.trip(Trip.EXTERNAL_TRIP)
+        self._trips.set_level_cause(Trip.BX, self.emergency_stop())
         command = self._virtual_run_command(closed)
         previous, self._virtual_command = self._virtual_command, command
-        if self._values[CMD_SOURCE.address] not in (CMD_SOURCE_FX_RX_1, CMD_SOURCE_FX_RX_2) or command == previous:
+        if self._state.values[_CMD_SOURCE] not in (CMD_SOURCE_FX_RX_1, CMD_SOURCE_FX_RX_2) or command == previous:
             return
         if command is None:
-            self._stop()
+            self._run.stop()
         else:
-            self._run(command)
+            self._run.run(command)
 
-    def _emergency_stop(self) -> bool:
+    def emergency_stop(self) -> bool:
         """BX: the common area's emergency stop bit (0x0006 B4) or a closed virtual BX input."""
-        return bool(self._values[0x0006] & 0x10) or BX in self._closed_functions
+        return bool(self._state.values[0x0006] & 0x10) or BX in self._closed_functions
 
 
 __all__ = ["TERMINAL_FUNCTION_ADDRESSES", "VIRTUAL_FUNCTION_ADDRESSES", "VIRTUAL_INPUT_CONTROL", "VirtualInputs"]
