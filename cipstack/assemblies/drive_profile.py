@@ -10,11 +10,30 @@ Each field links the Control Supervisor (0x29) or AC/DC Drive (0x2A) attribute i
 
 from __future__ import annotations
 
+from enum import IntEnum
+
 from ..cip.types import INT, USINT
 from .schema import AssemblyField, AssemblySchema, bit, word
 
 CONTROL_SUPERVISOR = 0x29
 AC_DC_DRIVE = 0x2A
+
+
+class DriveState(IntEnum):
+    """Control Supervisor attribute 6 "Drive State", the byte ``drive_state`` of input 71 carries.
+
+    One state machine for both families: the ACG lists 0-6 (ACG-ET2 manual, class 0x29 attribute 6),
+    the Omron option board 1-7 (CompoNet manual, Tables B-8 and D-4), Faulted being the state a
+    trip holds after its Fault Stop."""
+
+    VENDOR_SPECIFIC = 0
+    STARTUP = 1
+    NOT_READY = 2
+    READY = 3
+    ENABLED = 4
+    STOPPING = 5
+    FAULT_STOP = 6
+    FAULTED = 7
 
 
 def _speed(name: str, unit: str, scale: float, attribute: int, help_text: str) -> AssemblyField:

@@ -6,6 +6,7 @@ from __future__ import annotations
 from enum import Enum, IntEnum
 from typing import TYPE_CHECKING
 
+from ...assemblies.drive_profile import DriveState
 from .registers import (
     CMD_SOURCE,
     CMD_SOURCE_FIELDBUS,
@@ -38,18 +39,6 @@ class CommandPort(Enum):
 class Direction(IntEnum):
     FORWARD = 1
     REVERSE = -1
-
-
-class DriveState(IntEnum):
-    """Class 0x29 attribute 6 "Drive State" (ACG-ET2 manual)."""
-
-    VENDOR_SPECIFIC = 0
-    STARTUP = 1
-    NOT_READY = 2
-    READY = 3
-    ENABLED = 4
-    STOPPING = 5
-    FAULT_STOP = 6
 
 
 class RunAction(Enum):

@@ -169,8 +169,8 @@ class OmronDevice(Device):
                 self.assembly.add_assembly(self._point(instance))
         # Table E-5 gives 0x16 for an instance that does not exist, in every object the board serves
         # (Identity, Message Router and Assembly as well as appendices C/D): one answer for the device.
-        for obj in self.router.objects.values():
-            obj.missing_instance_status = MISSING_INSTANCE
+        for served in self.router.objects.values():
+            served.missing_instance_status = MISSING_INSTANCE
         self._start()
 
     # -- the option board as its objects see it ------------------------------------------------

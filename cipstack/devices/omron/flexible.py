@@ -3,13 +3,14 @@
 
 from __future__ import annotations
 
-from collections.abc import Mapping, Sequence
+from collections.abc import Iterator, Mapping, Sequence
 from dataclasses import dataclass
 from enum import Enum
 
 from ...errors import BadRequest
-from ..registers import RegisterAccess, RegisterError
+from ..registers import RegisterAccess
 from .registers import (
+    Parameter,
     RegisterSet,
 )
 
@@ -116,45 +117,27 @@ def validate_flexible(values: Mapping[str, int], registers: RegisterSet, inverte
     return FlexibleMapping(outputs, inputs)
 
 
-# -- states and commands -----------------------------------------------------------------------------
-
-
-class FlexibleFormat:
-    """Assemblies 139/159 through the mapped registers (part of ``Inverter``)."""
-
-    def flexible_output(self, words: Sequence[int], now: float) -> None:
-        """The output words of assembly 139, written to the mapped registers in order (appendix F)."""
-        if self.flexible is None:
-            raise RuntimeError("the flexible format is not active (P046 = 6 and a valid P160-P179 at start-up)")
-        mapping = self.flexible.outputs
-        if len(words) != len(mapping):
-            raise ValueError(f"flexible output is {len(mapping)} words, got {len(words)}")
-        self.advance(now)
-        i = 0
-        while i < len(mapping):
-            address, word = mapping[i], words[i] & 0xFFFF
+def flexible_writes(mapping: FlexibleMapping, registers: RegisterSet,
+                    words: Sequence[int]) -> Iterator[tuple[Parameter, int]]:
+    """The register writes the output words of assembly 139 make, in order (appendix F): each mapped
+    register and its value (a double word from two words, signed types signed)."""
+    outputs = mapping.outputs
+    i = 0
+    while i < len(outputs):
+        address, word = outputs[i], words[i] & 0xFFFF
+        i += 1
+        if not address:
+            continue   # Note 2: a reserved word is ignored
+        found = registers.word(address)
+        if found is None:   # validate_flexible let no such address through
+            raise AssertionError(f"{address:04X}h is not a register")
+        parameter, index = found
+        value = word
+        if parameter.words == 2 and index == 0:
+            value = word << 16 | (words[i] & 0xFFFF)
             i += 1
-            if not address:
-                continue   # Note 2: a reserved word is ignored
-            found = self.registers.word(address)
-            if found is None:   # validate_flexible let no such address through
-                raise AssertionError(f"{address:04X}h is not a register")
-            parameter, index = found
-            value = word
-            if parameter.words == 2 and index == 0:
-                value = word << 16 | (words[i] & 0xFFFF)
-                i += 1
-            if parameter.signed and parameter.words == 1 and value >= 0x8000:
-                value -= 0x10000
-            elif parameter.signed and parameter.words == 2 and index == 0 and value >= 0x80000000:
-                value -= 1 << 32
-            try:
-                self._write(parameter, value, now)
-            except RegisterError:
-                self.flexible_write_errors += 1
-
-    def flexible_input(self) -> list[int]:
-        """The input words of assembly 159: each mapped register's word, 0 for a reserved word."""
-        if self.flexible is None:
-            raise RuntimeError("the flexible format is not active (P046 = 6 and a valid P160-P179 at start-up)")
-        return [self.read_word(address) if address else 0 for address in self.flexible.inputs]
+        if parameter.signed and parameter.words == 1 and value >= 0x8000:
+            value -= 0x10000
+        elif parameter.signed and parameter.words == 2 and index == 0 and value >= 0x80000000:
+            value -= 1 << 32
+        yield parameter, value

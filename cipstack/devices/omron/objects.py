@@ -212,10 +212,13 @@ class DiscreteInputPointObject(BoundObject):
             else:
                 def value(mask: int = mask) -> int:
                     return int(bool(board.inverter.status().inputs & mask))
-            self.add_instance(n, value=self.bound(value),
-                              override=self.bound(lambda mask=mask: int(bool(board.inverter.option_command
-                                                                              .input_overrides & mask)),
-                                                  lambda on, mask=mask: self._override(mask, on)))
+            def overridden(mask: int = mask) -> int:
+                return int(bool(board.inverter.option_command.input_overrides & mask))
+
+            def override(on: int, mask: int = mask) -> None:
+                self._override(mask, on)
+
+            self.add_instance(n, value=self.bound(value), override=self.bound(overridden, override))
 
     def _override(self, mask: int, on: int) -> None:
         current = self.board.inverter.option_command.input_overrides
@@ -229,9 +232,13 @@ class DiscreteOutputPointObject(BoundObject):
         super().__init__(DISCRETE_OUTPUT_SPEC, board)
         for n in range(1, len(traits.output_terminals) + 1):
             mask = 1 << (n - 1)
-            self.add_instance(n, value=self.bound(
-                lambda mask=mask: int(bool(board.inverter.option_command.outputs & mask)),
-                lambda on, mask=mask: self._set(mask, on)))
+            def value(mask: int = mask) -> int:
+                return int(bool(board.inverter.option_command.outputs & mask))
+
+            def set_value(on: int, mask: int = mask) -> None:
+                self._set(mask, on)
+
+            self.add_instance(n, value=self.bound(value, set_value))
 
     def _set(self, mask: int, on: int) -> None:
         current = self.board.inverter.option_command.outputs

@@ -282,7 +282,7 @@ _COIL_DATA_1 = tuple(Bit(index, name, description, 0x10 + index, writable=False)
 ))
 
 _I570 = "I570 B-4-2"
-_HZ = dict(scale=0.01, unit="Hz")
+_HZ: dict[str, Any] = {"scale": 0.01, "unit": "Hz"}
 
 
 def _terminal_functions(family: tuple[Family, ...], count: int, base: int | None) -> tuple[Parameter, ...]:

@@ -4,25 +4,19 @@ fields and the status the assemblies report."""
 
 from __future__ import annotations
 
+from collections.abc import Mapping
 from dataclasses import dataclass
 from enum import Enum, IntEnum
+from typing import TYPE_CHECKING
 
+from ...assemblies.drive_profile import DriveState
 from ..registers import RegisterError
 from .registers import (
     SpeedUnit,
 )
 
-
-class DriveState(IntEnum):
-    """Drive Status of assemblies 71/173 and Control Supervisor attribute 6 (Tables B-8, D-4)."""
-
-    STARTUP = 1
-    NOT_READY = 2
-    READY = 3
-    ENABLED = 4
-    STOPPING = 5
-    FAULT_STOP = 6
-    FAULTED = 7
+if TYPE_CHECKING:
+    from .flexible import FlexibleMapping, FlexibleMappingError
 
 
 class DriveStateDetail(IntEnum):
@@ -110,6 +104,61 @@ class Status:
     status_c: int                   # inverter status C (0005h)
 
 
+class InverterState:
+    """What one inverter and its option board are at one instant: the state the components of
+    ``Inverter`` share (given it at construction) and change."""
+
+    # Read many times per class 1 datagram: slots keep each read one step.
+    __slots__ = ("armed_fwd", "armed_rev", "armed_rst", "cmd", "coils", "connection_path", "flexible",
+                 "flexible_error", "force_status", "free_run_inputs", "frequency", "idle", "last_ok", "last_trip",
+                 "local_reference", "local_run", "net_error", "pending_trip", "run_since", "t", "terminal_functions",
+                 "terminals", "trip", "values")
+
+    def __init__(self, values: Mapping[str, int], now: float) -> None:
+        #: Physical intelligent input terminals, bit n-1 = terminal [n] (the test rig's wiring).
+        self.terminals = 0
+        #: Run command of the local sources (FW/RV terminals, operator): +1, -1 or 0.
+        self.local_run = 0
+        #: Frequency reference of the local sources (terminal analog input), 0.01 Hz.
+        self.local_reference = 0
+        #: The last trip (d081), kept across a power cycle.
+        self.last_trip = 0
+        self.power_on(values, now)
+
+    def power_on(self, values: Mapping[str, int], now: float) -> None:
+        """The inverter switched on at ``now`` with ``values`` (function code -> value)."""
+        self.t = now
+        self.values: dict[str, int] = dict(values)
+        self.frequency = 0.0            # signed output frequency, 0.01 Hz (negative: reverse)
+        self.trip = 0                   # n of En, 0 when not tripped
+        self.pending_trip = 0           # trip to raise once a "deceleration and trip" stop ends
+        self.force_status = False
+        self.cmd = OptionCommand()
+        self.coils = 0
+        self.last_ok: float | None = None
+        self.run_since: float | None = None
+        self.net_error = False
+        self.idle = False
+        # What the option board read from the inverter at its start (``OptionBoard.start``).
+        self.terminal_functions: tuple[int, ...] = ()
+        #: The input terminals whose function is FRS (free-run stop), bit n-1 = terminal [n].
+        self.free_run_inputs = 0
+        self.connection_path = 0
+        # Note to Tables B-2/B-6/B-10/B-19/B-25: FWD, REV and RST act only after a 0 -> 1 transition
+        # following power-on or a trip reset; "armed" means the bit has been seen at 0 since.
+        self.armed_fwd = self.armed_rev = self.armed_rst = False
+        self.flexible: FlexibleMapping | None = None
+        self.flexible_error: FlexibleMappingError | None = None
+
+    def raise_trip(self, number: int) -> None:
+        """Trip the inverter with En (none if it is tripped already): the output is cut."""
+        if self.trip:
+            return
+        self.trip = self.last_trip = number
+        self.pending_trip = 0
+        self.frequency = 0.0   # the output is cut; the speed monitor reads 0
+
+
 class InverterModeError(RegisterError):
     """A torque-related register written outside the constant-torque IM mode (section 4-4 note)."""
 
@@ -120,3 +169,7 @@ _DIR = 1 << 2
 _EXT = 1 << 3
 _RS = 1 << 4
 _IN_SHIFT = 7    # coil data 0 bit 7 is intelligent input [1] (Table 18)
+
+
+__all__ = ["DriveState", "DriveStateDetail", "InverterModeError", "InverterState", "NetworkAction", "OptionCommand",
+           "Source", "Status"]
