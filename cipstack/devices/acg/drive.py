@@ -230,7 +230,7 @@ class AcgDrive(TimedSimulation):
         # At rest (``_at_rest``) moving on is the clock alone: called several times per request and
         # per O->T datagram, it skips the timer and ramp steps that would find nothing to do.
         state = self._state
-        if state.output_on or now < state.time or state.watched:
+        if state.output_on or now < state.time or not state.at_rest():
             TimedSimulation.advance(self, now)   # ramps, timers; or the error for a time gone backwards
         else:
             state.time = now
@@ -240,7 +240,7 @@ class AcgDrive(TimedSimulation):
         # traffic) nothing ramps, counts or times out: moving on is the clock alone, which is all
         # ``_run_until`` does with the output off, and there is no deadline.
         state = self._state
-        if not state.output_on and not state.watched:
+        if state.at_rest():
             if now > state.time:
                 state.time = now
             return None
@@ -249,7 +249,7 @@ class AcgDrive(TimedSimulation):
     def _at_rest(self) -> bool:
         # Output off: no ramp and no run-time counting (``_run_until``); no command-loss watch
         # running: no timer (``_timer_deadline``). The stopped drive of most explicit traffic.
-        return not self._state.output_on and not self._state.watched
+        return self._state.at_rest()
 
     # -----------------------------------------------------------------------------------------
     # Commands

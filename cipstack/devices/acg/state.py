@@ -86,11 +86,12 @@ class AcgState:
     def watches(self) -> tuple[CommandLossWatch, CommandLossWatch, CommandLossWatch]:
         return self.io_watch, self.modbus_watch, self.int485_watch
 
-    @property
-    def watched(self) -> bool:
-        """Some command-loss watch is running (something has gone silent): a timer is pending."""
-        return (self.io_watch.silent_since is not None or self.modbus_watch.silent_since is not None
-                or self.int485_watch.silent_since is not None)
+    def at_rest(self) -> bool:
+        """Output off (nothing ramps, nothing counts) and no command-loss watch running (no timer): the
+        stopped drive of most explicit traffic, which time moves on by the clock alone. A method, not a
+        property: it is asked on every request, and a method call costs less."""
+        return (not self.output_on and self.io_watch.silent_since is None and self.modbus_watch.silent_since is None
+                and self.int485_watch.silent_since is None)
 
     # -- speeds --------------------------------------------------------------------------------
     def max_hz(self) -> float:
