@@ -40,7 +40,8 @@ class _SubParsers(argparse._SubParsersAction):  # type: ignore[type-arg]  # gene
         if text is not None:
             kwargs.update(help=text.help, description=text.description_text(), epilog=text.epilog())
         kwargs.setdefault("formatter_class", _Formatter)
-        return super().add_parser(name, **kwargs)
+        parser: argparse.ArgumentParser = super().add_parser(name, **kwargs)
+        return parser
 
 
 class _Parser(argparse.ArgumentParser):

@@ -708,7 +708,7 @@ class _Checker:
         """A member's size in bits: as written, or else the size of what it refers to (a member
         naming its own assembly, empty-sized, is the assembly's whole data)."""
         if size.kind is FieldKind.INT:
-            return size.value
+            return _int(size)
         reference = _reference(member)
         if size.kind is not FieldKind.EMPTY or reference is None:
             return None
