@@ -18,6 +18,7 @@ from .devices.acg.modbus_rtu import LineSettings
 from .devices.base import Device, DeviceLimits
 from .devices.keypad import Keypad, NoKeypad
 from .devices.profiles import DEFAULT_MAC, DEFAULT_PROFILE, ProfileOptions, build_device
+from .eip.encapsulation import DEFAULT_FRAME_TIMEOUT
 from .eip.identity_items import CAPABILITY_CIP_TCP, CAPABILITY_CLASS01_UDP
 from .eip.interfaces import interface_of
 from .eip.io_core import DEFAULT_IO_PORT, ProductionGrid
@@ -26,7 +27,7 @@ from .eip.io_target import IoTarget
 from .eip.limits import DEFAULT_MAX_TCP_CONNECTIONS
 from .eip.seams import IoSeam, ReplySeam, RequestSeam
 from .eip.server import DEFAULT_PORT, EncapsulationServer
-from .eip.target import DEFAULT_FRAME_TIMEOUT, EncapsulationTarget, TargetSettings
+from .eip.target import EncapsulationTarget, TargetSettings
 from .errors import BadRequest
 from .faults import Fault, FaultController
 from .listening import ListenError, held_log_records
@@ -400,7 +401,7 @@ class Adapter:
         info = self.device.identity_info
         log.info("emulating %s (vendor %d, device type %d, product code %d, revision %d.%d)",
                  info.product_name, info.vendor_id, info.device_type, info.product_code, *info.revision)
-        task = asyncio.create_task(until(self)) if until is not None else None
+        task = asyncio.ensure_future(until(self)) if until is not None else None
         if task is not None:
             task.add_done_callback(lambda _: stop.set())
         try:

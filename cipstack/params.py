@@ -164,22 +164,22 @@ async def load_params(scanner: Scanner, recipe: Sequence[ParamValue], *, force: 
         if item.path not in known:
             report.skipped.append((item, f"not a parameter of {scanner.catalog.source}"))
     for parameter in _parameters(scanner):
-        item = wanted.get(parameter.path)
-        if item is None:
+        value = wanted.get(parameter.path)
+        if value is None:
             continue
         if not parameter.settable:
-            report.skipped.append((item, "read only"))
+            report.skipped.append((value, "read only"))
             continue
         try:
             present = await scanner.read(*parameter.path)
-            if present.raw == item.raw:
+            if present.raw == value.raw:
                 report.unchanged += 1
                 continue
-            await scanner.write(*parameter.path, item.raw)
+            await scanner.write(*parameter.path, value.raw)
         except CipError as exc:
-            report.refused.append((item, str(exc)))
+            report.refused.append((value, str(exc)))
             continue
-        report.written.append(item)
+        report.written.append(value)
     if save and report.written:
         report.saved = await save_params(scanner, wanted)
     return report

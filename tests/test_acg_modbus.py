@@ -9,9 +9,9 @@ import struct
 from collections.abc import AsyncIterator
 from dataclasses import dataclass
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import pytest
-from pymodbus.client import AsyncModbusTcpClient
 
 from cipstack.adapter import Adapter, AdapterSettings
 from cipstack.catalog import Catalog
@@ -21,6 +21,10 @@ from cipstack.devices.acg.modbus import MbapBuffer, ModbusTcpCore
 from cipstack.devices.acg.registers import ACG_REGISTERS, CLASS_64_INSTANCES, modbus_tcp_number
 from cipstack.modbus.tcp_server import ModbusTcpServer
 from cipstack.scanner import Scanner
+from tests.optional import needs
+
+if TYPE_CHECKING:
+    from pymodbus.client import AsyncModbusTcpClient
 
 UNIT = 0xFF  # "The address is fixed to 0xFF when Modbus TCP communication is used alone."
 
@@ -52,12 +56,13 @@ async def modbus_port() -> AsyncIterator[int]:
 
 @pytest.fixture
 async def bench(tmp_path: Path) -> AsyncIterator[Bench]:
+    client_class = needs("pymodbus.client").AsyncModbusTcpClient
     state_file = tmp_path / "acg.json"
     device = build_acg_device(state_path=state_file)
     async with Adapter(AdapterSettings(host="127.0.0.1", port=0, io_port=0), device=device) as adapter, \
             ModbusTcpServer(lambda: device.drive, "127.0.0.1", 0, saves=device.saves) as modbus:
         scanner = await Scanner.connect(f"127.0.0.1:{adapter.port}", catalog=Catalog(device.catalog_classes()))
-        client = AsyncModbusTcpClient("127.0.0.1", port=modbus.port, timeout=3)
+        client = client_class("127.0.0.1", port=modbus.port, timeout=3)
         assert await client.connect()
         try:
             yield Bench(device, scanner, client, state_file)

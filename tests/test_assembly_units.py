@@ -2,8 +2,8 @@
 --list-fields``, the generated EDS, the decoded value and the drive itself.
 
 ACG-ET2 manual calls the speed words of the ACG's 100/101/110/111 "Hz unit"; the AC/DC Drive object
-gives the same values (Reference Hz/Actual Hz, 0x2A attributes 101/100) as "0-400.00 Hz" and seed
-001 gives the frequency command 0x0380 in 0.01 Hz: one count is 0.01 Hz, and 3000 runs the drive at
+gives the same values (Reference Hz/Actual Hz, 0x2A attributes 101/100) as "0-400.00 Hz" and the
+ACG RS-485 manual gives the frequency command 0x0380 in 0.01 Hz: one count is 0.01 Hz, and 3000 runs the drive at
 30.00 Hz. The words of 20/21/70/71 are in rpm (0x2A attributes 7/8, "[rpm]")."""
 
 from __future__ import annotations

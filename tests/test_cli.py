@@ -17,6 +17,7 @@ import pytest
 
 from cipstack.cli import parse_duration, parse_object_path
 from tests.cli_errors import one_line_error
+from tests.optional import needs
 from tests.ports import free_port
 
 
@@ -220,8 +221,7 @@ def stop(process: subprocess.Popen[str]) -> str:
 def test_saved_parameters_survive_a_restart_of_the_process(tmp_path: Path) -> None:
     """ACG RS-485 manual memory control: writing 0x03E0 from 0 to 1 saves every parameter; what is written
     afterwards and not saved is gone after a restart."""
-    from pymodbus.client import ModbusTcpClient
-
+    ModbusTcpClient = needs("pymodbus.client").ModbusTcpClient
     from cipstack.devices.acg.registers import ACG_REGISTERS
 
     state = tmp_path / "acg.json"

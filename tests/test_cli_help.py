@@ -23,6 +23,7 @@ from cipstack.cli.io import PRINT_MODES, parse_print
 from cipstack.cli.parser import build_parser, command_word
 from cipstack.eip.cpf import Item, ItemType, encode_items
 from cipstack.eip.encapsulation import RR_PREFIX, Command, encode_frame
+from tests.optional import needs
 
 #: What ends the command part of an example (a pipe, a redirection).
 SHELL_OPERATORS = {"|", ">", ">>", "<", ";", "&&", "||"}
@@ -143,7 +144,7 @@ def test_a_closed_stdout_ends_the_command_quietly_with_141(argv: list[str], capt
     """``cipstack ... | head`` once the reader is gone: no "Broken pipe", no traceback, status
     141 (128 + SIGPIPE) as ``cat`` and ``grep`` end."""
     if argv[0] == "completion":
-        pytest.importorskip("shtab")
+        needs("shtab")
     read_end, write_end = os.pipe()
     os.close(read_end)  # the reader is gone before the first line is written
     try:
@@ -162,7 +163,7 @@ def test_the_capture_file_of_the_pipe_test_has_output(capture_file: Path) -> Non
 
 
 def test_bash_completion_is_generated_and_bash_accepts_it(tmp_path: Path) -> None:
-    pytest.importorskip("shtab")
+    needs("shtab")
     result = run("completion", "bash")
     assert result.returncode == 0, result.stderr
     script = tmp_path / "cipstack.bash"
@@ -181,7 +182,7 @@ def test_bash_completion_is_generated_and_bash_accepts_it(tmp_path: Path) -> Non
 
 @pytest.mark.skipif(shutil.which("zsh") is None, reason="zsh is not installed")
 def test_zsh_completion_is_generated_and_zsh_accepts_it(tmp_path: Path) -> None:
-    pytest.importorskip("shtab")
+    needs("shtab")
     result = run("completion", "zsh")
     assert result.returncode == 0, result.stderr
     script = tmp_path / "_cipstack"

@@ -20,7 +20,6 @@ import socket
 from collections.abc import AsyncIterator
 from pathlib import Path
 
-import aiohttp
 import pytest
 
 from cipstack.adapter import Adapter, AdapterSettings
@@ -40,6 +39,7 @@ from cipstack.eds.reader import parse_eds
 from cipstack.eip.io_originator import IoTimeoutError
 from cipstack.scanner import Scanner
 from tests.eds.samples import GENERIC_EDS
+from tests.optional import needs
 
 MX2 = "MX2-A2015-E"
 RX = "RX-A4055-E"
@@ -149,6 +149,7 @@ async def test_a_trip_is_cleared_by_the_power_cycle_and_kept_in_the_trip_history
 async def test_power_cycle_over_http(tmp_path: Path) -> None:
     """``POST /faults`` with ``power-cycle``: the reply comes once the power is back; the MX2 run by
     explicit messages (Control Supervisor Run1, section 4-5) is stopped, its unsaved sources are lost."""
+    aiohttp = needs("aiohttp")
     adapter = Adapter(AdapterSettings(port=0, io_port=0, profile="mx2", model=MX2, state_path=tmp_path / "mx2.json",
                                       control_path=tmp_path / "control.sock", http="127.0.0.1:0"))
     await adapter.start_serving()
@@ -329,6 +330,7 @@ async def test_a_device_without_power_takes_no_trip_no_keypad_write_and_no_secon
         tmp_path: Path) -> None:
     """While the power is off (``off``), nothing reaches the device: a trip, a keypad write and another
     power cycle are refused with the reason; once the power is back each is taken again."""
+    aiohttp = needs("aiohttp")
     from cipstack.devices.keypad import WriteRefused
     from cipstack.errors import StateRefused
     from cipstack.faults import FaultStateError

@@ -21,8 +21,11 @@ import urllib.request
 from pathlib import Path
 from typing import Any
 
-import aiohttp
 import pytest
+
+pytest.importorskip("aiohttp", reason="aiohttp is not installed (the http extra): pip install '.[http]'")
+
+import aiohttp
 from aiohttp import web
 
 from cipstack.cip.status import CipError

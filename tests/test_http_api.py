@@ -8,8 +8,11 @@ import json
 from collections.abc import AsyncIterator
 from pathlib import Path
 
-import aiohttp
 import pytest
+
+pytest.importorskip("aiohttp", reason="aiohttp is not installed (the http extra): pip install '.[http]'")
+
+import aiohttp
 
 from cipstack.adapter import Adapter, AdapterSettings
 from cipstack.control.http import (
@@ -23,6 +26,7 @@ from cipstack.control.http import (
 )
 from cipstack.control.http_relay import RelayApi
 from cipstack.scanner import Scanner
+from tests.http_client import call
 
 
 @pytest.fixture
@@ -39,13 +43,6 @@ async def adapter(tmp_path: Path) -> AsyncIterator[Adapter]:
 async def http(adapter: Adapter) -> AsyncIterator[tuple[aiohttp.ClientSession, str]]:
     async with aiohttp.ClientSession() as session:
         yield session, f"http://127.0.0.1:{adapter.http_api.port}"
-
-
-async def call(http: tuple[aiohttp.ClientSession, str], method: str, path: str, **kwargs: object) -> tuple[int, object]:
-    session, base = http
-    async with session.request(method, base + path, **kwargs) as response:  # type: ignore[arg-type]
-        assert response.content_type == "application/json"
-        return response.status, await response.json()
 
 
 async def test_status_faults_and_events(adapter: Adapter, http: tuple[aiohttp.ClientSession, str]) -> None:

@@ -22,8 +22,11 @@ import urllib.request
 from collections.abc import AsyncIterator
 from pathlib import Path
 
-import aiohttp
 import pytest
+
+pytest.importorskip("aiohttp", reason="aiohttp is not installed (the http extra): pip install '.[http]'")
+
+import aiohttp
 
 from cipstack.adapter import Adapter, AdapterSettings
 from cipstack.cli.emulators import TOKEN_VARIABLE

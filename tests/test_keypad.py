@@ -20,9 +20,8 @@ import textwrap
 import tty
 from collections.abc import AsyncIterator
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
-import aiohttp
 import pytest
 
 from cipstack.adapter import Adapter, AdapterSettings
@@ -31,8 +30,12 @@ from cipstack.devices.acg.modbus_rtu import with_crc
 from cipstack.devices.acg.registers import ACG_REGISTERS
 from cipstack.devices.profiles import catalog_for
 from cipstack.scanner import Scanner
+from tests.http_client import call
+from tests.optional import needs
 from tests.test_cli import one_line_error, run, start_adapter, stop
-from tests.test_http_api import call
+
+if TYPE_CHECKING:
+    import aiohttp
 
 ROOT = Path(__file__).resolve().parents[1]
 #: Class 0x65 (Function Code, Table E-3): instance/attribute = the function code number's bytes.
@@ -51,6 +54,7 @@ async def _serving(tmp_path: Path, **settings: Any) -> Adapter:
 
 @contextlib.asynccontextmanager
 async def serving(tmp_path: Path, **settings: Any) -> AsyncIterator[tuple[Adapter, tuple[aiohttp.ClientSession, str]]]:
+    aiohttp = needs("aiohttp")
     adapter = await _serving(tmp_path, **settings)
     try:
         async with aiohttp.ClientSession() as session:
@@ -121,6 +125,7 @@ async def test_rx_refuses_what_is_not_run_mode_editable_while_running(tmp_path: 
 
 
 async def test_a_device_without_a_keypad_says_so(tmp_path: Path) -> None:
+    aiohttp = needs("aiohttp")
     from cipstack.devices.base import DeviceLimits
     from cipstack.eds.emulated_device import build_eds_device
     from cipstack.eds.reader import read_eds
@@ -216,7 +221,7 @@ def test_the_pytest_plugin_takes_mx2_parameters(tmp_path: Path) -> None:
 
 # -- events: one per accepted write, from every route --------------------------------------------------------------
 async def test_each_route_writes_one_event_with_what_it_wrote(tmp_path: Path) -> None:
-    from pymodbus.client import AsyncModbusTcpClient
+    AsyncModbusTcpClient = needs("pymodbus.client").AsyncModbusTcpClient
 
     async with serving(tmp_path, modbus_port=0, rtu="pty") as (adapter, http):
         assert adapter.modbus is not None and adapter.rtu is not None

@@ -19,6 +19,10 @@ from collections.abc import AsyncIterator, Iterator
 from pathlib import Path
 
 import pytest
+
+pytest.importorskip("pymodbus", reason="pymodbus, the peer these tests talk to, is not installed: "
+                                      "pip install '.[test]'")
+
 from pymodbus import FramerType
 from pymodbus.client import AsyncModbusSerialClient, ModbusSerialClient
 from pymodbus.exceptions import ModbusIOException

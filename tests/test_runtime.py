@@ -18,7 +18,6 @@ import tty
 from collections.abc import AsyncIterator
 from pathlib import Path
 
-import aiohttp
 import pytest
 
 from cipstack.adapter import Adapter, AdapterSettings
@@ -28,6 +27,7 @@ from cipstack.devices.acg.modbus_rtu import with_crc
 from cipstack.devices.acg.registers import ACG_REGISTERS
 from cipstack.errors import BadRequest
 from cipstack.faults import FaultStateError
+from tests.optional import needs
 
 #: Modbus-RTU, station 1, Read Holding Registers (0x03) of ACC, one register: the PDU address is the
 #: communication address minus one (as ``test_keypad`` writes it).
@@ -72,6 +72,7 @@ async def rtu_answer(fd: int, request: bytes, wait: float) -> bytes:
 
 @pytest.fixture
 async def acg(tmp_path: Path) -> AsyncIterator[Adapter]:
+    needs("aiohttp")  # the adapter serves its HTTP API too
     adapter = Adapter(AdapterSettings(port=0, io_port=0, modbus_port=0, rtu="pty", state_path=tmp_path / "acg.json",
                                       control_path=tmp_path / "control.sock", http="127.0.0.1:0"))
     await adapter.start_serving()
@@ -142,6 +143,7 @@ async def test_plug_while_the_power_is_off_opens_nothing_and_the_power_opens_eac
 
 
 async def test_http_answers_a_long_power_cycle_while_the_power_is_off_and_clear_ends_it(acg: Adapter) -> None:
+    aiohttp = needs("aiohttp")
     base = f"http://127.0.0.1:{acg.http_api.port}"
     async with aiohttp.ClientSession() as session:
         async with session.post(base + "/faults", json={"name": "power-cycle", "options": {"off": "60s"}}) as reply:
@@ -183,6 +185,7 @@ async def test_a_scenario_line_carries_the_time_its_step_fired(acg: Adapter, tmp
 
 async def test_every_operation_is_on_every_surface(acg: Adapter, capsys: pytest.CaptureFixture[str]) -> None:
     """The HTTP routes, the OpenAPI document and the command line's subcommands are the operations."""
+    aiohttp = needs("aiohttp")
     from cipstack.cli.parser import build_parser
     from cipstack.control.http import openapi_document
 
@@ -219,6 +222,7 @@ async def test_a_trip_and_its_reset_on_each_family(tmp_path: Path) -> None:
 async def test_arguments_are_checked_against_the_declaration_on_every_surface(acg: Adapter) -> None:
     """A key the operation does not take, a missing one and a value of the wrong JSON type are each a bad
     request naming the JSON key, from the service and through HTTP and the control socket alike."""
+    aiohttp = needs("aiohttp")
     from cipstack.control import ControlRefused, control_request
 
     for arguments, said in (({"code": [1]}, '"code" is a string or integer'), ({}, 'needs "code"'),

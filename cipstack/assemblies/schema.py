@@ -82,13 +82,13 @@ class AssemblySchema:
         self._by_name = {f.name: f for f in self.fields}
         self._check()
         self._decoders = self._build_decoders()
-        self._construct: cs.Construct | None = None
+        self._construct: cs.Construct[Any, Any] | None = None
         #: The field values last encoded and their bytes: a produced assembly whose values have not
         #: changed since (every firing of a class 1 timer, mostly) costs one comparison.
         self._last_encoded: tuple[tuple[tuple[str, Any], ...], bytes] | None = None
 
     @property
-    def construct(self) -> cs.Construct:
+    def construct(self) -> cs.Construct[Any, Any]:
         """The compiled parser, built when first used (compiling is most of a schema's cost, and a
         catalog of schemas is mostly never parsed with)."""
         if self._construct is None:
@@ -112,7 +112,7 @@ class AssemblySchema:
     def _build_construct(self) -> cs.Struct:
         import construct as cs  # only here: what decodes by the readers below never imports it
 
-        parts: list[cs.Construct] = []
+        parts: list[cs.Construct[Any, Any]] = []
         offset = 0
         by_offset: dict[int, list[AssemblyField]] = {}
         for f in self.fields:
@@ -124,7 +124,7 @@ class AssemblySchema:
                 offset += 1
             elif group[0].bits:
                 # A byte of flags: construct's BitStruct lists bits most significant first.
-                members: list[cs.Construct] = []
+                members: list[cs.Construct[Any, Any]] = []
                 position = 8
                 for f in sorted(group, key=lambda g: -(g.bit + g.bits)):
                     top = f.bit + f.bits

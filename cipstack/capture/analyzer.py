@@ -13,6 +13,7 @@ times go into a log histogram and a fixed-size reservoir.
 
 from __future__ import annotations
 
+import builtins
 import struct
 from collections import deque
 from collections.abc import Callable
@@ -84,7 +85,7 @@ class Direction:
     intervals: LogHistogram = field(default_factory=LogHistogram)
     reservoir: Reservoir = field(default_factory=Reservoir)
     worst: Worst = field(default_factory=Worst)
-    last_payload: bytes | None = None
+    last_payload: builtins.bytes | None = None  # ``bytes`` above is this class's byte count
     last_fields: dict[str, Any] | None = None
     timeout: float | None = None
 

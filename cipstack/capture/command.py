@@ -6,12 +6,26 @@ import argparse
 import json
 import sys
 import time as clock
+from collections.abc import Mapping
 from pathlib import Path
-from typing import TYPE_CHECKING, Any, TextIO
+from typing import TYPE_CHECKING, Any, Protocol, TextIO, runtime_checkable
 
 from ..errors import BadRequest
 
+
+@runtime_checkable
+class DeclaringDevice(Protocol):
+    """A device that lists the classes and assemblies it serves (the Omron inverters): what a capture
+    of it is decoded by."""
+
+    def catalog_classes(self) -> tuple[ClassSpec, ...]: ...
+
+    def schemas(self) -> Mapping[int, AssemblySchema]: ...
+
+
 if TYPE_CHECKING:  # the analysis modules load when the command runs, not when the parser is built
+    from ..assemblies.schema import AssemblySchema
+    from ..cip.model import ClassSpec
     from .analyzer import Connection
     from .decoding import Declarations
 
@@ -35,7 +49,7 @@ def add_arguments(sub: Any) -> None:
     capture = p.add_subparsers(dest="capture_command", metavar="COMMAND", title="commands", required=True,
                                parser_class=type(p))
     q = capture.add_parser("analyze")
-    q.add_argument("file", type=Path, help="pcap or pcapng file").complete = {  # type: ignore[attr-defined]
+    q.add_argument("file", type=Path, help="pcap or pcapng file").complete = {
         "bash": "_shtab_compgen_files", "zsh": "_files", "tcsh": "f"}
     q.add_argument("--profile", help="decode every target by this profile (acg, mx2, rx) instead of its identity")
     q.add_argument("--model", help="the model of an mx2/rx profile (see `cipstack models`)")
@@ -67,6 +81,8 @@ def fixed_declarations(profile: str | None, model: str | None, eds: list[Path]) 
 
         if profile not in PROFILES:
             raise UsageProblem(f"unknown profile {profile!r} (known: {', '.join(sorted(PROFILES))})")
+        if model is not None and profile == "acg":
+            raise UsageProblem(f"--model {model}: the acg profile has one model; --model names an MX2 or RX model")
         chosen = PROFILES[profile]
         if model is None and chosen.catalog is not None:
             return Declarations(chosen.catalog(), source=f"profile {profile}")
@@ -74,8 +90,10 @@ def fixed_declarations(profile: str | None, model: str | None, eds: list[Path]) 
             device = build_device(profile, options=ProfileOptions(model=model))
         except (KeyError, ValueError) as exc:
             raise UsageProblem(str(exc.args[0]) if exc.args else str(exc)) from None
-        schemas = device.schemas().values() if hasattr(device, "schemas") else ()
-        return Declarations(Catalog(device.catalog_classes(), schemas), source=f"profile {profile} {model}")
+        if not isinstance(device, DeclaringDevice):
+            raise UsageProblem(f"profile {profile} declares no classes to decode by")
+        return Declarations(Catalog(device.catalog_classes(), device.schemas().values()),
+                            source=f"profile {profile} {model}")
     if eds:
         from ..eds.interpret import read_view
         from ..eds.reader import read_eds
@@ -92,10 +110,10 @@ def fixed_declarations(profile: str | None, model: str | None, eds: list[Path]) 
                 if param.link is not None:
                     # The first parameter of a link names the attribute, as ``adapter --eds`` serves the first:
                     # a later one is an assembly member's name for the same value ("Faulted" for "Drive Fault").
-                    out.eds_params.setdefault(tuple(param.link), param)
+                    out.eds_params.setdefault(param.link, param)
             for info in view.assemblies.values():
                 schema = view.schema(info.instance) if info.instance is not None else None
-                if schema is not None:
+                if info.instance is not None and schema is not None:
                     out.eds_schemas[info.instance] = schema
         return out
     return None

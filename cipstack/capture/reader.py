@@ -12,7 +12,7 @@ from __future__ import annotations
 import struct
 from collections.abc import Iterator
 from dataclasses import dataclass
-from typing import BinaryIO
+from typing import BinaryIO, cast
 
 from ..errors import BadRequest
 
@@ -47,13 +47,16 @@ def read_records(stream: BinaryIO) -> Iterator[Record]:
     from scapy.utils import RawPcapNgReader, RawPcapReader
 
     try:
-        reader = RawPcapReader(stream)
+        # scapy opens a file object as well as a name (utils.open_file); its annotation names only str.
+        reader = RawPcapReader(stream)  # type: ignore[arg-type]
     except (Scapy_Exception, EOFError, struct.error) as exc:
         raise CaptureFormatError(f"not a pcap or pcapng file ({exc})") from None
     if isinstance(reader, RawPcapNgReader):
-        for data, meta in reader:
+        for data, pcap_meta in reader:
+            # A pcapng reader's records carry its own metadata; scapy types iteration by the pcap reader's.
+            ng_meta = cast("RawPcapNgReader.PacketMetadata", pcap_meta)
             # tsresol: timestamp units per second of the packet's interface (if_tsresol).
-            yield Record(((meta.tshigh << 32) | meta.tslow) / meta.tsresol, meta.linktype, data)
+            yield Record(((ng_meta.tshigh << 32) | ng_meta.tslow) / ng_meta.tsresol, ng_meta.linktype, data)
         return
     divisor = 1e9 if getattr(reader, "nano", False) else 1e6
     linktype = reader.linktype

@@ -166,7 +166,8 @@ def write_plot(path: Path, connections: list[Connection], origin: float) -> None
     shown = [c for c in connections if c.o_t.intervals.count or c.t_o.intervals.count]
     rows = max(1, len(shown))
     figure, axes = plt.subplots(rows, 1, figsize=(8, 2.6 * rows), squeeze=False)
-    for axis, connection in zip(axes[:, 0], shown or [None], strict=False):
+    slots: list[Connection | None] = [*shown] or [None]
+    for axis, connection in zip(axes[:, 0], slots, strict=False):
         if connection is None:
             axis.text(0.5, 0.5, "no class 1 traffic", ha="center", va="center")
             continue

@@ -110,8 +110,8 @@ def encode_segment(segment: Segment, padded: bool = True) -> bytes:
             raise ValueError("a port segment needs a port 1..65535 and a link address")
         extended_port = segment.port > 14
         long_link = len(segment.link) > 1
-        head = (0x0F if extended_port else segment.port) | (0x10 if long_link else 0)
-        out = bytearray([head])
+        port_head = (0x0F if extended_port else segment.port) | (0x10 if long_link else 0)
+        out = bytearray([port_head])
         if long_link:
             if len(segment.link) > 0xFF:
                 raise ValueError("link address longer than 255 bytes")

@@ -15,6 +15,7 @@ import struct
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass
 from enum import Enum
+from functools import partial
 from typing import TYPE_CHECKING, Any, ClassVar
 
 from .epath import ApplicationPath
@@ -243,7 +244,7 @@ class CipObject:
             7: (AttributeSpec(7, "Maximum ID Number Instance Attributes", UINT), lambda: max_inst_attr),
         }
         for extra in spec.extra_class_attributes:
-            table[extra.id] = (extra, lambda extra=extra: extra.default)
+            table[extra.id] = (extra, partial(getattr, extra, "default"))
         return table
 
     def class_attribute_ids(self) -> list[int]:
@@ -288,7 +289,7 @@ class CipObject:
             raise CipError(GeneralStatus.ATTRIBUTE_NOT_SUPPORTED)
         return spec, None
 
-    def _encoded(self, instance: Instance | None, attribute_id: int) -> bytes:
+    def _encoded(self, instance: Instance | None, attribute_id: int | None) -> bytes:
         spec, getter = self._attribute(instance, attribute_id)
         if getter is not None:
             return spec.type.encode(getter())

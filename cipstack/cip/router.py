@@ -114,11 +114,15 @@ class MessageRouter:
             spec, getter = obj._attribute(instance, attribute_id)  # declarations do not change
         except CipError:
             return None
-        if getter is None and not spec.access.readable:
-            return None
         # A class attribute has its getter; an instance attribute is read from the instance found now,
         # which must still be the one that exists when the reader reads.
-        value = getter if getter is not None else partial(obj.read_attribute, instance, spec)
+        value: Callable[[], Any]
+        if getter is not None:
+            value = getter
+        elif instance is not None and spec.access.readable:
+            value = partial(obj.read_attribute, instance, spec)
+        else:
+            return None
         encode, counts, failure, instances = spec.type.encode, self.status_counts, self._failure, obj.instances
 
         def reader() -> bytes | None:

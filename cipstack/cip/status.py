@@ -126,6 +126,8 @@ class CipError(ProtocolError):
     and by the scanner when a reply carries an error status.
     """
 
+    general: int  # always a status here (a ProtocolError may have none)
+
     def __init__(
         self,
         general: int,

@@ -31,22 +31,20 @@ class CipType:
     code: int | None
     #: Encoded size in bytes, or None for variable-size types.
     size: int | None
-    construct: cs.Construct
     #: The fixed-size numeric types' precompiled little-endian codec (None for the others): what
     #: the hot paths (assembly decoding) unpack with instead of the ``construct`` parser.
     struct_codec: struct.Struct | None = None
 
     @property
-    def construct(self) -> cs.Construct:
+    def construct(self) -> cs.Construct[Any, Any]:
         """This type as a ``construct`` codec, for schemas that embed it; built on first use."""
-        built: cs.Construct | None = self.__dict__.get("_construct")
+        built: cs.Construct[Any, Any] | None = self.__dict__.get("_construct")
         if built is None:
-            import construct
-
-            built = self.__dict__["_construct"] = self._build_construct(construct)
+            built = self.__dict__["_construct"] = self._build_construct()
         return built
 
-    def _build_construct(self, cs: Any) -> cs.Construct:
+    def _build_construct(self) -> cs.Construct[Any, Any]:
+        """The codec; each type imports ``construct`` here, on first use."""
         raise NotImplementedError
 
     def encode(self, value: Any) -> bytes:
@@ -98,6 +96,10 @@ def parse_int(text: str) -> int:
 
 
 class IntegerType(CipType):
+    #: Fixed-size: the size and the precompiled codec are always there.
+    size: int
+    struct_codec: struct.Struct
+
     def __init__(self, name: str, code: int | None, size: int, signed: bool) -> None:
         self.name = name
         self.code = code
@@ -109,7 +111,9 @@ class IntegerType(CipType):
         self.minimum = -(1 << (bits - 1)) if signed else 0
         self.maximum = (1 << (bits - 1)) - 1 if signed else (1 << bits) - 1
 
-    def _build_construct(self, cs: Any) -> cs.Construct:
+    def _build_construct(self) -> cs.Construct[Any, Any]:
+        import construct as cs
+
         return cs.BytesInteger(self.size, signed=self.signed, swapped=True)
 
     def encode(self, value: Any) -> bytes:
@@ -127,21 +131,25 @@ class IntegerType(CipType):
         if len(data) != self.size:
             code = GeneralStatus.NOT_ENOUGH_DATA if len(data) < self.size else GeneralStatus.TOO_MUCH_DATA
             raise CipError(code, message=f"{self.name} is {self.size} bytes, got {len(data)}")
-        return self.struct_codec.unpack(data)[0]
+        value: int = self.struct_codec.unpack(data)[0]
+        return value
 
     def check(self, value: Any) -> int:
-        if isinstance(value, bool) or not isinstance(value, int):
+        number: int
+        if isinstance(value, int) and not isinstance(value, bool):
+            number = value
+        else:
             try:
-                value = int(value)
+                number = int(value)
             except (TypeError, ValueError):
                 raise CipError(GeneralStatus.INVALID_ATTRIBUTE_VALUE,
                                message=f"{value!r} is not a {self.name}") from None
-        if not self.minimum <= value <= self.maximum:
+        if not self.minimum <= number <= self.maximum:
             raise CipError(
                 GeneralStatus.INVALID_ATTRIBUTE_VALUE,
-                message=f"{value} outside {self.name} range {self.minimum}..{self.maximum}",
+                message=f"{number} outside {self.name} range {self.minimum}..{self.maximum}",
             )
-        return value
+        return number
 
     def parse_text(self, text: str) -> int:
         return parse_int(text)
@@ -184,13 +192,19 @@ class BoolType(IntegerType):
 
 
 class RealType(CipType):
+    #: Fixed-size: the size and the precompiled codec are always there.
+    size: int
+    struct_codec: struct.Struct
+
     def __init__(self, name: str, code: int, size: int) -> None:
         self.name = name
         self.code = code
         self.size = size
         self.struct_codec = struct.Struct("<f" if size == 4 else "<d")
 
-    def _build_construct(self, cs: Any) -> cs.Construct:
+    def _build_construct(self) -> cs.Construct[Any, Any]:
+        import construct as cs
+
         return cs.Float32l if self.size == 4 else cs.Float64l
 
     def encode(self, value: Any) -> bytes:
@@ -204,15 +218,15 @@ class RealType(CipType):
 
     def check(self, value: Any) -> float:
         try:
-            value = float(value)
+            number = float(value)
         except (TypeError, ValueError):
             raise CipError(GeneralStatus.INVALID_ATTRIBUTE_VALUE, message=f"{value!r} is not a {self.name}") from None
         if self.size == 4:
             try:
-                self.struct_codec.pack(value)
+                self.struct_codec.pack(number)
             except OverflowError:
-                raise CipError(GeneralStatus.INVALID_ATTRIBUTE_VALUE, message=f"{value} overflows REAL") from None
-        return value
+                raise CipError(GeneralStatus.INVALID_ATTRIBUTE_VALUE, message=f"{number} overflows REAL") from None
+        return number
 
     def parse_text(self, text: str) -> float:
         try:
@@ -237,7 +251,9 @@ class StringType(CipType):
         #: (names, revisions) are read again and again with the same one.
         self._last: tuple[Any, bytes] = (_NOTHING, b"")
 
-    def _build_construct(self, cs: Any) -> cs.Construct:
+    def _build_construct(self) -> cs.Construct[Any, Any]:
+        import construct as cs
+
         return cs.PascalString(self._length.construct, "latin-1")
 
     def encode(self, value: Any) -> bytes:
@@ -284,12 +300,16 @@ class StringType(CipType):
 class OctetString(CipType):
     """A fixed number of raw bytes (a MAC address, a reserved block); value is ``bytes``."""
 
+    size: int
+
     def __init__(self, size: int, name: str | None = None) -> None:
         self.name = name or f"BYTE[{size}]"
         self.code = None
         self.size = size
 
-    def _build_construct(self, cs: Any) -> cs.Construct:
+    def _build_construct(self) -> cs.Construct[Any, Any]:
+        import construct as cs
+
         return cs.Bytes(self.size)
 
     def encode(self, value: Any) -> bytes:
@@ -321,7 +341,9 @@ class RemainingBytes(CipType):
         self.code = None
         self.size = None
 
-    def _build_construct(self, cs: Any) -> cs.Construct:
+    def _build_construct(self) -> cs.Construct[Any, Any]:
+        import construct as cs
+
         return cs.GreedyBytes
 
     def encode(self, value: Any) -> bytes:
@@ -352,7 +374,9 @@ class StructType(CipType):
         sizes = [m.size for _, m in self.members]
         self.size = None if None in sizes else sum(s for s in sizes if s is not None)
 
-    def _build_construct(self, cs: Any) -> cs.Construct:
+    def _build_construct(self) -> cs.Construct[Any, Any]:
+        import construct as cs
+
         return cs.Struct(*(member_name / member.construct for member_name, member in self.members))
 
     def encode(self, value: Any) -> bytes:
@@ -387,7 +411,9 @@ class ArrayType(CipType):
         self.code = None
         self.size = None if count is None or element.size is None else count * element.size
 
-    def _build_construct(self, cs: Any) -> cs.Construct:
+    def _build_construct(self) -> cs.Construct[Any, Any]:
+        import construct as cs
+
         element = self.element.construct
         return cs.Array(self.count, element) if self.count is not None else cs.GreedyRange(element)
 

@@ -22,6 +22,7 @@ def _fleet_spec(args: argparse.Namespace) -> Any:
     """The spec of the command line, over the spec file's (an option given wins over the file's key)."""
     from ..devices.state import data_directory
     from ..fleet.spec import (
+        DeviceGroup,
         FleetSpec,
         SpecError,
         assign,
@@ -35,7 +36,7 @@ def _fleet_spec(args: argparse.Namespace) -> Any:
     )
 
     settings: dict[str, Any] = {}
-    groups = []
+    groups: list[DeviceGroup] = []
     if args.spec is not None:
         if args.device:
             raise UsageError("give the devices with --device or in --spec FILE, not both")

@@ -307,8 +307,9 @@ def cmd_io(args: argparse.Namespace) -> int:
                 for task in tasks:
                     task.cancel()
                 await asyncio.gather(*tasks, return_exceptions=True)
-            if tasks[0] in done and not tasks[0].cancelled() and tasks[0].exception() is not None:
-                raise tasks[0].exception()  # type: ignore[misc]
+            failure = tasks[0].exception() if tasks[0] in done and not tasks[0].cancelled() else None
+            if failure is not None:
+                raise failure
             if print_mode == "every" and latest["dirty"]:
                 show(latest["image"])
             if print_mode == "summary" and io.connection.input:

@@ -31,7 +31,7 @@ class _Formatter(argparse.RawDescriptionHelpFormatter):
     wraps them), options wrapped to the terminal."""
 
 
-class _SubParsers(argparse._SubParsersAction):  # type: ignore[type-arg]
+class _SubParsers(argparse._SubParsersAction):  # type: ignore[type-arg]  # generic in typeshed, not at run time
     """Names each command's parser after its path and gives it its text from ``help_texts``."""
 
     def add_parser(self, name: str, **kwargs: Any) -> argparse.ArgumentParser:
@@ -40,7 +40,8 @@ class _SubParsers(argparse._SubParsersAction):  # type: ignore[type-arg]
         if text is not None:
             kwargs.update(help=text.help, description=text.description_text(), epilog=text.epilog())
         kwargs.setdefault("formatter_class", _Formatter)
-        return super().add_parser(name, **kwargs)
+        parser: argparse.ArgumentParser = super().add_parser(name, **kwargs)
+        return parser
 
 
 class _Parser(argparse.ArgumentParser):
@@ -69,7 +70,7 @@ _DIRECTORY = {"bash": "_shtab_compgen_dirs", "zsh": "_files -/", "tcsh": "d"}
 
 
 def _complete(action: argparse.Action, kind: dict[str, str]) -> argparse.Action:
-    action.complete = kind  # type: ignore[attr-defined]
+    action.complete = kind  # type: ignore[attr-defined]  # shtab reads it; argparse declares no such attribute
     return action
 
 
@@ -104,7 +105,8 @@ def build_parser(command: str | None = None) -> argparse.ArgumentParser:
     def add_parser(name: str, **kwargs: Any) -> argparse.ArgumentParser:
         return _add_parser(name, parents=[logging_options], **kwargs)
 
-    sub.add_parser = add_parser  # type: ignore[method-assign]
+    # argparse has no option for parents every subparser shares; typeshed's add_parser names every keyword.
+    sub.add_parser = add_parser  # type: ignore[method-assign, assignment]
 
     def number(what: str) -> Any:
         return lambda text: parse_number(text, what)

@@ -125,7 +125,7 @@ def _production(ctx: Context, spec: CheckSpec) -> tuple[Plan, Run] | Outcome:
     cached = ctx.cache["production"]
     if isinstance(cached, Outcome):
         return outcome(spec, cached.verdict, cached.observed, cached.exchanges)
-    return cached  # type: ignore[no-any-return]
+    return cached  # type: ignore[no-any-return]  # the cache holds any check's results; this key, these
 
 
 def _on_production(body: Callable[[Context, CheckSpec, Plan, Run], Outcome]) -> Callable[[Context, CheckSpec], Outcome]:

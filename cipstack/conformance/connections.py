@@ -14,6 +14,7 @@ import functools
 import random
 import socket
 from collections.abc import Callable
+from collections.abc import Set as AbstractSet
 from dataclasses import dataclass, replace
 
 from ..cip.epath import request_path
@@ -190,7 +191,7 @@ def _on_main_plan(body: MainPlanCheck) -> Callable[[Context, CheckSpec], Outcome
 
 
 def _refusal(spec: CheckSpec, probe: Probe, reply: Reply, opened: Opened | None, codes: set[int],
-             warn: set[int] = frozenset(), what: str = "") -> Outcome:  # type: ignore[assignment]
+             warn: AbstractSet[int] = frozenset(), what: str = "") -> Outcome:
     if opened is not None:
         opened.close()
         return outcome(spec, False, f"{what}: accepted ({reply.describe()})", probe.exchanges)

@@ -53,7 +53,7 @@ class Context:
     #: Probes opened by checks, closed at the end of each check whatever happens.
     probes: list[Probe] = field(default_factory=list)
     #: Forward_Close requests to send for connections still open (``cm`` and ``class1`` register them).
-    pending_closes: list[Callable[[], None]] = field(default_factory=list)
+    pending_closes: list[Callable[[], object]] = field(default_factory=list)  # what a close returns is unused
     #: What one check measured that the next ones judge too (one class 1 run serves three checks).
     cache: dict[str, Any] = field(default_factory=dict)
 

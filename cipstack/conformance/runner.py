@@ -9,11 +9,12 @@ from typing import TYPE_CHECKING
 
 from ..eip.encapsulation import DEFAULT_PORT, Command
 from . import class1, connections, eds_checks, encapsulation, objects, router  # noqa: F401 - they declare checks
-from .model import GROUPS, Outcome, Report, Verdict
-from .registry import CHECKS, RUNNERS, Context, outcome
+from .model import GROUPS, CheckSpec, Outcome, Report, Verdict
+from .registry import CHECKS, RUNNERS, CheckFunction, Context, outcome
 from .wire import Probe, TargetUnreachable, frame
 
 if TYPE_CHECKING:
+    from ..eds.interpret import EdsView
     from ..eds.model import EdsDocument
 
 
@@ -33,7 +34,7 @@ def parse_groups(text: str | Sequence[str] | None) -> tuple[str, ...]:
     return tuple(g for g in GROUPS if g in names)
 
 
-def _load_eds(eds: str | os.PathLike[str] | EdsDocument | None) -> tuple[EdsDocument | None, object]:
+def _load_eds(eds: str | os.PathLike[str] | EdsDocument | None) -> tuple[EdsDocument | None, EdsView | None]:
     if eds is None:
         return None, None
     from ..eds.interpret import read_view
@@ -57,14 +58,14 @@ def _preflight(context: Context) -> None:
         context.identity = record
 
 
-def _run_check(context: Context, spec: object, function: object) -> list[Outcome]:
+def _run_check(context: Context, spec: CheckSpec, function: CheckFunction) -> list[Outcome]:
     try:
-        result = function(context, spec)  # type: ignore[operator]
+        result = function(context, spec)
         return [result] if isinstance(result, Outcome) else list(result)
     except TargetUnreachable as exc:
-        return [outcome(spec, Verdict.FAIL, f"the target stopped answering: {exc}")]  # type: ignore[arg-type]
+        return [outcome(spec, Verdict.FAIL, f"the target stopped answering: {exc}")]
     except Exception as exc:  # a check that cannot finish is a failure of the target's
-        return [outcome(spec, Verdict.FAIL, f"the check could not finish: {type(exc).__name__}: {exc}")]  # type: ignore[arg-type]
+        return [outcome(spec, Verdict.FAIL, f"the check could not finish: {type(exc).__name__}: {exc}")]
     finally:
         context.cleanup()
 
@@ -81,7 +82,7 @@ def run(host: str, port: int = DEFAULT_PORT, *, eds: str | os.PathLike[str] | Ed
     """
     selected = parse_groups(groups if groups is None or isinstance(groups, str) else list(groups))
     doc, view = _load_eds(eds)
-    context = Context(host, port, timeout, allow_writes, allow_reset, doc, view)  # type: ignore[arg-type]
+    context = Context(host, port, timeout, allow_writes, allow_reset, doc, view)
     started = time.monotonic()
     _preflight(context)
     report = Report(f"{host}:{port}", groups=selected, identity=context.identity,

@@ -326,9 +326,10 @@ async def serve_app(app: web.Application, host: str, port: int, path: str | None
     except OSError:
         await runner.cleanup()
         raise
+    assert runner.server is not None  # made by runner.setup()
     if connections is not None:
         connections.server = runner.server
-    factory = connections if connections is not None else runner.server
+    factory: Callable[[], asyncio.BaseProtocol] = connections if connections is not None else runner.server
     try:
         server = await loop.create_server(factory, sock=listener)
     except BaseException:
@@ -510,9 +511,10 @@ async def openapi(request: web.Request) -> web.Response:
     return web.json_response(openapi_document())
 
 
-_JSON_TYPES = {"string": {"type": "string"}, "integer": {"type": "integer"}, "number": {"type": "number"},
-               "object": {"type": "object"}, "string|integer": {"type": ["string", "integer"]},
-               "string|number": {"type": ["string", "number"]}}
+_JSON_TYPES: dict[str, dict[str, Any]] = {
+    "string": {"type": "string"}, "integer": {"type": "integer"}, "number": {"type": "number"},
+    "object": {"type": "object"}, "string|integer": {"type": ["string", "integer"]},
+    "string|number": {"type": ["string", "number"]}}
 
 
 def openapi_document() -> dict[str, Any]:

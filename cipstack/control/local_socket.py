@@ -30,7 +30,7 @@ import sys
 import tempfile
 from collections.abc import Awaitable, Callable
 from pathlib import Path
-from typing import Any
+from typing import Any, TypeGuard
 
 from ..eip.limits import RateLimitedLog
 from ..errors import BadRequest, CipstackError, NotFound, PeerUnreachable, StateRefused
@@ -54,7 +54,7 @@ def default_control_path(port: int, host: str = "127.0.0.1") -> ControlAddress:
     return Path(base) / f"cipstack-adapter-{host}-{port}.sock"
 
 
-def is_abstract(address: ControlAddress) -> bool:
+def is_abstract(address: ControlAddress) -> TypeGuard[str]:
     return isinstance(address, str) and address.startswith("\0")
 
 

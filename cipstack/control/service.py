@@ -54,7 +54,7 @@ class Outcome:
 #: From an error's kind to its outcome, the first that matches (the command line's exit 2 is a usage
 #: error: the request itself is malformed; 1 is a failure: the device has no such thing, its state
 #: says no, or it cannot be reached).
-OUTCOMES: tuple[tuple[type[BaseException], Outcome], ...] = (
+OUTCOMES: tuple[tuple[type[CipstackError], Outcome], ...] = (
     (BadRequest, Outcome("bad-request", 2, 400)),
     (NotFound, Outcome("not-found", 1, 404)),
     (StateRefused, Outcome("refused", 1, 409)),
@@ -75,8 +75,7 @@ def outcome(error: BaseException) -> Outcome | None:
 def error_of(name: str, message: str) -> CipstackError:
     """The error an outcome's name stands for, rebuilt on the client's side of a socket or an HTTP call."""
     kinds = {result.name: kind for kind, result in OUTCOMES}
-    kind = kinds.get(name, CipstackError)
-    return kind(message)  # type: ignore[no-any-return]  # every kind of OUTCOMES is a CipstackError
+    return kinds.get(name, CipstackError)(message)
 
 
 def check_arguments(operation: Operation, arguments: dict[str, Any]) -> dict[str, Any]:

@@ -96,19 +96,19 @@ class KeypadCodes:
 def raw_value(register: Register, text: str) -> int:
     """The raw value of ``text`` in the keypad's unit: a number on the keypad's step (``scale``) within
     the parameter's range, or a name of its enumeration; ``BadValue`` says why not."""
-    raw: Decimal | int | None = None
+    raw: int | None = None
     if register.enum:
         wanted = text.replace(" ", "").lower()
         raw = next((value for value, name in register.enum.items() if name.replace(" ", "").lower() == wanted), None)
     if raw is None:
         try:
             shown = Decimal(int(text, 0)) if text.lower().startswith("0x") else Decimal(text)
-            raw = shown / Decimal(str(register.scale))
+            steps = shown / Decimal(str(register.scale))
         except (InvalidOperation, ValueError):
             raise BadValue("not a number" + (f" nor one of {choices(register)}" if register.enum else "")) from None
-        if not raw.is_finite() or raw != raw.to_integral_value():
-            raise BadValue(f"finer than the keypad's step {register.scale:g}" if raw.is_finite() else "not a number")
-        raw = int(raw)
+        if not steps.is_finite() or steps != steps.to_integral_value():
+            raise BadValue(f"finer than the keypad's step {register.scale:g}" if steps.is_finite() else "not a number")
+        raw = int(steps)
     try:
         register.check(raw)
     except RegisterError:

@@ -109,10 +109,10 @@ def _acg_catalog() -> Catalog:
 
     # A recipe: the keypad parameters the save command keeps (ACG RS-485 manual, 0x03E0), Max Freq first (it
     # bounds every frequency parameter), the CM group last (it changes the network settings).
-    saved = [r for r in ACG_REGISTERS.values() if r.saved and r.access.writable and class64_path(r) is not None]
-    saved.sort(key=lambda r: (r is not MAX_FREQUENCY, r.group == "CM"))
-    parameters = [Parameter(r.code, KEYPAD_PARAMETERS, *class64_path(r), keypad_parameter_spec(r))  # type: ignore[misc]
-                  for r in saved]
+    saved = [(r, path) for r in ACG_REGISTERS.values()
+             if r.saved and r.access.writable and (path := class64_path(r)) is not None]
+    saved.sort(key=lambda item: (item[0] is not MAX_FREQUENCY, item[0].group == "CM"))
+    parameters = [Parameter(r.code, KEYPAD_PARAMETERS, *path, keypad_parameter_spec(r)) for r, path in saved]
     # ACC and dEC are operation-group parameters with no class 0x64 address: AC/DC Drive attributes
     # 102/103 mirror them (ACG-ET2 manual, "Value at DRV-03 (Acc Time)", "DRV-04 (Dec Time)").
     ramps = [Parameter(code, AC_DC_DRIVE, 1, attribute, spec) for code, attribute in (("ACC", 102), ("dEC", 103))
@@ -137,8 +137,9 @@ def _omron(family: str, default_model: str) -> Callable[[NetworkInterface, Devic
 
 def _omron_catalog(default_model: str) -> Callable[[], Catalog]:
     def catalog() -> Catalog:
+        from .omron.board import FUNCTION_CODE, MODBUS_REGISTER
         from .omron.device import build_omron_device
-        from .omron.register_objects import FUNCTION_CODE, MODBUS_REGISTER, register_attribute
+        from .omron.register_objects import register_attribute
 
         device = build_omron_device(default_model)
         registers = device.inverter.registers

@@ -159,7 +159,7 @@ def remove_stale_temporaries(path: str | os.PathLike[str]) -> list[Path]:
     """Remove the temporary files of saves of ``path`` that never finished (a killed process);
     the ones that could be removed are returned. Call it at start, before any save of ``path``."""
     path = Path(path)
-    removed = []
+    removed: list[Path] = []
     try:
         candidates = list(path.parent.glob(f".{glob.escape(path.name)}.*.tmp"))
     except OSError:

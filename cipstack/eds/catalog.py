@@ -12,6 +12,7 @@ standard objects (Identity, TCP/IP, ...).
 from __future__ import annotations
 
 import os
+from collections.abc import Callable
 from pathlib import Path
 
 from ..catalog import Catalog, Parameter
@@ -54,7 +55,7 @@ def catalog_from_eds(eds: str | os.PathLike[str] | EdsDocument, name: str | None
     for link, spec in table.items():
         by_class.setdefault(link[0], {})[link] = spec
 
-    def resolver(class_id: int, entries: _Table):  # type: ignore[no-untyped-def]
+    def resolver(class_id: int, entries: _Table) -> Callable[[int, int], AttributeSpec | None]:
         def resolve(instance: int, attribute: int) -> AttributeSpec | None:
             return entries.get((class_id, instance, attribute)) or standard.attribute(class_id, instance, attribute)
         return resolve

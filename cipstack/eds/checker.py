@@ -335,12 +335,12 @@ class _Checker:
             if name not in names:
                 self.report("required-section", 0, f"section [{name}] is missing")
         for name, keywords in REQUIRED_KEYWORDS.items():
-            section = self.doc.get(name)
-            if section is None:
+            found = self.doc.get(name)
+            if found is None:
                 continue
             for keyword in keywords:
-                if _get(section, keyword) is None:
-                    self.report("required-keyword", section.line, f"[{name}] lacks {keyword}")
+                if _get(found, keyword) is None:
+                    self.report("required-keyword", found.line, f"[{name}] lacks {keyword}")
         self.check_order()
 
     def check_order(self) -> None:
@@ -604,9 +604,8 @@ class _Checker:
     def check_limits(self, entry: Entry, code: int) -> None:
         minimum, maximum, default = (_number(entry.field(number)) for number in (10, 11, 12))
         cip_type = BY_CODE.get(code)
-        bounds = (getattr(cip_type, "minimum", None), getattr(cip_type, "maximum", None))
-        if None not in bounds:
-            low, high = bounds
+        low, high = getattr(cip_type, "minimum", None), getattr(cip_type, "maximum", None)
+        if low is not None and high is not None:
             for number, value in ((10, minimum), (11, maximum), (12, default)):
                 if value is not None and not low <= value <= high:
                     self.report(
@@ -615,7 +614,7 @@ class _Checker:
                     )
         if minimum is not None and maximum is not None and minimum > maximum:
             self.report("min-default-max", entry.line_of(10), f"{entry.keyword} minimum {minimum} > maximum {maximum}")
-        elif None not in (minimum, maximum, default) and not minimum <= default <= maximum:
+        elif minimum is not None and maximum is not None and default is not None and not minimum <= default <= maximum:
             self.report(
                 "min-default-max", entry.line_of(12),
                 f"{entry.keyword} default {default} is outside {minimum}..{maximum}",
@@ -665,7 +664,7 @@ class _Checker:
             self.check_kinds(entry, [_INT | _EMPTY, _KEYWORD | _EMPTY] * ((count - 6) // 2), first=7)
             self.check_path(entry, 2)
             size_item = entry.field(3)
-            if _reference(size_item) is not None:
+            if size_item is not None and _reference(size_item) is not None:
                 self.check_param_reference(entry, size_item, size_item.value)
             keyword = canonical_keyword(entry.keyword)
             for item in entry.fields[7::2]:
@@ -709,7 +708,7 @@ class _Checker:
         """A member's size in bits: as written, or else the size of what it refers to (a member
         naming its own assembly, empty-sized, is the assembly's whole data)."""
         if size.kind is FieldKind.INT:
-            return size.value
+            return _int(size)
         reference = _reference(member)
         if size.kind is not FieldKind.EMPTY or reference is None:
             return None
@@ -750,12 +749,12 @@ class _Checker:
             self.check_path(entry, 15, required=True)
             for number in (3, 4, 6, 7, 9, 11):
                 item = entry.field(number)
-                if _reference(item) is not None:
+                if item is not None and _reference(item) is not None:
                     self.check_param_reference(entry, item, item.value)
             for number in (5, 8, 10, 12):
                 item = entry.field(number)
                 reference = _reference(item)
-                if reference is None:
+                if item is None or reference is None:
                     continue
                 if number == 12 and _PARAM.fullmatch(reference):
                     # The configuration format may be a parameter rather than an assembly.
@@ -773,7 +772,8 @@ class _Checker:
             if size is None or assembly is None:
                 continue
             assembly_size = _int(assembly.field(3))
-            if assembly_size is None and assembly.field(3) is not None and assembly.field(3).kind is FieldKind.EMPTY:
+            size_field = assembly.field(3)
+            if assembly_size is None and size_field is not None and size_field.kind is FieldKind.EMPTY:
                 # An empty size: the sum of the members (eds-pie: AssemExaN's size may be empty).
                 assembly_size = self.summed_sizes.get(canonical_keyword(assembly.keyword))
             parameters = _int(entry.field(2))
@@ -884,8 +884,8 @@ def _logical_values(items: tuple[int | str, ...], logical_type: int) -> list[int
         if len(value_items) < width:
             break
         if (head >> 2) & 0x07 == logical_type:
-            is_bytes = all(isinstance(item, int) for item in value_items)
-            values.append(int.from_bytes(bytes(value_items), "little") if is_bytes else None)  # type: ignore[arg-type]
+            numbers = [item for item in value_items if isinstance(item, int)]
+            values.append(int.from_bytes(bytes(numbers), "little") if len(numbers) == width else None)
         index = start + width
     return values
 

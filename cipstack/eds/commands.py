@@ -218,13 +218,14 @@ def _assembly(entry: Entry, params: Section | None, sizes: Mapping[str, Any]) ->
     for size_item, member in zip(entry.fields[6::2], entry.fields[7::2], strict=False):
         reference = member.value if member.kind is FieldKind.KEYWORD else None
         bits = size_item.value if size_item.kind is FieldKind.INT else None
-        if bits is None and isinstance(sizes.get(reference or ""), int):
+        if bits is None and reference is not None and isinstance(sizes.get(reference), int):
             bits = sizes[reference] * 8   # an assembly member (its own: the instance's whole data)
         name = None
         if reference is not None and params is not None and (param := params.get(reference)) is not None:
             name = _value(param, 7)
-            if bits is None and param.field(6) is not None and param.field(6).kind is FieldKind.INT:
-                bits = param.field(6).value * 8
+            data_size = param.field(6)
+            if bits is None and data_size is not None and data_size.kind is FieldKind.INT:
+                bits = data_size.value * 8
         members.append({"bits": bits, "reference": reference, "name": name})
     return {
         "keyword": entry.keyword,

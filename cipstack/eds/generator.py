@@ -382,7 +382,8 @@ def _member_parameter(item: AssemblyField, output: bool, schema: AssemblySchema,
                          f"(the rule gives {field_name(item.name)!r}): an EDS could not give it back")
     same_value: EdsParameter | None = None
     if item.link is not None:
-        declared = declared_by_link.get(item.link, ())
+        own_link = item.link  # narrowed for the generator below (``item`` is reassigned)
+        declared = declared_by_link.get(own_link, ())
         compatible = [index for index in declared if _compatible(params[index], item)]
         for index in compatible:
             if field_name(params[index].name) == item.name:
@@ -393,7 +394,7 @@ def _member_parameter(item: AssemblyField, output: bool, schema: AssemblySchema,
             # The field carries the attribute in another form (a Hz word for an rpm attribute): its
             # parameter is not that attribute's value, so it gets no link path of its own.
             item = replace(item, link=None)
-        elif any(link[:2] == item.link[:2] for link in declared_by_link):
+        elif any(link[:2] == own_link[:2] for link in declared_by_link):
             # The description declares that object's attributes but not this one: the device does not
             # serve it (ACG-ET2 manual: Net Control 0x29/5 and Net Reference 0x2A/4 are "N/A"), so a path to
             # it would be answered 0x14.

@@ -281,9 +281,8 @@ def _param(entry: Entry, enum_entry: Entry | None, issues: list[EdsIssue]) -> Pa
                 break
             enum[value] = name_item.value
     numeric = isinstance(cip_type, (IntegerType, RealType))
-    minimum, maximum, default = (_number(entry.field(n)) if numeric else None for n in (10, 11, 12))
-    if not numeric:
-        default = _text(entry.field(12))
+    minimum, maximum, number = (_number(entry.field(n)) if numeric else None for n in (10, 11, 12))
+    default: int | float | str | None = number if numeric else _text(entry.field(12))
     scale, offset, decimals = _scaling(entry, keyword, descriptor, issues) if numeric else (1.0, 0.0, None)
     return ParamInfo(keyword, _text(entry.field(7)), link, cip_type, size, not descriptor & 0x10, minimum, maximum,
                      default, enum or None, _text(entry.field(8)), _text(entry.field(9)), entry.line,
@@ -382,8 +381,8 @@ def _assembly(entry: Entry, params: Mapping[str, ParamInfo], sizes: Mapping[str,
         position += bits
     size = sizes.get(keyword)
     if size is None:
-        size_item = entry.field(3)
-        written = size_item.raw if size_item is not None else ""
+        size_field = entry.field(3)
+        written = size_field.raw if size_field is not None else ""
         issues.append(EdsIssue(entry.line_of(3), f"{keyword}: size {written or '(empty)'} is not a number of bytes, "
                                                  "nor a ParamN with a default, nor members of known sizes (a modular "
                                                  "or variable-size assembly needs one of them): skipped"))
@@ -455,8 +454,8 @@ def assembly_sizes(doc: EdsDocument) -> dict[str, int]:
             count = _int(member_size)
             name = _keyword(member)
             if count is None and name is not None and name != entry.keyword:
-                if name in params and params[name][0] is not None:
-                    count = 8 * params[name][0]  # type: ignore[operator]
+                if name in params and (param_size := params[name][0]) is not None:
+                    count = 8 * param_size
                 elif (inner := size_of(name)) is not None:
                     count = 8 * inner
             if count is None or count < 0:

@@ -178,7 +178,7 @@ class FieldSource:
 
     def edited(self, item: Field) -> bool:
         """Whether ``item``, in this field's place now, means something else than what was read."""
-        return item.semantic_value() != self.value
+        return bool(item.semantic_value() != self.value)
 
 
 @dataclass(frozen=True)
@@ -379,7 +379,7 @@ def render_field(item: Field) -> str:
         return "{:02d}:{:02d}:{:02d}".format(*value)
     if kind is FieldKind.REVISION:
         return "{}.{}".format(*value)
-    if kind is FieldKind.KEYWORD and is_bare_word(value) and value.isascii():
+    if kind is FieldKind.KEYWORD and isinstance(value, str) and is_bare_word(value) and value.isascii():
         return value
     raise ValueError(f"field {item.raw!r} of kind {kind.value} cannot be written")
 

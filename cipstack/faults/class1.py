@@ -29,7 +29,8 @@ DEFAULT_DELAY = 0.010
 
 class Class1Filter:
     """A class 1 fault in force: which connections it acts on (``--connection``, ``--originator``, or
-    all), installed in the class 1 seam from ``start`` to ``stop``."""
+    all), installed in the class 1 seam from ``start`` (an ``OutboundFilter`` or an ``InboundFilter``)
+    to ``stop``."""
 
     def __init__(self, context: FaultContext) -> None:
         self.context = context
@@ -40,9 +41,6 @@ class Class1Filter:
         self.count = 0
         assert context.runtime.class1 is not None   # checked by the controller: the device has class 1
         self.seam: IoSeam = context.runtime.class1
-
-    def start(self) -> None:
-        self.seam.add(self)
 
     def stop(self) -> None:
         self.seam.remove(self)
@@ -62,6 +60,9 @@ class Class1Filter:
 
 class OutboundFilter(Class1Filter):
     """A filter of T->O datagrams: ``change`` each one of a matching connection."""
+
+    def start(self) -> None:
+        self.seam.add(self)
 
     def outbound(self, datagrams: list[Datagram], now: float, seam: IoSeam) -> list[Datagram]:
         by_to_id = {c.to_connection_id: c for c in self.context.runtime.class1_connections()}
@@ -140,7 +141,18 @@ class WrongSize(OutboundFilter):
         return [(raw[:16] + _UINT.pack(2 + len(data)) + raw[18:HEAD] + data, datagram[1])]
 
 
-class IgnoreOutput(Class1Filter):
+class InboundFilter(Class1Filter):
+    """A filter of O->T datagrams (``inbound``)."""
+
+    def start(self) -> None:
+        self.seam.add(self)
+
+    def inbound(self, raw: bytes, source: tuple[str, int], now: float, connection: IoConnection | None,
+                seam: IoSeam) -> bytes | None:
+        raise NotImplementedError
+
+
+class IgnoreOutput(InboundFilter):
     """O->T data of a matching connection is consumed (its sequence count, its watchdog, run/idle) and
     not handed to the device, which keeps its last command."""
 
@@ -152,7 +164,7 @@ class IgnoreOutput(Class1Filter):
         return None
 
 
-class Idle(Class1Filter):
+class Idle(InboundFilter):
     """O->T data of a matching connection reaches the device with its run/idle header's run bit clear."""
 
     def inbound(self, raw: bytes, source: tuple[str, int], now: float, connection: IoConnection | None,

@@ -40,6 +40,7 @@ import tempfile
 import time
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
+from functools import partial
 from multiprocessing.connection import Connection
 from typing import Any
 
@@ -227,8 +228,9 @@ class Supervisor:
     def _start(self) -> None:
         # fork where there is one: the parent holds no thread and no loop yet, and a forked worker
         # starts without importing cipstack again.
-        context = multiprocessing.get_context("fork" if "fork" in multiprocessing.get_all_start_methods()
-                                              else "spawn")
+        context: multiprocessing.context.ForkContext | multiprocessing.context.SpawnContext = (
+            multiprocessing.get_context("fork") if "fork" in multiprocessing.get_all_start_methods()
+            else multiprocessing.get_context("spawn"))
         if self.http is not None:   # mkdtemp: mode 0700, so only this user (and root) reaches the sockets
             runtime = os.environ.get("XDG_RUNTIME_DIR")
             self._runtime = tempfile.mkdtemp(prefix="cipstack-fleet-",
@@ -337,7 +339,7 @@ class Supervisor:
         loop = asyncio.get_running_loop()
         wake = asyncio.Event()
         host, port = parse_listen(self.http["http"])
-        relay = RelayApi([Backend(w.name, w.api_path or "", lambda w=w: self._why_down(w), w.number)
+        relay = RelayApi([Backend(w.name, w.api_path or "", partial(self._why_down, w), w.number)
                           for w in self.workers], host, port, token=self.http.get("http_token"),
                          allow_remote=self.http.get("http_allow_remote", False),
                          hosts=tuple(self.http.get("http_hosts", ())))

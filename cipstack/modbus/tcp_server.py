@@ -66,7 +66,7 @@ class ModbusTcpServer:
         self.host = host
         self.saves = saves
         self._requested_port = port
-        self._server: asyncio.AbstractServer | None = None
+        self._server: asyncio.Server | None = None
         self._writers: set[asyncio.StreamWriter] = set()
         self._timer: asyncio.TimerHandle | None = None
         self.loop: asyncio.AbstractEventLoop | None = None

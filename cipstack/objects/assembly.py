@@ -10,6 +10,7 @@ from __future__ import annotations
 
 from collections.abc import Callable
 from dataclasses import dataclass
+from typing import Any
 
 from ..cip.messages import Service
 from ..cip.model import Access, AttributeSpec, Binding, CipObject, ClassSpec, Instance
@@ -72,7 +73,7 @@ class AssemblyObject(CipObject):
     def data(self, instance_id: int) -> bytes:
         return bytes(self.get(instance_id, 3))
 
-    def write_attribute(self, instance: Instance, spec: AttributeSpec, value: object,
+    def write_attribute(self, instance: Instance, spec: AttributeSpec, value: Any,
                         context: RequestContext | None = None) -> None:
         if spec.id == 3:
             point = self.points[instance.instance_id]
@@ -80,7 +81,7 @@ class AssemblyObject(CipObject):
             if not point.consumed and context is not None:
                 # An input (produced) assembly is the device's to write, not the network's.
                 raise CipError(GeneralStatus.ATTRIBUTE_NOT_SETTABLE, message=f"{where} is an input")
-            data = bytes(value)  # type: ignore[call-overload]
+            data = bytes(value)
             if len(data) != point.size:
                 code = GeneralStatus.NOT_ENOUGH_DATA if len(data) < point.size else GeneralStatus.TOO_MUCH_DATA
                 raise CipError(code, message=f"{where} is {point.size} bytes, got {len(data)}")

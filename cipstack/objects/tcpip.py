@@ -9,7 +9,6 @@ multicast address allocation.
 from __future__ import annotations
 
 import socket
-import struct
 from dataclasses import dataclass
 
 from ..cip.messages import Service
@@ -66,7 +65,7 @@ ETHERNET_LINK_SPEC = ClassSpec(
 
 
 def ip_to_udint(address: str) -> int:
-    return struct.unpack(">I", socket.inet_aton(address))[0]
+    return int.from_bytes(socket.inet_aton(address), "big")
 
 
 @dataclass(frozen=True)

@@ -37,7 +37,7 @@ class Observers(list["RuntimeObserver"]):
         self.append(observer)
         self.watched = True
 
-    def remove(self, observer: RuntimeObserver) -> None:  # type: ignore[override]  # list.remove takes any
+    def remove(self, observer: RuntimeObserver) -> None:
         super().remove(observer)
         self.watched = bool(self)
 

@@ -13,7 +13,7 @@ import threading
 from collections.abc import Awaitable, Callable, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any, TypeVar
+from typing import Any, TypeVar, overload
 
 from ..adapter import Adapter, AdapterSettings, network_interface
 from ..control.events import Event
@@ -96,13 +96,19 @@ class EmulatedDevice:
         return endpoint.port
 
     # -- calls on the device's loop -------------------------------------------------------------------------
-    def run(self, function: Callable[[], Awaitable[T] | T], timeout: float = CALL_TIMEOUT) -> T:
+    @overload
+    def run(self, function: Callable[[], Awaitable[T]], timeout: float = CALL_TIMEOUT) -> T: ...
+
+    @overload
+    def run(self, function: Callable[[], T], timeout: float = CALL_TIMEOUT) -> T: ...
+
+    def run(self, function: Callable[[], Any], timeout: float = CALL_TIMEOUT) -> Any:
         """Run ``function`` on the device's loop (awaited if it returns an awaitable); its result."""
-        async def call() -> T:
+        async def call() -> Any:
             result = function()
             if asyncio.iscoroutine(result) or isinstance(result, asyncio.Future):
-                return await result  # type: ignore[no-any-return]
-            return result  # type: ignore[return-value]
+                return await result
+            return result
 
         return asyncio.run_coroutine_threadsafe(call(), self.loop).result(timeout)
 

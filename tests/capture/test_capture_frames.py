@@ -199,7 +199,9 @@ def test_bad_files_and_missing_matplotlib_are_one_line_errors(tmp_path: Path) ->
     assert result.returncode == 2 and 'pip install "cipstack[plot]"' in result.stderr
     for args, message in ((["--connection", "xyz"], "'xyz' is not a connection number or id"),
                           (["--profile", "mx2", "--model", "BAD"], "unknown inverter model 'BAD'"),
-                          (["--model", "MX2-A2015-E"], "--model needs --profile")):
+                          (["--model", "MX2-A2015-E"], "--model needs --profile"),
+                          # The acg profile has one model: --model named a crash (AttributeError) once.
+                          (["--profile", "acg", "--model", "MX2-A2015-E"], "the acg profile has one model")):
         result = subprocess.run([sys.executable, "-m", "cipstack", "capture", "analyze", str(junk), *args],
                                 capture_output=True, text=True, timeout=60, check=False)
         assert result.returncode == 2 and message in one_line_error(result)

@@ -2,12 +2,13 @@
 
 from __future__ import annotations
 
-import importlib
 import logging
 from collections.abc import Iterator
 from typing import Any
 
 import pytest
+
+from tests.optional import needs
 
 
 class EdsPieLog(logging.Handler):
@@ -29,7 +30,7 @@ def cip_eds() -> Any:
     guard = logging.NullHandler()
     root.addHandler(guard)
     try:
-        module = importlib.import_module("eds_pie.eds_pie")
+        module = needs("eds_pie.eds_pie")
     finally:
         root.removeHandler(guard)
     return module.CIP_EDS

@@ -30,6 +30,7 @@ from cipstack.eds.interpret import ConnectionInfo, read_view
 from cipstack.eds.model import semantic_differences
 from cipstack.eds.reader import parse_eds, read_eds
 from cipstack.eds.writer import format_eds
+from tests.optional import needs
 from tests.ports import free_port
 
 DIRECTORY = Path(__file__).parent / "files"
@@ -376,8 +377,8 @@ def _ethernetip_format(path: Path, number: int) -> int:
 
 
 def test_python_ethernetip_runs_what_it_can_open(adapter: Adapter, monkeypatch: pytest.MonkeyPatch) -> None:
-    import ethernetip
-    import ethernetip.ethernetip as enip_module
+    ethernetip = needs("ethernetip")
+    enip_module = needs("ethernetip.ethernetip")
 
     from cipstack.scanner import SyncScanner
 

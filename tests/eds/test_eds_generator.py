@@ -45,6 +45,7 @@ from cipstack.eip.io_target import IoProfile
 from cipstack.objects.assembly import AssemblyPoint
 from cipstack.objects.identity import identity_spec
 from cipstack.objects.tcpip import TCPIP_SPEC
+from tests.optional import needs
 
 from .conftest import EdsPieLog
 
@@ -158,9 +159,8 @@ def test_device_equals_acg_identity() -> None:
     assert (value(doc, "Device", "MajRev"), value(doc, "Device", "MinRev")) == identity.revision == (1, 1)
     assert value(doc, "Device", "ProdName") == identity.product_name == "CENT"
     # Vendor 259's name as the ODVA vendor list of the field's scanners has it (pycomm3's table).
-    from pycomm3.cip.status_info import VENDORS
-
-    assert value(doc, "Device", "VendName") == VENDORS[259] == "LS ELECTRIC"
+    vendors = needs("pycomm3.cip.status_info").VENDORS
+    assert value(doc, "Device", "VendName") == vendors[259] == "LS ELECTRIC"
     assert value(doc, "Device Classification", "Class1") == "EtherNetIP"
     live = {"vendor_id": 259, "device_type": 2, "product_code": 100, "revision": (1, 1), "product_name": "CENT"}
     assert check_eds(doc, live) == []

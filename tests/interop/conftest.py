@@ -42,6 +42,10 @@ IDENTITY = {
 
 
 def python_module(module: str, *args: str) -> list[str]:
+    """The command that runs ``module`` in this Python; the test is skipped when the module (a peer
+    such as cpppo) is not installed, as ``pytest.importorskip`` skips one imported in the test."""
+    pytest.importorskip(module.split(".")[0], reason=f"{module.split('.')[0]}, a peer of this test, is not "
+                                                      "installed: pip install '.[test]'")
     return [sys.executable, "-m", module, *args]
 
 

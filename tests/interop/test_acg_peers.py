@@ -14,6 +14,9 @@ from pathlib import Path
 from typing import Any
 
 import pytest
+
+pytest.importorskip("pycomm3", reason="pycomm3, the peer these tests talk to, is not installed: pip install '.[test]'")
+
 from pycomm3 import CIPDriver, Services
 from pycomm3.cip.data_types import INT, SHORT_STRING, UINT, USINT
 from pycomm3.cip.status_info import SERVICE_STATUS

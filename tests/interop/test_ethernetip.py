@@ -12,9 +12,13 @@ from collections.abc import Iterator
 from contextlib import contextmanager
 from typing import Any
 
+import pytest
+
+pytest.importorskip("ethernetip", reason="python-ethernetip, the peer these tests talk to, is not installed: "
+                                         "pip install '.[test]'")
+
 import ethernetip
 import ethernetip.ethernetip as enip_module
-import pytest
 
 from cipstack.cip.types import UINT
 from cipstack.devices.acg.registers import ACG_REGISTERS, CLASS_64_INSTANCES

@@ -14,6 +14,9 @@ import time
 from collections.abc import Callable, Iterator
 
 import pytest
+
+pytest.importorskip("pycomm3", reason="pycomm3, the peer these tests talk to, is not installed: pip install '.[test]'")
+
 from pycomm3 import CIPDriver
 from pycomm3.cip.data_types import INT, USINT
 

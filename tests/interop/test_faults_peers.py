@@ -19,6 +19,9 @@ import time
 from collections.abc import Iterator
 
 import pytest
+
+pytest.importorskip("pycomm3", reason="pycomm3, the peer these tests talk to, is not installed: pip install '.[test]'")
+
 from pycomm3 import CIPDriver, CommError, Services
 from pycomm3.cip.data_types import SHORT_STRING, UDINT, UINT
 

@@ -7,6 +7,9 @@ from collections.abc import Iterator
 from typing import Any
 
 import pytest
+
+pytest.importorskip("pycomm3", reason="pycomm3, the peer these tests talk to, is not installed: pip install '.[test]'")
+
 from pycomm3 import CIPDriver, Services
 from pycomm3.cip import PADDED_EPATH, PortSegment
 from pycomm3.cip.data_types import SHORT_STRING, UDINT, UINT, USINT, WORD, Struct

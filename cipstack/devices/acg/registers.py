@@ -1,6 +1,6 @@
 """The ACG drive's register map, declared once.
 
-Sources (the two seeds in the ACG-ET2 manual and the ACG RS-485 manual):
+Sources (the ACG-ET2 manual and the ACG RS-485 manual):
 
 * ACG RS-485 manual, chapter 5 "Serial communications" of the ACG user manual: the Compatible Common
   Area (0x0000-0x001B), the Monitoring Area (0x0300-0x034C, read only), the Control Area

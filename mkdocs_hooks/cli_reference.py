@@ -5,6 +5,10 @@ MkDocs calls :func:`on_page_markdown`, which puts there the ``--help`` of ``cips
 command and subcommand, as ``cipstack.cli.parser.build_parser()`` formats it. Nothing of the
 reference is written by hand, so it cannot drift from the command line; ``tests/test_docs.py``
 checks that every subcommand the parser has appears in it.
+
+The hook lives outside ``docs_dir``, so that the site does not publish it as a page asset. Each help
+block carries the class ``cli-help``: ``docs/stylesheets/cli-reference.css`` wraps its lines within the
+content column (the examples of a few commands are longer than the help's width).
 """
 
 from __future__ import annotations
@@ -16,10 +20,11 @@ from collections.abc import Iterator
 from pathlib import Path
 from typing import Any
 
-ROOT = Path(__file__).resolve().parents[2]
+ROOT = Path(__file__).resolve().parents[1]
 MARKER = "<!-- cli-reference -->"
-#: The width the help is formatted to, whatever the terminal that builds the docs.
-WIDTH = 100
+#: The width the help is formatted to, whatever the terminal that builds the docs: the width the
+#: descriptions are written to (``cipstack.cli.help_texts``).
+WIDTH = 80
 
 
 def _subcommands(parser: argparse.ArgumentParser) -> Iterator[tuple[str, argparse.ArgumentParser]]:
@@ -52,7 +57,7 @@ def render() -> str:
         for words, parser in commands():
             name = " ".join(("cipstack", *words))
             level = "#" * min(2 + max(len(words) - 1, 0), 4)
-            parts.append(f"{level} `{name}`\n\n```text\n{parser.format_help().rstrip()}\n```\n")
+            parts.append(f"{level} `{name}`\n\n``` {{.text .cli-help}}\n{parser.format_help().rstrip()}\n```\n")
         return "\n".join(parts)
     finally:
         if saved is None:
