@@ -244,8 +244,28 @@ def _parse_value(args: argparse.Namespace, cip_type: Any, spec: Any) -> Any:
             if spec is None:
                 raise UsageError(f"--scaled: {args.path} has no declared scale (give the raw value)")
             return spec.scaling.to_raw(float(args.value))
+        if spec is not None and spec.scaling.scaled:
+            _refuse_engineering_value(args, spec)
         value = cip_type.parse_text(args.value)
         cip_type.encode(value)
         return value
     except (ValueError, CipError, TypeError) as exc:
         raise UsageError(f"value {args.value!r} is not a valid {cip_type.name}: {exc}") from None
+
+
+def _refuse_engineering_value(args: argparse.Namespace, spec: Any) -> None:
+    """A value with a fraction for an attribute counted in steps (2.5 for Accel Time, 0.1 s per step)
+    is an engineering value given without ``--scaled``: say so, as the library's ``write`` does."""
+    try:
+        engineering = float(args.value)
+    except ValueError:
+        return
+    if engineering.is_integer() and "." not in args.value:
+        return  # a raw count, as the rule says
+    scaling = spec.scaling
+    what = f"{args.path} {spec.name} takes a raw integer ({scaling.scale:g} {spec.unit} per step)"
+    try:
+        raw = scaling.to_raw(engineering)
+    except ValueError as exc:
+        raise UsageError(f"{what}, and {exc}") from None
+    raise UsageError(f"{what}: give {args.value} with --scaled, or the raw value {raw}")
