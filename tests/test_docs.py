@@ -434,6 +434,8 @@ def test_section(section: Section, shell_env: dict[str, str], tmp_path: Path) ->
                     _run_console(namespace, section.document, block, shell_env, work, log)
     finally:
         namespace.close()
+    if " --factory" in section.adapter:   # what the section wrote or saved left the user's saved drive alone
+        assert not list((tmp_path / "data").rglob("*.json")), f"{section.id} wrote a state file"
 
 
 def _run_python(namespace: Namespace, document: str, block: Block, env: dict[str, str], work: Path,

@@ -33,9 +33,19 @@ def cmd_adapter(args: argparse.Namespace) -> int:
         raise UsageError(f"--model {args.model}: the acg profile has one model; --model names an MX2 or RX model")
     if not 0 <= args.port < 65536:
         raise UsageError(f"port {args.port} out of range")
-    if args.state is None:
+    default_state = default_state_path(f"{args.profile}-{args.model}" if args.model else args.profile)
+    if args.factory:
+        if args.state is not None:
+            raise UsageError("--factory reads and writes no state file: drop --state FILE")
+        # The user's saved drive stays as it is: this run's saves live in memory until it stops.
+        logging.getLogger("cipstack.adapter").info(
+            "factory settings: saves last until the emulator stops; %s is not read or written", default_state)
+    elif args.state is None:
         # One file per profile and model: another model's saved parameters are not this one's.
-        args.state = default_state_path(f"{args.profile}-{args.model}" if args.model else args.profile)
+        args.state = default_state
+    if args.state is not None:
+        logging.getLogger("cipstack.adapter").info(
+            "saved parameters in %s (--factory starts without them)", args.state)
     settings = AdapterSettings(host=args.host, port=args.port, profile=args.profile, model=args.model,
                                max_sessions=args.max_sessions, max_connections=args.max_connections,
                                io_port=args.io_port, control_path=args.control,

@@ -150,6 +150,9 @@ def build_parser(command: str | None = None) -> argparse.ArgumentParser:
     _complete(p.add_argument("--state", type=Path, metavar="FILE",
                              help="state file of saved parameters (default: in the user's data directory, "
                                   "per profile)"), _FILE)
+    p.add_argument("--factory", action="store_true",
+                   help="start from factory settings without reading or writing the state file: a save lasts "
+                        "until the emulator stops (for examples and tests that change parameters)")
     p.add_argument("--modbus-port", type=number("modbus port"), metavar="N",
                    help="also serve Modbus TCP on this port (ACG)")
     p.add_argument("--rtu", metavar="DEVICE",
@@ -185,6 +188,8 @@ def build_parser(command: str | None = None) -> argparse.ArgumentParser:
     _complete(p.add_argument("--state-dir", type=Path, metavar="DIR",
                              help="where each device keeps its state file, ADDRESS-PROFILE[-MODEL].json "
                                   "(default: fleet/ in the user's data directory)"), _DIRECTORY)
+    p.add_argument("--factory", action="store_true",
+                   help="every device starts from factory settings; no state file is read or written")
     p.add_argument("--param", action="append", metavar="CODE=VALUE",
                    help="set an ACG keypad parameter at start on every ACG device; repeatable")
     _add_http_arguments(p)
