@@ -310,6 +310,20 @@ class Scanner:
             value = int(value)
         await self.set_attribute_single(class_id, instance, attribute, value, cip_type)
 
+    async def parameter(self, code: str) -> Value:
+        """A parameter by the code its manual prints (``"ACC"``, ``"CM.24"``, ``"A004"``; an EDS file's
+        ``ParamN`` or its name), read with its unit: ``cipstack.parameter_codes``."""
+        from .parameter_codes import read_parameter
+
+        return await read_parameter(self, code)
+
+    async def set_parameter(self, code: str, value: Any) -> Value:
+        """Write a parameter by its code, the value in its own unit (``set_parameter("ACC", 2.5)``: 2.5 s);
+        the value written. ``cipstack.parameter_codes``."""
+        from .parameter_codes import write_parameter
+
+        return await write_parameter(self, code, value)
+
     async def set_attribute_single(self, class_id: int, instance: int, attribute: int, value: Any,
                                    cip_type: CipType | None = None) -> None:
         """Set_Attribute_Single of a raw value (or ``bytes``), encoded by the declaration or ``cip_type``."""
@@ -632,6 +646,14 @@ class SyncScanner:
               cip_type: CipType | None = None) -> None:
         """``Scanner.write``: the raw value, or the engineering value with ``scaled=True``."""
         run_blocking(self._scanner.write(class_id, instance, attribute, value, scaled=scaled, cip_type=cip_type))
+
+    def parameter(self, code: str) -> Value:
+        """``Scanner.parameter``: a parameter by its code (``"ACC"``), read with its unit."""
+        return run_blocking(self._scanner.parameter(code))
+
+    def set_parameter(self, code: str, value: Any) -> Value:
+        """``Scanner.set_parameter``: write a parameter by its code, in its own unit (``2.5`` for 2.5 s)."""
+        return run_blocking(self._scanner.set_parameter(code, value))
 
     def identify(self) -> IdentityRecord | None:
         """``Scanner.identify``: ask the device again and take its profile's catalog."""

@@ -234,7 +234,9 @@ def build_parser(command: str | None = None) -> argparse.ArgumentParser:
 
     p = sub.add_parser("get")
     common(p)
-    p.add_argument("path", metavar="CLASS/INSTANCE[/ATTRIBUTE]", help="decimal or 0x hex numbers: 1/1/7, 0x2A/1/102")
+    p.add_argument("path", metavar="CLASS/INSTANCE[/ATTRIBUTE]|CODE",
+                   help="decimal or 0x hex numbers: 1/1/7, 0x2A/1/102; or a parameter's code: ACC, CM.24, A004, "
+                        "an EDS ParamN or its name")
     p.add_argument("--type", help="CIP type to decode the value (UINT, SHORT_STRING, ...)")
     p.add_argument("--connected", action="store_true", help="use a class 3 connection")
     p.add_argument("--route", metavar="PORT/LINK[,...]",
@@ -249,9 +251,12 @@ def build_parser(command: str | None = None) -> argparse.ArgumentParser:
 
     p = sub.add_parser("set")
     common(p)
-    p.add_argument("path", metavar="CLASS/INSTANCE/ATTRIBUTE", help="decimal or 0x hex numbers: 0xF5/1/13")
-    p.add_argument("value", metavar="VALUE", help="the raw value, as on the wire (50 for 5.0 s at 0.1 s per step); "
-                                                  "BOOL also true/false/on/off")
+    p.add_argument("path", metavar="CLASS/INSTANCE/ATTRIBUTE|CODE",
+                   help="decimal or 0x hex numbers: 0xF5/1/13; or a parameter's code: ACC, CM.24, A004, an EDS ParamN "
+                        "or its name")
+    p.add_argument("value", metavar="VALUE", help="by path, the raw value, as on the wire (50 for 5.0 s at 0.1 s per "
+                                                  "step); BOOL also true/false/on/off. By code, the value in the "
+                                                  "parameter's unit (2.5 for 2.5 s), as the keypad takes it")
     p.add_argument("--type", help="CIP type of the value (UINT, INT, REAL, SHORT_STRING, ...); "
                                   "default: the attribute's declaration")
     p.add_argument("--scaled", action="store_true",
