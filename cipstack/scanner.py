@@ -310,6 +310,20 @@ class Scanner:
             value = int(value)
         await self.set_attribute_single(class_id, instance, attribute, value, cip_type)
 
+    async def parameter(self, code: str) -> Value:
+        """A parameter by the code its manual prints (``"ACC"``, ``"CM.24"``, ``"A004"``; an EDS file's
+        ``ParamN`` or its name), read with its unit: ``cipstack.parameter_codes``."""
+        from .parameter_codes import read_parameter
+
+        return await read_parameter(self, code)
+
+    async def set_parameter(self, code: str, value: Any) -> Value:
+        """Write a parameter by its code, the value in its own unit (``set_parameter("ACC", 2.5)``: 2.5 s);
+        the value written. ``cipstack.parameter_codes``."""
+        from .parameter_codes import write_parameter
+
+        return await write_parameter(self, code, value)
+
     async def set_attribute_single(self, class_id: int, instance: int, attribute: int, value: Any,
                                    cip_type: CipType | None = None) -> None:
         """Set_Attribute_Single of a raw value (or ``bytes``), encoded by the declaration or ``cip_type``."""
@@ -430,18 +444,25 @@ class Scanner:
     async def io_connection(self, output: int | None = None, input: int = 0, rpi: float = 0.010, *,
                             config: int = 1, heartbeat: int | None = None, output_size: int | None = None,
                             input_size: int | None = None, output_schema: AssemblySchema | None = None,
-                            input_schema: AssemblySchema | None = None,
-                            **options: Any) -> AsyncIterator[IoConnectionHandle]:
+                            input_schema: AssemblySchema | None = None, target_io_port: int | None = None,
+                            local_io_port: int = 0, multicast: bool = False, timeout_multiplier: int = 2,
+                            run: bool = True, keep_intervals: bool = False, config_data: bytes = b"",
+                            ot_format: OtFormat | str | None = None, kernel_arrival_times: bool = False,
+                            ) -> AsyncIterator[IoConnectionHandle]:
         """A class 1 connection: ``async with scanner.io_connection(output=21, input=71, rpi=0.010) as io``.
 
         Sizes come from the assembly schemas of a known profile, else from each assembly's
         attribute 4; fields are accessible by name when the schema is known (``io.output.run_forward``),
         raw bytes always (``io.output.raw``); ``output_schema`` / ``input_schema`` name the fields (and
         give the sizes) where the catalog does not (an EDS file's assemblies, say). ``config`` is the
-        configuration instance; ``options`` go
-        to ``EncapsulationClient.io_connection`` (``config_data``, ``ot_format``, ``target_io_port``,
-        ``local_io_port``, ``multicast``, ``timeout_multiplier``, ``run``, ``keep_intervals``,
-        ``kernel_arrival_times``). Leaving the block by any way closes the connection (Forward_Close);
+        configuration instance and ``config_data`` the data sent to it; ``target_io_port`` the
+        target's class 1 UDP port (default: what the reply names, else 2222), ``local_io_port`` ours
+        (0: any); ``multicast`` asks for T->O multicast; ``timeout_multiplier`` (0-7) sets the timeout
+        to RPI x 4 x 2^N; ``run`` the run/idle bit first sent; ``ot_format`` the O->T real-time
+        format (run/idle header, heartbeat, modeless); ``keep_intervals`` and ``kernel_arrival_times``
+        keep each arrival's interval (from the kernel's time stamps) for the statistics: as
+        ``EncapsulationClient.io_connection`` takes them. Leaving the block by any way closes the
+        connection (Forward_Close);
         ``io.statistics()`` gives the counters and how the target really produces (received rate,
         inter-arrival p50/p99/max, missed slots).
         """
@@ -460,7 +481,10 @@ class Scanner:
             input_size = input_schema.size if input_schema is not None else await self.assembly_size(input)
         context = self.client.io_connection(
             output, input, rpi, output_size=output_size, input_size=input_size, config=config, heartbeat=heartbeat,
-            output_schema=output_schema if output is not None else None, input_schema=input_schema, **options)
+            output_schema=output_schema if output is not None else None, input_schema=input_schema,
+            target_io_port=target_io_port, local_io_port=local_io_port, multicast=multicast,
+            timeout_multiplier=timeout_multiplier, run=run, keep_intervals=keep_intervals, config_data=config_data,
+            ot_format=ot_format, kernel_arrival_times=kernel_arrival_times)
         async with context as handle:
             handle.describe_schemas(self._schema_source(output, handle.output.schema),
                                     self._schema_source(input, handle.input.schema))
@@ -623,6 +647,14 @@ class SyncScanner:
         """``Scanner.write``: the raw value, or the engineering value with ``scaled=True``."""
         run_blocking(self._scanner.write(class_id, instance, attribute, value, scaled=scaled, cip_type=cip_type))
 
+    def parameter(self, code: str) -> Value:
+        """``Scanner.parameter``: a parameter by its code (``"ACC"``), read with its unit."""
+        return run_blocking(self._scanner.parameter(code))
+
+    def set_parameter(self, code: str, value: Any) -> Value:
+        """``Scanner.set_parameter``: write a parameter by its code, in its own unit (``2.5`` for 2.5 s)."""
+        return run_blocking(self._scanner.set_parameter(code, value))
+
     def identify(self) -> IdentityRecord | None:
         """``Scanner.identify``: ask the device again and take its profile's catalog."""
         return run_blocking(self._scanner.identify())
@@ -649,16 +681,26 @@ class SyncScanner:
         run_blocking(self._scanner.close_connection())
 
     # -- class 1 ---------------------------------------------------------------------------------------
-    def io_connection(self, output: int | None = None, input: int = 0, rpi: float = 0.010, **options: Any
+    def io_connection(self, output: int | None = None, input: int = 0, rpi: float = 0.010, *,
+                      config: int = 1, heartbeat: int | None = None, output_size: int | None = None,
+                      input_size: int | None = None, output_schema: AssemblySchema | None = None,
+                      input_schema: AssemblySchema | None = None, target_io_port: int | None = None,
+                      local_io_port: int = 0, multicast: bool = False, timeout_multiplier: int = 2,
+                      run: bool = True, keep_intervals: bool = False, config_data: bytes = b"",
+                      ot_format: OtFormat | str | None = None, kernel_arrival_times: bool = False,
                       ) -> SyncIoConnection:
         """A class 1 connection run by a private event loop in a background thread:
         ``with scanner.io_connection(output=21, input=71, rpi=0.010) as io: io.update(run_forward=True)``.
 
-        Arguments as for ``Scanner.io_connection`` (``heartbeat``, ``config``, ``multicast``,
-        ``ot_format``, ``target_io_port``, ...); fields are named by this scanner's catalog. The
+        Arguments as for ``Scanner.io_connection``; fields are named by this scanner's catalog. The
         connection has a TCP session of its own; leaving the ``with`` block, ``close()`` on it, or
         closing this scanner sends the Forward_Close."""
-        return self._open_io(lambda scanner: scanner.io_connection(output=output, input=input, rpi=rpi, **options))
+        return self._open_io(lambda scanner: scanner.io_connection(
+            output=output, input=input, rpi=rpi, config=config, heartbeat=heartbeat, output_size=output_size,
+            input_size=input_size, output_schema=output_schema, input_schema=input_schema,
+            target_io_port=target_io_port, local_io_port=local_io_port, multicast=multicast,
+            timeout_multiplier=timeout_multiplier, run=run, keep_intervals=keep_intervals, config_data=config_data,
+            ot_format=ot_format, kernel_arrival_times=kernel_arrival_times))
 
     def io_connection_from_eds(self, doc: EdsDocument | str | Path, connection: int | str, rpi: float | None = None,
                                **options: Any) -> SyncIoConnection:

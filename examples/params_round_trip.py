@@ -1,7 +1,8 @@
 """A parameter recipe: dump every parameter of the drive, change one, see the difference, load the
 recipe back (written, then saved). The same as ``cipstack params dump/diff/load``.
 
-Against the default emulator (``cipstack adapter``). Usage: ``python3 params_round_trip.py [HOST]``.
+Against the emulator from factory settings (``cipstack adapter --factory``: the recipe's save then
+lasts until it stops, and the saved drive, its state file, is left as it was). Usage: ``python3 params_round_trip.py [HOST]``.
 """
 
 import sys

@@ -1,6 +1,7 @@
 """The ramp script of ``ramp_sync.py`` with the async ``Scanner``, on the precise event loop.
 
-Against ``cipstack adapter --param drv=4 --param Frq=8``. Usage: ``python3 ramp_async.py [HOST]``.
+Against ``cipstack adapter --factory --param drv=4 --param Frq=8`` (from factory settings: what it
+writes leaves the saved drive alone). Usage: ``python3 ramp_async.py [HOST]``.
 """
 
 import sys

@@ -1,7 +1,8 @@
 """Run the drive at 45 Hz over class 1 by field names, and time its ramps (blocking code).
 
 Against the emulator started as the README's tour starts it, with the network as command and
-frequency source: ``cipstack adapter --param drv=4 --param Frq=8``. Usage: ``python3 ramp_sync.py [HOST]``.
+frequency source, from factory settings (what it writes leaves the saved drive alone):
+``cipstack adapter --factory --param drv=4 --param Frq=8``. Usage: ``python3 ramp_sync.py [HOST]``.
 """
 
 import sys

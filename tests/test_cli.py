@@ -98,6 +98,22 @@ def test_errors_are_one_line(adapter_process: tuple[str, subprocess.Popen[str]],
     assert fragment in one_line_error(result)
 
 
+def test_an_engineering_value_without_scaled_says_scaled(adapter_process: tuple[str, subprocess.Popen[str]]) -> None:
+    """`cipstack set HOST 0x2A/1/102 2.5`: Accel Time counts 0.1 s steps, so 2.5 is the engineering
+    value, and the message says `--scaled` (as the library says scaled=True); nothing is written."""
+    address, _ = adapter_process
+    before = run("get", address, "0x2A/1/102", "--json")
+    result = run("set", address, "0x2A/1/102", "2.5")
+    assert result.returncode == 2
+    assert one_line_error(result) == ("cipstack set: 0x2A/1/102 Acceleration Time takes a raw integer (0.1 s per "
+                                      "step): give 2.5 with --scaled, or the raw value 25")
+    between = run("set", address, "0x2A/1/102", "2.55")
+    assert between.returncode == 2 and "2.55 s is not a whole number of steps of 0.1 s" in one_line_error(between)
+    assert run("get", address, "0x2A/1/102", "--json").stdout == before.stdout
+    raw = run("set", address, "0x2A/1/102", str(json.loads(before.stdout)["value"]))
+    assert raw.returncode == 0 and raw.stdout.startswith("set 0x2A/1/102 Acceleration Time = ")
+
+
 def test_error_status_json(adapter_process: tuple[str, subprocess.Popen[str]]) -> None:
     address, _ = adapter_process
     result = run("get", address, "1/1/99", "--json")

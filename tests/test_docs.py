@@ -233,6 +233,18 @@ def test_two_set_up_commands() -> None:
                         '. .venv/bin/activate && pip install ".[test]" && python3 -m pytest']
 
 
+@pytest.mark.parametrize("path", [README, DOCS / "getting-started.md"], ids=_name)
+def test_every_extra_is_named_where_the_install_is(path: Path) -> None:
+    """A new user reads the extras where the install is: each extra of pyproject.toml is named there
+    (``.[http]`` was not, and ``--http`` then said to install an extra nobody had listed)."""
+    from cipstack.params import _load_toml  # tomllib, or tomli on Python 3.10
+
+    extras = _load_toml((ROOT / "pyproject.toml").read_text())["project"]["optional-dependencies"]
+    text = path.read_text()
+    missing = [name for name in extras if f".[{name}]" not in text]
+    assert not missing, f"{_name(path)} does not name the extras {missing}"
+
+
 @pytest.mark.parametrize("path", documents(), ids=_name)
 def test_document_is_parsed_whole(path: Path) -> None:
     """Every fence is closed and has a language this test knows, and every marker is known, so no
@@ -442,6 +454,8 @@ def test_section(section: Section, shell_env: dict[str, str], tmp_path: Path) ->
                     _run_console(namespace, section.document, block, shell_env, work, log)
     finally:
         namespace.close()
+    if " --factory" in section.adapter:   # what the section wrote or saved left the user's saved drive alone
+        assert not list((tmp_path / "data").rglob("*.json")), f"{section.id} wrote a state file"
 
 
 def _run_python(namespace: Namespace, document: str, block: Block, env: dict[str, str], work: Path,

@@ -175,7 +175,8 @@ def test_an_unknown_model_says_its_message_plainly() -> None:
 
     with pytest.raises(KeyError) as caught:
         model("MX2-NOPE")
-    assert str(caught.value) == "unknown inverter model 'MX2-NOPE'"
+    assert str(caught.value) == ("unknown inverter model 'MX2-NOPE': `cipstack models` lists the 61 models "
+                                 "(MX2-AB001-E to RX-B413K-E)")
     assert isinstance(caught.value, NotFound)
 
 

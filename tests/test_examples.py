@@ -13,7 +13,7 @@ from tests.test_docs import COMMAND_TIMEOUT, Namespace, _namespaces_available, e
 from tests.test_docs import shell_env as shell_env
 
 EXAMPLES = Path(__file__).resolve().parents[1] / "examples"
-NETWORK_CONTROL = "cipstack adapter --param drv=4 --param Frq=8"
+NETWORK_CONTROL = "cipstack adapter --factory --param drv=4 --param Frq=8"
 
 #: script, the emulator it runs against, set-up commands, arguments, lines its output must have.
 CASES = [
@@ -25,7 +25,7 @@ CASES = [
       "lost 0 packets"]),
     ("eds_io.py", "cipstack adapter", ["cipstack eds generate --profile acg -o eds"], ["eds/ACG-ET2_1.01.eds"],
      ["declarations: EDS file", "output fields: fault_reset, ", "input fields: ", "input: {"]),
-    ("params_round_trip.py", "cipstack adapter", [], [],
+    ("params_round_trip.py", "cipstack adapter --factory", [], [],
      ["409 parameters in drive.toml", "ACC in the recipe: 5.0 s (raw 50)",
       "differs: ACC Acceleration Time: device 7.5 s (75), file 5.0 s (50)", "written: ['ACC'] saved: True",
       "ACC now: 5.0 s"]),
@@ -62,3 +62,5 @@ def test_example(script: str, adapter: str, setup: list[str], arguments: list[st
         namespace.close()
     for fragment in expected:
         assert fragment in output, f"{fragment!r} not in the output of {script}:\n{output}"
+    if "--factory" in adapter:   # what the example wrote or saved left the user's saved drive alone
+        assert not list((tmp_path / "data").rglob("*.json")), f"{script} wrote a state file"

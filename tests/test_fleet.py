@@ -168,6 +168,24 @@ def test_groups_take_addresses_in_order() -> None:
         assign([parse_group("acg*2@127.0.0.10"), parse_group("acg@127.0.0.11")], None, None)
 
 
+
+def test_factory_fleet_keeps_no_state_file(tmp_path: Path) -> None:
+    """`cipstack fleet --factory`: every device from factory settings, no state file read or written
+    (the devices' saves last until the fleet stops); with --state-dir it is one line, exit 2."""
+    from cipstack.cli import build_parser
+    from cipstack.cli.fleet import _fleet_spec
+
+    args = build_parser().parse_args(["fleet", "--addresses", "127.77.9.1-127.77.9.2", "--device", "acg*2",
+                                      "--factory"])
+    spec = _fleet_spec(args)
+    assert spec.state_dir is None and [d.state_path for d in spec.devices] == [None, None]
+    kept = _fleet_spec(build_parser().parse_args(["fleet", "--addresses", "127.77.9.1", "--device", "acg",
+                                                  "--state-dir", str(tmp_path)]))
+    assert kept.devices[0].state_path == tmp_path / "127.77.9.1-acg.json"
+    assert main(["fleet", "--addresses", "127.77.9.1", "--device", "acg", "--factory", "--state-dir",
+                 str(tmp_path)]) == 2
+
+
 BAD_SPECS = [
     (["--addresses", "127.77.9.1-127.77.9.4", "--device", "pump*2"], "unknown profile 'pump'"),
     (["--addresses", "127.77.9.4-127.77.9.1", "--device", "acg"], "the range 127.77.9.4-127.77.9.1 ends before"),

@@ -6,6 +6,7 @@ says why."""
 
 from __future__ import annotations
 
+import json
 import signal
 import subprocess
 import sys
@@ -126,3 +127,36 @@ def test_eds_with_output_and_input_takes_the_field_names_from_the_file(tmp_path:
                                    "--ot-format", "heartbeat"), capture_output=True, text=True, timeout=60)
     assert result.returncode == 0, result.stderr
     assert "distance=0  temperature=20  signal_quality=0" in result.stdout
+
+
+def test_an_assembly_without_field_names_is_shown_and_written_as_raw_hex() -> None:
+    """A new user's first connection to a device emulated from a vendor's file: Connection3 of
+    vendor_drive_own_data.eds names no member of its assemblies 100 and 150. What `--list-fields`
+    lists, what each input line and `--json` show, and what `--set` takes are the raw bytes in hex."""
+    path = FILES / "vendor_drive_own_data.eds"
+    with adapter_process("--eds", str(path)) as (address, io_port):
+        connection = ("--eds", str(path), "--connection", "3")
+        listed = run("io", address, *connection, "--list-fields")
+        assert listed.returncode == 0, listed.stderr
+        assert listed.stdout.splitlines() == [
+            "output (O->T): assembly 100 'Vendor Output', 8 bytes: no field names (write it with --set raw=HEX)",
+            "input (T->O): assembly 150 'Vendor Input', 12 bytes: no field names (printed as raw=HEX)"]
+        text = subprocess.run(io(address, io_port, *connection, "--print", "changes", "--set", "raw=0102030405060708",
+                                 duration="0.5s"), capture_output=True, text=True, timeout=60)
+        assert text.returncode == 0, text.stderr
+        first = text.stdout.splitlines()[0].split()
+        assert first[1:] == ["raw=" + "00" * 12], text.stdout
+        written = run("get", address, "0x04/100/3")
+        assert written.stdout.strip() == "Data = 01 02 03 04 05 06 07 08", written.stdout + written.stderr
+        as_json = subprocess.run(io(address, io_port, *connection, "--print", "changes", "--json", duration="0.5s"),
+                                 capture_output=True, text=True, timeout=60)
+        assert as_json.returncode == 0, as_json.stderr
+        assert json.loads(as_json.stdout.splitlines()[0])["input"] == {"raw": "00" * 12}
+        wrong = subprocess.run(io(address, io_port, *connection, "--set", "speed=1", duration="0.5s"),
+                               capture_output=True, text=True, timeout=60)
+        short = subprocess.run(io(address, io_port, *connection, "--set", "raw=01", duration="0.5s"),
+                               capture_output=True, text=True, timeout=60)
+    assert wrong.returncode != 0 and wrong.stderr.strip() == (
+        "cipstack io: --set speed=1: assembly 100 'Vendor Output' (8 bytes) declares no field names: "
+        "give raw=HEX (8 bytes, e.g. raw=0000000000000000)")
+    assert short.returncode != 0 and short.stderr.strip() == "cipstack io: --set raw=01: assembly is 8 bytes, got 1"

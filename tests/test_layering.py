@@ -39,7 +39,9 @@ ALLOWED = {
     # and runtime, the fault controller, the event stream and the command service, and passes each
     # its collaborators; so it sits above faults and control, which know only the runtime.
     "adapter": {"control", "devices", "eip", "errors", "faults", "listening", "modbus", "objects", "runtime"},
-    "scanner": {"catalog", "cip", "devices", "eds", "eip", "errors", "objects", "sync_io"},
+    "scanner": {"catalog", "cip", "devices", "eds", "eip", "errors", "objects", "parameter_codes", "sync_io"},
+    # Parameters by code: the catalog's declarations, read and written through the scanner it is given.
+    "parameter_codes": {"catalog", "cip", "errors"},
     "sync_io": {"eip", "errors"},
     "params": {"catalog", "cip", "errors"},
     "catalog": {"assemblies", "cip", "eip", "objects", "errors"},

@@ -109,6 +109,8 @@ def test_unknown_model_without_near_match():
     with pytest.raises(UnknownModelError) as caught:
         model("ACG-ET2")
     assert caught.value.near == []
+    assert str(caught.value) == ("unknown inverter model 'ACG-ET2': `cipstack models` lists the 61 models "
+                                 "(MX2-AB001-E to RX-B413K-E)")
 
 
 @given(st.sampled_from(MODELS))

@@ -16,7 +16,7 @@ from pathlib import Path
 import pytest
 
 from cipstack.devices import state
-from cipstack.devices.acg.drive import AcgDrive
+from cipstack.devices.acg.drive import FAMILY, MODEL, AcgDrive
 from cipstack.devices.acg.registers import ACG_REGISTERS
 from cipstack.devices.registers import RegisterError, RegisterRefusal
 from cipstack.devices.state import (
@@ -287,3 +287,46 @@ def test_parameter_store_is_the_drive_memory(path: Path) -> None:
     assert store.load() == drive.saved_parameters
     assert store.load()[ACC] == 120
     assert json.loads(path.read_text())["model"] == "ACG-ET2"
+
+
+def test_factory_leaves_the_users_saved_drive_alone(monkeypatch: pytest.MonkeyPatch, tmp_path: Path) -> None:
+    """What a new user met: a docs script saved ACC = 2.5 s, and the tour's `cipstack get` then said
+    2.5 s where the README says 5.0 s. `cipstack adapter --factory` starts from factory settings, a
+    save there (here `params load`, which saves with 0x03E0) lasts until it stops, and the user's
+    state file is neither read nor written; the next `cipstack adapter` comes back with the user's save."""
+    from tests.library_support import run_cli
+    from tests.test_cli import start_adapter, stop
+
+    monkeypatch.setenv("XDG_DATA_HOME", str(tmp_path / "data"))
+    users = default_state_path("acg")
+    assert str(users).startswith(str(tmp_path / "data"))
+    users.parent.mkdir(parents=True)
+    save_state(users, FAMILY, MODEL, {addr("ACC"): 25})
+    before = users.read_bytes()
+
+    address, process = start_adapter("--factory")
+    try:
+        assert run_cli("get", address, "0x2A/1/102").stdout == "Acceleration Time = 5.0 s (50)\n"
+        recipe = tmp_path / "drive.toml"
+        assert run_cli("params", "dump", address, "-o", str(recipe)).returncode == 0
+        text = recipe.read_text()
+        assert "raw = 50" in text
+        changed = tmp_path / "changed.toml"
+        changed.write_text(text.replace("raw = 50", "raw = 75", 1))
+        loaded = run_cli("params", "load", address, str(changed))
+        assert loaded.returncode == 0 and loaded.stdout.splitlines()[-1].endswith(", saved"), loaded.stdout
+        assert run_cli("get", address, "0x2A/1/102").stdout == "Acceleration Time = 7.5 s (75)\n"
+    finally:
+        log = stop(process)
+    assert f"factory settings: saves last until the emulator stops; {users} is not read or written" in log
+    assert users.read_bytes() == before
+
+    address, process = start_adapter()
+    try:
+        assert run_cli("get", address, "0x2A/1/102").stdout == "Acceleration Time = 2.5 s (25)\n"
+    finally:
+        log = stop(process)
+    assert f"saved parameters in {users} (--factory starts without them)" in log
+    refused = run_cli("adapter", "--factory", "--state", str(tmp_path / "other.json"))
+    assert refused.returncode == 2 and refused.stderr.strip().endswith("--factory reads and writes no state "
+                                                                        "file: drop --state FILE")

@@ -4,10 +4,13 @@ suite of a scanner program's comm-loss handling (examples/comm_loss)."""
 
 from __future__ import annotations
 
+import inspect
 import subprocess
 import sys
 import textwrap
 from pathlib import Path
+
+import pytest
 
 if sys.version_info >= (3, 11):
     import tomllib
@@ -53,6 +56,15 @@ async def test_async_faults_and_events(cip_adapter):
         assert event.fields["originator"] == "127.0.0.1"
 
 
+def test_a_power_cycle_ends_the_session_and_a_new_scanner_waits_for_the_power(cip_adapter, cip_scanner):
+    cip_scanner.write(0x2A, 1, 102, 75)                     # ACC 7.5 s, not saved
+    cip_adapter.fault("power-cycle", off="3s")              # answers while the power is off
+    with pytest.raises(ConnectionError):                    # cip_scanner's session went with the power
+        cip_scanner.read(0x2A, 1, 102)
+    scanner = cip_adapter.scanner()                         # connects once the power is back
+    assert scanner.read(0x2A, 1, 102) == 50                 # what was not saved is lost
+
+
 def test_sync_wait_for_a_trip(cip_adapter):
     cip_adapter.trip(0x4200)
     assert cip_adapter.wait_for("trip", 5).fields["trip"] == "OverHeat"
@@ -83,9 +95,32 @@ def test_the_fixtures_in_a_users_suite(tmp_path: Path) -> None:
     (tmp_path / "test_users.py").write_text(textwrap.dedent(SUITE).replace("{eds!r}", repr(eds)))
     result = pytest_in_subprocess("-rA", "test_users.py", cwd=tmp_path)
     out = result.stdout
-    assert "6 passed, 1 error" in out, out + result.stderr
+    assert "7 passed, 1 error" in out, out + result.stderr
     assert "ERROR test_users.py::test_a_bad_marker_option" in out
     assert "cip_adapter: unknown option colour; valid: profile, model, eds, params, host, settings" in out
+
+
+def test_an_async_test_without_pytest_asyncio_is_told_what_it_needs(tmp_path: Path) -> None:
+    """The docs say async tests need pytest-asyncio: without it, pytest fails such a test and names it."""
+    (tmp_path / "test_async.py").write_text("async def test_async(cip_adapter):\n    assert cip_adapter.port\n")
+    result = pytest_in_subprocess("-p", "no:asyncio", "test_async.py", cwd=tmp_path)
+    assert result.returncode == 1, result.stdout + result.stderr
+    assert "async def functions are not natively supported" in result.stdout and "pytest-asyncio" in result.stdout
+
+
+def test_io_connection_names_its_keyword_arguments() -> None:
+    """``io_connection``'s options are in its signature (IDEs and the API reference show them), and a
+    misspelt one is refused by name before anything is sent."""
+    from cipstack.scanner import Scanner, SyncScanner
+
+    for method in (Scanner.io_connection, SyncScanner.io_connection):
+        parameters = inspect.signature(method).parameters
+        assert not any(p.kind is inspect.Parameter.VAR_KEYWORD for p in parameters.values())
+        assert {"target_io_port", "timeout_multiplier", "multicast", "ot_format", "config_data", "heartbeat",
+                "local_io_port", "run"} <= set(parameters)
+    scanner = SyncScanner.__new__(SyncScanner)
+    with pytest.raises(TypeError, match="timeout_multipler"):
+        scanner.io_connection(output=21, input=71, timeout_multipler=3)  # type: ignore[call-arg]
 
 
 def test_the_example_suite_passes() -> None:

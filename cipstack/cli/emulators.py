@@ -33,9 +33,12 @@ def cmd_adapter(args: argparse.Namespace) -> int:
         raise UsageError(f"--model {args.model}: the acg profile has one model; --model names an MX2 or RX model")
     if not 0 <= args.port < 65536:
         raise UsageError(f"port {args.port} out of range")
-    if args.state is None:
+    default_state = default_state_path(f"{args.profile}-{args.model}" if args.model else args.profile)
+    if args.factory and args.state is not None:
+        raise UsageError("--factory reads and writes no state file: drop --state FILE")
+    if args.state is None and not args.factory:
         # One file per profile and model: another model's saved parameters are not this one's.
-        args.state = default_state_path(f"{args.profile}-{args.model}" if args.model else args.profile)
+        args.state = default_state
     settings = AdapterSettings(host=args.host, port=args.port, profile=args.profile, model=args.model,
                                max_sessions=args.max_sessions, max_connections=args.max_connections,
                                io_port=args.io_port, control_path=args.control,
@@ -45,6 +48,12 @@ def cmd_adapter(args: argparse.Namespace) -> int:
         adapter = Adapter(settings)
     except (StateFileError, ValueError, KeyError) as exc:
         raise UsageError(str(exc)) from None
+    log = logging.getLogger("cipstack.adapter")
+    if args.factory:
+        # The user's saved drive stays as it is: this run's saves live in memory until it stops.
+        log.info("factory settings: saves last until the emulator stops; %s is not read or written", default_state)
+    else:
+        log.info("saved parameters in %s (--factory starts without them)", args.state)
     if args.param:
         _apply_keypad_parameters(adapter, args.param)
     return _serve(adapter, args, "adapter")
@@ -67,7 +76,7 @@ def _profile_of_model(name: str) -> str:
     try:
         return model(name).family.value.lower()
     except KeyError as exc:
-        raise UsageError(f"--model: {exc} (`cipstack models` lists them)") from None
+        raise UsageError(f"--model: {exc}") from None
 
 
 def _limit_settings(args: argparse.Namespace) -> dict[str, Any]:

@@ -124,7 +124,45 @@ async def _connect_identified(args: argparse.Namespace, standard: tuple[int, int
     return scanner
 
 
+def _is_code(text: str) -> bool:
+    """A parameter's code (``ACC``, ``CM.24``, ``A004``, ``Param4``), not a path: paths begin with a number."""
+    return text.strip()[:1].isalpha()
+
+
+def _by_code(args: argparse.Namespace, value: str | None) -> int:
+    """``get|set HOST CODE [VALUE]``: a parameter by the code its manual prints, its value in its unit
+    (``cipstack.parameter_codes``), over the scanner identified as for a path."""
+    from ..parameter_codes import find_parameter
+
+    if args.type is not None:
+        raise UsageError(f"--type: {args.path} is a parameter's code, whose type is its declaration")
+
+    async def run() -> tuple[Any, Any]:
+        scanner = await _connect_identified(args)
+        try:
+            if args.connected:
+                await scanner.open_connection()
+            parameter = find_parameter(scanner.catalog, args.path)
+            if value is None:
+                return parameter, await scanner.read(*parameter.path)
+            return parameter, await scanner.set_parameter(parameter.code, value)
+        finally:
+            await scanner.close()
+
+    try:
+        parameter, reading = asyncio.run(run())
+    except (KeyError, ValueError) as exc:
+        raise UsageError(str(exc)) from None
+    path = f"0x{parameter.class_id:02X}/{parameter.instance}/{parameter.attribute}"
+    record = {"status": 0, "code": parameter.code, "name": parameter.spec.name, "path": path, **reading.json()}
+    text = f"{parameter.code} {parameter.spec.name} = {_reading_text(reading)}"
+    _emit(args, record, text if value is None else f"set {text}")
+    return EXIT_OK
+
+
 def cmd_get(args: argparse.Namespace) -> int:
+    if _is_code(args.path):
+        return _by_code(args, None)
     class_id, instance, attribute = parse_object_path(args.path)
     cip_type = parse_type(args.type)
 
@@ -202,6 +240,8 @@ def _jsonable(value: Any) -> Any:
 def cmd_set(args: argparse.Namespace) -> int:
     """Set_Attribute_Single. The value is raw (as on the wire) unless ``--scaled`` (the engineering value,
     5.0 for 5.0 s); its type is the attribute's declaration, else ``--type``."""
+    if _is_code(args.path):
+        return _by_code(args, args.value)
     class_id, instance, attribute = parse_object_path(args.path, need_attribute=True)
     assert attribute is not None
     given_type = parse_type(args.type)
@@ -244,8 +284,28 @@ def _parse_value(args: argparse.Namespace, cip_type: Any, spec: Any) -> Any:
             if spec is None:
                 raise UsageError(f"--scaled: {args.path} has no declared scale (give the raw value)")
             return spec.scaling.to_raw(float(args.value))
+        if spec is not None and spec.scaling.scaled:
+            _refuse_engineering_value(args, spec)
         value = cip_type.parse_text(args.value)
         cip_type.encode(value)
         return value
     except (ValueError, CipError, TypeError) as exc:
         raise UsageError(f"value {args.value!r} is not a valid {cip_type.name}: {exc}") from None
+
+
+def _refuse_engineering_value(args: argparse.Namespace, spec: Any) -> None:
+    """A value with a fraction for an attribute counted in steps (2.5 for Accel Time, 0.1 s per step)
+    is an engineering value given without ``--scaled``: say so, as the library's ``write`` does."""
+    try:
+        engineering = float(args.value)
+    except ValueError:
+        return
+    if engineering.is_integer() and "." not in args.value:
+        return  # a raw count, as the rule says
+    scaling = spec.scaling
+    what = f"{args.path} {spec.name} takes a raw integer ({scaling.scale:g} {spec.unit} per step)"
+    try:
+        raw = scaling.to_raw(engineering)
+    except ValueError as exc:
+        raise UsageError(f"{what}, and {exc}") from None
+    raise UsageError(f"{what}: give {args.value} with --scaled, or the raw value {raw}")

@@ -55,8 +55,12 @@ def _fleet_spec(args: argparse.Namespace) -> Any:
     addresses = args.addresses if args.addresses is not None else settings.get("addresses")
     pool = parse_addresses(addresses, "--addresses" if args.addresses is not None else f"{where}: addresses") \
         if addresses is not None else None
-    state_dir = args.state_dir or settings.get("state_dir") or data_directory() / "fleet"
-    devices = assign(groups, pool, Path(state_dir))
+    state_dir: Path | None = Path(args.state_dir or settings.get("state_dir") or data_directory() / "fleet")
+    if args.factory:
+        if args.state_dir is not None:
+            raise UsageError("--factory reads and writes no state file: drop --state-dir DIR")
+        state_dir = None   # every device from factory settings; its saves last until the fleet stops
+    devices = assign(groups, pool, state_dir)
     port = check_port(args.port if args.port is not None else settings.get("port", DEFAULT_PORT), "port")
     io_port = check_port(args.io_port if args.io_port is not None else settings.get("io_port", DEFAULT_IO_PORT),
                          "io port")
@@ -67,7 +71,7 @@ def _fleet_spec(args: argparse.Namespace) -> Any:
         devices = assign_stations(devices, workers, "--rtu" if args.rtu is not None else f"{where}: rtu")
     elif any(d.station is not None for d in devices):
         raise SpecError(f"{where}: a station ID puts a drive on the fleet's RS-485 line: give --rtu (rtu = \"pty\")")
-    return FleetSpec(devices, port, io_port, workers, Path(state_dir), rtu)
+    return FleetSpec(devices, port, io_port, workers, state_dir, rtu)
 
 
 def cmd_fleet(args: argparse.Namespace) -> int:

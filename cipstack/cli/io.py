@@ -85,10 +85,18 @@ def parse_config_data(text: str | None) -> bytes:
 
 
 def _set_output(io: Any, name: str, value: str) -> None:
-    """One ``--set``; an unknown field names the valid ones."""
+    """One ``--set``; an unknown field names the valid ones, or says that ``raw=HEX`` is the only way."""
     try:
         if name == "raw":
-            io.output.raw = bytes.fromhex(value)
+            try:
+                data = bytes.fromhex(value)
+            except ValueError:
+                size = len(io.output.raw)
+                raise ValueError(f"not hex: raw takes the {size} bytes in hex (e.g. {'00' * size})") from None
+            io.output.raw = data
+        elif not io.output.field_names:
+            raise UsageError(f"--set {name}={value}: {_unnamed(io.output.schema, len(io.output.raw))}: give "
+                             f"raw=HEX ({len(io.output.raw)} bytes, e.g. raw={'00' * len(io.output.raw)})")
         else:
             schema = io.output.schema
             flag = schema is not None and name in schema.field_names and schema.field(name).bits == 1
@@ -117,13 +125,32 @@ def _statistics_text(stats: dict[str, Any]) -> str:
             + f"  input changes {stats['input_changes']}")
 
 
+def _unnamed(schema: Any, size: int) -> str:
+    """Why an assembly's data has no field names: no declaration, or one that names no member."""
+    if schema is None:
+        return "no field names are known for this assembly"
+    return f"assembly {schema.instance} {schema.name!r} ({size} bytes) declares no field names"
+
+
+def image_values(image: Any) -> dict[str, Any]:
+    """What a printed input shows: every field by name, or ``raw`` (hex) when no field names the data."""
+    if not image.field_names:
+        return {"raw": image.raw.hex()}
+    values: dict[str, Any] = image.fields()
+    return values
+
+
 def _field_lines(direction: str, schema: Any, instance: int | None) -> list[str]:
     """One line per field of an assembly: name, offset, width or type, and the unit of a raw value
-    (what ``--set`` takes: ``[0.01 Hz]`` for a frequency word, from the field's declaration)."""
+    (what ``--set`` takes: ``[0.01 Hz]`` for a frequency word, from the field's declaration). An
+    assembly without field names says that ``raw=HEX`` is the way: to write it, and in what is printed."""
+    how = "write it with --set raw=HEX" if direction.startswith("output") else "printed as raw=HEX"
     if schema is None:
-        what = "no data (heartbeat)" if instance is None else f"assembly {instance}: no field names known (raw=HEX)"
+        what = "no data (heartbeat)" if instance is None else f"assembly {instance}: no field names known ({how})"
         return [f"{direction}: {what}"]
     lines = [f"{direction}: assembly {schema.instance} {schema.name!r}, {schema.size} bytes"]
+    if not schema.fields:
+        return [f"{lines[0]}: no field names ({how})"]
     for item in schema.fields:
         place = f"byte {item.offset} bit {item.bit}" + (f"-{item.bit + item.bits - 1}" if item.bits > 1 else "") \
             if item.bits else f"byte {item.offset} {item.type.name}"
@@ -275,10 +302,7 @@ def cmd_io(args: argparse.Namespace) -> int:
 
             def show(image: Any) -> None:
                 elapsed = round(loop.time() - started, 4)
-                try:
-                    values: Any = image.fields()
-                except AttributeError:
-                    values = {"raw": image.raw.hex()}
+                values = image_values(image)
                 if args.json:
                     print(json.dumps({"t": elapsed, "input": values}), flush=True)
                 else:

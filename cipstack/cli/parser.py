@@ -152,6 +152,9 @@ def build_parser(command: str | None = None) -> argparse.ArgumentParser:
     _complete(p.add_argument("--state", type=Path, metavar="FILE",
                              help="state file of saved parameters (default: in the user's data directory, "
                                   "per profile)"), _FILE)
+    p.add_argument("--factory", action="store_true",
+                   help="start from factory settings without reading or writing the state file: a save lasts "
+                        "until the emulator stops (for examples and tests that change parameters)")
     p.add_argument("--modbus-port", type=number("modbus port"), metavar="N",
                    help="also serve Modbus TCP on this port (ACG)")
     p.add_argument("--rtu", metavar="DEVICE",
@@ -187,6 +190,8 @@ def build_parser(command: str | None = None) -> argparse.ArgumentParser:
     _complete(p.add_argument("--state-dir", type=Path, metavar="DIR",
                              help="where each device keeps its state file, ADDRESS-PROFILE[-MODEL].json "
                                   "(default: fleet/ in the user's data directory)"), _DIRECTORY)
+    p.add_argument("--factory", action="store_true",
+                   help="every device starts from factory settings; no state file is read or written")
     p.add_argument("--param", action="append", metavar="CODE=VALUE",
                    help="set an ACG keypad parameter at start on every ACG device; repeatable")
     _add_http_arguments(p)
@@ -231,7 +236,9 @@ def build_parser(command: str | None = None) -> argparse.ArgumentParser:
 
     p = sub.add_parser("get")
     common(p)
-    p.add_argument("path", metavar="CLASS/INSTANCE[/ATTRIBUTE]", help="decimal or 0x hex numbers: 1/1/7, 0x2A/1/102")
+    p.add_argument("path", metavar="CLASS/INSTANCE[/ATTRIBUTE]|CODE",
+                   help="decimal or 0x hex numbers: 1/1/7, 0x2A/1/102; or a parameter's code: ACC, CM.24, A004, "
+                        "an EDS ParamN or its name")
     p.add_argument("--type", help="CIP type to decode the value (UINT, SHORT_STRING, ...)")
     p.add_argument("--connected", action="store_true", help="use a class 3 connection")
     p.add_argument("--route", metavar="PORT/LINK[,...]",
@@ -246,9 +253,12 @@ def build_parser(command: str | None = None) -> argparse.ArgumentParser:
 
     p = sub.add_parser("set")
     common(p)
-    p.add_argument("path", metavar="CLASS/INSTANCE/ATTRIBUTE", help="decimal or 0x hex numbers: 0xF5/1/13")
-    p.add_argument("value", metavar="VALUE", help="the raw value, as on the wire (50 for 5.0 s at 0.1 s per step); "
-                                                  "BOOL also true/false/on/off")
+    p.add_argument("path", metavar="CLASS/INSTANCE/ATTRIBUTE|CODE",
+                   help="decimal or 0x hex numbers: 0xF5/1/13; or a parameter's code: ACC, CM.24, A004, an EDS ParamN "
+                        "or its name")
+    p.add_argument("value", metavar="VALUE", help="by path, the raw value, as on the wire (50 for 5.0 s at 0.1 s per "
+                                                  "step); BOOL also true/false/on/off. By code, the value in the "
+                                                  "parameter's unit (2.5 for 2.5 s), as the keypad takes it")
     p.add_argument("--type", help="CIP type of the value (UINT, INT, REAL, SHORT_STRING, ...); "
                                   "default: the attribute's declaration")
     p.add_argument("--scaled", action="store_true",

@@ -5,14 +5,17 @@ What is compared, each through the services the device has:
 * ``[Device]`` with the Identity object: Get_Attributes_All of instance 1; where the device refuses
   it (0x08, as the MX2 and RX do), Get_Attribute_Single of attributes 1-4 and 7; where that is
   refused too, the ListIdentity reply (which carries the same attributes).
-* every ``ParamN`` with a link path: Get_Attribute_Single of that attribute; the size of the reply
+* every ``ParamN`` with a link path (a class attribute, instance 0, too): Get_Attribute_Single of that
+  attribute; the size of the reply
   against the parameter's data type and size (fields 5 and 6), its value against the minimum and
   maximum (fields 10 and 11).
 * every ``AssemN`` the file places at an instance: its size against Assembly attribute 4 (where
-  attribute 4 is not served, the length of attribute 3, the data).
+  attribute 4 is not served, the length of attribute 3, the data); one it places at no instance
+  (no path, and no connection names it) is noted, since nothing says which instance to read.
 * every class 1 ``ConnectionN``: opened as the file describes it (``Scanner.io_connection_from_eds``)
   and closed at once; a listen-only connection while a connection of the file that produces the
-  same input by multicast is open.
+  same input by multicast is open. A refusal says who refused: the device (its status), or the
+  file, whose connection cannot be opened as it declares it (never sent).
 
 A difference is an error finding of the checker's kind (a rule, a line of the file, a message);
 what the device refuses without saying the file is wrong (a service it does not serve, a state
@@ -22,6 +25,7 @@ conflict) is an ``info`` finding, so the check goes on with what the device does
 from __future__ import annotations
 
 import asyncio
+import re
 from collections.abc import Awaitable, Callable
 from dataclasses import dataclass, field
 from typing import TYPE_CHECKING, Any, TypeVar
@@ -36,6 +40,9 @@ if TYPE_CHECKING:
     from ..scanner import Scanner
 
 T = TypeVar("T")
+
+#: What the file's reading says of a ConnectionN it skipped (see ``interpret._connection``).
+_DECLARED_NOT_OPENABLE = re.compile(r"Connection[0-9]+\b.*: skipped$")
 
 #: Statuses that say the attribute or instance is not there: the file names something the device lacks.
 _ABSENT = frozenset({GeneralStatus.PATH_DESTINATION_UNKNOWN, GeneralStatus.ATTRIBUTE_NOT_SUPPORTED,
@@ -213,13 +220,20 @@ async def _connection(scanner: Scanner, doc: EdsDocument, connection: Connection
             # Both assemblies exist: the device offers other pairs now (the ACG-ET2 serves the pair
             # its parameters select), which says nothing against the file.
             _find(report, "live-connection", connection.line,
-                  f"{where}: Forward_Open refused ({_status(exc)}); the device has assemblies "
+                  f"{where}: Forward_Open refused by the device ({_status(exc)}); the device has assemblies "
                   f"{', '.join(str(p) for p in sorted(points))} but does not offer this path now", WARNING)
         else:
-            _find(report, "live-connection", connection.line, f"{where}: Forward_Open refused ({_status(exc)})")
+            _find(report, "live-connection", connection.line,
+                  f"{where}: Forward_Open refused by the device ({_status(exc)})")
         return
-    except (OSError, asyncio.TimeoutError, ValueError) as exc:
-        _find(report, "live-connection", connection.line, f"{where}: {type(exc).__name__}: {exc}")
+    except (OSError, asyncio.TimeoutError) as exc:
+        _find(report, "live-connection", connection.line, f"{where}: no answer from the device ({type(exc).__name__}: "
+                                                          f"{exc})")
+        return
+    except (ValueError, KeyError, TypeError) as exc:
+        # Raised before anything is sent: the file's declaration is what cannot be opened.
+        _find(report, "live-connection", connection.line, f"{where}: cannot be opened as the file declares it "
+                                                          f"({exc}): not sent")
         return
     report.opened += 1
 
@@ -242,12 +256,23 @@ async def compare_with_device(doc: EdsDocument, scanner: Scanner, *, target_io_p
     await _guarded(_identity(scanner, report), report, "Identity")
     view = read_view(doc)
     for param in view.params.values():
-        if param.link is not None and param.link[1] != 0:
+        if param.link is not None:
             await _guarded(_parameter(scanner, param, report), report, param.keyword)
+    members = {m.reference for a in view.assemblies.values() for m in a.members if m.reference}
     for info in view.assemblies.values():
         if info.instance is not None and info.size:
             await _guarded(_assembly(scanner, info.keyword, info.instance, info.size, info.line, report), report,
                            info.keyword)
+        elif info.instance is None and info.keyword not in members:
+            _find(report, "live-assembly", info.line, f"{info.keyword}: not sized: it has no path and no connection "
+                                                      "names it, so nothing says which instance of the device it is",
+                  INFO)
+    if connections:
+        for issue in view.issues:
+            # A class 1 connection the file declares but does not describe so that it can be opened.
+            if _DECLARED_NOT_OPENABLE.match(issue.message) and "is not class 1" not in issue.message:
+                _find(report, "live-connection", issue.line, f"{issue.message.removesuffix(': skipped')}: cannot be "
+                                                             "opened as the file declares it: not sent", WARNING)
     if connections:
         options: dict[str, Any] = {"target_io_port": target_io_port, "timeout_multiplier": 4}
         owners = [c for c in view.connections if c.kind != "listen only"]

@@ -202,14 +202,24 @@ def summarize(doc: EdsDocument) -> dict[str, Any]:
     assembly_entries = [entry for entry in assembly_section if _ASSEMBLY.fullmatch(entry.keyword)] \
         if assembly_section else []
     # Sizes as the emulator reads them: a ParamN's default, the members' sum (AssemExaN, modular).
-    from .interpret import assembly_sizes
+    from .interpret import assembly_sizes, read_view
 
+    view = read_view(doc)
     sizes: dict[str, Any] = {entry.keyword: _value(entry, 3) for entry in assembly_entries}
     sizes.update(assembly_sizes(doc))
+    # An assembly of empty size sized by its connections, as the emulator sizes it.
+    sizes.update({keyword: info.size for keyword, info in view.assemblies.items() if sizes.get(keyword) is None})
     assemblies = [_assembly(entry, params, sizes) for entry in assembly_entries]
     manager = doc.get("Connection Manager")
     connections = [_connection(entry, sizes, params) for entry in manager
                    if _CONNECTION.fullmatch(entry.keyword)] if manager else []
+    # The sizes the emulator offers (a size parameter that defaults to 0 at its smallest non-zero size).
+    read = {f"Connection{c.number}": c for c in view.connections}
+    for connection in connections:
+        found = read.get(connection["keyword"])
+        if found is not None:
+            connection["o_to_t"]["size"] = 0 if found.heartbeat else found.o_t_size
+            connection["t_to_o"]["size"] = found.t_o_size
     return {"identity": identity, "networks": networks, "assemblies": assemblies, "connections": connections}
 
 

@@ -47,7 +47,7 @@ from ..errors import BadRequest
 from ..objects.assembly import AssemblyPoint
 from ..objects.identity import IdentityInfo
 from ..objects.tcpip import NetworkInterface
-from .interpret import EdsIssue, EdsView, ParamInfo, assembly_schema, read_view
+from .interpret import EXCLUSIVE_OWNER_KIND, EdsIssue, EdsView, ParamInfo, assembly_schema, read_view
 from .model import EdsDocument, FieldKind
 
 if TYPE_CHECKING:
@@ -227,6 +227,8 @@ def _add_parameter_objects(device: EdsDevice, view: EdsView, issues: list[EdsIss
     standard = dict(device.router.objects)
     deferred: list[ParamInfo] = []
     declared: dict[int, dict[int, dict[int, AttributeSpec]]] = {}
+    #: Parameters that link a class attribute (instance 0): served read-only, at their default.
+    class_level: dict[int, dict[int, AttributeSpec]] = {}
     first: dict[Link, ParamInfo] = {}
     for param in view.params.values():
         if param.link is None:
@@ -242,19 +244,24 @@ def _add_parameter_objects(device: EdsDevice, view: EdsView, issues: list[EdsIss
         if class_id in standard:
             deferred.append(param)
             continue
+        if instance == 0 and 1 <= class_id <= 0xFFFF and 1 <= attribute <= 0xFFFF:
+            class_level.setdefault(class_id, {})[attribute] = attribute_spec(param, attribute, issues)
+            continue
         if not (1 <= class_id <= 0xFFFF and 1 <= instance <= 0xFFFF and 1 <= attribute <= 0xFFFF):
-            what = "a class attribute (instance 0)" if instance == 0 else "no instance attribute"
-            issues.append(EdsIssue(param.line, f"{param.keyword}: link {param.link} is {what}: not served"))
+            issues.append(EdsIssue(param.line, f"{param.keyword}: link {param.link} is no instance attribute: "
+                                               "not served"))
             continue
         spec = attribute_spec(param, attribute, issues)
         declared.setdefault(class_id, {}).setdefault(instance, {})[attribute] = spec
-    for class_id, instances in sorted(declared.items()):
+    for class_id in sorted(declared.keys() | class_level.keys()):
+        instances = declared.get(class_id, {})
         union: dict[int, AttributeSpec] = {}
         for attributes in instances.values():
             for attribute_id, spec in attributes.items():
                 union.setdefault(attribute_id, spec)
+        extra = class_level.get(class_id, {})
         class_spec = ClassSpec(class_id, f"Class 0x{class_id:02X}", instance_attributes=tuple(
-            union[key] for key in sorted(union)))
+            union[key] for key in sorted(union)), extra_class_attributes=tuple(extra[key] for key in sorted(extra)))
         device.router.register(EdsObject(class_spec, instances))
     return deferred
 
@@ -335,7 +342,11 @@ def _add_raw_points(device: EdsDevice, view: EdsView, points: dict[int, Assembly
         if not connection.heartbeat and not connection.o_t_assembly:
             wanted.insert(0, (connection.o_t_point, connection.o_t_size, True))
         for instance, size, output in wanted:
-            if instance in points or instance in heartbeats or size <= 0 or not 1 <= instance <= 0xFFFF:
+            # An exclusive owner whose T->O point is a heartbeat (198, 254: an output-only device) is
+            # legal: the target produces no data, only the connection's sequence count.
+            heartbeat_input = not output and size == 0 and connection.kind == EXCLUSIVE_OWNER_KIND
+            if instance in points or instance in heartbeats or (size <= 0 and not heartbeat_input) \
+                    or not 1 <= instance <= 0xFFFF:
                 continue
             point = _point(device, instance, size, output, None, [], f"Connection{connection.number} data", False)
             points[instance] = point

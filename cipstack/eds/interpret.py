@@ -115,6 +115,11 @@ class AssemblyInfo:
     #: An ``AssemExaN``: its size is that of its default configuration (a parameter's default, its
     #: members); a variable-size connection may carry less of it.
     variable: bool = False
+    #: Declared with an empty size (the modular I/O of field-bus blocks): the size field of the
+    #: connections that name it gives its size (``size_by_connections``); 0 until then.
+    sized_by_connection: bool = False
+    #: The line of its size field, for what is said of it.
+    size_line: int = 0
 
 
 @dataclass(frozen=True)
@@ -383,6 +388,11 @@ def _assembly(entry: Entry, params: Mapping[str, ParamInfo], sizes: Mapping[str,
     if size is None:
         size_field = entry.field(3)
         written = size_field.raw if size_field is not None else ""
+        if not written.strip() and not members:
+            # The field-bus block's style: the connection that names it says how big it is.
+            return AssemblyInfo(keyword, _text(entry.field(1)), instance, 0, (), entry.line,
+                                variable=keyword.startswith("AssemExa"), sized_by_connection=True,
+                                size_line=entry.line_of(3))
         issues.append(EdsIssue(entry.line_of(3), f"{keyword}: size {written or '(empty)'} is not a number of bytes, "
                                                  "nor a ParamN with a default, nor members of known sizes (a modular "
                                                  "or variable-size assembly needs one of them): skipped"))
@@ -616,18 +626,30 @@ def _connection(entry: Entry, number: int, params: Mapping[str, ParamInfo], asse
         kind = EXCLUSIVE_OWNER_KIND
     else:
         # No application type bit: older files; a connection with no O->T data sends the heartbeat.
-        o_t_data = o_t_assembly.size if o_t_assembly is not None else (_int(entry.field(4)) or 0)
+        o_t_data = o_t_assembly.size if o_t_assembly is not None and not o_t_assembly.sized_by_connection \
+            else (_int(entry.field(4)) or 0)
         kind = EXCLUSIVE_OWNER_KIND if o_t_data else INPUT_ONLY_KIND
 
     def size(number: int, assembly: AssemblyInfo | None) -> int | None:
-        if assembly is not None:
+        if assembly is not None and not assembly.sized_by_connection:
             return assembly.size
         value = _int(entry.field(number))
         if value is not None:
             return value
         reference = _keyword(entry.field(number))
         param = params.get(reference) if reference else None
-        return param.default if param is not None and isinstance(param.default, int) else None
+        if param is None or not isinstance(param.default, int):
+            return None
+        if param.default == 0 and isinstance(param.maximum, int) and param.maximum > 0:
+            # Nothing mapped yet (a gateway's default): offered at the smallest size it allows.
+            smallest = max(param.minimum if isinstance(param.minimum, int) else 0, 1)
+            direction = "O->T" if number == 4 else "T->O"
+            unit = "byte" if smallest == 1 else "bytes"
+            issues.append(EdsIssue(entry.line_of(number), f"{reference}, the {direction} size of {keyword}, defaults "
+                                                          f"to 0: offered at {smallest} {unit}, the smallest non-zero "
+                                                          "size it allows"))
+            return smallest
+        return param.default
 
     o_t_size = 0 if kind != EXCLUSIVE_OWNER_KIND else size(4, o_t_assembly)
     t_o_size = size(7, t_o_assembly)
@@ -695,12 +717,37 @@ def place_assemblies(assemblies: Mapping[str, AssemblyInfo], connections: list[C
     return placed
 
 
+def size_by_connections(assemblies: Mapping[str, AssemblyInfo], connections: list[ConnectionInfo],
+                        issues: list[EdsIssue]) -> dict[str, AssemblyInfo]:
+    """Give an assembly declared with an empty size the size the connections that name it give it
+    (their size field: a number, or a ParamN with its default); one they do not size, or size
+    differently, is skipped with the reason."""
+    sized = dict(assemblies)
+    for keyword, info in assemblies.items():
+        if not info.sized_by_connection:
+            continue
+        sizes = {c.o_t_size for c in connections if c.o_t_assembly == keyword and not c.heartbeat}
+        sizes |= {c.t_o_size for c in connections if c.t_o_assembly == keyword}
+        if len(sizes) == 1 and min(sizes) > 0:
+            sized[keyword] = replace(info, size=sizes.pop(), sized_by_connection=False)
+            continue
+        why = (f"its connections give it the sizes {', '.join(str(n) for n in sorted(sizes))}" if len(sizes) > 1
+               else "no connection that names it gives a size")
+        issues.append(EdsIssue(info.size_line or info.line, f"{keyword}: size (empty), and {why} (a modular or "
+                                                            "variable-size assembly needs a size, a ParamN with a "
+                                                            "default, members of known sizes or a connection that "
+                                                            "sizes it): skipped"))
+        del sized[keyword]
+    return sized
+
+
 def read_view(doc: EdsDocument) -> EdsView:
     """Parameters, assemblies and class 1 connections of ``doc``, with what was skipped."""
     issues: list[EdsIssue] = []
     params = read_params(doc, issues)
     assemblies = read_assemblies(doc, params, issues)
     connections = read_connections(doc, params, assemblies, issues)
+    assemblies = size_by_connections(assemblies, connections, issues)
     view = EdsView(params, place_assemblies(assemblies, connections, issues), connections, issues)
     if not connections:
         view.why_none = _why_no_connection(doc, issues)
@@ -725,5 +772,5 @@ def _why_no_connection(doc: EdsDocument, issues: list[EdsIssue]) -> str:
 
 __all__ = [
     "AssemblyInfo", "AssemblyMember", "ConnectionInfo", "EdsIssue", "EdsView", "ParamInfo", "assembly_schema",
-    "place_assemblies", "read_assemblies", "read_connections", "read_params", "read_view",
+    "place_assemblies", "read_assemblies", "read_connections", "read_params", "read_view", "size_by_connections",
 ]

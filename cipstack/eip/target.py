@@ -25,6 +25,7 @@ from collections.abc import Callable
 from dataclasses import dataclass, field
 
 from ..cip.router import MessageRouter, RequestContext
+from ..cip.status import GeneralStatus
 from .connection_manager import ConnectionTable, ExplicitConnection, origin_host
 from .cpf import Item, ItemType, SockAddr, decode_items, encode_items
 from .encapsulation import (
@@ -42,6 +43,7 @@ from .encapsulation import (
 from .identity_items import CAPABILITY_CIP_TCP, IdentityRecord, encode_list_identity, encode_list_services
 from .limits import RateLimitedLog
 from .seams import RequestSeam
+from .trailing_bytes import is_too_much_data, too_much_data_hint
 
 log = logging.getLogger(__name__)
 
@@ -52,6 +54,7 @@ _MAY_CARRY_SOCKADDR = frozenset({0x54, 0x5B, 0x52})
 
 # Plain ints for the request path: an enum member costs an attribute lookup each time it is named.
 _SEND_RR_DATA = int(Command.SEND_RR_DATA)
+_TOO_MUCH_DATA = int(GeneralStatus.TOO_MUCH_DATA)
 _NULL_ADDRESS = int(ItemType.NULL_ADDRESS)
 _UNCONNECTED_DATA = int(ItemType.UNCONNECTED_DATA)
 
@@ -183,6 +186,7 @@ class EncapsulationTarget:
         self.frames_refused_log = RateLimitedLog(log, level=logging.INFO)
         self.frames_late_log = RateLimitedLog(log, level=logging.INFO)
         self.idle_log = RateLimitedLog(log, level=logging.INFO)
+        self.too_much_data_log = RateLimitedLog(log, level=logging.INFO)
 
     # -- TCP ------------------------------------------------------------------------------------
     def connection(self, peer: str, local: SockAddr, now: float) -> EncapsulationConnection:
@@ -462,9 +466,17 @@ class EncapsulationConnection:
         request_context.now = now
         request_context.connected = False
         reply = self.target.requests.entry.handle(request, request_context)  # the router, or the seam's chain
+        if reply[2] == _TOO_MUCH_DATA:
+            self._too_much_data(request, now)
         self._outbox.append(_RR_REPLY_FRAME.pack(
             _SEND_RR_DATA, _RR_TWO_ITEMS_SIZE + len(reply), session, 0, context, 0, 0, 0, 2,
             _NULL_ADDRESS, 0, _UNCONNECTED_DATA, len(reply)) + reply)
+
+    def _too_much_data(self, request: bytes, now: float) -> None:
+        """A request answered 0x15: the log says what it carried beyond what its service takes, and the
+        likely cause (a route path appended by the client), so that a client author sees more than
+        "Too much data"."""
+        self.target.too_much_data_log("%s: %s", self.peer, too_much_data_hint(request), source=self.host, now=now)
 
     def _check_session(self, session: int) -> None:
         if self.session is None or session != self.session:
@@ -512,6 +524,8 @@ class EncapsulationConnection:
         context.connected = False
         if len(items) == 2 and items[1].data[0] not in _MAY_CARRY_SOCKADDR:
             reply = self.target.requests.entry.handle(items[1].data, context)
+            if is_too_much_data(reply):
+                self._too_much_data(items[1].data, now)
             return RR_PREFIX.pack(0, 0) + encode_items((Item(ItemType.NULL_ADDRESS), Item(ItemType.UNCONNECTED_DATA,
                                                                                           reply)))
         # A Forward_Open may carry Sockaddr Info items (where the originator wants T->O data), and
@@ -528,6 +542,8 @@ class EncapsulationConnection:
             reply = self.target.requests.entry.handle(items[1].data, context)
         finally:
             del context.extras["sockaddr"], context.extras["reply_items"]
+        if is_too_much_data(reply):
+            self._too_much_data(items[1].data, now)
         return RR_PREFIX.pack(0, 0) + encode_items((Item(ItemType.NULL_ADDRESS), Item(ItemType.UNCONNECTED_DATA, reply),
                                                     *reply_items))
 
@@ -557,6 +573,8 @@ class EncapsulationConnection:
             context.connected = True
             reply = self.target.requests.entry.handle(items[1].data[2:], context)
             context.connected = False
+            if is_too_much_data(reply):
+                self._too_much_data(items[1].data[2:], now)
             connection.last_sequence = sequence
             connection.last_reply = reply
             connection.requests += 1

@@ -9,7 +9,9 @@ own, reached through its command service (``cipstack.control.service``), as ever
 from __future__ import annotations
 
 import asyncio
+import contextlib
 import threading
+import time
 from collections.abc import Awaitable, Callable, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -17,11 +19,14 @@ from typing import Any, TypeVar, overload
 
 from ..adapter import Adapter, AdapterSettings, network_interface
 from ..control.events import Event
+from ..scanner import SyncScanner
 
 T = TypeVar("T")
 
 #: How long a call on the device's loop may take before the test is told.
 CALL_TIMEOUT = 30.0
+#: How long ``EmulatedDevice.scanner`` waits for the device to answer (its power back, its link plugged).
+CONNECT_TIMEOUT = 10.0
 
 
 @dataclass
@@ -47,6 +52,7 @@ class EmulatedDevice:
         self.loop = asyncio.new_event_loop()
         self._thread = threading.Thread(target=self.loop.run_forever, name="cipstack-device", daemon=True)
         self._thread.start()
+        self._scanners: list[SyncScanner] = []
         try:
             self.adapter: Adapter = self.run(self._start)
         except BaseException:
@@ -162,10 +168,37 @@ class EmulatedDevice:
         origin "python"."""
         return dict(self.call("set-parameter", code=code, value=value))
 
+    # -- a scanner --------------------------------------------------------------------------------------------
+    def scanner(self, timeout: float = CONNECT_TIMEOUT) -> SyncScanner:
+        """A new blocking scanner connected to this device, decoding its assemblies by name, as soon as
+        the device accepts a connection (within ``timeout`` seconds); closed with the device if the test
+        does not close it first.
+
+        A power-cycle or an unplug ends every session with the device, as on a real drive, so a scanner
+        from before (``cip_scanner`` too) fails from then on; this one is the session a program would
+        open again once the power is back."""
+        from ..devices.profiles import catalog_for
+
+        info = self.adapter.device.identity_info
+        deadline = time.monotonic() + timeout
+        while True:
+            try:
+                scanner = SyncScanner(self.address, catalog=catalog_for(info.vendor_id, info.product_code))
+                break
+            except OSError:  # refused or reset while the power is off or the link unplugged
+                if time.monotonic() >= deadline:
+                    raise
+                time.sleep(0.05)
+        self._scanners.append(scanner)
+        return scanner
+
     # -- the end ------------------------------------------------------------------------------------------
     def close(self) -> None:
         if self.loop.is_closed():
             return
+        for scanner in self._scanners:
+            with contextlib.suppress(Exception):   # one whose session the test ended, or the power did
+                scanner.close()
         try:
             async def stop() -> None:
                 await self.adapter.faults.settle()

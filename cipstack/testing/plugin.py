@@ -77,11 +77,11 @@ def cip_fleet(request: pytest.FixtureRequest, tmp_path: Path) -> Iterator[list[E
 
 @pytest.fixture
 def cip_scanner(cip_adapter: EmulatedDevice) -> Iterator[SyncScanner]:
-    """A blocking scanner connected to ``cip_adapter``, with its device's assemblies by name."""
-    from ..devices.profiles import catalog_for
+    """A blocking scanner connected to ``cip_adapter``, with its device's assemblies by name.
 
-    info = cip_adapter.adapter.device.identity_info
-    scanner = SyncScanner(cip_adapter.address, catalog=catalog_for(info.vendor_id, info.product_code))
+    It does not reconnect: a power-cycle or an unplug ends its session, as it ends a real drive's.
+    ``cip_adapter.scanner()`` gives a new one once the device answers again."""
+    scanner = cip_adapter.scanner()
     try:
         yield scanner
     finally:

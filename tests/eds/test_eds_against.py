@@ -118,9 +118,9 @@ def test_a_deliberately_wrong_file_shows_each_difference(tmp_path: Path) -> None
          "Param6 (Heatsink Temp) at 0x64/1/9: the device has no such attribute (0x14 (attribute not supported))"),
         ("live-assembly", line('"Vendor Input"'), "Assem150 (Assembly instance 150) is 10 bytes in the file, "
                                                   "12 on the device"),
-        ("live-connection", line("Connection2 ="), "Connection2 (Extended Speed Control): Forward_Open refused "
-                                                   "(0x01 (connection failure), extended 0x012A (invalid consuming "
-                                                   "path))"),
+        ("live-connection", line("Connection2 ="), "Connection2 (Extended Speed Control): Forward_Open refused by "
+                                                   "the device (0x01 (connection failure), extended 0x012A (invalid "
+                                                   "consuming path))"),
         # The originator retries with the size the device names: the file's size is still wrong.
         ("live-connection", line("Connection3 ="), "Connection3 (Vendor Control): T->O size 12 refused (0x0128), "
                                                    "the target wants 14: retrying with 14"),
@@ -135,3 +135,62 @@ def test_a_deliberately_wrong_file_shows_each_difference(tmp_path: Path) -> None
     assert static == [("connection-path", line("Connection2 =") + 1)]
     assert lines[-1] == "1 file: 6 errors, 1 warning" and text.returncode == 1
     assert len(lines) == 1 + len(findings) + 1
+
+
+# -- files from the field (issue 43, item 9) ------------------------------------------------------------------
+
+def test_the_field_constructs_are_served_and_every_connection_opens() -> None:
+    """An exclusive owner whose T->O point is a heartbeat, assemblies of empty size sized by their
+    connections, points sized by a parameter that defaults to 0: `adapter --eds` serves each file,
+    and `eds check --against` opens every connection it declares, with no error."""
+    for name, connections in (("field_owner_heartbeat_input.eds", 2), ("field_modular_empty_size.eds", 2),
+                              ("field_size_param_default_zero.eds", 1)):
+        with adapter_process("--eds", str(DIRECTORY / name)) as (address, io_port):
+            status, record, findings = check(DIRECTORY / name, address, io_port)
+        assert status == 0 and record["errors"] == 0, findings
+        assert f"{connections} of {connections} class 1 connections opened and closed" in record["against"]
+
+
+def test_a_parameter_of_a_class_attribute_is_read(tmp_path: Path) -> None:
+    """A ParamN linking a class attribute (instance 0) was skipped silently: it is read now. The
+    emulator of the file serves it (at its default); a device without it is an error."""
+    original = (DIRECTORY / "vendor_drive_own_data.eds").read_bytes().decode("latin-1")
+    anchor = '    Param6 = 0, 6, "20 64 24 01 30 05"'
+    assert anchor in original
+    added = ('    Param7 = 0, 6, "20 64 24 00 30 08", 0x0010, 0xC7, 2, "Drive Count", "", "", 0, 16, 3, , , , , , , '
+             ', , 0;\r\n')
+    with_class = original.replace(anchor, added + anchor)
+    path = tmp_path / "with_class_attribute.eds"
+    path.write_bytes(with_class.encode("latin-1"))
+    with adapter_process("--eds", str(path)) as (address, io_port):
+        status, record, _ = check(path, address, io_port, "--no-connections")
+    assert status == 0 and "6 parameters read" in record["against"]          # 5 of instances, 1 of the class
+    with adapter_process("--eds", str(DIRECTORY / "vendor_drive_own_data.eds")) as (address, io_port):
+        status, _, findings = check(path, address, io_port, "--no-connections")
+    assert status == 1 and [f["message"] for f in findings if f["rule"] == "live-parameter"] == [
+        "Param7 (Drive Count) at 0x64/0/8: the device has no such attribute (0x14 (attribute not supported))"]
+
+
+def test_an_assembly_at_no_instance_is_noted_and_a_connection_not_openable_is_told_from_a_refusal() -> None:
+    """Assemblies the file places at no instance were neither sized nor mentioned: a note says why.
+    A connection the file declares so that it cannot be opened is said so (never sent), apart from
+    the device's refusals."""
+    path = DIRECTORY / "hand_valve_manifold.eds"
+    with adapter_process("--eds", str(path)) as (address, io_port):
+        _, _, findings = check(path, address, io_port)
+    notes = [f["message"] for f in findings if f["rule"] == "live-assembly" and f["severity"] == "info"]
+    assert notes == [
+        "Assem110: not sized: it has no path and no connection names it, so nothing says which instance of the "
+        "device it is",
+        "Assem120: not sized: it has no path and no connection names it, so nothing says which instance of the "
+        "device it is"]
+    declared = sorted(f["message"] for f in findings if "cannot be opened as the file declares it" in f["message"])
+    assert declared == [
+        "Connection3: redundant owner connections are not supported: cannot be opened as the file declares it: "
+        "not sent",
+        "Connection5: path 20 04 24 01 2C 64 2C 65 80 01 0F 00 is not an assembly connection path: cannot be opened "
+        "as the file declares it: not sent",
+        "Connection6: path: path item [Param5] has no byte value as its default: cannot be opened as the file "
+        "declares it: not sent"]
+    refused = [f["message"].split(" (")[0] for f in findings if "Forward_Open refused by the device" in f["message"]]
+    assert refused == ["Connection7", "Connection8", "Connection9"]

@@ -104,6 +104,17 @@ EXPECTED: dict[str, Expected] = {
         offered=[1, 2, 3, 4], ethernetip=[1, 2]),
     "vendor_plc_generic_adapter.eds": Expected(offered=[1, 2, 3, 4, 5, 6], ethernetip=[1, 4, 5]),
     "vendor_iolink_master_8port.eds": Expected(offered=list(range(1, 61)), ethernetip=ETHERNETIP_8PORT),
+    # An exclusive owner whose T->O point is a heartbeat (198, 254): the target produces no data.
+    "field_owner_heartbeat_input.eds": Expected(offered=[1, 2]),
+    # Assemblies of empty size, sized by the size their connections give (Param2, Param3).
+    "field_modular_empty_size.eds": Expected(offered=[1, 2], ethernetip=[1]),
+    # Points sized by parameters whose default is 0: offered at the smallest non-zero size.
+    "field_size_param_default_zero.eds": Expected(
+        skipped=[(37, "Param2, the O->T size of Connection1, defaults to 0: offered at 1 byte, the smallest "
+                      "non-zero size it allows"),
+                 (37, "Param3, the T->O size of Connection1, defaults to 0: offered at 1 byte, the smallest "
+                      "non-zero size it allows")],
+        offered=[1], ethernetip=[1]),
 }
 WITH_CONNECTIONS = [path for path in FILES if read_eds(path).get("Connection Manager")]
 

@@ -510,6 +510,9 @@ def test_generate_acg(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> Non
 
 @pytest.mark.parametrize(("argv", "message"), [
     (("--profile", "mx2", "--model", "MX2-A9999-E"), "unknown inverter model 'MX2-A9999-E'"),
+    # Nothing near: the message still says where the valid names are.
+    (("--profile", "mx2", "--model", "MX2-XXXX"), "unknown inverter model 'MX2-XXXX': `cipstack models` lists "
+                                                  "the 61 models (MX2-AB001-E to RX-B413K-E)"),
     (("--profile", "rx", "--model", "MX2-A2015-E"), "MX2-A2015-E is an MX2 model, not RX"),
     (("--profile", "vfd", "--all"), "unknown profile 'vfd'"),
     (("--profile", "acg", "--model", "ACG"), "profile acg has one model"),

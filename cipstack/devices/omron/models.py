@@ -130,9 +130,11 @@ class UnknownModelError(NotFound, KeyError):
     def __init__(self, name: str, near: list[str]) -> None:
         self.name = name
         self.near = near
-        hint = f"; did you mean {', '.join(near)}?" if near else ""
+        hint = f": did you mean {', '.join(near)}?" if near else ":"
+        # A name nothing resembles still says where the valid ones are, as every unknown name does.
+        listed = f"`cipstack models` lists the {len(MODELS)} models ({MODELS[0].name} to {MODELS[-1].name})"
         # NotFound's __str__ comes before KeyError's: the message plain, not its repr.
-        super().__init__(f"unknown inverter model {name!r}{hint}")
+        super().__init__(f"unknown inverter model {name!r}{hint} {listed}")
 
 
 def model(name: str) -> Model:
