@@ -32,7 +32,7 @@ from ..eip.io_core import DEFAULT_IO_PORT
 from ..eip.io_originator import SEQUENCE_COUNT_SIZE, OtFormat, class1_path
 from .model import CheckSpec, Outcome, Verdict
 from .registry import Context, check, outcome
-from .wire import Probe, Reply
+from .wire import Probe, Reply, TargetUnreachable
 
 CM = request_path(0x06, 1)
 FORWARD_OPEN, LARGE_FORWARD_OPEN, FORWARD_CLOSE = 0x54, 0x5B, 0x4E
@@ -115,8 +115,9 @@ def forward_open_request(plan: Plan, *, multiplier: int = 2, large: bool = False
 class Opened:
     """A connection the target accepted: closed by ``close`` or, failing that, when the check ends."""
 
-    def __init__(self, probe: Probe, request: ForwardOpenRequest, reply: ForwardOpenReply, items: tuple[Item, ...]):
-        self.probe, self.request, self.reply = probe, request, reply
+    def __init__(self, ctx: Context, probe: Probe, request: ForwardOpenRequest, reply: ForwardOpenReply,
+                 items: tuple[Item, ...]):
+        self.ctx, self.probe, self.request, self.reply = ctx, probe, request, reply
         self.io_port = DEFAULT_IO_PORT
         for item in items:
             if item.type == ItemType.SOCKADDR_O_T:
@@ -126,11 +127,35 @@ class Opened:
 
     def close(self) -> Reply:
         self.closed = True
-        return forward_close(self.probe, self.request.triad, self.request.connection_path)
+        return close_connection(self.ctx, self.probe, self.request.triad, self.request.connection_path)
 
 
 def forward_close(probe: Probe, triad: ConnectionTriad, path: bytes) -> Reply:
     return probe.request(FORWARD_CLOSE, CM, ForwardCloseRequest(0x0A, 0x0E, triad, path).encode())
+
+
+def close_connection(ctx: Context, probe: Probe, triad: ConnectionTriad, path: bytes) -> Reply:
+    """Forward_Close of a connection the battery opened, on a live session: on ``probe``, or on a new
+    session when the target closed that one (OpENer closes the TCP session of a class 1 connection
+    that timed out, and keeps the connection's ownership until a Forward_Close comes). What cannot be
+    closed is noted in ``ctx.left_behind`` for the final self-check to report."""
+    reply = forward_close(probe, triad, path) if probe.alive else None
+    if reply is None or reply.response is None:
+        try:
+            reply = forward_close(ctx.probe(), triad, path)
+        except TargetUnreachable as exc:
+            ctx.left_behind.append(f"connection {_triad_text(triad)} not closed: {exc}")
+            return Reply(None, None, str(exc))
+    # 0x0107: the target holds no such connection any more (it timed out, or a check closed it).
+    if reply.status != 0 and not (reply.status == 0x01 and reply.extended == 0x0107):
+        ctx.left_behind.append(f"connection {_triad_text(triad)} (path {path.hex(' ')}): Forward_Close answered "
+                               f"{reply.describe()}")
+    return reply
+
+
+def _triad_text(triad: ConnectionTriad) -> str:
+    return (f"serial 0x{triad.connection_serial:04X}, vendor 0x{triad.vendor_id:04X}, "
+            f"originator serial 0x{triad.originator_serial:08X}")
 
 
 class Endpoint:
@@ -158,9 +183,11 @@ def send_forward_open(ctx: Context, probe: Probe, endpoint: Endpoint, request: F
         decoded = ForwardOpenReply.decode(reply.data)
     except ValueError:
         # Accepted, but the reply cannot be read: close by the triad sent all the same.
-        ctx.pending_closes.append(lambda: forward_close(probe, request.triad, request.connection_path))
+        ctx.accepted.append(request)
+        ctx.pending_closes.append(lambda: close_connection(ctx, probe, request.triad, request.connection_path))
         return reply, None
-    opened = Opened(probe, request, decoded, reply.items)
+    ctx.accepted.append(request)
+    opened = Opened(ctx, probe, request, decoded, reply.items)
     ctx.pending_closes.append(lambda: None if opened.closed else opened.close())
     return reply, opened
 

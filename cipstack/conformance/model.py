@@ -20,7 +20,7 @@ class Verdict(str, Enum):
     NOT_APPLICABLE = "n/a"
 
 
-#: The groups in the order they run and are reported (issue 28, groups 1-6).
+#: The groups in the order they run and are reported.
 GROUPS: dict[str, str] = {
     "encap": "Encapsulation",
     "router": "Message router and errors",
@@ -28,7 +28,10 @@ GROUPS: dict[str, str] = {
     "cm": "Connection Manager",
     "class1": "Class 1 behaviour",
     "eds": "EDS against the device",
+    "final": "The device as found",
 }
+#: The group run after every run, whatever the groups selected: the battery leaves the device as found.
+FINAL = "final"
 
 
 @dataclass(frozen=True)

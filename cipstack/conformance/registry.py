@@ -14,6 +14,9 @@ from .wire import Probe
 if TYPE_CHECKING:
     from ..eds.interpret import EdsView
     from ..eds.model import EdsDocument
+    from ..eip.cm_messages import ForwardOpenRequest
+
+GET_ATTRIBUTE_SINGLE, SET_ATTRIBUTE_SINGLE = 0x0E, 0x10
 
 #: Every check, by id, in declaration order (which is the order they run in).
 CHECKS: dict[str, CheckSpec] = {}
@@ -53,9 +56,15 @@ class Context:
     #: Probes opened by checks, closed at the end of each check whatever happens.
     probes: list[Probe] = field(default_factory=list)
     #: Forward_Close requests to send for connections still open (``cm`` and ``class1`` register them).
-    pending_closes: list[Callable[[], None]] = field(default_factory=list)
+    pending_closes: list[Callable[[], object]] = field(default_factory=list)
     #: What one check measured that the next ones judge too (one class 1 run serves three checks).
     cache: dict[str, Any] = field(default_factory=dict)
+    #: Every Forward_Open the target accepted, in order: the final self-check opens each point again.
+    accepted: list[ForwardOpenRequest] = field(default_factory=list)
+    #: What the battery could not undo (a Forward_Close refused, a write not restored), in words.
+    left_behind: list[str] = field(default_factory=list)
+    #: Undo the writes of the run, last first, at its end; each returns a problem in words or None.
+    restores: list[Callable[[], str | None]] = field(default_factory=list)
 
     def probe(self, register: bool = True) -> Probe:
         """A new TCP connection (and session) to the target, closed after the check."""
@@ -73,6 +82,23 @@ class Context:
                 close()
         while self.probes:
             self.probes.pop().close()
+
+
+def restore_later(ctx: Context, path: bytes, original: bytes, what: str) -> None:
+    """A write to ``path`` took effect: at the end of the run, write ``original`` back (on a new
+    session) and read it again; the final self-check reports what does not come back."""
+
+    def restore() -> str | None:
+        probe = ctx.probe()
+        reply = probe.request(SET_ATTRIBUTE_SINGLE, path, original)
+        if reply.status != 0:
+            return f"{what}: writing back {original.hex(' ')} answered {reply.describe()}"
+        read = probe.request(GET_ATTRIBUTE_SINGLE, path)
+        if read.status != 0 or read.data != original:
+            return f"{what}: reads {read.data.hex(' ') or read.describe()} after writing back {original.hex(' ')}"
+        return None
+
+    ctx.restores.append(restore)
 
 
 def outcome(spec: CheckSpec, verdict: Verdict | bool, observed: str, exchanges: Iterable[Exchange] = (),

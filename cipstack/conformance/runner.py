@@ -8,8 +8,8 @@ from collections.abc import Iterable, Sequence
 from typing import TYPE_CHECKING
 
 from ..eip.encapsulation import DEFAULT_PORT, Command
-from . import class1, connections, eds_checks, encapsulation, objects, router  # noqa: F401 - they declare checks
-from .model import GROUPS, Outcome, Report, Verdict
+from . import as_found, class1, connections, eds_checks, encapsulation, objects, router  # noqa: F401 - they declare checks
+from .model import FINAL, GROUPS, Outcome, Report, Verdict
 from .registry import CHECKS, RUNNERS, Context, outcome
 from .wire import Probe, TargetUnreachable, frame
 
@@ -89,9 +89,16 @@ def run(host: str, port: int = DEFAULT_PORT, *, eds: str | os.PathLike[str] | Ed
                              "allow_writes": allow_writes, "allow_reset": allow_reset, "timeout": timeout})
     try:
         for group in selected:
+            if group == FINAL:
+                continue
             for spec, function in RUNNERS.get(group, []):
                 report.outcomes.extend(_run_check(context, spec, function))
     finally:
         context.cleanup()
+        # Whatever happened: the device as found (every point used opens again, every write restored),
+        # checked whenever the run opened or wrote anything, whatever the groups selected.
+        if FINAL in selected or context.accepted or context.restores or context.left_behind:
+            for spec, function in RUNNERS[FINAL]:
+                report.outcomes.extend(_run_check(context, spec, function))
     report.duration_s = time.monotonic() - started
     return report

@@ -59,13 +59,24 @@ class Connection:
     destination: tuple[str, int]
     last_heard: float
     stop: threading.Event = field(default_factory=threading.Event)
+    #: The TCP connection whose session opened it (OpENer closes it when the connection times out).
+    session_socket: socket.socket | None = None
+    #: Timed out and kept: no production, the ownership held until a Forward_Close (or forever).
+    timed_out: bool = False
 
 
 class FakeTarget:
     """The target on 127.0.0.1: TCP and UDP on one port, class 1 I/O on another UDP port."""
 
-    def __init__(self, deviation: str | None = None, host: str = "127.0.0.1", name: bytes = NAME) -> None:
+    def __init__(self, deviation: str | None = None, host: str = "127.0.0.1", name: bytes = NAME,
+                 opener_timeout: bool = False) -> None:
+        """``opener_timeout``: on a class 1 timeout, close the TCP session that opened the connection and
+        keep the connection's ownership until a Forward_Close of its triad comes, as OpENer does."""
         self.deviation = deviation
+        self.opener_timeout = opener_timeout
+        #: TCP sessions this target closed because their class 1 connection timed out.
+        self.sessions_closed_on_timeout = 0
+        self._local = threading.local()
         self.name = name
         self.host = host
         self.errors: list[str] = []
@@ -166,6 +177,7 @@ class FakeTarget:
 
     def _serve(self, conn: socket.socket) -> None:
         state = {"session": 0}
+        self._local.conn = conn  # one thread per TCP connection: the Forward_Open it serves records it
         with conn:
             for command, session, context, options, body in encapsulation_frames(conn, self._stop):
                 if options:
@@ -391,7 +403,8 @@ class FakeTarget:
             ot_id = next(self._ids)
             api = to_rpi / 1e6
             connection = Connection(triad, ot_id, to_id, ot_point, api,
-                                    ot_rpi / 1e6 * (4 << multiplier), (self.host, port), time.monotonic() + 10.0)
+                                    ot_rpi / 1e6 * (4 << multiplier), (self.host, port), time.monotonic() + 10.0,
+                                    session_socket=getattr(self._local, "conn", None))
             self.connections[ot_id] = connection
         self._start(self._produce, connection)
         echoed = (serial, vendor, originator + 1) if self.deviates("cm.forward_open.accepted") else triad
@@ -402,8 +415,10 @@ class FakeTarget:
         serial, vendor, originator = struct.unpack_from("<HHI", data, 2)
         triad = (serial, vendor, originator)
         with self._lock:
-            found = next((c for c in self.connections.values() if c.triad == triad
-                          or (self.deviates("cm.forward_close.other_originator") and c.triad[0] == serial)), None)
+            found = next((c for c in self.connections.values() if (c.triad == triad
+                          or (self.deviates("cm.forward_close.other_originator") and c.triad[0] == serial))
+                          # This stack keeps a timed-out owner whatever comes: only a restart clears it.
+                          and not (c.timed_out and self.deviates("final.as_found"))), None)
             if found is not None:
                 del self.connections[found.ot_id]
                 found.stop.set()
@@ -435,6 +450,14 @@ class FakeTarget:
                 continue
             connection.last_heard = time.monotonic() + connection.timeout
 
+    def _time_out_and_keep(self, connection: Connection) -> None:
+        """Stop producing, keep the ownership, and close the TCP session that opened the connection."""
+        connection.timed_out = True
+        if connection.session_socket is not None:
+            with contextlib.suppress(OSError):
+                connection.session_socket.shutdown(socket.SHUT_RDWR)
+            self.sessions_closed_on_timeout += 1
+
     def _drop(self, connection: Connection) -> None:
         with self._lock:
             self.connections.pop(connection.ot_id, None)
@@ -449,7 +472,10 @@ class FakeTarget:
         start, sequence = time.monotonic(), 0
         while not connection.stop.is_set() and not self._stop.is_set():
             if time.monotonic() > connection.last_heard and not self.deviates("class1.timeout"):
-                self._drop(connection)  # the connection timed out
+                if self.opener_timeout or self.deviates("final.as_found"):
+                    self._time_out_and_keep(connection)
+                else:
+                    self._drop(connection)  # the connection timed out
                 return
             sequence += 1
             datagram = IO_HEAD.pack(2, 0x8002, 8, connection.to_id, sequence * step, 0x00B1, 2 + len(payload),
