@@ -30,13 +30,18 @@ from ..eip.cm_messages import (
 from ..eip.cpf import Item, ItemType, SockAddr
 from ..eip.io_core import DEFAULT_IO_PORT
 from ..eip.io_originator import SEQUENCE_COUNT_SIZE, OtFormat, class1_path
-from .model import CheckSpec, Outcome, Verdict
+from .io_run import drive, judge_production
+from .model import CheckSpec, Code, Outcome, Verdict
 from .registry import Context, check, outcome
 from .wire import Probe, Reply, TargetUnreachable
 
 CM = request_path(0x06, 1)
 FORWARD_OPEN, LARGE_FORWARD_OPEN, FORWARD_CLOSE = 0x54, 0x5B, 0x4E
 EXTENDED = "CIP Vol. 1 §3-5.5.2 and Table 3-5.33 (extended status); Wireshark packet-cip.c (cip_cm_ext_st_vals)"
+#: Where each extended status is listed.
+TABLE = "CIP Vol. 1 Table 3-5.33; Wireshark packet-cip.c cip_cm_ext_st_vals; OpENer ciperror.h"
+#: How long an accepted RPI of 1 us is measured: long enough for a target producing every 10 ms.
+RPI_MEASURE_S = 0.5
 #: Our vendor id as an originator, as the scanner's (0xFFFE is not assigned).
 VENDOR = 0xFFFE
 
@@ -216,22 +221,25 @@ def _on_main_plan(body: MainPlanCheck) -> Callable[[Context, CheckSpec], Outcome
     return run
 
 
-def _refusal(spec: CheckSpec, probe: Probe, reply: Reply, opened: Opened | None, codes: set[int],
-             warn: set[int] = frozenset(), what: str = "") -> Outcome:  # type: ignore[assignment]
+def _refusal(spec: CheckSpec, probe: Probe, reply: Reply, opened: Opened | None, what: str = "") -> Outcome:
+    """A refusal judged by the extended statuses the check declares."""
     if opened is not None:
         opened.close()
         return outcome(spec, False, f"{what}: accepted ({reply.describe()})", probe.exchanges)
-    if reply.status == 0x01 and reply.extended in codes:
-        return outcome(spec, True, f"{what}: {reply.describe()}", probe.exchanges)
-    verdict = Verdict.WARNING if reply.status == 0x01 and reply.extended in warn else Verdict.FAIL
+    verdict = spec.verdict_for(reply.extended) if reply.status == 0x01 else Verdict.FAIL
     return outcome(spec, verdict, f"{what}: {reply.describe()}", probe.exchanges)
 
 
 def _refused(ctx: Context, spec: CheckSpec, probe: Probe, endpoint: Endpoint, request: ForwardOpenRequest,
-             codes: set[int], warn: set[int], what: str) -> Outcome:
-    """Send ``request``, which the target should refuse with one of the extended ``codes``."""
+             what: str) -> Outcome:
+    """Send ``request``, which the target should refuse with one of the check's extended statuses."""
     reply, opened = send_forward_open(ctx, probe, endpoint, request)
-    return _refusal(spec, probe, reply, opened, codes, warn, what)
+    return _refusal(spec, probe, reply, opened, what)
+
+
+def extended(value: int, meaning: str, verdict: Verdict = Verdict.PASS) -> Code:
+    """An extended status of general status 0x01 the specification permits, with its reference."""
+    return Code(value, meaning, TABLE, verdict)
 
 
 @check("cm.forward_open.accepted", "Forward_Open of the EDS's first exclusive owner connection",
@@ -255,48 +263,63 @@ def accepted(ctx: Context, spec: CheckSpec, plan: Plan, probe: Probe, endpoint: 
 
 
 @check("cm.forward_open.ot_size", "Forward_Open with an O->T connection size 2 bytes too large",
-       "status 0x01, extended 0x0127 (invalid O->T size)", EXTENDED)
+       "status 0x01, extended 0x0127 (invalid O->T size) or the general 0x0109 (invalid connection size)", EXTENDED,
+       codes=[extended(0x0127, "invalid O->T connection size"), extended(0x0109, "invalid connection size")])
 @_on_main_plan
 def ot_size(ctx: Context, spec: CheckSpec, plan: Plan, probe: Probe, endpoint: Endpoint) -> Outcome:
     request = forward_open_request(replace(plan, ot_size=plan.ot_size + 2))
-    return _refused(ctx, spec, probe, endpoint, request, {0x0127}, {0x0109}, f"O->T size {plan.ot_size + 2}")
+    return _refused(ctx, spec, probe, endpoint, request, f"O->T size {plan.ot_size + 2}")
 
 
 @check("cm.forward_open.to_size", "Forward_Open with a T->O connection size 2 bytes too large",
-       "status 0x01, extended 0x0128 (invalid T->O size)", EXTENDED)
+       "status 0x01, extended 0x0128 (invalid T->O size) or the general 0x0109 (invalid connection size)", EXTENDED,
+       codes=[extended(0x0128, "invalid T->O connection size"), extended(0x0109, "invalid connection size")])
 @_on_main_plan
 def to_size(ctx: Context, spec: CheckSpec, plan: Plan, probe: Probe, endpoint: Endpoint) -> Outcome:
     request = forward_open_request(replace(plan, to_size=plan.to_size + 2))
-    return _refused(ctx, spec, probe, endpoint, request, {0x0128}, {0x0109}, f"T->O size {plan.to_size + 2}")
+    return _refused(ctx, spec, probe, endpoint, request, f"T->O size {plan.to_size + 2}")
 
 
 @check("cm.forward_open.rpi", "Forward_Open with an RPI of 1 us",
-       "status 0x01, extended 0x0111 (RPI not supported) or 0x0112 (RPI value not acceptable)", EXTENDED)
+       "status 0x01, extended 0x0111 (RPI not supported) or 0x0112 (RPI value not acceptable); or an honest "
+       "acceptance: T->O then comes at the API the reply granted, measured on the wire for 0.5 s", EXTENDED,
+       codes=[extended(0x0111, "RPI not supported"), extended(0x0112, "RPI value not acceptable")])
 @_on_main_plan
 def rpi(ctx: Context, spec: CheckSpec, plan: Plan, probe: Probe, endpoint: Endpoint) -> Outcome:
     request = replace(forward_open_request(plan), ot_rpi_us=1, to_rpi_us=1)
-    return _refused(ctx, spec, probe, endpoint, request, {0x0111, 0x0112}, set(), "RPI 1 us")
+    reply, opened = send_forward_open(ctx, probe, endpoint, request)
+    if opened is None:
+        return _refusal(spec, probe, reply, None, "RPI 1 us")
+    # Accepted: the target may grant another interval than the one asked (CIP Vol. 1 §3-5.5.2, the
+    # actual packet interval), but must then produce at the interval it granted.
+    run = drive(ctx, plan, endpoint, opened, [(RPI_MEASURE_S, "run")])
+    opened.close()
+    ok, measured = judge_production(run, RPI_MEASURE_S)
+    return outcome(spec, ok, f"RPI 1 us accepted with APIs O->T {opened.reply.ot_api_us} us, T->O "
+                   f"{opened.reply.to_api_us} us; {measured}", run.exchanges())
 
 
 @check("cm.forward_open.duplicate", "the same Forward_Open (same triad) twice",
-       "the second is refused with status 0x01, extended 0x0100 (connection in use)", EXTENDED)
+       "the second is refused with status 0x01, extended 0x0100 (connection in use)", EXTENDED,
+       codes=[extended(0x0100, "connection in use or duplicate Forward_Open")])
 @_on_main_plan
 def duplicate(ctx: Context, spec: CheckSpec, plan: Plan, probe: Probe, endpoint: Endpoint) -> Outcome:
     request = forward_open_request(plan)
     first, opened = send_forward_open(ctx, probe, endpoint, request)
     if opened is None:
         return outcome(spec, False, f"the first Forward_Open failed: {first.describe()}", probe.exchanges)
-    return _refused(ctx, spec, probe, endpoint, request, {0x0100}, set(), "the same triad again")
+    return _refused(ctx, spec, probe, endpoint, request, "the same triad again")
 
 
 @check("cm.forward_open.ownership", "a second exclusive owner of the same output, from another triad",
-       "status 0x01, extended 0x0106 (ownership conflict)", EXTENDED)
+       "status 0x01, extended 0x0106 (ownership conflict)", EXTENDED,
+       codes=[extended(0x0106, "ownership conflict")])
 @_on_main_plan
 def ownership(ctx: Context, spec: CheckSpec, plan: Plan, probe: Probe, endpoint: Endpoint) -> Outcome:
     first, opened = send_forward_open(ctx, probe, endpoint, forward_open_request(plan))
     if opened is None:
         return outcome(spec, False, f"the first Forward_Open failed: {first.describe()}", probe.exchanges)
-    return _refused(ctx, spec, probe, endpoint, forward_open_request(plan), {0x0106}, set(), "a second exclusive owner")
+    return _refused(ctx, spec, probe, endpoint, forward_open_request(plan), "a second exclusive owner")
 
 
 def _unused_instance(ctx: Context, plan: Plan) -> int:
@@ -308,34 +331,47 @@ def _unused_instance(ctx: Context, plan: Plan) -> int:
 
 
 @check("cm.forward_open.bad_segment", "Forward_Open whose connection path starts with a reserved segment (0xE0)",
-       "status 0x01, extended 0x0315 (invalid segment in connection path) or 0x0316", EXTENDED)
+       "status 0x01, extended 0x0315 (invalid segment in connection path)", EXTENDED,
+       codes=[extended(0x0315, "invalid segment in connection path")])
 @_on_main_plan
 def bad_segment(ctx: Context, spec: CheckSpec, plan: Plan, probe: Probe, endpoint: Endpoint) -> Outcome:
     request = replace(forward_open_request(plan), connection_path=b"\xE0\x00" + plan.path)
-    return _refused(ctx, spec, probe, endpoint, request, {0x0315, 0x0316}, set(), "segment E0 00")
+    return _refused(ctx, spec, probe, endpoint, request, "segment E0 00")
 
 
 @check("cm.forward_open.consuming_point", "Forward_Open to an O->T (consuming) point the device does not have",
-       "status 0x01, extended 0x012A (invalid consuming application path)", EXTENDED)
+       "status 0x01, extended 0x012A (invalid consuming application path) or the general 0x0117 (invalid "
+       "produced or consumed application path); 0x0315 is a warning", EXTENDED,
+       codes=[extended(0x012A, "invalid consuming application path"),
+              extended(0x0117, "invalid produced or consumed application path"),
+              extended(0x0315, "invalid segment in connection path: the segments are valid, the point is not",
+                       Verdict.WARNING)])
 @_on_main_plan
 def consuming_point(ctx: Context, spec: CheckSpec, plan: Plan, probe: Probe, endpoint: Endpoint) -> Outcome:
     unused = _unused_instance(ctx, plan)
     request = forward_open_request(replace(plan, ot_point=unused))
-    return _refused(ctx, spec, probe, endpoint, request, {0x012A}, {0x0117, 0x0315}, f"O->T point {unused}")
+    return _refused(ctx, spec, probe, endpoint, request, f"O->T point {unused}")
 
 
 @check("cm.forward_open.producing_point", "Forward_Open to a T->O (producing) point the device does not have",
-       "status 0x01, extended 0x012B (invalid producing application path)", EXTENDED)
+       "status 0x01, extended 0x012B (invalid producing application path) or the general 0x0117 (invalid "
+       "produced or consumed application path); 0x0315 is a warning", EXTENDED,
+       codes=[extended(0x012B, "invalid producing application path"),
+              extended(0x0117, "invalid produced or consumed application path"),
+              extended(0x0315, "invalid segment in connection path: the segments are valid, the point is not",
+                       Verdict.WARNING)])
 @_on_main_plan
 def producing_point(ctx: Context, spec: CheckSpec, plan: Plan, probe: Probe, endpoint: Endpoint) -> Outcome:
     unused = _unused_instance(ctx, plan)
     request = forward_open_request(replace(plan, to_point=unused))
-    return _refused(ctx, spec, probe, endpoint, request, {0x012B}, {0x0117, 0x0315}, f"T->O point {unused}")
+    return _refused(ctx, spec, probe, endpoint, request, f"T->O point {unused}")
 
 
 @check("cm.forward_open.transport_class", "Forward_Open with transport class 2",
-       "status 0x01, extended 0x0103 (transport class and trigger combination not supported); a device that "
-       "implements class 2 is a warning", EXTENDED)
+       "status 0x01, extended 0x0103 (transport class and trigger combination not supported) or 0x011C "
+       "(transport class not supported); a device that implements class 2 is a warning", EXTENDED,
+       codes=[extended(0x0103, "transport class and trigger combination not supported"),
+              extended(0x011C, "transport class not supported")])
 @_on_main_plan
 def transport_class(ctx: Context, spec: CheckSpec, plan: Plan, probe: Probe, endpoint: Endpoint) -> Outcome:
     request = replace(forward_open_request(plan), transport=TransportTrigger(2, TriggerType.CYCLIC))
@@ -343,12 +379,13 @@ def transport_class(ctx: Context, spec: CheckSpec, plan: Plan, probe: Probe, end
     if opened is not None:
         opened.close()
         return outcome(spec, Verdict.WARNING, f"transport class 2 accepted: {reply.describe()}", probe.exchanges)
-    return _refusal(spec, probe, reply, opened, {0x0103}, set(), "transport class 2")
+    return _refusal(spec, probe, reply, opened, "transport class 2")
 
 
 @check("cm.forward_open.null", "a null Forward_Open (both connection types null) for the configuration point",
        "status 0 (configuration accepted, no connection made) or status 0x01 with extended 0x0132 (null "
-       "Forward_Open not supported)", f"CIP Vol. 1 §3-5.5.2.2 (null Forward_Open); {EXTENDED}")
+       "Forward_Open not supported)", f"CIP Vol. 1 §3-5.5.2.2 (null Forward_Open); {EXTENDED}",
+       codes=[extended(0x0132, "null Forward_Open function not supported")])
 @_on_main_plan
 def null_forward_open(ctx: Context, spec: CheckSpec, plan: Plan, probe: Probe, endpoint: Endpoint) -> Outcome:
     base = forward_open_request(plan)
@@ -357,7 +394,7 @@ def null_forward_open(ctx: Context, spec: CheckSpec, plan: Plan, probe: Probe, e
     reply, opened = send_forward_open(ctx, probe, endpoint, request)
     if reply.status == 0:
         return outcome(spec, True, f"accepted: {reply.describe()}", probe.exchanges)
-    return _refusal(spec, probe, reply, opened, {0x0132}, set(), "null Forward_Open")
+    return _refusal(spec, probe, reply, opened, "null Forward_Open")
 
 
 @check("cm.large_forward_open", "Large_Forward_Open of the EDS's first exclusive owner connection",
@@ -376,18 +413,19 @@ def large_forward_open(ctx: Context, spec: CheckSpec, plan: Plan, probe: Probe, 
 
 
 @check("cm.forward_close.unknown", "Forward_Close of a connection that does not exist",
-       "status 0x01, extended 0x0107 (target connection not found)", EXTENDED)
+       "status 0x01, extended 0x0107 (target connection not found)", EXTENDED,
+       codes=[extended(0x0107, "target connection not found")])
 def close_unknown(ctx: Context, spec: CheckSpec) -> Outcome:
     probe = ctx.probe()
     reply = forward_close(probe, new_triad(), request_path(0x02, 1))
-    ok = reply.status == 0x01 and reply.extended == 0x0107
-    return outcome(spec, ok, reply.describe(), probe.exchanges)
+    return _refusal(spec, probe, reply, None, "serial of no connection")
 
 
 @check("cm.forward_close.other_originator",
        "Forward_Close naming an open connection's serial with another originator serial",
        "status 0x01, extended 0x0107 (the triad names no connection); the connection stays open and its "
-       "own Forward_Close then succeeds", f"CIP Vol. 1 §3-5.5.4 (Forward_Close matches the whole triad); {EXTENDED}")
+       "own Forward_Close then succeeds", f"CIP Vol. 1 §3-5.5.4 (Forward_Close matches the whole triad); {EXTENDED}",
+       codes=[extended(0x0107, "target connection not found")])
 @_on_main_plan
 def close_other_originator(ctx: Context, spec: CheckSpec, plan: Plan, probe: Probe, endpoint: Endpoint) -> Outcome:
     first, opened = send_forward_open(ctx, probe, endpoint, forward_open_request(plan))
@@ -398,7 +436,7 @@ def close_other_originator(ctx: Context, spec: CheckSpec, plan: Plan, probe: Pro
     stranger = ctx.probe()
     reply = forward_close(stranger, other, plan.path)
     own = opened.close()
-    ok = reply.status == 0x01 and reply.extended == 0x0107 and own.status == 0
+    ok = reply.status == 0x01 and spec.verdict_for(reply.extended) is Verdict.PASS and own.status == 0
     return outcome(spec, ok, f"other originator: {reply.describe()}; own Forward_Close: {own.describe()}",
                    [*probe.exchanges, *stranger.exchanges])
 

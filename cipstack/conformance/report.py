@@ -124,3 +124,21 @@ def to_html(report: Report) -> str:
         parts.append("</table>")
     parts.append("</body></html>")
     return "\n".join(parts)
+
+
+def markdown_table(group: str) -> str:
+    """The docs' table of a group's checks, generated from their declarations (docs/conformance.md)."""
+    from .registry import CHECKS
+
+    def cell(text: str) -> str:
+        return text.replace("|", "\\|")
+
+    rows = ["| check | what it sends | what the specification expects | permitted answers | reference |",
+            "|---|---|---|---|---|"]
+    for spec in CHECKS.values():
+        if spec.group == group:
+            codes = ", ".join(f"0x{c.value:0{4 if c.value > 0xFF else 2}X} ({c.meaning})"
+                              + (" warning" if c.verdict is Verdict.WARNING else "") for c in spec.codes)
+            rows.append(f"| `{spec.id}` | {cell(spec.title)} | {cell(spec.expected)} | {cell(codes) or '-'} | "
+                        f"{cell(spec.reference)} |")
+    return "\n".join(rows)

@@ -28,6 +28,14 @@ FO_LARGE = struct.Struct("<IIIIBB")
 IO_HEAD = struct.Struct("<HHHIIHHH")
 
 VENDOR, DEVICE_TYPE, PRODUCT_CODE, REVISION, SERIAL, NAME = 65001, 12, 7, (1, 2), 0x00C0FFEE, b"Fake Target"
+#: Checks for which the specification permits another answer than the fake's default, and that answer.
+VARIANTS = {
+    "cm.forward_open.transport_class": "0x011C (transport class not supported) instead of 0x0103",
+    "cm.forward_open.rpi": "an RPI of 1 us accepted with a granted API of 10 ms, produced at 10 ms",
+    "cm.forward_open.ot_size": "0x0109 (invalid connection size) instead of 0x0127",
+}
+#: The interval this target produces at when it accepts an RPI it cannot (the API it really has).
+CYCLE_US = 10_000
 #: Output -> input assembly pairs the device connects (fake_device.eds Connection1 and 2).
 PAIRS = {100: 101, 102: 103}
 ASSEMBLY_SIZE = 2
@@ -69,10 +77,12 @@ class FakeTarget:
     """The target on 127.0.0.1: TCP and UDP on one port, class 1 I/O on another UDP port."""
 
     def __init__(self, deviation: str | None = None, host: str = "127.0.0.1", name: bytes = NAME,
-                 opener_timeout: bool = False) -> None:
+                 opener_timeout: bool = False, variant: str | None = None) -> None:
         """``opener_timeout``: on a class 1 timeout, close the TCP session that opened the connection and
-        keep the connection's ownership until a Forward_Close of its triad comes, as OpENer does."""
+        keep the connection's ownership until a Forward_Close of its triad comes, as OpENer does.
+        ``variant`` names a check whose other permitted answer this target gives (``VARIANTS``)."""
         self.deviation = deviation
+        self.variant = variant
         self.opener_timeout = opener_timeout
         #: TCP sessions this target closed because their class 1 connection timed out.
         self.sessions_closed_on_timeout = 0
@@ -374,7 +384,8 @@ class FakeTarget:
         if ot_type == 0 and to_type == 0:
             return self._refuse(service, triad, 0x0108 if self.deviates("cm.forward_open.null") else 0x0132)
         if transport & 0x0F != 1:
-            return self._refuse(service, triad, 0x0108 if self.deviates("cm.forward_open.transport_class") else 0x0103)
+            code = 0x011C if self.variant == "cm.forward_open.transport_class" else 0x0103
+            return self._refuse(service, triad, 0x0108 if self.deviates("cm.forward_open.transport_class") else code)
         if len(path) != 8 or path[0:2] != b"\x20\x04" or path[2] != 0x24 or path[4] != 0x2C or path[6] != 0x2C:
             return self._refuse(service, triad, 0x0117 if self.deviates("cm.forward_open.bad_segment") else 0x0315)
         ot_point, to_point = path[5], path[7]
@@ -384,10 +395,18 @@ class FakeTarget:
             return self._refuse(service, triad, 0x0110 if self.deviates("cm.forward_open.producing_point") else 0x012B)
         if ot_point == 102 and self.deviates("eds.connection.open"):
             return self._refuse(service, triad, 0x0113)
-        if ot_rpi < 10_000 or to_rpi < 10_000:
-            return self._refuse(service, triad, 0x0108 if self.deviates("cm.forward_open.rpi") else 0x0112,
-                                0x0202, 10_000 & 0xFFFF, 10_000 >> 16, 10_000 & 0xFFFF, 10_000 >> 16)
+        # Accepting a short RPI: honestly (granting the interval it produces at) or, as OpENer, granting
+        # the RPI asked for and producing at its own cycle all the same.
+        accept_short = self.variant == "cm.forward_open.rpi" or self.deviates("cm.forward_open.rpi")
+        ot_api, to_api = ot_rpi, to_rpi
+        if (ot_rpi < CYCLE_US or to_rpi < CYCLE_US) and not accept_short:
+            return self._refuse(service, triad, 0x0112, 0x0202, CYCLE_US & 0xFFFF, CYCLE_US >> 16,
+                                CYCLE_US & 0xFFFF, CYCLE_US >> 16)
+        if self.variant == "cm.forward_open.rpi":
+            ot_api, to_api = max(ot_rpi, CYCLE_US), max(to_rpi, CYCLE_US)
         if ot_size != 2 + 4 + ASSEMBLY_SIZE and not self.deviates("cm.forward_open.ot_size"):
+            if self.variant == "cm.forward_open.ot_size":
+                return self._refuse(service, triad, 0x0109)
             return self._refuse(service, triad, 0x0127, 2 + 4 + ASSEMBLY_SIZE)
         if to_size != 2 + ASSEMBLY_SIZE:
             code = 0x0127 if self.deviates("cm.forward_open.to_size") else 0x0128
@@ -401,14 +420,15 @@ class FakeTarget:
                 return self._refuse(service, triad, 0x0106)
             port = next((struct.unpack_from(">H", d, 2)[0] for t, d in extra if t == 0x8001), 2222)
             ot_id = next(self._ids)
-            api = to_rpi / 1e6
+            api = max(to_api, CYCLE_US) / 1e6
             connection = Connection(triad, ot_id, to_id, ot_point, api,
-                                    ot_rpi / 1e6 * (4 << multiplier), (self.host, port), time.monotonic() + 10.0,
+                                    max(ot_api, CYCLE_US) / 1e6 * (4 << multiplier), (self.host, port),
+                                    time.monotonic() + 10.0,
                                     session_socket=getattr(self._local, "conn", None))
             self.connections[ot_id] = connection
         self._start(self._produce, connection)
         echoed = (serial, vendor, originator + 1) if self.deviates("cm.forward_open.accepted") else triad
-        answer = struct.pack("<IIHHIIIBB", ot_id, to_id, *echoed, ot_rpi, to_rpi, 0, 0)
+        answer = struct.pack("<IIHHIIIBB", ot_id, to_id, *echoed, ot_api, to_api, 0, 0)
         return reply(service, data=answer), [(0x8000, sockaddr(self.host, self.io_port))]
 
     def _forward_close(self, data: bytes) -> bytes:
