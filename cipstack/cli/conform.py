@@ -18,6 +18,8 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--allow-writes", action="store_true",
                    help="also run checks that write (a set of a read-only attribute)")
     p.add_argument("--allow-reset", action="store_true", help="also reset the device (Identity Reset type 0)")
+    p.add_argument("--strict", action="store_true",
+                   help="warnings are failures: in the exit status and the JUnit report")
     p.add_argument("--json", action="store_true", help="the report as one JSON object on stdout")
     p.add_argument("--junit", metavar="FILE", type=Path, help="also write the report as JUnit XML")
     p.add_argument("--html", metavar="FILE", type=Path, help="also write the report as one self-contained HTML page")
@@ -36,7 +38,7 @@ def _duration(text: str) -> float:
 
 
 def cmd_conform(args: argparse.Namespace) -> int:
-    from ..conformance import TargetUnreachable, parse_groups, run
+    from ..conformance import TargetUnreachable, Verdict, parse_groups, run
     from ..conformance.report import to_html, to_json, to_junit, to_text
 
     host, port = parse_host(args.target)
@@ -62,8 +64,11 @@ def cmd_conform(args: argparse.Namespace) -> int:
         return EXIT_USAGE
     if args.eds is not None:
         report.options["eds"] = args.eds
-    for path, render in ((args.junit, to_junit), (args.html, to_html)):
-        if path is not None:
-            path.write_text(render(report), encoding="utf-8")
+    report.options["strict"] = args.strict
+    if args.junit is not None:
+        args.junit.write_text(to_junit(report, strict=args.strict), encoding="utf-8")
+    if args.html is not None:
+        args.html.write_text(to_html(report), encoding="utf-8")
     print(to_json(report) if args.json else to_text(report), flush=True)
-    return EXIT_OK if report.passed else EXIT_FAILURE
+    warned = args.strict and any(o.verdict is Verdict.WARNING for o in report)
+    return EXIT_OK if report.passed and not warned else EXIT_FAILURE

@@ -54,7 +54,9 @@ def again(request: ForwardOpenRequest) -> ForwardOpenRequest:
 
 
 def _describe(request: ForwardOpenRequest) -> str:
-    return f"connection path {request.connection_path.hex(' ')}"
+    service = "Large_Forward_Open" if request.large else "Forward_Open"
+    return (f"{service} of path {request.connection_path.hex(' ')} (O->T {request.ot_parameters.type.name.lower()}, "
+            f"T->O {request.to_parameters.type.name.lower()})")
 
 
 def _reopen(ctx: Context, probe: Probe, endpoint: Endpoint, request: ForwardOpenRequest,

@@ -18,6 +18,7 @@ import socket
 import struct
 import threading
 import time
+from collections.abc import Iterable
 from dataclasses import dataclass, field
 
 from tests.fakes import HEADER, cpf, encapsulation_frames, split_cpf
@@ -76,12 +77,13 @@ class Connection:
 class FakeTarget:
     """The target on 127.0.0.1: TCP and UDP on one port, class 1 I/O on another UDP port."""
 
-    def __init__(self, deviation: str | None = None, host: str = "127.0.0.1", name: bytes = NAME,
+    def __init__(self, deviation: str | Iterable[str] | None = None, host: str = "127.0.0.1", name: bytes = NAME,
                  opener_timeout: bool = False, variant: str | None = None) -> None:
         """``opener_timeout``: on a class 1 timeout, close the TCP session that opened the connection and
         keep the connection's ownership until a Forward_Close of its triad comes, as OpENer does.
         ``variant`` names a check whose other permitted answer this target gives (``VARIANTS``)."""
-        self.deviation = deviation
+        #: The checks this target deviates for (one, in the tests that fail one check; several, for the docs).
+        self.deviations = {deviation} if isinstance(deviation, str) else set(deviation or ())
         self.variant = variant
         self.opener_timeout = opener_timeout
         #: TCP sessions this target closed because their class 1 connection timed out.
@@ -144,7 +146,7 @@ class FakeTarget:
         self.close()
 
     def deviates(self, check_id: str) -> bool:
-        return self.deviation == check_id
+        return check_id in self.deviations
 
     # -- the device --------------------------------------------------------------------------------------
     def _attributes(self) -> dict[tuple[int, int], dict[int, bytes]]:
@@ -390,7 +392,9 @@ class FakeTarget:
             return self._refuse(service, triad, 0x0117 if self.deviates("cm.forward_open.bad_segment") else 0x0315)
         ot_point, to_point = path[5], path[7]
         if ot_point not in PAIRS:
-            return self._refuse(service, triad, 0x0110 if self.deviates("cm.forward_open.consuming_point") else 0x012A)
+            # 0x0315 is allowed and less precise: a warning ("warn:" variant).
+            code = 0x0315 if self.variant == "warn:cm.forward_open.consuming_point" else 0x012A
+            return self._refuse(service, triad, 0x0110 if self.deviates("cm.forward_open.consuming_point") else code)
         if to_point != PAIRS[ot_point]:
             return self._refuse(service, triad, 0x0110 if self.deviates("cm.forward_open.producing_point") else 0x012B)
         if ot_point == 102 and self.deviates("eds.connection.open"):

@@ -162,12 +162,65 @@ def test_command_text_report_puts_failures_first_with_their_bytes() -> None:
     assert result.returncode == 1, result.stdout + result.stderr
     lines = result.stdout.splitlines()
     assert lines[1].startswith("9 checks: 8 pass, 1 fail")
+    assert "Message router and errors (router)" in lines[2]
     failures = lines.index("Failures")
     assert lines[failures + 1] == "  FAIL router.unknown_attribute: Get_Attribute_Single of Identity attribute 0xFE"
     assert any(line.strip().startswith("sent (tcp):") and "0e 03 20 01 24 01 30 fe" in line
                for line in lines[failures:])
     table = lines.index("Message router and errors")
     assert lines[table + 1].split()[:2] == ["fail", "router.unknown_attribute"]
+
+
+def test_html_report_has_a_linked_summary_per_group_failures_and_warnings_first(tmp_path: Path) -> None:
+    page, junit = tmp_path / "conform.html", tmp_path / "conform.xml"
+    eds = Path(__file__).with_name("fake_device.eds")
+    with FakeTarget(deviation="cm.forward_open.duplicate", variant="warn:cm.forward_open.consuming_point") as target:
+        result = conform(target.address, "--eds", str(eds), "--only", "router,cm", "--html", str(page),
+                         "--junit", str(junit), "--timeout", "2")
+    assert result.returncode == 1, result.stdout + result.stderr
+    text = page.read_text()
+    # The summary: a row per group with its counts, linked to the group's table.
+    assert '<a href="#group-cm">Connection Manager</a>' in text and 'id="group-cm"' in text
+    assert '<a href="#group-router">' in text and '<a href="#group-final">' in text
+    # Failures, then warnings, listed before the tables, each linked to its row.
+    failures, warnings, tables = text.index('id="fails"'), text.index('id="warnings"'), text.index('id="group-router"')
+    assert failures < warnings < tables
+    assert '<a href="#check-cm.forward_open.duplicate">' in text and 'id="check-cm.forward_open.duplicate"' in text
+    # In a group's table, the failure comes first, the warning next.
+    cm = text[text.index('id="group-cm"'):]
+    assert cm.index('id="check-cm.forward_open.duplicate"') < cm.index('id="check-cm.forward_open.consuming_point"') \
+        < cm.index('id="check-cm.forward_open.accepted"')
+    # Rows are short: the bytes are folded away, ids never break, the reference is a citation.
+    assert text.count("<details>") >= text.count('<tr class="pass"') and "break-all" not in text
+    assert '<code class="id">' in text and "code.id { white-space: nowrap; }" in text and "<cite>" in text
+    # JUnit: the warning is a skipped test case with its message; the failure a failure.
+    cases = {c.get("name"): c for c in ElementTree.parse(junit).getroot().iter("testcase")}
+    skipped = cases["cm.forward_open.consuming_point"].find("skipped")
+    assert skipped is not None and skipped.get("message", "").startswith("warning: ")
+    assert cases["cm.forward_open.duplicate"].find("failure") is not None
+
+
+def test_strict_makes_a_warning_a_failure(tmp_path: Path) -> None:
+    junit = tmp_path / "conform.xml"
+    eds = Path(__file__).with_name("fake_device.eds")
+    with FakeTarget(variant="warn:cm.forward_open.consuming_point") as target:
+        lenient = conform(target.address, "--eds", str(eds), "--only", "cm", "--timeout", "2")
+        strict = conform(target.address, "--eds", str(eds), "--only", "cm", "--strict", "--junit", str(junit),
+                         "--timeout", "2")
+    assert (lenient.returncode, strict.returncode) == (0, 1), lenient.stdout + strict.stdout
+    case = next(c for c in ElementTree.parse(junit).getroot().iter("testcase")
+                if c.get("name") == "cm.forward_open.consuming_point")
+    failure = case.find("failure")
+    assert failure is not None and failure.get("message", "").startswith("warning (--strict): ")
+
+
+def test_text_report_has_one_summary_line_per_group() -> None:
+    with FakeTarget(deviation="router.unknown_attribute") as target:
+        result = conform(target.address, "--only", "encap,router")
+    lines = result.stdout.splitlines()
+    assert lines[2].split() == ["Encapsulation", "(encap)", "15", "checks:", "15", "pass,", "0", "fail,", "0",
+                                "warning,", "0", "n/a"]
+    assert lines[3].split()[:4] == ["Message", "router", "and", "errors"] and "1 fail" in lines[3]
 
 
 def _garbage_server(reply: bytes) -> tuple[socket.socket, threading.Thread]:
