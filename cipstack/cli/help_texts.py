@@ -291,6 +291,14 @@ COMMANDS: dict[tuple[str, ...], CommandText] = {
         (("cipstack eds generate --profile acg -o eds", "the ACG-ET2's file"),
          ("cipstack eds generate --profile mx2 --all -o eds", "every MX2 model's file")),
     ),
+    ("eds", "fetch"): CommandText(
+        "read a device's own EDS file from its File object",
+        "Read the EDS file a device carries, from its File object (class 0x37, instance 0xC8, \"EDS and "
+        "Icon Files\") with Initiate_Upload and Upload_Transfer, check its size and checksum, and write "
+        "it (uncompressed when the device serves it compressed). The emulators serve theirs.",
+        (("cipstack eds fetch 127.0.0.1 -o device.eds", "the emulator's EDS file"),
+         ("cipstack eds fetch 192.168.1.20:44818 -o - | cipstack eds show /dev/stdin", "straight to a summary")),
+    ),
     ("eds", "show"): CommandText(
         "a readable summary: identity, assemblies, connections",
         "Print a readable summary of an EDS file: its identity, parameters by group, assemblies with "
