@@ -14,6 +14,11 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("target", metavar="HOST[:PORT]", help="target address (default port 44818)")
     p.add_argument("--eds", metavar="FILE", help="the target's EDS file: enables group eds and the connection "
                                                   "checks of groups cm and class1")
+    p.add_argument("--eds-dir", metavar="DIR", help="without --eds: a directory of EDS files, the one matching the "
+                                                     "device's vendor, product code and revision is used")
+    p.add_argument("--connection-points", metavar="O,T[,C]",
+                   help="the class 1 connection points to test: output (O->T), input (T->O) and configuration "
+                        "instance (default 1), instead of finding them")
     p.add_argument("--only", metavar="GROUP,...", help="run these groups only: encap, router, objects, cm, class1, eds")
     p.add_argument("--allow-writes", action="store_true",
                    help="also run checks that write (a set of a read-only attribute)")
@@ -48,6 +53,16 @@ def cmd_conform(args: argparse.Namespace) -> int:
         raise UsageError(f"--only: {exc}") from None
     if args.eds is not None and not Path(args.eds).is_file():
         raise UsageError(f"--eds: no such file: {args.eds}")
+    if args.eds_dir is not None and not Path(args.eds_dir).is_dir():
+        raise UsageError(f"--eds-dir: no such directory: {args.eds_dir}")
+    points = None
+    if args.connection_points is not None:
+        from ..conformance.discovery import parse_points
+
+        try:
+            points = parse_points(args.connection_points)
+        except ValueError as exc:
+            raise UsageError(f"--connection-points {exc}") from None
     eds = None
     if args.eds is not None:
         from ..eds.reader import EdsSyntaxError, read_eds
@@ -58,7 +73,8 @@ def cmd_conform(args: argparse.Namespace) -> int:
             raise UsageError(f"--eds {args.eds}: {exc}") from None
     try:
         report = run(host, port, eds=eds, groups=groups, allow_writes=args.allow_writes,
-                     allow_reset=args.allow_reset, timeout=args.timeout)
+                     allow_reset=args.allow_reset, timeout=args.timeout, connection_points=points,
+                     eds_dir=args.eds_dir)
     except TargetUnreachable as exc:
         print(f"cipstack conform: {exc}", file=sys.stderr)
         return EXIT_USAGE

@@ -15,6 +15,7 @@ import random
 import socket
 from collections.abc import Callable
 from dataclasses import dataclass, replace
+from typing import TYPE_CHECKING
 
 from ..cip.epath import request_path
 from ..eip.cm_messages import (
@@ -34,6 +35,10 @@ from .io_run import drive, judge_production
 from .model import CheckSpec, Code, Outcome, Verdict
 from .registry import Context, check, outcome
 from .wire import Probe, Reply, TargetUnreachable
+
+if TYPE_CHECKING:
+    from ..eds.interpret import EdsView
+    from ..eds.model import EdsDocument
 
 CM = request_path(0x06, 1)
 FORWARD_OPEN, LARGE_FORWARD_OPEN, FORWARD_CLOSE = 0x54, 0x5B, 0x4E
@@ -76,15 +81,23 @@ class Plan:
 
 
 def plans(ctx: Context) -> list[Plan]:
-    """Every class 1 connection of the EDS, exclusive owners first."""
+    """The connections groups cm and class1 use: those the discovery found (``discovery``), else every
+    class 1 connection of the EDS given."""
+    if ctx.discovered is not None:
+        return list(ctx.discovered)
     if ctx.view is None or ctx.eds is None:
         return []
+    return plans_of_eds(ctx.eds, ctx.view)
+
+
+def plans_of_eds(eds: EdsDocument, view: EdsView) -> list[Plan]:
+    """Every class 1 connection of an EDS, exclusive owners first."""
     from ..eds.generator import EXCLUSIVE_OWNER_KIND
     from ..scanner import _eds_ot_format
 
     found = []
-    for info in ctx.view.connections:
-        fmt = _eds_ot_format(ctx.eds, info.number) or (OtFormat.HEARTBEAT if info.heartbeat else OtFormat.RUN_IDLE)
+    for info in view.connections:
+        fmt = _eds_ot_format(eds, info.number) or (OtFormat.HEARTBEAT if info.heartbeat else OtFormat.RUN_IDLE)
         ot_data = 0 if info.heartbeat else info.o_t_size
         rpi = info.rpi_us or 10_000
         if info.rpi_min_us:
@@ -198,8 +211,13 @@ def send_forward_open(ctx: Context, probe: Probe, endpoint: Endpoint, request: F
 
 
 def not_planned(ctx: Context, spec: CheckSpec, consequence: str = "") -> Outcome:
-    """The outcome of a check that needs the EDS's main connection when there is none."""
-    why = "no EDS given (--eds)" if ctx.eds is None else "the EDS declares no point-to-point exclusive owner"
+    """The outcome of a check that needs a point-to-point exclusive owner when none was found."""
+    if ctx.points_source:
+        why = f"no connection point found ({ctx.points_source})"
+    elif ctx.eds is None:
+        why = "no EDS given (--eds)"
+    else:
+        why = "the EDS declares no point-to-point exclusive owner"
     return outcome(spec, Verdict.NOT_APPLICABLE, f"not run: {why}{consequence}")
 
 

@@ -15,6 +15,7 @@ if TYPE_CHECKING:
     from ..eds.interpret import EdsView
     from ..eds.model import EdsDocument
     from ..eip.cm_messages import ForwardOpenRequest
+    from .connections import Plan
 
 GET_ATTRIBUTE_SINGLE, SET_ATTRIBUTE_SINGLE = 0x0E, 0x10
 
@@ -61,6 +62,10 @@ class Context:
     pending_closes: list[Callable[[], object]] = field(default_factory=list)
     #: What one check measured that the next ones judge too (one class 1 run serves three checks).
     cache: dict[str, Any] = field(default_factory=dict)
+    #: The connections the discovery found (``discovery``) when no EDS was given; None: the EDS's.
+    discovered: list[Plan] | None = None
+    #: Where the connection points came from, or what was tried, in words ("" with --eds).
+    points_source: str = ""
     #: Every Forward_Open the target accepted, in order: the final self-check opens each point again.
     accepted: list[ForwardOpenRequest] = field(default_factory=list)
     #: What the battery could not undo (a Forward_Close refused, a write not restored), in words.

@@ -63,6 +63,8 @@ def _exchange_lines(exchange: Exchange, indent: str) -> list[str]:
 
 def to_text(report: Report) -> str:
     lines = [f"cipstack conform {_identity_line(report)}", summary_line(report), *group_lines(report)]
+    if report.options.get("connection_points"):
+        lines.append(f"connection points: {report.options['connection_points']}")
     failures = [o for _, members in _grouped(report) for o in members if o.verdict is Verdict.FAIL]
     if failures:
         lines += ["", "Failures"]
@@ -159,6 +161,8 @@ def to_html(report: Report) -> str:
     parts = ["<!DOCTYPE html>", '<html lang="en"><head><meta charset="utf-8">',
              f"<title>cipstack conform {e(report.target)}</title>", f"<style>{_STYLE}</style></head><body>",
              f"<h1>cipstack conform {e(_identity_line(report))}</h1>", f"<p>{e(summary_line(report))}</p>",
+             *([f"<p>connection points: {e(str(report.options['connection_points']))}</p>"]
+               if report.options.get("connection_points") else []),
              '<h2 id="summary">Summary</h2>', "<table><tr><th>group</th><th>checks</th><th>fail</th><th>warning</th>"
              "<th>pass</th><th>n/a</th></tr>"]
     for group, members in groups:

@@ -57,6 +57,28 @@ def _preflight(context: Context) -> None:
         context.identity = record
 
 
+#: The groups that need connection points (or an EDS) to run.
+NEED_POINTS = {"cm", "class1", "eds"}
+
+
+def _discover(context: Context, report: Report, points: tuple[int, int, int] | None,
+              eds_dir: str | os.PathLike[str] | None) -> None:
+    """Find the connection points without an EDS and say where they came from (``discovery``)."""
+    from ..eds.interpret import read_view
+    from .discovery import discover
+
+    try:
+        found = discover(context, points, eds_dir)
+    finally:
+        context.cleanup()
+    context.discovered = found.plans
+    context.points_source = found.source if found.plans else "tried: " + "; ".join(found.tried)
+    report.options["connection_points"] = context.points_source
+    if found.eds is not None:
+        context.eds, context.view = found.eds, read_view(found.eds)
+        report.options["eds"] = found.eds_source
+
+
 def _run_check(context: Context, spec: object, function: object) -> list[Outcome]:
     try:
         result = function(context, spec)  # type: ignore[operator]
@@ -71,13 +93,17 @@ def _run_check(context: Context, spec: object, function: object) -> list[Outcome
 
 def run(host: str, port: int = DEFAULT_PORT, *, eds: str | os.PathLike[str] | EdsDocument | None = None,
         groups: str | Iterable[str] | None = None, allow_writes: bool = False, allow_reset: bool = False,
-        timeout: float = 5.0) -> Report:
+        timeout: float = 5.0, connection_points: tuple[int, int, int] | None = None,
+        eds_dir: str | os.PathLike[str] | None = None) -> Report:
     """Run the conformance battery against ``host:port``.
 
     ``eds``: an EDS file (or a read ``EdsDocument``) of the target, which enables group ``eds`` and
-    gives ``cm`` and ``class1`` their connection points. ``groups``: the groups to run (default
-    all). Nothing is written without ``allow_writes`` and the device is not reset without
-    ``allow_reset``. ``TargetUnreachable`` when the target does not accept a connection and a session.
+    gives ``cm`` and ``class1`` their connection points. Without one the battery finds the points
+    itself (``discovery``): ``connection_points`` (output, input, configuration) names them, else
+    the device's own EDS (File object), an EDS of ``eds_dir`` for its identity, the AC drive profile,
+    bounded probing of its assemblies. ``groups``: the groups to run (default all). Nothing is
+    written without ``allow_writes`` and the device is not reset without ``allow_reset``.
+    ``TargetUnreachable`` when the target does not accept a connection and a session.
     """
     selected = parse_groups(groups if groups is None or isinstance(groups, str) else list(groups))
     doc, view = _load_eds(eds)
@@ -87,6 +113,10 @@ def run(host: str, port: int = DEFAULT_PORT, *, eds: str | os.PathLike[str] | Ed
     report = Report(f"{host}:{port}", groups=selected, identity=context.identity,
                     options={"eds": os.fspath(eds) if isinstance(eds, (str, os.PathLike)) else None,
                              "allow_writes": allow_writes, "allow_reset": allow_reset, "timeout": timeout})
+    if doc is not None:
+        report.options["connection_points"] = "the EDS given (--eds)"
+    elif set(selected) & NEED_POINTS:
+        _discover(context, report, connection_points, eds_dir)
     try:
         for group in selected:
             if group == FINAL:

@@ -76,6 +76,53 @@ def test_every_applicable_check_passes_on_our_emulators(name: str, adapter_with,
         assert all(verdicts[i] is Verdict.PASS for i in check_ids() if i.startswith(("cm.", "class1.")))
 
 
+#: Where the battery finds each emulator's connection points without --eds (the MX2's and RX's own
+#: EDS files describe CompoNet, with no class 1 connection: the AC drive profile gives them).
+SOURCES = {"acg": "the device's own EDS file", "mx2": "the AC drive profile", "rx": "the AC drive profile"}
+
+
+@pytest.mark.parametrize("name", sorted(EMULATORS))
+def test_without_an_eds_the_battery_finds_the_points_itself(name: str, adapter_with) -> None:  # type: ignore[no-untyped-def]
+    peer = adapter_with(*EMULATORS[name][0])
+    report = run(peer.host, peer.port)
+    assert _not_passed(report) == {}
+    assert str(report.options["connection_points"]).startswith(SOURCES[name])
+    assert report.options["eds"].startswith("the device's own EDS file")  # group eds runs with it
+    not_applicable = [o.name for o in report if o.verdict is Verdict.NOT_APPLICABLE]
+    assert len(not_applicable) <= 6, not_applicable
+    assert all(o.verdict is Verdict.PASS for o in report if o.group in ("cm", "class1", "final"))
+
+
+def test_an_eds_emulated_device_without_an_eds_serves_its_own(adapter_with) -> None:  # type: ignore[no-untyped-def]
+    peer = adapter_with("--eds", str(Path(__file__).with_name("fake_device.eds")))
+    report = run(peer.host, peer.port, allow_writes=True)
+    assert _not_passed(report) == {}
+    assert str(report.options["connection_points"]).startswith("the device's own EDS file")
+    not_applicable = [o.name for o in report if o.verdict is Verdict.NOT_APPLICABLE]
+    assert len(not_applicable) <= 6, not_applicable
+    assert all(o.verdict is Verdict.PASS for o in report if o.group in ("cm", "class1", "eds", "final"))
+
+
+def test_the_other_sources_of_connection_points(tmp_path: Path) -> None:
+    """The scripted target serves no EDS and is no drive: --eds-dir finds its file by its identity,
+    --connection-points names them, and else probing the Assembly object finds them."""
+    directory = tmp_path / "eds"
+    directory.mkdir()
+    (directory / "other.eds").write_text("[Device]\nVendCode = 1;\nProdCode = 7;\nMajRev = 1;\nMinRev = 2;\n")
+    (directory / "fake.eds").write_bytes(Path(__file__).with_name("fake_device.eds").read_bytes())
+    with FakeTarget() as target:
+        from_dir = run(target.host, target.port, groups="cm,eds", eds_dir=directory, timeout=2.0)
+        named = run(target.host, target.port, groups="cm", connection_points=(102, 103, 1), timeout=2.0)
+        probed = run(target.host, target.port, groups="cm", timeout=2.0)
+    assert str(from_dir.options["connection_points"]).endswith("fake.eds (--eds-dir)")
+    assert {o.group for o in from_dir if o.verdict is Verdict.PASS} >= {"cm", "eds", "final"}
+    assert named.options["connection_points"] == "--connection-points 102,103,1"
+    assert str(probed.options["connection_points"]).startswith("probing the Assembly object")
+    for report in (from_dir, named, probed):
+        assert _not_passed(report) == {} and not [o for o in report if o.group == "cm"
+                                                   and o.verdict is Verdict.NOT_APPLICABLE]
+
+
 def test_every_applicable_check_passes_on_an_eds_emulated_device(adapter_with, tmp_path: Path) -> None:  # type: ignore[no-untyped-def]
     eds = Path(__file__).with_name("fake_device.eds")
     peer = adapter_with("--eds", str(eds))
@@ -240,8 +287,9 @@ def _garbage_server(reply: bytes) -> tuple[socket.socket, threading.Thread]:
 
 
 @pytest.mark.parametrize("args", [
-    ["--only", "encap,bogus"], ["--eds", "/nonexistent.eds"], ["--timeout", "0"],
-], ids=["unknown-group", "missing-eds", "zero-timeout"])
+    ["--only", "encap,bogus"], ["--eds", "/nonexistent.eds"], ["--timeout", "0"], ["--eds-dir", "/nonexistent"],
+    ["--connection-points", "150"], ["--connection-points", "150,x"],
+], ids=["unknown-group", "missing-eds", "zero-timeout", "missing-eds-dir", "one-point", "not-a-number"])
 def test_command_bad_arguments_exit_2_in_one_line(args: list[str]) -> None:
     result = conform("127.0.0.1:1", *args)
     assert (result.returncode, result.stdout) == (2, "")
