@@ -13,7 +13,16 @@ from dataclasses import replace
 from ..cip.epath import LogicalSegment, LogicalType, decode_path
 from ..cip.status import CipError
 from ..eip.cm_messages import ForwardOpenRequest
-from .connections import Endpoint, Opened, new_triad, send_forward_open
+from .connections import (
+    CM,
+    FORWARD_OPEN,
+    LARGE_FORWARD_OPEN,
+    Endpoint,
+    Opened,
+    close_connection,
+    new_triad,
+    send_forward_open,
+)
 from .model import CheckSpec, Outcome, Verdict
 from .registry import Context, check, outcome
 from .wire import Probe
@@ -59,9 +68,21 @@ def _describe(request: ForwardOpenRequest) -> str:
             f"T->O {request.to_parameters.type.name.lower()})")
 
 
+def _reopen_explicit(ctx: Context, probe: Probe, request: ForwardOpenRequest) -> str | None:
+    """A class 3 connection opened again as it was, with no sockaddr item, and closed."""
+    fresh = again(request)
+    reply = probe.request(LARGE_FORWARD_OPEN if fresh.large else FORWARD_OPEN, CM, fresh.encode())
+    if reply.status != 0:
+        return f"{_describe(request)} (class 3) no longer opens: {reply.describe()}"
+    closing = close_connection(ctx, probe, fresh.triad, fresh.connection_path)
+    return None if closing.status == 0 else f"{_describe(request)} (class 3): Forward_Close {closing.describe()}"
+
+
 def _reopen(ctx: Context, probe: Probe, endpoint: Endpoint, request: ForwardOpenRequest,
             points: list[ForwardOpenRequest]) -> str | None:
     """Open ``request`` again and close it; a problem in words, or None."""
+    if request.transport.transport_class != 1:
+        return _reopen_explicit(ctx, probe, request)
     reply, opened = send_forward_open(ctx, probe, endpoint, again(request))
     owner: Opened | None = None
     if opened is None and reply.status == 0x01 and reply.extended == 0x0119:

@@ -415,17 +415,17 @@ def null_forward_open(ctx: Context, spec: CheckSpec, plan: Plan, probe: Probe, e
     return _refusal(spec, probe, reply, opened, "null Forward_Open")
 
 
-@check("cm.large_forward_open", "Large_Forward_Open of the EDS's first exclusive owner connection",
-       "status 0 and a well formed reply; 0x08 (service not supported) makes the check not applicable",
-       "CIP Vol. 1 §3-5.5.3 (Large_Forward_Open, 0x5B); Wireshark packet-cip.c")
+@check("cm.large_forward_open", "Large_Forward_Open of the first point-to-point exclusive owner connection",
+       "status 0 and a well formed reply, then a Forward_Close that succeeds; a target without Large_Forward_Open "
+       "answers 0x08 (service not supported)", "CIP Vol. 1 §3-5.5.3 (Large_Forward_Open, 0x5B); Wireshark packet-cip.c",
+       codes=[Code(0x08, "service not supported: no Large_Forward_Open", "CIP Vol. 1 Appendix B; §3-5.5.3")])
 @_on_main_plan
 def large_forward_open(ctx: Context, spec: CheckSpec, plan: Plan, probe: Probe, endpoint: Endpoint) -> Outcome:
     request = forward_open_request(plan, large=True)
     reply, opened = send_forward_open(ctx, probe, endpoint, request)
-    if reply.status == 0x08:
-        return outcome(spec, Verdict.NOT_APPLICABLE, "Large_Forward_Open not supported (0x08)", probe.exchanges)
     if opened is None:
-        return outcome(spec, False, f"{plan.name}: {reply.describe()}", probe.exchanges)
+        verdict = spec.verdict_for(reply.status) if reply.status else Verdict.FAIL
+        return outcome(spec, verdict, f"{plan.name}: {reply.describe()}", probe.exchanges)
     closing = opened.close()
     return outcome(spec, closing.status == 0, f"opened; Forward_Close: {closing.describe()}", probe.exchanges)
 

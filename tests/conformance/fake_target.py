@@ -40,6 +40,10 @@ CYCLE_US = 10_000
 #: Output -> input assembly pairs the device connects (fake_device.eds Connection1 and 2).
 PAIRS = {100: 101, 102: 103}
 ASSEMBLY_SIZE = 2
+#: Sessions this target holds at once (``encap.session_limit`` opens more).
+MAX_SESSIONS = 12
+#: The message router's path: a class 3 connection's.
+ROUTER_PATH = bytes((0x20, 0x02, 0x24, 0x01))
 
 
 def sockaddr(host: str, port: int, family: bytes = b"\x00\x02") -> bytes:
@@ -98,6 +102,9 @@ class FakeTarget:
         self._sessions = itertools.count(0x1000)
         self._ids = itertools.count(0x2000)
         self.connections: dict[int, Connection] = {}
+        #: Class 3 connections to the message router: O->T id -> [triad, T->O id, last sequence, last reply].
+        self.explicit: dict[int, list[object]] = {}
+        self._active_sessions = 0
         for _ in range(20):  # a TCP port whose UDP twin is free too
             self.tcp = socket.socket(socket.AF_INET, socket.SOCK_STREAM)
             self.tcp.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
@@ -190,6 +197,14 @@ class FakeTarget:
     def _serve(self, conn: socket.socket) -> None:
         state = {"session": 0}
         self._local.conn = conn  # one thread per TCP connection: the Forward_Open it serves records it
+        try:
+            self._serve_frames(conn, state)
+        finally:
+            if state["session"]:
+                with self._lock:
+                    self._active_sessions -= 1
+
+    def _serve_frames(self, conn: socket.socket, state: dict[str, int]) -> None:
         with conn:
             for command, session, context, options, body in encapsulation_frames(conn, self._stop):
                 if options:
@@ -223,6 +238,11 @@ class FakeTarget:
                 raise EncapStatus(0x0069)
             if version != 1 and not self.deviates("encap.register_session.protocol_version"):
                 raise EncapStatus(0x0069)
+            with self._lock:
+                if self._active_sessions >= MAX_SESSIONS:
+                    # No session slot: 0x0002 (insufficient memory); the deviating stack says "invalid length".
+                    raise EncapStatus(0x0065 if self.deviates("encap.session_limit") else 0x0002)
+                self._active_sessions += 1
             state["session"] = next(self._sessions)
             return bytes(4) if self.deviates("encap.register_session.version") else body[:4]
         if command == 0x66:
@@ -249,6 +269,10 @@ class FakeTarget:
             extra = [(t, d) for t, d in items if t == 0x8001]
             answer, reply_items = self._request(request, extra)
             return bytes(6) + cpf((0x0000, b""), (0x00B2, answer), *reply_items)
+        if command == 0x70:
+            if session != state["session"] or not session:
+                raise EncapStatus(0x0064)
+            return self._send_unit_data(split_cpf(body[6:]))
         if command == 0x0001 and self.deviates("encap.unsupported_command"):
             return self._list_identity(udp=False)  # as cpppo: some answer, status 0
         raise EncapStatus(0x0001)
@@ -328,6 +352,15 @@ class FakeTarget:
             if data and not self.deviates("router.too_much_data"):
                 return reply(service, 0x15)
             return reply(service, data=values[attribute])
+        if service == 0x03 and class_id == 0x01:
+            (count,) = struct.unpack_from("<H", data)
+            entries = []
+            for attribute in struct.unpack_from(f"<{count}H", data, 2):
+                value = values.get(attribute)
+                entries.append(struct.pack("<HH", attribute, 0 if value is not None else 0x14) + (value or b""))
+            failed = any(a not in values for a in struct.unpack_from(f"<{count}H", data, 2))
+            status = 0x0A if failed and not self.deviates("router.get_attribute_list") else 0
+            return reply(service, status, data=struct.pack("<H", count) + b"".join(entries))
         if service == 0x01 and class_id == 0x01:
             every = b"".join(values[a] for a in range(1, 8))
             return reply(service, data=every[:-3] if self.deviates("objects.identity.get_attributes_all") else every)
@@ -363,6 +396,8 @@ class FakeTarget:
             return reply(service, data=struct.pack("<H", 0)) if attribute == 1 else reply(service, 0x14), []
         if service in (0x54, 0x5B):
             return self._forward_open(service, data, extra)
+        if service == 0x52:
+            return self._unconnected_send(data), []
         if service == 0x4E:
             return self._forward_close(data), []
         return reply(service, 0x08), []
@@ -385,6 +420,8 @@ class FakeTarget:
         ot_size, to_size = ((p & 0xFFFF) if large else (p & 0x1FF) for p in (ot_params, to_params))
         if ot_type == 0 and to_type == 0:
             return self._refuse(service, triad, 0x0108 if self.deviates("cm.forward_open.null") else 0x0132)
+        if transport & 0x0F == 3 and path == ROUTER_PATH:
+            return self._open_explicit(service, triad, to_id)
         if transport & 0x0F != 1:
             code = 0x011C if self.variant == "cm.forward_open.transport_class" else 0x0103
             return self._refuse(service, triad, 0x0108 if self.deviates("cm.forward_open.transport_class") else code)
@@ -435,21 +472,63 @@ class FakeTarget:
         answer = struct.pack("<IIHHIIIBB", ot_id, to_id, *echoed, ot_api, to_api, 0, 0)
         return reply(service, data=answer), [(0x8000, sockaddr(self.host, self.io_port))]
 
+    def _open_explicit(self, service: int, triad: tuple[int, int, int], to_id: int) -> tuple[bytes, list]:
+        """A class 3 connection to the message router."""
+        with self._lock:
+            if any(c[0] == triad for c in self.explicit.values()):
+                return self._refuse(service, triad, 0x0100)
+            ot_id = next(self._ids)
+            self.explicit[ot_id] = [triad, to_id, None, b""]
+        answer = struct.pack("<IIHHIIIBB", ot_id, to_id, *triad, 2_000_000, 2_000_000, 0, 0)
+        return reply(service, data=answer), []
+
+    def _send_unit_data(self, items: list[tuple[int, bytes]]) -> bytes | None:
+        address = next(d for t, d in items if t == 0x00A1)
+        data = next(d for t, d in items if t == 0x00B1)
+        (ot_id,) = struct.unpack("<I", address)
+        with self._lock:
+            connection = self.explicit.get(ot_id)
+        if connection is None:
+            return None  # no CIP answer for an unknown connection: dropped
+        (sequence,) = struct.unpack_from("<H", data)
+        if sequence == connection[2] and not self.deviates("cm.class3.duplicate"):
+            answer = connection[3]  # a duplicate: the last reply again, not executed
+        else:
+            answer, _ = self._request(data[2:], [])
+            connection[2], connection[3] = sequence, answer
+        # The deviating stack answers on the O->T id instead of the originator's T->O id.
+        to_id = ot_id if self.deviates("cm.class3.read") else connection[1]
+        return bytes(6) + cpf((0x00A1, struct.pack("<I", to_id)), (0x00B1, struct.pack("<H", sequence) + answer))
+
+    def _unconnected_send(self, data: bytes) -> bytes:
+        size = struct.unpack_from("<H", data, 2)[0]
+        message = data[4:4 + size]
+        position = 4 + size + (size & 1)
+        route = data[position + 2:position + 2 + 2 * data[position]]
+        if route[:1] == b"\x01" or self.deviates("router.unconnected_send.missing_port"):
+            return self._request(message, [])[0]  # the backplane (or, deviating, any port): served here
+        return reply(0x52, 0x01, (0x0311,), bytes((len(route) // 2, 0)))
+
     def _forward_close(self, data: bytes) -> bytes:
         serial, vendor, originator = struct.unpack_from("<HHI", data, 2)
         triad = (serial, vendor, originator)
         with self._lock:
+            explicit = next((i for i, c in self.explicit.items() if c[0] == triad), None)
+            if explicit is not None:
+                del self.explicit[explicit]
+                return reply(0x4E, data=struct.pack("<HHIBB", *triad, 0, 0))
+        with self._lock:
             found = next((c for c in self.connections.values() if (c.triad == triad
-                          or (self.deviates("cm.forward_close.other_originator") and c.triad[0] == serial))
+                          or (self.deviates("cm.forward_close.other_originator") and c.triad[0] == serial)
+                          or (self.deviates("cm.forward_close.wrong_serial") and c.triad[1:] == triad[1:]))
                           # This stack keeps a timed-out owner whatever comes: only a restart clears it.
                           and not (c.timed_out and self.deviates("final.as_found"))), None)
             if found is not None:
                 del self.connections[found.ot_id]
                 found.stop.set()
         if found is None:
-            # The deviating stack has one code for every refusal when no connection has the serial.
-            known = any(c.triad[0] == serial for c in self.connections.values())
-            code = 0x0100 if self.deviates("cm.forward_close.unknown") and not known else 0x0107
+            # The deviating stack has another code for a Forward_Close while it holds no connection at all.
+            code = 0x0100 if self.deviates("cm.forward_close.unknown") and not self.connections else 0x0107
             return reply(0x4E, 0x01, (code,), struct.pack("<HHIBB", *triad, 0, 0))
         return reply(0x4E, data=struct.pack("<HHIBB", *triad, 0, 0))
 
