@@ -19,7 +19,9 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--connection-points", metavar="O,T[,C]",
                    help="the class 1 connection points to test: output (O->T), input (T->O) and configuration "
                         "instance (default 1), instead of finding them")
-    p.add_argument("--only", metavar="GROUP,...", help="run these groups only: encap, router, objects, cm, class1, eds")
+    p.add_argument("--only", metavar="GROUP,...",
+                   help="run these groups only: encap, router, objects, cm, class1, eds, profile (final runs after "
+                        "any that opens a connection or writes)")
     p.add_argument("--allow-writes", action="store_true",
                    help="also run checks that write (a set of a read-only attribute)")
     p.add_argument("--allow-reset", action="store_true", help="also reset the device (Identity Reset type 0)")

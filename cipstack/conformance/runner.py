@@ -8,7 +8,17 @@ from collections.abc import Iterable, Sequence
 from typing import TYPE_CHECKING
 
 from ..eip.encapsulation import DEFAULT_PORT, Command
-from . import as_found, class1, connections, eds_checks, encapsulation, more_wire, objects, router  # noqa: F401 - they declare checks
+from . import (  # noqa: F401 - they declare checks
+    as_found,
+    class1,
+    connections,
+    eds_checks,
+    encapsulation,
+    more_wire,
+    objects,
+    profile,
+    router,
+)
 from .model import FINAL, GROUPS, Outcome, Report, Verdict
 from .registry import CHECKS, RUNNERS, Context, outcome
 from .wire import Probe, TargetUnreachable, frame

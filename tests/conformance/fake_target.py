@@ -28,6 +28,7 @@ FO_SMALL = struct.Struct("<IHIHBB")
 FO_LARGE = struct.Struct("<IIIIBB")
 IO_HEAD = struct.Struct("<HHHIIHHH")
 
+AC_DRIVE = 2
 VENDOR, DEVICE_TYPE, PRODUCT_CODE, REVISION, SERIAL, NAME = 65001, 12, 7, (1, 2), 0x00C0FFEE, b"Fake Target"
 #: Checks for which the specification permits another answer than the fake's default, and that answer.
 VARIANTS = {
@@ -40,6 +41,8 @@ CYCLE_US = 10_000
 #: Output -> input assembly pairs the device connects (fake_device.eds Connection1 and 2).
 PAIRS = {100: 101, 102: 103}
 ASSEMBLY_SIZE = 2
+#: The drive attributes a Set_Attribute_Single may change (Run1, Run2, FaultRst, SpeedRef).
+SETTABLE = {(0x29, 3), (0x29, 4), (0x29, 12), (0x2A, 8)}
 #: Sessions this target holds at once (``encap.session_limit`` opens more).
 MAX_SESSIONS = 12
 #: The message router's path: a class 3 connection's.
@@ -82,10 +85,12 @@ class FakeTarget:
     """The target on 127.0.0.1: TCP and UDP on one port, class 1 I/O on another UDP port."""
 
     def __init__(self, deviation: str | Iterable[str] | None = None, host: str = "127.0.0.1", name: bytes = NAME,
-                 opener_timeout: bool = False, variant: str | None = None) -> None:
+                 opener_timeout: bool = False, variant: str | None = None, drive: bool = False) -> None:
         """``opener_timeout``: on a class 1 timeout, close the TCP session that opened the connection and
         keep the connection's ownership until a Forward_Close of its triad comes, as OpENer does.
-        ``variant`` names a check whose other permitted answer this target gives (``VARIANTS``)."""
+        ``variant`` names a check whose other permitted answer this target gives (``VARIANTS``).
+        ``drive``: an AC drive (device type 2) with the profile's assemblies and drive objects."""
+        self.drive = drive
         #: The checks this target deviates for (one, in the tests that fail one check; several, for the docs).
         self.deviations = {deviation} if isinstance(deviation, str) else set(deviation or ())
         self.variant = variant
@@ -161,7 +166,8 @@ class FakeTarget:
         status = 0x0032 if self.deviates("objects.identity.status") else 0x0030
         identity = {
             1: struct.pack("<H", VENDOR),
-            2: struct.pack("<I" if self.deviates("objects.identity.attributes") else "<H", DEVICE_TYPE),
+            2: struct.pack("<I" if self.deviates("objects.identity.attributes") else "<H",
+                           AC_DRIVE if self.drive else DEVICE_TYPE),
             3: struct.pack("<H", PRODUCT_CODE), 4: bytes(revision), 5: struct.pack("<H", status),
             6: struct.pack("<I", SERIAL), 7: bytes((len(self.name),)) + self.name,
         }
@@ -182,6 +188,21 @@ class FakeTarget:
         for instance in (100, 101, 102, 103):
             size = 3 if self.deviates("eds.assembly.size") and instance == 101 else ASSEMBLY_SIZE
             table[(0x04, instance)] = {3: bytes(ASSEMBLY_SIZE), 4: struct.pack("<H", size)}
+        if self.drive:
+            table.update(self._drive_objects())
+        return table
+
+    def _drive_objects(self) -> dict[tuple[int, int], dict[int, bytes]]:
+        """The AC drive profile's assemblies and its Control Supervisor and AC/DC Drive, at rest."""
+        table: dict[tuple[int, int], dict[int, bytes]] = {}
+        for instance in (20, 21, 70, 71):
+            size = 3 if self.deviates("profile.assemblies") and instance == 71 else 4
+            table[(0x04, instance)] = {3: bytes(size), 4: struct.pack("<H", size)}
+        state = 9 if self.deviates("profile.control_supervisor") else 3  # 3 Ready; 9 is no state
+        table[(0x29, 1)] = {3: b"\0", 4: b"\0", 6: bytes((state,)), 7: b"\0", 8: b"\0", 9: b"\1", 10: b"\0",
+                            12: b"\0", 13: struct.pack("<H", 0), 15: b"\0"}
+        speed = struct.pack("<i" if self.deviates("profile.ac_dc_drive") else "<h", 0)  # a DINT, not an INT
+        table[(0x2A, 1)] = {3: b"\0", 7: speed, 8: struct.pack("<h", 0), 29: b"\0"}
         return table
 
     # -- TCP ---------------------------------------------------------------------------------------------
@@ -282,7 +303,8 @@ class FakeTarget:
         family = b"\x02\x00" if self.deviates("encap.list_identity.tcp") and not udp else b"\x00\x02"
         attributes = self.attributes[(0x01, 1)]
         item = (struct.pack("<H", 1) + sockaddr(self.host, self.port, family) + attributes[1]
-                + struct.pack("<H", DEVICE_TYPE) + attributes[3] + attributes[4] + attributes[5]
+                + struct.pack("<H", AC_DRIVE if self.drive else DEVICE_TYPE) + attributes[3] + attributes[4]
+                + attributes[5]
                 + struct.pack("<I", serial) + attributes[7] + b"\x03")
         if udp and self.deviates("encap.list_identity.udp"):
             item = item[:-1]  # no state byte
@@ -366,6 +388,13 @@ class FakeTarget:
             return reply(service, data=every[:-3] if self.deviates("objects.identity.get_attributes_all") else every)
         if service == 0x10 and class_id == 0x01:
             return reply(service, 0 if self.deviates("objects.identity.set_read_only") else 0x0E)
+        if service == 0x10 and class_id in (0x29, 0x2A):
+            if attribute not in values:
+                return reply(service, 0x14)
+            if (class_id, attribute) not in SETTABLE:
+                return reply(service, 0x0E)
+            values[attribute] = data
+            return reply(service)
         if service == 0x05 and class_id == 0x01:
             return reply(service, 0x08 if self.deviates("objects.identity.reset") else 0)
         return reply(service, 0x05 if self.deviates("router.unknown_service") else 0x08)

@@ -93,6 +93,14 @@ def test_without_an_eds_the_battery_finds_the_points_itself(name: str, adapter_w
     assert all(o.verdict is Verdict.PASS for o in report if o.group in ("cm", "class1", "final"))
 
 
+@pytest.mark.parametrize("name", sorted(EMULATORS))
+def test_both_drive_families_pass_the_profile_group(name: str, adapter_with) -> None:  # type: ignore[no-untyped-def]
+    peer = adapter_with(*EMULATORS[name][0])
+    report = run(peer.host, peer.port, groups="profile", allow_writes=True)
+    assert {o.id: o.verdict for o in report} == {i: Verdict.PASS for i in check_ids() if i.startswith("profile.")}
+    assert "refused a Set (0x0E)" in next(o.observed for o in report if o.id == "profile.ac_dc_drive")
+
+
 def test_an_eds_emulated_device_without_an_eds_serves_its_own(adapter_with) -> None:  # type: ignore[no-untyped-def]
     peer = adapter_with("--eds", str(Path(__file__).with_name("fake_device.eds")))
     report = run(peer.host, peer.port, allow_writes=True)

@@ -24,9 +24,9 @@ SHOWN_BY = {"final.as_found": "class1"}
 CONNECTING = ("cm", "class1", "eds")
 
 
-@pytest.mark.parametrize("group", ["encap", "router", "objects", "cm", "class1", "eds"])
+@pytest.mark.parametrize("group", ["encap", "router", "objects", "cm", "class1", "eds", "profile"])
 def test_the_conformant_fake_passes_every_check(group: str) -> None:
-    with FakeTarget() as target:
+    with FakeTarget(drive=group == "profile") as target:
         report = run_group(target, group)
     assert target.errors == []
     assert {o.name: o.observed for o in report if o.verdict is not Verdict.PASS} == {}
@@ -37,7 +37,7 @@ def test_the_conformant_fake_passes_every_check(group: str) -> None:
 
 @pytest.mark.parametrize("check_id", check_ids())
 def test_each_check_fails_on_its_deviation(check_id: str) -> None:
-    with FakeTarget(deviation=check_id) as target:
+    with FakeTarget(deviation=check_id, drive=CHECKS[check_id].group == "profile") as target:
         report = run_group(target, SHOWN_BY.get(check_id, CHECKS[check_id].group))
     assert target.errors == []
     failed = {o.id for o in report.failures}
@@ -89,3 +89,10 @@ def test_every_check_that_judges_a_status_declares_the_codes_with_their_referenc
               and i not in ("router.multiple_service.good", "cm.forward_open.accepted")]
     assert [i for i in judged if not CHECKS[i].codes] == []
     assert all(code.reference for spec in CHECKS.values() for code in spec.codes)
+
+
+def test_the_profile_does_not_apply_to_another_device_type() -> None:
+    with FakeTarget() as target:
+        report = run_group(target, "profile")
+    assert {o.id: o.verdict for o in report} == {i: Verdict.NOT_APPLICABLE for i in check_ids()
+                                                 if i.startswith("profile.")}
