@@ -446,15 +446,20 @@ def close_unknown(ctx: Context, spec: CheckSpec) -> Outcome:
        codes=[extended(0x0107, "target connection not found")])
 @_on_main_plan
 def close_other_originator(ctx: Context, spec: CheckSpec, plan: Plan, probe: Probe, endpoint: Endpoint) -> Outcome:
+    return close_with_wrong_triad(ctx, spec, plan, probe, endpoint, "other originator", lambda t: ConnectionTriad(
+        t.connection_serial, t.vendor_id, (t.originator_serial + 1) & 0xFFFFFFFF), ctx.probe())
+
+
+def close_with_wrong_triad(ctx: Context, spec: CheckSpec, plan: Plan, probe: Probe, endpoint: Endpoint, what: str,
+                           wrong: Callable[[ConnectionTriad], ConnectionTriad], closer: Probe) -> Outcome:
+    """Open ``plan``, send a Forward_Close on ``closer`` with the triad ``wrong`` makes of the connection's,
+    which the target must refuse with a code the check permits, then the connection's own Forward_Close,
+    which must succeed."""
     first, opened = send_forward_open(ctx, probe, endpoint, forward_open_request(plan))
     if opened is None:
         return outcome(spec, False, f"Forward_Open failed: {first.describe()}", probe.exchanges)
-    triad = opened.request.triad
-    other = ConnectionTriad(triad.connection_serial, triad.vendor_id, (triad.originator_serial + 1) & 0xFFFFFFFF)
-    stranger = ctx.probe()
-    reply = forward_close(stranger, other, plan.path)
+    reply = forward_close(closer, wrong(opened.request.triad), plan.path)
     own = opened.close()
     ok = reply.status == 0x01 and spec.verdict_for(reply.extended) is Verdict.PASS and own.status == 0
-    return outcome(spec, ok, f"other originator: {reply.describe()}; own Forward_Close: {own.describe()}",
-                   [*probe.exchanges, *stranger.exchanges])
-
+    exchanges = probe.exchanges if closer is probe else [*probe.exchanges, *closer.exchanges]
+    return outcome(spec, ok, f"{what}: {reply.describe()}; own Forward_Close: {own.describe()}", exchanges)

@@ -29,11 +29,10 @@ from .connections import (
     Endpoint,
     Plan,
     _on_main_plan,
+    close_with_wrong_triad,
     extended,
-    forward_close,
     forward_open_request,
     new_triad,
-    send_forward_open,
 )
 from .model import CheckSpec, Code, Outcome, Verdict
 from .registry import Context, check, outcome
@@ -282,13 +281,5 @@ def session_limit(ctx: Context, spec: CheckSpec) -> Outcome:
        codes=[extended(0x0107, "target connection not found")])
 @_on_main_plan
 def close_wrong_serial(ctx: Context, spec: CheckSpec, plan: Plan, probe: Probe, endpoint: Endpoint) -> Outcome:
-    first, opened = send_forward_open(ctx, probe, endpoint, forward_open_request(plan))
-    if opened is None:
-        return outcome(spec, False, f"Forward_Open failed: {first.describe()}", probe.exchanges)
-    triad = opened.request.triad
-    wrong = ConnectionTriad((triad.connection_serial + 1) & 0xFFFF or 1, triad.vendor_id, triad.originator_serial)
-    reply = forward_close(probe, wrong, plan.path)
-    own = opened.close()
-    ok = reply.status == 0x01 and spec.verdict_for(reply.extended) is Verdict.PASS and own.status == 0
-    return outcome(spec, ok, f"serial + 1: {reply.describe()}; own Forward_Close: {own.describe()}", probe.exchanges)
-
+    return close_with_wrong_triad(ctx, spec, plan, probe, endpoint, "serial + 1", lambda t: ConnectionTriad(
+        (t.connection_serial + 1) & 0xFFFF or 1, t.vendor_id, t.originator_serial), probe)

@@ -37,25 +37,6 @@ def generate_eds(profile_args: list[str], directory: Path) -> Path:
     return found
 
 
-@pytest.fixture
-def adapter_with(tmp_path: Path) -> Iterator[object]:
-    """Start ``cipstack adapter ARGS`` on a free port; stopped by PID when the test ends."""
-    started: list[PeerProcess] = []
-
-    def start(*args: str) -> PeerProcess:
-        port = free_port()
-        command = python_module("cipstack", "adapter", "--host", HOST, "--port", str(port), "--io-port", "0",
-                                "--quiet", *args)
-        peer = start_peer("cipstack adapter", command, HOST, port, tmp_path / f"adapter-{port}.log")
-        started.append(peer)
-        return peer
-
-    yield start
-    for peer in started:
-        peer.stop(signal.SIGTERM)
-        assert "Traceback" not in peer.log_text(), peer.log_text()
-
-
 def _not_passed(report: object) -> dict[str, str]:
     return {o.name: f"{o.verdict.value}: {o.observed}" for o in report  # type: ignore[attr-defined]
             if o.verdict is Verdict.FAIL}

@@ -5,11 +5,9 @@ fetch`` reads it over the wire with Initiate_Upload and Upload_Transfer."""
 from __future__ import annotations
 
 import gzip
-import signal
 import struct
 import subprocess
 import sys
-from collections.abc import Iterator
 from pathlib import Path
 
 import pytest
@@ -28,28 +26,9 @@ from cipstack.objects.file import (
 )
 from cipstack.scanner import SyncScanner
 from tests.cli_errors import one_line_error
-from tests.interop.conftest import HOST, PeerProcess, python_module, start_peer
-from tests.ports import free_port
+from tests.interop.conftest import python_module
 
-FAKE_EDS = Path(__file__).parent / "conformance" / "fake_device.eds"
-
-
-@pytest.fixture
-def adapter(tmp_path: Path) -> Iterator[object]:
-    started: list[PeerProcess] = []
-
-    def start(*args: str) -> PeerProcess:
-        port = free_port()
-        command = python_module("cipstack", "adapter", "--host", HOST, "--port", str(port), "--io-port", "0",
-                                "--quiet", *args)
-        peer = start_peer("cipstack adapter", command, HOST, port, tmp_path / f"adapter-{port}.log")
-        started.append(peer)
-        return peer
-
-    yield start
-    for peer in started:
-        peer.stop(signal.SIGTERM)
-        assert "Traceback" not in peer.log_text(), peer.log_text()
+FAKE_EDS = Path(__file__).with_name("fake_device.eds")
 
 
 def fetch(*args: str) -> subprocess.CompletedProcess[str]:
@@ -59,8 +38,8 @@ def fetch(*args: str) -> subprocess.CompletedProcess[str]:
 
 @pytest.mark.parametrize("profile", [["--profile", "acg"], ["--profile", "mx2", "--model", "MX2-A2015-E"]],
                          ids=["acg", "mx2"])
-def test_the_emulator_serves_the_eds_file_it_generates(profile: list[str], adapter, tmp_path: Path) -> None:  # type: ignore[no-untyped-def]
-    peer = adapter(*profile)
+def test_the_emulator_serves_the_eds_file_it_generates(profile: list[str], adapter_with, tmp_path: Path) -> None:  # type: ignore[no-untyped-def]
+    peer = adapter_with(*profile)
     out = tmp_path / "fetched.eds"
     result = fetch(f"{peer.host}:{peer.port}", "-o", str(out))
     assert result.returncode == 0, result.stderr
@@ -71,15 +50,15 @@ def test_the_emulator_serves_the_eds_file_it_generates(profile: list[str], adapt
     assert result.stdout.strip() == f"{out}: {len(generated.read_bytes())} bytes"
 
 
-def test_an_eds_emulated_device_serves_its_file_byte_for_byte(adapter, tmp_path: Path) -> None:  # type: ignore[no-untyped-def]
-    peer = adapter("--eds", str(FAKE_EDS))
+def test_an_eds_emulated_device_serves_its_file_byte_for_byte(adapter_with, tmp_path: Path) -> None:  # type: ignore[no-untyped-def]
+    peer = adapter_with("--eds", str(FAKE_EDS))
     out = tmp_path / "fetched.eds"
     assert fetch(f"{peer.host}:{peer.port}", "-o", str(out)).returncode == 0
     assert out.read_bytes() == FAKE_EDS.read_bytes()
 
 
-def test_the_instance_attributes_and_the_wire_bytes(adapter) -> None:  # type: ignore[no-untyped-def]
-    peer = adapter("--eds", str(FAKE_EDS))
+def test_the_instance_attributes_and_the_wire_bytes(adapter_with) -> None:  # type: ignore[no-untyped-def]
+    peer = adapter_with("--eds", str(FAKE_EDS))
     data = FAKE_EDS.read_bytes()
     with SyncScanner(f"{peer.host}:{peer.port}", identify=False) as scanner:
         def get(attribute: int) -> bytes:
@@ -103,7 +82,7 @@ def test_the_instance_attributes_and_the_wire_bytes(adapter) -> None:  # type: i
 
 
 def test_fetch_from_a_device_without_a_file_object_is_one_line(tmp_path: Path) -> None:
-    from tests.conformance.fake_target import FakeTarget
+    from .fake_target import FakeTarget
 
     with FakeTarget() as target:
         result = fetch(target.address, "-o", str(tmp_path / "x.eds"))
