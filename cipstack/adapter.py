@@ -33,6 +33,7 @@ from .faults import Fault, FaultController
 from .listening import ListenError, held_log_records
 from .modbus.rtu_line import RtuLine, RtuPortError, open_port
 from .modbus.tcp_server import ModbusTcpServer
+from .objects.file import StoredFile
 from .objects.tcpip import NetworkInterface
 from .runtime import Class1Port, DeviceRuntime, Port, PowerLink, Rs485Port, ServerPort
 from .runtime.observer import IoEventRelay, Observers, register_relay
@@ -94,6 +95,8 @@ class AdapterSettings:
     http: str | None = None
     http_token: str | None = None
     http_allow_remote: bool = False
+    #: Files the device serves through its File object (its EDS file: ``cipstack.eds.served``).
+    files: tuple[StoredFile, ...] = ()
     #: Host names the HTTP API answers to besides its addresses and localhost (``--http-allow-host``).
     http_hosts: tuple[str, ...] = ()
 
@@ -111,7 +114,7 @@ class Adapter:
         s = self.settings
         self.device = device or build_device(s.profile, network_interface(s.host, s.mac or DEFAULT_MAC),
                                              DeviceLimits(s.max_sessions, s.max_connections),
-                                             ProfileOptions(s.state_path, s.model))
+                                             ProfileOptions(s.state_path, s.model, s.files))
         self.observers = Observers()
         self.clock = DeviceClock(self.device, self.observers)
         # The ports the device's family declares beside EtherNet/IP (the ACG's Modbus TCP and RS-485).

@@ -14,10 +14,19 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("target", metavar="HOST[:PORT]", help="target address (default port 44818)")
     p.add_argument("--eds", metavar="FILE", help="the target's EDS file: enables group eds and the connection "
                                                   "checks of groups cm and class1")
-    p.add_argument("--only", metavar="GROUP,...", help="run these groups only: encap, router, objects, cm, class1, eds")
+    p.add_argument("--eds-dir", metavar="DIR", help="without --eds: a directory of EDS files, the one matching the "
+                                                     "device's vendor, product code and revision is used")
+    p.add_argument("--connection-points", metavar="O,T[,C]",
+                   help="the class 1 connection points to test: output (O->T), input (T->O) and configuration "
+                        "instance (default 1), instead of finding them")
+    p.add_argument("--only", metavar="GROUP,...",
+                   help="run these groups only: encap, router, objects, cm, class1, eds, profile (final runs after "
+                        "any that opens a connection or writes)")
     p.add_argument("--allow-writes", action="store_true",
                    help="also run checks that write (a set of a read-only attribute)")
     p.add_argument("--allow-reset", action="store_true", help="also reset the device (Identity Reset type 0)")
+    p.add_argument("--strict", action="store_true",
+                   help="warnings are failures: in the exit status and the JUnit report")
     p.add_argument("--json", action="store_true", help="the report as one JSON object on stdout")
     p.add_argument("--junit", metavar="FILE", type=Path, help="also write the report as JUnit XML")
     p.add_argument("--html", metavar="FILE", type=Path, help="also write the report as one self-contained HTML page")
@@ -36,7 +45,7 @@ def _duration(text: str) -> float:
 
 
 def cmd_conform(args: argparse.Namespace) -> int:
-    from ..conformance import TargetUnreachable, parse_groups, run
+    from ..conformance import TargetUnreachable, Verdict, parse_groups, run
     from ..conformance.report import to_html, to_json, to_junit, to_text
 
     host, port = parse_host(args.target)
@@ -46,6 +55,16 @@ def cmd_conform(args: argparse.Namespace) -> int:
         raise UsageError(f"--only: {exc}") from None
     if args.eds is not None and not Path(args.eds).is_file():
         raise UsageError(f"--eds: no such file: {args.eds}")
+    if args.eds_dir is not None and not Path(args.eds_dir).is_dir():
+        raise UsageError(f"--eds-dir: no such directory: {args.eds_dir}")
+    points = None
+    if args.connection_points is not None:
+        from ..conformance.discovery import parse_points
+
+        try:
+            points = parse_points(args.connection_points)
+        except ValueError as exc:
+            raise UsageError(f"--connection-points {exc}") from None
     eds = None
     if args.eds is not None:
         from ..eds.reader import EdsSyntaxError, read_eds
@@ -56,14 +75,18 @@ def cmd_conform(args: argparse.Namespace) -> int:
             raise UsageError(f"--eds {args.eds}: {exc}") from None
     try:
         report = run(host, port, eds=eds, groups=groups, allow_writes=args.allow_writes,
-                     allow_reset=args.allow_reset, timeout=args.timeout)
+                     allow_reset=args.allow_reset, timeout=args.timeout, connection_points=points,
+                     eds_dir=args.eds_dir)
     except TargetUnreachable as exc:
         print(f"cipstack conform: {exc}", file=sys.stderr)
         return EXIT_USAGE
     if args.eds is not None:
         report.options["eds"] = args.eds
-    for path, render in ((args.junit, to_junit), (args.html, to_html)):
-        if path is not None:
-            path.write_text(render(report), encoding="utf-8")
+    report.options["strict"] = args.strict
+    if args.junit is not None:
+        args.junit.write_text(to_junit(report, strict=args.strict), encoding="utf-8")
+    if args.html is not None:
+        args.html.write_text(to_html(report), encoding="utf-8")
     print(to_json(report) if args.json else to_text(report), flush=True)
-    return EXIT_OK if report.passed else EXIT_FAILURE
+    warned = args.strict and any(o.verdict is Verdict.WARNING for o in report)
+    return EXIT_OK if report.passed and not warned else EXIT_FAILURE

@@ -35,6 +35,35 @@ def cmd_eds_check(args: argparse.Namespace) -> int:
     return status if status != EXIT_UNREADABLE or reports else EXIT_UNREADABLE
 
 
+def cmd_eds_fetch(args: argparse.Namespace) -> int:
+    """Read the device's own EDS file from its File object (class 0x37, instance 0xC8)."""
+    import sys
+    from pathlib import Path
+
+    from ..objects.file import CLASS_ID, EDS_INSTANCE, FileTransferError, read_file
+    from ..scanner import SyncScanner
+    from .common import EXIT_FAILURE, EXIT_OK
+
+    with SyncScanner(args.host, timeout=args.timeout, identify=False) as scanner:
+        def request(service: int, data: bytes) -> tuple[int, bytes]:
+            reply = scanner.request(service, CLASS_ID, EDS_INSTANCE, data=data, check=False)
+            return int(reply.general_status), bytes(reply.data)
+
+        try:
+            content = read_file(request)
+        except FileTransferError as exc:
+            print(f"cipstack eds fetch: {args.host} serves no EDS file through its File object (class 0x37, "
+                  f"instance 0xC8): {exc}", file=sys.stderr)
+            return EXIT_FAILURE
+    if args.output == "-":
+        sys.stdout.buffer.write(content)
+        sys.stdout.flush()
+    else:
+        Path(args.output).write_bytes(content)
+        print(f"{args.output}: {len(content)} bytes", flush=True)
+    return EXIT_OK
+
+
 def cmd_eds_generate(args: argparse.Namespace) -> int:
     from ..eds.commands_generate import run_generate
 

@@ -6,6 +6,7 @@ import argparse
 import logging
 import os
 import sys
+from pathlib import Path
 from typing import Any
 
 from .common import (
@@ -22,6 +23,7 @@ def cmd_adapter(args: argparse.Namespace) -> int:
     from ..adapter import Adapter, AdapterSettings
     from ..devices.profiles import PROFILES
     from ..devices.state import StateFileError, default_state_path
+    from ..eds.served import profile_eds_file
 
     if args.eds is not None:
         return _adapter_from_eds(args)
@@ -43,7 +45,8 @@ def cmd_adapter(args: argparse.Namespace) -> int:
                                max_sessions=args.max_sessions, max_connections=args.max_connections,
                                io_port=args.io_port, control_path=args.control,
                                status_lines=not args.quiet, state_path=args.state, modbus_port=args.modbus_port,
-                               rtu=args.rtu, **_limit_settings(args), **_http_settings(args))
+                               rtu=args.rtu, files=(profile_eds_file(args.profile, args.model),),
+                               **_limit_settings(args), **_http_settings(args))
     try:
         adapter = Adapter(settings)
     except (StateFileError, ValueError, KeyError) as exc:
@@ -218,7 +221,8 @@ def _adapter_from_eds(args: argparse.Namespace) -> int:
     doc = _read_eds_file(args.eds)
     try:
         device = build_eds_device(doc, network_interface(args.host, DEFAULT_MAC),
-                                  DeviceLimits(args.max_sessions, args.max_connections))
+                                  DeviceLimits(args.max_sessions, args.max_connections),
+                                  served=Path(args.eds).read_bytes())
     except EdsDeviceError as exc:
         raise UsageError(f"{args.eds}: {exc}") from None
     for issue in device.issues:

@@ -316,6 +316,14 @@ COMMANDS: dict[tuple[str, ...], CommandText] = {
         (("cipstack eds generate --profile acg -o eds", "the ACG-ET2's file"),
          ("cipstack eds generate --profile mx2 --all -o eds", "every MX2 model's file")),
     ),
+    ("eds", "fetch"): CommandText(
+        "read a device's own EDS file from its File object",
+        "Read the EDS file a device carries, from its File object (class 0x37, instance 0xC8, \"EDS and "
+        "Icon Files\") with Initiate_Upload and Upload_Transfer, check its size and checksum, and write "
+        "it (uncompressed when the device serves it compressed). The emulators serve theirs.",
+        (("cipstack eds fetch 127.0.0.1 -o device.eds", "the emulator's EDS file"),
+         ("cipstack eds fetch 192.168.1.20:44818 -o - | cipstack eds show /dev/stdin", "straight to a summary")),
+    ),
     ("eds", "show"): CommandText(
         "a readable summary: identity, assemblies, connections",
         "Print a readable summary of an EDS file: its identity, parameters by group, assemblies with "
@@ -345,13 +353,18 @@ COMMANDS: dict[tuple[str, ...], CommandText] = {
         "does against what the specification (and, with --eds, its EDS file) expects: the request sent, "
         "the reply, the reference and a verdict (pass, fail, warning, n/a). Groups: encap "
         "(encapsulation), router (message router and errors), objects (required objects), cm (Connection "
-        "Manager Forward_Open matrix), class1 (class 1 behaviour), eds (EDS against the device); cm and "
-        "class1 take their connection points from --eds.\n\n"
+        "Manager Forward_Open matrix), class1 (class 1 behaviour), eds (EDS against the device), profile "
+        "(the AC drive profile's assemblies and attributes), and "
+        "final (the device as found: run after every run that opened a connection or wrote). cm and "
+        "class1 take their connection points from --eds; without it from --connection-points, the "
+        "device's own EDS file (File object), --eds-dir, the AC drive profile or bounded probing of its "
+        "assemblies, and say which.\n\n"
         "Safe by default: nothing is written without --allow-writes, the device is not reset without "
-        "--allow-reset, requests are rate-bounded and every connection opened is closed. Exit status 0 "
-        "when no check fails, 1 when one fails, 2 for bad arguments or a target that is unreachable or "
-        "does not speak EtherNet/IP.",
-        (("cipstack conform 127.0.0.1", "every group that needs no EDS, against the emulator"),
+        "--allow-reset, requests are rate-bounded, every connection opened is closed on a live session "
+        "and every write is written back. Exit status 0 when no check fails, 1 when one fails, 2 for bad "
+        "arguments or a target that is unreachable or does not speak EtherNet/IP; with --strict a "
+        "warning counts as a failure.",
+        (("cipstack conform 127.0.0.1", "every group, the connection points found on the device"),
          ("cipstack conform 192.168.1.20 --eds drive.eds --junit conform.xml --html conform.html",
           "all six groups, with a JUnit file for CI and a page to attach to a test report"),
          ("cipstack conform 127.0.0.1:44818 --only encap,router --json", "two groups, as one JSON object")),

@@ -17,7 +17,7 @@ from .common import (
 from .completion import cmd_completion
 from .conform import add_arguments as add_conform_arguments
 from .drive import add_drive_commands
-from .eds import cmd_eds_check, cmd_eds_generate, cmd_eds_show
+from .eds import cmd_eds_check, cmd_eds_fetch, cmd_eds_generate, cmd_eds_show
 from .emulators import cmd_adapter, cmd_componet, cmd_models
 from .explicit import cmd_discover, cmd_get, cmd_identity, cmd_set
 from .fleet import DEFAULT_WORKERS, cmd_fleet
@@ -399,3 +399,9 @@ def _add_eds_commands(sub: Any) -> None:
     q = eds.add_parser("show")
     add_show_arguments(q)
     q.set_defaults(func=cmd_eds_show)
+    q = eds.add_parser("fetch")
+    q.add_argument("host", metavar="HOST[:PORT]", help="the device (default port 44818)")
+    q.add_argument("-o", "--output", metavar="FILE", required=True, help="where to write the file (- for stdout)")
+    q.add_argument("--timeout", type=parse_duration, default=5.0, metavar="DURATION",
+                   help="reply timeout (default %(default)s s)")
+    q.set_defaults(func=cmd_eds_fetch)

@@ -6,93 +6,15 @@ from __future__ import annotations
 
 import functools
 import itertools
-import select
-import statistics
-import time
 from collections.abc import Callable
-from dataclasses import dataclass, field
 
-from ..eip.io_core import IoDatagramError, decode_io_datagram, encode_io_datagram, seq16_newer
+from ..eip.io_core import seq16_newer
 from .connections import Endpoint, Opened, Plan, forward_open_request, main_plan, not_planned, send_forward_open
-from .model import CheckSpec, Exchange, Outcome, Verdict
+from .io_run import Run, drive, judge_production
+from .model import CheckSpec, Outcome, Verdict
 from .registry import Context, check, outcome
 
 IO_REFERENCE = "CIP Vol. 1 §3-4.4 (connection timeout = RPI x 4 x 2^multiplier); Vol. 2 §3-2 (class 1 over UDP)"
-
-
-@dataclass
-class Arrival:
-    at: float
-    phase: int
-    encap_sequence: int
-    cip_sequence: int
-    size: int
-
-
-@dataclass
-class Run:
-    """One class 1 connection driven through phases of (seconds, "run" | "idle" | "silent")."""
-
-    opened: Opened
-    phases: list[tuple[float, str]]
-    starts: list[float] = field(default_factory=list)
-    arrivals: list[Arrival] = field(default_factory=list)
-    foreign: int = 0
-    first_datagram: bytes | None = None
-    sent_example: bytes | None = None
-
-    @property
-    def api(self) -> float:
-        return self.opened.reply.to_api_us / 1e6
-
-    def in_phase(self, index: int) -> list[Arrival]:
-        return [a for a in self.arrivals if a.phase == index]
-
-
-def drive(ctx: Context, plan: Plan, endpoint: Endpoint, opened: Opened, phases: list[tuple[float, str]]) -> Run:
-    """Send O->T at the granted O->T API in the run and idle phases (nothing in silent ones) and record
-    every T->O datagram of the connection."""
-    run = Run(opened, phases)
-    ot_api = max(opened.reply.ot_api_us, 1000) / 1e6
-    header = 4 if plan.run_idle else 0
-    data = bytes(max(0, plan.ot_size - 2 - header))
-    destination = (ctx.host, opened.io_port)
-    sequence = 0
-    sock = endpoint.sock
-    for index, (duration, mode) in enumerate(phases):
-        start = time.monotonic()
-        run.starts.append(start)
-        end, due = start + duration, start
-        while True:
-            now = time.monotonic()
-            if now >= end:
-                break
-            if mode != "silent" and now >= due:
-                sequence += 1
-                run_idle = (1 if mode == "run" else 0) if plan.run_idle else None
-                datagram = encode_io_datagram(opened.reply.ot_connection_id, sequence, sequence, data, run_idle)
-                run.sent_example = run.sent_example or datagram
-                sock.sendto(datagram, destination)
-                due += ot_api
-                if due < now:
-                    due = now + ot_api
-            wait = min(end, due if mode != "silent" else end) - time.monotonic()
-            ready, _, _ = select.select([sock], [], [], max(0.0, wait))
-            if ready:
-                raw = sock.recv(65536)
-                at = time.monotonic()
-                try:
-                    datagram_in = decode_io_datagram(raw)
-                except IoDatagramError:
-                    run.foreign += 1
-                    continue
-                if datagram_in.connection_id != opened.reply.to_connection_id:
-                    run.foreign += 1
-                    continue
-                run.first_datagram = run.first_datagram or raw
-                run.arrivals.append(Arrival(at, index, datagram_in.encap_sequence, datagram_in.cip_sequence,
-                                            len(datagram_in.payload)))
-    return run
 
 
 def _open(ctx: Context, spec: CheckSpec, multiplier: int) -> tuple[Plan, Endpoint, Opened] | Outcome:
@@ -105,10 +27,6 @@ def _open(ctx: Context, spec: CheckSpec, multiplier: int) -> tuple[Plan, Endpoin
     if opened is None:
         return outcome(spec, False, f"Forward_Open of {plan.name}: {reply.describe()}", probe.exchanges)
     return plan, endpoint, opened
-
-
-def _exchanges(run: Run) -> list[Exchange]:
-    return [*run.opened.probe.exchanges, Exchange(run.sent_example or b"", run.first_datagram, "udp")]
 
 
 def _production(ctx: Context, spec: CheckSpec) -> tuple[Plan, Run] | Outcome:
@@ -147,16 +65,8 @@ def _on_production(body: Callable[[Context, CheckSpec, Plan, Run], Outcome]) -> 
        f"{IO_REFERENCE}")
 @_on_production
 def production(ctx: Context, spec: CheckSpec, plan: Plan, run: Run) -> Outcome:
-    arrivals = run.arrivals
-    expected = 1.0 / run.api if run.api > 0 else 0
-    if len(arrivals) < 2:
-        return outcome(spec, False, f"{len(arrivals)} T->O packets in 1 s at an API of {run.api * 1e3:.1f} ms",
-                       _exchanges(run))
-    intervals = [b.at - a.at for a, b in itertools.pairwise(arrivals)]
-    mean = statistics.fmean(intervals)
-    ok = 0.8 * run.api <= mean <= 1.25 * run.api and len(arrivals) >= 0.7 * expected
-    return outcome(spec, ok, f"{len(arrivals)} packets (about {expected:.0f} due), mean interval {mean * 1e3:.2f} ms, "
-                   f"max {max(intervals) * 1e3:.2f} ms, API {run.api * 1e3:.2f} ms", _exchanges(run))
+    ok, observed = judge_production(run, 1.0)
+    return outcome(spec, ok, observed, run.exchanges())
 
 
 @check("class1.sequence", "T->O sequence numbers",
@@ -173,7 +83,7 @@ def sequence(ctx: Context, spec: CheckSpec, plan: Plan, run: Run) -> Outcome:
     if not run.arrivals:
         problems.append("no T->O packet")
     return outcome(spec, not problems, "; ".join(problems[:3]) or f"{len(run.arrivals)} packets in order",
-                   _exchanges(run))
+                   run.exchanges())
 
 
 @check("class1.data_size", "T->O data size",
@@ -183,7 +93,7 @@ def sequence(ctx: Context, spec: CheckSpec, plan: Plan, run: Run) -> Outcome:
 def data_size(ctx: Context, spec: CheckSpec, plan: Plan, run: Run) -> Outcome:
     sizes = sorted({a.size for a in run.arrivals})
     ok = sizes == [plan.to_data_size]
-    return outcome(spec, ok, f"data sizes {sizes}, the connection carries {plan.to_data_size}", _exchanges(run))
+    return outcome(spec, ok, f"data sizes {sizes}, the connection carries {plan.to_data_size}", run.exchanges())
 
 
 @check("class1.run_idle", "O->T run, then idle for 0.5 s, then run",
@@ -203,7 +113,7 @@ def run_idle(ctx: Context, spec: CheckSpec) -> Outcome:
     due = 0.5 / run.api if run.api > 0 else 0
     ok = counts[1] >= 0.5 * due and counts[2] > 0 and closing.status == 0
     return outcome(spec, ok, f"T->O packets in the run/idle/run phases: {counts}; Forward_Close: "
-                   f"{closing.describe()}", _exchanges(run))
+                   f"{closing.describe()}", run.exchanges())
 
 
 @check("class1.timeout", "O->T silence longer than the connection timeout",
@@ -225,4 +135,4 @@ def timeout(ctx: Context, spec: CheckSpec) -> Outcome:
     connection.close()  # the target should answer 0x0107 now; one that did not time out is closed all the same
     ok = bool(run.in_phase(0)) and stopped_after <= limit + 0.5
     return outcome(spec, ok, f"timeout {limit * 1e3:.0f} ms; production stopped {stopped_after * 1e3:.0f} ms after "
-                   f"the last O->T packet ({len(run.in_phase(0))} packets before)", _exchanges(run))
+                   f"the last O->T packet ({len(run.in_phase(0))} packets before)", run.exchanges())

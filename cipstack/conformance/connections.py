@@ -14,8 +14,8 @@ import functools
 import random
 import socket
 from collections.abc import Callable
-from collections.abc import Set as AbstractSet
 from dataclasses import dataclass, replace
+from typing import TYPE_CHECKING
 
 from ..cip.epath import request_path
 from ..eip.cm_messages import (
@@ -31,13 +31,22 @@ from ..eip.cm_messages import (
 from ..eip.cpf import Item, ItemType, SockAddr
 from ..eip.io_core import DEFAULT_IO_PORT
 from ..eip.io_originator import SEQUENCE_COUNT_SIZE, OtFormat, class1_path
-from .model import CheckSpec, Outcome, Verdict
+from .io_run import drive, judge_production
+from .model import CheckSpec, Code, Outcome, Verdict
 from .registry import Context, check, outcome
-from .wire import Probe, Reply
+from .wire import Probe, Reply, TargetUnreachable
+
+if TYPE_CHECKING:
+    from ..eds.interpret import EdsView
+    from ..eds.model import EdsDocument
 
 CM = request_path(0x06, 1)
 FORWARD_OPEN, LARGE_FORWARD_OPEN, FORWARD_CLOSE = 0x54, 0x5B, 0x4E
 EXTENDED = "CIP Vol. 1 §3-5.5.2 and Table 3-5.33 (extended status); Wireshark packet-cip.c (cip_cm_ext_st_vals)"
+#: Where each extended status is listed.
+TABLE = "CIP Vol. 1 Table 3-5.33; Wireshark packet-cip.c cip_cm_ext_st_vals; OpENer ciperror.h"
+#: How long an accepted RPI of 1 us is measured: long enough for a target producing every 10 ms.
+RPI_MEASURE_S = 0.5
 #: Our vendor id as an originator, as the scanner's (0xFFFE is not assigned).
 VENDOR = 0xFFFE
 
@@ -72,15 +81,23 @@ class Plan:
 
 
 def plans(ctx: Context) -> list[Plan]:
-    """Every class 1 connection of the EDS, exclusive owners first."""
+    """The connections groups cm and class1 use: those the discovery found (``discovery``), else every
+    class 1 connection of the EDS given."""
+    if ctx.discovered is not None:
+        return list(ctx.discovered)
     if ctx.view is None or ctx.eds is None:
         return []
+    return plans_of_eds(ctx.eds, ctx.view)
+
+
+def plans_of_eds(eds: EdsDocument, view: EdsView) -> list[Plan]:
+    """Every class 1 connection of an EDS, exclusive owners first."""
     from ..eds.generator import EXCLUSIVE_OWNER_KIND
     from ..scanner import _eds_ot_format
 
     found = []
-    for info in ctx.view.connections:
-        fmt = _eds_ot_format(ctx.eds, info.number) or (OtFormat.HEARTBEAT if info.heartbeat else OtFormat.RUN_IDLE)
+    for info in view.connections:
+        fmt = _eds_ot_format(eds, info.number) or (OtFormat.HEARTBEAT if info.heartbeat else OtFormat.RUN_IDLE)
         ot_data = 0 if info.heartbeat else info.o_t_size
         rpi = info.rpi_us or 10_000
         if info.rpi_min_us:
@@ -116,8 +133,9 @@ def forward_open_request(plan: Plan, *, multiplier: int = 2, large: bool = False
 class Opened:
     """A connection the target accepted: closed by ``close`` or, failing that, when the check ends."""
 
-    def __init__(self, probe: Probe, request: ForwardOpenRequest, reply: ForwardOpenReply, items: tuple[Item, ...]):
-        self.probe, self.request, self.reply = probe, request, reply
+    def __init__(self, ctx: Context, probe: Probe, request: ForwardOpenRequest, reply: ForwardOpenReply,
+                 items: tuple[Item, ...]):
+        self.ctx, self.probe, self.request, self.reply = ctx, probe, request, reply
         self.io_port = DEFAULT_IO_PORT
         for item in items:
             if item.type == ItemType.SOCKADDR_O_T:
@@ -127,11 +145,35 @@ class Opened:
 
     def close(self) -> Reply:
         self.closed = True
-        return forward_close(self.probe, self.request.triad, self.request.connection_path)
+        return close_connection(self.ctx, self.probe, self.request.triad, self.request.connection_path)
 
 
 def forward_close(probe: Probe, triad: ConnectionTriad, path: bytes) -> Reply:
     return probe.request(FORWARD_CLOSE, CM, ForwardCloseRequest(0x0A, 0x0E, triad, path).encode())
+
+
+def close_connection(ctx: Context, probe: Probe, triad: ConnectionTriad, path: bytes) -> Reply:
+    """Forward_Close of a connection the battery opened, on a live session: on ``probe``, or on a new
+    session when the target closed that one (OpENer closes the TCP session of a class 1 connection
+    that timed out, and keeps the connection's ownership until a Forward_Close comes). What cannot be
+    closed is noted in ``ctx.left_behind`` for the final self-check to report."""
+    reply = forward_close(probe, triad, path) if probe.alive else None
+    if reply is None or reply.response is None:
+        try:
+            reply = forward_close(ctx.probe(), triad, path)
+        except TargetUnreachable as exc:
+            ctx.left_behind.append(f"connection {_triad_text(triad)} not closed: {exc}")
+            return Reply(None, None, str(exc))
+    # 0x0107: the target holds no such connection any more (it timed out, or a check closed it).
+    if reply.status != 0 and not (reply.status == 0x01 and reply.extended == 0x0107):
+        ctx.left_behind.append(f"connection {_triad_text(triad)} (path {path.hex(' ')}): Forward_Close answered "
+                               f"{reply.describe()}")
+    return reply
+
+
+def _triad_text(triad: ConnectionTriad) -> str:
+    return (f"serial 0x{triad.connection_serial:04X}, vendor 0x{triad.vendor_id:04X}, "
+            f"originator serial 0x{triad.originator_serial:08X}")
 
 
 class Endpoint:
@@ -159,16 +201,23 @@ def send_forward_open(ctx: Context, probe: Probe, endpoint: Endpoint, request: F
         decoded = ForwardOpenReply.decode(reply.data)
     except ValueError:
         # Accepted, but the reply cannot be read: close by the triad sent all the same.
-        ctx.pending_closes.append(lambda: forward_close(probe, request.triad, request.connection_path))
+        ctx.accepted.append(request)
+        ctx.pending_closes.append(lambda: close_connection(ctx, probe, request.triad, request.connection_path))
         return reply, None
-    opened = Opened(probe, request, decoded, reply.items)
+    ctx.accepted.append(request)
+    opened = Opened(ctx, probe, request, decoded, reply.items)
     ctx.pending_closes.append(lambda: None if opened.closed else opened.close())
     return reply, opened
 
 
 def not_planned(ctx: Context, spec: CheckSpec, consequence: str = "") -> Outcome:
-    """The outcome of a check that needs the EDS's main connection when there is none."""
-    why = "no EDS given (--eds)" if ctx.eds is None else "the EDS declares no point-to-point exclusive owner"
+    """The outcome of a check that needs a point-to-point exclusive owner when none was found."""
+    if ctx.points_source:
+        why = f"no connection point found ({ctx.points_source})"
+    elif ctx.eds is None:
+        why = "no EDS given (--eds)"
+    else:
+        why = "the EDS declares no point-to-point exclusive owner"
     return outcome(spec, Verdict.NOT_APPLICABLE, f"not run: {why}{consequence}")
 
 
@@ -190,22 +239,25 @@ def _on_main_plan(body: MainPlanCheck) -> Callable[[Context, CheckSpec], Outcome
     return run
 
 
-def _refusal(spec: CheckSpec, probe: Probe, reply: Reply, opened: Opened | None, codes: set[int],
-             warn: AbstractSet[int] = frozenset(), what: str = "") -> Outcome:
+def _refusal(spec: CheckSpec, probe: Probe, reply: Reply, opened: Opened | None, what: str = "") -> Outcome:
+    """A refusal judged by the extended statuses the check declares."""
     if opened is not None:
         opened.close()
         return outcome(spec, False, f"{what}: accepted ({reply.describe()})", probe.exchanges)
-    if reply.status == 0x01 and reply.extended in codes:
-        return outcome(spec, True, f"{what}: {reply.describe()}", probe.exchanges)
-    verdict = Verdict.WARNING if reply.status == 0x01 and reply.extended in warn else Verdict.FAIL
+    verdict = spec.verdict_for(reply.extended) if reply.status == 0x01 else Verdict.FAIL
     return outcome(spec, verdict, f"{what}: {reply.describe()}", probe.exchanges)
 
 
 def _refused(ctx: Context, spec: CheckSpec, probe: Probe, endpoint: Endpoint, request: ForwardOpenRequest,
-             codes: set[int], warn: set[int], what: str) -> Outcome:
-    """Send ``request``, which the target should refuse with one of the extended ``codes``."""
+             what: str) -> Outcome:
+    """Send ``request``, which the target should refuse with one of the check's extended statuses."""
     reply, opened = send_forward_open(ctx, probe, endpoint, request)
-    return _refusal(spec, probe, reply, opened, codes, warn, what)
+    return _refusal(spec, probe, reply, opened, what)
+
+
+def extended(value: int, meaning: str, verdict: Verdict = Verdict.PASS) -> Code:
+    """An extended status of general status 0x01 the specification permits, with its reference."""
+    return Code(value, meaning, TABLE, verdict)
 
 
 @check("cm.forward_open.accepted", "Forward_Open of the EDS's first exclusive owner connection",
@@ -229,48 +281,63 @@ def accepted(ctx: Context, spec: CheckSpec, plan: Plan, probe: Probe, endpoint: 
 
 
 @check("cm.forward_open.ot_size", "Forward_Open with an O->T connection size 2 bytes too large",
-       "status 0x01, extended 0x0127 (invalid O->T size)", EXTENDED)
+       "status 0x01, extended 0x0127 (invalid O->T size) or the general 0x0109 (invalid connection size)", EXTENDED,
+       codes=[extended(0x0127, "invalid O->T connection size"), extended(0x0109, "invalid connection size")])
 @_on_main_plan
 def ot_size(ctx: Context, spec: CheckSpec, plan: Plan, probe: Probe, endpoint: Endpoint) -> Outcome:
     request = forward_open_request(replace(plan, ot_size=plan.ot_size + 2))
-    return _refused(ctx, spec, probe, endpoint, request, {0x0127}, {0x0109}, f"O->T size {plan.ot_size + 2}")
+    return _refused(ctx, spec, probe, endpoint, request, f"O->T size {plan.ot_size + 2}")
 
 
 @check("cm.forward_open.to_size", "Forward_Open with a T->O connection size 2 bytes too large",
-       "status 0x01, extended 0x0128 (invalid T->O size)", EXTENDED)
+       "status 0x01, extended 0x0128 (invalid T->O size) or the general 0x0109 (invalid connection size)", EXTENDED,
+       codes=[extended(0x0128, "invalid T->O connection size"), extended(0x0109, "invalid connection size")])
 @_on_main_plan
 def to_size(ctx: Context, spec: CheckSpec, plan: Plan, probe: Probe, endpoint: Endpoint) -> Outcome:
     request = forward_open_request(replace(plan, to_size=plan.to_size + 2))
-    return _refused(ctx, spec, probe, endpoint, request, {0x0128}, {0x0109}, f"T->O size {plan.to_size + 2}")
+    return _refused(ctx, spec, probe, endpoint, request, f"T->O size {plan.to_size + 2}")
 
 
 @check("cm.forward_open.rpi", "Forward_Open with an RPI of 1 us",
-       "status 0x01, extended 0x0111 (RPI not supported) or 0x0112 (RPI value not acceptable)", EXTENDED)
+       "status 0x01, extended 0x0111 (RPI not supported) or 0x0112 (RPI value not acceptable); or an honest "
+       "acceptance: T->O then comes at the API the reply granted, measured on the wire for 0.5 s", EXTENDED,
+       codes=[extended(0x0111, "RPI not supported"), extended(0x0112, "RPI value not acceptable")])
 @_on_main_plan
 def rpi(ctx: Context, spec: CheckSpec, plan: Plan, probe: Probe, endpoint: Endpoint) -> Outcome:
     request = replace(forward_open_request(plan), ot_rpi_us=1, to_rpi_us=1)
-    return _refused(ctx, spec, probe, endpoint, request, {0x0111, 0x0112}, set(), "RPI 1 us")
+    reply, opened = send_forward_open(ctx, probe, endpoint, request)
+    if opened is None:
+        return _refusal(spec, probe, reply, None, "RPI 1 us")
+    # Accepted: the target may grant another interval than the one asked (CIP Vol. 1 §3-5.5.2, the
+    # actual packet interval), but must then produce at the interval it granted.
+    run = drive(ctx, plan, endpoint, opened, [(RPI_MEASURE_S, "run")])
+    opened.close()
+    ok, measured = judge_production(run, RPI_MEASURE_S)
+    return outcome(spec, ok, f"RPI 1 us accepted with APIs O->T {opened.reply.ot_api_us} us, T->O "
+                   f"{opened.reply.to_api_us} us; {measured}", run.exchanges())
 
 
 @check("cm.forward_open.duplicate", "the same Forward_Open (same triad) twice",
-       "the second is refused with status 0x01, extended 0x0100 (connection in use)", EXTENDED)
+       "the second is refused with status 0x01, extended 0x0100 (connection in use)", EXTENDED,
+       codes=[extended(0x0100, "connection in use or duplicate Forward_Open")])
 @_on_main_plan
 def duplicate(ctx: Context, spec: CheckSpec, plan: Plan, probe: Probe, endpoint: Endpoint) -> Outcome:
     request = forward_open_request(plan)
     first, opened = send_forward_open(ctx, probe, endpoint, request)
     if opened is None:
         return outcome(spec, False, f"the first Forward_Open failed: {first.describe()}", probe.exchanges)
-    return _refused(ctx, spec, probe, endpoint, request, {0x0100}, set(), "the same triad again")
+    return _refused(ctx, spec, probe, endpoint, request, "the same triad again")
 
 
 @check("cm.forward_open.ownership", "a second exclusive owner of the same output, from another triad",
-       "status 0x01, extended 0x0106 (ownership conflict)", EXTENDED)
+       "status 0x01, extended 0x0106 (ownership conflict)", EXTENDED,
+       codes=[extended(0x0106, "ownership conflict")])
 @_on_main_plan
 def ownership(ctx: Context, spec: CheckSpec, plan: Plan, probe: Probe, endpoint: Endpoint) -> Outcome:
     first, opened = send_forward_open(ctx, probe, endpoint, forward_open_request(plan))
     if opened is None:
         return outcome(spec, False, f"the first Forward_Open failed: {first.describe()}", probe.exchanges)
-    return _refused(ctx, spec, probe, endpoint, forward_open_request(plan), {0x0106}, set(), "a second exclusive owner")
+    return _refused(ctx, spec, probe, endpoint, forward_open_request(plan), "a second exclusive owner")
 
 
 def _unused_instance(ctx: Context, plan: Plan) -> int:
@@ -282,34 +349,47 @@ def _unused_instance(ctx: Context, plan: Plan) -> int:
 
 
 @check("cm.forward_open.bad_segment", "Forward_Open whose connection path starts with a reserved segment (0xE0)",
-       "status 0x01, extended 0x0315 (invalid segment in connection path) or 0x0316", EXTENDED)
+       "status 0x01, extended 0x0315 (invalid segment in connection path)", EXTENDED,
+       codes=[extended(0x0315, "invalid segment in connection path")])
 @_on_main_plan
 def bad_segment(ctx: Context, spec: CheckSpec, plan: Plan, probe: Probe, endpoint: Endpoint) -> Outcome:
     request = replace(forward_open_request(plan), connection_path=b"\xE0\x00" + plan.path)
-    return _refused(ctx, spec, probe, endpoint, request, {0x0315, 0x0316}, set(), "segment E0 00")
+    return _refused(ctx, spec, probe, endpoint, request, "segment E0 00")
 
 
 @check("cm.forward_open.consuming_point", "Forward_Open to an O->T (consuming) point the device does not have",
-       "status 0x01, extended 0x012A (invalid consuming application path)", EXTENDED)
+       "status 0x01, extended 0x012A (invalid consuming application path) or the general 0x0117 (invalid "
+       "produced or consumed application path); 0x0315 is a warning", EXTENDED,
+       codes=[extended(0x012A, "invalid consuming application path"),
+              extended(0x0117, "invalid produced or consumed application path"),
+              extended(0x0315, "invalid segment in connection path: the segments are valid, the point is not",
+                       Verdict.WARNING)])
 @_on_main_plan
 def consuming_point(ctx: Context, spec: CheckSpec, plan: Plan, probe: Probe, endpoint: Endpoint) -> Outcome:
     unused = _unused_instance(ctx, plan)
     request = forward_open_request(replace(plan, ot_point=unused))
-    return _refused(ctx, spec, probe, endpoint, request, {0x012A}, {0x0117, 0x0315}, f"O->T point {unused}")
+    return _refused(ctx, spec, probe, endpoint, request, f"O->T point {unused}")
 
 
 @check("cm.forward_open.producing_point", "Forward_Open to a T->O (producing) point the device does not have",
-       "status 0x01, extended 0x012B (invalid producing application path)", EXTENDED)
+       "status 0x01, extended 0x012B (invalid producing application path) or the general 0x0117 (invalid "
+       "produced or consumed application path); 0x0315 is a warning", EXTENDED,
+       codes=[extended(0x012B, "invalid producing application path"),
+              extended(0x0117, "invalid produced or consumed application path"),
+              extended(0x0315, "invalid segment in connection path: the segments are valid, the point is not",
+                       Verdict.WARNING)])
 @_on_main_plan
 def producing_point(ctx: Context, spec: CheckSpec, plan: Plan, probe: Probe, endpoint: Endpoint) -> Outcome:
     unused = _unused_instance(ctx, plan)
     request = forward_open_request(replace(plan, to_point=unused))
-    return _refused(ctx, spec, probe, endpoint, request, {0x012B}, {0x0117, 0x0315}, f"T->O point {unused}")
+    return _refused(ctx, spec, probe, endpoint, request, f"T->O point {unused}")
 
 
 @check("cm.forward_open.transport_class", "Forward_Open with transport class 2",
-       "status 0x01, extended 0x0103 (transport class and trigger combination not supported); a device that "
-       "implements class 2 is a warning", EXTENDED)
+       "status 0x01, extended 0x0103 (transport class and trigger combination not supported) or 0x011C "
+       "(transport class not supported); a device that implements class 2 is a warning", EXTENDED,
+       codes=[extended(0x0103, "transport class and trigger combination not supported"),
+              extended(0x011C, "transport class not supported")])
 @_on_main_plan
 def transport_class(ctx: Context, spec: CheckSpec, plan: Plan, probe: Probe, endpoint: Endpoint) -> Outcome:
     request = replace(forward_open_request(plan), transport=TransportTrigger(2, TriggerType.CYCLIC))
@@ -317,12 +397,13 @@ def transport_class(ctx: Context, spec: CheckSpec, plan: Plan, probe: Probe, end
     if opened is not None:
         opened.close()
         return outcome(spec, Verdict.WARNING, f"transport class 2 accepted: {reply.describe()}", probe.exchanges)
-    return _refusal(spec, probe, reply, opened, {0x0103}, set(), "transport class 2")
+    return _refusal(spec, probe, reply, opened, "transport class 2")
 
 
 @check("cm.forward_open.null", "a null Forward_Open (both connection types null) for the configuration point",
        "status 0 (configuration accepted, no connection made) or status 0x01 with extended 0x0132 (null "
-       "Forward_Open not supported)", f"CIP Vol. 1 §3-5.5.2.2 (null Forward_Open); {EXTENDED}")
+       "Forward_Open not supported)", f"CIP Vol. 1 §3-5.5.2.2 (null Forward_Open); {EXTENDED}",
+       codes=[extended(0x0132, "null Forward_Open function not supported")])
 @_on_main_plan
 def null_forward_open(ctx: Context, spec: CheckSpec, plan: Plan, probe: Probe, endpoint: Endpoint) -> Outcome:
     base = forward_open_request(plan)
@@ -331,48 +412,54 @@ def null_forward_open(ctx: Context, spec: CheckSpec, plan: Plan, probe: Probe, e
     reply, opened = send_forward_open(ctx, probe, endpoint, request)
     if reply.status == 0:
         return outcome(spec, True, f"accepted: {reply.describe()}", probe.exchanges)
-    return _refusal(spec, probe, reply, opened, {0x0132}, set(), "null Forward_Open")
+    return _refusal(spec, probe, reply, opened, "null Forward_Open")
 
 
-@check("cm.large_forward_open", "Large_Forward_Open of the EDS's first exclusive owner connection",
-       "status 0 and a well formed reply; 0x08 (service not supported) makes the check not applicable",
-       "CIP Vol. 1 §3-5.5.3 (Large_Forward_Open, 0x5B); Wireshark packet-cip.c")
+@check("cm.large_forward_open", "Large_Forward_Open of the first point-to-point exclusive owner connection",
+       "status 0 and a well formed reply, then a Forward_Close that succeeds; a target without Large_Forward_Open "
+       "answers 0x08 (service not supported)", "CIP Vol. 1 §3-5.5.3 (Large_Forward_Open, 0x5B); Wireshark packet-cip.c",
+       codes=[Code(0x08, "service not supported: no Large_Forward_Open", "CIP Vol. 1 Appendix B; §3-5.5.3")])
 @_on_main_plan
 def large_forward_open(ctx: Context, spec: CheckSpec, plan: Plan, probe: Probe, endpoint: Endpoint) -> Outcome:
     request = forward_open_request(plan, large=True)
     reply, opened = send_forward_open(ctx, probe, endpoint, request)
-    if reply.status == 0x08:
-        return outcome(spec, Verdict.NOT_APPLICABLE, "Large_Forward_Open not supported (0x08)", probe.exchanges)
     if opened is None:
-        return outcome(spec, False, f"{plan.name}: {reply.describe()}", probe.exchanges)
+        verdict = spec.verdict_for(reply.status) if reply.status else Verdict.FAIL
+        return outcome(spec, verdict, f"{plan.name}: {reply.describe()}", probe.exchanges)
     closing = opened.close()
     return outcome(spec, closing.status == 0, f"opened; Forward_Close: {closing.describe()}", probe.exchanges)
 
 
 @check("cm.forward_close.unknown", "Forward_Close of a connection that does not exist",
-       "status 0x01, extended 0x0107 (target connection not found)", EXTENDED)
+       "status 0x01, extended 0x0107 (target connection not found)", EXTENDED,
+       codes=[extended(0x0107, "target connection not found")])
 def close_unknown(ctx: Context, spec: CheckSpec) -> Outcome:
     probe = ctx.probe()
     reply = forward_close(probe, new_triad(), request_path(0x02, 1))
-    ok = reply.status == 0x01 and reply.extended == 0x0107
-    return outcome(spec, ok, reply.describe(), probe.exchanges)
+    return _refusal(spec, probe, reply, None, "serial of no connection")
 
 
 @check("cm.forward_close.other_originator",
        "Forward_Close naming an open connection's serial with another originator serial",
        "status 0x01, extended 0x0107 (the triad names no connection); the connection stays open and its "
-       "own Forward_Close then succeeds", f"CIP Vol. 1 §3-5.5.4 (Forward_Close matches the whole triad); {EXTENDED}")
+       "own Forward_Close then succeeds", f"CIP Vol. 1 §3-5.5.4 (Forward_Close matches the whole triad); {EXTENDED}",
+       codes=[extended(0x0107, "target connection not found")])
 @_on_main_plan
 def close_other_originator(ctx: Context, spec: CheckSpec, plan: Plan, probe: Probe, endpoint: Endpoint) -> Outcome:
+    return close_with_wrong_triad(ctx, spec, plan, probe, endpoint, "other originator", lambda t: ConnectionTriad(
+        t.connection_serial, t.vendor_id, (t.originator_serial + 1) & 0xFFFFFFFF), ctx.probe())
+
+
+def close_with_wrong_triad(ctx: Context, spec: CheckSpec, plan: Plan, probe: Probe, endpoint: Endpoint, what: str,
+                           wrong: Callable[[ConnectionTriad], ConnectionTriad], closer: Probe) -> Outcome:
+    """Open ``plan``, send a Forward_Close on ``closer`` with the triad ``wrong`` makes of the connection's,
+    which the target must refuse with a code the check permits, then the connection's own Forward_Close,
+    which must succeed."""
     first, opened = send_forward_open(ctx, probe, endpoint, forward_open_request(plan))
     if opened is None:
         return outcome(spec, False, f"Forward_Open failed: {first.describe()}", probe.exchanges)
-    triad = opened.request.triad
-    other = ConnectionTriad(triad.connection_serial, triad.vendor_id, (triad.originator_serial + 1) & 0xFFFFFFFF)
-    stranger = ctx.probe()
-    reply = forward_close(stranger, other, plan.path)
+    reply = forward_close(closer, wrong(opened.request.triad), plan.path)
     own = opened.close()
-    ok = reply.status == 0x01 and reply.extended == 0x0107 and own.status == 0
-    return outcome(spec, ok, f"other originator: {reply.describe()}; own Forward_Close: {own.describe()}",
-                   [*probe.exchanges, *stranger.exchanges])
-
+    ok = reply.status == 0x01 and spec.verdict_for(reply.extended) is Verdict.PASS and own.status == 0
+    exchanges = probe.exchanges if closer is probe else [*probe.exchanges, *closer.exchanges]
+    return outcome(spec, ok, f"{what}: {reply.describe()}; own Forward_Close: {own.describe()}", exchanges)

@@ -10,7 +10,7 @@ from dataclasses import replace
 from typing import TYPE_CHECKING
 
 from ..cip.epath import request_path
-from .connections import Endpoint, Opened, Plan, forward_open_request, plans, send_forward_open
+from .connections import Endpoint, Opened, Plan, forward_open_request, plans_of_eds, send_forward_open
 from .model import CheckSpec, Outcome, Verdict
 from .registry import Context, check, outcome
 from .wire import Probe
@@ -116,7 +116,8 @@ def assembly_sizes(ctx: Context, spec: CheckSpec, view: EdsView) -> Iterator[Out
        f"{EDS_REFERENCE} [Connection Manager] ConnectionN; CIP Vol. 1 §3-5.5")
 @_each_with_eds
 def connections_open(ctx: Context, spec: CheckSpec, view: EdsView) -> Iterator[Outcome]:
-    found = plans(ctx)
+    assert ctx.eds is not None  # _each_with_eds: there is one
+    found = plans_of_eds(ctx.eds, view)
     if not found:
         yield outcome(spec, Verdict.NOT_APPLICABLE, "the EDS declares no class 1 connection")
         return

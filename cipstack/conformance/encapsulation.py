@@ -8,7 +8,7 @@ import struct
 from ..eip.cpf import Item, decode_items
 from ..eip.encapsulation import HEADER_SIZE, REGISTER_SESSION_DATA, Command
 from ..eip.identity_items import decode_identity_item
-from .model import CheckSpec, Exchange, Outcome, Verdict
+from .model import CheckSpec, Code, Exchange, Outcome, Verdict
 from .registry import Context, check, outcome
 from .wire import Frame, Probe, frame, rr_data, udp_exchange
 
@@ -22,14 +22,21 @@ def _status(reply: Frame | None) -> str:
     return f"command 0x{reply.header.command:04X} status 0x{reply.header.status:04X}, {len(reply.body)} data bytes"
 
 
-def _expect_status(spec: CheckSpec, probe: Probe, raw: bytes, status: int, what: str) -> Outcome:
-    """Send ``raw``; the reply must carry encapsulation ``status`` (and echo the sender context)."""
+def encap(value: int, meaning: str, section: str) -> Code:
+    """An encapsulation status the specification permits, with where it says so."""
+    return Code(value, meaning, f"{VOL2}{section}; {STATUS_TABLE}")
+
+
+def _expect_status(spec: CheckSpec, probe: Probe, raw: bytes, what: str) -> Outcome:
+    """Send ``raw``; the reply must carry an encapsulation status the check permits (and echo the
+    sender context)."""
     try:
         reply = probe.exchange(raw)
     except ConnectionError as exc:
         return outcome(spec, False, f"{what}: the target closed the connection instead ({exc})", probe.exchanges)
-    ok = reply is not None and reply.header.status == status and reply.header.context == raw[12:20]
-    return outcome(spec, ok, f"{what}: {_status(reply)}", probe.exchanges)
+    if reply is None or reply.header.context != raw[12:20]:
+        return outcome(spec, False, f"{what}: {_status(reply)}", probe.exchanges)
+    return outcome(spec, spec.verdict_for(reply.header.status), f"{what}: {_status(reply)}", probe.exchanges)
 
 
 def _list_items(spec: CheckSpec, probe: Probe, command: Command) -> list[Item] | Outcome:
@@ -59,27 +66,30 @@ def register_session(ctx: Context, spec: CheckSpec) -> Outcome:
 
 @check("encap.register_session.options", "RegisterSession with option flags set",
        "status 0x0069 (unsupported protocol revision): option flags must be 0",
-       f"{VOL2}-4.5 RegisterSession; {STATUS_TABLE}")
+       f"{VOL2}-4.5 RegisterSession; {STATUS_TABLE}",
+       codes=[encap(0x0069, "unsupported protocol revision", "-4.5 RegisterSession")])
 def register_session_options(ctx: Context, spec: CheckSpec) -> Outcome:
     probe = ctx.probe(register=False)
-    return _expect_status(spec, probe, frame(Command.REGISTER_SESSION, REGISTER_SESSION_DATA.pack(1, 1)), 0x0069,
+    return _expect_status(spec, probe, frame(Command.REGISTER_SESSION, REGISTER_SESSION_DATA.pack(1, 1)),
                           "options 0x0001")
 
 
 @check("encap.register_session.protocol_version", "RegisterSession with protocol version 2",
-       "status 0x0069 (unsupported protocol revision)", f"{VOL2}-4.5 RegisterSession; {STATUS_TABLE}")
+       "status 0x0069 (unsupported protocol revision)", f"{VOL2}-4.5 RegisterSession; {STATUS_TABLE}",
+       codes=[encap(0x0069, "unsupported protocol revision", "-4.5 RegisterSession")])
 def register_session_version(ctx: Context, spec: CheckSpec) -> Outcome:
     probe = ctx.probe(register=False)
-    return _expect_status(spec, probe, frame(Command.REGISTER_SESSION, REGISTER_SESSION_DATA.pack(2, 0)), 0x0069,
+    return _expect_status(spec, probe, frame(Command.REGISTER_SESSION, REGISTER_SESSION_DATA.pack(2, 0)),
                           "version 2")
 
 
 @check("encap.register_session.second", "a second RegisterSession on the same connection",
        "status 0x0001 (invalid command): one session per TCP connection",
-       f"{VOL2}-4.5 RegisterSession; OpENer encap.c (kEncapsulationProtocolInvalidCommand)")
+       f"{VOL2}-4.5 RegisterSession; OpENer encap.c (kEncapsulationProtocolInvalidCommand)",
+       codes=[encap(0x0001, "invalid or unsupported command", "-4.5 RegisterSession")])
 def register_session_second(ctx: Context, spec: CheckSpec) -> Outcome:
     probe = ctx.probe()
-    return _expect_status(spec, probe, frame(Command.REGISTER_SESSION, REGISTER_SESSION_DATA.pack(1, 0)), 0x0001,
+    return _expect_status(spec, probe, frame(Command.REGISTER_SESSION, REGISTER_SESSION_DATA.pack(1, 0)),
                           "second RegisterSession")
 
 
@@ -241,10 +251,11 @@ def list_interfaces(ctx: Context, spec: CheckSpec) -> Outcome:
 
 
 @check("encap.unsupported_command", "an unsupported command (0x0001)",
-       "status 0x0001 (invalid or unsupported command), and the connection keeps serving", STATUS_TABLE)
+       "status 0x0001 (invalid or unsupported command), and the connection keeps serving", STATUS_TABLE,
+       codes=[encap(0x0001, "invalid or unsupported command", "-3.3")])
 def unsupported_command(ctx: Context, spec: CheckSpec) -> Outcome:
     probe = ctx.probe()
-    result = _expect_status(spec, probe, frame(0x0001, session=probe.session), 0x0001, "command 0x0001")
+    result = _expect_status(spec, probe, frame(0x0001, session=probe.session), "command 0x0001")
     if result.verdict is Verdict.PASS:
         try:
             after = probe.exchange(frame(Command.LIST_SERVICES))
@@ -256,26 +267,29 @@ def unsupported_command(ctx: Context, spec: CheckSpec) -> Outcome:
 
 
 @check("encap.wrong_length", "RegisterSession whose length field counts 2 bytes more than the command takes",
-       "status 0x0065 (invalid length)", f"{VOL2}-4.5 RegisterSession (length 4); {STATUS_TABLE}")
+       "status 0x0065 (invalid length)", f"{VOL2}-4.5 RegisterSession (length 4); {STATUS_TABLE}",
+       codes=[encap(0x0065, "invalid length", "-4.5 RegisterSession (length 4)")])
 def wrong_length(ctx: Context, spec: CheckSpec) -> Outcome:
     probe = ctx.probe(register=False)
     return _expect_status(spec, probe, frame(Command.REGISTER_SESSION, REGISTER_SESSION_DATA.pack(1, 0) + b"\x00\x00"),
-                          0x0065, "length 6")
+                          "length 6")
 
 
 @check("encap.send_rr_data.no_session", "SendRRData on a connection that registered no session",
-       "status 0x0064 (invalid session handle)", f"{VOL2}-4.7 SendRRData; {STATUS_TABLE}")
+       "status 0x0064 (invalid session handle)", f"{VOL2}-4.7 SendRRData; {STATUS_TABLE}",
+       codes=[encap(0x0064, "invalid session handle", "-4.7 SendRRData")])
 def send_rr_data_no_session(ctx: Context, spec: CheckSpec) -> Outcome:
     probe = ctx.probe(register=False)
     raw = frame(Command.SEND_RR_DATA, rr_data(bytes((0x0E, 0x03, 0x20, 0x01, 0x24, 0x01, 0x30, 0x01))), 0x1234)
-    return _expect_status(spec, probe, raw, 0x0064, "session 0x00001234 never registered")
+    return _expect_status(spec, probe, raw, "session 0x00001234 never registered")
 
 
 @check("encap.send_rr_data.wrong_session", "SendRRData with a session handle other than the one registered",
-       "status 0x0064 (invalid session handle)", f"{VOL2}-4.7 SendRRData; {STATUS_TABLE}")
+       "status 0x0064 (invalid session handle)", f"{VOL2}-4.7 SendRRData; {STATUS_TABLE}",
+       codes=[encap(0x0064, "invalid session handle", "-4.7 SendRRData")])
 def send_rr_data_wrong_session(ctx: Context, spec: CheckSpec) -> Outcome:
     probe = ctx.probe()
     wrong = (probe.session ^ 0x5A5A0000) or 1
     raw = frame(Command.SEND_RR_DATA, rr_data(bytes((0x0E, 0x03, 0x20, 0x01, 0x24, 0x01, 0x30, 0x01))), wrong)
-    return _expect_status(spec, probe, raw, 0x0064, f"session 0x{wrong:08X} instead of 0x{probe.session:08X}")
+    return _expect_status(spec, probe, raw, f"session 0x{wrong:08X} instead of 0x{probe.session:08X}")
 

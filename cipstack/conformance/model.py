@@ -20,7 +20,7 @@ class Verdict(str, Enum):
     NOT_APPLICABLE = "n/a"
 
 
-#: The groups in the order they run and are reported (issue 28, groups 1-6).
+#: The groups in the order they run and are reported.
 GROUPS: dict[str, str] = {
     "encap": "Encapsulation",
     "router": "Message router and errors",
@@ -28,21 +28,52 @@ GROUPS: dict[str, str] = {
     "cm": "Connection Manager",
     "class1": "Class 1 behaviour",
     "eds": "EDS against the device",
+    "profile": "AC drive profile",
+    "final": "The device as found",
 }
+#: The group run after every run, whatever the groups selected: the battery leaves the device as found.
+FINAL = "final"
+
+
+@dataclass(frozen=True)
+class Code:
+    """A status a check's target may answer with, as the specification permits: its value (general,
+    extended or encapsulation status, as the check says), what it means, and where it is written.
+    ``verdict`` is PASS, or WARNING for an answer that is allowed but less precise than another."""
+
+    value: int
+    meaning: str
+    reference: str
+    verdict: Verdict = Verdict.PASS
+
+    def __str__(self) -> str:
+        width = 4 if self.value > 0xFF else 2
+        return f"0x{self.value:0{width}X} ({self.meaning}; {self.reference})"
 
 
 @dataclass(frozen=True)
 class CheckSpec:
-    """One check as declared: ``id`` is ``GROUP.WHAT[.DETAIL]``."""
+    """One check as declared: ``id`` is ``GROUP.WHAT[.DETAIL]``; ``codes``, every status the
+    specification permits as the answer (the check judges by them: one source for both)."""
 
     id: str
     title: str
     expected: str
     reference: str
+    codes: tuple[Code, ...] = ()
 
     @property
     def group(self) -> str:
         return self.id.split(".", 1)[0]
+
+    def verdict_for(self, value: int | None) -> Verdict:
+        """PASS (or WARNING) for a permitted status, FAIL for any other and for none."""
+        return next((c.verdict for c in self.codes if c.value == value), Verdict.FAIL)
+
+    @property
+    def permitted(self) -> str:
+        """The permitted statuses in words, for the reports and the docs."""
+        return "; ".join(str(c) for c in self.codes)
 
 
 @dataclass
@@ -92,6 +123,8 @@ class Outcome:
     def as_dict(self) -> dict[str, Any]:
         return {"id": self.spec.id, "group": self.group, "subject": self.subject or None, "title": self.spec.title,
                 "verdict": self.verdict.value, "expected": self.spec.expected, "reference": self.spec.reference,
+                "permitted": [{"code": c.value, "meaning": c.meaning, "reference": c.reference,
+                               "verdict": c.verdict.value} for c in self.spec.codes],
                 "observed": self.observed, "exchanges": [e.as_dict() for e in self.exchanges]}
 
 

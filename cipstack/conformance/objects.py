@@ -10,7 +10,7 @@ from collections.abc import Callable
 
 from ..cip.epath import request_path
 from .model import CheckSpec, Outcome, Verdict
-from .registry import Context, check, outcome
+from .registry import Context, check, outcome, restore_later
 from .wire import Probe, TargetUnreachable
 
 GET_SINGLE, GET_ALL, SET_SINGLE, RESET = 0x0E, 0x01, 0x10, 0x05
@@ -232,6 +232,9 @@ def set_read_only(ctx: Context, spec: CheckSpec) -> Outcome:
     if current.status != 0:
         return outcome(spec, False, f"vendor ID not readable: {current.describe()}", probe.exchanges)
     reply = probe.request(SET_SINGLE, request_path(0x01, 1, 1), current.data)
+    if reply.status == 0:
+        # Taken (the check fails): it wrote the value it read, and the end of the run writes it back all the same.
+        restore_later(ctx, request_path(0x01, 1, 1), current.data, "Identity vendor ID (1/1/1)")
     if reply.status == 0x08:
         # An Identity object with no settable attribute need not implement the service at all.
         return outcome(spec, Verdict.NOT_APPLICABLE, "Identity implements no Set_Attribute_Single (0x08)",

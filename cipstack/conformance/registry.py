@@ -8,12 +8,16 @@ from collections.abc import Callable, Iterable
 from dataclasses import dataclass, field
 from typing import TYPE_CHECKING, Any
 
-from .model import CheckSpec, Exchange, Outcome, Verdict
+from .model import CheckSpec, Code, Exchange, Outcome, Verdict
 from .wire import Probe
 
 if TYPE_CHECKING:
     from ..eds.interpret import EdsView
     from ..eds.model import EdsDocument
+    from ..eip.cm_messages import ForwardOpenRequest
+    from .connections import Plan
+
+GET_ATTRIBUTE_SINGLE, SET_ATTRIBUTE_SINGLE = 0x0E, 0x10
 
 #: Every check, by id, in declaration order (which is the order they run in).
 CHECKS: dict[str, CheckSpec] = {}
@@ -23,9 +27,11 @@ CheckFunction = Callable[["Context", CheckSpec], "Outcome | Iterable[Outcome]"]
 RUNNERS: dict[str, list[tuple[CheckSpec, CheckFunction]]] = {}
 
 
-def check(id: str, title: str, expected: str, reference: str) -> Callable[[CheckFunction], CheckFunction]:
-    """Declare a check and register the function that runs it."""
-    spec = CheckSpec(id, title, expected, reference)
+def check(id: str, title: str, expected: str, reference: str, codes: Iterable[Code] = ()
+          ) -> Callable[[CheckFunction], CheckFunction]:
+    """Declare a check and register the function that runs it; ``codes``: every status the
+    specification permits as the answer, each with its reference."""
+    spec = CheckSpec(id, title, expected, reference, tuple(codes))
     if id in CHECKS:
         raise ValueError(f"check {id} declared twice")
     CHECKS[id] = spec
@@ -56,6 +62,16 @@ class Context:
     pending_closes: list[Callable[[], object]] = field(default_factory=list)  # what a close returns is unused
     #: What one check measured that the next ones judge too (one class 1 run serves three checks).
     cache: dict[str, Any] = field(default_factory=dict)
+    #: The connections the discovery found (``discovery``) when no EDS was given; None: the EDS's.
+    discovered: list[Plan] | None = None
+    #: Where the connection points came from, or what was tried, in words ("" with --eds).
+    points_source: str = ""
+    #: Every Forward_Open the target accepted, in order: the final self-check opens each point again.
+    accepted: list[ForwardOpenRequest] = field(default_factory=list)
+    #: What the battery could not undo (a Forward_Close refused, a write not restored), in words.
+    left_behind: list[str] = field(default_factory=list)
+    #: Undo the writes of the run, last first, at its end; each returns a problem in words or None.
+    restores: list[Callable[[], str | None]] = field(default_factory=list)
 
     def probe(self, register: bool = True) -> Probe:
         """A new TCP connection (and session) to the target, closed after the check."""
@@ -73,6 +89,23 @@ class Context:
                 close()
         while self.probes:
             self.probes.pop().close()
+
+
+def restore_later(ctx: Context, path: bytes, original: bytes, what: str) -> None:
+    """A write to ``path`` took effect: at the end of the run, write ``original`` back (on a new
+    session) and read it again; the final self-check reports what does not come back."""
+
+    def restore() -> str | None:
+        probe = ctx.probe()
+        reply = probe.request(SET_ATTRIBUTE_SINGLE, path, original)
+        if reply.status != 0:
+            return f"{what}: writing back {original.hex(' ')} answered {reply.describe()}"
+        read = probe.request(GET_ATTRIBUTE_SINGLE, path)
+        if read.status != 0 or read.data != original:
+            return f"{what}: reads {read.data.hex(' ') or read.describe()} after writing back {original.hex(' ')}"
+        return None
+
+    ctx.restores.append(restore)
 
 
 def outcome(spec: CheckSpec, verdict: Verdict | bool, observed: str, exchanges: Iterable[Exchange] = (),

@@ -22,10 +22,22 @@ def _identity_line(report: Report) -> str:
             f"{revision.get('major')}.{revision.get('minor')})")
 
 
+def _counts_text(outcomes: list[Outcome]) -> str:
+    counts = {v: sum(o.verdict is v for o in outcomes) for v in Verdict}
+    return (f"{counts[Verdict.PASS]} pass, {counts[Verdict.FAIL]} fail, {counts[Verdict.WARNING]} warning, "
+            f"{counts[Verdict.NOT_APPLICABLE]} n/a")
+
+
 def summary_line(report: Report) -> str:
-    counts = report.counts()
-    return (f"{len(report.outcomes)} checks: {counts['pass']} pass, {counts['fail']} fail, {counts['warning']} "
-            f"warning, {counts['n/a']} n/a ({report.duration_s:.1f} s)")
+    return f"{len(report.outcomes)} checks: {_counts_text(report.outcomes)} ({report.duration_s:.1f} s)"
+
+
+def group_lines(report: Report) -> list[str]:
+    """One line per group: its name, its id and its counts."""
+    groups = _grouped(report)
+    width = max((len(GROUPS[g]) + len(g) for g, _ in groups), default=0) + 4
+    return [f"  {f'{GROUPS[g]} ({g})':<{width}} {len(members):>4} {'check:' if len(members) == 1 else 'checks:':<7} "
+            f"{_counts_text(members)}" for g, members in groups]
 
 
 def _hex(data: bytes | None, limit: int = 96) -> str:
@@ -50,7 +62,9 @@ def _exchange_lines(exchange: Exchange, indent: str) -> list[str]:
 
 
 def to_text(report: Report) -> str:
-    lines = [f"cipstack conform {_identity_line(report)}", summary_line(report)]
+    lines = [f"cipstack conform {_identity_line(report)}", summary_line(report), *group_lines(report)]
+    if report.options.get("connection_points"):
+        lines.append(f"connection points: {report.options['connection_points']}")
     failures = [o for _, members in _grouped(report) for o in members if o.verdict is Verdict.FAIL]
     if failures:
         lines += ["", "Failures"]
@@ -71,56 +85,123 @@ def to_json(report: Report) -> str:
     return json.dumps(report.as_dict())
 
 
-def to_junit(report: Report) -> str:
+def to_junit(report: Report, strict: bool = False) -> str:
+    """JUnit XML, a test suite per group: a failure is ``<failure>``; a warning is ``<skipped>`` with its
+    message (``strict``: a ``<failure>``); a check that does not apply is ``<skipped>``."""
+    def failed(item: Outcome) -> bool:
+        return item.verdict is Verdict.FAIL or (strict and item.verdict is Verdict.WARNING)
+
     suites = ElementTree.Element("testsuites", name=f"cipstack conform {report.target}",
-                                 tests=str(len(report.outcomes)), failures=str(len(report.failures)),
+                                 tests=str(len(report.outcomes)), failures=str(sum(map(failed, report.outcomes))),
                                  time=f"{report.duration_s:.3f}")
     for group, members in _grouped(report):
         suite = ElementTree.SubElement(
             suites, "testsuite", name=f"{group}: {GROUPS[group]}", tests=str(len(members)),
-            failures=str(sum(o.verdict is Verdict.FAIL for o in members)),
-            skipped=str(sum(o.verdict is Verdict.NOT_APPLICABLE for o in members)))
+            failures=str(sum(map(failed, members))),
+            skipped=str(sum(not failed(o) and o.verdict in (Verdict.NOT_APPLICABLE, Verdict.WARNING) for o in members)))
         for item in members:
             case = ElementTree.SubElement(suite, "testcase", classname=f"conform.{group}", name=item.name)
             detail = "\n".join([f"expected: {item.spec.expected}", f"observed: {item.observed}",
                                 f"reference: {item.spec.reference}",
                                 *(line for e in item.exchanges for line in _exchange_lines(e, ""))])
-            if item.verdict is Verdict.FAIL:
-                ElementTree.SubElement(case, "failure", message=item.observed).text = detail
+            if failed(item):
+                prefix = "warning (--strict): " if item.verdict is Verdict.WARNING else ""
+                ElementTree.SubElement(case, "failure", message=prefix + item.observed).text = detail
+            elif item.verdict is Verdict.WARNING:
+                ElementTree.SubElement(case, "skipped", message=f"warning: {item.observed}").text = detail
             elif item.verdict is Verdict.NOT_APPLICABLE:
                 ElementTree.SubElement(case, "skipped", message=item.observed)
             else:
-                prefix = "warning: " if item.verdict is Verdict.WARNING else ""
-                ElementTree.SubElement(case, "system-out").text = prefix + detail
+                ElementTree.SubElement(case, "system-out").text = detail
     return '<?xml version="1.0" encoding="utf-8"?>\n' + ElementTree.tostring(suites, encoding="unicode")
 
 
 _STYLE = """
 body { font-family: sans-serif; margin: 2em; color: #222; }
-table { border-collapse: collapse; width: 100%; margin-bottom: 1.5em; }
-th, td { border: 1px solid #ccc; padding: 4px 8px; vertical-align: top; text-align: left; }
+table { border-collapse: collapse; margin-bottom: 1.5em; }
+table.checks { width: 100%; table-layout: auto; }
+th, td { border: 1px solid #ccc; padding: 3px 8px; vertical-align: top; text-align: left; }
 th { background: #eee; }
-code, pre { font-family: monospace; font-size: 90%; white-space: pre-wrap; word-break: break-all; }
+td.num { text-align: right; }
+code, pre { font-family: monospace; font-size: 90%; }
+code.id { white-space: nowrap; }
+pre { white-space: pre-wrap; overflow-wrap: anywhere; margin: 0.3em 0; }
+details summary { cursor: pointer; color: #555; }
+cite { font-style: normal; color: #555; font-size: 90%; }
 .pass { background: #e6f4e6; } .fail { background: #fbe3e3; } .warning { background: #fff4d6; }
 .na { color: #777; }
 """
 
 
-def to_html(report: Report) -> str:
+def _anchor(text: str) -> str:
+    """An HTML id of ``text``: letters, digits, ``-``, ``_`` and ``.`` kept, anything else ``-``."""
+    return "".join(c if c.isalnum() or c in "-_." else "-" for c in text)
+
+
+def _css(verdict: Verdict) -> str:
+    return "na" if verdict is Verdict.NOT_APPLICABLE else verdict.value
+
+
+def _html_row(item: Outcome) -> str:
     e = html.escape
+    wire = "".join(f"<pre>{e(x.transport)} &rarr; {e(_hex(x.sent))}\n{e(x.transport)} &larr; {e(_hex(x.received))}"
+                   "</pre>" for x in item.shown_exchanges())
+    folded = (f"<details><summary>request and reply bytes</summary>{wire}</details>" if wire else "")
+    return (f'<tr class="{_css(item.verdict)}" id="check-{_anchor(item.name)}"><td><code class="id">{e(item.name)}'
+            f"</code></td><td>{e(item.spec.title)}</td><td>{e(item.verdict.value)}</td><td>{e(item.spec.expected)}"
+            f"</td><td>{e(item.observed)}<br><cite>{e(item.spec.reference)}</cite>{folded}</td></tr>")
+
+
+def to_html(report: Report) -> str:
+    """One self-contained page: a summary table per group with links, the failures and warnings
+    first, then each group's checks (failures, warnings, passes, checks that do not apply), each row
+    short with its request and reply bytes folded away."""
+    e = html.escape
+    groups = _grouped(report)
     parts = ["<!DOCTYPE html>", '<html lang="en"><head><meta charset="utf-8">',
              f"<title>cipstack conform {e(report.target)}</title>", f"<style>{_STYLE}</style></head><body>",
-             f"<h1>cipstack conform {e(_identity_line(report))}</h1>", f"<p>{e(summary_line(report))}</p>"]
-    for group, members in _grouped(report):
-        parts += [f"<h2>{e(GROUPS[group])}</h2>", "<table><tr><th>verdict</th><th>check</th><th>expected</th>"
-                  "<th>observed</th><th>reference</th><th>sent / received</th></tr>"]
-        for item in members:
-            css = "na" if item.verdict is Verdict.NOT_APPLICABLE else item.verdict.value
-            wire = "<br>".join(f"{e(x.transport)} &rarr; <code>{e(_hex(x.sent))}</code><br>{e(x.transport)} &larr; "
-                               f"<code>{e(_hex(x.received))}</code>" for x in item.shown_exchanges())
-            parts.append(f'<tr class="{css}"><td>{e(item.verdict.value)}</td><td><code>{e(item.name)}</code><br>'
-                         f"{e(item.spec.title)}</td><td>{e(item.spec.expected)}</td><td>{e(item.observed)}</td>"
-                         f"<td>{e(item.spec.reference)}</td><td>{wire}</td></tr>")
-        parts.append("</table>")
+             f"<h1>cipstack conform {e(_identity_line(report))}</h1>", f"<p>{e(summary_line(report))}</p>",
+             *([f"<p>connection points: {e(str(report.options['connection_points']))}</p>"]
+               if report.options.get("connection_points") else []),
+             '<h2 id="summary">Summary</h2>', "<table><tr><th>group</th><th>checks</th><th>fail</th><th>warning</th>"
+             "<th>pass</th><th>n/a</th></tr>"]
+    for group, members in groups:
+        count = {v: sum(o.verdict is v for o in members) for v in Verdict}
+        parts.append(f'<tr><td><a href="#group-{group}">{e(GROUPS[group])}</a> (<code>{e(group)}</code>)</td>'
+                     f'<td class="num">{len(members)}</td><td class="num">{count[Verdict.FAIL]}</td>'
+                     f'<td class="num">{count[Verdict.WARNING]}</td><td class="num">{count[Verdict.PASS]}</td>'
+                     f'<td class="num">{count[Verdict.NOT_APPLICABLE]}</td></tr>')
+    parts.append("</table>")
+    for verdict, heading in ((Verdict.FAIL, "Failures"), (Verdict.WARNING, "Warnings")):
+        found = [o for _, members in groups for o in members if o.verdict is verdict]
+        if found:
+            parts += [f'<h2 id="{verdict.value}s">{heading}</h2>', "<ul>"]
+            parts += [f'<li><a href="#check-{_anchor(o.name)}"><code class="id">{e(o.name)}</code></a>: '
+                      f"{e(o.observed)}</li>" for o in found]
+            parts.append("</ul>")
+    head = ("<tr><th>check</th><th>title</th><th>verdict</th><th>expected</th><th>observed, reference, bytes</th>"
+            "</tr>")
+    for group, members in groups:
+        parts += [f'<h2 id="group-{group}">{e(GROUPS[group])} (<code>{e(group)}</code>): '
+                  f"{e(_counts_text(members))}</h2>", '<p><a href="#summary">summary</a></p>',
+                  f'<table class="checks">{head}', *(_html_row(o) for o in members), "</table>"]
     parts.append("</body></html>")
     return "\n".join(parts)
+
+
+def markdown_table(group: str) -> str:
+    """The docs' table of a group's checks, generated from their declarations (docs/conformance.md)."""
+    from .registry import CHECKS
+
+    def cell(text: str) -> str:
+        return text.replace("|", "\\|")
+
+    rows = ["| check | what it sends | what the specification expects | permitted answers | reference |",
+            "|---|---|---|---|---|"]
+    for spec in CHECKS.values():
+        if spec.group == group:
+            codes = ", ".join(f"0x{c.value:0{4 if c.value > 0xFF else 2}X} ({c.meaning})"
+                              + (" warning" if c.verdict is Verdict.WARNING else "") for c in spec.codes)
+            rows.append(f"| `{spec.id}` | {cell(spec.title)} | {cell(spec.expected)} | {cell(codes) or '-'} | "
+                        f"{cell(spec.reference)} |")
+    return "\n".join(rows)

@@ -7,7 +7,7 @@ from __future__ import annotations
 import struct
 
 from ..cip.epath import request_path
-from .model import CheckSpec, Outcome, Verdict
+from .model import CheckSpec, Code, Outcome, Verdict
 from .registry import Context, check, outcome
 from .wire import Probe, Reply
 
@@ -21,68 +21,79 @@ RESERVED_SERVICE = 0x1F
 IDENTITY_NAME = request_path(0x01, 1, 7)
 
 
-def _general(spec: CheckSpec, probe: Probe, reply: Reply, allowed: dict[int, Verdict], what: str) -> Outcome:
-    status = reply.status
-    verdict = allowed.get(status, Verdict.FAIL) if status is not None else Verdict.FAIL
-    return outcome(spec, verdict, f"{what}: {reply.describe()}", probe.exchanges)
+def _general(spec: CheckSpec, probe: Probe, reply: Reply, what: str) -> Outcome:
+    """Judge a general status by the codes the check declares."""
+    return outcome(spec, spec.verdict_for(reply.status), f"{what}: {reply.describe()}", probe.exchanges)
+
+
+def general(value: int, meaning: str, reference: str = STATUS) -> Code:
+    return Code(value, meaning, reference)
+
+
+NOT_FOUND = (general(0x05, "path destination unknown", f"{STATUS}; wire.md"),
+             general(0x16, "object does not exist", STATUS))
 
 
 @check("router.unknown_service", "a reserved service code to the Identity object",
-       "general status 0x08 (service not supported)", f"{STATUS}; OpENer cipcommon.c NotifyClass")
+       "general status 0x08 (service not supported)", f"{STATUS}; OpENer cipcommon.c NotifyClass",
+       codes=[general(0x08, "service not supported")])
 def unknown_service(ctx: Context, spec: CheckSpec) -> Outcome:
     probe = ctx.probe()
     reply = probe.request(RESERVED_SERVICE, request_path(0x01, 1))
-    return _general(spec, probe, reply, {0x08: Verdict.PASS}, f"service 0x{RESERVED_SERVICE:02X} to 1/1")
+    return _general(spec, probe, reply, f"service 0x{RESERVED_SERVICE:02X} to 1/1")
 
 
 @check("router.unknown_class", "Get_Attribute_Single of a class in the reserved range (0xE0)",
        "general status 0x05 (path destination unknown) or 0x16 (object does not exist)",
-       f"{STATUS}; wire.md (an unknown class answers 0x05)")
+       f"{STATUS}; wire.md (an unknown class answers 0x05)", codes=NOT_FOUND)
 def unknown_class(ctx: Context, spec: CheckSpec) -> Outcome:
     probe = ctx.probe()
     reply = probe.request(GET_SINGLE, request_path(RESERVED_CLASS, 1, 1))
-    return _general(spec, probe, reply, {0x05: Verdict.PASS, 0x16: Verdict.PASS}, "class 0xE0")
+    return _general(spec, probe, reply, "class 0xE0")
 
 
 @check("router.unknown_instance", "Get_Attribute_Single of Identity instance 0xFE",
-       "general status 0x05 (path destination unknown) or 0x16 (object does not exist)", STATUS)
+       "general status 0x05 (path destination unknown) or 0x16 (object does not exist)", STATUS, codes=NOT_FOUND)
 def unknown_instance(ctx: Context, spec: CheckSpec) -> Outcome:
     probe = ctx.probe()
     reply = probe.request(GET_SINGLE, request_path(0x01, 0xFE, 1))
-    return _general(spec, probe, reply, {0x05: Verdict.PASS, 0x16: Verdict.PASS}, "instance 1/0xFE")
+    return _general(spec, probe, reply, "instance 1/0xFE")
 
 
 @check("router.unknown_attribute", "Get_Attribute_Single of Identity attribute 0xFE",
-       "general status 0x14 (attribute not supported)", f"{STATUS}; OpENer cipcommon.c GetAttributeSingle")
+       "general status 0x14 (attribute not supported)", f"{STATUS}; OpENer cipcommon.c GetAttributeSingle",
+       codes=[general(0x14, "attribute not supported")])
 def unknown_attribute(ctx: Context, spec: CheckSpec) -> Outcome:
     probe = ctx.probe()
     reply = probe.request(GET_SINGLE, request_path(0x01, 1, 0xFE))
-    return _general(spec, probe, reply, {0x14: Verdict.PASS}, "attribute 1/1/0xFE")
+    return _general(spec, probe, reply, "attribute 1/1/0xFE")
 
 
 @check("router.too_much_data", "Get_Attribute_Single of Identity attribute 1 with 2 bytes after the path",
        "general status 0x15 (too much data): trailing bytes after a complete request",
-       f"{STATUS}; wire.md (trailing bytes are too much data)")
+       f"{STATUS}; wire.md (trailing bytes are too much data)", codes=[general(0x15, "too much data")])
 def too_much_data(ctx: Context, spec: CheckSpec) -> Outcome:
     probe = ctx.probe()
     reply = probe.request(GET_SINGLE, request_path(0x01, 1, 1), b"\x00\x00")
-    return _general(spec, probe, reply, {0x15: Verdict.PASS}, "1/1/1 + 00 00")
+    return _general(spec, probe, reply, "1/1/1 + 00 00")
 
 
 @check("router.not_enough_data", "Forward_Open with its first 10 bytes only",
-       "general status 0x13 (not enough data)", f"{STATUS}; CIP Vol. 1 §3-5.5.2 Forward_Open request")
+       "general status 0x13 (not enough data)", f"{STATUS}; CIP Vol. 1 §3-5.5.2 Forward_Open request",
+       codes=[general(0x13, "not enough data")])
 def not_enough_data(ctx: Context, spec: CheckSpec) -> Outcome:
     probe = ctx.probe()
     reply = probe.request(0x54, request_path(0x06, 1), bytes((0x0A, 0x0E)) + struct.pack("<II", 0, 0x1234))
-    return _general(spec, probe, reply, {0x13: Verdict.PASS}, "Forward_Open cut after 10 bytes")
+    return _general(spec, probe, reply, "Forward_Open cut after 10 bytes")
 
 
 @check("router.bad_path", "a request whose path holds a reserved segment type (0xE0)",
-       "general status 0x04 (path segment error)", f"{STATUS}; CIP Vol. 1 Appendix C (segment types)")
+       "general status 0x04 (path segment error)", f"{STATUS}; CIP Vol. 1 Appendix C (segment types)",
+       codes=[general(0x04, "path segment error", f"{STATUS}; CIP Vol. 1 Appendix C")])
 def bad_path(ctx: Context, spec: CheckSpec) -> Outcome:
     probe = ctx.probe()
     reply = probe.request(GET_SINGLE, bytes((0xE0, 0x01, 0x24, 0x01)))
-    return _general(spec, probe, reply, {0x04: Verdict.PASS}, "path E0 01 24 01")
+    return _general(spec, probe, reply, "path E0 01 24 01")
 
 
 def _msp(requests: list[bytes]) -> bytes:
@@ -134,7 +145,8 @@ def multiple_service_good(ctx: Context, spec: CheckSpec) -> Outcome:
 @check("router.multiple_service.bad_member", "Multiple_Service_Packet of a good request and one for attribute 0xFE",
        "general status 0x1E (embedded service error); the good member's status 0, the other's an error status "
        "(which one is router.unknown_attribute's concern)",
-       "CIP Vol. 1 Appendix A (Multiple_Service_Packet) and Appendix B (0x1E)")
+       "CIP Vol. 1 Appendix A (Multiple_Service_Packet) and Appendix B (0x1E)",
+       codes=[general(0x1E, "embedded service error", "CIP Vol. 1 Appendix B")])
 def multiple_service_bad(ctx: Context, spec: CheckSpec) -> Outcome:
     probe = ctx.probe()
     members_sent = [GOOD_MEMBERS[0], bytes((GET_SINGLE, 3)) + request_path(0x01, 1, 0xFE)]
@@ -143,5 +155,6 @@ def multiple_service_bad(ctx: Context, spec: CheckSpec) -> Outcome:
         return outcome(spec, Verdict.NOT_APPLICABLE, "Multiple_Service_Packet not supported (0x08)", probe.exchanges)
     members = _msp_members(reply.data) if reply.response is not None else None
     statuses = [_member_status(m) for m in members] if members is not None else None
-    ok = reply.status == 0x1E and statuses is not None and len(statuses) == 2 and statuses[0] == 0 and bool(statuses[1])
+    ok = (spec.verdict_for(reply.status) is Verdict.PASS and statuses is not None and len(statuses) == 2
+          and statuses[0] == 0 and bool(statuses[1]))
     return outcome(spec, ok, f"{reply.describe()}; member statuses {_hexes(statuses)}", probe.exchanges)

@@ -8,8 +8,18 @@ from collections.abc import Iterable, Sequence
 from typing import TYPE_CHECKING
 
 from ..eip.encapsulation import DEFAULT_PORT, Command
-from . import class1, connections, eds_checks, encapsulation, objects, router  # noqa: F401 - they declare checks
-from .model import GROUPS, CheckSpec, Outcome, Report, Verdict
+from . import (  # noqa: F401 - they declare checks
+    as_found,
+    class1,
+    connections,
+    eds_checks,
+    encapsulation,
+    more_wire,
+    objects,
+    profile,
+    router,
+)
+from .model import FINAL, GROUPS, CheckSpec, Outcome, Report, Verdict
 from .registry import CHECKS, RUNNERS, CheckFunction, Context, outcome
 from .wire import Probe, TargetUnreachable, frame
 
@@ -58,6 +68,28 @@ def _preflight(context: Context) -> None:
         context.identity = record
 
 
+#: The groups that need connection points (or an EDS) to run.
+NEED_POINTS = {"cm", "class1", "eds"}
+
+
+def _discover(context: Context, report: Report, points: tuple[int, int, int] | None,
+              eds_dir: str | os.PathLike[str] | None) -> None:
+    """Find the connection points without an EDS and say where they came from (``discovery``)."""
+    from ..eds.interpret import read_view
+    from .discovery import discover
+
+    try:
+        found = discover(context, points, eds_dir)
+    finally:
+        context.cleanup()
+    context.discovered = found.plans
+    context.points_source = found.source if found.plans else "tried: " + "; ".join(found.tried)
+    report.options["connection_points"] = context.points_source
+    if found.eds is not None:
+        context.eds, context.view = found.eds, read_view(found.eds)
+        report.options["eds"] = found.eds_source
+
+
 def _run_check(context: Context, spec: CheckSpec, function: CheckFunction) -> list[Outcome]:
     try:
         result = function(context, spec)
@@ -72,13 +104,17 @@ def _run_check(context: Context, spec: CheckSpec, function: CheckFunction) -> li
 
 def run(host: str, port: int = DEFAULT_PORT, *, eds: str | os.PathLike[str] | EdsDocument | None = None,
         groups: str | Iterable[str] | None = None, allow_writes: bool = False, allow_reset: bool = False,
-        timeout: float = 5.0) -> Report:
+        timeout: float = 5.0, connection_points: tuple[int, int, int] | None = None,
+        eds_dir: str | os.PathLike[str] | None = None) -> Report:
     """Run the conformance battery against ``host:port``.
 
     ``eds``: an EDS file (or a read ``EdsDocument``) of the target, which enables group ``eds`` and
-    gives ``cm`` and ``class1`` their connection points. ``groups``: the groups to run (default
-    all). Nothing is written without ``allow_writes`` and the device is not reset without
-    ``allow_reset``. ``TargetUnreachable`` when the target does not accept a connection and a session.
+    gives ``cm`` and ``class1`` their connection points. Without one the battery finds the points
+    itself (``discovery``): ``connection_points`` (output, input, configuration) names them, else
+    the device's own EDS (File object), an EDS of ``eds_dir`` for its identity, the AC drive profile,
+    bounded probing of its assemblies. ``groups``: the groups to run (default all). Nothing is
+    written without ``allow_writes`` and the device is not reset without ``allow_reset``.
+    ``TargetUnreachable`` when the target does not accept a connection and a session.
     """
     selected = parse_groups(groups if groups is None or isinstance(groups, str) else list(groups))
     doc, view = _load_eds(eds)
@@ -88,11 +124,22 @@ def run(host: str, port: int = DEFAULT_PORT, *, eds: str | os.PathLike[str] | Ed
     report = Report(f"{host}:{port}", groups=selected, identity=context.identity,
                     options={"eds": os.fspath(eds) if isinstance(eds, (str, os.PathLike)) else None,
                              "allow_writes": allow_writes, "allow_reset": allow_reset, "timeout": timeout})
+    if doc is not None:
+        report.options["connection_points"] = "the EDS given (--eds)"
+    elif set(selected) & NEED_POINTS:
+        _discover(context, report, connection_points, eds_dir)
     try:
         for group in selected:
+            if group == FINAL:
+                continue
             for spec, function in RUNNERS.get(group, []):
                 report.outcomes.extend(_run_check(context, spec, function))
     finally:
         context.cleanup()
+        # Whatever happened: the device as found (every point used opens again, every write restored),
+        # checked whenever the run opened or wrote anything, whatever the groups selected.
+        if FINAL in selected or context.accepted or context.restores or context.left_behind:
+            for spec, function in RUNNERS[FINAL]:
+                report.outcomes.extend(_run_check(context, spec, function))
     report.duration_s = time.monotonic() - started
     return report

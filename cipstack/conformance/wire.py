@@ -56,6 +56,8 @@ class Probe:
     def __init__(self, host: str, port: int, timeout: float) -> None:
         self.host, self.port, self.timeout = host, port, timeout
         self.session = 0
+        #: The target closed (or reset) this TCP connection: nothing more can be sent on it.
+        self.closed_by_peer = False
         self.exchanges: list[Exchange] = []
         self._buffer = b""
         self._last_send = 0.0
@@ -83,6 +85,11 @@ class Probe:
         self.close()
 
     @property
+    def alive(self) -> bool:
+        """Open on both ends, as far as this side has seen."""
+        return self.sock is not None and not self.closed_by_peer
+
+    @property
     def local_host(self) -> str:
         assert self.sock is not None
         return str(self.sock.getsockname()[0])
@@ -95,7 +102,11 @@ class Probe:
         if wait > 0:
             time.sleep(wait)
         self._last_send = time.monotonic()
-        self.sock.sendall(raw)
+        try:
+            self.sock.sendall(raw)
+        except OSError as exc:
+            self.closed_by_peer = True
+            raise ConnectionError(f"send failed: {exc}") from None
 
     def receive(self, timeout: float | None = None) -> Frame | None:
         """The next whole frame; None on timeout; ``ConnectionError`` when the target closed."""
@@ -117,8 +128,10 @@ class Probe:
             try:
                 chunk = self.sock.recv(65536)
             except OSError as exc:
+                self.closed_by_peer = True
                 raise ConnectionError(f"connection reset: {exc}") from None
             if not chunk:
+                self.closed_by_peer = True
                 raise ConnectionError("connection closed by the target")
             self._buffer += chunk
 

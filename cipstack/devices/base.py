@@ -20,6 +20,7 @@ from ..eip.identity_items import IdentityRecord
 from ..eip.io_target import CIP_MULTICAST_BASE, ConnectionKind, IoConnection, IoProfile
 from ..errors import StateRefused
 from ..objects.assembly import AssemblyObject
+from ..objects.file import FileObject, StoredFile
 from ..objects.identity import ExtendedDeviceStatus, IdentityInfo, IdentityObject, IdentityStatus
 from ..objects.message_router import MessageRouterObject
 from ..objects.tcpip import EthernetLinkObject, NetworkInterface, TcpIpObject
@@ -77,6 +78,8 @@ class Device:
         if self.ethernet:
             self.router.register(self.tcpip)
             self.router.register(self.ethernet_link)
+        if self.files:
+            self.router.register(FileObject(self.files))
         self._io_connections: dict[int, IoConnection] = {}
         self._io_faulted = False
 
@@ -173,6 +176,9 @@ class Device:
     # -- saved parameters -------------------------------------------------------------------------
     #: Where the device's saves are written off the event loop (``state.StateWriter``), or None.
     saves: StateWriter | None = field(default=None, kw_only=True)
+    #: Files the device serves through a File object (class 0x37): its EDS file, as EtherNet/IP
+    #: devices that carry theirs do. None registers no File object.
+    files: tuple[StoredFile, ...] = field(default=(), kw_only=True)
 
     def flush_saves(self, timeout: float | None = None) -> bool:
         """Wait until the saves handed to the state file are written (or failed); False on timeout."""

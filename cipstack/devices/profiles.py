@@ -11,6 +11,7 @@ from typing import TYPE_CHECKING
 from ..catalog import Catalog, Parameter
 from ..cip.model import AttributeSpec
 from ..eip.identity_items import IdentityRecord
+from ..objects.file import StoredFile
 from ..objects.identity import IdentityInfo
 from ..objects.tcpip import NetworkInterface
 
@@ -57,6 +58,8 @@ class ProfileOptions:
     state_path: Path | None = None
     #: Model name, for families with several models.
     model: str | None = None
+    #: Files the device serves through its File object (its EDS file); none by default.
+    files: tuple[StoredFile, ...] = ()
 
 
 @dataclass(frozen=True)
@@ -72,6 +75,8 @@ class Profile:
     #: The codes of the drive's keypad, to check ``--param`` before a device is built (the device's
     #: ``keypad()`` uses the same declaration); None for a device without a keypad.
     keypad: Callable[[], KeypadCodes] | None = None
+    #: The model built when none is given (families with several models).
+    default_model: str | None = None
 
     def matches(self, identity: IdentityRecord) -> bool:
         return identity.vendor_id == self.vendor_id and identity.product_code in self.product_codes
@@ -80,7 +85,7 @@ class Profile:
 def _acg(interface: NetworkInterface, limits: DeviceLimits, options: ProfileOptions) -> Device:
     from .acg.device import build_acg_device
 
-    return build_acg_device(interface, limits, options.state_path)
+    return build_acg_device(interface, limits, options.state_path, files=options.files)
 
 
 def _acg_catalog() -> Catalog:
@@ -130,7 +135,7 @@ def _omron(family: str, default_model: str) -> Callable[[NetworkInterface, Devic
         name = options.model or default_model
         if model(name).family.value.lower() != family:
             raise ValueError(f"{name} is not an {family.upper()} model (see `cipstack models`)")
-        return build_omron_device(name, interface, limits, options.state_path)
+        return build_omron_device(name, interface, limits, options.state_path, files=options.files)
 
     return build
 
@@ -189,10 +194,10 @@ PROFILES: dict[str, Profile] = {
     # The Omron inverters with the CompoNet option board (CompoNet manual), served over EtherNet/IP.
     "mx2": Profile("mx2", "Omron MX2 with the 3G3AX-MX2-CRT-E CompoNet option board (--model, Tables 2/C-3)",
                    _omron("mx2", "MX2-A2015-E"), vendor_id=47, product_codes=_omron_product_codes("mx2"),
-                   catalog=_omron_catalog("MX2-A2015-E"), keypad=_omron_keypad("mx2")),
+                   catalog=_omron_catalog("MX2-A2015-E"), keypad=_omron_keypad("mx2"), default_model="MX2-A2015-E"),
     "rx": Profile("rx", "Omron RX with the 3G3AX-RX-CRT-E CompoNet option board (--model, Tables 3/C-4)",
                   _omron("rx", "RX-A4055-E"), vendor_id=47, product_codes=_omron_product_codes("rx"),
-                  catalog=_omron_catalog("RX-A4055-E"), keypad=_omron_keypad("rx")),
+                  catalog=_omron_catalog("RX-A4055-E"), keypad=_omron_keypad("rx"), default_model="RX-A4055-E"),
 }
 DEFAULT_PROFILE = "acg"
 

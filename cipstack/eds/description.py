@@ -51,6 +51,10 @@ def wire_type(cip_type: CipType, words: int) -> CipType:
     return cip_type
 
 
+#: The ``[File]`` revision of the EDS files cipstack generates.
+FILE_REVISION = (1, 0)
+
+
 @dataclass(frozen=True)
 class EdsParameter:
     """One ``ParamN``: values are raw (as on the wire), ``scale`` turns them into ``unit``."""
@@ -224,7 +228,7 @@ class EdsDescription:
     #: Name of the EDS file; empty lets ``eds_file_name`` make one up from the catalog and revision.
     file_name: str = ""
     #: ``Revision`` of ``[File]``: the revision of the EDS file itself.
-    file_revision: tuple[int, int] = (1, 0)
+    file_revision: tuple[int, int] = FILE_REVISION
 
     def __post_init__(self) -> None:
         if self.network not in NETWORKS:

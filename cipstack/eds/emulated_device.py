@@ -49,6 +49,8 @@ from ..objects.identity import IdentityInfo
 from ..objects.tcpip import NetworkInterface
 from .interpret import EXCLUSIVE_OWNER_KIND, EdsIssue, EdsView, ParamInfo, assembly_schema, read_view
 from .model import EdsDocument, FieldKind
+from .served import document_eds_file
+from .writer import encode_eds, format_eds
 
 if TYPE_CHECKING:
     from .keypad import EdsParameters
@@ -482,14 +484,18 @@ def _io_profile(doc: EdsDocument, view: EdsView, points: Mapping[int, AssemblyPo
 
 
 def build_eds_device(doc: EdsDocument, interface: NetworkInterface | None = None,
-                     limits: DeviceLimits | None = None) -> EdsDevice:
-    """The device ``doc`` describes (module docstring); what it cannot serve is in ``.issues``."""
+                     limits: DeviceLimits | None = None, served: bytes | None = None) -> EdsDevice:
+    """The device ``doc`` describes (module docstring); what it cannot serve is in ``.issues``.
+    ``served``: the file's bytes, which the device then serves through its File object, as a device
+    that carries its EDS does (default: the document as ``format_eds`` writes it)."""
     interface = interface or NetworkInterface(mac=DEFAULT_MAC)
     issues: list[EdsIssue] = []
     identity = identity_from_eds(doc, serial_from_mac(interface.mac), issues)
     view = read_view(doc)
     issues.extend(view.issues)
-    device = EdsDevice(identity, interface, limits or DeviceLimits(), issues=issues)
+    data = served if served is not None else encode_eds(format_eds(doc))
+    device = EdsDevice(identity, interface, limits or DeviceLimits(), issues=issues,
+                       files=(document_eds_file(data, identity.revision),))
     standard_links = _add_parameter_objects(device, view, issues)
     device.params = list(view.params.values())
     points = _add_assemblies(device, view, issues)

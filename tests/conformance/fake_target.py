@@ -18,6 +18,7 @@ import socket
 import struct
 import threading
 import time
+from collections.abc import Iterable
 from dataclasses import dataclass, field
 
 from tests.fakes import HEADER, cpf, encapsulation_frames, split_cpf
@@ -27,10 +28,25 @@ FO_SMALL = struct.Struct("<IHIHBB")
 FO_LARGE = struct.Struct("<IIIIBB")
 IO_HEAD = struct.Struct("<HHHIIHHH")
 
+AC_DRIVE = 2
 VENDOR, DEVICE_TYPE, PRODUCT_CODE, REVISION, SERIAL, NAME = 65001, 12, 7, (1, 2), 0x00C0FFEE, b"Fake Target"
+#: Checks for which the specification permits another answer than the fake's default, and that answer.
+VARIANTS = {
+    "cm.forward_open.transport_class": "0x011C (transport class not supported) instead of 0x0103",
+    "cm.forward_open.rpi": "an RPI of 1 us accepted with a granted API of 10 ms, produced at 10 ms",
+    "cm.forward_open.ot_size": "0x0109 (invalid connection size) instead of 0x0127",
+}
+#: The interval this target produces at when it accepts an RPI it cannot (the API it really has).
+CYCLE_US = 10_000
 #: Output -> input assembly pairs the device connects (fake_device.eds Connection1 and 2).
 PAIRS = {100: 101, 102: 103}
 ASSEMBLY_SIZE = 2
+#: The drive attributes a Set_Attribute_Single may change (Run1, Run2, FaultRst, SpeedRef).
+SETTABLE = {(0x29, 3), (0x29, 4), (0x29, 12), (0x2A, 8)}
+#: Sessions this target holds at once (``encap.session_limit`` opens more).
+MAX_SESSIONS = 12
+#: The message router's path: a class 3 connection's.
+ROUTER_PATH = bytes((0x20, 0x02, 0x24, 0x01))
 
 
 def sockaddr(host: str, port: int, family: bytes = b"\x00\x02") -> bytes:
@@ -59,13 +75,29 @@ class Connection:
     destination: tuple[str, int]
     last_heard: float
     stop: threading.Event = field(default_factory=threading.Event)
+    #: The TCP connection whose session opened it (OpENer closes it when the connection times out).
+    session_socket: socket.socket | None = None
+    #: Timed out and kept: no production, the ownership held until a Forward_Close (or forever).
+    timed_out: bool = False
 
 
 class FakeTarget:
     """The target on 127.0.0.1: TCP and UDP on one port, class 1 I/O on another UDP port."""
 
-    def __init__(self, deviation: str | None = None, host: str = "127.0.0.1", name: bytes = NAME) -> None:
-        self.deviation = deviation
+    def __init__(self, deviation: str | Iterable[str] | None = None, host: str = "127.0.0.1", name: bytes = NAME,
+                 opener_timeout: bool = False, variant: str | None = None, drive: bool = False) -> None:
+        """``opener_timeout``: on a class 1 timeout, close the TCP session that opened the connection and
+        keep the connection's ownership until a Forward_Close of its triad comes, as OpENer does.
+        ``variant`` names a check whose other permitted answer this target gives (``VARIANTS``).
+        ``drive``: an AC drive (device type 2) with the profile's assemblies and drive objects."""
+        self.drive = drive
+        #: The checks this target deviates for (one, in the tests that fail one check; several, for the docs).
+        self.deviations = {deviation} if isinstance(deviation, str) else set(deviation or ())
+        self.variant = variant
+        self.opener_timeout = opener_timeout
+        #: TCP sessions this target closed because their class 1 connection timed out.
+        self.sessions_closed_on_timeout = 0
+        self._local = threading.local()
         self.name = name
         self.host = host
         self.errors: list[str] = []
@@ -75,6 +107,9 @@ class FakeTarget:
         self._sessions = itertools.count(0x1000)
         self._ids = itertools.count(0x2000)
         self.connections: dict[int, Connection] = {}
+        #: Class 3 connections to the message router: O->T id -> [triad, T->O id, last sequence, last reply].
+        self.explicit: dict[int, list[object]] = {}
+        self._active_sessions = 0
         for _ in range(20):  # a TCP port whose UDP twin is free too
             self.tcp = socket.socket(socket.AF_INET, socket.SOCK_STREAM)
             self.tcp.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
@@ -123,7 +158,7 @@ class FakeTarget:
         self.close()
 
     def deviates(self, check_id: str) -> bool:
-        return self.deviation == check_id
+        return check_id in self.deviations
 
     # -- the device --------------------------------------------------------------------------------------
     def _attributes(self) -> dict[tuple[int, int], dict[int, bytes]]:
@@ -131,7 +166,8 @@ class FakeTarget:
         status = 0x0032 if self.deviates("objects.identity.status") else 0x0030
         identity = {
             1: struct.pack("<H", VENDOR),
-            2: struct.pack("<I" if self.deviates("objects.identity.attributes") else "<H", DEVICE_TYPE),
+            2: struct.pack("<I" if self.deviates("objects.identity.attributes") else "<H",
+                           AC_DRIVE if self.drive else DEVICE_TYPE),
             3: struct.pack("<H", PRODUCT_CODE), 4: bytes(revision), 5: struct.pack("<H", status),
             6: struct.pack("<I", SERIAL), 7: bytes((len(self.name),)) + self.name,
         }
@@ -152,6 +188,21 @@ class FakeTarget:
         for instance in (100, 101, 102, 103):
             size = 3 if self.deviates("eds.assembly.size") and instance == 101 else ASSEMBLY_SIZE
             table[(0x04, instance)] = {3: bytes(ASSEMBLY_SIZE), 4: struct.pack("<H", size)}
+        if self.drive:
+            table.update(self._drive_objects())
+        return table
+
+    def _drive_objects(self) -> dict[tuple[int, int], dict[int, bytes]]:
+        """The AC drive profile's assemblies and its Control Supervisor and AC/DC Drive, at rest."""
+        table: dict[tuple[int, int], dict[int, bytes]] = {}
+        for instance in (20, 21, 70, 71):
+            size = 3 if self.deviates("profile.assemblies") and instance == 71 else 4
+            table[(0x04, instance)] = {3: bytes(size), 4: struct.pack("<H", size)}
+        state = 9 if self.deviates("profile.control_supervisor") else 3  # 3 Ready; 9 is no state
+        table[(0x29, 1)] = {3: b"\0", 4: b"\0", 6: bytes((state,)), 7: b"\0", 8: b"\0", 9: b"\1", 10: b"\0",
+                            12: b"\0", 13: struct.pack("<H", 0), 15: b"\0"}
+        speed = struct.pack("<i" if self.deviates("profile.ac_dc_drive") else "<h", 0)  # a DINT, not an INT
+        table[(0x2A, 1)] = {3: b"\0", 7: speed, 8: struct.pack("<h", 0), 29: b"\0"}
         return table
 
     # -- TCP ---------------------------------------------------------------------------------------------
@@ -166,6 +217,15 @@ class FakeTarget:
 
     def _serve(self, conn: socket.socket) -> None:
         state = {"session": 0}
+        self._local.conn = conn  # one thread per TCP connection: the Forward_Open it serves records it
+        try:
+            self._serve_frames(conn, state)
+        finally:
+            if state["session"]:
+                with self._lock:
+                    self._active_sessions -= 1
+
+    def _serve_frames(self, conn: socket.socket, state: dict[str, int]) -> None:
         with conn:
             for command, session, context, options, body in encapsulation_frames(conn, self._stop):
                 if options:
@@ -199,6 +259,11 @@ class FakeTarget:
                 raise EncapStatus(0x0069)
             if version != 1 and not self.deviates("encap.register_session.protocol_version"):
                 raise EncapStatus(0x0069)
+            with self._lock:
+                if self._active_sessions >= MAX_SESSIONS:
+                    # No session slot: 0x0002 (insufficient memory); the deviating stack says "invalid length".
+                    raise EncapStatus(0x0065 if self.deviates("encap.session_limit") else 0x0002)
+                self._active_sessions += 1
             state["session"] = next(self._sessions)
             return bytes(4) if self.deviates("encap.register_session.version") else body[:4]
         if command == 0x66:
@@ -225,6 +290,10 @@ class FakeTarget:
             extra = [(t, d) for t, d in items if t == 0x8001]
             answer, reply_items = self._request(request, extra)
             return bytes(6) + cpf((0x0000, b""), (0x00B2, answer), *reply_items)
+        if command == 0x70:
+            if session != state["session"] or not session:
+                raise EncapStatus(0x0064)
+            return self._send_unit_data(split_cpf(body[6:]))
         if command == 0x0001 and self.deviates("encap.unsupported_command"):
             return self._list_identity(udp=False)  # as cpppo: some answer, status 0
         raise EncapStatus(0x0001)
@@ -234,7 +303,8 @@ class FakeTarget:
         family = b"\x02\x00" if self.deviates("encap.list_identity.tcp") and not udp else b"\x00\x02"
         attributes = self.attributes[(0x01, 1)]
         item = (struct.pack("<H", 1) + sockaddr(self.host, self.port, family) + attributes[1]
-                + struct.pack("<H", DEVICE_TYPE) + attributes[3] + attributes[4] + attributes[5]
+                + struct.pack("<H", AC_DRIVE if self.drive else DEVICE_TYPE) + attributes[3] + attributes[4]
+                + attributes[5]
                 + struct.pack("<I", serial) + attributes[7] + b"\x03")
         if udp and self.deviates("encap.list_identity.udp"):
             item = item[:-1]  # no state byte
@@ -304,11 +374,27 @@ class FakeTarget:
             if data and not self.deviates("router.too_much_data"):
                 return reply(service, 0x15)
             return reply(service, data=values[attribute])
+        if service == 0x03 and class_id == 0x01:
+            (count,) = struct.unpack_from("<H", data)
+            entries = []
+            for attribute in struct.unpack_from(f"<{count}H", data, 2):
+                value = values.get(attribute)
+                entries.append(struct.pack("<HH", attribute, 0 if value is not None else 0x14) + (value or b""))
+            failed = any(a not in values for a in struct.unpack_from(f"<{count}H", data, 2))
+            status = 0x0A if failed and not self.deviates("router.get_attribute_list") else 0
+            return reply(service, status, data=struct.pack("<H", count) + b"".join(entries))
         if service == 0x01 and class_id == 0x01:
             every = b"".join(values[a] for a in range(1, 8))
             return reply(service, data=every[:-3] if self.deviates("objects.identity.get_attributes_all") else every)
         if service == 0x10 and class_id == 0x01:
             return reply(service, 0 if self.deviates("objects.identity.set_read_only") else 0x0E)
+        if service == 0x10 and class_id in (0x29, 0x2A):
+            if attribute not in values:
+                return reply(service, 0x14)
+            if (class_id, attribute) not in SETTABLE:
+                return reply(service, 0x0E)
+            values[attribute] = data
+            return reply(service)
         if service == 0x05 and class_id == 0x01:
             return reply(service, 0x08 if self.deviates("objects.identity.reset") else 0)
         return reply(service, 0x05 if self.deviates("router.unknown_service") else 0x08)
@@ -339,6 +425,8 @@ class FakeTarget:
             return reply(service, data=struct.pack("<H", 0)) if attribute == 1 else reply(service, 0x14), []
         if service in (0x54, 0x5B):
             return self._forward_open(service, data, extra)
+        if service == 0x52:
+            return self._unconnected_send(data), []
         if service == 0x4E:
             return self._forward_close(data), []
         return reply(service, 0x08), []
@@ -361,21 +449,34 @@ class FakeTarget:
         ot_size, to_size = ((p & 0xFFFF) if large else (p & 0x1FF) for p in (ot_params, to_params))
         if ot_type == 0 and to_type == 0:
             return self._refuse(service, triad, 0x0108 if self.deviates("cm.forward_open.null") else 0x0132)
+        if transport & 0x0F == 3 and path == ROUTER_PATH:
+            return self._open_explicit(service, triad, to_id)
         if transport & 0x0F != 1:
-            return self._refuse(service, triad, 0x0108 if self.deviates("cm.forward_open.transport_class") else 0x0103)
+            code = 0x011C if self.variant == "cm.forward_open.transport_class" else 0x0103
+            return self._refuse(service, triad, 0x0108 if self.deviates("cm.forward_open.transport_class") else code)
         if len(path) != 8 or path[0:2] != b"\x20\x04" or path[2] != 0x24 or path[4] != 0x2C or path[6] != 0x2C:
             return self._refuse(service, triad, 0x0117 if self.deviates("cm.forward_open.bad_segment") else 0x0315)
         ot_point, to_point = path[5], path[7]
         if ot_point not in PAIRS:
-            return self._refuse(service, triad, 0x0110 if self.deviates("cm.forward_open.consuming_point") else 0x012A)
+            # 0x0315 is allowed and less precise: a warning ("warn:" variant).
+            code = 0x0315 if self.variant == "warn:cm.forward_open.consuming_point" else 0x012A
+            return self._refuse(service, triad, 0x0110 if self.deviates("cm.forward_open.consuming_point") else code)
         if to_point != PAIRS[ot_point]:
             return self._refuse(service, triad, 0x0110 if self.deviates("cm.forward_open.producing_point") else 0x012B)
         if ot_point == 102 and self.deviates("eds.connection.open"):
             return self._refuse(service, triad, 0x0113)
-        if ot_rpi < 10_000 or to_rpi < 10_000:
-            return self._refuse(service, triad, 0x0108 if self.deviates("cm.forward_open.rpi") else 0x0112,
-                                0x0202, 10_000 & 0xFFFF, 10_000 >> 16, 10_000 & 0xFFFF, 10_000 >> 16)
+        # Accepting a short RPI: honestly (granting the interval it produces at) or, as OpENer, granting
+        # the RPI asked for and producing at its own cycle all the same.
+        accept_short = self.variant == "cm.forward_open.rpi" or self.deviates("cm.forward_open.rpi")
+        ot_api, to_api = ot_rpi, to_rpi
+        if (ot_rpi < CYCLE_US or to_rpi < CYCLE_US) and not accept_short:
+            return self._refuse(service, triad, 0x0112, 0x0202, CYCLE_US & 0xFFFF, CYCLE_US >> 16,
+                                CYCLE_US & 0xFFFF, CYCLE_US >> 16)
+        if self.variant == "cm.forward_open.rpi":
+            ot_api, to_api = max(ot_rpi, CYCLE_US), max(to_rpi, CYCLE_US)
         if ot_size != 2 + 4 + ASSEMBLY_SIZE and not self.deviates("cm.forward_open.ot_size"):
+            if self.variant == "cm.forward_open.ot_size":
+                return self._refuse(service, triad, 0x0109)
             return self._refuse(service, triad, 0x0127, 2 + 4 + ASSEMBLY_SIZE)
         if to_size != 2 + ASSEMBLY_SIZE:
             code = 0x0127 if self.deviates("cm.forward_open.to_size") else 0x0128
@@ -389,28 +490,74 @@ class FakeTarget:
                 return self._refuse(service, triad, 0x0106)
             port = next((struct.unpack_from(">H", d, 2)[0] for t, d in extra if t == 0x8001), 2222)
             ot_id = next(self._ids)
-            api = to_rpi / 1e6
+            api = max(to_api, CYCLE_US) / 1e6
             connection = Connection(triad, ot_id, to_id, ot_point, api,
-                                    ot_rpi / 1e6 * (4 << multiplier), (self.host, port), time.monotonic() + 10.0)
+                                    max(ot_api, CYCLE_US) / 1e6 * (4 << multiplier), (self.host, port),
+                                    time.monotonic() + 10.0,
+                                    session_socket=getattr(self._local, "conn", None))
             self.connections[ot_id] = connection
         self._start(self._produce, connection)
         echoed = (serial, vendor, originator + 1) if self.deviates("cm.forward_open.accepted") else triad
-        answer = struct.pack("<IIHHIIIBB", ot_id, to_id, *echoed, ot_rpi, to_rpi, 0, 0)
+        answer = struct.pack("<IIHHIIIBB", ot_id, to_id, *echoed, ot_api, to_api, 0, 0)
         return reply(service, data=answer), [(0x8000, sockaddr(self.host, self.io_port))]
+
+    def _open_explicit(self, service: int, triad: tuple[int, int, int], to_id: int) -> tuple[bytes, list]:
+        """A class 3 connection to the message router."""
+        with self._lock:
+            if any(c[0] == triad for c in self.explicit.values()):
+                return self._refuse(service, triad, 0x0100)
+            ot_id = next(self._ids)
+            self.explicit[ot_id] = [triad, to_id, None, b""]
+        answer = struct.pack("<IIHHIIIBB", ot_id, to_id, *triad, 2_000_000, 2_000_000, 0, 0)
+        return reply(service, data=answer), []
+
+    def _send_unit_data(self, items: list[tuple[int, bytes]]) -> bytes | None:
+        address = next(d for t, d in items if t == 0x00A1)
+        data = next(d for t, d in items if t == 0x00B1)
+        (ot_id,) = struct.unpack("<I", address)
+        with self._lock:
+            connection = self.explicit.get(ot_id)
+        if connection is None:
+            return None  # no CIP answer for an unknown connection: dropped
+        (sequence,) = struct.unpack_from("<H", data)
+        if sequence == connection[2] and not self.deviates("cm.class3.duplicate"):
+            answer = connection[3]  # a duplicate: the last reply again, not executed
+        else:
+            answer, _ = self._request(data[2:], [])
+            connection[2], connection[3] = sequence, answer
+        # The deviating stack answers on the O->T id instead of the originator's T->O id.
+        to_id = ot_id if self.deviates("cm.class3.read") else connection[1]
+        return bytes(6) + cpf((0x00A1, struct.pack("<I", to_id)), (0x00B1, struct.pack("<H", sequence) + answer))
+
+    def _unconnected_send(self, data: bytes) -> bytes:
+        size = struct.unpack_from("<H", data, 2)[0]
+        message = data[4:4 + size]
+        position = 4 + size + (size & 1)
+        route = data[position + 2:position + 2 + 2 * data[position]]
+        if route[:1] == b"\x01" or self.deviates("router.unconnected_send.missing_port"):
+            return self._request(message, [])[0]  # the backplane (or, deviating, any port): served here
+        return reply(0x52, 0x01, (0x0311,), bytes((len(route) // 2, 0)))
 
     def _forward_close(self, data: bytes) -> bytes:
         serial, vendor, originator = struct.unpack_from("<HHI", data, 2)
         triad = (serial, vendor, originator)
         with self._lock:
-            found = next((c for c in self.connections.values() if c.triad == triad
-                          or (self.deviates("cm.forward_close.other_originator") and c.triad[0] == serial)), None)
+            explicit = next((i for i, c in self.explicit.items() if c[0] == triad), None)
+            if explicit is not None:
+                del self.explicit[explicit]
+                return reply(0x4E, data=struct.pack("<HHIBB", *triad, 0, 0))
+        with self._lock:
+            found = next((c for c in self.connections.values() if (c.triad == triad
+                          or (self.deviates("cm.forward_close.other_originator") and c.triad[0] == serial)
+                          or (self.deviates("cm.forward_close.wrong_serial") and c.triad[1:] == triad[1:]))
+                          # This stack keeps a timed-out owner whatever comes: only a restart clears it.
+                          and not (c.timed_out and self.deviates("final.as_found"))), None)
             if found is not None:
                 del self.connections[found.ot_id]
                 found.stop.set()
         if found is None:
-            # The deviating stack has one code for every refusal when no connection has the serial.
-            known = any(c.triad[0] == serial for c in self.connections.values())
-            code = 0x0100 if self.deviates("cm.forward_close.unknown") and not known else 0x0107
+            # The deviating stack has another code for a Forward_Close while it holds no connection at all.
+            code = 0x0100 if self.deviates("cm.forward_close.unknown") and not self.connections else 0x0107
             return reply(0x4E, 0x01, (code,), struct.pack("<HHIBB", *triad, 0, 0))
         return reply(0x4E, data=struct.pack("<HHIBB", *triad, 0, 0))
 
@@ -435,6 +582,14 @@ class FakeTarget:
                 continue
             connection.last_heard = time.monotonic() + connection.timeout
 
+    def _time_out_and_keep(self, connection: Connection) -> None:
+        """Stop producing, keep the ownership, and close the TCP session that opened the connection."""
+        connection.timed_out = True
+        if connection.session_socket is not None:
+            with contextlib.suppress(OSError):
+                connection.session_socket.shutdown(socket.SHUT_RDWR)
+            self.sessions_closed_on_timeout += 1
+
     def _drop(self, connection: Connection) -> None:
         with self._lock:
             self.connections.pop(connection.ot_id, None)
@@ -449,7 +604,10 @@ class FakeTarget:
         start, sequence = time.monotonic(), 0
         while not connection.stop.is_set() and not self._stop.is_set():
             if time.monotonic() > connection.last_heard and not self.deviates("class1.timeout"):
-                self._drop(connection)  # the connection timed out
+                if self.opener_timeout or self.deviates("final.as_found"):
+                    self._time_out_and_keep(connection)
+                else:
+                    self._drop(connection)  # the connection timed out
                 return
             sequence += 1
             datagram = IO_HEAD.pack(2, 0x8002, 8, connection.to_id, sequence * step, 0x00B1, 2 + len(payload),

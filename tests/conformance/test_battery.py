@@ -37,25 +37,6 @@ def generate_eds(profile_args: list[str], directory: Path) -> Path:
     return found
 
 
-@pytest.fixture
-def adapter_with(tmp_path: Path) -> Iterator[object]:
-    """Start ``cipstack adapter ARGS`` on a free port; stopped by PID when the test ends."""
-    started: list[PeerProcess] = []
-
-    def start(*args: str) -> PeerProcess:
-        port = free_port()
-        command = python_module("cipstack", "adapter", "--host", HOST, "--port", str(port), "--io-port", "0",
-                                "--quiet", *args)
-        peer = start_peer("cipstack adapter", command, HOST, port, tmp_path / f"adapter-{port}.log")
-        started.append(peer)
-        return peer
-
-    yield start
-    for peer in started:
-        peer.stop(signal.SIGTERM)
-        assert "Traceback" not in peer.log_text(), peer.log_text()
-
-
 def _not_passed(report: object) -> dict[str, str]:
     return {o.name: f"{o.verdict.value}: {o.observed}" for o in report  # type: ignore[attr-defined]
             if o.verdict is Verdict.FAIL}
@@ -74,6 +55,61 @@ def test_every_applicable_check_passes_on_our_emulators(name: str, adapter_with,
     if name == "acg":
         # The ACG-ET2 has class 1 connections: the connection groups ran, they did not just not apply.
         assert all(verdicts[i] is Verdict.PASS for i in check_ids() if i.startswith(("cm.", "class1.")))
+
+
+#: Where the battery finds each emulator's connection points without --eds (the MX2's and RX's own
+#: EDS files describe CompoNet, with no class 1 connection: the AC drive profile gives them).
+SOURCES = {"acg": "the device's own EDS file", "mx2": "the AC drive profile", "rx": "the AC drive profile"}
+
+
+@pytest.mark.parametrize("name", sorted(EMULATORS))
+def test_without_an_eds_the_battery_finds_the_points_itself(name: str, adapter_with) -> None:  # type: ignore[no-untyped-def]
+    peer = adapter_with(*EMULATORS[name][0])
+    report = run(peer.host, peer.port)
+    assert _not_passed(report) == {}
+    assert str(report.options["connection_points"]).startswith(SOURCES[name])
+    assert report.options["eds"].startswith("the device's own EDS file")  # group eds runs with it
+    not_applicable = [o.name for o in report if o.verdict is Verdict.NOT_APPLICABLE]
+    assert len(not_applicable) <= 6, not_applicable
+    assert all(o.verdict is Verdict.PASS for o in report if o.group in ("cm", "class1", "final"))
+
+
+@pytest.mark.parametrize("name", sorted(EMULATORS))
+def test_both_drive_families_pass_the_profile_group(name: str, adapter_with) -> None:  # type: ignore[no-untyped-def]
+    peer = adapter_with(*EMULATORS[name][0])
+    report = run(peer.host, peer.port, groups="profile", allow_writes=True)
+    assert {o.id: o.verdict for o in report} == {i: Verdict.PASS for i in check_ids() if i.startswith("profile.")}
+    assert "refused a Set (0x0E)" in next(o.observed for o in report if o.id == "profile.ac_dc_drive")
+
+
+def test_an_eds_emulated_device_without_an_eds_serves_its_own(adapter_with) -> None:  # type: ignore[no-untyped-def]
+    peer = adapter_with("--eds", str(Path(__file__).with_name("fake_device.eds")))
+    report = run(peer.host, peer.port, allow_writes=True)
+    assert _not_passed(report) == {}
+    assert str(report.options["connection_points"]).startswith("the device's own EDS file")
+    not_applicable = [o.name for o in report if o.verdict is Verdict.NOT_APPLICABLE]
+    assert len(not_applicable) <= 6, not_applicable
+    assert all(o.verdict is Verdict.PASS for o in report if o.group in ("cm", "class1", "eds", "final"))
+
+
+def test_the_other_sources_of_connection_points(tmp_path: Path) -> None:
+    """The scripted target serves no EDS and is no drive: --eds-dir finds its file by its identity,
+    --connection-points names them, and else probing the Assembly object finds them."""
+    directory = tmp_path / "eds"
+    directory.mkdir()
+    (directory / "other.eds").write_text("[Device]\nVendCode = 1;\nProdCode = 7;\nMajRev = 1;\nMinRev = 2;\n")
+    (directory / "fake.eds").write_bytes(Path(__file__).with_name("fake_device.eds").read_bytes())
+    with FakeTarget() as target:
+        from_dir = run(target.host, target.port, groups="cm,eds", eds_dir=directory, timeout=2.0)
+        named = run(target.host, target.port, groups="cm", connection_points=(102, 103, 1), timeout=2.0)
+        probed = run(target.host, target.port, groups="cm", timeout=2.0)
+    assert str(from_dir.options["connection_points"]).endswith("fake.eds (--eds-dir)")
+    assert {o.group for o in from_dir if o.verdict is Verdict.PASS} >= {"cm", "eds", "final"}
+    assert named.options["connection_points"] == "--connection-points 102,103,1"
+    assert str(probed.options["connection_points"]).startswith("probing the Assembly object")
+    for report in (from_dir, named, probed):
+        assert _not_passed(report) == {} and not [o for o in report if o.group == "cm"
+                                                   and o.verdict is Verdict.NOT_APPLICABLE]
 
 
 def test_every_applicable_check_passes_on_an_eds_emulated_device(adapter_with, tmp_path: Path) -> None:  # type: ignore[no-untyped-def]
@@ -110,6 +146,10 @@ CPPPO_DEVIATIONS = {
     "objects.tcp_ip.attributes": "no TCP/IP attribute 13 (encapsulation inactivity timeout)",
     "objects.ethernet_link.attributes": "no Ethernet Link object (encapsulation status 0x0008)",
     "cm.forward_close.unknown": "answers success to a Forward_Close of a connection that does not exist",
+    "router.unconnected_send.missing_port": "serves the embedded request whatever port the route names",
+    "router.get_attribute_list": "status 0 with a failed member, no count, 0x16 for a missing attribute",
+    "cm.class3.read": "answers SendUnitData on the O->T connection ID, not the originator's T->O ID",
+    "cm.class3.duplicate": "executes a request repeated with the same sequence count",
 }
 
 
@@ -161,13 +201,66 @@ def test_command_text_report_puts_failures_first_with_their_bytes() -> None:
         result = conform(target.address, "--only", "router")
     assert result.returncode == 1, result.stdout + result.stderr
     lines = result.stdout.splitlines()
-    assert lines[1].startswith("9 checks: 8 pass, 1 fail")
+    assert lines[1].startswith("11 checks: 10 pass, 1 fail")
+    assert "Message router and errors (router)" in lines[2]
     failures = lines.index("Failures")
     assert lines[failures + 1] == "  FAIL router.unknown_attribute: Get_Attribute_Single of Identity attribute 0xFE"
     assert any(line.strip().startswith("sent (tcp):") and "0e 03 20 01 24 01 30 fe" in line
                for line in lines[failures:])
     table = lines.index("Message router and errors")
     assert lines[table + 1].split()[:2] == ["fail", "router.unknown_attribute"]
+
+
+def test_html_report_has_a_linked_summary_per_group_failures_and_warnings_first(tmp_path: Path) -> None:
+    page, junit = tmp_path / "conform.html", tmp_path / "conform.xml"
+    eds = Path(__file__).with_name("fake_device.eds")
+    with FakeTarget(deviation="cm.forward_open.duplicate", variant="warn:cm.forward_open.consuming_point") as target:
+        result = conform(target.address, "--eds", str(eds), "--only", "router,cm", "--html", str(page),
+                         "--junit", str(junit), "--timeout", "2")
+    assert result.returncode == 1, result.stdout + result.stderr
+    text = page.read_text()
+    # The summary: a row per group with its counts, linked to the group's table.
+    assert '<a href="#group-cm">Connection Manager</a>' in text and 'id="group-cm"' in text
+    assert '<a href="#group-router">' in text and '<a href="#group-final">' in text
+    # Failures, then warnings, listed before the tables, each linked to its row.
+    failures, warnings, tables = text.index('id="fails"'), text.index('id="warnings"'), text.index('id="group-router"')
+    assert failures < warnings < tables
+    assert '<a href="#check-cm.forward_open.duplicate">' in text and 'id="check-cm.forward_open.duplicate"' in text
+    # In a group's table, the failure comes first, the warning next.
+    cm = text[text.index('id="group-cm"'):]
+    assert cm.index('id="check-cm.forward_open.duplicate"') < cm.index('id="check-cm.forward_open.consuming_point"') \
+        < cm.index('id="check-cm.forward_open.accepted"')
+    # Rows are short: the bytes are folded away, ids never break, the reference is a citation.
+    assert text.count("<details>") >= text.count('<tr class="pass"') and "break-all" not in text
+    assert '<code class="id">' in text and "code.id { white-space: nowrap; }" in text and "<cite>" in text
+    # JUnit: the warning is a skipped test case with its message; the failure a failure.
+    cases = {c.get("name"): c for c in ElementTree.parse(junit).getroot().iter("testcase")}
+    skipped = cases["cm.forward_open.consuming_point"].find("skipped")
+    assert skipped is not None and skipped.get("message", "").startswith("warning: ")
+    assert cases["cm.forward_open.duplicate"].find("failure") is not None
+
+
+def test_strict_makes_a_warning_a_failure(tmp_path: Path) -> None:
+    junit = tmp_path / "conform.xml"
+    eds = Path(__file__).with_name("fake_device.eds")
+    with FakeTarget(variant="warn:cm.forward_open.consuming_point") as target:
+        lenient = conform(target.address, "--eds", str(eds), "--only", "cm", "--timeout", "2")
+        strict = conform(target.address, "--eds", str(eds), "--only", "cm", "--strict", "--junit", str(junit),
+                         "--timeout", "2")
+    assert (lenient.returncode, strict.returncode) == (0, 1), lenient.stdout + strict.stdout
+    case = next(c for c in ElementTree.parse(junit).getroot().iter("testcase")
+                if c.get("name") == "cm.forward_open.consuming_point")
+    failure = case.find("failure")
+    assert failure is not None and failure.get("message", "").startswith("warning (--strict): ")
+
+
+def test_text_report_has_one_summary_line_per_group() -> None:
+    with FakeTarget(deviation="router.unknown_attribute") as target:
+        result = conform(target.address, "--only", "encap,router")
+    lines = result.stdout.splitlines()
+    assert lines[2].split() == ["Encapsulation", "(encap)", "16", "checks:", "16", "pass,", "0", "fail,", "0",
+                                "warning,", "0", "n/a"]
+    assert lines[3].split()[:4] == ["Message", "router", "and", "errors"] and "1 fail" in lines[3]
 
 
 def _garbage_server(reply: bytes) -> tuple[socket.socket, threading.Thread]:
@@ -187,8 +280,9 @@ def _garbage_server(reply: bytes) -> tuple[socket.socket, threading.Thread]:
 
 
 @pytest.mark.parametrize("args", [
-    ["--only", "encap,bogus"], ["--eds", "/nonexistent.eds"], ["--timeout", "0"],
-], ids=["unknown-group", "missing-eds", "zero-timeout"])
+    ["--only", "encap,bogus"], ["--eds", "/nonexistent.eds"], ["--timeout", "0"], ["--eds-dir", "/nonexistent"],
+    ["--connection-points", "150"], ["--connection-points", "150,x"],
+], ids=["unknown-group", "missing-eds", "zero-timeout", "missing-eds-dir", "one-point", "not-a-number"])
 def test_command_bad_arguments_exit_2_in_one_line(args: list[str]) -> None:
     result = conform("127.0.0.1:1", *args)
     assert (result.returncode, result.stdout) == (2, "")

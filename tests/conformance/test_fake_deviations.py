@@ -9,7 +9,7 @@ import pytest
 
 from cipstack.conformance import CHECKS, Verdict, check_ids, run
 
-from .fake_target import FakeTarget
+from .fake_target import VARIANTS, FakeTarget
 
 EDS = Path(__file__).with_name("fake_device.eds")
 
@@ -18,19 +18,27 @@ def run_group(target: FakeTarget, group: str):  # type: ignore[no-untyped-def]
     return run(target.host, target.port, eds=EDS, groups=group, allow_writes=True, allow_reset=True, timeout=2.0)
 
 
-@pytest.mark.parametrize("group", ["encap", "router", "objects", "cm", "class1", "eds"])
+#: The group whose run shows a check's deviation, where it is not the check's own.
+SHOWN_BY = {"final.as_found": "class1"}
+#: The groups that open connections: after them the final self-check has something to check.
+CONNECTING = ("cm", "class1", "eds")
+
+
+@pytest.mark.parametrize("group", ["encap", "router", "objects", "cm", "class1", "eds", "profile"])
 def test_the_conformant_fake_passes_every_check(group: str) -> None:
-    with FakeTarget() as target:
+    with FakeTarget(drive=group == "profile") as target:
         report = run_group(target, group)
     assert target.errors == []
     assert {o.name: o.observed for o in report if o.verdict is not Verdict.PASS} == {}
-    assert {o.id for o in report} == {i for i in check_ids() if CHECKS[i].group == group}
+    # The final self-check runs after every run that opened a connection or wrote.
+    final = ("final",) if group in CONNECTING else ()
+    assert {o.id for o in report} == {i for i in check_ids() if CHECKS[i].group in (group, *final)}
 
 
 @pytest.mark.parametrize("check_id", check_ids())
 def test_each_check_fails_on_its_deviation(check_id: str) -> None:
-    with FakeTarget(deviation=check_id) as target:
-        report = run_group(target, CHECKS[check_id].group)
+    with FakeTarget(deviation=check_id, drive=CHECKS[check_id].group == "profile") as target:
+        report = run_group(target, SHOWN_BY.get(check_id, CHECKS[check_id].group))
     assert target.errors == []
     failed = {o.id for o in report.failures}
     assert failed == {check_id}, {o.name: o.observed for o in report.failures}
@@ -41,3 +49,50 @@ def test_every_check_has_a_deviation_in_the_fake() -> None:
     to fail it is caught here (the parametrized test above would run it, and this says why)."""
     source = Path(__file__).with_name("fake_target.py").read_text(encoding="utf-8")
     assert [i for i in check_ids() if f'"{i}"' not in source] == []
+
+
+def test_a_target_that_closes_the_session_on_a_timeout_is_left_as_found() -> None:
+    """OpENer, on a class 1 timeout, closes the TCP session that opened the connection and keeps the
+    timed-out exclusive owner until a Forward_Close of its triad: the battery closes it on a new
+    session, and the final self-check opens the point again. A second run finds the same."""
+    with FakeTarget(opener_timeout=True) as target:
+        first = run_group(target, "class1")
+        closed_sessions = target.sessions_closed_on_timeout
+        second = run_group(target, "class1")
+        left = dict(target.connections)
+    assert closed_sessions == 1
+    for report in (first, second):
+        assert {o.name: o.observed for o in report if o.verdict is not Verdict.PASS} == {}
+        assert "opened again and closed" in next(o.observed for o in report if o.id == "final.as_found")
+    assert left == {}
+
+
+def test_a_connection_left_behind_is_named_with_how_to_clear_it() -> None:
+    with FakeTarget(deviation="final.as_found") as target:
+        report = run_group(target, "class1")
+    (final,) = [o for o in report if o.id == "final.as_found"]
+    assert final.verdict is Verdict.FAIL
+    assert "0x0106 (ownership conflict" in final.observed and "power-cycle the device" in final.observed
+
+
+@pytest.mark.parametrize("check_id", sorted(VARIANTS))
+def test_every_answer_the_specification_permits_passes(check_id: str) -> None:
+    """Where the specification allows more than one answer, the other one passes too."""
+    assert CHECKS[check_id].codes or check_id == "cm.forward_open.rpi"
+    with FakeTarget(variant=check_id) as target:
+        report = run_group(target, CHECKS[check_id].group)
+    assert {o.name: o.observed for o in report if o.verdict is not Verdict.PASS} == {}, VARIANTS[check_id]
+
+
+def test_every_check_that_judges_a_status_declares_the_codes_with_their_reference() -> None:
+    judged = [i for i, spec in CHECKS.items() if i.startswith(("router.", "cm.forward_open.", "cm.forward_close."))
+              and i not in ("router.multiple_service.good", "cm.forward_open.accepted")]
+    assert [i for i in judged if not CHECKS[i].codes] == []
+    assert all(code.reference for spec in CHECKS.values() for code in spec.codes)
+
+
+def test_the_profile_does_not_apply_to_another_device_type() -> None:
+    with FakeTarget() as target:
+        report = run_group(target, "profile")
+    assert {o.id: o.verdict for o in report} == {i: Verdict.NOT_APPLICABLE for i in check_ids()
+                                                 if i.startswith("profile.")}

@@ -40,6 +40,7 @@ from ...assemblies.schema import AssemblySchema
 from ...cip.model import ClassSpec
 from ...eip.io_target import ConnectionKind, IoConnection, IoProfile
 from ...objects.assembly import AssemblyPoint
+from ...objects.file import StoredFile
 from ...objects.tcpip import NetworkInterface
 from ..base import Device, DeviceLimits, ModbusDrive, TripRefused
 from ..profiles import DEFAULT_MAC, serial_from_mac
@@ -397,12 +398,13 @@ def parse_trip(code: Trip | int | str) -> Trip:
 
 
 def build_acg_device(interface: NetworkInterface | None = None, limits: DeviceLimits | None = None,
-                     state_path: Path | None = None, *, now: float | None = None) -> AcgDevice:
+                     state_path: Path | None = None, *, now: float | None = None,
+                     files: tuple[StoredFile, ...] = ()) -> AcgDevice:
     """The ACG drive with its ACG-ET2 card. ``state_path``: the state file that holds the saved
     parameters (None: they are kept in memory only, for the life of the process). ``now``: the
     power-up time on the clock the device will be advanced with; None: the first time its shell
     advances it to (the device reads no clock). A corrupt or foreign state file raises
-    ``StateFileError``."""
+    ``StateFileError``. ``files``: what its File object serves (its EDS file, ``cipstack.objects.file``)."""
     interface = interface or NetworkInterface(mac=DEFAULT_MAC)
     writer: StateWriter | None = None
     if state_path is None:
@@ -414,7 +416,7 @@ def build_acg_device(interface: NetworkInterface | None = None, limits: DeviceLi
         writer = StateWriter(store, saved)
     info = acg_identity_info(drive, serial_from_mac(interface.mac))
     return AcgDevice(info, interface, limits or DeviceLimits(), drive=drive, saves=writer,
-                     power_up_on_first_advance=now is None)
+                     power_up_on_first_advance=now is None, files=files)
 
 
 __all__ = ["RPI_MIN_US", "AcgDevice", "build_acg_device", "parse_trip"]

@@ -54,6 +54,7 @@ from ...componet.gateway import COMPONET_PORT, CompoNetGateway
 from ...componet.network import NODE_ADDRESSES, CompoNetNetwork
 from ...eip.io_target import IoConnection, IoProfile
 from ...objects.assembly import AssemblyPoint
+from ...objects.file import StoredFile
 from ...objects.identity import IdentityInfo, IdentityStatus
 from ...objects.tcpip import NetworkInterface
 from ..base import Device, DeviceLimits, TripRefused
@@ -568,14 +569,16 @@ class OmronDevice(Device):
 
 def build_omron_device(model_name: str, interface: NetworkInterface | None = None,
                        limits: DeviceLimits | None = None, state_path: Path | None = None,
-                       ethernet: bool = True, rotary_switches: int = 0) -> OmronDevice:
+                       ethernet: bool = True, rotary_switches: int = 0,
+                       files: tuple[StoredFile, ...] = ()) -> OmronDevice:
     """An emulated MX2 or RX of Tables 2/3 with its option board; ``ethernet=False`` for a CompoNet-only
-    slave (no TCP/IP or Ethernet Link object). The serial number comes from the interface's MAC."""
+    slave (no TCP/IP or Ethernet Link object). The serial number comes from the interface's MAC.
+    ``files``: what its File object serves (its EDS file, ``cipstack.objects.file``)."""
     inverter_model = model(model_name)
     interface = interface or NetworkInterface()
     serial = int.from_bytes(interface.mac[-4:], "big")
     return OmronDevice(omron_identity(inverter_model, serial), interface, limits or DeviceLimits(), ethernet,
-                       model=inverter_model, state_path=state_path, rotary_switches=rotary_switches)
+                       model=inverter_model, state_path=state_path, rotary_switches=rotary_switches, files=files)
 
 
 # -- a CompoNet network behind an EtherNet/IP gateway -------------------------------------------------

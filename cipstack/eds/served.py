@@ -1,0 +1,33 @@
+"""The EDS file an emulated device serves through its File object (class 0x37, instance 0xC8), as
+EtherNet/IP devices that carry their EDS do: generated from the same declarations as
+``cipstack eds generate`` writes, or, for a device emulated from an EDS file, that file."""
+
+from __future__ import annotations
+
+from ..objects.file import StoredFile, eds_file
+
+#: The file name devices give their EDS in the File object (OpENer's File object; Rockwell 1444 Table 287).
+FILE_NAME = "EDS.txt"
+
+
+def profile_eds_file(profile: str, model: str | None = None) -> StoredFile:
+    """The EDS file of an emulated profile (``acg``, ``mx2``, ``rx``) and model, generated when first
+    read (the ACG's takes about half a second)."""
+    from ..devices.profiles import PROFILES
+    from .commands_generate import descriptions
+    from .description import FILE_REVISION
+    from .generator import eds_text
+    from .writer import encode_eds
+
+    chosen = model or PROFILES[profile].default_model
+
+    def content() -> bytes:
+        (description,) = descriptions(profile, chosen)
+        return encode_eds(eds_text(description))
+
+    return eds_file(FILE_NAME, FILE_REVISION, content)
+
+
+def document_eds_file(data: bytes, revision: tuple[int, int]) -> StoredFile:
+    """The EDS file a device emulated from that file serves: the file itself, byte for byte."""
+    return eds_file(FILE_NAME, revision, lambda: data)
