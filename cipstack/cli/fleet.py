@@ -31,11 +31,13 @@ def _fleet_spec(args: argparse.Namespace) -> Any:
         make_group,
         parse_addresses,
         parse_group,
+        parse_shard,
         read_spec_file,
+        select_shard,
     )
 
     settings: dict[str, Any] = {}
-    groups = []
+    groups: list[Any] = []
     if args.spec is not None:
         if args.device:
             raise UsageError("give the devices with --device or in --spec FILE, not both")
@@ -56,6 +58,11 @@ def _fleet_spec(args: argparse.Namespace) -> Any:
         if addresses is not None else None
     state_dir = args.state_dir or settings.get("state_dir") or data_directory() / "fleet"
     devices = assign(groups, pool, Path(state_dir))
+    # The shard is cut from the whole plant, before anything that depends on the process (workers, the
+    # RS-485 line), so that every pod reading one spec agrees on who serves which device.
+    shard = parse_shard(args.shard) if args.shard is not None else None
+    if shard is not None:
+        devices = select_shard(devices, shard)
     port = check_port(args.port if args.port is not None else settings.get("port", DEFAULT_PORT), "port")
     io_port = check_port(args.io_port if args.io_port is not None else settings.get("io_port", DEFAULT_IO_PORT),
                          "io port")
@@ -66,7 +73,7 @@ def _fleet_spec(args: argparse.Namespace) -> Any:
         devices = assign_stations(devices, workers, "--rtu" if args.rtu is not None else f"{where}: rtu")
     elif any(d.station is not None for d in devices):
         raise SpecError(f"{where}: a station ID puts a drive on the fleet's RS-485 line: give --rtu (rtu = \"pty\")")
-    return FleetSpec(devices, port, io_port, workers, Path(state_dir), rtu)
+    return FleetSpec(devices, port, io_port, workers, Path(state_dir), rtu, shard)
 
 
 def cmd_fleet(args: argparse.Namespace) -> int:
@@ -81,6 +88,10 @@ def cmd_fleet(args: argparse.Namespace) -> int:
         spec = _fleet_spec(args)
     except SpecError as exc:
         raise UsageError(str(exc)) from None
+    if args.list_addresses:   # what a pod's init container adds to the plant interface, then nothing else
+        for device in spec.devices:
+            print(device.address)
+        return EXIT_OK
     addresses = describe_addresses(d.address for d in spec.devices)
     from .emulators import _http_settings
 
@@ -90,8 +101,9 @@ def cmd_fleet(args: argparse.Namespace) -> int:
         for line in lines:
             print(line, flush=True)
         processes = "1 process" if spec.workers == 1 else f"{spec.workers} worker processes"
-        log.info("emulating %d devices on %s (%s); Ctrl-C or SIGTERM stops them", len(spec.devices), addresses,
-                 processes)
+        shard = f", shard {spec.shard} of the plant" if spec.shard is not None else ""
+        log.info("emulating %d devices on %s (%s%s); Ctrl-C or SIGTERM stops them", len(spec.devices), addresses,
+                 processes, shard)
 
     try:
         if spec.workers == 1:

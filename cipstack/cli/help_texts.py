@@ -71,13 +71,16 @@ COMMANDS: dict[tuple[str, ...], CommandText] = {
         "Linux's loopback), from --device groups or a TOML --spec file. Each device keeps its own state "
         "file and control socket (`cipstack drive ... --host ADDRESS`); --workers spreads the devices "
         "over processes; --http serves one HTTP control API for every device of every worker, by "
-        "address (/devices/ADDRESS/...).",
+        "address (/devices/ADDRESS/...); --shard serves one part of a plant spec, the same on every "
+        "machine.",
         (("cipstack fleet --addresses 127.0.0.10-127.0.0.13 --device 'acg*3' --device mx2:MX2-A2015-E",
           "three ACG drives and one MX2 on 127.0.0.10 to 127.0.0.13"),
          ("cipstack fleet --addresses 127.0.0.10-127.0.0.73 --device 'acg*64' --workers 2",
           "64 ACG drives over two processes"),
          ("cipstack fleet --addresses 127.0.0.10-127.0.0.73 --device 'acg*64' --workers 2 --http 127.0.0.1:8080",
-          "the same, with one HTTP API for all: curl http://127.0.0.1:8080/devices")),
+          "the same, with one HTTP API for all: curl http://127.0.0.1:8080/devices"),
+         ("cipstack fleet --spec plant.toml --shard 1/3",
+          "the second of three shards of one plant spec (one per machine or Kubernetes pod)")),
     ),
     ("models",): CommandText(
         "the MX2/RX models the mx2/rx profiles emulate (Tables 2/3)",

@@ -193,6 +193,11 @@ def build_parser(command: str | None = None) -> argparse.ArgumentParser:
     p.add_argument("--rtu", metavar="DEVICE",
                    help="put the ACG drives (up to 16) on one RS-485 Modbus-RTU line: pty (a new pseudo-terminal, "
                         "its path printed) or a serial device; station IDs 1, 2, ... in address order")
+    p.add_argument("--shard", metavar="INDEX/COUNT",
+                   help="serve one of COUNT contiguous shares of the plant's devices (in address order), INDEX "
+                        "from 0: 0/3 is the first of three; each machine or pod runs one, from the same spec")
+    p.add_argument("--list-addresses", action="store_true",
+                   help="print the addresses of the devices this fleet (or shard) serves, one a line, and exit")
     p.set_defaults(func=cmd_fleet)
 
     p = sub.add_parser("models")

@@ -47,7 +47,7 @@ from ..eip.io_server import run_precise
 from ..errors import CipstackError
 from ..listening import ListenError
 from .serve import serve_until_signalled
-from .spec import FleetDevice, SpecError, describe_addresses
+from .spec import FleetDevice, SpecError, describe_addresses, shares
 
 log = logging.getLogger(__name__)
 
@@ -63,17 +63,6 @@ HEARTBEAT_INTERVAL = 1.0
 HEARTBEAT_TIMEOUT = 5.0
 PING, PONG = "ping", "pong"
 _PR_SET_PDEATHSIG = 1
-
-
-def shares(devices: Sequence[FleetDevice], workers: int) -> list[list[FleetDevice]]:
-    """``devices`` in ``workers`` contiguous shares whose sizes differ by one at most."""
-    size, extra = divmod(len(devices), workers)
-    result, start = [], 0
-    for index in range(workers):
-        end = start + size + (1 if index < extra else 0)
-        result.append(list(devices[start:end]))
-        start = end
-    return result
 
 
 def _die_with_parent(parent: int) -> None:
