@@ -96,6 +96,8 @@ def cmd_fleet(args: argparse.Namespace) -> int:
     from .emulators import _http_settings
 
     http = _http_settings(args)
+    if http:   # the fleet's gauges of itself on /metrics carry its shard (0/1: the whole plant)
+        http["shard"] = str(spec.shard or "0/1")
 
     def ready(lines: list[str]) -> None:
         for line in lines:

@@ -31,6 +31,7 @@ from aiohttp import web
 
 from ..eip.limits import RateLimitedLog, guarded_listener, quiet_accept_errors
 from ..errors import BadRequest, CipstackError
+from .metrics import ShardGauges, add_metrics_route
 from .operations import OPERATIONS, Operation
 from .service import outcome
 
@@ -334,10 +335,11 @@ CONNECTIONS: web.AppKey[HttpConnections] = web.AppKey("cipstack_http_connections
 class HttpApi:
     def __init__(self, devices: dict[str, DeviceService], host: str = "127.0.0.1", port: int = 0, *,
                  token: str | None = None, allow_remote: bool = False, path: str | None = None,
-                 hosts: tuple[str, ...] = ()) -> None:
+                 hosts: tuple[str, ...] = (), shard: ShardGauges | None = None) -> None:
         """``devices``: the command service of each device, by address (its host, or ``host:port`` when
         several share a host). ``path``: listen on this Unix socket instead of ``host:port`` (a fleet
-        worker's API, which the fleet's relay forwards to; its directory is what keeps others out)."""
+        worker's API, which the fleet's relay forwards to; its directory is what keeps others out).
+        ``shard``: a fleet's gauges of itself on ``/metrics``."""
         if path is None:
             check_settings(f"{host}:{port}", token, allow_remote)
         self.devices = devices
@@ -347,6 +349,7 @@ class HttpApi:
         self.token = token
         self.allow_remote = allow_remote
         self.guard = Guard(token, allow_remote, local=path is not None, hosts=hosts)
+        self.shard = shard
         self._served: ServedApp | None = None
         self.app = self._build()
 
@@ -373,6 +376,7 @@ class HttpApi:
             app.router.add_route(method, DEVICE_PREFIX + path, handler)
         app.router.add_get("/devices", self.list_devices)
         app.router.add_get("/openapi.json", openapi)
+        add_metrics_route(app, self.devices, self.shard)
         return app
 
     async def list_devices(self, request: web.Request) -> web.Response:
@@ -530,6 +534,9 @@ def openapi_document() -> dict[str, Any]:
     paths["/devices"] = {"get": {"summary": "the devices this API serves (in a fleet of workers, each with its "
                                             "worker's number, and `error` where that worker is lost)",
                                  "operationId": "devices", "responses": {"200": ok}}}
+    paths["/metrics"] = {"get": {"summary": "the devices' counters in the Prometheus text format",
+                                 "operationId": "metrics", "responses": {"200": {
+                                     "description": "Prometheus text", "content": {"text/plain": {"schema": {}}}}}}}
     return {"openapi": "3.0.3",
             "info": {"title": "cipstack emulator control", "version": "2"},
             "paths": paths,

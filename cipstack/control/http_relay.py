@@ -39,6 +39,7 @@ from .http import (
     openapi,
     serve_app,
 )
+from .metrics import ShardGauges, merge_families, metrics_response, powered_devices, render
 
 log = logging.getLogger(__name__)
 
@@ -72,12 +73,15 @@ class RelayApi:
     """The fleet's HTTP API on ``host:port`` over the APIs of ``backends`` (see the module docstring)."""
 
     def __init__(self, backends: list[Backend], host: str = "127.0.0.1", port: int = 0, *,
-                 token: str | None = None, allow_remote: bool = False, hosts: tuple[str, ...] = ()) -> None:
+                 token: str | None = None, allow_remote: bool = False, hosts: tuple[str, ...] = (),
+                 shard: str = "0/1") -> None:
+        """``shard``: the fleet's name on ``/metrics`` (``--shard``; 0/1 for a whole plant)."""
         check_settings(f"{host}:{port}", token, allow_remote)
         self.backends = backends
         self.host = host
         self.port = port
         self.guard = Guard(token, allow_remote, hosts=hosts)
+        self.shard = shard
         #: Each device's worker, by the address the worker's API gives it.
         self.routes: dict[str, Backend] = {}
         self._served: ServedApp | None = None
@@ -131,6 +135,7 @@ class RelayApi:
             app.router.add_route(method, DEVICE_PREFIX + path, self.forward)
         app.router.add_get("/devices", self.list_devices)
         app.router.add_get("/openapi.json", openapi)
+        app.router.add_get("/metrics", self.metrics)
         return app
 
     # -- handlers ---------------------------------------------------------------------------------------
@@ -143,6 +148,24 @@ class RelayApi:
             for entry in backend.devices:
                 listed.append({**entry, "worker": backend.number, **({"error": down} if down else {})})
         return web.json_response(sorted(listed, key=lambda entry: str(entry["address"])))
+
+    async def metrics(self, request: web.Request) -> web.Response:
+        """Every serving worker's ``/metrics`` in one, with the fleet's gauges: a lost worker's devices
+        are not up, and their counters are gone with it."""
+        texts = []
+        for backend in self.backends:
+            if backend.down() is not None or backend.session is None:
+                continue
+            try:
+                async with backend.session.get(URL.build(scheme="http", host=_WORKER_HOST, path="/metrics")) as reply:
+                    if reply.status == 200:
+                        texts.append(await reply.text())
+            except (aiohttp.ClientError, asyncio.TimeoutError):
+                continue   # gone since: its devices count as not up
+        families = merge_families(texts)
+        up = powered_devices(families)
+        gauges = ShardGauges(self.shard, lambda: (len(self.routes), up))
+        return metrics_response(await render([*families.values(), *gauges.families()]))
 
     async def unaddressed(self, request: web.Request) -> web.Response:
         """A device's route without its address: a fleet has more than one device."""

@@ -329,7 +329,7 @@ class Supervisor:
         relay = RelayApi([Backend(w.name, w.api_path or "", lambda w=w: self._why_down(w), w.number)
                           for w in self.workers], host, port, token=self.http.get("http_token"),
                          allow_remote=self.http.get("http_allow_remote", False),
-                         hosts=tuple(self.http.get("http_hosts", ())))
+                         hosts=tuple(self.http.get("http_hosts", ())), shard=self.http.get("shard", "0/1"))
         watched: dict[int, _Worker] = {}
         self._wake = wake.set
         for sig in (signal.SIGINT, signal.SIGTERM):   # the loop's own handling, which wakes its wait
