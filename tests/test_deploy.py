@@ -81,7 +81,7 @@ def env(spec: dict[str, Any]) -> dict[str, Any]:
 def test_every_object_renders_and_validates(kustomization: str) -> None:
     objects = render(kustomization)
     kinds = sorted(o["kind"] for o in objects)
-    assert {"StatefulSet", "Service", "ConfigMap", "Secret"} <= set(kinds)
+    assert {"StatefulSet", "Deployment", "Service", "ConfigMap", "Secret"} <= set(kinds)
     for document in objects:
         if document["kind"] == "NetworkAttachmentDefinition":
             jsonschema.validate(document, NAD_SCHEMA)
@@ -163,3 +163,10 @@ def test_probes_ask_the_emulator_and_the_scrape_names_the_api(kustomization: str
     service = one(objects, "Service", "cipstack-fleet")
     assert service["spec"]["clusterIP"] == "None" and fleet["spec"]["serviceName"] == service["metadata"]["name"]
     assert service["spec"]["selector"] == fleet["spec"]["selector"]["matchLabels"]
+    # The plant view finds the fleets by the headless Service's name, at the port of their API.
+    view = container(one(objects, "Deployment", "cipstack-plant")["spec"]["template"]["spec"], "plant")
+    assert view["args"][:3] == ["plant", "--fleet", f"{service['metadata']['name']}:{port}"]
+    assert {p["port"] for p in service["spec"]["ports"]} == {port}
+    assert {v["secret"]["secretName"] for v in template["spec"]["volumes"] if "secret" in v} == {
+        v["secret"]["secretName"] for v in one(objects, "Deployment", "cipstack-plant")["spec"]["template"]["spec"][
+            "volumes"] if "secret" in v}

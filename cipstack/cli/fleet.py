@@ -131,4 +131,57 @@ def cmd_fleet(args: argparse.Namespace) -> int:
     return EXIT_OK
 
 
-__all__ = ["cmd_fleet"]
+def cmd_plant(args: argparse.Namespace) -> int:
+    """``cipstack plant``: one HTTP API for every device of the fleets a name resolves to."""
+    from ..control.plant import PlantError, parse_fleet
+    from .emulators import _http_settings
+
+    if args.http is None:
+        raise UsageError("cipstack plant serves an HTTP API: give --http HOST:PORT")
+    try:
+        fleets = [parse_fleet(text) for text in args.fleet]
+    except PlantError as exc:
+        raise UsageError(str(exc)) from None
+    if args.refresh <= 0:
+        raise UsageError(f"--refresh {args.refresh:g}: not a positive duration")
+    http = _http_settings(args)
+    from ..eip.io_server import run_precise
+
+    try:
+        run_precise(_serve_plant(fleets, http, args.refresh))
+    except OSError as exc:
+        print(f"cipstack plant: cannot listen on {args.http}: {exc.strerror or exc}", file=sys.stderr)
+        return EXIT_USAGE
+    log.info("stopped")
+    return EXIT_OK
+
+
+async def _serve_plant(fleets: list[tuple[str, int]], http: dict[str, Any], refresh: float) -> None:
+    """The plant view until SIGINT or SIGTERM."""
+    import asyncio
+    import signal
+
+    from ..control.http import parse_listen
+    from ..control.http_relay import RelayApi
+    from ..control.plant import PlantView
+
+    host, port = parse_listen(http["http"])
+    relay = RelayApi([], host, port, token=http.get("http_token"), allow_remote=http.get("http_allow_remote", False),
+                     hosts=tuple(http.get("http_hosts", ())), shard=None)
+    view = PlantView(fleets, relay, token=http.get("http_token"), refresh=refresh)
+    stop = asyncio.Event()
+    loop = asyncio.get_running_loop()
+    for sig in (signal.SIGINT, signal.SIGTERM):
+        loop.add_signal_handler(sig, stop.set)
+    try:
+        await view.start()
+        log.info("plant view of %s: %d devices in %d fleets; Ctrl-C or SIGTERM stops it",
+                 ", ".join(f"{name}:{p}" for name, p in fleets), len(relay.routes), len(view.fleets))
+        await stop.wait()
+    finally:
+        await view.close()
+        for sig in (signal.SIGINT, signal.SIGTERM):
+            loop.remove_signal_handler(sig)
+
+
+__all__ = ["cmd_fleet", "cmd_plant"]

@@ -82,6 +82,19 @@ COMMANDS: dict[tuple[str, ...], CommandText] = {
          ("cipstack fleet --spec plant.toml --shard 1/3",
           "the second of three shards of one plant spec (one per machine or Kubernetes pod)")),
     ),
+    ("plant",): CommandText(
+        "one HTTP API for every device of a plant's fleets, on many machines or pods",
+        "Serve one HTTP control API for every device of every fleet (`cipstack fleet --http`) that "
+        "--fleet names: a DNS name whose A records are every fleet, such as a Kubernetes headless "
+        "Service, with the port of their APIs. It looks again every --refresh: a new fleet is added, "
+        "one that does not answer or is gone from the records is listed with its devices' error, "
+        "which answer 503. Its token (--http-token...) is also the one it sends to the fleets.",
+        (("cipstack plant --fleet cipstack-fleet:8080 --http 0.0.0.0:8080 --http-allow-remote "
+          "--http-token-file token",
+          "the plant view of a Kubernetes StatefulSet's fleets (deploy/)"),
+         ("cipstack plant --fleet 127.0.0.1:8081 --fleet 127.0.0.1:8082 --http 127.0.0.1:8080",
+          "two fleets on one machine, one API")),
+    ),
     ("models",): CommandText(
         "the MX2/RX models the mx2/rx profiles emulate (Tables 2/3)",
         "List the Omron MX2 and RX models the mx2 and rx profiles emulate (Tables 2 and 3 of the option "
