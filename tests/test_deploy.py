@@ -16,10 +16,10 @@ import sysconfig
 from pathlib import Path
 from typing import Any
 
-import jsonschema
-import kubernetes_validate
+import jsonschema  # type: ignore[import-untyped]
+import kubernetes_validate  # type: ignore[import-untyped]
 import pytest
-import yaml
+import yaml  # type: ignore[import-untyped]
 
 from cipstack.cli import main
 
@@ -69,8 +69,9 @@ def one(objects: list[dict[str, Any]], kind: str, name: str) -> dict[str, Any]:
 
 
 def container(pod: dict[str, Any], name: str, init: bool = False) -> dict[str, Any]:
-    (found,) = [c for c in pod["initContainers" if init else "containers"] if c["name"] == name]
-    return found
+    found: list[dict[str, Any]] = [c for c in pod["initContainers" if init else "containers"] if c["name"] == name]
+    assert len(found) == 1, name
+    return found[0]
 
 
 def env(spec: dict[str, Any]) -> dict[str, Any]:
@@ -118,13 +119,13 @@ def test_the_shards_of_the_plant_spec_are_the_replicas(kustomization: str, tmp_p
     # is at most what a pod was sized for, the shards together the plant once.
     config = one(objects, "ConfigMap", "cipstack-plant")
     assert {v["configMap"]["name"] for v in pod["volumes"] if "configMap" in v} == {config["metadata"]["name"]}
-    spec = tmp_path / "plant.toml"
-    spec.write_text(config["data"]["plant.toml"])
-    assert main(["fleet", "--spec", str(spec), "--list-addresses"]) == 0
+    spec_file = tmp_path / "plant.toml"
+    spec_file.write_text(config["data"]["plant.toml"])
+    assert main(["fleet", "--spec", str(spec_file), "--list-addresses"]) == 0
     plant = capsys.readouterr().out.split()
     shards = []
     for ordinal in range(replicas):
-        assert main(["fleet", "--spec", str(spec), "--shard", f"{ordinal}/{replicas}", "--list-addresses"]) == 0
+        assert main(["fleet", "--spec", str(spec_file), "--shard", f"{ordinal}/{replicas}", "--list-addresses"]) == 0
         shards.append(capsys.readouterr().out.split())
     assert [a for shard in shards for a in shard] == plant
     assert max(map(len, shards)) <= DRIVES_PER_POD

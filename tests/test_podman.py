@@ -31,7 +31,7 @@ from pathlib import Path
 from typing import Any
 
 import pytest
-import yaml
+import yaml  # type: ignore[import-untyped]
 
 from tests.podman_pods import deployment_pod, secrets_as_directories, statefulset_pods
 from tests.test_deploy import kubectl
