@@ -43,8 +43,8 @@ IMAGE = "localhost/cipstack:test"
 #: The plant network (tests/podman/plant.toml: the drives at .100-.108; podman gives pods .2-.62).
 SUBNET, IP_RANGE, BROADCAST = "10.89.50.0/24", "10.89.50.0/26", "10.89.50.255"
 DRIVES = [f"10.89.50.{100 + n}" for n in range(9)]
-#: The image run alone, as an adapter (its default command).
-ADAPTER = "10.89.50.60"
+#: The image run alone, as an adapter (its default command): outside the range podman gives out.
+ADAPTER = "10.89.50.90"
 #: An ACG drive of each shard (the last shard's other two are MX2s).
 ONE_PER_SHARD = ["10.89.50.100", "10.89.50.103", "10.89.50.106"]
 #: podman on this kind of machine: containers start only with these limits, under runc.
