@@ -1,7 +1,8 @@
 """``GET /metrics``: a fleet's devices' counters in the Prometheus text format, read by
 prometheus_client's own parser after real traffic over loopback (explicit requests, a refused one,
 Forward_Opens, a class 1 connection held then closed, a trip), through one process's API and through
-the relay of a fleet spread over workers, where a killed worker's devices stop counting as up."""
+the relay of a fleet spread over workers, where a killed worker's devices stop counting as up; and an
+adapter's RS-485 line over a real pty."""
 
 from __future__ import annotations
 
@@ -18,12 +19,14 @@ import pytest
 from prometheus_client.parser import text_string_to_metric_families
 
 from cipstack.cip.status import CipError
+from cipstack.devices.acg.modbus_rtu import with_crc
 from cipstack.devices.profiles import PROFILES
 from cipstack.eip.io_server import run_precise
 from cipstack.scanner import Scanner
 from tests.ports import free_port
 from tests.test_fleet import Fleet
 from tests.test_fleet_http import TOKEN, Api, worker_pid
+from tests.test_rtu_live import adapter, pdu, serial_client
 from tests.waiting import wait_for
 
 pytestmark = pytest.mark.skipif(not sys.platform.startswith("linux"), reason="any 127.x on loopback")
@@ -144,3 +147,25 @@ def test_the_relay_merges_its_workers_and_a_killed_worker_is_not_up(
     finally:
         fleet.stop()
         fleet.kill()
+
+
+def test_an_adapter_counts_the_frames_of_its_rs485_line(tmp_path: Path) -> None:
+    """The RS-485 port's counters (ACG RS-485 manual, the drive's Modbus-RTU port): a request answered,
+    and a frame whose CRC is wrong, which the drive ignores and counts."""
+    http = free_port()
+    with adapter(tmp_path, "--http", f"127.0.0.1:{http}") as path:
+        client = serial_client(path)
+        try:
+            assert client.read_holding_registers(pdu("Pr.12"), count=1, device_id=1).registers
+        finally:
+            client.close()
+        with open(path, "wb", buffering=0) as line:
+            frame = with_crc(bytes([1, 3, 0, 0, 0, 1]))
+            line.write(frame[:-1] + bytes([frame[-1] ^ 0xFF]))   # the CRC's last byte wrong
+        base = f"http://127.0.0.1:{http}"
+        wait_for(lambda: value(scrape(base)[1], "cipstack_rtu_errors_total", device="127.0.0.1",
+                               kind="crc_errors") == 1, 10)
+        _, samples = scrape(base)
+        assert value(samples, "cipstack_rtu_frames_total", device="127.0.0.1") == 2
+        assert value(samples, "cipstack_rtu_errors_total", device="127.0.0.1", kind="truncated") == 0
+        assert not any(name.startswith("cipstack_fleet_") for name, _ in samples)   # an adapter is no fleet shard
