@@ -67,7 +67,7 @@ SLOW_MODULES = frozenset({
     "test_fleet_http", "test_hardening", "test_io_session", "test_metrics", "test_plant",
 })
 #: A test with none of these is also marked ``quick``: ``pytest -m quick`` runs in a couple of minutes.
-NOT_QUICK = ("slow", "interop", "tshark", "docs", "podman")
+NOT_QUICK = ("slow", "interop", "tshark", "browser", "docs", "podman")
 
 
 @pytest.hookimpl(tryfirst=True)  # before ``-m`` selects by the markers

@@ -15,6 +15,7 @@ import socket
 import stat
 import sys
 import tempfile
+import time
 import urllib.error
 import urllib.request
 from pathlib import Path
@@ -304,3 +305,31 @@ async def test_the_relay_streams_a_body_as_it_comes_and_a_silent_worker_is_503(t
     finally:
         await relay.close()
         await runner.cleanup()
+
+
+@pytest.mark.parametrize("sig", [signal.SIGINT, signal.SIGTERM], ids=["SIGINT", "SIGTERM"])
+def test_the_fleet_stops_within_2s_during_a_long_power_cycle(tmp_path: Path, sig: int) -> None:
+    """A power-cycle of 50 minutes applied through the relay to a device of a worker does not hold the
+    fleet: SIGINT or SIGTERM ends the parent and every worker within 2 s, without a traceback."""
+    hosts = addresses(5 if sig == signal.SIGINT else 6, 2)
+    port, http = free_port(*hosts), free_port()
+    fleet = Fleet(tmp_path, "--addresses", f"{hosts[0]}-{hosts[-1]}", "--device", "acg*2", "--port", str(port),
+                  "--io-port", "0", "--workers", "2", "--state-dir", str(tmp_path / "state"),
+                  "--http", f"127.0.0.1:{http}")
+    try:
+        fleet.wait_ready()
+        workers = children(fleet.process.pid)
+        assert len(workers) == 2
+        api = Api(f"http://127.0.0.1:{http}", token=None)
+        status, body = api("POST", f"/devices/{hosts[0]}/power", {"action": "cycle", "off": "3000s"})
+        assert status == 200, body
+        assert api("GET", f"/devices/{hosts[0]}/status")[1]["power"] == "off"
+        fleet.process.send_signal(sig)
+        started = time.monotonic()
+        code = fleet.process.wait(30)
+        took = time.monotonic() - started
+        assert code == 0 and "Traceback" not in fleet.err.read_text(), fleet.err.read_text()
+        assert took < 2.0, took
+        assert not any(alive(pid) for pid in workers)
+    finally:
+        fleet.kill()

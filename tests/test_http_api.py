@@ -148,16 +148,17 @@ async def test_openapi_and_token(adapter: Adapter) -> None:
 
 def test_the_description_has_every_route_the_api_serves(adapter: Adapter) -> None:
     """The route table (``DEVICE_ROUTES``), ``/openapi.json`` and a fleet's relay name the same
-    routes, at the top and under a device's address."""
+    routes, at the top and under a device's address; the front panel's files besides."""
     paths = openapi_document()["paths"]
     served = {(method.lower(), prefix + path) for method, path, _ in DEVICE_ROUTES for prefix in ("", DEVICE_PREFIX)}
     described = {(method, path) for path, operations in paths.items() for method in operations}
-    assert described == served | {("get", "/devices"), ("get", "/metrics")}
+    assert described == served | {("get", "/devices"), ("get", "/stream"), ("get", "/devices/{device}/stream"),
+                                  ("get", "/metrics")}
     relay = RelayApi([], "127.0.0.1", 0)
     for app in (adapter.http_api.app, relay.app):                            # a fleet's relay serves the same
         routes = {(route.method.lower(), route.resource.canonical) for route in app.router.routes()
                   if route.resource is not None and route.method != "HEAD"}
-        assert routes == described | {("get", "/openapi.json")}
+        assert routes == described | {("get", "/openapi.json"), ("get", "/"), ("get", "/panel/{name}")}
 
 
 def test_settings_refuse_other_addresses_without_a_token() -> None:

@@ -5,6 +5,7 @@ and its exit status says whether every step fired. A scenario file that cannot r
 from __future__ import annotations
 
 import asyncio
+import json
 import re
 import subprocess
 import sys
@@ -79,6 +80,13 @@ async def test_comm_loss_during_a_ramp(tmp_path: Path) -> None:
 async def test_forward_open_refused_twice_then_accepted(tmp_path: Path) -> None:
     process, port, io_port = start(tmp_path, "forward_open_refused_twice.toml")
     try:
+        def progress() -> object:
+            status = run("drive", "status", "--json", "--control", str(tmp_path / "control.sock"))
+            return json.loads(status.stdout).get("scenario")
+
+        # How far it is, for status and the front panel: the first step fired, the second awaited.
+        wait_for(lambda: progress() == {"file": "forward_open_refused_twice.toml", "state": "running", "steps": 2,
+                                        "fired": 1, "next": "accepted"}, 10, "the scenario's first step")
         refused = []
         async with await Scanner.connect(f"127.0.0.1:{port}", catalog=CATALOG) as scanner:
             for _ in range(3):

@@ -1,6 +1,7 @@
 """cipstack drive: a running emulator's command service over its control socket. One subcommand per
 operation of the service (``cipstack.control.operations.OPERATIONS``), generated from it: status,
-trip, fault / faults / clear, parameter / set-parameter, events, power, link."""
+trip, fault / faults / clear, parameter / set-parameter, parameters, connections, fault-table, trips,
+events, power, link."""
 
 from __future__ import annotations
 
@@ -44,6 +45,10 @@ def _status_text(reply: dict[str, Any]) -> str:
     line = "" if not rtu else ("  rtu " + " ".join(f"{k} {v}" for k, v in rtu.items() if k != "device"))
     power = "" if reply.get("power", "on") == "on" else "  POWER OFF"
     link = "" if reply.get("link", "plugged") == "plugged" else "  UNPLUGGED"
+    scenario = reply.get("scenario")
+    if scenario:
+        line += (f"  scenario {scenario['file']} {scenario['state']} {scenario['fired']}/{scenario['steps']}"
+                 + (f" next {scenario['next']}" if scenario["next"] else ""))
     return (f"{reply['status'] or '(no drive)'}{power}{link}  sessions {reply['sessions']}  class 3 "
             f"{reply['class3_connections']}  class 1 {reply['class1_connections']}{line}")
 
@@ -55,8 +60,9 @@ def _status_json(reply: dict[str, Any]) -> dict[str, Any]:
     record = {**fields, "power": reply.get("power"), "link": reply.get("link"), "sessions": reply["sessions"],
               "class3_connections": reply["class3_connections"], "class1_connections": reply["class1_connections"],
               "faults": reply.get("faults", 0)}
-    if "rtu" in reply:
-        record["rtu"] = reply["rtu"]
+    for extra in ("rtu", "scenario"):
+        if extra in reply:
+            record[extra] = reply[extra]
     return record
 
 
@@ -97,6 +103,42 @@ def _events_text(reply: Any) -> str:
     return "\n".join(lines) or "no event"
 
 
+def _parameters_text(reply: dict[str, Any]) -> str:
+    lines = [str(reply["keypad"])]
+    for group in reply["groups"]:
+        lines.append(f"[{group['group']}]")
+        for p in group["parameters"]:
+            unit = f" {p['unit']}" if p.get("unit") else ""
+            access = "" if p["writable"] else "  read-only"
+            lines.append(f"  {p['code']:<7} {p['name']:<28} {p['value']}{unit}  ({p['minimum']}..{p['maximum']})"
+                         f"{access}")
+    return "\n".join(lines)
+
+
+def _connections_text(reply: dict[str, Any]) -> str:
+    lines = [f"sessions {len(reply['sessions'])}" + "".join(f"  {s['peer']}" for s in reply["sessions"])]
+    lines += [f"class 3 {c['id']} from {c['originator']}  requests {c['requests']}" for c in reply["class3"]]
+    for c in reply["class1"]:
+        run = "-" if c["run"] is None else "run" if c["run"] else "idle"
+        lines.append(f"class 1 {c['name']} from {c['originator']}  rpi {c['ot_rpi_us']}/{c['to_rpi_us']} us  "
+                     f"received {c['received']} lost {c['lost']} sent {c['sent']} late {c['late']}  {run}")
+        for direction, data in (("O->T", c["output_data"]), ("T->O", c["input_data"])):
+            if data is not None:
+                fields = " ".join(f"{k}={int(v) if isinstance(v, bool) else v}" for k, v in data["fields"].items())
+                lines.append(f"  {direction} {fields or data['hex'] or '(no data)'}")
+    return "\n".join(lines)
+
+
+def _fault_table_text(reply: list[dict[str, Any]]) -> str:
+    return "\n".join(f"{f['name']:<22} {f['where']:<9} {f['summary']}"
+                     + "".join(f"\n  {o['name']} {o['metavar']}: {o['help']}" for o in f["options"]) for f in reply)
+
+
+def _trips_text(reply: list[dict[str, Any]]) -> str:
+    return "\n".join(f"{t['code']!s:<20} fault code 0x{t['fault_code']:04X}  {t['label']}" for t in reply) \
+        or "this device simulates no drive"
+
+
 def _result_text(reply: Any) -> str:
     if isinstance(reply, dict) and "result" in reply:
         text = str(reply["result"])
@@ -108,7 +150,9 @@ def _result_text(reply: Any) -> str:
 _TEXT: dict[str, Callable[[Any], str]] = {"status": _status_text, "faults": _faults_text, "fault": _fault_text,
                                           "power": _fault_text, "link": _fault_text, "clear": _cleared_text,
                                           "parameter": _parameter_text, "set-parameter": _parameter_text,
-                                          "events": _events_text}
+                                          "events": _events_text, "parameters": _parameters_text,
+                                          "connections": _connections_text, "fault-table": _fault_table_text,
+                                          "trips": _trips_text}
 _JSON: dict[str, Callable[[Any], Any]] = {"status": _status_json}
 
 

@@ -285,6 +285,31 @@ COMMANDS: dict[tuple[str, ...], CommandText] = {
         "on) or plug it back (the unplug and plug faults).",
         (("cipstack drive link unplug", "pull the cable"), ("cipstack drive link plug", "plug it back")),
     ),
+    ("drive", "parameters"): CommandText(
+        "every keypad parameter, group by group",
+        "Print every keypad parameter of the emulated drive, group by group as its manual lists them: code, "
+        "name, value in the keypad's unit, range and whether it is writable (what the front panel shows).",
+        (("cipstack drive parameters", "the ACG's groups"), ("cipstack drive parameters --json", "as JSON")),
+    ),
+    ("drive", "connections"): CommandText(
+        "every session and connection, with its data",
+        "Print the sessions, class 3 and class 1 connections of the emulator; each class 1 connection with "
+        "its RPIs, counters, run/idle and the data of both directions by field names (hex where the "
+        "assembly names none).",
+        (("cipstack drive connections", "what holds the drive now"),),
+    ),
+    ("drive", "fault-table"): CommandText(
+        "every fault the emulator can be given",
+        "Print every fault of the fault table with where it acts and its options (what `cipstack drive "
+        "fault` and the front panel's fault forms take).",
+        (("cipstack drive fault-table", "the faults and their options"),),
+    ),
+    ("drive", "trips"): CommandText(
+        "the trips the drive's manual lists",
+        "Print the trips `cipstack drive trip` takes: the ACG's Drive Fault Codes table by name, the MX2/RX "
+        "trip codes of its table, each with its CIP fault code.",
+        (("cipstack drive trips", "what `cipstack drive trip` takes"),),
+    ),
     ("eds",): CommandText(
         "EDS files: generate, check, show",
         "Electronic Data Sheets: write the EDS files of the emulated models, check EDS files from "

@@ -33,6 +33,7 @@ from ..eip.limits import RateLimitedLog, guarded_listener, quiet_accept_errors
 from ..errors import BadRequest, CipstackError
 from .metrics import ShardGauges, add_metrics_route
 from .operations import OPERATIONS, Operation
+from .panel_app import PanelStreams
 from .service import outcome
 
 if TYPE_CHECKING:
@@ -59,6 +60,8 @@ DEVICE_ROUTES: tuple[tuple[str, str, Operation], ...] = tuple(
     (operation.method, path, operation) for operation in OPERATIONS for path in _routes(operation))
 #: Where a device's routes answer by its address.
 DEVICE_PREFIX = "/devices/{device}"
+#: The front panel's live stream of a device (``panel_app``), at the top and under ``DEVICE_PREFIX``.
+STREAM_PATH = "/stream"
 
 
 class HttpApiError(BadRequest):
@@ -132,6 +135,12 @@ def _is_address(name: str) -> bool:
     return True
 
 
+def _public(request: web.Request) -> bool:
+    """The front panel's own files: the same for everyone, no secret in them, so a browser loads them
+    without the token (the page then asks for it, and sends it with every call of the API)."""
+    return request.method == "GET" and (request.path == "/" or request.path.startswith("/panel/"))
+
+
 class Guard:
     """What every request passes before its handler (an aiohttp middleware): loopback peers only unless
     ``allow_remote``, the bearer ``token`` when one is set, at most ``MAX_IN_FLIGHT`` at once; an error
@@ -156,27 +165,27 @@ class Guard:
         self.hosts = frozenset(h.lower() for h in hosts)
         self.in_flight = 0
 
-    def refusal(self, request: web.Request) -> web.Response | None:
-        """Why ``request`` is refused before its handler, or None."""
+    def refusal(self, request: web.Request) -> tuple[int, str] | None:
+        """The status and the reason ``request`` is refused for before its handler, or None."""
         peer = request.remote or ""
         if not self.allow_remote and not _is_loopback(peer):
-            return json_error(403, f"{peer} is not loopback: this API serves loopback only (--http-allow-remote)")
+            return 403, f"{peer} is not loopback: this API serves loopback only (--http-allow-remote)"
         name = _host_name(request.headers.get("Host", "")).lower()
         if not (_is_address(name) or name == "localhost" or name.endswith(".localhost") or name in self.hosts):
-            return json_error(403, f"Host {name!r} is not this API's: use its address, localhost, or name it with "
-                                   "--http-allow-host")
+            return 403, (f"Host {name!r} is not this API's: use its address, localhost, or name it with "
+                         "--http-allow-host")
         if request.method in _CHANGING:
             origin = request.headers.get("Origin")
             if origin is not None:
                 own = f"{request.scheme}://{request.headers.get('Host', '')}".lower()
                 if origin.strip().lower() != own:
-                    return json_error(403, f"Origin {origin!r} is not this API's own: a page of another origin "
-                                           "cannot change the emulator")
+                    return 403, (f"Origin {origin!r} is not this API's own: a page of another origin "
+                                 "cannot change the emulator")
             elif request.headers.get("Sec-Fetch-Site", "none").lower() not in _SAME_SITE:
-                return json_error(403, "a request a browser sent from another site cannot change the emulator "
-                                       "(Sec-Fetch-Site)")
+                return 403, ("a request a browser sent from another site cannot change the emulator "
+                             "(Sec-Fetch-Site)")
             if request.can_read_body and request.content_type != "application/json":
-                return json_error(415, "a body is JSON: send it with Content-Type: application/json")
+                return 415, "a body is JSON: send it with Content-Type: application/json"
         return None
 
     @web.middleware
@@ -187,8 +196,10 @@ class Guard:
         if not self.local:
             refused = self.refusal(request)
             if refused is not None:
-                return refused
-        if self.token is not None:
+                # Said once per request, so that whoever wonders why a page or a script is refused reads it.
+                log.info("HTTP %s %s refused (%d): %s", request.method, request.path, *refused)
+                return json_error(*refused)
+        if self.token is not None and not _public(request):
             given = request.headers.get("Authorization", "")
             # A header aiohttp decoded with surrogates (bytes that are not UTF-8) compares as what it is.
             if not hmac.compare_digest(given.encode("utf-8", "surrogateescape"), f"Bearer {self.token}".encode()):
@@ -350,6 +361,7 @@ class HttpApi:
         self.allow_remote = allow_remote
         self.guard = Guard(token, allow_remote, local=path is not None, hosts=hosts)
         self.shard = shard
+        self.panel = PanelStreams()
         self._served: ServedApp | None = None
         self.app = self._build()
 
@@ -360,9 +372,10 @@ class HttpApi:
         self._served = await serve_app(self.app, self.host, self.port, self.path)
         self.port = self._served.port
         if self.path is None:
-            log.info("HTTP control API on http://%s:%d/ (openapi.json)", self.host, self.port)
+            log.info("HTTP control API on http://%s:%d/ (the front panel; openapi.json)", self.host, self.port)
 
     async def close(self) -> None:
+        self.panel.close()
         if self._served is not None:
             await self._served.close()
             self._served = None
@@ -377,7 +390,23 @@ class HttpApi:
         app.router.add_get("/devices", self.list_devices)
         app.router.add_get("/openapi.json", openapi)
         add_metrics_route(app, self.devices, self.shard)
+        app.router.add_get(STREAM_PATH, self.stream)
+        app.router.add_get(DEVICE_PREFIX + STREAM_PATH, self.stream)
+        self.panel.add_routes(app)
         return app
+
+    def _service(self, request: web.Request) -> DeviceService | web.Response:
+        """The device a request's route names (the only one where it names none), or the 404 saying so."""
+        name = request.match_info.get("device")
+        service = self.devices.get(name) if name is not None else \
+            next(iter(self.devices.values())) if len(self.devices) == 1 else None
+        return service if service is not None else no_device(name, list(self.devices))
+
+    async def stream(self, request: web.Request) -> web.StreamResponse:
+        service = self._service(request)
+        if isinstance(service, web.Response):
+            return service
+        return await self.panel.stream(request, service)
 
     async def list_devices(self, request: web.Request) -> web.Response:
         return web.json_response([{"address": name, **service.describe()}
@@ -385,11 +414,9 @@ class HttpApi:
 
     def _handler(self, operation: Operation) -> Callable[[web.Request], Awaitable[web.Response]]:
         async def handle(request: web.Request) -> web.Response:
-            name = request.match_info.get("device")
-            service = self.devices.get(name) if name is not None else \
-                next(iter(self.devices.values())) if len(self.devices) == 1 else None
-            if service is None:
-                return no_device(name, list(self.devices))
+            service = self._service(request)
+            if isinstance(service, web.Response):
+                return service
             try:
                 arguments = await _arguments(operation, request)
                 # The client's host:port; none behind a fleet's relay (a worker's API is on a Unix socket).
@@ -531,6 +558,17 @@ def openapi_document() -> dict[str, Any]:
             if prefix:
                 routed["operationId"] = operation.name + "-by-address"
             paths.setdefault(prefix + path, {})[method.lower()] = routed
+    stream: dict[str, Any] = {
+        "summary": "the front panel's live feed: Server-Sent Events `status`, `faults` and `connections` when "
+                   "they change and the new `events`, twice a second",
+        "operationId": "stream",
+        "parameters": [{"name": "since", "in": "query", "required": False, "schema": {"type": "integer"},
+                        "description": "the last event the client has (0: every event kept)"}],
+        "responses": {"200": {"description": "a stream of events",
+                              "content": {"text/event-stream": {"schema": {"type": "string"}}}}, **errors}}
+    paths[STREAM_PATH] = {"get": stream}
+    paths[DEVICE_PREFIX + STREAM_PATH] = {"get": {**stream, "operationId": "stream-by-address",
+                                                  "parameters": [device, *stream["parameters"]]}}
     paths["/devices"] = {"get": {"summary": "the devices this API serves (in a fleet of workers, each with its "
                                             "worker's number, and `error` where that worker is lost)",
                                  "operationId": "devices", "responses": {"200": ok}}}

@@ -34,6 +34,7 @@ from .http import (
     DEVICE_PREFIX,
     DEVICE_ROUTES,
     MAX_BODY,
+    STREAM_PATH,
     Guard,
     HttpConnections,
     ServedApp,
@@ -44,6 +45,7 @@ from .http import (
     serve_app,
 )
 from .metrics import ShardGauges, merge_families, metrics_response, powered_devices, render
+from .panel_app import PanelStreams
 
 log = logging.getLogger(__name__)
 
@@ -109,6 +111,8 @@ class RelayApi:
         self.port = port
         self.guard = Guard(token, allow_remote, hosts=hosts)
         self.shard = shard
+        #: The front panel's files (the plant view and each device's panel); its streams are the workers'.
+        self.panel = PanelStreams()
         #: Each device's worker, by the address the worker's API gives it.
         self.routes: dict[str, Backend] = {}
         self._served: ServedApp | None = None
@@ -125,10 +129,11 @@ class RelayApi:
         except BaseException:
             await self.close()
             raise
-        log.info("HTTP control API on http://%s:%d/ (openapi.json), for %d devices in %d workers", self.host,
+        log.info("HTTP control API on http://%s:%d/ (the plant; openapi.json), for %d devices in %d workers", self.host,
                  self.port, len(self.routes), len(self.backends))
 
     async def close(self) -> None:
+        self.panel.close()
         if self._served is not None:
             await self._served.close()
             self._served = None
@@ -172,6 +177,9 @@ class RelayApi:
         app.router.add_get("/devices", self.list_devices)
         app.router.add_get("/openapi.json", openapi)
         app.router.add_get("/metrics", self.metrics)
+        app.router.add_get(STREAM_PATH, self.unaddressed)
+        app.router.add_get(DEVICE_PREFIX + STREAM_PATH, self.forward)
+        self.panel.add_routes(app)
         return app
 
     # -- handlers ---------------------------------------------------------------------------------------
@@ -232,6 +240,8 @@ class RelayApi:
                 response = web.StreamResponse(status=reply.status, headers=kept)
                 await response.prepare(request)
                 async for chunk in reply.content.iter_any():
+                    if self.panel.closing.is_set():     # the relay stops: a panel's stream ends here
+                        break
                     await response.write(chunk)
                 await response.write_eof()
                 return response

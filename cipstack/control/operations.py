@@ -67,6 +67,12 @@ OPERATIONS: tuple[Operation, ...] = (
               "/parameters/{code}",
               (_CODE, Argument("value", "string|number", "the value in the keypad's unit (\"2.5\", 60, or an "
                                "enumeration's name)", required=True, positional=True, metavar="VALUE"))),
+    Operation("parameters", "every keypad parameter, group by group: value, unit, range, access", "GET",
+              "/parameters"),
+    Operation("connections", "every session, class 3 and class 1 connection; class 1 with its counters and data "
+              "by field names", "GET", "/connections"),
+    Operation("fault-table", "every fault a device can be given, with its options", "GET", "/fault-table"),
+    Operation("trips", "the trips of the drive's manual that `trip` takes", "GET", "/trips"),
     Operation("events", "the events after event number `since`, oldest first", "GET", "/events",
               (Argument("since", "integer", "an event number (0: every event kept)", where="query",
                         metavar="N"),)),

@@ -173,11 +173,18 @@ async def run(service: DeviceService, scenario: Scenario, report: Callable[[str]
     waiting = [step.name + (f" ({round_}/{step.repeat})" if step.repeat > 1 else "")
                for step in scenario.steps for round_ in range(1, step.repeat + 1)]
     interrupted = False
+    total = len(waiting)
 
     def line(text: str, at: float | None = None) -> None:
         report(f"{(loop.time() if at is None else at) - start:8.3f}s  {text}")
 
+    def progress(state: str) -> None:
+        # What ``status`` (and the front panel) shows of the scenario: steps fired, the one awaited.
+        service.scenario = {"file": scenario.path.name, "state": state, "steps": total,
+                            "fired": total - len(waiting), "next": waiting[0] if waiting else None}
+
     line(f"scenario {scenario.path.name}: {sum(s.repeat for s in scenario.steps)} step(s)")
+    progress("running")
     try:
         for step in scenario.steps:
             for round_ in range(1, step.repeat + 1):
@@ -199,6 +206,7 @@ async def run(service: DeviceService, scenario: Scenario, report: Callable[[str]
                     return False
                 line(f"{label} fired: {step.describe()}", fired_at)
                 waiting.pop(0)
+                progress("running")
         if scenario.linger:
             await asyncio.sleep(scenario.linger)
         return fired_all
@@ -209,6 +217,7 @@ async def run(service: DeviceService, scenario: Scenario, report: Callable[[str]
         if service.faults.active:
             await service.call_async("clear", {})
         await service.faults.settle()
+        progress("interrupted" if interrupted and waiting else "complete" if fired_all else "incomplete")
         if interrupted and waiting:
             shown = ", ".join(waiting[:10]) + (f" and {len(waiting) - 10} more" if len(waiting) > 10 else "")
             line(f"scenario interrupted: {len(waiting)} step(s) did not fire ({shown}); no fault left active")

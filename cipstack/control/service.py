@@ -25,6 +25,7 @@ from ..devices.keypad import NoKeypad, WriteRefused
 from ..errors import BadRequest, CipstackError, NotFound, PeerUnreachable, StateRefused
 from ..faults import FaultController, FaultRequest
 from ..faults.model import JSON_SPELLING
+from . import views
 from .events import EventStream
 from .operations import JSON_TYPES, OPERATION_BY_NAME, OPERATIONS, Argument, Operation
 
@@ -107,11 +108,15 @@ class DeviceService:
         self.events = events
         #: The device's product name, for ``/devices``.
         self.name = name
+        #: How far a scenario running on the device is (``scenario.run`` keeps it), for ``status``.
+        self.scenario: dict[str, Any] | None = None
         #: Each operation's method.
         self.handlers: dict[str, Callable[..., Any]] = {
             "status": self.status, "trip": self.trip, "reset": self.reset, "fault": self.fault,
             "faults": self.faults_active, "clear": self.clear, "parameter": self.parameter,
-            "set-parameter": self.set_parameter, "events": self.events_since, "power": self.power, "link": self.link}
+            "set-parameter": self.set_parameter, "events": self.events_since, "power": self.power, "link": self.link,
+            "parameters": self.parameters, "connections": self.connections, "fault-table": self.fault_table,
+            "trips": self.trips}
 
     def describe(self) -> dict[str, Any]:
         """What ``GET /devices`` lists of the device: its EtherNet/IP port and product name."""
@@ -142,7 +147,10 @@ class DeviceService:
     # -- status, trip ----------------------------------------------------------------------------------
     def status(self) -> dict[str, Any]:
         self.runtime.tick()
-        return {**self.runtime.status(), "faults": len(self.faults.active)}
+        status = {**self.runtime.status(), "faults": len(self.faults.active)}
+        if self.scenario is not None:
+            status["scenario"] = dict(self.scenario)
+        return status
 
     def check_trip(self, code: object) -> int | str:
         """``code`` as ``trip`` takes it, checked against the device's trip codes without tripping it
@@ -282,6 +290,22 @@ class DeviceService:
                                           **keypad.write_fields(register, raw))
         self.runtime.tick(now)
         return dict(keypad.get(register.code))
+
+    def parameters(self) -> dict[str, Any]:
+        self.runtime.tick()
+        return views.parameter_groups(self._keypad())
+
+    # -- what a front panel shows ---------------------------------------------------------------------------
+    def connections(self) -> dict[str, Any]:
+        self.runtime.tick()
+        return views.connections(self.runtime)
+
+    @staticmethod
+    def fault_table() -> list[dict[str, Any]]:
+        return views.fault_table()
+
+    def trips(self) -> list[dict[str, Any]]:
+        return [dict(choice) for choice in self.runtime.device.trip_choices()]
 
     # -- events -------------------------------------------------------------------------------------------
     def events_since(self, since: int | str = 0) -> list[dict[str, Any]]:

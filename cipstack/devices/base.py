@@ -135,6 +135,11 @@ class Device:
         """The trip codes ``inject_trip`` takes, as one line for an error message."""
         return "none (this profile simulates no drive)"
 
+    def trip_choices(self) -> list[dict[str, object]]:
+        """Each trip ``inject_trip`` takes, as a front panel offers it: ``code`` (what to send), ``label``
+        and the CIP ``fault_code``; empty for a device without a drive."""
+        return []
+
     def check_trip_code(self, code: int | str) -> None:
         """Raise what ``inject_trip`` would for a code it does not take (``KeyError``, ``ValueError``,
         ``NotImplementedError`` for a device without a drive); nothing for one it takes."""

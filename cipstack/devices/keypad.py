@@ -63,6 +63,9 @@ class KeypadCodes:
     lookup: Callable[[str], Register]
     #: Codes an error message names as examples.
     examples: tuple[str, ...]
+    #: Every parameter of the keypad with a code, group by group in the order its manual lists them
+    #: (what a front panel shows).
+    listed: tuple[Register, ...] = ()
 
     def register(self, code: str) -> Register:
         """The register of ``code``; ``UnknownCode`` naming valid examples for another."""

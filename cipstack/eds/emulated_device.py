@@ -32,7 +32,7 @@ from __future__ import annotations
 import logging
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 from ..assemblies.schema import AssemblySchema
 from ..cip.messages import MessageRouterRequest
@@ -49,6 +49,9 @@ from ..objects.identity import IdentityInfo
 from ..objects.tcpip import NetworkInterface
 from .interpret import EdsIssue, EdsView, ParamInfo, assembly_schema, read_view
 from .model import EdsDocument, FieldKind
+
+if TYPE_CHECKING:
+    from .keypad import EdsParameters
 
 log = logging.getLogger(__name__)
 
@@ -111,6 +114,26 @@ class EdsDevice(Device):
         self._io: IoProfile | None = None
         #: The Assembly instances made from the file, with the schema their data is decoded by.
         self.schemas: dict[int, AssemblySchema] = {}
+        #: The file's parameters, in its order (what ``keypad`` offers of them).
+        self.params: list[ParamInfo] = []
+
+    def eds_object(self, link: Link) -> tuple[EdsObject, int, int] | None:
+        """The object made from the file that serves ``link`` (class, instance, attribute), with the
+        instance and attribute; None where the link is not one of those."""
+        class_id, instance, attribute = link
+        obj = self.router.objects.get(class_id)
+        if isinstance(obj, EdsObject) and attribute in obj.declared.get(instance, {}):
+            return obj, instance, attribute
+        return None
+
+    def keypad(self) -> EdsParameters | None:
+        """The file's parameters that link an integer attribute of an object made from it, as a keypad
+        (``cipstack.eds.keypad``): what the front panel shows and ``cipstack drive parameter`` reads;
+        None where the file has no such parameter."""
+        from .keypad import EdsParameters
+
+        parameters = EdsParameters(self, self.params)
+        return parameters if parameters.codes.listed else None
 
     def io_profile(self) -> IoProfile | None:
         return self._io
@@ -457,6 +480,7 @@ def build_eds_device(doc: EdsDocument, interface: NetworkInterface | None = None
     issues.extend(view.issues)
     device = EdsDevice(identity, interface, limits or DeviceLimits(), issues=issues)
     standard_links = _add_parameter_objects(device, view, issues)
+    device.params = list(view.params.values())
     points = _add_assemblies(device, view, issues)
     _check_standard_links(device, standard_links, issues)
     device._io = _io_profile(doc, view, points, issues)

@@ -335,6 +335,10 @@ class AcgDevice(Device):
         codes = sorted({trip.fault_code for trip in Trip})
         return ", ".join(f"0x{code:04X}" for code in codes) + " (or a trip name, e.g. OverHeat)"
 
+    def trip_choices(self) -> list[dict[str, object]]:
+        """The trips of the Drive Fault Codes table (ACG-ET2 manual) by name: several share a code."""
+        return [{"code": trip.label, "label": trip.label, "fault_code": trip.fault_code} for trip in Trip]
+
     def keypad(self) -> AcgKeypad:
         """The drive's keypad: its codes (drv, ACC, CM.23...) in the keypad's unit."""
         return AcgKeypad(lambda: self.drive, self.router.objects)
@@ -345,6 +349,8 @@ class AcgDevice(Device):
             "state": drive.drive_state.name,
             "direction": "fwd" if drive.running_forward else "rev" if drive.running_reverse else None,
             "output_frequency_hz": drive.output_frequency / 100, "reference_hz": drive.speed_reference / 100,
+            # Output current, 0x0009 in 0.1 A (ACG RS-485 manual, Monitoring Area Parameter).
+            "output_current_a": drive.read(0x0009) / 10,
             "io_connections": len(self._io_connections),
             "trip": drive.trip.label if drive.trip is not None else None,
             "fault_code": drive.fault_code if drive.trip is not None else None,

@@ -15,10 +15,14 @@ from typing import Any
 from ..keypad import Keypad, KeypadCodes
 from ..registers import Register
 from .drive import AcgDrive
-from .registers import class64_register, register_for_code
+from .registers import ACG_REGISTERS, KEYPAD_GROUPS, class64_register, register_for_code
 
 #: The ACG's keypad codes: the operation group's (drv, Frq, ACC...) and GROUP.N (ACG RS-485 manual tables).
-ACG_KEYPAD = KeypadCodes("the ACG keypad", register_for_code, ("drv", "Frq", "ACC", "dr.20", "CM.23"))
+ACG_KEYPAD = KeypadCodes(
+    "the ACG keypad", register_for_code, ("drv", "Frq", "ACC", "dr.20", "CM.23"),
+    # The operation group first, as the keypad shows it at power-on, then the groups in their order.
+    tuple(sorted((r for r in ACG_REGISTERS.values() if r.code and r.group in KEYPAD_GROUPS),
+                 key=lambda r: (r.group != "operation", KEYPAD_GROUPS.index(r.group)))))
 
 #: Class 0x64, the keypad parameters by group and code number (ACG-ET2 manual).
 _KEYPAD_CLASS = 0x64

@@ -539,6 +539,11 @@ class OmronDevice(Device):
         """The trip numbers of Table D-5 this family has (5 or E05)."""
         return " ".join(str(t.number) for t in TRIP_CODES if self.family in t.families) + " (or as En, e.g. E05)"
 
+    def trip_choices(self) -> list[dict[str, object]]:
+        """The trip codes of Table D-5 this family has (CompoNet manual), with the CIP fault code."""
+        return [{"code": t.code, "label": f"{t.code} {t.name}", "fault_code": t.cip_code}
+                for t in TRIP_CODES if self.family in t.families]
+
     def status_fields(self) -> dict[str, object]:
         status = self.inverter.status()
         return {

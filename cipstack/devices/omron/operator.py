@@ -41,8 +41,11 @@ SAVING_CODES = frozenset({"b180"})
 def operator_codes(family: Family) -> KeypadCodes:
     """The function codes of ``family``'s Digital Operator (Table E-3 spellings, any letter case)."""
     registers = register_set(family)
+    # The monitor codes (d) first, then the function codes, group by group as the operator lists them.
+    listed = sorted((r for r in registers.modbus.values() if r.code),
+                    key=lambda r: ("dFAbCHP".find(r.code[0]) % 8, r.code))
     return KeypadCodes(f"the {family.value} Digital Operator", registers.by_code,
-                       ("F001", "A001", "A004", "b049", "P044", "P046"))
+                       ("F001", "A001", "A004", "b049", "P044", "P046"), tuple(listed))
 
 
 _CODES = {family: operator_codes(family) for family in Family}

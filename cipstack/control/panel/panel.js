@@ -1,0 +1,480 @@
+// The front panel of cipstack's emulated devices: one device's panel, or the plant of a fleet.
+// It calls the HTTP API's JSON operations like any client (same origin, same token) and reads the
+// device live from its Server-Sent Events stream (/devices/ADDRESS/stream). Everything a device
+// sends is shown as text (textContent), never as markup.
+"use strict";
+
+const $ = (id) => document.getElementById(id);
+const TOKEN_KEY = "cipstack-token";
+const TREND_SECONDS = 60;
+
+// -- the API ----------------------------------------------------------------------------------------
+class ApiError extends Error {
+  constructor(status, message) { super(message); this.status = status; }
+}
+
+function headers(json) {
+  const given = {};
+  const token = sessionStorage.getItem(TOKEN_KEY);
+  if (token) given.Authorization = `Bearer ${token}`;
+  if (json) given["Content-Type"] = "application/json";
+  return given;
+}
+
+function askToken() {
+  return new Promise((resolve) => {
+    const dialog = $("token-dialog");
+    $("token-form").onsubmit = () => {
+      sessionStorage.setItem(TOKEN_KEY, $("token-input").value);
+      resolve();
+    };
+    dialog.showModal();
+    $("token-input").focus();
+  });
+}
+
+async function api(method, path, body) {
+  for (let attempt = 0; attempt < 3; attempt++) {
+    const reply = await fetch(path, {method, headers: headers(body !== undefined),
+                                     body: body === undefined ? undefined : JSON.stringify(body)});
+    if (reply.status === 401) { await askToken(); continue; }
+    const text = await reply.text();
+    let value = null;
+    try { value = text ? JSON.parse(text) : null; } catch (error) { value = {error: text}; }
+    if (!reply.ok) throw new ApiError(reply.status, (value && value.error) || `HTTP ${reply.status}`);
+    return value;
+  }
+  throw new ApiError(401, "the token was refused");
+}
+
+function element(tag, text, attributes) {
+  const made = document.createElement(tag);
+  if (text !== undefined && text !== null) made.textContent = String(text);
+  for (const [name, value] of Object.entries(attributes || {})) made.setAttribute(name, value);
+  return made;
+}
+
+function row(cells) {
+  const tr = document.createElement("tr");
+  for (const cell of cells) {
+    const td = document.createElement("td");
+    if (cell instanceof Node) td.appendChild(cell); else td.textContent = cell === null ? "-" : String(cell);
+    tr.appendChild(td);
+  }
+  return tr;
+}
+
+function say(where, text, ok) {
+  const target = $(where);
+  target.textContent = text;
+  target.className = "message " + (ok ? "ok" : "error");
+}
+
+// -- the live stream ----------------------------------------------------------------------------------
+// fetch rather than EventSource: a token goes in a header, which EventSource cannot send.
+async function follow(path, handlers, since) {
+  for (;;) {
+    try {
+      const reply = await fetch(`${path}?since=${since()}`, {headers: headers(false)});
+      if (reply.status === 401) { await askToken(); continue; }
+      if (!reply.ok || !reply.body) throw new Error(`HTTP ${reply.status}`);
+      setLink(true);
+      const reader = reply.body.getReader();
+      const decoder = new TextDecoder();
+      let pending = "";
+      for (;;) {
+        const {value, done} = await reader.read();
+        if (done) break;
+        pending += decoder.decode(value, {stream: true});
+        let end;
+        while ((end = pending.indexOf("\n\n")) >= 0) {
+          const block = pending.slice(0, end);
+          pending = pending.slice(end + 2);
+          let name = "message"; const data = [];
+          for (const line of block.split("\n")) {
+            if (line.startsWith("event: ")) name = line.slice(7);
+            else if (line.startsWith("data: ")) data.push(line.slice(6));
+          }
+          if (data.length && handlers[name]) handlers[name](JSON.parse(data.join("\n")));
+        }
+      }
+    } catch (error) {
+      // the device's API went away (a stop, a worker that ended): say so and try again
+    }
+    setLink(false);
+    await new Promise((resolve) => setTimeout(resolve, 1000));
+  }
+}
+
+function setLink(up) {
+  const state = $("link-state");
+  state.textContent = up ? "live" : "not connected to the emulator; retrying";
+  state.className = up ? "" : "down";
+}
+
+// -- one device's panel ---------------------------------------------------------------------------------
+const panel = {prefix: "", connections: [], faultTable: [], events: [], samples: [], status: null};
+
+async function openPanel(address) {
+  panel.prefix = `/devices/${encodeURIComponent(address)}`;
+  $("panel").hidden = false;
+  $("title").textContent = address;
+  document.title = `${address}: cipstack front panel`;
+  wireControls();
+  const [trips, table] = await Promise.all([api("GET", panel.prefix + "/trips"),
+                                            api("GET", panel.prefix + "/fault-table")]);
+  const select = $("trip-code");
+  for (const trip of trips) select.appendChild(element("option", `${trip.label} (0x${trip.fault_code.toString(16).toUpperCase().padStart(4, "0")})`, {value: trip.code}));
+  if (!trips.length) $("trip-form").hidden = true;
+  panel.faultTable = table;
+  for (const kind of table) $("fault-name").appendChild(element("option", kind.name, {value: kind.name}));
+  showFaultForm();
+  await loadParameters();
+  setInterval(sample, 500);
+  follow(panel.prefix + "/stream", {status: showStatus, faults: showFaults, connections: showConnections,
+                                     events: addEvents},
+         () => (panel.events.length ? panel.events[panel.events.length - 1].number : 0));
+}
+
+function wireControls() {
+  const post = (path, body, message) => async () => {
+    try { const result = await api("POST", panel.prefix + path, body); say("drive-message", message(result), true); }
+    catch (error) { say("drive-message", error.message, false); }
+  };
+  $("trip-form").addEventListener("submit", (event) => {
+    event.preventDefault();
+    post("/trip", {code: $("trip-code").value}, (r) => r.result)();
+  });
+  $("reset").addEventListener("click", post("/reset", undefined, (r) => r.result));
+  $("power-off").addEventListener("click", post("/power", {action: "cycle", off: "3600s"},
+                                                 () => "power off (for up to an hour; Power on ends it)"));
+  $("power-on").addEventListener("click", async () => {
+    try { await api("DELETE", panel.prefix + "/faults/power-cycle"); say("drive-message", "power on", true); }
+    catch (error) { say("drive-message", error.message, false); }
+  });
+  $("unplug").addEventListener("click", post("/link", {state: "unplug"}, () => "cable unplugged"));
+  $("plug").addEventListener("click", post("/link", {state: "plug"}, () => "cable plugged"));
+  $("fault-name").addEventListener("change", showFaultForm);
+  $("fault-form").addEventListener("submit", applyFault);
+  $("clear-all").addEventListener("click", () => clearFaults(""));
+  $("parameter-filter").addEventListener("input", filterParameters);
+  $("parameters-refresh").addEventListener("click", loadParameters);
+  $("event-filter").addEventListener("input", showEvents);
+}
+
+function showStatus(status) {
+  panel.status = status;
+  const drive = status.drive || {};
+  const tripped = Boolean(drive.trip);
+  // The Control Supervisor's states (CIP): Enabled and Stopping are the motor energized.
+  const running = /^(enabled|stopping)$/i.test(drive.state || "") && !tripped;
+  const hz = drive.output_frequency_hz;
+  if (!panel.shownParameter) {
+    $("display").textContent = status.power === "off" ? "" : tripped ? String(drive.trip) :
+      hz === undefined ? "-----" : Number(hz).toFixed(2);
+  }
+  $("display").className = tripped ? "tripped" : "";
+  const lit = {"ind-run": running, "ind-stop": !running && status.power !== "off", "ind-fwd": drive.direction === "fwd",
+               "ind-rev": drive.direction === "rev", "ind-trip": tripped};
+  for (const [id, on] of Object.entries(lit)) $(id).classList.toggle("lit", on);
+  $("state").textContent = drive.state || "-";
+  $("state").className = tripped ? "state-fault" : running ? "state-running" : "";
+  $("output").textContent = hz === undefined ? "-" : `${Number(hz).toFixed(2)} Hz`;
+  const reference = drive.reference_hz !== undefined ? `${Number(drive.reference_hz).toFixed(2)} Hz` :
+    drive.speed_reference !== undefined ? `${drive.speed_reference} (${drive.speed_unit})` : "-";
+  $("reference").textContent = reference;
+  $("direction").textContent = drive.direction || "-";
+  $("current").textContent = drive.output_current_a === undefined ? "-" : `${Number(drive.output_current_a).toFixed(1)} A`;
+  $("trip").textContent = drive.trip || "none";
+  $("power").textContent = status.power;
+  $("link").textContent = status.link;
+  $("power").className = status.power === "off" ? "down" : "";
+  const scenario = status.scenario;
+  $("scenario").hidden = !scenario;
+  if (scenario) {
+    $("scenario").textContent = `Scenario ${scenario.file}: ${scenario.state}, ${scenario.fired} of ${scenario.steps} ` +
+      `step(s) fired` + (scenario.next ? `; next: ${scenario.next}` : "");
+  }
+  $("link").className = status.link === "unplugged" ? "down" : "";
+}
+
+// -- the trend: output and reference frequency of the last minute ----------------------------------------
+function sample() {
+  const drive = (panel.status && panel.status.drive) || {};
+  const now = Date.now() / 1000;
+  panel.samples.push([now, Number(drive.output_frequency_hz || 0), Number(drive.reference_hz || 0)]);
+  while (panel.samples.length && panel.samples[0][0] < now - TREND_SECONDS) panel.samples.shift();
+  drawTrend(now);
+}
+
+function drawTrend(now) {
+  const canvas = $("trend");
+  const context = canvas.getContext("2d");
+  const {width, height} = canvas;
+  context.clearRect(0, 0, width, height);
+  const top = Math.max(10, ...panel.samples.map((s) => Math.max(s[1], s[2]))) * 1.1;
+  context.strokeStyle = "#d5dae0"; context.fillStyle = "#5b6470"; context.font = "11px sans-serif";
+  for (let i = 0; i <= 4; i++) {
+    const y = height - 16 - (height - 34) * i / 4;
+    context.beginPath(); context.moveTo(40, y); context.lineTo(width, y); context.stroke();
+    context.fillText((top * i / 4).toFixed(1), 2, y + 4);
+  }
+  context.fillText("Hz", 2, 10); context.fillText("-60 s", 40, height - 2); context.fillText("now", width - 24, height - 2);
+  const x = (t) => 40 + (width - 40) * (1 - (now - t) / TREND_SECONDS);
+  const y = (v) => height - 16 - (height - 34) * v / top;
+  for (const [index, colour] of [[2, "#b35900"], [1, "#0969da"]]) {
+    context.strokeStyle = colour; context.lineWidth = 2; context.beginPath();
+    panel.samples.forEach((s, n) => (n ? context.lineTo(x(s[0]), y(s[index])) : context.moveTo(x(s[0]), y(s[index]))));
+    context.stroke();
+  }
+}
+
+// -- connections ----------------------------------------------------------------------------------------------
+function dataCell(data) {
+  const cell = document.createElement("div");
+  if (!data) { cell.textContent = "-"; return cell; }
+  const names = Object.entries(data.fields || {});
+  if (names.length) {
+    const list = element("ul", null, {class: "fields"});
+    for (const [name, value] of names) list.appendChild(element("li", `${name} = ${value === true ? 1 : value === false ? 0 : value}`));
+    cell.appendChild(list);
+  }
+  cell.appendChild(element("div", data.hex || "(no data)", {class: "hex"}));
+  return cell;
+}
+
+function showConnections(all) {
+  panel.connections = all.class1;
+  $("sessions").textContent = `${all.sessions.length} session(s)` +
+    (all.sessions.length ? `: ${all.sessions.map((s) => s.peer).join(", ")}` : "");
+  const body = $("class1-table").tBodies[0];
+  body.replaceChildren(...all.class1.map((c) => row([
+    `${c.kind} ${c.ot_id} / ${c.to_id}`, c.originator, `${c.output === null ? "heartbeat" : c.output} → ${c.input}`,
+    `${c.ot_rpi_us / 1000} ms / ${c.to_rpi_us / 1000} ms`, `${c.received} / ${c.lost}`, `${c.sent} / ${c.late}`,
+    c.run === null ? "-" : c.run ? "run" : "idle", dataCell(c.output_data), dataCell(c.input_data)])));
+  if (!all.class1.length) body.appendChild(row(["no class 1 connection", "", "", "", "", "", "", "", ""]));
+  $("class3-table").tBodies[0].replaceChildren(...all.class3.map((c) => row([
+    c.id, c.originator, c.requests, `${c.timeout_s} s`])));
+  refreshConnectionChoices();
+}
+
+// -- faults ---------------------------------------------------------------------------------------------------
+function showFaultForm() {
+  const kind = panel.faultTable.find((k) => k.name === $("fault-name").value);
+  const box = $("fault-options");
+  box.replaceChildren();
+  if (!kind) return;
+  $("fault-summary").textContent = `${kind.summary} (acts on: ${kind.where})`;
+  for (const option of kind.options) {
+    const id = `fault-option-${option.name}`;
+    box.appendChild(element("label", option.name + (option.required ? " (required)" : ""), {for: id}));
+    let input;
+    if (option.name === "connection") {
+      input = element("select", null, {id, "data-option": option.name});
+    } else {
+      input = element("input", null, {id, "data-option": option.name, placeholder: option.metavar,
+                                      "aria-describedby": id + "-help"});
+    }
+    box.appendChild(input);
+    box.appendChild(element("small", option.help, {id: id + "-help"}));
+  }
+  refreshConnectionChoices();
+}
+
+function refreshConnectionChoices() {
+  const select = document.querySelector('#fault-options select[data-option="connection"]');
+  if (!select) return;
+  const chosen = select.value;
+  select.replaceChildren(element("option", "every connection", {value: ""}),
+    ...panel.connections.map((c) => element("option", `${c.ot_id} (${c.output === null ? "heartbeat" : c.output} → ${c.input}, ${c.originator})`, {value: c.ot_id})));
+  select.value = [...select.options].some((o) => o.value === chosen) ? chosen : "";
+}
+
+async function applyFault(event) {
+  event.preventDefault();
+  const options = {};
+  for (const input of document.querySelectorAll("#fault-options [data-option]")) {
+    if (input.value.trim() !== "") options[input.dataset.option] = input.value.trim();
+  }
+  try {
+    const fault = await api("POST", panel.prefix + "/faults", {name: $("fault-name").value, options});
+    say("fault-message", `fault ${fault.id} applied: ${fault.name}`, true);
+  } catch (error) { say("fault-message", error.message, false); }
+}
+
+async function clearFaults(which) {
+  try {
+    const cleared = await api("DELETE", panel.prefix + "/faults" + (which === "" ? "" : `/${which}`));
+    say("fault-message", cleared.length ? `cleared ${cleared.map((f) => f.name).join(", ")}` : "no fault was active", true);
+  } catch (error) { say("fault-message", error.message, false); }
+}
+
+function showFaults(faults) {
+  $("faults-table").tBodies[0].replaceChildren(...faults.map((f) => {
+    const button = element("button", "Clear", {type: "button", "aria-label": `clear fault ${f.id} ${f.name}`});
+    button.addEventListener("click", () => clearFaults(String(f.id)));
+    return row([f.id, f.name, JSON.stringify(f.options), f.remaining_s === undefined ? "until cleared" : `${f.remaining_s} s`, button]);
+  }));
+}
+
+// -- parameters ---------------------------------------------------------------------------------------------
+async function loadParameters() {
+  let found;
+  try { found = await api("GET", panel.prefix + "/parameters"); }
+  catch (error) { $("parameters-note").textContent = error.message; return; }
+  $("parameters-note").textContent = `${found.keypad}: a value is written as the keypad writes it (not saved).`;
+  const groups = $("parameter-groups");
+  if (groups.childElementCount) {
+    // Shown already: the values alone change, in place (a field being edited, and what the device
+    // said beside a field, stay).
+    for (const group of found.groups) for (const p of group.parameters) {
+      const field = $(parameterId(p.code));
+      if (field && document.activeElement !== field) field.value = p.value;
+    }
+    return;
+  }
+  const open = new Set([...groups.querySelectorAll("details[open]")].map((d) => d.dataset.group));
+  groups.replaceChildren(...found.groups.map((group, index) => {
+    const details = element("details", null, {"data-group": group.group});
+    if (open.has(group.group) || (!open.size && index === 0)) details.open = true;
+    details.appendChild(element("summary", `${group.group} (${group.parameters.length})`));
+    const table = element("table");
+    table.appendChild(element("thead")).appendChild(row(["Code", "Name", "Value", "Unit", "Range", ""]));
+    const body = table.appendChild(element("tbody"));
+    for (const p of group.parameters) body.appendChild(parameterRow(p));
+    details.appendChild(table);
+    return details;
+  }));
+  filterParameters();
+}
+
+function parameterId(code) {
+  return `parameter-${code.replace(/[^A-Za-z0-9]/g, "_")}`;
+}
+
+function parameterRow(p) {
+  const id = parameterId(p.code);
+  const tr = element("tr", null, {class: "parameter", "data-search": `${p.code} ${p.name}`.toLowerCase()});
+  const value = element("input", null, {id, value: p.value, "aria-label": `${p.code} ${p.name}`});
+  if (!p.writable) value.readOnly = true;
+  const note = element("span", p.meaning || "", {class: "refusal-or-meaning", role: "status"});
+  const form = element("form");
+  form.append(value, " ", note);
+  form.addEventListener("submit", async (event) => {
+    event.preventDefault();
+    try {
+      const written = await api("PUT", `${panel.prefix}/parameters/${encodeURIComponent(p.code)}`, {value: value.value});
+      value.value = written.value;
+      note.textContent = written.meaning || "written";
+      note.className = "refusal-or-meaning";
+    } catch (error) {
+      note.textContent = error.message;
+      note.className = "refusal-or-meaning refusal";
+    }
+  });
+  value.addEventListener("focus", () => { panel.shownParameter = p.code; $("display").textContent = `${p.code} ${value.value}`; });
+  value.addEventListener("blur", () => { panel.shownParameter = null; if (panel.status) showStatus(panel.status); });
+  const set = element("button", "Set", {type: "button", "aria-label": `set ${p.code}`});
+  set.disabled = !p.writable;
+  set.addEventListener("click", () => form.requestSubmit());
+  const range = p.choices ? p.choices : `${p.minimum}..${p.maximum}`;
+  for (const cell of [element("code", p.code), p.name, form, p.unit, element("span", range + (p.access.includes("stopped") ? " (stopped only)" : ""), {class: "range"}), set]) {
+    const td = element("td");
+    if (cell instanceof Node) td.appendChild(cell); else td.textContent = cell;
+    tr.appendChild(td);
+  }
+  return tr;
+}
+
+function filterParameters() {
+  const wanted = $("parameter-filter").value.trim().toLowerCase();
+  for (const tr of document.querySelectorAll("#parameter-groups tr.parameter")) {
+    tr.hidden = wanted !== "" && !tr.dataset.search.includes(wanted);
+  }
+  if (wanted) for (const details of document.querySelectorAll("#parameter-groups details")) {
+    details.open = [...details.querySelectorAll("tr.parameter")].some((tr) => !tr.hidden);
+  }
+}
+
+// -- events ---------------------------------------------------------------------------------------------------
+function addEvents(events) {
+  panel.events.push(...events);
+  if (panel.events.length > 1000) panel.events.splice(0, panel.events.length - 1000);
+  if (events.some((e) => e.kind === "parameter write")) loadParameters();
+  showEvents();
+}
+
+function eventText(e) {
+  const rest = Object.entries(e).filter(([k]) => !["number", "kind", "time", "monotonic"].includes(k))
+    .map(([k, v]) => `${k}=${typeof v === "object" ? JSON.stringify(v) : v}`).join(" ");
+  return `${e.time} #${e.number} ${e.kind} ${rest}`;
+}
+
+function showEvents() {
+  const wanted = $("event-filter").value.trim().toLowerCase();
+  const shown = panel.events.map(eventText).filter((t) => !wanted || t.toLowerCase().includes(wanted)).reverse();
+  $("event-list").replaceChildren(...shown.slice(0, 300).map((t) => element("li", t)));
+}
+
+// -- the plant ------------------------------------------------------------------------------------------------
+async function openPlant(devices) {
+  $("plant").hidden = false;
+  $("title").textContent = `the plant: ${devices.length} devices`;
+  $("plant-filter").addEventListener("input", filterPlant);
+  const body = $("plant-table").tBodies[0];
+  const rows = new Map();
+  for (const device of devices) {
+    const link = element("a", device.address, {href: `/?device=${encodeURIComponent(device.address)}`});
+    const tr = row([link, device.product_name || "-", device.worker === undefined ? "-" : device.worker,
+                    device.error ? "worker ended" : "…", "-", "-", "-", "-"]);
+    if (device.error) { tr.cells[3].className = "down"; tr.cells[3].title = device.error; }
+    tr.dataset.search = `${device.address} ${device.product_name || ""}`.toLowerCase();
+    rows.set(device.address, tr);
+    body.appendChild(tr);
+  }
+  setLink(true);
+  const poll = async () => {
+    let listed = devices;
+    try { listed = await api("GET", "/devices"); setLink(true); } catch (error) { setLink(false); }
+    for (const device of listed) {
+      const tr = rows.get(device.address);
+      if (!tr) continue;
+      if (device.error) { tr.cells[3].textContent = "worker ended"; tr.cells[3].className = "down"; tr.cells[3].title = device.error; continue; }
+      try {
+        const status = await api("GET", `/devices/${encodeURIComponent(device.address)}/status`);
+        const drive = status.drive || {};
+        tr.cells[3].textContent = drive.trip ? `${drive.state} (${drive.trip})` : drive.state || "-";
+        tr.cells[3].className = drive.trip ? "down" : "";
+        tr.cells[4].textContent = drive.output_frequency_hz === undefined ? "-" : `${Number(drive.output_frequency_hz).toFixed(2)} Hz`;
+        tr.cells[5].textContent = `${status.power} / ${status.link}`;
+        tr.cells[6].textContent = `${status.sessions} sessions, ${status.class3_connections} class 3, ${status.class1_connections} class 1`;
+        tr.cells[7].textContent = String(status.faults);
+      } catch (error) {
+        tr.cells[3].textContent = error.status === 503 ? "worker ended" : error.message;
+        tr.cells[3].className = "down";
+      }
+      tr.dataset.search = `${device.address} ${device.product_name || ""} ${tr.cells[3].textContent}`.toLowerCase();
+    }
+    filterPlant();
+    setTimeout(poll, 2000);
+  };
+  poll();
+}
+
+function filterPlant() {
+  const wanted = $("plant-filter").value.trim().toLowerCase();
+  for (const tr of $("plant-table").tBodies[0].rows) tr.hidden = wanted !== "" && !tr.dataset.search.includes(wanted);
+}
+
+// -- which page ------------------------------------------------------------------------------------------------
+async function start() {
+  const chosen = new URLSearchParams(location.search).get("device");
+  let devices;
+  try { devices = await api("GET", "/devices"); }
+  catch (error) { setLink(false); $("link-state").textContent = error.message; return; }
+  if (chosen) return openPanel(chosen);
+  if (devices.length === 1) return openPanel(devices[0].address);
+  return openPlant(devices);
+}
+
+start();

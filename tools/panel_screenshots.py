@@ -1,0 +1,104 @@
+"""The screenshots of docs/front-panel.md, taken from live pages: an ACG adapter run by a class 1
+connection (`cipstack io`) with a fault applied, and a fleet's plant view. Run from the repository:
+
+    python3 tools/panel_screenshots.py docs/images
+
+It needs what the browser tests need (Debian's chromium and chromium-driver, selenium)."""
+
+from __future__ import annotations
+
+import json
+import socket
+import subprocess
+import sys
+import tempfile
+import time
+import urllib.request
+from pathlib import Path
+from typing import Any
+
+ROOT = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(ROOT))
+
+from tests.browser import chromium  # noqa: E402  (the browser the tests drive, set up once)
+
+
+def free_port(host: str = "127.0.0.1") -> int:
+    with socket.socket() as probe:
+        probe.bind((host, 0))
+        return int(probe.getsockname()[1])
+
+
+def wait_listening(port: int, seconds: float = 30) -> None:
+    deadline = time.monotonic() + seconds
+    while time.monotonic() < deadline:
+        try:
+            socket.create_connection(("127.0.0.1", port), timeout=0.2).close()
+            return
+        except OSError:
+            time.sleep(0.1)
+    raise TimeoutError(f"nothing listens on 127.0.0.1:{port}")
+
+
+def call(base: str, method: str, path: str, body: object) -> object:
+    request = urllib.request.Request(base + path, method=method, data=json.dumps(body).encode(),
+                                     headers={"Content-Type": "application/json"})
+    with urllib.request.urlopen(request, timeout=10) as reply:
+        return json.loads(reply.read())
+
+
+def shoot(driver: Any, url: str, out: Path, settle: float, height: int) -> None:
+    driver.get(url)
+    time.sleep(settle)
+    driver.set_window_size(1280, height)
+    time.sleep(0.5)
+    driver.save_screenshot(str(out))
+    errors = [e for e in driver.get_log("browser") if e.get("source") == "javascript"]
+    if errors:
+        raise RuntimeError(f"{url}: the page logged script errors: {errors}")
+    print(out)
+
+
+def main(out: Path) -> None:
+    out.mkdir(parents=True, exist_ok=True)
+    work = Path(tempfile.mkdtemp())
+    port, http = free_port(), free_port()
+    started: list[subprocess.Popen[bytes]] = []
+    try:
+        started.append(subprocess.Popen([sys.executable, "-m", "cipstack", "adapter", "--port", str(port), "--io-port",
+                                         "0", "--quiet", "--state", str(work / "acg.json"), "--control",
+                                         str(work / "c.sock"), "--http", f"127.0.0.1:{http}"],
+                                        stderr=subprocess.DEVNULL))
+        wait_listening(http)
+        base = f"http://127.0.0.1:{http}"
+        for code, value in (("drv", "4"), ("Frq", "8"), ("ACC", "8.0")):
+            call(base, "PUT", f"/parameters/{code}", {"value": value})
+        started.append(subprocess.Popen([sys.executable, "-m", "cipstack", "io", f"127.0.0.1:{port}", "--output", "21",
+                                         "--input", "71", "--rpi", "20ms", "--io-port", "0", "--set", "run_forward=1",
+                                         "--set", "net_ctrl=1", "--set", "net_ref=1", "--set", "speed_reference=1500",
+                                         "--duration", "120s"], stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL))
+        with chromium(work / "profile") as driver:
+            driver.get(base + "/")
+            time.sleep(3)
+            call(base, "POST", "/faults", {"name": "delay", "options": {"by": "3ms", "jitter": "1ms"}})
+            shoot(driver, base + "/", out / "front-panel.png", 6, 1900)
+        hosts = [f"127.79.200.{n}" for n in range(10, 14)]
+        fleet_http = free_port()
+        started.append(subprocess.Popen([sys.executable, "-m", "cipstack", "fleet", "--addresses",
+                                         f"{hosts[0]}-{hosts[-1]}", "--device", "acg*2", "--device", "mx2*1",
+                                         "--device", "rx*1", "--port", str(free_port()), "--io-port", "0",
+                                         "--workers", "2", "--state-dir", str(work / "state"), "--http",
+                                         f"127.0.0.1:{fleet_http}"], stdout=subprocess.DEVNULL,
+                                        stderr=subprocess.DEVNULL))
+        wait_listening(fleet_http)
+        call(f"http://127.0.0.1:{fleet_http}", "POST", f"/devices/{hosts[1]}/trip", {"code": "OverHeat"})
+        with chromium(work / "profile-plant") as driver:
+            shoot(driver, f"http://127.0.0.1:{fleet_http}/", out / "plant.png", 4, 480)
+    finally:
+        for process in reversed(started):
+            process.terminate()
+            process.wait(30)
+
+
+if __name__ == "__main__":
+    main(Path(sys.argv[1]) if len(sys.argv) > 1 else ROOT / "docs" / "images")
