@@ -26,8 +26,18 @@ from cipstack.devices.profiles import PROFILES, mac_for_address, serial_from_mac
 from cipstack.eip.cm_messages import ForwardOpenRequest
 from cipstack.eip.io_server import run_precise
 from cipstack.fleet.serve import DeviceSet, build_adapter
-from cipstack.fleet.spec import FleetDevice, SpecError, assign, describe_addresses, parse_addresses, parse_group
-from cipstack.fleet.workers import shares
+from cipstack.fleet.spec import (
+    FleetDevice,
+    Shard,
+    SpecError,
+    assign,
+    describe_addresses,
+    parse_addresses,
+    parse_group,
+    parse_shard,
+    select_shard,
+    shares,
+)
 from cipstack.scanner import Scanner, discover
 from tests.attacks import ACG_INPUT_ONLY_PATH, class1_open
 from tests.ports import free_port, list_identity_replies
@@ -168,7 +178,6 @@ def test_groups_take_addresses_in_order() -> None:
         assign([parse_group("acg*2@127.0.0.10"), parse_group("acg@127.0.0.11")], None, None)
 
 
-
 def test_factory_fleet_keeps_no_state_file(tmp_path: Path) -> None:
     """`cipstack fleet --factory`: every device from factory settings, no state file read or written
     (the devices' saves last until the fleet stops); with --state-dir it is one line, exit 2."""
@@ -186,6 +195,40 @@ def test_factory_fleet_keeps_no_state_file(tmp_path: Path) -> None:
                  str(tmp_path)]) == 2
 
 
+@pytest.mark.parametrize("count", [1, 2, 3, 7, 10])
+def test_the_shards_of_a_plant_are_the_plant_once_in_address_order(count: int) -> None:
+    pool = parse_addresses("10.0.0.10-10.0.0.19")
+    groups = [parse_group("acg*6"), parse_group("mx2:MX2-A2015-E*4")]
+    plant = assign(groups, pool, Path("state"))
+    cut = [select_shard(plant, Shard(index, count)) for index in range(count)]
+    assert [device for shard in cut for device in shard] == plant
+    assert max(map(len, cut)) - min(map(len, cut)) <= 1
+    # Computed again, from a spec assigned again (another pod reading the same ConfigMap): the same cut.
+    again = [select_shard(assign(groups, pool, Path("state")), Shard(index, count)) for index in range(count)]
+    assert again == cut
+
+
+def test_a_shard_is_index_over_count_from_zero() -> None:
+    assert parse_shard("0/3") == Shard(0, 3) and str(parse_shard(" 2/3 ")) == "2/3"
+    for text in ("3/3", "-1/3", "1/0", "1", "1/3/4", ""):
+        with pytest.raises(SpecError, match="not INDEX/COUNT"):
+            parse_shard(text)
+
+
+def test_list_addresses_prints_the_shard_of_a_spec_file(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    spec = tmp_path / "plant.toml"
+    spec.write_text('addresses = "10.20.0.10-10.20.0.19"\n[[device]]\nprofile = "acg"\ncount = 7\n'
+                    '[[device]]\nmodel = "MX2-A2015-E"\nfirst = "10.20.1.1"\n')
+    printed = []
+    for index in range(3):
+        assert main(["fleet", "--spec", str(spec), "--shard", f"{index}/3", "--list-addresses"]) == 0
+        printed.append(capsys.readouterr().out.split())
+    assert printed == [["10.20.0.10", "10.20.0.11", "10.20.0.12"], ["10.20.0.13", "10.20.0.14", "10.20.0.15"],
+                       ["10.20.0.16", "10.20.1.1"]]
+    assert main(["fleet", "--spec", str(spec), "--list-addresses"]) == 0
+    assert capsys.readouterr().out.split() == [a for shard in printed for a in shard]
+
+
 BAD_SPECS = [
     (["--addresses", "127.77.9.1-127.77.9.4", "--device", "pump*2"], "unknown profile 'pump'"),
     (["--addresses", "127.77.9.4-127.77.9.1", "--device", "acg"], "the range 127.77.9.4-127.77.9.1 ends before"),
@@ -201,6 +244,13 @@ BAD_SPECS = [
     (["--addresses", "127.77.9.1-127.77.9.4", "--device", "acg*2", "--workers", "3"], "more worker processes"),
     (["--device", "acg*2"], "no address: give --addresses"),
     (["--addresses", "127.77.9.1"], "no device"),
+    (["--addresses", "127.77.9.1-127.77.9.4", "--device", "acg*4", "--shard", "3/3"], "--shard '3/3': not INDEX/COUNT"),
+    (["--addresses", "127.77.9.1-127.77.9.4", "--device", "acg*4", "--shard", "1"], "--shard '1': not INDEX/COUNT"),
+    (["--addresses", "127.77.9.1-127.77.9.4", "--device", "acg*4", "--shard", "a/b"], "--shard 'a/b': not INDEX/"),
+    (["--addresses", "127.77.9.1-127.77.9.4", "--device", "acg*2", "--shard", "0/3"],
+     "--shard 0/3: more shards than the plant's 2 device(s)"),
+    (["--addresses", "127.77.9.1-127.77.9.4", "--device", "acg*4", "--shard", "0/2", "--workers", "3"],
+     "--workers 3: more worker processes than the fleet's 2 device(s)"),
 ]
 
 
@@ -327,6 +377,28 @@ def test_each_device_keeps_its_own_saved_parameters(tmp_path: Path) -> None:
     with running(tmp_path, *args, name="restarted"):                         # a power cycle of both
         assert asyncio.run(_read(hosts[0], port, 0x2A, 1, 103)) == 55
         assert asyncio.run(_read(hosts[1], port, 0x2A, 1, 103)) == default
+
+
+def test_shards_of_one_spec_serve_the_plant_between_them(tmp_path: Path) -> None:
+    hosts = addresses(11, 5)
+    port = free_port(*hosts)
+    spec = tmp_path / "plant.toml"
+    spec.write_text(f'addresses = "{hosts[0]}-{hosts[-1]}"\nport = {port}\nio_port = 0\nstate_dir = "s"\n'
+                    f'[[device]]\nprofile = "acg"\ncount = 5\n')
+    with running(tmp_path, "--spec", str(spec), "--shard", "1/2") as (_, lines):
+        # The second of two shares of five: the last two addresses, and nothing answers on the others.
+        assert [line.split()[0] for line in lines] == [f"{hosts[3]}:{port}", f"{hosts[4]}:{port}"]
+        found = asyncio.run(discover(BROADCAST, port, timeout=1.2))
+        assert sorted(r.address.host for r in found if r.address and r.address.host in hosts) == hosts[3:]
+        fleet = Fleet(tmp_path, "--spec", str(spec), "--shard", "0/2", name="first")
+        try:
+            first = fleet.wait_ready()
+            assert [line.split()[0] for line in first] == [f"{h}:{port}" for h in hosts[:3]]
+            found = asyncio.run(discover(BROADCAST, port, timeout=1.2))
+            assert sorted((r.address.host for r in found if r.address and r.address.host in hosts),
+                          key=sort_key) == hosts
+        finally:
+            assert fleet.stop() == 0
 
 
 @pytest.mark.parametrize("workers", [1, 2])

@@ -279,4 +279,5 @@ def test_a_failing_read_is_read_once(router: MessageRouter, caplog: pytest.LogCa
             assert ask(router, 0x0E, request_path(0x70, 1, 5)).general_status == status
             assert reads == [outcome]
         assert router.status_counts[status] == before.get(status, 0) + 2
+        assert router.reply_counts[0x0E << 8 | status] >= 2
     assert "internal error serving service 0x0E" in caplog.text

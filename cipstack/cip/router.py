@@ -56,8 +56,9 @@ MAX_NESTING = 4
 class MessageRouter:
     def __init__(self) -> None:
         self.objects: dict[int, CipObject] = {}
-        #: Counts of requests answered with each general status (for diagnostics).
-        self.status_counts: dict[int, int] = {}
+        #: Counts of requests by service and the general status they were answered with, keyed
+        #: ``service << 8 | status`` (one int key: no tuple to build per request); ``/metrics`` reads it.
+        self.reply_counts: dict[int, int] = {}
         #: Get_Attribute_Single requests -> their readers (``_attribute_reader``), bounded.
         self._readers: dict[bytes, Callable[[], bytes | None]] = {}
 
@@ -123,7 +124,8 @@ class MessageRouter:
             value = partial(obj.read_attribute, instance, spec)
         else:
             return None
-        encode, counts, failure, instances = spec.type.encode, self.status_counts, self._failure, obj.instances
+        encode, counts, failure, instances = spec.type.encode, self.reply_counts, self._failure, obj.instances
+        success = _GET_ATTRIBUTE_SINGLE << 8
 
         def reader() -> bytes | None:
             if instance is not None and instances.get(instance_id) is not instance:
@@ -132,7 +134,7 @@ class MessageRouter:
                 data = encode(value())
             except Exception as exc:
                 return failure(_GET_ATTRIBUTE_SINGLE, exc).encode()
-            counts[0] = counts.get(0, 0) + 1
+            counts[success] = counts.get(success, 0) + 1
             return _GET_ATTRIBUTE_SINGLE_REPLY + data
         if len(self._readers) < MAX_ATTRIBUTE_READERS:
             self._readers[raw] = reader
@@ -157,7 +159,8 @@ class MessageRouter:
             return self._failure(service, exc)
         finally:
             context.depth -= 1
-        self.status_counts[response.general_status] = self.status_counts.get(response.general_status, 0) + 1
+        key = service << 8 | response.general_status
+        self.reply_counts[key] = self.reply_counts.get(key, 0) + 1
         return response
 
     def _failure(self, service: int, exc: Exception) -> MessageRouterResponse:
@@ -169,5 +172,14 @@ class MessageRouter:
         else:
             log.exception("internal error serving service 0x%02X", service)
             response = MessageRouterResponse(service, GeneralStatus.VENDOR_SPECIFIC)
-        self.status_counts[response.general_status] = self.status_counts.get(response.general_status, 0) + 1
+        key = service << 8 | response.general_status
+        self.reply_counts[key] = self.reply_counts.get(key, 0) + 1
         return response
+
+    @property
+    def status_counts(self) -> dict[int, int]:
+        """Counts of requests answered with each general status, whatever the service."""
+        counts: dict[int, int] = {}
+        for key, count in self.reply_counts.items():
+            counts[key & 0xFF] = counts.get(key & 0xFF, 0) + count
+        return counts

@@ -32,7 +32,9 @@ def _fleet_spec(args: argparse.Namespace) -> Any:
         make_group,
         parse_addresses,
         parse_group,
+        parse_shard,
         read_spec_file,
+        select_shard,
     )
 
     settings: dict[str, Any] = {}
@@ -61,6 +63,11 @@ def _fleet_spec(args: argparse.Namespace) -> Any:
             raise UsageError("--factory reads and writes no state file: drop --state-dir DIR")
         state_dir = None   # every device from factory settings; its saves last until the fleet stops
     devices = assign(groups, pool, state_dir)
+    # The shard is cut from the whole plant, before anything that depends on the process (workers, the
+    # RS-485 line), so that every pod reading one spec agrees on who serves which device.
+    shard = parse_shard(args.shard) if args.shard is not None else None
+    if shard is not None:
+        devices = select_shard(devices, shard)
     port = check_port(args.port if args.port is not None else settings.get("port", DEFAULT_PORT), "port")
     io_port = check_port(args.io_port if args.io_port is not None else settings.get("io_port", DEFAULT_IO_PORT),
                          "io port")
@@ -71,7 +78,7 @@ def _fleet_spec(args: argparse.Namespace) -> Any:
         devices = assign_stations(devices, workers, "--rtu" if args.rtu is not None else f"{where}: rtu")
     elif any(d.station is not None for d in devices):
         raise SpecError(f"{where}: a station ID puts a drive on the fleet's RS-485 line: give --rtu (rtu = \"pty\")")
-    return FleetSpec(devices, port, io_port, workers, state_dir, rtu)
+    return FleetSpec(devices, port, io_port, workers, state_dir, rtu, shard)
 
 
 def cmd_fleet(args: argparse.Namespace) -> int:
@@ -86,17 +93,24 @@ def cmd_fleet(args: argparse.Namespace) -> int:
         spec = _fleet_spec(args)
     except SpecError as exc:
         raise UsageError(str(exc)) from None
+    if args.list_addresses:   # what a pod's init container adds to the plant interface, then nothing else
+        for device in spec.devices:
+            print(device.address)
+        return EXIT_OK
     addresses = describe_addresses(d.address for d in spec.devices)
     from .emulators import _http_settings
 
     http = _http_settings(args)
+    if http:   # the fleet's gauges of itself on /metrics carry its shard (0/1: the whole plant)
+        http["shard"] = str(spec.shard or "0/1")
 
     def ready(lines: list[str]) -> None:
         for line in lines:
             print(line, flush=True)
         processes = "1 process" if spec.workers == 1 else f"{spec.workers} worker processes"
-        log.info("emulating %d devices on %s (%s); Ctrl-C or SIGTERM stops them", len(spec.devices), addresses,
-                 processes)
+        shard = f", shard {spec.shard} of the plant" if spec.shard is not None else ""
+        log.info("emulating %d devices on %s (%s%s); Ctrl-C or SIGTERM stops them", len(spec.devices), addresses,
+                 processes, shard)
 
     try:
         if spec.workers == 1:
@@ -122,4 +136,57 @@ def cmd_fleet(args: argparse.Namespace) -> int:
     return EXIT_OK
 
 
-__all__ = ["cmd_fleet"]
+def cmd_plant(args: argparse.Namespace) -> int:
+    """``cipstack plant``: one HTTP API for every device of the fleets a name resolves to."""
+    from ..control.plant import PlantError, parse_fleet
+    from .emulators import _http_settings
+
+    if args.http is None:
+        raise UsageError("cipstack plant serves an HTTP API: give --http HOST:PORT")
+    try:
+        fleets = [parse_fleet(text) for text in args.fleet]
+    except PlantError as exc:
+        raise UsageError(str(exc)) from None
+    if args.refresh <= 0:
+        raise UsageError(f"--refresh {args.refresh:g}: not a positive duration")
+    http = _http_settings(args)
+    from ..eip.io_server import run_precise
+
+    try:
+        run_precise(_serve_plant(fleets, http, args.refresh))
+    except OSError as exc:
+        print(f"cipstack plant: cannot listen on {args.http}: {exc.strerror or exc}", file=sys.stderr)
+        return EXIT_USAGE
+    log.info("stopped")
+    return EXIT_OK
+
+
+async def _serve_plant(fleets: list[tuple[str, int]], http: dict[str, Any], refresh: float) -> None:
+    """The plant view until SIGINT or SIGTERM."""
+    import asyncio
+    import signal
+
+    from ..control.http import parse_listen
+    from ..control.http_relay import RelayApi
+    from ..control.plant import PlantView
+
+    host, port = parse_listen(http["http"])
+    relay = RelayApi([], host, port, token=http.get("http_token"), allow_remote=http.get("http_allow_remote", False),
+                     hosts=tuple(http.get("http_hosts", ())), shard=None)
+    view = PlantView(fleets, relay, token=http.get("http_token"), refresh=refresh)
+    stop = asyncio.Event()
+    loop = asyncio.get_running_loop()
+    for sig in (signal.SIGINT, signal.SIGTERM):
+        loop.add_signal_handler(sig, stop.set)
+    try:
+        await view.start()
+        log.info("plant view of %s: %d devices in %d fleets; Ctrl-C or SIGTERM stops it",
+                 ", ".join(f"{name}:{p}" for name, p in fleets), len(relay.routes), len(view.fleets))
+        await stop.wait()
+    finally:
+        await view.close()
+        for sig in (signal.SIGINT, signal.SIGTERM):
+            loop.remove_signal_handler(sig)
+
+
+__all__ = ["cmd_fleet", "cmd_plant"]

@@ -71,13 +71,29 @@ COMMANDS: dict[tuple[str, ...], CommandText] = {
         "Linux's loopback), from --device groups or a TOML --spec file. Each device keeps its own state "
         "file and control socket (`cipstack drive ... --host ADDRESS`); --workers spreads the devices "
         "over processes; --http serves one HTTP control API for every device of every worker, by "
-        "address (/devices/ADDRESS/...).",
+        "address (/devices/ADDRESS/...); --shard serves one part of a plant spec, the same on every "
+        "machine.",
         (("cipstack fleet --addresses 127.0.0.10-127.0.0.13 --device 'acg*3' --device mx2:MX2-A2015-E",
           "three ACG drives and one MX2 on 127.0.0.10 to 127.0.0.13"),
          ("cipstack fleet --addresses 127.0.0.10-127.0.0.73 --device 'acg*64' --workers 2",
           "64 ACG drives over two processes"),
          ("cipstack fleet --addresses 127.0.0.10-127.0.0.73 --device 'acg*64' --workers 2 --http 127.0.0.1:8080",
-          "the same, with one HTTP API for all: curl http://127.0.0.1:8080/devices")),
+          "the same, with one HTTP API for all: curl http://127.0.0.1:8080/devices"),
+         ("cipstack fleet --spec plant.toml --shard 1/3",
+          "the second of three shards of one plant spec (one per machine or Kubernetes pod)")),
+    ),
+    ("plant",): CommandText(
+        "one HTTP API for every device of a plant's fleets, on many machines or pods",
+        "Serve one HTTP control API for every device of every fleet (`cipstack fleet --http`) that "
+        "--fleet names: a DNS name whose A records are every fleet, such as a Kubernetes headless "
+        "Service, with the port of their APIs. It looks again every --refresh: a new fleet is added, "
+        "one that does not answer or is gone from the records is listed with its devices' error, "
+        "which answer 503. Its token (--http-token...) is also the one it sends to the fleets.",
+        (("cipstack plant --fleet cipstack-fleet:8080 --http 0.0.0.0:8080 --http-allow-remote "
+          "--http-token-file token",
+          "the plant view of a Kubernetes StatefulSet's fleets (deploy/)"),
+         ("cipstack plant --fleet 127.0.0.1:8081 --fleet 127.0.0.1:8082 --http 127.0.0.1:8080",
+          "two fleets on one machine, one API")),
     ),
     ("models",): CommandText(
         "the MX2/RX models the mx2/rx profiles emulate (Tables 2/3)",

@@ -20,7 +20,7 @@ from .drive import add_drive_commands
 from .eds import cmd_eds_check, cmd_eds_fetch, cmd_eds_generate, cmd_eds_show
 from .emulators import cmd_adapter, cmd_componet, cmd_models
 from .explicit import cmd_discover, cmd_get, cmd_identity, cmd_set
-from .fleet import DEFAULT_WORKERS, cmd_fleet
+from .fleet import DEFAULT_WORKERS, cmd_fleet, cmd_plant
 from .help_texts import COMMANDS, PROGRAM
 from .io import PRINT_MODES, cmd_io
 
@@ -200,7 +200,21 @@ def build_parser(command: str | None = None) -> argparse.ArgumentParser:
     p.add_argument("--rtu", metavar="DEVICE",
                    help="put the ACG drives (up to 16) on one RS-485 Modbus-RTU line: pty (a new pseudo-terminal, "
                         "its path printed) or a serial device; station IDs 1, 2, ... in address order")
+    p.add_argument("--shard", metavar="INDEX/COUNT",
+                   help="serve one of COUNT contiguous shares of the plant's devices (in address order), INDEX "
+                        "from 0: 0/3 is the first of three; each machine or pod runs one, from the same spec")
+    p.add_argument("--list-addresses", action="store_true",
+                   help="print the addresses of the devices this fleet (or shard) serves, one a line, and exit")
     p.set_defaults(func=cmd_fleet)
+
+    p = sub.add_parser("plant")
+    p.add_argument("--fleet", action="append", required=True, metavar="NAME:PORT",
+                   help="the fleets' HTTP APIs: a DNS name whose A records are every fleet (a Kubernetes headless "
+                        "Service), or an address; repeatable")
+    p.add_argument("--refresh", type=parse_duration, default=5.0, metavar="DURATION",
+                   help="how often to look for fleets and ask each for its devices (default %(default)s s)")
+    _add_http_arguments(p)
+    p.set_defaults(func=cmd_plant)
 
     p = sub.add_parser("models")
     p.add_argument("--profile", choices=["mx2", "rx"], help="one family only (default: both)")

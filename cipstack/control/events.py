@@ -82,6 +82,8 @@ class EventStream:
         self.faults = faults
         self.events: deque[Event] = deque(maxlen=limit)
         self._numbers = itertools.count(1)
+        #: Events emitted by kind since the stream began (kept past the bounded ``events``): ``/metrics``.
+        self.counts: dict[str, int] = {}
         self._waiters: list[tuple[Callable[[Event], bool], asyncio.Future[Event]]] = []
         self._listeners: list[Callable[[Event], None]] = []
         self._started = False
@@ -129,6 +131,7 @@ class EventStream:
             now = time.monotonic()
         event = Event(next(self._numbers), kind, time.time(), now, fields)
         self.events.append(event)
+        self.counts[kind] = self.counts.get(kind, 0) + 1
         for match, future in list(self._waiters):
             if not future.done() and match(event):
                 future.set_result(event)

@@ -31,6 +31,7 @@ from aiohttp import web
 
 from ..eip.limits import RateLimitedLog, guarded_listener, quiet_accept_errors
 from ..errors import BadRequest, CipstackError
+from .metrics import ShardGauges, add_metrics_route
 from .operations import OPERATIONS, Operation
 from .panel_app import PanelStreams
 from .service import outcome
@@ -346,10 +347,11 @@ CONNECTIONS: web.AppKey[HttpConnections] = web.AppKey("cipstack_http_connections
 class HttpApi:
     def __init__(self, devices: dict[str, DeviceService], host: str = "127.0.0.1", port: int = 0, *,
                  token: str | None = None, allow_remote: bool = False, path: str | None = None,
-                 hosts: tuple[str, ...] = ()) -> None:
+                 hosts: tuple[str, ...] = (), shard: ShardGauges | None = None) -> None:
         """``devices``: the command service of each device, by address (its host, or ``host:port`` when
         several share a host). ``path``: listen on this Unix socket instead of ``host:port`` (a fleet
-        worker's API, which the fleet's relay forwards to; its directory is what keeps others out)."""
+        worker's API, which the fleet's relay forwards to; its directory is what keeps others out).
+        ``shard``: a fleet's gauges of itself on ``/metrics``."""
         if path is None:
             check_settings(f"{host}:{port}", token, allow_remote)
         self.devices = devices
@@ -359,6 +361,7 @@ class HttpApi:
         self.token = token
         self.allow_remote = allow_remote
         self.guard = Guard(token, allow_remote, local=path is not None, hosts=hosts)
+        self.shard = shard
         self.panel = PanelStreams()
         self._served: ServedApp | None = None
         self.app = self._build()
@@ -387,6 +390,7 @@ class HttpApi:
             app.router.add_route(method, DEVICE_PREFIX + path, handler)
         app.router.add_get("/devices", self.list_devices)
         app.router.add_get("/openapi.json", openapi)
+        add_metrics_route(app, self.devices, self.shard)
         app.router.add_get(STREAM_PATH, self.stream)
         app.router.add_get(DEVICE_PREFIX + STREAM_PATH, self.stream)
         self.panel.add_routes(app)
@@ -570,6 +574,9 @@ def openapi_document() -> dict[str, Any]:
     paths["/devices"] = {"get": {"summary": "the devices this API serves (in a fleet of workers, each with its "
                                             "worker's number, and `error` where that worker is lost)",
                                  "operationId": "devices", "responses": {"200": ok}}}
+    paths["/metrics"] = {"get": {"summary": "the devices' counters in the Prometheus text format",
+                                 "operationId": "metrics", "responses": {"200": {
+                                     "description": "Prometheus text", "content": {"text/plain": {"schema": {}}}}}}}
     return {"openapi": "3.0.3",
             "info": {"title": "cipstack emulator control", "version": "2"},
             "paths": paths,

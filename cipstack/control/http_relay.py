@@ -11,6 +11,10 @@ back as it is.
 
 A worker that no longer serves (ended, or stopped answering its parent) makes its devices answer 503
 with a JSON body naming the device and why; the other workers' devices answer as before.
+
+The same relay serves a plant spread over machines or pods (``cipstack.control.plant``): there each
+backend is a fleet's own HTTP API over TCP (``Backend.url``, its token in ``Backend.headers``), and
+backends come and go while it serves (``RelayApi.add``).
 """
 
 from __future__ import annotations
@@ -40,46 +44,73 @@ from .http import (
     openapi,
     serve_app,
 )
+from .metrics import ShardGauges, merge_families, metrics_response, powered_devices, render
 from .panel_app import PanelStreams
 
 log = logging.getLogger(__name__)
+
+#: A worker's API by its Unix socket: the socket has no host name, aiohttp's client needs one.
+_WORKER_URL = URL("http://cipstack-worker")
 
 #: How long the relay waits for a worker's socket to accept; its event loop accepts in microseconds,
 #: so a worker that takes longer is stopped or stuck (its parent's heartbeat says so, and ends it).
 CONNECT_TIMEOUT = 5.0
 #: Headers of a request the worker's API reads (the token stays with the relay, which checked it).
 _FORWARDED = ("Content-Type", "Accept")
-#: The host name of a worker's URL: a Unix socket has none, aiohttp's client needs one.
-_WORKER_HOST = "cipstack-worker"
 
 
 @dataclass
 class Backend:
-    """A worker's API as the relay reaches it."""
+    """A worker's API as the relay reaches it (or a fleet's, for a plant: ``url``)."""
 
     #: How the worker is named in messages: ``worker 2 (127.0.0.12-127.0.0.13)``.
     name: str
-    #: The Unix socket its ``HttpApi`` listens on.
-    path: str
+    #: The Unix socket its ``HttpApi`` listens on; None: TCP to ``url``.
+    path: str | None
     #: Why it serves no more (``worker 2 (...) ended: killed by SIGKILL``), or None while it serves.
     down: Callable[[], str | None] = lambda: None
     #: Its number among the fleet's workers (1, 2, ...), shown in ``/devices``.
     number: int = 0
-    #: Its devices as its own ``GET /devices`` lists them (read once at start: they do not change).
+    #: Its devices as its own ``GET /devices`` lists them (read when it is added: they do not change).
     devices: list[dict[str, Any]] = field(default_factory=list)
     session: aiohttp.ClientSession | None = None
+    #: Where its API is.
+    url: URL = field(default_factory=lambda: _WORKER_URL)
+    #: Headers of every request to it (a fleet's token).
+    headers: dict[str, str] = field(default_factory=dict)
+    #: What ``/devices`` adds to each of its devices (default: its worker number).
+    shown: dict[str, Any] | None = None
+
+    def open(self) -> None:
+        """Its client session (call once, on the relay's loop)."""
+        connector = aiohttp.UnixConnector(path=self.path) if self.path is not None else None
+        self.session = aiohttp.ClientSession(connector=connector, headers=self.headers,
+                                             timeout=aiohttp.ClientTimeout(total=None, sock_connect=CONNECT_TIMEOUT))
+
+    def at(self, path: str) -> URL:
+        """The URL of ``path`` (already encoded, with its query) on its API."""
+        return URL(f"{self.url}{path}", encoded=True)
+
+    async def close(self) -> None:
+        if self.session is not None:
+            session, self.session = self.session, None
+            await session.close()
 
 
 class RelayApi:
     """The fleet's HTTP API on ``host:port`` over the APIs of ``backends`` (see the module docstring)."""
 
     def __init__(self, backends: list[Backend], host: str = "127.0.0.1", port: int = 0, *,
-                 token: str | None = None, allow_remote: bool = False, hosts: tuple[str, ...] = ()) -> None:
+                 token: str | None = None, allow_remote: bool = False, hosts: tuple[str, ...] = (),
+                 shard: str | None = "0/1") -> None:
+        """``shard``: the fleet's name on ``/metrics`` (``--shard``; 0/1 for a whole plant); None: its
+        backends' gauges only (a plant's fleets say their own)."""
         check_settings(f"{host}:{port}", token, allow_remote)
         self.backends = backends
         self.host = host
         self.port = port
         self.guard = Guard(token, allow_remote, hosts=hosts)
+        self.shard = shard
         #: The front panel's files (the plant view and each device's panel); its streams are the workers'.
         self.panel = PanelStreams()
         #: Each device's worker, by the address the worker's API gives it.
@@ -92,11 +123,7 @@ class RelayApi:
         ``ConnectionError`` naming it; a port that is taken raises ``OSError``."""
         try:
             for backend in self.backends:
-                backend.session = aiohttp.ClientSession(
-                    connector=aiohttp.UnixConnector(path=backend.path),
-                    timeout=aiohttp.ClientTimeout(total=None, sock_connect=CONNECT_TIMEOUT))
-                backend.devices = await self._listing(backend)
-                self.routes.update((entry["address"], backend) for entry in backend.devices)
+                await self.add(backend, listed=True)
             self._served = await serve_app(self.app, self.host, self.port)
             self.port = self._served.port
         except BaseException:
@@ -111,15 +138,28 @@ class RelayApi:
             await self._served.close()
             self._served = None
         for backend in self.backends:
-            if backend.session is not None:
-                await backend.session.close()
-                backend.session = None
+            await backend.close()
+
+    async def add(self, backend: Backend, listed: bool = False) -> None:
+        """Open ``backend``, read its devices and route them to it (from another backend that listed them
+        before: a fleet that came back elsewhere). ``listed``: it is in ``backends`` already. A backend
+        that does not answer raises ``ConnectionError`` naming it, and is closed."""
+        backend.open()
+        try:
+            backend.devices = await self.listing(backend)
+        except BaseException:
+            await backend.close()
+            raise
+        if not listed:
+            self.backends.append(backend)
+        self.routes.update((entry["address"], backend) for entry in backend.devices)
 
     @staticmethod
-    async def _listing(backend: Backend) -> list[dict[str, Any]]:
+    async def listing(backend: Backend) -> list[dict[str, Any]]:
+        """The devices ``backend``'s ``GET /devices`` lists; ``ConnectionError`` naming it when it does not answer."""
         assert backend.session is not None
         try:
-            async with backend.session.get(URL.build(scheme="http", host=_WORKER_HOST, path="/devices")) as reply:
+            async with backend.session.get(backend.at("/devices")) as reply:
                 listed = await reply.json()
                 if reply.status != 200 or not isinstance(listed, list):
                     raise ConnectionError(f"{backend.name}: its HTTP API answered {reply.status} to GET /devices")
@@ -136,6 +176,7 @@ class RelayApi:
             app.router.add_route(method, DEVICE_PREFIX + path, self.forward)
         app.router.add_get("/devices", self.list_devices)
         app.router.add_get("/openapi.json", openapi)
+        app.router.add_get("/metrics", self.metrics)
         app.router.add_get(STREAM_PATH, self.unaddressed)
         app.router.add_get(DEVICE_PREFIX + STREAM_PATH, self.forward)
         self.panel.add_routes(app)
@@ -148,9 +189,29 @@ class RelayApi:
         listed = []
         for backend in self.backends:
             down = backend.down()
+            shown = backend.shown if backend.shown is not None else {"worker": backend.number}
             for entry in backend.devices:
-                listed.append({**entry, "worker": backend.number, **({"error": down} if down else {})})
+                if self.routes.get(entry["address"]) is backend:   # not one another backend serves now
+                    listed.append({**entry, **shown, **({"error": down} if down else {})})
         return web.json_response(sorted(listed, key=lambda entry: str(entry["address"])))
+
+    async def metrics(self, request: web.Request) -> web.Response:
+        """Every serving worker's ``/metrics`` in one, with the fleet's gauges: a lost worker's devices
+        are not up, and their counters are gone with it."""
+        texts = []
+        for backend in self.backends:
+            if backend.down() is not None or backend.session is None:
+                continue
+            try:
+                async with backend.session.get(backend.at("/metrics")) as reply:
+                    if reply.status == 200:
+                        texts.append(await reply.text())
+            except (aiohttp.ClientError, asyncio.TimeoutError):
+                continue   # gone since: its devices count as not up
+        families = merge_families(texts)
+        up = powered_devices(families)
+        gauges = ShardGauges(self.shard, lambda: (len(self.routes), up)) if self.shard is not None else None
+        return metrics_response(await render([*families.values(), *(gauges.families() if gauges else [])]))
 
     async def unaddressed(self, request: web.Request) -> web.Response:
         """A device's route without its address: a fleet has more than one device."""
@@ -167,7 +228,7 @@ class RelayApi:
             return self._unserved(name, down or f"{backend.name} is stopping")
         body = await request.read()   # within MAX_BODY (413 beyond), as the worker's own limit
         headers = {key: request.headers[key] for key in _FORWARDED if key in request.headers}
-        url = URL(f"http://{_WORKER_HOST}{request.raw_path}", encoded=True)
+        url = backend.at(request.raw_path)
         response: web.StreamResponse | None = None
         try:
             async with backend.session.request(request.method, url, data=body or None, headers=headers,

@@ -99,6 +99,12 @@ class IoStatistics:
     skipped_slots: int = 0
     max_lateness: float = 0.0
 
+    def add(self, other: IoStatistics) -> None:
+        """Add ``other``'s counts to these (the largest lateness is the larger one)."""
+        for name in ("sent", "received", "late", "lost", "duplicates", "stale", "skipped_slots"):
+            setattr(self, name, getattr(self, name) + getattr(other, name))
+        self.max_lateness = max(self.max_lateness, other.max_lateness)
+
     def as_dict(self) -> dict[str, float]:
         return {k: getattr(self, k) for k in ("sent", "received", "late", "lost", "duplicates", "stale",
                                               "skipped_slots", "max_lateness")}

@@ -225,6 +225,9 @@ class IoTarget:
         self._ids = itertools.count(random.randrange(0x10000, 0x7FFF0000))
         self.timeouts = 0
         self.dropped = 0
+        #: The packet counts of the connections closed so far, added up when each closes (nothing per
+        #: packet): with the open connections' own, what ``/metrics`` reports as totals.
+        self.closed_stats = IoStatistics()
         #: Refused Forward_Opens: at most one line per 10 s per originator address and status.
         self.refused_log = RateLimitedLog(log, level=logging.INFO)
         #: Called when a connection opens (the shell re-arms its timer for the new deadlines).
@@ -519,6 +522,7 @@ class IoTarget:
     def _close(self, connection: IoConnection, timed_out: bool) -> None:
         if self.connections.pop(connection.ot_connection_id, None) is None:
             return
+        self.closed_stats.add(connection.stats)
         if connection.owner is not None and connection in connection.owner.listeners:
             connection.owner.listeners.remove(connection)
         log.info("class 1 %s %s", connection.name, "timed out" if timed_out else "closed")

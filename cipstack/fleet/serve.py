@@ -196,6 +196,7 @@ async def _start_http(adapters: Sequence[Adapter], http: dict[str, Any]) -> Any:
     (``HOST:PORT``), or for a worker of a fleet on the Unix socket ``http["path"]``, which only the
     fleet's relay reaches (``cipstack.control.http_relay``)."""
     from ..control.http import HttpApi, parse_listen
+    from ..control.metrics import ShardGauges
     from ..listening import ListenError
 
     path = http.get("path")
@@ -204,8 +205,12 @@ async def _start_http(adapters: Sequence[Adapter], http: dict[str, Any]) -> Any:
         where = f"Unix socket {path} (the worker's HTTP control API)"
     else:
         host, port = parse_listen(http["http"])
+        shard = http.get("shard")
+        gauges = ShardGauges(shard, lambda: (len(adapters), sum(a.runtime.power.powered for a in adapters))) \
+            if shard is not None else None
         api = HttpApi(api_addresses(adapters), host, port, token=http.get("http_token"),
-                      allow_remote=http.get("http_allow_remote", False), hosts=tuple(http.get("http_hosts", ())))
+                      allow_remote=http.get("http_allow_remote", False), hosts=tuple(http.get("http_hosts", ())),
+                      shard=gauges)
         where = f"TCP {http['http']} (HTTP control API, --http)"
     try:
         await api.start()

@@ -84,6 +84,8 @@ class FleetSpec:
     state_dir: Path | None = None
     #: The RS-485 line the ACG drives share: "pty" or a serial device (None: none).
     rtu: str | None = None
+    #: Which shard of the plant this fleet serves (``--shard INDEX/COUNT``), or None: all of it.
+    shard: Shard | None = None
 
 
 # -- addresses ------------------------------------------------------------------------------------------
@@ -305,6 +307,49 @@ def check_workers(workers: Any, devices: int, where: str = "--workers") -> int:
     return workers
 
 
+# -- shards of a plant -----------------------------------------------------------------------------------
+@dataclass(frozen=True)
+class Shard:
+    """One of ``count`` parts of a plant spec: ``index`` counts from 0, as a StatefulSet's pod ordinals do."""
+
+    index: int
+    count: int
+
+    def __str__(self) -> str:
+        return f"{self.index}/{self.count}"
+
+
+def parse_shard(text: str, where: str = "--shard") -> Shard:
+    """``INDEX/COUNT``: ``0/3`` is the first of three shards."""
+    index_text, slash, count_text = text.strip().partition("/")
+    try:
+        index, count = int(index_text), int(count_text)
+    except ValueError:
+        raise SpecError(f"{where} {text!r}: not INDEX/COUNT (e.g. 0/3, the first of three)") from None
+    if not slash or count < 1 or not 0 <= index < count:
+        raise SpecError(f"{where} {text!r}: not INDEX/COUNT with 0 <= INDEX < COUNT (e.g. 0/3, the first of three)")
+    return Shard(index, count)
+
+
+def shares(devices: Sequence[FleetDevice], parts: int) -> list[list[FleetDevice]]:
+    """``devices`` in ``parts`` contiguous shares whose sizes differ by one at most."""
+    size, extra = divmod(len(devices), parts)
+    result, start = [], 0
+    for index in range(parts):
+        end = start + size + (1 if index < extra else 0)
+        result.append(list(devices[start:end]))
+        start = end
+    return result
+
+
+def select_shard(devices: Sequence[FleetDevice], shard: Shard, where: str = "--shard") -> list[FleetDevice]:
+    """The devices of ``shard``: the plant's devices in address order cut as ``shares`` cuts them, so that
+    every shard of one spec is the same wherever it is computed, and together they are the plant once."""
+    if shard.count > len(devices):
+        raise SpecError(f"{where} {shard}: more shards than the plant's {len(devices)} device(s)")
+    return shares(devices, shard.count)[shard.index]
+
+
 # -- the TOML file ---------------------------------------------------------------------------------------
 _FILE_KEYS = {"addresses", "port", "io_port", "workers", "state_dir", "device", "rtu"}
 _GROUP_KEYS = {"profile", "model", "count", "first", "params", "station"}
@@ -367,6 +412,6 @@ def read_spec_file(path: Path) -> tuple[dict[str, Any], list[DeviceGroup]]:
     return settings, groups
 
 
-__all__ = ["MAX_DEVICES", "MAX_DRIVES_PER_LINE", "DeviceGroup", "FleetDevice", "FleetSpec", "SpecError", "assign",
-           "assign_stations", "check_port",
-           "check_workers", "describe_addresses", "make_group", "parse_addresses", "parse_group", "read_spec_file"]
+__all__ = ["MAX_DEVICES", "MAX_DRIVES_PER_LINE", "DeviceGroup", "FleetDevice", "FleetSpec", "Shard", "SpecError",
+           "assign", "assign_stations", "check_port", "check_workers", "describe_addresses", "make_group",
+           "parse_addresses", "parse_group", "parse_shard", "read_spec_file", "select_shard", "shares"]

@@ -48,7 +48,7 @@ from ..eip.io_server import run_precise
 from ..errors import CipstackError
 from ..listening import ListenError
 from .serve import serve_until_signalled
-from .spec import FleetDevice, SpecError, describe_addresses
+from .spec import FleetDevice, SpecError, describe_addresses, shares
 
 log = logging.getLogger(__name__)
 
@@ -64,17 +64,6 @@ HEARTBEAT_INTERVAL = 1.0
 HEARTBEAT_TIMEOUT = 5.0
 PING, PONG = "ping", "pong"
 _PR_SET_PDEATHSIG = 1
-
-
-def shares(devices: Sequence[FleetDevice], workers: int) -> list[list[FleetDevice]]:
-    """``devices`` in ``workers`` contiguous shares whose sizes differ by one at most."""
-    size, extra = divmod(len(devices), workers)
-    result, start = [], 0
-    for index in range(workers):
-        end = start + size + (1 if index < extra else 0)
-        result.append(list(devices[start:end]))
-        start = end
-    return result
 
 
 def _die_with_parent(parent: int) -> None:
@@ -342,7 +331,7 @@ class Supervisor:
         relay = RelayApi([Backend(w.name, w.api_path or "", partial(self._why_down, w), w.number)
                           for w in self.workers], host, port, token=self.http.get("http_token"),
                          allow_remote=self.http.get("http_allow_remote", False),
-                         hosts=tuple(self.http.get("http_hosts", ())))
+                         hosts=tuple(self.http.get("http_hosts", ())), shard=self.http.get("shard", "0/1"))
         watched: dict[int, _Worker] = {}
         self._wake = wake.set
         for sig in (signal.SIGINT, signal.SIGTERM):   # the loop's own handling, which wakes its wait
