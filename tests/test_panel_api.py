@@ -10,8 +10,11 @@ from collections.abc import AsyncIterator
 from pathlib import Path
 from typing import Any
 
-import aiohttp
 import pytest
+
+pytest.importorskip("aiohttp", reason="aiohttp is not installed (the http extra): pip install '.[http]'")
+
+import aiohttp
 
 from cipstack.adapter import Adapter, AdapterSettings
 from cipstack.control.panel_app import MAX_STREAMS
