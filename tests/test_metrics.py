@@ -19,6 +19,7 @@ import pytest
 from prometheus_client.parser import text_string_to_metric_families
 
 from cipstack.cip.status import CipError
+from cipstack.control.metrics import merge_families, render
 from cipstack.devices.acg.modbus_rtu import with_crc
 from cipstack.devices.profiles import PROFILES
 from cipstack.eip.io_server import run_precise
@@ -169,3 +170,20 @@ def test_an_adapter_counts_the_frames_of_its_rs485_line(tmp_path: Path) -> None:
         assert value(samples, "cipstack_rtu_frames_total", device="127.0.0.1") == 2
         assert value(samples, "cipstack_rtu_errors_total", device="127.0.0.1", kind="truncated") == 0
         assert not any(name.startswith("cipstack_fleet_") for name, _ in samples)   # an adapter is no fleet shard
+
+
+def test_merged_expositions_add_up_a_sample_two_processes_give() -> None:
+    """Two fleets that are not shards of one plant both say shard="0/1": the plant view's answer adds
+    them up rather than giving one sample twice (which a scraper refuses)."""
+    first = ('# HELP cipstack_fleet_devices devices\n# TYPE cipstack_fleet_devices gauge\n'
+             'cipstack_fleet_devices{shard="0/1"} 2.0\n# HELP cipstack_trips trips\n# TYPE cipstack_trips counter\n'
+             'cipstack_trips_total{device="10.0.0.1"} 1.0\n')
+    second = first.replace("2.0", "3.0").replace("10.0.0.1", "10.0.0.2")
+    families = merge_families([first, second])
+    text = asyncio.run(render(list(families.values()))).decode()
+    parsed = {(s.name, tuple(sorted(s.labels.items()))): s.value
+              for f in text_string_to_metric_families(text) for s in f.samples}
+    assert parsed == {("cipstack_fleet_devices", (("shard", "0/1"),)): 5.0,
+                      ("cipstack_trips_total", (("device", "10.0.0.1"),)): 1.0,
+                      ("cipstack_trips_total", (("device", "10.0.0.2"),)): 1.0}
+    assert text.count("# TYPE cipstack_fleet_devices gauge") == 1

@@ -205,14 +205,22 @@ class Families(Collector):
 
 
 def merge_families(texts: Iterable[str]) -> dict[str, Metric]:
-    """The families of ``texts`` (each a process's ``/metrics``) by name, each once with the samples of all."""
+    """The families of ``texts`` (each a process's ``/metrics``) by name, each once with the samples of all.
+    A sample that several give with the same labels is their sum, so that the answer stays valid: the
+    gauges of fleets that are not shards of one plant (each says ``shard="0/1"``) add up to the plant's."""
     merged: dict[str, Metric] = {}
+    where: dict[tuple[str, tuple[tuple[str, str], ...]], int] = {}   # a sample -> its index in its family
     for text in texts:
         for family in text_string_to_metric_families(text):
-            if family.name in merged:
-                merged[family.name].samples.extend(family.samples)
-            else:
-                merged[family.name] = family
+            into = merged.setdefault(family.name, Metric(family.name, family.documentation, family.type))
+            for sample in family.samples:
+                key = (sample.name, tuple(sorted(sample.labels.items())))
+                if key in where:
+                    index = where[key]
+                    into.samples[index] = into.samples[index]._replace(value=into.samples[index].value + sample.value)
+                else:
+                    where[key] = len(into.samples)
+                    into.samples.append(sample)
     return merged
 
 
