@@ -11,7 +11,7 @@ from __future__ import annotations
 import contextlib
 import logging
 import struct
-from collections.abc import AsyncIterator, Iterator, Sequence
+from collections.abc import AsyncIterator, Callable, Iterator, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING, Any, TypeVar
@@ -24,7 +24,6 @@ from .cip.status import CipError, ExtendedStatus, GeneralStatus
 from .cip.types import UINT, CipType, IntegerType
 from .cip.values import Value
 from .eip.blocking_client import BlockingEncapsulationClient
-from .eip.discovery import discover, list_services_udp
 from .eip.encapsulation import DEFAULT_PORT
 from .eip.identity_items import IdentityRecord, ServiceRecord
 from .eip.originator_core import (
@@ -137,8 +136,11 @@ class ExplicitMessaging:
         elif identify:
             yield from self.identify()
 
-    def identify(self) -> Plan[IdentityRecord | None]:
-        from .devices.profiles import catalog_for
+    def identify(self, catalogs: Callable[[int, int], Catalog] | None = None) -> Plan[IdentityRecord | None]:
+        """``catalogs``: the catalog of (vendor id, product code); by default the profile's whole one
+        (``devices.profiles.catalog_for``)."""
+        if catalogs is None:
+            from .devices.profiles import catalog_for as catalogs
 
         record = None
         if not self.route:
@@ -155,7 +157,7 @@ class ExplicitMessaging:
             self.catalog = Catalog(source="the standard objects only: the device did not identify itself (no "
                                           "ListIdentity reply, no Identity attributes 1 and 3); give eds= or catalog=")
         else:
-            self.catalog = catalog_for(record.vendor_id, record.product_code)
+            self.catalog = catalogs(record.vendor_id, record.product_code)
         return record
 
     def _identity_attributes(self) -> Plan[IdentityRecord | None]:
@@ -811,10 +813,21 @@ class SyncScanner(_Declarations):
         return discover_blocking(address, port, timeout)
 
 
+def __getattr__(name: str) -> Any:
+    """``discover`` and ``list_services_udp`` (asyncio, UDP), imported when first used: the blocking
+    scanner does not load asyncio."""
+    if name in ("discover", "list_services_udp"):
+        from .eip import discovery
+
+        return getattr(discovery, name)
+    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
+
+
 def discover_blocking(address: str | Sequence[str] | None = None, port: int = DEFAULT_PORT,
                       timeout: float = 2.0) -> list[IdentityRecord]:
     """``discover`` for synchronous code: every device that answers ListIdentity over UDP within
     ``timeout`` seconds (``address`` None: every interface's broadcast address, loopback included)."""
+    from .eip.discovery import discover
     from .sync_io import run_in_private_loop
 
     return run_in_private_loop(discover(address, port, timeout))
@@ -827,5 +840,7 @@ def componet_route(node: int) -> list[Segment]:
     return [PortSegment(2, bytes((node,)))]
 
 
-__all__ = ["UNDECODED", "AttributeValue", "ReplyDecodeError", "Scanner", "SyncScanner", "UnknownAttributeError",
-           "Value", "backplane_route", "componet_route", "discover", "discover_blocking", "list_services_udp"]
+__all__ = [  # noqa: F822 - discover and list_services_udp come from ``__getattr__``
+    "UNDECODED", "AttributeValue", "ReplyDecodeError", "Scanner", "SyncScanner", "UnknownAttributeError",
+    "Value", "backplane_route", "componet_route", "discover", "discover_blocking", "list_services_udp",
+]
