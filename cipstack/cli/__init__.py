@@ -74,7 +74,8 @@ def _timeouts() -> tuple[type[Exception], ...]:
 
 def _main(argv: Sequence[str] | None) -> int:
     words = list(sys.argv[1:] if argv is None else argv)
-    parser = build_parser(command_word(words))
+    # A command alone shows its usage when its line is wrong; only help shows the descriptions.
+    parser = build_parser(command_word(words), texts=not words or any(w in ("-h", "--help") for w in words))
     try:
         args = parser.parse_args(words)
     except UsageError as exc:

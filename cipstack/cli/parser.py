@@ -29,7 +29,9 @@ class _SubParsers(argparse._SubParsersAction):  # type: ignore[type-arg]
         path = (*getattr(self, "_prog_prefix", "cipstack").split()[1:], name)
         text = COMMANDS.get(path)
         if text is not None:
-            kwargs.update(help=text.help, description=text.description_text(), epilog=text.epilog())
+            kwargs["help"] = text.help
+            if getattr(self, "texts", True):
+                kwargs.update(description=text.description_text(), epilog=text.epilog())
         kwargs.setdefault("formatter_class", _Formatter)
         return super().add_parser(name, **kwargs)
 
@@ -75,11 +77,14 @@ def command_word(argv: list[str]) -> str | None:
     return None
 
 
-def build_parser(command: str | None = None) -> argparse.ArgumentParser:
+def build_parser(command: str | None = None, texts: bool = True) -> argparse.ArgumentParser:
     """The whole command line, or given the ``command`` it will parse, that command alone (a one-shot
     ``get`` builds no other command's options and imports no other command's module).
-    A default a help text names is argparse's own (``%(default)s``), so the two cannot disagree."""
-    parser = _Parser(prog="cipstack", description=PROGRAM.description_text(), epilog=PROGRAM.epilog())
+    A default a help text names is argparse's own (``%(default)s``), so the two cannot disagree.
+    ``texts``: the descriptions and examples ``--help`` prints (wrapping them is most of the work of
+    building a command: a line that asks for no help goes without)."""
+    parser = _Parser(prog="cipstack", description=PROGRAM.description_text() if texts else None,
+                     epilog=PROGRAM.epilog() if texts else None)
     parser.add_argument("--version", action="version", version=f"cipstack {__version__}")
     levels = ["DEBUG", "INFO", "WARNING", "ERROR"]
     parser.add_argument("--log-level", default="INFO", choices=levels, type=str.upper,
@@ -90,6 +95,7 @@ def build_parser(command: str | None = None) -> argparse.ArgumentParser:
                                  help=f"log level on stderr (default {parser.get_default('log_level')})")
     # Not required here: without a command ``main`` prints the list of commands.
     sub = parser.add_subparsers(dest="command", metavar="COMMAND", title="commands", parser_class=_Parser)
+    sub.texts = texts  # type: ignore[attr-defined]  # read by ``_SubParsers.add_parser``
     _add_parser = sub.add_parser
 
     def add_parser(name: str, **kwargs: Any) -> argparse.ArgumentParser:

@@ -15,7 +15,7 @@ from ..errors import CipstackError
 from .encapsulation import DEFAULT_PORT
 from .originator_core import (
     DEFAULT_TIMEOUT,
-    ExplicitConnectionInfo,
+    CoreClient,
     NoReplyError,
     OriginatorCore,
     Plan,
@@ -29,15 +29,12 @@ T = TypeVar("T")
 _RECEIVE_SIZE = 4096
 
 
-class BlockingEncapsulationClient:
+class BlockingEncapsulationClient(CoreClient):
     """One TCP connection and one session, blocking: ``perform`` a transaction, ``run`` a plan."""
 
     def __init__(self, host: str, port: int = DEFAULT_PORT, timeout: float = DEFAULT_TIMEOUT,
                  core: OriginatorCore | None = None) -> None:
-        self.host = host
-        self.port = port
-        self.timeout = timeout
-        self.core = core or OriginatorCore(timeout)
+        super().__init__(host, port, timeout, core)
         self._sock: socket.socket | None = None
         self._sock_timeout: float | None = None
 
@@ -58,15 +55,6 @@ class BlockingEncapsulationClient:
                 client.close()
                 raise
         return client
-
-    @property
-    def session(self) -> int:
-        return self.core.session
-
-    @property
-    def connection(self) -> ExplicitConnectionInfo | None:
-        """The open class 3 connection, if any."""
-        return self.core.connection
 
     @property
     def is_open(self) -> bool:
@@ -109,7 +97,7 @@ class BlockingEncapsulationClient:
 
     def _no_reply(self, transaction: Transaction[Any]) -> NoReplyError:
         self.core.forget(transaction)
-        return NoReplyError(f"no reply from {self.host}:{self.port} to {transaction.what}")
+        return self.no_reply(transaction)
 
     def run(self, plan: Plan[T]) -> T:
         """Drive a plan of several requests to its result."""

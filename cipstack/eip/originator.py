@@ -25,6 +25,7 @@ from .originator_core import (
     DEFAULT_TIMEOUT,
     MESSAGE_ROUTER_PATH,
     ORIGINATOR_VENDOR_ID,
+    CoreClient,
     ExplicitConnectionInfo,
     NoReplyError,
     OriginatorCore,
@@ -68,15 +69,12 @@ class _ClientProtocol(asyncio.Protocol):
         self.client._lost(exc)
 
 
-class EncapsulationClient:
+class EncapsulationClient(CoreClient):
     """The asyncio originator: each request's reply resolves a future, so requests may overlap."""
 
     def __init__(self, host: str, port: int = DEFAULT_PORT, timeout: float = DEFAULT_TIMEOUT,
                  core: OriginatorCore | None = None) -> None:
-        self.host = host
-        self.port = port
-        self.timeout = timeout
-        self.core = core or OriginatorCore(timeout)
+        super().__init__(host, port, timeout, core)
         self._protocol: _ClientProtocol | None = None
         self._waiting: dict[Transaction[Any], asyncio.Future[Any]] = {}
         self._timer: asyncio.TimerHandle | None = None
@@ -99,15 +97,6 @@ class EncapsulationClient:
         self._protocol = protocol
         if register:
             await self.register_session()
-
-    @property
-    def session(self) -> int:
-        return self.core.session
-
-    @property
-    def connection(self) -> ExplicitConnectionInfo | None:
-        """The open class 3 connection, if any: requests travel on it."""
-        return self.core.connection
 
     def local_host(self) -> str:
         """The local address of the TCP connection (where T->O data should come)."""
@@ -180,7 +169,7 @@ class EncapsulationClient:
         for transaction in self.core.expired(loop.time()):
             future = self._waiting.pop(transaction, None)
             if future is not None and not future.done():
-                future.set_exception(_NoReply(f"no reply from {self.host}:{self.port} to {transaction.what}"))
+                future.set_exception(_NoReply(*self.no_reply(transaction).args))
         self._arm(loop)
 
     def _arm(self, loop: asyncio.AbstractEventLoop) -> None:

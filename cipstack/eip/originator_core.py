@@ -464,6 +464,32 @@ class OriginatorCore:
                      closed)
 
 
+class CoreClient:
+    """What every shell over the core holds: the target's address, the default reply timeout and
+    the core itself, whose session and class 3 connection it shows."""
+
+    def __init__(self, host: str, port: int = DEFAULT_PORT, timeout: float = DEFAULT_TIMEOUT,
+                 core: OriginatorCore | None = None) -> None:
+        self.host = host
+        self.port = port
+        self.timeout = timeout
+        self.core = core or OriginatorCore(timeout)
+
+    @property
+    def session(self) -> int:
+        """The session handle RegisterSession gave (0: none)."""
+        return self.core.session
+
+    @property
+    def connection(self) -> ExplicitConnectionInfo | None:
+        """The open class 3 connection, if any: requests travel on it."""
+        return self.core.connection
+
+    def no_reply(self, transaction: Transaction[Any]) -> NoReplyError:
+        """The error of ``transaction`` whose reply did not come in time."""
+        return NoReplyError(f"no reply from {self.host}:{self.port} to {transaction.what}")
+
+
 def _header_and_body(header: EncapsulationHeader, body: bytes) -> tuple[EncapsulationHeader, bytes]:
     return header, body
 
@@ -506,7 +532,7 @@ def one(transaction: Transaction[T]) -> Plan[T]:
     return (yield transaction)  # type: ignore[no-any-return]  # what the shell sends back is T
 
 
-__all__ = ["DEFAULT_TIMEOUT", "MESSAGE_ROUTER_PATH", "ORIGINATOR_VENDOR_ID", "Completion", "ExplicitConnectionInfo",
-           "FrameBuffer", "NoReplyError", "OriginatorCore", "Plan", "Transaction", "decode_message_reply",
-           "decode_multiple_service", "encode_multiple_service", "one", "parse_host", "rr_reply_data", "rr_reply_items",
-           "rr_request_body", "run_plan"]
+__all__ = ["DEFAULT_TIMEOUT", "MESSAGE_ROUTER_PATH", "ORIGINATOR_VENDOR_ID", "Completion", "CoreClient",
+           "ExplicitConnectionInfo", "FrameBuffer", "NoReplyError", "OriginatorCore", "Plan", "Transaction",
+           "decode_message_reply", "decode_multiple_service", "encode_multiple_service", "one", "parse_host",
+           "rr_reply_data", "rr_reply_items", "rr_request_body", "run_plan"]
