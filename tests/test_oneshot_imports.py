@@ -24,8 +24,9 @@ except SystemExit as done:
 print("MODULES " + json.dumps({"status": status, "modules": sorted(sys.modules)}))
 """
 
-#: The most cipstack modules each command may load (today's count and a little room).
-BUDGET = {"get-standard": 36, "get-decoded": 38, "set": 38, "identity": 20}
+#: The most cipstack modules each command may load: today's count (31, 35, 35, 19) and room for the
+#: package modules of eip's layout by role.
+BUDGET = {"get-standard": 34, "get-decoded": 38, "set": 38, "identity": 22}
 #: Never on the one-shot path.
 FORBIDDEN = ("asyncio", "construct", "cipstack.eip.originator", "cipstack.devices.acg", "cipstack.devices.omron",
              "cipstack.devices.profiles", "cipstack.eds", "cipstack.assemblies.schema", "cipstack.cli.io",
