@@ -28,9 +28,9 @@ print("MODULES " + json.dumps({"status": status, "modules": sorted(sys.modules)}
 #: package modules of eip's layout by role.
 BUDGET = {"get-standard": 34, "get-decoded": 38, "set": 38, "identity": 22}
 #: Never on the one-shot path.
-FORBIDDEN = ("asyncio", "construct", "cipstack.eip.originator", "cipstack.devices.acg", "cipstack.devices.omron",
-             "cipstack.devices.profiles", "cipstack.eds", "cipstack.assemblies.schema", "cipstack.cli.io",
-             "cipstack.cli.drive", "cipstack.control", "cipstack.sync_io")
+FORBIDDEN = ("asyncio", "construct", "cipstack.eip.originator", "cipstack.devices.acg",
+             "cipstack.devices.omron", "cipstack.devices.profiles", "cipstack.eds", "cipstack.assemblies.schema",
+             "cipstack.cli.io", "cipstack.cli.drive", "cipstack.control", "cipstack.sync_io")
 
 COMMANDS = {"get-standard": ["get", "{target}", "1/1/7"], "get-decoded": ["get", "{target}", "0x2A/1/102"],
             "set": ["set", "{target}", "0x2A/1/102", "50"], "identity": ["identity", "{target}"]}
