@@ -8,8 +8,8 @@ from __future__ import annotations
 
 from collections.abc import Callable, Iterable, Mapping
 from dataclasses import dataclass
+from typing import TYPE_CHECKING
 
-from .assemblies.schema import AssemblySchema
 from .cip.model import AttributeSpec, ClassSpec
 from .cip.types import UINT
 from .eip.cm_spec import SPEC as CONNECTION_MANAGER_SPEC
@@ -17,6 +17,10 @@ from .objects.assembly import SPEC as ASSEMBLY_SPEC
 from .objects.identity import identity_spec
 from .objects.message_router import SPEC as MESSAGE_ROUTER_SPEC
 from .objects.tcpip import ETHERNET_LINK_SPEC, TCPIP_SPEC
+
+if TYPE_CHECKING:
+    # A catalog holds schemas; decoding an attribute (a one-shot ``get``) needs none of their machinery.
+    from .assemblies.schema import AssemblySchema
 
 STANDARD_CLASSES: dict[int, ClassSpec] = {
     spec.class_id: spec

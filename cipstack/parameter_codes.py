@@ -12,15 +12,12 @@ HOST CODE`` call what is here, over the scanner's own read and write."""
 from __future__ import annotations
 
 import difflib
-from typing import TYPE_CHECKING, Any
+from typing import Any
 
 from .catalog import Catalog, Parameter
 from .cip.types import IntegerType
 from .cip.values import Value
 from .errors import BadRequest, NotFound
-
-if TYPE_CHECKING:
-    from .scanner import Scanner
 
 
 class UnknownParameterError(NotFound, KeyError):
@@ -99,18 +96,3 @@ def raw_of(parameter: Parameter, value: Any) -> Any:
         return scaling.to_raw(value)
     except ValueError as exc:
         raise ParameterValueError(f"{where}: {exc}") from None
-
-
-async def read_parameter(scanner: Scanner, code: str) -> Value:
-    """The parameter ``code`` of the scanner's device, read with its unit."""
-    parameter = find_parameter(scanner.catalog, code)
-    return await scanner.read(*parameter.path)
-
-
-async def write_parameter(scanner: Scanner, code: str, value: Any) -> Value:
-    """Write the parameter ``code`` in its own unit (``2.5`` for 2.5 s); the value written, as a ``Value``."""
-    parameter = find_parameter(scanner.catalog, code)
-    raw = raw_of(parameter, value)
-    await scanner.write(*parameter.path, raw)
-    spec = parameter.spec
-    return Value(raw, spec.name, spec.type, spec.scaling)

@@ -8,11 +8,10 @@ returned. Every error status raises ``CipError`` naming the general and extended
 
 from __future__ import annotations
 
-import asyncio
 import contextlib
 import logging
 import struct
-from collections.abc import AsyncIterator, Iterator, Sequence
+from collections.abc import AsyncIterator, Callable, Iterator, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING, Any, TypeVar
@@ -24,26 +23,26 @@ from .cip.model import AttributeSpec
 from .cip.status import CipError, ExtendedStatus, GeneralStatus
 from .cip.types import UINT, CipType, IntegerType
 from .cip.values import Value
+from .eip.blocking_client import BlockingEncapsulationClient
+from .eip.encapsulation import DEFAULT_PORT
 from .eip.identity_items import IdentityRecord, ServiceRecord
-from .eip.originator import (
-    DEFAULT_PORT,
-    BlockingEncapsulationClient,
-    EncapsulationClient,
-    ExplicitClient,
-    MalformedReplyError,
-    discover,
-    list_services_udp,
+from .eip.originator_core import (
+    OriginatorCore,
+    Plan,
+    decode_multiple_service,
+    encode_multiple_service,
+    one,
     parse_host,
-    run_blocking,
 )
-from .eip.replies import EncapsulationStatusError
+from .eip.replies import EncapsulationStatusError, MalformedReplyError
 from .errors import NotFound, ProtocolError
 
 if TYPE_CHECKING:
-    # Imported where used: explicit messaging alone does not load the EDS model or class 1.
+    # Imported where used: explicit messaging alone does not load asyncio, the EDS model or class 1.
     from .assemblies.schema import AssemblySchema
     from .eds.model import EdsDocument
     from .eip.io_originator import IoConnectionHandle, OtFormat
+    from .eip.originator import EncapsulationClient
     from .sync_io import LoopThread, SyncIoConnection
 
 T = TypeVar("T")
@@ -113,47 +112,21 @@ def _malformed(what: str) -> Iterator[None]:
         raise MalformedReplyError(f"malformed {what}: {exc}") from None
 
 
-class Scanner:
-    """Explicit messaging and class 1 I/O with one target (unconnected, routed or class 3), async.
+class ExplicitMessaging:
+    """What a scanner asks a device and how it reads the replies, without I/O: each method is a
+    ``Plan`` (it yields the core's transactions and is sent their results) that ``Scanner`` runs on
+    its asyncio client and ``SyncScanner`` on its blocking one, so both behave alike by construction.
+    It holds the declarations replies decode by (``catalog``), the ``route`` and the ``identity``."""
 
-    Open one with ``await Scanner.connect(host)``: it identifies the device and decodes every
-    reply by the declarations of its profile (``catalog``); ``read`` returns a ``Value`` with its
-    unit, ``write`` takes a raw value or, with ``scaled=True``, an engineering one.
-    """
-
-    def __init__(self, client: ExplicitClient, catalog: Catalog | None = None,
+    def __init__(self, core: OriginatorCore, catalog: Catalog | None = None,
                  route: Sequence[Segment] | None = None) -> None:
-        self.client = client
-        #: The declarations replies decode by and class 1 fields are named by (``catalog.source`` says whose).
+        self.core = core
         self.catalog = catalog or Catalog()
         self.route = route
-        #: What the device said it is (``identify``), or None before (or without) identification.
         self.identity: IdentityRecord | None = None
 
-    @classmethod
-    async def connect(cls, address: str, port: int | None = None, *, timeout: float = 5.0,
-                      catalog: Catalog | None = None, route: Sequence[Segment] | None = None,
-                      identify: bool = True, eds: str | Path | EdsDocument | None = None) -> Scanner:
-        """Connect to ``address`` (``"host"`` or ``"host:port"``) and register a session.
-
-        The catalog replies decode by is, first match: ``catalog``; the EDS file ``eds`` (a path or
-        a read ``EdsDocument``); the profile of the device's identity (``identify``, the default);
-        else the standard objects alone. ``route`` sends every request through Unconnected_Send
-        along that path (``backplane_route``, a CompoNet node behind a gateway: ``[PortSegment(2, b"\\x03")]``),
-        and identification then asks the routed device itself.
-        """
-        host, parsed_port = parse_host(address)
-        client = await EncapsulationClient.connect(host, port or parsed_port, timeout)
-        scanner = cls(client, catalog, route)
-        try:
-            await scanner._choose_catalog(catalog, eds, identify)
-        except BaseException:
-            await scanner.close()
-            raise
-        return scanner
-
-    async def _choose_catalog(self, catalog: Catalog | None, eds: str | Path | EdsDocument | None,
-                              identify: bool) -> None:
+    def choose_catalog(self, catalog: Catalog | None, eds: str | Path | EdsDocument | None,
+                       identify: bool) -> Plan[None]:
         if catalog is not None:
             return
         if eds is not None:
@@ -161,37 +134,33 @@ class Scanner:
 
             self.catalog = catalog_from_eds(eds)
         elif identify:
-            await self.identify()
+            yield from self.identify()
 
-    async def identify(self) -> IdentityRecord | None:
-        """Ask the device what it is and take the catalog of its profile; returns its identity.
-
-        ListIdentity over this TCP connection; where a device does not answer it (or when a
-        ``route`` leads past the device that would), Identity attributes 1-4 and 7 (vendor,
-        device type, product code, revision, product name). A device of no known profile gets
-        the standard objects, and ``catalog.source`` says so; one that answers neither keeps them
-        too, with the reason."""
-        from .devices.profiles import catalog_for
+    def identify(self, catalogs: Callable[[int, int], Catalog] | None = None) -> Plan[IdentityRecord | None]:
+        """``catalogs``: the catalog of (vendor id, product code); by default the profile's whole one
+        (``devices.profiles.catalog_for``)."""
+        if catalogs is None:
+            from .devices.profiles import catalog_for as catalogs
 
         record = None
         if not self.route:
             try:
-                records = await self.client.list_identity()
-            except (EncapsulationStatusError, MalformedReplyError, asyncio.TimeoutError) as exc:
+                records = yield self.core.list_identity()
+            except (EncapsulationStatusError, MalformedReplyError, TimeoutError) as exc:
                 log.debug("ListIdentity over TCP: %s; reading the Identity object instead", exc)
                 records = []
             record = records[0] if records else None
         if record is None:
-            record = await self._identity_attributes()
+            record = yield from self._identity_attributes()
         self.identity = record
         if record is None:
             self.catalog = Catalog(source="the standard objects only: the device did not identify itself (no "
                                           "ListIdentity reply, no Identity attributes 1 and 3); give eds= or catalog=")
         else:
-            self.catalog = catalog_for(record.vendor_id, record.product_code)
+            self.catalog = catalogs(record.vendor_id, record.product_code)
         return record
 
-    async def _identity_attributes(self) -> IdentityRecord | None:
+    def _identity_attributes(self) -> Plan[IdentityRecord | None]:
         """Identity attributes 1-4 and 7 (only vendor and product code are needed)."""
         from .objects.identity import identity_spec
 
@@ -200,7 +169,7 @@ class Scanner:
         for attribute in (1, 3, 2, 4, 7):
             declared = spec.instance_attribute(attribute)
             try:
-                reply = await self.request(Service.GET_ATTRIBUTE_SINGLE, 0x01, 1, attribute)
+                reply = yield from self.request(Service.GET_ATTRIBUTE_SINGLE, 0x01, 1, attribute)
                 values[attribute] = declared.type.decode(reply.data) if declared is not None else None
             except (CipError, ValueError, struct.error, MalformedReplyError) as exc:
                 if attribute in (1, 3):
@@ -210,22 +179,12 @@ class Scanner:
         return IdentityRecord(values[1], values.get(2) or 0, values[3],
                               (revision.get("major", 0), revision.get("minor", 0)), 0, 0, values.get(7) or "")
 
-    async def close(self) -> None:
-        await self.client.close()
-
-    async def __aenter__(self) -> Scanner:
-        return self
-
-    async def __aexit__(self, *exc: object) -> None:
-        await self.close()
-
     # -- generic ----------------------------------------------------------------------------------
-    async def request(self, service: int, class_id: int, instance: int | None = None, attribute: int | None = None,
-                      data: bytes = b"", *, check: bool = True) -> MessageRouterResponse:
-        """Any service by code to class/instance[/attribute]; raises ``CipError`` on an error status."""
+    def request(self, service: int, class_id: int, instance: int | None = None, attribute: int | None = None,
+                data: bytes = b"", *, check: bool = True) -> Plan[MessageRouterResponse]:
         path = request_path(class_id, instance, attribute)
-        reply = await self.client.request(service, path, data, route=self.route)
-        if (self.route is not None and self.client.connection is None and reply.service == Service.UNCONNECTED_SEND
+        reply: MessageRouterResponse = yield self.core.request(service, path, data, route=self.route)
+        if (self.route is not None and self.core.connection is None and reply.service == Service.UNCONNECTED_SEND
                 and service != reply.service):
             # The Connection Manager could not route the request: its error is the answer.
             reply.raise_for_status()
@@ -233,13 +192,13 @@ class Scanner:
             raise CipError(GeneralStatus.INVALID_REPLY_RECEIVED, message=f"reply to service 0x{reply.service:02X}")
         return reply.raise_for_status() if check else reply
 
-    async def open_connection(self, rpi: float = 2.0, large: bool = True, connection_size: int = 500) -> None:
-        """Open a class 3 connection; later requests travel on it until ``close_connection``."""
-        route: Sequence[Segment] = self.route or ()
-        await self.client.forward_open(int(rpi * 1e6), connection_size, large, route=list(route))
+    def open_connection(self, rpi: float, large: bool, connection_size: int) -> Plan[None]:
+        yield self.core.forward_open(int(rpi * 1e6), connection_size, large, route=list(self.route or ()))
 
-    async def close_connection(self) -> None:
-        await self.client.forward_close()
+    def close_connection(self) -> Plan[None]:
+        closing = self.core.forward_close()
+        if closing is not None:
+            yield closing
 
     # -- attributes -------------------------------------------------------------------------------
     def _type_for(self, class_id: int, instance: int, attribute: int, cip_type: CipType | None
@@ -247,16 +206,14 @@ class Scanner:
         spec = self.catalog.attribute(class_id, instance, attribute)
         return (cip_type or (spec.type if spec is not None else None)), spec
 
-    async def get_attribute_single(self, class_id: int, instance: int, attribute: int,
-                                   cip_type: CipType | None = None) -> AttributeValue:
-        """Get_Attribute_Single: the reply's bytes, the value decoded by the declaration (or ``cip_type``)
-        and the declaration itself."""
-        data, value, value_type, spec = await self._get_single(class_id, instance, attribute, cip_type)
+    def get_attribute_single(self, class_id: int, instance: int, attribute: int,
+                             cip_type: CipType | None = None) -> Plan[AttributeValue]:
+        data, value, value_type, spec = yield from self._get_single(class_id, instance, attribute, cip_type)
         return AttributeValue(class_id, instance, attribute, data, value, spec, value_type)
 
-    async def _get_single(self, class_id: int, instance: int, attribute: int, cip_type: CipType | None
-                          ) -> tuple[bytes, Any, CipType | None, AttributeSpec | None]:
-        reply = await self.request(Service.GET_ATTRIBUTE_SINGLE, class_id, instance, attribute)
+    def _get_single(self, class_id: int, instance: int, attribute: int, cip_type: CipType | None
+                    ) -> Plan[tuple[bytes, Any, CipType | None, AttributeSpec | None]]:
+        reply = yield from self.request(Service.GET_ATTRIBUTE_SINGLE, class_id, instance, attribute)
         value_type, spec = self._type_for(class_id, instance, attribute, cip_type)
         data = reply.data
         if value_type is None:
@@ -272,26 +229,16 @@ class Scanner:
             log.debug("%s: reply %s does not decode as declared (%s): %s", where, data.hex(), value_type, exc)
             return data, None, None, spec
 
-    async def read(self, class_id: int, instance: int, attribute: int, cip_type: CipType | None = None) -> Value:
-        """Get_Attribute_Single, decoded by the attribute's declaration (or ``cip_type``): a ``Value``
-        whose ``raw`` is the value on the wire, ``value`` the engineering value, ``unit`` its unit
-        (``str()`` gives ``5.0 s``). Undeclared and no ``cip_type``: ``raw`` is the reply's bytes."""
-        data, value, value_type, spec = await self._get_single(class_id, instance, attribute, cip_type)
+    def read(self, class_id: int, instance: int, attribute: int, cip_type: CipType | None = None) -> Plan[Value]:
+        data, value, value_type, spec = yield from self._get_single(class_id, instance, attribute, cip_type)
         if value_type is None:
             return Value(data, spec.name if spec is not None else "")
         if spec is None:
             return Value(value, "", value_type)
         return Value(value, spec.name, value_type, spec.scaling)
 
-    async def write(self, class_id: int, instance: int, attribute: int, value: Any, *, scaled: bool = False,
-                    cip_type: CipType | None = None) -> None:
-        """Set_Attribute_Single by the attribute's declaration (or ``cip_type``).
-
-        The rule: ``value`` is the raw value, as on the wire (an ``int`` for a scaled attribute:
-        ``write(0x2A, 1, 102, 50)`` is 5.0 s at 0.1 s per step), unless ``scaled=True``: then it is the
-        engineering value (``write(0x2A, 1, 102, 5.0, scaled=True)``), turned into raw steps by the
-        declaration; a value between two steps raises ``ValueError``. A ``Value`` writes its raw
-        value; ``bytes`` go as they are."""
+    def write(self, class_id: int, instance: int, attribute: int, value: Any, scaled: bool,
+              cip_type: CipType | None) -> Plan[None]:
         value_type, spec = self._type_for(class_id, instance, attribute, cip_type)
         if isinstance(value, Value):
             value = value.raw
@@ -308,25 +255,27 @@ class Scanner:
             if not value.is_integer():
                 raise ValueError(f"{where} is an integer ({value_type.name}), not {value!r}")
             value = int(value)
-        await self.set_attribute_single(class_id, instance, attribute, value, cip_type)
+        yield from self.set_attribute_single(class_id, instance, attribute, value, cip_type)
 
-    async def parameter(self, code: str) -> Value:
+    def parameter(self, code: str) -> Plan[Value]:
         """A parameter by the code its manual prints (``"ACC"``, ``"CM.24"``, ``"A004"``; an EDS file's
-        ``ParamN`` or its name), read with its unit: ``cipstack.parameter_codes``."""
-        from .parameter_codes import read_parameter
+        ``ParamN`` or its name), read with its unit (``cipstack.parameter_codes``)."""
+        from .parameter_codes import find_parameter
 
-        return await read_parameter(self, code)
+        return (yield from self.read(*find_parameter(self.catalog, code).path))
 
-    async def set_parameter(self, code: str, value: Any) -> Value:
-        """Write a parameter by its code, the value in its own unit (``set_parameter("ACC", 2.5)``: 2.5 s);
-        the value written. ``cipstack.parameter_codes``."""
-        from .parameter_codes import write_parameter
+    def set_parameter(self, code: str, value: Any) -> Plan[Value]:
+        """Write a parameter by its code, the value in its own unit (``2.5`` for 2.5 s); the value written."""
+        from .parameter_codes import find_parameter, raw_of
 
-        return await write_parameter(self, code, value)
+        parameter = find_parameter(self.catalog, code)
+        raw = raw_of(parameter, value)
+        yield from self.write(*parameter.path, raw, False, None)
+        spec = parameter.spec
+        return Value(raw, spec.name, spec.type, spec.scaling)
 
-    async def set_attribute_single(self, class_id: int, instance: int, attribute: int, value: Any,
-                                   cip_type: CipType | None = None) -> None:
-        """Set_Attribute_Single of a raw value (or ``bytes``), encoded by the declaration or ``cip_type``."""
+    def set_attribute_single(self, class_id: int, instance: int, attribute: int, value: Any,
+                             cip_type: CipType | None = None) -> Plan[None]:
         value_type, _ = self._type_for(class_id, instance, attribute, cip_type)
         if isinstance(value, (bytes, bytearray)):
             data = bytes(value)
@@ -335,15 +284,10 @@ class Scanner:
                                         f"{self.catalog.source}: its type is unknown, give cip_type or bytes")
         else:
             data = value_type.encode(value)
-        await self.request(Service.SET_ATTRIBUTE_SINGLE, class_id, instance, attribute, data)
+        yield from self.request(Service.SET_ATTRIBUTE_SINGLE, class_id, instance, attribute, data)
 
-    async def get_attributes_all(self, class_id: int, instance: int) -> tuple[bytes, dict[str, Any] | None]:
-        """Raw reply and, when the class is declared, the values by attribute name.
-
-        A device may carry attributes beyond the declared ones after them (its own, or a later
-        revision's): the declared ones are decoded and the rest is returned as raw bytes under
-        the key ``UNDECODED`` (nothing is dropped silently)."""
-        reply = await self.request(Service.GET_ATTRIBUTES_ALL, class_id, instance)
+    def get_attributes_all(self, class_id: int, instance: int) -> Plan[tuple[bytes, dict[str, Any] | None]]:
+        reply = yield from self.request(Service.GET_ATTRIBUTES_ALL, class_id, instance)
         layout = self.catalog.get_all_layout(class_id) if instance else None
         if layout is None:
             return reply.data, None
@@ -358,11 +302,10 @@ class Scanner:
             values[UNDECODED] = reply.data[offset:]
         return reply.data, values
 
-    async def get_attribute_list(self, class_id: int, instance: int, attributes: Sequence[int]
-                                 ) -> dict[int, AttributeValue | CipError]:
-        """Per-attribute results; needs every attribute's declaration to split the reply."""
+    def get_attribute_list(self, class_id: int, instance: int, attributes: Sequence[int]
+                           ) -> Plan[dict[int, AttributeValue | CipError]]:
         data = UINT.encode(len(attributes)) + struct.pack(f"<{len(attributes)}H", *attributes)
-        reply = await self.request(Service.GET_ATTRIBUTE_LIST, class_id, instance, data=data, check=False)
+        reply = yield from self.request(Service.GET_ATTRIBUTE_LIST, class_id, instance, data=data, check=False)
         if reply.general_status not in (GeneralStatus.SUCCESS, GeneralStatus.ATTRIBUTE_LIST_ERROR):
             reply.raise_for_status()
         results: dict[int, AttributeValue | CipError] = {}
@@ -385,8 +328,7 @@ class Scanner:
                 offset = end
         return results
 
-    async def set_attribute_list(self, class_id: int, instance: int, values: dict[int, Any]) -> dict[int, int]:
-        """Set several attributes; returns each attribute's status (0 = set)."""
+    def set_attribute_list(self, class_id: int, instance: int, values: dict[int, Any]) -> Plan[dict[int, int]]:
         out = bytearray(UINT.encode(len(values)))
         for attribute_id, value in values.items():
             value_type, _ = self._type_for(class_id, instance, attribute_id, None)
@@ -398,7 +340,7 @@ class Scanner:
             else:
                 encoded = value_type.encode(value)
             out += UINT.encode(attribute_id) + encoded
-        reply = await self.request(Service.SET_ATTRIBUTE_LIST, class_id, instance, data=bytes(out), check=False)
+        reply = yield from self.request(Service.SET_ATTRIBUTE_LIST, class_id, instance, data=bytes(out), check=False)
         if reply.general_status not in (GeneralStatus.SUCCESS, GeneralStatus.ATTRIBUTE_LIST_ERROR):
             reply.raise_for_status()
         statuses: dict[int, int] = {}
@@ -409,36 +351,198 @@ class Scanner:
                 statuses[attribute_id], offset = UINT.decode_from(reply.data, offset)
         return statuses
 
-    async def reset(self, class_id: int = 0x01, instance: int = 1, reset_type: int | None = None) -> None:
+    def reset(self, class_id: int, instance: int, reset_type: int | None) -> Plan[None]:
         data = b"" if reset_type is None else bytes((reset_type,))
-        await self.request(Service.RESET, class_id, instance, data=data)
+        yield from self.request(Service.RESET, class_id, instance, data=data)
+
+    def multiple_service_packet(self, requests: Sequence[MessageRouterRequest]
+                                ) -> Plan[list[MessageRouterResponse]]:
+        reply = yield from self.request(Service.MULTIPLE_SERVICE_PACKET, 0x02, 1,
+                                        data=encode_multiple_service(requests), check=False)
+        if reply.general_status not in (GeneralStatus.SUCCESS, GeneralStatus.EMBEDDED_SERVICE_ERROR):
+            reply.raise_for_status()
+        return decode_multiple_service(reply.data)
+
+    def assembly_size(self, instance: int) -> Plan[int]:
+        schema = self.catalog.assemblies.get(instance)
+        if schema is not None:
+            return schema.size
+        return int((yield from self.read(0x04, instance, 4, UINT)).raw)
+
+    def list_identity(self) -> Plan[list[IdentityRecord]]:
+        return one(self.core.list_identity())
+
+    def list_services(self) -> Plan[list[ServiceRecord]]:
+        return one(self.core.list_services())
+
+
+class _Declarations:
+    """``catalog``, ``route`` and ``identity`` of a scanner: those of its ``ExplicitMessaging``."""
+
+    explicit: ExplicitMessaging
+
+    @property
+    def catalog(self) -> Catalog:
+        """The declarations replies decode by and class 1 fields are named by (``catalog.source`` says whose)."""
+        return self.explicit.catalog
+
+    @catalog.setter
+    def catalog(self, catalog: Catalog) -> None:
+        self.explicit.catalog = catalog
+
+    @property
+    def identity(self) -> IdentityRecord | None:
+        """What the device said it is (``identify``), or None before (or without) identification."""
+        return self.explicit.identity
+
+    @identity.setter
+    def identity(self, identity: IdentityRecord | None) -> None:
+        self.explicit.identity = identity
+
+    @property
+    def route(self) -> Sequence[Segment] | None:
+        """The route every request travels (Unconnected_Send), None for the target itself."""
+        return self.explicit.route
+
+
+class Scanner(_Declarations):
+    """Explicit messaging and class 1 I/O with one target (unconnected, routed or class 3), async.
+
+    Open one with ``await Scanner.connect(host)``: it identifies the device and decodes every
+    reply by the declarations of its profile (``catalog``); ``read`` returns a ``Value`` with its
+    unit, ``write`` takes a raw value or, with ``scaled=True``, an engineering one.
+    """
+
+    def __init__(self, client: EncapsulationClient, catalog: Catalog | None = None,
+                 route: Sequence[Segment] | None = None) -> None:
+        self.client = client
+        #: What is asked and how replies are read: the same plans ``SyncScanner`` runs.
+        self.explicit = ExplicitMessaging(client.core, catalog, route)
+
+    @classmethod
+    async def connect(cls, address: str, port: int | None = None, *, timeout: float = 5.0,
+                      catalog: Catalog | None = None, route: Sequence[Segment] | None = None,
+                      identify: bool = True, eds: str | Path | EdsDocument | None = None) -> Scanner:
+        """Connect to ``address`` (``"host"`` or ``"host:port"``) and register a session.
+
+        The catalog replies decode by is, first match: ``catalog``; the EDS file ``eds`` (a path or
+        a read ``EdsDocument``); the profile of the device's identity (``identify``, the default);
+        else the standard objects alone. ``route`` sends every request through Unconnected_Send
+        along that path (``backplane_route``, a CompoNet node behind a gateway: ``[PortSegment(2, b"\\x03")]``),
+        and identification then asks the routed device itself.
+        """
+        from .eip.originator import EncapsulationClient
+
+        host, parsed_port = parse_host(address)
+        client = await EncapsulationClient.connect(host, port or parsed_port, timeout)
+        scanner = cls(client, catalog, route)
+        try:
+            await client.run(scanner.explicit.choose_catalog(catalog, eds, identify))
+        except BaseException:
+            await scanner.close()
+            raise
+        return scanner
+
+    async def identify(self) -> IdentityRecord | None:
+        """Ask the device what it is and take the catalog of its profile; returns its identity.
+
+        ListIdentity over this TCP connection; where a device does not answer it (or when a
+        ``route`` leads past the device that would), Identity attributes 1-4 and 7 (vendor,
+        device type, product code, revision, product name). A device of no known profile gets
+        the standard objects, and ``catalog.source`` says so; one that answers neither keeps them
+        too, with the reason."""
+        return await self.client.run(self.explicit.identify())
+
+    async def close(self) -> None:
+        await self.client.close()
+
+    async def __aenter__(self) -> Scanner:
+        return self
+
+    async def __aexit__(self, *exc: object) -> None:
+        await self.close()
+
+    # -- generic ----------------------------------------------------------------------------------
+    async def request(self, service: int, class_id: int, instance: int | None = None, attribute: int | None = None,
+                      data: bytes = b"", *, check: bool = True) -> MessageRouterResponse:
+        """Any service by code to class/instance[/attribute]; raises ``CipError`` on an error status."""
+        return await self.client.run(self.explicit.request(service, class_id, instance, attribute, data, check=check))
+
+    async def open_connection(self, rpi: float = 2.0, large: bool = True, connection_size: int = 500) -> None:
+        """Open a class 3 connection; later requests travel on it until ``close_connection``."""
+        await self.client.run(self.explicit.open_connection(rpi, large, connection_size))
+
+    async def close_connection(self) -> None:
+        await self.client.run(self.explicit.close_connection())
+
+    # -- attributes -------------------------------------------------------------------------------
+    async def get_attribute_single(self, class_id: int, instance: int, attribute: int,
+                                   cip_type: CipType | None = None) -> AttributeValue:
+        """Get_Attribute_Single: the reply's bytes, the value decoded by the declaration (or ``cip_type``)
+        and the declaration itself."""
+        return await self.client.run(self.explicit.get_attribute_single(class_id, instance, attribute, cip_type))
+
+    async def read(self, class_id: int, instance: int, attribute: int, cip_type: CipType | None = None) -> Value:
+        """Get_Attribute_Single, decoded by the attribute's declaration (or ``cip_type``): a ``Value``
+        whose ``raw`` is the value on the wire, ``value`` the engineering value, ``unit`` its unit
+        (``str()`` gives ``5.0 s``). Undeclared and no ``cip_type``: ``raw`` is the reply's bytes."""
+        return await self.client.run(self.explicit.read(class_id, instance, attribute, cip_type))
+
+    async def write(self, class_id: int, instance: int, attribute: int, value: Any, *, scaled: bool = False,
+                    cip_type: CipType | None = None) -> None:
+        """Set_Attribute_Single by the attribute's declaration (or ``cip_type``).
+
+        The rule: ``value`` is the raw value, as on the wire (an ``int`` for a scaled attribute:
+        ``write(0x2A, 1, 102, 50)`` is 5.0 s at 0.1 s per step), unless ``scaled=True``: then it is the
+        engineering value (``write(0x2A, 1, 102, 5.0, scaled=True)``), turned into raw steps by the
+        declaration; a value between two steps raises ``ValueError``. A ``Value`` writes its raw
+        value; ``bytes`` go as they are."""
+        await self.client.run(self.explicit.write(class_id, instance, attribute, value, scaled, cip_type))
+
+    async def parameter(self, code: str) -> Value:
+        """A parameter by the code its manual prints (``"ACC"``, ``"CM.24"``, ``"A004"``; an EDS file's
+        ``ParamN`` or its name), read with its unit: ``cipstack.parameter_codes``."""
+        return await self.client.run(self.explicit.parameter(code))
+
+    async def set_parameter(self, code: str, value: Any) -> Value:
+        """Write a parameter by its code, the value in its own unit (``set_parameter("ACC", 2.5)``: 2.5 s);
+        the value written, as a ``Value``."""
+        return await self.client.run(self.explicit.set_parameter(code, value))
+
+    async def set_attribute_single(self, class_id: int, instance: int, attribute: int, value: Any,
+                                   cip_type: CipType | None = None) -> None:
+        """Set_Attribute_Single of a raw value (or ``bytes``), encoded by the declaration or ``cip_type``."""
+        await self.client.run(self.explicit.set_attribute_single(class_id, instance, attribute, value, cip_type))
+
+    async def get_attributes_all(self, class_id: int, instance: int) -> tuple[bytes, dict[str, Any] | None]:
+        """Raw reply and, when the class is declared, the values by attribute name.
+
+        A device may carry attributes beyond the declared ones after them (its own, or a later
+        revision's): the declared ones are decoded and the rest is returned as raw bytes under
+        the key ``UNDECODED`` (nothing is dropped silently)."""
+        return await self.client.run(self.explicit.get_attributes_all(class_id, instance))
+
+    async def get_attribute_list(self, class_id: int, instance: int, attributes: Sequence[int]
+                                 ) -> dict[int, AttributeValue | CipError]:
+        """Per-attribute results; needs every attribute's declaration to split the reply."""
+        return await self.client.run(self.explicit.get_attribute_list(class_id, instance, attributes))
+
+    async def set_attribute_list(self, class_id: int, instance: int, values: dict[int, Any]) -> dict[int, int]:
+        """Set several attributes; returns each attribute's status (0 = set)."""
+        return await self.client.run(self.explicit.set_attribute_list(class_id, instance, values))
+
+    async def reset(self, class_id: int = 0x01, instance: int = 1, reset_type: int | None = None) -> None:
+        await self.client.run(self.explicit.reset(class_id, instance, reset_type))
 
     async def multiple_service_packet(self, requests: Sequence[MessageRouterRequest]) -> list[MessageRouterResponse]:
         """Several requests in one Multiple_Service_Packet; returns each reply (status unchecked)."""
-        encoded = [r.encode() for r in requests]
-        table = bytearray(UINT.encode(len(encoded)))
-        offset = 2 + 2 * len(encoded)
-        for item in encoded:
-            table += UINT.encode(offset)
-            offset += len(item)
-        reply = await self.request(Service.MULTIPLE_SERVICE_PACKET, 0x02, 1, data=bytes(table) + b"".join(encoded),
-                                   check=False)
-        if reply.general_status not in (GeneralStatus.SUCCESS, GeneralStatus.EMBEDDED_SERVICE_ERROR):
-            reply.raise_for_status()
-        body = reply.data
-        with _malformed("Multiple_Service_Packet reply"):
-            count, _ = UINT.decode_from(body, 0)
-            offsets = [UINT.decode_from(body, 2 + 2 * i)[0] for i in range(count)] + [len(body)]
-            return [MessageRouterResponse.decode(body[offsets[i]:offsets[i + 1]]) for i in range(count)]
-        raise AssertionError("unreachable")  # pragma: no cover - the block returns or raises
+        return await self.client.run(self.explicit.multiple_service_packet(requests))
 
     # -- class 1 --------------------------------------------------------------------------------------
     async def assembly_size(self, instance: int) -> int:
         """Size of an assembly instance: from its schema when known, else Assembly attribute 4."""
-        schema = self.catalog.assemblies.get(instance)
-        if schema is not None:
-            return schema.size
-        return int((await self.read(0x04, instance, 4, UINT)).raw)
+        return await self.client.run(self.explicit.assembly_size(instance))
+
 
     @contextlib.asynccontextmanager
     async def io_connection(self, output: int | None = None, input: int = 0, rpi: float = 0.010, *,
@@ -468,8 +572,6 @@ class Scanner:
         """
         if output is None and heartbeat is None:
             raise ValueError("give an output assembly, or a heartbeat point for input-only / listen-only")
-        if not isinstance(self.client, EncapsulationClient):
-            raise TypeError("class 1 connections need the asyncio client (Scanner.connect)")
         if output_schema is None and output is not None:
             output_schema = self.catalog.assemblies.get(output)
         if input_schema is None:
@@ -524,9 +626,6 @@ class Scanner:
 
         if not isinstance(doc, EdsDocument):
             doc = read_eds(doc)
-
-        if not isinstance(self.client, EncapsulationClient):
-            raise TypeError("class 1 connections need the asyncio client (Scanner.connect)")
         view = read_view(doc)
         found = view.connection(connection)
         if rpi is None:
@@ -592,93 +691,110 @@ def backplane_route(slot: int = 0) -> list[Segment]:
     return [PortSegment(1, bytes((slot,)))]
 
 
-class SyncScanner:
+class SyncScanner(_Declarations):
     """Blocking twin of ``Scanner`` for scripts: the same methods, called without ``await``.
 
-    It runs the same scanner code over a blocking socket (``BlockingEncapsulationClient``), with
-    no event loop in between, so a call costs little more than the socket round trip. It
-    identifies the device as ``Scanner.connect`` does (``catalog=``, ``eds=``, ``identify=``).
-    Class 1 connections (``io_connection``, ``io_connection_from_eds``) run on a private event
-    loop in a background thread, opened when first needed.
+    It runs the same plans as ``Scanner`` (``ExplicitMessaging``) over a blocking socket
+    (``BlockingEncapsulationClient``), with no event loop in between, so a call costs little more
+    than the socket round trip. It identifies the device as ``Scanner.connect`` does (``catalog=``,
+    ``eds=``, ``identify=``). Class 1 connections (``io_connection``, ``io_connection_from_eds``) run
+    on a private event loop in a background thread, opened when first needed.
     """
 
     def __init__(self, address: str, port: int | None = None, *, timeout: float = 5.0,
                  catalog: Catalog | None = None, route: Sequence[Segment] | None = None,
                  identify: bool = True, eds: str | Path | EdsDocument | None = None) -> None:
         host, parsed_port = parse_host(address)
-        client = BlockingEncapsulationClient.connect(host, port or parsed_port, timeout)
+        #: The blocking client requests travel on (``client.connection``: the class 3 connection, if open).
+        self.client = BlockingEncapsulationClient.connect(host, port or parsed_port, timeout)
         self._address = (host, port or parsed_port, timeout)
-        self._scanner = Scanner(client, catalog, route)
+        self.explicit = ExplicitMessaging(self.client.core, catalog, route)
         self._loop_thread: LoopThread | None = None
         self._io: set[SyncIoConnection] = set()
         try:
-            run_blocking(self._scanner._choose_catalog(catalog, eds, identify))
+            self.client.run(self.explicit.choose_catalog(catalog, eds, identify))
         except BaseException:
             self.close()
             raise
 
     @property
-    def scanner(self) -> Scanner:
-        """The ``Scanner`` this one runs (its methods are coroutines driven without an event loop)."""
-        return self._scanner
+    def scanner(self) -> SyncScanner:
+        """This scanner (``sync.scanner.client`` is ``sync.client``), for scripts written when it
+        wrapped an async one."""
+        return self
 
-    @property
-    def catalog(self) -> Catalog:
-        """The declarations replies decode by (``catalog.source`` says whose)."""
-        return self._scanner.catalog
+    def identify(self) -> IdentityRecord | None:
+        """``Scanner.identify``: ask the device again and take its profile's catalog."""
+        return self.client.run(self.explicit.identify())
 
-    @property
-    def identity(self) -> IdentityRecord | None:
-        """What the device said it is, when it was identified."""
-        return self._scanner.identity
+    def request(self, service: int, class_id: int, instance: int | None = None, attribute: int | None = None,
+                data: bytes = b"", *, check: bool = True) -> MessageRouterResponse:
+        """``Scanner.request``: any service by code; ``CipError`` on an error status (unless ``check=False``)."""
+        return self.client.run(self.explicit.request(service, class_id, instance, attribute, data, check=check))
 
-    @property
-    def route(self) -> Sequence[Segment] | None:
-        return self._scanner.route
+    def open_connection(self, rpi: float = 2.0, large: bool = True, connection_size: int = 500) -> None:
+        """``Scanner.open_connection``: later requests travel on a class 3 connection."""
+        self.client.run(self.explicit.open_connection(rpi, large, connection_size))
 
-    # The methods a script uses most, typed and documented here; any other ``Scanner`` coroutine
-    # method is reached through ``__getattr__`` and called the same way, without ``await``.
+    def close_connection(self) -> None:
+        self.client.run(self.explicit.close_connection())
+
     def read(self, class_id: int, instance: int, attribute: int, cip_type: CipType | None = None) -> Value:
         """``Scanner.read``: the attribute's ``Value`` (raw, engineering value, unit)."""
-        return run_blocking(self._scanner.read(class_id, instance, attribute, cip_type))
+        return self.client.run(self.explicit.read(class_id, instance, attribute, cip_type))
 
     def write(self, class_id: int, instance: int, attribute: int, value: Any, *, scaled: bool = False,
               cip_type: CipType | None = None) -> None:
         """``Scanner.write``: the raw value, or the engineering value with ``scaled=True``."""
-        run_blocking(self._scanner.write(class_id, instance, attribute, value, scaled=scaled, cip_type=cip_type))
+        self.client.run(self.explicit.write(class_id, instance, attribute, value, scaled, cip_type))
 
     def parameter(self, code: str) -> Value:
         """``Scanner.parameter``: a parameter by its code (``"ACC"``), read with its unit."""
-        return run_blocking(self._scanner.parameter(code))
+        return self.client.run(self.explicit.parameter(code))
 
     def set_parameter(self, code: str, value: Any) -> Value:
         """``Scanner.set_parameter``: write a parameter by its code, in its own unit (``2.5`` for 2.5 s)."""
-        return run_blocking(self._scanner.set_parameter(code, value))
-
-    def identify(self) -> IdentityRecord | None:
-        """``Scanner.identify``: ask the device again and take its profile's catalog."""
-        return run_blocking(self._scanner.identify())
+        return self.client.run(self.explicit.set_parameter(code, value))
 
     def get_attribute_single(self, class_id: int, instance: int, attribute: int,
                              cip_type: CipType | None = None) -> AttributeValue:
         """``Scanner.get_attribute_single``: the reply's bytes with the decoded value and declaration."""
-        return run_blocking(self._scanner.get_attribute_single(class_id, instance, attribute, cip_type))
+        return self.client.run(self.explicit.get_attribute_single(class_id, instance, attribute, cip_type))
 
     def set_attribute_single(self, class_id: int, instance: int, attribute: int, value: Any,
                              cip_type: CipType | None = None) -> None:
         """``Scanner.set_attribute_single``: a raw value (or bytes)."""
-        run_blocking(self._scanner.set_attribute_single(class_id, instance, attribute, value, cip_type))
+        self.client.run(self.explicit.set_attribute_single(class_id, instance, attribute, value, cip_type))
 
     def get_attributes_all(self, class_id: int, instance: int) -> tuple[bytes, dict[str, Any] | None]:
         """``Scanner.get_attributes_all``: the raw reply and the values by attribute name."""
-        return run_blocking(self._scanner.get_attributes_all(class_id, instance))
+        return self.client.run(self.explicit.get_attributes_all(class_id, instance))
 
-    def open_connection(self, rpi: float = 2.0, large: bool = True, connection_size: int = 500) -> None:
-        """``Scanner.open_connection``: later requests travel on a class 3 connection."""
-        run_blocking(self._scanner.open_connection(rpi, large, connection_size))
+    def get_attribute_list(self, class_id: int, instance: int, attributes: Sequence[int]
+                           ) -> dict[int, AttributeValue | CipError]:
+        """``Scanner.get_attribute_list``: per-attribute results."""
+        return self.client.run(self.explicit.get_attribute_list(class_id, instance, attributes))
 
-    def close_connection(self) -> None:
-        run_blocking(self._scanner.close_connection())
+    def set_attribute_list(self, class_id: int, instance: int, values: dict[int, Any]) -> dict[int, int]:
+        """``Scanner.set_attribute_list``: each attribute's status (0 = set)."""
+        return self.client.run(self.explicit.set_attribute_list(class_id, instance, values))
+
+    def reset(self, class_id: int = 0x01, instance: int = 1, reset_type: int | None = None) -> None:
+        self.client.run(self.explicit.reset(class_id, instance, reset_type))
+
+    def multiple_service_packet(self, requests: Sequence[MessageRouterRequest]) -> list[MessageRouterResponse]:
+        """``Scanner.multiple_service_packet``: each reply (status unchecked)."""
+        return self.client.run(self.explicit.multiple_service_packet(requests))
+
+    def assembly_size(self, instance: int) -> int:
+        """``Scanner.assembly_size``: from the schema when known, else Assembly attribute 4."""
+        return self.client.run(self.explicit.assembly_size(instance))
+
+    def list_identity(self) -> list[IdentityRecord]:
+        return self.client.run(self.explicit.list_identity())
+
+    def list_services(self) -> list[ServiceRecord]:
+        return self.client.run(self.explicit.list_services())
 
     # -- class 1 ---------------------------------------------------------------------------------------
     def io_connection(self, output: int | None = None, input: int = 0, rpi: float = 0.010, *,
@@ -708,12 +824,13 @@ class SyncScanner:
         return self._open_io(lambda scanner: scanner.io_connection_from_eds(doc, connection, rpi, **options))
 
     def _open_io(self, make: Any) -> SyncIoConnection:
+        from .eip.originator import EncapsulationClient
         from .sync_io import LoopThread, SyncIoConnection
 
         if self._loop_thread is None:
             self._loop_thread = LoopThread()
         host, port, timeout = self._address
-        catalog, route, identity = self._scanner.catalog, self._scanner.route, self._scanner.identity
+        catalog, route, identity = self.catalog, self.route, self.identity
 
         async def opener(stack: contextlib.AsyncExitStack) -> IoConnectionHandle:
             client = await EncapsulationClient.connect(host, port, timeout)
@@ -726,20 +843,6 @@ class SyncScanner:
         self._io.add(opened)
         return opened
 
-    def __getattr__(self, name: str) -> Any:
-        if name.startswith("_"):
-            raise AttributeError(name)
-        attribute = getattr(self._scanner, name)
-        if not asyncio.iscoroutinefunction(attribute):
-            return attribute
-
-        def call(*args: Any, **kwargs: Any) -> Any:
-            return run_blocking(attribute(*args, **kwargs))
-
-        call.__doc__ = attribute.__doc__
-        setattr(self, name, call)  # later calls find it directly, without this lookup
-        return call
-
     def close(self) -> None:
         """Close every class 1 connection opened here (Forward_Close), then the session."""
         try:
@@ -750,7 +853,7 @@ class SyncScanner:
                 self._loop_thread.stop()
                 self._loop_thread = None
         finally:
-            run_blocking(self._scanner.close())
+            self.client.close()
 
     def __enter__(self) -> SyncScanner:
         return self
@@ -765,10 +868,21 @@ class SyncScanner:
         return discover_blocking(address, port, timeout)
 
 
+def __getattr__(name: str) -> Any:
+    """``discover`` and ``list_services_udp`` (asyncio, UDP), imported when first used: the blocking
+    scanner does not load asyncio."""
+    if name in ("discover", "list_services_udp"):
+        from .eip import discovery
+
+        return getattr(discovery, name)
+    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
+
+
 def discover_blocking(address: str | Sequence[str] | None = None, port: int = DEFAULT_PORT,
                       timeout: float = 2.0) -> list[IdentityRecord]:
     """``discover`` for synchronous code: every device that answers ListIdentity over UDP within
     ``timeout`` seconds (``address`` None: every interface's broadcast address, loopback included)."""
+    from .eip.discovery import discover
     from .sync_io import run_in_private_loop
 
     return run_in_private_loop(discover(address, port, timeout))
@@ -781,5 +895,7 @@ def componet_route(node: int) -> list[Segment]:
     return [PortSegment(2, bytes((node,)))]
 
 
-__all__ = ["UNDECODED", "AttributeValue", "ReplyDecodeError", "Scanner", "SyncScanner", "UnknownAttributeError",
-           "Value", "backplane_route", "componet_route", "discover", "discover_blocking", "list_services_udp"]
+__all__ = [  # noqa: F822 - discover and list_services_udp come from ``__getattr__``
+    "UNDECODED", "AttributeValue", "ReplyDecodeError", "Scanner", "SyncScanner", "UnknownAttributeError",
+    "Value", "backplane_route", "componet_route", "discover", "discover_blocking", "list_services_udp",
+]

@@ -15,15 +15,8 @@ from typing import Any, TypeVar
 
 import pytest
 
-from cipstack.eip.io_server import (
-    DRAIN_LIMIT,
-    FD_SETSIZE,
-    HARVEST_EVENTS,
-    RECEIVE_BUFFER,
-    IoEndpoint,
-    PreciseEventLoop,
-    precise_event_loop,
-)
+from cipstack.eip.io_server import DRAIN_LIMIT, RECEIVE_BUFFER, IoEndpoint
+from cipstack.eip.precise_loop import FD_SETSIZE, HARVEST_EVENTS, PreciseEventLoop, precise_event_loop
 
 T = TypeVar("T")
 

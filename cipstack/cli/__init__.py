@@ -10,7 +10,6 @@ command lives in its own module and imports what it needs when it runs."""
 from __future__ import annotations
 
 import argparse
-import asyncio
 import json
 import logging
 import os
@@ -66,9 +65,17 @@ def _stdout_reader_gone() -> bool:
     return any(events & select.POLLERR for _, events in poller.poll(0))
 
 
+def _timeouts() -> tuple[type[Exception], ...]:
+    """The timeouts a command may raise: asyncio's is the builtin one from Python 3.11, and asyncio is
+    imported only by the commands that use it (a one-shot ``get`` does not)."""
+    asyncio = sys.modules.get("asyncio")
+    return (TimeoutError,) if asyncio is None else (TimeoutError, asyncio.TimeoutError)
+
+
 def _main(argv: Sequence[str] | None) -> int:
     words = list(sys.argv[1:] if argv is None else argv)
-    parser = build_parser(command_word(words))
+    # A command alone shows its usage when its line is wrong; only help shows the descriptions.
+    parser = build_parser(command_word(words), texts=not words or any(w in ("-h", "--help") for w in words))
     try:
         args = parser.parse_args(words)
     except UsageError as exc:
@@ -109,7 +116,7 @@ def _main(argv: Sequence[str] | None) -> int:
             raise  # ``main`` ends quietly
         print(f"{name}: {exc}", file=sys.stderr)
         return EXIT_FAILURE
-    except (ConnectionError, asyncio.TimeoutError, TimeoutError, OSError) as exc:
+    except (ConnectionError, *_timeouts(), OSError) as exc:
         print(f"{name}: {exc or type(exc).__name__}", file=sys.stderr)
         return EXIT_FAILURE
     except KeyboardInterrupt:

@@ -3,14 +3,13 @@
 from __future__ import annotations
 
 import argparse
-import asyncio
 import json
 import sys
 from typing import Any
 
 from ..cip.status import CipError
 from ..cip.types import parse_int
-from ..eip.originator import parse_host
+from ..eip.originator_core import parse_host
 from .common import (
     EXIT_FAILURE,
     EXIT_OK,
@@ -31,7 +30,9 @@ def _identity_text(record: Any) -> str:
 
 
 def cmd_discover(args: argparse.Namespace) -> int:
-    from ..eip.originator import discover
+    import asyncio
+
+    from ..eip.discovery import discover
 
     records = asyncio.run(discover(args.broadcast, args.port, args.timeout))
     for record in records:
@@ -42,18 +43,11 @@ def cmd_discover(args: argparse.Namespace) -> int:
 
 
 def cmd_identity(args: argparse.Namespace) -> int:
-    from ..eip.originator import EncapsulationClient
+    from ..eip.blocking_client import BlockingEncapsulationClient
 
     host, port = parse_host(args.target)
-
-    async def run() -> list[Any]:
-        client = await EncapsulationClient.connect(host, port, args.timeout, register=False)
-        try:
-            return await client.list_identity()
-        finally:
-            await client.close()
-
-    records = asyncio.run(run())
+    with BlockingEncapsulationClient.connect(host, port, args.timeout, register=False) as client:
+        records = client.perform(client.core.list_identity())
     if not records:
         print(f"cipstack identity: {args.target} answered ListIdentity with no identity", file=sys.stderr)
         return EXIT_FAILURE
@@ -95,31 +89,40 @@ def parse_route(text: str | None) -> list[Any] | None:
     return route
 
 
-async def _connect_identified(args: argparse.Namespace, standard: tuple[int, int, int] | None = None) -> Any:
-    """A scanner that decodes by the declarations of the device's profile when it is one we know
-    (the routed device's own Identity when ``--route`` is given). ``standard``: the (class,
+def eds_document(args: argparse.Namespace) -> Any:
+    """The EDS file ``--eds`` names, read (None without ``--eds``)."""
+    eds = getattr(args, "eds", None)
+    if eds is None:
+        return None
+    from .emulators import _read_eds_file
+
+    return _read_eds_file(eds)
+
+
+def _connect_identified(args: argparse.Namespace, standard: tuple[int, int, int] | None = None) -> Any:
+    """A blocking scanner that decodes by the declarations of the device's profile when it is one we
+    know (the routed device's own Identity when ``--route`` is given). ``standard``: the (class,
     attribute) asked for, which when a standard class declares it decodes by that declaration
     alone, as every profile's does: no identity is asked, and no profile loaded."""
     from ..catalog import STANDARD_CLASSES
-    from ..scanner import Scanner
+    from ..scanner import SyncScanner
 
     eds = getattr(args, "eds", None)
-    doc = None
-    if eds is not None:
-        from .emulators import _read_eds_file
-
-        doc = _read_eds_file(eds)
-    scanner = await Scanner.connect(args.target, timeout=args.timeout, route=parse_route(args.route),
-                                    identify=False, eds=doc)
+    doc = eds_document(args)
+    scanner = SyncScanner(args.target, timeout=args.timeout, route=parse_route(args.route), identify=False, eds=doc)
     if doc is not None:
         scanner.catalog.source = f"EDS file {eds}"
         return scanner
     if standard is not None and standard[0] in STANDARD_CLASSES and scanner.catalog.attribute(*standard):
         return scanner
+    from ..devices.decoding import decoding_catalog
+
     try:
-        await scanner.identify()   # the library's own identification: one code path
+        # The library's own identification (one code path), with the profile's declarations for
+        # decoding only: a one-shot command does not import the device model.
+        scanner.client.run(scanner.explicit.identify(decoding_catalog))
     except BaseException:
-        await scanner.close()
+        scanner.close()
         raise
     return scanner
 
@@ -137,22 +140,20 @@ def _by_code(args: argparse.Namespace, value: str | None) -> int:
     if args.type is not None:
         raise UsageError(f"--type: {args.path} is a parameter's code, whose type is its declaration")
 
-    async def run() -> tuple[Any, Any]:
-        scanner = await _connect_identified(args)
-        try:
-            if args.connected:
-                await scanner.open_connection()
-            parameter = find_parameter(scanner.catalog, args.path)
-            if value is None:
-                return parameter, await scanner.read(*parameter.path)
-            return parameter, await scanner.set_parameter(parameter.code, value)
-        finally:
-            await scanner.close()
+    from ..scanner import SyncScanner
 
-    try:
-        parameter, reading = asyncio.run(run())
-    except (KeyError, ValueError) as exc:
-        raise UsageError(str(exc)) from None
+    doc = eds_document(args)
+    # By code: the profile's whole declarations (its parameters' codes), not the compact decoding data.
+    with SyncScanner(args.target, timeout=args.timeout, route=parse_route(args.route), identify=doc is None,
+                     eds=doc) as scanner:
+        if args.connected:
+            scanner.open_connection()
+        try:
+            parameter = find_parameter(scanner.catalog, args.path)
+            reading = scanner.read(*parameter.path) if value is None else \
+                scanner.set_parameter(parameter.code, value)
+        except (KeyError, ValueError) as exc:
+            raise UsageError(str(exc)) from None
     path = f"0x{parameter.class_id:02X}/{parameter.instance}/{parameter.attribute}"
     record = {"status": 0, "code": parameter.code, "name": parameter.spec.name, "path": path, **reading.json()}
     text = f"{parameter.code} {parameter.spec.name} = {_reading_text(reading)}"
@@ -165,19 +166,17 @@ def cmd_get(args: argparse.Namespace) -> int:
         return _by_code(args, None)
     class_id, instance, attribute = parse_object_path(args.path)
     cip_type = parse_type(args.type)
-
-    async def run() -> tuple[dict[str, Any], str]:
-        scanner = await _connect_identified(args, None if attribute is None else (class_id, instance, attribute))
-        try:
-            if args.connected:
-                await scanner.open_connection()
-            if attribute is None:
-                data, values = await scanner.get_attributes_all(class_id, instance)
-                record: dict[str, Any] = {"status": 0, "data": data.hex()}
-                if values is not None:
-                    record["value"] = {json_key(name): _jsonable(v) for name, v in values.items()}
-                return record, ""
-            result = await scanner.get_attribute_single(class_id, instance, attribute, cip_type)
+    with _connect_identified(args, None if attribute is None else (class_id, instance, attribute)) as scanner:
+        if args.connected:
+            scanner.open_connection()
+        if attribute is None:
+            data, values = scanner.get_attributes_all(class_id, instance)
+            record: dict[str, Any] = {"status": 0, "data": data.hex()}
+            if values is not None:
+                record["value"] = {json_key(name): _jsonable(v) for name, v in values.items()}
+            text = ""
+        else:
+            result = scanner.get_attribute_single(class_id, instance, attribute, cip_type)
             record = {"status": 0, "data": result.data.hex()}
             reading = result.reading
             if result.known:
@@ -185,11 +184,7 @@ def cmd_get(args: argparse.Namespace) -> int:
                 record["type"] = result.type.name if result.type else None
             if result.spec is not None:
                 record["name"] = result.spec.name
-            return record, _reading_text(reading)
-        finally:
-            await scanner.close()
-
-    record, text = asyncio.run(run())
+            text = _reading_text(reading)
     record["path"] = args.path
     if args.json:
         print(json.dumps(record), flush=True)
@@ -248,24 +243,17 @@ def cmd_set(args: argparse.Namespace) -> int:
     if given_type is not None and not args.scaled:
         _parse_value(args, given_type, None)  # a bad value is refused before connecting
 
-    async def run() -> tuple[Any, Any, bytes]:
-        scanner = await _connect_identified(args, (class_id, instance, attribute))
-        try:
-            spec = scanner.catalog.attribute(class_id, instance, attribute)
-            cip_type = given_type or (spec.type if spec is not None else None)
-            if cip_type is None:
-                raise UsageError(f"{args.path} is not declared in {scanner.catalog.source}: give --type (UINT, INT, "
-                                 "REAL, ...)" + (" or --eds FILE" if getattr(args, "eds", None) is None else ""))
-            raw = _parse_value(args, cip_type, spec)
-            data = cip_type.encode(raw)
-            if args.connected:
-                await scanner.open_connection()
-            await scanner.set_attribute_single(class_id, instance, attribute, data)
-            return spec, cip_type, data
-        finally:
-            await scanner.close()
-
-    spec, cip_type, data = asyncio.run(run())
+    with _connect_identified(args, (class_id, instance, attribute)) as scanner:
+        spec = scanner.catalog.attribute(class_id, instance, attribute)
+        cip_type = given_type or (spec.type if spec is not None else None)
+        if cip_type is None:
+            raise UsageError(f"{args.path} is not declared in {scanner.catalog.source}: give --type (UINT, INT, "
+                             "REAL, ...)" + (" or --eds FILE" if getattr(args, "eds", None) is None else ""))
+        raw = _parse_value(args, cip_type, spec)
+        data = cip_type.encode(raw)
+        if args.connected:
+            scanner.open_connection()
+        scanner.set_attribute_single(class_id, instance, attribute, data)
     from ..cip.values import Scaling, Value
 
     reading = Value(cip_type.decode(data), spec.name if spec is not None else "", cip_type,

@@ -9,11 +9,19 @@ import sys
 from typing import Any
 
 from .common import EXIT_FAILURE, EXIT_OK, UsageError
-from .explicit import _connect_identified
+from .explicit import eds_document, parse_route
 
 
 async def _scanner(args: argparse.Namespace) -> Any:
-    scanner = await _connect_identified(args)
+    """An asyncio scanner with the whole catalog of the device's profile (its parameters), or the
+    EDS file's (``--eds``)."""
+    from ..scanner import Scanner
+
+    doc = eds_document(args)
+    scanner = await Scanner.connect(args.target, timeout=args.timeout, route=parse_route(getattr(args, "route", None)),
+                                    eds=doc)
+    if doc is not None:
+        scanner.catalog.source = f"EDS file {args.eds}"
     if not scanner.catalog.parameters:
         await scanner.close()
         raise UsageError(f"no parameters are declared in {scanner.catalog.source}: give --eds FILE")

@@ -7,22 +7,13 @@ from pathlib import Path
 from typing import Any
 
 from .. import __version__
-from ..eip.encapsulation import DEFAULT_FRAME_TIMEOUT, DEFAULT_PORT
-from ..eip.io_core import DEFAULT_IO_PORT
+from ..eip.encapsulation import DEFAULT_FRAME_TIMEOUT, DEFAULT_IO_PORT, DEFAULT_PORT
 from .common import (
     UsageError,
     parse_duration,
     parse_number,
 )
-from .completion import cmd_completion
-from .conform import add_arguments as add_conform_arguments
-from .drive import add_drive_commands
-from .eds import cmd_eds_check, cmd_eds_fetch, cmd_eds_generate, cmd_eds_show
-from .emulators import cmd_adapter, cmd_componet, cmd_models
-from .explicit import cmd_discover, cmd_get, cmd_identity, cmd_set
-from .fleet import DEFAULT_WORKERS, cmd_fleet, cmd_plant
 from .help_texts import COMMANDS, PROGRAM
-from .io import PRINT_MODES, cmd_io
 
 
 # -- parser ------------------------------------------------------------------------------------------
@@ -38,7 +29,9 @@ class _SubParsers(argparse._SubParsersAction):  # type: ignore[type-arg]  # gene
         path = (*getattr(self, "_prog_prefix", "cipstack").split()[1:], name)
         text = COMMANDS.get(path)
         if text is not None:
-            kwargs.update(help=text.help, description=text.description_text(), epilog=text.epilog())
+            kwargs["help"] = text.help
+            if getattr(self, "texts", True):
+                kwargs.update(description=text.description_text(), epilog=text.epilog())
         kwargs.setdefault("formatter_class", _Formatter)
         parser: argparse.ArgumentParser = super().add_parser(name, **kwargs)
         return parser
@@ -85,11 +78,14 @@ def command_word(argv: list[str]) -> str | None:
     return None
 
 
-def build_parser(command: str | None = None) -> argparse.ArgumentParser:
-    """The whole command line; given the ``command`` it will parse, the ``eds`` and ``capture``
-    commands are only named unless it is theirs (a one-shot ``get`` does not import the EDS tool).
-    A default a help text names is argparse's own (``%(default)s``), so the two cannot disagree."""
-    parser = _Parser(prog="cipstack", description=PROGRAM.description_text(), epilog=PROGRAM.epilog())
+def build_parser(command: str | None = None, texts: bool = True) -> argparse.ArgumentParser:
+    """The whole command line, or given the ``command`` it will parse, that command alone (a one-shot
+    ``get`` builds no other command's options and imports no other command's module).
+    A default a help text names is argparse's own (``%(default)s``), so the two cannot disagree.
+    ``texts``: the descriptions and examples ``--help`` prints (wrapping them is most of the work of
+    building a command: a line that asks for no help goes without)."""
+    parser = _Parser(prog="cipstack", description=PROGRAM.description_text() if texts else None,
+                     epilog=PROGRAM.epilog() if texts else None)
     parser.add_argument("--version", action="version", version=f"cipstack {__version__}")
     levels = ["DEBUG", "INFO", "WARNING", "ERROR"]
     parser.add_argument("--log-level", default="INFO", choices=levels, type=str.upper,
@@ -100,6 +96,7 @@ def build_parser(command: str | None = None) -> argparse.ArgumentParser:
                                  help=f"log level on stderr (default {parser.get_default('log_level')})")
     # Not required here: without a command ``main`` prints the list of commands.
     sub = parser.add_subparsers(dest="command", metavar="COMMAND", title="commands", parser_class=_Parser)
+    sub.texts = texts  # type: ignore[attr-defined]  # read by ``_SubParsers.add_parser``
     _add_parser = sub.add_parser
 
     def add_parser(name: str, **kwargs: Any) -> argparse.ArgumentParser:
@@ -107,6 +104,14 @@ def build_parser(command: str | None = None) -> argparse.ArgumentParser:
 
     # argparse has no option for parents every subparser shares; typeshed's add_parser names every keyword.
     sub.add_parser = add_parser  # type: ignore[method-assign, assignment]
+
+    if (command,) not in COMMANDS:
+        command = None  # no command, or one that is not: every command, for the list and the error
+
+    def wanted(name: str) -> bool:
+        """Whether to build the command ``name``: every command for the full help, else only the one
+        the line names (``cipstack get`` builds and imports no other command)."""
+        return command is None or command == name
 
     def number(what: str) -> Any:
         return lambda text: parse_number(text, what)
@@ -118,257 +123,294 @@ def build_parser(command: str | None = None) -> argparse.ArgumentParser:
                        help="reply timeout: 2, 500ms, 1.5s (default %(default)s s)")
         p.add_argument("--json", action="store_true", help="one JSON object per line")
 
-    p = sub.add_parser("adapter")
-    p.add_argument("--host", default="127.0.0.1", help="address to listen on (default %(default)s)")
-    p.add_argument("--port", type=number("port"), default=DEFAULT_PORT,
-                   help="EtherNet/IP port, TCP and UDP (default %(default)s)")
-    device = p.add_mutually_exclusive_group()
-    device.add_argument("--profile", help="device profile: acg (default), mx2, rx")
-    _complete(device.add_argument("--eds", metavar="FILE",
-                                  help="emulate the generic device an EDS file describes (identity, parameters "
-                                       "as attributes, assemblies, connections)"), _FILE)
-    p.add_argument("--model", help="model of the mx2/rx profiles (e.g. MX2-A2015-E, RX-A4055-E; see "
-                                   "`cipstack models`)")
-    p.add_argument("--max-sessions", type=number("max sessions"), default=32, metavar="N",
-                   help="encapsulation sessions at once; one more is refused with 0x0002 (default %(default)s)")
-    p.add_argument("--max-sessions-per-host", type=number("max sessions per host"), metavar="N",
-                   help="sessions one originator address may hold (default: half of --max-sessions)")
-    p.add_argument("--max-connections", type=number("max connections"), default=32, metavar="N",
-                   help="class 3 (connected explicit) connections (default %(default)s)")
-    p.add_argument("--max-io-connections", type=number("max io connections"), metavar="N",
-                   help="class 1 (I/O) connections (default: the device's, 64 for the ACG-ET2)")
-    p.add_argument("--max-tcp-connections", type=number("max tcp connections"), default=256, metavar="N",
-                   help="open TCP connections to the encapsulation port; more are closed at accept "
-                        "(default %(default)s)")
-    p.add_argument("--max-tcp-connections-per-host", type=number("max tcp connections per host"), metavar="N",
-                   help="open TCP connections from one address (default: half of --max-tcp-connections)")
-    p.add_argument("--frame-timeout", type=parse_duration, default=DEFAULT_FRAME_TIMEOUT, metavar="SECONDS",
-                   help="time a TCP frame, once begun, has to arrive whole; a slower one closes its connection "
-                        "(default %(default)s s)")
-    p.add_argument("--io-port", type=number("io port"), default=DEFAULT_IO_PORT, metavar="N",
-                   help="UDP port of class 1 I/O (default %(default)s; 0 picks a free one)")
-    _complete(p.add_argument("--control", type=Path, metavar="PATH",
-                             help="control socket for `cipstack drive` (default: per address and port)"), _FILE)
-    _complete(p.add_argument("--state", type=Path, metavar="FILE",
-                             help="state file of saved parameters (default: in the user's data directory, "
-                                  "per profile)"), _FILE)
-    p.add_argument("--factory", action="store_true",
-                   help="start from factory settings without reading or writing the state file: a save lasts "
-                        "until the emulator stops (for examples and tests that change parameters)")
-    p.add_argument("--modbus-port", type=number("modbus port"), metavar="N",
-                   help="also serve Modbus TCP on this port (ACG)")
-    p.add_argument("--rtu", metavar="DEVICE",
-                   help="also answer Modbus-RTU on the drive's RS-485 port (ACG): a serial device such as "
-                        "/dev/ttyUSB0 (needs pyserial: the rtu extra), or pty for a new pseudo-terminal whose "
-                        "path is printed; line settings from CM.1, CM.3, CM.4, CM.5")
-    p.add_argument("--param", action="append", metavar="CODE=VALUE",
-                   help="set a keypad parameter at start by its code, in the keypad's unit, not saved; "
-                        "repeatable: the ACG's keypad codes (drv=4 Frq=8: run from the network; ACC=2.5), "
-                        "an MX2/RX Digital Operator function code (A004=60 is 60.0 Hz, A001=2, P044=1.5)")
-    p.add_argument("--quiet", action="store_true", help="no status line on stdout")
-    _add_http_arguments(p)
-    _complete(p.add_argument("--scenario", type=Path, metavar="FILE.toml",
-                             help="run this timeline of faults and actions (docs/scenarios.md), then exit: 0 when "
-                                  "every step fired, 1 when one did not"), _FILE)
-    p.add_argument("--json", action="store_true", help=argparse.SUPPRESS)
-    p.set_defaults(func=cmd_adapter)
+    if wanted("adapter"):
+        from .emulators import cmd_adapter
 
-    p = sub.add_parser("fleet")
-    p.add_argument("--addresses", metavar="RANGE[,...]",
-                   help="the addresses the devices take in order: 127.0.0.10-127.0.0.73, or a list "
-                        "(127.0.0.10,127.0.0.12-127.0.0.20); any 127.x works on Linux's loopback")
-    p.add_argument("--device", action="append", metavar="PROFILE[:MODEL][*COUNT][@FIRST]",
-                   help="a group of devices: acg*32, mx2:MX2-A2015-E*16, rx*2@127.0.0.90 (from that address "
-                        "on); repeatable")
-    _complete(p.add_argument("--spec", type=Path, metavar="FILE",
-                             help="the fleet in a TOML file (devices, addresses, ports, workers)"), _FILE)
-    # No argparse defaults below: a value given here overrides the --spec file's, which overrides these.
-    p.add_argument("--port", type=number("port"), metavar="N",
-                   help=f"EtherNet/IP port of every device, TCP and UDP (default {DEFAULT_PORT})")
-    p.add_argument("--io-port", type=number("io port"), metavar="N",
-                   help=f"UDP port of class 1 I/O of every device (default {DEFAULT_IO_PORT})")
-    _complete(p.add_argument("--state-dir", type=Path, metavar="DIR",
-                             help="where each device keeps its state file, ADDRESS-PROFILE[-MODEL].json "
-                                  "(default: fleet/ in the user's data directory)"), _DIRECTORY)
-    p.add_argument("--factory", action="store_true",
-                   help="every device starts from factory settings; no state file is read or written")
-    p.add_argument("--param", action="append", metavar="CODE=VALUE",
-                   help="set an ACG keypad parameter at start on every ACG device; repeatable")
-    _add_http_arguments(p)
-    p.add_argument("--workers", type=number("workers"), metavar="N",
-                   help=f"spread the devices over N processes, one event loop each (default {DEFAULT_WORKERS})")
-    p.add_argument("--rtu", metavar="DEVICE",
-                   help="put the ACG drives (up to 16) on one RS-485 Modbus-RTU line: pty (a new pseudo-terminal, "
-                        "its path printed) or a serial device; station IDs 1, 2, ... in address order")
-    p.add_argument("--shard", metavar="INDEX/COUNT",
-                   help="serve one of COUNT contiguous shares of the plant's devices (in address order), INDEX "
-                        "from 0: 0/3 is the first of three; each machine or pod runs one, from the same spec")
-    p.add_argument("--list-addresses", action="store_true",
-                   help="print the addresses of the devices this fleet (or shard) serves, one a line, and exit")
-    p.set_defaults(func=cmd_fleet)
-
-    p = sub.add_parser("plant")
-    p.add_argument("--fleet", action="append", required=True, metavar="NAME:PORT",
-                   help="the fleets' HTTP APIs: a DNS name whose A records are every fleet (a Kubernetes headless "
-                        "Service), or an address; repeatable")
-    p.add_argument("--refresh", type=parse_duration, default=5.0, metavar="DURATION",
-                   help="how often to look for fleets and ask each for its devices (default %(default)s s)")
-    _add_http_arguments(p)
-    p.set_defaults(func=cmd_plant)
-
-    p = sub.add_parser("models")
-    p.add_argument("--profile", choices=["mx2", "rx"], help="one family only (default: both)")
-    p.add_argument("--json", action="store_true", help="one JSON object per line")
-    p.set_defaults(func=cmd_models)
-
-    p = sub.add_parser("componet")
-    p.add_argument("--nodes", required=True, metavar="PROFILE:MODEL@NODE,...",
-                   help="slaves, e.g. mx2:MX2-A2015-E@3,rx:RX-A4055-E@5 (node addresses 0-63)")
-    p.add_argument("--host", default="127.0.0.1", help="address to listen on (default %(default)s)")
-    p.add_argument("--port", type=number("port"), default=DEFAULT_PORT,
-                   help="EtherNet/IP port, TCP and UDP (default %(default)s)")
-    p.add_argument("--io-port", type=number("io port"), default=DEFAULT_IO_PORT, metavar="N",
-                   help="UDP port of class 1 I/O (default %(default)s; 0 picks a free one)")
-    _complete(p.add_argument("--control", type=Path, metavar="PATH",
-                             help="control socket (default: per address and port)"), _FILE)
-    p.add_argument("--quiet", action="store_true", help="no status line on stdout")
-    p.add_argument("--json", action="store_true", help=argparse.SUPPRESS)
-    p.set_defaults(func=cmd_componet)
-
-    p = sub.add_parser("discover")
-    p.add_argument("--broadcast", metavar="ADDRESS",
-                   help="broadcast or unicast address (default: 255.255.255.255 and every interface's broadcast "
-                        "address, loopback's 127.255.255.255 included)")
-    p.add_argument("--port", type=number("port"), default=DEFAULT_PORT,
-                   help="UDP port to ask (default %(default)s)")
-    common(p, target=False, timeout=2.0)
-    p.set_defaults(func=cmd_discover)
-
-    p = sub.add_parser("identity")
-    common(p)
-    p.set_defaults(func=cmd_identity)
-
-    p = sub.add_parser("get")
-    common(p)
-    p.add_argument("path", metavar="CLASS/INSTANCE[/ATTRIBUTE]|CODE",
-                   help="decimal or 0x hex numbers: 1/1/7, 0x2A/1/102; or a parameter's code: ACC, CM.24, A004, "
-                        "an EDS ParamN or its name")
-    p.add_argument("--type", help="CIP type to decode the value (UINT, SHORT_STRING, ...)")
-    p.add_argument("--connected", action="store_true", help="use a class 3 connection")
-    p.add_argument("--route", metavar="PORT/LINK[,...]",
-                   help="route through the target (Unconnected_Send), e.g. 1/0 or 2/3 (CompoNet node 3)")
-    p.add_argument("--eds", metavar="FILE", help="decode by this EDS file's parameters (link paths, units, scaling) "
-                                                 "instead of the device's profile")
-    p.set_defaults(func=cmd_get)
-
-    from .params import add_arguments as add_params_arguments
-
-    add_params_arguments(sub, _Parser, common)
-
-    p = sub.add_parser("set")
-    common(p)
-    p.add_argument("path", metavar="CLASS/INSTANCE/ATTRIBUTE|CODE",
-                   help="decimal or 0x hex numbers: 0xF5/1/13; or a parameter's code: ACC, CM.24, A004, an EDS ParamN "
-                        "or its name")
-    p.add_argument("value", metavar="VALUE", help="by path, the raw value, as on the wire (50 for 5.0 s at 0.1 s per "
-                                                  "step); BOOL also true/false/on/off. By code, the value in the "
-                                                  "parameter's unit (2.5 for 2.5 s), as the keypad takes it")
-    p.add_argument("--type", help="CIP type of the value (UINT, INT, REAL, SHORT_STRING, ...); "
-                                  "default: the attribute's declaration")
-    p.add_argument("--scaled", action="store_true",
-                   help="VALUE is the engineering value (5.0 for 5.0 s), turned into raw steps by the declaration")
-    p.add_argument("--connected", action="store_true", help="use a class 3 connection")
-    p.add_argument("--route", metavar="PORT/LINK[,...]", help="route through the target (Unconnected_Send)")
-    p.add_argument("--eds", metavar="FILE", help="decode by this EDS file's parameters (link paths, units, scaling) "
-                                                 "instead of the device's profile")
-    p.set_defaults(func=cmd_set)
-
-    p = sub.add_parser("io")
-    common(p)
-    p.add_argument("--output", type=number("output"), metavar="N", help="output (O->T) assembly instance")
-    p.add_argument("--input", type=number("input"), metavar="N", help="input assembly instance")
-    p.add_argument("--heartbeat", type=number("heartbeat"), metavar="N",
-                   help="O->T heartbeat point instead of an output (input only: e.g. 198, listen only: 199)")
-    p.add_argument("--rpi", metavar="DURATION",
-                   help="requested packet interval with its unit: 10ms, 500us, 0.5s (default: the EDS's with "
-                        "--eds, else 10ms)")
-    _complete(p.add_argument("--eds", metavar="FILE", help="open a connection this EDS file describes "
-                                                            "(with --connection), or take only field names from "
-                                                            "it (with --output/--input)"), _FILE)
-    p.add_argument("--connection", metavar="N",
-                   help="the ConnectionN of --eds to open, by number N or by name")
-    p.add_argument("--set", action="append", metavar="FIELD=VALUE",
-                   help="output field to set, a raw value in the field's unit (see --list-fields), or "
-                        "raw=HEX; repeatable")
-    p.add_argument("--duration", type=parse_duration, default=5.0, metavar="DURATION",
-                   help="how long to run (default %(default)s s)")
-    p.add_argument("--idle", action="store_true", help="send idle instead of run in the run/idle header")
-    p.add_argument("--io-port", type=number("io port"), default=0, metavar="N",
-                   help="local UDP port for T->O data (default %(default)s: any free port, announced to the "
-                        "target)")
-    p.add_argument("--target-io-port", type=number("target io port"), metavar="N",
-                   help="the target's class 1 UDP port (default: the port its Forward_Open reply names, else "
-                        f"{DEFAULT_IO_PORT})")
-    p.add_argument("--multicast", action="store_true",
-                   help="ask T->O multicast (a listen-only connection needs an owner opened so); with --eds: "
-                        "the file's transport, and multicast when it allows both and the target refuses "
-                        "point-to-point (0x0108)")
-    p.add_argument("--config", type=number("config"), metavar="N",
-                   help="configuration assembly instance of the connection path (default 1)")
-    p.add_argument("--config-data", metavar="HEX", help="configuration data sent in the Forward_Open (hex bytes)")
-    p.add_argument("--ot-format", choices=["run-idle", "heartbeat", "modeless"],
-                   help="O->T real-time format: run-idle header (default), heartbeat (sequence count only, "
-                        "size 2), modeless (no header); with --eds: the file's")
-    p.add_argument("--list-fields", action="store_true",
-                   help="list the output and input fields of the connection (names for --set and the input, "
-                        "and the unit of a raw value) and exit")
-    p.add_argument("--timeout-multiplier", type=number("timeout multiplier"), choices=range(8),
-                   metavar="0..7", help="connection timeout = RPI x 4 x 2^N, each way (default 2: 16 ms at a "
-                                        "1 ms RPI; 3 or more at RPIs under 2 ms on a busy host)")
-    p.add_argument("--print", default="changes", metavar="|".join(PRINT_MODES),
-                   help="which input lines to print: " + "; ".join(f"{mode}: {what}" for mode, what in
-                                                                   PRINT_MODES.items())
-                        + " (default %(default)s)")
-    p.set_defaults(func=cmd_io)
-
-    p = sub.add_parser("drive")
-    drive = p.add_subparsers(dest="drive_command", metavar="COMMAND", title="commands", required=True,
-                             parser_class=_Parser)
-
-    def where_the_emulator_is(q: argparse.ArgumentParser) -> None:
-        q.add_argument("--host", default="127.0.0.1",
-                       help="the emulator's address (its --host), which with --port finds its control socket "
+        p = sub.add_parser("adapter")
+        p.add_argument("--host", default="127.0.0.1", help="address to listen on (default %(default)s)")
+        p.add_argument("--port", type=number("port"), default=DEFAULT_PORT,
+                       help="EtherNet/IP port, TCP and UDP (default %(default)s)")
+        device = p.add_mutually_exclusive_group()
+        device.add_argument("--profile", help="device profile: acg (default), mx2, rx")
+        _complete(device.add_argument("--eds", metavar="FILE",
+                                      help="emulate the generic device an EDS file describes (identity, parameters "
+                                           "as attributes, assemblies, connections)"), _FILE)
+        p.add_argument("--model", help="model of the mx2/rx profiles (e.g. MX2-A2015-E, RX-A4055-E; see "
+                                       "`cipstack models`)")
+        p.add_argument("--max-sessions", type=number("max sessions"), default=32, metavar="N",
+                       help="encapsulation sessions at once; one more is refused with 0x0002 (default %(default)s)")
+        p.add_argument("--max-sessions-per-host", type=number("max sessions per host"), metavar="N",
+                       help="sessions one originator address may hold (default: half of --max-sessions)")
+        p.add_argument("--max-connections", type=number("max connections"), default=32, metavar="N",
+                       help="class 3 (connected explicit) connections (default %(default)s)")
+        p.add_argument("--max-io-connections", type=number("max io connections"), metavar="N",
+                       help="class 1 (I/O) connections (default: the device's, 64 for the ACG-ET2)")
+        p.add_argument("--max-tcp-connections", type=number("max tcp connections"), default=256, metavar="N",
+                       help="open TCP connections to the encapsulation port; more are closed at accept "
                             "(default %(default)s)")
-        q.add_argument("--port", type=number("port"), default=DEFAULT_PORT,
-                       help="the emulator's EtherNet/IP port, which finds its control socket (default %(default)s)")
-        _complete(q.add_argument("--control", type=Path, metavar="PATH", help="the emulator's control socket"),
-                  _FILE)
-        q.add_argument("--timeout", type=parse_duration, default=5.0, metavar="DURATION",
-                       help="reply timeout (default %(default)s s)")
-        q.add_argument("--json", action="store_true", help="one JSON object per line")
+        p.add_argument("--max-tcp-connections-per-host", type=number("max tcp connections per host"), metavar="N",
+                       help="open TCP connections from one address (default: half of --max-tcp-connections)")
+        p.add_argument("--frame-timeout", type=parse_duration, default=DEFAULT_FRAME_TIMEOUT, metavar="SECONDS",
+                       help="time a TCP frame, once begun, has to arrive whole; a slower one closes its connection "
+                            "(default %(default)s s)")
+        p.add_argument("--io-port", type=number("io port"), default=DEFAULT_IO_PORT, metavar="N",
+                       help="UDP port of class 1 I/O (default %(default)s; 0 picks a free one)")
+        _complete(p.add_argument("--control", type=Path, metavar="PATH",
+                                 help="control socket for `cipstack drive` (default: per address and port)"), _FILE)
+        _complete(p.add_argument("--state", type=Path, metavar="FILE",
+                                 help="state file of saved parameters (default: in the user's data directory, "
+                                      "per profile)"), _FILE)
+        p.add_argument("--factory", action="store_true",
+                       help="start from factory settings without reading or writing the state file: a save lasts "
+                            "until the emulator stops (for examples and tests that change parameters)")
+        p.add_argument("--modbus-port", type=number("modbus port"), metavar="N",
+                       help="also serve Modbus TCP on this port (ACG)")
+        p.add_argument("--rtu", metavar="DEVICE",
+                       help="also answer Modbus-RTU on the drive's RS-485 port (ACG): a serial device such as "
+                            "/dev/ttyUSB0 (needs pyserial: the rtu extra), or pty for a new pseudo-terminal whose "
+                            "path is printed; line settings from CM.1, CM.3, CM.4, CM.5")
+        p.add_argument("--param", action="append", metavar="CODE=VALUE",
+                       help="set a keypad parameter at start by its code, in the keypad's unit, not saved; "
+                            "repeatable: the ACG's keypad codes (drv=4 Frq=8: run from the network; ACC=2.5), "
+                            "an MX2/RX Digital Operator function code (A004=60 is 60.0 Hz, A001=2, P044=1.5)")
+        p.add_argument("--quiet", action="store_true", help="no status line on stdout")
+        _add_http_arguments(p)
+        _complete(p.add_argument("--scenario", type=Path, metavar="FILE.toml",
+                                 help="run this timeline of faults and actions (docs/scenarios.md), then exit: 0 when "
+                                      "every step fired, 1 when one did not"), _FILE)
+        p.add_argument("--json", action="store_true", help=argparse.SUPPRESS)
+        p.set_defaults(func=cmd_adapter)
 
-    add_drive_commands(drive, where_the_emulator_is)
+    if wanted("fleet"):
+        from .fleet import DEFAULT_WORKERS, cmd_fleet
 
-    if command in (None, "eds"):
+        p = sub.add_parser("fleet")
+        p.add_argument("--addresses", metavar="RANGE[,...]",
+                       help="the addresses the devices take in order: 127.0.0.10-127.0.0.73, or a list "
+                            "(127.0.0.10,127.0.0.12-127.0.0.20); any 127.x works on Linux's loopback")
+        p.add_argument("--device", action="append", metavar="PROFILE[:MODEL][*COUNT][@FIRST]",
+                       help="a group of devices: acg*32, mx2:MX2-A2015-E*16, rx*2@127.0.0.90 (from that address "
+                            "on); repeatable")
+        _complete(p.add_argument("--spec", type=Path, metavar="FILE",
+                                 help="the fleet in a TOML file (devices, addresses, ports, workers)"), _FILE)
+        # No argparse defaults below: a value given here overrides the --spec file's, which overrides these.
+        p.add_argument("--port", type=number("port"), metavar="N",
+                       help=f"EtherNet/IP port of every device, TCP and UDP (default {DEFAULT_PORT})")
+        p.add_argument("--io-port", type=number("io port"), metavar="N",
+                       help=f"UDP port of class 1 I/O of every device (default {DEFAULT_IO_PORT})")
+        _complete(p.add_argument("--state-dir", type=Path, metavar="DIR",
+                                 help="where each device keeps its state file, ADDRESS-PROFILE[-MODEL].json "
+                                      "(default: fleet/ in the user's data directory)"), _DIRECTORY)
+        p.add_argument("--factory", action="store_true",
+                       help="every device starts from factory settings; no state file is read or written")
+        p.add_argument("--param", action="append", metavar="CODE=VALUE",
+                       help="set an ACG keypad parameter at start on every ACG device; repeatable")
+        _add_http_arguments(p)
+        p.add_argument("--workers", type=number("workers"), metavar="N",
+                       help=f"spread the devices over N processes, one event loop each (default {DEFAULT_WORKERS})")
+        p.add_argument("--rtu", metavar="DEVICE",
+                       help="put the ACG drives (up to 16) on one RS-485 Modbus-RTU line: pty (a new pseudo-terminal, "
+                            "its path printed) or a serial device; station IDs 1, 2, ... in address order")
+        p.add_argument("--shard", metavar="INDEX/COUNT",
+                       help="serve one of COUNT contiguous shares of the plant's devices (in address order), INDEX "
+                            "from 0: 0/3 is the first of three; each machine or pod runs one, from the same spec")
+        p.add_argument("--list-addresses", action="store_true",
+                       help="print the addresses of the devices this fleet (or shard) serves, one a line, and exit")
+        p.set_defaults(func=cmd_fleet)
+
+    if wanted("plant"):
+        from .fleet import cmd_plant
+
+        p = sub.add_parser("plant")
+        p.add_argument("--fleet", action="append", required=True, metavar="NAME:PORT",
+                       help="the fleets' HTTP APIs: a DNS name whose A records are every fleet (a Kubernetes "
+                            "headless Service), or an address; repeatable")
+        p.add_argument("--refresh", type=parse_duration, default=5.0, metavar="DURATION",
+                       help="how often to look for fleets and ask each for its devices (default %(default)s s)")
+        _add_http_arguments(p)
+        p.set_defaults(func=cmd_plant)
+
+    if wanted("models"):
+        from .emulators import cmd_models
+
+        p = sub.add_parser("models")
+        p.add_argument("--profile", choices=["mx2", "rx"], help="one family only (default: both)")
+        p.add_argument("--json", action="store_true", help="one JSON object per line")
+        p.set_defaults(func=cmd_models)
+
+    if wanted("componet"):
+        from .emulators import cmd_componet
+
+        p = sub.add_parser("componet")
+        p.add_argument("--nodes", required=True, metavar="PROFILE:MODEL@NODE,...",
+                       help="slaves, e.g. mx2:MX2-A2015-E@3,rx:RX-A4055-E@5 (node addresses 0-63)")
+        p.add_argument("--host", default="127.0.0.1", help="address to listen on (default %(default)s)")
+        p.add_argument("--port", type=number("port"), default=DEFAULT_PORT,
+                       help="EtherNet/IP port, TCP and UDP (default %(default)s)")
+        p.add_argument("--io-port", type=number("io port"), default=DEFAULT_IO_PORT, metavar="N",
+                       help="UDP port of class 1 I/O (default %(default)s; 0 picks a free one)")
+        _complete(p.add_argument("--control", type=Path, metavar="PATH",
+                                 help="control socket (default: per address and port)"), _FILE)
+        p.add_argument("--quiet", action="store_true", help="no status line on stdout")
+        p.add_argument("--json", action="store_true", help=argparse.SUPPRESS)
+        p.set_defaults(func=cmd_componet)
+
+    if wanted("discover"):
+        from .explicit import cmd_discover
+
+        p = sub.add_parser("discover")
+        p.add_argument("--broadcast", metavar="ADDRESS",
+                       help="broadcast or unicast address (default: 255.255.255.255 and every interface's broadcast "
+                            "address, loopback's 127.255.255.255 included)")
+        p.add_argument("--port", type=number("port"), default=DEFAULT_PORT,
+                       help="UDP port to ask (default %(default)s)")
+        common(p, target=False, timeout=2.0)
+        p.set_defaults(func=cmd_discover)
+
+    if wanted("identity"):
+        from .explicit import cmd_identity
+
+        p = sub.add_parser("identity")
+        common(p)
+        p.set_defaults(func=cmd_identity)
+
+    if wanted("get"):
+        from .explicit import cmd_get
+
+        p = sub.add_parser("get")
+        common(p)
+        p.add_argument("path", metavar="CLASS/INSTANCE[/ATTRIBUTE]|CODE",
+                       help="decimal or 0x hex numbers: 1/1/7, 0x2A/1/102; or a parameter's code: ACC, CM.24, A004, "
+                            "an EDS ParamN or its name")
+        p.add_argument("--type", help="CIP type to decode the value (UINT, SHORT_STRING, ...)")
+        p.add_argument("--connected", action="store_true", help="use a class 3 connection")
+        p.add_argument("--route", metavar="PORT/LINK[,...]",
+                       help="route through the target (Unconnected_Send), e.g. 1/0 or 2/3 (CompoNet node 3)")
+        p.add_argument("--eds", metavar="FILE",
+                       help="decode by this EDS file's parameters (link paths, units, scaling) instead of the "
+                            "device's profile")
+        p.set_defaults(func=cmd_get)
+
+    if wanted("params"):
+        from .params import add_arguments as add_params_arguments
+
+        add_params_arguments(sub, _Parser, common)
+
+    if wanted("set"):
+        from .explicit import cmd_set
+
+        p = sub.add_parser("set")
+        common(p)
+        p.add_argument("path", metavar="CLASS/INSTANCE/ATTRIBUTE|CODE",
+                       help="decimal or 0x hex numbers: 0xF5/1/13; or a parameter's code: ACC, CM.24, A004, an EDS "
+                            "ParamN or its name")
+        p.add_argument("value", metavar="VALUE",
+                       help="by path, the raw value, as on the wire (50 for 5.0 s at 0.1 s per step); BOOL also "
+                            "true/false/on/off. By code, the value in the parameter's unit (2.5 for 2.5 s), as the "
+                            "keypad takes it")
+        p.add_argument("--type", help="CIP type of the value (UINT, INT, REAL, SHORT_STRING, ...); "
+                                      "default: the attribute's declaration")
+        p.add_argument("--scaled", action="store_true",
+                       help="VALUE is the engineering value (5.0 for 5.0 s), turned into raw steps by the declaration")
+        p.add_argument("--connected", action="store_true", help="use a class 3 connection")
+        p.add_argument("--route", metavar="PORT/LINK[,...]", help="route through the target (Unconnected_Send)")
+        p.add_argument("--eds", metavar="FILE",
+                       help="decode by this EDS file's parameters (link paths, units, scaling) instead of the "
+                            "device's profile")
+        p.set_defaults(func=cmd_set)
+
+    if wanted("io"):
+        from .io import PRINT_MODES, cmd_io
+
+        p = sub.add_parser("io")
+        common(p)
+        p.add_argument("--output", type=number("output"), metavar="N", help="output (O->T) assembly instance")
+        p.add_argument("--input", type=number("input"), metavar="N", help="input assembly instance")
+        p.add_argument("--heartbeat", type=number("heartbeat"), metavar="N",
+                       help="O->T heartbeat point instead of an output (input only: e.g. 198, listen only: 199)")
+        p.add_argument("--rpi", metavar="DURATION",
+                       help="requested packet interval with its unit: 10ms, 500us, 0.5s (default: the EDS's with "
+                            "--eds, else 10ms)")
+        _complete(p.add_argument("--eds", metavar="FILE", help="open a connection this EDS file describes "
+                                                                "(with --connection), or take only field names from "
+                                                                "it (with --output/--input)"), _FILE)
+        p.add_argument("--connection", metavar="N",
+                       help="the ConnectionN of --eds to open, by number N or by name")
+        p.add_argument("--set", action="append", metavar="FIELD=VALUE",
+                       help="output field to set, a raw value in the field's unit (see --list-fields), or "
+                            "raw=HEX; repeatable")
+        p.add_argument("--duration", type=parse_duration, default=5.0, metavar="DURATION",
+                       help="how long to run (default %(default)s s)")
+        p.add_argument("--idle", action="store_true", help="send idle instead of run in the run/idle header")
+        p.add_argument("--io-port", type=number("io port"), default=0, metavar="N",
+                       help="local UDP port for T->O data (default %(default)s: any free port, announced to the "
+                            "target)")
+        p.add_argument("--target-io-port", type=number("target io port"), metavar="N",
+                       help="the target's class 1 UDP port (default: the port its Forward_Open reply names, else "
+                            f"{DEFAULT_IO_PORT})")
+        p.add_argument("--multicast", action="store_true",
+                       help="ask T->O multicast (a listen-only connection needs an owner opened so); with --eds: "
+                            "the file's transport, and multicast when it allows both and the target refuses "
+                            "point-to-point (0x0108)")
+        p.add_argument("--config", type=number("config"), metavar="N",
+                       help="configuration assembly instance of the connection path (default 1)")
+        p.add_argument("--config-data", metavar="HEX", help="configuration data sent in the Forward_Open (hex bytes)")
+        p.add_argument("--ot-format", choices=["run-idle", "heartbeat", "modeless"],
+                       help="O->T real-time format: run-idle header (default), heartbeat (sequence count only, "
+                            "size 2), modeless (no header); with --eds: the file's")
+        p.add_argument("--list-fields", action="store_true",
+                       help="list the output and input fields of the connection (names for --set and the input, "
+                            "and the unit of a raw value) and exit")
+        p.add_argument("--timeout-multiplier", type=number("timeout multiplier"), choices=range(8),
+                       metavar="0..7", help="connection timeout = RPI x 4 x 2^N, each way (default 2: 16 ms at a "
+                                            "1 ms RPI; 3 or more at RPIs under 2 ms on a busy host)")
+        p.add_argument("--print", default="changes", metavar="|".join(PRINT_MODES),
+                       help="which input lines to print: " + "; ".join(f"{mode}: {what}" for mode, what in
+                                                                       PRINT_MODES.items())
+                            + " (default %(default)s)")
+        p.set_defaults(func=cmd_io)
+
+    if wanted("drive"):
+        from .drive import add_drive_commands
+
+        p = sub.add_parser("drive")
+        drive = p.add_subparsers(dest="drive_command", metavar="COMMAND", title="commands", required=True,
+                                 parser_class=_Parser)
+
+        def where_the_emulator_is(q: argparse.ArgumentParser) -> None:
+            q.add_argument("--host", default="127.0.0.1",
+                           help="the emulator's address (its --host), which with --port finds its control socket "
+                                "(default %(default)s)")
+            q.add_argument("--port", type=number("port"), default=DEFAULT_PORT,
+                           help="the emulator's EtherNet/IP port, which finds its control socket (default %(default)s)")
+            _complete(q.add_argument("--control", type=Path, metavar="PATH", help="the emulator's control socket"),
+                      _FILE)
+            q.add_argument("--timeout", type=parse_duration, default=5.0, metavar="DURATION",
+                           help="reply timeout (default %(default)s s)")
+            q.add_argument("--json", action="store_true", help="one JSON object per line")
+
+        add_drive_commands(drive, where_the_emulator_is)
+
+    if wanted("eds"):
         _add_eds_commands(sub)
-    else:
-        sub.add_parser("eds")
-    if command in (None, "capture"):
+    if wanted("capture"):
         from ..capture.command import add_arguments as add_capture_arguments
 
         add_capture_arguments(sub)
-    else:
-        sub.add_parser("capture")
+    if wanted("completion"):
+        from .completion import cmd_completion
 
-    p = sub.add_parser("completion")
-    p.add_argument("shell", choices=["bash", "zsh"], help="the shell")
-    p.set_defaults(func=cmd_completion)
+        p = sub.add_parser("completion")
+        p.add_argument("shell", choices=["bash", "zsh"], help="the shell")
+        p.set_defaults(func=cmd_completion)
+    if wanted("conform"):
+        from .conform import add_arguments as add_conform_arguments
 
-    p = sub.add_parser("conform")
-    add_conform_arguments(p)
-    for action in p._actions:
-        if action.dest in ("eds", "junit", "html"):
-            _complete(action, _FILE)
+        p = sub.add_parser("conform")
+        add_conform_arguments(p)
+        for action in p._actions:
+            if action.dest in ("eds", "junit", "html"):
+                _complete(action, _FILE)
     return parser
 
 
@@ -390,6 +432,7 @@ def _add_http_arguments(p: argparse.ArgumentParser) -> None:
 def _add_eds_commands(sub: Any) -> None:
     from ..eds.commands import add_check_arguments, add_show_arguments
     from ..eds.commands_generate import add_generate_arguments
+    from .eds import cmd_eds_check, cmd_eds_fetch, cmd_eds_generate, cmd_eds_show
 
     p = sub.add_parser("eds")
     eds = p.add_subparsers(dest="eds_command", metavar="COMMAND", title="commands", required=True,

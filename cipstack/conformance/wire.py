@@ -1,23 +1,25 @@
 """The battery's own view of the wire: blocking sockets that send exactly the bytes a check
 builds (well formed or not) and return exactly what came back, every exchange recorded.
 
-The originator client of ``eip.originator`` is tolerant by design and would hide what a check
-looks for (a status in the header, a reply that should not exist, a connection the target
-closed), so the battery frames its requests itself with the same codecs. Requests are spaced
-by ``MIN_GAP`` so that the battery never floods a device.
+The scanner's clients are tolerant by design and would hide what a check looks for (a status in
+the header, a reply that should not exist, a connection the target closed), so the battery builds
+its requests itself, byte by byte, and sees every reply frame. What it shares with them is the
+originator core's reading of the stream: frames cut by ``FrameBuffer``, SendRRData replies read
+by ``rr_reply_items``. Requests are spaced by ``MIN_GAP`` so that the battery never floods a device.
 """
 
 from __future__ import annotations
 
 import select
 import socket
-import struct
 import time
 from dataclasses import dataclass
 
 from ..cip.messages import MessageRouterRequest, MessageRouterResponse
-from ..eip.cpf import Item, ItemType, decode_items, encode_items
-from ..eip.encapsulation import HEADER, HEADER_SIZE, REGISTER_SESSION_DATA, RR_PREFIX, Command, EncapsulationHeader
+from ..eip.cpf import Item
+from ..eip.encapsulation import HEADER, HEADER_SIZE, REGISTER_SESSION_DATA, Command, EncapsulationHeader
+from ..eip.originator_core import FrameBuffer, rr_reply_items, rr_request_body
+from ..eip.replies import MalformedReplyError
 from ..errors import PeerUnreachable
 from .model import Exchange
 
@@ -46,8 +48,7 @@ def frame(command: int, data: bytes = b"", session: int = 0, status: int = 0, co
 
 def rr_data(request: bytes, extra: tuple[Item, ...] = ()) -> bytes:
     """SendRRData data: interface handle, timeout, Null Address + Unconnected Data (+ extra items)."""
-    return RR_PREFIX.pack(0, 0) + encode_items((Item(ItemType.NULL_ADDRESS), Item(ItemType.UNCONNECTED_DATA, request),
-                                                *extra))
+    return rr_request_body(request, extra)
 
 
 class Probe:
@@ -59,7 +60,8 @@ class Probe:
         #: The target closed (or reset) this TCP connection: nothing more can be sent on it.
         self.closed_by_peer = False
         self.exchanges: list[Exchange] = []
-        self._buffer = b""
+        self._frames = FrameBuffer()
+        self._received: list[bytes] = []
         self._last_send = 0.0
         try:
             self.sock: socket.socket | None = socket.create_connection((host, port), timeout)
@@ -114,11 +116,9 @@ class Probe:
             raise ConnectionError("probe closed")
         deadline = time.monotonic() + (self.timeout if timeout is None else timeout)
         while True:
-            if len(self._buffer) >= HEADER_SIZE:
-                end = HEADER_SIZE + struct.unpack_from("<H", self._buffer, 2)[0]
-                if len(self._buffer) >= end:
-                    raw, self._buffer = self._buffer[:end], self._buffer[end:]
-                    return Frame(EncapsulationHeader.decode(raw), raw[HEADER_SIZE:], raw)
+            if self._received:
+                raw = self._received.pop(0)
+                return Frame(EncapsulationHeader.decode(raw), raw[HEADER_SIZE:], raw)
             left = deadline - time.monotonic()
             if left <= 0:
                 return None
@@ -133,7 +133,7 @@ class Probe:
             if not chunk:
                 self.closed_by_peer = True
                 raise ConnectionError("connection closed by the target")
-            self._buffer += chunk
+            self._received += self._frames.feed(chunk)
 
     def exchange(self, raw: bytes, timeout: float | None = None) -> Frame | None:
         """Send ``raw`` and wait for one reply frame (None: no reply in time). A closed connection
@@ -198,11 +198,10 @@ class Reply:
         if reply.header.status != 0:
             return cls(reply, None, f"encapsulation status 0x{reply.header.status:04X}")
         try:
-            items = decode_items(reply.body, RR_PREFIX.size, strict=False)
-            data = next(i.data for i in items if i.type == ItemType.UNCONNECTED_DATA)
+            data, items = rr_reply_items(reply.body)
             return cls(reply, MessageRouterResponse.decode(data), "", tuple(items))
-        except (StopIteration, ValueError, struct.error) as exc:
-            return cls(reply, None, f"malformed reply ({exc or 'no Unconnected Data item'})")
+        except (MalformedReplyError, ValueError) as exc:
+            return cls(reply, None, f"malformed reply ({exc})")
 
     @property
     def status(self) -> int | None:

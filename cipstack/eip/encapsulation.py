@@ -77,6 +77,8 @@ def encode_frame(command: int, data: bytes = b"", session: int = 0, status: int 
 PROTOCOL_VERSION = 1
 #: The registered EtherNet/IP port: TCP and UDP 44818 (explicit messages, ListIdentity).
 DEFAULT_PORT = 44818
+#: The registered port of class 1 I/O: UDP 2222.
+DEFAULT_IO_PORT = 2222
 #: Seconds a TCP frame, once begun, has to arrive whole by default (``TargetSettings.frame_timeout``).
 DEFAULT_FRAME_TIMEOUT = 5.0
 REGISTER_SESSION_DATA = struct.Struct("<HH")

@@ -19,12 +19,12 @@ from typing import NamedTuple
 
 from ..errors import ProtocolError
 from .cpf import ItemType
+from .encapsulation import DEFAULT_IO_PORT  # noqa: F401 - its home was here; importers keep their path
 
 #: CPF count 2, Sequenced Address item (type, length 8, connection id, sequence), Connected Data header.
 _IO_HEAD = struct.Struct("<HHHIIHHH")
 IO_HEAD_SIZE = _IO_HEAD.size  # 22 bytes before the run/idle header or data
 _RUN_IDLE = struct.Struct("<I")
-DEFAULT_IO_PORT = 2222
 #: The item type codes as plain ints: compared and packed for every datagram, where an enum
 #: member's lookup costs more than the comparison.
 _SEQUENCED_ADDRESS = int(ItemType.SEQUENCED_ADDRESS)

@@ -1,7 +1,7 @@
 """Encapsulation TCP connections served on the lane of a ``PreciseEventLoop``.
 
 On that loop the ``EncapsulationServer`` accepts its connections and serves their bytes in the
-selector's wait (``io_server.IoLane``), as the class 1 sockets are: a request costs one
+selector's wait (``precise_loop.IoLane``), as the class 1 sockets are: a request costs one
 ``recv``, the sans-I/O ``EncapsulationConnection`` and one ``send``, with no asyncio handle,
 transport buffer or flow-control bookkeeping between them. That bookkeeping was most of the
 server's own time per Get_Attribute_Single; what is left is the system calls and the CIP work.
@@ -31,8 +31,8 @@ from time import monotonic
 from typing import TYPE_CHECKING
 
 from .cpf import SockAddr
-from .io_server import IoLane, LaneTimer
 from .limits import LISTEN_BACKLOG
+from .precise_loop import IoLane, LaneTimer
 
 if TYPE_CHECKING:
     from .limits import GuardedListener

@@ -241,7 +241,7 @@ def test_scanner_reads_and_writes_cpppo_tag(cpppo_server: PeerProcess, connectio
     with SyncScanner(cpppo_server.address) as sync:
         if connection is not None:
             sync.open_connection(large=connection == "large")
-            assert sync.scanner.client.connection is not None
+            assert sync.client.connection is not None
         sync.set_attribute_single(0x2A, 1, 7, 1500, INT)
         result = sync.get_attribute_single(0x2A, 1, 7, INT)
         assert (result.value, result.data) == (1500, b"\xdc\x05")

@@ -1,0 +1,130 @@
+"""The originator over a blocking socket, for scripts and one-shot commands: no event loop.
+
+A thin shell over ``OriginatorCore``: it writes a transaction's frame, reads until the core says the
+reply came (or the deadline passed), and returns the reply's meaning. One request at a time; a late
+reply to one that timed out is dropped by the core. It imports nothing of asyncio.
+"""
+
+from __future__ import annotations
+
+import socket
+import time
+from typing import Any, TypeVar
+
+from ..errors import CipstackError
+from .encapsulation import DEFAULT_PORT
+from .originator_core import (
+    DEFAULT_TIMEOUT,
+    CoreClient,
+    NoReplyError,
+    OriginatorCore,
+    Plan,
+    Transaction,
+    run_plan,
+)
+
+T = TypeVar("T")
+
+#: A reply is small: a 64 KiB receive buffer would be allocated and shrunk on every call.
+_RECEIVE_SIZE = 4096
+
+
+class BlockingEncapsulationClient(CoreClient):
+    """One TCP connection and one session, blocking: ``perform`` a transaction, ``run`` a plan."""
+
+    def __init__(self, host: str, port: int = DEFAULT_PORT, timeout: float = DEFAULT_TIMEOUT,
+                 core: OriginatorCore | None = None) -> None:
+        super().__init__(host, port, timeout, core)
+        self._sock: socket.socket | None = None
+        self._sock_timeout: float | None = None
+
+    @classmethod
+    def connect(cls, host: str, port: int = DEFAULT_PORT, timeout: float = DEFAULT_TIMEOUT,
+                register: bool = True) -> BlockingEncapsulationClient:
+        """Connect (and register a session unless ``register`` is false)."""
+        client = cls(host, port, timeout)
+        try:
+            client._sock = socket.create_connection((host, port), timeout)
+        except OSError as exc:
+            raise ConnectionError(f"cannot connect to {host}:{port}: {exc}") from None
+        client._sock.setsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY, 1)
+        if register:
+            try:
+                client.perform(client.core.register_session())
+            except BaseException:
+                client.close()
+                raise
+        return client
+
+    @property
+    def is_open(self) -> bool:
+        return self._sock is not None
+
+    def _send(self, frame: bytes) -> None:
+        if self._sock is None:
+            raise ConnectionError(f"connection to {self.host}:{self.port} is closed")
+        try:
+            self._sock.sendall(frame)
+        except OSError as exc:
+            raise ConnectionError(f"connection to {self.host}:{self.port} lost: {exc}") from None
+
+    def perform(self, transaction: Transaction[T]) -> T:
+        """Send ``transaction`` and wait for its reply; the reply's meaning, or the error it carries."""
+        core = self.core
+        self._send(core.start(transaction, time.monotonic()))
+        sock = self._sock
+        assert sock is not None
+        timeout = transaction.timeout or self.timeout
+        if timeout != self._sock_timeout:
+            sock.settimeout(timeout)
+            self._sock_timeout = timeout
+        while True:
+            try:
+                chunk = sock.recv(_RECEIVE_SIZE)
+            except TimeoutError:
+                raise self._no_reply(transaction) from None
+            except OSError as exc:
+                core.lost()
+                raise ConnectionError(f"connection to {self.host}:{self.port} lost: {exc}") from None
+            if not chunk:
+                core.lost()
+                raise ConnectionError(f"connection to {self.host}:{self.port} closed by the target")
+            for done, header, body in core.receive_data(chunk):
+                if done is transaction:
+                    return transaction.result(header, body)
+            if time.monotonic() >= transaction.deadline:  # only frames nothing waits for kept coming
+                raise self._no_reply(transaction)
+
+    def _no_reply(self, transaction: Transaction[Any]) -> NoReplyError:
+        self.core.forget(transaction)
+        return self.no_reply(transaction)
+
+    def run(self, plan: Plan[T]) -> T:
+        """Drive a plan of several requests to its result."""
+        return run_plan(plan, self.perform)
+
+    def close(self) -> None:
+        """Forward_Close the class 3 connection, UnRegisterSession, close the socket."""
+        if self._sock is None:
+            return
+        try:
+            closing = self.core.forward_close()
+            if closing is not None:
+                self.perform(closing)
+            if self.core.session:
+                self._send(self.core.unregister_session())
+        except (OSError, CipstackError):
+            pass  # the session ends either way: the target may be gone already
+        finally:
+            self._sock.close()
+            self._sock = None
+            self.core.session = 0
+
+    def __enter__(self) -> BlockingEncapsulationClient:
+        return self
+
+    def __exit__(self, *exc: Any) -> None:
+        self.close()
+
+
+__all__ = ["BlockingEncapsulationClient"]

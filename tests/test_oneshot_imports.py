@@ -1,0 +1,57 @@
+"""The import budget of a one-shot command (issue 40): ``cipstack get|set|identity`` loads the
+blocking originator and the profile's compact declarations, never asyncio, the device model, the
+EDS tool or another command's module. A whole-process timing against pycomm3 is
+``benchmarks/oneshot.py``'s job (no timing asserts here); the module count is what this guards."""
+
+from __future__ import annotations
+
+import json
+import subprocess
+import sys
+
+import pytest
+
+from tests.test_cli import adapter_process  # noqa: F401 - the fixture: the emulator in a process of its own
+
+#: Runs the command line as ``python -m cipstack`` does, then prints the modules it loaded.
+SCRIPT = """
+import json, runpy, sys
+sys.argv = ["cipstack", *sys.argv[1:]]
+try:
+    runpy.run_module("cipstack", run_name="__main__", alter_sys=True)
+except SystemExit as done:
+    status = done.code
+print("MODULES " + json.dumps({"status": status, "modules": sorted(sys.modules)}))
+"""
+
+#: The most cipstack modules each command may load: today's count (31, 35, 35, 19) and room for the
+#: package modules of eip's layout by role.
+BUDGET = {"get-standard": 34, "get-decoded": 38, "set": 38, "identity": 22}
+#: Never on the one-shot path.
+FORBIDDEN = ("asyncio", "construct", "cipstack.eip.originator", "cipstack.devices.acg",
+             "cipstack.devices.omron", "cipstack.devices.profiles", "cipstack.eds", "cipstack.assemblies.schema",
+             "cipstack.cli.io", "cipstack.cli.drive", "cipstack.control", "cipstack.sync_io")
+
+COMMANDS = {"get-standard": ["get", "{target}", "1/1/7"], "get-decoded": ["get", "{target}", "0x2A/1/102"],
+            "set": ["set", "{target}", "0x2A/1/102", "50"], "identity": ["identity", "{target}"]}
+
+
+@pytest.mark.parametrize("name", sorted(COMMANDS))
+def test_a_one_shot_command_loads_little(name: str, adapter_process: tuple[str, subprocess.Popen[str]]  # noqa: F811
+                                         ) -> None:
+    address, _ = adapter_process
+    arguments = [a.format(target=address) for a in COMMANDS[name]]
+    done = subprocess.run([sys.executable, "-c", SCRIPT, *arguments], capture_output=True, text=True, timeout=60)
+    report = json.loads(done.stdout.rsplit("MODULES ", 1)[1])
+    assert report["status"] == 0, done.stderr
+    modules = report["modules"]
+    loaded = [m for m in modules if m.split(".")[0] == "cipstack"]
+    assert [m for m in modules if any(m == f or m.startswith(f + ".") for f in FORBIDDEN)] == []
+    assert len(loaded) <= BUDGET[name], loaded
+    assert "cipstack.eip.blocking_client" in loaded or name == "identity"
+
+
+def test_the_blocking_scanner_imports_no_asyncio() -> None:
+    script = "import sys, cipstack.scanner; print('asyncio' in sys.modules)"
+    assert subprocess.run([sys.executable, "-c", script], capture_output=True, text=True, check=True,
+                          timeout=60).stdout.strip() == "False"
