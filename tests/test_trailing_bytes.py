@@ -37,7 +37,7 @@ def test_the_hint_names_the_bytes_and_reads_them_as_a_route_path() -> None:
 
 @pytest.mark.parametrize("route", [EMPTY_ROUTE, BACKPLANE_SLOT_0], ids=["empty", "port1-link0"])
 def test_the_adapter_answers_0x15_logs_why_and_keeps_serving(route: bytes, caplog: pytest.LogCaptureFixture) -> None:
-    caplog.set_level(logging.INFO, logger="cipstack.eip.target")
+    caplog.set_level(logging.INFO, logger="cipstack.eip.target.core")
     with threaded_adapter(build_device("acg")) as adapter, Client(adapter.port) as client:
         status, _, data = client.request(GET_NAME + route)
         assert (status, data) == (0x15, b"")

@@ -12,7 +12,7 @@ from dataclasses import replace
 
 from ..cip.epath import LogicalSegment, LogicalType, decode_path
 from ..cip.status import CipError
-from ..eip.cm_messages import ForwardOpenRequest
+from ..eip.wire.cm_messages import ForwardOpenRequest
 from .connections import (
     CM,
     FORWARD_OPEN,

@@ -18,7 +18,9 @@ from dataclasses import dataclass, replace
 from typing import TYPE_CHECKING
 
 from ..cip.epath import request_path
-from ..eip.cm_messages import (
+from ..eip.io_core import DEFAULT_IO_PORT
+from ..eip.originator.io_originator import SEQUENCE_COUNT_SIZE, OtFormat, class1_path
+from ..eip.wire.cm_messages import (
     ConnectionTriad,
     ConnectionType,
     ForwardCloseRequest,
@@ -28,9 +30,7 @@ from ..eip.cm_messages import (
     TransportTrigger,
     TriggerType,
 )
-from ..eip.cpf import Item, ItemType, SockAddr
-from ..eip.io_core import DEFAULT_IO_PORT
-from ..eip.io_originator import SEQUENCE_COUNT_SIZE, OtFormat, class1_path
+from ..eip.wire.cpf import Item, ItemType, SockAddr
 from .io_run import drive, judge_production
 from .model import CheckSpec, Code, Outcome, Verdict
 from .registry import Context, check, outcome

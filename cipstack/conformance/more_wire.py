@@ -11,7 +11,7 @@ from dataclasses import replace
 
 from ..cip.epath import request_path
 from ..cip.messages import MessageRouterRequest, MessageRouterResponse
-from ..eip.cm_messages import (
+from ..eip.wire.cm_messages import (
     ConnectionTriad,
     ConnectionType,
     ForwardOpenReply,
@@ -20,8 +20,8 @@ from ..eip.cm_messages import (
     TriggerType,
     UnconnectedSendRequest,
 )
-from ..eip.cpf import Item, ItemType, decode_items, encode_items
-from ..eip.encapsulation import REGISTER_SESSION_DATA, RR_PREFIX, Command
+from ..eip.wire.cpf import Item, ItemType, decode_items, encode_items
+from ..eip.wire.encapsulation import REGISTER_SESSION_DATA, RR_PREFIX, Command
 from .connections import (
     CM,
     EXTENDED,

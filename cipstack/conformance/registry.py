@@ -14,7 +14,7 @@ from .wire import Probe
 if TYPE_CHECKING:
     from ..eds.interpret import EdsView
     from ..eds.model import EdsDocument
-    from ..eip.cm_messages import ForwardOpenRequest
+    from ..eip.wire.cm_messages import ForwardOpenRequest
     from .connections import Plan
 
 GET_ATTRIBUTE_SINGLE, SET_ATTRIBUTE_SINGLE = 0x0E, 0x10

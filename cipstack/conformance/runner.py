@@ -7,7 +7,7 @@ import time
 from collections.abc import Iterable, Sequence
 from typing import TYPE_CHECKING
 
-from ..eip.encapsulation import DEFAULT_PORT, Command
+from ..eip.wire.encapsulation import DEFAULT_PORT, Command
 from . import (  # noqa: F401 - they declare checks
     as_found,
     class1,

@@ -12,7 +12,7 @@ from ..devices.registers import RegisterError
 if TYPE_CHECKING:
     from ..devices.keypad import Keypad
     from ..devices.registers import Register
-    from ..eip.io_target import IoConnection
+    from ..eip.target.io_target import IoConnection
     from ..runtime import DeviceRuntime
 
 

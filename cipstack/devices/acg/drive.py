@@ -44,7 +44,7 @@ import os
 from collections.abc import Iterator, Mapping
 from contextlib import contextmanager
 
-from ...eip.limits import RateLimitedLog
+from ...eip.target.limits import RateLimitedLog
 from ..registers import Register, RegisterAccess, RegisterError, RegisterMap, RegisterRefusal
 from ..simulation import TimedSimulation
 from ..state import ParameterStore

@@ -24,11 +24,11 @@ import struct
 from collections.abc import Callable
 from dataclasses import dataclass, field
 
-from ..cip.router import MessageRouter, RequestContext
-from ..cip.status import GeneralStatus
-from .connection_manager import ConnectionTable, ExplicitConnection, origin_host
-from .cpf import Item, ItemType, SockAddr, decode_items, encode_items
-from .encapsulation import (
+from ...cip.router import MessageRouter, RequestContext
+from ...cip.status import GeneralStatus
+from ..trailing_bytes import is_too_much_data, too_much_data_hint
+from ..wire.cpf import Item, ItemType, SockAddr, decode_items, encode_items
+from ..wire.encapsulation import (
     DEFAULT_FRAME_TIMEOUT,
     HEADER,
     HEADER_SIZE,
@@ -40,10 +40,10 @@ from .encapsulation import (
     EncapsulationError,
     EncapsulationStatus,
 )
-from .identity_items import CAPABILITY_CIP_TCP, IdentityRecord, encode_list_identity, encode_list_services
+from ..wire.identity_items import CAPABILITY_CIP_TCP, IdentityRecord, encode_list_identity, encode_list_services
+from .connection_manager import ConnectionTable, ExplicitConnection, origin_host
 from .limits import RateLimitedLog
 from .seams import RequestSeam
-from .trailing_bytes import is_too_much_data, too_much_data_hint
 
 log = logging.getLogger(__name__)
 
