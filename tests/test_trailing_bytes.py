@@ -12,7 +12,7 @@ import logging
 import pytest
 
 from cipstack.devices.profiles import build_device
-from cipstack.eip.trailing_bytes import route_path_at_end, too_much_data_hint
+from cipstack.eip.target.trailing_bytes import route_path_at_end, too_much_data_hint
 from tests.attacks import GET_NAME, IDENTITY_NAME, Client
 from tests.library_support import threaded_adapter
 

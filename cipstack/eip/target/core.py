@@ -26,7 +26,7 @@ from dataclasses import dataclass, field
 
 from ...cip.router import MessageRouter, RequestContext
 from ...cip.status import GeneralStatus
-from ..trailing_bytes import is_too_much_data, too_much_data_hint
+from .trailing_bytes import is_too_much_data, too_much_data_hint
 from ..wire.cpf import Item, ItemType, SockAddr, decode_items, encode_items
 from ..wire.encapsulation import (
     DEFAULT_FRAME_TIMEOUT,
