@@ -26,7 +26,6 @@ from dataclasses import dataclass, field
 
 from ...cip.router import MessageRouter, RequestContext
 from ...cip.status import GeneralStatus
-from .trailing_bytes import is_too_much_data, too_much_data_hint
 from ..wire.cpf import Item, ItemType, SockAddr, decode_items, encode_items
 from ..wire.encapsulation import (
     DEFAULT_FRAME_TIMEOUT,
@@ -44,6 +43,7 @@ from ..wire.identity_items import CAPABILITY_CIP_TCP, IdentityRecord, encode_lis
 from .connection_manager import ConnectionTable, ExplicitConnection, origin_host
 from .limits import RateLimitedLog
 from .seams import RequestSeam
+from .trailing_bytes import is_too_much_data, too_much_data_hint
 
 log = logging.getLogger(__name__)
 

@@ -6,9 +6,9 @@ words, a reserved byte, port segments) to a request it sends to the device itsel
 
 from __future__ import annotations
 
-from ..cip.epath import PortSegment, decode_path, parse_application_path
-from ..cip.messages import MessageRouterRequest, Service
-from ..cip.status import CipError, GeneralStatus
+from ...cip.epath import PortSegment, decode_path, parse_application_path
+from ...cip.messages import MessageRouterRequest, Service
+from ...cip.status import CipError, GeneralStatus
 
 #: Services whose request carries no data after its path: whatever follows is trailing.
 _NO_DATA = frozenset({Service.GET_ATTRIBUTE_SINGLE, Service.GET_ATTRIBUTES_ALL})
