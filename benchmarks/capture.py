@@ -25,7 +25,8 @@ from typing import Any
 from cipstack.capture.synth import PcapWriter, TcpFlow, ethernet, udp
 from cipstack.cip.epath import request_path
 from cipstack.cip.messages import MessageRouterRequest, MessageRouterResponse, Service
-from cipstack.eip.cm_messages import (
+from cipstack.eip.io_core import encode_io_datagram
+from cipstack.eip.wire.cm_messages import (
     ConnectionTriad,
     ForwardCloseReply,
     ForwardCloseRequest,
@@ -34,9 +35,8 @@ from cipstack.eip.cm_messages import (
     NetworkParameters,
     TransportTrigger,
 )
-from cipstack.eip.cpf import Item, ItemType, encode_items
-from cipstack.eip.encapsulation import RR_PREFIX, Command, encode_frame
-from cipstack.eip.io_core import encode_io_datagram
+from cipstack.eip.wire.cpf import Item, ItemType, encode_items
+from cipstack.eip.wire.encapsulation import RR_PREFIX, Command, encode_frame
 
 SCANNER, ADAPTER = "192.168.1.10", "192.168.1.20"
 CM_PATH = request_path(0x06, 1)

@@ -36,7 +36,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 from explicit import EXPECTED_NAME, HEADER, REGISTER_FRAME, get_product_name_frame
 
 from cipstack.adapter import Adapter, AdapterSettings
-from cipstack.eip.cpf import SockAddr
+from cipstack.eip.wire.cpf import SockAddr
 
 #: The reply's end: Get_Attribute_Single reply (0x8E), success, the product name.
 EXPECTED_REPLY_END = b"\x8e\x00\x00\x00" + EXPECTED_NAME

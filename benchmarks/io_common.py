@@ -24,7 +24,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 from tests.ports import free_port
 
 if TYPE_CHECKING:
-    from cipstack.eip.io_target import IoProfile
+    from cipstack.eip.target.io_target import IoProfile
 
 __all__ = ["free_port"]
 

@@ -21,8 +21,8 @@ sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 
 from cipstack.cip.router import RequestContext
 from cipstack.devices.profiles import build_device
-from cipstack.eip.cm_messages import ForwardOpenRequest
-from cipstack.eip.io_target import IoTarget
+from cipstack.eip.target.io_target import IoTarget
+from cipstack.eip.wire.cm_messages import ForwardOpenRequest
 from tests.attacks import ACG_INPUT_ONLY_PATH, class1_open, io_datagram
 
 RPI = 0.010

@@ -34,15 +34,15 @@ _EXPORTS: dict[str, str] = {
     "discover_blocking": "cipstack.scanner",
     "list_services_udp": "cipstack.scanner",
     "Catalog": "cipstack.catalog",
-    "IdentityRecord": "cipstack.eip.identity_items",
+    "IdentityRecord": "cipstack.eip.wire.identity_items",
     # values
     "Value": "cipstack.cip.values",
     "Scaling": "cipstack.cip.values",
     # class 1
-    "IoConnectionHandle": "cipstack.eip.io_originator",
-    "ProcessImage": "cipstack.eip.io_originator",
-    "IoTimeoutError": "cipstack.eip.io_originator",
-    "OtFormat": "cipstack.eip.io_originator",
+    "IoConnectionHandle": "cipstack.eip.originator.io_originator",
+    "ProcessImage": "cipstack.eip.originator.io_originator",
+    "IoTimeoutError": "cipstack.eip.originator.io_originator",
+    "OtFormat": "cipstack.eip.originator.io_originator",
     "SyncIoConnection": "cipstack.sync_io",
     "run_precise": "cipstack.eip.io_server",
     "precise_event_loop": "cipstack.eip.io_server",
@@ -57,8 +57,8 @@ _EXPORTS: dict[str, str] = {
     "ProtocolError": "cipstack.errors",
     "CipError": "cipstack.cip.status",
     "GeneralStatus": "cipstack.cip.status",
-    "MalformedReplyError": "cipstack.eip.replies",
-    "EncapsulationStatusError": "cipstack.eip.replies",
+    "MalformedReplyError": "cipstack.eip.originator.replies",
+    "EncapsulationStatusError": "cipstack.eip.originator.replies",
     # EDS files
     "read_eds": "cipstack.eds.reader",
     "parse_eds": "cipstack.eds.reader",
@@ -150,10 +150,10 @@ if TYPE_CHECKING:  # what type checkers and the API reference see; nothing is im
     from .eds.catalog import catalog_from_eds
     from .eds.model import EdsDocument
     from .eds.reader import parse_eds, read_eds
-    from .eip.identity_items import IdentityRecord
-    from .eip.io_originator import IoConnectionHandle, IoTimeoutError, OtFormat, ProcessImage
     from .eip.io_server import precise_event_loop, run_precise
-    from .eip.replies import EncapsulationStatusError, MalformedReplyError
+    from .eip.originator.io_originator import IoConnectionHandle, IoTimeoutError, OtFormat, ProcessImage
+    from .eip.originator.replies import EncapsulationStatusError, MalformedReplyError
+    from .eip.wire.identity_items import IdentityRecord
     from .errors import BadRequest, CipstackError, NotFound, PeerUnreachable, ProtocolError, StateRefused
     from .params import diff_params, dump_params, load_params, read_recipe, write_recipe
     from .scanner import (

@@ -18,15 +18,15 @@ from .devices.acg.modbus_rtu import LineSettings
 from .devices.base import Device, DeviceLimits
 from .devices.keypad import Keypad, NoKeypad
 from .devices.profiles import DEFAULT_MAC, DEFAULT_PROFILE, ProfileOptions, build_device
-from .eip.identity_items import CAPABILITY_CIP_TCP, CAPABILITY_CLASS01_UDP
 from .eip.interfaces import interface_of
 from .eip.io_core import DEFAULT_IO_PORT, ProductionGrid
 from .eip.io_server import IoEndpoint, freeze_startup_objects
-from .eip.io_target import IoTarget
-from .eip.limits import DEFAULT_MAX_TCP_CONNECTIONS
-from .eip.seams import IoSeam, ReplySeam, RequestSeam
-from .eip.server import DEFAULT_PORT, EncapsulationServer
-from .eip.target import DEFAULT_FRAME_TIMEOUT, EncapsulationTarget, TargetSettings
+from .eip.target.core import DEFAULT_FRAME_TIMEOUT, EncapsulationTarget, TargetSettings
+from .eip.target.io_target import IoTarget
+from .eip.target.limits import DEFAULT_MAX_TCP_CONNECTIONS
+from .eip.target.seams import IoSeam, ReplySeam, RequestSeam
+from .eip.target.server import DEFAULT_PORT, EncapsulationServer
+from .eip.wire.identity_items import CAPABILITY_CIP_TCP, CAPABILITY_CLASS01_UDP
 from .errors import BadRequest
 from .faults import Fault, FaultController
 from .listening import ListenError, held_log_records

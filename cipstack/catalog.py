@@ -12,7 +12,7 @@ from typing import TYPE_CHECKING
 
 from .cip.model import AttributeSpec, ClassSpec
 from .cip.types import UINT
-from .eip.cm_spec import SPEC as CONNECTION_MANAGER_SPEC
+from .eip.wire.cm_spec import SPEC as CONNECTION_MANAGER_SPEC
 from .objects.assembly import SPEC as ASSEMBLY_SPEC
 from .objects.identity import identity_spec
 from .objects.message_router import SPEC as MESSAGE_ROUTER_SPEC

@@ -23,10 +23,8 @@ from .cip.model import AttributeSpec
 from .cip.status import CipError, ExtendedStatus, GeneralStatus
 from .cip.types import UINT, CipType, IntegerType
 from .cip.values import Value
-from .eip.blocking_client import BlockingEncapsulationClient
-from .eip.encapsulation import DEFAULT_PORT
-from .eip.identity_items import IdentityRecord, ServiceRecord
-from .eip.originator_core import (
+from .eip.originator.blocking import BlockingEncapsulationClient
+from .eip.originator.core import (
     OriginatorCore,
     Plan,
     decode_multiple_service,
@@ -34,15 +32,17 @@ from .eip.originator_core import (
     one,
     parse_host,
 )
-from .eip.replies import EncapsulationStatusError, MalformedReplyError
+from .eip.originator.replies import EncapsulationStatusError, MalformedReplyError
+from .eip.wire.encapsulation import DEFAULT_PORT
+from .eip.wire.identity_items import IdentityRecord, ServiceRecord
 from .errors import NotFound, ProtocolError
 
 if TYPE_CHECKING:
     # Imported where used: explicit messaging alone does not load asyncio, the EDS model or class 1.
     from .assemblies.schema import AssemblySchema
     from .eds.model import EdsDocument
-    from .eip.io_originator import IoConnectionHandle, OtFormat
-    from .eip.originator import EncapsulationClient
+    from .eip.originator.asyncio_client import EncapsulationClient
+    from .eip.originator.io_originator import IoConnectionHandle, OtFormat
     from .sync_io import LoopThread, SyncIoConnection
 
 T = TypeVar("T")
@@ -414,7 +414,7 @@ class Scanner(_Declarations):
         along that path (``backplane_route``, a CompoNet node behind a gateway: ``[PortSegment(2, b"\\x03")]``),
         and identification then asks the routed device itself.
         """
-        from .eip.originator import EncapsulationClient
+        from .eip.originator.asyncio_client import EncapsulationClient
 
         host, parsed_port = parse_host(address)
         client = await EncapsulationClient.connect(host, port or parsed_port, timeout)
@@ -639,7 +639,7 @@ def _eds_ot_format(doc: EdsDocument, number: int) -> OtFormat | None:
     """The O->T real-time format ``ConnectionN`` declares (field 2, bits 8-10: 0 modeless,
     3 heartbeat, 4 run/idle header; eds.md), or None when the file gives none we know."""
     from .eds.model import FieldKind
-    from .eip.io_originator import OtFormat
+    from .eip.originator.io_originator import OtFormat
 
     section = doc.get("Connection Manager")
     entry = section.get(f"Connection{number}") if section is not None else None
@@ -769,7 +769,7 @@ class SyncScanner(_Declarations):
         return self._open_io(lambda scanner: scanner.io_connection_from_eds(doc, connection, rpi, **options))
 
     def _open_io(self, make: Any) -> SyncIoConnection:
-        from .eip.originator import EncapsulationClient
+        from .eip.originator.asyncio_client import EncapsulationClient
         from .sync_io import LoopThread, SyncIoConnection
 
         if self._loop_thread is None:
@@ -817,7 +817,7 @@ def __getattr__(name: str) -> Any:
     """``discover`` and ``list_services_udp`` (asyncio, UDP), imported when first used: the blocking
     scanner does not load asyncio."""
     if name in ("discover", "list_services_udp"):
-        from .eip import discovery
+        from .eip.originator import discovery
 
         return getattr(discovery, name)
     raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
@@ -827,7 +827,7 @@ def discover_blocking(address: str | Sequence[str] | None = None, port: int = DE
                       timeout: float = 2.0) -> list[IdentityRecord]:
     """``discover`` for synchronous code: every device that answers ListIdentity over UDP within
     ``timeout`` seconds (``address`` None: every interface's broadcast address, loopback included)."""
-    from .eip.discovery import discover
+    from .eip.originator.discovery import discover
     from .sync_io import run_in_private_loop
 
     return run_in_private_loop(discover(address, port, timeout))

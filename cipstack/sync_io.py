@@ -17,7 +17,7 @@ from collections.abc import Callable, Coroutine
 from typing import TYPE_CHECKING, Any, TypeVar
 
 if TYPE_CHECKING:
-    from .eip.io_originator import IoConnectionHandle, ProcessImage
+    from .eip.originator.io_originator import IoConnectionHandle, ProcessImage
 
 T = TypeVar("T")
 

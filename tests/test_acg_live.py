@@ -15,8 +15,8 @@ from cipstack.catalog import Catalog
 from cipstack.cip.types import UINT
 from cipstack.devices.acg.device import AcgDevice, build_acg_device
 from cipstack.devices.acg.registers import ACG_REGISTERS, CLASS_64_INSTANCES
-from cipstack.eip.io_context import shared_io_endpoint
-from cipstack.eip.originator import EncapsulationClient
+from cipstack.eip.originator.asyncio_client import EncapsulationClient
+from cipstack.eip.originator.io_context import shared_io_endpoint
 from cipstack.scanner import Scanner
 
 CM, PR = CLASS_64_INSTANCES["CM"], CLASS_64_INSTANCES["Pr"]

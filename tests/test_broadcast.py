@@ -14,8 +14,8 @@ import sys
 import pytest
 
 from cipstack.adapter import Adapter, AdapterSettings
-from cipstack.eip import server as server_module
 from cipstack.eip.interfaces import ipv4_networks, subnet_broadcast
+from cipstack.eip.target import server as server_module
 from cipstack.scanner import discover
 from tests.ports import free_port, list_identity_replies
 

@@ -357,8 +357,8 @@ def test_a_one_shot_get_loads_neither_the_eds_tool_nor_a_device_profile() -> Non
         probe = (f"import runpy, sys; sys.argv = ['cipstack', 'get', '127.0.0.1:{port}', '1/1/7'];\n"
                  "try:\n    runpy.run_module('cipstack', run_name='__main__')\nexcept SystemExit as e:\n"
                  "    print(sorted(m for m in sys.modules if m.startswith(('cipstack.eds', 'cipstack.capture',"
-                 " 'cipstack.devices', 'construct', 'cipstack.eip.cm_messages',"
-                 " 'cipstack.eip.connection_manager'))), e.code)")
+                 " 'cipstack.devices', 'construct', 'cipstack.eip.wire.cm_messages',"
+                 " 'cipstack.eip.target.connection_manager'))), e.code)")
         deadline = time.monotonic() + 10
         while True:
             out = subprocess.run([sys.executable, "-c", probe], capture_output=True, text=True, timeout=30)

@@ -21,8 +21,8 @@ from cipstack.cip.epath import request_path
 from cipstack.cip.messages import MessageRouterRequest, Service
 from cipstack.cli.io import PRINT_MODES, parse_print
 from cipstack.cli.parser import build_parser, command_word
-from cipstack.eip.cpf import Item, ItemType, encode_items
-from cipstack.eip.encapsulation import RR_PREFIX, Command, encode_frame
+from cipstack.eip.wire.cpf import Item, ItemType, encode_items
+from cipstack.eip.wire.encapsulation import RR_PREFIX, Command, encode_frame
 
 #: What ends the command part of an example (a pipe, a redirection).
 SHELL_OPERATORS = {"|", ">", ">>", "<", ";", "&&", "||"}

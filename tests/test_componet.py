@@ -20,7 +20,7 @@ from cipstack.devices.omron.device import (
     parse_nodes,
 )
 from cipstack.devices.omron.registers import function_code_path
-from cipstack.eip.cm_messages import UnconnectedSendRequest
+from cipstack.eip.wire.cm_messages import UnconnectedSendRequest
 
 MX2 = "MX2-A2015-E"
 RX = "RX-A4055-E"

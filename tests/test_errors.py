@@ -60,7 +60,7 @@ CLASSES = _exception_classes()
 def test_the_walk_finds_the_exception_classes() -> None:
     # Without this, a walk that found nothing would pass every test below.
     assert len(MODULES) > 100
-    for name in ("cipstack.cip.status.CipError", "cipstack.eip.replies.MalformedReplyError",
+    for name in ("cipstack.cip.status.CipError", "cipstack.eip.originator.replies.MalformedReplyError",
                  "cipstack.scanner._Unsplittable", "cipstack.listening.ListenError", "cipstack.errors.NotFound"):
         assert name in CLASSES
 
@@ -73,11 +73,11 @@ def test_every_exception_class_derives_from_cipstack_error() -> None:
 @pytest.mark.parametrize(("name", "kind", "builtin"), [
     ("cipstack.cip.status.CipError", ProtocolError, Exception),
     ("cipstack.scanner._Unsplittable", ProtocolError, Exception),
-    ("cipstack.eip.replies.MalformedReplyError", ProtocolError, ConnectionError),
-    ("cipstack.eip.replies.EncapsulationStatusError", ProtocolError, Exception),
-    ("cipstack.eip.encapsulation.EncapsulationError", ProtocolError, Exception),
+    ("cipstack.eip.originator.replies.MalformedReplyError", ProtocolError, ConnectionError),
+    ("cipstack.eip.originator.replies.EncapsulationStatusError", ProtocolError, Exception),
+    ("cipstack.eip.wire.encapsulation.EncapsulationError", ProtocolError, Exception),
     ("cipstack.eip.io_core.IoDatagramError", ProtocolError, ValueError),
-    ("cipstack.eip.io_originator.IoTimeoutError", PeerUnreachable, ConnectionError),
+    ("cipstack.eip.originator.io_originator.IoTimeoutError", PeerUnreachable, ConnectionError),
     ("cipstack.scanner.UnknownAttributeError", NotFound, TypeError),
     ("cipstack.scanner.ReplyDecodeError", ProtocolError, ValueError),
     ("cipstack.conformance.wire.TargetUnreachable", PeerUnreachable, ConnectionError),
@@ -126,8 +126,8 @@ def test_each_class_has_its_kind_and_keeps_its_builtin_base(name: str, kind: typ
 
 def test_the_builtin_bases_callers_catch_are_kept() -> None:
     from cipstack.devices.omron.models import UnknownModelError
-    from cipstack.eip.io_originator import IoTimeoutError
-    from cipstack.eip.replies import MalformedReplyError
+    from cipstack.eip.originator.io_originator import IoTimeoutError
+    from cipstack.eip.originator.replies import MalformedReplyError
     from cipstack.listening import ListenError
     from cipstack.params import DriveRunningError
     from cipstack.scanner import ReplyDecodeError, UnknownAttributeError

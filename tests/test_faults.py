@@ -19,7 +19,7 @@ from cipstack.cip.types import UINT
 from cipstack.devices.acg.device import AcgDevice
 from cipstack.devices.acg.registers import ACG_REGISTERS, CLASS_64_INSTANCES
 from cipstack.devices.profiles import catalog_for
-from cipstack.eip.io_originator import IoTimeoutError
+from cipstack.eip.originator.io_originator import IoTimeoutError
 from cipstack.faults import FaultError, FaultStateError, NoSuchConnection
 from cipstack.scanner import Scanner
 

@@ -37,7 +37,7 @@ from cipstack.devices.omron.registers import function_code_path
 from cipstack.devices.profiles import catalog_for
 from cipstack.eds.emulated_device import build_eds_device
 from cipstack.eds.reader import parse_eds
-from cipstack.eip.io_originator import IoTimeoutError
+from cipstack.eip.originator.io_originator import IoTimeoutError
 from cipstack.scanner import Scanner
 from tests.eds.samples import GENERIC_EDS
 

@@ -24,11 +24,11 @@ from cipstack.cip.status import CipError
 from cipstack.cli import main
 from cipstack.eds.generator import eds_text
 from cipstack.eds.profiles import acg_et2_description
-from cipstack.eip.cpf import decode_items
-from cipstack.eip.encapsulation import EncapsulationError
-from cipstack.eip.io_originator import ArrivalStatistics, Class1Request, OtFormat, class1_path
 from cipstack.eip.io_server import IoEndpoint
-from cipstack.eip.originator import MalformedReplyError, broadcast_addresses, discover
+from cipstack.eip.originator.asyncio_client import MalformedReplyError, broadcast_addresses, discover
+from cipstack.eip.originator.io_originator import ArrivalStatistics, Class1Request, OtFormat, class1_path
+from cipstack.eip.wire.cpf import decode_items
+from cipstack.eip.wire.encapsulation import EncapsulationError
 from cipstack.scanner import UNDECODED, Scanner
 from tests.fakes import (
     FORWARD_CLOSE,
@@ -232,7 +232,7 @@ def test_trailing_item_keeps_the_cip_status(producer: ClassOneProducer, capsys: 
     assert len(body) == struct.unpack_from("<H", TRAILING_FRAME, 2)[0]
     with ScriptedTarget(handler=lambda r: body if r.service == FORWARD_OPEN else None,
                         assembly_sizes={21: 4, 71: 4}) as target, \
-            caplog.at_level(logging.DEBUG, logger="cipstack.eip.cpf"):
+            caplog.at_level(logging.DEBUG, logger="cipstack.eip.wire.cpf"):
         code, _, err = run_cli(["io", target.address, "--output", "21", "--input", "71",
                                 "--target-io-port", str(producer.port)], capsys)
     assert code == 1

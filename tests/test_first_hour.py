@@ -85,7 +85,7 @@ async def test_refused_pair_names_the_cm24_cm23_selection(caplog: pytest.LogCapt
     adapter = await _acg_adapter()
     try:
         async with await Scanner.connect(f"127.0.0.1:{adapter.port}", catalog=ACG_CATALOG) as scanner:
-            with caplog.at_level(logging.INFO, logger="cipstack.eip.io_target"), \
+            with caplog.at_level(logging.INFO, logger="cipstack.eip.target.io_target"), \
                     pytest.raises(CipError) as refused:
                 async with scanner.io_connection(output=100, input=110, rpi=0.010, target_io_port=adapter.io.io_port):
                     pass
@@ -114,7 +114,7 @@ async def test_silent_consumer_is_logged(caplog: pytest.LogCaptureFixture) -> No
     adapter = await _acg_adapter()
     elsewhere = free_port()
     try:
-        with caplog.at_level(logging.INFO, logger="cipstack.eip.io_target"):
+        with caplog.at_level(logging.INFO, logger="cipstack.eip.target.io_target"):
             async with await Scanner.connect(f"127.0.0.1:{adapter.port}", catalog=ACG_CATALOG) as scanner:
                 async with scanner.io_connection(output=21, input=71, rpi=0.010, target_io_port=elsewhere):
                     await asyncio.sleep(1.0)
@@ -367,7 +367,7 @@ def test_silence_is_said_once_after_8_rpis(caplog: pytest.LogCaptureFixture, dat
     from tests.test_io_core import Rig
 
     rig = Rig()
-    with caplog.at_level(logging.WARNING, logger="cipstack.eip.io_target"):
+    with caplog.at_level(logging.WARNING, logger="cipstack.eip.target.io_target"):
         rig.open(rig.request(rpi=10_000), now=0.0)
         [connection] = rig.io.connections.values()
         if data_at is not None:
@@ -395,8 +395,8 @@ def omron_register_target(reply_data: bytes, layout: str = "00000000 0000 0200 0
     with status 0 and ``reply_data``: the issue's 4-byte reply of 0x64/0/1 (F001). ``layout``: the bytes of
     the SendRRData reply before the unconnected item's length (interface, timeout, item count, items)."""
     from cipstack.devices.omron.models import model
-    from cipstack.eip.cpf import SockAddr
-    from cipstack.eip.identity_items import IdentityRecord, encode_list_identity
+    from cipstack.eip.wire.cpf import SockAddr
+    from cipstack.eip.wire.identity_items import IdentityRecord, encode_list_identity
 
     server = socket.socket()
     server.bind(("127.0.0.1", 0))

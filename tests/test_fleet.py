@@ -23,8 +23,8 @@ import pytest
 from cipstack.cip.router import RequestContext
 from cipstack.cli import main
 from cipstack.devices.profiles import PROFILES, mac_for_address, serial_from_mac
-from cipstack.eip.cm_messages import ForwardOpenRequest
 from cipstack.eip.io_server import run_precise
+from cipstack.eip.wire.cm_messages import ForwardOpenRequest
 from cipstack.fleet.serve import DeviceSet, build_adapter
 from cipstack.fleet.spec import FleetDevice, SpecError, assign, describe_addresses, parse_addresses, parse_group
 from cipstack.fleet.workers import shares

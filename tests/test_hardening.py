@@ -25,10 +25,10 @@ from typing import Any, TypeVar
 import pytest
 
 from cipstack.adapter import Adapter, AdapterSettings
-from cipstack.eip.cm_messages import ConnectionTriad
 from cipstack.eip.io_server import FD_SETSIZE, precise_event_loop
-from cipstack.eip.limits import ConnectionLimiter, RateLimitedLog
-from cipstack.eip.target import DelayedReplies, EncapsulationTarget, TargetSettings
+from cipstack.eip.target.core import DelayedReplies, EncapsulationTarget, TargetSettings
+from cipstack.eip.target.limits import ConnectionLimiter, RateLimitedLog
+from cipstack.eip.wire.cm_messages import ConnectionTriad
 from tests import attacks
 from tests.attacks import CASES, OPTIONS, AttackTarget, Client, served
 from tests.ports import free_port
@@ -248,7 +248,7 @@ import asyncio, logging, resource, sys
 resource.setrlimit(resource.RLIMIT_NOFILE, (48, 48))
 logging.basicConfig(level=logging.INFO, stream=sys.stderr)
 from cipstack.eip.io_server import precise_event_loop
-from cipstack.eip.limits import guarded_listener, quiet_accept_errors
+from cipstack.eip.target.limits import guarded_listener, quiet_accept_errors
 
 class Hold(asyncio.Protocol):
     held = []
@@ -339,7 +339,7 @@ def test_list_identity_flood_keeps_a_bounded_queue_and_counts_the_drops() -> Non
     device = build_device()
     target = EncapsulationTarget(device.router, device.identity_record, TargetSettings(rng=random.Random(3)))
     request = struct.pack("<HHII8sI", 0x63, 0, 0, 0, b"\xff\xff" + bytes(6), 0)
-    from cipstack.eip.cpf import SockAddr
+    from cipstack.eip.wire.cpf import SockAddr
 
     local = SockAddr("127.0.0.1", 44818)
     for index in range(20_000):
@@ -354,8 +354,8 @@ def test_list_identity_flood_keeps_a_bounded_queue_and_counts_the_drops() -> Non
 def _io_rig() -> tuple[Any, int, Callable[[bytes, float], None]]:
     from cipstack.cip.router import RequestContext
     from cipstack.devices.profiles import build_device
-    from cipstack.eip.cm_messages import ForwardOpenRequest
-    from cipstack.eip.io_target import IoTarget
+    from cipstack.eip.target.io_target import IoTarget
+    from cipstack.eip.wire.cm_messages import ForwardOpenRequest
 
     device = build_device()
     io = IoTarget(device.io_profile(), device)
@@ -387,8 +387,8 @@ def test_wrong_size_datagram_does_not_move_the_sequence_window() -> None:
 def test_heartbeat_datagram_must_have_the_size_it_was_opened_with() -> None:
     from cipstack.cip.router import RequestContext
     from cipstack.devices.profiles import build_device
-    from cipstack.eip.cm_messages import ForwardOpenRequest
-    from cipstack.eip.io_target import IoTarget
+    from cipstack.eip.target.io_target import IoTarget
+    from cipstack.eip.wire.cm_messages import ForwardOpenRequest
 
     device = build_device()
     io = IoTarget(device.io_profile(), device)
@@ -404,7 +404,7 @@ def test_heartbeat_datagram_must_have_the_size_it_was_opened_with() -> None:
 
 # -- 4. Forward_Close from another address (sans-I/O) -------------------------------------------------
 def test_class3_connection_is_named_by_triad_and_originator_address() -> None:
-    from cipstack.eip.connection_manager import ConnectionTable, ExplicitConnection
+    from cipstack.eip.target.connection_manager import ConnectionTable, ExplicitConnection
 
     table = ConnectionTable()
     triad = ConnectionTriad(1, 0x1234, 0xC0FFEE)
@@ -443,8 +443,8 @@ def _open_status(raw: bytes) -> tuple[int, tuple[int, ...]]:
     from cipstack.cip.router import RequestContext
     from cipstack.cip.status import CipError
     from cipstack.devices.profiles import build_device
-    from cipstack.eip.cm_messages import ForwardOpenRequest
-    from cipstack.eip.io_target import IoTarget
+    from cipstack.eip.target.io_target import IoTarget
+    from cipstack.eip.wire.cm_messages import ForwardOpenRequest
 
     device = build_device()
     io = IoTarget(device.io_profile(), device)

@@ -13,16 +13,6 @@ from cipstack.cip.epath import ElectronicKey, encode_path
 from cipstack.cip.router import MessageRouter, RequestContext
 from cipstack.cip.status import CipError
 from cipstack.devices.profiles import identity_only_device as build_device
-from cipstack.eip.cm_messages import (
-    ConnectionTriad,
-    ConnectionType,
-    ForwardCloseRequest,
-    ForwardOpenRequest,
-    NetworkParameters,
-    TransportTrigger,
-    TriggerType,
-)
-from cipstack.eip.cpf import ItemType, SockAddr
 from cipstack.eip.io_core import (
     ConsumerState,
     IoDatagramError,
@@ -34,8 +24,18 @@ from cipstack.eip.io_core import (
     seq16_newer,
     seq32_newer,
 )
-from cipstack.eip.io_originator import Class1Request, IoOriginator, OtFormat, class1_path, new_connection
-from cipstack.eip.io_target import ConnectionKind, IoConnection, IoProfile, IoTarget
+from cipstack.eip.originator.io_originator import Class1Request, IoOriginator, OtFormat, class1_path, new_connection
+from cipstack.eip.target.io_target import ConnectionKind, IoConnection, IoProfile, IoTarget
+from cipstack.eip.wire.cm_messages import (
+    ConnectionTriad,
+    ConnectionType,
+    ForwardCloseRequest,
+    ForwardOpenRequest,
+    NetworkParameters,
+    TransportTrigger,
+    TriggerType,
+)
+from cipstack.eip.wire.cpf import ItemType, SockAddr
 from cipstack.objects.assembly import AssemblyPoint
 
 

@@ -23,8 +23,8 @@ from cipstack.assemblies.drive_profile import (
 from cipstack.catalog import Catalog
 from cipstack.devices.base import Device
 from cipstack.devices.profiles import acg_et2_identity
-from cipstack.eip.io_originator import IoTimeoutError
-from cipstack.eip.io_target import IoConnection, IoProfile
+from cipstack.eip.originator.io_originator import IoTimeoutError
+from cipstack.eip.target.io_target import IoConnection, IoProfile
 from cipstack.objects.assembly import AssemblyPoint
 from cipstack.objects.tcpip import NetworkInterface
 from cipstack.scanner import Scanner

@@ -317,8 +317,8 @@ async def test_endpoints_on_port_0_never_share_a_port() -> None:
     port-0 bind, Linux gave a port another such socket held (600 of them shared about 5), and an
     adapter then refused to start ("cannot listen on UDP 127.0.0.1:0") or two endpoints read each
     other's T->O."""
-    from cipstack.eip.io_originator import IoOriginator
     from cipstack.eip.io_server import IoEndpoint
+    from cipstack.eip.originator.io_originator import IoOriginator
 
     # An originator's endpoint, and a target's (``exclusive``, as the adapter opens it); no datagram
     # is sent, so one core serves both kinds.

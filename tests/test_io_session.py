@@ -17,7 +17,7 @@ import pytest
 
 from cipstack.adapter import Adapter, AdapterSettings
 from cipstack.cip.types import UINT
-from cipstack.eip import io_context
+from cipstack.eip.originator import io_context
 from cipstack.scanner import Scanner
 
 INACTIVITY_S = 1  # TCP/IP attribute 13, in seconds

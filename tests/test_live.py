@@ -14,7 +14,7 @@ from cipstack.cip.messages import MessageRouterRequest
 from cipstack.cip.status import CipError
 from cipstack.cip.types import UDINT, UINT
 from cipstack.devices.profiles import identity_only_device
-from cipstack.eip.originator import EncapsulationClient, discover, list_services_udp
+from cipstack.eip.originator.asyncio_client import EncapsulationClient, discover, list_services_udp
 from cipstack.scanner import Scanner, SyncScanner, backplane_route
 
 

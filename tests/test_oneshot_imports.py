@@ -28,7 +28,7 @@ print("MODULES " + json.dumps({"status": status, "modules": sorted(sys.modules)}
 #: package modules of eip's layout by role.
 BUDGET = {"get-standard": 34, "get-decoded": 38, "set": 38, "identity": 22}
 #: Never on the one-shot path.
-FORBIDDEN = ("asyncio", "construct", "cipstack.eip.originator", "cipstack.devices.acg",
+FORBIDDEN = ("asyncio", "construct", "cipstack.eip.originator.asyncio_client", "cipstack.devices.acg",
              "cipstack.devices.omron", "cipstack.devices.profiles", "cipstack.eds", "cipstack.assemblies.schema",
              "cipstack.cli.io", "cipstack.cli.drive", "cipstack.control", "cipstack.sync_io")
 
@@ -48,7 +48,7 @@ def test_a_one_shot_command_loads_little(name: str, adapter_process: tuple[str, 
     loaded = [m for m in modules if m.split(".")[0] == "cipstack"]
     assert [m for m in modules if any(m == f or m.startswith(f + ".") for f in FORBIDDEN)] == []
     assert len(loaded) <= BUDGET[name], loaded
-    assert "cipstack.eip.blocking_client" in loaded or name == "identity"
+    assert "cipstack.eip.originator.blocking" in loaded or name == "identity"
 
 
 def test_the_blocking_scanner_imports_no_asyncio() -> None:

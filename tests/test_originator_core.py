@@ -13,10 +13,7 @@ from cipstack.cip.epath import PortSegment, request_path
 from cipstack.cip.messages import MessageRouterRequest, MessageRouterResponse, Service
 from cipstack.cip.status import CipError
 from cipstack.devices.profiles import identity_only_device
-from cipstack.eip.cm_messages import ForwardCloseRequest, ForwardOpenRequest, UnconnectedSendRequest
-from cipstack.eip.cpf import Item, ItemType, SockAddr, decode_items, encode_items
-from cipstack.eip.encapsulation import HEADER, HEADER_SIZE, Command, EncapsulationHeader
-from cipstack.eip.originator_core import (
+from cipstack.eip.originator.core import (
     FrameBuffer,
     NoReplyError,
     OriginatorCore,
@@ -25,8 +22,11 @@ from cipstack.eip.originator_core import (
     encode_multiple_service,
     run_plan,
 )
-from cipstack.eip.replies import EncapsulationStatusError, MalformedReplyError
-from cipstack.eip.target import EncapsulationTarget, TargetSettings
+from cipstack.eip.originator.replies import EncapsulationStatusError, MalformedReplyError
+from cipstack.eip.target.core import EncapsulationTarget, TargetSettings
+from cipstack.eip.wire.cm_messages import ForwardCloseRequest, ForwardOpenRequest, UnconnectedSendRequest
+from cipstack.eip.wire.cpf import Item, ItemType, SockAddr, decode_items, encode_items
+from cipstack.eip.wire.encapsulation import HEADER, HEADER_SIZE, Command, EncapsulationHeader
 from cipstack.scanner import ExplicitMessaging
 
 GET_NAME = MessageRouterRequest(Service.GET_ATTRIBUTE_SINGLE, request_path(1, 1, 7)).encode()

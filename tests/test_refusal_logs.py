@@ -17,8 +17,8 @@ import sys
 import pytest
 
 from cipstack.control import default_control_path
-from cipstack.eip.limits import MAX_LOGGED_SOURCES, OTHER_SOURCES, RateLimitedLog
-from cipstack.eip.target import EncapsulationTarget, TargetSettings
+from cipstack.eip.target.core import EncapsulationTarget, TargetSettings
+from cipstack.eip.target.limits import MAX_LOGGED_SOURCES, OTHER_SOURCES, RateLimitedLog
 from tests import attacks
 from tests.ports import free_port
 
@@ -36,8 +36,8 @@ def test_class1_forward_opens_over_the_limit_are_a_line_per_10_s_with_the_count(
     from cipstack.cip.router import RequestContext
     from cipstack.cip.status import CipError
     from cipstack.devices.profiles import build_device
-    from cipstack.eip.cm_messages import ForwardOpenRequest
-    from cipstack.eip.io_target import IoTarget
+    from cipstack.eip.target.io_target import IoTarget
+    from cipstack.eip.wire.cm_messages import ForwardOpenRequest
 
     device = build_device()
     io = IoTarget(dataclasses.replace(device.io_profile(), max_connections=2), device)
@@ -46,7 +46,7 @@ def test_class1_forward_opens_over_the_limit_are_a_line_per_10_s_with_the_count(
         raw = attacks.class1_open(serial, path=attacks.ACG_INPUT_ONLY_PATH, ot_size=6)[6:]
         io.forward_open(ForwardOpenRequest.decode(raw, large=False), context)
     refusals = 10_000
-    with caplog.at_level(logging.INFO, logger="cipstack.eip.io_target"):
+    with caplog.at_level(logging.INFO, logger="cipstack.eip.target.io_target"):
         for index in range(refusals):
             context.now = index * 0.003
             raw = attacks.class1_open(3 + index)[6:]
@@ -68,7 +68,7 @@ def _frame(command: int, body: bytes = b"", session: int = 0) -> bytes:
 def test_sessions_over_the_per_host_limit_are_a_line_per_10_s_with_the_count(
         caplog: pytest.LogCaptureFixture) -> None:
     from cipstack.devices.profiles import build_device
-    from cipstack.eip.cpf import SockAddr
+    from cipstack.eip.wire.cpf import SockAddr
 
     device = build_device()
     target = EncapsulationTarget(device.router, device.identity_record, TargetSettings(max_sessions=4))
@@ -78,7 +78,7 @@ def test_sessions_over_the_per_host_limit_are_a_line_per_10_s_with_the_count(
         held = target.connection(f"127.0.0.9:{port}", local, 0.0)
         held.receive(register, 0.0)
         assert struct.unpack_from("<I", held.data_to_send(), 8)[0] == 0
-    with caplog.at_level(logging.INFO, logger="cipstack.eip.target"):
+    with caplog.at_level(logging.INFO, logger="cipstack.eip.target.core"):
         for index in range(10_000):
             now = index * 0.002
             connection = target.connection(f"127.0.0.9:{10_000 + index}", local, now)

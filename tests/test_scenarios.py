@@ -16,7 +16,7 @@ from cipstack.cip.status import CipError
 from cipstack.cip.types import UINT
 from cipstack.devices.acg.registers import CLASS_64_INSTANCES
 from cipstack.devices.profiles import catalog_for
-from cipstack.eip.io_originator import IoTimeoutError
+from cipstack.eip.originator.io_originator import IoTimeoutError
 from cipstack.scanner import Scanner
 from tests.cli_errors import one_line_error
 from tests.ports import free_port

@@ -21,7 +21,7 @@ import pytest
 
 from cipstack.adapter import Adapter, AdapterSettings
 from cipstack.eip.io_server import precise_event_loop
-from cipstack.eip.limits import ConnectionLimiter
+from cipstack.eip.target.limits import ConnectionLimiter
 from tests.attacks import NOP, REGISTER, AttackTarget, Client, frame, served
 
 T = TypeVar("T")

@@ -12,7 +12,8 @@ from cipstack.cip.messages import MessageRouterRequest, MessageRouterResponse, S
 from cipstack.cip.model import Binding
 from cipstack.devices.base import Device, DeviceLimits
 from cipstack.devices.profiles import identity_only_device as build_device
-from cipstack.eip.cm_messages import (
+from cipstack.eip.target.core import EncapsulationConnection, EncapsulationTarget, TargetSettings
+from cipstack.eip.wire.cm_messages import (
     ConnectionTriad,
     ConnectionType,
     ForwardCloseRequest,
@@ -23,10 +24,9 @@ from cipstack.eip.cm_messages import (
     TriggerType,
     UnconnectedSendRequest,
 )
-from cipstack.eip.cpf import Item, ItemType, SockAddr, decode_items, encode_items
-from cipstack.eip.encapsulation import HEADER, HEADER_SIZE, Command, EncapsulationHeader
-from cipstack.eip.identity_items import decode_list_identity, decode_list_services
-from cipstack.eip.target import EncapsulationConnection, EncapsulationTarget, TargetSettings
+from cipstack.eip.wire.cpf import Item, ItemType, SockAddr, decode_items, encode_items
+from cipstack.eip.wire.encapsulation import HEADER, HEADER_SIZE, Command, EncapsulationHeader
+from cipstack.eip.wire.identity_items import decode_list_identity, decode_list_services
 
 LOCAL = SockAddr("127.0.0.1", 44818)
 CTX = b"ctx-0001"

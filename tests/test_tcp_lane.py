@@ -1,4 +1,4 @@
-"""Encapsulation TCP served on the precise loop's lane (``cipstack.eip.tcp_lane``): the same rules as
+"""Encapsulation TCP served on the precise loop's lane (``cipstack.eip.target.tcp_lane``): the same rules as
 asyncio's transport path (admission, back-pressure, closing), checked on real loopback sockets.
 
 The tests run on the precise loop (the one the command line runs); the clients are plain
@@ -20,7 +20,7 @@ import pytest
 from cipstack.adapter import Adapter, AdapterSettings
 from cipstack.devices.profiles import identity_only_device
 from cipstack.eip.io_server import PreciseEventLoop
-from cipstack.eip.tcp_lane import LaneTcpConnection
+from cipstack.eip.target.tcp_lane import LaneTcpConnection
 
 HEADER = struct.Struct("<HHII8sI")
 REGISTER_SESSION, SEND_RR_DATA, LIST_SERVICES = 0x0065, 0x006F, 0x0004

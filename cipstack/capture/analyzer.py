@@ -21,11 +21,11 @@ from socket import inet_aton, inet_ntoa
 from typing import Any
 
 from ..cip.messages import MessageRouterResponse, Service
-from ..eip.cm_messages import ForwardCloseRequest, ForwardOpenReply, ForwardOpenRequest
-from ..eip.cpf import ItemType, SockAddr, decode_items
-from ..eip.encapsulation import HEADER, HEADER_SIZE, RR_PREFIX, Command, EncapsulationError
-from ..eip.identity_items import decode_list_identity
 from ..eip.io_core import DEFAULT_IO_PORT, IoDatagramError, connection_timeout, decode_io_datagram, seq32_newer
+from ..eip.wire.cm_messages import ForwardCloseRequest, ForwardOpenReply, ForwardOpenRequest
+from ..eip.wire.cpf import ItemType, SockAddr, decode_items
+from ..eip.wire.encapsulation import HEADER, HEADER_SIZE, RR_PREFIX, Command, EncapsulationError
+from ..eip.wire.identity_items import decode_list_identity
 from .decoding import (
     CONNECTION_MANAGER,
     Declarations,

@@ -18,7 +18,7 @@ from ..cip.messages import MessageRouterRequest, MessageRouterResponse, Service
 from ..cip.status import CipError, describe_status
 from ..cip.units import scaled_text
 from ..componet.gateway import COMPONET_PORT
-from ..eip.cm_messages import UnconnectedSendRequest
+from ..eip.wire.cm_messages import UnconnectedSendRequest
 
 CONNECTION_MANAGER = 0x06
 IDENTITY = 0x01

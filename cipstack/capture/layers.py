@@ -33,9 +33,9 @@ from scapy.layers.inet import TCP, UDP
 from scapy.packet import Packet, bind_layers
 
 from ..cip.messages import REPLY_BIT, Service
-from ..eip.cpf import ItemType
-from ..eip.encapsulation import Command, EncapsulationStatus
 from ..eip.io_core import DEFAULT_IO_PORT, IoDatagram, decode_io_datagram
+from ..eip.wire.cpf import ItemType
+from ..eip.wire.encapsulation import Command, EncapsulationStatus
 from .decoding import Declarations, decode_reply, decode_request
 
 ENIP_PORT = 44818

@@ -18,8 +18,8 @@ import sys
 from collections.abc import Callable, Sequence
 
 from ..cip.status import CipError, describe_status
-from ..eip.encapsulation import EncapsulationError
-from ..eip.replies import EncapsulationStatusError
+from ..eip.originator.replies import EncapsulationStatusError
+from ..eip.wire.encapsulation import EncapsulationError
 from .common import EXIT_FAILURE, EXIT_OK, EXIT_USAGE, UsageError, parse_duration, parse_object_path
 from .explicit import json_key
 from .parser import build_parser, command_word

@@ -6,7 +6,7 @@ import argparse
 import sys
 from pathlib import Path
 
-from ..eip.originator import parse_host
+from ..eip.originator.asyncio_client import parse_host
 from .common import EXIT_FAILURE, EXIT_OK, EXIT_USAGE, UsageError
 
 

@@ -9,7 +9,7 @@ from typing import Any
 
 from ..cip.status import CipError
 from ..cip.types import parse_int
-from ..eip.originator_core import parse_host
+from ..eip.originator.core import parse_host
 from .common import (
     EXIT_FAILURE,
     EXIT_OK,
@@ -32,7 +32,7 @@ def _identity_text(record: Any) -> str:
 def cmd_discover(args: argparse.Namespace) -> int:
     import asyncio
 
-    from ..eip.discovery import discover
+    from ..eip.originator.discovery import discover
 
     records = asyncio.run(discover(args.broadcast, args.port, args.timeout))
     for record in records:
@@ -43,7 +43,7 @@ def cmd_discover(args: argparse.Namespace) -> int:
 
 
 def cmd_identity(args: argparse.Namespace) -> int:
-    from ..eip.blocking_client import BlockingEncapsulationClient
+    from ..eip.originator.blocking import BlockingEncapsulationClient
 
     host, port = parse_host(args.target)
     with BlockingEncapsulationClient.connect(host, port, args.timeout, register=False) as client:

@@ -8,8 +8,8 @@ import sys
 from pathlib import Path
 from typing import Any
 
-from ..eip.encapsulation import DEFAULT_PORT
 from ..eip.io_core import DEFAULT_IO_PORT
+from ..eip.wire.encapsulation import DEFAULT_PORT
 from .common import EXIT_OK, EXIT_USAGE, UsageError
 
 #: Worker processes when neither --workers nor the spec file says.

@@ -10,7 +10,7 @@ import sys
 from typing import Any
 
 from ..cip.types import BOOL, parse_int
-from ..eip.originator import parse_host
+from ..eip.originator.asyncio_client import parse_host
 from .common import EXIT_OK, UsageError, parse_duration
 from .emulators import _read_eds_file
 
@@ -191,8 +191,8 @@ async def _explained(opened: Any, args: argparse.Namespace) -> Any:
 def cmd_io(args: argparse.Namespace) -> int:
     import signal
 
-    from ..eip.io_originator import OtFormat
     from ..eip.io_server import freeze_startup_objects, run_precise
+    from ..eip.originator.io_originator import OtFormat
     from ..scanner import Scanner
 
     doc = None

@@ -7,7 +7,7 @@ from pathlib import Path
 from typing import Any
 
 from .. import __version__
-from ..eip.encapsulation import DEFAULT_FRAME_TIMEOUT, DEFAULT_IO_PORT, DEFAULT_PORT
+from ..eip.wire.encapsulation import DEFAULT_FRAME_TIMEOUT, DEFAULT_IO_PORT, DEFAULT_PORT
 from .common import (
     UsageError,
     parse_duration,

@@ -17,7 +17,9 @@ from collections.abc import Callable
 from dataclasses import dataclass, replace
 
 from ..cip.epath import request_path
-from ..eip.cm_messages import (
+from ..eip.io_core import DEFAULT_IO_PORT
+from ..eip.originator.io_originator import SEQUENCE_COUNT_SIZE, OtFormat, class1_path
+from ..eip.wire.cm_messages import (
     ConnectionTriad,
     ConnectionType,
     ForwardCloseRequest,
@@ -27,9 +29,7 @@ from ..eip.cm_messages import (
     TransportTrigger,
     TriggerType,
 )
-from ..eip.cpf import Item, ItemType, SockAddr
-from ..eip.io_core import DEFAULT_IO_PORT
-from ..eip.io_originator import SEQUENCE_COUNT_SIZE, OtFormat, class1_path
+from ..eip.wire.cpf import Item, ItemType, SockAddr
 from .model import CheckSpec, Outcome, Verdict
 from .registry import Context, check, outcome
 from .wire import Probe, Reply

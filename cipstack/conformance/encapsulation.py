@@ -5,9 +5,9 @@ from __future__ import annotations
 
 import struct
 
-from ..eip.cpf import Item, decode_items
-from ..eip.encapsulation import HEADER_SIZE, REGISTER_SESSION_DATA, Command
-from ..eip.identity_items import decode_identity_item
+from ..eip.wire.cpf import Item, decode_items
+from ..eip.wire.encapsulation import HEADER_SIZE, REGISTER_SESSION_DATA, Command
+from ..eip.wire.identity_items import decode_identity_item
 from .model import CheckSpec, Exchange, Outcome, Verdict
 from .registry import Context, check, outcome
 from .wire import Frame, Probe, frame, rr_data, udp_exchange

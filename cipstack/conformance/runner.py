@@ -7,7 +7,7 @@ import time
 from collections.abc import Iterable, Sequence
 from typing import TYPE_CHECKING
 
-from ..eip.encapsulation import DEFAULT_PORT, Command
+from ..eip.wire.encapsulation import DEFAULT_PORT, Command
 from . import class1, connections, eds_checks, encapsulation, objects, router  # noqa: F401 - they declare checks
 from .model import GROUPS, Outcome, Report, Verdict
 from .registry import CHECKS, RUNNERS, Context, outcome

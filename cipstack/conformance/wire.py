@@ -16,10 +16,10 @@ import time
 from dataclasses import dataclass
 
 from ..cip.messages import MessageRouterRequest, MessageRouterResponse
-from ..eip.cpf import Item
-from ..eip.encapsulation import HEADER, HEADER_SIZE, REGISTER_SESSION_DATA, Command, EncapsulationHeader
-from ..eip.originator_core import FrameBuffer, rr_reply_items, rr_request_body
-from ..eip.replies import MalformedReplyError
+from ..eip.originator.core import FrameBuffer, rr_reply_items, rr_request_body
+from ..eip.originator.replies import MalformedReplyError
+from ..eip.wire.cpf import Item
+from ..eip.wire.encapsulation import HEADER, HEADER_SIZE, REGISTER_SESSION_DATA, Command, EncapsulationHeader
 from ..errors import PeerUnreachable
 from .model import Exchange
 

@@ -30,7 +30,7 @@ from typing import TYPE_CHECKING, Any
 
 if TYPE_CHECKING:
     from ..cip.router import RequestContext
-    from ..eip.seams import Handle
+    from ..eip.target.seams import Handle
     from ..faults import FaultController
     from ..runtime import DeviceRuntime
 

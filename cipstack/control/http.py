@@ -29,7 +29,7 @@ from typing import TYPE_CHECKING, Any
 
 from aiohttp import web
 
-from ..eip.limits import RateLimitedLog, guarded_listener, quiet_accept_errors
+from ..eip.target.limits import RateLimitedLog, guarded_listener, quiet_accept_errors
 from ..errors import BadRequest, CipstackError
 from .operations import OPERATIONS, Operation
 from .service import outcome

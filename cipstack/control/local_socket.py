@@ -32,7 +32,7 @@ from collections.abc import Awaitable, Callable
 from pathlib import Path
 from typing import Any
 
-from ..eip.limits import RateLimitedLog
+from ..eip.target.limits import RateLimitedLog
 from ..errors import BadRequest, CipstackError, NotFound, PeerUnreachable, StateRefused
 
 log = logging.getLogger(__name__)

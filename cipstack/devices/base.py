@@ -15,9 +15,9 @@ from typing import TYPE_CHECKING, Any
 from ..cip.epath import ElectronicKey
 from ..cip.router import MessageRouter
 from ..cip.status import CipError, ExtendedStatus, GeneralStatus
-from ..eip.connection_manager import ConnectionManagerObject, ConnectionTable
-from ..eip.identity_items import IdentityRecord
-from ..eip.io_target import CIP_MULTICAST_BASE, ConnectionKind, IoConnection, IoProfile
+from ..eip.target.connection_manager import ConnectionManagerObject, ConnectionTable
+from ..eip.target.io_target import CIP_MULTICAST_BASE, ConnectionKind, IoConnection, IoProfile
+from ..eip.wire.identity_items import IdentityRecord
 from ..errors import StateRefused
 from ..objects.assembly import AssemblyObject
 from ..objects.identity import ExtendedDeviceStatus, IdentityInfo, IdentityObject, IdentityStatus

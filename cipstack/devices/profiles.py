@@ -10,7 +10,7 @@ from typing import TYPE_CHECKING
 
 from ..catalog import Catalog, Parameter
 from ..cip.model import AttributeSpec
-from ..eip.identity_items import IdentityRecord
+from ..eip.wire.identity_items import IdentityRecord
 from ..objects.identity import IdentityInfo
 from ..objects.tcpip import NetworkInterface
 

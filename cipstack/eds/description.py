@@ -31,8 +31,8 @@ from ..assemblies.schema import AssemblySchema
 from ..cip.model import AttributeSpec, ClassSpec
 from ..cip.types import DINT, UDINT, CipType, IntegerType
 from ..devices.registers import Register
-from ..eip.cm_messages import TriggerType
-from ..eip.io_target import IoProfile
+from ..eip.target.io_target import IoProfile
+from ..eip.wire.cm_messages import TriggerType
 from ..objects.identity import IdentityInfo
 
 Network = Literal["EtherNetIP", "CompoNet"]

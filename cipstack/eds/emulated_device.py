@@ -42,7 +42,7 @@ from ..cip.status import CipError, GeneralStatus
 from ..cip.types import IntegerType, RealType
 from ..devices.base import Device, DeviceLimits
 from ..devices.profiles import DEFAULT_MAC, serial_from_mac
-from ..eip.io_target import IoProfile
+from ..eip.target.io_target import IoProfile
 from ..errors import BadRequest
 from ..objects.assembly import AssemblyPoint
 from ..objects.identity import IdentityInfo

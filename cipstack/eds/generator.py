@@ -56,7 +56,7 @@ from ..assemblies.schema import AssemblyField, AssemblySchema
 from ..cip.epath import LogicalSegment, LogicalType, encode_path, request_path
 from ..cip.types import BOOL, UDINT, UINT, USINT, IntegerType, RealType
 from ..cip.units import decimal_places
-from ..eip.cm_messages import TriggerType
+from ..eip.wire.cm_messages import TriggerType
 from .description import EdsDescription, EdsObjectClass, EdsParameter, IoOffer, Link
 from .model import EdsDocument, Field, Section
 from .writer import format_eds

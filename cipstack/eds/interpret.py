@@ -23,7 +23,7 @@ from ..cip.epath import ElectronicKey, LogicalSegment, LogicalType, PortSegment,
 from ..cip.status import CipError
 from ..cip.types import BY_CODE, UDINT, UINT, ULINT, USINT, CipType, IntegerType, RealType
 from ..cip.values import Scaling
-from ..eip.cm_messages import TriggerType
+from ..eip.wire.cm_messages import TriggerType
 from .generator import (
     EXCLUSIVE_OWNER,
     EXCLUSIVE_OWNER_KIND,

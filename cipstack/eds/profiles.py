@@ -43,7 +43,7 @@ from ..devices.omron.objects import CONTROL_SUPERVISOR_SPEC as OMRON_CONTROL_SUP
 from ..devices.omron.objects import FUNCTION_CODE
 from ..devices.omron.objects import MOTOR_DATA_SPEC as OMRON_MOTOR_DATA_SPEC
 from ..devices.omron.registers import Parameter, function_code_path, register_set
-from ..eip.cm_spec import BACKPLANE_PORT
+from ..eip.wire.cm_spec import BACKPLANE_PORT
 from ..objects.identity import IdentityInfo
 from ..objects.tcpip import TCPIP_CLASS_ID
 from .description import (

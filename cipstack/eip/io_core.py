@@ -18,8 +18,8 @@ from enum import Enum
 from typing import NamedTuple
 
 from ..errors import ProtocolError
-from .cpf import ItemType
-from .encapsulation import DEFAULT_IO_PORT  # noqa: F401 - its home was here; importers keep their path
+from .wire.cpf import ItemType
+from .wire.encapsulation import DEFAULT_IO_PORT  # noqa: F401 - its home was here; importers keep their path
 
 #: CPF count 2, Sequenced Address item (type, length 8, connection id, sequence), Connected Data header.
 _IO_HEAD = struct.Struct("<HHHIIHHH")

@@ -1,5 +1,5 @@
 """Class 1 faults: filters of the datagrams that enter or leave the device, in its class 1 seam
-(``cipstack.eip.seams.IoSeam``). Each fault is one filter, installed while the fault is active; with
+(``cipstack.eip.target.seams.IoSeam``). Each fault is one filter, installed while the fault is active; with
 none, the seam is a direct call to the core and costs nothing.
 
 Datagrams are read and changed by their bytes (CIP Vol. 2, 3-2: a Sequenced Address item, the
@@ -16,8 +16,8 @@ from typing import TYPE_CHECKING
 from .effect import FaultContext
 
 if TYPE_CHECKING:
-    from ..eip.io_target import IoConnection
-    from ..eip.seams import Datagram, IoSeam
+    from ..eip.target.io_target import IoConnection
+    from ..eip.target.seams import Datagram, IoSeam
 
 _CONNECTION_ID = struct.Struct("<I")
 _UINT = struct.Struct("<H")

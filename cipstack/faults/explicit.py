@@ -1,5 +1,5 @@
 """Explicit-messaging faults: filters where a request reaches the message router
-(``cipstack.eip.seams.RequestSeam``) or a reply leaves on TCP (``ReplySeam``), and the actions on
+(``cipstack.eip.target.seams.RequestSeam``) or a reply leaves on TCP (``ReplySeam``), and the actions on
 the encapsulation layer.
 
 ``error-status`` and ``refuse-forward-open`` answer a matching request with the chosen status; it
@@ -15,14 +15,14 @@ from typing import TYPE_CHECKING
 from ..cip.epath import parse_application_path
 from ..cip.messages import MessageRouterRequest, MessageRouterResponse, Service
 from ..cip.status import CipError, GeneralStatus
-from ..eip.cm_messages import ForwardOpenRequest
-from ..eip.connection_manager import connection_failure
+from ..eip.target.connection_manager import connection_failure
+from ..eip.wire.cm_messages import ForwardOpenRequest
 from .class1 import DEFAULT_DELAY
 from .effect import Action, FaultContext
 
 if TYPE_CHECKING:
     from ..cip.router import RequestContext
-    from ..eip.seams import Handle, ReplySender
+    from ..eip.target.seams import Handle, ReplySender
 
 _FORWARD_OPENS = (Service.FORWARD_OPEN, Service.LARGE_FORWARD_OPEN)
 _CONNECTION_MANAGER = 0x06

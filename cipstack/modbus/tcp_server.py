@@ -11,14 +11,14 @@ from ..devices.acg.drive import AcgDrive
 from ..devices.acg.modbus import DriveSource, ExceptionCode, MbapBuffer, MbapLengthError, ModbusTcpCore
 from ..devices.acg.modbus_core import RegisterWritten
 from ..devices.state import StateFileError, StateWriter
-from ..eip.encapsulation import DEFAULT_FRAME_TIMEOUT
-from ..eip.limits import (
+from ..eip.target.limits import (
     DEFAULT_MAX_TCP_CONNECTIONS,
     ConnectionLimiter,
     RateLimitedLog,
     guarded_listener,
     quiet_accept_errors,
 )
+from ..eip.wire.encapsulation import DEFAULT_FRAME_TIMEOUT
 
 log = logging.getLogger(__name__)
 

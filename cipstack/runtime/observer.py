@@ -10,7 +10,7 @@ from typing import TYPE_CHECKING, Any, Protocol
 
 if TYPE_CHECKING:
     from ..devices.acg.modbus_core import RegisterWritten
-    from ..eip.io_target import IoConnection, IoEvents
+    from ..eip.target.io_target import IoConnection, IoEvents
 
 
 class RuntimeObserver(Protocol):

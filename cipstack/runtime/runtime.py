@@ -12,10 +12,10 @@ from .power import PowerLink
 if TYPE_CHECKING:
     from ..devices.base import Device
     from ..eip.io_server import IoEndpoint
-    from ..eip.io_target import IoConnection, IoTarget
-    from ..eip.seams import Datagram, IoSeam, ReplySeam, RequestSeam
-    from ..eip.server import EncapsulationServer
-    from ..eip.target import EncapsulationTarget
+    from ..eip.target.core import EncapsulationTarget
+    from ..eip.target.io_target import IoConnection, IoTarget
+    from ..eip.target.seams import Datagram, IoSeam, ReplySeam, RequestSeam
+    from ..eip.target.server import EncapsulationServer
     from ..modbus.rtu_line import RtuLine
 
 

@@ -14,7 +14,7 @@ from collections.abc import Callable
 
 from cipstack.cip.status import CipError
 from cipstack.devices.profiles import catalog_for
-from cipstack.eip.io_originator import IoTimeoutError
+from cipstack.eip.originator.io_originator import IoTimeoutError
 from cipstack.scanner import Scanner
 
 CATALOG = catalog_for(259, 100)   # the ACG-ET2's assemblies

@@ -13,7 +13,8 @@ from cipstack.capture.layers import CIP, CPF, ENIP, ENIP_IO, CPFItem
 from cipstack.capture.synth import PcapWriter, TcpFlow, ethernet, udp
 from cipstack.cip.epath import PortSegment, encode_path, request_path
 from cipstack.cip.messages import MessageRouterRequest, MessageRouterResponse, Service
-from cipstack.eip.cm_messages import (
+from cipstack.eip.io_core import encode_io_datagram
+from cipstack.eip.wire.cm_messages import (
     ConnectionTriad,
     ForwardOpenReply,
     ForwardOpenRequest,
@@ -21,9 +22,8 @@ from cipstack.eip.cm_messages import (
     TransportTrigger,
     UnconnectedSendRequest,
 )
-from cipstack.eip.cpf import Item, ItemType, encode_items
-from cipstack.eip.encapsulation import RR_PREFIX, Command, encode_frame
-from cipstack.eip.io_core import encode_io_datagram
+from cipstack.eip.wire.cpf import Item, ItemType, encode_items
+from cipstack.eip.wire.encapsulation import RR_PREFIX, Command, encode_frame
 from tests.cli_errors import one_line_error
 
 CLIENT, TARGET = ("10.0.0.1", 50000), ("10.0.0.2", 44818)

@@ -202,7 +202,7 @@ def test_explicit_exchanges_match_tshark_frame_by_frame(recorded: tuple[Path, di
                                                         analysis: list[dict[str, Any]]) -> None:
     path, _ = recorded
     # Every CIP reply tshark sees over TCP: frame, session, service, general status.
-    from cipstack.eip.encapsulation import Command
+    from cipstack.eip.wire.encapsulation import Command
 
     rows = tshark_fields(path, "tcp && cip && enip.command != 0x0065",
                          ("frame.number", "enip.command", "enip.session", "cip.service", "cip.genstat",

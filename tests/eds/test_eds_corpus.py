@@ -19,7 +19,10 @@ from cipstack.cip.status import CipError
 from cipstack.eds.checker import check_eds
 from cipstack.eds.emulated_device import build_eds_device
 from cipstack.eds.reader import parse_eds, read_eds
-from cipstack.eip.cm_messages import (
+from cipstack.eip.io_core import decode_io_datagram, encode_io_datagram
+from cipstack.eip.originator.io_originator import class1_path
+from cipstack.eip.target.io_target import IoTarget
+from cipstack.eip.wire.cm_messages import (
     ConnectionTriad,
     ConnectionType,
     ForwardOpenRequest,
@@ -27,9 +30,6 @@ from cipstack.eip.cm_messages import (
     TransportTrigger,
     TriggerType,
 )
-from cipstack.eip.io_core import decode_io_datagram, encode_io_datagram
-from cipstack.eip.io_originator import class1_path
-from cipstack.eip.io_target import IoTarget
 
 from .test_eds_field_files import EXPECTED, FILES
 

@@ -41,7 +41,7 @@ from cipstack.eds.model import EdsDocument, FieldKind
 from cipstack.eds.profiles import acg_et2_description, eds_file_name, omron_description, omron_models_by_file
 from cipstack.eds.reader import parse_eds
 from cipstack.eds.writer import format_eds
-from cipstack.eip.io_target import IoProfile
+from cipstack.eip.target.io_target import IoProfile
 from cipstack.objects.assembly import AssemblyPoint
 from cipstack.objects.identity import identity_spec
 from cipstack.objects.tcpip import TCPIP_SPEC

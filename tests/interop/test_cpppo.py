@@ -14,7 +14,7 @@ import pytest
 
 from cipstack.cip.status import CipError
 from cipstack.cip.types import INT
-from cipstack.eip.originator import EncapsulationClient, EncapsulationStatusError, discover, parse_host
+from cipstack.eip.originator.asyncio_client import EncapsulationClient, EncapsulationStatusError, discover, parse_host
 from cipstack.scanner import SyncScanner, backplane_route
 
 from .conftest import CPPPO_RESULT_LINE as RESULT_LINE

@@ -162,10 +162,10 @@ def cpppo_exchange():
 async def connection_manager_errors():
     """Forward_Open / Forward_Close refusals from our client, so tshark sees the CM error replies."""
     from cipstack.cip.epath import request_path
-    from cipstack.eip.cm_messages import (ConnectionTriad, ForwardCloseRequest, ForwardOpenRequest,
+    from cipstack.eip.wire.cm_messages import (ConnectionTriad, ForwardCloseRequest, ForwardOpenRequest,
                                           NetworkParameters, TransportTrigger, TriggerType)
-    from cipstack.eip.cm_messages import CONNECTION_MANAGER_PATH
-    from cipstack.eip.originator import MESSAGE_ROUTER_PATH, EncapsulationClient
+    from cipstack.eip.wire.cm_messages import CONNECTION_MANAGER_PATH
+    from cipstack.eip.originator.asyncio_client import MESSAGE_ROUTER_PATH, EncapsulationClient
 
     def forward_open(triad, transport_class=3, path=MESSAGE_ROUTER_PATH, large=False):
         params = NetworkParameters(500, variable=True)
@@ -200,7 +200,7 @@ async def connection_manager_errors():
 def ours_exchange():
     from cipstack.cip.status import CipError
     from cipstack.cip.types import INT, UINT
-    from cipstack.eip.originator import discover, list_services_udp
+    from cipstack.eip.originator.asyncio_client import discover, list_services_udp
     from cipstack.scanner import SyncScanner, backplane_route
 
     def error_of(function, *args):

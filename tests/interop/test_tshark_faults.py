@@ -24,7 +24,7 @@ async def exchange():
     from cipstack.cip.status import CipError
     from cipstack.control import control_request
     from cipstack.devices.profiles import catalog_for
-    from cipstack.eip.io_originator import IoTimeoutError
+    from cipstack.eip.originator.io_originator import IoTimeoutError
     from cipstack.scanner import Scanner
 
     control = OUT / "control.sock"

@@ -38,7 +38,7 @@ from ...assemblies.acg import (
 )
 from ...assemblies.schema import AssemblySchema
 from ...cip.model import ClassSpec
-from ...eip.io_target import ConnectionKind, IoConnection, IoProfile
+from ...eip.target.io_target import ConnectionKind, IoConnection, IoProfile
 from ...objects.assembly import AssemblyPoint
 from ...objects.tcpip import NetworkInterface
 from ..base import Device, DeviceLimits, ModbusDrive, TripRefused

@@ -41,7 +41,7 @@ import os
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass
 
-from ...eip.limits import RateLimitedLog
+from ...eip.target.limits import RateLimitedLog
 from ..registers import Register, RegisterAccess, RegisterError, RegisterMap, RegisterRefusal
 from ..simulation import TimedSimulation
 from ..state import ParameterStore, StateFileError

@@ -52,7 +52,7 @@ from ...assemblies.schema import AssemblySchema
 from ...cip.model import ClassSpec
 from ...componet.gateway import COMPONET_PORT, CompoNetGateway
 from ...componet.network import NODE_ADDRESSES, CompoNetNetwork
-from ...eip.io_target import IoConnection, IoProfile
+from ...eip.target.io_target import IoConnection, IoProfile
 from ...objects.assembly import AssemblyPoint
 from ...objects.identity import IdentityInfo, IdentityStatus
 from ...objects.tcpip import NetworkInterface

@@ -9,35 +9,35 @@ import ipaddress
 import logging
 from typing import TYPE_CHECKING
 
-from ..cip.messages import MessageRouterRequest, MessageRouterResponse, Service
-from ..cip.status import CipError, GeneralStatus
-from .cm_messages import (
+from ...cip.messages import MessageRouterRequest, MessageRouterResponse, Service
+from ...cip.status import CipError, GeneralStatus
+from ..io_core import DEFAULT_IO_PORT
+from ..io_server import IoEndpoint
+from ..wire.cm_messages import (
     CONNECTION_MANAGER_PATH,
     ConnectionTriad,
     ForwardCloseRequest,
     ForwardOpenReply,
     ForwardOpenRequest,
 )
-from .cpf import Item, ItemType, SockAddr
-from .encapsulation import (
+from ..wire.cpf import Item, ItemType, SockAddr
+from ..wire.encapsulation import (
     EncapsulationError,
 )
-from .io_core import DEFAULT_IO_PORT
 from .io_originator import (
     Class1Request,
     IoConnectionHandle,
     IoOriginator,
     new_connection,
 )
-from .io_server import IoEndpoint
 
 if TYPE_CHECKING:
-    from ..assemblies.schema import AssemblySchema
+    from ...assemblies.schema import AssemblySchema
 
 from .replies import EncapsulationStatusError, decode_reply
 
 if TYPE_CHECKING:
-    from .originator import EncapsulationClient
+    from .asyncio_client import EncapsulationClient
 
 log = logging.getLogger(__name__)
 

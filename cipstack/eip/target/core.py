@@ -24,10 +24,9 @@ import struct
 from collections.abc import Callable
 from dataclasses import dataclass, field
 
-from ..cip.router import MessageRouter, RequestContext
-from .connection_manager import ConnectionTable, ExplicitConnection, origin_host
-from .cpf import Item, ItemType, SockAddr, decode_items, encode_items
-from .encapsulation import (
+from ...cip.router import MessageRouter, RequestContext
+from ..wire.cpf import Item, ItemType, SockAddr, decode_items, encode_items
+from ..wire.encapsulation import (
     DEFAULT_FRAME_TIMEOUT,
     HEADER,
     HEADER_SIZE,
@@ -39,7 +38,8 @@ from .encapsulation import (
     EncapsulationError,
     EncapsulationStatus,
 )
-from .identity_items import CAPABILITY_CIP_TCP, IdentityRecord, encode_list_identity, encode_list_services
+from ..wire.identity_items import CAPABILITY_CIP_TCP, IdentityRecord, encode_list_identity, encode_list_services
+from .connection_manager import ConnectionTable, ExplicitConnection, origin_host
 from .limits import RateLimitedLog
 from .seams import RequestSeam
 

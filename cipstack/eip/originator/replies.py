@@ -7,9 +7,9 @@ import struct
 from collections.abc import Callable
 from typing import TypeVar
 
-from ..cip.status import CipError
-from ..errors import ProtocolError
-from .encapsulation import EncapsulationError, EncapsulationStatus
+from ...cip.status import CipError
+from ...errors import ProtocolError
+from ..wire.encapsulation import EncapsulationError, EncapsulationStatus
 
 T = TypeVar("T")
 

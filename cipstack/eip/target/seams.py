@@ -22,7 +22,7 @@ from collections.abc import Callable
 from typing import TYPE_CHECKING, Any, Protocol
 
 if TYPE_CHECKING:
-    from ..cip.router import RequestContext
+    from ...cip.router import RequestContext
     from .io_target import IoConnection
 
 Datagram = tuple[bytes, tuple[str, int]]

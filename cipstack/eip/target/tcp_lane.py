@@ -30,14 +30,14 @@ import socket
 from time import monotonic
 from typing import TYPE_CHECKING
 
-from .cpf import SockAddr
+from ..precise_loop import IoLane, LaneTimer
+from ..wire.cpf import SockAddr
 from .limits import LISTEN_BACKLOG
-from .precise_loop import IoLane, LaneTimer
 
 if TYPE_CHECKING:
+    from .core import EncapsulationConnection
     from .limits import GuardedListener
     from .server import EncapsulationServer
-    from .target import EncapsulationConnection
 
 log = logging.getLogger(__name__)
 

@@ -11,9 +11,9 @@ import socket
 import time
 from typing import Any, TypeVar
 
-from ..errors import CipstackError
-from .encapsulation import DEFAULT_PORT
-from .originator_core import (
+from ...errors import CipstackError
+from ..wire.encapsulation import DEFAULT_PORT
+from .core import (
     DEFAULT_TIMEOUT,
     CoreClient,
     NoReplyError,

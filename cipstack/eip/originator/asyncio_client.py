@@ -14,14 +14,13 @@ import socket
 from collections.abc import Sequence
 from typing import TYPE_CHECKING, Any, TypeVar
 
-from ..cip.epath import Segment
-from ..cip.messages import MessageRouterResponse
-from ..cip.status import CipError, GeneralStatus
-from .cpf import Item
-from .discovery import broadcast_addresses, discover, list_services_udp, udp_query
-from .encapsulation import DEFAULT_PORT, EncapsulationHeader
-from .identity_items import IdentityRecord, ServiceRecord
-from .originator_core import (
+from ...cip.epath import Segment
+from ...cip.messages import MessageRouterResponse
+from ...cip.status import CipError, GeneralStatus
+from ..wire.cpf import Item
+from ..wire.encapsulation import DEFAULT_PORT, EncapsulationHeader
+from ..wire.identity_items import IdentityRecord, ServiceRecord
+from .core import (
     DEFAULT_TIMEOUT,
     MESSAGE_ROUTER_PATH,
     ORIGINATOR_VENDOR_ID,
@@ -33,11 +32,12 @@ from .originator_core import (
     Transaction,
     parse_host,
 )
+from .discovery import broadcast_addresses, discover, list_services_udp, udp_query
 from .replies import EncapsulationStatusError, MalformedReplyError
 
 if TYPE_CHECKING:
     # Imported where used: explicit messaging does not load class 1.
-    from ..assemblies.schema import AssemblySchema
+    from ...assemblies.schema import AssemblySchema
     from .io_context import IoContext
     from .io_originator import OtFormat
 

@@ -10,7 +10,7 @@ import struct
 from dataclasses import dataclass
 from enum import IntEnum
 
-from ..errors import ProtocolError
+from ...errors import ProtocolError
 
 HEADER = struct.Struct("<HHII8sI")
 HEADER_SIZE = HEADER.size  # 24

@@ -5,9 +5,9 @@ codecs that module loads."""
 
 from __future__ import annotations
 
-from ..cip.messages import Service
-from ..cip.model import AttributeSpec, ClassSpec
-from ..cip.types import UINT
+from ...cip.messages import Service
+from ...cip.model import AttributeSpec, ClassSpec
+from ...cip.types import UINT
 
 CLASS_ID = 0x06
 #: Backplane port of a device: a route path "port 1, link 0" addresses the device itself.

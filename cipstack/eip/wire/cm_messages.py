@@ -10,8 +10,8 @@ import struct
 from dataclasses import dataclass, field
 from enum import IntEnum
 
-from ..cip.epath import request_path
-from ..cip.status import CipError, GeneralStatus
+from ...cip.epath import request_path
+from ...cip.status import CipError, GeneralStatus
 
 #: Where an originator sends Forward_Open and Forward_Close: the Connection Manager, instance 1.
 CONNECTION_MANAGER_PATH = request_path(0x06, 1)

@@ -16,12 +16,12 @@ from collections.abc import Callable
 from dataclasses import dataclass, field
 from typing import Any, Protocol
 
-from ..cip.epath import ElectronicKey, LogicalSegment, LogicalType, PortSegment, decode_path
-from ..cip.messages import MessageRouterRequest, MessageRouterResponse, Service
-from ..cip.model import CipObject, Instance
-from ..cip.router import RequestContext
-from ..cip.status import CipError, ExtendedStatus, GeneralStatus
-from .cm_messages import (
+from ...cip.epath import ElectronicKey, LogicalSegment, LogicalType, PortSegment, decode_path
+from ...cip.messages import MessageRouterRequest, MessageRouterResponse, Service
+from ...cip.model import CipObject, Instance
+from ...cip.router import RequestContext
+from ...cip.status import CipError, ExtendedStatus, GeneralStatus
+from ..wire.cm_messages import (
     ConnectionTriad,
     ConnectionType,
     ForwardCloseReply,
@@ -31,7 +31,7 @@ from .cm_messages import (
     UnconnectedSendRequest,
     forward_open_failure_data,
 )
-from .cm_spec import BACKPLANE_PORT, SPEC
+from ..wire.cm_spec import BACKPLANE_PORT, SPEC
 
 log = logging.getLogger(__name__)
 

@@ -9,9 +9,9 @@ import socket
 import struct
 from collections.abc import Sequence
 
-from .encapsulation import DEFAULT_PORT, HEADER, HEADER_SIZE, Command, EncapsulationError, EncapsulationHeader
-from .identity_items import IdentityRecord, ServiceRecord, decode_list_identity, decode_list_services
-from .interfaces import LIMITED_BROADCAST, directed_broadcasts
+from ..interfaces import LIMITED_BROADCAST, directed_broadcasts
+from ..wire.encapsulation import DEFAULT_PORT, HEADER, HEADER_SIZE, Command, EncapsulationError, EncapsulationHeader
+from ..wire.identity_items import IdentityRecord, ServiceRecord, decode_list_identity, decode_list_services
 
 log = logging.getLogger(__name__)
 

@@ -20,10 +20,9 @@ from dataclasses import dataclass, field, replace
 from enum import Enum
 from typing import TYPE_CHECKING, Any
 
-from ..cip.epath import LogicalSegment, LogicalType, encode_path
-from ..errors import PeerUnreachable
-from .cm_messages import ConnectionTriad, ConnectionType, NetworkParameters, TransportTrigger, TriggerType
-from .io_core import (
+from ...cip.epath import LogicalSegment, LogicalType, encode_path
+from ...errors import PeerUnreachable
+from ..io_core import (
     RECEIVED_NEW,
     RECEIVED_STALE,
     ConsumerState,
@@ -36,11 +35,12 @@ from .io_core import (
     decode_io_datagram,
     encode_io_datagram,
 )
-from .io_target import EARLY_SHARE, TO_OVERHEAD
+from ..target.io_target import EARLY_SHARE, TO_OVERHEAD
+from ..wire.cm_messages import ConnectionTriad, ConnectionType, NetworkParameters, TransportTrigger, TriggerType
 
 if TYPE_CHECKING:
-    from ..assemblies.schema import AssemblySchema
-    from .io_server import IoEndpoint
+    from ...assemblies.schema import AssemblySchema
+    from ..io_server import IoEndpoint
 
 log = logging.getLogger(__name__)
 

@@ -23,20 +23,10 @@ from dataclasses import dataclass, field
 from enum import Enum
 from typing import Protocol
 
-from ..cip.epath import DataSegment, ElectronicKey, LogicalSegment, LogicalType, decode_path
-from ..cip.router import RequestContext
-from ..cip.status import CipError, ExtendedStatus
-from .cm_messages import (
-    ConnectionTriad,
-    ConnectionType,
-    ForwardCloseRequest,
-    ForwardOpenReply,
-    ForwardOpenRequest,
-    TriggerType,
-)
-from .connection_manager import connection_failure, origin_host
-from .cpf import Item, ItemType, SockAddr
-from .io_core import (
+from ...cip.epath import DataSegment, ElectronicKey, LogicalSegment, LogicalType, decode_path
+from ...cip.router import RequestContext
+from ...cip.status import CipError, ExtendedStatus
+from ..io_core import (
     DEFAULT_IO_PORT,
     RECEIVED_NEW,
     RECEIVED_STALE,
@@ -50,6 +40,16 @@ from .io_core import (
     encode_io_datagram,
     split_run_idle,
 )
+from ..wire.cm_messages import (
+    ConnectionTriad,
+    ConnectionType,
+    ForwardCloseRequest,
+    ForwardOpenReply,
+    ForwardOpenRequest,
+    TriggerType,
+)
+from ..wire.cpf import Item, ItemType, SockAddr
+from .connection_manager import connection_failure, origin_host
 from .limits import RateLimitedLog
 
 log = logging.getLogger(__name__)

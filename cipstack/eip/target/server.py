@@ -28,10 +28,11 @@ import socket
 import struct
 import sys
 
-from .cpf import SockAddr
-from .encapsulation import DEFAULT_PORT, HEADER_SIZE
-from .interfaces import LIMITED_BROADCAST, subnet_broadcast
-from .io_server import lane_of
+from ..interfaces import LIMITED_BROADCAST, subnet_broadcast
+from ..io_server import lane_of
+from ..wire.cpf import SockAddr
+from ..wire.encapsulation import DEFAULT_PORT, HEADER_SIZE
+from .core import EncapsulationConnection, EncapsulationTarget
 from .limits import (
     DEFAULT_MAX_TCP_CONNECTIONS,
     LISTEN_BACKLOG,
@@ -42,7 +43,6 @@ from .limits import (
     quiet_accept_errors,
 )
 from .seams import ReplySeam
-from .target import EncapsulationConnection, EncapsulationTarget
 from .tcp_lane import LaneListener, LaneTcpConnection
 
 log = logging.getLogger(__name__)

@@ -26,11 +26,11 @@ from collections.abc import Callable, Generator, Sequence
 from dataclasses import dataclass
 from typing import TYPE_CHECKING, Any, Generic, TypeVar
 
-from ..cip.epath import Segment, encode_path, request_path
-from ..cip.messages import MessageRouterRequest, MessageRouterResponse, Service
-from ..errors import CipstackError
-from .cpf import Item, ItemType, decode_items, encode_items
-from .encapsulation import (
+from ...cip.epath import Segment, encode_path, request_path
+from ...cip.messages import MessageRouterRequest, MessageRouterResponse, Service
+from ...errors import CipstackError
+from ..wire.cpf import Item, ItemType, decode_items, encode_items
+from ..wire.encapsulation import (
     DEFAULT_PORT,
     HEADER,
     HEADER_SIZE,
@@ -41,13 +41,13 @@ from .encapsulation import (
     EncapsulationError,
     EncapsulationHeader,
 )
-from .identity_items import IdentityRecord, ServiceRecord, decode_list_identity, decode_list_services
+from ..wire.identity_items import IdentityRecord, ServiceRecord, decode_list_identity, decode_list_services
 from .replies import EncapsulationStatusError, MalformedReplyError, decode_reply
 
 if TYPE_CHECKING:
     # Imported where used: explicit messaging (a one-shot ``cipstack get``) does not load the
     # Connection Manager's messages (their dataclasses cost milliseconds to import).
-    from .cm_messages import ConnectionTriad
+    from ..wire.cm_messages import ConnectionTriad
 
 log = logging.getLogger(__name__)
 T = TypeVar("T")
@@ -402,7 +402,7 @@ class OriginatorCore:
         raw = MessageRouterRequest(service, path, data).encode()
         use_connection = self.connection is not None if connected is None else connected
         if route is not None and not use_connection:
-            from .cm_messages import CONNECTION_MANAGER_PATH, UnconnectedSendRequest
+            from ..wire.cm_messages import CONNECTION_MANAGER_PATH, UnconnectedSendRequest
 
             route_bytes = route if isinstance(route, bytes) else encode_path(route)
             raw = MessageRouterRequest(Service.UNCONNECTED_SEND, CONNECTION_MANAGER_PATH,
@@ -416,7 +416,7 @@ class OriginatorCore:
                      path: bytes = MESSAGE_ROUTER_PATH) -> Transaction[ExplicitConnectionInfo]:
         """Open a class 3 connection to the message router (Forward_Open or Large_Forward_Open); once
         its reply is read, later requests travel on it."""
-        from .cm_messages import (
+        from ..wire.cm_messages import (
             CONNECTION_MANAGER_PATH,
             ConnectionTriad,
             ForwardOpenReply,
@@ -453,7 +453,7 @@ class OriginatorCore:
         if connection is None:
             return None
         self.connection = None
-        from .cm_messages import CONNECTION_MANAGER_PATH, ForwardCloseRequest
+        from ..wire.cm_messages import CONNECTION_MANAGER_PATH, ForwardCloseRequest
 
         request = ForwardCloseRequest(0x0A, 0x0E, connection.triad, MESSAGE_ROUTER_PATH)
 
