@@ -140,7 +140,9 @@ class ExplicitMessaging:
         """``catalogs``: the catalog of (vendor id, product code); by default the profile's whole one
         (``devices.profiles.catalog_for``)."""
         if catalogs is None:
-            from .devices.profiles import catalog_for as catalogs
+            from .devices.profiles import catalog_for
+
+            catalogs = catalog_for
 
         record = None
         if not self.route:

@@ -72,6 +72,11 @@ def _timeouts() -> tuple[type[Exception], ...]:
     return (TimeoutError,) if asyncio is None else (TimeoutError, asyncio.TimeoutError)
 
 
+def _transport_errors() -> tuple[type[BaseException], ...]:
+    """What a command's transport raises (looked at when one is raised: asyncio may have come in)."""
+    return (ConnectionError, *_timeouts(), OSError)
+
+
 def _main(argv: Sequence[str] | None) -> int:
     words = list(sys.argv[1:] if argv is None else argv)
     # A command alone shows its usage when its line is wrong; only help shows the descriptions.
@@ -116,7 +121,7 @@ def _main(argv: Sequence[str] | None) -> int:
             raise  # ``main`` ends quietly
         print(f"{name}: {exc}", file=sys.stderr)
         return EXIT_FAILURE
-    except (ConnectionError, *_timeouts(), OSError) as exc:
+    except _transport_errors() as exc:
         print(f"{name}: {exc or type(exc).__name__}", file=sys.stderr)
         return EXIT_FAILURE
     except KeyboardInterrupt:

@@ -19,7 +19,7 @@ from typing import NamedTuple
 
 from ..errors import ProtocolError
 from .wire.cpf import ItemType
-from .wire.encapsulation import DEFAULT_IO_PORT  # noqa: F401 - its home was here; importers keep their path
+from .wire.encapsulation import DEFAULT_IO_PORT
 
 #: CPF count 2, Sequenced Address item (type, length 8, connection id, sequence), Connected Data header.
 _IO_HEAD = struct.Struct("<HHHIIHHH")
@@ -220,3 +220,22 @@ class ConsumerState:
 def connection_timeout(rpi_us: int, multiplier: int) -> float:
     """RPI x 4 x 2^multiplier, in seconds (multiplier field 0..7)."""
     return rpi_us * (4 << min(multiplier, 7)) / 1e6
+
+
+__all__ = [
+    "DEFAULT_IO_PORT",
+    "IO_HEAD_SIZE",
+    "ConsumerState",
+    "IoDatagram",
+    "IoDatagramError",
+    "IoStatistics",
+    "ProductionGrid",
+    "ProductionSchedule",
+    "Reception",
+    "connection_timeout",
+    "decode_io_datagram",
+    "encode_io_datagram",
+    "seq16_newer",
+    "seq32_newer",
+    "split_run_idle"
+]

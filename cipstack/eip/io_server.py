@@ -82,7 +82,7 @@ def _kernel_time(ancillary: list[tuple[int, int, bytes]], offset: float) -> floa
     for level, kind, stamp in ancillary:
         if level == socket.SOL_SOCKET and kind == SO_TIMESTAMPNS and len(stamp) >= _TIMESPEC.size:
             seconds, nanoseconds = _TIMESPEC.unpack_from(stamp)
-            return seconds - offset + nanoseconds * 1e-9
+            return float(seconds - offset + nanoseconds * 1e-9)
     return None
 
 #: The receive buffer asked for a class 1 socket. One socket takes every connection's datagrams
@@ -246,7 +246,7 @@ class IoEndpoint:
             self._lane.add_reader(sock.fileno(), lambda: self._drain(sock))
             return None
         transport, _ = await self.loop.create_datagram_endpoint(lambda: _UdpIo(self), sock=sock)
-        return transport  # type: ignore[return-value]
+        return transport
 
     def _drain(self, sock: socket.socket) -> None:
         """The lane's reader: what the socket holds, up to ``DRAIN_LIMIT`` datagrams, to the core, each
@@ -356,7 +356,8 @@ class IoEndpoint:
         next production carries newer data anyway)."""
         sock, transport = self._sock, self.transport
         for index, (datagram, destination) in enumerate(datagrams):
-            if transport is not None and (sock is None or transport.get_write_buffer_size()):
+            # asyncio's selector datagram transport has it; typeshed's DatagramTransport does not say so.
+            if transport is not None and (sock is None or transport.get_write_buffer_size()):  # type: ignore[attr-defined]
                 for queued, where in datagrams[index:]:
                     transport.sendto(queued, where)
                 return
@@ -390,3 +391,23 @@ class IoEndpoint:
                 if self._lane is not None:
                     self._lane.remove_reader(sock.fileno())
                 sock.close()
+
+
+# What the loop's users import from here (the loop itself lives in precise_loop).
+__all__ = [
+    "CATCH_UP_AFTER_S",
+    "CATCH_UP_READS",
+    "COALESCE_S",
+    "DRAIN_LIMIT",
+    "MAX_DATAGRAM",
+    "RECEIVE_BUFFER",
+    "SO_TIMESTAMPNS",
+    "IoCore",
+    "IoEndpoint",
+    "freeze_startup_objects",
+    "lane_of",
+    "precise_event_loop",
+    "refuse_exact_sharer",
+    "run_precise",
+    "udp_sockets_on"
+]

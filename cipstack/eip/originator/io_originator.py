@@ -350,6 +350,11 @@ class ProcessImage:
     does not have raises ``AttributeError`` naming the schema and its fields, or why none is known.
     """
 
+    _buffer: bytearray
+    _schema: AssemblySchema | None
+    _writable: bool
+    _where: str
+
     def __init__(self, buffer: bytearray, schema: AssemblySchema | None, writable: bool, where: str = "") -> None:
         object.__setattr__(self, "_buffer", buffer)
         object.__setattr__(self, "_schema", schema)
@@ -415,12 +420,14 @@ class ProcessImage:
         """Set several fields at once (``io.output.update(run_forward=True, speed_reference=900)``)."""
         if not self._writable:
             raise AttributeError("input data is read-only")
+        schema = self._schema
         for name in values:
-            if self._schema is None or name not in self._schema.field_names:
+            if schema is None or name not in schema.field_names:
                 raise AttributeError(self._no_field(name))
         data = bytes(self._buffer)
         for name, value in values.items():
-            data = self._schema.with_field(data, name, value)  # type: ignore[union-attr]
+            assert schema is not None   # every name was checked above
+            data = schema.with_field(data, name, value)
         self._buffer[:] = data  # one assignment: a production sees all the fields or none
 
     def __repr__(self) -> str:

@@ -82,7 +82,7 @@ class ConnectionTable:
     max_connections: int = 32
     connections: dict[int, ExplicitConnection] = field(default_factory=dict)
     timeouts: int = 0
-    _ids: itertools.count = field(default_factory=lambda: itertools.count(random.randrange(1, 0x7FFF0000)))
+    _ids: itertools.count[int] = field(default_factory=lambda: itertools.count(random.randrange(1, 0x7FFF0000)))
 
     def new_id(self) -> int:
         while True:

@@ -295,7 +295,7 @@ class EncapsulationConnection:
         if self.closing:
             return
         inbox = self._inbox
-        if data == self._repeat and not inbox:
+        if data == self._repeat and not inbox and self.session is not None:
             # The same frame again, byte for byte and alone (a client polling one attribute): what
             # its header and items were found to say still holds, since the session cannot change
             # while the connection is open, so the frame goes straight to its request.

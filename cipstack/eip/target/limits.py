@@ -282,6 +282,7 @@ def guarded_listener(host: str, port: int, backlog: int = LISTEN_BACKLOG, listen
     """A ``GuardedListener`` bound to ``host:port`` and listening ("" or "0.0.0.0": every IPv4
     address; a name or an IPv6 address: its first address); with ``listen`` false only bound, so
     that it takes its port and accepts nothing yet (``listen()`` later)."""
+    address: tuple[str, int] | tuple[str, int, int, int] | tuple[int, bytes]
     if host in ("", "0.0.0.0"):
         family, address = socket.AF_INET, ("0.0.0.0", port)
     else:

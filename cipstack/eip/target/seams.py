@@ -98,7 +98,7 @@ class IoSeam:
         self.core.receive(raw, source, now, False)
 
     def _poll_filtered(self, now: float, horizon: float = 0.0) -> list[Datagram]:
-        out = self.core.poll(now, horizon)
+        out: list[Datagram] = self.core.poll(now, horizon)
         for item in list(self.outbound):
             if not out:
                 break

@@ -434,7 +434,7 @@ class EncapsulationServer:
             return
         transport, unicast = await self.loop.create_datagram_endpoint(lambda: _UdpProtocol(self),
                                                                       local_addr=(self.host, self.port))
-        self._udp = transport  # type: ignore[assignment]
+        self._udp = transport
         self._broadcasts = await self._listen_broadcasts(unicast)
 
     async def _listen_broadcasts(self, unicast: _UdpProtocol) -> list[asyncio.DatagramTransport]:
@@ -459,7 +459,7 @@ class EncapsulationServer:
                 log.warning("broadcasts to %s:%d are not heard: %s", broadcast, self.port, exc.strerror or exc)
                 continue
             transport, _ = await self.loop.create_datagram_endpoint(lambda: _BroadcastListener(unicast), sock=sock)
-            transports.append(transport)  # type: ignore[arg-type]
+            transports.append(transport)
         return transports
 
     async def _close_tcp(self) -> None:
