@@ -3,9 +3,11 @@
 from __future__ import annotations
 
 import argparse
+import asyncio
 import logging
 import os
 import sys
+from collections.abc import Awaitable, Callable
 from pathlib import Path
 from typing import Any
 
@@ -52,14 +54,17 @@ def cmd_adapter(args: argparse.Namespace) -> int:
     except (StateFileError, ValueError, KeyError) as exc:
         raise UsageError(str(exc)) from None
     log = logging.getLogger("cipstack.adapter")
-    if args.factory:
-        # The user's saved drive stays as it is: this run's saves live in memory until it stops.
-        log.info("factory settings: saves last until the emulator stops; %s is not read or written", default_state)
-    else:
-        log.info("saved parameters in %s (--factory starts without them)", args.state)
+
+    def started() -> None:
+        # Said once it serves (after any one-line refusal of a bad argument, never before one).
+        if args.factory:   # the user's saved drive stays as it is: this run's saves live in memory
+            log.info("factory settings: saves last until the emulator stops; %s is not read or written", default_state)
+        else:
+            log.info("saved parameters in %s (--factory starts without them)", args.state)
+
     if args.param:
         _apply_keypad_parameters(adapter, args.param)
-    return _serve(adapter, args, "adapter")
+    return _serve(adapter, args, "adapter", started)
 
 
 def _apply_keypad_parameters(adapter: Any, assignments: list[str]) -> None:
@@ -154,15 +159,16 @@ def _http_settings(args: argparse.Namespace) -> dict[str, Any]:
             "http_hosts": tuple(args.http_allow_host)}
 
 
-def _serve(adapter: Any, args: argparse.Namespace, command: str) -> int:
+def _serve(adapter: Any, args: argparse.Namespace, command: str, started: Callable[[], None] | None = None) -> int:
     """Run an emulator until SIGINT/SIGTERM; a port it cannot listen on (taken, or not an address of
-    this machine) is one line naming the port and its option, and exit 2."""
+    this machine) is one line naming the port and its option, and exit 2. ``started`` runs once it
+    serves (after its ``emulating`` line)."""
     from ..eip.io_server import run_precise
     from ..listening import ListenError
     from ..modbus.rtu_line import RtuPortError
 
     scenario = getattr(args, "scenario", None)
-    until = None
+    run_scenario: Callable[[Any], Awaitable[Any]] | None = None
     if scenario is not None:
         from ..control import scenario as scenarios
 
@@ -172,8 +178,18 @@ def _serve(adapter: Any, args: argparse.Namespace, command: str) -> int:
         except scenarios.ScenarioError as exc:
             raise UsageError(str(exc)) from None
 
-        def until(running: Any) -> Any:
+        def run_scenario(running: Any) -> Awaitable[Any]:
             return scenarios.run(running.service, loaded, lambda line: print(line, flush=True))
+
+    async def serving(running: Any) -> Any:
+        if started is not None:
+            started()
+        if run_scenario is not None:
+            return await run_scenario(running)
+        await asyncio.Event().wait()   # no scenario: serve until a signal (this is then cancelled)
+        return None
+
+    until = serving if started is not None or run_scenario is not None else None
     try:
         fired = run_precise(adapter.serve_forever(until) if until is not None else adapter.serve_forever())
     except RtuPortError as exc:
