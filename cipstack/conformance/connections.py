@@ -72,6 +72,8 @@ class Plan:
 
     @property
     def path(self) -> bytes:
+        if not self.ot_point and not self.to_point:
+            return request_path(0x04, self.config)  # the configuration alone (``NO_POINTS``)
         return class1_path(None if self.heartbeat else self.ot_point, self.to_point, self.config,
                            self.ot_point if self.heartbeat else None)
 
@@ -224,19 +226,30 @@ def not_planned(ctx: Context, spec: CheckSpec, consequence: str = "") -> Outcome
 MainPlanCheck = Callable[[Context, CheckSpec, Plan, Probe, Endpoint], Outcome]
 
 
-def _on_main_plan(body: MainPlanCheck) -> Callable[[Context, CheckSpec], Outcome]:
-    """Run ``body`` with the main connection's plan, a registered probe and a T->O endpoint; not
-    applicable without them."""
+#: For the checks that need no connection point of the device: the configuration instance 1 with no
+#: connection point (a null Forward_Open configures, a refused transport class is refused before any path).
+NO_POINTS = Plan("configuration instance 1", 1, 0, 0, SEQUENCE_COUNT_SIZE + 4, SEQUENCE_COUNT_SIZE, 10_000, None,
+                 False, True, True)
+
+
+def _on_main_plan(body: MainPlanCheck, fallback: Plan | None = None) -> Callable[[Context, CheckSpec], Outcome]:
+    """Run ``body`` with the main connection's plan, a registered probe and a T->O endpoint; without a
+    plan, with ``fallback``, else not applicable."""
 
     @functools.wraps(body)
     def run(ctx: Context, spec: CheckSpec) -> Outcome:
-        plan = main_plan(ctx)
+        plan = main_plan(ctx) or fallback
         if plan is None:
             return not_planned(ctx, spec, ": the connection points are unknown")
         probe = ctx.probe()
         return body(ctx, spec, plan, probe, Endpoint(ctx, probe))
 
     return run
+
+
+def _with_or_without_points(body: MainPlanCheck) -> Callable[[Context, CheckSpec], Outcome]:
+    """A check that runs on the main connection's plan, or without one on ``NO_POINTS``."""
+    return _on_main_plan(body, NO_POINTS)
 
 
 def _refusal(spec: CheckSpec, probe: Probe, reply: Reply, opened: Opened | None, what: str = "") -> Outcome:
@@ -390,7 +403,7 @@ def producing_point(ctx: Context, spec: CheckSpec, plan: Plan, probe: Probe, end
        "(transport class not supported); a device that implements class 2 is a warning", EXTENDED,
        codes=[extended(0x0103, "transport class and trigger combination not supported"),
               extended(0x011C, "transport class not supported")])
-@_on_main_plan
+@_with_or_without_points
 def transport_class(ctx: Context, spec: CheckSpec, plan: Plan, probe: Probe, endpoint: Endpoint) -> Outcome:
     request = replace(forward_open_request(plan), transport=TransportTrigger(2, TriggerType.CYCLIC))
     reply, opened = send_forward_open(ctx, probe, endpoint, request)
@@ -404,7 +417,7 @@ def transport_class(ctx: Context, spec: CheckSpec, plan: Plan, probe: Probe, end
        "status 0 (configuration accepted, no connection made) or status 0x01 with extended 0x0132 (null "
        "Forward_Open not supported)", f"CIP Vol. 1 §3-5.5.2.2 (null Forward_Open); {EXTENDED}",
        codes=[extended(0x0132, "null Forward_Open function not supported")])
-@_on_main_plan
+@_with_or_without_points
 def null_forward_open(ctx: Context, spec: CheckSpec, plan: Plan, probe: Probe, endpoint: Endpoint) -> Outcome:
     base = forward_open_request(plan)
     request = replace(base, ot_parameters=replace(base.ot_parameters, type=ConnectionType.NULL),
