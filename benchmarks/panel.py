@@ -77,7 +77,7 @@ def cpu_turn(pid: int, seconds: float) -> float:
     started = time.monotonic()
     time.sleep(seconds)
     user2, system2 = cpu_seconds(pid)
-    return round((user2 + system2 - user - system) / (time.monotonic() - started), 4)
+    return round(max(0.0, (user2 + system2 - user - system) / (time.monotonic() - started)), 4)
 
 
 def median(turns: list[dict[str, float]], key: str) -> float:
