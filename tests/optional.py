@@ -9,7 +9,8 @@ from types import ModuleType
 import pytest
 
 #: What brings each package: the extra a user installs for it.
-_EXTRA = {"aiohttp": "http", "matplotlib": "plot", "shtab": "completion", "serial": "rtu"}
+_EXTRA = {"aiohttp": "http", "prometheus_client": "http", "matplotlib": "plot", "shtab": "completion",
+          "serial": "rtu"}
 
 
 def needs(module: str) -> ModuleType:

@@ -16,9 +16,13 @@ import sysconfig
 from pathlib import Path
 from typing import Any
 
+import pytest
+
+pytest.importorskip("yaml", reason="PyYAML renders the manifests (the test extra): pip install '.[test]'")
+pytest.importorskip("kubernetes_validate", reason="kubernetes-validate checks the manifests (the test extra)")
+
 import jsonschema  # type: ignore[import-untyped]
 import kubernetes_validate  # type: ignore[import-untyped]
-import pytest
 import yaml  # type: ignore[import-untyped]
 
 from cipstack.cli import main

@@ -16,6 +16,10 @@ import urllib.request
 from pathlib import Path
 
 import pytest
+
+pytest.importorskip("prometheus_client", reason="prometheus_client is not installed (the http extra): "
+                                                "pip install '.[http]'")
+
 from prometheus_client.parser import text_string_to_metric_families
 
 from cipstack.cip.status import CipError

@@ -14,8 +14,13 @@ import time
 from pathlib import Path
 from typing import Any
 
-import aiohttp
 import pytest
+
+pytest.importorskip("aiohttp", reason="aiohttp is not installed (the http extra): pip install '.[http]'")
+pytest.importorskip("prometheus_client", reason="prometheus_client is not installed (the http extra): "
+                                                "pip install '.[http]'")
+
+import aiohttp
 from prometheus_client.parser import text_string_to_metric_families
 
 from cipstack.cli import main

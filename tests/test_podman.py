@@ -31,6 +31,9 @@ from pathlib import Path
 from typing import Any
 
 import pytest
+
+pytest.importorskip("yaml", reason="PyYAML renders the manifests (the test extra): pip install '.[test]'")
+
 import yaml  # type: ignore[import-untyped]
 
 from tests.podman_pods import deployment_pod, secrets_as_directories, statefulset_pods
