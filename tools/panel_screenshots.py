@@ -21,23 +21,19 @@ ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
 from tests.browser import chromium  # noqa: E402  (the browser the tests drive, set up once)
-
-
-def free_port(host: str = "127.0.0.1") -> int:
-    with socket.socket() as probe:
-        probe.bind((host, 0))
-        return int(probe.getsockname()[1])
+from tests.ports import free_port  # noqa: E402
+from tests.waiting import wait_for  # noqa: E402
 
 
 def wait_listening(port: int, seconds: float = 30) -> None:
-    deadline = time.monotonic() + seconds
-    while time.monotonic() < deadline:
+    def accepting() -> bool:
         try:
             socket.create_connection(("127.0.0.1", port), timeout=0.2).close()
-            return
         except OSError:
-            time.sleep(0.1)
-    raise TimeoutError(f"nothing listens on 127.0.0.1:{port}")
+            return False
+        return True
+
+    wait_for(accepting, seconds, f"127.0.0.1:{port} to accept")
 
 
 def call(base: str, method: str, path: str, body: object) -> object:
@@ -86,7 +82,7 @@ def main(out: Path) -> None:
         fleet_http = free_port()
         started.append(subprocess.Popen([sys.executable, "-m", "cipstack", "fleet", "--addresses",
                                          f"{hosts[0]}-{hosts[-1]}", "--device", "acg*2", "--device", "mx2*1",
-                                         "--device", "rx*1", "--port", str(free_port()), "--io-port", "0",
+                                         "--device", "rx*1", "--port", str(free_port(*hosts)), "--io-port", "0",
                                          "--workers", "2", "--state-dir", str(work / "state"), "--http",
                                          f"127.0.0.1:{fleet_http}"], stdout=subprocess.DEVNULL,
                                         stderr=subprocess.DEVNULL))

@@ -43,7 +43,7 @@ def connections(runtime: DeviceRuntime) -> dict[str, Any]:
     """Sessions, class 3 and class 1 connections; class 1 with its counters and the data of both
     directions by field names (raw hex beside, and alone where the assembly has no field names)."""
     now = runtime.now()
-    sessions = [{"session": handle, "peer": getattr(owner, "peer", "")}
+    sessions = [{"session": handle, "peer": owner.peer}
                 for handle, owner in sorted(runtime.target.sessions.items())]
     class3 = [{"id": f"0x{c.ot_connection_id:08X}", "originator": c.host, "requests": c.requests,
                "timeout_s": c.timeout_s, "serial": c.triad.connection_serial}
@@ -75,18 +75,10 @@ def _data(runtime: DeviceRuntime, instance: int) -> dict[str, Any]:
         data = device.assembly.data(instance)
     except Exception:  # an instance the device no longer serves (a remapped assembly)
         return {"hex": "", "fields": {}}
-    # A family's schemas are a method (they follow its mapping parameters); an EDS device's a table.
-    declared = getattr(device, "schemas", None)
-    schemas = declared() if callable(declared) else declared
+    schema = device.data_schema(instance)
     fields: dict[str, Any] = {}
-    if schemas is not None:
-        try:
-            schema = schemas[instance]
-        except (KeyError, IndexError):
-            schema = None        # an assembly without field names: its bytes alone
-        if schema is not None and schema.size == len(data):
-            fields = {name: _json_value(value) for name, value in schema.decode(data).items()
-                      if not name.startswith("_")}
+    if schema is not None and schema.size == len(data):
+        fields = {name: _json_value(value) for name, value in schema.decode(data).items() if not name.startswith("_")}
     return {"hex": data.hex(" "), "fields": fields}
 
 

@@ -12,6 +12,7 @@ from collections.abc import Callable
 from dataclasses import dataclass, field
 from typing import TYPE_CHECKING, Any
 
+from ..assemblies.schema import AssemblySchema
 from ..cip.epath import ElectronicKey
 from ..cip.router import MessageRouter
 from ..cip.status import CipError, ExtendedStatus, GeneralStatus
@@ -137,6 +138,11 @@ class Device:
     def trip_codes(self) -> str:
         """The trip codes ``inject_trip`` takes, as one line for an error message."""
         return "none (this profile simulates no drive)"
+
+    def data_schema(self, instance: int) -> AssemblySchema | None:
+        """The declaration an assembly instance's data decodes by (its field names), None where the
+        device declares none for it (an EDS file's vendor assembly; an instance it does not serve)."""
+        return None
 
     def trip_choices(self) -> list[dict[str, object]]:
         """Each trip ``inject_trip`` takes, as a front panel offers it: ``code`` (what to send), ``label``

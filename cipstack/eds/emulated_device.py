@@ -119,6 +119,9 @@ class EdsDevice(Device):
         #: The file's parameters, in its order (what ``keypad`` offers of them).
         self.params: list[ParamInfo] = []
 
+    def data_schema(self, instance: int) -> AssemblySchema | None:
+        return self.schemas.get(instance)
+
     def eds_object(self, link: Link) -> tuple[EdsObject, int, int] | None:
         """The object made from the file that serves ``link`` (class, instance, attribute), with the
         instance and attribute; None where the link is not one of those."""

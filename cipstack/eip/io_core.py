@@ -101,8 +101,13 @@ class IoStatistics:
 
     def add(self, other: IoStatistics) -> None:
         """Add ``other``'s counts to these (the largest lateness is the larger one)."""
-        for name in ("sent", "received", "late", "lost", "duplicates", "stale", "skipped_slots"):
-            setattr(self, name, getattr(self, name) + getattr(other, name))
+        self.sent += other.sent
+        self.received += other.received
+        self.late += other.late
+        self.lost += other.lost
+        self.duplicates += other.duplicates
+        self.stale += other.stale
+        self.skipped_slots += other.skipped_slots
         self.max_lateness = max(self.max_lateness, other.max_lateness)
 
     def as_dict(self) -> dict[str, float]:

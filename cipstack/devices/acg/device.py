@@ -43,6 +43,7 @@ from ...objects.assembly import AssemblyPoint
 from ...objects.file import StoredFile
 from ...objects.tcpip import NetworkInterface
 from ..base import Device, DeviceLimits, ModbusDrive, TripRefused
+from ..keypad import shown_value
 from ..profiles import DEFAULT_MAC, serial_from_mac
 from ..registers import Register, RegisterError
 from ..state import ParameterStore, StateWriter
@@ -51,6 +52,7 @@ from .drive import FAMILY, MODEL, AcgDrive, Trip
 from .keypad import AcgKeypad
 from .objects import (
     CATALOG_CLASSES,
+    OUTPUT_CURRENT,
     OUTPUT_FREQUENCY,
     AcDcDriveObject,
     AcgIdentityObject,
@@ -129,6 +131,12 @@ class AcgDevice(Device):
         """The schema of one instance; 121-128 and 141-148 as CM.51-58 / CM.31-38 name them now."""
         schema = self._speed_schemas.get(instance)
         return schema if schema is not None else self.schemas()[instance]
+
+    def data_schema(self, instance: int) -> AssemblySchema | None:
+        try:
+            return self.assembly_schema(instance)
+        except KeyError:
+            return None
 
     @property
     def active_output_instance(self) -> int:
@@ -350,8 +358,8 @@ class AcgDevice(Device):
             "state": drive.drive_state.name,
             "direction": "fwd" if drive.running_forward else "rev" if drive.running_reverse else None,
             "output_frequency_hz": drive.output_frequency / 100, "reference_hz": drive.speed_reference / 100,
-            # Output current, 0x0009 in 0.1 A (ACG RS-485 manual, Monitoring Area Parameter).
-            "output_current_a": drive.read(0x0009) / 10,
+            # In its register's unit and step (0x0009, 0.1 A: ACG RS-485 manual, Monitoring Area Parameter).
+            "output_current_a": float(shown_value(OUTPUT_CURRENT, drive.read(OUTPUT_CURRENT.address))),
             "io_connections": len(self._io_connections),
             "trip": drive.trip.label if drive.trip is not None else None,
             "fault_code": drive.fault_code if drive.trip is not None else None,

@@ -223,6 +223,9 @@ class OmronDevice(Device):
             schemas[FLEXIBLE_INPUT] = flexible_schema(FLEXIBLE_INPUT, len(mapping.inputs))
         return schemas
 
+    def data_schema(self, instance: int) -> AssemblySchema | None:
+        return self.schemas().get(instance)
+
     def _point(self, instance: int, words: int = 0) -> AssemblyPoint:
         consumed = instance in OUTPUT_INSTANCES
         size = 2 * words if words else SIZES[instance]
