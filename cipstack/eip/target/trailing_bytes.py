@@ -16,9 +16,13 @@ _NO_DATA = frozenset({Service.GET_ATTRIBUTE_SINGLE, Service.GET_ATTRIBUTES_ALL})
 _MAX_ROUTE_WORDS = 8
 
 
+#: 0x15 as a plain int: compared on every explicit reply, where an enum member's lookup costs more.
+_TOO_MUCH_DATA = int(GeneralStatus.TOO_MUCH_DATA)
+
+
 def is_too_much_data(reply: bytes) -> bool:
     """The encoded message-router reply answers 0x15 (the general status is its third byte)."""
-    return len(reply) > 2 and reply[2] == GeneralStatus.TOO_MUCH_DATA
+    return len(reply) > 2 and reply[2] == _TOO_MUCH_DATA
 
 
 def route_path_at_end(request: bytes) -> tuple[list[PortSegment], bytes] | None:
