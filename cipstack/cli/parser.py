@@ -25,16 +25,25 @@ class _Formatter(argparse.RawDescriptionHelpFormatter):
 class _SubParsers(argparse._SubParsersAction):  # type: ignore[type-arg]  # generic in typeshed, not at run time
     """Names each command's parser after its path and gives it its text from ``help_texts``."""
 
+    #: With the descriptions and examples ``--help`` prints (``_BriefSubParsers``: the help line alone).
+    texts = True
+
     def add_parser(self, name: str, **kwargs: Any) -> argparse.ArgumentParser:
         path = (*getattr(self, "_prog_prefix", "cipstack").split()[1:], name)
         text = COMMANDS.get(path)
         if text is not None:
             kwargs["help"] = text.help
-            if getattr(self, "texts", True):
+            if self.texts:
                 kwargs.update(description=text.description_text(), epilog=text.epilog())
         kwargs.setdefault("formatter_class", _Formatter)
         parser: argparse.ArgumentParser = super().add_parser(name, **kwargs)
         return parser
+
+
+class _BriefSubParsers(_SubParsers):
+    """The commands of a line that asks for no help: wrapping their texts is most of the work."""
+
+    texts = False
 
 
 class _Parser(argparse.ArgumentParser):
@@ -95,8 +104,9 @@ def build_parser(command: str | None = None, texts: bool = True) -> argparse.Arg
     logging_options.add_argument("--log-level", default=argparse.SUPPRESS, choices=levels, type=str.upper,
                                  help=f"log level on stderr (default {parser.get_default('log_level')})")
     # Not required here: without a command ``main`` prints the list of commands.
+    if not texts:
+        parser.register("action", "parsers", _BriefSubParsers)
     sub = parser.add_subparsers(dest="command", metavar="COMMAND", title="commands", parser_class=_Parser)
-    sub.texts = texts  # type: ignore[attr-defined]  # read by ``_SubParsers.add_parser``
     _add_parser = sub.add_parser
 
     def add_parser(name: str, **kwargs: Any) -> argparse.ArgumentParser:
