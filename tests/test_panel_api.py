@@ -67,6 +67,8 @@ async def test_the_acg_parameters_trips_and_fault_table(served: tuple[Adapter, s
     assert status == 200 and [kind["name"] for kind in table] == list(FAULTS)
     drop = next(kind for kind in table if kind["name"] == "drop")
     assert [o["name"] for o in drop["options"]] == ["connection", "originator", "share", "every", "for"]
+    share = drop["options"][2]                                   # one of share and every, neither required
+    assert share["required"] is False and share["one_of"] == ["share", "every"]
     refuse = next(kind for kind in table if kind["name"] == "refuse-forward-open")
     assert refuse["options"][0] == {"name": "status", "metavar": "STATUS", "required": True,
                                     "help": refuse["options"][0]["help"]}

@@ -99,8 +99,12 @@ def fault_table() -> list[dict[str, Any]]:
     for kind in FAULTS.values():
         declared = [*((kind.positional,) if kind.positional is not None else ()), *kind.options,
                     *(() if kind.once else (FOR,))]
+        # A group of ``requires`` with one option makes it required; a group of several asks for one
+        # of them (``drop``: share or every).
+        groups = {name: group for group in kind.requires for name in group}
         options = [{"name": o.name, "metavar": o.metavar, "help": o.help,
-                    "required": o is kind.positional or any(o.name in group for group in kind.requires)}
+                    "required": o is kind.positional or len(groups.get(o.name, ())) == 1,
+                    **({"one_of": list(groups[o.name])} if len(groups.get(o.name, ())) > 1 else {})}
                    for o in declared]
         table.append({"name": kind.name, "where": kind.where, "summary": kind.summary, "once": kind.once,
                       "lasts": kind.lasts, "options": options})

@@ -267,7 +267,8 @@ function showFaultForm() {
   $("fault-summary").textContent = `${kind.summary} (acts on: ${kind.where})`;
   for (const option of kind.options) {
     const id = `fault-option-${option.name}`;
-    box.appendChild(element("label", option.name + (option.required ? " (required)" : ""), {for: id}));
+    const need = option.required ? " (required)" : option.one_of ? ` (${option.one_of.join(" or ")})` : "";
+    box.appendChild(element("label", option.name + need, {for: id}));
     let input;
     if (option.name === "connection") {
       input = element("select", null, {id, "data-option": option.name});
