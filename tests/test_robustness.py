@@ -986,9 +986,10 @@ def opened_by(sent: bytes, replies: list[Frame]) -> set[int]:
 def _opened_in(reply: CipReply) -> set[int]:
     """The O->T ids of the Forward_Opens ``reply`` accepted, a Multiple Service Packet's embedded ones too
     (its data: a count, the offsets of the replies, the replies, CIP Vol. 1, A-4.10)."""
-    if reply.service in (FORWARD_OPEN | 0x80, LARGE_FORWARD_OPEN | 0x80) and reply.status == 0:
+    # ``CipReply.service`` is the request's service: the reply bit is taken off when it is parsed.
+    if reply.service in (FORWARD_OPEN, LARGE_FORWARD_OPEN) and reply.status == 0:
         return {int(struct.unpack_from("<I", reply.data)[0])}
-    if reply.service != MSP | 0x80 or len(reply.data) < 2:
+    if reply.service != MSP or len(reply.data) < 2:
         return set()
     data = reply.data
     count = struct.unpack_from("<H", data)[0]
@@ -1035,6 +1036,7 @@ def test_random_and_mutated_tcp_frames(target: RunningAdapter) -> None:
     # (the target counts them up), which a mutated connected frame can hit. Such a connection may have
     # timed out or been closed by a random Forward_Close since: a reply and no reply are both right.
     fuzz_opened: set[int] = set()
+    fuzz_opened_total = 0
     sequence = 0
     deadline = time.monotonic() + 15.0
     frames = reconnects = 0
@@ -1047,7 +1049,9 @@ def test_random_and_mutated_tcp_frames(target: RunningAdapter) -> None:
             frames += 1
             if expected is None and not (replies == [] and not closed and connected_id(sent) in fuzz_opened):
                 check_shape(sent, replies, closed)
-                fuzz_opened |= opened_by(sent, replies)
+                opened = opened_by(sent, replies)
+                fuzz_opened |= opened
+                fuzz_opened_total += len(opened)
             elif expected is not None:
                 check_outcome(sent, replies, closed, expected)
             if closed:
@@ -1059,6 +1063,9 @@ def test_random_and_mutated_tcp_frames(target: RunningAdapter) -> None:
     finally:
         client.close()
     assert frames >= 3000, f"only {frames} frames in the time allowed"
+    # The model above follows the connections random Forward_Opens open; some must have been opened
+    # (and followed), or a connected frame that hits one would be judged against a wrong model.
+    assert fuzz_opened_total > 0, "no random Forward_Open opened a connection the model followed"
     target.assert_healthy(errors_before)
 
 
