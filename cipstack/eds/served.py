@@ -4,15 +4,19 @@ EtherNet/IP devices that carry their EDS do: generated from the same declaration
 
 from __future__ import annotations
 
+import functools
+
 from ..objects.file import StoredFile, eds_file
 
 #: The file name devices give their EDS in the File object (OpENer's File object; Rockwell 1444 Table 287).
 FILE_NAME = "EDS.txt"
 
 
+@functools.cache
 def profile_eds_file(profile: str, model: str | None = None) -> StoredFile:
     """The EDS file of an emulated profile (``acg``, ``mx2``, ``rx``) and model, generated when first
-    read (the ACG's takes about half a second)."""
+    read (the ACG's takes about half a second) and then kept: the devices of one profile and model
+    in a process (a fleet's) share it."""
     from ..devices.profiles import PROFILES
     from .commands_generate import descriptions
     from .description import FILE_REVISION
@@ -21,6 +25,7 @@ def profile_eds_file(profile: str, model: str | None = None) -> StoredFile:
 
     chosen = model or PROFILES[profile].default_model
 
+    @functools.cache
     def content() -> bytes:
         (description,) = descriptions(profile, chosen)
         return encode_eds(eds_text(description))

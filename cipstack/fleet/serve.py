@@ -21,6 +21,7 @@ from ..control.service import DeviceService
 from ..devices.acg.modbus_rtu import LineSettings
 from ..devices.profiles import mac_for_address
 from ..devices.state import StateFileError
+from ..eds.served import profile_eds_file
 from ..eip.io_core import ProductionGrid
 from ..eip.io_server import freeze_startup_objects
 from ..listening import held_log_records
@@ -52,8 +53,10 @@ def raise_open_file_limit(devices: int) -> None:
 def build_adapter(device: FleetDevice, port: int, io_port: int, grid: ProductionGrid | None = None) -> Adapter:
     """The emulator of one device; a state file or parameter it cannot take raises ``SpecError``.
     ``grid``: the process's class 1 slots, which its devices share (one wake-up for all that are due)."""
+    # Each device carries its EDS file in its File object, as the single adapter's does.
     settings = AdapterSettings(host=device.address, port=port, io_port=io_port, profile=device.profile,
-                               model=device.model, state_path=device.state_path, mac=mac_for_address(device.address))
+                               model=device.model, state_path=device.state_path, mac=mac_for_address(device.address),
+                               files=(profile_eds_file(device.profile, device.model),))
     try:
         adapter = Adapter(settings, production_grid=grid)
     except (StateFileError, ValueError, KeyError) as exc:

@@ -19,6 +19,7 @@ from typing import Any, TypeVar, overload
 
 from ..adapter import Adapter, AdapterSettings, network_interface
 from ..control.events import Event
+from ..eds.served import profile_eds_file
 from ..scanner import SyncScanner
 
 T = TypeVar("T")
@@ -62,7 +63,10 @@ class EmulatedDevice:
     async def _start(self) -> Adapter:
         options = self.options
         settings = AdapterSettings(host=options.host, port=0, io_port=0, profile=options.profile,
-                                   model=options.model, state_path=options.state_path, **options.settings)
+                                   model=options.model, state_path=options.state_path,
+                                   # The device carries its EDS file (File object), as the adapter's does.
+                                   **{"files": (profile_eds_file(options.profile, options.model),),
+                                      **options.settings})
         device = None
         if options.eds is not None:
             from ..devices.base import DeviceLimits

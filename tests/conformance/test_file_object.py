@@ -12,6 +12,7 @@ from pathlib import Path
 
 import pytest
 
+from cipstack.devices.profiles import PROFILES
 from cipstack.objects.file import (
     FIRST,
     FIRST_AND_LAST,
@@ -27,6 +28,7 @@ from cipstack.objects.file import (
 from cipstack.scanner import SyncScanner
 from tests.cli_errors import one_line_error
 from tests.interop.conftest import python_module
+from tests.ports import free_port
 
 FAKE_EDS = Path(__file__).with_name("fake_device.eds")
 
@@ -48,6 +50,43 @@ def test_the_emulator_serves_the_eds_file_it_generates(profile: list[str], adapt
     (generated,) = (tmp_path / "gen").glob("*.eds")
     assert out.read_bytes() == generated.read_bytes()
     assert result.stdout.strip() == f"{out}: {len(generated.read_bytes())} bytes"
+
+
+def generated_eds(tmp_path: Path, *profile: str) -> bytes:
+    """What ``cipstack eds generate`` writes for ``profile``."""
+    out = tmp_path / "generated"
+    subprocess.run(python_module("cipstack", "eds", "generate", *profile, "-o", str(out)), check=True,
+                   capture_output=True, timeout=60)
+    (generated,) = out.glob("*.eds")
+    return generated.read_bytes()
+
+
+def test_a_fleet_device_serves_its_eds_file(tmp_path: Path) -> None:
+    from tests.test_fleet import addresses, running
+
+    hosts = addresses(21, 2)
+    port = free_port(*hosts)
+    with running(tmp_path, "--addresses", f"{hosts[0]}-{hosts[1]}", "--device", "acg", "--device",
+                 "mx2:MX2-A2015-E", "--port", str(port), "--io-port", str(free_port(*hosts)), "--factory"):
+        for host, name in zip(hosts, ("acg", "mx2"), strict=True):
+            out = tmp_path / f"{name}.eds"
+            result = fetch(f"{host}:{port}", "-o", str(out))
+            assert result.returncode == 0, result.stderr
+    assert (tmp_path / "acg.eds").read_bytes() == generated_eds(tmp_path / "acg", "--profile", "acg")
+    assert (tmp_path / "mx2.eds").read_bytes() == generated_eds(tmp_path / "mx2", "--profile", "mx2", "--model",
+                                                                "MX2-A2015-E")
+
+
+def test_the_pytest_plugins_device_serves_its_eds_file(tmp_path: Path) -> None:
+    from cipstack.testing.device import DeviceOptions, EmulatedDevice
+
+    with EmulatedDevice(DeviceOptions(profile="rx", state_path=tmp_path / "state.json")) as device:
+        out = tmp_path / "rx.eds"
+        result = fetch(device.address, "-o", str(out))
+        assert result.returncode == 0, result.stderr
+    model = PROFILES["rx"].default_model
+    assert model is not None and model.removeprefix("RX-") in device.adapter.device.identity_info.product_name
+    assert out.read_bytes() == generated_eds(tmp_path, "--profile", "rx", "--model", model)
 
 
 def test_an_eds_emulated_device_serves_its_file_byte_for_byte(adapter_with, tmp_path: Path) -> None:  # type: ignore[no-untyped-def]
