@@ -54,7 +54,7 @@ DRIVE = {
 READ_ONLY = {CONTROL_SUPERVISOR: 6, AC_DC_DRIVE: 7}
 
 
-def _not_a_drive(ctx: Context, spec: CheckSpec) -> Outcome | None:
+def not_a_drive(ctx: Context, spec: CheckSpec) -> Outcome | None:
     device_type = (ctx.identity or {}).get("device_type")
     if device_type in DRIVE_DEVICE_TYPES:
         return None
@@ -66,7 +66,7 @@ def _not_a_drive(ctx: Context, spec: CheckSpec) -> Outcome | None:
        "length of attribute 3); 22, 23, 72, 73, where present, with 6",
        f"{PROFILE}; ACG-ET2 manual, input and output instances; CompoNet manual, Tables B-1 to B-8")
 def assemblies(ctx: Context, spec: CheckSpec) -> Outcome:
-    skipped = _not_a_drive(ctx, spec)
+    skipped = not_a_drive(ctx, spec)
     if skipped is not None:
         return skipped
     probe = ctx.probe()
@@ -85,7 +85,7 @@ def assemblies(ctx: Context, spec: CheckSpec) -> Outcome:
 
 
 def _attributes(ctx: Context, spec: CheckSpec, class_id: int, table: dict[int, Required]) -> Outcome:
-    skipped = _not_a_drive(ctx, spec)
+    skipped = not_a_drive(ctx, spec)
     if skipped is not None:
         return skipped
     probe = ctx.probe()

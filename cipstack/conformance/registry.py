@@ -72,6 +72,8 @@ class Context:
     left_behind: list[str] = field(default_factory=list)
     #: Undo the writes of the run, last first, at its end; each returns a problem in words or None.
     restores: list[Callable[[], str | None]] = field(default_factory=list)
+    #: Run the drive profile's motion checks (``motion``): they run the motor.
+    allow_motion: bool = False
 
     def probe(self, register: bool = True) -> Probe:
         """A new TCP connection (and session) to the target, closed after the check."""
