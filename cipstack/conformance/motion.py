@@ -49,6 +49,9 @@ MARGIN_S = 1.0
 #: The ramp time assumed where the drive has no AccelTime / DecelTime attribute (the ACG serves its
 #: times only in vendor attributes, ACG-ET2 manual, AC/DC Drive object).
 UNKNOWN_RAMP_S = 30.0
+#: Added to twice the deceleration time when a check ends: how long the drive is given to stop before
+#: Run1 is cleared by explicit messaging and the run noted as leaving it running.
+RELEASE_S = 5.0
 FAULT_S = 1.0
 HOLD_S = 0.5
 HANDOVER_S = 1.0
@@ -242,7 +245,7 @@ class MotionLink:
             self.as_found.get("SpeedRef", b"")) >= 2 else 0
         with contextlib.suppress(OSError):
             decel, _ = self.ramp_time(19)
-            self.send(self.control, SPEED_REFERENCE, 2 * decel + MARGIN_S, until=lambda s: not s.running)
+            self.send(self.control, SPEED_REFERENCE, 2 * decel + RELEASE_S, until=lambda s: not s.running)
             if self.force_fault_used:
                 self.write(*FORCE_FAULT, b"\0")
             if self.fault_free and self.last is not None and self.last.faulted:
