@@ -36,7 +36,7 @@ from ..eip.io_core import IoDatagramError, decode_io_datagram, encode_io_datagra
 from ..eip.originator.io_originator import SEQUENCE_COUNT_SIZE
 from .connections import Endpoint, Opened, Plan, forward_open_request, send_forward_open
 from .discovery import profile_pair
-from .model import CheckSpec, Exchange, Outcome, Verdict
+from .model import Behaviour, CheckSpec, Exchange, Outcome, Verdict
 from .profile import PROFILE, not_a_drive  # and the static checks of the group register before these
 from .registry import GET_ATTRIBUTE_SINGLE, SET_ATTRIBUTE_SINGLE, Context, check, outcome
 from .wire import Probe
@@ -74,9 +74,16 @@ AS_FOUND = {"NetCtrl": (CONTROL_SUPERVISOR, 5), "NetRef": (AC_DC_DRIVE, 4), "Spe
 FORCE_FAULT = (CONTROL_SUPERVISOR, 17)
 T = TypeVar("T")
 
+IDLE_REFERENCE = "CIP Vol. 1 §3-6.1 (32-bit run/idle header: the data of an idle packet is not applied)"
 MOTION = f"{PROFILE}: Control Supervisor state machine and run/stop event matrix"
 CITED = ("ACG-ET2 manual, Control Supervisor object (Drive Run table, Drive Fault Reset) and output instances "
          "20/21; CompoNet manual, Tables B-1 to B-8 and D-4")
+RUN_STATES = ("Control Supervisor attributes 6 State and 7 Running1 (Enabled and Run1, or Stopping and still "
+              "Running1); ACG-ET2 manual, Control Supervisor object (Drive Run table); CompoNet manual, Tables B-5 to "
+              "B-8 and D-4")
+FAULT_RESET = ("ACG-ET2 manual, Control Supervisor object, Drive Fault Reset (a reset only when the value changes "
+               "from 0 to 1; 1 over 1 does not reset); CompoNet manual, Tables B-1 to B-4 (RST: reset on a 0 to 1 "
+               "transition) and Table D-4 (Force Fault 0x11: a fault on the rising edge)")
 
 
 @dataclass(frozen=True)
@@ -381,8 +388,10 @@ def _run_and_stop(ctx: Context, spec: CheckSpec, link: MotionLink, status: Statu
 @check("profile.motion.run_forward", "run forward by the output assembly: Running1, then AtReference",
        "with RunFwd 0->1 and a speed reference of 300 (NetCtl and NetRef 1 on output 21), the input shows Running1 "
        "and then AtReference (input 71 bit 7, else 0x2A/1/3) within the drive's AccelTime (0x2A/1/18, or 30 s where "
-       "it has none) + 1 s; the permitted behaviour: Running1 at once, AtReference once the ramp ends",
-       f"{MOTION}; {CITED}")
+       "it has none) + 1 s", f"{MOTION}; {CITED}",
+       behaviours=[Behaviour("runs", "Running1 once the run command is taken (Enabled), AtReference once the ramp "
+                             "reaches the reference, both within AccelTime + 1 s",
+                             f"{RUN_STATES}; AC/DC Drive attribute 3 AtReference (CompoNet manual, Table D-7)")])
 def run_forward(ctx: Context, spec: CheckSpec) -> Outcome:
     cycle = _cycle(ctx, spec)
     if isinstance(cycle, Outcome):
@@ -393,13 +402,15 @@ def run_forward(ctx: Context, spec: CheckSpec) -> Outcome:
                        cycle.exchanges)
     ok = cycle.at_reference_after is not None
     reached = f"AtReference after {cycle.at_reference_after:.2f} s" if ok else f"no AtReference within {bound:g} s"
-    return outcome(spec, ok, f"Running1 after {cycle.running_after:.2f} s, {reached} ({cycle.accel_source})",
-                   cycle.exchanges)
+    return outcome(spec, ok, (f"{spec.permits('runs').name}: " if ok else "") + f"Running1 after "
+                   f"{cycle.running_after:.2f} s, {reached} ({cycle.accel_source})", cycle.exchanges)
 
 
 @check("profile.motion.stop", "stop by the output assembly: Running1 clears",
        "with RunFwd 1->0 the drive stops: Running1 clears within the drive's DecelTime (0x2A/1/19, or 30 s where "
-       "it has none) + 1 s (it may stay set while Stopping, as the state machine says)", f"{MOTION}; {CITED}")
+       "it has none) + 1 s (it may stay set while Stopping, as the state machine says)", f"{MOTION}; {CITED}",
+       behaviours=[Behaviour("stops", "Running1 stays set while Stopping and clears once stopped (Ready), within "
+                             "DecelTime + 1 s", RUN_STATES)])
 def stop(ctx: Context, spec: CheckSpec) -> Outcome:
     cycle = _cycle(ctx, spec)
     if isinstance(cycle, Outcome):
@@ -411,16 +422,21 @@ def stop(ctx: Context, spec: CheckSpec) -> Outcome:
     if cycle.stopped_after is None:
         return outcome(spec, False, f"still Running1 {bound:g} s after the stop ({cycle.decel_source}); last: "
                        f"{cycle.last}", cycle.exchanges)
-    return outcome(spec, True, f"stopped {cycle.stopped_after:.2f} s after RunFwd 1->0 ({cycle.decel_source})",
-                   cycle.exchanges)
+    return outcome(spec, True, f"{spec.permits('stops').name}: Running1 clear {cycle.stopped_after:.2f} s after "
+                   f"RunFwd 1->0 ({cycle.decel_source})", cycle.exchanges)
 
 
 @check("profile.motion.fault_reset", "FaultRst resets on a 0->1 edge only",
        "where the drive offers ForceFault (0x29/1/17, a rising edge forces a fault): a forced fault shows Faulted "
        "within 1 s, a FaultRst 0->1 clears it within 1 s, and a FaultRst held at 1 does not clear a fault forced "
        "meanwhile (0.5 s watched); else a FaultRst 0->1 with no fault leaves the drive Ready and not Faulted",
-       f"{MOTION}; ACG-ET2 manual, Control Supervisor object, Drive Fault Reset; CompoNet manual, Table D-4 "
-       "(Fault Rst 0x0C, Force Fault 0x11) and Tables B-1 to B-4 (RST on a 0->1 transition)")
+       f"{MOTION}; {FAULT_RESET}",
+       behaviours=[Behaviour("edge resets", "a fault forced by ForceFault 0->1 shows Faulted; FaultRst 0->1 clears it "
+                             "(State out of Faulted); FaultRst held at 1 does not clear the next one", FAULT_RESET),
+                   Behaviour("no fault to reset", "no way through CIP to fault the drive (no ForceFault): FaultRst "
+                             "0->1, then held at 1, leaves it Ready and not Faulted",
+                             "ACG-ET2 manual, Control Supervisor object (no Force Fault attribute; Drive Fault "
+                             "Reset)")])
 @_motion
 def fault_reset(ctx: Context, spec: CheckSpec, link: MotionLink, status: Status) -> Outcome:
     control = link.control
@@ -428,9 +444,9 @@ def fault_reset(ctx: Context, spec: CheckSpec, link: MotionLink, status: Status)
         seen = link.hold(control | FAULT_RST, HOLD_S)
         seen += link.hold(control, SETTLE_S)
         bad = [s for s in seen if s.faulted or s.ready is False or s.running]
-        return outcome(spec, not bad, ("with no fault, FaultRst 0->1 (no ForceFault to fault the drive): "
-                                       + (bad[0].describe() if bad else "Ready, not Faulted, throughout")),
-                       link.exchanges())
+        return outcome(spec, not bad, (f"with no fault, FaultRst 0->1 then held at 1: {bad[0].describe()}" if bad else
+                                       f"{spec.permits('no fault to reset').name}: FaultRst 0->1 then held at 1, "
+                                       "Ready and not Faulted throughout"), link.exchanges())
     problems: list[str] = []
 
     def force(holding: int) -> float | None:
@@ -464,16 +480,20 @@ def fault_reset(ctx: Context, spec: CheckSpec, link: MotionLink, status: Status)
         link.hold(control, SETTLE_S)
         if link.send(control | FAULT_RST, SPEED_REFERENCE, FAULT_S, until=lambda s: not s.faulted)[0] is None:
             problems.append("the second FaultRst 0->1 did not reset")
-    return outcome(spec, not problems, "; ".join(problems) or "a forced fault is reset by a FaultRst 0->1 edge and not "
-                   "by FaultRst held at 1", link.exchanges())
+    return outcome(spec, not problems, "; ".join(problems) or f"{spec.permits('edge resets').name}: a forced fault "
+                   "is reset by a FaultRst 0->1 edge and not by FaultRst held at 1", link.exchanges())
 
 
-def _source(before: bool | None, on: bool | None, after: bool | None) -> str | None:
-    """How a source flag followed its request bit 0 -> 1 -> 0: "follows", "fixed" (set locally), or None."""
+NET_CTRL_REFERENCE = ("CompoNet manual, Tables B-3/B-4 and D-4 (Net Ctrl, Ctrl From Net) and D-7 (Net Ref, Ref From "
+                      "Net)")
+
+
+def _source(spec: CheckSpec, before: bool | None, on: bool | None, after: bool | None) -> str | None:
+    """Which declared behaviour a source flag showed for its request bit 0 -> 1 -> 0, or None."""
     if (before, on, after) == (False, True, False):
-        return "follows"
+        return spec.permits("follows").name
     if before is not None and before == on == after:
-        return f"fixed at {int(before)}"
+        return f"{spec.permits('set locally').name} at {int(before)}"
     return None
 
 
@@ -481,8 +501,15 @@ def _source(before: bool | None, on: bool | None, after: bool | None) -> str | N
        "output 21's NetCtl (bit 5) and NetRef (bit 6) going 0 -> 1 -> 0 are seen in CtrlFromNet and RefFromNet "
        "(input 71 bits 5 and 6, else 0x29/1/15 and 0x2A/1/29) within 1 s each; a drive whose sources are set "
        "locally reports them unchanged (ACG-ET2 manual, output instance 21 note 2); with CtrlFromNet 0 a network "
-       "RunFwd 0->1 does not run the drive (0.5 s watched)", f"{MOTION}; CompoNet manual, Tables B-3/B-4 and D-4 "
-       "(Net Ctrl, Ctrl From Net), D-7 (Net Ref, Ref From Net); ACG-ET2 manual, output instance 21")
+       "RunFwd 0->1 does not run the drive (0.5 s watched)", f"{MOTION}; {NET_CTRL_REFERENCE}; ACG-ET2 manual, "
+       "output instance 21",
+       behaviours=[Behaviour("follows", "CtrlFromNet and RefFromNet follow NetCtl and NetRef within 1 s",
+                             NET_CTRL_REFERENCE),
+                   Behaviour("set locally", "the drive's run and reference sources are set locally (its keypad): "
+                             "CtrlFromNet and RefFromNet stay as they are, whatever NetCtl and NetRef say",
+                             "ACG-ET2 manual, output instance 21 note 2"),
+                   Behaviour("ignores the network run", "with CtrlFromNet 0 a network RunFwd 0->1 does not run the "
+                             "drive", f"{RUN_STATES}; Run and Stop count only with CtrlFromNet 1")])
 def net_ctrl(ctx: Context, spec: CheckSpec) -> Outcome:
     if ctx.allow_motion and (plan := _motion_plan(ctx)) is not None and plan.ot_point != 21:
         return outcome(spec, Verdict.NOT_APPLICABLE, f"not run: {plan.name}: output 20 has no NetCtl/NetRef bits")
@@ -500,7 +527,7 @@ def net_ctrl(ctx: Context, spec: CheckSpec) -> Outcome:
         observed, problems = [], []
         for name, flag in (("CtrlFromNet", "ctrl_from_net"), ("RefFromNet", "ref_from_net")):
             b, o, a = (getattr(s, flag) for s in phases)
-            how = _source(b, o, a)
+            how = _source(spec, b, o, a)
             seen = f"{name} {'/'.join('?' if v is None else str(int(v)) for v in (b, o, a))}"
             observed.append(f"{seen} ({how})" if how else seen)
             if how is None:
@@ -511,7 +538,7 @@ def net_ctrl(ctx: Context, spec: CheckSpec) -> Outcome:
             if ran:
                 problems.append("a network RunFwd 0->1 ran the drive with CtrlFromNet 0")
             else:
-                observed.append("RunFwd with CtrlFromNet 0 ignored")
+                observed.append(f"{spec.permits('ignores the network run').name} (RunFwd with CtrlFromNet 0)")
         return outcome(spec, not problems, "; ".join(problems or observed), link.exchanges())
 
 
@@ -520,8 +547,12 @@ def net_ctrl(ctx: Context, spec: CheckSpec) -> Outcome:
        "the data of an idle packet is not applied) and is still stopped when run packets with RunFwd 0 follow; "
        "permitted: Ready, or Faulted where the drive's idle action trips (CompoNet manual, Table 12, P048). What a "
        "running drive does on idle is its vendor's choice (NetIdleMode 0x29/1/20, P048; the ACG-ET2 manual names "
-       "none): not judged", "CIP Vol. 1 §3-6.1 (32-bit run/idle header: idle data is not applied); "
-       f"{MOTION}; CompoNet manual, Table 12 (P048) and Table D-4 (Net Idle Mode)")
+       "none): not judged", f"{IDLE_REFERENCE}; {MOTION}; CompoNet manual, Table 12 (P048) and Table D-4 (Net Idle "
+       "Mode)",
+       behaviours=[Behaviour("stays stopped", "the idle packets' data is not applied: the drive stays stopped and "
+                             "Ready", IDLE_REFERENCE),
+                   Behaviour("stopped by its idle action", "not running, Faulted by the drive's idle action (the "
+                             "MX2's and RX's P048 trips)", "CompoNet manual, Table 12 (P048)")])
 @_motion
 def idle(ctx: Context, spec: CheckSpec, link: MotionLink, status: Status) -> Outcome:
     during = link.hold(link.control | RUN_FWD, IDLE_S, run=False)
@@ -529,8 +560,8 @@ def idle(ctx: Context, spec: CheckSpec, link: MotionLink, status: Status) -> Out
     if not during:
         return outcome(spec, False, "no T->O packet while O->T was idle", link.exchanges())
     ran = [s for s in during + after if s.running]
-    faulted = any(s.faulted for s in during + after)
-    observed = ("ran on idle data: " + ran[0].describe()) if ran else (
-        f"not running through {len(during)} T->O packets of the idle phase and after it"
-        + (" (faulted by its idle action)" if faulted else ""))
-    return outcome(spec, not ran, observed, link.exchanges())
+    if ran:
+        return outcome(spec, False, "ran on idle data: " + ran[0].describe(), link.exchanges())
+    shown = spec.permits("stopped by its idle action" if any(s.faulted for s in during + after) else "stays stopped")
+    return outcome(spec, True, f"{shown.name}: not running through the {len(during)} T->O packets of the idle "
+                   "phase and after it", link.exchanges())

@@ -47,8 +47,9 @@ def test_each_check_fails_on_its_deviation(check_id: str) -> None:
 
 
 def test_every_check_has_a_deviation_in_the_fake() -> None:
-    """The fake (and the motor of its drive) names each check id it can deviate for: a check added to the battery without a way
-    to fail it is caught here (the parametrized test above would run it, and this says why)."""
+    """The fake (and the motor of its drive) names each check id it can deviate for: a check added to the
+    battery without a way to fail it is caught here (the parametrized test above would run it, and this
+    says why)."""
     source = "".join(Path(__file__).with_name(name).read_text(encoding="utf-8")
                      for name in ("fake_target.py", "fake_drive.py"))
     assert [i for i in check_ids() if f'"{i}"' not in source] == []

@@ -39,3 +39,12 @@ def test_without_allow_motion_nothing_is_opened() -> None:
             assert not isinstance(link, MotionLink)
             assert "--allow-motion" in link.observed
         assert ctx.accepted == [] and target.motor is not None and not target.motor.touched
+
+
+def test_every_motion_check_declares_the_behaviours_it_permits() -> None:
+    motion = {i: spec for i, spec in CHECKS.items() if i.startswith("profile.motion.")}
+    assert len(motion) == 5
+    assert [i for i, spec in motion.items() if not spec.behaviours] == []
+    assert all(b.reference and b.meaning for spec in motion.values() for b in spec.behaviours)
+    with pytest.raises(KeyError, match="declares no behaviour"):
+        motion["profile.motion.idle"].permits("runs")
