@@ -39,7 +39,7 @@ from .discovery import profile_pair
 from .model import Behaviour, CheckSpec, Exchange, Outcome, Verdict
 from .profile import PROFILE, not_a_drive  # and the static checks of the group register before these
 from .registry import GET_ATTRIBUTE_SINGLE, SET_ATTRIBUTE_SINGLE, Context, check, outcome
-from .wire import Probe
+from .wire import Probe, TargetUnreachable
 
 #: The speed reference the checks run at: 300 rpm on a drive in rpm, 3.00 Hz on one in 0.01 Hz (the MX2
 #: and RX without motor poles set, CompoNet manual Table B-1): a low speed on either.
@@ -261,6 +261,14 @@ class MotionLink:
             self.hold(self.control, SETTLE_S)
             self.hold(found_bits, SETTLE_S, speed=found_speed)
         self.opened.close()
+        try:
+            self._check_by_explicit_messaging()
+        except (TargetUnreachable, OSError) as exc:
+            ctx.left_behind.append(f"the drive could not be checked after a motion check: {exc}")
+
+    def _check_by_explicit_messaging(self) -> None:
+        """After the connection: a drive still running gets Run1 = 0, a source not as found is written back."""
+        ctx = self.ctx
         running = self.read_flag(CONTROL_SUPERVISOR, 7)
         if running:
             # The connection could not stop it: Run1 0 by explicit messaging (the event matrix's stop).

@@ -142,6 +142,22 @@ def test_the_other_sources_of_connection_points(tmp_path: Path) -> None:
                                                    and o.verdict is Verdict.NOT_APPLICABLE]
 
 
+@pytest.mark.parametrize("deviation", [None, "cm.forward_open.bad_segment"])
+def test_the_checks_that_need_no_connection_point_run_without_one(deviation: str | None) -> None:
+    """Points that do not exist: no connection point, and the Forward_Opens that need none still run (the
+    reserved segment before the message router's path is refused at its first segment)."""
+    with FakeTarget(deviation=deviation) as target:
+        report = run(target.host, target.port, groups="cm", connection_points=(0x50, 0x51, 1), timeout=2.0)
+    assert "has no size" in str(report.options["connection_points"])
+    ran = {o.id: o.verdict for o in report if o.verdict is not Verdict.NOT_APPLICABLE and o.group == "cm"}
+    expected = Verdict.FAIL if deviation else Verdict.PASS
+    assert ran == {"cm.forward_open.bad_segment": expected, "cm.forward_open.transport_class": Verdict.PASS,
+                   "cm.forward_open.null": Verdict.PASS, "cm.forward_close.unknown": Verdict.PASS,
+                   "cm.class3.read": Verdict.PASS, "cm.class3.duplicate": Verdict.PASS}
+    assert "segment E0 00 before 20 02 24 01" in next(o.observed for o in report
+                                                     if o.id == "cm.forward_open.bad_segment")
+
+
 def test_every_applicable_check_passes_on_an_eds_emulated_device(adapter_with, tmp_path: Path) -> None:  # type: ignore[no-untyped-def]
     eds = Path(__file__).with_name("fake_device.eds")
     peer = adapter_with("--eds", str(eds))
@@ -181,9 +197,10 @@ CPPPO_DEVIATIONS = {
     "router.get_attribute_list": "status 0 with a failed member, no count, 0x16 for a missing attribute",
     "cm.class3.read": "answers SendUnitData on the O->T connection ID, not the originator's T->O ID",
     "cm.class3.duplicate": "executes a request repeated with the same sequence count",
-    # It has no Forward_Open: these two run without a connection point and find that.
+    # It has no Forward_Open: these three run without a connection point and find that.
     "cm.forward_open.transport_class": "Forward_Open: encapsulation status 0x0008 (0x01 with 0x0103 expected)",
     "cm.forward_open.null": "Forward_Open: encapsulation status 0x0008 (0 or 0x01 with 0x0132 expected)",
+    "cm.forward_open.bad_segment": "Forward_Open: encapsulation status 0x0008 (0x01 with 0x0315 expected)",
 }
 
 
