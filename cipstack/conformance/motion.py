@@ -37,7 +37,7 @@ from ..eip.originator.io_originator import SEQUENCE_COUNT_SIZE
 from .connections import Endpoint, Opened, Plan, forward_open_request, send_forward_open
 from .discovery import profile_pair
 from .model import Behaviour, CheckSpec, Exchange, Outcome, Verdict
-from .profile import PROFILE, not_a_drive  # and the static checks of the group register before these
+from .profile import PROFILE, clear_fault_of_the_run, not_a_drive  # and the static checks register before these
 from .registry import GET_ATTRIBUTE_SINGLE, SET_ATTRIBUTE_SINGLE, Context, check, outcome
 from .wire import Probe, TargetUnreachable
 
@@ -314,6 +314,8 @@ def motion_link(ctx: Context, spec: CheckSpec) -> Iterator[MotionLink | Outcome]
                       "70 opens")
         return
     probe = ctx.probe()
+    # A fault an earlier group caused (a class 1 timeout) is cleared; one the drive had is its own.
+    clear_fault_of_the_run(ctx, probe)
     endpoint = Endpoint(ctx, probe)
     as_found = {}
     for name, (class_id, attribute) in AS_FOUND.items():

@@ -75,6 +75,8 @@ class Context:
     restores: list[Callable[[], str | None]] = field(default_factory=list)
     #: Run the drive profile's motion checks (``motion``): they run the motor.
     allow_motion: bool = False
+    #: For a drive: whether it was faulted when the run began (None: not a drive, or not read).
+    drive_faulted_at_start: bool | None = None
 
     def probe(self, register: bool = True) -> Probe:
         """A new TCP connection (and session) to the target, closed after the check."""

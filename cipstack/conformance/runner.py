@@ -20,7 +20,9 @@ from . import (  # noqa: F401 - they declare checks
     profile,
     router,
 )
+from .discovery import DRIVE_DEVICE_TYPES
 from .model import FINAL, GROUPS, CheckSpec, Outcome, Report, Verdict
+from .profile import faulted
 from .registry import CHECKS, RUNNERS, CheckFunction, Context, outcome
 from .wire import Probe, TargetUnreachable, frame
 
@@ -123,6 +125,11 @@ def run(host: str, port: int = DEFAULT_PORT, *, eds: str | os.PathLike[str] | Ed
     context = Context(host, port, timeout, allow_writes, allow_reset, doc, view, allow_motion=allow_motion)
     started = time.monotonic()
     _preflight(context)
+    if (context.identity or {}).get("device_type") in DRIVE_DEVICE_TYPES:
+        # A drive: whether it is faulted now, so that a fault the run causes is told from one it had.
+        with Probe(host, port, timeout) as probe:
+            probe.register()
+            context.drive_faulted_at_start = faulted(probe)
     report = Report(f"{host}:{port}", groups=selected, identity=context.identity,
                     options={"eds": os.fspath(eds) if isinstance(eds, (str, os.PathLike)) else None,
                              "allow_writes": allow_writes, "allow_reset": allow_reset, "allow_motion": allow_motion,

@@ -77,7 +77,11 @@ def test_without_an_eds_the_battery_finds_the_points_itself(name: str, adapter_w
     assert str(report.options["connection_points"]).startswith(SOURCES[name])
     assert report.options["eds"].startswith("the device's own EDS file")  # group eds runs with it
     assert len(not_applicable(report)) <= 6, not_applicable(report)
-    assert all(o.verdict is Verdict.PASS for o in report if o.group in ("cm", "class1", "final"))
+    assert all(o.verdict is Verdict.PASS for o in report if o.group in ("cm", "class1"))
+    # The MX2 and RX trip when a class 1 connection times out (P045 = 0, CompoNet manual Table 12): the
+    # battery's class1.timeout faults them, and without --allow-writes it says so rather than write.
+    (final,) = [o for o in report if o.group == "final"]
+    assert final.verdict is (Verdict.PASS if name == "acg" else Verdict.WARNING), final.observed
 
 
 #: The ACG takes its run command and reference from the network only when its keypad says so (drv = 4
@@ -102,6 +106,19 @@ def _get(peer: PeerProcess, attribute: str) -> int:
     done = subprocess.run(python_module("cipstack", "get", f"{peer.host}:{peer.port}", attribute, "--json"),
                           capture_output=True, text=True, timeout=30, check=True)
     return int(json.loads(done.stdout)["value"])
+
+
+@pytest.mark.parametrize("allow_writes", [False, True])
+def test_a_fault_the_run_caused_is_cleared_only_when_writes_are_allowed(allow_writes: bool, adapter_with) -> None:  # type: ignore[no-untyped-def]
+    peer = adapter_with("--profile", "mx2", "--model", "MX2-A2015-E", "--factory")
+    report = run(peer.host, peer.port, groups="class1", allow_writes=allow_writes)
+    (final,) = [o for o in report if o.id == "final.as_found"]
+    assert "faulted during the run (FaultCode 10 75), not at its start" in final.observed
+    if allow_writes:
+        assert final.verdict is Verdict.PASS and "FaultRst 0->1 cleared it" in final.observed
+    else:
+        assert final.verdict is Verdict.WARNING and "nothing is written without --allow-writes" in final.observed
+    assert _get(peer, "0x29/1/10") == int(not allow_writes)
 
 
 def test_without_allow_motion_the_motor_is_not_run(adapter_with) -> None:  # type: ignore[no-untyped-def]
