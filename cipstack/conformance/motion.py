@@ -250,7 +250,7 @@ class MotionLink:
             NET_REF if self.as_found.get("NetRef", b"\0")[:1] == b"\1" else 0)
         found_speed = struct.unpack("<h", self.as_found["SpeedRef"][:2])[0] if len(
             self.as_found.get("SpeedRef", b"")) >= 2 else 0
-        with contextlib.suppress(OSError):
+        with contextlib.suppress(OSError, TargetUnreachable):  # the explicit part below notes what is left
             decel, _ = self.ramp_time(19)
             self.send(self.control, SPEED_REFERENCE, 2 * decel + RELEASE_S, until=lambda s: not s.running)
             if self.force_fault_used:
