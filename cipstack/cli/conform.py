@@ -25,6 +25,10 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--allow-writes", action="store_true",
                    help="also run checks that write (a set of a read-only attribute)")
     p.add_argument("--allow-reset", action="store_true", help="also reset the device (Identity Reset type 0)")
+    p.add_argument("--allow-motion", action="store_true",
+                   help="also run the AC drive profile's motion checks: they RUN THE MOTOR (forward at a low "
+                        "speed reference, stop, fault reset, NetCtrl/NetRef, idle); the drive is stopped and its "
+                        "sources restored at the end")
     p.add_argument("--strict", action="store_true",
                    help="warnings are failures: in the exit status and the JUnit report")
     p.add_argument("--json", action="store_true", help="the report as one JSON object on stdout")
@@ -76,7 +80,7 @@ def cmd_conform(args: argparse.Namespace) -> int:
     try:
         report = run(host, port, eds=eds, groups=groups, allow_writes=args.allow_writes,
                      allow_reset=args.allow_reset, timeout=args.timeout, connection_points=points,
-                     eds_dir=args.eds_dir)
+                     eds_dir=args.eds_dir, allow_motion=args.allow_motion)
     except TargetUnreachable as exc:
         print(f"cipstack conform: {exc}", file=sys.stderr)
         return EXIT_USAGE

@@ -370,20 +370,26 @@ COMMANDS: dict[tuple[str, ...], CommandText] = {
         "the reply, the reference and a verdict (pass, fail, warning, n/a). Groups: encap "
         "(encapsulation), router (message router and errors), objects (required objects), cm (Connection "
         "Manager Forward_Open matrix), class1 (class 1 behaviour), eds (EDS against the device), profile "
-        "(the AC drive profile's assemblies and attributes), and "
+        "(the AC drive profile's assemblies and attributes; with --allow-motion also its motion: run forward, "
+        "stop, fault reset, NetCtrl/NetRef and idle, over a class 1 connection of assemblies 20/21 and "
+        "70/71, within the drive's own acceleration and deceleration times), and "
         "final (the device as found: run after every run that opened a connection or wrote). cm and "
         "class1 take their connection points from --eds; without it from --connection-points, the "
         "device's own EDS file (File object), --eds-dir, the AC drive profile or bounded probing of its "
         "assemblies, and say which.\n\n"
         "Safe by default: nothing is written without --allow-writes, the device is not reset without "
-        "--allow-reset, requests are rate-bounded, every connection opened is closed on a live session "
+        "--allow-reset, the motor is not run without --allow-motion (the drive is stopped and its "
+        "NetCtrl/NetRef and speed reference restored after each motion check, whatever happens), "
+        "requests are rate-bounded, every connection opened is closed on a live session "
         "and every write is written back. Exit status 0 when no check fails, 1 when one fails, 2 for bad "
         "arguments or a target that is unreachable or does not speak EtherNet/IP; with --strict a "
         "warning counts as a failure.",
         (("cipstack conform 127.0.0.1", "every group, the connection points found on the device"),
          ("cipstack conform 192.168.1.20 --eds drive.eds --junit conform.xml --html conform.html",
           "all six groups, with a JUnit file for CI and a page to attach to a test report"),
-         ("cipstack conform 127.0.0.1:44818 --only encap,router --json", "two groups, as one JSON object")),
+         ("cipstack conform 127.0.0.1:44818 --only encap,router --json", "two groups, as one JSON object"),
+         ("cipstack conform 127.0.0.1 --only profile --allow-motion",
+          "the AC drive profile, running the motor: only with the machine safe to move")),
     ),
     ("completion",): CommandText(
         "print the shell completion script for bash or zsh",

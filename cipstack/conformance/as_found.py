@@ -24,6 +24,7 @@ from .connections import (
     send_forward_open,
 )
 from .model import CheckSpec, Outcome, Verdict
+from .profile import clear_fault_of_the_run
 from .registry import Context, check, outcome
 from .wire import Probe
 
@@ -137,9 +138,14 @@ def as_found(ctx: Context, spec: CheckSpec) -> Outcome:
         problem = _reopen(ctx, probe, endpoint, request, points)
         if problem is not None:
             problems.append(problem)
+    cleared, clear = clear_fault_of_the_run(ctx, probe)
+    if not clear and (ctx.allow_writes or ctx.allow_motion):
+        problems.append(cleared)
     if problems:
         return outcome(spec, False, "left behind: " + "; ".join(problems) + f". To clear it: {HOW_TO_CLEAR}",
                        probe.exchanges)
-    return outcome(spec, True, f"{len(points)} connection point(s) opened again and closed; {restored} write(s) "
-                   "restored", probe.exchanges)
+    # A fault the run caused and was not allowed to clear: allowed by the options, so a warning.
+    return outcome(spec, Verdict.PASS if clear else Verdict.WARNING, f"{len(points)} connection point(s) opened "
+                   f"again and closed; {restored} write(s) restored" + (f"; {cleared}" if cleared else ""),
+                   probe.exchanges)
 

@@ -41,6 +41,7 @@ if TYPE_CHECKING:
     from ..eds.model import EdsDocument
 
 CM = request_path(0x06, 1)
+MESSAGE_ROUTER = request_path(0x02, 1)
 FORWARD_OPEN, LARGE_FORWARD_OPEN, FORWARD_CLOSE = 0x54, 0x5B, 0x4E
 EXTENDED = "CIP Vol. 1 §3-5.5.2 and Table 3-5.33 (extended status); Wireshark packet-cip.c (cip_cm_ext_st_vals)"
 #: Where each extended status is listed.
@@ -362,12 +363,17 @@ def _unused_instance(ctx: Context, plan: Plan) -> int:
 
 
 @check("cm.forward_open.bad_segment", "Forward_Open whose connection path starts with a reserved segment (0xE0)",
-       "status 0x01, extended 0x0315 (invalid segment in connection path)", EXTENDED,
+       "status 0x01, extended 0x0315 (invalid segment in connection path); without a connection point, the path "
+       "is the segment then the message router's (20 02 24 01): the target refuses it at its first segment, "
+       "before any application path", EXTENDED,
        codes=[extended(0x0315, "invalid segment in connection path")])
-@_on_main_plan
+@_with_or_without_points
 def bad_segment(ctx: Context, spec: CheckSpec, plan: Plan, probe: Probe, endpoint: Endpoint) -> Outcome:
-    request = replace(forward_open_request(plan), connection_path=b"\xE0\x00" + plan.path)
-    return _refused(ctx, spec, probe, endpoint, request, "segment E0 00")
+    # CIP Vol. 1 §3-5.5.2: the connection path is parsed from its first segment; a reserved one is
+    # refused there, so no assembly is needed behind it.
+    behind = MESSAGE_ROUTER if plan is NO_POINTS else plan.path
+    request = replace(forward_open_request(plan), connection_path=b"\xE0\x00" + behind)
+    return _refused(ctx, spec, probe, endpoint, request, f"segment E0 00 before {behind.hex(' ')}")
 
 
 @check("cm.forward_open.consuming_point", "Forward_Open to an O->T (consuming) point the device does not have",
@@ -448,7 +454,7 @@ def large_forward_open(ctx: Context, spec: CheckSpec, plan: Plan, probe: Probe, 
        codes=[extended(0x0107, "target connection not found")])
 def close_unknown(ctx: Context, spec: CheckSpec) -> Outcome:
     probe = ctx.probe()
-    reply = forward_close(probe, new_triad(), request_path(0x02, 1))
+    reply = forward_close(probe, new_triad(), MESSAGE_ROUTER)
     return _refusal(spec, probe, reply, None, "serial of no connection")
 
 

@@ -153,10 +153,12 @@ def _open_closes(ctx: Context, probe: Probe, endpoint: Endpoint, plan: Plan) -> 
     return False, reply.extended if reply.status == 0x01 else None
 
 
-def _profile(ctx: Context, probe: Probe, endpoint: Endpoint) -> list[Plan]:
-    sizes = {i: assembly_size(probe, i) for i in (*PROFILE_OUTPUTS, *PROFILE_INPUTS)}
-    for output in PROFILE_OUTPUTS:
-        for input in PROFILE_INPUTS:
+def profile_pair(ctx: Context, probe: Probe, endpoint: Endpoint, outputs: tuple[int, ...] = PROFILE_OUTPUTS,
+                 inputs: tuple[int, ...] = PROFILE_INPUTS) -> list[Plan]:
+    """The first pair of ``outputs`` x ``inputs`` (in order) that opens as an exclusive owner (closed at once)."""
+    sizes = {i: assembly_size(probe, i) for i in (*outputs, *inputs)}
+    for output in outputs:
+        for input in inputs:
             out_size, in_size = sizes[output], sizes[input]
             if out_size is None or in_size is None:
                 continue
@@ -224,7 +226,7 @@ def discover(ctx: Context, points: tuple[int, int, int] | None = None,
     endpoint = Endpoint(ctx, probe)
     device_type = (ctx.identity or {}).get("device_type")
     if device_type in DRIVE_DEVICE_TYPES:
-        profile = _profile(ctx, probe, endpoint)
+        profile = profile_pair(ctx, probe, endpoint)
         if profile:
             found.source, found.plans = "the AC drive profile (assemblies 20-23 and 70-73)", profile
             return found

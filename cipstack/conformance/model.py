@@ -52,6 +52,20 @@ class Code:
 
 
 @dataclass(frozen=True)
+class Behaviour:
+    """What a check's target may do, as the specification permits, where the check judges behaviour
+    rather than a status (the drive profile's motion): a short name the check reports it by, what it
+    is, and where it is written."""
+
+    name: str
+    meaning: str
+    reference: str
+
+    def __str__(self) -> str:
+        return f"{self.name}: {self.meaning} ({self.reference})"
+
+
+@dataclass(frozen=True)
 class CheckSpec:
     """One check as declared: ``id`` is ``GROUP.WHAT[.DETAIL]``; ``codes``, every status the
     specification permits as the answer (the check judges by them: one source for both)."""
@@ -61,6 +75,7 @@ class CheckSpec:
     expected: str
     reference: str
     codes: tuple[Code, ...] = ()
+    behaviours: tuple[Behaviour, ...] = ()
 
     @property
     def group(self) -> str:
@@ -70,10 +85,17 @@ class CheckSpec:
         """PASS (or WARNING) for a permitted status, FAIL for any other and for none."""
         return next((c.verdict for c in self.codes if c.value == value), Verdict.FAIL)
 
+    def permits(self, name: str) -> Behaviour:
+        """The declared behaviour ``name``: a check reports only behaviours it declares (KeyError else)."""
+        for behaviour in self.behaviours:
+            if behaviour.name == name:
+                return behaviour
+        raise KeyError(f"{self.id} declares no behaviour {name!r}")
+
     @property
     def permitted(self) -> str:
-        """The permitted statuses in words, for the reports and the docs."""
-        return "; ".join(str(c) for c in self.codes)
+        """The permitted statuses and behaviours in words, for the reports and the docs."""
+        return "; ".join([*(str(c) for c in self.codes), *(str(b) for b in self.behaviours)])
 
 
 @dataclass
@@ -125,6 +147,8 @@ class Outcome:
                 "verdict": self.verdict.value, "expected": self.spec.expected, "reference": self.spec.reference,
                 "permitted": [{"code": c.value, "meaning": c.meaning, "reference": c.reference,
                                "verdict": c.verdict.value} for c in self.spec.codes],
+                "behaviours": [{"name": b.name, "meaning": b.meaning, "reference": b.reference}
+                               for b in self.spec.behaviours],
                 "observed": self.observed, "exchanges": [e.as_dict() for e in self.exchanges]}
 
 

@@ -54,7 +54,34 @@ DRIVE = {
 READ_ONLY = {CONTROL_SUPERVISOR: 6, AC_DC_DRIVE: 7}
 
 
-def _not_a_drive(ctx: Context, spec: CheckSpec) -> Outcome | None:
+def faulted(probe: Probe) -> bool | None:
+    """Control Supervisor attribute 10 Faulted; None where it cannot be read."""
+    reply = probe.request(0x0E, request_path(CONTROL_SUPERVISOR, 1, 10))
+    return bool(reply.data[0]) if reply.status == 0 and reply.data else None
+
+
+def clear_fault_of_the_run(ctx: Context, probe: Probe) -> tuple[str, bool]:
+    """A drive found not faulted that is faulted now was faulted by the run (a class 1 connection
+    timed out on a drive whose network-loss action is a trip: the MX2's and RX's P045 default,
+    CompoNet manual Table 12). With --allow-writes or --allow-motion: FaultRst (0x29/1/12) 0 -> 1 -> 0
+    by explicit messaging, as the drive was found; without, nothing is written and it is only said.
+    What was found or done in words ("" when nothing) and whether the drive is clear."""
+    if ctx.drive_faulted_at_start is not False or not faulted(probe):
+        return "", True
+    code = probe.request(0x0E, request_path(CONTROL_SUPERVISOR, 1, 13))
+    what = f"FaultCode {code.data.hex(' ') if code.status == 0 else 'unreadable'}"
+    if not (ctx.allow_writes or ctx.allow_motion):
+        return (f"the drive was faulted during the run ({what}), not at its start (a class 1 timeout trips a drive "
+                "whose network-loss action is a trip); not cleared, as nothing is written without --allow-writes: "
+                "clear it with FaultRst 0 then 1 (0x29/1/12) or on the drive"), False
+    for value in (b"\0", b"\1", b"\0"):  # a 0 -> 1 edge (ACG-ET2 manual, Drive Fault Reset), then 0 as found
+        probe.request(0x10, request_path(CONTROL_SUPERVISOR, 1, 12), value)
+    clear = faulted(probe) is False
+    return (f"the drive was faulted during the run ({what}), not at its start: FaultRst 0->1 "
+            + ("cleared it" if clear else "did not clear it; clear it on the drive (its STOP/RESET key)")), clear
+
+
+def not_a_drive(ctx: Context, spec: CheckSpec) -> Outcome | None:
     device_type = (ctx.identity or {}).get("device_type")
     if device_type in DRIVE_DEVICE_TYPES:
         return None
@@ -66,7 +93,7 @@ def _not_a_drive(ctx: Context, spec: CheckSpec) -> Outcome | None:
        "length of attribute 3); 22, 23, 72, 73, where present, with 6",
        f"{PROFILE}; ACG-ET2 manual, input and output instances; CompoNet manual, Tables B-1 to B-8")
 def assemblies(ctx: Context, spec: CheckSpec) -> Outcome:
-    skipped = _not_a_drive(ctx, spec)
+    skipped = not_a_drive(ctx, spec)
     if skipped is not None:
         return skipped
     probe = ctx.probe()
@@ -85,7 +112,7 @@ def assemblies(ctx: Context, spec: CheckSpec) -> Outcome:
 
 
 def _attributes(ctx: Context, spec: CheckSpec, class_id: int, table: dict[int, Required]) -> Outcome:
-    skipped = _not_a_drive(ctx, spec)
+    skipped = not_a_drive(ctx, spec)
     if skipped is not None:
         return skipped
     probe = ctx.probe()

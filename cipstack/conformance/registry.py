@@ -8,7 +8,7 @@ from collections.abc import Callable, Iterable
 from dataclasses import dataclass, field
 from typing import TYPE_CHECKING, Any
 
-from .model import CheckSpec, Code, Exchange, Outcome, Verdict
+from .model import Behaviour, CheckSpec, Code, Exchange, Outcome, Verdict
 from .wire import Probe
 
 if TYPE_CHECKING:
@@ -27,11 +27,12 @@ CheckFunction = Callable[["Context", CheckSpec], "Outcome | Iterable[Outcome]"]
 RUNNERS: dict[str, list[tuple[CheckSpec, CheckFunction]]] = {}
 
 
-def check(id: str, title: str, expected: str, reference: str, codes: Iterable[Code] = ()
-          ) -> Callable[[CheckFunction], CheckFunction]:
+def check(id: str, title: str, expected: str, reference: str, codes: Iterable[Code] = (),
+          behaviours: Iterable[Behaviour] = ()) -> Callable[[CheckFunction], CheckFunction]:
     """Declare a check and register the function that runs it; ``codes``: every status the
-    specification permits as the answer, each with its reference."""
-    spec = CheckSpec(id, title, expected, reference, tuple(codes))
+    specification permits as the answer, each with its reference; ``behaviours``: likewise, where
+    the check judges what the target does."""
+    spec = CheckSpec(id, title, expected, reference, tuple(codes), tuple(behaviours))
     if id in CHECKS:
         raise ValueError(f"check {id} declared twice")
     CHECKS[id] = spec
@@ -72,6 +73,10 @@ class Context:
     left_behind: list[str] = field(default_factory=list)
     #: Undo the writes of the run, last first, at its end; each returns a problem in words or None.
     restores: list[Callable[[], str | None]] = field(default_factory=list)
+    #: Run the drive profile's motion checks (``motion``): they run the motor.
+    allow_motion: bool = False
+    #: For a drive: whether it was faulted when the run began (None: not a drive, or not read).
+    drive_faulted_at_start: bool | None = None
 
     def probe(self, register: bool = True) -> Probe:
         """A new TCP connection (and session) to the target, closed after the check."""

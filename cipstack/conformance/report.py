@@ -200,8 +200,9 @@ def markdown_table(group: str) -> str:
             "|---|---|---|---|---|"]
     for spec in CHECKS.values():
         if spec.group == group:
-            codes = ", ".join(f"0x{c.value:0{4 if c.value > 0xFF else 2}X} ({c.meaning})"
-                              + (" warning" if c.verdict is Verdict.WARNING else "") for c in spec.codes)
+            codes = ", ".join([*(f"0x{c.value:0{4 if c.value > 0xFF else 2}X} ({c.meaning})"
+                                 + (" warning" if c.verdict is Verdict.WARNING else "") for c in spec.codes),
+                               *(f"{b.name}: {b.meaning}" for b in spec.behaviours)])
             rows.append(f"| `{spec.id}` | {cell(spec.title)} | {cell(spec.expected)} | {cell(codes) or '-'} | "
                         f"{cell(spec.reference)} |")
     return "\n".join(rows)

@@ -15,11 +15,14 @@ from . import (  # noqa: F401 - they declare checks
     eds_checks,
     encapsulation,
     more_wire,
+    motion,
     objects,
     profile,
     router,
 )
+from .discovery import DRIVE_DEVICE_TYPES
 from .model import FINAL, GROUPS, CheckSpec, Outcome, Report, Verdict
+from .profile import faulted
 from .registry import CHECKS, RUNNERS, CheckFunction, Context, outcome
 from .wire import Probe, TargetUnreachable, frame
 
@@ -105,7 +108,7 @@ def _run_check(context: Context, spec: CheckSpec, function: CheckFunction) -> li
 def run(host: str, port: int = DEFAULT_PORT, *, eds: str | os.PathLike[str] | EdsDocument | None = None,
         groups: str | Iterable[str] | None = None, allow_writes: bool = False, allow_reset: bool = False,
         timeout: float = 5.0, connection_points: tuple[int, int, int] | None = None,
-        eds_dir: str | os.PathLike[str] | None = None) -> Report:
+        eds_dir: str | os.PathLike[str] | None = None, allow_motion: bool = False) -> Report:
     """Run the conformance battery against ``host:port``.
 
     ``eds``: an EDS file (or a read ``EdsDocument``) of the target, which enables group ``eds`` and
@@ -113,17 +116,24 @@ def run(host: str, port: int = DEFAULT_PORT, *, eds: str | os.PathLike[str] | Ed
     itself (``discovery``): ``connection_points`` (output, input, configuration) names them, else
     the device's own EDS (File object), an EDS of ``eds_dir`` for its identity, the AC drive profile,
     bounded probing of its assemblies. ``groups``: the groups to run (default all). Nothing is
-    written without ``allow_writes`` and the device is not reset without ``allow_reset``.
+    written without ``allow_writes`` and the device is not reset without ``allow_reset``; the drive
+    profile's motion checks (``motion``) run the motor only with ``allow_motion``.
     ``TargetUnreachable`` when the target does not accept a connection and a session.
     """
     selected = parse_groups(groups if groups is None or isinstance(groups, str) else list(groups))
     doc, view = _load_eds(eds)
-    context = Context(host, port, timeout, allow_writes, allow_reset, doc, view)
+    context = Context(host, port, timeout, allow_writes, allow_reset, doc, view, allow_motion=allow_motion)
     started = time.monotonic()
     _preflight(context)
+    if (context.identity or {}).get("device_type") in DRIVE_DEVICE_TYPES:
+        # A drive: whether it is faulted now, so that a fault the run causes is told from one it had.
+        with Probe(host, port, timeout) as probe:
+            probe.register()
+            context.drive_faulted_at_start = faulted(probe)
     report = Report(f"{host}:{port}", groups=selected, identity=context.identity,
                     options={"eds": os.fspath(eds) if isinstance(eds, (str, os.PathLike)) else None,
-                             "allow_writes": allow_writes, "allow_reset": allow_reset, "timeout": timeout})
+                             "allow_writes": allow_writes, "allow_reset": allow_reset, "allow_motion": allow_motion,
+                             "timeout": timeout})
     if doc is not None:
         report.options["connection_points"] = "the EDS given (--eds)"
     elif set(selected) & NEED_POINTS:

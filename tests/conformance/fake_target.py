@@ -23,6 +23,8 @@ from dataclasses import dataclass, field
 
 from tests.fakes import HEADER, cpf, encapsulation_frames, split_cpf
 
+from .fake_drive import ACCEL_MS, DECEL_MS, FakeDrive
+
 FO_HEAD = struct.Struct("<BBIIHHIB3x")
 FO_SMALL = struct.Struct("<IHIHBB")
 FO_LARGE = struct.Struct("<IIIIBB")
@@ -41,8 +43,12 @@ CYCLE_US = 10_000
 #: Output -> input assembly pairs the device connects (fake_device.eds Connection1 and 2).
 PAIRS = {100: 101, 102: 103}
 ASSEMBLY_SIZE = 2
-#: The drive attributes a Set_Attribute_Single may change (Run1, Run2, FaultRst, SpeedRef).
-SETTABLE = {(0x29, 3), (0x29, 4), (0x29, 12), (0x2A, 8)}
+#: The AC drive's pairs (an output of the profile produces its input) and their data sizes.
+DRIVE_PAIRS = {20: 70, 21: 71}
+DRIVE_ASSEMBLY_SIZE = 4
+#: The drive attributes a Set_Attribute_Single may change (Run1, Run2, NetCtrl, FaultRst, ForceFault,
+#: NetRef, SpeedRef).
+SETTABLE = {(0x29, 3), (0x29, 4), (0x29, 5), (0x29, 12), (0x29, 17), (0x2A, 4), (0x2A, 8)}
 #: Sessions this target holds at once (``encap.session_limit`` opens more).
 MAX_SESSIONS = 12
 #: The message router's path: a class 3 connection's.
@@ -70,6 +76,7 @@ class Connection:
     ot_id: int
     to_id: int
     ot_point: int
+    to_point: int
     api: float
     timeout: float
     destination: tuple[str, int]
@@ -93,6 +100,9 @@ class FakeTarget:
         self.drive = drive
         #: The checks this target deviates for (one, in the tests that fail one check; several, for the docs).
         self.deviations = {deviation} if isinstance(deviation, str) else set(deviation or ())
+        #: The motor of the drive, moved by class 1 output 20/21 (``fake_drive``).
+        self.motor = FakeDrive(self.deviations) if drive else None
+        self.pairs = {**PAIRS, **(DRIVE_PAIRS if drive else {})}
         self.variant = variant
         self.opener_timeout = opener_timeout
         #: TCP sessions this target closed because their class 1 connection timed out.
@@ -199,10 +209,11 @@ class FakeTarget:
             size = 3 if self.deviates("profile.assemblies") and instance == 71 else 4
             table[(0x04, instance)] = {3: bytes(size), 4: struct.pack("<H", size)}
         state = 9 if self.deviates("profile.control_supervisor") else 3  # 3 Ready; 9 is no state
-        table[(0x29, 1)] = {3: b"\0", 4: b"\0", 6: bytes((state,)), 7: b"\0", 8: b"\0", 9: b"\1", 10: b"\0",
-                            12: b"\0", 13: struct.pack("<H", 0), 15: b"\0"}
+        table[(0x29, 1)] = {3: b"\0", 4: b"\0", 5: b"\0", 6: bytes((state,)), 7: b"\0", 8: b"\0", 9: b"\1",
+                            10: b"\0", 12: b"\0", 13: struct.pack("<H", 0), 15: b"\0", 17: b"\0"}
         speed = struct.pack("<i" if self.deviates("profile.ac_dc_drive") else "<h", 0)  # a DINT, not an INT
-        table[(0x2A, 1)] = {3: b"\0", 7: speed, 8: struct.pack("<h", 0), 29: b"\0"}
+        table[(0x2A, 1)] = {3: b"\0", 4: b"\0", 7: speed, 8: struct.pack("<h", 0), 18: struct.pack("<H", ACCEL_MS),
+                            19: struct.pack("<H", DECEL_MS), 29: b"\0"}
         return table
 
     # -- TCP ---------------------------------------------------------------------------------------------
@@ -366,6 +377,8 @@ class FakeTarget:
         if (class_id, instance) == (0x02, 1) and self.deviates("objects.message_router"):
             return reply(service, 0x05)
         values = self.attributes.get((class_id, instance or 0))
+        if self.motor is not None and class_id in (0x29, 0x2A):
+            self.motor.sync(self.attributes[(0x29, 1)], self.attributes[(0x2A, 1)])
         if values is None:
             return reply(service, 0x08 if self.deviates("router.unknown_instance") else 0x05)
         if service == 0x0E:
@@ -394,6 +407,8 @@ class FakeTarget:
             if (class_id, attribute) not in SETTABLE:
                 return reply(service, 0x0E)
             values[attribute] = data
+            if self.motor is not None:
+                self.motor.set(class_id, attribute, data)
             return reply(service)
         if service == 0x05 and class_id == 0x01:
             return reply(service, 0x08 if self.deviates("objects.identity.reset") else 0)
@@ -457,11 +472,11 @@ class FakeTarget:
         if len(path) != 8 or path[0:2] != b"\x20\x04" or path[2] != 0x24 or path[4] != 0x2C or path[6] != 0x2C:
             return self._refuse(service, triad, 0x0117 if self.deviates("cm.forward_open.bad_segment") else 0x0315)
         ot_point, to_point = path[5], path[7]
-        if ot_point not in PAIRS:
+        if ot_point not in self.pairs:
             # 0x0315 is allowed and less precise: a warning ("warn:" variant).
             code = 0x0315 if self.variant == "warn:cm.forward_open.consuming_point" else 0x012A
             return self._refuse(service, triad, 0x0110 if self.deviates("cm.forward_open.consuming_point") else code)
-        if to_point != PAIRS[ot_point]:
+        if to_point != self.pairs[ot_point]:
             return self._refuse(service, triad, 0x0110 if self.deviates("cm.forward_open.producing_point") else 0x012B)
         if ot_point == 102 and self.deviates("eds.connection.open"):
             return self._refuse(service, triad, 0x0113)
@@ -474,13 +489,14 @@ class FakeTarget:
                                 CYCLE_US & 0xFFFF, CYCLE_US >> 16)
         if self.variant == "cm.forward_open.rpi":
             ot_api, to_api = max(ot_rpi, CYCLE_US), max(to_rpi, CYCLE_US)
-        if ot_size != 2 + 4 + ASSEMBLY_SIZE and not self.deviates("cm.forward_open.ot_size"):
+        size = DRIVE_ASSEMBLY_SIZE if ot_point in DRIVE_PAIRS else ASSEMBLY_SIZE
+        if ot_size != 2 + 4 + size and not self.deviates("cm.forward_open.ot_size"):
             if self.variant == "cm.forward_open.ot_size":
                 return self._refuse(service, triad, 0x0109)
-            return self._refuse(service, triad, 0x0127, 2 + 4 + ASSEMBLY_SIZE)
-        if to_size != 2 + ASSEMBLY_SIZE:
+            return self._refuse(service, triad, 0x0127, 2 + 4 + size)
+        if to_size != 2 + size:
             code = 0x0127 if self.deviates("cm.forward_open.to_size") else 0x0128
-            return self._refuse(service, triad, code, 2 + ASSEMBLY_SIZE)
+            return self._refuse(service, triad, code, 2 + size)
         with self._lock:
             if not self.deviates("cm.forward_open.duplicate") and any(
                     c.triad == triad for c in self.connections.values()):
@@ -491,7 +507,7 @@ class FakeTarget:
             port = next((struct.unpack_from(">H", d, 2)[0] for t, d in extra if t == 0x8001), 2222)
             ot_id = next(self._ids)
             api = max(to_api, CYCLE_US) / 1e6
-            connection = Connection(triad, ot_id, to_id, ot_point, api,
+            connection = Connection(triad, ot_id, to_id, ot_point, to_point, api,
                                     max(ot_api, CYCLE_US) / 1e6 * (4 << multiplier), (self.host, port),
                                     time.monotonic() + 10.0,
                                     session_socket=getattr(self._local, "conn", None))
@@ -581,6 +597,8 @@ class FakeTarget:
                 self._drop(connection)  # this stack closes the connection on idle
                 continue
             connection.last_heard = time.monotonic() + connection.timeout
+            if self.motor is not None and connection.ot_point in DRIVE_PAIRS and len(header) == 4:
+                self.motor.consume(connection.ot_point, data[IO_HEAD.size + 4:], bool(header[0] & 1))
 
     def _time_out_and_keep(self, connection: Connection) -> None:
         """Stop producing, keep the ownership, and close the TCP session that opened the connection."""
@@ -601,6 +619,7 @@ class FakeTarget:
         period = connection.api * (1.5 if self.deviates("class1.production") else 1)
         step = 2 if self.deviates("class1.sequence") else 1
         payload = bytes(3 if self.deviates("class1.data_size") else ASSEMBLY_SIZE)
+        motor = self.motor if connection.to_point in DRIVE_PAIRS.values() else None
         start, sequence = time.monotonic(), 0
         while not connection.stop.is_set() and not self._stop.is_set():
             if time.monotonic() > connection.last_heard and not self.deviates("class1.timeout"):
@@ -610,6 +629,8 @@ class FakeTarget:
                     self._drop(connection)  # the connection timed out
                 return
             sequence += 1
+            if motor is not None:
+                payload = motor.input(connection.to_point)
             datagram = IO_HEAD.pack(2, 0x8002, 8, connection.to_id, sequence * step, 0x00B1, 2 + len(payload),
                                     sequence & 0xFFFF) + payload
             with contextlib.suppress(OSError):

@@ -15,13 +15,15 @@ EDS = Path(__file__).with_name("fake_device.eds")
 
 
 def run_group(target: FakeTarget, group: str):  # type: ignore[no-untyped-def]
-    return run(target.host, target.port, eds=EDS, groups=group, allow_writes=True, allow_reset=True, timeout=2.0)
+    return run(target.host, target.port, eds=EDS, groups=group, allow_writes=True, allow_reset=True, timeout=2.0,
+               allow_motion=True)
 
 
 #: The group whose run shows a check's deviation, where it is not the check's own.
 SHOWN_BY = {"final.as_found": "class1"}
-#: The groups that open connections: after them the final self-check has something to check.
-CONNECTING = ("cm", "class1", "eds")
+#: The groups that open connections (profile: its motion checks): after them the final self-check has
+#: something to check.
+CONNECTING = ("cm", "class1", "eds", "profile")
 
 
 @pytest.mark.parametrize("group", ["encap", "router", "objects", "cm", "class1", "eds", "profile"])
@@ -45,9 +47,11 @@ def test_each_check_fails_on_its_deviation(check_id: str) -> None:
 
 
 def test_every_check_has_a_deviation_in_the_fake() -> None:
-    """The fake names each check id it can deviate for: a check added to the battery without a way
-    to fail it is caught here (the parametrized test above would run it, and this says why)."""
-    source = Path(__file__).with_name("fake_target.py").read_text(encoding="utf-8")
+    """The fake (and the motor of its drive) names each check id it can deviate for: a check added to the
+    battery without a way to fail it is caught here (the parametrized test above would run it, and this
+    says why)."""
+    source = "".join(Path(__file__).with_name(name).read_text(encoding="utf-8")
+                     for name in ("fake_target.py", "fake_drive.py"))
     assert [i for i in check_ids() if f'"{i}"' not in source] == []
 
 
