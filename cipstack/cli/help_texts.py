@@ -367,7 +367,8 @@ COMMANDS: dict[tuple[str, ...], CommandText] = {
         "run the conformance battery against an EtherNet/IP target",
         "Run the conformance battery against any EtherNet/IP target and report, check by check, what it "
         "does against what the specification (and, with --eds, its EDS file) expects: the request sent, "
-        "the reply, the reference and a verdict (pass, fail, warning, n/a). Groups: encap "
+        "the reply, the reference and a verdict (pass, fail, warning, n/a, or not run when it needs an "
+        "--allow-* option not given). Groups: encap "
         "(encapsulation), router (message router and errors), objects (required objects), cm (Connection "
         "Manager Forward_Open matrix), class1 (class 1 behaviour), eds (EDS against the device), profile "
         "(the AC drive profile's assemblies and attributes; with --allow-motion also its motion: run forward, "

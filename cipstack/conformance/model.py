@@ -18,6 +18,9 @@ class Verdict(str, Enum):
     FAIL = "fail"
     WARNING = "warning"
     NOT_APPLICABLE = "n/a"
+    #: Not run because the option it needs was not given (--allow-writes, --allow-reset,
+    #: --allow-motion): the device may well have what it checks, unlike a check that does not apply.
+    NOT_RUN = "not run"
 
 
 #: The groups in the order they run and are reported.

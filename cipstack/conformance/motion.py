@@ -301,8 +301,9 @@ def _motion_plan(ctx: Context) -> Plan | None:
 def motion_link(ctx: Context, spec: CheckSpec) -> Iterator[MotionLink | Outcome]:
     """A ``MotionLink`` with the drive under network control, released whatever happens; or the outcome
     of a check that cannot run (not allowed, not a drive, no connection, no control from the network)."""
+    # The option first, as for --allow-writes: without it nothing about the motor is asked of the device.
     if not ctx.allow_motion:
-        yield outcome(spec, Verdict.NOT_APPLICABLE, "not run: needs --allow-motion (this check runs the motor)")
+        yield outcome(spec, Verdict.NOT_RUN, "needs --allow-motion (this check runs the motor)")
         return
     skipped = not_a_drive(ctx, spec)
     if skipped is not None:

@@ -169,7 +169,7 @@ def identity_get_all(ctx: Context, spec: CheckSpec) -> Outcome:
        "CIP Vol. 1 §5-2.3.1 (Reset service, type 0: as a power cycle)")
 def identity_reset(ctx: Context, spec: CheckSpec) -> Outcome:
     if not ctx.allow_reset:
-        return outcome(spec, Verdict.NOT_APPLICABLE, "not run: needs --allow-reset")
+        return outcome(spec, Verdict.NOT_RUN, "needs --allow-reset")
     probe = ctx.probe()
     reply = probe.request(RESET, request_path(0x01, 1), b"\x00")
     if reply.status != 0:
@@ -226,7 +226,7 @@ def ethernet_link(ctx: Context, spec: CheckSpec) -> Outcome:
        "CIP Vol. 1 Appendix B (0x0E); §5-2.2 (vendor ID is Get only)")
 def set_read_only(ctx: Context, spec: CheckSpec) -> Outcome:
     if not ctx.allow_writes:
-        return outcome(spec, Verdict.NOT_APPLICABLE, "not run: needs --allow-writes")
+        return outcome(spec, Verdict.NOT_RUN, "needs --allow-writes")
     probe = ctx.probe()
     current = probe.request(GET_SINGLE, request_path(0x01, 1, 1))
     if current.status != 0:

@@ -8,8 +8,8 @@ from xml.etree import ElementTree
 
 from .model import GROUPS, Exchange, Outcome, Report, Verdict
 
-#: Failures first, then warnings, passes, checks that do not apply.
-_ORDER = {Verdict.FAIL: 0, Verdict.WARNING: 1, Verdict.PASS: 2, Verdict.NOT_APPLICABLE: 3}
+#: Failures first, then warnings, passes, checks that do not apply, checks not asked for.
+_ORDER = {Verdict.FAIL: 0, Verdict.WARNING: 1, Verdict.PASS: 2, Verdict.NOT_APPLICABLE: 3, Verdict.NOT_RUN: 4}
 
 
 def _identity_line(report: Report) -> str:
@@ -25,7 +25,7 @@ def _identity_line(report: Report) -> str:
 def _counts_text(outcomes: list[Outcome]) -> str:
     counts = {v: sum(o.verdict is v for o in outcomes) for v in Verdict}
     return (f"{counts[Verdict.PASS]} pass, {counts[Verdict.FAIL]} fail, {counts[Verdict.WARNING]} warning, "
-            f"{counts[Verdict.NOT_APPLICABLE]} n/a")
+            f"{counts[Verdict.NOT_APPLICABLE]} n/a, {counts[Verdict.NOT_RUN]} not run")
 
 
 def summary_line(report: Report) -> str:
@@ -85,9 +85,13 @@ def to_json(report: Report) -> str:
     return json.dumps(report.as_dict())
 
 
+#: What JUnit shows as skipped (unless ``--strict`` makes a warning a failure).
+_SKIPPED = (Verdict.NOT_APPLICABLE, Verdict.NOT_RUN, Verdict.WARNING)
+
+
 def to_junit(report: Report, strict: bool = False) -> str:
     """JUnit XML, a test suite per group: a failure is ``<failure>``; a warning is ``<skipped>`` with its
-    message (``strict``: a ``<failure>``); a check that does not apply is ``<skipped>``."""
+    message (``strict``: a ``<failure>``); a check that does not apply, or was not asked for, is ``<skipped>``."""
     def failed(item: Outcome) -> bool:
         return item.verdict is Verdict.FAIL or (strict and item.verdict is Verdict.WARNING)
 
@@ -98,7 +102,7 @@ def to_junit(report: Report, strict: bool = False) -> str:
         suite = ElementTree.SubElement(
             suites, "testsuite", name=f"{group}: {GROUPS[group]}", tests=str(len(members)),
             failures=str(sum(map(failed, members))),
-            skipped=str(sum(not failed(o) and o.verdict in (Verdict.NOT_APPLICABLE, Verdict.WARNING) for o in members)))
+            skipped=str(sum(not failed(o) and o.verdict in _SKIPPED for o in members)))
         for item in members:
             case = ElementTree.SubElement(suite, "testcase", classname=f"conform.{group}", name=item.name)
             detail = "\n".join([f"expected: {item.spec.expected}", f"observed: {item.observed}",
@@ -109,7 +113,7 @@ def to_junit(report: Report, strict: bool = False) -> str:
                 ElementTree.SubElement(case, "failure", message=prefix + item.observed).text = detail
             elif item.verdict is Verdict.WARNING:
                 ElementTree.SubElement(case, "skipped", message=f"warning: {item.observed}").text = detail
-            elif item.verdict is Verdict.NOT_APPLICABLE:
+            elif item.verdict in (Verdict.NOT_APPLICABLE, Verdict.NOT_RUN):
                 ElementTree.SubElement(case, "skipped", message=item.observed)
             else:
                 ElementTree.SubElement(case, "system-out").text = detail
@@ -139,7 +143,7 @@ def _anchor(text: str) -> str:
 
 
 def _css(verdict: Verdict) -> str:
-    return "na" if verdict is Verdict.NOT_APPLICABLE else verdict.value
+    return {Verdict.NOT_APPLICABLE: "na", Verdict.NOT_RUN: "na"}.get(verdict, verdict.value)
 
 
 def _html_row(item: Outcome) -> str:
@@ -164,13 +168,14 @@ def to_html(report: Report) -> str:
              *([f"<p>connection points: {e(str(report.options['connection_points']))}</p>"]
                if report.options.get("connection_points") else []),
              '<h2 id="summary">Summary</h2>', "<table><tr><th>group</th><th>checks</th><th>fail</th><th>warning</th>"
-             "<th>pass</th><th>n/a</th></tr>"]
+             "<th>pass</th><th>n/a</th><th>not run</th></tr>"]
     for group, members in groups:
         count = {v: sum(o.verdict is v for o in members) for v in Verdict}
         parts.append(f'<tr><td><a href="#group-{group}">{e(GROUPS[group])}</a> (<code>{e(group)}</code>)</td>'
                      f'<td class="num">{len(members)}</td><td class="num">{count[Verdict.FAIL]}</td>'
                      f'<td class="num">{count[Verdict.WARNING]}</td><td class="num">{count[Verdict.PASS]}</td>'
-                     f'<td class="num">{count[Verdict.NOT_APPLICABLE]}</td></tr>')
+                     f'<td class="num">{count[Verdict.NOT_APPLICABLE]}</td>'
+                     f'<td class="num">{count[Verdict.NOT_RUN]}</td></tr>')
     parts.append("</table>")
     for verdict, heading in ((Verdict.FAIL, "Failures"), (Verdict.WARNING, "Warnings")):
         found = [o for _, members in groups for o in members if o.verdict is verdict]

@@ -58,10 +58,8 @@ def test_every_applicable_check_passes_on_our_emulators(name: str, adapter_with,
 
 
 def not_applicable(report: object) -> list[str]:
-    """The checks that did not apply, but for the motion checks, which run only when asked to (--allow-motion):
-    the coverage without an EDS is about what the battery can find by itself."""
-    return [o.name for o in report  # type: ignore[attr-defined]
-            if o.verdict is Verdict.NOT_APPLICABLE and not o.id.startswith("profile.motion.")]
+    """The checks that did not apply (those that need an option not given are "not run", apart)."""
+    return [o.name for o in report if o.verdict is Verdict.NOT_APPLICABLE]  # type: ignore[attr-defined]
 
 
 #: Where the battery finds each emulator's connection points without --eds (the MX2's and RX's own
@@ -125,7 +123,7 @@ def test_without_allow_motion_the_motor_is_not_run(adapter_with) -> None:  # typ
     peer = adapter_with("--profile", "mx2", "--model", "MX2-A2015-E", "--factory")
     report = run(peer.host, peer.port, groups="profile")
     motion = {o.id: (o.verdict, o.observed) for o in report if o.id.startswith("profile.motion.")}
-    assert motion and all(v == (Verdict.NOT_APPLICABLE, "not run: needs --allow-motion (this check runs the motor)")
+    assert motion and all(v == (Verdict.NOT_RUN, "needs --allow-motion (this check runs the motor)")
                           for v in motion.values())
     assert "final.as_found" not in {o.id for o in report}  # no connection opened, nothing written
 
@@ -327,7 +325,7 @@ def test_text_report_has_one_summary_line_per_group() -> None:
         result = conform(target.address, "--only", "encap,router")
     lines = result.stdout.splitlines()
     assert lines[2].split() == ["Encapsulation", "(encap)", "16", "checks:", "16", "pass,", "0", "fail,", "0",
-                                "warning,", "0", "n/a"]
+                                "warning,", "0", "n/a,", "0", "not", "run"]
     assert lines[3].split()[:4] == ["Message", "router", "and", "errors"] and "1 fail" in lines[3]
 
 
@@ -387,8 +385,8 @@ def test_safe_by_default_no_write_no_reset() -> None:
         report = run(target.host, target.port, groups="objects")
         sent = [e.sent for o in report for e in o.exchanges]
     verdicts = {o.id: o.verdict for o in report}
-    assert verdicts["objects.identity.reset"] is Verdict.NOT_APPLICABLE
-    assert verdicts["objects.identity.set_read_only"] is Verdict.NOT_APPLICABLE
+    assert verdicts["objects.identity.reset"] is Verdict.NOT_RUN
+    assert verdicts["objects.identity.set_read_only"] is Verdict.NOT_RUN
     # No Set_Attribute_Single (0x10) and no Reset (0x05) in any request sent.
     requests = [raw[40:] for raw in sent if raw[:2] == b"\x6f\x00"]
     assert not any(r[:1] in (b"\x10", b"\x05") for r in requests)
