@@ -221,7 +221,7 @@ def not_planned(ctx: Context, spec: CheckSpec, consequence: str = "") -> Outcome
         why = "no EDS given (--eds)"
     else:
         why = "the EDS declares no point-to-point exclusive owner"
-    return outcome(spec, Verdict.NOT_APPLICABLE, f"not run: {why}{consequence}")
+    return outcome(spec, Verdict.NOT_APPLICABLE, f"{why}{consequence}")
 
 
 MainPlanCheck = Callable[[Context, CheckSpec, Plan, Probe, Endpoint], Outcome]

@@ -23,7 +23,7 @@ EDS_REFERENCE = "CIP Vol. 1 §7 (EDS)"
 
 def _no_eds(ctx: Context, spec: CheckSpec) -> Outcome | None:
     if ctx.eds is None or ctx.view is None:
-        return outcome(spec, Verdict.NOT_APPLICABLE, "not run: no EDS given (--eds)")
+        return outcome(spec, Verdict.NOT_APPLICABLE, "no EDS file: none given (--eds) and none found")
     return None
 
 

@@ -344,7 +344,7 @@ def _motion(body: Callable[[Context, CheckSpec, MotionLink, Status], T]) -> Call
                 return link
             status = link.take_control()
             if isinstance(status, str):
-                return outcome(spec, Verdict.NOT_APPLICABLE, f"not run: {status}", link.exchanges())
+                return outcome(spec, Verdict.NOT_APPLICABLE, status, link.exchanges())
             return body(ctx, spec, link, status)
 
     run.__name__ = body.__name__
@@ -427,7 +427,7 @@ def stop(ctx: Context, spec: CheckSpec) -> Outcome:
     if isinstance(cycle, Outcome):
         return cycle
     if cycle.running_after is None:
-        return outcome(spec, Verdict.NOT_APPLICABLE, "not run: the drive did not run (profile.motion.run_forward)",
+        return outcome(spec, Verdict.NOT_APPLICABLE, "the drive did not run (profile.motion.run_forward)",
                        cycle.exchanges)
     bound = cycle.decel + MARGIN_S
     if cycle.stopped_after is None:
@@ -523,7 +523,7 @@ def _source(spec: CheckSpec, before: bool | None, on: bool | None, after: bool |
                              "drive", f"{RUN_STATES}; Run and Stop count only with CtrlFromNet 1")])
 def net_ctrl(ctx: Context, spec: CheckSpec) -> Outcome:
     if ctx.allow_motion and (plan := _motion_plan(ctx)) is not None and plan.ot_point != 21:
-        return outcome(spec, Verdict.NOT_APPLICABLE, f"not run: {plan.name}: output 20 has no NetCtl/NetRef bits")
+        return outcome(spec, Verdict.NOT_APPLICABLE, f"{plan.name}: output 20 has no NetCtl/NetRef bits")
     with motion_link(ctx, spec) as link:
         if isinstance(link, Outcome):
             return link
