@@ -8,25 +8,49 @@ from __future__ import annotations
 
 from collections.abc import Callable, Iterable, Mapping
 from dataclasses import dataclass
-from typing import TYPE_CHECKING
+from functools import cache
+from typing import TYPE_CHECKING, Any
 
 from .cip.model import AttributeSpec, ClassSpec
 from .cip.types import UINT
-from .eip.wire.cm_spec import SPEC as CONNECTION_MANAGER_SPEC
-from .objects.assembly import SPEC as ASSEMBLY_SPEC
-from .objects.identity import identity_spec
-from .objects.message_router import SPEC as MESSAGE_ROUTER_SPEC
-from .objects.tcpip import ETHERNET_LINK_SPEC, TCPIP_SPEC
 
 if TYPE_CHECKING:
     # A catalog holds schemas; decoding an attribute (a one-shot ``get``) needs none of their machinery.
     from .assemblies.schema import AssemblySchema
 
-STANDARD_CLASSES: dict[int, ClassSpec] = {
-    spec.class_id: spec
-    for spec in (identity_spec(), MESSAGE_ROUTER_SPEC, ASSEMBLY_SPEC, CONNECTION_MANAGER_SPEC, TCPIP_SPEC,
-                 ETHERNET_LINK_SPEC)
-}
+    #: The standard objects' declarations by class id (as the objects that serve them declare them).
+    STANDARD_CLASSES: dict[int, ClassSpec]
+
+
+@cache
+def standard_classes() -> dict[int, ClassSpec]:
+    """The standard objects' declarations by class id, from the modules of the objects that serve them
+    (imported on first use: a one-shot command decodes by their compact data, ``devices.decoding``)."""
+    from .eip.wire.cm_spec import SPEC as CONNECTION_MANAGER_SPEC
+    from .objects.assembly import SPEC as ASSEMBLY_SPEC
+    from .objects.identity import identity_spec
+    from .objects.message_router import SPEC as MESSAGE_ROUTER_SPEC
+    from .objects.tcpip import ETHERNET_LINK_SPEC, TCPIP_SPEC
+
+    return {spec.class_id: spec for spec in (identity_spec(), MESSAGE_ROUTER_SPEC, ASSEMBLY_SPEC,
+                                             CONNECTION_MANAGER_SPEC, TCPIP_SPEC, ETHERNET_LINK_SPEC)}
+
+
+@cache
+def compact_standard_classes() -> dict[int, ClassSpec]:
+    """The standard objects' declarations for decoding replies, from their compact data
+    (``objects/declared.py``, generated from ``standard_classes`` and held equal to it): what a
+    one-shot command decodes by without importing the objects (``cip.compact`` says what a row keeps)."""
+    from .cip.compact import class_specs
+    from .objects.declared import CLASSES
+
+    return {spec.class_id: spec for spec in class_specs(CLASSES)}
+
+
+def __getattr__(name: str) -> Any:
+    if name == "STANDARD_CLASSES":
+        return standard_classes()
+    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
 
 #: Standard class attributes every class has (instance 0).
 CLASS_ATTRIBUTES: dict[int, AttributeSpec] = {
@@ -75,14 +99,17 @@ class Catalog:
 
     ``source`` says where they come from (a device profile, an EDS file, the standard objects
     alone and why), so that an attribute or a field it does not know can say where it looked.
+    ``standard``: the standard objects' declarations under ``classes`` (default: the objects' own,
+    ``standard_classes``; ``compact_standard_classes`` for decoding only).
     """
 
     def __init__(self, classes: Iterable[ClassSpec] = (), assemblies: Iterable[AssemblySchema] = (),
                  resolvers: Mapping[int, AttributeResolver] | None = None, source: str = STANDARD_ONLY,
-                 parameters: Iterable[Parameter] = (), profile: str | None = None) -> None:
+                 parameters: Iterable[Parameter] = (), profile: str | None = None,
+                 standard: Mapping[int, ClassSpec] | None = None) -> None:
         #: Where the declarations come from, for messages: "profile acg (...)", "EDS file x.eds", ...
         self.source = source
-        self.classes: dict[int, ClassSpec] = dict(STANDARD_CLASSES)
+        self.classes: dict[int, ClassSpec] = dict(standard_classes() if standard is None else standard)
         for spec in classes:
             self.classes[spec.class_id] = spec
         #: Assembly schemas by instance, when the device profile is known.

@@ -34,7 +34,6 @@ from .eip.originator.core import (
 )
 from .eip.originator.replies import EncapsulationStatusError, MalformedReplyError
 from .eip.wire.encapsulation import DEFAULT_PORT
-from .eip.wire.identity_items import IdentityRecord, ServiceRecord
 from .errors import NotFound, ProtocolError
 
 if TYPE_CHECKING:
@@ -43,6 +42,7 @@ if TYPE_CHECKING:
     from .eds.model import EdsDocument
     from .eip.originator.asyncio_client import EncapsulationClient
     from .eip.originator.io_originator import IoConnectionHandle, OtFormat
+    from .eip.wire.identity_items import IdentityRecord, ServiceRecord
     from .sync_io import LoopThread, SyncIoConnection
 
 T = TypeVar("T")
@@ -164,6 +164,7 @@ class ExplicitMessaging:
 
     def _identity_attributes(self) -> Plan[IdentityRecord | None]:
         """Identity attributes 1-4 and 7 (only vendor and product code are needed)."""
+        from .eip.wire.identity_items import IdentityRecord
         from .objects.identity import identity_spec
 
         spec = identity_spec()

@@ -63,6 +63,21 @@ def test_count_unit_and_scaled_text() -> None:
     assert (decimal_places(0.01), decimal_places(1.0), decimal_places(10.0)) == (2, 0, 0)
 
 
+def test_decimal_places_are_those_decimal_reads() -> None:
+    """``decimal_places`` reads the float's repr without importing decimal; Decimal's normal form of it
+    is the definition."""
+    from decimal import Decimal
+
+    def by_decimal(scale: float) -> int:
+        exponent = Decimal(repr(float(scale))).normalize().as_tuple().exponent
+        return max(0, -exponent) if isinstance(exponent, int) else 0
+
+    scales = [0.1, 0.01, 1, 5, 10, 100, 1e-5, 1.5e-5, 0.005, 0.25, -0.1, 1e16, 1e22, 123.456, 0.0, 2.5e-10,
+              1e-320, float("inf"), float("nan")]
+    scales += [m * 10.0 ** e for m in (1, 2, 2.5, 5, 7.25) for e in range(-9, 10)]
+    assert [decimal_places(s) for s in scales] == [by_decimal(s) for s in scales]
+
+
 def test_every_acg_speed_word_is_in_the_manual_s_unit() -> None:
     device = build_acg_device(now=0.0)
     for instance, unit in ACG_SPEED_UNITS.items():

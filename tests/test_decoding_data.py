@@ -5,8 +5,11 @@ from __future__ import annotations
 
 import pytest
 
+from cipstack.catalog import Catalog, compact_standard_classes, standard_classes
+from cipstack.cip.compact import attribute_spec, cip_type, row_of, type_data
 from cipstack.cip.model import AttributeSpec
-from cipstack.devices.decoding import DECLARED, decoding_catalog, generate
+from cipstack.cip.types import REVISION, ArrayType, OctetString, RealType, StructType
+from cipstack.devices.decoding import DECLARED, STANDARD_DECLARED, decoding_catalog, generate, generate_standard
 from cipstack.devices.profiles import PROFILES, catalog_for
 
 
@@ -16,6 +19,7 @@ def test_the_generated_modules_are_up_to_date() -> None:
     assert sorted(generated) == sorted(p.name for p in DECLARED.glob("*.py"))
     for name, text in generated.items():
         assert (DECLARED / name).read_text(encoding="utf-8") == text, f"devices/declared/{name} is stale"
+    assert STANDARD_DECLARED.read_text(encoding="utf-8") == generate_standard(), "objects/declared.py is stale"
 
 
 def decoding(spec: AttributeSpec | None) -> tuple[object, ...] | None:
@@ -49,3 +53,33 @@ def test_every_declaration_decodes_alike(name: str) -> None:
 def test_a_device_of_no_profile_gets_the_standard_objects() -> None:
     assert decoding_catalog(1, 1).source == catalog_for(1, 1).source
     assert decoding_catalog(1, 1).attribute(0x2A, 1, 102) is None
+
+
+def test_the_standard_objects_compact_data_is_their_declarations() -> None:
+    """What a one-shot command decodes a standard attribute by (``objects/declared.py``): every row
+    the objects' own declaration gives, the structures' members and the octet strings' sizes included."""
+    full, compact = standard_classes(), compact_standard_classes()
+    assert sorted(compact) == sorted(full) and len(full) >= 6
+    for class_id, spec in full.items():
+        assert compact[class_id].name == spec.name
+        assert [row_of(a) for a in compact[class_id].instance_attributes] == \
+               [row_of(a) for a in spec.instance_attributes], class_id
+        assert [decoding(a) for a in compact[class_id].instance_attributes] == \
+               [decoding(a) for a in spec.instance_attributes]
+    by_compact, by_objects = Catalog(standard=compact), Catalog()
+    reply = bytes([2, 0, 1, 0, 4, 0, 6, 0])  # Object List: the count, then class ids to the end
+    assert by_compact.attribute(2, 1, 1).type.decode(reply) == by_objects.attribute(2, 1, 1).type.decode(reply) \
+        == {"number": 2, "classes": [1, 4, 6]}
+    assert by_compact.attribute(0xF6, 1, 3).type.decode(bytes(range(6))) == bytes(range(6))
+
+
+def test_a_row_builds_its_declaration_again() -> None:
+    structure = StructType("PAIR", [("count", REVISION), ("items", ArrayType(OctetString(2, "TWO"), 3, "TRIPLE"))])
+    assert type_data(REVISION) == "REVISION"
+    rebuilt = cip_type(type_data(structure))
+    assert isinstance(rebuilt, StructType) and rebuilt.name == "PAIR" and rebuilt.size == 8
+    assert rebuilt.decode(bytes(range(8))) == structure.decode(bytes(range(8)))
+    spec = AttributeSpec(9, "Pair", structure, unit="s", scale=0.1, decimals=2, in_get_all=False)
+    assert row_of(attribute_spec(row_of(spec))) == row_of(spec)
+    with pytest.raises(ValueError, match="Odd: type ODD cannot be named"):  # a type cip.types has not
+        row_of(AttributeSpec(1, "Odd", RealType("ODD", 0xCA, 4)))

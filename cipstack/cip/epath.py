@@ -33,6 +33,8 @@ class LogicalType(IntEnum):
 
 @dataclass(frozen=True)
 class LogicalSegment:
+    """A logical segment: a class, instance, member, connection point or attribute number."""
+
     kind: LogicalType
     value: int
     #: 8, 16 or 32; None picks the smallest that holds the value.
@@ -50,6 +52,9 @@ class LogicalSegment:
 
 @dataclass(frozen=True)
 class PortSegment:
+    """A port segment: leave by ``port`` for the node at ``link`` (a slot, a node address, an IP
+    address as text)."""
+
     port: int
     link: bytes
 
@@ -64,6 +69,8 @@ class PortSegment:
 
 @dataclass(frozen=True)
 class ElectronicKey:
+    """The electronic key of a connection path: the identity the target must have (zeros match any)."""
+
     vendor_id: int = 0
     device_type: int = 0
     product_code: int = 0

@@ -40,6 +40,8 @@ REPLY_BIT = 0x80
 
 @dataclass(frozen=True, slots=True)
 class MessageRouterRequest:
+    """A message-router request: service code, request path (padded EPATH), request data."""
+
     service: int
     path: bytes
     data: bytes = b""
@@ -65,6 +67,9 @@ class MessageRouterRequest:
 
 @dataclass(frozen=True, slots=True)
 class MessageRouterResponse:
+    """A message-router reply: the service it answers (reply bit clear), general and extended
+    status, reply data."""
+
     service: int
     general_status: int = 0
     extended_status: tuple[int, ...] = field(default=())

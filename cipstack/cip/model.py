@@ -98,6 +98,8 @@ class AttributeSpec:
 
 @dataclass(frozen=True)
 class ClassSpec:
+    """A CIP class, declared once: id, name, revision, instance attributes, services."""
+
     class_id: int
     name: str
     revision: int = 1

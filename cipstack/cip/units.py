@@ -9,13 +9,15 @@ are 30.00 Hz, not 3000 Hz).
 
 from __future__ import annotations
 
-from decimal import Decimal
-
 
 def decimal_places(scale: float) -> int:
-    """Decimal places a scaled value has: 0.01 -> 2, 0.1 -> 1, 1 -> 0, 5 -> 0."""
-    exponent = Decimal(repr(float(scale))).normalize().as_tuple().exponent
-    return max(0, -exponent) if isinstance(exponent, int) else 0
+    """Decimal places a scaled value has: 0.01 -> 2, 0.1 -> 1, 1 -> 0, 5 -> 0, 1e-05 -> 5."""
+    # From the shortest repr of the float, as Decimal(repr(scale)).normalize() reads it, without
+    # importing decimal (a one-shot ``get`` prints one scaled value): digits after the point, less
+    # the exponent; inf and nan have none.
+    mantissa, _, exponent = repr(float(scale)).partition("e")
+    fraction = mantissa.partition(".")[2].rstrip("0")
+    return max(0, len(fraction) - int(exponent or 0))
 
 
 def count_unit(unit: str, scale: float = 1.0) -> str:
@@ -23,6 +25,8 @@ def count_unit(unit: str, scale: float = 1.0) -> str:
     ("rpm", 1) -> "rpm", ("A", 0.1) -> "0.1 A", ("", 0.5) -> "0.5", ("", 1) -> ""."""
     if scale == 1:
         return unit
+    from decimal import Decimal  # here, not at the top: decoding a value needs only decimal_places
+
     step = f"{Decimal(repr(float(scale))).normalize():f}"
     return f"{step} {unit}".strip()
 
@@ -32,6 +36,8 @@ def scaled_text(raw: int, unit: str, scale: float = 1.0) -> str:
     -> "30.00 Hz", (900, "rpm", 1) -> "900 rpm"."""
     if scale == 1:
         return f"{raw} {unit}".strip()
+    from decimal import Decimal
+
     value = Decimal(raw) * Decimal(repr(float(scale)))
     return f"{value:.{decimal_places(scale)}f} {unit}".strip()
 

@@ -17,7 +17,6 @@ worse than an error.
 
 from __future__ import annotations
 
-import json
 import math
 from collections.abc import Mapping
 from dataclasses import dataclass
@@ -81,6 +80,8 @@ class Scaling:
         if isinstance(raw, (bytes, bytearray)):
             return bytes(raw).hex(" ")
         if isinstance(raw, (dict, list)):
+            import json  # a structure's text only: a one-shot that prints a number does without
+
             return json.dumps(raw)
         if self.enum is not None and isinstance(raw, int) and raw in self.enum:
             return f"{raw} ({self.enum[raw]})"

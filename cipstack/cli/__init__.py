@@ -9,20 +9,22 @@ command lives in its own module and imports what it needs when it runs."""
 
 from __future__ import annotations
 
-import argparse
-import json
 import logging
 import os
 import select
 import sys
 from collections.abc import Callable, Sequence
+from typing import TYPE_CHECKING, Any
 
 from ..cip.status import CipError, describe_status
 from ..eip.originator.replies import EncapsulationStatusError
 from ..eip.wire.encapsulation import EncapsulationError
+from . import oneshot
 from .common import EXIT_FAILURE, EXIT_OK, EXIT_USAGE, UsageError, parse_duration, parse_object_path
-from .explicit import json_key
-from .parser import build_parser, command_word
+
+if TYPE_CHECKING:
+    from .explicit import json_key
+    from .parser import build_parser
 
 #: A command whose reader went away (``cipstack capture analyze F | head``) stops quietly with the
 #: status of a process that SIGPIPE ended, 128 + 13, as ``cat`` or ``grep`` do: its output was cut
@@ -79,23 +81,28 @@ def _transport_errors() -> tuple[type[BaseException], ...]:
 
 def _main(argv: Sequence[str] | None) -> int:
     words = list(sys.argv[1:] if argv is None else argv)
-    # A command alone shows its usage when its line is wrong; only help shows the descriptions.
-    parser = build_parser(command_word(words), texts=not words or any(w in ("-h", "--help") for w in words))
-    try:
-        args = parser.parse_args(words)
-    except UsageError as exc:
-        # As argparse reports it: the usage of the command the line names, then PROG: error: MESSAGE.
-        print(f"{exc.usage}{exc.prog or 'cipstack'}: error: {exc}", file=sys.stderr)
-        return EXIT_USAGE
-    if args.command is None:
-        # ``cipstack`` alone: the commands and what each does, on stderr, exit 2 as argparse exits for a
-        # missing argument (a script that loses its command word fails; ``cipstack --help`` is the 0 way).
-        print(parser.format_help() + "\ncipstack: error: the following arguments are required: COMMAND",
-              file=sys.stderr)
-        return EXIT_USAGE
+    # A one-shot command's plain line is read without argparse; any other line, and every error, by it.
+    args: Any = oneshot.parse(words)
+    if args is None:
+        from .parser import build_parser, command_word
+
+        # A command alone shows its usage when its line is wrong; only help shows the descriptions.
+        parser = build_parser(command_word(words), texts=not words or any(w in ("-h", "--help") for w in words))
+        try:
+            args = parser.parse_args(words)
+        except UsageError as exc:
+            # As argparse reports it: the usage of the command the line names, then PROG: error: MESSAGE.
+            print(f"{exc.usage}{exc.prog or 'cipstack'}: error: {exc}", file=sys.stderr)
+            return EXIT_USAGE
+        if args.command is None:
+            # ``cipstack`` alone: the commands and what each does, on stderr, exit 2 as argparse exits for a
+            # missing argument (a script that loses its command word fails; ``cipstack --help`` is the 0 way).
+            print(parser.format_help() + "\ncipstack: error: the following arguments are required: COMMAND",
+                  file=sys.stderr)
+            return EXIT_USAGE
     logging.basicConfig(level=getattr(logging, args.log_level), stream=sys.stderr,
                         format="%(asctime)s %(levelname)s %(name)s: %(message)s")
-    func: Callable[[argparse.Namespace], int] = args.func
+    func: Callable[[Any], int] = args.func
     name = f"cipstack {args.command}"
     try:
         return func(args)
@@ -104,6 +111,8 @@ def _main(argv: Sequence[str] | None) -> int:
         return EXIT_USAGE
     except CipError as exc:
         if getattr(args, "json", False):
+            import json
+
             print(json.dumps({"status": exc.general, "extended_status": list(exc.extended),
                               "error": describe_status(exc.general, exc.extended),
                               "path": getattr(args, "path", None)}), flush=True)
@@ -129,6 +138,19 @@ def _main(argv: Sequence[str] | None) -> int:
     except ValueError as exc:
         print(f"{name}: {exc}", file=sys.stderr)
         return EXIT_USAGE
+
+
+def __getattr__(name: str) -> Any:
+    # The grammar and the JSON key helper, imported when first asked for: a one-shot line needs neither.
+    if name == "build_parser":
+        from . import parser
+
+        return parser.build_parser
+    if name == "json_key":
+        from . import explicit
+
+        return explicit.json_key
+    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
 
 
 __all__ = ["EXIT_BROKEN_PIPE", "EXIT_FAILURE", "EXIT_OK", "EXIT_USAGE", "UsageError", "build_parser", "json_key",

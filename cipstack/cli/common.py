@@ -3,12 +3,13 @@ durations, and one-record output."""
 
 from __future__ import annotations
 
-import argparse
-import json
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 from ..cip.types import CipType, parse_int, type_by_name
 from ..errors import CipstackError
+
+if TYPE_CHECKING:
+    import argparse
 
 EXIT_OK = 0
 EXIT_FAILURE = 1
@@ -76,6 +77,8 @@ def parse_duration(text: str) -> float:
 
 def _emit(args: argparse.Namespace, record: dict[str, Any], text: str) -> None:
     if args.json:
+        import json  # only for --json: a one-shot that prints text does without
+
         print(json.dumps(record), flush=True)
     else:
         print(text, flush=True)

@@ -2,10 +2,8 @@
 
 from __future__ import annotations
 
-import argparse
-import json
 import sys
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 from ..cip.status import CipError
 from ..cip.types import parse_int
@@ -19,6 +17,9 @@ from .common import (
     parse_object_path,
     parse_type,
 )
+
+if TYPE_CHECKING:
+    import argparse
 
 
 # -- discovery -----------------------------------------------------------------------------------
@@ -62,7 +63,11 @@ def _value_text(value: Any) -> str:
         return value.hex(" ")
     if isinstance(value, str):
         return repr(value)
-    return json.dumps(value) if isinstance(value, (dict, list)) else str(value)
+    if isinstance(value, (dict, list)):
+        import json
+
+        return json.dumps(value)
+    return str(value)
 
 
 def parse_route(text: str | None) -> list[Any] | None:
@@ -104,16 +109,19 @@ def _connect_identified(args: argparse.Namespace, standard: tuple[int, int, int]
     know (the routed device's own Identity when ``--route`` is given). ``standard``: the (class,
     attribute) asked for, which when a standard class declares it decodes by that declaration
     alone, as every profile's does: no identity is asked, and no profile loaded."""
-    from ..catalog import STANDARD_CLASSES
+    from ..catalog import Catalog, compact_standard_classes
     from ..scanner import SyncScanner
 
     eds = getattr(args, "eds", None)
     doc = eds_document(args)
-    scanner = SyncScanner(args.target, timeout=args.timeout, route=parse_route(args.route), identify=False, eds=doc)
+    # Without an EDS file, the standard objects' compact declarations: a one-shot command does not
+    # import the objects that serve them.
+    scanner = SyncScanner(args.target, timeout=args.timeout, route=parse_route(args.route), identify=False, eds=doc,
+                          catalog=None if doc is not None else Catalog(standard=compact_standard_classes()))
     if doc is not None:
         scanner.catalog.source = f"EDS file {eds}"
         return scanner
-    if standard is not None and standard[0] in STANDARD_CLASSES and scanner.catalog.attribute(*standard):
+    if standard is not None and standard[0] in compact_standard_classes() and scanner.catalog.attribute(*standard):
         return scanner
     from ..devices.decoding import decoding_catalog
 
@@ -187,6 +195,8 @@ def cmd_get(args: argparse.Namespace) -> int:
             text = _reading_text(reading)
     record["path"] = args.path
     if args.json:
+        import json  # only for --json: a one-shot that prints text does without
+
         print(json.dumps(record), flush=True)
     elif "value" in record:
         name = f"{record['name']} = " if "name" in record else ""

@@ -6,7 +6,8 @@ classes, the assemblies, the parameters a recipe holds. A one-shot read (``cipst
 it most of its time. ``decoding_catalog`` gives those from the modules of ``devices/declared/``,
 generated from the same declarations by ``python -m cipstack.devices.decoding`` (and held equal to
 them by ``tests/test_decoding_data.py``): the same attributes, names, types, units and scales, and
-the same ``source``; no assemblies and no parameters.
+the same ``source``; no assemblies and no parameters. The rows are ``cip.compact``'s; this module
+also writes the standard objects' (``objects/declared.py``).
 """
 
 from __future__ import annotations
@@ -16,33 +17,14 @@ from collections.abc import Callable, Iterator
 from pathlib import Path
 from typing import Any
 
-from ..catalog import Catalog
-from ..cip import types
-from ..cip.model import Access, AttributeSpec, ClassSpec
-from ..cip.types import CipType, RemainingBytes, type_by_name
-
-#: One attribute's declaration as data: id, name, type, access, unit, scale, offset, decimals,
-#: enumeration, in Get_Attributes_All.
-Row = tuple[int, str, str, str, str, float, float, "int | None", "dict[int, str] | None", bool]
+from ..catalog import Catalog, compact_standard_classes
+from ..cip.compact import Row, attribute_spec, class_specs, classes_data, row_of
+from ..cip.model import AttributeSpec
 
 #: What the generated modules are made from, and where they go.
 DECLARED = Path(__file__).resolve().parent / "declared"
-_BYTES = "bytes:"
-
-
-def _type(name: str) -> CipType:
-    """The type a row names: an elementary type, another type ``cip.types`` defines (REVISION), or
-    ``bytes:NAME``, the remaining bytes under that name."""
-    if name.startswith(_BYTES):
-        return RemainingBytes(name[len(_BYTES):])
-    defined = getattr(types, name, None)
-    return defined if isinstance(defined, CipType) else type_by_name(name)
-
-
-def _spec(row: Row) -> AttributeSpec:
-    attribute, name, type_name, access, unit, scale, offset, decimals, enum, in_get_all = row
-    return AttributeSpec(attribute, name, _type(type_name), Access(access), enum=enum, unit=unit, scale=scale,
-                         in_get_all=in_get_all, offset=offset, decimals=decimals)
+#: The standard objects' compact data (``catalog.compact_standard_classes``), generated here too.
+STANDARD_DECLARED = Path(__file__).resolve().parent.parent / "objects" / "declared.py"
 
 
 def _no_profile(vendor_id: int, product_code: int) -> str:
@@ -56,14 +38,13 @@ def decoding_catalog(vendor_id: int, product_code: int) -> Catalog:
     from .declared import DESCRIPTIONS, PROFILES
 
     name = PROFILES.get((vendor_id, product_code))
+    standard = compact_standard_classes()
     if name is None:
-        return Catalog(source=_no_profile(vendor_id, product_code))
+        return Catalog(source=_no_profile(vendor_id, product_code), standard=standard)
     description = DESCRIPTIONS[name]
     data: Any = importlib.import_module(f"{__package__}.declared.{name}")
-    classes = [ClassSpec(class_id, class_name, instance_attributes=tuple(_spec(row) for row in rows))
-               for class_id, (class_name, rows) in data.CLASSES.items()]
     resolvers = {class_id: _resolver(rows) for class_id, rows in data.RESOLVED.items()}
-    return Catalog(classes, resolvers=resolvers, profile=data.PROFILE,
+    return Catalog(class_specs(data.CLASSES), resolvers=resolvers, profile=data.PROFILE, standard=standard,
                    source=f"profile {name} (vendor {vendor_id} product code {product_code}: {description})")
 
 
@@ -76,30 +57,13 @@ def _resolver(rows: dict[tuple[int, int], Row]) -> Callable[[int, int], Attribut
             row = rows.get((instance, attribute))
             if row is None:
                 return None
-            spec = built[instance, attribute] = _spec(row)
+            spec = built[instance, attribute] = attribute_spec(row)
         return spec
 
     return resolve
 
 
 # -- generation ----------------------------------------------------------------------------------------
-def row_of(spec: AttributeSpec) -> Row:
-    """The data of one declaration (what decoding a reply and writing a value use of it)."""
-    if isinstance(spec.type, RemainingBytes):
-        type_name = _BYTES + spec.type.name
-    else:
-        type_name = spec.type.name
-        try:
-            named = _type(type_name)
-        except ValueError:
-            named = None
-        if named is not spec.type:
-            raise ValueError(f"{spec.name}: type {spec.type.name} cannot be named in the compact data")
-    return (spec.id, spec.name, type_name, spec.access.value, spec.unit, float(spec.scale), float(spec.offset),
-            spec.decimals, {int(k): str(v) for k, v in spec.enum.items()} if spec.enum is not None else None,
-            spec.in_get_all)
-
-
 def _resolved_rows(resolve: Callable[[int, int], AttributeSpec | None]) -> Iterator[tuple[tuple[int, int], Row]]:
     # A resolver answers for instance and attribute numbers of one byte each (the class 0x64/0x65 maps).
     for instance in range(256):
@@ -111,8 +75,10 @@ def _resolved_rows(resolve: Callable[[int, int], AttributeSpec | None]) -> Itera
 
 def generate() -> dict[str, str]:
     """The modules of ``devices/declared/``, by file name, generated from the profiles' declarations."""
-    from ..catalog import STANDARD_CLASSES
+    from ..catalog import standard_classes
     from .profiles import PROFILES
+
+    standard = standard_classes()
 
     header = '"""Generated by ``python -m cipstack.devices.decoding`` from the device declarations: do not edit.\n\n'
     files: dict[str, str] = {}
@@ -125,9 +91,8 @@ def generate() -> dict[str, str]:
             identities[profile.vendor_id, product_code] = name
         descriptions[name] = profile.description
         catalog = profile.catalog()
-        classes = {class_id: (spec.name, [row_of(a) for a in spec.instance_attributes])
-                   for class_id, spec in sorted(catalog.classes.items())
-                   if STANDARD_CLASSES.get(class_id) is not spec and class_id not in catalog.resolvers}
+        classes = classes_data({class_id: spec for class_id, spec in catalog.classes.items()
+                                if standard.get(class_id) is not spec and class_id not in catalog.resolvers})
         resolved = {class_id: dict(_resolved_rows(resolve)) for class_id, resolve in sorted(catalog.resolvers.items())}
         files[f"{name}.py"] = (
             f'{header}The attribute declarations of profile {name} that replies decode by."""\n\n'
@@ -141,6 +106,18 @@ def generate() -> dict[str, str]:
         f"#: (vendor id, product code) -> profile.\nPROFILES = {_pretty(identities)}\n\n"
         f"#: profile -> what it emulates.\nDESCRIPTIONS = {_pretty(descriptions)}\n")
     return files
+
+
+def generate_standard() -> str:
+    """``objects/declared.py``: the standard objects' declarations (``catalog.standard_classes``) as data."""
+    from ..catalog import standard_classes
+
+    return ('"""Generated by ``python -m cipstack.devices.decoding`` from the standard objects\' declarations: '
+            'do not edit.\n\nWhat a reply of a standard object decodes by '
+            '(``catalog.compact_standard_classes``)."""\n\n'
+            "from ..cip.compact import Classes\n\n"
+            "#: class id -> (class name, instance attributes), as ``catalog.standard_classes`` declares them.\n"
+            f"CLASSES: Classes = {_pretty(classes_data(standard_classes()))}\n")
 
 
 def _pretty(value: Any) -> str:
@@ -164,6 +141,7 @@ def main() -> int:
     DECLARED.mkdir(exist_ok=True)
     for name, text in generate().items():
         (DECLARED / name).write_text(text, encoding="utf-8")
+    STANDARD_DECLARED.write_text(generate_standard(), encoding="utf-8")
     return 0
 
 

@@ -281,7 +281,8 @@ class PreciseEpollSelector(selectors.EpollSelector):
                 except Exception:  # one callback must never take the loop down
                     log.exception("lane callback %r", reader)
                 continue
-            key = self._key_from_fd(fd)  # type: ignore[attr-defined]  # the base selector's own lookup
+            # The base selector's own table (``_key_from_fd``, which read it, is gone in Python 3.13).
+            key = self._fd_to_key.get(fd)  # type: ignore[attr-defined]
             if key:
                 mask = (selectors.EVENT_WRITE if event & ~select.EPOLLIN else 0) | (
                     selectors.EVENT_READ if event & ~select.EPOLLOUT else 0)

@@ -41,13 +41,13 @@ from ..wire.encapsulation import (
     EncapsulationError,
     EncapsulationHeader,
 )
-from ..wire.identity_items import IdentityRecord, ServiceRecord, decode_list_identity, decode_list_services
 from .replies import EncapsulationStatusError, MalformedReplyError, decode_reply
 
 if TYPE_CHECKING:
     # Imported where used: explicit messaging (a one-shot ``cipstack get``) does not load the
     # Connection Manager's messages (their dataclasses cost milliseconds to import).
     from ..wire.cm_messages import ConnectionTriad
+    from ..wire.identity_items import IdentityRecord, ServiceRecord
 
 log = logging.getLogger(__name__)
 T = TypeVar("T")
@@ -350,10 +350,14 @@ class OriginatorCore:
                                  "RegisterSession", registered)
 
     def list_identity(self) -> Transaction[list[IdentityRecord]]:
+        from ..wire.identity_items import decode_list_identity  # here: a one-shot ``get`` lists nothing
+
         return self._transaction(Command.LIST_IDENTITY, b"", "ListIdentity", lambda _, body: decode_reply(
             "ListIdentity reply", lambda: decode_list_identity(body)))
 
     def list_services(self) -> Transaction[list[ServiceRecord]]:
+        from ..wire.identity_items import decode_list_services
+
         return self._transaction(Command.LIST_SERVICES, b"", "ListServices", lambda _, body: decode_reply(
             "ListServices reply", lambda: decode_list_services(body)))
 

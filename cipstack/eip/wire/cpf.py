@@ -33,6 +33,8 @@ MAX_ITEMS = 16
 
 @dataclass(frozen=True, slots=True)
 class Item:
+    """One item of a Common Packet Format list: its type id and its data."""
+
     type: int
     data: bytes = b""
 
@@ -82,6 +84,8 @@ SOCKADDR = struct.Struct(">hHI8s")
 
 @dataclass(frozen=True, slots=True)
 class SockAddr:
+    """The Sockaddr Info of a CPF item or a ListIdentity reply: an IPv4 address and port."""
+
     host: str
     port: int
 

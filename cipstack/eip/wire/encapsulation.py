@@ -53,6 +53,9 @@ class EncapsulationError(ProtocolError):
 
 @dataclass(frozen=True, slots=True)
 class EncapsulationHeader:
+    """The 24-byte encapsulation header: command, data length, session handle, status, sender
+    context and options."""
+
     command: int
     length: int
     session: int

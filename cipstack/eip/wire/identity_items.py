@@ -74,6 +74,8 @@ def decode_list_identity(body: bytes) -> list[IdentityRecord]:
 
 @dataclass(frozen=True)
 class ServiceRecord:
+    """One service of a ListServices reply: protocol version, capability flags and name."""
+
     version: int
     capabilities: int
     name: str

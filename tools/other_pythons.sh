@@ -1,0 +1,48 @@
+#!/usr/bin/env bash
+# The precise event loop (cipstack/eip/precise_loop.py) reads asyncio's private queues, which each
+# Python may lay out anew: its tests run on every supported Python this machine has besides the one
+# that runs the suite (pyenv's interpreters, or python3.X on PATH), each in a venv of its own with the
+# wheel's dependencies and the test runner (the tests import the tree's cipstack, run from its root). A
+# supported Python the machine lacks is named and skipped; an unknown one is refused by check_python
+# (tests/test_precise_loop.py, on every Python).
+#
+#   bash tools/other_pythons.sh DIST/cipstack-*.whl
+set -euo pipefail
+cd "$(dirname "$0")/.."
+wheel="$1"
+# The loop itself, its lanes beside asyncio's streams and datagrams, and the class 1 TCP lane: seconds each.
+tests=(tests/test_precise_loop.py tests/test_io_lane.py tests/test_tcp_lane.py)
+running="$(python3 -c 'import sys; print(f"{sys.version_info[0]}.{sys.version_info[1]}")')"
+supported="$(python3 -c 'import ast, re, pathlib
+text = pathlib.Path("cipstack/eip/precise_loop.py").read_text(encoding="utf-8")
+print(" ".join(f"{a}.{b}" for a, b in ast.literal_eval(re.search(r"^SUPPORTED_PYTHONS = (.*)$", text, re.M).group(1))))')"
+pyenv_root="$(command -v pyenv >/dev/null 2>&1 && pyenv root || echo "${PYENV_ROOT:-$HOME/.pyenv}")"
+work="$(mktemp -d)"
+trap 'rm -rf "$work"' EXIT
+failed=""
+for version in $supported; do
+  [ "$version" = "$running" ] && continue
+  # pyenv's own build first: python3.X on PATH may be a pyenv shim that runs only the selected version.
+  python="$(ls -d "$pyenv_root"/versions/"$version".*/bin/python3 2>/dev/null | sort -V | tail -n 1 || true)"
+  if [ -z "$python" ] || ! "$python" -c pass 2>/dev/null; then
+    python="$(command -v "python$version" || true)"
+  fi
+  if [ -z "$python" ] || ! "$python" -c pass 2>/dev/null; then
+    echo "precise loop on Python $version: no such interpreter on this machine, skipped"
+    continue
+  fi
+  "$python" -m venv "$work/$version"
+  "$work/$version/bin/python" -m pip install --quiet --disable-pip-version-check "$wheel[test-runner]"
+  # Bounded: a hang in the loop on a new Python fails the step instead of holding CI.
+  exact="$("$python" -c 'import sys; print(sys.version.split()[0])')"
+  if timeout 600 "$work/$version/bin/python" -m pytest -q -p no:cacheprovider -n 0 "${tests[@]}"; then
+    echo "precise loop on Python $exact: its tests pass"
+  else
+    echo "precise loop on Python $exact: FAILED"
+    failed="$failed $exact"
+  fi
+done
+if [ -n "$failed" ]; then
+  echo "the precise loop's tests failed on Python$failed" >&2
+  exit 1
+fi
