@@ -402,3 +402,24 @@ def test_every_connection_opened_is_closed(adapter_with, tmp_path: Path) -> None
     assert status.returncode == 0, status.stderr
     record = json.loads(status.stdout.splitlines()[-1])
     assert (record["class1_connections"], record["class3_connections"], record["io_connections"]) == (0, 0, 0), record
+
+
+def test_a_check_an_option_was_not_given_for_is_not_run_in_every_form(tmp_path: Path) -> None:
+    """Identity Reset and the set of a read-only attribute need --allow-reset and --allow-writes: without
+    them they are "not run", apart from the checks the target does not offer (n/a)."""
+    junit, page = tmp_path / "conform.xml", tmp_path / "conform.html"
+    with FakeTarget() as target:
+        result = conform(target.address, "--only", "objects", "--json", "--junit", str(junit), "--html", str(page))
+        text = conform(target.address, "--only", "objects")
+    assert result.returncode == 0, result.stdout + result.stderr
+    report = json.loads(result.stdout)
+    verdicts = {c["id"]: (c["verdict"], c["observed"]) for c in report["checks"]}
+    assert verdicts["objects.identity.reset"] == ("not run", "needs --allow-reset")
+    assert verdicts["objects.identity.set_read_only"] == ("not run", "needs --allow-writes")
+    assert report["counts"]["not run"] == 2 and report["counts"]["n/a"] == sum(
+        v == "n/a" for v, _ in verdicts.values())
+    cases = {c.get("name"): c for c in ElementTree.parse(junit).getroot().iter("testcase")}
+    skipped = cases["objects.identity.reset"].find("skipped")
+    assert skipped is not None and skipped.get("message") == "needs --allow-reset"
+    assert "<th>not run</th>" in page.read_text()
+    assert "  not run objects.identity.reset" in text.stdout and ", 2 not run" in text.stdout.splitlines()[1]
