@@ -64,15 +64,17 @@ def write_parameter(browser: Any, code: str, value: str) -> str:
     """Type ``value`` into the field of ``code`` and press Enter; what the page then says beside it."""
     field = browser.find_element("id", f"parameter-{code}")
     note = field.find_element("xpath", "following-sibling::span")
-    before = note.text
-    browser.execute_script("arguments[0].closest('details').open = true; arguments[0].scrollIntoView()", field)
+    # The note is marked as waiting; the page's answer (a meaning, "written" or the device's refusal)
+    # replaces the mark, whatever the note said before (a refusal, then the same refusal, included).
+    pending = "(waiting for the answer)"
+    browser.execute_script("arguments[0].closest('details').open = true; arguments[0].scrollIntoView();"
+                           "arguments[1].textContent = arguments[2]", field, note, pending)
     from selenium.webdriver.common.keys import Keys
 
     field.click()                     # focused: the page's refresh of the values leaves it alone
     field.send_keys(Keys.CONTROL, "a")
     field.send_keys(value + "\n")
-    wait_for(lambda: note.text not in ("", before) or "refusal" in (note.get_attribute("class") or ""), 10,
-             f"the answer to {code}={value}")
+    wait_for(lambda: note.get_attribute("textContent") != pending, 10, f"the answer to {code}={value}")
     return str(note.text)
 
 
