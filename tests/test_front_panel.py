@@ -117,10 +117,10 @@ def test_the_acg_panel_runs_faults_refuses_and_loses_power(tmp_path: Path) -> No
             table = browser.find_element("id", "class1-table")
             wait_for(lambda: "21 → 71" in table.text and "run_forward = 1" in table.text, 20,
                      "the connection with its decoded output")
-            wait_for(lambda: "lit" in (browser.find_element("id", "ind-run").get_attribute("class") or ""), 20,
+            wait_for(lambda: "lit" in (browser.find_element("id", "ind-run").get_attribute("class") or "").split(), 20,
                      "RUN lit")
             wait_for(lambda: text(browser, "output") not in ("0.00 Hz", "-"), 20, "the output frequency")
-            assert "lit" in (browser.find_element("id", "ind-fwd").get_attribute("class") or "")
+            assert "lit" in (browser.find_element("id", "ind-fwd").get_attribute("class") or "").split()
 
             # A fault from the page's form, seen by pycomm3; cleared from the page's list.
             from selenium.webdriver.support.select import Select
