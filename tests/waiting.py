@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import asyncio
 import time
 from collections.abc import Callable
 
@@ -18,3 +19,14 @@ def wait_for(predicate: Callable[[], object], timeout: float, what: str = "the c
     if predicate():
         return True
     raise TimeoutError(f"timed out after {timeout:g} s waiting for {what}")
+
+
+async def wait_until(predicate: Callable[[], object], timeout: float, what: str = "the condition",
+                     interval: float = 0.01) -> None:
+    """``wait_for`` inside the event loop the condition depends on: it polls between ``asyncio.sleep``s,
+    so the loop goes on serving (raises ``TimeoutError`` naming ``what``)."""
+    deadline = time.monotonic() + timeout
+    while not predicate():
+        if time.monotonic() >= deadline:
+            raise TimeoutError(f"timed out after {timeout:g} s waiting for {what}")
+        await asyncio.sleep(interval)
