@@ -114,7 +114,7 @@ def parse(words: Sequence[str], func: Callable[[str], Callable[..., int]] | None
 
 
 def _explicit(name: str) -> Callable[..., int]:
-    from . import explicit
+    from .explicit import cmd_get, cmd_identity, cmd_set
 
-    function: Callable[..., int] = getattr(explicit, f"cmd_{name}")
-    return function
+    commands: dict[str, Callable[..., int]] = {"get": cmd_get, "set": cmd_set, "identity": cmd_identity}
+    return commands[name]
