@@ -536,8 +536,10 @@ def net_ctrl(ctx: Context, spec: CheckSpec) -> Outcome:
             return outcome(spec, False, "no T->O packet in a phase", link.exchanges())
         phases = (before[-1], on[-1], off[-1])
         observed, problems = [], []
-        for name, flag in (("CtrlFromNet", "ctrl_from_net"), ("RefFromNet", "ref_from_net")):
-            b, o, a = (getattr(s, flag) for s in phases)
+        sources: tuple[tuple[str, Callable[[Status], bool | None]], ...] = (
+            ("CtrlFromNet", lambda s: s.ctrl_from_net), ("RefFromNet", lambda s: s.ref_from_net))
+        for name, flag in sources:
+            b, o, a = (flag(s) for s in phases)
             how = _source(spec, b, o, a)
             seen = f"{name} {'/'.join('?' if v is None else str(int(v)) for v in (b, o, a))}"
             observed.append(f"{seen} ({how})" if how else seen)
