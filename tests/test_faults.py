@@ -5,6 +5,8 @@ sockets, and by the device's own state. After ``clear`` the device goes on as be
 from __future__ import annotations
 
 import asyncio
+import itertools
+import random
 import socket
 import struct
 import time
@@ -19,8 +21,9 @@ from cipstack.cip.types import UINT
 from cipstack.devices.acg.device import AcgDevice
 from cipstack.devices.acg.registers import ACG_REGISTERS, CLASS_64_INSTANCES
 from cipstack.devices.profiles import catalog_for
+from cipstack.eip.io_core import encode_io_datagram
 from cipstack.eip.originator.io_originator import IoTimeoutError
-from cipstack.faults import FaultError, FaultStateError, NoSuchConnection
+from cipstack.faults import FaultController, FaultError, FaultStateError, NoSuchConnection
 from cipstack.scanner import Scanner
 from tests.waiting import wait_until
 
@@ -103,6 +106,26 @@ async def test_a_fault_for_a_while_clears_itself_and_the_connection_lives_on(ada
         await wait_until(lambda: io.stats.received > after + 10, 5, "production to resume")
         assert not io.timed_out
     assert [r["event"] for r in adapter.faults.history] == ["fault applied", "fault expired"]
+
+
+async def test_drop_a_share_drops_that_share_of_20000_datagrams(adapter: Adapter) -> None:
+    """``drop --share 0.3`` through the device's class 1 seam, with a seeded random source: of 20,000
+    T->O datagrams, 0.3 within 0.015 are dropped (4.6 standard deviations), each one independently
+    (a dropped one is followed by a drop as often as any other)."""
+    faults = FaultController(adapter.runtime, rng=random.Random(2026))
+    faults.apply("drop", share=0.3)
+    seam = adapter.runtime.class1
+    assert seam is not None and len(seam.outbound) == 1
+    drop = seam.outbound[0]
+    passed = [bool(drop.outbound([(encode_io_datagram(0x1234, n, n, bytes(4)), ("127.0.0.1", 2222))], 0.0, seam))
+              for n in range(20_000)]
+    faults.clear()
+    await faults.settle()
+    assert seam.outbound == []
+    dropped = passed.count(False) / len(passed)
+    after_a_drop = [b for a, b in itertools.pairwise(passed) if not a]
+    assert abs(dropped - 0.3) <= 0.015, dropped
+    assert abs(after_a_drop.count(False) / len(after_a_drop) - 0.3) <= 0.03, after_a_drop.count(False)
 
 
 # The tests below judge what the scanner counts, not when it times out: their connections time out at

@@ -26,6 +26,7 @@ import itertools
 import json
 import math
 from collections import Counter
+from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
 
@@ -120,7 +121,7 @@ def run_faults():
     at = seen["marks"][-1][1]
     wait_for(lambda: len(packets_after(at)) >= 5, 10, "T->O data after clear")
     time.sleep(0.5)
-    for name, options, window in (("drop", {"every": 4}, 1.5), ("drop", {"share": ARGS["share"]}, 3.0),
+    for name, options, window in (("drop", {"every": 4}, 1.5), ("drop", {"share": ARGS["share"]}, 6.0),
                                   ("duplicate", {}, 0.6), ("reorder", {}, 0.6), ("freeze-sequence", {}, 0.6),
                                   ("delay", {"by": 0.1}, 0.6)):
         fault(name, **options)
@@ -217,13 +218,18 @@ class Run:
     def closes_in(self, start: float, end: float) -> list[float]:
         return [t for t, line in self.log if "closed by timeout" in line and start < t <= end]
 
-    def wire(self, start: float, end: float) -> list[tuple[float, int, int, int]]:
-        """T->O frames of the bridge's connection on the wire between two wall times: time, connection
-        id, CIP sequence count, UDP length (the connection with the most frames in the window)."""
+    def frames(self, start: float, end: float) -> list[tuple[float, int, int, int]]:
+        """The adapter's T->O frames on the wire between two wall times, in order: time, connection id,
+        CIP sequence count, UDP length."""
         rows = [line.split("\t") for line in tshark(
             self.capture, f"ip.src == 127.0.0.2 && udp.srcport == 2222 && frame.time_epoch > {start} && "
             f"frame.time_epoch <= {end}", fields=("frame.time_epoch", "enip.cpf.sai.connid", "cip.seq", "udp.length"))]
-        frames = [(float(t), int(c, 0), int(s, 0) if s else -1, int(n)) for t, c, s, n in rows]
+        return [(float(t), int(c, 0), int(s, 0) if s else -1, int(n)) for t, c, s, n in rows]
+
+    def wire(self, start: float, end: float) -> list[tuple[float, int, int, int]]:
+        """The frames of the bridge's connection between two wall times (the connection with the most
+        frames in the window)."""
+        frames = self.frames(start, end)
         if not frames:
             return []
         busiest = Counter(f[1] for f in frames).most_common(1)[0][0]
@@ -245,7 +251,7 @@ def run(tmp_path_factory: pytest.TempPathFactory) -> Run:
     return Run(out, seen)
 
 
-def gaps(times: list[float]) -> list[float]:
+def gaps(times: Sequence[float]) -> list[float]:
     return [b - a for a, b in itertools.pairwise(times)]
 
 
@@ -298,22 +304,27 @@ def test_drop_every_4th_packet_removes_every_4th_sequence_count(run: Run) -> Non
 
 
 def test_drop_a_share_removes_that_share_of_the_packets(run: Run) -> None:
-    """``--share 0.3`` over 3 s, about 60 packets: the share lost is binomial, and is bounded by 3 standard
-    deviations (about 0.06) around 0.3. Four drops in a row outlast EIPScanner's watchdog and it reconnects
-    (as it should): the sequence counts are read per connection, split at its closes."""
-    start, end = run.window("drop", 1)
-    packets = run.packets_in(start, end)
-    bounds = [start, *run.closes_in(start, end), end]
-    received = span = 0
-    for low, high in itertools.pairwise(bounds):
-        seqs = [p[1] for p in packets if low < p[0] <= high]
-        if seqs:
-            received, span = received + len(seqs), span + seqs[-1] - seqs[0] + 1
-    deviation = 3 * math.sqrt(SHARE * (1 - SHARE) / span)
-    assert span >= 40 and abs((1 - received / span) - SHARE) <= deviation, (received, span)
-    # Against the baseline's rate over the same time (its own error, about 0.03, added to the bound).
-    expected = baseline_rate(run) * (end - start)
-    assert abs((1 - len(packets) / expected) - SHARE) <= deviation + 0.05, (len(packets), expected)
+    """``--share 0.3`` for 6 s, about 120 T->O packets. On the wire, a sequence count missing between a
+    connection's first and last frame of the window is a packet dropped (each production takes the next
+    count, dropped or not); the share is binomial, bounded by 4.5 standard deviations (about 0.19 here,
+    and a false failure about once in 150,000 runs). So few packets make that bound wide: the share
+    itself is held to 0.02 over 20,000 datagrams in tests/test_faults.py. Measured at EIPScanner, the
+    share would count its reconnections too: four drops in a row outlast its watchdog and it reconnects,
+    as it should, losing what comes meanwhile. What it accepted is what the wire carried: never a
+    dropped count."""
+    start, end = run.wall("drop", 1)
+    produced = missing = 0
+    by_connection: dict[int, list[int]] = {}
+    for _, connection, seq, _ in run.frames(start, end):
+        by_connection.setdefault(connection, []).append(seq)
+    for seqs in by_connection.values():
+        span = seqs[-1] - seqs[0] + 1
+        produced, missing = produced + span, missing + span - len(seqs)
+    deviation = 4.5 * math.sqrt(SHARE * (1 - SHARE) / produced)
+    assert produced >= 80 and abs(missing / produced - SHARE) <= deviation, (missing, produced, by_connection)
+    accepted = Counter(p[1] for p in run.packets_in(*run.window("drop", 1)))
+    carried = Counter(f[2] for f in run.frames(start - 2 * RPI, end + 2 * RPI))
+    assert sum(accepted.values()) >= 40 and not accepted - carried, (accepted - carried, by_connection)
 
 
 def test_duplicate_hands_eipscanner_each_sequence_count_twice(run: Run) -> None:
