@@ -9,7 +9,6 @@ returned. Every error status raises ``CipError`` naming the general and extended
 from __future__ import annotations
 
 import contextlib
-import logging
 import struct
 from collections.abc import AsyncIterator, Callable, Iterator, Sequence
 from dataclasses import dataclass
@@ -35,6 +34,7 @@ from .eip.originator.core import (
 from .eip.originator.replies import EncapsulationStatusError, MalformedReplyError
 from .eip.wire.encapsulation import DEFAULT_PORT
 from .errors import NotFound, ProtocolError
+from .logs import logger
 
 if TYPE_CHECKING:
     # Imported where used: explicit messaging alone does not load asyncio, the EDS model or class 1.
@@ -46,7 +46,7 @@ if TYPE_CHECKING:
     from .sync_io import LoopThread, SyncIoConnection
 
 T = TypeVar("T")
-log = logging.getLogger(__name__)
+log = logger(__name__)
 
 #: Key of the bytes of a Get_Attributes_All reply after the attributes the catalog declares.
 UNDECODED = "(undecoded)"

@@ -1,5 +1,6 @@
 """The dependency direction DESIGN.md gives, checked on the source: ``cip`` depends on nothing of
-ours but ``errors`` (the error root, which every part may import and which imports nothing of ours);
+ours but ``errors`` and ``logs`` (the error root and the loggers on demand, which every part may
+import and which import nothing of ours);
 ``objects`` and ``assemblies`` on ``cip``; ``eip`` and ``componet`` on ``cip`` alone (a
 transport knows no device); ``devices`` on those; ``eds`` reads the devices' declarations, never
 the other way round."""
@@ -13,7 +14,9 @@ import pytest
 
 PACKAGE = Path(__file__).resolve().parent.parent / "cipstack"
 
-#: What each part may import of the package (its own modules always).
+#: What every part may import: the error root and the loggers on demand (both import nothing of ours).
+BELOW_ALL = {"errors", "logs"}
+#: What each part may import of the package (its own modules always, and ``BELOW_ALL``).
 ALLOWED = {
     "cip": {"errors"},
     "objects": {"cip", "errors"},
@@ -104,7 +107,7 @@ def test_each_part_imports_only_what_lies_below_it(part: str) -> None:
     assert modules, part
     wrong = {}
     for path in modules:
-        extra = _imports(path) - ALLOWED[part] - {part}
+        extra = _imports(path) - ALLOWED[part] - BELOW_ALL - {part}
         if extra:
             wrong[str(path.relative_to(PACKAGE))] = sorted(extra)
     assert wrong == {}
@@ -122,9 +125,10 @@ def test_nothing_below_imports_the_parts_on_top(part: str) -> None:
     assert wrong == {}
 
 
-def test_errors_imports_nothing_of_the_package() -> None:
-    """``errors`` lies below every part: it imports nothing of ours, so any part may import it."""
-    assert _imports(PACKAGE / "errors.py") == set()
+@pytest.mark.parametrize("module", sorted(BELOW_ALL))
+def test_what_lies_below_every_part_imports_nothing_of_the_package(module: str) -> None:
+    """``errors`` and ``logs`` lie below every part: they import nothing of ours, so any part may import them."""
+    assert _imports(PACKAGE / f"{module}.py") == set()
 
 
 @pytest.mark.parametrize("part", RUNTIME_CLIENTS)

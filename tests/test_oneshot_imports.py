@@ -6,11 +6,13 @@ EDS tool or another command's module. A whole-process timing against pycomm3 is
 from __future__ import annotations
 
 import json
+import re
 import subprocess
 import sys
 
 import pytest
 
+from tests.fakes import ScriptedTarget
 from tests.test_cli import adapter_process  # noqa: F401 - the fixture: the emulator in a process of its own
 
 #: Runs the command line as ``python -m cipstack`` does, then prints the modules it loaded.
@@ -27,10 +29,11 @@ print("MODULES " + json.dumps({"status": status, "modules": sorted(sys.modules)}
 #: The most cipstack modules each command may load: today's count. A one-shot line is read without
 #: argparse, a standard attribute decodes by the standard objects' compact data (``objects/declared.py``)
 #: and a profile's by its own (``devices/declared/``).
-BUDGET = {"get-standard": 27, "get-decoded": 32, "set": 32, "identity": 20}
+BUDGET = {"get-standard": 28, "get-decoded": 33, "set": 33, "identity": 21}
 #: Never on the one-shot path: another command's modules, the device model, the objects that serve the
-#: standard classes, the command-line grammar, and what only they or a name lookup import.
-FORBIDDEN = ("asyncio", "construct", "cipstack.eip.originator.asyncio_client", "cipstack.devices.acg",
+#: standard classes, the command-line grammar, and what only they or a name lookup import; ``logging``
+#: too, while nothing is logged (``cipstack.logs``).
+FORBIDDEN = ("asyncio", "logging", "construct", "cipstack.eip.originator.asyncio_client", "cipstack.devices.acg",
              "cipstack.devices.omron", "cipstack.devices.profiles", "cipstack.eds", "cipstack.assemblies.schema",
              "cipstack.cli.io", "cipstack.cli.drive", "cipstack.control", "cipstack.sync_io",
              "cipstack.objects.identity", "cipstack.objects.tcpip", "cipstack.objects.assembly", "cipstack.cip.router",
@@ -59,3 +62,22 @@ def test_the_blocking_scanner_imports_no_asyncio() -> None:
     script = "import sys, cipstack.scanner; print('asyncio' in sys.modules)"
     assert subprocess.run([sys.executable, "-c", script], capture_output=True, text=True, check=True,
                           timeout=60).stdout.strip() == "False"
+
+
+@pytest.mark.parametrize("level", ["DEBUG", "INFO"])
+def test_a_one_shot_command_that_logs_loads_logging_configured_as_asked(level: str) -> None:
+    """A target that answers no Identity request: the scanner logs that it could not identify it (a
+    DEBUG record), the moment ``logging`` is loaded and configured with the level and format the line
+    gives, as every other command has them from the start."""
+    with ScriptedTarget() as target:
+        done = subprocess.run([sys.executable, "-m", "cipstack", "--log-level", level, "get", target.address,
+                               "0x2A/1/102"], capture_output=True, text=True, timeout=60)
+    assert done.returncode == 1 and done.stdout == "", done.stderr
+    lines = done.stderr.splitlines()
+    assert lines[-1] == "cipstack get: error status service 0x0E: 0x08 (service not supported)", lines
+    logged = [line for line in lines if " cipstack.scanner: " in line]
+    if level == "DEBUG":
+        assert re.fullmatch(r"\d{4}-\d\d-\d\d \d\d:\d\d:\d\d,\d{3} DEBUG cipstack\.scanner: Identity attribute 1: "
+                            r".*0x08.*", logged[0]), lines
+    else:
+        assert logged == [], lines

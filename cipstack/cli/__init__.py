@@ -9,7 +9,6 @@ command lives in its own module and imports what it needs when it runs."""
 
 from __future__ import annotations
 
-import logging
 import os
 import select
 import sys
@@ -19,6 +18,7 @@ from typing import TYPE_CHECKING, Any
 from ..cip.status import CipError, describe_status
 from ..eip.originator.replies import EncapsulationStatusError
 from ..eip.wire.encapsulation import EncapsulationError
+from ..logs import configured_on_first_log
 from . import oneshot
 from .common import EXIT_FAILURE, EXIT_OK, EXIT_USAGE, UsageError, parse_duration, parse_object_path
 
@@ -30,6 +30,8 @@ if TYPE_CHECKING:
 #: status of a process that SIGPIPE ended, 128 + 13, as ``cat`` or ``grep`` do: its output was cut
 #: short, which a success would hide from ``set -o pipefail`` or a reader that failed.
 EXIT_BROKEN_PIPE = 128 + 13
+#: How a log record is printed on stderr.
+LOG_FORMAT = "%(asctime)s %(levelname)s %(name)s: %(message)s"
 
 
 def main(argv: Sequence[str] | None = None) -> int:
@@ -79,29 +81,42 @@ def _transport_errors() -> tuple[type[BaseException], ...]:
     return (ConnectionError, *_timeouts(), OSError)
 
 
+def _configure_logging(level: str) -> None:
+    import logging
+
+    logging.basicConfig(level=getattr(logging, level), stream=sys.stderr, format=LOG_FORMAT)
+
+
 def _main(argv: Sequence[str] | None) -> int:
     words = list(sys.argv[1:] if argv is None else argv)
     # A one-shot command's plain line is read without argparse; any other line, and every error, by it.
     args: Any = oneshot.parse(words)
-    if args is None:
-        from .parser import build_parser, command_word
+    if args is not None:
+        # A one-shot command's modules log only when something goes wrong: ``logging`` is loaded then.
+        with configured_on_first_log(lambda: _configure_logging(args.log_level)):
+            return _run(args)
+    from .parser import build_parser, command_word
 
-        # A command alone shows its usage when its line is wrong; only help shows the descriptions.
-        parser = build_parser(command_word(words), texts=not words or any(w in ("-h", "--help") for w in words))
-        try:
-            args = parser.parse_args(words)
-        except UsageError as exc:
-            # As argparse reports it: the usage of the command the line names, then PROG: error: MESSAGE.
-            print(f"{exc.usage}{exc.prog or 'cipstack'}: error: {exc}", file=sys.stderr)
-            return EXIT_USAGE
-        if args.command is None:
-            # ``cipstack`` alone: the commands and what each does, on stderr, exit 2 as argparse exits for a
-            # missing argument (a script that loses its command word fails; ``cipstack --help`` is the 0 way).
-            print(parser.format_help() + "\ncipstack: error: the following arguments are required: COMMAND",
-                  file=sys.stderr)
-            return EXIT_USAGE
-    logging.basicConfig(level=getattr(logging, args.log_level), stream=sys.stderr,
-                        format="%(asctime)s %(levelname)s %(name)s: %(message)s")
+    # A command alone shows its usage when its line is wrong; only help shows the descriptions.
+    parser = build_parser(command_word(words), texts=not words or any(w in ("-h", "--help") for w in words))
+    try:
+        args = parser.parse_args(words)
+    except UsageError as exc:
+        # As argparse reports it: the usage of the command the line names, then PROG: error: MESSAGE.
+        print(f"{exc.usage}{exc.prog or 'cipstack'}: error: {exc}", file=sys.stderr)
+        return EXIT_USAGE
+    if args.command is None:
+        # ``cipstack`` alone: the commands and what each does, on stderr, exit 2 as argparse exits for a
+        # missing argument (a script that loses its command word fails; ``cipstack --help`` is the 0 way).
+        print(parser.format_help() + "\ncipstack: error: the following arguments are required: COMMAND",
+              file=sys.stderr)
+        return EXIT_USAGE
+    _configure_logging(args.log_level)
+    return _run(args)
+
+
+def _run(args: Any) -> int:
+    """Run the command ``args`` names; each failure it raises, one line on stderr (the module docstring)."""
     func: Callable[[Any], int] = args.func
     name = f"cipstack {args.command}"
     try:

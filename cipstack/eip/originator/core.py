@@ -19,7 +19,6 @@ yielded transaction drives it completely; ``run_plan`` is the blocking driver.
 from __future__ import annotations
 
 import itertools
-import logging
 import random
 import struct
 from collections.abc import Callable, Generator, Sequence
@@ -29,6 +28,7 @@ from typing import TYPE_CHECKING, Any, Generic, TypeVar
 from ...cip.epath import Segment, encode_path, request_path
 from ...cip.messages import MessageRouterRequest, MessageRouterResponse, Service
 from ...errors import CipstackError
+from ...logs import logger
 from ..wire.cpf import Item, ItemType, decode_items, encode_items
 from ..wire.encapsulation import (
     DEFAULT_PORT,
@@ -49,7 +49,7 @@ if TYPE_CHECKING:
     from ..wire.cm_messages import ConnectionTriad
     from ..wire.identity_items import IdentityRecord, ServiceRecord
 
-log = logging.getLogger(__name__)
+log = logger(__name__)
 T = TypeVar("T")
 
 #: Our vendor id as an originator (0xFFFF is not assigned; any value works for tests).

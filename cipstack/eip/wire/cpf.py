@@ -2,12 +2,12 @@
 
 from __future__ import annotations
 
-import logging
 import socket
 import struct
 from dataclasses import dataclass
 from enum import IntEnum
 
+from ...logs import logger
 from .encapsulation import EncapsulationError, EncapsulationStatus
 
 
@@ -23,7 +23,7 @@ class ItemType(IntEnum):
     SEQUENCED_ADDRESS = 0x8002
 
 
-log = logging.getLogger(__name__)
+log = logger(__name__)
 
 _ITEM = struct.Struct("<HH")
 _COUNT = struct.Struct("<H")
