@@ -78,6 +78,7 @@ async def test_drv_and_frq_make_the_drive_run_over_class_1(params: tuple[str, ..
             else:
                 # Factory drv = 1: the terminals command the drive, the network's run bit does nothing, in
                 # 50 packets that reached it (0.5 s of them), however long they took to come.
+                assert adapter.io is not None
                 [consuming] = adapter.io.connections.values()
                 await wait_until(lambda: consuming.stats.received >= 50, 10, "50 O->T packets")
                 assert not io.input.running_forward and io.input.speed_actual == 0 and not io.input.ctrl_from_net
