@@ -5,6 +5,7 @@ sockets, and by the device's own state. After ``clear`` the device goes on as be
 from __future__ import annotations
 
 import asyncio
+import errno
 import itertools
 import random
 import socket
@@ -53,6 +54,12 @@ async def write_registers(scanner: Scanner, values: dict[int, int]) -> None:
     await scanner.set_attribute_single(0x04, 120 + len(values), 3, b"".join(UINT.encode(v) for v in values.values()))
 
 
+def refused(port: int) -> bool:
+    """Whether a TCP connection to ``port`` on loopback is refused (nothing listens there)."""
+    with socket.socket() as probe:
+        return probe.connect_ex(("127.0.0.1", port)) == errno.ECONNREFUSED
+
+
 def io_port(adapter: Adapter) -> int:
     assert adapter.io_endpoint is not None
     return adapter.io_endpoint.port
@@ -64,30 +71,35 @@ async def test_stop_producing_times_out_the_scanner_at_rpi_x_4_x_2_to_the_multip
     expected = rpi * 4 * 2 ** multiplier                                     # 80 ms
     async with await connect(adapter) as scanner, scanner.io_connection(
             output=21, input=71, rpi=rpi, timeout_multiplier=multiplier, target_io_port=io_port(adapter)) as io:
-        await io.wait_input(lambda i: True, 5)
-        await asyncio.sleep(0.2)
+        # Straight to the fault once data flows: a warm-up would only leave room for a scheduling stall
+        # longer than the 80 ms timeout to close the connection before the fault.
+        await wait_until(lambda: io.stats.received >= 3, 5, "T->O data")
         consumer = io.connection.consumer
         assert consumer.timeout == pytest.approx(expected)
+        assert adapter.io is not None
+        [produced] = adapter.io.connections.values()
         applied = time.monotonic()
         adapter.fault("stop-producing")
+        sent_before = produced.encap_sequence                                  # the last the device produced
         with pytest.raises(IoTimeoutError):
             async for _ in io.updates():
                 pass
         timed_out = time.monotonic()
-        last_packet = consumer.deadline - consumer.timeout                    # what the scanner last accepted
-        # It times out its own timeout after the last packet it got, and that packet left at most about
-        # an RPI before the fault (none after it).
-        assert expected <= timed_out - last_packet < expected + 0.05
-        assert timed_out - applied < expected + rpi + 0.05
-        assert last_packet < applied + 0.002
+        # Judged by the watchdog's own numbers, not by when this test got to look: its deadline was its
+        # timeout after the last packet it accepted, and it did not time out before that deadline.
+        last_packet = io.arrivals.last
+        assert last_packet is not None
+        assert consumer.deadline - last_packet == pytest.approx(expected)
+        assert timed_out >= last_packet + expected
+        # The last packet it accepted left before the fault (none after it), wherever the loop read it.
+        assert consumer.last_encap_sequence is not None and consumer.last_encap_sequence <= sent_before
+        assert timed_out - applied < expected + 2.0                           # and it did time out
     assert [f.name for f in adapter.faults.faults()] == ["stop-producing"]
     adapter.clear_faults()
     # Cleared: a new connection gets its data as before.
     async with await connect(adapter) as scanner, scanner.io_connection(
-            output=21, input=71, rpi=rpi, target_io_port=io_port(adapter)) as io:
-        await io.wait_input(lambda i: True, 5)
-        await asyncio.sleep(0.1)
-        assert io.stats.received > 5
+            output=21, input=71, rpi=rpi, timeout_multiplier=5, target_io_port=io_port(adapter)) as io:
+        await wait_until(lambda: io.stats.received > 5, 5, "T->O data after clear")
     events = [(r["event"], r["fault"]) for r in adapter.faults.history]
     assert events == [("fault applied", "stop-producing"), ("fault cleared", "stop-producing")]
     assert all(isinstance(r["wall"], float) and r["time"].endswith("Z") for r in adapter.faults.history)
@@ -137,11 +149,12 @@ async def test_drop_every_second_packet_is_seen_as_lost(adapter: Adapter) -> Non
         await io.wait_input(lambda i: True, 5)
         lost, received = io.stats.lost, io.stats.received
         adapter.fault("drop", every=2)
-        await asyncio.sleep(0.3)
+        await wait_until(lambda: io.stats.received - received >= 30, 5, "30 packets under the fault")
         adapter.clear_faults("drop")
         got, missed = io.stats.received - received, io.stats.lost - lost
-        assert got > 10 and abs(missed - got) <= 3                          # one in two dropped
-        await asyncio.sleep(0.1)
+        assert got >= 30 and abs(missed - got) <= 3                          # one in two dropped
+        since = io.stats.received
+        await wait_until(lambda: io.stats.received - since >= 20, 5, "20 packets after clear")
         assert io.stats.lost - lost - missed <= 1 and not io.timed_out       # cleared: none lost since
 
 
@@ -151,32 +164,37 @@ async def test_duplicate_and_reorder_are_seen_by_the_scanner(adapter: Adapter) -
         await io.wait_input(lambda i: True, 5)
         stale, received = io.stats.stale, io.stats.received
         duplicate = adapter.fault("duplicate")
-        await asyncio.sleep(0.2)
+        await wait_until(lambda: io.stats.stale - stale >= 20, 5, "20 second copies")
         adapter.clear_faults(duplicate.id)
         # Each packet came twice: the second copy is no newer than the first, and is dropped.
-        assert io.stats.stale - stale > 10 and abs((io.stats.stale - stale) - (io.stats.received - received)) <= 3
+        assert io.stats.stale - stale >= 20 and abs((io.stats.stale - stale) - (io.stats.received - received)) <= 3
         stale = io.stats.stale
         adapter.fault("reorder")
-        await asyncio.sleep(0.2)
+        await wait_until(lambda: io.stats.stale - stale >= 10, 5, "10 packets that came late")
         adapter.clear_faults()
-        assert io.stats.stale - stale > 5                                    # the older of each pair came late
+        assert io.stats.stale - stale >= 10                                  # the older of each pair came late
         assert not io.timed_out
 
 
 async def test_freeze_sequence_and_wrong_size_and_delay(adapter: Adapter) -> None:
     async with await connect(adapter) as scanner:
+        await write_registers(scanner, {DRV: 4, FRQ: 8})                     # run and reference from the network
         async with scanner.io_connection(output=21, input=71, rpi=0.005, timeout_multiplier=5,
                                          target_io_port=io_port(adapter)) as io:
             await io.wait_input(lambda i: True, 5)
+            duplicates = io.stats.duplicates
             adapter.fault("freeze-sequence")
-            await asyncio.sleep(0.05)
-            updates = io.stats.received
-            io.output.speed_reference = 300                                   # the input would change...
-            await asyncio.sleep(0.1)
-            assert io.input.raw == io.input.raw and not io.timed_out
+            # The first packet after the fault still carries a new count; those after it repeat it.
+            await wait_until(lambda: io.stats.duplicates > duplicates, 5, "a frozen sequence count")
+            frozen = io.input.raw
+            io.output.update(run_forward=True, speed_reference=300)          # the input changes...
+            await wait_until(lambda: adapter.device.assembly.data(71) != frozen, 5, "the device's input to change")
+            duplicates = io.stats.duplicates
+            await wait_until(lambda: io.stats.duplicates - duplicates >= 10, 5, "10 packets since")
+            # ... and the scanner, taking each packet for a repeat of the last, keeps the old data.
+            assert io.input.raw == frozen and not io.timed_out
             adapter.clear_faults()
-            await asyncio.sleep(0.05)
-            assert io.stats.received >= updates
+            await io.wait_input(lambda i: i.running_forward, 5)              # new counts: the new data
         async with scanner.io_connection(output=21, input=71, rpi=0.005, timeout_multiplier=1,
                                          target_io_port=io_port(adapter)) as io:
             await io.wait_input(lambda i: True, 5)
@@ -188,10 +206,11 @@ async def test_freeze_sequence_and_wrong_size_and_delay(adapter: Adapter) -> Non
         async with scanner.io_connection(output=21, input=71, rpi=0.005, timeout_multiplier=5,
                                          target_io_port=io_port(adapter), keep_intervals=True) as io:
             await io.wait_input(lambda i: True, 5)
+            received, lost = io.stats.received, io.stats.lost
             adapter.fault("delay", by="40ms", jitter="2ms")
-            await asyncio.sleep(0.3)
+            await wait_until(lambda: io.stats.received - received > 20, 5, "20 packets under the delay")
             adapter.clear_faults()
-            assert not io.timed_out and io.stats.received > 20              # late, not lost
+            assert not io.timed_out and io.stats.lost == lost                # late, not lost
 
 
 async def test_ignore_output_keeps_the_last_command_and_idle_is_idle(adapter: Adapter) -> None:
@@ -201,28 +220,38 @@ async def test_ignore_output_keeps_the_last_command_and_idle_is_idle(adapter: Ad
         await write_registers(scanner, {DRV: 4, FRQ: 8})                     # run and reference from the network
         async with scanner.io_connection(output=21, input=71, rpi=0.005, timeout_multiplier=5,
                                          target_io_port=io_port(adapter)) as io:
+            table = adapter.io
+            assert table is not None
+            [consuming] = table.connections.values()
+
+            async def o_t_packets(count: int) -> None:
+                """Until ``count`` more O->T packets reached the device's connection (what it keeps or
+                ignores is then judged on data that did arrive, not on how long this test slept)."""
+                since = consuming.stats.received
+                await wait_until(lambda: consuming.stats.received - since >= count, 5, f"{count} O->T packets")
+
             io.output.speed_reference = 600
-            await asyncio.sleep(0.1)
-            assert device.status_fields()["reference_hz"] == 20.0           # 600 rpm, 4 poles: 20 Hz
+            await wait_until(lambda: device.status_fields()["reference_hz"] == 20.0, 5,
+                             "the reference")                                 # 600 rpm, 4 poles: 20 Hz
             adapter.fault("ignore-output", connection=io.connection.to_connection_id)
             io.output.speed_reference = 1200
-            await asyncio.sleep(0.1)
+            await o_t_packets(10)
             assert device.status_fields()["reference_hz"] == 20.0           # keeps its last command
-            assert not io.timed_out and adapter.io is not None and adapter.io.connections  # not timed out either
+            assert not io.timed_out and table.connections                   # not timed out either
             adapter.clear_faults()
-            await asyncio.sleep(0.1)
-            assert device.status_fields()["reference_hz"] == 40.0
+            await wait_until(lambda: device.status_fields()["reference_hz"] == 40.0, 5, "the new reference")
             adapter.fault("idle")
             io.output.speed_reference = 1500
-            await asyncio.sleep(0.1)
             # Idle: the device's connection is idle and the ACG keeps its last commands (ACG-ET2 manual; its
             # Identity status has no idle state, so attribute 5 still says running).
-            assert adapter.io is not None and [c.run for c in adapter.io.connections.values()] == [False]
+            await wait_until(lambda: [c.run for c in table.connections.values()] == [False], 5,
+                             "the connection to go idle")
+            await o_t_packets(10)
             assert device.status_fields()["reference_hz"] == 40.0
             adapter.clear_faults()
-            await asyncio.sleep(0.1)
-            assert [c.run for c in adapter.io.connections.values()] == [True]
-            assert device.status_fields()["reference_hz"] == 50.0
+            await wait_until(lambda: [c.run for c in table.connections.values()] == [True], 5,
+                             "the connection to run again")
+            await wait_until(lambda: device.status_fields()["reference_hz"] == 50.0, 5, "the reference after idle")
 
 
 async def test_a_fault_on_a_connection_that_is_not_open_is_refused(adapter: Adapter) -> None:
@@ -301,18 +330,23 @@ async def test_drop_sessions_and_close_tcp(adapter: Adapter) -> None:
 
 
 async def test_delay_replies(adapter: Adapter) -> None:
+    async def fastest_of_3() -> float:
+        """The quickest of three round trips: a stall of this busy process lengthens one, rarely all."""
+        times = []
+        for _ in range(3):
+            started = time.monotonic()
+            assert await scanner.read(0x01, 1, 1) == 259
+            times.append(time.monotonic() - started)
+        return min(times)
+
     async with await connect(adapter) as scanner:
-        started = time.monotonic()
-        await scanner.read(0x01, 1, 1)
-        quick = time.monotonic() - started
+        quick = await fastest_of_3()
         adapter.fault("delay-replies", by="150ms")
         started = time.monotonic()
         assert await scanner.read(0x01, 1, 1) == 259
         assert time.monotonic() - started >= 0.15 > quick
         adapter.clear_faults()
-        started = time.monotonic()
-        await scanner.read(0x01, 1, 1)
-        assert time.monotonic() - started < 0.1
+        assert await fastest_of_3() < 0.1
 
 
 # -- the whole device -----------------------------------------------------------------------------------------
@@ -329,8 +363,9 @@ async def test_unplug_is_silent_and_plug_serves_again(adapter: Adapter) -> None:
                 pass
         with pytest.raises(FaultStateError):
             adapter.fault("unplug")
-        await asyncio.sleep(0.2)
-        assert adapter.io is not None and not adapter.io.connections          # the device's side timed out too
+        table = adapter.io
+        assert table is not None
+        await wait_until(lambda: not table.connections, 5, "the device's side to time out too")
     adapter.fault("plug")
     await adapter.faults.settle()
     async with await connect(adapter) as scanner:
@@ -345,12 +380,14 @@ async def test_power_cycle_loses_exactly_the_unsaved_parameters(adapter: Adapter
         await write_registers(scanner, {SAVE_PARAMETERS: 1})                # 0x03E0: 0 -> 1 saves (ACG RS-485 manual)
         await scanner.set_attribute_single(0x2A, 1, 103, 77)                # dEC 7.7 s, not saved
         assert await scanner.read(0x2A, 1, 103) == 77
-        adapter.fault("power-cycle", off="100ms")
-        await asyncio.sleep(0.05)
-        with pytest.raises(ConnectionRefusedError):                         # no power: nothing answers
-            socket.create_connection(("127.0.0.1", adapter.port), timeout=1).close()
+        # Off for longer than a loaded machine may stall this test, and ended by clearing the fault: what
+        # must happen while the power is off cannot find it back on.
+        adapter.fault("power-cycle", off="30s")
+        await wait_until(lambda: refused(adapter.port), 5, "the port to close")   # no power: nothing answers
         with pytest.raises((ConnectionError, OSError, asyncio.TimeoutError, TimeoutError)):
             await scanner.read(0x2A, 1, 102)                                # its connection went with the power
+    assert not adapter.runtime.power.powered                                 # all of it while off
+    adapter.clear_faults("power-cycle")
     await adapter.faults.settle()
     async with await connect(adapter) as scanner:
         assert await scanner.read(0x2A, 1, 102) == 55                       # saved: kept

@@ -30,6 +30,7 @@ from cipstack.devices.registers import RegisterError
 from cipstack.scanner import ReplyDecodeError, Scanner
 from tests.ports import free_port
 from tests.test_cli import one_line_error, run, start_adapter, stop
+from tests.waiting import wait_until
 
 ACG_CATALOG = catalog_for(259, 100)
 
@@ -67,15 +68,19 @@ async def test_drv_and_frq_make_the_drive_run_over_class_1(params: tuple[str, ..
     adapter = await _acg_adapter(*params)
     try:
         async with await Scanner.connect(f"127.0.0.1:{adapter.port}", catalog=ACG_CATALOG) as scanner, \
-                scanner.io_connection(output=21, input=71, rpi=0.010, target_io_port=adapter.io.io_port) as io:
+                scanner.io_connection(output=21, input=71, rpi=0.010, timeout_multiplier=5,
+                                      target_io_port=adapter.io.io_port) as io:
             io.output.speed_reference = 900
             io.output.run_forward = True
             if runs:
                 image = await io.wait_input(lambda i: i.at_reference, 10)
                 assert image.speed_actual == 900 and image.ctrl_from_net and image.ref_from_net
             else:
-                # Factory drv = 1: the terminals command the drive, the network's run bit does nothing.
-                await asyncio.sleep(0.5)
+                # Factory drv = 1: the terminals command the drive, the network's run bit does nothing, in
+                # 50 packets that reached it (0.5 s of them), however long they took to come.
+                assert adapter.io is not None
+                [consuming] = adapter.io.connections.values()
+                await wait_until(lambda: consuming.stats.received >= 50, 10, "50 O->T packets")
                 assert not io.input.running_forward and io.input.speed_actual == 0 and not io.input.ctrl_from_net
     finally:
         await adapter.close()

@@ -17,6 +17,7 @@ import pytest
 
 from cipstack.eip.io_server import DRAIN_LIMIT, RECEIVE_BUFFER, IoEndpoint
 from cipstack.eip.precise_loop import FD_SETSIZE, HARVEST_EVENTS, PreciseEventLoop, precise_event_loop
+from tests.waiting import wait_until
 
 T = TypeVar("T")
 
@@ -139,7 +140,7 @@ def test_lane_production_timer_sends_on_schedule_and_stops_at_close() -> None:
         loop = asyncio.get_running_loop()
         core.deadline = loop.time() + 0.002
         endpoint = await started(core)
-        await asyncio.sleep(0.05)
+        await wait_until(lambda: len(core.polls) >= 5, 5, "five firings")
         await endpoint.close()
         polls_at_close = len(core.polls)
         await asyncio.sleep(0.02)

@@ -29,6 +29,7 @@ from cipstack.objects.assembly import AssemblyPoint
 from cipstack.objects.tcpip import NetworkInterface
 from cipstack.scanner import Scanner
 from tests.ports import free_port
+from tests.waiting import wait_until
 
 OUTPUTS = [basic_speed_control_output(), extended_speed_control_output()]
 INPUTS = [basic_speed_control_input(), extended_speed_control_input()]
@@ -92,7 +93,7 @@ async def adapter() -> AsyncIterator[Adapter]:
 async def test_fields_by_name_and_updates(adapter: Adapter) -> None:
     assert adapter.io_endpoint is not None
     async with await Scanner.connect(f"127.0.0.1:{adapter.port}", catalog=CATALOG) as scanner:
-        async with scanner.io_connection(output=21, input=71, rpi=0.005,
+        async with scanner.io_connection(output=21, input=71, rpi=0.005, timeout_multiplier=5,
                                          target_io_port=adapter.io_endpoint.port) as io:
             io.output.run_forward = True
             io.output.speed_reference = 1500
@@ -104,10 +105,10 @@ async def test_fields_by_name_and_updates(adapter: Adapter) -> None:
             assert device.consumed[-1][:2] == (21, bytes.fromhex("0100dc05"))
             assert device.identity.status & 0x00F1 == 0x0061  # owned, I/O running
             io.set_run(False)
-            await asyncio.sleep(0.05)
-            assert device.run_modes[-1] is False
+            await wait_until(lambda: device.run_modes and device.run_modes[-1] is False, 5, "idle at the device")
             assert device.identity.status & 0x00F0 == 0x0070  # idle
-            assert io.stats.sent > 5 and io.stats.received > 5 and io.stats.lost == 0
+            await wait_until(lambda: io.stats.sent > 5 and io.stats.received > 5, 5, "data both ways")
+            assert io.stats.lost == 0
         assert device.closed == [False]
         assert not adapter.io or not adapter.io.connections  # Forward_Close on exit
 
@@ -122,8 +123,9 @@ async def test_kernel_arrival_times_through_the_scanner(adapter: Adapter) -> Non
     rpi = 0.004
     scanner = await Scanner.connect(f"127.0.0.1:{adapter.port}", catalog=CATALOG)
     async with scanner, scanner.io_connection(output=21, input=71, rpi=rpi, target_io_port=adapter.io_endpoint.port,
-                                              keep_intervals=True, kernel_arrival_times=True) as io:
-        await asyncio.sleep(0.3)
+                                              timeout_multiplier=5, keep_intervals=True,
+                                              kernel_arrival_times=True) as io:
+        await wait_until(lambda: len(io.connection.interval_samples) > 20, 5, "20 intervals")
         intervals = sorted(io.connection.interval_samples)
         kernel = io.kernel_arrival_times
     assert kernel is isinstance(asyncio.get_running_loop(), PreciseEventLoop)
@@ -134,7 +136,7 @@ async def test_kernel_arrival_times_through_the_scanner(adapter: Adapter) -> Non
 async def test_sizes_from_attribute_4_without_schema(adapter: Adapter) -> None:
     assert adapter.io_endpoint is not None
     scanner = await Scanner.connect(f"127.0.0.1:{adapter.port}", identify=False)  # no catalog: raw bytes
-    async with scanner, scanner.io_connection(output=20, input=70, rpi=0.004,
+    async with scanner, scanner.io_connection(output=20, input=70, rpi=0.004, timeout_multiplier=5,
                                               target_io_port=adapter.io_endpoint.port) as io:
         io.output.raw = bytes.fromhex("0100e803")
         image = await io.wait_input(lambda i: i.raw == bytes.fromhex("0400e803"), timeout=5)
@@ -154,16 +156,18 @@ async def test_several_targets_on_two_loopback_addresses() -> None:
         second_port = second.io_endpoint.port
         # Our originator's own I/O socket uses the same port number, on 127.0.0.1.
         async with a, b, a.io_connection(output=21, input=71, rpi=0.002, target_io_port=port,
-                                         local_io_port=port) as io_a, \
-                b.io_connection(output=21, input=71, rpi=0.003, target_io_port=second_port) as io_b, \
-                b.io_connection(output=20, input=70, rpi=0.010, target_io_port=second_port) as io_c:
+                                         local_io_port=port, timeout_multiplier=5) as io_a, \
+                b.io_connection(output=21, input=71, rpi=0.003, target_io_port=second_port,
+                                timeout_multiplier=5) as io_b, \
+                b.io_connection(output=20, input=70, rpi=0.010, target_io_port=second_port,
+                                timeout_multiplier=5) as io_c:
             io_a.output.speed_reference = 111
             io_b.output.speed_reference = 222
             io_c.output.speed_reference = 333
             await io_a.wait_input(lambda i: i.speed_actual == 111, 5)
             await io_b.wait_input(lambda i: i.speed_actual in (222, 333), 5)
-            await asyncio.sleep(0.2)
-            assert io_a.stats.received > 50 and io_b.stats.received > 30 and io_c.stats.received > 10
+            await wait_until(lambda: io_a.stats.received > 50 and io_b.stats.received > 30 and io_c.stats.received > 10,
+                             5, "data on all three connections")
             assert first.io and first.io.connections and len(second.io.connections) == 2  # type: ignore[union-attr]
     finally:
         await first.close()
@@ -184,10 +188,10 @@ async def test_connections_opened_apart_are_produced_in_the_same_slots_both_ways
     rpi = 0.010
     scanner = await Scanner.connect(f"127.0.0.1:{adapter.port}", catalog=CATALOG)
     async with scanner, scanner.io_connection(output=21, input=71, rpi=rpi, target_io_port=adapter.io_endpoint.port,
-                                              kernel_arrival_times=True) as io_a:
+                                              timeout_multiplier=5, kernel_arrival_times=True) as io_a:
         await asyncio.sleep(0.003)
         async with scanner.io_connection(output=20, input=70, rpi=rpi, target_io_port=adapter.io_endpoint.port,
-                                         kernel_arrival_times=True) as io_b:
+                                         timeout_multiplier=5, kernel_arrival_times=True) as io_b:
             produced = [c.producer for c in adapter.io.connections.values() if c.producer is not None]
             assert len(produced) == 2
             assert _slot_offsets(produced[0].next_due, produced[1].next_due, rpi) < 1e-9
@@ -241,7 +245,7 @@ async def test_killed_originator_times_out_at_the_target(adapter: Adapter, tmp_p
         process.send_signal(signal.SIGKILL)
         process.wait(5)
         # Timeout = 10 ms x 4 x 2^1 = 80 ms after the last packet.
-        await asyncio.sleep(0.3)
+        await wait_until(lambda: device.closed, 5, "the target's watchdog")
         assert device.closed == [True]
         assert not adapter.io.connections
         assert device.identity.status & 0x00F0 == 0x0020  # I/O connection faulted
@@ -279,7 +283,7 @@ async def test_every_port_is_ready_once_the_ethernet_ip_port_accepts() -> None:
         with socket.create_connection(("127.0.0.1", modbus_port), timeout=2):
             pass
         scanner = await Scanner.connect(f"127.0.0.1:{port}", catalog=CATALOG)
-        async with scanner, scanner.io_connection(output=21, input=71, rpi=0.005,
+        async with scanner, scanner.io_connection(output=21, input=71, rpi=0.005, timeout_multiplier=5,
                                                   target_io_port=adapter.io_endpoint.port) as io:
             for _ in range(500):  # T->O data comes: the class 1 port served the connection
                 if io.stats.received:

@@ -38,7 +38,7 @@ async def test_the_session_is_kept_alive_while_the_connection_runs(monkeypatch: 
     try:
         async with await Scanner.connect(f"127.0.0.1:{adapter.port}", timeout=3) as scanner:
             with caplog.at_level(logging.INFO):
-                async with scanner.io_connection(output=21, input=71, rpi=0.010,
+                async with scanner.io_connection(output=21, input=71, rpi=0.010, timeout_multiplier=5,
                                                  target_io_port=adapter.io.io_port) as io:
                     await asyncio.sleep(3 * INACTIVITY_S)
                     assert scanner.client.is_open  # three inactivity timeouts later, NOPs kept it
@@ -58,7 +58,7 @@ async def test_a_session_the_target_closed_is_reopened_for_the_forward_close(
     try:
         async with await Scanner.connect(f"127.0.0.1:{adapter.port}", timeout=3) as scanner:
             with caplog.at_level(logging.INFO):
-                async with scanner.io_connection(output=21, input=71, rpi=0.010,
+                async with scanner.io_connection(output=21, input=71, rpi=0.010, timeout_multiplier=5,
                                                  target_io_port=adapter.io.io_port) as io:
                     await asyncio.sleep(2.5 * INACTIVITY_S)
                     assert not scanner.client.is_open  # closed by the target's inactivity timeout

@@ -26,7 +26,8 @@ def test_sync_class1_runs_the_drive_by_field_names() -> None:
             SyncScanner(f"127.0.0.1:{adapter.port}") as scanner:
         scanner.write(0x2A, 1, 102, 1.0, scaled=True)                     # ACC and dEC 1.0 s (0 <-> 60 Hz)
         scanner.write(0x2A, 1, 103, 1.0, scaled=True)
-        with scanner.io_connection(output=21, input=71, rpi=0.010, target_io_port=adapter.io_endpoint.port) as io:
+        with scanner.io_connection(output=21, input=71, rpi=0.010, timeout_multiplier=5,
+                                   target_io_port=adapter.io_endpoint.port) as io:
             io.update(run_forward=True, speed_reference=900)
             started = time.monotonic()
             image = io.wait_input(lambda i: i.at_reference, timeout=5)
@@ -62,7 +63,8 @@ def test_every_exit_sends_forward_close() -> None:
 
 def test_wait_input_times_out_with_builtin_timeout_error() -> None:
     with threaded_adapter(build_acg_device()) as adapter, SyncScanner(f"127.0.0.1:{adapter.port}") as scanner, \
-            scanner.io_connection(output=21, input=71, rpi=0.010, target_io_port=adapter.io_endpoint.port) as io:
+            scanner.io_connection(output=21, input=71, rpi=0.010, timeout_multiplier=5,
+                                  target_io_port=adapter.io_endpoint.port) as io:
         with pytest.raises(TimeoutError, match=r"within 0\.2 s"):
             io.wait_input(lambda i: i.faulted, timeout=0.2)
         assert not io.timed_out

@@ -32,7 +32,7 @@ from tests.ports import free_port
 from tests.test_fleet import Fleet
 from tests.test_fleet_http import TOKEN, Api, worker_pid
 from tests.test_rtu_live import adapter, pdu, serial_client
-from tests.waiting import wait_for
+from tests.waiting import wait_for, wait_until
 
 pytestmark = pytest.mark.skipif(not sys.platform.startswith("linux"), reason="any 127.x on loopback")
 
@@ -72,9 +72,10 @@ async def _traffic(host: str, port: int, io_port: int) -> None:
             await scanner.read(0x01, 1, 7)                      # Identity product name
         with pytest.raises(CipError):
             await scanner.get_attribute_single(0x77, 1, 1)      # no such class: 0x05
-        async with scanner.io_connection(output=21, input=71, rpi=0.010, target_io_port=io_port) as handle:
-            await asyncio.sleep(0.5)
-            assert handle.stats.received >= 20
+        async with scanner.io_connection(output=21, input=71, rpi=0.010, timeout_multiplier=5,
+                                         target_io_port=io_port) as handle:
+            # Past the 20 packets each way the device's counters are checked for (a few in flight at the close).
+            await wait_until(lambda: handle.stats.received >= 25 and handle.stats.sent >= 25, 10, "25 packets each way")
 
 
 def test_one_process_counts_traffic_faults_and_its_shard(tmp_path: Path) -> None:

@@ -156,7 +156,7 @@ async def test_class1_extended_speed(direct: Adapter, model_name: str) -> None:
         await scanner.set_attribute_single(0x65, *function_code_path("A001"), source, UINT)
         await scanner.set_attribute_single(0x65, *function_code_path("A002"), source, UINT)
         await scanner.set_attribute_single(0x2A, 1, 0x12, 200)
-        async with scanner.io_connection(output=21, input=71, rpi=0.01,
+        async with scanner.io_connection(output=21, input=71, rpi=0.01, timeout_multiplier=5,
                                          target_io_port=direct.io_endpoint.port) as io:
             io.output.speed_reference = 1500
             await io.wait_input(lambda i: i.ready and i.ctrl_from_net, timeout=5)

@@ -20,9 +20,11 @@ from cipstack.adapter import Adapter, AdapterSettings
 from cipstack.control.panel_app import MAX_STREAMS
 from cipstack.eds.emulated_device import build_eds_device
 from cipstack.eds.reader import read_eds
+from cipstack.eip.originator.io_originator import IoConnectionHandle
 from cipstack.faults import FAULTS
 from cipstack.objects.tcpip import NetworkInterface
 from cipstack.scanner import Scanner
+from tests.waiting import wait_until
 
 EDS = Path(__file__).parent / "eds" / "files" / "vendor_drive_own_data.eds"
 
@@ -86,13 +88,23 @@ async def test_the_mx2_digital_operator_monitor_and_function_codes(served: tuple
     assert trips[0]["code"] == "E01" and trips[0]["fault_code"] == 0x2200
 
 
+async def both_ways(adapter: Adapter, io: IoConnectionHandle, output: bytes) -> None:
+    """Until data went both ways on the one class 1 connection and the device consumed ``output``."""
+    [connection] = adapter.runtime.class1_connections()
+    consumed = connection.consumed
+    assert consumed is not None
+    await wait_until(lambda: io.stats.received > 0 and connection.stats.received > 0
+                     and adapter.device.assembly.data(consumed.instance_id) == output, 5, "data both ways")
+
+
 async def test_a_class1_connection_with_its_data_by_field_names(served: tuple[Adapter, str]) -> None:
     adapter, base = served
     assert adapter.io_endpoint is not None
     async with await Scanner.connect(f"127.0.0.1:{adapter.port}") as scanner, \
-            scanner.io_connection(output=21, input=71, rpi=0.01, target_io_port=adapter.io_endpoint.port) as io:
+            scanner.io_connection(output=21, input=71, rpi=0.01, timeout_multiplier=5,
+                                  target_io_port=adapter.io_endpoint.port) as io:
         io.output.speed_reference = 900
-        await asyncio.sleep(0.3)
+        await both_ways(adapter, io, bytes.fromhex("00008403"))
         status, found = await get(base + "/connections")
     assert status == 200 and len(found["sessions"]) == 1 and found["class3"] == []
     [connection] = found["class1"]
@@ -108,9 +120,10 @@ async def test_an_eds_device_s_data_without_field_names_is_hex(served: tuple[Ada
     adapter, base = served
     assert adapter.io_endpoint is not None
     async with await Scanner.connect(f"127.0.0.1:{adapter.port}") as scanner, \
-            scanner.io_connection(output=100, input=150, rpi=0.01, target_io_port=adapter.io_endpoint.port) as io:
+            scanner.io_connection(output=100, input=150, rpi=0.01, timeout_multiplier=5,
+                                  target_io_port=adapter.io_endpoint.port) as io:
         io.output.raw = bytes(range(1, 9))
-        await asyncio.sleep(0.3)
+        await both_ways(adapter, io, bytes(range(1, 9)))
         _, found = await get(base + "/connections")
     [connection] = found["class1"]
     assert connection["output_data"] == {"hex": "01 02 03 04 05 06 07 08", "fields": {}}

@@ -15,7 +15,9 @@ milliseconds, to a counter in microseconds that every accepted T->O packet zeroe
 ``_connectionTimeoutMultiplier x _t2oAPI``, where src/ConnectionManager.cpp ``forwardOpen`` sets the
 factor to ``4 << multiplier code`` and the API is the Forward_Open reply's T->O API. So the close
 comes more than 4 x 50 ms = 200 ms after the last accepted packet, later by the sub-millisecond
-remainders its passes drop (about 10 % here, and scheduling): the bound is 200 ms .. 200 ms + 2 RPIs.
+remainders its passes drop (about 10 % here, and scheduling): the bound is 200 ms .. 200 ms + 2 RPIs
+on the wire, and + 5 RPIs as the helper reads the close and the packets (through the bridge's output,
+NATS and threads, on a loaded machine).
 It does not check the sequence count (duplicated, reordered and frozen counts are all handed on)
 and ignores a packet whose size is not the connection's, without zeroing the counter.
 """
@@ -259,16 +261,23 @@ def closed_after_silence(run: Run, name: str) -> tuple[float, float]:
     """The first watchdog close after fault ``name``, and the last packet the bridge accepted before it."""
     start, _ = run.window(name)
     close = run.closes_in(start, start + 5)[0]
-    last = max(p[0] for p in run.packets if p[0] < close)
-    # Nothing accepted from just after the fault to the close (a packet sent before the fault may land
-    # during the control request's reply).
-    assert last < start + 0.01, (last - start, close - start)
+    last, last_seq, _ = max(p for p in run.packets if p[0] < close)
+    # Nothing accepted that was produced after the fault: the last packet the bridge accepted is the last
+    # one of the connection's usual size on the wire before the fault's mark. Matched by its CIP sequence
+    # count, not by when this helper read it: a packet produced just before the fault reaches it through
+    # the bridge, NATS and a thread, late on a loaded machine.
+    usual = {f[3] for f in run.wire(*run.wall("baseline"))}
+    wall_start, _ = run.wall(name)
+    before = [f for f in run.wire(wall_start - 1, wall_start) if f[3] in usual]
+    assert before and last_seq == before[-1][2], (last_seq, before[-3:], last - start, close - start)
     return close, last
 
 
 def test_stop_producing_times_eipscanner_out_at_rpi_times_multiplier(run: Run) -> None:
     close, last = closed_after_silence(run, "stop-producing")
-    assert TIMEOUT <= close - last <= TIMEOUT + 2 * RPI, close - last
+    # Both times are when this helper read them (the packet through NATS, the close from the bridge's
+    # output): the room above is for those pipes and threads; on the wire, below, the bound is tighter.
+    assert TIMEOUT <= close - last <= TIMEOUT + 5 * RPI, close - last
     # On the wire: the last T->O frame of its connection, then the Forward_Open it reconnects with.
     start, end = run.wall("stop-producing")
     frames = run.wire(start - 1, end)
@@ -357,7 +366,7 @@ def test_freeze_sequence_keeps_one_count_and_eipscanner_connected(run: Run) -> N
 
 def test_wrong_size_is_ignored_by_eipscanner_which_times_out(run: Run) -> None:
     close, last = closed_after_silence(run, "wrong-size")
-    assert TIMEOUT <= close - last <= TIMEOUT + 2 * RPI, close - last
+    assert TIMEOUT <= close - last <= TIMEOUT + 5 * RPI, close - last      # as read here: see above
     start, _ = run.window("wrong-size")
     assert any("has fixed size 4 bytes but 3 bytes were received" in line for t, line in run.log if t > start)
     usual = {f[3] for f in run.wire(*run.wall("baseline"))}

@@ -29,6 +29,7 @@ from cipstack.devices.acg.registers import CLASS_64_INSTANCES
 from cipstack.devices.omron.registers import function_code_path
 from tests.ports import free_port
 from tests.test_cli import run
+from tests.waiting import wait_for
 
 from .conftest import HOST, IDENTITY, PeerProcess, adapter_command, start_peer
 from .test_pycomm3 import get_single, ok, set_single
@@ -107,6 +108,16 @@ def write_register(drv: CIPDriver, address: int, value: int) -> None:
     set_single(drv, 0x04, 121, 3, UINT.encode(value))
 
 
+def answers(peer: PeerProcess) -> bool:
+    """Whether ``peer`` answers an explicit request (its power is back: the fault's command answers once
+    the ports are closed, and when it waited for the power to come back depends on the machine's load)."""
+    try:
+        with CIPDriver(peer.address) as drv:
+            return get_single(drv, 1, 1, 1, UINT).error is None
+    except (CommError, OSError):
+        return False
+
+
 def test_power_cycle_loses_exactly_the_unsaved_parameter(adapter: PeerProcess) -> None:
     with CIPDriver(adapter.address) as drv:
         set_single(drv, 0x2A, 1, 102, UINT.encode(44))                        # ACC 4.4 s
@@ -116,7 +127,7 @@ def test_power_cycle_loses_exactly_the_unsaved_parameter(adapter: PeerProcess) -
         before = (ok(get_single(drv, 0x2A, 1, 102, UINT)), ok(get_single(drv, 0x2A, 1, 103, UINT)))
         assert before == (44, 66)
         fault(adapter, "power-cycle", "--off", "200ms")
-    time.sleep(0.5)
+    wait_for(lambda: answers(adapter), 10, "the adapter to answer again")
     with CIPDriver(adapter.address) as drv:
         after = (ok(get_single(drv, 0x2A, 1, 102, UINT)), ok(get_single(drv, 0x2A, 1, 103, UINT)))
     assert after[0] == 44 and after[1] != 66
@@ -148,7 +159,7 @@ def test_power_cycle_of_an_rx_loses_exactly_what_was_not_entered(rx: PeerProcess
     finally:
         with contextlib.suppress(CommError):                                  # nothing to close it on
             drv.close()
-    time.sleep(0.5)
+    wait_for(lambda: answers(rx), 10, "the RX to answer again")
     with CIPDriver(rx.address) as drv:
         after = ok(get_single(drv, 0x65, *f002, UDINT)), ok(get_single(drv, 0x65, *f003, UDINT))
         assert ok(get_single(drv, 0x01, 1, 9, UINT)) == 1                     # Identity 9 counted one save
