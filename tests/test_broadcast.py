@@ -69,9 +69,11 @@ async def test_each_target_answers_the_limited_broadcast_once_from_its_own_addre
 
 async def test_a_free_port_is_free_in_udp_too(monkeypatch: pytest.MonkeyPatch) -> None:
     """The OS picks the TCP number; when that number is taken in UDP, another pair is taken."""
+    # The clash is one of this worker's numbers, below the ephemeral range: free in TCP, so the first
+    # listener does take it (a number the kernel picked for UDP may be some outgoing TCP connection's).
+    clash = free_port()
     taken = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
-    taken.bind(("127.0.0.1", 0))
-    clash = taken.getsockname()[1]
+    taken.bind(("127.0.0.1", clash))
     picks: list[int] = []
     real = server_module.guarded_listener
 
