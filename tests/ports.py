@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import asyncio
 import collections
+import errno
 import os
 import random
 import socket
@@ -73,6 +74,12 @@ def free_port(*hosts: str) -> int:
         _GIVEN.append(port)
         return port
     raise RuntimeError(f"no port free for TCP and UDP on {', '.join(hosts)}")
+
+
+def refused(port: int) -> bool:
+    """Whether a TCP connection to ``port`` on loopback is refused (nothing listens there)."""
+    with socket.socket() as probe:
+        return probe.connect_ex(("127.0.0.1", port)) == errno.ECONNREFUSED
 
 
 #: A ListIdentity request (encapsulation command 0x0063, no session, sender context "\xf4\x01...").

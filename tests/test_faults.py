@@ -5,7 +5,6 @@ sockets, and by the device's own state. After ``clear`` the device goes on as be
 from __future__ import annotations
 
 import asyncio
-import errno
 import itertools
 import random
 import socket
@@ -26,6 +25,7 @@ from cipstack.eip.io_core import encode_io_datagram
 from cipstack.eip.originator.io_originator import IoTimeoutError
 from cipstack.faults import FaultController, FaultError, FaultStateError, NoSuchConnection
 from cipstack.scanner import Scanner
+from tests.ports import refused
 from tests.waiting import wait_until
 
 CM = CLASS_64_INSTANCES["CM"]
@@ -52,12 +52,6 @@ async def write_registers(scanner: Scanner, values: dict[int, int]) -> None:
     for index, address in enumerate(values):
         await scanner.set_attribute_single(0x64, CM, 51 + index, address)
     await scanner.set_attribute_single(0x04, 120 + len(values), 3, b"".join(UINT.encode(v) for v in values.values()))
-
-
-def refused(port: int) -> bool:
-    """Whether a TCP connection to ``port`` on loopback is refused (nothing listens there)."""
-    with socket.socket() as probe:
-        return probe.connect_ex(("127.0.0.1", port)) == errno.ECONNREFUSED
 
 
 def io_port(adapter: Adapter) -> int:

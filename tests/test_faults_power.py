@@ -16,8 +16,6 @@ the emulator as ``cipstack adapter`` (pycomm3 reads the parameters back there)."
 from __future__ import annotations
 
 import asyncio
-import errno
-import socket
 from collections.abc import AsyncIterator
 from pathlib import Path
 
@@ -42,6 +40,7 @@ from cipstack.eip.target.io_target import IoConnection
 from cipstack.scanner import Scanner
 from tests.eds.samples import GENERIC_EDS
 from tests.optional import needs
+from tests.ports import refused
 from tests.waiting import wait_until
 
 MX2 = "MX2-A2015-E"
@@ -61,12 +60,6 @@ ACG_CATALOG = catalog_for(259, 100)
 #: A power-cycle's off period for the tests that check what happens while the power is off: longer than
 #: a loaded machine may stall a test, and ended by clearing the fault (as the fault allows) once checked.
 LONG_OFF = "30s"
-
-
-def refused(port: int) -> bool:
-    """Whether a TCP connection to ``port`` on loopback is refused (nothing listens there)."""
-    with socket.socket() as probe:
-        return probe.connect_ex(("127.0.0.1", port)) == errno.ECONNREFUSED
 
 
 async def o_t_packets(connection: IoConnection, count: int) -> None:
