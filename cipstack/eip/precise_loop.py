@@ -282,7 +282,7 @@ class PreciseEpollSelector(selectors.EpollSelector):
                     log.exception("lane callback %r", reader)
                 continue
             # The base selector's own table (``_key_from_fd``, which read it, is gone in Python 3.13).
-            key = self._fd_to_key.get(fd)  # type: ignore[attr-defined]
+            key = self._fd_to_key.get(fd)  # type: ignore[attr-defined]  # private to BaseSelector, untyped
             if key:
                 mask = (selectors.EVENT_WRITE if event & ~select.EPOLLIN else 0) | (
                     selectors.EVENT_READ if event & ~select.EPOLLOUT else 0)

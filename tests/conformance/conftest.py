@@ -3,7 +3,7 @@
 from __future__ import annotations
 
 import signal
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator
 from pathlib import Path
 
 import pytest
@@ -11,9 +11,12 @@ import pytest
 from tests.interop.conftest import HOST, PeerProcess, python_module, start_peer
 from tests.ports import free_port
 
+#: ``adapter_with(*ARGS)``: a ``cipstack adapter ARGS`` started for the test.
+AdapterStarter = Callable[..., PeerProcess]
+
 
 @pytest.fixture
-def adapter_with(tmp_path: Path) -> Iterator[object]:
+def adapter_with(tmp_path: Path) -> Iterator[AdapterStarter]:
     """Start ``cipstack adapter ARGS`` on a free port; stopped by PID when the test ends."""
     started: list[PeerProcess] = []
 

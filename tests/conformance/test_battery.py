@@ -16,11 +16,12 @@ from xml.etree import ElementTree
 
 import pytest
 
-from cipstack.conformance import TargetUnreachable, Verdict, check_ids, run
+from cipstack.conformance import Report, TargetUnreachable, Verdict, check_ids, run
 from tests.cli_errors import one_line_error
 from tests.interop.conftest import HOST, PeerProcess, cpppo_server_command, python_module, start_peer
 from tests.ports import free_port
 
+from .conftest import AdapterStarter
 from .fake_target import FakeTarget
 
 EMULATORS = {
@@ -43,7 +44,8 @@ def _not_passed(report: object) -> dict[str, str]:
 
 
 @pytest.mark.parametrize("name", sorted(EMULATORS))
-def test_every_applicable_check_passes_on_our_emulators(name: str, adapter_with, tmp_path: Path) -> None:  # type: ignore[no-untyped-def]
+def test_every_applicable_check_passes_on_our_emulators(name: str, adapter_with: AdapterStarter,
+                                                        tmp_path: Path) -> None:
     adapter_args, eds_args = EMULATORS[name]
     eds = generate_eds(eds_args, tmp_path / "eds")
     peer = adapter_with(*adapter_args)
@@ -57,9 +59,9 @@ def test_every_applicable_check_passes_on_our_emulators(name: str, adapter_with,
         assert all(verdicts[i] is Verdict.PASS for i in check_ids() if i.startswith(("cm.", "class1.")))
 
 
-def not_applicable(report: object) -> list[str]:
+def not_applicable(report: Report) -> list[str]:
     """The checks that did not apply (those that need an option not given are "not run", apart)."""
-    return [o.name for o in report if o.verdict is Verdict.NOT_APPLICABLE]  # type: ignore[attr-defined]
+    return [o.name for o in report if o.verdict is Verdict.NOT_APPLICABLE]
 
 
 #: Where the battery finds each emulator's connection points without --eds (the MX2's and RX's own
@@ -68,7 +70,7 @@ SOURCES = {"acg": "the device's own EDS file", "mx2": "the AC drive profile", "r
 
 
 @pytest.mark.parametrize("name", sorted(EMULATORS))
-def test_without_an_eds_the_battery_finds_the_points_itself(name: str, adapter_with) -> None:  # type: ignore[no-untyped-def]
+def test_without_an_eds_the_battery_finds_the_points_itself(name: str, adapter_with: AdapterStarter) -> None:
     peer = adapter_with(*EMULATORS[name][0])
     report = run(peer.host, peer.port)
     assert _not_passed(report) == {}
@@ -88,7 +90,7 @@ FROM_THE_NETWORK = {"acg": ["--param", "drv=4", "--param", "Frq=8"], "mx2": [], 
 
 
 @pytest.mark.parametrize("name", sorted(EMULATORS))
-def test_both_drive_families_pass_the_profile_group(name: str, adapter_with) -> None:  # type: ignore[no-untyped-def]
+def test_both_drive_families_pass_the_profile_group(name: str, adapter_with: AdapterStarter) -> None:
     peer = adapter_with(*EMULATORS[name][0], *FROM_THE_NETWORK[name], "--factory")
     report = run(peer.host, peer.port, groups="profile", allow_writes=True, allow_motion=True)
     assert {o.id: o.verdict for o in report if o.group == "profile"} == {
@@ -107,7 +109,8 @@ def _get(peer: PeerProcess, attribute: str) -> int:
 
 
 @pytest.mark.parametrize("allow_writes", [False, True])
-def test_a_fault_the_run_caused_is_cleared_only_when_writes_are_allowed(allow_writes: bool, adapter_with) -> None:  # type: ignore[no-untyped-def]
+def test_a_fault_the_run_caused_is_cleared_only_when_writes_are_allowed(allow_writes: bool,
+                                                                        adapter_with: AdapterStarter) -> None:
     peer = adapter_with("--profile", "mx2", "--model", "MX2-A2015-E", "--factory")
     report = run(peer.host, peer.port, groups="class1", allow_writes=allow_writes)
     (final,) = [o for o in report if o.id == "final.as_found"]
@@ -119,7 +122,7 @@ def test_a_fault_the_run_caused_is_cleared_only_when_writes_are_allowed(allow_wr
     assert _get(peer, "0x29/1/10") == int(not allow_writes)
 
 
-def test_without_allow_motion_the_motor_is_not_run(adapter_with) -> None:  # type: ignore[no-untyped-def]
+def test_without_allow_motion_the_motor_is_not_run(adapter_with: AdapterStarter) -> None:
     peer = adapter_with("--profile", "mx2", "--model", "MX2-A2015-E", "--factory")
     report = run(peer.host, peer.port, groups="profile")
     motion = {o.id: (o.verdict, o.observed) for o in report if o.id.startswith("profile.motion.")}
@@ -128,7 +131,7 @@ def test_without_allow_motion_the_motor_is_not_run(adapter_with) -> None:  # typ
     assert "final.as_found" not in {o.id for o in report}  # no connection opened, nothing written
 
 
-def test_an_eds_emulated_device_without_an_eds_serves_its_own(adapter_with) -> None:  # type: ignore[no-untyped-def]
+def test_an_eds_emulated_device_without_an_eds_serves_its_own(adapter_with: AdapterStarter) -> None:
     peer = adapter_with("--eds", str(Path(__file__).with_name("fake_device.eds")))
     report = run(peer.host, peer.port, allow_writes=True)
     assert _not_passed(report) == {}
@@ -173,7 +176,7 @@ def test_the_checks_that_need_no_connection_point_run_without_one(deviation: str
                                                      if o.id == "cm.forward_open.bad_segment")
 
 
-def test_every_applicable_check_passes_on_an_eds_emulated_device(adapter_with, tmp_path: Path) -> None:  # type: ignore[no-untyped-def]
+def test_every_applicable_check_passes_on_an_eds_emulated_device(adapter_with: AdapterStarter, tmp_path: Path) -> None:
     eds = Path(__file__).with_name("fake_device.eds")
     peer = adapter_with("--eds", str(eds))
     report = run(peer.host, peer.port, eds=eds, allow_writes=True)
@@ -392,7 +395,7 @@ def test_safe_by_default_no_write_no_reset() -> None:
     assert not any(r[:1] in (b"\x10", b"\x05") for r in requests)
 
 
-def test_every_connection_opened_is_closed(adapter_with, tmp_path: Path) -> None:  # type: ignore[no-untyped-def]
+def test_every_connection_opened_is_closed(adapter_with: AdapterStarter, tmp_path: Path) -> None:
     """After the whole battery, the target holds no connection: each was closed, on every path."""
     eds = generate_eds(["--profile", "acg"], tmp_path / "eds")
     peer = adapter_with()

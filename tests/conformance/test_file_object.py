@@ -30,6 +30,8 @@ from tests.cli_errors import one_line_error
 from tests.interop.conftest import python_module
 from tests.ports import free_port
 
+from .conftest import AdapterStarter
+
 FAKE_EDS = Path(__file__).with_name("fake_device.eds")
 
 
@@ -40,7 +42,8 @@ def fetch(*args: str) -> subprocess.CompletedProcess[str]:
 
 @pytest.mark.parametrize("profile", [["--profile", "acg"], ["--profile", "mx2", "--model", "MX2-A2015-E"]],
                          ids=["acg", "mx2"])
-def test_the_emulator_serves_the_eds_file_it_generates(profile: list[str], adapter_with, tmp_path: Path) -> None:  # type: ignore[no-untyped-def]
+def test_the_emulator_serves_the_eds_file_it_generates(profile: list[str], adapter_with: AdapterStarter,
+                                                       tmp_path: Path) -> None:
     peer = adapter_with(*profile)
     out = tmp_path / "fetched.eds"
     result = fetch(f"{peer.host}:{peer.port}", "-o", str(out))
@@ -89,14 +92,14 @@ def test_the_pytest_plugins_device_serves_its_eds_file(tmp_path: Path) -> None:
     assert out.read_bytes() == generated_eds(tmp_path, "--profile", "rx", "--model", model)
 
 
-def test_an_eds_emulated_device_serves_its_file_byte_for_byte(adapter_with, tmp_path: Path) -> None:  # type: ignore[no-untyped-def]
+def test_an_eds_emulated_device_serves_its_file_byte_for_byte(adapter_with: AdapterStarter, tmp_path: Path) -> None:
     peer = adapter_with("--eds", str(FAKE_EDS))
     out = tmp_path / "fetched.eds"
     assert fetch(f"{peer.host}:{peer.port}", "-o", str(out)).returncode == 0
     assert out.read_bytes() == FAKE_EDS.read_bytes()
 
 
-def test_the_instance_attributes_and_the_wire_bytes(adapter_with) -> None:  # type: ignore[no-untyped-def]
+def test_the_instance_attributes_and_the_wire_bytes(adapter_with: AdapterStarter) -> None:
     peer = adapter_with("--eds", str(FAKE_EDS))
     data = FAKE_EDS.read_bytes()
     with SyncScanner(f"{peer.host}:{peer.port}", identify=False) as scanner:
