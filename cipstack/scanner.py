@@ -34,7 +34,7 @@ from .eip.originator.core import (
 from .eip.originator.replies import EncapsulationStatusError, MalformedReplyError
 from .eip.wire.encapsulation import DEFAULT_PORT
 from .errors import NotFound, ProtocolError
-from .logs import logger
+from .logs import debug
 
 if TYPE_CHECKING:
     # Imported where used: explicit messaging alone does not load asyncio, the EDS model or class 1.
@@ -46,7 +46,6 @@ if TYPE_CHECKING:
     from .sync_io import LoopThread, SyncIoConnection
 
 T = TypeVar("T")
-log = logger(__name__)
 
 #: Key of the bytes of a Get_Attributes_All reply after the attributes the catalog declares.
 UNDECODED = "(undecoded)"
@@ -149,7 +148,7 @@ class ExplicitMessaging:
             try:
                 records = yield self.core.list_identity()
             except (EncapsulationStatusError, MalformedReplyError, TimeoutError) as exc:
-                log.debug("ListIdentity over TCP: %s; reading the Identity object instead", exc)
+                debug(__name__, "ListIdentity over TCP: %s; reading the Identity object instead", exc)
                 records = []
             record = records[0] if records else None
         if record is None:
@@ -176,7 +175,7 @@ class ExplicitMessaging:
                 values[attribute] = declared.type.decode(reply.data) if declared is not None else None
             except (CipError, ValueError, struct.error, MalformedReplyError) as exc:
                 if attribute in (1, 3):
-                    log.debug("Identity attribute %d: %s", attribute, exc)
+                    debug(__name__, "Identity attribute %d: %s", attribute, exc)
                     return None
         revision = values.get(4) or {}
         return IdentityRecord(values[1], values.get(2) or 0, values[3],
@@ -229,7 +228,7 @@ class ExplicitMessaging:
                 raise ReplyDecodeError(f"{where} answered {len(data)} bytes ({data.hex(' ') or 'none'}), "
                                        f"which do not decode as {cip_type.name}: {exc.message}") from None
             # The device differs from the declaration: tolerant as an originator, the raw bytes stand.
-            log.debug("%s: reply %s does not decode as declared (%s): %s", where, data.hex(), value_type, exc)
+            debug(__name__, "%s: reply %s does not decode as declared (%s): %s", where, data.hex(), value_type, exc)
             return data, None, None, spec
 
     def read(self, class_id: int, instance: int, attribute: int, cip_type: CipType | None = None) -> Plan[Value]:

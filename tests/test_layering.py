@@ -1,5 +1,5 @@
 """The dependency direction DESIGN.md gives, checked on the source: ``cip`` depends on nothing of
-ours but ``errors`` and ``logs`` (the error root and the loggers on demand, which every part may
+ours but ``errors`` and ``logs`` (the error root and the debug records made on demand, which every part may
 import and which import nothing of ours);
 ``objects`` and ``assemblies`` on ``cip``; ``eip`` and ``componet`` on ``cip`` alone (a
 transport knows no device); ``devices`` on those; ``eds`` reads the devices' declarations, never
@@ -14,7 +14,7 @@ import pytest
 
 PACKAGE = Path(__file__).resolve().parent.parent / "cipstack"
 
-#: What every part may import: the error root and the loggers on demand (both import nothing of ours).
+#: What every part may import: the error root and the debug records on demand (both import nothing of ours).
 BELOW_ALL = {"errors", "logs"}
 #: What each part may import of the package (its own modules always, and ``BELOW_ALL``).
 ALLOWED = {

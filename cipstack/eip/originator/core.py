@@ -28,7 +28,7 @@ from typing import TYPE_CHECKING, Any, Generic, TypeVar
 from ...cip.epath import Segment, encode_path, request_path
 from ...cip.messages import MessageRouterRequest, MessageRouterResponse, Service
 from ...errors import CipstackError
-from ...logs import logger
+from ...logs import debug
 from ..wire.cpf import Item, ItemType, decode_items, encode_items
 from ..wire.encapsulation import (
     DEFAULT_PORT,
@@ -49,7 +49,6 @@ if TYPE_CHECKING:
     from ..wire.cm_messages import ConnectionTriad
     from ..wire.identity_items import IdentityRecord, ServiceRecord
 
-log = logger(__name__)
 T = TypeVar("T")
 
 #: Our vendor id as an originator (0xFFFF is not assigned; any value works for tests).
@@ -261,8 +260,8 @@ class OriginatorCore:
                 continue
             transaction = self._pending.get(header.context)
             if transaction is None or transaction.command != header.command:
-                log.debug("reply nothing waits for dropped: command 0x%04X context %s", header.command,
-                          header.context.hex())
+                debug(__name__, "reply nothing waits for dropped: command 0x%04X context %s", header.command,
+                      header.context.hex())
                 continue
             del self._pending[header.context]
             completed.append((transaction, header, body))
@@ -274,11 +273,11 @@ class OriginatorCore:
             data = items[1].data
             (sequence,) = _SEQ.unpack_from(data)
         except (EncapsulationError, struct.error, IndexError):
-            log.debug("malformed SendUnitData reply dropped: %s", body.hex())
+            debug(__name__, "malformed SendUnitData reply dropped: %s", body.hex())
             return None
         transaction = self._connected.pop(sequence, None)
         if transaction is None:
-            log.debug("SendUnitData reply to no pending sequence count %d dropped", sequence)
+            debug(__name__, "SendUnitData reply to no pending sequence count %d dropped", sequence)
             return None
         return transaction, data[2:]
 

@@ -7,7 +7,7 @@ import struct
 from dataclasses import dataclass
 from enum import IntEnum
 
-from ...logs import logger
+from ...logs import debug
 from .encapsulation import EncapsulationError, EncapsulationStatus
 
 
@@ -23,7 +23,6 @@ class ItemType(IntEnum):
     SEQUENCED_ADDRESS = 0x8002
 
 
-log = logger(__name__)
 
 _ITEM = struct.Struct("<HH")
 _COUNT = struct.Struct("<H")
@@ -71,8 +70,8 @@ def decode_items(raw: bytes, offset: int = 0, *, strict: bool = True) -> list[It
         pos += length
     if pos != len(raw):
         if not strict:
-            log.debug("CPF: %d bytes after the %d declared item(s) ignored: %s", len(raw) - pos, count,
-                      bytes(raw[pos:pos + 64]).hex())
+            debug(__name__, "CPF: %d bytes after the %d declared item(s) ignored: %s", len(raw) - pos, count,
+                  bytes(raw[pos:pos + 64]).hex())
             return items
         raise EncapsulationError(EncapsulationStatus.INCORRECT_DATA, "bytes after the last CPF item", pos)
     return items
