@@ -7,9 +7,8 @@ standard ones, so a profile's attributes decode by the same declaration the emul
 from __future__ import annotations
 
 from collections.abc import Callable, Iterable, Mapping
-from dataclasses import dataclass
 from functools import cache
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING, Any, NamedTuple
 
 from .cip.model import AttributeSpec, ClassSpec
 from .cip.types import UINT
@@ -67,8 +66,7 @@ CLASS_ATTRIBUTES: dict[int, AttributeSpec] = {
 AttributeResolver = Callable[[int, int], "AttributeSpec | None"]
 
 
-@dataclass(frozen=True)
-class Parameter:
+class Parameter(NamedTuple):
     """A device parameter a recipe holds (``cipstack params``): where it is and how it is declared.
 
     ``code`` is the manual's name for it (the ACG's keypad code ``dr.20``, the Omron function code

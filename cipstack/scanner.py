@@ -11,9 +11,8 @@ from __future__ import annotations
 import contextlib
 import struct
 from collections.abc import AsyncIterator, Callable, Iterator, Sequence
-from dataclasses import dataclass
 from pathlib import Path
-from typing import TYPE_CHECKING, Any, TypeVar
+from typing import TYPE_CHECKING, Any, NamedTuple, TypeVar
 
 from .catalog import Catalog
 from .cip.epath import PortSegment, Segment, request_path
@@ -51,8 +50,7 @@ T = TypeVar("T")
 UNDECODED = "(undecoded)"
 
 
-@dataclass(frozen=True)
-class AttributeValue:
+class AttributeValue(NamedTuple):
     """A read attribute: its raw bytes, and its value when the type is known (``reading`` gives it
     with its unit and scale)."""
 

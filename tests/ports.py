@@ -10,6 +10,7 @@ import os
 import random
 import socket
 import struct
+from typing import Any
 
 #: The numbers handed out last: a number may come up again, and two calls in a row (an adapter's
 #: --port and --io-port) must not get the same one.
@@ -89,21 +90,18 @@ LIST_IDENTITY = struct.pack("<HHII8sI", 0x0063, 0, 0, 0, struct.pack("<H", 500) 
 async def list_identity_replies(destination: str, port: int, seconds: float = 1.2) -> list[tuple[bytes, str]]:
     """Each reply, with the address it came from, to one ListIdentity sent over UDP to ``destination``
     (a broadcast address too) within ``seconds``."""
-    sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
-    sock.setsockopt(socket.SOL_SOCKET, socket.SO_BROADCAST, 1)
-    sock.bind(("127.0.0.1", 0))
-    sock.setblocking(False)
-    loop = asyncio.get_running_loop()
+    replies: list[tuple[bytes, str]] = []
+
+    class Collect(asyncio.DatagramProtocol):
+        def datagram_received(self, data: bytes, addr: tuple[str | Any, int]) -> None:
+            replies.append((data, addr[0]))
+
+    # A datagram endpoint, not loop.sock_sendto/sock_recvfrom: those came with Python 3.11.
+    transport, _ = await asyncio.get_running_loop().create_datagram_endpoint(
+        Collect, local_addr=("127.0.0.1", 0), allow_broadcast=True)
     try:
-        await loop.sock_sendto(sock, LIST_IDENTITY, (destination, port))
-        replies = []
-        deadline = loop.time() + seconds
-        while (left := deadline - loop.time()) > 0:
-            try:
-                data, (host, _) = await asyncio.wait_for(loop.sock_recvfrom(sock, 2048), left)
-            except asyncio.TimeoutError:
-                break
-            replies.append((data, host))
+        transport.sendto(LIST_IDENTITY, (destination, port))
+        await asyncio.sleep(seconds)
         return replies
     finally:
-        sock.close()
+        transport.close()

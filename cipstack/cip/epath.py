@@ -17,8 +17,8 @@ from __future__ import annotations
 
 import struct
 from collections.abc import Iterable
-from dataclasses import dataclass
 from enum import IntEnum
+from typing import NamedTuple
 
 from .status import CipError, GeneralStatus
 
@@ -31,8 +31,7 @@ class LogicalType(IntEnum):
     ATTRIBUTE_ID = 4
 
 
-@dataclass(frozen=True)
-class LogicalSegment:
+class LogicalSegment(NamedTuple):
     """A logical segment: a class, instance, member, connection point or attribute number."""
 
     kind: LogicalType
@@ -50,8 +49,7 @@ class LogicalSegment:
         return 32
 
 
-@dataclass(frozen=True)
-class PortSegment:
+class PortSegment(NamedTuple):
     """A port segment: leave by ``port`` for the node at ``link`` (a slot, a node address, an IP
     address as text)."""
 
@@ -67,8 +65,7 @@ class PortSegment:
         return cls(port, bytes(link))
 
 
-@dataclass(frozen=True)
-class ElectronicKey:
+class ElectronicKey(NamedTuple):
     """The electronic key of a connection path: the identity the target must have (zeros match any)."""
 
     vendor_id: int = 0
@@ -85,8 +82,7 @@ class ElectronicKey:
                     or self.major_revision or self.minor_revision)
 
 
-@dataclass(frozen=True)
-class DataSegment:
+class DataSegment(NamedTuple):
     """Simple data segment: configuration data carried in a connection path."""
 
     data: bytes
@@ -242,8 +238,7 @@ def request_path(class_id: int, instance: int | None = None, attribute: int | No
     return encode_path(logical_path(class_id, instance, attribute, member))
 
 
-@dataclass(frozen=True, slots=True)
-class ApplicationPath:
+class ApplicationPath(NamedTuple):
     """What a message-router request addresses: class, instance, attribute, member."""
 
     class_id: int

@@ -2,8 +2,8 @@
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
 from enum import IntEnum
+from typing import NamedTuple
 
 from .status import CipError, GeneralStatus, describe_status
 
@@ -38,8 +38,7 @@ class Service(IntEnum):
 REPLY_BIT = 0x80
 
 
-@dataclass(frozen=True, slots=True)
-class MessageRouterRequest:
+class MessageRouterRequest(NamedTuple):
     """A message-router request: service code, request path (padded EPATH), request data."""
 
     service: int
@@ -65,14 +64,13 @@ class MessageRouterRequest:
         return cls(service, bytes(raw[2:end]), bytes(raw[end:]))
 
 
-@dataclass(frozen=True, slots=True)
-class MessageRouterResponse:
+class MessageRouterResponse(NamedTuple):
     """A message-router reply: the service it answers (reply bit clear), general and extended
     status, reply data."""
 
     service: int
     general_status: int = 0
-    extended_status: tuple[int, ...] = field(default=())
+    extended_status: tuple[int, ...] = ()
     data: bytes = b""
 
     @property

@@ -13,10 +13,9 @@ from __future__ import annotations
 
 import struct
 from collections.abc import Callable, Mapping
-from dataclasses import dataclass
 from enum import Enum
 from functools import partial
-from typing import TYPE_CHECKING, Any, ClassVar
+from typing import TYPE_CHECKING, Any, ClassVar, NamedTuple
 
 from .epath import ApplicationPath
 from .messages import MessageRouterRequest, Service
@@ -42,8 +41,7 @@ class Access(Enum):
         return self is not Access.GET
 
 
-@dataclass(frozen=True)
-class AttributeSpec:
+class AttributeSpec(NamedTuple):
     """One attribute, declared once; runtime, EDS parameters, decoding and docs derive from it."""
 
     id: int
@@ -70,11 +68,7 @@ class AttributeSpec:
     @property
     def scaling(self) -> Scaling:
         """Unit, scale, offset, decimal places and enumeration: how a raw value reads."""
-        scaling = self.__dict__.get("_scaling")
-        if scaling is None:  # built once: every read of the attribute hands it to its Value
-            scaling = Scaling(self.unit, self.scale, self.offset, self.decimals, self.enum)
-            object.__setattr__(self, "_scaling", scaling)
-        return scaling
+        return Scaling(self.unit, self.scale, self.offset, self.decimals, self.enum)
 
     def validate(self, value: Any) -> Any:
         """Check a value about to be stored: type (a BOOL is 0 or 1), declared range, enumeration
@@ -96,39 +90,82 @@ class AttributeSpec:
         return self.scaling.text(value)
 
 
-@dataclass(frozen=True)
+_INSTANCE_SERVICES = frozenset({Service.GET_ATTRIBUTES_ALL, Service.GET_ATTRIBUTE_SINGLE, Service.SET_ATTRIBUTE_SINGLE,
+                                Service.GET_ATTRIBUTE_LIST, Service.SET_ATTRIBUTE_LIST})
+
+
 class ClassSpec:
-    """A CIP class, declared once: id, name, revision, instance attributes, services."""
+    """A CIP class, declared once: id, name, revision, instance attributes, services.
+
+    Immutable once made (``replace`` gives a changed copy), checked when made (an instance
+    attribute id declared twice is a ``ValueError``), and indexed by attribute id then, for the
+    lookup every request does.
+    """
+
+    __slots__ = ("_index", "class_id", "class_services", "extra_class_attributes", "instance_attributes",
+                 "instance_services", "max_instance", "name", "revision")
+    #: The fields, in the order ``__init__`` takes them.
+    _FIELDS: ClassVar[tuple[str, ...]] = ("class_id", "name", "revision", "instance_attributes",
+                                          "extra_class_attributes", "class_services", "instance_services",
+                                          "max_instance")
 
     class_id: int
     name: str
-    revision: int = 1
-    instance_attributes: tuple[AttributeSpec, ...] = ()
+    revision: int
+    instance_attributes: tuple[AttributeSpec, ...]
     #: Class attributes beyond the standard 1-3, 6, 7 (rare).
-    extra_class_attributes: tuple[AttributeSpec, ...] = ()
-    class_services: frozenset[int] = frozenset({Service.GET_ATTRIBUTE_SINGLE})
-    instance_services: frozenset[int] = frozenset(
-        {Service.GET_ATTRIBUTES_ALL, Service.GET_ATTRIBUTE_SINGLE, Service.SET_ATTRIBUTE_SINGLE,
-         Service.GET_ATTRIBUTE_LIST, Service.SET_ATTRIBUTE_LIST}
-    )
+    extra_class_attributes: tuple[AttributeSpec, ...]
+    class_services: frozenset[int]
+    instance_services: frozenset[int]
     #: Declared maximum instance number when it exceeds the instances created (attribute 2).
-    max_instance: int | None = None
+    max_instance: int | None
+    _index: dict[int, AttributeSpec]
+
+    def __init__(self, class_id: int, name: str, revision: int = 1, instance_attributes: tuple[AttributeSpec, ...] = (),
+                 extra_class_attributes: tuple[AttributeSpec, ...] = (),
+                 class_services: frozenset[int] = frozenset({Service.GET_ATTRIBUTE_SINGLE}),
+                 instance_services: frozenset[int] = _INSTANCE_SERVICES, max_instance: int | None = None) -> None:
+        index = {a.id: a for a in instance_attributes}
+        if len(index) != len(instance_attributes):
+            raise ValueError(f"{name}: an instance attribute id is declared twice")
+        values = (class_id, name, revision, tuple(instance_attributes), tuple(extra_class_attributes), class_services,
+                  instance_services, max_instance)
+        for field, value in zip(self._FIELDS, values, strict=True):
+            object.__setattr__(self, field, value)  # set here once: __setattr__ refuses later
+        object.__setattr__(self, "_index", index)
 
     def instance_attribute(self, attribute_id: int) -> AttributeSpec | None:
-        return self._instance_index.get(attribute_id)
+        return self._index.get(attribute_id)
 
-    @property
-    def _instance_index(self) -> dict[int, AttributeSpec]:
-        index = self.__dict__.get("_index_cache")
-        if index is None:
-            index = {a.id: a for a in self.instance_attributes}
-            object.__setattr__(self, "_index_cache", index)
-        return index
+    def replace(self, **changes: Any) -> ClassSpec:
+        """A copy with ``changes`` (field name -> value), checked as a new declaration is."""
+        unknown = changes.keys() - set(self._FIELDS)
+        if unknown:
+            raise TypeError(f"ClassSpec has no field {', '.join(sorted(unknown))}")
+        return ClassSpec(**{field: changes.get(field, getattr(self, field)) for field in self._FIELDS})
 
-    def __post_init__(self) -> None:
-        ids = [a.id for a in self.instance_attributes]
-        if len(ids) != len(set(ids)):
-            raise ValueError(f"{self.name}: an instance attribute id is declared twice")
+    def _values(self) -> tuple[Any, ...]:
+        return tuple(getattr(self, field) for field in self._FIELDS)
+
+    def __setattr__(self, name: str, value: Any) -> None:
+        raise AttributeError(f"ClassSpec is immutable: {name} cannot be set (use replace)")
+
+    def __delattr__(self, name: str) -> None:
+        raise AttributeError(f"ClassSpec is immutable: {name} cannot be deleted")
+
+    def __eq__(self, other: object) -> bool:
+        if not isinstance(other, ClassSpec):
+            return NotImplemented
+        return self._values() == other._values()
+
+    def __hash__(self) -> int:
+        return hash(self._values())
+
+    def __repr__(self) -> str:
+        return "ClassSpec(" + ", ".join(f"{field}={getattr(self, field)!r}" for field in self._FIELDS) + ")"
+
+    def __reduce__(self) -> tuple[Any, ...]:
+        return ClassSpec, self._values()
 
 
 class Binding:

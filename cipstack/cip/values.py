@@ -19,8 +19,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Mapping
-from dataclasses import dataclass
-from typing import Any
+from typing import Any, NamedTuple
 
 from .types import CipType
 from .units import decimal_places
@@ -34,8 +33,7 @@ def places_of(scale: float) -> int:
     return decimal_places(scale)
 
 
-@dataclass(frozen=True)
-class Scaling:
+class Scaling(NamedTuple):
     """How a raw value becomes an engineering value, and its unit (the declaration's)."""
 
     unit: str = ""

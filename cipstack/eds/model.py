@@ -232,6 +232,7 @@ class Field:
         """An integer, in decimal or, with ``hex_digits``, as ``0x`` and that many digits."""
         if isinstance(value, bool) or not isinstance(value, int):
             raise TypeError(f"integer field needs an int, not {value!r}")
+        value = int(value)  # an IntEnum member is its number (Python 3.10's str() gives its name)
         raw = str(value) if hex_digits is None else ("-" if value < 0 else "") + f"0x{abs(value):0{hex_digits}X}"
         return cls(FieldKind.INT, value, raw)
 

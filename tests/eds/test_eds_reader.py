@@ -6,6 +6,8 @@ import datetime
 
 import pytest
 
+from cipstack.assemblies.drive_profile import DriveState
+from cipstack.cip.status import GeneralStatus
 from cipstack.eds.model import (
     EdsDocument,
     Entry,
@@ -210,6 +212,14 @@ def test_read_eds_missing_file(tmp_path) -> None:  # type: ignore[no-untyped-def
 
 
 class TestBuildingInCode:
+    def test_an_enumerated_member_is_written_as_its_number(self) -> None:
+        """An ``EnumN`` value declared as an IntEnum member (the Drive State of the AC drive profile)
+        is its number in the file on every Python: 3.10's ``str()`` of a member is its name, which
+        made ``DriveState.READY, "Ready"`` an entry no reader takes."""
+        field = Field.integer(DriveState.READY)
+        assert (type(field.value), field.value, field.raw) == (int, 3, "3")
+        assert Field.integer(GeneralStatus.PATH_SEGMENT_ERROR, hex_digits=2).raw == "0x04"
+
     def test_section_add_and_typed_fields(self) -> None:
         doc = EdsDocument()
         doc.section("File", comment="written by the project's generator tests").add("DescText", ["Drive"])

@@ -15,7 +15,7 @@ runs 0x10 (device state conflict), no such register 0x14.
 from __future__ import annotations
 
 from collections.abc import Callable, Mapping
-from dataclasses import dataclass, replace
+from dataclasses import dataclass
 from typing import Any
 
 from ...cip.epath import ApplicationPath
@@ -347,10 +347,10 @@ class KeypadParameterObject(CipObject):
 # ---------------------------------------------------------------------------------------------
 
 #: ACG-ET2 manual Identity table: attributes 1-7; "Support for Class: No"; instance 0x0E, 0x05, 0x01.
-IDENTITY_SPEC = replace(
-    standard_identity_spec(
-        instance_services=frozenset({Service.GET_ATTRIBUTE_SINGLE, Service.RESET, Service.GET_ATTRIBUTES_ALL}),
-        class_services=NO_SERVICES),
+IDENTITY_SPEC = standard_identity_spec(
+    instance_services=frozenset({Service.GET_ATTRIBUTE_SINGLE, Service.RESET, Service.GET_ATTRIBUTES_ALL}),
+    class_services=NO_SERVICES,
+).replace(
     instance_attributes=tuple(a for a in standard_identity_spec().instance_attributes if a.id <= 7),
 )
 #: "Serial number uses the last 4 digits of the MAC ID"; "Product Name 4 Byte CENT".

@@ -16,7 +16,7 @@ between option board and inverter 0x02.
 from __future__ import annotations
 
 from collections.abc import Callable, Mapping
-from dataclasses import dataclass, replace
+from dataclasses import dataclass
 from types import MappingProxyType
 from typing import Any
 
@@ -72,7 +72,7 @@ _IDENTITY_SPEC = identity_spec(
     class_services=_GET,
 )
 #: Table C-2 (CompoNet manual) lists attributes 1-7, 9 and 65h: 8 (State) is not served (0x14).
-IDENTITY_SPEC = replace(_IDENTITY_SPEC, instance_attributes=tuple(
+IDENTITY_SPEC = _IDENTITY_SPEC.replace(instance_attributes=tuple(
     a for a in _IDENTITY_SPEC.instance_attributes if a.id != 8))
 
 

@@ -22,7 +22,6 @@ import itertools
 import random
 import struct
 from collections.abc import Callable, Generator, Sequence
-from dataclasses import dataclass
 from typing import TYPE_CHECKING, Any, Generic, TypeVar
 
 from ...cip.epath import Segment, encode_path, request_path
@@ -88,15 +87,23 @@ class NoReplyError(CipstackError, TimeoutError):
     """A request whose reply did not come before its deadline."""
 
 
-@dataclass
 class ExplicitConnectionInfo:
-    """A class 3 connection this originator opened."""
+    """A class 3 connection this originator opened; ``sequence`` is the count of its last request."""
 
-    ot_connection_id: int
-    to_connection_id: int
-    triad: ConnectionTriad
-    rpi_us: int
-    sequence: int = 0
+    __slots__ = ("ot_connection_id", "rpi_us", "sequence", "to_connection_id", "triad")
+
+    def __init__(self, ot_connection_id: int, to_connection_id: int, triad: ConnectionTriad, rpi_us: int,
+                 sequence: int = 0) -> None:
+        self.ot_connection_id = ot_connection_id
+        self.to_connection_id = to_connection_id
+        self.triad = triad
+        self.rpi_us = rpi_us
+        self.sequence = sequence
+
+    def __repr__(self) -> str:
+        return (f"ExplicitConnectionInfo(ot_connection_id=0x{self.ot_connection_id:08X}, "
+                f"to_connection_id=0x{self.to_connection_id:08X}, triad={self.triad!r}, rpi_us={self.rpi_us}, "
+                f"sequence={self.sequence})")
 
 
 class Transaction(Generic[T]):

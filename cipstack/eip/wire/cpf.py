@@ -4,8 +4,8 @@ from __future__ import annotations
 
 import socket
 import struct
-from dataclasses import dataclass
 from enum import IntEnum
+from typing import NamedTuple
 
 from ...logs import debug
 from .encapsulation import EncapsulationError, EncapsulationStatus
@@ -30,8 +30,7 @@ _COUNT = struct.Struct("<H")
 MAX_ITEMS = 16
 
 
-@dataclass(frozen=True, slots=True)
-class Item:
+class Item(NamedTuple):
     """One item of a Common Packet Format list: its type id and its data."""
 
     type: int
@@ -81,8 +80,7 @@ def decode_items(raw: bytes, offset: int = 0, *, strict: bool = True) -> list[It
 SOCKADDR = struct.Struct(">hHI8s")
 
 
-@dataclass(frozen=True, slots=True)
-class SockAddr:
+class SockAddr(NamedTuple):
     """The Sockaddr Info of a CPF item or a ListIdentity reply: an IPv4 address and port."""
 
     host: str

@@ -7,8 +7,8 @@ UDINT, sender context 8 bytes (echoed unchanged), options UDINT (must be 0). Lit
 from __future__ import annotations
 
 import struct
-from dataclasses import dataclass
 from enum import IntEnum
+from typing import NamedTuple
 
 from ...errors import ProtocolError
 
@@ -51,8 +51,7 @@ class EncapsulationError(ProtocolError):
         super().__init__(message or status.name.lower().replace("_", " "))
 
 
-@dataclass(frozen=True, slots=True)
-class EncapsulationHeader:
+class EncapsulationHeader(NamedTuple):
     """The 24-byte encapsulation header: command, data length, session handle, status, sender
     context and options."""
 

@@ -3,7 +3,7 @@
 from __future__ import annotations
 
 import struct
-from dataclasses import dataclass
+from typing import NamedTuple
 
 from .cpf import Item, ItemType, SockAddr, decode_items, encode_items
 
@@ -15,8 +15,7 @@ CAPABILITY_CIP_TCP = 0x0020
 CAPABILITY_CLASS01_UDP = 0x0100
 
 
-@dataclass(frozen=True)
-class IdentityRecord:
+class IdentityRecord(NamedTuple):
     """What a ListIdentity reply says about a device (Identity attributes 1-8)."""
 
     vendor_id: int
@@ -72,8 +71,7 @@ def decode_list_identity(body: bytes) -> list[IdentityRecord]:
             if item.type == ItemType.LIST_IDENTITY]
 
 
-@dataclass(frozen=True)
-class ServiceRecord:
+class ServiceRecord(NamedTuple):
     """One service of a ListServices reply: protocol version, capability flags and name."""
 
     version: int
