@@ -28,7 +28,7 @@ def test_an_attribute_declaration_is_a_value() -> None:
     assert (changed.maximum, SPEED.maximum) == (3600, 1800)
     assert changed != SPEED and changed._replace(maximum=1800) == SPEED
     with pytest.raises(AttributeError):
-        SPEED.maximum = 1  # type: ignore[misc]
+        SPEED.maximum = 1  # type: ignore[misc]  # a named tuple's field is read-only: the point
     assert SPEED.scaling == Scaling("rpm", 1.0, 0.0, None, None)
     assert MODE.scaling.enum == {1: "speed", 2: "torque"}
     assert repr(SPEED).startswith("AttributeSpec(id=2, name='Speed Reference', type=")
@@ -62,11 +62,11 @@ def test_a_changed_copy_of_a_class_leaves_the_original_alone() -> None:
 
 def test_a_class_declaration_cannot_be_changed_in_place() -> None:
     with pytest.raises(AttributeError, match="immutable"):
-        DRIVE.name = "Other"  # type: ignore[misc]
+        DRIVE.name = "Other"
     with pytest.raises(AttributeError, match="immutable"):
         del DRIVE.revision
     with pytest.raises(AttributeError):
-        DRIVE.colour = "red"  # type: ignore[attr-defined]
+        DRIVE.colour = "red"
 
 
 def test_equal_class_declarations_are_equal_and_hash_alike() -> None:

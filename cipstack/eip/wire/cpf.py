@@ -23,7 +23,6 @@ class ItemType(IntEnum):
     SEQUENCED_ADDRESS = 0x8002
 
 
-
 _ITEM = struct.Struct("<HH")
 _COUNT = struct.Struct("<H")
 #: Upper bound on items in one packet; real packets carry 1-4.
