@@ -10,6 +10,8 @@ each connection it offers, as a user runs them; python-ethernetip runs those it 
 from __future__ import annotations
 
 import argparse
+import asyncio
+import contextlib
 import io
 import re
 import signal
@@ -21,6 +23,7 @@ import time
 from collections.abc import Iterator
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import Any
 
 import pytest
 
@@ -308,25 +311,31 @@ def adapter(request: pytest.FixtureRequest) -> Iterator[Adapter]:
     started.close()
 
 
-def _io(adapter: Adapter, number: int, duration: float, *more: str) -> subprocess.Popen[str]:
-    return subprocess.Popen(
-        [sys.executable, "-m", "cipstack", "io", f"127.0.0.1:{adapter.port}", "--eds", str(adapter.path),
-         "--connection", str(number), "--rpi", "10ms", "--duration", f"{duration}s", "--timeout-multiplier", "4",
-         "--target-io-port", str(adapter.io_port), "--print", "summary", *more],
-        stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+#: At most this many connections at once, and never more than the file's MaxIOConnections (a file of
+#: 60 connections runs in rounds).
+ROUND_SIZE = 16
 
 
-#: At most this many `cipstack io` processes at once (a file of 60 connections runs in rounds).
-ROUND_SIZE = 6
+def _capacity(path: Path) -> int:
+    entry = read_eds(path).entry("Capacity", "MaxIOConnections")
+    declared = entry.value() if entry is not None else None
+    return min(ROUND_SIZE, declared) if isinstance(declared, int) and declared > 0 else ROUND_SIZE
 
 
-def _rounds(connections: list[ConnectionInfo], size: int = ROUND_SIZE) -> list[list[ConnectionInfo]]:
+def _rounds(connections: list[ConnectionInfo], size: int, weight: dict[int, int] | None = None,
+            ) -> list[list[ConnectionInfo]]:
     """Connections that may run at once: one exclusive owner per output assembly in a round, at most
-    ``size`` of them."""
+    ``size`` connections in all, a connection counting with the listeners it takes along (``weight``,
+    by number: 1 where not given)."""
+    weight = weight or {}
     rounds: list[list[ConnectionInfo]] = []
+
+    def load(batch: list[ConnectionInfo]) -> int:
+        return sum(weight.get(c.number, 1) for c in batch)
+
     for connection in connections:
         for batch in rounds:
-            if len(batch) < size and (connection.heartbeat or all(
+            if load(batch) + weight.get(connection.number, 1) <= size and (connection.heartbeat or all(
                     other.heartbeat or other.o_t_point != connection.o_t_point for other in batch)):
                 batch.append(connection)
                 break
@@ -341,45 +350,107 @@ def test_the_adapter_says_what_it_skips(adapter: Adapter) -> None:
                         for line, message in EXPECTED[adapter.path.name].skipped]
 
 
-def test_each_offered_connection_runs_with_cipstack_io(adapter: Adapter) -> None:
-    """Every connection the adapter offers exchanges data with `cipstack io --eds`; those of a round
-    run at once. A listen-only connection runs while a connection of the file that produces the same
-    input by multicast (its owner) runs: the owner runs until its listeners are done, then stops as
-    Ctrl-C stops it (exit 130, after closing and printing its statistics)."""
-    view = read_view(read_eds(adapter.path))
+async def test_each_offered_connection_runs(adapter: Adapter) -> None:
+    """Every connection the adapter offers exchanges data with the library's originator, as `cipstack
+    io --eds` opens it (``io_connection_from_eds``, RPI 10 ms, timeout multiplier 4); those of a round
+    run at once, in this process. A listen-only connection runs while a connection of the file that
+    produces the same input by multicast (its owner) runs. The command line itself runs one
+    connection of each kind (the next test)."""
+    from cipstack.scanner import Scanner
+
+    doc = read_eds(adapter.path)
+    view = read_view(doc)
     offered = [c for c in view.connections if c.number in EXPECTED[adapter.path.name].offered]
     listeners = [c for c in offered if c.kind == "listen only"]
     owners = {c.number: next(o for o in offered if o.kind != "listen only" and o.t_o_point == c.t_o_point
                              and o.t_o_multicast) for c in listeners}
-    results: dict[int, subprocess.CompletedProcess[str]] = {}
-    interrupted: set[int] = set()
+    received: dict[int, int] = {}
 
-    def collect(number: int, process: subprocess.Popen[str]) -> None:
-        stdout, stderr = process.communicate(timeout=60)
-        results[number] = subprocess.CompletedProcess(process.args, process.returncode, stdout, stderr)
+    def opened(number: int, **options: Any) -> Any:
+        return scanner.io_connection_from_eds(doc, number, 0.010, target_io_port=adapter.io_port,
+                                              timeout_multiplier=4, **options)
 
-    # The listeners run beside their owners' round: the round leaves room for them, or the last to
-    # open finds the device's connections taken (0x0113) while a short connection of the round lingers.
-    for batch in _rounds([c for c in offered if c.kind != "listen only"], ROUND_SIZE - len(listeners)):
-        serving = [o for o in batch if o in owners.values()]
-        # An owner the file lets produce both ways is asked for multicast (--multicast), for its listeners.
-        running = {c.number: _io(adapter, c.number, 30.0 if c in serving else 0.5,
-                                 *(["--multicast"] if c in serving else [])) for c in batch}
-        for owner in serving:
-            adapter.wait_for(rf"->{owner.t_o_point} \(0x[0-9A-F]+\) opened .*multicast")
-        listening = {n: _io(adapter, n, 0.5) for n, o in owners.items() if o in serving}
-        for number, process in listening.items():
-            collect(number, process)
-        for owner in serving:
-            running[owner.number].send_signal(signal.SIGINT)
-            interrupted.add(owner.number)
-        for number, process in running.items():
-            collect(number, process)
-    assert sorted(results) == EXPECTED[adapter.path.name].offered
-    for number, result in sorted(results.items()):
-        assert result.returncode == (130 if number in interrupted else 0), f"Connection{number}: {result.stderr}"
-        stats = next(line for line in result.stdout.splitlines() if line.startswith("sent "))
-        assert int(stats.split()[3]) > 10, f"Connection{number}: {stats}"
+    async with await Scanner.connect(f"127.0.0.1:{adapter.port}", eds=doc) as scanner:
+        # The listeners run beside their owners' round: an owner counts with its listeners, or the last
+        # to open finds the device's connections taken (0x0113).
+        weight = {o.number: 1 + sum(owner is o for owner in owners.values()) for o in owners.values()}
+        for batch in _rounds([c for c in offered if c.kind != "listen only"], _capacity(adapter.path), weight):
+            serving = [o for o in batch if o in owners.values()]
+            async with contextlib.AsyncExitStack() as stack:
+                # An owner the file lets produce both ways is asked for multicast, for its listeners.
+                running = {c.number: await stack.enter_async_context(
+                    opened(c.number, **({"multicast": True} if c in serving else {}))) for c in batch}
+                for owner in serving:
+                    assert running[owner.number].multicast_group is not None, f"Connection{owner.number}"
+                for number, owner in owners.items():
+                    if owner in serving:
+                        running[number] = await stack.enter_async_context(opened(number))
+                for handle in running.values():
+                    handle.set_run(True)
+                # Data both ways until each has received more than 10 packets (bounded: a target that
+                # produces nothing fails below).
+                deadline = asyncio.get_running_loop().time() + 10.0
+                while (any(h.statistics()["received"] <= 10 for h in running.values())
+                       and asyncio.get_running_loop().time() < deadline):
+                    await asyncio.sleep(0.02)
+                received.update({n: h.statistics()["received"] for n, h in running.items()})
+    assert sorted(received) == EXPECTED[adapter.path.name].offered
+    for number, count in sorted(received.items()):
+        assert count > 10, f"Connection{number}: received {count}"
+
+
+def _io(adapter: Adapter, number: int, duration: float, *more: str) -> subprocess.Popen[str]:
+    return subprocess.Popen(
+        [sys.executable, "-m", "cipstack", "io", f"127.0.0.1:{adapter.port}", "--eds", str(adapter.path),
+         "--connection", str(number), "--rpi", "10ms", "--duration", f"{duration}s", "--timeout-multiplier", "4",
+         "--target-io-port", str(adapter.io_port), "--print", "summary", *more],
+        stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+
+
+def _first_of_each_kind() -> dict[str, tuple[Path, int]]:
+    """The first corpus file and connection the adapter offers of each kind (listen only: one whose
+    owner may produce by multicast)."""
+    found: dict[str, tuple[Path, int]] = {}
+    for path in WITH_CONNECTIONS:
+        view = read_view(read_eds(path))
+        for connection in view.connections:
+            if connection.number in EXPECTED[path.name].offered and connection.kind not in found:
+                found[connection.kind] = (path, connection.number)
+    return found
+
+
+def test_a_connection_of_each_kind_runs_with_cipstack_io() -> None:
+    """`cipstack io --eds FILE --connection N`, as a user runs it, for one connection of each kind the
+    corpus offers; a listen-only one beside its owner, which is asked for multicast (--multicast)
+    and runs until its listener is done, then stops as Ctrl-C stops it (exit 130, after closing
+    and printing its statistics)."""
+    kinds = _first_of_each_kind()
+    assert set(kinds) == {"exclusive owner", "input only", "listen only"}
+    for kind, (path, number) in sorted(kinds.items()):
+        started = Adapter(path)
+        try:
+            view = read_view(read_eds(path))
+            if kind == "listen only":
+                listener = view.connection(number)
+                owner = next(o for o in view.connections if o.number in EXPECTED[path.name].offered
+                             and o.kind != "listen only" and o.t_o_point == listener.t_o_point and o.t_o_multicast)
+                serving = _io(started, owner.number, 30.0, "--multicast")
+                started.wait_for(rf"->{owner.t_o_point} \(0x[0-9A-F]+\) opened .*multicast")
+                listening = _io(started, number, 0.5)
+                outputs = {number: listening.communicate(timeout=60)}
+                serving.send_signal(signal.SIGINT)
+                results = [(number, 0, listening), (owner.number, 130, serving)]
+            else:
+                results = [(number, 0, _io(started, number, 0.5))]
+                outputs = {}
+            for connection, expected, process in results:
+                stdout, stderr = outputs.get(connection) or process.communicate(timeout=60)
+                assert process.returncode == expected, (
+                    f"{path.name} Connection{connection} ({kind}): {stderr}\n" + "\n".join(started.lines))
+                stats = next(line for line in stdout.splitlines() if line.startswith("sent "))
+                assert int(stats.split()[3]) > 10, f"{path.name} Connection{connection}: {stats}"
+        finally:
+            started.close()
 
 
 def _ethernetip_format(path: Path, number: int) -> int:
@@ -431,10 +502,17 @@ def test_python_ethernetip_runs_what_it_can_open(adapter: Adapter, monkeypatch: 
             if outputs:
                 outputs[1] = outputs[3] = True          # 0x0A in the first output byte
             explicit.produce()
-            time.sleep(0.5)
+            # Until more than 10 packets came (asserted below) and the output is in the assembly (bounded).
+            deadline = time.monotonic() + 10.0
+            while received.get(explicit.toconnid, 0) <= 10 and time.monotonic() < deadline:
+                time.sleep(0.02)
             if outputs:
                 with SyncScanner(f"127.0.0.1:{adapter.port}") as scanner:
-                    data = scanner.get_attribute_single(0x04, connection.o_t_point, 3).data
+                    while True:
+                        data = scanner.get_attribute_single(0x04, connection.o_t_point, 3).data
+                        if data[0] == 0x0A or time.monotonic() > deadline:
+                            break
+                        time.sleep(0.02)
                 assert data[0] == 0x0A, f"Connection{number}: output assembly holds {data.hex()}"
             explicit.stopProduce()
             assert explicit.sendFwdCloseReq(connection.t_o_point, connection.o_t_point, connection.config) == 0
