@@ -10,10 +10,24 @@ the other. docs/contributing.md has the rules for a new test."""
 from __future__ import annotations
 
 import os
+import sys
 from collections.abc import Callable, Iterator
 from typing import Any
 
 import pytest
+
+#: Each test's CPU, the slowest tests, the suite's time budget (``--time-budget``).
+pytest_plugins = ["tests.timing"]
+
+
+def pytest_configure(config: pytest.Config) -> None:
+    """Bytecode is cached, whatever the environment says. Some container images set
+    PYTHONDONTWRITEBYTECODE: then every interpreter the suite starts (hundreds of ``cipstack``
+    processes, each worker) compiles cipstack from source again, and pytest rewrites every test
+    module's assertions anew in each worker: a large share of the suite's CPU time.
+    Dropped here, before the workers start, it holds for them and for every process a test starts."""
+    if os.environ.pop("PYTHONDONTWRITEBYTECODE", None) is not None:
+        sys.dont_write_bytecode = False
 
 
 @pytest.fixture(scope="session", autouse=True)
