@@ -14,9 +14,9 @@ from __future__ import annotations
 MIN_REMOTE_TOKEN_LENGTH = 32
 #: ``"a" * 40`` is long and still guessed first; a random token of 32 characters has far more.
 MIN_DISTINCT_CHARACTERS = 8
-#: Tokens that were shipped in cipstack's repository (manifests, documentation, tests): public values,
-#: whatever their length. ``replace-this-token`` was deploy/'s Secret until every overlay stopped
-#: shipping one; the tests make theirs at run time and add none here.
+#: Tokens that were shipped in cipstack's repository (manifests, tests), and the placeholders everyone
+#: tries first: public values, whatever their length. ``replace-this-token`` was deploy/'s Secret until
+#: the overlays stopped shipping one; the tests now make theirs at run time and add none here.
 KNOWN_WEAK_TOKENS = frozenset({
     "replace-this-token",
     "fleet-s3cret",
