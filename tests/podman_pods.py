@@ -1,7 +1,9 @@
 """What a Kubernetes cluster would make of deploy/'s rendered objects, as Pods for ``podman kube play``
-(tests/test_podman.py): a StatefulSet's pods, one per ordinal with its name as host name; a Deployment's
-pod; a ConfigMap given to ``kube play --configmap``. Secret volumes become host directories of the
-secret's files, readable by the pods' user (podman 4.3's ``kube play`` mounts no Secret object).
+(tests/test_podman.py): a StatefulSet's pods, one per ordinal with its name as host name, each with the
+claims of its ``volumeClaimTemplates`` named as the controller names them (``TEMPLATE-NAME-ORDINAL``:
+``kube play`` makes a named podman volume of each, which outlives the pod as a claim does); a
+Deployment's pod; a ConfigMap given to ``kube play --configmap``. Secret volumes become host directories
+of the secret's files, readable by the pods' user (podman 4.3's ``kube play`` mounts no Secret object).
 
 The containers' ``ports`` are left out (a probe that names one gets its number): podman 4.3's ``kube
 play`` publishes a container port without a host port on the host's same port, which the pods of one
@@ -43,12 +45,21 @@ def statefulset_pods(statefulset: dict[str, Any]) -> list[dict[str, Any]]:
     for ordinal in range(statefulset["spec"]["replicas"]):
         spec = _unpublished(copy.deepcopy(template["spec"]))
         spec["hostname"] = f"{name}-{ordinal}"
+        spec.setdefault("volumes", []).extend(
+            {"name": claim["metadata"]["name"],
+             "persistentVolumeClaim": {"claimName": claim_name(statefulset, claim, ordinal)}}
+            for claim in statefulset["spec"].get("volumeClaimTemplates", []))
         spec["restartPolicy"] = RESTART_POLICY
         pods.append({"apiVersion": "v1", "kind": "Pod",
                      "metadata": {"name": f"{name}-{ordinal}", "labels": dict(template["metadata"].get("labels", {})),
                                   "annotations": dict(template["metadata"].get("annotations", {}))},
                      "spec": spec})
     return pods
+
+
+def claim_name(statefulset: dict[str, Any], claim: dict[str, Any], ordinal: int) -> str:
+    """The claim the StatefulSet controller makes of ``claim`` (a volume claim template) for pod ``ordinal``."""
+    return f"{claim['metadata']['name']}-{statefulset['metadata']['name']}-{ordinal}"
 
 
 def deployment_pod(deployment: dict[str, Any]) -> dict[str, Any]:

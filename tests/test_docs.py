@@ -9,8 +9,8 @@ The convention, for whoever writes a block:
   stdout, then its stderr). A line ``...`` matches any number of lines; ``...`` inside a line
   matches any text within that line. A command must exit 0 unless its expected output shows an
   error line of the command (one starting ``cipstack``), as a failing command prints.
-* ```` ```sh ```` (set-up commands), ```` ```text ```` (synopses, sample output) and
-  ```` ```toml ```` (files) are not run.
+* ```` ```sh ```` (set-up commands), ```` ```text ```` (synopses, sample output),
+  ```` ```toml ```` and ```` ```yaml ```` (files) are not run.
 
 A block that cannot run as written is marked by an HTML comment on the line before its fence,
 which the rendered page does not show, and checked another way:
@@ -60,7 +60,7 @@ DEFAULT_ADAPTER = "cipstack adapter"
 COMMAND_TIMEOUT = 60.0
 #: The README stays a front page; what does not fit goes to a page of docs/.
 README_MAX_LINES = 250
-LANGUAGES = {"python", "console", "sh", "text", "toml"}
+LANGUAGES = {"python", "console", "sh", "text", "toml", "yaml"}
 RUN, PYTEST, INTERRUPT = "run", "pytest", "interrupt"
 
 

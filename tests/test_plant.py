@@ -8,6 +8,7 @@ fleet that comes back at another address serves its devices again; /metrics hold
 from __future__ import annotations
 
 import asyncio
+import secrets
 import subprocess
 import sys
 import time
@@ -28,13 +29,14 @@ from cipstack.control.http_relay import RelayApi
 from cipstack.control.plant import PlantView, resolve_addresses
 from tests.ports import free_port
 from tests.test_fleet import Fleet
-from tests.test_fleet_http import TOKEN
 
 pytestmark = pytest.mark.skipif(not sys.platform.startswith("linux"), reason="any 127.x on loopback")
 
 DEVICES = [f"127.83.1.{10 + n}" for n in range(6)]
 #: Where each fleet's HTTP API listens (a pod's address, in a cluster).
 API_HOSTS = [f"127.83.2.{1 + n}" for n in range(3)]
+#: The fleets serve --http-allow-remote, which refuses a token that can be guessed: one made now.
+TOKEN = secrets.token_hex(32)
 AUTH = {"Authorization": f"Bearer {TOKEN}"}
 
 

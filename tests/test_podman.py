@@ -17,6 +17,7 @@ installs (built here for the base's Python)."""
 
 from __future__ import annotations
 
+import base64
 import contextlib
 import json
 import os
@@ -36,8 +37,8 @@ pytest.importorskip("yaml", reason="PyYAML renders the manifests (the test extra
 
 import yaml  # type: ignore[import-untyped]
 
-from tests.podman_pods import deployment_pod, secrets_as_directories, statefulset_pods
-from tests.test_deploy import kubectl
+from tests.podman_pods import claim_name, deployment_pod, secrets_as_directories, statefulset_pods
+from tests.test_deploy import documented_secret, kubectl
 
 pytestmark = [pytest.mark.podman, pytest.mark.skipif(not sys.platform.startswith("linux"), reason="Linux only")]
 
@@ -57,7 +58,6 @@ default_ulimits = ["nofile=1024:1024", "nproc=4096:4096"]
 runtime = "runc"
 """
 LIMITS = ["--ulimit", "nofile=1024:1024", "--ulimit", "nproc=4096:4096"]
-TOKEN = "replace-this-token"   # deploy/base's, which the rendered Secret holds
 
 
 def _missing() -> str | None:
@@ -155,22 +155,33 @@ def build_image(podman: Podman, base: str, context: Path) -> None:
            timeout=900, netns=False)
 
 
-def pods(work: Path) -> tuple[list[dict[str, Any]], dict[str, Any], Path]:
-    """The fleet pods, the plant view's pod, and the ConfigMap's file for ``kube play``."""
+#: The fleet pods' claims of saved parameters (``state-cipstack-fleet-N``), podman volumes here.
+CLAIMS = [f"state-cipstack-fleet-{n}" for n in range(3)]
+
+
+def pods(work: Path) -> tuple[list[dict[str, Any]], dict[str, Any], Path, str]:
+    """The fleet pods, the plant view's pod, the ConfigMap's file for ``kube play``, and the token of the
+    Secret made as docs/kubernetes.md says (the manifests ship none)."""
     rendered = subprocess.run([kubectl(), "kustomize", str(ROOT / "tests" / "podman")], capture_output=True,
                               text=True, check=True, timeout=120).stdout
     objects = [o for o in yaml.safe_load_all(rendered) if o]
-    secrets = {o["metadata"]["name"]: o for o in objects if o["kind"] == "Secret"}
+    assert not [o for o in objects if o["kind"] == "Secret"], "the manifests ship a Secret"
+    made = documented_secret()
+    secrets = {made["metadata"]["name"]: made}
+    token = base64.b64decode(made["data"]["token"]).decode()
     (statefulset,) = [o for o in objects if o["kind"] == "StatefulSet"]
     (deployment,) = [o for o in objects if o["kind"] == "Deployment"]
     (config,) = [o for o in objects if o["kind"] == "ConfigMap"]
     fleet = statefulset_pods(statefulset)
+    assert [v["persistentVolumeClaim"]["claimName"] for pod in fleet for v in pod["spec"]["volumes"]
+            if "persistentVolumeClaim" in v] == [claim_name(statefulset, statefulset["spec"]["volumeClaimTemplates"][0],
+                                                            n) for n in range(3)] == CLAIMS
     view = deployment_pod(deployment)
     for pod in (*fleet, view):
         secrets_as_directories(pod, secrets, work / "secrets")
     configmap = work / "configmap.yaml"
     configmap.write_text(yaml.safe_dump(config))
-    return fleet, view, configmap
+    return fleet, view, configmap, token
 
 
 def play(podman: Podman, pod: dict[str, Any], configmap: Path, work: Path) -> None:
@@ -205,8 +216,8 @@ def class1(podman: Podman, drive: str) -> dict[str, Any]:
     return summaries[-1]  # type: ignore[no-any-return]
 
 
-def plant_devices(podman: Podman, view_ip: str) -> list[dict[str, Any]]:
-    request = f"urllib.request.Request('http://{view_ip}:8080/devices', headers={{'Authorization': 'Bearer {TOKEN}'}})"
+def plant_devices(podman: Podman, view_ip: str, token: str) -> list[dict[str, Any]]:
+    request = f"urllib.request.Request('http://{view_ip}:8080/devices', headers={{'Authorization': 'Bearer {token}'}})"
     script = f"import json, urllib.request; print(json.dumps(json.load(urllib.request.urlopen({request}, timeout=10))))"
     out = podman.client("--entrypoint", "python3", IMAGE, "-c", script).stdout
     return json.loads(out)  # type: ignore[no-any-return]
@@ -229,6 +240,8 @@ def podman() -> Iterator[Podman]:
     namespace = f"cipstack-podman-{os.getpid()}"
     subprocess.run(["ip", "netns", "add", namespace], check=True)
     runner = Podman(namespace, conf)
+    for claim in CLAIMS:   # a claim a run before this one left: its saved parameters are not this run's
+        runner("volume", "rm", "--force", claim, check=False)
     try:
         subprocess.run(["nsenter", f"--net=/run/netns/{namespace}", "ip", "link", "set", "lo", "up"], check=True)
         runner("network", "create", "--subnet", SUBNET, "--ip-range", IP_RANGE, "plant")
@@ -238,6 +251,8 @@ def podman() -> Iterator[Podman]:
         for pod in ("cipstack-plant", "cipstack-fleet-0", "cipstack-fleet-1", "cipstack-fleet-2"):
             runner("pod", "rm", "--force", "--time", "2", pod, check=False)
         runner("network", "rm", "--force", "plant", check=False)
+        for claim in CLAIMS:
+            runner("volume", "rm", "--force", claim, check=False)
         subprocess.run(["ip", "netns", "delete", namespace], check=False)
         shutil.rmtree(work, ignore_errors=True)
 
@@ -247,7 +262,7 @@ def test_the_image_runs_the_plant_of_the_manifests(podman: Podman) -> None:
     base = base_image(podman, work)
     wheels(podman, base, work / "context" / "dist")
     build_image(podman, base, work / "context")
-    fleet, view, configmap = pods(work)
+    fleet, view, configmap, token = pods(work)
     assert [pod["metadata"]["name"] for pod in fleet] == ["cipstack-fleet-0", "cipstack-fleet-1", "cipstack-fleet-2"]
     for pod in fleet:
         play(podman, pod, configmap, work)
@@ -279,7 +294,7 @@ def test_the_image_runs_the_plant_of_the_manifests(podman: Podman) -> None:
     play(podman, view, configmap, work)
     wait_for_log(podman, "cipstack-plant-plant", "plant view of cipstack-fleet:8080: 9 devices in 3 fleets")
     view_ip = pod_ip(podman, "cipstack-plant")
-    listed = plant_devices(podman, view_ip)
+    listed = plant_devices(podman, view_ip, token)
     assert [d["address"] for d in listed] == DRIVES and not any("error" in d for d in listed), listed
 
     # A fleet's process killed (SIGKILL from outside: `podman kill` would be a stop by the user, which no
@@ -293,6 +308,26 @@ def test_the_image_runs_the_plant_of_the_manifests(podman: Podman) -> None:
     summary = class1(podman, ONE_PER_SHARD[1])
     assert summary["received"] >= 20 and summary["lost"] == 0, summary
     deadline = time.monotonic() + 30
-    while any("error" in d for d in plant_devices(podman, view_ip)):
+    while any("error" in d for d in plant_devices(podman, view_ip, token)):
         assert time.monotonic() < deadline, "the plant view still shows the restarted fleet's devices as lost"
         time.sleep(1)
+
+    # A parameter saved on a drive survives its pod: the pod deleted and made again (a reschedule), its
+    # claim (a podman volume here) is mounted again and the drive reads its saved file.
+    drive = ONE_PER_SHARD[1]
+    assert "= 5.5 s" not in podman.client(IMAGE, "get", drive, "dEC").stdout   # factory settings, not this
+    podman.client("--entrypoint", "sh", IMAGE, "-c", " && ".join((
+        f"cipstack set {drive} dEC 5.5",
+        # Save (register 0x03E0 from 0 to 1, ACG manual): named in CM.51, written through output assembly 121.
+        f"cipstack set {drive} CM.51 992",
+        f"cipstack set {drive} 0x04/121/3 0 --type UINT",
+        f"cipstack set {drive} 0x04/121/3 1 --type UINT")))
+    podman("pod", "rm", "--force", "--time", "2", "cipstack-fleet-1")
+    assert CLAIMS[1] in podman("volume", "ls", "--format", "{{.Name}}").stdout.split()
+    play(podman, fleet[1], configmap, work)
+    wait_for_log(podman, "cipstack-fleet-1-fleet", "shard 1/3 of the plant")
+    assert "dEC Deceleration Time = 5.5 s" in podman.client(IMAGE, "get", drive, "dEC").stdout
+    # Every root file system is read-only: the fleet writes to its volumes only. As root (with no
+    # capability), who owns /opt/cipstack: what refuses the write is the file system, not its modes.
+    refused = podman("exec", "--user", "0", "cipstack-fleet-1-fleet", "touch", "/opt/cipstack/written", check=False)
+    assert refused.returncode != 0 and "Read-only file system" in refused.stderr, refused

@@ -110,10 +110,10 @@ def _limit_settings(args: argparse.Namespace) -> dict[str, Any]:
 TOKEN_VARIABLE = "CIPSTACK_HTTP_TOKEN"
 
 
-def _http_token(args: argparse.Namespace) -> str | None:
-    """The HTTP token: ``--http-token``, else the first line of ``--http-token-file``, else the
-    environment's ``CIPSTACK_HTTP_TOKEN``; one of them only. A file that cannot be read, or an empty
-    token, is a usage error naming it."""
+def _http_token(args: argparse.Namespace) -> tuple[str | None, str]:
+    """The HTTP token and where it came from: ``--http-token``, else the first line of
+    ``--http-token-file``, else the environment's ``CIPSTACK_HTTP_TOKEN``; one of them only. A file
+    that cannot be read, or an empty token, is a usage error naming it."""
     given = [name for name, value in (("--http-token", args.http_token), ("--http-token-file", args.http_token_file))
              if value is not None]
     if len(given) > 1:
@@ -134,7 +134,7 @@ def _http_token(args: argparse.Namespace) -> str | None:
         where = TOKEN_VARIABLE
     if token is not None and not token.strip():
         raise UsageError(f"{where}: the token is empty")
-    return token
+    return token, where
 
 
 def _http_settings(args: argparse.Namespace) -> dict[str, Any]:
@@ -146,7 +146,14 @@ def _http_settings(args: argparse.Namespace) -> dict[str, Any]:
             raise UsageError("--http-token, --http-token-file, --http-allow-remote and --http-allow-host go with "
                              "--http HOST:PORT")
         return {}
-    args.http_token = _http_token(args)
+    args.http_token, where = _http_token(args)
+    if args.http_allow_remote and args.http_token is not None:
+        # Refused before anything listens, naming where the token came from (a Secret's file, say).
+        from ..control.tokens import weak_token_reason
+
+        reason = weak_token_reason(args.http_token)
+        if reason is not None:
+            raise UsageError(f"{where}: {reason}")
     try:
         from ..control.http import HttpApiError, check_settings
     except ImportError:

@@ -433,7 +433,8 @@ def _add_http_arguments(p: argparse.ArgumentParser) -> None:
     _complete(p.add_argument("--http-token-file", type=Path, metavar="FILE",
                              help="read the HTTP token from the first line of FILE (keep it mode 0600)"), _FILE)
     p.add_argument("--http-allow-remote", action="store_true",
-                   help="let the HTTP API listen on and serve other than loopback (needs --http-token)")
+                   help="let the HTTP API listen on and serve other than loopback (needs a token of 32 characters or "
+                        "more that nobody can guess: openssl rand -hex 32)")
     p.add_argument("--http-allow-host", action="append", default=[], metavar="NAME",
                    help="a host name the HTTP API answers to besides its address and localhost (a request "
                         "naming another is refused: DNS rebinding); repeatable")

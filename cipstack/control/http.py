@@ -35,6 +35,7 @@ from .metrics import ShardGauges, add_metrics_route
 from .operations import OPERATIONS, Operation
 from .panel_app import PanelStreams
 from .service import outcome
+from .tokens import weak_token_reason
 
 if TYPE_CHECKING:
     from .service import DeviceService
@@ -91,6 +92,10 @@ def check_settings(listen: str, token: str | None, allow_remote: bool) -> tuple[
                            "--http-allow-remote and --http-token")
     if allow_remote and not token:
         raise HttpApiError("--http-allow-remote needs --http-token (every request must carry it)")
+    if allow_remote and token:   # the token is then the only lock: one that can be guessed is none
+        reason = weak_token_reason(token)
+        if reason is not None:
+            raise HttpApiError(f"--http-allow-remote: {reason}")
     return host, port
 
 
