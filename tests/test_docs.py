@@ -376,16 +376,38 @@ class Namespace:
         self.holder.wait(10)
 
 
+def command_shims(bin_dir: Path, python: str) -> None:
+    """``cipstack`` and ``python3`` in ``bin_dir``, each a script that execs ``python`` by the path it
+    has. Not a symlink: a virtual environment's interpreter finds its environment by the
+    ``pyvenv.cfg`` beside (or above) the path it was started by, so a link to it in another directory
+    starts the base Python, without the packages the environment installed (cpppo, pycomm3)."""
+    bin_dir.mkdir(parents=True, exist_ok=True)
+    for name, argv in (("cipstack", f"{shlex.quote(python)} -m cipstack"), ("python3", shlex.quote(python))):
+        shim = bin_dir / name
+        shim.write_text(f'#!/bin/sh\nexec {argv} "$@"\n')
+        shim.chmod(0o755)
+
+
+def test_the_shims_run_a_virtual_environment_s_python(tmp_path: Path) -> None:
+    """From a virtual environment (as the README's install makes one), the sections' ``python3`` is
+    that environment's: its ``sys.prefix`` is the environment, not the base Python's."""
+    venv = tmp_path / "venv"
+    subprocess.run([sys.executable, "-m", "venv", "--without-pip", str(venv)], check=True, timeout=120,
+                   capture_output=True)
+    command_shims(tmp_path / "bin", str(venv / "bin" / "python3"))
+    env = dict(os.environ, PATH=f"{tmp_path / 'bin'}{os.pathsep}{os.environ.get('PATH', '')}")
+    env.pop("PYTHONHOME", None)
+    prefix = subprocess.run(["sh", "-c", 'python3 -c "import sys; print(sys.prefix)"'], capture_output=True,
+                            text=True, env=env, cwd=tmp_path, timeout=60, check=True).stdout.strip()
+    assert Path(prefix).resolve() == venv.resolve()
+
+
 @pytest.fixture
 def shell_env(tmp_path: Path) -> dict[str, str]:
-    """The environment of the README's commands: this checkout's ``cipstack`` first on the PATH."""
+    """The environment of the README's commands: this checkout's ``cipstack`` and this interpreter
+    first on the PATH."""
     bin_dir = tmp_path / "bin"
-    bin_dir.mkdir()
-    shim = bin_dir / "cipstack"
-    shim.write_text(f'#!/bin/sh\nexec {shlex.quote(sys.executable)} -m cipstack "$@"\n')
-    shim.chmod(0o755)
-    python = bin_dir / "python3"
-    python.symlink_to(sys.executable)
+    command_shims(bin_dir, sys.executable)
     env = dict(os.environ)
     env["PATH"] = f"{bin_dir}{os.pathsep}{env.get('PATH', '')}"
     env["PYTHONPATH"] = os.pathsep.join(p for p in (str(ROOT), env.get("PYTHONPATH", "")) if p)
