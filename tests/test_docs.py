@@ -245,6 +245,39 @@ def test_every_extra_is_named_where_the_install_is(path: Path) -> None:
     assert not missing, f"{_name(path)} does not name the extras {missing}"
 
 
+def _clauses(text: str) -> list[str]:
+    """The prose of a page in clauses: its lines joined, cut at a sentence's end, a semicolon and a table's
+    cell border."""
+    return [c for c in re.split(r"(?<=\.)\s+(?=[A-Z`(])|;\s|\s\|\s", " ".join(text.split())) if c.strip()]
+
+
+def _cm94_saves_everything(text: str) -> list[str]:
+    """The clauses of ``text`` that have CM.94 among what saves every parameter, without the CM group."""
+    return [c for c in _clauses(text) if "CM.94" in c and re.search(r"\bsav(e|es|ed)\b", c)
+            and re.search(r"every parameter|all parameters|them all|everything", c) and "CM group" not in c]
+
+
+def test_the_pages_agree_on_what_each_acg_save_keeps() -> None:
+    """CM.94 Comm Update saves the CM group (ACG-ET2 manual, "Comm Update (CM.94)": CM.7 and CM.10-CM.25);
+    what saves every parameter is 0x03E0 from 0 to 1 (ACG RS-485 manual, "Saving Parameters Defined by
+    Communication"). No clause has CM.94 save every parameter (two pages said so, a third said the CM
+    group), and each page that says what CM.94 saves names 0x03E0, the save of everything, too."""
+    # As the ACG page and the emulator's page put it before.
+    assert _cm94_saves_everything("A write is lost unless saved: writing 0x03E0 from 0 to 1 (ACG RS-485 manual), "
+                                  "CM.94 Comm Update or a parameter initialization saves every parameter in the "
+                                  "state file (see\n[state files](index.md)). A save")
+    assert _cm94_saves_everything("as on the real drive: the ACG saves every parameter when 0x03E0 is written "
+                                  "from 0 to 1, on CM.94\nComm Update and on a parameter initialization; the Omron")
+    wrong, unnamed = [], []
+    for path in documents():
+        text = path.read_text()
+        wrong += [f"{_name(path)}: {c}" for c in _cm94_saves_everything(text)]
+        if any("CM.94" in c and "CM group" in c for c in _clauses(text)) and "0x03E0" not in text:
+            unnamed.append(_name(path))
+    assert not wrong, "CM.94 saves the CM group, not every parameter:\n" + "\n".join(wrong)
+    assert not unnamed, f"{unnamed} say what CM.94 saves, not that 0x03E0 saves every parameter"
+
+
 @pytest.mark.parametrize("path", documents(), ids=_name)
 def test_document_is_parsed_whole(path: Path) -> None:
     """Every fence is closed and has a language this test knows, and every marker is known, so no
