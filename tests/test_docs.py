@@ -233,6 +233,24 @@ def test_two_set_up_commands() -> None:
                         '. .venv/bin/activate && pip install ".[test]" && python3 -m pytest']
 
 
+def built_only(page: Path) -> bool:
+    """Whether ``page`` has its content only in the built site: the command-line reference's marker, or
+    the API reference (``reference/``: its pages are ``:::`` directives, its index a table of them)."""
+    text = page.read_text()
+    return ("<!-- cli-reference -->" in text or bool(re.search(r"^::: ", text, re.MULTILINE))
+            or page.resolve().is_relative_to((DOCS / "reference").resolve()))
+
+
+def test_the_readme_links_pages_that_read_where_it_is_read() -> None:
+    """The README is read on a code host, where the generated references are a marker and ``:::`` lines:
+    it links pages with their content in Markdown, and names where the generated ones are."""
+    assert built_only(DOCS / "command-line" / "reference.md") and built_only(DOCS / "reference" / "api" / "index.md")
+    assert not built_only(DOCS / "library.md") and not built_only(DOCS / "command-line" / "index.md")
+    targets = re.findall(r"\]\((docs/[\w./-]+\.md)(?:#[\w-]*)?\)", README.read_text())
+    assert len(targets) > 20
+    assert [t for t in targets if built_only(ROOT / t)] == []
+
+
 @pytest.mark.parametrize("path", [README, DOCS / "getting-started.md"], ids=_name)
 def test_every_extra_is_named_where_the_install_is(path: Path) -> None:
     """A new user reads the extras where the install is: each extra of pyproject.toml is named there
