@@ -12,6 +12,12 @@ table. The device layer knows nothing of HTTP.
 
 from __future__ import annotations
 
+import os
+import re
+from typing import TypeVar
+
+_Unreachable = TypeVar("_Unreachable", bound="PeerUnreachable")
+
 
 class CipstackError(Exception):
     """Every error the package raises on purpose derives from this one."""
@@ -36,6 +42,29 @@ class StateRefused(CipstackError):
 
 class PeerUnreachable(CipstackError, ConnectionError):
     """A peer (a device, an emulator's control socket) cannot be reached, or stopped answering."""
+
+    @classmethod
+    def connecting(cls: type[_Unreachable], host: str, port: int, failure: BaseException) -> _Unreachable:
+        """``cannot connect to HOST:PORT: REASON``, whichever socket API failed to connect: every command
+        and the library say a refused connection in the same words."""
+        return cls(f"cannot connect to {host}:{port}: {connect_failure(failure)}")
+
+
+def connect_failure(failure: BaseException) -> str:
+    """Why a connection could not be made, in the operating system's words for its error number.
+
+    A blocking ``connect`` says ``[Errno 111] Connection refused`` where asyncio's ``create_connection``
+    says ``[Errno 111] Connect call failed ('127.0.0.1', 1)`` for the same refusal, and joins several
+    addresses' failures into ``Multiple exceptions: ...`` with no number: one number is one reason."""
+    number = failure.errno if isinstance(failure, OSError) else None
+    if number is None:
+        numbers = set(re.findall(r"\[Errno (\d+)\]", str(failure)))
+        number = int(numbers.pop()) if len(numbers) == 1 else None
+    if number is not None and number > 0:
+        return os.strerror(number)
+    if isinstance(failure, OSError) and failure.strerror:   # a resolver's error (negative numbers)
+        return failure.strerror
+    return str(failure) or "timed out"
 
 
 class ProtocolError(CipstackError):

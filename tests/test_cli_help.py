@@ -78,6 +78,31 @@ def test_cipstack_alone_lists_every_command_with_its_line_and_exits_2() -> None:
     assert result.stderr.rstrip().splitlines()[-1] == "cipstack: error: the following arguments are required: COMMAND"
 
 
+def test_a_group_s_line_names_every_subcommand_it_lists() -> None:
+    """`cipstack --help` lists a group as "EDS files: generate, check, show, fetch": the words after its
+    colon are its subcommands, all of them (`fetch` was left out); and `cipstack eds --help` names
+    each of its subcommands, in its description and in its list of commands."""
+    overview = run("--help")
+    assert overview.returncode == 0
+    lines = dict(re.findall(r"^    ([\w-]+) +(\S.*(?:\n {24}\S.*)*)$", overview.stdout, re.MULTILINE))
+    listing = 0
+    for path, parser in commands(build_parser(None)):
+        subcommands = [name for sub_path, _ in commands(parser) for name in sub_path[:1]]
+        if len(path) != 1 or not subcommands:
+            continue
+        line = " ".join(lines[path[0]].split())
+        listed = re.split(r",\s*", re.sub(r"\s*\(.*\)$", "", line.split(":", 1)[-1].strip()))
+        if ":" in line and all(re.fullmatch(r"[\w-]+", word) for word in listed):   # a list, not prose
+            assert sorted(listed) == sorted(subcommands), (path, line)
+            listing += 1
+    assert listing >= 2   # eds and params
+    eds = run("eds", "--help")
+    description = " ".join(eds.stdout.split("options:")[0].split())
+    for name in ("generate", "check", "show", "fetch"):
+        assert re.search(rf"^    {name} ", eds.stdout, re.MULTILINE), name
+    assert "fetch the one a device carries" in description, description
+
+
 @pytest.mark.parametrize(("argv", "prog", "message"), [
     (["set", "127.0.0.1", "0xF5/1/13"], "cipstack set", "the following arguments are required: VALUE"),
     (["drive"], "cipstack drive", "the following arguments are required: COMMAND"),

@@ -233,6 +233,24 @@ def test_two_set_up_commands() -> None:
                         '. .venv/bin/activate && pip install ".[test]" && python3 -m pytest']
 
 
+def built_only(page: Path) -> bool:
+    """Whether ``page`` has its content only in the built site: the command-line reference's marker, or
+    the API reference (``reference/``: its pages are ``:::`` directives, its index a table of them)."""
+    text = page.read_text()
+    return ("<!-- cli-reference -->" in text or bool(re.search(r"^::: ", text, re.MULTILINE))
+            or page.resolve().is_relative_to((DOCS / "reference").resolve()))
+
+
+def test_the_readme_links_pages_that_read_where_it_is_read() -> None:
+    """The README is read on a code host, where the generated references are a marker and ``:::`` lines:
+    it links pages with their content in Markdown, and names where the generated ones are."""
+    assert built_only(DOCS / "command-line" / "reference.md") and built_only(DOCS / "reference" / "api" / "index.md")
+    assert not built_only(DOCS / "library.md") and not built_only(DOCS / "command-line" / "index.md")
+    targets = re.findall(r"\]\((docs/[\w./-]+\.md)(?:#[\w-]*)?\)", README.read_text())
+    assert len(targets) > 20
+    assert [t for t in targets if built_only(ROOT / t)] == []
+
+
 @pytest.mark.parametrize("path", [README, DOCS / "getting-started.md"], ids=_name)
 def test_every_extra_is_named_where_the_install_is(path: Path) -> None:
     """A new user reads the extras where the install is: each extra of pyproject.toml is named there
@@ -243,6 +261,39 @@ def test_every_extra_is_named_where_the_install_is(path: Path) -> None:
     text = path.read_text()
     missing = [name for name in extras if f".[{name}]" not in text]
     assert not missing, f"{_name(path)} does not name the extras {missing}"
+
+
+def _clauses(text: str) -> list[str]:
+    """The prose of a page in clauses: its lines joined, cut at a sentence's end, a semicolon and a table's
+    cell border."""
+    return [c for c in re.split(r"(?<=\.)\s+(?=[A-Z`(])|;\s|\s\|\s", " ".join(text.split())) if c.strip()]
+
+
+def _cm94_saves_everything(text: str) -> list[str]:
+    """The clauses of ``text`` that have CM.94 among what saves every parameter, without the CM group."""
+    return [c for c in _clauses(text) if "CM.94" in c and re.search(r"\bsav(e|es|ed)\b", c)
+            and re.search(r"every parameter|all parameters|them all|everything", c) and "CM group" not in c]
+
+
+def test_the_pages_agree_on_what_each_acg_save_keeps() -> None:
+    """CM.94 Comm Update saves the CM group (ACG-ET2 manual, "Comm Update (CM.94)": CM.7 and CM.10-CM.25);
+    what saves every parameter is 0x03E0 from 0 to 1 (ACG RS-485 manual, "Saving Parameters Defined by
+    Communication"). No clause has CM.94 save every parameter (two pages said so, a third said the CM
+    group), and each page that says what CM.94 saves names 0x03E0, the save of everything, too."""
+    # As the ACG page and the emulator's page put it before.
+    assert _cm94_saves_everything("A write is lost unless saved: writing 0x03E0 from 0 to 1 (ACG RS-485 manual), "
+                                  "CM.94 Comm Update or a parameter initialization saves every parameter in the "
+                                  "state file (see\n[state files](index.md)). A save")
+    assert _cm94_saves_everything("as on the real drive: the ACG saves every parameter when 0x03E0 is written "
+                                  "from 0 to 1, on CM.94\nComm Update and on a parameter initialization; the Omron")
+    wrong, unnamed = [], []
+    for path in documents():
+        text = path.read_text()
+        wrong += [f"{_name(path)}: {c}" for c in _cm94_saves_everything(text)]
+        if any("CM.94" in c and "CM group" in c for c in _clauses(text)) and "0x03E0" not in text:
+            unnamed.append(_name(path))
+    assert not wrong, "CM.94 saves the CM group, not every parameter:\n" + "\n".join(wrong)
+    assert not unnamed, f"{unnamed} say what CM.94 saves, not that 0x03E0 saves every parameter"
 
 
 @pytest.mark.parametrize("path", documents(), ids=_name)
@@ -376,16 +427,38 @@ class Namespace:
         self.holder.wait(10)
 
 
+def command_shims(bin_dir: Path, python: str) -> None:
+    """``cipstack`` and ``python3`` in ``bin_dir``, each a script that execs ``python`` by the path it
+    has. Not a symlink: a virtual environment's interpreter finds its environment by the
+    ``pyvenv.cfg`` beside (or above) the path it was started by, so a link to it in another directory
+    starts the base Python, without the packages the environment installed (cpppo, pycomm3)."""
+    bin_dir.mkdir(parents=True, exist_ok=True)
+    for name, argv in (("cipstack", f"{shlex.quote(python)} -m cipstack"), ("python3", shlex.quote(python))):
+        shim = bin_dir / name
+        shim.write_text(f'#!/bin/sh\nexec {argv} "$@"\n')
+        shim.chmod(0o755)
+
+
+def test_the_shims_run_a_virtual_environment_s_python(tmp_path: Path) -> None:
+    """From a virtual environment (as the README's install makes one), the sections' ``python3`` is
+    that environment's: its ``sys.prefix`` is the environment, not the base Python's."""
+    venv = tmp_path / "venv"
+    subprocess.run([sys.executable, "-m", "venv", "--without-pip", str(venv)], check=True, timeout=120,
+                   capture_output=True)
+    command_shims(tmp_path / "bin", str(venv / "bin" / "python3"))
+    env = dict(os.environ, PATH=f"{tmp_path / 'bin'}{os.pathsep}{os.environ.get('PATH', '')}")
+    env.pop("PYTHONHOME", None)
+    prefix = subprocess.run(["sh", "-c", 'python3 -c "import sys; print(sys.prefix)"'], capture_output=True,
+                            text=True, env=env, cwd=tmp_path, timeout=60, check=True).stdout.strip()
+    assert Path(prefix).resolve() == venv.resolve()
+
+
 @pytest.fixture
 def shell_env(tmp_path: Path) -> dict[str, str]:
-    """The environment of the README's commands: this checkout's ``cipstack`` first on the PATH."""
+    """The environment of the README's commands: this checkout's ``cipstack`` and this interpreter
+    first on the PATH."""
     bin_dir = tmp_path / "bin"
-    bin_dir.mkdir()
-    shim = bin_dir / "cipstack"
-    shim.write_text(f'#!/bin/sh\nexec {shlex.quote(sys.executable)} -m cipstack "$@"\n')
-    shim.chmod(0o755)
-    python = bin_dir / "python3"
-    python.symlink_to(sys.executable)
+    command_shims(bin_dir, sys.executable)
     env = dict(os.environ)
     env["PATH"] = f"{bin_dir}{os.pathsep}{env.get('PATH', '')}"
     env["PYTHONPATH"] = os.pathsep.join(p for p in (str(ROOT), env.get("PYTHONPATH", "")) if p)

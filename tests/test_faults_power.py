@@ -301,6 +301,31 @@ async def test_acg_power_cycle_stops_the_run_and_loses_the_unsaved(tmp_path: Pat
         await adapter.close()
 
 
+async def test_acg_comm_update_saves_the_cm_group_and_nothing_else(tmp_path: Path) -> None:
+    """ACG-ET2 manual, Comm Update (CM.94): after changes to CM.7 and CM.10-CM.25, "you must set CM.94
+    ... to save the changes"; what saves every parameter is 0x03E0 (ACG RS-485 manual, "Saving Parameters
+    Defined by Communication"). Over CIP: CM.23 and ACC written, CM.94 = 1, a power cycle: CM.23 is kept,
+    ACC is lost (docs/emulator/acg.md, "Saving parameters")."""
+    adapter = Adapter(AdapterSettings(port=0, io_port=0, state_path=tmp_path / "acg.json"))
+    await adapter.start()
+    try:
+        async with await Scanner.connect(f"127.0.0.1:{adapter.port}", catalog=ACG_CATALOG, timeout=2.0) as scanner:
+            assert await scanner.read(0x2A, 1, 102) == 50                     # ACC 5.0 s from the factory
+            await scanner.set_attribute_single(0x2A, 1, 102, 75)              # ACC 7.5 s, not saved by CM.94
+            await scanner.set_attribute_single(0x64, 7, 23, 3)                   # CM.23 = 3 (input 111)
+            await scanner.set_attribute_single(0x64, 7, 94, 1)                   # CM.94 Comm Update
+        adapter.fault("power-cycle", off=LONG_OFF)
+        await wait_until(lambda: refused(adapter.port), 5, "the port to close")
+        adapter.clear_faults("power-cycle")
+        await adapter.faults.settle()
+        async with await Scanner.connect(f"127.0.0.1:{adapter.port}", catalog=ACG_CATALOG, timeout=2.0) as scanner:
+            assert await scanner.read(0x64, 7, 23) == 3                       # the CM group: saved
+            assert await scanner.read(0x2A, 1, 102) == 50                     # ACC: lost
+    finally:
+        await adapter.faults.settle()
+        await adapter.close()
+
+
 # -- a device emulated from an EDS ---------------------------------------------------------------------------
 
 async def test_an_eds_device_keeps_nothing_it_was_told() -> None:

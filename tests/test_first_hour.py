@@ -317,7 +317,7 @@ def test_options_the_docs_name() -> None:
     assert "`discover`, `identity`, `get`, `set`, `io`, `models`, `drive`, `eds check` and `eds show`" in readme
     assert "`identity`, `get`, `set`, `io`, `drive` and `eds check`" in readme
     overview = subprocess.run([sys.executable, "-m", "cipstack", "--help"], capture_output=True, text=True).stdout
-    assert "EDS files: generate, check, show" in " ".join(overview.split())
+    assert "EDS files: generate, check, show, fetch" in " ".join(overview.split())
     adapter_help = " ".join(run("adapter", "--help").stdout.split())
     assert "--port PORT EtherNet/IP port, TCP and UDP (default 44818)" in adapter_help
     assert "refused with 0x0002 (default 32)" in adapter_help

@@ -174,6 +174,10 @@ def test_the_plant_lists_every_device_and_links_to_its_panel(tmp_path: Path) -> 
             grid = browser.find_element("id", "plant-table")
             wait_for(lambda: grid.text.count("on / plugged") == 3, 20, "every device's state")
             assert all(host in grid.text for host in hosts) and "MX2" in grid.text
+            # One case for one state, whichever family says it (the ACG READY, the MX2 ready).
+            states = [row.find_elements("css selector", "td")[3].text
+                      for row in grid.find_elements("css selector", "tbody tr")]
+            assert states == ["READY"] * 3, states
             # A worker that ended: its devices say so, the others go on.
             os.kill(worker_pid(hosts[0], port), signal.SIGKILL)
             wait_for(lambda: grid.text.count("worker ended") == 2, 20, "the ended worker's devices")
@@ -184,7 +188,7 @@ def test_the_plant_lists_every_device_and_links_to_its_panel(tmp_path: Path) -> 
             browser.find_element("link text", hosts[2]).click()
             wait_for(lambda: text(browser, "title") == hosts[2] and text(browser, "link-state") == "live", 20,
                      "the MX2's panel through the relay")
-            wait_for(lambda: text(browser, "state") == "ready", 10, "its state")
+            wait_for(lambda: text(browser, "state") == "READY", 10, "its state, in the ACG's case")
             groups = browser.find_element("id", "parameter-groups")
             wait_for(lambda: "d (" in groups.text, 10, "the Digital Operator's monitor codes")
             assert browser.find_element("id", "parameter-d001").get_attribute("readonly") is not None
@@ -192,6 +196,49 @@ def test_the_plant_lists_every_device_and_links_to_its_panel(tmp_path: Path) -> 
         fleet.stop(signal.SIGINT)
     finally:
         fleet.kill()
+
+
+def test_the_mx2_panel_shows_its_reference_in_hz_on_a_round_axis(tmp_path: Path) -> None:
+    """The MX2's speed reference is a word in 0.01 Hz (CompoNet manual, P049 and d060): shown as the
+    frequency it stands for ("0.00 Hz", not "0 (0.01 Hz)"); its state in the ACG's case; and the trend's
+    axis at round steps (0/20/40/60 Hz for a 50 Hz reference, where it read 13.8/27.5/41.3/55.0)."""
+    with adapter(tmp_path, "--profile", "mx2") as (_, port, http), chromium(tmp_path / "profile") as browser:
+        browser.get(f"http://127.0.0.1:{http}/")
+        wait_for(lambda: text(browser, "link-state") == "live", 20, "the panel's stream")
+        wait_for(lambda: text(browser, "state") != "-", 10, "the drive's state")
+        assert text(browser, "state") == "READY"
+        assert text(browser, "reference") == "0.00 Hz"
+        trend = browser.find_element("id", "trend")
+        wait_for(lambda: str(trend.get_attribute("aria-label")).endswith(", axis 0, 2, 4, 6, 8, 10, 12 Hz"), 10,
+                 "the idle drive's axis")
+        written = subprocess.run([sys.executable, "-m", "cipstack", "set", f"127.0.0.1:{port}", "0x2A/1/8", "5000"],
+                                 capture_output=True, text=True, timeout=60)       # Speed Ref: 50.00 Hz
+        assert written.returncode == 0, written.stderr
+        wait_for(lambda: text(browser, "reference") == "50.00 Hz", 10, "the new reference")
+        wait_for(lambda: str(trend.get_attribute("aria-label")).endswith(", axis 0, 20, 40, 60 Hz"), 10,
+                 "the axis up to 60 Hz in steps of 20")
+        assert browser.execute_script("return [trendTicks(60), trendTicks(400)]") == [
+            [0, 25, 50, 75], [0, 100, 200, 300, 400, 500]]
+        no_script_error(browser)
+
+
+def test_an_unknown_device_in_the_address_says_so_and_lists_the_devices(tmp_path: Path) -> None:
+    """`/?device=ADDRESS` for a device the API does not serve: a message that says so, and the devices it
+    does serve, each a link to its panel (it was an uncaught promise error and a blank page)."""
+    with adapter(tmp_path) as (_, _, http), chromium(tmp_path / "profile") as browser:
+        browser.get(f"http://127.0.0.1:{http}/?device=127.0.0.99")
+        message = browser.find_element("id", "page-message")
+        wait_for(lambda: message.is_displayed(), 10, "the message")
+        assert message.text == ('There is no device "127.0.0.99" here (?device=127.0.0.99): the devices this API '
+                                'serves are below.')
+        grid = browser.find_element("id", "plant-table")
+        wait_for(lambda: "on / plugged" in grid.text, 20, "the device that is there")
+        no_script_error(browser)
+        browser.find_element("link text", "127.0.0.1").click()
+        wait_for(lambda: text(browser, "link-state") == "live" and text(browser, "state") == "READY", 20,
+                 "its panel")
+        assert not browser.find_element("id", "page-message").is_displayed()
+        no_script_error(browser)
 
 
 def test_the_panel_asks_for_the_token_once_and_keeps_it_for_the_tab(tmp_path: Path) -> None:

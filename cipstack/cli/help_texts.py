@@ -311,11 +311,13 @@ COMMANDS: dict[tuple[str, ...], CommandText] = {
         (("cipstack drive trips", "what `cipstack drive trip` takes"),),
     ),
     ("eds",): CommandText(
-        "EDS files: generate, check, show",
+        "EDS files: generate, check, show, fetch",
         "Electronic Data Sheets: write the EDS files of the emulated models, check EDS files from "
-        "anywhere against the rules a configuration tool relies on, or summarize one.",
+        "anywhere against the rules a configuration tool relies on, summarize one, or fetch the one a "
+        "device carries from its File object.",
         (("cipstack eds generate --profile acg -o eds", "the ACG-ET2's EDS file into eds/"),
-         ("cipstack eds check eds/ACG-ET2_1.01.eds", "check a file")),
+         ("cipstack eds check eds/ACG-ET2_1.01.eds", "check a file"),
+         ("cipstack eds fetch 127.0.0.1 -o device.eds", "the EDS file the device at 127.0.0.1 carries")),
     ),
     ("eds", "check"): CommandText(
         "check EDS files against the rules a configuration tool relies on",

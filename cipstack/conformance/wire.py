@@ -66,7 +66,7 @@ class Probe:
         try:
             self.sock: socket.socket | None = socket.create_connection((host, port), timeout)
         except OSError as exc:
-            raise TargetUnreachable(f"cannot connect to {host}:{port}: {exc}") from None
+            raise TargetUnreachable.connecting(host, port, exc) from None
         self.sock.setsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY, 1)
 
     # -- life cycle ---------------------------------------------------------------------------------------

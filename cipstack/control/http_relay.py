@@ -29,6 +29,7 @@ import aiohttp
 from aiohttp import web
 from yarl import URL
 
+from ..errors import PeerUnreachable, connect_failure
 from .http import (
     CONNECTIONS,
     DEVICE_PREFIX,
@@ -97,6 +98,15 @@ class Backend:
             await session.close()
 
 
+def _failure(backend: Backend, exc: BaseException) -> str:
+    """Why ``backend`` did not answer; a refused connection in the words every command uses for one
+    (aiohttp's own, ``Cannot connect to host ... [Connect call failed ...]``, are asyncio's)."""
+    if isinstance(exc, aiohttp.ClientConnectorError):
+        where = backend.path or f"{backend.url.host}:{backend.url.port}"
+        return f"cannot connect to {where}: {connect_failure(exc.os_error)}"
+    return str(exc) or type(exc).__name__
+
+
 class RelayApi:
     """The fleet's HTTP API on ``host:port`` over the APIs of ``backends`` (see the module docstring)."""
 
@@ -156,16 +166,16 @@ class RelayApi:
 
     @staticmethod
     async def listing(backend: Backend) -> list[dict[str, Any]]:
-        """The devices ``backend``'s ``GET /devices`` lists; ``ConnectionError`` naming it when it does not answer."""
+        """The devices ``backend``'s ``GET /devices`` lists; ``PeerUnreachable`` naming it when it does not answer."""
         assert backend.session is not None
         try:
             async with backend.session.get(backend.at("/devices")) as reply:
                 listed = await reply.json()
                 if reply.status != 200 or not isinstance(listed, list):
-                    raise ConnectionError(f"{backend.name}: its HTTP API answered {reply.status} to GET /devices")
+                    raise PeerUnreachable(f"{backend.name}: its HTTP API answered {reply.status} to GET /devices")
                 return listed
         except (aiohttp.ClientError, asyncio.TimeoutError, ValueError) as exc:
-            raise ConnectionError(f"{backend.name}: its HTTP API does not answer ({exc or type(exc).__name__})") \
+            raise PeerUnreachable(f"{backend.name}: its HTTP API does not answer ({_failure(backend, exc)})") \
                 from None
 
     def _build(self) -> web.Application:
@@ -249,7 +259,7 @@ class RelayApi:
             if response is not None:   # the worker went away in mid-stream: the stream ends there
                 return response
             return self._unserved(name, backend.down() or f"{backend.name} does not answer "
-                                                          f"({exc or type(exc).__name__})")
+                                                          f"({_failure(backend, exc)})")
 
     @staticmethod
     def _unserved(name: str, why: str) -> web.Response:

@@ -177,12 +177,10 @@ function showStatus(status) {
   const lit = {"ind-run": running, "ind-stop": !running && status.power !== "off", "ind-fwd": drive.direction === "fwd",
                "ind-rev": drive.direction === "rev", "ind-trip": tripped};
   for (const [id, on] of Object.entries(lit)) $(id).classList.toggle("lit", on);
-  $("state").textContent = drive.state || "-";
+  $("state").textContent = stateText(drive.state);
   $("state").className = tripped ? "state-fault" : running ? "state-running" : "";
   $("output").textContent = hz === undefined ? "-" : `${Number(hz).toFixed(2)} Hz`;
-  const reference = drive.reference_hz !== undefined ? `${Number(drive.reference_hz).toFixed(2)} Hz` :
-    drive.speed_reference !== undefined ? `${drive.speed_reference} (${drive.speed_unit})` : "-";
-  $("reference").textContent = reference;
+  $("reference").textContent = referenceText(drive);
   $("direction").textContent = drive.direction || "-";
   $("current").textContent = drive.output_current_a === undefined ? "-" : `${Number(drive.output_current_a).toFixed(1)} A`;
   $("trip").textContent = drive.trip || "none";
@@ -198,11 +196,60 @@ function showStatus(status) {
   $("link").className = status.link === "unplugged" ? "down" : "";
 }
 
+// The Control Supervisor's state (CIP), in one case whichever family names it: the ACG says READY,
+// the MX2/RX ready.
+function stateText(state) {
+  return state ? String(state).toUpperCase() : "-";
+}
+
+// A word counted in steps of its unit ("0.01 Hz", "0.1 Hz", "RPM"), as the value it stands for:
+// 3000 in 0.01 Hz is "30.00 Hz".
+function scaledText(raw, unit) {
+  const match = /^(\d+(?:\.(\d+))?) (.+)$/.exec(unit || "");
+  if (!match) return `${raw} ${unit || ""}`.trim();
+  return `${(Number(raw) * Number(match[1])).toFixed((match[2] || "").length)} ${match[3]}`;
+}
+
+// The speed reference in Hz: the ACG gives it so; the MX2/RX give the network's reference word in its
+// unit (P049, d060: 0.01 Hz, 0.1 Hz or RPM), in Hz unless it counts RPM.
+function referenceHz(drive) {
+  if (drive.reference_hz !== undefined) return Number(drive.reference_hz);
+  const match = /^(\d+(?:\.\d+)?) Hz$/.exec(drive.speed_unit || "");
+  return match && drive.speed_reference !== undefined ? Number(drive.speed_reference) * Number(match[1]) : undefined;
+}
+
+function referenceText(drive) {
+  const hz = referenceHz(drive);
+  if (hz !== undefined) return `${hz.toFixed(2)} Hz`;
+  return drive.speed_reference !== undefined ? scaledText(drive.speed_reference, drive.speed_unit) : "-";
+}
+
 // -- the trend: output and reference frequency of the last minute ----------------------------------------
+// The frequency axis in round steps (1, 2, 2.5 or 5 times a power of ten; 0/20/40/60 Hz, not
+// 0/13.8/27.5/41.3/55.0): the lowest top, 2 to 6 steps (4 where two tops are equal), at or above the
+// highest value with a margin.
+function trendTicks(highest) {
+  const wanted = Math.max(10, Number(highest) || 0) * 1.05;
+  let best = null;
+  for (let power = Math.floor(Math.log10(wanted / 6)); power <= Math.ceil(Math.log10(wanted / 2)); power++) {
+    for (const mantissa of [1, 2, 2.5, 5]) {
+      const step = mantissa * 10 ** power;
+      const count = Math.ceil(wanted / step - 1e-9);
+      if (count < 2 || count > 6) continue;
+      const top = step * count;
+      if (!best || top < best.top - 1e-9 ||
+          (Math.abs(top - best.top) <= 1e-9 && Math.abs(count - 4) < Math.abs(best.count - 4))) {
+        best = {step, count, top};
+      }
+    }
+  }
+  return Array.from({length: best.count + 1}, (_, i) => Number((best.step * i).toFixed(6)));
+}
+
 function sample() {
   const drive = (panel.status && panel.status.drive) || {};
   const now = Date.now() / 1000;
-  panel.samples.push([now, Number(drive.output_frequency_hz || 0), Number(drive.reference_hz || 0)]);
+  panel.samples.push([now, Number(drive.output_frequency_hz || 0), referenceHz(drive) || 0]);
   while (panel.samples.length && panel.samples[0][0] < now - TREND_SECONDS) panel.samples.shift();
   drawTrend(now);
 }
@@ -212,13 +259,15 @@ function drawTrend(now) {
   const context = canvas.getContext("2d");
   const {width, height} = canvas;
   context.clearRect(0, 0, width, height);
-  const top = Math.max(10, ...panel.samples.map((s) => Math.max(s[1], s[2]))) * 1.1;
+  const ticks = trendTicks(Math.max(0, ...panel.samples.map((s) => Math.max(s[1], s[2]))));
+  const top = ticks[ticks.length - 1];
   context.strokeStyle = "#d5dae0"; context.fillStyle = "#5b6470"; context.font = "11px sans-serif";
-  for (let i = 0; i <= 4; i++) {
-    const y = height - 16 - (height - 34) * i / 4;
+  for (const tick of ticks) {
+    const y = height - 16 - (height - 34) * tick / top;
     context.beginPath(); context.moveTo(40, y); context.lineTo(width, y); context.stroke();
-    context.fillText((top * i / 4).toFixed(1), 2, y + 4);
+    context.fillText(String(tick), 2, y + 4);
   }
+  canvas.setAttribute("aria-label", `output and reference frequency over the last minute, axis ${ticks.join(", ")} Hz`);
   context.fillText("Hz", 2, 10); context.fillText("-60 s", 40, height - 2); context.fillText("now", width - 24, height - 2);
   const x = (t) => 40 + (width - 40) * (1 - (now - t) / TREND_SECONDS);
   const y = (v) => height - 16 - (height - 34) * v / top;
@@ -444,7 +493,7 @@ async function openPlant(devices) {
       try {
         const status = await api("GET", `/devices/${encodeURIComponent(device.address)}/status`);
         const drive = status.drive || {};
-        tr.cells[3].textContent = drive.trip ? `${drive.state} (${drive.trip})` : drive.state || "-";
+        tr.cells[3].textContent = drive.trip ? `${stateText(drive.state)} (${drive.trip})` : stateText(drive.state);
         tr.cells[3].className = drive.trip ? "down" : "";
         tr.cells[4].textContent = drive.output_frequency_hz === undefined ? "-" : `${Number(drive.output_frequency_hz).toFixed(2)} Hz`;
         tr.cells[5].textContent = `${status.power} / ${status.link}`;
@@ -468,14 +517,27 @@ function filterPlant() {
 }
 
 // -- which page ------------------------------------------------------------------------------------------------
+function pageMessage(text) {
+  const shown = $("page-message");
+  shown.textContent = text;
+  shown.hidden = false;
+}
+
 async function start() {
   const chosen = new URLSearchParams(location.search).get("device");
   let devices;
   try { devices = await api("GET", "/devices"); }
   catch (error) { setLink(false); $("link-state").textContent = error.message; return; }
+  if (chosen !== null && !devices.some((device) => device.address === chosen)) {
+    // A link to a device that is gone, or a typing error: say so, and list the devices there are.
+    pageMessage(`There is no device ${JSON.stringify(chosen)} here (?device=${chosen}): ` +
+                (devices.length ? "the devices this API serves are below." : "this API serves none."));
+    return openPlant(devices);
+  }
   if (chosen) return openPanel(chosen);
   if (devices.length === 1) return openPanel(devices[0].address);
   return openPlant(devices);
 }
 
-start();
+// Whatever fails on the way in is said on the page, not left as an unhandled rejection and a blank page.
+start().catch((error) => { pageMessage(`The panel could not open: ${error.message}`); });

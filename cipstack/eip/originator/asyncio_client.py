@@ -17,6 +17,7 @@ from typing import TYPE_CHECKING, Any, TypeVar
 from ...cip.epath import Segment
 from ...cip.messages import MessageRouterResponse
 from ...cip.status import CipError, GeneralStatus
+from ...errors import PeerUnreachable
 from ..wire.cpf import Item
 from ..wire.encapsulation import DEFAULT_PORT, EncapsulationHeader
 from ..wire.identity_items import IdentityRecord, ServiceRecord
@@ -93,7 +94,7 @@ class EncapsulationClient(CoreClient):
             _, protocol = await asyncio.wait_for(
                 loop.create_connection(lambda: _ClientProtocol(self), self.host, self.port), self.timeout)
         except (OSError, asyncio.TimeoutError) as exc:
-            raise ConnectionError(f"cannot connect to {self.host}:{self.port}: {exc or 'timed out'}") from None
+            raise PeerUnreachable.connecting(self.host, self.port, exc) from None
         self._protocol = protocol
         if register:
             await self.register_session()

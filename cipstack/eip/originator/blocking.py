@@ -11,7 +11,7 @@ import socket
 import time
 from typing import Any, TypeVar
 
-from ...errors import CipstackError
+from ...errors import CipstackError, PeerUnreachable
 from ..wire.encapsulation import DEFAULT_PORT
 from .core import (
     DEFAULT_TIMEOUT,
@@ -64,7 +64,7 @@ class BlockingEncapsulationClient(CoreClient):
         try:
             client._sock = _open(host, port, timeout)
         except OSError as exc:
-            raise ConnectionError(f"cannot connect to {host}:{port}: {exc}") from None
+            raise PeerUnreachable.connecting(host, port, exc) from None
         client._sock.setsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY, 1)
         if register:
             try:
