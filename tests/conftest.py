@@ -16,8 +16,8 @@ from typing import Any
 
 import pytest
 
-#: Each test's CPU, the slowest tests, the suite's time budget (``--time-budget``).
-pytest_plugins = ["tests.timing"]
+#: Each test's CPU, the slowest tests and the time budget (``--time-budget``); a sample (``--sample K``).
+pytest_plugins = ["tests.timing", "tests.sampling"]
 
 
 def pytest_configure(config: pytest.Config) -> None:
