@@ -28,9 +28,11 @@ from dataclasses import dataclass
 from yarl import URL
 
 from ..errors import BadRequest
+from .http import one_line_records
 from .http_relay import Backend, RelayApi
 
 log = logging.getLogger(__name__)
+one_line_records(log)
 
 #: How often the plant view looks for fleets and asks each for its devices, by default.
 DEFAULT_REFRESH = 5.0
