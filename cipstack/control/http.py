@@ -323,15 +323,19 @@ class Guard:
         if connections is not None:
             connections.started(request.protocol)    # its head came in time: busy until its answer
         try:
-            return await self._guarded(request, handler)
+            return await self._guarded(request, handler, connections)
         finally:
             if connections is not None:
                 connections.finished(request.protocol)
 
-    async def _guarded(self, request: web.Request, handler: Handler) -> web.StreamResponse:
+    async def _guarded(self, request: web.Request, handler: Handler,
+                       connections: HttpConnections | None) -> web.StreamResponse:
         wrong_target = check_target(request.raw_path)
-        if wrong_target is not None:
-            log.info("HTTP %s refused (400): %s", request.method, wrong_target)
+        if wrong_target is not None:   # a malformed request, logged as those aiohttp cannot parse are
+            if connections is not None:
+                connections.malformed(request.remote, 400, wrong_target)
+            else:
+                log.info("HTTP request refused (400): %s", wrong_target)
             return json_error(400, wrong_target)
         if not self.local:
             refused = self.refusal(request)
