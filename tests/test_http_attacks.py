@@ -35,8 +35,9 @@ import aiohttp
 
 from cipstack.control.http import HEADER_TIMEOUT, MAX_CONNECTIONS, MAX_IN_FLIGHT
 from cipstack.control.panel_app import MAX_STREAMS
+from tests.cli_errors import one_line_error
 from tests.ports import free_port
-from tests.test_cli import stop
+from tests.test_cli import run, stop
 from tests.test_fleet import Fleet
 from tests.waiting import wait_for
 
@@ -384,6 +385,31 @@ def test_a_query_number_is_ascii_digits_or_a_400_before_any_answer(tmp_path: Pat
                 assert sock.recv(65536).startswith(b"HTTP/1.1 200 ")
         assert_clean(api.log)
     assert_clean(fleet.log)
+
+
+def test_a_fault_id_in_a_path_is_ascii_digits(tmp_path: Path) -> None:
+    """``DELETE /faults/ID``: an Arabic-Indic one (which ``int()`` reads as 1) is no fault's id and clears
+    nothing, a superscript two (which ``str.isdigit()`` takes and ``int()`` refuses) is a 404 naming it,
+    never a 500."""
+    json_type = b"Content-Type: application/json\r\n"
+    with adapter(tmp_path) as api:
+        body = b'{"name": "error-status", "options": {"status": "0x08", "class": 1}}'
+        applied = exchange(api.port, b"POST /faults HTTP/1.1\r\nHost: 127.0.0.1\r\n" + AUTH + json_type
+                           + f"Content-Length: {len(body)}\r\nConnection: close\r\n\r\n".encode() + body)
+        assert applied.status == 201 and applied.json() == {**applied.json(), "id": 1}, applied.raw[:300]
+        for value in ("%D9%A1", "%C2%B2", "%2B1", "1_0", "%201"):
+            answer = exchange(api.port, get(f"/faults/{value}").replace(b"GET", b"DELETE", 1))
+            assert answer.status == 404, (value, answer.raw[:300])
+            error = answer.json()
+            assert isinstance(error, dict) and error["error"].startswith("no active fault '"), error
+        active = exchange(api.port, get("/faults")).json()
+        assert isinstance(active, list) and [fault["id"] for fault in active] == [1]
+        assert exchange(api.port, get("/faults/1").replace(b"GET", b"DELETE", 1)).status == 200
+
+
+def test_a_fleet_port_of_other_digits_is_one_line() -> None:
+    result = run("plant", "--fleet", "cipstack-fleet:\u00b2", "--http", "127.0.0.1:0")
+    assert result.returncode == 2 and "is not NAME:PORT" in one_line_error(result)
 
 
 def test_a_request_target_that_is_not_a_path_is_a_400(tmp_path: Path, fleet: Served) -> None:

@@ -40,7 +40,7 @@ from .metrics import ShardGauges, add_metrics_route
 from .operations import OPERATIONS, Operation
 from .panel_app import PanelStreams
 from .panel_app import log as panel_log
-from .service import outcome
+from .service import outcome, whole_number
 
 if TYPE_CHECKING:
     from .service import DeviceService
@@ -126,21 +126,6 @@ def json_error(status: int, message: str, *, headers: Mapping[str, str] | None =
 def busy(message: str) -> web.Response:
     """503 for want of room, with when to try again."""
     return json_error(503, message, headers={"Retry-After": str(RETRY_AFTER_S)})
-
-
-#: The most digits a whole number of a request's query may have (an event number has far fewer).
-MAX_QUERY_DIGITS = 18
-#: A whole number of a query: ASCII digits only. ``int()`` alone would take what no client means (``+1``,
-#: ``1_0``, `` 1``, an Arabic-Indic one) and ``str.isdigit()`` what ``int()`` refuses (``²``).
-_WHOLE_NUMBER = re.compile(f"[0-9]{{1,{MAX_QUERY_DIGITS}}}")
-
-
-def whole_number(key: str, text: str) -> int:
-    """``text``, the value of ``key`` in a query, as a whole number; ``BadRequest`` naming the grammar
-    when it is not 1 to ``MAX_QUERY_DIGITS`` ASCII digits."""
-    if _WHOLE_NUMBER.fullmatch(text) is None:
-        raise BadRequest(f"{key} is a whole number (1 to {MAX_QUERY_DIGITS} digits 0-9), not {text[:40]!r}")
-    return int(text)
 
 
 def check_target(raw: str) -> str | None:
