@@ -310,6 +310,43 @@ async def test_the_relay_streams_a_body_as_it_comes_and_a_silent_worker_is_503(t
         await runner.cleanup()
 
 
+async def test_a_stream_whose_worker_went_silent_does_not_hold_the_relays_stop(tmp_path: Path) -> None:
+    """A worker's stream that sends a first event and then nothing more (no end, no tick: a worker that
+    broke in the middle of an answer) is ended by the relay's stop at once: the relay closes within
+    2 s, as a fleet must stop, and the client sees its stream end."""
+    async def listing(request: web.Request) -> web.Response:
+        return web.json_response([{"address": "127.79.9.11", "port": 44818, "product_name": "CENT"}])
+
+    async def silent(request: web.Request) -> web.StreamResponse:
+        response = web.StreamResponse(headers={"Content-Type": "text/event-stream"})
+        await response.prepare(request)
+        await response.write(b"event: status\ndata: {}\n\n")
+        await asyncio.sleep(3600)
+        return response
+
+    worker = web.Application()
+    worker.router.add_get("/devices", listing)
+    worker.router.add_get("/devices/{device}/stream", silent)
+    runner = web.AppRunner(worker, shutdown_timeout=0.1)
+    await runner.setup()
+    path = str(tmp_path / "worker-1.sock")
+    await web.UnixSite(runner, path).start()
+    relay = RelayApi([Backend("worker 1 (127.79.9.11)", path, number=1)], "127.0.0.1", 0)
+    await relay.start()
+    try:
+        async with aiohttp.ClientSession() as session, \
+                session.get(f"http://127.0.0.1:{relay.port}/devices/127.79.9.11/stream") as reply:
+            assert reply.status == 200
+            assert await asyncio.wait_for(reply.content.readline(), 10) == b"event: status\n"
+            started = asyncio.get_running_loop().time()
+            await asyncio.wait_for(relay.close(), 10)
+            assert asyncio.get_running_loop().time() - started < 2.0
+            await asyncio.wait_for(reply.read(), 5)          # the stream ends with the relay
+    finally:
+        await relay.close()
+        await runner.cleanup()
+
+
 @pytest.mark.parametrize("sig", [signal.SIGINT, signal.SIGTERM], ids=["SIGINT", "SIGTERM"])
 def test_the_fleet_stops_within_2s_during_a_long_power_cycle(tmp_path: Path, sig: int) -> None:
     """A power-cycle of 50 minutes applied through the relay to a device of a worker does not hold the

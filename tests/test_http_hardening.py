@@ -236,8 +236,9 @@ def test_a_scenario_is_checked_whole_when_it_is_read(tmp_path: Path, step: str, 
 
 def test_idle_http_connections_neither_exhaust_the_process_nor_stay(tmp_path: Path) -> None:
     """Under a low open-file limit (256), 300 connections to the HTTP API that never send a request
-    head: at most ``MAX_CONNECTIONS`` are kept, EtherNet/IP and a new HTTP client (once there is room)
-    are served meanwhile, and each idle one is closed ``HEADER_TIMEOUT`` after it came."""
+    head: at most ``MAX_CONNECTIONS`` are kept, each of the others is answered 503 (a refusal is an
+    answer), EtherNet/IP and a new HTTP client (once there is room) are served meanwhile, and each idle
+    one is closed ``HEADER_TIMEOUT`` after it came."""
     import resource
 
     from cipstack.control.http import HEADER_TIMEOUT, MAX_CONNECTIONS
@@ -258,6 +259,8 @@ def test_idle_http_connections_neither_exhaust_the_process_nor_stay(tmp_path: Pa
         time.sleep(0.5)
         open_ones = [s for s in idle if _still_open(s)]
         assert 0 < len(open_ones) <= MAX_CONNECTIONS
+        refused = [s for s in idle if s not in open_ones]
+        assert all(_answer(s).startswith(b"HTTP/1.1 503 ") for s in refused)
         # EtherNet/IP accepts and answers a RegisterSession meanwhile.
         with socket.create_connection(("127.0.0.1", port), timeout=5) as eip:
             eip.sendall(bytes.fromhex("6500 0400 00000000 00000000 0000000000000000 00000000 0100 0000"))
@@ -284,13 +287,23 @@ def _accepting(port: int) -> bool:
 
 
 def _still_open(sock: socket.socket) -> bool:
-    """The peer has not closed ``sock`` (nothing was sent on it: a read would block)."""
+    """The peer has neither answered nor closed ``sock`` (nothing was sent on it: a read would block)."""
     sock.setblocking(False)
     try:
-        return sock.recv(1) != b""
+        sock.recv(1, socket.MSG_PEEK)       # an answer (kept for a read) or the end
+        return False
     except BlockingIOError:
         return True
     except OSError:
         return False
     finally:
         sock.setblocking(True)
+
+
+def _answer(sock: socket.socket) -> bytes:
+    """What the peer sent on ``sock`` until it closed it."""
+    sock.settimeout(10)
+    received = b""
+    while chunk := sock.recv(4096):
+        received += chunk
+    return received

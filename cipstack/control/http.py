@@ -12,9 +12,12 @@ that holds it (``http_relay``); each worker serves this API on a Unix socket onl
 Limits (never trust the wire): it listens on loopback unless ``allow_remote`` is given, and then only
 with a bearer token, which every request must carry; a request from an address that is not loopback
 is refused (403) unless ``allow_remote``; bodies above ``MAX_BODY`` bytes are refused (413); at most
-``MAX_IN_FLIGHT`` requests are served at once (503 beyond); a malformed body is a 400 with a JSON
-body; nothing a client sends raises out of a handler. The description of every route is at
-``/openapi.json``.
+``MAX_IN_FLIGHT`` requests are served at once (503 beyond), the front panel's streams apart
+(``panel_app.MAX_STREAMS``); at most ``MAX_CONNECTIONS`` connections, shared between addresses by the
+listeners' one policy (``HttpConnections``); a malformed request, target, query or body is a 400 with
+a JSON body; every answer says ``X-Content-Type-Options: nosniff``; nothing a client sends raises out
+of a handler, and what it sends is logged one line per source per 10 s, never a traceback, never a
+credential (``redact``). The description of every route is at ``/openapi.json``.
 """
 
 from __future__ import annotations
@@ -24,17 +27,20 @@ import hmac
 import ipaddress
 import json
 import logging
-from collections.abc import Awaitable, Callable
+import re
+import traceback
+from collections.abc import Awaitable, Callable, Mapping
 from typing import TYPE_CHECKING, Any
 
 from aiohttp import web
 
-from ..eip.target.limits import RateLimitedLog, guarded_listener, quiet_accept_errors
+from ..eip.target.limits import ConnectionLimiter, RateLimitedLog, guarded_listener, quiet_accept_errors
 from ..errors import BadRequest, CipstackError
 from .metrics import ShardGauges, add_metrics_route
 from .operations import OPERATIONS, Operation
 from .panel_app import PanelStreams
-from .service import outcome
+from .panel_app import log as panel_log
+from .service import outcome, whole_number
 from .tokens import weak_token_reason
 
 if TYPE_CHECKING:
@@ -63,6 +69,9 @@ DEVICE_ROUTES: tuple[tuple[str, str, Operation], ...] = tuple(
 DEVICE_PREFIX = "/devices/{device}"
 #: The front panel's live stream of a device (``panel_app``), at the top and under ``DEVICE_PREFIX``.
 STREAM_PATH = "/stream"
+#: The routes of the streams: bounded by ``panel_app.MAX_STREAMS``, never counted as requests in flight
+#: (a panel left open must not take a request's place).
+STREAM_ROUTES = frozenset({STREAM_PATH, DEVICE_PREFIX + STREAM_PATH})
 
 
 class HttpApiError(BadRequest):
@@ -106,8 +115,109 @@ def _is_loopback(host: str) -> bool:
         return False
 
 
-def json_error(status: int, message: str, **extra: Any) -> web.Response:
-    return web.json_response({"error": message, **extra}, status=status)
+#: Headers of every answer, whatever it is (JSON, an error, ``/metrics``, a stream, a refusal at the
+#: connection limit), as on the front panel's files: a browser takes the type given and never guesses
+#: another (an error that quotes a client's text is never read as a page or a script).
+ALWAYS_HEADERS: Mapping[str, str] = {"X-Content-Type-Options": "nosniff"}
+#: Seconds a client refused for want of room (503: connections, requests or streams) is told to wait
+#: before it tries again (``Retry-After``).
+RETRY_AFTER_S = 1
+
+
+def json_error(status: int, message: str, *, headers: Mapping[str, str] | None = None, **extra: Any) -> web.Response:
+    return web.json_response({"error": message, **extra}, status=status, headers={**ALWAYS_HEADERS, **(headers or {})})
+
+
+def busy(message: str) -> web.Response:
+    """503 for want of room, with when to try again."""
+    return json_error(503, message, headers={"Retry-After": str(RETRY_AFTER_S)})
+
+
+def check_target(raw: str) -> str | None:
+    """Why a request's target (``raw``, as the request line gave it) is not served, or None: only an
+    origin-form target (a path from ``/``, then its query). An absolute-form target
+    (``http://host/path``, for proxies) would give the path, the host and the URL that a relay
+    forwards other values than the ``Host`` header that the guard checks; ``*`` and ``//name`` are
+    no path of this API either."""
+    if not raw.startswith("/") or raw.startswith("//"):
+        shown = raw if len(raw) <= 60 else raw[:60] + "..."
+        return f"the request target {shown!r} is not a path: send GET /devices/... with a Host header"
+    return None
+
+
+# -- logs: one line each, no credential --------------------------------------------------------------------
+#: What stands for a credential in a log line.
+REDACTED = "[redacted]"
+#: The tokens of this process's APIs (each ``Guard`` adds its own), never written in a log line.
+_SECRETS: set[str] = set()
+#: Credentials as a client sends them, whatever the token: a header with its value (to the end of the
+#: line or quote), an authorization scheme with its credentials, a secret in a query.
+_CREDENTIALS = re.compile(
+    r"(?i)\b((?:proxy-)?authorization|cookie|x-api-key)\b(\s*:?\s*)[^\r\n'\"]*"
+    r"|\b(bearer|basic|digest)(\s+)[^\s'\",;]+"
+    r"|\b(access_token|token|password|secret)(=)[^\s'\"&;]+")
+#: The longest a client's text quoted in a log line may be.
+_MAX_QUOTED = 160
+
+
+def redact(text: str) -> str:
+    """``text`` with every credential in it replaced by ``REDACTED``: the tokens of this process's
+    APIs, and whatever a client sends as one (``Authorization: ...``, ``Bearer ...``, ``token=...``)."""
+    for secret in _SECRETS:
+        text = text.replace(secret, REDACTED)
+
+    def hide(match: re.Match[str]) -> str:
+        name, separator = (match.group(1), match.group(2)) if match.group(1) else \
+            (match.group(3), match.group(4)) if match.group(3) else (match.group(5), match.group(6))
+        return f"{name}{separator}{REDACTED}"
+
+    return _CREDENTIALS.sub(hide, text)
+
+
+def _one_line(text: str) -> str:
+    """``text`` on one line: line breaks and other control characters escaped."""
+    return "".join(c if c.isprintable() else repr(c)[1:-1] for c in text)
+
+
+def describe_exception(exc: BaseException) -> str:
+    """An exception in one line: its type, its message's first line (bounded), where it was raised."""
+    text = str(exc).strip().splitlines()[0] if str(exc).strip() else ""
+    if len(text) > _MAX_QUOTED:
+        text = text[:_MAX_QUOTED] + "..."
+    where = ""
+    frames = traceback.extract_tb(exc.__traceback__) if exc.__traceback__ is not None else []
+    if frames:
+        where = f" (at {frames[-1].filename.rsplit('/', 1)[-1]}:{frames[-1].lineno})"
+    return f"{type(exc).__name__}{': ' + text if text else ''}{where}"
+
+
+class OneLineRecords(logging.Filter):
+    """Each record of a logger of the HTTP API as one line and with no credential: a traceback becomes
+    its exception in one line (``describe_exception``), and ``redact`` runs over the whole. A client
+    can neither fill the log with tracebacks nor have a token written in clear."""
+
+    def filter(self, record: logging.LogRecord) -> bool:
+        text = record.getMessage()
+        if record.exc_info and record.exc_info[1] is not None:
+            text += ": " + describe_exception(record.exc_info[1])
+        record.msg = redact(_one_line(text))
+        record.args = ()
+        record.exc_info = None
+        record.exc_text = None
+        record.stack_info = None
+        return True
+
+
+def one_line_records(logger: logging.Logger) -> None:
+    """``OneLineRecords`` on ``logger`` (once)."""
+    if not any(isinstance(f, OneLineRecords) for f in logger.filters):
+        logger.addFilter(OneLineRecords())
+
+
+#: aiohttp's own records of the servers here (what it cannot parse, what escapes a handler).
+server_log = logging.getLogger(__name__ + ".server")
+for _logger in (log, server_log, panel_log):
+    one_line_records(_logger)
 
 
 def no_device(name: str | None, names: list[str]) -> web.Response:
@@ -169,6 +279,10 @@ class Guard:
         #: Host names the API answers to besides addresses and localhost (``--http-allow-host``).
         self.hosts = frozenset(h.lower() for h in hosts)
         self.in_flight = 0
+        #: What escapes a handler (a defect of ours, never a client's): one line per source per 10 s.
+        self.defects = RateLimitedLog(log, level=logging.ERROR)
+        if token:
+            _SECRETS.add(token)
 
     def refusal(self, request: web.Request) -> tuple[int, str] | None:
         """The status and the reason ``request`` is refused for before its handler, or None."""
@@ -197,7 +311,22 @@ class Guard:
     async def middleware(self, request: web.Request, handler: Handler) -> web.StreamResponse:
         connections = request.app.get(CONNECTIONS)
         if connections is not None:
-            connections.started(request.protocol)    # its head came in time
+            connections.started(request.protocol)    # its head came in time: busy until its answer
+        try:
+            return await self._guarded(request, handler, connections)
+        finally:
+            if connections is not None:
+                connections.finished(request.protocol)
+
+    async def _guarded(self, request: web.Request, handler: Handler,
+                       connections: HttpConnections | None) -> web.StreamResponse:
+        wrong_target = check_target(request.raw_path)
+        if wrong_target is not None:   # a malformed request, logged as those aiohttp cannot parse are
+            if connections is not None:
+                connections.malformed(request.remote, 400, wrong_target)
+            else:
+                log.info("HTTP request refused (400): %s", wrong_target)
+            return json_error(400, wrong_target)
         if not self.local:
             refused = self.refusal(request)
             if refused is not None:
@@ -209,88 +338,277 @@ class Guard:
             # A header aiohttp decoded with surrogates (bytes that are not UTF-8) compares as what it is.
             if not hmac.compare_digest(given.encode("utf-8", "surrogateescape"), f"Bearer {self.token}".encode()):
                 return json_error(401, "a request needs the header Authorization: Bearer TOKEN (--http-token)")
-        if self.in_flight >= MAX_IN_FLIGHT:
-            return json_error(503, f"{MAX_IN_FLIGHT} requests in progress; try again")
-        self.in_flight += 1
+        # A stream is bounded by the streams' own limit (``panel_app.MAX_STREAMS``), never by this one:
+        # panels left open must not leave the API without room for requests.
+        stream = request.match_info.route.resource is not None and \
+            request.match_info.route.resource.canonical in STREAM_ROUTES
+        if not stream and self.in_flight >= MAX_IN_FLIGHT:
+            return busy(f"{MAX_IN_FLIGHT} requests in progress; try again")
+        self.in_flight += not stream
         try:
             return await handler(request)
         except web.HTTPException as exc:
             if exc.status < 400:
                 raise
-            return json_error(exc.status, exc.reason)
-        except Exception:  # a request must never take the API down
-            log.exception("HTTP %s %s", request.method, request.path)
+            # 503: no room (the streams' bound), which is said with when to try again.
+            return busy(exc.reason) if exc.status == 503 else json_error(exc.status, exc.reason)
+        except Exception as exc:  # a request must never take the API down
+            self.defects("HTTP %s %s from %s: internal error, a defect: %s", request.method, request.path,
+                         request.remote, describe_exception(exc), source=request.remote)
             return json_error(500, "internal error (logged)")
         finally:
-            self.in_flight -= 1
+            self.in_flight -= not stream
 
 
-#: HTTP connections served at once; one more is closed at accept. Far below the process's open-file
-#: limit, so that no number of HTTP clients can keep EtherNet/IP and Modbus TCP from accepting theirs.
+#: HTTP connections served at once. Far below the process's open-file limit, so that no number of HTTP
+#: clients can keep EtherNet/IP and Modbus TCP from accepting theirs.
 MAX_CONNECTIONS = 64
 #: Seconds a connection has to send a whole request head after it is accepted, or after its last
 #: request (idle keep-alive); then it is closed.
 HEADER_TIMEOUT = 10.0
-#: Connections awaiting their first request head remembered, per connection of the limit (a burst of
-#: connections that open and close at once must not grow the table without bound).
-PENDING_PER_CONNECTION = 16
 #: Seconds a request's body has to arrive whole once its head has.
 BODY_TIMEOUT = 10.0
+#: Refused connections kept open at once while their 503 goes out; past that, one is closed as soon
+#: as its 503 is written.
+MAX_LINGERING_REFUSALS = 64
+#: Seconds a refused connection stays open after its 503, reading (and dropping) what the client still
+#: sends: closed with unread bytes, a connection ends in a reset, which can destroy the 503 before the
+#: client reads it.
+REFUSAL_LINGER_S = 2.0
+#: The most a refused connection's client may send while its 503 goes out.
+REFUSAL_READ_LIMIT = 64 * 1024
 
 
 class HttpConnections:
-    """The protocol factory of the HTTP listener over aiohttp's own (``server``): at most ``limit``
-    connections at once (one more is closed at once, one log line per 10 s), and a connection that has
+    """The protocol factory of the HTTP listener, in front of aiohttp's: at most ``limit`` connections
+    at once, shared between addresses by the one policy of every listener here (``ConnectionLimiter``,
+    as EtherNet/IP and Modbus TCP): when every slot is taken, a new address takes the place of the
+    idlest connection of the address holding the most, while that one holds more than the newcomer
+    would; else the newcomer is answered 503 (JSON, ``Retry-After``) and closed. A connection that has
     not sent a whole request head ``header_timeout`` seconds after it was accepted is closed (an idle
-    keep-alive connection is aiohttp's, after the same time)."""
+    keep-alive connection is aiohttp's, after the same time).
+
+    The count is of the connections open now: each is counted in when asyncio says it is made, and out
+    when it says it is lost (or when it is closed to make room), whatever aiohttp still does with it.
+    What aiohttp cannot parse is answered 400 with a JSON body, and logged one line per source per
+    10 s (``RequestHandler``)."""
 
     def __init__(self, limit: int = MAX_CONNECTIONS, header_timeout: float = HEADER_TIMEOUT) -> None:
-        #: aiohttp's protocol factory, given when the app is served (``serve_app``).
-        self.server: Any = None
-        self.limit = limit
+        #: One address may hold every slot while it is alone: a newcomer takes one of them.
+        self.limiter = ConnectionLimiter(limit, per_host=limit)
         self.header_timeout = header_timeout
-        #: Connections that have not begun a request yet, by id (the guard takes them out).
-        self.pending: dict[int, Any] = {}
+        #: Makes aiohttp's protocol of a connection (given when the app is served: ``serve``).
+        self.make_handler: Callable[[HttpConnections], asyncio.Protocol] | None = None
+        #: The connections served, by aiohttp's protocol of each (``request.protocol``).
+        self.served: dict[Any, _Connection] = {}
         self.refused_log = RateLimitedLog(log)
-        self.refused = 0
-        #: Connections made this round of the loop, which aiohttp does not list yet.
-        self.unmade = 0
+        self.evicted_log = RateLimitedLog(log, level=logging.INFO)
+        #: Requests aiohttp could not parse.
+        self.malformed_log = RateLimitedLog(log)
+        #: Refused connections still open while their 503 goes out.
+        self.lingering = 0
 
-    def __call__(self) -> asyncio.BaseProtocol:
-        loop = asyncio.get_running_loop()
-        # aiohttp lists a connection once asyncio has told its protocol, on the loop's next round: those
-        # made in this round are counted apart until then. Connections still awaiting their first
-        # head are remembered (to close them at the timeout) up to a bound, closed ones included.
-        if (len(self.server.connections) + self.unmade >= self.limit
-                or len(self.pending) >= PENDING_PER_CONNECTION * self.limit):
-            self.refused += 1
-            self.refused_log("HTTP connection refused: %d connections already", self.limit, source="http")
-            return _Closed()
-        handler = self.server()
-        self.unmade += 1
-        loop.call_soon(loop.call_soon, self._made)   # after asyncio's own call of connection_made
-        self.pending[id(handler)] = handler
-        loop.call_later(self.header_timeout, self._check, id(handler))
-        return handler  # type: ignore[no-any-return]  # aiohttp types its Server as returning Any
+    @property
+    def limit(self) -> int:
+        return self.limiter.total
 
-    def _made(self) -> None:
-        self.unmade -= 1
+    @property
+    def refused(self) -> int:
+        """Connections refused since the start."""
+        return self.limiter.refused
+
+    def __call__(self) -> asyncio.Protocol:
+        return _Connection(self)
+
+    def admit(self, connection: _Connection) -> bool:
+        """Count ``connection`` in (making room when every slot is taken), or say why not in the log."""
+        if self.limiter.admit_making_room(connection.host, self._close_idlest):
+            return True
+        self.refused_log("HTTP connection from %s refused (503): all %d connections are open, %d of them from "
+                         "%s, and no address holds more than it would", connection.host, self.limit,
+                         self.limiter.by_host.get(connection.host, 0), connection.host, source=connection.host)
+        return False
+
+    def _close_idlest(self, victim: str, host: str) -> bool:
+        """Every slot taken: close the idlest connection of ``victim`` (none in a request first, then the
+        longest since its last request began or ended, or since it came) to make room for ``host``."""
+        idlest = min((c for c in self.served.values() if c.host == victim and not c.evicted),
+                     key=lambda c: (c.busy > 0, c.since), default=None)
+        if idlest is None:
+            return False
+        self.evicted_log("HTTP connection from %s closed to make room for %s: %s held %d of the %d connections",
+                         victim, host, victim, self.limiter.by_host.get(victim, 0), self.limit, source=victim)
+        idlest.evict()
+        return True
 
     def started(self, handler: Any) -> None:
-        """``handler``'s connection sent a whole request head."""
-        self.pending.pop(id(handler), None)
+        """``handler``'s connection sent a whole request head: it is in a request until ``finished``."""
+        connection = self.served.get(handler)
+        if connection is not None:
+            connection.began()
 
-    def _check(self, key: int) -> None:
-        handler = self.pending.pop(key, None)
-        if handler is not None and handler.transport is not None:
-            handler.transport.close()
+    def finished(self, handler: Any) -> None:
+        connection = self.served.get(handler)
+        if connection is not None:
+            connection.ended()
+
+    def malformed(self, host: str | None, status: int, reason: str) -> None:
+        self.malformed_log("HTTP request from %s refused (%d): %s", host or "?", status, reason, source=host)
 
 
-class _Closed(asyncio.Protocol):
-    """A connection over the limit: closed as soon as it is made."""
+class _Connection(asyncio.Protocol):
+    """One accepted connection: admitted, it hands everything to aiohttp's protocol (``handler``);
+    refused, it answers 503 and reads what comes until the client closes (``REFUSAL_LINGER_S``)."""
+
+    def __init__(self, connections: HttpConnections) -> None:
+        self.connections = connections
+        self.transport: asyncio.Transport | None = None
+        self.handler: Any = None
+        self.host = ""
+        #: When its last request began or ended, or when it came (loop time): its idleness.
+        self.since = 0.0
+        #: Requests in progress on it.
+        self.busy = 0
+        self.evicted = False
+        self.admitted = False
+        self.head_came = False
+        self.timer: asyncio.TimerHandle | None = None
+        self.dropped = 0
 
     def connection_made(self, transport: asyncio.BaseTransport) -> None:
-        transport.close()
+        assert isinstance(transport, asyncio.Transport)
+        self.transport = transport
+        loop = asyncio.get_running_loop()
+        self.since = loop.time()
+        peer = transport.get_extra_info("peername")
+        self.host = str(peer[0]) if isinstance(peer, tuple) and peer else "?"
+        connections = self.connections
+        if not connections.admit(self):
+            self._refuse(loop)
+            return
+        self.admitted = True
+        assert connections.make_handler is not None   # set by ``serve_app`` before it listens
+        self.handler = connections.make_handler(connections)
+        connections.served[self.handler] = self
+        self.timer = loop.call_later(connections.header_timeout, self._no_head)
+        self.handler.connection_made(transport)
+
+    def data_received(self, data: bytes) -> None:
+        if self.handler is not None:
+            self.handler.data_received(data)
+            return
+        self.dropped += len(data)           # a refused connection's request: read, never parsed
+        if self.dropped > REFUSAL_READ_LIMIT and self.transport is not None:
+            self.transport.close()
+
+    def eof_received(self) -> bool | None:
+        if self.handler is not None:
+            return self.handler.eof_received()  # type: ignore[no-any-return]  # aiohttp's protocol, untyped here
+        return False                         # a refused connection's client has read its 503: close
+
+    def pause_writing(self) -> None:
+        if self.handler is not None:
+            self.handler.pause_writing()
+
+    def resume_writing(self) -> None:
+        if self.handler is not None:
+            self.handler.resume_writing()
+
+    def connection_lost(self, exc: Exception | None) -> None:
+        if self.timer is not None:
+            self.timer.cancel()
+            self.timer = None
+        if self.admitted:
+            self.connections.served.pop(self.handler, None)
+            if not self.evicted:
+                self.connections.limiter.release(self.host)
+            self.handler.connection_lost(exc)
+        else:
+            self.connections.lingering -= 1
+
+    def began(self) -> None:
+        self.head_came = True
+        self.busy += 1
+        self.since = asyncio.get_running_loop().time()
+
+    def ended(self) -> None:
+        self.busy = max(0, self.busy - 1)
+        self.since = asyncio.get_running_loop().time()
+
+    def evict(self) -> None:
+        """Closed to make room for another address: its slot is free at once."""
+        self.evicted = True
+        self.connections.limiter.release(self.host)
+        if self.transport is not None:
+            self.transport.abort()
+
+    def _no_head(self) -> None:
+        self.timer = None
+        if not self.head_came and self.transport is not None:
+            self.transport.close()
+
+    def _refuse(self, loop: asyncio.AbstractEventLoop) -> None:
+        """A 503 with a JSON body, then the end: at once when too many refusals are open already, else
+        once the client has closed or after ``REFUSAL_LINGER_S``."""
+        transport = self.transport
+        assert transport is not None
+        self.connections.lingering += 1
+        try:
+            transport.write(_refusal_bytes(self.connections.limit))
+            if self.connections.lingering > MAX_LINGERING_REFUSALS:
+                transport.close()
+                return
+            transport.write_eof()
+        except OSError:          # the client is gone already (reset): nobody to answer
+            transport.abort()
+            return
+        self.timer = loop.call_later(REFUSAL_LINGER_S, transport.close)
+
+
+def _refusal_bytes(limit: int) -> bytes:
+    """The answer to a connection over the limit, written before its request is read (there is no
+    room to parse it): 503, a JSON body, when to try again, and the end of the connection."""
+    body = json.dumps({"error": f"{limit} HTTP connections are open; try again"}).encode()
+    head = ["HTTP/1.1 503 Service Unavailable", "Content-Type: application/json; charset=utf-8",
+            f"Content-Length: {len(body)}", f"Retry-After: {RETRY_AFTER_S}",
+            *(f"{name}: {value}" for name, value in ALWAYS_HEADERS.items()), "Connection: close"]
+    return ("\r\n".join(head) + "\r\n\r\n").encode() + body
+
+
+class QuietRequestHandler(web.RequestHandler):
+    """aiohttp's protocol of a connection, but a request it cannot parse (a bad request line or header)
+    is answered with a JSON body and logged one line per source per 10 s with the reason, never a
+    traceback, never the bytes of a header (a token in a malformed ``Authorization`` header)."""
+
+    __slots__ = ("connections",)
+
+    def __init__(self, manager: web.Server, connections: HttpConnections, **kwargs: Any) -> None:
+        super().__init__(manager, **kwargs)
+        self.connections = connections
+
+    def handle_error(self, request: Any, status: int = 500, exc: BaseException | None = None,
+                     message: str | None = None) -> web.StreamResponse:
+        if status >= 500:
+            reason = "internal error (logged)"
+            self.connections.malformed(request.remote, status, "internal error, a defect: "
+                                       + (describe_exception(exc) if exc is not None else "unknown"))
+        else:
+            reason = _parse_error(exc, message)
+            self.connections.malformed(request.remote, status, reason)
+        if request.writer.output_size > 0:   # an answer began: there is none to give but the close
+            raise ConnectionError("an answer began already: the connection ends here")
+        response = json_error(status, reason)
+        response.force_close()
+        return response
+
+
+def _parse_error(exc: BaseException | None, message: str | None) -> str:
+    """What aiohttp found wrong with a request, in one line without the client's bytes: the first line
+    of its message (``Invalid header value char``), redacted and bounded."""
+    text = getattr(exc, "message", None) or message or str(exc or "")
+    first = str(text).strip().splitlines()[0].rstrip(":") if str(text).strip() else "malformed request"
+    first = redact(_one_line(first))
+    return "malformed request: " + (first if len(first) <= _MAX_QUOTED else first[:_MAX_QUOTED] + "...")
 
 
 class ServedApp:
@@ -310,12 +628,19 @@ class ServedApp:
             await self.server.wait_closed()
 
 
+#: Seconds closing an API waits for a request in progress (then for its cancellation) before it goes
+#: on: an answer that never ends (a stream whose source went silent) cannot hold a stop.
+STOP_WAIT_S = 0.5
+
+
 async def serve_app(app: web.Application, host: str, port: int, path: str | None = None) -> ServedApp:
     """``app`` served on ``host:port`` (TCP, through ``HttpConnections``), or on the Unix socket ``path``
     (``port`` 0: the OS's choice). A port or path it cannot take raises ``OSError``."""
     connections = app.get(CONNECTIONS)
-    runner = web.AppRunner(app, access_log=None, handle_signals=False,
-                           keepalive_timeout=connections.header_timeout if connections else HEADER_TIMEOUT)
+    # What aiohttp's protocol of each connection takes: its own records go to a logger of ours, one line each.
+    options: dict[str, Any] = {"access_log": None, "logger": server_log,
+                               "keepalive_timeout": connections.header_timeout if connections else HEADER_TIMEOUT}
+    runner = web.AppRunner(app, handle_signals=False, shutdown_timeout=STOP_WAIT_S, **options)
     await runner.setup()
     if path is not None:
         site = web.UnixSite(runner, path)
@@ -332,21 +657,37 @@ async def serve_app(app: web.Application, host: str, port: int, path: str | None
     except OSError:
         await runner.cleanup()
         raise
-    assert runner.server is not None  # made by runner.setup()
+    server = runner.server
+    assert server is not None  # made by runner.setup()
+    factory: Callable[[], asyncio.BaseProtocol] = server
     if connections is not None:
-        connections.server = runner.server
-    factory: Callable[[], asyncio.BaseProtocol] = connections if connections is not None else runner.server
+        connections.make_handler = lambda owner: QuietRequestHandler(server, owner, loop=loop, **options)
+        factory = connections
     try:
-        server = await loop.create_server(factory, sock=listener)
+        listening = await loop.create_server(factory, sock=listener)
     except BaseException:
         listener.close()
         await runner.cleanup()
         raise
-    return ServedApp(runner, int(listener.getsockname()[1]), server)
+    return ServedApp(runner, int(listener.getsockname()[1]), listening)
 
 
 #: Where an app keeps its ``HttpConnections`` (the guard marks the connections that began a request).
 CONNECTIONS: web.AppKey[HttpConnections] = web.AppKey("cipstack_http_connections", HttpConnections)
+
+
+async def _always_headers(request: web.Request, response: web.StreamResponse) -> None:
+    response.headers.update(ALWAYS_HEADERS)
+
+
+def guarded_app(guard: Guard) -> web.Application:
+    """An application of the API (one process's, or a relay's): ``guard`` before every handler, bodies
+    within ``MAX_BODY``, its connections bounded (``HttpConnections``), ``ALWAYS_HEADERS`` on every
+    answer, aiohttp's records one line each."""
+    app = web.Application(client_max_size=MAX_BODY, middlewares=[guard.middleware], logger=server_log)
+    app[CONNECTIONS] = HttpConnections()
+    app.on_response_prepare.append(_always_headers)
+    return app
 
 
 class HttpApi:
@@ -387,8 +728,7 @@ class HttpApi:
             self._served = None
 
     def _build(self) -> web.Application:
-        app = web.Application(client_max_size=MAX_BODY, middlewares=[self.guard.middleware])
-        app[CONNECTIONS] = HttpConnections()
+        app = guarded_app(self.guard)
         for method, path, operation in DEVICE_ROUTES:
             handler = self._handler(operation)
             app.router.add_route(method, path, handler)
@@ -412,7 +752,11 @@ class HttpApi:
         service = self._service(request)
         if isinstance(service, web.Response):
             return service
-        return await self.panel.stream(request, service)
+        try:   # before any answer begins: a stream, once its head is out, can only end
+            since = whole_number("since", request.query.get("since", "0"))
+        except BadRequest as exc:
+            return json_error(400, str(exc))
+        return await self.panel.stream(request, service, since)
 
     async def list_devices(self, request: web.Request) -> web.Response:
         return web.json_response([{"address": name, **service.describe()}
@@ -507,10 +851,7 @@ async def _arguments(operation: Operation, request: web.Request) -> dict[str, An
         else:
             value = body.get(argument.key)
         if isinstance(value, str) and argument.where != "body" and argument.json_type == "integer":
-            try:
-                value = int(value)
-            except ValueError:
-                raise BadRequest(f"{argument.key} is a whole number, not {value!r}") from None
+            value = whole_number(argument.key, value)
         if value is not None:
             arguments[argument.key] = value
     return arguments

@@ -31,17 +31,16 @@ from yarl import URL
 
 from ..errors import PeerUnreachable, connect_failure
 from .http import (
-    CONNECTIONS,
     DEVICE_PREFIX,
     DEVICE_ROUTES,
-    MAX_BODY,
     STREAM_PATH,
     Guard,
-    HttpConnections,
     ServedApp,
     check_settings,
+    guarded_app,
     json_error,
     no_device,
+    one_line_records,
     openapi,
     serve_app,
 )
@@ -49,6 +48,7 @@ from .metrics import ShardGauges, merge_families, metrics_response, powered_devi
 from .panel_app import PanelStreams
 
 log = logging.getLogger(__name__)
+one_line_records(log)
 
 #: A worker's API by its Unix socket: the socket has no host name, aiohttp's client needs one.
 _WORKER_URL = URL("http://cipstack-worker")
@@ -179,8 +179,7 @@ class RelayApi:
                 from None
 
     def _build(self) -> web.Application:
-        app = web.Application(client_max_size=MAX_BODY, middlewares=[self.guard.middleware])
-        app[CONNECTIONS] = HttpConnections()
+        app = guarded_app(self.guard)
         for method, path, _operation in DEVICE_ROUTES:
             app.router.add_route(method, path, self.unaddressed)
             app.router.add_route(method, DEVICE_PREFIX + path, self.forward)
@@ -188,7 +187,7 @@ class RelayApi:
         app.router.add_get("/openapi.json", openapi)
         app.router.add_get("/metrics", self.metrics)
         app.router.add_get(STREAM_PATH, self.unaddressed)
-        app.router.add_get(DEVICE_PREFIX + STREAM_PATH, self.forward)
+        app.router.add_get(DEVICE_PREFIX + STREAM_PATH, self.forward_stream)
         self.panel.add_routes(app)
         return app
 
@@ -227,6 +226,13 @@ class RelayApi:
         """A device's route without its address: a fleet has more than one device."""
         return no_device(None, list(self.routes))
 
+    async def forward_stream(self, request: web.Request) -> web.StreamResponse:
+        """A panel's stream, forwarded as any route, in one of the relay's own ``MAX_STREAMS`` slots: the
+        relay bounds the streams of all its workers together, apart from the requests in flight, so
+        that open panels never leave the API without room."""
+        with self.panel.slot():
+            return await self.forward(request)
+
     async def forward(self, request: web.Request) -> web.StreamResponse:
         """The request, as it came, to the API of the worker that holds the device; its answer back."""
         name = request.match_info["device"]
@@ -249,9 +255,7 @@ class RelayApi:
                 # A body of no announced length (a stream of events) goes on as it comes.
                 response = web.StreamResponse(status=reply.status, headers=kept)
                 await response.prepare(request)
-                async for chunk in reply.content.iter_any():
-                    if self.panel.closing.is_set():     # the relay stops: a panel's stream ends here
-                        break
+                while (chunk := await self._next_chunk(reply)) is not None:
                     await response.write(chunk)
                 await response.write_eof()
                 return response
@@ -260,6 +264,24 @@ class RelayApi:
                 return response
             return self._unserved(name, backend.down() or f"{backend.name} does not answer "
                                                           f"({_failure(backend, exc)})")
+
+    async def _next_chunk(self, reply: aiohttp.ClientResponse) -> bytes | None:
+        """What the worker sends next of a body of no announced length; None at its end, or as soon as the
+        relay stops (a panel's stream ends there, whether or not the worker still sends)."""
+        if self.panel.closing.is_set():
+            return None
+        reading = asyncio.ensure_future(reply.content.readany())
+        closing = asyncio.ensure_future(self.panel.closing.wait())
+        try:
+            await asyncio.wait((reading, closing), return_when=asyncio.FIRST_COMPLETED)
+        finally:
+            closing.cancel()
+            if not reading.done():
+                reading.cancel()
+        if reading.cancelled() or not reading.done():
+            return None
+        chunk = reading.result()
+        return chunk if chunk else None
 
     @staticmethod
     def _unserved(name: str, why: str) -> web.Response:

@@ -13,6 +13,7 @@ import asyncio
 import contextlib
 import json
 import logging
+from collections.abc import Iterator
 from importlib import resources
 from typing import TYPE_CHECKING, Any
 
@@ -25,7 +26,8 @@ log = logging.getLogger(__name__)
 
 #: Seconds between two looks at the device for a stream (a panel is for eyes, not for timing).
 STREAM_INTERVAL_S = 0.5
-#: Streams served at once by one API (each is one long request); one more is a 503.
+#: Streams served at once by one API, a fleet's relay included (each is one long request, counted
+#: apart from the requests in flight); one more is a 503.
 MAX_STREAMS = 8
 #: The panel's files and their content types.
 _TYPES = {".html": "text/html", ".js": "text/javascript", ".css": "text/css", ".svg": "image/svg+xml"}
@@ -76,18 +78,29 @@ class PanelStreams:
     def close(self) -> None:
         self.closing.set()
 
-    async def stream(self, request: web.Request, service: DeviceService) -> web.StreamResponse:
-        """Server-Sent Events of ``service``'s device until the client goes or the API closes."""
+    @contextlib.contextmanager
+    def slot(self) -> Iterator[None]:
+        """One of the ``MAX_STREAMS`` streams for the block, or ``HTTPServiceUnavailable`` (the guard's 503,
+        with when to try again) when they are all open. A fleet's relay takes one for each stream it forwards."""
         if self.count >= MAX_STREAMS:
             raise web.HTTPServiceUnavailable(reason=f"{MAX_STREAMS} panels are open already")
         self.count += 1
+        try:
+            yield
+        finally:
+            self.count -= 1
+
+    async def stream(self, request: web.Request, service: DeviceService, since: int = 0) -> web.StreamResponse:
+        """Server-Sent Events of ``service``'s device until the client goes or the API closes; ``since``:
+        the last event the panel has (one that reconnects says it, ``?since=N``: each event once)."""
+        with self.slot():
+            return await self._stream(request, service, since)
+
+    async def _stream(self, request: web.Request, service: DeviceService, since: int) -> web.StreamResponse:
         response = web.StreamResponse(headers={"Content-Type": "text/event-stream", "Cache-Control": "no-cache"})
         try:
             await response.prepare(request)
             last: dict[str, str] = {}
-            # A panel that reconnects says the last event it has (``?since=N``): each event once.
-            given = request.query.get("since", "0")
-            since = int(given) if given.isdigit() and len(given) < 20 else 0
             while not self.closing.is_set():
                 try:
                     snapshot = (("status", service.status()), ("faults", service.faults_active()),
@@ -109,8 +122,6 @@ class PanelStreams:
                     await asyncio.wait_for(self.closing.wait(), STREAM_INTERVAL_S)
         except ConnectionResetError:   # the panel was closed or reloaded
             pass
-        finally:
-            self.count -= 1
         return response
 
 

@@ -28,9 +28,12 @@ from dataclasses import dataclass
 from yarl import URL
 
 from ..errors import BadRequest
+from .http import one_line_records
 from .http_relay import Backend, RelayApi
+from .service import is_whole_number
 
 log = logging.getLogger(__name__)
+one_line_records(log)
 
 #: How often the plant view looks for fleets and asks each for its devices, by default.
 DEFAULT_REFRESH = 5.0
@@ -57,7 +60,8 @@ async def resolve_addresses(name: str, port: int) -> list[tuple[str, int]]:
 def parse_fleet(text: str) -> tuple[str, int]:
     """``--fleet NAME:PORT``: a DNS name (or an address) and the port of its fleets' HTTP API."""
     name, sep, port_text = text.rpartition(":")
-    if not sep or not name or not port_text.isdigit() or not 0 < int(port_text) < 65536:
+    # ASCII digits: ``isdigit()`` alone takes a superscript two, which ``int()`` then refuses with a traceback.
+    if not sep or not name or not is_whole_number(port_text) or not 0 < int(port_text) < 65536:
         raise PlantError(f"--fleet {text!r} is not NAME:PORT (e.g. cipstack-fleet:8080)")
     return name, int(port_text)
 

@@ -17,6 +17,7 @@ from __future__ import annotations
 import asyncio
 import contextlib
 import json
+import re
 from collections.abc import Awaitable, Callable
 from dataclasses import dataclass
 from typing import TYPE_CHECKING, Any
@@ -96,6 +97,26 @@ def check_arguments(operation: Operation, arguments: dict[str, Any]) -> dict[str
     return arguments
 
 
+#: The most digits a whole number given as text may have (an event number, a fault's id: far fewer).
+MAX_WHOLE_DIGITS = 18
+#: A whole number given as text (a query, a path, a command line): ASCII digits only. ``int()`` alone
+#: takes what no client means (``+1``, ``1_0``, `` 1``, an Arabic-Indic one), and ``str.isdigit()`` what
+#: ``int()`` refuses (a superscript two).
+_WHOLE_NUMBER = re.compile(f"[0-9]{{1,{MAX_WHOLE_DIGITS}}}")
+
+
+def is_whole_number(text: str) -> bool:
+    return _WHOLE_NUMBER.fullmatch(text) is not None
+
+
+def whole_number(key: str, text: str) -> int:
+    """``text``, the value of ``key``, as a whole number; ``BadRequest`` naming the grammar when it is not
+    1 to ``MAX_WHOLE_DIGITS`` ASCII digits."""
+    if not is_whole_number(text):
+        raise BadRequest(f"{key} is a whole number (1 to {MAX_WHOLE_DIGITS} digits 0-9), not {text[:40]!r}")
+    return int(text)
+
+
 class DeviceService:
     """The operations on one running device (``handlers``: one method each), called with JSON values and
     answering JSON values."""
@@ -156,7 +177,7 @@ class DeviceService:
         (a scenario's steps are checked when it is read); ``BadRequest`` naming the valid ones."""
         if not isinstance(code, (int, str)) or isinstance(code, bool):
             raise BadRequest("\"code\" is a number or a name")
-        if isinstance(code, str):
+        if isinstance(code, str) and code.isascii():   # int() would read other digits as ASCII ones
             with contextlib.suppress(ValueError):
                 code = int(code, 0)
         device = self.runtime.device
@@ -232,7 +253,7 @@ class DeviceService:
 
     async def clear(self, fault: int | str | None = None) -> list[dict[str, Any]]:
         """Clear every active fault, or one by id, or those of one name; the faults cleared."""
-        which = int(fault) if isinstance(fault, str) and fault.strip().isdigit() else fault
+        which = int(fault) if isinstance(fault, str) and is_whole_number(fault) else fault
         cleared = self.faults.clear(which)
         await self._settled()
         return [f.as_json() for f in cleared]
@@ -308,14 +329,16 @@ class DeviceService:
 
     # -- events -------------------------------------------------------------------------------------------
     def events_since(self, since: int | str = 0) -> list[dict[str, Any]]:
-        try:
-            number = int(since)
-        except (TypeError, ValueError):
-            raise BadRequest("\"since\" is an event number") from None
+        if isinstance(since, str):
+            number = whole_number("since", since)
+        elif isinstance(since, int) and not isinstance(since, bool):
+            number = since
+        else:
+            raise BadRequest("\"since\" is an event number")
         if number < 0:
             raise BadRequest("\"since\" is an event number (0 or more)")
         return [e.as_json() for e in self.events.since(number)[:MAX_EVENTS]]
 
 
 __all__ = ["OPERATIONS", "OUTCOMES", "Argument", "DeviceService", "Operation", "Outcome", "check_arguments",
-           "error_of", "outcome"]
+           "error_of", "is_whole_number", "outcome", "whole_number"]
