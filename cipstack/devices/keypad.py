@@ -10,8 +10,13 @@ parameter. What a family adds is declared once, in its own package: which codes 
 (``KeypadCodes``) and how its keypad reads and writes them (a ``Keypad``, which the device gives
 with ``Device.keypad()``), with the write rules of its manual.
 
-Values written from the keypad are not saved: like any value written but not saved, they are lost
-at a power loss (the manuals' save rules).
+The values given at start (``--param``) are keypad entries: a drive keeps what is entered on its
+keypad across a power loss, and loses only what was written over communication and not saved (ACG
+RS-485 manual, "Saving Parameters Defined by Communication"; ACG-ET2 manual, CM.94; the CompoNet
+manual's Table C-2 and section 3-3, where an operator setting is followed by a power OFF and ON). Each
+family keeps them as its keypad does (``Keypad.keep``). Given with ``kept=False`` (``--param-unsaved``)
+they are written as over communication instead, and a power-cycle loses them. A value set while the
+device runs (the HTTP API, the pytest plugin's ``set_parameter``) is such a write too: not saved.
 """
 
 from __future__ import annotations
@@ -166,6 +171,11 @@ class Keypad:
         knows it (for the event stream); None elsewhere."""
         return None
 
+    def keep(self, written: list[Register], now: float) -> None:
+        """Keep the values of ``written``, just entered, as the keypad keeps its entries: a power-cycle
+        brings them back (until a later save or write changes them). A family's keypad overrides it;
+        the default keeps nothing."""
+
     def started(self, written: list[Register], now: float) -> None:
         """After the assignments given at start: what the device does with them before the network
         connects (nothing by default)."""
@@ -219,9 +229,11 @@ class Keypad:
         self._write(register, raw, now, f"{register.code}={value.strip()}")
         return register, raw
 
-    def assign(self, assignments: Iterable[str], now: float) -> list[str]:
+    def assign(self, assignments: Iterable[str], now: float, kept: bool = True) -> list[str]:
         """``--param CODE=VALUE`` at start, in order; one line per value set, for the log. The first one
-        not taken raises (``UnknownCode``, ``BadValue``, ``WriteRefused``); nothing after it is written."""
+        not taken raises (``UnknownCode``, ``BadValue``, ``WriteRefused``); nothing after it is written.
+        ``kept``: keypad entries, which a power-cycle keeps (``keep``); False: written as over
+        communication, not saved, so a power-cycle loses them."""
         applied, written = [], []
         for text in assignments:
             register, raw = self.codes.parse(text)
@@ -229,6 +241,8 @@ class Keypad:
             written.append(register)
             applied.append(describe(register, raw))
         if written:
+            if kept:
+                self.keep(written, now)
             self.started(written, now)
         return applied
 

@@ -186,6 +186,12 @@ class AcgDrive(TimedSimulation):
         drive._locks.hide_locked, drive._locks.parameter_locked = self._locks.hide_locked, self._locks.parameter_locked
         return drive
 
+    def keep_keypad_entries(self, addresses: list[int]) -> None:
+        """The values at ``addresses`` were entered on the keypad: a power cycle keeps them
+        (``memory.SavedParameters.keep``)."""
+        values = self._state.values
+        self._saving.keep({address: values[address] for address in addresses if address in values})
+
     def save_parameters(self) -> None:
         """Save every keypad parameter as it is now (what 0x03E0 0 -> 1 does)."""
         self._saving.save_all(self._state.values)
