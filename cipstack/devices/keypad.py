@@ -28,6 +28,7 @@ from typing import Any
 
 from ..cip.epath import parse_application_path
 from ..cip.status import CipError
+from ..cip.values import Scaling
 from ..errors import BadRequest, NotFound, StateRefused
 from .registers import Register, RegisterError
 
@@ -117,10 +118,9 @@ def raw_value(register: Register, text: str) -> int:
     try:
         register.check(raw)
     except RegisterError:
-        unit = f" {register.unit}" if register.unit else ""
-        raise BadValue(f"{register.code} ({register.name}) takes {shown_value(register, register.raw_minimum)}.."
-                       f"{shown_value(register, register.raw_maximum)}{unit}"
-                       + (f" ({choices(register)})" if register.enum else "")) from None
+        scaling = Scaling(register.unit, register.scale, enum=register.enum or None)
+        raise BadValue(scaling.range_text(f"{register.code} ({register.name})", register.raw_minimum,
+                                          register.raw_maximum)) from None
     return raw
 
 
