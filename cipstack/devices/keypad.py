@@ -135,13 +135,16 @@ def choices(register: Register) -> str:
 
 def record(register: Register, raw: int) -> dict[str, Any]:
     """A parameter as JSON: code, name, value in the keypad's unit (text, exact), raw value, unit, its
-    communication address (None where it has none), and the meaning of an enumerated value."""
+    communication address (None where it has none), the meaning of an enumerated value, and
+    ``"simulated": false`` for a monitor the emulator does not simulate (it reads 0)."""
     address = register.address if register.address is not None and register.addressed else None
     result: dict[str, Any] = {"code": register.code, "name": register.name, "value": shown_value(register, raw),
                               "raw": raw, "unit": register.unit,
                               "address": f"0x{address:04X}" if address is not None else None}
     if register.enum and raw in register.enum:
         result["meaning"] = register.enum[raw]
+    if not register.simulated:
+        result["simulated"] = False
     return result
 
 

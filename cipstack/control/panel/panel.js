@@ -184,7 +184,8 @@ function showStatus(status) {
     drive.speed_reference !== undefined ? `${drive.speed_reference} (${drive.speed_unit})` : "-";
   $("reference").textContent = reference;
   $("direction").textContent = drive.direction || "-";
-  $("current").textContent = drive.output_current_a === undefined ? "-" : `${Number(drive.output_current_a).toFixed(1)} A`;
+  $("current").textContent = (drive.not_simulated || []).includes("output_current_a") ? "not simulated" :
+    drive.output_current_a === undefined ? "-" : `${Number(drive.output_current_a).toFixed(1)} A`;
   $("trip").textContent = drive.trip || "none";
   $("power").textContent = status.power;
   $("link").textContent = status.link;
@@ -323,7 +324,8 @@ async function loadParameters() {
   let found;
   try { found = await api("GET", panel.prefix + "/parameters"); }
   catch (error) { $("parameters-note").textContent = error.message; return; }
-  $("parameters-note").textContent = `${found.keypad}: a value is written as the keypad writes it (not saved).`;
+  $("parameters-note").textContent =
+    `${found.keypad}: a value is written with the keypad's rules, as over communication (not saved).`;
   const groups = $("parameter-groups");
   if (groups.childElementCount) {
     // Shown already: the values alone change, in place (a field being edited, and what the device
@@ -358,7 +360,8 @@ function parameterRow(p) {
   const tr = element("tr", null, {class: "parameter", "data-search": `${p.code} ${p.name}`.toLowerCase()});
   const value = element("input", null, {id, value: p.value, "aria-label": `${p.code} ${p.name}`});
   if (!p.writable) value.readOnly = true;
-  const note = element("span", p.meaning || "", {class: "refusal-or-meaning", role: "status"});
+  const note = element("span", p.meaning || (p.simulated === false ? "not simulated" : ""),
+                       {class: "refusal-or-meaning", role: "status"});
   const form = element("form");
   form.append(value, " ", note);
   form.addEventListener("submit", async (event) => {

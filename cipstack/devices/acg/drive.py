@@ -33,8 +33,10 @@ Drive Run table's inputs), ``lost_command.CommandLossWatches``, ``virtual_inputs
 ``computed.ComputedRegisters`` (the monitors, and every register's read). ``AcgDrive`` composes them
 and holds the drive's public interface: time, speeds, status and register access.
 
-The simulation has no motor or load model: output current, voltage, power, torque and the
-analog inputs read 0. The monitor rpm is the synchronous speed 120 * f / poles.
+The simulation has no motor or load model: output current, power, torque, the inverter temperature
+and the analog inputs read 0 (the registers say ``simulated=False``). The output voltage is a V/f line
+and the DC link the rectified input (``computed``). The monitor rpm is the synchronous speed
+120 * f / poles.
 """
 
 from __future__ import annotations
