@@ -318,14 +318,17 @@ class Adapter:
                            "parameters are a drive's: profile acg, mx2 or rx); write its parameters over CIP")
         return keypad
 
-    def apply_keypad_parameters(self, assignments: list[str]) -> list[str]:
+    def apply_keypad_parameters(self, assignments: list[str], kept: bool = True) -> list[str]:
         """``--param CODE=VALUE``: keypad parameters set before the network connects, by the keypad's
-        codes and in its unit, written with the device's rules and not saved. Returns what was set, one
-        line each; a device without a keypad or an assignment not taken raises ``ValueError`` (an
-        unknown code ``UnknownCode``, a ``LookupError``) naming it. Not an event: it precedes the stream."""
+        codes and in its unit, written with the device's rules. ``kept``: keypad entries, which a
+        power-cycle keeps as the drive's keypad keeps them (``Keypad.keep``); False
+        (``--param-unsaved``): written as over communication, not saved, so a power-cycle loses them.
+        Returns what was set, one line each; a device without a keypad or an assignment not taken raises
+        ``ValueError`` (an unknown code ``UnknownCode``, a ``LookupError``) naming it. Not an event: it
+        precedes the stream."""
         # At the device's own present time: before the shell's clock moves it (a drive's power-up
         # instant is the first time the shell advances it).
-        return self.keypad().assign(assignments, 0.0)
+        return self.keypad().assign(assignments, 0.0, kept)
 
     def keypad_parameter(self, code: str) -> dict[str, Any]:
         """A keypad parameter by its code (``drv``, ``ACC``, ``CM.23``; ``F001``, ``A004``, ``P044``): code,

@@ -70,7 +70,17 @@ def find_parameter(catalog: Catalog, code: str) -> Parameter:
 
 def raw_of(parameter: Parameter, value: Any) -> Any:
     """The raw value of ``value`` given in the parameter's unit: a number (or its text) scaled by the
-    declaration, a choice of an enumeration by its text (``"Field Bus"``), a ``Value`` as it was read."""
+    declaration, a choice of an enumeration by its text (``"Field Bus"``), a ``Value`` as it was read.
+    A value outside the declared range (else the type's) is refused here, before anything is sent:
+    ``ACC (Acceleration Time) takes 0.0..6000.0 s``."""
+    raw = _raw_of(parameter, value)
+    out_of_range = parameter.spec.out_of_range(raw, f"{parameter.code} ({parameter.spec.name})")
+    if out_of_range is not None:
+        raise ParameterValueError(out_of_range)
+    return raw
+
+
+def _raw_of(parameter: Parameter, value: Any) -> Any:
     spec = parameter.spec
     if isinstance(value, Value):
         return value.raw

@@ -23,10 +23,12 @@ def test_the_generated_modules_are_up_to_date() -> None:
 
 
 def decoding(spec: AttributeSpec | None) -> tuple[object, ...] | None:
-    """What reading a reply and writing a value take from a declaration."""
+    """What reading a reply and writing a value take from a declaration (the range: what a value is
+    checked against before it is sent)."""
     if spec is None:
         return None
-    return (spec.id, spec.name, type(spec.type), spec.type.name, spec.access, spec.scaling, spec.in_get_all)
+    return (spec.id, spec.name, type(spec.type), spec.type.name, spec.access, spec.scaling, spec.in_get_all,
+            spec.minimum, spec.maximum)
 
 
 @pytest.mark.parametrize("name", sorted(PROFILES))

@@ -273,7 +273,8 @@ async def test_acg_power_cycle_stops_the_run_and_loses_the_unsaved(tmp_path: Pat
     """ACG RS-485 manual: "Parameter SET via Communications + NOT Saved + Power Cycle = Parameters reverts back";
     the output is cut: the drive does not decelerate over a ramp, it has no power."""
     adapter = Adapter(AdapterSettings(port=0, io_port=0, state_path=tmp_path / "acg.json"))
-    adapter.apply_keypad_parameters(["drv=4", "Frq=8"])
+    # Written as over communication (--param-unsaved): a keypad entry would be kept (test_keypad.py).
+    adapter.apply_keypad_parameters(["drv=4", "Frq=8"], kept=False)
     await adapter.start()
     assert adapter.io_endpoint is not None
     try:

@@ -198,7 +198,8 @@ def test_acg_status_json_by_field(tmp_path: Path) -> None:
         assert json.loads(by_name.stdout)["trip"] == "OverHeat", by_name.stderr
         status = json.loads(run("drive", "status", "--control", str(control), "--json").stdout)
         assert status == {"state": "FAULT_STOP", "direction": None, "output_frequency_hz": 0.0, "reference_hz": 0.0,
-                          "output_current_a": 0.0, "io_connections": 0, "trip": "OverHeat", "fault_code": 0x4200,
+                          "output_current_a": 0.0, "not_simulated": ["output_current_a"], "io_connections": 0,
+                          "trip": "OverHeat", "fault_code": 0x4200,
                           "lost_command": False, "comm_update_pending": False, "power": "on", "link": "plugged",
                           "sessions": 0, "class3_connections": 0, "class1_connections": 0, "faults": 0}
     finally:

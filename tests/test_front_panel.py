@@ -160,6 +160,32 @@ def test_the_acg_panel_runs_faults_refuses_and_loses_power(tmp_path: Path) -> No
         assert time.monotonic() - started < 2.0
 
 
+def test_the_panel_shows_the_voltages_while_running_and_says_what_is_not_simulated(tmp_path: Path) -> None:
+    """Issue 52, item 7: at 50 Hz the operation group's vOL is the V/f output voltage (230 V x 50 / 60 Hz)
+    and dCL the DC link (sqrt(2) x 230 V); the output current, which the emulator has no model for,
+    says "not simulated" in the status and beside its parameter, rather than a plausible-looking 0.0 A."""
+    with adapter(tmp_path, "--param", "drv=4", "--param", "Frq=8", "--param", "ACC=0.5") as (_, port, http), \
+            chromium(tmp_path / "profile") as browser:
+        for path, value in (("0x2A/1/101", "5000"), ("0x29/1/3", "1")):
+            done = subprocess.run([sys.executable, "-m", "cipstack", "set", f"127.0.0.1:{port}", path, value],
+                                  capture_output=True, text=True, timeout=30)
+            assert done.returncode == 0, done.stderr
+        browser.set_window_size(1280, 1600)
+        browser.get(f"http://127.0.0.1:{http}/")
+        wait_for(lambda: text(browser, "link-state") == "live", 20, "the panel's stream")
+        wait_for(lambda: text(browser, "output") == "50.00 Hz", 20, "50 Hz")
+        assert text(browser, "current") == "not simulated"
+
+        def field(code: str) -> Any:
+            return browser.find_element("id", f"parameter-{code}")
+
+        wait_for(lambda: field("vOL").get_attribute("value") == "192", 20, "the output voltage at 50 Hz")
+        assert field("dCL").get_attribute("value") == "325"
+        assert field("Cur").find_element("xpath", "following-sibling::span").get_attribute("textContent") == \
+            "not simulated"
+        no_script_error(browser)
+
+
 def test_the_plant_lists_every_device_and_links_to_its_panel(tmp_path: Path) -> None:
     require_browser()
     hosts = [f"127.79.11.{10 + n}" for n in range(3)]

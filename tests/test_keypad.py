@@ -33,6 +33,7 @@ from cipstack.scanner import Scanner
 from tests.http_client import call
 from tests.optional import needs
 from tests.test_cli import one_line_error, run, start_adapter, stop
+from tests.waiting import wait_for
 
 if TYPE_CHECKING:
     import aiohttp
@@ -121,7 +122,7 @@ async def test_rx_refuses_what_is_not_run_mode_editable_while_running(tmp_path: 
         assert status == 200 and f001["raw"] == 3000  # type: ignore[index]
         assert [w["code"] for w in writes(adapter, mark)] == ["F001"]                   # the refused one is none
         status, body = await call(http, "PUT", "/parameters/b180", json={"value": 1})
-        assert status == 409 and "never saved" in body["error"]  # type: ignore[index]
+        assert status == 409 and "stores every parameter to EEPROM: write it over the network" in body["error"]  # type: ignore[index]
 
 
 async def test_a_device_without_a_keypad_says_so(tmp_path: Path) -> None:
@@ -160,6 +161,72 @@ def test_param_sets_an_mx2_function_code_from_the_command_line(tmp_path: Path) -
         stderr = stop(process)
     assert "keypad parameter A004 Maximum frequency = 60.0 Hz" in stderr
     assert "keypad parameter P044 Network error timer = 1.5 s" in stderr
+
+
+def _power_cycle(address: str, control: Path, probe: str) -> None:
+    """``cipstack drive power cycle`` and wait for the power to come back (a CIP read of ``probe`` answers)."""
+    cycled = run("drive", "power", "cycle", "--off", "1s", "--control", str(control))
+    assert cycled.returncode == 0, cycled.stderr
+    wait_for(lambda: run("get", address, probe).returncode == 0, 30, "the power to come back")
+
+
+def _cip(address: str, path: str) -> int:
+    got = run("get", address, path, "--json")
+    assert got.returncode == 0, got.stderr
+    return int(json.loads(got.stdout)["value"])
+
+
+def _keypad(control: Path, code: str) -> int:
+    got = run("drive", "parameter", code, "--control", str(control), "--json")
+    assert got.returncode == 0, got.stderr
+    return int(json.loads(got.stdout)["raw"])
+
+
+@pytest.mark.parametrize("unsaved", [False, True])
+def test_acg_param_values_are_keypad_entries_a_power_cycle_keeps(unsaved: bool, tmp_path: Path) -> None:
+    """ACG RS-485 manual, "Saving Parameters Defined by Communication": what is written over communication
+    and not saved is lost at a power-cycle, a keypad entry is not. ``--param`` is the keypad: drv = 4 and
+    Frq = 8 survive the power-cycle, so a PLC drives the drive again after it; ACC written over CIP and not
+    saved goes back to the keypad's 2.5 s. ``--param-unsaved`` makes them communication writes: factory
+    values after the power-cycle."""
+    control, state = tmp_path / "acg.sock", tmp_path / "acg.json"
+    address, process = start_adapter("--quiet", "--control", str(control), "--state", str(state), "--param", "drv=4",
+                                      "--param", "Frq=8", "--param", "ACC=2.5", *(["--param-unsaved"] * unsaved))
+    try:
+        assert _cip(address, "0x29/1/14") == 1                                # Control From Net: drv = 4
+        assert run("set", address, "0x2A/1/102", "75").returncode == 0        # ACC 7.5 s over CIP, not saved
+        _power_cycle(address, control, "0x29/1/14")
+        after = (_keypad(control, "drv"), _keypad(control, "Frq"), _cip(address, "0x29/1/14"),
+                 _cip(address, "0x2A/1/29"), _cip(address, "0x2A/1/102"))
+    finally:
+        stop(process)
+    # drv, Frq, Control From Net (drv = 4), Ref.From Network (0x2A/1/29: Frq = 8), ACC (0.1 s)
+    assert after == ((1, 0, 0, 0, 50) if unsaved else (4, 8, 1, 1, 25))
+    assert not state.exists()   # kept as the keypad keeps them, in the drive's memory: no save was asked
+
+
+@pytest.mark.parametrize("unsaved", [False, True])
+def test_mx2_operator_entries_a_power_cycle_keeps(unsaved: bool, tmp_path: Path) -> None:
+    """CompoNet manual section 3-3 Step 3: a setting on the Digital Operator, then power OFF and ON, and it
+    takes effect; network writes are temporary until the ENTER command (section E-2-2 note). Identity
+    attribute 9 counts saves through the option board only (Table C-2): an operator entry is none."""
+    control = tmp_path / "mx2.sock"
+    address, process = start_adapter("--quiet", "--profile", "mx2", "--control", str(control), "--factory",
+                                     "--param", "A004=60", *(["--param-unsaved"] * unsaved))
+    a004 = f"0x65/{A004[0]}/{A004[1]}"
+    try:
+        assert _cip(address, a004) == 600
+        _power_cycle(address, control, a004)
+        after = (_cip(address, a004), _cip(address, "1/1/9"))
+    finally:
+        stop(process)
+    assert after == ((500, 0) if unsaved else (600, 0))   # A004 in 0.1 Hz (default 50.0 Hz); attribute 9
+
+
+def test_param_unsaved_needs_param(tmp_path: Path) -> None:
+    result = run("adapter", "--port", "0", "--state", str(tmp_path / "state.json"), "--param-unsaved")
+    assert result.returncode == 2 and one_line_error(result) == \
+        "cipstack adapter: --param-unsaved goes with --param CODE=VALUE", result.stderr
 
 
 @pytest.mark.parametrize(("args", "message"), [

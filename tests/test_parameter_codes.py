@@ -15,10 +15,14 @@ from cipstack.catalog import Catalog
 from cipstack.devices.profiles import build_device, catalog_for
 from cipstack.eds.emulated_device import build_eds_device
 from cipstack.eds.reader import read_eds
+from cipstack.eip.wire.cpf import SockAddr
+from cipstack.eip.wire.identity_items import IdentityRecord, encode_identity_item
+from cipstack.errors import BadRequest
 from cipstack.objects.tcpip import NetworkInterface
 from cipstack.parameter_codes import ParameterValueError, UnknownParameterError, find_parameter
 from cipstack.scanner import Scanner, SyncScanner
 from tests.cli_errors import one_line_error
+from tests.fakes import ScriptedTarget
 from tests.library_support import adapter_process, run_cli, threaded_adapter
 
 ACG = catalog_for(259, 100)
@@ -100,3 +104,60 @@ def test_get_by_eds_name_on_the_command_line() -> None:
         done = run_cli("set", address, "Accel Time", "2500", "--eds", str(DRIVE_EDS))
     assert got.returncode == 0 and got.stdout == "Param4 Accel Time = 10000 ms\n", got.stderr
     assert done.returncode == 0 and done.stdout == "set Param4 Accel Time = 2500 ms\n", done.stderr
+
+
+# -- a value out of the parameter's range, by code or by path: refused before anything is sent ----------------
+def _scripted_acg() -> ScriptedTarget:
+    """A target that says it is an ACG (ListIdentity) and records every request; a Set is answered 0x08."""
+    record = IdentityRecord(259, 2, 100, (1, 1), 0, 1, "CENT")
+    return ScriptedTarget(identity=encode_identity_item(record, SockAddr(host="127.0.0.1", port=44818)))
+
+
+@pytest.mark.parametrize("value", ["7000", "6500"])
+def test_out_of_range_by_code_is_refused_in_its_unit_and_nothing_is_sent(value: str) -> None:
+    """Issue 52, item 4: 7000 s (raw 70000, beyond UINT) and 6500 s (a UINT, beyond the declared
+    0..60000) are both outside ACC's range: one line in the parameter's unit, exit 2, no Set sent."""
+    with _scripted_acg() as target:
+        done = run_cli("set", target.address, "ACC", value)
+        with SyncScanner(target.address) as drive, pytest.raises(BadRequest) as refused:
+            drive.set_parameter("ACC", float(value))
+        sets = target.services(0x10)
+    assert done.returncode == 2 and one_line_error(done) == "cipstack set: ACC (Acceleration Time) takes 0.0..6000.0 s"
+    assert isinstance(refused.value, ParameterValueError)
+    assert str(refused.value) == "ACC (Acceleration Time) takes 0.0..6000.0 s"
+    assert sets == []
+
+
+def test_out_of_range_by_path_is_refused_from_the_compact_declarations() -> None:
+    """``cipstack set HOST 0x2A/1/102 65000`` (the one-shot path, compact declarations): the range the
+    declaration gives, in its unit and raw, before sending; ``--type`` sets the declaration aside."""
+    with _scripted_acg() as target:
+        raw = run_cli("set", target.address, "0x2A/1/102", "65000")
+        scaled = run_cli("set", target.address, "0x2A/1/102", "6500", "--scaled")
+        assert target.services(0x10) == []
+        forced = run_cli("set", target.address, "0x2A/1/102", "65000", "--type", "UINT")
+        sent = target.services(0x10)
+    assert raw.returncode == 2 and one_line_error(raw) == (
+        "cipstack set: 0x2A/1/102 (Acceleration Time) takes 0.0..6000.0 s (raw 0..60000); "
+        "--type UINT sends 65000 anyway")
+    assert scaled.returncode == 2 and one_line_error(scaled) == (
+        "cipstack set: 0x2A/1/102 (Acceleration Time) takes 0.0..6000.0 s; --type UINT sends 6500 anyway")
+    assert [r.data for r in sent] == [(65000).to_bytes(2, "little")]   # sent as asked; the target says 0x08
+    assert forced.returncode == 1
+
+
+def test_the_range_is_worded_alike_by_code_and_on_the_keypad() -> None:
+    """One wording: ``cipstack set HOST dr.20`` (the catalog's declaration) and the keypad's
+    ``cipstack drive set-parameter dr.20`` (the HTTP API's and ``--param``'s check) say the same; an
+    enumeration lists its choices."""
+    with adapter_process("--factory") as (address, _):
+        port = address.rsplit(":", 1)[1]
+        by_code = run_cli("set", address, "dr.20", "500")
+        keypad = run_cli("drive", "set-parameter", "dr.20", "500", "--port", port)
+        choice = run_cli("set", address, "CM.23", "12")
+        assert run_cli("get", address, "dr.20").stdout == "dr.20 Max Freq = 60.00 Hz (6000)\n"
+    assert by_code.returncode == 2
+    assert one_line_error(by_code) == "cipstack set: dr.20 (Max Freq) takes 40.00..400.00 Hz"
+    assert keypad.returncode == 2 and one_line_error(keypad).endswith("dr.20 (Max Freq) takes 40.00..400.00 Hz")
+    assert choice.returncode == 2 and one_line_error(choice).startswith(
+        "cipstack set: CM.23 (Opt Parameter 14) takes 0..11 (0 instance 70, 1 instance 71, ")

@@ -97,7 +97,8 @@ def test_the_fixtures_in_a_users_suite(tmp_path: Path) -> None:
     out = result.stdout
     assert "7 passed, 1 error" in out, out + result.stderr
     assert "ERROR test_users.py::test_a_bad_marker_option" in out
-    assert "cip_adapter: unknown option colour; valid: profile, model, eds, params, host, settings" in out
+    assert ("cip_adapter: unknown option colour; valid: profile, model, eds, params, params_unsaved, host, "
+            "settings") in out
 
 
 def test_an_async_test_without_pytest_asyncio_is_told_what_it_needs(tmp_path: Path) -> None:

@@ -7,7 +7,8 @@ would cost it most of its time. Generated modules hold the declarations as rows 
 by ``python -m cipstack.devices.decoding`` from the declarations themselves and held equal to them
 by ``tests/test_decoding_data.py``. A row keeps what decoding a reply and writing a value use: id,
 name, type, access, unit, scale, offset, decimals, enumeration, whether Get_Attributes_All holds
-it; not the defaults, ranges and help the emulator serves.
+it, and the declared range (a value is checked against it before ``cipstack set`` sends it); not the
+defaults and help the emulator serves.
 """
 
 from __future__ import annotations
@@ -23,8 +24,9 @@ from .types import ArrayType, CipType, OctetString, RemainingBytes, StructType, 
 #: ``("octets", SIZE, NAME)``.
 TypeData = Any
 #: One attribute's declaration as data: id, name, type, access, unit, scale, offset, decimals,
-#: enumeration, in Get_Attributes_All.
-Row = tuple[int, str, TypeData, str, str, float, float, "int | None", "dict[int, str] | None", bool]
+#: enumeration, in Get_Attributes_All, minimum, maximum.
+Row = tuple[int, str, TypeData, str, str, float, float, "int | None", "dict[int, str] | None", bool,
+            "int | float | None", "int | float | None"]
 #: Classes as data: class id -> (class name, its instance attributes' rows).
 Classes = dict[int, tuple[str, list[Row]]]
 
@@ -69,9 +71,9 @@ def type_data(of: CipType) -> TypeData:
 
 def attribute_spec(row: Row) -> AttributeSpec:
     """The declaration a row holds (for decoding)."""
-    attribute, name, type_name, access, unit, scale, offset, decimals, enum, in_get_all = row
+    attribute, name, type_name, access, unit, scale, offset, decimals, enum, in_get_all, minimum, maximum = row
     return AttributeSpec(attribute, name, cip_type(type_name), Access(access), enum=enum, unit=unit, scale=scale,
-                         in_get_all=in_get_all, offset=offset, decimals=decimals)
+                         in_get_all=in_get_all, offset=offset, decimals=decimals, minimum=minimum, maximum=maximum)
 
 
 def row_of(spec: AttributeSpec) -> Row:
@@ -82,7 +84,7 @@ def row_of(spec: AttributeSpec) -> Row:
         raise ValueError(f"{spec.name}: {exc}") from None
     return (spec.id, spec.name, data, spec.access.value, spec.unit, float(spec.scale), float(spec.offset),
             spec.decimals, {int(k): str(v) for k, v in spec.enum.items()} if spec.enum is not None else None,
-            spec.in_get_all)
+            spec.in_get_all, spec.minimum, spec.maximum)
 
 
 def class_specs(classes: Classes) -> list[ClassSpec]:

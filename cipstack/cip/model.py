@@ -20,7 +20,7 @@ from typing import TYPE_CHECKING, Any, ClassVar, NamedTuple
 from .epath import ApplicationPath
 from .messages import MessageRouterRequest, Service
 from .status import CipError, GeneralStatus
-from .types import UINT, CipType
+from .types import UINT, CipType, IntegerType
 from .values import Scaling
 
 if TYPE_CHECKING:
@@ -88,6 +88,26 @@ class AttributeSpec(NamedTuple):
     def describe(self, value: Any) -> str:
         """A raw value as a person reads it (``5.0 s``): the scanner's ``Value`` text."""
         return self.scaling.text(value)
+
+    def out_of_range(self, raw: Any, label: str) -> str | None:
+        """Why ``raw`` is outside what this declares (its range, else its integer type's), worded in the
+        attribute's unit for a person about to write it (``Scaling.range_text``: ``ACC (Acceleration
+        Time) takes 0.0..6000.0 s``); None when it is inside, or not a number. A writer checks it before
+        sending; the target's own check is ``validate`` (0x09)."""
+        if isinstance(raw, bool) or not isinstance(raw, (int, float)):
+            return None
+        minimum, maximum = self.minimum, self.maximum
+        if isinstance(self.type, IntegerType):
+            minimum = self.type.minimum if minimum is None else minimum
+            maximum = self.type.maximum if maximum is None else maximum
+        if (minimum is None or raw >= minimum) and (maximum is None or raw <= maximum):
+            return None
+        scaling = self.scaling
+        if minimum is None or maximum is None:
+            bound = (f"at least {scaling.number(minimum)}" if minimum is not None
+                     else f"at most {scaling.number(maximum)}")
+            return f"{label} takes {bound}" + (f" {self.unit}" if self.unit else "")
+        return scaling.range_text(label, minimum, maximum)
 
 
 _INSTANCE_SERVICES = frozenset({Service.GET_ATTRIBUTES_ALL, Service.GET_ATTRIBUTE_SINGLE, Service.SET_ATTRIBUTE_SINGLE,

@@ -83,9 +83,21 @@ class Scaling(NamedTuple):
             return json.dumps(raw)
         if self.enum is not None and isinstance(raw, int) and raw in self.enum:
             return f"{raw} ({self.enum[raw]})"
-        value = self.engineering(raw)
-        number = f"{value:.{self.places}f}" if self.scaled and isinstance(value, (int, float)) else str(value)
+        number = self.number(raw)
         return f"{number} {self.unit}" if self.unit else number
+
+    def number(self, raw: Any) -> str:
+        """The engineering value of ``raw`` as a number alone (no unit): ``5.0`` for raw 50 at 0.1 s."""
+        value = self.engineering(raw)
+        return f"{value:.{self.places}f}" if self.scaled and isinstance(value, (int, float)) else str(value)
+
+    def range_text(self, label: str, minimum: Any, maximum: Any) -> str:
+        """What a parameter takes, in its own unit: ``ACC (Acc Time) takes 0.0..6000.0 s`` for the raw bounds
+        0..60000 at 0.1 s, with the choices of an enumeration. The one wording of a value out of a
+        declared range, wherever it is checked (the keypad, a write by code, ``cipstack set``)."""
+        unit = f" {self.unit}" if self.unit else ""
+        choices = f" ({', '.join(f'{raw} {name}' for raw, name in self.enum.items())})" if self.enum else ""
+        return f"{label} takes {self.number(minimum)}..{self.number(maximum)}{unit}{choices}"
 
 
 _UNSCALED = Scaling()

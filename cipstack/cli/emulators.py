@@ -62,15 +62,18 @@ def cmd_adapter(args: argparse.Namespace) -> int:
         else:
             log.info("saved parameters in %s (--factory starts without them)", args.state)
 
+    if args.param_unsaved and not args.param:
+        raise UsageError("--param-unsaved goes with --param CODE=VALUE")
     if args.param:
-        _apply_keypad_parameters(adapter, args.param)
+        _apply_keypad_parameters(adapter, args.param, kept=not args.param_unsaved)
     return _serve(adapter, args, "adapter", started)
 
 
-def _apply_keypad_parameters(adapter: Any, assignments: list[str]) -> None:
-    """``--param CODE=VALUE``: keypad parameters set before the network connects (the device's keypad)."""
+def _apply_keypad_parameters(adapter: Any, assignments: list[str], kept: bool = True) -> None:
+    """``--param CODE=VALUE``: keypad parameters set before the network connects (the device's keypad):
+    keypad entries a power-cycle keeps, or with ``--param-unsaved`` written as over communication."""
     try:
-        applied = adapter.apply_keypad_parameters(assignments)
+        applied = adapter.apply_keypad_parameters(assignments, kept)
     except ValueError as exc:
         raise UsageError(str(exc)) from None
     for line in applied:
@@ -237,7 +240,7 @@ def _adapter_from_eds(args: argparse.Namespace) -> int:
     from ..eds.emulated_device import EdsDeviceError, build_eds_device
 
     if (args.model is not None or args.state is not None or args.modbus_port is not None or args.param
-            or args.rtu is not None):
+            or args.param_unsaved or args.rtu is not None):
         raise UsageError("--model, --state, --modbus-port, --rtu and --param belong to --profile, not --eds")
     if not 0 <= args.port < 65536:
         raise UsageError(f"port {args.port} out of range")

@@ -281,14 +281,31 @@ def _parse_value(args: argparse.Namespace, cip_type: Any, spec: Any) -> Any:
         if getattr(args, "scaled", False):
             if spec is None:
                 raise UsageError(f"--scaled: {args.path} has no declared scale (give the raw value)")
-            return spec.scaling.to_raw(float(args.value))
-        if spec is not None and spec.scaling.scaled:
-            _refuse_engineering_value(args, spec)
-        value = cip_type.parse_text(args.value)
+            value = spec.scaling.to_raw(float(args.value))
+        else:
+            if spec is not None and spec.scaling.scaled:
+                _refuse_engineering_value(args, spec)
+            value = cip_type.parse_text(args.value)
+        if spec is not None and args.type is None:
+            _refuse_out_of_range(args, spec, value)
         cip_type.encode(value)
         return value
     except (ValueError, CipError, TypeError) as exc:
         raise UsageError(f"value {args.value!r} is not a valid {cip_type.name}: {exc}") from None
+
+
+def _refuse_out_of_range(args: argparse.Namespace, spec: Any, raw: Any) -> None:
+    """A value outside the attribute's declared range is refused before it is sent, in the attribute's
+    unit (``AttributeSpec.out_of_range``, the check a write by code makes), with the raw bounds where the
+    value was given raw; ``--type`` sends it anyway (the declaration set aside)."""
+    refusal = spec.out_of_range(raw, f"{args.path} ({spec.name})")
+    if refusal is None:
+        return
+    if spec.scaling.scaled and not getattr(args, "scaled", False):
+        low, high = spec.minimum, spec.maximum
+        if low is not None and high is not None:
+            refusal += f" (raw {low}..{high})"
+    raise UsageError(f"{refusal}; --type {spec.type.name} sends {args.value} anyway")
 
 
 def _refuse_engineering_value(args: argparse.Namespace, spec: Any) -> None:

@@ -180,9 +180,13 @@ def build_parser(command: str | None = None, texts: bool = True) -> argparse.Arg
                             "/dev/ttyUSB0 (needs pyserial: the rtu extra), or pty for a new pseudo-terminal whose "
                             "path is printed; line settings from CM.1, CM.3, CM.4, CM.5")
         p.add_argument("--param", action="append", metavar="CODE=VALUE",
-                       help="set a keypad parameter at start by its code, in the keypad's unit, not saved; "
-                            "repeatable: the ACG's keypad codes (drv=4 Frq=8: run from the network; ACC=2.5), "
-                            "an MX2/RX Digital Operator function code (A004=60 is 60.0 Hz, A001=2, P044=1.5)")
+                       help="enter a keypad parameter at start by its code, in the keypad's unit: kept at a "
+                            "power-cycle, as the drive keeps a keypad entry; repeatable: the ACG's keypad codes "
+                            "(drv=4 Frq=8: run from the network; ACC=2.5), an MX2/RX Digital Operator function "
+                            "code (A004=60 is 60.0 Hz, A001=2, P044=1.5)")
+        p.add_argument("--param-unsaved", action="store_true",
+                       help="write the --param values as over communication instead: not saved, so a "
+                            "power-cycle loses them")
         p.add_argument("--quiet", action="store_true", help="no status line on stdout")
         _add_http_arguments(p)
         _complete(p.add_argument("--scenario", type=Path, metavar="FILE.toml",

@@ -294,7 +294,17 @@ class DeviceService:
         return keypad
 
     def parameter(self, code: str) -> dict[str, Any]:
-        return dict(self._keypad().get(code))
+        keypad = self._keypad()
+        # A monitor (the output frequency, the output voltage) is read as of now, as ``parameters`` and
+        # ``status`` read it: the simulation is moved to the present first, once an event loop runs the
+        # device (before it serves, ``Adapter.keypad_parameter`` reads the device as it was built).
+        try:
+            now = self.runtime.now()
+        except RuntimeError:
+            now = None
+        if now is not None:
+            self.runtime.tick(now)
+        return dict(keypad.get(code))
 
     def set_parameter(self, code: str, value: object, origin: str = "python", peer: str | None = None
                       ) -> dict[str, Any]:

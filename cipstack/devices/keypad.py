@@ -10,8 +10,13 @@ parameter. What a family adds is declared once, in its own package: which codes 
 (``KeypadCodes``) and how its keypad reads and writes them (a ``Keypad``, which the device gives
 with ``Device.keypad()``), with the write rules of its manual.
 
-Values written from the keypad are not saved: like any value written but not saved, they are lost
-at a power loss (the manuals' save rules).
+The values given at start (``--param``) are keypad entries: a drive keeps what is entered on its
+keypad across a power loss, and loses only what was written over communication and not saved (ACG
+RS-485 manual, "Saving Parameters Defined by Communication"; ACG-ET2 manual, CM.94; the CompoNet
+manual's Table C-2 and section 3-3, where an operator setting is followed by a power OFF and ON). Each
+family keeps them as its keypad does (``Keypad.keep``). Given with ``kept=False`` (``--param-unsaved``)
+they are written as over communication instead, and a power-cycle loses them. A value set while the
+device runs (the HTTP API, the pytest plugin's ``set_parameter``) is such a write too: not saved.
 """
 
 from __future__ import annotations
@@ -23,6 +28,7 @@ from typing import Any
 
 from ..cip.epath import parse_application_path
 from ..cip.status import CipError
+from ..cip.values import Scaling
 from ..errors import BadRequest, NotFound, StateRefused
 from .registers import Register, RegisterError
 
@@ -112,10 +118,9 @@ def raw_value(register: Register, text: str) -> int:
     try:
         register.check(raw)
     except RegisterError:
-        unit = f" {register.unit}" if register.unit else ""
-        raise BadValue(f"{register.code} ({register.name}) takes {shown_value(register, register.raw_minimum)}.."
-                       f"{shown_value(register, register.raw_maximum)}{unit}"
-                       + (f" ({choices(register)})" if register.enum else "")) from None
+        scaling = Scaling(register.unit, register.scale, enum=register.enum or None)
+        raise BadValue(scaling.range_text(f"{register.code} ({register.name})", register.raw_minimum,
+                                          register.raw_maximum)) from None
     return raw
 
 
@@ -130,13 +135,16 @@ def choices(register: Register) -> str:
 
 def record(register: Register, raw: int) -> dict[str, Any]:
     """A parameter as JSON: code, name, value in the keypad's unit (text, exact), raw value, unit, its
-    communication address (None where it has none), and the meaning of an enumerated value."""
+    communication address (None where it has none), the meaning of an enumerated value, and
+    ``"simulated": false`` for a monitor the emulator does not simulate (it reads 0)."""
     address = register.address if register.address is not None and register.addressed else None
     result: dict[str, Any] = {"code": register.code, "name": register.name, "value": shown_value(register, raw),
                               "raw": raw, "unit": register.unit,
                               "address": f"0x{address:04X}" if address is not None else None}
     if register.enum and raw in register.enum:
         result["meaning"] = register.enum[raw]
+    if not register.simulated:
+        result["simulated"] = False
     return result
 
 
@@ -165,6 +173,11 @@ class Keypad:
         """The parameter a CIP Set of ``class_id``/``instance``/``attribute`` writes, where the family
         knows it (for the event stream); None elsewhere."""
         return None
+
+    def keep(self, written: list[Register], now: float) -> None:
+        """Keep the values of ``written``, just entered, as the keypad keeps its entries: a power-cycle
+        brings them back (until a later save or write changes them). A family's keypad overrides it;
+        the default keeps nothing."""
 
     def started(self, written: list[Register], now: float) -> None:
         """After the assignments given at start: what the device does with them before the network
@@ -219,9 +232,11 @@ class Keypad:
         self._write(register, raw, now, f"{register.code}={value.strip()}")
         return register, raw
 
-    def assign(self, assignments: Iterable[str], now: float) -> list[str]:
+    def assign(self, assignments: Iterable[str], now: float, kept: bool = True) -> list[str]:
         """``--param CODE=VALUE`` at start, in order; one line per value set, for the log. The first one
-        not taken raises (``UnknownCode``, ``BadValue``, ``WriteRefused``); nothing after it is written."""
+        not taken raises (``UnknownCode``, ``BadValue``, ``WriteRefused``); nothing after it is written.
+        ``kept``: keypad entries, which a power-cycle keeps (``keep``); False: written as over
+        communication, not saved, so a power-cycle loses them."""
         applied, written = [], []
         for text in assignments:
             register, raw = self.codes.parse(text)
@@ -229,6 +244,8 @@ class Keypad:
             written.append(register)
             applied.append(describe(register, raw))
         if written:
+            if kept:
+                self.keep(written, now)
             self.started(written, now)
         return applied
 

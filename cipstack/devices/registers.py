@@ -80,6 +80,9 @@ class Register:
     #: reached by its keypad code alone (CIP class 0x64), and ``address`` is only the key the
     #: device holds it under, never served at that address (Modbus, smart-scaling words).
     addressed: bool = True
+    #: False for a monitor the simulation has no model for (an output current needs a motor and a
+    #: load): it reads 0, and the front panel, ``record`` and the docs say "not simulated".
+    simulated: bool = True
 
     @property
     def signed(self) -> bool:

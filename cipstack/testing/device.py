@@ -40,6 +40,9 @@ class DeviceOptions:
     #: Keypad parameters set at start, as ``cipstack adapter --param`` takes them: the ACG's codes
     #: (``drv=4``), an MX2/RX Digital Operator's function codes (``A004=60``).
     params: Sequence[str] = ()
+    #: True: the ``params`` are written as over communication, not saved, so a power-cycle loses them
+    #: (``cipstack adapter --param-unsaved``); by default they are keypad entries, which it keeps.
+    params_unsaved: bool = False
     host: str = "127.0.0.1"
     state_path: Path | None = None
     settings: dict[str, Any] = field(default_factory=dict)
@@ -78,7 +81,7 @@ class EmulatedDevice:
                                       DeviceLimits(settings.max_sessions, settings.max_connections))
         adapter = Adapter(settings, device=device)
         if options.params:
-            adapter.apply_keypad_parameters(list(options.params))
+            adapter.apply_keypad_parameters(list(options.params), kept=not options.params_unsaved)
         await adapter.start()
         adapter.events  # noqa: B018 (watching starts now, so every event of the test is kept)
         return adapter

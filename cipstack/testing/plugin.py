@@ -11,12 +11,13 @@ import pytest
 from ..scanner import SyncScanner
 from .device import DeviceOptions, EmulatedDevice
 
-_OPTION_NAMES = ("profile", "model", "eds", "params", "host", "settings")
+_OPTION_NAMES = ("profile", "model", "eds", "params", "params_unsaved", "host", "settings")
 
 
 def pytest_configure(config: pytest.Config) -> None:
-    config.addinivalue_line("markers", "cip_adapter(profile='acg', model=None, eds=None, params=(), host, settings): "
-                                       "the device the cip_adapter fixture starts")
+    config.addinivalue_line("markers", "cip_adapter(profile='acg', model=None, eds=None, params=(), "
+                                       "params_unsaved=False, host, settings): the device the cip_adapter fixture "
+                                       "starts")
     config.addinivalue_line("markers", "cip_fleet(count=2, ...): how many devices cip_fleet starts, and which")
 
 

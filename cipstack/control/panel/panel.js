@@ -182,7 +182,8 @@ function showStatus(status) {
   $("output").textContent = hz === undefined ? "-" : `${Number(hz).toFixed(2)} Hz`;
   $("reference").textContent = referenceText(drive);
   $("direction").textContent = drive.direction || "-";
-  $("current").textContent = drive.output_current_a === undefined ? "-" : `${Number(drive.output_current_a).toFixed(1)} A`;
+  $("current").textContent = (drive.not_simulated || []).includes("output_current_a") ? "not simulated" :
+    drive.output_current_a === undefined ? "-" : `${Number(drive.output_current_a).toFixed(1)} A`;
   $("trip").textContent = drive.trip || "none";
   $("power").textContent = status.power;
   $("link").textContent = status.link;
@@ -372,7 +373,8 @@ async function loadParameters() {
   let found;
   try { found = await api("GET", panel.prefix + "/parameters"); }
   catch (error) { $("parameters-note").textContent = error.message; return; }
-  $("parameters-note").textContent = `${found.keypad}: a value is written as the keypad writes it (not saved).`;
+  $("parameters-note").textContent =
+    `${found.keypad}: a value is written with the keypad's rules, as over communication (not saved).`;
   const groups = $("parameter-groups");
   if (groups.childElementCount) {
     // Shown already: the values alone change, in place (a field being edited, and what the device
@@ -407,7 +409,8 @@ function parameterRow(p) {
   const tr = element("tr", null, {class: "parameter", "data-search": `${p.code} ${p.name}`.toLowerCase()});
   const value = element("input", null, {id, value: p.value, "aria-label": `${p.code} ${p.name}`});
   if (!p.writable) value.readOnly = true;
-  const note = element("span", p.meaning || "", {class: "refusal-or-meaning", role: "status"});
+  const note = element("span", p.meaning || (p.simulated === false ? "not simulated" : ""),
+                       {class: "refusal-or-meaning", role: "status"});
   const form = element("form");
   form.append(value, " ", note);
   form.addEventListener("submit", async (event) => {

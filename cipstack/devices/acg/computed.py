@@ -1,8 +1,21 @@
 """Computed registers: the monitors of the common and monitoring areas (ACG RS-485 manual) that the
-simulation produces rather than stores."""
+simulation produces rather than stores.
+
+The voltages follow from the running state (there is no motor model, so not the current, power or
+torque: those registers are declared ``simulated=False`` and read 0):
+
+* DC link voltage (0x000C, 0x0315, dCL): the rectified input, sqrt(2) x the input voltage while the
+  drive is powered, running or not. The input is the drive's class, 0x0002 "Drive input voltage"
+  (0 "230V level", 1 "460V level"; the emulated drive is 230 V 3-phase, 0x0302 = 0x0230).
+* Output voltage (0x000B, 0x0314, vOL): a linear V/f, the rated voltage bA.15 (Motor Data attribute 7;
+  0, its factory value here, takes the input voltage) times the output frequency over dr.20 Max Freq,
+  at most the rated voltage, 0 while the output is off. The ACG manuals name no base frequency (dr.18
+  is listed without a description), so the V/f line ends at the maximum frequency.
+"""
 
 from __future__ import annotations
 
+import math
 from collections.abc import Callable
 from typing import TYPE_CHECKING
 
@@ -12,6 +25,8 @@ from .registers import (
     ALIASES,
     CMD_SOURCE,
     FREQ_REF_SOURCE,
+    MAX_FREQUENCY,
+    RATED_VOLTAGE,
     SPEED_REFERENCE,
     FaultTripInformation,
     OperationDirection,
@@ -30,6 +45,12 @@ if TYPE_CHECKING:
 _CMD_SOURCE = CMD_SOURCE.address
 _FREQ_REF_SOURCE = FREQ_REF_SOURCE.address
 _SPEED_REFERENCE = SPEED_REFERENCE.address
+
+_MAX_FREQUENCY = MAX_FREQUENCY.address
+_RATED_VOLTAGE = RATED_VOLTAGE.address
+#: 0x0002 Drive input voltage (ACG RS-485 manual, Compatible Common Area): its levels in volts.
+_INPUT_VOLTAGE = {0: 230, 1: 460}
+_INPUT_VOLTAGE_LEVEL = 0x0002
 
 _SECONDS_PER_MINUTE = 60
 _SECONDS_PER_DAY = 86400
@@ -70,6 +91,23 @@ class ComputedRegisters:
 
     def _output_frequency(self) -> int:
         return round(abs(self._state.output_hz) * 100)
+
+    def _input_voltage(self) -> int:
+        return _INPUT_VOLTAGE.get(self._state.values[_INPUT_VOLTAGE_LEVEL], _INPUT_VOLTAGE[0])
+
+    def _dc_link_voltage(self) -> int:
+        """0x000C / 0x0315: sqrt(2) x the input voltage (325 V on the 230 V class), while powered."""
+        return round(math.sqrt(2) * self._input_voltage())
+
+    def _output_voltage(self) -> int:
+        """0x000B / 0x0314: V/f from 0 V at 0 Hz to the rated voltage at dr.20 Max Freq (module docstring)."""
+        state = self._state
+        if not state.output_on:
+            return 0
+        values = state.values
+        rated = values[_RATED_VOLTAGE] or self._input_voltage()
+        maximum = values[_MAX_FREQUENCY] / 100
+        return round(rated * min(1.0, abs(state.output_hz) / maximum)) if maximum > 0 else rated
 
     def _operation_status(self) -> int:
         """Common area 0x000E (ACG RS-485 manual)."""
@@ -189,6 +227,8 @@ class ComputedRegisters:
         computed: dict[int, Callable[[], int]] = {
             0x0006: self._operation_command_word,
             0x000A: self._output_frequency,
+            0x000B: self._output_voltage,
+            0x000C: self._dc_link_voltage,
             0x000E: self._operation_status,
             0x000F: self._fault_trip_information,
             0x0011: relays,
@@ -200,6 +240,8 @@ class ComputedRegisters:
             0x0311: self._output_frequency,
             0x0312: rpm,
             0x0313: lambda: state.hz_to_rpm(state.output_hz),
+            0x0314: self._output_voltage,
+            0x0315: self._dc_link_voltage,
             0x031A: poles,
             # The second motor's pole number is an M2 parameter the ACG manuals do not describe.
             0x031B: poles,
@@ -215,6 +257,8 @@ class ComputedRegisters:
             0x03E7: lambda: int(locks.hide_locked),
             0x03E8: lambda: int(locks.parameter_locked),
             0x1F09: rpm,
+            0x1F0A: self._dc_link_voltage,
+            0x1F0B: self._output_voltage,
             self._registers.by_code("CM.86").address: virtual_inputs,
             **{address: trip_bits(address) for address in (0x0330, 0x0331, 0x0332, 0x0333, 0x0335)},
             **{reg.STATUS_PARAMETER_BASE + i: parameter_word(f"CM.{31 + i}") for i in range(8)},

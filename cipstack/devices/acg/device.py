@@ -360,6 +360,8 @@ class AcgDevice(Device):
             "output_frequency_hz": drive.output_frequency / 100, "reference_hz": drive.speed_reference / 100,
             # In its register's unit and step (0x0009, 0.1 A: ACG RS-485 manual, Monitoring Area Parameter).
             "output_current_a": float(shown_value(OUTPUT_CURRENT, drive.read(OUTPUT_CURRENT.address))),
+            # What the panel shows "not simulated" beside: there is no motor or load model (registers.py).
+            "not_simulated": [] if OUTPUT_CURRENT.simulated else ["output_current_a"],
             "io_connections": len(self._io_connections),
             "trip": drive.trip.label if drive.trip is not None else None,
             "fault_code": drive.fault_code if drive.trip is not None else None,

@@ -33,8 +33,10 @@ Drive Run table's inputs), ``lost_command.CommandLossWatches``, ``virtual_inputs
 ``computed.ComputedRegisters`` (the monitors, and every register's read). ``AcgDrive`` composes them
 and holds the drive's public interface: time, speeds, status and register access.
 
-The simulation has no motor or load model: output current, voltage, power, torque and the
-analog inputs read 0. The monitor rpm is the synchronous speed 120 * f / poles.
+The simulation has no motor or load model: output current, power, torque, the inverter temperature
+and the analog inputs read 0 (the registers say ``simulated=False``). The output voltage is a V/f line
+and the DC link the rectified input (``computed``). The monitor rpm is the synchronous speed
+120 * f / poles.
 """
 
 from __future__ import annotations
@@ -185,6 +187,12 @@ class AcgDrive(TimedSimulation):
         after.fault_history = list(before.fault_history)
         drive._locks.hide_locked, drive._locks.parameter_locked = self._locks.hide_locked, self._locks.parameter_locked
         return drive
+
+    def keep_keypad_entries(self, addresses: list[int]) -> None:
+        """The values at ``addresses`` were entered on the keypad: a power cycle keeps them
+        (``memory.SavedParameters.keep``)."""
+        values = self._state.values
+        self._saving.keep({address: values[address] for address in addresses if address in values})
 
     def save_parameters(self) -> None:
         """Save every keypad parameter as it is now (what 0x03E0 0 -> 1 does)."""

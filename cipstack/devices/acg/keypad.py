@@ -4,7 +4,8 @@ A real ACG is made to run from the network on its keypad before any network clie
 drv = 4 and Frq = 8 ("Field Bus", ACG-ET2 manual). ``--param`` does the same for the emulator, by the
 keypad code and in the unit the keypad shows (``ACC=2.5`` is 2.5 s, raw 25 at scale 0.1). The
 values are written as the drive's own write rules allow (range, not while running, the parameter
-lock) and are not saved: like any value written but not saved, they last until a power loss.
+lock) and kept as keypad entries: a power cycle keeps them, where a value written over communication
+and not saved is lost (ACG RS-485 manual, "Saving Parameters Defined by Communication").
 """
 
 from __future__ import annotations
@@ -45,6 +46,9 @@ class AcgKeypad(Keypad):
     def write(self, register: Register, raw: int, now: float) -> None:
         drive = self._drive()
         drive.write(register.address, raw, max(now, drive.time))
+
+    def keep(self, written: list[Register], now: float) -> None:
+        self._drive().keep_keypad_entries([register.address for register in written if register.address is not None])
 
     def register_at(self, class_id: int, instance: int, attribute: int) -> Register | None:
         if class_id == _KEYPAD_CLASS:

@@ -47,6 +47,15 @@ class SavedParameters:
         """Save these values (address -> raw) on top of the saved ones."""
         self.persist({**self.saved, **values})
 
+    def keep(self, values: Mapping[int, int]) -> None:
+        """Keypad entries (address -> raw): a drive keeps what its keypad enters, where communication
+        writes are lost unless saved (ACG RS-485 manual, "Saving Parameters Defined by Communication"),
+        so a power cycle comes back with them. Kept in memory, not handed to the shell: the next save
+        writes them with the rest, and the emulator's command line enters them again at its next start."""
+        kept = {a: v for a, v in values.items() if (r := self._registers.get(a)) is not None and r.saved
+                and a not in ALIASES}
+        self.saved = {**self.saved, **kept}
+
     def persist(self, saved: dict[int, int]) -> None:
         """Hand a save to the shell; refused (``RegisterError`` SAVE_FAILED), nothing is saved."""
         if self.on_save is not None:

@@ -416,7 +416,7 @@ _OPERATION: list[Register] = [
     # The display codes Cur, RPM, dCL and vOL show the output current, motor speed, DC link and
     # output voltages, the monitors of 0x0310, 0x0312, 0x0315 and 0x0314.
     Register(0x1F08, "Cur", "Output current", access=R, scale=0.1, unit="A", group="operation", saved=False,
-             source=ADDRESS_TABLE),
+             source=ADDRESS_TABLE, simulated=False),
     Register(0x1F09, "RPM", "Motor rpm", access=R, unit="rpm", group="operation", saved=False,
              source=ADDRESS_TABLE),
     Register(0x1F0A, "dCL", "DC link voltage", access=R, unit="V", group="operation", saved=False,
@@ -597,13 +597,13 @@ _COMMON: list[Register] = [
     _alias(ACCEL_TIME, 0x0007, "Acceleration time", "common", COMMON_TABLE),
     _alias(DECEL_TIME, 0x0008, "Deceleration time", "common", COMMON_TABLE),
     Register(0x0009, "", "Output current", access=R, scale=0.1, unit="A", group="common", saved=False,
-             source=COMMON_TABLE),
+             source=COMMON_TABLE, simulated=False),
     Register(0x000A, "", "Output frequency", access=R, scale=0.01, unit="Hz", group="common", saved=False,
              source=COMMON_TABLE),
     Register(0x000B, "", "Output voltage", access=R, unit="V", group="common", saved=False, source=COMMON_TABLE),
     Register(0x000C, "", "DC link voltage", access=R, unit="V", group="common", saved=False, source=COMMON_TABLE),
     Register(0x000D, "", "Output power", access=R, scale=0.1, unit="kW", group="common", saved=False,
-             source=COMMON_TABLE),
+             source=COMMON_TABLE, simulated=False),
     Register(0x000E, "", "Operation status", access=R, group="common", saved=False, source=COMMON_TABLE,
              help="bits: OperationStatus"),
     Register(0x000F, "", "Fault trip information", access=R, group="common", saved=False, source=COMMON_TABLE,
@@ -659,14 +659,17 @@ _MONITOR: list[Register] = [
     _monitor(0x0306, "Drive operation frequency command source",
              help="B8-B15 operation command source, B0-B7 frequency command source"),
     *_reserved_range(0x0307, 0x030F, "monitor", MONITOR_TABLE),
-    _monitor(0x0310, "Output current", scale=0.1, unit="A"),
+    # No motor or load model: the current, power and torque the ACG manuals give no figure to simulate
+    # from (no no-load current, no load) read 0, declared "not simulated"; the inverter temperature and
+    # the energy counted from the power likewise.
+    _monitor(0x0310, "Output current", scale=0.1, unit="A", simulated=False),
     _monitor(0x0311, "Output frequency", scale=0.01, unit="Hz"),
     _monitor(0x0312, "Output rpm", unit="rpm"),
     _monitor(0x0313, "Motor feedback speed", type=INT, unit="rpm", help="-32768 rpm to 32767 rpm (directional)"),
     _monitor(0x0314, "Output voltage", unit="V"),
     _monitor(0x0315, "DC Link voltage", unit="V"),
-    _monitor(0x0316, "Output power", scale=0.1, unit="kW"),
-    _monitor(0x0317, "Output torque", scale=0.1, unit="%"),
+    _monitor(0x0316, "Output power", scale=0.1, unit="kW", simulated=False),
+    _monitor(0x0317, "Output torque", scale=0.1, unit="%", simulated=False),
     _monitor(0x0318, "PID reference", scale=0.1, unit="%"),
     _monitor(0x0319, "PID feedback", scale=0.1, unit="%"),
     _monitor(0x031A, "Number of poles of the first motor"),
@@ -694,9 +697,9 @@ _MONITOR: list[Register] = [
     *_reserved_range(0x032A, 0x032C, "monitor", MONITOR_TABLE),
     # 0x032D-0x032F: the names are garbled in the OCR text; read with their units they are the
     # inverter temperature and the power consumption in kWh and MWh, which 0x03EA initializes.
-    _monitor(0x032D, "Inverter temperature", unit="degC"),
-    _monitor(0x032E, "Power consumption", unit="kWh"),
-    _monitor(0x032F, "Power consumption", unit="MWh"),
+    _monitor(0x032D, "Inverter temperature", unit="degC", simulated=False),
+    _monitor(0x032E, "Power consumption", unit="kWh", simulated=False),
+    _monitor(0x032F, "Power consumption", unit="MWh", simulated=False),
     _monitor(0x0330, "Latch type trip information - 1", help="bits: LatchTrip1"),
     _monitor(0x0331, "Latch type trip information - 2", help="bits: LatchTrip2"),
     _monitor(0x0332, "Level type trip information", help="bits: LevelTrip"),

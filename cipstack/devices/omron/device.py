@@ -156,9 +156,9 @@ class OmronDevice(Device):
             self.connection,
             DiscreteInputPointObject(self, traits),
             DiscreteOutputPointObject(self, traits),
-            MotorDataObject(self, inverter_model.name, inverter_model.voltage_class),
+            motor_data := MotorDataObject(self, inverter_model.name, inverter_model.voltage_class),
             ControlSupervisorObject(self),
-            AcDcDriveObject(self),
+            AcDcDriveObject(self, motor_data),
             ModbusRegisterObject(self, self.inverter.registers),
             FunctionCodeObject(self, self.inverter.registers),
             UnitParameterObject(self),
@@ -557,6 +557,8 @@ class OmronDevice(Device):
             "speed_unit": self.inverter.speed_unit.value,
             "trip": f"E{status.trip_cause:02d}" if status.trip_cause else None,
             "connection_path": self.inverter.connection_path,
+            # What the panel shows "not simulated" for: no motor or load model (objects.AcDcDriveObject).
+            "not_simulated": ["output_current_a"],
         }
 
     def status_line(self) -> str:

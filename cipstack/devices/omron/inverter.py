@@ -396,6 +396,22 @@ class Inverter(TimedSimulation):
         self.advance(now)
         self._write(self._by_code(code), value, now)
 
+    def keep_operator_entries(self, codes: list[str]) -> None:
+        """The values of ``codes`` were entered on the Digital Operator: the EEPROM holds them, and a
+        power cycle comes back with them. The CompoNet manual sets the option board's parameters on the
+        operator and then has the system powered OFF and ON for them to take effect (section 3-3 Step 3),
+        and leaves out only what the network writes (section E-2-2 note: Function Code and Modbus Register
+        object writes are temporary until the ENTER command). Not a save through the option board:
+        Identity attribute 9 does not count it ("changes using the other Inverter interfaces (Serial,
+        Digital operator) will not influence this attribute", Table C-2). Kept in memory: the next EEPROM
+        save hands them to the shell with the rest."""
+        values = self._state.values
+        for code in codes:
+            parameter = self._by_code(code)
+            number = parameter.function_code_number
+            if parameter.saved and number is not None:
+                self._eeprom[number] = values[parameter.key]
+
     def read_function_code(self, number: int) -> int:
         """Class 0x65 by instance/attribute number (Table E-3)."""
         return self.read_code(self._code_of(number))

@@ -410,9 +410,17 @@ def speed_word(value: int) -> int:
 
 
 class AcDcDriveObject(BoundObject):
-    def __init__(self, board: OptionBoard) -> None:
+    """Table D-7. Output Voltage (11h) is simulated as a linear V/f: the Motor Data object's Rated
+    Voltage (Table D-2 attribute 7: the model's voltage class) at its Rated Frequency (attribute 9,
+    50 Hz), in proportion below it, at most the rated voltage above it, 0 while the output is off.
+    Current Actual (09h), Power Actual (0Fh) and Torque Actual Rel (77h), like the assemblies' output
+    current word, need a motor and its load, for which the CompoNet manual gives no figure: they are
+    not simulated and read 0 (the docs and the front panel say so)."""
+
+    def __init__(self, board: OptionBoard, motor_data: MotorDataObject) -> None:
         super().__init__(AC_DC_DRIVE_SPEC, board)
         inverter = board.inverter
+        self._motor_data = motor_data
 
         def status(name: str) -> Binding:
             return self.bound(lambda: int(getattr(inverter.status(), name)))
@@ -429,7 +437,7 @@ class AcDcDriveObject(BoundObject):
             speed_actual=self.bound(lambda: speed_word(inverter.status().speed_actual)),
             speed_ref=self.bound(lambda: speed_word(inverter.option_command.speed_reference),
                                  lambda value: board.command(speed_reference=value)),
-            current_actual=0, power_actual=0, output_voltage=0,
+            current_actual=0, power_actual=0, output_voltage=self.bound(self._output_voltage),
             accel_time=ramp("F002"), decel_time=ramp("F003"), ref_from_net=status("ref_from_net"),
             # d012 is a monitor: writing it is refused by the inverter (0x0E).
             torque_actual_rel=self.bound(lambda: inverter.read_code("d012"),
@@ -439,6 +447,15 @@ class AcDcDriveObject(BoundObject):
             torque_compensation_bias_rel=self.bound(lambda: inverter.option_command.torque_bias,
                                                     lambda value: self._torque(torque_bias=value)),
             at_zero_speed=status("zero_speed"))
+
+    def _output_voltage(self) -> int:
+        status = self.board.inverter.status()
+        if not status.running:
+            return 0
+        rated_voltage, rated_hz = int(self._motor_data.get(1, 7)), int(self._motor_data.get(1, 9))
+        if rated_hz <= 0:
+            return rated_voltage
+        return round(rated_voltage * min(1.0, status.output_frequency / 100 / rated_hz))
 
     def _torque(self, **value: int) -> None:
         if self.board.inverter.read_code("d060") != 0:

@@ -8,11 +8,14 @@ inverter's own rules (``Inverter.write_from_operator``): read-only monitors, the
 that are not run-mode editable while the output is on, torque-related ones outside d060 = 0. The
 Function Code object's limit on F001 (section E-2-2) is the network's, not the operator's.
 
-What the operator writes is not saved: it is in the inverter's memory until the ENTER command
-(0900h) stores it, and lost at a power loss (section E-2-2 note). Two codes are not taken here:
-b180 (the initialization) stores to EEPROM as it runs, which a keypad write of the emulator never
-does; and the operator does not change Identity attribute 9, which counts saves "through the Option
-Board interface" only (Table C-2).
+What is entered on the operator at start (``--param``) is kept: the manual sets the option board's
+parameters on the operator and then has the system powered OFF and ON for them to take effect
+(section 3-3 Step 3), and only what the network writes through the Function Code and Modbus Register
+objects is temporary until the ENTER command (0900h) stores it (section E-2-2 note). The operator
+does not change Identity attribute 9, which counts saves "through the Option Board interface" only
+(Table C-2). A value set while the inverter runs (the HTTP API) is written as over the network, not
+stored. b180 (the initialization) is not taken here: it stores every parameter as it runs, which the
+emulator does only when the network asks for it.
 """
 
 from __future__ import annotations
@@ -64,8 +67,8 @@ class DigitalOperator(Keypad):
     def write(self, register: Register, raw: int, now: float) -> None:
         if register.code in SAVING_CODES:
             raise RegisterError(RegisterRefusal.READ_ONLY, register.address or 0,
-                                f"{register.code} initializes and stores to EEPROM, and the emulator's keypad "
-                                "writes are never saved: write it over the network (class 0x65)")
+                                f"{register.code} initializes and stores every parameter to EEPROM: write it "
+                                "over the network (class 0x65)")
         device = self.device
         device.inverter.write_from_operator(register.code, raw, max(now, device.now))
 
@@ -79,6 +82,9 @@ class DigitalOperator(Keypad):
         except (KeyError, ValueError):
             pass
         return None
+
+    def keep(self, written: list[Register], now: float) -> None:
+        self.device.inverter.keep_operator_entries([register.code for register in written])
 
     def started(self, written: list[Register], now: float) -> None:
         """Set on the operator before the network connects: the option board starts with them (it
