@@ -339,7 +339,8 @@ def cmd_io(args: argparse.Namespace) -> int:
             if print_mode == "summary" and io.connection.input:
                 show(io.input)
             stats = io.statistics()
-            outputs_set = bool(assignments) and any(io.output.raw) and not args.idle
+            # A T->O of no data (a heartbeat: an owner that only writes) has no input to change.
+            outputs_set = bool(assignments) and any(io.output.raw) and not args.idle and bool(io.input.raw)
         summary = {"summary": {"duration_s": round(loop.time() - started, 3), **stats}}
         if args.json:
             print(json.dumps(summary), flush=True)

@@ -10,13 +10,21 @@ from dataclasses import replace
 from typing import TYPE_CHECKING
 
 from ..cip.epath import request_path
+from ..eds import refusals
+from ..eds.checker import ERROR, INFO, WARNING
+from ..eds.generator import LISTEN_ONLY_KIND
+from ..eds.refusals import ConnectionVerdict
 from .connections import Endpoint, Opened, Plan, forward_open_request, plans_of_eds, send_forward_open
 from .model import CheckSpec, Outcome, Verdict
 from .registry import Context, check, outcome
-from .wire import Probe
+from .wire import Exchange, Probe
 
 if TYPE_CHECKING:
-    from ..eds.interpret import EdsView
+    from ..eds.interpret import ConnectionInfo, EdsView
+
+#: A finding's severity of ``eds check`` as this battery's verdict: one judgement (``eds.refusals``)
+#: for both tools; a note neither fails nor warns, and a check that does not count is n/a here.
+VERDICTS = {ERROR: Verdict.FAIL, WARNING: Verdict.WARNING, INFO: Verdict.NOT_APPLICABLE}
 
 EDS_REFERENCE = "CIP Vol. 1 §7 (EDS)"
 
@@ -112,7 +120,9 @@ def assembly_sizes(ctx: Context, spec: CheckSpec, view: EdsView) -> Iterator[Out
 
 
 @check("eds.connection.open", "every class 1 ConnectionN opened and closed",
-       "Forward_Open with the connection's points, sizes and RPI succeeds, and its Forward_Close succeeds",
+       "Forward_Open with the connection's points, sizes and RPI succeeds, and its Forward_Close succeeds; a "
+       "connection the device refuses for its path while it has the assemblies and accepts another of the file's "
+       "connections of the same kind is its configuration (n/a), as is a listener with no owner to listen to",
        f"{EDS_REFERENCE} [Connection Manager] ConnectionN; CIP Vol. 1 §3-5.5")
 @_each_with_eds
 def connections_open(ctx: Context, spec: CheckSpec, view: EdsView) -> Iterator[Outcome]:
@@ -121,47 +131,79 @@ def connections_open(ctx: Context, spec: CheckSpec, view: EdsView) -> Iterator[O
     if not found:
         yield outcome(spec, Verdict.NOT_APPLICABLE, "the EDS declares no class 1 connection")
         return
+    infos = {f"Connection{c.number}": c for c in view.connections}
     probe = ctx.probe()
     endpoint = Endpoint(ctx, probe)
+    outcomes: list[Outcome | None] = []
+    #: Judged once every connection was tried (``eds.refusals``: whether another opened matters).
+    pending: list[tuple[int, Plan, Callable[..., ConnectionVerdict], list[Exchange]]] = []
+    opened_infos: list[ConnectionInfo] = []
     for plan in found:
+        info = infos[plan.name]
         before = len(probe.exchanges)
         reply, opened = send_forward_open(ctx, probe, endpoint, forward_open_request(plan))
-        owner = None
-        if opened is None and reply.status == 0x01 and reply.extended == 0x0119:
-            # Listen only (or input only) needs a connection that owns the data: open the file's
-            # exclusive owner of the same input first, as a configuration tool would.
-            owner = _open_owner(ctx, probe, endpoint, found, plan)
+        owner: Opened | None = None
+        owners_refused: list[tuple[ConnectionInfo, int, list[int]]] = []
+        listener = info.kind == LISTEN_ONLY_KIND
+        if opened is None and (listener or (reply.status == 0x01 and reply.extended == 0x0119)):
+            # Listen only (or input only, on some devices) needs a connection that owns the data: open
+            # the file's connection that produces it first, as a configuration tool would.
+            owner, owners_refused = _open_owner(ctx, probe, endpoint, found, infos, plan, info)
             if owner is not None:
                 reply, opened = send_forward_open(ctx, probe, endpoint, forward_open_request(plan))
-        exchanges = probe.exchanges[before:]
         if opened is None:
             if owner is not None:
                 owner.close()
-            verdict = Verdict.FAIL
-            note = ""
-            if reply.status == 0x01 and reply.extended in (0x012A, 0x012B) and _assemblies_exist(probe, plan):
-                # The assemblies are there and the device refuses to connect them now: which pair it
-                # connects is part of its configuration (the ACG-ET2's CM.23/CM.24 select it).
-                verdict = Verdict.WARNING
-                note = ": the assemblies exist; the device's present configuration refuses this connection"
-            yield outcome(spec, verdict, f"Forward_Open: {reply.describe()}{note}", exchanges, plan.name)
+            if reply.response is None:
+                outcomes.append(outcome(spec, Verdict.FAIL, f"Forward_Open: {reply.describe()}",
+                                        probe.exchanges[before:], plan.name))
+                continue
+            if listener and owner is None:
+                verdict = refusals.unheard(info, owners_refused)
+                outcomes.append(outcome(spec, VERDICTS[verdict.severity], verdict.message, probe.exchanges[before:],
+                                        plan.name))
+                continue
+            general, extended = reply.response.general_status, list(reply.response.extended_status)
+            exist = bool(extended) and extended[0] in refusals.PATH_REFUSALS and _assemblies_exist(probe, info)
+            pending.append((len(outcomes), plan, functools.partial(
+                refusals.refused, info, general, extended, assemblies_exist=exist), probe.exchanges[before:]))
+            outcomes.append(None)
             continue
         closing = opened.close()
         if owner is not None:
             owner.close()
-        yield outcome(spec, closing.status == 0, f"opened{' with its owner' if owner else ''}; Forward_Close: "
-                      f"{closing.describe()}", probe.exchanges[before:], plan.name)
+        if closing.status == 0:
+            opened_infos.append(info)
+        outcomes.append(outcome(spec, closing.status == 0, f"opened{' with its owner' if owner else ''}; "
+                                f"Forward_Close: {closing.describe()}", probe.exchanges[before:], plan.name))
+    for index, plan, judge, exchanges in pending:
+        verdict = judge(opened=opened_infos)
+        outcomes[index] = outcome(spec, VERDICTS[verdict.severity], verdict.message, exchanges, plan.name)
+    yield from (o for o in outcomes if o is not None)
 
 
-def _open_owner(ctx: Context, probe: Probe, endpoint: Endpoint, found: list[Plan], plan: Plan) -> Opened | None:
-    for owner in (p for p in found if p.exclusive_owner and p.to_point == plan.to_point):
-        for variant in (replace(owner, multicast=plan.multicast), owner):
-            _, opened = send_forward_open(ctx, probe, endpoint, forward_open_request(variant))
+def _open_owner(ctx: Context, probe: Probe, endpoint: Endpoint, found: list[Plan], infos: dict[str, ConnectionInfo],
+                plan: Plan, info: ConnectionInfo) -> tuple[Opened | None, list[tuple[ConnectionInfo, int, list[int]]]]:
+    """The connection that produces ``plan``'s input, opened: for a listener, the file's connections
+    that produce it by multicast (``refusals.owners_of``), asked for multicast; else its exclusive
+    owners. What refused each, when none opens."""
+    if info.kind == LISTEN_ONLY_KIND:
+        owners = [p for p in found if infos[p.name] in refusals.owners_of(info, infos.values())]
+        variants = [[replace(owner, multicast=True)] for owner in owners]
+    else:
+        owners = [p for p in found if p.exclusive_owner and p.to_point == plan.to_point]
+        variants = [[replace(owner, multicast=plan.multicast), owner] for owner in owners]
+    refused: list[tuple[ConnectionInfo, int, list[int]]] = []
+    for owner, tries in zip(owners, variants, strict=True):
+        reply = None
+        for variant in tries:
+            reply, opened = send_forward_open(ctx, probe, endpoint, forward_open_request(variant))
             if opened is not None:
-                return opened
-    return None
+                return opened, []
+        if reply is not None and reply.response is not None:
+            refused.append((infos[owner.name], reply.response.general_status, list(reply.response.extended_status)))
+    return None, refused
 
 
-def _assemblies_exist(probe: Probe, plan: Plan) -> bool:
-    points = [plan.to_point] if plan.heartbeat else [plan.ot_point, plan.to_point]
-    return all(probe.request(0x0E, request_path(0x04, point, 4)).status == 0 for point in points)
+def _assemblies_exist(probe: Probe, info: ConnectionInfo) -> bool:
+    return all(probe.request(0x0E, request_path(0x04, point, 4)).status == 0 for point in refusals.data_points(info))

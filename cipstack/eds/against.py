@@ -15,7 +15,10 @@ What is compared, each through the services the device has:
 * every class 1 ``ConnectionN``: opened as the file describes it (``Scanner.io_connection_from_eds``)
   and closed at once; a listen-only connection while a connection of the file that produces the
   same input by multicast is open. A refusal says who refused: the device (its status), or the
-  file, whose connection cannot be opened as it declares it (never sent).
+  file, whose connection cannot be opened as it declares it (never sent). A refusal by the device is
+  judged once every connection was tried, by ``refusals`` (as ``conform --eds`` judges it): a path
+  the device refuses while it has the assemblies and opened another connection of the file of the
+  same kind is its configuration (a note), with none of that kind opened a warning.
 
 A difference is an error finding of the checker's kind (a rule, a line of the file, a message);
 what the device refuses without saying the file is wrong (a service it does not serve, a state
@@ -30,8 +33,9 @@ from collections.abc import Awaitable, Callable
 from dataclasses import dataclass, field
 from typing import TYPE_CHECKING, Any, TypeVar
 
-from ..cip.status import CipError, ExtendedStatus, GeneralStatus, describe_status
+from ..cip.status import CipError, GeneralStatus, describe_status
 from ..cip.types import SHORT_STRING, UINT, USINT, IntegerType, RealType
+from . import refusals
 from .checker import ERROR, INFO, WARNING, Finding
 from .interpret import ConnectionInfo, ParamInfo, read_view
 from .model import EdsDocument
@@ -47,9 +51,6 @@ _DECLARED_NOT_OPENABLE = re.compile(r"Connection[0-9]+\b.*: skipped$")
 #: Statuses that say the attribute or instance is not there: the file names something the device lacks.
 _ABSENT = frozenset({GeneralStatus.PATH_DESTINATION_UNKNOWN, GeneralStatus.ATTRIBUTE_NOT_SUPPORTED,
                      GeneralStatus.OBJECT_DOES_NOT_EXIST, GeneralStatus.PATH_SEGMENT_ERROR})
-#: Forward_Open refusals of a connection path: the device does not offer these points (now).
-_PATH_REFUSALS = frozenset({ExtendedStatus.INVALID_CONSUMING_PATH, ExtendedStatus.INVALID_PRODUCING_PATH,
-                            ExtendedStatus.INCONSISTENT_PATH_COMBINATION})
 #: Identity attributes ``[Device]`` mirrors (eds.md: "must equal Identity attributes 1-4 and 7").
 _IDENTITY_ATTRIBUTES = ((1, "vendor_id", UINT), (2, "device_type", UINT), (3, "product_code", UINT),
                         (7, "product_name", SHORT_STRING))
@@ -173,9 +174,23 @@ async def _assembly(scanner: Scanner, keyword: str, instance: int, size: int, li
         _find(report, "live-assembly", line, f"{where} is {size} bytes in the file, {served} on the device")
 
 
+@dataclass
+class _Attempt:
+    """How opening one connection of the file went: opened, refused by the device (its status), or
+    a listen-only connection whose owners were all refused (each with its status)."""
+
+    connection: ConnectionInfo
+    opened: bool = False
+    refusal: CipError | None = None
+    owners_refused: list[tuple[ConnectionInfo, CipError]] = field(default_factory=list)
+
+
 async def _connection(scanner: Scanner, doc: EdsDocument, connection: ConnectionInfo, owners: list[ConnectionInfo],
-                      options: dict[str, Any], report: LiveReport) -> None:
+                      options: dict[str, Any], report: LiveReport) -> _Attempt | None:
+    """Open and close ``connection``; None when the attempt is a finding already (no answer, or the
+    file's declaration cannot be sent)."""
     where = f"Connection{connection.number} ({connection.name})"
+    attempt = _Attempt(connection)
 
     async def opened(number: int, multicast: bool | None, then: Callable[[], Awaitable[None]] | None) -> None:
         extra = dict(options)
@@ -189,8 +204,7 @@ async def _connection(scanner: Scanner, doc: EdsDocument, connection: Connection
 
     try:
         if connection.kind == "listen only":
-            candidates = [o for o in owners if o.t_o_point == connection.t_o_point and o.t_o_multicast]
-            refusals: list[str] = []
+            candidates = refusals.owners_of(connection, owners)
             listened: list[bool] = []
 
             async def listen() -> None:
@@ -203,39 +217,48 @@ async def _connection(scanner: Scanner, doc: EdsDocument, connection: Connection
                 except CipError as exc:
                     if listened:
                         raise   # the owner opened: the listener was refused
-                    refusals.append(f"Connection{owner.number}: {_status(exc)}")
+                    attempt.owners_refused.append((owner, exc))
                     continue
                 break
             else:
-                why = "; ".join(refusals) or "no connection of the file produces it by multicast"
-                _find(report, "live-connection", connection.line,
-                      f"{where}: listen only, and nothing produces input {connection.t_o_point} by multicast for "
-                      f"it to listen to ({why}): not opened", INFO)
-                return
+                return attempt   # nothing to listen to: judged with the rest
         else:
             await opened(connection.number, None, None)
     except CipError as exc:
-        points = {connection.t_o_point} | (set() if connection.heartbeat else {connection.o_t_point})
-        if exc.extended[:1] and exc.extended[0] in _PATH_REFUSALS and points <= report.sized:
-            # Both assemblies exist: the device offers other pairs now (the ACG-ET2 serves the pair
-            # its parameters select), which says nothing against the file.
-            _find(report, "live-connection", connection.line,
-                  f"{where}: Forward_Open refused by the device ({_status(exc)}); the device has assemblies "
-                  f"{', '.join(str(p) for p in sorted(points))} but does not offer this path now", WARNING)
-        else:
-            _find(report, "live-connection", connection.line,
-                  f"{where}: Forward_Open refused by the device ({_status(exc)})")
-        return
+        attempt.refusal = exc
+        return attempt
     except (OSError, asyncio.TimeoutError) as exc:
         _find(report, "live-connection", connection.line, f"{where}: no answer from the device ({type(exc).__name__}: "
                                                           f"{exc})")
-        return
+        return None
     except (ValueError, KeyError, TypeError) as exc:
         # Raised before anything is sent: the file's declaration is what cannot be opened.
         _find(report, "live-connection", connection.line, f"{where}: cannot be opened as the file declares it "
                                                           f"({exc}): not sent")
-        return
+        return None
     report.opened += 1
+    attempt.opened = True
+    return attempt
+
+
+def _judge(attempts: list[_Attempt], report: LiveReport) -> None:
+    """A finding for each connection not opened, judged once the whole file was tried (whether
+    another of its connections opened tells a configuration from a refusal: ``refusals``)."""
+    opened = [a.connection for a in attempts if a.opened]
+    for attempt in attempts:
+        connection = attempt.connection
+        where = f"Connection{connection.number} ({connection.name})"
+        if attempt.refusal is not None:
+            exc = attempt.refusal
+            verdict = refusals.refused(connection, exc.general, exc.extended,
+                                       assemblies_exist=refusals.data_points(connection) <= report.sized,
+                                       opened=opened)
+        elif not attempt.opened:
+            verdict = refusals.unheard(connection, [(owner, exc.general, exc.extended)
+                                                    for owner, exc in attempt.owners_refused])
+        else:
+            continue
+        _find(report, "live-connection", connection.line, f"{where}: {verdict.message}", verdict.severity)
 
 
 async def _guarded(step: Awaitable[T], report: LiveReport, what: str) -> T | None:
@@ -277,8 +300,9 @@ async def compare_with_device(doc: EdsDocument, scanner: Scanner, *, target_io_p
         options: dict[str, Any] = {"target_io_port": target_io_port, "timeout_multiplier": 4}
         owners = [c for c in view.connections if c.kind != "listen only"]
         report.connections = len(view.connections)
-        for connection in view.connections:
-            await _connection(scanner, doc, connection, owners, options, report)
+        attempts = [await _connection(scanner, doc, connection, owners, options, report)
+                    for connection in view.connections]
+        _judge([a for a in attempts if a is not None], report)
     report.findings.sort(key=lambda finding: finding.line)
     return report
 

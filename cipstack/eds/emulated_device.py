@@ -15,7 +15,8 @@
   otherwise an output when every parameter its members name is settable. Where a member carries a
   linked parameter whole (``assembly_schema``), an input's data shows the attribute and data
   written to an output sets it; other bytes are plain data, kept as written.
-* ``[Connection Manager]``: the class 1 offer: one exclusive owner per (output, input) pair, the
+* ``[Connection Manager]``: the class 1 offer: one exclusive owner per (output, input) pair (the
+  input a heartbeat point of size 0 where the owner only writes), the
   input-only and listen-only heartbeat points, the configuration instances, the triggers and the
   RPI range of the connections (the target's defaults where the file gives none), and
   ``[Capacity] MaxIOConnections``.
@@ -47,7 +48,7 @@ from ..errors import BadRequest
 from ..objects.assembly import AssemblyPoint
 from ..objects.identity import IdentityInfo
 from ..objects.tcpip import NetworkInterface
-from .interpret import EXCLUSIVE_OWNER_KIND, EdsIssue, EdsView, ParamInfo, assembly_schema, read_view
+from .interpret import EdsIssue, EdsView, ParamInfo, assembly_schema, read_view
 from .model import EdsDocument, FieldKind
 from .served import document_eds_file
 from .writer import encode_eds, format_eds
@@ -292,6 +293,7 @@ def _add_assemblies(device: EdsDevice, view: EdsView, issues: list[EdsIssue]) ->
     o_t_points = {c.o_t_point for c in view.connections if not c.heartbeat}
     t_o_points = {c.t_o_point for c in view.connections}
     heartbeats = {c.o_t_point for c in view.connections if c.heartbeat}
+    t_o_heartbeats = {c.t_o_point for c in view.connections if c.t_o_heartbeat}
     configs = {c.config for c in view.connections}
     points: dict[int, AssemblyPoint] = {}
     # An assembly that is a member of another (a module's data in a modular station) needs no instance.
@@ -304,7 +306,9 @@ def _add_assemblies(device: EdsDevice, view: EdsView, issues: list[EdsIssue]) ->
                                                   "not served"))
             continue
         if info.size == 0:
-            if info.instance not in heartbeats:
+            # A heartbeat point: an input-only or listen-only connection's O->T, served by the
+            # Connection Manager; an owner's T->O, served by _add_raw_points.
+            if info.instance not in heartbeats and info.instance not in t_o_heartbeats:
                 issues.append(EdsIssue(info.line, f"{info.keyword}: an assembly of size 0 that no connection uses as "
                                                   "its heartbeat: not served"))
             continue
@@ -343,15 +347,18 @@ def _add_raw_points(device: EdsDevice, view: EdsView, points: dict[int, Assembly
     data of that size: an output when a connection sends it O->T, else an input. A connection
     whose format field names an assembly gets none (that assembly's placement decides)."""
     for connection in view.connections:
-        wanted = [] if connection.t_o_assembly else [(connection.t_o_point, connection.t_o_size, False)]
+        wanted = [] if connection.t_o_assembly and not connection.t_o_heartbeat else [
+            (connection.t_o_point, connection.t_o_size, False)]
         if not connection.heartbeat and not connection.o_t_assembly:
             wanted.insert(0, (connection.o_t_point, connection.o_t_size, True))
         for instance, size, output in wanted:
-            # An exclusive owner whose T->O point is a heartbeat (198, 254: an output-only device) is
-            # legal: the target produces no data, only the connection's sequence count.
-            heartbeat_input = not output and size == 0 and connection.kind == EXCLUSIVE_OWNER_KIND
-            if instance in points or instance in heartbeats or (size <= 0 and not heartbeat_input) \
-                    or not 1 <= instance <= 0xFFFF:
+            # An exclusive owner whose T->O point is a heartbeat (198, 254: an output-only device, a
+            # controller's "write data" connection) is legal: the target produces no data, only the
+            # connection's sequence count. The point may be the O->T heartbeat of the file's
+            # input-only connections too: the Forward_Open's O->T point tells the two uses apart.
+            heartbeat_input = not output and connection.t_o_heartbeat
+            if instance in points or (instance in heartbeats and not heartbeat_input) \
+                    or (size <= 0 and not heartbeat_input) or not 1 <= instance <= 0xFFFF:
                 continue
             point = _point(device, instance, size, output, None, [], f"Connection{connection.number} data", False)
             points[instance] = point

@@ -27,10 +27,13 @@ from ..eip.wire.cm_messages import TriggerType
 from .generator import (
     EXCLUSIVE_OWNER,
     EXCLUSIVE_OWNER_KIND,
+    FORMAT_HEARTBEAT,
+    FORMAT_ZERO_LENGTH,
     INPUT_ONLY,
     INPUT_ONLY_KIND,
     LISTEN_ONLY,
     LISTEN_ONLY_KIND,
+    T_O_FORMAT_SHIFT,
     T_O_TYPE_SHIFT,
     TRANSPORT_CLASS_1,
     TRIGGER_SHIFT,
@@ -157,6 +160,13 @@ class ConnectionInfo:
     #: Field 2 bits 1 and 3: the O->T / T->O size is variable (up to the size above).
     o_t_variable: bool = False
     t_o_variable: bool = False
+
+    @property
+    def t_o_heartbeat(self) -> bool:
+        """An exclusive owner whose T->O carries no data (size 0): its T->O point is a heartbeat
+        (198, 254), as output-only devices and controllers' "write data" connections declare it. The
+        target produces packets of the sequence count alone, and the owner's O->T keeps the watchdog."""
+        return self.kind == EXCLUSIVE_OWNER_KIND and self.t_o_size == 0
 
     @property
     def heartbeat(self) -> bool:
@@ -570,7 +580,10 @@ def _rpi(item: Field | None, params: Mapping[str, ParamInfo]) -> tuple[int | Non
 
 
 def _connection(entry: Entry, number: int, params: Mapping[str, ParamInfo], assemblies: Mapping[str, AssemblyInfo],
-                issues: list[EdsIssue]) -> ConnectionInfo | None:
+                issues: list[EdsIssue], heartbeat_points: frozenset[int] = frozenset()) -> ConnectionInfo | None:
+    """One ``ConnectionN``; ``heartbeat_points``: the O->T points the file's input-only and
+    listen-only connections send their heartbeat to (an exclusive owner whose T->O is one of them
+    produces no data)."""
     keyword = entry.keyword
     if len(entry.fields) < 15:
         issues.append(EdsIssue(entry.line, f"{keyword} has {len(entry.fields)} fields, not 15: skipped"))
@@ -630,16 +643,29 @@ def _connection(entry: Entry, number: int, params: Mapping[str, ParamInfo], asse
             else (_int(entry.field(4)) or 0)
         kind = EXCLUSIVE_OWNER_KIND if o_t_data else INPUT_ONLY_KIND
 
+    # The file says the owner's T->O is a heartbeat: its T->O real-time format is heartbeat or zero
+    # length (field 2 bits 12-14, eds.md), or its T->O point is where the file's input-only or
+    # listen-only connections send their heartbeat. A size it leaves open is then 0, not a guess.
+    t_o_format = (parameters >> T_O_FORMAT_SHIFT) & 0x7
+    t_o_heartbeat = kind == EXCLUSIVE_OWNER_KIND and (
+        t_o in heartbeat_points or t_o_format in (FORMAT_HEARTBEAT, FORMAT_ZERO_LENGTH))
+
     def size(number: int, assembly: AssemblyInfo | None) -> int | None:
         if assembly is not None and not assembly.sized_by_connection:
             return assembly.size
         value = _int(entry.field(number))
         if value is not None:
             return value
+        heartbeat = number == 7 and t_o_heartbeat
+        given = entry.field(number)
+        if heartbeat and (given is None or given.kind is FieldKind.EMPTY):
+            return 0
         reference = _keyword(entry.field(number))
         param = params.get(reference) if reference else None
         if param is None or not isinstance(param.default, int):
             return None
+        if param.default == 0 and heartbeat:
+            return 0
         if param.default == 0 and isinstance(param.maximum, int) and param.maximum > 0:
             # Nothing mapped yet (a gateway's default): offered at the smallest size it allows.
             smallest = max(param.minimum if isinstance(param.minimum, int) else 0, 1)
@@ -678,11 +704,13 @@ def read_connections(doc: EdsDocument, params: Mapping[str, ParamInfo], assembli
     out: list[ConnectionInfo] = []
     if section is None:
         return out
-    for entry in section:
-        match = re.fullmatch(r"Connection([0-9]+)", entry.keyword)
-        if match is None:
-            continue
-        found = _connection(entry, int(match[1]), params, assemblies, issues)
+    numbered = [(entry, int(match[1])) for entry in section
+                if (match := re.fullmatch(r"Connection([0-9]+)", entry.keyword)) is not None]
+    # A first reading finds the heartbeat points (what it says is said again by the second).
+    first = [_connection(entry, number, params, assemblies, []) for entry, number in numbered]
+    heartbeats = frozenset(c.o_t_point for c in first if c is not None and c.kind != EXCLUSIVE_OWNER_KIND)
+    for entry, number in numbered:
+        found = _connection(entry, number, params, assemblies, issues, heartbeats)
         if found is not None:
             out.append(found)
     return out

@@ -118,6 +118,8 @@ EXPECTED: dict[str, Expected] = {
                  (37, "Param3, the T->O size of Connection1, defaults to 0: offered at 1 byte, the smallest "
                       "non-zero size it allows")],
         offered=[1], ethernetip=[1]),
+    # Controllers' "write data" owners whose T->O is the heartbeat 198 or 254 the input-only ones send to.
+    "field_write_data_heartbeat.eds": Expected(offered=[1, 2, 3, 4, 5, 6], ethernetip=[1, 2, 5]),
 }
 WITH_CONNECTIONS = [path for path in FILES if read_eds(path).get("Connection Manager")]
 
