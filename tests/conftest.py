@@ -30,6 +30,23 @@ def pytest_configure(config: pytest.Config) -> None:
         sys.dont_write_bytecode = False
 
 
+def _hypothesis_profiles() -> None:
+    """Under CI (``CI`` set, as .ci/run's environment has it), the property-based tests draw the same
+    examples on every run, as many as elsewhere: a failure there is the code's and comes back when
+    the run is repeated, never a draw's luck; and no example database is written into a clone thrown
+    away after the run. Elsewhere Hypothesis draws anew and keeps what failed in ``.hypothesis/``."""
+    try:
+        from hypothesis import settings
+    except ImportError:  # the runtime dependencies alone: no property-based test runs
+        return
+    settings.register_profile("ci", derandomize=True, database=None)
+    if os.environ.get("CI"):
+        settings.load_profile("ci")
+
+
+_hypothesis_profiles()
+
+
 @pytest.fixture(scope="session", autouse=True)
 def isolated_user_directories(tmp_path_factory: pytest.TempPathFactory) -> Iterator[None]:
     saved = {name: os.environ.get(name) for name in ("XDG_DATA_HOME", "XDG_RUNTIME_DIR")}

@@ -521,6 +521,8 @@ def test_python_ethernetip_runs_what_it_can_open(adapter: Adapter, monkeypatch: 
         finally:
             explicit.stopProduce()
             enip.stopIO()
+            # A session each: ended, as a well-behaved client ends it, or the device's table fills.
+            explicit.unregisterSession()
         assert received.get(explicit.toconnid, 0) > 10, f"Connection{number}: {received}"
 
 
