@@ -330,11 +330,11 @@ def _cli_reference() -> object:
 
 def _command_lines(parser: argparse.ArgumentParser, words: tuple[str, ...] = ()) -> list[tuple[str, ...]]:
     """Every command line the parser takes: ``("adapter",)``, ..., ``("drive", "trip")``, ..."""
+    from cipstack.cli.parser import subcommands
+
     found = []
-    for action in parser._actions:
-        if isinstance(action, argparse._SubParsersAction):
-            for name, sub in action.choices.items():
-                found += [(*words, name), *_command_lines(sub, (*words, name))]
+    for name, sub in subcommands(parser).items():
+        found += [(*words, name), *_command_lines(sub, (*words, name))]
     return found
 
 
