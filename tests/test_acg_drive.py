@@ -785,13 +785,12 @@ def test_advance_to_is_advance_then_next_deadline(steps) -> None:
 
 def test_advance_to_at_rest_moves_only_the_clock() -> None:
     d = AcgDrive()
-    d.advance_to(1.0)
-    assert d._at_rest() and d.time == 1.0
+    assert d.advance_to(1.0) is None and d.time == 1.0   # at rest: no deadline, the clock alone moves
     assert d.advance_to(0.5) is None and d.time == 1.0  # never backwards: it stays where it is
     d.write(DRV, 4, 1.0)
     d.write(FRQ, 8, 1.0)
     d.write(FREQUENCY_COMMAND, 6000, 1.0)
     d.set_run_command(True, False, 1.0)
-    assert not d._at_rest()                              # ramping: advance_to runs the ramp
+    assert d.next_deadline() is not None                 # ramping: advance_to runs the ramp
     assert d.advance_to(2.0) == pytest.approx(1.0 + 5.0)  # ACC 5.0 s to 60 Hz
     assert d.output_frequency == 1200

@@ -19,8 +19,9 @@ import pytest
 from cipstack.capture.synth import PcapWriter, TcpFlow, ethernet
 from cipstack.cip.epath import request_path
 from cipstack.cip.messages import MessageRouterRequest, Service
+from cipstack.cli.help_texts import COMMANDS
 from cipstack.cli.io import PRINT_MODES, parse_print
-from cipstack.cli.parser import build_parser, command_word
+from cipstack.cli.parser import arguments, build_parser, command_word, subcommands
 from cipstack.eip.wire.cpf import Item, ItemType, encode_items
 from cipstack.eip.wire.encapsulation import RR_PREFIX, Command, encode_frame
 from tests.optional import needs
@@ -38,11 +39,9 @@ def run(*args: str, **kwargs: object) -> subprocess.CompletedProcess[str]:
 def commands(parser: argparse.ArgumentParser, path: tuple[str, ...] = ()) -> Iterator[
         tuple[tuple[str, ...], argparse.ArgumentParser]]:
     """Every command's parser, by its path (``("drive", "trip")``), nested ones included."""
-    for action in parser._actions:
-        if isinstance(action, argparse._SubParsersAction):
-            for name, sub in action.choices.items():
-                yield (*path, name), sub
-                yield from commands(sub, (*path, name))
+    for name, sub in subcommands(parser).items():
+        yield (*path, name), sub
+        yield from commands(sub, (*path, name))
 
 
 def test_every_command_has_a_description_and_examples_that_parse() -> None:
@@ -69,9 +68,7 @@ def test_cipstack_alone_lists_every_command_with_its_line_and_exits_2() -> None:
     assert result.returncode == 2
     assert "Traceback" not in result.stderr and result.stdout == ""
     listed = dict(re.findall(r"^    (\w+) +(\S.*)$", result.stderr, re.MULTILINE))
-    parser = build_parser(None)
-    sub = next(a for a in parser._actions if isinstance(a, argparse._SubParsersAction))
-    expected = {choice.dest: choice.help for choice in sub._choices_actions}
+    expected = {name: COMMANDS[(name,)].help for name in subcommands(build_parser(None))}
     assert set(listed) == set(expected)
     for name, line in listed.items():
         assert expected[name].startswith(line), name
@@ -122,10 +119,9 @@ def test_a_parser_error_shows_the_command_s_usage_and_names_the_command(argv: li
 def test_a_default_the_help_names_is_the_parser_s_own() -> None:
     """Every option with a default shows it through ``%(default)s``; `discover` waits 2 s, not 5."""
     for path, parser in commands(build_parser(None)):
-        for action in parser._actions:
+        for action in arguments(parser):
+            # --help and --version (default SUPPRESS) and the choice of command (default None) go here too.
             if action.help in (None, argparse.SUPPRESS) or action.default in (None, False, [], argparse.SUPPRESS):
-                continue
-            if isinstance(action, (argparse._HelpAction, argparse._VersionAction, argparse._SubParsersAction)):
                 continue
             assert "%(default)s" in action.help, (path, action.option_strings)
     shown = run("discover", "--help").stdout
@@ -136,7 +132,7 @@ def test_a_default_the_help_names_is_the_parser_s_own() -> None:
 def test_the_print_modes_the_help_offers_are_the_ones_accepted() -> None:
     parser = build_parser("io")
     io = dict(commands(parser))[("io",)]
-    action = next(a for a in io._actions if "--print" in a.option_strings)
+    action = next(a for a in arguments(io) if "--print" in a.option_strings)
     text = action.help % {"default": action.default}
     assert action.metavar == "|".join(PRINT_MODES)
     for mode in PRINT_MODES:

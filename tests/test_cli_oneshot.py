@@ -10,22 +10,19 @@ import sys
 import pytest
 
 from cipstack.cli import oneshot
-from cipstack.cli.parser import build_parser, command_word
+from cipstack.cli.parser import arguments, build_parser, command_word, subcommands
 
 
 def command_parser(name: str) -> argparse.ArgumentParser:
-    parser = build_parser(name)
-    action = next(a for a in parser._actions if isinstance(a, argparse._SubParsersAction))
-    sub: argparse.ArgumentParser = action.choices[name]
-    return sub
+    return subcommands(build_parser(name))[name]
 
 
 @pytest.mark.parametrize("name", sorted(oneshot.COMMANDS))
 def test_the_tables_are_the_argparse_grammar(name: str) -> None:
     grammar = oneshot.COMMANDS[name]
     parser = command_parser(name)
-    positionals = [a.dest for a in parser._actions if not a.option_strings]
-    options = {a.option_strings[0]: a for a in parser._actions if a.option_strings
+    positionals = [a.dest for a in arguments(parser) if not a.option_strings]
+    options = {a.option_strings[0]: a for a in arguments(parser) if a.option_strings
                and a.dest not in ("help", "log_level")}
     assert positionals == list(grammar.positionals)
     assert {o for o, a in options.items() if a.nargs == 0} == set(grammar.flags)
@@ -36,7 +33,8 @@ def test_the_tables_are_the_argparse_grammar(name: str) -> None:
         assert (action.dest, action.default) == (dest, grammar.defaults[dest]), option
     assert parser.get_default("log_level") is argparse.SUPPRESS
     top = build_parser(name)
-    assert (top.get_default("log_level"), tuple(top._option_string_actions["--log-level"].choices)) == \
+    log_level = next(a for a in arguments(top) if "--log-level" in a.option_strings)
+    assert (top.get_default("log_level"), tuple(log_level.choices or ())) == \
            (oneshot.DEFAULT_LOG_LEVEL, oneshot.LOG_LEVELS)
 
 

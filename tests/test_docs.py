@@ -255,9 +255,12 @@ def test_the_readme_links_pages_that_read_where_it_is_read() -> None:
 def test_every_extra_is_named_where_the_install_is(path: Path) -> None:
     """A new user reads the extras where the install is: each extra of pyproject.toml is named there
     (``.[http]`` was not, and ``--http`` then said to install an extra nobody had listed)."""
-    from cipstack.params import _load_toml  # tomllib, or tomli on Python 3.10
+    if sys.version_info >= (3, 11):
+        import tomllib
+    else:
+        import tomli as tomllib
 
-    extras = _load_toml((ROOT / "pyproject.toml").read_text())["project"]["optional-dependencies"]
+    extras = tomllib.loads((ROOT / "pyproject.toml").read_text())["project"]["optional-dependencies"]
     text = path.read_text()
     missing = [name for name in extras if f".[{name}]" not in text]
     assert not missing, f"{_name(path)} does not name the extras {missing}"
@@ -330,11 +333,11 @@ def _cli_reference() -> object:
 
 def _command_lines(parser: argparse.ArgumentParser, words: tuple[str, ...] = ()) -> list[tuple[str, ...]]:
     """Every command line the parser takes: ``("adapter",)``, ..., ``("drive", "trip")``, ..."""
+    from cipstack.cli.parser import subcommands
+
     found = []
-    for action in parser._actions:
-        if isinstance(action, argparse._SubParsersAction):
-            for name, sub in action.choices.items():
-                found += [(*words, name), *_command_lines(sub, (*words, name))]
+    for name, sub in subcommands(parser).items():
+        found += [(*words, name), *_command_lines(sub, (*words, name))]
     return found
 
 

@@ -182,7 +182,7 @@ def test_factory_fleet_keeps_no_state_file(tmp_path: Path) -> None:
     """`cipstack fleet --factory`: every device from factory settings, no state file read or written
     (the devices' saves last until the fleet stops); with --state-dir it is one line, exit 2."""
     from cipstack.cli import build_parser
-    from cipstack.cli.fleet import _fleet_spec
+    from cipstack.cli.fleet import _fleet_spec  # internals: the spec the line makes, before any device starts
 
     args = build_parser().parse_args(["fleet", "--addresses", "127.77.9.1-127.77.9.2", "--device", "acg*2",
                                       "--factory"])

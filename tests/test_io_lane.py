@@ -219,7 +219,7 @@ def test_lane_works_when_the_epoll_descriptor_is_numbered_above_select_range() -
     try:
         loop = precise_event_loop()
         assert isinstance(loop, PreciseEventLoop)
-        assert loop.selector._selector.fileno() >= FD_SETSIZE  # type: ignore[attr-defined]
+        assert loop.selector.fileno() >= FD_SETSIZE
 
         async def scenario() -> tuple[list[float], list[bytes]]:
             listener = sender()
@@ -276,9 +276,9 @@ def test_class1_socket_asks_for_a_receive_buffer_that_outlasts_a_stall() -> None
     async def scenario() -> int:
         endpoint = await started(RecordingCore())
         try:
-            sock = endpoint._sock
-            assert sock is not None
-            return sock.getsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF)
+            size = endpoint.receive_buffer_size
+            assert size is not None
+            return size
         finally:
             await endpoint.close()
 

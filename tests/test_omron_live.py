@@ -200,7 +200,7 @@ async def test_class1_idle_and_timeout_actions() -> None:
                 await io.wait_input(lambda i: not i.faulted, timeout=5)
                 io.output.run_forward = True
                 await io.wait_input(lambda i: i.at_reference, timeout=5)
-                io._core.remove(io.connection)                                     # the scanner stops sending
+                io.stop_producing()                                                # the scanner stops sending
                 await until(lambda: _true(not adapter.io or not adapter.io.connections))
             status = device.inverter.status()                                      # P045 = 3: free run, no trip
             assert device.inverter.trip == 0 and status.output_frequency == 0 and not status.running

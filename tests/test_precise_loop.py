@@ -39,13 +39,13 @@ def test_an_unknown_python_is_refused_clearly() -> None:
 def test_a_loop_without_the_queues_is_refused() -> None:
     """A loop that keeps its ready queue elsewhere, as a later asyncio might."""
     loop = asyncio.SelectorEventLoop()
-    ready = loop._ready  # type: ignore[attr-defined]  # the private queue the check looks for
+    ready = loop._ready  # type: ignore[attr-defined]  # internals: the private queue check_python looks for
     try:
-        del loop._ready  # type: ignore[attr-defined]
+        del loop._ready  # type: ignore[attr-defined]  # internals: a Python without it, as check_python fears
         with pytest.raises(UnsupportedPythonError, match="asyncio's loop has no _ready in this Python"):
             check_python(loop=loop)
     finally:
-        loop._ready = ready  # type: ignore[attr-defined]
+        loop._ready = ready  # type: ignore[attr-defined]  # internals: put back for close()
         loop.close()
 
 

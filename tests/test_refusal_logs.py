@@ -100,14 +100,14 @@ def test_each_source_has_its_own_line_and_the_table_of_sources_is_bounded(
         assert not line("refused %s", "a", source="10.0.0.1")
         for index in range(3 * MAX_LOGGED_SOURCES):               # a flood from ever new sources
             line("refused %s", index, source=f"10.1.{index // 256}.{index % 256}")
-        assert len(line._sources) <= MAX_LOGGED_SOURCES + 1
+        assert len(line.sources) <= MAX_LOGGED_SOURCES + 1
         now[0] = 10.0
         assert line("refused %s", "c", source="10.0.0.1")
     messages = [r.getMessage() for r in caplog.records]
     # Two named sources and the 254 others that fit, then one line for every source past the table.
     assert len(messages) == MAX_LOGGED_SOURCES + 1 + 1
     assert messages[-1] == "refused c (1 more like it in the last 10 s)"
-    assert OTHER_SOURCES in line._sources
+    assert OTHER_SOURCES in line.sources
 
 
 @pytest.mark.skipif(not sys.platform.startswith("linux") or os.geteuid() != 0

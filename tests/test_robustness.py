@@ -285,7 +285,7 @@ class RunningAdapter:
         return self.inspect(lambda a: len(a.server.connections))
 
     def inbox_sizes(self) -> list[int]:
-        return self.inspect(lambda a: [len(p.connection._inbox) for p in a.server.connections
+        return self.inspect(lambda a: [p.connection.buffered_bytes for p in a.server.connections
                                        if p.connection is not None])
 
     def write_buffer_sizes(self) -> list[int]:

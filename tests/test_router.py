@@ -252,7 +252,7 @@ def test_attribute_readers_are_bounded() -> None:
         for attribute in range(1, 256):
             raw = bytes((0x0E, 0x03, 0x20, 0x70, 0x24, instance, 0x30, attribute))
             assert router.handle(raw, context) == b"\x8e\x00\x00\x00" + struct.pack("<H", attribute)
-    assert len(router._readers) == MAX_ATTRIBUTE_READERS
+    assert len(router._readers) == MAX_ATTRIBUTE_READERS  # internals: the router's own cache, seen nowhere else
 
 
 def test_a_failing_read_is_read_once(router: MessageRouter, caplog: pytest.LogCaptureFixture) -> None:

@@ -194,7 +194,7 @@ def test_oversized_frame_is_refused_and_connection_closed() -> None:
     replies = h.send(HEADER.pack(Command.SEND_RR_DATA, 65535, 0, 0, CTX, 0))
     assert [r[0].status for r in replies] == [0x0065]
     assert h.conn.closing
-    assert len(h.conn._inbox) == 0
+    assert h.conn.buffered_bytes == 0
 
 
 def test_frames_split_and_coalesced() -> None:
@@ -260,7 +260,7 @@ def test_a_repeated_frame_is_not_served_after_the_session_ends_nor_when_it_compl
     # data of a NOP, which has no reply.
     assert h.send(HEADER.pack(Command.NOP, len(polled), 0, 0, CTX, 0)) == []
     assert h.send(polled) == []
-    assert len(h.conn._inbox) == 0
+    assert h.conn.buffered_bytes == 0
     assert h.send(polled[:10]) == []
     [(header, _)] = h.send(polled[10:] + polled[:10])
     assert header.status == 0

@@ -229,6 +229,12 @@ class Analyzer:
         self._numbers = 0
         self._unknown: dict[tuple[bytes, int], int] = {}
 
+    @property
+    def buffered_bytes(self) -> int:
+        """Bytes of TCP streams held for reassembly: frames still incomplete and segments that came
+        ahead of a gap, over every stream (what a long capture costs in memory beyond its records)."""
+        return sum(len(s.buffer) + sum(map(len, s.ahead.values())) for s in self._streams.values())
+
     # -- frames ------------------------------------------------------------------------------------
 
     def feed(self, time: float, number: int, linktype: int, data: bytes) -> None:

@@ -76,6 +76,25 @@ def _complete(action: argparse.Action, kind: dict[str, str]) -> argparse.Action:
     return action
 
 
+def arguments(parser: argparse.ArgumentParser) -> tuple[argparse.Action, ...]:
+    """Every argument ``parser`` takes, in the order they were added: its positionals, its options
+    (``--help`` included) and its choice of command, for a tool that walks the command line (a
+    reference, a completion script, a check of the grammar). argparse offers no public list of them:
+    this is the one place that reads its own."""
+    return tuple(parser._actions)
+
+
+def subcommands(parser: argparse.ArgumentParser) -> dict[str, argparse.ArgumentParser]:
+    """The commands ``parser`` takes next, by name, in the order ``--help`` lists them: the commands
+    of ``cipstack`` for ``build_parser(None)``, its subcommands for a command's own parser (``drive``:
+    ``trip``...), none for a command that has no subcommand."""
+    found: dict[str, argparse.ArgumentParser] = {}
+    for action in arguments(parser):
+        if isinstance(action, argparse._SubParsersAction):
+            found.update(action.choices)
+    return found
+
+
 def command_word(argv: list[str]) -> str | None:
     """The command a command line names (``get`` in ``--log-level DEBUG get HOST 1/1/7``), or None."""
     words = iter(argv)

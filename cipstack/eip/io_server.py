@@ -224,6 +224,14 @@ class IoEndpoint:
         """Started and not closed since."""
         return self._sock is not None
 
+    @property
+    def receive_buffer_size(self) -> int | None:
+        """The receive buffer the kernel gave the endpoint's socket (``SO_RCVBUF``, bytes: Linux
+        reports twice what was asked, ``RECEIVE_BUFFER``, capped at ``net.core.rmem_max``), or None
+        when not open. Datagrams that come while the loop is held up wait there, or are lost."""
+        sock = self._sock
+        return None if sock is None else sock.getsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF)
+
     def stamp_arrivals(self) -> bool:
         """From now on, give the core each datagram with the time the kernel received it, not the
         time the loop read it: what a capture shows, whatever delayed this process (on loopback, the

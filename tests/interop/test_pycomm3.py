@@ -33,6 +33,7 @@ IDENTITY_ATTRIBUTES: dict[int, tuple[Any, Any]] = {
 
 TCPIP_CLASS = 0xF5
 INACTIVITY_TIMEOUT = 13
+CONNECTION_MANAGER_CLASS = 0x06
 
 
 def get_single(drv: CIPDriver, class_code: int, instance: int, attribute: int, data_type: Any = None,
@@ -54,6 +55,14 @@ def ok(tag: Any) -> Any:
     return tag.value
 
 
+def forward_opens(drv: CIPDriver) -> tuple[int, int]:
+    """The adapter's Connection Manager counters, read unconnected: its Open Requests (attribute 1)
+    and its rejects of every kind (Open Format, Resource and Other Rejects, attributes 2 to 4)."""
+    requests = ok(get_single(drv, CONNECTION_MANAGER_CLASS, 1, 1, UINT))
+    rejects = sum(ok(get_single(drv, CONNECTION_MANAGER_CLASS, 1, attribute, UINT)) for attribute in (2, 3, 4))
+    return requests, rejects
+
+
 @pytest.fixture
 def driver(adapter: PeerProcess) -> Iterator[CIPDriver]:
     drv = CIPDriver(adapter.address)
@@ -67,7 +76,7 @@ def driver(adapter: PeerProcess) -> Iterator[CIPDriver]:
 @pytest.fixture(params=[True, False], ids=["large-forward-open", "forward-open"])
 def connected_driver(request: pytest.FixtureRequest, adapter: PeerProcess) -> Iterator[CIPDriver]:
     drv = CIPDriver(adapter.address)
-    drv._cfg["extended forward open"] = request.param
+    drv._cfg["extended forward open"] = request.param  # internals: pycomm3 has no public switch for it
     drv.open()
     try:
         yield drv
@@ -112,9 +121,11 @@ def test_get_identity_attributes_all_unconnected(driver: CIPDriver) -> None:
 
 
 def test_get_identity_connected(connected_driver: CIPDriver) -> None:
+    requests, rejects = forward_opens(connected_driver)
     for attribute, (data_type, expected) in sorted(IDENTITY_ATTRIBUTES.items()):
         assert ok(get_single(connected_driver, 1, 1, attribute, data_type, connected=True)) == expected, attribute
-    assert connected_driver._target_is_connected, "pycomm3 did not open a connection"
+    # One Forward_Open (or Large_Forward_Open, as asked), accepted: the reads went over a connection.
+    assert forward_opens(connected_driver) == (requests + 1, rejects), "pycomm3 did not open a connection"
     raw = ok(get_single(connected_driver, 1, 1, 5, connected=True))
     assert len(raw) == 2
     # an error on the connection leaves it usable
@@ -209,11 +220,12 @@ def test_default_route_path_appends_two_bytes(driver: CIPDriver) -> None:
 def test_route_in_the_path(adapter: PeerProcess, large: bool) -> None:
     """``HOST:PORT/bp/0``: pycomm3 puts port 1 link 0 in the Forward_Open path and in Unconnected_Send."""
     drv = CIPDriver(f"{adapter.address}/bp/0")
-    drv._cfg["extended forward open"] = large
+    drv._cfg["extended forward open"] = large  # internals: pycomm3 has no public switch for it
     drv.open()
     try:
+        requests, rejects = forward_opens(drv)
         assert ok(get_single(drv, 1, 1, 7, SHORT_STRING, connected=True)) == IDENTITY["product_name"]
-        assert drv._target_is_connected
+        assert forward_opens(drv) == (requests + 1, rejects)
         tag = drv.generic_message(service=Services.get_attribute_single, class_code=1, instance=1, attribute=1,
                                   data_type=UINT, connected=False, unconnected_send=True)
         assert ok(tag) == IDENTITY["vendor_id"]
@@ -225,9 +237,11 @@ def test_forward_open_to_a_missing_slot_is_refused(adapter: PeerProcess, caplog:
     drv = CIPDriver(f"{adapter.address}/bp/3")
     drv.open()
     try:
+        requests, rejects = forward_opens(drv)
         with caplog.at_level("ERROR"), pytest.raises(Exception, match="did not connect"):
             get_single(drv, 1, 1, 7, SHORT_STRING, connected=True)
-        assert not drv._target_is_connected
+        requests_after, rejects_after = forward_opens(drv)
+        assert requests_after > requests and requests_after - rejects_after == requests - rejects  # all refused
         failures = [r.getMessage() for r in caplog.records if "forward_open failed" in r.getMessage()]
         assert failures and failures[0].endswith("(01, 312)"), failures
         # the session is still usable without a connection

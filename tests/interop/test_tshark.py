@@ -133,7 +133,7 @@ def pycomm3_exchange():
             route_path=bad_route).error
     for large in (True, False):
         drv = CIPDriver(ADAPTER)
-        drv._cfg["extended forward open"] = large
+        drv._cfg["extended forward open"] = large  # internals: pycomm3 has no public switch for it
         drv.open()
         try:
             result[f"connected_large_{large}"] = {

@@ -494,6 +494,12 @@ class IoConnectionHandle:
         """Run (True) or idle (False) in the O->T run/idle header."""
         self.connection.run = run
 
+    def stop_producing(self) -> None:
+        """Stop sending O->T data, with no Forward_Close: what the target sees of a scanner that lost
+        power or its cable. The target's connection times out and its timeout action runs; T->O data
+        is no longer taken. Leaving the ``io_connection`` block still sends the Forward_Close."""
+        self._core.remove(self.connection)
+
     async def updates(self) -> AsyncIterator[ProcessImage]:
         """Input data each time it changes; raises ``IoTimeoutError`` when the target goes silent."""
         queue = self.connection.updates

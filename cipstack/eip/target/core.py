@@ -290,6 +290,12 @@ class EncapsulationConnection:
         self._repeat_request = b""
         self._repeat_context = b""
 
+    @property
+    def buffered_bytes(self) -> int:
+        """Bytes held of a frame still incomplete (0 between whole frames): never more than a header
+        and the frame limit, whatever the peer sends, since a larger announced length closes."""
+        return len(self._inbox)
+
     # -- bytes in, bytes out ------------------------------------------------------------------------
     def receive(self, data: bytes, now: float) -> None:
         if self.closing:

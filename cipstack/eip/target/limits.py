@@ -153,6 +153,12 @@ class RateLimitedLog:
         self.written = 0
         self.held_back = 0
 
+    @property
+    def sources(self) -> tuple[Hashable, ...]:
+        """The sources kept apart now, oldest first: at most ``max_sources`` of their own, then
+        ``OTHER_SOURCES``, which those past the table share."""
+        return tuple(self._sources)
+
     def __call__(self, message: str, *args: Any, source: Hashable = None, now: float | None = None) -> bool:
         """Log ``message % args`` unless a line of ``source`` went out less than ``interval`` ago;
         True when logged."""
