@@ -208,6 +208,7 @@ def markdown_table(group: str) -> str:
             codes = ", ".join([*(f"0x{c.value:0{4 if c.value > 0xFF else 2}X} ({c.meaning})"
                                  + (" warning" if c.verdict is Verdict.WARNING else "") for c in spec.codes),
                                *(f"{b.name}: {b.meaning}" for b in spec.behaviours)])
-            rows.append(f"| `{spec.id}` | {cell(spec.title)} | {cell(spec.expected)} | {cell(codes) or '-'} | "
+            title = spec.title + (f" (only with `--allow-stress`: it {spec.stress})" if spec.stress else "")
+            rows.append(f"| `{spec.id}` | {cell(title)} | {cell(spec.expected)} | {cell(codes) or '-'} | "
                         f"{cell(spec.reference)} |")
     return "\n".join(rows)

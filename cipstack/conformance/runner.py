@@ -94,6 +94,10 @@ def _discover(context: Context, report: Report, points: tuple[int, int, int] | N
 
 
 def _run_check(context: Context, spec: CheckSpec, function: CheckFunction) -> list[Outcome]:
+    if spec.stress and not context.allow_stress:
+        # Declared once on the check: it exhausts what the device has (sessions, connections), and a
+        # default run leaves the device as found.
+        return [outcome(spec, Verdict.NOT_RUN, f"needs --allow-stress (this check {spec.stress})")]
     try:
         result = function(context, spec)
         return [result] if isinstance(result, Outcome) else list(result)
@@ -108,7 +112,8 @@ def _run_check(context: Context, spec: CheckSpec, function: CheckFunction) -> li
 def run(host: str, port: int = DEFAULT_PORT, *, eds: str | os.PathLike[str] | EdsDocument | None = None,
         groups: str | Iterable[str] | None = None, allow_writes: bool = False, allow_reset: bool = False,
         timeout: float = 5.0, connection_points: tuple[int, int, int] | None = None,
-        eds_dir: str | os.PathLike[str] | None = None, allow_motion: bool = False) -> Report:
+        eds_dir: str | os.PathLike[str] | None = None, allow_motion: bool = False,
+        allow_stress: bool = False) -> Report:
     """Run the conformance battery against ``host:port``.
 
     ``eds``: an EDS file (or a read ``EdsDocument``) of the target, which enables group ``eds`` and
@@ -117,12 +122,14 @@ def run(host: str, port: int = DEFAULT_PORT, *, eds: str | os.PathLike[str] | Ed
     the device's own EDS (File object), an EDS of ``eds_dir`` for its identity, the AC drive profile,
     bounded probing of its assemblies. ``groups``: the groups to run (default all). Nothing is
     written without ``allow_writes`` and the device is not reset without ``allow_reset``; the drive
-    profile's motion checks (``motion``) run the motor only with ``allow_motion``.
-    ``TargetUnreachable`` when the target does not accept a connection and a session.
+    profile's motion checks (``motion``) run the motor only with ``allow_motion``, and the checks that
+    exhaust the device's resources on purpose (``CheckSpec.stress``: 40 sessions at once) only with
+    ``allow_stress``. ``TargetUnreachable`` when the target does not accept a connection and a session.
     """
     selected = parse_groups(groups if groups is None or isinstance(groups, str) else list(groups))
     doc, view = _load_eds(eds)
-    context = Context(host, port, timeout, allow_writes, allow_reset, doc, view, allow_motion=allow_motion)
+    context = Context(host, port, timeout, allow_writes, allow_reset, doc, view, allow_motion=allow_motion,
+                      allow_stress=allow_stress)
     started = time.monotonic()
     _preflight(context)
     if (context.identity or {}).get("device_type") in DRIVE_DEVICE_TYPES:
@@ -133,7 +140,7 @@ def run(host: str, port: int = DEFAULT_PORT, *, eds: str | os.PathLike[str] | Ed
     report = Report(f"{host}:{port}", groups=selected, identity=context.identity,
                     options={"eds": os.fspath(eds) if isinstance(eds, (str, os.PathLike)) else None,
                              "allow_writes": allow_writes, "allow_reset": allow_reset, "allow_motion": allow_motion,
-                             "timeout": timeout})
+                             "allow_stress": allow_stress, "timeout": timeout})
     if doc is not None:
         report.options["connection_points"] = "the EDS given (--eds)"
     elif set(selected) & NEED_POINTS:

@@ -92,12 +92,21 @@ class FakeTarget:
     """The target on 127.0.0.1: TCP and UDP on one port, class 1 I/O on another UDP port."""
 
     def __init__(self, deviation: str | Iterable[str] | None = None, host: str = "127.0.0.1", name: bytes = NAME,
-                 opener_timeout: bool = False, variant: str | None = None, drive: bool = False) -> None:
+                 opener_timeout: bool = False, variant: str | None = None, drive: bool = False,
+                 tcp_limit: int | None = None) -> None:
         """``opener_timeout``: on a class 1 timeout, close the TCP session that opened the connection and
         keep the connection's ownership until a Forward_Close of its triad comes, as OpENer does.
         ``variant`` names a check whose other permitted answer this target gives (``VARIANTS``).
-        ``drive``: an AC drive (device type 2) with the profile's assemblies and drive objects."""
+        ``drive``: an AC drive (device type 2) with the profile's assemblies and drive objects.
+        ``tcp_limit``: abort, as stock OpENer's debug build does on an assertion at its 21st TCP
+        connection (``tcp_limit=20``), when one more TCP connection than this is open at once: the
+        listener and every connection closed, nothing answered any more (``aborted``)."""
         self.drive = drive
+        self.tcp_limit = tcp_limit
+        #: TCP connections open now, the most open at once, and whether the target aborted.
+        self.live_connections = 0
+        self.peak_connections = 0
+        self.aborted = False
         #: The checks this target deviates for (one, in the tests that fail one check; several, for the docs).
         self.deviations = {deviation} if isinstance(deviation, str) else set(deviation or ())
         #: The motor of the drive, moved by class 1 output 20/21 (``fake_drive``).
@@ -223,8 +232,25 @@ class FakeTarget:
                 conn, _ = self.tcp.accept()
             except (TimeoutError, OSError):
                 continue
+            with self._lock:
+                self.live_connections += 1
+                self.peak_connections = max(self.peak_connections, self.live_connections)
+                over = self.tcp_limit is not None and self.live_connections > self.tcp_limit
+            if over:
+                conn.close()
+                self._abort()
+                return
             conn.settimeout(0.05)
             self._start(self._serve, conn)
+
+    def _abort(self) -> None:
+        """The process is gone: no listener, no connection, no answer on any port."""
+        self.aborted = True
+        self._stop.set()
+        for connection in list(self.connections.values()):
+            connection.stop.set()
+        for sock in (self.tcp, self.udp):
+            sock.close()
 
     def _serve(self, conn: socket.socket) -> None:
         state = {"session": 0}
@@ -232,8 +258,9 @@ class FakeTarget:
         try:
             self._serve_frames(conn, state)
         finally:
-            if state["session"]:
-                with self._lock:
+            with self._lock:
+                self.live_connections -= 1
+                if state["session"]:
                     self._active_sessions -= 1
 
     def _serve_frames(self, conn: socket.socket, state: dict[str, int]) -> None:
