@@ -170,6 +170,9 @@ class Report:
     identity: dict[str, Any] | None = None
     duration_s: float = 0.0
     options: dict[str, Any] = field(default_factory=dict)
+    #: The target stopped answering: ``after`` (the check it went silent in or after, its finding; or
+    #: "the search for connection points"), ``reason``, and ``not_run``, how many checks that left out.
+    stopped: dict[str, Any] | None = None
 
     def __iter__(self) -> Iterator[Outcome]:
         return iter(self.outcomes)
@@ -196,4 +199,4 @@ class Report:
     def as_dict(self) -> dict[str, Any]:
         return {"target": self.target, "identity": self.identity, "groups": list(self.groups),
                 "options": self.options, "duration_s": round(self.duration_s, 3), "counts": self.counts(),
-                "passed": self.passed, "checks": [o.as_dict() for o in self.outcomes]}
+                "passed": self.passed, "stopped": self.stopped, "checks": [o.as_dict() for o in self.outcomes]}

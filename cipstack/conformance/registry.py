@@ -9,7 +9,7 @@ from dataclasses import dataclass, field
 from typing import TYPE_CHECKING, Any
 
 from .model import Behaviour, CheckSpec, Code, Exchange, Outcome, Verdict
-from .wire import Probe
+from .wire import Liveness, Probe
 
 if TYPE_CHECKING:
     from ..eds.interpret import EdsView
@@ -80,10 +80,12 @@ class Context:
     drive_faulted_at_start: bool | None = None
     #: Run the checks that exhaust the device's resources on purpose (``CheckSpec.stress``).
     allow_stress: bool = False
+    #: Whether the target still answers, shared by every probe of the run (None: not asked).
+    liveness: Liveness | None = None
 
     def probe(self, register: bool = True) -> Probe:
         """A new TCP connection (and session) to the target, closed after the check."""
-        probe = Probe(self.host, self.port, self.timeout)
+        probe = Probe(self.host, self.port, self.timeout, self.liveness)
         self.probes.append(probe)
         if register:
             probe.register()

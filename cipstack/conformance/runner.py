@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import contextlib
 import os
 import time
 from collections.abc import Iterable, Sequence
@@ -24,7 +25,7 @@ from .discovery import DRIVE_DEVICE_TYPES
 from .model import FINAL, GROUPS, CheckSpec, Outcome, Report, Verdict
 from .profile import faulted
 from .registry import CHECKS, RUNNERS, CheckFunction, Context, outcome
-from .wire import Probe, TargetUnreachable, frame
+from .wire import Liveness, Probe, TargetUnreachable, frame
 
 if TYPE_CHECKING:
     from ..eds.interpret import EdsView
@@ -93,20 +94,31 @@ def _discover(context: Context, report: Report, points: tuple[int, int, int] | N
         report.options["eds"] = found.eds_source
 
 
-def _run_check(context: Context, spec: CheckSpec, function: CheckFunction) -> list[Outcome]:
+def _run_check(context: Context, liveness: Liveness, spec: CheckSpec, function: CheckFunction) -> list[Outcome]:
     if spec.stress and not context.allow_stress:
         # Declared once on the check: it exhausts what the device has (sessions, connections), and a
         # default run leaves the device as found.
         return [outcome(spec, Verdict.NOT_RUN, f"needs --allow-stress (this check {spec.stress})")]
     try:
-        result = function(context, spec)
-        return [result] if isinstance(result, Outcome) else list(result)
+        # A stress check makes the target refuse on purpose: whether it is still there is asked after.
+        with liveness.hold() if spec.stress else contextlib.nullcontext():
+            result = function(context, spec)
+            outcomes = [result] if isinstance(result, Outcome) else list(result)
     except TargetUnreachable as exc:
-        return [outcome(spec, Verdict.FAIL, f"the target stopped answering: {exc}")]
+        outcomes = [outcome(spec, Verdict.FAIL, f"a connection to the target failed: {exc}")]
     except Exception as exc:  # a check that cannot finish is a failure of the target's
-        return [outcome(spec, Verdict.FAIL, f"the check could not finish: {type(exc).__name__}: {exc}")]
+        outcomes = [outcome(spec, Verdict.FAIL, f"the check could not finish: {type(exc).__name__}: {exc}")]
     finally:
         context.cleanup()
+    if all(o.verdict is Verdict.NOT_RUN for o in outcomes) or not liveness.confirm():
+        return outcomes
+    # The target went silent in this check or right after it: that is the finding, and the check's own
+    # verdicts (every request after it unanswered) are not.
+    seen = next((o.observed for o in outcomes if o.verdict is not Verdict.PASS), outcomes[-1].observed if outcomes
+                else "")
+    return [outcome(spec, Verdict.FAIL, f"the target stopped answering after this check: {liveness.silent}"
+                    + (f"; the check saw: {seen}" if seen else ""), [e for o in outcomes for e in o.exchanges])]
+
 
 
 def run(host: str, port: int = DEFAULT_PORT, *, eds: str | os.PathLike[str] | EdsDocument | None = None,
@@ -124,7 +136,9 @@ def run(host: str, port: int = DEFAULT_PORT, *, eds: str | os.PathLike[str] | Ed
     written without ``allow_writes`` and the device is not reset without ``allow_reset``; the drive
     profile's motion checks (``motion``) run the motor only with ``allow_motion``, and the checks that
     exhaust the device's resources on purpose (``CheckSpec.stress``: 40 sessions at once) only with
-    ``allow_stress``. ``TargetUnreachable`` when the target does not accept a connection and a session.
+    ``allow_stress``. A target that stops answering stops the run: the check after which it went
+    silent fails with that finding, every later one is not run (``Report.stopped`` says where and
+    why). ``TargetUnreachable`` when the target does not accept a connection and a session.
     """
     selected = parse_groups(groups if groups is None or isinstance(groups, str) else list(groups))
     doc, view = _load_eds(eds)
@@ -132,6 +146,7 @@ def run(host: str, port: int = DEFAULT_PORT, *, eds: str | os.PathLike[str] | Ed
                       allow_stress=allow_stress)
     started = time.monotonic()
     _preflight(context)
+    liveness = context.liveness = Liveness(host, port, timeout)
     if (context.identity or {}).get("device_type") in DRIVE_DEVICE_TYPES:
         # A drive: whether it is faulted now, so that a fault the run causes is told from one it had.
         with Probe(host, port, timeout) as probe:
@@ -144,19 +159,41 @@ def run(host: str, port: int = DEFAULT_PORT, *, eds: str | os.PathLike[str] | Ed
     if doc is not None:
         report.options["connection_points"] = "the EDS given (--eds)"
     elif set(selected) & NEED_POINTS:
-        _discover(context, report, connection_points, eds_dir)
+        try:
+            _discover(context, report, connection_points, eds_dir)
+        except TargetUnreachable:
+            if not liveness.confirm():
+                raise
+        if liveness.silent:
+            report.stopped = {"after": "the search for connection points", "reason": liveness.silent}
+    left_out = 0
+
+    def run_one(spec: CheckSpec, function: CheckFunction) -> None:
+        """Run one check, or, once the target stopped answering, say why it does not run."""
+        nonlocal left_out
+        if report.stopped is not None:
+            left_out += 1
+            report.outcomes.append(outcome(spec, Verdict.NOT_RUN,
+                                           f"the target stopped answering after {report.stopped['after']}"))
+            return
+        report.outcomes.extend(_run_check(context, liveness, spec, function))
+        if liveness.silent:
+            report.stopped = {"after": spec.id, "reason": liveness.silent}
+
     try:
         for group in selected:
             if group == FINAL:
                 continue
             for spec, function in RUNNERS.get(group, []):
-                report.outcomes.extend(_run_check(context, spec, function))
+                run_one(spec, function)
     finally:
         context.cleanup()
         # Whatever happened: the device as found (every point used opens again, every write restored),
         # checked whenever the run opened or wrote anything, whatever the groups selected.
         if FINAL in selected or context.accepted or context.restores or context.left_behind:
             for spec, function in RUNNERS[FINAL]:
-                report.outcomes.extend(_run_check(context, spec, function))
+                run_one(spec, function)
+    if report.stopped is not None:
+        report.stopped["not_run"] = left_out
     report.duration_s = time.monotonic() - started
     return report

@@ -53,6 +53,10 @@ SETTABLE = {(0x29, 3), (0x29, 4), (0x29, 5), (0x29, 12), (0x29, 17), (0x2A, 4), 
 MAX_SESSIONS = 12
 #: The message router's path: a class 3 connection's.
 ROUTER_PATH = bytes((0x20, 0x02, 0x24, 0x01))
+#: Where this target can go silent (``silent_after``): after answering the one request of
+#: ``router.bad_path`` (a reserved segment type), or within ``objects.identity.attributes``, after
+#: answering its read of Identity attribute 4 (attributes 5-7 then go unanswered).
+SILENCE_POINTS = ("router.bad_path", "objects.identity.attributes")
 
 
 def sockaddr(host: str, port: int, family: bytes = b"\x00\x02") -> bytes:
@@ -93,16 +97,28 @@ class FakeTarget:
 
     def __init__(self, deviation: str | Iterable[str] | None = None, host: str = "127.0.0.1", name: bytes = NAME,
                  opener_timeout: bool = False, variant: str | None = None, drive: bool = False,
-                 tcp_limit: int | None = None) -> None:
+                 tcp_limit: int | None = None, silent_after: str | None = None, silence: str = "hang",
+                 max_sessions: int = MAX_SESSIONS) -> None:
         """``opener_timeout``: on a class 1 timeout, close the TCP session that opened the connection and
         keep the connection's ownership until a Forward_Close of its triad comes, as OpENer does.
         ``variant`` names a check whose other permitted answer this target gives (``VARIANTS``).
         ``drive``: an AC drive (device type 2) with the profile's assemblies and drive objects.
         ``tcp_limit``: abort, as stock OpENer's debug build does on an assertion at its 21st TCP
         connection (``tcp_limit=20``), when one more TCP connection than this is open at once: the
-        listener and every connection closed, nothing answered any more (``aborted``)."""
+        listener and every connection closed, nothing answered any more (``aborted``); it grants
+        ``max_sessions`` sessions at once, and refuses the next with 0x0002.
+        ``silent_after``: one of ``SILENCE_POINTS``, where the target stops answering, as ``silence``
+        says: "hang" (a process that hangs: connections still open, nothing read or answered, no
+        connection accepted) or "close" (it closes its listener and every connection)."""
+        assert silent_after in (None, *SILENCE_POINTS) and silence in ("hang", "close")
+        self.silent_after, self.silence = silent_after, silence
+        #: It stopped answering (``silent_after``); ``_silence_due``: once the reply in flight is sent.
+        self.silent = False
+        self._silence_due = False
+        #: When (``time.monotonic()``) it stopped answering, or aborted (None: it did not).
+        self.silent_since: float | None = None
         self.drive = drive
-        self.tcp_limit = tcp_limit
+        self.tcp_limit, self.max_sessions = tcp_limit, max_sessions
         #: TCP connections open now, the most open at once, and whether the target aborted.
         self.live_connections = 0
         self.peak_connections = 0
@@ -228,6 +244,9 @@ class FakeTarget:
     # -- TCP ---------------------------------------------------------------------------------------------
     def _accept(self) -> None:
         while not self._stop.is_set():
+            if self.silent:  # hung: connections wait in the listen backlog, then are not even taken
+                self._stop.wait(0.05)
+                continue
             try:
                 conn, _ = self.tcp.accept()
             except (TimeoutError, OSError):
@@ -243,9 +262,24 @@ class FakeTarget:
             conn.settimeout(0.05)
             self._start(self._serve, conn)
 
+    def _silent_here(self, point: str) -> None:
+        """The request that ``point`` sends is being answered: fall silent once the reply is out."""
+        if self.silent_after == point:
+            self._silence_due = True
+
+    def _fall_silent(self) -> None:
+        self._silence_due = False
+        self.silent = True
+        self.silent_since = time.monotonic()
+        for connection in list(self.connections.values()):
+            connection.stop.set()  # no more class 1 production either
+        if self.silence == "close":
+            self._abort()
+
     def _abort(self) -> None:
         """The process is gone: no listener, no connection, no answer on any port."""
         self.aborted = True
+        self.silent_since = self.silent_since or time.monotonic()
         self._stop.set()
         for connection in list(self.connections.values()):
             connection.stop.set()
@@ -266,6 +300,8 @@ class FakeTarget:
     def _serve_frames(self, conn: socket.socket, state: dict[str, int]) -> None:
         with conn:
             for command, session, context, options, body in encapsulation_frames(conn, self._stop):
+                if self.silent:
+                    continue  # hung: read, never answered
                 if options:
                     continue  # discarded (wire.md)
                 try:
@@ -285,6 +321,8 @@ class FakeTarget:
                                  + answer)
                 except OSError:
                     return
+                if self._silence_due:
+                    self._fall_silent()
 
     def _frame(self, command: int, body: bytes, session: int, state: dict[str, int]) -> bytes | None:
         if command == 0x65:
@@ -298,7 +336,7 @@ class FakeTarget:
             if version != 1 and not self.deviates("encap.register_session.protocol_version"):
                 raise EncapStatus(0x0069)
             with self._lock:
-                if self._active_sessions >= MAX_SESSIONS:
+                if self._active_sessions >= self.max_sessions:
                     # No session slot: 0x0002 (insufficient memory); the deviating stack says "invalid length".
                     raise EncapStatus(0x0065 if self.deviates("encap.session_limit") else 0x0002)
                 self._active_sessions += 1
@@ -359,7 +397,7 @@ class FakeTarget:
                 data, peer = self.udp.recvfrom(2048)
             except (TimeoutError, OSError):
                 continue
-            if len(data) < 24:
+            if len(data) < 24 or self.silent:
                 continue
             command, _, _, _, context, _ = HEADER.unpack_from(data)
             if command == 0x63:
@@ -384,6 +422,7 @@ class FakeTarget:
         for pos in range(0, len(path), 2):
             kind = path[pos]
             if kind not in (0x20, 0x24, 0x30):
+                self._silent_here("router.bad_path")
                 if self.deviates("router.bad_path"):
                     return reply(service, 0x05), []
                 return reply(service, 0x04), []
@@ -409,6 +448,8 @@ class FakeTarget:
         if values is None:
             return reply(service, 0x08 if self.deviates("router.unknown_instance") else 0x05)
         if service == 0x0E:
+            if (class_id, instance, attribute) == (0x01, 1, 4):
+                self._silent_here("objects.identity.attributes")
             if attribute not in values:
                 return reply(service, 0x08 if self.deviates("router.unknown_attribute") else 0x14)
             if data and not self.deviates("router.too_much_data"):
