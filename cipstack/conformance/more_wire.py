@@ -272,9 +272,9 @@ def session_limit(ctx: Context, spec: CheckSpec) -> Outcome:
                 break
             time.sleep(0.1)
     limit = f"limit reached after {granted} ({refusal})" if refusal else "no limit reached"
-    return outcome(spec, not problems, "; ".join([*problems, f"{granted} sessions granted, {limit}", after_text]
-                                                  if problems else [f"{granted} sessions granted, {limit}",
-                                                                    after_text]), exchanges)
+    # No new session after them: nothing to say of it (no empty part in the sentence).
+    return outcome(spec, not problems, "; ".join(p for p in [*problems, f"{granted} sessions granted, {limit}",
+                                                             after_text] if p), exchanges)
 
 
 # -- Forward_Close ------------------------------------------------------------------------------------
