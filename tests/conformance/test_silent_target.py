@@ -111,3 +111,20 @@ def test_every_report_says_where_the_run_stopped(tmp_path: Path) -> None:
     top = html.index('<p class="stopped">')
     assert top < html.index('id="summary"')
     assert 'href="#check-router.bad_path"' in html[top:html.index('id="summary"')]
+
+
+def test_the_docs_show_what_the_opener_like_target_gives() -> None:
+    """docs/conformance.md's run against the OpENer-like target with --allow-stress, as the command
+    prints it today (its port and duration aside)."""
+    page = (Path(__file__).resolve().parents[2] / "docs" / "conformance.md").read_text()
+    section = page[page.index("## A target that stops answering"):page.index("## Safe by default")]
+    section = section[section.index("```text\n"):section.index("```\n", section.index("```text\n") + 8)]
+    with FakeTarget(opener_layout=True, tcp_limit=20, max_sessions=40) as target:
+        result = subprocess.run([sys.executable, "-m", "cipstack", "conform", target.address, "--allow-stress",
+                                 "--timeout", "2"], capture_output=True, text=True, timeout=120, check=False)
+    assert result.returncode == 1, result.stderr
+    printed = result.stdout.replace(target.address, "127.0.0.1:44818").splitlines()
+    shown = [line for line in section.splitlines()[1:] if line != "..." and not line.startswith("72 checks: ")]
+    assert shown and [line for line in shown if line not in printed] == []
+    summary = next(line for line in section.splitlines() if line.startswith("72 checks: "))
+    assert any(line.startswith(summary.split(" (")[0] + " (") for line in printed), printed[:3]
