@@ -74,6 +74,9 @@ def _preflight(context: Context) -> None:
 
 #: The groups that need connection points (or an EDS) to run.
 NEED_POINTS = {"cm", "class1", "eds"}
+#: What ``Report.stopped`` names when the target went silent before any check, while the battery
+#: looked for its connection points.
+DISCOVERY = "the search for connection points"
 
 
 def _discover(context: Context, report: Report, points: tuple[int, int, int] | None,
@@ -120,7 +123,6 @@ def _run_check(context: Context, liveness: Liveness, spec: CheckSpec, function: 
                     + (f"; the check saw: {seen}" if seen else ""), [e for o in outcomes for e in o.exchanges])]
 
 
-
 def run(host: str, port: int = DEFAULT_PORT, *, eds: str | os.PathLike[str] | EdsDocument | None = None,
         groups: str | Iterable[str] | None = None, allow_writes: bool = False, allow_reset: bool = False,
         timeout: float = 5.0, connection_points: tuple[int, int, int] | None = None,
@@ -165,7 +167,7 @@ def run(host: str, port: int = DEFAULT_PORT, *, eds: str | os.PathLike[str] | Ed
             if not liveness.confirm():
                 raise
         if liveness.silent:
-            report.stopped = {"after": "the search for connection points", "reason": liveness.silent}
+            report.stopped = {"after": DISCOVERY, "reason": liveness.silent}
     left_out = 0
 
     def run_one(spec: CheckSpec, function: CheckFunction) -> None:

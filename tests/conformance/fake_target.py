@@ -62,8 +62,9 @@ OPENER_OWNER, OPENER_INPUT_ONLY, OPENER_LISTEN_ONLY = (150, 100, 151), (152, 100
 OPENER_IDENTITY = (1, 12, 65001, (2, 3), b"OpENer PC")
 #: Where this target can go silent (``silent_after``): after answering the one request of
 #: ``router.bad_path`` (a reserved segment type), or within ``objects.identity.attributes``, after
-#: answering its read of Identity attribute 4 (attributes 5-7 then go unanswered).
-SILENCE_POINTS = ("router.bad_path", "objects.identity.attributes")
+#: answering its read of Identity attribute 4 (attributes 5-7 then go unanswered), or at the first
+#: request for the Assembly class (instance 0), which the search for connection points sends.
+SILENCE_POINTS = ("router.bad_path", "objects.identity.attributes", "the search for connection points")
 
 
 def sockaddr(host: str, port: int, family: bytes = b"\x00\x02") -> bytes:
@@ -469,6 +470,8 @@ class FakeTarget:
             return reply(service, 0x05)
         if (class_id, instance) == (0x02, 1) and self.deviates("objects.message_router"):
             return reply(service, 0x05)
+        if (class_id, instance) == (0x04, 0):
+            self._silent_here("the search for connection points")
         values = self.attributes.get((class_id, instance or 0))
         if self.motor is not None and class_id in (0x29, 0x2A):
             self.motor.sync(self.attributes[(0x29, 1)], self.attributes[(0x2A, 1)])

@@ -15,7 +15,8 @@ from xml.etree import ElementTree
 
 import pytest
 
-from cipstack.conformance import Report, Verdict, run
+from cipstack.conformance import Report, Verdict, check_ids, run
+from cipstack.conformance.runner import DISCOVERY
 
 from .fake_target import FakeTarget
 
@@ -62,6 +63,21 @@ def test_the_check_after_which_the_target_went_silent_is_named(point: str, silen
     with FakeTarget(silent_after=point, silence=silence) as target:
         report, after_silence = _run_until_silent(target)
     _assert_stopped_at(report, point)
+    assert after_silence < BOUND_S, after_silence
+
+
+@pytest.mark.parametrize("silence", ["hang", "close"])
+def test_a_target_silent_while_its_connection_points_are_sought_runs_no_check(silence: str) -> None:
+    """Without an EDS the battery looks for the connection points before the first check: a target
+    that falls silent then is named in ``stopped`` and no check runs."""
+    with FakeTarget(silent_after=DISCOVERY, silence=silence) as target:
+        report = run(target.host, target.port, timeout=TIMEOUT_S)
+        assert target.silent_since is not None
+        after_silence = time.monotonic() - target.silent_since
+    assert report.stopped is not None and report.stopped["after"] == DISCOVERY
+    assert report.stopped["not_run"] == len(report.outcomes) == len(check_ids())
+    assert {(o.verdict, o.observed) for o in report} == {(Verdict.NOT_RUN, f"the target stopped answering after "
+                                                                           f"{DISCOVERY}")}
     assert after_silence < BOUND_S, after_silence
 
 
