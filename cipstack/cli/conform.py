@@ -29,6 +29,9 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                    help="also run the AC drive profile's motion checks: they RUN THE MOTOR (forward at a low "
                         "speed reference, stop, fault reset, NetCtrl/NetRef, idle); the drive is stopped and its "
                         "sources restored at the end")
+    p.add_argument("--allow-stress", action="store_true",
+                   help="also run the checks that exhaust the device's resources on purpose (encap.session_limit "
+                        "opens 40 TCP connections and sessions at once): a device with fewer may stop or crash")
     p.add_argument("--strict", action="store_true",
                    help="warnings are failures: in the exit status and the JUnit report")
     p.add_argument("--json", action="store_true", help="the report as one JSON object on stdout")
@@ -80,7 +83,8 @@ def cmd_conform(args: argparse.Namespace) -> int:
     try:
         report = run(host, port, eds=eds, groups=groups, allow_writes=args.allow_writes,
                      allow_reset=args.allow_reset, timeout=args.timeout, connection_points=points,
-                     eds_dir=args.eds_dir, allow_motion=args.allow_motion)
+                     eds_dir=args.eds_dir, allow_motion=args.allow_motion,
+                     allow_stress=args.allow_stress)
     except TargetUnreachable as exc:
         print(f"cipstack conform: {exc}", file=sys.stderr)
         return EXIT_USAGE

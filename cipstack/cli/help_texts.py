@@ -370,7 +370,8 @@ COMMANDS: dict[tuple[str, ...], CommandText] = {
         "Run the conformance battery against any EtherNet/IP target and report, check by check, what it "
         "does against what the specification (and, with --eds, its EDS file) expects: the request sent, "
         "the reply, the reference and a verdict (pass, fail, warning, n/a, or not run when it needs an "
-        "--allow-* option not given). Groups: encap "
+        "--allow-* option not given or the target stopped answering before it: the check after which "
+        "it went silent is named and the run stops). Groups: encap "
         "(encapsulation), router (message router and errors), objects (required objects), cm (Connection "
         "Manager Forward_Open matrix), class1 (class 1 behaviour), eds (EDS against the device), profile "
         "(the AC drive profile's assemblies and attributes; with --allow-motion also its motion: run forward, "
@@ -382,10 +383,11 @@ COMMANDS: dict[tuple[str, ...], CommandText] = {
         "assemblies, and say which.\n\n"
         "Safe by default: nothing is written without --allow-writes, the device is not reset without "
         "--allow-reset, the motor is not run without --allow-motion (the drive is stopped and its "
-        "NetCtrl/NetRef and speed reference restored after each motion check, whatever happens), "
-        "requests are rate-bounded, every connection opened is closed on a live session "
-        "and every write is written back. Exit status 0 when no check fails, 1 when one fails, 2 for bad "
-        "arguments or a target that is unreachable or does not speak EtherNet/IP; with --strict a "
+        "NetCtrl/NetRef and speed reference restored after each motion check, whatever happens), the "
+        "checks that exhaust the device's resources on purpose (encap.session_limit: 40 sessions at once) "
+        "do not run without --allow-stress, requests are rate-bounded, every connection opened is closed "
+        "on a live session and every write is written back. Exit status 0 when no check fails, 1 when one "
+        "fails, 2 for bad arguments or a target that is unreachable or does not speak EtherNet/IP; with --strict a "
         "warning counts as a failure.",
         (("cipstack conform 127.0.0.1", "every group, the connection points found on the device"),
          ("cipstack conform 192.168.1.20 --eds drive.eds --junit conform.xml --html conform.html",

@@ -4,7 +4,9 @@
 with what the specification (and the target's EDS file) expects, and returns a ``Report`` of
 outcomes: pass, fail, warning or not applicable, each with the bytes sent and received. Safe by
 default: nothing is written without ``allow_writes``, the device is not reset without
-``allow_reset``, requests are rate-bounded and every connection opened is closed.
+``allow_reset``, nothing exhausts the device's resources without ``allow_stress``, requests are
+rate-bounded and every connection opened is closed. A target that stops answering stops the run, by
+the name of the check after which it went silent.
 """
 
 from __future__ import annotations

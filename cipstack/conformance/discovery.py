@@ -8,8 +8,11 @@ source it used. In order, the first that gives a point-to-point exclusive owner 
    major revision (the minor revision too, when a file matches it).
 4. The AC drive profile (Identity device type 2, or 0x13 for a DC drive): the output assemblies
    21, 20, 23, 22 with the inputs 71, 70, 73, 72, the extended forms first.
-5. Probing the Assembly object: the sizes (attribute 4) of instances ``PROBED_INSTANCES``, then
-   Forward_Opens of output/input candidates, at most ``MAX_PROBE_OPENS`` of them.
+5. Probing the Assembly object: the class's highest instance and instance count (class attributes
+   2 and 3), the sizes (attribute 4) of instances ``PROBED_INSTANCES`` up to that highest one (until
+   as many as the class counts are found), then Forward_Opens of output/input candidates with each
+   configuration instance the device may have (``configuration_candidates``: 1, the instance after
+   the output, the others); at most ``MAX_PROBE_OPENS``.
 
 Probing stays within these bounds: a few hundred Get_Attribute_Single requests and a few dozen
 Forward_Opens, each opened connection closed at once.
@@ -168,27 +171,95 @@ def profile_pair(ctx: Context, probe: Probe, endpoint: Endpoint, outputs: tuple[
     return []
 
 
-def _probed(ctx: Context, probe: Probe, endpoint: Endpoint) -> list[Plan]:
-    sizes = {i: s for i in PROBED_INSTANCES if (s := assembly_size(probe, i))}
-    outputs, inputs = list(sizes), list(sizes)
+def assembly_class(probe: Probe) -> tuple[int | None, int | None]:
+    """The Assembly class's highest instance and number of instances (class attributes 2 and 3, CIP
+    Vol. 1 §4-4.1): by Get_Attributes_All of instance 0, else Get_Attribute_Single of each; None
+    where the device does not say."""
+    every = probe.request(0x01, request_path(0x04, 0))
+    if every.status == 0 and len(every.data) >= 6:
+        _, highest, count = struct.unpack_from("<3H", every.data)
+        return highest, count
+    values: list[int | None] = []
+    for attribute in (2, 3):
+        reply = probe.request(0x0E, request_path(0x04, 0, attribute))
+        values.append(int(struct.unpack("<H", reply.data)[0]) if reply.status == 0 and len(reply.data) == 2
+                      else None)
+    return values[0], values[1]
+
+
+def assembly_sizes(probe: Probe) -> tuple[dict[int, int], str]:
+    """Every Assembly instance found and its data size (0: a data-less instance, such as a heartbeat
+    or a configuration point without data), and what was probed, in words."""
+    highest, count = assembly_class(probe)
+    instances = [i for i in PROBED_INSTANCES if highest is None or i <= highest]
+    if highest is not None and highest not in instances:
+        instances.append(highest)  # the highest instance exists, wherever it is
+    sizes: dict[int, int] = {}
+    for instance in instances:
+        size = assembly_size(probe, instance)
+        if size is not None:
+            sizes[instance] = size
+        if count is not None and len(sizes) >= count:
+            break  # the class says there are no more
+    said = "" if highest is None else f", up to the class's highest, {highest}"
+    return sizes, f"instances 1-8, 20-23, 70-73, 100-199{said}: {len(sizes)} found"
+
+
+def configuration_candidates(sizes: dict[int, int], output: int) -> list[int]:
+    """The configuration instances to try with ``output``, in order: 1, the one most devices take;
+    the instance right after the output, where OpENer's sample application and the layouts that
+    follow it put it (output 150, configuration 151); then the other instances the device has, those
+    with data first (a configuration assembly carries the configuration), then the data-less ones
+    (a configuration point without data)."""
+    others = sorted((i for i in sizes if i not in (CONFIG_INSTANCE, output + 1)), key=lambda i: (sizes[i] == 0, i))
+    return [CONFIG_INSTANCE, *([output + 1] if output + 1 in sizes else []), *others]
+
+
+#: Refusals that say the configuration instance is wrong whatever the points (CIP Vol. 1 Table
+#: 3-5.33): invalid segment in the connection path (OpENer's answer for a configuration instance it
+#: lacks), invalid configuration application path.
+CONFIG_REFUSED = (0x0315, 0x0129)
+#: Refusals another configuration instance may answer otherwise: an inconsistent application path
+#: combination (OpENer's for points it has but does not configure together), an invalid configuration
+#: size.
+CONFIG_SUSPECT = (0x012F, 0x0126)
+
+
+def _probed(ctx: Context, probe: Probe, endpoint: Endpoint, sizes: dict[int, int]) -> list[Plan]:
+    inputs = [i for i, size in sizes.items() if size]
+    # The outputs followed by an instance (their configuration, by the convention above) first.
+    outputs = sorted(inputs, key=lambda i: (i + 1 not in sizes, i))
+    ruled_out: set[int] = set()  # configuration instances refused whatever the points
     opens = 0
     for output in list(outputs):
         for input in list(inputs):
             if output == input or output not in outputs:
                 continue
-            if opens >= MAX_PROBE_OPENS:
-                return []
-            opens += 1
-            plan = _plan(f"probed {output}/{input}", output, input, sizes[output], sizes[input])
-            ok, extended = _open_closes(ctx, probe, endpoint, plan)
-            if ok:
-                return [plan]
-            # The refusal says which side is wrong: no more Forward_Opens for it.
-            if extended in (0x012A, 0x0127):
-                outputs.remove(output)
+            for config in configuration_candidates(sizes, output):
+                if config in (output, input) or config in ruled_out:
+                    continue
+                if opens >= MAX_PROBE_OPENS:
+                    return []
+                opens += 1
+                plan = _plan(f"probed {output}/{input}/{config}", output, input, sizes[output], sizes[input], config)
+                ok, extended = _open_closes(ctx, probe, endpoint, plan)
+                if ok:
+                    return [plan]
+                # The refusal says which part is wrong: no more Forward_Opens for it.
+                if extended in CONFIG_REFUSED:
+                    ruled_out.add(config)
+                    continue
+                if extended in (0x012A, 0x0127):
+                    outputs.remove(output)
+                    break
+                if extended in (0x012B, 0x0128):
+                    if input in inputs:
+                        inputs.remove(input)
+                    break
+                if extended not in CONFIG_SUSPECT:
+                    break  # not about the configuration: the next pair
+            if output not in outputs:
                 break
-            if extended in (0x012B, 0x0128) and input in inputs:
-                inputs.remove(input)
     return []
 
 
@@ -231,11 +302,13 @@ def discover(ctx: Context, points: tuple[int, int, int] | None = None,
             found.source, found.plans = "the AC drive profile (assemblies 20-23 and 70-73)", profile
             return found
         found.tried.append("no profile assembly pair opens")
-    probed = _probed(ctx, probe, endpoint)
+    sizes, probed_what = assembly_sizes(probe)
+    probed = _probed(ctx, probe, endpoint, sizes)
     if probed:
-        found.source, found.plans = f"probing the Assembly object (instances 1-8, 20-23, 70-73, 100-199; " \
-                                    f"{probed[0].ot_point}/{probed[0].to_point} opens)", probed
+        plan = probed[0]
+        found.source, found.plans = (f"probing the Assembly object ({probed_what}; {plan.ot_point}/{plan.to_point}, "
+                                     f"configuration {plan.config} opens)"), probed
         return found
-    found.tried.append("no probed assembly pair opens")
+    found.tried.append(f"no probed assembly pair opens ({probed_what})")
     found.plans = []
     return found

@@ -19,7 +19,8 @@ class Verdict(str, Enum):
     WARNING = "warning"
     NOT_APPLICABLE = "n/a"
     #: Not run because the option it needs was not given (--allow-writes, --allow-reset,
-    #: --allow-motion): the device may well have what it checks, unlike a check that does not apply.
+    #: --allow-motion, --allow-stress), or because the target stopped answering before it: the device
+    #: may well have what it checks, unlike a check that does not apply.
     NOT_RUN = "not run"
 
 
@@ -71,7 +72,9 @@ class Behaviour:
 @dataclass(frozen=True)
 class CheckSpec:
     """One check as declared: ``id`` is ``GROUP.WHAT[.DETAIL]``; ``codes``, every status the
-    specification permits as the answer (the check judges by them: one source for both)."""
+    specification permits as the answer (the check judges by them: one source for both); ``stress``,
+    for a check that exhausts a resource of the device on purpose (sessions, connections, a flood),
+    what it does in words: such a check runs only with ``allow_stress``."""
 
     id: str
     title: str
@@ -79,6 +82,7 @@ class CheckSpec:
     reference: str
     codes: tuple[Code, ...] = ()
     behaviours: tuple[Behaviour, ...] = ()
+    stress: str = ""
 
     @property
     def group(self) -> str:
@@ -152,6 +156,7 @@ class Outcome:
                                "verdict": c.verdict.value} for c in self.spec.codes],
                 "behaviours": [{"name": b.name, "meaning": b.meaning, "reference": b.reference}
                                for b in self.spec.behaviours],
+                "stress": self.spec.stress or None,
                 "observed": self.observed, "exchanges": [e.as_dict() for e in self.exchanges]}
 
 
@@ -165,6 +170,9 @@ class Report:
     identity: dict[str, Any] | None = None
     duration_s: float = 0.0
     options: dict[str, Any] = field(default_factory=dict)
+    #: The target stopped answering: ``after`` (the check it went silent in or after, its finding; or
+    #: "the search for connection points"), ``reason``, and ``not_run``, how many checks that left out.
+    stopped: dict[str, Any] | None = None
 
     def __iter__(self) -> Iterator[Outcome]:
         return iter(self.outcomes)
@@ -191,4 +199,4 @@ class Report:
     def as_dict(self) -> dict[str, Any]:
         return {"target": self.target, "identity": self.identity, "groups": list(self.groups),
                 "options": self.options, "duration_s": round(self.duration_s, 3), "counts": self.counts(),
-                "passed": self.passed, "checks": [o.as_dict() for o in self.outcomes]}
+                "passed": self.passed, "stopped": self.stopped, "checks": [o.as_dict() for o in self.outcomes]}

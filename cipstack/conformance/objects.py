@@ -4,6 +4,7 @@ and packet-enip.c decode each attribute with the type used here)."""
 
 from __future__ import annotations
 
+import contextlib
 import struct
 import time
 from collections.abc import Callable
@@ -176,12 +177,14 @@ def identity_reset(ctx: Context, spec: CheckSpec) -> Outcome:
         return outcome(spec, False, reply.describe(), probe.exchanges)
     deadline = time.monotonic() + 30.0
     time.sleep(0.5)
-    while time.monotonic() < deadline:
-        try:
-            ctx.probe()
-            return outcome(spec, True, "reset accepted; the device came back", probe.exchanges)
-        except TargetUnreachable:
-            time.sleep(0.5)
+    # A device that resets is away for a while on purpose: not silent (the runner asks after the check).
+    with ctx.liveness.hold() if ctx.liveness is not None else contextlib.nullcontext():
+        while time.monotonic() < deadline:
+            try:
+                ctx.probe()
+                return outcome(spec, True, "reset accepted; the device came back", probe.exchanges)
+            except TargetUnreachable:
+                time.sleep(0.5)
     return outcome(spec, False, "reset accepted, but the device did not come back in 30 s", probe.exchanges)
 
 

@@ -9,7 +9,7 @@ from dataclasses import dataclass, field
 from typing import TYPE_CHECKING, Any
 
 from .model import Behaviour, CheckSpec, Code, Exchange, Outcome, Verdict
-from .wire import Probe
+from .wire import Liveness, Probe
 
 if TYPE_CHECKING:
     from ..eds.interpret import EdsView
@@ -28,11 +28,12 @@ RUNNERS: dict[str, list[tuple[CheckSpec, CheckFunction]]] = {}
 
 
 def check(id: str, title: str, expected: str, reference: str, codes: Iterable[Code] = (),
-          behaviours: Iterable[Behaviour] = ()) -> Callable[[CheckFunction], CheckFunction]:
+          behaviours: Iterable[Behaviour] = (), stress: str = "") -> Callable[[CheckFunction], CheckFunction]:
     """Declare a check and register the function that runs it; ``codes``: every status the
     specification permits as the answer, each with its reference; ``behaviours``: likewise, where
-    the check judges what the target does."""
-    spec = CheckSpec(id, title, expected, reference, tuple(codes), tuple(behaviours))
+    the check judges what the target does; ``stress``: what the check exhausts on purpose, in words
+    ("opens ..."), for a check that may take a device down: it runs only with ``allow_stress``."""
+    spec = CheckSpec(id, title, expected, reference, tuple(codes), tuple(behaviours), stress)
     if id in CHECKS:
         raise ValueError(f"check {id} declared twice")
     CHECKS[id] = spec
@@ -77,10 +78,14 @@ class Context:
     allow_motion: bool = False
     #: For a drive: whether it was faulted when the run began (None: not a drive, or not read).
     drive_faulted_at_start: bool | None = None
+    #: Run the checks that exhaust the device's resources on purpose (``CheckSpec.stress``).
+    allow_stress: bool = False
+    #: Whether the target still answers, shared by every probe of the run (None: not asked).
+    liveness: Liveness | None = None
 
     def probe(self, register: bool = True) -> Probe:
         """A new TCP connection (and session) to the target, closed after the check."""
-        probe = Probe(self.host, self.port, self.timeout)
+        probe = Probe(self.host, self.port, self.timeout, self.liveness)
         self.probes.append(probe)
         if register:
             probe.register()

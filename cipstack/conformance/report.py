@@ -32,6 +32,16 @@ def summary_line(report: Report) -> str:
     return f"{len(report.outcomes)} checks: {_counts_text(report.outcomes)} ({report.duration_s:.1f} s)"
 
 
+def stopped_line(report: Report) -> str:
+    """Where the run stopped because the target stopped answering ("" when it did not)."""
+    stopped = report.stopped
+    if stopped is None:
+        return ""
+    left = stopped.get("not_run", 0)
+    return (f"the run stopped: the target stopped answering after {stopped['after']} ({stopped['reason']}); "
+            f"{left} check{'' if left == 1 else 's'} after it not run")
+
+
 def group_lines(report: Report) -> list[str]:
     """One line per group: its name, its id and its counts."""
     groups = _grouped(report)
@@ -63,6 +73,8 @@ def _exchange_lines(exchange: Exchange, indent: str) -> list[str]:
 
 def to_text(report: Report) -> str:
     lines = [f"cipstack conform {_identity_line(report)}", summary_line(report), *group_lines(report)]
+    if report.stopped is not None:
+        lines.append(stopped_line(report))
     if report.options.get("connection_points"):
         lines.append(f"connection points: {report.options['connection_points']}")
     failures = [o for _, members in _grouped(report) for o in members if o.verdict is Verdict.FAIL]
@@ -134,6 +146,7 @@ details summary { cursor: pointer; color: #555; }
 cite { font-style: normal; color: #555; font-size: 90%; }
 .pass { background: #e6f4e6; } .fail { background: #fbe3e3; } .warning { background: #fff4d6; }
 .na { color: #777; }
+p.stopped { background: #fbe3e3; padding: 0.5em; }
 """
 
 
@@ -165,6 +178,10 @@ def to_html(report: Report) -> str:
     parts = ["<!DOCTYPE html>", '<html lang="en"><head><meta charset="utf-8">',
              f"<title>cipstack conform {e(report.target)}</title>", f"<style>{_STYLE}</style></head><body>",
              f"<h1>cipstack conform {e(_identity_line(report))}</h1>", f"<p>{e(summary_line(report))}</p>",
+             *([f'<p class="stopped"><strong>{e(stopped_line(report))}</strong>'
+                + (f' (<a href="#check-{_anchor(report.stopped["after"])}">its row</a>)'
+                   if any(o.name == report.stopped["after"] for o in report.outcomes) else "") + "</p>"]
+               if report.stopped is not None else []),
              *([f"<p>connection points: {e(str(report.options['connection_points']))}</p>"]
                if report.options.get("connection_points") else []),
              '<h2 id="summary">Summary</h2>', "<table><tr><th>group</th><th>checks</th><th>fail</th><th>warning</th>"
@@ -208,6 +225,7 @@ def markdown_table(group: str) -> str:
             codes = ", ".join([*(f"0x{c.value:0{4 if c.value > 0xFF else 2}X} ({c.meaning})"
                                  + (" warning" if c.verdict is Verdict.WARNING else "") for c in spec.codes),
                                *(f"{b.name}: {b.meaning}" for b in spec.behaviours)])
-            rows.append(f"| `{spec.id}` | {cell(spec.title)} | {cell(spec.expected)} | {cell(codes) or '-'} | "
+            title = spec.title + (f" (only with `--allow-stress`: it {spec.stress})" if spec.stress else "")
+            rows.append(f"| `{spec.id}` | {cell(title)} | {cell(spec.expected)} | {cell(codes) or '-'} | "
                         f"{cell(spec.reference)} |")
     return "\n".join(rows)

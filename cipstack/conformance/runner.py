@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import contextlib
 import os
 import time
 from collections.abc import Iterable, Sequence
@@ -24,7 +25,7 @@ from .discovery import DRIVE_DEVICE_TYPES
 from .model import FINAL, GROUPS, CheckSpec, Outcome, Report, Verdict
 from .profile import faulted
 from .registry import CHECKS, RUNNERS, CheckFunction, Context, outcome
-from .wire import Probe, TargetUnreachable, frame
+from .wire import Liveness, Probe, TargetUnreachable, frame
 
 if TYPE_CHECKING:
     from ..eds.interpret import EdsView
@@ -73,6 +74,9 @@ def _preflight(context: Context) -> None:
 
 #: The groups that need connection points (or an EDS) to run.
 NEED_POINTS = {"cm", "class1", "eds"}
+#: What ``Report.stopped`` names when the target went silent before any check, while the battery
+#: looked for its connection points.
+DISCOVERY = "the search for connection points"
 
 
 def _discover(context: Context, report: Report, points: tuple[int, int, int] | None,
@@ -93,22 +97,37 @@ def _discover(context: Context, report: Report, points: tuple[int, int, int] | N
         report.options["eds"] = found.eds_source
 
 
-def _run_check(context: Context, spec: CheckSpec, function: CheckFunction) -> list[Outcome]:
+def _run_check(context: Context, liveness: Liveness, spec: CheckSpec, function: CheckFunction) -> list[Outcome]:
+    if spec.stress and not context.allow_stress:
+        # Declared once on the check: it exhausts what the device has (sessions, connections), and a
+        # default run leaves the device as found.
+        return [outcome(spec, Verdict.NOT_RUN, f"needs --allow-stress (this check {spec.stress})")]
     try:
-        result = function(context, spec)
-        return [result] if isinstance(result, Outcome) else list(result)
+        # A stress check makes the target refuse on purpose: whether it is still there is asked after.
+        with liveness.hold() if spec.stress else contextlib.nullcontext():
+            result = function(context, spec)
+            outcomes = [result] if isinstance(result, Outcome) else list(result)
     except TargetUnreachable as exc:
-        return [outcome(spec, Verdict.FAIL, f"the target stopped answering: {exc}")]
+        outcomes = [outcome(spec, Verdict.FAIL, f"a connection to the target failed: {exc}")]
     except Exception as exc:  # a check that cannot finish is a failure of the target's
-        return [outcome(spec, Verdict.FAIL, f"the check could not finish: {type(exc).__name__}: {exc}")]
+        outcomes = [outcome(spec, Verdict.FAIL, f"the check could not finish: {type(exc).__name__}: {exc}")]
     finally:
         context.cleanup()
+    if all(o.verdict is Verdict.NOT_RUN for o in outcomes) or not liveness.confirm():
+        return outcomes
+    # The target went silent in this check or right after it: that is the finding, and the check's own
+    # verdicts (every request after it unanswered) are not.
+    seen = next((o.observed for o in outcomes if o.verdict is not Verdict.PASS), outcomes[-1].observed if outcomes
+                else "")
+    return [outcome(spec, Verdict.FAIL, f"the target stopped answering after this check: {liveness.silent}"
+                    + (f"; the check saw: {seen}" if seen else ""), [e for o in outcomes for e in o.exchanges])]
 
 
 def run(host: str, port: int = DEFAULT_PORT, *, eds: str | os.PathLike[str] | EdsDocument | None = None,
         groups: str | Iterable[str] | None = None, allow_writes: bool = False, allow_reset: bool = False,
         timeout: float = 5.0, connection_points: tuple[int, int, int] | None = None,
-        eds_dir: str | os.PathLike[str] | None = None, allow_motion: bool = False) -> Report:
+        eds_dir: str | os.PathLike[str] | None = None, allow_motion: bool = False,
+        allow_stress: bool = False) -> Report:
     """Run the conformance battery against ``host:port``.
 
     ``eds``: an EDS file (or a read ``EdsDocument``) of the target, which enables group ``eds`` and
@@ -117,14 +136,19 @@ def run(host: str, port: int = DEFAULT_PORT, *, eds: str | os.PathLike[str] | Ed
     the device's own EDS (File object), an EDS of ``eds_dir`` for its identity, the AC drive profile,
     bounded probing of its assemblies. ``groups``: the groups to run (default all). Nothing is
     written without ``allow_writes`` and the device is not reset without ``allow_reset``; the drive
-    profile's motion checks (``motion``) run the motor only with ``allow_motion``.
-    ``TargetUnreachable`` when the target does not accept a connection and a session.
+    profile's motion checks (``motion``) run the motor only with ``allow_motion``, and the checks that
+    exhaust the device's resources on purpose (``CheckSpec.stress``: 40 sessions at once) only with
+    ``allow_stress``. A target that stops answering stops the run: the check after which it went
+    silent fails with that finding, every later one is not run (``Report.stopped`` says where and
+    why). ``TargetUnreachable`` when the target does not accept a connection and a session.
     """
     selected = parse_groups(groups if groups is None or isinstance(groups, str) else list(groups))
     doc, view = _load_eds(eds)
-    context = Context(host, port, timeout, allow_writes, allow_reset, doc, view, allow_motion=allow_motion)
+    context = Context(host, port, timeout, allow_writes, allow_reset, doc, view, allow_motion=allow_motion,
+                      allow_stress=allow_stress)
     started = time.monotonic()
     _preflight(context)
+    liveness = context.liveness = Liveness(host, port, timeout)
     if (context.identity or {}).get("device_type") in DRIVE_DEVICE_TYPES:
         # A drive: whether it is faulted now, so that a fault the run causes is told from one it had.
         with Probe(host, port, timeout) as probe:
@@ -133,23 +157,45 @@ def run(host: str, port: int = DEFAULT_PORT, *, eds: str | os.PathLike[str] | Ed
     report = Report(f"{host}:{port}", groups=selected, identity=context.identity,
                     options={"eds": os.fspath(eds) if isinstance(eds, (str, os.PathLike)) else None,
                              "allow_writes": allow_writes, "allow_reset": allow_reset, "allow_motion": allow_motion,
-                             "timeout": timeout})
+                             "allow_stress": allow_stress, "timeout": timeout})
     if doc is not None:
         report.options["connection_points"] = "the EDS given (--eds)"
     elif set(selected) & NEED_POINTS:
-        _discover(context, report, connection_points, eds_dir)
+        try:
+            _discover(context, report, connection_points, eds_dir)
+        except TargetUnreachable:
+            if not liveness.confirm():
+                raise
+        if liveness.silent:
+            report.stopped = {"after": DISCOVERY, "reason": liveness.silent}
+    left_out = 0
+
+    def run_one(spec: CheckSpec, function: CheckFunction) -> None:
+        """Run one check, or, once the target stopped answering, say why it does not run."""
+        nonlocal left_out
+        if report.stopped is not None:
+            left_out += 1
+            report.outcomes.append(outcome(spec, Verdict.NOT_RUN,
+                                           f"the target stopped answering after {report.stopped['after']}"))
+            return
+        report.outcomes.extend(_run_check(context, liveness, spec, function))
+        if liveness.silent:
+            report.stopped = {"after": spec.id, "reason": liveness.silent}
+
     try:
         for group in selected:
             if group == FINAL:
                 continue
             for spec, function in RUNNERS.get(group, []):
-                report.outcomes.extend(_run_check(context, spec, function))
+                run_one(spec, function)
     finally:
         context.cleanup()
         # Whatever happened: the device as found (every point used opens again, every write restored),
         # checked whenever the run opened or wrote anything, whatever the groups selected.
         if FINAL in selected or context.accepted or context.restores or context.left_behind:
             for spec, function in RUNNERS[FINAL]:
-                report.outcomes.extend(_run_check(context, spec, function))
+                run_one(spec, function)
+    if report.stopped is not None:
+        report.stopped["not_run"] = left_out
     report.duration_s = time.monotonic() - started
     return report

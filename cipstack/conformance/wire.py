@@ -10,9 +10,11 @@ by ``rr_reply_items``. Requests are spaced by ``MIN_GAP`` so that the battery ne
 
 from __future__ import annotations
 
+import contextlib
 import select
 import socket
 import time
+from collections.abc import Iterator
 from dataclasses import dataclass
 
 from ..cip.messages import MessageRouterRequest, MessageRouterResponse
@@ -25,6 +27,8 @@ from .model import Exchange
 
 #: At most one request every 2 ms from one probe: the battery's rate bound.
 MIN_GAP = 0.002
+#: A target that does not answer is asked once more this long after, before it is called silent.
+SILENCE_RETRY_S = 0.5
 
 
 class TargetUnreachable(PeerUnreachable):
@@ -51,11 +55,66 @@ def rr_data(request: bytes, extra: tuple[Item, ...] = ()) -> bytes:
     return rr_request_body(request, extra)
 
 
-class Probe:
-    """One TCP connection to the target; ``exchanges`` records everything sent and received."""
+class Liveness:
+    """Whether the target still answers at all, asked on a TCP connection of its own (ListIdentity,
+    which needs no session): after every check, and within one whenever a request goes unanswered or
+    a connection drops. A target that fails to answer twice, ``SILENCE_RETRY_S`` apart, is *silent*
+    for the rest of the run: every probe then fails at once, so that the check running ends in
+    bounded time and the runner names it, rather than each later check waiting out its timeouts.
+
+    ``hold()`` suspends the question while the target may refuse on purpose: a stress check that
+    exhausts its sessions, a reset device that is away for a while."""
 
     def __init__(self, host: str, port: int, timeout: float) -> None:
         self.host, self.port, self.timeout = host, port, timeout
+        #: Why the target is called silent ("" while it answers).
+        self.silent = ""
+        self._held = 0
+
+    def answers(self) -> str:
+        """"" when the target answers ListIdentity on a new TCP connection, else what happened."""
+        try:
+            with Probe(self.host, self.port, self.timeout) as probe:
+                reply = probe.exchange(frame(Command.LIST_IDENTITY))
+        except TargetUnreachable as exc:
+            return f"no TCP connection: {exc}"
+        except ConnectionError as exc:
+            return f"a new TCP connection was closed on ListIdentity ({exc})"
+        if reply is None:
+            return f"no reply to ListIdentity on a new TCP connection within {self.timeout:g} s"
+        return ""
+
+    def confirm(self) -> bool:
+        """Whether the target is silent, asked now (twice) unless known or held."""
+        if self.silent or self._held:
+            return bool(self.silent)
+        problem = self.answers()
+        if problem:
+            time.sleep(SILENCE_RETRY_S)
+            if self.answers():
+                self.silent = problem
+        return bool(self.silent)
+
+    @contextlib.contextmanager
+    def hold(self) -> Iterator[None]:
+        """No question asked within the block (a refusal there may be on purpose)."""
+        self._held += 1
+        try:
+            yield
+        finally:
+            self._held -= 1
+
+
+class Probe:
+    """One TCP connection to the target; ``exchanges`` records everything sent and received.
+    ``liveness``: asked whenever a request goes unanswered or the connection drops; once it calls
+    the target silent, nothing more is sent or waited for."""
+
+    def __init__(self, host: str, port: int, timeout: float, liveness: Liveness | None = None) -> None:
+        self.host, self.port, self.timeout = host, port, timeout
+        self.liveness = liveness
+        if liveness is not None and liveness.silent:
+            raise TargetUnreachable(f"{host}:{port} stopped answering: {liveness.silent}")
         self.session = 0
         #: The target closed (or reset) this TCP connection: nothing more can be sent on it.
         self.closed_by_peer = False
@@ -66,6 +125,7 @@ class Probe:
         try:
             self.sock: socket.socket | None = socket.create_connection((host, port), timeout)
         except OSError as exc:
+            self._confirm()
             raise TargetUnreachable.connecting(host, port, exc) from None
         self.sock.setsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY, 1)
 
@@ -96,10 +156,21 @@ class Probe:
         assert self.sock is not None
         return str(self.sock.getsockname()[0])
 
+    def _confirm(self) -> None:
+        """Something went unanswered: ask whether the target is there at all."""
+        if self.liveness is not None:
+            self.liveness.confirm()
+
+    def _not_silent(self) -> None:
+        if self.liveness is not None and self.liveness.silent:
+            self.closed_by_peer = True
+            raise ConnectionError(f"the target stopped answering: {self.liveness.silent}")
+
     # -- frames -------------------------------------------------------------------------------------------
     def send(self, raw: bytes) -> None:
         if self.sock is None:
             raise ConnectionError("probe closed")
+        self._not_silent()
         wait = self._last_send + MIN_GAP - time.monotonic()
         if wait > 0:
             time.sleep(wait)
@@ -108,12 +179,14 @@ class Probe:
             self.sock.sendall(raw)
         except OSError as exc:
             self.closed_by_peer = True
+            self._confirm()
             raise ConnectionError(f"send failed: {exc}") from None
 
     def receive(self, timeout: float | None = None) -> Frame | None:
         """The next whole frame; None on timeout; ``ConnectionError`` when the target closed."""
         if self.sock is None:
             raise ConnectionError("probe closed")
+        self._not_silent()
         deadline = time.monotonic() + (self.timeout if timeout is None else timeout)
         while True:
             if self._received:
@@ -129,9 +202,11 @@ class Probe:
                 chunk = self.sock.recv(65536)
             except OSError as exc:
                 self.closed_by_peer = True
+                self._confirm()
                 raise ConnectionError(f"connection reset: {exc}") from None
             if not chunk:
                 self.closed_by_peer = True
+                self._confirm()
                 raise ConnectionError("connection closed by the target")
             self._received += self._frames.feed(chunk)
 
@@ -143,6 +218,8 @@ class Probe:
         self.send(raw)
         reply = self.receive(timeout)
         record.received = None if reply is None else reply.raw
+        if reply is None:
+            self._confirm()
         return reply
 
     def closed_by_target(self, timeout: float) -> bool:

@@ -53,6 +53,18 @@ SETTABLE = {(0x29, 3), (0x29, 4), (0x29, 5), (0x29, 12), (0x29, 17), (0x2A, 4), 
 MAX_SESSIONS = 12
 #: The message router's path: a class 3 connection's.
 ROUTER_PATH = bytes((0x20, 0x02, 0x24, 0x01))
+#: OpENer's sample application (its assemblies and connection points, as OpENer's sample
+#: application configures them): input 100, output 150, configuration 151 (32, 32 and 10 bytes), the
+#: data-less heartbeat points 152 (input only) and 153 (listen only), 154 for explicit messaging.
+OPENER_ASSEMBLIES = {100: 32, 150: 32, 151: 10, 152: 0, 153: 0, 154: 32}
+#: Its one exclusive owner (output, input, configuration) and its input-only and listen-only points.
+OPENER_OWNER, OPENER_INPUT_ONLY, OPENER_LISTEN_ONLY = (150, 100, 151), (152, 100, 151), (153, 100, 151)
+OPENER_IDENTITY = (1, 12, 65001, (2, 3), b"OpENer PC")
+#: Where this target can go silent (``silent_after``): after answering the one request of
+#: ``router.bad_path`` (a reserved segment type), or within ``objects.identity.attributes``, after
+#: answering its read of Identity attribute 4 (attributes 5-7 then go unanswered), or at the first
+#: request for the Assembly class (instance 0), which the search for connection points sends.
+SILENCE_POINTS = ("router.bad_path", "objects.identity.attributes", "the search for connection points")
 
 
 def sockaddr(host: str, port: int, family: bytes = b"\x00\x02") -> bytes:
@@ -92,17 +104,48 @@ class FakeTarget:
     """The target on 127.0.0.1: TCP and UDP on one port, class 1 I/O on another UDP port."""
 
     def __init__(self, deviation: str | Iterable[str] | None = None, host: str = "127.0.0.1", name: bytes = NAME,
-                 opener_timeout: bool = False, variant: str | None = None, drive: bool = False) -> None:
+                 opener_timeout: bool = False, variant: str | None = None, drive: bool = False,
+                 tcp_limit: int | None = None, silent_after: str | None = None, silence: str = "hang",
+                 max_sessions: int = MAX_SESSIONS, opener_layout: bool = False) -> None:
         """``opener_timeout``: on a class 1 timeout, close the TCP session that opened the connection and
         keep the connection's ownership until a Forward_Close of its triad comes, as OpENer does.
         ``variant`` names a check whose other permitted answer this target gives (``VARIANTS``).
-        ``drive``: an AC drive (device type 2) with the profile's assemblies and drive objects."""
+        ``drive``: an AC drive (device type 2) with the profile's assemblies and drive objects.
+        ``tcp_limit``: abort, as stock OpENer's debug build does on an assertion at its 21st TCP
+        connection (``tcp_limit=20``), when one more TCP connection than this is open at once: the
+        listener and every connection closed, nothing answered any more (``aborted``); it grants
+        ``max_sessions`` sessions at once, and refuses the next with 0x0002.
+        ``opener_layout``: the identity and the assemblies of OpENer's sample application
+        (``OPENER_ASSEMBLIES``), whose Forward_Open takes exactly its configured points and refuses
+        the others as OpENer does (0x0315 for a configuration instance it lacks, 0x012F for a point
+        it lacks or a combination it does not configure); its Assembly class says its highest
+        instance and how many it has (class attributes 2 and 3).
+        ``silent_after``: one of ``SILENCE_POINTS``, where the target stops answering, as ``silence``
+        says: "hang" (a process that hangs: connections still open, nothing read or answered, no
+        connection accepted) or "close" (it closes its listener and every connection)."""
+        self.opener_layout = opener_layout
+        assert silent_after in (None, *SILENCE_POINTS) and silence in ("hang", "close")
+        self.silent_after, self.silence = silent_after, silence
+        #: It stopped answering (``silent_after``); ``_silence_due``: once the reply in flight is sent.
+        self.silent = False
+        self._silence_due = False
+        #: When (``time.monotonic()``) it stopped answering, or aborted (None: it did not).
+        self.silent_since: float | None = None
         self.drive = drive
+        self.tcp_limit, self.max_sessions = tcp_limit, max_sessions
+        #: TCP connections open now, the most open at once, and whether the target aborted.
+        self.live_connections = 0
+        self.peak_connections = 0
+        self.aborted = False
         #: The checks this target deviates for (one, in the tests that fail one check; several, for the docs).
         self.deviations = {deviation} if isinstance(deviation, str) else set(deviation or ())
         #: The motor of the drive, moved by class 1 output 20/21 (``fake_drive``).
         self.motor = FakeDrive(self.deviations) if drive else None
         self.pairs = {**PAIRS, **(DRIVE_PAIRS if drive else {})}
+        #: Every assembly instance and its data size.
+        self.assembly_sizes = dict(OPENER_ASSEMBLIES) if opener_layout else {
+            **dict.fromkeys((*PAIRS, *PAIRS.values()), ASSEMBLY_SIZE),
+            **(dict.fromkeys((*DRIVE_PAIRS, *DRIVE_PAIRS.values()), DRIVE_ASSEMBLY_SIZE) if drive else {})}
         self.variant = variant
         self.opener_timeout = opener_timeout
         #: TCP sessions this target closed because their class 1 connection timed out.
@@ -117,6 +160,7 @@ class FakeTarget:
         self._sessions = itertools.count(0x1000)
         self._ids = itertools.count(0x2000)
         self.connections: dict[int, Connection] = {}
+        self.forward_opens: list[tuple[int, int]] = []
         #: Class 3 connections to the message router: O->T id -> [triad, T->O id, last sequence, last reply].
         self.explicit: dict[int, list[object]] = {}
         self._active_sessions = 0
@@ -174,11 +218,13 @@ class FakeTarget:
     def _attributes(self) -> dict[tuple[int, int], dict[int, bytes]]:
         revision = (2, 0) if self.deviates("eds.device.identity") else REVISION
         status = 0x0032 if self.deviates("objects.identity.status") else 0x0030
+        vendor, device_type, product_code = VENDOR, AC_DRIVE if self.drive else DEVICE_TYPE, PRODUCT_CODE
+        if self.opener_layout:
+            vendor, device_type, product_code, revision, self.name = OPENER_IDENTITY
         identity = {
-            1: struct.pack("<H", VENDOR),
-            2: struct.pack("<I" if self.deviates("objects.identity.attributes") else "<H",
-                           AC_DRIVE if self.drive else DEVICE_TYPE),
-            3: struct.pack("<H", PRODUCT_CODE), 4: bytes(revision), 5: struct.pack("<H", status),
+            1: struct.pack("<H", vendor),
+            2: struct.pack("<I" if self.deviates("objects.identity.attributes") else "<H", device_type),
+            3: struct.pack("<H", product_code), 4: bytes(revision), 5: struct.pack("<H", status),
             6: struct.pack("<I", SERIAL), 7: bytes((len(self.name),)) + self.name,
         }
         domain = b"lan"
@@ -195,6 +241,13 @@ class FakeTarget:
             (0xF6, 1): {1: struct.pack("<I", 100), 2: struct.pack("<I", 0x0F), 3: mac},
             (0x64, 1): {1: struct.pack("<I" if self.deviates("eds.param.link") else "<H", 10)},
         }
+        if self.opener_layout:
+            for instance, size in OPENER_ASSEMBLIES.items():
+                table[(0x04, instance)] = {3: bytes(size), 4: struct.pack("<H", size)}
+            # The class: revision, highest instance, number of instances.
+            table[(0x04, 0)] = {1: struct.pack("<H", 2), 2: struct.pack("<H", max(OPENER_ASSEMBLIES)),
+                                3: struct.pack("<H", len(OPENER_ASSEMBLIES))}
+            return table
         for instance in (100, 101, 102, 103):
             size = 3 if self.deviates("eds.assembly.size") and instance == 101 else ASSEMBLY_SIZE
             table[(0x04, instance)] = {3: bytes(ASSEMBLY_SIZE), 4: struct.pack("<H", size)}
@@ -219,12 +272,47 @@ class FakeTarget:
     # -- TCP ---------------------------------------------------------------------------------------------
     def _accept(self) -> None:
         while not self._stop.is_set():
+            if self.silent:  # hung: connections wait in the listen backlog, then are not even taken
+                self._stop.wait(0.05)
+                continue
             try:
                 conn, _ = self.tcp.accept()
             except (TimeoutError, OSError):
                 continue
+            with self._lock:
+                self.live_connections += 1
+                self.peak_connections = max(self.peak_connections, self.live_connections)
+                over = self.tcp_limit is not None and self.live_connections > self.tcp_limit
+            if over:
+                conn.close()
+                self._abort()
+                return
             conn.settimeout(0.05)
             self._start(self._serve, conn)
+
+    def _silent_here(self, point: str) -> None:
+        """The request that ``point`` sends is being answered: fall silent once the reply is out."""
+        if self.silent_after == point:
+            self._silence_due = True
+
+    def _fall_silent(self) -> None:
+        self._silence_due = False
+        self.silent = True
+        self.silent_since = time.monotonic()
+        for connection in list(self.connections.values()):
+            connection.stop.set()  # no more class 1 production either
+        if self.silence == "close":
+            self._abort()
+
+    def _abort(self) -> None:
+        """The process is gone: no listener, no connection, no answer on any port."""
+        self.aborted = True
+        self.silent_since = self.silent_since or time.monotonic()
+        self._stop.set()
+        for connection in list(self.connections.values()):
+            connection.stop.set()
+        for sock in (self.tcp, self.udp):
+            sock.close()
 
     def _serve(self, conn: socket.socket) -> None:
         state = {"session": 0}
@@ -232,13 +320,16 @@ class FakeTarget:
         try:
             self._serve_frames(conn, state)
         finally:
-            if state["session"]:
-                with self._lock:
+            with self._lock:
+                self.live_connections -= 1
+                if state["session"]:
                     self._active_sessions -= 1
 
     def _serve_frames(self, conn: socket.socket, state: dict[str, int]) -> None:
         with conn:
             for command, session, context, options, body in encapsulation_frames(conn, self._stop):
+                if self.silent:
+                    continue  # hung: read, never answered
                 if options:
                     continue  # discarded (wire.md)
                 try:
@@ -253,6 +344,8 @@ class FakeTarget:
                     if command == 0x66 and not self.deviates("encap.unregister_session"):
                         return  # UnRegisterSession: close the connection
                     continue
+                if self._silence_due:
+                    self._fall_silent()  # before this last reply goes out: nothing after it is answered
                 try:
                     conn.sendall(HEADER.pack(command, len(answer), state["session"] or session, status, context, 0)
                                  + answer)
@@ -271,7 +364,7 @@ class FakeTarget:
             if version != 1 and not self.deviates("encap.register_session.protocol_version"):
                 raise EncapStatus(0x0069)
             with self._lock:
-                if self._active_sessions >= MAX_SESSIONS:
+                if self._active_sessions >= self.max_sessions:
                     # No session slot: 0x0002 (insufficient memory); the deviating stack says "invalid length".
                     raise EncapStatus(0x0065 if self.deviates("encap.session_limit") else 0x0002)
                 self._active_sessions += 1
@@ -332,7 +425,7 @@ class FakeTarget:
                 data, peer = self.udp.recvfrom(2048)
             except (TimeoutError, OSError):
                 continue
-            if len(data) < 24:
+            if len(data) < 24 or self.silent:
                 continue
             command, _, _, _, context, _ = HEADER.unpack_from(data)
             if command == 0x63:
@@ -357,6 +450,7 @@ class FakeTarget:
         for pos in range(0, len(path), 2):
             kind = path[pos]
             if kind not in (0x20, 0x24, 0x30):
+                self._silent_here("router.bad_path")
                 if self.deviates("router.bad_path"):
                     return reply(service, 0x05), []
                 return reply(service, 0x04), []
@@ -376,12 +470,16 @@ class FakeTarget:
             return reply(service, 0x05)
         if (class_id, instance) == (0x02, 1) and self.deviates("objects.message_router"):
             return reply(service, 0x05)
+        if (class_id, instance) == (0x04, 0):
+            self._silent_here("the search for connection points")
         values = self.attributes.get((class_id, instance or 0))
         if self.motor is not None and class_id in (0x29, 0x2A):
             self.motor.sync(self.attributes[(0x29, 1)], self.attributes[(0x2A, 1)])
         if values is None:
             return reply(service, 0x08 if self.deviates("router.unknown_instance") else 0x05)
         if service == 0x0E:
+            if (class_id, instance, attribute) == (0x01, 1, 4):
+                self._silent_here("objects.identity.attributes")
             if attribute not in values:
                 return reply(service, 0x08 if self.deviates("router.unknown_attribute") else 0x14)
             if data and not self.deviates("router.too_much_data"):
@@ -439,7 +537,10 @@ class FakeTarget:
                 raise EncapStatus(0x0008)
             return reply(service, data=struct.pack("<H", 0)) if attribute == 1 else reply(service, 0x14), []
         if service in (0x54, 0x5B):
-            return self._forward_open(service, data, extra)
+            answer, items = self._forward_open(service, data, extra)
+            # (general status, first extended status word) of each Forward_Open, in order.
+            self.forward_opens.append((answer[2], struct.unpack_from("<H", answer, 4)[0] if answer[3] else 0))
+            return answer, items
         if service == 0x52:
             return self._unconnected_send(data), []
         if service == 0x4E:
@@ -472,11 +573,15 @@ class FakeTarget:
         if len(path) != 8 or path[0:2] != b"\x20\x04" or path[2] != 0x24 or path[4] != 0x2C or path[6] != 0x2C:
             return self._refuse(service, triad, 0x0117 if self.deviates("cm.forward_open.bad_segment") else 0x0315)
         ot_point, to_point = path[5], path[7]
-        if ot_point not in self.pairs:
+        if self.opener_layout:
+            refused = self._opener_points(path[3], ot_point, to_point)
+            if refused:
+                return self._refuse(service, triad, refused)
+        elif ot_point not in self.pairs:
             # 0x0315 is allowed and less precise: a warning ("warn:" variant).
             code = 0x0315 if self.variant == "warn:cm.forward_open.consuming_point" else 0x012A
             return self._refuse(service, triad, 0x0110 if self.deviates("cm.forward_open.consuming_point") else code)
-        if to_point != self.pairs[ot_point]:
+        elif to_point != self.pairs[ot_point]:
             return self._refuse(service, triad, 0x0110 if self.deviates("cm.forward_open.producing_point") else 0x012B)
         if ot_point == 102 and self.deviates("eds.connection.open"):
             return self._refuse(service, triad, 0x0113)
@@ -489,14 +594,16 @@ class FakeTarget:
                                 CYCLE_US & 0xFFFF, CYCLE_US >> 16)
         if self.variant == "cm.forward_open.rpi":
             ot_api, to_api = max(ot_rpi, CYCLE_US), max(to_rpi, CYCLE_US)
-        size = DRIVE_ASSEMBLY_SIZE if ot_point in DRIVE_PAIRS else ASSEMBLY_SIZE
-        if ot_size != 2 + 4 + size and not self.deviates("cm.forward_open.ot_size"):
+        # A data-less (heartbeat) point carries the sequence count alone, no run/idle header.
+        ot_data, to_data = self.assembly_sizes[ot_point], self.assembly_sizes[to_point]
+        ot_expected = 2 + 4 + ot_data if ot_data else 2
+        if ot_size != ot_expected and not self.deviates("cm.forward_open.ot_size"):
             if self.variant == "cm.forward_open.ot_size":
                 return self._refuse(service, triad, 0x0109)
-            return self._refuse(service, triad, 0x0127, 2 + 4 + size)
-        if to_size != 2 + size:
+            return self._refuse(service, triad, 0x0127, ot_expected)
+        if to_size != 2 + to_data:
             code = 0x0127 if self.deviates("cm.forward_open.to_size") else 0x0128
-            return self._refuse(service, triad, code, 2 + size)
+            return self._refuse(service, triad, code, 2 + to_data)
         with self._lock:
             if not self.deviates("cm.forward_open.duplicate") and any(
                     c.triad == triad for c in self.connections.values()):
@@ -516,6 +623,21 @@ class FakeTarget:
         echoed = (serial, vendor, originator + 1) if self.deviates("cm.forward_open.accepted") else triad
         answer = struct.pack("<IIHHIIIBB", ot_id, to_id, *echoed, ot_api, to_api, 0, 0)
         return reply(service, data=answer), [(0x8000, sockaddr(self.host, self.io_port))]
+
+    def _opener_points(self, config: int, output: int, input: int) -> int:
+        """OpENer's checks of a class 1 path (its connection manager and application connection
+        types): the extended status it refuses with, or 0 for its exclusive owner and its input-only
+        connection (a listen-only one needs a connection producing its input: not kept here)."""
+        if config not in OPENER_ASSEMBLIES:
+            return 0x0315  # a configuration instance it lacks: "invalid segment in connection path"
+        if output not in OPENER_ASSEMBLIES or input not in OPENER_ASSEMBLIES:
+            return 0x012F  # a point it lacks: "inconsistent application path combination"
+        if (output, input, config) == OPENER_OWNER:
+            return 0
+        for points, accepted in ((OPENER_INPUT_ONLY, 0), (OPENER_LISTEN_ONLY, 0x0119)):
+            if output == points[0]:
+                return 0x012B if input != points[1] else 0x012F if config != points[2] else accepted
+        return 0x012F
 
     def _open_explicit(self, service: int, triad: tuple[int, int, int], to_id: int) -> tuple[bytes, list]:
         """A class 3 connection to the message router."""
@@ -618,7 +740,7 @@ class FakeTarget:
         # idle phase of class1.run_idle got about half its due packets, its own bound, and failed now and then.
         period = connection.api * (1.5 if self.deviates("class1.production") else 1)
         step = 2 if self.deviates("class1.sequence") else 1
-        payload = bytes(3 if self.deviates("class1.data_size") else ASSEMBLY_SIZE)
+        payload = bytes(3 if self.deviates("class1.data_size") else self.assembly_sizes[connection.to_point])
         motor = self.motor if connection.to_point in DRIVE_PAIRS.values() else None
         start, sequence = time.monotonic(), 0
         while not connection.stop.is_set() and not self._stop.is_set():

@@ -16,7 +16,7 @@ EDS = Path(__file__).with_name("fake_device.eds")
 
 def run_group(target: FakeTarget, group: str):  # type: ignore[no-untyped-def]
     return run(target.host, target.port, eds=EDS, groups=group, allow_writes=True, allow_reset=True, timeout=2.0,
-               allow_motion=True)
+               allow_motion=True, allow_stress=True)
 
 
 #: The group whose run shows a check's deviation, where it is not the check's own.
