@@ -26,16 +26,6 @@ MARKER = "# internals:"
 PUBLIC = frozenset({"_replace", "_asdict", "_fields", "_field_defaults", "_make", "_getframe", "_exit"})
 #: Calls that name an attribute by a string: ``getattr(obj, "_name")``, ``monkeypatch.setattr(obj, "_name", ...)``.
 BY_NAME = frozenset({"getattr", "setattr", "hasattr", "delattr"})
-#: Reads in modules another change is rewriting, each a file and the expression read: reported
-#: there, allowed here until that rewrite (a new read in those files still fails).
-PENDING: frozenset[tuple[str, str]] = frozenset({
-    ("tests/test_hardening.py", "loop._selector"),
-    ("tests/test_hardening.py", "loop._selector._selector"),
-    ("tests/test_hardening.py", "parser._subparsers"),
-    ("tests/test_hardening.py", "parser._subparsers._group_actions"),
-})
-
-
 def _private(name: str) -> bool:
     return name.startswith("_") and not name.startswith("__") and name not in PUBLIC
 
@@ -124,9 +114,7 @@ def test_every_test_reads_other_objects_through_their_public_side() -> None:
     unmarked = []
     for path in _test_modules():
         name = path.relative_to(ROOT).as_posix()
-        for line, what in private_reads(path.read_text(encoding="utf-8"), path):
-            if (name, what) not in PENDING:
-                unmarked.append(f"{name}:{line}: {what}")
+        unmarked += [f"{name}:{line}: {what}" for line, what in private_reads(path.read_text(encoding="utf-8"), path)]
     assert not unmarked, ("a test reads another object's private attribute: read what it shows instead (a "
                           "property, a counter, the wire), add one to the product if a user would want it too, "
                           f"or say why on the line with '{MARKER} <why>':\n  " + "\n  ".join(unmarked))

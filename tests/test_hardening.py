@@ -132,7 +132,7 @@ def test_precise_loop_fires_timers_and_serves_sockets_when_made_after_1024_files
     try:
         loop = precise_event_loop()
         try:
-            assert loop._selector._selector.fileno() >= FD_SETSIZE  # type: ignore[attr-defined]
+            assert loop.selector.fileno() >= FD_SETSIZE   # the epoll descriptor
 
             async def exchange() -> tuple[bytes, bool]:
                 fired = asyncio.get_running_loop().create_future()
@@ -416,10 +416,9 @@ def test_class3_connection_is_named_by_triad_and_originator_address() -> None:
 # -- 5. limits per transport class ---------------------------------------------------------------------
 def test_adapter_help_names_every_limit_and_its_default() -> None:
     from cipstack.cli import build_parser
+    from cipstack.cli.parser import subcommands
 
-    parser = build_parser()
-    adapter = next(a for a in parser._subparsers._group_actions[0].choices.values()  # type: ignore[union-attr]
-                   if a.prog.endswith("adapter"))
+    adapter = subcommands(build_parser())["adapter"]
     text = adapter.format_help()
     for option, words in (("--max-connections", "class 3"), ("--max-io-connections", "class 1"),
                           ("--max-tcp-connections", "default 256"), ("--max-sessions-per-host", "half"),
