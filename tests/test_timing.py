@@ -4,6 +4,7 @@ tests written here, with the plugin and without the project's conftest."""
 
 from __future__ import annotations
 
+import json
 import os
 import subprocess
 import sys
@@ -64,7 +65,13 @@ def test_a_run_over_its_budget_fails_though_every_test_passed(tmp_path: Path) ->
     assert "budget: 0 s (+25% allowed): OVER BUDGET: the run fails" in result.stdout
 
 
-def test_without_a_budget_nothing_is_judged(tmp_path: Path) -> None:
-    result = run(tmp_path)
+def test_without_a_budget_nothing_is_judged_and_every_test_is_written_down(tmp_path: Path) -> None:
+    result = run(tmp_path, "--timings", "timings.json")
     assert result.returncode == 0, result.stdout + result.stderr
     assert "budget:" not in result.stdout and "test_sleeps" in result.stdout
+    written = json.loads((tmp_path / "timings.json").read_text(encoding="utf-8"))
+    tests = {row["test"].split("::")[1]: row for row in written["tests"]}
+    assert set(tests) == {"test_sleeps", "test_burns_cpu_in_a_child", "test_quick"}
+    assert tests["test_sleeps"]["wall_s"] >= 0.6 and written["wall_s"] >= 0.6
+    assert [row["wall_s"] for row in written["tests"]] == sorted((row["wall_s"] for row in written["tests"]),
+                                                                 reverse=True)

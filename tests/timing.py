@@ -14,9 +14,11 @@ twenty slowest tests. docs/contributing.md says how to look at a slow test.
 
 from __future__ import annotations
 
+import json
 import resource
 import time
 from collections.abc import Generator
+from pathlib import Path
 from typing import Any
 
 import pytest
@@ -34,6 +36,8 @@ def pytest_addoption(parser: pytest.Parser) -> None:
     parser.addoption("--time-budget", type=float, default=None, metavar="SECONDS",
                      help="fail the run when its wall time exceeds SECONDS by more than "
                           f"{BUDGET_SLACK:.0%}, and name the {SLOWEST} slowest tests (tests/timing.py)")
+    parser.addoption("--timings", default=None, metavar="FILE",
+                     help="write every test's wall and CPU seconds to FILE (JSON), slowest first")
 
 
 def _cpu_now() -> float:
@@ -62,8 +66,9 @@ def pytest_runtest_teardown(item: pytest.Item, nextitem: pytest.Item | None) -> 
 class SuiteClock:
     """Collects every test's wall and CPU time in the controlling process, and judges the budget."""
 
-    def __init__(self, budget: float | None) -> None:
+    def __init__(self, budget: float | None, timings: str | None) -> None:
         self.budget = budget
+        self.timings = timings
         self.started = time.monotonic()
         self.wall: dict[str, float] = {}
         self.cpu: dict[str, float] = {}
@@ -83,6 +88,11 @@ class SuiteClock:
         elapsed = time.monotonic() - self.started
         if self.over_budget(elapsed) and session.exitstatus == pytest.ExitCode.OK:
             session.exitstatus = pytest.ExitCode.TESTS_FAILED
+        if self.timings is not None:
+            rows = [{"test": nodeid, "wall_s": round(seconds, 3), "cpu_s": self.cpu.get(nodeid)}
+                    for nodeid, seconds in sorted(self.wall.items(), key=lambda item: -item[1])]
+            Path(self.timings).write_text(json.dumps({"wall_s": round(elapsed, 1), "tests": rows}, indent=1),
+                                          encoding="utf-8")
 
     def pytest_terminal_summary(self, terminalreporter: Any) -> None:
         elapsed = time.monotonic() - self.started
@@ -102,4 +112,5 @@ class SuiteClock:
 def pytest_configure(config: pytest.Config) -> None:
     if hasattr(config, "workerinput"):   # a worker of pytest-xdist: the controller sums up
         return
-    config.pluginmanager.register(SuiteClock(config.getoption("--time-budget")), "cipstack-suite-clock")
+    config.pluginmanager.register(SuiteClock(config.getoption("--time-budget"), config.getoption("--timings")),
+                                  "cipstack-suite-clock")
