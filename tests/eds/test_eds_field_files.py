@@ -10,7 +10,6 @@ each connection it offers, as a user runs them; python-ethernetip runs those it 
 from __future__ import annotations
 
 import argparse
-import asyncio
 import contextlib
 import io
 import re
@@ -35,6 +34,7 @@ from cipstack.eds.reader import parse_eds, read_eds
 from cipstack.eds.writer import format_eds
 from tests.optional import needs
 from tests.ports import free_port
+from tests.waiting import wait_for, wait_until
 
 DIRECTORY = Path(__file__).parent / "files"
 FILES = sorted(DIRECTORY.glob("*.eds"))
@@ -389,12 +389,9 @@ async def test_each_offered_connection_runs(adapter: Adapter) -> None:
                         running[number] = await stack.enter_async_context(opened(number))
                 for handle in running.values():
                     handle.set_run(True)
-                # Data both ways until each has received more than 10 packets (bounded: a target that
-                # produces nothing fails below).
-                deadline = asyncio.get_running_loop().time() + 10.0
-                while (any(h.statistics()["received"] <= 10 for h in running.values())
-                       and asyncio.get_running_loop().time() < deadline):
-                    await asyncio.sleep(0.02)
+                # Data both ways until each has received more than 10 packets.
+                await wait_until(lambda now=running: all(h.statistics()["received"] > 10 for h in now.values()), 10.0,
+                                 f"more than 10 packets on each of {sorted(running)}")
                 received.update({n: h.statistics()["received"] for n, h in running.items()})
     assert sorted(received) == EXPECTED[adapter.path.name].offered
     for number, count in sorted(received.items()):
@@ -504,18 +501,14 @@ def test_python_ethernetip_runs_what_it_can_open(adapter: Adapter, monkeypatch: 
             if outputs:
                 outputs[1] = outputs[3] = True          # 0x0A in the first output byte
             explicit.produce()
-            # Until more than 10 packets came (asserted below) and the output is in the assembly (bounded).
-            deadline = time.monotonic() + 10.0
-            while received.get(explicit.toconnid, 0) <= 10 and time.monotonic() < deadline:
-                time.sleep(0.02)
+            wait_for(lambda conn=explicit.toconnid: received.get(conn, 0) > 10, 10.0,
+                     f"more than 10 packets of Connection{number}")
             if outputs:
                 with SyncScanner(f"127.0.0.1:{adapter.port}") as scanner:
-                    while True:
-                        data = scanner.get_attribute_single(0x04, connection.o_t_point, 3).data
-                        if data[0] == 0x0A or time.monotonic() > deadline:
-                            break
-                        time.sleep(0.02)
-                assert data[0] == 0x0A, f"Connection{number}: output assembly holds {data.hex()}"
+                    def holds(point: int = connection.o_t_point) -> bool:
+                        return scanner.get_attribute_single(0x04, point, 3).data[0] == 0x0A
+
+                    wait_for(holds, 10.0, f"the output of Connection{number} (0x0A) in its assembly")
             explicit.stopProduce()
             assert explicit.sendFwdCloseReq(connection.t_o_point, connection.o_t_point, connection.config) == 0
         finally:
