@@ -31,6 +31,7 @@ import aiohttp
 from cipstack.adapter import Adapter, AdapterSettings
 from cipstack.cli.emulators import TOKEN_VARIABLE
 from tests.cli_errors import one_line_error
+from tests.http_client import status as http_status
 from tests.ports import free_port
 from tests.test_cli import run, stop
 from tests.waiting import wait_for
@@ -160,15 +161,7 @@ def _serve(tmp_path: Path, *args: str, env: dict[str, str] | None = None) -> tup
 
 
 def _status(http: int, token: str | None) -> int:
-    request = urllib.request.Request(f"http://127.0.0.1:{http}/status")
-    if token is not None:
-        request.add_header("Authorization", f"Bearer {token}")
-    try:
-        with urllib.request.urlopen(request, timeout=10) as reply:
-            return int(reply.status)
-    except urllib.error.HTTPError as error:
-        with error:
-            return int(error.code)
+    return http_status(f"http://127.0.0.1:{http}/status", token)
 
 
 @pytest.mark.parametrize("where", ["file", "environment"])

@@ -12,8 +12,6 @@ import os
 import secrets
 import subprocess
 import sys
-import urllib.error
-import urllib.request
 from pathlib import Path
 
 import pytest
@@ -23,6 +21,7 @@ pytest.importorskip("aiohttp", reason="aiohttp is not installed (the http extra)
 from cipstack.control.http import HttpApiError, check_settings
 from cipstack.control.tokens import KNOWN_WEAK_TOKENS, MIN_REMOTE_TOKEN_LENGTH, weak_token_reason
 from tests.cli_errors import one_line_error
+from tests.http_client import status
 from tests.ports import free_port
 from tests.test_fleet import running
 from tests.waiting import wait_for
@@ -126,13 +125,3 @@ def test_the_library_refuses_it_too() -> None:
     assert all(weak_token_reason(known) is not None for known in KNOWN_WEAK_TOKENS)
 
 
-def status(url: str, token: str | None) -> int:
-    request = urllib.request.Request(url)
-    if token is not None:
-        request.add_header("Authorization", f"Bearer {token}")
-    try:
-        with urllib.request.urlopen(request, timeout=10) as reply:
-            return int(reply.status)
-    except urllib.error.HTTPError as error:
-        with error:
-            return int(error.code)
