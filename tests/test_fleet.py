@@ -461,38 +461,42 @@ def test_a_stopped_worker_is_reported_and_stopping_takes_seconds(tmp_path: Path)
     stopped ends within seconds (SIGCONT, then SIGTERM), not after 30 s."""
     from cipstack.fleet.workers import HEARTBEAT_INTERVAL, HEARTBEAT_TIMEOUT, HUNG_STOP_TIMEOUT
 
-    hosts = addresses(20, 4)
-    args = ("--addresses", f"{hosts[0]}-{hosts[-1]}", "--device", "acg*4", "--port", str(free_port(*hosts)),
-            "--io-port", "0", "--workers", "2", "--state-dir", str(tmp_path / "state"))
-    fleet = Fleet(tmp_path, *args, name="hung")
+    def fleet(block: int, name: str) -> Fleet:
+        hosts = addresses(block, 4)
+        return Fleet(tmp_path, "--addresses", f"{hosts[0]}-{hosts[-1]}", "--device", "acg*4", "--port",
+                     str(free_port(*hosts)), "--io-port", "0", "--workers", "2", "--state-dir",
+                     str(tmp_path / name), name=name)
+
+    # Two fleets started together: the second is stopped while the first finds its worker hung.
+    hung, stopped = fleet(20, "hung"), fleet(21, "stopped")
     try:
-        fleet.wait_ready()
-        workers = children(fleet.process.pid)
+        hung.wait_ready()
+        stopped.wait_ready()
+        workers = children(hung.process.pid)
         assert len(workers) == 2
         os.kill(workers[1], signal.SIGSTOP)
         stopped_at = time.monotonic()
-        assert fleet.process.wait(30) == 1
+
+        others = children(stopped.process.pid)
+        os.kill(others[0], signal.SIGSTOP)
+        asked = time.monotonic()
+        stopped.process.send_signal(signal.SIGTERM)
+        assert stopped.process.wait(30) == 0, stopped.err.read_text()
+        assert time.monotonic() - asked < 8.0
+        wait_for(lambda: not any(alive(pid) for pid in others), 10, "the workers to end")
+
+        assert hung.process.wait(30) == 1
         took = time.monotonic() - stopped_at
         assert took < HEARTBEAT_TIMEOUT + HEARTBEAT_INTERVAL + HUNG_STOP_TIMEOUT + 3.0, took
-        err = [line for line in fleet.err.read_text().splitlines() if "cipstack fleet:" in line]
+        err = [line for line in hung.err.read_text().splitlines() if "cipstack fleet:" in line]
         assert len(err) == 1 and "stopped answering" in err[0] and "stopping the fleet" in err[0], err
+        hosts = addresses(20, 4)
         assert f"{hosts[2]}-{hosts[3]}" in err[0], err
-        assert "Traceback" not in fleet.err.read_text()
+        assert "Traceback" not in hung.err.read_text()
         wait_for(lambda: not any(alive(pid) for pid in workers), 10, "the workers to end")
     finally:
-        fleet.kill()
-    fleet = Fleet(tmp_path, *args, name="stopped")
-    try:
-        fleet.wait_ready()
-        workers = children(fleet.process.pid)
-        os.kill(workers[0], signal.SIGSTOP)
-        asked = time.monotonic()
-        fleet.process.send_signal(signal.SIGTERM)
-        assert fleet.process.wait(30) == 0, fleet.err.read_text()
-        assert time.monotonic() - asked < 8.0
-        wait_for(lambda: not any(alive(pid) for pid in workers), 10, "the workers to end")
-    finally:
-        fleet.kill()
+        hung.kill()
+        stopped.kill()
 
 
 def test_sigterm_stops_every_worker_and_a_killed_parent_leaves_none(tmp_path: Path) -> None:
