@@ -81,7 +81,7 @@ def ethernetip_exchange():
         time.sleep(0.01)
     running = bool(inputs[2])
     outputs[0] = False
-    time.sleep(0.2)
+    time.sleep(0.2)                       # the subject: the stop command on the wire, 20 of its RPIs
     conn.stopProduce()
     closed = conn.sendFwdCloseReq(70, 20, 1)
     enip.stopIO()
