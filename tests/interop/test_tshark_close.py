@@ -56,7 +56,7 @@ try:
     io = subprocess.Popen([PY, "-m", "cipstack", "io", ADAPTER, "--output", "21", "--input", "71", "--duration",
                            "60s"], stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
     first = io.stdout.readline()          # the first input line: the connection is open and running
-    time.sleep(0.3)
+    time.sleep(0.3)                       # the subject: Ctrl-C while the exchange runs, not at its first input
     io.send_signal(signal.SIGINT)
     out, err = io.communicate(timeout=30)
     seen["interrupt"] = {"code": io.returncode, "out": first + out, "err": err}
