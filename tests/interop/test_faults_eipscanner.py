@@ -111,7 +111,8 @@ def packets_after(since):
 
 
 def run_faults():
-    time.sleep(1.0)                   # the bridge's exchange settled before the baseline is taken
+    # The bridge's exchange running (its data on NATS) before the baseline is taken.
+    wait_for(lambda: len(seen["packets"]) >= 5, 10, "T->O data through the bridge")
     mark("baseline")
     time.sleep(1.0)                   # the subject: the baseline window, the rate the faults are measured by
     # stop-producing: the bridge's connection times out; every reconnection times out again, until clear.
