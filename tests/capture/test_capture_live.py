@@ -152,7 +152,7 @@ finally:
         if process is not None:
             process.send_signal(signal.SIGTERM)
             seen[name + "_exit"] = process.wait(10)
-    time.sleep(0.5)
+    time.sleep(0.5)  # the capturer reads its ring on its own time: no event says it has the last frames
     dump.send_signal(signal.SIGINT)
     dump.wait(20)
     (OUT / "seen.json").write_text(json.dumps(seen, indent=1))

@@ -67,7 +67,7 @@ finally:
     if adapter is not None:
         adapter.send_signal(signal.SIGTERM)
         seen["adapter_exit"] = adapter.wait(10)
-    time.sleep(0.5)
+    time.sleep(0.5)  # the capturer reads its ring on its own time: no event says it has the last frames
     tshark.send_signal(signal.SIGINT)
     tshark.wait(20)
     (OUT / "seen.json").write_text(json.dumps(seen, indent=1))
