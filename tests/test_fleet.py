@@ -432,14 +432,22 @@ def test_workers_serve_every_device_and_a_dead_worker_stops_the_fleet(tmp_path: 
         assert [line.split()[0] for line in lines] == [f"{h}:{port}" for h in hosts]
         workers = children(fleet.process.pid)
         assert len(workers) == 2
-        replies = asyncio.run(broadcast_replies(port, 2.0))
-        assert sorted(replies, key=sort_key) == hosts                      # 64 devices, each answered once
-        replies = [host for _, host in asyncio.run(list_identity_replies("255.255.255.255", port, 2.0))]
+        # Three broadcasts at once, each collecting its own window: `cipstack discover` with its default
+        # broadcast addresses, and ListIdentity to loopback's broadcast address and to the limited one.
+        command = subprocess.Popen([sys.executable, "-m", "cipstack", "discover", "--port", str(port), "--json"],
+                                   stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+
+        async def both() -> tuple[list[str], list[tuple[bytes, str]]]:
+            return await asyncio.gather(broadcast_replies(port, 2.0),
+                                        list_identity_replies("255.255.255.255", port, 2.0))
+
+        looped, limited = asyncio.run(both())
+        stdout, _ = command.communicate(timeout=30)
+        assert sorted(looped, key=sort_key) == hosts                       # 64 devices, each answered once
+        replies = [host for _, host in limited]
         assert sorted(replies, key=sort_key) == hosts                      # the limited broadcast too
-        # `cipstack discover` with its default broadcast addresses lists every device once.
-        command = subprocess.run([sys.executable, "-m", "cipstack", "discover", "--port", str(port), "--json"],
-                                 capture_output=True, text=True, timeout=30)
-        listed = [json.loads(line)["address"] for line in command.stdout.splitlines()]
+        # `cipstack discover` lists every device once.
+        listed = [json.loads(line)["address"] for line in stdout.splitlines()]
         assert sorted(listed, key=lambda a: sort_key(a.rsplit(":", 1)[0])) == [f"{h}:{port}" for h in hosts]
         for host in (hosts[0], hosts[-1]):                                   # one of each worker's share
             status = drive("status", "--host", host, "--port", str(port))
