@@ -17,6 +17,7 @@ import sys
 import time
 from collections.abc import Iterator
 from pathlib import Path
+from typing import Any
 
 import pytest
 
@@ -289,24 +290,30 @@ def test_discovery_finds_every_device_once(tmp_path: Path) -> None:
                  "mx2:MX2-A2015-E*4", "--port", str(port), "--io-port", str(io_port),
                  "--state-dir", str(tmp_path / "state")) as (_, lines):
         assert [line.split()[0] for line in lines] == [f"{h}:{port}" for h in hosts]
+        # Four broadcasts at once, each collecting its own window (the command's output is read below).
+        command = subprocess.Popen([sys.executable, "-m", "cipstack", "discover", "--broadcast", BROADCAST, "--port",
+                                    str(port)], stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+
+        async def at_once() -> tuple[list[str], list[tuple[bytes, str]], list[Any]]:
+            return await asyncio.gather(broadcast_replies(port), list_identity_replies("255.255.255.255", port),
+                                        discover(BROADCAST, port, timeout=1.2))
+
+        looped, limited, found = asyncio.run(at_once())
+        stdout, _ = command.communicate(timeout=30)
         # One broadcast: each device answers once, from its own address.
-        replies = asyncio.run(broadcast_replies(port))
-        assert sorted(replies, key=sort_key) == hosts
+        assert sorted(looped, key=sort_key) == hosts
         # And to the limited broadcast, which many scanners send (issue 30, item 1).
-        replies = [host for _, host in asyncio.run(list_identity_replies("255.255.255.255", port))]
+        replies = [host for _, host in limited]
         assert sorted(replies, key=sort_key) == hosts
         # The scanner's discovery lists each once, with its own identity: the serial is its address's.
-        found = asyncio.run(discover(BROADCAST, port, timeout=1.2))
         by_host = {r.address.host: r for r in found if r.address}
         assert sorted(by_host, key=sort_key) == hosts and len(found) == len(hosts)
         for host in hosts:
             assert by_host[host].serial_number == int(ipaddress.IPv4Address(host))
         assert {by_host[h].vendor_id for h in hosts[:12]} == {PROFILES["acg"].vendor_id}
         assert {by_host[h].vendor_id for h in hosts[12:]} == {47}
-        command = subprocess.run([sys.executable, "-m", "cipstack", "discover", "--broadcast", BROADCAST, "--port",
-                                  str(port)], capture_output=True, text=True, timeout=30)
-        listed = sorted((line.split()[0] for line in command.stdout.splitlines()), key=lambda a: sort_key(a[:-6]))
-        assert listed == [f"{h}:{port}" for h in hosts], command.stdout
+        listed = sorted((line.split()[0] for line in stdout.splitlines()), key=lambda a: sort_key(a[:-6]))
+        assert listed == [f"{h}:{port}" for h in hosts], stdout
 
 
 async def _class1_then_trip(hosts: list[str], port: int, io_port: int) -> None:
