@@ -140,10 +140,12 @@ async def test_list_commands(adapter: Adapter) -> None:
 
 
 async def test_udp_discovery(adapter: Adapter) -> None:
-    records = await discover("127.0.0.1", adapter.port, timeout=0.8)
+    # Both at once, each collecting its own window.
+    records, services = await asyncio.gather(discover("127.0.0.1", adapter.port, timeout=0.8),
+                                             list_services_udp("127.0.0.1", adapter.port, timeout=0.3))
     assert [(r.vendor_id, r.product_code, r.product_name) for r in records] == [(259, 100, "CENT")]
     assert records[0].address and records[0].address.port == adapter.port
-    [service] = await list_services_udp("127.0.0.1", adapter.port, timeout=0.3)
+    [service] = services
     assert service.cip_over_tcp
 
 
