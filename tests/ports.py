@@ -101,7 +101,7 @@ async def list_identity_replies(destination: str, port: int, seconds: float = 1.
         Collect, local_addr=("127.0.0.1", 0), allow_broadcast=True)
     try:
         transport.sendto(LIST_IDENTITY, (destination, port))
-        await asyncio.sleep(seconds)
+        await asyncio.sleep(seconds)      # the subject: replies of any number of devices, for the window
         return replies
     finally:
         transport.close()

@@ -166,14 +166,16 @@ def test_3000_on_output_101_over_class_1_runs_the_emulator_at_30_hz(tmp_path: Pa
     adapter = subprocess.Popen([sys.executable, "-m", "cipstack", "adapter", "--port", str(port), *control,
                                 "--io-port", str(io_port),
                                 "--state", str(tmp_path / "state.json"), "--quiet", "--log-level", "WARNING",
-                                *(f"--param={p}" for p in ("drv=4", "Frq=8", "CM.24=3", "CM.23=3", "CM.94=1"))],
+                                # ACC 0.5 s: the ramp to 30 Hz is over well within the run (5.0 s would take 2.5 s).
+                                *(f"--param={p}" for p in ("drv=4", "Frq=8", "CM.24=3", "CM.23=3", "CM.94=1",
+                                                           "ACC=0.5"))],
                                stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True)
     try:
         wait_for(lambda: accepts("127.0.0.1", port), 15, "the adapter")
         target = ("io", f"127.0.0.1:{port}", "--output", "101", "--input", "111", "--target-io-port", str(io_port))
         listed = cipstack(*target, "--list-fields")
         assert "speed_reference              byte 2 UINT [0.01 Hz]" in listed.stdout, listed.stderr
-        ran = cipstack(*target, "--set", "run_forward=1", "--set", "speed_reference=3000", "--duration", "4s",
+        ran = cipstack(*target, "--set", "run_forward=1", "--set", "speed_reference=3000", "--duration", "1.5s",
                        "--print", "summary", "--json")
         assert ran.returncode == 0, ran.stderr
         status = cipstack("drive", "status", *control, "--json")

@@ -6,6 +6,7 @@ in both TCP and UDP even when the OS's first pick is taken in UDP."""
 
 from __future__ import annotations
 
+import asyncio
 import ipaddress
 import socket
 import struct
@@ -36,14 +37,16 @@ async def test_each_target_answers_a_subnet_broadcast_once_from_its_own_address(
     port = free_port("127.0.0.2", "127.0.0.3")
     async with Adapter(AdapterSettings(host="127.0.0.2", port=port, io_port=0)) as first, \
             Adapter(AdapterSettings(host="127.0.0.3", port=port, io_port=0)) as second:
-        replies = await list_identity_replies("127.255.255.255", port)
+        # Three requests at once, each collecting its own window.
+        replies, unicast, found = await asyncio.gather(list_identity_replies("127.255.255.255", port),
+                                                       list_identity_replies("127.0.0.3", port),
+                                                       discover("127.255.255.255", port, timeout=1.2))
         assert sorted(host for _, host in replies) == ["127.0.0.2", "127.0.0.3"]
         for data, _ in replies:
             assert struct.unpack_from("<H", data)[0] == 0x0063 and len(data) > 24
         # Unicast is still the target's own: only the one asked answers.
-        assert [host for _, host in await list_identity_replies("127.0.0.3", port)] == ["127.0.0.3"]
+        assert [host for _, host in unicast] == ["127.0.0.3"]
         # The scanner's discovery, given the broadcast address, lists each device once.
-        found = await discover("127.255.255.255", port, timeout=1.2)
         assert sorted(record.address.host for record in found if record.address) == ["127.0.0.2", "127.0.0.3"]
         assert first.server.port == second.server.port == port
 
@@ -55,7 +58,9 @@ async def test_each_target_answers_the_limited_broadcast_once_from_its_own_addre
     port = free_port("127.0.0.2", "127.0.0.3")
     async with Adapter(AdapterSettings(host="127.0.0.2", port=port, io_port=0)), \
             Adapter(AdapterSettings(host="127.0.0.3", port=port, io_port=0)):
-        replies = await list_identity_replies("255.255.255.255", port)
+        # Both requests at once, each collecting its own window.
+        replies, found = await asyncio.gather(list_identity_replies("255.255.255.255", port),
+                                              discover("255.255.255.255", port, timeout=1.2))
         assert sorted(host for _, host in replies) == ["127.0.0.2", "127.0.0.3"]
         for data, host in replies:
             command, length = struct.unpack_from("<HH", data)
@@ -63,7 +68,6 @@ async def test_each_target_answers_the_limited_broadcast_once_from_its_own_addre
             # The item's sockaddr (after the item count, type, length and version) is the target's own.
             family, item_port, address = struct.unpack_from(">hH4s", data, 24 + 2 + 4 + 2)
             assert (family, item_port, socket.inet_ntoa(address)) == (2, port, host)
-        found = await discover("255.255.255.255", port, timeout=1.2)
         assert sorted(record.address.host for record in found if record.address) == ["127.0.0.2", "127.0.0.3"]
 
 

@@ -19,6 +19,7 @@ from cipstack.cli import parse_duration, parse_object_path
 from tests.cli_errors import one_line_error
 from tests.optional import needs
 from tests.ports import free_port
+from tests.waiting import wait_for
 
 
 def run(*args: str, timeout: float = 20) -> subprocess.CompletedProcess[str]:
@@ -375,6 +376,15 @@ def test_a_one_shot_get_loads_neither_the_eds_tool_nor_a_device_profile() -> Non
                  "    print(sorted(m for m in sys.modules if m.startswith(('cipstack.eds', 'cipstack.capture',"
                  " 'cipstack.devices', 'construct', 'cipstack.eip.wire.cm_messages',"
                  " 'cipstack.eip.target.connection_manager'))), e.code)")
+        def accepting() -> bool:
+            try:
+                socket.create_connection(("127.0.0.1", port), timeout=0.2).close()
+            except OSError:
+                return False
+            return True
+
+        # The adapter listening, before a probe (a process start each) is tried.
+        wait_for(accepting, 15, "the adapter to listen")
         deadline = time.monotonic() + 10
         while True:
             out = subprocess.run([sys.executable, "-c", probe], capture_output=True, text=True, timeout=30)

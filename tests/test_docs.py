@@ -557,7 +557,7 @@ def _run_until_interrupted(namespace: Namespace, where: str, script: Path, secon
     process = subprocess.Popen(namespace.command([sys.executable, str(script)]), stdout=subprocess.PIPE,
                                stderr=subprocess.PIPE, text=True, env=env, cwd=work, stdin=subprocess.DEVNULL)
     try:
-        time.sleep(seconds)
+        time.sleep(seconds)               # the subject: still running after the seconds the page gives
         ended = process.poll()
         process.send_signal(signal.SIGINT)
         out, err = process.communicate(timeout=15)

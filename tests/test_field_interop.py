@@ -343,7 +343,7 @@ def test_a_slow_producer_shows_in_the_statistics(producer: ClassOneProducer, cap
     async def scenario(address: str) -> dict[str, Any]:
         async with await Scanner.connect(address) as scanner, scanner.io_connection(
                 output=21, input=71, rpi=0.001, output_size=4, input_size=4, target_io_port=producer.port) as io:
-            await asyncio.sleep(1.0)
+            await asyncio.sleep(1.0)     # the subject: the statistics of a second of arrivals
             return io.statistics()
 
     with ScriptedTarget(handler=handle) as target, caplog.at_level(logging.WARNING):
@@ -404,7 +404,7 @@ class IdentityResponder:
             self.reply_from.sendto(reply, addr)
             time.sleep(0.0005)
             self.reply_from.sendto(reply, addr)
-            time.sleep(0.3)
+            time.sleep(0.3)              # the subject: the late duplicate of the device
             self.reply_from.sendto(reply, addr)
 
     def close(self) -> None:
@@ -568,7 +568,7 @@ def test_ctrl_c_while_the_forward_open_is_on_the_wire(producer: ClassOneProducer
     def slow(request: MrRequest) -> bytes | None:
         if request.service != FORWARD_OPEN:
             return None
-        time.sleep(1.5)
+        time.sleep(1.5)                  # the subject: a reply late enough for the Ctrl-C to come first
         return p2p_echo_reply(request, producer)
 
     with ScriptedTarget(handler=slow, assembly_sizes={21: 4, 71: 4}) as target:
@@ -606,7 +606,7 @@ def test_t_o_data_of_another_size_is_counted_and_reported_once(producer: ClassOn
     async def scenario(address: str) -> dict[str, Any]:
         async with await Scanner.connect(address) as scanner, scanner.io_connection(
                 output=21, input=71, output_size=4, input_size=4, target_io_port=producer.port) as io:
-            await asyncio.sleep(0.6)
+            await asyncio.sleep(0.6)     # the subject: the 40 datagrams (0.4 s) all come and are reported once
             return io.statistics()
 
     with ScriptedTarget(handler=handle) as target, caplog.at_level(logging.WARNING):

@@ -17,6 +17,7 @@ import sys
 import time
 from collections.abc import Iterator
 from pathlib import Path
+from typing import Any
 
 import pytest
 
@@ -289,24 +290,30 @@ def test_discovery_finds_every_device_once(tmp_path: Path) -> None:
                  "mx2:MX2-A2015-E*4", "--port", str(port), "--io-port", str(io_port),
                  "--state-dir", str(tmp_path / "state")) as (_, lines):
         assert [line.split()[0] for line in lines] == [f"{h}:{port}" for h in hosts]
+        # Four broadcasts at once, each collecting its own window (the command's output is read below).
+        command = subprocess.Popen([sys.executable, "-m", "cipstack", "discover", "--broadcast", BROADCAST, "--port",
+                                    str(port)], stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+
+        async def at_once() -> tuple[list[str], list[tuple[bytes, str]], list[Any]]:
+            return await asyncio.gather(broadcast_replies(port), list_identity_replies("255.255.255.255", port),
+                                        discover(BROADCAST, port, timeout=1.2))
+
+        looped, limited, found = asyncio.run(at_once())
+        stdout, _ = command.communicate(timeout=30)
         # One broadcast: each device answers once, from its own address.
-        replies = asyncio.run(broadcast_replies(port))
-        assert sorted(replies, key=sort_key) == hosts
+        assert sorted(looped, key=sort_key) == hosts
         # And to the limited broadcast, which many scanners send (issue 30, item 1).
-        replies = [host for _, host in asyncio.run(list_identity_replies("255.255.255.255", port))]
+        replies = [host for _, host in limited]
         assert sorted(replies, key=sort_key) == hosts
         # The scanner's discovery lists each once, with its own identity: the serial is its address's.
-        found = asyncio.run(discover(BROADCAST, port, timeout=1.2))
         by_host = {r.address.host: r for r in found if r.address}
         assert sorted(by_host, key=sort_key) == hosts and len(found) == len(hosts)
         for host in hosts:
             assert by_host[host].serial_number == int(ipaddress.IPv4Address(host))
         assert {by_host[h].vendor_id for h in hosts[:12]} == {PROFILES["acg"].vendor_id}
         assert {by_host[h].vendor_id for h in hosts[12:]} == {47}
-        command = subprocess.run([sys.executable, "-m", "cipstack", "discover", "--broadcast", BROADCAST, "--port",
-                                  str(port)], capture_output=True, text=True, timeout=30)
-        listed = sorted((line.split()[0] for line in command.stdout.splitlines()), key=lambda a: sort_key(a[:-6]))
-        assert listed == [f"{h}:{port}" for h in hosts], command.stdout
+        listed = sorted((line.split()[0] for line in stdout.splitlines()), key=lambda a: sort_key(a[:-6]))
+        assert listed == [f"{h}:{port}" for h in hosts], stdout
 
 
 async def _class1_then_trip(hosts: list[str], port: int, io_port: int) -> None:
@@ -432,14 +439,22 @@ def test_workers_serve_every_device_and_a_dead_worker_stops_the_fleet(tmp_path: 
         assert [line.split()[0] for line in lines] == [f"{h}:{port}" for h in hosts]
         workers = children(fleet.process.pid)
         assert len(workers) == 2
-        replies = asyncio.run(broadcast_replies(port, 2.0))
-        assert sorted(replies, key=sort_key) == hosts                      # 64 devices, each answered once
-        replies = [host for _, host in asyncio.run(list_identity_replies("255.255.255.255", port, 2.0))]
+        # Three broadcasts at once, each collecting its own window: `cipstack discover` with its default
+        # broadcast addresses, and ListIdentity to loopback's broadcast address and to the limited one.
+        command = subprocess.Popen([sys.executable, "-m", "cipstack", "discover", "--port", str(port), "--json"],
+                                   stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+
+        async def both() -> tuple[list[str], list[tuple[bytes, str]]]:
+            return await asyncio.gather(broadcast_replies(port, 2.0),
+                                        list_identity_replies("255.255.255.255", port, 2.0))
+
+        looped, limited = asyncio.run(both())
+        stdout, _ = command.communicate(timeout=30)
+        assert sorted(looped, key=sort_key) == hosts                       # 64 devices, each answered once
+        replies = [host for _, host in limited]
         assert sorted(replies, key=sort_key) == hosts                      # the limited broadcast too
-        # `cipstack discover` with its default broadcast addresses lists every device once.
-        command = subprocess.run([sys.executable, "-m", "cipstack", "discover", "--port", str(port), "--json"],
-                                 capture_output=True, text=True, timeout=30)
-        listed = [json.loads(line)["address"] for line in command.stdout.splitlines()]
+        # `cipstack discover` lists every device once.
+        listed = [json.loads(line)["address"] for line in stdout.splitlines()]
         assert sorted(listed, key=lambda a: sort_key(a.rsplit(":", 1)[0])) == [f"{h}:{port}" for h in hosts]
         for host in (hosts[0], hosts[-1]):                                   # one of each worker's share
             status = drive("status", "--host", host, "--port", str(port))
@@ -461,38 +476,42 @@ def test_a_stopped_worker_is_reported_and_stopping_takes_seconds(tmp_path: Path)
     stopped ends within seconds (SIGCONT, then SIGTERM), not after 30 s."""
     from cipstack.fleet.workers import HEARTBEAT_INTERVAL, HEARTBEAT_TIMEOUT, HUNG_STOP_TIMEOUT
 
-    hosts = addresses(20, 4)
-    args = ("--addresses", f"{hosts[0]}-{hosts[-1]}", "--device", "acg*4", "--port", str(free_port(*hosts)),
-            "--io-port", "0", "--workers", "2", "--state-dir", str(tmp_path / "state"))
-    fleet = Fleet(tmp_path, *args, name="hung")
+    def fleet(block: int, name: str) -> Fleet:
+        hosts = addresses(block, 4)
+        return Fleet(tmp_path, "--addresses", f"{hosts[0]}-{hosts[-1]}", "--device", "acg*4", "--port",
+                     str(free_port(*hosts)), "--io-port", "0", "--workers", "2", "--state-dir",
+                     str(tmp_path / name), name=name)
+
+    # Two fleets started together: the second is stopped while the first finds its worker hung.
+    hung, stopped = fleet(20, "hung"), fleet(21, "stopped")
     try:
-        fleet.wait_ready()
-        workers = children(fleet.process.pid)
+        hung.wait_ready()
+        stopped.wait_ready()
+        workers = children(hung.process.pid)
         assert len(workers) == 2
         os.kill(workers[1], signal.SIGSTOP)
         stopped_at = time.monotonic()
-        assert fleet.process.wait(30) == 1
+
+        others = children(stopped.process.pid)
+        os.kill(others[0], signal.SIGSTOP)
+        asked = time.monotonic()
+        stopped.process.send_signal(signal.SIGTERM)
+        assert stopped.process.wait(30) == 0, stopped.err.read_text()
+        assert time.monotonic() - asked < 8.0
+        wait_for(lambda: not any(alive(pid) for pid in others), 10, "the workers to end")
+
+        assert hung.process.wait(30) == 1
         took = time.monotonic() - stopped_at
         assert took < HEARTBEAT_TIMEOUT + HEARTBEAT_INTERVAL + HUNG_STOP_TIMEOUT + 3.0, took
-        err = [line for line in fleet.err.read_text().splitlines() if "cipstack fleet:" in line]
+        err = [line for line in hung.err.read_text().splitlines() if "cipstack fleet:" in line]
         assert len(err) == 1 and "stopped answering" in err[0] and "stopping the fleet" in err[0], err
+        hosts = addresses(20, 4)
         assert f"{hosts[2]}-{hosts[3]}" in err[0], err
-        assert "Traceback" not in fleet.err.read_text()
+        assert "Traceback" not in hung.err.read_text()
         wait_for(lambda: not any(alive(pid) for pid in workers), 10, "the workers to end")
     finally:
-        fleet.kill()
-    fleet = Fleet(tmp_path, *args, name="stopped")
-    try:
-        fleet.wait_ready()
-        workers = children(fleet.process.pid)
-        os.kill(workers[0], signal.SIGSTOP)
-        asked = time.monotonic()
-        fleet.process.send_signal(signal.SIGTERM)
-        assert fleet.process.wait(30) == 0, fleet.err.read_text()
-        assert time.monotonic() - asked < 8.0
-        wait_for(lambda: not any(alive(pid) for pid in workers), 10, "the workers to end")
-    finally:
-        fleet.kill()
+        hung.kill()
+        stopped.kill()
 
 
 def test_sigterm_stops_every_worker_and_a_killed_parent_leaves_none(tmp_path: Path) -> None:

@@ -288,7 +288,7 @@ def test_the_pictures_of_the_docs_are_made_from_live_pages(tmp_path: Path) -> No
     and it fails on a script error of the page."""
     require_browser()
     root = Path(__file__).resolve().parents[1]
-    result = subprocess.run([sys.executable, str(root / "tools" / "panel_screenshots.py"), str(tmp_path)],
+    result = subprocess.run([sys.executable, str(root / "tools" / "panel_screenshots.py"), str(tmp_path), "--at-once"],
                             capture_output=True, text=True, timeout=180, cwd=root)
     assert result.returncode == 0, result.stderr
     for name in ("front-panel.png", "plant.png"):

@@ -10,7 +10,6 @@ import json
 import signal
 import subprocess
 import sys
-import time
 from pathlib import Path
 
 from tests.library_support import adapter_process
@@ -57,13 +56,20 @@ def test_a_listen_only_point_refused_point_to_point_is_asked_again_by_multicast(
         # The owner the file lets produce both ways: asked for multicast, so that there is something to listen to.
         owner = subprocess.Popen(io(address, io_port, "--eds", str(path), "--connection", "1", "--multicast",
                                     duration="30s"), stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+        owner_said: list[str] = []
         try:
-            time.sleep(1.5)
+            # The owner says where its T->O comes from once its connection is open (or ends at its duration).
+            assert owner.stderr is not None
+            for line in owner.stderr:
+                owner_said.append(line)
+                if "T->O multicast from" in line:
+                    break
             listener = subprocess.run(io(address, io_port, "--eds", str(path), "--connection", "6"),
                                       capture_output=True, text=True, timeout=60)
         finally:
             owner.send_signal(signal.SIGINT)
-            _, owner_err = owner.communicate(timeout=30)
+            _, rest = owner.communicate(timeout=30)
+            owner_err = "".join(owner_said) + rest
     assert listener.returncode == 0, listener.stderr
     lines = said(listener.stderr)
     assert lines[0] == ("cipstack io: the target refused point-to-point T->O (0x0108): multicast asked, which the "

@@ -37,7 +37,10 @@ SCRIPT = textwrap.dedent('''
                 # The owner's originator stops producing (a PLC that died): the owner times out at the
                 # target (5 ms x 4 x 2^2 = 80 ms) and its listener goes with it.
                 owner.connection.closed = True
-                await asyncio.sleep(0.3)
+                for _ in range(30):                    # within 0.3 s: both gone
+                    if not adapter.io.connections:
+                        break
+                    await asyncio.sleep(0.01)
                 left = len(adapter.io.connections)
             print(json.dumps({{"destinations": destinations, "shared": shared, "left": left,
                                "owner_received": owner.stats.received, "listener_received": listener.stats.received}}))

@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import asyncio
 import logging
+import time
 
 import pytest
 
@@ -19,6 +20,7 @@ from cipstack.adapter import Adapter, AdapterSettings
 from cipstack.cip.types import UINT
 from cipstack.eip.originator import io_context
 from cipstack.scanner import Scanner
+from tests.waiting import wait_until
 
 INACTIVITY_S = 1  # TCP/IP attribute 13, in seconds
 
@@ -40,7 +42,7 @@ async def test_the_session_is_kept_alive_while_the_connection_runs(monkeypatch: 
             with caplog.at_level(logging.INFO):
                 async with scanner.io_connection(output=21, input=71, rpi=0.010, timeout_multiplier=5,
                                                  target_io_port=adapter.io.io_port) as io:
-                    await asyncio.sleep(3 * INACTIVITY_S)
+                    await asyncio.sleep(3 * INACTIVITY_S)   # the subject: three inactivity timeouts pass
                     assert scanner.client.is_open  # three inactivity timeouts later, NOPs kept it
                     assert io.statistics()["received"] > 100
                     assert len(adapter.io.connections) == 1
@@ -60,9 +62,13 @@ async def test_a_session_the_target_closed_is_reopened_for_the_forward_close(
             with caplog.at_level(logging.INFO):
                 async with scanner.io_connection(output=21, input=71, rpi=0.010, timeout_multiplier=5,
                                                  target_io_port=adapter.io.io_port) as io:
-                    await asyncio.sleep(2.5 * INACTIVITY_S)
-                    assert not scanner.client.is_open  # closed by the target's inactivity timeout
-                    assert io.statistics()["received"] > 100  # the class 1 connection ran on
+                    # Within the 2.5 inactivity timeouts the test gives: the session closed by the
+                    # target's inactivity timeout, and the class 1 connection running on.
+                    began = time.monotonic()
+                    await wait_until(lambda: not scanner.client.is_open, 2.5 * INACTIVITY_S,
+                                     "the target to close the session")
+                    await wait_until(lambda: io.statistics()["received"] > 100,
+                                     2.5 * INACTIVITY_S - (time.monotonic() - began), "100 datagrams of class 1")
             assert "a new one sends the Forward_Close" in caplog.text
             assert "Forward_Close of class 1 connection failed" not in caplog.text
             # Closed at once by the Forward_Close, not by its watchdog a timeout later.

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import asyncio
 import struct
+import time
 from collections.abc import AsyncIterator
 
 import pytest
@@ -16,6 +17,7 @@ from cipstack.cip.types import UDINT, UINT
 from cipstack.devices.profiles import identity_only_device
 from cipstack.eip.originator.asyncio_client import EncapsulationClient, discover, list_services_udp
 from cipstack.scanner import Scanner, SyncScanner, backplane_route
+from tests.waiting import wait_until
 
 
 @pytest.fixture
@@ -138,18 +140,22 @@ async def test_list_commands(adapter: Adapter) -> None:
 
 
 async def test_udp_discovery(adapter: Adapter) -> None:
-    records = await discover("127.0.0.1", adapter.port, timeout=0.8)
+    # Both at once, each collecting its own window.
+    records, services = await asyncio.gather(discover("127.0.0.1", adapter.port, timeout=0.8),
+                                             list_services_udp("127.0.0.1", adapter.port, timeout=0.3))
     assert [(r.vendor_id, r.product_code, r.product_name) for r in records] == [(259, 100, "CENT")]
     assert records[0].address and records[0].address.port == adapter.port
-    [service] = await list_services_udp("127.0.0.1", adapter.port, timeout=0.3)
+    [service] = services
     assert service.cip_over_tcp
 
 
 async def test_inactivity_timeout_closes_idle_connection(adapter: Adapter) -> None:
     adapter.device.tcpip.set(1, 13, 1)
+    connected = time.monotonic()
     client = await EncapsulationClient.connect("127.0.0.1", adapter.port)
-    await asyncio.sleep(1.6)
-    assert not adapter.server.connections
+    # The subject: closed once idle for the timeout (1 s), not before.
+    await wait_until(lambda: not adapter.server.connections, 1.6, "the idle connection closed")
+    assert time.monotonic() - connected >= 1.0
     with pytest.raises(ConnectionError):
         await client.send_rr_data(MessageRouterRequest(0x0E, request_path(1, 1, 1)).encode())
     await client.close()

@@ -1378,7 +1378,7 @@ def test_client_that_never_reads_does_not_grow_the_adapter(target: RunningAdapte
                 if time.monotonic() - last_progress > 0.5:
                     break
                 time.sleep(0.005)
-        time.sleep(0.2)
+        time.sleep(0.2)                # the subject: what the adapter holds once it has read what it can
         held = max(target.write_buffer_sizes(), default=0)
         # With flow control the adapter holds at most one read's worth of replies (under 1 MB).
         assert held <= 2_000_000, (f"after {sent / 1e6:.1f} MB of unread requests the adapter holds "

@@ -248,7 +248,7 @@ def test_a_multi_drop_line_of_drives_answers_by_station_id(tmp_path: Path) -> No
             fd = _raw_slave(path)
             try:
                 os.write(fd, with_crc(bytes.fromhex("00 06") + pdu("ACC").to_bytes(2, "big") + b"\x00\x63"))
-                time.sleep(0.3)
+                time.sleep(0.3)                # the subject: no answer comes in this window
                 with contextlib.suppress(BlockingIOError):
                     assert os.read(fd, 256) == b""
             finally:

@@ -28,6 +28,7 @@ from cipstack.devices.acg.registers import ACG_REGISTERS
 from cipstack.errors import BadRequest
 from cipstack.faults import FaultStateError
 from tests.optional import needs
+from tests.waiting import wait_until
 
 #: Modbus-RTU, station 1, Read Holding Registers (0x03) of ACC, one register: the PDU address is the
 #: communication address minus one (as ``test_keypad`` writes it).
@@ -128,11 +129,11 @@ async def test_plug_while_the_power_is_off_opens_nothing_and_the_power_opens_eac
     acg.fault("unplug")
     await acg.faults.settle()
     acg.fault("power-cycle", off="0.6s")
-    await asyncio.sleep(0.1)
+    await wait_until(lambda: acg.service.status()["power"] == "off", 5, "the power off")
     caplog.clear()
     with caplog.at_level(logging.INFO):
         acg.fault("plug")                                                   # while the power is off
-        await asyncio.sleep(0.1)
+        await asyncio.sleep(0.1)       # the subject: the plug opens nothing meanwhile
         assert refused(acg.port) and refused(acg.modbus.port)              # no power: still closed
         await acg.faults.settle()
     opened = [r.getMessage() for r in caplog.records if r.getMessage().startswith(

@@ -144,7 +144,7 @@ def test_complete_frames_keep_a_slow_peer_connected(adapter: Running) -> None:
     with Client(port, "127.0.0.6") as client:
         for _ in range(4):
             client.sock.sendall(frame(NOP))
-            time.sleep(0.4)
+            time.sleep(0.4)            # the subject: slow whole frames, 1.6 s in all, past the 1 s frame timeout
         served(AttackTarget(port, 0), client)
 
 

@@ -135,7 +135,7 @@ async def test_a_client_that_does_not_read_stops_the_reading_and_loses_no_reply(
     extra = [next(contexts) for _ in range(200)]
     sent += extra
     await asyncio.wait_for(loop.sock_sendall(sock, b"".join(frame(LIST_SERVICES, context=c) for c in extra)), 5)
-    await asyncio.sleep(0.1)
+    await asyncio.sleep(0.1)           # the subject: the adapter reads none of them meanwhile
     assert (served.write_buffer_size(), stats.frames) == (held, frames)
     replies = [(await read_frame(sock, buffer))[3] for _ in sent]
     assert replies == sent

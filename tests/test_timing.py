@@ -16,7 +16,7 @@ SUITE = '''
 import subprocess, sys, time
 
 def test_sleeps():
-    time.sleep(0.6)
+    time.sleep(0.6)   # the subject: a test that waits without CPU
 
 def test_burns_cpu_in_a_child():
     subprocess.run([sys.executable, "-c", "sum(range(15_000_000))"], check=True)

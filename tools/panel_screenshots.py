@@ -3,6 +3,10 @@ connection (`cipstack io`) with a fault applied, and a fleet's plant view. Run f
 
     python3 tools/panel_screenshots.py docs/images
 
+Each picture is taken once the page shows what it is of (the drive running under its connection, the
+fault listed; every device of the plant polled, the tripped one marked), and then after the front
+panel's trend has gathered a few seconds of history; `--at-once` leaves out that history (the tests).
+
 It needs what the browser tests need (Debian's chromium and chromium-driver, selenium)."""
 
 from __future__ import annotations
@@ -43,11 +47,34 @@ def call(base: str, method: str, path: str, body: object) -> object:
         return json.loads(reply.read())
 
 
-def shoot(driver: Any, url: str, out: Path, settle: float, height: int) -> None:
+#: The front panel shows the drive running under a class 1 connection.
+RUNNING = ("return document.getElementById('state').className === 'state-running'"
+           " && document.getElementById('class1-table').tBodies[0].rows.length > 0")
+#: ... and the fault applied.
+FAULTED = RUNNING + " && document.getElementById('faults-table').tBodies[0].rows.length > 0"
+#: The plant view has polled every device, and marks the tripped one.
+POLLED = ("const rows = [...document.getElementById('plant-table').tBodies[0].rows];"
+          " return rows.length > 0 && rows.every((r) => r.cells[3].textContent !== '\u2026')"
+          " && rows.some((r) => r.cells[3].className === 'down')")
+
+
+def showing(driver: Any, script: str, what: str, seconds: float = 60) -> None:
+    """Wait until the page's ``script`` returns true."""
+    wait_for(lambda: driver.execute_script(script), seconds, what, interval=0.1)
+
+
+def laid_out(driver: Any) -> None:
+    """Wait until the page has drawn two frames (its layout after a change of the window's size)."""
+    driver.execute_async_script("const done = arguments[arguments.length - 1];"
+                                " requestAnimationFrame(() => requestAnimationFrame(() => done(true)));")
+
+
+def shoot(driver: Any, url: str, out: Path, ready: str, history: float, height: int) -> None:
     driver.get(url)
-    time.sleep(settle)
+    showing(driver, ready, f"{url} to show its subject")
+    time.sleep(history)                   # the trend's history in the picture (0 with --at-once)
     driver.set_window_size(1280, height)
-    time.sleep(0.5)
+    laid_out(driver)
     driver.save_screenshot(str(out))
     errors = [e for e in driver.get_log("browser") if e.get("source") == "javascript"]
     if errors:
@@ -55,7 +82,7 @@ def shoot(driver: Any, url: str, out: Path, settle: float, height: int) -> None:
     print(out)
 
 
-def main(out: Path) -> None:
+def main(out: Path, at_once: bool = False) -> None:
     out.mkdir(parents=True, exist_ok=True)
     work = Path(tempfile.mkdtemp())
     port, http = free_port(), free_port()
@@ -75,9 +102,10 @@ def main(out: Path) -> None:
                                          "--duration", "120s"], stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL))
         with chromium(work / "profile") as driver:
             driver.get(base + "/")
-            time.sleep(3)
+            showing(driver, RUNNING, "the drive running under its connection")
+            time.sleep(0 if at_once else 3)   # the trend: the ramp before the fault
             call(base, "POST", "/faults", {"name": "delay", "options": {"by": "3ms", "jitter": "1ms"}})
-            shoot(driver, base + "/", out / "front-panel.png", 6, 1900)
+            shoot(driver, base + "/", out / "front-panel.png", FAULTED, 0 if at_once else 6, 1900)
         hosts = [f"127.79.200.{n}" for n in range(10, 14)]
         fleet_http = free_port()
         started.append(subprocess.Popen([sys.executable, "-m", "cipstack", "fleet", "--addresses",
@@ -89,7 +117,7 @@ def main(out: Path) -> None:
         wait_listening(fleet_http)
         call(f"http://127.0.0.1:{fleet_http}", "POST", f"/devices/{hosts[1]}/trip", {"code": "OverHeat"})
         with chromium(work / "profile-plant") as driver:
-            shoot(driver, f"http://127.0.0.1:{fleet_http}/", out / "plant.png", 4, 480)
+            shoot(driver, f"http://127.0.0.1:{fleet_http}/", out / "plant.png", POLLED, 0, 480)
     finally:
         for process in reversed(started):
             process.terminate()
@@ -97,4 +125,5 @@ def main(out: Path) -> None:
 
 
 if __name__ == "__main__":
-    main(Path(sys.argv[1]) if len(sys.argv) > 1 else ROOT / "docs" / "images")
+    arguments = [a for a in sys.argv[1:] if a != "--at-once"]
+    main(Path(arguments[0]) if arguments else ROOT / "docs" / "images", at_once="--at-once" in sys.argv[1:])

@@ -68,12 +68,12 @@ async def ours():
         await scanner.get_attribute_single(0x01, 1, 3)
         await scanner.close_connection()
         async with scanner.io_connection(output=21, input=71, rpi=0.010, local_io_port=2222) as owner:
-            await asyncio.sleep(0.5)
+            await asyncio.sleep(0.5)   # the subject: a run of class 1 frames to time (the RPI's p50)
             reply = await asyncio.to_thread(control_request, OUT / "control.sock",
                                             {"command": "trip", "code": int(sys.argv[2])})
             seen["trip"] = reply.get("result")
             await owner.wait_input(lambda i: i.faulted, 5)
-            await asyncio.sleep(0.3)
+            await asyncio.sleep(0.3)   # the subject: the tripped drive's input on the wire
             stats = owner.stats.as_dict()
     # A request routed through the CompoNet gateway (port 2) to the MX2 at node 5.
     from cipstack.cip.epath import PortSegment
@@ -118,9 +118,12 @@ def ethernetip_exchange():
     status = conn.sendFwdOpenReq(70, 20, 1, torpi=20, otrpi=20, multiplier=1, inputsz=4, outputsz=4,
                                  originator_udp_port=port)
     conn.produce()
-    time.sleep(0.4)
+    time.sleep(0.4)                   # the subject: the peer's frames at its RPI, to capture
     conn.stopProduce()  # and no Forward_Close: the connection times out (20 ms x 4 x 2^1 = 160 ms)
-    time.sleep(0.4)
+    from cipstack.control import control_request
+
+    wait_for(lambda: control_request(OUT / "control.sock", {"command": "status"})["class1_connections"] == 0, 5,
+             "the adapter to time the connection out")
     enip.stopIO()
     return {"forward_open": status, "port": port}
 
@@ -149,7 +152,7 @@ finally:
         if process is not None:
             process.send_signal(signal.SIGTERM)
             seen[name + "_exit"] = process.wait(10)
-    time.sleep(0.5)
+    time.sleep(0.5)  # the capturer reads its ring on its own time: no event says it has the last frames
     dump.send_signal(signal.SIGINT)
     dump.wait(20)
     (OUT / "seen.json").write_text(json.dumps(seen, indent=1))

@@ -188,7 +188,8 @@ def test_one_script_runs_both_ways(acg_file: Path, acg_adapter: tuple[str, int])
     both are accepted, both reach the drive (its SpeedRef and Forward Run Cmd. attributes), and both
     print the input under the same names."""
     address, io_port = acg_adapter
-    common = ["--duration", "1s", "--print", "summary", "--json", "--io-port", "0", "--target-io-port", str(io_port)]
+    # Half a second: about 50 RPIs of 10 ms, and the ramp begun (speed_actual > 0).
+    common = ["--duration", "0.5s", "--print", "summary", "--json", "--io-port", "0", "--target-io-port", str(io_port)]
     inputs = {}
     for way, run_forward, speed in ((["--output", "21", "--input", "71"], 1, 900),
                                     (["--eds", str(acg_file), "--connection", "1"], 0, 450)):

@@ -90,6 +90,18 @@ def all_texts() -> Iterator[tuple[str, str]]:
         yield name, omron_text(name)
 
 
+@cache
+def parsed(name: str) -> EdsDocument:
+    """The generated file of ``name`` ("ACG-ET2" or a model), parsed once for the tests of every file
+    (each only reads it): parsing the 62 files takes seconds, and five tests go through them all."""
+    return parse_eds(acg_text() if name == "ACG-ET2" else omron_text(name))
+
+
+def all_parsed() -> Iterator[tuple[str, EdsDocument]]:
+    for name, _ in all_texts():
+        yield name, parsed(name)
+
+
 def value(doc: EdsDocument, section: str, keyword: str) -> Any:
     entry = doc.entry(section, keyword)
     assert entry is not None, f"[{section}] {keyword}"
@@ -138,15 +150,14 @@ def test_bad_source_date_epoch(monkeypatch: pytest.MonkeyPatch) -> None:
 
 @pytest.mark.parametrize("name", ["ACG-ET2", *MODEL_NAMES])
 def test_checker_finds_no_error(name: str) -> None:
-    text = acg_text() if name == "ACG-ET2" else omron_text(name)
-    findings = check_eds(parse_eds(text))
+    findings = check_eds(parsed(name))
     assert [f for f in findings if f.severity == ERROR] == []
     assert findings == []
 
 
 def test_round_trip_byte_identical() -> None:
     for name, text in all_texts():
-        assert format_eds(parse_eds(text), layout=True) == text, name
+        assert format_eds(parsed(name), layout=True) == text, name
         assert text.isascii() and "\r\n" in text and "\n" not in text.replace("\r\n", ""), name
 
 
@@ -169,7 +180,7 @@ def test_device_equals_acg_identity() -> None:
 
 @pytest.mark.parametrize("name", MODEL_NAMES)
 def test_device_equals_omron_identity(name: str) -> None:
-    doc = parse_eds(omron_text(name))
+    doc = parsed(name)
     found = omron.model(name)
     assert value(doc, "Device", "VendCode") == omron.VENDOR_ID == 47
     assert value(doc, "Device", "VendName") == "OMRON Corporation"
@@ -182,8 +193,7 @@ def test_device_equals_omron_identity(name: str) -> None:
 
 
 def test_assembly_members_add_up() -> None:
-    for name, text in all_texts():
-        doc = parse_eds(text)
+    for name, doc in all_parsed():
         params = doc.get("Params")
         assert params is not None
         for entry in doc.get("Assembly") or ():
@@ -196,8 +206,7 @@ def test_assembly_members_add_up() -> None:
 
 
 def test_every_param_min_default_max() -> None:
-    for name, text in all_texts():
-        doc = parse_eds(text)
+    for name, doc in all_parsed():
         params = doc.get("Params")
         assert params is not None
         for entry in params:
@@ -486,8 +495,8 @@ def test_generate_all_writes_the_table(profile: str, table: tuple[str, ...], tmp
     assert err == "" and len(out.splitlines()) == len(table)
     for path in tmp_path.iterdir():
         text = path.read_bytes().decode("ascii")
-        assert text == format_eds(parse_eds(text), layout=True)
         doc = parse_eds(text)
+        assert text == format_eds(doc, layout=True)
         assert value(doc, "Device", "ProdName") + ".eds" == path.name
 
 

@@ -182,7 +182,7 @@ def test_cpppo_sees_the_drive_ramp(emulator: PeerProcess) -> None:
         assert code == 0, output
         speeds.append(int.from_bytes(bytes(rows[0][2]), "little"))
         assert rows[1][2] == [4], output                                       # Enabled
-        time.sleep(0.3)
+        time.sleep(0.3)                 # the subject: the ramp goes on between the readings
     assert 0 < speeds[0] < speeds[1] < speeds[2] < 1800, speeds
     code, _, output = cpppo(emulator.address, "@0x29/1/3=(SINT)0", "@0x2A/1/102=(INT)50")
     assert code == 0, output

@@ -111,14 +111,15 @@ def packets_after(since):
 
 
 def run_faults():
-    time.sleep(1.0)
+    # The bridge's exchange running (its data on NATS) before the baseline is taken.
+    wait_for(lambda: len(seen["packets"]) >= 5, 10, "T->O data through the bridge")
     mark("baseline")
-    time.sleep(1.0)
+    time.sleep(1.0)                   # the subject: the baseline window, the rate the faults are measured by
     # stop-producing: the bridge's connection times out; every reconnection times out again, until clear.
     fault("stop-producing")
     at = seen["marks"][-1][1]
     wait_for(lambda: log_after("closed by timeout", at), 5, "EIPScanner's timeout")
-    time.sleep(0.3)
+    time.sleep(0.3)                   # the subject: its reconnections under the fault time out too
     clear()
     at = seen["marks"][-1][1]
     wait_for(lambda: len(packets_after(at)) >= 5, 10, "T->O data after clear")
@@ -127,9 +128,9 @@ def run_faults():
                                   ("duplicate", {}, 0.6), ("reorder", {}, 0.6), ("freeze-sequence", {}, 0.6),
                                   ("delay", {"by": 0.1}, 0.6)):
         fault(name, **options)
-        time.sleep(window)
+        time.sleep(window)            # the subject: the fault's window
         clear()
-        time.sleep(0.5)
+        time.sleep(0.5)               # the subject: a gap between windows, so none runs into the next
     # wrong-size: the bridge ignores the data, so its watchdog is never fed.
     fault("wrong-size")
     at = seen["marks"][-1][1]
@@ -184,7 +185,7 @@ finally:
         if child.poll() is None:
             child.send_signal(signal.SIGTERM)
             child.wait(10)
-    time.sleep(0.5)
+    time.sleep(0.5)  # the capturer reads its ring on its own time: no event says it has the last frames
     tshark.send_signal(signal.SIGINT)
     tshark.wait(20)
     (OUT / "seen.json").write_text(json.dumps(seen, indent=1))

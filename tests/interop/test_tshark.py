@@ -261,7 +261,7 @@ finally:
     for name, process in servers:
         seen[f"{name}_alive"] = process.poll() is None
         seen[f"{name}_exit"] = stop(process, signal.SIGTERM)
-    time.sleep(0.5)
+    time.sleep(0.5)  # the capturer reads its ring on its own time: no event says it has the last frames
     seen["tshark_exit"] = stop(tshark, signal.SIGINT)
     seen["adapter_log"] = log_text("adapter")
     (OUT / "seen.json").write_text(json.dumps(seen, indent=1, default=repr))

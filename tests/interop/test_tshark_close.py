@@ -56,7 +56,7 @@ try:
     io = subprocess.Popen([PY, "-m", "cipstack", "io", ADAPTER, "--output", "21", "--input", "71", "--duration",
                            "60s"], stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
     first = io.stdout.readline()          # the first input line: the connection is open and running
-    time.sleep(0.3)
+    time.sleep(0.3)                       # the subject: Ctrl-C while the exchange runs, not at its first input
     io.send_signal(signal.SIGINT)
     out, err = io.communicate(timeout=30)
     seen["interrupt"] = {"code": io.returncode, "out": first + out, "err": err}
@@ -76,7 +76,7 @@ finally:
     if adapter is not None:
         adapter.send_signal(signal.SIGTERM)
         seen["adapter_exit"] = adapter.wait(10)
-    time.sleep(0.5)
+    time.sleep(0.5)  # the capturer reads its ring on its own time: no event says it has the last frames
     tshark.send_signal(signal.SIGINT)
     tshark.wait(20)
     (OUT / "seen.json").write_text(json.dumps(seen, indent=1))

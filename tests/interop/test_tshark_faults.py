@@ -33,7 +33,7 @@ async def exchange():
         async with scanner.io_connection(output=21, input=71, rpi=0.010, timeout_multiplier=1,
                                          local_io_port=2222) as io:
             await io.wait_input(lambda i: True, 5)
-            await asyncio.sleep(0.3)
+            await asyncio.sleep(0.3)   # the subject: T->O on the wire before the fault stops it
             seen["fault"] = control_request(control, {"command": "fault", "name": "stop-producing", "options": {}})
             try:
                 async for _ in io.updates():
@@ -67,7 +67,7 @@ finally:
     if adapter is not None:
         adapter.send_signal(signal.SIGTERM)
         seen["adapter_exit"] = adapter.wait(10)
-    time.sleep(0.5)
+    time.sleep(0.5)  # the capturer reads its ring on its own time: no event says it has the last frames
     tshark.send_signal(signal.SIGINT)
     tshark.wait(20)
     (OUT / "seen.json").write_text(json.dumps(seen, indent=1))

@@ -81,7 +81,7 @@ def ethernetip_exchange():
         time.sleep(0.01)
     running = bool(inputs[2])
     outputs[0] = False
-    time.sleep(0.2)
+    time.sleep(0.2)                       # the subject: the stop command on the wire, 20 of its RPIs
     conn.stopProduce()
     closed = conn.sendFwdCloseReq(70, 20, 1)
     enip.stopIO()
@@ -110,7 +110,7 @@ finally:
     if adapter is not None:
         adapter.send_signal(signal.SIGTERM)
         seen["adapter_exit"] = adapter.wait(10)
-    time.sleep(0.5)
+    time.sleep(0.5)  # the capturer reads its ring on its own time: no event says it has the last frames
     tshark.send_signal(signal.SIGINT)
     tshark.wait(20)
     (OUT / "seen.json").write_text(json.dumps(seen, indent=1))
