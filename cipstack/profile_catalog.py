@@ -51,7 +51,7 @@ class ProfileCatalog(Catalog):
                          standard=compact_standard_classes())
 
     # The base class assigns both in its constructor; the property keeps them lazy.
-    @property  # type: ignore[override]  # a lazy attribute: Catalog declares it a plain one
+    @property  # a lazy attribute where Catalog has a plain one
     def assemblies(self) -> dict[int, AssemblySchema]:
         """The profile's assembly schemas, from its device model (imported now, the first time)."""
         if self._assemblies is None:
@@ -65,7 +65,7 @@ class ProfileCatalog(Catalog):
         # Catalog's constructor gives an empty table: the profile's are loaded when first asked for.
         self._assemblies = assemblies or None
 
-    @property  # type: ignore[override]  # a lazy attribute: Catalog declares it a plain one
+    @property  # a lazy attribute where Catalog has a plain one
     def parameters(self) -> tuple[Parameter, ...]:
         """The profile's parameters in the order its declaration lists them (a safe order to write them)."""
         if self._parameters is None:
