@@ -141,10 +141,11 @@ LIBRARY_CASES = {
 
 
 @pytest.mark.parametrize("profile", sorted(LIBRARY_CASES))
-def test_the_library_decodes_by_path_and_by_code_without_the_device_model(
-        profile: str, adapter_process: tuple[str, subprocess.Popen[str]], mx2_process: str  # noqa: F811
-) -> None:
-    target = adapter_process[0] if profile == "acg" else mx2_process
+def test_the_library_decodes_by_path_and_by_code_without_the_device_model(profile: str,
+                                                                          request: pytest.FixtureRequest) -> None:
+    # Each profile's emulator: the ACG's of the command tests, the MX2's of its own.
+    target = request.getfixturevalue("adapter_process")[0] if profile == "acg" else \
+        request.getfixturevalue("mx2_process")
     path, code, value, too_big, name, declared = LIBRARY_CASES[profile]
     script = LIBRARY_SCRIPT.format(target=target, path=path, code=code, value=value, too_big=too_big)
     done = subprocess.run([sys.executable, "-c", script], capture_output=True, text=True, timeout=60)
