@@ -12,6 +12,10 @@ the request, the close):
 * ``set``: ``cipstack set HOST 0x2A/1/102 50`` against pycomm3 writing it;
 * ``identity``: ``cipstack identity HOST`` against ``CIPDriver.list_identity`` (both ListIdentity
   over TCP);
+* ``get-code``: ``cipstack get HOST ACC`` (the same attribute by the parameter's code, found in the
+  profile's declarations) against the pycomm3 script of ``get-decoded`` (pycomm3 knows no codes);
+* ``script-code``: a Python script as the library's guide writes it, ``SyncScanner(HOST)`` (the drive
+  identified) and ``.parameter("ACC")`` printed, against the same pycomm3 script;
 * ``python``: ``python -c pass``, the interpreter alone (the floor both pay).
 
 Wall time of each process, medians printed, and each ratio cipstack / pycomm3 against its target
@@ -72,7 +76,22 @@ CIPSTACK = {
     "get-decoded": ["get", "{target}", "0x2A/1/102"],
     "set": ["set", "{target}", "0x2A/1/102", "50"],
     "identity": ["identity", "{target}"],
+    "get-code": ["get", "{target}", "ACC"],
 }
+
+#: Pairs whose cipstack side is a script of the library (run as ``python -c SCRIPT HOST``).
+CIPSTACK_SCRIPTS = {
+    "script-code": """
+import sys
+from cipstack import SyncScanner
+with SyncScanner(sys.argv[1]) as drive:
+    print(drive.parameter("ACC"))
+""",
+}
+
+#: The pairs whose pycomm3 side is another pair's script (one command, timed once a round).
+PYCOMM3_OF = {"get-code": "get-decoded", "script-code": "get-decoded"}
+PAIRS = [*CIPSTACK, *CIPSTACK_SCRIPTS]
 
 #: Bytecode caching as an installed package has it: with PYTHONDONTWRITEBYTECODE set, every run
 #: compiles every module it imports again, which is most of a one-shot's time.
@@ -105,7 +124,10 @@ def measure(rounds: int) -> dict[str, Any]:
     for name, arguments in CIPSTACK.items():
         commands[f"cipstack {name}"] = [sys.executable, "-m", "cipstack",
                                         *(a.format(target=target) for a in arguments)]
-        commands[f"pycomm3 {name}"] = [sys.executable, "-c", PYCOMM3[name], target]
+    for name, script in CIPSTACK_SCRIPTS.items():
+        commands[f"cipstack {name}"] = [sys.executable, "-c", script, target]
+    for name, script in PYCOMM3.items():
+        commands[f"pycomm3 {name}"] = [sys.executable, "-c", script, target]
     times: dict[str, list[float]] = {name: [] for name in commands}
     try:
         for command in commands.values():  # warm the page cache and the bytecode once
@@ -114,22 +136,28 @@ def measure(rounds: int) -> dict[str, Any]:
             for name, command in commands.items():
                 times[name].append(timed(command))
         modules = imported_modules(["-m", "cipstack", *(a.format(target=target) for a in CIPSTACK["get-decoded"])])
+        script_modules = imported_modules(["-c", CIPSTACK_SCRIPTS["script-code"], target])
         python_modules = imported_modules(["-c", "pass"])
     finally:
         stop_adapter(adapter)
     medians = {name: statistics.median(values) for name, values in times.items()}
     pairs = {}
-    for name in CIPSTACK:
-        ratio = medians[f"cipstack {name}"] / medians[f"pycomm3 {name}"]
+    for name in PAIRS:
+        theirs = medians[f"pycomm3 {PYCOMM3_OF.get(name, name)}"]
+        ratio = medians[f"cipstack {name}"] / theirs
         pairs[name] = {"cipstack_ms": round(medians[f"cipstack {name}"] * 1e3, 1),
-                       "pycomm3_ms": round(medians[f"pycomm3 {name}"] * 1e3, 1),
-                       "ratio": round(ratio, 2), "pass": ratio <= TARGET_RATIO}
+                       "pycomm3_ms": round(theirs * 1e3, 1), "ratio": round(ratio, 2), "pass": ratio <= TARGET_RATIO}
     ours = [m for m in modules if m.startswith("cipstack")]
     return {"rounds": rounds, "python_ms": round(medians["python"] * 1e3, 1), "target_ratio": TARGET_RATIO,
             "commands": pairs, "pass": all(p["pass"] for p in pairs.values()),
             "get_decoded_modules": len(modules), "get_decoded_cipstack_modules": len(ours),
             "python_modules": len(python_modules),
-            "eds_or_asyncio_imported": sorted(m for m in modules if m.startswith(("cipstack.eds", "asyncio")))}
+            "eds_or_asyncio_imported": sorted(m for m in modules if m.startswith(("cipstack.eds", "asyncio"))),
+            "script_code_modules": len(script_modules),
+            "script_code_cipstack_modules": len([m for m in script_modules if m.startswith("cipstack")]),
+            "script_code_asyncio_or_device_model": sorted(
+                m for m in script_modules if m.startswith(("asyncio", "cipstack.eip.target"))
+                or (m.startswith("cipstack.devices.") and not m.startswith("cipstack.devices.declared")))}
 
 
 def report(result: dict[str, Any]) -> list[str]:
@@ -142,6 +170,9 @@ def report(result: dict[str, Any]) -> list[str]:
                  f"modules, {result['get_decoded_cipstack_modules']} of cipstack (python alone: "
                  f"{result['python_modules']}); EDS or asyncio modules among them: "
                  f"{result['eds_or_asyncio_imported'] or 'none'}")
+    lines.append(f"the `script-code` script imports {result['script_code_modules']} modules, "
+                 f"{result['script_code_cipstack_modules']} of cipstack; asyncio, target or device model modules "
+                 f"among them: {result['script_code_asyncio_or_device_model'] or 'none'}")
     return lines
 
 

@@ -145,6 +145,14 @@ class Catalog:
         spec = self.classes.get(class_id)
         return spec.instance_attribute(attribute_id) if spec is not None else None
 
+    def parameter(self, code: str) -> Parameter | None:
+        """The parameter whose code is exactly ``code``, or None (``parameter_codes.find_parameter``
+        also takes a code as a person types it, and a name)."""
+        for parameter in self.parameters:
+            if parameter.code == code:
+                return parameter
+        return None
+
     def get_all_layout(self, class_id: int) -> list[AttributeSpec] | None:
         """The attributes of a Get_Attributes_All reply of ``class_id``, in order (None: unknown class)."""
         spec = self.classes.get(class_id)

@@ -11,7 +11,6 @@ HOST CODE`` call what is here, over the scanner's own read and write."""
 
 from __future__ import annotations
 
-import difflib
 from typing import Any
 
 from .catalog import Catalog, Parameter
@@ -47,10 +46,10 @@ def find_parameter(catalog: Catalog, code: str) -> Parameter:
     """The parameter ``code`` names: its code exactly, else its code or its name (an EDS
     ``ParamN``'s name, ``"Accel Time"``) without regard to case and separators. A name two
     parameters share is refused with their codes."""
+    exact = catalog.parameter(code)
+    if exact is not None:
+        return exact
     parameters = catalog.parameters
-    for parameter in parameters:
-        if parameter.code == code:
-            return parameter
     wanted = _key(code)
     by_code = [p for p in parameters if _key(p.code) == wanted]
     if len(by_code) == 1:
@@ -60,6 +59,8 @@ def find_parameter(catalog: Catalog, code: str) -> Parameter:
         return by_name[0]
     if len(by_code) + len(by_name) > 1:
         raise UnknownParameterError(code, catalog, [p.code for p in by_code + by_name])
+    import difflib  # only to suggest codes near one that is not there
+
     names = {p.code: p for p in parameters}
     near = difflib.get_close_matches(code, list(names), n=5, cutoff=0.6)
     if not near:   # by name, then their codes

@@ -14,7 +14,7 @@ from collections.abc import AsyncIterator, Callable, Iterator, Sequence
 from pathlib import Path
 from typing import TYPE_CHECKING, Any, NamedTuple, TypeVar
 
-from .catalog import Catalog
+from .catalog import Catalog, compact_standard_classes
 from .cip.epath import PortSegment, Segment, request_path
 from .cip.messages import MessageRouterRequest, MessageRouterResponse, Service
 from .cip.model import AttributeSpec
@@ -118,7 +118,8 @@ class ExplicitMessaging:
     def __init__(self, core: OriginatorCore, catalog: Catalog | None = None,
                  route: Sequence[Segment] | None = None) -> None:
         self.core = core
-        self.catalog = catalog or Catalog()
+        # The standard objects' compact declarations (what decoding takes of them) until identified.
+        self.catalog = catalog or Catalog(standard=compact_standard_classes())
         self.route = route
         self.identity: IdentityRecord | None = None
 
@@ -134,12 +135,12 @@ class ExplicitMessaging:
             yield from self.identify()
 
     def identify(self, catalogs: Callable[[int, int], Catalog] | None = None) -> Plan[IdentityRecord | None]:
-        """``catalogs``: the catalog of (vendor id, product code); by default the profile's whole one
-        (``devices.profiles.catalog_for``)."""
+        """``catalogs``: the catalog of (vendor id, product code); by default the profile's, built from
+        its compact declarations (``profile_catalog.decoding_catalog``: no device model is imported)."""
         if catalogs is None:
-            from .devices.profiles import catalog_for
+            from .profile_catalog import decoding_catalog
 
-            catalogs = catalog_for
+            catalogs = decoding_catalog
 
         record = None
         if not self.route:
@@ -154,7 +155,8 @@ class ExplicitMessaging:
         self.identity = record
         if record is None:
             self.catalog = Catalog(source="the standard objects only: the device did not identify itself (no "
-                                          "ListIdentity reply, no Identity attributes 1 and 3); give eds= or catalog=")
+                                          "ListIdentity reply, no Identity attributes 1 and 3); give eds= or catalog=",
+                                   standard=compact_standard_classes())
         else:
             self.catalog = catalogs(record.vendor_id, record.product_code)
         return record
@@ -162,9 +164,8 @@ class ExplicitMessaging:
     def _identity_attributes(self) -> Plan[IdentityRecord | None]:
         """Identity attributes 1-4 and 7 (only vendor and product code are needed)."""
         from .eip.wire.identity_items import IdentityRecord
-        from .objects.identity import identity_spec
 
-        spec = identity_spec()
+        spec = compact_standard_classes()[0x01]   # the Identity object's declarations, as data
         values: dict[int, Any] = {}
         for attribute in (1, 3, 2, 4, 7):
             declared = spec.instance_attribute(attribute)

@@ -9,8 +9,9 @@ from cipstack.catalog import Catalog, compact_standard_classes, standard_classes
 from cipstack.cip.compact import attribute_spec, cip_type, row_of, type_data
 from cipstack.cip.model import AttributeSpec
 from cipstack.cip.types import REVISION, ArrayType, OctetString, RealType, StructType
-from cipstack.devices.decoding import DECLARED, STANDARD_DECLARED, decoding_catalog, generate, generate_standard
+from cipstack.devices.decoding import DECLARED, STANDARD_DECLARED, generate, generate_standard
 from cipstack.devices.profiles import PROFILES, catalog_for
+from cipstack.profile_catalog import decoding_catalog
 
 
 def test_the_generated_modules_are_up_to_date() -> None:
@@ -85,3 +86,32 @@ def test_a_row_builds_its_declaration_again() -> None:
     assert row_of(attribute_spec(row_of(spec))) == row_of(spec)
     with pytest.raises(ValueError, match="Odd: type ODD cannot be named"):  # a type cip.types has not
         row_of(AttributeSpec(1, "Odd", RealType("ODD", 0xCA, 4)))
+
+
+@pytest.mark.parametrize("name", sorted(PROFILES))
+def test_every_parameter_code_is_the_device_model_s(name: str) -> None:
+    """The codes a scanner reads and writes by (``parameter("ACC")``), from the compact data: the same
+    codes in the same order (the order a recipe writes them), each at the same path, declared alike
+    (its range too: a value is checked against it before it is sent)."""
+    profile = PROFILES[name]
+    product_code = min(profile.product_codes)
+    full = catalog_for(profile.vendor_id, product_code)
+    compact = decoding_catalog(profile.vendor_id, product_code)
+    expected = [(p.code, p.path, row_of(p.spec), decoding(p.spec)) for p in full.parameters]
+    assert len(expected) > 40
+    # One code asked for builds one declaration; the whole list after it is the device model's.
+    for code, path, row, _ in expected[::7]:
+        found = decoding_catalog(profile.vendor_id, product_code).parameter(code)
+        assert found is not None and (found.path, row_of(found.spec)) == (path, row), code
+    assert [(p.code, p.path, row_of(p.spec), decoding(p.spec)) for p in compact.parameters] == expected
+    assert compact.parameter("no such code") is None and full.parameter("no such code") is None
+
+
+def test_the_assemblies_come_from_the_device_model_when_asked_for() -> None:
+    """Decoding imports no device model; class 1 fields by name (``catalog.assemblies``) load it."""
+    compact, full = decoding_catalog(259, 100), catalog_for(259, 100)
+    copied = compact.copy("mine")
+    assert sorted(compact.assemblies) == sorted(full.assemblies) and len(full.assemblies) >= 8
+    assert [a.instance for a in compact.assemblies.values()] == [a.instance for a in full.assemblies.values()]
+    assert (copied.source, copied.profile, sorted(copied.assemblies)) == ("mine", "acg", sorted(full.assemblies))
+    assert copied.attribute(0x2A, 1, 102) == compact.attribute(0x2A, 1, 102)

@@ -42,9 +42,12 @@ ALLOWED = {
     # and runtime, the fault controller, the event stream and the command service, and passes each
     # its collaborators; so it sits above faults and control, which know only the runtime.
     "adapter": {"control", "devices", "eip", "errors", "faults", "listening", "modbus", "objects", "runtime"},
-    "scanner": {"catalog", "cip", "devices", "eds", "eip", "errors", "objects", "parameter_codes", "sync_io"},
+    "scanner": {"catalog", "cip", "devices", "eds", "eip", "errors", "objects", "parameter_codes", "profile_catalog",
+                "sync_io"},
     # Parameters by code: the catalog's declarations, read and written through the scanner it is given.
     "parameter_codes": {"catalog", "cip", "errors"},
+    # A profile's catalog from its generated compact declarations (the device model only for assemblies).
+    "profile_catalog": {"catalog", "cip", "devices", "errors"},
     "sync_io": {"eip", "errors"},
     "params": {"catalog", "cip", "errors"},
     "catalog": {"assemblies", "cip", "eip", "objects", "errors"},

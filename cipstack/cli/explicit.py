@@ -123,12 +123,9 @@ def _connect_identified(args: argparse.Namespace, standard: tuple[int, int, int]
         return scanner
     if standard is not None and standard[0] in compact_standard_classes() and scanner.catalog.attribute(*standard):
         return scanner
-    from ..devices.decoding import decoding_catalog
-
     try:
-        # The library's own identification (one code path), with the profile's declarations for
-        # decoding only: a one-shot command does not import the device model.
-        scanner.client.run(scanner.explicit.identify(decoding_catalog))
+        # The library's own identification: the profile's compact declarations, no device model.
+        scanner.identify()
     except BaseException:
         scanner.close()
         raise
@@ -151,7 +148,7 @@ def _by_code(args: argparse.Namespace, value: str | None) -> int:
     from ..scanner import SyncScanner
 
     doc = eds_document(args)
-    # By code: the profile's whole declarations (its parameters' codes), not the compact decoding data.
+    # By code: the profile's compact declarations know its parameters' codes and ranges.
     with SyncScanner(args.target, timeout=args.timeout, route=parse_route(args.route), identify=doc is None,
                      eds=doc) as scanner:
         if args.connected:

@@ -1,66 +1,29 @@
-"""The declarations a scanner decodes replies by, per profile, loaded as compact data.
+"""The declarations a scanner decodes replies by, per profile, written as compact data.
 
 ``catalog_for`` (``devices.profiles``) builds a profile's whole catalog from its device model: the
-classes, the assemblies, the parameters a recipe holds. A one-shot read (``cipstack get HOST
-0x2A/1/102``) needs only the attributes' declarations, and importing the device model would cost
-it most of its time. ``decoding_catalog`` gives those from the modules of ``devices/declared/``,
-generated from the same declarations by ``python -m cipstack.devices.decoding`` (and held equal to
-them by ``tests/test_decoding_data.py``): the same attributes, names, types, units and scales, and
-the same ``source``; no assemblies and no parameters. The rows are ``cip.compact``'s; this module
-also writes the standard objects' (``objects/declared.py``).
+classes, the assemblies, the parameters a recipe holds. A scanner reading an attribute or a
+parameter by its code needs only the attributes' declarations and where each code is, and importing
+the device model would cost a script most of its time. This module generates the modules of
+``devices/declared/`` from the profiles' declarations (``python -m cipstack.devices.decoding``;
+``tests/test_decoding_data.py`` holds them equal): each attribute's row (``cip.compact``), and each
+parameter code's path, in the catalog's order. ``cipstack.profile_catalog`` builds a scanner's
+catalog from them. This module also writes the standard objects' rows (``objects/declared.py``).
 """
 
 from __future__ import annotations
 
-import importlib
 from collections.abc import Callable, Iterator
 from pathlib import Path
 from typing import Any
 
-from ..catalog import Catalog, compact_standard_classes
-from ..cip.compact import Row, attribute_spec, class_specs, classes_data, row_of
+from ..catalog import Catalog
+from ..cip.compact import Row, classes_data, row_of
 from ..cip.model import AttributeSpec
 
 #: What the generated modules are made from, and where they go.
 DECLARED = Path(__file__).resolve().parent / "declared"
 #: The standard objects' compact data (``catalog.compact_standard_classes``), generated here too.
 STANDARD_DECLARED = Path(__file__).resolve().parent.parent / "objects" / "declared.py"
-
-
-def _no_profile(vendor_id: int, product_code: int) -> str:
-    return f"the standard objects only: no profile for vendor {vendor_id} product code {product_code} " \
-           "(give eds= or catalog=)"
-
-
-def decoding_catalog(vendor_id: int, product_code: int) -> Catalog:
-    """The attribute declarations of the profile of (vendor id, product code), without its device
-    model: ``catalog_for``'s, for decoding replies (no assemblies, no parameters)."""
-    from .declared import DESCRIPTIONS, PROFILES
-
-    name = PROFILES.get((vendor_id, product_code))
-    standard = compact_standard_classes()
-    if name is None:
-        return Catalog(source=_no_profile(vendor_id, product_code), standard=standard)
-    description = DESCRIPTIONS[name]
-    data: Any = importlib.import_module(f"{__package__}.declared.{name}")
-    resolvers = {class_id: _resolver(rows) for class_id, rows in data.RESOLVED.items()}
-    return Catalog(class_specs(data.CLASSES), resolvers=resolvers, profile=data.PROFILE, standard=standard,
-                   source=f"profile {name} (vendor {vendor_id} product code {product_code}: {description})")
-
-
-def _resolver(rows: dict[tuple[int, int], Row]) -> Callable[[int, int], AttributeSpec | None]:
-    built: dict[tuple[int, int], AttributeSpec] = {}
-
-    def resolve(instance: int, attribute: int) -> AttributeSpec | None:
-        spec = built.get((instance, attribute))
-        if spec is None:
-            row = rows.get((instance, attribute))
-            if row is None:
-                return None
-            spec = built[instance, attribute] = attribute_spec(row)
-        return spec
-
-    return resolve
 
 
 # -- generation ----------------------------------------------------------------------------------------
@@ -94,18 +57,35 @@ def generate() -> dict[str, str]:
         classes = classes_data({class_id: spec for class_id, spec in catalog.classes.items()
                                 if standard.get(class_id) is not spec and class_id not in catalog.resolvers})
         resolved = {class_id: dict(_resolved_rows(resolve)) for class_id, resolve in sorted(catalog.resolvers.items())}
+        parameters = _parameter_paths(name, catalog)
         files[f"{name}.py"] = (
             f'{header}The attribute declarations of profile {name} that replies decode by."""\n\n'
             f"PROFILE = {catalog.profile!r}\n\n"
             f"#: class id -> (class name, instance attributes), where they are not the standard objects'.\n"
             f"CLASSES = {_pretty(classes)}\n\n"
             f"#: class id -> {{(instance, attribute): declaration}}, the classes declared per instance.\n"
-            f"RESOLVED = {_pretty(resolved)}\n")
+            f"RESOLVED = {_pretty(resolved)}\n\n"
+            f"#: The parameters a recipe holds, by code, in the catalog's order: (code, class, instance, attribute),\n"
+            f"#: each declared as the attribute at its path is.\n"
+            f"PARAMETERS = {_pretty_list(parameters)}\n")
     files["__init__.py"] = (
         f'{header}Which profile a device is, by its identity, and what the profile is."""\n\n'
         f"#: (vendor id, product code) -> profile.\nPROFILES = {_pretty(identities)}\n\n"
         f"#: profile -> what it emulates.\nDESCRIPTIONS = {_pretty(descriptions)}\n")
     return files
+
+
+def _parameter_paths(name: str, catalog: Catalog) -> list[tuple[str, int, int, int]]:
+    """Each parameter's code and path; its declaration must be the attribute's at that path, which
+    is what the compact data rebuilds it from."""
+    out = []
+    for parameter in catalog.parameters:
+        declared = catalog.attribute(*parameter.path)
+        if declared is None or row_of(declared) != row_of(parameter.spec):
+            raise ValueError(f"profile {name}: parameter {parameter.code} is not declared as the attribute at "
+                             f"{parameter.path} is: the compact data cannot hold it")
+        out.append((parameter.code, *parameter.path))
+    return out
 
 
 def generate_standard() -> str:
@@ -126,6 +106,11 @@ def _pretty(value: Any) -> str:
         return repr(value)
     lines = [f"    {key!r}: {_pretty_inner(item)}," for key, item in value.items()]
     return "{\n" + "\n".join(lines) + "\n}"
+
+
+def _pretty_list(value: list[Any]) -> str:
+    """A list literal with one item a line."""
+    return "[\n" + "".join(f"    {item!r},\n" for item in value) + "]" if value else "[]"
 
 
 def _pretty_inner(value: Any) -> str:
