@@ -8,6 +8,7 @@ import logging
 import signal
 from collections.abc import Awaitable, Callable
 from dataclasses import dataclass
+from functools import partial
 from pathlib import Path
 from typing import Any
 
@@ -22,7 +23,7 @@ from .eip.interfaces import interface_of
 from .eip.io_core import DEFAULT_IO_PORT, ProductionGrid
 from .eip.io_server import IoEndpoint, freeze_startup_objects
 from .eip.target.core import EncapsulationTarget, TargetSettings
-from .eip.target.io_target import IoTarget
+from .eip.target.io_target import IoProfile, IoTarget
 from .eip.target.limits import DEFAULT_MAX_TCP_CONNECTIONS
 from .eip.target.seams import IoSeam, ReplySeam, RequestSeam
 from .eip.target.server import DEFAULT_PORT, EncapsulationServer
@@ -157,16 +158,12 @@ class Adapter:
         if profile is not None:
             if s.max_io_connections is not None:
                 profile.max_connections = s.max_io_connections
-            self.io = IoTarget(profile, IoEventRelay(self.device, self.observers), self.device.multicast_block,
-                               s.io_port, production_grid)
+            self.io_endpoint = IoEndpoint(host=s.host, port=s.io_port,
+                                          multicast_ttl=lambda: int(self.device.tcpip.get(1, 8)), exclusive=True,
+                                          make_core=partial(self._class1_core, profile, production_grid))
+            assert self.io is not None   # made by _class1_core, with the endpoint
             self.device.connection_manager.io_handler = self.io
             self.target.settings.capabilities = CAPABILITY_CIP_TCP | CAPABILITY_CLASS01_UDP
-            self.io_seam = IoSeam(self.io)
-            self.io_endpoint = IoEndpoint(self.io_seam, s.host, s.io_port, lambda: int(self.device.tcpip.get(1, 8)),
-                                          exclusive=True)
-            self.io.changed = self.io_endpoint.wakeup
-            self.io.deliver = self.device.assembly.deliver
-            self.io.tick = self.clock.tick
             self.device.update_io_status()
             ports.append(Class1Port(self.io_endpoint, self.io_seam))
         self.power = PowerLink(ports)
@@ -178,6 +175,16 @@ class Adapter:
         self.control_server: ControlServer | None = None
         #: The HTTP control API, while serving with ``settings.http``.
         self.http_api: Any = None
+
+    def _class1_core(self, profile: IoProfile, grid: ProductionGrid | None, endpoint: IoEndpoint) -> IoSeam:
+        """The class 1 core and its seam, made by their UDP ``endpoint`` (``IoEndpoint.make_core``) with
+        every hook they call: the device's Assembly object takes consumed data, the clock moves the
+        device, the endpoint re-arms its timer when a connection opens and sends what a filter delays."""
+        self.io = IoTarget(profile, IoEventRelay(self.device, self.observers), self.device.multicast_block,
+                           self.settings.io_port, grid, deliver=self.device.assembly.deliver, tick=self.clock.tick,
+                           changed=endpoint.wakeup)
+        self.io_seam = IoSeam(self.io, endpoint.send_later)
+        return self.io_seam
 
     @property
     def port(self) -> int:

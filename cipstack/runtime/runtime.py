@@ -14,7 +14,7 @@ if TYPE_CHECKING:
     from ..eip.io_server import IoEndpoint
     from ..eip.target.core import EncapsulationTarget
     from ..eip.target.io_target import IoConnection, IoTarget
-    from ..eip.target.seams import Datagram, IoSeam, ReplySeam, RequestSeam
+    from ..eip.target.seams import IoSeam, ReplySeam, RequestSeam
     from ..eip.target.server import EncapsulationServer
     from ..modbus.rtu_line import RtuLine
 
@@ -94,8 +94,6 @@ class DeviceRuntime:
         self.class1 = class1
         self.endpoint = endpoint
         self.rtu = rtu
-        if class1 is not None:
-            class1.send_later = self.send_later
 
     # -- time ---------------------------------------------------------------------------------------------
     @staticmethod
@@ -124,12 +122,6 @@ class DeviceRuntime:
 
     def class1_connections(self) -> list[IoConnection]:
         return list(self.io.connections.values()) if self.io is not None else []
-
-    def send_later(self, at: float, datagrams: list[Datagram]) -> None:
-        """Send class 1 datagrams at ``at`` (a delayed production), if the port is still open then."""
-        endpoint = self.endpoint
-        if endpoint is not None:
-            asyncio.get_running_loop().call_at(at, endpoint.send, datagrams)
 
     async def lose_power(self) -> None:
         """The power goes: every port closes (``power``) and every connection with it (no Forward_Close
