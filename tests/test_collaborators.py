@@ -26,10 +26,11 @@ from cipstack.adapter import Adapter, AdapterSettings
 PACKAGE = Path(cipstack.__file__).parent
 
 #: What a shell takes in ``start`` from the running loop, not from whoever made it: the loop itself, the
-#: class 1 lane of a ``PreciseEventLoop`` (None on any other loop), and the TCP listener the
-#: encapsulation server makes on that lane for its own socket.
+#: class 1 lane of a ``PreciseEventLoop`` (None on any other loop), the TCP listener the encapsulation
+#: server makes on that lane for its own socket, and the line the RS-485 port makes when it opens its tty.
 TAKEN_AT_START = frozenset({("IoEndpoint", "loop"), ("IoEndpoint", "_lane"), ("EncapsulationServer", "loop"),
                             ("EncapsulationServer", "_tcp"), ("ModbusTcpServer", "loop"), ("RtuLine", "loop"),
+                            ("Rs485Port", "line"),
                             # The line's settings, read from the first drive when the line starts: state.
                             ("RtuLine", "_settings")})
 
@@ -38,9 +39,6 @@ STILL_SET_LATER = frozenset({
     # The device makes its Connection Manager before the class 1 target exists, and the target is made
     # from the device's offer (``Device.io_profile``): the handler goes in once the target is made.
     ("ConnectionManagerObject", "io_handler"),
-    # The RS-485 line is made when its tty opens, in ``start`` (a port that cannot be opened is the
-    # error ``start`` names, with nothing left open), after the adapter and its runtime are made.
-    ("Adapter", "rtu"), ("DeviceRuntime", "rtu"),
 })
 
 

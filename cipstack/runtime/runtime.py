@@ -17,6 +17,7 @@ if TYPE_CHECKING:
     from ..eip.target.seams import IoSeam, ReplySeam, RequestSeam
     from ..eip.target.server import EncapsulationServer
     from ..modbus.rtu_line import RtuLine
+    from .ports import Rs485Port
 
 
 class DeviceClock:
@@ -81,7 +82,7 @@ class DeviceRuntime:
     def __init__(self, device: Device, clock: DeviceClock, observers: Observers, power: PowerLink,
                  target: EncapsulationTarget, server: EncapsulationServer, requests: RequestSeam,
                  replies: ReplySeam, io: IoTarget | None = None, class1: IoSeam | None = None,
-                 endpoint: IoEndpoint | None = None, rtu: RtuLine | None = None) -> None:
+                 endpoint: IoEndpoint | None = None, rs485: Rs485Port | None = None) -> None:
         self.device = device
         self.clock = clock
         self.observers = observers
@@ -93,7 +94,12 @@ class DeviceRuntime:
         self.io = io
         self.class1 = class1
         self.endpoint = endpoint
-        self.rtu = rtu
+        self.rs485 = rs485
+
+    @property
+    def rtu(self) -> RtuLine | None:
+        """The RS-485 line, once its port has opened it."""
+        return self.rs485.line if self.rs485 is not None else None
 
     # -- time ---------------------------------------------------------------------------------------------
     @staticmethod
