@@ -135,7 +135,19 @@ class Adapter:
                                           written=register_relay("modbus-tcp", self.observers))
         #: The drive's RS-485 port with ``settings.rtu``: its line opens when the adapter starts.
         self.rs485 = Rs485Port(self._open_rtu_line) if s.rtu is not None else None
+        # Class 1 first: the encapsulation target offers it to the Connection Manager (``RequestContext.class1``).
+        self.io: IoTarget | None = None
+        self.io_seam: IoSeam | None = None
+        self.io_endpoint: IoEndpoint | None = None
         profile = self.device.io_profile()
+        if profile is not None:
+            if s.max_io_connections is not None:
+                profile.max_connections = s.max_io_connections
+            self.io_endpoint = IoEndpoint(host=s.host, port=s.io_port,
+                                          multicast_ttl=lambda: int(self.device.tcpip.get(1, 8)), exclusive=True,
+                                          make_core=partial(self._class1_core, profile, production_grid))
+            assert self.io is not None   # made by _class1_core, with the endpoint
+            self.device.update_io_status()
         self.requests = RequestSeam(self.device.router)
         self.replies = ReplySeam()
         self.target = EncapsulationTarget(
@@ -144,27 +156,16 @@ class Adapter:
                            max_connections=s.max_connections, max_frame_length=s.max_frame_length,
                            frame_timeout=s.frame_timeout,
                            inactivity_timeout=lambda: self.device.inactivity_timeout,
-                           capabilities=CAPABILITY_CIP_TCP | (CAPABILITY_CLASS01_UDP if profile is not None else 0)),
-            table=self.device.connection_table, requests=self.requests, tick=self.clock.tick,
+                           capabilities=CAPABILITY_CIP_TCP | (CAPABILITY_CLASS01_UDP if self.io is not None else 0)),
+            table=self.device.connection_table, requests=self.requests, tick=self.clock.tick, class1=self.io,
         )
         self.server = EncapsulationServer(self.target, s.host, s.port, max_tcp_connections=s.max_tcp_connections,
                                           max_tcp_connections_per_host=s.max_tcp_connections_per_host,
                                           replies=self.replies)
-        self.io: IoTarget | None = None
-        self.io_seam: IoSeam | None = None
-        self.io_endpoint: IoEndpoint | None = None
         ports: list[Port] = [ServerPort("EtherNet/IP", self.server)]
         if self.modbus is not None:
             ports.append(ServerPort("Modbus TCP", self.modbus))
-        if profile is not None:
-            if s.max_io_connections is not None:
-                profile.max_connections = s.max_io_connections
-            self.io_endpoint = IoEndpoint(host=s.host, port=s.io_port,
-                                          multicast_ttl=lambda: int(self.device.tcpip.get(1, 8)), exclusive=True,
-                                          make_core=partial(self._class1_core, profile, production_grid))
-            assert self.io is not None   # made by _class1_core, with the endpoint
-            self.device.connection_manager.io_handler = self.io
-            self.device.update_io_status()
+        if self.io_endpoint is not None:
             ports.append(Class1Port(self.io_endpoint, self.io_seam))
         if self.rs485 is not None:
             ports.append(self.rs485)

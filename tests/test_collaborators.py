@@ -34,12 +34,6 @@ TAKEN_AT_START = frozenset({("IoEndpoint", "loop"), ("IoEndpoint", "_lane"), ("E
                             # The line's settings, read from the first drive when the line starts: state.
                             ("RtuLine", "_settings")})
 
-#: Collaborators still set after construction, each with why (issue 54 names what is left).
-STILL_SET_LATER = frozenset({
-    # The device makes its Connection Manager before the class 1 target exists, and the target is made
-    # from the device's offer (``Device.io_profile``): the handler goes in once the target is made.
-    ("ConnectionManagerObject", "io_handler"),
-})
 
 
 def _ours(value: object) -> bool:
@@ -154,7 +148,7 @@ async def test_every_collaborator_is_the_one_given_at_construction(adapter: Any)
             continue   # made before the adapter (a shared declaration), or by no __init__ of ours
         kind = type(held).__name__
         for name, now in _attributes(held).items():
-            if not _collaborator(now) or (kind, name) in TAKEN_AT_START | STILL_SET_LATER:
+            if not _collaborator(now) or (kind, name) in TAKEN_AT_START:
                 continue
             if name not in before or not _same(before[name], now):
                 later.append(f"{kind}.{name}: {before.get(name)!r} at construction, {now!r} after start")
@@ -165,7 +159,7 @@ async def test_the_class1_hooks_are_the_methods_of_what_serves_them(adapter: Any
     running, constructions = adapter
     io, seam, endpoint = running.io, running.io_seam, running.io_endpoint
     assert io is not None and seam is not None and endpoint is not None
-    assert endpoint.core is seam and seam.core is io
+    assert endpoint.core is seam and seam.core is io and running.target.class1 is io
     assert io.changed == endpoint.wakeup
     assert io.deliver == running.device.assembly.deliver
     assert io.tick == running.clock.tick
