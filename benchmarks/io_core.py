@@ -32,8 +32,7 @@ def run(n: int, staggered: bool, seconds: float = 2.0) -> tuple[int, float]:
     device = build_device()
     profile = device.io_profile()
     profile.max_connections = n
-    io = IoTarget(profile, device)
-    io.tick = device.advance
+    io = IoTarget(profile, device, tick=device.advance)
     ids = []
     for index in range(n):
         raw = class1_open(0x100 + index, rpi_us=int(RPI * 1e6), multiplier=2, path=ACG_INPUT_ONLY_PATH, ot_size=2)

@@ -8,6 +8,7 @@ import logging
 import signal
 from collections.abc import Awaitable, Callable
 from dataclasses import dataclass
+from functools import partial
 from pathlib import Path
 from typing import Any
 
@@ -22,7 +23,7 @@ from .eip.interfaces import interface_of
 from .eip.io_core import DEFAULT_IO_PORT, ProductionGrid
 from .eip.io_server import IoEndpoint, freeze_startup_objects
 from .eip.target.core import EncapsulationTarget, TargetSettings
-from .eip.target.io_target import IoTarget
+from .eip.target.io_target import IoProfile, IoTarget
 from .eip.target.limits import DEFAULT_MAX_TCP_CONNECTIONS
 from .eip.target.seams import IoSeam, ReplySeam, RequestSeam
 from .eip.target.server import DEFAULT_PORT, EncapsulationServer
@@ -132,8 +133,21 @@ class Adapter:
                                           max_connections_per_host=s.max_tcp_connections_per_host,
                                           frame_timeout=s.frame_timeout,
                                           written=register_relay("modbus-tcp", self.observers))
-        #: The RS-485 line of ``settings.rtu`` once started.
-        self.rtu: RtuLine | None = None
+        #: The drive's RS-485 port with ``settings.rtu``: its line opens when the adapter starts.
+        self.rs485 = Rs485Port(self._open_rtu_line) if s.rtu is not None else None
+        # Class 1 first: the encapsulation target offers it to the Connection Manager (``RequestContext.class1``).
+        self.io: IoTarget | None = None
+        self.io_seam: IoSeam | None = None
+        self.io_endpoint: IoEndpoint | None = None
+        profile = self.device.io_profile()
+        if profile is not None:
+            if s.max_io_connections is not None:
+                profile.max_connections = s.max_io_connections
+            self.io_endpoint = IoEndpoint(host=s.host, port=s.io_port,
+                                          multicast_ttl=lambda: int(self.device.tcpip.get(1, 8)), exclusive=True,
+                                          make_core=partial(self._class1_core, profile, production_grid))
+            assert self.io is not None   # made by _class1_core, with the endpoint
+            self.device.update_io_status()
         self.requests = RequestSeam(self.device.router)
         self.replies = ReplySeam()
         self.target = EncapsulationTarget(
@@ -141,37 +155,24 @@ class Adapter:
             TargetSettings(max_sessions=s.max_sessions, max_sessions_per_host=s.max_sessions_per_host,
                            max_connections=s.max_connections, max_frame_length=s.max_frame_length,
                            frame_timeout=s.frame_timeout,
-                           inactivity_timeout=lambda: self.device.inactivity_timeout),
-            table=self.device.connection_table, requests=self.requests, tick=self.clock.tick,
+                           inactivity_timeout=lambda: self.device.inactivity_timeout,
+                           capabilities=CAPABILITY_CIP_TCP | (CAPABILITY_CLASS01_UDP if self.io is not None else 0)),
+            table=self.device.connection_table, requests=self.requests, tick=self.clock.tick, class1=self.io,
         )
         self.server = EncapsulationServer(self.target, s.host, s.port, max_tcp_connections=s.max_tcp_connections,
                                           max_tcp_connections_per_host=s.max_tcp_connections_per_host,
                                           replies=self.replies)
-        self.io: IoTarget | None = None
-        self.io_seam: IoSeam | None = None
-        self.io_endpoint: IoEndpoint | None = None
         ports: list[Port] = [ServerPort("EtherNet/IP", self.server)]
         if self.modbus is not None:
             ports.append(ServerPort("Modbus TCP", self.modbus))
-        profile = self.device.io_profile()
-        if profile is not None:
-            if s.max_io_connections is not None:
-                profile.max_connections = s.max_io_connections
-            self.io = IoTarget(profile, IoEventRelay(self.device, self.observers), self.device.multicast_block,
-                               s.io_port, production_grid)
-            self.device.connection_manager.io_handler = self.io
-            self.target.settings.capabilities = CAPABILITY_CIP_TCP | CAPABILITY_CLASS01_UDP
-            self.io_seam = IoSeam(self.io)
-            self.io_endpoint = IoEndpoint(self.io_seam, s.host, s.io_port, lambda: int(self.device.tcpip.get(1, 8)),
-                                          exclusive=True)
-            self.io.changed = self.io_endpoint.wakeup
-            self.io.deliver = self.device.assembly.deliver
-            self.io.tick = self.clock.tick
-            self.device.update_io_status()
+        if self.io_endpoint is not None:
             ports.append(Class1Port(self.io_endpoint, self.io_seam))
+        if self.rs485 is not None:
+            ports.append(self.rs485)
         self.power = PowerLink(ports)
         self.runtime = DeviceRuntime(self.device, self.clock, self.observers, self.power, self.target, self.server,
-                                     self.requests, self.replies, self.io, self.io_seam, self.io_endpoint)
+                                     self.requests, self.replies, self.io, self.io_seam, self.io_endpoint,
+                                     self.rs485)
         self.faults = FaultController(self.runtime)
         self._events = EventStream(self.runtime, self.faults)
         self.service = DeviceService(self.runtime, self.faults, self._events, product)
@@ -179,9 +180,24 @@ class Adapter:
         #: The HTTP control API, while serving with ``settings.http``.
         self.http_api: Any = None
 
+    def _class1_core(self, profile: IoProfile, grid: ProductionGrid | None, endpoint: IoEndpoint) -> IoSeam:
+        """The class 1 core and its seam, made by their UDP ``endpoint`` (``IoEndpoint.make_core``) with
+        every hook they call: the device's Assembly object takes consumed data, the clock moves the
+        device, the endpoint re-arms its timer when a connection opens and sends what a filter delays."""
+        self.io = IoTarget(profile, IoEventRelay(self.device, self.observers), self.device.multicast_block,
+                           self.settings.io_port, grid, deliver=self.device.assembly.deliver, tick=self.clock.tick,
+                           changed=endpoint.wakeup)
+        self.io_seam = IoSeam(self.io, endpoint.send_later)
+        return self.io_seam
+
     @property
     def port(self) -> int:
         return self.server.port
+
+    @property
+    def rtu(self) -> RtuLine | None:
+        """The RS-485 line of ``settings.rtu`` once started."""
+        return self.rs485.line if self.rs485 is not None else None
 
     # -- faults and events (cipstack.faults, cipstack.control.events) ------------------------------------
     @property
@@ -219,8 +235,8 @@ class Adapter:
                                     f"{s.host}:{s.port} (EtherNet/IP, --port)"))
         if self.modbus is not None:
             await self._listen(self.modbus.start, lambda: f"TCP {s.host}:{s.modbus_port} (Modbus TCP, --modbus-port)")
-        if s.rtu is not None:
-            await self._open_rtu(s.rtu)
+        if self.rs485 is not None:
+            await self._open_rtu(self.rs485)
         self.clock.tick(asyncio.get_running_loop().time())
         if self.io_endpoint is not None:
             await self._listen(self.io_endpoint.start, lambda: f"UDP {s.host}:{s.io_port} (class 1 I/O, --io-port)")
@@ -240,22 +256,23 @@ class Adapter:
             await self.close()
             raise ListenError(what, exc) from None
 
-    async def _open_rtu(self, device: str) -> None:
-        """The drive's RS-485 port on ``device`` ("pty" or a serial device); one that cannot be
-        opened raises ``RtuPortError`` naming it, with nothing left open."""
-        drive = self.modbus_drive
-        assert drive is not None   # checked when the adapter was made
+    async def _open_rtu(self, rs485: Rs485Port) -> None:
+        """Open the drive's RS-485 port; a device that cannot be opened raises ``RtuPortError`` naming
+        it, with nothing left open."""
         try:
-            port = open_port(device, LineSettings.from_drive(drive.drive()))
+            await rs485.open()
         except RtuPortError:
             await self.close()
             raise
-        self.rtu = RtuLine(port)
-        self.rtu.add(drive.drive, drive.saves, written=register_relay("modbus-rtu", self.observers))
-        self.runtime.rtu = self.rtu
-        rs485 = Rs485Port(self.rtu)
-        self.power.ports.append(rs485)
-        await rs485.open()
+
+    def _open_rtu_line(self) -> RtuLine:
+        """The RS-485 line on ``settings.rtu`` ("pty" or a serial device) with the drive on it: what
+        the RS-485 port opens when the adapter starts (``RtuPortError`` if the device cannot be opened)."""
+        drive = self.modbus_drive
+        assert drive is not None and self.settings.rtu is not None   # checked when the adapter was made
+        line = RtuLine(open_port(self.settings.rtu, LineSettings.from_drive(drive.drive())))
+        line.add(drive.drive, drive.saves, written=register_relay("modbus-rtu", self.observers))
+        return line
 
     @property
     def control_path(self) -> ControlAddress:
@@ -353,9 +370,8 @@ class Adapter:
                 port.shutdown()
         if self.modbus is not None:
             await self.modbus.close()
-        if self.rtu is not None:
-            await self.rtu.close()
-            self.rtu = None
+        if self.rs485 is not None:
+            await self.rs485.release()
         if self.io is not None:
             self.io.close_all()
         if self.io_endpoint is not None:

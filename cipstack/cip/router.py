@@ -42,6 +42,10 @@ class RequestContext:
     extras: dict[str, Any] = field(default_factory=dict)
     #: How many requests enclose the one being served (Multiple_Service_Packet, Unconnected_Send).
     depth: int = 0
+    #: The class 1 (I/O) connections the transport offers, which the Connection Manager hands a
+    #: class 1 Forward_Open or Forward_Close (an ``IoConnectionHandler`` of ``eip.target``); None where
+    #: the transport carries no I/O (CompoNet, a device without I/O assemblies).
+    class1: Any = None
 
 
 #: Readers of Get_Attribute_Single kept at most: every readable attribute of a large device, and a

@@ -30,6 +30,7 @@ import logging
 import re
 import traceback
 from collections.abc import Awaitable, Callable, Mapping
+from functools import partial
 from typing import TYPE_CHECKING, Any
 
 from aiohttp import web
@@ -397,8 +398,6 @@ class HttpConnections:
         #: One address may hold every slot while it is alone: a newcomer takes one of them.
         self.limiter = ConnectionLimiter(limit, per_host=limit)
         self.header_timeout = header_timeout
-        #: Makes aiohttp's protocol of a connection (given when the app is served: ``serve``).
-        self.make_handler: Callable[[HttpConnections], asyncio.Protocol] | None = None
         #: The connections served, by aiohttp's protocol of each (``request.protocol``).
         self.served: dict[Any, _Connection] = {}
         self.refused_log = RateLimitedLog(log)
@@ -416,9 +415,6 @@ class HttpConnections:
     def refused(self) -> int:
         """Connections refused since the start."""
         return self.limiter.refused
-
-    def __call__(self) -> asyncio.Protocol:
-        return _Connection(self)
 
     def admit(self, connection: _Connection) -> bool:
         """Count ``connection`` in (making room when every slot is taken), or say why not in the log."""
@@ -456,12 +452,27 @@ class HttpConnections:
         self.malformed_log("HTTP request from %s refused (%d): %s", host or "?", status, reason, source=host)
 
 
+class _Listener:
+    """The protocol factory of one served listener: each connection it accepts goes through
+    ``connections`` (admitted or refused), and admitted to the aiohttp protocol ``make_handler`` makes."""
+
+    def __init__(self, connections: HttpConnections,
+                 make_handler: Callable[[HttpConnections], asyncio.Protocol]) -> None:
+        self.connections = connections
+        self.make_handler = make_handler
+
+    def __call__(self) -> asyncio.Protocol:
+        return _Connection(self.connections, self.make_handler)
+
+
 class _Connection(asyncio.Protocol):
     """One accepted connection: admitted, it hands everything to aiohttp's protocol (``handler``);
     refused, it answers 503 and reads what comes until the client closes (``REFUSAL_LINGER_S``)."""
 
-    def __init__(self, connections: HttpConnections) -> None:
+    def __init__(self, connections: HttpConnections,
+                 make_handler: Callable[[HttpConnections], asyncio.Protocol]) -> None:
         self.connections = connections
+        self.make_handler = make_handler
         self.transport: asyncio.Transport | None = None
         self.handler: Any = None
         self.host = ""
@@ -487,8 +498,7 @@ class _Connection(asyncio.Protocol):
             self._refuse(loop)
             return
         self.admitted = True
-        assert connections.make_handler is not None   # set by ``serve_app`` before it listens
-        self.handler = connections.make_handler(connections)
+        self.handler = self.make_handler(connections)
         connections.served[self.handler] = self
         self.timer = loop.call_later(connections.header_timeout, self._no_head)
         self.handler.connection_made(transport)
@@ -661,8 +671,7 @@ async def serve_app(app: web.Application, host: str, port: int, path: str | None
     assert server is not None  # made by runner.setup()
     factory: Callable[[], asyncio.BaseProtocol] = server
     if connections is not None:
-        connections.make_handler = lambda owner: QuietRequestHandler(server, owner, loop=loop, **options)
-        factory = connections
+        factory = _Listener(connections, partial(QuietRequestHandler, server, loop=loop, **options))
     try:
         listening = await loop.create_server(factory, sock=listener)
     except BaseException:

@@ -23,7 +23,6 @@ import contextlib
 import logging
 import socket
 from collections.abc import Awaitable, Callable, Sequence
-from dataclasses import dataclass
 
 from yarl import URL
 
@@ -66,14 +65,21 @@ def parse_fleet(text: str) -> tuple[str, int]:
     return name, int(port_text)
 
 
-@dataclass
 class _Fleet:
-    """A fleet's API as the plant view found it."""
+    """A fleet's API as the plant view found it: its relay backend, which asks it why it is down."""
 
-    where: tuple[str, int]
-    backend: Backend
-    #: Why it is shown as not serving, or None.
-    lost: str | None = None
+    def __init__(self, where: tuple[str, int], token: str | None) -> None:
+        host, port = where
+        self.where = where
+        #: Why it is shown as not serving, or None.
+        self.lost: str | None = None
+        self.backend = Backend(f"fleet {_text(where)}", None, down=self.why_lost,
+                               url=URL.build(scheme="http", host=host, port=port),
+                               headers={"Authorization": f"Bearer {token}"} if token else {},
+                               shown={"fleet": _text(where)})
+
+    def why_lost(self) -> str | None:
+        return self.lost
 
 
 class PlantView:
@@ -153,12 +159,8 @@ class PlantView:
                 await fleet.backend.close()
 
     async def _add(self, where: tuple[str, int]) -> None:
-        host, port = where
-        backend = Backend(f"fleet {_text(where)}", None, url=URL.build(scheme="http", host=host, port=port),
-                          headers={"Authorization": f"Bearer {self.token}"} if self.token else {},
-                          shown={"fleet": _text(where)})
-        fleet = _Fleet(where, backend)
-        backend.down = lambda: fleet.lost
+        fleet = _Fleet(where, self.token)
+        backend = fleet.backend
         try:
             await self.relay.add(backend)
         except ConnectionError as exc:   # not answering yet (a pod starting): the next round asks again

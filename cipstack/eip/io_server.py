@@ -29,6 +29,8 @@ import time
 from collections.abc import Callable
 from typing import Any, Protocol
 
+from ..errors import BadRequest
+
 # The loop had its home here: FD_SETSIZE, PreciseEventLoop, run_precise, ... are still exported from here.
 from .precise_loop import (  # noqa: F401
     FD_SETSIZE,
@@ -156,9 +158,13 @@ class IoEndpoint:
     """UDP socket + timer around an ``IoCore``: on the class 1 lane of a ``PreciseEventLoop``, or
     through asyncio's datagram transport and timers on any other loop."""
 
-    def __init__(self, core: IoCore, host: str = "127.0.0.1", port: int = 2222,
-                 multicast_ttl: Callable[[], int] = lambda: 1, exclusive: bool = False) -> None:
-        self.core = core
+    def __init__(self, core: IoCore | None = None, host: str = "127.0.0.1", port: int = 2222,
+                 multicast_ttl: Callable[[], int] = lambda: 1, exclusive: bool = False, *,
+                 make_core: Callable[[IoEndpoint], IoCore] | None = None) -> None:
+        """``core``, or ``make_core``: what makes the core around this endpoint, called once here with
+        the endpoint, for a core that takes the endpoint's methods as its collaborators when it is made
+        (a target's core wakes the endpoint when a Forward_Open adds a deadline; its filters send
+        later through it), so that nothing is set on the core afterwards."""
         #: The address and port are this endpoint's alone: a second socket on exactly them is refused
         #: (a target's consuming port must be its own, see ``refuse_exact_sharer``), while a socket
         #: on the wildcard address and the same port may coexist (a scanner on 0.0.0.0:2222 beside
@@ -186,6 +192,11 @@ class IoEndpoint:
         #: When each socket was last read to its end (``_catch_up``), by socket: the endpoint's own and
         #: each group's, every socket the endpoint reads.
         self._emptied_at: dict[socket.socket, float] = {}
+        if make_core is not None:
+            core = make_core(self)   # last: the endpoint is whole when its core takes its methods
+        if core is None:
+            raise BadRequest("an IoEndpoint takes its core, or make_core to make it")
+        self.core: IoCore = core
 
     async def start(self) -> None:
         self.loop = asyncio.get_running_loop()
@@ -355,6 +366,10 @@ class IoEndpoint:
         """Send datagrams now, outside a firing (a production held back for a while), if still open."""
         if self._sock is not None:
             self._send(datagrams)
+
+    def send_later(self, at: float, datagrams: list[tuple[bytes, tuple[str, int]]]) -> None:
+        """Send datagrams at ``at`` on the running loop's clock (a delayed production), if open then."""
+        asyncio.get_running_loop().call_at(at, self.send, datagrams)
 
     def _send(self, datagrams: list[tuple[bytes, tuple[str, int]]]) -> None:
         """The datagrams due in one firing, sent back to back on the socket itself (a transport's

@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import asyncio
 import enum
+from collections.abc import Callable
 from typing import TYPE_CHECKING, Protocol
 
 if TYPE_CHECKING:
@@ -117,29 +118,39 @@ class Class1Port:
 
 
 class Rs485Port:
-    """The drive's RS-485 line (Modbus-RTU). The tty is opened once, when the device starts (a pty's
-    client must not see it vanish); the port is open while the drives on it have power, and closed
-    it is silent: whatever comes is read and dropped."""
+    """The drive's RS-485 line (Modbus-RTU). The tty is opened once, the first time the port opens, when
+    the device starts (a pty's client must not see it vanish): ``open_line`` opens it and puts the
+    drives on it, raising ``RtuPortError`` for a device that cannot be opened. The port is open while
+    the drives on it have power, and closed it is silent: whatever comes is read and dropped."""
 
     medium = Medium.SERIAL
 
-    def __init__(self, line: RtuLine) -> None:
-        self.line = line
+    def __init__(self, open_line: Callable[[], RtuLine]) -> None:
+        self.open_line = open_line
         self.name = "RS-485"
-        self._started = False
+        #: The line this port opened (None before its first ``open`` and after ``release``).
+        self.line: RtuLine | None = None
 
     @property
     def is_open(self) -> bool:
-        return self._started and self.line.powered
+        return self.line is not None and self.line.powered
 
     async def open(self) -> None:
-        if not self._started:
-            await self.line.start()
-            self._started = True
+        if self.line is None:
+            line = self.open_line()
+            await line.start()
+            self.line = line
         self.line.power_on()
 
     async def close(self) -> None:
-        self.line.power_off()
+        if self.line is not None:
+            self.line.power_off()
+
+    async def release(self) -> None:
+        """The device stops: the tty is closed."""
+        line, self.line = self.line, None
+        if line is not None:
+            await line.close()
 
 
 __all__ = ["Class1Port", "Listener", "Medium", "Port", "Rs485Port", "ServerPort"]

@@ -14,9 +14,10 @@ if TYPE_CHECKING:
     from ..eip.io_server import IoEndpoint
     from ..eip.target.core import EncapsulationTarget
     from ..eip.target.io_target import IoConnection, IoTarget
-    from ..eip.target.seams import Datagram, IoSeam, ReplySeam, RequestSeam
+    from ..eip.target.seams import IoSeam, ReplySeam, RequestSeam
     from ..eip.target.server import EncapsulationServer
     from ..modbus.rtu_line import RtuLine
+    from .ports import Rs485Port
 
 
 class DeviceClock:
@@ -81,7 +82,7 @@ class DeviceRuntime:
     def __init__(self, device: Device, clock: DeviceClock, observers: Observers, power: PowerLink,
                  target: EncapsulationTarget, server: EncapsulationServer, requests: RequestSeam,
                  replies: ReplySeam, io: IoTarget | None = None, class1: IoSeam | None = None,
-                 endpoint: IoEndpoint | None = None, rtu: RtuLine | None = None) -> None:
+                 endpoint: IoEndpoint | None = None, rs485: Rs485Port | None = None) -> None:
         self.device = device
         self.clock = clock
         self.observers = observers
@@ -93,9 +94,12 @@ class DeviceRuntime:
         self.io = io
         self.class1 = class1
         self.endpoint = endpoint
-        self.rtu = rtu
-        if class1 is not None:
-            class1.send_later = self.send_later
+        self.rs485 = rs485
+
+    @property
+    def rtu(self) -> RtuLine | None:
+        """The RS-485 line, once its port has opened it."""
+        return self.rs485.line if self.rs485 is not None else None
 
     # -- time ---------------------------------------------------------------------------------------------
     @staticmethod
@@ -124,12 +128,6 @@ class DeviceRuntime:
 
     def class1_connections(self) -> list[IoConnection]:
         return list(self.io.connections.values()) if self.io is not None else []
-
-    def send_later(self, at: float, datagrams: list[Datagram]) -> None:
-        """Send class 1 datagrams at ``at`` (a delayed production), if the port is still open then."""
-        endpoint = self.endpoint
-        if endpoint is not None:
-            asyncio.get_running_loop().call_at(at, endpoint.send, datagrams)
 
     async def lose_power(self) -> None:
         """The power goes: every port closes (``power``) and every connection with it (no Forward_Close

@@ -175,8 +175,7 @@ def test_a_variable_size_assembly_is_served_at_its_default_size_and_a_forward_op
     assert profile is not None
     points = {**profile.consumed(), **profile.produced()}
     assert (points[103].size, points[153].size, points[103].variable) == (36, 32, True)
-    target = IoTarget(profile)
-    target.deliver = device.assembly.deliver   # as the adapter wires it
+    target = IoTarget(profile, deliver=device.assembly.deliver)   # as the adapter makes it
     context = RequestContext(device.router, 0.0, "127.0.0.1:50000")
     with pytest.raises(CipError) as refused:
         target.forward_open(_forward_open(1, class1_path(153, 103, 1), 6 + 16, 2 + 20, variable=False), context)

@@ -90,8 +90,6 @@ class AcgDevice(Device):
 
     def __post_init__(self) -> None:
         super().__post_init__()
-        if self.saves is not None:
-            self.drive.on_save = self.saves.request
         #: The latest time the adapter has moved the device to (loop time, seconds).
         self._now = self.drive.time
         # The ACG's Identity replaces the generic one: its services, status bits and state.
@@ -422,8 +420,8 @@ def build_acg_device(interface: NetworkInterface | None = None, limits: DeviceLi
     else:
         store = ParameterStore(state_path, FAMILY, MODEL)
         saved = store.load()
-        drive = AcgDrive(saved, now=now or 0.0, origin=str(store.path))
         writer = StateWriter(store, saved)
+        drive = AcgDrive(saved, now=now or 0.0, on_save=writer.request, origin=str(store.path))
     info = acg_identity_info(drive, serial_from_mac(interface.mac))
     return AcgDevice(info, interface, limits or DeviceLimits(), drive=drive, saves=writer,
                      power_up_on_first_advance=now is None, files=files)

@@ -148,10 +148,6 @@ class AcgDrive(TimedSimulation):
         """Where each save is handed (the shell: a state file, its writer); None: kept in memory."""
         return self._saving.on_save
 
-    @on_save.setter
-    def on_save(self, on_save: SaveRequest | None) -> None:
-        self._saving.on_save = on_save
-
     @property
     def saved_parameters(self) -> dict[int, int]:
         """What a power cycle comes back with (address -> raw value), beyond the defaults."""

@@ -3,7 +3,8 @@
 Sans-I/O: connections are entries in a ``ConnectionTable`` with a deadline; the transport
 calls ``expire(now)`` and asks ``next_deadline()``. A class 3 connection belongs to the TCP
 connection that opened it and dies with it. Transport class 1 is delegated to an
-``IoConnectionHandler`` when the device has one (the class 1 I/O layer), else refused with
+``IoConnectionHandler`` when the transport that carried the request offers one (the class 1 I/O
+layer, ``RequestContext.class1``, given to the encapsulation target when it is made), else refused with
 extended status 0x0103.
 """
 
@@ -129,7 +130,6 @@ class ConnectionManagerObject(CipObject):
         super().__init__(SPEC)
         self.table = table
         self.key_check = key_check
-        self.io_handler: IoConnectionHandler | None = None
         #: Routes out of this device by port number (a CompoNet gateway registers its port).
         self.routes: dict[int, RouteHandler] = {}
         self.counters = self.add_instance(1)
@@ -165,10 +165,11 @@ class ConnectionManagerObject(CipObject):
             raise connection_failure(ExtendedStatus.NULL_FORWARD_OPEN_NOT_SUPPORTED, fo.triad,
                                      "null Forward_Open not supported")
         if fo.transport.transport_class == 1:
-            if self.io_handler is None:
+            class1: IoConnectionHandler | None = context.class1
+            if class1 is None:
                 raise connection_failure(ExtendedStatus.TRANSPORT_CLASS_NOT_SUPPORTED, fo.triad,
                                          "class 1 I/O is not offered by this device")
-            return self.io_handler.forward_open(fo, context).encode()
+            return class1.forward_open(fo, context).encode()
         if fo.transport.transport_class != 3:
             raise connection_failure(ExtendedStatus.TRANSPORT_CLASS_NOT_SUPPORTED, fo.triad,
                                      f"transport class {fo.transport.transport_class}")
@@ -249,7 +250,8 @@ class ConnectionManagerObject(CipObject):
             del self.table.connections[connection.ot_connection_id]
             log.info("class 3 connection 0x%08X closed", connection.ot_connection_id)
             return ForwardCloseReply(fc.triad).encode()
-        if self.io_handler is not None and self.io_handler.forward_close(fc, context):
+        class1: IoConnectionHandler | None = context.class1
+        if class1 is not None and class1.forward_close(fc, context):
             return ForwardCloseReply(fc.triad).encode()
         self._count(7)
         raise connection_failure(ExtendedStatus.CONNECTION_NOT_FOUND, fc.triad, "no such connection")

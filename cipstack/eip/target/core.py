@@ -40,7 +40,7 @@ from ..wire.encapsulation import (
     EncapsulationStatus,
 )
 from ..wire.identity_items import CAPABILITY_CIP_TCP, IdentityRecord, encode_list_identity, encode_list_services
-from .connection_manager import ConnectionTable, ExplicitConnection, origin_host
+from .connection_manager import ConnectionTable, ExplicitConnection, IoConnectionHandler, origin_host
 from .limits import RateLimitedLog
 from .seams import RequestSeam
 from .trailing_bytes import is_too_much_data, too_much_data_hint
@@ -166,11 +166,15 @@ class DelayedReplies:
 class EncapsulationTarget:
     def __init__(self, router: MessageRouter, identity: Callable[[], IdentityRecord],
                  settings: TargetSettings | None = None, table: ConnectionTable | None = None,
-                 requests: RequestSeam | None = None, tick: Callable[[float], None] | None = None) -> None:
+                 requests: RequestSeam | None = None, tick: Callable[[float], None] | None = None,
+                 class1: IoConnectionHandler | None = None) -> None:
         """``requests``: the seam explicit requests reach the router through (``seams.RequestSeam``); by
         default one of its own, with nothing in it. ``tick``: called with the time before a request is
-        served (the device moves its simulation there)."""
+        served (the device moves its simulation there). ``class1``: the class 1 I/O connections this
+        target offers over UDP (``io_target.IoTarget``), which the Connection Manager hands class 1
+        Forward_Opens and Forward_Closes (``RequestContext.class1``); None: refused, 0x0103."""
         self.router = router
+        self.class1 = class1
         self.requests = requests or RequestSeam(router)
         self.identity = identity
         self.settings = settings or TargetSettings()
@@ -283,7 +287,7 @@ class EncapsulationConnection:
         self.frame_started: float | None = None
         self._inbox = bytearray()
         self._outbox: list[bytes] = []
-        self._context = RequestContext(target.router, now, peer, self)
+        self._context = RequestContext(target.router, now, peer, self, class1=target.class1)
         #: The last common SendRRData that was a read of its own (``_frame``): its bytes, its CIP
         #: request and its sender context, for a client that sends it again (``receive``).
         self._repeat = b""

@@ -199,14 +199,30 @@ def _variable(point: AssemblyPoint | None) -> bool:
     return bool(getattr(point, "variable", False))
 
 
+def _nothing_changed() -> None:
+    """``IoTarget.changed`` of a target no shell times (a test driving the core by hand)."""
+
+
+def _no_time(now: float) -> None:
+    """``IoTarget.tick`` of a target without a device to move in time."""
+
+
 class IoTarget:
     def __init__(self, profile: IoProfile, events: IoEvents | None = None,
                  multicast_block: Callable[[], tuple[int, int]] | None = None,
-                 io_port: int = DEFAULT_IO_PORT, grid: ProductionGrid | None = None) -> None:
+                 io_port: int = DEFAULT_IO_PORT, grid: ProductionGrid | None = None, *,
+                 deliver: Callable[[int, bytes, float], None] | None = None,
+                 tick: Callable[[float], None] | None = None,
+                 changed: Callable[[], None] | None = None) -> None:
+        """The hooks are given here by whoever builds the target (the adapter), never set later:
+        ``deliver`` takes consumed data (and a Forward_Open's configuration data) to the device, by
+        default each point's own ``consume``; ``tick`` moves the device to the time of what it is
+        told, by default nothing; ``changed`` says a connection opened (the shell re-arms its timer
+        for the new deadlines), by default nothing. Each is held as given, one call on the hot path."""
         self.profile = profile
         self.events = events or NoEvents()
         #: Where consumed data goes: the device's Assembly object (``AssemblyObject.deliver``).
-        self.deliver: Callable[[int, bytes, float], None] = self._deliver_to_point
+        self.deliver: Callable[[int, bytes, float], None] = deliver or self._deliver_to_point
         #: (first multicast address as an int, number of addresses) for T->O multicast.
         self.multicast_block = multicast_block or (lambda: (CIP_MULTICAST_BASE, 32))
         self.io_port = io_port
@@ -231,9 +247,9 @@ class IoTarget:
         #: Refused Forward_Opens: at most one line per 10 s per originator address and status.
         self.refused_log = RateLimitedLog(log, level=logging.INFO)
         #: Called when a connection opens (the shell re-arms its timer for the new deadlines).
-        self.changed: Callable[[], None] = lambda: None
+        self.changed: Callable[[], None] = changed or _nothing_changed
         #: Called with the time before data is consumed or produced: the device moves its simulation there.
-        self.tick: Callable[[float], None] = lambda now: None
+        self.tick: Callable[[float], None] = tick or _no_time
 
     # -- Forward_Open -------------------------------------------------------------------------
     def forward_open(self, fo: ForwardOpenRequest, context: RequestContext) -> ForwardOpenReply:

@@ -49,13 +49,14 @@ class IoSeam:
     """The class 1 core as its UDP endpoint sees it (``io_server.IoCore``). ``receive`` and ``poll`` are
     the core's own bound methods while no filter is in place, and the filtered paths otherwise."""
 
-    def __init__(self, core: Any) -> None:
-        """``core``: the ``IoTarget``."""
+    def __init__(self, core: Any, send_later: Callable[[float, list[Datagram]], None]) -> None:
+        """``core``: the ``IoTarget``; ``send_later``: what sends datagrams at a later time (a delayed
+        production), the UDP endpoint's ``send_later``, given by whoever builds the seam."""
         self.core = core
         self.inbound: list[IoInFilter] = []
         self.outbound: list[IoOutFilter] = []
-        #: Sends datagrams at a later time (a delayed production); given by the runtime.
-        self.send_later: Callable[[float, list[Datagram]], None] = lambda at, datagrams: None
+        #: Sends datagrams at a later time (a delayed production): the filters call it.
+        self.send_later = send_later
         self.next_deadline = core.next_deadline
         self.expire = core.expire
         self.receive: Callable[[bytes, tuple[str, int], float], None] = core.receive
