@@ -99,7 +99,7 @@ class Probe:
     # -- frames -------------------------------------------------------------------------------------------
     def send(self, raw: bytes) -> None:
         if self.sock is None:
-            raise ConnectionError("probe closed")
+            raise TargetUnreachable("probe closed")
         wait = self._last_send + MIN_GAP - time.monotonic()
         if wait > 0:
             time.sleep(wait)
@@ -108,12 +108,12 @@ class Probe:
             self.sock.sendall(raw)
         except OSError as exc:
             self.closed_by_peer = True
-            raise ConnectionError(f"send failed: {exc}") from None
+            raise TargetUnreachable(f"send failed: {exc}") from None
 
     def receive(self, timeout: float | None = None) -> Frame | None:
         """The next whole frame; None on timeout; ``ConnectionError`` when the target closed."""
         if self.sock is None:
-            raise ConnectionError("probe closed")
+            raise TargetUnreachable("probe closed")
         deadline = time.monotonic() + (self.timeout if timeout is None else timeout)
         while True:
             if self._received:
@@ -129,10 +129,10 @@ class Probe:
                 chunk = self.sock.recv(65536)
             except OSError as exc:
                 self.closed_by_peer = True
-                raise ConnectionError(f"connection reset: {exc}") from None
+                raise TargetUnreachable(f"connection reset: {exc}") from None
             if not chunk:
                 self.closed_by_peer = True
-                raise ConnectionError("connection closed by the target")
+                raise TargetUnreachable("connection closed by the target")
             self._received += self._frames.feed(chunk)
 
     def exchange(self, raw: bytes, timeout: float | None = None) -> Frame | None:
