@@ -230,8 +230,8 @@ def logical_path(class_id: int, instance: int | None = None, attribute: int | No
 def request_path(class_id: int, instance: int | None = None, attribute: int | None = None,
                  member: int | None = None) -> bytes:
     """Padded EPATH for class/instance[/attribute[/member]], e.g. ``20 01 24 01 30 07``."""
-    if member is None and class_id <= 0xFF and instance is not None and instance <= 0xFF and (
-            attribute is None or attribute <= 0xFF):
+    if member is None and 0 <= class_id <= 0xFF and instance is not None and 0 <= instance <= 0xFF and (
+            attribute is None or 0 <= attribute <= 0xFF):
         # Every explicit request builds one of these: the 8-bit forms without segment objects.
         if attribute is None:
             return bytes((0x20, class_id, 0x24, instance))
