@@ -8,7 +8,7 @@ base callers caught before, and its text is one line naming the problem.
 | silent peer (accepts, never answers) | ``NoReply`` | ``ConnectionError``, ``TimeoutError`` |
 | the peer closes the connection, or the caller did | ``PeerUnreachable`` | ``ConnectionError`` |
 | a path the device lacks, a value out of its range | ``CipError`` (the device's refusal) | |
-| a path no request can carry (a negative id) | ``BadRequest`` | ``ValueError`` |
+| a path no request can carry (a negative id), a port or a class 1 RPI out of range | ``BadRequest`` | ``ValueError`` |
 | class 1: the target stops producing | ``IoTimeoutError`` | ``ConnectionError`` |
 """
 
@@ -253,3 +253,23 @@ def test_a_class_1_timeout(kind: str, cip_adapter: EmulatedDevice) -> None:
     assert isinstance(error, PeerUnreachable) and isinstance(error, CipstackError)
     assert isinstance(error, ConnectionError)
     assert one_line(error) == "class 1 connection to 127.0.0.1 timed out"
+
+
+@pytest.mark.parametrize("kind", KINDS)
+def test_a_port_out_of_range(kind: str) -> None:
+    """Given apart from the address: the socket's own error for it is an OverflowError."""
+    error = failure(kind, "127.0.0.1", port=70000, timeout=5)
+    assert isinstance(error, BadRequest) and isinstance(error, ValueError)
+    assert one_line(error) == "port 70000 out of range"
+
+
+@pytest.mark.parametrize("kind", KINDS)
+def test_a_class_1_rpi_out_of_range(kind: str, device: EmulatedDevice) -> None:
+    """A negative RPI: struct's own error ("argument out of range") named neither the RPI nor its range."""
+    def open_io(scanner: Any) -> Any:
+        opening = scanner.io_connection(output=21, input=71, rpi=-1, target_io_port=device.io_port)
+        return opening.__aenter__() if isinstance(scanner, Scanner) else opening.__enter__()
+
+    error = failure(kind, device.address, open_io, timeout=5)
+    assert isinstance(error, BadRequest) and isinstance(error, ValueError)
+    one_line(error, "RPI", "-1000000 us")

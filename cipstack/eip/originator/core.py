@@ -481,6 +481,8 @@ class CoreClient:
 
     def __init__(self, host: str, port: int = DEFAULT_PORT, timeout: float = DEFAULT_TIMEOUT,
                  core: OriginatorCore | None = None) -> None:
+        if not 0 < port < 65536:   # the socket's own OverflowError is no CipstackError
+            raise BadRequest(f"port {port} out of range")
         self.host = host
         self.port = port
         self.timeout = timeout

@@ -141,6 +141,11 @@ class ForwardOpenRequest:
     def encode(self) -> bytes:
         if len(self.connection_path) % 2:
             raise BadRequest("connection path must be whole words")
+        for direction, rpi_us in (("O->T", self.ot_rpi_us), ("T->O", self.to_rpi_us)):
+            if not 0 <= rpi_us <= 0xFFFFFFFF:   # a UDINT of microseconds: struct's own error names neither
+                raise BadRequest(f"{direction} RPI {rpi_us} us is outside 0..4294967295 us")
+        if not 0 <= self.timeout_multiplier <= 0xFF:
+            raise BadRequest(f"connection timeout multiplier {self.timeout_multiplier} is outside 0..255")
         tail = _FO_LARGE_TAIL if self.large else _FO_SMALL_TAIL
         return _FO_HEAD.pack(self.priority_tick, self.timeout_ticks, self.ot_connection_id, self.to_connection_id,
                              self.triad.connection_serial, self.triad.vendor_id, self.triad.originator_serial,
