@@ -35,9 +35,38 @@ class NotFound(CipstackError, LookupError):
         return str(self.args[0]) if len(self.args) == 1 else super().__str__()
 
 
+class UnknownKey(NotFound, KeyError):
+    """A name or number looked up in a table that has no such entry (an assembly instance, a node, a
+    keypad code). Still a ``KeyError`` for callers that catch one, but its message is one plain line."""
+
+
+class UnknownField(NotFound, AttributeError):
+    """A field or attribute asked for by name that is not there (an assembly field, a device's class 1
+    I/O). Still an ``AttributeError``, so ``hasattr`` and ``getattr(obj, name, default)`` keep working."""
+
+
+class ReadOnlyField(BadRequest, AttributeError):
+    """A field that may be read and not set (input data, an immutable declaration). Still an
+    ``AttributeError``, as setting a read-only property is in Python."""
+
+
+class WrongType(BadRequest, TypeError):
+    """An argument of the wrong type (a text where a number goes, a datetime where a date goes). Still
+    a ``TypeError``."""
+
+
 class StateRefused(CipstackError):
     """The request is understood and the device's present state refuses it (a trip while powered
     off, a write while running, a second unplug)."""
+
+
+class WrongState(StateRefused, RuntimeError):
+    """A call the object's present state does not allow (a blocking call from the loop it would wait
+    on, a flexible format that is not active). Still a ``RuntimeError``."""
+
+
+class TimedOut(CipstackError, TimeoutError):
+    """A wait the caller bounded ran out before its condition held (the peer may well be answering)."""
 
 
 class PeerUnreachable(CipstackError, ConnectionError):
@@ -48,6 +77,11 @@ class PeerUnreachable(CipstackError, ConnectionError):
         """``cannot connect to HOST:PORT: REASON``, whichever socket API failed to connect: every command
         and the library say a refused connection in the same words."""
         return cls(f"cannot connect to {host}:{port}: {connect_failure(failure)}")
+
+
+class NoReply(PeerUnreachable, TimeoutError):
+    """A peer that was reached did not answer before the deadline: a ``TimeoutError`` too, so an
+    ``except TimeoutError`` written for the reply that does not come still catches it."""
 
 
 def connect_failure(failure: BaseException) -> str:
@@ -75,4 +109,5 @@ class ProtocolError(CipstackError):
     extended: tuple[int, ...] = ()
 
 
-__all__ = ["BadRequest", "CipstackError", "NotFound", "PeerUnreachable", "ProtocolError", "StateRefused"]
+__all__ = ["BadRequest", "CipstackError", "NoReply", "NotFound", "PeerUnreachable", "ProtocolError", "ReadOnlyField",
+           "StateRefused", "TimedOut", "UnknownField", "UnknownKey", "WrongState", "WrongType"]

@@ -39,7 +39,7 @@ from typing import TYPE_CHECKING, Any
 from .catalog import Parameter
 from .cip.status import CipError
 from .cip.values import Value
-from .errors import StateRefused
+from .errors import BadRequest, NotFound, StateRefused
 
 if TYPE_CHECKING:
     from .scanner import Scanner
@@ -120,7 +120,7 @@ def _declared(parameter: Parameter | None, item: ParamValue) -> ParamValue:
 def _parameters(scanner: Scanner) -> tuple[Parameter, ...]:
     parameters = scanner.catalog.parameters
     if not parameters:
-        raise LookupError(f"no parameters are declared in {scanner.catalog.source}: give an EDS file (eds=)")
+        raise NotFound(f"no parameters are declared in {scanner.catalog.source}: give an EDS file (eds=)")
     return parameters
 
 
@@ -272,7 +272,7 @@ def parse_recipe(text: str) -> list[ParamValue]:
     try:
         data = _load_toml(text)
     except Exception as exc:  # tomllib.TOMLDecodeError and its 3.10 twin
-        raise ValueError(f"not a TOML recipe: {exc}") from None
+        raise BadRequest(f"not a TOML recipe: {exc}") from None
     out = []
     for index, entry in enumerate(data.get("parameter", []), 1):
         try:
@@ -280,7 +280,7 @@ def parse_recipe(text: str) -> list[ParamValue]:
             path = (int(parts[0], 0), int(parts[1], 0), int(parts[2], 0))
             raw = entry["raw"]
         except (KeyError, ValueError, IndexError, TypeError):
-            raise ValueError(f"parameter {index}: needs path = \"CLASS/INSTANCE/ATTRIBUTE\" and raw") from None
+            raise BadRequest(f"parameter {index}: needs path = \"CLASS/INSTANCE/ATTRIBUTE\" and raw") from None
         out.append(ParamValue(str(entry.get("code", "")), str(entry.get("name", "")), path, raw,
                               entry.get("value"), str(entry.get("unit", ""))))
     return out

@@ -32,7 +32,7 @@ from .eip.originator.core import (
 )
 from .eip.originator.replies import EncapsulationStatusError, MalformedReplyError
 from .eip.wire.encapsulation import DEFAULT_PORT
-from .errors import NotFound, ProtocolError
+from .errors import BadRequest, NotFound, ProtocolError
 from .logs import debug
 
 if TYPE_CHECKING:
@@ -251,10 +251,10 @@ class ExplicitMessaging:
             value = spec.scaling.to_raw(value)
         elif isinstance(value, float) and isinstance(value_type, IntegerType):
             if spec is not None and spec.scaling.scaled:
-                raise ValueError(f"{where} {spec.name} takes a raw integer ({spec.scaling.scale:g} {spec.unit} per "
+                raise BadRequest(f"{where} {spec.name} takes a raw integer ({spec.scaling.scale:g} {spec.unit} per "
                                  f"step): give {value!r} with scaled=True, or the raw value")
             if not value.is_integer():
-                raise ValueError(f"{where} is an integer ({value_type.name}), not {value!r}")
+                raise BadRequest(f"{where} is an integer ({value_type.name}), not {value!r}")
             value = int(value)
         yield from self.set_attribute_single(class_id, instance, attribute, value, cip_type)
 
@@ -572,7 +572,7 @@ class Scanner(_Declarations):
         inter-arrival p50/p99/max, missed slots).
         """
         if output is None and heartbeat is None:
-            raise ValueError("give an output assembly, or a heartbeat point for input-only / listen-only")
+            raise BadRequest("give an output assembly, or a heartbeat point for input-only / listen-only")
         if output_schema is None and output is not None:
             output_schema = self.catalog.assemblies.get(output)
         if input_schema is None:
@@ -892,7 +892,7 @@ def discover_blocking(address: str | Sequence[str] | None = None, port: int = DE
 def componet_route(node: int) -> list[Segment]:
     """Route path to CompoNet node ``node`` (0-63) behind a CompoNet gateway: port 2, link = node."""
     if not 0 <= node <= 63:
-        raise ValueError(f"CompoNet node {node} out of range 0..63")
+        raise BadRequest(f"CompoNet node {node} out of range 0..63")
     return [PortSegment(2, bytes((node,)))]
 
 

@@ -16,6 +16,8 @@ import threading
 from collections.abc import Callable, Coroutine
 from typing import TYPE_CHECKING, Any, TypeVar
 
+from .errors import NoReply, TimedOut, WrongState
+
 if TYPE_CHECKING:
     from .eip.originator.io_originator import IoConnectionHandle, ProcessImage
 
@@ -43,13 +45,13 @@ class LoopThread:
         """Run ``coroutine`` on the loop and wait for its result (from any other thread)."""
         if threading.current_thread() is self._thread:
             coroutine.close()
-            raise RuntimeError("a blocking call from the connection's own loop would wait for itself")
+            raise WrongState("a blocking call from the connection's own loop would wait for itself")
         future = asyncio.run_coroutine_threadsafe(coroutine, self.loop)
         try:
             return future.result(timeout)
         except concurrent.futures.TimeoutError:
             future.cancel()
-            raise TimeoutError(f"no result within {timeout} s") from None
+            raise NoReply(f"no result within {timeout} s") from None
 
     def stop(self) -> None:
         if self.loop.is_closed():
@@ -116,7 +118,7 @@ class SyncIoConnection:
         try:
             return self._runner.run(self._handle.wait_input(predicate, timeout), timeout + CLOSE_TIMEOUT)
         except asyncio.TimeoutError:
-            raise TimeoutError(f"input did not satisfy the condition within {timeout} s") from None
+            raise TimedOut(f"input did not satisfy the condition within {timeout} s") from None
 
     def statistics(self) -> dict[str, Any]:
         """Counters and T->O arrival figures (``IoConnectionHandle.statistics``)."""

@@ -117,6 +117,15 @@ def test_every_exception_class_derives_from_cipstack_error() -> None:
     ("cipstack.control.scenario.ScenarioError", BadRequest, ValueError),
     ("cipstack.control.http.HttpApiError", BadRequest, ValueError),
     ("cipstack.modbus.rtu_line.RtuPortError", CipstackError, Exception),
+    ("cipstack.errors.NoReply", PeerUnreachable, TimeoutError),
+    ("cipstack.eip.originator.core.NoReplyError", PeerUnreachable, TimeoutError),
+    ("cipstack.errors.UnknownKey", NotFound, KeyError),
+    ("cipstack.errors.UnknownField", NotFound, AttributeError),
+    ("cipstack.errors.ReadOnlyField", BadRequest, AttributeError),
+    ("cipstack.errors.WrongType", BadRequest, TypeError),
+    ("cipstack.errors.WrongState", StateRefused, RuntimeError),
+    ("cipstack.errors.TimedOut", CipstackError, TimeoutError),
+    ("cipstack.devices.base.NoDrive", BadRequest, NotImplementedError),
 ])
 def test_each_class_has_its_kind_and_keeps_its_builtin_base(name: str, kind: type, builtin: type) -> None:
     module = name.rsplit(".", 1)[0]
@@ -196,3 +205,27 @@ def test_a_usage_error_is_no_value_error() -> None:
     from cipstack.cli.common import UsageError
 
     assert not issubclass(UsageError, ValueError)
+
+
+def test_a_missing_key_says_its_message_plainly_and_is_still_a_key_error() -> None:
+    from cipstack.assemblies.acg import assembly_size
+
+    with pytest.raises(KeyError) as caught:
+        assembly_size(999)
+    assert isinstance(caught.value, NotFound)
+    assert str(caught.value) == "the ACG-ET2 has no assembly instance 999"
+
+
+def test_an_unknown_field_keeps_hasattr_and_getattr_working() -> None:
+    from cipstack.assemblies.schema import AssemblyField, AssemblySchema
+    from cipstack.eip.originator.io_originator import ProcessImage
+    from cipstack.errors import ReadOnlyField, UnknownField
+
+    schema = AssemblySchema(71, "status", 2, [AssemblyField("status", 0)])
+    image = ProcessImage(bytearray(schema.size), schema, writable=False)
+    assert not hasattr(image, "no_such_field")
+    assert getattr(image, "no_such_field", "default") == "default"
+    with pytest.raises(UnknownField, match="no_such_field"):
+        image.no_such_field  # noqa: B018
+    with pytest.raises(ReadOnlyField, match="read-only"):
+        image.raw = bytes(schema.size)

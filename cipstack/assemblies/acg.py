@@ -26,6 +26,7 @@ from dataclasses import dataclass, replace
 from typing import Protocol
 
 from ..cip.types import UINT, CipType
+from ..errors import UnknownKey
 from .drive_profile import (
     basic_speed_control_input,
     basic_speed_control_output,
@@ -87,7 +88,7 @@ def assembly_size(instance: int) -> int:
         return 2 * words
     if instance in OUTPUT_INSTANCES or instance in INPUT_INSTANCES:
         return 4
-    raise KeyError(f"the ACG-ET2 has no assembly instance {instance}")
+    raise UnknownKey(f"the ACG-ET2 has no assembly instance {instance}")
 
 
 def _hz_speed(schema: AssemblySchema, name: str, register: ParameterWord) -> AssemblySchema:
@@ -111,7 +112,7 @@ def speed_output(instance: int, frequency_command: ParameterWord) -> AssemblySch
         return _hz_speed(basic_speed_control_output(100), "speed_reference", frequency_command)
     if instance == 101:
         return _hz_speed(extended_speed_control_output(101), "speed_reference", frequency_command)
-    raise KeyError(f"{instance} is not a speed control output of the ACG-ET2")
+    raise UnknownKey(f"{instance} is not a speed control output of the ACG-ET2")
 
 
 #: ACG-ET2 manual disagrees with itself: the table after the input instances relates Ctrl From Net to 0x29
@@ -132,7 +133,7 @@ def speed_input(instance: int, output_frequency: ParameterWord) -> AssemblySchem
     if instance == 111:
         return _hz_speed(extended_speed_control_input(111, ctrl_from_net_attribute=CTRL_FROM_NET_ATTRIBUTE),
                          "speed_actual", output_frequency)
-    raise KeyError(f"{instance} is not a speed control input of the ACG-ET2")
+    raise UnknownKey(f"{instance} is not a speed control input of the ACG-ET2")
 
 
 def _parameter_fields(kind: str, cm_first: int, words: Sequence[ParameterWord | None]) -> list[AssemblyField]:
@@ -158,7 +159,7 @@ def control_parameter_output(instance: int, words: Sequence[ParameterWord | None
     ``words`` are those registers in order (None: the address names no register)."""
     count = parameter_words(instance)
     if not count or instance > CONTROL_PARAMETER_BASE_INSTANCE + MAX_PARAMETER_WORDS:
-        raise KeyError(f"{instance} is not a control parameter output (121-128)")
+        raise UnknownKey(f"{instance} is not a control parameter output (121-128)")
     return AssemblySchema(instance, f"Control Parameter Output, {count} word(s)", 2 * count,
                           _parameter_fields("Control", 51, words[:count]))
 
@@ -167,7 +168,7 @@ def status_parameter_input(instance: int, words: Sequence[ParameterWord | None])
     """Input 141-148: "Status Parameter - 1 ... n data", the registers CM.31-CM.3n name."""
     count = parameter_words(instance)
     if not count or instance <= STATUS_PARAMETER_BASE_INSTANCE:
-        raise KeyError(f"{instance} is not a status parameter input (141-148)")
+        raise UnknownKey(f"{instance} is not a status parameter input (141-148)")
     return AssemblySchema(instance, f"Status Parameter Input, {count} word(s)", 2 * count,
                           _parameter_fields("Status", 31, words[:count]))
 

@@ -18,6 +18,7 @@ from functools import cache
 from types import MappingProxyType
 
 from ..cip.types import INT, UINT, USINT
+from ..errors import BadRequest
 from .drive_profile import (
     AC_DC_DRIVE,
     CONTROL_SUPERVISOR,
@@ -196,7 +197,7 @@ def _special_fields() -> list[AssemblyField]:
 def flexible_schema(instance: int, words: int) -> AssemblySchema:
     """Flexible output 139 or input 159 with ``words`` words (1 to 8): word n is the register of P16n / P17n."""
     if instance not in (FLEXIBLE_OUTPUT, FLEXIBLE_INPUT) or not 1 <= words <= FLEXIBLE_MAX_WORDS:
-        raise ValueError(f"no flexible assembly {instance} of {words} words")
+        raise BadRequest(f"no flexible assembly {instance} of {words} words")
     area, first = ("Output", "P16") if instance == FLEXIBLE_OUTPUT else ("Input", "P17")
     return AssemblySchema(instance, f"Omron Flexible {area}", 2 * words, [
         word(f"word_{n}", 2 * n, UINT, help=f"Modbus register set by {first}{n}") for n in range(words)])
@@ -207,7 +208,7 @@ def pair_sizes(output: int, input_: int, flexible: tuple[int, int] | None = None
     flexible pair 139/159 needs its word counts (output, input) from the mapping (appendix F Note 1)."""
     if output == FLEXIBLE_OUTPUT:
         if flexible is None:
-            raise ValueError("the flexible format's size depends on P160-P177: give the word counts")
+            raise BadRequest("the flexible format's size depends on P160-P177: give the word counts")
         return 2 * flexible[0], 2 * flexible[1]
     return SIZES[output], SIZES[input_]
 

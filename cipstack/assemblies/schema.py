@@ -14,6 +14,7 @@ from typing import TYPE_CHECKING, Any
 
 from ..cip.types import USINT, CipType
 from ..cip.units import count_unit
+from ..errors import BadRequest, UnknownKey
 
 if TYPE_CHECKING:
     import construct as cs
@@ -97,16 +98,16 @@ class AssemblySchema:
 
     def _check(self) -> None:
         if len(self._by_name) != len(self.fields):
-            raise ValueError(f"assembly {self.instance}: a field name is declared twice")
+            raise BadRequest(f"assembly {self.instance}: a field name is declared twice")
         used = [False] * (8 * self.size)
         for f in self.fields:
             if f.bits and not f.bit >= 0 and f.bit + f.bits <= 8:
-                raise ValueError(f"assembly {self.instance}: bit field {f.name} crosses a byte")
+                raise BadRequest(f"assembly {self.instance}: bit field {f.name} crosses a byte")
             for position in range(f.start_bit, f.start_bit + f.size_bits):
                 if position >= len(used):
-                    raise ValueError(f"assembly {self.instance}: field {f.name} runs past {self.size} bytes")
+                    raise BadRequest(f"assembly {self.instance}: field {f.name} runs past {self.size} bytes")
                 if used[position]:
-                    raise ValueError(f"assembly {self.instance}: field {f.name} overlaps another")
+                    raise BadRequest(f"assembly {self.instance}: field {f.name} overlaps another")
                 used[position] = True
 
     def _build_construct(self) -> cs.Struct:
@@ -166,13 +167,13 @@ class AssemblySchema:
     def decode(self, data: bytes) -> dict[str, Any]:
         """Field values by name (bit flags as bool, multi-bit fields and words as int)."""
         if len(data) != self.size:
-            raise ValueError(f"assembly {self.instance} is {self.size} bytes, got {len(data)}")
+            raise BadRequest(f"assembly {self.instance} is {self.size} bytes, got {len(data)}")
         return {name: read(data) for name, read in self._decoders}
 
     def decode_with_construct(self, data: bytes) -> dict[str, Any]:
         """``decode`` by the compiled ``construct`` schema: the reference ``decode`` is tested against."""
         if len(data) != self.size:
-            raise ValueError(f"assembly {self.instance} is {self.size} bytes, got {len(data)}")
+            raise BadRequest(f"assembly {self.instance} is {self.size} bytes, got {len(data)}")
         parsed = self.construct.parse(data)
         values: dict[str, Any] = {}
         for key, value in parsed.items():
@@ -193,7 +194,7 @@ class AssemblySchema:
             return last[1]
         unknown = set(given) - self.field_names
         if unknown:
-            raise KeyError(f"assembly {self.instance} has no field {', '.join(sorted(unknown))}")
+            raise UnknownKey(f"assembly {self.instance} has no field {', '.join(sorted(unknown))}")
         out = bytearray(self.size)
         for name, value in given.items():
             self._put(out, self._by_name[name], value)
@@ -205,7 +206,7 @@ class AssemblySchema:
     def with_field(self, data: bytes, name: str, value: Any) -> bytes:
         """``data`` with one field changed."""
         if name not in self._by_name:
-            raise KeyError(f"assembly {self.instance} has no field {name!r}")
+            raise UnknownKey(f"assembly {self.instance} has no field {name!r}")
         out = bytearray(data)
         self._put(out, self._by_name[name], value)
         return bytes(out)
@@ -214,7 +215,7 @@ class AssemblySchema:
         if f.bits:
             raw = int(value)
             if not 0 <= raw < (1 << f.bits):
-                raise ValueError(f"{f.name}: {value} does not fit {f.bits} bit(s)")
+                raise BadRequest(f"{f.name}: {value} does not fit {f.bits} bit(s)")
             mask = ((1 << f.bits) - 1) << f.bit
             out[f.offset] = (out[f.offset] & ~mask) | (raw << f.bit)
         else:

@@ -15,6 +15,7 @@ from __future__ import annotations
 
 from typing import Any
 
+from ..errors import BadRequest
 from . import types
 from .model import Access, AttributeSpec, ClassSpec
 from .types import ArrayType, CipType, OctetString, RemainingBytes, StructType, type_by_name
@@ -66,7 +67,7 @@ def type_data(of: CipType) -> TypeData:
         return ("array", type_data(of.element), of.count, of.name)
     if isinstance(of, OctetString):
         return ("octets", of.size, of.name)
-    raise ValueError(f"type {of.name} cannot be named in the compact data")
+    raise BadRequest(f"type {of.name} cannot be named in the compact data")
 
 
 def attribute_spec(row: Row) -> AttributeSpec:
@@ -81,7 +82,7 @@ def row_of(spec: AttributeSpec) -> Row:
     try:
         data = type_data(spec.type)
     except ValueError as exc:
-        raise ValueError(f"{spec.name}: {exc}") from None
+        raise BadRequest(f"{spec.name}: {exc}") from None
     return (spec.id, spec.name, data, spec.access.value, spec.unit, float(spec.scale), float(spec.offset),
             spec.decimals, {int(k): str(v) for k, v in spec.enum.items()} if spec.enum is not None else None,
             spec.in_get_all, spec.minimum, spec.maximum)

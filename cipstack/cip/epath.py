@@ -20,6 +20,7 @@ from collections.abc import Iterable
 from enum import IntEnum
 from typing import NamedTuple
 
+from ..errors import BadRequest, WrongType
 from .status import CipError, GeneralStatus
 
 
@@ -103,21 +104,21 @@ def encode_segment(segment: Segment, padded: bool = True) -> bytes:
     if isinstance(segment, LogicalSegment):
         bits = segment.width()
         if bits not in _FORMAT_CODE or segment.value < 0 or segment.value >= 1 << bits:
-            raise ValueError(f"{segment.kind.name} {segment.value} does not fit {bits} bits")
+            raise BadRequest(f"{segment.kind.name} {segment.value} does not fit {bits} bits")
         head = bytes([0x20 | (segment.kind << 2) | _FORMAT_CODE[bits]])
         body = segment.value.to_bytes(bits // 8, "little")
         pad = b"\x00" if padded and bits > 8 else b""
         return head + pad + body
     if isinstance(segment, PortSegment):
         if not 0 < segment.port <= 0xFFFF or not segment.link:
-            raise ValueError("a port segment needs a port 1..65535 and a link address")
+            raise BadRequest("a port segment needs a port 1..65535 and a link address")
         extended_port = segment.port > 14
         long_link = len(segment.link) > 1
         port_head = (0x0F if extended_port else segment.port) | (0x10 if long_link else 0)
         out = bytearray([port_head])
         if long_link:
             if len(segment.link) > 0xFF:
-                raise ValueError("link address longer than 255 bytes")
+                raise BadRequest("link address longer than 255 bytes")
             out.append(len(segment.link))
         if extended_port:
             out += segment.port.to_bytes(2, "little")
@@ -131,9 +132,9 @@ def encode_segment(segment: Segment, padded: bool = True) -> bytes:
                                        segment.product_code, major, segment.minor_revision)
     if isinstance(segment, DataSegment):
         if len(segment.data) % 2 or len(segment.data) > 510:
-            raise ValueError("simple data segment must be whole words, at most 255")
+            raise BadRequest("simple data segment must be whole words, at most 255")
         return bytes([0x80, len(segment.data) // 2]) + segment.data
-    raise TypeError(f"not a segment: {segment!r}")
+    raise WrongType(f"not a segment: {segment!r}")
 
 
 def encode_path(segments: Iterable[Segment], padded: bool = True) -> bytes:
@@ -229,8 +230,8 @@ def logical_path(class_id: int, instance: int | None = None, attribute: int | No
 def request_path(class_id: int, instance: int | None = None, attribute: int | None = None,
                  member: int | None = None) -> bytes:
     """Padded EPATH for class/instance[/attribute[/member]], e.g. ``20 01 24 01 30 07``."""
-    if member is None and class_id <= 0xFF and instance is not None and instance <= 0xFF and (
-            attribute is None or attribute <= 0xFF):
+    if member is None and 0 <= class_id <= 0xFF and instance is not None and 0 <= instance <= 0xFF and (
+            attribute is None or 0 <= attribute <= 0xFF):
         # Every explicit request builds one of these: the 8-bit forms without segment objects.
         if attribute is None:
             return bytes((0x20, class_id, 0x24, instance))

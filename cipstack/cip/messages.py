@@ -5,6 +5,7 @@ from __future__ import annotations
 from enum import IntEnum
 from typing import NamedTuple
 
+from ..errors import BadRequest
 from .status import CipError, GeneralStatus, describe_status
 
 
@@ -47,7 +48,7 @@ class MessageRouterRequest(NamedTuple):
 
     def encode(self) -> bytes:
         if len(self.path) % 2:
-            raise ValueError("request path must be a whole number of words")
+            raise BadRequest("request path must be a whole number of words")
         return bytes((self.service, len(self.path) // 2)) + self.path + self.data
 
     @classmethod
@@ -85,13 +86,13 @@ class MessageRouterResponse(NamedTuple):
     @classmethod
     def decode(cls, raw: bytes) -> MessageRouterResponse:
         if len(raw) < 4:
-            raise ValueError("reply shorter than the 4-byte message-router reply header")
+            raise BadRequest("reply shorter than the 4-byte message-router reply header")
         if not raw[0] & REPLY_BIT:
-            raise ValueError(f"service 0x{raw[0]:02X} is not a reply")
+            raise BadRequest(f"service 0x{raw[0]:02X} is not a reply")
         ext_words = raw[3]
         end = 4 + 2 * ext_words
         if end > len(raw):
-            raise ValueError("additional status runs past the reply")
+            raise BadRequest("additional status runs past the reply")
         ext = tuple(int.from_bytes(raw[i:i + 2], "little") for i in range(4, end, 2))
         return cls(raw[0] & 0x7F, raw[2], ext, bytes(raw[end:]))
 

@@ -17,6 +17,7 @@ from enum import Enum
 from functools import partial
 from typing import TYPE_CHECKING, Any, ClassVar, NamedTuple
 
+from ..errors import BadRequest, ReadOnlyField, UnknownKey, WrongType
 from .epath import ApplicationPath
 from .messages import MessageRouterRequest, Service
 from .status import CipError, GeneralStatus
@@ -147,7 +148,7 @@ class ClassSpec:
                  instance_services: frozenset[int] = _INSTANCE_SERVICES, max_instance: int | None = None) -> None:
         index = {a.id: a for a in instance_attributes}
         if len(index) != len(instance_attributes):
-            raise ValueError(f"{name}: an instance attribute id is declared twice")
+            raise BadRequest(f"{name}: an instance attribute id is declared twice")
         values = (class_id, name, revision, tuple(instance_attributes), tuple(extra_class_attributes), class_services,
                   instance_services, max_instance)
         for field, value in zip(self._FIELDS, values, strict=True):
@@ -161,17 +162,17 @@ class ClassSpec:
         """A copy with ``changes`` (field name -> value), checked as a new declaration is."""
         unknown = changes.keys() - set(self._FIELDS)
         if unknown:
-            raise TypeError(f"ClassSpec has no field {', '.join(sorted(unknown))}")
+            raise WrongType(f"ClassSpec has no field {', '.join(sorted(unknown))}")
         return ClassSpec(**{field: changes.get(field, getattr(self, field)) for field in self._FIELDS})
 
     def _values(self) -> tuple[Any, ...]:
         return tuple(getattr(self, field) for field in self._FIELDS)
 
     def __setattr__(self, name: str, value: Any) -> None:
-        raise AttributeError(f"ClassSpec is immutable: {name} cannot be set (use replace)")
+        raise ReadOnlyField(f"ClassSpec is immutable: {name} cannot be set (use replace)")
 
     def __delattr__(self, name: str) -> None:
-        raise AttributeError(f"ClassSpec is immutable: {name} cannot be deleted")
+        raise ReadOnlyField(f"ClassSpec is immutable: {name} cannot be deleted")
 
     def __eq__(self, other: object) -> bool:
         if not isinstance(other, ClassSpec):
@@ -238,7 +239,7 @@ class CipObject:
         ``attr_<id>`` to a value or a ``Binding``.
         """
         if instance_id in self.instances or instance_id < 1:
-            raise ValueError(f"{self.spec.name}: instance {instance_id} exists or is invalid")
+            raise BadRequest(f"{self.spec.name}: instance {instance_id} exists or is invalid")
         values = {a.id: a.default for a in self.spec.instance_attributes}
         by_key = {attribute_key(a): a.id for a in self.spec.instance_attributes}
         for key, value in overrides.items():
@@ -246,7 +247,7 @@ class CipObject:
             if attr_id is None and key.startswith("attr_"):
                 attr_id = int(key[5:])
             if attr_id is None or attr_id not in values:
-                raise KeyError(f"{self.spec.name} has no attribute {key!r}")
+                raise UnknownKey(f"{self.spec.name} has no attribute {key!r}")
             values[attr_id] = value
         instance = Instance(instance_id, values)
         self.instances[instance_id] = instance

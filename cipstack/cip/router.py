@@ -13,6 +13,7 @@ from dataclasses import dataclass, field
 from functools import partial
 from typing import Any
 
+from ..errors import BadRequest
 from .epath import parse_application_path
 from .messages import MessageRouterRequest, MessageRouterResponse
 from .model import CipObject
@@ -69,7 +70,7 @@ class MessageRouter:
     def register(self, obj: CipObject) -> CipObject:
         class_id = obj.spec.class_id
         if class_id in self.objects:
-            raise ValueError(f"class 0x{class_id:02X} registered twice")
+            raise BadRequest(f"class 0x{class_id:02X} registered twice")
         self.objects[class_id] = obj
         return obj
 

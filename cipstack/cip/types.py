@@ -17,6 +17,7 @@ import struct
 from collections.abc import Sequence
 from typing import TYPE_CHECKING, Any
 
+from ..errors import BadRequest
 from .status import CipError, GeneralStatus
 
 if TYPE_CHECKING:
@@ -78,7 +79,7 @@ class CipType:
 
     def parse_text(self, text: str) -> Any:
         """A value typed on the command line ("1500", "0x5DC", "1.5", "name")."""
-        raise ValueError(f"cannot parse a {self.name} from text")
+        raise BadRequest(f"cannot parse a {self.name} from text")
 
     def to_json(self, value: Any) -> Any:
         return value
@@ -92,7 +93,7 @@ def parse_int(text: str) -> int:
     try:
         return int(text.strip(), 0)
     except ValueError:
-        raise ValueError(f"not a number: {text!r}") from None
+        raise BadRequest(f"not a number: {text!r}") from None
 
 
 class IntegerType(CipType):
@@ -232,7 +233,7 @@ class RealType(CipType):
         try:
             return float(text)
         except ValueError:
-            raise ValueError(f"not a number: {text!r}") from None
+            raise BadRequest(f"not a number: {text!r}") from None
 
 
 #: Stands for "no value encoded yet": no value a caller passes is this object.
@@ -477,4 +478,4 @@ def type_by_name(name: str) -> CipType:
         return ELEMENTARY[name.strip().upper()]
     except KeyError:
         known = ", ".join(ELEMENTARY)
-        raise ValueError(f"unknown CIP type {name!r} (known: {known})") from None
+        raise BadRequest(f"unknown CIP type {name!r} (known: {known})") from None

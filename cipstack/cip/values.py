@@ -21,6 +21,7 @@ import math
 from collections.abc import Mapping
 from typing import Any, NamedTuple
 
+from ..errors import BadRequest, WrongType
 from .types import CipType
 from .units import decimal_places
 
@@ -65,12 +66,12 @@ class Scaling(NamedTuple):
         """The raw integer whose engineering value is ``engineering``; ``ValueError`` when it falls
         between two steps (5.05 s with a step of 0.1 s)."""
         if isinstance(engineering, bool) or not isinstance(engineering, (int, float)):
-            raise TypeError(f"an engineering value is a number, not {type(engineering).__name__}")
+            raise WrongType(f"an engineering value is a number, not {type(engineering).__name__}")
         steps = engineering / self.scale - self.offset
         raw = round(steps)
         if abs(steps - raw) > 1e-6 * max(1.0, abs(steps)):
             step = f"{self.scale:g} {self.unit}".strip()
-            raise ValueError(f"{engineering:g} {self.unit} is not a whole number of steps of {step}".replace("  ", " "))
+            raise BadRequest(f"{engineering:g} {self.unit} is not a whole number of steps of {step}".replace("  ", " "))
         return int(raw)
 
     def text(self, raw: Any) -> str:

@@ -18,6 +18,7 @@ from typing import TYPE_CHECKING, Any
 from ..cip.status import CipError, describe_status
 from ..eip.originator.replies import EncapsulationStatusError
 from ..eip.wire.encapsulation import EncapsulationError
+from ..errors import CipstackError
 from ..logs import configured_on_first_log
 from . import oneshot
 from .common import EXIT_FAILURE, EXIT_OK, EXIT_USAGE, UsageError, parse_duration, parse_object_path
@@ -153,6 +154,9 @@ def _run(args: Any) -> int:
     except ValueError as exc:
         print(f"{name}: {exc}", file=sys.stderr)
         return EXIT_USAGE
+    except CipstackError as exc:   # a name that is not there (a KeyError too), a state that says no
+        print(f"{name}: {exc}", file=sys.stderr)
+        return EXIT_FAILURE
 
 
 def __getattr__(name: str) -> Any:

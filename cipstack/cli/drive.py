@@ -12,6 +12,7 @@ from typing import Any
 
 from ..cip.types import parse_int
 from ..control.operations import OPERATIONS, Operation
+from ..errors import PeerUnreachable
 from .common import EXIT_OK, UsageError
 
 
@@ -27,7 +28,7 @@ def _control(args: argparse.Namespace, request: dict[str, Any]) -> dict[str, Any
     except ControlError as exc:
         # Nothing of that name there, its state says no, no emulator there, no answer: exit 1
         # (``cipstack.control.service.OUTCOMES``).
-        raise ConnectionError(str(exc)) from None
+        raise PeerUnreachable(str(exc)) from None
     reply.pop("ok", None)
     return reply
 

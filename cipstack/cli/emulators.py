@@ -11,6 +11,7 @@ from collections.abc import Awaitable, Callable
 from pathlib import Path
 from typing import Any
 
+from ..errors import BadRequest
 from .common import (
     EXIT_FAILURE,
     EXIT_OK,
@@ -284,7 +285,7 @@ def cmd_componet(args: argparse.Namespace) -> int:
     try:
         nodes = parse_nodes(args.nodes)
         if not nodes:
-            raise ValueError("--nodes names no node")
+            raise BadRequest("--nodes names no node")
         gateway = build_componet_gateway(nodes, network_interface(args.host, DEFAULT_MAC))
     except (ValueError, KeyError) as exc:
         raise UsageError(str(exc)) from None

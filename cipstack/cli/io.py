@@ -11,6 +11,7 @@ from typing import Any
 
 from ..cip.types import BOOL, parse_int
 from ..eip.originator.asyncio_client import parse_host
+from ..errors import BadRequest
 from .common import EXIT_OK, UsageError, parse_duration
 from .emulators import _read_eds_file
 
@@ -92,7 +93,7 @@ def _set_output(io: Any, name: str, value: str) -> None:
                 data = bytes.fromhex(value)
             except ValueError:
                 size = len(io.output.raw)
-                raise ValueError(f"not hex: raw takes the {size} bytes in hex (e.g. {'00' * size})") from None
+                raise BadRequest(f"not hex: raw takes the {size} bytes in hex (e.g. {'00' * size})") from None
             io.output.raw = data
         elif not io.output.field_names:
             raise UsageError(f"--set {name}={value}: {_unnamed(io.output.schema, len(io.output.raw))}: give "

@@ -30,7 +30,7 @@ from enum import Enum
 from typing import Protocol
 
 from ..cip.router import MessageRouter, RequestContext
-from ..errors import PeerUnreachable
+from ..errors import BadRequest, PeerUnreachable, UnknownKey
 from .explicit import ExplicitRequest, serve_explicit
 
 log = logging.getLogger(__name__)
@@ -136,7 +136,7 @@ class CompoNetNetwork:
         out_bytes, in_bytes = slave.componet_sizes()
         participant = Participant(slave, node, words(out_bytes), words(in_bytes))
         if not 0 <= node < NODE_ADDRESSES or node + max(participant.out_words, participant.in_words) > AREA_WORDS:
-            raise ValueError(f"node {node} with {participant.out_words}/{participant.in_words} words does not fit "
+            raise BadRequest(f"node {node} with {participant.out_words}/{participant.in_words} words does not fit "
                              f"the {AREA_WORDS}-word areas")
         slave.componet_baud_rate(self.baud_rate)
         clash = self._clash(participant)
@@ -178,7 +178,7 @@ class CompoNetNetwork:
     def _need(self, node: int) -> Participant:
         participant = self.participant(node)
         if participant is None:
-            raise KeyError(f"no slave at node {node}")
+            raise UnknownKey(f"no slave at node {node}")
         return participant
 
     def _event(self, now: float, node: int, kind: str) -> None:
@@ -197,14 +197,14 @@ class CompoNetNetwork:
     def set_out_words(self, node: int, data: bytes) -> None:
         participant = self._need(node)
         if len(data) != 2 * participant.out_words:
-            raise ValueError(f"node {node} has {participant.out_words} output words")
+            raise BadRequest(f"node {node} has {participant.out_words} output words")
         self.out_area[2 * node: 2 * node + len(data)] = data
         self.run = True
 
     def write_out_area(self, data: bytes) -> None:
         """The whole OUT area at once (what the gateway's output assembly carries); the master runs."""
         if len(data) != len(self.out_area):
-            raise ValueError(f"the OUT area is {len(self.out_area)} bytes")
+            raise BadRequest(f"the OUT area is {len(self.out_area)} bytes")
         self.out_area[:] = data
         self.run = True
 

@@ -28,6 +28,7 @@ from typing import TYPE_CHECKING
 
 from ..cip.epath import request_path
 from ..eip.originator.io_originator import SEQUENCE_COUNT_SIZE
+from ..errors import BadRequest
 from .connections import Endpoint, Plan, forward_open_request, plans_of_eds, send_forward_open
 from .registry import Context
 from .wire import Probe
@@ -82,13 +83,13 @@ def parse_points(text: str) -> tuple[int, int, int]:
     """``O,T[,C]`` (decimal or 0x hex) -> (output, input, configuration); ``ValueError`` names the problem."""
     parts = [p.strip() for p in text.split(",")]
     if len(parts) not in (2, 3) or not all(parts):
-        raise ValueError(f"{text!r}: give O,T or O,T,C (output point, input point, configuration instance)")
+        raise BadRequest(f"{text!r}: give O,T or O,T,C (output point, input point, configuration instance)")
     try:
         numbers = [int(p, 0) for p in parts]
     except ValueError:
-        raise ValueError(f"{text!r}: the points are numbers (decimal or 0x hex)") from None
+        raise BadRequest(f"{text!r}: the points are numbers (decimal or 0x hex)") from None
     if not all(1 <= n <= 0xFFFF for n in numbers):
-        raise ValueError(f"{text!r}: a connection point is 1-65535")
+        raise BadRequest(f"{text!r}: a connection point is 1-65535")
     return numbers[0], numbers[1], numbers[2] if len(numbers) == 3 else CONFIG_INSTANCE
 
 

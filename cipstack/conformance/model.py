@@ -12,6 +12,8 @@ from dataclasses import dataclass, field
 from enum import Enum
 from typing import Any
 
+from ..errors import UnknownKey
+
 
 class Verdict(str, Enum):
     PASS = "pass"
@@ -97,7 +99,7 @@ class CheckSpec:
         for behaviour in self.behaviours:
             if behaviour.name == name:
                 return behaviour
-        raise KeyError(f"{self.id} declares no behaviour {name!r}")
+        raise UnknownKey(f"{self.id} declares no behaviour {name!r}")
 
     @property
     def permitted(self) -> str:

@@ -8,6 +8,7 @@ from collections.abc import Callable, Iterable
 from dataclasses import dataclass, field
 from typing import TYPE_CHECKING, Any
 
+from ..errors import BadRequest
 from .model import Behaviour, CheckSpec, Code, Exchange, Outcome, Verdict
 from .wire import Liveness, Probe
 
@@ -35,7 +36,7 @@ def check(id: str, title: str, expected: str, reference: str, codes: Iterable[Co
     ("opens ..."), for a check that may take a device down: it runs only with ``allow_stress``."""
     spec = CheckSpec(id, title, expected, reference, tuple(codes), tuple(behaviours), stress)
     if id in CHECKS:
-        raise ValueError(f"check {id} declared twice")
+        raise BadRequest(f"check {id} declared twice")
     CHECKS[id] = spec
 
     def register(function: CheckFunction) -> CheckFunction:

@@ -9,6 +9,7 @@ from collections.abc import Iterable, Sequence
 from typing import TYPE_CHECKING
 
 from ..eip.wire.encapsulation import DEFAULT_PORT, Command
+from ..errors import BadRequest
 from . import (  # noqa: F401 - they declare checks
     as_found,
     class1,
@@ -44,7 +45,7 @@ def parse_groups(text: str | Sequence[str] | None) -> tuple[str, ...]:
     names = [n.strip() for n in (text.split(",") if isinstance(text, str) else text) if n.strip()]
     unknown = [n for n in names if n not in GROUPS]
     if unknown or not names:
-        raise ValueError(f"unknown group {', '.join(unknown) or '(none given)'} (known: {', '.join(GROUPS)})")
+        raise BadRequest(f"unknown group {', '.join(unknown) or '(none given)'} (known: {', '.join(GROUPS)})")
     return tuple(g for g in GROUPS if g in names)
 
 

@@ -164,12 +164,12 @@ class Probe:
     def _not_silent(self) -> None:
         if self.liveness is not None and self.liveness.silent:
             self.closed_by_peer = True
-            raise ConnectionError(f"the target stopped answering: {self.liveness.silent}")
+            raise TargetUnreachable(f"the target stopped answering: {self.liveness.silent}")
 
     # -- frames -------------------------------------------------------------------------------------------
     def send(self, raw: bytes) -> None:
         if self.sock is None:
-            raise ConnectionError("probe closed")
+            raise TargetUnreachable("probe closed")
         self._not_silent()
         wait = self._last_send + MIN_GAP - time.monotonic()
         if wait > 0:
@@ -180,12 +180,12 @@ class Probe:
         except OSError as exc:
             self.closed_by_peer = True
             self._confirm()
-            raise ConnectionError(f"send failed: {exc}") from None
+            raise TargetUnreachable(f"send failed: {exc}") from None
 
     def receive(self, timeout: float | None = None) -> Frame | None:
         """The next whole frame; None on timeout; ``ConnectionError`` when the target closed."""
         if self.sock is None:
-            raise ConnectionError("probe closed")
+            raise TargetUnreachable("probe closed")
         self._not_silent()
         deadline = time.monotonic() + (self.timeout if timeout is None else timeout)
         while True:
@@ -203,11 +203,11 @@ class Probe:
             except OSError as exc:
                 self.closed_by_peer = True
                 self._confirm()
-                raise ConnectionError(f"connection reset: {exc}") from None
+                raise TargetUnreachable(f"connection reset: {exc}") from None
             if not chunk:
                 self.closed_by_peer = True
                 self._confirm()
-                raise ConnectionError("connection closed by the target")
+                raise TargetUnreachable("connection closed by the target")
             self._received += self._frames.feed(chunk)
 
     def exchange(self, raw: bytes, timeout: float | None = None) -> Frame | None:

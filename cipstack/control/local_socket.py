@@ -170,7 +170,7 @@ class ControlServer:
             except OSError:
                 path.unlink()
             else:
-                raise OSError(f"another emulator already uses {path}")
+                raise ControlTaken(errno.EADDRINUSE, f"another emulator already uses {path}")
             finally:
                 probe.close()
         self._server = await asyncio.start_unix_server(self._serve, path=str(path), limit=MAX_LINE)

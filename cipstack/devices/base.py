@@ -19,7 +19,7 @@ from ..cip.status import CipError, ExtendedStatus, GeneralStatus
 from ..eip.target.connection_manager import ConnectionManagerObject, ConnectionTable
 from ..eip.target.io_target import CIP_MULTICAST_BASE, ConnectionKind, IoConnection, IoProfile
 from ..eip.wire.identity_items import IdentityRecord
-from ..errors import StateRefused
+from ..errors import BadRequest, StateRefused
 from ..objects.assembly import AssemblyObject
 from ..objects.file import FileObject, StoredFile
 from ..objects.identity import ExtendedDeviceStatus, IdentityInfo, IdentityObject, IdentityStatus
@@ -32,6 +32,11 @@ if TYPE_CHECKING:
 
 log = logging.getLogger(__name__)
 
+
+
+class NoDrive(BadRequest, NotImplementedError):
+    """A drive's operation (a trip, a reset) asked of a device that simulates no drive. Still a
+    ``NotImplementedError``, as it was before it was a ``CipstackError``."""
 
 
 class TripRefused(StateRefused, ValueError):
@@ -133,7 +138,7 @@ class Device:
     # -- emulator control (test rigs) -------------------------------------------------------------
     def inject_trip(self, code: int | str) -> object:
         """Trip the simulated drive, now, with a fault code (or name) of its manual; returns the trip."""
-        raise NotImplementedError(f"{self.identity_info.product_name}: this profile simulates no drive")
+        raise NoDrive(f"{self.identity_info.product_name}: this profile simulates no drive")
 
     def trip_codes(self) -> str:
         """The trip codes ``inject_trip`` takes, as one line for an error message."""
@@ -152,12 +157,12 @@ class Device:
     def check_trip_code(self, code: int | str) -> None:
         """Raise what ``inject_trip`` would for a code it does not take (``KeyError``, ``ValueError``,
         ``NotImplementedError`` for a device without a drive); nothing for one it takes."""
-        raise NotImplementedError(f"{self.identity_info.product_name}: this profile simulates no drive")
+        raise NoDrive(f"{self.identity_info.product_name}: this profile simulates no drive")
 
     def reset_trip(self) -> object | None:
         """A fault reset, now, as the drive's manual resets a trip: the trip it cleared, None when it had
         none; ``TripRefused`` when the trip holds (its cause lasts)."""
-        raise NotImplementedError(f"{self.identity_info.product_name}: this profile simulates no drive")
+        raise NoDrive(f"{self.identity_info.product_name}: this profile simulates no drive")
 
     def status_line(self) -> str | None:
         """A compact line of the device's state for the emulator's console, or None."""

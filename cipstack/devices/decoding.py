@@ -19,6 +19,7 @@ from typing import Any
 from ..catalog import Catalog
 from ..cip.compact import Row, classes_data, row_of
 from ..cip.model import AttributeSpec
+from ..errors import BadRequest
 
 #: What the generated modules are made from, and where they go.
 DECLARED = Path(__file__).resolve().parent / "declared"
@@ -82,7 +83,7 @@ def _parameter_paths(name: str, catalog: Catalog) -> list[tuple[str, int, int, i
     for parameter in catalog.parameters:
         declared = catalog.attribute(*parameter.path)
         if declared is None or row_of(declared) != row_of(parameter.spec):
-            raise ValueError(f"profile {name}: parameter {parameter.code} is not declared as the attribute at "
+            raise BadRequest(f"profile {name}: parameter {parameter.code} is not declared as the attribute at "
                              f"{parameter.path} is: the compact data cannot hold it")
         out.append((parameter.code, *parameter.path))
     return out

@@ -11,6 +11,7 @@ from typing import TYPE_CHECKING
 from ..catalog import Catalog, Parameter
 from ..cip.model import AttributeSpec
 from ..eip.wire.identity_items import IdentityRecord
+from ..errors import BadRequest
 from ..objects.file import StoredFile
 from ..objects.identity import IdentityInfo
 from ..objects.tcpip import NetworkInterface
@@ -134,7 +135,7 @@ def _omron(family: str, default_model: str) -> Callable[[NetworkInterface, Devic
 
         name = options.model or default_model
         if model(name).family.value.lower() != family:
-            raise ValueError(f"{name} is not an {family.upper()} model (see `cipstack models`)")
+            raise BadRequest(f"{name} is not an {family.upper()} model (see `cipstack models`)")
         return build_omron_device(name, interface, limits, options.state_path, files=options.files)
 
     return build
@@ -244,7 +245,7 @@ def build_device(name: str = DEFAULT_PROFILE, interface: NetworkInterface | None
     try:
         profile = PROFILES[name]
     except KeyError:
-        raise ValueError(f"unknown profile {name!r} (known: {', '.join(sorted(PROFILES))})") from None
+        raise BadRequest(f"unknown profile {name!r} (known: {', '.join(sorted(PROFILES))})") from None
     return profile.build(interface or NetworkInterface(mac=DEFAULT_MAC), limits or DeviceLimits(),
                          options or ProfileOptions())
 

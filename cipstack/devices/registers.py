@@ -15,7 +15,7 @@ from dataclasses import dataclass
 from enum import Enum
 
 from ..cip.types import INT, UINT, CipType
-from ..errors import StateRefused
+from ..errors import BadRequest, StateRefused
 
 
 class RegisterAccess(Enum):
@@ -142,13 +142,13 @@ class RegisterMap(Mapping[int, Register]):
                 address = register.address + index
                 if address in self._words:
                     other = self._words[address][0]
-                    raise ValueError(f"register 0x{address:04X} declared twice ({other.code or other.name}"
+                    raise BadRequest(f"register 0x{address:04X} declared twice ({other.code or other.name}"
                                      f" and {register.code or register.name})")
                 self._words[address] = (register, index)
             self._by_address[register.address] = register
             if register.code:
                 if register.code in self._by_code:
-                    raise ValueError(f"keypad code {register.code} declared twice")
+                    raise BadRequest(f"keypad code {register.code} declared twice")
                 self._by_code[register.code] = register
 
     def __getitem__(self, address: int) -> Register:

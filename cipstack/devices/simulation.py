@@ -11,6 +11,8 @@ from __future__ import annotations
 
 from abc import ABC, abstractmethod
 
+from ..errors import BadRequest
+
 
 class TimedSimulation(ABC):
     """The ``advance`` loop of a simulation with ramps and timers; families supply the four steps."""
@@ -39,7 +41,7 @@ class TimedSimulation(ABC):
     def advance(self, now: float) -> None:
         """Move the simulation to ``now``: ramps, then each timer that falls due on the way."""
         if now < self.time:
-            raise ValueError(f"time went backwards: {now} < {self.time}")
+            raise BadRequest(f"time went backwards: {now} < {self.time}")
         while True:
             deadline = self._timer_deadline()
             if deadline is None or deadline > now:

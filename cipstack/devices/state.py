@@ -37,7 +37,7 @@ from collections.abc import Mapping
 from concurrent.futures import Future
 from pathlib import Path
 
-from ..errors import StateRefused
+from ..errors import BadRequest, StateRefused
 
 log = logging.getLogger(__name__)
 
@@ -64,7 +64,7 @@ def data_directory() -> Path:
 def default_state_path(profile: str) -> Path:
     """Where the emulated drive of ``profile`` (e.g. "acg") keeps its saved parameters."""
     if not _PROFILE_PATTERN.match(profile):
-        raise ValueError(f"profile name {profile!r} must be letters, digits, '.', '_' or '-'")
+        raise BadRequest(f"profile name {profile!r} must be letters, digits, '.', '_' or '-'")
     return data_directory() / "state" / f"{profile}.json"
 
 

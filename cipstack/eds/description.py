@@ -33,6 +33,7 @@ from ..cip.types import DINT, UDINT, CipType, IntegerType
 from ..devices.registers import Register
 from ..eip.target.io_target import IoProfile
 from ..eip.wire.cm_messages import TriggerType
+from ..errors import BadRequest, UnknownKey
 from ..objects.identity import IdentityInfo
 
 Network = Literal["EtherNetIP", "CompoNet"]
@@ -81,7 +82,7 @@ class EdsParameter:
 
     def __post_init__(self) -> None:
         if self.type.code is None:
-            raise ValueError(f"parameter {self.name!r}: {self.type.name} has no EDS data type code")
+            raise BadRequest(f"parameter {self.name!r}: {self.type.name} has no EDS data type code")
 
     @classmethod
     def from_register(cls, register: Register, link: Link | None, *, group: str | None = None,
@@ -147,9 +148,9 @@ class IoOffer:
 
     def __post_init__(self) -> None:
         if not self.rpi_min_us <= self.rpi_default_us <= self.rpi_max_us:
-            raise ValueError(f"default RPI {self.rpi_default_us} us outside {self.rpi_min_us}..{self.rpi_max_us}")
+            raise BadRequest(f"default RPI {self.rpi_default_us} us outside {self.rpi_min_us}..{self.rpi_max_us}")
         if len(set(self.pairs)) != len(self.pairs):
-            raise ValueError("an assembly pair is listed twice")
+            raise BadRequest("an assembly pair is listed twice")
 
     @property
     def input_instances(self) -> tuple[int, ...]:
@@ -232,23 +233,23 @@ class EdsDescription:
 
     def __post_init__(self) -> None:
         if self.network not in NETWORKS:
-            raise ValueError(f"network must be one of {', '.join(NETWORKS)}, not {self.network!r}")
+            raise BadRequest(f"network must be one of {', '.join(NETWORKS)}, not {self.network!r}")
         instances = [schema.instance for schema in self.assemblies]
         if len(set(instances)) != len(instances):
-            raise ValueError("an assembly instance is declared twice")
+            raise BadRequest("an assembly instance is declared twice")
         outputs = {schema.instance for schema in self.outputs}
         inputs = {schema.instance for schema in self.inputs}
         if self.io is not None:
             for output, input_ in self.io.pairs:
                 if output not in outputs or input_ not in inputs:
-                    raise ValueError(f"connection pair {output}/{input_} names an assembly the description lacks")
+                    raise BadRequest(f"connection pair {output}/{input_} names an assembly the description lacks")
             heartbeats = {self.io.input_only_point, self.io.listen_only_point} - {None}
             if heartbeats & set(instances):
-                raise ValueError("a heartbeat connection point is also an assembly instance")
+                raise BadRequest("a heartbeat connection point is also an assembly instance")
         if self.componet_io is not None:
             output, input_ = self.componet_io
             if output not in outputs or input_ not in inputs:
-                raise ValueError(f"CompoNet default path {output}/{input_} names an assembly the description lacks")
+                raise BadRequest(f"CompoNet default path {output}/{input_} names an assembly the description lacks")
 
     @property
     def assemblies(self) -> tuple[AssemblySchema, ...]:
@@ -259,7 +260,7 @@ class EdsDescription:
         for schema in self.assemblies:
             if schema.instance == instance:
                 return schema
-        raise KeyError(f"no assembly {instance}")
+        raise UnknownKey(f"no assembly {instance}")
 
     @property
     def groups(self) -> tuple[str, ...]:

@@ -57,6 +57,7 @@ from ..cip.epath import LogicalSegment, LogicalType, encode_path, request_path
 from ..cip.types import BOOL, UDINT, UINT, USINT, IntegerType, RealType
 from ..cip.units import decimal_places
 from ..eip.wire.cm_messages import TriggerType
+from ..errors import BadRequest
 from .description import EdsDescription, EdsObjectClass, EdsParameter, IoOffer, Link
 from .model import EdsDocument, Field, Section
 from .writer import format_eds
@@ -162,7 +163,7 @@ def creation_time(created: datetime | None = None) -> datetime:
         try:
             return datetime.fromtimestamp(int(epoch), tz=timezone.utc)
         except (ValueError, OverflowError, OSError):
-            raise ValueError(f"SOURCE_DATE_EPOCH is not a number of seconds: {epoch!r}") from None
+            raise BadRequest(f"SOURCE_DATE_EPOCH is not a number of seconds: {epoch!r}") from None
     return DEFAULT_CREATED
 
 
@@ -210,7 +211,7 @@ def scaling(scale: float) -> tuple[int, int, int] | None:
     if scale == 1:
         return None
     if scale <= 0:
-        raise ValueError(f"a scale must be positive, not {scale}")
+        raise BadRequest(f"a scale must be positive, not {scale}")
     exact = Fraction(repr(float(scale)))
     return exact.numerator, exact.denominator, decimal_places(scale)
 
@@ -379,7 +380,7 @@ def _member_parameter(item: AssemblyField, output: bool, schema: AssemblySchema,
     """
     name = display_name(item.name)
     if field_name(name) != item.name:
-        raise ValueError(f"assembly {schema.instance}: field {item.name!r} is not in field-name form "
+        raise BadRequest(f"assembly {schema.instance}: field {item.name!r} is not in field-name form "
                          f"(the rule gives {field_name(item.name)!r}): an EDS could not give it back")
     same_value: EdsParameter | None = None
     if item.link is not None:

@@ -24,6 +24,7 @@ from ..cip.status import CipError
 from ..cip.types import BY_CODE, UDINT, UINT, ULINT, USINT, CipType, IntegerType, RealType
 from ..cip.values import Scaling
 from ..eip.wire.cm_messages import TriggerType
+from ..errors import UnknownKey
 from .generator import (
     EXCLUSIVE_OWNER,
     EXCLUSIVE_OWNER_KIND,
@@ -195,7 +196,7 @@ class EdsView:
             if (text.isdigit() and item.number == int(text)) or item.name == str(which):
                 return item
         known = ", ".join(f"{c.number} ({c.name})" for c in self.connections) or f"none usable: {self.why_none}"
-        raise KeyError(f"no class 1 connection {which!r} in the EDS (known: {known})")
+        raise UnknownKey(f"no class 1 connection {which!r} in the EDS (known: {known})")
 
     def assembly_at(self, instance: int) -> AssemblyInfo | None:
         """The assembly whose path names ``instance``."""

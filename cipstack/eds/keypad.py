@@ -13,6 +13,7 @@ from ..cip.status import CipError
 from ..cip.types import IntegerType
 from ..devices.keypad import Keypad, KeypadCodes
 from ..devices.registers import Register, RegisterAccess, RegisterError, RegisterRefusal
+from ..errors import UnknownKey
 from .interpret import ParamInfo
 
 if TYPE_CHECKING:
@@ -56,7 +57,7 @@ class EdsParameters(Keypad):
             wanted = text.strip().lower()
             found = by_code.get(wanted) or by_code.get(f"param{wanted}") or by_name.get(wanted)
             if found is None:
-                raise KeyError(text)
+                raise UnknownKey(text)
             return found
 
         examples = tuple(r.code for r in registers[:3]) or ("Param1",)

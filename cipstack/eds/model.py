@@ -24,6 +24,8 @@ from dataclasses import field as dataclass_field
 from enum import Enum
 from typing import Any
 
+from ..errors import BadRequest, WrongType
+
 
 class FieldKind(str, Enum):
     INT = "int"
@@ -231,7 +233,7 @@ class Field:
     def integer(cls, value: int, hex_digits: int | None = None) -> Field:
         """An integer, in decimal or, with ``hex_digits``, as ``0x`` and that many digits."""
         if isinstance(value, bool) or not isinstance(value, int):
-            raise TypeError(f"integer field needs an int, not {value!r}")
+            raise WrongType(f"integer field needs an int, not {value!r}")
         value = int(value)  # an IntEnum member is its number (Python 3.10's str() gives its name)
         raw = str(value) if hex_digits is None else ("-" if value < 0 else "") + f"0x{abs(value):0{hex_digits}X}"
         return cls(FieldKind.INT, value, raw)
@@ -240,7 +242,7 @@ class Field:
     def real(cls, value: float) -> Field:
         value = float(value)
         if not math.isfinite(value):
-            raise ValueError("an EDS real must be finite")
+            raise BadRequest("an EDS real must be finite")
         raw = repr(value)
         return cls(FieldKind.FLOAT, value, raw)
 
@@ -254,14 +256,14 @@ class Field:
         if isinstance(path, str):
             items = parse_epath(path)
             if items is None:
-                raise ValueError(f"not an EPATH: {path!r}")
+                raise BadRequest(f"not an EPATH: {path!r}")
         else:
             items = tuple(path)
             for item in items:
                 if isinstance(item, str) and not _REFERENCE.fullmatch(item):
-                    raise ValueError(f"not a parameter reference: {item!r}")
+                    raise BadRequest(f"not a parameter reference: {item!r}")
                 if isinstance(item, int) and not 0 <= item <= 0xFF:
-                    raise ValueError(f"not a byte: {item!r}")
+                    raise BadRequest(f"not a byte: {item!r}")
         return cls(FieldKind.EPATH, items, '"' + format_epath(items) + '"')
 
     @classmethod
@@ -269,7 +271,7 @@ class Field:
         """An unquoted word: a keyword value (``EtherNetIP``) or a reference (``Param3``)."""
         kind, _ = parse_word(word)
         if kind is not FieldKind.KEYWORD or not is_bare_word(word):
-            raise ValueError(f"not a keyword: {word!r}")
+            raise BadRequest(f"not a keyword: {word!r}")
         return cls(FieldKind.KEYWORD, word, word)
 
     @classmethod
@@ -335,12 +337,12 @@ def as_field(value: Any) -> Field:
     if isinstance(value, str):
         return Field.string(value)
     if isinstance(value, datetime.datetime):
-        raise TypeError("give a date or a time, not a datetime")
+        raise WrongType("give a date or a time, not a datetime")
     if isinstance(value, datetime.date):
         return Field.date(value)
     if isinstance(value, datetime.time):
         return Field.time(value)
-    raise TypeError(f"no EDS field for {value!r}")
+    raise WrongType(f"no EDS field for {value!r}")
 
 
 def _raw_still_valid(item: Field) -> bool:
@@ -382,7 +384,7 @@ def render_field(item: Field) -> str:
         return "{}.{}".format(*value)
     if kind is FieldKind.KEYWORD and isinstance(value, str) and is_bare_word(value) and value.isascii():
         return value
-    raise ValueError(f"field {item.raw!r} of kind {kind.value} cannot be written")
+    raise BadRequest(f"field {item.raw!r} of kind {kind.value} cannot be written")
 
 
 @dataclass
@@ -426,7 +428,7 @@ class Section:
     def add(self, keyword: str, fields: Sequence[Any], comment: str | Sequence[str] | None = None) -> Entry:
         """Append an entry; ``fields`` holds Fields or plain values (see :func:`as_field`)."""
         if not _KEYWORD.fullmatch(keyword):
-            raise ValueError(f"not an EDS keyword: {keyword!r}")
+            raise BadRequest(f"not an EDS keyword: {keyword!r}")
         entry = Entry(keyword, [as_field(item) for item in fields] or [Field.empty()])
         entry.comments = _comment_list(comment)
         self.entries.append(entry)
@@ -477,7 +479,7 @@ class EdsDocument:
         found = self.get(name)
         if found is None:
             if not SECTION_NAME.fullmatch(name):
-                raise ValueError(f"not an EDS section name: {name!r}")
+                raise BadRequest(f"not an EDS section name: {name!r}")
             found = Section(name, comments=_comment_list(comment))
             self.sections.append(found)
         elif comment is not None:

@@ -23,6 +23,7 @@ import os
 import re
 from collections.abc import Callable, Sequence
 
+from ..errors import BadRequest
 from .model import (
     SECTION_NAME,
     DocumentSource,
@@ -151,9 +152,9 @@ def format_entry(entry: Entry, indent: str = ENTRY_INDENT, field_indent: str = F
     """The lines of one entry, its comments first (a string in pieces holds ``newline``)."""
     lines = [_comment_line(indent, comment) for comment in entry.comments]
     if not entry.fields:
-        raise ValueError(f"entry {entry.keyword!r} has no field")
+        raise BadRequest(f"entry {entry.keyword!r} has no field")
     if not is_bare_word(entry.keyword):
-        raise ValueError(f"keyword {entry.keyword!r} cannot be written")
+        raise BadRequest(f"keyword {entry.keyword!r} cannot be written")
     groups = _field_groups(entry)
     continuation = newline + field_indent
     if len(groups) == 1:
@@ -166,7 +167,7 @@ def format_entry(entry: Entry, indent: str = ENTRY_INDENT, field_indent: str = F
 
 def _section_header(section: Section) -> list[str]:
     if not SECTION_NAME.fullmatch(section.name):
-        raise ValueError(f"section name {section.name!r} cannot be written")
+        raise BadRequest(f"section name {section.name!r} cannot be written")
     return [*(_comment_line("", comment) for comment in section.comments), f"[{section.name}]"]
 
 

@@ -17,7 +17,7 @@ from dataclasses import dataclass, field
 from enum import Enum
 from typing import NamedTuple
 
-from ..errors import ProtocolError
+from ..errors import BadRequest, ProtocolError
 from .wire.cpf import ItemType
 from .wire.encapsulation import DEFAULT_IO_PORT
 
@@ -131,7 +131,7 @@ class ProductionSchedule:
 
     def __post_init__(self) -> None:
         if self.period <= 0:
-            raise ValueError("production period must be positive")
+            raise BadRequest("production period must be positive")
         if self.tolerance < 0:
             self.tolerance = min(self.period / 2, 0.0005)
 

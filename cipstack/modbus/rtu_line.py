@@ -26,7 +26,7 @@ from ..devices.acg.drive import AcgDrive
 from ..devices.acg.modbus_core import ExceptionCode, RegisterWritten
 from ..devices.acg.modbus_rtu import MAX_DRIVES_PER_LINE, LineSettings, Reply, RtuSlave
 from ..devices.state import StateFileError, StateWriter
-from ..errors import CipstackError
+from ..errors import BadRequest, CipstackError
 
 log = logging.getLogger(__name__)
 
@@ -171,7 +171,7 @@ class RtuLine:
             written: RegisterWritten | None = None) -> RtuSlave:
         """Put a drive on the line; ``written``: told of each register a request writes."""
         if len(self.stations) >= MAX_DRIVES_PER_LINE:
-            raise ValueError(f"an RS-485 line takes at most {MAX_DRIVES_PER_LINE} drives (ACG RS-485 manual, "
+            raise BadRequest(f"an RS-485 line takes at most {MAX_DRIVES_PER_LINE} drives (ACG RS-485 manual, "
                              f"Communication Standards)")
         station = _Station(drive, saves, self.port.paced, written)
         self.stations.append(station)

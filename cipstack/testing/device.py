@@ -20,6 +20,7 @@ from typing import Any, TypeVar, overload
 from ..adapter import Adapter, AdapterSettings, network_interface
 from ..control.events import Event
 from ..eds.served import profile_eds_file
+from ..errors import UnknownField
 from ..scanner import SyncScanner
 
 T = TypeVar("T")
@@ -105,7 +106,7 @@ class EmulatedDevice:
         """The class 1 UDP port (``target_io_port`` of a scanner's class 1 connection)."""
         endpoint = self.adapter.io_endpoint
         if endpoint is None:
-            raise AttributeError("this device has no class 1 I/O")
+            raise UnknownField("this device has no class 1 I/O")
         return endpoint.port
 
     # -- calls on the device's loop -------------------------------------------------------------------------

@@ -39,6 +39,7 @@ from ...assemblies.acg import (
 from ...assemblies.schema import AssemblySchema
 from ...cip.model import ClassSpec
 from ...eip.target.io_target import ConnectionKind, IoConnection, IoProfile
+from ...errors import BadRequest
 from ...objects.assembly import AssemblyPoint
 from ...objects.file import StoredFile
 from ...objects.tcpip import NetworkInterface
@@ -402,7 +403,7 @@ def parse_trip(code: Trip | int | str) -> Trip:
     for trip in Trip:
         if wanted in (trip.name.replace("_", "").lower(), trip.label.replace(" ", "").lower()):
             return trip
-    raise ValueError(f"unknown trip {code!r}: give a fault code (e.g. 0x4200) or a name (e.g. OverHeat)")
+    raise BadRequest(f"unknown trip {code!r}: give a fault code (e.g. 0x4200) or a name (e.g. OverHeat)")
 
 
 def build_acg_device(interface: NetworkInterface | None = None, limits: DeviceLimits | None = None,

@@ -47,6 +47,7 @@ from collections.abc import Iterator, Mapping
 from contextlib import contextmanager
 
 from ...eip.target.limits import RateLimitedLog
+from ...errors import WrongState
 from ..registers import Register, RegisterAccess, RegisterError, RegisterMap, RegisterRefusal
 from ..simulation import TimedSimulation
 from ..state import ParameterStore
@@ -207,7 +208,7 @@ class AcgDrive(TimedSimulation):
         before anything has moved it."""
         state = self._state
         if state.time != state.start_time:
-            raise RuntimeError("the drive has already run: its power-up time is fixed")
+            raise WrongState("the drive has already run: its power-up time is fixed")
         state.time = state.start_time = now
 
     @property

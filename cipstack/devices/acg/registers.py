@@ -37,6 +37,7 @@ from dataclasses import dataclass, replace
 from enum import IntEnum, IntFlag
 
 from ...cip.types import INT
+from ...errors import UnknownKey
 from ..registers import Register, RegisterAccess, RegisterMap
 
 R = RegisterAccess.READ
@@ -849,7 +850,7 @@ def normalize_code(text: str) -> str:
     match = _CODE_PATTERN.match(text)
     if match and match.group(1).lower() in _GROUP_SPELLINGS:
         return f"{_GROUP_SPELLINGS[match.group(1).lower()]}.{int(match.group(2))}"
-    raise KeyError(f"not an ACG keypad code: {text!r}")
+    raise UnknownKey(f"not an ACG keypad code: {text!r}")
 
 
 def register_for_code(text: str) -> Register:
@@ -858,7 +859,7 @@ def register_for_code(text: str) -> Register:
     try:
         return ACG_REGISTERS.by_code(code)
     except KeyError:
-        raise KeyError(f"keypad code {code} has no communication address") from None
+        raise UnknownKey(f"keypad code {code} has no communication address") from None
 
 
 def class64_register(instance: int, attribute: int) -> Register | None:

@@ -6,6 +6,7 @@ from __future__ import annotations
 from enum import Enum
 from typing import TYPE_CHECKING
 
+from ...errors import BadRequest
 from .registers import (
     LatchTrip1,
     LatchTrip2,
@@ -73,7 +74,7 @@ class Trip(Enum):
         for trip in cls:
             if trip.fault_code == code:
                 return trip
-        raise ValueError(f"0x{code:04X} is not a trip of the Drive Fault Codes table")
+        raise BadRequest(f"0x{code:04X} is not a trip of the Drive Fault Codes table")
 
 
 NO_FAULT = 0x0000

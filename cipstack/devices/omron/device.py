@@ -53,6 +53,7 @@ from ...cip.model import ClassSpec
 from ...componet.gateway import COMPONET_PORT, CompoNetGateway
 from ...componet.network import NODE_ADDRESSES, CompoNetNetwork
 from ...eip.target.io_target import IoConnection, IoProfile
+from ...errors import BadRequest, UnknownKey
 from ...objects.assembly import AssemblyPoint
 from ...objects.file import StoredFile
 from ...objects.identity import IdentityInfo, IdentityStatus
@@ -128,7 +129,7 @@ class OmronDevice(Device):
     def __post_init__(self) -> None:
         super().__post_init__()
         if self.model is None:
-            raise ValueError("an OmronDevice needs its inverter model")
+            raise BadRequest("an OmronDevice needs its inverter model")
         inverter_model = self.model
         self._now = 0.0
         #: False simulates a broken link between option board and inverter (E60/E70 territory).
@@ -482,7 +483,7 @@ class OmronDevice(Device):
         try:
             number = int(text[1:] if text.startswith("E") else text)
         except ValueError:
-            raise ValueError(f"not a trip code of Table D-5: {code!r} (e.g. 5 or E05)") from None
+            raise BadRequest(f"not a trip code of Table D-5: {code!r} (e.g. 5 or E05)") from None
         return number, trip_code(self.family, number)
 
     def check_trip_code(self, code: int | str) -> None:
@@ -626,7 +627,7 @@ class CompoNetGatewayDevice(Device):
         for slave in self.slaves:
             if slave.node_address == node:
                 return slave
-        raise KeyError(f"no slave at node {node}")
+        raise UnknownKey(f"no slave at node {node}")
 
     def advance(self, now: float) -> None:
         assert self.network is not None
@@ -666,7 +667,7 @@ def parse_nodes(text: str) -> list[tuple[str, str, int]]:
             model_name, node = rest.rsplit("@", 1)
             nodes.append((profile.strip().lower(), model_name.strip(), int(node)))
         except ValueError:
-            raise ValueError(f"node {item!r} is not PROFILE:MODEL@NODE (e.g. mx2:MX2-A2015-E@3)") from None
+            raise BadRequest(f"node {item!r} is not PROFILE:MODEL@NODE (e.g. mx2:MX2-A2015-E@3)") from None
     return nodes
 
 
@@ -680,9 +681,9 @@ def build_componet_gateway(nodes: list[tuple[str, str, int]], interface: Network
     for profile, model_name, node in nodes:
         inverter_model = model(model_name)
         if inverter_model.family.value.lower() != profile.lower():
-            raise ValueError(f"{model_name} is an {inverter_model.family.value}, not a {profile} model")
+            raise BadRequest(f"{model_name} is an {inverter_model.family.value}, not a {profile} model")
         if not 0 <= node < NODE_ADDRESSES:
-            raise ValueError(f"node address {node} outside 0-63")
+            raise BadRequest(f"node address {node} outside 0-63")
         slave_interface = NetworkInterface(mac=interface.mac[:-1] + bytes([node]))
         slaves.append(build_omron_device(model_name, slave_interface, DeviceLimits(), ethernet=False,
                                          rotary_switches=node))

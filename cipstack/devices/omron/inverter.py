@@ -24,6 +24,7 @@ from __future__ import annotations
 import dataclasses
 from collections.abc import Callable, Mapping, Sequence
 
+from ...errors import BadRequest, WrongState
 from ..registers import RegisterAccess, RegisterError, RegisterRefusal
 from ..simulation import TimedSimulation
 from ..state import StateFileError
@@ -100,11 +101,11 @@ class Inverter(TimedSimulation):
         for number, value in saved.items():
             parameter = self.registers.by_number.get(number)
             if parameter is None or not parameter.saved:
-                raise ValueError(f"saved value for {number}: not a saved {self.family.value} parameter")
+                raise BadRequest(f"saved value for {number}: not a saved {self.family.value} parameter")
             try:
                 checked[number] = parameter.check(value)
             except RegisterError as exc:
-                raise ValueError(f"saved value for {parameter.key}: {exc}") from None
+                raise BadRequest(f"saved value for {parameter.key}: {exc}") from None
         return checked
 
     def _power_on_values(self) -> dict[str, int]:
@@ -134,7 +135,7 @@ class Inverter(TimedSimulation):
         saved trips again (appendix F Note 5, Tables 22/23 note), and FWD, REV and RST wait for a
         rising edge (note under Table B-2)."""
         if now < self._state.t:
-            raise ValueError(f"time went backwards: {now} < {self._state.t}")
+            raise BadRequest(f"time went backwards: {now} < {self._state.t}")
         self._state.power_on(self._power_on_values(), now)
         self._startup.start()
         self._trips.evaluate(now)
@@ -320,9 +321,9 @@ class Inverter(TimedSimulation):
         """The output words of assembly 139, written to the mapped registers in order (appendix F)."""
         mapping = self._state.flexible
         if mapping is None:
-            raise RuntimeError("the flexible format is not active (P046 = 6 and a valid P160-P179 at start-up)")
+            raise WrongState("the flexible format is not active (P046 = 6 and a valid P160-P179 at start-up)")
         if len(words) != len(mapping.outputs):
-            raise ValueError(f"flexible output is {len(mapping.outputs)} words, got {len(words)}")
+            raise BadRequest(f"flexible output is {len(mapping.outputs)} words, got {len(words)}")
         self.advance(now)
         for parameter, value in flexible_writes(mapping, self.registers, words):
             try:
@@ -334,7 +335,7 @@ class Inverter(TimedSimulation):
         """The input words of assembly 159: each mapped register's word, 0 for a reserved word."""
         mapping = self._state.flexible
         if mapping is None:
-            raise RuntimeError("the flexible format is not active (P046 = 6 and a valid P160-P179 at start-up)")
+            raise WrongState("the flexible format is not active (P046 = 6 and a valid P160-P179 at start-up)")
         return [self.read_word(address) if address else 0 for address in mapping.inputs]
 
     # -- registers ----------------------------------------------------------------------------------

@@ -28,6 +28,7 @@ from types import MappingProxyType
 from typing import Any
 
 from ...cip.types import DINT, INT, UDINT
+from ...errors import BadRequest, UnknownKey
 from ..registers import Register, RegisterAccess, RegisterError, RegisterMap, RegisterRefusal
 from .models import Family
 
@@ -56,12 +57,12 @@ _GROUP_BY_BASE = {base: group for group, base in FUNCTION_GROUPS.items()}
 def _split_code(code: str) -> tuple[str, int]:
     text = code.strip()
     if len(text) != 4 or not text[1:].isdigit():
-        raise ValueError(f"not a function code: {code!r} (expected a group letter and three digits, e.g. P044)")
+        raise BadRequest(f"not a function code: {code!r} (expected a group letter and three digits, e.g. P044)")
     letter = text[0].upper()
     group = next((g for g in FUNCTION_GROUPS if g.upper() == letter), None)
     number = int(text[1:])
     if group is None or not 1 <= number <= 999:
-        raise ValueError(f"not a function code of Table E-3: {code!r}")
+        raise BadRequest(f"not a function code of Table E-3: {code!r}")
     return group, number
 
 
@@ -89,27 +90,27 @@ def function_code_from_number(number: int) -> str:
     base, code = divmod(number, 1000)
     group = _GROUP_BY_BASE.get(base * 1000)
     if group is None or code == 0:
-        raise ValueError(f"{number} is not a function code number of Table E-3")
+        raise BadRequest(f"{number} is not a function code number of Table E-3")
     return f"{group}{code:03d}"
 
 
 def function_code_from_path(instance: int, attribute: int) -> str:
     """The function code a class 0x65 instance/attribute pair addresses."""
     if not (0 <= instance <= 0xFF and 0 <= attribute <= 0xFF):
-        raise ValueError("instance and attribute are one byte each")
+        raise BadRequest("instance and attribute are one byte each")
     return function_code_from_number(instance << 8 | attribute)
 
 
 def modbus_path(address: int) -> tuple[int, int]:
     """Instance and attribute of Modbus address XXYYh in class 0x64: (XX, YY) (section E-3-2)."""
     if not 0 <= address <= 0xFFFF:
-        raise ValueError(f"Modbus address out of range: {address}")
+        raise BadRequest(f"Modbus address out of range: {address}")
     return address >> 8, address & 0xFF
 
 
 def modbus_address(instance: int, attribute: int) -> int:
     if not (0 <= instance <= 0xFF and 0 <= attribute <= 0xFF):
-        raise ValueError("instance and attribute are one byte each")
+        raise BadRequest("instance and attribute are one byte each")
     return instance << 8 | attribute
 
 
@@ -183,7 +184,7 @@ class Parameter(Register):
         for bit in self.bits:
             if bit.name == name:
                 return bit
-        raise KeyError(f"{self.key} has no bit {name!r}")
+        raise UnknownKey(f"{self.key} has no bit {name!r}")
 
     @property
     def register(self) -> Register | None:
@@ -549,7 +550,7 @@ def trip_code(family: Family, number: int) -> TripCode:
     for trip in TRIP_CODES:
         if trip.number == number and family in trip.families:
             return trip
-    raise KeyError(f"{family.value} has no trip code E{number:02d} in Table D-5")
+    raise UnknownKey(f"{family.value} has no trip code E{number:02d} in Table D-5")
 
 
 # -- family traits -----------------------------------------------------------------------------
@@ -656,7 +657,7 @@ class RegisterSet:
         by_key: dict[str, Parameter] = {}
         for parameter in self.parameters:
             if parameter.key in by_key:
-                raise ValueError(f"{self.family.value}: {parameter.key} declared twice")
+                raise BadRequest(f"{self.family.value}: {parameter.key} declared twice")
             by_key[parameter.key] = parameter
         object.__setattr__(self, "by_key", MappingProxyType(by_key))
         object.__setattr__(self, "by_number", MappingProxyType(
@@ -674,7 +675,7 @@ class RegisterSet:
         try:
             return self.by_key[normalize_code(code)]
         except (KeyError, ValueError):
-            raise KeyError(f"{self.family.value} has no function code {code!r}") from None
+            raise UnknownKey(f"{self.family.value} has no function code {code!r}") from None
 
     def at(self, address: int) -> Parameter | None:
         """The parameter whose first word is at Modbus ``address``."""

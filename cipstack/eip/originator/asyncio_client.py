@@ -17,7 +17,7 @@ from typing import TYPE_CHECKING, Any, TypeVar
 from ...cip.epath import Segment
 from ...cip.messages import MessageRouterResponse
 from ...cip.status import CipError, GeneralStatus
-from ...errors import PeerUnreachable
+from ...errors import BadRequest, PeerUnreachable
 from ..wire.cpf import Item
 from ..wire.encapsulation import DEFAULT_PORT, EncapsulationHeader
 from ..wire.identity_items import IdentityRecord, ServiceRecord
@@ -141,7 +141,7 @@ class EncapsulationClient(CoreClient):
     def _write(self, frame: bytes) -> None:
         protocol = self._protocol
         if protocol is None or protocol.transport is None or protocol.transport.is_closing():
-            raise ConnectionError(f"connection to {self.host}:{self.port} is closed")
+            raise PeerUnreachable(f"connection to {self.host}:{self.port} is closed")
         protocol.transport.write(frame)
 
     def _received(self, data: bytes) -> None:
@@ -155,7 +155,7 @@ class EncapsulationClient(CoreClient):
                 future.set_exception(exc)
 
     def _lost(self, exc: Exception | None) -> None:
-        error = ConnectionError(f"connection to {self.host}:{self.port} lost" + (f": {exc}" if exc else ""))
+        error = PeerUnreachable(f"connection to {self.host}:{self.port} lost" + (f": {exc}" if exc else ""))
         self.core.lost()
         for future in self._waiting.values():
             if not future.done():
@@ -297,7 +297,7 @@ class EncapsulationClient(CoreClient):
 
         fmt = OtFormat(ot_format) if ot_format is not None else OtFormat.RUN_IDLE
         if fmt is OtFormat.HEARTBEAT and heartbeat is None:
-            raise ValueError("the heartbeat format carries no data: give a heartbeat point, not an output")
+            raise BadRequest("the heartbeat format carries no data: give a heartbeat point, not an output")
         request = Class1Request(None if heartbeat is not None else output_size, input_size, int(rpi * 1e6),
                                 int(rpi * 1e6), class1_path(output, input, config, heartbeat, config_data), multicast,
                                 timeout_multiplier, ot_format=fmt)

@@ -80,11 +80,11 @@ class BlockingEncapsulationClient(CoreClient):
 
     def _send(self, frame: bytes) -> None:
         if self._sock is None:
-            raise ConnectionError(f"connection to {self.host}:{self.port} is closed")
+            raise PeerUnreachable(f"connection to {self.host}:{self.port} is closed")
         try:
             self._sock.sendall(frame)
         except OSError as exc:
-            raise ConnectionError(f"connection to {self.host}:{self.port} lost: {exc}") from None
+            raise PeerUnreachable(f"connection to {self.host}:{self.port} lost: {exc}") from None
 
     def perform(self, transaction: Transaction[T]) -> T:
         """Send ``transaction`` and wait for its reply; the reply's meaning, or the error it carries."""
@@ -103,10 +103,10 @@ class BlockingEncapsulationClient(CoreClient):
                 raise self._no_reply(transaction) from None
             except OSError as exc:
                 core.lost()
-                raise ConnectionError(f"connection to {self.host}:{self.port} lost: {exc}") from None
+                raise PeerUnreachable(f"connection to {self.host}:{self.port} lost: {exc}") from None
             if not chunk:
                 core.lost()
-                raise ConnectionError(f"connection to {self.host}:{self.port} closed by the target")
+                raise PeerUnreachable(f"connection to {self.host}:{self.port} closed by the target")
             for done, header, body in core.receive_data(chunk):
                 if done is transaction:
                     return transaction.result(header, body)

@@ -26,7 +26,7 @@ from typing import TYPE_CHECKING, Any, Generic, TypeVar
 
 from ...cip.epath import Segment, encode_path, request_path
 from ...cip.messages import MessageRouterRequest, MessageRouterResponse, Service
-from ...errors import CipstackError
+from ...errors import BadRequest, NoReply, PeerUnreachable
 from ...logs import debug
 from ..wire.cpf import Item, ItemType, decode_items, encode_items
 from ..wire.encapsulation import (
@@ -73,18 +73,19 @@ def parse_host(text: str, default_port: int = DEFAULT_PORT) -> tuple[str, int]:
     if not sep:
         return text, default_port
     if not host:
-        raise ValueError(f"no host in {text!r}")
+        raise BadRequest(f"no host in {text!r}")
     try:
         number = int(port, 0)
     except ValueError:
-        raise ValueError(f"bad port in {text!r}") from None
+        raise BadRequest(f"bad port in {text!r}") from None
     if not 0 < number < 65536:
-        raise ValueError(f"port {number} out of range")
+        raise BadRequest(f"port {number} out of range")
     return host, number
 
 
-class NoReplyError(CipstackError, TimeoutError):
-    """A request whose reply did not come before its deadline."""
+class NoReplyError(NoReply):
+    """A request whose reply did not come before its deadline: ``PeerUnreachable`` (a
+    ``ConnectionError``) and, as before, a ``TimeoutError``."""
 
 
 class ExplicitConnectionInfo:
@@ -391,7 +392,7 @@ class OriginatorCore:
         the encoded message-router reply."""
         connection = self.connection
         if connection is None:
-            raise ConnectionError("no class 3 connection is open")
+            raise PeerUnreachable("no class 3 connection is open")
         connection.sequence = sequence = (connection.sequence + 1) & 0xFFFF
         body = RR_PREFIX.pack(0, 0) + encode_items((
             Item(ItemType.CONNECTED_ADDRESS, _CONN_ID.pack(connection.ot_connection_id)),
@@ -480,6 +481,8 @@ class CoreClient:
 
     def __init__(self, host: str, port: int = DEFAULT_PORT, timeout: float = DEFAULT_TIMEOUT,
                  core: OriginatorCore | None = None) -> None:
+        if not 0 < port < 65536:   # the socket's own OverflowError is no CipstackError
+            raise BadRequest(f"port {port} out of range")
         self.host = host
         self.port = port
         self.timeout = timeout

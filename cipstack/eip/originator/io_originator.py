@@ -21,7 +21,7 @@ from enum import Enum
 from typing import TYPE_CHECKING, Any
 
 from ...cip.epath import LogicalSegment, LogicalType, encode_path
-from ...errors import PeerUnreachable
+from ...errors import BadRequest, PeerUnreachable, ReadOnlyField, UnknownField
 from ..io_core import (
     RECEIVED_NEW,
     RECEIVED_STALE,
@@ -368,9 +368,9 @@ class ProcessImage:
     @raw.setter
     def raw(self, value: bytes) -> None:
         if not self._writable:
-            raise AttributeError("input data is read-only")
+            raise ReadOnlyField("input data is read-only")
         if len(value) != len(self._buffer):
-            raise ValueError(f"assembly is {len(self._buffer)} bytes, got {len(value)}")
+            raise BadRequest(f"assembly is {len(self._buffer)} bytes, got {len(value)}")
         self._buffer[:] = value
 
     @property
@@ -386,7 +386,7 @@ class ProcessImage:
     def fields(self) -> dict[str, Any]:
         """Every field's value by name."""
         if self._schema is None:
-            raise AttributeError(self._no_field(None))
+            raise UnknownField(self._no_field(None))
         return self._schema.decode(bytes(self._buffer))
 
     def _no_field(self, name: str | None) -> str:
@@ -403,7 +403,7 @@ class ProcessImage:
         if name.startswith("__") or schema is None or name not in schema.field_names:
             if name.startswith("__"):
                 raise AttributeError(name)
-            raise AttributeError(self._no_field(name))
+            raise UnknownField(self._no_field(name))
         return schema.decode(bytes(self._buffer))[name]
 
     def __setattr__(self, name: str, value: Any) -> None:
@@ -411,19 +411,19 @@ class ProcessImage:
             ProcessImage.raw.fset(self, value)  # type: ignore[attr-defined]
             return
         if not self._writable:
-            raise AttributeError("input data is read-only")
+            raise ReadOnlyField("input data is read-only")
         if self._schema is None or name not in self._schema.field_names:
-            raise AttributeError(self._no_field(name))
+            raise UnknownField(self._no_field(name))
         self._buffer[:] = self._schema.with_field(bytes(self._buffer), name, value)
 
     def update(self, **values: Any) -> None:
         """Set several fields at once (``io.output.update(run_forward=True, speed_reference=900)``)."""
         if not self._writable:
-            raise AttributeError("input data is read-only")
+            raise ReadOnlyField("input data is read-only")
         schema = self._schema
         for name in values:
             if schema is None or name not in schema.field_names:
-                raise AttributeError(self._no_field(name))
+                raise UnknownField(self._no_field(name))
         data = bytes(self._buffer)
         for name, value in values.items():
             assert schema is not None   # every name was checked above
@@ -543,7 +543,7 @@ def class1_path(output: int | None, input: int, config: int, heartbeat: int | No
     ])
     if config_data:
         if len(config_data) > MAX_CONFIG_DATA:
-            raise ValueError(f"configuration data is {len(config_data)} bytes, at most {MAX_CONFIG_DATA}")
+            raise BadRequest(f"configuration data is {len(config_data)} bytes, at most {MAX_CONFIG_DATA}")
         padded = config_data + b"\x00" * (len(config_data) & 1)
         path += bytes((0x80, len(padded) // 2)) + padded
     return path

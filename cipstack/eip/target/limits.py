@@ -31,6 +31,8 @@ import time
 from collections.abc import Callable, Hashable
 from typing import Any
 
+from ...errors import BadRequest
+
 log = logging.getLogger(__name__)
 
 #: Default bound on open TCP connections per listener: well above what sessions need (32 by
@@ -50,11 +52,11 @@ class ConnectionLimiter:
 
     def __init__(self, total: int, per_host: int | None = None) -> None:
         if total < 1:
-            raise ValueError("the connection limit must be at least 1")
+            raise BadRequest("the connection limit must be at least 1")
         self.total = total
         self.per_host = per_host if per_host is not None else per_host_default(total)
         if self.per_host < 1:
-            raise ValueError("the per-host connection limit must be at least 1")
+            raise BadRequest("the per-host connection limit must be at least 1")
         self.open = 0
         self.by_host: dict[str, int] = {}
         #: Connections refused since the start.

@@ -12,6 +12,7 @@ from enum import IntEnum
 
 from ...cip.epath import request_path
 from ...cip.status import CipError, GeneralStatus
+from ...errors import BadRequest
 
 #: Where an originator sends Forward_Open and Forward_Close: the Connection Manager, instance 1.
 CONNECTION_MANAGER_PATH = request_path(0x06, 1)
@@ -71,7 +72,7 @@ class NetworkParameters:
         if large:
             return (flags << 16) | (self.size & 0xFFFF)
         if self.size > 0x1FF:
-            raise ValueError(f"connection size {self.size} needs a Large_Forward_Open")
+            raise BadRequest(f"connection size {self.size} needs a Large_Forward_Open")
         return flags | self.size
 
 
@@ -139,7 +140,12 @@ class ForwardOpenRequest:
 
     def encode(self) -> bytes:
         if len(self.connection_path) % 2:
-            raise ValueError("connection path must be whole words")
+            raise BadRequest("connection path must be whole words")
+        for direction, rpi_us in (("O->T", self.ot_rpi_us), ("T->O", self.to_rpi_us)):
+            if not 0 <= rpi_us <= 0xFFFFFFFF:   # a UDINT of microseconds: struct's own error names neither
+                raise BadRequest(f"{direction} RPI {rpi_us} us is outside 0..4294967295 us")
+        if not 0 <= self.timeout_multiplier <= 0xFF:
+            raise BadRequest(f"connection timeout multiplier {self.timeout_multiplier} is outside 0..255")
         tail = _FO_LARGE_TAIL if self.large else _FO_SMALL_TAIL
         return _FO_HEAD.pack(self.priority_tick, self.timeout_ticks, self.ot_connection_id, self.to_connection_id,
                              self.triad.connection_serial, self.triad.vendor_id, self.triad.originator_serial,
@@ -171,7 +177,7 @@ class ForwardOpenReply:
     @classmethod
     def decode(cls, data: bytes) -> ForwardOpenReply:
         if len(data) < _FO_REPLY.size:
-            raise ValueError("Forward_Open reply cut short")
+            raise BadRequest("Forward_Open reply cut short")
         ot_id, to_id, serial, vendor, orig, ot_api, to_api, words, _ = _FO_REPLY.unpack_from(data)
         return cls(ot_id, to_id, ConnectionTriad(serial, vendor, orig), ot_api, to_api,
                    bytes(data[_FO_REPLY.size:_FO_REPLY.size + 2 * words]))
@@ -217,7 +223,7 @@ class ForwardCloseReply:
     @classmethod
     def decode(cls, data: bytes) -> ForwardCloseReply:
         if len(data) < _FC_REPLY.size:
-            raise ValueError("Forward_Close reply cut short")
+            raise BadRequest("Forward_Close reply cut short")
         serial, vendor, orig, words, _ = _FC_REPLY.unpack_from(data)
         return cls(ConnectionTriad(serial, vendor, orig), bytes(data[_FC_REPLY.size:_FC_REPLY.size + 2 * words]))
 

@@ -5,6 +5,7 @@ from __future__ import annotations
 import struct
 from typing import NamedTuple
 
+from ...errors import BadRequest
 from .cpf import Item, ItemType, SockAddr, decode_items, encode_items
 
 _IDENTITY_FIXED = struct.Struct("<HHHBBHI")
@@ -54,7 +55,7 @@ def encode_list_identity(record: IdentityRecord, local: SockAddr) -> bytes:
 
 def decode_identity_item(data: bytes) -> IdentityRecord:
     if len(data) < 2 + 16 + _IDENTITY_FIXED.size + 1:
-        raise ValueError("ListIdentity item cut short")
+        raise BadRequest("ListIdentity item cut short")
     (version,) = struct.unpack_from("<H", data)
     address = SockAddr.decode(data, 2)
     vendor, device, product, major, minor, status, serial = _IDENTITY_FIXED.unpack_from(data, 18)
