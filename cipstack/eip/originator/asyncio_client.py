@@ -39,8 +39,8 @@ from .replies import EncapsulationStatusError, MalformedReplyError
 if TYPE_CHECKING:
     # Imported where used: explicit messaging does not load class 1.
     from ...assemblies.schema import AssemblySchema
+    from .class1 import OtFormat
     from .io_context import IoContext
-    from .io_originator import OtFormat
 
 log = logging.getLogger(__name__)
 T = TypeVar("T")
@@ -292,14 +292,16 @@ class EncapsulationClient(CoreClient):
         on the precise event loop under Linux, for every connection of the shared endpoint
         (``io.kernel_arrival_times`` says whether it is so).
         """
+        from ..io_core import rpi_us_of
+        from .class1 import Class1Request, OtFormat, class1_path
         from .io_context import IoContext
-        from .io_originator import Class1Request, OtFormat, class1_path
 
         fmt = OtFormat(ot_format) if ot_format is not None else OtFormat.RUN_IDLE
         if fmt is OtFormat.HEARTBEAT and heartbeat is None:
             raise ValueError("the heartbeat format carries no data: give a heartbeat point, not an output")
-        request = Class1Request(None if heartbeat is not None else output_size, input_size, int(rpi * 1e6),
-                                int(rpi * 1e6), class1_path(output, input, config, heartbeat, config_data), multicast,
+        rpi_us = rpi_us_of(rpi)  # seconds at the API, microseconds from here on
+        request = Class1Request(None if heartbeat is not None else output_size, input_size, rpi_us,
+                                rpi_us, class1_path(output, input, config, heartbeat, config_data), multicast,
                                 timeout_multiplier, ot_format=fmt)
         return IoContext(self, request, target_io_port, local_io_port, output_schema, input_schema, run,
                          keep_intervals, kernel_arrival_times)
