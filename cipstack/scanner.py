@@ -404,6 +404,18 @@ class _Declarations:
         """The route every request travels (Unconnected_Send), None for the target itself."""
         return self.explicit.route
 
+    def _schema_source(self, instance: int | None, schema: AssemblySchema | None, eds: str = "") -> str:
+        """Where an image's field names come from, or why it has none, for error messages."""
+        if instance is None:
+            return "a heartbeat connection sends no output data"
+        if schema is not None:
+            return f"assembly {instance} {schema.name!r} of {eds or self.catalog.source}"
+        declared = self.catalog.assemblies.get(instance)
+        if declared is not None:
+            return (f"assembly {instance} of {self.catalog.source} is {declared.size} bytes, not the size the "
+                    "connection opened with")
+        return f"no schema of assembly {instance} in {eds + ' nor in ' if eds else ''}{self.catalog.source}"
+
 
 class Scanner(_Declarations):
     """Explicit messaging and class 1 I/O with one target (unconnected, routed or class 3), async.
@@ -570,20 +582,11 @@ class Scanner(_Declarations):
         ``io.statistics()`` gives the counters and how the target really produces (received rate,
         inter-arrival p50/p99/max, missed slots).
         """
-        if output is None and heartbeat is None:
-            raise ValueError("give an output assembly, or a heartbeat point for input-only / listen-only")
-        if output_schema is None and output is not None:
-            output_schema = self.catalog.assemblies.get(output)
-        if input_schema is None:
-            input_schema = self.catalog.assemblies.get(input)
-        if output_size is None:
-            output_size = 0 if output is None else (
-                output_schema.size if output_schema is not None else await self.assembly_size(output))
-        if input_size is None:
-            input_size = input_schema.size if input_schema is not None else await self.assembly_size(input)
+        ot_size, to_size, output_schema, input_schema = await self.client.run(class1_assemblies(
+            self.explicit, output, input, heartbeat, output_size, input_size, output_schema, input_schema))
         context = self.client.io_connection(
-            output, input, rpi, output_size=output_size, input_size=input_size, config=config, heartbeat=heartbeat,
-            output_schema=output_schema if output is not None else None, input_schema=input_schema,
+            output, input, rpi, output_size=ot_size, input_size=to_size, config=config, heartbeat=heartbeat,
+            output_schema=output_schema, input_schema=input_schema,
             target_io_port=target_io_port, local_io_port=local_io_port, multicast=multicast,
             timeout_multiplier=timeout_multiplier, run=run, keep_intervals=keep_intervals, config_data=config_data,
             ot_format=ot_format, kernel_arrival_times=kernel_arrival_times)
@@ -591,18 +594,6 @@ class Scanner(_Declarations):
             handle.describe_schemas(self._schema_source(output, handle.output.schema),
                                     self._schema_source(input, handle.input.schema))
             yield handle
-
-    def _schema_source(self, instance: int | None, schema: AssemblySchema | None, eds: str = "") -> str:
-        """Where an image's field names come from, or why it has none, for error messages."""
-        if instance is None:
-            return "a heartbeat connection sends no output data"
-        if schema is not None:
-            return f"assembly {instance} {schema.name!r} of {eds or self.catalog.source}"
-        declared = self.catalog.assemblies.get(instance)
-        if declared is not None:
-            return (f"assembly {instance} of {self.catalog.source} is {declared.size} bytes, not the size the "
-                    "connection opened with")
-        return f"no schema of assembly {instance} in {eds + ' nor in ' if eds else ''}{self.catalog.source}"
 
     @contextlib.asynccontextmanager
     async def io_connection_from_eds(self, doc: EdsDocument | str | Path, connection: int | str,
@@ -619,49 +610,16 @@ class Scanner(_Declarations):
         be a field; else the catalog's schema, else raw bytes. ``options`` as for ``io_connection``.
         A connection the file does not describe raises ``KeyError``.
         """
-        from .eds.description import DEFAULT_RPI_US
-        from .eds.interpret import read_view
-        from .eds.model import EdsDocument
-        from .eds.reader import read_eds
-
-        if not isinstance(doc, EdsDocument):
-            doc = read_eds(doc)
-        view = read_view(doc)
-        found = view.connection(connection)
-        if rpi is None:
-            rpi = (found.rpi_us or DEFAULT_RPI_US) / 1e6
-        # T->O as the file allows: multicast when it allows only that; when it allows both,
-        # point-to-point, and multicast when the target refuses that with 0x0108 (a listen-only
-        # point, say). An explicit ``multicast`` is asked as given.
-        may_retry = "multicast" not in options and found.t_o_multicast and found.t_o_point_to_point
-        options.setdefault("multicast", found.t_o_multicast and not found.t_o_point_to_point)
-        eds_format = _eds_ot_format(doc, found.number)
-        if eds_format is not None:
-            options.setdefault("ot_format", eds_format)
-        output = None if found.heartbeat else found.o_t_point
-        output_schema = None if output is None else (view.schema(output) or self.catalog.assemblies.get(output))
-        input_schema = view.schema(found.t_o_point) or self.catalog.assemblies.get(found.t_o_point)
-        client = self.client
-
-        def context(multicast: bool) -> Any:
-            return client.io_connection(
-                output, found.t_o_point, rpi, output_size=found.o_t_size, input_size=found.t_o_size,
-                config=found.config, heartbeat=found.o_t_point if found.heartbeat else None,
-                output_schema=output_schema, input_schema=input_schema, **{**options, "multicast": multicast})
-
+        eds = EdsConnection(self.catalog, doc, connection, rpi, options)
         async with contextlib.AsyncExitStack() as stack:
             try:
-                handle = await stack.enter_async_context(context(options["multicast"]))
+                handle = await stack.enter_async_context(self.client.io_connection(**eds.arguments()))
             except CipError as refused:
-                if not (may_retry and refused.general == GeneralStatus.CONNECTION_FAILURE
-                        and refused.extended[:1] == (ExtendedStatus.INVALID_NETWORK_CONNECTION_PARAMETER,)):
+                if not eds.may_retry(refused):
                     raise
-                handle = await stack.enter_async_context(context(True))
-                handle.notes.append("the target refused point-to-point T->O (0x0108): multicast asked, which the "
-                                    "file allows")
-            source = f"the EDS file's Connection{found.number}"
-            handle.describe_schemas(self._schema_source(output, handle.output.schema, source),
-                                    self._schema_source(found.t_o_point, handle.input.schema, source))
+                handle = await stack.enter_async_context(self.client.io_connection(**eds.arguments(multicast=True)))
+                handle.notes.append(eds.RETRY_NOTE)
+            eds.describe(self, handle)
             yield handle
 
     # -- encapsulation --------------------------------------------------------------------------
@@ -684,6 +642,80 @@ def _eds_ot_format(doc: EdsDocument, number: int) -> OtFormat | None:
     if parameters is None or parameters.kind is not FieldKind.INT:
         return None
     return OtFormat.from_eds((int(parameters.value) >> 8) & 0x7)
+
+
+def class1_assemblies(explicit: ExplicitMessaging, output: int | None, input: int, heartbeat: int | None,
+                      output_size: int | None, input_size: int | None, output_schema: AssemblySchema | None,
+                      input_schema: AssemblySchema | None
+                      ) -> Plan[tuple[int, int, AssemblySchema | None, AssemblySchema | None]]:
+    """The sizes and schemas of a class 1 connection's assemblies, both scanners': those given, else the
+    catalog's schemas, else each assembly's attribute 4 (asked of the device)."""
+    if output is None and heartbeat is None:
+        raise ValueError("give an output assembly, or a heartbeat point for input-only / listen-only")
+    if output_schema is None and output is not None:
+        output_schema = explicit.catalog.assemblies.get(output)
+    if input_schema is None:
+        input_schema = explicit.catalog.assemblies.get(input)
+    if output_size is None:
+        output_size = 0 if output is None else (
+            output_schema.size if output_schema is not None else (yield from explicit.assembly_size(output)))
+    if input_size is None:
+        input_size = input_schema.size if input_schema is not None else (yield from explicit.assembly_size(input))
+    return output_size, input_size, output_schema if output is not None else None, input_schema
+
+
+class EdsConnection:
+    """What an EDS file's ``ConnectionN`` asks for, as both scanners' ``io_connection_from_eds`` open it:
+    the arguments of the client's ``io_connection``, whether a refusal earns the multicast retry, and
+    where the field names come from."""
+
+    RETRY_NOTE = "the target refused point-to-point T->O (0x0108): multicast asked, which the file allows"
+
+    def __init__(self, catalog: Catalog, doc: EdsDocument | str | Path, connection: int | str, rpi: float | None,
+                 options: dict[str, Any]) -> None:
+        from .eds.description import DEFAULT_RPI_US
+        from .eds.interpret import read_view
+        from .eds.model import EdsDocument
+        from .eds.reader import read_eds
+
+        if not isinstance(doc, EdsDocument):
+            doc = read_eds(doc)
+        view = read_view(doc)
+        found = self.found = view.connection(connection)
+        if rpi is None:
+            rpi = (found.rpi_us or DEFAULT_RPI_US) / 1e6
+        options = dict(options)
+        # T->O as the file allows: multicast when it allows only that; when it allows both,
+        # point-to-point, and multicast when the target refuses that with 0x0108 (a listen-only
+        # point, say). An explicit ``multicast`` is asked as given.
+        self._may_retry = "multicast" not in options and found.t_o_multicast and found.t_o_point_to_point
+        options.setdefault("multicast", found.t_o_multicast and not found.t_o_point_to_point)
+        eds_format = _eds_ot_format(doc, found.number)
+        if eds_format is not None:
+            options.setdefault("ot_format", eds_format)
+        self.output = None if found.heartbeat else found.o_t_point
+        output_schema = None if self.output is None else (view.schema(self.output)
+                                                          or catalog.assemblies.get(self.output))
+        input_schema = view.schema(found.t_o_point) or catalog.assemblies.get(found.t_o_point)
+        self._arguments: dict[str, Any] = {
+            "output": self.output, "input": found.t_o_point, "rpi": rpi, "output_size": found.o_t_size,
+            "input_size": found.t_o_size, "config": found.config,
+            "heartbeat": found.o_t_point if found.heartbeat else None, "output_schema": output_schema,
+            "input_schema": input_schema, **options}
+
+    def arguments(self, multicast: bool | None = None) -> dict[str, Any]:
+        """The client's ``io_connection`` arguments (``multicast`` for the retry)."""
+        return self._arguments if multicast is None else {**self._arguments, "multicast": multicast}
+
+    def may_retry(self, refused: CipError) -> bool:
+        """Whether ``refused`` is a point-to-point T->O refusal (0x0108) the file lets multicast answer."""
+        return bool(self._may_retry and refused.general == GeneralStatus.CONNECTION_FAILURE
+                    and refused.extended[:1] == (ExtendedStatus.INVALID_NETWORK_CONNECTION_PARAMETER,))
+
+    def describe(self, scanner: _Declarations, handle: Any) -> None:
+        source = f"the EDS file's Connection{self.found.number}"
+        handle.describe_schemas(scanner._schema_source(self.output, handle.output.schema, source),
+                                scanner._schema_source(self.found.t_o_point, handle.input.schema, source))
 
 
 def backplane_route(slot: int = 0) -> list[Segment]:

@@ -293,16 +293,13 @@ class EncapsulationClient(CoreClient):
         (``io.kernel_arrival_times`` says whether it is so).
         """
         from ..io_core import rpi_us_of
-        from .class1 import Class1Request, OtFormat, class1_path
+        from .class1 import Class1Request
         from .io_context import IoContext
 
-        fmt = OtFormat(ot_format) if ot_format is not None else OtFormat.RUN_IDLE
-        if fmt is OtFormat.HEARTBEAT and heartbeat is None:
-            raise ValueError("the heartbeat format carries no data: give a heartbeat point, not an output")
-        rpi_us = rpi_us_of(rpi)  # seconds at the API, microseconds from here on
-        request = Class1Request(None if heartbeat is not None else output_size, input_size, rpi_us,
-                                rpi_us, class1_path(output, input, config, heartbeat, config_data), multicast,
-                                timeout_multiplier, ot_format=fmt)
+        request = Class1Request.asked(output, input, rpi_us_of(rpi), output_size=output_size, input_size=input_size,
+                                      config=config, heartbeat=heartbeat, multicast=multicast,
+                                      timeout_multiplier=timeout_multiplier, config_data=config_data,
+                                      ot_format=ot_format)
         return IoContext(self, request, target_io_port, local_io_port, output_schema, input_schema, run,
                          keep_intervals, kernel_arrival_times)
 

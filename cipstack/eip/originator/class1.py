@@ -426,6 +426,19 @@ class Class1Request:
     large: bool = False
     ot_format: OtFormat = OtFormat.RUN_IDLE
 
+    @classmethod
+    def asked(cls, output: int | None, input: int, rpi_us: int, *, output_size: int, input_size: int,
+              config: int = 1, heartbeat: int | None = None, multicast: bool = False, timeout_multiplier: int = 2,
+              config_data: bytes = b"", ot_format: OtFormat | str | None = None) -> Class1Request:
+        """The request of an ``io_connection`` call, both shells' (their arguments, the RPI in microseconds):
+        ``heartbeat`` replaces the output point for input-only and listen-only connections."""
+        fmt = OtFormat(ot_format) if ot_format is not None else OtFormat.RUN_IDLE
+        if fmt is OtFormat.HEARTBEAT and heartbeat is None:
+            raise ValueError("the heartbeat format carries no data: give a heartbeat point, not an output")
+        return cls(None if heartbeat is not None else output_size, input_size, rpi_us, rpi_us,
+                   class1_path(output, input, config, heartbeat, config_data), multicast, timeout_multiplier,
+                   ot_format=fmt)
+
     @property
     def ot_size(self) -> int:
         """O->T connection size: sequence count, header of the format, data."""
