@@ -230,6 +230,11 @@ class SyncIoConnection:
         self._input_where = input
 
     @property
+    def input_schema(self) -> AssemblySchema | None:
+        """The input assembly's declaration (None: raw bytes only)."""
+        return self._input_schema
+
+    @property
     def handle(self) -> SyncIoConnection:
         """This connection (it was the async handle on a background loop: ``handle.connection``,
         ``handle.stats`` read the same)."""
