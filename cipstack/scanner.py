@@ -715,11 +715,11 @@ def __getattr__(name: str) -> Any:
 def discover_blocking(address: str | Sequence[str] | None = None, port: int = DEFAULT_PORT,
                       timeout: float = 2.0) -> list[IdentityRecord]:
     """``discover`` for synchronous code: every device that answers ListIdentity over UDP within
-    ``timeout`` seconds (``address`` None: every interface's broadcast address, loopback included)."""
-    from .eip.originator.discovery import discover
-    from .sync_io import run_in_private_loop
+    ``timeout`` seconds (``address`` None: every interface's broadcast address, loopback included), on
+    a plain UDP socket with no event loop (the same query as ``discover``: ``discovery_core``)."""
+    from .eip.originator import blocking_discovery
 
-    return run_in_private_loop(discover(address, port, timeout))
+    return blocking_discovery.discover_blocking(address, port, timeout)
 
 
 def componet_route(node: int) -> list[Segment]:
