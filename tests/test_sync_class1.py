@@ -5,10 +5,13 @@ of its own only when the caller asks for a callback."""
 from __future__ import annotations
 
 import json
+import os
+import shutil
 import subprocess
 import sys
 import threading
 import time
+from pathlib import Path
 
 import pytest
 
@@ -96,3 +99,43 @@ def test_a_silent_target_times_the_connection_out() -> None:
                 _ = io.input
             assert io.timed_out
         assert io.closed and not client.is_open
+
+
+MULTICAST = """
+import json, sys
+sys.path[:0] = [{root!r}]
+from cipstack.devices.acg.device import build_acg_device
+from cipstack.scanner import SyncScanner
+from tests.library_support import threaded_adapter
+
+with threaded_adapter(build_acg_device()) as adapter, \\
+        SyncScanner(f"127.0.0.1:{{adapter.port}}") as first, SyncScanner(f"127.0.0.1:{{adapter.port}}") as second:
+    port = adapter.io_endpoint.port
+    # One thread serves each connection in turn: a long timeout lets the other wait meanwhile.
+    with first.io_connection(output=21, input=71, rpi=0.005, multicast=True, timeout_multiplier=7,
+                             target_io_port=port) as owner, \\
+            second.io_connection(input=71, heartbeat=199, rpi=0.005, multicast=True, timeout_multiplier=7,
+                                 target_io_port=port) as listener:
+        owner.wait_input(lambda i: True, 3)
+        listener.wait_input(lambda i: True, 3)
+        owner.sleep(0.05)
+        listener.sleep(0.05)
+        report = {{"groups": [owner.multicast_group, listener.multicast_group],
+                  "shared": owner.connection.to_connection_id == listener.connection.to_connection_id,
+                  "owner_received": owner.stats.received, "listener_received": listener.stats.received}}
+print(json.dumps(report))
+"""
+
+
+@pytest.mark.skipif(os.geteuid() != 0 or not shutil.which("unshare") or not shutil.which("ip"),
+                    reason="needs root, unshare and ip for a private network namespace")
+def test_multicast_owner_and_listener_without_asyncio_in_the_scanner(tmp_path: Path) -> None:
+    """The blocking shell joins the group the Forward_Open reply names, as the asyncio one does."""
+    script = tmp_path / "multicast.py"
+    script.write_text(MULTICAST.format(root=str(Path(__file__).resolve().parent.parent)))
+    result = subprocess.run(["unshare", "-n", "sh", "-c", f"ip link set lo up && exec {sys.executable} {script}"],
+                            capture_output=True, text=True, timeout=60)
+    assert result.returncode == 0, result.stderr
+    report = json.loads(result.stdout.strip().splitlines()[-1])
+    assert report["groups"] == ["239.192.1.0", "239.192.1.0"] and report["shared"] is True
+    assert report["owner_received"] > 0 and report["listener_received"] > 0
