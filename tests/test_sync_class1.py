@@ -5,8 +5,10 @@ of its own only when the caller asks for a callback."""
 from __future__ import annotations
 
 import json
+import logging
 import os
 import shutil
+import socket
 import subprocess
 import sys
 import threading
@@ -139,3 +141,20 @@ def test_multicast_owner_and_listener_without_asyncio_in_the_scanner(tmp_path: P
     report = json.loads(result.stdout.strip().splitlines()[-1])
     assert report["groups"] == ["239.192.1.0", "239.192.1.0"] and report["shared"] is True
     assert report["owner_received"] > 0 and report["listener_received"] > 0
+
+
+def test_a_lost_session_still_gets_its_forward_close(caplog: pytest.LogCaptureFixture) -> None:
+    """The connection's TCP session dies under it (the target closed it): closing sends the
+    Forward_Close on a new session, and the target forgets the connection at once."""
+    with threaded_adapter(build_acg_device()) as adapter, SyncScanner(f"127.0.0.1:{adapter.port}") as scanner:
+        io = scanner.io_connection(output=21, input=71, rpi=0.010, timeout_multiplier=7,
+                                   target_io_port=adapter.io_endpoint.port)
+        io.wait_input(lambda i: True, timeout=5)
+        assert len(adapter.io.connections) == 1
+        sock = io._client._sock
+        assert sock is not None
+        sock.shutdown(socket.SHUT_RDWR)                        # the session is gone; the socket object stays
+        with caplog.at_level(logging.INFO, logger="cipstack.eip.originator.blocking_io"):
+            io.close()
+        assert adapter.io.connections == {}
+        assert any("a new one sends the Forward_Close" in r.getMessage() for r in caplog.records), caplog.text

@@ -321,12 +321,28 @@ class SyncIoConnection:
         return self._closed
 
     def _forward_close(self) -> None:
+        """The Forward_Close, on the connection's session, or on a new one when that session is gone
+        (the class 1 connection outlives it at the target)."""
         if self._triad is None:
             return
         triad, self._triad = self._triad, None
+        client = self._client
         try:
-            if self._client.is_open:
-                self._client.run(close_plan(self._client.core, triad, self.request.path))
+            if not client.is_open:
+                raise ConnectionError("the session is closed")
+            client.run(close_plan(client.core, triad, self.request.path))
+            return
+        except OSError as lost:
+            log.info("class 1 connection to %s: the session was lost (%s); a new one sends the Forward_Close",
+                     client.host, lost)
+        except CipstackError as exc:
+            log.info("Forward_Close of class 1 connection failed: %s", exc)
+            return
+        from .blocking import BlockingEncapsulationClient
+
+        try:
+            with BlockingEncapsulationClient.connect(client.host, client.port, client.timeout) as fresh:
+                fresh.run(close_plan(fresh.core, triad, self.request.path))
         except (OSError, CipstackError) as exc:
             log.info("Forward_Close of class 1 connection failed: %s", exc)
 
