@@ -6,8 +6,8 @@ free loopback ports and opens class 1 connections to it with cipstack's scanner:
 (a) one exclusive-owner connection (output 21, input 71) at RPI 1 ms for ``--seconds`` (default
     10): packets per second in each direction, the distribution of the intervals (p50, p99, max),
     the share of intervals within +-0.5 ms of the RPI, late and lost packets;
-(c) the same connection as (a) from synchronous code, ``SyncScanner.io_connection`` (its private loop in
-    a background thread, the main thread reading the input every 10 ms as a script does), measured
+(c) the same connection as (a) from synchronous code, ``SyncScanner.io_connection`` (served by the
+    main thread, which reads the input every 10 ms and waits with ``io.sleep`` as a script does), measured
     back to back with the async handle (no capture): their shares within +-0.5 ms must agree within
     one point;
 (b) 64 connections (one exclusive owner, 63 input-only on the heartbeat point; 64 is the ACG-ET2's
@@ -125,13 +125,13 @@ def _figures(connection: Any, stats_before: dict[str, int], stats: dict[str, int
 
 
 def sync_single_connection(port: int, io_port: int, seconds: float) -> dict[str, Any]:
-    """(a)'s connection opened from blocking code: the handle's loop runs in a background thread while
-    this thread reads the input every 10 ms."""
+    """(a)'s connection opened from blocking code: this thread serves it (no event loop, no thread),
+    reading the input every 10 ms and waiting with ``io.sleep`` in between, as a script does."""
     rpi = 0.001
     with SyncScanner(f"127.0.0.1:{port}") as scanner, \
             scanner.io_connection(output=21, input=71, rpi=rpi, target_io_port=io_port, keep_intervals=True,
                                   timeout_multiplier=3) as io:
-        time.sleep(0.5)
+        io.sleep(0.5)
         connection = io.handle.connection
         connection.interval_samples.clear()
         connection.send_times.clear()
@@ -142,7 +142,7 @@ def sync_single_connection(port: int, io_port: int, seconds: float) -> dict[str,
         while time.monotonic() < end:
             _ = io.input.speed_actual
             reads += 1
-            time.sleep(0.010)
+            io.sleep(0.010)
         received = list(connection.interval_samples)
         sends = list(connection.send_times)
         stats = io.handle.stats.as_dict()

@@ -40,10 +40,10 @@ _EXPORTS: dict[str, str] = {
     "Scaling": "cipstack.cip.values",
     # class 1
     "IoConnectionHandle": "cipstack.eip.originator.io_originator",
-    "ProcessImage": "cipstack.eip.originator.io_originator",
-    "IoTimeoutError": "cipstack.eip.originator.io_originator",
-    "OtFormat": "cipstack.eip.originator.io_originator",
-    "SyncIoConnection": "cipstack.sync_io",
+    "ProcessImage": "cipstack.eip.originator.process_image",
+    "IoTimeoutError": "cipstack.eip.originator.class1",
+    "OtFormat": "cipstack.eip.originator.class1",
+    "SyncIoConnection": "cipstack.eip.originator.blocking_io",
     "run_precise": "cipstack.eip.io_server",
     "precise_event_loop": "cipstack.eip.io_server",
     # routes
@@ -165,7 +165,10 @@ if TYPE_CHECKING:  # what type checkers and the API reference see; nothing is im
     from .eds.model import EdsDocument
     from .eds.reader import parse_eds, read_eds
     from .eip.io_server import precise_event_loop, run_precise
-    from .eip.originator.io_originator import IoConnectionHandle, IoTimeoutError, OtFormat, ProcessImage
+    from .eip.originator.blocking_io import SyncIoConnection
+    from .eip.originator.class1 import IoTimeoutError, OtFormat
+    from .eip.originator.io_originator import IoConnectionHandle
+    from .eip.originator.process_image import ProcessImage
     from .eip.originator.replies import EncapsulationStatusError, MalformedReplyError
     from .eip.wire.identity_items import IdentityRecord
     from .errors import (
@@ -196,4 +199,3 @@ if TYPE_CHECKING:  # what type checkers and the API reference see; nothing is im
         discover_blocking,
         list_services_udp,
     )
-    from .sync_io import SyncIoConnection

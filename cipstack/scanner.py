@@ -1,16 +1,18 @@
-"""The scanner library: typed explicit messaging over an ``EncapsulationClient``.
+"""The scanner library: typed explicit messaging and class 1, by role.
 
-``Scanner`` is async; ``SyncScanner`` is a thin wrapper that runs it on a private event
-loop for scripts. Values decode by the attribute's declaration when the catalog knows it
-(standard objects, device profiles), or by an explicit type; otherwise the raw bytes are
-returned. Every error status raises ``CipError`` naming the general and extended status.
+``ExplicitMessaging`` is what a scanner asks and how it reads the replies, as plans; ``SyncScanner``
+(here) runs them on the blocking client, with class 1 on a plain UDP socket and no event loop;
+``Scanner`` (``async_scanner``, named here too) runs them on the asyncio client. Values decode by
+the attribute's declaration when the catalog knows it (standard objects, device profiles), or by an
+explicit type; otherwise the raw bytes are returned. Every error status raises ``CipError`` naming
+the general and extended status.
 """
 
 from __future__ import annotations
 
 import contextlib
 import struct
-from collections.abc import AsyncIterator, Callable, Iterator, Sequence
+from collections.abc import Callable, Iterator, Sequence
 from pathlib import Path
 from typing import TYPE_CHECKING, Any, NamedTuple, TypeVar
 
@@ -38,11 +40,12 @@ from .logs import debug
 if TYPE_CHECKING:
     # Imported where used: explicit messaging alone does not load asyncio, the EDS model or class 1.
     from .assemblies.schema import AssemblySchema
+    from .async_scanner import Scanner
     from .eds.model import EdsDocument
-    from .eip.originator.asyncio_client import EncapsulationClient
-    from .eip.originator.io_originator import IoConnectionHandle, OtFormat
+    from .eip.originator.blocking_io import SyncIoConnection
+    from .eip.originator.class1 import OtFormat
+    from .eip.originator.process_image import ProcessImage
     from .eip.wire.identity_items import IdentityRecord, ServiceRecord
-    from .sync_io import LoopThread, SyncIoConnection
 
 T = TypeVar("T")
 
@@ -405,194 +408,6 @@ class _Declarations:
         """The route every request travels (Unconnected_Send), None for the target itself."""
         return self.explicit.route
 
-
-class Scanner(_Declarations):
-    """Explicit messaging and class 1 I/O with one target (unconnected, routed or class 3), async.
-
-    Open one with ``await Scanner.connect(host)``: it identifies the device and decodes every
-    reply by the declarations of its profile (``catalog``); ``read`` returns a ``Value`` with its
-    unit, ``write`` takes a raw value or, with ``scaled=True``, an engineering one.
-    """
-
-    def __init__(self, client: EncapsulationClient, catalog: Catalog | None = None,
-                 route: Sequence[Segment] | None = None) -> None:
-        self.client = client
-        #: What is asked and how replies are read: the same plans ``SyncScanner`` runs.
-        self.explicit = ExplicitMessaging(client.core, catalog, route)
-
-    @classmethod
-    async def connect(cls, address: str, port: int | None = None, *, timeout: float = 5.0,
-                      catalog: Catalog | None = None, route: Sequence[Segment] | None = None,
-                      identify: bool = True, eds: str | Path | EdsDocument | None = None) -> Scanner:
-        """Connect to ``address`` (``"host"`` or ``"host:port"``) and register a session.
-
-        The catalog replies decode by is, first match: ``catalog``; the EDS file ``eds`` (a path or
-        a read ``EdsDocument``); the profile of the device's identity (``identify``, the default);
-        else the standard objects alone. ``route`` sends every request through Unconnected_Send
-        along that path (``backplane_route``, a CompoNet node behind a gateway: ``[PortSegment(2, b"\\x03")]``),
-        and identification then asks the routed device itself.
-        """
-        from .eip.originator.asyncio_client import EncapsulationClient
-
-        host, parsed_port = parse_host(address)
-        client = await EncapsulationClient.connect(host, port or parsed_port, timeout)
-        scanner = cls(client, catalog, route)
-        try:
-            await client.run(scanner.explicit.choose_catalog(catalog, eds, identify))
-        except BaseException:
-            await scanner.close()
-            raise
-        return scanner
-
-    async def identify(self) -> IdentityRecord | None:
-        """Ask the device what it is and take the catalog of its profile; returns its identity.
-
-        ListIdentity over this TCP connection; where a device does not answer it (or when a
-        ``route`` leads past the device that would), Identity attributes 1-4 and 7 (vendor,
-        device type, product code, revision, product name). A device of no known profile gets
-        the standard objects, and ``catalog.source`` says so; one that answers neither keeps them
-        too, with the reason."""
-        return await self.client.run(self.explicit.identify())
-
-    async def close(self) -> None:
-        await self.client.close()
-
-    async def __aenter__(self) -> Scanner:
-        return self
-
-    async def __aexit__(self, *exc: object) -> None:
-        await self.close()
-
-    # -- generic ----------------------------------------------------------------------------------
-    async def request(self, service: int, class_id: int, instance: int | None = None, attribute: int | None = None,
-                      data: bytes = b"", *, check: bool = True) -> MessageRouterResponse:
-        """Any service by code to class/instance[/attribute]; raises ``CipError`` on an error status."""
-        return await self.client.run(self.explicit.request(service, class_id, instance, attribute, data, check=check))
-
-    async def open_connection(self, rpi: float = 2.0, large: bool = True, connection_size: int = 500) -> None:
-        """Open a class 3 connection; later requests travel on it until ``close_connection``."""
-        await self.client.run(self.explicit.open_connection(rpi, large, connection_size))
-
-    async def close_connection(self) -> None:
-        await self.client.run(self.explicit.close_connection())
-
-    # -- attributes -------------------------------------------------------------------------------
-    async def get_attribute_single(self, class_id: int, instance: int, attribute: int,
-                                   cip_type: CipType | None = None) -> AttributeValue:
-        """Get_Attribute_Single: the reply's bytes, the value decoded by the declaration (or ``cip_type``)
-        and the declaration itself."""
-        return await self.client.run(self.explicit.get_attribute_single(class_id, instance, attribute, cip_type))
-
-    async def read(self, class_id: int, instance: int, attribute: int, cip_type: CipType | None = None) -> Value:
-        """Get_Attribute_Single, decoded by the attribute's declaration (or ``cip_type``): a ``Value``
-        whose ``raw`` is the value on the wire, ``value`` the engineering value, ``unit`` its unit
-        (``str()`` gives ``5.0 s``). Undeclared and no ``cip_type``: ``raw`` is the reply's bytes."""
-        return await self.client.run(self.explicit.read(class_id, instance, attribute, cip_type))
-
-    async def write(self, class_id: int, instance: int, attribute: int, value: Any, *, scaled: bool = False,
-                    cip_type: CipType | None = None) -> None:
-        """Set_Attribute_Single by the attribute's declaration (or ``cip_type``).
-
-        The rule: ``value`` is the raw value, as on the wire (an ``int`` for a scaled attribute:
-        ``write(0x2A, 1, 102, 50)`` is 5.0 s at 0.1 s per step), unless ``scaled=True``: then it is the
-        engineering value (``write(0x2A, 1, 102, 5.0, scaled=True)``), turned into raw steps by the
-        declaration; a value between two steps raises ``ValueError``. A ``Value`` writes its raw
-        value; ``bytes`` go as they are."""
-        await self.client.run(self.explicit.write(class_id, instance, attribute, value, scaled, cip_type))
-
-    async def parameter(self, code: str) -> Value:
-        """A parameter by the code its manual prints (``"ACC"``, ``"CM.24"``, ``"A004"``; an EDS file's
-        ``ParamN`` or its name), read with its unit: ``cipstack.parameter_codes``."""
-        return await self.client.run(self.explicit.parameter(code))
-
-    async def set_parameter(self, code: str, value: Any) -> Value:
-        """Write a parameter by its code, the value in its own unit (``set_parameter("ACC", 2.5)``: 2.5 s);
-        the value written, as a ``Value``."""
-        return await self.client.run(self.explicit.set_parameter(code, value))
-
-    async def set_attribute_single(self, class_id: int, instance: int, attribute: int, value: Any,
-                                   cip_type: CipType | None = None) -> None:
-        """Set_Attribute_Single of a raw value (or ``bytes``), encoded by the declaration or ``cip_type``."""
-        await self.client.run(self.explicit.set_attribute_single(class_id, instance, attribute, value, cip_type))
-
-    async def get_attributes_all(self, class_id: int, instance: int) -> tuple[bytes, dict[str, Any] | None]:
-        """Raw reply and, when the class is declared, the values by attribute name.
-
-        A device may carry attributes beyond the declared ones after them (its own, or a later
-        revision's): the declared ones are decoded and the rest is returned as raw bytes under
-        the key ``UNDECODED`` (nothing is dropped silently)."""
-        return await self.client.run(self.explicit.get_attributes_all(class_id, instance))
-
-    async def get_attribute_list(self, class_id: int, instance: int, attributes: Sequence[int]
-                                 ) -> dict[int, AttributeValue | CipError]:
-        """Per-attribute results; needs every attribute's declaration to split the reply."""
-        return await self.client.run(self.explicit.get_attribute_list(class_id, instance, attributes))
-
-    async def set_attribute_list(self, class_id: int, instance: int, values: dict[int, Any]) -> dict[int, int]:
-        """Set several attributes; returns each attribute's status (0 = set)."""
-        return await self.client.run(self.explicit.set_attribute_list(class_id, instance, values))
-
-    async def reset(self, class_id: int = 0x01, instance: int = 1, reset_type: int | None = None) -> None:
-        await self.client.run(self.explicit.reset(class_id, instance, reset_type))
-
-    async def multiple_service_packet(self, requests: Sequence[MessageRouterRequest]) -> list[MessageRouterResponse]:
-        """Several requests in one Multiple_Service_Packet; returns each reply (status unchecked)."""
-        return await self.client.run(self.explicit.multiple_service_packet(requests))
-
-    # -- class 1 --------------------------------------------------------------------------------------
-    async def assembly_size(self, instance: int) -> int:
-        """Size of an assembly instance: from its schema when known, else Assembly attribute 4."""
-        return await self.client.run(self.explicit.assembly_size(instance))
-
-
-    @contextlib.asynccontextmanager
-    async def io_connection(self, output: int | None = None, input: int = 0, rpi: float = 0.010, *,
-                            config: int = 1, heartbeat: int | None = None, output_size: int | None = None,
-                            input_size: int | None = None, output_schema: AssemblySchema | None = None,
-                            input_schema: AssemblySchema | None = None, target_io_port: int | None = None,
-                            local_io_port: int = 0, multicast: bool = False, timeout_multiplier: int = 2,
-                            run: bool = True, keep_intervals: bool = False, config_data: bytes = b"",
-                            ot_format: OtFormat | str | None = None, kernel_arrival_times: bool = False,
-                            ) -> AsyncIterator[IoConnectionHandle]:
-        """A class 1 connection: ``async with scanner.io_connection(output=21, input=71, rpi=0.010) as io``.
-
-        Sizes come from the assembly schemas of a known profile, else from each assembly's
-        attribute 4; fields are accessible by name when the schema is known (``io.output.run_forward``),
-        raw bytes always (``io.output.raw``); ``output_schema`` / ``input_schema`` name the fields (and
-        give the sizes) where the catalog does not (an EDS file's assemblies, say). ``config`` is the
-        configuration instance and ``config_data`` the data sent to it; ``target_io_port`` the
-        target's class 1 UDP port (default: what the reply names, else 2222), ``local_io_port`` ours
-        (0: any); ``multicast`` asks for T->O multicast; ``timeout_multiplier`` (0-7) sets the timeout
-        to RPI x 4 x 2^N; ``run`` the run/idle bit first sent; ``ot_format`` the O->T real-time
-        format (run/idle header, heartbeat, modeless); ``keep_intervals`` and ``kernel_arrival_times``
-        keep each arrival's interval (from the kernel's time stamps) for the statistics: as
-        ``EncapsulationClient.io_connection`` takes them. Leaving the block by any way closes the
-        connection (Forward_Close);
-        ``io.statistics()`` gives the counters and how the target really produces (received rate,
-        inter-arrival p50/p99/max, missed slots).
-        """
-        if output is None and heartbeat is None:
-            raise BadRequest("give an output assembly, or a heartbeat point for input-only / listen-only")
-        if output_schema is None and output is not None:
-            output_schema = self.catalog.assemblies.get(output)
-        if input_schema is None:
-            input_schema = self.catalog.assemblies.get(input)
-        if output_size is None:
-            output_size = 0 if output is None else (
-                output_schema.size if output_schema is not None else await self.assembly_size(output))
-        if input_size is None:
-            input_size = input_schema.size if input_schema is not None else await self.assembly_size(input)
-        context = self.client.io_connection(
-            output, input, rpi, output_size=output_size, input_size=input_size, config=config, heartbeat=heartbeat,
-            output_schema=output_schema if output is not None else None, input_schema=input_schema,
-            target_io_port=target_io_port, local_io_port=local_io_port, multicast=multicast,
-            timeout_multiplier=timeout_multiplier, run=run, keep_intervals=keep_intervals, config_data=config_data,
-            ot_format=ot_format, kernel_arrival_times=kernel_arrival_times)
-        async with context as handle:
-            handle.describe_schemas(self._schema_source(output, handle.output.schema),
-                                    self._schema_source(input, handle.input.schema))
-            yield handle
-
     def _schema_source(self, instance: int | None, schema: AssemblySchema | None, eds: str = "") -> str:
         """Where an image's field names come from, or why it has none, for error messages."""
         if instance is None:
@@ -604,73 +419,6 @@ class Scanner(_Declarations):
             return (f"assembly {instance} of {self.catalog.source} is {declared.size} bytes, not the size the "
                     "connection opened with")
         return f"no schema of assembly {instance} in {eds + ' nor in ' if eds else ''}{self.catalog.source}"
-
-    @contextlib.asynccontextmanager
-    async def io_connection_from_eds(self, doc: EdsDocument | str | Path, connection: int | str,
-                                     rpi: float | None = None, **options: Any) -> AsyncIterator[IoConnectionHandle]:
-        """The class 1 connection ``ConnectionN`` of an EDS describes, by number N or by name (field 13):
-        ``async with scanner.io_connection_from_eds(doc, 1) as io``.
-
-        Its path gives the configuration instance and the connection points; the sizes are those of
-        the assemblies it names (else its size fields); input only and listen only send the
-        heartbeat point; T->O is multicast when the file allows only multicast (listen only), unless
-        ``multicast`` is given; the O->T real-time format is the file's (field 2), unless ``ot_format``
-        is given. ``rpi`` (seconds) defaults to the RPI the file proposes, else 10 ms.
-        Fields are named after the parameters the assembly members refer to, when every member can
-        be a field; else the catalog's schema, else raw bytes. ``options`` as for ``io_connection``.
-        A connection the file does not describe raises ``KeyError``.
-        """
-        from .eds.description import DEFAULT_RPI_US
-        from .eds.interpret import read_view
-        from .eds.model import EdsDocument
-        from .eds.reader import read_eds
-
-        if not isinstance(doc, EdsDocument):
-            doc = read_eds(doc)
-        view = read_view(doc)
-        found = view.connection(connection)
-        if rpi is None:
-            rpi = (found.rpi_us or DEFAULT_RPI_US) / 1e6
-        # T->O as the file allows: multicast when it allows only that; when it allows both,
-        # point-to-point, and multicast when the target refuses that with 0x0108 (a listen-only
-        # point, say). An explicit ``multicast`` is asked as given.
-        may_retry = "multicast" not in options and found.t_o_multicast and found.t_o_point_to_point
-        options.setdefault("multicast", found.t_o_multicast and not found.t_o_point_to_point)
-        eds_format = _eds_ot_format(doc, found.number)
-        if eds_format is not None:
-            options.setdefault("ot_format", eds_format)
-        output = None if found.heartbeat else found.o_t_point
-        output_schema = None if output is None else (view.schema(output) or self.catalog.assemblies.get(output))
-        input_schema = view.schema(found.t_o_point) or self.catalog.assemblies.get(found.t_o_point)
-        client = self.client
-
-        def context(multicast: bool) -> Any:
-            return client.io_connection(
-                output, found.t_o_point, rpi, output_size=found.o_t_size, input_size=found.t_o_size,
-                config=found.config, heartbeat=found.o_t_point if found.heartbeat else None,
-                output_schema=output_schema, input_schema=input_schema, **{**options, "multicast": multicast})
-
-        async with contextlib.AsyncExitStack() as stack:
-            try:
-                handle = await stack.enter_async_context(context(options["multicast"]))
-            except CipError as refused:
-                if not (may_retry and refused.general == GeneralStatus.CONNECTION_FAILURE
-                        and refused.extended[:1] == (ExtendedStatus.INVALID_NETWORK_CONNECTION_PARAMETER,)):
-                    raise
-                handle = await stack.enter_async_context(context(True))
-                handle.notes.append("the target refused point-to-point T->O (0x0108): multicast asked, which the "
-                                    "file allows")
-            source = f"the EDS file's Connection{found.number}"
-            handle.describe_schemas(self._schema_source(output, handle.output.schema, source),
-                                    self._schema_source(found.t_o_point, handle.input.schema, source))
-            yield handle
-
-    # -- encapsulation --------------------------------------------------------------------------
-    async def list_identity(self) -> list[IdentityRecord]:
-        return await self.client.list_identity()
-
-    async def list_services(self) -> list[ServiceRecord]:
-        return await self.client.list_services()
 
 
 def _eds_ot_format(doc: EdsDocument, number: int) -> OtFormat | None:
@@ -687,6 +435,80 @@ def _eds_ot_format(doc: EdsDocument, number: int) -> OtFormat | None:
     return OtFormat.from_eds((int(parameters.value) >> 8) & 0x7)
 
 
+def class1_assemblies(explicit: ExplicitMessaging, output: int | None, input: int, heartbeat: int | None,
+                      output_size: int | None, input_size: int | None, output_schema: AssemblySchema | None,
+                      input_schema: AssemblySchema | None
+                      ) -> Plan[tuple[int, int, AssemblySchema | None, AssemblySchema | None]]:
+    """The sizes and schemas of a class 1 connection's assemblies, both scanners': those given, else the
+    catalog's schemas, else each assembly's attribute 4 (asked of the device)."""
+    if output is None and heartbeat is None:
+        raise BadRequest("give an output assembly, or a heartbeat point for input-only / listen-only")
+    if output_schema is None and output is not None:
+        output_schema = explicit.catalog.assemblies.get(output)
+    if input_schema is None:
+        input_schema = explicit.catalog.assemblies.get(input)
+    if output_size is None:
+        output_size = 0 if output is None else (
+            output_schema.size if output_schema is not None else (yield from explicit.assembly_size(output)))
+    if input_size is None:
+        input_size = input_schema.size if input_schema is not None else (yield from explicit.assembly_size(input))
+    return output_size, input_size, output_schema if output is not None else None, input_schema
+
+
+class EdsConnection:
+    """What an EDS file's ``ConnectionN`` asks for, as both scanners' ``io_connection_from_eds`` open it:
+    the arguments of the client's ``io_connection``, whether a refusal earns the multicast retry, and
+    where the field names come from."""
+
+    RETRY_NOTE = "the target refused point-to-point T->O (0x0108): multicast asked, which the file allows"
+
+    def __init__(self, catalog: Catalog, doc: EdsDocument | str | Path, connection: int | str, rpi: float | None,
+                 options: dict[str, Any]) -> None:
+        from .eds.description import DEFAULT_RPI_US
+        from .eds.interpret import read_view
+        from .eds.model import EdsDocument
+        from .eds.reader import read_eds
+
+        if not isinstance(doc, EdsDocument):
+            doc = read_eds(doc)
+        view = read_view(doc)
+        found = self.found = view.connection(connection)
+        if rpi is None:
+            rpi = (found.rpi_us or DEFAULT_RPI_US) / 1e6
+        options = dict(options)
+        # T->O as the file allows: multicast when it allows only that; when it allows both,
+        # point-to-point, and multicast when the target refuses that with 0x0108 (a listen-only
+        # point, say). An explicit ``multicast`` is asked as given.
+        self._may_retry = "multicast" not in options and found.t_o_multicast and found.t_o_point_to_point
+        options.setdefault("multicast", found.t_o_multicast and not found.t_o_point_to_point)
+        eds_format = _eds_ot_format(doc, found.number)
+        if eds_format is not None:
+            options.setdefault("ot_format", eds_format)
+        self.output = None if found.heartbeat else found.o_t_point
+        output_schema = None if self.output is None else (view.schema(self.output)
+                                                          or catalog.assemblies.get(self.output))
+        input_schema = view.schema(found.t_o_point) or catalog.assemblies.get(found.t_o_point)
+        self._arguments: dict[str, Any] = {
+            "output": self.output, "input": found.t_o_point, "rpi": rpi, "output_size": found.o_t_size,
+            "input_size": found.t_o_size, "config": found.config,
+            "heartbeat": found.o_t_point if found.heartbeat else None, "output_schema": output_schema,
+            "input_schema": input_schema, **options}
+
+    def arguments(self, multicast: bool | None = None) -> dict[str, Any]:
+        """The client's ``io_connection`` arguments (``multicast`` for the retry)."""
+        return self._arguments if multicast is None else {**self._arguments, "multicast": multicast}
+
+    def may_retry(self, refused: CipError) -> bool:
+        """Whether ``refused`` is a point-to-point T->O refusal (0x0108) the file lets multicast answer."""
+        return bool(self._may_retry and refused.general == GeneralStatus.CONNECTION_FAILURE
+                    and refused.extended[:1] == (ExtendedStatus.INVALID_NETWORK_CONNECTION_PARAMETER,))
+
+    def describe(self, scanner: _Declarations, handle: Any) -> None:
+        source = f"the EDS file's Connection{self.found.number}"
+        handle.describe_schemas(scanner._schema_source(self.output, handle.output.schema, source),
+                                scanner._schema_source(self.found.t_o_point, handle.input.schema, source))
+
+
 def backplane_route(slot: int = 0) -> list[Segment]:
     """Route path "port 1 (backplane), link = slot": with slot 0, the target itself."""
     return [PortSegment(1, bytes((slot,)))]
@@ -699,7 +521,8 @@ class SyncScanner(_Declarations):
     (``BlockingEncapsulationClient``), with no event loop in between, so a call costs little more
     than the socket round trip. It identifies the device as ``Scanner.connect`` does (``catalog=``,
     ``eds=``, ``identify=``). Class 1 connections (``io_connection``, ``io_connection_from_eds``) run
-    on a private event loop in a background thread, opened when first needed.
+    on a plain UDP socket, served by the calling thread (``eip.originator.blocking_io``), each with a
+    TCP session of its own; no event loop either.
     """
 
     def __init__(self, address: str, port: int | None = None, *, timeout: float = 5.0,
@@ -710,7 +533,6 @@ class SyncScanner(_Declarations):
         self.client = BlockingEncapsulationClient.connect(host, port or parsed_port, timeout)
         self._address = (host, port or parsed_port, timeout)
         self.explicit = ExplicitMessaging(self.client.core, catalog, route)
-        self._loop_thread: LoopThread | None = None
         self._io: set[SyncIoConnection] = set()
         try:
             self.client.run(self.explicit.choose_catalog(catalog, eds, identify))
@@ -805,42 +627,52 @@ class SyncScanner(_Declarations):
                       local_io_port: int = 0, multicast: bool = False, timeout_multiplier: int = 2,
                       run: bool = True, keep_intervals: bool = False, config_data: bytes = b"",
                       ot_format: OtFormat | str | None = None, kernel_arrival_times: bool = False,
-                      ) -> SyncIoConnection:
-        """A class 1 connection run by a private event loop in a background thread:
+                      on_input: Callable[[ProcessImage], Any] | None = None) -> SyncIoConnection:
+        """A class 1 connection for blocking code, without an event loop:
         ``with scanner.io_connection(output=21, input=71, rpi=0.010) as io: io.update(run_forward=True)``.
 
         Arguments as for ``Scanner.io_connection``; fields are named by this scanner's catalog. The
-        connection has a TCP session of its own; leaving the ``with`` block, ``close()`` on it, or
-        closing this scanner sends the Forward_Close."""
-        return self._open_io(lambda scanner: scanner.io_connection(
-            output=output, input=input, rpi=rpi, config=config, heartbeat=heartbeat, output_size=output_size,
-            input_size=input_size, output_schema=output_schema, input_schema=input_schema,
+        connection runs while it is called (``io.input``, ``io.update``, ``io.wait_input``,
+        ``io.sleep``: wait with ``io.sleep`` rather than ``time.sleep``); with ``on_input``, a callback
+        for each input change, on a thread of its own that serves it. It has a TCP session of its own;
+        leaving the ``with`` block, ``close()`` on it, or closing this scanner sends the Forward_Close.
+        ``kernel_arrival_times`` is the asyncio shell's: packets are timed here when read."""
+        ot_size, to_size, output_schema, input_schema = self.client.run(class1_assemblies(
+            self.explicit, output, input, heartbeat, output_size, input_size, output_schema, input_schema))
+        opened = self._open_io(
+            output=output, input=input, rpi=rpi, output_size=ot_size, input_size=to_size, config=config,
+            heartbeat=heartbeat, output_schema=output_schema, input_schema=input_schema,
             target_io_port=target_io_port, local_io_port=local_io_port, multicast=multicast,
             timeout_multiplier=timeout_multiplier, run=run, keep_intervals=keep_intervals, config_data=config_data,
-            ot_format=ot_format, kernel_arrival_times=kernel_arrival_times))
+            ot_format=ot_format, kernel_arrival_times=kernel_arrival_times, on_input=on_input)
+        opened.describe_schemas(self._schema_source(output, opened.output.schema),
+                                self._schema_source(input, opened.input_schema))
+        return opened
 
     def io_connection_from_eds(self, doc: EdsDocument | str | Path, connection: int | str, rpi: float | None = None,
                                **options: Any) -> SyncIoConnection:
         """``Scanner.io_connection_from_eds`` for synchronous code (``doc``: an EDS file or its path)."""
-        return self._open_io(lambda scanner: scanner.io_connection_from_eds(doc, connection, rpi, **options))
+        eds = EdsConnection(self.catalog, doc, connection, rpi, options)
+        try:
+            opened = self._open_io(**eds.arguments())
+        except CipError as refused:
+            if not eds.may_retry(refused):
+                raise
+            opened = self._open_io(**eds.arguments(multicast=True))
+            opened.notes.append(eds.RETRY_NOTE)
+        eds.describe(self, opened)
+        return opened
 
-    def _open_io(self, make: Any) -> SyncIoConnection:
-        from .eip.originator.asyncio_client import EncapsulationClient
-        from .sync_io import LoopThread, SyncIoConnection
+    def _open_io(self, **arguments: Any) -> SyncIoConnection:
+        from .eip.originator.blocking_io import io_connection
 
-        if self._loop_thread is None:
-            self._loop_thread = LoopThread()
         host, port, timeout = self._address
-        catalog, route, identity = self.catalog, self.route, self.identity
-
-        async def opener(stack: contextlib.AsyncExitStack) -> IoConnectionHandle:
-            client = await EncapsulationClient.connect(host, port, timeout)
-            scanner = Scanner(client, catalog, route)
-            scanner.identity = identity
-            stack.push_async_callback(scanner.close)
-            return await stack.enter_async_context(make(scanner))  # type: ignore[no-any-return]
-
-        opened = SyncIoConnection(self._loop_thread, opener, self._io.discard)
+        client = BlockingEncapsulationClient.connect(host, port, timeout)
+        try:
+            opened = io_connection(client, **arguments, on_close=self._io.discard)
+        except BaseException:
+            client.close()
+            raise
         self._io.add(opened)
         return opened
 
@@ -850,9 +682,6 @@ class SyncScanner(_Declarations):
             for opened in list(self._io):
                 with contextlib.suppress(Exception):
                     opened.close()
-            if self._loop_thread is not None:
-                self._loop_thread.stop()
-                self._loop_thread = None
         finally:
             self.client.close()
 
@@ -870,23 +699,28 @@ class SyncScanner(_Declarations):
 
 
 def __getattr__(name: str) -> Any:
-    """``discover`` and ``list_services_udp`` (asyncio, UDP), imported when first used: the blocking
-    scanner does not load asyncio."""
+    """``discover`` and ``list_services_udp`` (asyncio, UDP), and ``Scanner`` (the async scanner, in
+    ``async_scanner``), imported when first used: the blocking scanner does not load asyncio, and a
+    one-shot command loads neither."""
     if name in ("discover", "list_services_udp"):
         from .eip.originator import discovery
 
         return getattr(discovery, name)
+    if name == "Scanner":
+        from .async_scanner import Scanner
+
+        return Scanner
     raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
 
 
 def discover_blocking(address: str | Sequence[str] | None = None, port: int = DEFAULT_PORT,
                       timeout: float = 2.0) -> list[IdentityRecord]:
     """``discover`` for synchronous code: every device that answers ListIdentity over UDP within
-    ``timeout`` seconds (``address`` None: every interface's broadcast address, loopback included)."""
-    from .eip.originator.discovery import discover
-    from .sync_io import run_in_private_loop
+    ``timeout`` seconds (``address`` None: every interface's broadcast address, loopback included), on
+    a plain UDP socket with no event loop (the same query as ``discover``: ``discovery_core``)."""
+    from .eip.originator import blocking_discovery
 
-    return run_in_private_loop(discover(address, port, timeout))
+    return blocking_discovery.discover_blocking(address, port, timeout)
 
 
 def componet_route(node: int) -> list[Segment]:
@@ -896,7 +730,7 @@ def componet_route(node: int) -> list[Segment]:
     return [PortSegment(2, bytes((node,)))]
 
 
-__all__ = [  # noqa: F822 - discover and list_services_udp come from ``__getattr__``
+__all__ = [  # noqa: F822 - discover, list_services_udp and Scanner come from ``__getattr__``
     "UNDECODED", "AttributeValue", "ReplyDecodeError", "Scanner", "SyncScanner", "UnknownAttributeError",
     "Value", "backplane_route", "componet_route", "discover", "discover_blocking", "list_services_udp",
 ]

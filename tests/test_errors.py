@@ -77,7 +77,7 @@ def test_every_exception_class_derives_from_cipstack_error() -> None:
     ("cipstack.eip.originator.replies.EncapsulationStatusError", ProtocolError, Exception),
     ("cipstack.eip.wire.encapsulation.EncapsulationError", ProtocolError, Exception),
     ("cipstack.eip.io_core.IoDatagramError", ProtocolError, ValueError),
-    ("cipstack.eip.originator.io_originator.IoTimeoutError", PeerUnreachable, ConnectionError),
+    ("cipstack.eip.originator.class1.IoTimeoutError", PeerUnreachable, ConnectionError),
     ("cipstack.scanner.UnknownAttributeError", NotFound, TypeError),
     ("cipstack.scanner.ReplyDecodeError", ProtocolError, ValueError),
     ("cipstack.conformance.wire.TargetUnreachable", PeerUnreachable, ConnectionError),

@@ -43,7 +43,9 @@ ALLOWED = {
     # its collaborators; so it sits above faults and control, which know only the runtime.
     "adapter": {"control", "devices", "eip", "errors", "faults", "listening", "modbus", "objects", "runtime"},
     "scanner": {"catalog", "cip", "devices", "eds", "eip", "errors", "objects", "parameter_codes", "profile_catalog",
-                "sync_io"},
+                "sync_io", "async_scanner"},
+    # The async scanner: the scanner's plans on the asyncio client (``cipstack.scanner`` names it too).
+    "async_scanner": {"catalog", "cip", "eip", "errors", "scanner"},
     # Parameters by code: the catalog's declarations, read and written through the scanner it is given.
     "parameter_codes": {"catalog", "cip", "errors"},
     # A profile's catalog from its generated compact declarations (the device model only for assemblies).

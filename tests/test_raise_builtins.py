@@ -20,7 +20,7 @@ BUILTIN_ERRORS = frozenset(name for name, value in vars(builtins).items()
 #: The raises of builtins that stay, by (file, enclosing function, builtin), each with why.
 ALLOWED: dict[tuple[str, str, str], str] = {
     # Python's own protocols: the caller is the interpreter or a library, not a user.
-    ("eip/originator/io_originator.py", "ProcessImage.__getattr__", "AttributeError"):
+    ("eip/originator/process_image.py", "ProcessImage.__getattr__", "AttributeError"):
         "a dunder looked up by copy/pickle/hasattr: the protocol's plain AttributeError (names are UnknownField)",
     ("eip/target/limits.py", "GuardedListener.accept", "BlockingIOError"):
         "to asyncio's accept loop an empty queue (EAGAIN), never an error: no user sees it",

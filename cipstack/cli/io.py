@@ -220,7 +220,7 @@ def cmd_io(args: argparse.Namespace) -> int:
     import signal
 
     from ..eip.io_server import freeze_startup_objects, run_precise
-    from ..eip.originator.io_originator import OtFormat
+    from ..eip.originator.class1 import OtFormat
     from ..scanner import Scanner
 
     doc = None

@@ -18,8 +18,8 @@ from dataclasses import dataclass, replace
 from typing import TYPE_CHECKING
 
 from ..cip.epath import request_path
-from ..eip.io_core import DEFAULT_IO_PORT
-from ..eip.originator.io_originator import SEQUENCE_COUNT_SIZE, OtFormat, class1_path
+from ..eip.io_core import DEFAULT_IO_PORT, SEQUENCE_COUNT_SIZE
+from ..eip.originator.class1 import OtFormat, class1_path
 from ..eip.wire.cm_messages import (
     ConnectionTriad,
     ConnectionType,

@@ -27,7 +27,7 @@ from pathlib import Path
 from typing import TYPE_CHECKING
 
 from ..cip.epath import request_path
-from ..eip.originator.io_originator import SEQUENCE_COUNT_SIZE
+from ..eip.io_core import SEQUENCE_COUNT_SIZE
 from ..errors import BadRequest
 from .connections import Endpoint, Plan, forward_open_request, plans_of_eds, send_forward_open
 from .registry import Context

@@ -32,8 +32,7 @@ from dataclasses import dataclass, field, replace
 from typing import TypeVar
 
 from ..cip.epath import request_path
-from ..eip.io_core import IoDatagramError, decode_io_datagram, encode_io_datagram
-from ..eip.originator.io_originator import SEQUENCE_COUNT_SIZE
+from ..eip.io_core import SEQUENCE_COUNT_SIZE, IoDatagramError, decode_io_datagram, encode_io_datagram
 from .connections import Endpoint, Opened, Plan, forward_open_request, send_forward_open
 from .discovery import profile_pair
 from .model import Behaviour, CheckSpec, Exchange, Outcome, Verdict

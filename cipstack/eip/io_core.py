@@ -222,14 +222,39 @@ class ConsumerState:
         return now >= self.deadline
 
 
+#: A production may leave up to this share of its RPI early, to go with others in one firing (both
+#: roles: the target's ``IoTarget.poll`` and the originator's ``IoOriginator.poll``).
+EARLY_SHARE = 1 / 16
+
+#: The 2-byte CIP sequence count that opens every class 1 packet, and the 32-bit run/idle header.
+SEQUENCE_COUNT_SIZE = 2
+RUN_IDLE_HEADER_SIZE = 4
+#: Sequence count + 32-bit run/idle header in front of O->T data.
+OT_OVERHEAD = SEQUENCE_COUNT_SIZE + RUN_IDLE_HEADER_SIZE
+#: Sequence count in front of T->O data (modeless).
+TO_OVERHEAD = SEQUENCE_COUNT_SIZE
+
+
 def connection_timeout(rpi_us: int, multiplier: int) -> float:
-    """RPI x 4 x 2^multiplier, in seconds (multiplier field 0..7)."""
+    """The connection timeout, the one rule both roles apply: RPI x 4 x 2^multiplier (multiplier field
+    0..7, a larger value counts as 7), in seconds, the unit of the cores' clock (``now``)."""
     return rpi_us * (4 << min(multiplier, 7)) / 1e6
+
+
+def rpi_us_of(seconds: float) -> int:
+    """An RPI given in seconds (the public API's ``rpi=0.010``) in microseconds, the one unit RPIs have
+    inside: rounded, not truncated (``int(0.0029 * 1e6)`` is 2899)."""
+    return round(seconds * 1e6)
 
 
 __all__ = [
     "DEFAULT_IO_PORT",
+    "EARLY_SHARE",
     "IO_HEAD_SIZE",
+    "OT_OVERHEAD",
+    "RUN_IDLE_HEADER_SIZE",
+    "SEQUENCE_COUNT_SIZE",
+    "TO_OVERHEAD",
     "ConsumerState",
     "IoDatagram",
     "IoDatagramError",
@@ -240,6 +265,7 @@ __all__ = [
     "connection_timeout",
     "decode_io_datagram",
     "encode_io_datagram",
+    "rpi_us_of",
     "seq16_newer",
     "seq32_newer",
     "split_run_idle"

@@ -17,7 +17,7 @@ from typing import TYPE_CHECKING, Any, TypeVar
 from ...cip.epath import Segment
 from ...cip.messages import MessageRouterResponse
 from ...cip.status import CipError, GeneralStatus
-from ...errors import BadRequest, PeerUnreachable
+from ...errors import PeerUnreachable
 from ..wire.cpf import Item
 from ..wire.encapsulation import DEFAULT_PORT, EncapsulationHeader
 from ..wire.identity_items import IdentityRecord, ServiceRecord
@@ -39,8 +39,8 @@ from .replies import EncapsulationStatusError, MalformedReplyError
 if TYPE_CHECKING:
     # Imported where used: explicit messaging does not load class 1.
     from ...assemblies.schema import AssemblySchema
+    from .class1 import OtFormat
     from .io_context import IoContext
-    from .io_originator import OtFormat
 
 log = logging.getLogger(__name__)
 T = TypeVar("T")
@@ -292,15 +292,14 @@ class EncapsulationClient(CoreClient):
         on the precise event loop under Linux, for every connection of the shared endpoint
         (``io.kernel_arrival_times`` says whether it is so).
         """
+        from ..io_core import rpi_us_of
+        from .class1 import Class1Request
         from .io_context import IoContext
-        from .io_originator import Class1Request, OtFormat, class1_path
 
-        fmt = OtFormat(ot_format) if ot_format is not None else OtFormat.RUN_IDLE
-        if fmt is OtFormat.HEARTBEAT and heartbeat is None:
-            raise BadRequest("the heartbeat format carries no data: give a heartbeat point, not an output")
-        request = Class1Request(None if heartbeat is not None else output_size, input_size, int(rpi * 1e6),
-                                int(rpi * 1e6), class1_path(output, input, config, heartbeat, config_data), multicast,
-                                timeout_multiplier, ot_format=fmt)
+        request = Class1Request.asked(output, input, rpi_us_of(rpi), output_size=output_size, input_size=input_size,
+                                      config=config, heartbeat=heartbeat, multicast=multicast,
+                                      timeout_multiplier=timeout_multiplier, config_data=config_data,
+                                      ot_format=ot_format)
         return IoContext(self, request, target_io_port, local_io_port, output_schema, input_schema, run,
                          keep_intervals, kernel_arrival_times)
 

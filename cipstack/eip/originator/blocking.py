@@ -78,6 +78,20 @@ class BlockingEncapsulationClient(CoreClient):
     def is_open(self) -> bool:
         return self._sock is not None
 
+    def local_host(self) -> str:
+        """The local address of the TCP connection (where T->O data should come)."""
+        assert self._sock is not None
+        return str(self._sock.getsockname()[0])
+
+    def host_address(self) -> str:
+        """The target's address as connected (an IP address even if a name was given)."""
+        assert self._sock is not None
+        return str(self._sock.getpeername()[0])
+
+    def nop(self) -> None:
+        """An encapsulation NOP (no reply, by definition): keeps an idle session open."""
+        self._send(self.core.nop())
+
     def _send(self, frame: bytes) -> None:
         if self._sock is None:
             raise PeerUnreachable(f"connection to {self.host}:{self.port} is closed")

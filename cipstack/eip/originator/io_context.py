@@ -5,38 +5,27 @@ Forward_Close on every way out once the open succeeded."""
 from __future__ import annotations
 
 import asyncio
-import ipaddress
 import logging
 from typing import TYPE_CHECKING
 
-from ...cip.messages import MessageRouterRequest, MessageRouterResponse, Service
-from ...cip.status import CipError, GeneralStatus
+from ...cip.status import CipError
 from ..io_core import DEFAULT_IO_PORT
 from ..io_server import IoEndpoint
-from ..wire.cm_messages import (
-    CONNECTION_MANAGER_PATH,
-    ConnectionTriad,
-    ForwardCloseRequest,
-    ForwardOpenReply,
-    ForwardOpenRequest,
-)
-from ..wire.cpf import Item, ItemType, SockAddr
-from ..wire.encapsulation import (
-    EncapsulationError,
-)
-from .io_originator import (
+from ..wire.cm_messages import ConnectionTriad
+from .class1 import (
+    Class1Opened,
     Class1Request,
-    IoConnectionHandle,
     IoOriginator,
+    close_plan,
     new_connection,
+    open_plan,
+    reply_addresses,
 )
+from .io_originator import IoConnectionHandle, QueueListener
+from .replies import EncapsulationStatusError
 
 if TYPE_CHECKING:
     from ...assemblies.schema import AssemblySchema
-
-from .replies import EncapsulationStatusError, decode_reply
-
-if TYPE_CHECKING:
     from .asyncio_client import EncapsulationClient
 
 log = logging.getLogger(__name__)
@@ -74,33 +63,19 @@ class IoContext:
         #: What the opening had to adapt to (a retry with the size a target asked for), one line each.
         self.notes: list[str] = []
 
-    async def _forward_open(self, request: Class1Request, port: int
-                            ) -> tuple[ForwardOpenReply, list[Item], ConnectionTriad]:
-        ot, to, transport, triad, to_id = request.parameters()
-        large = request.large_forward_open
-        fo = ForwardOpenRequest(0x0A, 0x0E, 0, to_id, triad, request.timeout_multiplier, request.ot_rpi_us,
-                                ot, request.to_rpi_us, to, transport, request.path, large)
-        service = Service.LARGE_FORWARD_OPEN if large else Service.FORWARD_OPEN
-        raw = MessageRouterRequest(service, CONNECTION_MANAGER_PATH, fo.encode()).encode()
-        sockaddr = Item(ItemType.SOCKADDR_T_O, SockAddr("0.0.0.0", port).encode())
-        reply_raw, extra = await self.client.send_rr_data_items(raw, [] if request.multicast else [sockaddr])
-        response = decode_reply("Forward_Open reply", lambda: MessageRouterResponse.decode(reply_raw))
-        response.raise_for_status()
-        return decode_reply("Forward_Open reply", lambda: ForwardOpenReply.decode(response.data)), extra, triad
-
-    async def _open_shielded(self, request: Class1Request, port: int
-                             ) -> tuple[ForwardOpenReply, list[Item], ConnectionTriad]:
-        """``_forward_open``, closing what the target opens even when the caller is cancelled (Ctrl-C)
-        while the request is on the wire."""
-        opening = asyncio.ensure_future(self._forward_open(request, port))
+    async def _open_shielded(self, request: Class1Request, port: int) -> Class1Opened:
+        """The core's ``open_plan`` (with its one retry), closing what the target opens even when the
+        caller is cancelled (Ctrl-C) while a request is on the wire."""
+        opening = asyncio.ensure_future(self.client.run(open_plan(self.client.core, request, port)))
         try:
             return await asyncio.shield(opening)
         except asyncio.CancelledError:
             try:
-                _, _, self._triad = await opening
+                opened = await opening
             except Exception:  # refused or lost: nothing was opened
                 self._triad = None
             else:
+                self.request, self._triad = opened.request, opened.triad
                 await self._forward_close()
             raise
 
@@ -109,22 +84,14 @@ class IoContext:
         core, endpoint = await shared_io_endpoint(client.local_host(), self.local_io_port)
         if self.kernel_arrival_times:
             endpoint.stamp_arrivals()
-        request = self.request
-        try:
-            reply, extra, triad = await self._open_shielded(request, endpoint.port)
-        except CipError as refused:
-            corrected = request.corrected(refused.extended) if refused.general == GeneralStatus.CONNECTION_FAILURE \
-                else None
-            if corrected is None:
-                raise
-            request, note = corrected
+        opened = await self._open_shielded(self.request, endpoint.port)
+        for note in opened.notes:
             log.debug("Forward_Open to %s: %s", client.host, note)
-            self.notes.append(note)
-            reply, extra, triad = await self._open_shielded(request, endpoint.port)
-        self.request = request
-        self._triad = triad
+        self.notes.extend(opened.notes)
+        self.request = opened.request
+        self._triad = opened.triad
         try:
-            self.handle = await self._start(request, reply, extra, core, endpoint)
+            self.handle = await self._start(opened, core, endpoint)
             self.handle.notes = self.notes
         except BaseException:
             # Opened but not started: the target would keep producing to a port nobody reads.
@@ -144,36 +111,17 @@ class IoContext:
                 log.debug("class 1 session keepalive to %s: %s", self.client.host, exc)
                 return
 
-    async def _start(self, request: Class1Request, reply: ForwardOpenReply, extra: list[Item], core: IoOriginator,
-                     endpoint: IoEndpoint) -> IoConnectionHandle:
-        announced: int | None = None
-        group: str | None = None
-        for item in extra:
-            if item.type not in (ItemType.SOCKADDR_T_O, ItemType.SOCKADDR_O_T):
-                log.debug("Forward_Open reply: item 0x%04X ignored", item.type)
-                continue
-            try:
-                address = SockAddr.decode(item.data)
-            except EncapsulationError as exc:
-                log.debug("Forward_Open reply: Sockaddr Info 0x%04X ignored: %s", item.type, exc)
-                continue
-            if item.type == ItemType.SOCKADDR_T_O and ipaddress.IPv4Address(address.host).is_multicast:
-                await endpoint.join_multicast(address.host, address.port)
-                group = address.host
-            elif item.type == ItemType.SOCKADDR_O_T and address.port:
-                # The target consumes O->T data on this port, not 2222 (CIP Vol. 2, 2-6.3.3).
-                announced = address.port
-                log.debug("Forward_Open reply: the target consumes O->T data on UDP port %d", address.port)
-            else:
-                # 0.0.0.0:<our port> echoed back on a point-to-point connection, or the target's
-                # O->T address: informational; only a 224.0.0.0/4 group is something to join.
-                log.debug("Forward_Open reply: Sockaddr Info 0x%04X %s:%d (informational)", item.type,
-                          address.host, address.port)
+    async def _start(self, opened: Class1Opened, core: IoOriginator, endpoint: IoEndpoint) -> IoConnectionHandle:
+        request, reply = opened.request, opened.reply
+        addresses = reply_addresses(opened.items)
+        if addresses.group is not None:
+            await endpoint.join_multicast(addresses.group, addresses.group_port)
         # O->T data goes to the port the caller gave, else to the one the reply names, else to 2222.
-        ot_port = self.target_io_port if self.target_io_port is not None else announced or DEFAULT_IO_PORT
+        ot_port = self.target_io_port if self.target_io_port is not None else addresses.ot_port or DEFAULT_IO_PORT
+        listener = QueueListener()
         connection = new_connection(request, self.client.host_address(), ot_port,
                                     reply.ot_connection_id, reply.to_connection_id, reply.ot_api_us, reply.to_api_us,
-                                    asyncio.get_running_loop().time(), self.keep_intervals)
+                                    asyncio.get_running_loop().time(), self.keep_intervals, listener)
         connection.run = self.run
         output_schema, input_schema = self.output_schema, self.input_schema
         if output_schema is not None and output_schema.size != (request.output_size or 0):
@@ -182,15 +130,14 @@ class IoContext:
             input_schema = None
         core.add(connection)
         endpoint.wakeup()
-        handle = IoConnectionHandle(core, endpoint, connection, output_schema, input_schema)
-        handle.multicast_group = group
+        handle = IoConnectionHandle(core, endpoint, connection, output_schema, input_schema, listener.queue)
+        handle.multicast_group = addresses.group
         return handle
 
     async def _forward_close(self) -> None:
         if self._triad is None:
             return
-        fc = ForwardCloseRequest(0x0A, 0x0E, self._triad, self.request.path)
-        self._triad = None
+        triad, self._triad = self._triad, None
         try:
             if not self.client.is_open and self.client.session:
                 # The target closed the session (not the caller, who ends it with a session of 0):
@@ -198,9 +145,7 @@ class IoContext:
                 log.info("class 1 connection to %s: the session was closed; a new one sends the Forward_Close",
                          self.client.host)
                 await self.client.open()
-            reply = await self.client.request(Service.FORWARD_CLOSE, CONNECTION_MANAGER_PATH, fc.encode(),
-                                              connected=False)
-            reply.raise_for_status()
+            await self.client.run(close_plan(self.client.core, triad, self.request.path))
         except (ConnectionError, CipError, EncapsulationStatusError, asyncio.TimeoutError) as exc_close:
             log.info("Forward_Close of class 1 connection failed: %s", exc_close)
 
@@ -210,7 +155,6 @@ class IoContext:
             self._keepalive = None
         handle = self.handle
         if handle is not None:
-            handle.connection.closed = True
             handle._core.remove(handle.connection)
         await self._forward_close()
 

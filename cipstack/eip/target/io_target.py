@@ -28,8 +28,11 @@ from ...cip.router import RequestContext
 from ...cip.status import CipError, ExtendedStatus
 from ..io_core import (
     DEFAULT_IO_PORT,
+    EARLY_SHARE,
+    OT_OVERHEAD,
     RECEIVED_NEW,
     RECEIVED_STALE,
+    TO_OVERHEAD,
     ConsumerState,
     IoDatagramError,
     IoStatistics,
@@ -54,13 +57,6 @@ from .limits import RateLimitedLog
 
 log = logging.getLogger(__name__)
 
-#: A production may leave up to this share of its RPI early, to go with others in one firing.
-EARLY_SHARE = 1 / 16
-
-#: Sequence count + 32-bit run/idle header in front of O->T data.
-OT_OVERHEAD = 6
-#: Sequence count in front of T->O data (modeless).
-TO_OVERHEAD = 2
 #: CIP default multicast allocation (CIP Vol. 2, TCP/IP object attribute 9): 239.192.1.0 + 32 x host id.
 CIP_MULTICAST_BASE = 0xEFC00100
 

@@ -13,6 +13,7 @@ from enum import IntEnum
 from ...cip.epath import request_path
 from ...cip.status import CipError, GeneralStatus
 from ...errors import BadRequest
+from ..io_core import connection_timeout
 
 #: Where an originator sends Forward_Open and Forward_Close: the Connection Manager, instance 1.
 CONNECTION_MANAGER_PATH = request_path(0x06, 1)
@@ -156,8 +157,8 @@ class ForwardOpenRequest:
 
     @property
     def timeout_s(self) -> float:
-        """Connection timeout: O->T RPI x 4 x 2^multiplier (multiplier field 0..7)."""
-        return self.ot_rpi_us * (4 << min(self.timeout_multiplier, 7)) / 1e6
+        """Connection timeout of the O->T direction (``io_core.connection_timeout``, the one rule)."""
+        return connection_timeout(self.ot_rpi_us, self.timeout_multiplier)
 
 
 @dataclass(frozen=True)
