@@ -256,7 +256,11 @@ def test_idle_http_connections_neither_exhaust_the_process_nor_stay(tmp_path: Pa
         open_ones = [s for s in idle if _still_open(s)]
         assert 0 < len(open_ones) <= MAX_CONNECTIONS
         refused = [s for s in idle if s not in open_ones]
-        assert all(_answer(s).startswith(b"HTTP/1.1 503 ") for s in refused)
+        # Each is answered 503; under this low limit one accepted when no descriptor is left is shed (reset
+        # at once, the listener's rule for running out), never closed without a word.
+        answers = [_answer_or_reset(s) for s in refused]
+        assert all(a is None or a.startswith(b"HTTP/1.1 503 ") for a in answers), answers
+        assert any(a is not None for a in answers)
         # EtherNet/IP accepts and answers a RegisterSession meanwhile.
         with socket.create_connection(("127.0.0.1", port), timeout=5) as eip:
             eip.sendall(bytes.fromhex("6500 0400 00000000 00000000 0000000000000000 00000000 0100 0000"))
@@ -305,10 +309,13 @@ def _still_open(sock: socket.socket) -> bool:
         sock.setblocking(True)
 
 
-def _answer(sock: socket.socket) -> bytes:
-    """What the peer sent on ``sock`` until it closed it."""
+def _answer_or_reset(sock: socket.socket) -> bytes | None:
+    """What the peer sent on ``sock`` until it closed it; None if it reset the connection."""
     sock.settimeout(10)
     received = b""
-    while chunk := sock.recv(4096):
-        received += chunk
+    try:
+        while chunk := sock.recv(4096):
+            received += chunk
+    except ConnectionResetError:
+        return None
     return received

@@ -18,9 +18,10 @@ from pathlib import Path
 import pytest
 
 from cipstack.devices.acg.device import build_acg_device
+from cipstack.eip.io_core import rpi_us_of
 from cipstack.eip.originator.blocking import BlockingEncapsulationClient
-from cipstack.eip.originator.blocking_io import io_connection
-from cipstack.eip.originator.class1 import IoTimeoutError
+from cipstack.eip.originator.blocking_io import SyncIoConnection
+from cipstack.eip.originator.class1 import Class1Request, IoTimeoutError
 from cipstack.scanner import SyncScanner
 from tests.library_support import adapter_process, threaded_adapter
 
@@ -91,9 +92,10 @@ def test_a_silent_target_times_the_connection_out() -> None:
     skew = [0.0]
     with threaded_adapter(build_acg_device()) as adapter:
         client = BlockingEncapsulationClient.connect("127.0.0.1", adapter.port)
-        io = io_connection(client, 21, 71, 0.010, output_size=4, input_size=4, timeout_multiplier=5,
-                           target_io_port=adapter.io_endpoint.port)
-        io._clock = lambda: time.monotonic() + skew[0]
+        # The shell takes its clock at construction: this one can be moved past the watchdog.
+        io = SyncIoConnection(client, Class1Request.asked(21, 71, rpi_us_of(0.010), output_size=4, input_size=4,
+                                                          timeout_multiplier=5),
+                              target_io_port=adapter.io_endpoint.port, clock=lambda: time.monotonic() + skew[0])
         with io:
             io.wait_input(lambda i: True, timeout=5)
             skew[0] = 30.0
@@ -151,7 +153,7 @@ def test_a_lost_session_still_gets_its_forward_close(caplog: pytest.LogCaptureFi
                                    target_io_port=adapter.io_endpoint.port)
         io.wait_input(lambda i: True, timeout=5)
         assert len(adapter.io.connections) == 1
-        sock = io._client._sock
+        sock = io._client._sock   # internals: the connection's own session, which nothing public reaches
         assert sock is not None
         sock.shutdown(socket.SHUT_RDWR)                        # the session is gone; the socket object stays
         with caplog.at_level(logging.INFO, logger="cipstack.eip.originator.blocking_io"):

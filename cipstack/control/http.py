@@ -546,11 +546,22 @@ class _Connection(asyncio.Protocol):
         self.since = asyncio.get_running_loop().time()
 
     def evict(self) -> None:
-        """Closed to make room for another address: its slot is free at once."""
+        """Closed to make room for a newcomer: its slot is free at once. One in no request is told so (a
+        503, as a refusal: never a bare close); one in a request is cut."""
         self.evicted = True
         self.connections.limiter.release(self.host)
-        if self.transport is not None:
-            self.transport.abort()
+        transport = self.transport
+        if transport is None:
+            return
+        if self.busy:
+            transport.abort()
+            return
+        try:
+            transport.write(_refusal_bytes(self.connections.limit))
+        except OSError:          # the client is gone already (reset)
+            transport.abort()
+            return
+        transport.close()
 
     def _no_head(self) -> None:
         self.timer = None
