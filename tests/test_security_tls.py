@@ -23,6 +23,8 @@ from typing import NamedTuple
 
 import pytest
 
+pytest.importorskip("cryptography", reason="the security extra (cryptography) is not installed")
+
 from cipstack.cli import main
 from cipstack.eip.originator.blocking import BlockingEncapsulationClient
 from cipstack.errors import CipstackError, PeerUnreachable, SecurityError
@@ -431,3 +433,21 @@ def test_sslkeylogfile_is_written_by_both_roles(tmp_path: Path, lab: Path, monke
         assert "CLIENT_RANDOM " in client_keys.read_text()
     finally:
         _stop(device.process)
+
+
+# -- a security-free emulator and scanner pay nothing ------------------------------------------------
+def test_plain_adapter_and_scanner_import_nothing_of_security() -> None:
+    script = ("import asyncio, sys\n"
+              "from cipstack.adapter import Adapter, AdapterSettings\n"
+              "from cipstack.scanner import SyncScanner\n"
+              "async def main():\n"
+              "    async with Adapter(AdapterSettings(port=0, io_port=0)) as adapter:\n"
+              "        def read():\n"
+              "            with SyncScanner(f'127.0.0.1:{adapter.port}') as drive:\n"
+              "                assert drive.read(1, 1, 7) == 'CENT'\n"
+              "        await asyncio.to_thread(read)\n"
+              "asyncio.run(main())\n"
+              "print(sorted(m for m in sys.modules if m.startswith(('cipstack.security', 'cryptography'))))\n")
+    result = subprocess.run([sys.executable, "-c", script], capture_output=True, text=True, timeout=60)
+    assert result.returncode == 0, result.stderr
+    assert result.stdout.strip() == "[]"

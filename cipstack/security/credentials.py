@@ -194,7 +194,16 @@ def _read(path: Path) -> bytes:
         raise SecurityError(f"{path}: unreadable ({exc.strerror or exc})") from None
 
 
+def require_cryptography() -> None:
+    """``SecurityError`` naming the extra to install when ``cryptography`` is missing."""
+    try:
+        import cryptography  # noqa: F401 - only whether it is there
+    except ImportError:
+        raise SecurityError("CIP Security needs the cryptography package: pip install 'cipstack[security]'") from None
+
+
 def _load_certificate(path: Path, now: datetime.datetime | None) -> CertificateFile:
+    require_cryptography()
     from cryptography import x509
 
     data = _read(path)
@@ -246,4 +255,5 @@ def _load_psk(path: Path) -> PreSharedKey:
 
 
 __all__ = ["CA_FILE", "CLIENT_CERTIFICATE", "CLIENT_KEY", "DEVICE_CERTIFICATE", "DEVICE_KEY", "PSK_FILE",
-           "SECURE_PORT", "CertificateFile", "Credentials", "KeyPair", "PreSharedKey", "describe_tls_failure"]
+           "SECURE_PORT", "CertificateFile", "Credentials", "KeyPair", "PreSharedKey", "describe_tls_failure",
+           "require_cryptography"]

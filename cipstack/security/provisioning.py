@@ -13,7 +13,15 @@ import secrets
 from pathlib import Path
 
 from ..errors import SecurityError
-from .credentials import CA_FILE, CLIENT_CERTIFICATE, CLIENT_KEY, DEVICE_CERTIFICATE, DEVICE_KEY, PSK_FILE
+from .credentials import (
+    CA_FILE,
+    CLIENT_CERTIFICATE,
+    CLIENT_KEY,
+    DEVICE_CERTIFICATE,
+    DEVICE_KEY,
+    PSK_FILE,
+    require_cryptography,
+)
 
 #: Validity of what ``init`` makes, in days.
 CA_DAYS = 3650
@@ -53,6 +61,7 @@ def init(folder: str | os.PathLike[str], *, certificates: bool = True, psk: bool
 
 def _certificates(path: Path, device_name: str, client_name: str, days: int,
                   now: datetime.datetime | None) -> list[Path]:
+    require_cryptography()
     from cryptography import x509
     from cryptography.hazmat.primitives import hashes, serialization
     from cryptography.hazmat.primitives.asymmetric import ec
