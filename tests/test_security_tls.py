@@ -28,7 +28,7 @@ pytest.importorskip("cryptography", reason="the security extra (cryptography) is
 from cipstack.cli import main
 from cipstack.eip.originator.blocking import BlockingEncapsulationClient
 from cipstack.errors import CipstackError, PeerUnreachable, SecurityError
-from cipstack.scanner import SyncScanner
+from cipstack.scanner import Scanner, SyncScanner
 from cipstack.security import Credentials
 from cipstack.security.provisioning import init
 from tests.ports import free_port
@@ -338,6 +338,24 @@ def test_wrong_ca_is_certificate_verify_failed(device: Device, other_lab: Path) 
     # The device sends its chain (its certificate and the CA's): another CA's self-signed root in it.
     assert str(raised.value) == (f"TLS with {device.host}:{device.tls_port} failed: certificate verify failed: "
                                  "self-signed certificate in certificate chain")
+
+
+async def test_asyncio_scanner_reads_identity_over_tls(device: Device, lab: Path) -> None:
+    async with await Scanner.connect(f"{device.host}:{device.tls_port}", security=Credentials.load(lab)) as drive:
+        assert await drive.read(1, 1, 7) == "CENT"
+
+
+async def test_asyncio_scanner_names_a_wrong_ca(device: Device, other_lab: Path) -> None:
+    with pytest.raises(SecurityError, match=r"failed: certificate verify failed: self-signed certificate in "):
+        await Scanner.connect(f"{device.host}:{device.tls_port}", security=Credentials.load(other_lab), timeout=10)
+
+
+async def test_asyncio_scanner_names_a_client_certificate_the_device_refuses(device: Device, lab: Path,
+                                                                             other_lab: Path,
+                                                                             tmp_path: Path) -> None:
+    mixed = Credentials.load(_mixed_folder(tmp_path, lab, other_lab))
+    with pytest.raises(SecurityError, match=r"failed: the peer does not trust our certificate \(alert: unknown CA\)"):
+        await Scanner.connect(f"{device.host}:{device.tls_port}", security=mixed, timeout=10)
 
 
 # -- bad input on the device's side ------------------------------------------------------------------

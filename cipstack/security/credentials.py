@@ -141,7 +141,7 @@ class Credentials:
                                 f"handshake ({exc.strerror or exc})") from None
         return tls
 
-    def refusal(self, failure: OSError, host: str, port: int) -> SecurityError | None:
+    def refusal(self, failure: BaseException, host: str, port: int) -> SecurityError | None:
         """A ``SecurityError`` for a TLS alert that ended a connection after its handshake (TLS 1.3:
         the device refuses the client's certificate once the client has finished); None otherwise."""
         if isinstance(failure, ssl.SSLError) and not isinstance(failure, (ssl.SSLWantReadError, ssl.SSLWantWriteError)):

@@ -30,6 +30,7 @@ from .core import (
     NoReplyError,
     OriginatorCore,
     Plan,
+    SecureChannel,
     Transaction,
     parse_host,
 )
@@ -76,6 +77,8 @@ class EncapsulationClient(CoreClient):
     def __init__(self, host: str, port: int = DEFAULT_PORT, timeout: float = DEFAULT_TIMEOUT,
                  core: OriginatorCore | None = None) -> None:
         super().__init__(host, port, timeout, core)
+        #: CIP Security: the connection is TLS, made with this channel's context (None: plain TCP).
+        self.security: SecureChannel | None = None
         self._protocol: _ClientProtocol | None = None
         self._waiting: dict[Transaction[Any], asyncio.Future[Any]] = {}
         self._timer: asyncio.TimerHandle | None = None
@@ -83,18 +86,25 @@ class EncapsulationClient(CoreClient):
     # -- life cycle -----------------------------------------------------------------------------
     @classmethod
     async def connect(cls, host: str, port: int = DEFAULT_PORT, timeout: float = DEFAULT_TIMEOUT,
-                      register: bool = True) -> EncapsulationClient:
+                      register: bool = True, security: SecureChannel | None = None) -> EncapsulationClient:
+        """Connect (and register a session unless ``register`` is false); with ``security``, over
+        TLS (CIP Security: the device's port 2221)."""
         client = cls(host, port, timeout)
+        client.security = security
         await client.open(register)
         return client
 
     async def open(self, register: bool = True) -> None:
         loop = asyncio.get_running_loop()
+        security = self.security
+        context = security.client_context() if security is not None else None
         try:
             _, protocol = await asyncio.wait_for(
-                loop.create_connection(lambda: _ClientProtocol(self), self.host, self.port), self.timeout)
+                loop.create_connection(lambda: _ClientProtocol(self), self.host, self.port, ssl=context,
+                                       server_hostname="" if context is not None else None), self.timeout)
         except (OSError, asyncio.TimeoutError) as exc:
-            raise PeerUnreachable.connecting(self.host, self.port, exc) from None
+            refusal = security.refusal(exc, self.host, self.port) if security is not None else None
+            raise (refusal or PeerUnreachable.connecting(self.host, self.port, exc)) from None
         self._protocol = protocol
         if register:
             await self.register_session()
@@ -155,7 +165,8 @@ class EncapsulationClient(CoreClient):
                 future.set_exception(exc)
 
     def _lost(self, exc: Exception | None) -> None:
-        error = PeerUnreachable(f"connection to {self.host}:{self.port} lost" + (f": {exc}" if exc else ""))
+        refusal = self.security.refusal(exc, self.host, self.port) if self.security and exc else None
+        error = refusal or PeerUnreachable(f"connection to {self.host}:{self.port} lost" + (f": {exc}" if exc else ""))
         self.core.lost()
         for future in self._waiting.values():
             if not future.done():

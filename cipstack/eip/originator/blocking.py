@@ -9,7 +9,7 @@ from __future__ import annotations
 
 import socket
 import time
-from typing import Any, Protocol, TypeVar
+from typing import Any, TypeVar
 
 from ...errors import CipstackError, PeerUnreachable
 from ..wire.encapsulation import DEFAULT_PORT
@@ -19,6 +19,7 @@ from .core import (
     NoReplyError,
     OriginatorCore,
     Plan,
+    SecureChannel,
     Transaction,
     run_plan,
 )
@@ -45,17 +46,6 @@ def _open(host: str, port: int, timeout: float) -> socket.socket:
         sock.close()
         raise
     return sock
-
-
-class SecureChannel(Protocol):
-    """What secures the connection (``cipstack.security.Credentials``): a TLS handshake over the
-    connected socket, the socket to use after it; a ``SecurityError`` naming the cause if it fails."""
-
-    def wrap_client(self, sock: socket.socket, host: str, port: int) -> socket.socket: ...
-
-    def refusal(self, failure: OSError, host: str, port: int) -> CipstackError | None:
-        """The error to raise for a TLS alert that ends the connection after the handshake (with TLS 1.3
-        the device judges the client's certificate then); None for any other failure."""
 
 
 class BlockingEncapsulationClient(CoreClient):
