@@ -422,6 +422,26 @@ def test_bad_input_on_2221_is_refused_logged_once_per_source(tmp_path: Path, lab
         _stop(device.process)
 
 
+async def test_a_handshake_that_never_comes_is_closed_and_counted(lab: Path) -> None:
+    import asyncio
+
+    from cipstack.adapter import Adapter, AdapterSettings
+
+    settings = AdapterSettings(port=0, io_port=0, security=lab, security_port=0)
+    async with Adapter(settings) as adapter:
+        tls = adapter.tls
+        assert tls is not None
+        tls.handshake_timeout = 0.5
+        reader, writer = await asyncio.open_connection("127.0.0.1", tls.port)
+        try:
+            # Silence: closed once the handshake's time is up (a bound from the setting, with room).
+            assert await asyncio.wait_for(reader.read(), 15) == b""
+        finally:
+            writer.close()
+        assert tls.refused == 1
+        assert tls.connections == set()
+
+
 def test_plain_scanner_on_the_tls_port_gets_one_line(device: Device) -> None:
     with pytest.raises(CipstackError) as raised:
         SyncScanner(f"{device.host}:{device.tls_port}", timeout=5)

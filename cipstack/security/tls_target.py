@@ -80,7 +80,7 @@ class _TlsProtocol(asyncio.Protocol):
             sock.setsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY, 1)
         transport.set_write_buffer_limits(high=64 * 1024)
         self._tls = self.server.context.wrap_bio(self._incoming, self._outgoing, server_side=True)
-        self._timer_at = self.loop.time() + HANDSHAKE_TIMEOUT
+        self._timer_at = self.loop.time() + self.server.handshake_timeout
         self._timer = self.loop.call_at(self._timer_at, self._on_timer)
 
     def data_received(self, data: bytes) -> None:
@@ -200,7 +200,7 @@ class _TlsProtocol(asyncio.Protocol):
         connection = self.connection
         if connection is None:   # the handshake did not finish in time
             self.server.refuse(self.host, f"TLS handshake from {self.peer} refused: not complete after "
-                                          f"{HANDSHAKE_TIMEOUT:g} s")
+                                          f"{self.server.handshake_timeout:g} s")
             transport.abort()
             return
         connection.on_timer(self.loop.time())
@@ -233,6 +233,8 @@ class TlsServer:
         #: The TLS context every connection's ``SSLObject`` is made from.
         self.context = credentials.server_context(verify_client)
         self.limiter = ConnectionLimiter(max_connections, max_connections_per_host)
+        #: Seconds a handshake has from the accept (``HANDSHAKE_TIMEOUT``).
+        self.handshake_timeout = HANDSHAKE_TIMEOUT
         self.refused_log = RateLimitedLog(log)
         #: Connections refused (limits, handshakes that failed or timed out) since the start.
         self.refused = 0
