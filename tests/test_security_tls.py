@@ -193,6 +193,19 @@ def test_adapter_with_a_broken_folder_says_one_line(tmp_path: Path) -> None:
     assert "no such folder" in result.stderr
 
 
+def test_a_taken_security_port_is_one_line(lab: Path) -> None:
+    with socket.socket() as taken:
+        taken.bind(("127.0.0.1", free_port()))
+        taken.listen()
+        port = taken.getsockname()[1]
+        result = subprocess.run([sys.executable, "-m", "cipstack", "adapter", "--port", str(free_port()),
+                                 "--io-port", "0", "--factory", "--quiet", "--security", str(lab),
+                                 "--security-port", str(port)], capture_output=True, text=True, timeout=60)
+    assert result.returncode == 2
+    assert result.stderr == (f"cipstack adapter: cannot listen on TCP 127.0.0.1:{port} (EtherNet/IP over TLS, "
+                             "--security-port): Address already in use\n")
+
+
 # -- the target, from openssl s_client ---------------------------------------------------------------
 def _s_client(device: Device, lab: Path, *extra: str, cert: bool = True, data: bytes = REGISTER_SESSION,
               timeout: float = 30) -> subprocess.CompletedProcess[bytes]:

@@ -36,6 +36,10 @@ log = logging.getLogger(__name__)
 
 #: Seconds a TLS handshake has from the connection's accept.
 HANDSHAKE_TIMEOUT = 10.0
+#: Seconds a refused connection is kept half-closed, its alert sent and what still comes discarded,
+#: before it is reset: closed at once, data the peer sent after its handshake would make the kernel
+#: reset the connection, and the peer could lose the alert that says why.
+LINGER = 2.0
 #: Plaintext asked of the TLS layer per read.
 _READ_SIZE = 65536
 
@@ -57,6 +61,7 @@ class _TlsProtocol(asyncio.Protocol):
         self._local = SockAddr("0.0.0.0", server.port)
         self._timer: asyncio.TimerHandle | None = None
         self._timer_at: float | None = None
+        self._refused = False
 
     # -- asyncio's callbacks ------------------------------------------------------------------------
     def connection_made(self, transport: asyncio.BaseTransport) -> None:
@@ -85,8 +90,8 @@ class _TlsProtocol(asyncio.Protocol):
 
     def data_received(self, data: bytes) -> None:
         tls, transport = self._tls, self.transport
-        if tls is None or transport is None or transport.is_closing():
-            return
+        if tls is None or transport is None or transport.is_closing() or self._refused:
+            return   # a refused connection's last bytes are discarded
         self._incoming.write(data)
         if self.connection is None and not self._handshake(tls):
             return
@@ -145,7 +150,7 @@ class _TlsProtocol(asyncio.Protocol):
         except (ssl.SSLError, ValueError) as exc:
             self._flush()   # the alert that tells the peer why
             self.server.refuse(self.host, f"TLS handshake from {self.peer} refused: {describe_tls_failure(exc)}")
-            self.transport.close()
+            self._linger()
             return False
         self._flush()
         if self._timer is not None:
@@ -155,6 +160,23 @@ class _TlsProtocol(asyncio.Protocol):
         log.info("%s: TLS connection accepted (%s, %s)", self.peer, tls.version(), (tls.cipher() or ("?",))[0])
         self._arm()
         return True
+
+    def _linger(self) -> None:
+        """Half-close a refused connection: the alert goes out with a FIN, what the peer still sends is
+        read and dropped until it closes too, or ``LINGER`` seconds pass."""
+        transport = self.transport
+        assert transport is not None
+        self._refused = True
+        if self._timer is not None:
+            self._timer.cancel()
+        if not transport.can_write_eof():
+            transport.close()
+            return
+        transport.write_eof()
+        self._timer = self.loop.call_later(LINGER, transport.abort)
+
+    def eof_received(self) -> bool | None:
+        return None   # the transport closes: a refused peer is done, or an accepted one closed its side
 
     def _serve(self, plain: bytes) -> None:
         connection, tls, transport = self.connection, self._tls, self.transport

@@ -9,6 +9,7 @@ over UDP (unicast or broadcast) and collects replies until its timeout.
 from __future__ import annotations
 
 import asyncio
+import contextlib
 import logging
 import socket
 from collections.abc import Sequence
@@ -17,7 +18,7 @@ from typing import TYPE_CHECKING, Any, TypeVar
 from ...cip.epath import Segment
 from ...cip.messages import MessageRouterResponse
 from ...cip.status import CipError, GeneralStatus
-from ...errors import BadRequest, PeerUnreachable
+from ...errors import BadRequest, CipstackError, PeerUnreachable
 from ..wire.cpf import Item
 from ..wire.encapsulation import DEFAULT_PORT, EncapsulationHeader
 from ..wire.identity_items import IdentityRecord, ServiceRecord
@@ -44,6 +45,9 @@ if TYPE_CHECKING:
     from .io_originator import OtFormat
 
 log = logging.getLogger(__name__)
+
+#: Seconds a secured client waits to learn why a connection closed as it opened (``_why_closed``).
+_REFUSAL_WAIT = 1.0
 T = TypeVar("T")
 
 if asyncio.TimeoutError is TimeoutError:
@@ -57,9 +61,12 @@ class _ClientProtocol(asyncio.Protocol):
     def __init__(self, client: EncapsulationClient) -> None:
         self.client = client
         self.transport: asyncio.Transport | None = None
+        #: Done when the connection is lost (a secured client waits on it to learn why it closed).
+        self.lost: asyncio.Future[None] | None = None
 
     def connection_made(self, transport: asyncio.BaseTransport) -> None:
         self.transport = transport  # type: ignore[assignment]  # a TCP connection's transport
+        self.lost = asyncio.get_running_loop().create_future()
         sock = transport.get_extra_info("socket")
         if sock is not None:
             sock.setsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY, 1)
@@ -69,6 +76,8 @@ class _ClientProtocol(asyncio.Protocol):
 
     def connection_lost(self, exc: Exception | None) -> None:
         self.client._lost(exc)
+        if self.lost is not None and not self.lost.done():
+            self.lost.set_result(None)
 
 
 class EncapsulationClient(CoreClient):
@@ -79,6 +88,8 @@ class EncapsulationClient(CoreClient):
         super().__init__(host, port, timeout, core)
         #: CIP Security: the connection is TLS, made with this channel's context (None: plain TCP).
         self.security: SecureChannel | None = None
+        #: Why a secured connection was ended by a TLS alert (raised by every later request).
+        self._refusal: CipstackError | None = None
         self._protocol: _ClientProtocol | None = None
         self._waiting: dict[Transaction[Any], asyncio.Future[Any]] = {}
         self._timer: asyncio.TimerHandle | None = None
@@ -107,7 +118,23 @@ class EncapsulationClient(CoreClient):
             raise (refusal or PeerUnreachable.connecting(self.host, self.port, exc)) from None
         self._protocol = protocol
         if register:
-            await self.register_session()
+            try:
+                await self.register_session()
+            except PeerUnreachable:
+                refusal = await self._why_closed(protocol)
+                if refusal is None:
+                    raise
+                raise refusal from None
+
+    async def _why_closed(self, protocol: _ClientProtocol) -> CipstackError | None:
+        """The error of a connection that closed as it opened. A device that refuses a client's
+        certificate after a TLS 1.3 handshake (which the client has already finished) sends its alert
+        as the first request goes out: the transport is closing before asyncio reports why, a few
+        callbacks later. Wait for that (bounded): the alert's error, or None for any other end."""
+        if self.security is not None and protocol.lost is not None:
+            with contextlib.suppress(asyncio.TimeoutError):
+                await asyncio.wait_for(asyncio.shield(protocol.lost), _REFUSAL_WAIT)
+        return self._refusal
 
     def local_host(self) -> str:
         """The local address of the TCP connection (where T->O data should come)."""
@@ -151,6 +178,8 @@ class EncapsulationClient(CoreClient):
     def _write(self, frame: bytes) -> None:
         protocol = self._protocol
         if protocol is None or protocol.transport is None or protocol.transport.is_closing():
+            if self._refusal is not None:
+                raise self._refusal
             raise PeerUnreachable(f"connection to {self.host}:{self.port} is closed")
         protocol.transport.write(frame)
 
@@ -166,6 +195,7 @@ class EncapsulationClient(CoreClient):
 
     def _lost(self, exc: Exception | None) -> None:
         refusal = self.security.refusal(exc, self.host, self.port) if self.security and exc else None
+        self._refusal = refusal
         error = refusal or PeerUnreachable(f"connection to {self.host}:{self.port} lost" + (f": {exc}" if exc else ""))
         self.core.lost()
         for future in self._waiting.values():
