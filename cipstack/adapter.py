@@ -178,7 +178,7 @@ class Adapter:
 
             self.tls = TlsServer(self.target, Credentials.load(s.security), s.host, s.security_port,
                                  max_connections=s.max_tcp_connections,
-                                 max_connections_per_host=s.max_tcp_connections_per_host)
+                                 max_connections_per_host=s.max_tcp_connections_per_host, replies=self.replies)
         ports: list[Port] = [ServerPort("EtherNet/IP", self.server)]
         if self.tls is not None:
             ports.append(ServerPort("EtherNet/IP over TLS", self.tls))

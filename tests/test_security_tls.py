@@ -455,6 +455,29 @@ async def test_a_handshake_that_never_comes_is_closed_and_counted(lab: Path) -> 
         assert tls.connections == set()
 
 
+async def test_a_reply_fault_acts_on_tls_as_on_44818(lab: Path) -> None:
+    """The TLS shell passes its replies through the same seam: ``delay-replies`` holds them too."""
+    import asyncio
+
+    from cipstack.adapter import Adapter, AdapterSettings
+
+    async with Adapter(AdapterSettings(port=0, io_port=0, security=lab, security_port=0)) as adapter:
+        assert adapter.tls is not None
+        secured = f"127.0.0.1:{adapter.tls.port}"
+        credentials = Credentials.load(lab)
+
+        def timed_read() -> float:
+            with SyncScanner(secured, security=credentials, identify=False) as drive:
+                start = time.monotonic()
+                assert drive.read(1, 1, 7) == "CENT"
+                return time.monotonic() - start
+
+        adapter.fault("delay-replies", by="400ms")
+        assert await asyncio.to_thread(timed_read) >= 0.4
+        adapter.clear_faults()
+        assert await asyncio.to_thread(timed_read) < 5
+
+
 def test_plain_scanner_on_the_tls_port_gets_one_line(device: Device) -> None:
     with pytest.raises(CipstackError) as raised:
         SyncScanner(f"{device.host}:{device.tls_port}", timeout=5)

@@ -25,6 +25,7 @@ import ssl
 from typing import TYPE_CHECKING
 
 from ..eip.target.limits import DEFAULT_MAX_TCP_CONNECTIONS, ConnectionLimiter, RateLimitedLog
+from ..eip.target.seams import ReplySeam
 from ..eip.wire.cpf import SockAddr
 from .credentials import SECURE_PORT, describe_tls_failure
 
@@ -183,7 +184,13 @@ class _TlsProtocol(asyncio.Protocol):
         if connection is None or tls is None or transport is None or not plain:
             return
         connection.receive(plain, self.loop.time())
-        self._write(connection.data_to_send())
+        out = connection.data_to_send()
+        if out:
+            held = self.server.replies.filter
+            if held is None:
+                self._write(out)
+            else:   # a fault at the reply seam (delayed replies) acts on TLS as on 44818
+                held.reply(self, out)
         if connection.closing:
             self._flush()
             transport.close()
@@ -201,6 +208,12 @@ class _TlsProtocol(asyncio.Protocol):
                 self._tls.write(out)
             except ssl.SSLError as exc:
                 log.debug("%s: TLS write: %s", self.peer, exc)
+
+    def send_reply(self, out: bytes) -> None:
+        """Send reply bytes taken from the connection earlier (a reply the reply seam held back)."""
+        if self.transport is not None and not self.transport.is_closing():
+            self._write(out)
+            self._flush()
 
     def _flush(self) -> None:
         out = self._outgoing.read()
@@ -247,8 +260,10 @@ class TlsServer:
     def __init__(self, target: EncapsulationTarget, credentials: Credentials, host: str = "127.0.0.1",
                  port: int = SECURE_PORT, verify_client: bool = True,
                  max_connections: int = DEFAULT_MAX_TCP_CONNECTIONS,
-                 max_connections_per_host: int | None = None) -> None:
+                 max_connections_per_host: int | None = None, replies: ReplySeam | None = None) -> None:
+        """``replies``: the seam replies pass on their way out, the plain server's (``seams.ReplySeam``)."""
         self.target = target
+        self.replies = replies or ReplySeam()
         self.credentials = credentials
         self.host = host
         self.port = port
