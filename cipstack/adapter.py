@@ -10,7 +10,7 @@ from collections.abc import Awaitable, Callable
 from dataclasses import dataclass
 from functools import partial
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 from .control import ControlAddress, ControlServer, ControlTaken, default_control_path
 from .control.events import EventStream
@@ -39,6 +39,9 @@ from .objects.tcpip import NetworkInterface
 from .runtime import Class1Port, DeviceRuntime, Port, PowerLink, Rs485Port, ServerPort
 from .runtime.observer import IoEventRelay, Observers, register_relay
 from .runtime.runtime import DeviceClock
+
+if TYPE_CHECKING:
+    from .security.tls_target import TlsServer
 
 log = logging.getLogger(__name__)
 
@@ -100,6 +103,11 @@ class AdapterSettings:
     files: tuple[StoredFile, ...] = ()
     #: Host names the HTTP API answers to besides its addresses and localhost (``--http-allow-host``).
     http_hosts: tuple[str, ...] = ()
+    #: CIP Security: the folder ``cipstack security init`` writes (None: plain EtherNet/IP only). With
+    #: it the device also serves the same encapsulation over TLS on ``security_port``.
+    security: Path | None = None
+    #: TCP port of EtherNet/IP over TLS (2221, Wireshark's ENIP_SECURE_PORT; 0: any free one).
+    security_port: int = 2221
 
 
 class Adapter:
@@ -162,7 +170,18 @@ class Adapter:
         self.server = EncapsulationServer(self.target, s.host, s.port, max_tcp_connections=s.max_tcp_connections,
                                           max_tcp_connections_per_host=s.max_tcp_connections_per_host,
                                           replies=self.replies)
+        #: EtherNet/IP over TLS with ``settings.security`` (``cipstack.security.tls_target``).
+        self.tls: TlsServer | None = None
+        if s.security is not None:
+            from .security import Credentials
+            from .security.tls_target import TlsServer
+
+            self.tls = TlsServer(self.target, Credentials.load(s.security), s.host, s.security_port,
+                                 max_connections=s.max_tcp_connections,
+                                 max_connections_per_host=s.max_tcp_connections_per_host, replies=self.replies)
         ports: list[Port] = [ServerPort("EtherNet/IP", self.server)]
+        if self.tls is not None:
+            ports.append(ServerPort("EtherNet/IP over TLS", self.tls))
         if self.modbus is not None:
             ports.append(ServerPort("Modbus TCP", self.modbus))
         if self.io_endpoint is not None:
@@ -235,6 +254,9 @@ class Adapter:
                                     f"{s.host}:{s.port} (EtherNet/IP, --port)"))
         if self.modbus is not None:
             await self._listen(self.modbus.start, lambda: f"TCP {s.host}:{s.modbus_port} (Modbus TCP, --modbus-port)")
+        if self.tls is not None:
+            await self._listen(self.tls.start,
+                               lambda: f"TCP {s.host}:{s.security_port} (EtherNet/IP over TLS, --security-port)")
         if self.rs485 is not None:
             await self._open_rtu(self.rs485)
         self.clock.tick(asyncio.get_running_loop().time())
@@ -370,6 +392,8 @@ class Adapter:
                 port.shutdown()
         if self.modbus is not None:
             await self.modbus.close()
+        if self.tls is not None:
+            await self.tls.close()
         if self.rs485 is not None:
             await self.rs485.release()
         if self.io is not None:

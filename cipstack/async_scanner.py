@@ -17,12 +17,14 @@ from .cip.status import CipError
 from .cip.types import CipType
 from .cip.values import Value
 from .eip.originator.core import parse_host
+from .eip.wire.encapsulation import DEFAULT_PORT, SECURE_PORT
 from .scanner import AttributeValue, EdsConnection, ExplicitMessaging, _Declarations, class1_assemblies
 
 if TYPE_CHECKING:
     from .assemblies.schema import AssemblySchema
     from .eds.model import EdsDocument
     from .eip.originator.asyncio_client import EncapsulationClient
+    from .eip.originator.blocking import SecureChannel
     from .eip.originator.class1 import OtFormat
     from .eip.originator.io_originator import IoConnectionHandle
     from .eip.wire.identity_items import IdentityRecord, ServiceRecord
@@ -45,8 +47,11 @@ class Scanner(_Declarations):
     @classmethod
     async def connect(cls, address: str, port: int | None = None, *, timeout: float = 5.0,
                       catalog: Catalog | None = None, route: Sequence[Segment] | None = None,
-                      identify: bool = True, eds: str | Path | EdsDocument | None = None) -> Scanner:
-        """Connect to ``address`` (``"host"`` or ``"host:port"``) and register a session.
+                      identify: bool = True, eds: str | Path | EdsDocument | None = None,
+                      security: SecureChannel | None = None) -> Scanner:
+        """Connect to ``address`` (``"host"`` or ``"host:port"``) and register a session; with
+        ``security`` (``cipstack.security.Credentials.load(DIR)``) over TLS, to port 2221 unless the
+        address or ``port`` names another.
 
         The catalog replies decode by is, first match: ``catalog``; the EDS file ``eds`` (a path or
         a read ``EdsDocument``); the profile of the device's identity (``identify``, the default);
@@ -56,8 +61,8 @@ class Scanner(_Declarations):
         """
         from .eip.originator.asyncio_client import EncapsulationClient
 
-        host, parsed_port = parse_host(address)
-        client = await EncapsulationClient.connect(host, port or parsed_port, timeout)
+        host, parsed_port = parse_host(address, DEFAULT_PORT if security is None else SECURE_PORT)
+        client = await EncapsulationClient.connect(host, port or parsed_port, timeout, security=security)
         scanner = cls(client, catalog, route)
         try:
             await client.run(scanner.explicit.choose_catalog(catalog, eds, identify))

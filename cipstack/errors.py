@@ -101,6 +101,11 @@ def connect_failure(failure: BaseException) -> str:
     return str(failure) or "timed out"
 
 
+class SecurityError(CipstackError):
+    """CIP Security refused or could not start: a credentials folder that is missing, unreadable or
+    expired, a TLS handshake the peer or we refused (the message names the cause in one line)."""
+
+
 class ProtocolError(CipstackError):
     """A peer answered with an error on the wire. ``general`` and ``extended`` carry the CIP status
     where there is one (None otherwise)."""
@@ -110,4 +115,4 @@ class ProtocolError(CipstackError):
 
 
 __all__ = ["BadRequest", "CipstackError", "NoReply", "NotFound", "PeerUnreachable", "ProtocolError", "ReadOnlyField",
-           "StateRefused", "TimedOut", "UnknownField", "UnknownKey", "WrongState", "WrongType"]
+           "SecurityError", "StateRefused", "TimedOut", "UnknownField", "UnknownKey", "WrongState", "WrongType"]

@@ -23,7 +23,7 @@ from .cip.model import AttributeSpec
 from .cip.status import CipError, ExtendedStatus, GeneralStatus
 from .cip.types import UINT, CipType, IntegerType
 from .cip.values import Value
-from .eip.originator.blocking import BlockingEncapsulationClient
+from .eip.originator.blocking import BlockingEncapsulationClient, SecureChannel
 from .eip.originator.core import (
     OriginatorCore,
     Plan,
@@ -33,8 +33,8 @@ from .eip.originator.core import (
     parse_host,
 )
 from .eip.originator.replies import EncapsulationStatusError, MalformedReplyError
-from .eip.wire.encapsulation import DEFAULT_PORT
-from .errors import BadRequest, NotFound, ProtocolError
+from .eip.wire.encapsulation import DEFAULT_PORT, SECURE_PORT
+from .errors import BadRequest, NotFound, ProtocolError, WrongState
 from .logs import debug
 
 if TYPE_CHECKING:
@@ -527,11 +527,15 @@ class SyncScanner(_Declarations):
 
     def __init__(self, address: str, port: int | None = None, *, timeout: float = 5.0,
                  catalog: Catalog | None = None, route: Sequence[Segment] | None = None,
-                 identify: bool = True, eds: str | Path | EdsDocument | None = None) -> None:
-        host, parsed_port = parse_host(address)
+                 identify: bool = True, eds: str | Path | EdsDocument | None = None,
+                 security: SecureChannel | None = None) -> None:
+        """``security``: CIP Security's credentials (``cipstack.security.Credentials.load(DIR)``): the
+        requests go over TLS, to port 2221 unless the address or ``port`` names another."""
+        host, parsed_port = parse_host(address, DEFAULT_PORT if security is None else SECURE_PORT)
         #: The blocking client requests travel on (``client.connection``: the class 3 connection, if open).
-        self.client = BlockingEncapsulationClient.connect(host, port or parsed_port, timeout)
+        self.client = BlockingEncapsulationClient.connect(host, port or parsed_port, timeout, security=security)
         self._address = (host, port or parsed_port, timeout)
+        self._secured = security is not None
         self.explicit = ExplicitMessaging(self.client.core, catalog, route)
         self._io: set[SyncIoConnection] = set()
         try:
@@ -666,6 +670,8 @@ class SyncScanner(_Declarations):
     def _open_io(self, **arguments: Any) -> SyncIoConnection:
         from .eip.originator.blocking_io import io_connection
 
+        if self._secured:
+            raise WrongState("class 1 I/O over CIP Security (DTLS) is not implemented yet: open it without security=")
         host, port, timeout = self._address
         client = BlockingEncapsulationClient.connect(host, port, timeout)
         try:

@@ -41,7 +41,8 @@ ALLOWED = {
     # The single-file modules. The adapter is the composition root: it builds the device, its ports
     # and runtime, the fault controller, the event stream and the command service, and passes each
     # its collaborators; so it sits above faults and control, which know only the runtime.
-    "adapter": {"control", "devices", "eip", "errors", "faults", "listening", "modbus", "objects", "runtime"},
+    "adapter": {"control", "devices", "eip", "errors", "faults", "listening", "modbus", "objects", "runtime",
+                "security"},
     "scanner": {"catalog", "cip", "devices", "eds", "eip", "errors", "objects", "parameter_codes", "profile_catalog",
                 "sync_io", "async_scanner"},
     # The async scanner: the scanner's plans on the asyncio client (``cipstack.scanner`` names it too).
@@ -54,6 +55,8 @@ ALLOWED = {
     "params": {"catalog", "cip", "errors"},
     "catalog": {"assemblies", "cip", "eip", "objects", "errors"},
     "listening": {"errors"},
+    # CIP Security: TLS shells around the encapsulation cores, credentials and provisioning.
+    "security": {"eip", "errors"},
 }
 
 #: The parts that sit on top: nothing else in the package imports them (DESIGN.md).

@@ -47,7 +47,9 @@ FORBIDDEN = ("asyncio", "logging", "dataclasses", "inspect", "construct", "cipst
              "cipstack.assemblies.schema", "cipstack.cli.io", "cipstack.cli.drive", "cipstack.control",
              "cipstack.sync_io", "cipstack.objects.identity", "cipstack.objects.tcpip", "cipstack.objects.assembly",
              "cipstack.cip.router", "cipstack.cli.parser", "cipstack.cli.help_texts", "argparse", "gettext",
-             "decimal", "encodings.idna")
+             "decimal", "encodings.idna",
+             # CIP Security is for who asks for it: a plain one-shot loads neither TLS nor X.509 (issue 48).
+             "ssl", "cipstack.security", "cryptography")
 
 COMMANDS = {"get-standard": ["get", "{target}", "1/1/7"], "get-decoded": ["get", "{target}", "0x2A/1/102"],
             "set": ["set", "{target}", "0x2A/1/102", "50"], "identity": ["identity", "{target}"],
@@ -103,7 +105,8 @@ print("MODULES " + json.dumps({{"read": read, "refused": refused, "profile": pro
 #: ``devices/``, only the generated declarations), the EDS tool, the objects that serve the standard classes.
 LIBRARY_FORBIDDEN = ("asyncio", "cipstack.eip.target", "cipstack.eds", "cipstack.assemblies", "cipstack.sync_io",
                      "cipstack.objects.identity", "cipstack.objects.tcpip", "cipstack.objects.assembly",
-                     "cipstack.cip.router", "cipstack.eip.originator.asyncio_client")
+                     "cipstack.cip.router", "cipstack.eip.originator.asyncio_client",
+                     "ssl", "cipstack.security", "cryptography")
 
 
 @pytest.fixture(scope="module")

@@ -49,7 +49,7 @@ def cmd_adapter(args: argparse.Namespace) -> int:
                                io_port=args.io_port, control_path=args.control,
                                status_lines=not args.quiet, state_path=args.state, modbus_port=args.modbus_port,
                                rtu=args.rtu, files=(profile_eds_file(args.profile, args.model),),
-                               **_limit_settings(args), **_http_settings(args))
+                               **_limit_settings(args), **_http_settings(args), **_security_settings(args))
     try:
         adapter = Adapter(settings)
     except (StateFileError, ValueError, KeyError) as exc:
@@ -89,6 +89,18 @@ def _profile_of_model(name: str) -> str:
         return model(name).family.value.lower()
     except KeyError as exc:
         raise UsageError(f"--model: {exc}") from None
+
+
+def _security_settings(args: argparse.Namespace) -> dict[str, Any]:
+    """CIP Security: ``--security DIR`` serves EtherNet/IP over TLS too, on ``--security-port``."""
+    if args.security is None:
+        if args.security_port is not None:
+            raise UsageError("--security-port needs --security DIR")
+        return {}
+    port = 2221 if args.security_port is None else args.security_port
+    if not 0 <= port < 65536:
+        raise UsageError(f"--security-port {port} out of range")
+    return {"security": args.security, "security_port": port}
 
 
 def _limit_settings(args: argparse.Namespace) -> dict[str, Any]:
@@ -257,7 +269,7 @@ def _adapter_from_eds(args: argparse.Namespace) -> int:
     settings = AdapterSettings(host=args.host, port=args.port, max_sessions=args.max_sessions,
                                max_connections=args.max_connections, io_port=args.io_port,
                                control_path=args.control, status_lines=not args.quiet, **_limit_settings(args),
-                               **_http_settings(args))
+                               **_http_settings(args), **_security_settings(args))
     adapter = Adapter(settings, device=device)
     return _serve(adapter, args, "adapter")
 

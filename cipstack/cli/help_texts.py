@@ -310,6 +310,22 @@ COMMANDS: dict[tuple[str, ...], CommandText] = {
         "trip codes of its table, each with its CIP fault code.",
         (("cipstack drive trips", "what `cipstack drive trip` takes"),),
     ),
+    ("security",): CommandText(
+        "CIP Security: credentials for EtherNet/IP over TLS",
+        "CIP Security (EtherNet/IP over TLS on TCP 2221): make the folder of credentials that "
+        "`cipstack adapter --security DIR` serves with and a scanner connects with.",
+        (("cipstack security init lab", "a lab CA, the device's and the client's certificates and keys in lab/"),),
+    ),
+    ("security", "init"): CommandText(
+        "make a lab CA, device and client certificates, or a PSK",
+        "Write a lab certificate authority (ca.pem), the device's certificate and key (device.pem, "
+        "device.key) and the client's, that is the originator's (client.pem, client.key): ECDSA P-256 "
+        "keys, certificates signed with SHA-256, keys mode 0600. With --psk, a pre-shared key file "
+        "(psk.txt, one line IDENTITY:HEX, mode 0600) as well; with --psk-only, that file alone. A file "
+        "already there is kept unless --force is given.",
+        (("cipstack security init lab", "the lab CA and both key pairs in lab/"),
+         ("cipstack security init lab --psk --force", "the same, and a pre-shared key, replacing what is there")),
+    ),
     ("eds",): CommandText(
         "EDS files: generate, check, show, fetch",
         "Electronic Data Sheets: write the EDS files of the emulated models, check EDS files from "

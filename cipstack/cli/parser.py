@@ -207,6 +207,12 @@ def build_parser(command: str | None = None, texts: bool = True) -> argparse.Arg
                        help="write the --param values as over communication instead: not saved, so a "
                             "power-cycle loses them")
         p.add_argument("--quiet", action="store_true", help="no status line on stdout")
+        _complete(p.add_argument("--security", type=Path, metavar="DIR",
+                                 help="CIP Security: also serve EtherNet/IP over TLS, with the CA, device certificate "
+                                      "and key of DIR (`cipstack security init DIR`); client certificates are "
+                                      "verified against the CA"), _DIRECTORY)
+        p.add_argument("--security-port", type=number("security port"), metavar="N",
+                       help="TCP port of EtherNet/IP over TLS with --security (default 2221; 0 picks a free one)")
         _add_http_arguments(p)
         _complete(p.add_argument("--scenario", type=Path, metavar="FILE.toml",
                                  help="run this timeline of faults and actions (docs/scenarios.md), then exit: 0 when "
@@ -426,6 +432,22 @@ def build_parser(command: str | None = None, texts: bool = True) -> argparse.Arg
 
     if wanted("eds"):
         _add_eds_commands(sub)
+    if wanted("security"):
+        from .security import cmd_security_init
+
+        p = sub.add_parser("security")
+        security = p.add_subparsers(dest="security_command", metavar="COMMAND", title="commands", required=True,
+                                    parser_class=_Parser)
+        q = security.add_parser("init")
+        _complete(q.add_argument("folder", type=Path, metavar="DIR", help="the folder to write (made if missing)"),
+                  _DIRECTORY)
+        q.add_argument("--psk", action="store_true", help="also write a pre-shared key, psk.txt (IDENTITY:HEX)")
+        q.add_argument("--psk-only", action="store_true", help="write the pre-shared key and no certificate")
+        q.add_argument("--days", type=number("days"), default=825, metavar="N",
+                       help="validity of the device's and client's certificates (default %(default)s)")
+        q.add_argument("--force", action="store_true", help="replace files already there")
+        q.add_argument("--json", action="store_true", help="one JSON object per line")
+        q.set_defaults(func=cmd_security_init)
     if wanted("capture"):
         from ..capture.command import add_arguments as add_capture_arguments
 

@@ -9,6 +9,7 @@ over UDP (unicast or broadcast) and collects replies until its timeout.
 from __future__ import annotations
 
 import asyncio
+import contextlib
 import logging
 import socket
 from collections.abc import Sequence
@@ -17,7 +18,7 @@ from typing import TYPE_CHECKING, Any, TypeVar
 from ...cip.epath import Segment
 from ...cip.messages import MessageRouterResponse
 from ...cip.status import CipError, GeneralStatus
-from ...errors import PeerUnreachable
+from ...errors import CipstackError, PeerUnreachable
 from ..wire.cpf import Item
 from ..wire.encapsulation import DEFAULT_PORT, EncapsulationHeader
 from ..wire.identity_items import IdentityRecord, ServiceRecord
@@ -30,6 +31,7 @@ from .core import (
     NoReplyError,
     OriginatorCore,
     Plan,
+    SecureChannel,
     Transaction,
     parse_host,
 )
@@ -43,6 +45,9 @@ if TYPE_CHECKING:
     from .io_context import IoContext
 
 log = logging.getLogger(__name__)
+
+#: Seconds a secured client waits to learn why a connection closed as it opened (``_why_closed``).
+_REFUSAL_WAIT = 1.0
 T = TypeVar("T")
 
 if asyncio.TimeoutError is TimeoutError:
@@ -56,9 +61,12 @@ class _ClientProtocol(asyncio.Protocol):
     def __init__(self, client: EncapsulationClient) -> None:
         self.client = client
         self.transport: asyncio.Transport | None = None
+        #: Done when the connection is lost (a secured client waits on it to learn why it closed).
+        self.lost: asyncio.Future[None] | None = None
 
     def connection_made(self, transport: asyncio.BaseTransport) -> None:
         self.transport = transport  # type: ignore[assignment]  # a TCP connection's transport
+        self.lost = asyncio.get_running_loop().create_future()
         sock = transport.get_extra_info("socket")
         if sock is not None:
             sock.setsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY, 1)
@@ -68,6 +76,8 @@ class _ClientProtocol(asyncio.Protocol):
 
     def connection_lost(self, exc: Exception | None) -> None:
         self.client._lost(exc)
+        if self.lost is not None and not self.lost.done():
+            self.lost.set_result(None)
 
 
 class EncapsulationClient(CoreClient):
@@ -76,6 +86,10 @@ class EncapsulationClient(CoreClient):
     def __init__(self, host: str, port: int = DEFAULT_PORT, timeout: float = DEFAULT_TIMEOUT,
                  core: OriginatorCore | None = None) -> None:
         super().__init__(host, port, timeout, core)
+        #: CIP Security: the connection is TLS, made with this channel's context (None: plain TCP).
+        self.security: SecureChannel | None = None
+        #: Why a secured connection was ended by a TLS alert (raised by every later request).
+        self._refusal: CipstackError | None = None
         self._protocol: _ClientProtocol | None = None
         self._waiting: dict[Transaction[Any], asyncio.Future[Any]] = {}
         self._timer: asyncio.TimerHandle | None = None
@@ -83,21 +97,44 @@ class EncapsulationClient(CoreClient):
     # -- life cycle -----------------------------------------------------------------------------
     @classmethod
     async def connect(cls, host: str, port: int = DEFAULT_PORT, timeout: float = DEFAULT_TIMEOUT,
-                      register: bool = True) -> EncapsulationClient:
+                      register: bool = True, security: SecureChannel | None = None) -> EncapsulationClient:
+        """Connect (and register a session unless ``register`` is false); with ``security``, over
+        TLS (CIP Security: the device's port 2221)."""
         client = cls(host, port, timeout)
+        client.security = security
         await client.open(register)
         return client
 
     async def open(self, register: bool = True) -> None:
         loop = asyncio.get_running_loop()
+        security = self.security
+        context = security.client_context() if security is not None else None
         try:
             _, protocol = await asyncio.wait_for(
-                loop.create_connection(lambda: _ClientProtocol(self), self.host, self.port), self.timeout)
+                loop.create_connection(lambda: _ClientProtocol(self), self.host, self.port, ssl=context,
+                                       server_hostname="" if context is not None else None), self.timeout)
         except (OSError, asyncio.TimeoutError) as exc:
-            raise PeerUnreachable.connecting(self.host, self.port, exc) from None
+            refusal = security.refusal(exc, self.host, self.port) if security is not None else None
+            raise (refusal or PeerUnreachable.connecting(self.host, self.port, exc)) from None
         self._protocol = protocol
         if register:
-            await self.register_session()
+            try:
+                await self.register_session()
+            except PeerUnreachable:
+                refusal = await self._why_closed(protocol)
+                if refusal is None:
+                    raise
+                raise refusal from None
+
+    async def _why_closed(self, protocol: _ClientProtocol) -> CipstackError | None:
+        """The error of a connection that closed as it opened. A device that refuses a client's
+        certificate after a TLS 1.3 handshake (which the client has already finished) sends its alert
+        as the first request goes out: the transport is closing before asyncio reports why, a few
+        callbacks later. Wait for that (bounded): the alert's error, or None for any other end."""
+        if self.security is not None and protocol.lost is not None:
+            with contextlib.suppress(asyncio.TimeoutError):
+                await asyncio.wait_for(asyncio.shield(protocol.lost), _REFUSAL_WAIT)
+        return self._refusal
 
     def local_host(self) -> str:
         """The local address of the TCP connection (where T->O data should come)."""
@@ -141,6 +178,8 @@ class EncapsulationClient(CoreClient):
     def _write(self, frame: bytes) -> None:
         protocol = self._protocol
         if protocol is None or protocol.transport is None or protocol.transport.is_closing():
+            if self._refusal is not None:
+                raise self._refusal
             raise PeerUnreachable(f"connection to {self.host}:{self.port} is closed")
         protocol.transport.write(frame)
 
@@ -155,7 +194,9 @@ class EncapsulationClient(CoreClient):
                 future.set_exception(exc)
 
     def _lost(self, exc: Exception | None) -> None:
-        error = PeerUnreachable(f"connection to {self.host}:{self.port} lost" + (f": {exc}" if exc else ""))
+        refusal = self.security.refusal(exc, self.host, self.port) if self.security and exc else None
+        self._refusal = refusal
+        error = refusal or PeerUnreachable(f"connection to {self.host}:{self.port} lost" + (f": {exc}" if exc else ""))
         self.core.lost()
         for future in self._waiting.values():
             if not future.done():

@@ -19,6 +19,7 @@ from .core import (
     NoReplyError,
     OriginatorCore,
     Plan,
+    SecureChannel,
     Transaction,
     run_plan,
 )
@@ -54,18 +55,22 @@ class BlockingEncapsulationClient(CoreClient):
                  core: OriginatorCore | None = None) -> None:
         super().__init__(host, port, timeout, core)
         self._sock: socket.socket | None = None
+        self._security: SecureChannel | None = None
         self._sock_timeout: float | None = None
 
     @classmethod
     def connect(cls, host: str, port: int = DEFAULT_PORT, timeout: float = DEFAULT_TIMEOUT,
-                register: bool = True) -> BlockingEncapsulationClient:
-        """Connect (and register a session unless ``register`` is false)."""
+                register: bool = True, security: SecureChannel | None = None) -> BlockingEncapsulationClient:
+        """Connect (and register a session unless ``register`` is false); with ``security``, over
+        TLS (CIP Security: the device's port 2221)."""
         client = cls(host, port, timeout)
         try:
-            client._sock = _open(host, port, timeout)
+            sock = _open(host, port, timeout)
         except OSError as exc:
             raise PeerUnreachable.connecting(host, port, exc) from None
-        client._sock.setsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY, 1)
+        sock.setsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY, 1)
+        client._sock = sock if security is None else security.wrap_client(sock, host, port)
+        client._security = security
         if register:
             try:
                 client.perform(client.core.register_session())
@@ -98,7 +103,7 @@ class BlockingEncapsulationClient(CoreClient):
         try:
             self._sock.sendall(frame)
         except OSError as exc:
-            raise PeerUnreachable(f"connection to {self.host}:{self.port} lost: {exc}") from None
+            raise self._lost(exc) from None
 
     def perform(self, transaction: Transaction[T]) -> T:
         """Send ``transaction`` and wait for its reply; the reply's meaning, or the error it carries."""
@@ -117,7 +122,7 @@ class BlockingEncapsulationClient(CoreClient):
                 raise self._no_reply(transaction) from None
             except OSError as exc:
                 core.lost()
-                raise PeerUnreachable(f"connection to {self.host}:{self.port} lost: {exc}") from None
+                raise self._lost(exc) from None
             if not chunk:
                 core.lost()
                 raise PeerUnreachable(f"connection to {self.host}:{self.port} closed by the target")
@@ -126,6 +131,10 @@ class BlockingEncapsulationClient(CoreClient):
                     return transaction.result(header, body)
             if time.monotonic() >= transaction.deadline:  # only frames nothing waits for kept coming
                 raise self._no_reply(transaction)
+
+    def _lost(self, failure: OSError) -> CipstackError:
+        refusal = self._security.refusal(failure, self.host, self.port) if self._security is not None else None
+        return refusal or PeerUnreachable(f"connection to {self.host}:{self.port} lost: {failure}")
 
     def _no_reply(self, transaction: Transaction[Any]) -> NoReplyError:
         self.core.forget(transaction)
@@ -159,4 +168,4 @@ class BlockingEncapsulationClient(CoreClient):
         self.close()
 
 
-__all__ = ["BlockingEncapsulationClient"]
+__all__ = ["BlockingEncapsulationClient", "SecureChannel"]

@@ -22,11 +22,11 @@ import itertools
 import random
 import struct
 from collections.abc import Callable, Generator, Sequence
-from typing import TYPE_CHECKING, Any, Generic, TypeVar
+from typing import TYPE_CHECKING, Any, Generic, Protocol, TypeVar
 
 from ...cip.epath import Segment, encode_path, request_path
 from ...cip.messages import MessageRouterRequest, MessageRouterResponse, Service
-from ...errors import BadRequest, NoReply, PeerUnreachable
+from ...errors import BadRequest, CipstackError, NoReply, PeerUnreachable
 from ...logs import debug
 from ..wire.cpf import Item, ItemType, decode_items, encode_items
 from ..wire.encapsulation import (
@@ -43,6 +43,9 @@ from ..wire.encapsulation import (
 from .replies import EncapsulationStatusError, MalformedReplyError, decode_reply
 
 if TYPE_CHECKING:
+    import socket
+    import ssl
+
     # Imported where used: explicit messaging (a one-shot ``cipstack get``) does not load the
     # Connection Manager's messages (their dataclasses cost milliseconds to import).
     from ..wire.cm_messages import ConnectionTriad
@@ -475,6 +478,21 @@ class OriginatorCore:
                      closed)
 
 
+class SecureChannel(Protocol):
+    """What secures an originator's connection (CIP Security: ``cipstack.security.Credentials``)."""
+
+    def client_context(self) -> ssl.SSLContext:
+        """The TLS context of the originator's side (an asyncio client connects with it)."""
+
+    def wrap_client(self, sock: socket.socket, host: str, port: int) -> socket.socket:
+        """``sock`` after a TLS handshake as the originator (a blocking client); a ``SecurityError``
+        naming the cause if it fails."""
+
+    def refusal(self, failure: BaseException, host: str, port: int) -> CipstackError | None:
+        """The error to raise for a TLS failure (a handshake refused, or with TLS 1.3 an alert after it,
+        when the device judges the client's certificate); None for a failure that is not TLS's."""
+
+
 class CoreClient:
     """What every shell over the core holds: the target's address, the default reply timeout and
     the core itself, whose session and class 3 connection it shows."""
@@ -545,7 +563,26 @@ def one(transaction: Transaction[T]) -> Plan[T]:
     return (yield transaction)  # type: ignore[no-any-return]  # what the shell sends back is T
 
 
-__all__ = ["DEFAULT_TIMEOUT", "MESSAGE_ROUTER_PATH", "ORIGINATOR_VENDOR_ID", "Completion", "CoreClient",
-           "ExplicitConnectionInfo", "FrameBuffer", "NoReplyError", "OriginatorCore", "Plan", "Transaction",
-           "decode_message_reply", "decode_multiple_service", "encode_multiple_service", "one", "parse_host",
-           "rr_reply_data", "rr_reply_items", "rr_request_body", "run_plan"]
+__all__ = [
+    "DEFAULT_TIMEOUT",
+    "MESSAGE_ROUTER_PATH",
+    "ORIGINATOR_VENDOR_ID",
+    "Completion",
+    "CoreClient",
+    "ExplicitConnectionInfo",
+    "FrameBuffer",
+    "NoReplyError",
+    "OriginatorCore",
+    "Plan",
+    "SecureChannel",
+    "Transaction",
+    "decode_message_reply",
+    "decode_multiple_service",
+    "encode_multiple_service",
+    "one",
+    "parse_host",
+    "rr_reply_data",
+    "rr_reply_items",
+    "rr_request_body",
+    "run_plan",
+]

@@ -79,6 +79,9 @@ def encode_frame(command: int, data: bytes = b"", session: int = 0, status: int 
 PROTOCOL_VERSION = 1
 #: The registered EtherNet/IP port: TCP and UDP 44818 (explicit messages, ListIdentity).
 DEFAULT_PORT = 44818
+#: EtherNet/IP over TLS (TCP) and DTLS (UDP), CIP Security: 2221 (Wireshark's packet-enip.c,
+#: ``ENIP_SECURE_PORT``).
+SECURE_PORT = 2221
 #: The registered port of class 1 I/O: UDP 2222.
 DEFAULT_IO_PORT = 2222
 #: Seconds a TCP frame, once begun, has to arrive whole by default (``TargetSettings.frame_timeout``).

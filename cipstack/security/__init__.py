@@ -1,0 +1,12 @@
+"""CIP Security: EtherNet/IP over TLS as a shell around the same sans-I/O cores, and the credentials
+folder both roles read (``cipstack security init DIR`` writes it).
+
+``Credentials.load(DIR)`` gives the ``security=`` argument of ``SyncScanner``; ``cipstack adapter
+--security DIR`` serves TLS on TCP 2221 beside plain 44818. Nothing here is imported by the plain
+paths of the package: ``ssl`` and ``cryptography`` load only when security is asked for."""
+
+from __future__ import annotations
+
+from .credentials import SECURE_PORT, Credentials
+
+__all__ = ["SECURE_PORT", "Credentials"]
