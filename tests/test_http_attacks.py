@@ -33,7 +33,8 @@ pytest.importorskip("aiohttp", reason="aiohttp is not installed (the http extra)
 
 import aiohttp
 
-from cipstack.control.http import HEADER_TIMEOUT, MAX_CONNECTIONS, MAX_IN_FLIGHT
+from cipstack.control.http import MAX_IN_FLIGHT
+from cipstack.control.http_connections import HEADER_TIMEOUT, MAX_CONNECTIONS
 from cipstack.control.panel_app import MAX_STREAMS
 from tests.cli_errors import one_line_error
 from tests.ports import free_port

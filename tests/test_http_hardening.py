@@ -235,7 +235,7 @@ def test_idle_http_connections_neither_exhaust_the_process_nor_stay(tmp_path: Pa
     one is closed ``HEADER_TIMEOUT`` after it came."""
     import resource
 
-    from cipstack.control.http import HEADER_TIMEOUT, MAX_CONNECTIONS
+    from cipstack.control.http_connections import HEADER_TIMEOUT, MAX_CONNECTIONS
 
     def low_limit() -> None:
         resource.setrlimit(resource.RLIMIT_NOFILE, (256, 256))

@@ -39,7 +39,9 @@ def test_a_default_run_leaves_a_20_connection_device_up() -> None:
         report = run(target.host, target.port, eds=EDS, timeout=2.0, allow_writes=True, allow_reset=True)
         aborted, peak = target.aborted, target.peak_connections
     assert not aborted
-    assert peak <= 4, peak
+    # A few at once: the battery opens one or two, and the fake counts a connection until its serving
+    # thread has read the end, a poll later than the close, or longer on a loaded machine.
+    assert peak <= 8, peak
     verdicts = {o.id: (o.verdict, o.observed) for o in report}
     assert verdicts["encap.session_limit"] == (Verdict.NOT_RUN, NOT_RUN)
     assert report.failures == [], [(o.name, o.observed) for o in report.failures]
