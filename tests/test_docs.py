@@ -467,6 +467,7 @@ def shell_env(tmp_path: Path) -> dict[str, str]:
     env["PYTHONPATH"] = os.pathsep.join(p for p in (str(ROOT), env.get("PYTHONPATH", "")) if p)
     env["XDG_DATA_HOME"] = str(tmp_path / "data")   # parameters a block saves stay in its test
     env.pop("COLUMNS", None)
+    env.pop("PYTEST_ADDOPTS", None)   # the suite's options are not those of a page's own pytest
     env["LC_ALL"] = "C.UTF-8"
     return env
 

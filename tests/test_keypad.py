@@ -31,6 +31,7 @@ from cipstack.devices.acg.registers import ACG_REGISTERS
 from cipstack.devices.profiles import catalog_for
 from cipstack.scanner import Scanner
 from tests.http_client import call
+from tests.inner_pytest import environment
 from tests.optional import needs
 from tests.test_cli import one_line_error, run, start_adapter, stop
 from tests.waiting import wait_for
@@ -282,7 +283,8 @@ def test_the_factory_takes_an_rx_parameter(cip_adapter_factory):
 def test_the_pytest_plugin_takes_mx2_parameters(tmp_path: Path) -> None:
     (tmp_path / "test_mx2.py").write_text("from cipstack.cip.types import UINT\n" + textwrap.dedent(SUITE))
     result = subprocess.run([sys.executable, "-m", "pytest", "-q", "-p", "no:cacheprovider", "-p", "cipstack.testing",
-                             "test_mx2.py"], capture_output=True, text=True, cwd=tmp_path, timeout=180, check=False)
+                             "test_mx2.py"], capture_output=True, text=True, cwd=tmp_path, timeout=180, check=False,
+                            env=environment())
     assert "2 passed" in result.stdout, result.stdout + result.stderr
 
 

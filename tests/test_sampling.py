@@ -2,11 +2,11 @@
 
 from __future__ import annotations
 
-import os
 import subprocess
 import sys
 from pathlib import Path
 
+from tests.inner_pytest import environment
 from tests.sampling import VERSION_SENSITIVE
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -23,7 +23,7 @@ def _collected(tmp_path: Path, *options: str) -> list[str]:
     result = subprocess.run([sys.executable, "-m", "pytest", "-q", "-p", "no:cacheprovider", "-p", "tests.sampling",
                              "-n", "0", "--rootdir", str(tmp_path), "--collect-only", *options],
                             cwd=tmp_path, capture_output=True, text=True, timeout=120,
-                            env={**os.environ, "PYTHONPATH": str(ROOT)})
+                            env=environment(ROOT))
     assert result.returncode == 0, result.stdout + result.stderr
     return [line for line in result.stdout.splitlines() if "::" in line]
 

@@ -12,6 +12,8 @@ from pathlib import Path
 
 import pytest
 
+from tests.inner_pytest import environment
+
 if sys.version_info >= (3, 11):
     import tomllib
 else:
@@ -87,7 +89,8 @@ def test_a_bad_marker_option(cip_adapter):
 
 def pytest_in_subprocess(*args: str, cwd: Path) -> subprocess.CompletedProcess[str]:
     return subprocess.run([sys.executable, "-m", "pytest", "-q", "-p", "no:cacheprovider", "-p", "cipstack.testing",
-                           *args], capture_output=True, text=True, cwd=cwd, timeout=180, check=False)
+                           *args], capture_output=True, text=True, cwd=cwd, timeout=180, check=False,
+                          env=environment())
 
 
 def test_the_fixtures_in_a_users_suite(tmp_path: Path) -> None:

@@ -5,10 +5,11 @@ tests written here, with the plugin and without the project's conftest."""
 from __future__ import annotations
 
 import json
-import os
 import subprocess
 import sys
 from pathlib import Path
+
+from tests.inner_pytest import environment
 
 ROOT = Path(__file__).resolve().parents[1]
 
@@ -31,7 +32,7 @@ def run(tmp_path: Path, *options: str) -> subprocess.CompletedProcess[str]:
     return subprocess.run([sys.executable, "-m", "pytest", "-q", "-p", "no:cacheprovider", "-p", "tests.timing",
                            "-n", "0", "--rootdir", str(tmp_path), "test_three.py", *options],
                           cwd=tmp_path, capture_output=True, text=True, timeout=120,
-                          env={**os.environ, "PYTHONPATH": str(ROOT)})
+                          env=environment(ROOT))
 
 
 def _rows(stdout: str) -> dict[str, tuple[float, float]]:
