@@ -26,7 +26,7 @@ import pytest
 
 from cipstack.cip.status import CipError, GeneralStatus
 from cipstack.eip.originator.io_originator import IoTimeoutError
-from cipstack.errors import BadRequest, CipstackError, NoReply, PeerUnreachable
+from cipstack.errors import BadRequest, CipstackError, NoReply, PeerUnreachable, TimedOut
 from cipstack.scanner import Scanner, SyncScanner
 from cipstack.testing import DeviceOptions, EmulatedDevice
 from tests.ports import free_port, refused
@@ -273,3 +273,25 @@ def test_a_class_1_rpi_out_of_range(kind: str, device: EmulatedDevice) -> None:
     error = failure(kind, device.address, open_io, timeout=5)
     assert isinstance(error, BadRequest) and isinstance(error, ValueError)
     one_line(error, "RPI", "-1000000 us")
+
+
+@pytest.mark.parametrize("kind", KINDS)
+def test_an_input_condition_that_never_comes_true(kind: str, cip_adapter: EmulatedDevice) -> None:
+    """``wait_input`` whose condition stays false: ``TimedOut`` (a ``CipstackError``) after the timeout,
+    still a ``TimeoutError``, and on the async scanner still the ``asyncio.TimeoutError`` it was."""
+    options = {"output": 21, "input": 71, "rpi": 0.010, "target_io_port": cip_adapter.io_port}
+    if kind == "SyncScanner":
+        with cip_adapter.scanner() as scanner, scanner.io_connection(**options) as sync_io, \
+                pytest.raises(TimedOut) as raised:
+            sync_io.wait_input(lambda image: False, 0.2)
+    else:
+        async def run() -> None:
+            async with await Scanner.connect(cip_adapter.address) as scanner, \
+                    scanner.io_connection(**options) as io:
+                await io.wait_input(lambda image: False, 0.2)
+
+        with pytest.raises(asyncio.TimeoutError) as raised:
+            asyncio.run(run())
+        assert isinstance(raised.value, TimedOut)
+    assert isinstance(raised.value, CipstackError) and isinstance(raised.value, TimeoutError)
+    assert one_line(raised.value) == "input did not satisfy the condition within 0.2 s"

@@ -13,6 +13,7 @@ import asyncio
 from collections.abc import AsyncIterator
 from typing import TYPE_CHECKING, Any
 
+from ...errors import TimedOut
 from ..io_core import RUN_IDLE_HEADER_SIZE, SEQUENCE_COUNT_SIZE, IoStatistics
 from .class1 import (
     MAX_CONFIG_DATA,
@@ -135,7 +136,8 @@ class IoConnectionHandle:
                 yield ProcessImage(bytearray(data), self._input_schema, writable=False, where=self._input_where)
 
     async def wait_input(self, predicate: Any, timeout: float) -> ProcessImage:
-        """Wait until ``predicate(input_image)`` is true (or raise ``asyncio.TimeoutError``)."""
+        """Wait until ``predicate(input_image)`` is true, or raise ``InputTimedOut`` after ``timeout``
+        seconds (a ``TimedOut``, and still an ``asyncio.TimeoutError``)."""
         async def wait() -> ProcessImage:
             if self.connection.input and predicate(self.input):
                 return self.input
@@ -144,7 +146,15 @@ class IoConnectionHandle:
                     return image
             raise IoTimeoutError("input updates ended")
 
-        return await asyncio.wait_for(wait(), timeout)
+        try:
+            return await asyncio.wait_for(wait(), timeout)
+        except asyncio.TimeoutError:
+            raise InputTimedOut(f"input did not satisfy the condition within {timeout} s") from None
+
+
+class InputTimedOut(TimedOut, asyncio.TimeoutError):
+    """``wait_input``'s condition did not come true in time: a ``TimedOut`` of cipstack's, and still the
+    ``asyncio.TimeoutError`` callers caught before (on Python 3.10 not the builtin ``TimeoutError``)."""
 
 
 __all__ = ["MAX_CONFIG_DATA", "MAX_FORWARD_OPEN_SIZE", "RUN_IDLE_HEADER_SIZE", "SEQUENCE_COUNT_SIZE",
