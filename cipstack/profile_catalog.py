@@ -8,8 +8,7 @@ compact data (``devices/declared/``, by ``python -m cipstack.devices.decoding``,
 the device model's by ``tests/test_decoding_data.py``): the attributes' rows (name, type, access,
 unit, scale, range, enumeration) and where each parameter code is. ``decoding_catalog`` builds a
 catalog from them: the same ``source``, ``profile``, attributes and parameters as ``catalog_for``'s,
-each declaration built when first asked for. Only the assembly schemas (class 1 fields by name)
-come from the device model, loaded the first time ``assemblies`` is read.
+each declaration built when first asked for, the assembly schemas (class 1 fields by name) included.
 """
 
 from __future__ import annotations
@@ -36,13 +35,13 @@ def no_profile_source(vendor_id: int, product_code: int) -> str:
 
 
 class ProfileCatalog(Catalog):
-    """A profile's catalog from its compact declarations: attributes and parameters as ``catalog_for``
-    declares them; the assemblies from the device model on first use (``assemblies``)."""
+    """A profile's catalog from its compact declarations: attributes, parameters and assembly schemas
+    as ``catalog_for`` declares them, each built when first asked for."""
 
-    def __init__(self, name: str, vendor_id: int, product_code: int, source: str) -> None:
+    def __init__(self, name: str, source: str) -> None:
         data: Any = importlib.import_module(f"{DECLARED_PACKAGE}.{name}")
+        self._data = data
         resolvers = {class_id: _resolver(rows) for class_id, rows in data.RESOLVED.items()}
-        self._identity = (vendor_id, product_code)
         self._assemblies: dict[int, AssemblySchema] | None = None
         self._parameters: tuple[Parameter, ...] | None = None
         #: Parameter code -> (class, instance, attribute), as the generated data lists them.
@@ -53,11 +52,12 @@ class ProfileCatalog(Catalog):
     # The base class assigns both in its constructor; the property keeps them lazy.
     @property  # a lazy attribute where Catalog has a plain one
     def assemblies(self) -> dict[int, AssemblySchema]:
-        """The profile's assembly schemas, from its device model (imported now, the first time)."""
+        """The profile's assembly schemas, built from the compact data the first time."""
         if self._assemblies is None:
-            from .devices.profiles import catalog_for
+            from .assemblies.compact import assembly_schema
 
-            self._assemblies = catalog_for(*self._identity).assemblies
+            self._assemblies = {instance: assembly_schema(instance, data)
+                                for instance, data in self._data.ASSEMBLIES.items()}
         return self._assemblies
 
     @assemblies.setter
@@ -107,8 +107,8 @@ def decoding_catalog(vendor_id: int, product_code: int) -> Catalog:
     name = PROFILES.get((vendor_id, product_code))
     if name is None:
         return Catalog(source=no_profile_source(vendor_id, product_code), standard=compact_standard_classes())
-    return ProfileCatalog(name, vendor_id, product_code,
-                          f"profile {name} (vendor {vendor_id} product code {product_code}: {DESCRIPTIONS[name]})")
+    return ProfileCatalog(name, f"profile {name} (vendor {vendor_id} product code {product_code}: "
+                                f"{DESCRIPTIONS[name]})")
 
 
 def _resolver(rows: Mapping[tuple[int, int], Row]) -> Callable[[int, int], AttributeSpec | None]:

@@ -53,6 +53,25 @@ def test_every_declaration_decodes_alike(name: str) -> None:
                [decoding(a) for a in full.get_all_layout(0x2A) or []]
 
 
+@pytest.mark.parametrize("name", sorted(PROFILES))
+def test_every_assembly_schema_is_the_device_models(name: str) -> None:
+    """Class 1 fields are named by the compact data's schemas: the same fields (name, place, type,
+    width, unit, scale, help, linked attribute), size and description as the device model's, and the
+    same bytes for the same values."""
+    profile = PROFILES[name]
+    product_code = min(profile.product_codes)
+    full = catalog_for(profile.vendor_id, product_code).assemblies
+    compact = decoding_catalog(profile.vendor_id, product_code).assemblies
+    assert sorted(compact) == sorted(full) and full
+    for instance, schema in full.items():
+        built = compact[instance]
+        assert (built.name, built.size, built.description) == (schema.name, schema.size, schema.description)
+        assert built.fields == schema.fields, instance
+        data = bytes(range(1, schema.size + 1))
+        assert built.decode(data) == schema.decode(data)
+        assert built.encode(built.decode(data)) == schema.encode(schema.decode(data))
+
+
 def test_a_device_of_no_profile_gets_the_standard_objects() -> None:
     assert decoding_catalog(1, 1).source == catalog_for(1, 1).source
     assert decoding_catalog(1, 1).attribute(0x2A, 1, 102) is None
@@ -107,8 +126,9 @@ def test_every_parameter_code_is_the_device_model_s(name: str) -> None:
     assert compact.parameter("no such code") is None and full.parameter("no such code") is None
 
 
-def test_the_assemblies_come_from_the_device_model_when_asked_for() -> None:
-    """Decoding imports no device model; class 1 fields by name (``catalog.assemblies``) load it."""
+def test_the_assemblies_are_built_when_asked_for() -> None:
+    """Class 1 fields by name (``catalog.assemblies``): the device model's schemas, in its order, in a
+    copy of the catalog too."""
     compact, full = decoding_catalog(259, 100), catalog_for(259, 100)
     copied = compact.copy("mine")
     assert sorted(compact.assemblies) == sorted(full.assemblies) and len(full.assemblies) >= 8

@@ -50,7 +50,7 @@ ALLOWED = {
     # Parameters by code: the catalog's declarations, read and written through the scanner it is given.
     "parameter_codes": {"catalog", "cip", "errors"},
     # A profile's catalog from its generated compact declarations (the device model only for assemblies).
-    "profile_catalog": {"catalog", "cip", "devices", "errors"},
+    "profile_catalog": {"assemblies", "catalog", "cip", "devices", "errors"},
     "sync_io": {"eip", "errors"},
     "params": {"catalog", "cip", "errors"},
     "catalog": {"assemblies", "cip", "eip", "objects", "errors"},

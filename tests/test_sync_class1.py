@@ -59,6 +59,33 @@ def test_sync_io_connection_imports_no_asyncio_and_runs_no_thread() -> None:
     assert report["received"] > 0 and report["sent"] > 0 and "speed_actual" in report["fields"]
 
 
+#: The same, the fields named by the profile the device identifies as: its catalog is the compact data's,
+#: and building it imports no asyncio, nothing of the target, and no device module beyond the generated one.
+IDENTIFIED = """
+import json, sys
+from cipstack.scanner import SyncScanner
+
+address, io_port = sys.argv[1], int(sys.argv[2])
+with SyncScanner(address) as scanner, \\
+        scanner.io_connection(output=21, input=71, rpi=0.010, timeout_multiplier=5, target_io_port=io_port) as io:
+    io.update(speed_reference=300, run_forward=False)
+    image = io.wait_input(lambda i: True, timeout=10)
+loaded = [name for name in sys.modules if name == "asyncio" or name.startswith("cipstack.eip.target")
+          or (name.startswith("cipstack.devices.") and not name.startswith("cipstack.devices.declared"))]
+print(json.dumps({"loaded": loaded, "fields": sorted(image.fields())}))
+"""
+
+
+def test_class1_fields_named_by_the_identified_profile_load_no_device_model() -> None:
+    with adapter_process() as (address, io_port):
+        done = subprocess.run([sys.executable, "-c", IDENTIFIED, address, str(io_port)], capture_output=True,
+                              text=True, timeout=60)
+    assert done.returncode == 0, done.stderr
+    report = json.loads(done.stdout)
+    assert report["loaded"] == []
+    assert {"speed_actual", "running_forward", "at_reference"} <= set(report["fields"])
+
+
 def test_sleep_keeps_the_connection_running() -> None:
     """At 10 ms and multiplier 0 the target times out after 40 ms of silence: ``io.sleep`` for ten times
     that keeps producing, and the target's data keeps coming."""

@@ -16,6 +16,7 @@ from collections.abc import Callable, Iterator
 from pathlib import Path
 from typing import Any
 
+from ..assemblies.compact import assembly_data
 from ..catalog import Catalog
 from ..cip.compact import Row, classes_data, row_of
 from ..cip.model import AttributeSpec
@@ -59,6 +60,7 @@ def generate() -> dict[str, str]:
                                 if standard.get(class_id) is not spec and class_id not in catalog.resolvers})
         resolved = {class_id: dict(_resolved_rows(resolve)) for class_id, resolve in sorted(catalog.resolvers.items())}
         parameters = _parameter_paths(name, catalog)
+        assemblies = {instance: assembly_data(schema) for instance, schema in catalog.assemblies.items()}
         files[f"{name}.py"] = (
             f'{header}The attribute declarations of profile {name} that replies decode by."""\n\n'
             f"PROFILE = {catalog.profile!r}\n\n"
@@ -68,7 +70,10 @@ def generate() -> dict[str, str]:
             f"RESOLVED = {_pretty(resolved)}\n\n"
             f"#: The parameters a recipe holds, by code, in the catalog's order: (code, class, instance, attribute),\n"
             f"#: each declared as the attribute at its path is.\n"
-            f"PARAMETERS = {_pretty_list(parameters)}\n")
+            f"PARAMETERS = {_pretty_list(parameters)}\n\n"
+            f"#: instance -> (name, size, description, fields), the assemblies' schemas (class 1 fields by name);\n"
+            f"#: each field (name, offset, type, bits, bit, unit, scale, help, link), as ``assembly_data`` writes it.\n"
+            f"ASSEMBLIES = {_pretty(assemblies)}\n")
     files["__init__.py"] = (
         f'{header}Which profile a device is, by its identity, and what the profile is."""\n\n'
         f"#: (vendor id, product code) -> profile.\nPROFILES = {_pretty(identities)}\n\n"
@@ -119,6 +124,9 @@ def _pretty_inner(value: Any) -> str:
         return "{\n" + "\n".join(f"        {k!r}: {v!r}," for k, v in value.items()) + "\n    }"
     if isinstance(value, tuple) and len(value) == 2 and isinstance(value[1], list):
         return "(" + repr(value[0]) + ", [\n" + "\n".join(f"        {row!r}," for row in value[1]) + "\n    ])"
+    if isinstance(value, tuple) and len(value) == 4 and isinstance(value[3], list):   # an assembly
+        head = ", ".join(repr(part) for part in value[:3])
+        return f"({head}, [\n" + "\n".join(f"        {row!r}," for row in value[3]) + "\n    ])"
     return repr(value)
 
 

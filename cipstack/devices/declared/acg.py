@@ -896,3 +896,68 @@ PARAMETERS = [
     ('CM.92', 100, 7, 92),
     ('CM.93', 100, 7, 93),
 ]
+
+#: instance -> (name, size, description, fields), the assemblies' schemas (class 1 fields by name);
+#: each field (name, offset, type, bits, bit, unit, scale, help, link), as ``assembly_data`` writes it.
+ASSEMBLIES = {
+    20: ('Basic Speed Control Output', 4, '', [
+        ('run_forward', 0, 'USINT', 1, 0, '', 1.0, 'Forward run command', (41, 1, 3)),
+        ('fault_reset', 0, 'USINT', 1, 2, '', 1.0, 'Fault reset on a 0 to 1 transition', (41, 1, 12)),
+        ('speed_reference', 2, 'INT', 0, 0, 'rpm', 1.0, 'Speed reference', (42, 1, 8)),
+    ]),
+    21: ('Extended Speed Control Output', 4, '', [
+        ('run_forward', 0, 'USINT', 1, 0, '', 1.0, 'Forward run command', (41, 1, 3)),
+        ('run_reverse', 0, 'USINT', 1, 1, '', 1.0, 'Reverse run command', (41, 1, 4)),
+        ('fault_reset', 0, 'USINT', 1, 2, '', 1.0, 'Fault reset on a 0 to 1 transition', (41, 1, 12)),
+        ('net_ctrl', 0, 'USINT', 1, 5, '', 1.0, 'Run command from the network', (41, 1, 5)),
+        ('net_ref', 0, 'USINT', 1, 6, '', 1.0, 'Speed reference from the network', (42, 1, 4)),
+        ('speed_reference', 2, 'INT', 0, 0, 'rpm', 1.0, 'Speed reference', (42, 1, 8)),
+    ]),
+    100: ('Basic Speed Control Output', 4, '', [
+        ('run_forward', 0, 'USINT', 1, 0, '', 1.0, 'Forward run command', (41, 1, 3)),
+        ('fault_reset', 0, 'USINT', 1, 2, '', 1.0, 'Fault reset on a 0 to 1 transition', (41, 1, 12)),
+        ('speed_reference', 2, 'UINT', 0, 0, 'Hz', 0.01, 'Speed reference (Frequency command, 0x0380)', (42, 1, 8)),
+    ]),
+    101: ('Extended Speed Control Output', 4, '', [
+        ('run_forward', 0, 'USINT', 1, 0, '', 1.0, 'Forward run command', (41, 1, 3)),
+        ('run_reverse', 0, 'USINT', 1, 1, '', 1.0, 'Reverse run command', (41, 1, 4)),
+        ('fault_reset', 0, 'USINT', 1, 2, '', 1.0, 'Fault reset on a 0 to 1 transition', (41, 1, 12)),
+        ('net_ctrl', 0, 'USINT', 1, 5, '', 1.0, 'Run command from the network', (41, 1, 5)),
+        ('net_ref', 0, 'USINT', 1, 6, '', 1.0, 'Speed reference from the network', (42, 1, 4)),
+        ('speed_reference', 2, 'UINT', 0, 0, 'Hz', 0.01, 'Speed reference (Frequency command, 0x0380)', (42, 1, 8)),
+    ]),
+    70: ('Basic Speed Control Input', 4, '', [
+        ('faulted', 0, 'USINT', 1, 0, '', 1.0, 'Fault or trip', (41, 1, 10)),
+        ('running_forward', 0, 'USINT', 1, 2, '', 1.0, 'Running forward', (41, 1, 7)),
+        ('speed_actual', 2, 'INT', 0, 0, 'rpm', 1.0, 'Actual speed', (42, 1, 7)),
+    ]),
+    71: ('Extended Speed Control Input', 4, '', [
+        ('faulted', 0, 'USINT', 1, 0, '', 1.0, 'Fault or trip', (41, 1, 10)),
+        ('warning', 0, 'USINT', 1, 1, '', 1.0, 'Warning', (41, 1, 11)),
+        ('running_forward', 0, 'USINT', 1, 2, '', 1.0, 'Running forward', (41, 1, 7)),
+        ('running_reverse', 0, 'USINT', 1, 3, '', 1.0, 'Running reverse', (41, 1, 8)),
+        ('ready', 0, 'USINT', 1, 4, '', 1.0, 'Ready', (41, 1, 9)),
+        ('ctrl_from_net', 0, 'USINT', 1, 5, '', 1.0, 'Run command comes from the network', (41, 1, 14)),
+        ('ref_from_net', 0, 'USINT', 1, 6, '', 1.0, 'Speed reference comes from the network', (42, 1, 29)),
+        ('at_reference', 0, 'USINT', 1, 7, '', 1.0, 'Speed has reached the reference', (42, 1, 3)),
+        ('drive_state', 1, 'USINT', 0, 0, '', 1.0, 'Drive state (Control Supervisor attribute 6)', (41, 1, 6)),
+        ('speed_actual', 2, 'INT', 0, 0, 'rpm', 1.0, 'Actual speed', (42, 1, 7)),
+    ]),
+    110: ('Basic Speed Control Input', 4, '', [
+        ('faulted', 0, 'USINT', 1, 0, '', 1.0, 'Fault or trip', (41, 1, 10)),
+        ('running_forward', 0, 'USINT', 1, 2, '', 1.0, 'Running forward', (41, 1, 7)),
+        ('speed_actual', 2, 'UINT', 0, 0, 'Hz', 0.01, 'Actual speed (Output frequency, 0x000A)', (42, 1, 7)),
+    ]),
+    111: ('Extended Speed Control Input', 4, '', [
+        ('faulted', 0, 'USINT', 1, 0, '', 1.0, 'Fault or trip', (41, 1, 10)),
+        ('warning', 0, 'USINT', 1, 1, '', 1.0, 'Warning', (41, 1, 11)),
+        ('running_forward', 0, 'USINT', 1, 2, '', 1.0, 'Running forward', (41, 1, 7)),
+        ('running_reverse', 0, 'USINT', 1, 3, '', 1.0, 'Running reverse', (41, 1, 8)),
+        ('ready', 0, 'USINT', 1, 4, '', 1.0, 'Ready', (41, 1, 9)),
+        ('ctrl_from_net', 0, 'USINT', 1, 5, '', 1.0, 'Run command comes from the network', (41, 1, 14)),
+        ('ref_from_net', 0, 'USINT', 1, 6, '', 1.0, 'Speed reference comes from the network', (42, 1, 29)),
+        ('at_reference', 0, 'USINT', 1, 7, '', 1.0, 'Speed has reached the reference', (42, 1, 3)),
+        ('drive_state', 1, 'USINT', 0, 0, '', 1.0, 'Drive state (Control Supervisor attribute 6)', (41, 1, 6)),
+        ('speed_actual', 2, 'UINT', 0, 0, 'Hz', 0.01, 'Actual speed (Output frequency, 0x000A)', (42, 1, 7)),
+    ]),
+}
