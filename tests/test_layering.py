@@ -49,7 +49,7 @@ ALLOWED = {
     "async_scanner": {"catalog", "cip", "eip", "errors", "scanner"},
     # Parameters by code: the catalog's declarations, read and written through the scanner it is given.
     "parameter_codes": {"catalog", "cip", "errors"},
-    # A profile's catalog from its generated compact declarations (the device model only for assemblies).
+    # A profile's catalog from its generated compact declarations (devices/declared), assemblies included.
     "profile_catalog": {"assemblies", "catalog", "cip", "devices", "errors"},
     "sync_io": {"eip", "errors"},
     "params": {"catalog", "cip", "errors"},
