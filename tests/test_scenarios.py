@@ -140,12 +140,81 @@ def test_a_step_that_does_not_fire_is_exit_1(tmp_path: Path) -> None:
     assert "step 1 did not fire: no clear (on trip) within 0.3s" in result.stdout
 
 
+#: Every action a step can take, each kind of fault among them (explicit, device: link and power) and both
+#: clears, each step after the first waiting for what the one before did where an event shows it.
+EVERY_KIND = """
+[[step]]
+at = "0.1s"
+fault = "delay-replies"
+options = { by = "10ms" }
+
+[[step]]
+name = "named clear"
+at = "0.2s"
+clear = "delay-replies"
+
+[[step]]
+on = "fault cleared"
+within = "2s"
+trip = "0x4200"
+
+[[step]]
+on = "trip"
+within = "2s"
+fault = "unplug"
+
+[[step]]
+at = "0.5s"
+fault = "plug"
+
+[[step]]
+at = "0.6s"
+fault = "power-cycle"
+options = { off = "0.2s" }
+
+[[step]]
+at = "1.2s"
+fault = "refuse-forward-open"
+options = { status = "0x0113" }
+
+[[step]]
+name = "clear all"
+on = "fault applied"
+within = "2s"
+clear = true
+"""
+
+
+def test_every_step_kind_runs_from_a_file(tmp_path: Path) -> None:
+    """A fault by name with options, a clear by name (the step after it waits for its event), a trip,
+    the link unplugged and plugged, the power cycled, a Forward_Open refusal, and clear all."""
+    scenario = tmp_path / "every.toml"
+    scenario.write_text(EVERY_KIND)
+    port = free_port()
+    result = subprocess.run([sys.executable, "-m", "cipstack", "adapter", "--port", str(port), "--io-port", "0",
+                             "--quiet", "--state", str(tmp_path / "s.json"), "--control", str(tmp_path / "c.sock"),
+                             "--scenario", str(scenario)], capture_output=True, text=True, timeout=60)
+    assert "Traceback" not in result.stderr, result.stderr
+    fired = [line.split("s  ", 1)[1] for line in result.stdout.splitlines() if " fired: " in line]
+    assert fired == ["step 1 fired: fault delay-replies --by 0.01s (at 0.1s)",
+                     "named clear fired: clear delay-replies (at 0.2s)",
+                     "step 3 fired: trip 0x4200 (on fault cleared)",
+                     "step 4 fired: fault unplug (on trip)",
+                     "step 5 fired: fault plug (at 0.5s)",
+                     "step 6 fired: fault power-cycle --off 0.2s (at 0.6s)",
+                     "step 7 fired: fault refuse-forward-open --status 0x0113 (at 1.2s)",
+                     "clear all fired: clear (on fault applied)"], result.stdout
+    assert result.returncode == 0, result.stdout
+    assert result.stdout.splitlines()[-1].endswith("complete: every step fired; no fault left active")
+
+
 @pytest.mark.parametrize(("text", "message"), [
     ("[[step]]\nat = \"1s\"\nfault = \"stop\"\n", "step 1: unknown fault 'stop'; valid: stop-producing"),
     ("[[step]]\nfault = \"unplug\"\n", "step 1: one trigger, at = TIME or on = EVENT"),
     ("[[step]]\nat = \"1s\"\n", "step 1: one action, fault = NAME, clear = true or trip = CODE"),
     ("[[step]]\nat = \"1s\"\nclear = true\ncolour = 1\n", "step 1: unknown key 'colour'"),
     ("[[step\n", "not TOML"),
+    ("[[step]]\nat = \"1s\"\nclear = \"bogus\"\n", "step 1: unknown fault 'bogus'; valid: stop-producing"),
 ])
 def test_a_scenario_that_cannot_run_is_one_line(tmp_path: Path, text: str, message: str) -> None:
     scenario = tmp_path / "bad.toml"

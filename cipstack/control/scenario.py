@@ -29,7 +29,7 @@ from typing import TYPE_CHECKING, Any
 
 from ..errors import BadRequest
 from ..faults import FaultError, FaultRequest
-from ..faults.model import JSON_SPELLING, parse_duration, shown
+from ..faults.model import JSON_SPELLING, kind_of, parse_duration, shown
 from .events import EVENT_KINDS
 
 if sys.version_info >= (3, 11):
@@ -154,6 +154,8 @@ def _step(path: Path, number: int, raw: Any) -> Step:
         clear = raw.get("clear", False)
         if not isinstance(clear, (bool, str)):
             raise ScenarioError(f"{where}: clear is true or a fault's name")
+        if isinstance(clear, str):
+            kind_of(clear)      # a name no fault has is refused now, not when the step fires
     except FaultError as exc:
         raise ScenarioError(f"{where}: {exc}") from None
     return Step(number, str(raw.get("name", f"step {number}")), at, on, float(hz) if hz is not None else None,
@@ -251,6 +253,6 @@ async def _act(service: DeviceService, step: Step) -> None:
     if step.fault is not None:
         await service.call_async("fault", {"name": step.fault.name, "options": step.fault.as_json()})
     elif step.clear:
-        await service.call_async("clear", {"which": step.clear} if isinstance(step.clear, str) else {})
+        await service.call_async("clear", {"fault": step.clear} if isinstance(step.clear, str) else {})
     else:
         service.call("trip", {"code": step.trip})
