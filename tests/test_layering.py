@@ -8,6 +8,7 @@ the other way round."""
 from __future__ import annotations
 
 import ast
+import functools
 from pathlib import Path
 
 import pytest
@@ -57,7 +58,17 @@ ALLOWED = {
     "listening": {"errors"},
     # CIP Security: TLS shells around the encapsulation cores, credentials and provisioning.
     "security": {"eip", "errors"},
+    # The EDS tool reads the devices' declarations and writes their files; compared with a live device,
+    # it asks the scanner it is given through a protocol of its own (``eds.against.LiveDevice``).
+    "eds": {"assemblies", "catalog", "cip", "devices", "eip", "objects", "errors"},
+    # Capture analysis decodes what the devices and EDS files declare.
+    "capture": {"assemblies", "catalog", "cip", "componet", "devices", "eds", "eip", "errors"},
+    # A fleet: adapters in worker processes, their control planes relayed.
+    "fleet": {"adapter", "control", "devices", "eds", "eip", "errors", "listening", "modbus", "runtime"},
 }
+
+#: Parts that are one part in two modules (the blocking and the asyncio scanner name each other).
+SAME_PART = {"async_scanner": "scanner"}
 
 #: The parts that sit on top: nothing else in the package imports them (DESIGN.md).
 ON_TOP = {"conformance": {"cli"},
@@ -78,12 +89,18 @@ def _type_checking_only(tree: ast.Module) -> set[int]:
     return lines
 
 
+@functools.cache
+def _tree(path: Path) -> ast.Module:
+    """A module's syntax tree, parsed once for every check of the run."""
+    return ast.parse(path.read_text(encoding="utf-8"))
+
+
 def _imports(path: Path, type_checking: bool = False) -> set[str]:
     """The top-level parts of ``cipstack`` a module imports (relative or absolute); with
     ``type_checking``, its imports for annotations too."""
     part_depth = len(path.relative_to(PACKAGE).parts) - 1     # package levels below cipstack/
     found: set[str] = set()
-    tree = ast.parse(path.read_text(encoding="utf-8"))
+    tree = _tree(path)
     typing_only = set() if type_checking else _type_checking_only(tree)
     for node in ast.walk(tree):
         if getattr(node, "lineno", None) in typing_only:
@@ -164,3 +181,34 @@ def test_the_import_graph_has_no_circle_through_the_adapter() -> None:
         seen.add(part)
         todo.extend(graph[part])
     assert "adapter" not in seen and seen >= {"runtime", "faults", "control"}
+
+
+def test_no_arrow_runs_up_annotations_included() -> None:
+    """Between the parts, imports for annotations included, the graph has no circle: no part depends,
+    even for a type, on a part that depends on it."""
+    def part_of(name: str) -> str:
+        return SAME_PART.get(name, name)
+
+    graph: dict[str, set[str]] = {}
+    for path in sorted(PACKAGE.rglob("*.py")):
+        part = part_of(path.relative_to(PACKAGE).parts[0].removesuffix(".py"))
+        if part in ("__init__", "__main__"):
+            continue
+        graph.setdefault(part, set()).update(part_of(p) for p in _imports(path, type_checking=True))
+    for part in graph:
+        graph[part] &= set(graph) - {part}
+
+    def reaches(start: str, goal: str) -> list[str] | None:
+        paths, seen = [[start]], {start}
+        while paths:
+            path = paths.pop()
+            for nxt in sorted(graph[path[-1]]):
+                if nxt == goal:
+                    return [*path, nxt]
+                if nxt not in seen:
+                    seen.add(nxt)
+                    paths.append([*path, nxt])
+        return None
+
+    circles = [circle for part in sorted(graph) if (circle := reaches(part, part)) is not None]
+    assert circles == []

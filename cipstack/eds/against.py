@@ -31,17 +31,41 @@ import asyncio
 import re
 from collections.abc import Awaitable, Callable
 from dataclasses import dataclass, field
-from typing import TYPE_CHECKING, Any, TypeVar
+from typing import TYPE_CHECKING, Any, Protocol, TypeVar
 
 from ..cip.status import CipError, GeneralStatus, describe_status
-from ..cip.types import SHORT_STRING, UINT, USINT, IntegerType, RealType
+from ..cip.types import SHORT_STRING, UINT, USINT, CipType, IntegerType, RealType
 from . import refusals
 from .checker import ERROR, INFO, WARNING, Finding
 from .interpret import ConnectionInfo, ParamInfo, read_view
 from .model import EdsDocument
 
 if TYPE_CHECKING:
-    from ..scanner import Scanner
+    from contextlib import AbstractAsyncContextManager
+
+    from ..cip.values import Value
+    from ..eip.wire.identity_items import IdentityRecord
+
+
+class _Reply(Protocol):
+    @property
+    def data(self) -> bytes: ...
+
+
+class LiveDevice(Protocol):
+    """What the comparison asks of the device: a connected ``cipstack.Scanner`` is one. Named here, the
+    EDS checker lies below the scanner and never imports it."""
+
+    async def get_attributes_all(self, class_id: int, instance: int) -> tuple[bytes, dict[str, Any] | None]: ...
+
+    async def get_attribute_single(self, class_id: int, instance: int, attribute: int) -> _Reply: ...
+
+    async def read(self, class_id: int, instance: int, attribute: int, cip_type: CipType | None = None) -> Value: ...
+
+    async def list_identity(self) -> list[IdentityRecord]: ...
+
+    def io_connection_from_eds(self, doc: EdsDocument, connection: int,
+                               **options: Any) -> AbstractAsyncContextManager[Any]: ...
 
 T = TypeVar("T")
 
@@ -85,7 +109,7 @@ def _find(report: LiveReport, rule: str, line: int, message: str, severity: str 
     report.findings.append(Finding(rule, severity, line, message))
 
 
-async def _identity(scanner: Scanner, report: LiveReport) -> None:
+async def _identity(scanner: LiveDevice, report: LiveReport) -> None:
     try:
         _, values = await scanner.get_attributes_all(0x01, 1)
     except CipError as exc:
@@ -120,7 +144,7 @@ async def _identity(scanner: Scanner, report: LiveReport) -> None:
                            "product_name": record.product_name}
 
 
-async def _parameter(scanner: Scanner, param: ParamInfo, report: LiveReport) -> None:
+async def _parameter(scanner: LiveDevice, param: ParamInfo, report: LiveReport) -> None:
     assert param.link is not None
     class_id, instance, attribute = param.link
     where = f"{param.keyword} ({param.name}) at 0x{class_id:02X}/{instance}/{attribute}"
@@ -154,7 +178,7 @@ async def _parameter(scanner: Scanner, param: ParamInfo, report: LiveReport) -> 
                   f"{where}: the device holds {value}, outside the file's {low}..{high}", WARNING)
 
 
-async def _assembly(scanner: Scanner, keyword: str, instance: int, size: int, line: int, report: LiveReport) -> None:
+async def _assembly(scanner: LiveDevice, keyword: str, instance: int, size: int, line: int, report: LiveReport) -> None:
     where = f"{keyword} (Assembly instance {instance})"
     try:
         served = int(await scanner.read(0x04, instance, 4, UINT))
@@ -185,7 +209,7 @@ class _Attempt:
     owners_refused: list[tuple[ConnectionInfo, CipError]] = field(default_factory=list)
 
 
-async def _connection(scanner: Scanner, doc: EdsDocument, connection: ConnectionInfo, owners: list[ConnectionInfo],
+async def _connection(scanner: LiveDevice, doc: EdsDocument, connection: ConnectionInfo, owners: list[ConnectionInfo],
                       options: dict[str, Any], report: LiveReport) -> _Attempt | None:
     """Open and close ``connection``; None when the attempt is a finding already (no answer, or the
     file's declaration cannot be sent)."""
@@ -272,7 +296,7 @@ async def _guarded(step: Awaitable[T], report: LiveReport, what: str) -> T | Non
     return None
 
 
-async def compare_with_device(doc: EdsDocument, scanner: Scanner, *, target_io_port: int | None = None,
+async def compare_with_device(doc: EdsDocument, scanner: LiveDevice, *, target_io_port: int | None = None,
                               connections: bool = True) -> LiveReport:
     """Everything the module docstring lists, for one document."""
     report = LiveReport()
