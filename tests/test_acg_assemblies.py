@@ -7,7 +7,8 @@ import pytest
 from cipstack.assemblies.acg import INPUT_INSTANCES, OUTPUT_INSTANCES, assembly_size, parameter_words
 from cipstack.devices.acg.device import AcgDevice, build_acg_device
 from cipstack.devices.acg.drive import Trip
-from cipstack.devices.acg.registers import ACG_REGISTERS, OperationStatus
+from cipstack.devices.acg.registers import ACG_REGISTERS
+from cipstack.devices.acg.status_words import OperationStatus
 
 
 def addr(code: str) -> int:

@@ -16,13 +16,8 @@ from cipstack.devices.acg.drive import (
     Trip,
     drive_run_action,
 )
-from cipstack.devices.acg.registers import (
-    ACG_REGISTERS,
-    LatchTrip1,
-    LevelTrip,
-    OperationStatus,
-    WarningInformation,
-)
+from cipstack.devices.acg.registers import ACG_REGISTERS
+from cipstack.devices.acg.status_words import LatchTrip1, LevelTrip, OperationStatus, WarningInformation
 from cipstack.devices.registers import RegisterError, RegisterRefusal
 
 

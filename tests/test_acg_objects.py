@@ -14,7 +14,8 @@ from cipstack.cip.router import RequestContext
 from cipstack.devices.acg.device import AcgDevice, build_acg_device
 from cipstack.devices.acg.drive import DriveState, Trip
 from cipstack.devices.acg.objects import CATALOG_CLASSES
-from cipstack.devices.acg.registers import ACG_REGISTERS, CLASS_64_INSTANCES, OperationStatus, class64_path
+from cipstack.devices.acg.registers import ACG_REGISTERS, CLASS_64_INSTANCES, class64_path
+from cipstack.devices.acg.status_words import OperationStatus
 from cipstack.devices.profiles import serial_from_mac
 from cipstack.devices.state import StateFileError
 from cipstack.errors import StateRefused

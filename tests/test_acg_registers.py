@@ -8,6 +8,7 @@ from hypothesis import strategies as st
 
 from cipstack.cip.types import INT, UINT
 from cipstack.devices.acg import registers as acg
+from cipstack.devices.acg import status_words as words
 from cipstack.devices.acg.registers import (
     ACG_REGISTERS,
     ALIASES,
@@ -68,17 +69,18 @@ def test_monitoring_values_from_the_table() -> None:
 
 
 def test_trip_and_warning_bits_from_the_monitoring_table() -> None:
-    assert acg.LatchTrip1.FUSE_OPEN == 1 << 15 and acg.LatchTrip1.OVERLOAD == 1
-    assert acg.LatchTrip2.NO_MOTOR == 1 << 9 and acg.LatchTrip2.FAN_TRIP == 1 << 3
-    assert acg.LevelTrip.BX == 1 and acg.LevelTrip.LOST_COMMAND == 1 << 2
-    assert acg.WarningInformation.LOST_COMMAND == 1 << 3
-    assert acg.OperationStatus.SPEED_REACHED == 1 << 6 and acg.OperationStatus.FREQUENCY_FROM_COMMUNICATION == 1 << 14
+    assert words.LatchTrip1.FUSE_OPEN == 1 << 15 and words.LatchTrip1.OVERLOAD == 1
+    assert words.LatchTrip2.NO_MOTOR == 1 << 9 and words.LatchTrip2.FAN_TRIP == 1 << 3
+    assert words.LevelTrip.BX == 1 and words.LevelTrip.LOST_COMMAND == 1 << 2
+    assert words.WarningInformation.LOST_COMMAND == 1 << 3
+    assert words.OperationStatus.SPEED_REACHED == 1 << 6
+    assert words.OperationStatus.FREQUENCY_FROM_COMMUNICATION == 1 << 14
 
 
 def test_control_word_examples() -> None:
     # ACG RS-485 manual: "Forward operation command 0003h, Reverse operation command 0001h."
-    assert acg.ControlCommand.RUN | acg.ControlCommand.FORWARD == 0x0003
-    assert acg.ControlCommand.RUN == 0x0001
+    assert words.ControlCommand.RUN | words.ControlCommand.FORWARD == 0x0003
+    assert words.ControlCommand.RUN == 0x0001
 
 
 def test_memory_control_marks() -> None:

@@ -21,20 +21,10 @@ from typing import TYPE_CHECKING
 
 from ..registers import RegisterError, RegisterMap, RegisterRefusal
 from . import registers as reg
-from .registers import (
-    ALIASES,
-    CMD_SOURCE,
-    FREQ_REF_SOURCE,
-    MAX_FREQUENCY,
-    RATED_VOLTAGE,
-    SPEED_REFERENCE,
-    FaultTripInformation,
-    OperationDirection,
-    OperationHealth,
-    OperationPhase,
-    OperationStatus,
-)
+from . import status_words as words
+from .registers import ALIASES, CMD_SOURCE, FREQ_REF_SOURCE, MAX_FREQUENCY, RATED_VOLTAGE, SPEED_REFERENCE
 from .run_command import Direction
+from .status_words import FaultTripInformation, OperationDirection, OperationHealth, OperationPhase, OperationStatus
 from .trips import Trip
 
 if TYPE_CHECKING:
@@ -159,8 +149,8 @@ class ComputedRegisters:
         values = self._state.values
         frequency_source = _COMMON_FREQUENCY_SOURCE.get(values[_FREQ_REF_SOURCE], 0)
         return (values[0x0006] & 0x1F
-                | (values[_CMD_SOURCE] & reg.OPERATION_COMMAND_SOURCE_MASK) << reg.OPERATION_COMMAND_SOURCE_SHIFT
-                | (frequency_source & reg.OPERATION_FREQUENCY_SOURCE_MASK) << reg.OPERATION_FREQUENCY_SOURCE_SHIFT)
+                | (values[_CMD_SOURCE] & words.OPERATION_COMMAND_SOURCE_MASK) << words.OPERATION_COMMAND_SOURCE_SHIFT
+                | (frequency_source & words.OPERATION_FREQUENCY_SOURCE_MASK) << words.OPERATION_FREQUENCY_SOURCE_SHIFT)
 
     def _operation_state(self) -> int:
         """Monitoring 0x0305 (ACG RS-485 manual)."""
@@ -181,14 +171,14 @@ class ComputedRegisters:
             phase = OperationPhase.NONE
         direction = {Direction.FORWARD: OperationDirection.FORWARD, Direction.REVERSE: OperationDirection.REVERSE,
                      None: OperationDirection.STOPPED}[state.direction()]
-        return int(health << reg.OPERATION_HEALTH_SHIFT | phase << reg.OPERATION_PHASE_SHIFT | direction)
+        return int(health << words.OPERATION_HEALTH_SHIFT | phase << words.OPERATION_PHASE_SHIFT | direction)
 
     def _source_word(self) -> int:
         """Monitoring 0x0306 (ACG RS-485 manual)."""
         values = self._state.values
         command = _MONITOR_COMMAND_SOURCE[values[_CMD_SOURCE]]
         frequency = _MONITOR_FREQUENCY_SOURCE.get(values[_FREQ_REF_SOURCE], 0)
-        return command << reg.MONITOR_COMMAND_SOURCE_SHIFT | frequency
+        return command << words.MONITOR_COMMAND_SOURCE_SHIFT | frequency
 
     def _parameter_word(self, code: str) -> int:
         """0x0100-0x0107 / 0x0110-0x0117 read: the word at the address ``code`` (CM.31.. / CM.51..) holds."""

@@ -71,7 +71,6 @@ from .registers import (
     FREQ_REF_SOURCE_INT485,
     SAVE_PARAMETERS,
     SPEED_REFERENCE,
-    WarningInformation,
 )
 from .run_command import (
     CommandPort,
@@ -83,6 +82,7 @@ from .run_command import (
     drive_run_action,
 )
 from .state import AcgState
+from .status_words import WarningInformation
 from .trips import NO_FAULT, Trip, TripLog
 from .virtual_inputs import VirtualInputs
 

@@ -7,15 +7,9 @@ from dataclasses import dataclass
 from enum import IntEnum
 from typing import TYPE_CHECKING
 
-from .registers import (
-    CMD_SOURCE,
-    FREQ_REF_SOURCE,
-    LOST_CMD_MODE,
-    LOST_CMD_TIME,
-    LOST_PRESET_FREQ,
-    WarningInformation,
-)
+from .registers import CMD_SOURCE, FREQ_REF_SOURCE, LOST_CMD_MODE, LOST_CMD_TIME, LOST_PRESET_FREQ
 from .run_command import CommandPort
+from .status_words import WarningInformation
 from .trips import Trip
 
 if TYPE_CHECKING:

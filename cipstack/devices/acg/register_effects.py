@@ -8,17 +8,9 @@ from typing import TYPE_CHECKING
 
 from ..registers import RegisterError, RegisterMap, RegisterRefusal
 from . import registers as reg
-from .registers import (
-    COMM_UPDATE,
-    LOST_PRESET_FREQ,
-    MAX_FREQUENCY,
-    SAVE_PARAMETERS,
-    SPEED_REFERENCE,
-    TARGET_FREQUENCY,
-    ControlCommand,
-    OperationCommand,
-)
+from .registers import COMM_UPDATE, LOST_PRESET_FREQ, MAX_FREQUENCY, SAVE_PARAMETERS, SPEED_REFERENCE, TARGET_FREQUENCY
 from .run_command import Direction
+from .status_words import ControlCommand, OperationCommand
 from .trips import Trip
 from .virtual_inputs import (
     TERMINAL_FUNCTION_ADDRESSES,

@@ -18,9 +18,9 @@ from .registers import (
     POLE_NUMBER,
     SPEED_REFERENCE,
     TARGET_FREQUENCY,
-    WarningInformation,
 )
 from .run_command import CommandPort, Direction
+from .status_words import WarningInformation
 from .trips import Trip
 
 _MAX_FREQUENCY = MAX_FREQUENCY.address

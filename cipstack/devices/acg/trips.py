@@ -7,11 +7,7 @@ from enum import Enum
 from typing import TYPE_CHECKING
 
 from ...errors import BadRequest
-from .registers import (
-    LatchTrip1,
-    LatchTrip2,
-    LevelTrip,
-)
+from .status_words import LatchTrip1, LatchTrip2, LevelTrip
 
 if TYPE_CHECKING:
     from .ramps import Ramp
