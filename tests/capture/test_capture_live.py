@@ -67,7 +67,8 @@ async def ours():
         await scanner.open_connection()  # class 3: SendUnitData with CIP sequence counts
         await scanner.get_attribute_single(0x01, 1, 3)
         await scanner.close_connection()
-        async with scanner.io_connection(output=21, input=71, rpi=0.010, local_io_port=2222) as owner:
+        async with scanner.io_connection(output=21, input=71, rpi=0.010, local_io_port=2222,
+                                         timeout_multiplier=4) as owner:
             await asyncio.sleep(0.5)   # the subject: a run of class 1 frames to time (the RPI's p50)
             reply = await asyncio.to_thread(control_request, OUT / "control.sock",
                                             {"command": "trip", "code": int(sys.argv[2])})
