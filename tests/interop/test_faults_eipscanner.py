@@ -160,13 +160,15 @@ tshark = subprocess.Popen(["tshark", "-i", "lo", "-f", "tcp port 44818 or udp po
                           stdout=subprocess.DEVNULL, stderr=(OUT / "tshark.log").open("wb"))
 children = []
 try:
-    wait_for(lambda: "Capturing on" in (OUT / "tshark.log").read_text(errors="replace"), 30, "tshark")
+    # NATS and the adapter start while tshark does: nothing goes on the wire before the bridge starts,
+    # which waits for the capture.
     children.append(subprocess.Popen([ARGS["nats"], "-a", "127.0.0.1", "-p", "4222"],
                                      stdout=(OUT / "nats.log").open("wb"), stderr=subprocess.STDOUT))
     adapter = subprocess.Popen([PY, "-m", "cipstack", "adapter", "--host", ADAPTER, "--quiet",
                                 "--state", str(OUT / "state.json"), "--control", str(OUT / "control.sock")],
                                stdout=(OUT / "adapter.log").open("wb"), stderr=subprocess.STDOUT)
     children.append(adapter)
+    wait_for(lambda: "Capturing on" in (OUT / "tshark.log").read_text(errors="replace"), 30, "tshark")
     wait_for(listening, 20, "the adapter")
     nats = None
     deadline = time.monotonic() + 10
