@@ -160,17 +160,15 @@ def _field_lines(direction: str, schema: Any, instance: int | None) -> list[str]
     return lines
 
 
-def _list_fields(args: argparse.Namespace, doc: Any, names_from: Any = None) -> int:
+def _list_fields(args: argparse.Namespace, view: Any, names_from: Any = None) -> int:
     """``--list-fields``: the output and input fields of the connection, by the names ``--set`` and the
-    printed input take; from the EDS alone, or from the profile of the device's identity."""
+    printed input take; from the EDS alone (``view``, the file read), or from the profile of the device's
+    identity."""
     if names_from is not None:
         output = None if args.heartbeat is not None else args.output
         schemas = (names_from.schema(output) if output is not None else None, names_from.schema(args.input))
         points = (output, args.input)
-    elif doc is not None:
-        from ..eds.interpret import read_view
-
-        view = read_view(doc)
+    elif view is not None:
         connection = view.connection(args.connection)
         output = None if connection.heartbeat else connection.o_t_point
         schemas = (view.schema(output) if output is not None else None, view.schema(connection.t_o_point))
@@ -223,7 +221,7 @@ def cmd_io(args: argparse.Namespace) -> int:
     from ..eip.originator.class1 import OtFormat
     from ..scanner import Scanner
 
-    doc = None
+    doc = view = None
     names_from = None   # --eds FILE --output N --input M: the file gives the field names only
     if args.eds is not None and args.connection is None and args.input is not None:
         from ..eds.interpret import read_view
@@ -240,8 +238,9 @@ def cmd_io(args: argparse.Namespace) -> int:
         doc = _read_eds_file(args.eds)
         from ..eds.interpret import read_view
 
+        view = read_view(doc)
         try:
-            read_view(doc).connection(args.connection)
+            view.connection(args.connection)
         except KeyError as exc:
             raise UsageError(f"{args.eds}: {exc.args[0]}") from None
     elif args.connection is not None:
@@ -249,7 +248,7 @@ def cmd_io(args: argparse.Namespace) -> int:
     elif args.input is None:
         raise UsageError("give --input (or --eds FILE --connection N)")
     if args.list_fields:
-        return _list_fields(args, doc, names_from)
+        return _list_fields(args, view, names_from)
     if args.ot_format == OtFormat.HEARTBEAT.value and doc is None and args.heartbeat is None:
         raise UsageError("--ot-format heartbeat sends no data: give --heartbeat POINT instead of --output")
     if args.config is not None and not 0 <= args.config <= 0xFFFF:

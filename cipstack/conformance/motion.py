@@ -257,8 +257,18 @@ class MotionLink:
             if self.fault_free and self.last is not None and self.last.faulted:
                 self.hold(self.control, SETTLE_S)
                 self.send(self.control | FAULT_RST, SPEED_REFERENCE, FAULT_S, until=lambda s: not s.faulted)
-            self.hold(self.control, SETTLE_S)
-            self.hold(found_bits, SETTLE_S, speed=found_speed)
+            if self.extended and found_bits != self.control:
+                self.hold(self.control, SETTLE_S)
+                # NetCtl/NetRef handed back: once the input shows both sources as found, the drive has
+                # applied the packet that carries them and the speed reference; a drive whose sources are
+                # set locally shows no change, and is given the whole SETTLE_S.
+                ctrl, ref = bool(found_bits & NET_CTL), bool(found_bits & NET_REF)
+                self.send(found_bits, found_speed, SETTLE_S,
+                          until=lambda s: s.ctrl_from_net is ctrl and s.ref_from_net is ref)
+            else:
+                # The bits held are the bits found (output 20 has no NetCtl/NetRef): one level, and the
+                # speed reference as found, for SETTLE_S.
+                self.hold(found_bits, SETTLE_S, speed=found_speed)
         self.opened.close()
         try:
             self._check_by_explicit_messaging()

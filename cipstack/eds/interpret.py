@@ -344,6 +344,11 @@ def read_params(doc: EdsDocument, issues: list[EdsIssue]) -> dict[str, ParamInfo
     out: dict[str, ParamInfo] = {}
     if section is None:
         return out
+    # The first EnumN of each number, as Section.get finds it, looked up once rather than by a scan
+    # of the section per parameter (a file of a thousand parameters made that a million comparisons).
+    enums: dict[str, Entry] = {}
+    for entry in section:
+        enums.setdefault(entry.keyword, entry)
     for entry in section:
         match = re.fullmatch(r"Param([0-9]+)", entry.keyword)
         if match is None:
@@ -351,7 +356,7 @@ def read_params(doc: EdsDocument, issues: list[EdsIssue]) -> dict[str, ParamInfo
         if entry.keyword in out:
             issues.append(EdsIssue(entry.line, f"{entry.keyword} is defined twice: the first is kept"))
             continue
-        found = _param(entry, section.get(f"Enum{match[1]}"), issues)
+        found = _param(entry, enums.get(f"Enum{match[1]}"), issues)
         if found is not None:
             out[entry.keyword] = found
     return out

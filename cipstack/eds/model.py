@@ -135,6 +135,8 @@ _ESCAPES = {"n": "\n", "t": "\t", "r": "\r", '"': '"', "\\": "\\"}
 def unescape_string(body: str) -> str:
     """Inverse of :func:`escape_string`; an unknown escape keeps its backslash (real files
     contain Windows paths)."""
+    if "\\" not in body:
+        return body  # most strings: nothing to undo
     out: list[str] = []
     index = 0
     while index < len(body):

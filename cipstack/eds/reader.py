@@ -162,6 +162,7 @@ class _Parser:
     def __init__(self, text: str, start: int = 0) -> None:
         self.text = text
         self.tokens = list(_tokens(text, start))
+        self.count = len(self.tokens)
         self.position = 0
         #: Where the chunk of the next section header or entry starts: where the last one ended.
         self.chunk_start = 0
@@ -194,10 +195,18 @@ class _Parser:
             self.pending.append(text)
 
     def peek(self) -> _Token | None:
-        while self.position < len(self.tokens) and self.tokens[self.position].kind == "comment":
-            self._attach_comment(self.tokens[self.position])
-            self.position += 1
-        return self.tokens[self.position] if self.position < len(self.tokens) else None
+        position = self.position
+        if position >= self.count:
+            return None
+        token = self.tokens[position]
+        while token.kind == "comment":
+            self._attach_comment(token)
+            position += 1
+            self.position = position
+            if position >= self.count:
+                return None
+            token = self.tokens[position]
+        return token
 
     def take(self) -> _Token | None:
         token = self.peek()
@@ -270,9 +279,8 @@ class _Parser:
             token = self.peek()
             if token is None:
                 raise EdsSyntaxError(self.last_line, f"entry {entry.keyword!r} not terminated by '{closing}'")
-            if token.kind in (",", closing):
-                item = Field.empty()
-                item.line = token.line
+            if token.kind == "," or token.kind == closing:
+                item = Field(FieldKind.EMPTY, None, "", token.line)
                 self.field_spans[id(item)] = (token.start, token.start)
             else:
                 start = token.start
@@ -281,7 +289,7 @@ class _Parser:
             fields.append(item)
             self.trailing_target = item
             separator = self.take()
-            if separator is None or separator.kind not in (",", closing):
+            if separator is None or (separator.kind != "," and separator.kind != closing):
                 # The separator is missing where the field ends, not where the next token is.
                 found = "the end of the file" if separator is None else f"{separator.text!r} on line {separator.line}"
                 raise EdsSyntaxError(
@@ -294,16 +302,20 @@ class _Parser:
         token = self.take()
         assert token is not None
         if token.kind == "string":
+            following = self.peek()
+            if following is None or following.kind != "string":
+                return Field(FieldKind.STRING, unescape_string(token.text), f'"{token.text}"', token.line)
             pieces = [token.text]
             # Adjacent quoted strings are one field: long texts are split over lines this way.
-            while (following := self.peek()) is not None and following.kind == "string":
+            while following is not None and following.kind == "string":
                 pieces.append(following.text)
                 self.take()
+                following = self.peek()
             value = "".join(unescape_string(piece) for piece in pieces)
             raw = " ".join(f'"{piece}"' for piece in pieces)
             return Field(FieldKind.STRING, value, raw, token.line)
         if token.kind == "word":
-            if _HEX_BYTE.fullmatch(token.text) and (following := self.peek()) is not None \
+            if len(token.text) == 2 and _HEX_BYTE.fullmatch(token.text) and (following := self.peek()) is not None \
                     and following.kind == "word" and _HEX_BYTE.fullmatch(following.text):
                 return self._unquoted_path(entry, token)
             kind, value = parse_word(token.text)

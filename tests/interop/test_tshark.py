@@ -4,7 +4,8 @@ The whole exchange runs in a private network namespace, so the adapter can use t
 port 44818 (where tshark pairs requests with replies and decodes class 3 traffic) without
 colliding with anything. In it: tshark captures loopback; our adapter listens on 127.0.0.1
 and cpppo's server on 127.0.0.2; pycomm3, cpppo's tools and our scanner talk to the adapter,
-and our scanner to cpppo. Then tshark reads the capture back.
+and our scanner to cpppo (the steps that wait out a window, and write nothing, beside the others:
+``BESIDE``). Then tshark reads the capture back.
 """
 
 from __future__ import annotations
@@ -38,6 +39,7 @@ import signal
 import socket
 import subprocess
 import sys
+import threading
 import time
 import traceback
 from pathlib import Path
@@ -147,16 +149,17 @@ def pycomm3_exchange():
     return result
 
 
+GET_ATTRIBUTE = "cpppo.server.enip.get_attribute"
+
+
 def cpppo_exchange():
-    get_attribute = "cpppo.server.enip.get_attribute"
-    list_services = "cpppo.server.enip.list_services"
     return {
-        "routed": tool(get_attribute, "-a", ADAPTER, "@1/1/1", "@1/1/7", "@0xF5/1/13=(UINT)90", "@0xF5/1/13"),
-        "simple": tool(get_attribute, "-S", "-a", ADAPTER, "@1/1/7", "@0xF5/1/13=(UINT)120", "@0xF5/1/13"),
-        "error": tool(get_attribute, "-S", "-a", ADAPTER, "@1/1/99"),
-        "list_tcp": tool(list_services, "-a", ADAPTER, "-i"),
-        "list_udp": tool(list_services, "-a", ADAPTER, "-i", "-u", "-t", "3"),
+        "routed": tool(GET_ATTRIBUTE, "-a", ADAPTER, "@1/1/1", "@1/1/7", "@0xF5/1/13=(UINT)90", "@0xF5/1/13"),
+        "simple": tool(GET_ATTRIBUTE, "-S", "-a", ADAPTER, "@1/1/7", "@0xF5/1/13=(UINT)120", "@0xF5/1/13"),
     }
+
+
+LIST_SERVICES = "cpppo.server.enip.list_services"
 
 
 async def connection_manager_errors():
@@ -200,7 +203,6 @@ async def connection_manager_errors():
 def ours_exchange():
     from cipstack.cip.status import CipError
     from cipstack.cip.types import INT, UINT
-    from cipstack.eip.originator.asyncio_client import discover, list_services_udp
     from cipstack.scanner import SyncScanner, backplane_route
 
     def error_of(function, *args):
@@ -228,8 +230,6 @@ def ours_exchange():
     with SyncScanner(f"{ADAPTER}:{PORT}", route=backplane_route()) as scanner:
         result["routed"] = scanner.read(1, 1, 7).raw
     result["cm_errors"] = asyncio.run(connection_manager_errors())
-    result["discover"] = [(r.product_name, r.address.port) for r in asyncio.run(discover(ADAPTER, PORT, 1.0))]
-    result["list_services_udp"] = [s.name for s in asyncio.run(list_services_udp(ADAPTER, PORT, 1.0))]
     with SyncScanner(f"{CPPPO}:{PORT}") as scanner:
         result["cpppo_list_services"] = [s.name for s in scanner.list_services()]
         scanner.set_attribute_single(0x2A, 1, 7, 1500, INT)
@@ -237,6 +237,31 @@ def ours_exchange():
         scanner.open_connection()
         result["cpppo_connected"] = scanner.read(1, 1, 7).raw
     return result
+
+
+def our_discover():
+    from cipstack.eip.originator.asyncio_client import discover
+
+    return [(r.product_name, r.address.port) for r in asyncio.run(discover(ADAPTER, PORT, 1.0))]
+
+
+def our_list_services_udp():
+    from cipstack.eip.originator.asyncio_client import list_services_udp
+
+    return [s.name for s in asyncio.run(list_services_udp(ADAPTER, PORT, 1.0))]
+
+
+#: Steps that wait out a window or a timeout (ours collect the replies of 1 s; cpppo's tool over UDP, which
+#: has no end of replies, listens out its 3 s timeout after the last) and touch nothing the others write
+#: (attribute 0xF5/1/13): each in a thread of its own while the exchanges run, its finding kept under
+#: the exchange it belongs to, as (exchange, name, step).
+BESIDE = [
+    ("cpppo", "error", lambda: tool(GET_ATTRIBUTE, "-S", "-a", ADAPTER, "@1/1/99")),
+    ("cpppo", "list_tcp", lambda: tool(LIST_SERVICES, "-a", ADAPTER, "-i")),
+    ("cpppo", "list_udp", lambda: tool(LIST_SERVICES, "-a", ADAPTER, "-i", "-u", "-t", "3")),
+    ("ours", "discover", our_discover),
+    ("ours", "list_services_udp", our_list_services_udp),
+]
 
 
 tshark = subprocess.Popen(["tshark", "-i", "lo", "-f", f"tcp port {PORT} or udp port {PORT}",
@@ -252,9 +277,17 @@ try:
     servers = [("adapter", adapter), ("cpppo", cpppo)]
     wait_for(lambda: listening(ADAPTER), 20, "the adapter")
     wait_for(lambda: listening(CPPPO), 20, "the cpppo server")
+    beside = [threading.Thread(target=step, args=(f"{owner}/{name}", function)) for owner, name, function in BESIDE]
+    for thread in beside:
+        thread.start()
     step("pycomm3", pycomm3_exchange)
     step("cpppo", cpppo_exchange)
     step("ours", ours_exchange)
+    for thread in beside:
+        thread.join(60)
+    for owner, name, _ in BESIDE:
+        if f"{owner}/{name}" in seen:
+            seen.setdefault(owner, {})[name] = seen.pop(f"{owner}/{name}")
 except Exception:
     seen["errors"].append(traceback.format_exc())
 finally:
