@@ -208,6 +208,8 @@ class IoEndpoint:
         #: each group's, every socket the endpoint reads.
         self._emptied_at: dict[socket.socket, float] = {}
         self.gather_within = gather_within
+        #: A read stopped at ``DRAIN_LIMIT`` since the last catch-up: more may wait.
+        self._left_unread = False
         #: The sockets are left out of the wait until the next firing, which reads them (``_gather``).
         self._gathering = False
         if make_core is not None:
@@ -314,6 +316,7 @@ class IoEndpoint:
                 receive(data, source, clock() if now is None else now)
             except Exception:  # a datagram must never take the I/O path down
                 log.exception("class 1 datagram from %s", source)
+        self._left_unread = True   # DRAIN_LIMIT read, and maybe more waiting
 
     def _catch_up(self, now: float) -> None:
         """Before any connection is judged silent, read what a socket not read to its end for
@@ -324,6 +327,7 @@ class IoEndpoint:
         flow, each wake-up reads to the end and this costs nothing; otherwise one read per firing.
         Off the lane, asyncio's transport reads one datagram per round of its loop, after which the
         due timers run: the firing reads the socket itself, which the transport then finds empty."""
+        self._left_unread = False
         emptied = self._emptied_at
         for sock in emptied:
             for _ in range(CATCH_UP_READS):
@@ -368,6 +372,7 @@ class IoEndpoint:
                        else self.loop.call_at(deadline, self._on_timer))
 
     def _on_timer(self) -> None:
+        due_at = self._timer_at
         self._timer = None
         self._timer_at = None
         if self._sock is None:
@@ -381,7 +386,12 @@ class IoEndpoint:
         datagrams = poll(now, COALESCE_S)
         if datagrams:
             self._send(datagrams)
-        self._catch_up(now)
+        # On the lane, a firing on time comes in the wake-up whose harvest read every socket that was
+        # ready (level-triggered), or gathered them itself: only a late firing (the loop was held up)
+        # or a read cut at ``DRAIN_LIMIT`` can leave datagrams unread, and only then is it worth a read
+        # per socket (a system call and an exception when there is nothing).
+        if self._lane is None or self._left_unread or due_at is None or now - due_at > CATCH_UP_AFTER_S:
+            self._catch_up(now)
         expire(now)
         self.wakeup()
         if self.gather_within:

@@ -9,8 +9,8 @@ descriptor number, no scan); a wait spends its whole milliseconds in epoll_wait(
 sub-millisecond rest in a select() on the one epoll descriptor (it becomes readable when any
 registered socket is ready), and the ready events are then harvested with a non-blocking
 epoll_wait(). A wait for a lane timer (a class 1 production or watchdog) is one select() to the
-microsecond, whatever its length: one wake-up, not two. It also lowers the thread's timer slack: sends then leave within tens of
-microseconds of their slot.
+microsecond, whatever its length: one wake-up, not two. It also lowers the thread's timer
+slack: sends then leave within tens of microseconds of their slot.
 
 The lane (``IoLane``): the class 1 endpoints (``io_server``) and the encapsulation server's TCP
 connections (``tcp_lane``) hand their sockets and timers to the selector itself, which reads the
