@@ -21,7 +21,7 @@ from .devices.keypad import Keypad, NoKeypad
 from .devices.profiles import DEFAULT_MAC, DEFAULT_PROFILE, ProfileOptions, build_device
 from .eip.interfaces import interface_of
 from .eip.io_core import DEFAULT_IO_PORT, ProductionGrid
-from .eip.io_server import IoEndpoint, freeze_startup_objects
+from .eip.io_server import GATHER_WITHIN_S, IoEndpoint, freeze_startup_objects
 from .eip.target.core import EncapsulationTarget, TargetSettings
 from .eip.target.io_target import IoProfile, IoTarget
 from .eip.target.limits import DEFAULT_MAX_TCP_CONNECTIONS
@@ -153,7 +153,8 @@ class Adapter:
                 profile.max_connections = s.max_io_connections
             self.io_endpoint = IoEndpoint(host=s.host, port=s.io_port,
                                           multicast_ttl=lambda: int(self.device.tcpip.get(1, 8)), exclusive=True,
-                                          make_core=partial(self._class1_core, profile, production_grid))
+                                          make_core=partial(self._class1_core, profile, production_grid),
+                                          gather_within=GATHER_WITHIN_S)
             assert self.io is not None   # made by _class1_core, with the endpoint
             self.device.update_io_status()
         self.requests = RequestSeam(self.device.router)

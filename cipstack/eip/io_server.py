@@ -22,6 +22,7 @@ import errno
 import logging
 import math
 import os
+import select
 import socket
 import struct
 import sys
@@ -56,6 +57,15 @@ COALESCE_S = 0.0002
 #: Datagrams one socket may deliver per wake-up before the others get their turn (epoll is level
 #: triggered: what is left is reported again at once).
 DRAIN_LIMIT = 64
+
+#: ``IoEndpoint``'s ``gather_within`` for the adapter: while the next firing is this near, a datagram
+#: does not wake the process; the firing reads what came first, then produces. A wake-up costs more
+#: than a datagram's whole protocol work (benchmarks/README.md, "Where a class 1 packet's CPU goes"),
+#: and at an RPI of 10 ms or less a production fires within one RPI anyway. The O->T data reaches the
+#: device at the next firing, before the production that reports on it, and is timed when it is
+#: read, as a loop held up by other work times it: the watchdog may run out up to this much later,
+#: never sooner. A longer wait than this, and the socket wakes the process again.
+GATHER_WITHIN_S = 0.0125
 
 #: The largest UDP payload: a Large_Forward_Open connection may carry up to this much.
 MAX_DATAGRAM = 65535
@@ -160,11 +170,16 @@ class IoEndpoint:
 
     def __init__(self, core: IoCore | None = None, host: str = "127.0.0.1", port: int = 2222,
                  multicast_ttl: Callable[[], int] = lambda: 1, exclusive: bool = False, *,
-                 make_core: Callable[[IoEndpoint], IoCore] | None = None) -> None:
+                 make_core: Callable[[IoEndpoint], IoCore] | None = None, gather_within: float = 0.0) -> None:
         """``core``, or ``make_core``: what makes the core around this endpoint, called once here with
         the endpoint, for a core that takes the endpoint's methods as its collaborators when it is made
         (a target's core wakes the endpoint when a Forward_Open adds a deadline; its filters send
-        later through it), so that nothing is set on the core afterwards."""
+        later through it), so that nothing is set on the core afterwards.
+
+        ``gather_within`` (seconds, 0: off): while the endpoint's next firing is at most this far off,
+        arriving datagrams do not wake the loop; the firing reads them all first, then produces and
+        judges (``GATHER_WITHIN_S``). On the lane of a ``PreciseEventLoop`` only; elsewhere every
+        datagram is read as it comes."""
         #: The address and port are this endpoint's alone: a second socket on exactly them is refused
         #: (a target's consuming port must be its own, see ``refuse_exact_sharer``), while a socket
         #: on the wildcard address and the same port may coexist (a scanner on 0.0.0.0:2222 beside
@@ -192,6 +207,11 @@ class IoEndpoint:
         #: When each socket was last read to its end (``_catch_up``), by socket: the endpoint's own and
         #: each group's, every socket the endpoint reads.
         self._emptied_at: dict[socket.socket, float] = {}
+        self.gather_within = gather_within
+        #: A read stopped at ``DRAIN_LIMIT`` since the last catch-up: more may wait.
+        self._left_unread = False
+        #: The sockets are left out of the wait until the next firing, which reads them (``_gather``).
+        self._gathering = False
         if make_core is not None:
             core = make_core(self)   # last: the endpoint is whole when its core takes its methods
         if core is None:
@@ -201,6 +221,8 @@ class IoEndpoint:
     async def start(self) -> None:
         self.loop = asyncio.get_running_loop()
         self._lane = lane_of(self.loop)
+        if self._lane is None:
+            self.gather_within = 0.0   # off the lane, asyncio's transport reads each datagram as it comes
         sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
         # Sharing is for a port asked for by number (2222 beside a scanner on the wildcard). On port 0
         # Linux hands a SO_REUSEADDR socket a port another such socket holds (udp(7): sharing is allowed
@@ -262,7 +284,7 @@ class IoEndpoint:
             sock.setblocking(False)
             if self.kernel_arrival_times:
                 sock.setsockopt(socket.SOL_SOCKET, SO_TIMESTAMPNS, 1)
-            self._lane.add_reader(sock.fileno(), lambda: self._drain(sock))
+            self._lane.add_reader(sock.fileno(), lambda: self._drain(sock), 0 if self._gathering else select.EPOLLIN)
             return None
         transport, _ = await self.loop.create_datagram_endpoint(lambda: _UdpIo(self), sock=sock)
         return transport
@@ -294,6 +316,7 @@ class IoEndpoint:
                 receive(data, source, clock() if now is None else now)
             except Exception:  # a datagram must never take the I/O path down
                 log.exception("class 1 datagram from %s", source)
+        self._left_unread = True   # DRAIN_LIMIT read, and maybe more waiting
 
     def _catch_up(self, now: float) -> None:
         """Before any connection is judged silent, read what a socket not read to its end for
@@ -304,6 +327,7 @@ class IoEndpoint:
         flow, each wake-up reads to the end and this costs nothing; otherwise one read per firing.
         Off the lane, asyncio's transport reads one datagram per round of its loop, after which the
         due timers run: the firing reads the socket itself, which the transport then finds empty."""
+        self._left_unread = False
         emptied = self._emptied_at
         for sock in emptied:
             for _ in range(CATCH_UP_READS):
@@ -348,6 +372,7 @@ class IoEndpoint:
                        else self.loop.call_at(deadline, self._on_timer))
 
     def _on_timer(self) -> None:
+        due_at = self._timer_at
         self._timer = None
         self._timer_at = None
         if self._sock is None:
@@ -355,12 +380,31 @@ class IoEndpoint:
         now = self.loop.time()
         core = self.core
         poll, expire = core.poll, core.expire   # callables the seam holds: read as attributes, then called
+        if self._gathering:
+            for sock in self._emptied_at:   # what came since the last firing, before it is reported on
+                self._drain(sock)
         datagrams = poll(now, COALESCE_S)
         if datagrams:
             self._send(datagrams)
-        self._catch_up(now)
+        # On the lane, a firing on time comes in the wake-up whose harvest read every socket that was
+        # ready (level-triggered), or gathered them itself: only a late firing (the loop was held up)
+        # or a read cut at ``DRAIN_LIMIT`` can leave datagrams unread, and only then is it worth a read
+        # per socket (a system call and an exception when there is nothing).
+        if self._lane is None or self._left_unread or due_at is None or now - due_at > CATCH_UP_AFTER_S:
+            self._catch_up(now)
         expire(now)
         self.wakeup()
+        if self.gather_within:
+            self._gather(self._timer_at is not None and self._timer_at - now <= self.gather_within)
+
+    def _gather(self, gathering: bool) -> None:
+        """Leave the sockets out of the wait (the next firing reads them) or put them back in."""
+        if gathering is self._gathering or self._lane is None:
+            return
+        self._gathering = gathering
+        events = 0 if gathering else select.EPOLLIN   # errors and hang-ups are always reported
+        for sock in self._emptied_at:
+            self._lane.watch(sock.fileno(), events)
 
     def send(self, datagrams: list[tuple[bytes, tuple[str, int]]]) -> None:
         """Send datagrams now, outside a firing (a production held back for a while), if still open."""
@@ -407,6 +451,7 @@ class IoEndpoint:
         self._sock = self.transport = None
         self._groups.clear()
         self._emptied_at.clear()
+        self._gathering = False
         for sock, transport in sockets:
             if transport is not None:
                 transport.close()
@@ -422,6 +467,7 @@ __all__ = [
     "CATCH_UP_READS",
     "COALESCE_S",
     "DRAIN_LIMIT",
+    "GATHER_WITHIN_S",
     "MAX_DATAGRAM",
     "RECEIVE_BUFFER",
     "SO_TIMESTAMPNS",
