@@ -107,6 +107,16 @@ class IoCore(Protocol):
     def expire(self, now: float) -> list[Any]: ...
 
 
+class DatagramPaths:
+    """Where T->O datagrams to some destinations go instead of the endpoint's UDP socket: the address
+    of a DTLS session (``security.dtls_target``) maps to what sends a datagram in that session. Made
+    by whoever builds the endpoint and given to it and to the DTLS shell, which adds and removes its
+    sessions; while none is there, a datagram costs one test of an empty mapping."""
+
+    def __init__(self) -> None:
+        self.routes: dict[tuple[str, int], Callable[[bytes], None]] = {}
+
+
 class _UdpIo(asyncio.DatagramProtocol):
     def __init__(self, endpoint: IoEndpoint) -> None:
         self.endpoint = endpoint
@@ -160,11 +170,13 @@ class IoEndpoint:
 
     def __init__(self, core: IoCore | None = None, host: str = "127.0.0.1", port: int = 2222,
                  multicast_ttl: Callable[[], int] = lambda: 1, exclusive: bool = False, *,
-                 make_core: Callable[[IoEndpoint], IoCore] | None = None) -> None:
+                 make_core: Callable[[IoEndpoint], IoCore] | None = None,
+                 paths: DatagramPaths | None = None) -> None:
         """``core``, or ``make_core``: what makes the core around this endpoint, called once here with
         the endpoint, for a core that takes the endpoint's methods as its collaborators when it is made
         (a target's core wakes the endpoint when a Forward_Open adds a deadline; its filters send
-        later through it), so that nothing is set on the core afterwards."""
+        later through it), so that nothing is set on the core afterwards. ``paths``: the datagram
+        paths besides the socket (DTLS sessions), by destination."""
         #: The address and port are this endpoint's alone: a second socket on exactly them is refused
         #: (a target's consuming port must be its own, see ``refuse_exact_sharer``), while a socket
         #: on the wildcard address and the same port may coexist (a scanner on 0.0.0.0:2222 beside
@@ -187,6 +199,8 @@ class IoEndpoint:
         #: Multicast groups joined: each socket, and off the lane its transport.
         self._groups: dict[tuple[str, int], tuple[socket.socket, asyncio.DatagramTransport | None]] = {}
         self.send_errors = 0
+        #: Destinations whose datagrams go another way than the socket (a DTLS session's address).
+        self.paths = paths or DatagramPaths()
         #: Datagrams are given to the core with the time the kernel received them (``stamp_arrivals``).
         self.kernel_arrival_times = False
         #: When each socket was last read to its end (``_catch_up``), by socket: the endpoint's own and
@@ -378,7 +392,13 @@ class IoEndpoint:
         after it, in order; on the lane it is dropped and counted, as a full link drops it (the
         next production carries newer data anyway)."""
         sock, transport = self._sock, self.transport
+        routes = self.paths.routes
         for index, (datagram, destination) in enumerate(datagrams):
+            if routes:
+                route = routes.get(destination)
+                if route is not None:   # a connection opened over DTLS: its data flows in that session
+                    route(datagram)
+                    continue
             # asyncio's selector datagram transport has it; typeshed's DatagramTransport does not say so.
             if transport is not None and (sock is None or transport.get_write_buffer_size()):  # type: ignore[attr-defined]
                 for queued, where in datagrams[index:]:
@@ -425,6 +445,7 @@ __all__ = [
     "MAX_DATAGRAM",
     "RECEIVE_BUFFER",
     "SO_TIMESTAMPNS",
+    "DatagramPaths",
     "IoCore",
     "IoEndpoint",
     "freeze_startup_objects",
