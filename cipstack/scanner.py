@@ -34,7 +34,7 @@ from .eip.originator.core import (
 )
 from .eip.originator.replies import EncapsulationStatusError, MalformedReplyError
 from .eip.wire.encapsulation import DEFAULT_PORT, SECURE_PORT
-from .errors import BadRequest, NotFound, ProtocolError, WrongState
+from .errors import BadRequest, NotFound, ProtocolError
 from .logs import debug
 
 if TYPE_CHECKING:
@@ -536,6 +536,7 @@ class SyncScanner(_Declarations):
         self.client = BlockingEncapsulationClient.connect(host, port or parsed_port, timeout, security=security)
         self._address = (host, port or parsed_port, timeout)
         self._secured = security is not None
+        self._security = security
         self.explicit = ExplicitMessaging(self.client.core, catalog, route)
         self._io: set[SyncIoConnection] = set()
         try:
@@ -670,10 +671,13 @@ class SyncScanner(_Declarations):
     def _open_io(self, **arguments: Any) -> SyncIoConnection:
         from .eip.originator.blocking_io import io_connection
 
-        if self._secured:
-            raise WrongState("class 1 I/O over CIP Security (DTLS) is not implemented yet: open it without security=")
         host, port, timeout = self._address
-        client = BlockingEncapsulationClient.connect(host, port, timeout)
+        if self._secured:
+            # CIP Security: class 1 flows in a DTLS session on the device's UDP port 2221, where its
+            # Forward_Open is sent too (a Forward_Open over TLS would open plain UDP 2222).
+            client = BlockingEncapsulationClient.connect_dtls(host, port, timeout, self._security)
+        else:
+            client = BlockingEncapsulationClient.connect(host, port, timeout)
         try:
             opened = io_connection(client, **arguments, on_close=self._io.discard)
         except BaseException:

@@ -71,6 +71,12 @@ def is_client_hello(datagram: bytes) -> bool:
             and datagram[3:5] == b"\0\0" and datagram[13] == _CLIENT_HELLO)
 
 
+def is_dtls_record(datagram: bytes) -> bool:
+    """A datagram that begins with a DTLS record header (RFC 6347, 4.1: content type 20 to 23, a
+    version whose first octet is 254)."""
+    return len(datagram) >= 13 and 20 <= datagram[0] <= 23 and datagram[1] == 0xFE
+
+
 def is_io_datagram(plain: bytes) -> bool:
     """A class 0/1 datagram (CPF with a Sequenced Address item first), not an encapsulation message."""
     return plain[:4] == _IO_PREFIX
@@ -271,6 +277,8 @@ class DtlsServer:
         self.refused = 0
         #: HelloVerifyRequests sent (ClientHellos without a valid cookie): no state was kept for them.
         self.cookies_sent = 0
+        #: DTLS records of no session (an ended association's last ones), dropped.
+        self.stray = 0
         self.loop: asyncio.AbstractEventLoop
         self.local = SockAddr("0.0.0.0", port)
         self._transport: asyncio.DatagramTransport | None = None
@@ -289,6 +297,12 @@ class DtlsServer:
         session = self.sessions.get(address)
         if session is not None and not (session.connection is not None and is_client_hello(data)):
             session.datagram(data, now)
+            return
+        if not is_client_hello(data) and is_dtls_record(data):
+            # A record of an association that has ended (the close_notify of a peer whose session was
+            # already closed, a retransmission): RFC 6347, 4.1.2.1 discards it; not a refusal.
+            self.stray += 1
+            log.debug("DTLS record from %s:%d of no session: dropped", *address)
             return
         if not is_client_hello(data):
             self.refuse(address[0], f"datagram from {address[0]}:{address[1]} on the DTLS port refused: "
@@ -373,4 +387,5 @@ class DtlsServer:
             transport.close()
 
 
-__all__ = ["DEFAULT_MAX_SESSIONS", "DTLS_TIMEOUT", "DtlsServer", "is_client_hello", "is_io_datagram"]
+__all__ = ["DEFAULT_MAX_SESSIONS", "DTLS_TIMEOUT", "DtlsServer", "is_client_hello", "is_dtls_record",
+           "is_io_datagram"]
