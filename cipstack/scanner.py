@@ -535,7 +535,6 @@ class SyncScanner(_Declarations):
         #: The blocking client requests travel on (``client.connection``: the class 3 connection, if open).
         self.client = BlockingEncapsulationClient.connect(host, port or parsed_port, timeout, security=security)
         self._address = (host, port or parsed_port, timeout)
-        self._secured = security is not None
         self._security = security
         self.explicit = ExplicitMessaging(self.client.core, catalog, route)
         self._io: set[SyncIoConnection] = set()
@@ -672,7 +671,7 @@ class SyncScanner(_Declarations):
         from .eip.originator.blocking_io import io_connection
 
         host, port, timeout = self._address
-        if self._secured:
+        if self._security is not None:
             # CIP Security: class 1 flows in a DTLS session on the device's UDP port 2221, where its
             # Forward_Open is sent too (a Forward_Open over TLS would open plain UDP 2222).
             client = BlockingEncapsulationClient.connect_dtls(host, port, timeout, self._security)

@@ -148,6 +148,14 @@ class Credentials:
             return SecurityError(f"TLS with {host}:{port} failed: {describe_tls_failure(failure)}")
         return None
 
+    def datagram_link(self, host: str, port: int, timeout: float) -> Any:
+        """A DTLS session with the device's UDP ``port`` (2221), its handshake done within ``timeout``
+        (``dtls_link.DtlsLink``): ``SecurityError`` naming the cause of a refusal, ``PeerUnreachable``
+        when nothing answers."""
+        from .dtls_link import DtlsLink
+
+        return DtlsLink(self, host, port, timeout)
+
     def _common(self, context: ssl.SSLContext) -> None:
         context.minimum_version = ssl.TLSVersion.TLSv1_2
         assert self.ca is not None   # _pair checked it

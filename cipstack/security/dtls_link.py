@@ -19,7 +19,7 @@ from collections import deque
 from collections.abc import Callable
 from typing import TYPE_CHECKING
 
-from ..errors import PeerUnreachable, SecurityError
+from ..errors import NoReply, PeerUnreachable, SecurityError
 from .dtls import DtlsChannel, describe_dtls_failure, dtls_context
 from .dtls_target import is_io_datagram
 
@@ -130,7 +130,8 @@ class DtlsLink:
         self._flush()
 
     def recv(self, size: int) -> bytes:
-        """The next encapsulation record's plaintext; ``TimeoutError`` after the timeout."""
+        """The next encapsulation record's plaintext; ``NoReply`` (a ``TimeoutError``, as a socket's
+        timeout is) after the timeout."""
         deadline = None if self._timeout is None else time.monotonic() + self._timeout
         while not self._stream:
             self._pump()
@@ -138,7 +139,7 @@ class DtlsLink:
                 break
             wait = None if deadline is None else deadline - time.monotonic()
             if wait is not None and wait <= 0:
-                raise TimeoutError("no DTLS record")
+                raise NoReply(f"no DTLS record from {self.host}:{self.port}")
             select.select([self.sock], [], [], wait)
         return self._stream.popleft()
 

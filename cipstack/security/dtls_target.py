@@ -37,8 +37,10 @@ import hashlib
 import hmac
 import logging
 import os
+import socket
 from typing import TYPE_CHECKING
 
+from ..eip.io_server import RECEIVE_BUFFER, DatagramPaths
 from ..eip.target.limits import RateLimitedLog
 from ..eip.wire.cpf import SockAddr
 from .credentials import SECURE_PORT
@@ -46,7 +48,6 @@ from .dtls import DtlsChannel, describe_dtls_failure, dtls_context
 from .tls_target import HANDSHAKE_TIMEOUT
 
 if TYPE_CHECKING:
-    from ..eip.io_server import DatagramPaths
     from ..eip.target.core import EncapsulationConnection, EncapsulationTarget
     from ..eip.target.io_target import IoTarget
     from .credentials import Credentials
@@ -248,7 +249,6 @@ class DtlsServer:
                  verify_client: bool = True, max_sessions: int = DEFAULT_MAX_SESSIONS) -> None:
         """``io``: the class 1 core that takes the datagrams of connections opened over DTLS; ``paths``:
         the datagram paths of its UDP endpoint, where this server adds the address of each session."""
-        from ..eip.io_server import DatagramPaths
         from .dtls import require_pyopenssl
 
         require_pyopenssl()
@@ -374,6 +374,9 @@ class DtlsServer:
         transport, _ = await self.loop.create_datagram_endpoint(lambda: _DtlsProtocol(self),
                                                                 local_addr=(self.host, self.port))
         self._transport = transport
+        sock = transport.get_extra_info("socket")
+        if sock is not None:   # class 1 of every session arrives here: room for a burst, as on 2222
+            sock.setsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF, RECEIVE_BUFFER)
         self.port = transport.get_extra_info("sockname")[1]
         self.local = SockAddr(transport.get_extra_info("sockname")[0], self.port)
         log.info("EtherNet/IP over DTLS listening on %s:%d (UDP)", self.host, self.port)

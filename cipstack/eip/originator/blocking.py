@@ -82,15 +82,13 @@ class BlockingEncapsulationClient(CoreClient):
         return client
 
     @classmethod
-    def connect_dtls(cls, host: str, port: int, timeout: float, security: Any,
+    def connect_dtls(cls, host: str, port: int, timeout: float, security: SecureChannel,
                      register: bool = True) -> BlockingEncapsulationClient:
         """Open a DTLS session with ``security`` (``Credentials``) to the device's UDP ``port`` (2221)
         and register an encapsulation session in it: class 1 connections opened on this client then
         flow in the same DTLS session."""
-        from ...security.dtls_link import DtlsLink
-
         client = cls(host, port, timeout)
-        client._sock = client.datagram_link = DtlsLink(security, host, port, timeout)
+        client._sock = client.datagram_link = security.datagram_link(host, port, timeout)
         client._security = security
         if register:
             try:
