@@ -173,6 +173,24 @@ class Scanner(_Declarations):
 
 
     @contextlib.asynccontextmanager
+    async def _io_client(self) -> AsyncIterator[EncapsulationClient]:
+        """The client a class 1 connection is opened on: this scanner's, or with CIP Security a DTLS
+        session of its own to the same port number over UDP, where the connection's data then flows
+        (a Forward_Open over TLS would open plain UDP 2222)."""
+        client = self.client
+        if client.security is None:
+            yield client
+            return
+        from .eip.originator.asyncio_client import EncapsulationClient
+
+        secured = await EncapsulationClient.connect(client.host, client.port, client.timeout,
+                                                    security=client.security, datagrams=True)
+        try:
+            yield secured
+        finally:
+            await secured.close()
+
+    @contextlib.asynccontextmanager
     async def io_connection(self, output: int | None = None, input: int = 0, rpi: float = 0.010, *,
                             config: int = 1, heartbeat: int | None = None, output_size: int | None = None,
                             input_size: int | None = None, output_schema: AssemblySchema | None = None,
@@ -200,13 +218,12 @@ class Scanner(_Declarations):
         """
         ot_size, to_size, output_schema, input_schema = await self.client.run(class1_assemblies(
             self.explicit, output, input, heartbeat, output_size, input_size, output_schema, input_schema))
-        context = self.client.io_connection(
-            output, input, rpi, output_size=ot_size, input_size=to_size, config=config, heartbeat=heartbeat,
-            output_schema=output_schema, input_schema=input_schema,
-            target_io_port=target_io_port, local_io_port=local_io_port, multicast=multicast,
-            timeout_multiplier=timeout_multiplier, run=run, keep_intervals=keep_intervals, config_data=config_data,
-            ot_format=ot_format, kernel_arrival_times=kernel_arrival_times)
-        async with context as handle:
+        async with self._io_client() as client, client.io_connection(
+                output, input, rpi, output_size=ot_size, input_size=to_size, config=config, heartbeat=heartbeat,
+                output_schema=output_schema, input_schema=input_schema,
+                target_io_port=target_io_port, local_io_port=local_io_port, multicast=multicast,
+                timeout_multiplier=timeout_multiplier, run=run, keep_intervals=keep_intervals,
+                config_data=config_data, ot_format=ot_format, kernel_arrival_times=kernel_arrival_times) as handle:
             handle.describe_schemas(self._schema_source(output, handle.output.schema),
                                     self._schema_source(input, handle.input.schema))
             yield handle
@@ -228,12 +245,13 @@ class Scanner(_Declarations):
         """
         eds = EdsConnection(self.catalog, doc, connection, rpi, options)
         async with contextlib.AsyncExitStack() as stack:
+            client = await stack.enter_async_context(self._io_client())
             try:
-                handle = await stack.enter_async_context(self.client.io_connection(**eds.arguments()))
+                handle = await stack.enter_async_context(client.io_connection(**eds.arguments()))
             except CipError as refused:
                 if not eds.may_retry(refused):
                     raise
-                handle = await stack.enter_async_context(self.client.io_connection(**eds.arguments(multicast=True)))
+                handle = await stack.enter_async_context(client.io_connection(**eds.arguments(multicast=True)))
                 handle.notes.append(eds.RETRY_NOTE)
             eds.describe(self, handle)
             yield handle

@@ -10,11 +10,13 @@ from __future__ import annotations
 import asyncio
 import logging
 import os
+import re
 import shutil
 import signal
 import socket
 import struct
 import subprocess
+import sys
 import threading
 import time
 from collections.abc import Iterator
@@ -29,7 +31,7 @@ from cipstack.adapter import Adapter, AdapterSettings
 from cipstack.eip.originator.blocking import BlockingEncapsulationClient
 from cipstack.eip.originator.blocking_io import io_connection
 from cipstack.errors import CipstackError, PeerUnreachable, SecurityError
-from cipstack.scanner import SyncScanner
+from cipstack.scanner import Scanner, SyncScanner
 from cipstack.security import Credentials
 from cipstack.security.dtls import DtlsChannel, dtls_context
 from cipstack.security.dtls_link import DtlsLink
@@ -148,6 +150,37 @@ def test_class1_over_dtls_flows_in_the_session(served: Served, lab: Path) -> Non
         assert io.statistics()["received"] > 0
         assert connection.stats.received > 0
     assert served.io.connections == {}
+
+
+def test_the_asyncio_scanner_opens_class1_over_dtls(served: Served, lab: Path) -> None:
+    async def scan() -> tuple[int, bool, tuple[str, int], list[tuple[str, int]]]:
+        scanner = await Scanner.connect(f"127.0.0.1:{served.port}", security=Credentials.load(lab))
+        async with scanner, scanner.io_connection(output=21, input=71, rpi=0.010) as io:
+            await io.wait_input(lambda image: image.ready, timeout=10)
+            (connection,) = served.io.connections.values()
+            return io.statistics()["received"], connection.secured, connection.destination, list(served.dtls.sessions)
+
+    received, secured, destination, sessions = asyncio.run(scan())
+    assert received > 0 and secured and sessions == [destination]
+    wait_for(lambda: served.io.connections == {}, 5, "the Forward_Close")
+
+
+def test_cipstack_io_with_security_runs_over_dtls(served: Served, lab: Path) -> None:
+    result = subprocess.run([sys.executable, "-m", "cipstack", "io", f"127.0.0.1:{served.port}", "--security", str(lab),
+                             "--output", "21", "--input", "71", "--rpi", "10ms", "--duration", "0.5s"],
+                            capture_output=True, text=True, timeout=60)
+    assert result.returncode == 0, result.stderr
+    sent, received = (int(word) for word in re.findall(r"sent (\d+)  received (\d+)", result.stdout)[0])
+    assert sent > 0 and received > 0
+    assert served.dtls.refused == 0
+
+
+def test_cipstack_io_names_a_missing_security_folder(tmp_path: Path) -> None:
+    result = subprocess.run([sys.executable, "-m", "cipstack", "io", "127.0.0.1", "--security", str(tmp_path / "none"),
+                             "--output", "21", "--input", "71"], capture_output=True, text=True, timeout=60)
+    assert result.returncode != 0
+    assert result.stderr.strip().splitlines() == [f"cipstack io: {tmp_path / 'none'}: no such folder (make one with "
+                                                  f"`cipstack security init {tmp_path / 'none'}`)"]
 
 
 def test_a_forward_open_over_tls_keeps_plain_udp(served: Served, lab: Path) -> None:

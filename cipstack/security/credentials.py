@@ -156,6 +156,14 @@ class Credentials:
 
         return DtlsLink(self, host, port, timeout)
 
+    async def open_datagram_link(self, host: str, port: int, timeout: float,
+                                 protocol_factory: Any) -> tuple[Any, Any]:
+        """``datagram_link`` on the running loop (``dtls_client.AsyncDtlsLink``), its encapsulation
+        records given to the protocol ``protocol_factory`` makes: (the link, the protocol)."""
+        from .dtls_client import AsyncDtlsLink
+
+        return await AsyncDtlsLink.open(self, host, port, timeout, protocol_factory)
+
     def _common(self, context: ssl.SSLContext) -> None:
         context.minimum_version = ssl.TLSVersion.TLSv1_2
         assert self.ca is not None   # _pair checked it
