@@ -5,6 +5,7 @@ the blocking ``SyncScanner`` does.
 
 from __future__ import annotations
 
+import asyncio
 import contextlib
 from collections.abc import AsyncIterator, Sequence
 from pathlib import Path
@@ -41,6 +42,10 @@ class Scanner(_Declarations):
     def __init__(self, client: EncapsulationClient, catalog: Catalog | None = None,
                  route: Sequence[Segment] | None = None) -> None:
         self.client = client
+        #: With CIP Security: the DTLS session class 1 connections are opened in, made with the first
+        #: of them and closed with the scanner (``_io_client``).
+        self._secured_io: EncapsulationClient | None = None
+        self._secured_io_lock = asyncio.Lock()
         #: What is asked and how replies are read: the same plans ``SyncScanner`` runs.
         self.explicit = ExplicitMessaging(client.core, catalog, route)
 
@@ -82,7 +87,12 @@ class Scanner(_Declarations):
         return await self.client.run(self.explicit.identify())
 
     async def close(self) -> None:
-        await self.client.close()
+        secured, self._secured_io = self._secured_io, None
+        try:
+            if secured is not None:
+                await secured.close()
+        finally:
+            await self.client.close()
 
     async def __aenter__(self) -> Scanner:
         return self
@@ -174,21 +184,21 @@ class Scanner(_Declarations):
 
     @contextlib.asynccontextmanager
     async def _io_client(self) -> AsyncIterator[EncapsulationClient]:
-        """The client a class 1 connection is opened on: this scanner's, or with CIP Security a DTLS
-        session of its own to the same port number over UDP, where the connection's data then flows
-        (a Forward_Open over TLS would open plain UDP 2222)."""
+        """The client a class 1 connection is opened on: this scanner's, or with CIP Security the
+        scanner's DTLS session to the same port number over UDP, where the connection's data then
+        flows (a Forward_Open over TLS would open plain UDP 2222). One session carries every class 1
+        connection of the scanner, as one UDP 2222 socket carries a PLC's."""
         client = self.client
         if client.security is None:
             yield client
             return
-        from .eip.originator.asyncio_client import EncapsulationClient
+        async with self._secured_io_lock:
+            if self._secured_io is None or not self._secured_io.is_open:
+                from .eip.originator.asyncio_client import EncapsulationClient
 
-        secured = await EncapsulationClient.connect(client.host, client.port, client.timeout,
-                                                    security=client.security, datagrams=True)
-        try:
-            yield secured
-        finally:
-            await secured.close()
+                self._secured_io = await EncapsulationClient.connect(client.host, client.port, client.timeout,
+                                                                     security=client.security, datagrams=True)
+        yield self._secured_io
 
     @contextlib.asynccontextmanager
     async def io_connection(self, output: int | None = None, input: int = 0, rpi: float = 0.010, *,

@@ -128,6 +128,17 @@ def split_records(data: bytes, budget: int = DATAGRAM_BUDGET) -> list[bytes]:
     return out
 
 
+def record_lengths(data: bytes) -> list[int]:
+    """The lengths of the whole DTLS records ``data`` holds, by their headers (RFC 6347, 4.1)."""
+    lengths = []
+    offset = 0
+    while offset + RECORD_HEADER <= len(data):
+        length = int.from_bytes(data[offset + 11:offset + 13], "big")
+        lengths.append(length)
+        offset += RECORD_HEADER + length
+    return lengths
+
+
 class DtlsChannel:
     """One DTLS association in memory: ``feed`` it datagrams, ``send`` it plaintext, take what goes
     out from ``datagrams``. Each plaintext given to ``send`` is one record (one EtherNet/IP message
@@ -143,6 +154,8 @@ class DtlsChannel:
         self.established = False
         #: Whether the peer sent close_notify, or a fatal alert ended the association.
         self.closed = False
+        #: Whether the layer may have written since ``datagrams`` last took what it wrote.
+        self._output = True
 
     @classmethod
     def client(cls, context: SSL.Context) -> DtlsChannel:
@@ -171,30 +184,42 @@ class DtlsChannel:
         RFC 6347, 4.1.2.7) is dropped silently, as DTLS does."""
         if datagram:
             self.connection.bio_write(datagram)
-        if not self.established and not self.handshake():
-            return []
+        if not self.established:
+            self._output = True
+            if not self.handshake():
+                return []
         records = []
-        while True:
-            try:
-                records.append(self.connection.recv(_READ_SIZE))
-            except self._ssl.WantReadError:
-                break
-            except self._ssl.ZeroReturnError:
-                self.closed = True
-                break
+        # One read per record the datagram holds (their headers say how many and how long), so that
+        # the common datagram of one record costs no WantReadError; what is left, if the count was
+        # wrong (records buffered from before), is read until the layer says there is no more.
+        wanted = record_lengths(datagram) or [_READ_SIZE]
+        recv = self.connection.recv
+        try:
+            for length in wanted:
+                records.append(recv(max(length, 1)))
+        except self._ssl.WantReadError:
+            self._output = True   # a record that was not data (an alert, a handshake message): maybe an answer
+        except self._ssl.ZeroReturnError:
+            self.closed = True
         return records
 
     def send(self, plain: bytes) -> None:
         """Encrypt ``plain`` as one record (taken out with ``datagrams``)."""
         self.connection.send(plain)
+        self._output = True
 
     def datagrams(self) -> list[bytes]:
-        """What the layer has to send, as datagrams of whole records."""
+        """What the layer has to send, as datagrams of whole records. Once established, the layer
+        writes only when a record was sent or one that was not data came (``_output``): a data record
+        read costs no look at an empty buffer."""
+        if not self._output:
+            return []
+        self._output = not self.established
         try:
             data = self.connection.bio_read(65536)
         except self._ssl.WantReadError:
             return []
-        return split_records(data)
+        return split_records(data) if len(data) > DATAGRAM_BUDGET else [data]
 
     def timeout(self) -> float | None:
         """Seconds until a flight of the handshake is due again (``DTLSv1_get_timeout``); None when
@@ -204,6 +229,7 @@ class DtlsChannel:
     def on_timer(self) -> None:
         """The retransmission deadline passed: the last flight is queued again (``DTLSv1_handle_timeout``)."""
         self.connection.DTLSv1_handle_timeout()
+        self._output = True
 
     def close(self) -> None:
         """Queue close_notify (the peer learns the association is over)."""
@@ -219,4 +245,4 @@ class DtlsChannel:
 CookieFunction = Callable[[bytes], bytes]
 
 __all__ = ["DATAGRAM_BUDGET", "DTLS1_2_VERSION", "CookieFunction", "DtlsChannel", "KeyLog", "describe_dtls_failure",
-           "dtls_context", "require_pyopenssl", "split_records"]
+           "dtls_context", "record_lengths", "require_pyopenssl", "split_records"]

@@ -12,10 +12,11 @@ from __future__ import annotations
 
 import asyncio
 import logging
+import socket
 from collections.abc import Callable
 from typing import Any
 
-from ..eip.io_server import DatagramPaths, IoEndpoint
+from ..eip.io_server import RECEIVE_BUFFER, DatagramPaths, IoEndpoint
 from ..eip.originator.class1 import IoOriginator
 from ..errors import PeerUnreachable, SecurityError
 from .dtls import DtlsChannel, describe_dtls_failure, dtls_context
@@ -85,6 +86,9 @@ class AsyncDtlsLink(asyncio.DatagramProtocol):
     # -- the datagram side -----------------------------------------------------------------------------
     def connection_made(self, transport: asyncio.BaseTransport) -> None:
         self._transport = transport   # type: ignore[assignment]  # a datagram endpoint's
+        sock = transport.get_extra_info("socket")
+        if sock is not None:   # T->O of every connection in the session arrives here: room for a burst
+            sock.setsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF, RECEIVE_BUFFER)
         self._flush()
         self._arm()
 

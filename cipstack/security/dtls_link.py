@@ -19,6 +19,7 @@ from collections import deque
 from collections.abc import Callable
 from typing import TYPE_CHECKING
 
+from ..eip.io_server import RECEIVE_BUFFER
 from ..errors import NoReply, PeerUnreachable, SecurityError
 from .dtls import DtlsChannel, describe_dtls_failure, dtls_context
 from .dtls_target import is_io_datagram
@@ -48,6 +49,7 @@ class DtlsLink:
         try:
             self.sock.connect((host, port))
             self.sock.setblocking(False)
+            self.sock.setsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF, RECEIVE_BUFFER)
             self.channel = DtlsChannel.client(dtls_context(credentials, server=False))
             self._handshake(time.monotonic() + timeout)
         except OSError as exc:

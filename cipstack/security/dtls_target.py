@@ -40,7 +40,8 @@ import os
 import socket
 from typing import TYPE_CHECKING
 
-from ..eip.io_server import RECEIVE_BUFFER, DatagramPaths
+from ..eip.io_server import DRAIN_LIMIT, MAX_DATAGRAM, RECEIVE_BUFFER, DatagramPaths
+from ..eip.precise_loop import IoLane, lane_of
 from ..eip.target.limits import RateLimitedLog
 from ..eip.wire.cpf import SockAddr
 from .credentials import SECURE_PORT
@@ -117,14 +118,18 @@ class _Session:
         self.last_record = now
         if self.connection is None and self.channel.established:
             self._established(now)
+        explicit = False
         for plain in records:
-            self._record(plain, now)
+            explicit = self._record(plain, now) or explicit
         self.flush()
         if self.channel.closed or (self.connection is not None and self.connection.closing):
             self.flush()
             server.end(self)
             return
-        self.arm(now)
+        # Class 1 records move only the idle deadline on, which the timer finds when it fires; an
+        # encapsulation message may bring a deadline nearer (a frame begun, a class 3 connection).
+        if explicit or self._timer is None or self.connection is None:
+            self.arm(now)
 
     def _established(self, now: float) -> None:
         server = self.server
@@ -132,19 +137,21 @@ class _Session:
         server.paths.routes[self.address] = self.send_io
         log.info("%s: DTLS session accepted (%s)", self.peer, self.channel.description())
 
-    def _record(self, plain: bytes, now: float) -> None:
+    def _record(self, plain: bytes, now: float) -> bool:
+        """Serve one record's plaintext; whether it was an encapsulation message."""
         connection = self.connection
         if connection is None or not plain:
-            return
+            return False
         if is_io_datagram(plain):
             io = self.server.io
             if io is not None:
                 io.receive(plain, self.address, now, secured=True)
-            return
+            return False
         connection.receive(plain, now)
         out = connection.data_to_send()
         if out:
             self.channel.send(out)
+        return True
 
     def send_io(self, datagram: bytes) -> None:
         """Send a T->O datagram of a connection opened in this session (``DatagramPaths``)."""
@@ -282,6 +289,8 @@ class DtlsServer:
         self.loop: asyncio.AbstractEventLoop
         self.local = SockAddr("0.0.0.0", port)
         self._transport: asyncio.DatagramTransport | None = None
+        self._sock: socket.socket | None = None
+        self._lane: IoLane | None = None
 
     # -- cookies ---------------------------------------------------------------------------------------
     def _cookie(self, connection: object) -> bytes:
@@ -342,9 +351,38 @@ class DtlsServer:
         session.datagram(b"", now)
 
     def sendto(self, datagram: bytes, address: tuple[str, int]) -> None:
-        transport = self._transport
-        if transport is not None and not transport.is_closing():
-            transport.sendto(datagram, address)
+        sock = self._sock
+        if sock is None:
+            return
+        if self._transport is not None:
+            if not self._transport.is_closing():
+                self._transport.sendto(datagram, address)
+            return
+        try:
+            sock.sendto(datagram, address)
+        except (BlockingIOError, InterruptedError):   # a full buffer: DTLS resends a flight, class 1 newer data
+            log.debug("DTLS datagram to %s:%d dropped: the socket's buffer is full", *address)
+        except OSError as exc:
+            log.debug("DTLS datagram to %s:%d: %s", address[0], address[1], exc)
+
+    def _drain(self) -> None:
+        """The lane's reader: what the socket holds, up to ``DRAIN_LIMIT`` datagrams."""
+        sock = self._sock
+        if sock is None:
+            return
+        datagram = self.datagram
+        for _ in range(DRAIN_LIMIT):
+            try:
+                data, address = sock.recvfrom(MAX_DATAGRAM)
+            except (BlockingIOError, InterruptedError):
+                return
+            except OSError as exc:   # an ICMP error reported on the socket
+                log.debug("DTLS UDP error: %s", exc)
+                return
+            try:
+                datagram(data, address)
+            except Exception:   # a datagram must never take the port down
+                log.exception("DTLS datagram from %s", address)
 
     def end(self, session: _Session) -> None:
         """Forget ``session``: its route, its encapsulation connection, the class 1 connections opened in it."""
@@ -366,28 +404,45 @@ class DtlsServer:
     # -- the port --------------------------------------------------------------------------------------
     @property
     def is_open(self) -> bool:
-        return self._transport is not None
+        return self._sock is not None
 
     async def start(self) -> None:
-        """Listen on the DTLS port (0: any free one, read back in ``port``)."""
+        """Listen on the DTLS port (0: any free one, read back in ``port``). On the class 1 lane of a
+        ``PreciseEventLoop`` (the command line's) the socket is read there, as UDP 2222 is: a wake-up
+        drains what came, with no asyncio round per datagram; on any other loop through asyncio's
+        datagram transport."""
         self.loop = asyncio.get_running_loop()
-        transport, _ = await self.loop.create_datagram_endpoint(lambda: _DtlsProtocol(self),
-                                                                local_addr=(self.host, self.port))
-        self._transport = transport
-        sock = transport.get_extra_info("socket")
-        if sock is not None:   # class 1 of every session arrives here: room for a burst, as on 2222
+        sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+        try:
+            sock.bind((self.host, self.port))
+            # Class 1 of every session arrives here: room for a burst, as on 2222.
             sock.setsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF, RECEIVE_BUFFER)
-        self.port = transport.get_extra_info("sockname")[1]
-        self.local = SockAddr(transport.get_extra_info("sockname")[0], self.port)
+            sock.setblocking(False)
+        except OSError:
+            sock.close()
+            raise
+        self._sock = sock
+        self._lane = lane_of(self.loop)
+        if self._lane is not None:
+            self._lane.add_reader(sock.fileno(), self._drain)
+        else:
+            self._transport, _ = await self.loop.create_datagram_endpoint(lambda: _DtlsProtocol(self), sock=sock)
+        self.host, self.port = sock.getsockname()
+        self.local = SockAddr(self.host, self.port)
         log.info("EtherNet/IP over DTLS listening on %s:%d (UDP)", self.host, self.port)
 
     async def close(self) -> None:
         for session in list(self.sessions.values()):
             session.close()
             self.end(session)
+        sock, self._sock = self._sock, None
         transport, self._transport = self._transport, None
         if transport is not None:
             transport.close()
+        elif sock is not None:
+            if self._lane is not None:
+                self._lane.remove_reader(sock.fileno())
+            sock.close()
 
 
 __all__ = ["DEFAULT_MAX_SESSIONS", "DTLS_TIMEOUT", "DtlsServer", "is_client_hello", "is_dtls_record",
