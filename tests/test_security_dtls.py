@@ -406,6 +406,31 @@ def test_a_peer_that_vanishes_mid_handshake_is_forgotten(served: Served, lab: Pa
     assert served.dtls.refused == 1
 
 
+def test_an_idle_session_is_closed_after_the_dtls_timeout(served: Served, lab: Path) -> None:
+    served.call(setattr, served.dtls, "idle_timeout", 0.5)
+    client = BlockingEncapsulationClient.connect_dtls("127.0.0.1", served.port, 5.0, Credentials.load(lab))
+    try:
+        wait_for(lambda: len(served.dtls.sessions) == 1, 5, "the session")
+        wait_for(lambda: served.dtls.sessions == {}, 10, "the idle session to be closed")
+    finally:
+        client.close()
+    assert served.dtls.refused == 0
+
+
+def test_sessions_past_the_bound_are_refused_and_the_others_serve(served: Served, lab: Path) -> None:
+    served.call(setattr, served.dtls, "max_sessions", 1)
+    credentials = Credentials.load(lab)
+    with SyncScanner("127.0.0.1", served.port, security=credentials) as scanner, \
+            scanner.io_connection(output=21, input=71, rpi=0.010, on_input=lambda image: None) as io:
+        # (served by a thread of its own, on_input: it runs while this thread waits for the refusal)
+        with pytest.raises(PeerUnreachable, match="no answer to the handshake"):
+            DtlsLink(credentials, "127.0.0.1", served.port, 1.0)
+        assert served.dtls.refused >= 1 and len(served.dtls.sessions) == 1
+        before = io.statistics()["received"]
+        io.sleep(0.2)
+        assert io.statistics()["received"] > before
+
+
 def test_originator_names_a_device_that_does_not_listen(lab: Path) -> None:
     port = free_port()
     with pytest.raises(PeerUnreachable, match=rf"127\.0\.0\.1:{port}"):
