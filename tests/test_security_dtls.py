@@ -152,6 +152,34 @@ def test_class1_over_dtls_flows_in_the_session(served: Served, lab: Path) -> Non
     assert served.io.connections == {}
 
 
+def test_the_command_line_adapter_serves_class1_over_dtls(lab: Path, tmp_path: Path) -> None:
+    # The command line's adapter runs on the precise loop, whose lane drains the DTLS socket.
+    port, secure_port = free_port(), free_port()
+    log = tmp_path / "adapter.log"
+    with log.open("wb") as stderr:
+        process = subprocess.Popen([sys.executable, "-m", "cipstack", "adapter", "--host", "127.0.0.1", "--port",
+                                    str(port), "--io-port", "0", "--factory", "--quiet", "--security", str(lab),
+                                    "--security-port", str(secure_port)], stdout=subprocess.DEVNULL, stderr=stderr)
+    try:
+        def listening() -> bool:
+            try:
+                socket.create_connection(("127.0.0.1", port), timeout=0.2).close()
+            except OSError:
+                return process.poll() is not None
+            return True
+
+        wait_for(listening, 30, "the adapter to listen")   # plain TCP accepts last: DTLS is up by then
+        assert process.poll() is None, log.read_text()
+        with SyncScanner("127.0.0.1", secure_port, security=Credentials.load(lab)) as scanner, \
+                scanner.io_connection(output=21, input=71, rpi=0.010) as io:
+            io.sleep(0.5)
+            counts = io.statistics()
+        assert counts["received"] > 20 and counts["lost"] == 0
+    finally:
+        _stop(process)
+    assert "DTLS session accepted" in log.read_text()
+
+
 def test_the_asyncio_scanner_opens_class1_over_dtls(served: Served, lab: Path) -> None:
     async def scan() -> tuple[int, bool, tuple[str, int], list[tuple[str, int]]]:
         scanner = await Scanner.connect(f"127.0.0.1:{served.port}", security=Credentials.load(lab))
