@@ -115,6 +115,10 @@ class DatagramPaths:
 
     def __init__(self) -> None:
         self.routes: dict[tuple[str, int], Callable[[bytes], None]] = {}
+        #: What reads each path's socket (a DTLS port's, a DTLS session's): called before a firing
+        #: judges the connections (``IoEndpoint._catch_up``), so that datagrams that came in time but
+        #: wait unread after a stall of the loop are counted first, as those of the endpoint's own.
+        self.catch_up: list[Callable[[], None]] = []
 
 
 class _UdpIo(asyncio.DatagramProtocol):
@@ -373,6 +377,8 @@ class IoEndpoint:
         if datagrams:
             self._send(datagrams)
         self._catch_up(now)
+        for read in self.paths.catch_up:
+            read()
         expire(now)
         self.wakeup()
 

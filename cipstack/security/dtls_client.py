@@ -16,7 +16,7 @@ import socket
 from collections.abc import Callable
 from typing import Any
 
-from ..eip.io_server import RECEIVE_BUFFER, DatagramPaths, IoEndpoint
+from ..eip.io_server import CATCH_UP_READS, DRAIN_LIMIT, MAX_DATAGRAM, RECEIVE_BUFFER, DatagramPaths, IoEndpoint
 from ..eip.originator.class1 import IoOriginator
 from ..errors import PeerUnreachable, SecurityError
 from .dtls import DtlsChannel, describe_dtls_failure, dtls_context
@@ -45,6 +45,7 @@ class AsyncDtlsLink(asyncio.DatagramProtocol):
         self._transport: asyncio.DatagramTransport | None = None
         self._timer: asyncio.TimerHandle | None = None
         self._closed = False
+        self._sock: socket.socket | None = None
         #: The class 1 endpoint of ``io_core``, made with the first connection (``io_endpoint``).
         self._endpoint: IoEndpoint | None = None
         #: The endpoint's closing, once ``close`` began it.
@@ -68,7 +69,15 @@ class AsyncDtlsLink(asyncio.DatagramProtocol):
         protocol = protocol_factory()
         link = cls(DtlsChannel.client(dtls_context(credentials, server=False)), host, port, protocol)
         try:
-            await loop.create_datagram_endpoint(lambda: link, remote_addr=(host, port))
+            infos = await loop.getaddrinfo(host, port, type=socket.SOCK_DGRAM)
+            family, kind, proto, _name, address = infos[0]
+            sock = socket.socket(family, kind, proto)
+            link._sock = sock
+            sock.setblocking(False)
+            # T->O of every connection in the session arrives here: room for a burst.
+            sock.setsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF, RECEIVE_BUFFER)
+            await loop.sock_connect(sock, address)
+            await loop.create_datagram_endpoint(lambda: link, sock=sock)
             await asyncio.wait_for(asyncio.shield(link.established), timeout)
         except (OSError, asyncio.TimeoutError) as exc:
             link.close()
@@ -86,9 +95,7 @@ class AsyncDtlsLink(asyncio.DatagramProtocol):
     # -- the datagram side -----------------------------------------------------------------------------
     def connection_made(self, transport: asyncio.BaseTransport) -> None:
         self._transport = transport   # type: ignore[assignment]  # a datagram endpoint's
-        sock = transport.get_extra_info("socket")
-        if sock is not None:   # T->O of every connection in the session arrives here: room for a burst
-            sock.setsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF, RECEIVE_BUFFER)
+        self.paths.catch_up.append(self._catch_up)
         self._flush()
         self._arm()
 
@@ -112,6 +119,21 @@ class AsyncDtlsLink(asyncio.DatagramProtocol):
             self._fail(PeerUnreachable(f"DTLS session with {self.host}:{self.port} closed by the device"))
         elif not self.channel.established:
             self._arm()
+
+    def _catch_up(self) -> None:
+        """Before the class 1 endpoint judges the connections: the records this socket still holds
+        (after a stall of the loop the endpoint's timer may come before the transport's read)."""
+        sock = self._sock
+        for _ in range(CATCH_UP_READS * DRAIN_LIMIT):
+            if sock is None or self._closed:
+                return
+            try:
+                data, address = sock.recvfrom(MAX_DATAGRAM)
+            except (BlockingIOError, InterruptedError):
+                return
+            except OSError:
+                return   # an ICMP error: the transport reports it
+            self.datagram_received(data, address)
 
     def error_received(self, exc: Exception) -> None:
         if isinstance(exc, ConnectionRefusedError):   # ICMP port unreachable: nothing listens there
@@ -193,8 +215,13 @@ class AsyncDtlsLink(asyncio.DatagramProtocol):
         if self.channel.established:
             self.channel.close()
             self._flush()
+        if self._catch_up in self.paths.catch_up:
+            self.paths.catch_up.remove(self._catch_up)
         if self._transport is not None:
             self._transport.close()
+        elif self._sock is not None:
+            self._sock.close()
+        self._sock = None
         endpoint, self._endpoint = self._endpoint, None
         if endpoint is not None:
             self.closing = asyncio.ensure_future(endpoint.close())

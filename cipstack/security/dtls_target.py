@@ -38,9 +38,17 @@ import hmac
 import logging
 import os
 import socket
+import time
 from typing import TYPE_CHECKING
 
-from ..eip.io_server import DRAIN_LIMIT, MAX_DATAGRAM, RECEIVE_BUFFER, DatagramPaths
+from ..eip.io_server import (
+    CATCH_UP_AFTER_S,
+    CATCH_UP_READS,
+    DRAIN_LIMIT,
+    MAX_DATAGRAM,
+    RECEIVE_BUFFER,
+    DatagramPaths,
+)
 from ..eip.precise_loop import IoLane, lane_of
 from ..eip.target.limits import RateLimitedLog
 from ..eip.wire.cpf import SockAddr
@@ -291,6 +299,8 @@ class DtlsServer:
         self._transport: asyncio.DatagramTransport | None = None
         self._sock: socket.socket | None = None
         self._lane: IoLane | None = None
+        #: When the socket was last read to its end (``_catch_up``).
+        self._emptied_at = float("-inf")
 
     # -- cookies ---------------------------------------------------------------------------------------
     def _cookie(self, connection: object) -> bytes:
@@ -375,6 +385,7 @@ class DtlsServer:
             try:
                 data, address = sock.recvfrom(MAX_DATAGRAM)
             except (BlockingIOError, InterruptedError):
+                self._emptied_at = time.monotonic()
                 return
             except OSError as exc:   # an ICMP error reported on the socket
                 log.debug("DTLS UDP error: %s", exc)
@@ -401,6 +412,14 @@ class DtlsServer:
         self.refused += 1
         self.refused_log("%s", line, source=source)
 
+    def _catch_up(self) -> None:
+        """Before the class 1 endpoint judges its connections: what this socket still holds, unless it
+        was read to its end just now (``DatagramPaths.catch_up``; ``io_server.CATCH_UP_AFTER_S``)."""
+        for _ in range(CATCH_UP_READS):
+            if time.monotonic() - self._emptied_at <= CATCH_UP_AFTER_S or self._sock is None:
+                return
+            self._drain()
+
     # -- the port --------------------------------------------------------------------------------------
     @property
     def is_open(self) -> bool:
@@ -423,6 +442,7 @@ class DtlsServer:
             raise
         self._sock = sock
         self._lane = lane_of(self.loop)
+        self.paths.catch_up.append(self._catch_up)
         if self._lane is not None:
             self._lane.add_reader(sock.fileno(), self._drain)
         else:
@@ -436,6 +456,8 @@ class DtlsServer:
             session.close()
             self.end(session)
         sock, self._sock = self._sock, None
+        if self._catch_up in self.paths.catch_up:
+            self.paths.catch_up.remove(self._catch_up)
         transport, self._transport = self._transport, None
         if transport is not None:
             transport.close()
