@@ -149,4 +149,5 @@ def test_dtls_io_holds_both_ways_and_compares_the_adapters_cpu() -> None:
     [round_] = json.loads(result.stdout)["rounds"]
     for way in ("plain", "dtls"):
         assert round_[way]["opened"] == 4 and round_[way]["sent"] > 0 and round_[way]["received"] > 0, result.stderr
-    assert round_["dtls"]["cpu_per_packet_us"] is None or round_["dtls"]["cpu_per_packet_us"] > 0
+        # 4 connections at 10 ms for 1 s: about 400 packets each way, whatever the machine's load.
+        assert round_[way]["sent"] >= 200 and round_[way]["lost"] == 0
