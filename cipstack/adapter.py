@@ -187,7 +187,7 @@ class Adapter:
             self.tls = TlsServer(self.target, credentials, s.host, s.security_port,
                                  max_connections=s.max_tcp_connections,
                                  max_connections_per_host=s.max_tcp_connections_per_host, replies=self.replies)
-            self.dtls = DtlsServer(self.target, credentials, s.host, s.security_port, io=self.io,
+            self.dtls = DtlsServer(self.target, credentials, s.host, s.security_port, io=self.io_seam,
                                    paths=self.io_paths)
         ports: list[Port] = [ServerPort("EtherNet/IP", self.server)]
         if self.tls is not None:

@@ -212,6 +212,24 @@ def test_cipstack_io_names_a_missing_security_folder(tmp_path: Path) -> None:
                                                   f"`cipstack security init {tmp_path / 'none'}`)"]
 
 
+def test_class1_faults_act_on_a_secured_connection(served: Served, lab: Path) -> None:
+    with SyncScanner("127.0.0.1", served.port, security=Credentials.load(lab)) as scanner, \
+            scanner.io_connection(output=21, input=71, rpi=0.010, on_input=lambda image: None) as io:
+        wait_for(lambda: [c.run for c in served.io.connections.values()] == [True], 5, "the connection to run")
+        (connection,) = served.io.connections.values()
+        # An O->T filter: the run bit cleared on its way in, from the DTLS session as from UDP 2222.
+        served.call(served.adapter.fault, "idle")
+        wait_for(lambda: connection.run is False, 5, "the connection to go idle")
+        served.call(served.adapter.clear_faults)
+        wait_for(lambda: connection.run is True, 5, "the connection to run again")
+        # Withheld: consumed (its watchdog fed) without reaching the device, still secured.
+        served.call(served.adapter.fault, "ignore-output")
+        received = connection.stats.received
+        wait_for(lambda: connection.stats.received > received + 20, 5, "O->T datagrams under ignore-output")
+        served.call(served.adapter.clear_faults)
+        assert not io.timed_out and served.io.connections
+
+
 def test_a_forward_open_over_tls_keeps_plain_udp(served: Served, lab: Path) -> None:
     tls_port = served.adapter.tls.port   # type: ignore[union-attr]
     client = BlockingEncapsulationClient.connect("127.0.0.1", tls_port, 5.0, security=Credentials.load(lab))

@@ -58,7 +58,7 @@ from .tls_target import HANDSHAKE_TIMEOUT
 
 if TYPE_CHECKING:
     from ..eip.target.core import EncapsulationConnection, EncapsulationTarget
-    from ..eip.target.io_target import IoTarget
+    from ..eip.target.seams import IoSeam
     from .credentials import Credentials
 
 log = logging.getLogger(__name__)
@@ -153,7 +153,7 @@ class _Session:
         if is_io_datagram(plain):
             io = self.server.io
             if io is not None:
-                io.receive(plain, self.address, now, secured=True)
+                io.receive_secured(plain, self.address, now)
             return False
         connection.receive(plain, now)
         out = connection.data_to_send()
@@ -260,9 +260,10 @@ class DtlsServer:
     """The DTLS port of one target, beside its TLS port (``TlsServer``) on the same number."""
 
     def __init__(self, target: EncapsulationTarget, credentials: Credentials, host: str = "127.0.0.1",
-                 port: int = SECURE_PORT, *, io: IoTarget | None = None, paths: DatagramPaths | None = None,
+                 port: int = SECURE_PORT, *, io: IoSeam | None = None, paths: DatagramPaths | None = None,
                  verify_client: bool = True, max_sessions: int = DEFAULT_MAX_SESSIONS) -> None:
-        """``io``: the class 1 core that takes the datagrams of connections opened over DTLS; ``paths``:
+        """``io``: the class 1 seam whose core takes the datagrams of connections opened over DTLS (the
+        faults' filters act on them as on plain UDP 2222's); ``paths``:
         the datagram paths of its UDP endpoint, where this server adds the address of each session."""
         from .dtls import require_pyopenssl
 
@@ -405,7 +406,7 @@ class DtlsServer:
             session.connection.connection_lost()
             session.connection = None
             if self.io is not None:
-                self.io.close_path(session.address)
+                self.io.core.close_path(session.address)
 
     def refuse(self, source: str, line: str) -> None:
         """Count one refusal; its line is logged at most once per source per 10 s."""
