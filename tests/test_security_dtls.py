@@ -490,14 +490,14 @@ def test_an_idle_session_is_closed_after_the_dtls_timeout(served: Served, lab: P
 
 
 def test_sessions_past_the_bound_are_refused_and_the_others_serve(served: Served, lab: Path) -> None:
-    served.call(setattr, served.dtls, "max_sessions", 1)
+    served.call(setattr, served.dtls.limiter, "total", 1)
     credentials = Credentials.load(lab)
     with SyncScanner("127.0.0.1", served.port, security=credentials) as scanner, \
             scanner.io_connection(output=21, input=71, rpi=0.010, on_input=lambda image: None) as io:
         # (served by a thread of its own, on_input: it runs while this thread waits for the refusal)
         with pytest.raises(PeerUnreachable, match="no answer to the handshake"):
             DtlsLink(credentials, "127.0.0.1", served.port, 1.0)
-        assert served.dtls.refused >= 1 and len(served.dtls.sessions) == 1
+        assert served.dtls.refused >= 1 and len(served.dtls.sessions) == 1 and served.dtls.limiter.refused >= 1
         before = io.statistics()["received"]
         io.sleep(0.2)
         assert io.statistics()["received"] > before

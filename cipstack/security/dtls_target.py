@@ -15,7 +15,8 @@ connection on 44818 gets. Each record's plaintext is one of two things:
 Stateless cookies (RFC 6347, 4.2.1): a ClientHello without a valid cookie is answered with a
 HelloVerifyRequest whose cookie is an HMAC of the source address under a secret of this process, and
 nothing is kept; a session is made only for a ClientHello that returns it (``DTLSv1_listen``), so a
-flood of spoofed ClientHellos makes no state per source. Sessions are bounded (``max_sessions``); a
+flood of spoofed ClientHellos makes no state per source. Sessions are bounded (``limiter``: 64, 32
+from one host, by default); a
 handshake has ``handshake_timeout`` seconds and is retransmitted at the record layer's deadlines; a
 session without a record for ``idle_timeout`` seconds is closed (the EtherNet/IP Security object's
 DTLS Timeout, whose default of 12 s is the one OpENer's CIP Security branch gives).
@@ -50,7 +51,7 @@ from ..eip.io_server import (
     DatagramPaths,
 )
 from ..eip.precise_loop import IoLane, lane_of
-from ..eip.target.limits import RateLimitedLog
+from ..eip.target.limits import ConnectionLimiter, RateLimitedLog
 from ..eip.wire.cpf import SockAddr
 from .credentials import SECURE_PORT
 from .dtls import DtlsChannel, describe_dtls_failure, dtls_context
@@ -261,7 +262,8 @@ class DtlsServer:
 
     def __init__(self, target: EncapsulationTarget, credentials: Credentials, host: str = "127.0.0.1",
                  port: int = SECURE_PORT, *, io: IoSeam | None = None, paths: DatagramPaths | None = None,
-                 verify_client: bool = True, max_sessions: int = DEFAULT_MAX_SESSIONS) -> None:
+                 verify_client: bool = True, max_sessions: int = DEFAULT_MAX_SESSIONS,
+                 max_sessions_per_host: int | None = None) -> None:
         """``io``: the class 1 seam whose core takes the datagrams of connections opened over DTLS (the
         faults' filters act on them as on plain UDP 2222's); ``paths``:
         the datagram paths of its UDP endpoint, where this server adds the address of each session."""
@@ -282,7 +284,8 @@ class DtlsServer:
         self.context = dtls_context(credentials, server=True, verify_client=verify_client)
         self.context.set_cookie_generate_callback(self._cookie)
         self.context.set_cookie_verify_callback(self._cookie_matches)
-        self.max_sessions = max_sessions
+        #: Sessions at once, in all and per host (half of all by default: one host never holds every one).
+        self.limiter = ConnectionLimiter(max_sessions, max_sessions_per_host)
         #: Seconds a handshake has from the ClientHello that returned its cookie.
         self.handshake_timeout = HANDSHAKE_TIMEOUT
         #: Seconds a session may go without a record (``DTLS_TIMEOUT``).
@@ -354,9 +357,9 @@ class DtlsServer:
             self.refuse(address[0], f"DTLS ClientHello from {address[0]}:{address[1]} refused: "
                                     f"{describe_dtls_failure(exc)}")
             return
-        if len(self.sessions) >= self.max_sessions:
+        if not self.limiter.admit(address[0]):
             self.refuse(address[0], f"DTLS session from {address[0]}:{address[1]} refused: "
-                                    f"{self.max_sessions} sessions already")
+                                    f"{self.limiter.reason(address[0]).replace('connections', 'sessions')}")
             return
         session = self.sessions[address] = _Session(self, address, DtlsChannel(connection), now)
         session.datagram(b"", now)
@@ -401,6 +404,7 @@ class DtlsServer:
         session.cancel()
         if self.sessions.get(session.address) is session:
             del self.sessions[session.address]
+            self.limiter.release(session.address[0])
         self.paths.routes.pop(session.address, None)
         if session.connection is not None:
             session.connection.connection_lost()
