@@ -413,6 +413,18 @@ def test_garbage_and_plain_enip_are_refused_and_logged_once(served: Served, lab:
         assert plain.identify() is not None
 
 
+def test_garbage_in_an_established_session_is_discarded(served: Served, lab: Path) -> None:
+    client = BlockingEncapsulationClient.connect_dtls("127.0.0.1", served.port, 5.0, Credentials.load(lab))
+    with client:
+        link = client.datagram_link
+        for index in range(10):   # from the session's own address: not records of it (RFC 6347, 4.1.2.7)
+            link.sock.send(os.urandom(30 + index))
+        link.sock.send(bytes([23, 0xFE, 0xFD]) + bytes(10) + b"\x00\x20" + os.urandom(32))   # a forged record
+        [identity] = client.perform(client.core.list_identity())
+        assert identity.product_name == "CENT"
+        assert len(served.dtls.sessions) == 1
+
+
 def test_a_client_hello_flood_from_many_sources_keeps_no_state(served: Served, lab: Path) -> None:
     hello = _client_hello(Credentials.load(lab))
     sources, burst = 200, 50
