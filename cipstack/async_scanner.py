@@ -56,7 +56,8 @@ class Scanner(_Declarations):
                       security: SecureChannel | None = None) -> Scanner:
         """Connect to ``address`` (``"host"`` or ``"host:port"``) and register a session; with
         ``security`` (``cipstack.security.Credentials.load(DIR)``) over TLS, to port 2221 unless the
-        address or ``port`` names another.
+        address or ``port`` names another; its class 1 connections then go over DTLS to the same port
+        number (UDP), all in one DTLS session whose data they carry.
 
         The catalog replies decode by is, first match: ``catalog``; the EDS file ``eds`` (a path or
         a read ``EdsDocument``); the profile of the device's identity (``identify``, the default);

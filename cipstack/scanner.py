@@ -530,7 +530,8 @@ class SyncScanner(_Declarations):
                  identify: bool = True, eds: str | Path | EdsDocument | None = None,
                  security: SecureChannel | None = None) -> None:
         """``security``: CIP Security's credentials (``cipstack.security.Credentials.load(DIR)``): the
-        requests go over TLS, to port 2221 unless the address or ``port`` names another."""
+        requests go over TLS, to port 2221 unless the address or ``port`` names another, and each
+        class 1 connection over DTLS to the same port number (UDP), its data in that DTLS session."""
         host, parsed_port = parse_host(address, DEFAULT_PORT if security is None else SECURE_PORT)
         #: The blocking client requests travel on (``client.connection``: the class 3 connection, if open).
         self.client = BlockingEncapsulationClient.connect(host, port or parsed_port, timeout, security=security)
