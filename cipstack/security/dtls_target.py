@@ -414,8 +414,8 @@ class DtlsServer:
 
     def refuse(self, source: str, line: str) -> None:
         """Count one refusal; its line is logged at most once per source per 10 s."""
-        self.refused += 1
         self.refused_log("%s", line, source=source)
+        self.refused += 1   # after its line: whoever sees the count sees the line too
 
     def _catch_up(self) -> None:
         """Before the class 1 endpoint judges its connections: what this socket still holds, unless it
