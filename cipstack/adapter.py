@@ -21,7 +21,7 @@ from .devices.keypad import Keypad, NoKeypad
 from .devices.profiles import DEFAULT_MAC, DEFAULT_PROFILE, ProfileOptions, build_device
 from .eip.interfaces import interface_of
 from .eip.io_core import DEFAULT_IO_PORT, ProductionGrid
-from .eip.io_server import GATHER_WITHIN_S, IoEndpoint, freeze_startup_objects
+from .eip.io_server import GATHER_WITHIN_S, DatagramPaths, IoEndpoint, freeze_startup_objects
 from .eip.target.core import EncapsulationTarget, TargetSettings
 from .eip.target.io_target import IoProfile, IoTarget
 from .eip.target.limits import DEFAULT_MAX_TCP_CONNECTIONS
@@ -41,6 +41,7 @@ from .runtime.observer import IoEventRelay, Observers, register_relay
 from .runtime.runtime import DeviceClock
 
 if TYPE_CHECKING:
+    from .security.dtls_target import DtlsServer
     from .security.tls_target import TlsServer
 
 log = logging.getLogger(__name__)
@@ -147,6 +148,8 @@ class Adapter:
         self.io: IoTarget | None = None
         self.io_seam: IoSeam | None = None
         self.io_endpoint: IoEndpoint | None = None
+        #: Where class 1 datagrams of connections opened over DTLS go instead of UDP 2222.
+        self.io_paths = DatagramPaths()
         profile = self.device.io_profile()
         if profile is not None:
             if s.max_io_connections is not None:
@@ -154,7 +157,7 @@ class Adapter:
             self.io_endpoint = IoEndpoint(host=s.host, port=s.io_port,
                                           multicast_ttl=lambda: int(self.device.tcpip.get(1, 8)), exclusive=True,
                                           make_core=partial(self._class1_core, profile, production_grid),
-                                          gather_within=GATHER_WITHIN_S)
+                                          gather_within=GATHER_WITHIN_S, paths=self.io_paths)
             assert self.io is not None   # made by _class1_core, with the endpoint
             self.device.update_io_status()
         self.requests = RequestSeam(self.device.router)
@@ -173,16 +176,24 @@ class Adapter:
                                           replies=self.replies)
         #: EtherNet/IP over TLS with ``settings.security`` (``cipstack.security.tls_target``).
         self.tls: TlsServer | None = None
+        #: EtherNet/IP and class 1 over DTLS on the same port number, UDP (``cipstack.security.dtls_target``).
+        self.dtls: DtlsServer | None = None
         if s.security is not None:
             from .security import Credentials
+            from .security.dtls_target import DtlsServer
             from .security.tls_target import TlsServer
 
-            self.tls = TlsServer(self.target, Credentials.load(s.security), s.host, s.security_port,
+            credentials = Credentials.load(s.security)
+            self.tls = TlsServer(self.target, credentials, s.host, s.security_port,
                                  max_connections=s.max_tcp_connections,
                                  max_connections_per_host=s.max_tcp_connections_per_host, replies=self.replies)
+            self.dtls = DtlsServer(self.target, credentials, s.host, s.security_port, io=self.io_seam,
+                                   paths=self.io_paths)
         ports: list[Port] = [ServerPort("EtherNet/IP", self.server)]
         if self.tls is not None:
             ports.append(ServerPort("EtherNet/IP over TLS", self.tls))
+        if self.dtls is not None:
+            ports.append(ServerPort("EtherNet/IP over DTLS", self.dtls))
         if self.modbus is not None:
             ports.append(ServerPort("Modbus TCP", self.modbus))
         if self.io_endpoint is not None:
@@ -258,6 +269,10 @@ class Adapter:
         if self.tls is not None:
             await self._listen(self.tls.start,
                                lambda: f"TCP {s.host}:{s.security_port} (EtherNet/IP over TLS, --security-port)")
+        if self.dtls is not None and self.tls is not None:
+            self.dtls.port = self.tls.port   # the same number in UDP (port 0: the one TLS was given)
+            await self._listen(self.dtls.start,
+                               lambda: f"UDP {s.host}:{s.security_port} (EtherNet/IP over DTLS, --security-port)")
         if self.rs485 is not None:
             await self._open_rtu(self.rs485)
         self.clock.tick(asyncio.get_running_loop().time())
@@ -395,6 +410,8 @@ class Adapter:
             await self.modbus.close()
         if self.tls is not None:
             await self.tls.close()
+        if self.dtls is not None:
+            await self.dtls.close()
         if self.rs485 is not None:
             await self.rs485.release()
         if self.io is not None:

@@ -5,6 +5,7 @@ the blocking ``SyncScanner`` does.
 
 from __future__ import annotations
 
+import asyncio
 import contextlib
 from collections.abc import AsyncIterator, Sequence
 from pathlib import Path
@@ -41,6 +42,10 @@ class Scanner(_Declarations):
     def __init__(self, client: EncapsulationClient, catalog: Catalog | None = None,
                  route: Sequence[Segment] | None = None) -> None:
         self.client = client
+        #: With CIP Security: the DTLS session class 1 connections are opened in, made with the first
+        #: of them and closed with the scanner (``_io_client``).
+        self._secured_io: EncapsulationClient | None = None
+        self._secured_io_lock = asyncio.Lock()
         #: What is asked and how replies are read: the same plans ``SyncScanner`` runs.
         self.explicit = ExplicitMessaging(client.core, catalog, route)
 
@@ -51,7 +56,8 @@ class Scanner(_Declarations):
                       security: SecureChannel | None = None) -> Scanner:
         """Connect to ``address`` (``"host"`` or ``"host:port"``) and register a session; with
         ``security`` (``cipstack.security.Credentials.load(DIR)``) over TLS, to port 2221 unless the
-        address or ``port`` names another.
+        address or ``port`` names another; its class 1 connections then go over DTLS to the same port
+        number (UDP), all in one DTLS session whose data they carry.
 
         The catalog replies decode by is, first match: ``catalog``; the EDS file ``eds`` (a path or
         a read ``EdsDocument``); the profile of the device's identity (``identify``, the default);
@@ -82,7 +88,12 @@ class Scanner(_Declarations):
         return await self.client.run(self.explicit.identify())
 
     async def close(self) -> None:
-        await self.client.close()
+        secured, self._secured_io = self._secured_io, None
+        try:
+            if secured is not None:
+                await secured.close()
+        finally:
+            await self.client.close()
 
     async def __aenter__(self) -> Scanner:
         return self
@@ -173,6 +184,24 @@ class Scanner(_Declarations):
 
 
     @contextlib.asynccontextmanager
+    async def _io_client(self) -> AsyncIterator[EncapsulationClient]:
+        """The client a class 1 connection is opened on: this scanner's, or with CIP Security the
+        scanner's DTLS session to the same port number over UDP, where the connection's data then
+        flows (a Forward_Open over TLS would open plain UDP 2222). One session carries every class 1
+        connection of the scanner, as one UDP 2222 socket carries a PLC's."""
+        client = self.client
+        if client.security is None:
+            yield client
+            return
+        async with self._secured_io_lock:
+            if self._secured_io is None or not self._secured_io.is_open:
+                from .eip.originator.asyncio_client import EncapsulationClient
+
+                self._secured_io = await EncapsulationClient.connect(client.host, client.port, client.timeout,
+                                                                     security=client.security, datagrams=True)
+        yield self._secured_io
+
+    @contextlib.asynccontextmanager
     async def io_connection(self, output: int | None = None, input: int = 0, rpi: float = 0.010, *,
                             config: int = 1, heartbeat: int | None = None, output_size: int | None = None,
                             input_size: int | None = None, output_schema: AssemblySchema | None = None,
@@ -200,13 +229,12 @@ class Scanner(_Declarations):
         """
         ot_size, to_size, output_schema, input_schema = await self.client.run(class1_assemblies(
             self.explicit, output, input, heartbeat, output_size, input_size, output_schema, input_schema))
-        context = self.client.io_connection(
-            output, input, rpi, output_size=ot_size, input_size=to_size, config=config, heartbeat=heartbeat,
-            output_schema=output_schema, input_schema=input_schema,
-            target_io_port=target_io_port, local_io_port=local_io_port, multicast=multicast,
-            timeout_multiplier=timeout_multiplier, run=run, keep_intervals=keep_intervals, config_data=config_data,
-            ot_format=ot_format, kernel_arrival_times=kernel_arrival_times)
-        async with context as handle:
+        async with self._io_client() as client, client.io_connection(
+                output, input, rpi, output_size=ot_size, input_size=to_size, config=config, heartbeat=heartbeat,
+                output_schema=output_schema, input_schema=input_schema,
+                target_io_port=target_io_port, local_io_port=local_io_port, multicast=multicast,
+                timeout_multiplier=timeout_multiplier, run=run, keep_intervals=keep_intervals,
+                config_data=config_data, ot_format=ot_format, kernel_arrival_times=kernel_arrival_times) as handle:
             handle.describe_schemas(self._schema_source(output, handle.output.schema),
                                     self._schema_source(input, handle.input.schema))
             yield handle
@@ -228,12 +256,13 @@ class Scanner(_Declarations):
         """
         eds = EdsConnection(self.catalog, doc, connection, rpi, options)
         async with contextlib.AsyncExitStack() as stack:
+            client = await stack.enter_async_context(self._io_client())
             try:
-                handle = await stack.enter_async_context(self.client.io_connection(**eds.arguments()))
+                handle = await stack.enter_async_context(client.io_connection(**eds.arguments()))
             except CipError as refused:
                 if not eds.may_retry(refused):
                     raise
-                handle = await stack.enter_async_context(self.client.io_connection(**eds.arguments(multicast=True)))
+                handle = await stack.enter_async_context(client.io_connection(**eds.arguments(multicast=True)))
                 handle.notes.append(eds.RETRY_NOTE)
             eds.describe(self, handle)
             yield handle

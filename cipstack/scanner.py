@@ -34,7 +34,7 @@ from .eip.originator.core import (
 )
 from .eip.originator.replies import EncapsulationStatusError, MalformedReplyError
 from .eip.wire.encapsulation import DEFAULT_PORT, SECURE_PORT
-from .errors import BadRequest, NotFound, ProtocolError, WrongState
+from .errors import BadRequest, NotFound, ProtocolError
 from .logs import debug
 
 if TYPE_CHECKING:
@@ -530,12 +530,13 @@ class SyncScanner(_Declarations):
                  identify: bool = True, eds: str | Path | EdsDocument | None = None,
                  security: SecureChannel | None = None) -> None:
         """``security``: CIP Security's credentials (``cipstack.security.Credentials.load(DIR)``): the
-        requests go over TLS, to port 2221 unless the address or ``port`` names another."""
+        requests go over TLS, to port 2221 unless the address or ``port`` names another, and each
+        class 1 connection over DTLS to the same port number (UDP), its data in that DTLS session."""
         host, parsed_port = parse_host(address, DEFAULT_PORT if security is None else SECURE_PORT)
         #: The blocking client requests travel on (``client.connection``: the class 3 connection, if open).
         self.client = BlockingEncapsulationClient.connect(host, port or parsed_port, timeout, security=security)
         self._address = (host, port or parsed_port, timeout)
-        self._secured = security is not None
+        self._security = security
         self.explicit = ExplicitMessaging(self.client.core, catalog, route)
         self._io: set[SyncIoConnection] = set()
         try:
@@ -670,10 +671,13 @@ class SyncScanner(_Declarations):
     def _open_io(self, **arguments: Any) -> SyncIoConnection:
         from .eip.originator.blocking_io import io_connection
 
-        if self._secured:
-            raise WrongState("class 1 I/O over CIP Security (DTLS) is not implemented yet: open it without security=")
         host, port, timeout = self._address
-        client = BlockingEncapsulationClient.connect(host, port, timeout)
+        if self._security is not None:
+            # CIP Security: class 1 flows in a DTLS session on the device's UDP port 2221, where its
+            # Forward_Open is sent too (a Forward_Open over TLS would open plain UDP 2222).
+            client = BlockingEncapsulationClient.connect_dtls(host, port, timeout, self._security)
+        else:
+            client = BlockingEncapsulationClient.connect(host, port, timeout)
         try:
             opened = io_connection(client, **arguments, on_close=self._io.discard)
         except BaseException:

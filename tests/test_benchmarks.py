@@ -136,3 +136,18 @@ def test_rtu_prints_requests_per_second_against_the_lines_limit() -> None:
                           text=True, timeout=120)
     assert text.returncode == 0, text.stderr
     assert "    9,600 bps: " in text.stdout and "  115,200 bps: " in text.stdout and "ratio 0." in text.stdout
+
+
+def test_dtls_io_holds_both_ways_and_compares_the_adapters_cpu() -> None:
+    """``dtls_io.py``, one short round with few connections: both holds open every connection, count
+    packets both ways and the adapter's CPU, and give a ratio (not judged here: a benchmark's figure)."""
+    import json
+
+    pytest.importorskip("OpenSSL", reason="the security extra (pyOpenSSL) is not installed")
+    result = subprocess.run([sys.executable, str(BENCHMARKS / "dtls_io.py"), "--connections", "4", "--seconds", "1",
+                             "--rounds", "1", "--json"], capture_output=True, text=True, timeout=120)
+    [round_] = json.loads(result.stdout)["rounds"]
+    for way in ("plain", "dtls"):
+        assert round_[way]["opened"] == 4 and round_[way]["sent"] > 0 and round_[way]["received"] > 0, result.stderr
+        # 4 connections at 10 ms for 1 s: about 400 packets each way, whatever the machine's load.
+        assert round_[way]["sent"] >= 200

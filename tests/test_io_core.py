@@ -372,3 +372,31 @@ def test_a_connection_past_511_bytes_is_opened_with_large_forward_open() -> None
     assert request(506, 4).large_forward_open
     assert not request(None, 509).large_forward_open and request(None, 510).large_forward_open
     assert request(4, 4).ot_size == 10 and not request(4, 4).large_forward_open
+
+
+def test_a_forward_open_over_dtls_opens_a_secured_point_to_point_connection() -> None:
+    rig = Rig()
+    session = ("127.0.0.1", 50000)
+    context = rig.context(1.0)
+    context.extras["io_path"] = session   # what a connection arriving in a DTLS session says
+    rig.io.forward_open(rig.request(), context)
+    [connection] = rig.io.connections.values()
+    assert connection.secured and connection.destination == session
+    [(_datagram, destination)] = rig.io.poll(1.0)
+    assert destination == session   # T->O goes to the session, which the shell routes into DTLS
+    ot = encode_io_datagram(connection.ot_connection_id, 1, 1, b"\x01\x00\x00\x00" + b"\x05\x06\x07\x08")
+    rig.io.receive(ot, ("127.0.0.1", 2222), 1.001)   # the same datagram as plain UDP: dropped
+    rig.io.receive(ot, ("127.0.0.1", 50001), 1.001, secured=True)   # another session's: dropped
+    assert rig.io.dropped == 2 and rig.consumed_data == []
+    rig.io.receive(ot, session, 1.002, secured=True)
+    assert rig.consumed_data == [(b"\x05\x06\x07\x08", 1.002)]
+    assert rig.io.close_path(session) == 1 and not rig.io.connections
+
+
+def test_a_forward_open_over_dtls_for_multicast_is_refused() -> None:
+    rig = Rig()
+    context = rig.context(1.0)
+    context.extras["io_path"] = ("127.0.0.1", 50000)
+    with pytest.raises(CipError) as refused:
+        rig.io.forward_open(rig.request(to_type=ConnectionType.MULTICAST), context)
+    assert refused.value.extended == (0x0108,) and not rig.io.connections

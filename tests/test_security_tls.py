@@ -521,7 +521,8 @@ def test_plain_adapter_and_scanner_import_nothing_of_security() -> None:
               "                assert drive.read(1, 1, 7) == 'CENT'\n"
               "        await asyncio.to_thread(read)\n"
               "asyncio.run(main())\n"
-              "print(sorted(m for m in sys.modules if m.startswith(('cipstack.security', 'cryptography'))))\n")
+              "print(sorted(m for m in sys.modules\n"
+              "             if m.startswith(('cipstack.security', 'cryptography', 'OpenSSL'))))\n")
     result = subprocess.run([sys.executable, "-c", script], capture_output=True, text=True, timeout=60)
     assert result.returncode == 0, result.stderr
     assert result.stdout.strip() == "[]"

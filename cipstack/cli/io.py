@@ -262,11 +262,19 @@ def cmd_io(args: argparse.Namespace) -> int:
     print_mode, print_every = parse_print(args.print)
     config_data = parse_config_data(args.config_data)
     assignments = [parse_assignment(a) for a in args.set or []]
-    host, port = parse_host(args.target)
+    security = None
+    if args.security is not None:
+        from ..eip.wire.encapsulation import SECURE_PORT
+        from ..security import Credentials
+
+        security = Credentials.load(args.security)
+        host, port = parse_host(args.target, SECURE_PORT)
+    else:
+        host, port = parse_host(args.target)
 
     async def session(loop: asyncio.AbstractEventLoop, stop: asyncio.Event, state: dict[str, bool]) -> int:
         # Identifies the device and takes its profile's declarations, or those of the EDS file given.
-        scanner = await Scanner.connect(f"{host}:{port}", timeout=args.timeout, eds=doc)
+        scanner = await Scanner.connect(f"{host}:{port}", timeout=args.timeout, eds=doc, security=security)
         options: dict[str, Any] = {"target_io_port": args.target_io_port, "local_io_port": args.io_port,
                                    "config_data": config_data}
         if args.ot_format is not None:

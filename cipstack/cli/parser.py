@@ -208,11 +208,13 @@ def build_parser(command: str | None = None, texts: bool = True) -> argparse.Arg
                             "power-cycle loses them")
         p.add_argument("--quiet", action="store_true", help="no status line on stdout")
         _complete(p.add_argument("--security", type=Path, metavar="DIR",
-                                 help="CIP Security: also serve EtherNet/IP over TLS, with the CA, device certificate "
-                                      "and key of DIR (`cipstack security init DIR`); client certificates are "
-                                      "verified against the CA"), _DIRECTORY)
+                                 help="CIP Security: also serve EtherNet/IP over TLS (TCP) and DTLS (UDP, with "
+                                      "secured class 1), with the CA, device certificate and key of DIR (`cipstack "
+                                      "security init DIR`); client certificates are verified against the CA"),
+                  _DIRECTORY)
         p.add_argument("--security-port", type=number("security port"), metavar="N",
-                       help="TCP port of EtherNet/IP over TLS with --security (default 2221; 0 picks a free one)")
+                       help="TCP and UDP port of EtherNet/IP over TLS and DTLS with --security (default 2221; "
+                            "0 picks a free one)")
         _add_http_arguments(p)
         _complete(p.add_argument("--scenario", type=Path, metavar="FILE.toml",
                                  help="run this timeline of faults and actions (docs/scenarios.md), then exit: 0 when "
@@ -363,6 +365,10 @@ def build_parser(command: str | None = None, texts: bool = True) -> argparse.Arg
 
         p = sub.add_parser("io")
         common(p)
+        _complete(p.add_argument("--security", type=Path, metavar="DIR",
+                                 help="CIP Security: open the connection over DTLS (UDP 2221 unless TARGET names "
+                                      "a port) with the CA, client certificate and key of DIR (`cipstack security "
+                                      "init DIR`); its data flows in the DTLS session"), _DIRECTORY)
         p.add_argument("--output", type=number("output"), metavar="N", help="output (O->T) assembly instance")
         p.add_argument("--input", type=number("input"), metavar="N", help="input assembly instance")
         p.add_argument("--heartbeat", type=number("heartbeat"), metavar="N",

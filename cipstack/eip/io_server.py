@@ -117,6 +117,20 @@ class IoCore(Protocol):
     def expire(self, now: float) -> list[Any]: ...
 
 
+class DatagramPaths:
+    """Where T->O datagrams to some destinations go instead of the endpoint's UDP socket: the address
+    of a DTLS session (``security.dtls_target``) maps to what sends a datagram in that session. Made
+    by whoever builds the endpoint and given to it and to the DTLS shell, which adds and removes its
+    sessions; while none is there, a datagram costs one test of an empty mapping."""
+
+    def __init__(self) -> None:
+        self.routes: dict[tuple[str, int], Callable[[bytes], None]] = {}
+        #: What reads each path's socket (a DTLS port's, a DTLS session's): called before a firing
+        #: judges the connections (``IoEndpoint._catch_up``), so that datagrams that came in time but
+        #: wait unread after a stall of the loop are counted first, as those of the endpoint's own.
+        self.catch_up: list[Callable[[], None]] = []
+
+
 class _UdpIo(asyncio.DatagramProtocol):
     def __init__(self, endpoint: IoEndpoint) -> None:
         self.endpoint = endpoint
@@ -170,11 +184,13 @@ class IoEndpoint:
 
     def __init__(self, core: IoCore | None = None, host: str = "127.0.0.1", port: int = 2222,
                  multicast_ttl: Callable[[], int] = lambda: 1, exclusive: bool = False, *,
-                 make_core: Callable[[IoEndpoint], IoCore] | None = None, gather_within: float = 0.0) -> None:
+                 make_core: Callable[[IoEndpoint], IoCore] | None = None, gather_within: float = 0.0,
+                 paths: DatagramPaths | None = None) -> None:
         """``core``, or ``make_core``: what makes the core around this endpoint, called once here with
         the endpoint, for a core that takes the endpoint's methods as its collaborators when it is made
         (a target's core wakes the endpoint when a Forward_Open adds a deadline; its filters send
-        later through it), so that nothing is set on the core afterwards.
+        later through it), so that nothing is set on the core afterwards. ``paths``: the datagram
+        paths besides the socket (DTLS sessions), by destination.
 
         ``gather_within`` (seconds, 0: off): while the endpoint's next firing is at most this far off,
         arriving datagrams do not wake the loop; the firing reads them all first, then produces and
@@ -202,6 +218,8 @@ class IoEndpoint:
         #: Multicast groups joined: each socket, and off the lane its transport.
         self._groups: dict[tuple[str, int], tuple[socket.socket, asyncio.DatagramTransport | None]] = {}
         self.send_errors = 0
+        #: Destinations whose datagrams go another way than the socket (a DTLS session's address).
+        self.paths = paths or DatagramPaths()
         #: Datagrams are given to the core with the time the kernel received them (``stamp_arrivals``).
         self.kernel_arrival_times = False
         #: When each socket was last read to its end (``_catch_up``), by socket: the endpoint's own and
@@ -392,6 +410,9 @@ class IoEndpoint:
         # per socket (a system call and an exception when there is nothing).
         if self._lane is None or self._left_unread or due_at is None or now - due_at > CATCH_UP_AFTER_S:
             self._catch_up(now)
+        # The other paths (DTLS sessions) are read before timeouts are judged, whatever the firing.
+        for read in self.paths.catch_up:
+            read()
         expire(now)
         self.wakeup()
         if self.gather_within:
@@ -422,7 +443,13 @@ class IoEndpoint:
         after it, in order; on the lane it is dropped and counted, as a full link drops it (the
         next production carries newer data anyway)."""
         sock, transport = self._sock, self.transport
+        routes = self.paths.routes
         for index, (datagram, destination) in enumerate(datagrams):
+            if routes:
+                route = routes.get(destination)
+                if route is not None:   # a connection opened over DTLS: its data flows in that session
+                    route(datagram)
+                    continue
             # asyncio's selector datagram transport has it; typeshed's DatagramTransport does not say so.
             if transport is not None and (sock is None or transport.get_write_buffer_size()):  # type: ignore[attr-defined]
                 for queued, where in datagrams[index:]:
@@ -471,6 +498,7 @@ __all__ = [
     "MAX_DATAGRAM",
     "RECEIVE_BUFFER",
     "SO_TIMESTAMPNS",
+    "DatagramPaths",
     "IoCore",
     "IoEndpoint",
     "freeze_startup_objects",

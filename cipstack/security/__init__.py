@@ -1,9 +1,10 @@
-"""CIP Security: EtherNet/IP over TLS as a shell around the same sans-I/O cores, and the credentials
-folder both roles read (``cipstack security init DIR`` writes it).
+"""CIP Security: EtherNet/IP over TLS and DTLS as shells around the same sans-I/O cores, and the
+credentials folder both roles read (``cipstack security init DIR`` writes it).
 
-``Credentials.load(DIR)`` gives the ``security=`` argument of ``SyncScanner``; ``cipstack adapter
---security DIR`` serves TLS on TCP 2221 beside plain 44818. Nothing here is imported by the plain
-paths of the package: ``ssl`` and ``cryptography`` load only when security is asked for."""
+``Credentials.load(DIR)`` gives the ``security=`` argument of ``SyncScanner`` and ``Scanner``;
+``cipstack adapter --security DIR`` serves TLS on TCP 2221 and DTLS (with secured class 1) on UDP
+2221 beside plain 44818. Nothing here is imported by the plain paths of the package: ``ssl``,
+``cryptography`` and pyOpenSSL load only when security is asked for."""
 
 from __future__ import annotations
 

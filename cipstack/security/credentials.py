@@ -148,6 +148,22 @@ class Credentials:
             return SecurityError(f"TLS with {host}:{port} failed: {describe_tls_failure(failure)}")
         return None
 
+    def datagram_link(self, host: str, port: int, timeout: float) -> Any:
+        """A DTLS session with the device's UDP ``port`` (2221), its handshake done within ``timeout``
+        (``dtls_link.DtlsLink``): ``SecurityError`` naming the cause of a refusal, ``PeerUnreachable``
+        when nothing answers."""
+        from .dtls_link import DtlsLink
+
+        return DtlsLink(self, host, port, timeout)
+
+    async def open_datagram_link(self, host: str, port: int, timeout: float,
+                                 protocol_factory: Any) -> tuple[Any, Any]:
+        """``datagram_link`` on the running loop (``dtls_client.AsyncDtlsLink``), its encapsulation
+        records given to the protocol ``protocol_factory`` makes: (the link, the protocol)."""
+        from .dtls_client import AsyncDtlsLink
+
+        return await AsyncDtlsLink.open(self, host, port, timeout, protocol_factory)
+
     def _common(self, context: ssl.SSLContext) -> None:
         context.minimum_version = ssl.TLSVersion.TLSv1_2
         assert self.ca is not None   # _pair checked it

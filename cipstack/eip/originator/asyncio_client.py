@@ -93,21 +93,34 @@ class EncapsulationClient(CoreClient):
         self._protocol: _ClientProtocol | None = None
         self._waiting: dict[Transaction[Any], asyncio.Future[Any]] = {}
         self._timer: asyncio.TimerHandle | None = None
+        #: Over DTLS (``connect(datagrams=True)``): the session, which class 1 connections share.
+        self.datagram_link: Any = None
+        self._datagrams = False
 
     # -- life cycle -----------------------------------------------------------------------------
     @classmethod
     async def connect(cls, host: str, port: int = DEFAULT_PORT, timeout: float = DEFAULT_TIMEOUT,
-                      register: bool = True, security: SecureChannel | None = None) -> EncapsulationClient:
+                      register: bool = True, security: SecureChannel | None = None,
+                      datagrams: bool = False) -> EncapsulationClient:
         """Connect (and register a session unless ``register`` is false); with ``security``, over
-        TLS (CIP Security: the device's port 2221)."""
+        TLS (CIP Security: the device's port 2221), or with ``datagrams`` too over DTLS (UDP 2221),
+        where the class 1 connections it opens flow in the same DTLS session."""
         client = cls(host, port, timeout)
         client.security = security
+        client._datagrams = datagrams and security is not None
         await client.open(register)
         return client
 
     async def open(self, register: bool = True) -> None:
         loop = asyncio.get_running_loop()
         security = self.security
+        if security is not None and self._datagrams:
+            self.datagram_link, protocol = await security.open_datagram_link(
+                self.host, self.port, self.timeout, lambda: _ClientProtocol(self))
+            self._protocol = protocol
+            if register:
+                await self.register_session()
+            return
         context = security.client_context() if security is not None else None
         try:
             _, protocol = await asyncio.wait_for(

@@ -54,9 +54,11 @@ class BlockingEncapsulationClient(CoreClient):
     def __init__(self, host: str, port: int = DEFAULT_PORT, timeout: float = DEFAULT_TIMEOUT,
                  core: OriginatorCore | None = None) -> None:
         super().__init__(host, port, timeout, core)
-        self._sock: socket.socket | None = None
+        self._sock: socket.socket | Any = None
         self._security: SecureChannel | None = None
         self._sock_timeout: float | None = None
+        #: Over DTLS: the session (``security.dtls_link.DtlsLink``) whose datagrams class 1 shares.
+        self.datagram_link: Any = None
 
     @classmethod
     def connect(cls, host: str, port: int = DEFAULT_PORT, timeout: float = DEFAULT_TIMEOUT,
@@ -70,6 +72,23 @@ class BlockingEncapsulationClient(CoreClient):
             raise PeerUnreachable.connecting(host, port, exc) from None
         sock.setsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY, 1)
         client._sock = sock if security is None else security.wrap_client(sock, host, port)
+        client._security = security
+        if register:
+            try:
+                client.perform(client.core.register_session())
+            except BaseException:
+                client.close()
+                raise
+        return client
+
+    @classmethod
+    def connect_dtls(cls, host: str, port: int, timeout: float, security: SecureChannel,
+                     register: bool = True) -> BlockingEncapsulationClient:
+        """Open a DTLS session with ``security`` (``Credentials``) to the device's UDP ``port`` (2221)
+        and register an encapsulation session in it: class 1 connections opened on this client then
+        flow in the same DTLS session."""
+        client = cls(host, port, timeout)
+        client._sock = client.datagram_link = security.datagram_link(host, port, timeout)
         client._security = security
         if register:
             try:

@@ -88,9 +88,15 @@ class SyncIoConnection:
         #: The multicast group T->O data comes from (the target's Sockaddr Info), None for point-to-point.
         self.multicast_group: str | None = None
         self.request = request
+        #: Over DTLS: the client's session, which carries this connection's data both ways.
+        self._link = client.datagram_link
         try:
-            sock = self._bind(client.local_host(), local_io_port)
-            opened = client.run(open_plan(client.core, request, sock.getsockname()[1]))
+            if self._link is not None:
+                self._sockets.append(self._link.sock)   # the link's, closed with the client
+                local_port = self._link.getsockname()[1]
+            else:
+                local_port = self._bind(client.local_host(), local_io_port).getsockname()[1]
+            opened = client.run(open_plan(client.core, request, local_port))
             self.request, self._triad, self.notes = opened.request, opened.triad, opened.notes
             addresses = reply_addresses(opened.items)
             if addresses.group is not None:
@@ -146,12 +152,16 @@ class SyncIoConnection:
             self._forward_close()
         finally:
             for sock in self._sockets:
-                sock.close()
+                if self._link is None or sock is not self._link.sock:
+                    sock.close()
             self._sockets.clear()
             self._client.close()
 
     # -- serving the core --------------------------------------------------------------------------
     def _drain(self, sock: socket.socket) -> None:
+        if self._link is not None:
+            self._link.drain(self._core.receive)
+            return
         receive, clock = self._core.receive, self._clock
         while True:
             try:
@@ -178,7 +188,10 @@ class SyncIoConnection:
             now = clock()
             for datagram, destination in core.poll(now, COALESCE_S):
                 try:
-                    sock.sendto(datagram, destination)
+                    if self._link is not None:
+                        self._link.send_io(datagram)
+                    else:
+                        sock.sendto(datagram, destination)
                 except OSError as exc:   # a full buffer or an ICMP error: the next production carries newer data
                     log.debug("class 1 send to %s failed: %s", destination, exc)
             core.expire(now)
@@ -333,6 +346,9 @@ class SyncIoConnection:
             client.run(close_plan(client.core, triad, self.request.path))
             return
         except OSError as lost:
+            if self._link is not None:   # over DTLS the connection closes with its session at the device
+                log.info("class 1 connection to %s: the DTLS session was lost (%s)", client.host, lost)
+                return
             log.info("class 1 connection to %s: the session was lost (%s); a new one sends the Forward_Close",
                      client.host, lost)
         except CipstackError as exc:

@@ -492,6 +492,17 @@ class SecureChannel(Protocol):
         """The error to raise for a TLS failure (a handshake refused, or with TLS 1.3 an alert after it,
         when the device judges the client's certificate); None for a failure that is not TLS's."""
 
+    async def open_datagram_link(self, host: str, port: int, timeout: float,
+                                 protocol_factory: Any) -> tuple[Any, Any]:
+        """A DTLS session with the device's UDP ``port`` on the running loop after its handshake
+        (``security.dtls_client.AsyncDtlsLink``), with the protocol ``protocol_factory`` makes
+        connected to it as to a stream transport: (the link, the protocol)."""
+
+    def datagram_link(self, host: str, port: int, timeout: float) -> Any:
+        """A DTLS session with the device's UDP ``port`` after its handshake, blocking
+        (``security.dtls_link.DtlsLink``): what a blocking client and its class 1 connections use in
+        place of their sockets; ``SecurityError`` or ``PeerUnreachable`` naming the cause."""
+
 
 class CoreClient:
     """What every shell over the core holds: the target's address, the default reply timeout and

@@ -81,7 +81,11 @@ class IoContext:
 
     async def __aenter__(self) -> IoConnectionHandle:
         client = self.client
-        core, endpoint = await shared_io_endpoint(client.local_host(), self.local_io_port)
+        link = client.datagram_link
+        if link is not None:   # over DTLS: the session's own core, its data in the session both ways
+            core, endpoint = await link.io_endpoint(client.local_host())
+        else:
+            core, endpoint = await shared_io_endpoint(client.local_host(), self.local_io_port)
         if self.kernel_arrival_times:
             endpoint.stamp_arrivals()
         opened = await self._open_shielded(self.request, endpoint.port)
@@ -118,6 +122,8 @@ class IoContext:
             await endpoint.join_multicast(addresses.group, addresses.group_port)
         # O->T data goes to the port the caller gave, else to the one the reply names, else to 2222.
         ot_port = self.target_io_port if self.target_io_port is not None else addresses.ot_port or DEFAULT_IO_PORT
+        if self.client.datagram_link is not None:
+            ot_port = self.client.port   # the route of the DTLS session's address (``DatagramPaths``)
         listener = QueueListener()
         connection = new_connection(request, self.client.host_address(), ot_port,
                                     reply.ot_connection_id, reply.to_connection_id, reply.ot_api_us, reply.to_api_us,

@@ -193,8 +193,11 @@ class EncapsulationTarget:
         self.too_much_data_log = RateLimitedLog(log, level=logging.INFO)
 
     # -- TCP ------------------------------------------------------------------------------------
-    def connection(self, peer: str, local: SockAddr, now: float) -> EncapsulationConnection:
-        return EncapsulationConnection(self, peer, local, now)
+    def connection(self, peer: str, local: SockAddr, now: float,
+                   io_path: tuple[str, int] | None = None) -> EncapsulationConnection:
+        """A connection's core; ``io_path``: the address of the DTLS session it arrives in, where the
+        class 1 data of the Forward_Opens it carries then flows (None: a TCP connection, plain UDP)."""
+        return EncapsulationConnection(self, peer, local, now, io_path)
 
     def _new_session(self, owner: EncapsulationConnection) -> int:
         while True:
@@ -273,7 +276,8 @@ class EncapsulationTarget:
 class EncapsulationConnection:
     """One TCP connection to the target."""
 
-    def __init__(self, target: EncapsulationTarget, peer: str, local: SockAddr, now: float) -> None:
+    def __init__(self, target: EncapsulationTarget, peer: str, local: SockAddr, now: float,
+                 io_path: tuple[str, int] | None = None) -> None:
         self.target = target
         self.peer = peer
         self.host = origin_host(peer)
@@ -288,6 +292,10 @@ class EncapsulationConnection:
         self._inbox = bytearray()
         self._outbox: list[bytes] = []
         self._context = RequestContext(target.router, now, peer, self, class1=target.class1)
+        if io_path is not None:
+            # A Forward_Open over DTLS opens a connection whose data flows in that DTLS session
+            # (``IoTarget``); one over TCP or TLS opens plain UDP.
+            self._context.extras["io_path"] = io_path
         #: The last common SendRRData that was a read of its own (``_frame``): its bytes, its CIP
         #: request and its sender context, for a client that sends it again (``receive``).
         self._repeat = b""

@@ -183,6 +183,9 @@ class IoConnection:
     watch_at: float = 0.0
     #: T->O data bytes of a variable-size connection that asked for fewer than its assembly's size.
     to_payload_size: int | None = None
+    #: Opened by a Forward_Open over DTLS: its data flows in that DTLS session (``destination`` is
+    #: the session's address), and O->T datagrams that come as plain UDP are dropped.
+    secured: bool = False
 
     @property
     def name(self) -> str:
@@ -305,6 +308,10 @@ class IoTarget:
             raise connection_failure(ExtendedStatus.INCONSISTENT_PATH_COMBINATION, triad,
                                      f"assemblies {out_point}/{in_point} are not a pair this device offers")
         self._check_network(fo, kind, consumed, produced)
+        if context.extras.get("io_path") is not None and fo.to_parameters.type != ConnectionType.POINT_TO_POINT:
+            raise connection_failure(ExtendedStatus.INVALID_NETWORK_CONNECTION_PARAMETER, triad,
+                                     "a connection opened over DTLS is point-to-point: its data flows in the "
+                                     "DTLS session")
         self._check_rpi(fo)
         owner = None
         if kind is ConnectionKind.EXCLUSIVE_OWNER:
@@ -431,7 +438,13 @@ class IoTarget:
         multicast = fo.to_parameters.type == ConnectionType.MULTICAST
         peer_host = origin_host(context.origin) if context.origin else "127.0.0.1"
         sockaddrs: dict[int, SockAddr] = context.extras.get("sockaddr", {})
-        if owner is not None:
+        io_path: tuple[str, int] | None = context.extras.get("io_path")
+        if io_path is not None:
+            # Over DTLS both directions flow in the session the Forward_Open came in (OpENer issue
+            # #234; Wireshark dissects class 1 in DTLS on port 2221): T->O goes to its address.
+            destination = io_path
+            to_id = fo.to_connection_id
+        elif owner is not None:
             destination = owner.destination
             to_id = owner.to_connection_id
         elif multicast:
@@ -462,7 +475,8 @@ class IoTarget:
             to_payload_size = fo.to_parameters.size - TO_OVERHEAD
         connection = IoConnection(kind, fo.triad, self._new_id(), to_id, fo.ot_rpi_us, fo.to_rpi_us, consumed,
                                   produced, destination, multicast, consumer, producer, stats, peer_host,
-                                  owner=owner, ot_payload_size=ot_payload_size, to_payload_size=to_payload_size)
+                                  owner=owner, ot_payload_size=ot_payload_size, to_payload_size=to_payload_size,
+                                  secured=io_path is not None)
         if owner is not None:
             owner.listeners.append(connection)
         connection.silence_check = now + max(SILENT_RPIS * fo.ot_rpi_us / 1e6, SILENT_MINIMUM_S)
@@ -543,6 +557,14 @@ class IoTarget:
             # A listen-only connection lives only as long as the connection it listens to.
             self._close(listener, timed_out)
 
+    def close_path(self, path: tuple[str, int]) -> int:
+        """Close the connections opened over the DTLS session at ``path`` (it has ended: their data has
+        no way left to flow); how many."""
+        closing = [c for c in self.connections.values() if c.secured and c.destination == path]
+        for connection in closing:
+            self._close(connection, timed_out=False)
+        return len(closing)
+
     def close_all(self) -> None:
         for connection in list(self.connections.values()):
             self._close(connection, timed_out=False)
@@ -558,10 +580,12 @@ class IoTarget:
             return None
         return self.connections.get(int.from_bytes(raw[6:10], "little"))
 
-    def receive(self, raw: bytes, source: tuple[str, int], now: float, to_device: bool = True) -> None:
+    def receive(self, raw: bytes, source: tuple[str, int], now: float, to_device: bool = True,
+                secured: bool = False) -> None:
         """Consume one O->T datagram; anything malformed or unknown is dropped and counted. With
         ``to_device`` false its data is consumed (sequence count, watchdog, run/idle) and not handed
-        to the device (a filter withholds it: ``seams.IoSeam.withhold``)."""
+        to the device (a filter withholds it: ``seams.IoSeam.withhold``). ``secured``: it came in a
+        DTLS session; a connection opened over DTLS takes no other, one opened over TCP no such."""
         try:
             datagram = decode_io_datagram(raw)
         except IoDatagramError:
@@ -572,7 +596,8 @@ class IoTarget:
         # Refused before anything moves: a datagram of another source or of the wrong size neither
         # advances the sequence window nor feeds the watchdog (DESIGN: state changes only on
         # accepted input), so it can neither keep a dead connection alive nor make later ones stale.
-        if connection is None or connection.peer != source[0] or len(payload) != connection.ot_payload_size:
+        if (connection is None or connection.peer != source[0] or len(payload) != connection.ot_payload_size
+                or connection.secured is not secured or (secured and connection.destination != source)):
             self.dropped += 1
             return
         consumer = connection.consumer

@@ -61,6 +61,8 @@ class IoSeam:
         self.expire = core.expire
         self.receive: Callable[[bytes, tuple[str, int], float], None] = core.receive
         self.poll: Callable[..., list[Datagram]] = core.poll
+        #: Whether the datagram the filters are looking at came in a DTLS session (``receive_secured``).
+        self._secured = False
 
     def add(self, item: IoInFilter | IoOutFilter) -> None:
         if hasattr(item, "inbound"):
@@ -94,9 +96,28 @@ class IoSeam:
             raw = passed
         core.receive(raw, source, now)
 
+    def receive_secured(self, raw: bytes, source: tuple[str, int], now: float) -> None:
+        """An O->T datagram that came in a DTLS session (``security.dtls_target``): the same filters,
+        then the core, which takes it only for a connection opened in that session."""
+        core = self.core
+        if not self.inbound:
+            core.receive(raw, source, now, True, True)
+            return
+        connection = core.connection_of(raw)
+        self._secured = True   # what ``withhold`` passes on while the filters run (they run at once)
+        try:
+            for item in list(self.inbound):
+                passed = item.inbound(raw, source, now, connection, self)
+                if passed is None:
+                    return
+                raw = passed
+        finally:
+            self._secured = False
+        core.receive(raw, source, now, True, True)
+
     def withhold(self, raw: bytes, source: tuple[str, int], now: float) -> None:
         """Consume ``raw`` (sequence counts, watchdog, run/idle) without handing its data to the device."""
-        self.core.receive(raw, source, now, False)
+        self.core.receive(raw, source, now, False, self._secured)
 
     def _poll_filtered(self, now: float, horizon: float = 0.0) -> list[Datagram]:
         out: list[Datagram] = self.core.poll(now, horizon)
