@@ -14,6 +14,7 @@ from __future__ import annotations
 
 import asyncio
 import base64
+import functools
 import json
 import os
 import re
@@ -73,11 +74,19 @@ def kubectl() -> str:
     return found
 
 
-def render(kustomization: str) -> list[dict[str, Any]]:
+@functools.cache
+def _rendered(kustomization: str) -> str:
+    """``kubectl kustomize``'s output, once a process per kustomization: deploy/ does not change during a
+    run, and a dozen tests read the same three."""
     result = subprocess.run([kubectl(), "kustomize", str(DEPLOY / kustomization)], capture_output=True, text=True,
                             timeout=120, check=False)
     assert result.returncode == 0, result.stderr
-    return [doc for doc in yaml.safe_load_all(result.stdout) if doc]
+    return result.stdout
+
+
+def render(kustomization: str) -> list[dict[str, Any]]:
+    """The objects of a kustomization, read anew for each caller (a test may edit what it gets)."""
+    return [doc for doc in yaml.safe_load_all(_rendered(kustomization)) if doc]
 
 
 def one(objects: list[dict[str, Any]], kind: str, name: str) -> dict[str, Any]:

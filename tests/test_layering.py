@@ -95,9 +95,11 @@ def _tree(path: Path) -> ast.Module:
     return ast.parse(path.read_text(encoding="utf-8"))
 
 
-def _imports(path: Path, type_checking: bool = False) -> set[str]:
+@functools.cache
+def _imports(path: Path, type_checking: bool = False) -> frozenset[str]:
     """The top-level parts of ``cipstack`` a module imports (relative or absolute); with
-    ``type_checking``, its imports for annotations too."""
+    ``type_checking``, its imports for annotations too. Kept for the process: the tests of this module
+    ask about the same files again and again, and the source does not change during a run."""
     part_depth = len(path.relative_to(PACKAGE).parts) - 1     # package levels below cipstack/
     found: set[str] = set()
     tree = _tree(path)
@@ -117,7 +119,7 @@ def _imports(path: Path, type_checking: bool = False) -> set[str]:
                 found.add(node.module.split(".")[1])
         elif isinstance(node, ast.Import):
             found.update(alias.name.split(".")[1] for alias in node.names if alias.name.startswith("cipstack."))
-    return found
+    return frozenset(found)
 
 
 def _modules_of(part: str) -> list[Path]:

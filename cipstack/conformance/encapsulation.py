@@ -130,7 +130,7 @@ def nop(ctx: Context, spec: CheckSpec) -> Outcome:
         after = probe.exchange(frame(Command.LIST_SERVICES))
     except ConnectionError:
         return outcome(spec, False, "the target closed the connection after a NOP", exchanges)
-    if after is not None and after.header.command == Command.NOP:
+    if after is not None and after.header.command != Command.LIST_SERVICES:
         record.received = after.raw
         with contextlib.suppress(ConnectionError):
             probe.receive()  # the ListServices reply behind it, so that the next check starts clean
