@@ -131,10 +131,18 @@ def udp_sockets_on(host: str, port: int) -> set[int] | None:
     wanted = f"{struct.unpack('=I', socket.inet_aton(host))[0]:08X}:{port:04X}"
     try:
         with open("/proc/net/udp", encoding="ascii") as table:
-            next(table, None)  # the column headings
-            rows = [line.split() for line in table]
+            text = table.read()
     except OSError:
         return None
+    # Only the rows that name the address are split: a fleet's thousands of sockets are in the table,
+    # and splitting every row at each bind made a fleet's start quadratic.
+    rows = []
+    found = text.find(wanted)
+    while found >= 0:
+        start, end = text.rfind("\n", 0, found) + 1, text.find("\n", found)
+        end = len(text) if end < 0 else end
+        rows.append(text[start:end].split())
+        found = text.find(wanted, end)
     return {int(row[9]) for row in rows if len(row) > 9 and row[1] == wanted}
 
 
