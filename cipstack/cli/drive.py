@@ -50,8 +50,13 @@ def _status_text(reply: dict[str, Any]) -> str:
     if scenario:
         line += (f"  scenario {scenario['file']} {scenario['state']} {scenario['fired']}/{scenario['steps']}"
                  + (f" next {scenario['next']}" if scenario["next"] else ""))
+    productions = reply.get("productions") or {}
+    # Said only when some were: an overloaded fleet's drives produce late or skip slots, where
+    # an operator looks first; a device on time keeps its short line.
+    late = (f" (productions late {productions['late']}, missed {productions['missed']} of {productions['sent']})"
+            if productions.get("late") or productions.get("missed") else "")
     return (f"{reply['status'] or '(no drive)'}{power}{link}  sessions {reply['sessions']}  class 3 "
-            f"{reply['class3_connections']}  class 1 {reply['class1_connections']}{line}")
+            f"{reply['class3_connections']}  class 1 {reply['class1_connections']}{late}{line}")
 
 
 def _status_json(reply: dict[str, Any]) -> dict[str, Any]:
@@ -61,7 +66,7 @@ def _status_json(reply: dict[str, Any]) -> dict[str, Any]:
     record = {**fields, "power": reply.get("power"), "link": reply.get("link"), "sessions": reply["sessions"],
               "class3_connections": reply["class3_connections"], "class1_connections": reply["class1_connections"],
               "faults": reply.get("faults", 0)}
-    for extra in ("rtu", "scenario"):
+    for extra in ("productions", "rtu", "scenario"):
         if extra in reply:
             record[extra] = reply[extra]
     return record

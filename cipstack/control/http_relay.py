@@ -21,7 +21,7 @@ from __future__ import annotations
 
 import asyncio
 import logging
-from collections.abc import Callable
+from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -44,7 +44,7 @@ from .http import (
     openapi,
     serve_app,
 )
-from .metrics import ShardGauges, merge_families, metrics_response, powered_devices, render
+from .metrics import ShardGauges, WorkerGauges, merge_families, metrics_response, powered_devices, render
 from .panel_app import PanelStreams
 
 log = logging.getLogger(__name__)
@@ -81,6 +81,8 @@ class Backend:
     headers: dict[str, str] = field(default_factory=dict)
     #: What ``/devices`` adds to each of its devices (default: its worker number).
     shown: dict[str, Any] | None = None
+    #: Its load as its heartbeat last told (``WorkerGauges``), or None: not known (a plant's fleets).
+    load: Callable[[], Mapping[str, float] | None] = lambda: None
 
     def open(self) -> None:
         """Its client session (call once, on the relay's loop)."""
@@ -220,7 +222,11 @@ class RelayApi:
         families = merge_families(texts)
         up = powered_devices(families)
         gauges = ShardGauges(self.shard, lambda: (len(self.routes), up)) if self.shard is not None else None
-        return metrics_response(await render([*families.values(), *(gauges.families() if gauges else [])]))
+        loads = [(backend.number, load) for backend in self.backends
+                 if backend.down() is None and (load := backend.load()) is not None]
+        workers = WorkerGauges(lambda: loads).families() if loads else []
+        return metrics_response(await render([*families.values(), *(gauges.families() if gauges else []),
+                                              *workers]))
 
     async def unaddressed(self, request: web.Request) -> web.Response:
         """A device's route without its address: a fleet has more than one device."""

@@ -27,6 +27,7 @@ from ..eip.io_server import freeze_startup_objects
 from ..listening import held_log_records
 from ..modbus.rtu_line import RtuLine, open_port
 from ..runtime.observer import register_relay
+from .load import LoadSampler
 from .spec import FleetDevice, SpecError
 
 log = logging.getLogger(__name__)
@@ -153,11 +154,12 @@ class DeviceSet:
 async def serve_until_signalled(devices: Sequence[FleetDevice], port: int, io_port: int,
                                 on_ready: Callable[[list[str]], None],
                                 signals: Sequence[int] = (signal.SIGINT, signal.SIGTERM),
-                                rtu: str | None = None, http: dict[str, Any] | None = None) -> int:
+                                rtu: str | None = None, http: dict[str, Any] | None = None,
+                                sampler: LoadSampler | None = None) -> int:
     """Serve ``devices`` until one of ``signals``; returns the signal that stopped them. ``rtu``:
     the RS-485 line their ACG drives share (``DeviceSet``); ``http``: the settings of one HTTP control
     API for every device (``http``, ``http_token``, ``http_allow_remote``, ``http_hosts``; or ``path``, a fleet worker's
-    Unix socket)."""
+    Unix socket); ``sampler``: what sums the devices' productions for a worker's heartbeat."""
     loop = asyncio.get_running_loop()
     stop = asyncio.Event()
     received: list[int] = []
@@ -170,14 +172,19 @@ async def serve_until_signalled(devices: Sequence[FleetDevice], port: int, io_po
         loop.add_signal_handler(sig, stop_on, sig)
     fleet = DeviceSet(devices, port, io_port, rtu)
     api = None
+    sampling: asyncio.Task[None] | None = None
     try:
         lines = await fleet.start()
         if http is not None:
             api = await _start_http(fleet.adapters, http)
+        if sampler is not None:
+            sampling = asyncio.create_task(sampler.run([adapter.runtime for adapter in fleet.adapters]))
         freeze_startup_objects()  # every device built: a full collection would stop them all at once
         on_ready(lines)
         await stop.wait()
     finally:
+        if sampling is not None:
+            sampling.cancel()
         if api is not None:
             await api.close()
         await fleet.stop()
