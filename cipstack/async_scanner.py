@@ -248,9 +248,11 @@ class Scanner(_Declarations):
         return await self.client.list_services()
 
 
-#: Forward_Opens in flight at once by default in ``open_io_connections``: enough to keep a fleet's
-#: workers busy opening, few enough that a target's reply is never waited for behind hundreds of others.
-OPENS_IN_FLIGHT = 64
+#: Sessions and Forward_Opens under way at once by default in ``open_io_connections``. Each step of an
+#: open waits for a turn of the target's event loop; a fleet carrying the connections already open
+#: turns slowly, so the opens under way at once, not the round trips, set how fast a plant opens
+#: (1,024 drives at RPI 10 ms on two workers: 512 at once opened them in 7 s, 64 in 30 s).
+OPENS_IN_FLIGHT = 512
 
 
 @contextlib.asynccontextmanager

@@ -69,6 +69,7 @@ class LoadSampler:
 
     async def run(self, devices: Sequence[ProducingDevice]) -> None:
         """Sample until cancelled."""
+        self._latest = (self.clock(), 0.0, 0, 0, 0)   # the loop runs from now: the start-up is not its age
         while True:
             due = self.clock() + SAMPLE_INTERVAL
             await asyncio.sleep(SAMPLE_INTERVAL)
@@ -137,7 +138,9 @@ class LoadWatch:
         self.recent = (sent, late, missed)
         # Skipped slots, not productions past their tolerance, say that a worker cannot keep up: the
         # tolerance is half a millisecond at most, which a busy machine's scheduler alone exceeds.
-        behind = report.lag > LATE_LAG or missed > LATE_SHARE * (sent + missed)
+        # A sampling older than its interval is news too: a loop too busy to sample is behind.
+        behind = (max(report.lag, report.loop_age - SAMPLE_INTERVAL) > LATE_LAG
+                  or missed > LATE_SHARE * (sent + missed))
         if behind:
             self._on_time_answers = 0
             if self.late_since is None:
@@ -157,7 +160,8 @@ class LoadWatch:
         due = sent + missed
         share = (f"{missed} of {due} production slots missed ({100 * missed / due:.1f} %) and {late} late"
                  if due else "no production")
-        return (f"{share} since the last answer, its loop {report.lag * 1000:.0f} ms behind "
+        behind = max(report.lag, report.loop_age - SAMPLE_INTERVAL, 0.0)
+        return (f"{share} since the last answer, its loop {behind * 1000:.0f} ms behind "
                 f"(in all: {report.missed} missed, {report.late} late of {report.sent + report.missed})")
 
 
