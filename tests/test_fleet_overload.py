@@ -1,4 +1,5 @@
-"""A fleet that overloads gracefully: a worker held up (SIGSTOP for less than the dead threshold, as a
+"""A fleet at scale: more than 1,024 devices where the machine allows (and one line where it does not),
+and it overloads gracefully: a worker held up (SIGSTOP for less than the dead threshold, as a
 CPU-starved one is) keeps every device up, its parent reports it late instead of stopping the fleet,
 and the lateness shows on ``/metrics``, in ``drive status`` and in the log; a scanner opens hundreds of
 class 1 connections against a fleet with many Forward_Opens in flight. Real subprocesses, real sockets
@@ -9,7 +10,9 @@ from __future__ import annotations
 import asyncio
 import ipaddress
 import os
+import resource
 import signal
+import subprocess
 import sys
 import threading
 import urllib.request
@@ -185,3 +188,38 @@ def test_hundreds_of_connections_open_against_a_fleet(tmp_path: Path) -> None:
         assert fleet.stop(signal.SIGINT) == 0, fleet.err.read_text()
     finally:
         fleet.kill()
+
+
+def test_more_than_1024_devices_where_the_machine_allows(tmp_path: Path) -> None:
+    """1,024 is a default: ``--max-devices`` lets 1,030 drives serve on two workers, each of them found
+    at its address."""
+    hosts = addresses(8, 1030)
+    port = free_port(hosts[0], hosts[-1])
+    fleet = Fleet(tmp_path, "--addresses", f"{hosts[0]}-{hosts[-1]}", "--device", "acg*1030", "--port", str(port),
+                  "--io-port", "0", "--workers", "2", "--factory", "--max-devices", "1030")
+    try:
+        lines = fleet.wait_ready(120)
+        assert len(lines) == 1030 and lines[-1].startswith(f"{hosts[-1]}:{port}  acg"), lines[-1]
+        shown = drive("status", "--host", hosts[-1], "--port", str(port))
+        assert shown.returncode == 0 and "class 1 0" in shown.stdout, shown
+        assert fleet.stop(signal.SIGINT) == 0, fleet.err.read_text()
+    finally:
+        fleet.kill()
+
+
+def test_a_fleet_the_open_file_limit_cannot_hold_is_one_line(tmp_path: Path) -> None:
+    """Under a hard limit of 1,024 open files, 200 drives in one process (about 2,656 descriptors) are
+    refused before anything listens, with the number of workers that would fit."""
+    hosts = addresses(14, 200)
+
+    def limited() -> None:
+        resource.setrlimit(resource.RLIMIT_NOFILE, (1024, 1024))
+
+    refused = subprocess.run([sys.executable, "-m", "cipstack", "fleet", "--addresses", f"{hosts[0]}-{hosts[-1]}",
+                              "--device", "acg*200", "--factory"], capture_output=True, text=True, timeout=60,
+                             preexec_fn=limited, stdin=subprocess.DEVNULL, cwd=tmp_path)
+    assert refused.returncode == 2 and refused.stdout == "", refused
+    lines = refused.stderr.splitlines()
+    assert len(lines) == 1 and lines[0] == (
+        "cipstack fleet: 200 devices on 1 worker(s): 200 in one process need about 2656 open files, and the hard "
+        "limit here is 1024 (ulimit -Hn): give --workers 4 or more, or raise the limit"), lines

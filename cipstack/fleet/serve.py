@@ -36,6 +36,30 @@ log = logging.getLogger(__name__)
 #: Descriptors a device holds before any connection: TCP listener, UDP, broadcast UDP, class 1 UDP,
 #: control socket; with room for a few connections each.
 DESCRIPTORS_PER_DEVICE = 12
+#: Descriptors a process holds besides its devices': the interpreter's, the HTTP API's, the parent's channel.
+RESERVED_DESCRIPTORS = 256
+
+
+def check_open_files(devices: int, workers: int) -> None:
+    """Refuse (``SpecError``, one line) a fleet whose busiest process would need more descriptors than
+    the hard open-file limit lets any process of this user have: it would fail part way through its
+    start, or later at a connection; say how many workers would fit instead."""
+    try:
+        _, hard = resource.getrlimit(resource.RLIMIT_NOFILE)
+    except (OSError, ValueError):
+        return
+    busiest = -(-devices // workers)
+    needed = descriptors_needed(busiest)
+    if hard == resource.RLIM_INFINITY or needed <= hard:
+        return
+    per_process = max(1, (hard - RESERVED_DESCRIPTORS) // DESCRIPTORS_PER_DEVICE)
+    raise SpecError(f"{devices} devices on {workers} worker(s): {busiest} in one process need about {needed} open "
+                    f"files, and the hard limit here is {hard} (ulimit -Hn): give --workers "
+                    f"{-(-devices // per_process)} or more, or raise the limit")
+
+
+def descriptors_needed(devices: int) -> int:
+    return RESERVED_DESCRIPTORS + devices * DESCRIPTORS_PER_DEVICE
 
 
 def raise_open_file_limit(devices: int) -> None:
@@ -43,7 +67,7 @@ def raise_open_file_limit(devices: int) -> None:
     serve hundreds); where it cannot be raised, a device that cannot open a socket says so at start."""
     try:
         soft, hard = resource.getrlimit(resource.RLIMIT_NOFILE)
-        needed = 256 + devices * DESCRIPTORS_PER_DEVICE
+        needed = descriptors_needed(devices)
         if soft != resource.RLIM_INFINITY and soft < needed:
             resource.setrlimit(resource.RLIMIT_NOFILE, (needed if hard == resource.RLIM_INFINITY
                                                         else min(needed, hard), hard))
@@ -229,4 +253,4 @@ async def _start_http(adapters: Sequence[Adapter], http: dict[str, Any]) -> Any:
     return api
 
 
-__all__ = ["DeviceSet", "api_addresses", "build_adapter", "device_line", "serve_until_signalled"]
+__all__ = ["DeviceSet", "api_addresses", "build_adapter", "check_open_files", "device_line", "serve_until_signalled"]
