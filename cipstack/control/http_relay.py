@@ -46,6 +46,7 @@ from .http import (
 )
 from .metrics import ShardGauges, WorkerGauges, merge_families, metrics_response, powered_devices, render
 from .panel_app import PanelStreams
+from .plant_grid import down_rows
 
 log = logging.getLogger(__name__)
 one_line_records(log)
@@ -56,6 +57,9 @@ _WORKER_URL = URL("http://cipstack-worker")
 #: How long the relay waits for a worker's socket to accept; its event loop accepts in microseconds,
 #: so a worker that takes longer is stopped or stuck (its parent's heartbeat says so, and ends it).
 CONNECT_TIMEOUT = 5.0
+#: How long the grid's rows of one backend may take: a worker whose loop is that far behind is shown
+#: as not answering for this refresh, the others' rows still come (the grid asks again in a second).
+PLANT_TIMEOUT = 5.0
 #: Headers of a request the worker's API reads (the token stays with the relay, which checked it).
 _FORWARDED = ("Content-Type", "Accept")
 
@@ -186,6 +190,7 @@ class RelayApi:
             app.router.add_route(method, path, self.unaddressed)
             app.router.add_route(method, DEVICE_PREFIX + path, self.forward)
         app.router.add_get("/devices", self.list_devices)
+        app.router.add_get("/plant", self.plant)
         app.router.add_get("/openapi.json", openapi)
         app.router.add_get("/metrics", self.metrics)
         app.router.add_get(STREAM_PATH, self.unaddressed)
@@ -205,6 +210,28 @@ class RelayApi:
                 if self.routes.get(entry["address"]) is backend:   # not one another backend serves now
                     listed.append({**entry, **shown, **({"error": down} if down else {})})
         return web.json_response(sorted(listed, key=lambda entry: str(entry["address"])))
+
+    async def plant(self, request: web.Request) -> web.Response:
+        """Every device's row of the plant grid: each serving backend asked once, all at once; the
+        devices of one that no longer serves (or does not answer now) listed with why."""
+        rows = await asyncio.gather(*(self._plant_rows(backend) for backend in self.backends))
+        return web.json_response(sorted((row for part in rows for row in part), key=lambda row: str(row["address"])))
+
+    async def _plant_rows(self, backend: Backend) -> list[dict[str, Any]]:
+        shown = backend.shown if backend.shown is not None else {"worker": backend.number}
+        mine = [entry for entry in backend.devices if self.routes.get(entry["address"]) is backend]
+        down = backend.down()
+        if down is None and backend.session is not None:
+            try:
+                async with backend.session.get(backend.at("/plant"),
+                                               timeout=aiohttp.ClientTimeout(total=PLANT_TIMEOUT)) as reply:
+                    if reply.status == 200:
+                        addresses = {entry["address"] for entry in mine}
+                        return [{**row, **shown} for row in await reply.json() if row.get("address") in addresses]
+                    down = f"{backend.name} answered {reply.status}"
+            except (aiohttp.ClientError, asyncio.TimeoutError, ValueError) as exc:
+                down = f"{backend.name} did not answer: {_failure(backend, exc)}"
+        return down_rows(mine, shown, down or f"{backend.name} is not connected")
 
     async def metrics(self, request: web.Request) -> web.Response:
         """Every serving worker's ``/metrics`` in one, with the fleet's gauges: a lost worker's devices
