@@ -105,17 +105,20 @@ class Connections:
         return self.result
 
 
-def test_a_held_up_worker_stays_up_and_its_lateness_is_reported(tmp_path: Path) -> None:
+@pytest.mark.parametrize("workers", [2, 1])
+def test_a_held_up_worker_stays_up_and_its_lateness_is_reported(tmp_path: Path, workers: int) -> None:
     """SIGSTOP for 2 s, less than the 5 s after which a silent worker counts as dead: every production
     slot of the pause is skipped. The parent says the worker is late (not that it stopped answering),
     every device stays up, the scanner's connections stay open, and the missed productions show on
-    ``/metrics`` per worker, in the device's ``drive status``, and the worker is on time again after."""
+    ``/metrics`` per worker, in the device's ``drive status``, and the worker is on time again after.
+    A fleet of one process judges itself the same way, as its worker 1."""
     from cipstack.fleet.workers import HEARTBEAT_TIMEOUT
 
-    hosts = addresses(0, 4)
+    hosts = addresses(workers - 1, 4)
     port, http = free_port(*hosts), free_port()
     fleet = Fleet(tmp_path, "--addresses", f"{hosts[0]}-{hosts[-1]}", "--device", "acg*4", "--port", str(port),
-                  "--io-port", "0", "--workers", "2", "--factory", "--http", f"127.0.0.1:{http}")
+                  "--io-port", "0", "--workers", str(workers), "--factory", "--http", f"127.0.0.1:{http}")
+    name = f"worker 1 ({hosts[0]}-{hosts[1]})" if workers == 2 else f"the fleet ({hosts[0]}-{hosts[-1]})"
     connections = None
     try:
         fleet.wait_ready()
@@ -135,7 +138,7 @@ def test_a_held_up_worker_stays_up_and_its_lateness_is_reported(tmp_path: Path) 
         assert resumed.wait(pause + 5)
         wait_for(lambda: "is late" in fleet.err.read_text(), 15, "the parent to report the late worker")
         log = fleet.err.read_text()
-        assert f"worker 1 ({hosts[0]}-{hosts[1]}) is late: " in log and "it goes on serving" in log, log
+        assert f"{name} is late: " in log and "it goes on serving" in log, log
         assert "stopped answering" not in log and alive(held)
 
         def scraped() -> str:
@@ -146,7 +149,7 @@ def test_a_held_up_worker_stays_up_and_its_lateness_is_reported(tmp_path: Path) 
                  "worker 1's missed productions on /metrics")
         text = scraped()
         assert metric(text, "cipstack_fleet_worker_productions_sent_total", 1) > 0
-        assert metric(text, "cipstack_fleet_worker_productions_sent_total", 2) > 0
+        assert metric(text, "cipstack_fleet_worker_productions_sent_total", workers) > 0
         assert f'cipstack_class1_productions_missed_total{{device="{hosts[0]}"}}' in text
         status, body = api("GET", f"/devices/{hosts[0]}/status")
         assert status == 200 and body["productions"]["missed"] > 0, body
@@ -154,7 +157,7 @@ def test_a_held_up_worker_stays_up_and_its_lateness_is_reported(tmp_path: Path) 
         assert shown.returncode == 0 and "missed" in shown.stdout, shown
         for host in hosts:
             assert api("GET", f"/devices/{host}/status")[0] == 200
-        wait_for(lambda: "is on time again" in fleet.err.read_text(), 30, "worker 1 to be on time again")
+        wait_for(lambda: f"{name} is on time again" in fleet.err.read_text(), 30, "worker 1 to be on time again")
         result = connections.close()
         assert result["timed_out"] == 0 and all(received > 0 for received in result["received"]), result
         assert fleet.stop(signal.SIGINT) == 0, fleet.err.read_text()

@@ -38,10 +38,12 @@ _RTU_ERRORS = ("crc_errors", "truncated", "oversize", "interrupted", "overrun")
 class ShardGauges:
     """What a fleet shard says of itself: its devices, and how many of them serve."""
 
-    def __init__(self, shard: str, devices: Callable[[], tuple[int, int]]) -> None:
-        """``devices``: (devices, devices up) when asked."""
+    def __init__(self, shard: str, devices: Callable[[], tuple[int, int]],
+                 workers: WorkerGauges | None = None) -> None:
+        """``devices``: (devices, devices up) when asked; ``workers``: the load of its process(es)."""
         self.shard = shard
         self.devices = devices
+        self.workers = workers
 
     def families(self) -> list[Metric]:
         total, up = self.devices()
@@ -50,7 +52,7 @@ class ShardGauges:
         serving = GaugeMetricFamily("cipstack_fleet_devices_up", "devices of this fleet shard that serve "
                                     "(powered, in a worker that runs)", labels=["shard"])
         serving.add_metric([self.shard], up)
-        return [count, serving]
+        return [count, serving, *(self.workers.families() if self.workers is not None else [])]
 
 
 class WorkerGauges:

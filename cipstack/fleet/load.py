@@ -12,6 +12,7 @@ or stuck in code that holds the interpreter) from a late one by those two things
 from __future__ import annotations
 
 import asyncio
+import logging
 import threading
 import time
 from collections.abc import Callable, Sequence
@@ -32,6 +33,8 @@ LATE_SHARE = 0.01
 #: Answers in a row without lateness before a late worker counts as on time again.
 ON_TIME_ANSWERS = 5
 PING, PONG = "ping", "pong"
+
+log = logging.getLogger("cipstack.fleet.workers")
 
 
 class ProducingDevice(Protocol):
@@ -165,4 +168,30 @@ class LoadWatch:
                 f"(in all: {report.missed} missed, {report.late} late of {report.sent + report.missed})")
 
 
-__all__ = ["LOOP_STUCK_TIMEOUT", "PING", "PONG", "LoadReport", "LoadSampler", "LoadWatch", "answer_pings"]
+def report_lateness(name: str, watch: LoadWatch, change: str | None) -> None:
+    """One line when a worker goes late and one when it is on time again: an overloaded worker serves on."""
+    if change == "late":
+        log.warning("%s is late: %s; it goes on serving (fewer devices per worker, or a longer RPI, would "
+                    "keep it on time)", name, watch.describe())
+    elif change == "on time":
+        log.warning("%s is on time again: %s", name, watch.describe())
+
+
+def gauge_values(watch: LoadWatch) -> dict[str, float] | None:
+    """What ``/metrics`` says of a worker's load (``WorkerGauges``), once it has been judged."""
+    report = watch.report
+    if report is None:
+        return None
+    return {"late": 1.0 if watch.late else 0.0, "lag": report.lag, "sent": report.sent,
+            "late_productions": report.late, "missed": report.missed}
+
+
+async def watch_own_load(name: str, sampler: LoadSampler, watch: LoadWatch, interval: float = SAMPLE_INTERVAL) -> None:
+    """A fleet of one process judges its own load as a parent judges a worker's, until cancelled."""
+    while True:
+        await asyncio.sleep(interval)
+        report_lateness(name, watch, watch.answered(sampler.report(), time.monotonic()))
+
+
+__all__ = ["LOOP_STUCK_TIMEOUT", "PING", "PONG", "LoadReport", "LoadSampler", "LoadWatch", "answer_pings",
+           "gauge_values", "report_lateness", "watch_own_load"]

@@ -27,8 +27,8 @@ from ..eip.io_server import freeze_startup_objects
 from ..listening import held_log_records
 from ..modbus.rtu_line import RtuLine, open_port
 from ..runtime.observer import register_relay
-from .load import LoadSampler
-from .spec import FleetDevice, SpecError
+from .load import LoadSampler, LoadWatch, gauge_values, watch_own_load
+from .spec import FleetDevice, SpecError, describe_addresses
 
 log = logging.getLogger(__name__)
 
@@ -196,19 +196,24 @@ async def serve_until_signalled(devices: Sequence[FleetDevice], port: int, io_po
         loop.add_signal_handler(sig, stop_on, sig)
     fleet = DeviceSet(devices, port, io_port, rtu)
     api = None
-    sampling: asyncio.Task[None] | None = None
+    tasks: list[asyncio.Task[None]] = []
+    # A worker's parent judges its load; a fleet of one process judges its own, the same way.
+    watch = LoadWatch() if sampler is None else None
+    sampler = sampler or LoadSampler()
     try:
         lines = await fleet.start()
         if http is not None:
-            api = await _start_http(fleet.adapters, http)
-        if sampler is not None:
-            sampling = asyncio.create_task(sampler.run([adapter.runtime for adapter in fleet.adapters]))
+            api = await _start_http(fleet.adapters, http, watch)
+        tasks.append(asyncio.create_task(sampler.run([adapter.runtime for adapter in fleet.adapters])))
+        if watch is not None:
+            name = f"the fleet ({describe_addresses(d.address for d in fleet.devices)})"
+            tasks.append(asyncio.create_task(watch_own_load(name, sampler, watch)))
         freeze_startup_objects()  # every device built: a full collection would stop them all at once
         on_ready(lines)
         await stop.wait()
     finally:
-        if sampling is not None:
-            sampling.cancel()
+        for task in tasks:
+            task.cancel()
         if api is not None:
             await api.close()
         await fleet.stop()
@@ -225,12 +230,12 @@ def api_addresses(adapters: Sequence[Adapter]) -> dict[str, DeviceService]:
             for host, adapter in zip(hosts, adapters, strict=True)}
 
 
-async def _start_http(adapters: Sequence[Adapter], http: dict[str, Any]) -> Any:
+async def _start_http(adapters: Sequence[Adapter], http: dict[str, Any], watch: LoadWatch | None = None) -> Any:
     """One HTTP control API for every device, each by its address (``api_addresses``): on ``http["http"]``
     (``HOST:PORT``), or for a worker of a fleet on the Unix socket ``http["path"]``, which only the
     fleet's relay reaches (``cipstack.control.http_relay``)."""
     from ..control.http import HttpApi, parse_listen
-    from ..control.metrics import ShardGauges
+    from ..control.metrics import ShardGauges, WorkerGauges
     from ..listening import ListenError
 
     path = http.get("path")
@@ -240,8 +245,9 @@ async def _start_http(adapters: Sequence[Adapter], http: dict[str, Any]) -> Any:
     else:
         host, port = parse_listen(http["http"])
         shard = http.get("shard")
-        gauges = ShardGauges(shard, lambda: (len(adapters), sum(a.runtime.power.powered for a in adapters))) \
-            if shard is not None else None
+        workers = WorkerGauges(lambda: [(1, load)] if watch is not None and (load := gauge_values(watch)) else [])
+        gauges = ShardGauges(shard, lambda: (len(adapters), sum(a.runtime.power.powered for a in adapters)),
+                             workers) if shard is not None else None
         api = HttpApi(api_addresses(adapters), host, port, token=http.get("http_token"),
                       allow_remote=http.get("http_allow_remote", False), hosts=tuple(http.get("http_hosts", ())),
                       shard=gauges)

@@ -52,7 +52,17 @@ from typing import Any
 from ..eip.io_server import run_precise
 from ..errors import CipstackError
 from ..listening import ListenError
-from .load import LOOP_STUCK_TIMEOUT, PING, PONG, LoadReport, LoadSampler, LoadWatch, answer_pings
+from .load import (
+    LOOP_STUCK_TIMEOUT,
+    PING,
+    PONG,
+    LoadReport,
+    LoadSampler,
+    LoadWatch,
+    answer_pings,
+    gauge_values,
+    report_lateness,
+)
 from .serve import serve_until_signalled
 from .spec import FleetDevice, SpecError, describe_addresses, shares
 
@@ -145,15 +155,6 @@ class _Worker:
             except ValueError:
                 return f"killed by signal {-code}"
         return f"exit status {code}"
-
-
-def _report_lateness(worker: _Worker, change: str | None) -> None:
-    """One line when a worker goes late and one when it is on time again: an overloaded worker serves on."""
-    if change == "late":
-        log.warning("%s is late: %s; it goes on serving (fewer devices per worker, or a longer RPI, would "
-                    "keep it on time)", worker.name, worker.load.describe())
-    elif change == "on time":
-        log.warning("%s is on time again: %s", worker.name, worker.load.describe())
 
 
 class FleetFailure(CipstackError):
@@ -322,15 +323,6 @@ class Supervisor:
             return f"{worker.name} ended: {worker.how_it_ended()}"
         return worker.lost
 
-    @staticmethod
-    def _load_of(worker: _Worker) -> dict[str, float] | None:
-        """What ``/metrics`` says of ``worker``'s load (``WorkerGauges``), once it has answered."""
-        report = worker.load.report
-        if report is None:
-            return None
-        return {"late": 1.0 if worker.load.late else 0.0, "lag": report.lag, "sent": report.sent,
-                "late_productions": report.late, "missed": report.missed}
-
     async def _serve_http(self, on_ready: Callable[[], None]) -> None:
         """Serve the fleet's HTTP API and supervise the workers, both on this event loop, until a signal
         (or ``FleetFailure``). The API listens before ``on_ready``: a port it cannot take is a
@@ -343,7 +335,7 @@ class Supervisor:
         wake = asyncio.Event()
         host, port = parse_listen(self.http["http"])
         relay = RelayApi([Backend(w.name, w.api_path or "", partial(self._why_down, w), w.number,
-                                  load=partial(self._load_of, w))
+                                  load=partial(gauge_values, w.load))
                           for w in self.workers], host, port, token=self.http.get("http_token"),
                          allow_remote=self.http.get("http_allow_remote", False),
                          hosts=tuple(self.http.get("http_hosts", ())), shard=self.http.get("shard", "0/1"))
@@ -402,7 +394,8 @@ class Supervisor:
                 message = worker.channel.recv()
                 if isinstance(message, tuple) and message[0] == PONG:
                     worker.waiting_since = None
-                    _report_lateness(worker, worker.load.answered(LoadReport(*message[1]), time.monotonic()))
+                    report_lateness(worker.name, worker.load,
+                                    worker.load.answered(LoadReport(*message[1]), time.monotonic()))
         except (EOFError, OSError):
             pass   # the worker is gone: its sentinel says so
 
