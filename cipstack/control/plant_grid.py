@@ -31,7 +31,8 @@ def device_row(address: str, service: DeviceService) -> dict[str, Any]:
             "link": status.get("link"), "sessions": status.get("sessions", 0),
             "class3_connections": status.get("class3_connections", 0),
             "class1_connections": status.get("class1_connections", 0), "faults": status.get("faults", 0),
-            "late": productions.get("late", 0), "missed": productions.get("missed", 0)}
+            "sent": productions.get("sent", 0), "late": productions.get("late", 0),
+            "missed": productions.get("missed", 0)}
 
 
 async def plant_rows(devices: Mapping[str, DeviceService]) -> list[dict[str, Any]]:
