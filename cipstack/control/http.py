@@ -48,7 +48,7 @@ from .metrics import ShardGauges, add_metrics_route
 from .operations import OPERATIONS, Operation
 from .panel_app import PanelStreams
 from .panel_app import log as panel_log
-from .plant_grid import plant_rows
+from .plant_grid import SharedRows, plant_rows
 from .service import outcome, whole_number
 from .tokens import weak_token_reason
 
@@ -498,6 +498,7 @@ class HttpApi:
         self.shard = shard
         self.panel = PanelStreams()
         self._served: ServedApp | None = None
+        self._plant = SharedRows(lambda: plant_rows(self.devices))
         self.app = self._build()
 
     # -- serving -----------------------------------------------------------------------------------------
@@ -552,8 +553,8 @@ class HttpApi:
                                   for name, service in sorted(self.devices.items())])
 
     async def plant(self, request: web.Request) -> web.Response:
-        """Every device's row of the plant grid (``plant_grid``)."""
-        return web.json_response(await plant_rows(self.devices))
+        """Every device's row of the plant grid (``plant_grid``), one reading shared by the grids open."""
+        return web.json_response(await self._plant.get())
 
     def _handler(self, operation: Operation) -> Callable[[web.Request], Awaitable[web.Response]]:
         async def handle(request: web.Request) -> web.Response:

@@ -46,7 +46,7 @@ from .http import (
 )
 from .metrics import ShardGauges, WorkerGauges, merge_families, metrics_response, powered_devices, render
 from .panel_app import PanelStreams
-from .plant_grid import down_rows
+from .plant_grid import SharedRows, down_rows
 
 log = logging.getLogger(__name__)
 one_line_records(log)
@@ -132,6 +132,7 @@ class RelayApi:
         #: Each device's worker, by the address the worker's API gives it.
         self.routes: dict[str, Backend] = {}
         self._served: ServedApp | None = None
+        self._plant = SharedRows(self._read_plant)
         self.app = self._build()
 
     async def start(self) -> None:
@@ -212,10 +213,14 @@ class RelayApi:
         return web.json_response(sorted(listed, key=lambda entry: str(entry["address"])))
 
     async def plant(self, request: web.Request) -> web.Response:
-        """Every device's row of the plant grid: each serving backend asked once, all at once; the
-        devices of one that no longer serves (or does not answer now) listed with why."""
+        """Every device's row of the plant grid, one reading shared by the grids open (``SharedRows``)."""
+        return web.json_response(await self._plant.get())
+
+    async def _read_plant(self) -> list[dict[str, Any]]:
+        """Each serving backend asked once, all at once; the devices of one that no longer serves (or
+        does not answer now) listed with why."""
         rows = await asyncio.gather(*(self._plant_rows(backend) for backend in self.backends))
-        return web.json_response(sorted((row for part in rows for row in part), key=lambda row: str(row["address"])))
+        return sorted((row for part in rows for row in part), key=lambda row: str(row["address"]))
 
     async def _plant_rows(self, backend: Backend) -> list[dict[str, Any]]:
         shown = backend.shown if backend.shown is not None else {"worker": backend.number}

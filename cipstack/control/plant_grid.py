@@ -9,7 +9,8 @@ went late or were missed (an overloaded worker's devices say so here)."""
 from __future__ import annotations
 
 import asyncio
-from collections.abc import Mapping
+import time
+from collections.abc import Awaitable, Callable, Mapping
 from typing import TYPE_CHECKING, Any
 
 if TYPE_CHECKING:
@@ -50,4 +51,36 @@ def down_rows(devices: list[dict[str, Any]], shown: Mapping[str, Any], why: str)
     return [{**entry, **shown, "error": why} for entry in devices]
 
 
-__all__ = ["DEVICES_PER_SLICE", "device_row", "down_rows", "plant_rows"]
+#: How long one reading of the rows answers every grid that asks: several open grids cost the devices'
+#: processes one reading between them, not one each.
+ROWS_SHARED_FOR = 0.5
+
+
+class SharedRows:
+    """The rows ``read`` gives, read once for every request within ``ROWS_SHARED_FOR`` (and once for
+    requests that come while a reading is under way)."""
+
+    def __init__(self, read: Callable[[], Awaitable[list[dict[str, Any]]]],
+                 clock: Callable[[], float] = time.monotonic) -> None:
+        self.read = read
+        self.clock = clock
+        self._rows: tuple[float, list[dict[str, Any]]] | None = None
+        self._reading: asyncio.Future[list[dict[str, Any]]] | None = None
+
+    async def get(self) -> list[dict[str, Any]]:
+        if self._rows is not None and self.clock() - self._rows[0] < ROWS_SHARED_FOR:
+            return self._rows[1]
+        if self._reading is None:
+            self._reading = asyncio.ensure_future(self._read())
+        return await asyncio.shield(self._reading)
+
+    async def _read(self) -> list[dict[str, Any]]:
+        try:
+            rows = await self.read()
+            self._rows = (self.clock(), rows)
+            return rows
+        finally:
+            self._reading = None
+
+
+__all__ = ["DEVICES_PER_SLICE", "ROWS_SHARED_FOR", "SharedRows", "device_row", "down_rows", "plant_rows"]
