@@ -226,3 +226,41 @@ def test_a_fleet_the_open_file_limit_cannot_hold_is_one_line(tmp_path: Path) -> 
     assert len(lines) == 1 and lines[0] == (
         "cipstack fleet: 200 devices on 1 worker(s): 200 in one process need about 2656 open files, and the hard "
         "limit here is 1024 (ulimit -Hn): give --workers 4 or more, or raise the limit"), lines
+
+
+def test_many_drives_at_a_tiny_rpi_overload_the_fleet_and_every_drive_stays_up(tmp_path: Path) -> None:
+    """192 drives on two workers, one connection each at RPI 2 ms: 96,000 productions a second each way,
+    more than the two cores carry. For a few seconds the workers go late; the fleet says so and serves
+    on: none is reported dead or stuck, and once the connections close every device answers the
+    grid's request with the productions it missed, the workers are on time again, and it stops cleanly."""
+    hosts = addresses(20, 192)
+    port, http = free_port(hosts[0], hosts[-1]), free_port()
+    fleet = Fleet(tmp_path, "--addresses", f"{hosts[0]}-{hosts[-1]}", "--device", "acg*192", "--port", str(port),
+                  "--io-port", "0", "--workers", "2", "--factory", "--http", f"127.0.0.1:{http}")
+    try:
+        fleet.wait_ready(60)
+
+        async def overload() -> None:
+            async with open_io_connections([f"{host}:{port}" for host in hosts], output=21, input=71, rpi=0.002,
+                                           catalog=acg_catalog(), timeout=30.0, timeout_multiplier=7) as handles:
+                assert len(handles) == len(hosts)
+                await asyncio.get_running_loop().run_in_executor(
+                    None, lambda: wait_for(lambda: "is late" in fleet.err.read_text(), 30, "a worker reported late"))
+
+        run_precise(asyncio.wait_for(overload(), 120))
+        api = Api(f"http://127.0.0.1:{http}", token=None)
+        rows: list[dict[str, Any]] = []
+
+        def every_device_answers() -> bool:
+            rows[:] = api("GET", "/plant")[1]
+            return len(rows) == 192 and not any("error" in row for row in rows)
+
+        wait_for(every_device_answers, 30, "every device's row once the load is gone")
+        assert sum(row["missed"] for row in rows) > 0
+        wait_for(lambda: fleet.err.read_text().count("is on time again") >= 1, 30, "a worker on time again")
+        log = fleet.err.read_text()
+        assert "stopped answering" not in log and "stopping the fleet" not in log and "is stuck" not in log
+        assert fleet.process.poll() is None
+        assert fleet.stop(signal.SIGINT) == 0, fleet.err.read_text()[-2000:]
+    finally:
+        fleet.kill()
