@@ -234,7 +234,9 @@ class RelayApi:
                         addresses = {entry["address"] for entry in mine}
                         return [{**row, **shown} for row in await reply.json() if row.get("address") in addresses]
                     down = f"{backend.name} answered {reply.status}"
-            except (aiohttp.ClientError, asyncio.TimeoutError, ValueError) as exc:
+            except asyncio.TimeoutError:
+                down = f"{backend.name} did not answer in {PLANT_TIMEOUT:g} s (its event loop is behind: overloaded)"
+            except (aiohttp.ClientError, ValueError) as exc:
                 down = f"{backend.name} did not answer: {_failure(backend, exc)}"
         return down_rows(mine, shown, down or f"{backend.name} is not connected")
 

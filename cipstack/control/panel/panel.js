@@ -499,6 +499,16 @@ function plantRow(device) {
     $("plant-table").tBodies[0].appendChild(tr);
   }
   const state = plantState(device);
+  if (device.error && device.error.includes("did not answer") && tr.dataset.state !== "…") {
+    // A worker too busy to answer this refresh (its loop behind, overloaded): its devices keep what
+    // they last said, the state says why it is not new.
+    tr.cells[3].textContent = state;
+    tr.cells[3].className = "down";
+    tr.cells[3].title = device.error;
+    tr.dataset.state = state;
+    tr.dataset.search = `${device.address} ${tr.cells[1].textContent} ${tr.cells[2].textContent} ${state}`.toLowerCase();
+    return;
+  }
   const late = device.late === undefined ? "-" : `${device.late} / ${device.missed}`;
   const texts = [device.address, device.product_name || "-", device.worker === undefined ? "-" : String(device.worker),
     state, device.output_frequency_hz === undefined || device.output_frequency_hz === null ? "-"
