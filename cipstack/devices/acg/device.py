@@ -124,7 +124,7 @@ class AcgDevice(Device):
         #: Last data each smart-scaling output consumed: a word is written when it changes.
         self._last_words: dict[int, bytes] = {}
         for instance in (*OUTPUT_INSTANCES, *INPUT_INSTANCES):
-            point = self._assembly_point(instance)
+            point = self._assembly_point(instance, speed[instance].name)
             self._points[instance] = point
             self.assembly.add_assembly(point)
         self.update_io_status()
@@ -159,15 +159,16 @@ class AcgDevice(Device):
     def active_input_instance(self) -> int:
         return self.drive.active_comm_settings.input_instance.instance
 
-    def _assembly_point(self, instance: int) -> AssemblyPoint:
+    def _assembly_point(self, instance: int, name: str) -> AssemblyPoint:
+        """``name``: the instance's name, which no CM.31-38 / CM.51-58 setting changes (read from the
+        schemas once for all the points: each reading of them reads sixteen registers)."""
         size = assembly_size(instance)
         if instance in OUTPUT_INSTANCES:
             return AssemblyPoint(instance, size, consumed=True,
-                                 consume=lambda data, now: self._consume(instance, data, now),
-                                 name=self.assembly_schema(instance).name)
+                                 consume=lambda data, now: self._consume(instance, data, now), name=name)
         if parameter_words(instance):
             return AssemblyPoint(instance, size, consumed=False, produce=lambda: self._produce_words(instance),
-                                 name=self.assembly_schema(instance).name)
+                                 name=name)
         schema = self.assembly_schema(instance)
         return AssemblyPoint(instance, size, consumed=False, produce=lambda: self._produce_speed(schema),
                              name=schema.name)
