@@ -137,9 +137,14 @@ def children(pid: int) -> list[int]:
 
 
 def alive(pid: int) -> bool:
+    """Whether ``pid`` has not ended. A process whose first thread has ended shows as a zombie while
+    its other threads (a fleet worker's heartbeat thread) are still ending, and its parent cannot
+    collect its exit status until they have: it has ended only once it is a zombie alone."""
     try:
         with open(f"/proc/{pid}/stat") as stat:
-            return stat.read().rsplit(")", 1)[1].split()[0] != "Z"
+            if stat.read().rsplit(")", 1)[1].split()[0] != "Z":
+                return True
+        return len(os.listdir(f"/proc/{pid}/task")) > 1
     except OSError:
         return False
 
