@@ -19,6 +19,7 @@ from .cip.types import CipType
 from .cip.values import Value
 from .eip.originator.core import parse_host
 from .eip.wire.encapsulation import DEFAULT_PORT, SECURE_PORT
+from .errors import BadRequest
 from .scanner import AttributeValue, EdsConnection, ExplicitMessaging, _Declarations, class1_assemblies
 
 if TYPE_CHECKING:
@@ -275,4 +276,63 @@ class Scanner(_Declarations):
         return await self.client.list_services()
 
 
-__all__ = ["Scanner"]
+#: Sessions and Forward_Opens under way at once by default in ``open_io_connections``. Each step of an
+#: open waits for a turn of the target's event loop; a fleet carrying the connections already open
+#: turns slowly, so the opens under way at once, not the round trips, set how fast a plant opens
+#: (1,024 drives at RPI 10 ms on two workers: 512 at once opened them in 7 s, 64 in 30 s).
+OPENS_IN_FLIGHT = 512
+
+
+@contextlib.asynccontextmanager
+async def open_io_connections(targets: Sequence[str], output: int | None = None, input: int = 0,
+                              rpi: float = 0.010, *, in_flight: int = OPENS_IN_FLIGHT, timeout: float = 10.0,
+                              catalog: Catalog | None = None,
+                              **options: Any) -> AsyncIterator[list[IoConnectionHandle]]:
+    """One class 1 connection to each of ``targets`` (``"host"`` or ``"host:port"``), opened with up to
+    ``in_flight`` sessions and Forward_Opens under way at once, not one round trip after another:
+    ``async with open_io_connections(hosts, output=21, input=71, rpi=0.010) as handles``. The handles
+    are in the order of ``targets``; ``options`` are ``Scanner.io_connection``'s. Give a ``catalog`` for
+    a plant of one profile: each target is then not asked who it is first (one round trip less each).
+
+    All or nothing: the first target that cannot be reached or refuses raises its error once every
+    connection already open is closed again. Leaving the block closes them all (Forward_Close each).
+    """
+    if in_flight < 1:
+        raise BadRequest(f"in_flight {in_flight}: at least one Forward_Open must be under way")
+    slots = asyncio.Semaphore(in_flight)
+    closing = asyncio.Event()
+    handles: list[IoConnectionHandle | None] = [None] * len(targets)
+    opened = [asyncio.get_running_loop().create_future() for _ in targets]
+
+    async def hold(index: int, target: str) -> None:
+        try:
+            async with contextlib.AsyncExitStack() as stack:
+                async with slots:
+                    scanner = await stack.enter_async_context(
+                        await Scanner.connect(target, timeout=timeout, catalog=catalog, identify=catalog is None))
+                    handles[index] = await stack.enter_async_context(scanner.io_connection(output, input, rpi,
+                                                                                             **options))
+                opened[index].set_result(None)
+                await closing.wait()
+        except BaseException as exc:
+            if not opened[index].done():
+                opened[index].set_exception(exc)
+            raise
+
+    tasks = [asyncio.create_task(hold(index, target)) for index, target in enumerate(targets)]
+    try:
+        for future in asyncio.as_completed(opened):
+            await future   # the first failure ends the wait, and the block below closes the others
+        yield [handle for handle in handles if handle is not None]
+    finally:
+        closing.set()   # the open ones close (Forward_Close); those still opening are given up
+        for task, future in zip(tasks, opened, strict=True):
+            if not future.done():
+                task.cancel()
+        await asyncio.gather(*tasks, return_exceptions=True)
+        for future in opened:   # a failure after the first is retrieved, not left to the loop's log
+            if future.done() and not future.cancelled():
+                future.exception()
+
+
+__all__ = ["OPENS_IN_FLIGHT", "Scanner", "open_io_connections"]

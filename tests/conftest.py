@@ -96,7 +96,7 @@ SLOW_MODULES = frozenset({
     "test_benchmarks", "test_cli", "test_control_sockets", "test_eds_field_files", "test_eds_field_names",
     "test_eds_generator", "test_eds_roundtrip", "test_field_interop", "test_first_hour", "test_fleet",
     "test_fleet_http", "test_hardening", "test_http_attacks", "test_http_token", "test_io_session", "test_metrics",
-    "test_plant",
+    "test_plant", "test_fleet_overload",
 })
 #: A test with none of these is also marked ``quick``: ``pytest -m quick`` runs in a couple of minutes.
 NOT_QUICK = ("slow", "interop", "tshark", "browser", "docs", "podman")

@@ -203,7 +203,8 @@ def test_acg_status_json_by_field(tmp_path: Path) -> None:
                           "output_current_a": 0.0, "not_simulated": ["output_current_a"], "io_connections": 0,
                           "trip": "OverHeat", "fault_code": 0x4200,
                           "lost_command": False, "comm_update_pending": False, "power": "on", "link": "plugged",
-                          "sessions": 0, "class3_connections": 0, "class1_connections": 0, "faults": 0}
+                          "sessions": 0, "class3_connections": 0, "class1_connections": 0, "faults": 0,
+                          "productions": {"sent": 0, "late": 0, "missed": 0}}
     finally:
         stop(process)
 

@@ -137,9 +137,14 @@ def children(pid: int) -> list[int]:
 
 
 def alive(pid: int) -> bool:
+    """Whether ``pid`` has not ended. A process whose first thread has ended shows as a zombie while
+    its other threads (a fleet worker's heartbeat thread) are still ending, and its parent cannot
+    collect its exit status until they have: it has ended only once it is a zombie alone."""
     try:
         with open(f"/proc/{pid}/stat") as stat:
-            return stat.read().rsplit(")", 1)[1].split()[0] != "Z"
+            if stat.read().rsplit(")", 1)[1].split()[0] != "Z":
+                return True
+        return len(os.listdir(f"/proc/{pid}/task")) > 1
     except OSError:
         return False
 
@@ -237,7 +242,13 @@ BAD_SPECS = [
     (["--addresses", "127.77.9.1-127.77.9.4", "--device", "acg*5"],
      "5 devices, but the addresses 127.77.9.1-127.77.9.4 have 4 left"),
     (["--addresses", "127.77.9.1-127.77.9.4", "--device", "acg*2", "--device", "mx2*3"], "3 devices, but"),
-    (["--addresses", "127.0.0.0-127.255.255.255", "--device", "acg"], "more than 1024 addresses"),
+    (["--addresses", "127.0.0.0-127.255.255.255", "--device", "acg"],
+     "more than 1024 addresses (a fleet serves at most 1024 devices; --max-devices N for more)"),
+    (["--addresses", "127.77.0.1-127.77.8.1", "--device", "acg*2", "--max-devices", "2048"],
+     "more than 2048 addresses"),
+    (["--addresses", "127.77.9.1-127.77.9.4", "--device", "acg*1025"], "the count 1025 is not in 1..1024"),
+    (["--addresses", "127.77.9.1-127.77.9.4", "--device", "acg", "--max-devices", "0"],
+     "--max-devices: 0 is not a number of devices"),
     (["--addresses", "127.77.9.1-127.77.9.4", "--device", "acg*x"], "the count 'x' is not a number"),
     (["--addresses", "127.77.9.1-127.77.9.4", "--device", "mx2:RX-A4055-E"], "RX-A4055-E is an rx model"),
     (["--addresses", "127.77.9.1-127.77.9.4", "--device", "mx2", "--param", "drv=4"], "no acg device"),
@@ -270,6 +281,9 @@ def test_a_bad_spec_is_one_line(argv: list[str], message: str, capsys: pytest.Ca
     ('adresses = "127.77.9.1"\n', "unknown key 'adresses'"),
     ('[[device]]\nprofile = "acg"\ncolour = "red"\n', "unknown key 'colour'"),
     ('[[device]\n', "not valid TOML"),
+    ('max_devices = "many"\n[[device]]\nprofile = "acg"\n', "max_devices: 'many' is not a number of devices"),
+    ('addresses = "127.77.9.1-127.77.9.4"\nmax_devices = 2\n[[device]]\nprofile = "acg"\ncount = 3\n',
+     "the count 3 is not in 1..2"),
     ('addresses = "127.77.9.1"\n[[device]]\nprofile = "mx2"\nparams = ["drv=4"]\n',
      "'drv' is not a code of the MX2 Digital Operator"),
 ])

@@ -6,11 +6,14 @@ and a link to a device's panel, the token asked once. Every test fails when the 
 
 from __future__ import annotations
 
+import ipaddress
+import json
 import os
 import signal
 import subprocess
 import sys
 import time
+import urllib.request
 from collections.abc import Iterator
 from contextlib import contextmanager
 from pathlib import Path
@@ -218,6 +221,54 @@ def test_the_plant_lists_every_device_and_links_to_its_panel(tmp_path: Path) -> 
             groups = browser.find_element("id", "parameter-groups")
             wait_for(lambda: "d (" in groups.text, 10, "the Digital Operator's monitor codes")
             assert browser.find_element("id", "parameter-d001").get_attribute("readonly") is not None
+            no_script_error(browser)
+        fleet.stop(signal.SIGINT)
+    finally:
+        fleet.kill()
+
+
+def test_the_grid_of_a_thousand_drives_is_summed_up_sorted_filtered_and_live(tmp_path: Path) -> None:
+    """1,024 drives on two workers: the grid has a row for each from one request a refresh, a summary
+    by state whose counts filter, headings that sort, and a trip through the API seen in it."""
+    require_browser()
+    first = ipaddress.IPv4Address("127.79.16.1")
+    hosts = [str(first + n) for n in range(1024)]
+    port, http = free_port(hosts[0], hosts[-1]), free_port()
+    fleet = Fleet(tmp_path, "--addresses", f"{hosts[0]}-{hosts[-1]}", "--device", "acg*1024", "--port", str(port),
+                  "--io-port", "0", "--workers", "2", "--factory", "--http", f"127.0.0.1:{http}")
+    try:
+        fleet.wait_ready(120)
+        with chromium(tmp_path / "profile") as browser:
+            browser.get(f"http://127.0.0.1:{http}/")
+            wait_for(lambda: text(browser, "plant-summary") == "1024 devices: 1024 READY", 30, "every drive READY")
+            tripped = hosts[700]
+            request = urllib.request.Request(f"http://127.0.0.1:{http}/devices/{tripped}/trip", method="POST",
+                                             data=json.dumps({"code": "OverHeat"}).encode(),
+                                             headers={"Content-Type": "application/json"})
+            with urllib.request.urlopen(request, timeout=30) as reply:
+                assert reply.status == 200
+            try:
+                wait_for(lambda: text(browser, "plant-summary") == "1024 devices: 1023 READY 1 FAULT_STOP", 20,
+                         "the trip in the summary")
+            except TimeoutError:
+                raise AssertionError(text(browser, "plant-summary")) from None
+            grid = browser.find_element("id", "plant-table")
+
+            def first_rows(count: int) -> list[list[str]]:
+                return browser.execute_script(
+                    "return [...arguments[0].tBodies[0].rows].slice(0, arguments[1])"
+                    ".map((tr) => [...tr.cells].map((td) => td.textContent))", grid, count)
+
+            headings = grid.find_elements("css selector", "thead th button")
+            headings[3].click()                                    # by state: FAULT_STOP before READY
+            assert first_rows(2)[0][:4] == [tripped, "CENT", "2", "FAULT_STOP (OverHeat)"], first_rows(2)
+            headings[0].click()
+            headings[0].click()                                    # by address, from the last
+            assert [r[0] for r in first_rows(2)] == [hosts[-1], hosts[-2]]
+            browser.find_element("css selector", "#plant-summary button[data-filter='FAULT_STOP']").click()
+            assert text(browser, "plant-shown") == "1 of 1024 shown"
+            assert [row.text.split()[0] for row in grid.find_elements("css selector", "tbody tr")
+                    if row.is_displayed()] == [tripped]
             no_script_error(browser)
         fleet.stop(signal.SIGINT)
     finally:

@@ -150,7 +150,7 @@ def test_the_description_has_every_route_the_api_serves(adapter: Adapter) -> Non
     served = {(method.lower(), prefix + path) for method, path, _ in DEVICE_ROUTES for prefix in ("", DEVICE_PREFIX)}
     described = {(method, path) for path, operations in paths.items() for method in operations}
     assert described == served | {("get", "/devices"), ("get", "/stream"), ("get", "/devices/{device}/stream"),
-                                  ("get", "/metrics")}
+                                  ("get", "/metrics"), ("get", "/plant")}
     relay = RelayApi([], "127.0.0.1", 0)
     for app in (adapter.http_api.app, relay.app):                            # a fleet's relay serves the same
         routes = {(route.method.lower(), route.resource.canonical) for route in app.router.routes()

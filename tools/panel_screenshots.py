@@ -52,7 +52,7 @@ RUNNING = ("return document.getElementById('state').className === 'state-running
            " && document.getElementById('class1-table').tBodies[0].rows.length > 0")
 #: ... and the fault applied.
 FAULTED = RUNNING + " && document.getElementById('faults-table').tBodies[0].rows.length > 0"
-#: The plant view has polled every device, and marks the tripped one.
+#: The plant view has read every device, and marks the tripped one.
 POLLED = ("const rows = [...document.getElementById('plant-table').tBodies[0].rows];"
           " return rows.length > 0 && rows.every((r) => r.cells[3].textContent !== '\u2026')"
           " && rows.some((r) => r.cells[3].className === 'down')")
@@ -117,7 +117,7 @@ def main(out: Path, at_once: bool = False) -> None:
         wait_listening(fleet_http)
         call(f"http://127.0.0.1:{fleet_http}", "POST", f"/devices/{hosts[1]}/trip", {"code": "OverHeat"})
         with chromium(work / "profile-plant") as driver:
-            shoot(driver, f"http://127.0.0.1:{fleet_http}/", out / "plant.png", POLLED, 0, 480)
+            shoot(driver, f"http://127.0.0.1:{fleet_http}/", out / "plant.png", POLLED, 0, 620)
     finally:
         for process in reversed(started):
             process.terminate()

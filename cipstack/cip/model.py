@@ -14,7 +14,7 @@ from __future__ import annotations
 import struct
 from collections.abc import Callable, Mapping
 from enum import Enum
-from functools import partial
+from functools import lru_cache, partial
 from typing import TYPE_CHECKING, Any, ClassVar, NamedTuple
 
 from ..errors import BadRequest, ReadOnlyField, UnknownKey, WrongType
@@ -123,7 +123,7 @@ class ClassSpec:
     lookup every request does.
     """
 
-    __slots__ = ("_index", "class_id", "class_services", "extra_class_attributes", "instance_attributes",
+    __slots__ = ("_index", "_keys", "class_id", "class_services", "extra_class_attributes", "instance_attributes",
                  "instance_services", "max_instance", "name", "revision")
     #: The fields, in the order ``__init__`` takes them.
     _FIELDS: ClassVar[tuple[str, ...]] = ("class_id", "name", "revision", "instance_attributes",
@@ -157,6 +157,15 @@ class ClassSpec:
 
     def instance_attribute(self, attribute_id: int) -> AttributeSpec | None:
         return self._index.get(attribute_id)
+
+    def attribute_ids_by_key(self) -> Mapping[str, int]:
+        """Each instance attribute's id by its ``attribute_key``, worked out once per declaration:
+        every instance of the class looks its overrides up here (a fleet adds thousands)."""
+        keys: dict[str, int] | None = getattr(self, "_keys", None)
+        if keys is None:
+            keys = {attribute_key(a): a.id for a in self.instance_attributes}
+            object.__setattr__(self, "_keys", keys)
+        return keys
 
     def replace(self, **changes: Any) -> ClassSpec:
         """A copy with ``changes`` (field name -> value), checked as a new declaration is."""
@@ -241,7 +250,7 @@ class CipObject:
         if instance_id in self.instances or instance_id < 1:
             raise BadRequest(f"{self.spec.name}: instance {instance_id} exists or is invalid")
         values = {a.id: a.default for a in self.spec.instance_attributes}
-        by_key = {attribute_key(a): a.id for a in self.spec.instance_attributes}
+        by_key = self.spec.attribute_ids_by_key()
         for key, value in overrides.items():
             attr_id = by_key.get(key)
             if attr_id is None and key.startswith("attr_"):
@@ -484,8 +493,13 @@ def _attribute_id_list(data: bytes) -> list[int]:
 
 def attribute_key(spec: AttributeSpec) -> str:
     """Python-friendly name of an attribute: "Product Name" -> "product_name"."""
+    return _key_of_name(spec.name)
+
+
+@lru_cache(maxsize=4096)
+def _key_of_name(name: str) -> str:
     out = []
-    for ch in spec.name.lower():
+    for ch in name.lower():
         out.append(ch if ch.isalnum() else "_")
     return "_".join(part for part in "".join(out).split("_") if part)
 

@@ -41,6 +41,10 @@ def _trip_code(text: str) -> int | str:
 
 
 # -- what each operation prints without --json --------------------------------------------------------------
+#: The share of a device's production slots skipped above which ``drive status`` says so.
+OVERLOAD_SHARE = 0.01
+
+
 def _status_text(reply: dict[str, Any]) -> str:
     rtu = reply.get("rtu")
     line = "" if not rtu else ("  rtu " + " ".join(f"{k} {v}" for k, v in rtu.items() if k != "device"))
@@ -50,8 +54,15 @@ def _status_text(reply: dict[str, Any]) -> str:
     if scenario:
         line += (f"  scenario {scenario['file']} {scenario['state']} {scenario['fired']}/{scenario['steps']}"
                  + (f" next {scenario['next']}" if scenario["next"] else ""))
+    productions = reply.get("productions") or {}
+    # Said where an operator looks first when an overloaded process skipped more than 1 % of the
+    # device's production slots, as a fleet judges its workers; a device on time keeps its short line
+    # (a production past its half-millisecond tolerance alone is a busy machine, not overload).
+    sent, missed = productions.get("sent", 0), productions.get("missed", 0)
+    late = (f" (productions late {productions.get('late', 0)}, missed {missed} of {sent + missed})"
+            if missed > OVERLOAD_SHARE * (sent + missed) else "")
     return (f"{reply['status'] or '(no drive)'}{power}{link}  sessions {reply['sessions']}  class 3 "
-            f"{reply['class3_connections']}  class 1 {reply['class1_connections']}{line}")
+            f"{reply['class3_connections']}  class 1 {reply['class1_connections']}{late}{line}")
 
 
 def _status_json(reply: dict[str, Any]) -> dict[str, Any]:
@@ -61,7 +72,7 @@ def _status_json(reply: dict[str, Any]) -> dict[str, Any]:
     record = {**fields, "power": reply.get("power"), "link": reply.get("link"), "sessions": reply["sessions"],
               "class3_connections": reply["class3_connections"], "class1_connections": reply["class1_connections"],
               "faults": reply.get("faults", 0)}
-    for extra in ("rtu", "scenario"):
+    for extra in ("productions", "rtu", "scenario"):
         if extra in reply:
             record[extra] = reply[extra]
     return record

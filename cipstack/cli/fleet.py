@@ -21,12 +21,15 @@ log = logging.getLogger("cipstack.fleet")
 def _fleet_spec(args: argparse.Namespace) -> Any:
     """The spec of the command line, over the spec file's (an option given wins over the file's key)."""
     from ..devices.state import data_directory
+    from ..fleet.serve import check_open_files
     from ..fleet.spec import (
+        MAX_DEVICES,
         DeviceGroup,
         FleetSpec,
         SpecError,
         assign,
         assign_stations,
+        check_max_devices,
         check_port,
         check_workers,
         make_group,
@@ -39,30 +42,32 @@ def _fleet_spec(args: argparse.Namespace) -> Any:
 
     settings: dict[str, Any] = {}
     groups: list[DeviceGroup] = []
+    given_limit = check_max_devices(args.max_devices) if args.max_devices is not None else None
     if args.spec is not None:
         if args.device:
             raise UsageError("give the devices with --device or in --spec FILE, not both")
-        settings, groups = read_spec_file(args.spec)
+        settings, groups = read_spec_file(args.spec, given_limit)
         where = str(args.spec)
     else:
         where = "--device"
+    limit = given_limit or settings.get("max_devices", MAX_DEVICES)
     if args.param and args.spec is not None:
         raise UsageError("--param goes with --device; in a spec file, a [[device]] has params")
-    groups += [parse_group(text) for text in args.device or []]
+    groups += [parse_group(text, limit) for text in args.device or []]
     if args.param:   # every ACG of the command line gets them
         if not any(g.profile == "acg" for g in groups):
             raise UsageError("--param sets the ACG's keypad parameters, and the fleet has no acg device")
-        groups = [make_group(g.profile, g.model, g.count, str(g.first) if g.first else None, args.param, g.text)
-                  if g.profile == "acg" else g for g in groups]
+        groups = [make_group(g.profile, g.model, g.count, str(g.first) if g.first else None, args.param, g.text,
+                             limit=limit) if g.profile == "acg" else g for g in groups]
     addresses = args.addresses if args.addresses is not None else settings.get("addresses")
-    pool = parse_addresses(addresses, "--addresses" if args.addresses is not None else f"{where}: addresses") \
-        if addresses is not None else None
+    pool = parse_addresses(addresses, "--addresses" if args.addresses is not None else f"{where}: addresses",
+                           limit) if addresses is not None else None
     state_dir: Path | None = Path(args.state_dir or settings.get("state_dir") or data_directory() / "fleet")
     if args.factory:
         if args.state_dir is not None:
             raise UsageError("--factory reads and writes no state file: drop --state-dir DIR")
         state_dir = None   # every device from factory settings; its saves last until the fleet stops
-    devices = assign(groups, pool, state_dir)
+    devices = assign(groups, pool, state_dir, limit)
     # The shard is cut from the whole plant, before anything that depends on the process (workers, the
     # RS-485 line), so that every pod reading one spec agrees on who serves which device.
     shard = parse_shard(args.shard) if args.shard is not None else None
@@ -78,6 +83,8 @@ def _fleet_spec(args: argparse.Namespace) -> Any:
         devices = assign_stations(devices, workers, "--rtu" if args.rtu is not None else f"{where}: rtu")
     elif any(d.station is not None for d in devices):
         raise SpecError(f"{where}: a station ID puts a drive on the fleet's RS-485 line: give --rtu (rtu = \"pty\")")
+    if not args.list_addresses:   # a pod's init container lists them where the fleet will not run
+        check_open_files(len(devices), workers)
     return FleetSpec(devices, port, io_port, workers, state_dir, rtu, shard)
 
 

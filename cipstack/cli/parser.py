@@ -255,6 +255,9 @@ def build_parser(command: str | None = None, texts: bool = True) -> argparse.Arg
         p.add_argument("--shard", metavar="INDEX/COUNT",
                        help="serve one of COUNT contiguous shares of the plant's devices (in address order), INDEX "
                             "from 0: 0/3 is the first of three; each machine or pod runs one, from the same spec")
+        p.add_argument("--max-devices", type=number("max devices"), metavar="N",
+                       help="serve up to N devices (default 1024): more where the machine's open-file limit allows "
+                            "(about 12 descriptors a device in each worker)")
         p.add_argument("--list-addresses", action="store_true",
                        help="print the addresses of the devices this fleet (or shard) serves, one a line, and exit")
         p.set_defaults(func=cmd_fleet)

@@ -48,6 +48,7 @@ from .metrics import ShardGauges, add_metrics_route
 from .operations import OPERATIONS, Operation
 from .panel_app import PanelStreams
 from .panel_app import log as panel_log
+from .plant_grid import SharedRows, plant_rows
 from .service import outcome, whole_number
 from .tokens import weak_token_reason
 
@@ -497,6 +498,7 @@ class HttpApi:
         self.shard = shard
         self.panel = PanelStreams()
         self._served: ServedApp | None = None
+        self._plant = SharedRows(lambda: plant_rows(self.devices))
         self.app = self._build()
 
     # -- serving -----------------------------------------------------------------------------------------
@@ -521,6 +523,7 @@ class HttpApi:
             app.router.add_route(method, path, handler)
             app.router.add_route(method, DEVICE_PREFIX + path, handler)
         app.router.add_get("/devices", self.list_devices)
+        app.router.add_get("/plant", self.plant)
         app.router.add_get("/openapi.json", openapi)
         add_metrics_route(app, self.devices, self.shard)
         app.router.add_get(STREAM_PATH, self.stream)
@@ -548,6 +551,10 @@ class HttpApi:
     async def list_devices(self, request: web.Request) -> web.Response:
         return web.json_response([{"address": name, **service.describe()}
                                   for name, service in sorted(self.devices.items())])
+
+    async def plant(self, request: web.Request) -> web.Response:
+        """Every device's row of the plant grid (``plant_grid``), one reading shared by the grids open."""
+        return web.json_response(await self._plant.get())
 
     def _handler(self, operation: Operation) -> Callable[[web.Request], Awaitable[web.Response]]:
         async def handle(request: web.Request) -> web.Response:
@@ -707,6 +714,9 @@ def openapi_document() -> dict[str, Any]:
     paths["/devices"] = {"get": {"summary": "the devices this API serves (in a fleet of workers, each with its "
                                             "worker's number, and `error` where that worker is lost)",
                                  "operationId": "devices", "responses": {"200": ok}}}
+    paths["/plant"] = {"get": {"summary": "one row of every device for the plant grid: state, output, power and "
+                                          "link, connections, faults, class 1 productions late and missed",
+                               "operationId": "plant", "responses": {"200": ok}}}
     paths["/metrics"] = {"get": {"summary": "the devices' counters in the Prometheus text format",
                                  "operationId": "metrics", "responses": {"200": {
                                      "description": "Prometheus text", "content": {"text/plain": {"schema": {}}}}}}}

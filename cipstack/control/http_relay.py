@@ -21,7 +21,7 @@ from __future__ import annotations
 
 import asyncio
 import logging
-from collections.abc import Callable
+from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -44,8 +44,9 @@ from .http import (
     openapi,
     serve_app,
 )
-from .metrics import ShardGauges, merge_families, metrics_response, powered_devices, render
+from .metrics import ShardGauges, WorkerGauges, merge_families, metrics_response, powered_devices, render
 from .panel_app import PanelStreams
+from .plant_grid import SharedRows, down_rows
 
 log = logging.getLogger(__name__)
 one_line_records(log)
@@ -56,6 +57,9 @@ _WORKER_URL = URL("http://cipstack-worker")
 #: How long the relay waits for a worker's socket to accept; its event loop accepts in microseconds,
 #: so a worker that takes longer is stopped or stuck (its parent's heartbeat says so, and ends it).
 CONNECT_TIMEOUT = 5.0
+#: How long the grid's rows of one backend may take: a worker whose loop is that far behind is shown
+#: as not answering for this refresh, the others' rows still come (the grid asks again in a second).
+PLANT_TIMEOUT = 5.0
 #: Headers of a request the worker's API reads (the token stays with the relay, which checked it).
 _FORWARDED = ("Content-Type", "Accept")
 
@@ -81,6 +85,8 @@ class Backend:
     headers: dict[str, str] = field(default_factory=dict)
     #: What ``/devices`` adds to each of its devices (default: its worker number).
     shown: dict[str, Any] | None = None
+    #: Its load as its heartbeat last told (``WorkerGauges``), or None: not known (a plant's fleets).
+    load: Callable[[], Mapping[str, float] | None] = lambda: None
 
     def open(self) -> None:
         """Its client session (call once, on the relay's loop)."""
@@ -126,6 +132,7 @@ class RelayApi:
         #: Each device's worker, by the address the worker's API gives it.
         self.routes: dict[str, Backend] = {}
         self._served: ServedApp | None = None
+        self._plant = SharedRows(self._read_plant)
         self.app = self._build()
 
     async def start(self) -> None:
@@ -184,6 +191,7 @@ class RelayApi:
             app.router.add_route(method, path, self.unaddressed)
             app.router.add_route(method, DEVICE_PREFIX + path, self.forward)
         app.router.add_get("/devices", self.list_devices)
+        app.router.add_get("/plant", self.plant)
         app.router.add_get("/openapi.json", openapi)
         app.router.add_get("/metrics", self.metrics)
         app.router.add_get(STREAM_PATH, self.unaddressed)
@@ -204,6 +212,34 @@ class RelayApi:
                     listed.append({**entry, **shown, **({"error": down} if down else {})})
         return web.json_response(sorted(listed, key=lambda entry: str(entry["address"])))
 
+    async def plant(self, request: web.Request) -> web.Response:
+        """Every device's row of the plant grid, one reading shared by the grids open (``SharedRows``)."""
+        return web.json_response(await self._plant.get())
+
+    async def _read_plant(self) -> list[dict[str, Any]]:
+        """Each serving backend asked once, all at once; the devices of one that no longer serves (or
+        does not answer now) listed with why."""
+        rows = await asyncio.gather(*(self._plant_rows(backend) for backend in self.backends))
+        return sorted((row for part in rows for row in part), key=lambda row: str(row["address"]))
+
+    async def _plant_rows(self, backend: Backend) -> list[dict[str, Any]]:
+        shown = backend.shown if backend.shown is not None else {"worker": backend.number}
+        mine = [entry for entry in backend.devices if self.routes.get(entry["address"]) is backend]
+        down = backend.down()
+        if down is None and backend.session is not None:
+            try:
+                async with backend.session.get(backend.at("/plant"),
+                                               timeout=aiohttp.ClientTimeout(total=PLANT_TIMEOUT)) as reply:
+                    if reply.status == 200:
+                        addresses = {entry["address"] for entry in mine}
+                        return [{**row, **shown} for row in await reply.json() if row.get("address") in addresses]
+                    down = f"{backend.name} answered {reply.status}"
+            except asyncio.TimeoutError:
+                down = f"{backend.name} did not answer in {PLANT_TIMEOUT:g} s (its event loop is behind: overloaded)"
+            except (aiohttp.ClientError, ValueError) as exc:
+                down = f"{backend.name} did not answer: {_failure(backend, exc)}"
+        return down_rows(mine, shown, down or f"{backend.name} is not connected")
+
     async def metrics(self, request: web.Request) -> web.Response:
         """Every serving worker's ``/metrics`` in one, with the fleet's gauges: a lost worker's devices
         are not up, and their counters are gone with it."""
@@ -220,7 +256,11 @@ class RelayApi:
         families = merge_families(texts)
         up = powered_devices(families)
         gauges = ShardGauges(self.shard, lambda: (len(self.routes), up)) if self.shard is not None else None
-        return metrics_response(await render([*families.values(), *(gauges.families() if gauges else [])]))
+        loads = [(backend.number, load) for backend in self.backends
+                 if backend.down() is None and (load := backend.load()) is not None]
+        workers = WorkerGauges(lambda: loads).families() if loads else []
+        return metrics_response(await render([*families.values(), *(gauges.families() if gauges else []),
+                                              *workers]))
 
     async def unaddressed(self, request: web.Request) -> web.Response:
         """A device's route without its address: a fleet has more than one device."""

@@ -38,10 +38,12 @@ _RTU_ERRORS = ("crc_errors", "truncated", "oversize", "interrupted", "overrun")
 class ShardGauges:
     """What a fleet shard says of itself: its devices, and how many of them serve."""
 
-    def __init__(self, shard: str, devices: Callable[[], tuple[int, int]]) -> None:
-        """``devices``: (devices, devices up) when asked."""
+    def __init__(self, shard: str, devices: Callable[[], tuple[int, int]],
+                 workers: WorkerGauges | None = None) -> None:
+        """``devices``: (devices, devices up) when asked; ``workers``: the load of its process(es)."""
         self.shard = shard
         self.devices = devices
+        self.workers = workers
 
     def families(self) -> list[Metric]:
         total, up = self.devices()
@@ -50,7 +52,37 @@ class ShardGauges:
         serving = GaugeMetricFamily("cipstack_fleet_devices_up", "devices of this fleet shard that serve "
                                     "(powered, in a worker that runs)", labels=["shard"])
         serving.add_metric([self.shard], up)
-        return [count, serving]
+        return [count, serving, *(self.workers.families() if self.workers is not None else [])]
+
+
+class WorkerGauges:
+    """What a fleet's parent knows of each worker's load from its heartbeat: whether it is late, how far
+    behind its loop runs, and its devices' class 1 productions (sent, late, missed), for an operator to
+    see overload per worker where the devices' own counters are spread over hundreds of series."""
+
+    def __init__(self, loads: Callable[[], Iterable[tuple[int, Mapping[str, float]]]]) -> None:
+        """``loads``: (worker number, its load: ``late``, ``lag``, ``sent``, ``late_productions``,
+        ``missed``) of each serving worker that has answered, when asked."""
+        self.loads = loads
+
+    def families(self) -> list[Metric]:
+        label = ["worker"]
+        late = GaugeMetricFamily("cipstack_fleet_worker_late", "1 while the worker's productions go late "
+                                 "(overloaded: it goes on serving)", labels=label)
+        lag = GaugeMetricFamily("cipstack_fleet_worker_loop_lag_seconds", "how late the worker's event loop "
+                                "ran its last sampling", labels=label)
+        counters = {key: CounterMetricFamily(f"cipstack_fleet_worker_productions_{name}", text, labels=label)
+                    for key, name, text in (("sent", "sent", "class 1 productions of the worker's devices"),
+                                            ("late_productions", "late", "class 1 productions later than "
+                                             "their tolerance"),
+                                            ("missed", "missed", "class 1 production slots skipped "
+                                             "(the loop came too late for them)"))}
+        for number, load in self.loads():
+            late.add_metric([str(number)], load["late"])
+            lag.add_metric([str(number)], load["lag"])
+            for key, family in counters.items():
+                family.add_metric([str(number)], load[key])
+        return [late, lag, *counters.values()]
 
 
 class DeviceCollector(Collector):
@@ -126,6 +158,7 @@ class DeviceCollector(Collector):
         put("class1_packets_received", sum(s.received for s in every))
         put("class1_packets_late", sum(s.late for s in every))
         put("class1_packets_lost", sum(s.lost for s in every))
+        put("class1_productions_missed", sum(s.skipped_slots for s in every))
         for key, count in sorted(device.router.reply_counts.items()):
             families["requests"].add_metric([name, f"0x{key >> 8:02X}", f"0x{key & 0xFF:02X}"],  # type: ignore[attr-defined]
                                             count)
@@ -157,7 +190,8 @@ _COUNTERS = (
     ("class1_packets_sent", "class 1 packets produced"),
     ("class1_packets_received", "class 1 packets consumed"),
     ("class1_packets_late", "class 1 productions later than their tolerance"),
-    ("class1_packets_lost", "class 1 packets the device never saw, and production slots skipped"),
+    ("class1_packets_lost", "class 1 packets the device never saw"),
+    ("class1_productions_missed", "class 1 production slots skipped (its process came too late for them)"),
     ("class1_dropped", "class 1 datagrams dropped (malformed, or for no open connection)"),
     ("trips", "drive trips seen since the HTTP API started"),
     ("rtu_frames", "Modbus-RTU frames on the device's RS-485 line"))
@@ -245,5 +279,5 @@ def add_metrics_route(app: web.Application, devices: Mapping[str, DeviceService]
     app.router.add_get("/metrics", metrics)
 
 
-__all__ = ["DeviceCollector", "Families", "ShardGauges", "add_metrics_route", "exposition", "merge_families",
-           "metrics_response", "powered_devices", "render"]
+__all__ = ["DeviceCollector", "Families", "ShardGauges", "WorkerGauges", "add_metrics_route", "exposition",
+           "merge_families", "metrics_response", "powered_devices", "render"]

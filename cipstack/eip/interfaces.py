@@ -9,6 +9,7 @@ import ctypes.util
 import ipaddress
 import socket
 import sys
+from functools import lru_cache
 
 #: The limited broadcast: every host of the link the datagram is sent on, whatever its subnet.
 LIMITED_BROADCAST = "255.255.255.255"
@@ -31,6 +32,16 @@ _Ifaddrs._fields_ = [
 ]
 
 
+@lru_cache(maxsize=1)
+def _libc() -> ctypes.CDLL | None:
+    """The C library, found once: ``find_library`` runs ldconfig in a subprocess, milliseconds each
+    time, and a fleet asks for the interfaces twice per device."""
+    try:
+        return ctypes.CDLL(ctypes.util.find_library("c") or "libc.so.6", use_errno=True)
+    except OSError:
+        return None
+
+
 def ipv4_networks() -> list[ipaddress.IPv4Interface]:
     """Every IPv4 address of every interface with its netmask (loopback's 127.0.0.1/8 included, and
     each address a fleet adds to an interface); empty where the platform does not say (not Linux).
@@ -38,9 +49,8 @@ def ipv4_networks() -> list[ipaddress.IPv4Interface]:
     it: only getifaddrs (netlink underneath) lists them all, each with its own mask."""
     if not sys.platform.startswith("linux"):
         return []
-    try:
-        libc = ctypes.CDLL(ctypes.util.find_library("c") or "libc.so.6", use_errno=True)
-    except OSError:
+    libc = _libc()
+    if libc is None:
         return []
     head = ctypes.POINTER(_Ifaddrs)()
     if libc.getifaddrs(ctypes.byref(head)) != 0:

@@ -44,6 +44,7 @@ from .precise_loop import (  # noqa: F401
     precise_event_loop,
     run_precise,
 )
+from .udp_table import udp_inodes_bound_to
 
 log = logging.getLogger(__name__)
 
@@ -149,14 +150,20 @@ class _UdpIo(asyncio.DatagramProtocol):
 
 def udp_sockets_on(host: str, port: int) -> set[int] | None:
     """The inodes of the UDP sockets of this network namespace bound to exactly ``host:port``
-    (Linux: /proc/net/udp, whose local address is the 32-bit value in host order and the port in
-    hex; the inode is the tenth column); None where that table cannot be read. The table is read in
-    pages while other processes bind and close: a socket may be listed twice (hence a set)."""
+    (Linux: sock_diag, ``udp_table``; else /proc/net/udp, whose local address is the 32-bit value
+    in host order and the port in hex; the inode is the tenth column); None where neither can be read.
+    The table is read in pages while other processes bind and close: a socket may be listed twice
+    (hence a set)."""
+    # The kernel's own filter first (sock_diag): the whole table, read at each of a fleet's thousand
+    # binds, was most of a large fleet's start.
+    inodes = udp_inodes_bound_to(host, port)
+    if inodes is not None:
+        return inodes
     wanted = f"{struct.unpack('=I', socket.inet_aton(host))[0]:08X}:{port:04X}"
     try:
         with open("/proc/net/udp", encoding="ascii") as table:
             next(table, None)  # the column headings
-            rows = [line.split() for line in table]
+            rows = [line.split() for line in table if wanted in line]
     except OSError:
         return None
     return {int(row[9]) for row in rows if len(row) > 9 and row[1] == wanted}

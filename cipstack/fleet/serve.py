@@ -27,7 +27,8 @@ from ..eip.io_server import freeze_startup_objects
 from ..listening import held_log_records
 from ..modbus.rtu_line import RtuLine, open_port
 from ..runtime.observer import register_relay
-from .spec import FleetDevice, SpecError
+from .load import LoadSampler, LoadWatch, gauge_values, watch_own_load
+from .spec import FleetDevice, SpecError, describe_addresses
 
 log = logging.getLogger(__name__)
 
@@ -35,6 +36,30 @@ log = logging.getLogger(__name__)
 #: Descriptors a device holds before any connection: TCP listener, UDP, broadcast UDP, class 1 UDP,
 #: control socket; with room for a few connections each.
 DESCRIPTORS_PER_DEVICE = 12
+#: Descriptors a process holds besides its devices': the interpreter's, the HTTP API's, the parent's channel.
+RESERVED_DESCRIPTORS = 256
+
+
+def check_open_files(devices: int, workers: int) -> None:
+    """Refuse (``SpecError``, one line) a fleet whose busiest process would need more descriptors than
+    the hard open-file limit lets any process of this user have: it would fail part way through its
+    start, or later at a connection; say how many workers would fit instead."""
+    try:
+        _, hard = resource.getrlimit(resource.RLIMIT_NOFILE)
+    except (OSError, ValueError):
+        return
+    busiest = -(-devices // workers)
+    needed = descriptors_needed(busiest)
+    if hard == resource.RLIM_INFINITY or needed <= hard:
+        return
+    per_process = max(1, (hard - RESERVED_DESCRIPTORS) // DESCRIPTORS_PER_DEVICE)
+    raise SpecError(f"{devices} devices on {workers} worker(s): {busiest} in one process need about {needed} open "
+                    f"files, and the hard limit here is {hard} (ulimit -Hn): give --workers "
+                    f"{-(-devices // per_process)} or more, or raise the limit")
+
+
+def descriptors_needed(devices: int) -> int:
+    return RESERVED_DESCRIPTORS + devices * DESCRIPTORS_PER_DEVICE
 
 
 def raise_open_file_limit(devices: int) -> None:
@@ -42,7 +67,7 @@ def raise_open_file_limit(devices: int) -> None:
     serve hundreds); where it cannot be raised, a device that cannot open a socket says so at start."""
     try:
         soft, hard = resource.getrlimit(resource.RLIMIT_NOFILE)
-        needed = 256 + devices * DESCRIPTORS_PER_DEVICE
+        needed = descriptors_needed(devices)
         if soft != resource.RLIM_INFINITY and soft < needed:
             resource.setrlimit(resource.RLIMIT_NOFILE, (needed if hard == resource.RLIM_INFINITY
                                                         else min(needed, hard), hard))
@@ -153,11 +178,12 @@ class DeviceSet:
 async def serve_until_signalled(devices: Sequence[FleetDevice], port: int, io_port: int,
                                 on_ready: Callable[[list[str]], None],
                                 signals: Sequence[int] = (signal.SIGINT, signal.SIGTERM),
-                                rtu: str | None = None, http: dict[str, Any] | None = None) -> int:
+                                rtu: str | None = None, http: dict[str, Any] | None = None,
+                                sampler: LoadSampler | None = None) -> int:
     """Serve ``devices`` until one of ``signals``; returns the signal that stopped them. ``rtu``:
     the RS-485 line their ACG drives share (``DeviceSet``); ``http``: the settings of one HTTP control
     API for every device (``http``, ``http_token``, ``http_allow_remote``, ``http_hosts``; or ``path``, a fleet worker's
-    Unix socket)."""
+    Unix socket); ``sampler``: what sums the devices' productions for a worker's heartbeat."""
     loop = asyncio.get_running_loop()
     stop = asyncio.Event()
     received: list[int] = []
@@ -170,14 +196,24 @@ async def serve_until_signalled(devices: Sequence[FleetDevice], port: int, io_po
         loop.add_signal_handler(sig, stop_on, sig)
     fleet = DeviceSet(devices, port, io_port, rtu)
     api = None
+    tasks: list[asyncio.Task[None]] = []
+    # A worker's parent judges its load; a fleet of one process judges its own, the same way.
+    watch = LoadWatch() if sampler is None else None
+    sampler = sampler or LoadSampler()
     try:
         lines = await fleet.start()
         if http is not None:
-            api = await _start_http(fleet.adapters, http)
+            api = await _start_http(fleet.adapters, http, watch)
+        tasks.append(asyncio.create_task(sampler.run([adapter.runtime for adapter in fleet.adapters])))
+        if watch is not None:
+            name = f"the fleet ({describe_addresses(d.address for d in fleet.devices)})"
+            tasks.append(asyncio.create_task(watch_own_load(name, sampler, watch)))
         freeze_startup_objects()  # every device built: a full collection would stop them all at once
         on_ready(lines)
         await stop.wait()
     finally:
+        for task in tasks:
+            task.cancel()
         if api is not None:
             await api.close()
         await fleet.stop()
@@ -194,12 +230,12 @@ def api_addresses(adapters: Sequence[Adapter]) -> dict[str, DeviceService]:
             for host, adapter in zip(hosts, adapters, strict=True)}
 
 
-async def _start_http(adapters: Sequence[Adapter], http: dict[str, Any]) -> Any:
+async def _start_http(adapters: Sequence[Adapter], http: dict[str, Any], watch: LoadWatch | None = None) -> Any:
     """One HTTP control API for every device, each by its address (``api_addresses``): on ``http["http"]``
     (``HOST:PORT``), or for a worker of a fleet on the Unix socket ``http["path"]``, which only the
     fleet's relay reaches (``cipstack.control.http_relay``)."""
     from ..control.http import HttpApi, parse_listen
-    from ..control.metrics import ShardGauges
+    from ..control.metrics import ShardGauges, WorkerGauges
     from ..listening import ListenError
 
     path = http.get("path")
@@ -209,8 +245,9 @@ async def _start_http(adapters: Sequence[Adapter], http: dict[str, Any]) -> Any:
     else:
         host, port = parse_listen(http["http"])
         shard = http.get("shard")
-        gauges = ShardGauges(shard, lambda: (len(adapters), sum(a.runtime.power.powered for a in adapters))) \
-            if shard is not None else None
+        workers = WorkerGauges(lambda: [(1, load)] if watch is not None and (load := gauge_values(watch)) else [])
+        gauges = ShardGauges(shard, lambda: (len(adapters), sum(a.runtime.power.powered for a in adapters)),
+                             workers) if shard is not None else None
         api = HttpApi(api_addresses(adapters), host, port, token=http.get("http_token"),
                       allow_remote=http.get("http_allow_remote", False), hosts=tuple(http.get("http_hosts", ())),
                       shard=gauges)
@@ -222,4 +259,4 @@ async def _start_http(adapters: Sequence[Adapter], http: dict[str, Any]) -> Any:
     return api
 
 
-__all__ = ["DeviceSet", "api_addresses", "build_adapter", "device_line", "serve_until_signalled"]
+__all__ = ["DeviceSet", "api_addresses", "build_adapter", "check_open_files", "device_line", "serve_until_signalled"]

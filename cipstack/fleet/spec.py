@@ -27,9 +27,9 @@ from typing import Any
 
 from ..errors import BadRequest
 
-#: Devices in one fleet: each holds five descriptors (TCP listener, UDP, broadcast UDP, class 1 UDP,
-#: control socket) plus its connections, so a bound keeps a typo (127.0.0.0-127.255.255.255) from
-#: exhausting the machine.
+#: Devices in one fleet unless ``--max-devices`` (``max_devices`` in a file) says more: a default, so
+#: that a typo (127.0.0.0-127.255.255.255) is one line rather than a machine's every descriptor. What a
+#: machine can really hold is its open-file limit's (``cipstack.fleet.serve.check_open_files``).
 MAX_DEVICES = 1024
 
 #: ACG RS-485 manual, Communication Standards: "Maximum of 16 drives" on one line; CM.1 takes 1-250.
@@ -96,8 +96,10 @@ def _address(text: str, where: str) -> ipaddress.IPv4Address:
         raise SpecError(f"{where}: {text.strip()!r} is not an IPv4 address") from None
 
 
-def parse_addresses(text: str | Sequence[str], where: str = "--addresses") -> list[ipaddress.IPv4Address]:
-    """``127.0.0.10-127.0.0.73``, ``127.0.0.10,127.0.0.12``, or a mix; in the order given, each once."""
+def parse_addresses(text: str | Sequence[str], where: str = "--addresses",
+                    limit: int = MAX_DEVICES) -> list[ipaddress.IPv4Address]:
+    """``127.0.0.10-127.0.0.73``, ``127.0.0.10,127.0.0.12``, or a mix; in the order given, each once;
+    more than ``limit`` is refused."""
     items = [text] if isinstance(text, str) else list(text)
     found: list[ipaddress.IPv4Address] = []
     seen: set[ipaddress.IPv4Address] = set()
@@ -112,9 +114,9 @@ def parse_addresses(text: str | Sequence[str], where: str = "--addresses") -> li
             high = _address(high_text, where) if dash else low
             if high < low:
                 raise SpecError(f"{where}: the range {part.strip()} ends before it starts")
-            if int(high) - int(low) + 1 + len(found) > MAX_DEVICES:
-                raise SpecError(f"{where}: more than {MAX_DEVICES} addresses (a fleet serves at most {MAX_DEVICES} "
-                                f"devices)")
+            if int(high) - int(low) + 1 + len(found) > limit:
+                raise SpecError(f"{where}: more than {limit} addresses (a fleet serves at most {limit} devices; "
+                                f"--max-devices N for more)")
             for number in range(int(low), int(high) + 1):
                 address = ipaddress.IPv4Address(number)
                 if address in seen:
@@ -138,7 +140,7 @@ def describe_addresses(addresses: Iterable[str | ipaddress.IPv4Address]) -> str:
 
 
 # -- device groups --------------------------------------------------------------------------------------
-def _count(value: Any, where: str) -> int:
+def _count(value: Any, where: str, limit: int) -> int:
     if isinstance(value, str):
         try:
             value = int(value.strip(), 0)
@@ -146,13 +148,13 @@ def _count(value: Any, where: str) -> int:
             raise SpecError(f"{where}: the count {value!r} is not a number") from None
     if isinstance(value, bool) or not isinstance(value, int):
         raise SpecError(f"{where}: the count {value!r} is not a number")
-    if not 1 <= value <= MAX_DEVICES:
-        raise SpecError(f"{where}: the count {value} is not in 1..{MAX_DEVICES}")
+    if not 1 <= value <= limit:
+        raise SpecError(f"{where}: the count {value} is not in 1..{limit} (--max-devices N for more)")
     return value
 
 
 def make_group(profile: str | None, model: str | None, count: Any, first: str | None, params: Sequence[str],
-               where: str, station: Any = None) -> DeviceGroup:
+               where: str, station: Any = None, limit: int = MAX_DEVICES) -> DeviceGroup:
     """A group checked against the profiles and models this cipstack emulates."""
     from ..devices.omron.models import model as find_model
     from ..devices.profiles import PROFILES
@@ -187,11 +189,11 @@ def make_group(profile: str | None, model: str | None, count: Any, first: str | 
             raise SpecError(f"{where}: station {station!r} is not a station ID (1..{MAX_STATION}, CM.1)")
     if any(text.partition("=")[0].strip().upper().replace("-", ".") in ("CM.1", "CM.01") for text in params):
         raise SpecError(f"{where}: CM.1 (the station ID) is given by the fleet's RTU line: use station = N")
-    return DeviceGroup(profile, model, _count(count, where), _address(first, where) if first else None,
+    return DeviceGroup(profile, model, _count(count, where, limit), _address(first, where) if first else None,
                        tuple(params), where, station)
 
 
-def parse_group(text: str) -> DeviceGroup:
+def parse_group(text: str, limit: int = MAX_DEVICES) -> DeviceGroup:
     """``--device PROFILE[:MODEL][*COUNT][@FIRST]``, or ``MODEL[*COUNT][@FIRST]``."""
     from ..devices.profiles import PROFILES
 
@@ -212,7 +214,8 @@ def parse_group(text: str) -> DeviceGroup:
         profile, model = "", profile          # a model alone names its family
     if (colon and not model) or (count is not None and not count.strip()) or (first is not None and not first.strip()):
         raise SpecError(f"{where}: not PROFILE[:MODEL][*COUNT][@FIRST] (e.g. acg*32, mx2:MX2-A2015-E*16)")
-    return make_group(profile or None, model or None, count if count is not None else 1, first, (), where)
+    return make_group(profile or None, model or None, count if count is not None else 1, first, (), where,
+                      limit=limit)
 
 
 # -- assigning addresses ---------------------------------------------------------------------------------
@@ -222,7 +225,7 @@ def state_file(state_dir: Path, address: str, group: DeviceGroup) -> Path:
 
 
 def assign(groups: Sequence[DeviceGroup], pool: Sequence[ipaddress.IPv4Address] | None,
-           state_dir: Path | None) -> list[FleetDevice]:
+           state_dir: Path | None, limit: int = MAX_DEVICES) -> list[FleetDevice]:
     """The devices of ``groups``, each at its address, in address order: the groups with a first
     address take theirs, then the others the pool's unused addresses in order."""
     if not groups:
@@ -249,8 +252,8 @@ def assign(groups: Sequence[DeviceGroup], pool: Sequence[ipaddress.IPv4Address] 
             raise SpecError(f"{group.text}: {group.count} devices, but the addresses {describe_addresses(pool)} "
                             f"have {len(mine)} left for them")
         taken.update((a, group) for a in mine)
-    if len(taken) > MAX_DEVICES:
-        raise SpecError(f"{len(taken)} devices: a fleet serves at most {MAX_DEVICES}")
+    if len(taken) > limit:
+        raise SpecError(f"{len(taken)} devices: a fleet serves at most {limit} (--max-devices N for more)")
     devices = []
     placed: dict[int, int] = {}    # id(group) -> its devices so far
     for address, group in sorted(taken.items()):
@@ -296,6 +299,12 @@ def assign_stations(devices: Sequence[FleetDevice], workers: int, where: str = "
 def check_port(value: Any, where: str) -> int:
     if isinstance(value, bool) or not isinstance(value, int) or not 0 <= value < 65536:
         raise SpecError(f"{where}: {value!r} is not a port number (0..65535)")
+    return value
+
+
+def check_max_devices(value: Any, where: str = "--max-devices") -> int:
+    if isinstance(value, bool) or not isinstance(value, int) or value < 1:
+        raise SpecError(f"{where}: {value!r} is not a number of devices (1 or more)")
     return value
 
 
@@ -351,7 +360,7 @@ def select_shard(devices: Sequence[FleetDevice], shard: Shard, where: str = "--s
 
 
 # -- the TOML file ---------------------------------------------------------------------------------------
-_FILE_KEYS = {"addresses", "port", "io_port", "workers", "state_dir", "device", "rtu"}
+_FILE_KEYS = {"addresses", "port", "io_port", "workers", "state_dir", "device", "rtu", "max_devices"}
 _GROUP_KEYS = {"profile", "model", "count", "first", "params", "station"}
 
 
@@ -381,10 +390,13 @@ def _params(value: Any, where: str) -> list[str]:
     raise SpecError(f"{where}: params is a list of \"CODE=VALUE\" or a table of CODE = VALUE")
 
 
-def read_spec_file(path: Path) -> tuple[dict[str, Any], list[DeviceGroup]]:
-    """The file's settings (``addresses``, ``port``, ``io_port``, ``workers``, ``state_dir``) and its
-    ``[[device]]`` groups. A relative ``state_dir`` is relative to the file's directory."""
+def read_spec_file(path: Path, limit: int | None = None) -> tuple[dict[str, Any], list[DeviceGroup]]:
+    """The file's settings (``addresses``, ``port``, ``io_port``, ``workers``, ``state_dir``,
+    ``max_devices``) and its ``[[device]]`` groups. A relative ``state_dir`` is relative to the file's
+    directory; ``limit`` (``--max-devices``) wins over the file's ``max_devices``."""
     document = _load_toml(path)
+    if limit is None:
+        limit = check_max_devices(document.get("max_devices", MAX_DEVICES), f"{path}: max_devices")
     unknown = sorted(set(document) - _FILE_KEYS)
     if unknown:
         raise SpecError(f"{path}: unknown key {unknown[0]!r} (known: {', '.join(sorted(_FILE_KEYS))})")
@@ -408,10 +420,10 @@ def read_spec_file(path: Path) -> tuple[dict[str, Any], list[DeviceGroup]]:
             if key in entry and not isinstance(entry[key], str):
                 raise SpecError(f"{where}: {key} is text")
         groups.append(make_group(entry.get("profile"), entry.get("model"), entry.get("count", 1), entry.get("first"),
-                                 _params(entry.get("params", []), where), where, entry.get("station")))
+                                 _params(entry.get("params", []), where), where, entry.get("station"), limit))
     return settings, groups
 
 
 __all__ = ["MAX_DEVICES", "MAX_DRIVES_PER_LINE", "DeviceGroup", "FleetDevice", "FleetSpec", "Shard", "SpecError",
-           "assign", "assign_stations", "check_port", "check_workers", "describe_addresses", "make_group",
-           "parse_addresses", "parse_group", "parse_shard", "read_spec_file", "select_shard", "shares"]
+           "assign", "assign_stations", "check_max_devices", "check_port", "check_workers", "describe_addresses",
+           "make_group", "parse_addresses", "parse_group", "parse_shard", "read_spec_file", "select_shard", "shares"]

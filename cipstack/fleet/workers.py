@@ -4,10 +4,14 @@ the addresses, under a parent that supervises them.
 The parent starts the workers and waits until each says it serves (its device lines) or why it
 cannot (one line, e.g. an address that is taken): then every other worker is stopped and the
 fleet exits 2. While serving, a worker that ends is reported in one line, the others are stopped
-and the fleet exits 1. A worker that stops answering is reported and handled the same way: the
-parent pings each worker over its channel every ``HEARTBEAT_INTERVAL`` and the worker's event loop
-answers; no answer for ``HEARTBEAT_TIMEOUT`` means its loop no longer runs (stopped, or stuck), and
-the devices it holds no longer serve. SIGINT (Ctrl-C) and SIGTERM to the parent stop every worker
+and the fleet exits 1. A dead worker is reported and handled the same way: the parent pings each worker over
+its channel every ``HEARTBEAT_INTERVAL``, and a thread of the worker's answers with its load
+(``cipstack.fleet.load``); no answer for ``HEARTBEAT_TIMEOUT`` means the process no longer runs
+(stopped, or stuck holding the interpreter), and an event loop that has not run for
+``LOOP_STUCK_TIMEOUT`` is stuck: the devices it holds no longer serve. A worker that answers but
+whose productions go late is overloaded, not dead: it is reported in one line when it goes late and
+when it is on time again, and it goes on serving; the fleet never stops itself for being slow.
+SIGINT (Ctrl-C) and SIGTERM to the parent stop every worker
 with SIGTERM (after SIGCONT, so that a stopped one can act on it); the workers ignore SIGINT
 themselves, so a Ctrl-C at the terminal reaches them once, through the parent. A worker that has
 not ended ``STOP_TIMEOUT`` later (``HUNG_STOP_TIMEOUT`` for one that had stopped answering) is
@@ -37,9 +41,10 @@ import shutil
 import signal
 import sys
 import tempfile
+import threading
 import time
 from collections.abc import Callable, Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from functools import partial
 from multiprocessing.connection import Connection
 from typing import Any
@@ -47,6 +52,17 @@ from typing import Any
 from ..eip.io_server import run_precise
 from ..errors import CipstackError
 from ..listening import ListenError
+from .load import (
+    LOOP_STUCK_TIMEOUT,
+    PING,
+    PONG,
+    LoadReport,
+    LoadSampler,
+    LoadWatch,
+    answer_pings,
+    gauge_values,
+    report_lateness,
+)
 from .serve import serve_until_signalled
 from .spec import FleetDevice, SpecError, describe_addresses, shares
 
@@ -58,11 +74,10 @@ STOP_TIMEOUT = 5.0
 #: The same for a worker that had stopped answering: it is given a moment after SIGCONT, no more.
 HUNG_STOP_TIMEOUT = 2.0
 #: How often the parent pings each serving worker, and how long a ping may go unanswered before the
-#: worker is reported as not answering. The worker answers from its event loop, which never blocks
-#: for long (saves run off it), so 5 s of silence is a loop that does not run, not a busy one.
+#: worker is reported as not answering. The worker answers from a thread of its own, which a loop busy
+#: with productions does not hold up, so 5 s of silence is a process that does not run, not a busy one.
 HEARTBEAT_INTERVAL = 1.0
 HEARTBEAT_TIMEOUT = 5.0
-PING, PONG = "ping", "pong"
 _PR_SET_PDEATHSIG = 1
 
 
@@ -77,48 +92,33 @@ def _die_with_parent(parent: int) -> None:
         os._exit(1)
 
 
-async def _serve_answering(share: list[FleetDevice], port: int, io_port: int, channel: Connection,
-                           api_path: str | None) -> int:
-    """Serve ``share`` until SIGTERM, answering the parent's pings from the event loop; with ``api_path``,
-    the HTTP control API of its devices on that Unix socket, for the parent's relay."""
-    loop = asyncio.get_running_loop()
-    fd = channel.fileno()
-
-    def answer() -> None:
-        try:
-            while channel.poll():
-                if channel.recv() == PING:
-                    channel.send(PONG)
-        except (EOFError, OSError):   # the parent is gone: PR_SET_PDEATHSIG ends this process
-            loop.remove_reader(fd)
-
-    loop.add_reader(fd, answer)
-    try:
-        return await serve_until_signalled(share, port, io_port, lambda lines: channel.send(("ready", lines)),
-                                           signals=(signal.SIGTERM,),
-                                           http={"path": api_path} if api_path is not None else None)
-    finally:
-        loop.remove_reader(fd)
-
-
 def _worker(share: list[FleetDevice], port: int, io_port: int, parent: int, channel: Connection,
             api_path: str | None = None) -> None:
     """A worker process: serve ``share`` until SIGTERM; says "ready" with its lines, or "error", and
-    answers each "ping" with "pong"."""
+    answers each "ping" with "pong" and its load, from a thread (``answer_pings``); with ``api_path``,
+    the HTTP control API of its devices on that Unix socket, for the parent's relay."""
     signal.signal(signal.SIGINT, signal.SIG_IGN)     # Ctrl-C is the parent's to pass on
     signal.signal(signal.SIGTERM, signal.SIG_DFL)    # not the parent's handler, until the loop's own
     _die_with_parent(parent)
+    sampler = LoadSampler()
+    sending = threading.Lock()
+
+    def send(message: Any) -> None:
+        with sending:
+            channel.send(message)
+
+    answer_pings(channel, sampler.report, sending)
     try:
-        run_precise(_serve_answering(share, port, io_port, channel, api_path))
+        run_precise(serve_until_signalled(share, port, io_port, lambda lines: send(("ready", lines)),
+                                          signals=(signal.SIGTERM,),
+                                          http={"path": api_path} if api_path is not None else None,
+                                          sampler=sampler))
     except (ListenError, SpecError) as exc:
-        channel.send(("error", str(exc)))
+        send(("error", str(exc)))
         sys.exit(2)
     except OSError as exc:
-        channel.send(("error", f"cannot listen on {describe_addresses(d.address for d in share)}: "
-                               f"{exc.strerror or exc}"))
+        send(("error", f"cannot listen on {describe_addresses(d.address for d in share)}: {exc.strerror or exc}"))
         sys.exit(2)
-    finally:
-        channel.close()
 
 
 @dataclass
@@ -138,6 +138,8 @@ class _Worker:
     lost: str | None = None
     #: When a worker reported as not answering is killed if it has not ended by then.
     kill_at: float | None = None
+    #: Its load, from its answers.
+    load: LoadWatch = field(default_factory=LoadWatch)
 
     @property
     def name(self) -> str:
@@ -288,6 +290,10 @@ class Supervisor:
                 worker.hung = True
                 self._lose(worker, f"{worker.name} stopped answering (no reply in {HEARTBEAT_TIMEOUT:.0f} s: "
                                    "stopped or stuck)")
+            elif worker.load.stuck:
+                worker.hung = True
+                self._lose(worker, f"{worker.name} is stuck (its event loop has not run for "
+                                   f"{LOOP_STUCK_TIMEOUT:.0f} s)")
 
     def _lose(self, worker: _Worker, what: str) -> None:
         """Without ``--http``, a lost worker stops the fleet (``FleetFailure``). With it, it is reported
@@ -328,7 +334,8 @@ class Supervisor:
         loop = asyncio.get_running_loop()
         wake = asyncio.Event()
         host, port = parse_listen(self.http["http"])
-        relay = RelayApi([Backend(w.name, w.api_path or "", partial(self._why_down, w), w.number)
+        relay = RelayApi([Backend(w.name, w.api_path or "", partial(self._why_down, w), w.number,
+                                  load=partial(gauge_values, w.load))
                           for w in self.workers], host, port, token=self.http.get("http_token"),
                          allow_remote=self.http.get("http_allow_remote", False),
                          hosts=tuple(self.http.get("http_hosts", ())), shard=self.http.get("shard", "0/1"))
@@ -384,8 +391,11 @@ class Supervisor:
     def _read_answers(worker: _Worker) -> None:
         try:
             while worker.channel.poll():
-                if worker.channel.recv() == PONG:
+                message = worker.channel.recv()
+                if isinstance(message, tuple) and message[0] == PONG:
                     worker.waiting_since = None
+                    report_lateness(worker.name, worker.load,
+                                    worker.load.answered(LoadReport(*message[1]), time.monotonic()))
         except (EOFError, OSError):
             pass   # the worker is gone: its sentinel says so
 

@@ -129,6 +129,16 @@ class DeviceRuntime:
     def class1_connections(self) -> list[IoConnection]:
         return list(self.io.connections.values()) if self.io is not None else []
 
+    def productions(self) -> tuple[int, int, int]:
+        """(sent, late, missed): the class 1 productions of every connection since the device started,
+        closed ones included; missed are the slots skipped because the loop came too late for them
+        (an overloaded process produces fewer packets, it never bursts to catch up)."""
+        io = self.io
+        if io is None:
+            return 0, 0, 0
+        every = [io.closed_stats, *(c.stats for c in list(io.connections.values()))]
+        return (sum(s.sent for s in every), sum(s.late for s in every), sum(s.skipped_slots for s in every))
+
     async def lose_power(self) -> None:
         """The power goes: every port closes (``power``) and every connection with it (no Forward_Close
         and no FIN would come from a device without power, but the peer's socket is gone either way);
@@ -158,6 +168,8 @@ class DeviceRuntime:
                                   "sessions": len(self.target.sessions),
                                   "class3_connections": len(device.connection_table.connections),
                                   "class1_connections": len(self.io.connections) if self.io is not None else 0}
+        sent, late, missed = self.productions()
+        status["productions"] = {"sent": sent, "late": late, "missed": missed}
         if self.rtu is not None:
             status["rtu"] = {"device": self.rtu.name, **self.rtu.slaves[0].counters.as_dict()}
         return status

@@ -470,53 +470,136 @@ function showEvents() {
 }
 
 // -- the plant ------------------------------------------------------------------------------------------------
+// One GET /plant a second brings every device's row (a thousand devices in one answer); the rows are kept,
+// their cells changed where the value did, then sorted and filtered again. A summary counts the devices
+// by state; a click on a count filters by it, a click on a column heading sorts by it (again: reversed).
+const plant = {rows: new Map(), keys: new Map(), sortColumn: 0, descending: false};
+const PLANT_REFRESH_MS = 1000;
+const OVERLOAD_SHARE = 0.01;
+
+function addressNumber(address) {
+  const parts = String(address).split(":")[0].split(".").map(Number);
+  return parts.length === 4 && parts.every((p) => p >= 0 && p < 256)
+    ? ((parts[0] * 256 + parts[1]) * 256 + parts[2]) * 256 + parts[3] : Number.MAX_SAFE_INTEGER;
+}
+
+function plantState(device) {
+  if (device.error) return /ended/.test(device.error) ? "worker ended" : "not answering";
+  if (device.state === undefined) return "…";
+  const state = stateText(device.state);
+  return device.trip ? `${state} (${device.trip})` : state;
+}
+
+function plantRow(device) {
+  let tr = plant.rows.get(device.address);
+  if (!tr) {
+    const link = element("a", device.address, {href: `/?device=${encodeURIComponent(device.address)}`});
+    tr = row([link, "-", "-", "…", "-", "-", "-", "-", "-"]);
+    plant.rows.set(device.address, tr);
+    $("plant-table").tBodies[0].appendChild(tr);
+  }
+  const state = plantState(device);
+  if (device.error && device.error.includes("did not answer") && tr.dataset.state !== "…") {
+    // A worker too busy to answer this refresh (its loop behind, overloaded): its devices keep what
+    // they last said, the state says why it is not new.
+    tr.cells[3].textContent = state;
+    tr.cells[3].className = "down";
+    tr.cells[3].title = device.error;
+    tr.dataset.state = state;
+    tr.dataset.search = `${device.address} ${tr.cells[1].textContent} ${tr.cells[2].textContent} ${state}`.toLowerCase();
+    return;
+  }
+  const late = device.late === undefined ? "-" : `${device.late} / ${device.missed}`;
+  const texts = [device.address, device.product_name || "-", device.worker === undefined ? "-" : String(device.worker),
+    state, device.output_frequency_hz === undefined || device.output_frequency_hz === null ? "-"
+      : `${Number(device.output_frequency_hz).toFixed(2)} Hz`,
+    device.power === undefined ? "-" : `${device.power} / ${device.link}`,
+    device.sessions === undefined ? "-"
+      : `${device.sessions} sessions, ${device.class3_connections} class 3, ${device.class1_connections} class 1`,
+    device.faults === undefined ? "-" : String(device.faults), late];
+  for (let i = 1; i < texts.length; i++) if (tr.cells[i].textContent !== texts[i]) tr.cells[i].textContent = texts[i];
+  const down = Boolean(device.error) || Boolean(device.trip);
+  tr.cells[3].className = down ? "down" : "";
+  tr.cells[3].title = device.error || "";
+  // Overloaded, as a fleet judges its workers: more than 1 % of the production slots skipped (a
+  // production past its half-millisecond tolerance alone is a busy machine).
+  const overloaded = (device.missed || 0) > OVERLOAD_SHARE * ((device.sent || 0) + (device.missed || 0));
+  tr.cells[8].className = overloaded ? "late" : "";
+  tr.dataset.state = device.error || device.state === undefined ? state : stateText(device.state);
+  tr.dataset.late = overloaded ? "late" : "";
+  tr.dataset.search = `${texts.slice(0, 4).join(" ")} ${tr.dataset.late}`.toLowerCase();
+  plant.keys.set(tr, [addressNumber(device.address), texts[1], Number(device.worker) || 0, state,
+    Number(device.output_frequency_hz) || 0, texts[5], (device.class1_connections || 0) + (device.sessions || 0),
+    device.faults || 0, (device.missed || 0) * 1e9 + (device.late || 0)]);
+}
+
+function showPlant(devices) {
+  for (const device of devices) plantRow(device);
+  const counts = new Map();
+  let late = 0;
+  for (const tr of plant.rows.values()) {
+    counts.set(tr.dataset.state, (counts.get(tr.dataset.state) || 0) + 1);
+    if (tr.dataset.late) late += 1;
+  }
+  const items = [...counts.entries()].sort((a, b) => b[1] - a[1]).map(([state, count]) => [state, count, state]);
+  if (late) items.push(["missing productions", late, "late"]);
+  const parts = [element("span", `${plant.rows.size} devices:`)];
+  for (const [label, count, filter] of items) {
+    const button = element("button", `${count} ${label}`, {type: "button", "data-filter": filter});
+    button.addEventListener("click", () => { $("plant-filter").value = filter.toLowerCase(); filterPlant(); });
+    parts.push(document.createTextNode(" "), button);
+  }
+  $("plant-summary").replaceChildren(...parts);
+  sortPlant();
+  filterPlant();
+}
+
+function sortPlant(column) {
+  if (column !== undefined) {
+    plant.descending = column === plant.sortColumn ? !plant.descending : false;
+    plant.sortColumn = column;
+  }
+  const headings = $("plant-table").tHead.rows[0].cells;
+  for (let i = 0; i < headings.length; i++) {
+    headings[i].setAttribute("aria-sort", i === plant.sortColumn ? (plant.descending ? "descending" : "ascending") : "none");
+  }
+  const direction = plant.descending ? -1 : 1;
+  const sorted = [...plant.rows.values()].sort((a, b) => {
+    const x = plant.keys.get(a)[plant.sortColumn], y = plant.keys.get(b)[plant.sortColumn];
+    const order = typeof x === "number" ? x - y : String(x).localeCompare(String(y));
+    return direction * order || plant.keys.get(a)[0] - plant.keys.get(b)[0];
+  });
+  const body = $("plant-table").tBodies[0];
+  // Moved only where the order changed: a refresh that changes nothing moves no row.
+  sorted.forEach((tr, index) => { if (body.rows[index] !== tr) body.insertBefore(tr, body.rows[index] || null); });
+}
+
 async function openPlant(devices) {
   $("plant").hidden = false;
   $("title").textContent = `the plant: ${devices.length} devices`;
   $("plant-filter").addEventListener("input", filterPlant);
-  const body = $("plant-table").tBodies[0];
-  const rows = new Map();
-  for (const device of devices) {
-    const link = element("a", device.address, {href: `/?device=${encodeURIComponent(device.address)}`});
-    const tr = row([link, device.product_name || "-", device.worker === undefined ? "-" : device.worker,
-                    device.error ? "worker ended" : "…", "-", "-", "-", "-"]);
-    if (device.error) { tr.cells[3].className = "down"; tr.cells[3].title = device.error; }
-    tr.dataset.search = `${device.address} ${device.product_name || ""}`.toLowerCase();
-    rows.set(device.address, tr);
-    body.appendChild(tr);
-  }
+  [...$("plant-table").tHead.rows[0].cells].forEach((th, index) => {
+    const button = element("button", th.textContent, {type: "button", class: "sort"});
+    button.addEventListener("click", () => sortPlant(index));
+    th.replaceChildren(button);
+  });
+  showPlant(devices);
   setLink(true);
   const poll = async () => {
-    let listed = devices;
-    try { listed = await api("GET", "/devices"); setLink(true); } catch (error) { setLink(false); }
-    for (const device of listed) {
-      const tr = rows.get(device.address);
-      if (!tr) continue;
-      if (device.error) { tr.cells[3].textContent = "worker ended"; tr.cells[3].className = "down"; tr.cells[3].title = device.error; continue; }
-      try {
-        const status = await api("GET", `/devices/${encodeURIComponent(device.address)}/status`);
-        const drive = status.drive || {};
-        tr.cells[3].textContent = drive.trip ? `${stateText(drive.state)} (${drive.trip})` : stateText(drive.state);
-        tr.cells[3].className = drive.trip ? "down" : "";
-        tr.cells[4].textContent = drive.output_frequency_hz === undefined ? "-" : `${Number(drive.output_frequency_hz).toFixed(2)} Hz`;
-        tr.cells[5].textContent = `${status.power} / ${status.link}`;
-        tr.cells[6].textContent = `${status.sessions} sessions, ${status.class3_connections} class 3, ${status.class1_connections} class 1`;
-        tr.cells[7].textContent = String(status.faults);
-      } catch (error) {
-        tr.cells[3].textContent = error.status === 503 ? "worker ended" : error.message;
-        tr.cells[3].className = "down";
-      }
-      tr.dataset.search = `${device.address} ${device.product_name || ""} ${tr.cells[3].textContent}`.toLowerCase();
-    }
-    filterPlant();
-    setTimeout(poll, 2000);
+    try { showPlant(await api("GET", "/plant")); setLink(true); } catch (error) { setLink(false); }
+    setTimeout(poll, PLANT_REFRESH_MS);
   };
   poll();
 }
 
 function filterPlant() {
   const wanted = $("plant-filter").value.trim().toLowerCase();
-  for (const tr of $("plant-table").tBodies[0].rows) tr.hidden = wanted !== "" && !tr.dataset.search.includes(wanted);
+  let shown = 0;
+  for (const tr of plant.rows.values()) {
+    tr.hidden = wanted !== "" && !tr.dataset.search.includes(wanted);
+    if (!tr.hidden) shown += 1;
+  }
+  $("plant-shown").textContent = wanted ? `${shown} of ${plant.rows.size} shown` : "";
 }
 
 // -- which page ------------------------------------------------------------------------------------------------

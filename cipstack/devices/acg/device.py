@@ -21,9 +21,11 @@ and assemblies (ACG-ET2 manual, appendix B).
 
 from __future__ import annotations
 
+import copy
 import logging
 import struct
 from dataclasses import dataclass, field
+from functools import lru_cache
 from pathlib import Path
 
 from ...assemblies.acg import (
@@ -76,6 +78,14 @@ _CONTROL_ADDRESSES = tuple(reg.ACG_REGISTERS.by_code(f"CM.{51 + i}").address for
 _STATUS_ADDRESSES = tuple(reg.ACG_REGISTERS.by_code(f"CM.{31 + i}").address for i in range(8))
 
 
+@lru_cache(maxsize=64)
+def _assemblies_at(key: tuple[tuple[int, ...], tuple[int, ...]]) -> AcgAssemblies:
+    """The schemas for the CM.51-58 / CM.31-38 addresses ``key``, built once per process for every
+    drive that has those addresses (a fleet's drives mostly share one set): building them was a
+    large part of a drive's start-up."""
+    return acg_assemblies(reg.SPEED_REFERENCE, OUTPUT_FREQUENCY, _words(key[0]), _words(key[1]))
+
+
 def _words(addresses: tuple[int, ...]) -> list[Register | None]:
     """The registers at communication addresses (a parameter without one, CM.94, is at none)."""
     found = (reg.ACG_REGISTERS.get(a) for a in addresses)
@@ -106,12 +116,15 @@ class AcgDevice(Device):
         self._schemas: tuple[tuple[tuple[int, ...], tuple[int, ...]], AcgAssemblies] | None = None
         # 20/21/100/101 and 70/71/110/111 do not depend on any setting: decoded on the I/O path as they are.
         speed = self.schemas()
-        self._speed_schemas = {i: speed[i] for i in (*OUTPUT_INSTANCES, *INPUT_INSTANCES) if not parameter_words(i)}
+        # A copy of each for this drive: a schema remembers the last values it encoded, and drives
+        # that shared one would take turns replacing what each produces on every class 1 firing.
+        self._speed_schemas = {i: copy.copy(speed[i]) for i in (*OUTPUT_INSTANCES, *INPUT_INSTANCES)
+                               if not parameter_words(i)}
         self._points: dict[int, AssemblyPoint] = {}
         #: Last data each smart-scaling output consumed: a word is written when it changes.
         self._last_words: dict[int, bytes] = {}
         for instance in (*OUTPUT_INSTANCES, *INPUT_INSTANCES):
-            point = self._assembly_point(instance)
+            point = self._assembly_point(instance, speed[instance].name)
             self._points[instance] = point
             self.assembly.add_assembly(point)
         self.update_io_status()
@@ -123,7 +136,7 @@ class AcgDevice(Device):
         key = (tuple(drive.read(_CONTROL_ADDRESSES[i]) for i in range(8)),
                tuple(drive.read(_STATUS_ADDRESSES[i]) for i in range(8)))
         if self._schemas is None or self._schemas[0] != key:
-            self._schemas = key, acg_assemblies(reg.SPEED_REFERENCE, OUTPUT_FREQUENCY, _words(key[0]), _words(key[1]))
+            self._schemas = key, _assemblies_at(key)
         return self._schemas[1]
 
     def assembly_schema(self, instance: int) -> AssemblySchema:
@@ -146,15 +159,16 @@ class AcgDevice(Device):
     def active_input_instance(self) -> int:
         return self.drive.active_comm_settings.input_instance.instance
 
-    def _assembly_point(self, instance: int) -> AssemblyPoint:
+    def _assembly_point(self, instance: int, name: str) -> AssemblyPoint:
+        """``name``: the instance's name, which no CM.31-38 / CM.51-58 setting changes (read from the
+        schemas once for all the points: each reading of them reads sixteen registers)."""
         size = assembly_size(instance)
         if instance in OUTPUT_INSTANCES:
             return AssemblyPoint(instance, size, consumed=True,
-                                 consume=lambda data, now: self._consume(instance, data, now),
-                                 name=self.assembly_schema(instance).name)
+                                 consume=lambda data, now: self._consume(instance, data, now), name=name)
         if parameter_words(instance):
             return AssemblyPoint(instance, size, consumed=False, produce=lambda: self._produce_words(instance),
-                                 name=self.assembly_schema(instance).name)
+                                 name=name)
         schema = self.assembly_schema(instance)
         return AssemblyPoint(instance, size, consumed=False, produce=lambda: self._produce_speed(schema),
                              name=schema.name)
