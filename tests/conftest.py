@@ -99,7 +99,7 @@ SLOW_MODULES = frozenset({
     "test_plant", "test_fleet_overload",
 })
 #: A test with none of these is also marked ``quick``: ``pytest -m quick`` runs in a couple of minutes.
-NOT_QUICK = ("slow", "interop", "tshark", "browser", "docs", "podman")
+NOT_QUICK = ("slow", "interop", "tshark", "browser", "docs", "podman", "overload")
 
 
 @pytest.hookimpl(tryfirst=True)  # before ``-m`` selects by the markers

@@ -193,6 +193,7 @@ def test_hundreds_of_connections_open_against_a_fleet(tmp_path: Path) -> None:
         fleet.kill()
 
 
+@pytest.mark.overload  # 1,030 drives start on both CPUs at once
 def test_more_than_1024_devices_where_the_machine_allows(tmp_path: Path) -> None:
     """1,024 is a default: ``--max-devices`` lets 1,030 drives serve on two workers, each of them found
     at its address."""
@@ -228,6 +229,7 @@ def test_a_fleet_the_open_file_limit_cannot_hold_is_one_line(tmp_path: Path) -> 
         "limit here is 1024 (ulimit -Hn): give --workers 4 or more, or raise the limit"), lines
 
 
+@pytest.mark.overload  # both CPUs saturated for seconds: the timing of any test beside it would suffer
 def test_many_drives_at_a_tiny_rpi_overload_the_fleet_and_every_drive_stays_up(tmp_path: Path) -> None:
     """192 drives on two workers, one connection each at RPI 2 ms: 96,000 productions a second each way,
     more than the two cores carry. For a few seconds the workers go late; the fleet says so and serves
