@@ -41,7 +41,15 @@ from .runtime.observer import IoEventRelay, Observers, register_relay
 from .runtime.runtime import DeviceClock
 
 if TYPE_CHECKING:
+    import ssl
+
+    from .security import Credentials
+    from .security.configuration import Configurator
+    from .security.endpoint import SecureEndpoint
     from .security.tls_target import TlsServer
+
+#: Seconds a CIP Security configuration session lasts without Kick_Timer (``security.configuration``).
+SECURITY_CONFIG_TIMEOUT = 60.0
 
 log = logging.getLogger(__name__)
 
@@ -108,6 +116,15 @@ class AdapterSettings:
     security: Path | None = None
     #: TCP port of EtherNet/IP over TLS (2221, Wireshark's ENIP_SECURE_PORT; 0: any free one).
     security_port: int = 2221
+    #: Serve the CIP Security, EtherNet/IP Security and Certificate Management objects (0x5D-0x5F): a
+    #: device without ``security`` starts in Factory Default and can be configured over the network.
+    #: Off by default in the library (a plain adapter imports nothing of ``cipstack.security``); the
+    #: ``cipstack adapter`` command turns it on unless ``--no-security-objects``.
+    security_objects: bool = False
+    #: Once configured, refuse explicit requests that do not arrive over TLS (``security.endpoint``).
+    secure_only: bool = False
+    #: Seconds a configuration session lasts without Kick_Timer (``security.configuration``).
+    security_config_timeout: float = SECURITY_CONFIG_TIMEOUT
 
 
 class Adapter:
@@ -179,8 +196,32 @@ class Adapter:
             self.tls = TlsServer(self.target, Credentials.load(s.security), s.host, s.security_port,
                                  max_connections=s.max_tcp_connections,
                                  max_connections_per_host=s.max_tcp_connections_per_host, replies=self.replies)
+        #: CIP Security's objects, their configuration and the TLS listener that follows it.
+        self.secure: SecureEndpoint | None = None
+        self.configurator: Configurator | None = None
+        if s.security_objects or s.security is not None:
+            from .security.configuration import Configurator
+            from .security.endpoint import (
+                PlainRefusal,
+                SecureEndpoint,
+                configuration_of,
+                load_configuration,
+                state_folder,
+            )
+            from .security.objects import register as register_security_objects
+
+            folder = state_folder(s.state_path) if s.security is None else None
+            kept = load_configuration(folder)
+            self.secure = SecureEndpoint(self._tls_server, s.security_port, folder, self.tls, kept)
+            initial = configuration_of(self.tls.credentials) if self.tls is not None else kept
+            self.configurator = Configurator(self.secure.configured, initial, s.security_config_timeout)
+            register_security_objects(self.device.router, self.configurator, self._csr_defaults())
+            if s.secure_only:
+                self.requests.add(PlainRefusal(self.secure, self.configurator.is_configured))
         ports: list[Port] = [ServerPort("EtherNet/IP", self.server)]
-        if self.tls is not None:
+        if self.secure is not None:
+            ports.append(ServerPort("EtherNet/IP over TLS", self.secure))
+        elif self.tls is not None:
             ports.append(ServerPort("EtherNet/IP over TLS", self.tls))
         if self.modbus is not None:
             ports.append(ServerPort("Modbus TCP", self.modbus))
@@ -198,6 +239,21 @@ class Adapter:
         self.control_server: ControlServer | None = None
         #: The HTTP control API, while serving with ``settings.http``.
         self.http_api: Any = None
+
+    def _tls_server(self, credentials: Credentials, context: ssl.SSLContext | None, port: int) -> TlsServer:
+        """A TLS listener for a configuration applied over the network, with this adapter's limits."""
+        from .security.tls_target import TlsServer
+
+        s = self.settings
+        return TlsServer(self.target, credentials, s.host, port, max_connections=s.max_tcp_connections,
+                         max_connections_per_host=s.max_tcp_connections_per_host, replies=self.replies,
+                         context=context)
+
+    def _csr_defaults(self) -> dict[str, str]:
+        """What a Create_CSR leaves empty: the product's name, its serial number, its address."""
+        info = self.device.identity_info
+        return {"common name": info.product_name, "serial number": f"{info.serial_number:08X}",
+                "subject alternative name": self.device.interface.ip_address}
 
     def _class1_core(self, profile: IoProfile, grid: ProductionGrid | None, endpoint: IoEndpoint) -> IoSeam:
         """The class 1 core and its seam, made by their UDP ``endpoint`` (``IoEndpoint.make_core``) with
@@ -254,8 +310,9 @@ class Adapter:
                                     f"{s.host}:{s.port} (EtherNet/IP, --port)"))
         if self.modbus is not None:
             await self._listen(self.modbus.start, lambda: f"TCP {s.host}:{s.modbus_port} (Modbus TCP, --modbus-port)")
-        if self.tls is not None:
-            await self._listen(self.tls.start,
+        secure = self.secure or self.tls
+        if secure is not None:
+            await self._listen(secure.start,
                                lambda: f"TCP {s.host}:{s.security_port} (EtherNet/IP over TLS, --security-port)")
         if self.rs485 is not None:
             await self._open_rtu(self.rs485)
@@ -392,6 +449,8 @@ class Adapter:
                 port.shutdown()
         if self.modbus is not None:
             await self.modbus.close()
+        if self.secure is not None:
+            await self.secure.close()
         if self.tls is not None:
             await self.tls.close()
         if self.rs485 is not None:

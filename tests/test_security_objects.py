@@ -1,0 +1,469 @@
+"""CIP Security's three objects served by the adapter (0x5D, 0x5E, 0x5F), the configuration session and
+its timer, the push-model configuration over the wire (`cipstack security configure`), `--secure-only`,
+and what a device does with bad or hostile requests to them (issue 48).
+
+The adapter runs in the test's event loop on ports the system picks; the clients are the library's
+blocking scanner in a thread, real sockets on loopback."""
+
+from __future__ import annotations
+
+import asyncio
+import logging
+import struct
+from collections.abc import Callable
+from pathlib import Path
+from typing import Any
+
+import pytest
+
+pytest.importorskip("cryptography", reason="the security extra (cryptography) is not installed")
+
+from cipstack.adapter import Adapter, AdapterSettings
+from cipstack.cip.types import SHORT_STRING
+from cipstack.cli import main
+from cipstack.errors import SecurityError
+from cipstack.scanner import SyncScanner
+from cipstack.security import Credentials
+from cipstack.security.attributes import CERTIFICATE, PATH_LIST, PRE_SHARED_KEYS
+from cipstack.security.configuration import Configurator
+from cipstack.security.declarations import CIPHER_SUITES, SecurityState
+from cipstack.security.provisioning import init, sign_csr
+from cipstack.security.push import configure
+from tests.ports import free_port
+
+GET, SET, GET_ALL, RESET = 0x0E, 0x10, 0x01, 0x05
+BEGIN, KICK, APPLY, ABORT = 0x4B, 0x4C, 0x4D, 0x4E
+CREATE_CSR, VERIFY = 0x4B, 0x4C
+EIP_SECURITY, CERTIFICATES, CIP_SECURITY = 0x5E, 0x5F, 0x5D
+
+
+@pytest.fixture(scope="module")
+def lab(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    folder = tmp_path_factory.mktemp("security") / "lab"
+    init(folder)
+    return folder
+
+
+@pytest.fixture(scope="module")
+def other_lab(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    folder = tmp_path_factory.mktemp("security") / "other"
+    init(folder)
+    return folder
+
+
+class Client:
+    """One plain EtherNet/IP connection (one session), raw requests in, (status, extended, data) out."""
+
+    def __init__(self, address: str, **options: Any) -> None:
+        self.scanner = SyncScanner(address, identify=False, **options)
+
+    def __call__(self, service: int, class_id: int, instance: int, attribute: int | None = None,
+                 data: bytes = b"") -> tuple[int, tuple[int, ...], bytes]:
+        reply = self.scanner.request(service, class_id, instance, attribute, data, check=False)
+        return reply.general_status, reply.extended_status, reply.data
+
+    def status(self, *request: Any) -> int:
+        return self(*request)[0]
+
+    def close(self) -> None:
+        self.scanner.close()
+
+
+async def run(function: Callable[..., Any], *args: Any) -> Any:
+    return await asyncio.to_thread(function, *args)
+
+
+def _settings(**changes: Any) -> AdapterSettings:
+    return AdapterSettings(**{"port": 0, "io_port": 0, "security_port": free_port(), "security_objects": True,
+                              **changes})
+
+
+def _csr_request(*fields: str) -> bytes:
+    values = list(fields) + [""] * (9 - len(fields))
+    return b"".join(SHORT_STRING.encode(value) for value in values)
+
+
+# -- the objects in factory default ---------------------------------------------------------------------
+@pytest.mark.parametrize("profile", ["acg", "mx2"])
+async def test_factory_default_objects_read_as_declared(profile: str) -> None:
+    async with Adapter(_settings(profile=profile)) as adapter:
+        def read() -> None:
+            client = Client(f"127.0.0.1:{adapter.port}")
+            try:
+                assert client(GET, EIP_SECURITY, 1, 1) == (0, (), b"\x00")              # Factory Default
+                assert client(GET, EIP_SECURITY, 1, 3) == (0, (), bytes.fromhex("03" "C023" "C02B" "C02C"))
+                assert client(GET, EIP_SECURITY, 1, 15) == (0, (), struct.pack("<H", 12))   # DTLS Timeout
+                assert client(GET, EIP_SECURITY, 1, 13) == (0, (), b"\x01")             # Pull Model Enable
+                assert client(GET, EIP_SECURITY, 1, 6) == (0, (), b"\x00")              # no active certificate
+                assert client.status(GET, EIP_SECURITY, 1, 5) == 0x14                   # PSKs: never read back
+                assert client.status(GET, EIP_SECURITY, 1, 17) == 0x14
+                assert client.status(0x33, EIP_SECURITY, 1) == 0x08
+                assert client.status(GET, EIP_SECURITY, 2, 1) == 0x05
+                assert client(GET, CIP_SECURITY, 1, 1) == (0, (), b"\x00")
+                assert client(GET, CIP_SECURITY, 1, 2) == (0, (), b"\x02\x00")           # Confidentiality Profile
+                assert client(GET, CIP_SECURITY, 1, 3) == (0, (), b"\x00\x00")
+                assert client(GET, CERTIFICATES, 1, 1) == (0, (), SHORT_STRING.encode("Default Device Certificate"))
+                assert client(GET, CERTIFICATES, 1, 3) == (0, (), b"\x00\x00\x00")     # no certificate yet
+                assert client(GET, CERTIFICATES, 0, 8) == (0, (), b"\x01\x00\x00\x00")  # push model
+                # A Set outside a configuration session: object state conflict; nothing changes.
+                assert client.status(SET, EIP_SECURITY, 1, 9, b"\x01") == 0x0C
+                assert client(GET, EIP_SECURITY, 1, 9) == (0, (), b"\x00")
+                for service in (KICK, APPLY, ABORT):
+                    assert client.status(service, EIP_SECURITY, 1) == 0x0C
+                status, _, data = client(GET_ALL, EIP_SECURITY, 1)
+                assert status == 0 and data[0] == 0
+            finally:
+                client.close()
+
+        await run(read)
+
+
+async def test_an_eds_emulated_device_serves_the_objects_too() -> None:
+    from cipstack.eds.emulated_device import build_eds_device
+    from cipstack.eds.reader import read_eds
+
+    device = build_eds_device(read_eds(Path(__file__).parent / "eds" / "files" / "ez_style_iolink_master.eds"))
+    async with Adapter(_settings(), device) as adapter:
+        def read() -> tuple[int, tuple[int, ...], bytes]:
+            client = Client(f"127.0.0.1:{adapter.port}")
+            try:
+                return client(GET, EIP_SECURITY, 1, 1)
+            finally:
+                client.close()
+
+        assert await run(read) == (0, (), b"\x00")
+
+
+async def test_a_device_without_the_objects_answers_path_destination_unknown() -> None:
+    async with Adapter(_settings(security_objects=False)) as adapter:
+        def read() -> int:
+            client = Client(f"127.0.0.1:{adapter.port}")
+            try:
+                return client.status(GET, EIP_SECURITY, 1, 1)
+            finally:
+                client.close()
+
+        assert await run(read) == 0x05
+
+
+# -- the configuration session ------------------------------------------------------------------------
+async def test_the_session_belongs_to_the_connection_that_began_it() -> None:
+    async with Adapter(_settings()) as adapter:
+        def session() -> None:
+            owner, other = Client(f"127.0.0.1:{adapter.port}"), Client(f"127.0.0.1:{adapter.port}")
+            try:
+                assert owner.status(BEGIN, EIP_SECURITY, 1) == 0
+                assert owner(GET, EIP_SECURITY, 1, 1) == (0, (), b"\x01")      # Configuration In Progress
+                assert other(GET, CIP_SECURITY, 1, 1) == (0, (), b"\x01")
+                # A second connection: neither a session of its own, nor a hand in this one.
+                assert other.status(BEGIN, EIP_SECURITY, 1) == 0x0C
+                assert other.status(SET, EIP_SECURITY, 1, 9, b"\x01") == 0x0C
+                assert other.status(KICK, EIP_SECURITY, 1) == 0x0C
+                assert other.status(ABORT, EIP_SECURITY, 1) == 0x0C
+                assert other.status(APPLY, EIP_SECURITY, 1) == 0x0C
+                assert other.status(RESET, EIP_SECURITY, 1) == 0x0C
+                assert other.status(CREATE_CSR, CERTIFICATES, 1, None, _csr_request()) == 0x0C
+                # The owner goes on undisturbed.
+                assert owner.status(SET, EIP_SECURITY, 1, 9, b"\x01") == 0
+                assert owner(GET, EIP_SECURITY, 1, 9) == (0, (), b"\x01")
+                assert owner.status(KICK, EIP_SECURITY, 1) == 0
+                # Apply without a certificate: 0x0C, extended 0x0002 (no certificates configured); still open.
+                assert owner(APPLY, EIP_SECURITY, 1, None, b"\x00\x00\x00\x00")[:2] == (0x0C, (0x0002,))
+                assert owner.status(ABORT, EIP_SECURITY, 1) == 0
+                assert other(GET, EIP_SECURITY, 1, 1) == (0, (), b"\x00")      # back to Factory Default
+                assert other(GET, EIP_SECURITY, 1, 9) == (0, (), b"\x00")      # the change dropped
+                assert other.status(BEGIN, EIP_SECURITY, 1) == 0               # now the other's turn
+            finally:
+                owner.close()
+                other.close()
+
+        await run(session)
+
+
+async def test_the_session_timer_expires_and_drops_the_changes() -> None:
+    async with Adapter(_settings(security_config_timeout=0.3)) as adapter:
+        def session() -> None:
+            from tests.waiting import wait_for
+
+            owner, other = Client(f"127.0.0.1:{adapter.port}"), Client(f"127.0.0.1:{adapter.port}")
+            try:
+                assert owner.status(BEGIN, EIP_SECURITY, 1) == 0
+                assert owner.status(SET, EIP_SECURITY, 1, 11, b"\x01") == 0
+                wait_for(lambda: other(GET, EIP_SECURITY, 1, 1)[2] == b"\x00", 10, "the session to expire")
+                assert other(GET, EIP_SECURITY, 1, 11) == (0, (), b"\x00")
+                assert owner.status(KICK, EIP_SECURITY, 1) == 0x0C        # too late: no session any more
+                assert other.status(BEGIN, EIP_SECURITY, 1) == 0          # a new one can begin
+            finally:
+                owner.close()
+                other.close()
+
+        await run(session)
+
+
+def test_the_adapters_session_timeout_is_the_configurators() -> None:
+    from cipstack.adapter import SECURITY_CONFIG_TIMEOUT
+    from cipstack.security.configuration import CONFIG_TIMEOUT
+
+    assert SECURITY_CONFIG_TIMEOUT == CONFIG_TIMEOUT
+
+
+def test_kick_timer_keeps_the_session_alive_on_the_configurators_clock() -> None:
+    """Sans-I/O: the time is an argument. A session of 10 s kicked at 9 s lives until 19 s."""
+    applied: list[object] = []
+    configurator = Configurator(applied.append, timeout=10.0)
+    owner = object()
+    configurator.begin(owner, "127.0.0.1:1", now=0.0)
+    configurator.kick(owner, "127.0.0.1:1", now=9.0)
+    configurator.expire(18.9)
+    assert configurator.state == SecurityState.CONFIGURATION_IN_PROGRESS
+    configurator.expire(19.0)
+    assert configurator.state == SecurityState.FACTORY_DEFAULT
+    assert applied == []
+
+
+# -- push-model configuration ---------------------------------------------------------------------------
+def _push(address: str, folder: Path, **options: Any) -> Any:
+    client = Client(address)
+    try:
+        return configure(client, folder, **options)
+    finally:
+        client.close()
+
+
+async def test_configured_over_the_wire_the_device_serves_tls_with_the_new_certificate(lab: Path) -> None:
+    async with Adapter(_settings()) as adapter:
+        plain = f"127.0.0.1:{adapter.port}"
+        pushed = await run(_push, plain, lab)
+        assert adapter.secure is not None
+        secured = f"127.0.0.1:{adapter.settings.security_port}"
+
+        def check() -> None:
+            import socket
+
+            credentials = Credentials.load(lab)
+            with SyncScanner(secured, security=credentials, identify=False) as drive:
+                assert drive.read(1, 1, 7) == "CENT"
+            # The certificate the device presents is the one just pushed, signed by the lab CA.
+            sock = socket.create_connection(("127.0.0.1", adapter.settings.security_port), timeout=10)
+            with credentials.wrap_client(sock, "127.0.0.1", adapter.settings.security_port) as tls:
+                assert tls.getpeercert(binary_form=True) == pushed.certificate
+                assert tls.version() == "TLSv1.2"
+            client = Client(plain)
+            try:
+                assert client(GET, EIP_SECURITY, 1, 1) == (0, (), b"\x02")             # Configured
+                assert client(GET, CIP_SECURITY, 1, 3) == (0, (), b"\x02\x00")
+                assert client(GET, CERTIFICATES, 1, 2) == (0, (), b"\x03")             # Verified
+                assert client(GET, CERTIFICATES, 1, 3) == (0, (), CERTIFICATE.encode((1, pushed.certificate)))
+                assert client(GET, EIP_SECURITY, 1, 6) == (0, (), bytes.fromhex("01" "02" "205F2401"))
+                # Configured: a new session needs a Reset first.
+                assert client.status(BEGIN, EIP_SECURITY, 1) == 0x0C
+            finally:
+                client.close()
+
+        await wait_reloaded(adapter)
+        await run(check)
+
+
+async def wait_reloaded(adapter: Adapter, count: int = 1) -> None:
+    """Until the device's TLS listener follows the configuration (it is put in place after the reply)."""
+    assert adapter.secure is not None
+    for _ in range(1000):
+        if adapter.secure.reloads >= count:
+            return
+        await asyncio.sleep(0.01)
+    raise AssertionError("the TLS listener was not put in place")
+
+
+async def test_reset_returns_to_factory_default_and_closes_tls(lab: Path) -> None:
+    async with Adapter(_settings()) as adapter:
+        plain = f"127.0.0.1:{adapter.port}"
+        await run(_push, plain, lab)
+        await wait_reloaded(adapter)
+        assert adapter.secure is not None and adapter.secure.server is not None
+
+        def reset() -> None:
+            client = Client(plain)
+            try:
+                assert client.status(RESET, EIP_SECURITY, 1, None, b"\x02") == 0x20   # a BOOL is 0 or 1
+                assert client.status(RESET, EIP_SECURITY, 1) == 0
+                assert client(GET, EIP_SECURITY, 1, 1) == (0, (), b"\x00")
+                assert client(GET, CERTIFICATES, 1, 3) == (0, (), b"\x00\x00\x00")
+            finally:
+                client.close()
+
+        await run(reset)
+        await wait_reloaded(adapter, 2)
+        assert adapter.secure.server is None
+
+
+async def test_configuration_survives_a_restart_with_a_state_file(lab: Path, tmp_path: Path) -> None:
+    settings = _settings(state_path=tmp_path / "acg.json")
+    async with Adapter(settings) as adapter:
+        await run(_push, f"127.0.0.1:{adapter.port}", lab)
+        await wait_reloaded(adapter)
+    kept = tmp_path / "acg.json.security"
+    assert {p.name for p in kept.iterdir()} == {"configuration.json", "ca.pem", "device.pem", "device.key"}
+    assert oct((kept / "device.key").stat().st_mode & 0o777) == "0o600"
+    async with Adapter(settings) as again:
+        def read() -> None:
+            client = Client(f"127.0.0.1:{settings.security_port}", security=Credentials.load(lab))
+            try:
+                assert client(GET, EIP_SECURITY, 1, 1) == (0, (), b"\x02")
+            finally:
+                client.close()
+        await run(read)
+        assert again.configurator is not None and again.configurator.state == SecurityState.CONFIGURED
+
+
+async def test_the_configure_command_configures_a_factory_default_device(lab: Path,
+                                                                        capsys: pytest.CaptureFixture[str]) -> None:
+    async with Adapter(_settings()) as adapter:
+        code = await run(main, ["security", "configure", f"127.0.0.1:{adapter.port}", "--security", str(lab),
+                                "--security-port", str(adapter.settings.security_port), "--common-name", "drive 7"])
+        assert code == 0
+        out = capsys.readouterr().out
+        assert out.startswith(f"127.0.0.1:{adapter.port} configured (Begin_Config, Create_CSR, ")
+        assert "certificate 2.5.4.5=" in out and ",CN=drive 7; CENT answers over TLS on" in out
+        # Once more: the device is configured, Begin_Config is refused, the command says so in one line.
+        code = await run(main, ["security", "configure", f"127.0.0.1:{adapter.port}", "--security", str(lab)])
+        captured = capsys.readouterr()
+        assert code != 0
+        assert captured.err.strip().splitlines() == [
+            "cipstack security: Begin_Config refused: 0x0C (object state conflict); the device is configured "
+            "already, or another configuration session is open (a Reset of 0x5E/1 returns a configured device to "
+            "factory default)"]
+
+
+# -- --secure-only -------------------------------------------------------------------------------------
+async def test_secure_only_refuses_plain_explicit_requests_once_configured(lab: Path) -> None:
+    async with Adapter(_settings(secure_only=True)) as adapter:
+        plain = f"127.0.0.1:{adapter.port}"
+
+        def before() -> None:
+            with SyncScanner(plain, identify=False) as drive:
+                assert drive.read(1, 1, 7) == "CENT"     # factory default: plain is served
+        await run(before)
+        await run(_push, plain, lab)
+        await wait_reloaded(adapter)
+
+        def after() -> None:
+            client = Client(plain)
+            try:
+                assert client(GET, 1, 1, 7) == (0x0F, (), b"")       # privilege violation, nothing served
+                assert client.scanner.list_identity()[0].product_name   # discovery still answers
+            finally:
+                client.close()
+            with SyncScanner(f"127.0.0.1:{adapter.settings.security_port}", security=Credentials.load(lab),
+                             identify=False) as drive:
+                assert drive.read(1, 1, 7) == "CENT"
+        await run(after)
+
+
+# -- bad input -----------------------------------------------------------------------------------------
+async def test_malformed_create_csr_requests_get_their_status_and_change_nothing() -> None:
+    async with Adapter(_settings()) as adapter:
+        def attack() -> None:
+            client = Client(f"127.0.0.1:{adapter.port}")
+            try:
+                assert client.status(BEGIN, EIP_SECURITY, 1) == 0
+                full = _csr_request()
+                assert client.status(CREATE_CSR, CERTIFICATES, 1, None, full[:-1]) == 0x13    # eight strings
+                assert client.status(CREATE_CSR, CERTIFICATES, 1, None, full + b"\x00") == 0x15
+                assert client.status(CREATE_CSR, CERTIFICATES, 1, None, b"\x40abc") == 0x13    # a string cut short
+                assert client.status(CREATE_CSR, CERTIFICATES, 1, None, _csr_request("", "", "", "", "", "USA")) \
+                    == 0x20                                                                   # not a country code
+                status, _, reply = client(CREATE_CSR, CERTIFICATES, 1, None, _csr_request("drive"))
+                assert status == 0 and struct.unpack_from("<H", reply)[0] == len(reply) - 2
+                assert client.status(GET, 1, 1, 7) == 0                                      # the rest serves on
+            finally:
+                client.close()
+
+        await run(attack)
+
+
+async def test_a_certificate_not_signed_by_the_trusted_ca_is_refused(lab: Path, other_lab: Path) -> None:
+    async with Adapter(_settings()) as adapter:
+        def attack() -> None:
+            from cipstack.security.certificates import der_of_pem
+
+            client = Client(f"127.0.0.1:{adapter.port}")
+            try:
+                assert client.status(BEGIN, EIP_SECURITY, 1) == 0
+                _, _, reply = client(CREATE_CSR, CERTIFICATES, 1, None, _csr_request())
+                forged = sign_csr(other_lab, reply[2:])          # signed by another CA than the one pushed
+                ca = der_of_pem((lab / "ca.pem").read_bytes())
+                assert client.status(SET, CERTIFICATES, 1, 4, CERTIFICATE.encode((0, ca))) == 0
+                assert client.status(SET, CERTIFICATES, 1, 3, CERTIFICATE.encode((0, forged))) == 0
+                assert client.status(SET, EIP_SECURITY, 1, 6, PATH_LIST.encode(((0x5F, 1),))) == 0
+                assert client.status(SET, EIP_SECURITY, 1, 7, PATH_LIST.encode(((0x5F, 1),))) == 0
+                assert client.status(VERIFY, CERTIFICATES, 1) == 0xD0             # verification failed
+                assert client(GET, CERTIFICATES, 1, 2) == (0, (), b"\x04")         # Invalid
+                assert client(APPLY, EIP_SECURITY, 1, None, b"\x00" * 4)[:2] == (0x0C, (0x0002,))
+                assert client(GET, EIP_SECURITY, 1, 1) == (0, (), b"\x01")         # not applied
+                # Octets that are no certificate at all: invalid attribute value.
+                assert client.status(SET, CERTIFICATES, 1, 3, CERTIFICATE.encode((0, b"\x30\x03abc"))) == 0x09
+            finally:
+                client.close()
+
+        await run(attack)
+        assert adapter.secure is not None and adapter.secure.server is None      # no TLS from it
+
+
+def test_the_configuration_tool_names_the_step_the_device_refused(lab: Path, other_lab: Path) -> None:
+    """The originator's side: a CA folder whose CA the device cannot verify the certificate with."""
+    async def scenario() -> str:
+        async with Adapter(_settings()) as adapter:
+            mixed = other_lab.parent / "mixed"
+            mixed.mkdir(exist_ok=True)
+            for name in ("ca.key", "client.pem", "client.key"):
+                (mixed / name).write_bytes((other_lab / name).read_bytes())
+            (mixed / "ca.pem").write_bytes((lab / "ca.pem").read_bytes())   # the CA pushed is not the signer
+            with pytest.raises(SecurityError) as raised:
+                await run(_push, f"127.0.0.1:{adapter.port}", mixed)
+
+            def state() -> bytes:
+                client = Client(f"127.0.0.1:{adapter.port}")
+                try:
+                    return client(GET, EIP_SECURITY, 1, 1)[2]
+                finally:
+                    client.close()
+            assert await run(state) == b"\x00"     # the tool aborted its session
+            return str(raised.value)
+
+    assert asyncio.run(scenario()) == ("Verify_Certificate refused: 0xD0 (unknown status); the device certificate "
+                                       "does not verify against the CA certificate pushed")
+
+
+async def test_oversized_and_malformed_attribute_writes(caplog: pytest.LogCaptureFixture) -> None:
+    async with Adapter(_settings()) as adapter:
+        def attack() -> None:
+            client = Client(f"127.0.0.1:{adapter.port}")
+            try:
+                assert client.status(BEGIN, EIP_SECURITY, 1) == 0
+                huge = CERTIFICATE.encode((0, b"\x30" * 4096))[:3] + b"\x30" * 4096
+                assert client.status(SET, CERTIFICATES, 1, 3, b"\x00" + struct.pack("<H", 4097) + b"\x30" * 4097) \
+                    == 0x09
+                assert client.status(SET, CERTIFICATES, 1, 3, huge[:-1]) == 0x13               # cut short
+                identity = b"i" * 129
+                psk = b"\x01" + bytes((len(identity),)) + identity + b"\x20" + b"k" * 32
+                assert client.status(SET, EIP_SECURITY, 1, 5, psk) == 0x09                     # identity > 128
+                two = PRE_SHARED_KEYS.encode(((b"a", b"k"),)) [1:]
+                assert client.status(SET, EIP_SECURITY, 1, 5, b"\x02" + two + two) == 0x09     # one key kept
+                assert client.status(SET, EIP_SECURITY, 1, 5, PRE_SHARED_KEYS.encode(((b"a", b"k" * 32),))) == 0
+                assert client.status(SET, EIP_SECURITY, 1, 4, CIPHER_SUITES.encode((0xC02B, 0x0001))) == 0x09
+                assert client.status(SET, EIP_SECURITY, 1, 4, b"\x09" + b"\xc0\x2b" * 9) == 0x09  # more than kept
+                assert client.status(SET, EIP_SECURITY, 1, 9, b"\x01\x00") == 0x15
+                assert client.status(SET, EIP_SECURITY, 1, 9, b"\x02") == 0x09
+                assert client.status(SET, EIP_SECURITY, 1, 6, PATH_LIST.encode(((0x01, 1),))) == 0x09
+                assert client.status(SET, EIP_SECURITY, 1, 3, CIPHER_SUITES.encode((0xC02B,))) == 0x0E
+                assert client.status(SET, EIP_SECURITY, 1, 15, b"\x00\x00") == 0x09              # DTLS timeout 0
+                assert client(GET, EIP_SECURITY, 1, 4) == (0, (), bytes.fromhex("03" "C023" "C02B" "C02C"))
+                assert client.status(GET, 1, 1, 7) == 0
+            finally:
+                client.close()
+
+        with caplog.at_level(logging.WARNING, logger="cipstack.security"):
+            await run(attack)
+        refused = [r for r in caplog.records if "refused" in r.getMessage()]
+        assert len(refused) == 1     # eleven refusals from one source: one line in 10 s
+        assert adapter.configurator is not None and adapter.configurator.refused == 11
