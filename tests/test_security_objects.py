@@ -467,3 +467,37 @@ async def test_oversized_and_malformed_attribute_writes(caplog: pytest.LogCaptur
         refused = [r for r in caplog.records if "refused" in r.getMessage()]
         assert len(refused) == 1     # eleven refusals from one source: one line in 10 s
         assert adapter.configurator is not None and adapter.configurator.refused == 11
+
+
+async def test_allowed_cipher_suites_decide_the_tls_handshake(lab: Path) -> None:
+    async with Adapter(_settings()) as adapter:
+        await run(lambda: _push(f"127.0.0.1:{adapter.port}", lab, allowed_suites=(0xC02B,)))
+        await wait_reloaded(adapter)
+        port = adapter.settings.security_port
+
+        def handshake(suite: str) -> str:
+            import socket
+            import ssl
+
+            context = Credentials.load(lab).client_context()
+            context.maximum_version = ssl.TLSVersion.TLSv1_2
+            context.set_ciphers(suite)
+            with socket.create_connection(("127.0.0.1", port), timeout=10) as sock, \
+                    context.wrap_socket(sock) as tls:
+                return str(tls.cipher()[0])
+
+        assert await run(handshake, "ECDHE-ECDSA-AES128-GCM-SHA256") == "ECDHE-ECDSA-AES128-GCM-SHA256"
+        with pytest.raises(OSError, match=r"HANDSHAKE_FAILURE|handshake failure"):
+            await run(handshake, "ECDHE-ECDSA-AES128-SHA256")      # available, not allowed
+        # A client that offers TLS 1.3 only: a configured device speaks 1.2 (its suites decide).
+        def tls13() -> None:
+            import socket
+            import ssl
+
+            context = Credentials.load(lab).client_context()
+            context.minimum_version = ssl.TLSVersion.TLSv1_3
+            with socket.create_connection(("127.0.0.1", port), timeout=10) as sock, context.wrap_socket(sock):
+                pass
+        with pytest.raises(OSError):
+            await run(tls13)
+        assert await run(handshake, "ECDHE-ECDSA-AES128-GCM-SHA256")   # the device serves on
