@@ -43,6 +43,7 @@ from .runtime.runtime import DeviceClock
 if TYPE_CHECKING:
     import ssl
 
+    from .cip.router import RequestContext
     from .security import Credentials
     from .security.configuration import Configurator
     from .security.endpoint import SecureEndpoint
@@ -173,7 +174,13 @@ class Adapter:
                                           make_core=partial(self._class1_core, profile, production_grid))
             assert self.io is not None   # made by _class1_core, with the endpoint
             self.device.update_io_status()
-        self.requests = RequestSeam(self.device.router)
+        # --secure-only: a configured device's router refuses what did not come over TLS.
+        policy = None
+        if s.secure_only:
+            from .security.endpoint import PlainRefusal
+
+            policy = PlainRefusal(self.device.router, self._arrived_secured, self._security_configured)
+        self.requests = RequestSeam(policy or self.device.router)
         self.replies = ReplySeam()
         self.target = EncapsulationTarget(
             self.device.router, self.device.identity_record,
@@ -202,7 +209,6 @@ class Adapter:
         if s.security_objects or s.security is not None:
             from .security.configuration import Configurator
             from .security.endpoint import (
-                PlainRefusal,
                 SecureEndpoint,
                 configuration_of,
                 load_configuration,
@@ -216,8 +222,6 @@ class Adapter:
             initial = configuration_of(self.tls.credentials) if self.tls is not None else kept
             self.configurator = Configurator(self.secure.configured, initial, s.security_config_timeout)
             register_security_objects(self.device.router, self.configurator, self._csr_defaults())
-            if s.secure_only:
-                self.requests.add(PlainRefusal(self.secure, self.configurator.is_configured))
         ports: list[Port] = [ServerPort("EtherNet/IP", self.server)]
         if self.secure is not None:
             ports.append(ServerPort("EtherNet/IP over TLS", self.secure))
@@ -248,6 +252,13 @@ class Adapter:
         return TlsServer(self.target, credentials, s.host, port, max_connections=s.max_tcp_connections,
                          max_connections_per_host=s.max_tcp_connections_per_host, replies=self.replies,
                          context=context)
+
+    def _arrived_secured(self, context: RequestContext) -> bool:
+        """Whether a request arrived over TLS (``--secure-only``)."""
+        return self.secure is not None and self.secure.secured(context)
+
+    def _security_configured(self) -> bool:
+        return self.configurator is not None and self.configurator.is_configured()
 
     def _csr_defaults(self) -> dict[str, str]:
         """What a Create_CSR leaves empty: the product's name, its serial number, its address."""

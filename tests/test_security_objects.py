@@ -294,6 +294,16 @@ async def test_reset_returns_to_factory_default_and_closes_tls(lab: Path) -> Non
         await run(reset)
         await wait_reloaded(adapter, 2)
         assert adapter.secure.server is None
+        # Configured again: the listener is back, on the same port.
+        await run(_push, plain, lab)
+        await wait_reloaded(adapter, 3)
+        assert adapter.secure.server is not None and adapter.secure.server.port == adapter.settings.security_port
+
+        def read() -> str:
+            with SyncScanner(f"127.0.0.1:{adapter.settings.security_port}", security=Credentials.load(lab),
+                             identify=False) as drive:
+                return str(drive.read(1, 1, 7))
+        assert await run(read) == "CENT"
 
 
 async def test_configuration_survives_a_restart_with_a_state_file(lab: Path, tmp_path: Path) -> None:
@@ -501,3 +511,23 @@ async def test_allowed_cipher_suites_decide_the_tls_handshake(lab: Path) -> None
         with pytest.raises(OSError):
             await run(tls13)
         assert await run(handshake, "ECDHE-ECDSA-AES128-GCM-SHA256")   # the device serves on
+
+
+async def test_cipstack_get_words_the_security_attributes(capsys: pytest.CaptureFixture[str]) -> None:
+    async with Adapter(_settings()) as adapter:
+        target = f"127.0.0.1:{adapter.port}"
+        for path, line in (("0x5E/1/1", "State = 0 (Factory Default)"),
+                           ("0x5E/1/4", "Allowed Cipher Suites = 0xC023 ECDHE-ECDSA-AES128-SHA256, "
+                                        "0xC02B ECDHE-ECDSA-AES128-GCM-SHA256, 0xC02C ECDHE-ECDSA-AES256-GCM-SHA384"),
+                           ("0x5E/1/7", "Trusted Authorities = none"),
+                           ("0x5E/1/15", "DTLS Timeout = 12 s"),
+                           ("0x5F/1/4", "CA Certificate = none (not verified)"),
+                           ("0x5D/1/2", "Security Profiles = 2")):
+            assert await run(main, ["get", target, path]) == 0
+            assert capsys.readouterr().out == line + "\n"
+        assert await run(main, ["get", target, "0x5E/1/3", "--json"]) == 0
+        import json
+
+        assert json.loads(capsys.readouterr().out) == {
+            "status": 0, "data": "03c023c02bc02c", "value": ["0xC023", "0xC02B", "0xC02C"], "type": "CIPHER_SUITES",
+            "name": "Available Cipher Suites", "path": "0x5E/1/3"}

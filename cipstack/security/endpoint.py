@@ -7,12 +7,13 @@ just written, built from them; a new Apply_Config replaces it, and Reset closes 
 is written into a folder (the adapter's ``<state>.security``, or a private temporary one) off the event
 loop, and read back when the adapter starts, so a configured device stays configured.
 
-``PlainRefusal`` is the ``--secure-only`` policy: a request filter at the seam every explicit request
-passes (``RequestSeam``). Once the device is Configured, a CIP request that arrived on a plain TCP
-connection (not on the TLS port) is answered with general status 0x0F (privilege violation) and not
-served; encapsulation commands (ListIdentity, ListServices, RegisterSession) still answer, so the
-device can be found and told to be secured. While the device is not configured, plain requests are
-served: a factory-default device must be configurable (Volume 8's push model goes over 44818).
+``PlainRefusal`` is the ``--secure-only`` policy: the router every explicit request reaches through
+the request seam (``RequestSeam``), in front of the device's own. Once the device is Configured, a
+CIP request that arrived on a plain TCP connection (not on the TLS port) is answered with general
+status 0x0F (privilege violation) and not served; encapsulation commands (ListIdentity,
+ListServices, RegisterSession) still answer, so the device can be found and told to be secured.
+While the device is not configured, plain requests are served: a factory-default device must be
+configurable (Volume 8's push model goes over 44818).
 """
 
 from __future__ import annotations
@@ -26,7 +27,7 @@ import ssl
 import tempfile
 from collections.abc import Callable
 from pathlib import Path
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Any
 
 from ..cip.messages import MessageRouterResponse
 from ..cip.router import RequestContext
@@ -217,23 +218,26 @@ class SecureEndpoint:
 
 
 class PlainRefusal:
-    """``--secure-only``: a configured device refuses explicit requests that did not arrive over TLS,
-    with general status 0x0F, logged once per source per 10 s."""
+    """``--secure-only``: the message router as the encapsulation target reaches it, in front of the
+    device's own. Once the device is configured, an explicit request that did not arrive over TLS is
+    answered with general status 0x0F and not served; refusals are logged once per source per 10 s."""
 
-    def __init__(self, endpoint: SecureEndpoint, configured: Callable[[], bool]) -> None:
-        self.endpoint = endpoint
+    def __init__(self, router: Any, secured: Callable[[RequestContext], bool], configured: Callable[[], bool]) -> None:
+        """``secured(context)``: whether a request arrived over TLS (``SecureEndpoint.secured``);
+        ``configured()``: whether the device is configured (``Configurator.is_configured``)."""
+        self.router = router
+        self.secured = secured
         self.configured = configured
         self.refusals = RateLimitedLog(log)
         #: Plain requests refused since the start.
         self.refused = 0
 
-    def request(self, raw: bytes, context: RequestContext,
-                call_next: Callable[[bytes, RequestContext], bytes]) -> bytes:
-        if not self.configured() or self.endpoint.secured(context) or context.depth:
-            return call_next(raw, context)
+    def handle(self, raw: bytes, context: RequestContext) -> bytes:
+        if context.depth or not self.configured() or self.secured(context):
+            return self.router.handle(raw, context)   # type: ignore[no-any-return]  # the router's bytes
         self.refused += 1
-        self.refusals("plain request from %s refused: the device is secured (--secure-only): use TLS on port %d",
-                      context.origin, self.endpoint.port, source=context.origin.rpartition(":")[0])
+        self.refusals("plain request from %s refused: the device is secured (--secure-only): use TLS",
+                      context.origin, source=context.origin.rpartition(":")[0])
         service = raw[0] & 0x7F if raw else 0
         return MessageRouterResponse(service, GeneralStatus.PRIVILEGE_VIOLATION).encode()
 
