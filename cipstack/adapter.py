@@ -198,11 +198,15 @@ class Adapter:
         self.tls: TlsServer | None = None
         if s.security is not None:
             from .security import Credentials
+            from .security.endpoint import available_suites_context
             from .security.tls_target import TlsServer
 
-            self.tls = TlsServer(self.target, Credentials.load(s.security), s.host, s.security_port,
+            credentials = Credentials.load(s.security)
+            # TLS 1.2 offers what the EtherNet/IP Security object lists as its Allowed Cipher Suites.
+            self.tls = TlsServer(self.target, credentials, s.host, s.security_port,
                                  max_connections=s.max_tcp_connections,
-                                 max_connections_per_host=s.max_tcp_connections_per_host, replies=self.replies)
+                                 max_connections_per_host=s.max_tcp_connections_per_host, replies=self.replies,
+                                 context=available_suites_context(credentials))
         #: CIP Security's objects, their configuration and the TLS listener that follows it.
         self.secure: SecureEndpoint | None = None
         self.configurator: Configurator | None = None

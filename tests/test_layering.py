@@ -28,7 +28,7 @@ ALLOWED = {
     # The battery sits on top: it may use what lies below (the codecs, the EDS reader, the
     # scanner's reading of an EDS) and nothing imports it but the command line.
     "conformance": {"cip", "objects", "assemblies", "eip", "componet", "devices", "catalog", "eds", "scanner",
-                    "errors"},
+                    "security", "errors"},
     # Modbus ports: transport shells over a drive's sans-I/O Modbus core (the register map is the device's).
     "modbus": {"cip", "eip", "devices", "errors"},
     # A running device: its ports, power and link, seams and observers; it knows no shell above it.

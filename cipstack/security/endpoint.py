@@ -84,6 +84,15 @@ def configuration_of(credentials: Credentials) -> Configuration:
                          device_key=credentials.device.key.read_bytes())
 
 
+def available_suites_context(credentials: Credentials) -> ssl.SSLContext:
+    """The TLS context of a device started with ``--security DIR``: TLS 1.2 with the suites its
+    EtherNet/IP Security object lists (Available = Allowed), and TLS 1.3 as before (its suites are
+    the TLS library's; Python's ``ssl`` cannot narrow them)."""
+    context = credentials.server_context()
+    context.set_ciphers(":".join(CIPHER_SUITE_NAMES.values()))
+    return context
+
+
 def server_context(credentials: Credentials, configuration: Configuration) -> ssl.SSLContext:
     """The TLS context of a configured device: TLS 1.2 with the Allowed Cipher Suites only (Python's
     ``ssl`` cannot narrow TLS 1.3's suites, so a device whose suites were chosen does not offer 1.3),
@@ -242,6 +251,5 @@ class PlainRefusal:
         return MessageRouterResponse(service, GeneralStatus.PRIVILEGE_VIOLATION).encode()
 
 
-__all__ = ["CONFIGURATION_FILE", "PlainRefusal", "SecureEndpoint", "configuration_of", "load_configuration",
-           "server_context",
-           "state_folder"]
+__all__ = ["CONFIGURATION_FILE", "PlainRefusal", "SecureEndpoint", "available_suites_context", "configuration_of",
+           "load_configuration", "server_context", "state_folder"]
