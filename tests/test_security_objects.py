@@ -313,7 +313,9 @@ async def test_configuration_survives_a_restart_with_a_state_file(lab: Path, tmp
         await wait_reloaded(adapter)
     kept = tmp_path / "acg.json.security"
     assert {p.name for p in kept.iterdir()} == {"configuration.json", "ca.pem", "device.pem", "device.key"}
-    assert oct((kept / "device.key").stat().st_mode & 0o777) == "0o600"
+    for secret in ("device.key", "configuration.json"):   # the key, and the PSKs a configuration may hold
+        assert oct((kept / secret).stat().st_mode & 0o777) == "0o600"
+    assert oct(kept.stat().st_mode & 0o777) == "0o700"
     async with Adapter(settings) as again:
         def read() -> None:
             client = Client(f"127.0.0.1:{settings.security_port}", security=Credentials.load(lab))
@@ -531,3 +533,26 @@ async def test_cipstack_get_words_the_security_attributes(capsys: pytest.Capture
         assert json.loads(capsys.readouterr().out) == {
             "status": 0, "data": "03c023c02bc02c", "value": ["0xC023", "0xC02B", "0xC02C"], "type": "CIPHER_SUITES",
             "name": "Available Cipher Suites", "path": "0x5E/1/3"}
+
+
+async def test_a_power_cycle_keeps_the_configuration_and_tls(lab: Path) -> None:
+    """The power-cycle fault closes and opens every port: the TLS listener of a configuration applied
+    over the network comes back with it, on the same port; the configuration is the device's."""
+    async with Adapter(_settings()) as adapter:
+        await run(_push, f"127.0.0.1:{adapter.port}", lab)
+        await wait_reloaded(adapter)
+        adapter.fault("power-cycle")
+        await adapter.faults.settle()                      # the power is back, every port open again
+        assert adapter.secure is not None and adapter.secure.server is not None
+        assert adapter.secure.server.is_open and adapter.secure.server.port == adapter.settings.security_port
+
+        def read() -> tuple[str, tuple[int, tuple[int, ...], bytes]]:
+            with SyncScanner(f"127.0.0.1:{adapter.settings.security_port}", security=Credentials.load(lab),
+                             identify=False) as drive:
+                name = str(drive.read(1, 1, 7))
+            client = Client(f"127.0.0.1:{adapter.port}")
+            try:
+                return name, client(GET, EIP_SECURITY, 1, 1)
+            finally:
+                client.close()
+        assert await run(read) == ("CENT", (0, (), b"\x02"))

@@ -115,7 +115,8 @@ def _write(folder: Path, configuration: Configuration | None) -> None:
     files = ((CA_FILE, pem(configuration.ca_certificate), 0o644),
              (DEVICE_CERTIFICATE, pem(configuration.device_certificate), 0o644),
              (DEVICE_KEY, configuration.device_key, 0o600),
-             (CONFIGURATION_FILE, configuration.to_json().encode(), 0o644))
+             # The configuration holds the pre-shared keys: as private as the device's key.
+             (CONFIGURATION_FILE, configuration.to_json().encode(), 0o600))
     for name, data, mode in files:
         temporary = folder / f".{name}.new"
         with contextlib.suppress(FileNotFoundError):
