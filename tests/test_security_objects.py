@@ -84,7 +84,7 @@ def _csr_request(*fields: str) -> bytes:
 
 
 # -- the objects in factory default ---------------------------------------------------------------------
-@pytest.mark.parametrize("profile", ["acg", "mx2"])
+@pytest.mark.parametrize("profile", ["acg", "mx2", "rx"])
 async def test_factory_default_objects_read_as_declared(profile: str) -> None:
     async with Adapter(_settings(profile=profile)) as adapter:
         def read() -> None:
@@ -196,6 +196,30 @@ async def test_the_session_timer_expires_and_drops_the_changes() -> None:
             finally:
                 owner.close()
                 other.close()
+
+        await run(session)
+
+
+async def test_kick_timer_keeps_a_live_session_past_its_timeout() -> None:
+    """A 1 s session kicked every 0.1 s is still open 2.5 s later; left alone, it ends."""
+    async with Adapter(_settings(security_config_timeout=1.0)) as adapter:
+        def session() -> None:
+            import time
+
+            from tests.waiting import wait_for
+
+            owner = Client(f"127.0.0.1:{adapter.port}")
+            try:
+                assert owner.status(BEGIN, EIP_SECURITY, 1) == 0
+                started = time.monotonic()
+                while time.monotonic() - started < 2.5:
+                    assert owner.status(KICK, EIP_SECURITY, 1) == 0
+                    time.sleep(0.1)                                   # the pace of a tool's keep-alive
+                assert owner(GET, EIP_SECURITY, 1, 1) == (0, (), b"\x01")  # still In Progress
+                wait_for(lambda: owner(GET, EIP_SECURITY, 1, 1)[2] == b"\x00", 10, "the session to expire")
+                assert owner.status(KICK, EIP_SECURITY, 1) == 0x0C
+            finally:
+                owner.close()
 
         await run(session)
 
