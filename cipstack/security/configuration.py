@@ -238,11 +238,12 @@ class Configurator:
         log.info("security configuration reset to factory default by %s", peer)
         self.on_configured(None)
 
-    def refuse(self, peer: str, status: int, line: str, extended: tuple[int, ...] = ()) -> Refused:
-        """Count and log (once per source per 10 s) a refused request; the error to raise."""
+    def refuse(self, peer: str, status: int, line: str, extended: tuple[int, ...] = (), data: bytes = b"") -> Refused:
+        """Count and log (once per source per 10 s) a refused request; the error to raise (``data``: what
+        the error reply carries, a list service's per-attribute statuses)."""
         self.refused += 1
         self.refusals("%s", line, source=peer.rpartition(":")[0] or peer)
-        return Refused(status, extended, message=line)
+        return Refused(status, extended, message=line, data=data)
 
 
 class Refused(CipError):

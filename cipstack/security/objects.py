@@ -67,7 +67,7 @@ class _SecurityObject(CipObject):
             raise self.configurator.refuse(
                 context.origin, exc.general,
                 f"{self.spec.name} service 0x{request.service:02X} from {context.origin} refused: {exc}",
-                exc.extended) from None
+                exc.extended, exc.data) from None
 
     def _session_change(self, context: RequestContext | None, what: str, **changes: Any) -> None:
         if context is None:
