@@ -56,7 +56,7 @@ ALLOWED = {
     "catalog": {"assemblies", "cip", "eip", "objects", "errors"},
     "listening": {"errors"},
     # CIP Security: TLS shells around the encapsulation cores, credentials and provisioning.
-    "security": {"cip", "eip", "errors"},
+    "security": {"cip", "eip", "errors", "objects"},
 }
 
 #: The parts that sit on top: nothing else in the package imports them (DESIGN.md).

@@ -22,9 +22,11 @@ from cipstack.adapter import Adapter, AdapterSettings
 from cipstack.cip.types import SHORT_STRING
 from cipstack.cli import main
 from cipstack.errors import SecurityError
+from cipstack.objects.file import FileTransferError, read_file, write_file
 from cipstack.scanner import SyncScanner
 from cipstack.security import Credentials
-from cipstack.security.attributes import CERTIFICATE, PATH_LIST, PRE_SHARED_KEYS
+from cipstack.security.attributes import PATH_LIST, PRE_SHARED_KEYS
+from cipstack.security.certificates import pem
 from cipstack.security.configuration import Configurator
 from cipstack.security.declarations import CIPHER_SUITES, SecurityState
 from cipstack.security.provisioning import init, sign_csr
@@ -35,6 +37,10 @@ GET, SET, GET_ALL, RESET = 0x0E, 0x10, 0x01, 0x05
 BEGIN, KICK, APPLY, ABORT = 0x4B, 0x4C, 0x4D, 0x4E
 CREATE_CSR, VERIFY = 0x4B, 0x4C
 EIP_SECURITY, CERTIFICATES, CIP_SECURITY = 0x5E, 0x5F, 0x5D
+#: The File object instances of the CSR, the device certificate and the CA certificate, and their paths
+#: as the objects give them (size in words, then 20 37 24 NN).
+CSR_FILE, DEVICE_FILE, CA_FILE = 0xC9, 0xCA, 0xCB
+CSR_PATH, DEVICE_PATH, CA_PATH = (bytes((2, 0x20, 0x37, 0x24, n)) for n in (CSR_FILE, DEVICE_FILE, CA_FILE))
 
 
 @pytest.fixture(scope="module")
@@ -64,6 +70,20 @@ class Client:
 
     def status(self, *request: Any) -> int:
         return self(*request)[0]
+
+    def _file(self, instance: int) -> Callable[[int, bytes], tuple[int, bytes]]:
+        def request(service: int, data: bytes) -> tuple[int, bytes]:
+            status, _, reply = self(service, 0x37, instance, None, data)
+            return status, reply
+        return request
+
+    def upload(self, instance: int) -> bytes:
+        """A File object instance's content, read as a configuration tool reads it."""
+        return read_file(self._file(instance))
+
+    def download(self, instance: int, data: bytes) -> None:
+        """Download ``data`` into a File object instance (``FileTransferError`` when refused)."""
+        write_file(self._file(instance), data)
 
     def close(self) -> None:
         self.scanner.close()
@@ -103,7 +123,9 @@ async def test_factory_default_objects_read_as_declared(profile: str) -> None:
                 assert client(GET, CIP_SECURITY, 1, 2) == (0, (), b"\x02\x00")           # Confidentiality Profile
                 assert client(GET, CIP_SECURITY, 1, 3) == (0, (), b"\x00\x00")
                 assert client(GET, CERTIFICATES, 1, 1) == (0, (), SHORT_STRING.encode("Default Device Certificate"))
-                assert client(GET, CERTIFICATES, 1, 3) == (0, (), b"\x00\x00\x00")     # no certificate yet
+                assert client(GET, CERTIFICATES, 1, 3) == (0, (), b"\x00" + DEVICE_PATH)   # not verified, its file
+                assert client(GET, CERTIFICATES, 1, 4) == (0, (), b"\x00" + CA_PATH)
+                assert client.upload(DEVICE_FILE) == b""                              # an empty file yet
                 assert client(GET, CERTIFICATES, 0, 8) == (0, (), b"\x01\x00\x00\x00")  # push model
                 # A Set outside a configuration session: object state conflict; nothing changes.
                 assert client.status(SET, EIP_SECURITY, 1, 9, b"\x01") == 0x0C
@@ -277,7 +299,8 @@ async def test_configured_over_the_wire_the_device_serves_tls_with_the_new_certi
                 assert client(GET, EIP_SECURITY, 1, 1) == (0, (), b"\x02")             # Configured
                 assert client(GET, CIP_SECURITY, 1, 3) == (0, (), b"\x02\x00")
                 assert client(GET, CERTIFICATES, 1, 2) == (0, (), b"\x03")             # Verified
-                assert client(GET, CERTIFICATES, 1, 3) == (0, (), CERTIFICATE.encode((1, pushed.certificate)))
+                assert client(GET, CERTIFICATES, 1, 3) == (0, (), b"\x01" + DEVICE_PATH)   # verified
+                assert client.upload(DEVICE_FILE) == pem(pushed.certificate)           # the file holds it
                 assert client(GET, EIP_SECURITY, 1, 6) == (0, (), bytes.fromhex("01" "02" "205F2401"))
                 # Configured: a new session needs a Reset first.
                 assert client.status(BEGIN, EIP_SECURITY, 1) == 0x0C
@@ -311,7 +334,8 @@ async def test_reset_returns_to_factory_default_and_closes_tls(lab: Path) -> Non
                 assert client.status(RESET, EIP_SECURITY, 1, None, b"\x02") == 0x20   # a BOOL is 0 or 1
                 assert client.status(RESET, EIP_SECURITY, 1) == 0
                 assert client(GET, EIP_SECURITY, 1, 1) == (0, (), b"\x00")
-                assert client(GET, CERTIFICATES, 1, 3) == (0, (), b"\x00\x00\x00")
+                assert client(GET, CERTIFICATES, 1, 3) == (0, (), b"\x00" + DEVICE_PATH)
+                assert client.upload(DEVICE_FILE) == b""
             finally:
                 client.close()
 
@@ -408,8 +432,8 @@ async def test_malformed_create_csr_requests_get_their_status_and_change_nothing
                 assert client.status(CREATE_CSR, CERTIFICATES, 1, None, b"\x40abc") == 0x13    # a string cut short
                 assert client.status(CREATE_CSR, CERTIFICATES, 1, None, _csr_request("", "", "", "", "", "USA")) \
                     == 0x20                                                                   # not a country code
-                status, _, reply = client(CREATE_CSR, CERTIFICATES, 1, None, _csr_request("drive"))
-                assert status == 0 and struct.unpack_from("<H", reply)[0] == len(reply) - 2
+                assert client(CREATE_CSR, CERTIFICATES, 1, None, _csr_request("drive")) == (0, (), CSR_PATH)
+                assert client.upload(CSR_FILE).startswith(b"-----BEGIN CERTIFICATE REQUEST-----\n")
                 assert client.status(GET, 1, 1, 7) == 0                                      # the rest serves on
             finally:
                 client.close()
@@ -420,24 +444,24 @@ async def test_malformed_create_csr_requests_get_their_status_and_change_nothing
 async def test_a_certificate_not_signed_by_the_trusted_ca_is_refused(lab: Path, other_lab: Path) -> None:
     async with Adapter(_settings()) as adapter:
         def attack() -> None:
-            from cipstack.security.certificates import der_of_pem
 
             client = Client(f"127.0.0.1:{adapter.port}")
             try:
                 assert client.status(BEGIN, EIP_SECURITY, 1) == 0
-                _, _, reply = client(CREATE_CSR, CERTIFICATES, 1, None, _csr_request())
-                forged = sign_csr(other_lab, reply[2:])          # signed by another CA than the one pushed
-                ca = der_of_pem((lab / "ca.pem").read_bytes())
-                assert client.status(SET, CERTIFICATES, 1, 4, CERTIFICATE.encode((0, ca))) == 0
-                assert client.status(SET, CERTIFICATES, 1, 3, CERTIFICATE.encode((0, forged))) == 0
+                assert client(CREATE_CSR, CERTIFICATES, 1, None, _csr_request()) == (0, (), CSR_PATH)
+                forged = sign_csr(other_lab, client.upload(CSR_FILE))   # signed by another CA than the one pushed
+                client.download(CA_FILE, (lab / "ca.pem").read_bytes())
+                client.download(DEVICE_FILE, pem(forged))
                 assert client.status(SET, EIP_SECURITY, 1, 6, PATH_LIST.encode(((0x5F, 1),))) == 0
                 assert client.status(SET, EIP_SECURITY, 1, 7, PATH_LIST.encode(((0x5F, 1),))) == 0
                 assert client.status(VERIFY, CERTIFICATES, 1) == 0xD0             # verification failed
                 assert client(GET, CERTIFICATES, 1, 2) == (0, (), b"\x04")         # Invalid
                 assert client(APPLY, EIP_SECURITY, 1, None, b"\x00" * 4)[:2] == (0x0C, (0x0002,))
                 assert client(GET, EIP_SECURITY, 1, 1) == (0, (), b"\x01")         # not applied
-                # Octets that are no certificate at all: invalid attribute value.
-                assert client.status(SET, CERTIFICATES, 1, 3, CERTIFICATE.encode((0, b"\x30\x03abc"))) == 0x09
+                # Octets that are no certificate at all: refused at the last transfer, 0x09.
+                with pytest.raises(FileTransferError, match="general status 0x09"):
+                    client.download(DEVICE_FILE, b"\x30\x03abc")
+                assert client.upload(DEVICE_FILE) == pem(forged)                    # the file as it was
             finally:
                 client.close()
 
@@ -476,10 +500,13 @@ async def test_oversized_and_malformed_attribute_writes(caplog: pytest.LogCaptur
             client = Client(f"127.0.0.1:{adapter.port}")
             try:
                 assert client.status(BEGIN, EIP_SECURITY, 1) == 0
-                huge = CERTIFICATE.encode((0, b"\x30" * 4096))[:3] + b"\x30" * 4096
-                assert client.status(SET, CERTIFICATES, 1, 3, b"\x00" + struct.pack("<H", 4097) + b"\x30" * 4097) \
-                    == 0x09
-                assert client.status(SET, CERTIFICATES, 1, 3, huge[:-1]) == 0x13               # cut short
+                elsewhere = bytes((2, 0x20, 0x37, 0x24, 0xC8))                                # the EDS file's
+                assert client.status(SET, CERTIFICATES, 1, 3, b"\x00" + elsewhere) == 0x09     # not its file
+                assert client.status(SET, CERTIFICATES, 1, 3, b"\x00\x02\x20") == 0x13          # cut short
+                with pytest.raises(FileTransferError, match="Initiate_Download answered general status 0x20"):
+                    client.download(DEVICE_FILE, b"\x30" * 20000)                          # over the file's limit
+                with pytest.raises(FileTransferError, match="general status 0x09"):
+                    client.download(DEVICE_FILE, b"\x30" * 5000)                           # over a certificate's
                 identity = b"i" * 129
                 psk = b"\x01" + bytes((len(identity),)) + identity + b"\x20" + b"k" * 32
                 assert client.status(SET, EIP_SECURITY, 1, 5, psk) == 0x09                     # identity > 128
@@ -501,8 +528,8 @@ async def test_oversized_and_malformed_attribute_writes(caplog: pytest.LogCaptur
         with caplog.at_level(logging.WARNING, logger="cipstack.security"):
             await run(attack)
         refused = [r for r in caplog.records if "refused" in r.getMessage()]
-        assert len(refused) == 1     # eleven refusals from one source: one line in 10 s
-        assert adapter.configurator is not None and adapter.configurator.refused == 11
+        assert len(refused) == 1     # twelve refusals from one source: one line in 10 s
+        assert adapter.configurator is not None and adapter.configurator.refused == 12
 
 
 async def test_allowed_cipher_suites_decide_the_tls_handshake(lab: Path) -> None:
@@ -547,7 +574,7 @@ async def test_cipstack_get_words_the_security_attributes(capsys: pytest.Capture
                                         "0xC02B ECDHE-ECDSA-AES128-GCM-SHA256, 0xC02C ECDHE-ECDSA-AES256-GCM-SHA384"),
                            ("0x5E/1/7", "Trusted Authorities = none"),
                            ("0x5E/1/15", "DTLS Timeout = 12 s"),
-                           ("0x5F/1/4", "CA Certificate = none (not verified)"),
+                           ("0x5F/1/4", "CA Certificate = not verified, in File object instance 203 (class 0x37)"),
                            ("0x5D/1/2", "Security Profiles = 2")):
             assert await run(main, ["get", target, path]) == 0
             assert capsys.readouterr().out == line + "\n"

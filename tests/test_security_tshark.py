@@ -86,7 +86,8 @@ async def test_tshark_dissects_the_security_attributes_as_served(tmp_path: Path)
                 configure(request, lab, allowed_suites=(0xC02B,))
             return _exchange(adapter.port, [_get(0x5E, 1, 1), _get(0x5E, 1, 2), _get(0x5E, 1, 3), _get(0x5E, 1, 4),
                                             _get(0x5E, 1, 6), _get(0x5E, 1, 7), _get(0x5E, 1, 9), _get(0x5F, 1, 1),
-                                            _get(0x5F, 1, 2), _get(0x5F, 1, 5), _get(0x5F, 0, 8)])
+                                            _get(0x5F, 1, 2), _get(0x5F, 1, 5), _get(0x5F, 0, 8), _get(0x5F, 1, 3),
+                                            _get(0x5F, 1, 4)])
 
         frames = await asyncio.to_thread(run)
     pcap = tmp_path / "security.pcap"
@@ -101,7 +102,8 @@ async def test_tshark_dissects_the_security_attributes_as_served(tmp_path: Path)
                    "cip.eip_security.num_allow_cipher_suites", "cip.eip_security.allow_cipher_suite",
                    "cip.eip_security.num_active_certs", "cip.eip_security.num_trusted_auths",
                    "cip.eip_security.verify_client_cert", "cip.eip_cert.name", "cip.eip_cert.state",
-                   "cip.eip_cert.encoding", "cip.eip_cert.capflags.push", "_ws.expert")
+                   "cip.eip_cert.encoding", "cip.eip_cert.capflags.push", "_ws.expert",
+                   "cip.eip_cert.device_cert.status", "cip.eip_cert.ca_cert.status", "cip.instance")
     shown: dict[int, str] = {}
     for row in rows:
         for index, value in enumerate(row):
@@ -118,3 +120,6 @@ async def test_tshark_dissects_the_security_attributes_as_served(tmp_path: Path)
     assert shown[10] == "3" and shown[11] == "0"             # Verified, PEM
     assert shown[12] == "1"                        # push model
     assert 13 not in shown                                   # no expert info: nothing malformed
+    assert shown[14] == "1" and shown[15] == "1"             # both certificates verified, each then its path
+    # The paths to the certificates' File object instances, as Wireshark reads them (0xCA, 0xCB).
+    assert "0xca" in shown[16] and "0xcb" in shown[16]       # the instances of the two replies' paths

@@ -332,8 +332,9 @@ COMMANDS: dict[tuple[str, ...], CommandText] = {
     ("security", "configure"): CommandText(
         "configure a factory-default device's CIP Security over the network",
         "The push model of a configuration tool, over plain EtherNet/IP: Begin_Config, Create_CSR on the "
-        "device, the lab CA of DIR signs the request, the CA and device certificates and the trust are "
-        "written, Verify_Certificate, Apply_Config; then the device is read over TLS on --security-port "
+        "device (its request read from the File object), the lab CA of DIR signs it, the CA and device "
+        "certificates downloaded into their File object instances and the trust written, "
+        "Verify_Certificate, Apply_Config; then the device is read over TLS on --security-port "
         "to check it serves the certificate just written. A step the device refuses aborts the session "
         "and is named in one line.",
         (("cipstack security configure 192.168.1.20 --security lab", "configure the device with lab's CA"),

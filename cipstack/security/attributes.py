@@ -8,12 +8,10 @@ Layouts as OpENer's CIP Security branch declares them (``ethernetipsecurity.h``,
 * a path list: USINT count, then each path as its size in 16-bit words (USINT) and the padded
   EPATH (``EncodeCipSecurityObjectPath``); a single path the same without the count, size 0 for none;
 * pre-shared keys: USINT count, then per key USINT identity size, identity (at most 128 octets),
-  USINT key size, key (at most 64 octets).
-
-A certificate (Certificate Management attributes 3 and 4) is where this emulator departs from the
-branch, which gives a USINT certificate status and a path to a File object instance that holds the
-certificate: here the status is followed by the certificate itself, DER, after its size (UINT), so
-that a configuration tool needs no File object download (docs/security.md says so).
+  USINT key size, key (at most 64 octets);
+* a certificate (Certificate Management attributes 3 and 4): a USINT certificate status, then one
+  path, to the File object instance that holds the certificate (Wireshark's packet-enip.c,
+  dissect_eip_cert_device_cert, reads it the same way).
 """
 
 from __future__ import annotations
@@ -215,8 +213,9 @@ class PreSharedKeys(CipType):
 
 
 class Certificate(CipType):
-    """A certificate attribute: USINT certificate status, UINT size, the DER certificate (size 0: none).
-    The value is (status, DER)."""
+    """A certificate attribute: USINT certificate status, then the path (size in words, padded EPATH)
+    to the File object instance that holds the certificate. The value is (status, (class, instance)),
+    or (status, ()) for no path."""
 
     def __init__(self, name: str = "CERTIFICATE") -> None:
         self.name = name
@@ -224,44 +223,30 @@ class Certificate(CipType):
         self.size = None
 
     def encode(self, value: Any) -> bytes:
-        status, der = self.check(value)
-        return bytes((status,)) + len(der).to_bytes(2, "little") + der
+        status, path = self.check(value)
+        return bytes((status,)) + (encode_object_path(path) if path else b"\x00")  # type: ignore[arg-type]
 
-    def decode_from(self, data: bytes, offset: int = 0) -> tuple[tuple[int, bytes], int]:
-        if offset + 3 > len(data):
-            raise _short("a certificate is its status (USINT) and size (UINT), then its octets")
-        status = data[offset]
-        size = int.from_bytes(data[offset + 1:offset + 3], "little")
-        start = offset + 3
-        if start + size > len(data):
-            raise _short(f"a certificate of {size} octets is cut short")
-        return (status, bytes(data[start:start + size])), start + size
+    def decode_from(self, data: bytes, offset: int = 0) -> tuple[tuple[int, tuple[int, ...]], int]:
+        status, offset = USINT.decode_from(data, offset)
+        path, offset = decode_object_path(data, offset)
+        return (status, path or ()), offset
 
-    def check(self, value: Any) -> tuple[int, bytes]:
-        status, der = value
-        if not isinstance(status, int) or not 0 <= status <= 0xFF or not isinstance(der, (bytes, bytearray)):
-            raise _invalid("a certificate is (status, DER octets)")
-        if len(der) > MAX_CERTIFICATE:
-            raise _invalid(f"a certificate of {len(der)} octets; at most {MAX_CERTIFICATE}")
-        return status, bytes(der)
+    def check(self, value: Any) -> tuple[int, tuple[int, ...]]:
+        status, path = value
+        path = tuple(path or ())
+        if not isinstance(status, int) or not 0 <= status <= 0xFF or len(path) not in (0, 2):
+            raise _invalid("a certificate is (status, path to a File object instance)")
+        return status, path
 
     def to_json(self, value: Any) -> Any:
-        return {"status": value[0], "size": len(value[1]), "der": value[1].hex()}
+        status, path = value
+        return {"status": status, "file": f"0x{path[0]:02X}/{path[1]}" if path else None}
 
-    def text(self, value: tuple[int, bytes]) -> str:
-        """The status, and the certificate's subject, issuer and validity when ``cryptography`` reads it."""
-        status, der = value
+    def text(self, value: tuple[int, tuple[int, ...]]) -> str:
+        status, path = value
         shown = {0: "not verified", 1: "verified", 2: "invalid"}.get(status, str(status))
-        if not der:
-            return f"none ({shown})"
-        try:
-            from cryptography import x509
-
-            certificate = x509.load_der_x509_certificate(der)
-        except (ImportError, ValueError):
-            return f"{len(der)} octets ({shown})"
-        return (f"{certificate.subject.rfc4514_string()}, issued by {certificate.issuer.rfc4514_string()}, "
-                f"valid until {certificate.not_valid_after_utc:%Y-%m-%d} ({shown}, {len(der)} octets)")
+        where = f"File object instance {path[1]} (class 0x{path[0]:02X})" if path else "no file"
+        return f"{shown}, in {where}"
 
 
 PATH_LIST = PathList()

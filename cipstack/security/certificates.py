@@ -112,13 +112,28 @@ def verify(device_der: bytes, ca_der: bytes, key_pem: bytes, now: datetime.datet
     return None
 
 
-def pem(der: bytes) -> bytes:
-    """A DER certificate as PEM."""
+def pem(der: bytes, label: str = "CERTIFICATE") -> bytes:
+    """DER octets as PEM (a certificate; ``label`` "CERTIFICATE REQUEST" for a CSR); none for none."""
     import base64
 
+    if not der:
+        return b""
     body = base64.encodebytes(der).replace(b"\n", b"")
     lines = [body[i:i + 64] for i in range(0, len(body), 64)]
-    return b"-----BEGIN CERTIFICATE-----\n" + b"\n".join(lines) + b"\n-----END CERTIFICATE-----\n"
+    marker = label.encode()
+    return (b"-----BEGIN " + marker + b"-----\n" + b"\n".join(lines) + b"\n-----END " + marker + b"-----\n")
+
+
+def certificate_der(data: bytes) -> bytes:
+    """A certificate file's octets (PEM, the Certificate Encoding 0 the device reports, or DER) as DER;
+    0x09 (invalid attribute value) for a file that holds no certificate."""
+    if data.lstrip().startswith(b"-----BEGIN"):
+        try:
+            return der_of_pem(data)
+        except ValueError:
+            raise CipError(GeneralStatus.INVALID_ATTRIBUTE_VALUE, message="not a PEM certificate") from None
+    load_certificate(data)
+    return data
 
 
 def der_of_pem(data: bytes) -> bytes:
@@ -130,4 +145,5 @@ def der_of_pem(data: bytes) -> bytes:
     return x509.load_pem_x509_certificate(data).public_bytes(serialization.Encoding.DER)
 
 
-__all__ = ["CSR_FIELDS", "certificate_signing_request", "der_of_pem", "load_certificate", "new_key", "pem", "verify"]
+__all__ = ["CSR_FIELDS", "certificate_der", "certificate_signing_request", "der_of_pem", "load_certificate",
+           "new_key", "pem", "verify"]

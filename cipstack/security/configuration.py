@@ -67,6 +67,8 @@ class Configuration:
     device_status: int = CertificateStatus.NOT_VERIFIED
     ca_certificate: bytes = b""
     ca_status: int = CertificateStatus.NOT_VERIFIED
+    #: The last Create_CSR's request (DER), which the CSR's File object instance serves.
+    certificate_request: bytes = b""
     #: The private key of the last Create_CSR (PEM, PKCS#8): never readable over the network.
     device_key: bytes = field(default=b"", repr=False)
 

@@ -86,6 +86,10 @@ VERIFICATION_FAILED = 0xD0
 #: Apply_Config's extended status (Volume 8 5-4.8.1).
 NO_CERTIFICATES_CONFIGURED = 0x0002
 NO_CIPHER_SUITES_CONFIGURED = 0x0004
+#: The File object (class 0x37) instances of the certificate signing request, the device certificate
+#: and the CA certificate (chosen here: after the EDS file's 0xC8; the branch creates its own at start).
+FILE_CLASS = 0x37
+CSR_FILE, DEVICE_CERTIFICATE_FILE, CA_CERTIFICATE_FILE = 0xC9, 0xCA, 0xCB
 #: DTLS Timeout default, seconds (the branch's default).
 DTLS_TIMEOUT = 12
 
@@ -148,8 +152,8 @@ CERTIFICATE_MANAGEMENT_SPEC = ClassSpec(
         AttributeSpec(1, "Name", SHORT_STRING, default="Default Device Certificate"),
         AttributeSpec(2, "State", USINT, default=CertificateState.CREATED,
                       enum={s.value: s.name.replace("_", " ").title() for s in CertificateState}),
-        AttributeSpec(3, "Device Certificate", CERTIFICATE, Access.GET_SET, default=(0, b"")),
-        AttributeSpec(4, "CA Certificate", CERTIFICATE, Access.GET_SET, default=(0, b"")),
+        AttributeSpec(3, "Device Certificate", CERTIFICATE, Access.GET_SET, default=(0, ())),
+        AttributeSpec(4, "CA Certificate", CERTIFICATE, Access.GET_SET, default=(0, ())),
         AttributeSpec(5, "Certificate Encoding", USINT, default=0, enum={0: "PEM", 1: "PKCS#7"}),
     ),
     extra_class_attributes=(AttributeSpec(8, "Capability Flags", DWORD, default=PUSH_MODEL),
@@ -163,9 +167,9 @@ CERTIFICATE_MANAGEMENT_SPEC = ClassSpec(
 SECURITY_CLASSES: dict[int, ClassSpec] = {spec.class_id: spec for spec in
                                           (CIP_SECURITY_SPEC, EIP_SECURITY_SPEC, CERTIFICATE_MANAGEMENT_SPEC)}
 
-__all__ = ["AVAILABLE_CIPHER_SUITES", "CERTIFICATE_MANAGEMENT_CLASS", "CERTIFICATE_MANAGEMENT_SPEC",
-           "CIPHER_SUITES", "CIPHER_SUITE_NAMES", "CIP_SECURITY_CLASS", "CIP_SECURITY_SPEC",
-           "CONFIDENTIALITY_PROFILE", "DTLS_TIMEOUT", "EIP_SECURITY_CLASS", "EIP_SECURITY_SPEC",
-           "NO_CERTIFICATES_CONFIGURED", "NO_CIPHER_SUITES_CONFIGURED", "SECURITY_CLASSES", "VERIFICATION_FAILED",
-           "CertificateService", "CertificateState", "CertificateStatus", "CipSecurityState", "ConfigService",
-           "SecurityState"]
+__all__ = ["AVAILABLE_CIPHER_SUITES", "CA_CERTIFICATE_FILE", "CERTIFICATE_MANAGEMENT_CLASS",
+           "CERTIFICATE_MANAGEMENT_SPEC", "CIPHER_SUITES", "CIPHER_SUITE_NAMES", "CIP_SECURITY_CLASS",
+           "CIP_SECURITY_SPEC", "CONFIDENTIALITY_PROFILE", "CSR_FILE", "DEVICE_CERTIFICATE_FILE", "DTLS_TIMEOUT",
+           "EIP_SECURITY_CLASS", "EIP_SECURITY_SPEC", "FILE_CLASS", "NO_CERTIFICATES_CONFIGURED",
+           "NO_CIPHER_SUITES_CONFIGURED", "SECURITY_CLASSES", "VERIFICATION_FAILED", "CertificateService",
+           "CertificateState", "CertificateStatus", "CipSecurityState", "ConfigService", "SecurityState"]

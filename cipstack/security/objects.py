@@ -14,6 +14,7 @@ connection, 0x09 for a value the device cannot take, 0x13/0x15 for a request too
 from __future__ import annotations
 
 import struct
+from functools import partial
 from typing import Any
 
 from ..cip.epath import ApplicationPath
@@ -22,14 +23,21 @@ from ..cip.model import AttributeSpec, CipObject, ClassSpec, Instance
 from ..cip.router import MessageRouter, RequestContext
 from ..cip.status import CipError, GeneralStatus
 from ..cip.types import SHORT_STRING
+from ..errors import BadRequest
+from ..objects.file import FileObject, StoredFile
 from . import certificates
+from .attributes import encode_object_path
 from .configuration import DEVICE_CERTIFICATE_PATH, Configuration, Configurator, Refused
 from .declarations import (
     AVAILABLE_CIPHER_SUITES,
+    CA_CERTIFICATE_FILE,
     CERTIFICATE_MANAGEMENT_SPEC,
     CIP_SECURITY_SPEC,
     CONFIDENTIALITY_PROFILE,
+    CSR_FILE,
+    DEVICE_CERTIFICATE_FILE,
     EIP_SECURITY_SPEC,
+    FILE_CLASS,
     VERIFICATION_FAILED,
     CertificateService,
     CertificateState,
@@ -44,8 +52,9 @@ EIP_SECURITY_FIELDS = {4: "allowed_suites", 5: "pre_shared_keys", 6: "active_dev
                        7: "trusted_authorities", 8: "revocation_list", 9: "verify_client", 10: "send_chain",
                        11: "check_expiration", 12: "trusted_identities", 13: "pull_model_enable",
                        15: "dtls_timeout", 16: "udp_only_policy"}
-#: Certificate Management attributes 3 and 4 -> (certificate field, status field).
+#: Certificate Management attributes 3 and 4 -> (certificate field, status field), and their files.
 CERTIFICATE_FIELDS = {3: ("device_certificate", "device_status"), 4: ("ca_certificate", "ca_status")}
+CERTIFICATE_PATHS = {3: (FILE_CLASS, DEVICE_CERTIFICATE_FILE), 4: (FILE_CLASS, CA_CERTIFICATE_FILE)}
 _APPLY_ARGUMENTS = struct.Struct("<HH")
 
 
@@ -185,15 +194,45 @@ def usable(configuration: Configuration) -> str | None:
 
 
 class CertificateManagementObject(_SecurityObject):
-    """Class 0x5F, instance 1: the device's certificate and its CA's; Create_CSR, Verify_Certificate."""
+    """Class 0x5F, instance 1: the device's certificate and its CA's; Create_CSR, Verify_Certificate.
+
+    The certificates and the CSR live in File object instances (class 0x37: ``CSR_FILE``,
+    ``DEVICE_CERTIFICATE_FILE``, ``CA_CERTIFICATE_FILE``), as the branch keeps them: attributes 3 and 4
+    give a status and the path to their file; Create_CSR replies with the path to the CSR's. A tool
+    downloads a certificate into its file (Initiate_Download, Download_Transfer), within its session."""
 
     extra_services = {CertificateService.CREATE_CSR: "create_csr",
                       CertificateService.VERIFY_CERTIFICATE: "verify_certificate"}
 
-    def __init__(self, configurator: Configurator, csr_defaults: dict[str, str]) -> None:
+    def __init__(self, configurator: Configurator, csr_defaults: dict[str, str], files: FileObject) -> None:
         super().__init__(CERTIFICATE_MANAGEMENT_SPEC, configurator)
         #: The subject fields a Create_CSR leaves empty take (``certificates.CSR_FIELDS`` names).
         self.csr_defaults = dict(csr_defaults)
+        files.serve(StoredFile(CSR_FILE, "Certificate Signing Request", "device.csr", (1, 0), self._csr_file),
+                    live=True)
+        files.serve(StoredFile(DEVICE_CERTIFICATE_FILE, "Device Certificate", "device.pem", (1, 0),
+                               partial(self._certificate_file, 3)), partial(self._downloaded, 3), live=True)
+        files.serve(StoredFile(CA_CERTIFICATE_FILE, "CA Certificate", "ca.pem", (1, 0),
+                               partial(self._certificate_file, 4)), partial(self._downloaded, 4), live=True)
+
+    def _csr_file(self) -> bytes:
+        return certificates.pem(self.configurator.configuration.certificate_request, "CERTIFICATE REQUEST")
+
+    def _certificate_file(self, attribute: int) -> bytes:
+        return certificates.pem(getattr(self.configurator.configuration, CERTIFICATE_FIELDS[attribute][0]))
+
+    def _downloaded(self, attribute: int, data: bytes, context: RequestContext) -> None:
+        """A certificate downloaded into its file: the session's owner only; 0x09 for no certificate."""
+        certificate, status = CERTIFICATE_FIELDS[attribute]
+        what = f"a download of the {certificate.replace('_', ' ')}"
+        self.configurator.require(context.transport, context.origin, context.now, what)
+        try:
+            der = certificates.certificate_der(data)
+        except CipError as exc:
+            raise self.configurator.refuse(context.origin, exc.general, f"{what} from {context.origin} refused: "
+                                                                         f"{exc}") from None
+        self.configurator.change(context.transport, context.origin, context.now, what,
+                                 **{certificate: der, status: CertificateStatus.NOT_VERIFIED})
 
     def read_attribute(self, instance: Instance, spec: AttributeSpec) -> Any:
         configuration = self.configurator.configuration
@@ -208,22 +247,25 @@ class CertificateManagementObject(_SecurityObject):
             return CertificateState.CREATED
         fields = CERTIFICATE_FIELDS.get(spec.id)
         if fields is not None:
-            return getattr(configuration, fields[1]), getattr(configuration, fields[0])
+            return getattr(configuration, fields[1]), CERTIFICATE_PATHS[spec.id]
         return super().read_attribute(instance, spec)
 
     def write_attribute(self, instance: Instance, spec: AttributeSpec, value: Any,
                         context: RequestContext | None = None) -> None:
-        _, der = spec.validate(value)
-        if der:
-            certificates.load_certificate(der)   # 0x09 for octets that are not a certificate
-        certificate, status = CERTIFICATE_FIELDS[spec.id]
+        """A Set names the file of the certificate: this device keeps each in its own (0x09 for another);
+        the certificate is marked not verified, to be verified again."""
+        _, path = spec.validate(value)
+        if path != CERTIFICATE_PATHS[spec.id]:
+            file = CERTIFICATE_PATHS[spec.id]
+            raise CipError(GeneralStatus.INVALID_ATTRIBUTE_VALUE,
+                           message=f"{spec.name} is kept in File object instance {file[1]}")
         self._session_change(context, f"Set_Attribute_Single {spec.name}",
-                             **{certificate: der, status: CertificateStatus.NOT_VERIFIED})
+                             **{CERTIFICATE_FIELDS[spec.id][1]: CertificateStatus.NOT_VERIFIED})
 
     def create_csr(self, instance: Instance | None, path: ApplicationPath, request: MessageRouterRequest,
                    context: RequestContext) -> bytes:
-        """Nine SHORT_STRINGs (``certificates.CSR_FIELDS``); the reply is the CSR, DER, after its size
-        (UINT). A new key is made for it; the session's owner only."""
+        """Nine SHORT_STRINGs (``certificates.CSR_FIELDS``); the reply is the path to the File object
+        instance that holds the CSR (PEM). A new key is made for it; the session's owner only."""
         fields, offset = [], 0
         for _ in certificates.CSR_FIELDS:
             text, offset = SHORT_STRING.decode_from(request.data, offset)
@@ -233,8 +275,9 @@ class CertificateManagementObject(_SecurityObject):
         self.configurator.require(context.transport, context.origin, context.now, "Create_CSR")
         key = certificates.new_key()
         csr = certificates.certificate_signing_request(key, fields, self.csr_defaults)
-        self._session_change(context, "Create_CSR", device_key=key, device_status=CertificateStatus.NOT_VERIFIED)
-        return struct.pack("<H", len(csr)) + csr
+        self._session_change(context, "Create_CSR", device_key=key, certificate_request=csr,
+                             device_status=CertificateStatus.NOT_VERIFIED)
+        return encode_object_path((FILE_CLASS, CSR_FILE))
 
     def verify_certificate(self, instance: Instance | None, path: ApplicationPath, request: MessageRouterRequest,
                            context: RequestContext) -> bytes:
@@ -254,10 +297,16 @@ class CertificateManagementObject(_SecurityObject):
 
 
 def register(router: MessageRouter, configurator: Configurator, csr_defaults: dict[str, str]) -> None:
-    """Serve the three objects on ``router`` over ``configurator``."""
+    """Serve the three objects on ``router`` over ``configurator``, and their files on the device's File
+    object (one is made for a device that has none)."""
+    files = router.objects.get(FILE_CLASS)
+    if files is None:
+        files = router.register(FileObject(()))
+    if not isinstance(files, FileObject):
+        raise BadRequest(f"class 0x{FILE_CLASS:02X} is not a File object here: the certificates have no files")
     router.register(CipSecurityObject(configurator))
     router.register(EipSecurityObject(configurator))
-    router.register(CertificateManagementObject(configurator, csr_defaults))
+    router.register(CertificateManagementObject(configurator, csr_defaults, files))
 
 
 __all__ = ["CertificateManagementObject", "CipSecurityObject", "EipSecurityObject", "register", "usable"]

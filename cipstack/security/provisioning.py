@@ -124,7 +124,7 @@ def _certificates(path: Path, device_name: str, client_name: str, days: int,
 def sign_csr(folder: str | os.PathLike[str], csr_der: bytes, days: int = LEAF_DAYS,
              now: datetime.datetime | None = None) -> bytes:
     """The lab CA of ``folder`` (``ca.pem`` and ``ca.key``) signs a device's certificate signing request
-    (DER, as Create_CSR gives it): a server certificate with the request's subject and alternative
+    (PEM or DER, as a device's CSR file holds it): a server certificate with the request's subject and alternative
     name, for ``days``. ``SecurityError`` for a request that does not read or whose signature is wrong,
     or a folder without the CA's key."""
     require_cryptography()
@@ -141,10 +141,11 @@ def sign_csr(folder: str | os.PathLike[str], csr_der: bytes, days: int = LEAF_DA
     except (OSError, ValueError) as exc:
         raise SecurityError(f"{path}: the CA does not load ({exc})") from None
     try:
-        request = x509.load_der_x509_csr(csr_der)
+        pem_form = csr_der.lstrip().startswith(b"-----BEGIN")
+        request = x509.load_pem_x509_csr(csr_der) if pem_form else x509.load_der_x509_csr(csr_der)
         valid = request.is_signature_valid
     except ValueError:
-        raise SecurityError("the device's certificate signing request does not read (not a DER CSR)") from None
+        raise SecurityError("the device's certificate signing request does not read (not a PEM or DER CSR)") from None
     if not valid:
         raise SecurityError("the device's certificate signing request has a wrong signature")
     start = (now or datetime.datetime.now(datetime.timezone.utc)) - datetime.timedelta(minutes=5)
