@@ -53,6 +53,11 @@ def _path(data: bytes) -> str | None:
     return None if data and len(data) == 1 + 2 * data[0] else f"{len(data)} bytes, not a size and a padded EPATH"
 
 
+def _certificate(data: bytes) -> str | None:
+    """A certificate status (USINT), then a path to the File object instance holding it."""
+    return None if len(data) >= 2 and _path(data[1:]) is None else f"{len(data)} bytes, not a status and a path"
+
+
 def _fixed(size: int, name: str) -> Callable[[bytes], str | None]:
     return lambda data: None if len(data) == size else f"{len(data)} bytes, {name} is {size}"
 
@@ -76,6 +81,7 @@ ATTRIBUTES: dict[tuple[int, int], tuple[str, Callable[[bytes], str | None]]] = {
     (EIP_SECURITY, 15): ("DTLS Timeout", _fixed(2, "UINT")),
     (EIP_SECURITY, 16): ("UDP-only Policy", _fixed(1, "USINT")),
     (CERTIFICATES, 1): ("Name", _short_string), (CERTIFICATES, 2): ("State", _fixed(1, "USINT")),
+    (CERTIFICATES, 3): ("Device Certificate", _certificate), (CERTIFICATES, 4): ("CA Certificate", _certificate),
     (CERTIFICATES, 5): ("Certificate Encoding", _fixed(1, "USINT")),
 }
 
@@ -93,7 +99,7 @@ def _read(probe: Probe, class_id: int, attribute: int) -> tuple[int | None, byte
 
 @check("security.objects.attributes", "the security objects' attributes read with their types",
        "EtherNet/IP Security 0x5E/1 attributes 1-4 and 6-16, CIP Security 0x5D/1 attribute 1 and "
-       "Certificate Management 0x5F/1 attributes 1, 2 and 5 answer success, each the size of its type",
+       "Certificate Management 0x5F/1 attributes 1-5 answer success, each the size of its type",
        BRANCH + "; Wireshark packet-enip.c (dissect_eip_security_*, dissect_eip_cert_*)")
 def attributes(ctx: Context, spec: CheckSpec) -> Outcome:
     skipped = _needs_folder(ctx, spec)

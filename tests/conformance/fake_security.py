@@ -47,6 +47,7 @@ class FakeSecurity:
             (0x5E, 8): b"\x00", (0x5E, 9): b"\x01", (0x5E, 10): b"\x00", (0x5E, 11): b"\x00", (0x5E, 12): b"\x00",
             (0x5E, 13): b"\x01", (0x5E, 14): b"\x00\x00", (0x5E, 15): struct.pack("<H", 12), (0x5E, 16): b"\x00",
             (0x5F, 1): b"\x1aDefault Device Certificate", (0x5F, 2): b"\x03", (0x5F, 5): b"\x00",
+            (0x5F, 3): b"\x01\x02\x20\x37\x24\xca", (0x5F, 4): b"\x01\x02\x20\x37\x24\xcb",
         }
         self.context = ssl.SSLContext(ssl.PROTOCOL_TLS_SERVER)
         self.context.minimum_version = self.context.maximum_version = ssl.TLSVersion.TLSv1_2
