@@ -607,3 +607,34 @@ async def test_a_power_cycle_keeps_the_configuration_and_tls(lab: Path) -> None:
             finally:
                 client.close()
         assert await run(read) == ("CENT", (0, (), b"\x02"))
+
+
+async def test_file_downloads_refused_where_the_file_object_says() -> None:
+    """The EDS file's instance stays read-only; a download out of turn, with a wrong checksum or outside
+    the session is refused and the certificate's file stays as it was."""
+    from cipstack.eds.served import profile_eds_file
+
+    async with Adapter(_settings(files=(profile_eds_file("acg", None),))) as adapter:
+        def attack() -> None:
+            client = Client(f"127.0.0.1:{adapter.port}")
+            try:
+                eds = client.upload(0xC8)
+                with pytest.raises(FileTransferError, match="Initiate_Download answered general status 0x0C"):
+                    client.download(0xC8, b"[File]\n")
+                assert client.upload(0xC8) == eds
+                # Outside a configuration session: refused at the last transfer (0x0C), nothing kept.
+                with pytest.raises(FileTransferError, match="general status 0x0C"):
+                    client.download(DEVICE_FILE, b"-----BEGIN CERTIFICATE-----\n")
+                assert client.status(BEGIN, EIP_SECURITY, 1) == 0
+                initiate = struct.pack("<IHBB", 4, 1, 1, 0) + b"\x00"
+                assert client(0x4C, 0x37, DEVICE_FILE, None, initiate)[0] == 0
+                assert client.status(0x50, 0x37, DEVICE_FILE, None, b"\x05\x00abcd") == 0x20      # out of turn
+                assert client.status(0x50, 0x37, DEVICE_FILE, None, b"\x00\x01ab") == 0x0C        # Middle first
+                assert client.status(0x50, 0x37, DEVICE_FILE, None, b"\x00\x04abcd\x00\x00") == 0xD0  # checksum
+                assert client.upload(DEVICE_FILE) == b""
+                assert client(GET, 0x37, DEVICE_FILE, 1) == (0, (), b"\x02")                       # loaded
+                assert client.status(GET, 1, 1, 7) == 0
+            finally:
+                client.close()
+
+        await run(attack)
