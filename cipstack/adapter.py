@@ -41,8 +41,17 @@ from .runtime.observer import IoEventRelay, Observers, register_relay
 from .runtime.runtime import DeviceClock
 
 if TYPE_CHECKING:
+    import ssl
+
+    from .cip.router import RequestContext
+    from .security import Credentials
+    from .security.configuration import Configurator
     from .security.dtls_target import DtlsServer
+    from .security.endpoint import SecureEndpoint
     from .security.tls_target import TlsServer
+
+#: Seconds a CIP Security configuration session lasts without Kick_Timer (``security.configuration``).
+SECURITY_CONFIG_TIMEOUT = 60.0
 
 log = logging.getLogger(__name__)
 
@@ -109,6 +118,15 @@ class AdapterSettings:
     security: Path | None = None
     #: TCP port of EtherNet/IP over TLS (2221, Wireshark's ENIP_SECURE_PORT; 0: any free one).
     security_port: int = 2221
+    #: Serve the CIP Security, EtherNet/IP Security and Certificate Management objects (0x5D-0x5F): a
+    #: device without ``security`` starts in Factory Default and can be configured over the network.
+    #: Off by default in the library (a plain adapter imports nothing of ``cipstack.security``); the
+    #: ``cipstack adapter`` command turns it on unless ``--no-security-objects``.
+    security_objects: bool = False
+    #: Once configured, refuse explicit requests that do not arrive over TLS (``security.endpoint``).
+    secure_only: bool = False
+    #: Seconds a configuration session lasts without Kick_Timer (``security.configuration``).
+    security_config_timeout: float = SECURITY_CONFIG_TIMEOUT
 
 
 class Adapter:
@@ -160,7 +178,13 @@ class Adapter:
                                           gather_within=GATHER_WITHIN_S, paths=self.io_paths)
             assert self.io is not None   # made by _class1_core, with the endpoint
             self.device.update_io_status()
-        self.requests = RequestSeam(self.device.router)
+        # --secure-only: a configured device's router refuses what did not come over TLS.
+        policy = None
+        if s.secure_only:
+            from .security.endpoint import PlainRefusal
+
+            policy = PlainRefusal(self.device.router, self._arrived_secured, self._security_configured)
+        self.requests = RequestSeam(policy or self.device.router)
         self.replies = ReplySeam()
         self.target = EncapsulationTarget(
             self.device.router, self.device.identity_record,
@@ -181,16 +205,40 @@ class Adapter:
         if s.security is not None:
             from .security import Credentials
             from .security.dtls_target import DtlsServer
+            from .security.endpoint import available_suites_context
             from .security.tls_target import TlsServer
 
             credentials = Credentials.load(s.security)
+            # TLS 1.2 offers what the EtherNet/IP Security object lists as its Allowed Cipher Suites.
             self.tls = TlsServer(self.target, credentials, s.host, s.security_port,
                                  max_connections=s.max_tcp_connections,
-                                 max_connections_per_host=s.max_tcp_connections_per_host, replies=self.replies)
+                                 max_connections_per_host=s.max_tcp_connections_per_host, replies=self.replies,
+                                 context=available_suites_context(credentials))
             self.dtls = DtlsServer(self.target, credentials, s.host, s.security_port, io=self.io_seam,
                                    paths=self.io_paths)
+        #: CIP Security's objects, their configuration and the TLS listener that follows it.
+        self.secure: SecureEndpoint | None = None
+        self.configurator: Configurator | None = None
+        if s.security_objects or s.security is not None:
+            from .security.configuration import Configurator
+            from .security.endpoint import (
+                SecureEndpoint,
+                configuration_of,
+                load_configuration,
+                state_folder,
+            )
+            from .security.objects import register as register_security_objects
+
+            folder = state_folder(s.state_path) if s.security is None else None
+            kept = load_configuration(folder)
+            self.secure = SecureEndpoint(self._tls_server, s.security_port, folder, self.tls, kept)
+            initial = configuration_of(self.tls.credentials) if self.tls is not None else kept
+            self.configurator = Configurator(self.secure.configured, initial, s.security_config_timeout)
+            register_security_objects(self.device.router, self.configurator, self._csr_defaults())
         ports: list[Port] = [ServerPort("EtherNet/IP", self.server)]
-        if self.tls is not None:
+        if self.secure is not None:
+            ports.append(ServerPort("EtherNet/IP over TLS", self.secure))
+        elif self.tls is not None:
             ports.append(ServerPort("EtherNet/IP over TLS", self.tls))
         if self.dtls is not None:
             ports.append(ServerPort("EtherNet/IP over DTLS", self.dtls))
@@ -210,6 +258,28 @@ class Adapter:
         self.control_server: ControlServer | None = None
         #: The HTTP control API, while serving with ``settings.http``.
         self.http_api: Any = None
+
+    def _tls_server(self, credentials: Credentials, context: ssl.SSLContext | None, port: int) -> TlsServer:
+        """A TLS listener for a configuration applied over the network, with this adapter's limits."""
+        from .security.tls_target import TlsServer
+
+        s = self.settings
+        return TlsServer(self.target, credentials, s.host, port, max_connections=s.max_tcp_connections,
+                         max_connections_per_host=s.max_tcp_connections_per_host, replies=self.replies,
+                         context=context)
+
+    def _arrived_secured(self, context: RequestContext) -> bool:
+        """Whether a request arrived over TLS (``--secure-only``)."""
+        return self.secure is not None and self.secure.secured(context)
+
+    def _security_configured(self) -> bool:
+        return self.configurator is not None and self.configurator.is_configured()
+
+    def _csr_defaults(self) -> dict[str, str]:
+        """What a Create_CSR leaves empty: the product's name, its serial number, its address."""
+        info = self.device.identity_info
+        return {"common name": info.product_name, "serial number": f"{info.serial_number:08X}",
+                "subject alternative name": self.device.interface.ip_address}
 
     def _class1_core(self, profile: IoProfile, grid: ProductionGrid | None, endpoint: IoEndpoint) -> IoSeam:
         """The class 1 core and its seam, made by their UDP ``endpoint`` (``IoEndpoint.make_core``) with
@@ -266,8 +336,9 @@ class Adapter:
                                     f"{s.host}:{s.port} (EtherNet/IP, --port)"))
         if self.modbus is not None:
             await self._listen(self.modbus.start, lambda: f"TCP {s.host}:{s.modbus_port} (Modbus TCP, --modbus-port)")
-        if self.tls is not None:
-            await self._listen(self.tls.start,
+        secure = self.secure or self.tls
+        if secure is not None:
+            await self._listen(secure.start,
                                lambda: f"TCP {s.host}:{s.security_port} (EtherNet/IP over TLS, --security-port)")
         if self.dtls is not None and self.tls is not None:
             self.dtls.port = self.tls.port   # the same number in UDP (port 0: the one TLS was given)
@@ -408,6 +479,8 @@ class Adapter:
                 port.shutdown()
         if self.modbus is not None:
             await self.modbus.close()
+        if self.secure is not None:
+            await self.secure.close()
         if self.tls is not None:
             await self.tls.close()
         if self.dtls is not None:

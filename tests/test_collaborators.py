@@ -123,7 +123,7 @@ def _defined_in(hook: object, *places: Path) -> bool:
     return code is not None and any(Path(code.co_filename).is_relative_to(place) for place in places)
 
 
-@pytest.fixture(params=["bare", "every port", "mx2", "eds"])
+@pytest.fixture(params=["bare", "every port", "mx2", "eds", "security"])
 async def adapter(request: pytest.FixtureRequest, tmp_path: Path) -> Any:
     """An adapter on free ports: the ACG as ``cipstack adapter`` runs by default, or with every port its
     family has (Modbus TCP, Modbus-RTU on a pseudo-terminal) and a state file; an Omron MX2 with its
@@ -132,6 +132,9 @@ async def adapter(request: pytest.FixtureRequest, tmp_path: Path) -> Any:
     device = None
     if request.param == "mx2":
         settings = AdapterSettings(host="127.0.0.1", port=0, io_port=0, profile="mx2")
+    elif request.param == "security":   # CIP Security's objects, their endpoint and the --secure-only filter
+        settings = AdapterSettings(host="127.0.0.1", port=0, io_port=0, security_port=0, security_objects=True,
+                                   secure_only=True, state_path=tmp_path / "state.json")
     elif request.param == "every port":
         settings = AdapterSettings(host="127.0.0.1", port=0, io_port=0, modbus_port=0, rtu="pty",
                                    state_path=tmp_path / "state.json")

@@ -29,7 +29,7 @@ ALLOWED = {
     # The battery sits on top: it may use what lies below (the codecs, the EDS reader, the
     # scanner's reading of an EDS) and nothing imports it but the command line.
     "conformance": {"cip", "objects", "assemblies", "eip", "componet", "devices", "catalog", "eds", "scanner",
-                    "errors"},
+                    "security", "errors"},
     # Modbus ports: transport shells over a drive's sans-I/O Modbus core (the register map is the device's).
     "modbus": {"cip", "eip", "devices", "errors"},
     # A running device: its ports, power and link, seams and observers; it knows no shell above it.
@@ -57,7 +57,7 @@ ALLOWED = {
     "catalog": {"assemblies", "cip", "eip", "objects", "errors"},
     "listening": {"errors"},
     # CIP Security: TLS shells around the encapsulation cores, credentials and provisioning.
-    "security": {"eip", "errors"},
+    "security": {"cip", "eip", "errors", "objects"},
     # The EDS tool reads the devices' declarations and writes their files; compared with a live device,
     # it asks the scanner it is given through a protocol of its own (``eds.against.LiveDevice``).
     "eds": {"assemblies", "catalog", "cip", "devices", "eip", "objects", "errors"},

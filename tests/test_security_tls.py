@@ -117,14 +117,15 @@ def _refusals(log: Path) -> list[str]:
 
 
 # -- security init and the credentials folder ---------------------------------------------------------
-def test_init_writes_the_five_files_keys_private(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+def test_init_writes_the_six_files_keys_private(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
     folder = tmp_path / "lab"
     assert main(["security", "init", str(folder)]) == 0
-    names = {"ca.pem", "device.pem", "device.key", "client.pem", "client.key"}
+    names = {"ca.pem", "ca.key", "device.pem", "device.key", "client.pem", "client.key"}
     assert {path.name for path in folder.iterdir()} == names
     assert capsys.readouterr().out.split() == [str(folder / name) for name in
-                                               ("ca.pem", "device.pem", "device.key", "client.pem", "client.key")]
-    for key in ("device.key", "client.key"):
+                                               ("ca.pem", "ca.key", "device.pem", "device.key", "client.pem",
+                                                "client.key")]
+    for key in ("ca.key", "device.key", "client.key"):
         assert stat.S_IMODE((folder / key).stat().st_mode) == 0o600
     credentials = Credentials.load(folder)
     assert credentials.device is not None and credentials.client is not None and credentials.ca is not None

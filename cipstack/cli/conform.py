@@ -20,8 +20,8 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                    help="the class 1 connection points to test: output (O->T), input (T->O) and configuration "
                         "instance (default 1), instead of finding them")
     p.add_argument("--only", metavar="GROUP,...",
-                   help="run these groups only: encap, router, objects, cm, class1, eds, profile (final runs after "
-                        "any that opens a connection or writes)")
+                   help="run these groups only: encap, router, objects, cm, class1, eds, profile, security (final "
+                        "runs after any that opens a connection or writes)")
     p.add_argument("--allow-writes", action="store_true",
                    help="also run checks that write (a set of a read-only attribute)")
     p.add_argument("--allow-reset", action="store_true", help="also reset the device (Identity Reset type 0)")
@@ -32,6 +32,11 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--allow-stress", action="store_true",
                    help="also run the checks that exhaust the device's resources on purpose (encap.session_limit "
                         "opens 40 TCP connections and sessions at once): a device with fewer may stop or crash")
+    p.add_argument("--security", metavar="DIR", type=Path,
+                   help="CIP Security: the folder of `cipstack security init` whose CA the device trusts; enables "
+                        "group security (the security objects, the configuration session, the TLS port)")
+    p.add_argument("--security-port", type=int, default=2221, metavar="N",
+                   help="the device's TLS port for group security (default %(default)s)")
     p.add_argument("--strict", action="store_true",
                    help="warnings are failures: in the exit status and the JUnit report")
     p.add_argument("--json", action="store_true", help="the report as one JSON object on stdout")
@@ -62,6 +67,10 @@ def cmd_conform(args: argparse.Namespace) -> int:
         raise UsageError(f"--only: {exc}") from None
     if args.eds is not None and not Path(args.eds).is_file():
         raise UsageError(f"--eds: no such file: {args.eds}")
+    if args.security is not None and not args.security.is_dir():
+        raise UsageError(f"--security: no such folder: {args.security}")
+    if not 0 < args.security_port < 65536:
+        raise UsageError(f"--security-port {args.security_port} out of range")
     if args.eds_dir is not None and not Path(args.eds_dir).is_dir():
         raise UsageError(f"--eds-dir: no such directory: {args.eds_dir}")
     points = None
@@ -84,7 +93,7 @@ def cmd_conform(args: argparse.Namespace) -> int:
         report = run(host, port, eds=eds, groups=groups, allow_writes=args.allow_writes,
                      allow_reset=args.allow_reset, timeout=args.timeout, connection_points=points,
                      eds_dir=args.eds_dir, allow_motion=args.allow_motion,
-                     allow_stress=args.allow_stress)
+                     allow_stress=args.allow_stress, security=args.security, security_port=args.security_port)
     except TargetUnreachable as exc:
         print(f"cipstack conform: {exc}", file=sys.stderr)
         return EXIT_USAGE

@@ -92,15 +92,23 @@ def _profile_of_model(name: str) -> str:
 
 
 def _security_settings(args: argparse.Namespace) -> dict[str, Any]:
-    """CIP Security: ``--security DIR`` serves EtherNet/IP over TLS too, on ``--security-port``."""
-    if args.security is None:
-        if args.security_port is not None:
-            raise UsageError("--security-port needs --security DIR")
-        return {}
-    port = 2221 if args.security_port is None else args.security_port
-    if not 0 <= port < 65536:
-        raise UsageError(f"--security-port {port} out of range")
-    return {"security": args.security, "security_port": port}
+    """CIP Security: ``--security DIR`` serves EtherNet/IP over TLS too, on ``--security-port``; without
+    it the device starts in factory default and serves TLS there once configured over the network."""
+    settings: dict[str, Any] = {"security_objects": not getattr(args, "no_security_objects", False)}
+    timeout = getattr(args, "security_config_timeout", None)
+    if timeout is not None:
+        if timeout <= 0:
+            raise UsageError(f"--security-config-timeout {timeout:g}: must be more than 0")
+        settings["security_config_timeout"] = timeout
+    if getattr(args, "secure_only", False):
+        settings["secure_only"] = True
+    if args.security_port is not None:
+        if not 0 <= args.security_port < 65536:
+            raise UsageError(f"--security-port {args.security_port} out of range")
+        settings["security_port"] = args.security_port
+    if args.security is not None:
+        settings["security"] = args.security
+    return settings
 
 
 def _limit_settings(args: argparse.Namespace) -> dict[str, Any]:

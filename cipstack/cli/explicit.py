@@ -104,6 +104,10 @@ def eds_document(args: argparse.Namespace) -> Any:
     return _read_eds_file(eds)
 
 
+#: CIP Security, EtherNet/IP Security, Certificate Management (``cipstack.security.declarations``).
+SECURITY_CLASS_IDS = frozenset({0x5D, 0x5E, 0x5F})
+
+
 def _connect_identified(args: argparse.Namespace, standard: tuple[int, int, int] | None = None) -> Any:
     """A blocking scanner that decodes by the declarations of the device's profile when it is one we
     know (the routed device's own Identity when ``--route`` is given). ``standard``: the (class,
@@ -115,13 +119,19 @@ def _connect_identified(args: argparse.Namespace, standard: tuple[int, int, int]
     eds = getattr(args, "eds", None)
     doc = eds_document(args)
     # Without an EDS file, the standard objects' compact declarations: a one-shot command does not
-    # import the objects that serve them.
+    # import the objects that serve them. CIP Security's objects decode by their own declarations,
+    # loaded only when one of their classes is asked for.
+    standard_specs = compact_standard_classes()
+    if standard is not None and standard[0] in SECURITY_CLASS_IDS:
+        from ..security.declarations import SECURITY_CLASSES
+
+        standard_specs = {**standard_specs, **SECURITY_CLASSES}
     scanner = SyncScanner(args.target, timeout=args.timeout, route=parse_route(args.route), identify=False, eds=doc,
-                          catalog=None if doc is not None else Catalog(standard=compact_standard_classes()))
+                          catalog=None if doc is not None else Catalog(standard=standard_specs))
     if doc is not None:
         scanner.catalog.source = f"EDS file {eds}"
         return scanner
-    if standard is not None and standard[0] in compact_standard_classes() and scanner.catalog.attribute(*standard):
+    if standard is not None and standard[0] in standard_specs and scanner.catalog.attribute(*standard):
         return scanner
     try:
         # The library's own identification: the profile's compact declarations, no device model.
@@ -180,6 +190,7 @@ def cmd_get(args: argparse.Namespace) -> int:
             if values is not None:
                 record["value"] = {json_key(name): _jsonable(v) for name, v in values.items()}
             text = ""
+            worded = False
         else:
             result = scanner.get_attribute_single(class_id, instance, attribute, cip_type)
             record = {"status": 0, "data": result.data.hex()}
@@ -190,6 +201,7 @@ def cmd_get(args: argparse.Namespace) -> int:
             if result.spec is not None:
                 record["name"] = result.spec.name
             text = _reading_text(reading)
+            worded = isinstance(reading.raw, tuple)   # a type that words its value (CIP Security's lists)
     record["path"] = args.path
     if args.json:
         import json  # only for --json: a one-shot that prints text does without
@@ -198,7 +210,7 @@ def cmd_get(args: argparse.Namespace) -> int:
     elif "value" in record:
         name = f"{record['name']} = " if "name" in record else ""
         value = record["value"]
-        print(f"{name}{text}" if not isinstance(value, dict)
+        print(f"{name}{text}" if worded or not isinstance(value, dict)
               else "\n".join(_member_text(k, v) for k, v in value.items()), flush=True)
     else:
         print(bytes.fromhex(record["data"]).hex(" ") or "(no data)", flush=True)
@@ -210,6 +222,9 @@ def _reading_text(reading: Any) -> str:
     a string quoted, as Python writes it."""
     if isinstance(reading.raw, str):
         return repr(reading.raw)
+    text = getattr(reading.type, "text", None)
+    if isinstance(reading.raw, tuple) and callable(text):   # a list or record type that words itself
+        return str(text(reading.raw))
     return f"{reading} ({reading.raw})" if reading.scaled else str(reading)
 
 

@@ -313,18 +313,33 @@ COMMANDS: dict[tuple[str, ...], CommandText] = {
     ("security",): CommandText(
         "CIP Security: credentials for EtherNet/IP over TLS",
         "CIP Security (EtherNet/IP over TLS on TCP 2221): make the folder of credentials that "
-        "`cipstack adapter --security DIR` serves with and a scanner connects with.",
-        (("cipstack security init lab", "a lab CA, the device's and the client's certificates and keys in lab/"),),
+        "`cipstack adapter --security DIR` serves with and a scanner connects with, or configure a "
+        "factory-default device over the network with them.",
+        (("cipstack security init lab", "a lab CA, the device's and the client's certificates and keys in lab/"),
+         ("cipstack security configure 192.168.1.20 --security lab", "configure a device over the network")),
     ),
     ("security", "init"): CommandText(
         "make a lab CA, device and client certificates, or a PSK",
         "Write a lab certificate authority (ca.pem), the device's certificate and key (device.pem, "
         "device.key) and the client's, that is the originator's (client.pem, client.key): ECDSA P-256 "
-        "keys, certificates signed with SHA-256, keys mode 0600. With --psk, a pre-shared key file "
+        "keys, certificates signed with SHA-256, keys mode 0600, and the CA's key (ca.key, mode 0600) that "
+        "signs a device's request in `cipstack security configure`. With --psk, a pre-shared key file "
         "(psk.txt, one line IDENTITY:HEX, mode 0600) as well; with --psk-only, that file alone. A file "
         "already there is kept unless --force is given.",
         (("cipstack security init lab", "the lab CA and both key pairs in lab/"),
          ("cipstack security init lab --psk --force", "the same, and a pre-shared key, replacing what is there")),
+    ),
+    ("security", "configure"): CommandText(
+        "configure a factory-default device's CIP Security over the network",
+        "The push model of a configuration tool, over plain EtherNet/IP: Begin_Config, Create_CSR on the "
+        "device (its request read from the File object), the lab CA of DIR signs it, the CA and device "
+        "certificates downloaded into their File object instances and the trust written, "
+        "Verify_Certificate, Apply_Config; then the device is read over TLS on --security-port "
+        "to check it serves the certificate just written. A step the device refuses aborts the session "
+        "and is named in one line.",
+        (("cipstack security configure 192.168.1.20 --security lab", "configure the device with lab's CA"),
+         ("cipstack security configure 127.0.0.1:44818 --security lab --common-name drive-7",
+          "the device certificate named drive-7")),
     ),
     ("eds",): CommandText(
         "EDS files: generate, check, show, fetch",

@@ -213,8 +213,16 @@ def build_parser(command: str | None = None, texts: bool = True) -> argparse.Arg
                                       "security init DIR`); client certificates are verified against the CA"),
                   _DIRECTORY)
         p.add_argument("--security-port", type=number("security port"), metavar="N",
-                       help="TCP and UDP port of EtherNet/IP over TLS and DTLS with --security (default 2221; "
-                            "0 picks a free one)")
+                       help="TCP and UDP port of EtherNet/IP over TLS and DTLS, with --security or once "
+                            "configured over the network (TLS only) (default 2221; 0 picks a free one)")
+        p.add_argument("--secure-only", action="store_true",
+                       help="once configured, refuse explicit requests on plain TCP with CIP status 0x0F "
+                            "(privilege violation); ListIdentity and sessions still answer")
+        p.add_argument("--security-config-timeout", type=float, metavar="SECONDS",
+                       help="seconds a configuration session lasts without Kick_Timer (default 60)")
+        p.add_argument("--no-security-objects", action="store_true",
+                       help="serve no CIP Security objects (0x5D-0x5F): the device cannot be configured over the "
+                            "network")
         _add_http_arguments(p)
         _complete(p.add_argument("--scenario", type=Path, metavar="FILE.toml",
                                  help="run this timeline of faults and actions (docs/scenarios.md), then exit: 0 when "
@@ -442,7 +450,7 @@ def build_parser(command: str | None = None, texts: bool = True) -> argparse.Arg
     if wanted("eds"):
         _add_eds_commands(sub)
     if wanted("security"):
-        from .security import cmd_security_init
+        from .security import cmd_security_configure, cmd_security_init
 
         p = sub.add_parser("security")
         security = p.add_subparsers(dest="security_command", metavar="COMMAND", title="commands", required=True,
@@ -457,6 +465,19 @@ def build_parser(command: str | None = None, texts: bool = True) -> argparse.Arg
         q.add_argument("--force", action="store_true", help="replace files already there")
         q.add_argument("--json", action="store_true", help="one JSON object per line")
         q.set_defaults(func=cmd_security_init)
+        q = security.add_parser("configure")
+        q.add_argument("host", metavar="HOST[:PORT]", help="the device, in factory-default state, on plain EtherNet/IP")
+        _complete(q.add_argument("--security", type=Path, metavar="DIR", required=True,
+                                 help="the folder of `cipstack security init`: its CA signs the device's request"),
+                  _DIRECTORY)
+        q.add_argument("--common-name", metavar="NAME", help="the device certificate's common name (default: the "
+                                                              "device's product name)")
+        q.add_argument("--security-port", type=number("security port"), default=2221, metavar="N",
+                       help="TCP port where the device then serves TLS (default %(default)s)")
+        q.add_argument("--timeout", type=float, default=10.0, metavar="SECONDS",
+                       help="per request (default %(default)s)")
+        q.add_argument("--json", action="store_true", help="one JSON object")
+        q.set_defaults(func=cmd_security_configure)
     if wanted("capture"):
         from ..capture.command import add_arguments as add_capture_arguments
 

@@ -5,7 +5,8 @@ from __future__ import annotations
 import argparse
 import json
 
-from .common import EXIT_OK, UsageError
+from ..errors import CipstackError
+from .common import EXIT_OK, UsageError, _emit
 
 
 def cmd_security_init(args: argparse.Namespace) -> int:
@@ -20,4 +21,43 @@ def cmd_security_init(args: argparse.Namespace) -> int:
             print(json.dumps({"written": str(path)}))
         else:
             print(path)
+    return EXIT_OK
+
+
+def cmd_security_configure(args: argparse.Namespace) -> int:
+    """Configure a factory-default device over the network (``cipstack.security.push``), then check
+    that it answers over TLS with the certificate just written."""
+    import time
+
+    from ..scanner import SyncScanner
+    from ..security import Credentials
+    from ..security.push import configure
+
+    credentials = Credentials.load(args.security)
+    if credentials.client is None:
+        raise UsageError(f"{args.security}: no client.pem and client.key to check the device over TLS with")
+    with SyncScanner(args.host, timeout=args.timeout, identify=False) as scanner:
+        def request(service: int, class_id: int, instance: int, attribute: int | None,
+                    data: bytes) -> tuple[int, tuple[int, ...], bytes]:
+            reply = scanner.request(service, class_id, instance, attribute, data, check=False)
+            return reply.general_status, reply.extended_status, reply.data
+
+        steps: list[str] = []
+        pushed = configure(request, args.security, common_name=args.common_name or "", step=steps.append)
+    host = args.host.rsplit(":", 1)[0] if args.host.count(":") == 1 else args.host
+    secured = f"{host}:{args.security_port}"
+    deadline = time.monotonic() + args.timeout
+    while True:   # the device starts its TLS listener once Apply_Config is answered
+        try:
+            with SyncScanner(secured, security=credentials, timeout=args.timeout, identify=False) as check:
+                identity = check.list_identity()
+            break
+        except CipstackError:
+            if time.monotonic() > deadline:
+                raise
+            time.sleep(0.1)
+    name = identity[0].product_name if identity else "device"
+    _emit(args, {"configured": args.host, "steps": steps, "certificate_subject": pushed.subject, "tls": secured},
+          f"{args.host} configured ({', '.join(steps)}); certificate {pushed.subject}; "
+          f"{name} answers over TLS on {secured}")
     return EXIT_OK

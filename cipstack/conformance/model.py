@@ -35,6 +35,7 @@ GROUPS: dict[str, str] = {
     "class1": "Class 1 behaviour",
     "eds": "EDS against the device",
     "profile": "AC drive profile",
+    "security": "CIP Security",
     "final": "The device as found",
 }
 #: The group run after every run, whatever the groups selected: the battery leaves the device as found.

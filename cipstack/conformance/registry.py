@@ -6,6 +6,7 @@ from __future__ import annotations
 import contextlib
 from collections.abc import Callable, Iterable
 from dataclasses import dataclass, field
+from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 from ..errors import BadRequest
@@ -83,6 +84,10 @@ class Context:
     allow_stress: bool = False
     #: Whether the target still answers, shared by every probe of the run (None: not asked).
     liveness: Liveness | None = None
+    #: CIP Security: the credentials folder (``cipstack security init``) group security uses, and the
+    #: target's TLS port.
+    security: Path | None = None
+    security_port: int = 2221
 
     def probe(self, register: bool = True) -> Probe:
         """A new TCP connection (and session) to the target, closed after the check."""

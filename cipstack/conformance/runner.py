@@ -6,9 +6,10 @@ import contextlib
 import os
 import time
 from collections.abc import Iterable, Sequence
+from pathlib import Path
 from typing import TYPE_CHECKING
 
-from ..eip.wire.encapsulation import DEFAULT_PORT, Command
+from ..eip.wire.encapsulation import DEFAULT_PORT, SECURE_PORT, Command
 from ..errors import BadRequest
 from . import (  # noqa: F401 - they declare checks
     as_found,
@@ -22,6 +23,7 @@ from . import (  # noqa: F401 - they declare checks
     profile,
     router,
 )
+from . import security as security_checks  # noqa: F401 - it declares checks
 from .discovery import DRIVE_DEVICE_TYPES
 from .model import FINAL, GROUPS, CheckSpec, Outcome, Report, Verdict
 from .profile import faulted
@@ -128,7 +130,8 @@ def run(host: str, port: int = DEFAULT_PORT, *, eds: str | os.PathLike[str] | Ed
         groups: str | Iterable[str] | None = None, allow_writes: bool = False, allow_reset: bool = False,
         timeout: float = 5.0, connection_points: tuple[int, int, int] | None = None,
         eds_dir: str | os.PathLike[str] | None = None, allow_motion: bool = False,
-        allow_stress: bool = False) -> Report:
+        allow_stress: bool = False, security: str | os.PathLike[str] | None = None,
+        security_port: int = SECURE_PORT) -> Report:
     """Run the conformance battery against ``host:port``.
 
     ``eds``: an EDS file (or a read ``EdsDocument``) of the target, which enables group ``eds`` and
@@ -139,14 +142,18 @@ def run(host: str, port: int = DEFAULT_PORT, *, eds: str | os.PathLike[str] | Ed
     written without ``allow_writes`` and the device is not reset without ``allow_reset``; the drive
     profile's motion checks (``motion``) run the motor only with ``allow_motion``, and the checks that
     exhaust the device's resources on purpose (``CheckSpec.stress``: 40 sessions at once) only with
-    ``allow_stress``. A target that stops answering stops the run: the check after which it went
-    silent fails with that finding, every later one is not run (``Report.stopped`` says where and
-    why). ``TargetUnreachable`` when the target does not accept a connection and a session.
+    ``allow_stress``. ``security``: a CIP Security credentials folder (``cipstack security init``),
+    which enables group ``security`` against the TLS port ``security_port``; without it that group's
+    checks are not run. A target that stops answering stops the run: the
+    check after which it went silent fails with that finding, every later one is not run
+    (``Report.stopped`` says where and why). ``TargetUnreachable`` when the target does not accept a
+    connection and a session.
     """
     selected = parse_groups(groups if groups is None or isinstance(groups, str) else list(groups))
     doc, view = _load_eds(eds)
     context = Context(host, port, timeout, allow_writes, allow_reset, doc, view, allow_motion=allow_motion,
-                      allow_stress=allow_stress)
+                      allow_stress=allow_stress, security=None if security is None else Path(security),
+                      security_port=security_port)
     started = time.monotonic()
     _preflight(context)
     liveness = context.liveness = Liveness(host, port, timeout)
@@ -158,7 +165,8 @@ def run(host: str, port: int = DEFAULT_PORT, *, eds: str | os.PathLike[str] | Ed
     report = Report(f"{host}:{port}", groups=selected, identity=context.identity,
                     options={"eds": os.fspath(eds) if isinstance(eds, (str, os.PathLike)) else None,
                              "allow_writes": allow_writes, "allow_reset": allow_reset, "allow_motion": allow_motion,
-                             "allow_stress": allow_stress, "timeout": timeout})
+                             "allow_stress": allow_stress, "timeout": timeout,
+                             "security": None if security is None else os.fspath(security)})
     if doc is not None:
         report.options["connection_points"] = "the EDS given (--eds)"
     elif set(selected) & NEED_POINTS:

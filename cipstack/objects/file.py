@@ -8,6 +8,12 @@ Tables 285-287). Layouts as Wireshark's packet-cip.c (dissect_file_*) reads them
 * Upload_Transfer (0x4F): request transfer number (USINT, from 0, wrapping at 256); reply the
   number echoed, the packet type (0 first, 1 middle, 2 last, 4 first and last), the file bytes, and
   on a last packet the file checksum (UINT): the two's complement of the 16-bit sum of the bytes.
+* Initiate_Download (0x4C), on an instance made writable (``FileObject.writable``): request file
+  size (UDINT), instance format version (UINT), file revision (USINT, USINT), file name (STRINGI);
+  reply incremental burn (UDINT), incremental burn time (UINT), transfer size (USINT).
+* Download_Transfer (0x50): request transfer number (USINT), packet type, the data, and on a last
+  packet the checksum (UINT); reply the transfer number. A download to a read-only instance (the
+  EDS file's), a packet out of turn or a wrong packet type is 0x0C or 0x20; a wrong checksum 0xD0.
 """
 
 from __future__ import annotations
@@ -29,9 +35,17 @@ CLASS_ID = 0x37
 #: The instance that holds the device's EDS file.
 EDS_INSTANCE = 0xC8
 INITIATE_UPLOAD, UPLOAD_TRANSFER = 0x4B, 0x4F
+INITIATE_DOWNLOAD, DOWNLOAD_TRANSFER = 0x4C, 0x50
 FIRST, MIDDLE, LAST, ABORT, FIRST_AND_LAST = 0, 1, 2, 3, 4
 #: Instance attribute 1.
 FILE_EMPTY, FILE_LOADED, UPLOAD_INITIATED, UPLOAD_IN_PROGRESS = 1, 2, 3, 5
+DOWNLOAD_INITIATED, DOWNLOAD_IN_PROGRESS = 4, 6
+#: Largest file a download takes (a certificate, a CSR: a few KB at most).
+MAX_DOWNLOAD = 16384
+#: Transfer size this object chooses for a download.
+DOWNLOAD_TRANSFER_SIZE = 200
+#: Checksum mismatch on a download (object-specific general status, as the File object's table gives).
+CHECKSUM_MISMATCH = 0xD0
 #: The largest transfer this object chooses (OpENer's File object caps it at 100; the request's USINT at 255).
 MAX_TRANSFER = 255
 
@@ -53,7 +67,8 @@ SPEC = ClassSpec(
         AttributeSpec(11, "File Encoding Format", USINT, default=0),
     ),
     class_services=frozenset({Service.GET_ATTRIBUTE_SINGLE}),
-    instance_services=frozenset({Service.GET_ATTRIBUTE_SINGLE, INITIATE_UPLOAD, UPLOAD_TRANSFER}),
+    instance_services=frozenset({Service.GET_ATTRIBUTE_SINGLE, INITIATE_UPLOAD, UPLOAD_TRANSFER, INITIATE_DOWNLOAD,
+                                 DOWNLOAD_TRANSFER}),
     max_instance=EDS_INSTANCE,
 )
 
@@ -95,23 +110,119 @@ class _Upload:
     next_packet: int = 0
     last_sent: int = -1
     data: bytes = field(default=b"", repr=False)
+    #: A download's announced file size.
+    size_expected: int = 0
+
+
+#: What a writable instance calls once a download is whole: its bytes and the request that ended it
+#: (a ``CipError`` it raises refuses the last transfer, and the file stays as it was).
+Written = Callable[[bytes, RequestContext], None]
 
 
 class FileObject(CipObject):
-    extra_services = {INITIATE_UPLOAD: "initiate_upload", UPLOAD_TRANSFER: "upload_transfer"}
+    extra_services = {INITIATE_UPLOAD: "initiate_upload", UPLOAD_TRANSFER: "upload_transfer",
+                      INITIATE_DOWNLOAD: "initiate_download", DOWNLOAD_TRANSFER: "download_transfer"}
 
     def __init__(self, files: tuple[StoredFile, ...]) -> None:
         super().__init__(SPEC)
-        self._files = {f.instance: f for f in files}
+        self._files: dict[int, StoredFile] = {}
         self._cache: dict[int, bytes] = {}
         self._uploads: dict[int, _Upload] = {}
+        #: Writable instances: what each calls once a download is whole; downloads in progress.
+        self._written: dict[int, Written] = {}
+        self._downloads: dict[int, _Upload] = {}
+        #: Instances whose content is read from its source at each use (never cached).
+        self._live: set[int] = set()
         for stored in files:
+            self.serve(stored)
+
+    def serve(self, stored: StoredFile, written: Written | None = None, live: bool = False) -> None:
+        """Serve ``stored`` at its instance; with ``written``, it can be downloaded too (read/write);
+        ``live``: its content changes, and is read from ``stored.content`` at each use (``written``
+        then puts what was downloaded where that reads it)."""
+        self._files[stored.instance] = stored
+        self._cache.pop(stored.instance, None)
+        if live:
+            self._live.add(stored.instance)
+        instance = self.instances.get(stored.instance)
+        if instance is None:
             self.add_instance(stored.instance, instance_name=stringi(stored.instance_name),
                               file_name=stringi(stored.file_name),
                               file_revision={"major": stored.revision[0], "minor": stored.revision[1]},
                               file_size=Binding(functools.partial(self._size, stored.instance)),
                               file_checksum=Binding(functools.partial(self._checksum, stored.instance)),
-                              file_encoding_format=stored.encoding)
+                              file_encoding_format=stored.encoding, file_access_rule=0 if written else 1)
+        else:
+            instance.values[1] = FILE_LOADED
+        if written is not None:
+            self._written[stored.instance] = written
+
+    def initiate_download(self, instance: Instance | None, path: ApplicationPath, request: MessageRouterRequest,
+                          context: RequestContext) -> bytes:
+        assert instance is not None
+        state = instance.values[1]
+        if instance.instance_id not in self._written:
+            raise CipError(GeneralStatus.OBJECT_STATE_CONFLICT, data=bytes((state,)),
+                           message="this file is read-only")
+        if len(request.data) < 8:
+            raise CipError(GeneralStatus.NOT_ENOUGH_DATA, message="Initiate_Download: size, version, revision, name")
+        size = struct.unpack_from("<I", request.data)[0]
+        if size > MAX_DOWNLOAD:
+            raise CipError(GeneralStatus.INVALID_PARAMETER, (0x0004,), message=f"a file of {size} bytes")
+        self._downloads[instance.instance_id] = _Upload(DOWNLOAD_TRANSFER_SIZE, data=b"", size_expected=size)
+        instance.values[1] = DOWNLOAD_INITIATED
+        return struct.pack("<IHB", 0, 0, DOWNLOAD_TRANSFER_SIZE)
+
+    def download_transfer(self, instance: Instance | None, path: ApplicationPath, request: MessageRouterRequest,
+                          context: RequestContext) -> bytes:
+        assert instance is not None
+        download = self._downloads.get(instance.instance_id)
+        if download is None:
+            raise CipError(GeneralStatus.OBJECT_STATE_CONFLICT, data=bytes((instance.values[1],)),
+                           message="Download_Transfer before Initiate_Download")
+        if len(request.data) < 2:
+            raise CipError(GeneralStatus.NOT_ENOUGH_DATA, message="Download_Transfer: number and packet type")
+        number, kind = request.data[0], request.data[1]
+        if number != download.next_packet & 0xFF:
+            raise CipError(GeneralStatus.INVALID_PARAMETER, (0x0006,),
+                           message=f"transfer number {number}, {download.next_packet & 0xFF} expected")
+        first = download.next_packet == 0
+        if kind == ABORT:
+            del self._downloads[instance.instance_id]
+            instance.values[1] = FILE_LOADED
+            return bytes((number,))
+        if kind not in ((FIRST, FIRST_AND_LAST) if first else (MIDDLE, LAST)):
+            raise CipError(GeneralStatus.OBJECT_STATE_CONFLICT, data=bytes((instance.values[1],)),
+                           message=f"packet type {kind} out of turn")
+        chunk = request.data[2:]
+        if kind in (LAST, FIRST_AND_LAST):
+            if len(chunk) < 2:
+                raise CipError(GeneralStatus.NOT_ENOUGH_DATA, message="the last packet has no checksum")
+            data = download.data + chunk[:-2]
+            (sent,) = struct.unpack_from("<H", chunk, len(chunk) - 2)
+            if len(data) != download.size_expected:
+                raise CipError(GeneralStatus.INVALID_PARAMETER, (0x0004,),
+                               message=f"{len(data)} bytes, {download.size_expected} announced")
+            if sent != checksum(data):
+                del self._downloads[instance.instance_id]
+                instance.values[1] = FILE_LOADED
+                raise CipError(CHECKSUM_MISMATCH, message="checksum does not match the bytes")
+            self._written[instance.instance_id](data, context)   # may refuse: the file stays as it was
+            del self._downloads[instance.instance_id]
+            if instance.instance_id not in self._live:
+                stored = self._files[instance.instance_id]
+                self._files[instance.instance_id] = StoredFile(stored.instance, stored.instance_name,
+                                                               stored.file_name, stored.revision,
+                                                               functools.partial(bytes, data), stored.encoding)
+                self._cache[instance.instance_id] = data
+            instance.values[1] = FILE_LOADED
+            return bytes((number,))
+        if len(download.data) + len(chunk) > MAX_DOWNLOAD:
+            raise CipError(GeneralStatus.INVALID_PARAMETER, (0x0004,), message="more bytes than announced")
+        download.data += chunk
+        download.next_packet += 1
+        instance.values[1] = DOWNLOAD_IN_PROGRESS
+        return bytes((number,))
 
     def _size(self, instance: int) -> int:
         return len(self.content(instance))
@@ -120,6 +231,8 @@ class FileObject(CipObject):
         return checksum(self.content(instance))
 
     def content(self, instance: int) -> bytes:
+        if instance in self._live:
+            return bytes(self._files[instance].content())
         if instance not in self._cache:
             self._cache[instance] = bytes(self._files[instance].content())
         return self._cache[instance]
@@ -221,6 +334,26 @@ def read_file(request: FileRequest, max_transfer: int = MAX_TRANSFER) -> bytes:
     if sent != checksum(bytes(content)):
         raise FileTransferError(f"checksum 0x{sent:04X}, the bytes make 0x{checksum(bytes(content)):04X}")
     return _uncompressed(bytes(content))
+
+
+def write_file(request: FileRequest, data: bytes, name: str = "file", revision: tuple[int, int] = (1, 0)) -> None:
+    """Download ``data`` into a File object instance with Initiate_Download and Download_Transfer
+    through ``request``, in the transfer size the device chose; ``FileTransferError`` on a refusal."""
+    initiate = struct.pack("<IHBB", len(data), 1, *revision) + stringi(name)
+    status, reply = request(INITIATE_DOWNLOAD, initiate)
+    if status != 0:
+        raise FileTransferError(f"Initiate_Download answered general status 0x{status:02X}")
+    if len(reply) < 7 or reply[6] == 0:
+        raise FileTransferError(f"Initiate_Download reply {reply.hex()} gives no transfer size")
+    size = reply[6]
+    chunks = [data[i:i + size] for i in range(0, len(data), size)] or [b""]
+    for number, chunk in enumerate(chunks):
+        last = number == len(chunks) - 1
+        kind = (FIRST_AND_LAST if number == 0 else LAST) if last else (FIRST if number == 0 else MIDDLE)
+        body = bytes((number & 0xFF, kind)) + chunk + (struct.pack("<H", checksum(data)) if last else b"")
+        status, reply = request(DOWNLOAD_TRANSFER, body)
+        if status != 0:
+            raise FileTransferError(f"Download_Transfer {number} answered general status 0x{status:02X}")
 
 
 def _uncompressed(data: bytes) -> bytes:

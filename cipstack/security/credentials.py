@@ -29,6 +29,8 @@ if TYPE_CHECKING:
     import socket
 
 CA_FILE = "ca.pem"
+#: The lab CA's private key: what signs a device's certificate request (``security configure``).
+CA_KEY = "ca.key"
 DEVICE_CERTIFICATE = "device.pem"
 DEVICE_KEY = "device.key"
 CLIENT_CERTIFICATE = "client.pem"
@@ -270,6 +272,6 @@ def _load_psk(path: Path) -> PreSharedKey:
     return PreSharedKey(identity.encode(), octets)
 
 
-__all__ = ["CA_FILE", "CLIENT_CERTIFICATE", "CLIENT_KEY", "DEVICE_CERTIFICATE", "DEVICE_KEY", "PSK_FILE",
+__all__ = ["CA_FILE", "CA_KEY", "CLIENT_CERTIFICATE", "CLIENT_KEY", "DEVICE_CERTIFICATE", "DEVICE_KEY", "PSK_FILE",
            "SECURE_PORT", "CertificateFile", "Credentials", "KeyPair", "PreSharedKey", "describe_tls_failure",
            "require_cryptography"]

@@ -11,10 +11,12 @@ import datetime
 import os
 import secrets
 from pathlib import Path
+from typing import Any
 
 from ..errors import SecurityError
 from .credentials import (
     CA_FILE,
+    CA_KEY,
     CLIENT_CERTIFICATE,
     CLIENT_KEY,
     DEVICE_CERTIFICATE,
@@ -38,7 +40,7 @@ def init(folder: str | os.PathLike[str], *, certificates: bool = True, psk: bool
     of them exists and ``force`` is false: nothing is then written. ``now`` and ``days`` set the
     certificates' validity (a test makes an expired one with a ``now`` in the past)."""
     path = Path(folder)
-    names = [CA_FILE, DEVICE_CERTIFICATE, DEVICE_KEY, CLIENT_CERTIFICATE, CLIENT_KEY] if certificates else []
+    names = [CA_FILE, CA_KEY, DEVICE_CERTIFICATE, DEVICE_KEY, CLIENT_CERTIFICATE, CLIENT_KEY] if certificates else []
     if psk:
         names.append(PSK_FILE)
     if not names:
@@ -111,9 +113,53 @@ def _certificates(path: Path, device_name: str, client_name: str, days: int,
     device_cert, device_key = leaf(device_name, ExtendedKeyUsageOID.SERVER_AUTH,
                                    [x509.DNSName("localhost"), x509.IPAddress(ipaddress.ip_address("127.0.0.1"))])
     client_cert, client_key = leaf(client_name, ExtendedKeyUsageOID.CLIENT_AUTH, [])
+    ca_key_pem = ca_key.private_bytes(serialization.Encoding.PEM, serialization.PrivateFormat.PKCS8,
+                                      serialization.NoEncryption())
     return [_write(path / CA_FILE, ca.public_bytes(serialization.Encoding.PEM)),
+            _write(path / CA_KEY, ca_key_pem, secret=True),
             _write(path / DEVICE_CERTIFICATE, device_cert), _write(path / DEVICE_KEY, device_key, secret=True),
             _write(path / CLIENT_CERTIFICATE, client_cert), _write(path / CLIENT_KEY, client_key, secret=True)]
+
+
+def sign_csr(folder: str | os.PathLike[str], csr_der: bytes, days: int = LEAF_DAYS,
+             now: datetime.datetime | None = None) -> bytes:
+    """The lab CA of ``folder`` (``ca.pem`` and ``ca.key``) signs a device's certificate signing request
+    (PEM or DER, as a device's CSR file holds it): a server certificate with the request's subject and alternative
+    name, for ``days``. ``SecurityError`` for a request that does not read or whose signature is wrong,
+    or a folder without the CA's key."""
+    require_cryptography()
+    from cryptography import x509
+    from cryptography.hazmat.primitives import hashes, serialization
+    from cryptography.x509.oid import ExtendedKeyUsageOID
+
+    path = Path(folder)
+    if not (path / CA_KEY).exists():
+        raise SecurityError(f"{path / CA_KEY}: missing (the CA's key signs; `cipstack security init` writes it)")
+    try:
+        ca = x509.load_pem_x509_certificate((path / CA_FILE).read_bytes())
+        ca_key: Any = serialization.load_pem_private_key((path / CA_KEY).read_bytes(), password=None)
+    except (OSError, ValueError) as exc:
+        raise SecurityError(f"{path}: the CA does not load ({exc})") from None
+    try:
+        pem_form = csr_der.lstrip().startswith(b"-----BEGIN")
+        request = x509.load_pem_x509_csr(csr_der) if pem_form else x509.load_der_x509_csr(csr_der)
+        valid = request.is_signature_valid
+    except ValueError:
+        raise SecurityError("the device's certificate signing request does not read (not a PEM or DER CSR)") from None
+    if not valid:
+        raise SecurityError("the device's certificate signing request has a wrong signature")
+    start = (now or datetime.datetime.now(datetime.timezone.utc)) - datetime.timedelta(minutes=5)
+    builder = (x509.CertificateBuilder().subject_name(request.subject).issuer_name(ca.subject)
+               .public_key(request.public_key()).serial_number(x509.random_serial_number())
+               .not_valid_before(start).not_valid_after(start + datetime.timedelta(days=days))
+               .add_extension(x509.BasicConstraints(ca=False, path_length=None), critical=True)
+               .add_extension(x509.ExtendedKeyUsage([ExtendedKeyUsageOID.SERVER_AUTH]), critical=False))
+    try:
+        alternative = request.extensions.get_extension_for_class(x509.SubjectAlternativeName)
+        builder = builder.add_extension(alternative.value, critical=False)
+    except x509.ExtensionNotFound:
+        pass
+    return builder.sign(ca_key, hashes.SHA256()).public_bytes(serialization.Encoding.DER)
 
 
 def _write(path: Path, data: bytes, secret: bool = False) -> Path:
@@ -130,4 +176,4 @@ def _write(path: Path, data: bytes, secret: bool = False) -> Path:
     return path
 
 
-__all__ = ["init"]
+__all__ = ["init", "sign_csr"]

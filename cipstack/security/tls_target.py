@@ -260,15 +260,18 @@ class TlsServer:
     def __init__(self, target: EncapsulationTarget, credentials: Credentials, host: str = "127.0.0.1",
                  port: int = SECURE_PORT, verify_client: bool = True,
                  max_connections: int = DEFAULT_MAX_TCP_CONNECTIONS,
-                 max_connections_per_host: int | None = None, replies: ReplySeam | None = None) -> None:
-        """``replies``: the seam replies pass on their way out, the plain server's (``seams.ReplySeam``)."""
+                 max_connections_per_host: int | None = None, replies: ReplySeam | None = None,
+                 context: ssl.SSLContext | None = None) -> None:
+        """``replies``: the seam replies pass on their way out, the plain server's (``seams.ReplySeam``);
+        ``context``: a TLS context made elsewhere (a configuration applied over the network), else the
+        credentials' own."""
         self.target = target
         self.replies = replies or ReplySeam()
         self.credentials = credentials
         self.host = host
         self.port = port
         #: The TLS context every connection's ``SSLObject`` is made from.
-        self.context = credentials.server_context(verify_client)
+        self.context = context or credentials.server_context(verify_client)
         self.limiter = ConnectionLimiter(max_connections, max_connections_per_host)
         #: Seconds a handshake has from the accept (``HANDSHAKE_TIMEOUT``).
         self.handshake_timeout = HANDSHAKE_TIMEOUT

@@ -24,6 +24,7 @@ from dataclasses import dataclass, field
 from tests.fakes import HEADER, cpf, encapsulation_frames, split_cpf
 
 from .fake_drive import ACCEL_MS, DECEL_MS, FakeDrive
+from .fake_security import FakeSecurity
 
 FO_HEAD = struct.Struct("<BBIIHHIB3x")
 FO_SMALL = struct.Struct("<IHIHBB")
@@ -106,7 +107,7 @@ class FakeTarget:
     def __init__(self, deviation: str | Iterable[str] | None = None, host: str = "127.0.0.1", name: bytes = NAME,
                  opener_timeout: bool = False, variant: str | None = None, drive: bool = False,
                  tcp_limit: int | None = None, silent_after: str | None = None, silence: str = "hang",
-                 max_sessions: int = MAX_SESSIONS, opener_layout: bool = False) -> None:
+                 max_sessions: int = MAX_SESSIONS, opener_layout: bool = False, security: bool = False) -> None:
         """``opener_timeout``: on a class 1 timeout, close the TCP session that opened the connection and
         keep the connection's ownership until a Forward_Close of its triad comes, as OpENer does.
         ``variant`` names a check whose other permitted answer this target gives (``VARIANTS``).
@@ -186,6 +187,9 @@ class FakeTarget:
         self.attributes = self._attributes()
         for target in (self._accept, self._serve_udp, self._serve_io):
             self._start(target)
+        #: CIP Security (``security``): its objects and a TLS port (``fake_security``).
+        self.security = FakeSecurity(self.deviates, host, self._start, self._serve_secured,
+                                     self._stop.is_set) if security else None
 
     @property
     def address(self) -> str:
@@ -204,6 +208,8 @@ class FakeTarget:
             thread.join(5)
         for sock in (self.tcp, self.udp, self.io):
             sock.close()
+        if self.security is not None:
+            self.security.close()
 
     def __enter__(self) -> FakeTarget:
         return self
@@ -324,6 +330,11 @@ class FakeTarget:
                 self.live_connections -= 1
                 if state["session"]:
                     self._active_sessions -= 1
+
+    def _serve_secured(self, conn: socket.socket) -> None:
+        """A connection the TLS port accepted: the same encapsulation server as on the plain port."""
+        self._local.conn = conn
+        self._serve_frames(conn, {"session": 0})
 
     def _serve_frames(self, conn: socket.socket, state: dict[str, int]) -> None:
         with conn:
@@ -464,6 +475,8 @@ class FakeTarget:
 
     def _object(self, service: int, class_id: int | None, instance: int | None, attribute: int | None,
                 data: bytes) -> bytes:
+        if self.security is not None and class_id in (0x5D, 0x5E, 0x5F) and instance == 1:
+            return self.security.request(service, class_id, attribute)
         if class_id not in {c for c, _ in self.attributes}:
             if self.deviates("router.unknown_class"):
                 raise EncapStatus(0x0008)  # as cpppo

@@ -15,8 +15,10 @@ EDS = Path(__file__).with_name("fake_device.eds")
 
 
 def run_group(target: FakeTarget, group: str):  # type: ignore[no-untyped-def]
+    secured = target.security
     return run(target.host, target.port, eds=EDS, groups=group, allow_writes=True, allow_reset=True, timeout=2.0,
-               allow_motion=True, allow_stress=True)
+               allow_motion=True, allow_stress=True, security=secured.folder if secured else None,
+               security_port=secured.port if secured else 2221)
 
 
 #: The group whose run shows a check's deviation, where it is not the check's own.
@@ -26,9 +28,9 @@ SHOWN_BY = {"final.as_found": "class1"}
 CONNECTING = ("cm", "class1", "eds", "profile")
 
 
-@pytest.mark.parametrize("group", ["encap", "router", "objects", "cm", "class1", "eds", "profile"])
+@pytest.mark.parametrize("group", ["encap", "router", "objects", "cm", "class1", "eds", "profile", "security"])
 def test_the_conformant_fake_passes_every_check(group: str) -> None:
-    with FakeTarget(drive=group == "profile") as target:
+    with FakeTarget(drive=group == "profile", security=group == "security") as target:
         report = run_group(target, group)
     assert target.errors == []
     assert {o.name: o.observed for o in report if o.verdict is not Verdict.PASS} == {}
@@ -39,7 +41,8 @@ def test_the_conformant_fake_passes_every_check(group: str) -> None:
 
 @pytest.mark.parametrize("check_id", check_ids())
 def test_each_check_fails_on_its_deviation(check_id: str) -> None:
-    with FakeTarget(deviation=check_id, drive=CHECKS[check_id].group == "profile") as target:
+    group = CHECKS[check_id].group
+    with FakeTarget(deviation=check_id, drive=group == "profile", security=group == "security") as target:
         report = run_group(target, SHOWN_BY.get(check_id, CHECKS[check_id].group))
     assert target.errors == []
     failed = {o.id for o in report.failures}
@@ -51,7 +54,7 @@ def test_every_check_has_a_deviation_in_the_fake() -> None:
     battery without a way to fail it is caught here (the parametrized test above would run it, and this
     says why)."""
     source = "".join(Path(__file__).with_name(name).read_text(encoding="utf-8")
-                     for name in ("fake_target.py", "fake_drive.py"))
+                     for name in ("fake_target.py", "fake_drive.py", "fake_security.py"))
     assert [i for i in check_ids() if f'"{i}"' not in source] == []
 
 

@@ -1,0 +1,100 @@
+"""The battery's security group against our own secured emulators: one started with `--security DIR`,
+one configured over the network from factory default (which the group also checks in its factory
+state, with --allow-writes: a session begun, kicked and aborted), and `cipstack conform --security`."""
+
+from __future__ import annotations
+
+import asyncio
+import json
+from pathlib import Path
+
+import pytest
+
+pytest.importorskip("cryptography", reason="the security extra (cryptography) is not installed")
+
+from cipstack.adapter import Adapter, AdapterSettings
+from cipstack.cli import main
+from cipstack.conformance import CHECKS, Verdict, run
+from cipstack.scanner import SyncScanner
+from cipstack.security.provisioning import init
+from cipstack.security.push import configure
+from tests.ports import free_port
+
+SECURITY_CHECKS = {i for i, spec in CHECKS.items() if spec.group == "security"}
+
+
+@pytest.fixture(scope="module")
+def lab(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    folder = tmp_path_factory.mktemp("security") / "lab"
+    init(folder)
+    return folder
+
+
+def _verdicts(report: object) -> dict[str, str]:
+    return {o.id: o.verdict.value for o in report}  # type: ignore[attr-defined]
+
+
+async def test_the_group_passes_against_a_device_started_with_credentials(lab: Path) -> None:
+    settings = AdapterSettings(port=0, io_port=0, security=lab, security_port=free_port())
+    async with Adapter(settings) as adapter:
+        report = await asyncio.to_thread(run, "127.0.0.1", adapter.port, groups="security", security=lab,
+                                         security_port=settings.security_port, timeout=3.0)
+    assert _verdicts(report) == dict.fromkeys(SECURITY_CHECKS, "pass"), \
+        {o.id: o.observed for o in report if o.verdict is not Verdict.PASS}
+
+
+async def test_the_group_passes_before_and_after_configuration_over_the_wire(lab: Path) -> None:
+    settings = AdapterSettings(port=0, io_port=0, security_objects=True, security_port=free_port())
+    async with Adapter(settings) as adapter:
+        # Factory default: no TLS yet; the objects and the session (with --allow-writes) pass.
+        before = await asyncio.to_thread(run, "127.0.0.1", adapter.port, groups="security", security=lab,
+                                         security_port=settings.security_port, timeout=3.0, allow_writes=True)
+        objects = {"security.objects.attributes", "security.objects.psk_unreadable", "security.session.outside",
+                   "security.session.begin"}
+        assert {k: v for k, v in _verdicts(before).items() if k in objects} == dict.fromkeys(objects, "pass")
+        begin = next(o for o in before if o.id == "security.session.begin")
+        assert begin.observed == "after Abort_Config the state reads 00"
+
+        def push() -> None:
+            with SyncScanner(f"127.0.0.1:{adapter.port}", identify=False) as plain:
+                def request(service: int, class_id: int, instance: int, attribute: int | None,
+                            data: bytes) -> tuple[int, tuple[int, ...], bytes]:
+                    reply = plain.request(service, class_id, instance, attribute, data, check=False)
+                    return reply.general_status, reply.extended_status, reply.data
+                configure(request, lab, allowed_suites=(0xC02B,))
+        await asyncio.to_thread(push)
+        assert adapter.secure is not None
+        for _ in range(1000):
+            if adapter.secure.reloads:
+                break
+            await asyncio.sleep(0.01)
+        after = await asyncio.to_thread(run, "127.0.0.1", adapter.port, groups="security", security=lab,
+                                        security_port=settings.security_port, timeout=3.0)
+    assert _verdicts(after) == dict.fromkeys(SECURITY_CHECKS, "pass"), \
+        {o.id: o.observed for o in after if o.verdict is not Verdict.PASS}
+    disallowed = next(o for o in after if o.id == "security.tls.disallowed_suite")
+    assert disallowed.observed == "refused: 0xC023, 0xC02C, 0xC009, 0xCCA9"
+
+
+async def test_conform_security_on_the_command_line(lab: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    settings = AdapterSettings(port=0, io_port=0, security=lab, security_port=free_port())
+    async with Adapter(settings) as adapter:
+        code = await asyncio.to_thread(main, ["conform", f"127.0.0.1:{adapter.port}", "--only", "security",
+                                              "--security", str(lab), "--security-port",
+                                              str(settings.security_port), "--json"])
+    report = json.loads(capsys.readouterr().out)
+    assert code == 0
+    assert {o["id"]: o["verdict"] for o in report["checks"]} == dict.fromkeys(SECURITY_CHECKS, "pass")
+    assert report["options"]["security"] == str(lab)
+
+
+def test_without_credentials_the_group_is_left_out_or_not_run() -> None:
+    from cipstack.conformance import parse_groups
+
+    assert "security" in parse_groups(None)
+    from tests.conformance.fake_target import FakeTarget
+
+    with FakeTarget() as target:
+        report = run(target.host, target.port, groups="security", timeout=2.0)
+    assert {o.verdict for o in report} == {Verdict.NOT_RUN}
+    assert all("needs --security DIR" in o.observed for o in report)
