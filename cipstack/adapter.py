@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import asyncio
 import contextlib
+import errno
 import logging
 import signal
 from collections.abc import Awaitable, Callable
@@ -50,6 +51,8 @@ if TYPE_CHECKING:
     from .security.endpoint import SecureEndpoint
     from .security.tls_target import TlsServer
 
+#: Tries at a TCP and UDP pair of one number for TLS and DTLS on ``--security-port 0``.
+FREE_PORT_TRIES = 20
 #: Seconds a CIP Security configuration session lasts without Kick_Timer (``security.configuration``).
 SECURITY_CONFIG_TIMEOUT = 60.0
 
@@ -341,8 +344,7 @@ class Adapter:
             await self._listen(secure.start,
                                lambda: f"TCP {s.host}:{s.security_port} (EtherNet/IP over TLS, --security-port)")
         if self.dtls is not None and self.tls is not None:
-            self.dtls.port = self.tls.port   # the same number in UDP (port 0: the one TLS was given)
-            await self._listen(self.dtls.start,
+            await self._listen(self._start_dtls,
                                lambda: f"UDP {s.host}:{s.security_port} (EtherNet/IP over DTLS, --security-port)")
         if self.rs485 is not None:
             await self._open_rtu(self.rs485)
@@ -354,6 +356,26 @@ class Adapter:
         # Another process may have begun to listen on the port since it was bound (SO_REUSEADDR lets
         # two bind it while neither listens): then listen() is what fails.
         await self._listen(self.server.serve, lambda: f"TCP {s.host}:{self.server.port} (EtherNet/IP, --port)")
+
+    async def _start_dtls(self) -> None:
+        """DTLS on the UDP port of the number TLS listens on. With ``--security-port 0`` TLS took a
+        free TCP port whose number may be taken in UDP: then TLS takes another, as the plain target
+        does for its pair (``EncapsulationServer.start``)."""
+        assert self.dtls is not None and self.tls is not None
+        any_port = self.settings.security_port == 0
+        for attempt in range(FREE_PORT_TRIES if any_port else 1):
+            self.dtls.port = self.tls.port
+            try:
+                await self.dtls.start()
+                return
+            except OSError as exc:
+                if not any_port or exc.errno != errno.EADDRINUSE or attempt == FREE_PORT_TRIES - 1:
+                    raise
+            await self.tls.close()   # that number is taken in UDP: another pair
+            self.tls.port = 0
+            await self.tls.start()
+            if self.secure is not None:
+                self.secure.port = self.tls.port
 
     async def _listen(self, start: Callable[[], Awaitable[None]], where: Callable[[], str]) -> None:
         """``start`` one listener; if it cannot listen, close what is open and raise ``ListenError``
