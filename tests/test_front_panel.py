@@ -227,6 +227,7 @@ def test_the_plant_lists_every_device_and_links_to_its_panel(tmp_path: Path) -> 
         fleet.kill()
 
 
+@pytest.mark.overload  # 1,024 drives start on both CPUs at once
 def test_the_grid_of_a_thousand_drives_is_summed_up_sorted_filtered_and_live(tmp_path: Path) -> None:
     """1,024 drives on two workers: the grid has a row for each from one request a refresh, a summary
     by state whose counts filter, headings that sort, and a trip through the API seen in it."""
