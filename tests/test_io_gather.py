@@ -125,12 +125,12 @@ def test_a_datagram_wakes_the_loop_when_the_next_firing_is_far_or_there_is_none(
     assert _run(after_the_last) == [("firing", 1), ("datagram", b"after")]
 
 
-def test_the_adapter_gathers_and_asyncio_own_loop_reads_each_datagram() -> None:
-    from cipstack.adapter import Adapter
+def test_the_adapter_gathers_when_told_and_asyncio_own_loop_reads_each_datagram() -> None:
+    from cipstack.adapter import Adapter, AdapterSettings
 
-    adapter = Adapter()
-    assert adapter.io_endpoint is not None
-    assert adapter.io_endpoint.gather_within == GATHER_WITHIN_S
+    default, gathering = Adapter(), Adapter(AdapterSettings(io_gather=GATHER_WITHIN_S))
+    assert default.io_endpoint is not None and gathering.io_endpoint is not None
+    assert (default.io_endpoint.gather_within, gathering.io_endpoint.gather_within) == (0.0, GATHER_WITHIN_S)
 
     async def off_the_lane() -> float:
         endpoint = IoEndpoint(LoggingCore(0.01, 1), "127.0.0.1", 0, gather_within=GATHER_WITHIN_S)
