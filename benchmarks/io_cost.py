@@ -3,15 +3,17 @@
 For each RPI, the adapter emulator (``python -m cipstack adapter``, the ACG-ET2 profile) and one
 ``cipstack io HOST --output 21 --input 71 --rpi RPI --print summary`` run as a user runs them, each in
 its own process, the adapter on one CPU and the originator on another (as issue 50's figures were
-taken: the target on its own core). After a settling second, both processes' CPU time (utime + stime,
-``/proc/PID/stat``) is read over ``--seconds`` and divided by the class 1 packets of that window, both
-directions, counted on the wire (``dumpcap`` on the loopback interface, the class 1 port only; without
-it, by the RPI: two packets per RPI). The process start-up and the Forward_Open are outside the
-window.
+taken: the target on its own core). After a settling second, both processes' CPU time (the
+scheduler's count in nanoseconds, ``/proc/PID/task/*/schedstat``) is read over ``--seconds`` and
+divided by the class 1 packets of that window, both directions, counted on the wire (``dumpcap`` on
+the loopback interface, the class 1 port only; without it, by the RPI: two packets per RPI). The
+process start-up and the Forward_Open are outside the window.
 
-``--against TREE`` runs a second checkout of the project (``git worktree add /tmp/old-tree SHA``)
-under the same conditions, each tree's process started with ``PYTHONPATH=TREE``: the trees take turns
-in every round (the one or the other first by turns), and each figure is the median of
+``--gather`` also runs this tree with the adapter's ``--io-gather 12.5ms`` (O->T datagrams read at
+the productions, not as they come). ``--against TREE`` (repeatable) runs another checkout of the
+project (``git worktree add /tmp/old-tree SHA``) under the same conditions, each tree's processes
+started with ``PYTHONPATH=TREE``: the runs take turns in every round (each round starting with the
+next), and each figure is the median of
 ``--rounds`` rounds, so a drift of the shared machine's load weighs on both alike. The ratio of the
 two is the figure to quote; absolute microseconds move with the machine's load.
 
@@ -70,10 +72,11 @@ def tree_env(tree: Path) -> dict[str, str]:
     return env
 
 
-def start_tree_adapter(tree: Path, port: int, io_port: int, cpu: int | None, state_dir: str) -> subprocess.Popen[bytes]:
+def start_tree_adapter(tree: Path, port: int, io_port: int, cpu: int | None, state_dir: str,
+                       extra: Sequence[str] = ()) -> subprocess.Popen[bytes]:
     process = subprocess.Popen([sys.executable, "-m", "cipstack", "adapter", "--host", "127.0.0.1", "--port",
                                 str(port), "--io-port", str(io_port), "--log-level", "WARNING", "--quiet", "--state",
-                                os.path.join(state_dir, "state.json")], env=tree_env(tree), cwd=state_dir,
+                                os.path.join(state_dir, "state.json"), *extra], env=tree_env(tree), cwd=state_dir,
                                stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
     pin_to_cpu(process.pid, cpu)
     deadline = time.monotonic() + 30
@@ -88,16 +91,26 @@ def start_tree_adapter(tree: Path, port: int, io_port: int, cpu: int | None, sta
 
 
 def cpu_total(pid: int) -> float:
-    return sum(cpu_seconds(pid))
+    """CPU seconds of every thread of ``pid`` from the scheduler's own count (``/proc/PID/task/*/schedstat``,
+    nanoseconds), not ``/proc/PID/stat``'s 10 ms ticks: a run at RPI 10 ms spends about 0.1 s in all,
+    which ticks would give to within a tenth. ``/proc/PID/stat`` where schedstat is missing."""
+    try:
+        total = 0
+        for task in os.listdir(f"/proc/{pid}/task"):
+            with open(f"/proc/{pid}/task/{task}/schedstat") as stat:
+                total += int(stat.read().split()[0])
+        return total / 1e9
+    except (OSError, ValueError, IndexError):
+        return sum(cpu_seconds(pid))
 
 
-def one_run(tree: Path, rpi_text: str, seconds: float, cpus: tuple[int, int] | None, workdir: Path
-            ) -> dict[str, Any]:
+def one_run(tree: Path, rpi_text: str, seconds: float, cpus: tuple[int, int] | None, workdir: Path,
+            extra: Sequence[str] = ()) -> dict[str, Any]:
     """One tree at one RPI: the adapter and ``cipstack io`` each on its CPU; CPU per packet of each."""
     rpi = parse_rpi(rpi_text)
     port, io_port = free_port(), free_port()
     with tempfile.TemporaryDirectory() as state_dir:
-        adapter = start_tree_adapter(tree, port, io_port, cpus[0] if cpus else None, state_dir)
+        adapter = start_tree_adapter(tree, port, io_port, cpus[0] if cpus else None, state_dir, extra)
         try:
             duration = SETTLE_S + seconds + 2.0
             originator = subprocess.Popen(
@@ -148,45 +161,62 @@ def _window(adapter: int, originator: int, io_port: int, seconds: float, capture
         return measure()
 
 
-def measure(trees: Sequence[Path], rpis: Sequence[str], seconds: float, rounds: int) -> dict[str, Any]:
+#: ``--gather``: this tree once more, the adapter with ``--io-gather`` at the benchmarks' value.
+GATHER = ("--io-gather", "12.5ms")
+
+
+def label(tree: Path, extra: Sequence[str]) -> str:
+    return str(tree) + (" " + " ".join(extra) if extra else "")
+
+
+def measure(trees: Sequence[Path], rpis: Sequence[str], seconds: float, rounds: int,
+            variants: Sequence[tuple[Path, tuple[str, ...]]] = ()) -> dict[str, Any]:
     cpus = core_pair()
-    runs: dict[str, dict[str, list[dict[str, Any]]]] = {str(t): {r: [] for r in rpis} for t in trees}
+    runners = [(tree, ()) for tree in trees] + list(variants)
+    runs: dict[str, dict[str, list[dict[str, Any]]]] = {label(*r): {rpi: [] for rpi in rpis} for r in runners}
     with tempfile.TemporaryDirectory() as tmp:
         workdir = Path(tmp)
         os.chmod(workdir, 0o755)  # dumpcap may run as another user
         for index in range(rounds):
-            order = list(trees[index % len(trees):]) + list(trees[:index % len(trees)])
+            order = runners[index % len(runners):] + runners[:index % len(runners)]
             for rpi in rpis:
-                for tree in order:
-                    runs[str(tree)][rpi].append(one_run(tree, rpi, seconds, cpus, workdir))
+                for tree, extra in order:
+                    runs[label(tree, extra)][rpi].append(one_run(tree, rpi, seconds, cpus, workdir, extra))
     medians = {tree: {rpi: {key: statistics.median(r[key] for r in found)
                             for key in ("target_us", "originator_us", "packets_per_s")}
                       for rpi, found in by_rpi.items()}
                for tree, by_rpi in runs.items()}
-    return {"trees": [str(t) for t in trees], "rounds": rounds, "seconds": seconds, "pinned": cpus is not None,
+    return {"trees": [label(*r) for r in runners], "rounds": rounds, "seconds": seconds, "pinned": cpus is not None,
             "medians": medians, "runs": runs}
 
 
 def report(result: dict[str, Any]) -> list[str]:
+    """Per RPI: each run's medians (this tree first) and, for the others, this tree's figure over
+    theirs; then this tree's target against OpENer's figure."""
     lines = []
     trees = result["trees"]
     current = trees[0]
+
+    def name(run: str) -> str:
+        tree, _, extra = run.partition(" ")
+        return Path(tree).name + (f" {extra}" if extra else "")
+
     for rpi, figures in result["medians"][current].items():
         rpi_ms = parse_rpi(rpi) * 1e3
-        line = (f"RPI {rpi:>5}: target {figures['target_us']:6.1f} us/packet, originator "
-                f"{figures['originator_us']:6.1f} us/packet ({figures['packets_per_s']:.0f} packets/s)")
-        for other in trees[1:]:
-            old = result["medians"][other][rpi]
-            target_ratio = figures["target_us"] / old["target_us"]
-            originator_ratio = figures["originator_us"] / old["originator_us"]
-            line += (f"; {Path(other).name}: target {old['target_us']:.1f} ({target_ratio:.2f}x),"
-                     f" originator {old['originator_us']:.1f} ({originator_ratio:.2f}x)")
-        lines.append(line)
+        lines.append(f"RPI {rpi}:")
+        for run in trees:
+            found = result["medians"][run][rpi]
+            line = (f"    {name(run):<40} target {found['target_us']:6.1f} us/packet, originator "
+                    f"{found['originator_us']:6.1f} us/packet ({found['packets_per_s']:.0f} packets/s)")
+            if run != current:
+                line += (f"; {name(current)} / this: target {figures['target_us'] / found['target_us']:.2f}x, "
+                         f"originator {figures['originator_us'] / found['originator_us']:.2f}x")
+            lines.append(line)
         opener = OPENER_US.get(rpi_ms)
         if opener is not None:
             ratio = figures["target_us"] / opener
-            lines.append(f"    [{'PASS' if ratio <= TARGET_FACTOR else 'FAIL'}] target {ratio:.2f}x OpENer's "
-                         f"{opener:g} us (issue 50's figure; target <= {TARGET_FACTOR:g}x)")
+            lines.append(f"    [{'PASS' if ratio <= TARGET_FACTOR else 'FAIL'}] {name(current)}: target {ratio:.2f}x "
+                         f"OpENer's {opener:g} us (issue 50's figure; target <= {TARGET_FACTOR:g}x)")
     lines.append(f"medians of {result['rounds']} rounds of {result['seconds']:g} s, "
                  f"{'pinned' if result['pinned'] else 'unpinned'}; load average {os.getloadavg()[0]:.2f} "
                  f"on {os.cpu_count()} CPUs")
@@ -200,6 +230,8 @@ def main(argv: Sequence[str] | None = None) -> int:
     parser.add_argument("--rounds", type=int, default=3, help="rounds; the median is printed (default 3)")
     parser.add_argument("--against", type=Path, action="append", default=[],
                         help="another checkout measured in the same run (repeatable)")
+    parser.add_argument("--gather", action="store_true",
+                        help="also this tree's adapter with --io-gather 12.5ms (read O->T data at the productions)")
     parser.add_argument("--json", action="store_true", help="one JSON object instead of the text report")
     args = parser.parse_args(argv)
     trees = [HERE] + [tree.resolve() for tree in args.against]
@@ -207,7 +239,8 @@ def main(argv: Sequence[str] | None = None) -> int:
         if not (tree / "cipstack" / "__init__.py").is_file():
             print(f"io_cost.py: {tree} is not a checkout of cipstack", file=sys.stderr)
             return 2
-    result = measure(trees, args.rpi or DEFAULT_RPIS, args.seconds, args.rounds)
+    result = measure(trees, args.rpi or DEFAULT_RPIS, args.seconds, args.rounds,
+                     [(HERE, GATHER)] if args.gather else [])
     if args.json:
         print(json.dumps(result))
     else:

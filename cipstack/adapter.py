@@ -22,7 +22,7 @@ from .devices.keypad import Keypad, NoKeypad
 from .devices.profiles import DEFAULT_MAC, DEFAULT_PROFILE, ProfileOptions, build_device
 from .eip.interfaces import interface_of
 from .eip.io_core import DEFAULT_IO_PORT, ProductionGrid
-from .eip.io_server import GATHER_WITHIN_S, DatagramPaths, IoEndpoint, freeze_startup_objects
+from .eip.io_server import DatagramPaths, IoEndpoint, freeze_startup_objects
 from .eip.target.core import EncapsulationTarget, TargetSettings
 from .eip.target.io_target import IoProfile, IoTarget
 from .eip.target.limits import DEFAULT_MAX_TCP_CONNECTIONS
@@ -92,6 +92,10 @@ class AdapterSettings:
     frame_timeout: float = DEFAULT_FRAME_TIMEOUT
     #: UDP port of class 1 I/O (consumed O->T datagrams, and the default T->O destination port).
     io_port: int = DEFAULT_IO_PORT
+    #: Seconds: while the next class 1 production is this near, O->T datagrams do not wake the loop
+    #: and the production reads them first (``IoEndpoint``'s ``gather_within``; 0: off, each is read
+    #: as it comes). ``io_server.GATHER_WITHIN_S`` is the value the benchmarks use.
+    io_gather: float = 0.0
     #: Unix socket of the control channel (``cipstack drive ...``); None: the default for the port.
     control_path: Path | None = None
     #: Print the device's status line on stdout whenever it changes.
@@ -178,7 +182,7 @@ class Adapter:
             self.io_endpoint = IoEndpoint(host=s.host, port=s.io_port,
                                           multicast_ttl=lambda: int(self.device.tcpip.get(1, 8)), exclusive=True,
                                           make_core=partial(self._class1_core, profile, production_grid),
-                                          gather_within=GATHER_WITHIN_S, paths=self.io_paths)
+                                          gather_within=s.io_gather, paths=self.io_paths)
             assert self.io is not None   # made by _class1_core, with the endpoint
             self.device.update_io_status()
         # --secure-only: a configured device's router refuses what did not come over TLS.

@@ -125,12 +125,12 @@ def test_a_datagram_wakes_the_loop_when_the_next_firing_is_far_or_there_is_none(
     assert _run(after_the_last) == [("firing", 1), ("datagram", b"after")]
 
 
-def test_the_adapter_gathers_and_asyncio_own_loop_reads_each_datagram() -> None:
-    from cipstack.adapter import Adapter
+def test_the_adapter_gathers_when_told_and_asyncio_own_loop_reads_each_datagram() -> None:
+    from cipstack.adapter import Adapter, AdapterSettings
 
-    adapter = Adapter()
-    assert adapter.io_endpoint is not None
-    assert adapter.io_endpoint.gather_within == GATHER_WITHIN_S
+    default, gathering = Adapter(), Adapter(AdapterSettings(io_gather=GATHER_WITHIN_S))
+    assert default.io_endpoint is not None and gathering.io_endpoint is not None
+    assert (default.io_endpoint.gather_within, gathering.io_endpoint.gather_within) == (0.0, GATHER_WITHIN_S)
 
     async def off_the_lane() -> float:
         endpoint = IoEndpoint(LoggingCore(0.01, 1), "127.0.0.1", 0, gather_within=GATHER_WITHIN_S)
@@ -145,3 +145,41 @@ def test_the_adapter_gathers_and_asyncio_own_loop_reads_each_datagram() -> None:
         assert loop.run_until_complete(off_the_lane()) == 0.0
     finally:
         loop.close()
+
+
+async def test_a_gathering_adapter_serves_a_scanner_both_ways_at_rpi_2ms() -> None:
+    # The adapter with io_gather, a scanner at RPI 2 ms: the drive's input comes, the output reaches
+    # the drive, nothing is lost and no watchdog runs out on either side.
+    from cipstack.adapter import Adapter, AdapterSettings
+    from cipstack.devices.profiles import PROFILES
+    from cipstack.scanner import Scanner
+
+    adapter = Adapter(AdapterSettings(host="127.0.0.1", port=0, io_port=0, io_gather=GATHER_WITHIN_S))
+    await adapter.start()
+    make_catalog = PROFILES["acg"].catalog
+    assert make_catalog is not None and adapter.io_endpoint is not None and adapter.io is not None
+    try:
+        async with await Scanner.connect(f"127.0.0.1:{adapter.port}", catalog=make_catalog()) as scanner, \
+                scanner.io_connection(output=21, input=71, rpi=0.002, timeout_multiplier=5,
+                                      target_io_port=adapter.io_endpoint.port) as io:
+            io.output.run_forward = True
+            io.output.speed_reference = 900
+            assert (await io.wait_input(lambda i: i.ready, timeout=5)).ready
+            await _until(lambda: io.stats.sent > 200 and io.stats.received > 200)
+            # What the drive holds in its output assembly (4/21/3) is what the scanner sends.
+            assert (await scanner.get_attribute_single(4, 21, 3)).data == bytes.fromhex("01008403")
+            assert io.stats.lost == 0 and not io.timed_out
+            assert adapter.io.timeouts == 0
+    finally:
+        await adapter.close()
+
+
+def test_a_bad_io_gather_is_one_line_and_no_traceback() -> None:
+    import subprocess
+    import sys
+
+    done = subprocess.run([sys.executable, "-m", "cipstack", "adapter", "--io-gather", "soon"], capture_output=True,
+                          text=True, timeout=60)
+    assert done.returncode == 2 and "Traceback" not in done.stderr, done.stderr
+    assert done.stderr.strip().splitlines()[-1] == \
+        "cipstack adapter: error: 'soon' is not a duration (e.g. 2, 500ms, 1.5s)"

@@ -127,6 +127,9 @@ def _limit_settings(args: argparse.Namespace) -> dict[str, Any]:
         minimum = 0 if name in ("max_connections", "max_io_connections") else 1
         if value is not None and value < minimum:
             raise UsageError(f"--{name.replace('_', '-')} {value}: must be at least {minimum}")
+    io_gather = getattr(args, "io_gather", None)   # a duration, checked by its parser (not negative)
+    if io_gather is not None:
+        limits["io_gather"] = io_gather
     return limits
 
 

@@ -59,13 +59,16 @@ COALESCE_S = 0.0002
 #: triggered: what is left is reported again at once).
 DRAIN_LIMIT = 64
 
-#: ``IoEndpoint``'s ``gather_within`` for the adapter: while the next firing is this near, a datagram
-#: does not wake the process; the firing reads what came first, then produces. A wake-up costs more
-#: than a datagram's whole protocol work (benchmarks/README.md, "Where a class 1 packet's CPU goes"),
-#: and at an RPI of 10 ms or less a production fires within one RPI anyway. The O->T data reaches the
-#: device at the next firing, before the production that reports on it, and is timed when it is
-#: read, as a loop held up by other work times it: the watchdog may run out up to this much later,
-#: never sooner. A longer wait than this, and the socket wakes the process again.
+#: A ``gather_within`` for the adapter (``AdapterSettings.io_gather``, ``--io-gather``; off by
+#: default): while the next firing is this near, a datagram does not wake the process; the firing
+#: reads what came first, then produces. A wake-up costs more than a datagram's whole protocol work
+#: (benchmarks/README.md, "Where a class 1 packet's CPU goes"), and at an RPI of 10 ms or less a
+#: production fires within one RPI anyway. The O->T data reaches the device at the next firing,
+#: before the production that reports on it, and is timed when it is read, as a loop held up by
+#: other work times it: the watchdog may run out up to this much later, never sooner. A longer wait
+#: than this, and the socket wakes the process again. Off by default: on a loaded virtual machine a
+#: wake-up by a timer alone came up to half a second late where the datagrams' wake-ups had kept
+#: the productions going (benchmarks/README.md).
 GATHER_WITHIN_S = 0.0125
 
 #: The largest UDP payload: a Large_Forward_Open connection may carry up to this much.
