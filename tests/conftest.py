@@ -12,6 +12,7 @@ from __future__ import annotations
 import os
 import sys
 from collections.abc import Callable, Iterator
+from pathlib import Path
 from typing import Any
 
 import pytest
@@ -133,3 +134,23 @@ def pytest_xdist_auto_num_workers(config: pytest.Config) -> int:
     a command's answer before a fault ends) allow for. More only adds collections (each worker
     collects the whole suite) and load."""
     return 2 * len(os.sched_getaffinity(0)) + 1
+
+
+# -- the lab credentials the CIP Security tests share (``cipstack security init``, once per module) -----
+@pytest.fixture(scope="module")
+def lab(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    from cipstack.security.provisioning import init
+
+    folder = tmp_path_factory.mktemp("security") / "lab"
+    init(folder)
+    return folder
+
+
+@pytest.fixture(scope="module")
+def other_lab(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    """Credentials of another CA: neither side trusts those of ``lab``."""
+    from cipstack.security.provisioning import init
+
+    folder = tmp_path_factory.mktemp("security") / "other"
+    init(folder)
+    return folder

@@ -36,7 +36,6 @@ from cipstack.scanner import Scanner, SyncScanner
 from cipstack.security import Credentials
 from cipstack.security.dtls import DtlsChannel, dtls_context
 from cipstack.security.dtls_link import DtlsLink
-from cipstack.security.provisioning import init
 from tests.ports import free_port
 from tests.waiting import wait_for
 
@@ -90,19 +89,6 @@ class Served:
         self.loop.close()
 
 
-@pytest.fixture(scope="module")
-def lab(tmp_path_factory: pytest.TempPathFactory) -> Path:
-    folder = tmp_path_factory.mktemp("security") / "lab"
-    init(folder)
-    return folder
-
-
-@pytest.fixture(scope="module")
-def other_lab(tmp_path_factory: pytest.TempPathFactory) -> Path:
-    """Credentials of another CA: the device does not trust its client certificate."""
-    folder = tmp_path_factory.mktemp("security") / "other"
-    init(folder)
-    return folder
 
 
 @pytest.fixture

@@ -29,7 +29,7 @@ from cipstack.security.attributes import PATH_LIST, PRE_SHARED_KEYS
 from cipstack.security.certificates import pem
 from cipstack.security.configuration import Configurator
 from cipstack.security.declarations import CIPHER_SUITES, SecurityState
-from cipstack.security.provisioning import init, sign_csr
+from cipstack.security.provisioning import sign_csr
 from cipstack.security.push import configure
 from tests.ports import free_port
 
@@ -43,18 +43,6 @@ CSR_FILE, DEVICE_FILE, CA_FILE = 0xC9, 0xCA, 0xCB
 CSR_PATH, DEVICE_PATH, CA_PATH = (bytes((2, 0x20, 0x37, 0x24, n)) for n in (CSR_FILE, DEVICE_FILE, CA_FILE))
 
 
-@pytest.fixture(scope="module")
-def lab(tmp_path_factory: pytest.TempPathFactory) -> Path:
-    folder = tmp_path_factory.mktemp("security") / "lab"
-    init(folder)
-    return folder
-
-
-@pytest.fixture(scope="module")
-def other_lab(tmp_path_factory: pytest.TempPathFactory) -> Path:
-    folder = tmp_path_factory.mktemp("security") / "other"
-    init(folder)
-    return folder
 
 
 class Client:

@@ -88,19 +88,6 @@ def _stop(process: subprocess.Popen[bytes]) -> None:
             process.wait()
 
 
-@pytest.fixture(scope="module")
-def lab(tmp_path_factory: pytest.TempPathFactory) -> Path:
-    folder = tmp_path_factory.mktemp("security") / "lab"
-    init(folder)
-    return folder
-
-
-@pytest.fixture(scope="module")
-def other_lab(tmp_path_factory: pytest.TempPathFactory) -> Path:
-    """Credentials of another CA: neither side trusts those of ``lab``."""
-    folder = tmp_path_factory.mktemp("security") / "other"
-    init(folder)
-    return folder
 
 
 @pytest.fixture(scope="module")

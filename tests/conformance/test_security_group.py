@@ -16,18 +16,11 @@ from cipstack.adapter import Adapter, AdapterSettings
 from cipstack.cli import main
 from cipstack.conformance import CHECKS, Verdict, run
 from cipstack.scanner import SyncScanner
-from cipstack.security.provisioning import init
 from cipstack.security.push import configure
 from tests.ports import free_port
 
 SECURITY_CHECKS = {i for i, spec in CHECKS.items() if spec.group == "security"}
 
-
-@pytest.fixture(scope="module")
-def lab(tmp_path_factory: pytest.TempPathFactory) -> Path:
-    folder = tmp_path_factory.mktemp("security") / "lab"
-    init(folder)
-    return folder
 
 
 def _verdicts(report: object) -> dict[str, str]:

@@ -73,13 +73,7 @@ class BlockingEncapsulationClient(CoreClient):
         sock.setsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY, 1)
         client._sock = sock if security is None else security.wrap_client(sock, host, port)
         client._security = security
-        if register:
-            try:
-                client.perform(client.core.register_session())
-            except BaseException:
-                client.close()
-                raise
-        return client
+        return client._registered() if register else client
 
     @classmethod
     def connect_dtls(cls, host: str, port: int, timeout: float, security: SecureChannel,
@@ -90,13 +84,16 @@ class BlockingEncapsulationClient(CoreClient):
         client = cls(host, port, timeout)
         client._sock = client.datagram_link = security.datagram_link(host, port, timeout)
         client._security = security
-        if register:
-            try:
-                client.perform(client.core.register_session())
-            except BaseException:
-                client.close()
-                raise
-        return client
+        return client._registered() if register else client
+
+    def _registered(self) -> BlockingEncapsulationClient:
+        """This client with its session registered; closed if the registration fails."""
+        try:
+            self.perform(self.core.register_session())
+        except BaseException:
+            self.close()
+            raise
+        return self
 
     @property
     def is_open(self) -> bool:
