@@ -473,7 +473,8 @@ function showEvents() {
 // One GET /plant a second brings every device's row (a thousand devices in one answer); the rows are kept,
 // their cells changed where the value did, then sorted and filtered again. A summary counts the devices
 // by state; a click on a count filters by it, a click on a column heading sorts by it (again: reversed).
-const plant = {rows: new Map(), keys: new Map(), sortColumn: 0, descending: false};
+const plant = {rows: new Map(), keys: new Map(), sortColumn: 0, descending: false, summary: new Map(), order: "",
+  summaryTotal: null};
 const PLANT_REFRESH_MS = 1000;
 const OVERLOAD_SHARE = 0.01;
 
@@ -543,13 +544,31 @@ function showPlant(devices) {
   }
   const items = [...counts.entries()].sort((a, b) => b[1] - a[1]).map(([state, count]) => [state, count, state]);
   if (late) items.push(["missing productions", late, "late"]);
-  const parts = [element("span", `${plant.rows.size} devices:`)];
+  // The summary's buttons are kept from one refresh to the next, their counts changed in place: a
+  // button being clicked, or holding the keyboard's focus, is never swapped for a new one under it.
+  // Only a new or vanished state (or a new order of the counts) lays the summary out again.
+  const order = items.map(([, , filter]) => filter).join("\n");
   for (const [label, count, filter] of items) {
-    const button = element("button", `${count} ${label}`, {type: "button", "data-filter": filter});
-    button.addEventListener("click", () => { $("plant-filter").value = filter.toLowerCase(); filterPlant(); });
-    parts.push(document.createTextNode(" "), button);
+    let button = plant.summary.get(filter);
+    if (button === undefined) {
+      button = element("button", "", {type: "button", "data-filter": filter});
+      button.addEventListener("click", () => { $("plant-filter").value = filter.toLowerCase(); filterPlant(); });
+      plant.summary.set(filter, button);
+    }
+    const text = `${count} ${label}`;
+    if (button.textContent !== text) button.textContent = text;
   }
-  $("plant-summary").replaceChildren(...parts);
+  const total = `${plant.rows.size} devices:`;
+  if (order !== plant.order || !plant.summaryTotal) {
+    for (const filter of [...plant.summary.keys()]) if (!items.some((item) => item[2] === filter)) plant.summary.delete(filter);
+    plant.summaryTotal = element("span", total);
+    const parts = [plant.summaryTotal];
+    for (const [, , filter] of items) parts.push(document.createTextNode(" "), plant.summary.get(filter));
+    $("plant-summary").replaceChildren(...parts);
+    plant.order = order;
+  } else if (plant.summaryTotal.textContent !== total) {
+    plant.summaryTotal.textContent = total;
+  }
   sortPlant();
   filterPlant();
 }
