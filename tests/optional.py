@@ -10,7 +10,7 @@ import pytest
 
 #: What brings each package: the extra a user installs for it.
 _EXTRA = {"aiohttp": "http", "prometheus_client": "http", "matplotlib": "plot", "shtab": "completion",
-          "serial": "rtu"}
+          "serial": "rtu", "cryptography": "security", "OpenSSL": "security"}
 
 
 def needs(module: str) -> ModuleType:
