@@ -88,28 +88,50 @@ def list_fields(capsys: pytest.CaptureFixture[str], *args: str) -> str:
     return capsys.readouterr().out
 
 
-def test_every_acg_connection_lists_the_profile_fields(acg_file: Path, acg_adapter: tuple[str, int],
-                                                       capsys: pytest.CaptureFixture[str]) -> None:
+#: The connections of the ACG's file: 12 exclusive owners, 12 input only, 12 listen only.
+ACG_CONNECTIONS = 36
+
+
+@pytest.fixture(scope="module")
+def acg_view(acg_file: Path) -> Any:
+    return read_view(read_eds(acg_file))
+
+
+@pytest.fixture(scope="module")
+def acg_declared() -> dict[int, AssemblySchema]:
+    """The assemblies the profile declares whatever the CM settings."""
+    return PROFILES["acg"].catalog().assemblies  # type: ignore[misc]
+
+
+def by_profile(connection: Any, declared: dict[int, AssemblySchema]) -> bool:
+    """Whether ``cipstack io`` lists this connection's fields from the profile's declarations alone."""
+    return bool((connection.heartbeat or connection.o_t_point in declared) and connection.t_o_point in declared)
+
+
+def test_the_acg_file_offers_each_connection_kind(acg_view: Any, acg_declared: dict[int, AssemblySchema]) -> None:
+    """The 4 pairs and their 4 inputs that need no CM setting, by the profile; the others by the schemas
+    of the device at the factory settings the file describes."""
+    by_command = sum(by_profile(c, acg_declared) for c in acg_view.connections)
+    assert (len(acg_view.connections), by_command) == (ACG_CONNECTIONS, 12)
+
+
+@pytest.mark.parametrize("number", range(1, ACG_CONNECTIONS + 1))
+def test_each_acg_connection_lists_the_profile_fields(number: int, acg_file: Path, acg_adapter: tuple[str, int],
+                                                      acg_view: Any, acg_declared: dict[int, AssemblySchema],
+                                                      capsys: pytest.CaptureFixture[str]) -> None:
     address, _ = acg_adapter
-    view = read_view(read_eds(acg_file))
-    declared = PROFILES["acg"].catalog().assemblies  # type: ignore[misc]
-    device = build_acg_device()
-    by_command = by_schema = 0
-    for connection in view.connections:
-        from_file = list_fields(capsys, address, "--eds", str(acg_file), "--connection", str(connection.number))
-        output = ["--heartbeat" if connection.heartbeat else "--output", str(connection.o_t_point)]
-        if (connection.heartbeat or connection.o_t_point in declared) and connection.t_o_point in declared:
-            from_profile = list_fields(capsys, address, *output, "--input", str(connection.t_o_point))
-            assert from_file == from_profile, connection.name
-            by_command += 1
-        else:
-            points = [connection.t_o_point] if connection.heartbeat else [connection.o_t_point, connection.t_o_point]
-            for point in points:
-                assert layout(view.schema(point)) == layout(device.assembly_schema(point)), connection.name
-                assert f"assembly {point} " in from_file
-            by_schema += 1
-    # 12 exclusive owners, 12 input only, 12 listen only; 4 pairs and their 4 inputs need no CM setting.
-    assert (len(view.connections), by_command, by_schema) == (36, 12, 24)
+    connection = next(c for c in acg_view.connections if c.number == number)
+    from_file = list_fields(capsys, address, "--eds", str(acg_file), "--connection", str(connection.number))
+    output = ["--heartbeat" if connection.heartbeat else "--output", str(connection.o_t_point)]
+    if by_profile(connection, acg_declared):
+        from_profile = list_fields(capsys, address, *output, "--input", str(connection.t_o_point))
+        assert from_file == from_profile, connection.name
+    else:
+        device = build_acg_device()
+        points = [connection.t_o_point] if connection.heartbeat else [connection.o_t_point, connection.t_o_point]
+        for point in points:
+            assert layout(acg_view.schema(point)) == layout(device.assembly_schema(point)), connection.name
+            assert f"assembly {point} " in from_file
 
 
 def test_the_issue_names(acg_file: Path, capsys: pytest.CaptureFixture[str]) -> None:
