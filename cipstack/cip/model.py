@@ -141,6 +141,7 @@ class ClassSpec:
     #: Declared maximum instance number when it exceeds the instances created (attribute 2).
     max_instance: int | None
     _index: dict[int, AttributeSpec]
+    _keys: dict[str, int]
 
     def __init__(self, class_id: int, name: str, revision: int = 1, instance_attributes: tuple[AttributeSpec, ...] = (),
                  extra_class_attributes: tuple[AttributeSpec, ...] = (),
@@ -154,18 +155,16 @@ class ClassSpec:
         for field, value in zip(self._FIELDS, values, strict=True):
             object.__setattr__(self, field, value)  # set here once: __setattr__ refuses later
         object.__setattr__(self, "_index", index)
+        # Each attribute's id by its key, made once with the declaration: every instance of the class
+        # looks its overrides up here (a fleet adds thousands).
+        object.__setattr__(self, "_keys", {attribute_key(a): a.id for a in instance_attributes})
 
     def instance_attribute(self, attribute_id: int) -> AttributeSpec | None:
         return self._index.get(attribute_id)
 
     def attribute_ids_by_key(self) -> Mapping[str, int]:
-        """Each instance attribute's id by its ``attribute_key``, worked out once per declaration:
-        every instance of the class looks its overrides up here (a fleet adds thousands)."""
-        keys: dict[str, int] | None = getattr(self, "_keys", None)
-        if keys is None:
-            keys = {attribute_key(a): a.id for a in self.instance_attributes}
-            object.__setattr__(self, "_keys", keys)
-        return keys
+        """Each instance attribute's id by its ``attribute_key``, made with the declaration."""
+        return self._keys
 
     def replace(self, **changes: Any) -> ClassSpec:
         """A copy with ``changes`` (field name -> value), checked as a new declaration is."""
