@@ -224,7 +224,7 @@ class Certificate(CipType):
 
     def encode(self, value: Any) -> bytes:
         status, path = self.check(value)
-        return bytes((status,)) + (encode_object_path(path) if path else b"\x00")  # type: ignore[arg-type]
+        return bytes((status,)) + (encode_object_path(path) if path else b"\x00")  # type: ignore[arg-type]  # a pair when set
 
     def decode_from(self, data: bytes, offset: int = 0) -> tuple[tuple[int, tuple[int, ...]], int]:
         status, offset = USINT.decode_from(data, offset)

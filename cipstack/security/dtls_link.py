@@ -146,10 +146,10 @@ class DtlsLink:
         return self._stream.popleft()
 
     def getsockname(self) -> tuple[str, int]:
-        return self.sock.getsockname()   # type: ignore[no-any-return]
+        return self.sock.getsockname()   # type: ignore[no-any-return]  # typeshed: Any; an AF_INET pair here
 
     def getpeername(self) -> tuple[str, int]:
-        return self.sock.getpeername()   # type: ignore[no-any-return]
+        return self.sock.getpeername()   # type: ignore[no-any-return]  # typeshed: Any; an AF_INET pair here
 
     def close(self) -> None:
         """close_notify, then the socket."""

@@ -308,7 +308,7 @@ class DtlsServer:
 
     # -- cookies ---------------------------------------------------------------------------------------
     def _cookie(self, connection: object) -> bytes:
-        address = connection.get_app_data()   # type: ignore[attr-defined]
+        address = connection.get_app_data()   # type: ignore[attr-defined]  # pyOpenSSL's Connection, typed object here
         return hmac.new(self._secret, address, hashlib.sha256).digest()[:_COOKIE_SIZE]
 
     def _cookie_matches(self, connection: object, cookie: bytes) -> bool:
