@@ -49,6 +49,7 @@ if TYPE_CHECKING:
     from .security.configuration import Configurator
     from .security.dtls_target import DtlsServer
     from .security.endpoint import SecureEndpoint
+    from .security.tls_psk import PskTlsContext
     from .security.tls_target import TlsServer
 
 #: Tries at a TCP and UDP pair of one number for TLS and DTLS on ``--security-port 0``.
@@ -266,7 +267,8 @@ class Adapter:
         #: The HTTP control API, while serving with ``settings.http``.
         self.http_api: Any = None
 
-    def _tls_server(self, credentials: Credentials, context: ssl.SSLContext | None, port: int) -> TlsServer:
+    def _tls_server(self, credentials: Credentials, context: ssl.SSLContext | PskTlsContext | None,
+                    port: int) -> TlsServer:
         """A TLS listener for a configuration applied over the network, with this adapter's limits."""
         from .security.tls_target import TlsServer
 

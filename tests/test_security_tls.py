@@ -148,8 +148,9 @@ def test_init_psk_writes_identity_and_hex_key(tmp_path: Path) -> None:
     assert identity == "cipstack-lab" and len(bytes.fromhex(key)) == 32
     credentials = Credentials.load(folder)
     assert credentials.psk is not None and credentials.psk.key == bytes.fromhex(key)
-    with pytest.raises(SecurityError, match=r"no client\.pem and client\.key"):
-        credentials.client_context()
+    assert credentials.ca is None and credentials.client is None   # a PSK-only originator (test_security_psk)
+    with pytest.raises(SecurityError, match=r"no device\.pem and device\.key"):
+        credentials.server_context()   # the standard library's context is the certificates' alone
 
 
 def test_load_names_a_missing_folder_or_file(tmp_path: Path) -> None:

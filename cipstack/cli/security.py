@@ -43,7 +43,9 @@ def cmd_security_configure(args: argparse.Namespace) -> int:
             return reply.general_status, reply.extended_status, reply.data
 
         steps: list[str] = []
-        pushed = configure(request, args.security, common_name=args.common_name or "", step=steps.append)
+        keys = ((credentials.psk.identity, credentials.psk.key),) if credentials.psk is not None else ()
+        pushed = configure(request, args.security, common_name=args.common_name or "", step=steps.append,
+                           pre_shared_keys=keys)
     host = args.host.rsplit(":", 1)[0] if args.host.count(":") == 1 else args.host
     secured = f"{host}:{args.security_port}"
     deadline = time.monotonic() + args.timeout

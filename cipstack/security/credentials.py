@@ -7,7 +7,8 @@ it back. Names in the folder:
 * ``device.pem`` / ``device.key``: the target's certificate and private key (PEM, PKCS#8);
 * ``client.pem`` / ``client.key``: the originator's certificate and private key;
 * ``psk.txt``: a pre-shared key, one line ``IDENTITY:HEX`` (identity in ASCII, at most 128
-  octets; the key in hexadecimal, 32 octets by default). Read here, not yet used by TLS.
+  octets; the key in hexadecimal, 32 octets by default). With it, both roles offer the PSK suites of
+  TLS 1.2 and DTLS 1.2 (``psk``, ``tls_psk``).
 
 Each problem is one ``SecurityError`` line naming the file: missing, unreadable, not PEM, expired.
 ``cryptography`` is imported when a folder is loaded, never by the plain paths of the package.
@@ -27,6 +28,8 @@ from ..errors import SecurityError
 
 if TYPE_CHECKING:
     import socket
+
+    from .tls_psk import PskTlsContext, TlsSocket
 
 CA_FILE = "ca.pem"
 #: The lab CA's private key: what signs a device's certificate request (``security configure``).
@@ -117,10 +120,17 @@ class Credentials:
         context.verify_mode = ssl.CERT_REQUIRED if verify_client else ssl.CERT_NONE
         return context
 
-    def client_context(self) -> ssl.SSLContext:
+    def client_context(self) -> ssl.SSLContext | PskTlsContext:
         """The originator's TLS context: the client's certificate and key, the device's certificate
         verified against the CA. Devices are reached by address and named by their certificate's
-        subject, not by a host name: the chain is checked, the host name is not."""
+        subject, not by a host name: the chain is checked, the host name is not. With a PSK, a
+        pyOpenSSL context of TLS 1.2 offering the PSK suites first (``tls_psk``), with ``wrap_bio``
+        as asyncio's TLS transport calls it."""
+        if self.psk is not None:
+            from .declarations import CIPHER_SUITE_NAMES
+            from .tls_psk import psk_context
+
+            return psk_context(self, server=False, suites=tuple(CIPHER_SUITE_NAMES.values()))
         pair = self._pair(self.client, "client")
         context = ssl.SSLContext(ssl.PROTOCOL_TLS_CLIENT)
         context.check_hostname = False
@@ -128,15 +138,23 @@ class Credentials:
         context.load_cert_chain(pair.certificate.path, pair.key)
         return context
 
-    def wrap_client(self, sock: socket.socket, host: str, port: int) -> ssl.SSLSocket:
+    def wrap_client(self, sock: socket.socket, host: str, port: int) -> ssl.SSLSocket | TlsSocket:
         """``sock`` (connected, blocking) after a TLS handshake as the originator; a handshake that
         fails closes it and raises ``SecurityError`` naming the cause."""
         try:
-            tls = self.client_context().wrap_socket(sock, do_handshake_on_connect=False)
-            tls.do_handshake()
+            context = self.client_context()
+            tls: ssl.SSLSocket | TlsSocket
+            if isinstance(context, ssl.SSLContext):
+                tls = context.wrap_socket(sock, do_handshake_on_connect=False)
+                tls.do_handshake()
+            else:
+                from .tls_psk import TlsSocket
+
+                tls = TlsSocket(sock, context)
+                tls.handshake()
         except ssl.SSLError as exc:
             sock.close()
-            raise SecurityError(f"TLS with {host}:{port} failed: {describe_tls_failure(exc)}") from None
+            raise SecurityError(f"TLS with {host}:{port} failed: {self.describe(exc)}") from None
         except OSError as exc:
             sock.close()
             raise SecurityError(f"TLS with {host}:{port} failed: the device closed the connection during the "
@@ -147,8 +165,16 @@ class Credentials:
         """A ``SecurityError`` for a TLS alert that ended a connection after its handshake (TLS 1.3:
         the device refuses the client's certificate once the client has finished); None otherwise."""
         if isinstance(failure, ssl.SSLError) and not isinstance(failure, (ssl.SSLWantReadError, ssl.SSLWantWriteError)):
-            return SecurityError(f"TLS with {host}:{port} failed: {describe_tls_failure(failure)}")
+            return SecurityError(f"TLS with {host}:{port} failed: {self.describe(failure)}")
         return None
+
+    def describe(self, failure: BaseException) -> str:
+        """``describe_tls_failure``, naming this folder's PSK identity when the key is the cause."""
+        from .psk import explain
+
+        reason = getattr(failure, "reason", None) or ""
+        about_key = explain(reason, self.psk.identity) if self.psk is not None and reason else None
+        return about_key or describe_tls_failure(failure)
 
     def datagram_link(self, host: str, port: int, timeout: float) -> Any:
         """A DTLS session with the device's UDP ``port`` (2221), its handshake done within ``timeout``
@@ -197,6 +223,10 @@ def describe_tls_failure(exc: BaseException) -> str:
         return "the peer refused our certificate: certificate expired"
     if reason in ("TLSV13_ALERT_CERTIFICATE_REQUIRED", "SSLV3_ALERT_BAD_CERTIFICATE"):
         return f"the peer refused our certificate ({reason.lower().replace('_', ' ')})"
+    if "PSK" in reason or "BAD_RECORD_MAC" in reason or reason == "TLSV1_ALERT_DECRYPT_ERROR":
+        from .psk import explain
+
+        return explain(reason, None) or reason.lower().replace("_", " ")
     if reason == "WRONG_VERSION_NUMBER":
         return "the peer does not speak TLS here (wrong version number)"
     return reason.lower().replace("_", " ") if reason else (text or type(exc).__name__)

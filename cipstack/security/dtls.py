@@ -65,16 +65,22 @@ class KeyLog:
 
 
 def dtls_context(credentials: Credentials, server: bool, verify_client: bool = True) -> SSL.Context:
-    """The DTLS context of the device (``server``) or of the originator, from ``credentials``."""
+    """The DTLS context of the device (``server``) or of the originator, from ``credentials``. With
+    the folder's PSK it offers and accepts the PSK suites too (``psk``), before the certificate
+    suites, and speaks DTLS 1.2 only; a folder with a PSK and no certificates gives a PSK-only side."""
     require_pyopenssl()
     from OpenSSL import SSL
 
     role = "device" if server else "client"
     pair = credentials.device if server else credentials.client
-    if pair is None or credentials.ca is None:
+    if (pair is None or credentials.ca is None) and credentials.psk is None:
         raise SecurityError(f"{credentials.folder}: no {role}.pem and {role}.key for the {role}'s side of DTLS")
     context = SSL.Context(SSL.DTLS_SERVER_METHOD if server else SSL.DTLS_CLIENT_METHOD)
     context.set_min_proto_version(DTLS1_2_VERSION)
+    if credentials.psk is not None:
+        _use_psk(context, credentials, server, with_certificates=pair is not None and credentials.ca is not None)
+    if pair is None or credentials.ca is None:
+        return _keylog(context, credentials)
     try:
         context.use_certificate_chain_file(str(pair.certificate.path))
         context.use_privatekey_file(str(pair.key))
@@ -84,17 +90,45 @@ def dtls_context(credentials: Credentials, server: bool, verify_client: bool = T
                             f"({exc})") from None
     mode = SSL.VERIFY_PEER | (SSL.VERIFY_FAIL_IF_NO_PEER_CERT if server else 0)
     context.set_verify(mode if (verify_client or not server) else SSL.VERIFY_NONE)
+    return _keylog(context, credentials)
+
+
+def _keylog(context: SSL.Context, credentials: Credentials) -> SSL.Context:
     if credentials.keylog:
         context.set_keylog_callback(KeyLog(credentials.keylog))
     return context
 
 
-def describe_dtls_failure(exc: BaseException) -> str:
-    """A DTLS failure in one line, in the words ``describe_tls_failure`` uses for TLS."""
+def _use_psk(context: SSL.Context, credentials: Credentials, server: bool, with_certificates: bool) -> None:
+    """The PSK callbacks and suites (DTLS 1.2 only: the PSK suites are (D)TLS 1.2's)."""
+    from .declarations import CIPHER_SUITE_NAMES
+    from .psk import PSK_SUITES, offer_psk, serve_psk
+
+    psk = credentials.psk
+    assert psk is not None
+    if server:
+        serve_psk(context, [(psk.identity, psk.key)])
+    else:
+        offer_psk(context, psk.identity, psk.key)
+    context.set_max_proto_version(DTLS1_2_VERSION)
+    names = [*PSK_SUITES, *(CIPHER_SUITE_NAMES.values() if with_certificates else ())]
+    context.set_cipher_list(":".join(names).encode())
+
+
+def describe_dtls_failure(exc: BaseException, identity: bytes | None = None) -> str:
+    """A DTLS failure in one line, in the words ``describe_tls_failure`` uses for TLS; ``identity``:
+    the PSK identity this side offered, named when the key is the cause."""
     text = str(exc)
     args = getattr(exc, "args", ())
     reasons = [entry[2] for entry in args[0] if isinstance(entry, tuple) and len(entry) == 3] if (
         args and isinstance(args[0], list)) else []
+    from .psk import explain
+
+    # OpenSSL queues the cause first and what it led to after: a cause about the key is named.
+    for cause in reasons:
+        about_key = explain(cause, identity)
+        if about_key is not None:
+            return about_key
     reason = reasons[-1] if reasons else ""
     lowered = reason.lower()
     if "certificate verify failed" in lowered:

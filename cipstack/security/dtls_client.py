@@ -28,8 +28,10 @@ log = logging.getLogger(__name__)
 class AsyncDtlsLink(asyncio.DatagramProtocol):
     """One DTLS session with a device on the running loop: what ``open`` returns is established."""
 
-    def __init__(self, channel: DtlsChannel, host: str, port: int, protocol: asyncio.Protocol) -> None:
-        """``protocol``: the stream protocol encapsulation records go to (the originator client's)."""
+    def __init__(self, channel: DtlsChannel, host: str, port: int, protocol: asyncio.Protocol,
+                 identity: bytes | None = None) -> None:
+        """``protocol``: the stream protocol encapsulation records go to (the originator client's);
+        ``identity``: the PSK identity offered, named in a refusal that is about the key."""
         from OpenSSL import SSL
 
         self._ssl_error = SSL.Error
@@ -37,6 +39,7 @@ class AsyncDtlsLink(asyncio.DatagramProtocol):
         self.host = host
         self.port = port
         self.protocol = protocol
+        self.identity = identity
         #: The class 1 core of the connections opened in this session.
         self.io_core = IoOriginator()
         #: The route of O->T datagrams into this session, for the class 1 endpoint of ``io_core``.
@@ -67,7 +70,8 @@ class AsyncDtlsLink(asyncio.DatagramProtocol):
         failed, ``PeerUnreachable`` when nothing answers."""
         loop = asyncio.get_running_loop()
         protocol = protocol_factory()
-        link = cls(DtlsChannel.client(dtls_context(credentials, server=False)), host, port, protocol)
+        identity = credentials.psk.identity if credentials.psk is not None else None
+        link = cls(DtlsChannel.client(dtls_context(credentials, server=False)), host, port, protocol, identity)
         try:
             infos = await loop.getaddrinfo(host, port, type=socket.SOCK_DGRAM)
             family, kind, proto, _name, address = infos[0]
@@ -104,7 +108,8 @@ class AsyncDtlsLink(asyncio.DatagramProtocol):
             records = self.channel.feed(data)
         except self._ssl_error as exc:
             self._flush()
-            self._fail(SecurityError(f"DTLS with {self.host}:{self.port} failed: {describe_dtls_failure(exc)}"))
+            self._fail(SecurityError(f"DTLS with {self.host}:{self.port} failed: "
+                                     f"{describe_dtls_failure(exc, self.identity)}"))
             return
         if self.channel.established and not self.established.done():
             self.established.set_result(None)
@@ -173,7 +178,8 @@ class AsyncDtlsLink(asyncio.DatagramProtocol):
         try:
             self.channel.on_timer()
         except self._ssl_error as exc:
-            self._fail(SecurityError(f"DTLS with {self.host}:{self.port} failed: {describe_dtls_failure(exc)}"))
+            self._fail(SecurityError(f"DTLS with {self.host}:{self.port} failed: "
+                                     f"{describe_dtls_failure(exc, self.identity)}"))
             return
         self._flush()
         self._arm()

@@ -41,6 +41,8 @@ class DtlsLink:
         self._ssl_error = SSL.Error
         self.host = host
         self.port = port
+        #: The PSK identity offered, named in a refusal that is about the key.
+        self.identity = credentials.psk.identity if credentials.psk is not None else None
         self._timeout: float | None = timeout
         self._stream: deque[bytes] = deque()
         #: Class 1 records read while waiting for something else, for the class 1 shell's next ``drain``.
@@ -80,7 +82,7 @@ class DtlsLink:
                 except self._ssl_error as exc:
                     self._flush()
                     raise SecurityError(f"DTLS with {self.host}:{self.port} failed: "
-                                        f"{describe_dtls_failure(exc)}") from None
+                                        f"{describe_dtls_failure(exc, self.identity)}") from None
             self._flush()
 
     def _read_all(self) -> list[bytes]:
@@ -119,7 +121,8 @@ class DtlsLink:
             for datagram in self._read_all():
                 self._sort(self.channel.feed(datagram), time.monotonic())
         except self._ssl_error as exc:
-            raise SecurityError(f"DTLS with {self.host}:{self.port} failed: {describe_dtls_failure(exc)}") from None
+            raise SecurityError(f"DTLS with {self.host}:{self.port} failed: "
+                                f"{describe_dtls_failure(exc, self.identity)}") from None
         self._flush()
 
     # -- what the blocking originator uses of a socket -------------------------------------------------

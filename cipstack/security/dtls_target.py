@@ -55,6 +55,7 @@ from ..eip.target.limits import ConnectionLimiter, RateLimitedLog
 from ..eip.wire.cpf import SockAddr
 from .credentials import SECURE_PORT
 from .dtls import DtlsChannel, describe_dtls_failure, dtls_context
+from .psk import identity_asked
 from .tls_target import HANDSHAKE_TIMEOUT
 
 if TYPE_CHECKING:
@@ -119,7 +120,8 @@ class _Session:
         except server.ssl_error as exc:
             self.flush()   # the alert that tells the peer why
             if self.connection is None:
-                server.refuse(self.address[0], f"DTLS handshake from {self.peer} refused: {describe_dtls_failure(exc)}")
+                cause = describe_dtls_failure(exc, identity_asked(self.channel.connection))
+                server.refuse(self.address[0], f"DTLS handshake from {self.peer} refused: {cause}")
             else:
                 log.info("%s: DTLS session closed: %s", self.peer, describe_dtls_failure(exc))
             server.end(self)

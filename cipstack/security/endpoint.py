@@ -40,6 +40,7 @@ from .credentials import CA_FILE, DEVICE_CERTIFICATE, DEVICE_KEY, Credentials
 from .declarations import CIPHER_SUITE_NAMES
 
 if TYPE_CHECKING:
+    from .tls_psk import PskTlsContext
     from .tls_target import TlsServer
 
 log = logging.getLogger(__name__)
@@ -74,29 +75,46 @@ def configuration_of(credentials: Credentials) -> Configuration:
     from .configuration import DEVICE_CERTIFICATE_PATH
     from .declarations import CertificateStatus
 
+    keys = ((credentials.psk.identity, credentials.psk.key),) if credentials.psk is not None else ()
     if credentials.device is None or credentials.ca is None:
+        if keys:   # a PSK-only device: configured with its key, no certificate
+            return Configuration(pre_shared_keys=keys)
         raise SecurityError(f"{credentials.folder}: no device certificate and CA to serve")
     device, ca = credentials.device.certificate.path, credentials.ca.path
     return Configuration(active_device_certificates=(DEVICE_CERTIFICATE_PATH,),
                          trusted_authorities=(DEVICE_CERTIFICATE_PATH,), verify_client=1,
                          device_certificate=der_of_pem(device.read_bytes()), device_status=CertificateStatus.VERIFIED,
                          ca_certificate=der_of_pem(ca.read_bytes()), ca_status=CertificateStatus.VERIFIED,
-                         device_key=credentials.device.key.read_bytes())
+                         device_key=credentials.device.key.read_bytes(), pre_shared_keys=keys)
 
 
-def available_suites_context(credentials: Credentials) -> ssl.SSLContext:
+def available_suites_context(credentials: Credentials) -> ssl.SSLContext | PskTlsContext:
     """The TLS context of a device started with ``--security DIR``: TLS 1.2 with the suites its
     EtherNet/IP Security object lists (Available = Allowed), and TLS 1.3 as before (its suites are
-    the TLS library's; Python's ``ssl`` cannot narrow them)."""
+    the TLS library's; Python's ``ssl`` cannot narrow them). With the folder's PSK, a pyOpenSSL
+    context of TLS 1.2 only that accepts the PSK suites too (``tls_psk``)."""
+    if credentials.psk is not None:
+        from .tls_psk import psk_context
+
+        return psk_context(credentials, server=True, keys=[(credentials.psk.identity, credentials.psk.key)],
+                           suites=tuple(CIPHER_SUITE_NAMES.values()))
     context = credentials.server_context()
     context.set_ciphers(":".join(CIPHER_SUITE_NAMES.values()))
     return context
 
 
-def server_context(credentials: Credentials, configuration: Configuration) -> ssl.SSLContext:
+def server_context(credentials: Credentials, configuration: Configuration) -> ssl.SSLContext | PskTlsContext:
     """The TLS context of a configured device: TLS 1.2 with the Allowed Cipher Suites only (Python's
     ``ssl`` cannot narrow TLS 1.3's suites, so a device whose suites were chosen does not offer 1.3),
-    client certificates required when Verify Client Certificate is set."""
+    client certificates required when Verify Client Certificate is set. With Pre-Shared Keys
+    (attribute 5), the PSK suites with those keys too (``tls_psk``): the keys written over the wire
+    are the ones the next handshake uses."""
+    if configuration.pre_shared_keys:
+        from .tls_psk import psk_context
+
+        return psk_context(credentials, server=True, keys=configuration.pre_shared_keys,
+                           suites=[CIPHER_SUITE_NAMES[s] for s in configuration.allowed_suites],
+                           verify_client=bool(configuration.verify_client))
     context = credentials.server_context(verify_client=bool(configuration.verify_client))
     context.maximum_version = ssl.TLSVersion.TLSv1_2
     context.set_ciphers(":".join(CIPHER_SUITE_NAMES[s] for s in configuration.allowed_suites))
@@ -131,7 +149,7 @@ class SecureEndpoint:
     """The secure port of one device: no listener until the device is configured, then a TLS listener
     with the configuration's certificate, trust and suites."""
 
-    def __init__(self, make_server: Callable[[Credentials, ssl.SSLContext | None, int], TlsServer],
+    def __init__(self, make_server: Callable[[Credentials, ssl.SSLContext | PskTlsContext | None, int], TlsServer],
                  port: int, folder: Path | None, initial: TlsServer | None = None,
                  initial_configuration: Configuration | None = None) -> None:
         """``make_server(credentials, context, port)``: a TLS listener (the adapter's, with its limits and

@@ -28,7 +28,7 @@ from ..cip.status import CipError, describe_status
 from ..cip.types import BOOL, SHORT_STRING
 from ..errors import SecurityError
 from ..objects.file import FileRequest, FileTransferError, read_file, write_file
-from .attributes import CERTIFICATE, PATH_LIST, decode_object_path
+from .attributes import CERTIFICATE, PATH_LIST, PRE_SHARED_KEYS, decode_object_path
 from .certificates import CSR_FIELDS, pem
 from .configuration import DEVICE_CERTIFICATE_PATH
 from .credentials import CA_FILE
@@ -63,8 +63,11 @@ class Pushed:
 
 def configure(request: Request, folder: str | os.PathLike[str], common_name: str = "",
               allowed_suites: Sequence[int] | None = None, verify_client: bool = True,
-              step: Callable[[str], None] | None = None) -> Pushed:
-    """Configure the device ``request`` reaches with the CA of ``folder``; ``step`` hears each step's name."""
+              step: Callable[[str], None] | None = None,
+              pre_shared_keys: Sequence[tuple[bytes, bytes]] = ()) -> Pushed:
+    """Configure the device ``request`` reaches with the CA of ``folder``; ``step`` hears each step's
+    name. ``pre_shared_keys``: (identity, key) pairs written to the Pre-Shared Keys attribute (0x5E
+    attribute 5), which the device's TLS port then accepts beside its certificate."""
     from .certificates import der_of_pem
     from .provisioning import sign_csr
 
@@ -131,6 +134,8 @@ def configure(request: Request, folder: str | os.PathLike[str], common_name: str
         send("Set Verify Client Certificate", _SET, EIP_SECURITY_CLASS, 9, BOOL.encode(int(verify_client)))
         if allowed_suites is not None:
             send("Set Allowed Cipher Suites", _SET, EIP_SECURITY_CLASS, 4, CIPHER_SUITES.encode(tuple(allowed_suites)))
+        if pre_shared_keys:
+            send("Set Pre-Shared Keys", _SET, EIP_SECURITY_CLASS, 5, PRE_SHARED_KEYS.encode(tuple(pre_shared_keys)))
         send("Verify_Certificate", CertificateService.VERIFY_CERTIFICATE, CERTIFICATE_MANAGEMENT_CLASS, None)
         send("Apply_Config", ConfigService.APPLY_CONFIG, EIP_SECURITY_CLASS, None, struct.pack("<HH", 0, 0))
     except BaseException:

@@ -32,6 +32,7 @@ from .credentials import SECURE_PORT, describe_tls_failure
 if TYPE_CHECKING:
     from ..eip.target.core import EncapsulationConnection, EncapsulationTarget
     from .credentials import Credentials
+    from .tls_psk import PskTlsContext, TlsObject
 
 log = logging.getLogger(__name__)
 
@@ -58,7 +59,7 @@ class _TlsProtocol(asyncio.Protocol):
         self._admitted = False
         self._incoming = ssl.MemoryBIO()
         self._outgoing = ssl.MemoryBIO()
-        self._tls: ssl.SSLObject | None = None
+        self._tls: ssl.SSLObject | TlsObject | None = None
         self._local = SockAddr("0.0.0.0", server.port)
         self._timer: asyncio.TimerHandle | None = None
         self._timer_at: float | None = None
@@ -140,7 +141,7 @@ class _TlsProtocol(asyncio.Protocol):
                 log.info("%s: TLS connection closed", self.peer)
 
     # -- the TLS layer --------------------------------------------------------------------------------
-    def _handshake(self, tls: ssl.SSLObject) -> bool:
+    def _handshake(self, tls: ssl.SSLObject | TlsObject) -> bool:
         """Go on with the handshake; True once it is done (the core's connection then exists)."""
         assert self.transport is not None
         try:
@@ -150,7 +151,7 @@ class _TlsProtocol(asyncio.Protocol):
             return False
         except (ssl.SSLError, ValueError) as exc:
             self._flush()   # the alert that tells the peer why
-            self.server.refuse(self.host, f"TLS handshake from {self.peer} refused: {describe_tls_failure(exc)}")
+            self.server.refuse(self.host, f"TLS handshake from {self.peer} refused: {_cause(tls, exc)}")
             self._linger()
             return False
         self._flush()
@@ -254,6 +255,17 @@ class _TlsProtocol(asyncio.Protocol):
             self.transport.close()
 
 
+def _cause(tls: ssl.SSLObject | TlsObject, exc: BaseException) -> str:
+    """Why a handshake failed; with a pre-shared key, the identity the peer named."""
+    identity = getattr(tls, "psk_identity", None)
+    reason = getattr(exc, "reason", None)
+    if identity and reason:
+        from .psk import explain
+
+        return explain(reason, identity) or describe_tls_failure(exc)
+    return describe_tls_failure(exc)
+
+
 class TlsServer:
     """The TLS listener of one target: ``EncapsulationServer``'s TCP side on the secure port."""
 
@@ -261,17 +273,17 @@ class TlsServer:
                  port: int = SECURE_PORT, verify_client: bool = True,
                  max_connections: int = DEFAULT_MAX_TCP_CONNECTIONS,
                  max_connections_per_host: int | None = None, replies: ReplySeam | None = None,
-                 context: ssl.SSLContext | None = None) -> None:
+                 context: ssl.SSLContext | PskTlsContext | None = None) -> None:
         """``replies``: the seam replies pass on their way out, the plain server's (``seams.ReplySeam``);
-        ``context``: a TLS context made elsewhere (a configuration applied over the network), else the
-        credentials' own."""
+        ``context``: a TLS context made elsewhere (a configuration applied over the network, or one with
+        pre-shared keys: ``tls_psk.PskTlsContext``), else the credentials' own."""
         self.target = target
         self.replies = replies or ReplySeam()
         self.credentials = credentials
         self.host = host
         self.port = port
         #: The TLS context every connection's ``SSLObject`` is made from.
-        self.context = context or credentials.server_context(verify_client)
+        self.context: ssl.SSLContext | PskTlsContext = context or credentials.server_context(verify_client)
         self.limiter = ConnectionLimiter(max_connections, max_connections_per_host)
         #: Seconds a handshake has from the accept (``HANDSHAKE_TIMEOUT``).
         self.handshake_timeout = HANDSHAKE_TIMEOUT

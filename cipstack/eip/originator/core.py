@@ -44,7 +44,6 @@ from .replies import EncapsulationStatusError, MalformedReplyError, decode_reply
 
 if TYPE_CHECKING:
     import socket
-    import ssl
 
     # Imported where used: explicit messaging (a one-shot ``cipstack get``) does not load the
     # Connection Manager's messages (their dataclasses cost milliseconds to import).
@@ -481,10 +480,12 @@ class OriginatorCore:
 class SecureChannel(Protocol):
     """What secures an originator's connection (CIP Security: ``cipstack.security.Credentials``)."""
 
-    def client_context(self) -> ssl.SSLContext:
-        """The TLS context of the originator's side (an asyncio client connects with it)."""
+    def client_context(self) -> Any:
+        """The TLS context of the originator's side (an asyncio client connects with it): an
+        ``ssl.SSLContext``, or with a pre-shared key an object with its ``wrap_bio``
+        (``security.tls_psk.PskTlsContext``, what asyncio's TLS transport calls)."""
 
-    def wrap_client(self, sock: socket.socket, host: str, port: int) -> socket.socket:
+    def wrap_client(self, sock: socket.socket, host: str, port: int) -> Any:
         """``sock`` after a TLS handshake as the originator (a blocking client); a ``SecurityError``
         naming the cause if it fails."""
 

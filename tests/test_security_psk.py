@@ -1,0 +1,415 @@
+"""CIP Security with pre-shared keys: the PSK suites of TLS 1.2 and DTLS 1.2 in both roles, our
+originator against our adapter and both against the `openssl` binary, the bad identities and keys,
+and the Pre-Shared Keys attribute (0x5E attribute 5) written over the wire as the key the next
+handshake uses.
+
+The adapter runs in this process on a loop of its own thread, so that the tests read its counters
+while blocking clients talk to it from the test's thread."""
+
+from __future__ import annotations
+
+import asyncio
+import logging
+import os
+import re
+import shutil
+import signal
+import socket
+import struct
+import subprocess
+import sys
+import threading
+import time
+from collections.abc import Iterator
+from pathlib import Path
+
+import pytest
+
+pytest.importorskip("cryptography", reason="the security extra (cryptography) is not installed")
+pytest.importorskip("OpenSSL", reason="the security extra (pyOpenSSL) is not installed")
+
+from cipstack.adapter import Adapter, AdapterSettings
+from cipstack.cip.epath import request_path
+from cipstack.cli import main
+from cipstack.eip.originator.blocking import BlockingEncapsulationClient
+from cipstack.errors import CipstackError, SecurityError
+from cipstack.scanner import Scanner, SyncScanner
+from cipstack.security import Credentials
+from cipstack.security.dtls_link import DtlsLink
+from cipstack.security.provisioning import init
+from cipstack.security.push import configure
+from tests.ports import free_port
+from tests.waiting import wait_for
+
+OPENSSL = shutil.which("openssl")
+needs_openssl = pytest.mark.skipif(OPENSSL is None, reason="the openssl command is not installed")
+
+#: RegisterSession (0x0065), length 4, session 0, status 0, sender context "cipstack", options 0;
+#: protocol version 1, option flags 0: 28 bytes.
+REGISTER_SESSION = bytes.fromhex("6500" "0400" "00000000" "00000000") + b"cipstack" + bytes.fromhex("00000000"
+                                                                                                  "0100" "0000")
+GET_ATTRIBUTE_SINGLE = 0x0E
+
+
+class Served:
+    """An adapter on a loop of its own thread."""
+
+    def __init__(self, settings: AdapterSettings) -> None:
+        self.loop = asyncio.new_event_loop()
+
+        async def start() -> Adapter:
+            adapter = Adapter(settings)
+            await adapter.start()
+            return adapter
+
+        self.adapter = self.loop.run_until_complete(start())
+        self.thread = threading.Thread(target=self.loop.run_forever, daemon=True)
+        self.thread.start()
+
+    @property
+    def secure_port(self) -> int:
+        server = self.adapter.tls or (self.adapter.secure.server if self.adapter.secure is not None else None)
+        assert server is not None
+        return server.port
+
+    def close(self) -> None:
+        asyncio.run_coroutine_threadsafe(self.adapter.close(), self.loop).result(10)
+        self.loop.call_soon_threadsafe(self.loop.stop)
+        self.thread.join(10)
+        self.loop.close()
+
+
+def _serve(folder: Path) -> Served:
+    return Served(AdapterSettings(host="127.0.0.1", port=0, io_port=0, security=folder, security_port=0))
+
+
+@pytest.fixture(scope="module")
+def psk_lab(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    """A PSK-only folder, as `cipstack security init DIR --psk-only` writes it."""
+    folder = tmp_path_factory.mktemp("psk") / "lab"
+    assert main(["security", "init", str(folder), "--psk-only"]) == 0
+    assert sorted(path.name for path in folder.iterdir()) == ["psk.txt"]
+    return folder
+
+
+@pytest.fixture
+def served(psk_lab: Path) -> Iterator[Served]:
+    server = _serve(psk_lab)
+    try:
+        yield server
+    finally:
+        server.close()
+
+
+def _folder(path: Path, identity: str, key: bytes) -> Path:
+    path.mkdir(parents=True, exist_ok=True)
+    (path / "psk.txt").write_text(f"{identity}:{key.hex()}\n")
+    return path
+
+
+def _key_of(folder: Path) -> tuple[str, str]:
+    identity, _, key = (folder / "psk.txt").read_text().strip().partition(":")
+    return identity, key
+
+
+def _accepted(caplog: pytest.LogCaptureFixture, what: str) -> list[str]:
+    return [record.getMessage() for record in caplog.records if f"{what} accepted" in record.getMessage()]
+
+
+def _stop(process: subprocess.Popen[bytes]) -> None:
+    if process.poll() is None:
+        process.send_signal(signal.SIGTERM)
+        try:
+            process.wait(10)
+        except subprocess.TimeoutExpired:
+            process.kill()
+            process.wait()
+
+
+def _read_until(fd: int, size: int, timeout: float = 30) -> bytes:
+    out = b""
+    deadline = time.monotonic() + timeout
+    while len(out) < size and time.monotonic() < deadline:
+        chunk = os.read(fd, 4096)
+        if not chunk:
+            break
+        out += chunk
+    return out
+
+
+# -- our originator, our adapter ----------------------------------------------------------------------
+def test_a_psk_only_folder_reads_over_tls(served: Served, psk_lab: Path, caplog: pytest.LogCaptureFixture) -> None:
+    caplog.set_level(logging.INFO, logger="cipstack.security")
+    with SyncScanner("127.0.0.1", served.secure_port, security=Credentials.load(psk_lab)) as drive:
+        assert drive.read(1, 1, 7) == "CENT"   # Identity, Product Name: a Get_Attribute_Single over TLS
+    (line,) = _accepted(caplog, "TLS connection")
+    assert "(TLSv1.2, ECDHE-PSK-AES128-CBC-SHA256)" in line
+
+
+async def test_the_asyncio_scanner_reads_over_tls_with_a_psk(served: Served, psk_lab: Path) -> None:
+    async with await Scanner.connect("127.0.0.1", served.secure_port, security=Credentials.load(psk_lab)) as drive:
+        assert await drive.read(1, 1, 7) == "CENT"
+    assert served.adapter.tls is not None and served.adapter.tls.refused == 0
+
+
+def test_explicit_and_class1_over_dtls_with_a_psk(served: Served, psk_lab: Path,
+                                                  caplog: pytest.LogCaptureFixture) -> None:
+    caplog.set_level(logging.INFO, logger="cipstack.security")
+    credentials = Credentials.load(psk_lab)
+    client = BlockingEncapsulationClient.connect_dtls("127.0.0.1", served.secure_port, 5.0, credentials)
+    with client:
+        reply = client.perform(client.core.request(GET_ATTRIBUTE_SINGLE, request_path(1, 1, 7)))
+        assert (reply.general_status, reply.data) == (0, b"\x04CENT")
+    with SyncScanner("127.0.0.1", served.secure_port, security=credentials) as scanner, \
+            scanner.io_connection(output=21, input=71, rpi=0.010) as io:
+        io.update(run_forward=True, speed_reference=300)
+        io.wait_input(lambda image: image.ready, timeout=10)
+        assert served.adapter.io is not None
+        (connection,) = served.adapter.io.connections.values()
+        assert connection.secured
+        wait_for(lambda: io.statistics()["received"] > 5, 10, "T->O data in the DTLS session")
+    lines = _accepted(caplog, "DTLS session")
+    assert len(lines) == 2 and all("(DTLSv1.2, ECDHE-PSK-AES128-CBC-SHA256)" in line for line in lines)
+    assert served.adapter.dtls is not None and served.adapter.dtls.refused == 0
+
+
+def test_a_folder_with_both_serves_certificates_and_the_psk(tmp_path: Path, caplog: pytest.LogCaptureFixture) -> None:
+    caplog.set_level(logging.INFO, logger="cipstack.security")
+    both = tmp_path / "both"
+    init(both, psk=True)
+    certificates_only = tmp_path / "certificates"
+    certificates_only.mkdir()
+    for name in ("ca.pem", "client.pem", "client.key"):
+        shutil.copy(both / name, certificates_only / name)
+    server = _serve(both)
+    try:
+        with SyncScanner("127.0.0.1", server.secure_port, security=Credentials.load(certificates_only)) as drive:
+            assert drive.read(1, 1, 7) == "CENT"
+        with SyncScanner("127.0.0.1", server.secure_port, security=Credentials.load(both)) as drive:
+            assert drive.read(1, 1, 7) == "CENT"
+    finally:
+        server.close()
+    first, second = _accepted(caplog, "TLS connection")
+    assert "(TLSv1.2, ECDHE-ECDSA-" in first     # no key: the certificate suites, TLS 1.2 alone
+    assert "(TLSv1.2, ECDHE-PSK-AES128-CBC-SHA256)" in second   # the originator offers its key first
+
+
+def test_cipstack_io_with_a_psk_only_folder_runs_over_dtls(served: Served, psk_lab: Path, tmp_path: Path) -> None:
+    address = f"127.0.0.1:{served.secure_port}"
+    result = subprocess.run([sys.executable, "-m", "cipstack", "io", address, "--security", str(psk_lab),
+                             "--output", "21", "--input", "71", "--rpi", "10ms", "--duration", "0.5s"],
+                            capture_output=True, text=True, timeout=60)
+    assert result.returncode == 0, result.stderr
+    sent, received = (int(word) for word in re.findall(r"sent (\d+)  received (\d+)", result.stdout)[0])
+    assert sent > 0 and received > 0
+    identity, _ = _key_of(psk_lab)
+    wrong = _folder(tmp_path / "wrong", identity, bytes(32))
+    result = subprocess.run([sys.executable, "-m", "cipstack", "io", address, "--security", str(wrong),
+                             "--output", "21", "--input", "71", "--duration", "0.5s"],
+                            capture_output=True, text=True, timeout=60)
+    assert result.returncode != 0
+    (line,) = result.stderr.strip().splitlines()
+    # The command asks the device's identity over TLS first: that handshake is the one refused.
+    assert line.startswith(f"cipstack io: TLS with {address} failed: the peer could not check our Finished: "
+                           f"wrong pre-shared key for identity '{identity}'"), line
+
+
+async def test_the_asyncio_scanner_opens_class1_over_dtls_with_a_psk(served: Served, psk_lab: Path) -> None:
+    async with await Scanner.connect("127.0.0.1", served.secure_port, security=Credentials.load(psk_lab)) as drive, \
+            drive.io_connection(output=21, input=71, rpi=0.010) as io:
+        await io.wait_input(lambda image: image.ready, timeout=10)
+        deadline = time.monotonic() + 10
+        while io.statistics()["received"] <= 5 and time.monotonic() < deadline:
+            await asyncio.sleep(0.01)
+        assert io.statistics()["received"] > 5
+    assert served.adapter.dtls is not None and served.adapter.dtls.refused == 0
+
+
+# -- against openssl ------------------------------------------------------------------------------------
+@needs_openssl
+@pytest.mark.parametrize("version", ["-tls1_2", "-dtls1_2"])
+@pytest.mark.parametrize("suite", ["ECDHE-PSK-AES128-CBC-SHA256", "PSK-AES128-GCM-SHA256"])
+def test_openssl_s_client_with_a_psk_registers_a_session(served: Served, psk_lab: Path, version: str,
+                                                         suite: str) -> None:
+    assert OPENSSL is not None
+    identity, key = _key_of(psk_lab)
+    command = [OPENSSL, "s_client", version, "-connect", f"127.0.0.1:{served.secure_port}", "-psk", key,
+               "-psk_identity", identity, "-cipher", suite, "-quiet"]
+    process = subprocess.Popen(command, stdin=subprocess.PIPE, stdout=subprocess.PIPE, stderr=subprocess.PIPE)
+    try:
+        assert process.stdin is not None and process.stdout is not None
+        process.stdin.write(REGISTER_SESSION)
+        process.stdin.flush()
+        reply = _read_until(process.stdout.fileno(), 28)
+    finally:
+        _stop(process)
+        assert process.stderr is not None
+        stderr = process.stderr.read()
+        for stream in (process.stdin, process.stdout, process.stderr):
+            if stream is not None:
+                stream.close()
+    assert len(reply) == 28, stderr
+    command_code, length, session, status = struct.unpack_from("<HHII", reply)
+    assert (command_code, length, status) == (0x0065, 4, 0) and session != 0
+    assert reply[12:20] == b"cipstack"
+
+
+@needs_openssl
+@pytest.mark.parametrize("version", ["-tls1_2", "-dtls1_2"])
+def test_originator_completes_a_psk_handshake_with_openssl_s_server(psk_lab: Path, version: str) -> None:
+    assert OPENSSL is not None
+    identity, key = _key_of(psk_lab)
+    port = free_port()
+    server = subprocess.Popen([OPENSSL, "s_server", version, "-accept", f"127.0.0.1:{port}", "-quiet", "-nocert",
+                               "-psk", key, "-psk_identity", identity, "-cipher", "PSK-AES128-GCM-SHA256"],
+                              stdin=subprocess.PIPE, stdout=subprocess.PIPE, stderr=subprocess.PIPE)
+    credentials = Credentials.load(psk_lab)
+    try:
+        if version == "-tls1_2":
+            def listening() -> bool:
+                try:
+                    socket.create_connection(("127.0.0.1", port), timeout=0.2).close()
+                except OSError:
+                    return server.poll() is not None
+                return True
+
+            wait_for(listening, 30, "s_server to listen")
+            sock = socket.create_connection(("127.0.0.1", port), timeout=10)
+            tls = credentials.wrap_client(sock, "127.0.0.1", port)
+            try:
+                tls.sendall(REGISTER_SESSION)
+                assert server.stdout is not None
+                received = _read_until(server.stdout.fileno(), 28)
+            finally:
+                tls.close()
+        else:
+            links: list[DtlsLink] = []
+
+            def handshake() -> bool:
+                try:
+                    links.append(DtlsLink(credentials, "127.0.0.1", port, 2.0))
+                except CipstackError:   # not listening yet
+                    return server.poll() is not None
+                return True
+
+            wait_for(handshake, 30, "a DTLS handshake with s_server")
+            assert links, server.stderr.read() if server.stderr else ""
+            assert links[0].channel.description() == "DTLSv1.2, PSK-AES128-GCM-SHA256"
+            links[0].sendall(REGISTER_SESSION)
+            assert server.stdout is not None
+            received = _read_until(server.stdout.fileno(), 28)
+            links[0].close()
+        assert received == REGISTER_SESSION
+    finally:
+        _stop(server)
+
+
+# -- bad identities and keys ------------------------------------------------------------------------------
+def _refusals(caplog: pytest.LogCaptureFixture, what: str) -> list[str]:
+    return [record.getMessage() for record in caplog.records
+            if record.getMessage().startswith(f"{what} handshake from 127.0.0.1:")]
+
+
+def test_an_unknown_identity_or_a_wrong_key_is_named_and_nothing_else_is_disturbed(
+        served: Served, psk_lab: Path, tmp_path: Path, caplog: pytest.LogCaptureFixture) -> None:
+    caplog.set_level(logging.INFO, logger="cipstack.security")
+    identity, key = _key_of(psk_lab)
+    stranger = Credentials.load(_folder(tmp_path / "stranger", "intruder", bytes.fromhex(key)))
+    wrong = Credentials.load(_folder(tmp_path / "wrong", identity, bytes(32)))
+    adapter, port = served.adapter, served.secure_port
+    assert adapter.tls is not None and adapter.dtls is not None and adapter.io_endpoint is not None
+    good = Credentials.load(psk_lab)
+    plain_io_port = adapter.io_endpoint.port
+    # Opened before the bad input, used after it: a TLS session, class 1 over DTLS, plain 44818 and 2222.
+    with SyncScanner("127.0.0.1", port, security=good) as kept, \
+            kept.io_connection(output=21, input=71, rpi=0.010) as secured_io, \
+            SyncScanner("127.0.0.1", adapter.port) as plain, \
+            plain.io_connection(input=71, heartbeat=198, rpi=0.010, target_io_port=plain_io_port) as plain_io:
+        with pytest.raises(SecurityError) as raised:
+            SyncScanner("127.0.0.1", port, security=stranger, timeout=5)
+        assert str(raised.value) == (f"TLS with 127.0.0.1:{port} failed: PSK identity 'intruder' unknown to "
+                                     "the device (alert: unknown PSK identity)")
+        with pytest.raises(SecurityError) as raised:
+            SyncScanner("127.0.0.1", port, security=wrong, timeout=5)
+        assert str(raised.value).startswith(f"TLS with 127.0.0.1:{port} failed: the peer could not check our "
+                                            f"Finished: wrong pre-shared key for identity '{identity}'")
+        with pytest.raises(SecurityError) as raised:
+            BlockingEncapsulationClient.connect_dtls("127.0.0.1", port, 5.0, stranger)
+        assert str(raised.value) == (f"DTLS with 127.0.0.1:{port} failed: PSK identity 'intruder' unknown to "
+                                     "the device (alert: unknown PSK identity)")
+        with pytest.raises(SecurityError, match=f"wrong pre-shared key for identity '{identity}'"):
+            BlockingEncapsulationClient.connect_dtls("127.0.0.1", port, 5.0, wrong)
+        wait_for(lambda: adapter.tls is not None and adapter.tls.refused == 2 and adapter.dtls is not None
+                 and adapter.dtls.refused == 2, 10, "the four refusals to be counted")
+        # One line per source per 10 s for each port: the first refusal names the identity it did not know.
+        (tls_line,) = _refusals(caplog, "TLS")
+        (dtls_line,) = _refusals(caplog, "DTLS")
+        assert tls_line.endswith("refused: unknown PSK identity 'intruder'")
+        assert dtls_line.endswith("refused: unknown PSK identity 'intruder'")
+        # Nothing else disturbed.
+        assert kept.read(1, 1, 7) == "CENT"
+        assert plain.read(1, 1, 7) == "CENT"
+        for io in (secured_io, plain_io):
+            before = io.statistics()["received"]
+            wait_for(lambda io=io, before=before: io.statistics()["received"] > before + 5, 10, "class 1 data")
+    with SyncScanner("127.0.0.1", port, security=good) as fresh:
+        assert fresh.read(1, 1, 7) == "CENT"
+
+
+def test_the_describe_of_a_wrong_key_on_the_device_names_it(served: Served, psk_lab: Path, tmp_path: Path,
+                                                            caplog: pytest.LogCaptureFixture) -> None:
+    caplog.set_level(logging.INFO, logger="cipstack.security")
+    identity, _ = _key_of(psk_lab)
+    wrong = Credentials.load(_folder(tmp_path / "wrong", identity, bytes(32)))
+    with pytest.raises(SecurityError):
+        SyncScanner("127.0.0.1", served.secure_port, security=wrong, timeout=5)
+    wait_for(lambda: _refusals(caplog, "TLS"), 10, "the refusal line")
+    (line,) = _refusals(caplog, "TLS")
+    assert line.endswith(f"refused: wrong pre-shared key for identity '{identity}' "
+                         "(decryption failed or bad record mac)"), line
+
+
+# -- the Pre-Shared Keys attribute, written over the wire ---------------------------------------------------
+def _push(served: Served, lab: Path, keys: tuple[tuple[bytes, bytes], ...]) -> None:
+    with SyncScanner("127.0.0.1", served.adapter.port, identify=False) as plain:
+        def request(service: int, class_id: int, instance: int, attribute: int | None,
+                    data: bytes) -> tuple[int, tuple[int, ...], bytes]:
+            reply = plain.request(service, class_id, instance, attribute, data, check=False)
+            return reply.general_status, reply.extended_status, reply.data
+
+        configure(request, lab, pre_shared_keys=keys)
+    secure = served.adapter.secure
+    assert secure is not None
+    wait_for(lambda: secure.server is not None and secure.server.is_open, 10, "the TLS listener after Apply_Config")
+
+
+def _reset(served: Served) -> None:
+    secure = served.adapter.secure
+    assert secure is not None
+    reloads = secure.reloads
+    with SyncScanner("127.0.0.1", served.adapter.port, identify=False) as plain:
+        reply = plain.request(0x05, 0x5E, 1, None, b"", check=False)   # Reset: back to Factory Default
+        assert reply.general_status == 0
+    wait_for(lambda: secure.reloads > reloads, 10, "the listener to close after Reset")
+
+
+def test_the_psk_written_over_the_wire_is_the_one_the_next_handshake_uses(lab: Path, tmp_path: Path) -> None:
+    first, second = os.urandom(32), os.urandom(32)
+    old = Credentials.load(_folder(tmp_path / "first", "line-7", first))
+    new = Credentials.load(_folder(tmp_path / "second", "line-7", second))
+    served = Served(AdapterSettings(host="127.0.0.1", port=0, io_port=0, security_objects=True, security_port=0))
+    try:
+        _push(served, lab, ((b"line-7", first),))
+        with SyncScanner("127.0.0.1", served.secure_port, security=old, identify=False) as drive:
+            assert drive.read(1, 1, 7) == "CENT"
+        # A certificate client is still served beside the key.
+        with SyncScanner("127.0.0.1", served.secure_port, security=Credentials.load(lab)) as drive:
+            assert drive.read(1, 1, 7) == "CENT"
+        _reset(served)
+        _push(served, lab, ((b"line-7", second),))
+        with pytest.raises(SecurityError, match="wrong pre-shared key for identity 'line-7'"):
+            SyncScanner("127.0.0.1", served.secure_port, security=old, timeout=5)
+        with SyncScanner("127.0.0.1", served.secure_port, security=new, identify=False) as drive:
+            assert drive.read(1, 1, 7) == "CENT"
+    finally:
+        served.close()
