@@ -324,7 +324,8 @@ COMMANDS: dict[tuple[str, ...], CommandText] = {
         "device.key) and the client's, that is the originator's (client.pem, client.key): ECDSA P-256 "
         "keys, certificates signed with SHA-256, keys mode 0600, and the CA's key (ca.key, mode 0600) that "
         "signs a device's request in `cipstack security configure`. With --psk, a pre-shared key file "
-        "(psk.txt, one line IDENTITY:HEX, mode 0600) as well; with --psk-only, that file alone. A file "
+        "(psk.txt, one line IDENTITY:HEX, mode 0600) as well, which both roles then offer in TLS 1.2 and "
+        "DTLS 1.2 handshakes (the PSK suites); with --psk-only, that file alone. A file "
         "already there is kept unless --force is given.",
         (("cipstack security init lab", "the lab CA and both key pairs in lab/"),
          ("cipstack security init lab --psk --force", "the same, and a pre-shared key, replacing what is there")),
@@ -333,8 +334,9 @@ COMMANDS: dict[tuple[str, ...], CommandText] = {
         "configure a factory-default device's CIP Security over the network",
         "The push model of a configuration tool, over plain EtherNet/IP: Begin_Config, Create_CSR on the "
         "device (its request read from the File object), the lab CA of DIR signs it, the CA and device "
-        "certificates downloaded into their File object instances and the trust written, "
-        "Verify_Certificate, Apply_Config; then the device is read over TLS on --security-port "
+        "certificates downloaded into their File object instances and the trust written, DIR's psk.txt "
+        "(if any) written as the Pre-Shared Keys, Verify_Certificate, Apply_Config; then the device is "
+        "read over TLS on --security-port "
         "to check it serves the certificate just written. A step the device refuses aborts the session "
         "and is named in one line.",
         (("cipstack security configure 192.168.1.20 --security lab", "configure the device with lab's CA"),
