@@ -225,6 +225,27 @@ async def test_the_asyncio_scanner_opens_class1_over_dtls_with_a_psk(served: Ser
     assert served.adapter.dtls is not None and served.adapter.dtls.refused == 0
 
 
+def test_an_originator_with_a_key_still_reads_a_device_of_certificates(lab: Path, other_lab: Path,
+                                                                       tmp_path: Path) -> None:
+    # The originator's TLS is pyOpenSSL's once it holds a key: the device's certificate is still checked.
+    mine, stranger = tmp_path / "mine", tmp_path / "stranger"
+    for folder, source in ((mine, lab), (stranger, other_lab)):
+        folder.mkdir()
+        for name in ("ca.pem", "client.pem", "client.key"):
+            shutil.copy(source / name, folder / name)
+        _folder(folder, "line-7", bytes(range(32)))
+    server = _serve(lab)
+    try:
+        with SyncScanner("127.0.0.1", server.secure_port, security=Credentials.load(mine)) as drive:
+            assert drive.read(1, 1, 7) == "CENT"
+        with pytest.raises(SecurityError) as raised:
+            SyncScanner("127.0.0.1", server.secure_port, security=Credentials.load(stranger), timeout=5)
+        assert str(raised.value) == (f"TLS with 127.0.0.1:{server.secure_port} failed: certificate verify "
+                                     "failed: self-signed certificate in certificate chain")
+    finally:
+        server.close()
+
+
 # -- against openssl ------------------------------------------------------------------------------------
 @needs_openssl
 @pytest.mark.parametrize("version", ["-tls1_2", "-dtls1_2"])

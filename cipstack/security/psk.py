@@ -37,13 +37,17 @@ _CLIENT_CALLBACK = "unsigned int (*)(SSL *, const char *, char *, unsigned int, 
 #: The cffi callbacks of each context, kept as long as the context lives: OpenSSL holds bare function
 #: pointers, and a callback collected while the context still calls it would crash the process.
 _KEPT: weakref.WeakKeyDictionary[Any, list[Any]] = weakref.WeakKeyDictionary()
+#: The bindings, once checked.
+_BINDINGS: list[tuple[Any, Any]] = []
 #: The device's keys of each context that accepts them.
 _SERVERS: weakref.WeakKeyDictionary[Any, PskServer] = weakref.WeakKeyDictionary()
 
 
 def bindings() -> tuple[Any, Any]:
     """``(lib, ffi)`` of the OpenSSL that pyOpenSSL uses, with the PSK functions; ``SecurityError``
-    when this build of ``cryptography`` lacks them."""
+    when this build of ``cryptography`` lacks them. Checked once, then kept (a record costs no check)."""
+    if _BINDINGS:
+        return _BINDINGS[0]
     try:
         from OpenSSL._util import ffi, lib
     except ImportError:
@@ -52,6 +56,7 @@ def bindings() -> tuple[Any, Any]:
     if not getattr(lib, "Cryptography_HAS_PSK", False) or not all(hasattr(lib, name) for name in needed):
         raise SecurityError("pre-shared keys: the OpenSSL bindings of this cryptography package have no PSK "
                             "functions (Cryptography_HAS_PSK)")
+    _BINDINGS.append((lib, ffi))
     return lib, ffi
 
 
@@ -126,6 +131,14 @@ def offer_psk(context: SSL.Context, identity: bytes, key: bytes) -> None:
     lib.SSL_CTX_set_psk_client_callback(context._context, handle)
 
 
+def written(connection: Any) -> int:
+    """Octets the TLS layer of ``connection`` (a pyOpenSSL ``Connection`` over memory BIOs) has
+    written for the peer and not yet handed out: ``BIO_get_mem_data`` of its outgoing BIO, so that a
+    shell asks for them only when there are some (``Connection.bio_read`` of an empty BIO raises)."""
+    lib, ffi = bindings()
+    return int(lib.BIO_get_mem_data(connection._from_ssl, ffi.NULL))
+
+
 def reason_code(text: str) -> str:
     """OpenSSL's reason string as the ``ssl`` module names it: ``tlsv1 alert unknown ca`` ->
     ``TLSV1_ALERT_UNKNOWN_CA``."""
@@ -150,4 +163,4 @@ def explain(reason: str, identity: bytes | None) -> str | None:
 
 
 __all__ = ["PSK_SUITES", "PskServer", "bindings", "explain", "identity_asked", "offer_psk", "reason_code",
-           "serve_psk"]
+           "serve_psk", "written"]

@@ -23,15 +23,17 @@ from typing import TYPE_CHECKING, Any
 
 from ..errors import PeerUnreachable, SecurityError
 from .dtls import KeyLog, require_pyopenssl
-from .psk import PSK_SUITES, PskServer, explain, offer_psk, reason_code, serve_psk
+from .psk import PSK_SUITES, PskServer, explain, offer_psk, reason_code, serve_psk, written
 
 if TYPE_CHECKING:
     from OpenSSL import SSL
 
     from .credentials import Credentials
 
-#: Ciphertext taken from the TLS layer per read.
+#: Ciphertext taken from the socket per read (the blocking originator's).
 _CHUNK = 65536
+#: The largest plaintext of one TLS record (RFC 5246, 6.2.1).
+_RECORD = 16384
 
 
 def _translate(exc: Exception, connection: Any) -> ssl.SSLError:
@@ -77,6 +79,7 @@ class TlsObject:
         self._keys = keys
         #: The identity the peer named (device side), once the handshake read it.
         self.psk_identity: bytes | None = None
+        self._established = False
 
     def _call(self, operation: Any, *args: Any) -> Any:
         SSL = self._ssl
@@ -95,25 +98,25 @@ class TlsObject:
         except SSL.Error as exc:
             raise _translate(exc, self.connection) from None
         finally:
-            if self._keys is not None and operation == self.connection.do_handshake:
-                self.psk_identity = self._keys.identity_of(self.connection) or self.psk_identity
+            if self._keys is not None and self.psk_identity is None and not self._established:
+                self.psk_identity = self._keys.identity_of(self.connection)
             self._drain()
 
     def _drain(self) -> None:
-        while True:
-            try:
-                data = self.connection.bio_read(_CHUNK)
-            except self._ssl.WantReadError:
-                return
-            if not data:
-                return
-            self.outgoing.write(data)
+        pending = written(self.connection)
+        while pending > 0:
+            self.outgoing.write(self.connection.bio_read(pending))
+            pending = written(self.connection)
 
     # -- ssl.SSLObject's methods ------------------------------------------------------------------------
     def do_handshake(self) -> None:
         self._call(self.connection.do_handshake)
+        self._established = True
 
     def read(self, size: int = 1024, buffer: Any = None) -> Any:
+        # One call yields one record's plaintext at most (2^14 octets, RFC 5246 6.2.1): pyOpenSSL
+        # allocates the size asked for each call, so no more is asked.
+        size = min(size, _RECORD) if size > 0 else _RECORD
         if buffer is not None:
             return self._call(self.connection.recv_into, buffer, size)
         return self._call(self.connection.recv, size)
