@@ -40,6 +40,9 @@ EIP_SECURITY, CERTIFICATES, CIP_SECURITY = 0x5E, 0x5F, 0x5D
 #: The File object instances of the CSR, the device certificate and the CA certificate, and their paths
 #: as the objects give them (size in words, then 20 37 24 NN).
 CSR_FILE, DEVICE_FILE, CA_FILE = 0xC9, 0xCA, 0xCB
+#: Available (and by default Allowed) Cipher Suites as the wire carries them: the certificate suites,
+#: then the pre-shared key suites.
+AVAILABLE = bytes.fromhex("07" "C023" "C02B" "C02C" "C037" "CCAC" "00A8" "00A9")
 CSR_PATH, DEVICE_PATH, CA_PATH = (bytes((2, 0x20, 0x37, 0x24, n)) for n in (CSR_FILE, DEVICE_FILE, CA_FILE))
 
 
@@ -99,7 +102,7 @@ async def test_factory_default_objects_read_as_declared(profile: str) -> None:
             client = Client(f"127.0.0.1:{adapter.port}")
             try:
                 assert client(GET, EIP_SECURITY, 1, 1) == (0, (), b"\x00")              # Factory Default
-                assert client(GET, EIP_SECURITY, 1, 3) == (0, (), bytes.fromhex("03" "C023" "C02B" "C02C"))
+                assert client(GET, EIP_SECURITY, 1, 3) == (0, (), AVAILABLE)
                 assert client(GET, EIP_SECURITY, 1, 15) == (0, (), struct.pack("<H", 12))   # DTLS Timeout
                 assert client(GET, EIP_SECURITY, 1, 13) == (0, (), b"\x01")             # Pull Model Enable
                 assert client(GET, EIP_SECURITY, 1, 6) == (0, (), b"\x00")              # no active certificate
@@ -508,7 +511,7 @@ async def test_oversized_and_malformed_attribute_writes(caplog: pytest.LogCaptur
                 assert client.status(SET, EIP_SECURITY, 1, 6, PATH_LIST.encode(((0x01, 1),))) == 0x09
                 assert client.status(SET, EIP_SECURITY, 1, 3, CIPHER_SUITES.encode((0xC02B,))) == 0x0E
                 assert client.status(SET, EIP_SECURITY, 1, 15, b"\x00\x00") == 0x09              # DTLS timeout 0
-                assert client(GET, EIP_SECURITY, 1, 4) == (0, (), bytes.fromhex("03" "C023" "C02B" "C02C"))
+                assert client(GET, EIP_SECURITY, 1, 4) == (0, (), AVAILABLE)
                 assert client.status(GET, 1, 1, 7) == 0
             finally:
                 client.close()
@@ -559,7 +562,9 @@ async def test_cipstack_get_words_the_security_attributes(capsys: pytest.Capture
         target = f"127.0.0.1:{adapter.port}"
         for path, line in (("0x5E/1/1", "State = 0 (Factory Default)"),
                            ("0x5E/1/4", "Allowed Cipher Suites = 0xC023 ECDHE-ECDSA-AES128-SHA256, "
-                                        "0xC02B ECDHE-ECDSA-AES128-GCM-SHA256, 0xC02C ECDHE-ECDSA-AES256-GCM-SHA384"),
+                                        "0xC02B ECDHE-ECDSA-AES128-GCM-SHA256, 0xC02C ECDHE-ECDSA-AES256-GCM-SHA384, "
+                                        "0xC037 ECDHE-PSK-AES128-CBC-SHA256, 0xCCAC ECDHE-PSK-CHACHA20-POLY1305, "
+                                        "0x00A8 PSK-AES128-GCM-SHA256, 0x00A9 PSK-AES256-GCM-SHA384"),
                            ("0x5E/1/7", "Trusted Authorities = none"),
                            ("0x5E/1/15", "DTLS Timeout = 12 s"),
                            ("0x5F/1/4", "CA Certificate = not verified, in File object instance 203 (class 0x37)"),
@@ -570,7 +575,8 @@ async def test_cipstack_get_words_the_security_attributes(capsys: pytest.Capture
         import json
 
         assert json.loads(capsys.readouterr().out) == {
-            "status": 0, "data": "03c023c02bc02c", "value": ["0xC023", "0xC02B", "0xC02C"], "type": "CIPHER_SUITES",
+            "status": 0, "data": AVAILABLE.hex(), "type": "CIPHER_SUITES",
+            "value": ["0xC023", "0xC02B", "0xC02C", "0xC037", "0xCCAC", "0x00A8", "0x00A9"],
             "name": "Available Cipher Suites", "path": "0x5E/1/3"}
 
 

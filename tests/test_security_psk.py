@@ -391,14 +391,15 @@ def test_the_describe_of_a_wrong_key_on_the_device_names_it(served: Served, psk_
 
 
 # -- the Pre-Shared Keys attribute, written over the wire ---------------------------------------------------
-def _push(served: Served, lab: Path, keys: tuple[tuple[bytes, bytes], ...]) -> None:
+def _push(served: Served, lab: Path, keys: tuple[tuple[bytes, bytes], ...],
+          allowed: tuple[int, ...] | None = None) -> None:
     with SyncScanner("127.0.0.1", served.adapter.port, identify=False) as plain:
         def request(service: int, class_id: int, instance: int, attribute: int | None,
                     data: bytes) -> tuple[int, tuple[int, ...], bytes]:
             reply = plain.request(service, class_id, instance, attribute, data, check=False)
             return reply.general_status, reply.extended_status, reply.data
 
-        configure(request, lab, pre_shared_keys=keys)
+        configure(request, lab, pre_shared_keys=keys, allowed_suites=allowed)
     secure = served.adapter.secure
     assert secure is not None
     wait_for(lambda: secure.server is not None and secure.server.is_open, 10, "the TLS listener after Apply_Config")
@@ -434,3 +435,35 @@ def test_the_psk_written_over_the_wire_is_the_one_the_next_handshake_uses(lab: P
             assert drive.read(1, 1, 7) == "CENT"
     finally:
         served.close()
+
+
+def test_allowed_cipher_suites_decide_the_psk_suites(lab: Path, tmp_path: Path,
+                                                     caplog: pytest.LogCaptureFixture) -> None:
+    caplog.set_level(logging.INFO, logger="cipstack.security")
+    key = os.urandom(32)
+    originator = Credentials.load(_folder(tmp_path / "key", "line-7", key))
+    served = Served(AdapterSettings(host="127.0.0.1", port=0, io_port=0, security_objects=True, security_port=0))
+    try:
+        # PSK suites alone and no key: nothing a handshake could use, refused at Apply_Config.
+        with pytest.raises(SecurityError, match=r"Apply_Config refused: 0x0C .*extended 0x0004"):
+            _push(served, lab, (), allowed=(0xC037,))
+        # A key, and one PSK suite allowed: that suite alone.
+        _push(served, lab, ((b"line-7", key),), allowed=(0xC02B, 0x00A8))
+        with SyncScanner("127.0.0.1", served.secure_port, security=originator, identify=False) as drive:
+            assert drive.read(1, 1, 7) == "CENT"
+        assert "(TLSv1.2, PSK-AES128-GCM-SHA256)" in _accepted(caplog, "TLS connection")[-1]
+        _reset(served)
+        # A key, and no PSK suite allowed: the key is kept, no PSK handshake.
+        _push(served, lab, ((b"line-7", key),), allowed=(0xC02B,))
+        with pytest.raises(SecurityError, match="no cipher suite in common with the peer"):
+            SyncScanner("127.0.0.1", served.secure_port, security=originator, timeout=5)
+    finally:
+        served.close()
+
+
+def test_the_psk_suites_are_named_alike_in_the_object_and_the_handshake() -> None:
+    from cipstack.security.declarations import AVAILABLE_CIPHER_SUITES, PSK_SUITE_NAMES
+    from cipstack.security.psk import PSK_SUITES
+
+    assert tuple(PSK_SUITE_NAMES.values()) == PSK_SUITES
+    assert AVAILABLE_CIPHER_SUITES[-len(PSK_SUITES):] == (0xC037, 0xCCAC, 0x00A8, 0x00A9)

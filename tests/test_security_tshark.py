@@ -111,8 +111,9 @@ async def test_tshark_dissects_the_security_attributes_as_served(tmp_path: Path)
                 shown[index] = shown.get(index, "") + value
     assert shown[0] == "2"                                   # State: Configured
     assert shown[1] == "1"                         # secure renegotiation
-    assert shown[2] == "3"
-    assert shown[3] == "0xc023,0xc02b,0xc02c"                # IANA ids, first byte first, as Wireshark reads them
+    assert shown[2] == "7"
+    # IANA ids, first byte first, as Wireshark reads them: the certificate suites, then the PSK suites.
+    assert shown[3] == "0xc023,0xc02b,0xc02c,0xc037,0xccac,0x00a8,0x00a9"
     assert shown[4] == "1" and shown[5] == "0xc02b"
     assert shown[6] == "1" and shown[7] == "1"               # one path each (to 0x5F/1)
     assert shown[8] == "1"

@@ -30,9 +30,11 @@ from ..eip.target.limits import RateLimitedLog
 from .declarations import (
     AVAILABLE_CIPHER_SUITES,
     CERTIFICATE_MANAGEMENT_CLASS,
+    CERTIFICATE_SUITE_NAMES,
     DTLS_TIMEOUT,
     NO_CERTIFICATES_CONFIGURED,
     NO_CIPHER_SUITES_CONFIGURED,
+    PSK_SUITE_NAMES,
     CertificateStatus,
     SecurityState,
 )
@@ -114,6 +116,13 @@ def _from_jsonable(default: Any, value: Any) -> Any:
         return tuple(tuple(bytes.fromhex(x) if isinstance(x, str) else x for x in v) if isinstance(v, list) else v
                      for v in value)
     return value
+
+
+def usable_suites(configuration: Configuration) -> tuple[int, ...]:
+    """The allowed suites a handshake can use: the certificate suites, and the PSK suites when a key
+    is set."""
+    return tuple(s for s in configuration.allowed_suites
+                 if s in CERTIFICATE_SUITE_NAMES or (s in PSK_SUITE_NAMES and configuration.pre_shared_keys))
 
 
 #: The device's own certificate instance, the path every default list names.
@@ -217,6 +226,10 @@ class Configurator:
             raise self.refuse(peer, GeneralStatus.OBJECT_STATE_CONFLICT,
                               f"Apply_Config from {peer} refused: no allowed cipher suite",
                               (NO_CIPHER_SUITES_CONFIGURED,))
+        if not usable_suites(pending):
+            raise self.refuse(peer, GeneralStatus.OBJECT_STATE_CONFLICT,
+                              f"Apply_Config from {peer} refused: the allowed cipher suites are pre-shared key "
+                              "suites and no pre-shared key is set", (NO_CIPHER_SUITES_CONFIGURED,))
         why = problem(pending)
         if why is not None:
             raise self.refuse(peer, GeneralStatus.OBJECT_STATE_CONFLICT, f"Apply_Config from {peer} refused: {why}",
@@ -264,4 +277,4 @@ class _Session:
     before: SecurityState = SecurityState.FACTORY_DEFAULT
 
 
-__all__ = ["CONFIG_TIMEOUT", "DEVICE_CERTIFICATE_PATH", "Configuration", "Configurator", "Refused"]
+__all__ = ["CONFIG_TIMEOUT", "DEVICE_CERTIFICATE_PATH", "Configuration", "Configurator", "Refused", "usable_suites"]

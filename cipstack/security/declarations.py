@@ -93,15 +93,25 @@ CSR_FILE, DEVICE_CERTIFICATE_FILE, CA_CERTIFICATE_FILE = 0xC9, 0xCA, 0xCB
 #: DTLS Timeout default, seconds (the branch's default).
 DTLS_TIMEOUT = 12
 
-#: The suites this device offers over TLS 1.2, by IANA id, with OpenSSL's names: the
+#: The certificate suites this device offers over TLS 1.2, by IANA id, with OpenSSL's names: the
 #: ECDHE-ECDSA suites with AES-128 the EtherNet/IP Confidentiality Profile names (CBC-SHA256 and
 #: GCM-SHA256), and AES-256-GCM. The NULL suites are not offered (chosen here: they need OpenSSL's
 #: security level 0, and nothing here carries I/O over TLS).
-CIPHER_SUITE_NAMES: dict[int, str] = {
+CERTIFICATE_SUITE_NAMES: dict[int, str] = {
     0xC023: "ECDHE-ECDSA-AES128-SHA256",
     0xC02B: "ECDHE-ECDSA-AES128-GCM-SHA256",
     0xC02C: "ECDHE-ECDSA-AES256-GCM-SHA384",
 }
+#: The pre-shared key suites (``psk.PSK_SUITES``; ids of RFC 5489, RFC 7905 and RFC 5487):
+#: ECDHE-PSK-AES128-CBC-SHA256, the one the profile's public write-ups name, then the PSK AEAD
+#: suites. Offered when the device holds a key and Allowed Cipher Suites lists them.
+PSK_SUITE_NAMES: dict[int, str] = {
+    0xC037: "ECDHE-PSK-AES128-CBC-SHA256",
+    0xCCAC: "ECDHE-PSK-CHACHA20-POLY1305",
+    0x00A8: "PSK-AES128-GCM-SHA256",
+    0x00A9: "PSK-AES256-GCM-SHA384",
+}
+CIPHER_SUITE_NAMES: dict[int, str] = {**CERTIFICATE_SUITE_NAMES, **PSK_SUITE_NAMES}
 AVAILABLE_CIPHER_SUITES = tuple(CIPHER_SUITE_NAMES)
 CIPHER_SUITES = CipherSuiteList(names=CIPHER_SUITE_NAMES)
 
@@ -168,8 +178,9 @@ SECURITY_CLASSES: dict[int, ClassSpec] = {spec.class_id: spec for spec in
                                           (CIP_SECURITY_SPEC, EIP_SECURITY_SPEC, CERTIFICATE_MANAGEMENT_SPEC)}
 
 __all__ = ["AVAILABLE_CIPHER_SUITES", "CA_CERTIFICATE_FILE", "CERTIFICATE_MANAGEMENT_CLASS",
-           "CERTIFICATE_MANAGEMENT_SPEC", "CIPHER_SUITES", "CIPHER_SUITE_NAMES", "CIP_SECURITY_CLASS",
-           "CIP_SECURITY_SPEC", "CONFIDENTIALITY_PROFILE", "CSR_FILE", "DEVICE_CERTIFICATE_FILE", "DTLS_TIMEOUT",
-           "EIP_SECURITY_CLASS", "EIP_SECURITY_SPEC", "FILE_CLASS", "NO_CERTIFICATES_CONFIGURED",
-           "NO_CIPHER_SUITES_CONFIGURED", "SECURITY_CLASSES", "VERIFICATION_FAILED", "CertificateService",
-           "CertificateState", "CertificateStatus", "CipSecurityState", "ConfigService", "SecurityState"]
+           "CERTIFICATE_MANAGEMENT_SPEC", "CERTIFICATE_SUITE_NAMES", "CIPHER_SUITES", "CIPHER_SUITE_NAMES",
+           "CIP_SECURITY_CLASS", "CIP_SECURITY_SPEC", "CONFIDENTIALITY_PROFILE", "CSR_FILE",
+           "DEVICE_CERTIFICATE_FILE", "DTLS_TIMEOUT", "EIP_SECURITY_CLASS", "EIP_SECURITY_SPEC", "FILE_CLASS",
+           "NO_CERTIFICATES_CONFIGURED", "NO_CIPHER_SUITES_CONFIGURED", "PSK_SUITE_NAMES", "SECURITY_CLASSES",
+           "VERIFICATION_FAILED", "CertificateService", "CertificateState", "CertificateStatus", "CipSecurityState",
+           "ConfigService", "SecurityState"]

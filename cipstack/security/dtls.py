@@ -101,7 +101,7 @@ def _keylog(context: SSL.Context, credentials: Credentials) -> SSL.Context:
 
 def _use_psk(context: SSL.Context, credentials: Credentials, server: bool, with_certificates: bool) -> None:
     """The PSK callbacks and suites (DTLS 1.2 only: the PSK suites are (D)TLS 1.2's)."""
-    from .declarations import CIPHER_SUITE_NAMES
+    from .declarations import CERTIFICATE_SUITE_NAMES
     from .psk import PSK_SUITES, offer_psk, serve_psk
 
     psk = credentials.psk
@@ -111,7 +111,7 @@ def _use_psk(context: SSL.Context, credentials: Credentials, server: bool, with_
     else:
         offer_psk(context, psk.identity, psk.key)
     context.set_max_proto_version(DTLS1_2_VERSION)
-    names = [*PSK_SUITES, *(CIPHER_SUITE_NAMES.values() if with_certificates else ())]
+    names = [*PSK_SUITES, *(CERTIFICATE_SUITE_NAMES.values() if with_certificates else ())]
     context.set_cipher_list(":".join(names).encode())
 
 

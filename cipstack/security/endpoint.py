@@ -37,7 +37,7 @@ from ..errors import SecurityError
 from .certificates import pem
 from .configuration import Configuration
 from .credentials import CA_FILE, DEVICE_CERTIFICATE, DEVICE_KEY, Credentials
-from .declarations import CIPHER_SUITE_NAMES
+from .declarations import CERTIFICATE_SUITE_NAMES, CIPHER_SUITE_NAMES
 
 if TYPE_CHECKING:
     from .tls_psk import PskTlsContext
@@ -99,7 +99,7 @@ def available_suites_context(credentials: Credentials) -> ssl.SSLContext | PskTl
         return psk_context(credentials, server=True, keys=[(credentials.psk.identity, credentials.psk.key)],
                            suites=tuple(CIPHER_SUITE_NAMES.values()))
     context = credentials.server_context()
-    context.set_ciphers(":".join(CIPHER_SUITE_NAMES.values()))
+    context.set_ciphers(":".join(CERTIFICATE_SUITE_NAMES.values()))
     return context
 
 
@@ -117,7 +117,11 @@ def server_context(credentials: Credentials, configuration: Configuration) -> ss
                            verify_client=bool(configuration.verify_client))
     context = credentials.server_context(verify_client=bool(configuration.verify_client))
     context.maximum_version = ssl.TLSVersion.TLSv1_2
-    context.set_ciphers(":".join(CIPHER_SUITE_NAMES[s] for s in configuration.allowed_suites))
+    # Without a key, the certificate suites allowed: a PSK suite needs a key.
+    suites = [CERTIFICATE_SUITE_NAMES[s] for s in configuration.allowed_suites if s in CERTIFICATE_SUITE_NAMES]
+    if not suites:   # Apply_Config refuses such a configuration (``Configurator.apply``)
+        raise SecurityError("no certificate suite allowed, and no pre-shared key for a PSK suite")
+    context.set_ciphers(":".join(suites))
     return context
 
 

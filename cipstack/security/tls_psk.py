@@ -45,6 +45,8 @@ def _translate(exc: Exception, connection: Any) -> ssl.SSLError:
     about_key = [reason for reason in reasons if explain(reason, None) is not None]
     text = (about_key or reasons or [str(exc) or type(exc).__name__])[-1]
     code = reason_code(text)
+    if code.startswith("TLS_ALERT_"):   # OpenSSL 3's text for the alerts the ssl module names SSLV3_ALERT_
+        code = "SSLV3_" + code[len("TLS_"):]
     if code == "CERTIFICATE_VERIFY_FAILED":
         error: ssl.SSLError = ssl.SSLCertVerificationError(1, f"[SSL: {code}] {text}")
         error.verify_message = _verify_message(connection)   # type: ignore[attr-defined]  # as ssl sets it
@@ -181,8 +183,8 @@ class PskTlsContext:
 def psk_context(credentials: Credentials, server: bool, keys: Iterable[tuple[bytes, bytes]] = (),
                 suites: Sequence[str] = (), verify_client: bool = True) -> PskTlsContext:
     """The TLS 1.2 context of the device (``server``, with ``keys``) or of the originator (with the
-    folder's PSK): the PSK suites, and ``suites`` (the certificate suites, OpenSSL's names) with the
-    folder's certificate, key and CA when it has them."""
+    folder's PSK): of ``suites`` (OpenSSL's names), the PSK suites with a key and the certificate
+    suites with the folder's certificate, key and CA when it has them."""
     require_pyopenssl()
     from OpenSSL import SSL
 
@@ -191,6 +193,10 @@ def psk_context(credentials: Credentials, server: bool, keys: Iterable[tuple[byt
     context.set_max_proto_version(SSL.TLS1_2_VERSION)
     pair = credentials.device if server else credentials.client
     names: list[str] = []
+    # ``suites`` may name PSK suites too (the device's Allowed Cipher Suites): the device offers those
+    # it lists; the originator offers every PSK suite.
+    psk_names = [name for name in suites if name in PSK_SUITES] if server else list(PSK_SUITES)
+    suites = [name for name in suites if name not in PSK_SUITES]
     if pair is not None and credentials.ca is not None and suites:
         role = "device" if server else "client"
         try:
@@ -208,10 +214,10 @@ def psk_context(credentials: Credentials, server: bool, keys: Iterable[tuple[byt
     keeper: PskServer | None = None
     if server:
         keeper = serve_psk(context, keys)
-        names = [*PSK_SUITES, *names] if keeper.keys else names
+        names = [*psk_names, *names] if keeper.keys else names
     elif credentials.psk is not None:
         offer_psk(context, credentials.psk.identity, credentials.psk.key)
-        names = [*PSK_SUITES, *names]   # the originator prefers its key: the device picks among both
+        names = [*psk_names, *names]   # the originator prefers its key: the device picks among both
     if not names:
         raise SecurityError(f"{credentials.folder}: neither a pre-shared key nor certificates for TLS")
     try:
