@@ -467,3 +467,25 @@ def test_the_psk_suites_are_named_alike_in_the_object_and_the_handshake() -> Non
 
     assert tuple(PSK_SUITE_NAMES.values()) == PSK_SUITES
     assert AVAILABLE_CIPHER_SUITES[-len(PSK_SUITES):] == (0xC037, 0xCCAC, 0x00A8, 0x00A9)
+
+
+def test_a_key_written_over_the_wire_survives_a_restart_with_a_state_file(lab: Path, tmp_path: Path) -> None:
+    key = os.urandom(32)
+    originator = Credentials.load(_folder(tmp_path / "key", "line-7", key))
+    settings = AdapterSettings(host="127.0.0.1", port=0, io_port=0, security_objects=True,
+                               security_port=free_port(), state_path=tmp_path / "acg.json")
+    served = Served(settings)
+    try:
+        _push(served, lab, ((b"line-7", key),))
+    finally:
+        served.close()
+    kept = (tmp_path / "acg.json.security" / "configuration.json").read_text()
+    assert key.hex() in kept   # in the 0600 file beside the state (test_security_objects checks the mode)
+    again = Served(settings)
+    try:
+        wait_for(lambda: again.adapter.secure is not None and again.adapter.secure.server is not None
+                 and again.adapter.secure.server.is_open, 10, "the kept configuration's listener")
+        with SyncScanner("127.0.0.1", again.secure_port, security=originator, identify=False) as drive:
+            assert drive.read(1, 1, 7) == "CENT"
+    finally:
+        again.close()
