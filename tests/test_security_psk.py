@@ -489,3 +489,34 @@ def test_a_key_written_over_the_wire_survives_a_restart_with_a_state_file(lab: P
             assert drive.read(1, 1, 7) == "CENT"
     finally:
         again.close()
+
+
+def test_a_device_configured_with_keys_alone_serves_the_psk_suites_alone(lab: Path, tmp_path: Path) -> None:
+    from cipstack.security.attributes import PRE_SHARED_KEYS
+    from cipstack.security.declarations import CIPHER_SUITES
+
+    key = os.urandom(32)
+    originator = Credentials.load(_folder(tmp_path / "key", "line-7", key))
+    served = Served(AdapterSettings(host="127.0.0.1", port=0, io_port=0, security_objects=True,
+                                    security_port=free_port()))
+    try:
+        with SyncScanner("127.0.0.1", served.adapter.port, identify=False) as plain:
+            def status(service: int, attribute: int | None = None, data: bytes = b"") -> tuple[int, tuple[int, ...]]:
+                reply = plain.request(service, 0x5E, 1, attribute, data, check=False)
+                return reply.general_status, tuple(reply.extended_status)
+
+            assert status(0x4B) == (0, ())                                             # Begin_Config
+            assert status(0x10, 4, CIPHER_SUITES.encode((0xC02B,))) == (0, ())
+            assert status(0x10, 5, PRE_SHARED_KEYS.encode(((b"line-7", key),))) == (0, ())
+            assert status(0x4D) == (0x0C, (0x0002,))   # a key, no PSK suite allowed, no certificate
+            assert status(0x10, 4, CIPHER_SUITES.encode((0xC037, 0x00A8))) == (0, ())
+            assert status(0x4D) == (0, ())                                             # Apply_Config
+        secure = served.adapter.secure
+        assert secure is not None
+        wait_for(lambda: secure.server is not None and secure.server.is_open, 10, "the TLS listener")
+        with SyncScanner("127.0.0.1", served.secure_port, security=originator, identify=False) as drive:
+            assert drive.read(1, 1, 7) == "CENT"
+        with pytest.raises(SecurityError, match="no cipher suite in common with the peer"):
+            SyncScanner("127.0.0.1", served.secure_port, security=Credentials.load(lab), timeout=5)
+    finally:
+        served.close()

@@ -108,6 +108,12 @@ class Credentials:
                                 f"and no {PSK_FILE} (make them with `cipstack security init {path}`)")
         return cls(path, ca, device, client, psk, os.environ.get("SSLKEYLOGFILE") or None)
 
+    @classmethod
+    def keys_only(cls, folder: str | os.PathLike[str]) -> Credentials:
+        """Credentials of no file: a device configured with pre-shared keys alone, whose keys its
+        configuration holds (``endpoint.server_context``)."""
+        return cls(Path(folder), None, None, None, None, os.environ.get("SSLKEYLOGFILE") or None)
+
     # -- TLS contexts -----------------------------------------------------------------------------
     def server_context(self, verify_client: bool = True) -> ssl.SSLContext:
         """The target's TLS context: TLS 1.2 at least (1.3 where the peer offers it), the device's

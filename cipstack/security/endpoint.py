@@ -134,11 +134,16 @@ def _write(folder: Path, configuration: Configuration | None) -> None:
             with contextlib.suppress(FileNotFoundError):
                 (folder / name).unlink()
         return
-    files = ((CA_FILE, pem(configuration.ca_certificate), 0o644),
+    files: tuple[tuple[str, bytes, int], ...] = ((CA_FILE, pem(configuration.ca_certificate), 0o644),
              (DEVICE_CERTIFICATE, pem(configuration.device_certificate), 0o644),
              (DEVICE_KEY, configuration.device_key, 0o600),
              # The configuration holds the pre-shared keys: as private as the device's key.
              (CONFIGURATION_FILE, configuration.to_json().encode(), 0o600))
+    if not configuration.active_device_certificates:   # pre-shared keys alone: no certificate files
+        for name in (CA_FILE, DEVICE_CERTIFICATE, DEVICE_KEY):
+            with contextlib.suppress(FileNotFoundError):
+                (folder / name).unlink()
+        files = files[3:]
     for name, data, mode in files:
         temporary = folder / f".{name}.new"
         with contextlib.suppress(FileNotFoundError):
@@ -238,7 +243,10 @@ class SecureEndpoint:
             await server.close()
         self.servers.clear()
         if configuration is not None and folder is not None:
-            credentials = await loop.run_in_executor(None, Credentials.load, folder)
+            if configuration.active_device_certificates:
+                credentials = await loop.run_in_executor(None, Credentials.load, folder)
+            else:   # pre-shared keys alone, from the configuration
+                credentials = Credentials.keys_only(folder)
             server = self.make_server(credentials, server_context(credentials, configuration), self.port)
             self.servers.append(server)
             if self._open:

@@ -38,6 +38,7 @@ from .declarations import (
     DEVICE_CERTIFICATE_FILE,
     EIP_SECURITY_SPEC,
     FILE_CLASS,
+    PSK_SUITE_NAMES,
     VERIFICATION_FAILED,
     CertificateService,
     CertificateState,
@@ -164,6 +165,9 @@ class EipSecurityObject(_SecurityObject):
                 raise CipError(GeneralStatus.TOO_MUCH_DATA, message="Apply_Config takes a WORD and a UINT")
         configurator, peer, owner = self.configurator, context.origin, context.transport
         pending = configurator.require(owner, peer, context.now, "Apply_Config")
+        if keys_only(pending):   # no certificate to check: TLS with the pre-shared keys alone
+            configurator.apply(owner, peer, context.now, lambda _: None)
+            return b""
         why = usable(pending)
         if why is None:
             configurator.change(owner, peer, context.now, "Apply_Config", device_status=CertificateStatus.VERIFIED,
@@ -181,6 +185,13 @@ class EipSecurityObject(_SecurityObject):
             raise CipError(GeneralStatus.INVALID_PARAMETER, message=f"Reset's BOOL is 0 or 1, not {pull_model}")
         self.configurator.reset(context.transport, context.origin, context.now, pull_model)
         return b""
+
+
+def keys_only(configuration: Configuration) -> bool:
+    """A configuration of pre-shared keys alone: no active device certificate, a key, and a PSK suite
+    allowed (chosen here: a device that names no certificate serves the PSK suites alone)."""
+    return (not configuration.active_device_certificates and bool(configuration.pre_shared_keys)
+            and any(suite in PSK_SUITE_NAMES for suite in configuration.allowed_suites))
 
 
 def usable(configuration: Configuration) -> str | None:
