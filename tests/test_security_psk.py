@@ -143,7 +143,8 @@ def test_a_psk_only_folder_reads_over_tls(served: Served, psk_lab: Path, caplog:
     with SyncScanner("127.0.0.1", served.secure_port, security=Credentials.load(psk_lab)) as drive:
         assert drive.read(1, 1, 7) == "CENT"   # Identity, Product Name: a Get_Attribute_Single over TLS
     (line,) = _accepted(caplog, "TLS connection")
-    assert "(TLSv1.2, ECDHE-PSK-AES128-CBC-SHA256)" in line
+    identity, _ = _key_of(psk_lab)
+    assert f"(TLSv1.2, ECDHE-PSK-AES128-CBC-SHA256, PSK identity '{identity}')" in line
 
 
 async def test_the_asyncio_scanner_reads_over_tls_with_a_psk(served: Served, psk_lab: Path) -> None:
@@ -169,7 +170,9 @@ def test_explicit_and_class1_over_dtls_with_a_psk(served: Served, psk_lab: Path,
         assert connection.secured
         wait_for(lambda: io.statistics()["received"] > 5, 10, "T->O data in the DTLS session")
     lines = _accepted(caplog, "DTLS session")
-    assert len(lines) == 2 and all("(DTLSv1.2, ECDHE-PSK-AES128-CBC-SHA256)" in line for line in lines)
+    identity, _ = _key_of(psk_lab)
+    assert len(lines) == 2
+    assert all(f"(DTLSv1.2, ECDHE-PSK-AES128-CBC-SHA256, PSK identity '{identity}')" in line for line in lines)
     assert served.adapter.dtls is not None and served.adapter.dtls.refused == 0
 
 
@@ -191,7 +194,7 @@ def test_a_folder_with_both_serves_certificates_and_the_psk(tmp_path: Path, capl
         server.close()
     first, second = _accepted(caplog, "TLS connection")
     assert "(TLSv1.2, ECDHE-ECDSA-" in first     # no key: the certificate suites, TLS 1.2 alone
-    assert "(TLSv1.2, ECDHE-PSK-AES128-CBC-SHA256)" in second   # the originator offers its key first
+    assert "(TLSv1.2, ECDHE-PSK-AES128-CBC-SHA256, PSK identity 'cipstack-lab')" in second   # its key first
 
 
 def test_cipstack_io_with_a_psk_only_folder_runs_over_dtls(served: Served, psk_lab: Path, tmp_path: Path) -> None:
@@ -451,7 +454,7 @@ def test_allowed_cipher_suites_decide_the_psk_suites(lab: Path, tmp_path: Path,
         _push(served, lab, ((b"line-7", key),), allowed=(0xC02B, 0x00A8))
         with SyncScanner("127.0.0.1", served.secure_port, security=originator, identify=False) as drive:
             assert drive.read(1, 1, 7) == "CENT"
-        assert "(TLSv1.2, PSK-AES128-GCM-SHA256)" in _accepted(caplog, "TLS connection")[-1]
+        assert "(TLSv1.2, PSK-AES128-GCM-SHA256, PSK identity 'line-7')" in _accepted(caplog, "TLS connection")[-1]
         _reset(served)
         # A key, and no PSK suite allowed: the key is kept, no PSK handshake.
         _push(served, lab, ((b"line-7", key),), allowed=(0xC02B,))

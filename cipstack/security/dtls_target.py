@@ -56,7 +56,7 @@ from ..eip.wire.cpf import SockAddr
 from .credentials import SECURE_PORT
 from .dtls import DtlsChannel, describe_dtls_failure, dtls_context
 from .psk import identity_asked
-from .tls_target import HANDSHAKE_TIMEOUT
+from .tls_target import HANDSHAKE_TIMEOUT, named_identity
 
 if TYPE_CHECKING:
     from ..eip.target.core import EncapsulationConnection, EncapsulationTarget
@@ -146,7 +146,8 @@ class _Session:
         server = self.server
         self.connection = server.target.connection(self.peer, server.local, now, io_path=self.address)
         server.paths.routes[self.address] = self.send_io
-        log.info("%s: DTLS session accepted (%s)", self.peer, self.channel.description())
+        log.info("%s: DTLS session accepted (%s%s)", self.peer, self.channel.description(),
+                 named_identity(identity_asked(self.channel.connection)))
 
     def _record(self, plain: bytes, now: float) -> bool:
         """Serve one record's plaintext; whether it was an encapsulation message."""

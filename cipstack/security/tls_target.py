@@ -159,7 +159,9 @@ class _TlsProtocol(asyncio.Protocol):
             self._timer.cancel()
             self._timer = None
         self.connection = self.server.target.connection(self.peer, self._local, self.loop.time())
-        log.info("%s: TLS connection accepted (%s, %s)", self.peer, tls.version(), (tls.cipher() or ("?",))[0])
+        identity = getattr(tls, "psk_identity", None)
+        log.info("%s: TLS connection accepted (%s, %s%s)", self.peer, tls.version(), (tls.cipher() or ("?",))[0],
+                 named_identity(identity))
         self._arm()
         return True
 
@@ -255,6 +257,11 @@ class _TlsProtocol(asyncio.Protocol):
             self.transport.close()
 
 
+def named_identity(identity: bytes | None) -> str:
+    """``, PSK identity 'x'`` for a handshake made with a pre-shared key, else nothing."""
+    return f", PSK identity '{identity.decode('ascii', 'replace')}'" if identity else ""
+
+
 def _cause(tls: ssl.SSLObject | TlsObject, exc: BaseException) -> str:
     """Why a handshake failed; with a pre-shared key, the identity the peer named."""
     identity = getattr(tls, "psk_identity", None)
@@ -321,4 +328,4 @@ class TlsServer:
         await server.wait_closed()
 
 
-__all__ = ["HANDSHAKE_TIMEOUT", "TlsServer"]
+__all__ = ["HANDSHAKE_TIMEOUT", "TlsServer", "named_identity"]
