@@ -151,3 +151,18 @@ def test_dtls_io_holds_both_ways_and_compares_the_adapters_cpu() -> None:
         assert round_[way]["opened"] == 4 and round_[way]["sent"] > 0 and round_[way]["received"] > 0, result.stderr
         # 4 connections at 10 ms for 1 s: about 400 packets each way, whatever the machine's load.
         assert round_[way]["sent"] >= 200
+
+
+def test_psk_tls_reads_and_handshakes_both_ways() -> None:
+    """``psk_tls.py``, one short round: both adapters answer every read and handshake, and the ratios
+    are given (not judged here: a benchmark's figure)."""
+    import json
+
+    pytest.importorskip("OpenSSL", reason="the security extra (pyOpenSSL) is not installed")
+    result = subprocess.run([sys.executable, str(BENCHMARKS / "psk_tls.py"), "--reads", "200", "--handshakes", "10",
+                             "--rounds", "1", "--json"], capture_output=True, text=True, timeout=120)
+    assert result.returncode == 0, result.stderr
+    [round_] = json.loads(result.stdout)["rounds"]
+    for way in ("certificates", "psk"):
+        assert set(round_[way]) == {"cpu_per_read_us", "cpu_per_handshake_us"}
+    assert {"ratio_cpu_per_read_us", "ratio_cpu_per_handshake_us"} <= set(round_)
