@@ -523,3 +523,18 @@ def test_a_device_configured_with_keys_alone_serves_the_psk_suites_alone(lab: Pa
             SyncScanner("127.0.0.1", served.secure_port, security=Credentials.load(lab), timeout=5)
     finally:
         served.close()
+
+
+def test_an_identity_of_128_octets_is_offered_whole(tmp_path: Path) -> None:
+    # 128 octets: the longest the Pre-Shared Keys attribute takes (and psk.txt, MAX_PSK_IDENTITY).
+    identity = "i" * 128
+    folder = _folder(tmp_path / "long", identity, os.urandom(32))
+    server = _serve(folder)
+    try:
+        with SyncScanner("127.0.0.1", server.secure_port, security=Credentials.load(folder)) as drive:
+            assert drive.read(1, 1, 7) == "CENT"
+        client = BlockingEncapsulationClient.connect_dtls("127.0.0.1", server.secure_port, 5.0,
+                                                          Credentials.load(folder))
+        client.close()
+    finally:
+        server.close()

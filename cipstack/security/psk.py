@@ -118,7 +118,9 @@ def offer_psk(context: SSL.Context, identity: bytes, key: bytes) -> None:
 
     def callback(ssl: Any, hint: Any, identity_out: Any, max_identity_len: int, psk: Any, max_psk_len: int) -> int:
         try:
-            if len(identity) + 1 > max_identity_len or len(key) > max_psk_len:
+            # OpenSSL passes the room for the identity less its terminating NUL (its buffer is
+            # PSK_MAX_IDENTITY_LEN + 1): an identity of exactly that length still fits with its NUL.
+            if len(identity) > max_identity_len or len(key) > max_psk_len:
                 return 0
             ffi.memmove(identity_out, identity + b"\0", len(identity) + 1)
             ffi.memmove(psk, key, len(key))
