@@ -538,3 +538,26 @@ def test_an_identity_of_128_octets_is_offered_whole(tmp_path: Path) -> None:
         client.close()
     finally:
         server.close()
+
+
+def test_bindings_without_psk_are_one_security_error_line(psk_lab: Path) -> None:
+    # A cryptography build whose OpenSSL bindings lack PSK (Cryptography_HAS_PSK false), in a process
+    # of its own (the bindings are checked once per process).
+    script = f"""
+import OpenSSL._util as util
+real = util.lib
+class WithoutPsk:
+    def __getattr__(self, name):
+        return 0 if name == "Cryptography_HAS_PSK" else getattr(real, name)
+util.lib = WithoutPsk()
+from cipstack.errors import SecurityError
+from cipstack.security import Credentials
+try:
+    Credentials.load({str(psk_lab)!r}).client_context()
+except SecurityError as exc:
+    print(exc)
+"""
+    result = subprocess.run([sys.executable, "-c", script], capture_output=True, text=True, timeout=60)
+    assert result.returncode == 0, result.stderr
+    assert result.stdout == ("pre-shared keys: the OpenSSL bindings of this cryptography package have no PSK "
+                             "functions (Cryptography_HAS_PSK)\n")

@@ -1,9 +1,12 @@
-"""Pre-shared keys in an OpenSSL handshake: the PSK callbacks of a pyOpenSSL context, both roles.
+"""Pre-shared keys in an OpenSSL handshake: the PSK callbacks of a pyOpenSSL context, both roles,
+and the few other OpenSSL calls pyOpenSSL does not make public (``written``, ``verify_message``).
 
 pyOpenSSL (26.x) has no PSK API. The ``cryptography`` package it is built on exposes OpenSSL's
 ``SSL_CTX_set_psk_server_callback``, ``SSL_CTX_set_psk_client_callback`` and
 ``SSL_CTX_use_psk_identity_hint`` in its bindings, which pyOpenSSL re-exports as
-``OpenSSL._util.lib``/``ffi``: private names, used here and nowhere else. What guards them:
+``OpenSSL._util.lib``/``ffi``, and they take the OpenSSL pointers pyOpenSSL keeps in its objects
+(``Context._context``, ``Connection._ssl``, ``Connection._from_ssl``): private names, used here and
+nowhere else. What guards them:
 ``bindings()`` checks ``lib.Cryptography_HAS_PSK`` and each function, and a build without them is one
 ``SecurityError`` line, never an ``AttributeError`` in the middle of a handshake. The standard library
 has ``SSLContext.set_psk_server_callback`` only from Python 3.13, and no DTLS at all: one path
@@ -56,6 +59,15 @@ def bindings() -> tuple[Any, Any]:
     if not getattr(lib, "Cryptography_HAS_PSK", False) or not all(hasattr(lib, name) for name in needed):
         raise SecurityError("pre-shared keys: the OpenSSL bindings of this cryptography package have no PSK "
                             "functions (Cryptography_HAS_PSK)")
+    from OpenSSL import SSL
+
+    others = ("BIO_get_mem_data", "SSL_get_verify_result", "X509_verify_cert_error_string")
+    connection = SSL.Connection(SSL.Context(SSL.TLS_METHOD), None)
+    pointers = (hasattr(connection.get_context(), "_context") and hasattr(connection, "_ssl")
+                and hasattr(connection, "_from_ssl"))
+    if not pointers or not all(hasattr(lib, name) for name in others):
+        raise SecurityError("pre-shared keys: this pyOpenSSL keeps its OpenSSL pointers otherwise than "
+                            "cipstack.security.psk expects (26.x does)")
     _BINDINGS.append((lib, ffi))
     return lib, ffi
 
@@ -141,6 +153,14 @@ def written(connection: Any) -> int:
     return int(lib.BIO_get_mem_data(connection._from_ssl, ffi.NULL))
 
 
+def verify_message(connection: Any) -> str:
+    """Why the peer's certificate of ``connection`` did not verify, in OpenSSL's words
+    (``SSL_get_verify_result``; pyOpenSSL's error says only "certificate verify failed")."""
+    lib, ffi = bindings()
+    code = lib.SSL_get_verify_result(connection._ssl)
+    return str(ffi.string(lib.X509_verify_cert_error_string(code)).decode())
+
+
 def reason_code(text: str) -> str:
     """OpenSSL's reason string as the ``ssl`` module names it: ``tlsv1 alert unknown ca`` ->
     ``TLSV1_ALERT_UNKNOWN_CA``."""
@@ -165,4 +185,4 @@ def explain(reason: str, identity: bytes | None) -> str | None:
 
 
 __all__ = ["PSK_SUITES", "PskServer", "bindings", "explain", "identity_asked", "offer_psk", "reason_code",
-           "serve_psk", "written"]
+           "serve_psk", "verify_message", "written"]

@@ -23,7 +23,7 @@ from typing import TYPE_CHECKING, Any
 
 from ..errors import PeerUnreachable, SecurityError
 from .dtls import KeyLog, require_pyopenssl
-from .psk import PSK_SUITES, PskServer, explain, offer_psk, reason_code, serve_psk, written
+from .psk import PSK_SUITES, PskServer, explain, offer_psk, reason_code, serve_psk, verify_message, written
 
 if TYPE_CHECKING:
     from OpenSSL import SSL
@@ -49,20 +49,12 @@ def _translate(exc: Exception, connection: Any) -> ssl.SSLError:
         code = "SSLV3_" + code[len("TLS_"):]
     if code == "CERTIFICATE_VERIFY_FAILED":
         error: ssl.SSLError = ssl.SSLCertVerificationError(1, f"[SSL: {code}] {text}")
-        error.verify_message = _verify_message(connection)   # type: ignore[attr-defined]  # as ssl sets it
+        error.verify_message = verify_message(connection)   # type: ignore[attr-defined]  # as ssl sets it
     else:
         error = ssl.SSLError(1, f"[SSL: {code}] {text}")
     error.reason = code   # ssl.SSLError's attributes, set as _ssl sets them
     error.library = "SSL"
     return error
-
-
-def _verify_message(connection: Any) -> str:
-    from .psk import bindings
-
-    lib, ffi = bindings()
-    code = lib.SSL_get_verify_result(connection._ssl)
-    return str(ffi.string(lib.X509_verify_cert_error_string(code)).decode())
 
 
 class TlsObject:
