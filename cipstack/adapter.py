@@ -239,7 +239,7 @@ class Adapter:
 
             folder = state_folder(s.state_path) if s.security is None else None
             kept = load_configuration(folder)
-            self.secure = SecureEndpoint(self._tls_server, s.security_port, folder, self.tls, kept)
+            self.secure = SecureEndpoint(self._tls_server, s.security_port, folder, self.tls, kept, self.dtls)
             initial = configuration_of(self.tls.credentials) if self.tls is not None else kept
             self.configurator = Configurator(self.secure.configured, initial, s.security_config_timeout)
             register_security_objects(self.device.router, self.configurator, self._csr_defaults())

@@ -561,3 +561,33 @@ except SecurityError as exc:
     assert result.returncode == 0, result.stderr
     assert result.stdout == ("pre-shared keys: the OpenSSL bindings of this cryptography package have no PSK "
                              "functions (Cryptography_HAS_PSK)\n")
+
+
+def test_the_dtls_port_follows_a_reset_and_the_keys_written_over_the_wire(psk_lab: Path, lab: Path,
+                                                                          tmp_path: Path) -> None:
+    from cipstack.errors import PeerUnreachable
+
+    key = os.urandom(32)
+    pushed = Credentials.load(_folder(tmp_path / "pushed", "line-7", key))
+    folder = Credentials.load(psk_lab)
+    served = _serve(psk_lab)
+    try:
+        dtls = served.adapter.dtls
+        assert dtls is not None
+        port = dtls.port
+        BlockingEncapsulationClient.connect_dtls("127.0.0.1", port, 5.0, folder).close()
+        _reset(served)
+        # Factory Default: no handshake is answered, each ClientHello is refused and counted.
+        refused = dtls.refused
+        with pytest.raises(PeerUnreachable, match="no answer to the handshake"):
+            BlockingEncapsulationClient.connect_dtls("127.0.0.1", port, 1.0, folder)
+        assert dtls.refused > refused
+        _push(served, lab, ((b"line-7", key),))
+        client = BlockingEncapsulationClient.connect_dtls("127.0.0.1", port, 5.0, pushed)
+        with client:
+            reply = client.perform(client.core.request(GET_ATTRIBUTE_SINGLE, request_path(1, 1, 7)))
+            assert reply.data == b"\x04CENT"
+        with pytest.raises(SecurityError, match="PSK identity 'cipstack-lab' unknown to the device"):
+            BlockingEncapsulationClient.connect_dtls("127.0.0.1", port, 5.0, folder)
+    finally:
+        served.close()

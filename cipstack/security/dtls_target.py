@@ -59,6 +59,8 @@ from .psk import identity_asked
 from .tls_target import HANDSHAKE_TIMEOUT, named_identity
 
 if TYPE_CHECKING:
+    from OpenSSL import SSL
+
     from ..eip.target.core import EncapsulationConnection, EncapsulationTarget
     from ..eip.target.seams import IoSeam
     from .credentials import Credentials
@@ -283,10 +285,10 @@ class DtlsServer:
         self.ssl_error = SSL.Error
         self._ssl = SSL
         self._secret = os.urandom(32)
-        #: The DTLS context every session is made from.
-        self.context = dtls_context(credentials, server=True, verify_client=verify_client)
-        self.context.set_cookie_generate_callback(self._cookie)
-        self.context.set_cookie_verify_callback(self._cookie_matches)
+        #: The DTLS context every new session is made from; None while the device is not configured
+        #: (after a Reset): every ClientHello is then refused (``reconfigure``).
+        self.context: SSL.Context | None = None
+        self._use(dtls_context(credentials, server=True, verify_client=verify_client))
         #: Sessions at once, in all and per host (half of all by default: one host never holds every one).
         self.limiter = ConnectionLimiter(max_sessions, max_sessions_per_host)
         #: Seconds a handshake has from the ClientHello that returned its cookie.
@@ -308,6 +310,21 @@ class DtlsServer:
         self._lane: IoLane | None = None
         #: When the socket was last read to its end (``_catch_up``).
         self._emptied_at = float("-inf")
+
+    def _use(self, context: SSL.Context | None) -> None:
+        if context is not None:
+            context.set_cookie_generate_callback(self._cookie)
+            context.set_cookie_verify_callback(self._cookie_matches)
+        self.context = context
+
+    def reconfigure(self, context: SSL.Context | None) -> None:
+        """Serve new sessions with ``context`` (a configuration applied over the network), or refuse
+        every handshake (None: the device was Reset). The sessions of the former context end, as the
+        TLS port's connections end when it reloads."""
+        for session in list(self.sessions.values()):
+            session.close()
+            self.end(session)
+        self._use(context)
 
     # -- cookies ---------------------------------------------------------------------------------------
     def _cookie(self, connection: object) -> bytes:
@@ -345,6 +362,10 @@ class DtlsServer:
         """A ClientHello from an address without a session: a HelloVerifyRequest and nothing kept, or,
         with the cookie it returns, a new session (``DTLSv1_listen``)."""
         SSL = self._ssl
+        if self.context is None:
+            self.refuse(address[0], f"DTLS ClientHello from {address[0]}:{address[1]} refused: the device is not "
+                                    "configured (Factory Default)")
+            return
         connection = SSL.Connection(self.context, None)
         connection.set_accept_state()
         connection.set_app_data(_address_bytes(address))

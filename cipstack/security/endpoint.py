@@ -40,6 +40,7 @@ from .credentials import CA_FILE, DEVICE_CERTIFICATE, DEVICE_KEY, Credentials
 from .declarations import CERTIFICATE_SUITE_NAMES, CIPHER_SUITE_NAMES
 
 if TYPE_CHECKING:
+    from .dtls_target import DtlsServer
     from .tls_psk import PskTlsContext
     from .tls_target import TlsServer
 
@@ -125,6 +126,17 @@ def server_context(credentials: Credentials, configuration: Configuration) -> ss
     return context
 
 
+def dtls_server_context(credentials: Credentials, configuration: Configuration) -> Any:
+    """The DTLS context (pyOpenSSL's) of a configuration applied over the network: the Allowed Cipher
+    Suites, the certificate and the pre-shared keys it holds, as ``server_context`` for TLS."""
+    from .tls_psk import openssl_context
+
+    context, _ = openssl_context(credentials, server=True, keys=configuration.pre_shared_keys,
+                                 suites=[CIPHER_SUITE_NAMES[s] for s in configuration.allowed_suites],
+                                 verify_client=bool(configuration.verify_client), datagram=True)
+    return context
+
+
 def _write(folder: Path, configuration: Configuration | None) -> None:
     """Write (or, for None, remove) the configuration's files; the key 0600. Runs off the event loop."""
     folder.mkdir(mode=0o700, parents=True, exist_ok=True)
@@ -160,10 +172,13 @@ class SecureEndpoint:
 
     def __init__(self, make_server: Callable[[Credentials, ssl.SSLContext | PskTlsContext | None, int], TlsServer],
                  port: int, folder: Path | None, initial: TlsServer | None = None,
-                 initial_configuration: Configuration | None = None) -> None:
+                 initial_configuration: Configuration | None = None, datagrams: DtlsServer | None = None) -> None:
         """``make_server(credentials, context, port)``: a TLS listener (the adapter's, with its limits and
         reply seam). ``initial``: the listener of ``--security DIR``; ``initial_configuration``: the one
-        read back from ``folder``, served from the start."""
+        read back from ``folder``, served from the start. ``datagrams``: the DTLS port of
+        ``--security DIR``, whose new sessions follow each configuration as the TLS listener does
+        (``DtlsServer.reconfigure``)."""
+        self.datagrams = datagrams
         self.make_server = make_server
         self.port = port
         self.folder = folder
@@ -242,11 +257,15 @@ class SecureEndpoint:
                 self.port = server.port
             await server.close()
         self.servers.clear()
+        if self.datagrams is not None:
+            self.datagrams.reconfigure(None)
         if configuration is not None and folder is not None:
             if configuration.active_device_certificates:
                 credentials = await loop.run_in_executor(None, Credentials.load, folder)
             else:   # pre-shared keys alone, from the configuration
                 credentials = Credentials.keys_only(folder)
+            if self.datagrams is not None:
+                self.datagrams.reconfigure(dtls_server_context(credentials, configuration))
             server = self.make_server(credentials, server_context(credentials, configuration), self.port)
             self.servers.append(server)
             if self._open:
@@ -283,4 +302,4 @@ class PlainRefusal:
 
 
 __all__ = ["CONFIGURATION_FILE", "PlainRefusal", "SecureEndpoint", "available_suites_context", "configuration_of",
-           "load_configuration", "server_context", "state_folder"]
+           "dtls_server_context", "load_configuration", "server_context", "state_folder"]

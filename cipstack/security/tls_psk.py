@@ -177,12 +177,27 @@ def psk_context(credentials: Credentials, server: bool, keys: Iterable[tuple[byt
     """The TLS 1.2 context of the device (``server``, with ``keys``) or of the originator (with the
     folder's PSK): of ``suites`` (OpenSSL's names), the PSK suites with a key and the certificate
     suites with the folder's certificate, key and CA when it has them."""
+    return PskTlsContext(*openssl_context(credentials, server, keys, suites, verify_client))
+
+
+def openssl_context(credentials: Credentials, server: bool, keys: Iterable[tuple[bytes, bytes]] = (),
+                    suites: Sequence[str] = (), verify_client: bool = True,
+                    datagram: bool = False) -> tuple[SSL.Context, PskServer | None]:
+    """``psk_context``'s pyOpenSSL context and the device's keys; ``datagram``: DTLS 1.2 rather than
+    TLS 1.2 (a device's DTLS port configured over the network, ``endpoint.dtls_server_context``)."""
     require_pyopenssl()
     from OpenSSL import SSL
 
-    context = SSL.Context(SSL.TLS_SERVER_METHOD if server else SSL.TLS_CLIENT_METHOD)
-    context.set_min_proto_version(SSL.TLS1_2_VERSION)
-    context.set_max_proto_version(SSL.TLS1_2_VERSION)
+    from .dtls import DTLS1_2_VERSION
+
+    if datagram:
+        context = SSL.Context(SSL.DTLS_SERVER_METHOD if server else SSL.DTLS_CLIENT_METHOD)
+        version = DTLS1_2_VERSION
+    else:
+        context = SSL.Context(SSL.TLS_SERVER_METHOD if server else SSL.TLS_CLIENT_METHOD)
+        version = SSL.TLS1_2_VERSION
+    context.set_min_proto_version(version)
+    context.set_max_proto_version(version)
     pair = credentials.device if server else credentials.client
     names: list[str] = []
     # ``suites`` may name PSK suites too (the device's Allowed Cipher Suites): the device offers those
@@ -218,7 +233,7 @@ def psk_context(credentials: Credentials, server: bool, keys: Iterable[tuple[byt
         raise SecurityError(f"this OpenSSL offers none of the suites {':'.join(names)} ({exc})") from None
     if credentials.keylog:
         context.set_keylog_callback(KeyLog(credentials.keylog))
-    return PskTlsContext(context, keeper)
+    return context, keeper
 
 
 class TlsSocket:
@@ -294,4 +309,4 @@ class TlsSocket:
         self.sock.close()
 
 
-__all__ = ["PskTlsContext", "TlsObject", "TlsSocket", "psk_context"]
+__all__ = ["PskTlsContext", "TlsObject", "TlsSocket", "openssl_context", "psk_context"]
