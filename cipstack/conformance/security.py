@@ -92,6 +92,19 @@ def _needs_folder(ctx: Context, spec: CheckSpec) -> Outcome | None:
     return None
 
 
+def _needs_certificates(ctx: Context, spec: CheckSpec) -> Outcome | None:
+    """The TLS checks handshake with the folder's CA and client certificate: a folder of a pre-shared
+    key alone (`security init --psk-only`) does not run them."""
+    skipped = _needs_folder(ctx, spec)
+    if skipped is not None or ctx.security is None:
+        return skipped
+    missing = [name for name in ("ca.pem", "client.pem", "client.key") if not (ctx.security / name).exists()]
+    if missing:
+        return outcome(spec, Verdict.NOT_RUN, f"needs {', '.join(missing)} in {ctx.security} (the TLS checks "
+                                              "handshake with certificates, not with a pre-shared key)")
+    return None
+
+
 def _read(probe: Probe, class_id: int, attribute: int) -> tuple[int | None, bytes]:
     reply = probe.request(GET_SINGLE, request_path(class_id, 1, attribute))
     return reply.status, reply.data
@@ -234,7 +247,7 @@ def _allowed(ctx: Context) -> tuple[list[int], Probe]:
        "CA, completes the handshake on the TLS port and its RegisterSession is answered",
        "OpENer issue #228 (TLS 1.2); packet-enip.c ENIP_SECURE_PORT; " + BRANCH)
 def tls_allowed(ctx: Context, spec: CheckSpec) -> Outcome:
-    skipped = _needs_folder(ctx, spec)
+    skipped = _needs_certificates(ctx, spec)
     if skipped is not None:
         return skipped
     assert ctx.security is not None
@@ -254,7 +267,7 @@ def tls_allowed(ctx: Context, spec: CheckSpec) -> Outcome:
        "not list fails the handshake, for each such suite the battery knows",
        BRANCH + " (attribute 4: the suites the device may use)")
 def tls_disallowed(ctx: Context, spec: CheckSpec) -> Outcome:
-    skipped = _needs_folder(ctx, spec)
+    skipped = _needs_certificates(ctx, spec)
     if skipped is not None:
         return skipped
     assert ctx.security is not None
@@ -274,7 +287,7 @@ def tls_disallowed(ctx: Context, spec: CheckSpec) -> Outcome:
        "with Verify Client Certificate (0x5E/1/9) on, a TLS 1.2 client whose certificate another CA "
        "signed fails the handshake", BRANCH + " (attribute 9)")
 def tls_untrusted(ctx: Context, spec: CheckSpec) -> Outcome:
-    skipped = _needs_folder(ctx, spec)
+    skipped = _needs_certificates(ctx, spec)
     if skipped is not None:
         return skipped
     assert ctx.security is not None
@@ -297,7 +310,7 @@ def tls_untrusted(ctx: Context, spec: CheckSpec) -> Outcome:
        "then port 44818 and a TLS handshake still answer",
        "packet-enip.c (2221 carries TLS); OpENer issue #231")
 def tls_plaintext(ctx: Context, spec: CheckSpec) -> Outcome:
-    skipped = _needs_folder(ctx, spec)
+    skipped = _needs_certificates(ctx, spec)
     if skipped is not None:
         return skipped
     assert ctx.security is not None

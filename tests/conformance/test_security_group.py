@@ -91,3 +91,21 @@ def test_without_credentials_the_group_is_left_out_or_not_run() -> None:
         report = run(target.host, target.port, groups="security", timeout=2.0)
     assert {o.verdict for o in report} == {Verdict.NOT_RUN}
     assert all("needs --security DIR" in o.observed for o in report)
+
+
+async def test_a_folder_of_a_key_alone_runs_the_objects_checks_not_the_tls_ones(tmp_path: Path) -> None:
+    from cipstack.security.provisioning import init
+
+    folder = tmp_path / "psk"
+    init(folder, certificates=False, psk=True)
+    settings = AdapterSettings(port=0, io_port=0, security=folder, security_port=free_port())
+    async with Adapter(settings) as adapter:
+        report = await asyncio.to_thread(run, "127.0.0.1", adapter.port, groups="security", security=folder,
+                                         security_port=settings.security_port, timeout=3.0)
+    verdicts = _verdicts(report)
+    tls = {i for i in SECURITY_CHECKS if i.startswith("security.tls.")}
+    assert {i: verdicts[i] for i in tls} == dict.fromkeys(tls, "not run")
+    assert all(verdicts[i] == "pass" for i in SECURITY_CHECKS - tls), verdicts
+    allowed = next(o for o in report if o.id == "security.tls.allowed_suite")
+    assert allowed.observed == (f"needs ca.pem, client.pem, client.key in {folder} (the TLS checks handshake "
+                                "with certificates, not with a pre-shared key)")
