@@ -237,6 +237,11 @@ class Adapter:
             )
             from .security.objects import register as register_security_objects
 
+            if self.dtls is None:   # not configured yet: its port opens with a configuration
+                from .security.dtls_target import DtlsServer
+
+                self.dtls = DtlsServer(self.target, None, s.host, s.security_port, io=self.io_seam,
+                                       paths=self.io_paths)
             folder = state_folder(s.state_path) if s.security is None else None
             kept = load_configuration(folder)
             self.secure = SecureEndpoint(self._tls_server, s.security_port, folder, self.tls, kept, self.dtls)

@@ -577,17 +577,40 @@ def test_the_dtls_port_follows_a_reset_and_the_keys_written_over_the_wire(psk_la
         port = dtls.port
         BlockingEncapsulationClient.connect_dtls("127.0.0.1", port, 5.0, folder).close()
         _reset(served)
-        # Factory Default: no handshake is answered, each ClientHello is refused and counted.
-        refused = dtls.refused
-        with pytest.raises(PeerUnreachable, match="no answer to the handshake"):
+        # Factory Default: the DTLS port is closed, as the TLS listener is.
+        assert not dtls.is_open
+        with pytest.raises(PeerUnreachable):
             BlockingEncapsulationClient.connect_dtls("127.0.0.1", port, 1.0, folder)
-        assert dtls.refused > refused
         _push(served, lab, ((b"line-7", key),))
+        wait_for(lambda: dtls.is_open, 10, "the DTLS port with the configuration")
+        assert dtls.port == served.secure_port
         client = BlockingEncapsulationClient.connect_dtls("127.0.0.1", port, 5.0, pushed)
         with client:
             reply = client.perform(client.core.request(GET_ATTRIBUTE_SINGLE, request_path(1, 1, 7)))
             assert reply.data == b"\x04CENT"
         with pytest.raises(SecurityError, match="PSK identity 'cipstack-lab' unknown to the device"):
             BlockingEncapsulationClient.connect_dtls("127.0.0.1", port, 5.0, folder)
+    finally:
+        served.close()
+
+
+def test_a_device_configured_from_factory_default_serves_dtls_with_the_keys(lab: Path, tmp_path: Path) -> None:
+    key = os.urandom(32)
+    pushed = Credentials.load(_folder(tmp_path / "pushed", "line-7", key))
+    served = Served(AdapterSettings(host="127.0.0.1", port=0, io_port=0, security_objects=True,
+                                    security_port=free_port()))
+    try:
+        dtls = served.adapter.dtls
+        assert dtls is not None and not dtls.is_open   # Factory Default: no DTLS port yet
+        _push(served, lab, ((b"line-7", key),))
+        wait_for(lambda: dtls.is_open, 10, "the DTLS port with the configuration")
+        with SyncScanner("127.0.0.1", served.secure_port, security=pushed) as scanner, \
+                scanner.io_connection(output=21, input=71, rpi=0.010) as io:
+            io.wait_input(lambda image: image.ready, timeout=10)
+            wait_for(lambda: io.statistics()["received"] > 5, 10, "T->O data in the DTLS session")
+        # The certificate pushed serves DTLS too.
+        BlockingEncapsulationClient.connect_dtls("127.0.0.1", dtls.port, 5.0, Credentials.load(lab)).close()
+        _reset(served)
+        assert not dtls.is_open
     finally:
         served.close()

@@ -218,7 +218,7 @@ def build_parser(command: str | None = None, texts: bool = True) -> argparse.Arg
                   _DIRECTORY)
         p.add_argument("--security-port", type=number("security port"), metavar="N",
                        help="TCP and UDP port of EtherNet/IP over TLS and DTLS, with --security or once "
-                            "configured over the network (TLS only) (default 2221; 0 picks a free one)")
+                            "configured over the network (default 2221; 0 picks a free one)")
         p.add_argument("--secure-only", action="store_true",
                        help="once configured, refuse explicit requests on plain TCP with CIP status 0x0F "
                             "(privilege violation); ListIdentity and sessions still answer")

@@ -40,7 +40,7 @@ import logging
 import os
 import socket
 import time
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Any
 
 from ..eip.io_server import (
     CATCH_UP_AFTER_S,
@@ -265,30 +265,29 @@ class _DtlsProtocol(asyncio.DatagramProtocol):
 class DtlsServer:
     """The DTLS port of one target, beside its TLS port (``TlsServer``) on the same number."""
 
-    def __init__(self, target: EncapsulationTarget, credentials: Credentials, host: str = "127.0.0.1",
+    def __init__(self, target: EncapsulationTarget, credentials: Credentials | None, host: str = "127.0.0.1",
                  port: int = SECURE_PORT, *, io: IoSeam | None = None, paths: DatagramPaths | None = None,
                  verify_client: bool = True, max_sessions: int = DEFAULT_MAX_SESSIONS,
                  max_sessions_per_host: int | None = None) -> None:
-        """``io``: the class 1 seam whose core takes the datagrams of connections opened over DTLS (the
-        faults' filters act on them as on plain UDP 2222's); ``paths``:
-        the datagram paths of its UDP endpoint, where this server adds the address of each session."""
-        from .dtls import require_pyopenssl
-
-        require_pyopenssl()
-        from OpenSSL import SSL
-
+        """``credentials``: the folder of ``--security DIR``; None for a device not configured yet, whose
+        port opens once a configuration gives it a context (``reconfigure``; nothing of pyOpenSSL is
+        imported before). ``io``: the class 1 seam whose core takes the datagrams of connections opened
+        over DTLS (the faults' filters act on them as on plain UDP 2222's); ``paths``: the datagram
+        paths of its UDP endpoint, where this server adds the address of each session."""
         self.target = target
         self.io = io
         self.paths = paths or DatagramPaths()
         self.host = host
         self.port = port
-        self.ssl_error = SSL.Error
-        self._ssl = SSL
+        #: pyOpenSSL's ``SSL.Error`` once a context is in use (no session exists before).
+        self.ssl_error: Any = Exception
+        self._ssl: Any = None
         self._secret = os.urandom(32)
-        #: The DTLS context every new session is made from; None while the device is not configured
-        #: (after a Reset): every ClientHello is then refused (``reconfigure``).
+        #: The DTLS context every new session is made from; None while the device is not configured:
+        #: the port does not open (``start``), and a ClientHello that reaches it is refused.
         self.context: SSL.Context | None = None
-        self._use(dtls_context(credentials, server=True, verify_client=verify_client))
+        if credentials is not None:
+            self._use(dtls_context(credentials, server=True, verify_client=verify_client))
         #: Sessions at once, in all and per host (half of all by default: one host never holds every one).
         self.limiter = ConnectionLimiter(max_sessions, max_sessions_per_host)
         #: Seconds a handshake has from the ClientHello that returned its cookie.
@@ -313,6 +312,9 @@ class DtlsServer:
 
     def _use(self, context: SSL.Context | None) -> None:
         if context is not None:
+            from OpenSSL import SSL
+
+            self.ssl_error, self._ssl = SSL.Error, SSL
             context.set_cookie_generate_callback(self._cookie)
             context.set_cookie_verify_callback(self._cookie_matches)
         self.context = context
@@ -455,11 +457,13 @@ class DtlsServer:
         return self._sock is not None
 
     async def start(self) -> None:
-        """Listen on the DTLS port (0: any free one, read back in ``port``). On the class 1 lane of a
-        ``PreciseEventLoop`` (the command line's) the socket is read there, as UDP 2222 is: a wake-up
-        drains what came, with no asyncio round per datagram; on any other loop through asyncio's
-        datagram transport."""
+        """Listen on the DTLS port (0: any free one, read back in ``port``), once a context is in use. On
+        the class 1 lane of a ``PreciseEventLoop`` (the command line's) the socket is read there, as UDP
+        2222 is: a wake-up drains what came, with no asyncio round per datagram; on any other loop
+        through asyncio's datagram transport."""
         self.loop = asyncio.get_running_loop()
+        if self.context is None or self._sock is not None:
+            return   # not configured (the port opens with a configuration), or open already
         sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
         try:
             sock.bind((self.host, self.port))

@@ -2,8 +2,9 @@
 kept, and the policy that refuses plain explicit messaging once it is configured.
 
 ``SecureEndpoint`` is the listener of the adapter's "EtherNet/IP over TLS" port. A device configured
-over the wire (Apply_Config) gets a TLS listener on the secure port with the certificate and trust
-just written, built from them; a new Apply_Config replaces it, and Reset closes it. The configuration
+over the wire (Apply_Config) gets a TLS listener on the secure port with the certificate, trust and
+pre-shared keys just written, built from them, and its DTLS port on the same number in UDP; a new
+Apply_Config replaces them, and Reset closes them. The configuration
 is written into a folder (the adapter's ``<state>.security``, or a private temporary one) off the event
 loop, and read back when the adapter starts, so a configured device stays configured.
 
@@ -175,9 +176,9 @@ class SecureEndpoint:
                  initial_configuration: Configuration | None = None, datagrams: DtlsServer | None = None) -> None:
         """``make_server(credentials, context, port)``: a TLS listener (the adapter's, with its limits and
         reply seam). ``initial``: the listener of ``--security DIR``; ``initial_configuration``: the one
-        read back from ``folder``, served from the start. ``datagrams``: the DTLS port of
-        ``--security DIR``, whose new sessions follow each configuration as the TLS listener does
-        (``DtlsServer.reconfigure``)."""
+        read back from ``folder``, served from the start. ``datagrams``: the DTLS port, which follows
+        each configuration as the TLS listener does: closed at a Reset, opened on the listener's port
+        number with the configuration applied (``DtlsServer.reconfigure``)."""
         self.datagrams = datagrams
         self.make_server = make_server
         self.port = port
@@ -257,15 +258,14 @@ class SecureEndpoint:
                 self.port = server.port
             await server.close()
         self.servers.clear()
-        if self.datagrams is not None:
+        if self.datagrams is not None:   # closed as the TLS listener is, until the configuration is in place
             self.datagrams.reconfigure(None)
+            await self.datagrams.close()
         if configuration is not None and folder is not None:
             if configuration.active_device_certificates:
                 credentials = await loop.run_in_executor(None, Credentials.load, folder)
             else:   # pre-shared keys alone, from the configuration
                 credentials = Credentials.keys_only(folder)
-            if self.datagrams is not None:
-                self.datagrams.reconfigure(dtls_server_context(credentials, configuration))
             server = self.make_server(credentials, server_context(credentials, configuration), self.port)
             self.servers.append(server)
             if self._open:
@@ -273,7 +273,29 @@ class SecureEndpoint:
                 self.port = server.port
                 log.info("EtherNet/IP over TLS serves the configuration applied over the network (port %d)",
                          server.port)
+            await self._serve_datagrams(credentials, configuration)
         self.reloads += 1
+
+    async def _serve_datagrams(self, credentials: Credentials, configuration: Configuration) -> None:
+        """DTLS on the UDP port of the TLS listener's number, with the configuration just applied. A
+        DTLS port that cannot serve it is a warning: TLS serves on."""
+        datagrams, server = self.datagrams, self.server
+        if datagrams is None:
+            return
+        try:
+            datagrams.reconfigure(dtls_server_context(credentials, configuration))
+        except SecurityError as exc:
+            log.warning("EtherNet/IP over DTLS not served: %s", exc)
+            return
+        if self._open and server is not None and server.is_open:
+            datagrams.port = server.port
+            try:
+                await datagrams.start()
+            except OSError as exc:
+                log.warning("EtherNet/IP over DTLS not served on UDP %d: %s", server.port, exc)
+                return
+            log.info("EtherNet/IP over DTLS serves the configuration applied over the network (port %d)",
+                     datagrams.port)
 
 
 class PlainRefusal:
