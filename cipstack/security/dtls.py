@@ -8,7 +8,8 @@ handshake whose flight was lost is resent by the shell's own loop (no thread, no
 ``dtls_context`` builds the pyOpenSSL context of either role from the same credentials folder TLS
 uses (``Credentials``): DTLS 1.2 at least, the device's or the client's certificate, the peer's
 certificate checked against the CA, and ``SSLKEYLOGFILE`` honoured through the key log callback
-(Wireshark's DTLS dissector reads the same NSS key log format as its TLS dissector).
+(Wireshark's DTLS dissector reads the same NSS key log format as its TLS dissector). A folder with a
+pre-shared key adds the PSK suites of DTLS 1.2 (``psk``).
 
 pyOpenSSL is imported only here, when DTLS is asked for: the ``security`` extra installs it.
 """
@@ -117,7 +118,8 @@ def _use_psk(context: SSL.Context, credentials: Credentials, server: bool, with_
 
 def describe_dtls_failure(exc: BaseException, identity: bytes | None = None) -> str:
     """A DTLS failure in one line, in the words ``describe_tls_failure`` uses for TLS; ``identity``:
-    the PSK identity this side offered, named when the key is the cause."""
+    the handshake's PSK identity (the one this side offered, or the one the peer named), named when
+    the key is the cause."""
     text = str(exc)
     args = getattr(exc, "args", ())
     reasons = [entry[2] for entry in args[0] if isinstance(entry, tuple) and len(entry) == 3] if (
