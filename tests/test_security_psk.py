@@ -614,3 +614,22 @@ def test_a_device_configured_from_factory_default_serves_dtls_with_the_keys(lab:
         assert not dtls.is_open
     finally:
         served.close()
+
+
+def test_both_roles_write_psk_sessions_to_sslkeylogfile(psk_lab: Path, tmp_path: Path,
+                                                        monkeypatch: pytest.MonkeyPatch) -> None:
+    device_log, originator_log = tmp_path / "device.keys", tmp_path / "originator.keys"
+    monkeypatch.setenv("SSLKEYLOGFILE", str(device_log))
+    server = _serve(psk_lab)   # the device's credentials read the variable when loaded
+    try:
+        monkeypatch.setenv("SSLKEYLOGFILE", str(originator_log))
+        credentials = Credentials.load(psk_lab)
+        with SyncScanner("127.0.0.1", server.secure_port, security=credentials) as drive:
+            assert drive.read(1, 1, 7) == "CENT"
+        BlockingEncapsulationClient.connect_dtls("127.0.0.1", server.secure_port, 5.0, credentials).close()
+    finally:
+        server.close()
+    for path in (device_log, originator_log):
+        lines = path.read_text().splitlines()
+        # TLS 1.2 and DTLS 1.2: one CLIENT_RANDOM line (the master secret) per session.
+        assert len([line for line in lines if line.startswith("CLIENT_RANDOM ")]) == 2, lines
