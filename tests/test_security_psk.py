@@ -42,7 +42,9 @@ from tests.ports import free_port
 from tests.waiting import wait_for
 
 OPENSSL = shutil.which("openssl")
+TSHARK = shutil.which("tshark")
 needs_openssl = pytest.mark.skipif(OPENSSL is None, reason="the openssl command is not installed")
+needs_tshark = pytest.mark.skipif(TSHARK is None, reason="the tshark command is not installed")
 
 #: RegisterSession (0x0065), length 4, session 0, status 0, sender context "cipstack", options 0;
 #: protocol version 1, option flags 0: 28 bytes.
@@ -633,3 +635,45 @@ def test_both_roles_write_psk_sessions_to_sslkeylogfile(psk_lab: Path, tmp_path:
         lines = path.read_text().splitlines()
         # TLS 1.2 and DTLS 1.2: one CLIENT_RANDOM line (the master secret) per session.
         assert len([line for line in lines if line.startswith("CLIENT_RANDOM ")]) == 2, lines
+
+
+@needs_tshark
+def test_tshark_decrypts_a_psk_tls_session_with_the_key_log(psk_lab: Path, tmp_path: Path,
+                                                             monkeypatch: pytest.MonkeyPatch) -> None:
+    assert TSHARK is not None
+    keylog, capture = tmp_path / "keys.log", tmp_path / "tls.pcapng"
+    monkeypatch.setenv("SSLKEYLOGFILE", str(keylog))
+    server = _serve(psk_lab)
+    port = server.secure_port
+    dumpcap = None
+    try:
+        # -P -l: each packet is printed as it is captured: probes to a port of nothing until one shows
+        # tell the test the capture is live before the handshake it must see.
+        probe_port = free_port()
+        dumpcap = subprocess.Popen([TSHARK, "-i", "lo", "-f", f"tcp port {port} or udp port {probe_port}",
+                                    "-w", str(capture), "-a", "duration:60", "-P", "-l", "-q"],
+                                   stdout=subprocess.PIPE, stderr=subprocess.DEVNULL)
+        assert dumpcap.stdout is not None
+        live = threading.Event()
+        threading.Thread(target=lambda: (dumpcap.stdout.readline(), live.set()), daemon=True).start()   # type: ignore[union-attr]
+        with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as probe:
+            for _ in range(200):
+                probe.sendto(b"probe", ("127.0.0.1", probe_port))
+                if live.wait(0.05) or dumpcap.poll() is not None:
+                    break
+        if not live.is_set():
+            pytest.skip("tshark cannot capture on lo here")
+        with SyncScanner("127.0.0.1", port, security=Credentials.load(psk_lab)) as drive:
+            assert drive.read(1, 1, 7) == "CENT"
+        time.sleep(0.5)   # what was sent reaches the capture before it stops
+    finally:
+        if dumpcap is not None:
+            _stop(dumpcap)
+        server.close()
+    fields = subprocess.run([TSHARK, "-r", str(capture), "-o", f"tls.keylog_file:{keylog}",
+                             "-d", f"tcp.port=={port},tls", "-d", f"tls.port=={port},enip",
+                             "-Y", "enip.command == 0x0065", "-T", "fields", "-e", "enip.command"],
+                            capture_output=True, text=True, timeout=60, check=True)
+    rows = [line for line in fields.stdout.splitlines() if line.strip()]
+    # RegisterSession, request and reply, read out of the PSK suite's records.
+    assert len(rows) >= 2, subprocess.run([TSHARK, "-r", str(capture)], capture_output=True, text=True).stdout
