@@ -54,11 +54,13 @@ def _fleet_spec(args: argparse.Namespace) -> Any:
     if args.param and args.spec is not None:
         raise UsageError("--param goes with --device; in a spec file, a [[device]] has params")
     groups += [parse_group(text, limit) for text in args.device or []]
-    if args.param:   # every ACG of the command line gets them
-        if not any(g.profile == "acg" for g in groups):
-            raise UsageError("--param sets the ACG's keypad parameters, and the fleet has no acg device")
+    if args.param:   # every device of the command line whose keypad takes them all gets them
+        taking = [g for g in groups if _keypad_takes(g.profile, args.param)]
+        if not taking:
+            raise UsageError(f"--param {' '.join(args.param)}: no device of the fleet has a keypad with these "
+                             f"codes (profiles {', '.join(sorted({g.profile for g in groups}))})")
         groups = [make_group(g.profile, g.model, g.count, str(g.first) if g.first else None, args.param, g.text,
-                             limit=limit) if g.profile == "acg" else g for g in groups]
+                             limit=limit) if g in taking else g for g in groups]
     addresses = args.addresses if args.addresses is not None else settings.get("addresses")
     pool = parse_addresses(addresses, "--addresses" if args.addresses is not None else f"{where}: addresses",
                            limit) if addresses is not None else None
@@ -87,6 +89,23 @@ def _fleet_spec(args: argparse.Namespace) -> Any:
         check_open_files(len(devices), workers)
     return FleetSpec(devices, port, io_port, workers, state_dir, rtu, shard)
 
+
+
+def _keypad_takes(profile: str, params: list[str]) -> bool:
+    """Whether the keypad of ``profile`` knows the code of every ``CODE=VALUE`` of ``params`` (the values
+    are checked with the group, each refusal in its own words)."""
+    from ..devices.profiles import PROFILES
+
+    keypad = PROFILES[profile].keypad
+    if keypad is None:
+        return False
+    codes = keypad()
+    try:
+        for text in params:
+            codes.register(text.partition("=")[0])
+    except LookupError:
+        return False
+    return True
 
 def cmd_fleet(args: argparse.Namespace) -> int:
     from ..eip.io_server import run_precise
