@@ -266,6 +266,15 @@ def build_parser(command: str | None = None, texts: bool = True) -> argparse.Arg
         p.add_argument("--param", action="append", metavar="CODE=VALUE",
                        help="set an ACG keypad parameter at start on every ACG device; repeatable")
         _add_http_arguments(p)
+        _complete(p.add_argument("--security", type=Path, metavar="DIR",
+                                 help="CIP Security: every device also serves EtherNet/IP over TLS (TCP) and DTLS "
+                                      "(UDP, with secured class 1) at its address, with the CA, device certificate "
+                                      "and key of DIR (`cipstack security init DIR`), as `cipstack adapter "
+                                      "--security` does; client certificates are verified against the CA"),
+                  _DIRECTORY)
+        p.add_argument("--security-port", type=number("security port"), metavar="N",
+                       help=f"TCP and UDP port of EtherNet/IP over TLS and DTLS at every device, with --security "
+                            f"(default {SECURE_PORT})")
         p.add_argument("--workers", type=number("workers"), metavar="N",
                        help=f"spread the devices over N processes, one event loop each (default {DEFAULT_WORKERS})")
         p.add_argument("--rtu", metavar="DEVICE",

@@ -24,11 +24,13 @@ from ..devices.state import StateFileError
 from ..eds.served import profile_eds_file
 from ..eip.io_core import ProductionGrid
 from ..eip.io_server import freeze_startup_objects
+from ..eip.wire.encapsulation import SECURE_PORT
+from ..errors import SecurityError
 from ..listening import held_log_records
 from ..modbus.rtu_line import RtuLine, open_port
 from ..runtime.observer import register_relay
 from .load import LoadSampler, LoadWatch, gauge_values, watch_own_load
-from .spec import FleetDevice, SpecError, describe_addresses
+from .spec import FleetDevice, FleetSecurity, SpecError, describe_addresses
 
 log = logging.getLogger(__name__)
 
@@ -75,16 +77,21 @@ def raise_open_file_limit(devices: int) -> None:
         pass
 
 
-def build_adapter(device: FleetDevice, port: int, io_port: int, grid: ProductionGrid | None = None) -> Adapter:
-    """The emulator of one device; a state file or parameter it cannot take raises ``SpecError``.
-    ``grid``: the process's class 1 slots, which its devices share (one wake-up for all that are due)."""
+def build_adapter(device: FleetDevice, port: int, io_port: int, grid: ProductionGrid | None = None,
+                  security: FleetSecurity | None = None) -> Adapter:
+    """The emulator of one device; a state file, parameter or credentials folder it cannot take
+    raises ``SpecError``. ``grid``: the process's class 1 slots, which its devices share (one wake-up
+    for all that are due); ``security``: TLS and DTLS at the device's address too, as ``cipstack
+    adapter --security`` serves them."""
     # Each device carries its EDS file in its File object, as the single adapter's does.
     settings = AdapterSettings(host=device.address, port=port, io_port=io_port, profile=device.profile,
                                model=device.model, state_path=device.state_path, mac=mac_for_address(device.address),
-                               files=(profile_eds_file(device.profile, device.model),))
+                               files=(profile_eds_file(device.profile, device.model),),
+                               security=security.folder if security is not None else None,
+                               security_port=security.port if security is not None else SECURE_PORT)
     try:
         adapter = Adapter(settings, production_grid=grid)
-    except (StateFileError, ValueError, KeyError) as exc:
+    except (StateFileError, SecurityError, ValueError, KeyError) as exc:
         raise SpecError(f"{device.address}: {exc}") from None
     if device.params:
         try:
@@ -100,19 +107,23 @@ def device_line(device: FleetDevice, adapter: Adapter) -> str:
     info = adapter.device.identity_info
     kind = f"{device.profile}:{device.model}" if device.model else device.profile
     state = str(device.state_path) if device.state_path else "(in memory)"
+    secured = f"  TLS/DTLS {adapter.tls.port}" if adapter.tls is not None else ""
     return (f"{device.address}:{adapter.port}  {kind}  {info.product_name!r}  serial 0x{info.serial_number:08X}  "
-            f"state {state}  control {describe(adapter.control_path)}")
+            f"state {state}  control {describe(adapter.control_path)}{secured}")
 
 
 class DeviceSet:
     """The running adapters of one process's share of a fleet; with ``rtu`` ("pty" or a serial
-    device), its ACG drives on one RS-485 line as well, each at the station ID of its device."""
+    device), its ACG drives on one RS-485 line as well, each at the station ID of its device; with
+    ``security``, every device serves TLS and DTLS at its address too."""
 
-    def __init__(self, devices: Sequence[FleetDevice], port: int, io_port: int, rtu: str | None = None) -> None:
+    def __init__(self, devices: Sequence[FleetDevice], port: int, io_port: int, rtu: str | None = None,
+                 security: FleetSecurity | None = None) -> None:
         self.devices = list(devices)
         self.port = port
         self.io_port = io_port
         self.rtu = rtu
+        self.security = security
         #: The RS-485 line once started.
         self.line: RtuLine | None = None
         self.adapters: list[Adapter] = []
@@ -125,7 +136,7 @@ class DeviceSet:
         built: list[Adapter] = []
         try:
             for device in self.devices:
-                built.append(build_adapter(device, self.port, self.io_port, self.production_grid))
+                built.append(build_adapter(device, self.port, self.io_port, self.production_grid, self.security))
         except SpecError:
             for adapter in built:
                 adapter.device.close()
@@ -179,11 +190,12 @@ async def serve_until_signalled(devices: Sequence[FleetDevice], port: int, io_po
                                 on_ready: Callable[[list[str]], None],
                                 signals: Sequence[int] = (signal.SIGINT, signal.SIGTERM),
                                 rtu: str | None = None, http: dict[str, Any] | None = None,
-                                sampler: LoadSampler | None = None) -> int:
+                                sampler: LoadSampler | None = None, security: FleetSecurity | None = None) -> int:
     """Serve ``devices`` until one of ``signals``; returns the signal that stopped them. ``rtu``:
-    the RS-485 line their ACG drives share (``DeviceSet``); ``http``: the settings of one HTTP control
-    API for every device (``http``, ``http_token``, ``http_allow_remote``, ``http_hosts``; or ``path``, a fleet worker's
-    Unix socket); ``sampler``: what sums the devices' productions for a worker's heartbeat."""
+    the RS-485 line their ACG drives share, ``security`` their TLS and DTLS (``DeviceSet``); ``http``:
+    the settings of one HTTP control API for every device (``http``, ``http_token``,
+    ``http_allow_remote``, ``http_hosts``; or ``path``, a fleet worker's Unix socket); ``sampler``:
+    what sums the devices' productions for a worker's heartbeat."""
     loop = asyncio.get_running_loop()
     stop = asyncio.Event()
     received: list[int] = []
@@ -194,7 +206,7 @@ async def serve_until_signalled(devices: Sequence[FleetDevice], port: int, io_po
 
     for sig in signals:
         loop.add_signal_handler(sig, stop_on, sig)
-    fleet = DeviceSet(devices, port, io_port, rtu)
+    fleet = DeviceSet(devices, port, io_port, rtu, security)
     api = None
     tasks: list[asyncio.Task[None]] = []
     # A worker's parent judges its load; a fleet of one process judges its own, the same way.
