@@ -10,6 +10,7 @@ from __future__ import annotations
 import datetime
 import json
 import re
+import shutil
 import socket
 import subprocess
 import sys
@@ -52,9 +53,16 @@ def device(lab: Path, tmp_path_factory: pytest.TempPathFactory) -> Iterator[Devi
 
 
 @pytest.fixture(scope="module")
-def expired(tmp_path_factory: pytest.TempPathFactory) -> Path:
-    folder = tmp_path_factory.mktemp("security") / "expired"
-    init(folder, days=1, now=datetime.datetime(2020, 1, 1, tzinfo=datetime.timezone.utc))
+def expired(lab: Path, tmp_path_factory: pytest.TempPathFactory) -> Path:
+    """The CA of ``lab`` and a client certificate that expired in 2020 (of a CA of its own: the
+    folder is refused when it is read, before any handshake)."""
+    old = tmp_path_factory.mktemp("security") / "old"
+    init(old, days=1, now=datetime.datetime(2020, 1, 1, tzinfo=datetime.timezone.utc))
+    folder = old.parent / "expired"
+    folder.mkdir()
+    shutil.copy(lab / "ca.pem", folder / "ca.pem")
+    shutil.copy(old / "client.pem", folder / "client.pem")
+    shutil.copy(old / "client.key", folder / "client.key")
     return folder
 
 
@@ -98,8 +106,8 @@ def _bad_inputs(device: Device, lab: Path, other_lab: Path, expired: Path, tmp_p
         ("a client certificate the device does not trust", [secured, "--security",
                                                            str(_mixed_folder(tmp_path, lab, other_lab))],
          f"TLS with {secured} failed: the peer does not trust our certificate..."),
-        ("an expired certificate", [secured, "--security", str(expired)],
-         f"{expired / 'device.pem'}: certificate expired on 2020-01-01 23:55:00 UTC"),
+        ("an expired client certificate", [secured, "--security", str(expired)],
+         f"{expired / 'client.pem'}: certificate expired on 2020-01-01 23:55:00 UTC"),
         ("the plain port", [f"{device.host}:{device.port}", "--security", str(lab), "--timeout", "1"],
          f"TLS with {device.host}:{device.port} failed: no answer to the handshake within 1 s: a plain EtherNet/IP "
          "port (44818) answers no TLS; the device's TLS port is 2221 unless it was given another"),

@@ -84,8 +84,6 @@ def _fleet_spec(args: argparse.Namespace) -> Any:
         devices = assign_stations(devices, workers, "--rtu" if args.rtu is not None else f"{where}: rtu")
     elif any(d.station is not None for d in devices):
         raise SpecError(f"{where}: a station ID puts a drive on the fleet's RS-485 line: give --rtu (rtu = \"pty\")")
-    if not args.list_addresses:   # a pod's init container lists them where the fleet will not run
-        check_open_files(len(devices), workers)
     folder = args.security if args.security is not None else settings.get("security")
     secure_port = args.security_port if args.security_port is not None else settings.get("security_port")
     security = None
@@ -98,6 +96,8 @@ def _fleet_spec(args: argparse.Namespace) -> Any:
             Credentials.load(security.folder)   # a folder it cannot read: one line, before any device starts
     elif secure_port is not None:
         raise UsageError("--security-port goes with --security DIR (or security in the spec file)")
+    if not args.list_addresses:   # a pod's init container lists them where the fleet will not run
+        check_open_files(len(devices), workers, security is not None)
     return FleetSpec(devices, port, io_port, workers, state_dir, rtu, shard, security)
 
 

@@ -38,38 +38,45 @@ log = logging.getLogger(__name__)
 #: Descriptors a device holds before any connection: TCP listener, UDP, broadcast UDP, class 1 UDP,
 #: control socket; with room for a few connections each.
 DESCRIPTORS_PER_DEVICE = 12
+#: What CIP Security adds to a device (``--security``): its TLS listener and its DTLS socket.
+DESCRIPTORS_PER_SECURED_DEVICE = DESCRIPTORS_PER_DEVICE + 2
 #: Descriptors a process holds besides its devices': the interpreter's, the HTTP API's, the parent's channel.
 RESERVED_DESCRIPTORS = 256
 
 
-def check_open_files(devices: int, workers: int) -> None:
+def check_open_files(devices: int, workers: int, secured: bool = False) -> None:
     """Refuse (``SpecError``, one line) a fleet whose busiest process would need more descriptors than
     the hard open-file limit lets any process of this user have: it would fail part way through its
-    start, or later at a connection; say how many workers would fit instead."""
+    start, or later at a connection; say how many workers would fit instead. ``secured``: every
+    device serves TLS and DTLS too."""
     try:
         _, hard = resource.getrlimit(resource.RLIMIT_NOFILE)
     except (OSError, ValueError):
         return
     busiest = -(-devices // workers)
-    needed = descriptors_needed(busiest)
+    needed = descriptors_needed(busiest, secured)
     if hard == resource.RLIM_INFINITY or needed <= hard:
         return
-    per_process = max(1, (hard - RESERVED_DESCRIPTORS) // DESCRIPTORS_PER_DEVICE)
+    per_process = max(1, (hard - RESERVED_DESCRIPTORS) // _per_device(secured))
     raise SpecError(f"{devices} devices on {workers} worker(s): {busiest} in one process need about {needed} open "
                     f"files, and the hard limit here is {hard} (ulimit -Hn): give --workers "
                     f"{-(-devices // per_process)} or more, or raise the limit")
 
 
-def descriptors_needed(devices: int) -> int:
-    return RESERVED_DESCRIPTORS + devices * DESCRIPTORS_PER_DEVICE
+def _per_device(secured: bool) -> int:
+    return DESCRIPTORS_PER_SECURED_DEVICE if secured else DESCRIPTORS_PER_DEVICE
 
 
-def raise_open_file_limit(devices: int) -> None:
+def descriptors_needed(devices: int, secured: bool = False) -> int:
+    return RESERVED_DESCRIPTORS + devices * _per_device(secured)
+
+
+def raise_open_file_limit(devices: int, secured: bool = False) -> None:
     """Raise the soft open-file limit toward the hard one for ``devices`` devices (one process may
     serve hundreds); where it cannot be raised, a device that cannot open a socket says so at start."""
     try:
         soft, hard = resource.getrlimit(resource.RLIMIT_NOFILE)
-        needed = descriptors_needed(devices)
+        needed = descriptors_needed(devices, secured)
         if soft != resource.RLIM_INFINITY and soft < needed:
             resource.setrlimit(resource.RLIMIT_NOFILE, (needed if hard == resource.RLIM_INFINITY
                                                         else min(needed, hard), hard))
@@ -132,7 +139,7 @@ class DeviceSet:
 
     async def start(self) -> list[str]:
         """Build and start every device; returns their lines. All or nothing (see the module docstring)."""
-        raise_open_file_limit(len(self.devices))
+        raise_open_file_limit(len(self.devices), self.security is not None)
         built: list[Adapter] = []
         try:
             for device in self.devices:
