@@ -205,7 +205,7 @@ def test_discover_asks_each_named_device_over_dtls(device: Device, lab: Path) ->
                                 "(ICMP port unreachable)")
 
 
-@pytest.mark.parametrize("broadcast", [None, "255.255.255.255", "127.255.255.255", "239.192.1.1"])
+@pytest.mark.parametrize("broadcast", [None, "255.255.255.255", "127.255.255.255", "239.192.1.1", "0.0.0.0"])
 def test_discover_refuses_to_broadcast_with_security(broadcast: str | None, lab: Path) -> None:
     result = cipstack("discover", *(["--broadcast", broadcast] if broadcast else []), "--security", str(lab))
     assert result.returncode == 2

@@ -67,10 +67,12 @@ def secured_hosts(text: str | None) -> list[str]:
             address = ipaddress.ip_address(host)
         except ValueError:
             continue   # a name: resolved when its session opens
-        if host in broadcasts or address.is_multicast or address.is_unspecified or \
-                str(address).endswith(".255"):
-            raise UsageError(f"--broadcast {host}: a broadcast or multicast address, and a DTLS session has one "
-                             "peer: with --security give each device's own address")
+        # A directed broadcast of a network this host is not on cannot be told from a host's
+        # address here: the system refuses to send to it without SO_BROADCAST (one line too).
+        if host in broadcasts or address.is_multicast or address.is_unspecified:
+            raise UsageError(f"--broadcast {host}: a DTLS session has one peer, and {host} is no one device's "
+                             "address (a broadcast, multicast or unspecified one): with --security give each "
+                             "device's own address")
     return hosts
 
 
