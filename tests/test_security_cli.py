@@ -147,6 +147,9 @@ def test_params_dump_and_diff_over_tls(device: Device, lab: Path, tmp_path: Path
     assert re.fullmatch(r"\d+ parameters written to .*\n", result.stderr)
     result = cipstack("params", "diff", secured, str(recipe), "--security", str(lab))
     assert (result.returncode, result.stdout) == (0, f"no differences ({result.stdout.split('(')[1]}"), result.stderr
+    result = cipstack("params", "load", secured, str(recipe), "--security", str(lab), "--no-save")
+    assert result.returncode == 0, result.stderr
+    assert re.fullmatch(r"0 written, \d+ unchanged, 0 refused\n", result.stdout), result.stdout
 
 
 def test_eds_fetch_and_check_against_over_tls(device: Device, lab: Path, tmp_path: Path) -> None:
