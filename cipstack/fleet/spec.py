@@ -74,6 +74,17 @@ class FleetDevice:
     station: int | None = None
 
 
+@dataclass(frozen=True)
+class FleetSecurity:
+    """CIP Security of every device of a fleet: what ``cipstack adapter --security FOLDER
+    --security-port PORT`` serves, at each device's own address: TLS on TCP ``port`` and DTLS on
+    UDP ``port``, with the certificate and key of ``folder`` (one certificate for every device: an
+    originator checks the chain, not a host name)."""
+
+    folder: Path
+    port: int = 2221
+
+
 @dataclass
 class FleetSpec:
     devices: list[FleetDevice]
@@ -85,6 +96,8 @@ class FleetSpec:
     rtu: str | None = None
     #: Which shard of the plant this fleet serves (``--shard INDEX/COUNT``), or None: all of it.
     shard: Shard | None = None
+    #: TLS and DTLS at every device (``--security DIR``), or None: plain EtherNet/IP only.
+    security: FleetSecurity | None = None
 
 
 # -- addresses ------------------------------------------------------------------------------------------
@@ -377,7 +390,8 @@ def select_shard(devices: Sequence[FleetDevice], shard: Shard, where: str = "--s
 
 
 # -- the TOML file ---------------------------------------------------------------------------------------
-_FILE_KEYS = {"addresses", "port", "io_port", "workers", "state_dir", "device", "rtu", "max_devices"}
+_FILE_KEYS = {"addresses", "port", "io_port", "workers", "state_dir", "device", "rtu", "max_devices", "security",
+              "security_port"}
 _GROUP_KEYS = {"profile", "model", "count", "first", "params", "station"}
 
 
@@ -409,8 +423,9 @@ def _params(value: Any, where: str) -> list[str]:
 
 def read_spec_file(path: Path, limit: int | None = None) -> tuple[dict[str, Any], list[DeviceGroup]]:
     """The file's settings (``addresses``, ``port``, ``io_port``, ``workers``, ``state_dir``,
-    ``max_devices``) and its ``[[device]]`` groups. A relative ``state_dir`` is relative to the file's
-    directory; ``limit`` (``--max-devices``) wins over the file's ``max_devices``."""
+    ``max_devices``, ``security``, ``security_port``) and its ``[[device]]`` groups. A relative
+    ``state_dir`` or ``security`` is relative to the file's directory; ``limit`` (``--max-devices``)
+    wins over the file's ``max_devices``."""
     document = _load_toml(path)
     if limit is None:
         limit = check_max_devices(document.get("max_devices", MAX_DEVICES), f"{path}: max_devices")
@@ -424,6 +439,10 @@ def read_spec_file(path: Path, limit: int | None = None) -> tuple[dict[str, Any]
         if not isinstance(settings["state_dir"], str):
             raise SpecError(f"{path}: state_dir is a directory name (text)")
         settings["state_dir"] = path.parent / settings["state_dir"]
+    if "security" in settings:
+        if not isinstance(settings["security"], str):
+            raise SpecError(f"{path}: security is the folder of `cipstack security init` (text)")
+        settings["security"] = path.parent / settings["security"]
     entries = document.get("device", [])
     if not isinstance(entries, list) or not all(isinstance(e, dict) for e in entries):
         raise SpecError(f"{path}: devices are [[device]] tables")
@@ -441,6 +460,6 @@ def read_spec_file(path: Path, limit: int | None = None) -> tuple[dict[str, Any]
     return settings, groups
 
 
-__all__ = ["MAX_DEVICES", "DeviceGroup", "FleetDevice", "FleetSpec", "Shard", "SpecError",
+__all__ = ["MAX_DEVICES", "DeviceGroup", "FleetDevice", "FleetSecurity", "FleetSpec", "Shard", "SpecError",
            "assign", "assign_stations", "check_max_devices", "check_port", "check_workers", "describe_addresses",
            "make_group", "parse_addresses", "parse_group", "parse_shard", "read_spec_file", "select_shard", "shares"]

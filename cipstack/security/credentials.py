@@ -137,6 +137,10 @@ class Credentials:
         except ssl.SSLError as exc:
             sock.close()
             raise SecurityError(f"TLS with {host}:{port} failed: {describe_tls_failure(exc)}") from None
+        except TimeoutError:
+            waited = sock.gettimeout()
+            sock.close()
+            raise self.unanswered(host, port, waited) from None
         except OSError as exc:
             sock.close()
             raise SecurityError(f"TLS with {host}:{port} failed: the device closed the connection during the "
@@ -149,6 +153,15 @@ class Credentials:
         if isinstance(failure, ssl.SSLError) and not isinstance(failure, (ssl.SSLWantReadError, ssl.SSLWantWriteError)):
             return SecurityError(f"TLS with {host}:{port} failed: {describe_tls_failure(failure)}")
         return None
+
+    def unanswered(self, host: str, port: int, waited: float | None) -> SecurityError:
+        """A TCP port that took the connection and did not answer the ClientHello within ``waited``
+        seconds: a plain EtherNet/IP port does that (it waits for the rest of what it reads as an
+        encapsulation header)."""
+        within = f" within {waited:g} s" if waited else ""
+        return SecurityError(f"TLS with {host}:{port} failed: no answer to the handshake{within}: a plain "
+                             "EtherNet/IP port (44818) answers no TLS; the device's TLS port is 2221 unless it "
+                             "was given another")
 
     def datagram_link(self, host: str, port: int, timeout: float) -> Any:
         """A DTLS session with the device's UDP ``port`` (2221), its handshake done within ``timeout``

@@ -79,12 +79,16 @@ class AsyncDtlsLink(asyncio.DatagramProtocol):
             await loop.sock_connect(sock, address)
             await loop.create_datagram_endpoint(lambda: link, sock=sock)
             await asyncio.wait_for(asyncio.shield(link.established), timeout)
-        except (OSError, asyncio.TimeoutError) as exc:
+        except PeerUnreachable:
+            link.close()   # the session's own failure (``_fail``), already in words
+            raise
+        except asyncio.TimeoutError:   # before OSError: from Python 3.11 it is the builtin TimeoutError, an OSError
             link.close()
-            if isinstance(exc, OSError):
-                raise PeerUnreachable.connecting(host, port, exc) from None
             raise PeerUnreachable(f"DTLS with {host}:{port}: no answer to the handshake "
                                   "(is the device serving CIP Security over UDP there?)") from None
+        except OSError as exc:
+            link.close()
+            raise PeerUnreachable.connecting(host, port, exc) from None
         except BaseException:
             link.close()
             raise
@@ -137,7 +141,8 @@ class AsyncDtlsLink(asyncio.DatagramProtocol):
 
     def error_received(self, exc: Exception) -> None:
         if isinstance(exc, ConnectionRefusedError):   # ICMP port unreachable: nothing listens there
-            self._fail(PeerUnreachable.connecting(self.host, self.port, exc))
+            self._fail(PeerUnreachable(f"DTLS with {self.host}:{self.port}: nothing listens there "
+                                       "(ICMP port unreachable)"))
 
     def connection_lost(self, exc: Exception | None) -> None:
         self._fail(PeerUnreachable(f"DTLS session with {self.host}:{self.port} lost"))
