@@ -25,7 +25,7 @@ pytest.importorskip("OpenSSL", reason="the security extra (pyOpenSSL) is not ins
 from cipstack.security.provisioning import init
 from tests.ports import free_port
 from tests.test_fleet import children, running
-from tests.test_security_tls import Device, _mixed_folder, _start_adapter, _stop
+from tests.test_security_tls import Device, _mixed_folder, secured_adapter
 
 pytestmark = pytest.mark.skipif(not sys.platform.startswith("linux"), reason="any 127.x on loopback")
 
@@ -45,11 +45,7 @@ def one_line(result: subprocess.CompletedProcess[str]) -> str:
 
 @pytest.fixture(scope="module")
 def device(lab: Path, tmp_path_factory: pytest.TempPathFactory) -> Iterator[Device]:
-    started = _start_adapter(lab, tmp_path_factory.mktemp("adapter") / "adapter.log")
-    try:
-        yield started
-    finally:
-        _stop(started.process)
+    yield from secured_adapter(lab, tmp_path_factory)
 
 
 @pytest.fixture(scope="module")

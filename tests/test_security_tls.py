@@ -89,15 +89,18 @@ def _stop(process: subprocess.Popen[bytes]) -> None:
             process.wait()
 
 
-
-
-@pytest.fixture(scope="module")
-def device(lab: Path, tmp_path_factory: pytest.TempPathFactory) -> Iterator[Device]:
-    started = _start_adapter(lab, tmp_path_factory.mktemp("adapter") / "adapter.log")
+def secured_adapter(folder: Path, tmp_path_factory: pytest.TempPathFactory) -> Iterator[Device]:
+    """A module's secured adapter, from the ``folder`` of ``security init``, stopped after its tests."""
+    started = _start_adapter(folder, tmp_path_factory.mktemp("adapter") / "adapter.log")
     try:
         yield started
     finally:
         _stop(started.process)
+
+
+@pytest.fixture(scope="module")
+def device(lab: Path, tmp_path_factory: pytest.TempPathFactory) -> Iterator[Device]:
+    yield from secured_adapter(lab, tmp_path_factory)
 
 
 def _refusals(log: Path) -> list[str]:
