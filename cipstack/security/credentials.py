@@ -6,6 +6,9 @@ it back. Names in the folder:
 * ``ca.pem``: the certificate authority both roles trust (Volume 8's Trusted Authorities);
 * ``device.pem`` / ``device.key``: the target's certificate and private key (PEM, PKCS#8);
 * ``client.pem`` / ``client.key``: the originator's certificate and private key;
+* ``crl.pem``: a certificate revocation list of the CA (optional): the originator checks the
+  device's certificate against it (OpenSSL's leaf check) when it is there, read at each handshake
+  (the ``revoke-certificate`` fault publishes one);
 * ``psk.txt``: a pre-shared key, one line ``IDENTITY:HEX`` (identity in ASCII, at most 128
   octets; the key in hexadecimal, 32 octets by default). Read here, not yet used by TLS.
 
@@ -36,6 +39,8 @@ DEVICE_KEY = "device.key"
 CLIENT_CERTIFICATE = "client.pem"
 CLIENT_KEY = "client.key"
 PSK_FILE = "psk.txt"
+#: The CA's certificate revocation list, PEM: the originator checks the device's certificate against it.
+CRL_FILE = "crl.pem"
 
 #: Longest PSK identity: 128 octets (the EtherNet/IP Security object's Pre-Shared Keys attribute as
 #: OpENer's CIP Security branch declares it).
@@ -119,14 +124,28 @@ class Credentials:
 
     def client_context(self) -> ssl.SSLContext:
         """The originator's TLS context: the client's certificate and key, the device's certificate
-        verified against the CA. Devices are reached by address and named by their certificate's
-        subject, not by a host name: the chain is checked, the host name is not."""
+        verified against the CA, and against the folder's ``crl.pem`` when there is one. Devices are
+        reached by address and named by their certificate's subject, not by a host name: the chain is
+        checked, the host name is not."""
         pair = self._pair(self.client, "client")
         context = ssl.SSLContext(ssl.PROTOCOL_TLS_CLIENT)
         context.check_hostname = False
         self._common(context)
         context.load_cert_chain(pair.certificate.path, pair.key)
+        crl = self.crl()
+        if crl is not None:
+            try:
+                context.load_verify_locations(cafile=crl)
+            except (OSError, ssl.SSLError) as exc:
+                raise SecurityError(f"{crl}: not a usable CRL ({exc})") from None
+            context.verify_flags |= ssl.VERIFY_CRL_CHECK_LEAF
         return context
+
+    def crl(self) -> Path | None:
+        """The folder's certificate revocation list as it is now (read at each handshake: a CRL published
+        while a scanner runs counts from its next connection), or None."""
+        path = self.folder / CRL_FILE
+        return path if path.is_file() else None
 
     def wrap_client(self, sock: socket.socket, host: str, port: int) -> ssl.SSLSocket:
         """``sock`` (connected, blocking) after a TLS handshake as the originator; a handshake that
@@ -272,6 +291,6 @@ def _load_psk(path: Path) -> PreSharedKey:
     return PreSharedKey(identity.encode(), octets)
 
 
-__all__ = ["CA_FILE", "CA_KEY", "CLIENT_CERTIFICATE", "CLIENT_KEY", "DEVICE_CERTIFICATE", "DEVICE_KEY", "PSK_FILE",
-           "SECURE_PORT", "CertificateFile", "Credentials", "KeyPair", "PreSharedKey", "describe_tls_failure",
-           "require_cryptography"]
+__all__ = ["CA_FILE", "CA_KEY", "CLIENT_CERTIFICATE", "CLIENT_KEY", "CRL_FILE", "DEVICE_CERTIFICATE", "DEVICE_KEY",
+           "PSK_FILE", "SECURE_PORT", "CertificateFile", "Credentials", "KeyPair", "PreSharedKey",
+           "describe_tls_failure", "require_cryptography"]

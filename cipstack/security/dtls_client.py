@@ -104,7 +104,8 @@ class AsyncDtlsLink(asyncio.DatagramProtocol):
             records = self.channel.feed(data)
         except self._ssl_error as exc:
             self._flush()
-            self._fail(SecurityError(f"DTLS with {self.host}:{self.port} failed: {describe_dtls_failure(exc)}"))
+            cause = describe_dtls_failure(exc, self.channel.verify_error)
+            self._fail(SecurityError(f"DTLS with {self.host}:{self.port} failed: {cause}"))
             return
         if self.channel.established and not self.established.done():
             self.established.set_result(None)
@@ -173,7 +174,8 @@ class AsyncDtlsLink(asyncio.DatagramProtocol):
         try:
             self.channel.on_timer()
         except self._ssl_error as exc:
-            self._fail(SecurityError(f"DTLS with {self.host}:{self.port} failed: {describe_dtls_failure(exc)}"))
+            cause = describe_dtls_failure(exc, self.channel.verify_error)
+            self._fail(SecurityError(f"DTLS with {self.host}:{self.port} failed: {cause}"))
             return
         self._flush()
         self._arm()

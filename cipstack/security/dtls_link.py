@@ -80,7 +80,7 @@ class DtlsLink:
                 except self._ssl_error as exc:
                     self._flush()
                     raise SecurityError(f"DTLS with {self.host}:{self.port} failed: "
-                                        f"{describe_dtls_failure(exc)}") from None
+                                        f"{describe_dtls_failure(exc, self.channel.verify_error)}") from None
             self._flush()
 
     def _read_all(self) -> list[bytes]:
@@ -119,7 +119,8 @@ class DtlsLink:
             for datagram in self._read_all():
                 self._sort(self.channel.feed(datagram), time.monotonic())
         except self._ssl_error as exc:
-            raise SecurityError(f"DTLS with {self.host}:{self.port} failed: {describe_dtls_failure(exc)}") from None
+            cause = describe_dtls_failure(exc, self.channel.verify_error)
+            raise SecurityError(f"DTLS with {self.host}:{self.port} failed: {cause}") from None
         self._flush()
 
     # -- what the blocking originator uses of a socket -------------------------------------------------
