@@ -53,6 +53,7 @@ from ..eip.io_server import (
 from ..eip.precise_loop import IoLane, lane_of
 from ..eip.target.limits import ConnectionLimiter, RateLimitedLog
 from ..eip.wire.cpf import SockAddr
+from ..errors import CipstackError
 from .credentials import SECURE_PORT
 from .dtls import DtlsChannel, describe_dtls_failure, dtls_context
 from .tls_target import HANDSHAKE_TIMEOUT
@@ -380,7 +381,12 @@ class DtlsServer:
         """A ClientHello from an address without a session: a HelloVerifyRequest and nothing kept, or,
         with the cookie it returns, a new session (``DTLSv1_listen``)."""
         SSL = self._ssl
-        connection = SSL.Connection(self.handshake_context(), None)
+        try:
+            context = self.handshake_context()
+        except (CipstackError, SSL.Error, OSError) as exc:   # what a fault presents did not load
+            self.refuse(address[0], f"DTLS ClientHello from {address[0]}:{address[1]} refused: {exc}")
+            return
+        connection = SSL.Connection(context, None)
         connection.set_accept_state()
         connection.set_app_data(_address_bytes(address))
         connection.bio_write(data)

@@ -28,6 +28,7 @@ from typing import TYPE_CHECKING
 from ..eip.target.limits import DEFAULT_MAX_TCP_CONNECTIONS, ConnectionLimiter, RateLimitedLog
 from ..eip.target.seams import ReplySeam
 from ..eip.wire.cpf import SockAddr
+from ..errors import CipstackError
 from .credentials import SECURE_PORT, describe_tls_failure
 
 if TYPE_CHECKING:
@@ -88,7 +89,12 @@ class _TlsProtocol(asyncio.Protocol):
         if sock is not None:
             sock.setsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY, 1)
         transport.set_write_buffer_limits(high=64 * 1024)
-        self._context = self.server.handshake_context()
+        try:
+            self._context = self.server.handshake_context()
+        except (CipstackError, ssl.SSLError, OSError) as exc:   # what a fault presents did not load
+            self.server.refuse(self.host, f"TLS connection from {self.peer} refused: {exc}")
+            transport.abort()
+            return
         self._tls = self._context.wrap_bio(self._incoming, self._outgoing, server_side=True)
         self._timer_at = self.loop.time() + self.server.handshake_timeout
         self._timer = self.loop.call_at(self._timer_at, self._on_timer)
