@@ -285,10 +285,25 @@ def test_the_refusal_of_a_refused_suite_says_what_the_device_allows(secured: Emu
         (line,) = [r.getMessage() for r in caplog.records if "allows" in r.getMessage()]
         assert line.endswith("refused: no cipher suite in common with the peer (NO_SHARED_CIPHER): the device allows "
                              "ECDHE-ECDSA-AES128-GCM-SHA256, ECDHE-ECDSA-AES256-GCM-SHA384")
+        # Our originator offering that suite alone, by its IANA name: refused over TLS and DTLS, in one line.
+        offering = Credentials.load(lab).offering("TLS_ECDHE_ECDSA_WITH_AES_128_CBC_SHA256")
+        with pytest.raises(SecurityError) as refused:
+            SyncScanner(f"127.0.0.1:{port}", security=offering, identify=False)
+        assert str(refused.value) == (f"TLS with 127.0.0.1:{port} failed: no cipher suite in common with the peer "
+                                      "(SSLV3_ALERT_HANDSHAKE_FAILURE): we offered ECDHE-ECDSA-AES128-SHA256")
+        with pytest.raises(SecurityError) as refused:
+            DtlsLink(offering, "127.0.0.1", port, 5.0)
+        assert str(refused.value) == (f"DTLS with 127.0.0.1:{port} failed: no cipher suite in common with the peer "
+                                      "(tls alert handshake failure): we offered ECDHE-ECDSA-AES128-SHA256")
+        assert tls_read(port, lab) == "CENT"   # one that offers every suite agrees on another
     finally:
         secured.clear_faults(fault["id"])
     assert s_client(port, lab, "-tls1_2", "-cipher", "ECDHE-ECDSA-AES128-SHA256").endswith(
         "Cipher is ECDHE-ECDSA-AES128-SHA256")
+    with SyncScanner(f"127.0.0.1:{port}", security=offering, identify=False) as drive:
+        assert drive.read(1, 1, 7) == "CENT"
+    with pytest.raises(SecurityError, match=r"^TLS_NO_SUCH: no TLS 1\.2 cipher suite of that name or id$"):
+        Credentials.load(lab).offering("TLS_NO_SUCH")
 
 
 def test_a_fault_on_a_device_without_cip_security_is_refused(cip_adapter_factory: Callable[..., EmulatedDevice],

@@ -24,13 +24,12 @@ import ssl
 import tempfile
 from collections.abc import Callable
 from dataclasses import replace
-from functools import cache
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 from ..errors import BadRequest, StateRefused
 from .credentials import CA_FILE, CA_KEY, CRL_FILE, CertificateFile, Credentials, KeyPair
-from .declarations import CIPHER_SUITE_IANA_NAMES, CIPHER_SUITE_NAMES
+from .suites import describe_suites, suite_id, suite_names
 
 if TYPE_CHECKING:
     from OpenSSL import SSL
@@ -45,21 +44,9 @@ EXPIRED_SPAN = datetime.timedelta(days=30)
 CRL_NEXT_UPDATE = datetime.timedelta(days=30)
 
 
-@cache
-def suite_names() -> dict[int, str]:
-    """OpenSSL's name of every TLS 1.2 suite it knows, by IANA id."""
-    context = ssl.SSLContext(ssl.PROTOCOL_TLS_CLIENT)
-    context.set_ciphers("ALL:@SECLEVEL=0")
-    return {c["id"] & 0xFFFF: c["name"] for c in context.get_ciphers() if c["protocol"] != "TLSv1.3"}
-
-
 def accepted_suites(context: ssl.SSLContext) -> list[int]:
     """The TLS 1.2 suites a TLS context accepts, by IANA id, in its order."""
     return [c["id"] & 0xFFFF for c in context.get_ciphers() if c["protocol"] != "TLSv1.3"]
-
-
-def describe_suites(ids: list[int] | tuple[int, ...]) -> str:
-    return ", ".join(f"0x{i:04X} {suite_names().get(i, '?')}" for i in ids) or "none"
 
 
 class ReissuedCertificate:
@@ -180,26 +167,12 @@ class LabAuthority:
     def suite(self, name: str) -> int:
         server = self.listener()
         accepted = [i for i in accepted_suites(server.context) if i not in self.seam.refused()] if server else []
-        wanted = _suite_id(name)
+        wanted = suite_id(name)
         if wanted not in accepted:
             raise BadRequest(f"the device does not accept {name} now; it accepts {describe_suites(accepted)}")
         if len(accepted) == 1:
             raise StateRefused(f"{name} is the last TLS 1.2 suite the device accepts: refusing it too leaves none")
         return wanted
-
-
-def _suite_id(name: str) -> int:
-    text = name.strip()
-    if text.lower().startswith("0x"):
-        try:
-            return int(text, 16)
-        except ValueError:
-            return -1
-    for table in (CIPHER_SUITE_IANA_NAMES, CIPHER_SUITE_NAMES, suite_names()):
-        for number, known in table.items():
-            if known.upper() == text.upper():
-                return number
-    return -1
 
 
 def _replace(path: Path, data: bytes) -> None:
@@ -259,5 +232,5 @@ def allowed_names(context: ssl.SSLContext) -> str:
     return ", ".join(suite_names().get(i, f"0x{i:04X}") for i in accepted_suites(context)) or "none"
 
 
-__all__ = ["LabAuthority", "ReissuedCertificate", "accepted_suites", "allowed_names", "describe_suites",
-           "dtls_variant", "presenting", "suite_names", "tls_variant"]
+__all__ = ["LabAuthority", "ReissuedCertificate", "accepted_suites", "allowed_names", "dtls_variant", "presenting",
+           "tls_variant"]

@@ -91,6 +91,9 @@ class Credentials:
     psk: PreSharedKey | None
     #: Where both roles write their TLS secrets for Wireshark (``SSLKEYLOGFILE``, read at load).
     keylog: str | None = None
+    #: The TLS 1.2 suites the originator offers, by OpenSSL's names (empty: every one it has; see
+    #: ``offering``).
+    suites: tuple[str, ...] = ()
 
     @classmethod
     def load(cls, folder: str | os.PathLike[str], now: datetime.datetime | None = None) -> Credentials:
@@ -109,6 +112,29 @@ class Credentials:
             raise SecurityError(f"{path}: no {CA_FILE} with {DEVICE_CERTIFICATE} or {CLIENT_CERTIFICATE}, "
                                 f"and no {PSK_FILE} (make them with `cipstack security init {path}`)")
         return cls(path, ca, device, client, psk, os.environ.get("SSLKEYLOGFILE") or None)
+
+    def offering(self, *suites: str) -> Credentials:
+        """These credentials with an originator that offers only ``suites`` (IANA names, OpenSSL names or
+        0x ids), over TLS 1.2 and DTLS 1.2: what a test of the suites a device accepts needs. A name
+        OpenSSL knows no TLS 1.2 suite by is a ``SecurityError``."""
+        from dataclasses import replace
+
+        from .suites import openssl_name
+
+        names = []
+        for suite in suites:
+            name = openssl_name(suite)
+            if name is None:
+                raise SecurityError(f"{suite}: no TLS 1.2 cipher suite of that name or id")
+            names.append(name)
+        return replace(self, suites=tuple(names))
+
+    def explain(self, cause: str) -> str:
+        """A handshake's refusal, with what the originator offered when ``offering`` narrowed it and
+        the device found no suite in common."""
+        if self.suites and cause.startswith("no cipher suite in common"):
+            return f"{cause}: we offered {', '.join(self.suites)}"
+        return cause
 
     # -- TLS contexts -----------------------------------------------------------------------------
     def server_context(self, verify_client: bool = True) -> ssl.SSLContext:
@@ -132,6 +158,9 @@ class Credentials:
         context.check_hostname = False
         self._common(context)
         context.load_cert_chain(pair.certificate.path, pair.key)
+        if self.suites:   # TLS 1.3's suites cannot be narrowed (Python's ssl): TLS 1.2 alone
+            context.maximum_version = ssl.TLSVersion.TLSv1_2
+            context.set_ciphers(":".join(self.suites))
         crl = self.crl()
         if crl is not None:
             try:
@@ -155,7 +184,7 @@ class Credentials:
             tls.do_handshake()
         except ssl.SSLError as exc:
             sock.close()
-            raise SecurityError(f"TLS with {host}:{port} failed: {describe_tls_failure(exc)}") from None
+            raise SecurityError(f"TLS with {host}:{port} failed: {self.explain(describe_tls_failure(exc))}") from None
         except OSError as exc:
             sock.close()
             raise SecurityError(f"TLS with {host}:{port} failed: the device closed the connection during the "
@@ -166,7 +195,7 @@ class Credentials:
         """A ``SecurityError`` for a TLS alert that ended a connection after its handshake (TLS 1.3:
         the device refuses the client's certificate once the client has finished); None otherwise."""
         if isinstance(failure, ssl.SSLError) and not isinstance(failure, (ssl.SSLWantReadError, ssl.SSLWantWriteError)):
-            return SecurityError(f"TLS with {host}:{port} failed: {describe_tls_failure(failure)}")
+            return SecurityError(f"TLS with {host}:{port} failed: {self.explain(describe_tls_failure(failure))}")
         return None
 
     def datagram_link(self, host: str, port: int, timeout: float) -> Any:

@@ -115,6 +115,8 @@ def dtls_context(credentials: Credentials, server: bool, verify_client: bool = T
         context.set_verify(mode if verify_client else SSL.VERIFY_NONE)
     else:
         context.set_verify(mode, _note_verify_failure)
+        if credentials.suites:
+            context.set_cipher_list(":".join(credentials.suites).encode())
         crl = credentials.crl()
         if crl is not None:
             from OpenSSL import crypto
