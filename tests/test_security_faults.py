@@ -440,6 +440,15 @@ def test_a_device_configured_over_the_network_serves_secured_class1(
         with pytest.raises(StateRefused, match=r"ca\.key: missing: the lab CA's key signs what this fault makes"):
             device.fault("expire-certificate")
     assert device.faults() == []
+    # The cable pulled and plugged again: DTLS back on its number. A Reset closes it with TLS.
+    device.fault("unplug")
+    device.fault("plug")
+    assert adapter.secure.dtls.is_open and adapter.secure.dtls.port == port
+    assert dtls_handshake(port, lab) == "ok"
+    with SyncScanner(f"127.0.0.1:{device.port}", identify=False) as plain:
+        assert plain.request(0x05, 0x5E, 1, None, b"", check=False).general_status == 0
+    wait_for(lambda: adapter.secure is not None and adapter.secure.dtls is None, 10, "the DTLS listener to close")
+    assert dtls_handshake(port, lab, timeout=1.0).endswith("nothing listens there (ICMP port unreachable)")
 
 
 def test_a_dtls_handshake_refusal_names_the_x509_failure(cip_adapter_factory: Callable[..., EmulatedDevice],
