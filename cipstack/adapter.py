@@ -215,7 +215,7 @@ class Adapter:
         if s.security is not None:
             from .security import Credentials
             from .security.dtls_target import DtlsServer
-            from .security.endpoint import available_suites_context
+            from .security.endpoint import available_suites, available_suites_context
             from .security.tls_target import TlsServer
 
             credentials = Credentials.load(s.security)
@@ -224,8 +224,9 @@ class Adapter:
                                  max_connections=s.max_tcp_connections,
                                  max_connections_per_host=s.max_tcp_connections_per_host, replies=self.replies,
                                  recipe=available_suites_context, seam=self.secured_seam)
+            # DTLS 1.2 with the same suites (the library's defaults would add suites the object does not list).
             self.dtls = DtlsServer(self.target, credentials, s.host, s.security_port, io=self.io_seam,
-                                   paths=self.io_paths, seam=self.secured_seam)
+                                   paths=self.io_paths, seam=self.secured_seam, ciphers=available_suites())
         #: CIP Security's objects, their configuration and the TLS listener that follows it.
         self.secure: SecureEndpoint | None = None
         self.configurator: Configurator | None = None

@@ -291,10 +291,15 @@ def test_the_refusal_of_a_refused_suite_says_what_the_device_allows(secured: Emu
             SyncScanner(f"127.0.0.1:{port}", security=offering, identify=False)
         assert str(refused.value) == (f"TLS with 127.0.0.1:{port} failed: no cipher suite in common with the peer "
                                       "(SSLV3_ALERT_HANDSHAKE_FAILURE): we offered ECDHE-ECDSA-AES128-SHA256")
-        with pytest.raises(SecurityError) as refused:
+        with caplog.at_level("WARNING", logger="cipstack.security.dtls_target"), \
+                pytest.raises(SecurityError) as refused:
             DtlsLink(offering, "127.0.0.1", port, 5.0)
         assert str(refused.value) == (f"DTLS with 127.0.0.1:{port} failed: no cipher suite in common with the peer "
                                       "(tls alert handshake failure): we offered ECDHE-ECDSA-AES128-SHA256")
+        wait_for(lambda: any("DTLS handshake" in r.getMessage() for r in caplog.records), 10, "the DTLS refusal")
+        (line,) = [r.getMessage() for r in caplog.records if "DTLS handshake" in r.getMessage()]
+        assert line.endswith("refused: no cipher suite in common with the peer (no shared cipher): the device allows "
+                             "ECDHE-ECDSA-AES128-GCM-SHA256, ECDHE-ECDSA-AES256-GCM-SHA384")
         assert tls_read(port, lab) == "CENT"   # one that offers every suite agrees on another
     finally:
         secured.clear_faults(fault["id"])

@@ -95,12 +95,17 @@ def configuration_of(credentials: Credentials) -> Configuration:
                          device_key=credentials.device.key.read_bytes())
 
 
+def available_suites() -> str:
+    """The suites the EtherNet/IP Security object lists as available, as OpenSSL's cipher list."""
+    return ":".join(CIPHER_SUITE_NAMES.values())
+
+
 def available_suites_context(credentials: Credentials) -> ssl.SSLContext:
     """The TLS context of a device started with ``--security DIR``: TLS 1.2 with the suites its
     EtherNet/IP Security object lists (Available = Allowed), and TLS 1.3 as before (its suites are
     the TLS library's; Python's ``ssl`` cannot narrow them)."""
     context = credentials.server_context()
-    context.set_ciphers(":".join(CIPHER_SUITE_NAMES.values()))
+    context.set_ciphers(available_suites())
     return context
 
 
@@ -309,5 +314,5 @@ class PlainRefusal:
 
 
 __all__ = ["CONFIGURATION_FILE", "DatagramFactory", "PlainRefusal", "SecureEndpoint", "ServerFactory",
-           "available_suites_context", "configuration_of", "dtls_ciphers", "load_configuration", "server_context",
-           "state_folder"]
+           "available_suites", "available_suites_context", "configuration_of", "dtls_ciphers", "load_configuration",
+           "server_context", "state_folder"]
