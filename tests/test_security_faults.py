@@ -181,6 +181,7 @@ def test_revoke_certificate_over_http_publishes_the_crl_the_originator_reads(emu
     names = openapi["paths"]["/faults"]["post"]["requestBody"]["content"]["application/json"]["schema"][
         "properties"]["name"]["enum"]
     assert {"expire-certificate", "revoke-certificate", "refuse-cipher-suite", "drop-dtls-records"} <= set(names)
+    before = SyncScanner(f"127.0.0.1:{emulator.secure_port}", security=Credentials.load(lab), identify=False)
     status, fault = http(emulator, "POST", "/faults", {"name": "revoke-certificate"})
     assert status == 201, fault
     try:
@@ -193,9 +194,10 @@ def test_revoke_certificate_over_http_publishes_the_crl_the_originator_reads(emu
         # A second revocation while one is in force is refused, and says why.
         status, refused = http(emulator, "POST", "/faults", {"name": "revoke-certificate"})
         assert status == 409 and "revoked already" in refused["error"]
-        assert plain_read(emulator.port) == "CENT"
+        assert plain_read(emulator.port) == "CENT" == before.read(1, 1, 7)   # 44818, and the session from before
     finally:
         status, cleared = http(emulator, "DELETE", f"/faults/{fault['id']}")
+        before.close()
     assert status == 200 and [c["name"] for c in cleared] == ["revoke-certificate"]
     assert not (lab / "crl.pem").exists()   # the folder as it was
     assert tls_read(emulator.secure_port, lab) == "CENT"
@@ -252,7 +254,8 @@ def test_drop_dtls_records_times_a_secured_class1_connection_out(secured: Emulat
             with pytest.raises(IoTimeoutError):
                 for _ in range(200):
                     io.sleep(0.05)
-            assert plain_read(secured.port) == "CENT"
+            assert secured.adapter.tls is not None   # 44818 and TLS on the same port number serve on
+            assert plain_read(secured.port) == "CENT" == tls_read(secured.adapter.tls.port, lab)
         finally:
             secured.clear_faults(fault["id"])
     # What the device sends lost: a new handshake gets no answer, and the originator sends its ClientHello
