@@ -19,6 +19,7 @@ import ssl
 import subprocess
 import sys
 import textwrap
+import threading
 import urllib.error
 import urllib.request
 from collections.abc import Callable, Iterator
@@ -45,6 +46,8 @@ from tests.waiting import wait_for
 
 OPENSSL = shutil.which("openssl")
 needs_openssl = pytest.mark.skipif(OPENSSL is None, reason="the openssl command is not installed")
+TSHARK = shutil.which("tshark")
+needs_tshark = pytest.mark.skipif(TSHARK is None, reason="the tshark command is not installed")
 
 EXPIRED = "certificate verify failed: certificate has expired"
 REVOKED = "certificate verify failed: certificate revoked"
@@ -312,6 +315,53 @@ def test_the_refusal_of_a_refused_suite_says_what_the_device_allows(secured: Emu
         assert drive.read(1, 1, 7) == "CENT"
     with pytest.raises(SecurityError, match=r"^TLS_NO_SUCH: no TLS 1\.2 cipher suite of that name or id$"):
         Credentials.load(lab).offering("TLS_NO_SUCH")
+
+
+@needs_tshark
+def test_tshark_sees_the_client_hello_sent_again_and_nothing_back(secured: EmulatedDevice, lab: Path,
+                                                                  tmp_path: Path) -> None:
+    """On the wire, while every record the device sends is dropped: the originator's ClientHello again
+    and again, and not one datagram from the device to it; once cleared, the device's flights."""
+    assert TSHARK is not None and secured.adapter.dtls is not None
+    port = secured.adapter.dtls.port
+    capture = tmp_path / "dtls.pcapng"
+    # -P -l: a line per packet as it is captured, so the test knows what the capture holds.
+    dumpcap = subprocess.Popen([TSHARK, "-i", "lo", "-f", f"udp port {port}", "-w", str(capture), "-a",
+                                "duration:60", "-P", "-l", "-q"], stdout=subprocess.PIPE, stderr=subprocess.DEVNULL,
+                               text=True)
+    lines: list[str] = []
+    assert dumpcap.stdout is not None
+    reader = threading.Thread(target=lambda: lines.extend(iter(dumpcap.stdout.readline, "")), daemon=True)   # type: ignore[union-attr]
+    reader.start()
+    try:
+        # Until the capture is live: handshakes, each of which it shows (ICMP-free: the device answers).
+        wait_for(lambda: dumpcap.poll() is not None or (dtls_handshake(port, lab) == "ok" and bool(lines)), 30,
+                 "the capture to run")
+        if dumpcap.poll() is not None:
+            pytest.skip("tshark cannot capture on lo here")
+        fault = secured.fault("drop-dtls-records", share=1, direction="out")
+        try:
+            assert "no answer to the handshake" in dtls_handshake(port, lab, timeout=2.5)
+        finally:
+            secured.clear_faults(fault["id"])
+        seen = len(lines)
+        assert dtls_handshake(port, lab) == "ok"
+        wait_for(lambda: len(lines) >= seen + 4, 10, "the last handshake in the capture")
+    finally:
+        dumpcap.terminate()
+        dumpcap.wait(10)
+        reader.join(10)
+    fields = subprocess.run([TSHARK, "-r", str(capture), "-d", f"udp.port=={port},dtls", "-T", "fields",
+                             "-e", "udp.srcport", "-e", "udp.dstport", "-e", "dtls.handshake.type"],
+                            capture_output=True, text=True, timeout=60, check=True)
+    rows = [line.split("\t") for line in fields.stdout.splitlines() if line.strip()]
+    clients = list(dict.fromkeys(int(source) for source, destination, _ in rows if int(destination) == port))
+    # The last two originators: the one of the fault, and the one after it.
+    during, after = clients[-2], clients[-1]
+    hellos = [kinds for source, _, kinds in rows if int(source) == during and kinds.split(",")[0] == "1"]
+    assert len(hellos) >= 2, fields.stdout   # sent again at the record layer's deadline
+    assert not [row for row in rows if int(row[0]) == port and int(row[1]) == during], fields.stdout
+    assert [row for row in rows if int(row[0]) == port and int(row[1]) == after], fields.stdout
 
 
 def test_a_fault_on_a_device_without_cip_security_is_refused(cip_adapter_factory: Callable[..., EmulatedDevice],
