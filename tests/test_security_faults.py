@@ -72,6 +72,18 @@ def dtls_handshake(port: int, folder: Path, timeout: float = 5.0) -> str:
     return "ok"
 
 
+async def async_refusal(port: int, folder: Path) -> str:
+    """What the asyncio scanner's connect over TLS says."""
+    from cipstack.scanner import Scanner
+
+    try:
+        scanner = await Scanner.connect(f"127.0.0.1:{port}", security=Credentials.load(folder), identify=False)
+    except CipstackError as exc:
+        return str(exc)
+    await scanner.close()
+    return "connected"
+
+
 def plain_read(port: int) -> str:
     with SyncScanner(f"127.0.0.1:{port}", identify=False) as drive:
         return str(drive.read(1, 1, 7))
@@ -169,6 +181,14 @@ def test_expire_certificate_over_the_control_socket(emulator: Process, lab: Path
             assert dtls_handshake(emulator.secure_port, lab) == (f"DTLS with 127.0.0.1:{emulator.secure_port} "
                                                                  f"failed: {EXPIRED}")
             assert s_client(emulator.secure_port, lab) == "verify error:num=10:certificate has expired"
+            # The command line's originator and the asyncio scanner say the same.
+            io = subprocess.run([sys.executable, "-m", "cipstack", "io", f"127.0.0.1:{emulator.secure_port}",
+                                 "--security", str(lab), "--output", "21", "--input", "71", "--duration", "0.5s"],
+                                capture_output=True, text=True, timeout=60, stdin=subprocess.DEVNULL)
+            assert io.returncode == 1
+            assert io.stderr == f"cipstack io: TLS with 127.0.0.1:{emulator.secure_port} failed: {EXPIRED}\n"
+            assert asyncio.run(async_refusal(emulator.secure_port, lab)) == (
+                f"TLS with 127.0.0.1:{emulator.secure_port} failed: {EXPIRED}")
             # The session made before the fault keeps its certificate; 44818 serves on.
             assert before.read(1, 1, 7) == plain_read(emulator.port) == "CENT"
         finally:
