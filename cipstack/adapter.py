@@ -26,7 +26,7 @@ from .eip.io_server import DatagramPaths, IoEndpoint, freeze_startup_objects
 from .eip.target.core import EncapsulationTarget, TargetSettings
 from .eip.target.io_target import IoProfile, IoTarget
 from .eip.target.limits import DEFAULT_MAX_TCP_CONNECTIONS
-from .eip.target.seams import IoSeam, ReplySeam, RequestSeam
+from .eip.target.seams import IoSeam, ReplySeam, RequestSeam, SecuredSeam
 from .eip.target.server import DEFAULT_PORT, EncapsulationServer
 from .eip.wire.encapsulation import DEFAULT_FRAME_TIMEOUT
 from .eip.wire.identity_items import CAPABILITY_CIP_TCP, CAPABILITY_CLASS01_UDP
@@ -46,7 +46,8 @@ if TYPE_CHECKING:
 
     from .cip.router import RequestContext
     from .security import Credentials
-    from .security.configuration import Configurator
+    from .security.authority import LabAuthority
+    from .security.configuration import Configuration, Configurator
     from .security.dtls_target import DtlsServer
     from .security.endpoint import SecureEndpoint
     from .security.tls_target import TlsServer
@@ -209,10 +210,12 @@ class Adapter:
         self.tls: TlsServer | None = None
         #: EtherNet/IP and class 1 over DTLS on the same port number, UDP (``cipstack.security.dtls_target``).
         self.dtls: DtlsServer | None = None
+        #: Where the CIP Security faults act on the TLS and DTLS listeners (``cipstack.faults.security``).
+        self.secured_seam = SecuredSeam()
         if s.security is not None:
             from .security import Credentials
             from .security.dtls_target import DtlsServer
-            from .security.endpoint import available_suites_context
+            from .security.endpoint import available_suites, available_suites_context
             from .security.tls_target import TlsServer
 
             credentials = Credentials.load(s.security)
@@ -220,13 +223,17 @@ class Adapter:
             self.tls = TlsServer(self.target, credentials, s.host, s.security_port,
                                  max_connections=s.max_tcp_connections,
                                  max_connections_per_host=s.max_tcp_connections_per_host, replies=self.replies,
-                                 context=available_suites_context(credentials))
+                                 recipe=available_suites_context, seam=self.secured_seam)
+            # DTLS 1.2 with the same suites (the library's defaults would add suites the object does not list).
             self.dtls = DtlsServer(self.target, credentials, s.host, s.security_port, io=self.io_seam,
-                                   paths=self.io_paths)
+                                   paths=self.io_paths, seam=self.secured_seam, ciphers=available_suites())
         #: CIP Security's objects, their configuration and the TLS listener that follows it.
         self.secure: SecureEndpoint | None = None
         self.configurator: Configurator | None = None
+        #: The lab CA of the security folder and the listeners' seam, as the faults reach them.
+        self.authority: LabAuthority | None = None
         if s.security_objects or s.security is not None:
+            from .security.authority import LabAuthority
             from .security.configuration import Configurator
             from .security.endpoint import (
                 SecureEndpoint,
@@ -238,7 +245,11 @@ class Adapter:
 
             folder = state_folder(s.state_path) if s.security is None else None
             kept = load_configuration(folder)
-            self.secure = SecureEndpoint(self._tls_server, s.security_port, folder, self.tls, kept)
+            # A device configured over the network serves DTLS beside TLS, as --security DIR does; with
+            # --security DIR the DTLS listener is that folder's (``self.dtls``).
+            datagrams = self._dtls_server if s.security is None and self.io_seam is not None else None
+            self.secure = SecureEndpoint(self._tls_server, s.security_port, folder, self.tls, kept, datagrams)
+            self.authority = LabAuthority(self.secured_seam, self._serving_tls, self._serving_dtls)
             initial = configuration_of(self.tls.credentials) if self.tls is not None else kept
             self.configurator = Configurator(self.secure.configured, initial, s.security_config_timeout)
             register_security_objects(self.device.router, self.configurator, self._csr_defaults())
@@ -258,7 +269,7 @@ class Adapter:
         self.power = PowerLink(ports)
         self.runtime = DeviceRuntime(self.device, self.clock, self.observers, self.power, self.target, self.server,
                                      self.requests, self.replies, self.io, self.io_seam, self.io_endpoint,
-                                     self.rs485)
+                                     self.rs485, self.authority)
         self.faults = FaultController(self.runtime)
         self._events = EventStream(self.runtime, self.faults)
         self.service = DeviceService(self.runtime, self.faults, self._events, product)
@@ -266,14 +277,33 @@ class Adapter:
         #: The HTTP control API, while serving with ``settings.http``.
         self.http_api: Any = None
 
-    def _tls_server(self, credentials: Credentials, context: ssl.SSLContext | None, port: int) -> TlsServer:
+    def _tls_server(self, credentials: Credentials, recipe: Callable[[Credentials], ssl.SSLContext],
+                    port: int) -> TlsServer:
         """A TLS listener for a configuration applied over the network, with this adapter's limits."""
         from .security.tls_target import TlsServer
 
         s = self.settings
         return TlsServer(self.target, credentials, s.host, port, max_connections=s.max_tcp_connections,
                          max_connections_per_host=s.max_tcp_connections_per_host, replies=self.replies,
-                         context=context)
+                         recipe=recipe, seam=self.secured_seam)
+
+    def _dtls_server(self, credentials: Credentials, configuration: Configuration, port: int) -> DtlsServer:
+        """The DTLS listener of a configuration applied over the network: its certificate and trust, its
+        Allowed Cipher Suites, client certificates as Verify Client Certificate says, secured class 1."""
+        from .security.dtls_target import DtlsServer
+        from .security.endpoint import dtls_ciphers
+
+        return DtlsServer(self.target, credentials, self.settings.host, port, io=self.io_seam, paths=self.io_paths,
+                          verify_client=bool(configuration.verify_client), seam=self.secured_seam,
+                          ciphers=dtls_ciphers(configuration))
+
+    def _serving_tls(self) -> TlsServer | None:
+        """The TLS listener serving now: ``--security DIR``'s, or the configuration's."""
+        return self.secure.server if self.secure is not None else self.tls
+
+    def _serving_dtls(self) -> bool:
+        dtls = self.dtls if self.dtls is not None else (self.secure.dtls if self.secure is not None else None)
+        return dtls is not None and dtls.is_open
 
     def _arrived_secured(self, context: RequestContext) -> bool:
         """Whether a request arrived over TLS (``--secure-only``)."""

@@ -227,10 +227,12 @@ COMMANDS: dict[tuple[str, ...], CommandText] = {
         "Inject a fault between the wire and the emulated device: class 1 (stop-producing, drop, duplicate, "
         "reorder, delay, freeze-sequence, wrong-size, ignore-output, idle), explicit messaging "
         "(delay-replies, error-status, refuse-forward-open, close-tcp, drop-sessions) or the whole device "
-        "(unplug, plug, power-cycle). A lasting fault stays until `cipstack drive fault clear` or for "
+        "(unplug, plug, power-cycle) or its CIP Security (expire-certificate, revoke-certificate, "
+        "refuse-cipher-suite, drop-dtls-records). A lasting fault stays until `cipstack drive fault clear` or for "
         "--for DURATION; after it is cleared the device is what it would have been.",
         (("cipstack drive fault stop-producing --for 2s", "the scanner's class 1 connection times out"),
          ("cipstack drive fault refuse-forward-open 0x0113 --count 2", "the next two Forward_Opens refused"),
+         ("cipstack drive fault drop-dtls-records --share 0.5 --for 10s", "half the DTLS records lost"),
          ("cipstack drive fault clear", "clear every active fault")),
     ),
     ("drive", "faults"): CommandText(

@@ -64,8 +64,36 @@ class KeyLog:
             out.write(line + b"\n")
 
 
+#: OpenSSL's text of the verification failures a device's certificate meets most (``X509_V_ERR_*``,
+#: as ``openssl verify`` prints them): pyOpenSSL gives the number to the verify callback only.
+VERIFY_ERRORS = {
+    2: "unable to get issuer certificate",
+    3: "unable to get certificate CRL",
+    9: "certificate is not yet valid",
+    10: "certificate has expired",
+    11: "CRL is not yet valid",
+    12: "CRL has expired",
+    18: "self-signed certificate",
+    19: "self-signed certificate in certificate chain",
+    20: "unable to get local issuer certificate",
+    21: "unable to verify the first certificate",
+    23: "certificate revoked",
+}
+
+
+def _note_verify_failure(connection: Any, certificate: Any, number: int, depth: int, ok: int) -> bool:
+    """The originator's verify callback: OpenSSL's verdict unchanged, its first failure noted on the
+    connection (``DtlsChannel.verify_error``) so that the refusal names it."""
+    notes = connection.get_app_data()
+    if not ok and isinstance(notes, list):
+        notes.append(number)
+    return bool(ok)
+
+
 def dtls_context(credentials: Credentials, server: bool, verify_client: bool = True) -> SSL.Context:
-    """The DTLS context of the device (``server``) or of the originator, from ``credentials``."""
+    """The DTLS context of the device (``server``) or of the originator, from ``credentials``. The
+    originator checks the device's certificate against ``crl.pem`` when the folder holds one
+    (``Credentials.crl``)."""
     require_pyopenssl()
     from OpenSSL import SSL
 
@@ -83,14 +111,31 @@ def dtls_context(credentials: Credentials, server: bool, verify_client: bool = T
         raise SecurityError(f"{credentials.folder}: the {role}'s certificate, key or CA is not usable "
                             f"({exc})") from None
     mode = SSL.VERIFY_PEER | (SSL.VERIFY_FAIL_IF_NO_PEER_CERT if server else 0)
-    context.set_verify(mode if (verify_client or not server) else SSL.VERIFY_NONE)
+    if server:
+        context.set_verify(mode if verify_client else SSL.VERIFY_NONE)
+    else:
+        context.set_verify(mode, _note_verify_failure)
+        if credentials.suites:
+            context.set_cipher_list(":".join(credentials.suites).encode())
+        crl = credentials.crl()
+        if crl is not None:
+            from OpenSSL import crypto
+
+            try:
+                context.load_verify_locations(str(crl))
+            except SSL.Error as exc:
+                raise SecurityError(f"{crl}: not a usable CRL ({exc})") from None
+            store = context.get_cert_store()
+            assert store is not None   # a context has its store from the start
+            store.set_flags(crypto.X509StoreFlags.CRL_CHECK)
     if credentials.keylog:
         context.set_keylog_callback(KeyLog(credentials.keylog))
     return context
 
 
-def describe_dtls_failure(exc: BaseException) -> str:
-    """A DTLS failure in one line, in the words ``describe_tls_failure`` uses for TLS."""
+def describe_dtls_failure(exc: BaseException, verify_error: int | None = None) -> str:
+    """A DTLS failure in one line, in the words ``describe_tls_failure`` uses for TLS; ``verify_error``:
+    the X.509 failure the originator's verify callback noted (``DtlsChannel.verify_error``)."""
     text = str(exc)
     args = getattr(exc, "args", ())
     reasons = [entry[2] for entry in args[0] if isinstance(entry, tuple) and len(entry) == 3] if (
@@ -98,6 +143,8 @@ def describe_dtls_failure(exc: BaseException) -> str:
     reason = reasons[-1] if reasons else ""
     lowered = reason.lower()
     if "certificate verify failed" in lowered:
+        if verify_error is not None:
+            return f"certificate verify failed: {VERIFY_ERRORS.get(verify_error, f'X.509 error {verify_error}')}"
         return "certificate verify failed: the peer's certificate is not signed by our CA"
     if "unknown ca" in lowered:
         return "the peer does not trust our certificate (alert: unknown CA)"
@@ -163,6 +210,7 @@ class DtlsChannel:
 
         connection = SSL.Connection(context, None)
         connection.set_connect_state()
+        connection.set_app_data([])   # the verify callback's notes (``verify_error``)
         channel = cls(connection)
         channel.handshake()
         return channel
@@ -236,6 +284,12 @@ class DtlsChannel:
         with contextlib.suppress(self._ssl.Error):
             self.connection.shutdown()
 
+    @property
+    def verify_error(self) -> int | None:
+        """The first X.509 failure the originator's check of the peer's certificate met (None: none)."""
+        notes = self.connection.get_app_data()
+        return notes[0] if isinstance(notes, list) and notes else None
+
     def description(self) -> str:
         """``DTLSv1.2, CIPHER`` once established."""
         return f"{self.connection.get_protocol_version_name()}, {self.connection.get_cipher_name()}"
@@ -244,5 +298,5 @@ class DtlsChannel:
 #: A cookie function of the stateless exchange: the peer's address as bytes in, the cookie out.
 CookieFunction = Callable[[bytes], bytes]
 
-__all__ = ["DATAGRAM_BUDGET", "DTLS1_2_VERSION", "CookieFunction", "DtlsChannel", "KeyLog", "describe_dtls_failure",
-           "dtls_context", "record_lengths", "require_pyopenssl", "split_records"]
+__all__ = ["DATAGRAM_BUDGET", "DTLS1_2_VERSION", "VERIFY_ERRORS", "CookieFunction", "DtlsChannel", "KeyLog",
+           "describe_dtls_failure", "dtls_context", "record_lengths", "require_pyopenssl", "split_records"]

@@ -14,7 +14,7 @@ import asyncio
 import logging
 import socket
 from collections.abc import Callable
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 from ..eip.io_server import CATCH_UP_READS, DRAIN_LIMIT, MAX_DATAGRAM, RECEIVE_BUFFER, DatagramPaths, IoEndpoint
 from ..eip.originator.class1 import IoOriginator
@@ -22,18 +22,24 @@ from ..errors import PeerUnreachable, SecurityError
 from .dtls import DtlsChannel, describe_dtls_failure, dtls_context
 from .dtls_target import is_io_datagram
 
+if TYPE_CHECKING:
+    from .credentials import Credentials
+
 log = logging.getLogger(__name__)
 
 
 class AsyncDtlsLink(asyncio.DatagramProtocol):
     """One DTLS session with a device on the running loop: what ``open`` returns is established."""
 
-    def __init__(self, channel: DtlsChannel, host: str, port: int, protocol: asyncio.Protocol) -> None:
-        """``protocol``: the stream protocol encapsulation records go to (the originator client's)."""
+    def __init__(self, channel: DtlsChannel, host: str, port: int, protocol: asyncio.Protocol,
+                 credentials: Credentials) -> None:
+        """``protocol``: the stream protocol encapsulation records go to (the originator client's);
+        ``credentials``: those the channel was made of (a refusal says what they offered)."""
         from OpenSSL import SSL
 
         self._ssl_error = SSL.Error
         self.channel = channel
+        self.credentials = credentials
         self.host = host
         self.port = port
         self.protocol = protocol
@@ -61,13 +67,13 @@ class AsyncDtlsLink(asyncio.DatagramProtocol):
         return self.io_core, self._endpoint
 
     @classmethod
-    async def open(cls, credentials: Any, host: str, port: int, timeout: float,
+    async def open(cls, credentials: Credentials, host: str, port: int, timeout: float,
                    protocol_factory: Callable[[], asyncio.Protocol]) -> tuple[AsyncDtlsLink, asyncio.Protocol]:
         """Complete a handshake with ``host:port`` within ``timeout``; ``SecurityError`` naming why it
         failed, ``PeerUnreachable`` when nothing answers."""
         loop = asyncio.get_running_loop()
         protocol = protocol_factory()
-        link = cls(DtlsChannel.client(dtls_context(credentials, server=False)), host, port, protocol)
+        link = cls(DtlsChannel.client(dtls_context(credentials, server=False)), host, port, protocol, credentials)
         try:
             infos = await loop.getaddrinfo(host, port, type=socket.SOCK_DGRAM)
             family, kind, proto, _name, address = infos[0]
@@ -108,7 +114,8 @@ class AsyncDtlsLink(asyncio.DatagramProtocol):
             records = self.channel.feed(data)
         except self._ssl_error as exc:
             self._flush()
-            self._fail(SecurityError(f"DTLS with {self.host}:{self.port} failed: {describe_dtls_failure(exc)}"))
+            cause = self.credentials.explain(describe_dtls_failure(exc, self.channel.verify_error))
+            self._fail(SecurityError(f"DTLS with {self.host}:{self.port} failed: {cause}"))
             return
         if self.channel.established and not self.established.done():
             self.established.set_result(None)
@@ -178,7 +185,8 @@ class AsyncDtlsLink(asyncio.DatagramProtocol):
         try:
             self.channel.on_timer()
         except self._ssl_error as exc:
-            self._fail(SecurityError(f"DTLS with {self.host}:{self.port} failed: {describe_dtls_failure(exc)}"))
+            cause = self.credentials.explain(describe_dtls_failure(exc, self.channel.verify_error))
+            self._fail(SecurityError(f"DTLS with {self.host}:{self.port} failed: {cause}"))
             return
         self._flush()
         self._arm()

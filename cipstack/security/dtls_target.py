@@ -53,13 +53,16 @@ from ..eip.io_server import (
 from ..eip.precise_loop import IoLane, lane_of
 from ..eip.target.limits import ConnectionLimiter, RateLimitedLog
 from ..eip.wire.cpf import SockAddr
+from ..errors import CipstackError
 from .credentials import SECURE_PORT
 from .dtls import DtlsChannel, describe_dtls_failure, dtls_context
 from .tls_target import HANDSHAKE_TIMEOUT
 
 if TYPE_CHECKING:
+    from OpenSSL import SSL
+
     from ..eip.target.core import EncapsulationConnection, EncapsulationTarget
-    from ..eip.target.seams import IoSeam
+    from ..eip.target.seams import IoSeam, SecuredSeam
     from .credentials import Credentials
 
 log = logging.getLogger(__name__)
@@ -119,7 +122,11 @@ class _Session:
         except server.ssl_error as exc:
             self.flush()   # the alert that tells the peer why
             if self.connection is None:
-                server.refuse(self.address[0], f"DTLS handshake from {self.peer} refused: {describe_dtls_failure(exc)}")
+                cause = describe_dtls_failure(exc)
+                if cause.startswith("no cipher suite in common"):
+                    allowed = [n for n in self.channel.connection.get_cipher_list() if not n.startswith("TLS_")]
+                    cause = f"{cause}: the device allows {', '.join(allowed) or 'none'}"
+                server.refuse(self.address[0], f"DTLS handshake from {self.peer} refused: {cause}")
             else:
                 log.info("%s: DTLS session closed: %s", self.peer, describe_dtls_failure(exc))
             server.end(self)
@@ -263,10 +270,13 @@ class DtlsServer:
     def __init__(self, target: EncapsulationTarget, credentials: Credentials, host: str = "127.0.0.1",
                  port: int = SECURE_PORT, *, io: IoSeam | None = None, paths: DatagramPaths | None = None,
                  verify_client: bool = True, max_sessions: int = DEFAULT_MAX_SESSIONS,
-                 max_sessions_per_host: int | None = None) -> None:
+                 max_sessions_per_host: int | None = None, seam: SecuredSeam | None = None,
+                 ciphers: str | None = None) -> None:
         """``io``: the class 1 seam whose core takes the datagrams of connections opened over DTLS (the
         faults' filters act on them as on plain UDP 2222's); ``paths``:
-        the datagram paths of its UDP endpoint, where this server adds the address of each session."""
+        the datagram paths of its UDP endpoint, where this server adds the address of each session;
+        ``seam``: where faults change the next handshakes and drop records (``SecuredSeam``);
+        ``ciphers``: the suites accepted, as OpenSSL names them (None: the library's DTLS 1.2 ones)."""
         from .dtls import require_pyopenssl
 
         require_pyopenssl()
@@ -280,10 +290,13 @@ class DtlsServer:
         self.ssl_error = SSL.Error
         self._ssl = SSL
         self._secret = os.urandom(32)
-        #: The DTLS context every session is made from.
-        self.context = dtls_context(credentials, server=True, verify_client=verify_client)
-        self.context.set_cookie_generate_callback(self._cookie)
-        self.context.set_cookie_verify_callback(self._cookie_matches)
+        self.credentials = credentials
+        self.verify_client = verify_client
+        self.ciphers = ciphers
+        self.seam = seam
+        #: The DTLS context every session is made from, while no fault changes it.
+        self.context = self._recipe(credentials)
+        self._variant: tuple[int, SSL.Context] | None = None
         #: Sessions at once, in all and per host (half of all by default: one host never holds every one).
         self.limiter = ConnectionLimiter(max_sessions, max_sessions_per_host)
         #: Seconds a handshake has from the ClientHello that returned its cookie.
@@ -306,6 +319,27 @@ class DtlsServer:
         #: When the socket was last read to its end (``_catch_up``).
         self._emptied_at = float("-inf")
 
+    def _recipe(self, credentials: Credentials) -> SSL.Context:
+        """The DTLS context of this listener made of ``credentials``, with its cookie exchange."""
+        context = dtls_context(credentials, server=True, verify_client=self.verify_client)
+        if self.ciphers is not None:
+            context.set_cipher_list(self.ciphers.encode())
+        context.set_cookie_generate_callback(self._cookie)
+        context.set_cookie_verify_callback(self._cookie_matches)
+        return context
+
+    def handshake_context(self) -> SSL.Context:
+        """The context of a new session: ``context``, or while a fault is in the seam the one made for
+        it (once per change of the seam)."""
+        seam = self.seam
+        if seam is None or not seam.handshake:
+            return self.context
+        if self._variant is None or self._variant[0] != seam.generation:
+            from .authority import dtls_variant
+
+            self._variant = (seam.generation, dtls_variant(self.credentials, self._recipe, seam))
+        return self._variant[1]
+
     # -- cookies ---------------------------------------------------------------------------------------
     def _cookie(self, connection: object) -> bytes:
         address = connection.get_app_data()   # type: ignore[attr-defined]  # pyOpenSSL's Connection, typed object here
@@ -316,6 +350,11 @@ class DtlsServer:
 
     # -- datagrams -------------------------------------------------------------------------------------
     def datagram(self, data: bytes, address: tuple[str, int]) -> None:
+        seam = self.seam
+        if seam is not None and seam.records:   # a fault drops records before anything reads them
+            data = seam.inbound(data, address)
+            if not data:
+                return
         now = self.loop.time()
         session = self.sessions.get(address)
         if session is not None and not (session.connection is not None and is_client_hello(data)):
@@ -342,7 +381,12 @@ class DtlsServer:
         """A ClientHello from an address without a session: a HelloVerifyRequest and nothing kept, or,
         with the cookie it returns, a new session (``DTLSv1_listen``)."""
         SSL = self._ssl
-        connection = SSL.Connection(self.context, None)
+        try:
+            context = self.handshake_context()
+        except (CipstackError, SSL.Error, OSError) as exc:   # what a fault presents did not load
+            self.refuse(address[0], f"DTLS ClientHello from {address[0]}:{address[1]} refused: {exc}")
+            return
+        connection = SSL.Connection(context, None)
         connection.set_accept_state()
         connection.set_app_data(_address_bytes(address))
         connection.bio_write(data)
@@ -368,6 +412,11 @@ class DtlsServer:
         sock = self._sock
         if sock is None:
             return
+        seam = self.seam
+        if seam is not None and seam.records:   # a fault drops records after they are made
+            datagram = seam.outbound(datagram, address)
+            if not datagram:
+                return
         if self._transport is not None:
             if not self._transport.is_closing():
                 self._transport.sendto(datagram, address)

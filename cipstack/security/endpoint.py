@@ -3,7 +3,8 @@ kept, and the policy that refuses plain explicit messaging once it is configured
 
 ``SecureEndpoint`` is the listener of the adapter's "EtherNet/IP over TLS" port. A device configured
 over the wire (Apply_Config) gets a TLS listener on the secure port with the certificate and trust
-just written, built from them; a new Apply_Config replaces it, and Reset closes it. The configuration
+just written, built from them, and a DTLS listener on the UDP port of the same number (secured class 1,
+as ``--security DIR`` serves it); a new Apply_Config replaces both, and Reset closes both. The configuration
 is written into a folder (the adapter's ``<state>.security``, or a private temporary one) off the event
 loop, and read back when the adapter starts, so a configured device stays configured.
 
@@ -20,6 +21,7 @@ from __future__ import annotations
 
 import asyncio
 import contextlib
+import errno
 import logging
 import os
 import shutil
@@ -40,12 +42,21 @@ from .credentials import CA_FILE, DEVICE_CERTIFICATE, DEVICE_KEY, Credentials
 from .declarations import CIPHER_SUITE_NAMES
 
 if TYPE_CHECKING:
+    from .dtls_target import DtlsServer
     from .tls_target import TlsServer
 
 log = logging.getLogger(__name__)
 
 #: The configuration's own file in the folder, beside ca.pem, device.pem and device.key.
 CONFIGURATION_FILE = "configuration.json"
+#: Tries at a TCP and UDP pair of one number for TLS and DTLS on a secure port of 0 (any free one).
+FREE_PORT_TRIES = 20
+
+#: How a listener of a configuration is made: from its credentials, the recipe of its TLS context, and
+#: its port.
+ServerFactory = Callable[[Credentials, Callable[[Credentials], ssl.SSLContext], int], "TlsServer"]
+#: How the DTLS listener of a configuration is made: from its credentials, the configuration, its port.
+DatagramFactory = Callable[[Credentials, Configuration, int], "DtlsServer"]
 
 
 def state_folder(state_path: Path | None) -> Path | None:
@@ -84,13 +95,23 @@ def configuration_of(credentials: Credentials) -> Configuration:
                          device_key=credentials.device.key.read_bytes())
 
 
+def available_suites() -> str:
+    """The suites the EtherNet/IP Security object lists as available, as OpenSSL's cipher list."""
+    return ":".join(CIPHER_SUITE_NAMES.values())
+
+
 def available_suites_context(credentials: Credentials) -> ssl.SSLContext:
     """The TLS context of a device started with ``--security DIR``: TLS 1.2 with the suites its
     EtherNet/IP Security object lists (Available = Allowed), and TLS 1.3 as before (its suites are
     the TLS library's; Python's ``ssl`` cannot narrow them)."""
     context = credentials.server_context()
-    context.set_ciphers(":".join(CIPHER_SUITE_NAMES.values()))
+    context.set_ciphers(available_suites())
     return context
+
+
+def dtls_ciphers(configuration: Configuration) -> str:
+    """The Allowed Cipher Suites as OpenSSL's cipher list, for the DTLS listener of a configuration."""
+    return ":".join(CIPHER_SUITE_NAMES[s] for s in configuration.allowed_suites)
 
 
 def server_context(credentials: Credentials, configuration: Configuration) -> ssl.SSLContext:
@@ -131,17 +152,21 @@ class SecureEndpoint:
     """The secure port of one device: no listener until the device is configured, then a TLS listener
     with the configuration's certificate, trust and suites."""
 
-    def __init__(self, make_server: Callable[[Credentials, ssl.SSLContext | None, int], TlsServer],
-                 port: int, folder: Path | None, initial: TlsServer | None = None,
-                 initial_configuration: Configuration | None = None) -> None:
-        """``make_server(credentials, context, port)``: a TLS listener (the adapter's, with its limits and
-        reply seam). ``initial``: the listener of ``--security DIR``; ``initial_configuration``: the one
-        read back from ``folder``, served from the start."""
+    def __init__(self, make_server: ServerFactory, port: int, folder: Path | None, initial: TlsServer | None = None,
+                 initial_configuration: Configuration | None = None,
+                 make_datagrams: DatagramFactory | None = None) -> None:
+        """``make_server(credentials, recipe, port)``: a TLS listener (the adapter's, with its limits and
+        reply seam); ``make_datagrams(credentials, configuration, port)``: the DTLS listener beside it
+        (None: TLS only). ``initial``: the listener of ``--security DIR``; ``initial_configuration``:
+        the one read back from ``folder``, served from the start."""
         self.make_server = make_server
+        self.make_datagrams = make_datagrams
         self.port = port
         self.folder = folder
         #: The listener serving now (zero or one).
         self.servers: list[TlsServer] = [initial] if initial is not None else []
+        #: The DTLS listener of the configuration applied over the network (zero or one).
+        self.datagram_servers: list[DtlsServer] = []
         self._pending: list[Configuration | None] = [initial_configuration] if initial_configuration else []
         self._temporary: list[str] = []
         self._tasks: set[asyncio.Task[None]] = set()
@@ -157,6 +182,11 @@ class SecureEndpoint:
     def server(self) -> TlsServer | None:
         return self.servers[0] if self.servers else None
 
+    @property
+    def dtls(self) -> DtlsServer | None:
+        """The DTLS listener of the configuration applied over the network, if any."""
+        return self.datagram_servers[0] if self.datagram_servers else None
+
     def secured(self, context: RequestContext) -> bool:
         """Whether a request arrived over TLS: on a connection to the secure listener's port."""
         server = self.server
@@ -170,8 +200,27 @@ class SecureEndpoint:
         self._pending.clear()
         server = self.server
         if server is not None and not server.is_open:
+            await self._listen(server, self.dtls)
+
+    async def _listen(self, server: TlsServer, dtls: DtlsServer | None) -> None:
+        """TLS, then DTLS on the UDP port of the same number. On a port of 0, a TCP number taken in UDP
+        makes TLS take another, as the plain target does for its pair (``EncapsulationServer.start``)."""
+        any_port = server.port == 0
+        for attempt in range(FREE_PORT_TRIES if any_port else 1):
             await server.start()
             self.port = server.port
+            if dtls is None:
+                return
+            dtls.port = server.port
+            try:
+                await dtls.start()
+                return
+            except OSError as exc:
+                if not any_port or exc.errno != errno.EADDRINUSE or attempt == FREE_PORT_TRIES - 1:
+                    await server.close()
+                    raise
+            await server.close()
+            server.port = 0
 
     async def close(self) -> None:
         self._open = False
@@ -181,6 +230,8 @@ class SecureEndpoint:
                 await task
         for server in self.servers:
             await server.close()
+        for dtls in self.datagram_servers:
+            await dtls.close()
         for folder in self._temporary:
             shutil.rmtree(folder, ignore_errors=True)
         self._temporary.clear()
@@ -215,15 +266,25 @@ class SecureEndpoint:
                 self.port = server.port
             await server.close()
         self.servers.clear()
+        for dtls in self.datagram_servers:
+            await dtls.close()
+        self.datagram_servers.clear()
         if configuration is not None and folder is not None:
             credentials = await loop.run_in_executor(None, Credentials.load, folder)
-            server = self.make_server(credentials, server_context(credentials, configuration), self.port)
+            applied = configuration
+
+            def recipe(made: Credentials) -> ssl.SSLContext:
+                return server_context(made, applied)
+
+            server = self.make_server(credentials, recipe, self.port)
             self.servers.append(server)
+            datagrams = self.make_datagrams(credentials, configuration, self.port) if self.make_datagrams else None
+            if datagrams is not None:
+                self.datagram_servers.append(datagrams)
             if self._open:
-                await server.start()
-                self.port = server.port
-                log.info("EtherNet/IP over TLS serves the configuration applied over the network (port %d)",
-                         server.port)
+                await self._listen(server, datagrams)
+                log.info("EtherNet/IP over TLS%s serves the configuration applied over the network (port %d)",
+                         " and DTLS" if datagrams is not None else "", server.port)
         self.reloads += 1
 
 
@@ -252,5 +313,6 @@ class PlainRefusal:
         return MessageRouterResponse(service, GeneralStatus.PRIVILEGE_VIOLATION).encode()
 
 
-__all__ = ["CONFIGURATION_FILE", "PlainRefusal", "SecureEndpoint", "available_suites_context", "configuration_of",
-           "load_configuration", "server_context", "state_folder"]
+__all__ = ["CONFIGURATION_FILE", "DatagramFactory", "PlainRefusal", "SecureEndpoint", "ServerFactory",
+           "available_suites", "available_suites_context", "configuration_of", "dtls_ciphers", "load_configuration",
+           "server_context", "state_folder"]

@@ -22,15 +22,18 @@ import contextlib
 import logging
 import socket
 import ssl
+from collections.abc import Callable
 from typing import TYPE_CHECKING
 
 from ..eip.target.limits import DEFAULT_MAX_TCP_CONNECTIONS, ConnectionLimiter, RateLimitedLog
 from ..eip.target.seams import ReplySeam
 from ..eip.wire.cpf import SockAddr
+from ..errors import CipstackError
 from .credentials import SECURE_PORT, describe_tls_failure
 
 if TYPE_CHECKING:
     from ..eip.target.core import EncapsulationConnection, EncapsulationTarget
+    from ..eip.target.seams import SecuredSeam
     from .credentials import Credentials
 
 log = logging.getLogger(__name__)
@@ -59,6 +62,7 @@ class _TlsProtocol(asyncio.Protocol):
         self._incoming = ssl.MemoryBIO()
         self._outgoing = ssl.MemoryBIO()
         self._tls: ssl.SSLObject | None = None
+        self._context: ssl.SSLContext | None = None
         self._local = SockAddr("0.0.0.0", server.port)
         self._timer: asyncio.TimerHandle | None = None
         self._timer_at: float | None = None
@@ -85,7 +89,13 @@ class _TlsProtocol(asyncio.Protocol):
         if sock is not None:
             sock.setsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY, 1)
         transport.set_write_buffer_limits(high=64 * 1024)
-        self._tls = self.server.context.wrap_bio(self._incoming, self._outgoing, server_side=True)
+        try:
+            self._context = self.server.handshake_context()
+        except (CipstackError, ssl.SSLError, OSError) as exc:   # what a fault presents did not load
+            self.server.refuse(self.host, f"TLS connection from {self.peer} refused: {exc}")
+            transport.abort()
+            return
+        self._tls = self._context.wrap_bio(self._incoming, self._outgoing, server_side=True)
         self._timer_at = self.loop.time() + self.server.handshake_timeout
         self._timer = self.loop.call_at(self._timer_at, self._on_timer)
 
@@ -150,7 +160,12 @@ class _TlsProtocol(asyncio.Protocol):
             return False
         except (ssl.SSLError, ValueError) as exc:
             self._flush()   # the alert that tells the peer why
-            self.server.refuse(self.host, f"TLS handshake from {self.peer} refused: {describe_tls_failure(exc)}")
+            cause = describe_tls_failure(exc)
+            if cause.startswith("no cipher suite in common") and self._context is not None:
+                from .authority import allowed_names
+
+                cause = f"{cause}: the device allows {allowed_names(self._context)}"
+            self.server.refuse(self.host, f"TLS handshake from {self.peer} refused: {cause}")
             self._linger()
             return False
         self._flush()
@@ -261,17 +276,23 @@ class TlsServer:
                  port: int = SECURE_PORT, verify_client: bool = True,
                  max_connections: int = DEFAULT_MAX_TCP_CONNECTIONS,
                  max_connections_per_host: int | None = None, replies: ReplySeam | None = None,
-                 context: ssl.SSLContext | None = None) -> None:
+                 context: ssl.SSLContext | None = None, seam: SecuredSeam | None = None,
+                 recipe: Callable[[Credentials], ssl.SSLContext] | None = None) -> None:
         """``replies``: the seam replies pass on their way out, the plain server's (``seams.ReplySeam``);
-        ``context``: a TLS context made elsewhere (a configuration applied over the network), else the
-        credentials' own."""
+        ``recipe``: how the TLS context is made of credentials (a configuration applied over the
+        network narrows the suites), else the credentials' own; ``context``: one made already;
+        ``seam``: where faults change what the next handshakes present (``SecuredSeam``)."""
         self.target = target
         self.replies = replies or ReplySeam()
         self.credentials = credentials
         self.host = host
         self.port = port
-        #: The TLS context every connection's ``SSLObject`` is made from.
-        self.context = context or credentials.server_context(verify_client)
+        self.recipe: Callable[[Credentials], ssl.SSLContext] = recipe or (
+            lambda made: made.server_context(verify_client))
+        #: The TLS context every connection's ``SSLObject`` is made from, while no fault changes it.
+        self.context = context or self.recipe(credentials)
+        self.seam = seam
+        self._variant: tuple[int, ssl.SSLContext] | None = None
         self.limiter = ConnectionLimiter(max_connections, max_connections_per_host)
         #: Seconds a handshake has from the accept (``HANDSHAKE_TIMEOUT``).
         self.handshake_timeout = HANDSHAKE_TIMEOUT
@@ -281,6 +302,18 @@ class TlsServer:
         self.connections: set[_TlsProtocol] = set()
         self.loop: asyncio.AbstractEventLoop
         self._server: asyncio.base_events.Server | None = None
+
+    def handshake_context(self) -> ssl.SSLContext:
+        """The context of a new connection: ``context``, or while a fault is in the seam the one made
+        for it (once per change of the seam)."""
+        seam = self.seam
+        if seam is None or not seam.handshake:
+            return self.context
+        if self._variant is None or self._variant[0] != seam.generation:
+            from .authority import tls_variant
+
+            self._variant = (seam.generation, tls_variant(self.credentials, self.recipe, seam))
+        return self._variant[1]
 
     def refuse(self, source: str, line: str) -> None:
         """Count one refused connection; its line is logged at most once per source per 10 s."""
