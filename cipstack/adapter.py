@@ -4,7 +4,6 @@ from __future__ import annotations
 
 import asyncio
 import contextlib
-import errno
 import logging
 import signal
 from collections.abc import Awaitable, Callable
@@ -26,7 +25,7 @@ from .eip.io_server import DatagramPaths, IoEndpoint, freeze_startup_objects
 from .eip.target.core import EncapsulationTarget, TargetSettings
 from .eip.target.io_target import IoProfile, IoTarget
 from .eip.target.limits import DEFAULT_MAX_TCP_CONNECTIONS
-from .eip.target.seams import IoSeam, ReplySeam, RequestSeam
+from .eip.target.seams import IoSeam, ReplySeam, RequestSeam, SecuredSeam
 from .eip.target.server import DEFAULT_PORT, EncapsulationServer
 from .eip.wire.encapsulation import DEFAULT_FRAME_TIMEOUT
 from .eip.wire.identity_items import CAPABILITY_CIP_TCP, CAPABILITY_CLASS01_UDP
@@ -42,18 +41,14 @@ from .runtime.observer import IoEventRelay, Observers, register_relay
 from .runtime.runtime import DeviceClock
 
 if TYPE_CHECKING:
-    import ssl
-
     from .cip.router import RequestContext
     from .security import Credentials
-    from .security.configuration import Configurator
+    from .security.authority import LabAuthority
+    from .security.configuration import Configuration, Configurator
     from .security.dtls_target import DtlsServer
     from .security.endpoint import SecureEndpoint
-    from .security.tls_psk import PskTlsContext
-    from .security.tls_target import TlsServer
+    from .security.tls_target import Recipe, TlsServer
 
-#: Tries at a TCP and UDP pair of one number for TLS and DTLS on ``--security-port 0``.
-FREE_PORT_TRIES = 20
 #: Seconds a CIP Security configuration session lasts without Kick_Timer (``security.configuration``).
 SECURITY_CONFIG_TIMEOUT = 60.0
 
@@ -210,10 +205,12 @@ class Adapter:
         self.tls: TlsServer | None = None
         #: EtherNet/IP and class 1 over DTLS on the same port number, UDP (``cipstack.security.dtls_target``).
         self.dtls: DtlsServer | None = None
+        #: Where the CIP Security faults act on the TLS and DTLS listeners (``cipstack.faults.security``).
+        self.secured_seam = SecuredSeam()
         if s.security is not None:
             from .security import Credentials
             from .security.dtls_target import DtlsServer
-            from .security.endpoint import available_suites_context
+            from .security.endpoint import available_suites, available_suites_context
             from .security.tls_target import TlsServer
 
             credentials = Credentials.load(s.security)
@@ -221,13 +218,17 @@ class Adapter:
             self.tls = TlsServer(self.target, credentials, s.host, s.security_port,
                                  max_connections=s.max_tcp_connections,
                                  max_connections_per_host=s.max_tcp_connections_per_host, replies=self.replies,
-                                 context=available_suites_context(credentials))
+                                 recipe=available_suites_context, seam=self.secured_seam)
+            # DTLS 1.2 with the same suites (the library's defaults would add suites the object does not list).
             self.dtls = DtlsServer(self.target, credentials, s.host, s.security_port, io=self.io_seam,
-                                   paths=self.io_paths)
+                                   paths=self.io_paths, seam=self.secured_seam, ciphers=available_suites(credentials))
         #: CIP Security's objects, their configuration and the TLS listener that follows it.
         self.secure: SecureEndpoint | None = None
         self.configurator: Configurator | None = None
+        #: The lab CA of the security folder and the listeners' seam, as the faults reach them.
+        self.authority: LabAuthority | None = None
         if s.security_objects or s.security is not None:
+            from .security.authority import LabAuthority
             from .security.configuration import Configurator
             from .security.endpoint import (
                 SecureEndpoint,
@@ -237,14 +238,15 @@ class Adapter:
             )
             from .security.objects import register as register_security_objects
 
-            if self.dtls is None:   # not configured yet: its port opens with a configuration
-                from .security.dtls_target import DtlsServer
-
-                self.dtls = DtlsServer(self.target, None, s.host, s.security_port, io=self.io_seam,
-                                       paths=self.io_paths)
             folder = state_folder(s.state_path) if s.security is None else None
             kept = load_configuration(folder)
-            self.secure = SecureEndpoint(self._tls_server, s.security_port, folder, self.tls, kept, self.dtls)
+            # A device configured over the network serves DTLS beside TLS, as --security DIR does; the
+            # folder's DTLS listener (``self.dtls``) is the endpoint's until a Reset or a configuration
+            # replaces it, as its TLS listener is.
+            datagrams = self._dtls_server if self.io_seam is not None else None
+            self.secure = SecureEndpoint(self._tls_server, s.security_port, folder, self.tls, kept, datagrams,
+                                         self.dtls)
+            self.authority = LabAuthority(self.secured_seam, self._serving_tls, self._serving_dtls)
             initial = configuration_of(self.tls.credentials) if self.tls is not None else kept
             self.configurator = Configurator(self.secure.configured, initial, s.security_config_timeout)
             register_security_objects(self.device.router, self.configurator, self._csr_defaults())
@@ -253,7 +255,7 @@ class Adapter:
             ports.append(ServerPort("EtherNet/IP over TLS", self.secure))
         elif self.tls is not None:
             ports.append(ServerPort("EtherNet/IP over TLS", self.tls))
-        if self.dtls is not None:
+        if self.dtls is not None and self.secure is None:   # else the endpoint's, which it opens and closes
             ports.append(ServerPort("EtherNet/IP over DTLS", self.dtls))
         if self.modbus is not None:
             ports.append(ServerPort("Modbus TCP", self.modbus))
@@ -264,7 +266,7 @@ class Adapter:
         self.power = PowerLink(ports)
         self.runtime = DeviceRuntime(self.device, self.clock, self.observers, self.power, self.target, self.server,
                                      self.requests, self.replies, self.io, self.io_seam, self.io_endpoint,
-                                     self.rs485)
+                                     self.rs485, self.authority)
         self.faults = FaultController(self.runtime)
         self._events = EventStream(self.runtime, self.faults)
         self.service = DeviceService(self.runtime, self.faults, self._events, product)
@@ -272,7 +274,7 @@ class Adapter:
         #: The HTTP control API, while serving with ``settings.http``.
         self.http_api: Any = None
 
-    def _tls_server(self, credentials: Credentials, context: ssl.SSLContext | PskTlsContext | None,
+    def _tls_server(self, credentials: Credentials, recipe: Recipe,
                     port: int) -> TlsServer:
         """A TLS listener for a configuration applied over the network, with this adapter's limits."""
         from .security.tls_target import TlsServer
@@ -280,7 +282,27 @@ class Adapter:
         s = self.settings
         return TlsServer(self.target, credentials, s.host, port, max_connections=s.max_tcp_connections,
                          max_connections_per_host=s.max_tcp_connections_per_host, replies=self.replies,
-                         context=context)
+                         recipe=recipe, seam=self.secured_seam)
+
+    def _dtls_server(self, credentials: Credentials, configuration: Configuration, port: int) -> DtlsServer:
+        """The DTLS listener of a configuration applied over the network: its certificate and trust, its
+        Allowed Cipher Suites, client certificates as Verify Client Certificate says, secured class 1."""
+        from .security.dtls_target import DtlsServer
+        from .security.endpoint import dtls_server_context
+
+        def recipe(made: Credentials) -> Any:
+            return dtls_server_context(made, configuration)
+
+        return DtlsServer(self.target, credentials, self.settings.host, port, io=self.io_seam, paths=self.io_paths,
+                          verify_client=bool(configuration.verify_client), seam=self.secured_seam, recipe=recipe)
+
+    def _serving_tls(self) -> TlsServer | None:
+        """The TLS listener serving now: ``--security DIR``'s, or the configuration's."""
+        return self.secure.server if self.secure is not None else self.tls
+
+    def _serving_dtls(self) -> bool:
+        dtls = self.secure.dtls if self.secure is not None else self.dtls
+        return dtls is not None and dtls.is_open
 
     def _arrived_secured(self, context: RequestContext) -> bool:
         """Whether a request arrived over TLS (``--secure-only``)."""
@@ -350,13 +372,8 @@ class Adapter:
                                     f"{s.host}:{s.port} (EtherNet/IP, --port)"))
         if self.modbus is not None:
             await self._listen(self.modbus.start, lambda: f"TCP {s.host}:{s.modbus_port} (Modbus TCP, --modbus-port)")
-        secure = self.secure or self.tls
-        if secure is not None:
-            await self._listen(secure.start,
-                               lambda: f"TCP {s.host}:{s.security_port} (EtherNet/IP over TLS, --security-port)")
-        if self.dtls is not None and self.tls is not None:
-            await self._listen(self._start_dtls,
-                               lambda: f"UDP {s.host}:{s.security_port} (EtherNet/IP over DTLS, --security-port)")
+        if self.secure is not None:   # TLS, then DTLS on the same number (``SecureEndpoint.start``)
+            await self._listen(self.secure.start, self._secure_port_named)
         if self.rs485 is not None:
             await self._open_rtu(self.rs485)
         self.clock.tick(asyncio.get_running_loop().time())
@@ -368,25 +385,12 @@ class Adapter:
         # two bind it while neither listens): then listen() is what fails.
         await self._listen(self.server.serve, lambda: f"TCP {s.host}:{self.server.port} (EtherNet/IP, --port)")
 
-    async def _start_dtls(self) -> None:
-        """DTLS on the UDP port of the number TLS listens on. With ``--security-port 0`` TLS took a
-        free TCP port whose number may be taken in UDP: then TLS takes another, as the plain target
-        does for its pair (``EncapsulationServer.start``)."""
-        assert self.dtls is not None and self.tls is not None
-        any_port = self.settings.security_port == 0
-        for attempt in range(FREE_PORT_TRIES if any_port else 1):
-            self.dtls.port = self.tls.port
-            try:
-                await self.dtls.start()
-                return
-            except OSError as exc:
-                if not any_port or exc.errno != errno.EADDRINUSE or attempt == FREE_PORT_TRIES - 1:
-                    raise
-            await self.tls.close()   # that number is taken in UDP: another pair
-            self.tls.port = 0
-            await self.tls.start()
-            if self.secure is not None:
-                self.secure.port = self.tls.port
+    def _secure_port_named(self) -> str:
+        """The secure port that did not listen: UDP (DTLS) once TLS listens, else TCP (TLS)."""
+        s, server = self.settings, self._serving_tls()
+        if server is not None and server.is_open:
+            return f"UDP {s.host}:{server.port} (EtherNet/IP over DTLS, --security-port)"
+        return f"TCP {s.host}:{s.security_port} (EtherNet/IP over TLS, --security-port)"
 
     async def _listen(self, start: Callable[[], Awaitable[None]], where: Callable[[], str]) -> None:
         """``start`` one listener; if it cannot listen, close what is open and raise ``ListenError``

@@ -88,6 +88,19 @@ class Parameter(NamedTuple):
         return self.spec.access.settable
 
 
+class SaveProcedure(NamedTuple):
+    """How a device makes written parameters survive a power cycle over CIP, where its manual gives a
+    way (``cipstack params load`` saves with it): point the attribute ``pointer`` at ``target`` (the
+    register the save command is), write each of ``edges`` into ``trigger`` as ``width`` octets (a
+    change saving), then give ``pointer`` back its value."""
+
+    pointer: tuple[int, int, int]
+    target: int
+    trigger: tuple[int, int, int]
+    edges: tuple[int, ...]
+    width: int
+
+
 #: What a catalog of the standard objects alone says of itself.
 STANDARD_ONLY = "the standard objects only"
 
@@ -104,7 +117,7 @@ class Catalog:
     def __init__(self, classes: Iterable[ClassSpec] = (), assemblies: Iterable[AssemblySchema] = (),
                  resolvers: Mapping[int, AttributeResolver] | None = None, source: str = STANDARD_ONLY,
                  parameters: Iterable[Parameter] = (), profile: str | None = None,
-                 standard: Mapping[int, ClassSpec] | None = None) -> None:
+                 standard: Mapping[int, ClassSpec] | None = None, save: SaveProcedure | None = None) -> None:
         #: Where the declarations come from, for messages: "profile acg (...)", "EDS file x.eds", ...
         self.source = source
         self.classes: dict[int, ClassSpec] = dict(standard_classes() if standard is None else standard)
@@ -119,6 +132,8 @@ class Catalog:
         self.parameters: tuple[Parameter, ...] = tuple(parameters)
         #: The device profile these declarations are of (``acg``, ``mx2``, ``rx``), None otherwise.
         self.profile = profile
+        #: How the device saves its parameters, where it has a save command (None: it has none).
+        self.save = save
 
     def add(self, spec: ClassSpec) -> None:
         self.classes[spec.class_id] = spec
@@ -131,6 +146,7 @@ class Catalog:
         other.resolvers = dict(self.resolvers)
         other.parameters = self.parameters
         other.profile = self.profile
+        other.save = self.save
         return other
 
     def __repr__(self) -> str:

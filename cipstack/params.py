@@ -4,9 +4,8 @@ The parameters are those the scanner's catalog declares (``Catalog.parameters``:
 or every ``ParamN`` with a link path of an EDS file), each with its code, name, raw value, engineering
 value and unit. Loading writes only the settable parameters whose value differs, in the catalog's
 order (the ones that bound the others first), refuses while the drive runs unless forced, and saves
-where the device has a save command: on the ACG, memory control register 0x03E0 "Save parameters"
-(ACG RS-485 manual, 0x03E0-0x03EC), reached over CIP through CM.51 and output assembly 121 (ACG-ET2 manual, CM.51
-Para Control-1 and the smart-scaling output instances 121-128), a 0 to 1 change saving.
+where the device has a save command, as its catalog declares it (``Catalog.save``: on the ACG, memory
+control register 0x03E0 "Save parameters" reached over CIP through CM.51 and output assembly 121).
 
 The file::
 
@@ -43,13 +42,6 @@ from .errors import BadRequest, NotFound, StateRefused
 
 if TYPE_CHECKING:
     from .scanner import Scanner
-
-#: ACG: the memory control register whose 0 -> 1 change saves the parameters (ACG RS-485 manual, 0x03E0), the
-#: Para Control slot that points output assembly 121 at it (CM.51, ACG-ET2 manual), and that assembly.
-ACG_SAVE_REGISTER = 0x03E0
-ACG_PARA_CONTROL_1 = (0x64, 7, 51)
-ACG_PARA_CONTROL_ASSEMBLY = 121
-
 
 class DriveRunningError(StateRefused, RuntimeError):
     """A recipe load refused because the drive runs (give ``force=True`` to load anyway)."""
@@ -186,19 +178,20 @@ async def load_params(scanner: Scanner, recipe: Sequence[ParamValue], *, force: 
 
 
 async def save_params(scanner: Scanner, recipe: dict[tuple[int, int, int], ParamValue] | None = None) -> bool:
-    """Make the written parameters survive a power cycle where the device has a save command; returns
-    whether it has one. ACG: CM.51 points output assembly 121 at 0x03E0, which goes 0 then 1; CM.51
-    then gets back its value (the recipe's, else the one before) - the saved set keeps 0x03E0 in it."""
-    if scanner.catalog.profile != "acg":
+    """Make the written parameters survive a power cycle where the device has a save command (its
+    catalog's ``SaveProcedure``); returns whether it has one. The pointer then gets back its value: the
+    recipe's, else the one before (so a saved set keeps the save command in it)."""
+    save = scanner.catalog.save
+    if save is None:
         return False
-    before = (await scanner.read(*ACG_PARA_CONTROL_1)).raw
-    await scanner.write(*ACG_PARA_CONTROL_1, ACG_SAVE_REGISTER)
+    before = (await scanner.read(*save.pointer)).raw
+    await scanner.write(*save.pointer, save.target)
     try:
-        for edge in (0, 1):
-            await scanner.set_attribute_single(0x04, ACG_PARA_CONTROL_ASSEMBLY, 3, edge.to_bytes(2, "little"))
+        for edge in save.edges:
+            await scanner.set_attribute_single(*save.trigger, edge.to_bytes(save.width, "little"))
     finally:
-        restored = recipe.get(ACG_PARA_CONTROL_1) if recipe else None
-        await scanner.write(*ACG_PARA_CONTROL_1, restored.raw if restored is not None else before)
+        restored = recipe.get(save.pointer) if recipe else None
+        await scanner.write(*save.pointer, restored.raw if restored is not None else before)
     return True
 
 

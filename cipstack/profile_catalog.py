@@ -17,7 +17,7 @@ import importlib
 from collections.abc import Callable, Mapping
 from typing import TYPE_CHECKING, Any
 
-from .catalog import Catalog, Parameter, compact_standard_classes
+from .catalog import Catalog, Parameter, SaveProcedure, compact_standard_classes
 from .cip.compact import Row, attribute_spec, class_specs
 from .cip.model import AttributeSpec
 
@@ -47,7 +47,8 @@ class ProfileCatalog(Catalog):
         #: Parameter code -> (class, instance, attribute), as the generated data lists them.
         self._codes: dict[str, tuple[int, int, int]] = {code: (c, i, a) for code, c, i, a in data.PARAMETERS}
         super().__init__(class_specs(data.CLASSES), resolvers=resolvers, profile=data.PROFILE, source=source,
-                         standard=compact_standard_classes())
+                         standard=compact_standard_classes(),
+                         save=SaveProcedure(*data.SAVE) if data.SAVE is not None else None)
 
     # The base class assigns both in its constructor; the property keeps them lazy.
     @property  # a lazy attribute where Catalog has a plain one

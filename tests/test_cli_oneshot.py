@@ -50,6 +50,9 @@ LINES = [
     ["identity", "127.0.0.1"],
     ["identity", "--json", "127.0.0.2:44818", "--timeout", "250ms", "--log-level", "INFO"],
     ["get", "", "1/1/7"],
+    ["get", "10.0.0.5", "1/1/7", "--security", "lab"],
+    ["set", "10.0.0.5:2221", "ACC", "2.5", "--security", "/etc/cipstack/lab", "--json"],
+    ["identity", "--security", "lab", "10.0.0.5"],
 ]
 
 
@@ -74,6 +77,7 @@ FALLBACK = [
     ["get", "h", "1/1/7", "--"],
     ["get", "h", "1/1/7", "--scaled"],               # set's option on get
     ["identity", "h", "--type", "UINT"],
+    ["get", "h", "1/1/7", "--security"],             # a folder missing: argparse's usage and message
     ["discover"], ["io", "h"], ["adapter"],          # other commands
 ]
 

@@ -38,7 +38,7 @@ def test_every_declaration_decodes_alike(name: str) -> None:
     for product_code in sorted(profile.product_codes)[:2]:
         full = catalog_for(profile.vendor_id, product_code)
         compact = decoding_catalog(profile.vendor_id, product_code)
-        assert (compact.source, compact.profile) == (full.source, full.profile)
+        assert (compact.source, compact.profile, compact.save) == (full.source, full.profile, full.save)
         paths = [(class_id, instance, attribute.id) for class_id, spec in full.classes.items()
                  for instance in (1, 2) for attribute in spec.instance_attributes]
         paths += [(class_id, instance, attribute) for class_id in full.resolvers

@@ -39,7 +39,7 @@ from cipstack.fleet.spec import (
     select_shard,
     shares,
 )
-from cipstack.scanner import Scanner, discover
+from cipstack.scanner import Scanner, SyncScanner, discover
 from tests.attacks import ACG_INPUT_ONLY_PATH, class1_open
 from tests.ports import free_port, list_identity_replies
 from tests.test_acg_live import SAVE_PARAMETERS, write_registers
@@ -251,7 +251,8 @@ BAD_SPECS = [
      "--max-devices: 0 is not a number of devices"),
     (["--addresses", "127.77.9.1-127.77.9.4", "--device", "acg*x"], "the count 'x' is not a number"),
     (["--addresses", "127.77.9.1-127.77.9.4", "--device", "mx2:RX-A4055-E"], "RX-A4055-E is an rx model"),
-    (["--addresses", "127.77.9.1-127.77.9.4", "--device", "mx2", "--param", "drv=4"], "no acg device"),
+    (["--addresses", "127.77.9.1-127.77.9.4", "--device", "mx2", "--param", "drv=4"],
+     "--param drv=4: no device of the fleet has a keypad with these codes (profiles mx2)"),
     (["--addresses", "127.77.9.1-127.77.9.4", "--device", "acg", "--param", "drv=99"], "--param 'drv=99'"),
     (["--addresses", "127.77.9.1-127.77.9.4", "--device", "acg*2", "--workers", "3"], "more worker processes"),
     (["--device", "acg*2"], "no address: give --addresses"),
@@ -402,6 +403,23 @@ def test_each_device_keeps_its_own_saved_parameters(tmp_path: Path) -> None:
     with running(tmp_path, *args, name="restarted"):                         # a power cycle of both
         assert asyncio.run(_read(hosts[0], port, 0x2A, 1, 103)) == 55
         assert asyncio.run(_read(hosts[1], port, 0x2A, 1, 103)) == default
+
+
+def test_param_goes_to_every_device_whose_keypad_has_its_codes(tmp_path: Path) -> None:
+    """``--param A004=60`` is an MX2 function code: the MX2 takes it at start, the ACG (whose keypad
+    has no A004) is left as it is; ``ACC=7.5`` is the ACG's alone."""
+    hosts = addresses(4, 2)
+    port = free_port(*hosts)
+    with running(tmp_path, "--addresses", f"{hosts[0]}-{hosts[1]}", "--device", "acg", "--device", "mx2",
+                 "--param", "A004=60", "--port", str(port), "--io-port", "0", "--factory"):
+        with SyncScanner(f"{hosts[1]}:{port}") as mx2:
+            assert mx2.parameter("A004").value == 60.0
+        with SyncScanner(f"{hosts[0]}:{port}") as acg:
+            assert acg.catalog.profile == "acg"
+    with (running(tmp_path, "--addresses", f"{hosts[0]}-{hosts[1]}", "--device", "acg", "--device", "mx2",
+                  "--param", "ACC=7.5", "--port", str(port), "--io-port", "0", "--factory", name="acc"),
+          SyncScanner(f"{hosts[0]}:{port}") as acg):
+        assert acg.parameter("ACC").value == 7.5
 
 
 def test_shards_of_one_spec_serve_the_plant_between_them(tmp_path: Path) -> None:

@@ -13,6 +13,9 @@ from pathlib import Path
 
 import pytest
 
+#: One worker runs this module's tests (``--dist loadgroup``): the package is parsed once for all.
+pytestmark = pytest.mark.xdist_group("layering")
+
 PACKAGE = Path(__file__).resolve().parent.parent / "cipstack"
 
 #: What every part may import: the error root and the debug records on demand (both import nothing of ours).

@@ -13,6 +13,9 @@ from pathlib import Path
 
 import pytest
 
+#: One worker runs this module's tests (``--dist loadgroup``): the package is scanned once for all.
+pytestmark = pytest.mark.xdist_group("raise_builtins")
+
 PACKAGE = Path(__file__).resolve().parent.parent / "cipstack"
 
 #: Every builtin exception class, by name (``asyncio.TimeoutError`` and the like are caught by name too).

@@ -47,7 +47,7 @@ def test_stations_from_1_in_address_order_and_a_groups_own_first_id() -> None:
 
 @pytest.mark.parametrize(("groups", "workers", "message"), [
     ((("acg", 17, None),), 1, "--rtu: 17 ACG drives, but an RS-485 line takes at most 16"),
-    ((("mx2", 2, None),), 1, "--rtu: the fleet has no acg device"),
+    ((("mx2", 2, None),), 1, "--rtu: the fleet has no device with an RS-485 port (the ACG's RS-485 port: profile acg)"),
     ((("acg", 2, None),), 2, "--rtu: one RS-485 line is served by one process: --workers 1"),
     ((("acg", 2, 5), ("acg", 1, 6)), 1, "--rtu: station 6 is given to 127.0.0.11 and 127.0.0.12"),
 ])

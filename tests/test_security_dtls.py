@@ -507,6 +507,25 @@ def test_originator_names_a_device_that_does_not_listen(lab: Path) -> None:
         DtlsLink(Credentials.load(lab), "127.0.0.1", port, 2.0)
 
 
+async def test_asyncio_originator_names_no_answer_and_nothing_listening(lab: Path) -> None:
+    """The asyncio side says what the blocking one says: a port that drops the ClientHello (plain UDP
+    EtherNet/IP would) is no answer to the handshake, not a socket error; a closed port, one line."""
+    from cipstack.eip.originator.asyncio_client import EncapsulationClient
+
+    credentials = Credentials.load(lab)
+    with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as silent:
+        silent.bind(("127.0.0.1", 0))
+        port = silent.getsockname()[1]
+        with pytest.raises(PeerUnreachable) as raised:
+            await EncapsulationClient.connect("127.0.0.1", port, 0.5, security=credentials, datagrams=True)
+    assert str(raised.value) == (f"DTLS with 127.0.0.1:{port}: no answer to the handshake (is the device serving "
+                                 "CIP Security over UDP there?)")
+    closed = free_port()
+    with pytest.raises(PeerUnreachable) as raised:
+        await EncapsulationClient.connect("127.0.0.1", closed, 2.0, security=credentials, datagrams=True)
+    assert str(raised.value) == f"DTLS with 127.0.0.1:{closed}: nothing listens there (ICMP port unreachable)"
+
+
 def test_originator_names_an_untrusted_device(served: Served, lab: Path, other_lab: Path) -> None:
     # The device's certificate is of lab's CA; this client trusts only other_lab's.
     mixed = Credentials.load(other_lab)

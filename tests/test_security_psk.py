@@ -22,6 +22,7 @@ import threading
 import time
 from collections.abc import Iterator
 from pathlib import Path
+from typing import Any
 
 import pytest
 
@@ -574,18 +575,19 @@ def test_the_dtls_port_follows_a_reset_and_the_keys_written_over_the_wire(psk_la
     folder = Credentials.load(psk_lab)
     served = _serve(psk_lab)
     try:
-        dtls = served.adapter.dtls
-        assert dtls is not None
+        dtls = served.adapter.dtls   # the folder's, the endpoint's until a Reset
+        assert dtls is not None and served.adapter.secure is not None
+        secure = served.adapter.secure
         port = dtls.port
         BlockingEncapsulationClient.connect_dtls("127.0.0.1", port, 5.0, folder).close()
         _reset(served)
         # Factory Default: the DTLS port is closed, as the TLS listener is.
-        assert not dtls.is_open
+        assert not dtls.is_open and secure.dtls is None
         with pytest.raises(PeerUnreachable):
             BlockingEncapsulationClient.connect_dtls("127.0.0.1", port, 1.0, folder)
         _push(served, lab, ((b"line-7", key),))
-        wait_for(lambda: dtls.is_open, 10, "the DTLS port with the configuration")
-        assert dtls.port == served.secure_port
+        wait_for(lambda: secure.dtls is not None and secure.dtls.is_open, 10, "the DTLS port with the configuration")
+        assert secure.dtls is not None and secure.dtls.port == served.secure_port == port
         client = BlockingEncapsulationClient.connect_dtls("127.0.0.1", port, 5.0, pushed)
         with client:
             reply = client.perform(client.core.request(GET_ATTRIBUTE_SINGLE, request_path(1, 1, 7)))
@@ -602,10 +604,12 @@ def test_a_device_configured_from_factory_default_serves_dtls_with_the_keys(lab:
     served = Served(AdapterSettings(host="127.0.0.1", port=0, io_port=0, security_objects=True,
                                     security_port=free_port()))
     try:
-        dtls = served.adapter.dtls
-        assert dtls is not None and not dtls.is_open   # Factory Default: no DTLS port yet
+        secure = served.adapter.secure
+        assert secure is not None and secure.dtls is None   # Factory Default: no DTLS port yet
         _push(served, lab, ((b"line-7", key),))
-        wait_for(lambda: dtls.is_open, 10, "the DTLS port with the configuration")
+        wait_for(lambda: secure.dtls is not None and secure.dtls.is_open, 10, "the DTLS port with the configuration")
+        dtls = secure.dtls
+        assert dtls is not None
         with SyncScanner("127.0.0.1", served.secure_port, security=pushed) as scanner, \
                 scanner.io_connection(output=21, input=71, rpi=0.010) as io:
             io.wait_input(lambda image: image.ready, timeout=10)
@@ -613,7 +617,7 @@ def test_a_device_configured_from_factory_default_serves_dtls_with_the_keys(lab:
         # The certificate pushed serves DTLS too.
         BlockingEncapsulationClient.connect_dtls("127.0.0.1", dtls.port, 5.0, Credentials.load(lab)).close()
         _reset(served)
-        assert not dtls.is_open
+        assert not dtls.is_open and secure.dtls is None
     finally:
         served.close()
 
@@ -677,3 +681,42 @@ def test_tshark_decrypts_a_psk_tls_session_with_the_key_log(psk_lab: Path, tmp_p
     rows = [line for line in fields.stdout.splitlines() if line.strip()]
     # RegisterSession, request and reply, read out of the PSK suite's records.
     assert len(rows) >= 2, subprocess.run([TSHARK, "-r", str(capture)], capture_output=True, text=True).stdout
+
+
+def _on_loop(served: Served, call: Any) -> Any:
+    """``call()`` on the adapter's loop, as the control socket calls the faults."""
+    async def run() -> Any:
+        return call()
+
+    return asyncio.run_coroutine_threadsafe(run(), served.loop).result(10)
+
+
+def test_refuse_cipher_suite_takes_a_psk_suite_over_tls_and_dtls(psk_lab: Path,
+                                                                caplog: pytest.LogCaptureFixture) -> None:
+    served = _serve(psk_lab)
+    port = served.secure_port
+    offering = Credentials.load(psk_lab).offering("TLS_ECDHE_PSK_WITH_AES_128_CBC_SHA256")
+    allowed = "the device allows ECDHE-PSK-CHACHA20-POLY1305, PSK-AES128-GCM-SHA256, PSK-AES256-GCM-SHA384"
+    try:
+        _on_loop(served, lambda: served.adapter.fault("refuse-cipher-suite", suite="ECDHE-PSK-AES128-CBC-SHA256"))
+        with caplog.at_level("WARNING", logger="cipstack.security"):
+            with pytest.raises(SecurityError) as refused:
+                SyncScanner(f"127.0.0.1:{port}", security=offering, identify=False)
+            assert str(refused.value) == (f"TLS with 127.0.0.1:{port} failed: no cipher suite in common with the "
+                                          "peer (SSLV3_ALERT_HANDSHAKE_FAILURE): we offered "
+                                          "ECDHE-PSK-AES128-CBC-SHA256")
+            with pytest.raises(SecurityError) as refused:
+                DtlsLink(offering, "127.0.0.1", port, 5.0)
+            assert str(refused.value).endswith("no cipher suite in common with the peer (tls alert handshake "
+                                               "failure): we offered ECDHE-PSK-AES128-CBC-SHA256")
+            wait_for(lambda: len([r for r in caplog.records if allowed in r.getMessage()]) == 2, 10,
+                     "the device's TLS and DTLS refusals")
+        # One that offers every PSK suite agrees on another.
+        with SyncScanner(f"127.0.0.1:{port}", security=Credentials.load(psk_lab), identify=False) as drive:
+            assert drive.read(1, 1, 7) == "CENT"
+        _on_loop(served, served.adapter.clear_faults)
+        with SyncScanner(f"127.0.0.1:{port}", security=offering, identify=False) as drive:
+            assert drive.read(1, 1, 7) == "CENT"
+        DtlsLink(offering, "127.0.0.1", port, 5.0).close()
+    finally:
+        served.close()

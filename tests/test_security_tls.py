@@ -6,6 +6,7 @@ tests read; ports come from `free_port()`."""
 
 from __future__ import annotations
 
+import asyncio
 import datetime
 import os
 import shutil
@@ -88,15 +89,18 @@ def _stop(process: subprocess.Popen[bytes]) -> None:
             process.wait()
 
 
-
-
-@pytest.fixture(scope="module")
-def device(lab: Path, tmp_path_factory: pytest.TempPathFactory) -> Iterator[Device]:
-    started = _start_adapter(lab, tmp_path_factory.mktemp("adapter") / "adapter.log")
+def secured_adapter(folder: Path, tmp_path_factory: pytest.TempPathFactory) -> Iterator[Device]:
+    """A module's secured adapter, from the ``folder`` of ``security init``, stopped after its tests."""
+    started = _start_adapter(folder, tmp_path_factory.mktemp("adapter") / "adapter.log")
     try:
         yield started
     finally:
         _stop(started.process)
+
+
+@pytest.fixture(scope="module")
+def device(lab: Path, tmp_path_factory: pytest.TempPathFactory) -> Iterator[Device]:
+    yield from secured_adapter(lab, tmp_path_factory)
 
 
 def _refusals(log: Path) -> list[str]:
@@ -350,6 +354,25 @@ async def test_asyncio_scanner_reads_identity_over_tls(device: Device, lab: Path
 async def test_asyncio_scanner_names_a_wrong_ca(device: Device, other_lab: Path) -> None:
     with pytest.raises(SecurityError, match=r"failed: certificate verify failed: self-signed certificate in "):
         await Scanner.connect(f"{device.host}:{device.tls_port}", security=Credentials.load(other_lab), timeout=10)
+
+
+@pytest.mark.parametrize("blocking", [True, False], ids=["blocking", "asyncio"])
+async def test_both_scanners_name_a_plain_port_that_never_answers_the_handshake(blocking: bool, device: Device,
+                                                                                lab: Path) -> None:
+    # Plain 44818 takes the ClientHello for the start of an encapsulation header and waits for the rest.
+    address = f"{device.host}:{device.port}"
+    with pytest.raises(SecurityError) as raised:
+        if blocking:
+            await asyncio.to_thread(SyncScanner, address, security=Credentials.load(lab), timeout=1)
+        else:
+            await Scanner.connect(address, security=Credentials.load(lab), timeout=1)
+    assert str(raised.value) == (f"TLS with {address} failed: no answer to the handshake within 1 s: a plain "
+                                 "EtherNet/IP port (44818) answers no TLS; the device's TLS port is 2221 unless it "
+                                 "was given another")
+    # And a port where nothing listens is not taken for one.
+    closed = free_port()
+    with pytest.raises(PeerUnreachable, match=rf"^cannot connect to 127\.0\.0\.1:{closed}: "):
+        await Scanner.connect(f"127.0.0.1:{closed}", security=Credentials.load(lab), timeout=1)
 
 
 async def test_asyncio_scanner_names_a_client_certificate_the_device_refuses(device: Device, lab: Path,

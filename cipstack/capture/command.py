@@ -77,13 +77,15 @@ def fixed_declarations(profile: str | None, model: str | None, eds: list[Path]) 
         raise UsageProblem("give --profile or --eds, not both")
     if profile:
         from ..catalog import Catalog
-        from ..devices.profiles import PROFILES, ProfileOptions, build_device
+        from ..devices.profiles import PROFILES, ProfileOptions, build_device, check_model
 
         if profile not in PROFILES:
             raise UsageProblem(f"unknown profile {profile!r} (known: {', '.join(sorted(PROFILES))})")
-        if model is not None and profile == "acg":
-            raise UsageProblem(f"--model {model}: the acg profile has one model; --model names an MX2 or RX model")
         chosen = PROFILES[profile]
+        try:
+            check_model(chosen, model)
+        except BadRequest as exc:
+            raise UsageProblem(str(exc)) from None
         if model is None and chosen.catalog is not None:
             return Declarations(chosen.catalog(), source=f"profile {profile}")
         try:

@@ -11,16 +11,23 @@ def cmd_eds_check(args: argparse.Namespace) -> int:
     from ..eds.commands import run_check
 
     if not args.against:
+        if args.security is not None:
+            from .common import UsageError
+
+            raise UsageError("--security goes with --against HOST: the check of a file alone reads no device")
         return run_check(args)
     import asyncio
 
     from ..eds.against import compare_with_device
     from ..eds.commands import EXIT_UNREADABLE, load_quietly
     from ..scanner import Scanner
+    from .explicit import credentials
+
+    security = credentials(args)
 
     async def compare() -> dict[str, Any]:
         reports = {}
-        async with await Scanner.connect(args.against, timeout=args.timeout) as scanner:
+        async with await Scanner.connect(args.against, timeout=args.timeout, security=security) as scanner:
             for path in args.files:
                 doc = load_quietly(path)
                 if doc is not None:
@@ -43,8 +50,9 @@ def cmd_eds_fetch(args: argparse.Namespace) -> int:
     from ..objects.file import CLASS_ID, EDS_INSTANCE, FileTransferError, read_file
     from ..scanner import SyncScanner
     from .common import EXIT_FAILURE, EXIT_OK
+    from .explicit import credentials
 
-    with SyncScanner(args.host, timeout=args.timeout, identify=False) as scanner:
+    with SyncScanner(args.host, timeout=args.timeout, identify=False, security=credentials(args)) as scanner:
         def request(service: int, data: bytes) -> tuple[int, bytes]:
             reply = scanner.request(service, CLASS_ID, EDS_INSTANCE, data=data, check=False)
             return int(reply.general_status), bytes(reply.data)

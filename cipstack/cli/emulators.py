@@ -11,7 +11,7 @@ from collections.abc import Awaitable, Callable
 from pathlib import Path
 from typing import Any
 
-from ..errors import BadRequest
+from ..errors import BadRequest, NotFound
 from .common import (
     EXIT_FAILURE,
     EXIT_OK,
@@ -24,18 +24,20 @@ from .common import (
 # -- adapter -----------------------------------------------------------------------------------------
 def cmd_adapter(args: argparse.Namespace) -> int:
     from ..adapter import Adapter, AdapterSettings
-    from ..devices.profiles import PROFILES
+    from ..devices.profiles import DEFAULT_PROFILE, PROFILES, check_model
     from ..devices.state import StateFileError, default_state_path
     from ..eds.served import profile_eds_file
 
     if args.eds is not None:
         return _adapter_from_eds(args)
     if args.profile is None:
-        args.profile = _profile_of_model(args.model) if args.model else "acg"
+        args.profile = _profile_of_model(args.model) if args.model else DEFAULT_PROFILE
     if args.profile not in PROFILES:
         raise UsageError(f"unknown profile {args.profile!r} (known: {', '.join(sorted(PROFILES))})")
-    if args.model and args.profile == "acg":
-        raise UsageError(f"--model {args.model}: the acg profile has one model; --model names an MX2 or RX model")
+    try:
+        check_model(PROFILES[args.profile], args.model)
+    except BadRequest as exc:
+        raise UsageError(str(exc)) from None
     if not 0 <= args.port < 65536:
         raise UsageError(f"port {args.port} out of range")
     default_state = default_state_path(f"{args.profile}-{args.model}" if args.model else args.profile)
@@ -83,11 +85,11 @@ def _apply_keypad_parameters(adapter: Any, assignments: list[str], kept: bool = 
 
 def _profile_of_model(name: str) -> str:
     """The profile of ``--model`` given without ``--profile``: the family the model belongs to."""
-    from ..devices.omron.models import model
+    from ..devices.profiles import profile_of_model
 
     try:
-        return model(name).family.value.lower()
-    except KeyError as exc:
+        return profile_of_model(name).name
+    except NotFound as exc:
         raise UsageError(f"--model: {exc}") from None
 
 

@@ -34,8 +34,11 @@ def cmd_discover(args: argparse.Namespace) -> int:
     import asyncio
 
     from ..eip.originator.discovery import discover
+    from ..eip.wire.encapsulation import DEFAULT_PORT
 
-    records = asyncio.run(discover(args.broadcast, args.port, args.timeout))
+    if args.security is not None:
+        return _discover_secured(args)
+    records = asyncio.run(discover(args.broadcast, DEFAULT_PORT if args.port is None else args.port, args.timeout))
     for record in records:
         _emit(args, record.as_dict(), _identity_text(record))
     if not records and not args.json:
@@ -43,11 +46,98 @@ def cmd_discover(args: argparse.Namespace) -> int:
     return EXIT_OK
 
 
+def secured_hosts(text: str | None) -> list[str]:
+    """The hosts ``discover --security`` asks (``--broadcast HOST[:PORT][,HOST[:PORT]...]``). A DTLS session has one
+    peer: a broadcast (none given, the limited one, an interface's directed one) or a multicast
+    address cannot be secured, and is refused in one line rather than sent in the clear."""
+    import ipaddress
+
+    from ..eip.originator.discovery_core import broadcast_addresses
+
+    if not text:
+        raise UsageError("--security asks each device over DTLS, one session each, and a broadcast cannot be "
+                         "secured: give the devices with --broadcast HOST[:PORT][,...]")
+    hosts = [host.strip() for host in text.split(",")]
+    broadcasts = set(broadcast_addresses())
+    for item in hosts:
+        if not item:
+            raise UsageError(f"--broadcast {text!r}: an empty host")
+        host = item.rpartition(":")[0] or item
+        try:
+            address = ipaddress.ip_address(host)
+        except ValueError:
+            continue   # a name: resolved when its session opens
+        # A directed broadcast of a network this host is not on cannot be told from a host's
+        # address here: the system refuses to send to it without SO_BROADCAST (one line too).
+        if host in broadcasts or address.is_multicast or address.is_unspecified:
+            raise UsageError(f"--broadcast {host}: a DTLS session has one peer, and {host} is no one device's "
+                             "address (a broadcast, multicast or unspecified one): with --security give each "
+                             "device's own address")
+    return hosts
+
+
+def _discover_secured(args: argparse.Namespace) -> int:
+    """ListIdentity in a DTLS session with each host of ``--broadcast`` (UDP 2221 unless ``--port``),
+    at once: UDP as plain discovery, secured. A host that refuses the session or does not answer is
+    one line on stderr naming the cause, and the exit status 1."""
+    import asyncio
+
+    from ..eip.originator.asyncio_client import EncapsulationClient
+    from ..eip.wire.encapsulation import SECURE_PORT
+    from ..errors import CipstackError
+
+    hosts = secured_hosts(args.broadcast)
+    security = credentials(args)
+    port = SECURE_PORT if args.port is None else args.port
+
+    async def ask(item: str) -> list[Any]:
+        host, at = parse_host(item, port)
+        client = await EncapsulationClient.connect(host, at, args.timeout, register=False, security=security,
+                                                   datagrams=True)
+        try:
+            return await client.list_identity()
+        finally:
+            await client.close()
+
+    async def ask_all() -> list[Any]:
+        return await asyncio.gather(*(ask(host) for host in hosts), return_exceptions=True)
+
+    status = EXIT_OK
+    for host, answer in zip(hosts, asyncio.run(ask_all()), strict=True):
+        if isinstance(answer, CipstackError):
+            print(f"cipstack discover: {answer}", file=sys.stderr, flush=True)
+            status = EXIT_FAILURE
+        elif isinstance(answer, BaseException):
+            raise answer
+        elif not answer:
+            print(f"cipstack discover: {host} answered ListIdentity with no identity", file=sys.stderr,
+                  flush=True)
+            status = EXIT_FAILURE
+        else:
+            for record in answer:
+                _emit(args, record.as_dict(), _identity_text(record))
+    return status
+
+
+def credentials(args: argparse.Namespace) -> Any:
+    """CIP Security's credentials of ``--security DIR`` (``Credentials.load``), or None without it: the
+    requests then go over TLS, to port 2221 unless the target names one. Loaded only when asked for:
+    a plain one-shot imports neither TLS nor X.509."""
+    folder = getattr(args, "security", None)
+    if folder is None:
+        return None
+    from ..security import Credentials
+
+    return Credentials.load(folder)
+
+
 def cmd_identity(args: argparse.Namespace) -> int:
     from ..eip.originator.blocking import BlockingEncapsulationClient
+    from ..eip.wire.encapsulation import DEFAULT_PORT, SECURE_PORT
 
-    host, port = parse_host(args.target)
-    with BlockingEncapsulationClient.connect(host, port, args.timeout, register=False) as client:
+    security = credentials(args)
+    host, port = parse_host(args.target, DEFAULT_PORT if security is None else SECURE_PORT)
+    with BlockingEncapsulationClient.connect(host, port, args.timeout, register=False, security=security) as client:
         records = client.perform(client.core.list_identity())
     if not records:
         print(f"cipstack identity: {args.target} answered ListIdentity with no identity", file=sys.stderr)
@@ -127,7 +217,8 @@ def _connect_identified(args: argparse.Namespace, standard: tuple[int, int, int]
 
         standard_specs = {**standard_specs, **SECURITY_CLASSES}
     scanner = SyncScanner(args.target, timeout=args.timeout, route=parse_route(args.route), identify=False, eds=doc,
-                          catalog=None if doc is not None else Catalog(standard=standard_specs))
+                          catalog=None if doc is not None else Catalog(standard=standard_specs),
+                          security=credentials(args))
     if doc is not None:
         scanner.catalog.source = f"EDS file {eds}"
         return scanner
@@ -160,7 +251,7 @@ def _by_code(args: argparse.Namespace, value: str | None) -> int:
     doc = eds_document(args)
     # By code: the profile's compact declarations know its parameters' codes and ranges.
     with SyncScanner(args.target, timeout=args.timeout, route=parse_route(args.route), identify=doc is None,
-                     eds=doc) as scanner:
+                     eds=doc, security=credentials(args)) as scanner:
         if args.connected:
             scanner.open_connection()
         try:

@@ -9,7 +9,7 @@ from pathlib import Path
 from typing import Any
 
 from ..eip.io_core import DEFAULT_IO_PORT
-from ..eip.wire.encapsulation import DEFAULT_PORT
+from ..eip.wire.encapsulation import DEFAULT_PORT, SECURE_PORT
 from .common import EXIT_OK, EXIT_USAGE, UsageError
 
 #: Worker processes when neither --workers nor the spec file says.
@@ -25,6 +25,7 @@ def _fleet_spec(args: argparse.Namespace) -> Any:
     from ..fleet.spec import (
         MAX_DEVICES,
         DeviceGroup,
+        FleetSecurity,
         FleetSpec,
         SpecError,
         assign,
@@ -54,11 +55,13 @@ def _fleet_spec(args: argparse.Namespace) -> Any:
     if args.param and args.spec is not None:
         raise UsageError("--param goes with --device; in a spec file, a [[device]] has params")
     groups += [parse_group(text, limit) for text in args.device or []]
-    if args.param:   # every ACG of the command line gets them
-        if not any(g.profile == "acg" for g in groups):
-            raise UsageError("--param sets the ACG's keypad parameters, and the fleet has no acg device")
+    if args.param:   # every device of the command line whose keypad takes them all gets them
+        taking = [g for g in groups if _keypad_takes(g.profile, args.param)]
+        if not taking:
+            raise UsageError(f"--param {' '.join(args.param)}: no device of the fleet has a keypad with these "
+                             f"codes (profiles {', '.join(sorted({g.profile for g in groups}))})")
         groups = [make_group(g.profile, g.model, g.count, str(g.first) if g.first else None, args.param, g.text,
-                             limit=limit) if g.profile == "acg" else g for g in groups]
+                             limit=limit) if g in taking else g for g in groups]
     addresses = args.addresses if args.addresses is not None else settings.get("addresses")
     pool = parse_addresses(addresses, "--addresses" if args.addresses is not None else f"{where}: addresses",
                            limit) if addresses is not None else None
@@ -83,10 +86,39 @@ def _fleet_spec(args: argparse.Namespace) -> Any:
         devices = assign_stations(devices, workers, "--rtu" if args.rtu is not None else f"{where}: rtu")
     elif any(d.station is not None for d in devices):
         raise SpecError(f"{where}: a station ID puts a drive on the fleet's RS-485 line: give --rtu (rtu = \"pty\")")
-    if not args.list_addresses:   # a pod's init container lists them where the fleet will not run
-        check_open_files(len(devices), workers)
-    return FleetSpec(devices, port, io_port, workers, state_dir, rtu, shard)
+    folder = args.security if args.security is not None else settings.get("security")
+    secure_port = args.security_port if args.security_port is not None else settings.get("security_port")
+    security = None
+    if folder is not None:
+        security = FleetSecurity(Path(folder), check_port(SECURE_PORT if secure_port is None else secure_port,
+                                                          "security port"))
+        if not args.list_addresses:
+            from ..security import Credentials
 
+            Credentials.load(security.folder)   # a folder it cannot read: one line, before any device starts
+    elif secure_port is not None:
+        raise UsageError("--security-port goes with --security DIR (or security in the spec file)")
+    if not args.list_addresses:   # a pod's init container lists them where the fleet will not run
+        check_open_files(len(devices), workers, security is not None)
+    return FleetSpec(devices, port, io_port, workers, state_dir, rtu, shard, security)
+
+
+
+def _keypad_takes(profile: str, params: list[str]) -> bool:
+    """Whether the keypad of ``profile`` knows the code of every ``CODE=VALUE`` of ``params`` (the values
+    are checked with the group, each refusal in its own words)."""
+    from ..devices.profiles import PROFILES
+
+    keypad = PROFILES[profile].keypad
+    if keypad is None:
+        return False
+    codes = keypad()
+    try:
+        for text in params:
+            codes.register(text.partition("=")[0])
+    except LookupError:
+        return False
+    return True
 
 def cmd_fleet(args: argparse.Namespace) -> int:
     from ..eip.io_server import run_precise
@@ -122,9 +154,10 @@ def cmd_fleet(args: argparse.Namespace) -> int:
     try:
         if spec.workers == 1:
             run_precise(serve_until_signalled(spec.devices, spec.port, spec.io_port, ready, rtu=spec.rtu,
-                                              http=http or None))
+                                              http=http or None, security=spec.security))
         else:
-            supervisor = Supervisor(spec.devices, spec.port, spec.io_port, spec.workers, http=http or None)
+            supervisor = Supervisor(spec.devices, spec.port, spec.io_port, spec.workers, http=http or None,
+                                    security=spec.security)
             supervisor.run(ready)
             if supervisor.lost:   # --http: the fleet went on without them, and says so at the end
                 print(f"cipstack fleet: stopped; {len(supervisor.lost)} of {spec.workers} workers had ended: "

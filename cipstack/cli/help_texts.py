@@ -80,7 +80,9 @@ COMMANDS: dict[tuple[str, ...], CommandText] = {
          ("cipstack fleet --addresses 127.0.0.10-127.0.0.73 --device 'acg*64' --workers 2 --http 127.0.0.1:8080",
           "the same, with one HTTP API for all: curl http://127.0.0.1:8080/devices"),
          ("cipstack fleet --spec plant.toml --shard 1/3",
-          "the second of three shards of one plant spec (one per machine or Kubernetes pod)")),
+          "the second of three shards of one plant spec (one per machine or Kubernetes pod)"),
+         ("cipstack fleet --addresses 127.0.0.10-127.0.0.13 --device 'acg*4' --security lab",
+          "each device also serves TLS and DTLS (CIP Security) on port 2221 of its address")),
     ),
     ("plant",): CommandText(
         "one HTTP API for every device of a plant's fleets, on many machines or pods",
@@ -115,16 +117,21 @@ COMMANDS: dict[tuple[str, ...], CommandText] = {
         "ListIdentity over UDP",
         "Send ListIdentity over UDP (to the broadcast addresses, or to --broadcast) and print each "
         "device that answers within --timeout: address, product name, vendor, device type, product "
-        "code, revision, serial number, status and state.",
+        "code, revision, serial number, status and state. With --security, ListIdentity goes in a DTLS "
+        "session with each device --broadcast names (a broadcast cannot be secured), and a device that "
+        "refuses it or does not answer is one line on stderr and exit status 1.",
         (("cipstack discover", "every device on every interface, loopback included"),
-         ("cipstack discover --broadcast 127.255.255.255 --json", "loopback only, one JSON object a device")),
+         ("cipstack discover --broadcast 127.255.255.255 --json", "loopback only, one JSON object a device"),
+         ("cipstack discover --broadcast 192.168.1.20,192.168.1.21 --security lab",
+          "two devices, each over DTLS on UDP 2221 (CIP Security)")),
     ),
     ("identity",): CommandText(
         "ListIdentity over TCP",
         "Ask one target who it is (ListIdentity over TCP): vendor, device type, product code, revision, "
         "serial number, status, state and product name.",
         (("cipstack identity 127.0.0.1", "the emulator started by `cipstack adapter`"),
-         ("cipstack identity 127.0.0.2:44818 --json", "as one JSON object")),
+         ("cipstack identity 127.0.0.2:44818 --json", "as one JSON object"),
+         ("cipstack identity 192.168.1.20 --security lab", "over TLS on port 2221 (CIP Security)")),
     ),
     ("get",): CommandText(
         "Get_Attribute_Single (or Get_Attributes_All without an attribute)",
@@ -134,7 +141,9 @@ COMMANDS: dict[tuple[str, ...], CommandText] = {
         "decoded by what the device's profile declares, or as --type.",
         (("cipstack get 127.0.0.1 1/1/7", "the Identity's Product Name"),
          ("cipstack get 127.0.0.1 0x2A/1/102 --connected", "the ACG's acceleration time, over class 3"),
-         ("cipstack get 127.0.0.1 0xF5/1/13 --type UINT --json", "a raw attribute as UINT, in JSON")),
+         ("cipstack get 127.0.0.1 0xF5/1/13 --type UINT --json", "a raw attribute as UINT, in JSON"),
+         ("cipstack get 192.168.1.20 1/1/7 --security lab",
+          "over TLS on port 2221 (CIP Security), with lab's CA and client certificate")),
     ),
     ("set",): CommandText(
         "Set_Attribute_Single",
@@ -218,10 +227,12 @@ COMMANDS: dict[tuple[str, ...], CommandText] = {
         "Inject a fault between the wire and the emulated device: class 1 (stop-producing, drop, duplicate, "
         "reorder, delay, freeze-sequence, wrong-size, ignore-output, idle), explicit messaging "
         "(delay-replies, error-status, refuse-forward-open, close-tcp, drop-sessions) or the whole device "
-        "(unplug, plug, power-cycle). A lasting fault stays until `cipstack drive fault clear` or for "
+        "(unplug, plug, power-cycle) or its CIP Security (expire-certificate, revoke-certificate, "
+        "refuse-cipher-suite, drop-dtls-records). A lasting fault stays until `cipstack drive fault clear` or for "
         "--for DURATION; after it is cleared the device is what it would have been.",
         (("cipstack drive fault stop-producing --for 2s", "the scanner's class 1 connection times out"),
          ("cipstack drive fault refuse-forward-open 0x0113 --count 2", "the next two Forward_Opens refused"),
+         ("cipstack drive fault drop-dtls-records --share 0.5 --for 10s", "half the DTLS records lost"),
          ("cipstack drive fault clear", "clear every active fault")),
     ),
     ("drive", "faults"): CommandText(
@@ -358,7 +369,9 @@ COMMANDS: dict[tuple[str, ...], CommandText] = {
         "parameters, assemblies, connections); each finding is one line with the file and line number. "
         "With --against, also compare [Device] with a live device's Identity. Exits 1 on an error.",
         (("cipstack eds check eds/*.eds", "every file of a directory"),
-         ("cipstack eds check eds/ACG-ET2_1.01.eds --against 127.0.0.1", "and the device it describes")),
+         ("cipstack eds check eds/ACG-ET2_1.01.eds --against 127.0.0.1", "and the device it describes"),
+         ("cipstack eds check eds/ACG-ET2_1.01.eds --against 192.168.1.20 --security lab",
+          "the same over TLS, its class 1 connections over DTLS (CIP Security)")),
     ),
     ("eds", "generate"): CommandText(
         "write the EDS files of emulated models",

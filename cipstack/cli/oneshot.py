@@ -13,6 +13,7 @@ that grammar (options, destinations, defaults) and the namespaces equal line by 
 from __future__ import annotations
 
 from collections.abc import Callable, Sequence
+from pathlib import Path
 from types import SimpleNamespace
 from typing import Any
 
@@ -28,6 +29,7 @@ _VALUED: dict[str, tuple[str, Callable[[str], Any]]] = {
     "--type": ("type", str),
     "--route": ("route", str),
     "--eds": ("eds", str),
+    "--security": ("security", Path),
 }
 #: Options without a value (``store_true``): option -> destination.
 _FLAGS = {"--json": "json", "--connected": "connected", "--scaled": "scaled"}
@@ -50,9 +52,10 @@ class OneShot:
 #: The commands read here. ``func`` is looked up when a line is read: only that command's module loads.
 #: A namespace is a ``types.SimpleNamespace``: attributes by name, as ``argparse.Namespace`` has them.
 COMMANDS = {
-    "identity": OneShot("identity", ["target"], ["--timeout"], ["--json"]),
-    "get": OneShot("get", ["target", "path"], ["--timeout", "--type", "--route", "--eds"], ["--json", "--connected"]),
-    "set": OneShot("set", ["target", "path", "value"], ["--timeout", "--type", "--route", "--eds"],
+    "identity": OneShot("identity", ["target"], ["--timeout", "--security"], ["--json"]),
+    "get": OneShot("get", ["target", "path"], ["--timeout", "--type", "--route", "--eds", "--security"],
+                   ["--json", "--connected"]),
+    "set": OneShot("set", ["target", "path", "value"], ["--timeout", "--type", "--route", "--eds", "--security"],
                    ["--json", "--scaled", "--connected"]),
 }
 

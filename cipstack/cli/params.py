@@ -9,7 +9,7 @@ import sys
 from typing import Any
 
 from .common import EXIT_FAILURE, EXIT_OK, UsageError
-from .explicit import eds_document, parse_route
+from .explicit import credentials, eds_document, parse_route
 
 
 async def _scanner(args: argparse.Namespace) -> Any:
@@ -19,7 +19,7 @@ async def _scanner(args: argparse.Namespace) -> Any:
 
     doc = eds_document(args)
     scanner = await Scanner.connect(args.target, timeout=args.timeout, route=parse_route(getattr(args, "route", None)),
-                                    eds=doc)
+                                    eds=doc, security=credentials(args))
     if doc is not None:
         scanner.catalog.source = f"EDS file {args.eds}"
     if not scanner.catalog.parameters:
@@ -122,23 +122,25 @@ def _line(args: argparse.Namespace, record: dict[str, Any], text: str) -> None:
 
 
 def add_arguments(sub: Any, parser_class: Any, common: Any) -> None:
+    """``params`` and its subcommands; ``common(parser, secured=True)`` adds the target, ``--timeout``,
+    ``--json`` and ``--security``."""
     p = sub.add_parser("params", help="drive parameter recipes: dump, load, diff (TOML files)")
     commands = p.add_subparsers(dest="params_command", required=True, parser_class=parser_class)
     q = commands.add_parser("dump", help="write every declared parameter (code, name, raw and engineering "
                                          "value, unit) to a TOML file")
-    common(q)
+    common(q, secured=True)
     q.add_argument("-o", "--output", metavar="FILE", help="the recipe file (default: standard output)")
     q.set_defaults(func=cmd_params_dump)
     q = commands.add_parser("load", help="write a recipe's settable parameters that differ, in a safe order, "
                                          "and save them where the device has a save command")
-    common(q)
+    common(q, secured=True)
     q.add_argument("file", metavar="FILE")
     q.add_argument("--force", action="store_true", help="load even while the drive runs")
     q.add_argument("--no-save", action="store_true", help="write without saving (lost at the next power cycle)")
     q.set_defaults(func=cmd_params_load)
     q = commands.add_parser("diff", help="the recipe's parameters whose value on the device differs "
                                          "(exit status 1 when any does)")
-    common(q)
+    common(q, secured=True)
     q.add_argument("file", metavar="FILE")
     q.set_defaults(func=cmd_params_diff)
     for q in (commands.choices["dump"], commands.choices["load"], commands.choices["diff"]):

@@ -7,7 +7,7 @@ from pathlib import Path
 from typing import Any
 
 from .. import __version__
-from ..eip.wire.encapsulation import DEFAULT_FRAME_TIMEOUT, DEFAULT_IO_PORT, DEFAULT_PORT
+from ..eip.wire.encapsulation import DEFAULT_FRAME_TIMEOUT, DEFAULT_IO_PORT, DEFAULT_PORT, SECURE_PORT
 from .common import (
     UsageError,
     parse_duration,
@@ -69,6 +69,11 @@ class _Parser(argparse.ArgumentParser):
 #: A path argument, for shell completion (shtab's names; shtab is needed only to print the script).
 _FILE = {"bash": "_shtab_compgen_files", "zsh": "_files", "tcsh": "f"}
 _DIRECTORY = {"bash": "_shtab_compgen_dirs", "zsh": "_files -/", "tcsh": "d"}
+
+
+#: ``--security`` of the commands that send explicit requests (``get``, ``set``, ``identity``, ``params``...).
+EXPLICIT_OVER_TLS = ("CIP Security: send the requests over TLS (TCP 2221 unless TARGET names a port) with the CA, "
+                     "client certificate and key of DIR (`cipstack security init DIR`)")
 
 
 def _complete(action: argparse.Action, kind: dict[str, str]) -> argparse.Action:
@@ -145,12 +150,14 @@ def build_parser(command: str | None = None, texts: bool = True) -> argparse.Arg
     def number(what: str) -> Any:
         return lambda text: parse_number(text, what)
 
-    def common(p: argparse.ArgumentParser, target: bool = True, timeout: float = 5.0) -> None:
+    def common(p: argparse.ArgumentParser, target: bool = True, timeout: float = 5.0, secured: bool = False) -> None:
         if target:
             p.add_argument("target", metavar="HOST[:PORT]", help=f"target address (default port {DEFAULT_PORT})")
         p.add_argument("--timeout", type=parse_duration, default=timeout, metavar="DURATION",
                        help="reply timeout: 2, 500ms, 1.5s (default %(default)s s)")
         p.add_argument("--json", action="store_true", help="one JSON object per line")
+        if secured:
+            _complete(p.add_argument("--security", type=Path, metavar="DIR", help=EXPLICIT_OVER_TLS), _DIRECTORY)
 
     if wanted("adapter"):
         from .emulators import cmd_adapter
@@ -259,6 +266,15 @@ def build_parser(command: str | None = None, texts: bool = True) -> argparse.Arg
         p.add_argument("--param", action="append", metavar="CODE=VALUE",
                        help="set an ACG keypad parameter at start on every ACG device; repeatable")
         _add_http_arguments(p)
+        _complete(p.add_argument("--security", type=Path, metavar="DIR",
+                                 help="CIP Security: every device also serves EtherNet/IP over TLS (TCP) and DTLS "
+                                      "(UDP, with secured class 1) at its address, with the CA, device certificate "
+                                      "and key of DIR (`cipstack security init DIR`), as `cipstack adapter "
+                                      "--security` does; client certificates are verified against the CA"),
+                  _DIRECTORY)
+        p.add_argument("--security-port", type=number("security port"), metavar="N",
+                       help=f"TCP and UDP port of EtherNet/IP over TLS and DTLS at every device, with --security "
+                            f"(default {SECURE_PORT})")
         p.add_argument("--workers", type=number("workers"), metavar="N",
                        help=f"spread the devices over N processes, one event loop each (default {DEFAULT_WORKERS})")
         p.add_argument("--rtu", metavar="DEVICE",
@@ -317,24 +333,30 @@ def build_parser(command: str | None = None, texts: bool = True) -> argparse.Arg
         p = sub.add_parser("discover")
         p.add_argument("--broadcast", metavar="ADDRESS",
                        help="broadcast or unicast address (default: 255.255.255.255 and every interface's broadcast "
-                            "address, loopback's 127.255.255.255 included)")
-        p.add_argument("--port", type=number("port"), default=DEFAULT_PORT,
-                       help="UDP port to ask (default %(default)s)")
+                            "address, loopback's 127.255.255.255 included); with --security the devices' own "
+                            "addresses, HOST[:PORT][,HOST[:PORT]...]")
+        p.add_argument("--port", type=number("port"),
+                       help=f"UDP port to ask (default {DEFAULT_PORT}; with --security {SECURE_PORT})")
         common(p, target=False, timeout=2.0)
+        _complete(p.add_argument("--security", type=Path, metavar="DIR",
+                                 help="CIP Security: ask each device of --broadcast in a DTLS session of its own "
+                                      "(UDP 2221 unless --port or HOST:PORT) with the CA, client certificate and key "
+                                      "of DIR (`cipstack security init DIR`); a broadcast cannot be secured"),
+                  _DIRECTORY)
         p.set_defaults(func=cmd_discover)
 
     if wanted("identity"):
         from .explicit import cmd_identity
 
         p = sub.add_parser("identity")
-        common(p)
+        common(p, secured=True)
         p.set_defaults(func=cmd_identity)
 
     if wanted("get"):
         from .explicit import cmd_get
 
         p = sub.add_parser("get")
-        common(p)
+        common(p, secured=True)
         p.add_argument("path", metavar="CLASS/INSTANCE[/ATTRIBUTE]|CODE",
                        help="decimal or 0x hex numbers: 1/1/7, 0x2A/1/102; or a parameter's code: ACC, CM.24, A004, "
                             "an EDS ParamN or its name")
@@ -356,7 +378,7 @@ def build_parser(command: str | None = None, texts: bool = True) -> argparse.Arg
         from .explicit import cmd_set
 
         p = sub.add_parser("set")
-        common(p)
+        common(p, secured=True)
         p.add_argument("path", metavar="CLASS/INSTANCE/ATTRIBUTE|CODE",
                        help="decimal or 0x hex numbers: 0xF5/1/13; or a parameter's code: ACC, CM.24, A004, an EDS "
                             "ParamN or its name")
@@ -539,6 +561,10 @@ def _add_eds_commands(sub: Any) -> None:
                         "names, else 2222)")
     q.add_argument("--no-connections", action="store_true",
                    help="with --against: open no class 1 connection (read only)")
+    _complete(q.add_argument("--security", type=Path, metavar="DIR",
+                             help="with --against, CIP Security: read over TLS (TCP 2221 unless HOST names a port) "
+                                  "and open each class 1 connection over DTLS (UDP, the same port), with the CA, "
+                                  "client certificate and key of DIR (`cipstack security init DIR`)"), _DIRECTORY)
     q.set_defaults(func=cmd_eds_check)
     q = eds.add_parser("generate")
     add_generate_arguments(q)
@@ -551,4 +577,5 @@ def _add_eds_commands(sub: Any) -> None:
     q.add_argument("-o", "--output", metavar="FILE", required=True, help="where to write the file (- for stdout)")
     q.add_argument("--timeout", type=parse_duration, default=5.0, metavar="DURATION",
                    help="reply timeout (default %(default)s s)")
+    _complete(q.add_argument("--security", type=Path, metavar="DIR", help=EXPLICIT_OVER_TLS), _DIRECTORY)
     q.set_defaults(func=cmd_eds_fetch)

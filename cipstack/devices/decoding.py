@@ -64,6 +64,8 @@ def generate() -> dict[str, str]:
         files[f"{name}.py"] = (
             f'{header}The attribute declarations of profile {name} that replies decode by."""\n\n'
             f"PROFILE = {catalog.profile!r}\n\n"
+            f"#: How the device saves its parameters over CIP (pointer, target, trigger, edges, width), or None.\n"
+            f"SAVE = {tuple(catalog.save) if catalog.save is not None else None!r}\n\n"
             f"#: class id -> (class name, instance attributes), where they are not the standard objects'.\n"
             f"CLASSES = {_pretty(classes)}\n\n"
             f"#: class id -> {{(instance, attribute): declaration}}, the classes declared per instance.\n"

@@ -11,7 +11,7 @@ from typing import TYPE_CHECKING
 from ..catalog import Catalog, Parameter
 from ..cip.model import AttributeSpec
 from ..eip.wire.identity_items import IdentityRecord
-from ..errors import BadRequest
+from ..errors import BadRequest, NotFound
 from ..objects.file import StoredFile
 from ..objects.identity import IdentityInfo
 from ..objects.tcpip import NetworkInterface
@@ -64,6 +64,27 @@ class ProfileOptions:
 
 
 @dataclass(frozen=True)
+class SerialLink:
+    """A family's RS-485 (Modbus-RTU) port, as a fleet puts its drives on one multi-drop line."""
+
+    #: What the port is, in a message: "the ACG's RS-485 port".
+    port: str
+    #: What its devices are called on the line, plural: "ACG drives".
+    drives: str
+    #: The keypad code of the station ID, which the line gives each drive at start.
+    station_code: str
+    #: The highest station ID, and the most drives one line takes.
+    max_station: int
+    max_drives: int
+    #: Where the bounds come from, for a message.
+    source: str
+
+
+def _one_model() -> tuple[str, ...]:
+    return ()
+
+
+@dataclass(frozen=True)
 class Profile:
     name: str
     description: str
@@ -78,6 +99,12 @@ class Profile:
     keypad: Callable[[], KeypadCodes] | None = None
     #: The model built when none is given (families with several models).
     default_model: str | None = None
+    #: The names of the family's models, for ``--model``; none for a family of one model.
+    models: Callable[[], tuple[str, ...]] = _one_model
+    #: The canonical name of a model of the family; the family's own error (``NotFound``) for another.
+    find_model: Callable[[str], str] | None = None
+    #: Its RS-485 port, where a fleet may put its drives on one line; None without one.
+    serial_link: SerialLink | None = None
 
     def matches(self, identity: IdentityRecord) -> bool:
         return identity.vendor_id == self.vendor_id and identity.product_code in self.product_codes
@@ -103,6 +130,7 @@ def _acg_catalog() -> Catalog:
         keypad_parameter_spec,
     )
     from .acg.registers import ACG_REGISTERS, MAX_FREQUENCY, SPEED_REFERENCE, class64_path, class64_register
+    from .acg.saving import SAVE_OVER_CIP
 
     outputs = [speed_output(i, SPEED_REFERENCE) for i in (20, 21, *HZ_OUTPUTS)]
     inputs = [speed_input(i, OUTPUT_FREQUENCY) for i in (70, 71, *HZ_INPUTS)]
@@ -125,7 +153,7 @@ def _acg_catalog() -> Catalog:
              if (spec := AC_DC_DRIVE_SPEC.instance_attribute(attribute)) is not None]
     parameters[1:1] = ramps
     return Catalog(CATALOG_CLASSES, [*outputs, *inputs], {KEYPAD_PARAMETERS: keypad}, parameters=parameters,
-                   profile="acg")
+                   profile="acg", save=SAVE_OVER_CIP)
 
 
 def _omron(family: str, default_model: str) -> Callable[[NetworkInterface, DeviceLimits, ProfileOptions], Device]:
@@ -182,6 +210,36 @@ def _omron_keypad(family: str) -> Callable[[], KeypadCodes]:
     return keypad
 
 
+def _omron_models(family: str) -> Callable[[], tuple[str, ...]]:
+    def models() -> tuple[str, ...]:
+        from .omron.models import MODELS
+
+        return tuple(m.name for m in MODELS if m.family.value.lower() == family)
+
+    return models
+
+
+def _omron_find_model(family: str) -> Callable[[str], str]:
+    def find(name: str) -> str:
+        from .omron.models import model
+
+        found = model(name)
+        if found.family.value.lower() != family:
+            raise NotFound(f"{found.name} is not an {family.upper()} model (see `cipstack models`)")
+        return found.name
+
+    return find
+
+
+def _acg_serial_link() -> SerialLink:
+    from .acg.modbus_rtu import MAX_DRIVES_PER_LINE
+
+    # Station IDs 1-250 (CM.1) and up to 16 drives on one line: the ACG RS-485 manual's Communication
+    # Standards.
+    return SerialLink("the ACG's RS-485 port", "ACG drives", "CM.1", 250, MAX_DRIVES_PER_LINE,
+                      "ACG RS-485 manual, Communication Standards")
+
+
 def _omron_product_codes(family: str) -> frozenset[int]:
     from .omron.models import MODELS
 
@@ -191,16 +249,41 @@ def _omron_product_codes(family: str) -> frozenset[int]:
 PROFILES: dict[str, Profile] = {
     "acg": Profile("acg", "ACG drive with its ACG-ET2 EtherNet/IP card (the ACG-ET2 and ACG RS-485 manuals)", _acg,
                    vendor_id=acg_et2_identity().vendor_id, product_codes=frozenset({acg_et2_identity().product_code}),
-                   catalog=_acg_catalog, keypad=_acg_keypad),
+                   catalog=_acg_catalog, keypad=_acg_keypad, serial_link=_acg_serial_link()),
     # The Omron inverters with the CompoNet option board (CompoNet manual), served over EtherNet/IP.
     "mx2": Profile("mx2", "Omron MX2 with the 3G3AX-MX2-CRT-E CompoNet option board (--model, Tables 2/C-3)",
                    _omron("mx2", "MX2-A2015-E"), vendor_id=47, product_codes=_omron_product_codes("mx2"),
-                   catalog=_omron_catalog("MX2-A2015-E"), keypad=_omron_keypad("mx2"), default_model="MX2-A2015-E"),
+                   catalog=_omron_catalog("MX2-A2015-E"), keypad=_omron_keypad("mx2"), default_model="MX2-A2015-E",
+                   models=_omron_models("mx2"), find_model=_omron_find_model("mx2")),
     "rx": Profile("rx", "Omron RX with the 3G3AX-RX-CRT-E CompoNet option board (--model, Tables 3/C-4)",
                   _omron("rx", "RX-A4055-E"), vendor_id=47, product_codes=_omron_product_codes("rx"),
-                  catalog=_omron_catalog("RX-A4055-E"), keypad=_omron_keypad("rx"), default_model="RX-A4055-E"),
+                  catalog=_omron_catalog("RX-A4055-E"), keypad=_omron_keypad("rx"), default_model="RX-A4055-E",
+                  models=_omron_models("rx"), find_model=_omron_find_model("rx")),
 }
 DEFAULT_PROFILE = "acg"
+
+
+def profile_of_model(name: str) -> Profile:
+    """The profile of the family that has model ``name``: ``--model`` given without ``--profile``. A
+    name no family knows raises the error of the first family with models (its close matches)."""
+    first_error: NotFound | None = None
+    for profile in PROFILES.values():
+        if profile.find_model is None:
+            continue
+        try:
+            profile.find_model(name)
+        except NotFound as exc:
+            first_error = first_error or exc
+            continue
+        return profile
+    raise first_error or NotFound(f"--model {name}: no profile has models")
+
+
+def check_model(profile: Profile, model: str | None) -> None:
+    """``BadRequest`` where ``model`` is given to a family of one model."""
+    if model is not None and profile.find_model is None:
+        raise BadRequest(f"--model {model}: the {profile.name} profile has one model; --model names a model of "
+                         f"{', '.join(p.name for p in PROFILES.values() if p.find_model is not None)}")
 
 
 def catalog_for_identity(identity: IdentityRecord) -> Catalog:

@@ -18,7 +18,7 @@ from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field
 from typing import Any
 
-from . import class1, device, explicit
+from . import class1, device, explicit, security
 from .effect import EffectFactory
 from .errors import FaultError, FaultStateError, NoSuchConnection  # noqa: F401 (their import path of old)
 
@@ -147,11 +147,38 @@ def parse_off(value: object) -> float:
 
 OFF = Option("off", parse_off, "how long the power stays off (default 0, at most 3600s; clearing the fault "
              "ends it early)", "DURATION")
+#: The longest name a suite is given by (IANA's are at most 50 characters).
+MAX_SUITE_NAME = 64
+
+
+def parse_suite(value: object) -> str:
+    """A TLS suite as a user names it: IANA's name, OpenSSL's, or its 16-bit id (``0xC02B``). Whether the
+    device accepts it is the device's to say when the fault is applied."""
+    text = str(value).strip()
+    if not text or len(text) > MAX_SUITE_NAME or not all(c.isalnum() or c in "_-" for c in text):
+        raise FaultError(f"{shown(value)} is no cipher suite name (TLS_ECDHE_ECDSA_WITH_AES_128_GCM_SHA256, "
+                         "ECDHE-ECDSA-AES128-GCM-SHA256 or 0xC02B)")
+    return text
+
+
+def parse_direction(value: object) -> str:
+    text = str(value).strip().lower()
+    if text not in ("in", "out", "both"):
+        raise FaultError(f"direction {shown(value)} is in, out or both")
+    return text
+
+
+SUITE = Option("suite", parse_suite, "a TLS 1.2 suite by IANA name, OpenSSL name or id "
+               "(TLS_ECDHE_ECDSA_WITH_AES_128_GCM_SHA256, ECDHE-ECDSA-AES128-GCM-SHA256, 0xC02B)", "SUITE")
+DIRECTION = Option("direction", parse_direction, "records the device receives (in), sends (out) or both "
+                   "(default)", "in|out|both")
+DTLS_PEER = Option("originator", parse_host, "the DTLS sessions of one originator address", "HOST")
 EXTENDED = Option("status", lambda v: parse_integer(v, 0, 0xFFFF),
                   "the Connection Manager's extended status (0x0100, 0x0106, 0x0113, 0x0315, ...)", "STATUS")
 
-#: Where a fault acts: on class 1 datagrams, on explicit requests and the encapsulation, on the device.
-CLASS1, EXPLICIT, DEVICE = "class 1", "explicit", "device"
+#: Where a fault acts: on class 1 datagrams, on explicit requests and the encapsulation, on the device,
+#: on CIP Security's listeners (TLS and DTLS: their handshakes, DTLS records, the lab CA's CRL).
+CLASS1, EXPLICIT, DEVICE, SECURITY = "class 1", "explicit", "device", "security"
 
 
 @dataclass(frozen=True)
@@ -242,6 +269,16 @@ FAULTS: dict[str, FaultKind] = {kind.name: kind for kind in (
     FaultKind("power-cycle", DEVICE, "power loss: every port closed and RS-485 silent, connections gone, the run "
               "stopped, unsaved parameters lost; power back after --off (or when cleared)", device.PowerCycle,
               (OFF,), once=True, lasts="off"),
+    FaultKind("expire-certificate", SECURITY, "new TLS and DTLS handshakes present the device's certificate "
+              "re-issued by the lab CA with its validity ended", security.ExpireCertificate),
+    FaultKind("revoke-certificate", SECURITY, "the lab CA revokes the device's certificate: crl.pem in the "
+              "security folder lists it, and originators that read the folder refuse the device",
+              security.RevokeCertificate),
+    FaultKind("refuse-cipher-suite", SECURITY, "new TLS and DTLS handshakes no longer accept a TLS 1.2 suite",
+              security.RefuseCipherSuite, positional=SUITE),
+    FaultKind("drop-dtls-records", SECURITY, "drop a share or every Nth whole DTLS record the device receives "
+              "or sends, before decryption", security.DropDtlsRecords, (DTLS_PEER, SHARE, EVERY, DIRECTION),
+              requires=(("share", "every"),)),
 )}
 
 

@@ -24,11 +24,13 @@ from ..devices.state import StateFileError
 from ..eds.served import profile_eds_file
 from ..eip.io_core import ProductionGrid
 from ..eip.io_server import freeze_startup_objects
+from ..eip.wire.encapsulation import SECURE_PORT
+from ..errors import SecurityError
 from ..listening import held_log_records
 from ..modbus.rtu_line import RtuLine, open_port
 from ..runtime.observer import register_relay
 from .load import LoadSampler, LoadWatch, gauge_values, watch_own_load
-from .spec import FleetDevice, SpecError, describe_addresses
+from .spec import FleetDevice, FleetSecurity, SpecError, describe_addresses
 
 log = logging.getLogger(__name__)
 
@@ -36,38 +38,45 @@ log = logging.getLogger(__name__)
 #: Descriptors a device holds before any connection: TCP listener, UDP, broadcast UDP, class 1 UDP,
 #: control socket; with room for a few connections each.
 DESCRIPTORS_PER_DEVICE = 12
+#: What CIP Security adds to a device (``--security``): its TLS listener and its DTLS socket.
+DESCRIPTORS_PER_SECURED_DEVICE = DESCRIPTORS_PER_DEVICE + 2
 #: Descriptors a process holds besides its devices': the interpreter's, the HTTP API's, the parent's channel.
 RESERVED_DESCRIPTORS = 256
 
 
-def check_open_files(devices: int, workers: int) -> None:
+def check_open_files(devices: int, workers: int, secured: bool = False) -> None:
     """Refuse (``SpecError``, one line) a fleet whose busiest process would need more descriptors than
     the hard open-file limit lets any process of this user have: it would fail part way through its
-    start, or later at a connection; say how many workers would fit instead."""
+    start, or later at a connection; say how many workers would fit instead. ``secured``: every
+    device serves TLS and DTLS too."""
     try:
         _, hard = resource.getrlimit(resource.RLIMIT_NOFILE)
     except (OSError, ValueError):
         return
     busiest = -(-devices // workers)
-    needed = descriptors_needed(busiest)
+    needed = descriptors_needed(busiest, secured)
     if hard == resource.RLIM_INFINITY or needed <= hard:
         return
-    per_process = max(1, (hard - RESERVED_DESCRIPTORS) // DESCRIPTORS_PER_DEVICE)
+    per_process = max(1, (hard - RESERVED_DESCRIPTORS) // _per_device(secured))
     raise SpecError(f"{devices} devices on {workers} worker(s): {busiest} in one process need about {needed} open "
                     f"files, and the hard limit here is {hard} (ulimit -Hn): give --workers "
                     f"{-(-devices // per_process)} or more, or raise the limit")
 
 
-def descriptors_needed(devices: int) -> int:
-    return RESERVED_DESCRIPTORS + devices * DESCRIPTORS_PER_DEVICE
+def _per_device(secured: bool) -> int:
+    return DESCRIPTORS_PER_SECURED_DEVICE if secured else DESCRIPTORS_PER_DEVICE
 
 
-def raise_open_file_limit(devices: int) -> None:
+def descriptors_needed(devices: int, secured: bool = False) -> int:
+    return RESERVED_DESCRIPTORS + devices * _per_device(secured)
+
+
+def raise_open_file_limit(devices: int, secured: bool = False) -> None:
     """Raise the soft open-file limit toward the hard one for ``devices`` devices (one process may
     serve hundreds); where it cannot be raised, a device that cannot open a socket says so at start."""
     try:
         soft, hard = resource.getrlimit(resource.RLIMIT_NOFILE)
-        needed = descriptors_needed(devices)
+        needed = descriptors_needed(devices, secured)
         if soft != resource.RLIM_INFINITY and soft < needed:
             resource.setrlimit(resource.RLIMIT_NOFILE, (needed if hard == resource.RLIM_INFINITY
                                                         else min(needed, hard), hard))
@@ -75,16 +84,21 @@ def raise_open_file_limit(devices: int) -> None:
         pass
 
 
-def build_adapter(device: FleetDevice, port: int, io_port: int, grid: ProductionGrid | None = None) -> Adapter:
-    """The emulator of one device; a state file or parameter it cannot take raises ``SpecError``.
-    ``grid``: the process's class 1 slots, which its devices share (one wake-up for all that are due)."""
+def build_adapter(device: FleetDevice, port: int, io_port: int, grid: ProductionGrid | None = None,
+                  security: FleetSecurity | None = None) -> Adapter:
+    """The emulator of one device; a state file, parameter or credentials folder it cannot take
+    raises ``SpecError``. ``grid``: the process's class 1 slots, which its devices share (one wake-up
+    for all that are due); ``security``: TLS and DTLS at the device's address too, as ``cipstack
+    adapter --security`` serves them."""
     # Each device carries its EDS file in its File object, as the single adapter's does.
     settings = AdapterSettings(host=device.address, port=port, io_port=io_port, profile=device.profile,
                                model=device.model, state_path=device.state_path, mac=mac_for_address(device.address),
-                               files=(profile_eds_file(device.profile, device.model),))
+                               files=(profile_eds_file(device.profile, device.model),),
+                               security=security.folder if security is not None else None,
+                               security_port=security.port if security is not None else SECURE_PORT)
     try:
         adapter = Adapter(settings, production_grid=grid)
-    except (StateFileError, ValueError, KeyError) as exc:
+    except (StateFileError, SecurityError, ValueError, KeyError) as exc:
         raise SpecError(f"{device.address}: {exc}") from None
     if device.params:
         try:
@@ -100,19 +114,23 @@ def device_line(device: FleetDevice, adapter: Adapter) -> str:
     info = adapter.device.identity_info
     kind = f"{device.profile}:{device.model}" if device.model else device.profile
     state = str(device.state_path) if device.state_path else "(in memory)"
+    secured = f"  TLS/DTLS {adapter.tls.port}" if adapter.tls is not None else ""
     return (f"{device.address}:{adapter.port}  {kind}  {info.product_name!r}  serial 0x{info.serial_number:08X}  "
-            f"state {state}  control {describe(adapter.control_path)}")
+            f"state {state}  control {describe(adapter.control_path)}{secured}")
 
 
 class DeviceSet:
     """The running adapters of one process's share of a fleet; with ``rtu`` ("pty" or a serial
-    device), its ACG drives on one RS-485 line as well, each at the station ID of its device."""
+    device), its ACG drives on one RS-485 line as well, each at the station ID of its device; with
+    ``security``, every device serves TLS and DTLS at its address too."""
 
-    def __init__(self, devices: Sequence[FleetDevice], port: int, io_port: int, rtu: str | None = None) -> None:
+    def __init__(self, devices: Sequence[FleetDevice], port: int, io_port: int, rtu: str | None = None,
+                 security: FleetSecurity | None = None) -> None:
         self.devices = list(devices)
         self.port = port
         self.io_port = io_port
         self.rtu = rtu
+        self.security = security
         #: The RS-485 line once started.
         self.line: RtuLine | None = None
         self.adapters: list[Adapter] = []
@@ -121,11 +139,11 @@ class DeviceSet:
 
     async def start(self) -> list[str]:
         """Build and start every device; returns their lines. All or nothing (see the module docstring)."""
-        raise_open_file_limit(len(self.devices))
+        raise_open_file_limit(len(self.devices), self.security is not None)
         built: list[Adapter] = []
         try:
             for device in self.devices:
-                built.append(build_adapter(device, self.port, self.io_port, self.production_grid))
+                built.append(build_adapter(device, self.port, self.io_port, self.production_grid, self.security))
         except SpecError:
             for adapter in built:
                 adapter.device.close()
@@ -179,11 +197,12 @@ async def serve_until_signalled(devices: Sequence[FleetDevice], port: int, io_po
                                 on_ready: Callable[[list[str]], None],
                                 signals: Sequence[int] = (signal.SIGINT, signal.SIGTERM),
                                 rtu: str | None = None, http: dict[str, Any] | None = None,
-                                sampler: LoadSampler | None = None) -> int:
+                                sampler: LoadSampler | None = None, security: FleetSecurity | None = None) -> int:
     """Serve ``devices`` until one of ``signals``; returns the signal that stopped them. ``rtu``:
-    the RS-485 line their ACG drives share (``DeviceSet``); ``http``: the settings of one HTTP control
-    API for every device (``http``, ``http_token``, ``http_allow_remote``, ``http_hosts``; or ``path``, a fleet worker's
-    Unix socket); ``sampler``: what sums the devices' productions for a worker's heartbeat."""
+    the RS-485 line their ACG drives share, ``security`` their TLS and DTLS (``DeviceSet``); ``http``:
+    the settings of one HTTP control API for every device (``http``, ``http_token``,
+    ``http_allow_remote``, ``http_hosts``; or ``path``, a fleet worker's Unix socket); ``sampler``:
+    what sums the devices' productions for a worker's heartbeat."""
     loop = asyncio.get_running_loop()
     stop = asyncio.Event()
     received: list[int] = []
@@ -194,7 +213,7 @@ async def serve_until_signalled(devices: Sequence[FleetDevice], port: int, io_po
 
     for sig in signals:
         loop.add_signal_handler(sig, stop_on, sig)
-    fleet = DeviceSet(devices, port, io_port, rtu)
+    fleet = DeviceSet(devices, port, io_port, rtu, security)
     api = None
     tasks: list[asyncio.Task[None]] = []
     # A worker's parent judges its load; a fleet of one process judges its own, the same way.

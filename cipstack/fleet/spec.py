@@ -7,10 +7,10 @@ unused addresses of the pool, in order. Every device gets its own state file in 
 directory, named after its address and its profile (and model), so that a device keeps its saved
 parameters across restarts and no two devices share one.
 
-With ``--rtu DEVICE`` (``rtu = "pty"`` in a file) the fleet's ACG drives also share one RS-485
-line, the Multi-drop Link System of the ACG RS-485 manual: up to 16 drives, each at its own station ID (CM.1,
-1-250). A group may give its first station ID (``station = 10`` in a file); the others take the
-lowest free IDs from 1, in address order.
+With ``--rtu DEVICE`` (``rtu = "pty"`` in a file) the fleet's drives whose family has an RS-485 port
+(the ACG's) also share one line, the Multi-drop Link System of the ACG RS-485 manual: up to 16 drives,
+each at its own station ID (CM.1, 1-250). A group may give its first station ID (``station = 10`` in a
+file); the others take the lowest free IDs from 1, in address order.
 
 Everything here is checked before anything listens: a bad spec is one ``SpecError`` line.
 """
@@ -23,18 +23,17 @@ import sys
 from collections.abc import Iterable, Sequence
 from dataclasses import dataclass, replace
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
-from ..errors import BadRequest
+from ..errors import BadRequest, NotFound
+
+if TYPE_CHECKING:
+    from ..devices.profiles import SerialLink
 
 #: Devices in one fleet unless ``--max-devices`` (``max_devices`` in a file) says more: a default, so
 #: that a typo (127.0.0.0-127.255.255.255) is one line rather than a machine's every descriptor. What a
 #: machine can really hold is its open-file limit's (``cipstack.fleet.serve.check_open_files``).
 MAX_DEVICES = 1024
-
-#: ACG RS-485 manual, Communication Standards: "Maximum of 16 drives" on one line; CM.1 takes 1-250.
-MAX_DRIVES_PER_LINE = 16
-MAX_STATION = 250
 
 _GROUP = re.compile(r"^(?P<kind>[^*@]+?)(?:\*(?P<count>[^@]*))?(?:@(?P<first>.*))?$")
 
@@ -75,6 +74,17 @@ class FleetDevice:
     station: int | None = None
 
 
+@dataclass(frozen=True)
+class FleetSecurity:
+    """CIP Security of every device of a fleet: what ``cipstack adapter --security FOLDER
+    --security-port PORT`` serves, at each device's own address: TLS on TCP ``port`` and DTLS on
+    UDP ``port``, with the certificate and key of ``folder`` (one certificate for every device: an
+    originator checks the chain, not a host name)."""
+
+    folder: Path
+    port: int = 2221
+
+
 @dataclass
 class FleetSpec:
     devices: list[FleetDevice]
@@ -86,6 +96,8 @@ class FleetSpec:
     rtu: str | None = None
     #: Which shard of the plant this fleet serves (``--shard INDEX/COUNT``), or None: all of it.
     shard: Shard | None = None
+    #: TLS and DTLS at every device (``--security DIR``), or None: plain EtherNet/IP only.
+    security: FleetSecurity | None = None
 
 
 # -- addresses ------------------------------------------------------------------------------------------
@@ -156,8 +168,7 @@ def _count(value: Any, where: str, limit: int) -> int:
 def make_group(profile: str | None, model: str | None, count: Any, first: str | None, params: Sequence[str],
                where: str, station: Any = None, limit: int = MAX_DEVICES) -> DeviceGroup:
     """A group checked against the profiles and models this cipstack emulates."""
-    from ..devices.omron.models import model as find_model
-    from ..devices.profiles import PROFILES
+    from ..devices.profiles import PROFILES, profile_of_model
 
     if profile is None and model is None:
         raise SpecError(f"{where}: no profile")
@@ -165,30 +176,35 @@ def make_group(profile: str | None, model: str | None, count: Any, first: str | 
         raise SpecError(f"{where}: unknown profile {profile!r} (known: {', '.join(sorted(PROFILES))})")
     if model is not None:
         try:
-            family = find_model(model).family.value.lower()
-        except KeyError:
+            family = profile_of_model(model).name
+        except NotFound:
             raise SpecError(f"{where}: unknown model {model!r} (`cipstack models` lists them)") from None
         if profile is not None and profile != family:
             raise SpecError(f"{where}: {model} is an {family} model, not {profile}")
         profile = family
     assert profile is not None
+    chosen = PROFILES[profile]
+    link = chosen.serial_link
     if params:
-        keypad = PROFILES[profile].keypad
-        if keypad is None:
+        if chosen.keypad is None:
             raise SpecError(f"{where}: parameters (--param, params) are a keypad's, and profile {profile} has none")
-        codes = keypad()
+        codes = chosen.keypad()
         for text in params:
             try:
-                codes.parse(text)
+                register, _ = codes.parse(text)
             except (ValueError, LookupError) as exc:
                 raise SpecError(f"{where}: {exc}") from None
+            if link is not None and register.code == link.station_code:
+                raise SpecError(f"{where}: {link.station_code} (the station ID) is given by the fleet's RTU line: "
+                                "use station = N")
     if station is not None:
-        if profile != "acg":
-            raise SpecError(f"{where}: a station ID is the ACG's RS-485 port (profile acg)")
-        if isinstance(station, bool) or not isinstance(station, int) or not 1 <= station <= MAX_STATION:
-            raise SpecError(f"{where}: station {station!r} is not a station ID (1..{MAX_STATION}, CM.1)")
-    if any(text.partition("=")[0].strip().upper().replace("-", ".") in ("CM.1", "CM.01") for text in params):
-        raise SpecError(f"{where}: CM.1 (the station ID) is given by the fleet's RTU line: use station = N")
+        if link is None:
+            on_a_line = [p for p in PROFILES.values() if p.serial_link is not None]
+            raise SpecError(f"{where}: a station ID is " + " or ".join(
+                f"{p.serial_link.port} (profile {p.name})" for p in on_a_line if p.serial_link is not None))
+        if isinstance(station, bool) or not isinstance(station, int) or not 1 <= station <= link.max_station:
+            raise SpecError(f"{where}: station {station!r} is not a station ID (1..{link.max_station}, "
+                            f"{link.station_code})")
     return DeviceGroup(profile, model, _count(count, where, limit), _address(first, where) if first else None,
                        tuple(params), where, station)
 
@@ -260,23 +276,36 @@ def assign(groups: Sequence[DeviceGroup], pool: Sequence[ipaddress.IPv4Address] 
         index = placed.get(id(group), 0)
         placed[id(group)] = index + 1
         station = None if group.station is None else group.station + index
-        if station is not None and station > MAX_STATION:
-            raise SpecError(f"{group.text}: {group.count} station IDs from {group.station} run past {MAX_STATION}")
+        link = _serial_link(group.profile)
+        if station is not None and link is not None and station > link.max_station:
+            raise SpecError(f"{group.text}: {group.count} station IDs from {group.station} run past "
+                            f"{link.max_station}")
         devices.append(FleetDevice(str(address), group.profile, group.model, group.params,
                                    state_file(state_dir, str(address), group) if state_dir else None, station))
     return devices
 
 
+def _serial_link(profile: str) -> SerialLink | None:
+    from ..devices.profiles import PROFILES
+
+    return PROFILES[profile].serial_link
+
+
 def assign_stations(devices: Sequence[FleetDevice], workers: int, where: str = "--rtu") -> list[FleetDevice]:
-    """The devices with the ACG drives on one RS-485 line, each at its station ID (CM.1, set at
-    start): a group's drives from its ``station`` on (``assign``), the others at the lowest free IDs
-    from 1, in address order."""
-    drives = [d for d in devices if d.profile == "acg"]
-    if not drives:
-        raise SpecError(f"{where}: the fleet has no acg device (the RS-485 port is the ACG drive's)")
-    if len(drives) > MAX_DRIVES_PER_LINE:
-        raise SpecError(f"{where}: {len(drives)} ACG drives, but an RS-485 line takes at most {MAX_DRIVES_PER_LINE} "
-                        f"(ACG RS-485 manual, Communication Standards)")
+    """The devices whose family has an RS-485 port (``Profile.serial_link``: the ACG's) on one line, each
+    at its station ID (CM.1 on the ACG, set at start): a group's drives from its ``station`` on
+    (``assign``), the others at the lowest free IDs from 1, in address order."""
+    from ..devices.profiles import PROFILES
+
+    links = {d.address: link for d in devices if (link := _serial_link(d.profile)) is not None}
+    if not links:
+        ports = [f"{p.serial_link.port}: profile {p.name}" for p in PROFILES.values() if p.serial_link is not None]
+        raise SpecError(f"{where}: the fleet has no device with an RS-485 port (" + "; ".join(ports) + ")")
+    drives = [d for d in devices if d.address in links]
+    link = min(links.values(), key=lambda each: each.max_drives)
+    if len(drives) > link.max_drives:
+        raise SpecError(f"{where}: {len(drives)} {link.drives}, but an RS-485 line takes at most {link.max_drives} "
+                        f"({link.source})")
     if workers != 1:
         raise SpecError(f"{where}: one RS-485 line is served by one process: --workers 1")
     owner: dict[int, str] = {}
@@ -286,12 +315,13 @@ def assign_stations(devices: Sequence[FleetDevice], workers: int, where: str = "
                 raise SpecError(f"{where}: station {device.station} is given to {owner[device.station]} and "
                                 f"{device.address}")
             owner[device.station] = device.address
-    free = (n for n in range(1, MAX_STATION + 1) if n not in owner)
+    free = (n for n in range(1, min(each.max_station for each in links.values()) + 1) if n not in owner)
     result = []
     for device in devices:
-        if device.profile == "acg":
+        on_line = links.get(device.address)
+        if on_line is not None:
             station = device.station if device.station is not None else next(free)
-            device = replace(device, params=(*device.params, f"CM.1={station}"), station=station)
+            device = replace(device, params=(*device.params, f"{on_line.station_code}={station}"), station=station)
         result.append(device)
     return result
 
@@ -360,7 +390,8 @@ def select_shard(devices: Sequence[FleetDevice], shard: Shard, where: str = "--s
 
 
 # -- the TOML file ---------------------------------------------------------------------------------------
-_FILE_KEYS = {"addresses", "port", "io_port", "workers", "state_dir", "device", "rtu", "max_devices"}
+_FILE_KEYS = {"addresses", "port", "io_port", "workers", "state_dir", "device", "rtu", "max_devices", "security",
+              "security_port"}
 _GROUP_KEYS = {"profile", "model", "count", "first", "params", "station"}
 
 
@@ -392,8 +423,9 @@ def _params(value: Any, where: str) -> list[str]:
 
 def read_spec_file(path: Path, limit: int | None = None) -> tuple[dict[str, Any], list[DeviceGroup]]:
     """The file's settings (``addresses``, ``port``, ``io_port``, ``workers``, ``state_dir``,
-    ``max_devices``) and its ``[[device]]`` groups. A relative ``state_dir`` is relative to the file's
-    directory; ``limit`` (``--max-devices``) wins over the file's ``max_devices``."""
+    ``max_devices``, ``security``, ``security_port``) and its ``[[device]]`` groups. A relative
+    ``state_dir`` or ``security`` is relative to the file's directory; ``limit`` (``--max-devices``)
+    wins over the file's ``max_devices``."""
     document = _load_toml(path)
     if limit is None:
         limit = check_max_devices(document.get("max_devices", MAX_DEVICES), f"{path}: max_devices")
@@ -407,6 +439,10 @@ def read_spec_file(path: Path, limit: int | None = None) -> tuple[dict[str, Any]
         if not isinstance(settings["state_dir"], str):
             raise SpecError(f"{path}: state_dir is a directory name (text)")
         settings["state_dir"] = path.parent / settings["state_dir"]
+    if "security" in settings:
+        if not isinstance(settings["security"], str):
+            raise SpecError(f"{path}: security is the folder of `cipstack security init` (text)")
+        settings["security"] = path.parent / settings["security"]
     entries = document.get("device", [])
     if not isinstance(entries, list) or not all(isinstance(e, dict) for e in entries):
         raise SpecError(f"{path}: devices are [[device]] tables")
@@ -424,6 +460,6 @@ def read_spec_file(path: Path, limit: int | None = None) -> tuple[dict[str, Any]
     return settings, groups
 
 
-__all__ = ["MAX_DEVICES", "MAX_DRIVES_PER_LINE", "DeviceGroup", "FleetDevice", "FleetSpec", "Shard", "SpecError",
+__all__ = ["MAX_DEVICES", "DeviceGroup", "FleetDevice", "FleetSecurity", "FleetSpec", "Shard", "SpecError",
            "assign", "assign_stations", "check_max_devices", "check_port", "check_workers", "describe_addresses",
            "make_group", "parse_addresses", "parse_group", "parse_shard", "read_spec_file", "select_shard", "shares"]

@@ -64,7 +64,7 @@ from .load import (
     report_lateness,
 )
 from .serve import serve_until_signalled
-from .spec import FleetDevice, SpecError, describe_addresses, shares
+from .spec import FleetDevice, FleetSecurity, SpecError, describe_addresses, shares
 
 log = logging.getLogger(__name__)
 
@@ -93,7 +93,7 @@ def _die_with_parent(parent: int) -> None:
 
 
 def _worker(share: list[FleetDevice], port: int, io_port: int, parent: int, channel: Connection,
-            api_path: str | None = None) -> None:
+            api_path: str | None = None, security: FleetSecurity | None = None) -> None:
     """A worker process: serve ``share`` until SIGTERM; says "ready" with its lines, or "error", and
     answers each "ping" with "pong" and its load, from a thread (``answer_pings``); with ``api_path``,
     the HTTP control API of its devices on that Unix socket, for the parent's relay."""
@@ -112,7 +112,7 @@ def _worker(share: list[FleetDevice], port: int, io_port: int, parent: int, chan
         run_precise(serve_until_signalled(share, port, io_port, lambda lines: send(("ready", lines)),
                                           signals=(signal.SIGTERM,),
                                           http={"path": api_path} if api_path is not None else None,
-                                          sampler=sampler))
+                                          sampler=sampler, security=security))
     except (ListenError, SpecError) as exc:
         send(("error", str(exc)))
         sys.exit(2)
@@ -169,12 +169,14 @@ class Supervisor:
     """The parent of the worker processes (see the module docstring)."""
 
     def __init__(self, devices: Sequence[FleetDevice], port: int, io_port: int, workers: int,
-                 http: dict[str, Any] | None = None) -> None:
+                 http: dict[str, Any] | None = None, security: FleetSecurity | None = None) -> None:
         """``http``: the settings of the fleet's HTTP control API (``http``, ``http_token``,
-        ``http_allow_remote``, ``http_hosts``), or None for none."""
+        ``http_allow_remote``, ``http_hosts``), or None for none; ``security``: TLS and DTLS at every
+        device (``FleetSecurity``), or None."""
         self.devices = list(devices)
         self.port = port
         self.io_port = io_port
+        self.security = security
         self.workers_wanted = workers
         self.http = http
         self.workers: list[_Worker] = []
@@ -230,7 +232,7 @@ class Supervisor:
             ours, theirs = context.Pipe(duplex=True)
             api_path = os.path.join(self._runtime, f"worker-{number}.sock") if self._runtime is not None else None
             process = context.Process(target=_worker, args=(share, self.port, self.io_port, os.getpid(), theirs,
-                                                            api_path),
+                                                            api_path, self.security),
                                       name=f"cipstack fleet worker {number}", daemon=True)
             process.start()
             theirs.close()

@@ -4,7 +4,8 @@ may do to it and ask of it, without knowing the ``Adapter`` that composed it."""
 from __future__ import annotations
 
 import asyncio
-from typing import TYPE_CHECKING, Any
+from collections.abc import Callable
+from typing import TYPE_CHECKING, Any, Protocol
 
 from .observer import Observers, RuntimeObserver
 from .power import PowerLink
@@ -14,7 +15,7 @@ if TYPE_CHECKING:
     from ..eip.io_server import IoEndpoint
     from ..eip.target.core import EncapsulationTarget
     from ..eip.target.io_target import IoConnection, IoTarget
-    from ..eip.target.seams import IoSeam, ReplySeam, RequestSeam
+    from ..eip.target.seams import IoSeam, ReplySeam, RequestSeam, SecuredSeam
     from ..eip.target.server import EncapsulationServer
     from ..modbus.rtu_line import RtuLine
     from .ports import Rs485Port
@@ -75,6 +76,35 @@ class DeviceClock:
         self._arm(None, 0.0)
 
 
+class ReissuedCertificate(Protocol):
+    """A certificate made for a fault: its PEM certificate and key files, and how they go away."""
+
+    paths: tuple[str, str]
+
+    def discard(self) -> None: ...
+
+
+class CipSecurity(Protocol):
+    """The device's CIP Security as faults reach it (``cipstack.security.authority.LabAuthority``): the
+    seam of its listeners, and the lab CA of its security folder. Each call raises ``StateRefused``
+    naming the reason when the device serves no CIP Security now, or its folder holds no CA key."""
+
+    seam: SecuredSeam
+
+    def serving(self, datagrams: bool = False) -> None:
+        """Nothing, when the device serves TLS (and DTLS with ``datagrams``) now."""
+
+    def expired_certificate(self) -> ReissuedCertificate:
+        """The device's certificate re-issued (same subject and key) with its validity ended."""
+
+    def revoke(self) -> Callable[[], None]:
+        """Publish a CRL of the lab CA that lists the device's certificate; returns what undoes it."""
+
+    def suite(self, name: str) -> int:
+        """The IANA id of a suite the device accepts now, by IANA name, OpenSSL name or 0x id
+        (``BadRequest`` naming those it accepts)."""
+
+
 class DeviceRuntime:
     """A device running behind its ports: its clock, its power and link (``power``), the seams where
     faults act (``requests``, ``replies``, ``class1``) and its observers."""
@@ -82,7 +112,8 @@ class DeviceRuntime:
     def __init__(self, device: Device, clock: DeviceClock, observers: Observers, power: PowerLink,
                  target: EncapsulationTarget, server: EncapsulationServer, requests: RequestSeam,
                  replies: ReplySeam, io: IoTarget | None = None, class1: IoSeam | None = None,
-                 endpoint: IoEndpoint | None = None, rs485: Rs485Port | None = None) -> None:
+                 endpoint: IoEndpoint | None = None, rs485: Rs485Port | None = None,
+                 security: CipSecurity | None = None) -> None:
         self.device = device
         self.clock = clock
         self.observers = observers
@@ -95,6 +126,8 @@ class DeviceRuntime:
         self.class1 = class1
         self.endpoint = endpoint
         self.rs485 = rs485
+        #: CIP Security (None: a device without it, which imports nothing of ``cipstack.security``).
+        self.security = security
 
     @property
     def rtu(self) -> RtuLine | None:
@@ -180,4 +213,4 @@ class DeviceRuntime:
         self.clock.stop()
 
 
-__all__ = ["DeviceClock", "DeviceRuntime"]
+__all__ = ["CipSecurity", "DeviceClock", "DeviceRuntime", "ReissuedCertificate"]

@@ -6,6 +6,9 @@ it back. Names in the folder:
 * ``ca.pem``: the certificate authority both roles trust (Volume 8's Trusted Authorities);
 * ``device.pem`` / ``device.key``: the target's certificate and private key (PEM, PKCS#8);
 * ``client.pem`` / ``client.key``: the originator's certificate and private key;
+* ``crl.pem``: a certificate revocation list of the CA (optional): the originator checks the
+  device's certificate against it (OpenSSL's leaf check) when it is there, read at each handshake
+  (the ``revoke-certificate`` fault publishes one);
 * ``psk.txt``: a pre-shared key, one line ``IDENTITY:HEX`` (identity in ASCII, at most 128
   octets; the key in hexadecimal, 32 octets by default). With it, both roles offer the PSK suites of
   TLS 1.2 and DTLS 1.2 (``psk``, ``tls_psk``).
@@ -39,6 +42,8 @@ DEVICE_KEY = "device.key"
 CLIENT_CERTIFICATE = "client.pem"
 CLIENT_KEY = "client.key"
 PSK_FILE = "psk.txt"
+#: The CA's certificate revocation list, PEM: the originator checks the device's certificate against it.
+CRL_FILE = "crl.pem"
 
 #: Longest PSK identity: 128 octets (the EtherNet/IP Security object's Pre-Shared Keys attribute as
 #: OpENer's CIP Security branch declares it).
@@ -89,6 +94,9 @@ class Credentials:
     psk: PreSharedKey | None
     #: Where both roles write their TLS secrets for Wireshark (``SSLKEYLOGFILE``, read at load).
     keylog: str | None = None
+    #: The TLS 1.2 suites the originator offers, by OpenSSL's names (empty: every one it has; see
+    #: ``offering``).
+    suites: tuple[str, ...] = ()
 
     @classmethod
     def load(cls, folder: str | os.PathLike[str], now: datetime.datetime | None = None) -> Credentials:
@@ -114,6 +122,29 @@ class Credentials:
         configuration holds (``endpoint.server_context``)."""
         return cls(Path(folder), None, None, None, None, os.environ.get("SSLKEYLOGFILE") or None)
 
+    def offering(self, *suites: str) -> Credentials:
+        """These credentials with an originator that offers only ``suites`` (IANA names, OpenSSL names or
+        0x ids), over TLS 1.2 and DTLS 1.2: what a test of the suites a device accepts needs. A name
+        OpenSSL knows no TLS 1.2 suite by is a ``SecurityError``."""
+        from dataclasses import replace
+
+        from .suites import openssl_name
+
+        names = []
+        for suite in suites:
+            name = openssl_name(suite)
+            if name is None:
+                raise SecurityError(f"{suite}: no TLS 1.2 cipher suite of that name or id")
+            names.append(name)
+        return replace(self, suites=tuple(names))
+
+    def explain(self, cause: str) -> str:
+        """A handshake's refusal, with what the originator offered when ``offering`` narrowed it and
+        the device found no suite in common."""
+        if self.suites and cause.startswith("no cipher suite in common"):
+            return f"{cause}: we offered {', '.join(self.suites)}"
+        return cause
+
     # -- TLS contexts -----------------------------------------------------------------------------
     def server_context(self, verify_client: bool = True) -> ssl.SSLContext:
         """The target's TLS context: TLS 1.2 at least (1.3 where the peer offers it), the device's
@@ -128,21 +159,38 @@ class Credentials:
 
     def client_context(self) -> ssl.SSLContext | PskTlsContext:
         """The originator's TLS context: the client's certificate and key, the device's certificate
-        verified against the CA. Devices are reached by address and named by their certificate's
-        subject, not by a host name: the chain is checked, the host name is not. With a PSK, a
-        pyOpenSSL context of TLS 1.2 offering the PSK suites first (``tls_psk``), with ``wrap_bio``
-        as asyncio's TLS transport calls it."""
+        verified against the CA, and against the folder's ``crl.pem`` when there is one. Devices are
+        reached by address and named by their certificate's subject, not by a host name: the chain is
+        checked, the host name is not. With a PSK, a pyOpenSSL context of TLS 1.2 offering the PSK
+        suites first (``tls_psk``), with ``wrap_bio`` as asyncio's TLS transport calls it (the
+        certificate suites ``offering`` narrowed, if it did)."""
         if self.psk is not None:
             from .declarations import CIPHER_SUITE_NAMES
             from .tls_psk import psk_context
 
-            return psk_context(self, server=False, suites=tuple(CIPHER_SUITE_NAMES.values()))
+            return psk_context(self, server=False, suites=self.suites or tuple(CIPHER_SUITE_NAMES.values()))
         pair = self._pair(self.client, "client")
         context = ssl.SSLContext(ssl.PROTOCOL_TLS_CLIENT)
         context.check_hostname = False
         self._common(context)
         context.load_cert_chain(pair.certificate.path, pair.key)
+        if self.suites:   # TLS 1.3's suites cannot be narrowed (Python's ssl): TLS 1.2 alone
+            context.maximum_version = ssl.TLSVersion.TLSv1_2
+            context.set_ciphers(":".join(self.suites))
+        crl = self.crl()
+        if crl is not None:
+            try:
+                context.load_verify_locations(cafile=crl)
+            except (OSError, ssl.SSLError) as exc:
+                raise SecurityError(f"{crl}: not a usable CRL ({exc})") from None
+            context.verify_flags |= ssl.VERIFY_CRL_CHECK_LEAF
         return context
+
+    def crl(self) -> Path | None:
+        """The folder's certificate revocation list as it is now (read at each handshake: a CRL published
+        while a scanner runs counts from its next connection), or None."""
+        path = self.folder / CRL_FILE
+        return path if path.is_file() else None
 
     def wrap_client(self, sock: socket.socket, host: str, port: int) -> ssl.SSLSocket | TlsSocket:
         """``sock`` (connected, blocking) after a TLS handshake as the originator; a handshake that
@@ -160,7 +208,11 @@ class Credentials:
                 tls.handshake()
         except ssl.SSLError as exc:
             sock.close()
-            raise SecurityError(f"TLS with {host}:{port} failed: {self.describe(exc)}") from None
+            raise SecurityError(f"TLS with {host}:{port} failed: {self.explain(self.describe(exc))}") from None
+        except TimeoutError:
+            waited = sock.gettimeout()
+            sock.close()
+            raise self.unanswered(host, port, waited) from None
         except OSError as exc:
             sock.close()
             raise SecurityError(f"TLS with {host}:{port} failed: the device closed the connection during the "
@@ -171,7 +223,7 @@ class Credentials:
         """A ``SecurityError`` for a TLS alert that ended a connection after its handshake (TLS 1.3:
         the device refuses the client's certificate once the client has finished); None otherwise."""
         if isinstance(failure, ssl.SSLError) and not isinstance(failure, (ssl.SSLWantReadError, ssl.SSLWantWriteError)):
-            return SecurityError(f"TLS with {host}:{port} failed: {self.describe(failure)}")
+            return SecurityError(f"TLS with {host}:{port} failed: {self.explain(self.describe(failure))}")
         return None
 
     def describe(self, failure: BaseException) -> str:
@@ -181,6 +233,15 @@ class Credentials:
         reason = getattr(failure, "reason", None) or ""
         about_key = explain(reason, self.psk.identity) if self.psk is not None and reason else None
         return about_key or describe_tls_failure(failure)
+
+    def unanswered(self, host: str, port: int, waited: float | None) -> SecurityError:
+        """A TCP port that took the connection and did not answer the ClientHello within ``waited``
+        seconds: a plain EtherNet/IP port does that (it waits for the rest of what it reads as an
+        encapsulation header)."""
+        within = f" within {waited:g} s" if waited else ""
+        return SecurityError(f"TLS with {host}:{port} failed: no answer to the handshake{within}: a plain "
+                             "EtherNet/IP port (44818) answers no TLS; the device's TLS port is 2221 unless it "
+                             "was given another")
 
     def datagram_link(self, host: str, port: int, timeout: float) -> Any:
         """A DTLS session with the device's UDP ``port`` (2221), its handshake done within ``timeout``
@@ -308,6 +369,6 @@ def _load_psk(path: Path) -> PreSharedKey:
     return PreSharedKey(identity.encode(), octets)
 
 
-__all__ = ["CA_FILE", "CA_KEY", "CLIENT_CERTIFICATE", "CLIENT_KEY", "DEVICE_CERTIFICATE", "DEVICE_KEY", "PSK_FILE",
-           "SECURE_PORT", "CertificateFile", "Credentials", "KeyPair", "PreSharedKey", "describe_tls_failure",
-           "require_cryptography"]
+__all__ = ["CA_FILE", "CA_KEY", "CLIENT_CERTIFICATE", "CLIENT_KEY", "CRL_FILE", "DEVICE_CERTIFICATE", "DEVICE_KEY",
+           "PSK_FILE", "SECURE_PORT", "CertificateFile", "Credentials", "KeyPair", "PreSharedKey",
+           "describe_tls_failure", "require_cryptography"]

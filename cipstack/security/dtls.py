@@ -65,10 +65,38 @@ class KeyLog:
             out.write(line + b"\n")
 
 
+#: OpenSSL's text of the verification failures a device's certificate meets most (``X509_V_ERR_*``,
+#: as ``openssl verify`` prints them): pyOpenSSL gives the number to the verify callback only.
+VERIFY_ERRORS = {
+    2: "unable to get issuer certificate",
+    3: "unable to get certificate CRL",
+    9: "certificate is not yet valid",
+    10: "certificate has expired",
+    11: "CRL is not yet valid",
+    12: "CRL has expired",
+    18: "self-signed certificate",
+    19: "self-signed certificate in certificate chain",
+    20: "unable to get local issuer certificate",
+    21: "unable to verify the first certificate",
+    23: "certificate revoked",
+}
+
+
+def _note_verify_failure(connection: Any, certificate: Any, number: int, depth: int, ok: int) -> bool:
+    """The originator's verify callback: OpenSSL's verdict unchanged, its first failure noted on the
+    connection (``DtlsChannel.verify_error``) so that the refusal names it."""
+    notes = connection.get_app_data()
+    if not ok and isinstance(notes, list):
+        notes.append(number)
+    return bool(ok)
+
+
 def dtls_context(credentials: Credentials, server: bool, verify_client: bool = True) -> SSL.Context:
     """The DTLS context of the device (``server``) or of the originator, from ``credentials``. With
     the folder's PSK it offers and accepts the PSK suites too (``psk``), before the certificate
-    suites, and speaks DTLS 1.2 only; a folder with a PSK and no certificates gives a PSK-only side."""
+    suites, and speaks DTLS 1.2 only; a folder with a PSK and no certificates gives a PSK-only side.
+    The originator checks the device's certificate against ``crl.pem`` when the folder holds one
+    (``Credentials.crl``), and offers only the suites ``Credentials.offering`` chose, if it did."""
     require_pyopenssl()
     from OpenSSL import SSL
 
@@ -81,7 +109,7 @@ def dtls_context(credentials: Credentials, server: bool, verify_client: bool = T
     if credentials.psk is not None:
         _use_psk(context, credentials, server, with_certificates=pair is not None and credentials.ca is not None)
     if pair is None or credentials.ca is None:
-        return _keylog(context, credentials)
+        return _finish(context, credentials, server)
     try:
         context.use_certificate_chain_file(str(pair.certificate.path))
         context.use_privatekey_file(str(pair.key))
@@ -90,11 +118,35 @@ def dtls_context(credentials: Credentials, server: bool, verify_client: bool = T
         raise SecurityError(f"{credentials.folder}: the {role}'s certificate, key or CA is not usable "
                             f"({exc})") from None
     mode = SSL.VERIFY_PEER | (SSL.VERIFY_FAIL_IF_NO_PEER_CERT if server else 0)
-    context.set_verify(mode if (verify_client or not server) else SSL.VERIFY_NONE)
-    return _keylog(context, credentials)
+    if server:
+        context.set_verify(mode if verify_client else SSL.VERIFY_NONE)
+    else:
+        context.set_verify(mode, _note_verify_failure)
+        check_crl(context, credentials)
+    return _finish(context, credentials, server)
 
 
-def _keylog(context: SSL.Context, credentials: Credentials) -> SSL.Context:
+def check_crl(context: SSL.Context, credentials: Credentials) -> None:
+    """The originator's check of the device's certificate against the folder's ``crl.pem``, when it
+    holds one (OpenSSL's leaf check); the pyOpenSSL contexts of TLS with a key use it too."""
+    from OpenSSL import SSL, crypto
+
+    crl = credentials.crl()
+    if crl is None:
+        return
+    try:
+        context.load_verify_locations(str(crl))
+    except SSL.Error as exc:
+        raise SecurityError(f"{crl}: not a usable CRL ({exc})") from None
+    store = context.get_cert_store()
+    assert store is not None   # a context has its store from the start
+    store.set_flags(crypto.X509StoreFlags.CRL_CHECK)
+
+
+def _finish(context: SSL.Context, credentials: Credentials, server: bool) -> SSL.Context:
+    """The originator's chosen suites (``Credentials.offering``), and the key log of both roles."""
+    if not server and credentials.suites:
+        context.set_cipher_list(":".join(credentials.suites).encode())
     if credentials.keylog:
         context.set_keylog_callback(KeyLog(credentials.keylog))
     return context
@@ -116,10 +168,11 @@ def _use_psk(context: SSL.Context, credentials: Credentials, server: bool, with_
     context.set_cipher_list(":".join(names).encode())
 
 
-def describe_dtls_failure(exc: BaseException, identity: bytes | None = None) -> str:
+def describe_dtls_failure(exc: BaseException, identity: bytes | None = None, verify_error: int | None = None) -> str:
     """A DTLS failure in one line, in the words ``describe_tls_failure`` uses for TLS; ``identity``:
     the handshake's PSK identity (the one this side offered, or the one the peer named), named when
-    the key is the cause."""
+    the key is the cause; ``verify_error``: the X.509 failure the originator's verify callback noted
+    (``DtlsChannel.verify_error``)."""
     text = str(exc)
     args = getattr(exc, "args", ())
     reasons = [entry[2] for entry in args[0] if isinstance(entry, tuple) and len(entry) == 3] if (
@@ -134,6 +187,8 @@ def describe_dtls_failure(exc: BaseException, identity: bytes | None = None) -> 
     reason = reasons[-1] if reasons else ""
     lowered = reason.lower()
     if "certificate verify failed" in lowered:
+        if verify_error is not None:
+            return f"certificate verify failed: {VERIFY_ERRORS.get(verify_error, f'X.509 error {verify_error}')}"
         return "certificate verify failed: the peer's certificate is not signed by our CA"
     if "unknown ca" in lowered:
         return "the peer does not trust our certificate (alert: unknown CA)"
@@ -199,6 +254,7 @@ class DtlsChannel:
 
         connection = SSL.Connection(context, None)
         connection.set_connect_state()
+        connection.set_app_data([])   # the verify callback's notes (``verify_error``)
         channel = cls(connection)
         channel.handshake()
         return channel
@@ -272,6 +328,12 @@ class DtlsChannel:
         with contextlib.suppress(self._ssl.Error):
             self.connection.shutdown()
 
+    @property
+    def verify_error(self) -> int | None:
+        """The first X.509 failure the originator's check of the peer's certificate met (None: none)."""
+        notes = self.connection.get_app_data()
+        return notes[0] if isinstance(notes, list) and notes else None
+
     def description(self) -> str:
         """``DTLSv1.2, CIPHER`` once established."""
         return f"{self.connection.get_protocol_version_name()}, {self.connection.get_cipher_name()}"
@@ -280,5 +342,5 @@ class DtlsChannel:
 #: A cookie function of the stateless exchange: the peer's address as bytes in, the cookie out.
 CookieFunction = Callable[[bytes], bytes]
 
-__all__ = ["DATAGRAM_BUDGET", "DTLS1_2_VERSION", "CookieFunction", "DtlsChannel", "KeyLog", "describe_dtls_failure",
-           "dtls_context", "record_lengths", "require_pyopenssl", "split_records"]
+__all__ = ["DATAGRAM_BUDGET", "DTLS1_2_VERSION", "VERIFY_ERRORS", "CookieFunction", "DtlsChannel", "KeyLog",
+           "check_crl", "describe_dtls_failure", "dtls_context", "record_lengths", "require_pyopenssl", "split_records"]

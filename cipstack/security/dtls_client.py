@@ -14,13 +14,16 @@ import asyncio
 import logging
 import socket
 from collections.abc import Callable
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 from ..eip.io_server import CATCH_UP_READS, DRAIN_LIMIT, MAX_DATAGRAM, RECEIVE_BUFFER, DatagramPaths, IoEndpoint
 from ..eip.originator.class1 import IoOriginator
 from ..errors import PeerUnreachable, SecurityError
 from .dtls import DtlsChannel, describe_dtls_failure, dtls_context
 from .dtls_target import is_io_datagram
+
+if TYPE_CHECKING:
+    from .credentials import Credentials
 
 log = logging.getLogger(__name__)
 
@@ -29,17 +32,19 @@ class AsyncDtlsLink(asyncio.DatagramProtocol):
     """One DTLS session with a device on the running loop: what ``open`` returns is established."""
 
     def __init__(self, channel: DtlsChannel, host: str, port: int, protocol: asyncio.Protocol,
-                 identity: bytes | None = None) -> None:
+                 credentials: Credentials) -> None:
         """``protocol``: the stream protocol encapsulation records go to (the originator client's);
-        ``identity``: the PSK identity offered, named in a refusal that is about the key."""
+        ``credentials``: those the channel was made of (a refusal says what they offered)."""
         from OpenSSL import SSL
 
         self._ssl_error = SSL.Error
         self.channel = channel
+        self.credentials = credentials
         self.host = host
         self.port = port
         self.protocol = protocol
-        self.identity = identity
+        #: The PSK identity offered, named in a refusal that is about the key.
+        self.identity = credentials.psk.identity if credentials.psk is not None else None
         #: The class 1 core of the connections opened in this session.
         self.io_core = IoOriginator()
         #: The route of O->T datagrams into this session, for the class 1 endpoint of ``io_core``.
@@ -64,14 +69,13 @@ class AsyncDtlsLink(asyncio.DatagramProtocol):
         return self.io_core, self._endpoint
 
     @classmethod
-    async def open(cls, credentials: Any, host: str, port: int, timeout: float,
+    async def open(cls, credentials: Credentials, host: str, port: int, timeout: float,
                    protocol_factory: Callable[[], asyncio.Protocol]) -> tuple[AsyncDtlsLink, asyncio.Protocol]:
         """Complete a handshake with ``host:port`` within ``timeout``; ``SecurityError`` naming why it
         failed, ``PeerUnreachable`` when nothing answers."""
         loop = asyncio.get_running_loop()
         protocol = protocol_factory()
-        identity = credentials.psk.identity if credentials.psk is not None else None
-        link = cls(DtlsChannel.client(dtls_context(credentials, server=False)), host, port, protocol, identity)
+        link = cls(DtlsChannel.client(dtls_context(credentials, server=False)), host, port, protocol, credentials)
         try:
             infos = await loop.getaddrinfo(host, port, type=socket.SOCK_DGRAM)
             family, kind, proto, _name, address = infos[0]
@@ -83,12 +87,16 @@ class AsyncDtlsLink(asyncio.DatagramProtocol):
             await loop.sock_connect(sock, address)
             await loop.create_datagram_endpoint(lambda: link, sock=sock)
             await asyncio.wait_for(asyncio.shield(link.established), timeout)
-        except (OSError, asyncio.TimeoutError) as exc:
+        except PeerUnreachable:
+            link.close()   # the session's own failure (``_fail``), already in words
+            raise
+        except asyncio.TimeoutError:   # before OSError: from Python 3.11 it is the builtin TimeoutError, an OSError
             link.close()
-            if isinstance(exc, OSError):
-                raise PeerUnreachable.connecting(host, port, exc) from None
             raise PeerUnreachable(f"DTLS with {host}:{port}: no answer to the handshake "
                                   "(is the device serving CIP Security over UDP there?)") from None
+        except OSError as exc:
+            link.close()
+            raise PeerUnreachable.connecting(host, port, exc) from None
         except BaseException:
             link.close()
             raise
@@ -108,8 +116,8 @@ class AsyncDtlsLink(asyncio.DatagramProtocol):
             records = self.channel.feed(data)
         except self._ssl_error as exc:
             self._flush()
-            self._fail(SecurityError(f"DTLS with {self.host}:{self.port} failed: "
-                                     f"{describe_dtls_failure(exc, self.identity)}"))
+            cause = self.credentials.explain(describe_dtls_failure(exc, self.identity, self.channel.verify_error))
+            self._fail(SecurityError(f"DTLS with {self.host}:{self.port} failed: {cause}"))
             return
         if self.channel.established and not self.established.done():
             self.established.set_result(None)
@@ -142,7 +150,8 @@ class AsyncDtlsLink(asyncio.DatagramProtocol):
 
     def error_received(self, exc: Exception) -> None:
         if isinstance(exc, ConnectionRefusedError):   # ICMP port unreachable: nothing listens there
-            self._fail(PeerUnreachable.connecting(self.host, self.port, exc))
+            self._fail(PeerUnreachable(f"DTLS with {self.host}:{self.port}: nothing listens there "
+                                       "(ICMP port unreachable)"))
 
     def connection_lost(self, exc: Exception | None) -> None:
         self._fail(PeerUnreachable(f"DTLS session with {self.host}:{self.port} lost"))
@@ -178,8 +187,8 @@ class AsyncDtlsLink(asyncio.DatagramProtocol):
         try:
             self.channel.on_timer()
         except self._ssl_error as exc:
-            self._fail(SecurityError(f"DTLS with {self.host}:{self.port} failed: "
-                                     f"{describe_dtls_failure(exc, self.identity)}"))
+            cause = self.credentials.explain(describe_dtls_failure(exc, self.identity, self.channel.verify_error))
+            self._fail(SecurityError(f"DTLS with {self.host}:{self.port} failed: {cause}"))
             return
         self._flush()
         self._arm()

@@ -39,6 +39,7 @@ class DtlsLink:
         from OpenSSL import SSL
 
         self._ssl_error = SSL.Error
+        self.credentials = credentials
         self.host = host
         self.port = port
         #: The PSK identity offered, named in a refusal that is about the key.
@@ -81,8 +82,9 @@ class DtlsLink:
                     self._sort(channel.feed(datagram), time.monotonic())
                 except self._ssl_error as exc:
                     self._flush()
-                    raise SecurityError(f"DTLS with {self.host}:{self.port} failed: "
-                                        f"{describe_dtls_failure(exc, self.identity)}") from None
+                    cause = self.credentials.explain(
+                        describe_dtls_failure(exc, self.identity, self.channel.verify_error))
+                    raise SecurityError(f"DTLS with {self.host}:{self.port} failed: {cause}") from None
             self._flush()
 
     def _read_all(self) -> list[bytes]:
@@ -121,8 +123,8 @@ class DtlsLink:
             for datagram in self._read_all():
                 self._sort(self.channel.feed(datagram), time.monotonic())
         except self._ssl_error as exc:
-            raise SecurityError(f"DTLS with {self.host}:{self.port} failed: "
-                                f"{describe_dtls_failure(exc, self.identity)}") from None
+            cause = self.credentials.explain(describe_dtls_failure(exc, self.identity, self.channel.verify_error))
+            raise SecurityError(f"DTLS with {self.host}:{self.port} failed: {cause}") from None
         self._flush()
 
     # -- what the blocking originator uses of a socket -------------------------------------------------

@@ -40,7 +40,8 @@ import logging
 import os
 import socket
 import time
-from typing import TYPE_CHECKING, Any
+from collections.abc import Callable
+from typing import TYPE_CHECKING
 
 from ..eip.io_server import (
     CATCH_UP_AFTER_S,
@@ -53,6 +54,7 @@ from ..eip.io_server import (
 from ..eip.precise_loop import IoLane, lane_of
 from ..eip.target.limits import ConnectionLimiter, RateLimitedLog
 from ..eip.wire.cpf import SockAddr
+from ..errors import CipstackError
 from .credentials import SECURE_PORT
 from .dtls import DtlsChannel, describe_dtls_failure, dtls_context
 from .psk import identity_asked
@@ -62,7 +64,7 @@ if TYPE_CHECKING:
     from OpenSSL import SSL
 
     from ..eip.target.core import EncapsulationConnection, EncapsulationTarget
-    from ..eip.target.seams import IoSeam
+    from ..eip.target.seams import IoSeam, SecuredSeam
     from .credentials import Credentials
 
 log = logging.getLogger(__name__)
@@ -123,6 +125,9 @@ class _Session:
             self.flush()   # the alert that tells the peer why
             if self.connection is None:
                 cause = describe_dtls_failure(exc, identity_asked(self.channel.connection))
+                if cause.startswith("no cipher suite in common"):
+                    allowed = [n for n in self.channel.connection.get_cipher_list() if not n.startswith("TLS_")]
+                    cause = f"{cause}: the device allows {', '.join(allowed) or 'none'}"
                 server.refuse(self.address[0], f"DTLS handshake from {self.peer} refused: {cause}")
             else:
                 log.info("%s: DTLS session closed: %s", self.peer, describe_dtls_failure(exc))
@@ -265,29 +270,39 @@ class _DtlsProtocol(asyncio.DatagramProtocol):
 class DtlsServer:
     """The DTLS port of one target, beside its TLS port (``TlsServer``) on the same number."""
 
-    def __init__(self, target: EncapsulationTarget, credentials: Credentials | None, host: str = "127.0.0.1",
+    def __init__(self, target: EncapsulationTarget, credentials: Credentials, host: str = "127.0.0.1",
                  port: int = SECURE_PORT, *, io: IoSeam | None = None, paths: DatagramPaths | None = None,
                  verify_client: bool = True, max_sessions: int = DEFAULT_MAX_SESSIONS,
-                 max_sessions_per_host: int | None = None) -> None:
-        """``credentials``: the folder of ``--security DIR``; None for a device not configured yet, whose
-        port opens once a configuration gives it a context (``reconfigure``; nothing of pyOpenSSL is
-        imported before). ``io``: the class 1 seam whose core takes the datagrams of connections opened
-        over DTLS (the faults' filters act on them as on plain UDP 2222's); ``paths``: the datagram
-        paths of its UDP endpoint, where this server adds the address of each session."""
+                 max_sessions_per_host: int | None = None, seam: SecuredSeam | None = None,
+                 ciphers: str | None = None, recipe: Callable[[Credentials], SSL.Context] | None = None) -> None:
+        """``io``: the class 1 seam whose core takes the datagrams of connections opened over DTLS (the
+        faults' filters act on them as on plain UDP 2222's); ``paths``:
+        the datagram paths of its UDP endpoint, where this server adds the address of each session;
+        ``seam``: where faults change the next handshakes and drop records (``SecuredSeam``);
+        ``ciphers``: the suites accepted, as OpenSSL names them (None: the library's DTLS 1.2 ones);
+        ``recipe``: how the context is made of credentials instead (a configuration applied over the
+        network, with its pre-shared keys: ``endpoint.dtls_server_context``)."""
+        from .dtls import require_pyopenssl
+
+        require_pyopenssl()
+        from OpenSSL import SSL
+
         self.target = target
         self.io = io
         self.paths = paths or DatagramPaths()
         self.host = host
         self.port = port
-        #: pyOpenSSL's ``SSL.Error`` once a context is in use (no session exists before).
-        self.ssl_error: Any = Exception
-        self._ssl: Any = None
+        self.ssl_error = SSL.Error
+        self._ssl = SSL
         self._secret = os.urandom(32)
-        #: The DTLS context every new session is made from; None while the device is not configured:
-        #: the port does not open (``start``), and a ClientHello that reaches it is refused.
-        self.context: SSL.Context | None = None
-        if credentials is not None:
-            self._use(dtls_context(credentials, server=True, verify_client=verify_client))
+        self.credentials = credentials
+        self.verify_client = verify_client
+        self.ciphers = ciphers
+        self.recipe = recipe
+        self.seam = seam
+        #: The DTLS context every session is made from, while no fault changes it.
+        self.context = self._recipe(credentials)
+        self._variant: tuple[int, SSL.Context] | None = None
         #: Sessions at once, in all and per host (half of all by default: one host never holds every one).
         self.limiter = ConnectionLimiter(max_sessions, max_sessions_per_host)
         #: Seconds a handshake has from the ClientHello that returned its cookie.
@@ -310,23 +325,29 @@ class DtlsServer:
         #: When the socket was last read to its end (``_catch_up``).
         self._emptied_at = float("-inf")
 
-    def _use(self, context: SSL.Context | None) -> None:
-        if context is not None:
-            from OpenSSL import SSL
+    def _recipe(self, credentials: Credentials) -> SSL.Context:
+        """The DTLS context of this listener made of ``credentials``, with its cookie exchange."""
+        if self.recipe is not None:
+            context = self.recipe(credentials)
+        else:
+            context = dtls_context(credentials, server=True, verify_client=self.verify_client)
+            if self.ciphers is not None:
+                context.set_cipher_list(self.ciphers.encode())
+        context.set_cookie_generate_callback(self._cookie)
+        context.set_cookie_verify_callback(self._cookie_matches)
+        return context
 
-            self.ssl_error, self._ssl = SSL.Error, SSL
-            context.set_cookie_generate_callback(self._cookie)
-            context.set_cookie_verify_callback(self._cookie_matches)
-        self.context = context
+    def handshake_context(self) -> SSL.Context:
+        """The context of a new session: ``context``, or while a fault is in the seam the one made for
+        it (once per change of the seam)."""
+        seam = self.seam
+        if seam is None or not seam.handshake:
+            return self.context
+        if self._variant is None or self._variant[0] != seam.generation:
+            from .authority import dtls_variant
 
-    def reconfigure(self, context: SSL.Context | None) -> None:
-        """Serve new sessions with ``context`` (a configuration applied over the network), or refuse
-        every handshake (None: the device was Reset). The sessions of the former context end, as the
-        TLS port's connections end when it reloads."""
-        for session in list(self.sessions.values()):
-            session.close()
-            self.end(session)
-        self._use(context)
+            self._variant = (seam.generation, dtls_variant(self.credentials, self._recipe, seam))
+        return self._variant[1]
 
     # -- cookies ---------------------------------------------------------------------------------------
     def _cookie(self, connection: object) -> bytes:
@@ -338,6 +359,11 @@ class DtlsServer:
 
     # -- datagrams -------------------------------------------------------------------------------------
     def datagram(self, data: bytes, address: tuple[str, int]) -> None:
+        seam = self.seam
+        if seam is not None and seam.records:   # a fault drops records before anything reads them
+            data = seam.inbound(data, address)
+            if not data:
+                return
         now = self.loop.time()
         session = self.sessions.get(address)
         if session is not None and not (session.connection is not None and is_client_hello(data)):
@@ -364,11 +390,12 @@ class DtlsServer:
         """A ClientHello from an address without a session: a HelloVerifyRequest and nothing kept, or,
         with the cookie it returns, a new session (``DTLSv1_listen``)."""
         SSL = self._ssl
-        if self.context is None:
-            self.refuse(address[0], f"DTLS ClientHello from {address[0]}:{address[1]} refused: the device is not "
-                                    "configured (Factory Default)")
+        try:
+            context = self.handshake_context()
+        except (CipstackError, SSL.Error, OSError) as exc:   # what a fault presents did not load
+            self.refuse(address[0], f"DTLS ClientHello from {address[0]}:{address[1]} refused: {exc}")
             return
-        connection = SSL.Connection(self.context, None)
+        connection = SSL.Connection(context, None)
         connection.set_accept_state()
         connection.set_app_data(_address_bytes(address))
         connection.bio_write(data)
@@ -394,6 +421,11 @@ class DtlsServer:
         sock = self._sock
         if sock is None:
             return
+        seam = self.seam
+        if seam is not None and seam.records:   # a fault drops records after they are made
+            datagram = seam.outbound(datagram, address)
+            if not datagram:
+                return
         if self._transport is not None:
             if not self._transport.is_closing():
                 self._transport.sendto(datagram, address)
@@ -457,13 +489,11 @@ class DtlsServer:
         return self._sock is not None
 
     async def start(self) -> None:
-        """Listen on the DTLS port (0: any free one, read back in ``port``), once a context is in use. On
-        the class 1 lane of a ``PreciseEventLoop`` (the command line's) the socket is read there, as UDP
-        2222 is: a wake-up drains what came, with no asyncio round per datagram; on any other loop
-        through asyncio's datagram transport."""
+        """Listen on the DTLS port (0: any free one, read back in ``port``). On the class 1 lane of a
+        ``PreciseEventLoop`` (the command line's) the socket is read there, as UDP 2222 is: a wake-up
+        drains what came, with no asyncio round per datagram; on any other loop through asyncio's
+        datagram transport."""
         self.loop = asyncio.get_running_loop()
-        if self.context is None or self._sock is not None:
-            return   # not configured (the port opens with a configuration), or open already
         sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
         try:
             sock.bind((self.host, self.port))

@@ -3,8 +3,10 @@ kept, and the policy that refuses plain explicit messaging once it is configured
 
 ``SecureEndpoint`` is the listener of the adapter's "EtherNet/IP over TLS" port. A device configured
 over the wire (Apply_Config) gets a TLS listener on the secure port with the certificate, trust and
-pre-shared keys just written, built from them, and its DTLS port on the same number in UDP; a new
-Apply_Config replaces them, and Reset closes them. The configuration
+pre-shared keys just written, built from them, and a DTLS listener on the UDP port of the same number
+(secured class 1, as ``--security DIR`` serves it) with the same; a new Apply_Config replaces both,
+and Reset closes both (a device started with ``--security DIR`` included: the folder's listeners are
+the first configuration's). The configuration
 is written into a folder (the adapter's ``<state>.security``, or a private temporary one) off the event
 loop, and read back when the adapter starts, so a configured device stays configured.
 
@@ -21,6 +23,7 @@ from __future__ import annotations
 
 import asyncio
 import contextlib
+import errno
 import logging
 import os
 import shutil
@@ -38,17 +41,25 @@ from ..errors import SecurityError
 from .certificates import pem
 from .configuration import Configuration
 from .credentials import CA_FILE, DEVICE_CERTIFICATE, DEVICE_KEY, Credentials
-from .declarations import CERTIFICATE_SUITE_NAMES, CIPHER_SUITE_NAMES
+from .declarations import CERTIFICATE_SUITE_NAMES, CIPHER_SUITE_NAMES, PSK_SUITE_NAMES
 
 if TYPE_CHECKING:
     from .dtls_target import DtlsServer
     from .tls_psk import PskTlsContext
-    from .tls_target import TlsServer
+    from .tls_target import Recipe, TlsServer
 
 log = logging.getLogger(__name__)
 
 #: The configuration's own file in the folder, beside ca.pem, device.pem and device.key.
 CONFIGURATION_FILE = "configuration.json"
+#: Tries at a TCP and UDP pair of one number for TLS and DTLS on a secure port of 0 (any free one).
+FREE_PORT_TRIES = 20
+
+#: How a listener of a configuration is made: from its credentials, the recipe of its TLS context, and
+#: its port.
+ServerFactory = Callable[[Credentials, "Recipe", int], "TlsServer"]
+#: How the DTLS listener of a configuration is made: from its credentials, the configuration, its port.
+DatagramFactory = Callable[[Credentials, Configuration, int], "DtlsServer"]
 
 
 def state_folder(state_path: Path | None) -> Path | None:
@@ -88,6 +99,16 @@ def configuration_of(credentials: Credentials) -> Configuration:
                          device_certificate=der_of_pem(device.read_bytes()), device_status=CertificateStatus.VERIFIED,
                          ca_certificate=der_of_pem(ca.read_bytes()), ca_status=CertificateStatus.VERIFIED,
                          device_key=credentials.device.key.read_bytes(), pre_shared_keys=keys)
+
+
+def available_suites(credentials: Credentials) -> str:
+    """The suites the EtherNet/IP Security object lists as available that ``credentials`` can serve, as
+    OpenSSL's cipher list: the PSK suites with the folder's key, the certificate suites with its
+    certificates."""
+    names = list(PSK_SUITE_NAMES.values()) if credentials.psk is not None else []
+    if credentials.device is not None and credentials.ca is not None:
+        names += CERTIFICATE_SUITE_NAMES.values()
+    return ":".join(names)
 
 
 def available_suites_context(credentials: Credentials) -> ssl.SSLContext | PskTlsContext:
@@ -132,9 +153,9 @@ def dtls_server_context(credentials: Credentials, configuration: Configuration) 
     Suites, the certificate and the pre-shared keys it holds, as ``server_context`` for TLS."""
     from .tls_psk import openssl_context
 
-    context, _ = openssl_context(credentials, server=True, keys=configuration.pre_shared_keys,
-                                 suites=[CIPHER_SUITE_NAMES[s] for s in configuration.allowed_suites],
-                                 verify_client=bool(configuration.verify_client), datagram=True)
+    context, _, _ = openssl_context(credentials, server=True, keys=configuration.pre_shared_keys,
+                                    suites=[CIPHER_SUITE_NAMES[s] for s in configuration.allowed_suites],
+                                    verify_client=bool(configuration.verify_client), datagram=True)
     return context
 
 
@@ -169,22 +190,24 @@ def _write(folder: Path, configuration: Configuration | None) -> None:
 
 class SecureEndpoint:
     """The secure port of one device: no listener until the device is configured, then a TLS listener
-    with the configuration's certificate, trust and suites."""
+    and a DTLS listener with the configuration's certificate, trust, keys and suites."""
 
-    def __init__(self, make_server: Callable[[Credentials, ssl.SSLContext | PskTlsContext | None, int], TlsServer],
-                 port: int, folder: Path | None, initial: TlsServer | None = None,
-                 initial_configuration: Configuration | None = None, datagrams: DtlsServer | None = None) -> None:
-        """``make_server(credentials, context, port)``: a TLS listener (the adapter's, with its limits and
-        reply seam). ``initial``: the listener of ``--security DIR``; ``initial_configuration``: the one
-        read back from ``folder``, served from the start. ``datagrams``: the DTLS port, which follows
-        each configuration as the TLS listener does: closed at a Reset, opened on the listener's port
-        number with the configuration applied (``DtlsServer.reconfigure``)."""
-        self.datagrams = datagrams
+    def __init__(self, make_server: ServerFactory, port: int, folder: Path | None, initial: TlsServer | None = None,
+                 initial_configuration: Configuration | None = None,
+                 make_datagrams: DatagramFactory | None = None, initial_datagrams: DtlsServer | None = None) -> None:
+        """``make_server(credentials, recipe, port)``: a TLS listener (the adapter's, with its limits and
+        reply seam); ``make_datagrams(credentials, configuration, port)``: the DTLS listener beside it
+        (None: TLS only). ``initial``, ``initial_datagrams``: the listeners of ``--security DIR``, which
+        a configuration applied over the network replaces and a Reset closes, as its own;
+        ``initial_configuration``: the one read back from ``folder``, served from the start."""
         self.make_server = make_server
+        self.make_datagrams = make_datagrams
         self.port = port
         self.folder = folder
         #: The listener serving now (zero or one).
         self.servers: list[TlsServer] = [initial] if initial is not None else []
+        #: The DTLS listener serving now beside it (zero or one).
+        self.datagram_servers: list[DtlsServer] = [initial_datagrams] if initial_datagrams is not None else []
         self._pending: list[Configuration | None] = [initial_configuration] if initial_configuration else []
         self._temporary: list[str] = []
         self._tasks: set[asyncio.Task[None]] = set()
@@ -200,6 +223,11 @@ class SecureEndpoint:
     def server(self) -> TlsServer | None:
         return self.servers[0] if self.servers else None
 
+    @property
+    def dtls(self) -> DtlsServer | None:
+        """The DTLS listener serving now, if any."""
+        return self.datagram_servers[0] if self.datagram_servers else None
+
     def secured(self, context: RequestContext) -> bool:
         """Whether a request arrived over TLS: on a connection to the secure listener's port."""
         server = self.server
@@ -213,8 +241,28 @@ class SecureEndpoint:
         self._pending.clear()
         server = self.server
         if server is not None and not server.is_open:
+            await self._listen(server, self.dtls)
+
+    async def _listen(self, server: TlsServer, dtls: DtlsServer | None) -> None:
+        """TLS, then DTLS on the UDP port of the same number. On a port of 0, a TCP number taken in UDP
+        makes TLS take another, as the plain target does for its pair (``EncapsulationServer.start``).
+        A DTLS port that cannot listen otherwise raises with TLS left listening: the caller tells which
+        port failed, and closes what it must."""
+        any_port = server.port == 0
+        for attempt in range(FREE_PORT_TRIES if any_port else 1):
             await server.start()
             self.port = server.port
+            if dtls is None:
+                return
+            dtls.port = server.port
+            try:
+                await dtls.start()
+                return
+            except OSError as exc:
+                if not any_port or exc.errno != errno.EADDRINUSE or attempt == FREE_PORT_TRIES - 1:
+                    raise
+            await server.close()
+            server.port = 0
 
     async def close(self) -> None:
         self._open = False
@@ -224,6 +272,8 @@ class SecureEndpoint:
                 await task
         for server in self.servers:
             await server.close()
+        for dtls in self.datagram_servers:
+            await dtls.close()
         for folder in self._temporary:
             shutil.rmtree(folder, ignore_errors=True)
         self._temporary.clear()
@@ -258,44 +308,40 @@ class SecureEndpoint:
                 self.port = server.port
             await server.close()
         self.servers.clear()
-        if self.datagrams is not None:   # closed as the TLS listener is, until the configuration is in place
-            self.datagrams.reconfigure(None)
-            await self.datagrams.close()
+        for dtls in self.datagram_servers:
+            await dtls.close()
+        self.datagram_servers.clear()
         if configuration is not None and folder is not None:
             if configuration.active_device_certificates:
                 credentials = await loop.run_in_executor(None, Credentials.load, folder)
             else:   # pre-shared keys alone, from the configuration
                 credentials = Credentials.keys_only(folder)
-            server = self.make_server(credentials, server_context(credentials, configuration), self.port)
+            applied = configuration
+
+            def recipe(made: Credentials) -> ssl.SSLContext | PskTlsContext:
+                return server_context(made, applied)
+
+            server = self.make_server(credentials, recipe, self.port)
             self.servers.append(server)
+            datagrams = self._datagrams(credentials, configuration)
+            if datagrams is not None:
+                self.datagram_servers.append(datagrams)
             if self._open:
-                await server.start()
-                self.port = server.port
-                log.info("EtherNet/IP over TLS serves the configuration applied over the network (port %d)",
-                         server.port)
-            await self._serve_datagrams(credentials, configuration)
+                await self._listen(server, datagrams)
+                log.info("EtherNet/IP over TLS%s serves the configuration applied over the network (port %d)",
+                         " and DTLS" if datagrams is not None else "", server.port)
         self.reloads += 1
 
-    async def _serve_datagrams(self, credentials: Credentials, configuration: Configuration) -> None:
-        """DTLS on the UDP port of the TLS listener's number, with the configuration just applied. A
-        DTLS port that cannot serve it is a warning: TLS serves on."""
-        datagrams, server = self.datagrams, self.server
-        if datagrams is None:
-            return
+    def _datagrams(self, credentials: Credentials, configuration: Configuration) -> DtlsServer | None:
+        """The DTLS listener of a configuration, or None: without a factory, or when DTLS cannot serve
+        it (a warning: TLS serves on)."""
+        if self.make_datagrams is None:
+            return None
         try:
-            datagrams.reconfigure(dtls_server_context(credentials, configuration))
+            return self.make_datagrams(credentials, configuration, self.port)
         except SecurityError as exc:
             log.warning("EtherNet/IP over DTLS not served: %s", exc)
-            return
-        if self._open and server is not None and server.is_open:
-            datagrams.port = server.port
-            try:
-                await datagrams.start()
-            except OSError as exc:
-                log.warning("EtherNet/IP over DTLS not served on UDP %d: %s", server.port, exc)
-                return
-            log.info("EtherNet/IP over DTLS serves the configuration applied over the network (port %d)",
-                     datagrams.port)
+            return None
 
 
 class PlainRefusal:
@@ -323,5 +369,6 @@ class PlainRefusal:
         return MessageRouterResponse(service, GeneralStatus.PRIVILEGE_VIOLATION).encode()
 
 
-__all__ = ["CONFIGURATION_FILE", "PlainRefusal", "SecureEndpoint", "available_suites_context", "configuration_of",
-           "dtls_server_context", "load_configuration", "server_context", "state_folder"]
+__all__ = ["CONFIGURATION_FILE", "DatagramFactory", "PlainRefusal", "SecureEndpoint", "ServerFactory",
+           "available_suites", "available_suites_context", "configuration_of", "dtls_server_context",
+           "load_configuration", "server_context", "state_folder"]

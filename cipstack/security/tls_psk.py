@@ -22,7 +22,7 @@ from collections.abc import Iterable, Sequence
 from typing import TYPE_CHECKING, Any
 
 from ..errors import PeerUnreachable, SecurityError
-from .dtls import KeyLog, require_pyopenssl
+from .dtls import KeyLog, check_crl, require_pyopenssl
 from .psk import PSK_SUITES, PskServer, explain, offer_psk, reason_code, serve_psk, verify_message, written
 
 if TYPE_CHECKING:
@@ -155,10 +155,31 @@ class PskTlsContext:
     """A pyOpenSSL TLS context with ``ssl.SSLContext.wrap_bio``'s signature (what the TLS port and
     asyncio's TLS transport call)."""
 
-    def __init__(self, context: SSL.Context, server: PskServer | None) -> None:
+    def __init__(self, context: SSL.Context, server: PskServer | None, names: Sequence[str] = ()) -> None:
         self.context = context
         #: The device's keys (None on the originator's side).
         self.keys = server
+        #: The suites of ``context``, OpenSSL's names (pyOpenSSL reads them only from a connection, after
+        #: which the context no longer changes).
+        self.names = list(names)
+
+    def get_ciphers(self) -> list[dict[str, Any]]:
+        """``ssl.SSLContext.get_ciphers``'s shape (name, IANA id, protocol), for the suites faults refuse
+        and a refusal names (``authority``)."""
+        from .suites import suite_id
+
+        return [{"name": name, "id": 0x03000000 | (suite_id(name) or 0), "protocol": "TLSv1.2"}
+                for name in self.names]
+
+    def set_ciphers(self, names: str) -> None:
+        """Narrow the suites (before the first connection), as ``ssl.SSLContext.set_ciphers``."""
+        from OpenSSL import SSL
+
+        try:
+            self.context.set_cipher_list(names.encode())
+        except SSL.Error as exc:
+            raise ssl.SSLError(f"No cipher can be selected ({exc})") from None
+        self.names = names.split(":")
 
     def wrap_bio(self, incoming: ssl.MemoryBIO, outgoing: ssl.MemoryBIO, server_side: bool = False,
                  server_hostname: str | None = None, session: Any = None) -> TlsObject:
@@ -182,8 +203,8 @@ def psk_context(credentials: Credentials, server: bool, keys: Iterable[tuple[byt
 
 def openssl_context(credentials: Credentials, server: bool, keys: Iterable[tuple[bytes, bytes]] = (),
                     suites: Sequence[str] = (), verify_client: bool = True,
-                    datagram: bool = False) -> tuple[SSL.Context, PskServer | None]:
-    """``psk_context``'s pyOpenSSL context and the device's keys; ``datagram``: DTLS 1.2 rather than
+                    datagram: bool = False) -> tuple[SSL.Context, PskServer | None, list[str]]:
+    """``psk_context``'s pyOpenSSL context, the device's keys and the suites' names; ``datagram``: DTLS 1.2 rather than
     TLS 1.2 (a device's DTLS port configured over the network, ``endpoint.dtls_server_context``)."""
     require_pyopenssl()
     from OpenSSL import SSL
@@ -201,8 +222,9 @@ def openssl_context(credentials: Credentials, server: bool, keys: Iterable[tuple
     pair = credentials.device if server else credentials.client
     names: list[str] = []
     # ``suites`` may name PSK suites too (the device's Allowed Cipher Suites): the device offers those
-    # it lists; the originator offers every PSK suite.
-    psk_names = [name for name in suites if name in PSK_SUITES] if server else list(PSK_SUITES)
+    # it lists; the originator every PSK suite, or those ``Credentials.offering`` chose.
+    chosen = server or bool(credentials.suites)
+    psk_names = [name for name in suites if name in PSK_SUITES] if chosen else list(PSK_SUITES)
     suites = [name for name in suites if name not in PSK_SUITES]
     if pair is not None and credentials.ca is not None and suites:
         role = "device" if server else "client"
@@ -218,6 +240,7 @@ def openssl_context(credentials: Credentials, server: bool, keys: Iterable[tuple
             context.set_verify(SSL.VERIFY_PEER | SSL.VERIFY_FAIL_IF_NO_PEER_CERT if verify_client else SSL.VERIFY_NONE)
         else:
             context.set_verify(SSL.VERIFY_PEER)
+            check_crl(context, credentials)
     keeper: PskServer | None = None
     if server:
         keeper = serve_psk(context, keys)
@@ -233,7 +256,7 @@ def openssl_context(credentials: Credentials, server: bool, keys: Iterable[tuple
         raise SecurityError(f"this OpenSSL offers none of the suites {':'.join(names)} ({exc})") from None
     if credentials.keylog:
         context.set_keylog_callback(KeyLog(credentials.keylog))
-    return context, keeper
+    return context, keeper, names
 
 
 class TlsSocket:

@@ -22,19 +22,26 @@ import contextlib
 import logging
 import socket
 import ssl
+from collections.abc import Callable
 from typing import TYPE_CHECKING
 
 from ..eip.target.limits import DEFAULT_MAX_TCP_CONNECTIONS, ConnectionLimiter, RateLimitedLog
 from ..eip.target.seams import ReplySeam
 from ..eip.wire.cpf import SockAddr
+from ..errors import CipstackError
 from .credentials import SECURE_PORT, describe_tls_failure
 
 if TYPE_CHECKING:
     from ..eip.target.core import EncapsulationConnection, EncapsulationTarget
+    from ..eip.target.seams import SecuredSeam
     from .credentials import Credentials
     from .tls_psk import PskTlsContext, TlsObject
 
 log = logging.getLogger(__name__)
+
+#: How a listener's TLS context is made of credentials: Python's ``ssl``, or with pre-shared keys
+#: pyOpenSSL's in ``ssl``'s shape (``tls_psk``).
+Recipe = Callable[["Credentials"], "ssl.SSLContext | PskTlsContext"]
 
 #: Seconds a TLS handshake has from the connection's accept.
 HANDSHAKE_TIMEOUT = 10.0
@@ -60,6 +67,7 @@ class _TlsProtocol(asyncio.Protocol):
         self._incoming = ssl.MemoryBIO()
         self._outgoing = ssl.MemoryBIO()
         self._tls: ssl.SSLObject | TlsObject | None = None
+        self._context: ssl.SSLContext | PskTlsContext | None = None
         self._local = SockAddr("0.0.0.0", server.port)
         self._timer: asyncio.TimerHandle | None = None
         self._timer_at: float | None = None
@@ -86,7 +94,13 @@ class _TlsProtocol(asyncio.Protocol):
         if sock is not None:
             sock.setsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY, 1)
         transport.set_write_buffer_limits(high=64 * 1024)
-        self._tls = self.server.context.wrap_bio(self._incoming, self._outgoing, server_side=True)
+        try:
+            self._context = self.server.handshake_context()
+        except (CipstackError, ssl.SSLError, OSError) as exc:   # what a fault presents did not load
+            self.server.refuse(self.host, f"TLS connection from {self.peer} refused: {exc}")
+            transport.abort()
+            return
+        self._tls = self._context.wrap_bio(self._incoming, self._outgoing, server_side=True)
         self._timer_at = self.loop.time() + self.server.handshake_timeout
         self._timer = self.loop.call_at(self._timer_at, self._on_timer)
 
@@ -151,7 +165,12 @@ class _TlsProtocol(asyncio.Protocol):
             return False
         except (ssl.SSLError, ValueError) as exc:
             self._flush()   # the alert that tells the peer why
-            self.server.refuse(self.host, f"TLS handshake from {self.peer} refused: {_cause(tls, exc)}")
+            cause = _cause(tls, exc)
+            if cause.startswith("no cipher suite in common") and self._context is not None:
+                from .authority import allowed_names
+
+                cause = f"{cause}: the device allows {allowed_names(self._context)}"
+            self.server.refuse(self.host, f"TLS handshake from {self.peer} refused: {cause}")
             self._linger()
             return False
         self._flush()
@@ -280,17 +299,23 @@ class TlsServer:
                  port: int = SECURE_PORT, verify_client: bool = True,
                  max_connections: int = DEFAULT_MAX_TCP_CONNECTIONS,
                  max_connections_per_host: int | None = None, replies: ReplySeam | None = None,
-                 context: ssl.SSLContext | PskTlsContext | None = None) -> None:
+                 context: ssl.SSLContext | PskTlsContext | None = None, seam: SecuredSeam | None = None,
+                 recipe: Recipe | None = None) -> None:
         """``replies``: the seam replies pass on their way out, the plain server's (``seams.ReplySeam``);
-        ``context``: a TLS context made elsewhere (a configuration applied over the network, or one with
-        pre-shared keys: ``tls_psk.PskTlsContext``), else the credentials' own."""
+        ``recipe``: how the TLS context is made of credentials (a configuration applied over the
+        network narrows the suites; one with pre-shared keys makes a ``tls_psk.PskTlsContext``), else
+        the credentials' own; ``context``: one made already; ``seam``: where faults change what the
+        next handshakes present (``SecuredSeam``)."""
         self.target = target
         self.replies = replies or ReplySeam()
         self.credentials = credentials
         self.host = host
         self.port = port
-        #: The TLS context every connection's ``SSLObject`` is made from.
-        self.context: ssl.SSLContext | PskTlsContext = context or credentials.server_context(verify_client)
+        self.recipe: Recipe = recipe or (lambda made: made.server_context(verify_client))
+        #: The TLS context every connection's ``SSLObject`` is made from, while no fault changes it.
+        self.context: ssl.SSLContext | PskTlsContext = context or self.recipe(credentials)
+        self.seam = seam
+        self._variant: tuple[int, ssl.SSLContext | PskTlsContext] | None = None
         self.limiter = ConnectionLimiter(max_connections, max_connections_per_host)
         #: Seconds a handshake has from the accept (``HANDSHAKE_TIMEOUT``).
         self.handshake_timeout = HANDSHAKE_TIMEOUT
@@ -300,6 +325,18 @@ class TlsServer:
         self.connections: set[_TlsProtocol] = set()
         self.loop: asyncio.AbstractEventLoop
         self._server: asyncio.base_events.Server | None = None
+
+    def handshake_context(self) -> ssl.SSLContext | PskTlsContext:
+        """The context of a new connection: ``context``, or while a fault is in the seam the one made
+        for it (once per change of the seam)."""
+        seam = self.seam
+        if seam is None or not seam.handshake:
+            return self.context
+        if self._variant is None or self._variant[0] != seam.generation:
+            from .authority import tls_variant
+
+            self._variant = (seam.generation, tls_variant(self.credentials, self.recipe, seam))
+        return self._variant[1]
 
     def refuse(self, source: str, line: str) -> None:
         """Count one refused connection; its line is logged at most once per source per 10 s."""
@@ -328,4 +365,4 @@ class TlsServer:
         await server.wait_closed()
 
 
-__all__ = ["HANDSHAKE_TIMEOUT", "TlsServer", "named_identity"]
+__all__ = ["HANDSHAKE_TIMEOUT", "Recipe", "TlsServer", "named_identity"]

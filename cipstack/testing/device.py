@@ -19,6 +19,7 @@ from typing import Any, TypeVar, overload
 
 from ..adapter import Adapter, AdapterSettings, network_interface
 from ..control.events import Event
+from ..devices.profiles import DEFAULT_PROFILE
 from ..eds.served import profile_eds_file
 from ..errors import UnknownField
 from ..scanner import SyncScanner
@@ -35,7 +36,7 @@ CONNECT_TIMEOUT = 10.0
 class DeviceOptions:
     """What device a test wants: a profile (and model) with keypad parameters, or an EDS file."""
 
-    profile: str = "acg"
+    profile: str = DEFAULT_PROFILE
     model: str | None = None
     eds: str | Path | None = None
     #: Keypad parameters set at start, as ``cipstack adapter --param`` takes them: the ACG's codes

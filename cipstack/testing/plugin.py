@@ -8,6 +8,7 @@ from typing import Any
 
 import pytest
 
+from ..devices.profiles import DEFAULT_PROFILE
 from ..scanner import SyncScanner
 from .device import DeviceOptions, EmulatedDevice
 
@@ -15,7 +16,7 @@ _OPTION_NAMES = ("profile", "model", "eds", "params", "params_unsaved", "host", 
 
 
 def pytest_configure(config: pytest.Config) -> None:
-    config.addinivalue_line("markers", "cip_adapter(profile='acg', model=None, eds=None, params=(), "
+    config.addinivalue_line("markers", f"cip_adapter(profile={DEFAULT_PROFILE!r}, model=None, eds=None, params=(), "
                                        "params_unsaved=False, host, settings): the device the cip_adapter fixture "
                                        "starts")
     config.addinivalue_line("markers", "cip_fleet(count=2, ...): how many devices cip_fleet starts, and which")

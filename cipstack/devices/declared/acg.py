@@ -4,6 +4,9 @@ The attribute declarations of profile acg that replies decode by."""
 
 PROFILE = 'acg'
 
+#: How the device saves its parameters over CIP (pointer, target, trigger, edges, width), or None.
+SAVE = ((100, 7, 51), 992, (4, 121, 3), (0, 1), 2)
+
 #: class id -> (class name, instance attributes), where they are not the standard objects'.
 CLASSES = {
     40: ('Motor Data', [

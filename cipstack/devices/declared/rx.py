@@ -4,6 +4,9 @@ The attribute declarations of profile rx that replies decode by."""
 
 PROFILE = 'rx'
 
+#: How the device saves its parameters over CIP (pointer, target, trigger, edges, width), or None.
+SAVE = None
+
 #: class id -> (class name, instance attributes), where they are not the standard objects'.
 CLASSES = {
     1: ('Identity', [

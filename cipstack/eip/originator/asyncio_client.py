@@ -48,6 +48,26 @@ log = logging.getLogger(__name__)
 
 #: Seconds a secured client waits to learn why a connection closed as it opened (``_why_closed``).
 _REFUSAL_WAIT = 1.0
+
+
+async def _connected(loop: asyncio.AbstractEventLoop, host: str, port: int) -> socket.socket:
+    """A TCP socket connected to ``host``:``port`` (the first address that takes it), non-blocking."""
+    infos = await loop.getaddrinfo(host, port, type=socket.SOCK_STREAM)
+    for index, (family, kind, proto, _, address) in enumerate(infos):
+        sock = socket.socket(family, kind, proto)
+        sock.setblocking(False)
+        try:
+            await loop.sock_connect(sock, address)
+        except OSError:
+            sock.close()
+            if index == len(infos) - 1:
+                raise
+            continue
+        except BaseException:
+            sock.close()
+            raise
+        return sock
+    raise PeerUnreachable(f"cannot connect to {host}:{port}: no address")
 T = TypeVar("T")
 
 if asyncio.TimeoutError is TimeoutError:
@@ -121,14 +141,14 @@ class EncapsulationClient(CoreClient):
             if register:
                 await self.register_session()
             return
-        context = security.client_context() if security is not None else None
-        try:
-            _, protocol = await asyncio.wait_for(
-                loop.create_connection(lambda: _ClientProtocol(self), self.host, self.port, ssl=context,
-                                       server_hostname="" if context is not None else None), self.timeout)
-        except (OSError, asyncio.TimeoutError) as exc:
-            refusal = security.refusal(exc, self.host, self.port) if security is not None else None
-            raise (refusal or PeerUnreachable.connecting(self.host, self.port, exc)) from None
+        if security is not None:
+            protocol = await self._open_tls(loop, security)
+        else:
+            try:
+                _, protocol = await asyncio.wait_for(
+                    loop.create_connection(lambda: _ClientProtocol(self), self.host, self.port), self.timeout)
+            except (OSError, asyncio.TimeoutError) as exc:
+                raise PeerUnreachable.connecting(self.host, self.port, exc) from None
         self._protocol = protocol
         if register:
             try:
@@ -138,6 +158,29 @@ class EncapsulationClient(CoreClient):
                 if refusal is None:
                     raise
                 raise refusal from None
+
+    async def _open_tls(self, loop: asyncio.AbstractEventLoop, security: SecureChannel) -> _ClientProtocol:
+        """The TCP connection, then the TLS handshake on it, each within the timeout: a port that
+        takes the connection and never answers the handshake (a plain EtherNet/IP port) is told from
+        one that cannot be reached."""
+        context = security.client_context()
+        deadline = loop.time() + self.timeout
+        try:
+            sock = await asyncio.wait_for(_connected(loop, self.host, self.port), self.timeout)
+        except (OSError, asyncio.TimeoutError) as exc:
+            raise PeerUnreachable.connecting(self.host, self.port, exc) from None
+        try:
+            _, protocol = await asyncio.wait_for(
+                loop.create_connection(lambda: _ClientProtocol(self), sock=sock, ssl=context, server_hostname=""),
+                max(0.0, deadline - loop.time()))
+        except asyncio.TimeoutError:
+            sock.close()
+            raise security.unanswered(self.host, self.port, self.timeout) from None
+        except OSError as exc:
+            sock.close()
+            refusal = security.refusal(exc, self.host, self.port)
+            raise (refusal or PeerUnreachable.connecting(self.host, self.port, exc)) from None
+        return protocol
 
     async def _why_closed(self, protocol: _ClientProtocol) -> CipstackError | None:
         """The error of a connection that closed as it opened. A device that refuses a client's

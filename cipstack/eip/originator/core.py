@@ -493,6 +493,10 @@ class SecureChannel(Protocol):
         """The error to raise for a TLS failure (a handshake refused, or with TLS 1.3 an alert after it,
         when the device judges the client's certificate); None for a failure that is not TLS's."""
 
+    def unanswered(self, host: str, port: int, waited: float | None) -> CipstackError:
+        """The error of a TCP port that took the connection and did not answer the ClientHello within
+        ``waited`` seconds (a plain EtherNet/IP port does that)."""
+
     async def open_datagram_link(self, host: str, port: int, timeout: float,
                                  protocol_factory: Any) -> tuple[Any, Any]:
         """A DTLS session with the device's UDP ``port`` on the running loop after its handshake

@@ -14,6 +14,9 @@ knows only the order.
   (``RequestFilter``); filters act first, observers last, the router answers.
 * ``ReplySeam``: explicit replies between the encapsulation target and the TCP socket
   (``ReplyFilter``): a filter may hold a reply and send it later, in order.
+* ``SecuredSeam``: CIP Security's listeners (TLS and DTLS on 2221): what the next handshakes present
+  (``HandshakeFilter``: another certificate, suites no longer accepted) and the DTLS records that
+  enter and leave the UDP socket, whole and still encrypted (``RecordFilter``).
 """
 
 from __future__ import annotations
@@ -204,5 +207,92 @@ class ReplySeam:
         self.filter: ReplyFilter | None = None
 
 
-__all__ = ["Datagram", "IoInFilter", "IoOutFilter", "IoSeam", "ReplyFilter", "ReplySeam", "ReplySender",
-           "RequestFilter", "RequestSeam"]
+# -- CIP Security's listeners -----------------------------------------------------------------------------
+#: The header of a DTLS 1.2 record (RFC 6347, 4.1): type, version, epoch, sequence number, then the
+#: length of its fragment as the last two octets.
+DTLS_RECORD_HEADER = 13
+
+
+class HandshakeFilter(Protocol):
+    """What the next TLS and DTLS handshakes of the device change (sessions already made keep theirs):
+    ``certificate``, the PEM certificate and key files presented instead of the device's own (None:
+    its own); ``refused``, the IANA ids of the suites no longer accepted."""
+
+    certificate: tuple[str, str] | None
+    refused: frozenset[int]
+
+
+class RecordFilter(Protocol):
+    """A filter of the DTLS records of one UDP datagram, before decryption (``inbound``) or after
+    encryption (``outbound``): returns the datagram with the records it keeps (empty: none)."""
+
+    def records(self, datagram: bytes, peer: tuple[str, int], inbound: bool) -> bytes: ...
+
+
+def dtls_records(datagram: bytes) -> list[bytes]:
+    """The whole records of a datagram by their headers (RFC 6347, 4.1.1: a datagram carries whole
+    records, never part of one); bytes after the last whole record come as one more piece."""
+    records = []
+    offset = 0
+    while offset + DTLS_RECORD_HEADER <= len(datagram):
+        end = offset + DTLS_RECORD_HEADER + int.from_bytes(datagram[offset + 11:offset + 13], "big")
+        records.append(datagram[offset:end])
+        offset = end
+    if offset < len(datagram):
+        records.append(datagram[offset:])
+    return records
+
+
+class SecuredSeam:
+    """CIP Security's listeners as faults reach them. The TLS and DTLS listeners read ``handshake`` at
+    each new handshake (with none, their own context, unchanged) and pass each DTLS datagram through
+    ``inbound`` and ``outbound`` while ``records`` holds a filter. ``generation`` moves on whenever
+    ``handshake`` changes, so a listener rebuilds what it derived from it once."""
+
+    def __init__(self) -> None:
+        self.handshake: list[HandshakeFilter] = []
+        self.records: list[RecordFilter] = []
+        self.generation = 0
+
+    def add(self, item: HandshakeFilter | RecordFilter) -> None:
+        if hasattr(item, "records"):
+            self.records.append(item)  # type: ignore[arg-type]  # has records: a RecordFilter
+        else:
+            self.handshake.append(item)
+            self.generation += 1
+
+    def remove(self, item: object) -> None:
+        before = len(self.handshake)
+        self.handshake = [f for f in self.handshake if f is not item]
+        self.records = [f for f in self.records if f is not item]
+        if len(self.handshake) != before:
+            self.generation += 1
+
+    def certificate(self) -> tuple[str, str] | None:
+        """The certificate and key the next handshakes present instead of the device's (the last filter's)."""
+        chosen = None
+        for item in self.handshake:
+            chosen = item.certificate or chosen
+        return chosen
+
+    def refused(self) -> frozenset[int]:
+        """The suites (IANA ids) the next handshakes do not accept."""
+        return frozenset().union(*(item.refused for item in self.handshake))
+
+    def inbound(self, datagram: bytes, peer: tuple[str, int]) -> bytes:
+        for item in list(self.records):
+            if not datagram:
+                break
+            datagram = item.records(datagram, peer, True)
+        return datagram
+
+    def outbound(self, datagram: bytes, peer: tuple[str, int]) -> bytes:
+        for item in list(self.records):
+            if not datagram:
+                break
+            datagram = item.records(datagram, peer, False)
+        return datagram
+
+
+__all__ = ["DTLS_RECORD_HEADER", "Datagram", "HandshakeFilter", "IoInFilter", "IoOutFilter", "IoSeam", "RecordFilter",
+           "ReplyFilter", "ReplySeam", "ReplySender", "RequestFilter", "RequestSeam", "SecuredSeam", "dtls_records"]
