@@ -127,6 +127,8 @@ class LaneTlsConnection:
                 session.send(replies)
             else:   # a fault at the reply seam (delayed replies) acts on TLS as on 44818
                 held.reply(self, replies)
+        if session.ended:
+            session.close_notify()   # ours answers the peer's, after the replies
         out = session.data_to_send()
         if out:
             self._send(out)

@@ -115,6 +115,8 @@ class _TlsProtocol(asyncio.Protocol):
                 session.send(replies)
             else:   # a fault at the reply seam (delayed replies) acts on TLS as on 44818
                 held.reply(self, replies)
+        if session.ended:
+            session.close_notify()   # ours answers the peer's, after the replies
         self._flush()
         if session.ended or connection.closing:
             transport.close()
