@@ -8,11 +8,15 @@ python benchmarks/dtls_io.py --json
 
 One adapter with ``--security`` (a lab folder made by ``security init`` in a temporary directory)
 serves both. Each round holds N input-only connections (heartbeat 198 -> input 71) plain, then N over
-DTLS (each in a DTLS session of its own, as ``Scanner.io_connection`` opens them with ``security=``),
-from the asyncio Scanner in this process, and reads the adapter's CPU time (``/proc/PID/stat``) over
-the hold. Packets are what the originator sent and received; none may be lost and no connection may
-time out. The figure is the ratio of the adapter's CPU per packet over DTLS to plain, both measured
-in the same round; the target is 2x (issue 48). The median round is printed.
+DTLS (all in the scanner's one DTLS session, as ``Scanner.io_connection`` opens them with
+``security=``), from the asyncio Scanner in this process, and reads the adapter's CPU time
+(``/proc/PID/stat``) over the hold. Packets are what the originator sent and received; none may be
+lost (the T->O sequence gaps the originator saw) and no connection may time out. The figure is the
+ratio of the adapter's CPU per packet over DTLS to plain, both measured in the same round; the target
+is 2x (issue 48). The median round is printed.
+
+The issue's target is a 60 s hold (``--seconds 60``); the default's 10 s holds say so on the verdict
+line.
 """
 
 from __future__ import annotations
@@ -31,6 +35,8 @@ from io_common import acg_class1, cpu_seconds, free_port, start_adapter, stop_ad
 
 INPUT = 71
 RATIO_TARGET = 2.0
+#: The hold issue 48 names.
+ISSUE_HOLD_S = 60.0
 
 
 async def hold(port: int, connections: int, rpi: float, seconds: float, security: Any,
@@ -113,8 +119,10 @@ def main(argv: list[str] | None = None) -> int:
         print(f"{index:>5}  ratio  {r['ratio']:.2f}" if r["ratio"] is not None else f"{index:>5}  ratio  -")
     verdict = "PASS" if passed else "FAIL"
     shown = f"{median:.2f}x" if median is not None else "-"
+    shorter = (f" (holds of {args.seconds:g} s, shorter than the issue's {ISSUE_HOLD_S:g} s: --seconds "
+               f"{ISSUE_HOLD_S:g} for its target)" if args.seconds < ISSUE_HOLD_S else "")
     print(f"adapter CPU per packet, DTLS / plain: {shown} (target {RATIO_TARGET:g}x), none lost: {none_lost}: "
-          f"{verdict}")
+          f"{verdict}{shorter}")
     return 0 if passed else 1
 
 

@@ -118,6 +118,8 @@ class Verdict:
     note: str = ""
     #: A target that needs more than one figure (e.g. "none lost" beside a rate) decides it here.
     passed: bool | None = None
+    #: Decimals shown (a ratio's second one matters).
+    digits: int = 1
 
     def __post_init__(self) -> None:
         if self.passed is None:
@@ -129,7 +131,7 @@ class Verdict:
                 self.passed = self.measured <= self.target
 
     def line(self) -> str:
-        measured = "-" if self.measured is None else f"{self.measured:,.1f} {self.unit}"
+        measured = "-" if self.measured is None else f"{self.measured:,.{self.digits}f} {self.unit}"
         sign = ">=" if self.higher_is_better else "<="
         text = (f"[{'PASS' if self.passed else 'FAIL'}] {self.name}: {measured} "
                 f"(target {sign} {self.target:,g} {self.unit}")

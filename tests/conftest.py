@@ -74,8 +74,10 @@ def module_data_home(tmp_path_factory: pytest.TempPathFactory) -> Iterator[None]
 
 
 #: Modules whose tests also run on asyncio's own loop: a scanner inside an application's loop
-#: serves class 1 through asyncio's datagram transport and timers, not the precise loop's lane.
-BOTH_LOOPS = frozenset({"test_io_live", "test_io_session", "test_io_multicast", "test_acg_live", "test_faults"})
+#: serves class 1 through asyncio's datagram transport and timers, not the precise loop's lane; the TLS
+#: port has a shell for each loop too.
+BOTH_LOOPS = frozenset({"test_io_live", "test_io_session", "test_io_multicast", "test_acg_live", "test_faults",
+                        "test_security_tls"})
 
 
 def pytest_asyncio_loop_factories(config: pytest.Config, item: pytest.Item) -> dict[str, Callable[[], Any]]:

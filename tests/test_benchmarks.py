@@ -166,3 +166,41 @@ def test_psk_tls_reads_and_handshakes_both_ways() -> None:
     for way in ("certificates", "psk"):
         assert set(round_[way]) == {"cpu_per_read_us", "cpu_per_handshake_us"}
     assert {"ratio_cpu_per_read_us", "ratio_cpu_per_handshake_us"} <= set(round_)
+
+
+def test_tls_benchmark_measures_both_ports_handshakes_and_idle_sessions() -> None:
+    """``tls.py``, one short round: the adapter's CPU per request on plain TCP and over TLS (with and
+    without idle TLS sessions beside it), and per connection with and without a TLS handshake, both
+    TLS versions, on the P-256 certificate ``security init`` makes; a verdict for each target, and
+    the exit status says whether all were met (the figures are not judged here: a benchmark's)."""
+    pytest.importorskip("cryptography", reason="the security extra (cryptography) is not installed")
+    result = subprocess.run([sys.executable, str(BENCHMARKS / "tls.py"), "--seconds", "0.2", "--rounds", "1",
+                             "--warmup", "0.05", "--handshakes", "5", "--idle", "3", "--json"],
+                            capture_output=True, text=True, timeout=180)
+    summary = json.loads(result.stdout)
+    assert result.returncode == (0 if summary["passed"] else 1), result.stderr
+    assert summary["certificate"] == "ECDSA secp256r1"
+    assert set(summary["cpu_per_request_us"]) == {"plain", "tls", "tls idle", "tls +idle"}
+    assert all(cpu > 0 for cpu in summary["cpu_per_request_us"].values())
+    assert [(h["kind"], h["count"], h["version"]) for h in summary["handshakes"]] == [
+        ("plain TCP", 5, "-"), ("TLS", 5, "TLSv1.3"), ("TLS 1.2", 5, "TLSv1.2")]
+    assert [v["target"] for v in summary["verdicts"]] == [1.5, 20.0, 20.0, 1.1]
+    assert all(isinstance(v["passed"], bool) for v in summary["verdicts"])
+
+
+@pytest.mark.parametrize(("ratios", "verdict"), [
+    ([1.02, 0.97, 1.05, 0.99, 1.08], "PASS"),    # every paired ratio within 1.10
+    ([1.30, 1.25, 1.40, 1.22, 1.50], "FAIL"),    # even the smallest above it
+    ([1.02, 0.97, 1.05, 0.99, 1.60], "INCONCLUSIVE"),   # the bounds straddle the target
+    ([1.00, 1.01, 1.02], "INCONCLUSIVE"),        # three rounds bound the median at 75 %: too few
+])
+def test_tls_idle_sessions_verdict_is_taken_on_paired_ratios(ratios: list[float], verdict: str) -> None:
+    import tls
+
+    low, high, confidence = explicit.median_bounds(ratios)
+    summary = {"idle_ratio": sorted(ratios)[len(ratios) // 2], "idle_ratio_rounds": ratios, "idle_ratio_low": low,
+               "idle_ratio_high": high, "idle_ratio_confidence": confidence,
+               "cpu_per_request_us": {"tls +idle": 55.0, "tls idle": 54.0}}
+    line = tls.idle_verdict(summary).line()
+    assert line.startswith("[PASS]" if verdict == "PASS" else "[FAIL]"), line
+    assert ("INCONCLUSIVE" in line) == (verdict == "INCONCLUSIVE"), line

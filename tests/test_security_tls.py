@@ -7,6 +7,7 @@ tests read; ports come from `free_port()`."""
 from __future__ import annotations
 
 import asyncio
+import contextlib
 import datetime
 import os
 import shutil
@@ -33,7 +34,7 @@ from cipstack.scanner import Scanner, SyncScanner
 from cipstack.security import Credentials
 from cipstack.security.provisioning import init
 from tests.ports import free_port
-from tests.waiting import wait_for
+from tests.waiting import wait_for, wait_until
 
 OPENSSL = shutil.which("openssl")
 needs_openssl = pytest.mark.skipif(OPENSSL is None, reason="the openssl command is not installed")
@@ -488,6 +489,56 @@ async def test_a_reply_fault_acts_on_tls_as_on_44818(lab: Path) -> None:
         assert await asyncio.to_thread(timed_read) >= 0.4
         adapter.clear_faults()
         assert await asyncio.to_thread(timed_read) < 5
+
+
+async def test_pipelined_requests_and_a_close_notify_are_answered_then_closed(lab: Path) -> None:
+    """A RegisterSession and a ListServices sealed in two records and sent in one write with the
+    client's close_notify: both are answered, the adapter answers the close_notify with its own and
+    closes, and the connection leaves the server's set (on the lane and on asyncio's loop alike)."""
+    import asyncio
+
+    from cipstack.adapter import Adapter, AdapterSettings
+
+    async with Adapter(AdapterSettings(port=0, io_port=0, security=lab, security_port=0)) as adapter:
+        tls = adapter.tls
+        assert tls is not None
+        context = Credentials.load(lab).client_context()
+
+        def exchange() -> tuple[bytes, bytes]:
+            with socket.create_connection(("127.0.0.1", tls.port), timeout=10) as sock:
+                incoming, outgoing = ssl.MemoryBIO(), ssl.MemoryBIO()
+                client = context.wrap_bio(incoming, outgoing)
+                while True:
+                    try:
+                        client.do_handshake()
+                        break
+                    except ssl.SSLWantReadError:
+                        sock.sendall(outgoing.read())
+                        incoming.write(sock.recv(65536))
+                client.write(REGISTER_SESSION)
+                client.write(struct.pack("<HHII8sI", 0x0004, 0, 0, 0, b"services", 0))   # ListServices
+                with contextlib.suppress(ssl.SSLWantReadError):   # the adapter's close_notify: not yet
+                    client.unwrap()
+                sock.sendall(outgoing.read())   # two records and the close_notify, in one write
+                plain, notified = b"", False
+                while data := sock.recv(65536):
+                    incoming.write(data)
+                    try:
+                        while chunk := client.read(65536):
+                            plain += chunk
+                    except ssl.SSLWantReadError:
+                        pass
+                    except ssl.SSLZeroReturnError:   # the adapter's close_notify, before its FIN
+                        notified = True
+                return plain, notified
+
+        plain, notified = await asyncio.to_thread(exchange)
+        assert notified
+        # RegisterSession's reply (28 bytes, status 0), then ListServices' (status 0, "Communications").
+        assert struct.unpack_from("<HH", plain) == (0x0065, 4) and struct.unpack_from("<I", plain, 8) == (0,)
+        assert struct.unpack_from("<H", plain, 28) == (0x0004,) and struct.unpack_from("<I", plain, 36) == (0,)
+        assert plain[40:48] == b"services" and b"Communications" in plain[52:]
+        await wait_until(lambda: not tls.connections, timeout=5, what="the connection closed")
 
 
 def test_plain_scanner_on_the_tls_port_gets_one_line(device: Device) -> None:

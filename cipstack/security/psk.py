@@ -1,12 +1,13 @@
 """Pre-shared keys in an OpenSSL handshake: the PSK callbacks of a pyOpenSSL context, both roles,
-and the few other OpenSSL calls pyOpenSSL does not make public (``written``, ``verify_message``).
+and the few other OpenSSL calls pyOpenSSL does not make public (``written``, ``unread``,
+``verify_message``).
 
 pyOpenSSL (26.x) has no PSK API. The ``cryptography`` package it is built on exposes OpenSSL's
 ``SSL_CTX_set_psk_server_callback``, ``SSL_CTX_set_psk_client_callback`` and
 ``SSL_CTX_use_psk_identity_hint`` in its bindings, which pyOpenSSL re-exports as
 ``OpenSSL._util.lib``/``ffi``, and they take the OpenSSL pointers pyOpenSSL keeps in its objects
-(``Context._context``, ``Connection._ssl``, ``Connection._from_ssl``): private names, used here and
-nowhere else. What guards them:
+(``Context._context``, ``Connection._ssl``, ``Connection._from_ssl``, ``Connection._into_ssl``):
+private names, used here and nowhere else. What guards them:
 ``bindings()`` checks ``lib.Cryptography_HAS_PSK`` and each function, and a build without them is one
 ``SecurityError`` line, never an ``AttributeError`` in the middle of a handshake. The standard library
 has ``SSLContext.set_psk_server_callback`` only from Python 3.13, and no DTLS at all: one path
@@ -64,7 +65,7 @@ def bindings() -> tuple[Any, Any]:
     others = ("BIO_get_mem_data", "SSL_get_verify_result", "X509_verify_cert_error_string")
     connection = SSL.Connection(SSL.Context(SSL.TLS_METHOD), None)
     pointers = (hasattr(connection.get_context(), "_context") and hasattr(connection, "_ssl")
-                and hasattr(connection, "_from_ssl"))
+                and hasattr(connection, "_from_ssl") and hasattr(connection, "_into_ssl"))
     if not pointers or not all(hasattr(lib, name) for name in others):
         raise SecurityError("pre-shared keys: this pyOpenSSL keeps its OpenSSL pointers otherwise than "
                             "cipstack.security.psk expects (26.x does)")
@@ -151,6 +152,13 @@ def written(connection: Any) -> int:
     shell asks for them only when there are some (``Connection.bio_read`` of an empty BIO raises)."""
     lib, ffi = bindings()
     return int(lib.BIO_get_mem_data(connection._from_ssl, ffi.NULL))
+
+
+def unread(connection: Any) -> int:
+    """Octets of ciphertext ``connection`` was given and has not read yet (``BIO_get_mem_data`` of its
+    incoming BIO): the records after the one being read, which ``SSL_pending`` does not count."""
+    lib, ffi = bindings()
+    return int(lib.BIO_get_mem_data(connection._into_ssl, ffi.NULL))
 
 
 def verify_message(connection: Any) -> str:

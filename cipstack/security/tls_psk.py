@@ -23,7 +23,17 @@ from typing import TYPE_CHECKING, Any
 
 from ..errors import PeerUnreachable, SecurityError
 from .dtls import KeyLog, check_crl, require_pyopenssl
-from .psk import PSK_SUITES, PskServer, explain, offer_psk, reason_code, serve_psk, verify_message, written
+from .psk import (
+    PSK_SUITES,
+    PskServer,
+    explain,
+    offer_psk,
+    reason_code,
+    serve_psk,
+    unread,
+    verify_message,
+    written,
+)
 
 if TYPE_CHECKING:
     from OpenSSL import SSL
@@ -123,7 +133,10 @@ class TlsObject:
         self._call(self.connection.shutdown)
 
     def pending(self) -> int:
-        return int(self.connection.pending())
+        """Plaintext of the record being read, and the ciphertext of those after it: pyOpenSSL was
+        given every octet the incoming BIO had (``_call``), so ``MemoryBIO.pending`` no longer counts
+        them (``tls_session`` reads while either waits)."""
+        return int(self.connection.pending()) + unread(self.connection)
 
     def version(self) -> str | None:
         return str(self.connection.get_protocol_version_name())

@@ -1,10 +1,15 @@
 """EtherNet/IP over TLS (TCP 2221) as a shell around the same sans-I/O target.
 
-Each accepted connection runs a server-side ``ssl.SSLObject`` over two ``ssl.MemoryBIO``s: bytes
-from the socket go into the incoming BIO, the plaintext the TLS layer yields goes to the same
-``EncapsulationConnection`` a plain TCP connection on 44818 gets (``EncapsulationTarget.connection``),
-and its replies go back through the TLS layer. Sessions, the message router, the Connection Manager
-and the class 3 timers are the target's own: TLS adds transport, no behaviour.
+Each accepted connection runs a ``TlsSession`` (``tls_session``): a server-side ``ssl.SSLObject``
+over two ``ssl.MemoryBIO``s, whose plaintext goes to the same ``EncapsulationConnection`` a plain
+TCP connection on 44818 gets (``EncapsulationTarget.connection``), and whose replies go back through
+the TLS layer. Sessions, the message router, the Connection Manager and the class 3 timers are the
+target's own: TLS adds transport, no behaviour.
+
+On a ``PreciseEventLoop`` (the command line's) the listener and its connections are served on the
+loop's lane (``tls_lane``), as 44818's are (``tcp_lane``): a request costs one ``recv``, one record
+opened, the core, one record sealed and one ``send``, with no asyncio handle or transport between
+them. On any other loop they go through asyncio's transports (``_TlsProtocol``), by the same rules.
 
 A handshake that fails (plain EtherNet/IP or garbage on the port, no client certificate, one from
 another CA, no suite in common) closes that connection only: it is counted in ``refused`` and logged
@@ -18,24 +23,27 @@ version (OpENer issue #228).
 from __future__ import annotations
 
 import asyncio
-import contextlib
 import logging
 import socket
 import ssl
 from collections.abc import Callable
 from typing import TYPE_CHECKING
 
-from ..eip.target.limits import DEFAULT_MAX_TCP_CONNECTIONS, ConnectionLimiter, RateLimitedLog
+from ..eip.precise_loop import lane_of
+from ..eip.target.limits import DEFAULT_MAX_TCP_CONNECTIONS, ConnectionLimiter, RateLimitedLog, guarded_listener
 from ..eip.target.seams import ReplySeam
+from ..eip.target.tcp_lane import LaneListener
 from ..eip.wire.cpf import SockAddr
 from ..errors import CipstackError
-from .credentials import SECURE_PORT, describe_tls_failure
+from .credentials import SECURE_PORT
+from .tls_lane import LaneTlsConnection
+from .tls_session import LINGER, TlsSession, named_identity
 
 if TYPE_CHECKING:
     from ..eip.target.core import EncapsulationConnection, EncapsulationTarget
     from ..eip.target.seams import SecuredSeam
     from .credentials import Credentials
-    from .tls_psk import PskTlsContext, TlsObject
+    from .tls_psk import PskTlsContext
 
 log = logging.getLogger(__name__)
 
@@ -45,33 +53,27 @@ Recipe = Callable[["Credentials"], "ssl.SSLContext | PskTlsContext"]
 
 #: Seconds a TLS handshake has from the connection's accept.
 HANDSHAKE_TIMEOUT = 10.0
-#: Seconds a refused connection is kept half-closed, its alert sent and what still comes discarded,
-#: before it is reset: closed at once, data the peer sent after its handshake would make the kernel
-#: reset the connection, and the peer could lose the alert that says why.
-LINGER = 2.0
-#: Plaintext asked of the TLS layer per read.
-_READ_SIZE = 65536
 
 
 class _TlsProtocol(asyncio.Protocol):
-    """One TCP connection on the TLS port: the TLS layer in memory, then the encapsulation core."""
+    """One TCP connection on the TLS port served through asyncio's transport (on a loop other than the
+    precise one): its ``TlsSession`` between the transport and the encapsulation core."""
 
     def __init__(self, server: TlsServer) -> None:
         self.server = server
         self.loop = server.loop
         self.transport: asyncio.Transport | None = None
-        self.connection: EncapsulationConnection | None = None
+        self.session: TlsSession | None = None
         self.host = "?"
         self.peer = "?"
         self._admitted = False
-        self._incoming = ssl.MemoryBIO()
-        self._outgoing = ssl.MemoryBIO()
-        self._tls: ssl.SSLObject | TlsObject | None = None
-        self._context: ssl.SSLContext | PskTlsContext | None = None
-        self._local = SockAddr("0.0.0.0", server.port)
         self._timer: asyncio.TimerHandle | None = None
         self._timer_at: float | None = None
         self._refused = False
+
+    @property
+    def connection(self) -> EncapsulationConnection | None:
+        return self.session.connection if self.session is not None else None
 
     # -- asyncio's callbacks ------------------------------------------------------------------------
     def connection_made(self, transport: asyncio.BaseTransport) -> None:
@@ -88,51 +90,51 @@ class _TlsProtocol(asyncio.Protocol):
         self.transport = transport
         self.server.connections.add(self)
         sockname = transport.get_extra_info("sockname")
-        if sockname:
-            self._local = SockAddr(sockname[0], sockname[1])
+        local = SockAddr(sockname[0], sockname[1]) if sockname else SockAddr("0.0.0.0", self.server.port)
         sock = transport.get_extra_info("socket")
         if sock is not None:
             sock.setsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY, 1)
         transport.set_write_buffer_limits(high=64 * 1024)
-        try:
-            self._context = self.server.handshake_context()
-        except (CipstackError, ssl.SSLError, OSError) as exc:   # what a fault presents did not load
-            self.server.refuse(self.host, f"TLS connection from {self.peer} refused: {exc}")
-            transport.abort()
-            return
-        self._tls = self._context.wrap_bio(self._incoming, self._outgoing, server_side=True)
+        self.session = self.server.session(self.peer, local)
         self._timer_at = self.loop.time() + self.server.handshake_timeout
         self._timer = self.loop.call_at(self._timer_at, self._on_timer)
 
     def data_received(self, data: bytes) -> None:
-        tls, transport = self._tls, self.transport
-        if tls is None or transport is None or transport.is_closing() or self._refused:
+        session, transport = self.session, self.transport
+        if session is None or transport is None or transport.is_closing() or self._refused:
             return   # a refused connection's last bytes are discarded
-        self._incoming.write(data)
-        if self.connection is None and not self._handshake(tls):
+        handshaking = session.connection is None
+        replies = session.receive(data, self.loop.time())
+        if session.refusal is not None:
+            self._flush()   # the alert that tells the peer why
+            self.server.refuse(self.host, f"TLS handshake from {self.peer} refused: {session.refusal}")
+            self._linger()
             return
-        plain = []
-        try:
-            while True:
-                chunk = tls.read(_READ_SIZE)
-                if not chunk:
-                    break
-                plain.append(chunk)
-        except ssl.SSLWantReadError:
-            pass
-        except ssl.SSLZeroReturnError:   # close_notify: the peer is done
-            self._serve(b"".join(plain))
-            self._flush()
-            transport.close()
+        connection = session.connection
+        if connection is None:
+            self._flush()   # the handshake's next flight
             return
-        except ssl.SSLError as exc:
-            log.info("%s: TLS connection closed: %s", self.peer, describe_tls_failure(exc))
-            self._flush()
-            transport.close()
-            return
-        if plain:
-            self._serve(b"".join(plain))
+        if handshaking and self._timer is not None:   # done: the connection's own timers from now on
+            self._timer.cancel()
+            self._timer = None
+        if replies:
+            held = self.server.replies.filter
+            if held is None:
+                session.send(replies)
+            else:   # a fault at the reply seam (delayed replies) acts on TLS as on 44818
+                held.reply(self, replies)
+        if session.ended:
+            session.close_notify()   # ours answers the peer's, after the replies
         self._flush()
+        if session.ended or connection.closing:
+            transport.close()
+        elif self._timer is None:
+            self._arm()
+        elif connection.frame_started is not None:
+            frame_deadline = connection.frame_deadline()
+            if frame_deadline is not None and self._timer_at is not None and frame_deadline < self._timer_at:
+                self._timer.cancel()
+                self._arm()
 
     def pause_writing(self) -> None:
         if self.transport is not None:
@@ -148,41 +150,7 @@ class _TlsProtocol(asyncio.Protocol):
             self._timer = None
         if self._admitted:
             self._admitted = False
-            self.server.limiter.release(self.host)
-            self.server.connections.discard(self)
-            if self.connection is not None:
-                self.connection.connection_lost()
-                log.info("%s: TLS connection closed", self.peer)
-
-    # -- the TLS layer --------------------------------------------------------------------------------
-    def _handshake(self, tls: ssl.SSLObject | TlsObject) -> bool:
-        """Go on with the handshake; True once it is done (the core's connection then exists)."""
-        assert self.transport is not None
-        try:
-            tls.do_handshake()
-        except ssl.SSLWantReadError:
-            self._flush()
-            return False
-        except (ssl.SSLError, ValueError) as exc:
-            self._flush()   # the alert that tells the peer why
-            cause = _cause(tls, exc)
-            if cause.startswith("no cipher suite in common") and self._context is not None:
-                from .authority import allowed_names
-
-                cause = f"{cause}: the device allows {allowed_names(self._context)}"
-            self.server.refuse(self.host, f"TLS handshake from {self.peer} refused: {cause}")
-            self._linger()
-            return False
-        self._flush()
-        if self._timer is not None:
-            self._timer.cancel()
-            self._timer = None
-        self.connection = self.server.target.connection(self.peer, self._local, self.loop.time())
-        identity = getattr(tls, "psk_identity", None)
-        log.info("%s: TLS connection accepted (%s, %s%s)", self.peer, tls.version(), (tls.cipher() or ("?",))[0],
-                 named_identity(identity))
-        self._arm()
-        return True
+            self.server.closed(self, self.host, self.connection)
 
     def _linger(self) -> None:
         """Half-close a refused connection: the alert goes out with a FIN, what the peer still sends is
@@ -201,44 +169,14 @@ class _TlsProtocol(asyncio.Protocol):
     def eof_received(self) -> bool | None:
         return None   # the transport closes: a refused peer is done, or an accepted one closed its side
 
-    def _serve(self, plain: bytes) -> None:
-        connection, tls, transport = self.connection, self._tls, self.transport
-        if connection is None or tls is None or transport is None or not plain:
-            return
-        connection.receive(plain, self.loop.time())
-        out = connection.data_to_send()
-        if out:
-            held = self.server.replies.filter
-            if held is None:
-                self._write(out)
-            else:   # a fault at the reply seam (delayed replies) acts on TLS as on 44818
-                held.reply(self, out)
-        if connection.closing:
-            self._flush()
-            transport.close()
-        elif self._timer is None:
-            self._arm()
-        elif connection.frame_started is not None:
-            frame_deadline = connection.frame_deadline()
-            if frame_deadline is not None and self._timer_at is not None and frame_deadline < self._timer_at:
-                self._timer.cancel()
-                self._arm()
-
-    def _write(self, out: bytes) -> None:
-        if out and self._tls is not None:
-            try:
-                self._tls.write(out)
-            except ssl.SSLError as exc:
-                log.debug("%s: TLS write: %s", self.peer, exc)
-
     def send_reply(self, out: bytes) -> None:
         """Send reply bytes taken from the connection earlier (a reply the reply seam held back)."""
-        if self.transport is not None and not self.transport.is_closing():
-            self._write(out)
+        if self.session is not None and self.transport is not None and not self.transport.is_closing():
+            self.session.send(out)
             self._flush()
 
     def _flush(self) -> None:
-        out = self._outgoing.read()
+        out = self.session.data_to_send() if self.session is not None else b""
         if out and self.transport is not None and not self.transport.is_closing():
             self.transport.write(out)
 
@@ -269,27 +207,10 @@ class _TlsProtocol(asyncio.Protocol):
 
     def close(self) -> None:
         if self.transport is not None:
-            if self._tls is not None and self.connection is not None:
-                with contextlib.suppress(ssl.SSLError):
-                    self._tls.unwrap()
+            if self.session is not None:
+                self.session.close_notify()
                 self._flush()
             self.transport.close()
-
-
-def named_identity(identity: bytes | None) -> str:
-    """``, PSK identity 'x'`` for a handshake made with a pre-shared key, else nothing."""
-    return f", PSK identity '{identity.decode('ascii', 'replace')}'" if identity else ""
-
-
-def _cause(tls: ssl.SSLObject | TlsObject, exc: BaseException) -> str:
-    """Why a handshake failed; with a pre-shared key, the identity the peer named."""
-    identity = getattr(tls, "psk_identity", None)
-    reason = getattr(exc, "reason", None)
-    if identity and reason:
-        from .psk import explain
-
-        return explain(reason, identity) or describe_tls_failure(exc)
-    return describe_tls_failure(exc)
 
 
 class TlsServer:
@@ -322,9 +243,10 @@ class TlsServer:
         self.refused_log = RateLimitedLog(log)
         #: Connections refused (limits, handshakes that failed or timed out) since the start.
         self.refused = 0
-        self.connections: set[_TlsProtocol] = set()
+        self.connections: set[_TlsProtocol | LaneTlsConnection] = set()
         self.loop: asyncio.AbstractEventLoop
-        self._server: asyncio.base_events.Server | None = None
+        #: The listener: asyncio's server, or on a ``PreciseEventLoop`` the lane's (``tls_lane``).
+        self._server: asyncio.base_events.Server | LaneListener | None = None
 
     def handshake_context(self) -> ssl.SSLContext | PskTlsContext:
         """The context of a new connection: ``context``, or while a fault is in the seam the one made
@@ -343,6 +265,26 @@ class TlsServer:
         self.refused += 1
         self.refused_log("%s", line, source=source)
 
+    # -- what both kinds of connection (``_TlsProtocol``, ``LaneTlsConnection``) share -------------------
+    def session(self, peer: str, local: SockAddr) -> TlsSession:
+        """The TLS layer of a connection accepted from ``peer`` on ``local``, with the context a fault in
+        the seam makes; one that does not load refuses the connection (``TlsSession.refusal``)."""
+        target = self.target
+        try:
+            return TlsSession(self.handshake_context(), lambda now: target.connection(peer, local, now), peer)
+        except (CipstackError, ssl.SSLError, OSError) as exc:   # what a fault presents did not load
+            return TlsSession(self.context, lambda now: target.connection(peer, local, now), peer,
+                              refusal=f"what the fault presents did not load: {exc}")
+
+    def closed(self, served: _TlsProtocol | LaneTlsConnection, host: str,
+               connection: EncapsulationConnection | None) -> None:
+        """An admitted connection has ended: its host's place is free, its sessions end with it."""
+        self.limiter.release(host)
+        self.connections.discard(served)
+        if connection is not None:
+            connection.connection_lost()
+            log.info("%s: TLS connection closed", connection.peer)
+
     @property
     def is_open(self) -> bool:
         return self._server is not None
@@ -350,9 +292,18 @@ class TlsServer:
     async def start(self) -> None:
         """Listen on the TLS port (0: any free one, read back in ``port``)."""
         self.loop = asyncio.get_running_loop()
-        self._server = await self.loop.create_server(lambda: _TlsProtocol(self), self.host, self.port,
-                                                     reuse_address=True)
-        self.port = self._server.sockets[0].getsockname()[1]
+        lane = lane_of(self.loop)
+        if lane is not None:
+            listener = guarded_listener(self.host, self.port, listen=False)
+            self.port = listener.getsockname()[1]
+            self._server = LaneListener(listener, lane, lambda sock, peer: LaneTlsConnection.accepted(
+                self, sock, peer, lane))
+            self._server.start_serving()
+        else:
+            server = await self.loop.create_server(lambda: _TlsProtocol(self), self.host, self.port,
+                                                   reuse_address=True)
+            self.port = server.sockets[0].getsockname()[1]
+            self._server = server
         log.info("EtherNet/IP over TLS listening on %s:%d (TCP)", self.host, self.port)
 
     async def close(self) -> None:
@@ -362,7 +313,8 @@ class TlsServer:
         server.close()
         for connection in list(self.connections):
             connection.close()
-        await server.wait_closed()
+        if not isinstance(server, LaneListener):
+            await server.wait_closed()
 
 
 __all__ = ["HANDSHAKE_TIMEOUT", "Recipe", "TlsServer", "named_identity"]

@@ -410,7 +410,8 @@ class EncapsulationServer:
         lane = lane_of(self.loop)
         try:
             if lane is not None:
-                self._tcp = LaneListener(self, listener, lane)
+                self._tcp = LaneListener(listener, lane, lambda sock, peer: LaneTcpConnection.accepted(
+                    self, sock, peer, lane))
             else:
                 self._tcp = await self.loop.create_server(lambda: _TcpProtocol(self), sock=listener,
                                                           backlog=LISTEN_BACKLOG, start_serving=False)

@@ -27,6 +27,7 @@ import errno
 import logging
 import select
 import socket
+from collections.abc import Callable
 from time import monotonic
 from typing import TYPE_CHECKING
 
@@ -53,13 +54,15 @@ _WRITABLE = select.EPOLLOUT
 
 
 class LaneListener:
-    """The server's listening socket on the lane: accepts and hands each connection to a
-    ``LaneTcpConnection``. Made on a bound socket; ``start_serving`` listens."""
+    """A listening socket on the lane: accepts and hands each connection to ``accepted(sock, peer)``
+    (``LaneTcpConnection.accepted`` for 44818, the TLS port's own for 2221). Made on a bound socket;
+    ``start_serving`` listens."""
 
-    def __init__(self, server: EncapsulationServer, sock: GuardedListener, lane: IoLane) -> None:
-        self.server = server
+    def __init__(self, sock: GuardedListener, lane: IoLane,
+                 accepted: Callable[[socket.socket, tuple[str, int]], object]) -> None:
         self.sock = sock
         self.lane = lane
+        self.accepted = accepted
         self._fd = sock.fileno()
 
     def start_serving(self) -> None:
@@ -77,7 +80,7 @@ class LaneListener:
                 if exc.errno not in (errno.ECONNABORTED, errno.EPROTO, errno.EPERM):
                     return
                 continue
-            LaneTcpConnection.accepted(self.server, sock, peer, self.lane)
+            self.accepted(sock, peer)
 
     def close(self) -> None:
         self.lane.remove_reader(self._fd)
