@@ -303,10 +303,11 @@ def build_parser(command: str | None = None, texts: bool = True) -> argparse.Arg
         p.set_defaults(func=cmd_plant)
 
     if wanted("models"):
+        from ..devices.profiles import PROFILES
         from .emulators import cmd_models
 
         p = sub.add_parser("models")
-        p.add_argument("--profile", choices=["mx2", "rx"], help="one family only (default: both)")
+        p.add_argument("--profile", choices=list(PROFILES), help="one family only (default: every family)")
         p.add_argument("--json", action="store_true", help="one JSON object per line")
         p.set_defaults(func=cmd_models)
 
