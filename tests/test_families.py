@@ -41,8 +41,17 @@ def _build(interface, limits, options):
     return identity_only_device(interface, limits)
 
 
+def describe():
+    # A plug-in may use the EDS tool: it sits above cipstack, not inside its devices.
+    from cipstack.eds.profiles import acg_et2_description
+    from cipstack.objects.identity import IdentityInfo
+
+    return acg_et2_description(identity=IdentityInfo(1234, 2, 7, (1, 2), 1, "Block One"))
+
+
 BLOCK = Profile("block", "a block from elsewhere", _build, vendor_id=1234, product_codes=frozenset({7}),
-                model_info=lambda: (ModelInfo("BLK-1", 7, "Block One"),))
+                model_info=lambda: (ModelInfo("BLK-1", 7, "Block One"),), eds="block_family:describe")
+PLAIN = Profile("plain", "a family without an EDS file", _build)
 
 
 def make_block():
@@ -179,3 +188,24 @@ def test_a_broken_installed_plugin_leaves_the_other_commands_working(tmp_path: P
     assert asked.returncode != 0 and "Traceback" not in asked.stderr
     assert "device family 'block' of distribution block-dist" in asked.stderr
     assert len(asked.stderr.strip().splitlines()) == 1
+
+
+def test_the_eds_tool_describes_a_family_by_its_declaration(tmp_path: Path) -> None:
+    """``cipstack eds generate`` holds no table of families: a plug-in's family has its file made by the
+    function its declaration names, and a family that declares none is one line."""
+    env = _installed(tmp_path, f"""
+        [{GROUP}]
+        block = block_family:BLOCK
+        plain = block_family:PLAIN
+        """)
+    out = tmp_path / "eds"
+    made = subprocess.run([sys.executable, "-m", "cipstack", "eds", "generate", "--profile", "block", "-o", str(out)],
+                          capture_output=True, text=True, env=env, timeout=120)
+    assert made.returncode == 0, made.stderr
+    (path,) = out.iterdir()
+    text = path.read_text(encoding="ascii")
+    assert made.stdout == f"{path}\n" and "VendCode = 1234;" in text and "ProdCode = 7;" in text
+    assert 'ProdName = "Block One";' in text
+    refused = subprocess.run([sys.executable, "-m", "cipstack", "eds", "generate", "--profile", "plain", "-o",
+                              str(out)], capture_output=True, text=True, env=env, timeout=120)
+    assert (refused.returncode, refused.stderr) == (2, "cipstack eds generate: profile plain declares no EDS file\n")

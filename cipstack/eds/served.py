@@ -14,7 +14,7 @@ FILE_NAME = "EDS.txt"
 
 @functools.cache
 def profile_eds_file(profile: str, model: str | None = None) -> StoredFile:
-    """The EDS file of an emulated profile (``acg``, ``mx2``, ``rx``) and model, generated when first
+    """The EDS file of an emulated profile and model (as its ``Profile.eds`` describes it), generated when first
     read (the ACG's takes about half a second) and then kept: the devices of one profile and model
     in a process (a fleet's) share it."""
     from ..devices.profiles import PROFILES
