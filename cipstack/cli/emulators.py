@@ -26,7 +26,7 @@ def cmd_adapter(args: argparse.Namespace) -> int:
     from ..adapter import Adapter, AdapterSettings
     from ..devices.profiles import DEFAULT_PROFILE, PROFILES, check_model
     from ..devices.state import StateFileError, default_state_path
-    from ..eds.served import profile_eds_file
+    from ..eds.served import profile_eds_files
 
     if args.eds is not None:
         return _adapter_from_eds(args)
@@ -50,7 +50,7 @@ def cmd_adapter(args: argparse.Namespace) -> int:
                                max_sessions=args.max_sessions, max_connections=args.max_connections,
                                io_port=args.io_port, control_path=args.control,
                                status_lines=not args.quiet, state_path=args.state, modbus_port=args.modbus_port,
-                               rtu=args.rtu, files=(profile_eds_file(args.profile, args.model),),
+                               rtu=args.rtu, files=profile_eds_files(args.profile, args.model),
                                **_limit_settings(args), **_http_settings(args), **_security_settings(args))
     try:
         adapter = Adapter(settings)

@@ -33,6 +33,14 @@ def profile_eds_file(profile: str, model: str | None = None) -> StoredFile:
     return eds_file(FILE_NAME, FILE_REVISION, content)
 
 
+def profile_eds_files(profile: str, model: str | None = None) -> tuple[StoredFile, ...]:
+    """What a device of ``profile`` serves in its File object: its EDS file (``profile_eds_file``), or
+    nothing for a family that declares none (``Profile.eds``)."""
+    from ..devices.profiles import PROFILES
+
+    return (profile_eds_file(profile, model),) if PROFILES[profile].eds is not None else ()
+
+
 def document_eds_file(data: bytes, revision: tuple[int, int]) -> StoredFile:
     """The EDS file a device emulated from that file serves: the file itself, byte for byte."""
     return eds_file(FILE_NAME, revision, lambda: data)

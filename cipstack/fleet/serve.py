@@ -21,7 +21,7 @@ from ..control.service import DeviceService
 from ..devices.acg.modbus_rtu import LineSettings
 from ..devices.profiles import mac_for_address
 from ..devices.state import StateFileError
-from ..eds.served import profile_eds_file
+from ..eds.served import profile_eds_files
 from ..eip.io_core import ProductionGrid
 from ..eip.io_server import freeze_startup_objects
 from ..eip.wire.encapsulation import SECURE_PORT
@@ -93,7 +93,7 @@ def build_adapter(device: FleetDevice, port: int, io_port: int, grid: Production
     # Each device carries its EDS file in its File object, as the single adapter's does.
     settings = AdapterSettings(host=device.address, port=port, io_port=io_port, profile=device.profile,
                                model=device.model, state_path=device.state_path, mac=mac_for_address(device.address),
-                               files=(profile_eds_file(device.profile, device.model),),
+                               files=profile_eds_files(device.profile, device.model),
                                security=security.folder if security is not None else None,
                                security_port=security.port if security is not None else SECURE_PORT)
     try:
