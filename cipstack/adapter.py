@@ -156,16 +156,16 @@ class Adapter:
         product = self.device.identity_info.product_name
         if s.rtu is not None and (modbus_drive is None or modbus_drive.rtu is None):
             raise BadRequest(f"profile {s.profile!r} has no RS-485 Modbus-RTU port (the ACG drive has)")
-        if s.modbus_port is not None and modbus_drive is None:
+        if s.modbus_port is not None and (modbus_drive is None or modbus_drive.tcp is None):
             raise BadRequest(f"profile {s.profile!r} has no Modbus TCP (the ACG-ET2 card speaks it)")
         self.modbus_drive = modbus_drive
         self.modbus: ModbusTcpServer | None = None
-        if s.modbus_port is not None and modbus_drive is not None:
-            self.modbus = ModbusTcpServer(modbus_drive.drive, s.host, s.modbus_port, saves=modbus_drive.saves,
+        if s.modbus_port is not None and modbus_drive is not None and modbus_drive.tcp is not None:
+            self.modbus = ModbusTcpServer(modbus_drive.tcp(register_relay("modbus-tcp", self.observers)), s.host,
+                                          s.modbus_port, saves=modbus_drive.saves,
                                           max_connections=s.max_tcp_connections,
                                           max_connections_per_host=s.max_tcp_connections_per_host,
-                                          frame_timeout=s.frame_timeout,
-                                          written=register_relay("modbus-tcp", self.observers))
+                                          frame_timeout=s.frame_timeout)
         #: The drive's RS-485 port with ``settings.rtu``: its line opens when the adapter starts.
         self.rs485 = Rs485Port(self._open_rtu_line) if s.rtu is not None else None
         # Class 1 first: the encapsulation target offers it to the Connection Manager (``RequestContext.class1``).

@@ -70,6 +70,9 @@ class ModbusDrive:
     drive: Callable[[], Any]
     saves: StateWriter | None = None
     rtu: RtuPort | None = None
+    #: Its Modbus TCP: ``tcp(written)`` makes the sans-I/O core (``tcp_server.TcpCore``) the server's shell
+    #: runs; None for a drive without Modbus TCP.
+    tcp: Callable[[RegisterWritten | None], Any] | None = None
     #: The device's name for a one-line error (``--modbus-port`` on a device without Modbus).
 
 

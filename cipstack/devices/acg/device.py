@@ -53,6 +53,7 @@ from ..state import ParameterStore, StateWriter
 from . import registers as reg
 from .drive import FAMILY, MODEL, AcgDrive, Trip
 from .keypad import AcgKeypad
+from .modbus import ModbusTcpCore
 from .modbus_rtu import MAX_DRIVES_PER_LINE, LineSettings, RtuSlave
 from .objects import (
     CATALOG_CLASSES,
@@ -321,7 +322,7 @@ class AcgDevice(Device):
         rtu = RtuPort(lambda paced, written: RtuSlave(drive, paced, written),
                       lambda: LineSettings.from_drive(self.drive), MAX_DRIVES_PER_LINE,
                       "ACG RS-485 manual, Communication Standards")
-        return ModbusDrive(drive, self.saves, rtu)
+        return ModbusDrive(drive, self.saves, rtu, tcp=lambda written: ModbusTcpCore(drive, written))
 
     def power_cycle(self, now: float) -> None:
         """The drive and its ACG-ET2 card lose power and get it back at ``now``: the drive comes back with
