@@ -15,7 +15,6 @@ from typing import TYPE_CHECKING, Any
 from .control import ControlAddress, ControlServer, ControlTaken, default_control_path
 from .control.events import EventStream
 from .control.service import DeviceService
-from .devices.acg.modbus_rtu import LineSettings
 from .devices.base import Device, DeviceLimits
 from .devices.keypad import Keypad, NoKeypad
 from .devices.profiles import DEFAULT_MAC, DEFAULT_PROFILE, ProfileOptions, build_device
@@ -151,18 +150,18 @@ class Adapter:
         # The ports the device's family declares beside EtherNet/IP (the ACG's Modbus TCP and RS-485).
         modbus_drive = self.device.modbus_drive()
         product = self.device.identity_info.product_name
-        if s.rtu is not None and modbus_drive is None:
+        if s.rtu is not None and (modbus_drive is None or modbus_drive.rtu is None):
             raise BadRequest(f"profile {s.profile!r} has no RS-485 Modbus-RTU port (the ACG drive has)")
-        if s.modbus_port is not None and modbus_drive is None:
+        if s.modbus_port is not None and (modbus_drive is None or modbus_drive.tcp is None):
             raise BadRequest(f"profile {s.profile!r} has no Modbus TCP (the ACG-ET2 card speaks it)")
         self.modbus_drive = modbus_drive
         self.modbus: ModbusTcpServer | None = None
-        if s.modbus_port is not None and modbus_drive is not None:
-            self.modbus = ModbusTcpServer(modbus_drive.drive, s.host, s.modbus_port, saves=modbus_drive.saves,
+        if s.modbus_port is not None and modbus_drive is not None and modbus_drive.tcp is not None:
+            self.modbus = ModbusTcpServer(modbus_drive.tcp(register_relay("modbus-tcp", self.observers)), s.host,
+                                          s.modbus_port, saves=modbus_drive.saves,
                                           max_connections=s.max_tcp_connections,
                                           max_connections_per_host=s.max_tcp_connections_per_host,
-                                          frame_timeout=s.frame_timeout,
-                                          written=register_relay("modbus-tcp", self.observers))
+                                          frame_timeout=s.frame_timeout)
         #: The drive's RS-485 port with ``settings.rtu``: its line opens when the adapter starts.
         self.rs485 = Rs485Port(self._open_rtu_line) if s.rtu is not None else None
         # Class 1 first: the encapsulation target offers it to the Connection Manager (``RequestContext.class1``).
@@ -415,9 +414,11 @@ class Adapter:
         """The RS-485 line on ``settings.rtu`` ("pty" or a serial device) with the drive on it: what
         the RS-485 port opens when the adapter starts (``RtuPortError`` if the device cannot be opened)."""
         drive = self.modbus_drive
-        assert drive is not None and self.settings.rtu is not None   # checked when the adapter was made
-        line = RtuLine(open_port(self.settings.rtu, LineSettings.from_drive(drive.drive())))
-        line.add(drive.drive, drive.saves, written=register_relay("modbus-rtu", self.observers))
+        # Checked when the adapter was made.
+        assert drive is not None and drive.rtu is not None and self.settings.rtu is not None
+        rtu = drive.rtu
+        line = RtuLine(open_port(self.settings.rtu, rtu.line_settings()), rtu.max_drives, rtu.source)
+        line.add(rtu.slave(line.port.paced, register_relay("modbus-rtu", self.observers)), drive.saves)
         return line
 
     @property

@@ -50,7 +50,7 @@ class Bench:
 async def modbus_port() -> AsyncIterator[int]:
     """A Modbus TCP server of a fresh ACG drive, for a scripted peer."""
     device = build_acg_device()
-    async with ModbusTcpServer(lambda: device.drive, "127.0.0.1", 0) as modbus:
+    async with ModbusTcpServer(ModbusTcpCore(lambda: device.drive), "127.0.0.1", 0) as modbus:
         yield modbus.port
 
 
@@ -60,7 +60,7 @@ async def bench(tmp_path: Path) -> AsyncIterator[Bench]:
     state_file = tmp_path / "acg.json"
     device = build_acg_device(state_path=state_file)
     async with Adapter(AdapterSettings(host="127.0.0.1", port=0, io_port=0), device=device) as adapter, \
-            ModbusTcpServer(lambda: device.drive, "127.0.0.1", 0, saves=device.saves) as modbus:
+            ModbusTcpServer(ModbusTcpCore(lambda: device.drive), "127.0.0.1", 0, saves=device.saves) as modbus:
         scanner = await Scanner.connect(f"127.0.0.1:{adapter.port}", catalog=Catalog(device.catalog_classes()))
         client = client_class("127.0.0.1", port=modbus.port, timeout=3)
         assert await client.connect()
@@ -250,7 +250,7 @@ async def test_connections_past_the_limit_are_closed_and_the_rest_served(caplog:
     than it would, it is closed at accept. One log line per refused address; the others are served."""
     device = build_acg_device()
     read_acc = bytes.fromhex("0001 0000 0006 01 03 1f01 0001")
-    async with ModbusTcpServer(lambda: device.drive, "127.0.0.1", 0, max_connections=4,
+    async with ModbusTcpServer(ModbusTcpCore(lambda: device.drive), "127.0.0.1", 0, max_connections=4,
                                max_connections_per_host=2) as modbus:
         async def connect(source: str) -> tuple[asyncio.StreamReader, asyncio.StreamWriter]:
             return await asyncio.open_connection("127.0.0.1", modbus.port, local_addr=(source, 0))

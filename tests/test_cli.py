@@ -293,7 +293,9 @@ def test_drive_trip_and_status_over_the_control_socket(tmp_path: Path) -> None:
 
 def test_mx2_rx_profiles_models_and_componet_gateway() -> None:
     models = [json.loads(line) for line in run("models", "--json").stdout.splitlines()]
-    assert len(models) == 61 and {m["profile"] for m in models} == {"mx2", "rx"}
+    # The ACG family's one model, then the 61 of Tables 2/3; every one brought by cipstack itself.
+    assert len(models) == 62 and [m["profile"] for m in models[:2]] == ["acg", "mx2"]
+    assert {m["profile"] for m in models[1:]} == {"mx2", "rx"} and {m["distribution"] for m in models} == {"cipstack"}
     for profile, model in (("mx2", "MX2-A2015-E"), ("rx", "RX-A4055-E")):
         entry = next(m for m in models if m["model"] == model)
         address, process = start_adapter("--profile", profile, "--model", model, "--quiet")

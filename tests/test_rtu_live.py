@@ -52,7 +52,8 @@ def pdu(code_or_address: str | int) -> int:
 @contextlib.asynccontextmanager
 async def line_with(drive: AcgDrive) -> AsyncIterator[tuple[RtuLine, RtuSlave]]:
     line = RtuLine(PtyPort())
-    slave = line.add(drive)
+    slave = RtuSlave(drive, line.port.paced)
+    line.add(slave)
     async with line:
         yield line, slave
 
@@ -307,7 +308,8 @@ async def test_a_serial_device_is_served_through_pyserial() -> None:
         port = SerialDevicePort(os.ttyname(slave_fd), LineSettings.from_drive(drive))
         assert not port.paced and port.serial.parity == "E" and port.serial.baudrate == 9600
         line = RtuLine(port)
-        slave = line.add(drive)
+        slave = RtuSlave(drive, port.paced)
+        line.add(slave)
         async with line:
             request = with_crc(bytes.fromhex("09 03") + pdu("ACC").to_bytes(2, "big") + bytes.fromhex("0001"))
             os.write(master, request)

@@ -106,7 +106,7 @@ async def test_a_save_the_state_file_does_not_take_is_exception_06(small_filesys
     Busy, the chapter's code for a drive that could not carry the request out; the drive goes on."""
     device = build_acg_device(state_path=small_filesystem / "acg.json", now=0.0)
     line = RtuLine(PtyPort())
-    line.add(lambda: device.drive, device.saves)
+    line.add(RtuSlave(lambda: device.drive, line.port.paced), device.saves)
     try:
         async with line:
             fd = os.open(line.name, os.O_RDWR | os.O_NOCTTY | os.O_NONBLOCK)

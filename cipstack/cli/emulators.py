@@ -26,7 +26,7 @@ def cmd_adapter(args: argparse.Namespace) -> int:
     from ..adapter import Adapter, AdapterSettings
     from ..devices.profiles import DEFAULT_PROFILE, PROFILES, check_model
     from ..devices.state import StateFileError, default_state_path
-    from ..eds.served import profile_eds_file
+    from ..eds.served import profile_eds_files
 
     if args.eds is not None:
         return _adapter_from_eds(args)
@@ -50,7 +50,7 @@ def cmd_adapter(args: argparse.Namespace) -> int:
                                max_sessions=args.max_sessions, max_connections=args.max_connections,
                                io_port=args.io_port, control_path=args.control,
                                status_lines=not args.quiet, state_path=args.state, modbus_port=args.modbus_port,
-                               rtu=args.rtu, files=(profile_eds_file(args.profile, args.model),),
+                               rtu=args.rtu, files=profile_eds_files(args.profile, args.model),
                                **_limit_settings(args), **_http_settings(args), **_security_settings(args))
     try:
         adapter = Adapter(settings)
@@ -290,16 +290,27 @@ def _adapter_from_eds(args: argparse.Namespace) -> int:
 
 
 def cmd_models(args: argparse.Namespace) -> int:
-    from ..devices.omron.models import MODELS
+    """Every model of every family installed, with the distribution that brought it (a family of one model
+    is one line); a family whose plug-in cannot be used is a line on stderr and exit status 1."""
+    from ..devices.profiles import PROFILES
 
-    for m in MODELS:
-        family = m.family.value.lower()
-        if args.profile and family != args.profile:
+    for name, profile in PROFILES.items():
+        if args.profile and name != args.profile:
             continue
-        _emit(args, {"profile": family, "model": m.name, "product_code": m.product_code,
-                     "product_name": m.product_name, "eds_file": m.eds_file},
-              f"{family:3}  {m.name:14}  product code {m.product_code:5}  {m.product_name:32}  {m.eds_file}")
-    return EXIT_OK
+        distribution = PROFILES.distribution(name)
+        models = profile.model_info()
+        if not models:
+            _emit(args, {"profile": name, "model": None, "description": profile.description,
+                         "distribution": distribution}, f"{name:3}  {'-':14}  {profile.description}  {distribution}")
+        for m in models:
+            _emit(args, {"profile": name, "model": m.name, "product_code": m.product_code,
+                         "product_name": m.product_name, "eds_file": m.eds_file, "distribution": distribution},
+                  f"{name:3}  {m.name:14}  product code {m.product_code:5}  {m.product_name:32}  "
+                  f"{m.eds_file or '-':36}  {distribution}")
+    problems = PROFILES.problems
+    for problem in problems.values():
+        print(f"cipstack models: {problem}", file=sys.stderr)
+    return EXIT_FAILURE if problems else EXIT_OK
 
 
 def cmd_componet(args: argparse.Namespace) -> int:

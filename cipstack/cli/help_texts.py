@@ -98,9 +98,11 @@ COMMANDS: dict[tuple[str, ...], CommandText] = {
           "two fleets on one machine, one API")),
     ),
     ("models",): CommandText(
-        "the MX2/RX models the mx2/rx profiles emulate (Tables 2/3)",
-        "List the Omron MX2 and RX models the mx2 and rx profiles emulate (Tables 2 and 3 of the option "
-        "board manual): model, product code and EDS file name.",
+        "the device families installed and their models",
+        "List every device family installed (cipstack's own and those other packages bring by the "
+        "cipstack.devices entry point) and its models: profile, model, product code, product name, EDS file "
+        "name and the distribution that brought it; a family of one model is one line. A family whose "
+        "plug-in cannot be loaded is reported on stderr (exit status 1).",
         (("cipstack models --profile mx2", "the MX2 models"),
          ("cipstack models --json", "every model, one JSON object per line")),
     ),

@@ -167,12 +167,13 @@ def build_parser(command: str | None = None, texts: bool = True) -> argparse.Arg
         p.add_argument("--port", type=number("port"), default=DEFAULT_PORT,
                        help="EtherNet/IP port, TCP and UDP (default %(default)s)")
         device = p.add_mutually_exclusive_group()
-        device.add_argument("--profile", help="device profile: acg (default), mx2, rx")
+        device.add_argument("--profile", help="device family: acg (default), mx2, rx, or one another package "
+                                                 "brings (`cipstack models` lists them)")
         _complete(device.add_argument("--eds", metavar="FILE",
                                       help="emulate the generic device an EDS file describes (identity, parameters "
                                            "as attributes, assemblies, connections)"), _FILE)
-        p.add_argument("--model", help="model of the mx2/rx profiles (e.g. MX2-A2015-E, RX-A4055-E; see "
-                                       "`cipstack models`)")
+        p.add_argument("--model", help="model of a family with models, e.g. the mx2/rx profiles' MX2-A2015-E, "
+                                       "RX-A4055-E (`cipstack models` lists them)")
         p.add_argument("--max-sessions", type=number("max sessions"), default=32, metavar="N",
                        help="encapsulation sessions at once; one more is refused with 0x0002 (default %(default)s)")
         p.add_argument("--max-sessions-per-host", type=number("max sessions per host"), metavar="N",
@@ -303,10 +304,11 @@ def build_parser(command: str | None = None, texts: bool = True) -> argparse.Arg
         p.set_defaults(func=cmd_plant)
 
     if wanted("models"):
+        from ..devices.profiles import PROFILES
         from .emulators import cmd_models
 
         p = sub.add_parser("models")
-        p.add_argument("--profile", choices=["mx2", "rx"], help="one family only (default: both)")
+        p.add_argument("--profile", choices=list(PROFILES), help="one family only (default: every family)")
         p.add_argument("--json", action="store_true", help="one JSON object per line")
         p.set_defaults(func=cmd_models)
 

@@ -43,13 +43,36 @@ class TripRefused(StateRefused, ValueError):
     """A trip the device's present state does not take (it is tripped already and keeps its first trip):
     the request was understood, the device said no."""
 
+#: Told of one register a Modbus request wrote: the drive, the address, the raw value, the time, and the
+#: request's source (a TCP peer's ``host:port``, the RTU station addressed).
+RegisterWritten = Callable[[Any, int, int, float, object], None]
+
+
+@dataclass(frozen=True)
+class RtuPort:
+    """A drive's RS-485 port as the line's shell (``cipstack.modbus.rtu_line``) serves it, declared by the
+    family: the shell knows no family's Modbus-RTU slave or register map."""
+
+    #: The drive's sans-I/O slave on a line: ``slave(paced, written)`` (``rtu_line.Slave``).
+    slave: Callable[[bool, RegisterWritten | None], Any]
+    #: The line settings the drive's registers give now (``rtu_line.LineSettings``): what the port opens at.
+    line_settings: Callable[[], Any]
+    #: The most drives one line takes, and where that bound comes from (for the message).
+    max_drives: int
+    source: str
+
+
 @dataclass(frozen=True)
 class ModbusDrive:
     """What a device hands its Modbus ports: the present drive (a device may replace its drive, on an
-    Identity reset or a power cycle) and the writer of its saves."""
+    Identity reset or a power cycle), the writer of its saves, and its RS-485 port if it has one."""
 
     drive: Callable[[], Any]
     saves: StateWriter | None = None
+    rtu: RtuPort | None = None
+    #: Its Modbus TCP: ``tcp(written)`` makes the sans-I/O core (``tcp_server.TcpCore``) the server's shell
+    #: runs; None for a drive without Modbus TCP.
+    tcp: Callable[[RegisterWritten | None], Any] | None = None
     #: The device's name for a one-line error (``--modbus-port`` on a device without Modbus).
 
 

@@ -42,6 +42,7 @@ def generate() -> dict[str, str]:
     """The modules of ``devices/declared/``, by file name, generated from the profiles' declarations."""
     from ..catalog import standard_classes
     from .profiles import PROFILES
+    from .registry import OWN_DISTRIBUTION
 
     standard = standard_classes()
 
@@ -50,7 +51,8 @@ def generate() -> dict[str, str]:
     identities: dict[tuple[int, int], str] = {}
     descriptions: dict[str, str] = {}
     for name, profile in PROFILES.items():
-        if profile.catalog is None:
+        # cipstack's own families: a family another distribution brings is not written into cipstack's files.
+        if profile.catalog is None or PROFILES.distribution(name) != OWN_DISTRIBUTION:
             continue
         for product_code in sorted(profile.product_codes):
             identities[profile.vendor_id, product_code] = name

@@ -1,4 +1,5 @@
-"""The device profiles `cipstack adapter --profile NAME` can emulate."""
+"""The device profiles `cipstack adapter --profile NAME` can emulate: what a family declares
+(``Profile``), and every family installed (``PROFILES``, found by entry point: ``registry``)."""
 
 from __future__ import annotations
 
@@ -8,13 +9,13 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING
 
-from ..catalog import Catalog, Parameter
-from ..cip.model import AttributeSpec
+from ..catalog import Catalog
 from ..eip.wire.identity_items import IdentityRecord
 from ..errors import BadRequest, NotFound
 from ..objects.file import StoredFile
 from ..objects.identity import IdentityInfo
 from ..objects.tcpip import NetworkInterface
+from .registry import FamilyRegistry
 
 if TYPE_CHECKING:
     # The device model (router, Connection Manager, class 1 target) is loaded by what builds a
@@ -80,7 +81,24 @@ class SerialLink:
     source: str
 
 
+@dataclass(frozen=True)
+class ModelInfo:
+    """One model of a family as ``cipstack models`` lists it: what its Identity reports, and its EDS file."""
+
+    name: str
+    #: Identity attribute 3.
+    product_code: int
+    #: Identity attribute 7.
+    product_name: str
+    #: The name of the model's EDS file where the family's documents give one; empty otherwise.
+    eds_file: str = ""
+
+
 def _one_model() -> tuple[str, ...]:
+    return ()
+
+
+def _no_model_info() -> tuple[ModelInfo, ...]:
     return ()
 
 
@@ -105,161 +123,21 @@ class Profile:
     find_model: Callable[[str], str] | None = None
     #: Its RS-485 port, where a fleet may put its drives on one line; None without one.
     serial_link: SerialLink | None = None
+    #: What ``cipstack models`` lists: each model (one for a family of one model) with its identity.
+    model_info: Callable[[], tuple[ModelInfo, ...]] = _no_model_info
+    #: How the EDS tool describes the family: ``"module:function"`` of a function that returns the
+    #: ``cipstack.eds.description.EdsDescription`` of a model, given the model's name (no argument for a
+    #: family of one model). A reference, not a callable: the EDS tool sits above the devices, which never
+    #: import it (docs/architecture.md); None for a family without an EDS file.
+    eds: str | None = None
 
     def matches(self, identity: IdentityRecord) -> bool:
         return identity.vendor_id == self.vendor_id and identity.product_code in self.product_codes
 
 
-def _acg(interface: NetworkInterface, limits: DeviceLimits, options: ProfileOptions) -> Device:
-    from .acg.device import build_acg_device
-
-    return build_acg_device(interface, limits, options.state_path, files=options.files)
-
-
-def _acg_catalog() -> Catalog:
-    """From the declarations alone (no drive is built): the ACG classes and the assemblies whose
-    layout no CM setting changes, the speed outputs 20/21/100/101 and inputs 70/71/110/111 (ACG-ET2 manual
-    instance tables), made as the device makes them."""
-    from ..assemblies.acg import HZ_INPUTS, HZ_OUTPUTS, speed_input, speed_output
-    from .acg.objects import (
-        AC_DC_DRIVE,
-        AC_DC_DRIVE_SPEC,
-        CATALOG_CLASSES,
-        KEYPAD_PARAMETERS,
-        OUTPUT_FREQUENCY,
-        keypad_parameter_spec,
-    )
-    from .acg.registers import ACG_REGISTERS, MAX_FREQUENCY, SPEED_REFERENCE, class64_path, class64_register
-    from .acg.saving import SAVE_OVER_CIP
-
-    outputs = [speed_output(i, SPEED_REFERENCE) for i in (20, 21, *HZ_OUTPUTS)]
-    inputs = [speed_input(i, OUTPUT_FREQUENCY) for i in (70, 71, *HZ_INPUTS)]
-
-    def keypad(instance: int, attribute: int) -> AttributeSpec | None:
-        """Class 0x64 by the register behind it: its name, range, unit and scale (ACG-ET2 manual, class 0x64
-        "Identical to the ACG Manual Code number"; ACG RS-485 manual tables)."""
-        register = class64_register(instance, attribute)
-        return keypad_parameter_spec(register) if register is not None and class64_path(register) else None
-
-    # A recipe: the keypad parameters the save command keeps (ACG RS-485 manual, 0x03E0), Max Freq first (it
-    # bounds every frequency parameter), the CM group last (it changes the network settings).
-    saved = [(r, path) for r in ACG_REGISTERS.values()
-             if r.saved and r.access.writable and (path := class64_path(r)) is not None]
-    saved.sort(key=lambda item: (item[0] is not MAX_FREQUENCY, item[0].group == "CM"))
-    parameters = [Parameter(r.code, KEYPAD_PARAMETERS, *path, keypad_parameter_spec(r)) for r, path in saved]
-    # ACC and dEC are operation-group parameters with no class 0x64 address: AC/DC Drive attributes
-    # 102/103 mirror them (ACG-ET2 manual, "Value at DRV-03 (Acc Time)", "DRV-04 (Dec Time)").
-    ramps = [Parameter(code, AC_DC_DRIVE, 1, attribute, spec) for code, attribute in (("ACC", 102), ("dEC", 103))
-             if (spec := AC_DC_DRIVE_SPEC.instance_attribute(attribute)) is not None]
-    parameters[1:1] = ramps
-    return Catalog(CATALOG_CLASSES, [*outputs, *inputs], {KEYPAD_PARAMETERS: keypad}, parameters=parameters,
-                   profile="acg", save=SAVE_OVER_CIP)
-
-
-def _omron(family: str, default_model: str) -> Callable[[NetworkInterface, DeviceLimits, ProfileOptions], Device]:
-    def build(interface: NetworkInterface, limits: DeviceLimits, options: ProfileOptions) -> Device:
-        from .omron.device import build_omron_device
-        from .omron.models import model
-
-        name = options.model or default_model
-        if model(name).family.value.lower() != family:
-            raise BadRequest(f"{name} is not an {family.upper()} model (see `cipstack models`)")
-        return build_omron_device(name, interface, limits, options.state_path, files=options.files)
-
-    return build
-
-
-def _omron_catalog(default_model: str) -> Callable[[], Catalog]:
-    def catalog() -> Catalog:
-        from .omron.board import FUNCTION_CODE, MODBUS_REGISTER
-        from .omron.device import build_omron_device
-        from .omron.register_objects import register_attribute
-
-        device = build_omron_device(default_model)
-        registers = device.inverter.registers
-        resolvers = {class_id: (lambda instance, attribute, c=class_id: register_attribute(registers, c, instance,
-                                                                                          attribute))
-                     for class_id in (MODBUS_REGISTER, FUNCTION_CODE)}
-        # A recipe: the function codes the inverter keeps in its EEPROM (CompoNet manual, section E-2-2: class
-        # 0x65 instance/attribute = the function code number), A004 (maximum frequency) first.
-        parameters = []
-        for number, parameter in sorted(registers.by_number.items(), key=lambda item: item[1].code != "A004"):
-            if parameter.saved and parameter.access.writable and parameter.function_code_writable:
-                spec = register_attribute(registers, FUNCTION_CODE, number >> 8, number & 0xFF)
-                if spec is not None:
-                    parameters.append(Parameter(parameter.code, FUNCTION_CODE, number >> 8, number & 0xFF, spec))
-        return Catalog(device.catalog_classes(), device.schemas().values(), resolvers, parameters=parameters,
-                       profile=default_model.split("-")[0].lower())
-
-    return catalog
-
-
-def _acg_keypad() -> KeypadCodes:
-    from .acg.keypad import ACG_KEYPAD
-
-    return ACG_KEYPAD
-
-
-def _omron_keypad(family: str) -> Callable[[], KeypadCodes]:
-    def keypad() -> KeypadCodes:
-        from .omron.models import Family
-        from .omron.operator import operator_codes
-
-        return operator_codes(Family[family.upper()])
-
-    return keypad
-
-
-def _omron_models(family: str) -> Callable[[], tuple[str, ...]]:
-    def models() -> tuple[str, ...]:
-        from .omron.models import MODELS
-
-        return tuple(m.name for m in MODELS if m.family.value.lower() == family)
-
-    return models
-
-
-def _omron_find_model(family: str) -> Callable[[str], str]:
-    def find(name: str) -> str:
-        from .omron.models import model
-
-        found = model(name)
-        if found.family.value.lower() != family:
-            raise NotFound(f"{found.name} is not an {family.upper()} model (see `cipstack models`)")
-        return found.name
-
-    return find
-
-
-def _acg_serial_link() -> SerialLink:
-    from .acg.modbus_rtu import MAX_DRIVES_PER_LINE
-
-    # Station IDs 1-250 (CM.1) and up to 16 drives on one line: the ACG RS-485 manual's Communication
-    # Standards.
-    return SerialLink("the ACG's RS-485 port", "ACG drives", "CM.1", 250, MAX_DRIVES_PER_LINE,
-                      "ACG RS-485 manual, Communication Standards")
-
-
-def _omron_product_codes(family: str) -> frozenset[int]:
-    from .omron.models import MODELS
-
-    return frozenset(m.product_code for m in MODELS if m.family.value.lower() == family)
-
-
-PROFILES: dict[str, Profile] = {
-    "acg": Profile("acg", "ACG drive with its ACG-ET2 EtherNet/IP card (the ACG-ET2 and ACG RS-485 manuals)", _acg,
-                   vendor_id=acg_et2_identity().vendor_id, product_codes=frozenset({acg_et2_identity().product_code}),
-                   catalog=_acg_catalog, keypad=_acg_keypad, serial_link=_acg_serial_link()),
-    # The Omron inverters with the CompoNet option board (CompoNet manual), served over EtherNet/IP.
-    "mx2": Profile("mx2", "Omron MX2 with the 3G3AX-MX2-CRT-E CompoNet option board (--model, Tables 2/C-3)",
-                   _omron("mx2", "MX2-A2015-E"), vendor_id=47, product_codes=_omron_product_codes("mx2"),
-                   catalog=_omron_catalog("MX2-A2015-E"), keypad=_omron_keypad("mx2"), default_model="MX2-A2015-E",
-                   models=_omron_models("mx2"), find_model=_omron_find_model("mx2")),
-    "rx": Profile("rx", "Omron RX with the 3G3AX-RX-CRT-E CompoNet option board (--model, Tables 3/C-4)",
-                  _omron("rx", "RX-A4055-E"), vendor_id=47, product_codes=_omron_product_codes("rx"),
-                  catalog=_omron_catalog("RX-A4055-E"), keypad=_omron_keypad("rx"), default_model="RX-A4055-E",
-                  models=_omron_models("rx"), find_model=_omron_find_model("rx")),
-}
+#: Every family installed, by name: cipstack's own and those of other distributions, found by the
+#: ``cipstack.devices`` entry point and loaded when first asked for (``registry``).
+PROFILES: FamilyRegistry = FamilyRegistry()
 DEFAULT_PROFILE = "acg"
 
 

@@ -1,11 +1,15 @@
 """The ``cipstack eds generate`` command: write the EDS files of the emulated devices.
 
-``cipstack eds generate --profile acg|mx2|rx [--model M | --all] -o DIR``
+``cipstack eds generate --profile PROFILE [--model M | --all] -o DIR``
 
-* ``acg``: the ACG-ET2's one file (``--model`` is refused: the profile has one model).
-* ``mx2`` / ``rx``: the file of one inverter model (``--model MX2-A2015-E``), or with ``--all``
-  every file of Table 2 (MX2) or Table 3 (RX), one per product code, under the names of the
-  tables. One of ``--model`` and ``--all`` is required.
+Every family says how its EDS descriptions are made (``Profile.eds``, a ``module:function``
+reference: the EDS tool sits above the devices, which never import it), so this command holds no
+table of families of its own:
+
+* a family of one model (the ACG): its one file (``--model`` is refused);
+* a family with models (MX2, RX): the file of one model (``--model MX2-A2015-E``), or with
+  ``--all`` one file per EDS file name its models declare (``Profile.model_info``: Tables 2/3
+  give two models of one product code one file). One of ``--model`` and ``--all`` is required.
 
 Files are written as bytes (ASCII, CRLF), dated by ``SOURCE_DATE_EPOCH`` when it is set, else
 by the generator's fixed date; the paths written are printed one per line. Errors (an unknown
@@ -20,11 +24,10 @@ import sys
 from collections.abc import Callable
 from typing import TYPE_CHECKING, TextIO
 
-from ..devices.omron.models import Family, UnknownModelError
-from ..devices.omron.models import model as omron_model
-from ..errors import BadRequest
+from ..errors import BadRequest, NotFound
 
 if TYPE_CHECKING:
+    from ..devices.profiles import Profile
     from .description import EdsDescription
 
 # The generator and the descriptions (which build the devices they describe) are imported when a
@@ -33,8 +36,6 @@ if TYPE_CHECKING:
 EXIT_OK = 0
 EXIT_USAGE = 2
 
-PROFILES: dict[str, Family | None] = {"acg": None, "mx2": Family.MX2, "rx": Family.RX}
-
 
 class GenerateError(BadRequest):
     """A request the command cannot carry out; the message is the one line it prints."""
@@ -42,36 +43,62 @@ class GenerateError(BadRequest):
 
 def add_generate_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--profile", required=True, metavar="PROFILE",
-                        help="device family: " + ", ".join(PROFILES))
+                        help="device family (`cipstack models` lists them)")
     which = parser.add_mutually_exclusive_group()
-    which.add_argument("--model", metavar="M", help="inverter model of Tables 2/3, e.g. MX2-A2015-E")
+    which.add_argument("--model", metavar="M", help="model of a family with models, e.g. MX2-A2015-E")
     which.add_argument("--all", action="store_true", help="every EDS file of the family's table")
     parser.add_argument("-o", "--output", required=True, metavar="DIR", help="directory to write the files to")
 
 
+def describer(profile: Profile) -> Callable[..., EdsDescription]:
+    """The function ``profile.eds`` names, imported; ``GenerateError`` for a family without an EDS file or
+    whose reference does not lead to a function."""
+    import importlib
+
+    if profile.eds is None:
+        raise GenerateError(f"profile {profile.name} declares no EDS file")
+    module_name, _, attribute = profile.eds.partition(":")
+    try:
+        found: object = importlib.import_module(module_name)
+        for part in attribute.split("."):
+            found = getattr(found, part)
+    except (ImportError, AttributeError) as exc:
+        raise GenerateError(f"profile {profile.name}: its EDS description {profile.eds} cannot be loaded: "
+                            f"{exc}") from None
+    if not callable(found):
+        raise GenerateError(f"profile {profile.name}: its EDS description {profile.eds} is not a function")
+    describe: Callable[..., EdsDescription] = found
+    return describe
+
+
 def descriptions(profile: str, model: str | None = None, every: bool = False) -> list[EdsDescription]:
     """The descriptions a command line asks for; ``GenerateError`` when it asks for none."""
-    from .profiles import acg_et2_description, omron_description, omron_models_by_file
+    from ..devices.profiles import PROFILES
 
     key = profile.strip().lower()
     if key not in PROFILES:
         raise GenerateError(f"unknown profile {profile!r} (known: {', '.join(PROFILES)})")
-    family = PROFILES[key]
-    if family is None:
+    try:
+        family = PROFILES[key]
+    except NotFound as exc:   # a plug-in that cannot be loaded
+        raise GenerateError(str(exc)) from None
+    describe = describer(family)
+    if family.find_model is None:
         if model is not None:
             raise GenerateError(f"profile {key} has one model; give no --model")
-        return [acg_et2_description()]
+        return [describe()]
     if every:
-        return [omron_description(item.name) for item in omron_models_by_file(family)]
+        by_file: dict[str, str] = {}
+        for item in family.model_info():
+            by_file.setdefault(item.eds_file or item.name, item.name)
+        return [describe(name) for name in by_file.values()]
     if model is None:
         raise GenerateError(f"profile {key}: give --model M or --all")
     try:
-        found = omron_model(model)
-    except UnknownModelError as exc:
+        found = family.find_model(model)
+    except NotFound as exc:
         raise GenerateError(str(exc)) from None
-    if found.family is not family:
-        raise GenerateError(f"{found.name} is an {found.family.value} model, not {family.value}")
-    return [omron_description(found.name)]
+    return [describe(found)]
 
 
 def write_descriptions(items: list[EdsDescription], directory: str,

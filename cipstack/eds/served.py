@@ -14,7 +14,7 @@ FILE_NAME = "EDS.txt"
 
 @functools.cache
 def profile_eds_file(profile: str, model: str | None = None) -> StoredFile:
-    """The EDS file of an emulated profile (``acg``, ``mx2``, ``rx``) and model, generated when first
+    """The EDS file of an emulated profile and model (as its ``Profile.eds`` describes it), generated when first
     read (the ACG's takes about half a second) and then kept: the devices of one profile and model
     in a process (a fleet's) share it."""
     from ..devices.profiles import PROFILES
@@ -31,6 +31,14 @@ def profile_eds_file(profile: str, model: str | None = None) -> StoredFile:
         return encode_eds(eds_text(description))
 
     return eds_file(FILE_NAME, FILE_REVISION, content)
+
+
+def profile_eds_files(profile: str, model: str | None = None) -> tuple[StoredFile, ...]:
+    """What a device of ``profile`` serves in its File object: its EDS file (``profile_eds_file``), or
+    nothing for a family that declares none (``Profile.eds``)."""
+    from ..devices.profiles import PROFILES
+
+    return (profile_eds_file(profile, model),) if PROFILES[profile].eds is not None else ()
 
 
 def document_eds_file(data: bytes, revision: tuple[int, int]) -> StoredFile:

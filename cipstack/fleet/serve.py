@@ -18,10 +18,9 @@ from typing import Any
 from ..adapter import Adapter, AdapterSettings
 from ..control import describe
 from ..control.service import DeviceService
-from ..devices.acg.modbus_rtu import LineSettings
 from ..devices.profiles import mac_for_address
 from ..devices.state import StateFileError
-from ..eds.served import profile_eds_file
+from ..eds.served import profile_eds_files
 from ..eip.io_core import ProductionGrid
 from ..eip.io_server import freeze_startup_objects
 from ..eip.wire.encapsulation import SECURE_PORT
@@ -93,7 +92,7 @@ def build_adapter(device: FleetDevice, port: int, io_port: int, grid: Production
     # Each device carries its EDS file in its File object, as the single adapter's does.
     settings = AdapterSettings(host=device.address, port=port, io_port=io_port, profile=device.profile,
                                model=device.model, state_path=device.state_path, mac=mac_for_address(device.address),
-                               files=(profile_eds_file(device.profile, device.model),),
+                               files=profile_eds_files(device.profile, device.model),
                                security=security.folder if security is not None else None,
                                security_port=security.port if security is not None else SECURE_PORT)
     try:
@@ -172,16 +171,17 @@ class DeviceSet:
 
     async def _open_line(self, device: str) -> str:
         """The ACG drives on one RS-485 line; the line that says where it is and who is on it."""
-        drives = [(d, a, a.modbus_drive) for d, a in zip(self.devices, self.adapters, strict=True)
-                  if a.modbus_drive is not None]
-        port = open_port(device, LineSettings.from_drive(drives[0][2].drive()))
-        line = RtuLine(port)
-        for _, adapter, modbus in drives:
-            line.add(modbus.drive, modbus.saves, written=register_relay("modbus-rtu", adapter.observers))
+        drives = [(d, a, a.modbus_drive, a.modbus_drive.rtu) for d, a in zip(self.devices, self.adapters, strict=True)
+                  if a.modbus_drive is not None and a.modbus_drive.rtu is not None]
+        first = drives[0][3]
+        port = open_port(device, first.line_settings())
+        line = RtuLine(port, first.max_drives, first.source)
+        for _, adapter, modbus, rtu in drives:
+            line.add(rtu.slave(port.paced, register_relay("modbus-rtu", adapter.observers)), modbus.saves)
         self.line = line
         await line.start()
         stations = ", ".join(f"{d.address} station {s.settings.station}"
-                             for (d, _, _), s in zip(drives, line.slaves, strict=True))
+                             for (d, _, _, _), s in zip(drives, line.slaves, strict=True))
         return f"Modbus-RTU on {line.name} ({line.slaves[0].settings.describe().split(', ', 1)[1]}): {stations}"
 
     async def stop(self) -> None:

@@ -211,7 +211,7 @@ def make_group(profile: str | None, model: str | None, count: Any, first: str | 
 
 def parse_group(text: str, limit: int = MAX_DEVICES) -> DeviceGroup:
     """``--device PROFILE[:MODEL][*COUNT][@FIRST]``, or ``MODEL[*COUNT][@FIRST]``."""
-    from ..devices.profiles import PROFILES
+    from ..devices.profiles import PROFILES, profile_of_model
 
     where = f"--device {text}"
     match = _GROUP.match(text.strip())
@@ -220,11 +220,9 @@ def parse_group(text: str, limit: int = MAX_DEVICES) -> DeviceGroup:
     kind, count, first = match.group("kind"), match.group("count"), match.group("first")
     profile, colon, model = kind.partition(":")
     if not colon and profile not in PROFILES:
-        from ..devices.omron.models import model as find_model
-
         try:
-            find_model(profile)
-        except KeyError:
+            profile_of_model(profile)       # whichever family has it (its declaration's find_model)
+        except NotFound:
             raise SpecError(f"{where}: unknown profile {profile!r} (known: {', '.join(sorted(PROFILES))}; "
                             f"or a model `cipstack models` lists)") from None
         profile, model = "", profile          # a model alone names its family

@@ -1,5 +1,6 @@
-"""The asyncio shell of Modbus-RTU (``modbus_rtu``): one RS-485 line, a pseudo-terminal or a serial
-device, with one drive or several (the Multi-drop Link System of the ACG RS-485 manual, up to 16 drives).
+"""The asyncio shell of Modbus-RTU: one RS-485 line, a pseudo-terminal or a serial device, with one drive
+or several (a multi-drop line, as many as the drives' family declares: ``RtuPort.max_drives``). Each
+drive's sans-I/O slave is its family's (``RtuPort.slave``): the shell knows no register map.
 
 The line's file descriptor is watched by the event loop (``add_reader``): a read takes what the
 driver holds, without blocking, and every drive on the line hears it, as every station on a bus
@@ -19,12 +20,8 @@ import heapq
 import logging
 import os
 import tty
-from collections.abc import Callable
 from typing import Any, Protocol
 
-from ..devices.acg.drive import AcgDrive
-from ..devices.acg.modbus_core import ExceptionCode, RegisterWritten
-from ..devices.acg.modbus_rtu import MAX_DRIVES_PER_LINE, LineSettings, Reply, RtuSlave
 from ..devices.state import StateFileError, StateWriter
 from ..errors import BadRequest, CipstackError
 
@@ -36,6 +33,55 @@ READ_SIZE = 4096
 MAX_PENDING_OUTPUT = 16 * 1024
 #: Replies waiting for their moment (the response delay): a master waits for each, so a few at most.
 MAX_QUEUED_REPLIES = 64
+
+
+#: Modbus exception code 06, Slave Device Busy (Modbus Application Protocol, section 7): a save the
+#: state file did not take.
+SLAVE_DEVICE_BUSY = 0x06
+
+
+class LineSettings(Protocol):
+    """A drive's line settings, as its family's slave reads them from the drive's registers."""
+
+    station: int
+    baud: int
+    data_bits: int
+    parity: str
+    stop_bits: int
+
+    def describe(self) -> str: ...
+
+
+class Reply(Protocol):
+    """A reply and when to write it; ``request``: the frame it answers."""
+
+    frame: bytes
+    due: float
+    request: bytes
+
+
+class Slave(Protocol):
+    """One drive on the line, sans I/O: its family's Modbus-RTU slave (``RtuPort.slave``)."""
+
+    @property
+    def settings(self) -> Any: ...
+
+    @property
+    def drive(self) -> Any: ...
+
+    @property
+    def counters(self) -> Any:
+        """What the slave counted (frames, CRC errors, replies), for the metrics and the runtime."""
+
+    def feed(self, data: bytes, now: float) -> list[Any]: ...
+
+    def poll(self, now: float) -> list[Any]: ...
+
+    def deadline(self) -> float | None: ...
+
+    def forget_input(self) -> None: ...
+
+    def exception_reply(self, request: bytes, code: Any) -> bytes: ...
 
 
 class RtuPortError(CipstackError):
@@ -134,18 +180,20 @@ def open_port(device: str, settings: LineSettings) -> LinePort:
 class _Station:
     """One drive on the line: its sans-I/O slave, its state writer and its own timer."""
 
-    def __init__(self, drive: AcgDrive | Callable[[], AcgDrive], saves: StateWriter | None, paced: bool,
-                 written: RegisterWritten | None = None) -> None:
-        self.slave = RtuSlave(drive, paced, written)
+    def __init__(self, slave: Slave, saves: StateWriter | None) -> None:
+        self.slave = slave
         self.saves = saves
         self.drive_timer: asyncio.TimerHandle | None = None
 
 
 class RtuLine:
-    """An RS-485 line served by the drives added to it (``add``), up to 16."""
+    """An RS-485 line served by the drives added to it (``add``), up to ``max_drives`` (``source`` says
+    where that bound comes from, for the message that refuses one more)."""
 
-    def __init__(self, port: LinePort) -> None:
+    def __init__(self, port: LinePort, max_drives: int = 1, source: str = "") -> None:
         self.port = port
+        self.max_drives = max_drives
+        self.source = source
         self.stations: list[_Station] = []
         self.loop: asyncio.AbstractEventLoop | None = None
         self._frame_timer: asyncio.TimerHandle | None = None
@@ -167,18 +215,17 @@ class RtuLine:
     def name(self) -> str:
         return self.port.name
 
-    def add(self, drive: AcgDrive | Callable[[], AcgDrive], saves: StateWriter | None = None,
-            written: RegisterWritten | None = None) -> RtuSlave:
-        """Put a drive on the line; ``written``: told of each register a request writes."""
-        if len(self.stations) >= MAX_DRIVES_PER_LINE:
-            raise BadRequest(f"an RS-485 line takes at most {MAX_DRIVES_PER_LINE} drives (ACG RS-485 manual, "
-                             f"Communication Standards)")
-        station = _Station(drive, saves, self.port.paced, written)
-        self.stations.append(station)
-        return station.slave
+    def add(self, slave: Slave, saves: StateWriter | None = None) -> Slave:
+        """Put a drive's slave on the line (made with this line's ``port.paced``); ``saves``: its state
+        writer, whose saves the replies wait for."""
+        if len(self.stations) >= self.max_drives:
+            raise BadRequest(f"an RS-485 line takes at most {self.max_drives} drives"
+                             + (f" ({self.source})" if self.source else ""))
+        self.stations.append(_Station(slave, saves))
+        return slave
 
     @property
-    def slaves(self) -> list[RtuSlave]:
+    def slaves(self) -> list[Slave]:
         return [s.slave for s in self.stations]
 
     async def start(self) -> None:
@@ -260,7 +307,7 @@ class RtuLine:
             await asyncio.wrap_future(save)
         except StateFileError as exc:
             log.debug("Modbus-RTU: %s", exc)
-            frame = station.slave.exception_reply(reply.request, ExceptionCode.SLAVE_DEVICE_BUSY)
+            frame = station.slave.exception_reply(reply.request, SLAVE_DEVICE_BUSY)
         self._send_at(reply.due, frame)
 
     def _send_at(self, due: float, frame: bytes) -> None:

@@ -1,15 +1,14 @@
-"""The asyncio shell of the ACG-ET2's Modbus TCP (``modbus.ModbusTcpCore``): accepts connections,
-frames their streams, answers each request in order, and keeps a timer at the drive's next deadline."""
+"""The asyncio shell of a drive's Modbus TCP: accepts connections, frames their streams, answers each
+request in order, and keeps a timer at the drive's next deadline. The sans-I/O core is the family's
+(``ModbusDrive.tcp``, the ACG-ET2's ``ModbusTcpCore``): the shell knows no register map."""
 
 from __future__ import annotations
 
 import asyncio
 import logging
 from dataclasses import dataclass
+from typing import Any, Protocol
 
-from ..devices.acg.drive import AcgDrive
-from ..devices.acg.modbus import DriveSource, ExceptionCode, MbapBuffer, MbapLengthError, ModbusTcpCore
-from ..devices.acg.modbus_core import RegisterWritten
 from ..devices.state import StateFileError, StateWriter
 from ..eip.target.limits import (
     DEFAULT_MAX_TCP_CONNECTIONS,
@@ -19,8 +18,36 @@ from ..eip.target.limits import (
     quiet_accept_errors,
 )
 from ..eip.wire.encapsulation import DEFAULT_FRAME_TIMEOUT
+from ..errors import ProtocolError
 
 log = logging.getLogger(__name__)
+
+#: Modbus exception code 04, Slave Device Failure (Modbus Application Protocol, section 7): a save the
+#: state file did not take.
+SLAVE_DEVICE_FAILURE = 0x04
+
+
+class Framer(Protocol):
+    """Splits one connection's stream into frames; an impossible length raises ``ProtocolError`` with the
+    ``frames`` completed before it."""
+
+    @property
+    def pending(self) -> int: ...
+
+    def feed(self, data: bytes) -> list[bytes]: ...
+
+
+class TcpCore(Protocol):
+    """A drive's Modbus TCP, sans I/O (``ModbusDrive.tcp``)."""
+
+    @property
+    def drive(self) -> Any: ...
+
+    def framer(self) -> Framer: ...
+
+    def handle_adu(self, adu: bytes, now: float, source: object = None) -> bytes | None: ...
+
+    def exception_adu(self, adu: bytes, code: Any) -> bytes: ...
 
 
 @dataclass(eq=False)
@@ -36,10 +63,10 @@ class _Served:
 
 
 class ModbusTcpServer:
-    """Modbus TCP server of the emulated ACG-ET2 (port 502 on the real card; here any port, 0 =
-    chosen by the OS). ``drive``: the drive, or a function returning the present one (a device
-    replaces its drive on an Identity reset). It keeps a loop timer at the drive's next deadline,
-    so the Modbus silence timer fires even when nothing else moves the drive.
+    """Modbus TCP server of an emulated drive (port 502 on a real card; here any port, 0 = chosen by the
+    OS). ``core``: the drive's sans-I/O Modbus TCP, as its family makes it (``ModbusDrive.tcp``). It keeps
+    a loop timer at the drive's next deadline, so the Modbus silence timer fires even when nothing else
+    moves the drive.
 
     ``saves``: the state writer of the drive's saves. A request that saves is answered once the
     file is written, on the writer's thread: the event loop (and every class 1 connection) runs
@@ -50,12 +77,10 @@ class ModbusTcpServer:
     host finding every slot taken closes the idlest connection of the host holding the most
     (``ConnectionLimiter.victim``), and a frame once begun has ``frame_timeout`` seconds to arrive."""
 
-    def __init__(self, drive: AcgDrive | DriveSource, host: str = "127.0.0.1", port: int = 0, *,
+    def __init__(self, core: TcpCore, host: str = "127.0.0.1", port: int = 0, *,
                  saves: StateWriter | None = None, max_connections: int = DEFAULT_MAX_TCP_CONNECTIONS,
-                 max_connections_per_host: int | None = None, frame_timeout: float = DEFAULT_FRAME_TIMEOUT,
-                 written: RegisterWritten | None = None) -> None:
-        """``written``: told of each register a request writes (``ModbusCore.written``)."""
-        self.core = ModbusTcpCore(drive, written)
+                 max_connections_per_host: int | None = None, frame_timeout: float = DEFAULT_FRAME_TIMEOUT) -> None:
+        self.core = core
         self.frame_timeout = frame_timeout
         self.limiter = ConnectionLimiter(max_connections, max_connections_per_host)
         self._refused_log = RateLimitedLog(log)
@@ -128,7 +153,7 @@ class ModbusTcpServer:
 
     async def _serve(self, reader: asyncio.StreamReader, writer: asyncio.StreamWriter, served: _Served) -> None:
         assert self.loop is not None
-        buffer = MbapBuffer()
+        buffer = self.core.framer()
         frame_started: float | None = None
         while True:
             if frame_started is None:
@@ -145,13 +170,13 @@ class ModbusTcpServer:
                     return
             if not data:
                 return
-            unframed: MbapLengthError | None = None
+            unframed: ProtocolError | None = None
             try:
                 frames = buffer.feed(data)
-            except MbapLengthError as exc:
+            except ProtocolError as exc:
                 # The requests complete before the impossible length came are served and answered;
                 # nothing after it can be framed, so the connection then closes.
-                frames, unframed = exc.frames, exc
+                frames, unframed = list(getattr(exc, "frames", [])), exc
             now = self.loop.time()
             if frames:
                 served.last_activity = now
@@ -183,7 +208,7 @@ class ModbusTcpServer:
             await asyncio.wrap_future(saves.last)
         except StateFileError as exc:
             log.debug("Modbus TCP: %s", exc)
-            return self.core.exception_adu(frame, ExceptionCode.SLAVE_DEVICE_FAILURE)
+            return self.core.exception_adu(frame, SLAVE_DEVICE_FAILURE)
         return reply
 
     def rearm(self) -> None:

@@ -9,7 +9,7 @@ from __future__ import annotations
 from typing import TYPE_CHECKING, Any, Protocol
 
 if TYPE_CHECKING:
-    from ..devices.acg.modbus_core import RegisterWritten
+    from ..devices.base import RegisterWritten
     from ..eip.target.io_target import IoConnection, IoEvents
 
 

@@ -20,7 +20,7 @@ from typing import Any, TypeVar, overload
 from ..adapter import Adapter, AdapterSettings, network_interface
 from ..control.events import Event
 from ..devices.profiles import DEFAULT_PROFILE
-from ..eds.served import profile_eds_file
+from ..eds.served import profile_eds_files
 from ..errors import UnknownField
 from ..scanner import SyncScanner
 
@@ -70,7 +70,7 @@ class EmulatedDevice:
         settings = AdapterSettings(host=options.host, port=0, io_port=0, profile=options.profile,
                                    model=options.model, state_path=options.state_path,
                                    # The device carries its EDS file (File object), as the adapter's does.
-                                   **{"files": (profile_eds_file(options.profile, options.model),),
+                                   **{"files": profile_eds_files(options.profile, options.model),
                                       **options.settings})
         device = None
         if options.eds is not None:

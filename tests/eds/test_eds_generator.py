@@ -522,7 +522,7 @@ def test_generate_acg(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> Non
     # Nothing near: the message still says where the valid names are.
     (("--profile", "mx2", "--model", "MX2-XXXX"), "unknown inverter model 'MX2-XXXX': `cipstack models` lists "
                                                   "the 61 models (MX2-AB001-E to RX-B413K-E)"),
-    (("--profile", "rx", "--model", "MX2-A2015-E"), "MX2-A2015-E is an MX2 model, not RX"),
+    (("--profile", "rx", "--model", "MX2-A2015-E"), "MX2-A2015-E is not an RX model"),
     (("--profile", "vfd", "--all"), "unknown profile 'vfd'"),
     (("--profile", "acg", "--model", "ACG"), "profile acg has one model"),
     (("--profile", "mx2",), "give --model M or --all"),

@@ -45,7 +45,7 @@ from ...errors import BadRequest
 from ...objects.assembly import AssemblyPoint
 from ...objects.file import StoredFile
 from ...objects.tcpip import NetworkInterface
-from ..base import Device, DeviceLimits, ModbusDrive, TripRefused
+from ..base import Device, DeviceLimits, ModbusDrive, RtuPort, TripRefused
 from ..keypad import shown_value
 from ..profiles import DEFAULT_MAC, serial_from_mac
 from ..registers import Register, RegisterError
@@ -53,6 +53,8 @@ from ..state import ParameterStore, StateWriter
 from . import registers as reg
 from .drive import FAMILY, MODEL, AcgDrive, Trip
 from .keypad import AcgKeypad
+from .modbus import ModbusTcpCore
+from .modbus_rtu import MAX_DRIVES_PER_LINE, LineSettings, RtuSlave
 from .objects import (
     CATALOG_CLASSES,
     OUTPUT_CURRENT,
@@ -313,7 +315,14 @@ class AcgDevice(Device):
 
     def modbus_drive(self) -> ModbusDrive:
         """The ACG speaks Modbus TCP on its ACG-ET2 card and Modbus-RTU on the drive's RS-485 port."""
-        return ModbusDrive(lambda: self.drive, self.saves)
+        def drive() -> AcgDrive:
+            return self.drive
+
+        # Up to 16 drives on one line: the ACG RS-485 manual's Communication Standards.
+        rtu = RtuPort(lambda paced, written: RtuSlave(drive, paced, written),
+                      lambda: LineSettings.from_drive(self.drive), MAX_DRIVES_PER_LINE,
+                      "ACG RS-485 manual, Communication Standards")
+        return ModbusDrive(drive, self.saves, rtu, tcp=lambda written: ModbusTcpCore(drive, written))
 
     def power_cycle(self, now: float) -> None:
         """The drive and its ACG-ET2 card lose power and get it back at ``now``: the drive comes back with

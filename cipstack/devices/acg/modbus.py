@@ -63,6 +63,10 @@ class ModbusTcpCore(ModbusCore):
         pdu = self.handle_pdu(adu[MBAP_SIZE:], now, source)
         return MBAP.pack(transaction, 0, len(pdu) + 1, unit) + pdu
 
+    def framer(self) -> MbapBuffer:
+        """A new splitter of one connection's stream into MBAP frames."""
+        return MbapBuffer()
+
     def exception_adu(self, adu: bytes, code: ExceptionCode) -> bytes:
         """The exception reply to the request ``adu`` (e.g. 0x04 for a save the file did not take)."""
         transaction, _protocol, _length, unit = MBAP.unpack_from(adu)
