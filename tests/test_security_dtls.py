@@ -12,8 +12,6 @@ import contextlib
 import logging
 import os
 import re
-import shutil
-import signal
 import socket
 import struct
 import subprocess
@@ -37,17 +35,8 @@ from cipstack.security import Credentials
 from cipstack.security.dtls import DtlsChannel, dtls_context
 from cipstack.security.dtls_link import DtlsLink
 from tests.ports import free_port
-from tests.waiting import wait_for
-
-OPENSSL = shutil.which("openssl")
-TSHARK = shutil.which("tshark")
-needs_openssl = pytest.mark.skipif(OPENSSL is None, reason="the openssl command is not installed")
-needs_tshark = pytest.mark.skipif(TSHARK is None, reason="the tshark command is not installed")
-
-#: RegisterSession (0x0065), length 4, session 0, status 0, sender context "cipstack", options 0;
-#: protocol version 1, option flags 0: 28 bytes.
-REGISTER_SESSION = bytes.fromhex("6500" "0400" "00000000" "00000000") + b"cipstack" + bytes.fromhex("00000000"
-                                                                                                  "0100" "0000")
+from tests.security_peers import OPENSSL, REGISTER_SESSION, TSHARK, needs_openssl, needs_tshark
+from tests.waiting import stop_process, wait_for
 
 
 class Served:
@@ -89,8 +78,6 @@ class Served:
         self.loop.close()
 
 
-
-
 @pytest.fixture
 def served(lab: Path) -> Iterator[Served]:
     server = Served(lab)
@@ -103,16 +90,6 @@ def served(lab: Path) -> Iterator[Served]:
 def _client_hello(credentials: Credentials) -> bytes:
     """The first datagram of a DTLS client: a ClientHello without a cookie."""
     return DtlsChannel.client(dtls_context(credentials, server=False)).datagrams()[0]
-
-
-def _stop(process: subprocess.Popen[bytes]) -> None:
-    if process.poll() is None:
-        process.send_signal(signal.SIGTERM)
-        try:
-            process.wait(10)
-        except subprocess.TimeoutExpired:
-            process.kill()
-            process.wait()
 
 
 # -- encapsulation and secured class 1 ------------------------------------------------------------------
@@ -163,7 +140,7 @@ def test_the_command_line_adapter_serves_class1_over_dtls(lab: Path, tmp_path: P
             counts = io.statistics()
         assert counts["received"] > 20 and counts["lost"] == 0
     finally:
-        _stop(process)
+        stop_process(process)
     assert "DTLS session accepted" in log.read_text()
 
 
@@ -262,7 +239,7 @@ def test_openssl_s_client_dtls_registers_a_session(served: Served, lab: Path) ->
                 break
             reply += chunk
     finally:
-        _stop(process)
+        stop_process(process)
     command_code, length, session, status = struct.unpack_from("<HHII", reply)
     assert (command_code, length, status) == (0x0065, 4, 0) and session != 0
     assert reply[12:20] == b"cipstack"
@@ -302,7 +279,7 @@ def test_originator_completes_a_dtls_handshake_with_openssl_s_server(lab: Path) 
         link.close()
         assert received == REGISTER_SESSION
     finally:
-        _stop(server)
+        stop_process(server)
 
 
 @needs_tshark
@@ -337,7 +314,7 @@ def test_tshark_decrypts_class1_in_dtls_with_the_key_log(lab: Path, tmp_path: Pa
         time.sleep(0.5)   # what was sent reaches the capture before it stops
     finally:
         if dumpcap is not None:
-            _stop(dumpcap)
+            stop_process(dumpcap)
         served.close()
     assert keylog.read_text().count("CLIENT_RANDOM") >= 2   # both roles wrote their secrets
     fields = subprocess.run([TSHARK, "-r", str(capture), "-o", f"tls.keylog_file:{keylog}",

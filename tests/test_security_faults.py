@@ -13,7 +13,6 @@ import asyncio
 import json
 import os
 import shutil
-import signal
 import socket
 import ssl
 import subprocess
@@ -42,12 +41,8 @@ from cipstack.security import Credentials
 from cipstack.security.dtls_link import DtlsLink
 from cipstack.testing.device import EmulatedDevice
 from tests.ports import free_port
-from tests.waiting import wait_for
-
-OPENSSL = shutil.which("openssl")
-needs_openssl = pytest.mark.skipif(OPENSSL is None, reason="the openssl command is not installed")
-TSHARK = shutil.which("tshark")
-needs_tshark = pytest.mark.skipif(TSHARK is None, reason="the tshark command is not installed")
+from tests.security_peers import OPENSSL, TSHARK, needs_openssl, needs_tshark
+from tests.waiting import stop_process, wait_for
 
 EXPIRED = "certificate verify failed: certificate has expired"
 REVOKED = "certificate verify failed: certificate revoked"
@@ -144,13 +139,7 @@ def emulator(lab: Path, tmp_path_factory: pytest.TempPathFactory) -> Iterator[Pr
             pytest.fail(f"the adapter stopped: {log.read_text()}")
         yield started
     finally:
-        if process.poll() is None:
-            process.send_signal(signal.SIGTERM)
-            try:
-                process.wait(10)
-            except subprocess.TimeoutExpired:
-                process.kill()
-                process.wait()
+        stop_process(process)
 
 
 def drive(emulator: Process, *words: str) -> subprocess.CompletedProcess[str]:

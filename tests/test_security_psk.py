@@ -13,7 +13,6 @@ import logging
 import os
 import re
 import shutil
-import signal
 import socket
 import struct
 import subprocess
@@ -40,17 +39,9 @@ from cipstack.security.dtls_link import DtlsLink
 from cipstack.security.provisioning import init
 from cipstack.security.push import configure
 from tests.ports import free_port
-from tests.waiting import wait_for
+from tests.security_peers import OPENSSL, REGISTER_SESSION, TSHARK, needs_openssl, needs_tshark
+from tests.waiting import stop_process, wait_for
 
-OPENSSL = shutil.which("openssl")
-TSHARK = shutil.which("tshark")
-needs_openssl = pytest.mark.skipif(OPENSSL is None, reason="the openssl command is not installed")
-needs_tshark = pytest.mark.skipif(TSHARK is None, reason="the tshark command is not installed")
-
-#: RegisterSession (0x0065), length 4, session 0, status 0, sender context "cipstack", options 0;
-#: protocol version 1, option flags 0: 28 bytes.
-REGISTER_SESSION = bytes.fromhex("6500" "0400" "00000000" "00000000") + b"cipstack" + bytes.fromhex("00000000"
-                                                                                                  "0100" "0000")
 GET_ATTRIBUTE_SINGLE = 0x0E
 
 
@@ -117,16 +108,6 @@ def _key_of(folder: Path) -> tuple[str, str]:
 
 def _accepted(caplog: pytest.LogCaptureFixture, what: str) -> list[str]:
     return [record.getMessage() for record in caplog.records if f"{what} accepted" in record.getMessage()]
-
-
-def _stop(process: subprocess.Popen[bytes]) -> None:
-    if process.poll() is None:
-        process.send_signal(signal.SIGTERM)
-        try:
-            process.wait(10)
-        except subprocess.TimeoutExpired:
-            process.kill()
-            process.wait()
 
 
 def _read_until(fd: int, size: int, timeout: float = 30) -> bytes:
@@ -269,7 +250,7 @@ def test_openssl_s_client_with_a_psk_registers_a_session(served: Served, psk_lab
         process.stdin.flush()
         reply = _read_until(process.stdout.fileno(), 28)
     finally:
-        _stop(process)
+        stop_process(process)
         assert process.stderr is not None
         stderr = process.stderr.read()
         for stream in (process.stdin, process.stdout, process.stderr):
@@ -328,7 +309,7 @@ def test_originator_completes_a_psk_handshake_with_openssl_s_server(psk_lab: Pat
             links[0].close()
         assert received == REGISTER_SESSION
     finally:
-        _stop(server)
+        stop_process(server)
 
 
 # -- bad identities and keys ------------------------------------------------------------------------------
@@ -672,7 +653,7 @@ def test_tshark_decrypts_a_psk_tls_session_with_the_key_log(psk_lab: Path, tmp_p
         time.sleep(0.5)   # what was sent reaches the capture before it stops
     finally:
         if dumpcap is not None:
-            _stop(dumpcap)
+            stop_process(dumpcap)
         server.close()
     fields = subprocess.run([TSHARK, "-r", str(capture), "-o", f"tls.keylog_file:{keylog}",
                              "-d", f"tcp.port=={port},tls", "-d", f"tls.port=={port},enip",

@@ -11,7 +11,6 @@ import contextlib
 import datetime
 import os
 import shutil
-import signal
 import socket
 import ssl
 import stat
@@ -34,15 +33,8 @@ from cipstack.scanner import Scanner, SyncScanner
 from cipstack.security import Credentials
 from cipstack.security.provisioning import init
 from tests.ports import free_port
-from tests.waiting import wait_for, wait_until
-
-OPENSSL = shutil.which("openssl")
-needs_openssl = pytest.mark.skipif(OPENSSL is None, reason="the openssl command is not installed")
-
-#: RegisterSession (0x0065), length 4, session 0, status 0, sender context "cipstack", options 0;
-#: protocol version 1, option flags 0: 28 bytes.
-REGISTER_SESSION = bytes.fromhex("6500" "0400" "00000000" "00000000") + b"cipstack" + bytes.fromhex("00000000"
-                                                                                                  "0100" "0000")
+from tests.security_peers import OPENSSL, REGISTER_SESSION, needs_openssl
+from tests.waiting import stop_process, wait_for, wait_until
 
 
 class Device(NamedTuple):
@@ -80,23 +72,13 @@ def _start_adapter(folder: Path, log: Path, env: dict[str, str] | None = None) -
     return Device("127.0.0.1", port, tls_port, process, log)
 
 
-def _stop(process: subprocess.Popen[bytes]) -> None:
-    if process.poll() is None:
-        process.send_signal(signal.SIGTERM)
-        try:
-            process.wait(10)
-        except subprocess.TimeoutExpired:
-            process.kill()
-            process.wait()
-
-
 def secured_adapter(folder: Path, tmp_path_factory: pytest.TempPathFactory) -> Iterator[Device]:
     """A module's secured adapter, from the ``folder`` of ``security init``, stopped after its tests."""
     started = _start_adapter(folder, tmp_path_factory.mktemp("adapter") / "adapter.log")
     try:
         yield started
     finally:
-        _stop(started.process)
+        stop_process(started.process)
 
 
 @pytest.fixture(scope="module")
@@ -282,7 +264,7 @@ def test_originator_completes_a_handshake_with_openssl_s_server(lab: Path, versi
                 received += chunk
         assert received == REGISTER_SESSION
     finally:
-        _stop(server)
+        stop_process(server)
 
 
 @needs_openssl
@@ -303,7 +285,7 @@ def test_originator_names_an_expired_device_certificate(tmp_path: Path) -> None:
         assert str(raised.value) == (f"TLS with 127.0.0.1:{port} failed: certificate verify failed: "
                                      "certificate has expired")
     finally:
-        _stop(server)
+        stop_process(server)
 
 
 @needs_openssl
@@ -320,7 +302,7 @@ def test_originator_names_no_cipher_suite_in_common(lab: Path) -> None:
         with pytest.raises(SecurityError, match=r"failed: no cipher suite in common with the peer"):
             BlockingEncapsulationClient.connect("127.0.0.1", port, timeout=10, security=Credentials.load(lab))
     finally:
-        _stop(server)
+        stop_process(server)
 
 
 # -- the scanner over TLS, and plain 44818 beside it --------------------------------------------------
@@ -445,7 +427,7 @@ def test_bad_input_on_2221_is_refused_logged_once_per_source(tmp_path: Path, lab
                 assert plain.read(1, 1, 7) == "CENT"
         assert device.process.poll() is None
     finally:
-        _stop(device.process)
+        stop_process(device.process)
 
 
 async def test_a_handshake_that_never_comes_is_closed_and_counted(lab: Path) -> None:
@@ -569,7 +551,7 @@ def test_sslkeylogfile_is_written_by_both_roles(tmp_path: Path, lab: Path, monke
             assert len(tls.recv(64)) == 28
         assert "CLIENT_RANDOM " in client_keys.read_text()
     finally:
-        _stop(device.process)
+        stop_process(device.process)
 
 
 # -- a security-free emulator and scanner pay nothing ------------------------------------------------

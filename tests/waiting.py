@@ -3,8 +3,11 @@
 from __future__ import annotations
 
 import asyncio
+import signal
+import subprocess
 import time
 from collections.abc import Callable
+from typing import Any
 
 
 def wait_for(predicate: Callable[[], object], timeout: float, what: str = "the condition",
@@ -30,3 +33,15 @@ async def wait_until(predicate: Callable[[], object], timeout: float, what: str 
         if time.monotonic() >= deadline:
             raise TimeoutError(f"timed out after {timeout:g} s waiting for {what}")
         await asyncio.sleep(interval)
+
+
+def stop_process(process: subprocess.Popen[Any], timeout: float = 10) -> None:
+    """End a process a test started: SIGTERM, as a user's service manager would, and SIGKILL if it
+    has not exited after ``timeout`` seconds."""
+    if process.poll() is None:
+        process.send_signal(signal.SIGTERM)
+        try:
+            process.wait(timeout)
+        except subprocess.TimeoutExpired:
+            process.kill()
+            process.wait()

@@ -121,14 +121,7 @@ class LaneTlsConnection:
         if handshaking and self._timer is not None:   # done: the connection's own timers from now on
             self._timer.cancel()
             self._timer = None
-        if replies:
-            held = self.server.replies.filter
-            if held is None:
-                session.send(replies)
-            else:   # a fault at the reply seam (delayed replies) acts on TLS as on 44818
-                held.reply(self, replies)
-        if session.ended:
-            session.close_notify()   # ours answers the peer's, after the replies
+        self.server.deliver(self, session, replies)
         out = session.data_to_send()
         if out:
             self._send(out)

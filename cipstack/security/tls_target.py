@@ -117,14 +117,7 @@ class _TlsProtocol(asyncio.Protocol):
         if handshaking and self._timer is not None:   # done: the connection's own timers from now on
             self._timer.cancel()
             self._timer = None
-        if replies:
-            held = self.server.replies.filter
-            if held is None:
-                session.send(replies)
-            else:   # a fault at the reply seam (delayed replies) acts on TLS as on 44818
-                held.reply(self, replies)
-        if session.ended:
-            session.close_notify()   # ours answers the peer's, after the replies
+        self.server.deliver(self, session, replies)
         self._flush()
         if session.ended or connection.closing:
             transport.close()
@@ -275,6 +268,18 @@ class TlsServer:
         except (CipstackError, ssl.SSLError, OSError) as exc:   # what a fault presents did not load
             return TlsSession(self.context, lambda now: target.connection(peer, local, now), peer,
                               refusal=f"what the fault presents did not load: {exc}")
+
+    def deliver(self, served: _TlsProtocol | LaneTlsConnection, session: TlsSession, replies: bytes) -> None:
+        """Seal ``replies`` of ``served``'s session, or hand them to a fault at the reply seam (delayed
+        replies act on TLS as on 44818); after the peer's close_notify, ours, behind the replies."""
+        if replies:
+            held = self.replies.filter
+            if held is None:
+                session.send(replies)
+            else:
+                held.reply(served, replies)
+        if session.ended:
+            session.close_notify()
 
     def closed(self, served: _TlsProtocol | LaneTlsConnection, host: str,
                connection: EncapsulationConnection | None) -> None:
