@@ -285,7 +285,8 @@ class Adapter:
 
     def _dtls_server(self, credentials: Credentials, configuration: Configuration, port: int) -> DtlsServer:
         """The DTLS listener of a configuration applied over the network: its certificate and trust, its
-        Allowed Cipher Suites, client certificates as Verify Client Certificate says, secured class 1."""
+        Allowed Cipher Suites, client certificates as Verify Client Certificate says, secured class 1, its
+        sessions' idle timeout the DTLS Timeout attribute's seconds."""
         from .security.dtls_target import DtlsServer
         from .security.endpoint import dtls_server_context
 
@@ -293,7 +294,8 @@ class Adapter:
             return dtls_server_context(made, configuration)
 
         return DtlsServer(self.target, credentials, self.settings.host, port, io=self.io_seam, paths=self.io_paths,
-                          verify_client=bool(configuration.verify_client), seam=self.secured_seam, recipe=recipe)
+                          verify_client=bool(configuration.verify_client), seam=self.secured_seam, recipe=recipe,
+                          idle_timeout=float(configuration.dtls_timeout))
 
     def _serving_tls(self) -> TlsServer | None:
         """The TLS listener serving now: ``--security DIR``'s, or the configuration's."""

@@ -274,14 +274,16 @@ class DtlsServer:
                  port: int = SECURE_PORT, *, io: IoSeam | None = None, paths: DatagramPaths | None = None,
                  verify_client: bool = True, max_sessions: int = DEFAULT_MAX_SESSIONS,
                  max_sessions_per_host: int | None = None, seam: SecuredSeam | None = None,
-                 ciphers: str | None = None, recipe: Callable[[Credentials], SSL.Context] | None = None) -> None:
+                 ciphers: str | None = None, recipe: Callable[[Credentials], SSL.Context] | None = None,
+                 idle_timeout: float = DTLS_TIMEOUT) -> None:
         """``io``: the class 1 seam whose core takes the datagrams of connections opened over DTLS (the
         faults' filters act on them as on plain UDP 2222's); ``paths``:
         the datagram paths of its UDP endpoint, where this server adds the address of each session;
         ``seam``: where faults change the next handshakes and drop records (``SecuredSeam``);
         ``ciphers``: the suites accepted, as OpenSSL names them (None: the library's DTLS 1.2 ones);
         ``recipe``: how the context is made of credentials instead (a configuration applied over the
-        network, with its pre-shared keys: ``endpoint.dtls_server_context``)."""
+        network, with its pre-shared keys: ``endpoint.dtls_server_context``); ``idle_timeout``: seconds a
+        session may go without a record (a configured device's DTLS Timeout, 0x5E attribute 15)."""
         from .dtls import require_pyopenssl
 
         require_pyopenssl()
@@ -307,8 +309,8 @@ class DtlsServer:
         self.limiter = ConnectionLimiter(max_sessions, max_sessions_per_host)
         #: Seconds a handshake has from the ClientHello that returned its cookie.
         self.handshake_timeout = HANDSHAKE_TIMEOUT
-        #: Seconds a session may go without a record (``DTLS_TIMEOUT``).
-        self.idle_timeout = DTLS_TIMEOUT
+        #: Seconds a session may go without a record (``DTLS_TIMEOUT`` unless a configuration says).
+        self.idle_timeout = idle_timeout
         self.sessions: dict[tuple[str, int], _Session] = {}
         self.refused_log = RateLimitedLog(log)
         #: Datagrams and handshakes refused since the start.

@@ -94,8 +94,11 @@ def configuration_of(credentials: Credentials) -> Configuration:
             return Configuration(pre_shared_keys=keys)
         raise SecurityError(f"{credentials.folder}: no device certificate and CA to serve")
     device, ca = credentials.device.certificate.path, credentials.ca.path
+    # The folder's listeners verify client certificates and their dates and send the chain (OpenSSL's
+    # defaults there): the attributes show it.
     return Configuration(active_device_certificates=(DEVICE_CERTIFICATE_PATH,),
-                         trusted_authorities=(DEVICE_CERTIFICATE_PATH,), verify_client=1,
+                         trusted_authorities=(DEVICE_CERTIFICATE_PATH,), verify_client=1, check_expiration=1,
+                         send_chain=1,
                          device_certificate=der_of_pem(device.read_bytes()), device_status=CertificateStatus.VERIFIED,
                          ca_certificate=der_of_pem(ca.read_bytes()), ca_status=CertificateStatus.VERIFIED,
                          device_key=credentials.device.key.read_bytes(), pre_shared_keys=keys)
@@ -126,36 +129,37 @@ def available_suites_context(credentials: Credentials) -> ssl.SSLContext | PskTl
     return context
 
 
-def server_context(credentials: Credentials, configuration: Configuration) -> ssl.SSLContext | PskTlsContext:
-    """The TLS context of a configured device: TLS 1.2 with the Allowed Cipher Suites only (Python's
-    ``ssl`` cannot narrow TLS 1.3's suites, so a device whose suites were chosen does not offer 1.3),
-    client certificates required when Verify Client Certificate is set. With Pre-Shared Keys
-    (attribute 5), the PSK suites with those keys too (``tls_psk``): the keys written over the wire
-    are the ones the next handshake uses."""
-    if configuration.pre_shared_keys:
-        from .tls_psk import psk_context
+def server_context(credentials: Credentials, configuration: Configuration) -> PskTlsContext:
+    """The TLS context of a configured device: TLS 1.2 with the Allowed Cipher Suites only (a device
+    whose suites were chosen does not offer 1.3, whose suites are the library's), through pyOpenSSL
+    (``tls_psk``): client certificates as Verify Client Certificate says, their dates as Check
+    Expiration says, the chain as Send Certificate Chain says (``peer_policy``). With Pre-Shared Keys
+    (attribute 5), the PSK suites with those keys too: the keys written over the wire are the ones the
+    next handshake uses."""
+    from .peer_policy import apply
+    from .tls_psk import psk_context
 
-        return psk_context(credentials, server=True, keys=configuration.pre_shared_keys,
-                           suites=[CIPHER_SUITE_NAMES[s] for s in configuration.allowed_suites],
-                           verify_client=bool(configuration.verify_client))
-    context = credentials.server_context(verify_client=bool(configuration.verify_client))
-    context.maximum_version = ssl.TLSVersion.TLSv1_2
-    # Without a key, the certificate suites allowed: a PSK suite needs a key.
-    suites = [CERTIFICATE_SUITE_NAMES[s] for s in configuration.allowed_suites if s in CERTIFICATE_SUITE_NAMES]
-    if not suites:   # Apply_Config refuses such a configuration (``Configurator.apply``)
+    names = [CIPHER_SUITE_NAMES[s] for s in configuration.allowed_suites
+             if s in CERTIFICATE_SUITE_NAMES or configuration.pre_shared_keys]
+    if not names:   # Apply_Config refuses such a configuration (``Configurator.apply``)
         raise SecurityError("no certificate suite allowed, and no pre-shared key for a PSK suite")
-    context.set_ciphers(":".join(suites))
+    context = psk_context(credentials, server=True, keys=configuration.pre_shared_keys, suites=names,
+                          verify_client=bool(configuration.verify_client))
+    apply(context.context, credentials, configuration)
     return context
 
 
 def dtls_server_context(credentials: Credentials, configuration: Configuration) -> Any:
     """The DTLS context (pyOpenSSL's) of a configuration applied over the network: the Allowed Cipher
-    Suites, the certificate and the pre-shared keys it holds, as ``server_context`` for TLS."""
+    Suites, the certificate and the pre-shared keys it holds, and the checks of ``peer_policy``, as
+    ``server_context`` for TLS."""
+    from .peer_policy import apply
     from .tls_psk import openssl_context
 
     context, _, _ = openssl_context(credentials, server=True, keys=configuration.pre_shared_keys,
                                     suites=[CIPHER_SUITE_NAMES[s] for s in configuration.allowed_suites],
                                     verify_client=bool(configuration.verify_client), datagram=True)
+    apply(context, credentials, configuration)
     return context
 
 
@@ -318,7 +322,7 @@ class SecureEndpoint:
                 credentials = Credentials.keys_only(folder)
             applied = configuration
 
-            def recipe(made: Credentials) -> ssl.SSLContext | PskTlsContext:
+            def recipe(made: Credentials) -> PskTlsContext:
                 return server_context(made, applied)
 
             server = self.make_server(credentials, recipe, self.port)

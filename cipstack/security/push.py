@@ -20,7 +20,7 @@ from __future__ import annotations
 import contextlib
 import os
 import struct
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -64,10 +64,13 @@ class Pushed:
 def configure(request: Request, folder: str | os.PathLike[str], common_name: str = "",
               allowed_suites: Sequence[int] | None = None, verify_client: bool = True,
               step: Callable[[str], None] | None = None,
-              pre_shared_keys: Sequence[tuple[bytes, bytes]] = ()) -> Pushed:
+              pre_shared_keys: Sequence[tuple[bytes, bytes]] = (),
+              attributes: Mapping[int, bytes] | None = None) -> Pushed:
     """Configure the device ``request`` reaches with the CA of ``folder``; ``step`` hears each step's
     name. ``pre_shared_keys``: (identity, key) pairs written to the Pre-Shared Keys attribute (0x5E
-    attribute 5), which the device's TLS port then accepts beside its certificate."""
+    attribute 5), which the device's TLS port then accepts beside its certificate; ``attributes``:
+    other EtherNet/IP Security attributes written as they are given (id -> the Set's data, e.g.
+    ``{11: BOOL.encode(1)}`` for Check Expiration), after the ones above."""
     from .certificates import der_of_pem
     from .provisioning import sign_csr
 
@@ -136,6 +139,8 @@ def configure(request: Request, folder: str | os.PathLike[str], common_name: str
             send("Set Allowed Cipher Suites", _SET, EIP_SECURITY_CLASS, 4, CIPHER_SUITES.encode(tuple(allowed_suites)))
         if pre_shared_keys:
             send("Set Pre-Shared Keys", _SET, EIP_SECURITY_CLASS, 5, PRE_SHARED_KEYS.encode(tuple(pre_shared_keys)))
+        for attribute, data in (attributes or {}).items():
+            send(f"Set attribute {attribute}", _SET, EIP_SECURITY_CLASS, attribute, data)
         send("Verify_Certificate", CertificateService.VERIFY_CERTIFICATE, CERTIFICATE_MANAGEMENT_CLASS, None)
         send("Apply_Config", ConfigService.APPLY_CONFIG, EIP_SECURITY_CLASS, None, struct.pack("<HH", 0, 0))
     except BaseException:

@@ -1,0 +1,60 @@
+"""What the EtherNet/IP Security object's settings make of the next TLS and DTLS handshakes of a device
+configured over the network.
+
+OpENer's CIP Security branch (``ethernetipsecurity.c``, Apply_Config, citing Volume 8 5-4.7.3) says the
+device "shall begin using the new attribute settings when establishing new (D)TLS sessions"; the branch
+declares each attribute with its name, type and factory default, and acts on none. What each does here
+is read from its name (chosen here where no public source says more):
+
+* Verify Client Certificate (9): on, the device asks for the client's certificate and refuses a client
+  without one or with one its trusted authorities did not sign; off, it asks for none (branch default
+  off; a device started with ``--security DIR`` shows it on, as its listeners have always done);
+* Check Expiration (11): on, a client certificate outside its validity is refused; off, OpenSSL's time
+  check alone is skipped (``X509_V_FLAG_NO_CHECK_TIME``), the signature still checked (branch default
+  off; ``--security DIR`` shows it on, what OpenSSL always did there);
+* Send Certificate Chain (10): on, the handshake carries the device certificate and the CA certificate
+  the device holds; off, the device certificate alone (OpenSSL would otherwise build the chain from
+  its trust store: ``SSL_MODE_NO_AUTO_CHAIN``) (branch default off; ``--security DIR`` shows it on).
+
+Each is applied to a pyOpenSSL context: the TLS port of a configured device and its DTLS port are
+both pyOpenSSL's (``tls_psk.openssl_context``), since Python's ``ssl`` cannot stop the chain building.
+"""
+
+from __future__ import annotations
+
+from typing import TYPE_CHECKING, Any
+
+from ..errors import SecurityError
+
+if TYPE_CHECKING:
+    from .configuration import Configuration
+    from .credentials import Credentials
+
+#: OpenSSL's ``X509_V_FLAG_NO_CHECK_TIME`` (x509_vfy.h): verify without the validity dates. pyOpenSSL's
+#: ``X509StoreFlags`` does not name it; the store takes the number.
+NO_CHECK_TIME = 0x200000
+#: OpenSSL's ``SSL_MODE_NO_AUTO_CHAIN`` (ssl.h): send the certificate alone, build no chain from the store.
+NO_AUTO_CHAIN = 0x8
+
+
+def apply(context: Any, credentials: Credentials, configuration: Configuration) -> None:
+    """Make ``context`` (a device's ``OpenSSL.SSL.Context`` with its certificate loaded) follow Check
+    Expiration and Send Certificate Chain; Verify Client Certificate is its verify mode, set where it is
+    made (``tls_psk.openssl_context``)."""
+    if credentials.device is None or credentials.ca is None:
+        return   # pre-shared keys alone: no certificate to check or send
+    if not configuration.check_expiration:
+        context.get_cert_store().set_flags(NO_CHECK_TIME)
+    if configuration.send_chain:
+        from cryptography import x509
+
+        try:
+            authority = x509.load_pem_x509_certificate(credentials.ca.path.read_bytes())
+        except (OSError, ValueError) as exc:
+            raise SecurityError(f"{credentials.ca.path}: not a usable CA certificate ({exc})") from None
+        context.add_extra_chain_cert(authority)
+    else:
+        context.set_mode(NO_AUTO_CHAIN)
+
+
+__all__ = ["NO_AUTO_CHAIN", "NO_CHECK_TIME", "apply"]

@@ -1,0 +1,220 @@
+"""The EtherNet/IP Security object's attributes acted on (issue 48): Verify Client Certificate (9), Send
+Certificate Chain (10), Check Expiration (11) and DTLS Timeout (15), each written over the wire in a
+configuration session (Begin_Config, Set, Apply_Config) and then met by the next TLS and DTLS handshakes,
+with its opposite value.
+
+The adapter runs in the test's event loop on ports the system picks; the peers are OpenSSL's own client
+(``openssl s_client``), Python's ``ssl`` and the library's originator, over real sockets on loopback."""
+
+from __future__ import annotations
+
+import asyncio
+import datetime
+import socket
+import ssl
+import subprocess
+from pathlib import Path
+from typing import Any
+
+import pytest
+
+pytest.importorskip("OpenSSL", reason="the security extra (pyOpenSSL) is not installed")
+
+from cipstack.adapter import Adapter, AdapterSettings
+from cipstack.cip.types import BOOL, UINT
+from cipstack.scanner import SyncScanner
+from cipstack.security import Credentials
+from cipstack.security.push import configure
+from tests.ports import free_port
+from tests.security_peers import OPENSSL, REGISTER_SESSION, needs_openssl
+
+VERIFY_CLIENT, SEND_CHAIN, CHECK_EXPIRATION, DTLS_TIMEOUT = 9, 10, 11, 15
+
+
+async def configured(lab: Path, **attributes: bytes) -> Adapter:
+    """A device started in Factory Default, configured over the wire with the lab CA and the EtherNet/IP
+    Security attributes given (``a<id>=data``), its TLS and DTLS listeners in place."""
+    settings = AdapterSettings(port=0, io_port=0, security_port=free_port(), security_objects=True)
+    adapter = Adapter(settings)
+    await adapter.start()
+    written = {int(name[1:]): data for name, data in attributes.items()}
+    verify = bool(written.pop(VERIFY_CLIENT, b"\x01")[0])
+
+    def push() -> None:
+        with SyncScanner(f"127.0.0.1:{adapter.port}", identify=False) as plain:
+            def request(service: int, class_id: int, instance: int, attribute: int | None,
+                        data: bytes) -> tuple[int, Any, bytes]:
+                reply = plain.request(service, class_id, instance, attribute, data, check=False)
+                return reply.general_status, reply.extended_status, reply.data
+            configure(request, lab, verify_client=verify, attributes=written)
+
+    await asyncio.to_thread(push)
+    assert adapter.secure is not None
+    for _ in range(1000):
+        if adapter.secure.reloads and adapter.secure.dtls is not None and adapter.secure.dtls.is_open:
+            return adapter
+        await asyncio.sleep(0.01)
+    raise AssertionError("the configuration's listeners were not put in place")
+
+
+def s_client(port: int, *options: str, dtls: bool = False) -> tuple[int, str]:
+    """``openssl s_client`` against the device's TLS (or DTLS) port: its exit status and its words; it
+    ends when the handshake does (stdin is empty)."""
+    assert OPENSSL is not None
+    version = "-dtls1_2" if dtls else "-tls1_2"
+    done = subprocess.run([OPENSSL, "s_client", "-connect", f"127.0.0.1:{port}", version, *options],
+                          input=b"", capture_output=True, timeout=30, check=False)
+    return done.returncode, (done.stdout + done.stderr).decode(errors="replace")
+
+
+def expired_client(lab: Path, folder: Path) -> Path:
+    """The lab client's key in a certificate of the lab CA whose validity ended yesterday."""
+    from cryptography import x509
+    from cryptography.hazmat.primitives import hashes, serialization
+
+    ca = x509.load_pem_x509_certificate((lab / "ca.pem").read_bytes())
+    ca_key = serialization.load_pem_private_key((lab / "ca.key").read_bytes(), password=None)
+    key = serialization.load_pem_private_key((lab / "client.key").read_bytes(), password=None)
+    now = datetime.datetime.now(datetime.timezone.utc)
+    certificate = (x509.CertificateBuilder()
+                   .subject_name(x509.load_pem_x509_certificate((lab / "client.pem").read_bytes()).subject)
+                   .issuer_name(ca.subject).public_key(key.public_key())  # type: ignore[arg-type]
+                   .serial_number(x509.random_serial_number())
+                   .not_valid_before(now - datetime.timedelta(days=10))
+                   .not_valid_after(now - datetime.timedelta(days=1))
+                   .sign(ca_key, hashes.SHA256()))  # type: ignore[arg-type]
+    path = folder / "expired.pem"
+    path.write_bytes(certificate.public_bytes(serialization.Encoding.PEM))
+    return path
+
+
+def register_over_tls(lab: Path, port: int, certificate: Path) -> bytes:
+    """RegisterSession over TLS 1.2 from Python's ``ssl`` presenting ``certificate``: the reply's 28
+    octets (an ``ssl.SSLError`` when the device refuses the handshake)."""
+    context = ssl.SSLContext(ssl.PROTOCOL_TLS_CLIENT)
+    context.check_hostname = False
+    context.maximum_version = ssl.TLSVersion.TLSv1_2
+    context.load_verify_locations(lab / "ca.pem")
+    context.load_cert_chain(certificate, lab / "client.key")
+    with socket.create_connection(("127.0.0.1", port), timeout=10) as sock, context.wrap_socket(sock) as tls:
+        tls.sendall(REGISTER_SESSION)
+        reply = b""
+        while len(reply) < 28:
+            chunk = tls.recv(28 - len(reply))
+            if not chunk:
+                break
+            reply += chunk
+        return reply
+
+
+# -- Verify Client Certificate (9) -------------------------------------------------------------------
+@needs_openssl
+@pytest.mark.parametrize("verify", [1, 0])
+async def test_verify_client_certificate_decides_whether_a_client_without_one_is_served(lab: Path,
+                                                                                       verify: int) -> None:
+    adapter = await configured(lab, a9=BOOL.encode(verify))
+    try:
+        assert adapter.secure is not None and adapter.secure.server is not None
+        port = adapter.secure.server.port
+        # Our originator, with its certificate, is served either way.
+        with_certificate = await asyncio.to_thread(
+            lambda: SyncScanner(f"127.0.0.1:{port}", security=Credentials.load(lab), identify=False).read(1, 1, 7))
+        assert with_certificate == "CENT"
+        for dtls in (False, True):
+            status, words = await asyncio.to_thread(lambda d=dtls: s_client(port, "-CAfile", str(lab / "ca.pem"),
+                                                                           dtls=d))
+            if verify:   # no certificate: refused at the handshake
+                assert status != 0, words
+                assert "Cipher is (NONE)" in words or "alert" in words, words
+            else:
+                assert status == 0, words
+                assert "Verify return code: 0 (ok)" in words, words
+    finally:
+        await adapter.close()
+
+
+# -- Check Expiration (11) ---------------------------------------------------------------------------
+@needs_openssl
+@pytest.mark.parametrize("check", [1, 0])
+async def test_check_expiration_decides_whether_an_expired_client_certificate_is_served(
+        lab: Path, tmp_path: Path, check: int, caplog: pytest.LogCaptureFixture) -> None:
+    expired = expired_client(lab, tmp_path)
+    adapter = await configured(lab, a11=BOOL.encode(check))
+    try:
+        assert adapter.secure is not None and adapter.secure.server is not None
+        port = adapter.secure.server.port
+        client = ("-cert", str(expired), "-key", str(lab / "client.key"), "-CAfile", str(lab / "ca.pem"))
+        if check:
+            with pytest.raises(ssl.SSLError):
+                await asyncio.to_thread(register_over_tls, lab, port, expired)
+            assert any("certificate has expired" in r.getMessage() or "certificate expired" in r.getMessage()
+                       for r in caplog.records), [r.getMessage() for r in caplog.records]
+            status, words = await asyncio.to_thread(lambda: s_client(port, *client, dtls=True))
+            assert status != 0, words
+        else:
+            reply = await asyncio.to_thread(register_over_tls, lab, port, expired)
+            assert reply[:2] == b"\x65\x00" and reply[8:12] == bytes(4)      # RegisterSession, status 0
+            status, words = await asyncio.to_thread(lambda: s_client(port, *client, dtls=True))
+            assert status == 0 and "Cipher is ECDHE" in words, words
+        # A client certificate in its validity is served either way.
+        reply = await asyncio.to_thread(register_over_tls, lab, port, lab / "client.pem")
+        assert reply[8:12] == bytes(4)
+    finally:
+        await adapter.close()
+
+
+# -- Send Certificate Chain (10) ---------------------------------------------------------------------
+@needs_openssl
+@pytest.mark.parametrize("chain", [1, 0])
+async def test_send_certificate_chain_decides_what_the_handshake_carries(lab: Path, chain: int) -> None:
+    adapter = await configured(lab, a10=BOOL.encode(chain))
+    try:
+        assert adapter.secure is not None and adapter.secure.server is not None
+        port = adapter.secure.server.port
+        client = ("-cert", str(lab / "client.pem"), "-key", str(lab / "client.key"), "-CAfile", str(lab / "ca.pem"),
+                  "-showcerts")
+        for dtls in (False, True):
+            status, words = await asyncio.to_thread(lambda d=dtls: s_client(port, *client, dtls=d))
+            assert status == 0, words
+            assert words.count("-----BEGIN CERTIFICATE-----") == (2 if chain else 1), words
+            assert ("1 s:O = cipstack lab" in words) == bool(chain), words     # the CA, second in the chain
+            assert "Verify return code: 0 (ok)" in words, words               # the CA file completes it
+    finally:
+        await adapter.close()
+
+
+def test_a_device_started_with_a_folder_shows_what_its_listeners_do(lab: Path) -> None:
+    from cipstack.security.endpoint import configuration_of
+
+    shown = configuration_of(Credentials.load(lab))
+    assert (shown.verify_client, shown.send_chain, shown.check_expiration) == (1, 1, 1)
+
+
+# -- DTLS Timeout (15) -------------------------------------------------------------------------------
+@pytest.mark.parametrize("seconds", [1, None])
+async def test_dtls_timeout_is_the_idle_timeout_of_the_dtls_port(lab: Path, seconds: int | None) -> None:
+    attributes = {"a15": UINT.encode(seconds)} if seconds is not None else {}
+    adapter = await configured(lab, **attributes)
+    try:
+        assert adapter.secure is not None and adapter.secure.dtls is not None
+        dtls = adapter.secure.dtls
+        assert dtls.idle_timeout == (seconds or 12)
+        if seconds is None:
+            return
+        port = dtls.port
+        link = await asyncio.to_thread(Credentials.load(lab).datagram_link, "127.0.0.1", port, 10.0)
+        try:
+            for _ in range(200):
+                if dtls.sessions:
+                    break
+                await asyncio.sleep(0.01)
+            assert len(dtls.sessions) == 1
+            for _ in range(1000):            # closed once it has been idle for the attribute's second
+                if not dtls.sessions:
+                    break
+                await asyncio.sleep(0.01)
+            assert not dtls.sessions
+        finally:
+            await asyncio.to_thread(link.close)
+    finally:
+        await adapter.close()
