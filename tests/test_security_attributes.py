@@ -1,7 +1,7 @@
-"""The EtherNet/IP Security object's attributes acted on (issue 48): Verify Client Certificate (9), Send
-Certificate Chain (10), Check Expiration (11) and DTLS Timeout (15), each written over the wire in a
-configuration session (Begin_Config, Set, Apply_Config) and then met by the next TLS and DTLS handshakes,
-with its opposite value.
+"""The EtherNet/IP Security object's attributes acted on (issue 48): Certificate Revocation List (8),
+Verify Client Certificate (9), Send Certificate Chain (10), Check Expiration (11) and DTLS Timeout (15),
+each written over the wire in a configuration session (Begin_Config, Set, Apply_Config) and then met by
+the next TLS and DTLS handshakes, with its opposite value.
 
 The adapter runs in the test's event loop on ports the system picks; the peers are OpenSSL's own client
 (``openssl s_client``), Python's ``ssl`` and the library's originator, over real sockets on loopback."""
@@ -31,9 +31,10 @@ from tests.security_peers import OPENSSL, REGISTER_SESSION, needs_openssl
 VERIFY_CLIENT, SEND_CHAIN, CHECK_EXPIRATION, DTLS_TIMEOUT = 9, 10, 11, 15
 
 
-async def configured(lab: Path, **attributes: bytes) -> Adapter:
+async def configured(lab: Path, revocation_list: bytes = b"", **attributes: bytes) -> Adapter:
     """A device started in Factory Default, configured over the wire with the lab CA and the EtherNet/IP
-    Security attributes given (``a<id>=data``), its TLS and DTLS listeners in place."""
+    Security attributes given (``a<id>=data``), and the CRL downloaded, its TLS and DTLS listeners in
+    place."""
     settings = AdapterSettings(port=0, io_port=0, security_port=free_port(), security_objects=True)
     adapter = Adapter(settings)
     await adapter.start()
@@ -46,9 +47,13 @@ async def configured(lab: Path, **attributes: bytes) -> Adapter:
                         data: bytes) -> tuple[int, Any, bytes]:
                 reply = plain.request(service, class_id, instance, attribute, data, check=False)
                 return reply.general_status, reply.extended_status, reply.data
-            configure(request, lab, verify_client=verify, attributes=written)
+            configure(request, lab, verify_client=verify, attributes=written, revocation_list=revocation_list)
 
-    await asyncio.to_thread(push)
+    try:
+        await asyncio.to_thread(push)
+    except BaseException:
+        await adapter.close()
+        raise
     assert adapter.secure is not None
     for _ in range(1000):
         if adapter.secure.reloads and adapter.secure.dtls is not None and adapter.secure.dtls.is_open:
@@ -67,8 +72,9 @@ def s_client(port: int, *options: str, dtls: bool = False) -> tuple[int, str]:
     return done.returncode, (done.stdout + done.stderr).decode(errors="replace")
 
 
-def expired_client(lab: Path, folder: Path) -> Path:
-    """The lab client's key in a certificate of the lab CA whose validity ended yesterday."""
+def lab_client(lab: Path, folder: Path, name: str = "expired.pem", expired: bool = True) -> tuple[Path, int]:
+    """The lab client's key in another certificate of the lab CA (by default one whose validity ended
+    yesterday): its file and serial number."""
     from cryptography import x509
     from cryptography.hazmat.primitives import hashes, serialization
 
@@ -81,11 +87,28 @@ def expired_client(lab: Path, folder: Path) -> Path:
                    .issuer_name(ca.subject).public_key(key.public_key())  # type: ignore[arg-type]
                    .serial_number(x509.random_serial_number())
                    .not_valid_before(now - datetime.timedelta(days=10))
-                   .not_valid_after(now - datetime.timedelta(days=1))
+                   .not_valid_after(now + datetime.timedelta(days=-1 if expired else 10))
                    .sign(ca_key, hashes.SHA256()))  # type: ignore[arg-type]
-    path = folder / "expired.pem"
+    path = folder / name
     path.write_bytes(certificate.public_bytes(serialization.Encoding.PEM))
-    return path
+    return path, certificate.serial_number
+
+
+def revocation_list(lab: Path, *serials: int) -> bytes:
+    """A CRL of the lab CA revoking ``serials`` (PEM)."""
+    from cryptography import x509
+    from cryptography.hazmat.primitives import hashes, serialization
+
+    ca = x509.load_pem_x509_certificate((lab / "ca.pem").read_bytes())
+    ca_key = serialization.load_pem_private_key((lab / "ca.key").read_bytes(), password=None)
+    now = datetime.datetime.now(datetime.timezone.utc)
+    builder = (x509.CertificateRevocationListBuilder().issuer_name(ca.subject).last_update(now)
+               .next_update(now + datetime.timedelta(days=7)))
+    for serial in serials:
+        builder = builder.add_revoked_certificate(
+            x509.RevokedCertificateBuilder().serial_number(serial).revocation_date(now).build())
+    crl = builder.sign(ca_key, hashes.SHA256())  # type: ignore[arg-type]
+    return crl.public_bytes(serialization.Encoding.PEM)
 
 
 def register_over_tls(lab: Path, port: int, certificate: Path) -> bytes:
@@ -138,7 +161,7 @@ async def test_verify_client_certificate_decides_whether_a_client_without_one_is
 @pytest.mark.parametrize("check", [1, 0])
 async def test_check_expiration_decides_whether_an_expired_client_certificate_is_served(
         lab: Path, tmp_path: Path, check: int, caplog: pytest.LogCaptureFixture) -> None:
-    expired = expired_client(lab, tmp_path)
+    expired, _ = lab_client(lab, tmp_path)
     adapter = await configured(lab, a11=BOOL.encode(check))
     try:
         assert adapter.secure is not None and adapter.secure.server is not None
@@ -218,3 +241,40 @@ async def test_dtls_timeout_is_the_idle_timeout_of_the_dtls_port(lab: Path, seco
             await asyncio.to_thread(link.close)
     finally:
         await adapter.close()
+
+
+# -- Certificate Revocation List (8) -----------------------------------------------------------------
+@needs_openssl
+@pytest.mark.parametrize("revoke", [True, False])
+async def test_a_client_certificate_the_crl_lists_is_refused(lab: Path, tmp_path: Path, revoke: bool,
+                                                            caplog: pytest.LogCaptureFixture) -> None:
+    revoked, serial = lab_client(lab, tmp_path, "revoked.pem", expired=False)
+    kept, _ = lab_client(lab, tmp_path, "kept.pem", expired=False)
+    adapter = await configured(lab, revocation_list=revocation_list(lab, serial) if revoke else b"")
+    try:
+        assert adapter.secure is not None and adapter.secure.server is not None
+        port = adapter.secure.server.port
+        client = ("-cert", str(revoked), "-key", str(lab / "client.key"), "-CAfile", str(lab / "ca.pem"))
+        if revoke:
+            for _ in range(2):
+                with pytest.raises(ssl.SSLError):
+                    await asyncio.to_thread(register_over_tls, lab, port, revoked)
+            lines = [r.getMessage() for r in caplog.records if "refused" in r.getMessage()]
+            assert len(lines) == 1 and "certificate revoked" in lines[0], lines   # once per source per 10 s
+            status, words = await asyncio.to_thread(lambda: s_client(port, *client, dtls=True))
+            assert status != 0, words
+        else:
+            assert (await asyncio.to_thread(register_over_tls, lab, port, revoked))[8:12] == bytes(4)
+            status, words = await asyncio.to_thread(lambda: s_client(port, *client, dtls=True))
+            assert status == 0, words
+        # A certificate the CRL does not list is served either way.
+        assert (await asyncio.to_thread(register_over_tls, lab, port, kept))[8:12] == bytes(4)
+    finally:
+        await adapter.close()
+
+
+async def test_apply_config_refuses_a_crl_path_without_a_crl_of_the_ca(lab: Path, other_lab: Path) -> None:
+    from cipstack.errors import SecurityError
+
+    with pytest.raises(SecurityError, match="Apply_Config refused"):
+        await configured(lab, revocation_list=revocation_list(other_lab))

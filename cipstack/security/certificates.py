@@ -112,6 +112,34 @@ def verify(device_der: bytes, ca_der: bytes, key_pem: bytes, now: datetime.datet
     return None
 
 
+def revocation_list_der(data: bytes) -> bytes:
+    """A CRL file's octets (PEM or DER) as DER; 0x09 (invalid attribute value) for a file that holds no
+    certificate revocation list."""
+    _crypto()
+    from cryptography import x509
+    from cryptography.hazmat.primitives.serialization import Encoding
+
+    try:
+        if data.lstrip().startswith(b"-----BEGIN"):
+            return x509.load_pem_x509_crl(data).public_bytes(Encoding.DER)
+        return x509.load_der_x509_crl(data).public_bytes(Encoding.DER)
+    except ValueError:
+        raise CipError(GeneralStatus.INVALID_ATTRIBUTE_VALUE, message="not a certificate revocation list") from None
+
+
+def revocation_list_problem(crl_der: bytes, ca_der: bytes) -> str | None:
+    """Why a CRL cannot be checked against (none held, or not signed by the CA), or None."""
+    _crypto()
+    from cryptography import x509
+
+    if not crl_der:
+        return "the Certificate Revocation List names a file that holds no CRL"
+    crl = x509.load_der_x509_crl(crl_der)
+    if not ca_der or not crl.is_signature_valid(load_certificate(ca_der).public_key()):
+        return "the certificate revocation list is not signed by the CA certificate"
+    return None
+
+
 def pem(der: bytes, label: str = "CERTIFICATE") -> bytes:
     """DER octets as PEM (a certificate; ``label`` "CERTIFICATE REQUEST" for a CSR); none for none."""
     import base64

@@ -69,6 +69,9 @@ class Configuration:
     device_status: int = CertificateStatus.NOT_VERIFIED
     ca_certificate: bytes = b""
     ca_status: int = CertificateStatus.NOT_VERIFIED
+    #: The certificate revocation list (DER) downloaded into its File object instance (``CRL_FILE``),
+    #: checked when ``revocation_list`` names that file.
+    crl: bytes = b""
     #: The last Create_CSR's request (DER), which the CSR's File object instance serves.
     certificate_request: bytes = b""
     #: The private key of the last Create_CSR (PEM, PKCS#8): never readable over the network.

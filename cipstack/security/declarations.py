@@ -90,6 +90,9 @@ NO_CIPHER_SUITES_CONFIGURED = 0x0004
 #: and the CA certificate (chosen here: after the EDS file's 0xC8; the branch creates its own at start).
 FILE_CLASS = 0x37
 CSR_FILE, DEVICE_CERTIFICATE_FILE, CA_CERTIFICATE_FILE = 0xC9, 0xCA, 0xCB
+#: The File object instance a configuration tool downloads a certificate revocation list into, which
+#: the Certificate Revocation List attribute (0x5E attribute 8) then names (chosen here: the next one).
+CRL_FILE = 0xCC
 #: DTLS Timeout default, seconds (the branch's default).
 DTLS_TIMEOUT = 12
 
@@ -190,8 +193,8 @@ SECURITY_CLASSES: dict[int, ClassSpec] = {spec.class_id: spec for spec in
 
 __all__ = ["AVAILABLE_CIPHER_SUITES", "CA_CERTIFICATE_FILE", "CERTIFICATE_MANAGEMENT_CLASS",
            "CERTIFICATE_MANAGEMENT_SPEC", "CERTIFICATE_SUITE_NAMES", "CIPHER_SUITES", "CIPHER_SUITE_IANA_NAMES",
-           "CIPHER_SUITE_NAMES", "CIP_SECURITY_CLASS", "CIP_SECURITY_SPEC", "CONFIDENTIALITY_PROFILE", "CSR_FILE",
-           "DEVICE_CERTIFICATE_FILE", "DTLS_TIMEOUT", "EIP_SECURITY_CLASS", "EIP_SECURITY_SPEC", "FILE_CLASS",
-           "NO_CERTIFICATES_CONFIGURED", "NO_CIPHER_SUITES_CONFIGURED", "PSK_SUITE_NAMES", "SECURITY_CLASSES",
-           "VERIFICATION_FAILED", "CertificateService", "CertificateState", "CertificateStatus", "CipSecurityState",
-           "ConfigService", "SecurityState"]
+           "CIPHER_SUITE_NAMES", "CIP_SECURITY_CLASS", "CIP_SECURITY_SPEC", "CONFIDENTIALITY_PROFILE", "CRL_FILE",
+           "CSR_FILE", "DEVICE_CERTIFICATE_FILE", "DTLS_TIMEOUT", "EIP_SECURITY_CLASS", "EIP_SECURITY_SPEC",
+           "FILE_CLASS", "NO_CERTIFICATES_CONFIGURED", "NO_CIPHER_SUITES_CONFIGURED", "PSK_SUITE_NAMES",
+           "SECURITY_CLASSES", "VERIFICATION_FAILED", "CertificateService", "CertificateState", "CertificateStatus",
+           "CipSecurityState", "ConfigService", "SecurityState"]

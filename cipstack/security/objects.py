@@ -34,6 +34,7 @@ from .declarations import (
     CERTIFICATE_MANAGEMENT_SPEC,
     CIP_SECURITY_SPEC,
     CONFIDENTIALITY_PROFILE,
+    CRL_FILE,
     CSR_FILE,
     DEVICE_CERTIFICATE_FILE,
     EIP_SECURITY_SPEC,
@@ -128,6 +129,9 @@ class EipSecurityObject(_SecurityObject):
         if spec.id in (6, 7) and any(path != DEVICE_CERTIFICATE_PATH for path in value):
             raise CipError(GeneralStatus.INVALID_ATTRIBUTE_VALUE,
                            message="a certificate path names Certificate Management instance 1 (0x5F/1)")
+        if spec.id == 8 and value not in ((), (FILE_CLASS, CRL_FILE)):
+            raise CipError(GeneralStatus.INVALID_ATTRIBUTE_VALUE,
+                           message=f"a certificate revocation list is kept in File object instance {CRL_FILE}")
         self._session_change(context, f"Set_Attribute_Single {spec.name}", **{EIP_SECURITY_FIELDS[spec.id]: value})
 
     # -- the configuration services ---------------------------------------------------------------------
@@ -200,8 +204,11 @@ def usable(configuration: Configuration) -> str | None:
         return "no active device certificate (EtherNet/IP Security attribute 6 names none)"
     if DEVICE_CERTIFICATE_PATH not in configuration.trusted_authorities:
         return "no trusted authority (EtherNet/IP Security attribute 7 names none)"
-    return certificates.verify(configuration.device_certificate, configuration.ca_certificate,
-                               configuration.device_key, check_expiration=bool(configuration.check_expiration))
+    why = certificates.verify(configuration.device_certificate, configuration.ca_certificate,
+                              configuration.device_key, check_expiration=bool(configuration.check_expiration))
+    if why is None and configuration.revocation_list:
+        why = certificates.revocation_list_problem(configuration.crl, configuration.ca_certificate)
+    return why
 
 
 class CertificateManagementObject(_SecurityObject):
@@ -225,12 +232,29 @@ class CertificateManagementObject(_SecurityObject):
                                partial(self._certificate_file, 3)), partial(self._downloaded, 3), live=True)
         files.serve(StoredFile(CA_CERTIFICATE_FILE, "CA Certificate", "ca.pem", (1, 0),
                                partial(self._certificate_file, 4)), partial(self._downloaded, 4), live=True)
+        # The EtherNet/IP Security object's Certificate Revocation List (attribute 8) names this file.
+        files.serve(StoredFile(CRL_FILE, "Certificate Revocation List", "crl.pem", (1, 0), self._crl_file),
+                    self._crl_downloaded, live=True)
 
     def _csr_file(self) -> bytes:
         return certificates.pem(self.configurator.configuration.certificate_request, "CERTIFICATE REQUEST")
 
     def _certificate_file(self, attribute: int) -> bytes:
         return certificates.pem(getattr(self.configurator.configuration, CERTIFICATE_FIELDS[attribute][0]))
+
+    def _crl_file(self) -> bytes:
+        return certificates.pem(self.configurator.configuration.crl, "X509 CRL")
+
+    def _crl_downloaded(self, data: bytes, context: RequestContext) -> None:
+        """A CRL downloaded into its file: the session's owner only; 0x09 for no CRL."""
+        what = "a download of the certificate revocation list"
+        self.configurator.require(context.transport, context.origin, context.now, what)
+        try:
+            der = certificates.revocation_list_der(data)
+        except CipError as exc:
+            raise self.configurator.refuse(context.origin, exc.general, f"{what} from {context.origin} refused: "
+                                                                         f"{exc}") from None
+        self.configurator.change(context.transport, context.origin, context.now, what, crl=der)
 
     def _downloaded(self, attribute: int, data: bytes, context: RequestContext) -> None:
         """A certificate downloaded into its file: the session's owner only; 0x09 for no certificate."""

@@ -14,7 +14,10 @@ is read from its name (chosen here where no public source says more):
   off; ``--security DIR`` shows it on, what OpenSSL always did there);
 * Send Certificate Chain (10): on, the handshake carries the device certificate and the CA certificate
   the device holds; off, the device certificate alone (OpenSSL would otherwise build the chain from
-  its trust store: ``SSL_MODE_NO_AUTO_CHAIN``) (branch default off; ``--security DIR`` shows it on).
+  its trust store: ``SSL_MODE_NO_AUTO_CHAIN``) (branch default off; ``--security DIR`` shows it on);
+* Certificate Revocation List (8): a path to the File object instance a tool downloaded a CRL into
+  (``declarations.CRL_FILE``, chosen here); a client certificate it lists is refused (OpenSSL's leaf
+  check, ``X509_V_FLAG_CRL_CHECK``); Apply_Config refuses a path to a file with no CRL of the CA.
 
 Each is applied to a pyOpenSSL context: the TLS port of a configured device and its DTLS port are
 both pyOpenSSL's (``tls_psk.openssl_context``), since Python's ``ssl`` cannot stop the chain building.
@@ -43,8 +46,16 @@ def apply(context: Any, credentials: Credentials, configuration: Configuration) 
     made (``tls_psk.openssl_context``)."""
     if credentials.device is None or credentials.ca is None:
         return   # pre-shared keys alone: no certificate to check or send
+    store = context.get_cert_store()
     if not configuration.check_expiration:
-        context.get_cert_store().set_flags(NO_CHECK_TIME)
+        store.set_flags(NO_CHECK_TIME)
+    if configuration.revocation_list and configuration.crl:
+        from cryptography import x509
+        from OpenSSL import crypto
+
+        # Apply_Config checked that it reads and that the CA signed it (``objects.usable``).
+        store.add_crl(x509.load_der_x509_crl(configuration.crl))
+        store.set_flags(crypto.X509StoreFlags.CRL_CHECK)   # the client's certificate: the leaf
     if configuration.send_chain:
         from cryptography import x509
 

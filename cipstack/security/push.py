@@ -28,13 +28,14 @@ from ..cip.status import CipError, describe_status
 from ..cip.types import BOOL, SHORT_STRING
 from ..errors import SecurityError
 from ..objects.file import FileRequest, FileTransferError, read_file, write_file
-from .attributes import CERTIFICATE, PATH_LIST, PRE_SHARED_KEYS, decode_object_path
+from .attributes import CERTIFICATE, OBJECT_PATH, PATH_LIST, PRE_SHARED_KEYS, decode_object_path
 from .certificates import CSR_FIELDS, pem
 from .configuration import DEVICE_CERTIFICATE_PATH
 from .credentials import CA_FILE
 from .declarations import (
     CERTIFICATE_MANAGEMENT_CLASS,
     CIPHER_SUITES,
+    CRL_FILE,
     EIP_SECURITY_CLASS,
     FILE_CLASS,
     CertificateService,
@@ -65,12 +66,14 @@ def configure(request: Request, folder: str | os.PathLike[str], common_name: str
               allowed_suites: Sequence[int] | None = None, verify_client: bool = True,
               step: Callable[[str], None] | None = None,
               pre_shared_keys: Sequence[tuple[bytes, bytes]] = (),
-              attributes: Mapping[int, bytes] | None = None) -> Pushed:
+              attributes: Mapping[int, bytes] | None = None, revocation_list: bytes = b"") -> Pushed:
     """Configure the device ``request`` reaches with the CA of ``folder``; ``step`` hears each step's
     name. ``pre_shared_keys``: (identity, key) pairs written to the Pre-Shared Keys attribute (0x5E
     attribute 5), which the device's TLS port then accepts beside its certificate; ``attributes``:
     other EtherNet/IP Security attributes written as they are given (id -> the Set's data, e.g.
-    ``{11: BOOL.encode(1)}`` for Check Expiration), after the ones above."""
+    ``{11: BOOL.encode(1)}`` for Check Expiration), after the ones above; ``revocation_list``: a CRL of
+    the CA (PEM) downloaded into the device's CRL file, which Certificate Revocation List (attribute 8)
+    then names."""
     from .certificates import der_of_pem
     from .provisioning import sign_csr
 
@@ -139,6 +142,15 @@ def configure(request: Request, folder: str | os.PathLike[str], common_name: str
             send("Set Allowed Cipher Suites", _SET, EIP_SECURITY_CLASS, 4, CIPHER_SUITES.encode(tuple(allowed_suites)))
         if pre_shared_keys:
             send("Set Pre-Shared Keys", _SET, EIP_SECURITY_CLASS, 5, PRE_SHARED_KEYS.encode(tuple(pre_shared_keys)))
+        if revocation_list:
+            if step is not None:
+                step("download Certificate Revocation List")
+            try:
+                write_file(file("the CRL", (FILE_CLASS, CRL_FILE)), revocation_list, name="crl.pem")
+            except FileTransferError as exc:
+                raise _Refused(f"download of the certificate revocation list: {exc}") from None
+            send("Set Certificate Revocation List", _SET, EIP_SECURITY_CLASS, 8,
+                 OBJECT_PATH.encode((FILE_CLASS, CRL_FILE)))
         for attribute, data in (attributes or {}).items():
             send(f"Set attribute {attribute}", _SET, EIP_SECURITY_CLASS, attribute, data)
         send("Verify_Certificate", CertificateService.VERIFY_CERTIFICATE, CERTIFICATE_MANAGEMENT_CLASS, None)
