@@ -22,6 +22,7 @@ pytest.importorskip("OpenSSL", reason="the security extra (pyOpenSSL) is not ins
 
 from cipstack.adapter import Adapter, AdapterSettings
 from cipstack.cip.types import BOOL, UINT
+from cipstack.errors import SecurityError
 from cipstack.scanner import SyncScanner
 from cipstack.security import Credentials
 from cipstack.security.push import configure
@@ -31,7 +32,8 @@ from tests.security_peers import OPENSSL, REGISTER_SESSION, needs_openssl
 VERIFY_CLIENT, SEND_CHAIN, CHECK_EXPIRATION, DTLS_TIMEOUT = 9, 10, 11, 15
 
 
-async def configured(lab: Path, revocation_list: bytes = b"", **attributes: bytes) -> Adapter:
+async def configured(lab: Path, revocation_list: bytes = b"", trusted_identities: bytes = b"",
+                     **attributes: bytes) -> Adapter:
     """A device started in Factory Default, configured over the wire with the lab CA and the EtherNet/IP
     Security attributes given (``a<id>=data``), and the CRL downloaded, its TLS and DTLS listeners in
     place."""
@@ -47,7 +49,8 @@ async def configured(lab: Path, revocation_list: bytes = b"", **attributes: byte
                         data: bytes) -> tuple[int, Any, bytes]:
                 reply = plain.request(service, class_id, instance, attribute, data, check=False)
                 return reply.general_status, reply.extended_status, reply.data
-            configure(request, lab, verify_client=verify, attributes=written, revocation_list=revocation_list)
+            configure(request, lab, verify_client=verify, attributes=written, revocation_list=revocation_list,
+                      trusted_identities=trusted_identities)
 
     try:
         await asyncio.to_thread(push)
@@ -72,9 +75,10 @@ def s_client(port: int, *options: str, dtls: bool = False) -> tuple[int, str]:
     return done.returncode, (done.stdout + done.stderr).decode(errors="replace")
 
 
-def lab_client(lab: Path, folder: Path, name: str = "expired.pem", expired: bool = True) -> tuple[Path, int]:
+def lab_client(lab: Path, folder: Path, name: str = "expired.pem", expired: bool = True,
+               common_name: str = "") -> tuple[Path, int]:
     """The lab client's key in another certificate of the lab CA (by default one whose validity ended
-    yesterday): its file and serial number."""
+    yesterday; ``common_name``: another subject than the lab client's): its file and serial number."""
     from cryptography import x509
     from cryptography.hazmat.primitives import hashes, serialization
 
@@ -83,7 +87,8 @@ def lab_client(lab: Path, folder: Path, name: str = "expired.pem", expired: bool
     key = serialization.load_pem_private_key((lab / "client.key").read_bytes(), password=None)
     now = datetime.datetime.now(datetime.timezone.utc)
     certificate = (x509.CertificateBuilder()
-                   .subject_name(x509.load_pem_x509_certificate((lab / "client.pem").read_bytes()).subject)
+                   .subject_name(x509.Name([x509.NameAttribute(x509.NameOID.COMMON_NAME, common_name)]) if common_name
+                                 else x509.load_pem_x509_certificate((lab / "client.pem").read_bytes()).subject)
                    .issuer_name(ca.subject).public_key(key.public_key())  # type: ignore[arg-type]
                    .serial_number(x509.random_serial_number())
                    .not_valid_before(now - datetime.timedelta(days=10))
@@ -263,6 +268,8 @@ async def test_a_client_certificate_the_crl_lists_is_refused(lab: Path, tmp_path
             assert len(lines) == 1 and "certificate revoked" in lines[0], lines   # once per source per 10 s
             status, words = await asyncio.to_thread(lambda: s_client(port, *client, dtls=True))
             assert status != 0, words
+            assert any(r.getMessage().startswith("DTLS handshake") and "certificate revoked" in r.getMessage()
+                       for r in caplog.records)
         else:
             assert (await asyncio.to_thread(register_over_tls, lab, port, revoked))[8:12] == bytes(4)
             status, words = await asyncio.to_thread(lambda: s_client(port, *client, dtls=True))
@@ -274,7 +281,46 @@ async def test_a_client_certificate_the_crl_lists_is_refused(lab: Path, tmp_path
 
 
 async def test_apply_config_refuses_a_crl_path_without_a_crl_of_the_ca(lab: Path, other_lab: Path) -> None:
-    from cipstack.errors import SecurityError
-
     with pytest.raises(SecurityError, match="Apply_Config refused"):
         await configured(lab, revocation_list=revocation_list(other_lab))
+
+
+# -- Trusted Identities (12) -------------------------------------------------------------------------
+@pytest.mark.parametrize("listed", [True, False])
+async def test_trusted_identities_serve_only_the_clients_they_name(lab: Path, tmp_path: Path, listed: bool,
+                                                                  caplog: pytest.LogCaptureFixture) -> None:
+    stranger, _ = lab_client(lab, tmp_path, "stranger.pem", expired=False, common_name="plc-9")
+    identities = (lab / "client.pem").read_bytes() if listed else b""
+    adapter = await configured(lab, trusted_identities=identities)
+    try:
+        assert adapter.secure is not None and adapter.secure.server is not None
+        port = adapter.secure.server.port
+        # The lab client is served: it is listed, or no identity is.
+        assert await asyncio.to_thread(
+            lambda: SyncScanner(f"127.0.0.1:{port}", security=Credentials.load(lab), identify=False).read(1, 1, 7)) \
+            == "CENT"
+        if listed:   # a certificate of the same CA, another subject: refused
+            with pytest.raises(ssl.SSLError):
+                await asyncio.to_thread(register_over_tls, lab, port, stranger)
+            lines = [r.getMessage() for r in caplog.records if "refused" in r.getMessage()]
+            assert len(lines) == 1 and "CN=plc-9 is not one of the Trusted Identities" in lines[0], lines
+            with pytest.raises(SecurityError):     # and over DTLS
+                await asyncio.to_thread(_dtls_with, lab, tmp_path, stranger, port)
+        else:
+            assert (await asyncio.to_thread(register_over_tls, lab, port, stranger))[8:12] == bytes(4)
+        await asyncio.to_thread(_dtls_with, lab, tmp_path, lab / "client.pem", port)
+    finally:
+        await adapter.close()
+
+
+def _dtls_with(lab: Path, folder: Path, certificate: Path, port: int) -> None:
+    """A DTLS session from our originator presenting ``certificate`` (the lab client's key): the handshake,
+    then closed; ``SecurityError`` when the device refuses it."""
+    import shutil
+
+    own = folder / f"as-{certificate.stem}"
+    own.mkdir(exist_ok=True)
+    for name in ("ca.pem", "client.key"):
+        shutil.copy(lab / name, own / name)
+    shutil.copy(certificate, own / "client.pem")
+    Credentials.load(own).datagram_link("127.0.0.1", port, 10.0).close()

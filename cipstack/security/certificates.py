@@ -140,6 +140,28 @@ def revocation_list_problem(crl_der: bytes, ca_der: bytes) -> str | None:
     return None
 
 
+def identity_bundle(data: bytes) -> bytes:
+    """A Trusted Identities file's octets: one or more PEM certificates, returned as read; 0x09 (invalid
+    attribute value) for a file that holds none."""
+    _crypto()
+    from cryptography import x509
+
+    try:
+        x509.load_pem_x509_certificates(data)
+    except ValueError:
+        raise CipError(GeneralStatus.INVALID_ATTRIBUTE_VALUE, message="not PEM certificates") from None
+    return data
+
+
+def identities(bundle: bytes) -> frozenset[str]:
+    """The subjects (RFC 4514) of a Trusted Identities file's certificates."""
+    _crypto()
+    from cryptography import x509
+
+    return frozenset(c.subject.rfc4514_string() for c in x509.load_pem_x509_certificates(bundle)) if bundle \
+        else frozenset()
+
+
 def pem(der: bytes, label: str = "CERTIFICATE") -> bytes:
     """DER octets as PEM (a certificate; ``label`` "CERTIFICATE REQUEST" for a CSR); none for none."""
     import base64

@@ -72,6 +72,9 @@ class Configuration:
     #: The certificate revocation list (DER) downloaded into its File object instance (``CRL_FILE``),
     #: checked when ``revocation_list`` names that file.
     crl: bytes = b""
+    #: The certificates (PEM, one or more) downloaded into the Trusted Identities' File object instance
+    #: (``TRUSTED_IDENTITIES_FILE``): their subjects are the identities, when ``trusted_identities`` names it.
+    identity_certificates: bytes = b""
     #: The last Create_CSR's request (DER), which the CSR's File object instance serves.
     certificate_request: bytes = b""
     #: The private key of the last Create_CSR (PEM, PKCS#8): never readable over the network.

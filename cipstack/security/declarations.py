@@ -93,6 +93,9 @@ CSR_FILE, DEVICE_CERTIFICATE_FILE, CA_CERTIFICATE_FILE = 0xC9, 0xCA, 0xCB
 #: The File object instance a configuration tool downloads a certificate revocation list into, which
 #: the Certificate Revocation List attribute (0x5E attribute 8) then names (chosen here: the next one).
 CRL_FILE = 0xCC
+#: The File object instance a tool downloads the certificates of the Trusted Identities into (PEM, one
+#: or more), which that attribute (0x5E attribute 12) then names (chosen here, as ``CRL_FILE``).
+TRUSTED_IDENTITIES_FILE = 0xCD
 #: DTLS Timeout default, seconds (the branch's default).
 DTLS_TIMEOUT = 12
 
@@ -196,5 +199,6 @@ __all__ = ["AVAILABLE_CIPHER_SUITES", "CA_CERTIFICATE_FILE", "CERTIFICATE_MANAGE
            "CIPHER_SUITE_NAMES", "CIP_SECURITY_CLASS", "CIP_SECURITY_SPEC", "CONFIDENTIALITY_PROFILE", "CRL_FILE",
            "CSR_FILE", "DEVICE_CERTIFICATE_FILE", "DTLS_TIMEOUT", "EIP_SECURITY_CLASS", "EIP_SECURITY_SPEC",
            "FILE_CLASS", "NO_CERTIFICATES_CONFIGURED", "NO_CIPHER_SUITES_CONFIGURED", "PSK_SUITE_NAMES",
-           "SECURITY_CLASSES", "VERIFICATION_FAILED", "CertificateService", "CertificateState", "CertificateStatus",
+           "SECURITY_CLASSES", "TRUSTED_IDENTITIES_FILE",
+           "VERIFICATION_FAILED", "CertificateService", "CertificateState", "CertificateStatus",
            "CipSecurityState", "ConfigService", "SecurityState"]

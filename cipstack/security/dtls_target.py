@@ -57,7 +57,7 @@ from ..eip.wire.cpf import SockAddr
 from ..errors import CipstackError
 from .credentials import SECURE_PORT
 from .dtls import DtlsChannel, describe_dtls_failure, dtls_context
-from .psk import identity_asked
+from .psk import identity_asked, verify_message
 from .tls_target import HANDSHAKE_TIMEOUT, named_identity
 
 if TYPE_CHECKING:
@@ -125,6 +125,8 @@ class _Session:
             self.flush()   # the alert that tells the peer why
             if self.connection is None:
                 cause = describe_dtls_failure(exc, identity_asked(self.channel.connection))
+                if cause.startswith("certificate verify failed"):   # OpenSSL's words for the client's certificate
+                    cause = f"certificate verify failed: {verify_message(self.channel.connection)}"
                 if cause.startswith("no cipher suite in common"):
                     allowed = [n for n in self.channel.connection.get_cipher_list() if not n.startswith("TLS_")]
                     cause = f"{cause}: the device allows {', '.join(allowed) or 'none'}"

@@ -40,6 +40,7 @@ from .declarations import (
     EIP_SECURITY_SPEC,
     FILE_CLASS,
     PSK_SUITE_NAMES,
+    TRUSTED_IDENTITIES_FILE,
     VERIFICATION_FAILED,
     CertificateService,
     CertificateState,
@@ -129,6 +130,9 @@ class EipSecurityObject(_SecurityObject):
         if spec.id in (6, 7) and any(path != DEVICE_CERTIFICATE_PATH for path in value):
             raise CipError(GeneralStatus.INVALID_ATTRIBUTE_VALUE,
                            message="a certificate path names Certificate Management instance 1 (0x5F/1)")
+        if spec.id == 12 and any(path != (FILE_CLASS, TRUSTED_IDENTITIES_FILE) for path in value):
+            raise CipError(GeneralStatus.INVALID_ATTRIBUTE_VALUE,
+                           message=f"trusted identities are kept in File object instance {TRUSTED_IDENTITIES_FILE}")
         if spec.id == 8 and value not in ((), (FILE_CLASS, CRL_FILE)):
             raise CipError(GeneralStatus.INVALID_ATTRIBUTE_VALUE,
                            message=f"a certificate revocation list is kept in File object instance {CRL_FILE}")
@@ -208,6 +212,8 @@ def usable(configuration: Configuration) -> str | None:
                               configuration.device_key, check_expiration=bool(configuration.check_expiration))
     if why is None and configuration.revocation_list:
         why = certificates.revocation_list_problem(configuration.crl, configuration.ca_certificate)
+    if why is None and configuration.trusted_identities and not configuration.identity_certificates:
+        why = "the Trusted Identities name a file that holds no certificate"
     return why
 
 
@@ -235,6 +241,10 @@ class CertificateManagementObject(_SecurityObject):
         # The EtherNet/IP Security object's Certificate Revocation List (attribute 8) names this file.
         files.serve(StoredFile(CRL_FILE, "Certificate Revocation List", "crl.pem", (1, 0), self._crl_file),
                     self._crl_downloaded, live=True)
+        # Its Trusted Identities (attribute 12) name this one.
+        files.serve(StoredFile(TRUSTED_IDENTITIES_FILE, "Trusted Identities", "identities.pem", (1, 0),
+                               lambda: self.configurator.configuration.identity_certificates),
+                    self._identities_downloaded, live=True)
 
     def _csr_file(self) -> bytes:
         return certificates.pem(self.configurator.configuration.certificate_request, "CERTIFICATE REQUEST")
@@ -255,6 +265,17 @@ class CertificateManagementObject(_SecurityObject):
             raise self.configurator.refuse(context.origin, exc.general, f"{what} from {context.origin} refused: "
                                                                          f"{exc}") from None
         self.configurator.change(context.transport, context.origin, context.now, what, crl=der)
+
+    def _identities_downloaded(self, data: bytes, context: RequestContext) -> None:
+        """The Trusted Identities' certificates downloaded: the session's owner only; 0x09 for none."""
+        what = "a download of the trusted identities"
+        self.configurator.require(context.transport, context.origin, context.now, what)
+        try:
+            bundle = certificates.identity_bundle(data)
+        except CipError as exc:
+            raise self.configurator.refuse(context.origin, exc.general, f"{what} from {context.origin} refused: "
+                                                                         f"{exc}") from None
+        self.configurator.change(context.transport, context.origin, context.now, what, identity_certificates=bundle)
 
     def _downloaded(self, attribute: int, data: bytes, context: RequestContext) -> None:
         """A certificate downloaded into its file: the session's owner only; 0x09 for no certificate."""

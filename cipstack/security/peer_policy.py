@@ -17,7 +17,11 @@ is read from its name (chosen here where no public source says more):
   its trust store: ``SSL_MODE_NO_AUTO_CHAIN``) (branch default off; ``--security DIR`` shows it on);
 * Certificate Revocation List (8): a path to the File object instance a tool downloaded a CRL into
   (``declarations.CRL_FILE``, chosen here); a client certificate it lists is refused (OpenSSL's leaf
-  check, ``X509_V_FLAG_CRL_CHECK``); Apply_Config refuses a path to a file with no CRL of the CA.
+  check, ``X509_V_FLAG_CRL_CHECK``); Apply_Config refuses a path to a file with no CRL of the CA;
+* Trusted Identities (12): paths to the File object instance a tool downloaded certificates into
+  (``declarations.TRUSTED_IDENTITIES_FILE``, chosen here); with Verify Client Certificate on, a client
+  whose certificate's subject (the whole distinguished name) is not one of theirs is refused, however
+  good its signature (chosen here: no public source says which part of a certificate is the identity).
 
 Each is applied to a pyOpenSSL context: the TLS port of a configured device and its DTLS port are
 both pyOpenSSL's (``tls_psk.openssl_context``), since Python's ``ssl`` cannot stop the chain building.
@@ -25,6 +29,7 @@ both pyOpenSSL's (``tls_psk.openssl_context``), since Python's ``ssl`` cannot st
 
 from __future__ import annotations
 
+import weakref
 from typing import TYPE_CHECKING, Any
 
 from ..errors import SecurityError
@@ -38,6 +43,33 @@ if TYPE_CHECKING:
 NO_CHECK_TIME = 0x200000
 #: OpenSSL's ``SSL_MODE_NO_AUTO_CHAIN`` (ssl.h): send the certificate alone, build no chain from the store.
 NO_AUTO_CHAIN = 0x8
+
+
+#: Connections whose client certificate Trusted Identities refused, and why: OpenSSL records only "unspecified
+#: certificate verification error" when a verify callback says no (``psk.verify_message`` reads this).
+_UNTRUSTED: weakref.WeakKeyDictionary[Any, str] = weakref.WeakKeyDictionary()
+
+
+def untrusted(connection: Any) -> str | None:
+    """Why Trusted Identities refused the client of ``connection``, or None when they did not."""
+    return _UNTRUSTED.get(connection)
+
+
+class IdentityCheck:
+    """The verify callback of Trusted Identities: OpenSSL's verdict, and at the client's own certificate
+    (depth 0) its subject among ``subjects`` (RFC 4514 strings)."""
+
+    def __init__(self, subjects: frozenset[str]) -> None:
+        self.subjects = subjects
+
+    def __call__(self, connection: Any, certificate: Any, number: int, depth: int, ok: int) -> bool:
+        if not ok or depth:
+            return bool(ok)
+        subject = certificate.to_cryptography().subject.rfc4514_string()
+        if subject in self.subjects:
+            return True
+        _UNTRUSTED[connection] = f"subject {subject} is not one of the Trusted Identities"
+        return False
 
 
 def apply(context: Any, credentials: Credentials, configuration: Configuration) -> None:
@@ -56,6 +88,10 @@ def apply(context: Any, credentials: Credentials, configuration: Configuration) 
         # Apply_Config checked that it reads and that the CA signed it (``objects.usable``).
         store.add_crl(x509.load_der_x509_crl(configuration.crl))
         store.set_flags(crypto.X509StoreFlags.CRL_CHECK)   # the client's certificate: the leaf
+    if configuration.trusted_identities and configuration.identity_certificates and configuration.verify_client:
+        from .certificates import identities
+
+        context.set_verify(context.get_verify_mode(), IdentityCheck(identities(configuration.identity_certificates)))
     if configuration.send_chain:
         from cryptography import x509
 
@@ -68,4 +104,4 @@ def apply(context: Any, credentials: Credentials, configuration: Configuration) 
         context.set_mode(NO_AUTO_CHAIN)
 
 
-__all__ = ["NO_AUTO_CHAIN", "NO_CHECK_TIME", "apply"]
+__all__ = ["NO_AUTO_CHAIN", "NO_CHECK_TIME", "IdentityCheck", "apply", "untrusted"]

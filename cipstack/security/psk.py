@@ -163,7 +163,13 @@ def unread(connection: Any) -> int:
 
 def verify_message(connection: Any) -> str:
     """Why the peer's certificate of ``connection`` did not verify, in OpenSSL's words
-    (``SSL_get_verify_result``; pyOpenSSL's error says only "certificate verify failed")."""
+    (``SSL_get_verify_result``; pyOpenSSL's error says only "certificate verify failed"), or the
+    device's Trusted Identities' (``peer_policy``)."""
+    from .peer_policy import untrusted
+
+    note = untrusted(connection)
+    if note is not None:
+        return note
     lib, ffi = bindings()
     code = lib.SSL_get_verify_result(connection._ssl)
     return str(ffi.string(lib.X509_verify_cert_error_string(code)).decode())

@@ -38,6 +38,7 @@ from .declarations import (
     CRL_FILE,
     EIP_SECURITY_CLASS,
     FILE_CLASS,
+    TRUSTED_IDENTITIES_FILE,
     CertificateService,
     ConfigService,
 )
@@ -66,14 +67,16 @@ def configure(request: Request, folder: str | os.PathLike[str], common_name: str
               allowed_suites: Sequence[int] | None = None, verify_client: bool = True,
               step: Callable[[str], None] | None = None,
               pre_shared_keys: Sequence[tuple[bytes, bytes]] = (),
-              attributes: Mapping[int, bytes] | None = None, revocation_list: bytes = b"") -> Pushed:
+              attributes: Mapping[int, bytes] | None = None, revocation_list: bytes = b"",
+              trusted_identities: bytes = b"") -> Pushed:
     """Configure the device ``request`` reaches with the CA of ``folder``; ``step`` hears each step's
     name. ``pre_shared_keys``: (identity, key) pairs written to the Pre-Shared Keys attribute (0x5E
     attribute 5), which the device's TLS port then accepts beside its certificate; ``attributes``:
     other EtherNet/IP Security attributes written as they are given (id -> the Set's data, e.g.
     ``{11: BOOL.encode(1)}`` for Check Expiration), after the ones above; ``revocation_list``: a CRL of
     the CA (PEM) downloaded into the device's CRL file, which Certificate Revocation List (attribute 8)
-    then names."""
+    then names; ``trusted_identities``: client certificates (PEM) downloaded into the device's Trusted
+    Identities file, which attribute 12 then names: only clients of their subjects are served."""
     from .certificates import der_of_pem
     from .provisioning import sign_csr
 
@@ -151,6 +154,16 @@ def configure(request: Request, folder: str | os.PathLike[str], common_name: str
                 raise _Refused(f"download of the certificate revocation list: {exc}") from None
             send("Set Certificate Revocation List", _SET, EIP_SECURITY_CLASS, 8,
                  OBJECT_PATH.encode((FILE_CLASS, CRL_FILE)))
+        if trusted_identities:
+            if step is not None:
+                step("download Trusted Identities")
+            try:
+                write_file(file("the trusted identities", (FILE_CLASS, TRUSTED_IDENTITIES_FILE)), trusted_identities,
+                           name="identities.pem")
+            except FileTransferError as exc:
+                raise _Refused(f"download of the trusted identities: {exc}") from None
+            send("Set Trusted Identities", _SET, EIP_SECURITY_CLASS, 12,
+                 PATH_LIST.encode(((FILE_CLASS, TRUSTED_IDENTITIES_FILE),)))
         for attribute, data in (attributes or {}).items():
             send(f"Set attribute {attribute}", _SET, EIP_SECURITY_CLASS, attribute, data)
         send("Verify_Certificate", CertificateService.VERIFY_CERTIFICATE, CERTIFICATE_MANAGEMENT_CLASS, None)
