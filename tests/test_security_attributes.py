@@ -324,3 +324,39 @@ def _dtls_with(lab: Path, folder: Path, certificate: Path, port: int) -> None:
         shutil.copy(lab / name, own / name)
     shutil.copy(certificate, own / "client.pem")
     Credentials.load(own).datagram_link("127.0.0.1", port, 10.0).close()
+
+
+# -- what a Set or a download the device cannot take gets ----------------------------------------------
+async def test_paths_and_files_the_device_cannot_take_are_refused_and_change_nothing(lab: Path) -> None:
+    from cipstack.objects.file import FileTransferError, write_file
+    from cipstack.security.attributes import OBJECT_PATH, PATH_LIST
+
+    settings = AdapterSettings(port=0, io_port=0, security_port=free_port(), security_objects=True)
+    async with Adapter(settings) as adapter:
+        def attempt() -> None:
+            with SyncScanner(f"127.0.0.1:{adapter.port}", identify=False) as plain:
+                def status(service: int, class_id: int, instance: int, attribute: int | None,
+                           data: bytes = b"") -> int:
+                    return plain.request(service, class_id, instance, attribute, data, check=False).general_status
+
+                def file(instance: int) -> Any:
+                    def request(service: int, data: bytes) -> tuple[int, bytes]:
+                        reply = plain.request(service, 0x37, instance, None, data, check=False)
+                        return reply.general_status, reply.data
+                    return request
+
+                assert status(0x4B, 0x5E, 1, None) == 0                                        # Begin_Config
+                assert status(0x10, 0x5E, 1, 8, OBJECT_PATH.encode((0x37, 0xCA))) == 0x09      # not the CRL's file
+                assert status(0x10, 0x5E, 1, 12, PATH_LIST.encode(((0x5F, 1),))) == 0x09      # not the identities'
+                assert status(0x10, 0x5E, 1, 15, UINT.encode(0)) == 0x09                       # 1 s at least
+                for instance in (0xCC, 0xCD):
+                    with pytest.raises(FileTransferError):
+                        write_file(file(instance), b"no certificate, no CRL", name="x.pem")
+                reply = plain.request(0x0E, 0x5E, 1, 8, check=False)
+                assert (reply.general_status, reply.data) == (0, b"\x00")                      # still none
+                reply = plain.request(0x0E, 0x5E, 1, 12, check=False)
+                assert (reply.general_status, reply.data) == (0, b"\x00")
+                assert status(0x10, 0x5E, 1, 8, OBJECT_PATH.encode((0x37, 0xCC))) == 0        # its own file
+                assert status(0x4E, 0x5E, 1, None) == 0                                        # Abort_Config
+
+        await asyncio.to_thread(attempt)
