@@ -33,11 +33,12 @@ VERIFY_CLIENT, SEND_CHAIN, CHECK_EXPIRATION, DTLS_TIMEOUT = 9, 10, 11, 15
 
 
 async def configured(lab: Path, revocation_list: bytes = b"", trusted_identities: bytes = b"",
-                     **attributes: bytes) -> Adapter:
+                     state_path: Path | None = None, **attributes: bytes) -> Adapter:
     """A device started in Factory Default, configured over the wire with the lab CA and the EtherNet/IP
     Security attributes given (``a<id>=data``), and the CRL downloaded, its TLS and DTLS listeners in
-    place."""
-    settings = AdapterSettings(port=0, io_port=0, security_port=free_port(), security_objects=True)
+    place; ``state_path``: where it keeps its state (and its configuration beside it)."""
+    settings = AdapterSettings(port=0, io_port=0, security_port=free_port(), security_objects=True,
+                               state_path=state_path)
     adapter = Adapter(settings)
     await adapter.start()
     written = {int(name[1:]): data for name, data in attributes.items()}
@@ -278,6 +279,30 @@ async def test_a_client_certificate_the_crl_lists_is_refused(lab: Path, tmp_path
         assert (await asyncio.to_thread(register_over_tls, lab, port, kept))[8:12] == bytes(4)
     finally:
         await adapter.close()
+
+
+async def test_a_restarted_device_keeps_its_crl_and_identities(lab: Path, tmp_path: Path) -> None:
+    revoked, serial = lab_client(lab, tmp_path, "revoked.pem", expired=False)
+    stranger, _ = lab_client(lab, tmp_path, "stranger.pem", expired=False, common_name="plc-9")
+    adapter = await configured(lab, revocation_list=revocation_list(lab, serial),
+                               trusted_identities=(lab / "client.pem").read_bytes() + revoked.read_bytes(),
+                               state_path=tmp_path / "acg.json", a15=UINT.encode(5))
+    settings = adapter.settings
+    await adapter.close()
+    async with Adapter(settings) as again:
+        assert again.secure is not None
+        for _ in range(1000):
+            if again.secure.server is not None and again.secure.server.is_open and again.secure.dtls is not None:
+                break
+            await asyncio.sleep(0.01)
+        assert again.secure.server is not None and again.secure.dtls is not None
+        assert again.secure.dtls.idle_timeout == 5
+        port = again.secure.server.port
+        with pytest.raises(ssl.SSLError):                    # listed in the identities, but revoked
+            await asyncio.to_thread(register_over_tls, lab, port, revoked)
+        with pytest.raises(ssl.SSLError):                    # not revoked, but not listed
+            await asyncio.to_thread(register_over_tls, lab, port, stranger)
+        assert (await asyncio.to_thread(register_over_tls, lab, port, lab / "client.pem"))[8:12] == bytes(4)
 
 
 async def test_apply_config_refuses_a_crl_path_without_a_crl_of_the_ca(lab: Path, other_lab: Path) -> None:
