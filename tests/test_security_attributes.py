@@ -385,3 +385,36 @@ async def test_paths_and_files_the_device_cannot_take_are_refused_and_change_not
                 assert status(0x4E, 0x5E, 1, None) == 0                                        # Abort_Config
 
         await asyncio.to_thread(attempt)
+
+
+# -- the command line --------------------------------------------------------------------------------
+async def test_security_configure_sets_the_attributes_and_pushes_the_folders_crl(
+        lab: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    import shutil
+
+    from cipstack.cli import main
+
+    folder = tmp_path / "lab"
+    shutil.copytree(lab, folder)
+    revoked, serial = lab_client(lab, tmp_path, "revoked.pem", expired=False)
+    (folder / "crl.pem").write_bytes(revocation_list(lab, serial))
+    settings = AdapterSettings(port=0, io_port=0, security_port=free_port(), security_objects=True)
+    async with Adapter(settings) as adapter:
+        code = await asyncio.to_thread(main, [
+            "security", "configure", f"127.0.0.1:{adapter.port}", "--security", str(folder), "--security-port",
+            str(settings.security_port), "--check-expiration", "--send-chain", "--dtls-timeout", "7"])
+        out = capsys.readouterr().out
+        assert code == 0, out
+        assert ("download Certificate Revocation List, Set Certificate Revocation List, Set Check Expiration, "
+                "Set Send Certificate Chain, Set DTLS Timeout, Verify_Certificate, Apply_Config)") in out, out
+        assert adapter.configurator is not None
+        active = adapter.configurator.active
+        assert (active.check_expiration, active.send_chain, active.dtls_timeout) == (1, 1, 7)
+        assert active.revocation_list == (0x37, 0xCC)
+        with pytest.raises(ssl.SSLError):
+            await asyncio.to_thread(register_over_tls, lab, settings.security_port, revoked)
+        code = await asyncio.to_thread(main, ["security", "configure", f"127.0.0.1:{adapter.port}", "--security",
+                                              str(folder), "--dtls-timeout", "0"])
+        assert code != 0
+        assert capsys.readouterr().err.strip().splitlines() == [
+            "cipstack security: --dtls-timeout 0: 1 to 65535 seconds"]

@@ -502,6 +502,12 @@ def build_parser(command: str | None = None, texts: bool = True) -> argparse.Arg
                                                               "device's product name)")
         q.add_argument("--security-port", type=number("security port"), default=2221, metavar="N",
                        help="TCP port where the device then serves TLS (default %(default)s)")
+        q.add_argument("--check-expiration", action="store_true",
+                       help="set Check Expiration (0x5E/11): the device refuses expired client certificates")
+        q.add_argument("--send-chain", action="store_true",
+                       help="set Send Certificate Chain (0x5E/10): the device sends the CA certificate too")
+        q.add_argument("--dtls-timeout", type=number("DTLS timeout"), metavar="SECONDS",
+                       help="set DTLS Timeout (0x5E/15): the DTLS port's idle timeout (the device's default 12)")
         q.add_argument("--timeout", type=float, default=10.0, metavar="SECONDS",
                        help="per request (default %(default)s)")
         q.add_argument("--json", action="store_true", help="one JSON object")

@@ -29,6 +29,7 @@ def cmd_security_configure(args: argparse.Namespace) -> int:
     that it answers over TLS with the certificate just written."""
     import time
 
+    from ..cip.types import BOOL, UINT
     from ..scanner import SyncScanner
     from ..security import Credentials
     from ..security.push import configure
@@ -44,8 +45,16 @@ def cmd_security_configure(args: argparse.Namespace) -> int:
 
         steps: list[str] = []
         keys = ((credentials.psk.identity, credentials.psk.key),) if credentials.psk is not None else ()
+        attributes = {number: BOOL.encode(1) for number, wanted in ((11, args.check_expiration),
+                                                                   (10, args.send_chain)) if wanted}
+        if args.dtls_timeout is not None:
+            if not 1 <= args.dtls_timeout <= 0xFFFF:
+                raise UsageError(f"--dtls-timeout {args.dtls_timeout}: 1 to 65535 seconds")
+            attributes[15] = UINT.encode(args.dtls_timeout)
+        crl = credentials.crl()   # the folder's CRL, when it has one: the device checks clients against it
         pushed = configure(request, args.security, common_name=args.common_name or "", step=steps.append,
-                           pre_shared_keys=keys)
+                           pre_shared_keys=keys, attributes=attributes,
+                           revocation_list=crl.read_bytes() if crl is not None else b"")
     host = args.host.rsplit(":", 1)[0] if args.host.count(":") == 1 else args.host
     secured = f"{host}:{args.security_port}"
     deadline = time.monotonic() + args.timeout

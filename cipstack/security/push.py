@@ -44,6 +44,8 @@ from .declarations import (
 )
 
 _SET, _GET = 0x10, 0x0E
+#: The EtherNet/IP Security attributes ``configure(attributes=)`` names in its steps.
+ATTRIBUTE_NAMES = {10: "Send Certificate Chain", 11: "Check Expiration", 15: "DTLS Timeout", 16: "UDP-only Policy"}
 #: What a refusal most likely means, for the one line the tool prints.
 HINTS = {("Begin_Config", 0x0C): "the device is configured already, or another configuration session is open "
                                  "(a Reset of 0x5E/1 returns a configured device to factory default)",
@@ -165,7 +167,8 @@ def configure(request: Request, folder: str | os.PathLike[str], common_name: str
             send("Set Trusted Identities", _SET, EIP_SECURITY_CLASS, 12,
                  PATH_LIST.encode(((FILE_CLASS, TRUSTED_IDENTITIES_FILE),)))
         for attribute, data in (attributes or {}).items():
-            send(f"Set attribute {attribute}", _SET, EIP_SECURITY_CLASS, attribute, data)
+            send(f"Set {ATTRIBUTE_NAMES.get(attribute, f'attribute {attribute}')}", _SET, EIP_SECURITY_CLASS,
+                 attribute, data)
         send("Verify_Certificate", CertificateService.VERIFY_CERTIFICATE, CERTIFICATE_MANAGEMENT_CLASS, None)
         send("Apply_Config", ConfigService.APPLY_CONFIG, EIP_SECURITY_CLASS, None, struct.pack("<HH", 0, 0))
     except BaseException:
