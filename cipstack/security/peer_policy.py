@@ -74,8 +74,8 @@ class IdentityCheck:
 
 def apply(context: Any, credentials: Credentials, configuration: Configuration) -> None:
     """Make ``context`` (a device's ``OpenSSL.SSL.Context`` with its certificate loaded) follow Check
-    Expiration and Send Certificate Chain; Verify Client Certificate is its verify mode, set where it is
-    made (``tls_psk.openssl_context``)."""
+    Expiration, the Certificate Revocation List, the Trusted Identities and Send Certificate Chain;
+    Verify Client Certificate is its verify mode, set where it is made (``tls_psk.openssl_context``)."""
     if credentials.device is None or credentials.ca is None:
         return   # pre-shared keys alone: no certificate to check or send
     store = context.get_cert_store()
