@@ -168,6 +168,20 @@ def test_psk_tls_reads_and_handshakes_both_ways() -> None:
     assert {"ratio_cpu_per_read_us", "ratio_cpu_per_handshake_us"} <= set(round_)
 
 
+def test_configured_tls_reads_and_handshakes_both_ways() -> None:
+    """``configured_tls.py``, one short round: the device configured over the network and the folder's
+    both answer every read and handshake, and the ratios are given (not judged here)."""
+    pytest.importorskip("OpenSSL", reason="the security extra (pyOpenSSL) is not installed")
+    result = subprocess.run([sys.executable, str(BENCHMARKS / "configured_tls.py"), "--reads", "200",
+                             "--handshakes", "10", "--rounds", "1", "--json"], capture_output=True, text=True,
+                            timeout=120)
+    assert result.returncode == 0, result.stderr
+    [round_] = json.loads(result.stdout)["rounds"]
+    for way in ("folder", "configured"):
+        assert set(round_[way]) == {"cpu_per_read_us", "cpu_per_handshake_us"}
+    assert {"ratio_cpu_per_read_us", "ratio_cpu_per_handshake_us"} <= set(round_)
+
+
 def test_tls_benchmark_measures_both_ports_handshakes_and_idle_sessions() -> None:
     """``tls.py``, one short round: the adapter's CPU per request on plain TCP and over TLS (with and
     without idle TLS sessions beside it), and per connection with and without a TLS handshake, both
