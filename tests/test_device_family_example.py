@@ -1,9 +1,10 @@
 """examples/device-family, a device family in a distribution of its own, as a user installs it: cipstack
 and the example pip-installed (editable, no dependencies, no build isolation: nothing is downloaded) into a
 throwaway venv, then every surface, each a process of that venv: `cipstack models`, `cipstack adapter
---profile dio` with `identity`, `get` and `set` against the block, `cipstack eds generate`, the front
-panel's HTTP API, `cipstack drive`, a fleet of blocks, `cipstack conform`, and the pytest plugin in an
-inner pytest run. One venv for the module, one adapter process per surface at most."""
+--profile dio` with `identity`, `get`, `set` and `io` against the block, `cipstack eds generate`, the
+front panel (its HTTP API, and its page in a headless Chromium where there is one), `cipstack drive`, a
+fleet of blocks, `cipstack conform`, and the pytest plugin in an inner pytest run. One venv for the
+module, one adapter process per surface at most."""
 
 from __future__ import annotations
 
@@ -162,37 +163,61 @@ def _http(method: str, url: str, body: dict[str, Any] | None = None) -> tuple[in
             return int(error.code), error.read().decode()
 
 
-def test_the_front_panel_shows_the_block_and_refuses_what_only_a_drive_does(venv: Path) -> None:
+@pytest.fixture(scope="module")
+def panel(venv: Path) -> Iterator[tuple[str, str]]:
+    """One dio adapter with the HTTP API (the front panel's surface): its ``HOST:PORT`` and the API's."""
     http = free_port()
     with adapter(venv, "--io-port", "0", "--http", f"127.0.0.1:{http}") as address:
-        base = f"127.0.0.1:{http}"
         wait_for(lambda: _listening_at(("127.0.0.1", http)), 30, "the HTTP API to listen")
-        status, page = _http("GET", f"http://{base}/")
-        assert status == 200 and "<title>cipstack front panel</title>" in page
-        status, body = _http("GET", f"http://{base}/status")
-        shown = json.loads(body)
-        assert status == 200 and shown["drive"] is None and shown["power"] == "on" and shown["faults"] == 0, body
-        status, body = _http("GET", f"http://{base}/devices")
-        assert status == 200 and json.loads(body) == [{"address": "127.0.0.1", "port": int(address.split(":")[1]),
-                                                       "product_name": "DIO-4"}]
-        status, body = _http("GET", f"http://{base}/plant")
-        (row,) = json.loads(body)
-        assert status == 200 and row["product_name"] == "DIO-4" and row["trip"] is None, body
-        status, body = _http("GET", f"http://{base}/trips")
-        assert (status, json.loads(body)) == (200, [])
-        # What only a drive has: a one-line JSON error, and the device keeps serving.
-        status, body = _http("POST", f"http://{base}/trip", {"code": 1})
-        assert (status, json.loads(body)) == (400, {"error": "DIO-4: this profile simulates no drive"})
-        status, body = _http("GET", f"http://{base}/parameters")
-        error = json.loads(body)["error"]
-        assert status == 404 and error.startswith("DIO-4: this device has no keypad"), body
-        assert "profile acg, mx2 or rx" in error   # the families that have one, read from the registry
-        status, body = _http("POST", f"http://{base}/power", {"action": "cycle"})
-        assert status == 200 and json.loads(body)["name"] == "power-cycle", body
-        status, body = _http("GET", f"http://{base}/metrics")
-        assert status == 200 and 'cipstack_powered{device="127.0.0.1"}' in body
-        identity = cipstack(venv, "identity", address, "--json")
-        assert identity.returncode == 0 and '"product_name": "DIO-4"' in identity.stdout, identity.stderr
+        yield address, f"127.0.0.1:{http}"
+
+
+@pytest.mark.browser
+def test_the_front_panel_page_shows_the_block_in_a_browser(panel: tuple[str, str], tmp_path: Path) -> None:
+    from tests.browser import chromium
+
+    _, base = panel
+    with chromium(tmp_path / "profile") as browser:
+        browser.get(f"http://{base}/")
+        wait_for(lambda: browser.find_element("id", "link-state").text == "live", 20, "the panel's stream")
+        shown = {name: browser.find_element("id", name).text for name in ("display", "state", "trip", "power")}
+        assert shown == {"display": "-----", "state": "-", "trip": "none", "power": "on"}
+        # The parameters' section says why there are none: the device's own one-line refusal.
+        wait_for(lambda: "this device has no keypad" in browser.find_element("id", "parameters-note")
+                 .get_attribute("textContent"), 20, "the parameters' note")
+        errors = [entry for entry in browser.get_log("browser") if entry.get("source") == "javascript"]
+        assert errors == []
+
+
+def test_the_front_panel_shows_the_block_and_refuses_what_only_a_drive_does(venv: Path,
+                                                                            panel: tuple[str, str]) -> None:
+    address, base = panel
+    status, page = _http("GET", f"http://{base}/")
+    assert status == 200 and "<title>cipstack front panel</title>" in page
+    status, body = _http("GET", f"http://{base}/status")
+    shown = json.loads(body)
+    assert status == 200 and shown["drive"] is None and shown["power"] == "on" and shown["faults"] == 0, body
+    status, body = _http("GET", f"http://{base}/devices")
+    assert status == 200 and json.loads(body) == [{"address": "127.0.0.1", "port": int(address.split(":")[1]),
+                                                   "product_name": "DIO-4"}]
+    status, body = _http("GET", f"http://{base}/plant")
+    (row,) = json.loads(body)
+    assert status == 200 and row["product_name"] == "DIO-4" and row["trip"] is None, body
+    status, body = _http("GET", f"http://{base}/trips")
+    assert (status, json.loads(body)) == (200, [])
+    # What only a drive has: a one-line JSON error, and the device keeps serving.
+    status, body = _http("POST", f"http://{base}/trip", {"code": 1})
+    assert (status, json.loads(body)) == (400, {"error": "DIO-4: this profile simulates no drive"})
+    status, body = _http("GET", f"http://{base}/parameters")
+    error = json.loads(body)["error"]
+    assert status == 404 and error.startswith("DIO-4: this device has no keypad"), body
+    assert "profile acg, mx2 or rx" in error   # the families that have one, read from the registry
+    status, body = _http("POST", f"http://{base}/power", {"action": "cycle"})
+    assert status == 200 and json.loads(body)["name"] == "power-cycle", body
+    status, body = _http("GET", f"http://{base}/metrics")
+    assert status == 200 and 'cipstack_powered{device="127.0.0.1"}' in body
+    identity = cipstack(venv, "identity", address, "--json")
+    assert identity.returncode == 0 and '"product_name": "DIO-4"' in identity.stdout, identity.stderr
 
 
 def _one_line_refusal(done: subprocess.CompletedProcess[str], says: str) -> None:
