@@ -265,6 +265,9 @@ def test_a_fleet_of_blocks_serves_each_on_its_address(venv: Path) -> None:
         assert cipstack(venv, "get", f"{hosts[1]}:{port}", "8/4/3", "--type", "BOOL").stdout == "0\n"
         status = cipstack(venv, "drive", "status", "--host", hosts[1], "--port", str(port))
         assert status.returncode == 0 and status.stdout.startswith("(no drive)"), status.stderr
+    # A family of one model takes no model name.
+    _one_line_refusal(cipstack(venv, "fleet", "--device", "dio:DIO-4*2", "--addresses", "127.0.0.81-127.0.0.82"),
+                      "cipstack fleet: --device dio:DIO-4*2: profile dio has one model; give no model")
 
 
 def test_the_conformance_battery_passes_every_check_that_applies(venv: Path) -> None:
