@@ -134,6 +134,13 @@ def test_the_adapter_serves_the_block_and_a_scanner_reads_and_writes_it(venv: Pa
         io = cipstack(venv, "io", address, "--eds", str(tmp_path / "DIO-4_1.01.eds"), "--connection", "1",
                       "--set", "output_3=1", "--duration", "1", "--io-port", "0", "--target-io-port", str(io_port))
         assert io.returncode == 0 and "input_3=True" in io.stdout, io.stdout + io.stderr
+    # The ports a drive has beside EtherNet/IP: the block has none, one line each.
+    _one_line_refusal(cipstack(venv, "adapter", "--profile", "dio", "--port", "0", "--rtu", "pty", "--factory"),
+                      "cipstack adapter: profile 'dio' has no RS-485 Modbus-RTU port (one has: profile acg)")
+    _one_line_refusal(cipstack(venv, "adapter", "--profile", "dio", "--port", "0", "--modbus-port", "0",
+                               "--factory"), "cipstack adapter: profile 'dio' has no Modbus TCP")
+    _one_line_refusal(cipstack(venv, "adapter", "--profile", "dio", "--port", "0", "--param", "X=1", "--factory"),
+                      "cipstack adapter: DIO-4: this device has no keypad")
 
 
 def test_eds_generate_writes_the_file_the_family_describes(venv: Path, tmp_path: Path) -> None:
@@ -238,6 +245,10 @@ def test_drive_commands_serve_the_block_and_refuse_a_drive_s_in_one_line(venv: P
                           "cipstack drive: DIO-4: this device has no keypad")
         _one_line_refusal(cipstack(venv, "drive", "set-parameter", "X", "1", "--port", port),
                           "cipstack drive: DIO-4: this device has no keypad")
+        connections = cipstack(venv, "drive", "connections", "--port", port)
+        assert (connections.returncode, connections.stdout) == (0, "sessions 0\n"), connections
+        table = cipstack(venv, "drive", "fault-table", "--port", port)
+        assert table.returncode == 0 and "power-cycle" in table.stdout and "unplug" in table.stdout, table.stderr
         trips = cipstack(venv, "drive", "trips", "--port", port)
         assert (trips.returncode, trips.stdout) == (0, "this device simulates no drive\n")
         # What any EtherNet/IP device has: its network faults and its power.
