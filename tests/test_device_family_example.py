@@ -98,9 +98,9 @@ def serving(venv: Path, command: str, *args: str, at: tuple[tuple[str, int], ...
         yield
     finally:
         process.terminate()
-        process.wait(15)
-        if process.stderr:
-            process.stderr.close()
+        _, errors = process.communicate(timeout=15)
+    # What it served, refused or was stopped by never ended in a traceback.
+    assert "Traceback" not in errors, errors
 
 
 @contextlib.contextmanager
