@@ -17,7 +17,14 @@ from .control.events import EventStream
 from .control.service import DeviceService
 from .devices.base import Device, DeviceLimits
 from .devices.keypad import Keypad, NoKeypad
-from .devices.profiles import DEFAULT_MAC, DEFAULT_PROFILE, ProfileOptions, build_device
+from .devices.profiles import (
+    DEFAULT_MAC,
+    DEFAULT_PROFILE,
+    ProfileOptions,
+    build_device,
+    families_having,
+    keypad_families,
+)
 from .eip.interfaces import interface_of
 from .eip.io_core import DEFAULT_IO_PORT, ProductionGrid
 from .eip.io_server import DatagramPaths, IoEndpoint, freeze_startup_objects
@@ -151,7 +158,8 @@ class Adapter:
         modbus_drive = self.device.modbus_drive()
         product = self.device.identity_info.product_name
         if s.rtu is not None and (modbus_drive is None or modbus_drive.rtu is None):
-            raise BadRequest(f"profile {s.profile!r} has no RS-485 Modbus-RTU port (the ACG drive has)")
+            raise BadRequest(f"profile {s.profile!r} has no RS-485 Modbus-RTU port (one has: "
+                             f"{families_having(lambda profile: profile.serial_link is not None)})")
         if s.modbus_port is not None and (modbus_drive is None or modbus_drive.tcp is None):
             raise BadRequest(f"profile {s.profile!r} has no Modbus TCP (the ACG-ET2 card speaks it)")
         self.modbus_drive = modbus_drive
@@ -481,7 +489,7 @@ class Adapter:
         keypad = self.device.keypad()
         if keypad is None:
             raise NoKeypad(f"{self.device.identity_info.product_name}: this device has no keypad (keypad "
-                           "parameters are a drive's: profile acg, mx2 or rx); write its parameters over CIP")
+                           f"parameters are a drive's: {keypad_families()}); write its parameters over CIP")
         return keypad
 
     def apply_keypad_parameters(self, assignments: list[str], kept: bool = True) -> list[str]:

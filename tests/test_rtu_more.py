@@ -86,7 +86,7 @@ def test_a_profile_without_the_port_is_one_line(tmp_path: Path) -> None:
                             capture_output=True, text=True, timeout=30)
     assert result.returncode == 2
     assert result.stderr.strip().splitlines() == [
-        "cipstack adapter: profile 'mx2' has no RS-485 Modbus-RTU port (the ACG drive has)"]
+        "cipstack adapter: profile 'mx2' has no RS-485 Modbus-RTU port (one has: profile acg)"]
 
 
 # -- over the line ---------------------------------------------------------------------------------------

@@ -229,6 +229,10 @@ MainPlanCheck = Callable[[Context, CheckSpec, Plan, Probe, Endpoint], Outcome]
 
 #: For the checks that need no connection point of the device: the configuration instance 1 with no
 #: connection point (a null Forward_Open configures, a refused transport class is refused before any path).
+#: The connection size of a class 3 Forward_Open (that of ``more_wire.Class3``): what a request and its
+#: reply need, well within what any target takes.
+CLASS3_SIZE = 504
+
 NO_POINTS = Plan("configuration instance 1", 1, 0, 0, SEQUENCE_COUNT_SIZE + 4, SEQUENCE_COUNT_SIZE, 10_000, None,
                  False, True, True)
 
@@ -365,7 +369,8 @@ def _unused_instance(ctx: Context, plan: Plan) -> int:
 @check("cm.forward_open.bad_segment", "Forward_Open whose connection path starts with a reserved segment (0xE0)",
        "status 0x01, extended 0x0315 (invalid segment in connection path); without a connection point, the path "
        "is the segment then the message router's (20 02 24 01): the target refuses it at its first segment, "
-       "before any application path", EXTENDED,
+       "before any application path (a device that refuses that class 1 Forward_Open 0x0103, as one without class 1 "
+       "I/O may, is asked again on a class 3 one)", EXTENDED,
        codes=[extended(0x0315, "invalid segment in connection path")])
 @_with_or_without_points
 def bad_segment(ctx: Context, spec: CheckSpec, plan: Plan, probe: Probe, endpoint: Endpoint) -> Outcome:
@@ -373,7 +378,18 @@ def bad_segment(ctx: Context, spec: CheckSpec, plan: Plan, probe: Probe, endpoin
     # refused there, so no assembly is needed behind it.
     behind = MESSAGE_ROUTER if plan is NO_POINTS else plan.path
     request = replace(forward_open_request(plan), connection_path=b"\xE0\x00" + behind)
-    return _refused(ctx, spec, probe, endpoint, request, f"segment E0 00 before {behind.hex(' ')}")
+    what = f"segment E0 00 before {behind.hex(' ')}"
+    reply, opened = send_forward_open(ctx, probe, endpoint, request)
+    if plan is NO_POINTS and opened is None and reply.status == 0x01 and reply.extended == 0x0103:
+        # A device that offers no class 1 I/O may refuse a class 1 Forward_Open (0x0103) before it reads
+        # the path; the path to the message router is a class 3 connection's, which it takes: asked again so.
+        request = replace(request, triad=new_triad(),
+                          transport=TransportTrigger(3, TriggerType.APPLICATION, server=True),
+                          ot_parameters=NetworkParameters(CLASS3_SIZE, ConnectionType.POINT_TO_POINT),
+                          to_parameters=NetworkParameters(CLASS3_SIZE, ConnectionType.POINT_TO_POINT))
+        reply, opened = send_forward_open(ctx, probe, endpoint, request)
+        what = f"class 1 refused 0x0103 (no class 1 I/O); class 3, {what}"
+    return _refusal(spec, probe, reply, opened, what)
 
 
 @check("cm.forward_open.consuming_point", "Forward_Open to an O->T (consuming) point the device does not have",

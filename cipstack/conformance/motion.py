@@ -310,13 +310,15 @@ def _motion_plan(ctx: Context) -> Plan | None:
 def motion_link(ctx: Context, spec: CheckSpec) -> Iterator[MotionLink | Outcome]:
     """A ``MotionLink`` with the drive under network control, released whatever happens; or the outcome
     of a check that cannot run (not allowed, not a drive, no connection, no control from the network)."""
-    # The option first, as for --allow-writes: without it nothing about the motor is asked of the device.
-    if not ctx.allow_motion:
-        yield outcome(spec, Verdict.NOT_RUN, "needs --allow-motion (this check runs the motor)")
-        return
+    # A device that is no drive (its device type, from the identity the run began with: nothing more is
+    # asked of it) has no motor: the check does not apply, with or without the option. For a drive, the
+    # option first, as for --allow-writes: without it nothing about the motor is asked of the device.
     skipped = not_a_drive(ctx, spec)
     if skipped is not None:
         yield skipped
+        return
+    if not ctx.allow_motion:
+        yield outcome(spec, Verdict.NOT_RUN, "needs --allow-motion (this check runs the motor)")
         return
     plan = _motion_plan(ctx)
     if plan is None:

@@ -23,6 +23,7 @@ from dataclasses import dataclass
 from typing import TYPE_CHECKING, Any
 
 from ..devices.keypad import NoKeypad, WriteRefused
+from ..devices.profiles import keypad_families
 from ..errors import BadRequest, CipstackError, NotFound, PeerUnreachable, StateRefused
 from ..faults import FaultController, FaultRequest
 from ..faults.model import JSON_SPELLING
@@ -290,7 +291,7 @@ class DeviceService:
         keypad = device.keypad()
         if keypad is None:
             raise NoKeypad(f"{device.identity_info.product_name}: this device has no keypad (keypad parameters "
-                           "are a drive's: profile acg, mx2 or rx); write its parameters over CIP")
+                           f"are a drive's: {keypad_families()}); write its parameters over CIP")
         return keypad
 
     def parameter(self, code: str) -> dict[str, Any]:

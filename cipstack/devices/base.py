@@ -243,8 +243,14 @@ class Device:
 
     # -- class 1 ----------------------------------------------------------------------------------
     def io_profile(self) -> IoProfile | None:
-        """What this device offers for class 1 I/O; None when it has no I/O assemblies."""
-        return None
+        """What this device offers for class 1 I/O: any pair of its output (consumed) and input
+        (produced) assemblies, read at each Forward_Open; None when it has no input assembly (nothing
+        to produce). A family that offers only some pairs, or other RPIs, overrides this."""
+        points = self.assembly.points
+        if not any(not point.consumed for point in points.values()):
+            return None
+        return IoProfile(consumed=lambda: {i: p for i, p in points.items() if p.consumed},
+                         produced=lambda: {i: p for i, p in points.items() if not p.consumed})
 
     def multicast_block(self) -> tuple[int, int]:
         """T->O multicast addresses from TCP/IP attribute 9: the CIP default algorithm

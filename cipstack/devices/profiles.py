@@ -164,6 +164,21 @@ def check_model(profile: Profile, model: str | None) -> None:
                          f"{', '.join(p.name for p in PROFILES.values() if p.find_model is not None)}")
 
 
+def families_having(has: Callable[[Profile], bool]) -> str:
+    """The installed families a capability is declared by, for the message of a device without it:
+    "profile acg, mx2 or rx" (read from the declarations, so that a family from another distribution
+    is named too and no message lists cipstack's own by hand)."""
+    names = [profile.name for profile in PROFILES.values() if has(profile)]
+    if not names:
+        return "no installed family"
+    return "profile " + (names[0] if len(names) == 1 else f"{', '.join(names[:-1])} or {names[-1]}")
+
+
+def keypad_families() -> str:
+    """The families with a keypad: "profile acg, mx2 or rx"."""
+    return families_having(lambda profile: profile.keypad is not None)
+
+
 def catalog_for_identity(identity: IdentityRecord) -> Catalog:
     """The declarations a scanner decodes with for a device that identified itself: those of
     the profile with the same vendor and product code, else the standard objects only."""

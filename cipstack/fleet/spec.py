@@ -174,6 +174,8 @@ def make_group(profile: str | None, model: str | None, count: Any, first: str | 
         raise SpecError(f"{where}: no profile")
     if profile is not None and profile not in PROFILES:
         raise SpecError(f"{where}: unknown profile {profile!r} (known: {', '.join(sorted(PROFILES))})")
+    if profile is not None and model is not None and PROFILES[profile].find_model is None:
+        raise SpecError(f"{where}: profile {profile} has one model; give no model")
     if model is not None:
         try:
             family = profile_of_model(model).name

@@ -143,8 +143,26 @@ def test_an_eds_emulated_device_without_an_eds_serves_its_own(adapter_with: Adap
     report = run(peer.host, peer.port, allow_writes=True)
     assert _not_passed(report) == {}
     assert str(report.options["connection_points"]).startswith("the device's own EDS file")
-    assert len(not_applicable(report)) <= 6, not_applicable(report)
+    # Device type 12 is no drive: the AC drive profile's checks, motion ones included, do not apply.
+    assert all(o.verdict is Verdict.NOT_APPLICABLE for o in report if o.group == "profile")
+    assert len([i for i in not_applicable(report) if not i.startswith("profile.")]) <= 6, not_applicable(report)
     assert all(o.verdict is Verdict.PASS for o in report if o.group in ("cm", "class1", "eds", "final"))
+
+
+def test_a_device_without_class_1_fails_no_connection_check(adapter_with: AdapterStarter, tmp_path: Path) -> None:
+    # The first 23 lines of the fake device's file: its identity, no parameter, assembly or connection.
+    header = Path(__file__).with_name("fake_device.eds").read_text(encoding="ascii").splitlines()[:23]
+    (tmp_path / "explicit_only.eds").write_text("\n".join(header) + "\n", encoding="ascii")
+    peer = adapter_with("--eds", str(tmp_path / "explicit_only.eds"))
+    report = run(peer.host, peer.port, groups="cm")
+    verdicts = {o.id: (o.verdict, o.observed) for o in report}
+    assert _not_passed(report) == {}
+    # Refused 0x0103 as a class 1 Forward_Open (before its path is read), the malformed path is asked again
+    # on a class 3 one, whose path the message router's is.
+    assert verdicts["cm.forward_open.bad_segment"] == (
+        Verdict.PASS, "class 1 refused 0x0103 (no class 1 I/O); class 3, segment E0 00 before 20 02 24 01: general "
+                      "status 0x01 extended 0x0315")
+    assert verdicts["cm.forward_open.transport_class"][0] is Verdict.PASS
 
 
 def test_the_other_sources_of_connection_points(tmp_path: Path) -> None:

@@ -4,7 +4,7 @@ library (CIP Vol 1): Identity, Assembly, Discrete Input Point (class 0x08, secti
 Output Point (class 0x09, section 5-10).
 
 Its inputs are wired to its outputs, point by point, as on a test bench: input N reads what output N
-is set to, over explicit messaging or the output assembly."""
+is set to, over explicit messaging or the output assembly. Its EDS description is in ``eds.py``."""
 
 from __future__ import annotations
 
@@ -83,4 +83,7 @@ def build(interface: NetworkInterface, limits: DeviceLimits, options: ProfileOpt
 
 PROFILE = Profile("dio", "DIO-4 digital I/O block, four inputs wired to four outputs (examples/device-family)",
                   build, vendor_id=VENDOR_ID, product_codes=frozenset({PRODUCT_CODE}),
-                  model_info=lambda: (ModelInfo(PRODUCT_NAME, PRODUCT_CODE, PRODUCT_NAME),))
+                  model_info=lambda: (ModelInfo(PRODUCT_NAME, PRODUCT_CODE, PRODUCT_NAME),),
+                  # Imported by the EDS tool when a file is made (eds.py imports cipstack.eds, which the
+                  # device never does): a reference, not the function.
+                  eds="cipstack_dio.eds:description")
