@@ -2,7 +2,8 @@
 recipe back (written, then saved). The same as ``cipstack params dump/diff/load``.
 
 Against the emulator from factory settings (``cipstack adapter --factory``: the recipe's save then
-lasts until it stops, and the saved drive, its state file, is left as it was). Usage: ``python3 params_round_trip.py [HOST]``.
+lasts until it stops, and the saved drive, its state file, is left as it was).
+Usage: ``python3 params_round_trip.py [HOST]``.
 """
 
 import sys

@@ -8,7 +8,7 @@ is set to, over explicit messaging or the output assembly. Its EDS description i
 
 from __future__ import annotations
 
-from cipstack.cip.model import Access, AttributeSpec, Binding, ClassSpec, CipObject
+from cipstack.cip.model import Access, AttributeSpec, Binding, CipObject, ClassSpec
 from cipstack.cip.types import BOOL, UINT
 from cipstack.devices.base import Device, DeviceLimits
 from cipstack.devices.profiles import ModelInfo, Profile, ProfileOptions, serial_from_mac
