@@ -211,6 +211,15 @@ class _Parser:
         return token
 
     def take(self) -> _Token | None:
+        position = self.position
+        if position < self.count:
+            next_token = self.tokens[position]
+            if next_token.kind != "comment":
+                # Most tokens are no comment: taken without peek's look for comments to attach.
+                self.position = position + 1
+                self.last_line = next_token.line
+                self.last_end = next_token.end
+                return next_token
         token = self.peek()
         if token is not None:
             self.position += 1
