@@ -22,6 +22,7 @@ from collections.abc import Iterable, Iterator, Sequence
 from dataclasses import dataclass
 from dataclasses import field as dataclass_field
 from enum import Enum
+from functools import lru_cache
 from typing import Any
 
 from ..errors import BadRequest, WrongType
@@ -62,6 +63,8 @@ _KEYWORD = re.compile(r"[A-Za-z0-9_]+")
 SECTION_NAME = re.compile(r"[!-Z\\^-~](?:[ -Z\\^-~]*[!-Z\\^-~])?")
 # Longer numbers are no EDS value, and Python refuses to convert very long ones.
 _MAX_NUMBER_LENGTH = 64
+#: What escape_string changes: a quote, a backslash, a control character, beyond Latin-1.
+_NEEDS_ESCAPE = re.compile(r'["\\\x00-\x1f\x7f-\x9f\u0100-\U0010ffff]')
 
 
 def is_bare_word(text: str) -> bool:
@@ -69,8 +72,12 @@ def is_bare_word(text: str) -> bool:
     return bool(_BARE_WORD.fullmatch(text))
 
 
+@lru_cache(maxsize=4096)
 def parse_word(text: str, revision: bool = False) -> tuple[FieldKind, Any]:
-    """Kind and value of an unquoted field; ``revision`` where ``major.minor`` is expected."""
+    """Kind and value of an unquoted field; ``revision`` where ``major.minor`` is expected.
+
+    Remembered: a file repeats its words (data types, sizes, flags) thousands of times, and every
+    written field is read back to check its spelling; the kinds and values are immutable."""
     if len(text) > _MAX_NUMBER_LENGTH:
         return FieldKind.KEYWORD, text
     if _DECIMAL.fullmatch(text):
@@ -109,6 +116,9 @@ def escape_string(value: str) -> str:
     """Quoted-string body: backslash escapes for quotes, backslashes and control characters;
     Latin-1 letters as themselves (EDS files are Latin-1, and readers take ``\\xF6`` literally);
     a character beyond Latin-1, which no EDS file can hold, as "?"."""
+    if not _NEEDS_ESCAPE.search(value):
+        # Nearly every string of a file is plain text: taken whole, not character by character.
+        return value
     out: list[str] = []
     for char in value:
         code = ord(char)

@@ -63,7 +63,7 @@ _PUNCTUATION = "=,;{}"
 _END_OF_FILE_MARK = "\x1a"
 
 
-@dataclass
+@dataclass(slots=True)
 class _Token:
     kind: str  # "section", "word", "string", "comment", or the punctuation character itself
     text: str
@@ -76,6 +76,11 @@ class _Token:
 
 
 _LINE_END = "\r\n"
+#: A run of word characters, and the body of a quoted string up to where it ends or its line does
+#: (a backslash escapes the character after it, a quote included, but not a line break): matched
+#: whole rather than character by character, as most of a file's text is in them.
+_WORD_RUN = re.compile("[" + re.escape("".join(sorted(WORD_CHARACTERS))) + "]+")
+_STRING_BODY = re.compile(r'(?:[^"\\\r\n]|\\[^\r\n]|\\(?=[\r\n]|\Z))*')
 
 
 def _tokens(text: str, index: int = 0) -> Iterator[_Token]:
@@ -96,10 +101,8 @@ def _tokens(text: str, index: int = 0) -> Iterator[_Token]:
             yield _Token("comment", text[index + 1 : end], line, index, end, own_line=not line_has_token)
             index = end
         elif char == '"':
-            end = index + 1
-            while end < length and text[end] not in '"\r\n':
-                # A backslash escapes the next character, a quote included.
-                end += 2 if text[end] == "\\" and end + 1 < length and text[end + 1] not in _LINE_END else 1
+            body = _STRING_BODY.match(text, index + 1)
+            end = body.end() if body else index + 1
             if end >= length or text[end] != '"':
                 raise EdsSyntaxError(line, "string not closed on the line it starts")
             yield _Token("string", text[index + 1 : end], line, index, end + 1)
@@ -125,9 +128,8 @@ def _tokens(text: str, index: int = 0) -> Iterator[_Token]:
             line_has_token = True
             index += 1
         elif char in WORD_CHARACTERS:
-            end = index + 1
-            while end < length and text[end] in WORD_CHARACTERS:
-                end += 1
+            run = _WORD_RUN.match(text, index)
+            end = run.end() if run else index + 1
             yield _Token("word", text[index:end], line, index, end)
             line_has_token = True
             index = end
@@ -209,6 +211,15 @@ class _Parser:
         return token
 
     def take(self) -> _Token | None:
+        position = self.position
+        if position < self.count:
+            next_token = self.tokens[position]
+            if next_token.kind != "comment":
+                # Most tokens are no comment: taken without peek's look for comments to attach.
+                self.position = position + 1
+                self.last_line = next_token.line
+                self.last_end = next_token.end
+                return next_token
         token = self.peek()
         if token is not None:
             self.position += 1

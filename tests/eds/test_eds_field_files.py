@@ -29,7 +29,7 @@ import pytest
 from cipstack.eds.commands import run_check, run_show
 from cipstack.eds.emulated_device import build_eds_device
 from cipstack.eds.interpret import ConnectionInfo, read_view
-from cipstack.eds.model import semantic_differences
+from cipstack.eds.model import EdsDocument, semantic_differences
 from cipstack.eds.reader import parse_eds, read_eds
 from cipstack.eds.writer import format_eds
 from tests.optional import needs
@@ -452,9 +452,9 @@ def test_a_connection_of_each_kind_runs_with_cipstack_io() -> None:
             started.close()
 
 
-def _ethernetip_format(path: Path, number: int) -> int:
+def _ethernetip_format(doc: EdsDocument, number: int) -> int:
     """The O->T real-time format of ConnectionN (field 2 bits 8-10: 4 run/idle header)."""
-    return (read_eds(path).entry("Connection Manager", f"Connection{number}").value(2) >> 8) & 0x7
+    return (doc.entry("Connection Manager", f"Connection{number}").value(2) >> 8) & 0x7
 
 
 def test_python_ethernetip_runs_what_it_can_open(adapter: Adapter, monkeypatch: pytest.MonkeyPatch) -> None:
@@ -463,10 +463,11 @@ def test_python_ethernetip_runs_what_it_can_open(adapter: Adapter, monkeypatch: 
 
     from cipstack.scanner import SyncScanner
 
-    view = read_view(read_eds(adapter.path))
+    doc = read_eds(adapter.path)   # once: a file of 60 connections was read once for each
+    view = read_view(doc)
     expected = EXPECTED[adapter.path.name].ethernetip
     usable = [c.number for c in view.connections if c.number in EXPECTED[adapter.path.name].offered
-              and _ethernetip_format(adapter.path, c.number) == 4 and c.t_o_point_to_point
+              and _ethernetip_format(doc, c.number) == 4 and c.t_o_point_to_point
               and max(c.o_t_size + 6, c.t_o_size + 2) <= 511 and max(c.config, c.o_t_point, c.t_o_point) <= 255]
     assert usable == expected
     if not expected:

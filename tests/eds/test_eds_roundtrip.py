@@ -29,16 +29,25 @@ section_names = (
     .map(str.strip)
     .filter(lambda name: name != "" and name not in PLACE_DEPENDENT_SECTIONS)
 )
+# The words below are built from their parts, each the language of a regular expression (in the
+# comment): st.from_regex drew them several times slower than the code under test reads them.
+LETTERS = string.ascii_letters
+NAME_CHARACTERS = string.ascii_letters + string.digits + "_"
 keywords = st.one_of(
-    st.from_regex(r"[A-Za-z][A-Za-z0-9_]{0,12}", fullmatch=True),
-    st.from_regex(r"(Param|Assem|Connection|Enum)[1-9][0-9]{0,2}", fullmatch=True),
-    st.from_regex(r"[1-9][0-9]{0,3}_[A-Za-z0-9_]{1,8}", fullmatch=True),
+    # [A-Za-z][A-Za-z0-9_]{0,12}
+    st.builds(str.__add__, st.sampled_from(LETTERS), st.text(alphabet=NAME_CHARACTERS, max_size=12)),
+    # (Param|Assem|Connection|Enum)[1-9][0-9]{0,2}
+    st.builds("{}{}".format, st.sampled_from(["Param", "Assem", "Connection", "Enum"]), st.integers(1, 999)),
+    # [1-9][0-9]{0,3}_[A-Za-z0-9_]{1,8}
+    st.builds("{}_{}".format, st.integers(1, 9999), st.text(alphabet=NAME_CHARACTERS, min_size=1, max_size=8)),
 )
 comments = st.text(
     alphabet=st.characters(min_codepoint=0x20, max_codepoint=0xFF, exclude_characters="\x7f"), max_size=30
 )
 latin1_text = st.text(alphabet=st.characters(max_codepoint=0xFF, exclude_categories=("Cs",)), max_size=40)
-bare_keyword_values = st.from_regex(r"[A-Za-z_][A-Za-z0-9_./-]{0,10}", fullmatch=True)
+# [A-Za-z_][A-Za-z0-9_./-]{0,10}
+bare_keyword_values = st.builds(str.__add__, st.sampled_from(LETTERS + "_"),
+                                st.text(alphabet=NAME_CHARACTERS + "./-", max_size=10))
 
 
 def _integer_field(value: int, hex_digits: int | None) -> Field:
@@ -59,30 +68,39 @@ scalar_fields = st.one_of(
     st.times().map(Field.time),
 )
 fields = st.one_of(scalar_fields, st.lists(scalar_fields, max_size=4).map(Field.dataset))
+# The strategies the composites below draw from, built once: a strategy built inside a composite is
+# built and validated again at every draw, which cost more than the drawing and the code under test.
+maybe_comments = st.one_of(st.none(), comments)
+comment_lists = st.lists(comments, max_size=2)
 
 
 @st.composite
 def commented_field(draw: st.DrawFn) -> Field:
     item = draw(fields)
-    comment = draw(st.one_of(st.none(), comments))
+    comment = draw(maybe_comments)
     # Build a fresh field: strategies may hand out the same Field object twice.
     return Field(item.kind, item.value, item.raw, comment=None if comment is None else comment.strip() or None)
+
+
+section_name_lists = st.lists(section_names, min_size=1, max_size=5, unique=True)
+keyword_lists = st.lists(keywords, max_size=6)
+entry_fields = st.lists(commented_field(), min_size=1, max_size=26)
 
 
 @st.composite
 def documents(draw: st.DrawFn) -> EdsDocument:
     doc = EdsDocument()
-    for name in draw(st.lists(section_names, min_size=1, max_size=5, unique=True)):
-        section = doc.section(name, comment=draw(st.lists(comments, max_size=2)))
-        for keyword in draw(st.lists(keywords, max_size=6)):
-            entry = section.add(keyword, draw(st.lists(commented_field(), min_size=1, max_size=26)))
-            entry.comments = [c.strip() for c in draw(st.lists(comments, max_size=2))]
-    doc.trailing_comments = [c.strip() for c in draw(st.lists(comments, max_size=2))]
+    for name in draw(section_name_lists):
+        section = doc.section(name, comment=draw(comment_lists))
+        for keyword in draw(keyword_lists):
+            entry = section.add(keyword, draw(entry_fields))
+            entry.comments = [c.strip() for c in draw(comment_lists)]
+    doc.trailing_comments = [c.strip() for c in draw(comment_lists)]
     return doc
 
 
 epath_items = st.lists(
-    st.one_of(st.integers(min_value=0, max_value=255), st.from_regex(r"Param[1-9][0-9]{0,2}", fullmatch=True)),
+    st.one_of(st.integers(min_value=0, max_value=255), st.builds("Param{}".format, st.integers(1, 999))),
     max_size=8,
 )
 
@@ -138,6 +156,13 @@ def test_place_dependent_kinds_survive(doc: EdsDocument) -> None:
 # -- any layout -------------------------------------------------------------------------------
 
 
+blanks = st.sampled_from(["", " ", "\t", "  "])
+line_breaks = st.sampled_from(["", "\n", " \n  "])
+hex_prefixes = st.sampled_from(["0x", "0X"])
+header_blanks = st.sampled_from(["", " "])
+newlines = st.sampled_from(["\n", "\r\n"])
+
+
 @st.composite
 def spelled_as_anyone_might(draw: st.DrawFn, doc: EdsDocument) -> str:
     """``doc`` written with free layout: the text a different tool might produce."""
@@ -145,10 +170,10 @@ def spelled_as_anyone_might(draw: st.DrawFn, doc: EdsDocument) -> str:
 
     def gap() -> str:
         """Blanks, maybe a comment, maybe new lines, between two tokens."""
-        text = draw(st.sampled_from(["", " ", "\t", "  "]))
+        text = draw(blanks)
         if draw(st.booleans()):
             text += "$" + draw(comments).replace("$", "") + "\n"
-        text += draw(st.sampled_from(["", "\n", " \n  "]))
+        text += draw(line_breaks)
         return text
 
     def spell(item: Field) -> str:
@@ -164,19 +189,19 @@ def spelled_as_anyone_might(draw: st.DrawFn, doc: EdsDocument) -> str:
             return gap().join(quoted)
         if item.kind is FieldKind.INT and draw(st.booleans()):
             value = item.value
-            return ("-" if value < 0 else "") + draw(st.sampled_from(["0x", "0X"])) + format(abs(value), "x")
+            return ("-" if value < 0 else "") + draw(hex_prefixes) + format(abs(value), "x")
         if item.kind is FieldKind.DATASET:
             return "{" + ",".join(gap() + spell(child) + gap() for child in item.value) + "}"
         return str(item)
 
     for section in doc.sections:
-        out.append(gap() + f"[{draw(st.sampled_from(['', ' ']))}{section.name}]" + gap() + "\n")
+        out.append(gap() + f"[{draw(header_blanks)}{section.name}]" + gap() + "\n")
         for entry in section.entries:
             pieces = [spell(item) for item in entry.fields]
             separators = "".join(gap() + piece + gap() + "," for piece in pieces)[:-1]
             out.append(f"{gap()}{entry.keyword}{gap()}={separators};{gap()}\n")
     text = "".join(out)
-    newline = draw(st.sampled_from(["\n", "\r\n"]))
+    newline = draw(newlines)
     return text.replace("\n", newline)
 
 
