@@ -50,3 +50,12 @@ def test_what_applying_a_fault_ends_is_declared_on_it() -> None:
     assert FAULTS["plug"].replaces == ("unplug",)
     assert FAULTS["delay-replies"].replaces == ("delay-replies",)
     assert FAULTS["drop"].replaces == ()
+
+
+def test_a_request_made_with_its_checked_options_alone_has_its_record() -> None:
+    """``FaultRequest(name, options)`` (options already checked) has the record ``build`` would make."""
+    built = parse_arguments("delay", ["--by", "20ms", "--for", "2s"])
+    made = FaultRequest("delay", dict(built.options))
+    assert made.settings == built.settings == FaultOptions(by=0.02, duration=2.0)
+    assert made.duration == 2.0
+    assert parse_arguments("power-cycle", []).duration == 0.0

@@ -332,6 +332,12 @@ class FaultRequest:
     options: Mapping[str, Any] = field(default_factory=dict)
     settings: FaultOptions = field(default_factory=FaultOptions)
 
+    def __post_init__(self) -> None:
+        # A request made with its checked options alone (``FaultRequest(name, options)``) has its record
+        # made here, so that its effect reads what the options say.
+        if self.options and self.settings == FaultOptions():
+            object.__setattr__(self, "settings", typed_options(self.kind, self.options))
+
     @property
     def kind(self) -> FaultKind:
         return FAULTS[self.name]
@@ -339,8 +345,10 @@ class FaultRequest:
     @property
     def duration(self) -> float | None:
         kind = self.kind
-        value = self.options.get(kind.lasts, 0.0) if kind.lasts is not None else self.options.get("for")
-        return None if value is None else float(value)
+        if kind.lasts is None:
+            return self.settings.duration
+        value = getattr(self.settings, kind.lasts)
+        return 0.0 if value is None else float(value)
 
     @classmethod
     def build(cls, name: str, options: Mapping[str, object] | None = None,
@@ -390,6 +398,12 @@ class FaultRequest:
     def as_json(self) -> dict[str, Any]:
         """Options as plain JSON values (a status as ``0x01/0x0100``)."""
         return {key: (format_value(key, value) if key == "status" else value) for key, value in self.options.items()}
+
+
+def typed_options(kind: FaultKind, checked: Mapping[str, Any]) -> FaultOptions:
+    """The typed record of options already checked against ``kind``, by their option names."""
+    options = {o.name: o for o in (*kind.options, FOR, *((kind.positional,) if kind.positional else ()))}
+    return FaultOptions(**{options[name].field: value for name, value in checked.items()})
 
 
 def format_value(key: str, value: Any) -> str:
