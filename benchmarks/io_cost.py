@@ -9,6 +9,9 @@ divided by the class 1 packets of that window, both directions, counted on the w
 the loopback interface, the class 1 port only; without it, by the RPI: two packets per RPI). The
 process start-up and the Forward_Open are outside the window.
 
+``--fault "drop --every 1000000"`` also runs each tree with that fault applied (``cipstack drive
+fault``, before the originator connects): a filter in the class 1 seam on every T->O datagram that
+almost never acts, so its figure over the fault-free one is what a fault's filter costs per packet.
 ``--gather`` also runs this tree with the adapter's ``--io-gather 12.5ms`` (O->T datagrams read at
 the productions, not as they come). ``--against TREE`` (repeatable) runs another checkout of the
 project (``git worktree add /tmp/old-tree SHA``) under the same conditions, each tree's processes
@@ -104,14 +107,23 @@ def cpu_total(pid: int) -> float:
         return sum(cpu_seconds(pid))
 
 
+def apply_fault(tree: Path, port: int, fault: Sequence[str], state_dir: str) -> None:
+    """``cipstack drive fault FAULT...`` against the adapter on ``port``, with ``tree``'s code."""
+    subprocess.run([sys.executable, "-m", "cipstack", "drive", "fault", *fault, "--host", "127.0.0.1", "--port",
+                    str(port)], env=tree_env(tree), cwd=state_dir, check=True, stdout=subprocess.DEVNULL,
+                   timeout=30)
+
+
 def one_run(tree: Path, rpi_text: str, seconds: float, cpus: tuple[int, int] | None, workdir: Path,
-            extra: Sequence[str] = ()) -> dict[str, Any]:
+            extra: Sequence[str] = (), fault: Sequence[str] = ()) -> dict[str, Any]:
     """One tree at one RPI: the adapter and ``cipstack io`` each on its CPU; CPU per packet of each."""
     rpi = parse_rpi(rpi_text)
     port, io_port = free_port(), free_port()
     with tempfile.TemporaryDirectory() as state_dir:
         adapter = start_tree_adapter(tree, port, io_port, cpus[0] if cpus else None, state_dir, extra)
         try:
+            if fault:
+                apply_fault(tree, port, fault, state_dir)
             duration = SETTLE_S + seconds + 2.0
             originator = subprocess.Popen(
                 [sys.executable, "-m", "cipstack", "io", f"127.0.0.1:{port}", "--output", "21", "--input", "71",
@@ -165,14 +177,17 @@ def _window(adapter: int, originator: int, io_port: int, seconds: float, capture
 GATHER = ("--io-gather", "12.5ms")
 
 
-def label(tree: Path, extra: Sequence[str]) -> str:
-    return str(tree) + (" " + " ".join(extra) if extra else "")
+def label(tree: Path, extra: Sequence[str], fault: Sequence[str] = ()) -> str:
+    return str(tree) + (" " + " ".join(extra) if extra else "") + (" fault " + " ".join(fault) if fault else "")
 
 
 def measure(trees: Sequence[Path], rpis: Sequence[str], seconds: float, rounds: int,
-            variants: Sequence[tuple[Path, tuple[str, ...]]] = ()) -> dict[str, Any]:
+            variants: Sequence[tuple[Path, tuple[str, ...]]] = (), fault: Sequence[str] = ()) -> dict[str, Any]:
     cpus = core_pair()
-    runners = [(tree, ()) for tree in trees] + list(variants)
+    runners: list[tuple[Path, tuple[str, ...], tuple[str, ...]]] = [(tree, (), ()) for tree in trees]
+    runners += [(tree, extra, ()) for tree, extra in variants]
+    if fault:
+        runners += [(tree, (), tuple(fault)) for tree in trees]
     runs: dict[str, dict[str, list[dict[str, Any]]]] = {label(*r): {rpi: [] for rpi in rpis} for r in runners}
     with tempfile.TemporaryDirectory() as tmp:
         workdir = Path(tmp)
@@ -180,8 +195,9 @@ def measure(trees: Sequence[Path], rpis: Sequence[str], seconds: float, rounds: 
         for index in range(rounds):
             order = runners[index % len(runners):] + runners[:index % len(runners)]
             for rpi in rpis:
-                for tree, extra in order:
-                    runs[label(tree, extra)][rpi].append(one_run(tree, rpi, seconds, cpus, workdir, extra))
+                for tree, extra, faulted in order:
+                    runs[label(tree, extra, faulted)][rpi].append(one_run(tree, rpi, seconds, cpus, workdir, extra,
+                                                                          faulted))
     medians = {tree: {rpi: {key: statistics.median(r[key] for r in found)
                             for key in ("target_us", "originator_us", "packets_per_s")}
                       for rpi, found in by_rpi.items()}
@@ -232,6 +248,7 @@ def main(argv: Sequence[str] | None = None) -> int:
                         help="another checkout measured in the same run (repeatable)")
     parser.add_argument("--gather", action="store_true",
                         help="also this tree's adapter with --io-gather 12.5ms (read O->T data at the productions)")
+    parser.add_argument("--fault", help="also each tree with this fault applied (e.g. \"drop --every 1000000\")")
     parser.add_argument("--json", action="store_true", help="one JSON object instead of the text report")
     args = parser.parse_args(argv)
     trees = [HERE] + [tree.resolve() for tree in args.against]
@@ -240,7 +257,7 @@ def main(argv: Sequence[str] | None = None) -> int:
             print(f"io_cost.py: {tree} is not a checkout of cipstack", file=sys.stderr)
             return 2
     result = measure(trees, args.rpi or DEFAULT_RPIS, args.seconds, args.rounds,
-                     [(HERE, GATHER)] if args.gather else [])
+                     [(HERE, GATHER)] if args.gather else [], args.fault.split() if args.fault else ())
     if args.json:
         print(json.dumps(result))
     else:

@@ -99,3 +99,26 @@ def test_io_cost_refuses_a_directory_that_is_no_checkout(tmp_path: Path) -> None
                             capture_output=True, text=True, timeout=60)
     assert result.returncode == 2 and "Traceback" not in result.stderr
     assert result.stderr.strip() == f"io_cost.py: {tmp_path} is not a checkout of cipstack"
+
+
+def test_io_cost_runs_a_tree_again_with_a_fault_applied() -> None:
+    """``--fault``: the tree once fault-free and once with the fault applied through ``cipstack drive``,
+    each run by its own label."""
+    result = subprocess.run([sys.executable, str(BENCHMARKS / "io_cost.py"), "--rpi", "10ms", "--seconds", "1",
+                             "--rounds", "1", "--fault", "drop --every 1000000", "--json"],
+                            capture_output=True, text=True, timeout=240)
+    assert result.returncode == 0, result.stderr
+    figures = json.loads(result.stdout)
+    assert [t.partition(" ")[2] for t in figures["trees"]] == ["", "fault drop --every 1000000"]
+    for runs in figures["runs"].values():
+        [run] = runs["10ms"]
+        assert run["packets"] > 0 and run["target_us"] > 0
+
+
+def test_fault_filter_measures_each_fault_s_filter_per_datagram() -> None:
+    result = subprocess.run([sys.executable, str(BENCHMARKS / "fault_filter.py"), "--datagrams", "500", "--rounds",
+                             "1", "--json"], capture_output=True, text=True, timeout=120)
+    assert result.returncode == 0, result.stderr
+    [medians] = json.loads(result.stdout)["medians"].values()
+    assert set(medians) == {"drop --every 1000000", "wrong-size --size 12", "freeze-sequence"}
+    assert all(ns > 0 for ns in medians.values())

@@ -635,8 +635,7 @@ async def _arguments(operation: Operation, request: web.Request) -> dict[str, An
     stray = sorted(set(body) - takes)
     if stray:
         keys = ", ".join(f'"{k}"' for k in sorted(takes)) or "none"
-        hint = " (a fault's options go in \"options\")" if operation.name == "fault" else ""
-        raise BadRequest(f"unknown key {', '.join(map(repr, stray))}: the body is {{{keys}}}{hint}")
+        raise BadRequest(f"unknown key {', '.join(map(repr, stray))}: the body is {{{keys}}}{operation.body_hint}")
     for argument in operation.arguments:
         if argument.where == "path":
             value: Any = request.match_info.get(argument.key)
@@ -664,7 +663,6 @@ _JSON_TYPES: dict[str, dict[str, Any]] = {
 def openapi_document() -> dict[str, Any]:
     """The OpenAPI 3.0 description of the API (``/openapi.json``), generated from the operations: each
     route's parameters and body by their JSON keys, and the statuses of the outcome table."""
-    from ..faults import FAULTS
     from .service import OUTCOMES
 
     error = {"description": "an error",
@@ -679,8 +677,8 @@ def openapi_document() -> dict[str, Any]:
         body: dict[str, Any] = {}
         for argument in operation.arguments:
             schema = dict(_JSON_TYPES[argument.json_type])
-            if argument.key == "name" and operation.name == "fault":
-                schema["enum"] = list(FAULTS)
+            if argument.choices is not None:
+                schema["enum"] = argument.choices()
             if argument.where == "body":
                 body[argument.key] = {**schema, "description": argument.help}
             elif f"{{{argument.key}}}" in path or argument.where == "query":

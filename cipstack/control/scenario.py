@@ -143,11 +143,12 @@ def _step(path: Path, number: int, raw: Any) -> Step:
         if len(actions) != 1:
             raise ScenarioError(f"{where}: one action, fault = NAME, clear = true or trip = CODE")
         fault = None
-        if "fault" in raw:
+        named = raw.get("fault")    # TOML has no null: None is a step without a fault
+        if named is not None:
             options = raw.get("options", {})
             if not isinstance(options, dict):
                 raise ScenarioError(f"{where}: options is a table")
-            fault = FaultRequest.build(raw["fault"], options, JSON_SPELLING)
+            fault = FaultRequest.build(named, options, JSON_SPELLING)
         repeat = raw.get("repeat", 1)
         if not isinstance(repeat, int) or isinstance(repeat, bool) or not 1 <= repeat <= 1000:
             raise ScenarioError(f"{where}: repeat is a whole number 1..1000")

@@ -2,9 +2,10 @@
 
 The local control socket (``cipstack drive``), the HTTP API, scenarios, the pytest plugin and a
 fleet's relay all call ``DeviceService``; none adds behaviour. ``OPERATIONS`` declares each
-operation once (its arguments with their JSON keys, its HTTP route, its ``cipstack drive`` words),
-and the HTTP routes, ``/openapi.json`` and the ``cipstack drive`` subcommands are generated from it,
-so that every operation is on every surface and no surface can drift.
+operation once (its handler here, its argument record with their JSON keys, its HTTP route, its
+``cipstack drive`` words, its console formatter, its help), and the HTTP routes, ``/openapi.json``
+and the ``cipstack drive`` subcommands are generated from it, so that every operation is on every
+surface and no surface can drift.
 
 Errors: an operation raises one of the kinds of ``cipstack.errors``; ``outcome`` is the one table
 from an error to what each surface makes of it (an exit code, an HTTP status, the JSON error). The
@@ -18,7 +19,7 @@ import asyncio
 import contextlib
 import json
 import re
-from collections.abc import Awaitable, Callable
+from collections.abc import Awaitable
 from dataclasses import dataclass
 from typing import TYPE_CHECKING, Any
 
@@ -119,8 +120,8 @@ def whole_number(key: str, text: str) -> int:
 
 
 class DeviceService:
-    """The operations on one running device (``handlers``: one method each), called with JSON values and
-    answering JSON values."""
+    """The operations on one running device (each operation's ``handler``: one method each), called with
+    JSON values and answering JSON values."""
 
     def __init__(self, runtime: DeviceRuntime, faults: FaultController, events: EventStream,
                  name: str = "") -> None:
@@ -131,13 +132,6 @@ class DeviceService:
         self.name = name
         #: How far a scenario running on the device is (``scenario.run`` keeps it), for ``status``.
         self.scenario: dict[str, Any] | None = None
-        #: Each operation's method.
-        self.handlers: dict[str, Callable[..., Any]] = {
-            "status": self.status, "trip": self.trip, "reset": self.reset, "fault": self.fault,
-            "faults": self.faults_active, "clear": self.clear, "parameter": self.parameter,
-            "set-parameter": self.set_parameter, "events": self.events_since, "power": self.power, "link": self.link,
-            "parameters": self.parameters, "connections": self.connections, "fault-table": self.fault_table,
-            "trips": self.trips}
 
     def describe(self) -> dict[str, Any]:
         """What ``GET /devices`` lists of the device: its EtherNet/IP port and product name."""
@@ -152,10 +146,12 @@ class DeviceService:
         if declared is None:
             raise BadRequest(f"unknown operation {operation!r}; valid: {', '.join(OPERATION_BY_NAME)}")
         check_arguments(declared, arguments)
-        method = self.handlers[declared.name]
-        if method == self.set_parameter:
-            arguments = {**arguments, "origin": origin, "peer": peer}
-        return method(**arguments)
+        record = declared.record(**arguments)
+        method = getattr(self, declared.handler)
+        given = declared.given(record)
+        if declared.tells_origin:
+            given.update(origin=origin, peer=peer)
+        return method(**given)
 
     async def call_async(self, operation: str, arguments: dict[str, Any], origin: str = "python",
                          peer: str | None = None) -> Any:

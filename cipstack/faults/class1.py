@@ -35,8 +35,8 @@ class Class1Filter:
     def __init__(self, context: FaultContext) -> None:
         self.context = context
         options = context.options
-        self.connection: int | None = options.get("connection")
-        self.originator: str | None = options.get("originator")
+        self.connection = options.connection
+        self.originator = options.originator
         self.rng = context.rng
         self.count = 0
         assert context.runtime.class1 is not None   # checked by the controller: the device has class 1
@@ -85,15 +85,25 @@ class StopProducing(OutboundFilter):
 
 
 class Drop(OutboundFilter):
+    def __init__(self, context: FaultContext) -> None:
+        super().__init__(context)
+        self.share = context.options.share
+        # The fault model requires one of the two: without a share, every Nth.
+        self.every = context.options.every or 1
+
     def change(self, datagram: Datagram, to_id: int, now: float) -> list[Datagram]:
-        share = self.context.options.get("share")
-        dropped = self.rng.random() < share if share is not None else self.every_nth(self.context.options["every"])
+        share = self.share
+        dropped = self.rng.random() < share if share is not None else self.every_nth(self.every)
         return [] if dropped else [datagram]
 
 
 class Duplicate(OutboundFilter):
+    def __init__(self, context: FaultContext) -> None:
+        super().__init__(context)
+        self.every = context.options.every or 1
+
     def change(self, datagram: Datagram, to_id: int, now: float) -> list[Datagram]:
-        return [datagram, datagram] if self.every_nth(self.context.options.get("every", 1)) else [datagram]
+        return [datagram, datagram] if self.every_nth(self.every) else [datagram]
 
 
 class Reorder(OutboundFilter):
@@ -111,9 +121,14 @@ class Reorder(OutboundFilter):
 
 
 class Delay(OutboundFilter):
+    def __init__(self, context: FaultContext) -> None:
+        super().__init__(context)
+        options = context.options
+        self.by = DEFAULT_DELAY if options.by is None else options.by
+        self.jitter = options.jitter or 0.0
+
     def change(self, datagram: Datagram, to_id: int, now: float) -> list[Datagram]:
-        by = self.context.options.get("by", DEFAULT_DELAY)
-        jitter = self.context.options.get("jitter", 0.0)
+        by, jitter = self.by, self.jitter
         at = now + max(0.0, by + (self.rng.uniform(-jitter, jitter) if jitter else 0.0))
         self.seam.send_later(at, [datagram])
         return []
@@ -132,10 +147,14 @@ class FreezeSequence(OutboundFilter):
 
 
 class WrongSize(OutboundFilter):
+    def __init__(self, context: FaultContext) -> None:
+        super().__init__(context)
+        self.size = context.options.size
+
     def change(self, datagram: Datagram, to_id: int, now: float) -> list[Datagram]:
         raw = datagram[0]
         data = raw[HEAD:]
-        wanted = self.context.options.get("size")
+        wanted = self.size
         size = len(data) - 1 if wanted is None else wanted
         data = data[:size] if size <= len(data) else data + bytes(size - len(data))
         return [(raw[:16] + _UINT.pack(2 + len(data)) + raw[18:HEAD] + data, datagram[1])]

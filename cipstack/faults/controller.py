@@ -102,10 +102,10 @@ class FaultController:
         if kind.ends is not None and not any(f.name == kind.ends for f in self.active.values()):
             raise FaultStateError(kind.refusal or f"no {kind.ends} is active")
         fault = Fault(next(self._ids), request, now, time.time())
-        effect = kind.effect(FaultContext(self.runtime, fault.id, request.options, self.rng,
+        effect = kind.effect(FaultContext(self.runtime, fault.id, request.settings, self.rng,
                                           lambda: self._used_up(fault.id), self._start))
         effect.start()   # first: a fault its state refuses leaves everything as it was
-        for ended in [f for f in self.active.values() if f.name in (kind.ends, kind.name if kind.exclusive else None)]:
+        for ended in [f for f in self.active.values() if f.name in kind.replaces]:
             self._end(ended, "replaced" if ended.name == kind.name else "cleared")
         if not kind.lasting:
             self._record("applied", fault)
@@ -202,7 +202,7 @@ class FaultController:
     def _check_class1(self, request: FaultRequest) -> None:
         if self.runtime.class1 is None:
             raise FaultError(f"{request.name}: this device has no class 1 I/O")
-        wanted = request.options.get("connection")
+        wanted = request.settings.connection
         connections = self.runtime.class1_connections()
         if wanted is not None and not any(wanted in (c.ot_connection_id, c.to_connection_id) for c in connections):
             open_ids = ", ".join(f"0x{c.ot_connection_id:08X}/0x{c.to_connection_id:08X}"

@@ -4,9 +4,11 @@ with a ``FaultContext``, started when the fault is applied and stopped when it e
 from __future__ import annotations
 
 import random
-from collections.abc import Callable, Coroutine, Mapping
+from collections.abc import Callable, Coroutine
 from dataclasses import dataclass
 from typing import TYPE_CHECKING, Any, Protocol
+
+from .options import FaultOptions
 
 if TYPE_CHECKING:
     from ..runtime import DeviceRuntime
@@ -22,12 +24,12 @@ class Effect(Protocol):
 
 @dataclass
 class FaultContext:
-    """What an effect works with: the device's runtime, the fault's checked options, a random source,
-    and how it reports back to the controller."""
+    """What an effect works with: the device's runtime, the fault's checked options as a typed record
+    (read once, when the effect is made), a random source, and how it reports back to the controller."""
 
     runtime: DeviceRuntime
     fault_id: int
-    options: Mapping[str, Any]
+    options: FaultOptions
     rng: random.Random
     #: The fault ends itself (``--count`` spent): the controller clears it.
     used_up: Callable[[], None]

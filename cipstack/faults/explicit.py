@@ -69,25 +69,30 @@ def _decode(raw: bytes) -> tuple[MessageRouterRequest, int | None, int | None, i
 
 class ErrorStatus(RequestFault):
     def __init__(self, context: FaultContext) -> None:
-        super().__init__(context, context.options.get("count"))
+        super().__init__(context, context.options.count)
+        options = context.options
+        #: What a request must be to be answered: (what to compare, the option), each option given.
+        self.match = tuple((index, wanted) for index, wanted in enumerate(
+            (options.service, options.class_id, options.instance, options.attribute)) if wanted is not None)
+        self.status = options.status or (GeneralStatus.SERVICE_NOT_SUPPORTED, ())
 
     def _answer(self, raw: bytes) -> bytes | None:
         decoded = _decode(raw)
         if decoded is None:
             return None
         request, class_id, instance, attribute = decoded
-        options = self.context.options
-        for key, value in (("service", request.service), ("class", class_id), ("instance", instance),
-                           ("attribute", attribute)):
-            if options.get(key) is not None and value != options[key]:
-                return None
-        general, extended = options.get("status") or (GeneralStatus.SERVICE_NOT_SUPPORTED, ())
+        found = (request.service, class_id, instance, attribute)
+        if any(found[index] != wanted for index, wanted in self.match):
+            return None
+        general, extended = self.status
         return MessageRouterResponse(request.service, general, extended).encode()
 
 
 class RefuseForwardOpen(RequestFault):
     def __init__(self, context: FaultContext) -> None:
-        super().__init__(context, context.options.get("count", 1))
+        super().__init__(context, 1 if context.options.count is None else context.options.count)
+        # The fault model requires it (its positional argument).
+        self.extended_status = context.options.extended_status or 0
 
     def _answer(self, raw: bytes) -> bytes | None:
         decoded = _decode(raw)
@@ -100,7 +105,7 @@ class RefuseForwardOpen(RequestFault):
             forward_open = ForwardOpenRequest.decode(request.data, request.service == Service.LARGE_FORWARD_OPEN)
         except (CipError, ValueError, IndexError):
             return None
-        error = connection_failure(self.context.options["status"], forward_open.triad,
+        error = connection_failure(self.extended_status, forward_open.triad,
                                    "refused (fault refuse-forward-open)")
         return MessageRouterResponse.from_error(request.service, error).encode()
 
@@ -111,8 +116,8 @@ class DelayReplies:
 
     def __init__(self, context: FaultContext) -> None:
         self.context = context
-        self.by: float = context.options.get("by", DEFAULT_DELAY)
-        self.jitter: float = context.options.get("jitter", 0.0)
+        self.by: float = DEFAULT_DELAY if context.options.by is None else context.options.by
+        self.jitter: float = context.options.jitter or 0.0
         #: When the last reply of each connection leaves: the next never leaves before it.
         self._last: dict[int, float] = {}
 

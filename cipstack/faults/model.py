@@ -21,6 +21,7 @@ from typing import Any
 from . import class1, device, explicit, security
 from .effect import EffectFactory
 from .errors import FaultError, FaultStateError, NoSuchConnection  # noqa: F401 (their import path of old)
+from .options import FaultOptions
 
 #: The longest duration any option takes (``--for``, ``--by``, a scenario's ``at``): a day. A test rig's
 #: typo (``--for 1e9``) is refused rather than a fault that outlives the rig.
@@ -117,11 +118,17 @@ class Option:
     parse: Callable[[object], Any]
     help: str
     metavar: str = "VALUE"
+    #: Its attribute in the typed record (``FaultOptions``) where that is not its name.
+    attribute: str = ""
+
+    @property
+    def field(self) -> str:
+        return self.attribute or self.name
 
 
 CONNECTION = Option("connection", lambda v: parse_integer(v), "one class 1 connection (its O->T or T->O id)", "ID")
 ORIGINATOR = Option("originator", parse_host, "the class 1 connections of one originator address", "HOST")
-FOR = Option("for", parse_duration, "clear the fault after this long", "DURATION")
+FOR = Option("for", parse_duration, "clear the fault after this long", "DURATION", "duration")
 SHARE = Option("share", parse_share, "a random share of the packets (0.1 or 10%)", "SHARE")
 EVERY = Option("every", lambda v: parse_integer(v, 1, 1_000_000), "every Nth packet", "N")
 BY = Option("by", parse_duration, "how long (default 10ms)", "DURATION")
@@ -130,7 +137,7 @@ SIZE = Option("size", lambda v: parse_integer(v, 0, 65000), "data bytes sent (de
 COUNT = Option("count", lambda v: parse_integer(v, 1, 1_000_000), "how many times (then it clears itself)", "N")
 STATUS = Option("status", parse_status, "general status, or general/extended (0x08, 0x01/0x0100)", "STATUS")
 SERVICE = Option("service", lambda v: parse_integer(v, 0, 0x7F), "only this service code", "CODE")
-CLASS = Option("class", lambda v: parse_integer(v, 0, 0xFFFF), "only requests to this class", "ID")
+CLASS = Option("class", lambda v: parse_integer(v, 0, 0xFFFF), "only requests to this class", "ID", "class_id")
 INSTANCE = Option("instance", lambda v: parse_integer(v, 0, 0xFFFFFFFF), "only this instance", "ID")
 ATTRIBUTE = Option("attribute", lambda v: parse_integer(v, 0, 0xFFFF), "only this attribute", "ID")
 #: The longest a power-cycle's power stays off: a test rig's typo (``--off 3600000``) must not leave a
@@ -174,7 +181,8 @@ DIRECTION = Option("direction", parse_direction, "records the device receives (i
                    "(default)", "in|out|both")
 DTLS_PEER = Option("originator", parse_host, "the DTLS sessions of one originator address", "HOST")
 EXTENDED = Option("status", lambda v: parse_integer(v, 0, 0xFFFF),
-                  "the Connection Manager's extended status (0x0100, 0x0106, 0x0113, 0x0315, ...)", "STATUS")
+                  "the Connection Manager's extended status (0x0100, 0x0106, 0x0113, 0x0315, ...)", "STATUS",
+                  "extended_status")
 
 #: Where a fault acts: on class 1 datagrams, on explicit requests and the encapsulation, on the device,
 #: on CIP Security's listeners (TLS and DTLS: their handshakes, DTLS records, the lab CA's CRL).
@@ -203,6 +211,12 @@ class FaultKind:
     refusal: str = ""
     #: One at a time: applying it replaces the one in force.
     exclusive: bool = False
+
+    @property
+    def replaces(self) -> tuple[str, ...]:
+        """The names of the active faults applying it ends: the one it ``ends``, and itself when it is
+        ``exclusive`` (the relations between faults, declared on each)."""
+        return tuple(n for n in (self.ends, self.name if self.exclusive else None) if n is not None)
 
     @property
     def lasting(self) -> bool:
@@ -236,6 +250,8 @@ class FaultKind:
 
 
 _SELECT = (CONNECTION, ORIGINATOR)
+#: Options no request gives together: one connection or one originator's; a share or every Nth.
+EXCLUSIVE_OPTIONS: tuple[tuple[str, str], ...] = (("connection", "originator"), ("share", "every"))
 
 FAULTS: dict[str, FaultKind] = {kind.name: kind for kind in (
     FaultKind("stop-producing", CLASS1, "no T->O data: the originator's connection times out",
@@ -308,10 +324,19 @@ JSON_SPELLING = Spelling(lambda name: f'"{name}"', lambda kind: kind.json_usage(
 
 @dataclass(frozen=True)
 class FaultRequest:
-    """A fault by name with its checked options (``for``: the duration, None: until cleared)."""
+    """A fault by name with its checked options (``for``: the duration, None: until cleared): by their
+    names as given (``options``: what a record, an event and ``describe`` show) and as the typed record
+    the effect reads (``settings``), both made once by ``build``."""
 
     name: str
     options: Mapping[str, Any] = field(default_factory=dict)
+    settings: FaultOptions = field(default_factory=FaultOptions)
+
+    def __post_init__(self) -> None:
+        # A request made with its checked options alone (``FaultRequest(name, options)``) has its record
+        # made here, so that its effect reads what the options say.
+        if self.options and self.settings == FaultOptions():
+            object.__setattr__(self, "settings", typed_options(self.kind, self.options))
 
     @property
     def kind(self) -> FaultKind:
@@ -320,8 +345,10 @@ class FaultRequest:
     @property
     def duration(self) -> float | None:
         kind = self.kind
-        value = self.options.get(kind.lasts, 0.0) if kind.lasts is not None else self.options.get("for")
-        return None if value is None else float(value)
+        if kind.lasts is None:
+            return self.settings.duration
+        value = getattr(self.settings, kind.lasts)
+        return 0.0 if value is None else float(value)
 
     @classmethod
     def build(cls, name: str, options: Mapping[str, object] | None = None,
@@ -334,6 +361,7 @@ class FaultRequest:
         kind = kind_of(name)
         options = dict(options or {})
         checked: dict[str, Any] = {}
+        typed: dict[str, Any] = {}
         allowed = {o.name: o for o in kind.options}
         if kind.positional is not None:
             allowed[kind.positional.name] = kind.positional
@@ -348,7 +376,7 @@ class FaultRequest:
             if value is None:
                 continue
             try:
-                checked[key] = option.parse(value)
+                checked[key] = typed[option.field] = option.parse(value)
             except FaultError as exc:
                 raise FaultError(f"{name} {said(key)}: {exc}") from None
         if kind.positional is not None and kind.positional.name not in checked:
@@ -356,10 +384,10 @@ class FaultRequest:
         for group in kind.requires:
             if not any(g in checked for g in group):
                 raise FaultError(f"{name} needs {' or '.join(said(g) for g in group)}: {usage(kind)}")
-        for one, other in (("connection", "originator"), ("share", "every")):
+        for one, other in EXCLUSIVE_OPTIONS:
             if one in checked and other in checked:
                 raise FaultError(f"{name}: {said(one)} or {said(other)}, not both")
-        return cls(name, checked)
+        return cls(name, checked, FaultOptions(**typed))
 
     def describe(self) -> str:
         parts = [self.name]
@@ -370,6 +398,12 @@ class FaultRequest:
     def as_json(self) -> dict[str, Any]:
         """Options as plain JSON values (a status as ``0x01/0x0100``)."""
         return {key: (format_value(key, value) if key == "status" else value) for key, value in self.options.items()}
+
+
+def typed_options(kind: FaultKind, checked: Mapping[str, Any]) -> FaultOptions:
+    """The typed record of options already checked against ``kind``, by their option names."""
+    options = {o.name: o for o in (*kind.options, FOR, *((kind.positional,) if kind.positional else ()))}
+    return FaultOptions(**{options[name].field: value for name, value in checked.items()})
 
 
 def format_value(key: str, value: Any) -> str:

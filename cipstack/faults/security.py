@@ -68,7 +68,7 @@ class RefuseCipherSuite(HandshakeFault):
     def start(self) -> None:
         security = _security(self.context)
         security.serving()
-        self.refused = frozenset((security.suite(self.context.options["suite"]),))
+        self.refused = frozenset((security.suite(self.context.options.suite or ""),))
         security.seam.add(self)
 
 
@@ -97,10 +97,10 @@ class DropDtlsRecords:
     def __init__(self, context: FaultContext) -> None:
         self.context = context
         options = context.options
-        self.share: float | None = options.get("share")
-        self.every: int | None = options.get("every")
-        self.originator: str | None = options.get("originator")
-        direction = options.get("direction", "both")
+        self.share: float | None = options.share
+        self.every: int | None = options.every
+        self.originator: str | None = options.originator
+        direction = options.direction or "both"
         self.inbound = direction in ("in", "both")
         self.outbound = direction in ("out", "both")
         self.count = 0
