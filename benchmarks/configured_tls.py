@@ -17,9 +17,7 @@ folder, within the same round; the median round is printed.
 from __future__ import annotations
 
 import argparse
-import json
 import shutil
-import statistics
 import sys
 import tempfile
 import time
@@ -27,7 +25,7 @@ from pathlib import Path
 from typing import Any
 
 from io_common import free_port, start_adapter, stop_adapter
-from psk_tls import measure
+from psk_tls import measure, report
 
 FIGURES = ("cpu_per_read_us", "cpu_per_handshake_us")
 
@@ -78,22 +76,7 @@ def main(argv: list[str] | None = None) -> int:
         for adapter in adapters.values():
             stop_adapter(adapter)
         shutil.rmtree(root, ignore_errors=True)
-    medians = {figure: statistics.median(values) if values else None
-               for figure in FIGURES
-               for values in [[r[f"ratio_{figure}"] for r in rounds if r[f"ratio_{figure}"] is not None]]}
-    if args.json:
-        print(json.dumps({"rounds": rounds, "median_ratios": medians}))
-        return 0
-    print(f"{args.reads} reads in one session and {args.handshakes} sessions each way, {args.rounds} round(s)")
-    print(f"{'round':>5}  {'way':<12}  {'us/read':>8}  {'us/handshake':>12}")
-    for index, r in enumerate(rounds, 1):
-        for way in ("folder", "configured"):
-            w = r[way]
-            print(f"{index:>5}  {way:<12}  {w['cpu_per_read_us']:>8.1f}  {w['cpu_per_handshake_us']:>12.1f}")
-    shown = {figure: f"{value:.2f}x" if value is not None else "-" for figure, value in medians.items()}
-    print(f"adapter CPU, configured / folder: per read {shown['cpu_per_read_us']}, "
-          f"per handshake {shown['cpu_per_handshake_us']}")
-    return 0
+    return report(args, rounds, ("folder", "configured"), "configured / folder")
 
 
 if __name__ == "__main__":

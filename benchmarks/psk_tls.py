@@ -82,6 +82,12 @@ def main(argv: list[str] | None = None) -> int:
         for adapter in adapters.values():
             stop_adapter(adapter)
         shutil.rmtree(root, ignore_errors=True)
+    return report(args, rounds, ("certificates", "psk"), "PSK / certificates")
+
+
+def report(args: argparse.Namespace, rounds: list[dict[str, Any]], ways: tuple[str, str], ratio: str) -> int:
+    """Each round's CPU per read and per handshake of both ``ways``, then the median ratios (JSON with
+    ``--json``): what this benchmark and ``configured_tls.py`` print alike."""
     ratios = {figure: [r[f"ratio_{figure}"] for r in rounds if r[f"ratio_{figure}"] is not None]
               for figure in ("cpu_per_read_us", "cpu_per_handshake_us")}
     medians = {figure: statistics.median(values) if values else None
@@ -92,11 +98,11 @@ def main(argv: list[str] | None = None) -> int:
     print(f"{args.reads} reads in one session and {args.handshakes} sessions each way, {args.rounds} round(s)")
     print(f"{'round':>5}  {'way':<12}  {'us/read':>8}  {'us/handshake':>12}")
     for index, r in enumerate(rounds, 1):
-        for way in ("certificates", "psk"):
+        for way in ways:
             w = r[way]
             print(f"{index:>5}  {way:<12}  {w['cpu_per_read_us']:>8.1f}  {w['cpu_per_handshake_us']:>12.1f}")
     shown = {figure: f"{value:.2f}x" if value is not None else "-" for figure, value in medians.items()}
-    print(f"adapter CPU, PSK / certificates: per read {shown['cpu_per_read_us']}, "
+    print(f"adapter CPU, {ratio}: per read {shown['cpu_per_read_us']}, "
           f"per handshake {shown['cpu_per_handshake_us']}")
     return 0
 

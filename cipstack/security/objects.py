@@ -14,6 +14,7 @@ connection, 0x09 for a value the device cannot take, 0x13/0x15 for a request too
 from __future__ import annotations
 
 import struct
+from collections.abc import Callable
 from functools import partial
 from typing import Any
 
@@ -258,37 +259,33 @@ class CertificateManagementObject(_SecurityObject):
     def _crl_downloaded(self, data: bytes, context: RequestContext) -> None:
         """A CRL downloaded into its file: the session's owner only; 0x09 for no CRL."""
         what = "a download of the certificate revocation list"
-        self.configurator.require(context.transport, context.origin, context.now, what)
-        try:
-            der = certificates.revocation_list_der(data)
-        except CipError as exc:
-            raise self.configurator.refuse(context.origin, exc.general, f"{what} from {context.origin} refused: "
-                                                                         f"{exc}") from None
-        self.configurator.change(context.transport, context.origin, context.now, what, crl=der)
+        self._change(context, what, crl=self._take(data, context, what, certificates.revocation_list_der))
 
     def _identities_downloaded(self, data: bytes, context: RequestContext) -> None:
         """The Trusted Identities' certificates downloaded: the session's owner only; 0x09 for none."""
         what = "a download of the trusted identities"
-        self.configurator.require(context.transport, context.origin, context.now, what)
-        try:
-            bundle = certificates.identity_bundle(data)
-        except CipError as exc:
-            raise self.configurator.refuse(context.origin, exc.general, f"{what} from {context.origin} refused: "
-                                                                         f"{exc}") from None
-        self.configurator.change(context.transport, context.origin, context.now, what, identity_certificates=bundle)
+        self._change(context, what, identity_certificates=self._take(data, context, what,
+                                                                     certificates.identity_bundle))
 
     def _downloaded(self, attribute: int, data: bytes, context: RequestContext) -> None:
         """A certificate downloaded into its file: the session's owner only; 0x09 for no certificate."""
         certificate, status = CERTIFICATE_FIELDS[attribute]
         what = f"a download of the {certificate.replace('_', ' ')}"
+        der = self._take(data, context, what, certificates.certificate_der)
+        self._change(context, what, **{certificate: der, status: CertificateStatus.NOT_VERIFIED})
+
+    def _take(self, data: bytes, context: RequestContext, what: str, parse: Callable[[bytes], Any]) -> Any:
+        """What a download into a file holds, parsed, once the configuration session's owner is the one
+        downloading; a refusal (the parser's status, 0x09) naming ``what`` otherwise."""
         self.configurator.require(context.transport, context.origin, context.now, what)
         try:
-            der = certificates.certificate_der(data)
+            return parse(data)
         except CipError as exc:
             raise self.configurator.refuse(context.origin, exc.general, f"{what} from {context.origin} refused: "
                                                                          f"{exc}") from None
-        self.configurator.change(context.transport, context.origin, context.now, what,
-                                 **{certificate: der, status: CertificateStatus.NOT_VERIFIED})
+
+    def _change(self, context: RequestContext, what: str, **changes: Any) -> None:
+        self.configurator.change(context.transport, context.origin, context.now, what, **changes)
 
     def read_attribute(self, instance: Instance, spec: AttributeSpec) -> Any:
         configuration = self.configurator.configuration
