@@ -91,6 +91,21 @@ def _note_verify_failure(connection: Any, certificate: Any, number: int, depth: 
     return bool(ok)
 
 
+def use_certificates(context: Any, credentials: Credentials, pair: Any, role: str) -> None:
+    """Load ``pair`` (the device's or the client's certificate and key) and the folder's CA into a
+    pyOpenSSL ``context``; ``SecurityError`` naming ``role`` where one is not usable."""
+    from OpenSSL import SSL
+
+    assert credentials.ca is not None
+    try:
+        context.use_certificate_chain_file(str(pair.certificate.path))
+        context.use_privatekey_file(str(pair.key))
+        context.load_verify_locations(str(credentials.ca.path))
+    except SSL.Error as exc:
+        raise SecurityError(f"{credentials.folder}: the {role}'s certificate, key or CA is not usable "
+                            f"({exc})") from None
+
+
 def dtls_context(credentials: Credentials, server: bool, verify_client: bool = True) -> SSL.Context:
     """The DTLS context of the device (``server``) or of the originator, from ``credentials``. With
     the folder's PSK it offers and accepts the PSK suites too (``psk``), before the certificate
@@ -110,13 +125,7 @@ def dtls_context(credentials: Credentials, server: bool, verify_client: bool = T
         _use_psk(context, credentials, server, with_certificates=pair is not None and credentials.ca is not None)
     if pair is None or credentials.ca is None:
         return _finish(context, credentials, server)
-    try:
-        context.use_certificate_chain_file(str(pair.certificate.path))
-        context.use_privatekey_file(str(pair.key))
-        context.load_verify_locations(str(credentials.ca.path))
-    except SSL.Error as exc:
-        raise SecurityError(f"{credentials.folder}: the {role}'s certificate, key or CA is not usable "
-                            f"({exc})") from None
+    use_certificates(context, credentials, pair, role)
     mode = SSL.VERIFY_PEER | (SSL.VERIFY_FAIL_IF_NO_PEER_CERT if server else 0)
     if server:
         context.set_verify(mode if verify_client else SSL.VERIFY_NONE)

@@ -22,7 +22,7 @@ from collections.abc import Iterable, Sequence
 from typing import TYPE_CHECKING, Any
 
 from ..errors import PeerUnreachable, SecurityError
-from .dtls import KeyLog, check_crl, require_pyopenssl
+from .dtls import KeyLog, check_crl, require_pyopenssl, use_certificates
 from .psk import (
     PSK_SUITES,
     PskServer,
@@ -241,13 +241,7 @@ def openssl_context(credentials: Credentials, server: bool, keys: Iterable[tuple
     suites = [name for name in suites if name not in PSK_SUITES]
     if pair is not None and credentials.ca is not None and suites:
         role = "device" if server else "client"
-        try:
-            context.use_certificate_chain_file(str(pair.certificate.path))
-            context.use_privatekey_file(str(pair.key))
-            context.load_verify_locations(str(credentials.ca.path))
-        except SSL.Error as exc:
-            raise SecurityError(f"{credentials.folder}: the {role}'s certificate, key or CA is not usable "
-                                f"({exc})") from None
+        use_certificates(context, credentials, pair, role)
         names += suites
         if server:
             context.set_verify(SSL.VERIFY_PEER | SSL.VERIFY_FAIL_IF_NO_PEER_CERT if verify_client else SSL.VERIFY_NONE)
