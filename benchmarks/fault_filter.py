@@ -73,7 +73,7 @@ def one_tree(datagrams: int, only: str | None = None) -> dict[str, float]:
         request = parse_arguments(name, words)
         # The record the controller hands its effect: typed where the tree has it, the mapping before.
         options = getattr(request, "settings", request.options)
-        context = FaultContext(_Runtime(), 1, options, random.Random(1), lambda: None,  # type: ignore[arg-type]
+        context = FaultContext(_Runtime(), 1, options, random.Random(1), lambda: None,  # type: ignore[arg-type]  # a stand-in runtime: the filters read none of it
                                lambda work: None)
         effect: Any = TABLE[name].effect(context)
         batch = [_datagram()]

@@ -27,7 +27,7 @@ def test_a_request_s_record_holds_its_options_parsed_once() -> None:
     assert request.settings == FaultOptions(every=16, originator="127.0.0.1", duration=0.5)
     assert dict(request.options) == {"every": 16, "originator": "127.0.0.1", "for": 0.5}
     with pytest.raises(dataclasses.FrozenInstanceError):
-        request.settings.every = 2   # type: ignore[misc]
+        request.settings.every = 2   # type: ignore[misc]  # the subject: a frozen record refuses the write
 
 
 def test_the_two_statuses_are_two_attributes() -> None:

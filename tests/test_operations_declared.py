@@ -77,12 +77,12 @@ def test_each_operation_s_handler_takes_its_record(operation: Operation) -> None
         required = f.default is dataclasses.MISSING
         assert (parameters[f.name].default is inspect.Parameter.empty) == required, f.name
     assert dataclasses.is_dataclass(operation.record)
-    assert operation.record.__dataclass_params__.frozen   # type: ignore[attr-defined]
+    assert operation.record.__dataclass_params__.frozen   # type: ignore[attr-defined]  # dataclasses' own, untyped
     assert [a.key for a in operation.arguments] == fields
 
 
 def test_an_argument_record_is_frozen() -> None:
     record = OPERATION_BY_NAME["set-parameter"].record(code="ACC", value="2.5")
     with pytest.raises(dataclasses.FrozenInstanceError):
-        record.code = "DEC"   # type: ignore[misc]
+        record.code = "DEC"   # type: ignore[misc]  # the subject: a frozen record refuses the write
     assert OPERATION_BY_NAME["set-parameter"].given(record) == {"code": "ACC", "value": "2.5"}

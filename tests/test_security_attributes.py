@@ -90,11 +90,11 @@ def lab_client(lab: Path, folder: Path, name: str = "expired.pem", expired: bool
     certificate = (x509.CertificateBuilder()
                    .subject_name(x509.Name([x509.NameAttribute(x509.NameOID.COMMON_NAME, common_name)]) if common_name
                                  else x509.load_pem_x509_certificate((lab / "client.pem").read_bytes()).subject)
-                   .issuer_name(ca.subject).public_key(key.public_key())  # type: ignore[arg-type]
+                   .issuer_name(ca.subject).public_key(key.public_key())  # type: ignore[arg-type]  # the lab's keys are EC, which the builder takes
                    .serial_number(x509.random_serial_number())
                    .not_valid_before(now - datetime.timedelta(days=10))
                    .not_valid_after(now + datetime.timedelta(days=-1 if expired else 10))
-                   .sign(ca_key, hashes.SHA256()))  # type: ignore[arg-type]
+                   .sign(ca_key, hashes.SHA256()))  # type: ignore[arg-type]  # the lab CA's key is EC
     path = folder / name
     path.write_bytes(certificate.public_bytes(serialization.Encoding.PEM))
     return path, certificate.serial_number
@@ -113,7 +113,7 @@ def revocation_list(lab: Path, *serials: int) -> bytes:
     for serial in serials:
         builder = builder.add_revoked_certificate(
             x509.RevokedCertificateBuilder().serial_number(serial).revocation_date(now).build())
-    crl = builder.sign(ca_key, hashes.SHA256())  # type: ignore[arg-type]
+    crl = builder.sign(ca_key, hashes.SHA256())  # type: ignore[arg-type]  # the lab CA's key is EC
     return crl.public_bytes(serialization.Encoding.PEM)
 
 

@@ -340,7 +340,7 @@ def test_tshark_sees_the_client_hello_sent_again_and_nothing_back(secured: Emula
                                text=True)
     lines: list[str] = []
     assert dumpcap.stdout is not None
-    reader = threading.Thread(target=lambda: lines.extend(iter(dumpcap.stdout.readline, "")), daemon=True)   # type: ignore[union-attr]
+    reader = threading.Thread(target=lambda: lines.extend(iter(dumpcap.stdout.readline, "")), daemon=True)   # type: ignore[union-attr]  # stdout=PIPE: never None
     reader.start()
     try:
         # Until the capture is live: handshakes, each of which it shows (ICMP-free: the device answers).
@@ -498,7 +498,7 @@ def test_a_device_configured_over_the_network_serves_secured_class1(
             scanner.io_connection(output=21, input=71, rpi=0.010) as io:
         io.sleep(0.3)
         assert io.statistics()["received"] > 0
-        (connection,) = adapter.io.connections.values()   # type: ignore[union-attr]
+        (connection,) = adapter.io.connections.values()   # type: ignore[union-attr]  # the adapter serves class 1 here
         assert connection.secured
         # The faults that need no CA key act on it; the CA's key is the configuration tool's, not the device's.
         fault = device.fault("refuse-cipher-suite", suite="ECDHE-ECDSA-AES128-GCM-SHA256")
