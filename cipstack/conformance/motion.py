@@ -32,10 +32,11 @@ from dataclasses import dataclass, field, replace
 from typing import TypeVar
 
 from ..cip.epath import request_path
-from ..eip.io_core import SEQUENCE_COUNT_SIZE, IoDatagramError, decode_io_datagram, encode_io_datagram
+from ..eip.io_core import SEQUENCE_COUNT_SIZE, IoDatagramError, decode_io_datagram
 from .connections import Endpoint, Opened, Plan, forward_open_request, send_forward_open
 from .discovery import profile_pair
 from .model import Behaviour, CheckSpec, Exchange, Outcome, Verdict
+from .ot_producer import OutputProducer
 from .profile import PROFILE, clear_fault_of_the_run, not_a_drive  # and the static checks register before these
 from .registry import GET_ATTRIBUTE_SINGLE, SET_ATTRIBUTE_SINGLE, Context, check, outcome
 from .wire import Probe, TargetUnreachable
@@ -113,9 +114,8 @@ class MotionLink:
         self.ctx, self.plan, self.probe, self.endpoint, self.opened = ctx, plan, probe, endpoint, opened
         header = 4 if plan.run_idle else 0
         self.size = plan.ot_size - SEQUENCE_COUNT_SIZE - header
-        self.api = max(opened.reply.ot_api_us, 1000) / 1e6
-        self.sequence = 0
-        self.sent_example: bytes | None = None
+        self.producer = OutputProducer(endpoint.sock, (ctx.host, opened.io_port), opened.reply.ot_connection_id,
+                                       max(opened.reply.ot_api_us, 1000) / 1e6, plan.run_idle)
         self.received_example: bytes | None = None
         self.last: Status | None = None
         self._gets: dict[str, bool | None] = {}
@@ -167,21 +167,13 @@ class MotionLink:
              run: bool = True) -> tuple[float | None, list[Status]]:
         """Send ``bits``/``speed`` (idle: ``run`` False) for at most ``seconds``; return how long it took
         until a T->O packet showed ``until`` (None: never, or no ``until``) and every status seen."""
-        data = self.data(bits, speed)
+        self.producer.command(self.data(bits, speed), run)
         start = time.monotonic()
-        end, due = start + seconds, start
+        end = start + seconds
         seen: list[Status] = []
         sock = self.endpoint.sock
         while (now := time.monotonic()) < end:
-            if now >= due:
-                self.sequence += 1
-                run_idle = (1 if run else 0) if self.plan.run_idle else None
-                datagram = encode_io_datagram(self.opened.reply.ot_connection_id, self.sequence, self.sequence, data,
-                                              run_idle)
-                self.sent_example = self.sent_example or datagram
-                sock.sendto(datagram, (self.ctx.host, self.opened.io_port))
-                due = max(due + self.api, now)
-            ready, _, _ = select.select([sock], [], [], max(0.0, min(end, due) - time.monotonic()))
+            ready, _, _ = select.select([sock], [], [], end - now)
             if not ready:
                 continue
             raw = sock.recv(65536)
@@ -238,7 +230,7 @@ class MotionLink:
         return status
 
     def exchanges(self) -> list[Exchange]:
-        return [*self.probe.exchanges, Exchange(self.sent_example or b"", self.received_example, "udp")]
+        return [*self.probe.exchanges, Exchange(self.producer.first or b"", self.received_example, "udp")]
 
     def release(self) -> None:
         """Stop the drive, reset a fault this check caused, give NetCtl/NetRef and the speed reference
@@ -249,26 +241,29 @@ class MotionLink:
             NET_REF if self.as_found.get("NetRef", b"\0")[:1] == b"\1" else 0)
         found_speed = struct.unpack("<h", self.as_found["SpeedRef"][:2])[0] if len(
             self.as_found.get("SpeedRef", b"")) >= 2 else 0
-        with contextlib.suppress(OSError, TargetUnreachable):  # the explicit part below notes what is left
-            decel, _ = self.ramp_time(19)
-            self.send(self.control, SPEED_REFERENCE, 2 * decel + RELEASE_S, until=lambda s: not s.running)
-            if self.force_fault_used:
-                self.write(*FORCE_FAULT, b"\0")
-            if self.fault_free and self.last is not None and self.last.faulted:
-                self.hold(self.control, SETTLE_S)
-                self.send(self.control | FAULT_RST, SPEED_REFERENCE, FAULT_S, until=lambda s: not s.faulted)
-            if self.extended and found_bits != self.control:
-                self.hold(self.control, SETTLE_S)
-                # NetCtl/NetRef handed back: once the input shows both sources as found, the drive has
-                # applied the packet that carries them and the speed reference; a drive whose sources are
-                # set locally shows no change, and is given the whole SETTLE_S.
-                ctrl, ref = bool(found_bits & NET_CTL), bool(found_bits & NET_REF)
-                self.send(found_bits, found_speed, SETTLE_S,
-                          until=lambda s: s.ctrl_from_net is ctrl and s.ref_from_net is ref)
-            else:
-                # The bits held are the bits found (output 20 has no NetCtl/NetRef): one level, and the
-                # speed reference as found, for SETTLE_S.
-                self.hold(found_bits, SETTLE_S, speed=found_speed)
+        try:
+            with contextlib.suppress(OSError, TargetUnreachable):  # the explicit part below notes what is left
+                decel, _ = self.ramp_time(19)
+                self.send(self.control, SPEED_REFERENCE, 2 * decel + RELEASE_S, until=lambda s: not s.running)
+                if self.force_fault_used:
+                    self.write(*FORCE_FAULT, b"\0")
+                if self.fault_free and self.last is not None and self.last.faulted:
+                    self.hold(self.control, SETTLE_S)
+                    self.send(self.control | FAULT_RST, SPEED_REFERENCE, FAULT_S, until=lambda s: not s.faulted)
+                if self.extended and found_bits != self.control:
+                    self.hold(self.control, SETTLE_S)
+                    # NetCtl/NetRef handed back: once the input shows both sources as found, the drive has
+                    # applied the packet that carries them and the speed reference; a drive whose sources are
+                    # set locally shows no change, and is given the whole SETTLE_S.
+                    ctrl, ref = bool(found_bits & NET_CTL), bool(found_bits & NET_REF)
+                    self.send(found_bits, found_speed, SETTLE_S,
+                              until=lambda s: s.ctrl_from_net is ctrl and s.ref_from_net is ref)
+                else:
+                    # The bits held are the bits found (output 20 has no NetCtl/NetRef): one level, and the
+                    # speed reference as found, for SETTLE_S.
+                    self.hold(found_bits, SETTLE_S, speed=found_speed)
+        finally:
+            self.producer.stop()  # whatever went wrong above: nothing is sent once the check is over
         self.opened.close()
         try:
             self._check_by_explicit_messaging()
@@ -465,6 +460,8 @@ def fault_reset(ctx: Context, spec: CheckSpec, link: MotionLink, status: Status)
     if link.read(*FORCE_FAULT) is None:
         seen = link.hold(control | FAULT_RST, HOLD_S)
         seen += link.hold(control, SETTLE_S)
+        if not seen:
+            return outcome(spec, False, "no T->O packet while FaultRst went 0->1 and was held", link.exchanges())
         bad = [s for s in seen if s.faulted or s.ready is False or s.running]
         return outcome(spec, not bad, (f"with no fault, FaultRst 0->1 then held at 1: {bad[0].describe()}" if bad else
                                        f"{spec.permits('no fault to reset').name}: FaultRst 0->1 then held at 1, "
@@ -496,7 +493,9 @@ def fault_reset(ctx: Context, spec: CheckSpec, link: MotionLink, status: Status)
                 problems.append("ForceFault with FaultRst held at 1: no Faulted")
             else:
                 held = link.hold(control | FAULT_RST, HOLD_S)
-                if not all(s.faulted for s in held):
+                if not held:
+                    problems.append(f"no T->O packet in the {HOLD_S:g} s FaultRst was held at 1")
+                elif not all(s.faulted for s in held):
                     problems.append("FaultRst held at 1 reset the fault again (a level, not a 0->1 edge)")
     if not problems:
         link.hold(control, SETTLE_S)

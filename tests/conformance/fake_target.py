@@ -107,7 +107,8 @@ class FakeTarget:
     def __init__(self, deviation: str | Iterable[str] | None = None, host: str = "127.0.0.1", name: bytes = NAME,
                  opener_timeout: bool = False, variant: str | None = None, drive: bool = False,
                  tcp_limit: int | None = None, silent_after: str | None = None, silence: str = "hang",
-                 max_sessions: int = MAX_SESSIONS, opener_layout: bool = False, security: bool = False) -> None:
+                 max_sessions: int = MAX_SESSIONS, opener_layout: bool = False, security: bool = False,
+                 set_delay: float = 0.0) -> None:
         """``opener_timeout``: on a class 1 timeout, close the TCP session that opened the connection and
         keep the connection's ownership until a Forward_Close of its triad comes, as OpENer does.
         ``variant`` names a check whose other permitted answer this target gives (``VARIANTS``).
@@ -123,7 +124,10 @@ class FakeTarget:
         instance and how many it has (class attributes 2 and 3).
         ``silent_after``: one of ``SILENCE_POINTS``, where the target stops answering, as ``silence``
         says: "hang" (a process that hangs: connections still open, nothing read or answered, no
-        connection accepted) or "close" (it closes its listener and every connection)."""
+        connection accepted) or "close" (it closes its listener and every connection).
+        ``set_delay``: a Set_Attribute_Single of the drive's objects is applied at once and answered
+        this many seconds later (a slow explicit server, or a loaded machine)."""
+        self.set_delay = set_delay
         self.opener_layout = opener_layout
         assert silent_after in (None, *SILENCE_POINTS) and silence in ("hang", "close")
         self.silent_after, self.silence = silent_after, silence
@@ -151,6 +155,8 @@ class FakeTarget:
         self.opener_timeout = opener_timeout
         #: TCP sessions this target closed because their class 1 connection timed out.
         self.sessions_closed_on_timeout = 0
+        #: Class 1 connections that timed out (no O->T within RPI x 4 << multiplier).
+        self.timeouts = 0
         self._local = threading.local()
         self.name = name
         self.host = host
@@ -520,6 +526,7 @@ class FakeTarget:
             values[attribute] = data
             if self.motor is not None:
                 self.motor.set(class_id, attribute, data)
+            time.sleep(self.set_delay)
             return reply(service)
         if service == 0x05 and class_id == 0x01:
             return reply(service, 0x08 if self.deviates("objects.identity.reset") else 0)
@@ -758,6 +765,7 @@ class FakeTarget:
         start, sequence = time.monotonic(), 0
         while not connection.stop.is_set() and not self._stop.is_set():
             if time.monotonic() > connection.last_heard and not self.deviates("class1.timeout"):
+                self.timeouts += 1
                 if self.opener_timeout or self.deviates("final.as_found"):
                     self._time_out_and_keep(connection)
                 else:

@@ -3,9 +3,12 @@ and the speed reference back, the connection closed (against the scripted drive 
 
 from __future__ import annotations
 
+import threading
+from pathlib import Path
+
 import pytest
 
-from cipstack.conformance import CHECKS
+from cipstack.conformance import CHECKS, Verdict, run
 from cipstack.conformance.motion import RUN_FWD, SPEED_REFERENCE, MotionLink, motion_link
 from cipstack.conformance.registry import Context
 
@@ -48,3 +51,16 @@ def test_every_motion_check_declares_the_behaviours_it_permits() -> None:
     assert all(b.reference and b.meaning for spec in motion.values() for b in spec.behaviours)
     with pytest.raises(KeyError, match="declares no behaviour"):
         motion["profile.motion.idle"].permits("runs")
+
+
+def test_a_slow_explicit_server_does_not_starve_the_motion_connection() -> None:
+    """Each Set_Attribute_Single answered 0.3 s late: the fault reset check writes ForceFault twice in a
+    row while its connection (RPI 20 ms x 16: 0.32 s timeout) is open. O->T goes on meanwhile, so the
+    connection never times out (a real drive would trip on it) and every motion check passes."""
+    eds = Path(__file__).with_name("fake_device.eds")
+    with FakeTarget(drive=True, set_delay=0.3) as target:
+        report = run(target.host, target.port, eds=eds, groups="profile", allow_writes=True, allow_reset=True,
+                     timeout=2.0, allow_motion=True)
+    assert target.errors == [] and target.timeouts == 0
+    assert {o.name: o.observed for o in report if o.verdict is not Verdict.PASS} == {}
+    assert [t.name for t in threading.enumerate() if t.name == "battery O->T"] == []
