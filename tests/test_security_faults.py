@@ -539,3 +539,37 @@ def test_a_crl_in_the_folder_that_does_not_read_is_one_line(lab: Path, tmp_path:
         DtlsLink(Credentials.load(folder), "127.0.0.1", free_port(), 0.5)
     os.unlink(folder / "crl.pem")
     assert Credentials.load(folder).client_context().verify_flags & ssl.VERIFY_CRL_CHECK_LEAF == 0
+
+
+def test_a_device_started_with_a_folder_refuses_the_clients_its_crl_lists(
+        cip_adapter_factory: Callable[..., EmulatedDevice], lab: Path, tmp_path: Path) -> None:
+    """A device of ``--security DIR`` checks each client's certificate against the folder's ``crl.pem``
+    as it is at the handshake: a CRL published while it runs refuses the client it lists over TLS and
+    DTLS, one that lists another certificate refuses nobody, and a CRL withdrawn refuses nobody; plain
+    44818 serves on throughout."""
+    from cryptography import x509
+
+    from tests.test_security_attributes import revocation_list
+
+    folder = tmp_path / "lab"
+    shutil.copytree(lab, folder)
+    client_serial = x509.load_pem_x509_certificate((folder / "client.pem").read_bytes()).serial_number
+    device = cip_adapter_factory(settings={"security": folder, "security_port": 0})
+    assert device.adapter.tls is not None and device.adapter.dtls is not None
+    tls_port, dtls_port = device.adapter.tls.port, device.adapter.dtls.port
+    # The client reads the same folder, and checks the device's certificate against the same CRL: the
+    # device's is never listed here.
+    assert tls_read(tls_port, folder) == "CENT" and dtls_handshake(dtls_port, folder) == "ok"
+
+    (folder / "crl.pem").write_bytes(revocation_list(folder, client_serial + 1))
+    assert tls_read(tls_port, folder) == "CENT" and dtls_handshake(dtls_port, folder) == "ok"
+
+    (folder / "crl.pem").write_bytes(revocation_list(folder, client_serial, client_serial + 1))
+    refused = tls_read(tls_port, folder)
+    assert refused.startswith(f"TLS with 127.0.0.1:{tls_port} failed") and "revoked" in refused, refused
+    refused = dtls_handshake(dtls_port, folder, timeout=2.0)
+    assert refused.startswith(f"DTLS with 127.0.0.1:{dtls_port} failed") and "revoked" in refused, refused
+    assert plain_read(device.port) == "CENT"
+
+    os.unlink(folder / "crl.pem")
+    assert tls_read(tls_port, folder) == "CENT" and dtls_handshake(dtls_port, folder) == "ok"

@@ -155,6 +155,8 @@ class Credentials:
         self._common(context)
         context.load_cert_chain(pair.certificate.path, pair.key)
         context.verify_mode = ssl.CERT_REQUIRED if verify_client else ssl.CERT_NONE
+        if verify_client:
+            self._check_crl(context)
         return context
 
     def client_context(self) -> ssl.SSLContext | PskTlsContext:
@@ -177,6 +179,11 @@ class Credentials:
         if self.suites:   # TLS 1.3's suites cannot be narrowed (Python's ssl): TLS 1.2 alone
             context.maximum_version = ssl.TLSVersion.TLSv1_2
             context.set_ciphers(":".join(self.suites))
+        self._check_crl(context)
+        return context
+
+    def _check_crl(self, context: ssl.SSLContext) -> None:
+        """The peer's certificate checked against the folder's ``crl.pem``, when there is one."""
         crl = self.crl()
         if crl is not None:
             try:
@@ -184,13 +191,22 @@ class Credentials:
             except (OSError, ssl.SSLError) as exc:
                 raise SecurityError(f"{crl}: not a usable CRL ({exc})") from None
             context.verify_flags |= ssl.VERIFY_CRL_CHECK_LEAF
-        return context
 
     def crl(self) -> Path | None:
         """The folder's certificate revocation list as it is now (read at each handshake: a CRL published
         while a scanner runs counts from its next connection), or None."""
         path = self.folder / CRL_FILE
         return path if path.is_file() else None
+
+    def crl_stamp(self) -> tuple[int, int] | None:
+        """What identifies the folder's ``crl.pem`` as it is now (modification time and size), or None
+        without one: a device compares it at each handshake and remakes its contexts when it changed,
+        so a CRL published or withdrawn while it runs counts from the next handshake."""
+        try:
+            stat = (self.folder / CRL_FILE).stat()
+        except OSError:
+            return None
+        return stat.st_mtime_ns, stat.st_size
 
     def wrap_client(self, sock: socket.socket, host: str, port: int) -> ssl.SSLSocket | TlsSocket:
         """``sock`` (connected, blocking) after a TLS handshake as the originator; a handshake that

@@ -110,8 +110,9 @@ def dtls_context(credentials: Credentials, server: bool, verify_client: bool = T
     """The DTLS context of the device (``server``) or of the originator, from ``credentials``. With
     the folder's PSK it offers and accepts the PSK suites too (``psk``), before the certificate
     suites, and speaks DTLS 1.2 only; a folder with a PSK and no certificates gives a PSK-only side.
-    The originator checks the device's certificate against ``crl.pem`` when the folder holds one
-    (``Credentials.crl``), and offers only the suites ``Credentials.offering`` chose, if it did."""
+    Each side checks the other's certificate against ``crl.pem`` when the folder holds one
+    (``Credentials.crl``; the device when it verifies clients), and the originator offers only the
+    suites ``Credentials.offering`` chose, if it did."""
     require_pyopenssl()
     from OpenSSL import SSL
 
@@ -129,6 +130,8 @@ def dtls_context(credentials: Credentials, server: bool, verify_client: bool = T
     mode = SSL.VERIFY_PEER | (SSL.VERIFY_FAIL_IF_NO_PEER_CERT if server else 0)
     if server:
         context.set_verify(mode if verify_client else SSL.VERIFY_NONE)
+        if verify_client:
+            check_crl(context, credentials)
     else:
         context.set_verify(mode, _note_verify_failure)
         check_crl(context, credentials)
@@ -136,8 +139,9 @@ def dtls_context(credentials: Credentials, server: bool, verify_client: bool = T
 
 
 def check_crl(context: SSL.Context, credentials: Credentials) -> None:
-    """The originator's check of the device's certificate against the folder's ``crl.pem``, when it
-    holds one (OpenSSL's leaf check); the pyOpenSSL contexts of TLS with a key use it too."""
+    """The check of the peer's certificate against the folder's ``crl.pem``, when it holds one
+    (OpenSSL's leaf check): the originator's of the device's, a device's of its clients'; the
+    pyOpenSSL contexts of TLS with a key use it too."""
     from OpenSSL import SSL, crypto
 
     crl = credentials.crl()

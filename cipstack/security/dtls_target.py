@@ -54,7 +54,7 @@ from ..eip.io_server import (
 from ..eip.precise_loop import IoLane, lane_of
 from ..eip.target.limits import ConnectionLimiter, RateLimitedLog
 from ..eip.wire.cpf import SockAddr
-from ..errors import CipstackError
+from ..errors import CipstackError, SecurityError
 from .credentials import SECURE_PORT
 from .dtls import DtlsChannel, describe_dtls_failure, dtls_context
 from .psk import identity_asked, verify_message
@@ -306,6 +306,8 @@ class DtlsServer:
         self.seam = seam
         #: The DTLS context every session is made from, while no fault changes it.
         self.context = self._recipe(credentials)
+        #: The folder's ``crl.pem`` the context was made with (``Credentials.crl_stamp``).
+        self._crl = credentials.crl_stamp()
         self._variant: tuple[int, SSL.Context] | None = None
         #: Sessions at once, in all and per host (half of all by default: one host never holds every one).
         self.limiter = ConnectionLimiter(max_sessions, max_sessions_per_host)
@@ -343,7 +345,13 @@ class DtlsServer:
 
     def handshake_context(self) -> SSL.Context:
         """The context of a new session: ``context``, or while a fault is in the seam the one made for
-        it (once per change of the seam)."""
+        it (once per change of the seam); both remade when the folder's CRL changed."""
+        if (stamp := self.credentials.crl_stamp()) != self._crl:
+            self._crl = stamp
+            try:
+                self.context, self._variant = self._recipe(self.credentials), None
+            except SecurityError as exc:
+                log.error("the DTLS port keeps the contexts it had: %s", exc)
         seam = self.seam
         if seam is None or not seam.handshake:
             return self.context

@@ -120,10 +120,14 @@ def available_suites_context(credentials: Credentials) -> ssl.SSLContext | PskTl
     the TLS library's; Python's ``ssl`` cannot narrow them). With the folder's PSK, a pyOpenSSL
     context of TLS 1.2 only that accepts the PSK suites too (``tls_psk``)."""
     if credentials.psk is not None:
+        from .dtls import check_crl
         from .tls_psk import psk_context
 
-        return psk_context(credentials, server=True, keys=[(credentials.psk.identity, credentials.psk.key)],
+        made = psk_context(credentials, server=True, keys=[(credentials.psk.identity, credentials.psk.key)],
                            suites=tuple(CIPHER_SUITE_NAMES.values()))
+        if credentials.device is not None and credentials.ca is not None:
+            check_crl(made.context, credentials)   # the clients' certificates, as without a PSK
+        return made
     context = credentials.server_context()
     context.set_ciphers(":".join(CERTIFICATE_SUITE_NAMES.values()))
     return context

@@ -34,7 +34,7 @@ from ..eip.target.limits import DEFAULT_MAX_TCP_CONNECTIONS, ConnectionLimiter, 
 from ..eip.target.seams import ReplySeam
 from ..eip.target.tcp_lane import LaneListener
 from ..eip.wire.cpf import SockAddr
-from ..errors import CipstackError
+from ..errors import CipstackError, SecurityError
 from .credentials import SECURE_PORT
 from .tls_lane import LaneTlsConnection
 from .tls_session import LINGER, TlsSession, named_identity
@@ -228,6 +228,9 @@ class TlsServer:
         self.recipe: Recipe = recipe or (lambda made: made.server_context(verify_client))
         #: The TLS context every connection's ``SSLObject`` is made from, while no fault changes it.
         self.context: ssl.SSLContext | PskTlsContext = context or self.recipe(credentials)
+        #: The folder's ``crl.pem`` the context was made with (``Credentials.crl_stamp``); a context given
+        #: ready-made is not remade.
+        self._crl = credentials.crl_stamp() if context is None else False
         self.seam = seam
         self._variant: tuple[int, ssl.SSLContext | PskTlsContext] | None = None
         self.limiter = ConnectionLimiter(max_connections, max_connections_per_host)
@@ -243,7 +246,13 @@ class TlsServer:
 
     def handshake_context(self) -> ssl.SSLContext | PskTlsContext:
         """The context of a new connection: ``context``, or while a fault is in the seam the one made
-        for it (once per change of the seam)."""
+        for it (once per change of the seam); both remade when the folder's CRL changed."""
+        if self._crl is not False and (stamp := self.credentials.crl_stamp()) != self._crl:
+            self._crl = stamp
+            try:
+                self.context, self._variant = self.recipe(self.credentials), None
+            except SecurityError as exc:
+                log.error("the TLS port keeps the contexts it had: %s", exc)
         seam = self.seam
         if seam is None or not seam.handshake:
             return self.context
