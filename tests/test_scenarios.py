@@ -60,7 +60,9 @@ async def test_comm_loss_during_a_ramp(tmp_path: Path) -> None:
     try:
         async with await Scanner.connect(f"127.0.0.1:{port}", catalog=CATALOG) as scanner:
             with pytest.raises(IoTimeoutError):
-                async with scanner.io_connection(output=21, input=71, rpi=0.010, timeout_multiplier=1,
+                # RPI x 64 (multiplier 4): 0.64 s, past the stalls of a loaded machine (which timed the
+                # connection out at x 8 before the fault came) and well within the fault's 2 s.
+                async with scanner.io_connection(output=21, input=71, rpi=0.010, timeout_multiplier=4,
                                                  target_io_port=io_port) as io:
                     io.output.speed_reference = 1800
                     io.output.run_forward = True
@@ -71,7 +73,7 @@ async def test_comm_loss_during_a_ramp(tmp_path: Path) -> None:
         if process.poll() is None:
             process.kill()
     assert code == 0, lines
-    assert re.fullmatch(r" +\d+\.\d{3}s  ramping fired: fault stop-producing --for 0\.5s \(on frequency 10 Hz\)",
+    assert re.fullmatch(r" +\d+\.\d{3}s  ramping fired: fault stop-producing --for 2s \(on frequency 10 Hz\)",
                         lines[1]), lines
     assert "the scanner gave up fired" in lines[2] and lines[-1].endswith("complete: every step fired; no fault "
                                                                           "left active")
