@@ -228,7 +228,7 @@ async def test_killed_originator_times_out_at_the_target(adapter: Adapter, tmp_p
         from cipstack.scanner import Scanner
         async def main():
             scanner = await Scanner.connect("127.0.0.1:{adapter.port}")
-            async with scanner.io_connection(output=21, input=71, rpi=0.010, timeout_multiplier=1,
+            async with scanner.io_connection(output=21, input=71, rpi=0.010, timeout_multiplier=3,
                                              target_io_port={adapter.io_endpoint.port}) as io:
                 await io.wait_input(lambda i: len(i.raw) == 4, 5)
                 print("running", flush=True)
@@ -244,7 +244,8 @@ async def test_killed_originator_times_out_at_the_target(adapter: Adapter, tmp_p
         assert adapter.io and len(adapter.io.connections) == 1
         process.send_signal(signal.SIGKILL)
         process.wait(5)
-        # Timeout = 10 ms x 4 x 2^1 = 80 ms after the last packet.
+        # Timeout = 10 ms x 4 x 2^3 = 320 ms after the last packet (past the stalls of a loaded machine,
+        # which at 80 ms timed the connection out before the kill now and then).
         await wait_until(lambda: device.closed, 5, "the target's watchdog")
         assert device.closed == [True]
         assert not adapter.io.connections
