@@ -54,11 +54,11 @@ def test_every_motion_check_declares_the_behaviours_it_permits() -> None:
 
 
 def test_a_slow_explicit_server_does_not_starve_the_motion_connection() -> None:
-    """Each Set_Attribute_Single answered 0.3 s late: the fault reset check writes ForceFault twice in a
+    """Each Set_Attribute_Single answered 0.2 s late: the fault reset check writes ForceFault twice in a
     row while its connection (RPI 20 ms x 16: 0.32 s timeout) is open. O->T goes on meanwhile, so the
     connection never times out (a real drive would trip on it) and every motion check passes."""
     eds = Path(__file__).with_name("fake_device.eds")
-    with FakeTarget(drive=True, set_delay=0.3) as target:
+    with FakeTarget(drive=True, set_delay=0.2) as target:
         report = run(target.host, target.port, eds=eds, groups="profile", allow_writes=True, allow_reset=True,
                      timeout=2.0, allow_motion=True)
     assert target.errors == [] and target.timeouts == 0
