@@ -58,7 +58,7 @@ from ...objects.assembly import AssemblyPoint
 from ...objects.file import StoredFile
 from ...objects.identity import IdentityInfo, IdentityStatus
 from ...objects.tcpip import NetworkInterface
-from ..base import Device, DeviceLimits, TripRefused
+from ..base import Device, DeviceLimits, DriveTrips, TripRefused, TripReport
 from ..registers import RegisterError, RegisterRefusal
 from ..state import ParameterStore, StateFileError, StateWriter
 from .board import MISSING_INSTANCE
@@ -466,6 +466,16 @@ class OmronDevice(Device):
         """The inverter's EEPROM save, handed to the state writer (which may refuse it: StateFileError)."""
         if self.saves is not None:
             self.saves.request({**values, CONSISTENCY_KEY: self.inverter.consistency_value})
+
+    def drive_trips(self) -> DriveTrips:
+        """The trip codes of Table D-5 this family has, each reported as the emulator names it ("E05
+        Overload protection")."""
+        def reset() -> TripReport | None:
+            cleared = self.reset_trip()
+            return None if cleared is None else TripReport(cleared.label)
+
+        return DriveTrips(inject=lambda code: TripReport(self.inject_trip(code).label), check=self.check_trip_code,
+                          reset=reset, codes=self.trip_codes, choices=self.trip_choices)
 
     def reset_trip(self) -> TripCode | None:
         """The Digital Operator's STOP/RESET key clears the trip present (section 4-5-2, Table 25 Step
