@@ -229,6 +229,9 @@ class Operation:
     needs: Capability | None = None
     #: How a scenario's step takes it; None for what no step does (a read).
     step: StepKind | None = None
+    #: The method of the pytest plugin's device that calls it (``cipstack.testing``): "" for the name's
+    #: own words (``set-parameter``: ``set_parameter``), None for none.
+    python: str | None = ""
     #: How its reply reads on a console, and what ``--json`` prints of it.
     text: Callable[[Any], str] = console.result_text
     json: Callable[[Any], Any] = console.as_given
@@ -247,6 +250,11 @@ class Operation:
 
     def __post_init__(self) -> None:
         object.__setattr__(self, "arguments", arguments_of(self.record))
+
+    @property
+    def python_name(self) -> str | None:
+        """The plugin's method for it, or None."""
+        return self.name.replace("-", "_") if self.python == "" else self.python
 
     def argument(self, key: str) -> Argument | None:
         return next((a for a in self.arguments if a.key == key), None)
@@ -330,7 +338,8 @@ OPERATIONS: tuple[Operation, ...] = (
               free_words=True, instead="clear", step=StepKind("fault", _fault_step)),
     Operation("faults", "the faults active now", "GET", "/faults", _faults, text=console.faults_text),
     Operation("clear", "clear every active fault, or one by id or name", "DELETE", "/faults/{fault}", _clear,
-              ClearArguments, text=console.cleared_text, optional_path=True, step=StepKind("clear", _clear_step)),
+              ClearArguments, text=console.cleared_text, optional_path=True, step=StepKind("clear", _clear_step),
+              python="clear_faults"),
     Operation("parameter", "a keypad parameter: code, name, value in the keypad's unit, raw, unit, address",
               "GET", "/parameters/{code}", _parameter, ParameterArguments, needs=KEYPAD, text=console.parameter_text),
     Operation("set-parameter", "set a keypad parameter now, in the keypad's unit (not saved)", "PUT",
@@ -345,8 +354,9 @@ OPERATIONS: tuple[Operation, ...] = (
     # Not refused without a drive: an empty list is how a device without trips shows none.
     Operation("trips", "the trips of the drive's manual that `trip` takes", "GET", "/trips", _trips,
               text=console.trips_text),
+    # The plugin's device gives the events as records of their own (``events``, ``wait_for``), not as JSON.
     Operation("events", "the events after event number `since`, oldest first", "GET", "/events", _events,
-              EventsArguments, text=console.events_text),
+              EventsArguments, text=console.events_text, python=None),
     Operation("power", "the power: `cycle` it (off for `off`, then on again)", "POST", "/power", _power,
               PowerArguments, text=console.fault_text, step=StepKind("power", _power_step)),
     Operation("link", "the Ethernet link: `unplug` or `plug` the cable", "POST", "/link", _link, LinkArguments,
