@@ -166,7 +166,8 @@ class EmulatedDevice:
         deadline = time.monotonic() + timeout
         while True:
             try:
-                scanner = SyncScanner(self.address, catalog=catalog_for(info.vendor_id, info.product_code))
+                scanner = SyncScanner(self.address, catalog=catalog_for(info.vendor_id, info.product_code,
+                                                                       info.device_type))
                 break
             except OSError:  # refused or reset while the power is off or the link unplugged
                 if time.monotonic() >= deadline:
