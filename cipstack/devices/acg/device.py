@@ -28,16 +28,6 @@ from dataclasses import dataclass, field
 from functools import lru_cache
 from pathlib import Path
 
-from ...assemblies.acg import (
-    HZ_INPUTS,
-    HZ_OUTPUTS,
-    INPUT_INSTANCES,
-    OUTPUT_INSTANCES,
-    AcgAssemblies,
-    acg_assemblies,
-    assembly_size,
-    parameter_words,
-)
 from ...assemblies.schema import AssemblySchema
 from ...cip.model import ClassSpec
 from ...eip.target.io_target import ConnectionKind, IoConnection, IoProfile
@@ -51,6 +41,16 @@ from ..profiles import DEFAULT_MAC, serial_from_mac
 from ..registers import Register, RegisterError
 from ..state import ParameterStore, StateWriter
 from . import registers as reg
+from .assemblies import (
+    HZ_INPUTS,
+    HZ_OUTPUTS,
+    INPUT_INSTANCES,
+    OUTPUT_INSTANCES,
+    AcgAssemblies,
+    acg_assemblies,
+    assembly_size,
+    parameter_words,
+)
 from .drive import FAMILY, MODEL, AcgDrive, Trip
 from .keypad import AcgKeypad
 from .modbus import ModbusTcpCore

@@ -22,7 +22,20 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
-from ...assemblies.omron import (
+from ...assemblies.schema import AssemblySchema
+from ...cip.model import ClassSpec
+from ...componet.gateway import COMPONET_PORT, CompoNetGateway
+from ...componet.network import NODE_ADDRESSES, CompoNetNetwork
+from ...eip.target.io_target import IoConnection, IoProfile
+from ...errors import BadRequest, UnknownKey
+from ...objects.assembly import AssemblyPoint
+from ...objects.file import StoredFile
+from ...objects.identity import IdentityInfo, IdentityStatus
+from ...objects.tcpip import NetworkInterface
+from ..base import Device, DeviceLimits, DriveTrips, TripRefused, TripReport
+from ..registers import RegisterError, RegisterRefusal
+from ..state import ParameterStore, StateFileError, StateWriter
+from .assemblies import (
     CENTIHERTZ,
     DECIHERTZ,
     FAULT_DATA_SETTING,
@@ -48,19 +61,6 @@ from ...assemblies.omron import (
     omron_schemas,
     pair_sizes,
 )
-from ...assemblies.schema import AssemblySchema
-from ...cip.model import ClassSpec
-from ...componet.gateway import COMPONET_PORT, CompoNetGateway
-from ...componet.network import NODE_ADDRESSES, CompoNetNetwork
-from ...eip.target.io_target import IoConnection, IoProfile
-from ...errors import BadRequest, UnknownKey
-from ...objects.assembly import AssemblyPoint
-from ...objects.file import StoredFile
-from ...objects.identity import IdentityInfo, IdentityStatus
-from ...objects.tcpip import NetworkInterface
-from ..base import Device, DeviceLimits, DriveTrips, TripRefused, TripReport
-from ..registers import RegisterError, RegisterRefusal
-from ..state import ParameterStore, StateFileError, StateWriter
 from .board import MISSING_INSTANCE
 from .inverter import Inverter, InverterModeError
 from .models import DEVICE_TYPE, REVISION, VENDOR_ID, Family, Model, model
