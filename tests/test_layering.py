@@ -267,9 +267,6 @@ IMPORTS_A_FAMILY: dict[str, str] = {
     # The built-in families' EDS descriptions use the EDS tool's types, so they live in eds/ (the devices
     # never import it); each family's declaration names its builder (``Profile.eds``).
     "eds/profiles.py": "the ACG's and the Omron boards' EDS descriptions",
-    # ``cipstack componet``: a CompoNet network of MX2/RX slaves behind a gateway is the Omron option
-    # board's feature, not a profile's; no declaration describes it yet.
-    "cli/emulators.py": "cipstack componet builds the Omron CompoNet gateway",
 }
 
 

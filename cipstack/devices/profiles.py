@@ -127,6 +127,10 @@ class Profile:
     find_model: Callable[[str], str] | None = None
     #: Its RS-485 port, where a fleet may put its drives on one line; None without one.
     serial_link: SerialLink | None = None
+    #: Its CompoNet port, where ``cipstack componet`` puts its devices as slaves behind a gateway: the
+    #: gateway's builder, given every node (profile name, model, node address) and the gateway's
+    #: EtherNet/IP interface. Families that share a gateway declare the same builder; None without one.
+    componet_gateway: Callable[[list[tuple[str, str, int]], NetworkInterface], Device] | None = None
     #: What ``cipstack models`` lists: each model (one for a family of one model) with its identity.
     model_info: Callable[[], tuple[ModelInfo, ...]] = _no_model_info
     #: How the EDS tool describes the family: ``"module:function"`` of a function that returns the
@@ -187,6 +191,41 @@ def families_having(has: Callable[[Profile], bool]) -> str:
 def keypad_families() -> str:
     """The families with a keypad: "profile acg, mx2 or rx"."""
     return families_having(lambda profile: profile.keypad is not None)
+
+
+def parse_nodes(text: str) -> list[tuple[str, str, int]]:
+    """``"mx2:MX2-A2015-E@3,rx:RX-A4055-E@5"`` -> [("mx2", "MX2-A2015-E", 3), ("rx", "RX-A4055-E", 5)]."""
+    nodes = []
+    for item in filter(None, (part.strip() for part in text.split(","))):
+        try:
+            profile, rest = item.split(":", 1)
+            model_name, node = rest.rsplit("@", 1)
+            nodes.append((profile.strip().lower(), model_name.strip(), int(node)))
+        except ValueError:
+            raise BadRequest(f"node {item!r} is not PROFILE:MODEL@NODE (e.g. mx2:MX2-A2015-E@3)") from None
+    return nodes
+
+
+def componet_gateway(nodes: list[tuple[str, str, int]], interface: NetworkInterface) -> Device:
+    """The gateway of a CompoNet network of ``nodes`` (``parse_nodes``), as the nodes' families declare it
+    (``Profile.componet_gateway``); ``BadRequest`` naming a family without a CompoNet port, or nodes whose
+    families share no gateway."""
+    if not nodes:
+        raise BadRequest("--nodes names no node")
+    builders = []
+    for name, _, _ in nodes:
+        try:
+            profile = PROFILES[name]
+        except KeyError:
+            raise BadRequest(f"unknown profile {name!r} (known: {', '.join(sorted(PROFILES))})") from None
+        if profile.componet_gateway is None:
+            has = families_having(lambda p: p.componet_gateway is not None)
+            raise BadRequest(f"profile {name!r} has no CompoNet port (one has: {has})")
+        if profile.componet_gateway not in builders:
+            builders.append(profile.componet_gateway)
+    if len(builders) > 1:
+        raise BadRequest(f"profiles {', '.join(sorted({name for name, _, _ in nodes}))} share no CompoNet gateway")
+    return builders[0](nodes, interface)
 
 
 def catalog_for_identity(identity: IdentityRecord) -> Catalog:

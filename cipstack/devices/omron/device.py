@@ -668,19 +668,6 @@ class CompoNetGatewayDevice(Device):
         return CLASS_SPECS
 
 
-def parse_nodes(text: str) -> list[tuple[str, str, int]]:
-    """``"mx2:MX2-A2015-E@3,rx:RX-A4055-E@5"`` -> [("mx2", "MX2-A2015-E", 3), ("rx", "RX-A4055-E", 5)]."""
-    nodes = []
-    for item in filter(None, (part.strip() for part in text.split(","))):
-        try:
-            profile, rest = item.split(":", 1)
-            model_name, node = rest.rsplit("@", 1)
-            nodes.append((profile.strip().lower(), model_name.strip(), int(node)))
-        except ValueError:
-            raise BadRequest(f"node {item!r} is not PROFILE:MODEL@NODE (e.g. mx2:MX2-A2015-E@3)") from None
-    return nodes
-
-
 def build_componet_gateway(nodes: list[tuple[str, str, int]], interface: NetworkInterface | None = None,
                            limits: DeviceLimits | None = None) -> CompoNetGatewayDevice:
     """A gateway with one option-board slave per (profile "mx2"|"rx", model, node address 0-63); each
