@@ -192,11 +192,16 @@ def _fault_step(arguments: FaultArguments) -> str:
 
 
 def _clear_step(arguments: ClearArguments) -> str:
+    from ..errors import BadRequest
     from ..faults.model import kind_of
 
-    if isinstance(arguments.fault, str) and not (arguments.fault.isascii() and arguments.fault.isdigit()):
-        kind_of(arguments.fault)      # a name no fault has is refused when the file is read
-    return "clear" + (f" {arguments.fault}" if arguments.fault is not None else "")
+    if arguments.fault is None:
+        return "clear"
+    if not isinstance(arguments.fault, str):
+        # A fault's id is given when it is applied, after the file is read: a step clears by name.
+        raise BadRequest(f"clear = {arguments.fault}: clear is true or a fault's name")
+    kind_of(arguments.fault)      # a name no fault has is refused when the file is read
+    return f"clear {arguments.fault}"
 
 
 def _power_step(arguments: PowerArguments) -> str:

@@ -171,7 +171,9 @@ def _step(path: Path, number: int, raw: Any) -> Step:
         repeat = raw.get("repeat", 1)
         if not isinstance(repeat, int) or isinstance(repeat, bool) or not 1 <= repeat <= 1000:
             raise ScenarioError(f"{where}: repeat is a whole number 1..1000")
-    except FaultError as exc:
+    except ScenarioError:
+        raise
+    except (FaultError, BadRequest) as exc:   # a step's own check (``StepKind.check``) refused its arguments
         raise ScenarioError(f"{where}: {exc}") from None
     return Step(number, str(raw.get("name", f"step {number}")), at, on, float(hz) if hz is not None else None,
                 after, within, action, repeat)
@@ -208,15 +210,15 @@ def _action(where: str, raw: dict[str, Any]) -> Action | None:
     if value is True and (first is None or not first.required):
         pass
     elif first is None or isinstance(value, bool):
-        raise ScenarioError(f"{where}: {_spelled(operation)}")
+        raise ScenarioError(f"{where}: {key} is written {_spelled(operation)}")
     else:
         arguments = {first.key: value, **arguments}
     from .service import check_arguments
 
     try:
         check_arguments(operation, arguments)
-    except BadRequest as exc:
-        raise ScenarioError(f"{where}: {key}: {exc}") from None
+    except BadRequest as exc:      # its message names the operation: "trip: \"code\" is a string or integer"
+        raise ScenarioError(f"{where}: {exc}") from None
     record = operation.record(**arguments)
     kind = operation.step
     assert kind is not None
