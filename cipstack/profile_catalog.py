@@ -100,13 +100,23 @@ class ProfileCatalog(Catalog):
         return Parameter(code, *path, spec)
 
 
-def decoding_catalog(vendor_id: int, product_code: int) -> Catalog:
+def decoding_catalog(vendor_id: int, product_code: int, device_type: int | None = None) -> Catalog:
     """The catalog of the profile of (vendor id, product code), from its compact declarations
-    (``ProfileCatalog``); else the standard objects', with a ``source`` that says so."""
+    (``ProfileCatalog``) for cipstack's own families; for a family another distribution brings (the
+    ``cipstack.devices`` entry points, read only for an identity none of cipstack's families has), its
+    declaration's (``devices.profiles.catalog_for``); else the standard objects', with a ``source`` that
+    says so."""
     from .devices.declared import DESCRIPTIONS, PROFILES
 
     name = PROFILES.get((vendor_id, product_code))
     if name is None:
+        from .devices.profiles import profile_for
+
+        installed = profile_for(vendor_id, product_code, device_type)
+        if installed is not None:
+            from .devices.profiles import catalog_for
+
+            return catalog_for(vendor_id, product_code, device_type)
         return Catalog(source=no_profile_source(vendor_id, product_code), standard=compact_standard_classes())
     return ProfileCatalog(name, f"profile {name} (vendor {vendor_id} product code {product_code}: "
                                 f"{DESCRIPTIONS[name]})")

@@ -137,9 +137,11 @@ class ExplicitMessaging:
         elif identify:
             yield from self.identify()
 
-    def identify(self, catalogs: Callable[[int, int], Catalog] | None = None) -> Plan[IdentityRecord | None]:
-        """``catalogs``: the catalog of (vendor id, product code); by default the profile's, built from
-        its compact declarations (``profile_catalog.decoding_catalog``: no device model is imported)."""
+    def identify(self, catalogs: Callable[[int, int, int | None], Catalog] | None = None
+                 ) -> Plan[IdentityRecord | None]:
+        """``catalogs``: the catalog of (vendor id, product code, device type); by default the profile's,
+        built from its compact declarations for cipstack's own families (``profile_catalog.decoding_catalog``:
+        no device model is imported), from its declaration for a family another distribution brings."""
         if catalogs is None:
             from .profile_catalog import decoding_catalog
 
@@ -161,7 +163,8 @@ class ExplicitMessaging:
                                           "ListIdentity reply, no Identity attributes 1 and 3); give eds= or catalog=",
                                    standard=compact_standard_classes())
         else:
-            self.catalog = catalogs(record.vendor_id, record.product_code)
+            # Device type 0 where the Identity attributes did not give it (``_identity_attributes``): unknown.
+            self.catalog = catalogs(record.vendor_id, record.product_code, record.device_type or None)
         return record
 
     def _identity_attributes(self) -> Plan[IdentityRecord | None]:

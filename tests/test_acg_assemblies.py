@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import pytest
 
-from cipstack.assemblies.acg import INPUT_INSTANCES, OUTPUT_INSTANCES, assembly_size, parameter_words
+from cipstack.devices.acg.assemblies import INPUT_INSTANCES, OUTPUT_INSTANCES, assembly_size, parameter_words
 from cipstack.devices.acg.device import AcgDevice, build_acg_device
 from cipstack.devices.acg.drive import Trip
 from cipstack.devices.acg.registers import ACG_REGISTERS

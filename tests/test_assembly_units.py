@@ -15,12 +15,12 @@ from pathlib import Path
 
 import pytest
 
-from cipstack.assemblies.omron import CENTIHERTZ, DECIHERTZ, RPM, omron_schemas
 from cipstack.capture.decoding import decode_value
 from cipstack.cip.units import count_unit, decimal_places, scaled_text
 from cipstack.devices.acg.device import build_acg_device
 from cipstack.devices.acg.objects import OUTPUT_FREQUENCY
 from cipstack.devices.acg.registers import ACG_REGISTERS
+from cipstack.devices.omron.assemblies import CENTIHERTZ, DECIHERTZ, RPM, omron_schemas
 from cipstack.eds.interpret import read_view
 from cipstack.eds.reader import read_eds
 from tests.ports import free_port

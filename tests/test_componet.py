@@ -17,9 +17,9 @@ from cipstack.devices.omron.device import (
     OmronDevice,
     build_componet_gateway,
     build_omron_device,
-    parse_nodes,
 )
 from cipstack.devices.omron.registers import function_code_path
+from cipstack.devices.profiles import componet_gateway, parse_nodes
 from cipstack.eip.wire.cm_messages import UnconnectedSendRequest
 
 MX2 = "MX2-A2015-E"
@@ -223,3 +223,19 @@ def test_gateway_rejects_mismatched_profiles():
         build_componet_gateway([("rx", MX2, 3)])
     with pytest.raises(ValueError):
         parse_nodes("mx2-MX2-A2015-E")
+
+
+def test_the_gateway_is_the_one_the_nodes_families_declare():
+    """``cipstack componet`` builds the gateway the nodes' families declare (``Profile.componet_gateway``):
+    MX2 and RX share the option board's; a family without a CompoNet port is refused by name."""
+    from cipstack.errors import BadRequest
+    from cipstack.objects.tcpip import NetworkInterface
+
+    gateway = componet_gateway(parse_nodes("mx2:MX2-A2015-E@3,rx:RX-A4055-E@5"), NetworkInterface())
+    assert isinstance(gateway, CompoNetGatewayDevice) and len(gateway.slaves) == 2
+    with pytest.raises(BadRequest, match=r"profile 'acg' has no CompoNet port \(one has: profile mx2 or rx\)"):
+        componet_gateway(parse_nodes("acg:ACG@3"), NetworkInterface())
+    with pytest.raises(BadRequest, match="unknown profile 'vfd'"):
+        componet_gateway(parse_nodes("vfd:X@3"), NetworkInterface())
+    with pytest.raises(BadRequest, match="--nodes names no node"):
+        componet_gateway(parse_nodes(" , "), NetworkInterface())

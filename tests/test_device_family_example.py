@@ -119,11 +119,12 @@ def test_the_adapter_serves_the_block_and_a_scanner_reads_and_writes_it(venv: Pa
         assert identity.returncode == 0, identity.stderr
         assert '"vendor_id": 65520' in identity.stdout and '"product_code": 4' in identity.stdout
         assert '"device_type": 7' in identity.stdout and '"product_name": "DIO-4"' in identity.stdout
-        # Output point 2 on: input point 2 (wired to it) reads on, and the input assembly has bit 1 set.
-        assert cipstack(venv, "get", address, "8/2/3", "--type", "BOOL").stdout == "0\n"
+        # Output point 2 on: input point 2 (wired to it) reads on, and the input assembly has bit 1 set. The
+        # scanner knows the block by its identity: each value by its declaration (name, enumeration).
+        assert cipstack(venv, "get", address, "8/2/3").stdout == "Value = 0 (off)\n"
         written = cipstack(venv, "set", address, "9/2/3", "1", "--type", "BOOL")
         assert written.returncode == 0, written.stderr
-        assert cipstack(venv, "get", address, "8/2/3", "--type", "BOOL").stdout == "1\n"
+        assert cipstack(venv, "get", address, "8/2/3").stdout == "Value = 1 (on)\n"
         inputs = cipstack(venv, "get", address, "4/100/3", "--json")
         assert inputs.returncode == 0 and '"data": "02"' in inputs.stdout, inputs.stdout + inputs.stderr
         # The Discrete Input Point's Value is the device's, not the network's (CIP Vol 1, section 5-9).
@@ -141,6 +142,35 @@ def test_the_adapter_serves_the_block_and_a_scanner_reads_and_writes_it(venv: Pa
                                "--factory"), "cipstack adapter: profile 'dio' has no Modbus TCP")
     _one_line_refusal(cipstack(venv, "adapter", "--profile", "dio", "--port", "0", "--param", "X=1", "--factory"),
                       "cipstack adapter: DIO-4: this device has no keypad")
+
+
+#: Run in the venv against a running block: a scanner given no catalog, and the capture analyzer's
+#: choice of declarations for the block's identity.
+RECOGNISED = """
+import sys
+from cipstack.capture.command import declarations_for_identity
+from cipstack.scanner import SyncScanner
+
+with SyncScanner(sys.argv[1]) as scanner:
+    print(scanner.catalog.profile, scanner.catalog.source.split(" (")[0])
+    print(scanner.catalog.attribute(0x09, 1, 5).name, scanner.read(0x09, 2, 3))
+declarations = declarations_for_identity({"vendor_id": 0xFFF0, "device_type": 7, "product_code": 4})
+print(declarations.source, declarations.catalog.profile)
+other = declarations_for_identity({"vendor_id": 0xFFF0, "device_type": 12, "product_code": 4})
+print(other.source, other.catalog.profile)
+"""
+
+
+def test_a_scanner_and_the_capture_analyzer_recognise_the_block_by_its_identity(venv: Path) -> None:
+    """As cipstack's own families are: by the vendor id, product code and device type its declaration
+    gives, with no ``catalog=`` (its declarations are read from what its device model serves); a device
+    of another device type is not taken for it."""
+    with adapter(venv) as address:
+        done = subprocess.run([str(venv / "bin" / "python"), "-c", RECOGNISED, address], capture_output=True,
+                              text=True, env=_environment(), timeout=60, cwd=venv)
+        assert done.returncode == 0, done.stderr
+        assert done.stdout.splitlines() == ["dio profile dio", "Fault Action 0 (off)", "profile dio dio",
+                                            "standard objects None"], done.stdout
 
 
 def test_eds_generate_writes_the_file_the_family_describes(venv: Path, tmp_path: Path) -> None:
@@ -259,7 +289,7 @@ def test_drive_commands_serve_the_block_and_refuse_a_drive_s_in_one_line(venv: P
         cycled = cipstack(venv, "drive", "power", "cycle", "--port", port)
         assert cycled.returncode == 0 and "power-cycle" in cycled.stdout, cycled.stderr
         # The block comes back from its power cycle with its outputs off (nothing is saved of them).
-        assert cipstack(venv, "get", address, "9/1/3", "--type", "BOOL").stdout == "0\n"
+        assert cipstack(venv, "get", address, "9/1/3").stdout == "Value = 0 (off)\n"
 
 
 def test_a_fleet_of_blocks_serves_each_on_its_address(venv: Path) -> None:
@@ -272,8 +302,8 @@ def test_a_fleet_of_blocks_serves_each_on_its_address(venv: Path) -> None:
             assert identity.returncode == 0 and '"product_name": "DIO-4"' in identity.stdout, identity.stderr
         assert cipstack(venv, "set", f"{hosts[0]}:{port}", "9/4/3", "1", "--type", "BOOL").returncode == 0
         # Each block is a device of its own: the other's point 4 stays off.
-        assert cipstack(venv, "get", f"{hosts[0]}:{port}", "8/4/3", "--type", "BOOL").stdout == "1\n"
-        assert cipstack(venv, "get", f"{hosts[1]}:{port}", "8/4/3", "--type", "BOOL").stdout == "0\n"
+        assert cipstack(venv, "get", f"{hosts[0]}:{port}", "8/4/3").stdout == "Value = 1 (on)\n"
+        assert cipstack(venv, "get", f"{hosts[1]}:{port}", "8/4/3").stdout == "Value = 0 (off)\n"
         status = cipstack(venv, "drive", "status", "--host", hosts[1], "--port", str(port))
         assert status.returncode == 0 and status.stdout.startswith("(no drive)"), status.stderr
     # A family of one model takes no model name.

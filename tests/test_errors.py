@@ -208,7 +208,7 @@ def test_a_usage_error_is_no_value_error() -> None:
 
 
 def test_a_missing_key_says_its_message_plainly_and_is_still_a_key_error() -> None:
-    from cipstack.assemblies.acg import assembly_size
+    from cipstack.devices.acg.assemblies import assembly_size
 
     with pytest.raises(KeyError) as caught:
         assembly_size(999)

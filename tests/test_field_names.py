@@ -6,8 +6,15 @@ from __future__ import annotations
 import pytest
 
 from cipstack.assemblies.names import display_name, field_name, unique_field_names
-from cipstack.assemblies.omron import CENTIHERTZ, DECIHERTZ, FLEXIBLE_MAX_WORDS, RPM, flexible_schema, omron_schemas
 from cipstack.devices.acg.device import build_acg_device
+from cipstack.devices.omron.assemblies import (
+    CENTIHERTZ,
+    DECIHERTZ,
+    FLEXIBLE_MAX_WORDS,
+    RPM,
+    flexible_schema,
+    omron_schemas,
+)
 
 
 @pytest.mark.parametrize(("text", "name"), [

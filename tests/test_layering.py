@@ -248,14 +248,25 @@ def test_no_generic_module_names_a_family() -> None:
     assert sorted(set(NAMES_A_FAMILY) - set(found)) == []
 
 
+def test_no_generic_module_is_a_family_s() -> None:
+    """A family's modules are in its package under ``devices/``: no module or package elsewhere is named
+    after a family or a family's package (the ACG and Omron assemblies were ``assemblies/acg.py`` and
+    ``assemblies/omron.py``)."""
+    from cipstack.devices.registry import BUILT_IN
+
+    names = {name for name, _ in BUILT_IN} | {path.parent.name for path in (PACKAGE / "devices").glob("*/family.py")}
+    assert names == {"acg", "mx2", "rx", "omron"}
+    found = sorted(str(path.relative_to(PACKAGE)) for path in PACKAGE.rglob("*")
+                   if path.relative_to(PACKAGE).parts[0] != "devices" and "__pycache__" not in path.parts
+                   and (path.suffix == ".py" or path.is_dir()) and path.stem in names)
+    assert found == []
+
+
 #: Modules outside ``cipstack/devices/`` that import a family's own package, each with why.
 IMPORTS_A_FAMILY: dict[str, str] = {
     # The built-in families' EDS descriptions use the EDS tool's types, so they live in eds/ (the devices
     # never import it); each family's declaration names its builder (``Profile.eds``).
     "eds/profiles.py": "the ACG's and the Omron boards' EDS descriptions",
-    # ``cipstack componet``: a CompoNet network of MX2/RX slaves behind a gateway is the Omron option
-    # board's feature, not a profile's; no declaration describes it yet.
-    "cli/emulators.py": "cipstack componet builds the Omron CompoNet gateway",
 }
 
 

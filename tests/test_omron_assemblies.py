@@ -4,7 +4,7 @@ B-17) and the flexible format (section 4-7, appendix F), byte for byte."""
 import pytest
 
 from cipstack.assemblies.drive_profile import extended_speed_control_output
-from cipstack.assemblies.omron import (
+from cipstack.devices.omron.assemblies import (
     CENTIHERTZ,
     RPM,
     SIZES,

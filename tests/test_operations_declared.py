@@ -13,7 +13,6 @@ from pathlib import Path
 import pytest
 
 from cipstack.control.operations import OPERATION_BY_NAME, OPERATIONS, Operation
-from cipstack.control.service import DeviceService
 
 PACKAGE = Path(__file__).resolve().parent.parent / "cipstack"
 #: Where an operation's name must not be branched on (the declarations themselves excepted).
@@ -65,20 +64,48 @@ def test_no_surface_branches_on_an_operation_s_name(path: Path) -> None:
 
 
 @pytest.mark.parametrize("operation", OPERATIONS, ids=lambda o: o.name)
-def test_each_operation_s_handler_takes_its_record(operation: Operation) -> None:
-    """The handler is a method of the service whose parameters are the record's fields (plus who asks,
-    for an operation that records it), each required field a required parameter."""
-    handler = getattr(DeviceService, operation.handler)
-    parameters = inspect.signature(handler).parameters
-    taken = [name for name in parameters if name != "self"]
+def test_each_operation_is_bound_to_its_handler(operation: Operation) -> None:
+    """The declaration holds the handler itself (no method name looked up at run time): a function of
+    the service, the operation's own argument record and who asks; the record is a frozen dataclass
+    whose fields are the arguments."""
+    assert inspect.isfunction(operation.handler)
+    parameters = list(inspect.signature(operation.handler).parameters.values())
+    assert [p.annotation for p in parameters] == ["DeviceService", operation.record.__name__, "Caller"]
     fields = [f.name for f in dataclasses.fields(operation.record)]
-    assert taken == fields + (["origin", "peer"] if operation.tells_origin else [])
-    for f in dataclasses.fields(operation.record):
-        required = f.default is dataclasses.MISSING
-        assert (parameters[f.name].default is inspect.Parameter.empty) == required, f.name
     assert dataclasses.is_dataclass(operation.record)
     assert operation.record.__dataclass_params__.frozen   # type: ignore[attr-defined]  # dataclasses' own, untyped
     assert [a.key for a in operation.arguments] == fields
+
+
+async def test_an_operation_a_device_does_not_declare_is_refused_before_its_handler() -> None:
+    """A device without a drive declares no trips and no keypad (``Device.drive_trips``, ``keypad``):
+    ``trip``, ``reset`` and the parameter operations are refused from that with the declaration's own
+    error, and what is offered says so; ``trips`` answers the empty list a front panel shows."""
+    from cipstack.adapter import Adapter, AdapterSettings
+    from cipstack.devices.base import NoDrive
+    from cipstack.devices.keypad import NoKeypad
+    from cipstack.devices.profiles import build_device, identity_only_device
+    from cipstack.errors import BadRequest, NotFound
+
+    bare = Adapter(AdapterSettings(host="127.0.0.1", port=0), device=identity_only_device())
+    service = bare.service
+    for name in ("trip", "reset"):
+        assert not service.offers(OPERATION_BY_NAME[name])
+        with pytest.raises(NoDrive, match="this profile simulates no drive") as refused:
+            service.call(name, {"code": 5} if name == "trip" else {})
+        assert isinstance(refused.value, BadRequest)
+    for name, arguments in (("parameter", {"code": "ACC"}), ("parameters", {})):
+        assert not service.offers(OPERATION_BY_NAME[name])
+        with pytest.raises(NoKeypad, match="this device has no keypad") as missing:
+            service.call(name, arguments)
+        assert isinstance(missing.value, NotFound)
+    assert service.call("trips", {}) == []
+
+    drive = Adapter(AdapterSettings(host="127.0.0.1", port=0), device=build_device("acg"))
+    assert all(drive.service.offers(operation) for operation in OPERATIONS)
+    trip = drive.service.call("trip", {"code": "0x4200"})
+    assert (trip["result"], trip["trip"]) == ("tripped: OverHeat (fault code 0x4200)", "OverHeat")
+    assert drive.service.call("reset", {})["cleared"] == "OverHeat"
 
 
 def test_an_argument_record_is_frozen() -> None:

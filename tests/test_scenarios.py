@@ -142,8 +142,9 @@ def test_a_step_that_does_not_fire_is_exit_1(tmp_path: Path) -> None:
     assert "step 1 did not fire: no clear (on trip) within 0.3s" in result.stdout
 
 
-#: Every action a step can take, each kind of fault among them (explicit, device: link and power) and both
-#: clears, each step after the first waiting for what the one before did where an event shows it.
+#: Every kind of step: each operation a step can take (from their declarations, ``STEP_KINDS``) and a
+#: wait-for step, a fault by name with options and a device fault by the fault's name too, both clears,
+#: each step after the first waiting for what the one before did where an event shows it.
 EVERY_KIND = """
 [[step]]
 at = "0.1s"
@@ -161,21 +162,38 @@ within = "2s"
 trip = "0x4200"
 
 [[step]]
+name = "wait for the trip"
 on = "trip"
 within = "2s"
-fault = "unplug"
 
 [[step]]
-at = "0.5s"
-fault = "plug"
+at = "0.4s"
+reset = true
+
+[[step]]
+on = "trip reset"
+within = "2s"
+link = "unplug"
 
 [[step]]
 at = "0.6s"
-fault = "power-cycle"
-options = { off = "0.2s" }
+link = "plug"
 
 [[step]]
-at = "1.2s"
+at = "0.7s"
+fault = "unplug"
+
+[[step]]
+at = "0.8s"
+fault = "plug"
+
+[[step]]
+at = "0.9s"
+power = "cycle"
+off = "0.2s"
+
+[[step]]
+at = "1.5s"
 fault = "refuse-forward-open"
 options = { status = "0x0113" }
 
@@ -188,8 +206,13 @@ clear = true
 
 
 def test_every_step_kind_runs_from_a_file(tmp_path: Path) -> None:
-    """A fault by name with options, a clear by name (the step after it waits for its event), a trip,
-    the link unplugged and plugged, the power cycled, a Forward_Open refusal, and clear all."""
+    """A fault by name with options, a clear by name (the step after it waits for its event), a trip, a
+    step that waits for the trip, a reset, the link unplugged and plugged (as a step of its own and as a
+    fault), the power cycled, a Forward_Open refusal, and clear all: every step kind the operations
+    declare is in the file."""
+    from cipstack.control.scenario import STEP_KINDS
+
+    assert {line.split(" = ")[0] for line in EVERY_KIND.splitlines()} >= set(STEP_KINDS)
     scenario = tmp_path / "every.toml"
     scenario.write_text(EVERY_KIND)
     port = free_port()
@@ -201,10 +224,14 @@ def test_every_step_kind_runs_from_a_file(tmp_path: Path) -> None:
     assert fired == ["step 1 fired: fault delay-replies --by 0.01s (at 0.1s)",
                      "named clear fired: clear delay-replies (at 0.2s)",
                      "step 3 fired: trip 0x4200 (on fault cleared)",
-                     "step 4 fired: fault unplug (on trip)",
-                     "step 5 fired: fault plug (at 0.5s)",
-                     "step 6 fired: fault power-cycle --off 0.2s (at 0.6s)",
-                     "step 7 fired: fault refuse-forward-open --status 0x0113 (at 1.2s)",
+                     "wait for the trip fired: wait (on trip)",
+                     "step 5 fired: reset (at 0.4s)",
+                     "step 6 fired: link unplug (on trip reset)",
+                     "step 7 fired: link plug (at 0.6s)",
+                     "step 8 fired: fault unplug (at 0.7s)",
+                     "step 9 fired: fault plug (at 0.8s)",
+                     "step 10 fired: power cycle --off 0.2s (at 0.9s)",
+                     "step 11 fired: fault refuse-forward-open --status 0x0113 (at 1.5s)",
                      "clear all fired: clear (on fault applied)"], result.stdout
     assert result.returncode == 0, result.stdout
     assert result.stdout.splitlines()[-1].endswith("complete: every step fired; no fault left active")
@@ -213,7 +240,14 @@ def test_every_step_kind_runs_from_a_file(tmp_path: Path) -> None:
 @pytest.mark.parametrize(("text", "message"), [
     ("[[step]]\nat = \"1s\"\nfault = \"stop\"\n", "step 1: unknown fault 'stop'; valid: stop-producing"),
     ("[[step]]\nfault = \"unplug\"\n", "step 1: one trigger, at = TIME or on = EVENT"),
-    ("[[step]]\nat = \"1s\"\n", "step 1: one action, fault = NAME, clear = true or trip = CODE"),
+    ("[[step]]\nat = \"1s\"\n", "step 1: one action (trip = CODE, reset = true, fault = NAME, "),
+    ("[[step]]\nat = \"1s\"\ntrip = 5\nreset = true\n", "step 1: one action, not trip and reset"),
+    ("[[step]]\nat = \"1s\"\ntrip = 5\noff = \"1s\"\n", "step 1: off goes with power = ..."),
+    ("[[step]]\nat = \"1s\"\nlink = \"pull\"\n", "step 1: link: 'pull' is not one of unplug, plug"),
+    ("[[step]]\nat = \"1s\"\npower = \"cycle\"\noff = \"2h\"\n", "not a duration"),
+    ("[[step]]\nat = \"1s\"\nreset = false\n", "step 1: reset is written reset = true"),
+    ("[[step]]\nat = \"1s\"\nclear = 3\n", "step 1: clear = 3: clear is true or a fault's name"),
+    ("[[step]]\nat = \"1s\"\ntrip = 1.5\n", "step 1: trip: \"code\" is a string or integer, not 1.5"),
     ("[[step]]\nat = \"1s\"\nclear = true\ncolour = 1\n", "step 1: unknown key 'colour'"),
     ("[[step\n", "not TOML"),
     ("[[step]]\nat = \"1s\"\nclear = \"bogus\"\n", "step 1: unknown fault 'bogus'; valid: stop-producing"),

@@ -72,6 +72,25 @@ def test_sync_wait_for_a_trip(cip_adapter):
     assert cip_adapter.wait_for("trip", 5).fields["trip"] == "OverHeat"
 
 
+def test_every_operation_s_method(cip_adapter):
+    """The methods made from the operations' declarations, each called as a user's test calls it."""
+    assert cip_adapter.status()["faults"] == 0
+    assert {"code": "OverHeat", "label": "OverHeat", "fault_code": 0x4200} in cip_adapter.trips()
+    assert cip_adapter.trip("OverHeat")["trip"] == "OverHeat"
+    assert cip_adapter.reset()["cleared"] == "OverHeat"
+    assert cip_adapter.set_parameter("ACC", 2.5)["value"] == cip_adapter.parameter(code="ACC")["value"]
+    assert cip_adapter.parameters()["keypad"] == "the ACG keypad"
+    assert any(row["name"] == "stop-producing" for row in cip_adapter.fault_table())
+    assert cip_adapter.fault("delay-replies", by="10ms", for_=5)["options"]["for"] == 5.0
+    assert [f["name"] for f in cip_adapter.faults()] == ["delay-replies"]
+    assert [f["name"] for f in cip_adapter.clear_faults("delay-replies")] == ["delay-replies"]
+    assert cip_adapter.link("unplug")["name"] == "unplug" and cip_adapter.link(state="plug")["name"] == "plug"
+    assert cip_adapter.power("cycle", off="0.1s")["name"] == "power-cycle"
+    assert cip_adapter.connections()["sessions"] == []
+    with pytest.raises(TypeError, match="code"):
+        cip_adapter.trip()
+
+
 EDS = {eds!r}
 
 
@@ -98,10 +117,30 @@ def test_the_fixtures_in_a_users_suite(tmp_path: Path) -> None:
     (tmp_path / "test_users.py").write_text(textwrap.dedent(SUITE).replace("{eds!r}", repr(eds)))
     result = pytest_in_subprocess("-rA", "test_users.py", cwd=tmp_path)
     out = result.stdout
-    assert "7 passed, 1 error" in out, out + result.stderr
+    assert "8 passed, 1 error" in out, out + result.stderr
     assert "ERROR test_users.py::test_a_bad_marker_option" in out
     assert ("cip_adapter: unknown option colour; valid: profile, model, eds, params, params_unsaved, host, "
             "settings") in out
+
+
+def test_the_device_s_methods_are_made_from_the_operations() -> None:
+    """Each operation the declarations give a Python name is a method of the plugin's device whose
+    parameters are its argument record's keys (a fault's options as keywords), with its summary as help;
+    none is written by hand, and the event stream's own methods stay."""
+    from cipstack.control.operations import OPERATIONS
+    from cipstack.testing.device import EmulatedDevice
+
+    named = [op for op in OPERATIONS if op.python_name is not None]
+    assert {op.python_name for op in named} >= {"fault", "clear_faults", "faults", "status", "trip", "parameter",
+                                                 "set_parameter", "reset", "power", "link"}
+    for operation in named:
+        method = getattr(EmulatedDevice, str(operation.python_name))
+        assert method.__module__ == "cipstack.testing.device" and method.__name__ == operation.python_name
+        parameters = inspect.signature(method).parameters
+        assert [name for name in parameters if name != "self"] == [a.key for a in operation.arguments]
+        assert operation.summary[1:] in (method.__doc__ or "")
+    assert inspect.signature(EmulatedDevice.fault).parameters["options"].kind is inspect.Parameter.VAR_KEYWORD
+    assert {"events", "wait_for", "event", "call"} <= set(vars(EmulatedDevice))
 
 
 def test_an_async_test_without_pytest_asyncio_is_told_what_it_needs(tmp_path: Path) -> None:

@@ -122,13 +122,13 @@ def fixed_declarations(profile: str | None, model: str | None, eds: list[Path]) 
 
 
 def declarations_for_identity(identity: dict[str, Any]) -> Declarations:
-    from ..devices.profiles import PROFILES, catalog_for
+    from ..devices.profiles import catalog_for, profile_for
     from .decoding import Declarations
 
-    profile = next((p.name for p in PROFILES.values() if p.vendor_id == identity["vendor_id"]
-                    and identity["product_code"] in p.product_codes), None)
-    catalog = catalog_for(identity["vendor_id"], identity["product_code"])
-    return Declarations(catalog, source=f"profile {profile}" if profile else "standard objects")
+    device_type = identity.get("device_type")
+    profile = profile_for(identity["vendor_id"], identity["product_code"], device_type)
+    catalog = catalog_for(identity["vendor_id"], identity["product_code"], device_type)
+    return Declarations(catalog, source=f"profile {profile.name}" if profile else "standard objects")
 
 
 class Progress:

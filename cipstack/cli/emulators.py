@@ -315,14 +315,10 @@ def cmd_models(args: argparse.Namespace) -> int:
 
 def cmd_componet(args: argparse.Namespace) -> int:
     from ..adapter import Adapter, AdapterSettings, network_interface
-    from ..devices.omron.device import build_componet_gateway, parse_nodes
-    from ..devices.profiles import DEFAULT_MAC
+    from ..devices.profiles import DEFAULT_MAC, componet_gateway, parse_nodes
 
     try:
-        nodes = parse_nodes(args.nodes)
-        if not nodes:
-            raise BadRequest("--nodes names no node")
-        gateway = build_componet_gateway(nodes, network_interface(args.host, DEFAULT_MAC))
+        gateway = componet_gateway(parse_nodes(args.nodes), network_interface(args.host, DEFAULT_MAC))
     except (ValueError, KeyError) as exc:
         raise UsageError(str(exc)) from None
     settings = AdapterSettings(host=args.host, port=args.port, io_port=args.io_port, control_path=args.control,

@@ -11,9 +11,13 @@ from __future__ import annotations
 import dataclasses
 from collections.abc import Callable
 from dataclasses import dataclass, field
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 from . import console
+
+if TYPE_CHECKING:
+    from ..errors import CipstackError
+    from .service import DeviceService
 
 
 @dataclass(frozen=True)
@@ -122,6 +126,91 @@ class LinkArguments:
                                          choices=lambda: ["unplug", "plug"]))
 
 
+@dataclass(frozen=True)
+class Caller:
+    """Who asks for an operation: what the event of a parameter write records."""
+
+    origin: str = "python"
+    peer: str | None = None
+
+
+#: An operation's handler: the service, the operation's argument record and who asks; its answer, or an
+#: awaitable of it.
+Handler = Callable[["DeviceService", Any, Caller], Any]
+
+
+@dataclass(frozen=True)
+class Capability:
+    """What an operation needs the device to declare: a device whose declaration lacks it is refused the
+    operation before the handler runs, with the error ``absent`` makes."""
+
+    name: str
+    #: The device's declaration of it (``Device.drive_trips()``, ``Device.keypad()``): None where absent.
+    declared: Callable[[Any], Any]
+    absent: Callable[[Any], CipstackError]
+
+
+def _no_drive(device: Any) -> CipstackError:
+    from ..devices.base import NoDrive
+
+    return NoDrive(f"{device.identity_info.product_name}: this profile simulates no drive")
+
+
+def _no_keypad(device: Any) -> CipstackError:
+    from ..devices.keypad import NoKeypad
+    from ..devices.profiles import keypad_families
+
+    return NoKeypad(f"{device.identity_info.product_name}: this device has no keypad (keypad parameters are a "
+                    f"drive's: {keypad_families()}); write its parameters over CIP")
+
+
+#: A simulated drive's trips (``Device.drive_trips``).
+TRIPS = Capability("trips", lambda device: device.drive_trips(), _no_drive)
+#: A keypad's parameters by code (``Device.keypad``).
+KEYPAD = Capability("keypad", lambda device: device.keypad(), _no_keypad)
+
+
+@dataclass(frozen=True)
+class StepKind:
+    """An operation as a scenario's step takes it (``cipstack.control.scenario``): ``KEY = VALUE`` in a
+    ``[[step]]`` table, the value being the operation's first argument (``true`` where it has none or
+    that one is optional), its other arguments keys of the step by their JSON names."""
+
+    key: str
+    #: Checks the argument record when the file is read (the error of ``cipstack.faults`` for a fault's
+    #: options) and says what the step does, for its line; None: its words are the generic ones.
+    check: Callable[[Any], str] | None = None
+    #: Checks what only the device can tell (a trip's code), before the device serves.
+    on_device: Callable[[DeviceService, Any], object] | None = None
+
+
+def _fault_step(arguments: FaultArguments) -> str:
+    from ..faults import FaultRequest
+    from ..faults.model import JSON_SPELLING
+
+    return "fault " + FaultRequest.build(arguments.name, arguments.options or {}, JSON_SPELLING).describe()
+
+
+def _clear_step(arguments: ClearArguments) -> str:
+    from ..errors import BadRequest
+    from ..faults.model import kind_of
+
+    if arguments.fault is None:
+        return "clear"
+    if not isinstance(arguments.fault, str):
+        # A fault's id is given when it is applied, after the file is read: a step clears by name.
+        raise BadRequest(f"clear = {arguments.fault}: clear is true or a fault's name")
+    kind_of(arguments.fault)      # a name no fault has is refused when the file is read
+    return f"clear {arguments.fault}"
+
+
+def _power_step(arguments: PowerArguments) -> str:
+    from ..faults.model import parse_duration
+
+    off = "" if arguments.off is None else f" --off {parse_duration(arguments.off):g}s"
+    return f"power {arguments.action}{off}"
+
+
 #: The Python types a JSON type names (a bool is no number here).
 JSON_TYPES: dict[str, tuple[type, ...]] = {"string": (str,), "integer": (int,), "number": (int, float),
                                            "object": (dict,), "string|integer": (str, int),
@@ -131,16 +220,23 @@ JSON_TYPES: dict[str, tuple[type, ...]] = {"string": (str,), "integer": (int,), 
 @dataclass(frozen=True)
 class Operation:
     """One operation: its name (the control socket's ``command``, the ``cipstack drive`` subcommand, the
-    OpenAPI ``operationId``), its help text, its HTTP route, its handler (the name of the
-    ``DeviceService`` method that serves it, called with the record's fields), its argument record and
-    its console formatters."""
+    OpenAPI ``operationId``), its help text, its HTTP route, its handler (called with the service, the
+    argument record and the caller), its argument record, what it needs the device to declare and its
+    console formatters."""
 
     name: str
     summary: str
     method: str
     path: str
-    handler: str
+    handler: Handler
     record: type = NoArguments
+    #: What the device must declare for it (None: every device serves it).
+    needs: Capability | None = None
+    #: How a scenario's step takes it; None for what no step does (a read).
+    step: StepKind | None = None
+    #: The method of the pytest plugin's device that calls it (``cipstack.testing``): "" for the name's
+    #: own words (``set-parameter``: ``set_parameter``), None for none.
+    python: str | None = ""
     #: How its reply reads on a console, and what ``--json`` prints of it.
     text: Callable[[Any], str] = console.result_text
     json: Callable[[Any], Any] = console.as_given
@@ -148,8 +244,6 @@ class Operation:
     created: bool = False
     #: Also served without its path argument (``DELETE /faults`` clears every fault).
     optional_path: bool = False
-    #: The handler is told who asks (``origin``, ``peer``): what the event it records says.
-    tells_origin: bool = False
     #: Said after the keys an HTTP body takes when it holds another.
     body_hint: str = ""
     #: The command line takes its last words as they come (a fault's options, checked by the fault
@@ -162,48 +256,119 @@ class Operation:
     def __post_init__(self) -> None:
         object.__setattr__(self, "arguments", arguments_of(self.record))
 
+    @property
+    def python_name(self) -> str | None:
+        """The plugin's method for it, or None."""
+        return self.name.replace("-", "_") if self.python == "" else self.python
+
     def argument(self, key: str) -> Argument | None:
         return next((a for a in self.arguments if a.key == key), None)
 
     def given(self, record: Any) -> dict[str, Any]:
-        """The handler's keyword arguments from an argument record: the fields given (not None)."""
+        """The JSON arguments of an argument record: the fields given (not None)."""
         return {f.name: value for f in dataclasses.fields(record) if (value := getattr(record, f.name)) is not None}
+
+
+# -- the handlers: each operation bound to what serves it -------------------------------------------------
+def _status(service: DeviceService, _: NoArguments, caller: Caller) -> Any:
+    return service.status()
+
+
+def _trip(service: DeviceService, arguments: TripArguments, caller: Caller) -> Any:
+    return service.trip(arguments.code)
+
+
+def _reset(service: DeviceService, _: NoArguments, caller: Caller) -> Any:
+    return service.reset()
+
+
+def _fault(service: DeviceService, arguments: FaultArguments, caller: Caller) -> Any:
+    return service.fault(arguments.name, arguments.options)
+
+
+def _faults(service: DeviceService, _: NoArguments, caller: Caller) -> Any:
+    return service.faults_active()
+
+
+def _clear(service: DeviceService, arguments: ClearArguments, caller: Caller) -> Any:
+    return service.clear(arguments.fault)
+
+
+def _parameter(service: DeviceService, arguments: ParameterArguments, caller: Caller) -> Any:
+    return service.parameter(arguments.code)
+
+
+def _set_parameter(service: DeviceService, arguments: SetParameterArguments, caller: Caller) -> Any:
+    return service.set_parameter(arguments.code, arguments.value, caller.origin, caller.peer)
+
+
+def _parameters(service: DeviceService, _: NoArguments, caller: Caller) -> Any:
+    return service.parameters()
+
+
+def _connections(service: DeviceService, _: NoArguments, caller: Caller) -> Any:
+    return service.connections()
+
+
+def _fault_table(service: DeviceService, _: NoArguments, caller: Caller) -> Any:
+    return service.fault_table()
+
+
+def _trips(service: DeviceService, _: NoArguments, caller: Caller) -> Any:
+    return service.trips()
+
+
+def _events(service: DeviceService, arguments: EventsArguments, caller: Caller) -> Any:
+    return service.events_since(0 if arguments.since is None else arguments.since)
+
+
+def _power(service: DeviceService, arguments: PowerArguments, caller: Caller) -> Any:
+    return service.power(arguments.action, arguments.off)
+
+
+def _link(service: DeviceService, arguments: LinkArguments, caller: Caller) -> Any:
+    return service.link(arguments.state)
 
 
 OPERATIONS: tuple[Operation, ...] = (
     Operation("status", "the drive's state, power and link, sessions and connections, active faults", "GET",
-              "/status", "status", text=console.status_text, json=console.status_json),
+              "/status", _status, text=console.status_text, json=console.status_json),
     Operation("trip", "trip the drive with a fault code of its manual (decimal, 0x hex or its name)", "POST", "/trip",
-              "trip", TripArguments),
-    Operation("reset", "reset the drive's trip, as its manual's fault reset does", "POST", "/reset", "reset"),
-    Operation("fault", "apply a fault (cipstack.faults)", "POST", "/faults", "fault", FaultArguments,
+              _trip, TripArguments, needs=TRIPS,
+              step=StepKind("trip", on_device=lambda service, arguments: service.check_trip(arguments.code))),
+    Operation("reset", "reset the drive's trip, as its manual's fault reset does", "POST", "/reset", _reset,
+              needs=TRIPS, step=StepKind("reset")),
+    Operation("fault", "apply a fault (cipstack.faults)", "POST", "/faults", _fault, FaultArguments,
               text=console.fault_text, created=True, body_hint=" (a fault's options go in \"options\")",
-              free_words=True, instead="clear"),
-    Operation("faults", "the faults active now", "GET", "/faults", "faults_active", text=console.faults_text),
-    Operation("clear", "clear every active fault, or one by id or name", "DELETE", "/faults/{fault}", "clear",
-              ClearArguments, text=console.cleared_text, optional_path=True),
+              free_words=True, instead="clear", step=StepKind("fault", _fault_step)),
+    Operation("faults", "the faults active now", "GET", "/faults", _faults, text=console.faults_text),
+    Operation("clear", "clear every active fault, or one by id or name", "DELETE", "/faults/{fault}", _clear,
+              ClearArguments, text=console.cleared_text, optional_path=True, step=StepKind("clear", _clear_step),
+              python="clear_faults"),
     Operation("parameter", "a keypad parameter: code, name, value in the keypad's unit, raw, unit, address",
-              "GET", "/parameters/{code}", "parameter", ParameterArguments, text=console.parameter_text),
+              "GET", "/parameters/{code}", _parameter, ParameterArguments, needs=KEYPAD, text=console.parameter_text),
     Operation("set-parameter", "set a keypad parameter now, in the keypad's unit (not saved)", "PUT",
-              "/parameters/{code}", "set_parameter", SetParameterArguments, text=console.parameter_text,
-              tells_origin=True),
+              "/parameters/{code}", _set_parameter, SetParameterArguments, needs=KEYPAD,
+              text=console.parameter_text),
     Operation("parameters", "every keypad parameter, group by group: value, unit, range, access", "GET",
-              "/parameters", "parameters", text=console.parameters_text),
+              "/parameters", _parameters, needs=KEYPAD, text=console.parameters_text),
     Operation("connections", "every session, class 3 and class 1 connection; class 1 with its counters and data "
-              "by field names", "GET", "/connections", "connections", text=console.connections_text),
+              "by field names", "GET", "/connections", _connections, text=console.connections_text),
     Operation("fault-table", "every fault a device can be given, with its options", "GET", "/fault-table",
-              "fault_table", text=console.fault_table_text),
-    Operation("trips", "the trips of the drive's manual that `trip` takes", "GET", "/trips", "trips",
+              _fault_table, text=console.fault_table_text),
+    # Not refused without a drive: an empty list is how a device without trips shows none.
+    Operation("trips", "the trips of the drive's manual that `trip` takes", "GET", "/trips", _trips,
               text=console.trips_text),
-    Operation("events", "the events after event number `since`, oldest first", "GET", "/events", "events_since",
-              EventsArguments, text=console.events_text),
-    Operation("power", "the power: `cycle` it (off for `off`, then on again)", "POST", "/power", "power",
-              PowerArguments, text=console.fault_text),
-    Operation("link", "the Ethernet link: `unplug` or `plug` the cable", "POST", "/link", "link", LinkArguments,
-              text=console.fault_text),
+    # The plugin's device gives the events as records of their own (``events``, ``wait_for``), not as JSON.
+    Operation("events", "the events after event number `since`, oldest first", "GET", "/events", _events,
+              EventsArguments, text=console.events_text, python=None),
+    Operation("power", "the power: `cycle` it (off for `off`, then on again)", "POST", "/power", _power,
+              PowerArguments, text=console.fault_text, step=StepKind("power", _power_step)),
+    Operation("link", "the Ethernet link: `unplug` or `plug` the cable", "POST", "/link", _link, LinkArguments,
+              text=console.fault_text, step=StepKind("link")),
 )
 OPERATION_BY_NAME = {op.name: op for op in OPERATIONS}
 
 
-__all__ = ["JSON_TYPES", "OPERATIONS", "OPERATION_BY_NAME", "Argument", "NoArguments", "Operation", "argument",
-           "arguments_of"]
+__all__ = ["JSON_TYPES", "KEYPAD", "OPERATIONS", "OPERATION_BY_NAME", "TRIPS", "Argument", "Caller", "Capability",
+           "Handler", "NoArguments", "Operation", "StepKind", "argument", "arguments_of"]

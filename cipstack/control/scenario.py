@@ -8,8 +8,11 @@ Each ``[[step]]`` waits for its trigger, then does one thing:
   ``connection timed out``, ``trip``, ``parameter write``...; see ``cipstack.control.events``), or
   ``on = "frequency"`` with ``hz = 30`` (the drive's output frequency reaches it); ``after = "0.5s"``
   waits that much more; ``within = "10s"`` is how long the trigger may take (default 30 s).
-* action: ``fault = "NAME"`` with ``options = {...}`` (as ``cipstack drive fault`` takes them),
-  ``clear = true`` (every fault; or ``clear = "NAME"``), or ``trip = "0x4200"``.
+* action, at most one, each an operation of the command service declared as a step
+  (``cipstack.control.operations``, ``StepKind``): ``fault = "NAME"`` with ``options = {...}`` (as
+  ``cipstack drive fault`` takes them), ``clear = true`` (every fault; or ``clear = "NAME"``),
+  ``trip = "0x4200"``, ``reset = true``, ``power = "cycle"`` with ``off = "2s"``, ``link = "unplug"``
+  or ``"plug"``. A step with ``on = "KIND"`` and no action waits for that event (a wait-for step).
 * ``repeat = N``: the step N times in a row (each waits for its own trigger).
 
 Steps run in order; a step whose trigger does not come in time ends the scenario. A top-level
@@ -28,9 +31,10 @@ from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 from ..errors import BadRequest
-from ..faults import FaultError, FaultRequest
-from ..faults.model import JSON_SPELLING, kind_of, parse_duration, shown
+from ..faults import FaultError
+from ..faults.model import parse_duration, shown
 from .events import EVENT_KINDS
+from .operations import OPERATIONS, Operation, StepKind
 
 if sys.version_info >= (3, 11):
     import tomllib
@@ -43,11 +47,32 @@ if TYPE_CHECKING:
 DEFAULT_WITHIN = 30.0
 #: The highest output frequency a step may wait for: well above any emulated drive's maximum frequency.
 MAX_HZ = 1000.0
-_STEP_KEYS = {"at", "on", "hz", "after", "within", "fault", "options", "clear", "trip", "repeat", "name"}
+#: The keys of a step that say when it fires, how often, and its name.
+_TRIGGER_KEYS = ("at", "on", "hz", "after", "within", "repeat", "name")
+#: The step kinds by their key, and the keys of their other arguments: from the operations' declarations.
+STEP_KINDS: dict[str, Operation] = {op.step.key: op for op in OPERATIONS if op.step is not None}
+_ARGUMENT_KEYS: dict[str, str] = {a.key: key for key, op in STEP_KINDS.items() for a in op.arguments[1:]}
+_STEP_KEYS = {*_TRIGGER_KEYS, *STEP_KINDS, *_ARGUMENT_KEYS}
 
 
 class ScenarioError(BadRequest):
     """A scenario file that cannot be run (one line naming the file and the step)."""
+
+
+@dataclass(frozen=True)
+class Action:
+    """What a step does: an operation of the command service with its JSON arguments, checked when the
+    file is read, and how the step's line says it."""
+
+    operation: Operation
+    arguments: dict[str, Any]
+    record: Any
+    words: str
+
+    @property
+    def kind(self) -> StepKind:
+        assert self.operation.step is not None
+        return self.operation.step
 
 
 @dataclass(frozen=True)
@@ -59,18 +84,12 @@ class Step:
     hz: float | None = None
     after: float = 0.0
     within: float = DEFAULT_WITHIN
-    fault: FaultRequest | None = None
-    clear: bool | str = False
-    trip: str | int | None = None
+    #: None: a wait-for step (it fires when its event comes, and does nothing more).
+    action: Action | None = None
     repeat: int = 1
 
     def describe(self) -> str:
-        if self.fault is not None:
-            what = f"fault {self.fault.describe()}"
-        elif self.clear:
-            what = "clear" + (f" {self.clear}" if isinstance(self.clear, str) else "")
-        else:
-            what = f"trip {self.trip}"
+        what = self.action.words if self.action is not None else "wait"
         when = (f"at {self.at:g}s" if self.at is not None else
                 f"on frequency {self.hz:g} Hz" if self.on == "frequency" else f"on {self.on}")
         return f"{what} ({when}{f' + {self.after:g}s' if self.after else ''})"
@@ -84,14 +103,21 @@ class Scenario:
     linger: float = 0.0
 
     def check(self, service: DeviceService) -> None:
-        """What only the device can tell, checked before it serves: each ``trip`` step's code is one of
-        its trip codes (``ScenarioError`` naming the step and the valid codes)."""
+        """What only the device can tell, checked before it serves (each ``trip`` step's code is one of
+        its trip codes; a step the device's declaration lacks is refused): ``ScenarioError`` naming the
+        step."""
         for step in self.steps:
-            if step.trip is not None:
-                try:
-                    service.check_trip(step.trip)
-                except BadRequest as exc:
-                    raise ScenarioError(f"{self.path}: step {step.number}: trip {shown(step.trip)}: {exc}") from None
+            action = step.action
+            if action is None:
+                continue
+            first = next(iter(action.arguments.values()), None)
+            said = f"{action.kind.key}" + (f" {shown(first)}" if first is not None else "")
+            try:
+                service.refuse_absent(action.operation)
+                if action.kind.on_device is not None:
+                    action.kind.on_device(service, action.record)
+            except BadRequest as exc:
+                raise ScenarioError(f"{self.path}: step {step.number}: {said}: {exc}") from None
 
 
 def load(path: str | Path) -> Scenario:
@@ -139,28 +165,72 @@ def _step(path: Path, number: int, raw: Any) -> Step:
         if (on == "frequency") != (hz is not None) or (hz is not None and (
                 isinstance(hz, bool) or not isinstance(hz, (int, float)) or not 0 <= hz <= MAX_HZ)):
             raise ScenarioError(f"{where}: on = \"frequency\" goes with hz = a number 0..{MAX_HZ:g}")
-        actions = [k for k in ("fault", "clear", "trip") if k in raw]
-        if len(actions) != 1:
-            raise ScenarioError(f"{where}: one action, fault = NAME, clear = true or trip = CODE")
-        fault = None
-        named = raw.get("fault")    # TOML has no null: None is a step without a fault
-        if named is not None:
-            options = raw.get("options", {})
-            if not isinstance(options, dict):
-                raise ScenarioError(f"{where}: options is a table")
-            fault = FaultRequest.build(named, options, JSON_SPELLING)
+        action = _action(where, raw)
+        if action is None and on is None:
+            raise ScenarioError(f"{where}: one action ({_ACTIONS}), or none with on = EVENT to wait for it")
         repeat = raw.get("repeat", 1)
         if not isinstance(repeat, int) or isinstance(repeat, bool) or not 1 <= repeat <= 1000:
             raise ScenarioError(f"{where}: repeat is a whole number 1..1000")
-        clear = raw.get("clear", False)
-        if not isinstance(clear, (bool, str)):
-            raise ScenarioError(f"{where}: clear is true or a fault's name")
-        if isinstance(clear, str):
-            kind_of(clear)      # a name no fault has is refused now, not when the step fires
-    except FaultError as exc:
+    except ScenarioError:
+        raise
+    except (FaultError, BadRequest) as exc:   # a step's own check (``StepKind.check``) refused its arguments
         raise ScenarioError(f"{where}: {exc}") from None
     return Step(number, str(raw.get("name", f"step {number}")), at, on, float(hz) if hz is not None else None,
-                after, within, fault, clear, raw.get("trip"), repeat)
+                after, within, action, repeat)
+
+
+def _spelled(op: Operation) -> str:
+    """How a step kind is written: ``fault = NAME``, ``clear = true or ID|NAME``, ``reset = true``."""
+    if not op.arguments:
+        return f"{op.step.key if op.step else op.name} = true"
+    first = op.arguments[0]
+    value = first.metavar or first.key.upper()
+    return f"{op.step.key if op.step else op.name} = {value if first.required else 'true or ' + value}"
+
+
+#: Every action a step may take, as an error message lists them.
+_ACTIONS = ", ".join(_spelled(op) for op in STEP_KINDS.values())
+
+
+def _action(where: str, raw: dict[str, Any]) -> Action | None:
+    """The step's action, from the declaration of the operation its key names; None for none."""
+    keys = [key for key in STEP_KINDS if key in raw]
+    if len(keys) > 1:
+        raise ScenarioError(f"{where}: one action, not {' and '.join(keys)}")
+    stray = sorted(k for k in raw if k in _ARGUMENT_KEYS and (not keys or _ARGUMENT_KEYS[k] != keys[0]))
+    if stray:
+        raise ScenarioError(f"{where}: {stray[0]} goes with {_ARGUMENT_KEYS[stray[0]]} = ...")
+    if not keys:
+        return None
+    key = keys[0]
+    operation = STEP_KINDS[key]
+    value = raw[key]
+    arguments: dict[str, Any] = {a.key: raw[a.key] for a in operation.arguments[1:] if a.key in raw}
+    first = operation.arguments[0] if operation.arguments else None
+    if value is True and (first is None or not first.required):
+        pass
+    elif first is None or isinstance(value, bool):
+        raise ScenarioError(f"{where}: {key} is written {_spelled(operation)}")
+    else:
+        arguments = {first.key: value, **arguments}
+    from .service import check_arguments
+
+    try:
+        check_arguments(operation, arguments)
+    except BadRequest as exc:      # its message names the operation: "trip: \"code\" is a string or integer"
+        raise ScenarioError(f"{where}: {exc}") from None
+    record = operation.record(**arguments)
+    kind = operation.step
+    assert kind is not None
+    words = kind.check(record) if kind.check is not None else ""
+    for argument in operation.arguments:
+        given = arguments.get(argument.key)
+        if given is not None and argument.choices is not None and given not in argument.choices():
+            raise ScenarioError(f"{where}: {key}: {shown(given)} is not one of {', '.join(argument.choices())}")
+    if not words:
+        words = " ".join([key, *(str(arguments[a.key]) for a in operation.arguments[:1] if a.key in arguments),
+                          *(f"--{a.key} {arguments[a.key]}" for a in operation.arguments[1:] if a.key in arguments)])
+    return Action(operation, arguments, record, words)
 
 
 async def run(service: DeviceService, scenario: Scenario, report: Callable[[str], None]) -> bool:
@@ -250,10 +320,7 @@ async def _trigger(service: DeviceService, step: Step, start: float, mark: int) 
 
 
 async def _act(service: DeviceService, step: Step) -> None:
-    """The step's action, through the command service (a fault waits for its ports, not for a long off)."""
-    if step.fault is not None:
-        await service.call_async("fault", {"name": step.fault.name, "options": step.fault.as_json()})
-    elif step.clear:
-        await service.call_async("clear", {"fault": step.clear} if isinstance(step.clear, str) else {})
-    else:
-        service.call("trip", {"code": step.trip})
+    """The step's action, through the command service (a fault waits for its ports, not for a long off);
+    nothing for a wait-for step, whose trigger was all of it."""
+    if step.action is not None:
+        await service.call_async(step.action.operation.name, step.action.arguments)

@@ -23,16 +23,18 @@ from collections.abc import Awaitable
 from dataclasses import dataclass
 from typing import TYPE_CHECKING, Any
 
-from ..devices.keypad import NoKeypad, WriteRefused
-from ..devices.profiles import keypad_families
+from ..devices.base import TripRefused
+from ..devices.keypad import WriteRefused
 from ..errors import BadRequest, CipstackError, NotFound, PeerUnreachable, StateRefused
 from ..faults import FaultController, FaultRequest
 from ..faults.model import JSON_SPELLING
 from . import views
 from .events import EventStream
-from .operations import JSON_TYPES, OPERATION_BY_NAME, OPERATIONS, Argument, Operation
+from .operations import JSON_TYPES, KEYPAD, OPERATION_BY_NAME, OPERATIONS, TRIPS, Argument, Caller, Operation
 
 if TYPE_CHECKING:
+    from ..devices.base import DriveTrips
+    from ..devices.keypad import Keypad
     from ..runtime import DeviceRuntime
 
 #: How long an operation that opens or closes ports waits for them before it answers; a power-cycle
@@ -120,7 +122,7 @@ def whole_number(key: str, text: str) -> int:
 
 
 class DeviceService:
-    """The operations on one running device (each operation's ``handler``: one method each), called with
+    """The operations on one running device (each operation's ``handler`` calls one method), called with
     JSON values and answering JSON values."""
 
     def __init__(self, runtime: DeviceRuntime, faults: FaultController, events: EventStream,
@@ -147,11 +149,19 @@ class DeviceService:
             raise BadRequest(f"unknown operation {operation!r}; valid: {', '.join(OPERATION_BY_NAME)}")
         check_arguments(declared, arguments)
         record = declared.record(**arguments)
-        method = getattr(self, declared.handler)
-        given = declared.given(record)
-        if declared.tells_origin:
-            given.update(origin=origin, peer=peer)
-        return method(**given)
+        self.refuse_absent(declared)
+        return declared.handler(self, record, Caller(origin, peer))
+
+    def offers(self, operation: Operation) -> bool:
+        """Whether the device declares what ``operation`` needs (a drive's trips, a keypad)."""
+        return operation.needs is None or operation.needs.declared(self.runtime.device) is not None
+
+    def refuse_absent(self, operation: Operation) -> None:
+        """The error of a device whose declaration lacks what ``operation`` needs, raised before anything
+        runs (a trip of a device without a drive is a ``BadRequest``, as its message says)."""
+        if not self.offers(operation):
+            assert operation.needs is not None
+            raise operation.needs.absent(self.runtime.device)
 
     async def call_async(self, operation: str, arguments: dict[str, Any], origin: str = "python",
                          peer: str | None = None) -> Any:
@@ -177,57 +187,53 @@ class DeviceService:
         if isinstance(code, str) and code.isascii():   # int() would read other digits as ASCII ones
             with contextlib.suppress(ValueError):
                 code = int(code, 0)
-        device = self.runtime.device
+        trips = self._trips()
         try:
-            device.check_trip_code(code)
-        except NotImplementedError as exc:
-            raise BadRequest(str(exc)) from None
+            trips.check(code)
         except (KeyError, ValueError) as exc:
             reason = exc.args[0] if exc.args else exc
-            raise BadRequest(f"{reason}; valid codes: {device.trip_codes()}") from None
+            raise BadRequest(f"{reason}; valid codes: {trips.codes()}") from None
         return code
 
-    def trip(self, code: int | str) -> dict[str, Any]:
-        from ..devices.base import TripRefused
+    def _trips(self) -> DriveTrips:
+        """The device's declared trips; the declaration's refusal where it has none."""
+        trips = self.runtime.device.drive_trips()
+        if trips is None:
+            raise TRIPS.absent(self.runtime.device)
+        return trips
 
+    def trip(self, code: int | str) -> dict[str, Any]:
         code = self.check_trip(code)
         if not self.runtime.power.powered:
             raise StateRefused("the device is powered off (power-cycle): it cannot trip")
         now = self.runtime.tick()
-        device = self.runtime.device
+        trips = self._trips()
         try:
-            trip = device.inject_trip(code)
-        except NotImplementedError as exc:
-            raise BadRequest(str(exc)) from None
+            trip = trips.inject(code)
         except TripRefused as exc:
             raise StateRefused(str(exc)) from None
         except (KeyError, ValueError) as exc:
             reason = exc.args[0] if exc.args else exc
-            raise BadRequest(f"{reason}; valid codes: {device.trip_codes()}") from None
+            raise BadRequest(f"{reason}; valid codes: {trips.codes()}") from None
         self.runtime.tick(now)
-        label = getattr(trip, "label", None) or str(trip)
-        fault = getattr(trip, "fault_code", None)
-        return {"result": f"tripped: {label}" + (f" (fault code 0x{fault:04X})" if fault is not None else ""),
-                "trip": label, "status": device.status_line()}
+        fault = trip.fault_code
+        return {"result": f"tripped: {trip.label}" + (f" (fault code 0x{fault:04X})" if fault is not None else ""),
+                "trip": trip.label, "status": self.runtime.device.status_line()}
 
     def reset(self) -> dict[str, Any]:
         """A fault reset, now: the ACG's Drive Fault Reset, the MX2/RX Digital Operator's STOP/RESET key."""
-        from ..devices.base import TripRefused
-
         if not self.runtime.power.powered:
             raise StateRefused("the device is powered off (power-cycle): it cannot be reset")
         now = self.runtime.tick()
-        device = self.runtime.device
+        trips = self._trips()
         try:
-            cleared = device.reset_trip()
-        except NotImplementedError as exc:
-            raise BadRequest(str(exc)) from None
+            cleared = trips.reset()
         except TripRefused as exc:
             raise StateRefused(str(exc)) from None
         self.runtime.tick(now)
-        label = None if cleared is None else getattr(cleared, "label", None) or str(cleared)
+        label = None if cleared is None else cleared.label
         return {"result": f"reset: {label} cleared" if label is not None else "reset: no trip to clear",
-                "cleared": label, "status": device.status_line()}
+                "cleared": label, "status": self.runtime.device.status_line()}
 
     # -- faults -----------------------------------------------------------------------------------------
     async def fault(self, name: str, options: dict[str, Any] | None = None) -> dict[str, Any]:
@@ -282,12 +288,10 @@ class DeviceService:
         return await self.fault(state)
 
     # -- keypad parameters ------------------------------------------------------------------------------
-    def _keypad(self) -> Any:
-        device = self.runtime.device
-        keypad = device.keypad()
+    def _keypad(self) -> Keypad:
+        keypad = self.runtime.device.keypad()
         if keypad is None:
-            raise NoKeypad(f"{device.identity_info.product_name}: this device has no keypad (keypad parameters "
-                           f"are a drive's: {keypad_families()}); write its parameters over CIP")
+            raise KEYPAD.absent(self.runtime.device)
         return keypad
 
     def parameter(self, code: str) -> dict[str, Any]:
@@ -332,7 +336,8 @@ class DeviceService:
         return views.fault_table()
 
     def trips(self) -> list[dict[str, Any]]:
-        return [dict(choice) for choice in self.runtime.device.trip_choices()]
+        trips = self.runtime.device.drive_trips()
+        return [] if trips is None else [dict(choice) for choice in trips.choices()]
 
     # -- events -------------------------------------------------------------------------------------------
     def events_since(self, since: int | str = 0) -> list[dict[str, Any]]:

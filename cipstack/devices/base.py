@@ -43,6 +43,35 @@ class TripRefused(StateRefused, ValueError):
     """A trip the device's present state does not take (it is tripped already and keeps its first trip):
     the request was understood, the device said no."""
 
+@dataclass(frozen=True)
+class TripReport:
+    """A trip as every surface reports it, whatever the family's own record of it: how the emulator's
+    messages name it and the CIP fault code it reports (None where the family has none)."""
+
+    label: str
+    fault_code: int | None = None
+
+
+@dataclass(frozen=True)
+class DriveTrips:
+    """What a device that simulates a drive declares of its trips (``Device.drive_trips``): a device
+    without a drive declares none, and the command service refuses a trip or a reset from that."""
+
+    #: Trip the drive now with a fault code (or name) of its manual: the trip, as reported.
+    #: ``KeyError`` or ``ValueError`` (a ``BadRequest``) for a code it does not take, ``TripRefused``
+    #: when its present state does not take one.
+    inject: Callable[[int | str], TripReport]
+    #: Raise what ``inject`` would for a code it does not take; nothing for one it takes.
+    check: Callable[[int | str], None]
+    #: A fault reset, now: the trip it cleared, None when there was none; ``TripRefused`` when it holds.
+    reset: Callable[[], TripReport | None]
+    #: The codes ``inject`` takes, as one line for an error message.
+    codes: Callable[[], str]
+    #: Each trip ``inject`` takes, as a front panel offers it: ``code`` (what to send), ``label``, the CIP
+    #: ``fault_code``.
+    choices: Callable[[], list[dict[str, object]]]
+
+
 #: Told of one register a Modbus request wrote: the drive, the address, the raw value, the time, and the
 #: request's source (a TCP peer's ``host:port``, the RTU station addressed).
 RegisterWritten = Callable[[Any, int, int, float, object], None]
@@ -159,33 +188,16 @@ class Device:
         self.update_io_status()
 
     # -- emulator control (test rigs) -------------------------------------------------------------
-    def inject_trip(self, code: int | str) -> object:
-        """Trip the simulated drive, now, with a fault code (or name) of its manual; returns the trip."""
-        raise NoDrive(f"{self.identity_info.product_name}: this profile simulates no drive")
-
-    def trip_codes(self) -> str:
-        """The trip codes ``inject_trip`` takes, as one line for an error message."""
-        return "none (this profile simulates no drive)"
+    def drive_trips(self) -> DriveTrips | None:
+        """The trips of the simulated drive, as the command service's ``trip``, ``reset`` and ``trips``
+        operations use them; None for a device that simulates no drive (the declaration lacks them,
+        so those operations are refused from it)."""
+        return None
 
     def data_schema(self, instance: int) -> AssemblySchema | None:
         """The declaration an assembly instance's data decodes by (its field names), None where the
         device declares none for it (an EDS file's vendor assembly; an instance it does not serve)."""
         return None
-
-    def trip_choices(self) -> list[dict[str, object]]:
-        """Each trip ``inject_trip`` takes, as a front panel offers it: ``code`` (what to send), ``label``
-        and the CIP ``fault_code``; empty for a device without a drive."""
-        return []
-
-    def check_trip_code(self, code: int | str) -> None:
-        """Raise what ``inject_trip`` would for a code it does not take (``KeyError``, ``ValueError``,
-        ``NotImplementedError`` for a device without a drive); nothing for one it takes."""
-        raise NoDrive(f"{self.identity_info.product_name}: this profile simulates no drive")
-
-    def reset_trip(self) -> object | None:
-        """A fault reset, now, as the drive's manual resets a trip: the trip it cleared, None when it had
-        none; ``TripRefused`` when the trip holds (its cause lasts)."""
-        raise NoDrive(f"{self.identity_info.product_name}: this profile simulates no drive")
 
     def status_line(self) -> str | None:
         """A compact line of the device's state for the emulator's console, or None."""

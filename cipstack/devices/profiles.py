@@ -110,7 +110,11 @@ class Profile:
     #: (vendor id, product codes) a live device reports when it is of this profile.
     vendor_id: int = 0
     product_codes: frozenset[int] = frozenset()
-    #: The declarations of the profile's objects and assemblies, for a scanner.
+    #: The device type (Identity attribute 2) it reports, where the family declares one: a device that
+    #: reports another is not of this profile. None: any.
+    device_type: int | None = None
+    #: The declarations of the profile's objects and assemblies, for a scanner; None: what its device
+    #: model serves (``catalog_for`` builds one and reads its classes).
     catalog: Callable[[], Catalog] | None = None
     #: The codes of the drive's keypad, to check ``--param`` before a device is built (the device's
     #: ``keypad()`` uses the same declaration); None for a device without a keypad.
@@ -123,6 +127,10 @@ class Profile:
     find_model: Callable[[str], str] | None = None
     #: Its RS-485 port, where a fleet may put its drives on one line; None without one.
     serial_link: SerialLink | None = None
+    #: Its CompoNet port, where ``cipstack componet`` puts its devices as slaves behind a gateway: the
+    #: gateway's builder, given every node (profile name, model, node address) and the gateway's
+    #: EtherNet/IP interface. Families that share a gateway declare the same builder; None without one.
+    componet_gateway: Callable[[list[tuple[str, str, int]], NetworkInterface], Device] | None = None
     #: What ``cipstack models`` lists: each model (one for a family of one model) with its identity.
     model_info: Callable[[], tuple[ModelInfo, ...]] = _no_model_info
     #: How the EDS tool describes the family: ``"module:function"`` of a function that returns the
@@ -132,7 +140,13 @@ class Profile:
     eds: str | None = None
 
     def matches(self, identity: IdentityRecord) -> bool:
-        return identity.vendor_id == self.vendor_id and identity.product_code in self.product_codes
+        return self.is_identity(identity.vendor_id, identity.product_code, identity.device_type)
+
+    def is_identity(self, vendor_id: int, product_code: int, device_type: int | None = None) -> bool:
+        """Whether a device that reports this vendor id, product code (and device type, where known) is
+        of this profile."""
+        return (vendor_id == self.vendor_id and product_code in self.product_codes
+                and (device_type is None or self.device_type is None or device_type == self.device_type))
 
 
 #: Every family installed, by name: cipstack's own and those of other distributions, found by the
@@ -179,18 +193,70 @@ def keypad_families() -> str:
     return families_having(lambda profile: profile.keypad is not None)
 
 
+def parse_nodes(text: str) -> list[tuple[str, str, int]]:
+    """``"mx2:MX2-A2015-E@3,rx:RX-A4055-E@5"`` -> [("mx2", "MX2-A2015-E", 3), ("rx", "RX-A4055-E", 5)]."""
+    nodes = []
+    for item in filter(None, (part.strip() for part in text.split(","))):
+        try:
+            profile, rest = item.split(":", 1)
+            model_name, node = rest.rsplit("@", 1)
+            nodes.append((profile.strip().lower(), model_name.strip(), int(node)))
+        except ValueError:
+            raise BadRequest(f"node {item!r} is not PROFILE:MODEL@NODE (e.g. mx2:MX2-A2015-E@3)") from None
+    return nodes
+
+
+def componet_gateway(nodes: list[tuple[str, str, int]], interface: NetworkInterface) -> Device:
+    """The gateway of a CompoNet network of ``nodes`` (``parse_nodes``), as the nodes' families declare it
+    (``Profile.componet_gateway``); ``BadRequest`` naming a family without a CompoNet port, or nodes whose
+    families share no gateway."""
+    if not nodes:
+        raise BadRequest("--nodes names no node")
+    builders = []
+    for name, _, _ in nodes:
+        try:
+            profile = PROFILES[name]
+        except KeyError:
+            raise BadRequest(f"unknown profile {name!r} (known: {', '.join(sorted(PROFILES))})") from None
+        if profile.componet_gateway is None:
+            has = families_having(lambda p: p.componet_gateway is not None)
+            raise BadRequest(f"profile {name!r} has no CompoNet port (one has: {has})")
+        if profile.componet_gateway not in builders:
+            builders.append(profile.componet_gateway)
+    if len(builders) > 1:
+        raise BadRequest(f"profiles {', '.join(sorted({name for name, _, _ in nodes}))} share no CompoNet gateway")
+    return builders[0](nodes, interface)
+
+
 def catalog_for_identity(identity: IdentityRecord) -> Catalog:
     """The declarations a scanner decodes with for a device that identified itself: those of
     the profile with the same vendor and product code, else the standard objects only."""
-    return catalog_for(identity.vendor_id, identity.product_code)
+    return catalog_for(identity.vendor_id, identity.product_code, identity.device_type)
 
 
-def profile_for(vendor_id: int, product_code: int) -> Profile | None:
-    """The profile a device with this vendor id and product code is, or None."""
+def profile_for(vendor_id: int, product_code: int, device_type: int | None = None) -> Profile | None:
+    """The installed profile a device with this identity is (cipstack's or another distribution's), or
+    None."""
     for profile in PROFILES.values():
-        if profile.catalog is not None and vendor_id == profile.vendor_id and product_code in profile.product_codes:
+        if profile.is_identity(vendor_id, product_code, device_type):
             return profile
     return None
+
+
+def _served_catalog(profile: Profile) -> Catalog:
+    """For a family that declares no catalog: the classes its device model serves (each object's
+    declaration, as the router holds it) and the schemas of its assemblies, read from a device built
+    with factory settings."""
+    from .base import DeviceLimits
+
+    device = profile.build(NetworkInterface(mac=DEFAULT_MAC), DeviceLimits(), ProfileOptions())
+    try:
+        classes = [obj.spec for obj in device.router.objects.values()]
+        schemas = [schema for instance in device.assembly.points
+                   if (schema := device.data_schema(instance)) is not None]
+    finally:
+        device.close()
+    return Catalog(classes, schemas, profile=profile.name)
 
 
 #: Each profile's catalog, built once per process (the Omron ones build a device model, ~0.1 s):
@@ -198,16 +264,16 @@ def profile_for(vendor_id: int, product_code: int) -> Profile | None:
 _BUILT: dict[str, Catalog] = {}
 
 
-def catalog_for(vendor_id: int, product_code: int) -> Catalog:
-    """The catalog of the profile of (vendor id, product code); else the standard objects, with a
-    ``source`` that says no profile is known for them."""
-    profile = profile_for(vendor_id, product_code)
-    if profile is None or profile.catalog is None:
+def catalog_for(vendor_id: int, product_code: int, device_type: int | None = None) -> Catalog:
+    """The catalog of the installed profile of (vendor id, product code, device type where known); else
+    the standard objects, with a ``source`` that says no profile is known for them."""
+    profile = profile_for(vendor_id, product_code, device_type)
+    if profile is None:
         return Catalog(source=f"the standard objects only: no profile for vendor {vendor_id} product code "
                               f"{product_code} (give eds= or catalog=)")
     built = _BUILT.get(profile.name)
     if built is None:
-        built = _BUILT[profile.name] = profile.catalog()
+        built = _BUILT[profile.name] = profile.catalog() if profile.catalog is not None else _served_catalog(profile)
     return built.copy(f"profile {profile.name} (vendor {vendor_id} product code {product_code}: "
                       f"{profile.description})")
 

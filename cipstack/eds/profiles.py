@@ -25,17 +25,17 @@ from __future__ import annotations
 import dataclasses
 from collections.abc import Iterable, Sequence
 
-from ..assemblies.acg import INPUT_INSTANCES as ACG_INPUT_INSTANCES
-from ..assemblies.acg import OUTPUT_INSTANCES as ACG_OUTPUT_INSTANCES
-from ..assemblies.omron import INPUT_INSTANCES as OMRON_INPUT_INSTANCES
-from ..assemblies.omron import OUTPUT_INSTANCES as OMRON_OUTPUT_INSTANCES
 from ..assemblies.schema import AssemblySchema
 from ..devices.acg import registers as acg
+from ..devices.acg.assemblies import INPUT_INSTANCES as ACG_INPUT_INSTANCES
+from ..devices.acg.assemblies import OUTPUT_INSTANCES as ACG_OUTPUT_INSTANCES
 from ..devices.acg.device import build_acg_device
 from ..devices.acg.drive import MODEL as ACG_MODEL
 from ..devices.acg.objects import AC_DC_DRIVE_SPEC, CONTROL_SUPERVISOR_SPEC, KEYPAD_PARAMETERS, MOTOR_DATA_SPEC
 from ..devices.base import Device, DeviceLimits
 from ..devices.omron import models as omron
+from ..devices.omron.assemblies import INPUT_INSTANCES as OMRON_INPUT_INSTANCES
+from ..devices.omron.assemblies import OUTPUT_INSTANCES as OMRON_OUTPUT_INSTANCES
 from ..devices.omron.device import build_omron_device
 from ..devices.omron.objects import AC_DC_DRIVE_SPEC as OMRON_AC_DC_DRIVE_SPEC
 from ..devices.omron.objects import CLASS_SPECS as OMRON_CLASS_SPECS

@@ -6,9 +6,10 @@ Fixtures:
   state file, started for the test and stopped after it. Which device: the ``cip_adapter`` marker,
   ``@pytest.mark.cip_adapter(profile="acg", model=None, eds=None, params=["drv=4", "Frq=8"])``
   (``params`` by the device's keypad codes: ``profile="mx2", params=["A004=60"]`` for an MX2's Digital
-  Operator); by default the ACG drive. Its faults (``fault``, ``clear_faults``, ``faults``), its
-  events (``events``, ``wait_for``, ``await event``) and its keypad (``parameter``, ``set_parameter``)
-  are the in-process adapter's.
+  Operator); by default the ACG drive. It has a method for every operation of the command service
+  (``fault``, ``clear_faults``, ``faults``, ``trip``, ``reset``, ``power``, ``link``, ``parameter``,
+  ``set_parameter``, ...), made from the operations' declarations (``cipstack.control.operations``),
+  and its events (``events``, ``wait_for``, ``await event``) are the in-process adapter's.
 * ``cip_adapter_factory``: starts more devices, ``cip_adapter_factory(profile="mx2", params=...)``,
   each stopped after the test.
 * ``cip_fleet``: several devices (the ``cip_fleet`` marker: ``count``, and the options of

@@ -10,15 +10,17 @@ from __future__ import annotations
 
 import asyncio
 import contextlib
+import inspect
 import threading
 import time
 from collections.abc import Awaitable, Callable, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any, TypeVar, overload
+from typing import TYPE_CHECKING, Any, TypeVar, overload
 
 from ..adapter import Adapter, AdapterSettings, network_interface
 from ..control.events import Event
+from ..control.operations import OPERATIONS, Operation
 from ..devices.profiles import DEFAULT_PROFILE
 from ..eds.served import profile_eds_files
 from ..errors import UnknownField
@@ -127,24 +129,14 @@ class EmulatedDevice:
 
         return asyncio.run_coroutine_threadsafe(call(), self.loop).result(timeout)
 
+    if TYPE_CHECKING:
+        # The operations' methods, made from their declarations below (``operation_method``).
+        def __getattr__(self, name: str) -> Callable[..., Any]: ...
+
     def call(self, operation: str, **arguments: Any) -> Any:
         """Any operation of the device's command service (``cipstack.control.operations``), by its JSON
         keys, as every other surface calls it; its answer."""
         return self.run(lambda: self.adapter.service.call_async(operation, arguments))
-
-    def fault(self, name: str, **options: Any) -> dict[str, Any]:
-        """Apply a fault (``cipstack.faults``; ``for_=2.0`` for ``--for``), once its ports are closed or
-        opened (or, for a long power-cycle, while the power is still off); its record (id, name, options)."""
-        if "for_" in options:
-            options["for"] = options.pop("for_")
-        return dict(self.call("fault", name=name, options=options))
-
-    def clear_faults(self, which: int | str | None = None) -> list[dict[str, Any]]:
-        return list(self.call("clear", **({"fault": which} if which is not None else {})))
-
-    def faults(self) -> list[dict[str, Any]]:
-        """The faults active now."""
-        return list(self.call("faults"))
 
     def events(self, since: int = 0) -> list[Event]:
         """The events since event number ``since``, oldest first."""
@@ -158,24 +150,6 @@ class EmulatedDevice:
         """Await an event of ``kind`` without blocking the test's own loop; for async tests."""
         future = asyncio.run_coroutine_threadsafe(self.adapter.events.wait_for(kind, timeout, after), self.loop)
         return await asyncio.wrap_future(future)
-
-    def status(self) -> dict[str, Any]:
-        """What ``cipstack drive status`` reports: the drive's fields, power and link, sessions and
-        connections."""
-        return dict(self.call("status"))
-
-    def trip(self, code: int | str) -> dict[str, Any]:
-        return dict(self.call("trip", code=code))
-
-    def parameter(self, code: str) -> dict[str, Any]:
-        """A keypad parameter by its code (the ACG's ``ACC``, an MX2/RX function code ``A004``): code, name,
-        value in the keypad's unit, raw value, unit, address."""
-        return dict(self.call("parameter", code=code))
-
-    def set_parameter(self, code: str, value: object) -> dict[str, Any]:
-        """Set a keypad parameter now, in the keypad's unit, not saved; a ``parameter write`` event with
-        origin "python"."""
-        return dict(self.call("set-parameter", code=code, value=value))
 
     # -- a scanner --------------------------------------------------------------------------------------------
     def scanner(self, timeout: float = CONNECT_TIMEOUT) -> SyncScanner:
@@ -192,7 +166,8 @@ class EmulatedDevice:
         deadline = time.monotonic() + timeout
         while True:
             try:
-                scanner = SyncScanner(self.address, catalog=catalog_for(info.vendor_id, info.product_code))
+                scanner = SyncScanner(self.address, catalog=catalog_for(info.vendor_id, info.product_code,
+                                                                       info.device_type))
                 break
             except OSError:  # refused or reset while the power is off or the link unplugged
                 if time.monotonic() >= deadline:
@@ -227,3 +202,36 @@ class EmulatedDevice:
 
     def __exit__(self, *exc: object) -> None:
         self.close()
+
+
+def operation_method(operation: Operation) -> Callable[..., Any]:
+    """The method of ``EmulatedDevice`` that calls ``operation``, made from its declaration alone: its
+    arguments positional in the record's order or by their JSON keys (``trip(0x4200)``,
+    ``set_parameter("ACC", 2.5)``), and the options of an operation that takes free words as keywords
+    (``fault("stop-producing", for_=2.0)``: a trailing underscore spares a Python keyword); its answer
+    as the command service gives it."""
+    free = next((a.key for a in operation.arguments if operation.free_words and a.json_type == "object"), None)
+    fixed = [a for a in operation.arguments if a.key != free]
+    parameters = [inspect.Parameter("self", inspect.Parameter.POSITIONAL_OR_KEYWORD)]
+    parameters += [inspect.Parameter(a.key, inspect.Parameter.POSITIONAL_OR_KEYWORD,
+                                     **({} if a.required else {"default": None})) for a in fixed]
+    if free is not None:
+        parameters.append(inspect.Parameter(free, inspect.Parameter.VAR_KEYWORD))
+    signature = inspect.Signature(parameters)
+
+    def method(self: EmulatedDevice, *args: Any, **kwargs: Any) -> Any:
+        bound = signature.bind(self, *args, **kwargs)   # a wrong call is Python's own TypeError
+        arguments = {a.key: bound.arguments[a.key] for a in fixed if bound.arguments.get(a.key) is not None}
+        if free is not None:
+            arguments[free] = {key.rstrip("_"): value for key, value in bound.arguments.get(free, {}).items()}
+        return self.call(operation.name, **arguments)
+
+    method.__name__ = method.__qualname__ = operation.python_name or operation.name
+    method.__doc__ = f"{operation.summary[:1].upper()}{operation.summary[1:]} (``cipstack drive {operation.name}``)."
+    method.__signature__ = signature  # type: ignore[attr-defined]  # what help() and inspect show
+    return method
+
+
+for _operation in OPERATIONS:
+    if _operation.python_name is not None:
+        setattr(EmulatedDevice, _operation.python_name, operation_method(_operation))

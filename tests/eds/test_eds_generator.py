@@ -597,7 +597,7 @@ def test_acg_file_lists_every_assembly_and_pair_of_the_device() -> None:
 
 @pytest.mark.parametrize("name", ["MX2-A2015-E", "RX-A4055-E"])
 def test_omron_file_lists_what_the_device_serves(name: str) -> None:
-    from cipstack.assemblies.omron import componet_io_words
+    from cipstack.devices.omron.assemblies import componet_io_words
     from cipstack.devices.omron.device import build_omron_device
     from cipstack.devices.omron.objects import CLASS_SPECS
 

@@ -28,7 +28,20 @@ from dataclasses import dataclass, field
 from functools import lru_cache
 from pathlib import Path
 
-from ...assemblies.acg import (
+from ...assemblies.schema import AssemblySchema
+from ...cip.model import ClassSpec
+from ...eip.target.io_target import ConnectionKind, IoConnection, IoProfile
+from ...errors import BadRequest
+from ...objects.assembly import AssemblyPoint
+from ...objects.file import StoredFile
+from ...objects.tcpip import NetworkInterface
+from ..base import Device, DeviceLimits, DriveTrips, ModbusDrive, RtuPort, TripRefused, TripReport
+from ..keypad import shown_value
+from ..profiles import DEFAULT_MAC, serial_from_mac
+from ..registers import Register, RegisterError
+from ..state import ParameterStore, StateWriter
+from . import registers as reg
+from .assemblies import (
     HZ_INPUTS,
     HZ_OUTPUTS,
     INPUT_INSTANCES,
@@ -38,19 +51,6 @@ from ...assemblies.acg import (
     assembly_size,
     parameter_words,
 )
-from ...assemblies.schema import AssemblySchema
-from ...cip.model import ClassSpec
-from ...eip.target.io_target import ConnectionKind, IoConnection, IoProfile
-from ...errors import BadRequest
-from ...objects.assembly import AssemblyPoint
-from ...objects.file import StoredFile
-from ...objects.tcpip import NetworkInterface
-from ..base import Device, DeviceLimits, ModbusDrive, RtuPort, TripRefused
-from ..keypad import shown_value
-from ..profiles import DEFAULT_MAC, serial_from_mac
-from ..registers import Register, RegisterError
-from ..state import ParameterStore, StateWriter
-from . import registers as reg
 from .drive import FAMILY, MODEL, AcgDrive, Trip
 from .keypad import AcgKeypad
 from .modbus import ModbusTcpCore
@@ -369,6 +369,18 @@ class AcgDevice(Device):
     def trip_choices(self) -> list[dict[str, object]]:
         """The trips of the Drive Fault Codes table (ACG-ET2 manual) by name: several share a code."""
         return [{"code": trip.label, "label": trip.label, "fault_code": trip.fault_code} for trip in Trip]
+
+    def drive_trips(self) -> DriveTrips:
+        """The trips of the Drive Fault Codes table (ACG-ET2 manual), each reported with its fault code."""
+        def report(trip: Trip) -> TripReport:
+            return TripReport(trip.label, trip.fault_code)
+
+        def reset() -> TripReport | None:
+            cleared = self.reset_trip()
+            return None if cleared is None else report(cleared)
+
+        return DriveTrips(inject=lambda code: report(self.inject_trip(code)), check=self.check_trip_code,
+                          reset=reset, codes=self.trip_codes, choices=self.trip_choices)
 
     def keypad(self) -> AcgKeypad:
         """The drive's keypad: its codes (drv, ACC, CM.23...) in the keypad's unit."""

@@ -28,7 +28,7 @@ def _catalog() -> Catalog:
     """From the declarations alone (no drive is built): the ACG classes and the assemblies whose
     layout no CM setting changes, the speed outputs 20/21/100/101 and inputs 70/71/110/111 (ACG-ET2 manual
     instance tables), made as the device makes them."""
-    from ...assemblies.acg import HZ_INPUTS, HZ_OUTPUTS, speed_input, speed_output
+    from .assemblies import HZ_INPUTS, HZ_OUTPUTS, speed_input, speed_output
     from .objects import (
         AC_DC_DRIVE,
         AC_DC_DRIVE_SPEC,

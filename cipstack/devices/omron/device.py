@@ -22,7 +22,20 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
-from ...assemblies.omron import (
+from ...assemblies.schema import AssemblySchema
+from ...cip.model import ClassSpec
+from ...componet.gateway import COMPONET_PORT, CompoNetGateway
+from ...componet.network import NODE_ADDRESSES, CompoNetNetwork
+from ...eip.target.io_target import IoConnection, IoProfile
+from ...errors import BadRequest, UnknownKey
+from ...objects.assembly import AssemblyPoint
+from ...objects.file import StoredFile
+from ...objects.identity import IdentityInfo, IdentityStatus
+from ...objects.tcpip import NetworkInterface
+from ..base import Device, DeviceLimits, DriveTrips, TripRefused, TripReport
+from ..registers import RegisterError, RegisterRefusal
+from ..state import ParameterStore, StateFileError, StateWriter
+from .assemblies import (
     CENTIHERTZ,
     DECIHERTZ,
     FAULT_DATA_SETTING,
@@ -48,19 +61,6 @@ from ...assemblies.omron import (
     omron_schemas,
     pair_sizes,
 )
-from ...assemblies.schema import AssemblySchema
-from ...cip.model import ClassSpec
-from ...componet.gateway import COMPONET_PORT, CompoNetGateway
-from ...componet.network import NODE_ADDRESSES, CompoNetNetwork
-from ...eip.target.io_target import IoConnection, IoProfile
-from ...errors import BadRequest, UnknownKey
-from ...objects.assembly import AssemblyPoint
-from ...objects.file import StoredFile
-from ...objects.identity import IdentityInfo, IdentityStatus
-from ...objects.tcpip import NetworkInterface
-from ..base import Device, DeviceLimits, TripRefused
-from ..registers import RegisterError, RegisterRefusal
-from ..state import ParameterStore, StateFileError, StateWriter
 from .board import MISSING_INSTANCE
 from .inverter import Inverter, InverterModeError
 from .models import DEVICE_TYPE, REVISION, VENDOR_ID, Family, Model, model
@@ -467,6 +467,16 @@ class OmronDevice(Device):
         if self.saves is not None:
             self.saves.request({**values, CONSISTENCY_KEY: self.inverter.consistency_value})
 
+    def drive_trips(self) -> DriveTrips:
+        """The trip codes of Table D-5 this family has, each reported as the emulator names it ("E05
+        Overload protection")."""
+        def reset() -> TripReport | None:
+            cleared = self.reset_trip()
+            return None if cleared is None else TripReport(cleared.label)
+
+        return DriveTrips(inject=lambda code: TripReport(self.inject_trip(code).label), check=self.check_trip_code,
+                          reset=reset, codes=self.trip_codes, choices=self.trip_choices)
+
     def reset_trip(self) -> TripCode | None:
         """The Digital Operator's STOP/RESET key clears the trip present (section 4-5-2, Table 25 Step
         II): which one it was, None when the inverter had none."""
@@ -656,19 +666,6 @@ class CompoNetGatewayDevice(Device):
 
     def catalog_classes(self) -> tuple[ClassSpec, ...]:
         return CLASS_SPECS
-
-
-def parse_nodes(text: str) -> list[tuple[str, str, int]]:
-    """``"mx2:MX2-A2015-E@3,rx:RX-A4055-E@5"`` -> [("mx2", "MX2-A2015-E", 3), ("rx", "RX-A4055-E", 5)]."""
-    nodes = []
-    for item in filter(None, (part.strip() for part in text.split(","))):
-        try:
-            profile, rest = item.split(":", 1)
-            model_name, node = rest.rsplit("@", 1)
-            nodes.append((profile.strip().lower(), model_name.strip(), int(node)))
-        except ValueError:
-            raise BadRequest(f"node {item!r} is not PROFILE:MODEL@NODE (e.g. mx2:MX2-A2015-E@3)") from None
-    return nodes
 
 
 def build_componet_gateway(nodes: list[tuple[str, str, int]], interface: NetworkInterface | None = None,

@@ -91,12 +91,19 @@ def _find_model(family: Family) -> Callable[[str], str]:
     return find
 
 
+def _componet_gateway(nodes: list[tuple[str, str, int]], interface: NetworkInterface) -> Device:
+    """The CompoNet gateway with one option-board slave per node, MX2 and RX alike (CompoNet manual)."""
+    from .device import build_componet_gateway
+
+    return build_componet_gateway(nodes, interface)
+
+
 def _profile(family: Family, description: str, default_model: str) -> Profile:
     return Profile(_name(family), description, _build(family, default_model), vendor_id=VENDOR_ID,
                    product_codes=frozenset(m.product_code for m in MODELS if m.family is family),
                    catalog=_catalog(family, default_model), keypad=_keypad(family), default_model=default_model,
                    models=_models(family), find_model=_find_model(family), model_info=_model_info(family),
-                   eds="cipstack.eds.profiles:omron_description")
+                   componet_gateway=_componet_gateway, eds="cipstack.eds.profiles:omron_description")
 
 
 MX2 = _profile(Family.MX2, "Omron MX2 with the 3G3AX-MX2-CRT-E CompoNet option board (--model, Tables 2/C-3)",

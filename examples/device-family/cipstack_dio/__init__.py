@@ -82,7 +82,7 @@ def build(interface: NetworkInterface, limits: DeviceLimits, options: ProfileOpt
 
 
 PROFILE = Profile("dio", "DIO-4 digital I/O block, four inputs wired to four outputs (examples/device-family)",
-                  build, vendor_id=VENDOR_ID, product_codes=frozenset({PRODUCT_CODE}),
+                  build, vendor_id=VENDOR_ID, product_codes=frozenset({PRODUCT_CODE}), device_type=DEVICE_TYPE,
                   model_info=lambda: (ModelInfo(PRODUCT_NAME, PRODUCT_CODE, PRODUCT_NAME),),
                   # Imported by the EDS tool when a file is made (eds.py imports cipstack.eds, which the
                   # device never does): a reference, not the function.

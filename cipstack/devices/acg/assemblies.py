@@ -25,16 +25,16 @@ from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, replace
 from typing import Protocol
 
-from ..cip.types import UINT, CipType
-from ..errors import UnknownKey
-from .drive_profile import (
+from ...assemblies.drive_profile import (
     basic_speed_control_input,
     basic_speed_control_output,
     extended_speed_control_input,
     extended_speed_control_output,
 )
-from .names import field_name, unique_field_names
-from .schema import AssemblyField, AssemblySchema, word
+from ...assemblies.names import field_name, unique_field_names
+from ...assemblies.schema import AssemblyField, AssemblySchema, word
+from ...cip.types import UINT, CipType
+from ...errors import UnknownKey
 
 #: Output (O->T) instances, in CM.24 setting order (ACG-ET2 manual, "CIP Output Instance (CM.24)").
 OUTPUT_INSTANCES: tuple[int, ...] = (20, 21, 100, 101, *range(121, 129))

@@ -17,9 +17,7 @@ from collections.abc import Mapping
 from functools import cache
 from types import MappingProxyType
 
-from ..cip.types import INT, UINT, USINT
-from ..errors import BadRequest
-from .drive_profile import (
+from ...assemblies.drive_profile import (
     AC_DC_DRIVE,
     CONTROL_SUPERVISOR,
     basic_speed_control_input,
@@ -27,7 +25,9 @@ from .drive_profile import (
     extended_speed_control_input,
     extended_speed_control_output,
 )
-from .schema import AssemblyField, AssemblySchema, bit, word
+from ...assemblies.schema import AssemblyField, AssemblySchema, bit, word
+from ...cip.types import INT, UINT, USINT
+from ...errors import BadRequest
 
 #: Output (consumed) and input (produced) instances of Table C-6 (173 from Table B-11, see below).
 OUTPUT_INSTANCES = (20, 21, 100, 101, 110, 123, 139)
