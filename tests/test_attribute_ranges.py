@@ -21,12 +21,13 @@ from cipstack.cip.model import AttributeSpec, CipObject
 from cipstack.cip.types import BOOL, BoolType, IntegerType
 from cipstack.devices.acg import registers as acg_registers
 from cipstack.devices.acg.device import AcgDevice
+from cipstack.devices.acg.eds_file import acg_et2_description
 from cipstack.devices.acg.objects import KeypadParameterObject, keypad_parameter_spec
 from cipstack.devices.base import Device
+from cipstack.devices.omron.eds_file import omron_description
 from cipstack.devices.profiles import build_device
 from cipstack.eds.emulated_device import EdsObject, build_eds_device
 from cipstack.eds.generator import eds_text
-from cipstack.eds.profiles import acg_et2_description, omron_description
 from cipstack.eds.reader import parse_eds
 from cipstack.scanner import Scanner
 

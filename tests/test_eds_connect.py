@@ -22,8 +22,8 @@ from eds.samples import BROKEN_EDS, BROKEN_WARNINGS, GENERIC_EDS
 from cipstack.adapter import Adapter, AdapterSettings
 from cipstack.cip.status import CipError, ExtendedStatus
 from cipstack.devices.acg.device import build_acg_device
+from cipstack.devices.acg.eds_file import acg_et2_description
 from cipstack.eds.generator import eds_text
-from cipstack.eds.profiles import acg_et2_description
 from cipstack.eds.reader import parse_eds
 from cipstack.objects.tcpip import NetworkInterface
 from cipstack.scanner import Scanner

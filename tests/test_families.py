@@ -43,7 +43,7 @@ def _build(interface, limits, options):
 
 def describe():
     # A plug-in may use the EDS tool: it sits above cipstack, not inside its devices.
-    from cipstack.eds.profiles import acg_et2_description
+    from cipstack.devices.acg.eds_file import acg_et2_description
     from cipstack.objects.identity import IdentityInfo
 
     return acg_et2_description(identity=IdentityInfo(1234, 2, 7, (1, 2), 1, "Block One"))

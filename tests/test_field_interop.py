@@ -22,8 +22,8 @@ import pytest
 
 from cipstack.cip.status import CipError
 from cipstack.cli import main
+from cipstack.devices.acg.eds_file import acg_et2_description
 from cipstack.eds.generator import eds_text
-from cipstack.eds.profiles import acg_et2_description
 from cipstack.eip.io_server import IoEndpoint
 from cipstack.eip.originator.asyncio_client import MalformedReplyError, broadcast_addresses, discover
 from cipstack.eip.originator.io_originator import ArrivalStatistics, Class1Request, OtFormat, class1_path

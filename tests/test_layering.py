@@ -22,6 +22,9 @@ PACKAGE = Path(__file__).resolve().parent.parent / "cipstack"
 #: What every part may import: the error root and the debug records on demand (both import nothing of ours).
 BELOW_ALL = {"errors", "logs"}
 #: What each part may import of the package (its own modules always, and ``BELOW_ALL``).
+#: The part of the families' EDS descriptions (``devices/*/eds_file.py``).
+FAMILY_EDS = "family_eds"
+
 ALLOWED = {
     "cip": {"errors"},
     "objects": {"cip", "errors"},
@@ -69,6 +72,10 @@ ALLOWED = {
     "capture": {"assemblies", "catalog", "cip", "componet", "devices", "eds", "eip", "errors"},
     # A fleet: adapters in worker processes, their control planes relayed.
     "fleet": {"adapter", "control", "devices", "eds", "eip", "errors", "listening", "modbus", "runtime"},
+    # A family's EDS description (``devices/NAME/eds_file.py``): the family's package, but a part above
+    # the EDS tool whose types it uses, as a family from another distribution is; nothing imports it
+    # (its declaration names it, ``Profile.eds``, and the EDS generator loads it by that name).
+    FAMILY_EDS: {"assemblies", "cip", "devices", "eds", "eip", "objects", "errors"},
 }
 
 #: Parts that are one part in two modules (the blocking and the asyncio scanner name each other).
@@ -126,10 +133,23 @@ def _imports(path: Path, type_checking: bool = False) -> frozenset[str]:
     return frozenset(found)
 
 
+def _is_family_eds(path: Path) -> bool:
+    relative = path.relative_to(PACKAGE).parts
+    return len(relative) == 3 and relative[0] == "devices" and relative[2] == "eds_file.py"
+
+
+def _part(path: Path) -> str:
+    """The part a module belongs to: its top-level package or single-file module, or ``FAMILY_EDS``."""
+    return FAMILY_EDS if _is_family_eds(path) else path.relative_to(PACKAGE).parts[0].removesuffix(".py")
+
+
 def _modules_of(part: str) -> list[Path]:
-    """A package's modules, or the single-file module ``part.py``."""
+    """A package's modules, or the single-file module ``part.py`` (``FAMILY_EDS``: the families' EDS
+    descriptions, which ``devices`` does not count as its own)."""
+    if part == FAMILY_EDS:
+        return sorted(path for path in (PACKAGE / "devices").rglob("eds_file.py") if _is_family_eds(path))
     single = PACKAGE / f"{part}.py"
-    return [single] if single.is_file() else sorted((PACKAGE / part).rglob("*.py"))
+    return [single] if single.is_file() else sorted(p for p in (PACKAGE / part).rglob("*.py") if not _is_family_eds(p))
 
 
 @pytest.mark.parametrize("part", sorted(ALLOWED))
@@ -148,7 +168,7 @@ def test_each_part_imports_only_what_lies_below_it(part: str) -> None:
 def test_nothing_below_imports_the_parts_on_top(part: str) -> None:
     wrong = {}
     for path in sorted(PACKAGE.rglob("*.py")):
-        owner = path.relative_to(PACKAGE).parts[0].removesuffix(".py")
+        owner = _part(path)
         if owner == part or owner in ON_TOP[part]:
             continue
         if part in _imports(path, type_checking=True):
@@ -175,7 +195,7 @@ def test_what_lies_below_the_adapter_never_names_it_not_even_for_types(part: str
 def test_the_import_graph_has_no_circle_through_the_adapter() -> None:
     """Follow every import (type-only ones too) from what the adapter imports: none leads back to it."""
     parts = {path.relative_to(PACKAGE).parts[0].removesuffix(".py") for path in PACKAGE.glob("*")
-             if path.suffix == ".py" or (path.is_dir() and (path / "__init__.py").exists())}
+             if path.suffix == ".py" or (path.is_dir() and (path / "__init__.py").exists())} | {FAMILY_EDS}
     graph = {part: set().union(*(_imports(p, type_checking=True) for p in _modules_of(part))) - {part}
              for part in parts if _modules_of(part)}
     seen: set[str] = set()
@@ -197,7 +217,7 @@ def test_no_arrow_runs_up_annotations_included() -> None:
 
     graph: dict[str, set[str]] = {}
     for path in sorted(PACKAGE.rglob("*.py")):
-        part = part_of(path.relative_to(PACKAGE).parts[0].removesuffix(".py"))
+        part = part_of(_part(path))
         if part in ("__init__", "__main__"):
             continue
         graph.setdefault(part, set()).update(part_of(p) for p in _imports(path, type_checking=True))
@@ -263,11 +283,29 @@ def test_no_generic_module_is_a_family_s() -> None:
 
 
 #: Modules outside ``cipstack/devices/`` that import a family's own package, each with why.
-IMPORTS_A_FAMILY: dict[str, str] = {
-    # The built-in families' EDS descriptions use the EDS tool's types, so they live in eds/ (the devices
-    # never import it); each family's declaration names its builder (``Profile.eds``).
-    "eds/profiles.py": "the ACG's and the Omron boards' EDS descriptions",
-}
+IMPORTS_A_FAMILY: dict[str, str] = {}
+
+
+def test_nothing_imports_a_family_s_eds_description() -> None:
+    """A family's EDS description is loaded by the name its declaration gives (``Profile.eds``), never
+    imported: the device's runtime does not pull the EDS tool in, and the EDS tool names no family."""
+    found = []
+    for path in sorted(PACKAGE.rglob("*.py")):
+        for node in ast.walk(_tree(path)):
+            if isinstance(node, ast.ImportFrom):
+                # ``from .. import eds_file`` inside devices/, or a module path ending in it (not the File
+                # object's function of that name).
+                module = node.module or ""
+                inside = path.relative_to(PACKAGE).parts[0] == "devices" or "devices" in module.split(".")
+                named = [module, *(alias.name for alias in node.names if inside)]
+            elif isinstance(node, ast.Import):
+                named = [alias.name for alias in node.names]
+            else:
+                continue
+            if any(name.split(".")[-1] == "eds_file" for name in named):
+                found.append(str(path.relative_to(PACKAGE)))
+    assert found == []
+    assert [p.relative_to(PACKAGE).parts[1] for p in _modules_of(FAMILY_EDS)] == ["acg", "omron"]
 
 
 def test_no_generic_module_imports_a_family_package() -> None:

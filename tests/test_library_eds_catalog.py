@@ -12,10 +12,10 @@ import pytest
 
 from cipstack.adapter import Adapter, AdapterSettings
 from cipstack.devices.acg.device import build_acg_device
+from cipstack.devices.acg.eds_file import acg_et2_description
 from cipstack.eds.catalog import catalog_from_eds
 from cipstack.eds.emulated_device import build_eds_device
 from cipstack.eds.generator import eds_text
-from cipstack.eds.profiles import acg_et2_description
 from cipstack.eds.reader import parse_eds
 from cipstack.objects.tcpip import NetworkInterface
 from cipstack.scanner import Scanner

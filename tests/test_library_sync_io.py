@@ -11,8 +11,8 @@ from pathlib import Path
 import pytest
 
 from cipstack.devices.acg.device import build_acg_device
+from cipstack.devices.acg.eds_file import acg_et2_description
 from cipstack.eds.generator import eds_text
-from cipstack.eds.profiles import acg_et2_description
 from cipstack.scanner import SyncScanner, discover_blocking
 from tests.library_support import threaded_adapter
 

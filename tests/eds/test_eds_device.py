@@ -18,15 +18,16 @@ import pytest
 from cipstack.cip.status import CipError, ExtendedStatus, GeneralStatus
 from cipstack.cip.types import BOOL, INT, SHORT_STRING, UINT, USINT
 from cipstack.devices.acg.device import build_acg_device
+from cipstack.devices.acg.eds_file import acg_et2_description
 from cipstack.devices.base import Device
 from cipstack.devices.omron.device import build_omron_device
+from cipstack.devices.omron.eds_file import omron_description
 from cipstack.devices.omron.registers import function_code_path
 from cipstack.devices.profiles import DEFAULT_MAC
 from cipstack.eds.checker import check_eds
 from cipstack.eds.emulated_device import EdsDevice, EdsDeviceError, build_eds_device
 from cipstack.eds.generator import eds_text
 from cipstack.eds.interpret import read_view
-from cipstack.eds.profiles import acg_et2_description, omron_description
 from cipstack.eds.reader import parse_eds
 from cipstack.objects.tcpip import NetworkInterface
 from cipstack.scanner import Scanner

@@ -522,8 +522,8 @@ def test_python_ethernetip_runs_what_it_can_open(adapter: Adapter, monkeypatch: 
 
 def test_list_fields_names_what_set_and_the_input_take(tmp_path: Path) -> None:
     """`cipstack io --eds F --connection N --list-fields` reads the file alone (no device needed)."""
+    from cipstack.devices.acg.eds_file import acg_et2_description
     from cipstack.eds.generator import eds_text
-    from cipstack.eds.profiles import acg_et2_description
 
     path = tmp_path / "acg.eds"
     path.write_text(eds_text(acg_et2_description()), encoding="latin-1")

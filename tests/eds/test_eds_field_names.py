@@ -31,10 +31,10 @@ from cipstack.assemblies.schema import AssemblySchema
 from cipstack.cli import main
 from cipstack.devices.acg.device import build_acg_device
 from cipstack.devices.omron.device import OmronDevice, build_omron_device
+from cipstack.devices.omron.eds_file import omron_description
 from cipstack.devices.profiles import PROFILES
 from cipstack.eds.generator import eds_text
 from cipstack.eds.interpret import read_view
-from cipstack.eds.profiles import omron_description
 from cipstack.eds.reader import read_eds
 from tests.ports import free_port
 

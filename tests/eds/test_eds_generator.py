@@ -21,7 +21,9 @@ from cipstack.assemblies.drive_profile import extended_speed_control_input, exte
 from cipstack.assemblies.schema import AssemblySchema, word
 from cipstack.cip.model import Access, AttributeSpec
 from cipstack.cip.types import INT, UINT
+from cipstack.devices.acg.eds_file import acg_et2_description
 from cipstack.devices.omron import models as omron
+from cipstack.devices.omron.eds_file import omron_description, omron_models_by_file
 from cipstack.devices.profiles import acg_et2_identity
 from cipstack.eds.checker import ERROR, check_eds
 from cipstack.eds.commands_generate import add_generate_arguments, run_generate
@@ -38,7 +40,7 @@ from cipstack.eds.generator import (
     scaling,
 )
 from cipstack.eds.model import EdsDocument, FieldKind
-from cipstack.eds.profiles import acg_et2_description, eds_file_name, omron_description, omron_models_by_file
+from cipstack.eds.profiles import eds_file_name
 from cipstack.eds.reader import parse_eds
 from cipstack.eds.writer import format_eds
 from cipstack.eip.target.io_target import IoProfile

@@ -91,4 +91,4 @@ _IDENTITY = acg_et2_identity()
 PROFILE = Profile(NAME, "ACG drive with its ACG-ET2 EtherNet/IP card (the ACG-ET2 and ACG RS-485 manuals)", _build,
                   vendor_id=_IDENTITY.vendor_id, product_codes=frozenset({_IDENTITY.product_code}),
                   catalog=_catalog, keypad=_keypad, serial_link=_serial_link(), model_info=_model_info,
-                  eds="cipstack.eds.profiles:acg_et2_description")
+                  eds="cipstack.devices.acg.eds_file:acg_et2_description")

@@ -103,7 +103,7 @@ def _profile(family: Family, description: str, default_model: str) -> Profile:
                    product_codes=frozenset(m.product_code for m in MODELS if m.family is family),
                    catalog=_catalog(family, default_model), keypad=_keypad(family), default_model=default_model,
                    models=_models(family), find_model=_find_model(family), model_info=_model_info(family),
-                   componet_gateway=_componet_gateway, eds="cipstack.eds.profiles:omron_description")
+                   componet_gateway=_componet_gateway, eds="cipstack.devices.omron.eds_file:omron_description")
 
 
 MX2 = _profile(Family.MX2, "Omron MX2 with the 3G3AX-MX2-CRT-E CompoNet option board (--model, Tables 2/C-3)",
