@@ -24,6 +24,8 @@ from . import (  # noqa: F401 - they declare checks
     router,
 )
 from . import security as security_checks  # noqa: F401 - it declares checks
+from . import security_dtls as security_dtls_checks  # noqa: F401 - it declares checks
+from . import security_psk as security_psk_checks  # noqa: F401 - it declares checks
 from .discovery import DRIVE_DEVICE_TYPES
 from .model import FINAL, GROUPS, CheckSpec, Outcome, Report, Verdict
 from .profile import faulted
