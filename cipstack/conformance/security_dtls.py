@@ -19,7 +19,7 @@ from dataclasses import replace
 from typing import TYPE_CHECKING
 
 from ..eip.wire.encapsulation import HEADER, Command
-from ..errors import CipstackError, PeerUnreachable
+from ..errors import CipstackError, PeerUnreachable, SecurityError
 from .model import Behaviour, CheckSpec, Outcome, Verdict
 from .registry import Context, check, outcome
 from .security import BRANCH, SUITE_NAMES, allowed_suites, needs_certificates
@@ -42,6 +42,10 @@ class NoDtlsPort(CipstackError):
     """Nothing answers a DTLS ClientHello at the security port."""
 
 
+class UnusableFolder(CipstackError):
+    """The credentials folder does not load (a file missing, expired ...): the battery's, not the device's."""
+
+
 def _open(ctx: Context) -> DtlsLink:
     """A DTLS session with the security port, offering the folder's client certificate and the
     certificate suites of Allowed Cipher Suites the battery knows (all of them when it lists none).
@@ -49,8 +53,12 @@ def _open(ctx: Context) -> DtlsLink:
     from ..security.credentials import Credentials
 
     assert ctx.security is not None
+    try:
+        loaded = Credentials.load(ctx.security)
+    except SecurityError as exc:
+        raise UnusableFolder(str(exc)) from None
     # The certificate handshake only: the folder's key, if it holds one, is the PSK checks' business.
-    credentials = replace(Credentials.load(ctx.security), psk=None)
+    credentials = replace(loaded, psk=None)
     allowed, _ = allowed_suites(ctx)
     known = [SUITE_NAMES[s] for s in allowed if s in SUITE_NAMES]
     if known:
@@ -106,6 +114,8 @@ def dtls_handshake(ctx: Context, spec: CheckSpec) -> Outcome:
         link = _open(ctx)
     except NoDtlsPort as exc:
         return outcome(spec, Verdict.NOT_APPLICABLE, f"{NO_PORT.name}: {exc}")
+    except UnusableFolder as exc:
+        return outcome(spec, Verdict.NOT_RUN, str(exc))
     except CipstackError as exc:
         return outcome(spec, False, str(exc))
     try:
@@ -152,6 +162,8 @@ def dtls_plaintext(ctx: Context, spec: CheckSpec) -> Outcome:
         _open(ctx).close()
     except NoDtlsPort as exc:
         return outcome(spec, Verdict.NOT_APPLICABLE, f"{NO_PORT.name}: {exc}")
+    except UnusableFolder as exc:
+        return outcome(spec, Verdict.NOT_RUN, str(exc))
     except CipstackError as exc:
         return outcome(spec, False, f"the DTLS handshake before the plain datagram failed: {exc}")
     plain, refused = _plain_answer(ctx)
@@ -164,4 +176,4 @@ def dtls_plaintext(ctx: Context, spec: CheckSpec) -> Outcome:
         return outcome(spec, False, f"refused ({refused}), then the DTLS handshake failed: {exc}", probe.exchanges)
     return outcome(spec, True, f"refused ({refused}); 44818 and DTLS serve on", probe.exchanges)
 
-__all__ = ["NO_PORT", "NoDtlsPort", "needs_pyopenssl"]
+__all__ = ["NO_PORT", "NoDtlsPort", "UnusableFolder", "needs_pyopenssl"]

@@ -14,7 +14,7 @@ import secrets
 import socket
 from dataclasses import replace
 
-from ..errors import CipstackError
+from ..errors import CipstackError, SecurityError
 from .model import Behaviour, CheckSpec, Outcome, Verdict
 from .registry import Context, check, outcome
 from .security import BRANCH, allowed_suites, needs_folder, register_over
@@ -29,6 +29,12 @@ def _needs_key(ctx: Context, spec: CheckSpec) -> Outcome | None:
     if not (ctx.security / "psk.txt").exists():
         return outcome(spec, Verdict.NOT_APPLICABLE, f"no psk.txt in {ctx.security} (`cipstack security init "
                                                      "--psk` writes one): the device's keys are not known")
+    from ..security.credentials import Credentials
+
+    try:
+        Credentials.load(ctx.security)
+    except SecurityError as exc:   # the battery's folder, not the device
+        return outcome(spec, Verdict.NOT_RUN, str(exc))
     if importlib.util.find_spec("OpenSSL") is None:
         return outcome(spec, Verdict.NOT_RUN, "needs pyOpenSSL: pip install 'cipstack[security]'")
     if not _psk_suites(ctx):
@@ -56,7 +62,7 @@ def _offer(ctx: Context, identity: bytes | None = None, register: bool = True) -
     from ..security.credentials import Credentials, PreSharedKey
 
     assert ctx.security is not None
-    credentials = Credentials.load(ctx.security)
+    credentials = Credentials.load(ctx.security)   # _needs_key loaded it once already
     assert credentials.psk is not None   # _needs_key saw psk.txt
     if identity is not None:
         credentials = replace(credentials, psk=PreSharedKey(identity, credentials.psk.key))

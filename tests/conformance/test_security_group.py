@@ -137,3 +137,24 @@ async def test_a_folder_of_a_key_alone_runs_the_objects_checks_not_the_tls_ones(
     allowed = next(o for o in report if o.id == "security.tls.allowed_suite")
     assert allowed.observed == (f"needs ca.pem, client.pem, client.key in {folder} (the TLS checks handshake "
                                 "with certificates, not with a pre-shared key)")
+
+
+def test_a_folder_that_does_not_load_leaves_the_dtls_and_key_checks_not_run(tmp_path: Path) -> None:
+    """The folder is the battery's: a psk.txt that does not read is named, and no check of the device fails
+    for it."""
+    import shutil
+
+    from tests.conformance.fake_target import FakeTarget
+
+    with FakeTarget(security=True) as target:
+        assert target.security is not None
+        folder = tmp_path / "broken"
+        shutil.copytree(target.security.folder, folder)
+        (folder / "psk.txt").write_text("no colon here\n")
+        report = run(target.host, target.port, groups="security", security=folder,
+                     security_port=target.security.port, timeout=2.0)
+    verdicts = {o.id: (o.verdict.value, o.observed) for o in report}
+    loaded = {i for i in SECURITY_CHECKS if i.startswith(("security.dtls.", "security.psk."))}
+    assert {i: verdicts[i] for i in loaded} == dict.fromkeys(loaded, ("not run", f"{folder / 'psk.txt'}: not one "
+                                                                                 "line IDENTITY:HEX"))
+    assert all(verdicts[i][0] == "pass" for i in SECURITY_CHECKS - loaded), verdicts
