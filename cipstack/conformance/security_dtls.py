@@ -46,10 +46,16 @@ class UnusableFolder(CipstackError):
     """The credentials folder does not load (a file missing, expired ...): the battery's, not the device's."""
 
 
+class NothingToOffer(CipstackError):
+    """Allowed Cipher Suites lists no certificate suite the battery knows."""
+
+
 def _open(ctx: Context) -> DtlsLink:
     """A DTLS session with the security port, offering the folder's client certificate and the
-    certificate suites of Allowed Cipher Suites the battery knows (all of them when it lists none).
-    ``NoDtlsPort`` when nothing answers; ``SecurityError`` (naming the cause) when the device refuses."""
+    certificate suites of Allowed Cipher Suites the battery knows (OpenSSL's own when the attribute
+    does not read). ``NoDtlsPort`` when nothing answers; ``UnusableFolder`` when the folder does not
+    load; ``NothingToOffer`` when no allowed suite is one the battery knows; ``SecurityError`` (naming
+    the cause) when the device refuses."""
     from ..security.credentials import Credentials
 
     assert ctx.security is not None
@@ -61,6 +67,9 @@ def _open(ctx: Context) -> DtlsLink:
     credentials = replace(loaded, psk=None)
     allowed, _ = allowed_suites(ctx)
     known = [SUITE_NAMES[s] for s in allowed if s in SUITE_NAMES]
+    if allowed and not known:
+        raise NothingToOffer("no allowed certificate suite this battery can offer: "
+                             + ", ".join(f"0x{s:04X}" for s in allowed))
     if known:
         credentials = credentials.offering(*known)
     try:
@@ -71,6 +80,20 @@ def _open(ctx: Context) -> DtlsLink:
         if "no answer to the handshake" in str(exc) or "nothing listens there" in str(exc):
             raise NoDtlsPort(str(exc)) from None
         raise
+
+
+def _session(ctx: Context, spec: CheckSpec, failed: str = "") -> tuple[DtlsLink | None, Outcome | None]:
+    """``_open``'s session, or the outcome of the check when there is none (``failed`` before a refusal)."""
+    try:
+        return _open(ctx), None
+    except NoDtlsPort as exc:
+        return None, outcome(spec, Verdict.NOT_APPLICABLE, f"{NO_PORT.name}: {exc}")
+    except UnusableFolder as exc:
+        return None, outcome(spec, Verdict.NOT_RUN, str(exc))
+    except NothingToOffer as exc:
+        return None, outcome(spec, Verdict.NOT_APPLICABLE, str(exc))
+    except CipstackError as exc:
+        return None, outcome(spec, False, failed + str(exc))
 
 
 def needs_pyopenssl(ctx: Context, spec: CheckSpec) -> Outcome | None:
@@ -110,14 +133,10 @@ def dtls_handshake(ctx: Context, spec: CheckSpec) -> Outcome:
     skipped = needs_pyopenssl(ctx, spec)
     if skipped is not None:
         return skipped
-    try:
-        link = _open(ctx)
-    except NoDtlsPort as exc:
-        return outcome(spec, Verdict.NOT_APPLICABLE, f"{NO_PORT.name}: {exc}")
-    except UnusableFolder as exc:
-        return outcome(spec, Verdict.NOT_RUN, str(exc))
-    except CipstackError as exc:
-        return outcome(spec, False, str(exc))
+    link, verdict = _session(ctx, spec)
+    if link is None:
+        assert verdict is not None
+        return verdict
     try:
         problem = _list_identity(link, ctx.timeout)
         described = link.channel.description()
@@ -158,14 +177,11 @@ def dtls_plaintext(ctx: Context, spec: CheckSpec) -> Outcome:
     if skipped is not None:
         return skipped
     # A handshake first: a port that never served DTLS is told from one the plain datagram broke.
-    try:
-        _open(ctx).close()
-    except NoDtlsPort as exc:
-        return outcome(spec, Verdict.NOT_APPLICABLE, f"{NO_PORT.name}: {exc}")
-    except UnusableFolder as exc:
-        return outcome(spec, Verdict.NOT_RUN, str(exc))
-    except CipstackError as exc:
-        return outcome(spec, False, f"the DTLS handshake before the plain datagram failed: {exc}")
+    link, verdict = _session(ctx, spec, "the DTLS handshake before the plain datagram failed: ")
+    if link is None:
+        assert verdict is not None
+        return verdict
+    link.close()
     plain, refused = _plain_answer(ctx)
     if plain is not None:
         return outcome(spec, False, f"answered in plain: {plain[:HEADER.size].hex()}")
@@ -176,4 +192,4 @@ def dtls_plaintext(ctx: Context, spec: CheckSpec) -> Outcome:
         return outcome(spec, False, f"refused ({refused}), then the DTLS handshake failed: {exc}", probe.exchanges)
     return outcome(spec, True, f"refused ({refused}); 44818 and DTLS serve on", probe.exchanges)
 
-__all__ = ["NO_PORT", "NoDtlsPort", "UnusableFolder", "needs_pyopenssl"]
+__all__ = ["NO_PORT", "NoDtlsPort", "NothingToOffer", "UnusableFolder", "needs_pyopenssl"]
