@@ -145,7 +145,7 @@ def run(host: str, port: int = DEFAULT_PORT, *, eds: str | os.PathLike[str] | Ed
     profile's motion checks (``motion``) run the motor only with ``allow_motion``, and the checks that
     exhaust the device's resources on purpose (``CheckSpec.stress``: 40 sessions at once) only with
     ``allow_stress``. ``security``: a CIP Security credentials folder (``cipstack security init``),
-    which enables group ``security`` against the TLS port ``security_port``; without it that group's
+    which enables group ``security`` against the TLS and DTLS ports ``security_port``; without it that group's
     checks are not run. A target that stops answering stops the run: the
     check after which it went silent fails with that finding, every later one is not run
     (``Report.stopped`` says where and why). ``TargetUnreachable`` when the target does not accept a
