@@ -7,6 +7,7 @@ from __future__ import annotations
 
 import asyncio
 import json
+import socket
 from pathlib import Path
 
 import pytest
@@ -19,6 +20,7 @@ from cipstack.conformance import CHECKS, Verdict, run
 from cipstack.scanner import SyncScanner
 from cipstack.security.push import configure
 from tests.ports import free_port
+from tests.security_peers import OPENSSL, needs_openssl
 
 from .conftest import AdapterStarter
 
@@ -158,3 +160,43 @@ def test_a_folder_that_does_not_load_leaves_the_dtls_and_key_checks_not_run(tmp_
     assert {i: verdicts[i] for i in loaded} == dict.fromkeys(loaded, ("not run", f"{folder / 'psk.txt'}: not one "
                                                                                  "line IDENTITY:HEX"))
     assert all(verdicts[i][0] == "pass" for i in SECURITY_CHECKS - loaded), verdicts
+
+
+@needs_openssl
+def test_openssl_s_server_which_takes_any_psk_identity_fails_the_unknown_identity_check(psk_lab: Path) -> None:
+    """A real peer: `openssl s_server -psk` serves whatever identity the client names (it only warns), and
+    answers no EtherNet/IP; it listens on TCP alone, so the DTLS checks find no port there (ICMP)."""
+    import subprocess
+
+    from tests.conformance.fake_target import FakeTarget
+    from tests.waiting import stop_process, wait_for
+
+    assert OPENSSL is not None
+    identity, _, key = (psk_lab / "psk.txt").read_text().strip().partition(":")
+    port = free_port()
+    server = subprocess.Popen([OPENSSL, "s_server", "-tls1_2", "-accept", f"127.0.0.1:{port}", "-quiet", "-nocert",
+                               "-psk", key, "-psk_identity", identity, "-cipher", "PSK"],
+                              stdin=subprocess.PIPE, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+    try:
+        def listening() -> bool:
+            try:
+                socket.create_connection(("127.0.0.1", port), timeout=0.2).close()
+            except OSError:
+                return server.poll() is not None
+            return True
+
+        wait_for(listening, 30, "s_server to listen")
+        assert server.poll() is None
+        with FakeTarget() as target:   # the plain port, whose objects say nothing of the suites
+            report = run(target.host, target.port, groups="security", security=psk_lab, security_port=port,
+                         timeout=2.0)
+    finally:
+        stop_process(server)
+    verdicts = {o.id: (o.verdict.value, o.observed) for o in report}
+    assert verdicts["security.psk.unknown_identity"][0] == "fail"
+    assert verdicts["security.psk.unknown_identity"][1].startswith("identity 'cipstack-conform-")
+    assert verdicts["security.psk.handshake"] == ("fail", "no reply to RegisterSession over TLS within 2 s")
+    for dtls in ("security.dtls.handshake", "security.dtls.plaintext"):
+        verdict, observed = verdicts[dtls]
+        assert verdict == "n/a" and observed.startswith("no DTLS port: ")
+        assert observed.endswith(f"DTLS with 127.0.0.1:{port}: nothing listens there (ICMP port unreachable)")
