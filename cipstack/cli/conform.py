@@ -34,9 +34,10 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                         "opens 40 TCP connections and sessions at once): a device with fewer may stop or crash")
     p.add_argument("--security", metavar="DIR", type=Path,
                    help="CIP Security: the folder of `cipstack security init` whose CA the device trusts; enables "
-                        "group security (the security objects, the configuration session, the TLS port)")
+                        "group security (the security objects, the configuration session, the TLS and DTLS ports, "
+                        "and the pre-shared key of its psk.txt)")
     p.add_argument("--security-port", type=int, default=2221, metavar="N",
-                   help="the device's TLS port for group security (default %(default)s)")
+                   help="the device's TLS port (TCP) and DTLS port (UDP) for group security (default %(default)s)")
     p.add_argument("--strict", action="store_true",
                    help="warnings are failures: in the exit status and the JUnit report")
     p.add_argument("--json", action="store_true", help="the report as one JSON object on stdout")

@@ -85,7 +85,7 @@ class Context:
     #: Whether the target still answers, shared by every probe of the run (None: not asked).
     liveness: Liveness | None = None
     #: CIP Security: the credentials folder (``cipstack security init``) group security uses, and the
-    #: target's TLS port.
+    #: target's TLS port (TCP) and DTLS port (UDP), one number as on a device (2221).
     security: Path | None = None
     security_port: int = 2221
 

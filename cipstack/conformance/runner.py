@@ -24,6 +24,8 @@ from . import (  # noqa: F401 - they declare checks
     router,
 )
 from . import security as security_checks  # noqa: F401 - it declares checks
+from . import security_dtls as security_dtls_checks  # noqa: F401 - it declares checks
+from . import security_psk as security_psk_checks  # noqa: F401 - it declares checks
 from .discovery import DRIVE_DEVICE_TYPES
 from .model import FINAL, GROUPS, CheckSpec, Outcome, Report, Verdict
 from .profile import faulted
@@ -143,7 +145,7 @@ def run(host: str, port: int = DEFAULT_PORT, *, eds: str | os.PathLike[str] | Ed
     profile's motion checks (``motion``) run the motor only with ``allow_motion``, and the checks that
     exhaust the device's resources on purpose (``CheckSpec.stress``: 40 sessions at once) only with
     ``allow_stress``. ``security``: a CIP Security credentials folder (``cipstack security init``),
-    which enables group ``security`` against the TLS port ``security_port``; without it that group's
+    which enables group ``security`` against the TLS and DTLS ports ``security_port``; without it that group's
     checks are not run. A target that stops answering stops the run: the
     check after which it went silent fails with that finding, every later one is not run
     (``Report.stopped`` says where and why). ``TargetUnreachable`` when the target does not accept a

@@ -15,6 +15,7 @@ import ssl
 import tempfile
 from collections.abc import Callable
 from pathlib import Path
+from typing import Protocol
 
 from ..cip.epath import request_path
 from ..eip.wire.encapsulation import HEADER, REGISTER_SESSION_DATA, Command
@@ -86,16 +87,16 @@ ATTRIBUTES: dict[tuple[int, int], tuple[str, Callable[[bytes], str | None]]] = {
 }
 
 
-def _needs_folder(ctx: Context, spec: CheckSpec) -> Outcome | None:
+def needs_folder(ctx: Context, spec: CheckSpec) -> Outcome | None:
     if ctx.security is None:
         return outcome(spec, Verdict.NOT_RUN, "needs --security DIR (the CA the device trusts, a client certificate)")
     return None
 
 
-def _needs_certificates(ctx: Context, spec: CheckSpec) -> Outcome | None:
+def needs_certificates(ctx: Context, spec: CheckSpec) -> Outcome | None:
     """The TLS checks handshake with the folder's CA and client certificate: a folder of a pre-shared
     key alone (`security init --psk-only`) does not run them."""
-    skipped = _needs_folder(ctx, spec)
+    skipped = needs_folder(ctx, spec)
     if skipped is not None or ctx.security is None:
         return skipped
     missing = [name for name in ("ca.pem", "client.pem", "client.key") if not (ctx.security / name).exists()]
@@ -115,7 +116,7 @@ def _read(probe: Probe, class_id: int, attribute: int) -> tuple[int | None, byte
        "Certificate Management 0x5F/1 attributes 1-5 answer success, each the size of its type",
        BRANCH + "; Wireshark packet-enip.c (dissect_eip_security_*, dissect_eip_cert_*)")
 def attributes(ctx: Context, spec: CheckSpec) -> Outcome:
-    skipped = _needs_folder(ctx, spec)
+    skipped = needs_folder(ctx, spec)
     if skipped is not None:
         return skipped
     probe = ctx.probe()
@@ -136,7 +137,7 @@ def attributes(ctx: Context, spec: CheckSpec) -> Outcome:
               Code(0x08, "service not supported", "Vol. 1 appendix B"),
               Code(0x0F, "privilege violation", "Vol. 1 appendix B")))
 def psk_unreadable(ctx: Context, spec: CheckSpec) -> Outcome:
-    skipped = _needs_folder(ctx, spec)
+    skipped = needs_folder(ctx, spec)
     if skipped is not None:
         return skipped
     probe = ctx.probe()
@@ -153,7 +154,7 @@ def psk_unreadable(ctx: Context, spec: CheckSpec) -> Outcome:
        BRANCH + " (Kick_Timer only while Configuration In Progress)",
        codes=(Code(0x0C, "object state conflict", "Volume 8 5-4.7.2"),))
 def session_outside(ctx: Context, spec: CheckSpec) -> Outcome:
-    skipped = _needs_folder(ctx, spec)
+    skipped = needs_folder(ctx, spec)
     if skipped is not None:
         return skipped
     probe = ctx.probe()
@@ -168,7 +169,7 @@ def session_outside(ctx: Context, spec: CheckSpec) -> Outcome:
        BRANCH + " (Begin_Config from Factory Default only, else 0x0C)",
        codes=(Code(0x0C, "object state conflict", "Volume 8 5-4.7.1"),))
 def session_begin(ctx: Context, spec: CheckSpec) -> Outcome:
-    skipped = _needs_folder(ctx, spec)
+    skipped = needs_folder(ctx, spec)
     if skipped is not None:
         return skipped
     probe = ctx.probe()
@@ -214,27 +215,41 @@ def _client_context(folder: Path, suite: str | None = None, client: Path | None 
     return context
 
 
+class Stream(Protocol):
+    """What ``register_over`` uses of a TLS socket (the standard library's, or ``tls_psk.TlsSocket``)."""
+
+    def sendall(self, data: bytes) -> None: ...
+
+    def recv(self, size: int) -> bytes: ...
+
+
+def register_over(tls: Stream, over: str = "TLS") -> str | None:
+    """RegisterSession through an established TLS session: None when it is answered, else why not."""
+    tls.sendall(frame(Command.REGISTER_SESSION, REGISTER_SESSION_DATA.pack(1, 0)))
+    head = b""
+    while len(head) < HEADER.size:
+        chunk = tls.recv(HEADER.size - len(head))
+        if not chunk:
+            return f"the device closed the {over} connection before replying to RegisterSession"
+        head += chunk
+    command, _, session, status = HEADER.unpack(head)[:4]
+    if command != Command.REGISTER_SESSION or status != 0 or not session:
+        return f"RegisterSession over {over} answered {head.hex()}"
+    return None
+
+
 def _tls_register(ctx: Context, context: ssl.SSLContext) -> str | None:
     """Handshake on the TLS port and RegisterSession through it: None when both succeed, else why not."""
     try:
         with socket.create_connection((ctx.host, ctx.security_port), ctx.timeout) as sock, \
                 context.wrap_socket(sock) as tls:
-            tls.sendall(frame(Command.REGISTER_SESSION, REGISTER_SESSION_DATA.pack(1, 0)))
-            head = b""
-            while len(head) < HEADER.size:
-                chunk = tls.recv(HEADER.size - len(head))
-                if not chunk:
-                    return "the device closed the TLS connection before replying to RegisterSession"
-                head += chunk
-            command, _, session, status = HEADER.unpack(head)[:4]
-            if command != Command.REGISTER_SESSION or status != 0 or not session:
-                return f"RegisterSession over TLS answered {head.hex()}"
-            return None
+            return register_over(tls)
     except (OSError, ssl.SSLError) as exc:
         return f"{type(exc).__name__}: {exc}"
 
 
-def _allowed(ctx: Context) -> tuple[list[int], Probe]:
+def allowed_suites(ctx: Context) -> tuple[list[int], Probe]:
+    """The IANA ids of Allowed Cipher Suites (0x5E/1/4; empty when unreadable) and the probe that read them."""
     probe = ctx.probe()
     status, data = _read(probe, EIP_SECURITY, 4)
     if status != 0 or _suites(data) is not None:
@@ -246,12 +261,12 @@ def _allowed(ctx: Context) -> tuple[list[int], Probe]:
        "a client offering one suite of Allowed Cipher Suites (0x5E/1/4), with a certificate of the trusted "
        "CA, completes the handshake on the TLS port and its RegisterSession is answered",
        "OpENer issue #228 (TLS 1.2); packet-enip.c ENIP_SECURE_PORT; " + BRANCH)
-def tls_allowed(ctx: Context, spec: CheckSpec) -> Outcome:
-    skipped = _needs_certificates(ctx, spec)
+def tlsallowed_suites(ctx: Context, spec: CheckSpec) -> Outcome:
+    skipped = needs_certificates(ctx, spec)
     if skipped is not None:
         return skipped
     assert ctx.security is not None
-    allowed, probe = _allowed(ctx)
+    allowed, probe = allowed_suites(ctx)
     known = [s for s in allowed if s in SUITE_NAMES]
     if not known:
         return outcome(spec, Verdict.NOT_APPLICABLE, f"no allowed suite this battery can offer: "
@@ -267,11 +282,11 @@ def tls_allowed(ctx: Context, spec: CheckSpec) -> Outcome:
        "not list fails the handshake, for each such suite the battery knows",
        BRANCH + " (attribute 4: the suites the device may use)")
 def tls_disallowed(ctx: Context, spec: CheckSpec) -> Outcome:
-    skipped = _needs_certificates(ctx, spec)
+    skipped = needs_certificates(ctx, spec)
     if skipped is not None:
         return skipped
     assert ctx.security is not None
-    allowed, probe = _allowed(ctx)
+    allowed, probe = allowed_suites(ctx)
     if not allowed:
         return outcome(spec, False, "Allowed Cipher Suites unreadable", probe.exchanges)
     outside = [s for s in SUITE_NAMES if s not in allowed]
@@ -287,7 +302,7 @@ def tls_disallowed(ctx: Context, spec: CheckSpec) -> Outcome:
        "with Verify Client Certificate (0x5E/1/9) on, a TLS 1.2 client whose certificate another CA "
        "signed fails the handshake", BRANCH + " (attribute 9)")
 def tls_untrusted(ctx: Context, spec: CheckSpec) -> Outcome:
-    skipped = _needs_certificates(ctx, spec)
+    skipped = needs_certificates(ctx, spec)
     if skipped is not None:
         return skipped
     assert ctx.security is not None
@@ -310,7 +325,7 @@ def tls_untrusted(ctx: Context, spec: CheckSpec) -> Outcome:
        "then port 44818 and a TLS handshake still answer",
        "packet-enip.c (2221 carries TLS); OpENer issue #231")
 def tls_plaintext(ctx: Context, spec: CheckSpec) -> Outcome:
-    skipped = _needs_certificates(ctx, spec)
+    skipped = needs_certificates(ctx, spec)
     if skipped is not None:
         return skipped
     assert ctx.security is not None
@@ -328,4 +343,5 @@ def tls_plaintext(ctx: Context, spec: CheckSpec) -> Outcome:
                    + "); 44818 and TLS serve on", probe.exchanges)
 
 
-__all__ = ["ATTRIBUTES", "SUITE_NAMES"]
+__all__ = ["ATTRIBUTES", "BRANCH", "SUITE_NAMES", "Stream", "allowed_suites", "needs_certificates", "needs_folder",
+           "register_over"]

@@ -38,6 +38,9 @@ VARIANTS = {
     "cm.forward_open.transport_class": "0x011C (transport class not supported) instead of 0x0103",
     "cm.forward_open.rpi": "an RPI of 1 us accepted with a granted API of 10 ms, produced at 10 ms",
     "cm.forward_open.ot_size": "0x0109 (invalid connection size) instead of 0x0127",
+    "security.dtls.plaintext": "a fatal DTLS alert in answer to a plain datagram, instead of silence",
+    "security.psk.unknown_identity": "an unknown identity served another key (decrypt_error), instead of "
+                                     "the unknown_psk_identity alert",
 }
 #: The interval this target produces at when it accepts an RPI it cannot (the API it really has).
 CYCLE_US = 10_000
@@ -195,7 +198,7 @@ class FakeTarget:
             self._start(target)
         #: CIP Security (``security``): its objects and a TLS port (``fake_security``).
         self.security = FakeSecurity(self.deviates, host, self._start, self._serve_secured,
-                                     self._stop.is_set) if security else None
+                                     self._stop.is_set, self._answer, variant) if security else None
 
     @property
     def address(self) -> str:
@@ -341,6 +344,23 @@ class FakeTarget:
         """A connection the TLS port accepted: the same encapsulation server as on the plain port."""
         self._local.conn = conn
         self._serve_frames(conn, {"session": 0})
+
+    def _answer(self, message: bytes, state: dict[str, int]) -> bytes | None:
+        """One encapsulation message of a session that is not a TCP stream (a DTLS record, a PSK
+        session): its reply, or None when none is due."""
+        if len(message) < HEADER.size:
+            return None
+        command, length, session, _status, context, options = HEADER.unpack_from(message)
+        if options:
+            return None  # discarded (wire.md)
+        try:
+            answer = self._frame(command, message[HEADER.size:HEADER.size + length], session, state)
+            status = 0
+        except EncapStatus as exc:
+            answer, status = b"", exc.status
+        if answer is None:
+            return None
+        return HEADER.pack(command, len(answer), state["session"] or session, status, context, 0) + answer
 
     def _serve_frames(self, conn: socket.socket, state: dict[str, int]) -> None:
         with conn:

@@ -59,7 +59,7 @@ def test_every_check_has_a_deviation_in_the_fake() -> None:
     battery without a way to fail it is caught here (the parametrized test above would run it, and this
     says why)."""
     source = "".join(Path(__file__).with_name(name).read_text(encoding="utf-8")
-                     for name in ("fake_target.py", "fake_drive.py", "fake_security.py"))
+                     for name in ("fake_target.py", "fake_drive.py", "fake_security.py", "fake_secured.py"))
     assert [i for i in check_ids() if f'"{i}"' not in source] == []
 
 
@@ -90,10 +90,30 @@ def test_a_connection_left_behind_is_named_with_how_to_clear_it() -> None:
 @pytest.mark.parametrize("check_id", sorted(VARIANTS))
 def test_every_answer_the_specification_permits_passes(check_id: str) -> None:
     """Where the specification allows more than one answer, the other one passes too."""
-    assert CHECKS[check_id].codes or check_id == "cm.forward_open.rpi"
-    with FakeTarget(variant=check_id) as target:
+    assert CHECKS[check_id].codes or CHECKS[check_id].behaviours or check_id == "cm.forward_open.rpi"
+    group = CHECKS[check_id].group
+    if group == "security":
+        needs("cryptography")
+    with FakeTarget(variant=check_id, security=group == "security") as target:
         report = run_group(target, CHECKS[check_id].group)
     assert {o.name: o.observed for o in report if o.verdict is not Verdict.PASS} == {}, VARIANTS[check_id]
+
+
+@pytest.mark.parametrize("variant", ["no-dtls:unreachable", "no-dtls:silent"])
+def test_a_device_without_a_dtls_port_is_not_applicable_to_the_dtls_checks(variant: str) -> None:
+    """A device that serves TLS and no DTLS (its UDP port closed, or silent): the DTLS checks say so
+    and do not apply; the other checks of the group are not disturbed."""
+    needs("cryptography")
+    with FakeTarget(variant=variant, security=True) as target:
+        report = run_group(target, "security")
+    dtls = {o.id: o for o in report if o.id.startswith("security.dtls.")}
+    assert {i: o.verdict for i, o in dtls.items()} == dict.fromkeys(dtls, Verdict.NOT_APPLICABLE)
+    reason = "nothing listens there (ICMP port unreachable)" if variant.endswith("unreachable") else \
+        "no answer to the handshake"
+    assert all(o.observed.startswith("no DTLS port: ") and reason in o.observed for o in dtls.values()), \
+        [o.observed for o in dtls.values()]
+    assert {o.name: o.observed for o in report if o.verdict not in (Verdict.PASS, Verdict.NOT_APPLICABLE)} == {}
+    assert len(dtls) == 2
 
 
 def test_every_check_that_judges_a_status_declares_the_codes_with_their_reference() -> None:
