@@ -84,6 +84,11 @@ class NoReply(PeerUnreachable, TimeoutError):
     ``except TimeoutError`` written for the reply that does not come still catches it."""
 
 
+class NothingListens(PeerUnreachable, ConnectionRefusedError):
+    """Nothing listens at the peer's port: a datagram answered by ICMP port unreachable (a
+    ``ConnectionRefusedError`` too, as the socket reports it)."""
+
+
 def connect_failure(failure: BaseException) -> str:
     """Why a connection could not be made, in the operating system's words for its error number.
 

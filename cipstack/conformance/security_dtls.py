@@ -19,7 +19,7 @@ from dataclasses import replace
 from typing import TYPE_CHECKING
 
 from ..eip.wire.encapsulation import HEADER, Command
-from ..errors import CipstackError, PeerUnreachable, SecurityError
+from ..errors import CipstackError, NoReply, NothingListens, SecurityError
 from .model import Behaviour, CheckSpec, Outcome, Verdict
 from .registry import Context, check, outcome
 from .security import BRANCH, SUITE_NAMES, allowed_suites, needs_certificates
@@ -74,12 +74,10 @@ def _open(ctx: Context) -> DtlsLink:
         credentials = credentials.offering(*known)
     try:
         return credentials.datagram_link(ctx.host, ctx.security_port, ctx.timeout)
-    except PeerUnreachable as exc:
-        # DtlsLink's two ways of saying that nothing serves DTLS there; any other (the device closed
-        # the association during the handshake) is a refusal.
-        if "no answer to the handshake" in str(exc) or "nothing listens there" in str(exc):
-            raise NoDtlsPort(str(exc)) from None
-        raise
+    except (NoReply, NothingListens) as exc:
+        # Nothing serves DTLS there: no answer to the handshake, or ICMP port unreachable; any other
+        # failure (the device closed the association during the handshake) is a refusal.
+        raise NoDtlsPort(str(exc)) from None
 
 
 def _session(ctx: Context, spec: CheckSpec, failed: str = "") -> tuple[DtlsLink | None, Outcome | None]:

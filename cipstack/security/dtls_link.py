@@ -20,7 +20,7 @@ from collections.abc import Callable
 from typing import TYPE_CHECKING
 
 from ..eip.io_server import RECEIVE_BUFFER
-from ..errors import NoReply, PeerUnreachable, SecurityError
+from ..errors import NoReply, NothingListens, PeerUnreachable, SecurityError
 from .dtls import DtlsChannel, describe_dtls_failure, dtls_context
 from .dtls_target import is_io_datagram
 
@@ -55,6 +55,9 @@ class DtlsLink:
             self.sock.setsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF, RECEIVE_BUFFER)
             self.channel = DtlsChannel.client(dtls_context(credentials, server=False))
             self._handshake(time.monotonic() + timeout)
+        except PeerUnreachable:   # already says where and why (an OSError too: not wrapped again)
+            self.sock.close()
+            raise
         except OSError as exc:
             self.sock.close()
             raise PeerUnreachable.connecting(host, port, exc) from None
@@ -68,8 +71,8 @@ class DtlsLink:
         while not channel.established:
             now = time.monotonic()
             if now >= deadline:
-                raise PeerUnreachable(f"DTLS with {self.host}:{self.port}: no answer to the handshake "
-                                      "(is the device serving CIP Security over UDP there?)")
+                raise NoReply(f"DTLS with {self.host}:{self.port}: no answer to the handshake "
+                              "(is the device serving CIP Security over UDP there?)")
             retransmit = channel.timeout()
             wait = deadline - now if retransmit is None else min(deadline - now, max(retransmit, 0.0))
             if not select.select([self.sock], [], [], wait)[0]:
@@ -95,8 +98,8 @@ class DtlsLink:
             except (BlockingIOError, InterruptedError):
                 return out
             except ConnectionRefusedError:
-                raise PeerUnreachable(f"DTLS with {self.host}:{self.port}: nothing listens there "
-                                      "(ICMP port unreachable)") from None
+                raise NothingListens(f"DTLS with {self.host}:{self.port}: nothing listens there "
+                                     "(ICMP port unreachable)") from None
 
     def _sort(self, records: list[bytes], now: float) -> None:
         for plain in records:
@@ -114,8 +117,8 @@ class DtlsLink:
             except (BlockingIOError, InterruptedError):
                 pass   # a full buffer: DTLS resends what matters (the handshake), class 1 sends newer data
             except ConnectionRefusedError:
-                raise PeerUnreachable(f"DTLS with {self.host}:{self.port}: nothing listens there "
-                                      "(ICMP port unreachable)") from None
+                raise NothingListens(f"DTLS with {self.host}:{self.port}: nothing listens there "
+                                     "(ICMP port unreachable)") from None
 
     def _pump(self) -> None:
         """Read what arrived, sorting records into the stream and the class 1 queue."""
