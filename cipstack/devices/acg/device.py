@@ -128,6 +128,8 @@ class AcgDevice(Device):
         #: Each speed output's last data applied, the drive it went to and the drive's ``command_mark``
         #: right after: the same data again, to the same unchanged drive, is not applied again.
         self._applied: dict[int, tuple[bytes, AcgDrive, tuple[object, ...]]] = {}
+        #: Each speed input's last bytes, with the drive and its ``status_mark`` they were made from.
+        self._produced: dict[int, tuple[AcgDrive, tuple[object, ...], bytes]] = {}
         for instance in (*OUTPUT_INSTANCES, *INPUT_INSTANCES):
             point = self._assembly_point(instance, speed[instance].name)
             self._points[instance] = point
@@ -179,8 +181,13 @@ class AcgDevice(Device):
                              name=schema.name)
 
     def _produce_speed(self, schema: AssemblySchema) -> bytes:
-        """Inputs 70/71/110/111 (ACG-ET2 manual, input instances and the bits table after them)."""
+        """Inputs 70/71/110/111 (ACG-ET2 manual, input instances and the bits table after them); made
+        again only when the drive's ``status_mark`` moved since the last (every class 1 firing asks)."""
         drive = self.drive
+        mark = drive.status_mark()
+        made = self._produced.get(schema.instance)
+        if made is not None and made[0] is drive and made[1] == mark:
+            return made[2]
         hz = schema.instance in HZ_INPUTS
         values = {
             "faulted": drive.faulted,                          # 0x29 attribute 10
@@ -197,7 +204,9 @@ class AcgDevice(Device):
                 at_reference=drive.at_reference,               # 0x2A attribute 3
                 drive_state=int(drive.drive_state),            # 0x29 attribute 6
             )
-        return schema.encode(values)
+        produced = schema.encode(values)
+        self._produced[schema.instance] = drive, mark, produced
+        return produced
 
     def _produce_words(self, instance: int) -> bytes:
         """Inputs 141-148: the words of 0x0100-0x0107, the registers CM.31-CM.38 name."""

@@ -329,6 +329,13 @@ class AcgDrive(TimedSimulation):
         return (self._writes, supervisor.run_forward, supervisor.run_reverse, supervisor.fault_reset,
                 values[_CMD_SOURCE], state.command, state.trip, values[_SPEED_REFERENCE_ADDRESS])
 
+    def status_mark(self) -> tuple[object, ...]:
+        """What the speed input assemblies (70/71/110/111) are made of: ``command_mark``, the output
+        (on, frequency), a lost-command reference and the reference source. Equal marks, equal inputs."""
+        state = self._state
+        return (self.command_mark(), state.output_on, state.output_hz, state.lost_reference,
+                state.values[_FREQ_REF_SOURCE])
+
     def set_run_forward(self, value: bool, now: float) -> RunAction:
         """Class 0x29 attribute 3 alone."""
         return self.set_run_command(bool(value), self.control_supervisor.run_reverse, now)
