@@ -103,6 +103,17 @@ def fleet_pids(parent: int) -> list[int]:
     return found
 
 
+def user_system_seconds(pids: Sequence[int]) -> tuple[float, float]:
+    """(user, system) CPU seconds of ``pids`` from ``/proc/PID/stat`` (clock ticks): the interpreter's
+    work against the kernel's (system calls, and on loopback the delivery of what is sent)."""
+    user = system = 0.0
+    for pid in pids:
+        with open(f"/proc/{pid}/stat") as stat:
+            fields = stat.read().rsplit(")", 1)[1].split()
+        user, system = user + int(fields[11]) / CLOCK_TICKS, system + int(fields[12]) / CLOCK_TICKS
+    return user, system
+
+
 def rss_bytes(pids: Sequence[int]) -> int:
     total = 0
     for pid in pids:
@@ -249,10 +260,13 @@ def run_case(devices: int, workers: int, scanners: int, seconds: float, block: i
                 channel.send("go")
             time.sleep(1.0)
             (cpu_before, wait_before), wall_before = scheduled(pids), time.monotonic()
+            user_before, system_before = user_system_seconds(pids)
             time.sleep(seconds * 0.5)
             rss = rss_bytes(pids)
             reports = [channel.recv() for channel in channels]
             (cpu, wait), wall = scheduled(pids), time.monotonic() - wall_before
+            user, system = user_system_seconds(pids)
+            user, system = user - user_before, system - system_before
             cpu, wait = cpu - cpu_before, wait - wait_before
             for process in processes:
                 process.join(30)
@@ -275,6 +289,9 @@ def run_case(devices: int, workers: int, scanners: int, seconds: float, block: i
             "fleet_cpu_wait_share": round(wait / wall, 3),
             "scanner_cpu_share": round(sum(r["cpu_share"] for r in reports), 3),
             "fleet_cpu_us_per_pair": round(1e6 * cpu / max(1, pairs_per_s * wall), 1),
+            # The same split in user (the interpreter) and system (the kernel) time, from clock ticks.
+            "fleet_user_us_per_pair": round(1e6 * user / max(1, pairs_per_s * wall), 1),
+            "fleet_system_us_per_pair": round(1e6 * system / max(1, pairs_per_s * wall), 1),
             "scanner_cpu_us_per_pair": round(1e6 * sum(r["cpu_s"] for r in reports) / max(1, packets), 1),
             # What each further drive adds to the start, against the one-drive-per-worker fleet: the
             # processes' own start (Python, imports, the workers) is not the drives'.
@@ -311,7 +328,8 @@ def matrix_verdicts(case: dict[str, Any]) -> list[tuple[str, bool]]:
 
 
 MATRIX_HEADER = (f"{'tree':<16} {'drives':>6} {'RPI':>6} {'workers':>7} {'late %':>7} {'lost':>5} {'t/o':>4} "
-                 f"{'fleet CPU':>9} {'CPU wait':>8} {'scanner CPU':>11} {'fleet us/pair':>13} {'scanner us/pair':>15} "
+                 f"{'fleet CPU':>9} {'CPU wait':>8} {'scanner CPU':>11} {'fleet us/pair':>13} {'user/sys':>9} "
+                 f"{'scanner us/pair':>15} "
                  f"{'start s':>7} {'ms/drive':>8} {'RSS MB':>7} {'MB/drive':>8}  targets")
 
 
@@ -327,7 +345,9 @@ def matrix_row(case: dict[str, Any]) -> str:
     return (f"{tree[:16]:<16} {case['devices']:>6} {case['rpi_ms']:>4g}ms {case['workers']:>7} {late:>7} "
             f"{case['lost']:>5} {case['timeouts']:>4} {case['fleet_cpu_share']:>9.3f} "
             f"{case['fleet_cpu_wait_share']:>8.3f} {case['scanner_cpu_share']:>11.3f} "
-            f"{case['fleet_cpu_us_per_pair']:>13.1f} {case['scanner_cpu_us_per_pair']:>15.1f} {case['start_s']:>7.2f} "
+            f"{case['fleet_cpu_us_per_pair']:>13.1f} "
+            f"{case.get('fleet_user_us_per_pair', 0.0):>4.0f}/{case.get('fleet_system_us_per_pair', 0.0):<4.0f} "
+            f"{case['scanner_cpu_us_per_pair']:>15.1f} {case['start_s']:>7.2f} "
             f"{case['start_ms_per_drive']:>8.2f} {case['rss_mb']:>7.1f} {case['rss_per_device_mb']:>8.2f}  {targets}")
 
 
