@@ -18,7 +18,10 @@ none lost, no timeout; printed with PASS/FAIL.
 default a small matrix: 64 and 128 drives, 10 and 50 ms, one worker, 5 s each) and prints one row
 per case with issue 50's targets as [PASS]/[FAIL]: the case holds (under 1 % late, none lost, no
 timeout: the issue asks it of 1,024 drives at 50 ms and 128 at 10 ms on one worker), the fleet at
-35 us per pair or less (from 256 drives on), start-up at 5 ms per drive or less.
+35 us per pair or less (from 256 drives on), start-up at 5 ms per drive or less. Each row gives the
+share of time the fleet waited for a CPU (the machine's other work) and its CPU per pair in user and
+system time. ``--against TREE`` runs each case's fleet from another checkout too, by turns. Lateness
+is timed by the kernel's arrival stamps (``--late-by read``: when the scanner read each packet).
 
     python benchmarks/fleet.py [--seconds 20] [--only 64|128] [--rpi 10ms] [--json]
     python benchmarks/fleet.py --devices 256 --workers 1 --rpi 50ms
