@@ -171,3 +171,33 @@ def test_the_profile_catalog_is_the_device_s_own_declarations_without_building_o
         assert (schema.name, schema.size, schema.fields) == (served.name, served.size, served.fields)
     for spec in device.catalog_classes():
         assert catalog.classes[spec.class_id] == spec
+
+
+def test_the_same_output_data_again_overrides_what_was_written_in_between(device: AcgDevice) -> None:
+    """A scanner sends the same output every RPI. Data unchanged on a drive nothing else changed is not
+    applied again; a value written by other means in between (explicit messaging: class 0x2A
+    attribute 8, class 0x29 attribute 3; a register write) is overridden by the next data, as always."""
+    run_900 = bytes.fromhex("01008403")                          # Run Fwd, 900 rpm
+    device.assembly.deliver(21, run_900, 0.0)
+    device.assembly.deliver(21, run_900, 0.5)
+    assert device.drive.speed_reference_rpm == 900 and device.drive.running_forward
+    device.drive.set_speed_reference_rpm(1200, 1.0)              # SpeedRef written explicitly
+    assert device.drive.speed_reference_rpm == 1200
+    device.assembly.deliver(21, run_900, 1.0)
+    assert device.drive.speed_reference_rpm == 900
+    device.drive.set_run_forward(False, 1.5)                     # Run Fwd written explicitly: stop
+    assert device.drive.control_supervisor.run_forward is False
+    device.assembly.deliver(21, run_900, 1.5)                    # Run Fwd 0 -> 1 again: runs
+    assert device.drive.control_supervisor.run_forward and device.drive.running_forward
+    device.drive.write(0x0381, 600, 2.0)                         # the reference register over Modbus
+    device.assembly.deliver(21, run_900, 2.0)
+    assert device.drive.speed_reference_rpm == 900
+    stop = bytes.fromhex("00008403")
+    device.assembly.deliver(21, stop, 3.0)
+    device.assembly.deliver(21, stop, 3.5)
+    device.drive.set_run_forward(True, 4.0)                      # run by explicit messaging under a held stop
+    assert device.drive.running_forward
+    device.assembly.deliver(21, stop, 4.0)                       # the held stop stops it again
+    assert not device.drive.control_supervisor.run_forward
+    device.advance(30.0)
+    assert not device.drive.running

@@ -37,8 +37,9 @@ def test_cases_of_one_run_never_share_an_address() -> None:
 
 
 def case(**changes: Any) -> dict[str, Any]:
-    figures = {"devices": 256, "workers": 1, "rpi_ms": 50.0, "late_pct": 0.2, "lost": 0, "timeouts": 0,
-               "fleet_cpu_share": 0.5, "scanner_cpu_share": 0.2, "fleet_cpu_us_per_pair": 30.0,
+    figures = {"tree": "this tree", "devices": 256, "workers": 1, "rpi_ms": 50.0, "late_pct": 0.2, "lost": 0,
+               "timeouts": 0, "fleet_cpu_share": 0.5, "fleet_cpu_wait_share": 0.1, "scanner_cpu_share": 0.2,
+               "fleet_cpu_us_per_pair": 30.0,
                "scanner_cpu_us_per_pair": 12.0, "start_s": 2.0, "start_ms_per_drive": 4.0, "rss_mb": 100.0,
                "rss_per_device_mb": 0.4}
     figures.update(changes)
@@ -60,6 +61,17 @@ def test_matrix_verdicts_are_issue_50s_targets(changes: dict[str, Any], failed: 
     assert {name.split()[0] for name, ok in verdicts if not ok} == failed
     row = fleet.matrix_row(case(**changes))
     assert row.count("[FAIL]") == len(failed) and row.count("[PASS]") == len(verdicts) - len(failed), row
+
+
+def test_a_case_that_could_not_run_is_a_failed_row_naming_its_tree() -> None:
+    """A fleet too loaded to open its connections ends its case, not the matrix (``--against``: each
+    row says whose fleet it was)."""
+    failed = {"tree": "/tmp/fleet-before", "devices": 1024, "workers": 1, "rpi_ms": 10.0,
+              "error": "a scanner could not open its connections"}
+    assert not fleet.holds(failed)
+    row = fleet.matrix_row(failed)
+    assert row.startswith("fleet-before") and "[FAIL] a scanner could not open" in row, row
+    assert fleet.matrix_row(case()).startswith("this tree"), fleet.matrix_row(case())
 
 
 @pytest.mark.parametrize("argument", [["--sizes", "64,x"], ["--sizes", "0"], ["--rpis", "10ms,fast"],

@@ -565,3 +565,95 @@ def test_after_a_stall_every_waiting_datagram_is_read_before_a_watchdog_judges(l
     judged_with, received = run_on(loop, scenario())
     assert received == count
     assert judged_with and judged_with[0] == count, judged_with
+
+
+class LoggingCore(RecordingCore):
+    """A core that writes each reception and production to a log it shares with other cores, and has a
+    watchdog of its own at ``watchdog`` (part of its next deadline, as a real core's is)."""
+
+    def __init__(self, name: str, log: list[tuple[str, str]], watchdog: float) -> None:
+        super().__init__(period=1.0)
+        self.name = name
+        self.log = log
+        self.watchdog = watchdog
+        self.judged = 0
+
+    def receive(self, raw: bytes, source: tuple[str, int], now: float) -> None:
+        super().receive(raw, source, now)
+        self.log.append(("received", self.name))
+
+    def poll(self, now: float, horizon: float = 0.0) -> list[tuple[bytes, tuple[str, int]]]:
+        before = len(self.polls)
+        out = super().poll(now, horizon)
+        if len(self.polls) > before:
+            self.log.append(("produced", self.name))
+        return out
+
+    def next_deadline(self) -> float | None:
+        return None if self.deadline is None else min(self.deadline, self.watchdog)
+
+    def expire(self, now: float) -> list[Any]:
+        if now >= self.watchdog:
+            self.judged += 1
+            self.watchdog = now + 10.0
+        return []
+
+
+def test_endpoints_due_together_and_woken_late_all_produce_before_reading_what_judges_nothing() -> None:
+    """A fleet's drives on one grid: many endpoints due at one instant, each with a datagram waiting,
+    the loop held up past that instant. The wake-up produces for every endpoint first; the datagrams
+    are read after, by the lane, since no firing judges a watchdog (each a few milliseconds behind
+    its slot once the others ran, which once made each read its socket again for nothing). An
+    endpoint whose watchdog is due reads its socket first, then judges."""
+    count = 24
+
+    async def scenario() -> tuple[list[tuple[str, str]], list[int]]:
+        loop = asyncio.get_running_loop()
+        log: list[tuple[str, str]] = []
+        due = loop.time() + 0.02
+        cores = [LoggingCore(f"drive {n}", log, due + 10.0 if n else due) for n in range(count)]
+        endpoints = [await started(core) for core in cores]
+        out = sender()
+        try:
+            for core, endpoint in zip(cores, endpoints, strict=True):
+                core.deadline = due
+                endpoint.wakeup()
+                out.sendto(b"output data", ("127.0.0.1", endpoint.port))
+            time.sleep(0.05)   # the loop held up past the slot, every datagram waiting in its socket
+            await wait_until(lambda: len(log) == 2 * count, 5, "every production and every datagram")
+            return log, [core.judged for core in cores]
+        finally:
+            out.close()
+            for endpoint in endpoints:
+                await endpoint.close()
+
+    log, judged = run_on(precise_event_loop(), scenario())
+    assert judged == [1] + [0] * (count - 1)
+    # drive 0's watchdog was due: its datagram read before it judged, right after it produced
+    first = log.index(("produced", "drive 0"))
+    assert log[first + 1] == ("received", "drive 0"), log
+    others = [entry for entry in log if entry[1] != "drive 0"]
+    assert [kind for kind, _ in others] == ["produced"] * (count - 1) + ["received"] * (count - 1), others
+
+
+def test_a_socket_read_one_datagram_at_a_time_still_delivers_every_datagram_in_order() -> None:
+    """A socket that held one datagram at each reading is read one at a time (no read that finds it
+    empty); when several come together, every one is still given to the core, in order."""
+    async def scenario() -> list[bytes]:
+        core = RecordingCore()
+        endpoint = await started(core)
+        out = sender()
+        try:
+            for index in range(3):   # one at a time: the socket is read one datagram at a time from now on
+                out.sendto(b"alone %d" % index, ("127.0.0.1", endpoint.port))
+                await wait_until(lambda count=index + 1: len(core.received) == count, 5, f"datagram {index}")
+            for index in range(DRAIN_LIMIT + 5):
+                out.sendto(b"together %d" % index, ("127.0.0.1", endpoint.port))
+            await wait_until(lambda: len(core.received) == 3 + DRAIN_LIMIT + 5, 5, "every datagram")
+            return core.received
+        finally:
+            out.close()
+            await endpoint.close()
+
+    received = run_on(precise_event_loop(), scenario())
+    assert received == [b"alone %d" % i for i in range(3)] + [b"together %d" % i for i in range(DRAIN_LIMIT + 5)]

@@ -116,7 +116,9 @@ class IoCore(Protocol):
 
     def poll(self, now: float, horizon: float = 0.0) -> list[tuple[bytes, tuple[str, int]]]: ...
 
-    def next_deadline(self) -> float | None: ...
+    def next_deadline(self) -> float | None:
+        """The earliest production slot or watchdog: a firing whose core has none due after its
+        productions judges nothing, and ``expire`` is not called (``IoEndpoint._on_timer``)."""
 
     def expire(self, now: float) -> list[Any]: ...
 
@@ -238,6 +240,8 @@ class IoEndpoint:
         self.gather_within = gather_within
         #: A read stopped at ``DRAIN_LIMIT`` since the last catch-up: more may wait.
         self._left_unread = False
+        #: Sockets read one datagram at a time (``_drain``), with when each was last read.
+        self._lone: dict[socket.socket, float] = {}
         #: The sockets are left out of the wait until the next firing, which reads them (``_gather``).
         self._gathering = False
         if make_core is not None:
@@ -317,33 +321,53 @@ class IoEndpoint:
         transport, _ = await self.loop.create_datagram_endpoint(lambda: _UdpIo(self), sock=sock)
         return transport
 
-    def _drain(self, sock: socket.socket) -> None:
+    def _drain(self, sock: socket.socket, whole: bool = False) -> None:
         """The lane's reader: what the socket holds, up to ``DRAIN_LIMIT`` datagrams, to the core, each
-        with the time it was read, or with ``kernel_arrival_times`` the time the kernel received it."""
+        with the time it was read, or with ``kernel_arrival_times`` the time the kernel received it.
+
+        A socket that held one datagram at its last reading (a fleet drive's, whose one scanner sends
+        once per RPI) is read one datagram at a time: the read that would find it empty is a system
+        call and an exception per packet, and epoll, level-triggered, reports the socket again at once
+        if more waits. Reported again that soon (within ``CATCH_UP_AFTER_S``), it is read to its end
+        and judged again. ``whole``: read to the end whatever the socket held before (a catch-up, a
+        gathering firing)."""
         receive, clock = self.core.receive, time.monotonic  # the lane's loop keeps time.monotonic()
         stamped = self.kernel_arrival_times
         if stamped:
             # The kernel stamps with the wall clock; the loop keeps the monotonic one. Their
             # difference, taken once per wake-up, converts (they drift apart by microseconds at most).
             offset = time.time() - clock()
-        for _ in range(DRAIN_LIMIT):
+        lone = self._lone
+        single = False
+        if not whole:
+            lone_at = lone.get(sock)
+            single = lone_at is not None and clock() - lone_at > CATCH_UP_AFTER_S
+        for count in range(DRAIN_LIMIT):
             try:
                 if stamped:
                     data, ancillary, _flags, source = sock.recvmsg(MAX_DATAGRAM, _STAMP_SPACE)
                 else:
                     data, source = sock.recvfrom(MAX_DATAGRAM)
             except (BlockingIOError, InterruptedError):
-                self._emptied_at[sock] = clock()
+                emptied = self._emptied_at[sock] = clock()
+                if count == 1:
+                    lone[sock] = emptied
+                else:
+                    lone.pop(sock, None)
                 return
             except OSError as exc:  # an ICMP error reported on the socket, or the socket closed
                 log.debug("class 1 UDP error: %s", exc)
                 self._emptied_at[sock] = clock()
                 return
             now = _kernel_time(ancillary, offset) if stamped else None
+            read_at = clock() if now is None else now
             try:
-                receive(data, source, clock() if now is None else now)
+                receive(data, source, read_at)
             except Exception:  # a datagram must never take the I/O path down
                 log.exception("class 1 datagram from %s", source)
+            if single:
+                lone[sock] = read_at if now is None else clock()
+                return
         self._left_unread = True   # DRAIN_LIMIT read, and maybe more waiting
 
     def _catch_up(self, now: float) -> None:
@@ -361,7 +385,7 @@ class IoEndpoint:
             for _ in range(CATCH_UP_READS):
                 if now - emptied[sock] <= CATCH_UP_AFTER_S:
                     break
-                self._drain(sock)
+                self._drain(sock, whole=True)
 
     async def join_multicast(self, group: str, port: int) -> None:
         """Also receive what is sent to ``group:port`` (multicast T->O data), on this endpoint's interface.
@@ -384,10 +408,11 @@ class IoEndpoint:
         self._groups[key] = sock, await self._serve(sock)
         self._emptied_at[sock] = -math.inf
 
-    def wakeup(self) -> None:
-        """Re-arm the timer (a connection opened, so a deadline may be earlier)."""
-        next_deadline = self.core.next_deadline
-        deadline = next_deadline()
+    def wakeup(self, deadline: float | None = None) -> None:
+        """Re-arm the timer (a connection opened, so a deadline may be earlier); ``deadline``: the core's
+        next deadline when the caller has just asked it (a firing that judged nothing)."""
+        if deadline is None:
+            deadline = self.core.next_deadline()
         if deadline is None or self._sock is None:
             return
         if self._timer is not None:
@@ -410,21 +435,31 @@ class IoEndpoint:
         poll, expire = core.poll, core.expire   # callables the seam holds: read as attributes, then called
         if self._gathering:
             for sock in self._emptied_at:   # what came since the last firing, before it is reported on
-                self._drain(sock)
+                self._drain(sock, whole=True)
         datagrams = poll(now, COALESCE_S)
         if datagrams:
             self._send(datagrams)
         # On the lane, a firing on time comes in the wake-up whose harvest read every socket that was
         # ready (level-triggered), or gathered them itself: only a late firing (the loop was held up)
         # or a read cut at ``DRAIN_LIMIT`` can leave datagrams unread, and only then is it worth a read
-        # per socket (a system call and an exception when there is nothing).
-        if self._lane is None or self._left_unread or due_at is None or now - due_at > CATCH_UP_AFTER_S:
-            self._catch_up(now)
-        # The other paths (DTLS sessions) are read before timeouts are judged, whatever the firing.
-        for read in self.paths.catch_up:
-            read()
-        expire(now)
-        self.wakeup()
+        # per socket (a system call and an exception when there is nothing). Unread datagrams matter
+        # only to a watchdog or a silence judged now: with the productions moved on, a core whose next
+        # deadline is still ahead judges nothing at this firing, and neither reads nor judges. That is
+        # every firing of a process whose endpoints all fall due together (a fleet's drives on one
+        # ``ProductionGrid``): the last of them fire milliseconds after their slot, behind the others,
+        # and each read its socket once more for nothing.
+        lane = self._lane
+        deadline = None if lane is None else core.next_deadline()
+        judged = lane is None or deadline is None or deadline <= now
+        if judged:
+            if lane is None or self._left_unread or due_at is None or now - due_at > CATCH_UP_AFTER_S:
+                self._catch_up(now)
+            # The other paths (DTLS sessions) are read before timeouts are judged.
+            for read in self.paths.catch_up:
+                read()
+            expire(now)
+            deadline = None   # what expire judged moved the deadlines: asked again
+        self.wakeup(deadline)
         if self.gather_within:
             self._gather(self._timer_at is not None and self._timer_at - now <= self.gather_within)
 
@@ -488,6 +523,7 @@ class IoEndpoint:
         self._sock = self.transport = None
         self._groups.clear()
         self._emptied_at.clear()
+        self._lone.clear()
         self._gathering = False
         for sock, transport in sockets:
             if transport is not None:

@@ -125,6 +125,11 @@ class AcgDevice(Device):
         self._points: dict[int, AssemblyPoint] = {}
         #: Last data each smart-scaling output consumed: a word is written when it changes.
         self._last_words: dict[int, bytes] = {}
+        #: Each speed output's last data applied, the drive it went to and the drive's ``command_mark``
+        #: right after: the same data again, to the same unchanged drive, is not applied again.
+        self._applied: dict[int, tuple[bytes, AcgDrive, tuple[object, ...]]] = {}
+        #: Each speed input's last bytes, with the drive and its ``status_mark`` they were made from.
+        self._produced: dict[int, tuple[AcgDrive, tuple[object, ...], bytes]] = {}
         for instance in (*OUTPUT_INSTANCES, *INPUT_INSTANCES):
             point = self._assembly_point(instance, speed[instance].name)
             self._points[instance] = point
@@ -176,8 +181,13 @@ class AcgDevice(Device):
                              name=schema.name)
 
     def _produce_speed(self, schema: AssemblySchema) -> bytes:
-        """Inputs 70/71/110/111 (ACG-ET2 manual, input instances and the bits table after them)."""
+        """Inputs 70/71/110/111 (ACG-ET2 manual, input instances and the bits table after them); made
+        again only when the drive's ``status_mark`` moved since the last (every class 1 firing asks)."""
         drive = self.drive
+        mark = drive.status_mark()
+        made = self._produced.get(schema.instance)
+        if made is not None and made[0] is drive and made[1] == mark:
+            return made[2]
         hz = schema.instance in HZ_INPUTS
         values = {
             "faulted": drive.faulted,                          # 0x29 attribute 10
@@ -194,7 +204,9 @@ class AcgDevice(Device):
                 at_reference=drive.at_reference,               # 0x2A attribute 3
                 drive_state=int(drive.drive_state),            # 0x29 attribute 6
             )
-        return schema.encode(values)
+        produced = schema.encode(values)
+        self._produced[schema.instance] = drive, mark, produced
+        return produced
 
     def _produce_words(self, instance: int) -> bytes:
         """Inputs 141-148: the words of 0x0100-0x0107, the registers CM.31-CM.38 name."""
@@ -211,8 +223,16 @@ class AcgDevice(Device):
 
     def _consume_speed(self, instance: int, data: bytes, now: float) -> None:
         """Outputs 20/21/100/101: Run Fwd/Rev through the Drive Run edge table, Fault reset on
-        0 -> 1, the speed reference (rpm or Hz). NetCtrl/NetRef are "Not used" (note 2)."""
+        0 -> 1, the speed reference (rpm or Hz). NetCtrl/NetRef are "Not used" (note 2).
+
+        A scanner sends the same output every RPI; applied again to a drive nothing else changed
+        since (``AcgDrive.command_mark``), it changes nothing, and is skipped: most of what a class 1
+        packet cost the device. A value written by other means in between (explicit messaging, Modbus,
+        the keypad) moves the mark, and the next data is applied over it as it always was."""
         drive = self.drive
+        applied = self._applied.get(instance)
+        if applied is not None and applied[0] == data and applied[1] is drive and applied[2] == drive.command_mark():
+            return
         values = self.assembly_schema(instance).decode(data)
         drive.set_run_command(values["run_forward"], values.get("run_reverse", False), now)
         drive.set_fault_reset(values["fault_reset"], now)
@@ -222,7 +242,11 @@ class AcgDevice(Device):
             else:
                 drive.set_speed_reference_rpm(values["speed_reference"], now)
         except RegisterError as exc:
+            # Refused: tried again with the next data, as before (and logged each time).
+            self._applied.pop(instance, None)
             log.debug("assembly %d: speed reference refused: %s", instance, exc)
+            return
+        self._applied[instance] = bytes(data), drive, drive.command_mark()
 
     def _consume_words(self, instance: int, data: bytes, now: float) -> None:
         """Outputs 121-128: each word goes to the register its CM.51-CM.58 names, in order (the
@@ -267,6 +291,7 @@ class AcgDevice(Device):
         super().io_opened(connection)
         if connection.kind is ConnectionKind.EXCLUSIVE_OWNER:
             self._last_words.clear()
+            self._applied.clear()
             self.drive.on_io_connection_opened(self.now)
 
     def io_closed(self, connection: IoConnection, timed_out: bool) -> None:
@@ -331,6 +356,7 @@ class AcgDevice(Device):
         self.advance(max(now, self.now))   # places a power-up not yet placed, then runs to the loss
         self.drive = self.drive.power_cycled(self._now)
         self._last_words.clear()
+        self._applied.clear()
         super().power_cycle(self._now)
 
     def inject_trip(self, code: Trip | int | str) -> Trip:

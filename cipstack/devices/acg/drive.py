@@ -93,6 +93,7 @@ MODEL = "ACG-ET2"
 
 _CMD_SOURCE = CMD_SOURCE.address
 _FREQ_REF_SOURCE = FREQ_REF_SOURCE.address
+_SPEED_REFERENCE_ADDRESS = SPEED_REFERENCE.address
 
 
 class AcgDrive(TimedSimulation):
@@ -130,6 +131,8 @@ class AcgDrive(TimedSimulation):
                                         saving=self._saving, comm=self._comm, locks=self._locks,
                                         write_through=self.write)
         self._computed = ComputedRegisters(state, registers, ramp, self._locks)
+        #: Register writes tried so far, by any client (``write``): part of ``command_mark``.
+        self._writes = 0
 
     @classmethod
     def with_state_file(cls, path: str | os.PathLike[str], *, now: float = 0.0,
@@ -311,6 +314,27 @@ class AcgDrive(TimedSimulation):
             self._run.apply(action)
             self._ramp.run(0.0)
         return action
+
+    def command_mark(self) -> tuple[object, ...]:
+        """What applying an output assembly's commands again would read or change: the card's command
+        values (Forward/Reverse Run Cmd, Drive Fault Reset), the command source, the command the drive
+        obeys, its trip, the speed reference, and the count of register writes (a write of any register
+        may change what a speed reference converts to or whether it is accepted). While the mark and
+        the data are what they were right after the last application, applying the same data again
+        changes nothing: a held run bit is No Action, a held fault reset no edge, a stop with no command
+        nothing, the same reference the same value. Time alone moves none of these but to stop the
+        drive (a trip, the end of a stop), which a repeated stop or a held run leaves as it is."""
+        supervisor, state = self.control_supervisor, self._state
+        values = state.values
+        return (self._writes, supervisor.run_forward, supervisor.run_reverse, supervisor.fault_reset,
+                values[_CMD_SOURCE], state.command, state.trip, values[_SPEED_REFERENCE_ADDRESS])
+
+    def status_mark(self) -> tuple[object, ...]:
+        """What the speed input assemblies (70/71/110/111) are made of: ``command_mark``, the output
+        (on, frequency), a lost-command reference and the reference source. Equal marks, equal inputs."""
+        state = self._state
+        return (self.command_mark(), state.output_on, state.output_hz, state.lost_reference,
+                state.values[_FREQ_REF_SOURCE])
 
     def set_run_forward(self, value: bool, now: float) -> RunAction:
         """Class 0x29 attribute 3 alone."""
@@ -566,6 +590,7 @@ class AcgDrive(TimedSimulation):
 
     def write(self, address: int, value: int, now: float) -> None:
         """Write one register as a network client does, or raise ``RegisterError``."""
+        self._writes += 1   # tried, even if refused: ``command_mark`` moves on
         register = self.register(address)
         self.advance(now)
         if register.access is RegisterAccess.READ:
