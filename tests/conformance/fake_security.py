@@ -18,8 +18,6 @@ from typing import Any
 
 from cipstack.security.provisioning import init
 
-from .fake_secured import FakeDtls, serve_psk_connection
-
 SUITES = {0xC023: "ECDHE-ECDSA-AES128-SHA256", 0xC02B: "ECDHE-ECDSA-AES128-GCM-SHA256",
           0xC02C: "ECDHE-ECDSA-AES256-GCM-SHA384"}
 #: The PSK suites it allows too (it holds the folder's key), by IANA id.
@@ -123,6 +121,9 @@ class FakeSecurity:
         #: The TLS port, and the DTLS port of the same number.
         self.port = self.listener.getsockname()[1]
         self.variant = variant
+        # pyOpenSSL only for a secured fake: the plain fake runs where only the wheel is installed.
+        from .fake_secured import FakeDtls
+
         self.dtls = FakeDtls(datagrams, self.folder, deviates, answer, stopped, variant)
         start(self._accept)
         if variant == "no-dtls:unreachable":
@@ -164,6 +165,8 @@ class FakeSecurity:
                 conn.close()
                 continue
             if first == b"\x16" and offers_psk_only(conn):
+                from .fake_secured import serve_psk_connection
+
                 self.start(serve_psk_connection, conn, self.psk, self.deviates, self.answer, self.stopped,
                            self.variant)
                 continue
