@@ -36,7 +36,7 @@ from cipstack.security.dtls import DtlsChannel, dtls_context
 from cipstack.security.dtls_link import DtlsLink
 from tests.ports import free_port
 from tests.security_peers import OPENSSL, REGISTER_SESSION, TSHARK, needs_openssl, needs_tshark
-from tests.waiting import stop_process, wait_for
+from tests.waiting import stop_process, wait_for, wait_listening
 
 
 class Served:
@@ -125,14 +125,7 @@ def test_the_command_line_adapter_serves_class1_over_dtls(lab: Path, tmp_path: P
                                     str(port), "--io-port", "0", "--factory", "--quiet", "--security", str(lab),
                                     "--security-port", str(secure_port)], stdout=subprocess.DEVNULL, stderr=stderr)
     try:
-        def listening() -> bool:
-            try:
-                socket.create_connection(("127.0.0.1", port), timeout=0.2).close()
-            except OSError:
-                return process.poll() is not None
-            return True
-
-        wait_for(listening, 30, "the adapter to listen")   # plain TCP accepts last: DTLS is up by then
+        wait_listening(process, port, "the adapter to listen")   # plain TCP accepts last: DTLS is up by then
         assert process.poll() is None, log.read_text()
         with SyncScanner("127.0.0.1", secure_port, security=Credentials.load(lab)) as scanner, \
                 scanner.io_connection(output=21, input=71, rpi=0.010) as io:

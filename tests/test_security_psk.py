@@ -40,7 +40,7 @@ from cipstack.security.provisioning import init
 from cipstack.security.push import configure
 from tests.ports import free_port
 from tests.security_peers import OPENSSL, REGISTER_SESSION, TSHARK, needs_openssl, needs_tshark
-from tests.waiting import stop_process, wait_for
+from tests.waiting import stop_process, wait_for, wait_listening
 
 GET_ATTRIBUTE_SINGLE = 0x0E
 
@@ -274,14 +274,7 @@ def test_originator_completes_a_psk_handshake_with_openssl_s_server(psk_lab: Pat
     credentials = Credentials.load(psk_lab)
     try:
         if version == "-tls1_2":
-            def listening() -> bool:
-                try:
-                    socket.create_connection(("127.0.0.1", port), timeout=0.2).close()
-                except OSError:
-                    return server.poll() is not None
-                return True
-
-            wait_for(listening, 30, "s_server to listen")
+            wait_listening(server, port, "s_server to listen")
             sock = socket.create_connection(("127.0.0.1", port), timeout=10)
             tls = credentials.wrap_client(sock, "127.0.0.1", port)
             try:

@@ -35,6 +35,21 @@ async def wait_until(predicate: Callable[[], object], timeout: float, what: str 
         await asyncio.sleep(interval)
 
 
+def wait_listening(process: subprocess.Popen[Any], port: int, what: str, timeout: float = 30) -> None:
+    """Wait until ``process`` accepts TCP on 127.0.0.1:``port``, or has exited (the caller then says
+    why: its ``poll()`` is not None)."""
+    import socket
+
+    def listening() -> bool:
+        try:
+            socket.create_connection(("127.0.0.1", port), timeout=0.2).close()
+        except OSError:
+            return process.poll() is not None
+        return True
+
+    wait_for(listening, timeout, what)
+
+
 def stop_process(process: subprocess.Popen[Any], timeout: float = 10) -> None:
     """End a process a test started: SIGTERM, as a user's service manager would, and SIGKILL if it
     has not exited after ``timeout`` seconds."""

@@ -7,7 +7,6 @@ from __future__ import annotations
 
 import asyncio
 import json
-import socket
 from pathlib import Path
 
 import pytest
@@ -169,7 +168,7 @@ def test_openssl_s_server_which_takes_any_psk_identity_fails_the_unknown_identit
     import subprocess
 
     from tests.conformance.fake_target import FakeTarget
-    from tests.waiting import stop_process, wait_for
+    from tests.waiting import stop_process, wait_listening
 
     assert OPENSSL is not None
     identity, _, key = (psk_lab / "psk.txt").read_text().strip().partition(":")
@@ -178,14 +177,7 @@ def test_openssl_s_server_which_takes_any_psk_identity_fails_the_unknown_identit
                                "-psk", key, "-psk_identity", identity, "-cipher", "PSK"],
                               stdin=subprocess.PIPE, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
     try:
-        def listening() -> bool:
-            try:
-                socket.create_connection(("127.0.0.1", port), timeout=0.2).close()
-            except OSError:
-                return server.poll() is not None
-            return True
-
-        wait_for(listening, 30, "s_server to listen")
+        wait_listening(server, port, "s_server to listen")
         assert server.poll() is None
         with FakeTarget() as target:   # the plain port, whose objects say nothing of the suites
             report = run(target.host, target.port, groups="security", security=psk_lab, security_port=port,
