@@ -16,7 +16,6 @@ folder, within the same round; the median round is printed.
 
 from __future__ import annotations
 
-import argparse
 import shutil
 import sys
 import tempfile
@@ -25,7 +24,7 @@ from pathlib import Path
 from typing import Any
 
 from io_common import free_port, start_adapter, stop_adapter
-from psk_tls import measure, report
+from psk_tls import arguments, measure, report
 
 FIGURES = ("cpu_per_read_us", "cpu_per_handshake_us")
 
@@ -44,12 +43,7 @@ def push(port: int, folder: Path) -> None:
 
 
 def main(argv: list[str] | None = None) -> int:
-    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    parser.add_argument("--reads", type=int, default=2000)
-    parser.add_argument("--handshakes", type=int, default=100)
-    parser.add_argument("--rounds", type=int, default=3)
-    parser.add_argument("--json", action="store_true")
-    args = parser.parse_args(argv)
+    args = arguments(__doc__, argv)
 
     from cipstack.security import Credentials
     from cipstack.security.provisioning import init

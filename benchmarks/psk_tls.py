@@ -49,13 +49,18 @@ def measure(port: int, credentials: Any, reads: int, handshakes: int, pid: int) 
     return {"cpu_per_read_us": per_read, "cpu_per_handshake_us": per_handshake}
 
 
-def main(argv: list[str] | None = None) -> int:
-    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+def arguments(doc: str, argv: list[str] | None) -> argparse.Namespace:
+    """The options of this benchmark and of ``configured_tls.py``, which runs the same measurement."""
+    parser = argparse.ArgumentParser(description=doc.split("\n\n")[0])
     parser.add_argument("--reads", type=int, default=2000)
     parser.add_argument("--handshakes", type=int, default=100)
     parser.add_argument("--rounds", type=int, default=3)
     parser.add_argument("--json", action="store_true")
-    args = parser.parse_args(argv)
+    return parser.parse_args(argv)
+
+
+def main(argv: list[str] | None = None) -> int:
+    args = arguments(__doc__, argv)
 
     from cipstack.security import Credentials
     from cipstack.security.provisioning import init

@@ -10,6 +10,7 @@ from __future__ import annotations
 import ast
 import functools
 import itertools
+from collections.abc import Iterator
 from pathlib import Path
 
 import pytest
@@ -143,6 +144,14 @@ def _part(path: Path) -> str:
     return FAMILY_EDS if _is_family_eds(path) else path.relative_to(PACKAGE).parts[0].removesuffix(".py")
 
 
+def _generic_modules() -> Iterator[tuple[Path, list[ast.AST]]]:
+    """Every module outside ``cipstack/devices/`` (its path in the package) with the nodes of its tree."""
+    for path in sorted(PACKAGE.rglob("*.py")):
+        relative = path.relative_to(PACKAGE)
+        if relative.parts[0] != "devices":
+            yield relative, list(ast.walk(_tree(path)))
+
+
 def _modules_of(part: str) -> list[Path]:
     """A package's modules, or the single-file module ``part.py`` (``FAMILY_EDS``: the families' EDS
     descriptions, which ``devices`` does not count as its own)."""
@@ -256,11 +265,8 @@ def test_no_generic_module_names_a_family() -> None:
     families = {name for name, _ in BUILT_IN}
     assert families == {"acg", "mx2", "rx"}
     found: dict[str, list[str]] = {}
-    for path in sorted(PACKAGE.rglob("*.py")):
-        relative = path.relative_to(PACKAGE)
-        if relative.parts[0] == "devices":
-            continue
-        for node in ast.walk(_tree(path)):
+    for relative, nodes in _generic_modules():
+        for node in nodes:
             if isinstance(node, ast.Constant) and isinstance(node.value, str) and node.value in families:
                 found.setdefault(str(relative), []).append(f"{node.lineno}: {node.value!r}")
     assert {module: lines for module, lines in found.items() if module not in NAMES_A_FAMILY} == {}
@@ -314,11 +320,8 @@ def test_no_generic_module_imports_a_family_package() -> None:
     families = {path.parent.name for path in (PACKAGE / "devices").glob("*/family.py")}
     assert families == {"acg", "omron"}
     found: dict[str, list[str]] = {}
-    for path in sorted(PACKAGE.rglob("*.py")):
-        relative = path.relative_to(PACKAGE)
-        if relative.parts[0] == "devices":
-            continue
-        for node in ast.walk(_tree(path)):
+    for relative, nodes in _generic_modules():
+        for node in nodes:
             names: list[str] = []
             if isinstance(node, ast.ImportFrom) and node.module:
                 names = [node.module, *(f"{node.module}.{alias.name}" for alias in node.names)]
