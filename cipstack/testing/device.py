@@ -52,8 +52,50 @@ class DeviceOptions:
     settings: dict[str, Any] = field(default_factory=dict)
 
 
+def operation_method(operation: Operation) -> Callable[..., Any]:
+    """The method of ``EmulatedDevice`` that calls ``operation``, made from its declaration alone: its
+    arguments positional in the record's order or by their JSON keys (``trip(0x4200)``,
+    ``set_parameter("ACC", 2.5)``), and the options of an operation that takes free words as keywords
+    (``fault("stop-producing", for_=2.0)``: a trailing underscore spares a Python keyword); its answer
+    as the command service gives it."""
+    free = next((a.key for a in operation.arguments if operation.free_words and a.json_type == "object"), None)
+    fixed = [a for a in operation.arguments if a.key != free]
+    parameters = [inspect.Parameter("self", inspect.Parameter.POSITIONAL_OR_KEYWORD)]
+    parameters += [inspect.Parameter(a.key, inspect.Parameter.POSITIONAL_OR_KEYWORD,
+                                     **({} if a.required else {"default": None})) for a in fixed]
+    if free is not None:
+        parameters.append(inspect.Parameter(free, inspect.Parameter.VAR_KEYWORD))
+    signature = inspect.Signature(parameters)
+
+    def method(self: EmulatedDevice, *args: Any, **kwargs: Any) -> Any:
+        bound = signature.bind(self, *args, **kwargs)   # a wrong call is Python's own TypeError
+        arguments = {a.key: bound.arguments[a.key] for a in fixed if bound.arguments.get(a.key) is not None}
+        if free is not None:
+            arguments[free] = {key.rstrip("_"): value for key, value in bound.arguments.get(free, {}).items()}
+        return self.call(operation.name, **arguments)
+
+    method.__name__ = method.__qualname__ = operation.python_name or operation.name
+    method.__doc__ = f"{operation.summary[:1].upper()}{operation.summary[1:]} (``cipstack drive {operation.name}``)."
+    method.__signature__ = signature  # type: ignore[attr-defined]  # what help() and inspect show
+    return method
+
+
+_Class = TypeVar("_Class", bound=type)
+
+
+def with_operation_methods(cls: _Class) -> _Class:
+    """``cls`` with a method for every declared operation that names one (``Operation.python_name``),
+    made by ``operation_method`` when the class is made: the plugin's calls come from the declarations."""
+    for operation in OPERATIONS:
+        if operation.python_name is not None:
+            setattr(cls, operation.python_name, operation_method(operation))
+    return cls
+
+
+@with_operation_methods
 class EmulatedDevice:
-    """A running emulated device and the calls a test makes on it."""
+    """A running emulated device and the calls a test makes on it; one method per declared operation
+    (``with_operation_methods``) beside the calls written here."""
 
     def __init__(self, options: DeviceOptions) -> None:
         self.options = options
@@ -203,35 +245,3 @@ class EmulatedDevice:
     def __exit__(self, *exc: object) -> None:
         self.close()
 
-
-def operation_method(operation: Operation) -> Callable[..., Any]:
-    """The method of ``EmulatedDevice`` that calls ``operation``, made from its declaration alone: its
-    arguments positional in the record's order or by their JSON keys (``trip(0x4200)``,
-    ``set_parameter("ACC", 2.5)``), and the options of an operation that takes free words as keywords
-    (``fault("stop-producing", for_=2.0)``: a trailing underscore spares a Python keyword); its answer
-    as the command service gives it."""
-    free = next((a.key for a in operation.arguments if operation.free_words and a.json_type == "object"), None)
-    fixed = [a for a in operation.arguments if a.key != free]
-    parameters = [inspect.Parameter("self", inspect.Parameter.POSITIONAL_OR_KEYWORD)]
-    parameters += [inspect.Parameter(a.key, inspect.Parameter.POSITIONAL_OR_KEYWORD,
-                                     **({} if a.required else {"default": None})) for a in fixed]
-    if free is not None:
-        parameters.append(inspect.Parameter(free, inspect.Parameter.VAR_KEYWORD))
-    signature = inspect.Signature(parameters)
-
-    def method(self: EmulatedDevice, *args: Any, **kwargs: Any) -> Any:
-        bound = signature.bind(self, *args, **kwargs)   # a wrong call is Python's own TypeError
-        arguments = {a.key: bound.arguments[a.key] for a in fixed if bound.arguments.get(a.key) is not None}
-        if free is not None:
-            arguments[free] = {key.rstrip("_"): value for key, value in bound.arguments.get(free, {}).items()}
-        return self.call(operation.name, **arguments)
-
-    method.__name__ = method.__qualname__ = operation.python_name or operation.name
-    method.__doc__ = f"{operation.summary[:1].upper()}{operation.summary[1:]} (``cipstack drive {operation.name}``)."
-    method.__signature__ = signature  # type: ignore[attr-defined]  # what help() and inspect show
-    return method
-
-
-for _operation in OPERATIONS:
-    if _operation.python_name is not None:
-        setattr(EmulatedDevice, _operation.python_name, operation_method(_operation))
