@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import asyncio
 import json
+import logging
 import os
 import shutil
 import socket
@@ -573,3 +574,31 @@ def test_a_device_started_with_a_folder_refuses_the_clients_its_crl_lists(
 
     os.unlink(folder / "crl.pem")
     assert tls_read(tls_port, folder) == "CENT" and dtls_handshake(dtls_port, folder) == "ok"
+
+
+def test_a_crl_that_does_not_read_leaves_a_running_device_as_it_was(
+        cip_adapter_factory: Callable[..., EmulatedDevice], lab: Path, tmp_path: Path,
+        caplog: pytest.LogCaptureFixture) -> None:
+    """A careless publisher: a ``crl.pem`` that is no CRL, written while the device runs. The next
+    handshakes are served with the contexts the device had (its clients are not all refused for it),
+    each port says so in one line, once for that file, and a good CRL after it counts again."""
+    from cryptography import x509
+
+    from tests.test_security_attributes import revocation_list
+
+    folder = tmp_path / "lab"
+    shutil.copytree(lab, folder)
+    device = cip_adapter_factory(settings={"security": folder, "security_port": 0})
+    assert device.adapter.tls is not None and device.adapter.dtls is not None
+    tls_port, dtls_port = device.adapter.tls.port, device.adapter.dtls.port
+    caplog.set_level(logging.ERROR, logger="cipstack.security")
+    (folder / "crl.pem").write_text("not a CRL\n")
+    for _ in range(2):   # the client reads the unchanged lab folder, which holds no CRL
+        assert tls_read(tls_port, lab) == "CENT" and dtls_handshake(dtls_port, lab) == "ok"
+    lines = [r.getMessage() for r in caplog.records if "keeps the contexts it had" in r.getMessage()]
+    assert sorted(line.split(":")[0] for line in lines) == ["the DTLS port keeps the contexts it had",
+                                                           "the TLS port keeps the contexts it had"]
+    assert all("crl.pem: not a usable CRL" in line for line in lines)
+    client_serial = x509.load_pem_x509_certificate((folder / "client.pem").read_bytes()).serial_number
+    (folder / "crl.pem").write_bytes(revocation_list(folder, client_serial))
+    assert "revoked" in tls_read(tls_port, lab) and "revoked" in dtls_handshake(dtls_port, lab, timeout=2.0)
